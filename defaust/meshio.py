@@ -1,0 +1,165 @@
+"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL) with clear errors and
+atomic writes.
+
+File formats live here (the data stage), not in the geometry core.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["read_mesh", "write_mesh", "atomic_write"]
+
+_EXTS = {".obj", ".off", ".ply", ".stl"}
+
+
+def read_mesh(path, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh.
+
+    Parameters
+    ----------
+    path : str or Path, an ``.obj``, ``.off``, ``.ply`` or ``.stl`` file.
+    validate : bool, run :func:`sshade.validate.validate_mesh` on the result.
+
+    Returns
+    -------
+    V : (n, 3) float64 vertex positions, in the file's units.
+    F : (m, 3) int64 triangle indices.
+
+    Raises
+    ------
+    SShaDeError
+        Missing or unreadable file, unknown extension, non-triangle faces (polygons are
+        not silently triangulated), and with ``validate`` every problem
+        :func:`~sshade.validate.validate_mesh` names.
+
+    Examples
+    --------
+    >>> V, F = read_mesh("../shared/data/classic/bunny.off")  # doctest: +SKIP
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise SShaDeError(f"mesh file not found: {p}")
+    ext = p.suffix.lower()
+    if ext not in _EXTS:
+        raise SShaDeError(f"{p}: unsupported mesh format {ext!r} (use one of {sorted(_EXTS)})")
+    _check_polygon_faces(p, ext)
+    try:
+        import igl
+        V, F = igl.read_triangle_mesh(str(p))
+    except Exception as e:  # libigl raises RuntimeError/ValueError on garbage
+        raise SShaDeError(f"{p}: unreadable mesh file ({type(e).__name__}: {e})") from None
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    if V.size == 0 or F.size == 0 or V.ndim != 2 or F.ndim != 2:
+        raise SShaDeError(f"{p}: unreadable mesh file (no vertices or no faces found)")
+    if F.shape[1] != 3:
+        raise SShaDeError(f"{p}: faces have {F.shape[1]} vertices; only triangle meshes are supported")
+    if validate:
+        from sshade.validate import validate_mesh
+        V, F = validate_mesh(V, F, name=str(p))
+    return V, F
+
+
+def _check_polygon_faces(p: Path, ext: str) -> None:
+    """libigl would fan-triangulate polygons silently; refuse them instead."""
+    if ext == ".obj":
+        with open(p, "rb") as fh:
+            for i, line in enumerate(fh, 1):
+                if line.startswith(b"f "):
+                    if len(line.split()) - 1 != 3:
+                        raise SShaDeError(f"{p}: line {i} is a face with {len(line.split()) - 1} vertices; "
+                                          "only triangle meshes are supported")
+    elif ext == ".off":
+        with open(p, "rb") as fh:
+            try:
+                toks = []
+                header = None
+                for line in fh:
+                    s = line.split(b"#")[0].split()
+                    if not s:
+                        continue
+                    if header is None:
+                        if s[0].upper().endswith(b"OFF"):
+                            s = s[1:]
+                            header = []
+                            if not s:
+                                continue
+                        else:
+                            header = []
+                    if len(header) < 3:
+                        take = min(3 - len(header), len(s))
+                        header += [int(x) for x in s[:take]]
+                        s = s[take:]
+                        if len(header) < 3 or not s:
+                            if len(header) == 3:
+                                break
+                            continue
+                    break
+                nv, nf = header[0], header[1]
+                for _ in range(nv):
+                    fh.readline()
+                for j in range(nf):
+                    line = fh.readline().split()
+                    if line and int(line[0]) != 3:
+                        raise SShaDeError(f"{p}: face {j} has {int(line[0])} vertices; only triangle meshes are supported")
+            except SShaDeError:
+                raise
+            except Exception as e:
+                raise SShaDeError(f"{p}: unreadable OFF file ({e})") from None
+
+
+@contextlib.contextmanager
+def atomic_write(path, mode: str = "w", **kw):
+    """Open a temporary file beside ``path`` and rename it onto ``path`` on success.
+
+    Nothing half-written is ever left at ``path``: on an exception the temporary file is
+    removed and ``path`` keeps its previous content (or stays absent).
+
+    Examples
+    --------
+    >>> with atomic_write("/tmp/x.txt") as fh:  # doctest: +SKIP
+    ...     fh.write("hello")
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, mode, **kw) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def write_mesh(path, V: np.ndarray, F: np.ndarray) -> None:
+    """Write a triangle mesh atomically (format from the extension: .obj, .off, .ply).
+
+    Parameters
+    ----------
+    path : str or Path.
+    V : (n, 3) float64; F : (m, 3) int.
+
+    Raises
+    ------
+    SShaDeError on an unsupported extension.
+    """
+    import trimesh
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in {".obj", ".off", ".ply"}:
+        raise SShaDeError(f"{path}: unsupported output mesh format {ext!r}")
+    mesh = trimesh.Trimesh(np.asarray(V, np.float64), np.asarray(F, np.int64), process=False)
+    data = mesh.export(file_type=ext[1:])
+    with atomic_write(path, "wb" if isinstance(data, bytes) else "w") as fh:
+        fh.write(data)

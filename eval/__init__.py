@@ -1,0 +1,1 @@
+"""Evaluation harness: metrics, datasets, the Hydra app (`python -m eval`)."""

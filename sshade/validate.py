@@ -1,0 +1,216 @@
+"""Input validation for meshes and handles (paper §2, "Manifoldness").
+
+The method assumes a single-component, 2-manifold triangle mesh, possibly with
+boundary. These checks run before any work and raise :class:`SShaDeError` naming the
+problem and where it is.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .errors import SShaDeError
+
+__all__ = ["validate_mesh", "validate_handles", "unique_edges"]
+
+
+def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undirected edges of a triangle mesh and the edge index of every face side.
+
+    Parameters
+    ----------
+    F : (m, 3) int64 faces.
+
+    Returns
+    -------
+    E : (e, 2) int64, sorted pairs ``E[:, 0] < E[:, 1]``.
+    FE : (m, 3) int64, ``FE[f, k]`` is the index into ``E`` of the side from
+        ``F[f, k]`` to ``F[f, (k + 1) % 3]``.
+
+    Examples
+    --------
+    >>> E, FE = unique_edges(np.array([[0, 1, 2], [0, 2, 3]]))
+    >>> len(E)
+    5
+    """
+    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = np.sort(he, axis=1)
+    E, inv = np.unique(key, axis=0, return_inverse=True)
+    return E.astype(np.int64), inv.reshape(-1, 3).astype(np.int64)
+
+
+def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
+                  area_tol: float = 1e-14) -> tuple[np.ndarray, np.ndarray]:
+    """Check that ``(V, F)`` is a single-component 2-manifold triangle mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float, vertex positions (any length unit).
+    F : (m, 3) array_like of int, triangle faces (0-based vertex indices).
+    name : str, used in error messages.
+    allow_boundary : bool, if False a mesh with boundary edges is rejected.
+    area_tol : float, a face with area below ``area_tol * bbox_diag**2`` is degenerate.
+
+    Returns
+    -------
+    V : (n, 3) float64, C-contiguous (a copy only if the input was not already).
+    F : (m, 3) int64, C-contiguous.
+
+    Raises
+    ------
+    SShaDeError
+        Wrong shapes, non-triangle faces, NaN/inf coordinates, out-of-range or repeated
+        indices in a face, degenerate faces, duplicate faces, non-manifold edges
+        (>2 faces or inconsistent orientation), non-manifold vertices, unreferenced
+        vertices, several connected components.
+
+    Examples
+    --------
+    >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    >>> V2, F2 = validate_mesh(V, F)
+    """
+    try:
+        V = np.ascontiguousarray(V, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"{name}: vertex array is not numeric ({e})") from None
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise SShaDeError(f"{name}: V must have shape (n, 3), got {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise SShaDeError(f"{name}: F must have shape (m, 3) (triangles only), got {F.shape}")
+    if len(V) < 3 or len(F) < 1:
+        raise SShaDeError(f"{name}: needs at least 3 vertices and 1 face, got {len(V)} and {len(F)}")
+    if not np.issubdtype(F.dtype, np.integer):
+        if not np.all(np.isfinite(F)) or np.any(F != np.round(F)):
+            raise SShaDeError(f"{name}: face indices are not integers")
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        raise SShaDeError(f"{name}: {bad.sum()} vertices have NaN/inf coordinates (first: vertex {np.flatnonzero(bad)[0]})")
+    n = len(V)
+    out = (F < 0) | (F >= n)
+    if out.any():
+        f = np.flatnonzero(out.any(axis=1))[0]
+        raise SShaDeError(f"{name}: face {f} has vertex index out of range [0, {n}): {F[f].tolist()}")
+    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    if rep.any():
+        f = np.flatnonzero(rep)[0]
+        raise SShaDeError(f"{name}: face {f} repeats a vertex: {F[f].tolist()}")
+    used = np.zeros(n, bool)
+    used[F.ravel()] = True
+    if not used.all():
+        raise SShaDeError(f"{name}: {int((~used).sum())} unreferenced vertices (first: vertex {np.flatnonzero(~used)[0]}); "
+                          "remove them before deforming")
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    if diag == 0:
+        raise SShaDeError(f"{name}: all vertices coincide")
+    dbl = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    deg = dbl <= 2 * area_tol * diag * diag
+    if deg.any():
+        f = np.flatnonzero(deg)[0]
+        raise SShaDeError(f"{name}: {int(deg.sum())} degenerate (zero-area) faces (first: face {f} = {F[f].tolist()})")
+    sf = np.sort(F, axis=1)
+    _, first, cnt = np.unique(sf, axis=0, return_index=True, return_counts=True)
+    if (cnt > 1).any():
+        f = first[np.flatnonzero(cnt > 1)[0]]
+        raise SShaDeError(f"{name}: duplicate faces (first: face {f} = {F[f].tolist()})")
+    # edges: count faces per undirected edge and check orientation consistency
+    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = np.sort(he, axis=1)
+    E, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    if (cnt > 2).any():
+        e = np.flatnonzero(cnt > 2)[0]
+        raise SShaDeError(f"{name}: {int((cnt > 2).sum())} non-manifold edges shared by 3+ faces (first: edge {E[e].tolist()})")
+    _, dcnt = np.unique(he, axis=0, return_counts=True)
+    if (dcnt > 1).any():
+        raise SShaDeError(f"{name}: inconsistently oriented faces (a directed edge appears twice); "
+                          "the mesh is non-orientable or needs its faces re-wound")
+    if not allow_boundary and (cnt == 1).any():
+        raise SShaDeError(f"{name}: has {int((cnt == 1).sum())} boundary edges but a closed mesh is required")
+    # components
+    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    ncomp, _ = connected_components(A, directed=False)
+    if ncomp != 1:
+        raise SShaDeError(f"{name}: has {ncomp} connected components; SShaDe needs a single component (paper §2)")
+    # vertex manifoldness: the faces around each vertex form a single fan
+    _check_vertex_manifold(F, n, name)
+    return V, F
+
+
+def _check_vertex_manifold(F: np.ndarray, n: int, name: str) -> None:
+    """Each vertex's incident faces, linked through shared edges at that vertex, form
+    one fan. Counts, per vertex, (#incident faces) - (#interior edges at it) which is 0
+    for an interior fan, 1 for a boundary fan and >1 for several fans (pinch)."""
+    m = len(F)
+    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = np.sort(he, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    nfaces = np.bincount(F.ravel(), minlength=n)
+    interior = cnt[inv] == 2
+    # each interior undirected edge appears as two half-edges: count once via key[:,0] side
+    ends = key[interior]
+    ie = np.zeros(n, np.int64)
+    np.add.at(ie, ends.ravel(), 1)
+    ie //= 2  # every interior edge was seen twice (once per half-edge)
+    bnd = ~interior
+    be = np.zeros(n, np.int64)
+    np.add.at(be, key[bnd].ravel(), 1)
+    # fans = faces - interior edges (each fan is a path/cycle of faces)
+    fans = nfaces - ie
+    # interior vertex (no boundary edges): one fan means faces == interior edges
+    closed = be == 0
+    bad = (closed & (fans != 0)) | (~closed & ((fans != 1) | (be != 2)))
+    if bad.any():
+        v = np.flatnonzero(bad)[0]
+        raise SShaDeError(f"{name}: {int(bad.sum())} non-manifold vertices (several fans of faces meet there; first: vertex {v})")
+
+
+def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.ndarray]:
+    """Check handle indices and target positions against a mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertex positions.
+    handles : (h,) array_like of int, vertex indices, unique, in ``[0, n)``.
+    targets : (h, 3) array_like of float, target positions of the handles.
+
+    Returns
+    -------
+    handles : (h,) int64; targets : (h, 3) float64.
+
+    Raises
+    ------
+    SShaDeError
+        Empty handle set, non-integer, out-of-range or duplicate indices, length
+        mismatch, NaN/inf targets.
+
+    Examples
+    --------
+    >>> V = np.zeros((4, 3)); h, t = validate_handles(V, [0, 2], np.zeros((2, 3)))
+    """
+    h = np.asarray(handles)
+    if h.ndim != 1:
+        h = h.ravel() if h.size == h.shape[0] else h
+    if h.ndim != 1 or h.size == 0:
+        raise SShaDeError(f"handles must be a non-empty 1-D index array, got shape {np.shape(handles)}")
+    if not np.issubdtype(h.dtype, np.integer):
+        raise SShaDeError(f"handles must be integer vertex indices, got dtype {h.dtype}")
+    h = h.astype(np.int64)
+    n = len(V)
+    oob = (h < 0) | (h >= n)
+    if oob.any():
+        raise SShaDeError(f"handle index {int(h[oob][0])} is out of range [0, {n}) (handle off the surface)")
+    if len(np.unique(h)) != len(h):
+        raise SShaDeError("handles contain duplicate vertex indices")
+    T = np.ascontiguousarray(targets, dtype=np.float64)
+    if T.ndim != 2 or T.shape[1] != 3:
+        raise SShaDeError(f"targets must have shape (h, 3), got {T.shape}")
+    if len(T) != len(h):
+        raise SShaDeError(f"handles and targets differ in length: {len(h)} handles, {len(T)} targets")
+    if not np.isfinite(T).all():
+        raise SShaDeError("targets contain NaN/inf")
+    return h, T
