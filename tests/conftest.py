@@ -1,0 +1,26 @@
+"""Shared fixtures: the real meshes of ../shared/data (tests skip cleanly without them)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("SSHADE_SHARED_DATA", ROOT.parent / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Path of ../shared/data, or skip the test if it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"shared data folder not found: {SHARED_DATA}")
+    return SHARED_DATA
+
+
+def data_file(rel: str) -> Path:
+    """Path of one file in shared data, skipping the test if it is missing."""
+    p = SHARED_DATA / rel
+    if not p.is_file():
+        pytest.skip(f"shared data file not found: {p}")
+    return p
