@@ -1,0 +1,18 @@
+"""SShaDe: scalable shape deformation via local representations.
+
+Maggioli, Baieri, Lähner, Melzi. "SShaDe: scalable shape deformation via local
+representations". The pipeline (paper §3): topology-preserving remesh
+(:mod:`sshade.remesh`), projection onto seed fans (:mod:`sshade.projection`),
+low-res spokes-and-rims ARAP (:mod:`sshade.arap`), per-triangle LRF transfer
+(:mod:`sshade.lrf`), averaged over k samplings (:mod:`sshade.deform`).
+
+>>> from sshade import deform
+>>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
+"""
+from .deform import SShaDe, deform, deform_once
+from .errors import SShaDeError
+from .method import Deformer
+from .remesh import RemeshResult, remesh
+
+__all__ = ["deform", "deform_once", "SShaDe", "SShaDeError", "Deformer", "remesh", "RemeshResult"]
+__version__ = "0.1.0"

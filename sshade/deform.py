@@ -1,0 +1,186 @@
+"""SShaDe: the whole pipeline (paper §3, Fig. 1): remesh -> low-res spokes-and-rims ARAP
+-> LRF transfer, averaged over k samplings run in parallel processes (§3.3).
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from .arap import arap_deform
+from .errors import SShaDeError
+from .lrf import GRADIENTS, frame_functions, transfer
+from .projection import project_to_fans
+from .remesh import mesh_topology, remesh
+from .validate import validate_handles, validate_mesh
+
+__all__ = ["deform", "deform_once", "SShaDe"]
+
+# Worker-process state: the high-res mesh is handed to each worker once, at fork.
+_W: dict = {}
+
+
+def _init_worker(state: dict) -> None:
+    _W.clear()
+    _W.update(state)
+
+
+def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None, tol: float = 1e-4,
+                max_iter: int = 1000, gradient: str = "normalized") -> tuple[np.ndarray, dict]:
+    """One sampling of SShaDe (no averaging): remesh, low-res ARAP, transfer.
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64; targets : (h, 3) float64
+        (all validated). n_low : farthest-point samples. seed : first-seed RNG seed.
+    topology : optional :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
+    tol, max_iter : ARAP convergence rule (§4.1). gradient : LRF mode (§3.2).
+
+    Returns
+    -------
+    Vd : (n, 3) float64 deformed positions; info : dict with per-stage seconds
+    (remesh_s, project_s, arap_s, transfer_s), n_low (actual low-res vertex count),
+    iterations, converged, seed, first (first seed vertex), n_flipped.
+    """
+    t0 = time.perf_counter()
+    rm = remesh(V, F, n_low, seed=seed, required=handles, topology=topology)
+    t1 = time.perf_counter()
+    VN = V[rm.seeds]
+    proj = project_to_fans(V, rm.label, VN, rm.F)
+    t2 = time.perf_counter()
+    low_h = rm.label[handles]  # each handle is its own seed: its region is itself
+    res = arap_deform(VN, rm.F, low_h, targets, energy="spokes_and_rims", tol=tol, max_iter=max_iter)
+    t3 = time.perf_counter()
+    Vd = transfer(V, proj.tri, VN, res.V, rm.F, gradient=gradient)
+    # handles are low-res vertices: put them exactly on their targets (the transfer
+    # reproduces them up to round-off; this removes the round-off)
+    Vd[handles] = targets
+    t4 = time.perf_counter()
+    info = {"remesh_s": t1 - t0, "project_s": t2 - t1, "arap_s": t3 - t2, "transfer_s": t4 - t3,
+            "n_low": int(len(rm.seeds)), "n_repair": rm.n_repair, "n_flipped": rm.n_flipped,
+            "iterations": res.iterations, "converged": res.converged, "seed": int(seed), "first": rm.first}
+    return Vd, info
+
+
+def _run_sampling(i: int) -> tuple[int, np.ndarray, dict]:
+    w = _W
+    Vd, info = deform_once(w["V"], w["F"], w["handles"], w["targets"], n_low=w["n_low"], seed=w["seeds"][i],
+                           topology=w["topology"], tol=w["tol"], max_iter=w["max_iter"], gradient=w["gradient"])
+    return i, Vd, info
+
+
+def sampling_seeds(seed: int, k: int) -> list[int]:
+    """The k first-seed RNG seeds derived from ``seed`` (recorded in every output)."""
+    return [int(s) for s in np.random.SeedSequence(seed).generate_state(k, dtype=np.uint32)]
+
+
+def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0,
+           workers: int | None = None, tol: float = 1e-4, max_iter: int = 1000,
+           gradient: str = "normalized", return_info: bool = False):
+    """Deform a high-resolution mesh with SShaDe (paper §3, Alg. 1, §3.3 averaging).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest vertex positions (any length unit).
+    F : (m, 3) int faces of a single-component manifold triangle mesh (boundary allowed).
+    handles : (h,) int vertex indices. targets : (h, 3) float target positions.
+    n_low : int, farthest-point samples per low-res mesh (paper: ~6000 for 150k-200k
+        vertices); capped at n.
+    n_samplings : int, k samplings with different first seeds, averaged (paper: 5-10).
+    seed : int, master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
+    workers : int or None, processes (default: min(k, CPU count)); 1 runs in-process.
+    tol, max_iter : low-res ARAP stops when the largest move in one iteration is below
+        ``tol * bbox_diag``, at most ``max_iter`` iterations (paper: 1000).
+    gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
+    return_info : also return a dict of timings, seeds and per-sampling details.
+
+    Returns
+    -------
+    Vd : (n, 3) float64 deformed positions (same connectivity F); with ``return_info``
+    the tuple ``(Vd, info)``.
+
+    Raises
+    ------
+    SShaDeError on invalid mesh or handles (see :func:`sshade.validate.validate_mesh`),
+    n_samplings < 1, unknown gradient mode.
+
+    Examples
+    --------
+    >>> from sshade import deform
+    >>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
+    """
+    t0 = time.perf_counter()
+    V, F = validate_mesh(V, F)
+    handles, targets = validate_handles(V, handles, targets)
+    if n_samplings < 1:
+        raise SShaDeError(f"n_samplings must be >= 1, got {n_samplings}")
+    if gradient not in GRADIENTS:
+        raise SShaDeError(f"unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
+    if int(n_low) < 4:
+        raise SShaDeError(f"n_low must be at least 4, got {n_low}")
+    n_low = int(min(n_low, len(V)))
+    topo = mesh_topology(V, F)
+    seeds = sampling_seeds(seed, n_samplings)
+    state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, seeds=seeds, topology=topo,
+                 tol=tol, max_iter=max_iter, gradient=gradient)
+    if workers is None:
+        workers = min(n_samplings, os.cpu_count() or 1)
+    workers = max(1, min(int(workers), n_samplings))
+    t1 = time.perf_counter()
+    results: list = [None] * n_samplings
+    infos: list = [None] * n_samplings
+    if workers == 1 or "fork" not in mp.get_all_start_methods():
+        _init_worker(state)
+        try:
+            for i in range(n_samplings):
+                _, results[i], infos[i] = _run_sampling(i)
+        finally:
+            _W.clear()
+    else:
+        # fork: workers inherit the mesh and the compiled numba code without pickling
+        ctx = mp.get_context("fork")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                                 initargs=(state,)) as ex:
+            for i, Vd, info in ex.map(_run_sampling, range(n_samplings)):
+                results[i], infos[i] = Vd, info
+    Vd = np.mean(results, axis=0)
+    Vd[handles] = targets
+    t2 = time.perf_counter()
+    if not return_info:
+        return Vd
+    info = {"total_s": t2 - t0, "setup_s": t1 - t0, "workers": workers, "seed": seed, "sampling_seeds": seeds,
+            "samplings": infos}
+    for k in ("remesh_s", "project_s", "arap_s", "transfer_s", "iterations"):
+        info[k] = float(np.sum([d[k] for d in infos]))
+    info["n_low"] = int(np.mean([d["n_low"] for d in infos]))
+    return Vd, info
+
+
+class SShaDe:
+    """SShaDe behind the :class:`sshade.method.Deformer` interface.
+
+    Parameters are those of :func:`deform`. After :meth:`deform`, ``info`` holds
+    remesh_s / project_s / arap_s / transfer_s (summed CPU-side over samplings),
+    total_s (wall time), the sampling seeds and per-sampling details.
+
+    Examples
+    --------
+    >>> m = SShaDe(n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
+    >>> Vd = m.deform(V, F, handles, targets)  # doctest: +SKIP
+    """
+
+    name = "SShaDe"
+
+    def __init__(self, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, workers: int | None = None,
+                 tol: float = 1e-4, max_iter: int = 1000, gradient: str = "normalized"):
+        self.params = dict(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
+                           max_iter=max_iter, gradient=gradient)
+        self.info: dict = {}
+
+    def deform(self, V, F, handles, targets) -> np.ndarray:
+        """See :func:`deform`; returns (n, 3) float64."""
+        Vd, self.info = deform(V, F, handles, targets, return_info=True, **self.params)
+        return Vd

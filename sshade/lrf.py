@@ -1,0 +1,164 @@
+"""Per-triangle local reference frames and the deformation transfer (paper §3.2,
+Algorithm 1 "LRFT").
+
+For a low-res triangle t: L_t = (g_t, w_t, n_t) as columns, with n_t the unit normal,
+g_t the gradient on t of a scalar function f carried by the correspondence (the rest-pose
+coordinates), w_t = g_t x n_t; b_t the barycenter. A high-res vertex v with P(v) = t is
+stored as v_t = L_t^-1 (v - b_t) and rebuilt on the deformed N' as v' = L'_t v_t + b'_t.
+
+``gradient="raw"`` uses g_t as in the paper; ``gradient="normalized"`` divides it by its
+length, so L_t is orthonormal (a rotation) and the transfer is rigid per triangle.
+Where |grad f| is small (the coordinate axis is nearly normal to t; Poincaré-Hopf, §3.2)
+the frame falls back to the rest coordinate whose gradient is largest on t.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import SShaDeError
+
+__all__ = ["frame_functions", "triangle_gradients", "local_frames", "encode", "decode", "transfer"]
+
+GRADIENTS = ("normalized", "raw")
+
+
+def frame_functions(VN: np.ndarray, FN: np.ndarray, *, primary: int = 0, min_gradient: float = 0.5) -> np.ndarray:
+    """Per-triangle scalar function f: which rest coordinate (0=x, 1=y, 2=z) is used.
+
+    Parameters
+    ----------
+    VN : (k, 3) float64 rest low-res positions. FN : (t, 3) int64.
+    primary : int, the coordinate used where its gradient is large enough.
+    min_gradient : float in (0, 1): |grad x_a| on a triangle is sin(angle(axis a, n_t));
+        below this the coordinate with the largest gradient is used (paper §3.2 fallback).
+
+    Returns
+    -------
+    axis : (t,) int64.
+    """
+    n = np.cross(VN[FN[:, 1]] - VN[FN[:, 0]], VN[FN[:, 2]] - VN[FN[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    gmag = np.sqrt(np.clip(1.0 - n * n, 0.0, None))  # |grad of coordinate a| on each triangle
+    axis = np.full(len(FN), primary, np.int64)
+    weak = gmag[:, primary] < min_gradient
+    axis[weak] = gmag[weak].argmax(axis=1)
+    return axis
+
+
+def triangle_gradients(P: np.ndarray, FN: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gradient of a piecewise-linear function on each triangle, unit normals, barycenters.
+
+    Parameters
+    ----------
+    P : (k, 3) float64 positions. FN : (t, 3) int64. f : (t, 3) float64, the function's
+        values at each triangle's three corners.
+
+    Returns
+    -------
+    g : (t, 3) gradients (units of f per mesh unit); n : (t, 3) unit normals;
+    b : (t, 3) barycenters.
+
+    Raises
+    ------
+    SShaDeError on a degenerate (zero-area) triangle.
+    """
+    a, b_, c = P[FN[:, 0]], P[FN[:, 1]], P[FN[:, 2]]
+    nn = np.cross(b_ - a, c - a)
+    dbl = np.linalg.norm(nn, axis=1)
+    if (dbl <= 0).any() or not np.isfinite(dbl).all():
+        raise SShaDeError(f"LRF: {int((dbl <= 0).sum())} degenerate low-res triangles (zero area)")
+    n = nn / dbl[:, None]
+    # grad phi_i = n x e_i / (2A), e_i the edge opposite corner i (counter-clockwise)
+    e0, e1, e2 = c - b_, a - c, b_ - a
+    g = (f[:, 0:1] * np.cross(n, e0) + f[:, 1:2] * np.cross(n, e1) + f[:, 2:3] * np.cross(n, e2)) / dbl[:, None]
+    return g, n, (a + b_ + c) / 3.0
+
+
+def local_frames(P: np.ndarray, FN: np.ndarray, f: np.ndarray, gradient: str = "normalized") -> tuple[np.ndarray, np.ndarray]:
+    """L_t = (g_t, g_t x n_t, n_t) per triangle (paper §3.2 eq. for L_t).
+
+    Parameters
+    ----------
+    P : (k, 3) positions (N or N'). FN : (t, 3). f : (t, 3) corner values of the frame
+        function (the same values for N and N': carried by the correspondence).
+    gradient : ``"normalized"`` (orthonormal frames) or ``"raw"`` (paper).
+
+    Returns
+    -------
+    L : (t, 3, 3) with columns g, w, n. b : (t, 3) barycenters.
+    """
+    if gradient not in GRADIENTS:
+        raise SShaDeError(f"unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
+    g, n, b = triangle_gradients(P, FN, f)
+    if gradient == "normalized":
+        gl = np.linalg.norm(g, axis=1, keepdims=True)
+        if (gl <= 1e-300).any():
+            raise SShaDeError("LRF: zero gradient on a triangle (frame function constant there)")
+        g = g / gl
+    w = np.cross(g, n)
+    return np.stack([g, w, n], axis=2), b
+
+
+def _corner_values(VN_rest: np.ndarray, FN: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    return VN_rest[FN, axis[:, None]]  # (t, 3): rest coordinate `axis[t]` at each corner
+
+
+def encode(V: np.ndarray, tri: np.ndarray, VN: np.ndarray, FN: np.ndarray, axis: np.ndarray,
+           gradient: str = "normalized") -> np.ndarray:
+    """Local coordinates v_t = L_t^-1 (v - b_t) of each high-res vertex (Alg. 1, line 11).
+
+    Parameters
+    ----------
+    V : (n, 3) high-res positions. tri : (n,) int64 triangle P(v).
+    VN : (k, 3) rest low-res positions. FN : (t, 3). axis : (t,) frame function per triangle.
+
+    Returns
+    -------
+    C : (n, 3) float64 local coordinates.
+    """
+    L, b = local_frames(VN, FN, _corner_values(VN, FN, axis), gradient)
+    Linv = np.linalg.inv(L) if gradient == "raw" else np.transpose(L, (0, 2, 1))
+    return np.einsum("nij,nj->ni", Linv[tri], V - b[tri])
+
+
+def decode(C: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
+           axis: np.ndarray, gradient: str = "normalized") -> np.ndarray:
+    """Rebuild positions v' = L'_t v_t + b'_t on the deformed low-res mesh (Alg. 1, line 12).
+
+    Parameters
+    ----------
+    C : (n, 3) local coordinates from :func:`encode`. tri : (n,) int64.
+    VN_rest : (k, 3) rest low-res positions (the frame function's values).
+    VN_def : (k, 3) deformed low-res positions (N'). FN : (t, 3). axis : (t,).
+
+    Returns
+    -------
+    (n, 3) float64 deformed high-res positions.
+    """
+    L, b = local_frames(VN_def, FN, _corner_values(VN_rest, FN, axis), gradient)
+    return np.einsum("nij,nj->ni", L[tri], C) + b[tri]
+
+
+def transfer(V: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
+             *, gradient: str = "normalized", axis: np.ndarray | None = None) -> np.ndarray:
+    """Algorithm 1 (LRFT): deform high-res ``V`` following ``N -> N'``.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 high-res rest positions. tri : (n,) int64 P(v).
+    VN_rest, VN_def : (k, 3) float64 low-res rest / deformed positions. FN : (t, 3) int64.
+    gradient : ``"normalized"`` or ``"raw"``. axis : (t,) frame function per triangle,
+        default :func:`frame_functions` on ``VN_rest``.
+
+    Returns
+    -------
+    (n, 3) float64 deformed positions. A rigid motion of N is reproduced exactly on M.
+
+    Examples
+    --------
+    >>> Vd = transfer(V, proj.tri, V[rm.seeds], VN_def, rm.F)  # doctest: +SKIP
+    """
+    if axis is None:
+        axis = frame_functions(VN_rest, FN)
+    C = encode(V, tri, VN_rest, FN, axis, gradient)
+    return decode(C, tri, VN_rest, VN_def, FN, axis, gradient)
