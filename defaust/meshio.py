@@ -51,8 +51,14 @@ def read_mesh(path, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray]:
         raise SShaDeError(f"{p}: unsupported mesh format {ext!r} (use one of {sorted(_EXTS)})")
     _check_polygon_faces(p, ext)
     try:
-        import igl
-        V, F = igl.read_triangle_mesh(str(p))
+        if ext == ".stl":
+            # STL is a triangle soup: merge coincident vertices to recover connectivity
+            import trimesh
+            tm = trimesh.load(str(p), file_type="stl", process=True, force="mesh")
+            V, F = np.asarray(tm.vertices), np.asarray(tm.faces)
+        else:
+            import igl
+            V, F = igl.read_triangle_mesh(str(p))
     except Exception as e:  # libigl raises RuntimeError/ValueError on garbage
         raise SShaDeError(f"{p}: unreadable mesh file ({type(e).__name__}: {e})") from None
     V = np.ascontiguousarray(V, dtype=np.float64)
@@ -67,52 +73,42 @@ def read_mesh(path, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
+def _data_lines(p: Path):
+    """Lines of a text mesh file with comments and blank lines removed, split in tokens."""
+    with open(p, "rb") as fh:
+        for i, line in enumerate(fh, 1):
+            toks = line.split(b"#", 1)[0].split()
+            if toks:
+                yield i, toks
+
+
 def _check_polygon_faces(p: Path, ext: str) -> None:
     """libigl would fan-triangulate polygons silently; refuse them instead."""
-    if ext == ".obj":
-        with open(p, "rb") as fh:
-            for i, line in enumerate(fh, 1):
-                if line.startswith(b"f "):
-                    if len(line.split()) - 1 != 3:
-                        raise SShaDeError(f"{p}: line {i} is a face with {len(line.split()) - 1} vertices; "
-                                          "only triangle meshes are supported")
-    elif ext == ".off":
-        with open(p, "rb") as fh:
-            try:
-                toks = []
-                header = None
-                for line in fh:
-                    s = line.split(b"#")[0].split()
-                    if not s:
-                        continue
-                    if header is None:
-                        if s[0].upper().endswith(b"OFF"):
-                            s = s[1:]
-                            header = []
-                            if not s:
-                                continue
-                        else:
-                            header = []
-                    if len(header) < 3:
-                        take = min(3 - len(header), len(s))
-                        header += [int(x) for x in s[:take]]
-                        s = s[take:]
-                        if len(header) < 3 or not s:
-                            if len(header) == 3:
-                                break
-                            continue
-                    break
-                nv, nf = header[0], header[1]
-                for _ in range(nv):
-                    fh.readline()
-                for j in range(nf):
-                    line = fh.readline().split()
-                    if line and int(line[0]) != 3:
-                        raise SShaDeError(f"{p}: face {j} has {int(line[0])} vertices; only triangle meshes are supported")
-            except SShaDeError:
-                raise
-            except Exception as e:
-                raise SShaDeError(f"{p}: unreadable OFF file ({e})") from None
+    try:
+        if ext == ".obj":
+            for i, toks in _data_lines(p):
+                if toks[0] == b"f" and len(toks) != 4:
+                    raise SShaDeError(f"{p}: line {i} is a face with {len(toks) - 1} vertices; "
+                                      "only triangle meshes are supported")
+        elif ext == ".off":
+            it = _data_lines(p)
+            _, toks = next(it)
+            if toks[0].upper().endswith(b"OFF"):
+                toks = toks[1:]
+                if not toks:
+                    _, toks = next(it)
+            nv, nf = int(toks[0]), int(toks[1])
+            for _ in range(nv):
+                next(it)
+            for j in range(nf):
+                i, toks = next(it)
+                if int(toks[0]) != 3:
+                    raise SShaDeError(f"{p}: face {j} (line {i}) has {int(toks[0])} vertices; "
+                                      "only triangle meshes are supported")
+    except SShaDeError:
+        raise
+    except (StopIteration, ValueError, IndexError) as e:
+        raise SShaDeError(f"{p}: unreadable {ext[1:].upper()} file (truncated or malformed: {e!r})") from None
 
 
 @contextlib.contextmanager
@@ -135,6 +131,9 @@ def atomic_write(path, mode: str = "w", **kw):
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

@@ -23,6 +23,25 @@ __all__ = ["deform", "deform_once", "SShaDe"]
 _W: dict = {}
 
 
+_WARM = False
+
+
+def _warmup() -> None:
+    """Compile (or load from cache) the numba kernels in this process, so forked
+    workers inherit them instead of each compiling its own."""
+    global _WARM
+    if _WARM:
+        return
+    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 4], [2, 3, 4], [3, 1, 4]])
+    from .geodesic import VoronoiState
+    st = VoronoiState(V, F)
+    st.sample(3, 0)
+    st.add([4])
+    project_to_fans(V, np.zeros(5, np.int64), V[:3], np.array([[0, 1, 2]]))
+    _WARM = True
+
+
 def _init_worker(state: dict) -> None:
     _W.clear()
     _W.update(state)
@@ -129,6 +148,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     if workers is None:
         workers = min(n_samplings, os.cpu_count() or 1)
     workers = max(1, min(int(workers), n_samplings))
+    _warmup()
     t1 = time.perf_counter()
     results: list = [None] * n_samplings
     infos: list = [None] * n_samplings

@@ -31,6 +31,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .errors import SShaDeError
 from .geodesic import VoronoiState, edge_graph
+from .validate import unique_edges
 
 __all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
 
@@ -80,18 +81,14 @@ def mesh_topology(V: np.ndarray, F: np.ndarray) -> MeshTopology:
         a, b = loop, np.roll(loop, -1)
         cone.append(np.stack([b, a, np.full(len(loop), n + li)], axis=1))
     Fc = np.concatenate(cone).astype(np.int64)
-    he = np.stack([Fc, np.roll(Fc, -1, axis=1)], axis=2).reshape(-1, 2)
-    Ec, inv = np.unique(np.sort(he, axis=1), axis=0, return_inverse=True)
-    FEc = inv.reshape(-1, 3)
-    _, dcnt = np.unique(he, axis=0, return_counts=True)
-    if (dcnt > 1).any():  # libigl returned the loop in the other direction
-        cone = [F] + [np.stack([np.asarray(l)[:], np.roll(np.asarray(l), -1), np.full(len(l), n + li)], axis=1)
+    nc = n + len(loops)
+    a, b = Fc.ravel(), np.roll(Fc, -1, axis=1).ravel()
+    if len(np.unique(a * nc + b)) != len(a):  # libigl returned a loop the other way round
+        cone = [F] + [np.stack([np.asarray(l), np.roll(np.asarray(l), -1), np.full(len(l), n + li)], axis=1)
                       for li, l in enumerate(loops)]
         Fc = np.concatenate(cone).astype(np.int64)
-        he = np.stack([Fc, np.roll(Fc, -1, axis=1)], axis=2).reshape(-1, 2)
-        Ec, inv = np.unique(np.sort(he, axis=1), axis=0, return_inverse=True)
-        FEc = inv.reshape(-1, 3)
-    nE = len(np.unique(np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0))
+    Ec, FEc = unique_edges(Fc)
+    nE = len(np.unique(np.minimum(F, np.roll(F, -1, axis=1)) * n + np.maximum(F, np.roll(F, -1, axis=1))))
     euler = n - nE + m
     vn = igl.per_vertex_normals(V, F)
     return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec.astype(np.int64), FEc=FEc.astype(np.int64), n_loops=len(loops),
@@ -252,7 +249,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
 
 def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=None,
            topology: MeshTopology | None = None, max_rounds: int = 200,
-           fix_flips: bool = True) -> RemeshResult:
+           fix_flips: bool = True, max_flip_rounds: int = 8) -> RemeshResult:
     """Topology-preserving low-resolution remesh (paper §3.1, after ReMatching).
 
     Parameters
@@ -268,6 +265,8 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     topology : precomputed :func:`mesh_topology` of ``(V, F)`` (shared between samplings).
     max_rounds : int, cap on check-and-repair rounds.
     fix_flips : bool, also add seeds where a low-res face's normal opposes the surface.
+    max_flip_rounds : int, at most this many rounds spent on flipped faces; the rest
+        are counted in ``n_flipped``.
 
     Returns
     -------
@@ -302,7 +301,7 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     flip_rounds = 0
     while rounds < max_rounds:
         rounds += 1
-        new, FN, nflip = _check(topo, st.label, st.dist, st.nseeds, V, st.seeds, fix_flips and flip_rounds < 20)
+        new, FN, nflip = _check(topo, st.label, st.dist, st.nseeds, V, st.seeds, fix_flips and flip_rounds < max_flip_rounds)
         if len(new) == 0:
             break
         if FN is not None:

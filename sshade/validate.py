@@ -34,9 +34,12 @@ def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     >>> len(E)
     5
     """
-    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
-    key = np.sort(he, axis=1)
-    E, inv = np.unique(key, axis=0, return_inverse=True)
+    n = int(F.max()) + 1 if F.size else 0
+    a = F.ravel()
+    b = np.roll(F, -1, axis=1).ravel()
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    uk, inv = np.unique(key, return_inverse=True)
+    E = np.stack([uk // n, uk % n], axis=1)
     return E.astype(np.int64), inv.reshape(-1, 3).astype(np.int64)
 
 
@@ -75,7 +78,12 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         V = np.ascontiguousarray(V, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise SShaDeError(f"{name}: vertex array is not numeric ({e})") from None
-    F = np.asarray(F)
+    try:
+        F = np.asarray(F)
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"{name}: face array is ragged or not numeric ({e}); triangles only") from None
+    if F.dtype.kind not in "iuf":
+        raise SShaDeError(f"{name}: face indices must be integers, got dtype {F.dtype}")
     if V.ndim != 2 or V.shape[1] != 3:
         raise SShaDeError(f"{name}: V must have shape (n, 3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] != 3:
@@ -112,19 +120,20 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         f = np.flatnonzero(deg)[0]
         raise SShaDeError(f"{name}: {int(deg.sum())} degenerate (zero-area) faces (first: face {f} = {F[f].tolist()})")
     sf = np.sort(F, axis=1)
-    _, first, cnt = np.unique(sf, axis=0, return_index=True, return_counts=True)
-    if (cnt > 1).any():
-        f = first[np.flatnonzero(cnt > 1)[0]]
+    order = np.lexsort((sf[:, 2], sf[:, 1], sf[:, 0]))  # no int64 overflow at any size
+    same = (sf[order[1:]] == sf[order[:-1]]).all(axis=1)
+    if same.any():
+        f = int(order[1:][same][0])
         raise SShaDeError(f"{name}: duplicate faces (first: face {f} = {F[f].tolist()})")
     # edges: count faces per undirected edge and check orientation consistency
-    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
-    key = np.sort(he, axis=1)
-    E, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    a, b = F.ravel(), np.roll(F, -1, axis=1).ravel()
+    ukey, inv, cnt = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True, return_counts=True)
+    E = np.stack([ukey // n, ukey % n], axis=1)
     inv = inv.ravel()
     if (cnt > 2).any():
         e = np.flatnonzero(cnt > 2)[0]
         raise SShaDeError(f"{name}: {int((cnt > 2).sum())} non-manifold edges shared by 3+ faces (first: edge {E[e].tolist()})")
-    _, dcnt = np.unique(he, axis=0, return_counts=True)
+    _, dcnt = np.unique(a * n + b, return_counts=True)
     if (dcnt > 1).any():
         raise SShaDeError(f"{name}: inconsistently oriented faces (a directed edge appears twice); "
                           "the mesh is non-orientable or needs its faces re-wound")
@@ -136,34 +145,40 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     if ncomp != 1:
         raise SShaDeError(f"{name}: has {ncomp} connected components; SShaDe needs a single component (paper §2)")
     # vertex manifoldness: the faces around each vertex form a single fan
-    _check_vertex_manifold(F, n, name)
+    _check_vertex_manifold(F, n, name, E, inv, cnt)
     return V, F
 
 
-def _check_vertex_manifold(F: np.ndarray, n: int, name: str) -> None:
-    """Each vertex's incident faces, linked through shared edges at that vertex, form
-    one fan. Counts, per vertex, (#incident faces) - (#interior edges at it) which is 0
-    for an interior fan, 1 for a boundary fan and >1 for several fans (pinch)."""
+def _check_vertex_manifold(F: np.ndarray, n: int, name: str, E: np.ndarray, inv: np.ndarray,
+                           cnt: np.ndarray) -> None:
+    """Each vertex's incident faces, linked through the edges they share at that vertex,
+    form one fan. Corners (face, vertex) are linked across every interior edge at both
+    its ends; a vertex whose corners fall in several connected components is a pinch
+    (e.g. two cones touching at their tips, or a closed fan plus an open one)."""
     m = len(F)
-    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
-    key = np.sort(he, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
-    nfaces = np.bincount(F.ravel(), minlength=n)
-    interior = cnt[inv] == 2
-    # each interior undirected edge appears as two half-edges: count once via key[:,0] side
-    ends = key[interior]
-    ie = np.zeros(n, np.int64)
-    np.add.at(ie, ends.ravel(), 1)
-    ie //= 2  # every interior edge was seen twice (once per half-edge)
-    bnd = ~interior
-    be = np.zeros(n, np.int64)
-    np.add.at(be, key[bnd].ravel(), 1)
-    # fans = faces - interior edges (each fan is a path/cycle of faces)
-    fans = nfaces - ie
-    # interior vertex (no boundary edges): one fan means faces == interior edges
-    closed = be == 0
-    bad = (closed & (fans != 0)) | (~closed & ((fans != 1) | (be != 2)))
+    a, b = F.ravel(), np.roll(F, -1, axis=1).ravel()  # half-edge h = 3f+k goes a[h] -> b[h]
+    corner_a = np.arange(3 * m)                       # corner of face f at a[h]
+    corner_b = (np.arange(3 * m) // 3) * 3 + (np.arange(3 * m) % 3 + 1) % 3  # corner at b[h]
+    # twin of half-edge (a->b) is (b->a) in the neighbouring face
+    key = a * n + b
+    order = np.argsort(key)
+    skey = key[order]
+    tkey = b * n + a
+    pos = np.searchsorted(skey, tkey)
+    pos = np.minimum(pos, len(skey) - 1)
+    has = skey[pos] == tkey
+    h = np.flatnonzero(has)
+    t = order[pos[has]]
+    # half-edge h (a->b) in face f and twin t (b->a) in face g:
+    # corner of f at a[h] ~ corner of g at b[t] (= a[h]); corner of f at b[h] ~ corner of g at a[t]
+    i = np.concatenate([corner_a[h], corner_b[h]])
+    j = np.concatenate([corner_b[t], corner_a[t]])
+    A = sp.coo_matrix((np.ones(len(i), np.int8), (i, j)), shape=(3 * m, 3 * m))
+    _, comp = connected_components(A, directed=False)
+    vert = F.ravel()
+    pairs = np.unique(vert.astype(np.int64) * (3 * m) + comp)
+    fans = np.bincount(pairs // (3 * m), minlength=n)
+    bad = fans > 1
     if bad.any():
         v = np.flatnonzero(bad)[0]
         raise SShaDeError(f"{name}: {int(bad.sum())} non-manifold vertices (several fans of faces meet there; first: vertex {v})")
@@ -193,8 +208,8 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
     >>> V = np.zeros((4, 3)); h, t = validate_handles(V, [0, 2], np.zeros((2, 3)))
     """
     h = np.asarray(handles)
-    if h.ndim != 1:
-        h = h.ravel() if h.size == h.shape[0] else h
+    if h.ndim == 2 and 1 in h.shape:
+        h = h.ravel()
     if h.ndim != 1 or h.size == 0:
         raise SShaDeError(f"handles must be a non-empty 1-D index array, got shape {np.shape(handles)}")
     if not np.issubdtype(h.dtype, np.integer):
