@@ -9,8 +9,9 @@ than k full Dijkstra runs. The hot loops are compiled with numba.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
+
+from ._keys import unique_int
 
 __all__ = ["edge_graph", "VoronoiState", "farthest_point_sampling"]
 
@@ -35,15 +36,13 @@ def edge_graph(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     [0, 2, 4, 6]
     """
     n = len(V)
-    i = np.concatenate([F[:, 0], F[:, 1], F[:, 2]])
-    j = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
-    A = sp.coo_matrix((np.ones(len(i), np.int8), (i, j)), shape=(n, n)).tocsr()
-    A = (A + A.T).tocsr()
-    A.sort_indices()
-    indptr = A.indptr.astype(np.int64)
-    indices = A.indices.astype(np.int64)
-    rows = np.repeat(np.arange(n), np.diff(indptr))
-    w = np.linalg.norm(V[rows] - V[indices], axis=1)
+    a = F.ravel().astype(np.int64)
+    b = np.roll(F, -1, axis=1).ravel().astype(np.int64)
+    key = unique_int(np.concatenate([a * n + b, b * n + a]))  # both directions, sorted
+    rows, indices = key // n, key % n
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    w = np.sqrt(((V[rows] - V[indices]) ** 2).sum(1))
     return indptr, indices, w
 
 
@@ -96,17 +95,18 @@ def _pop(hk, hv, size):
 @njit(cache=True)
 def _propagate(indptr, indices, weights, dist, label, src, lab, hk, hv, mk, mv, msize):
     """Incremental Dijkstra from ``src`` (new label ``lab``): visits only vertices that
-    get strictly closer. Pushes every improved vertex onto the max-heap (mk, mv) with
-    key -dist. Returns the (possibly reallocated) heaps and the max-heap size."""
+    get strictly closer. Pushes every vertex it settles onto the max-heap (mk, mv) with
+    key -dist (once per run). Returns the (possibly reallocated) heaps and the max-heap size."""
     dist[src] = 0.0
     label[src] = lab
     size = 0
     hk, hv, size = _push(hk, hv, size, 0.0, src)
-    mk, mv, msize = _push(mk, mv, msize, -0.0, src)
     while size > 0:
         d, u, size = _pop(hk, hv, size)
         if d > dist[u]:
             continue
+        # u is settled for this run: its final distance goes on the max-heap once
+        mk, mv, msize = _push(mk, mv, msize, -d, u)
         for e in range(indptr[u], indptr[u + 1]):
             v = indices[e]
             nd = d + weights[e]
@@ -114,7 +114,6 @@ def _propagate(indptr, indices, weights, dist, label, src, lab, hk, hv, mk, mv, 
                 dist[v] = nd
                 label[v] = lab
                 hk, hv, size = _push(hk, hv, size, nd, v)
-                mk, mv, msize = _push(mk, mv, msize, -nd, v)
     return hk, hv, mk, mv, msize
 
 

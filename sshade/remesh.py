@@ -31,6 +31,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .errors import SShaDeError
 from .geodesic import VoronoiState, edge_graph
+from ._keys import unique_int
 from .validate import unique_edges
 
 __all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
@@ -83,12 +84,12 @@ def mesh_topology(V: np.ndarray, F: np.ndarray) -> MeshTopology:
     Fc = np.concatenate(cone).astype(np.int64)
     nc = n + len(loops)
     a, b = Fc.ravel(), np.roll(Fc, -1, axis=1).ravel()
-    if len(np.unique(a * nc + b)) != len(a):  # libigl returned a loop the other way round
+    if len(unique_int(a * nc + b)) != len(a):  # libigl returned a loop the other way round
         cone = [F] + [np.stack([np.asarray(l), np.roll(np.asarray(l), -1), np.full(len(l), n + li)], axis=1)
                       for li, l in enumerate(loops)]
         Fc = np.concatenate(cone).astype(np.int64)
     Ec, FEc = unique_edges(Fc)
-    nE = len(np.unique(np.minimum(F, np.roll(F, -1, axis=1)) * n + np.maximum(F, np.roll(F, -1, axis=1))))
+    nE = len(unique_int((np.minimum(F, np.roll(F, -1, axis=1)) * n + np.maximum(F, np.roll(F, -1, axis=1))).ravel()))
     euler = n - nE + m
     vn = igl.per_vertex_normals(V, F)
     return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec.astype(np.int64), FEc=FEc.astype(np.int64), n_loops=len(loops),
@@ -173,8 +174,6 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     ce = np.flatnonzero(cross)
     a, b = np.minimum(EL[ce, 0], EL[ce, 1]), np.maximum(EL[ce, 0], EL[ce, 1])
     pkey = a * nlab + b
-    nd = np.unique(L, axis=None)  # placeholder to keep numpy happy on tiny meshes
-    del nd
     two = (~same_f) & ((L[:, 0] == L[:, 1]) | (L[:, 1] == L[:, 2]) | (L[:, 0] == L[:, 2]))
     f2 = np.flatnonzero(two)
     fe = FEc[f2]
@@ -185,11 +184,10 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     A = sp.coo_matrix((np.ones(len(pair_edges)), (node_of[pair_edges[:, 0]], node_of[pair_edges[:, 1]])),
                       shape=(len(ce), len(ce)))
     ncomp, comp = connected_components(A, directed=False)
-    upair, pinv, n_e = np.unique(pkey, return_inverse=True, return_counts=True)
+    upair, pinv, n_e = unique_int(pkey, return_inverse=True, return_counts=True)
     n_f2 = np.bincount(pinv[node_of[pair_edges[:, 0]]], minlength=len(upair))
-    comps = np.bincount(pinv[np.unique(comp, return_index=True)[1]], minlength=len(upair))
     # number of distinct components per pair
-    pc = np.unique(pinv * (ncomp + 1) + comp)
+    pc = unique_int(pinv * (ncomp + 1) + comp)
     comps = np.bincount(pc // (ncomp + 1), minlength=len(upair))
     bad_p = np.flatnonzero((n_e - n_f2 != 1) | (comps != 1))
     if len(bad_p):
@@ -205,7 +203,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     f3 = np.flatnonzero(three)
     S = np.sort(L[f3], axis=1)
     tkey = (S[:, 0] * nlab + S[:, 1]) * nlab + S[:, 2]
-    utri, tinv, tcnt = np.unique(tkey, return_inverse=True, return_counts=True)
+    utri, tinv, tcnt = unique_int(tkey, return_inverse=True, return_counts=True)
     bad_t = np.flatnonzero(tcnt != 1)
     if len(bad_t):
         badmask = np.isin(tinv, bad_t)
@@ -215,7 +213,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
         cand.append(_group_argmax(g[keep], vv[keep], dist))
 
     if cand:
-        c = np.unique(np.concatenate(cand))
+        c = unique_int(np.concatenate(cand))
         return c, None, -1
 
     # Closed-ball property holds: the nerve. Drop faces touching cone vertices.

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from ._keys import unique_int
 from .errors import SShaDeError
 
 __all__ = ["validate_mesh", "validate_handles", "unique_edges"]
@@ -38,7 +39,7 @@ def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = F.ravel()
     b = np.roll(F, -1, axis=1).ravel()
     key = np.minimum(a, b) * n + np.maximum(a, b)
-    uk, inv = np.unique(key, return_inverse=True)
+    uk, inv = unique_int(key, return_inverse=True)
     E = np.stack([uk // n, uk % n], axis=1)
     return E.astype(np.int64), inv.reshape(-1, 3).astype(np.int64)
 
@@ -127,13 +128,13 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         raise SShaDeError(f"{name}: duplicate faces (first: face {f} = {F[f].tolist()})")
     # edges: count faces per undirected edge and check orientation consistency
     a, b = F.ravel(), np.roll(F, -1, axis=1).ravel()
-    ukey, inv, cnt = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True, return_counts=True)
+    ukey, inv, cnt = unique_int(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True, return_counts=True)
     E = np.stack([ukey // n, ukey % n], axis=1)
     inv = inv.ravel()
     if (cnt > 2).any():
         e = np.flatnonzero(cnt > 2)[0]
         raise SShaDeError(f"{name}: {int((cnt > 2).sum())} non-manifold edges shared by 3+ faces (first: edge {E[e].tolist()})")
-    _, dcnt = np.unique(a * n + b, return_counts=True)
+    _, dcnt = unique_int(a * n + b, return_counts=True)
     if (dcnt > 1).any():
         raise SShaDeError(f"{name}: inconsistently oriented faces (a directed edge appears twice); "
                           "the mesh is non-orientable or needs its faces re-wound")
@@ -176,7 +177,7 @@ def _check_vertex_manifold(F: np.ndarray, n: int, name: str, E: np.ndarray, inv:
     A = sp.coo_matrix((np.ones(len(i), np.int8), (i, j)), shape=(3 * m, 3 * m))
     _, comp = connected_components(A, directed=False)
     vert = F.ravel()
-    pairs = np.unique(vert.astype(np.int64) * (3 * m) + comp)
+    pairs = unique_int(vert.astype(np.int64) * (3 * m) + comp)
     fans = np.bincount(pairs // (3 * m), minlength=n)
     bad = fans > 1
     if bad.any():

@@ -1,0 +1,192 @@
+"""The evaluator: every method on every case, metrics, tables (Hydra app).
+
+Usage (from the repository root)::
+
+    python -m eval dataset=faust dataset.root=../shared/data/faust_reg
+    python -m eval experiment=ci dataset.root=DIR             # 2 cases, small settings
+    python -m eval dataset.root=DIR methods=[ARAP,Elastic] out_dir=/tmp/run
+
+Config: ``conf/config.yaml`` (+ ``conf/dataset/faust.yaml``, ``conf/experiment/*.yaml``).
+For each case (:mod:`eval.datasets`) and each method (:mod:`eval.methods`) the
+``deform`` call is timed with :func:`time.perf_counter`, the result is scored with
+:func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
+:func:`eval.metrics.ground_truth_metrics`. A method that raises
+:class:`~sshade.errors.SShaDeError` on a case gets its message in the ``error`` column
+and the run goes on. Outputs in ``out_dir`` (default ``results/<experiment.name>``):
+``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
+(:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
+``.hydra/`` folder. All tables and ``run.json`` are written atomically.
+
+Exit status: 0 on success (even if some method failed on some case), 2 on a
+configuration or input error (one ``error: ...`` line on stderr).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["CONF_DIR", "run", "main"]
+
+CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+
+log = logging.getLogger("eval")
+
+
+def _abs(path) -> Path:
+    """Resolve ``path`` against the directory the command was started from."""
+    from hydra.utils import to_absolute_path
+    return Path(to_absolute_path(str(Path(str(path)).expanduser()))).resolve()
+
+
+def _dataset_root(cfg) -> Path:
+    from omegaconf import OmegaConf
+    ds = cfg.get("dataset")
+    if ds is None:
+        raise SShaDeError("no dataset configured; pass dataset=faust dataset.root=DIR")
+    if OmegaConf.is_missing(ds, "root") or ds.get("root") in (None, ""):
+        raise SShaDeError("dataset.root is not set: pass dataset.root=DIR, a folder with FAUST "
+                          "registrations tr_reg_XYZ.ply (e.g. dataset.root=../shared/data/faust_reg)")
+    root = _abs(ds.root)
+    if not root.is_dir():
+        raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}")
+    return root
+
+
+def _metric_functions():
+    try:
+        from .metrics import deformation_metrics, ground_truth_metrics
+    except ImportError as e:
+        raise SShaDeError(f"eval.metrics is not available ({e})") from None
+    return deformation_metrics, ground_truth_metrics
+
+
+_SKIP = object()
+
+
+def _scalar(v):
+    """Method info value -> a CSV cell: scalars as they are, flat lists/arrays of
+    scalars as JSON (e.g. SShaDe's per-sampling seeds); nested structures (per-sampling
+    dicts) are left out of the table (their sums are separate info keys)."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return v
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    if isinstance(v, (list, tuple)) and all(
+            x is None or isinstance(x, (bool, int, float, str, np.generic)) for x in v):
+        return json.dumps([x.item() if isinstance(x, np.generic) else x for x in v])
+    return _SKIP
+
+
+def run(cfg) -> dict:
+    """Run the evaluation described by ``cfg`` (an OmegaConf DictConfig).
+
+    Returns
+    -------
+    dict with ``out_dir`` (Path), ``paths`` (name -> Path of the written files),
+    ``n_cases``, ``n_errors`` and ``summary`` (per-method DataFrame).
+
+    Raises
+    ------
+    SShaDeError on a configuration or input problem (missing dataset.root, no cases,
+    unknown method, ...), before any method runs.
+    """
+    t_start = time.perf_counter()
+    root = _dataset_root(cfg)  # fail fast, before the heavier imports
+
+    import pandas as pd
+    from omegaconf import OmegaConf
+    from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
+    from .datasets import load_cases
+    from .methods import make_methods
+    from .runinfo import collect_runinfo, write_runinfo
+    from .tables import summarize, to_markdown, write_cases, write_tables
+
+    out_dir = _abs(cfg.out_dir)
+    methods = make_methods(cfg)
+    deformation_metrics, ground_truth_metrics = _metric_functions()
+    ds = cfg.dataset
+    name = str(ds.get("name", "faust"))
+    opts = {k: ds.get(k) for k in ("subjects", "poses", "n_per_landmark", "neighbourhood",
+                                   "static_threshold", "seed", "limit") if k in ds}
+    for k in ("subjects", "poses"):
+        if opts.get(k) is not None and OmegaConf.is_config(opts[k]):
+            opts[k] = OmegaConf.to_container(opts[k])
+    cases = load_cases(name, root, **opts)
+    log.info("%d case(s) from %s; methods %s; output %s", len(cases), root,
+             [m.name for m in methods], out_dir)
+
+    config = OmegaConf.to_container(cfg, resolve=True)
+    config["dataset"]["root"] = str(root)
+    seeds = {"dataset": ds.get("seed"), "sshade": cfg.get("sshade", {}).get("seed"),
+             "cases": {c.name: c.seed for c in cases}}
+    info = collect_runinfo(config, seeds=seeds, extra={"status": "running", "out_dir": str(out_dir)})
+    write_runinfo(out_dir / "run.json", info)
+
+    rows: list[dict] = []
+    with logging_redirect_tqdm():
+        for case in tqdm(cases, desc="cases", unit="case", file=sys.stderr, dynamic_ncols=True):
+            for m in methods:
+                row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": m.name,
+                       "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
+                       "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
+                       "case_seed": case.seed, "error": ""}
+                try:
+                    t0 = time.perf_counter()
+                    Vd = m.deform(case.V, case.F, case.handles, case.targets)
+                    row["time_s"] = time.perf_counter() - t0
+                    Vd = np.asarray(Vd, np.float64)
+                    row.update(deformation_metrics(case.V, Vd, case.F, case.handles, case.targets))
+                    if getattr(case, "V_gt", None) is not None:
+                        row.update(ground_truth_metrics(Vd, case.F, case.V_gt))
+                    for k, v in (getattr(m, "info", None) or {}).items():
+                        v = _scalar(v)
+                        if v is not _SKIP:
+                            row[k if k not in row else f"info_{k}"] = v
+                    log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", case.name, m.name,
+                             row["time_s"], row.get("volume_err_pct", math.nan),
+                             row.get("edge_err_pct", math.nan), row.get("angle_err_deg", math.nan))
+                except SShaDeError as e:
+                    row["error"] = str(e) or type(e).__name__
+                    log.warning("%s %s failed: %s", case.name, m.name, row["error"])
+                rows.append(row)
+            write_cases(pd.DataFrame(rows), out_dir)  # partial results survive a crash
+
+    df = pd.DataFrame(rows)
+    exp = cfg.get("experiment", {}).get("name", name)
+    title = f"{exp}: {len(cases)} {name} case(s), mean over successful cases"
+    paths = write_tables(df, out_dir, title=title)
+    summ = summarize(df)
+    n_err = int((df["error"].astype(str).str.len() > 0).sum())
+    info.update(status="done", n_cases=len(cases), n_rows=len(df), n_errors=n_err,
+                wall_s=round(time.perf_counter() - t_start, 3),
+                outputs={k: Path(v).name for k, v in paths.items()})
+    paths["run_json"] = write_runinfo(out_dir / "run.json", info)
+    print(to_markdown(summ, title=title))
+    print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {out_dir}")
+    return {"out_dir": out_dir, "paths": paths, "n_cases": len(cases), "n_errors": n_err, "summary": summ}
+
+
+def _main(cfg) -> None:
+    try:
+        run(cfg)
+    except SShaDeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def main() -> None:
+    """Console entry point (``python -m eval``): Hydra parses the overrides."""
+    import hydra
+    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(_main)()

@@ -1,0 +1,30 @@
+"""Datasets of deformation cases for the evaluator.
+
+- :mod:`eval.datasets.faust`: FAUST registrations -> DeFAUST-style cases
+  (:func:`~eval.datasets.faust.faust_cases`).
+
+:func:`load_cases` dispatches on ``dataset.name`` from the Hydra config.
+"""
+from __future__ import annotations
+
+from sshade.errors import SShaDeError
+
+from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
+
+__all__ = ["Case", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases", "DATASETS"]
+
+DATASETS = ("faust",)
+
+
+def load_cases(name: str, root, **kw) -> list[Case]:
+    """Cases of dataset ``name`` (one of :data:`DATASETS`) found under ``root``.
+
+    Keyword arguments go to the dataset's builder (e.g. :func:`faust_cases`).
+
+    Raises
+    ------
+    SShaDeError on an unknown dataset name or whatever the builder raises.
+    """
+    if name == "faust":
+        return faust_cases(root, **kw)
+    raise SShaDeError(f"unknown dataset {name!r}; available: {list(DATASETS)}")

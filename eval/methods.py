@@ -1,0 +1,119 @@
+"""Build the deformation methods named in the evaluator's config.
+
+Names (case-insensitive): ``ARAP`` (spokes, Sorkine & Alexa 2007), ``Elastic``
+(spokes and rims, Chao et al. 2010) from :mod:`baselines`, and ``SShaDe`` from
+:mod:`sshade`, imported lazily so the baselines run without it.
+
+Config keys read (see ``conf/config.yaml``)::
+
+    methods: [ARAP, Elastic, SShaDe]
+    arap:   {tol: 1e-4, max_iter: 1000}          # ARAP, Elastic, and SShaDe's low-res ARAP
+    sshade: {n_low: 1000, n_samplings: 5, seed: 0, workers: null, gradient: normalized}
+            # optional sshade.tol / sshade.max_iter override the arap values for SShaDe
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from sshade.errors import SShaDeError
+
+__all__ = ["METHODS", "make_methods", "canonical_name"]
+
+METHODS = ("ARAP", "Elastic", "SShaDe")
+
+
+def canonical_name(name) -> str:
+    """``"arap"`` -> ``"ARAP"`` etc.; raises SShaDeError on an unknown name."""
+    key = str(name).strip().lower()
+    for m in METHODS:
+        if m.lower() == key:
+            return m
+    raise SShaDeError(f"unknown method {name!r}; choose among {list(METHODS)}")
+
+
+def _get(cfg, key, default=None):
+    if cfg is None:
+        return default
+    if isinstance(cfg, Mapping) or hasattr(cfg, "get"):
+        v = cfg.get(key, default)
+        return default if v is None and default is not None else v
+    return getattr(cfg, key, default)
+
+
+def make_methods(cfg) -> list:
+    """Instantiate the methods listed in ``cfg.methods``, in that order.
+
+    Parameters
+    ----------
+    cfg : OmegaConf DictConfig or plain mapping with ``methods`` (list of names) and
+        optional ``arap`` / ``sshade`` sections (defaults as in the module docstring).
+
+    Returns
+    -------
+    list of objects implementing :class:`sshade.method.Deformer`.
+
+    Raises
+    ------
+    SShaDeError
+        Empty or non-list ``methods``, unknown or repeated name, bad parameter values,
+        or ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
+
+    Examples
+    --------
+    >>> [m.name for m in make_methods({"methods": ["ARAP", "elastic"]})]
+    ['ARAP', 'Elastic']
+    """
+    names = _get(cfg, "methods")
+    if isinstance(names, str):
+        names = [n for n in names.replace(",", " ").split() if n]
+    try:
+        names = list(names) if names is not None else []
+    except TypeError:
+        raise SShaDeError(f"methods must be a list of names among {list(METHODS)}, got {names!r}") from None
+    if not names:
+        raise SShaDeError(f"methods is empty; choose among {list(METHODS)}")
+    canon = [canonical_name(n) for n in names]
+    dup = {n for n in canon if canon.count(n) > 1}
+    if dup:
+        raise SShaDeError(f"method(s) listed twice: {sorted(dup)}")
+
+    arap = _get(cfg, "arap", {}) or {}
+    try:
+        tol = float(_get(arap, "tol", 1e-4))
+        max_iter = int(_get(arap, "max_iter", 1000))
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"bad arap parameters: {e}") from None
+    if not (tol > 0) or max_iter < 1:
+        raise SShaDeError(f"arap.tol must be > 0 and arap.max_iter >= 1, got tol={tol}, max_iter={max_iter}")
+
+    out = []
+    for n in canon:
+        if n == "ARAP":
+            from baselines import ARAP
+            out.append(ARAP(tol=tol, max_iter=max_iter))
+        elif n == "Elastic":
+            from baselines import Elastic
+            out.append(Elastic(tol=tol, max_iter=max_iter))
+        else:
+            out.append(_make_sshade(_get(cfg, "sshade", {}) or {}, tol, max_iter))
+    return out
+
+
+def _make_sshade(sc, tol: float, max_iter: int):
+    try:
+        from sshade import SShaDe
+    except ImportError as e:
+        raise SShaDeError(f"method SShaDe is not available (cannot import sshade.SShaDe: {e}); "
+                          "run with methods=[ARAP,Elastic] meanwhile") from None
+    workers = _get(sc, "workers")
+    try:
+        kw = dict(n_low=int(_get(sc, "n_low", 1000)),
+                  n_samplings=int(_get(sc, "n_samplings", 5)),
+                  seed=int(_get(sc, "seed", 0)),
+                  workers=None if workers is None else int(workers),
+                  tol=float(_get(sc, "tol", tol)),
+                  max_iter=int(_get(sc, "max_iter", max_iter)),
+                  gradient=str(_get(sc, "gradient", "normalized")))
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"bad sshade parameters: {e}") from None
+    return SShaDe(**kw)

@@ -1,0 +1,107 @@
+"""Provenance of an evaluation run, written as ``run.json`` beside the tables.
+
+Records: the resolved config, the seeds used (dataset seed, per-case handle seeds,
+method seeds), the git commit of the project (and whether the tree had local changes),
+the Python version, the platform and the versions of the numerical packages (numpy,
+scipy, libigl, pymeshlab, trimesh, pandas, hydra-core, omegaconf, numba, tqdm).
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import subprocess
+import sys
+from importlib import metadata
+from pathlib import Path
+
+from defaust.meshio import atomic_write
+
+__all__ = ["PACKAGES", "package_versions", "git_info", "collect_runinfo", "write_runinfo"]
+
+#: distribution name -> import name (for a fallback ``__version__``).
+PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
+            "trimesh": "trimesh", "pandas": "pandas", "hydra-core": "hydra", "omegaconf": "omegaconf",
+            "numba": "numba", "tqdm": "tqdm"}
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def package_versions() -> dict[str, str | None]:
+    """Installed version of each package in :data:`PACKAGES` (None when absent)."""
+    out: dict[str, str | None] = {}
+    for dist, mod in PACKAGES.items():
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            try:
+                out[dist] = str(getattr(__import__(mod), "__version__", None))
+            except Exception:
+                out[dist] = None
+    return out
+
+
+def git_info(root=REPO_ROOT) -> dict:
+    """``{"commit": sha or None, "dirty": bool or None}`` of the git checkout at ``root``."""
+    def git(*args):
+        r = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
+        return r.stdout.strip() if r.returncode == 0 else None
+    try:
+        sha = git("rev-parse", "HEAD")
+        status = git("status", "--porcelain") if sha else None
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "dirty": None}
+    return {"commit": sha, "dirty": None if status is None else bool(status)}
+
+
+def collect_runinfo(config: dict, *, seeds: dict | None = None, extra: dict | None = None) -> dict:
+    """Provenance dict (JSON-serialisable).
+
+    Parameters
+    ----------
+    config : the resolved config as plain containers
+        (``OmegaConf.to_container(cfg, resolve=True)``).
+    seeds : seeds used, e.g. ``{"dataset": 0, "sshade": 0, "cases": {"s0_p1": 123}}``.
+    extra : anything else to record (status, timings, output paths).
+    """
+    info = {
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "command": _command(),
+        "cwd": os.getcwd(),
+        "config": config,
+        "seeds": seeds or {},
+        "git": git_info(),
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "packages": package_versions(),
+    }
+    if extra:
+        info.update(extra)
+    return info
+
+
+def write_runinfo(path, info: dict) -> Path:
+    """Write ``info`` as indented JSON to ``path`` atomically; returns the path."""
+    path = Path(path)
+    with atomic_write(path, "w") as fh:
+        json.dump(info, fh, indent=2, sort_keys=False, default=_jsonable)
+        fh.write("\n")
+    return path
+
+
+def _command() -> list[str]:
+    """The command line, with ``python -m eval`` instead of the path of ``__main__.py``."""
+    prog = Path(sys.argv[0]) if sys.argv and sys.argv[0] else Path("python")
+    head = ["python", "-m", prog.parent.name] if prog.name == "__main__.py" else [prog.name]
+    return [*head, *sys.argv[1:]]
+
+
+def _jsonable(o):
+    """Fallback for numpy scalars/arrays and paths."""
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    return repr(o)

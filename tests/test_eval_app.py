@@ -1,0 +1,269 @@
+"""The Hydra evaluator end to end (eval/app.py) and its parts: config, method factory,
+tables, run record."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.app import CONF_DIR
+from eval.methods import make_methods
+from eval.tables import summarize, to_latex, to_markdown, write_tables
+from sshade.errors import SShaDeError
+
+ROOT = Path(__file__).resolve().parents[1]
+METRICS = ["volume_err_pct", "area_err_pct", "edge_err_pct", "angle_err_deg", "angle_err_rel_pct",
+           "handle_err_pct", "gt_vertex_mean_pct", "gt_vertex_max_pct", "hausdorff", "chamfer", "time_s"]
+
+
+def _has_sshade() -> bool:
+    try:
+        from sshade import SShaDe  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@pytest.fixture(scope="module")
+def faust_root(shared_data):
+    root = shared_data / "faust_reg"
+    if not (root / "tr_reg_000.ply").is_file() or not list(root.glob("tr_reg_00[1-9].ply")):
+        pytest.skip(f"FAUST subject 0 rest + one pose not found in {root}")
+    return root
+
+
+def _run(args, cwd, timeout=300):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-m", "eval", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def _compose(overrides):
+    from hydra import compose, initialize_config_dir
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+# ---------------------------------------------------------------- end to end
+
+def test_app_end_to_end(tmp_path, faust_root):
+    """One FAUST case, ARAP and Elastic, relative dataset.root and out_dir resolved
+    against the directory the command runs from."""
+    (tmp_path / "faust").symlink_to(faust_root, target_is_directory=True)
+    r = _run(["dataset=faust", "dataset.root=faust", "dataset.limit=1", "methods=[ARAP,Elastic]",
+              "arap.tol=1e-3", "out_dir=out"], cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = tmp_path / "out"
+    for f in ("cases.csv", "table.csv", "table.md", "table.tex", "run.json"):
+        assert (out / f).is_file(), f
+    assert not list(out.glob("*.tmp")) and not list(out.glob(".*.tmp"))
+    assert not (tmp_path / "outputs").exists()  # Hydra's files stay under out_dir
+    assert (out / ".hydra" / "config.yaml").is_file()
+
+    cases = pd.read_csv(out / "cases.csv", keep_default_na=False)
+    assert len(cases) == 2 and cases["method"].tolist() == ["ARAP", "Elastic"]
+    assert (cases["error"] == "").all()
+    assert cases["case"].nunique() == 1 and (cases["n_vertices"] == 6890).all()
+    assert (cases["n_handles"] == cases["n_static"] + cases["n_dynamic"]).all()
+
+    table = pd.read_csv(out / "table.csv")
+    assert table["method"].tolist() == ["ARAP", "Elastic"]
+    assert (table["n_cases"] == 1).all() and (table["n_failed"] == 0).all()
+    for c in METRICS:
+        assert np.isfinite(table[c]).all(), c
+    assert (table["time_s"] > 0).all()
+    assert (table["handle_err_pct"] < 1e-3).all()  # handles reach their targets
+
+    md = (out / "table.md").read_text()
+    assert "| ARAP |" in md and "| Elastic |" in md
+    tex = (out / "table.tex").read_text()
+    assert "\\toprule" in tex and "\\bottomrule" in tex and "\\textdegree" in tex and "\\%" in tex
+    assert tex.index("ARAP &") < tex.index("Elastic &")
+    assert "Method & Volume & Area & EL & FA & Time" in tex
+
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "done" and run["n_errors"] == 0
+    assert Path(run["config"]["dataset"]["root"]) == (tmp_path / "faust").resolve()
+    assert run["config"]["methods"] == ["ARAP", "Elastic"]
+    assert run["seeds"]["dataset"] == 0 and list(run["seeds"]["cases"]) == cases["case"].unique().tolist()
+    assert run["seeds"]["cases"][cases["case"][0]] == int(cases["case_seed"][0])
+    for pkg in ("numpy", "scipy", "libigl", "pymeshlab", "trimesh", "pandas", "hydra-core", "numba"):
+        assert run["packages"][pkg], pkg
+    assert "commit" in run["git"] and run["python"].count(".") == 2
+    assert "ARAP" in r.stdout  # the table is printed
+
+
+@pytest.mark.skipif(not _has_sshade(), reason="sshade.SShaDe not available yet")
+def test_app_runs_sshade(tmp_path, faust_root):
+    r = _run([f"dataset.root={faust_root}", "dataset.limit=1", "methods=[SShaDe]", "sshade.n_samplings=1",
+              "sshade.n_low=500", f"out_dir={tmp_path}"], cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    cases = pd.read_csv(tmp_path / "cases.csv", keep_default_na=False)
+    assert cases["method"].tolist() == ["SShaDe"] and cases["error"].tolist() == [""]
+    for c in METRICS + ["remesh_s", "arap_s", "transfer_s", "total_s"]:
+        assert math.isfinite(float(cases[c][0])), c
+
+
+@pytest.mark.parametrize("args, message", [
+    ([], "dataset.root is not set"),
+    (["dataset.root=does/not/exist"], "does/not/exist"),
+])
+def test_bad_dataset_root_is_one_clear_error(tmp_path, args, message):
+    r = _run([*args, "out_dir=out"], cwd=tmp_path, timeout=120)
+    assert r.returncode == 2
+    assert message in r.stderr
+    assert "Traceback" not in r.stderr and "Traceback" not in r.stdout
+    err_lines = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(err_lines) == 1 and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("override, message", [
+    ("dataset.root=", "dataset.root is not set"),
+    ("dataset.root=null", "dataset.root is not set"),
+    ("dataset.root={tmp}", "no FAUST registrations"),
+    ("dataset.root={tmp}/missing", "does not exist"),
+    ("methods=[ARAP,Nope]", "unknown method"),
+])
+def test_bad_config_raises_before_work(tmp_path, faust_root, override, message):
+    from eval.app import run
+    over = override.format(tmp=tmp_path)
+    base = [] if over.startswith("dataset.root") else [f"dataset.root={faust_root}"]
+    cfg = _compose([*base, over, f"out_dir={tmp_path / 'out'}"])
+    with pytest.raises(SShaDeError, match=message):
+        run(cfg)
+    assert not (tmp_path / "out").exists()
+
+
+def test_method_failure_is_recorded_and_run_continues(tmp_path, faust_root, monkeypatch):
+    """A method raising SShaDeError on a case gets an `error` entry; the others go on."""
+    import eval.methods as em
+    from eval.app import run
+
+    class Broken:
+        name = "Broken"
+        info: dict = {}
+
+        def deform(self, V, F, handles, targets):
+            raise SShaDeError("boom: refused on purpose")
+
+    class Identity:
+        name = "Identity"
+        info: dict = {}
+
+        def deform(self, V, F, handles, targets):
+            self.info = {"iterations": 0, "seeds": [1, 2]}
+            Vd = V.copy()
+            Vd[handles] = targets
+            return Vd
+
+    monkeypatch.setattr(em, "make_methods", lambda cfg: [Broken(), Identity()])
+    cfg = _compose([f"dataset.root={faust_root}", "dataset.limit=1", f"out_dir={tmp_path}"])
+    res = run(cfg)
+    assert res["n_errors"] == 1
+    cases = pd.read_csv(tmp_path / "cases.csv", keep_default_na=False)
+    assert cases.set_index("method").loc["Broken", "error"] == "boom: refused on purpose"
+    assert cases.set_index("method").loc["Identity", "error"] == ""
+    assert json.loads(cases.set_index("method").loc["Identity", "seeds"]) == [1, 2]
+    table = pd.read_csv(tmp_path / "table.csv").set_index("method")
+    assert table.loc["Broken", "n_failed"] == 1 and table.loc["Broken", "n_cases"] == 0
+    assert np.isnan(table.loc["Broken", "volume_err_pct"])
+    assert np.isfinite(table.loc["Identity", "volume_err_pct"])
+
+
+# ---------------------------------------------------------------- config
+
+def test_config_defaults_and_ci_experiment():
+    cfg = _compose(["dataset.root=x"])
+    assert list(cfg.methods) == ["ARAP", "Elastic", "SShaDe"]
+    assert cfg.arap.tol == pytest.approx(1e-4) and isinstance(cfg.arap.tol, float) and cfg.arap.max_iter == 1000
+    assert dict(cfg.sshade) == {"n_low": 1000, "n_samplings": 5, "seed": 0, "workers": None, "gradient": "normalized"}
+    d = cfg.dataset
+    assert (d.name, d.subjects, d.poses, d.n_per_landmark, d.neighbourhood, d.static_threshold, d.seed, d.limit) == \
+        ("faust", None, None, 30, 90, 0.02, 0, None)
+    assert cfg.experiment.name == "faust" and cfg.out_dir == "results/faust"
+    ci = _compose(["experiment=ci", "dataset.root=x"])
+    assert ci.experiment.name == "ci" and ci.out_dir == "results/ci"
+    assert ci.dataset.limit == 2 and ci.sshade.n_samplings == 2
+    from omegaconf import OmegaConf
+    assert OmegaConf.is_missing(_compose([]).dataset, "root")
+
+
+def test_make_methods():
+    ms = make_methods({"methods": ["arap", "Elastic"], "arap": {"tol": 1e-3, "max_iter": 7}})
+    assert [m.name for m in ms] == ["ARAP", "Elastic"]
+    assert all(m.tol == 1e-3 and m.max_iter == 7 for m in ms)
+    with pytest.raises(SShaDeError, match="unknown method"):
+        make_methods({"methods": ["ARAP", "Foo"]})
+    with pytest.raises(SShaDeError, match="twice"):
+        make_methods({"methods": ["ARAP", "arap"]})
+    with pytest.raises(SShaDeError, match="empty"):
+        make_methods({"methods": []})
+    with pytest.raises(SShaDeError, match="max_iter"):
+        make_methods({"methods": ["ARAP"], "arap": {"max_iter": 0}})
+
+
+@pytest.mark.skipif(not _has_sshade(), reason="sshade.SShaDe not available yet")
+def test_make_methods_sshade_from_config():
+    cfg = _compose(["dataset.root=x", "sshade.n_low=321", "sshade.workers=1"])
+    m = make_methods(cfg)[-1]
+    assert m.name == "SShaDe"
+    params = getattr(m, "params", None)
+    if params is not None:
+        assert params["n_low"] == 321 and params["workers"] == 1 and params["n_samplings"] == 5
+        assert params["tol"] == pytest.approx(1e-4) and params["max_iter"] == 1000
+
+
+# ---------------------------------------------------------------- tables
+
+def _rows():
+    rows = []
+    vals = {"SShaDe": (2.0, 0.5, 1.2, 2.1, 0.8), "ARAP": (12.0, 0.4, 0.3, 0.5, 400.0),
+            "Elastic": (11.0, 0.4, 0.4, 0.6, 500.0)}
+    for case in ("s0_p1", "s0_p2"):
+        for m, (v, a, e, f, t) in vals.items():
+            rows.append(dict(case=case, subject=0, pose=int(case[-1]), method=m, n_vertices=10, n_handles=3,
+                             n_static=0, volume_err_pct=v, area_err_pct=a, edge_err_pct=e, angle_err_deg=f,
+                             time_s=t, iterations=10, converged=True, error=""))
+    rows.append(dict(case="s0_p3", subject=0, pose=3, method="ARAP", n_vertices=10, n_handles=3, n_static=0,
+                     error="SShaDeError: nope"))
+    return pd.DataFrame(rows)
+
+
+def test_summary_order_failures_and_means():
+    s = summarize(_rows())
+    assert s["method"].tolist() == ["ARAP", "Elastic", "SShaDe"]
+    a = s.set_index("method").loc["ARAP"]
+    assert a["n_cases"] == 2 and a["n_failed"] == 1 and a["volume_err_pct"] == 12.0 and a["converged"] == 1.0
+    assert "subject" not in s.columns and "case" not in s.columns
+
+
+def test_latex_and_markdown_tables():
+    s = summarize(_rows())
+    tex = to_latex(s)
+    lines = [ln for ln in tex.splitlines() if ln.endswith("\\\\")]
+    assert lines[0] == "Method & Volume & Area & EL & FA & Time \\\\"
+    assert lines[1].startswith("ARAP & 12.00\\% & \\textbf{0.40\\%} & \\textbf{0.30\\%} & \\textbf{0.500\\textdegree}")
+    assert lines[2].startswith("Elastic & 11.00\\% & \\textbf{0.40\\%}")  # ties are all bold
+    assert lines[3] == "SShaDe & \\textbf{2.00\\%} & 0.50\\% & 1.20\\% & 2.100\\textdegree & \\textbf{0.80s} \\\\"
+    md = to_markdown(s)
+    assert "| Method | Cases | Failed | Volume (%) | Area (%) | EL (%) | FA (deg) | Time (s) |" in md
+    assert "| SShaDe | 2 | 0 | **2.00** | 0.50 | 1.20 | 2.100 | **0.80** |" in md
+    assert "| ARAP | 2 | 1 | 12.00 | **0.40** | **0.30** | **0.500** | 400.00 |" in md
+    # a missing value prints as --
+    s2 = s.copy()
+    s2.loc[0, "angle_err_deg"] = float("nan")
+    assert "ARAP & 12.00\\% & \\textbf{0.40\\%} & \\textbf{0.30\\%} & -- &" in to_latex(s2)
+
+
+def test_write_tables_atomic(tmp_path):
+    paths = write_tables(_rows(), tmp_path / "t")
+    assert {p.name for p in paths.values()} == {"cases.csv", "table.csv", "table.md", "table.tex"}
+    assert sorted(x.name for x in (tmp_path / "t").iterdir()) == ["cases.csv", "table.csv", "table.md", "table.tex"]
+    assert len(pd.read_csv(paths["cases"])) == 7
