@@ -8,7 +8,7 @@ Config keys read (see ``conf/config.yaml``)::
 
     methods: [ARAP, Elastic, SShaDe]
     arap:   {tol: 1e-4, max_iter: 1000}          # ARAP, Elastic, and SShaDe's low-res ARAP
-    sshade: {n_low: 1000, n_samplings: 5, seed: 0, workers: null, gradient: normalized}
+    sshade: {n_low: 1000, n_samplings: 5, seed: 0, workers: null, gradient: normalized, warm_start: true}
             # optional sshade.tol / sshade.max_iter override the arap values for SShaDe
 """
 from __future__ import annotations
@@ -113,7 +113,8 @@ def _make_sshade(sc, tol: float, max_iter: int):
                   workers=None if workers is None else int(workers),
                   tol=float(_get(sc, "tol", tol)),
                   max_iter=int(_get(sc, "max_iter", max_iter)),
-                  gradient=str(_get(sc, "gradient", "normalized")))
+                  gradient=str(_get(sc, "gradient", "normalized")),
+                  warm_start=bool(_get(sc, "warm_start", True)))
     except (TypeError, ValueError) as e:
         raise SShaDeError(f"bad sshade parameters: {e}") from None
     return SShaDe(**kw)
