@@ -183,7 +183,8 @@ def test_config_defaults_and_ci_experiment():
     cfg = _compose(["dataset.root=x"])
     assert list(cfg.methods) == ["ARAP", "Elastic", "SShaDe"]
     assert cfg.arap.tol == pytest.approx(1e-4) and isinstance(cfg.arap.tol, float) and cfg.arap.max_iter == 1000
-    assert dict(cfg.sshade) == {"n_low": 1000, "n_samplings": 5, "seed": 0, "workers": None, "gradient": "normalized"}
+    assert dict(cfg.sshade) == {"n_low": 1000, "n_samplings": 5, "seed": 0, "workers": None, "gradient": "normalized",
+                                 "warm_start": True}
     d = cfg.dataset
     assert (d.name, d.subjects, d.poses, d.n_per_landmark, d.neighbourhood, d.static_threshold, d.seed, d.limit) == \
         ("faust", None, None, 30, 90, 0.02, 0, None)
