@@ -180,7 +180,11 @@ def run(cfg) -> dict:
 
 def _main(cfg) -> None:
     try:
-        run(cfg)
+        if cfg.get("experiment", {}).get("kind", "cases") == "scaling":
+            from .scaling import run_scaling
+            run_scaling(cfg)
+        else:
+            run(cfg)
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -82,7 +82,7 @@ class ArapResult:
 
 def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
                 energy: str = "spokes_and_rims", tol: float = 1e-4, max_iter: int = 1000,
-                V0: np.ndarray | None = None) -> ArapResult:
+                V0: np.ndarray | None = None, time_budget_s: float | None = None) -> ArapResult:
     """Handle-driven ARAP deformation run to convergence (paper §4.1 protocol).
 
     Parameters
@@ -96,6 +96,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     max_iter : int, iteration cap (paper: 1000).
     V0 : (n, 3) float64 or None, initial guess; default the best rigid fit of the
         handles (:func:`rigid_fit`) applied to ``V``.
+    time_budget_s : float or None, stop (unconverged) once the iterations have taken
+        this many seconds (for benchmarks of slow full-resolution runs).
 
     Returns
     -------
@@ -149,6 +151,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         U = Un
         if move < thresh:
             converged = True
+            break
+        if time_budget_s is not None and time.perf_counter() - t1 > time_budget_s:
             break
     t2 = time.perf_counter()
     return ArapResult(V=U, iterations=it, converged=converged, last_move=move,

@@ -47,80 +47,88 @@ def edge_graph(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
 
 
 # ---------------------------------------------------------------- numba heaps
+# Binary min-heaps over parallel arrays (keys, values) with preallocated capacity: the
+# callers guarantee room (growth is checked once per propagation, not per push).
 @njit(cache=True, inline="always")
 def _push(hk, hv, size, k, v):
-    if size == hk.shape[0]:
-        nk = np.empty(2 * size, hk.dtype)
-        nv = np.empty(2 * size, hv.dtype)
-        nk[:size] = hk
-        nv[:size] = hv
-        hk, hv = nk, nv
     i = size
-    hk[i] = k
-    hv[i] = v
     while i > 0:
         p = (i - 1) >> 1
-        if hk[p] <= hk[i]:
+        if hk[p] <= k:
             break
-        hk[p], hk[i] = hk[i], hk[p]
-        hv[p], hv[i] = hv[i], hv[p]
+        hk[i] = hk[p]
+        hv[i] = hv[p]
         i = p
-    return hk, hv, size + 1
+    hk[i] = k
+    hv[i] = v
+    return size + 1
 
 
 @njit(cache=True, inline="always")
 def _pop(hk, hv, size):
-    k = hk[0]
-    v = hv[0]
+    k0 = hk[0]
+    v0 = hv[0]
     size -= 1
-    hk[0] = hk[size]
-    hv[0] = hv[size]
+    k = hk[size]
+    v = hv[size]
     i = 0
     while True:
-        l = 2 * i + 1
-        if l >= size:
+        c = 2 * i + 1
+        if c >= size:
             break
-        r = l + 1
-        c = l
-        if r < size and hk[r] < hk[l]:
-            c = r
-        if hk[i] <= hk[c]:
+        if c + 1 < size and hk[c + 1] < hk[c]:
+            c += 1
+        if k <= hk[c]:
             break
-        hk[c], hk[i] = hk[i], hk[c]
-        hv[c], hv[i] = hv[i], hv[c]
+        hk[i] = hk[c]
+        hv[i] = hv[c]
         i = c
-    return k, v, size
+    hk[i] = k
+    hv[i] = v
+    return k0, v0, size
+
+
+@njit(cache=True)
+def _grow(hk, hv, size, need):
+    if size + need <= hk.shape[0]:
+        return hk, hv
+    cap = max(2 * hk.shape[0], size + need)
+    nk = np.empty(cap, hk.dtype)
+    nv = np.empty(cap, hv.dtype)
+    nk[:size] = hk[:size]
+    nv[:size] = hv[:size]
+    return nk, nv
 
 
 @njit(cache=True)
 def _propagate(indptr, indices, weights, dist, label, src, lab, hk, hv, mk, mv, msize):
     """Incremental Dijkstra from ``src`` (new label ``lab``): visits only vertices that
     get strictly closer. Pushes every vertex it settles onto the max-heap (mk, mv) with
-    key -dist (once per run). Returns the (possibly reallocated) heaps and the max-heap size."""
+    key -dist (once per run). ``hk``/``hv`` must hold len(indices) + 1 entries and the
+    max-heap room for n more (one run settles each vertex at most once)."""
     dist[src] = 0.0
     label[src] = lab
-    size = 0
-    hk, hv, size = _push(hk, hv, size, 0.0, src)
+    size = _push(hk, hv, 0, 0.0, src)
     while size > 0:
         d, u, size = _pop(hk, hv, size)
         if d > dist[u]:
             continue
-        # u is settled for this run: its final distance goes on the max-heap once
-        mk, mv, msize = _push(mk, mv, msize, -d, u)
+        msize = _push(mk, mv, msize, -d, u)
         for e in range(indptr[u], indptr[u + 1]):
             v = indices[e]
             nd = d + weights[e]
             if nd < dist[v]:
                 dist[v] = nd
                 label[v] = lab
-                hk, hv, size = _push(hk, hv, size, nd, v)
-    return hk, hv, mk, mv, msize
+                size = _push(hk, hv, size, nd, v)
+    return msize
 
 
 @njit(cache=True)
 def _fps(indptr, indices, weights, dist, label, seeds, nseeds, k_target, hk, hv, mk, mv, msize):
     """Farthest-point sampling until ``k_target`` seeds: pop the max-heap (lazy: skip
     entries whose key no longer equals the vertex's distance), propagate from it."""
+    n = dist.shape[0]
     while nseeds < k_target:
         found = -1
         while msize > 0:
@@ -131,22 +139,23 @@ def _fps(indptr, indices, weights, dist, label, seeds, nseeds, k_target, hk, hv,
         if found < 0:
             break  # every vertex is a seed
         seeds[nseeds] = found
-        hk, hv, mk, mv, msize = _propagate(indptr, indices, weights, dist, label, found, nseeds,
-                                           hk, hv, mk, mv, msize)
+        mk, mv = _grow(mk, mv, msize, n)
+        msize = _propagate(indptr, indices, weights, dist, label, found, nseeds, hk, hv, mk, mv, msize)
         nseeds += 1
-    return nseeds, hk, hv, mk, mv, msize
+    return nseeds, mk, mv, msize
 
 
 @njit(cache=True)
 def _add_seeds(indptr, indices, weights, dist, label, seeds, nseeds, new, hk, hv, mk, mv, msize):
+    n = dist.shape[0]
     for s in new:
         if dist[s] == 0.0 and label[s] >= 0 and seeds[label[s]] == s:
             continue  # already a seed
         seeds[nseeds] = s
-        hk, hv, mk, mv, msize = _propagate(indptr, indices, weights, dist, label, s, nseeds,
-                                           hk, hv, mk, mv, msize)
+        mk, mv = _grow(mk, mv, msize, n)
+        msize = _propagate(indptr, indices, weights, dist, label, s, nseeds, hk, hv, mk, mv, msize)
         nseeds += 1
-    return nseeds, hk, hv, mk, mv, msize
+    return nseeds, mk, mv, msize
 
 
 class VoronoiState:
@@ -177,10 +186,10 @@ class VoronoiState:
         self.label = np.full(self.n, -1, np.int64)
         self._seeds = np.empty(16, np.int64)
         self.nseeds = 0
-        self._hk = np.empty(1024, np.float64)
-        self._hv = np.empty(1024, np.int64)
-        self._mk = np.empty(max(1024, 2 * self.n), np.float64)
-        self._mv = np.empty(max(1024, 2 * self.n), np.int64)
+        self._hk = np.empty(len(self.indices) + 1, np.float64)  # one push per relaxation at most
+        self._hv = np.empty(len(self.indices) + 1, np.int64)
+        self._mk = np.empty(4 * self.n + 16, np.float64)
+        self._mv = np.empty(4 * self.n + 16, np.int64)
         self._msize = 0
 
     @property
@@ -199,7 +208,7 @@ class VoronoiState:
         self._reserve(k)
         if self.nseeds == 0:
             self.add([first])
-        (self.nseeds, self._hk, self._hv, self._mk, self._mv, self._msize) = _fps(
+        (self.nseeds, self._mk, self._mv, self._msize) = _fps(
             self.indptr, self.indices, self.weights, self.dist, self.label, self._seeds, self.nseeds, k,
             self._hk, self._hv, self._mk, self._mv, self._msize)
 
@@ -207,7 +216,7 @@ class VoronoiState:
         """Add the given vertices as seeds (existing seeds are skipped)."""
         vertices = np.asarray(vertices, np.int64).ravel()
         self._reserve(self.nseeds + len(vertices))
-        (self.nseeds, self._hk, self._hv, self._mk, self._mv, self._msize) = _add_seeds(
+        (self.nseeds, self._mk, self._mv, self._msize) = _add_seeds(
             self.indptr, self.indices, self.weights, self.dist, self.label, self._seeds, self.nseeds,
             vertices, self._hk, self._hv, self._mk, self._mv, self._msize)
 
