@@ -39,6 +39,8 @@ def _warmup() -> None:
     st.sample(3, 0)
     st.add([4])
     project_to_fans(V, np.zeros(5, np.int64), V[:3], np.array([[0, 1, 2]]))
+    from .halfedge import halfedges, vertex_fan_count
+    vertex_fan_count(F, halfedges(F, 5), 5)
     _WARM = True
 
 
@@ -185,7 +187,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     >>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
     """
     t0 = time.perf_counter()
-    V, F = validate_mesh(V, F)
+    _warmup()
+    V, F, he = validate_mesh(V, F, return_halfedges=True)
     handles, targets = validate_handles(V, handles, targets)
     if n_samplings < 1:
         raise SShaDeError(f"n_samplings must be >= 1, got {n_samplings}")
@@ -194,14 +197,13 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     if int(n_low) < 4:
         raise SShaDeError(f"n_low must be at least 4, got {n_low}")
     n_low = int(min(n_low, len(V)))
-    topo = mesh_topology(V, F)
+    topo = mesh_topology(V, F, he)
     seeds = sampling_seeds(seed, n_samplings)
     state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, seeds=seeds, topology=topo,
                  tol=tol, max_iter=max_iter, gradient=gradient)
     if workers is None:
         workers = min(n_samplings, os.cpu_count() or 1)
     workers = max(1, min(int(workers), n_samplings))
-    _warmup()
     t1 = time.perf_counter()
     results: list = [None] * n_samplings
     infos: list = [None] * n_samplings

@@ -13,7 +13,21 @@ from numba import njit
 
 from ._keys import unique_int
 
-__all__ = ["edge_graph", "VoronoiState", "farthest_point_sampling"]
+__all__ = ["edge_graph", "edge_graph_from_edges", "VoronoiState", "farthest_point_sampling"]
+
+
+def edge_graph_from_edges(V: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR edge graph (see :func:`edge_graph`) from unique undirected edges E (e, 2)
+    sorted by ``E[:, 0] * n + E[:, 1]``."""
+    n = len(V)
+    i = np.concatenate([E[:, 0], E[:, 1]])
+    j = np.concatenate([E[:, 1], E[:, 0]])
+    order = np.argsort(i * n + j)
+    rows, indices = i[order], j[order]
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    w = np.sqrt(((V[rows] - V[indices]) ** 2).sum(1))
+    return indptr, indices.astype(np.int64), w
 
 
 def edge_graph(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

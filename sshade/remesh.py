@@ -30,9 +30,9 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .errors import SShaDeError
-from .geodesic import VoronoiState, edge_graph
+from .geodesic import VoronoiState, edge_graph_from_edges
+from .halfedge import HalfEdges, boundary_loops, halfedges
 from ._keys import unique_int
-from .validate import unique_edges
 
 __all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
 
@@ -64,36 +64,45 @@ class MeshTopology:
     vnormals: np.ndarray
 
 
-def mesh_topology(V: np.ndarray, F: np.ndarray) -> MeshTopology:
-    """Connectivity needed by :func:`remesh` (computed once per mesh).
+def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> MeshTopology:
+    """Connectivity needed by :func:`remesh` (computed once per mesh, shared by samplings).
 
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64, a validated manifold mesh.
+    he : its :class:`~sshade.halfedge.HalfEdges` if already built (see
+        ``validate_mesh(..., return_halfedges=True)``).
     """
     import igl
     n, m = len(V), len(F)
-    loops = igl.boundary_loop_all(F)
-    cone = [F]
+    if he is None:
+        he = halfedges(F, n)
+    loops = boundary_loops(F, he)
+    e = len(he.E)
+    Ec, FEc, Fc = [he.E], [he.FE], [F]
+    off = e
     for li, loop in enumerate(loops):
-        loop = np.asarray(loop, np.int64)
-        # boundary loops from libigl run along the faces' orientation; the cone faces
-        # must use the opposite direction of each boundary edge
-        a, b = loop, np.roll(loop, -1)
-        cone.append(np.stack([b, a, np.full(len(loop), n + li)], axis=1))
-    Fc = np.concatenate(cone).astype(np.int64)
-    nc = n + len(loops)
-    a, b = Fc.ravel(), np.roll(Fc, -1, axis=1).ravel()
-    if len(unique_int(a * nc + b)) != len(a):  # libigl returned a loop the other way round
-        cone = [F] + [np.stack([np.asarray(l), np.roll(np.asarray(l), -1), np.full(len(l), n + li)], axis=1)
-                      for li, l in enumerate(loops)]
-        Fc = np.concatenate(cone).astype(np.int64)
-    Ec, FEc = unique_edges(Fc)
-    nE = len(unique_int((np.minimum(F, np.roll(F, -1, axis=1)) * n + np.maximum(F, np.roll(F, -1, axis=1))).ravel()))
-    euler = n - nE + m
+        # cone every loop to a virtual vertex c = n + li; cone faces (b, a, c) run the
+        # boundary half-edge a -> b the other way, so the coned mesh stays oriented
+        nl = len(loop)
+        a_, b_ = loop, np.roll(loop, -1)
+        c = n + li
+        Fc.append(np.stack([b_, a_, np.full(nl, c)], axis=1))
+        spokes = off + np.arange(nl)  # spoke of loop[i] -> c
+        Ec.append(np.stack([loop, np.full(nl, c)], axis=1))
+        # boundary edge index of (a, b): look it up through the sorted edge keys
+        key = np.minimum(a_, b_) * n + np.maximum(a_, b_)
+        ekey = he.E[:, 0] * n + he.E[:, 1]
+        bidx = np.searchsorted(ekey, key)
+        FEc.append(np.stack([bidx, spokes, np.roll(spokes, -1)], axis=1))
+        off += nl
+    Fc = np.concatenate(Fc).astype(np.int64)
+    Ec = np.concatenate(Ec).astype(np.int64)
+    FEc = np.concatenate(FEc).astype(np.int64)
+    euler = n - e + m
     vn = igl.per_vertex_normals(V, F)
-    return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec.astype(np.int64), FEc=FEc.astype(np.int64), n_loops=len(loops),
-                        euler=int(euler), graph=edge_graph(V, F), vnormals=vn)
+    return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec, FEc=FEc, n_loops=len(loops), euler=int(euler),
+                        graph=edge_graph_from_edges(V, he.E), vnormals=vn)
 
 
 @dataclass

@@ -12,40 +12,13 @@ from scipy.sparse.csgraph import connected_components
 
 from ._keys import unique_int
 from .errors import SShaDeError
+from .halfedge import halfedges, vertex_fan_count
 
-__all__ = ["validate_mesh", "validate_handles", "unique_edges"]
-
-
-def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Undirected edges of a triangle mesh and the edge index of every face side.
-
-    Parameters
-    ----------
-    F : (m, 3) int64 faces.
-
-    Returns
-    -------
-    E : (e, 2) int64, sorted pairs ``E[:, 0] < E[:, 1]``.
-    FE : (m, 3) int64, ``FE[f, k]`` is the index into ``E`` of the side from
-        ``F[f, k]`` to ``F[f, (k + 1) % 3]``.
-
-    Examples
-    --------
-    >>> E, FE = unique_edges(np.array([[0, 1, 2], [0, 2, 3]]))
-    >>> len(E)
-    5
-    """
-    n = int(F.max()) + 1 if F.size else 0
-    a = F.ravel()
-    b = np.roll(F, -1, axis=1).ravel()
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    uk, inv = unique_int(key, return_inverse=True)
-    E = np.stack([uk // n, uk % n], axis=1)
-    return E.astype(np.int64), inv.reshape(-1, 3).astype(np.int64)
+__all__ = ["validate_mesh", "validate_handles"]
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
-                  area_tol: float = 1e-14) -> tuple[np.ndarray, np.ndarray]:
+                  area_tol: float = 1e-14, return_halfedges: bool = False):
     """Check that ``(V, F)`` is a single-component 2-manifold triangle mesh.
 
     Parameters
@@ -56,10 +29,14 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     allow_boundary : bool, if False a mesh with boundary edges is rejected.
     area_tol : float, a face with area below ``area_tol * bbox_diag**2`` is degenerate.
 
+    return_halfedges : bool, also return the :class:`sshade.halfedge.HalfEdges` built
+        for the checks (reused by :func:`sshade.remesh.mesh_topology`).
+
     Returns
     -------
     V : (n, 3) float64, C-contiguous (a copy only if the input was not already).
     F : (m, 3) int64, C-contiguous.
+    he : HalfEdges, only with ``return_halfedges``.
 
     Raises
     ------
@@ -126,63 +103,33 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     if same.any():
         f = int(order[1:][same][0])
         raise SShaDeError(f"{name}: duplicate faces (first: face {f} = {F[f].tolist()})")
-    # edges: count faces per undirected edge and check orientation consistency
-    a, b = F.ravel(), np.roll(F, -1, axis=1).ravel()
-    ukey, inv, cnt = unique_int(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True, return_counts=True)
-    E = np.stack([ukey // n, ukey % n], axis=1)
-    inv = inv.ravel()
-    if (cnt > 2).any():
-        e = np.flatnonzero(cnt > 2)[0]
-        raise SShaDeError(f"{name}: {int((cnt > 2).sum())} non-manifold edges shared by 3+ faces (first: edge {E[e].tolist()})")
-    _, dcnt = unique_int(a * n + b, return_counts=True)
-    if (dcnt > 1).any():
-        raise SShaDeError(f"{name}: inconsistently oriented faces (a directed edge appears twice); "
-                          "the mesh is non-orientable or needs its faces re-wound")
-    if not allow_boundary and (cnt == 1).any():
-        raise SShaDeError(f"{name}: has {int((cnt == 1).sum())} boundary edges but a closed mesh is required")
+    he = halfedges(F, n)
+    if (he.count > 2).any():
+        e = np.flatnonzero(he.count > 2)[0]
+        raise SShaDeError(f"{name}: {int((he.count > 2).sum())} non-manifold edges shared by 3+ faces "
+                          f"(first: edge {he.E[e].tolist()})")
+    if he.misoriented:
+        raise SShaDeError(f"{name}: inconsistently oriented faces ({he.misoriented} edges whose two faces run "
+                          "the same way); the mesh is non-orientable or needs its faces re-wound")
+    if not allow_boundary and (he.count == 1).any():
+        raise SShaDeError(f"{name}: has {int((he.count == 1).sum())} boundary edges but a closed mesh is required")
     # components
-    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    E = he.E
+    A = sp.coo_matrix((np.ones(len(E), np.int8), (E[:, 0], E[:, 1])), shape=(n, n))
     ncomp, _ = connected_components(A, directed=False)
     if ncomp != 1:
         raise SShaDeError(f"{name}: has {ncomp} connected components; SShaDe needs a single component (paper §2)")
-    # vertex manifoldness: the faces around each vertex form a single fan
-    _check_vertex_manifold(F, n, name, E, inv, cnt)
-    return V, F
-
-
-def _check_vertex_manifold(F: np.ndarray, n: int, name: str, E: np.ndarray, inv: np.ndarray,
-                           cnt: np.ndarray) -> None:
-    """Each vertex's incident faces, linked through the edges they share at that vertex,
-    form one fan. Corners (face, vertex) are linked across every interior edge at both
-    its ends; a vertex whose corners fall in several connected components is a pinch
-    (e.g. two cones touching at their tips, or a closed fan plus an open one)."""
-    m = len(F)
-    a, b = F.ravel(), np.roll(F, -1, axis=1).ravel()  # half-edge h = 3f+k goes a[h] -> b[h]
-    corner_a = np.arange(3 * m)                       # corner of face f at a[h]
-    corner_b = (np.arange(3 * m) // 3) * 3 + (np.arange(3 * m) % 3 + 1) % 3  # corner at b[h]
-    # twin of half-edge (a->b) is (b->a) in the neighbouring face
-    key = a * n + b
-    order = np.argsort(key)
-    skey = key[order]
-    tkey = b * n + a
-    pos = np.searchsorted(skey, tkey)
-    pos = np.minimum(pos, len(skey) - 1)
-    has = skey[pos] == tkey
-    h = np.flatnonzero(has)
-    t = order[pos[has]]
-    # half-edge h (a->b) in face f and twin t (b->a) in face g:
-    # corner of f at a[h] ~ corner of g at b[t] (= a[h]); corner of f at b[h] ~ corner of g at a[t]
-    i = np.concatenate([corner_a[h], corner_b[h]])
-    j = np.concatenate([corner_b[t], corner_a[t]])
-    A = sp.coo_matrix((np.ones(len(i), np.int8), (i, j)), shape=(3 * m, 3 * m))
-    _, comp = connected_components(A, directed=False)
-    vert = F.ravel()
-    pairs = unique_int(vert.astype(np.int64) * (3 * m) + comp)
-    fans = np.bincount(pairs // (3 * m), minlength=n)
+    # vertex manifoldness: the faces around each vertex form a single fan (corners linked
+    # across interior edges at both ends; a pinch vertex has several groups of corners)
+    fans = vertex_fan_count(F, he, n)
     bad = fans > 1
     if bad.any():
         v = np.flatnonzero(bad)[0]
-        raise SShaDeError(f"{name}: {int(bad.sum())} non-manifold vertices (several fans of faces meet there; first: vertex {v})")
+        raise SShaDeError(f"{name}: {int(bad.sum())} non-manifold vertices (several fans of faces meet there; "
+                          f"first: vertex {v})")
+    if return_halfedges:
+        return V, F, he
+    return V, F
 
 
 def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.ndarray]:
