@@ -19,7 +19,7 @@ from sshade.errors import SShaDeError
 
 __all__ = ["METHODS", "make_methods", "canonical_name"]
 
-METHODS = ("ARAP", "Elastic", "SShaDe")
+METHODS = ("ARAP", "Elastic", "ARAP-SR", "SShaDe")
 
 
 def canonical_name(name) -> str:
@@ -94,6 +94,10 @@ def make_methods(cfg) -> list:
         elif n == "Elastic":
             from baselines import Elastic
             out.append(Elastic(tol=tol, max_iter=max_iter))
+        elif n == "ARAP-SR":
+            from baselines import ARAPSR
+            alpha = float(_get(_get(cfg, "arap_sr", {}) or {}, "alpha", 0.01))
+            out.append(ARAPSR(alpha=alpha, tol=tol, max_iter=max_iter))
         else:
             out.append(_make_sshade(_get(cfg, "sshade", {}) or {}, tol, max_iter))
     return out

@@ -31,7 +31,7 @@ from defaust.meshio import atomic_write
 
 __all__ = ["summarize", "write_tables", "to_markdown", "to_latex", "METHOD_ORDER", "TABLE_COLUMNS"]
 
-METHOD_ORDER = ("ARAP", "Elastic", "SShaDe")
+METHOD_ORDER = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe")
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")

@@ -27,7 +27,7 @@ def edge_graph_from_edges(V: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, np.
     indptr = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
     w = np.sqrt(((V[rows] - V[indices]) ** 2).sum(1))
-    return indptr, indices.astype(np.int64), w
+    return indptr, indices.astype(np.int32), w.astype(np.float32)
 
 
 def edge_graph(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -39,8 +39,10 @@ def edge_graph(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
 
     Returns
     -------
-    indptr : (n + 1,) int64; indices : (2e,) int64 neighbour vertices;
-    weights : (2e,) float64 edge lengths (mesh units).
+    indptr : (n + 1,) int64; indices : (2e,) int32 neighbour vertices;
+    weights : (2e,) float32 edge lengths (mesh units). Compact types keep the working
+    set of the propagation in cache (two concurrent samplings otherwise thrash L3;
+    distances still accumulate in float64).
 
     Examples
     --------
@@ -57,7 +59,7 @@ def edge_graph(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     indptr = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
     w = np.sqrt(((V[rows] - V[indices]) ** 2).sum(1))
-    return indptr, indices, w
+    return indptr, indices.astype(np.int32), w.astype(np.float32)
 
 
 # ---------------------------------------------------------------- numba heaps
@@ -114,20 +116,37 @@ def _grow(hk, hv, size, need):
     return nk, nv
 
 
+@njit(cache=True, inline="always")
+def _is_local_max(indptr, indices, dist, v):
+    d = dist[v]
+    for e in range(indptr[v], indptr[v + 1]):
+        if dist[indices[e]] > d:
+            return False
+    return True
+
+
 @njit(cache=True)
-def _propagate(indptr, indices, weights, dist, label, src, lab, hk, hv, mk, mv, msize):
+def _propagate(indptr, indices, weights, dist, label, src, lab, hk, hv, mk, mv, msize, settled, mark):
     """Incremental Dijkstra from ``src`` (new label ``lab``): visits only vertices that
-    get strictly closer. Pushes every vertex it settles onto the max-heap (mk, mv) with
-    key -dist (once per run). ``hk``/``hv`` must hold len(indices) + 1 entries and the
-    max-heap room for n more (one run settles each vertex at most once)."""
+    get strictly closer.
+
+    Farthest-point candidates: the farthest vertex is always a local maximum of
+    ``dist``, and only the vertices settled in this run and their unsettled neighbours
+    can have become local maxima, so only those local maxima are pushed onto the
+    max-heap (mk, mv) with key -dist (lazy: entries whose distance later changes are
+    skipped when popped). ``hk``/``hv`` must hold len(indices) + 1 entries and the
+    max-heap room for n more."""
     dist[src] = 0.0
     label[src] = lab
     size = _push(hk, hv, 0, 0.0, src)
+    ns = 0
     while size > 0:
         d, u, size = _pop(hk, hv, size)
         if d > dist[u]:
             continue
-        msize = _push(mk, mv, msize, -d, u)
+        settled[ns] = u
+        ns += 1
+        mark[u] = lab
         for e in range(indptr[u], indptr[u + 1]):
             v = indices[e]
             nd = d + weights[e]
@@ -135,11 +154,21 @@ def _propagate(indptr, indices, weights, dist, label, src, lab, hk, hv, mk, mv, 
                 dist[v] = nd
                 label[v] = lab
                 size = _push(hk, hv, size, nd, v)
+    for i in range(ns):
+        u = settled[i]
+        if _is_local_max(indptr, indices, dist, u):
+            msize = _push(mk, mv, msize, -dist[u], u)
+        for e in range(indptr[u], indptr[u + 1]):
+            w = indices[e]
+            if mark[w] != lab:
+                mark[w] = lab
+                if _is_local_max(indptr, indices, dist, w):
+                    msize = _push(mk, mv, msize, -dist[w], w)
     return msize
 
 
 @njit(cache=True)
-def _fps(indptr, indices, weights, dist, label, seeds, nseeds, k_target, hk, hv, mk, mv, msize):
+def _fps(indptr, indices, weights, dist, label, seeds, nseeds, k_target, hk, hv, mk, mv, msize, settled, mark):
     """Farthest-point sampling until ``k_target`` seeds: pop the max-heap (lazy: skip
     entries whose key no longer equals the vertex's distance), propagate from it."""
     n = dist.shape[0]
@@ -154,20 +183,22 @@ def _fps(indptr, indices, weights, dist, label, seeds, nseeds, k_target, hk, hv,
             break  # every vertex is a seed
         seeds[nseeds] = found
         mk, mv = _grow(mk, mv, msize, n)
-        msize = _propagate(indptr, indices, weights, dist, label, found, nseeds, hk, hv, mk, mv, msize)
+        msize = _propagate(indptr, indices, weights, dist, label, found, nseeds, hk, hv, mk, mv, msize,
+                           settled, mark)
         nseeds += 1
     return nseeds, mk, mv, msize
 
 
 @njit(cache=True)
-def _add_seeds(indptr, indices, weights, dist, label, seeds, nseeds, new, hk, hv, mk, mv, msize):
+def _add_seeds(indptr, indices, weights, dist, label, seeds, nseeds, new, hk, hv, mk, mv, msize, settled, mark):
     n = dist.shape[0]
     for s in new:
         if dist[s] == 0.0 and label[s] >= 0 and seeds[label[s]] == s:
             continue  # already a seed
         seeds[nseeds] = s
         mk, mv = _grow(mk, mv, msize, n)
-        msize = _propagate(indptr, indices, weights, dist, label, s, nseeds, hk, hv, mk, mv, msize)
+        msize = _propagate(indptr, indices, weights, dist, label, s, nseeds, hk, hv, mk, mv, msize,
+                           settled, mark)
         nseeds += 1
     return nseeds, mk, mv, msize
 
@@ -197,14 +228,16 @@ class VoronoiState:
         self.n = len(V)
         self.indptr, self.indices, self.weights = graph if graph is not None else edge_graph(V, F)
         self.dist = np.full(self.n, np.inf)
-        self.label = np.full(self.n, -1, np.int64)
+        self.label = np.full(self.n, -1, np.int32)
         self._seeds = np.empty(16, np.int64)
         self.nseeds = 0
         self._hk = np.empty(len(self.indices) + 1, np.float64)  # one push per relaxation at most
-        self._hv = np.empty(len(self.indices) + 1, np.int64)
-        self._mk = np.empty(4 * self.n + 16, np.float64)
-        self._mv = np.empty(4 * self.n + 16, np.int64)
+        self._hv = np.empty(len(self.indices) + 1, np.int32)
+        self._mk = np.empty(2 * self.n + 16, np.float64)
+        self._mv = np.empty(2 * self.n + 16, np.int32)
         self._msize = 0
+        self._settled = np.empty(self.n, np.int32)
+        self._mark = np.full(self.n, -1, np.int32)
 
     @property
     def seeds(self) -> np.ndarray:
@@ -224,7 +257,7 @@ class VoronoiState:
             self.add([first])
         (self.nseeds, self._mk, self._mv, self._msize) = _fps(
             self.indptr, self.indices, self.weights, self.dist, self.label, self._seeds, self.nseeds, k,
-            self._hk, self._hv, self._mk, self._mv, self._msize)
+            self._hk, self._hv, self._mk, self._mv, self._msize, self._settled, self._mark)
 
     def add(self, vertices) -> None:
         """Add the given vertices as seeds (existing seeds are skipped)."""
@@ -232,7 +265,7 @@ class VoronoiState:
         self._reserve(self.nseeds + len(vertices))
         (self.nseeds, self._mk, self._mv, self._msize) = _add_seeds(
             self.indptr, self.indices, self.weights, self.dist, self.label, self._seeds, self.nseeds,
-            vertices, self._hk, self._hv, self._mk, self._mv, self._msize)
+            vertices, self._hk, self._hv, self._mk, self._mv, self._msize, self._settled, self._mark)
 
 
 def farthest_point_sampling(V: np.ndarray, F: np.ndarray, k: int, *, first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
