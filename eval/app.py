@@ -178,13 +178,28 @@ def run(cfg) -> dict:
     return {"out_dir": out_dir, "paths": paths, "n_cases": len(cases), "n_errors": n_err, "summary": summ}
 
 
+#: experiment.kind -> "module:function" running that experiment from the config.
+EXPERIMENTS = {
+    "cases": "eval.app:run",                         # methods x dataset cases (FAUST, DeFAUST)
+    "scaling": "eval.scaling:run_scaling",           # issue 4 scaling benchmark
+    "tosca": "eval.isometric:run_tosca",             # paper §4.2 non-rigid isometric (TOSCA)
+    "pose_transfer": "eval.pose_transfer:run_pose_transfer",  # paper §4.3 pose transfer
+}
+
+
+def run_experiment(cfg):
+    """Dispatch on ``experiment.kind`` (default ``cases``); see :data:`EXPERIMENTS`."""
+    import importlib
+    kind = str(cfg.get("experiment", {}).get("kind", "cases"))
+    if kind not in EXPERIMENTS:
+        raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(EXPERIMENTS)}")
+    mod, fn = EXPERIMENTS[kind].split(":")
+    return getattr(importlib.import_module(mod), fn)(cfg)
+
+
 def _main(cfg) -> None:
     try:
-        if cfg.get("experiment", {}).get("kind", "cases") == "scaling":
-            from .scaling import run_scaling
-            run_scaling(cfg)
-        else:
-            run(cfg)
+        run_experiment(cfg)
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
