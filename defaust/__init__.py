@@ -1,4 +1,30 @@
-"""DeFAUST: datasets for handle-guided deformation (paper appendix) and mesh file IO."""
+"""DeFAUST: datasets for handle-guided deformation (paper appendix) and mesh file IO.
+
+Build a dataset with ``python -m defaust source=synthetic out=DIR`` (embedded synthetic
+bodies, the default) or ``python -m defaust source=faust faust.root=DIR out=DIR`` (a
+user's MPI-FAUST registrations); load it with :func:`load_defaust`.
+
+Modules: :mod:`defaust.synthetic` (parametric body + skinning), :mod:`defaust.faust_source`
+(FAUST discovery and landmarks), :mod:`defaust.highres` (LS3 Loop + isotropic remesh),
+:mod:`defaust.handles` (landmark handle groups, snapping), :mod:`defaust.build` (the
+builder), :mod:`defaust.dataset` (the loader), :mod:`defaust.store` (deterministic files),
+:mod:`defaust.cli` (Hydra entry point).
+"""
 from .meshio import read_mesh, write_mesh, atomic_write
 
-__all__ = ["read_mesh", "write_mesh", "atomic_write"]
+__all__ = ["read_mesh", "write_mesh", "atomic_write", "load_defaust", "DefaustCase", "load_handles",
+           "build_defaust", "BuildConfig", "BuildReport", "snap_handles", "HandleSet"]
+
+_LAZY = {
+    "load_defaust": "dataset", "DefaustCase": "dataset", "load_handles": "dataset",
+    "build_defaust": "build", "BuildConfig": "build", "BuildReport": "build",
+    "snap_handles": "handles", "HandleSet": "handles",
+}
+
+
+def __getattr__(name):  # lazy: `import defaust.meshio` stays light
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module 'defaust' has no attribute {name!r}")

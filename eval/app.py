@@ -135,8 +135,11 @@ def run(cfg) -> dict:
     write_runinfo(out_dir / "run.json", info)
 
     rows: list[dict] = []
+    from .figures import figures_options, write_case_figure
+    fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
     with logging_redirect_tqdm():
         for case in tqdm(cases, desc="cases", unit="case", file=sys.stderr, dynamic_ncols=True):
+            deformed = {}  # method -> deformed vertices, for the optional figure
             for m in methods:
                 row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": m.name,
                        "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
@@ -147,6 +150,7 @@ def run(cfg) -> dict:
                     Vd = m.deform(case.V, case.F, case.handles, case.targets)
                     row["time_s"] = time.perf_counter() - t0
                     Vd = np.asarray(Vd, np.float64)
+                    deformed[m.name] = Vd
                     row.update(deformation_metrics(case.V, Vd, case.F, case.handles, case.targets))
                     if getattr(case, "V_gt", None) is not None:
                         row.update(ground_truth_metrics(Vd, case.F, case.V_gt))
@@ -162,6 +166,9 @@ def run(cfg) -> dict:
                     log.warning("%s %s failed: %s", case.name, m.name, row["error"])
                 rows.append(row)
             write_cases(pd.DataFrame(rows), out_dir)  # partial results survive a crash
+            if fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
+                fig_left -= 1
+                write_case_figure(case, {m.name: deformed.get(m.name) for m in methods}, out_dir / "figures")
 
     df = pd.DataFrame(rows)
     exp = cfg.get("experiment", {}).get("name", name)

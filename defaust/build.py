@@ -1,0 +1,548 @@
+"""The DeFAUST builder: rest meshes (low and high resolution), handle files and ground
+truth, with a manifest; deterministic, resumable, atomic (paper appendix "DeFAUST
+dataset").
+
+Layout of the output folder::
+
+    manifest.json                 parameters, seeds, package versions, sha256 per file
+    subject_XX/rest_low.ply       rest pose (pose 0), low resolution
+    subject_XX/rest_high.ply      rest pose, LS3 Loop + isotropic remesh (150k-200k v.)
+    subject_XX/pose_YY_handles.npz  handles of target pose YY, as positions
+    subject_XX/pose_YY_low.ply    target pose YY at low resolution (same faces as
+                                  rest_low; FAUST: the registration itself)
+    subject_XX/pose_YY_high.ply   synthetic only: target pose YY at high resolution
+                                  (rest_high posed by the same skinning; ground truth)
+
+PLY files are binary little-endian with ``double`` coordinates (exact round trip),
+``.npz`` files have fixed timestamps, the manifest is written with sorted keys: the same
+configuration and seed give the same bytes. Work is split in *items*
+(``subject_XX/rest`` and ``subject_XX/pose_YY``); the manifest (rewritten atomically
+after every item) records each item's key (a hash of everything it depends on,
+including its inputs' checksums) and its files' sha256. On a rerun, an item whose key
+matches and whose files all exist with the recorded checksums is skipped; any other
+(missing, corrupted, stale) is rebuilt. Every file is written with
+:func:`defaust.meshio.atomic_write`, so an interrupted build leaves no partial file.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import platform
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
+from .meshio import atomic_write, read_mesh
+from .store import sha256_file, write_npz, write_ply
+
+__all__ = ["BuildConfig", "BuildReport", "build_defaust", "handle_seed", "MANIFEST", "FORMAT"]
+
+log = logging.getLogger("defaust")
+
+MANIFEST = "manifest.json"
+FORMAT = "defaust-1"
+#: Bumped whenever the builder's output for the same parameters changes.
+BUILDER_VERSION = 1
+
+
+@dataclass
+class BuildConfig:
+    """Parameters of a DeFAUST build (the Hydra config ``conf/defaust`` maps onto it).
+
+    Attributes
+    ----------
+    out : output folder.
+    source : ``"synthetic"`` (default, embedded parametric bodies) or ``"faust"``.
+    seed : int, dataset seed (synthetic bodies, poses, handle draws).
+    subjects : list of int or None, build only these subjects.
+    n_subjects : int, synthetic subjects ``0 .. n_subjects - 1``.
+    n_poses : int, rest + targets per subject (5: rest + 4 targets, as in the paper);
+        FAUST: the first ``n_poses - 1`` non-rest poses present unless
+        ``faust_target_poses`` is given.
+    vertex_range : (lo, hi), vertex count of the high-res rest mesh (paper [150k, 200k]).
+    remesh_iterations : int, isotropic remesh iterations for the high-res mesh.
+    n_per_landmark, neighbourhood, static_threshold : handle parameters, see
+        :func:`defaust.handles.landmark_handles` (threshold in metres).
+    faust_root : FAUST folder (``source="faust"``); faust_target_poses : list or None.
+    synthetic_vertices, synthetic_voxel, synthetic_blend, synthetic_remesh_iterations :
+        see :func:`defaust.synthetic.synthetic_subject` (low-res vertex count,
+        marching-cubes voxel in metres, skinning blend width in metres).
+    progress : bool, show a tqdm progress bar.
+    """
+
+    out: str | Path
+    source: str = "synthetic"
+    seed: int = 0
+    subjects: list | None = None
+    n_subjects: int = 10
+    n_poses: int = 5
+    vertex_range: tuple = (150_000, 200_000)
+    remesh_iterations: int = 10
+    n_per_landmark: int = 30
+    neighbourhood: int = 90
+    static_threshold: float = 0.02
+    faust_root: str | Path | None = None
+    faust_target_poses: list | None = None
+    synthetic_vertices: int = 7000
+    synthetic_voxel: float = 0.01
+    synthetic_blend: float = 0.07
+    synthetic_remesh_iterations: int = 10
+    progress: bool = True
+
+    def parameters(self) -> dict:
+        """JSON-able parameters (everything but ``out`` and ``progress``)."""
+        d = asdict(self)
+        d.pop("out")
+        d.pop("progress")
+        d["vertex_range"] = [int(x) for x in self.vertex_range]
+        if d["faust_root"] is not None:
+            d["faust_root"] = str(Path(d["faust_root"]).expanduser().resolve())
+        if self.source != "faust":
+            d.pop("faust_root")
+            d.pop("faust_target_poses")
+        else:
+            for k in ("n_subjects", "synthetic_vertices", "synthetic_voxel", "synthetic_blend",
+                      "synthetic_remesh_iterations"):
+                d.pop(k)
+        return d
+
+
+@dataclass
+class BuildReport:
+    """What :func:`build_defaust` did.
+
+    Attributes
+    ----------
+    out : Path; built, skipped : list of item ids (``subject_XX/rest``,
+    ``subject_XX/pose_YY``); seconds : dict item id -> build time (s);
+    subject_seconds : dict subject -> total build time of its items (s);
+    manifest : dict, the manifest written.
+    """
+
+    out: Path
+    built: list = field(default_factory=list)
+    skipped: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+    subject_seconds: dict = field(default_factory=dict)
+    manifest: dict = field(default_factory=dict)
+
+
+def handle_seed(seed: int, subject: int, pose: int) -> int:
+    """Seed of the handle draw of one case: ``SeedSequence([seed, subject, pose])``'s first
+    32-bit word (independent of which other cases are built).
+
+    Examples
+    --------
+    >>> handle_seed(0, 1, 2) == handle_seed(0, 1, 2)
+    True
+    """
+    return int(np.random.SeedSequence([int(seed), int(subject), int(pose)]).generate_state(1)[0])
+
+
+def _package_versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for p in ("numpy", "scipy", "libigl", "pymeshlab", "numba", "trimesh", "hydra-core"):
+        try:
+            out[p] = version(p)
+        except PackageNotFoundError:
+            out[p] = None
+    try:
+        out["sshade"] = version("sshade")
+    except PackageNotFoundError:
+        out["sshade"] = None
+    return out
+
+
+def _key(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _load_manifest(out: Path) -> dict:
+    p = out / MANIFEST
+    if not p.is_file():
+        return {}
+    try:
+        m = json.loads(p.read_text())
+        if not isinstance(m, dict) or m.get("format") != FORMAT:
+            raise ValueError("not a DeFAUST manifest")
+        return m
+    except (ValueError, OSError) as e:
+        log.warning("%s is unreadable (%s); every item will be checked by rebuilding it", p, e)
+        return {}
+
+
+def _write_manifest(out: Path, m: dict) -> None:
+    """Write the manifest atomically (sorted keys: deterministic bytes); a no-op when
+    the file already holds exactly this content."""
+    m = dict(m)
+    m["files"] = {f: h for it in m.get("items", {}).values() for f, h in it["files"].items()}
+    text = json.dumps(m, indent=1, sort_keys=True) + "\n"
+    p = out / MANIFEST
+    if p.is_file() and p.read_text() == text:
+        return
+    with atomic_write(p, "w") as fh:
+        fh.write(text)
+
+
+def _write_partial(out: Path, manifest: dict, old: dict) -> None:
+    """Manifest of a build in progress: finished items so far plus the earlier build's
+    entries (so an interruption loses nothing that was valid)."""
+    _write_manifest(out, {**manifest, "items": {**old.get("items", {}), **manifest["items"]},
+                          "subjects": {**old.get("subjects", {}), **manifest["subjects"]}})
+
+
+def _item_valid(out: Path, entry: dict | None, key: str) -> bool:
+    if not entry or entry.get("key") != key or not entry.get("files"):
+        return False
+    return all(sha256_file(out / f) == h for f, h in entry["files"].items())
+
+
+class _Source:
+    """Per-source data access with per-subject caches (only what an item needs)."""
+
+    def __init__(self, cfg: BuildConfig):
+        self.cfg = cfg
+        self._cache: dict = {}
+
+    # --- plan -------------------------------------------------------------------
+    def plan(self) -> dict[int, list[int]]:
+        raise NotImplementedError
+
+    # --- per subject ------------------------------------------------------------
+    def start_subject(self, s: int) -> None:
+        """Forget cached data of other subjects (bounded memory)."""
+        self._cache = {k: v for k, v in self._cache.items() if k[1] == s}
+
+    def rest_low(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def landmarks(self, s: int) -> dict[str, int]:
+        raise NotImplementedError
+
+
+class _FaustSource(_Source):
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        from .faust_source import discover_faust
+
+        self.files = discover_faust(cfg.faust_root)
+        self._sha: dict = {}
+
+    def plan(self):
+        from .faust_source import faust_subjects
+
+        return faust_subjects(self.files, n_targets=self.cfg.n_poses - 1, target_poses=self.cfg.faust_target_poses,
+                              subjects=self.cfg.subjects)
+
+    def file_sha(self, s, p) -> str:
+        if (s, p) not in self._sha:
+            self._sha[(s, p)] = sha256_file(self.files[(s, p)])
+        return self._sha[(s, p)]
+
+    def mesh(self, s, p):
+        k = ("mesh", s, p)
+        if k not in self._cache:
+            self._cache[k] = read_mesh(self.files[(s, p)])
+        return self._cache[k]
+
+    def rest_low(self, s):
+        return self.mesh(s, 0)
+
+    def landmarks(self, s):
+        from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES
+
+        V, _ = self.rest_low(s)
+        if len(V) != FAUST_N_VERTICES:
+            raise SShaDeError(f"{self.files[(s, 0)]}: {len(V)} vertices, not the FAUST template's "
+                              f"{FAUST_N_VERTICES}; the landmark indices would be meaningless")
+        return dict(FAUST_LANDMARKS)
+
+    def target_low(self, s, p):
+        V0, F0 = self.rest_low(s)
+        V1, F1 = self.mesh(s, p)
+        if V1.shape != V0.shape or not np.array_equal(F1, F0):
+            raise SShaDeError(f"{self.files[(s, p)]}: connectivity differs from the rest pose {self.files[(s, 0)]}; "
+                              "FAUST registrations must share one face array")
+        return V1
+
+    def rest_inputs(self, s):
+        return {"rest_file_sha256": self.file_sha(s, 0)}
+
+    def pose_inputs(self, s, p):
+        return {"rest_file_sha256": self.file_sha(s, 0), "target_file_sha256": self.file_sha(s, p)}
+
+    def pose_name(self, s, p):
+        return f"faust_pose_{p}"
+
+    def subject_record(self, s, poses):
+        return {"rest_file": str(self.files[(s, 0)]), "target_files": {str(p): str(self.files[(s, p)]) for p in poses}}
+
+
+class _SyntheticSource(_Source):
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        from .synthetic import pose_names
+
+        self.names = pose_names(cfg.n_poses)
+        if int(cfg.n_subjects) < 1:
+            raise SShaDeError(f"n_subjects must be >= 1, got {cfg.n_subjects}")
+
+    def plan(self):
+        subs = list(range(int(self.cfg.n_subjects)))
+        if self.cfg.subjects is not None:
+            want = sorted({int(s) for s in self.cfg.subjects})
+            bad = [s for s in want if s < 0]
+            if bad:
+                raise SShaDeError(f"subject ids must be >= 0, got {bad}")
+            subs = want
+        return {s: list(range(1, len(self.names))) for s in subs}
+
+    def model(self, s):
+        from .synthetic import synthetic_subject
+
+        k = ("model", s)
+        if k not in self._cache:
+            c = self.cfg
+            self._cache[k] = synthetic_subject(c.seed, s, n_poses=c.n_poses, voxel_size=c.synthetic_voxel,
+                                               n_vertices=c.synthetic_vertices, blend=c.synthetic_blend,
+                                               remesh_iterations=c.synthetic_remesh_iterations)
+        return self._cache[k]
+
+    def rest_low(self, s):
+        m = self.model(s)
+        return m.V, m.F
+
+    def landmarks(self, s):
+        return dict(self.model(s).landmarks)
+
+    def target_low(self, s, p):
+        return self.model(s).posed(p)
+
+    def target_high(self, s, p, Vh):
+        from .synthetic import transfer_weights
+
+        m = self.model(s)
+        k = ("W_high", s)
+        if k not in self._cache:
+            self._cache[k] = transfer_weights(m.V, m.F, m.W, Vh)
+        return m.posed(p, V=Vh, W=self._cache[k])
+
+    def rest_inputs(self, s):
+        return {}
+
+    def pose_inputs(self, s, p):
+        return {"pose_name": self.names[p]}
+
+    def pose_name(self, s, p):
+        return self.names[p]
+
+    def subject_record(self, s, poses):
+        return {"body_seed": [int(self.cfg.seed), 0xB0D1, int(s)],
+                "pose_seeds": {str(p): [int(self.cfg.seed), 0x905E, int(s), _pose_index(self.names[p])]
+                               for p in poses},
+                "pose_names": {str(p): self.names[p] for p in [0] + list(poses)}}
+
+
+def _pose_index(name: str) -> int:
+    from .synthetic import POSE_NAMES
+
+    return POSE_NAMES.index(name)
+
+
+def build_defaust(cfg: BuildConfig) -> BuildReport:
+    """Build (or resume building) a DeFAUST dataset.
+
+    Parameters
+    ----------
+    cfg : BuildConfig.
+
+    Returns
+    -------
+    BuildReport (items built and skipped, timings, the manifest).
+
+    Raises
+    ------
+    SShaDeError
+        Unknown source, missing ``out``, FAUST folder missing or without registrations,
+        FAUST meshes that are not registrations (different faces, not 6890 vertices),
+        a high-res remesh that misses the vertex range, bad handle parameters.
+
+    Examples
+    --------
+    >>> rep = build_defaust(BuildConfig(out="/tmp/defaust_ci", n_subjects=2,
+    ...                                 vertex_range=(8000, 12000)))  # doctest: +SKIP
+    >>> rep.built[:2]  # doctest: +SKIP
+    ['subject_00/rest', 'subject_00/pose_01']
+    """
+    from tqdm import tqdm
+
+    if cfg.out is None or str(cfg.out) == "":
+        raise SShaDeError("no output folder: pass out=DIR")
+    out = Path(cfg.out).expanduser().resolve()
+    if out.exists() and not out.is_dir():
+        raise SShaDeError(f"output path exists and is not a folder: {out}")
+    if cfg.source == "faust":
+        src: _Source = _FaustSource(cfg)
+    elif cfg.source == "synthetic":
+        src = _SyntheticSource(cfg)
+    else:
+        raise SShaDeError(f"unknown source {cfg.source!r}; use source=synthetic or source=faust")
+    lo, hi = (int(x) for x in cfg.vertex_range)
+    if not 0 < lo <= hi:
+        raise SShaDeError(f"high-res vertex range must satisfy 0 < lo <= hi, got {list(cfg.vertex_range)}")
+    plan = src.plan()
+    out.mkdir(parents=True, exist_ok=True)
+
+    params = cfg.parameters()
+    old = _load_manifest(out)
+    items_old = old.get("items", {})
+    manifest = {
+        "format": FORMAT,
+        "builder_version": BUILDER_VERSION,
+        "source": cfg.source,
+        "parameters": params,
+        "packages": _package_versions(),
+        "seeds": {"seed": int(cfg.seed),
+                  "handles": "SeedSequence([seed, subject, pose]).generate_state(1)[0] (see items)",
+                  "synthetic_body": "SeedSequence([seed, 0xB0D1, subject])",
+                  "synthetic_pose": "SeedSequence([seed, 0x905E, subject, POSE_NAMES.index(name)])"},
+        "units": "metres; static_threshold is on the mean displacement Delta_l / n_per_landmark",
+        "landmark_protocol": "targets but the last use BASE_LANDMARKS, the last target all landmarks",
+        "subjects": {},
+        "items": {},
+    }
+    common = {"builder_version": BUILDER_VERSION, "source": cfg.source, "seed": int(cfg.seed)}
+    if cfg.source == "synthetic":
+        common["synthetic"] = {k: params[k] for k in ("synthetic_vertices", "synthetic_voxel", "synthetic_blend",
+                                                      "synthetic_remesh_iterations")}
+        common["n_poses"] = int(cfg.n_poses)
+    high = {"vertex_range": [lo, hi], "remesh_iterations": int(cfg.remesh_iterations)}
+    hparams = {"n_per_landmark": int(cfg.n_per_landmark), "neighbourhood": int(cfg.neighbourhood),
+               "static_threshold": float(cfg.static_threshold)}
+
+    report = BuildReport(out=out)
+    n_items = sum(1 + len(p) for p in plan.values())
+    bar = tqdm(total=n_items, desc=f"DeFAUST {cfg.source}", unit="item", disable=not cfg.progress)
+    try:
+        for s, poses in plan.items():
+            sdir = f"subject_{s:02d}"
+            t_subject = 0.0
+            src.start_subject(s)
+            # ---------------------------------------------------------------- rest
+            rid = f"{sdir}/rest"
+            rkey = _key({**common, "item": "rest", "subject": s, "high_res": high, **src.rest_inputs(s)})
+            bar.set_postfix_str(rid)
+            if _item_valid(out, items_old.get(rid), rkey):
+                manifest["items"][rid] = items_old[rid]
+                report.skipped.append(rid)
+            else:
+                t0 = time.perf_counter()
+                manifest["items"][rid] = _build_rest(out, sdir, s, src, cfg, rkey)
+                dt = time.perf_counter() - t0
+                t_subject += dt
+                report.built.append(rid)
+                report.seconds[rid] = dt
+                _write_partial(out, manifest, old)
+            bar.update(1)
+            rest_files = manifest["items"][rid]["files"]
+            lm_all = None
+            # ---------------------------------------------------------------- poses
+            for ti, p in enumerate(poses):
+                pid = f"{sdir}/pose_{p:02d}"
+                bar.set_postfix_str(pid)
+                if lm_all is None:
+                    lm_all = _landmarks(manifest, rid, src, s)
+                lm = landmarks_for_target(lm_all, ti, len(poses))
+                hseed = handle_seed(cfg.seed, s, p)
+                pkey = _key({**common, "item": "pose", "subject": s, "pose": p, "handles": hparams,
+                             "landmarks": [[k, v] for k, v in lm.items()], "handle_seed": hseed,
+                             "rest_files": rest_files, **src.pose_inputs(s, p)})
+                if _item_valid(out, items_old.get(pid), pkey):
+                    manifest["items"][pid] = items_old[pid]
+                    report.skipped.append(pid)
+                else:
+                    t0 = time.perf_counter()
+                    manifest["items"][pid] = _build_pose(out, sdir, s, p, src, cfg, pkey, lm, hseed)
+                    dt = time.perf_counter() - t0
+                    t_subject += dt
+                    report.built.append(pid)
+                    report.seconds[pid] = dt
+                    _write_partial(out, manifest, old)
+                bar.update(1)
+            manifest["subjects"][sdir] = {"subject": s, "target_poses": list(poses),
+                                          "landmarks": manifest["items"][rid]["landmarks"],
+                                          **src.subject_record(s, poses)}
+            report.subject_seconds[s] = t_subject
+            if t_subject > 0:
+                log.info("%s: built in %.1f s", sdir, t_subject)
+    finally:
+        bar.close()
+    stale = sorted(set(items_old) - set(manifest["items"]))
+    if stale:
+        log.info("%d item(s) of an earlier build are not part of this one and are left out of the manifest "
+                 "(their files are kept): %s", len(stale), ", ".join(stale[:5]) + (" ..." if len(stale) > 5 else ""))
+    _write_manifest(out, manifest)
+    report.manifest = json.loads((out / MANIFEST).read_text())
+    return report
+
+
+def _landmarks(manifest, rid, src, s) -> dict[str, int]:
+    """Landmarks of subject ``s``: recorded with its rest item (no model rebuild needed)."""
+    lm = manifest["items"][rid].get("landmarks")
+    if lm is None:
+        return src.landmarks(s)
+    return {str(k): int(v) for k, v in lm}  # a list of [name, index]: JSON keeps its order
+
+
+def _build_rest(out: Path, sdir: str, s: int, src: _Source, cfg: BuildConfig, key: str) -> dict:
+    from .highres import subdivide_remesh
+
+    V, F = src.rest_low(s)
+    lm = src.landmarks(s)
+    hr = subdivide_remesh(V, F, vertex_range=cfg.vertex_range, remesh_iterations=cfg.remesh_iterations)
+    files = {}
+    files[f"{sdir}/rest_low.ply"] = write_ply(out / sdir / "rest_low.ply", V, F)
+    files[f"{sdir}/rest_high.ply"] = write_ply(out / sdir / "rest_high.ply", hr.V, hr.F)
+    src._cache[("rest_high", s)] = (hr.V, hr.F)
+    return {"key": key, "files": files, "landmarks": [[k, int(v)] for k, v in lm.items()],  # ordered
+            "info": {"n_vertices_low": int(len(V)), "n_faces_low": int(len(F)), "n_vertices_high": int(len(hr.V)),
+                     "n_faces_high": int(len(hr.F)), "ls3_iterations": int(hr.iterations),
+                     "n_vertices_subdivided": int(hr.n_subdivided), "remesh_target_edge": float(hr.target_edge),
+                     "remesh_attempts": int(hr.attempts)}}
+
+
+def _rest_high(out: Path, sdir: str, s: int, src: _Source):
+    k = ("rest_high", s)
+    if k not in src._cache:
+        src._cache[k] = read_mesh(out / sdir / "rest_high.ply", validate=False)
+    return src._cache[k]
+
+
+def _build_pose(out: Path, sdir: str, s: int, p: int, src: _Source, cfg: BuildConfig, key: str,
+                lm: dict, hseed: int) -> dict:
+    V0, F0 = src.rest_low(s)
+    V1 = src.target_low(s, p)
+    H = landmark_handles(V0, F0, V1, lm, n_per_landmark=cfg.n_per_landmark, neighbourhood=cfg.neighbourhood,
+                         static_threshold=cfg.static_threshold, seed=hseed)
+    files = {}
+    arrays = handles_to_arrays(H)
+    arrays["subject"] = np.int64(s)
+    arrays["pose"] = np.int64(p)
+    files[f"{sdir}/pose_{p:02d}_handles.npz"] = write_npz(out / sdir / f"pose_{p:02d}_handles.npz", arrays)
+    files[f"{sdir}/pose_{p:02d}_low.ply"] = write_ply(out / sdir / f"pose_{p:02d}_low.ply", V1, F0)
+    if isinstance(src, _SyntheticSource):
+        Vh, Fh = _rest_high(out, sdir, s, src)
+        Vg = src.target_high(s, p, Vh)
+        files[f"{sdir}/pose_{p:02d}_high.ply"] = write_ply(out / sdir / f"pose_{p:02d}_high.ply", Vg, Fh)
+    return {"key": key, "files": files, "pose_name": src.pose_name(s, p), "handle_seed": int(hseed),
+            "info": {"landmarks": list(H.landmark_names), "n_handles": int(len(H)),
+                     "n_static": int(H.static.sum()), "n_dynamic": int((~H.static).sum()),
+                     "delta": [float(x) for x in H.delta], "group_static": [bool(x) for x in H.group_static]}}

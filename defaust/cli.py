@@ -1,0 +1,140 @@
+"""``python -m defaust [overrides]``: the DeFAUST builder's command line (Hydra).
+
+Config: ``conf/defaust/config.yaml`` (+ ``conf/defaust/preset/{full,ci}.yaml``). Examples::
+
+    python -m defaust source=synthetic out=/data/defaust_syn
+    python -m defaust source=faust faust.root=/data/MPI-FAUST out=/data/defaust_faust
+    python -m defaust preset=ci out=/tmp/defaust_ci subjects=[0]
+
+Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
+:class:`defaust.build.BuildConfig` for :func:`defaust.build.build_defaust`.
+"""
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+from sshade.errors import SShaDeError
+
+from .build import BuildConfig, build_defaust
+
+__all__ = ["CONF_DIR", "config_from_omegaconf", "compose_config", "run", "main"]
+
+CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf" / "defaust")
+
+log = logging.getLogger("defaust")
+
+
+def _abs(path) -> str:
+    """Resolve ``path`` against the directory the command was started from."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.utils import to_absolute_path
+
+        if HydraConfig.initialized():
+            return to_absolute_path(str(Path(str(path)).expanduser()))
+    except ImportError:  # pragma: no cover
+        pass
+    return str(Path(str(path)).expanduser().resolve())
+
+
+def config_from_omegaconf(cfg) -> BuildConfig:
+    """Map the Hydra/OmegaConf config onto a :class:`BuildConfig`.
+
+    Raises
+    ------
+    SShaDeError if ``out`` is missing or, for ``source=faust``, ``faust.root`` is.
+
+    Examples
+    --------
+    >>> bc = config_from_omegaconf(compose_config(["preset=ci", "out=/tmp/x"]))  # doctest: +SKIP
+    """
+    from omegaconf import OmegaConf
+
+    c = OmegaConf.to_container(cfg, resolve=True)
+    if c.get("out") in (None, ""):
+        raise SShaDeError("no output folder: pass out=DIR (e.g. python -m defaust source=synthetic out=defaust_syn)")
+    src = c.get("source", "synthetic")
+    if src not in ("synthetic", "faust"):
+        raise SShaDeError(f"unknown source {src!r}; use source=synthetic or source=faust")
+    faust = c.get("faust") or {}
+    if src == "faust" and faust.get("root") in (None, ""):
+        raise SShaDeError("source=faust needs faust.root=DIR (a folder with tr_reg_XYZ.ply files or an "
+                          "MPI-FAUST folder with training/registrations/)")
+    hr, hd, sy = c.get("high_res") or {}, c.get("handles") or {}, c.get("synthetic") or {}
+    d = BuildConfig(out="x")
+    return BuildConfig(
+        out=_abs(c["out"]), source=src, seed=int(c.get("seed", 0)),
+        subjects=None if c.get("subjects") is None else [int(s) for s in _as_list(c["subjects"])],
+        n_subjects=int(c.get("n_subjects", d.n_subjects)), n_poses=int(c.get("n_poses", d.n_poses)),
+        vertex_range=tuple(int(x) for x in hr.get("vertex_range", d.vertex_range)),
+        remesh_iterations=int(hr.get("remesh_iterations", d.remesh_iterations)),
+        n_per_landmark=int(hd.get("n_per_landmark", d.n_per_landmark)),
+        neighbourhood=int(hd.get("neighbourhood", d.neighbourhood)),
+        static_threshold=float(hd.get("static_threshold", d.static_threshold)),
+        faust_root=None if faust.get("root") in (None, "") else _abs(faust["root"]),
+        faust_target_poses=(None if faust.get("target_poses") is None
+                            else [int(p) for p in _as_list(faust["target_poses"])]),
+        synthetic_vertices=int(sy.get("n_vertices", d.synthetic_vertices)),
+        synthetic_voxel=float(sy.get("voxel_size", d.synthetic_voxel)),
+        synthetic_blend=float(sy.get("skin_blend", d.synthetic_blend)),
+        synthetic_remesh_iterations=int(sy.get("remesh_iterations", d.synthetic_remesh_iterations)),
+        progress=bool(c.get("progress", True)),
+    )
+
+
+def _as_list(x):
+    if isinstance(x, (list, tuple)):
+        return list(x)
+    return [x]
+
+
+def compose_config(overrides=()):
+    """The builder's config with command-line style overrides, without running Hydra's
+    app (for tests and notebooks).
+
+    Examples
+    --------
+    >>> cfg = compose_config(["preset=ci", "out=/tmp/x"]); cfg.high_res.vertex_range  # doctest: +SKIP
+    [8000, 12000]
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    if GlobalHydra.instance().is_initialized():
+        GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+def run(cfg):
+    """Build from a Hydra config; log a summary. Returns the :class:`BuildReport`."""
+    bc = config_from_omegaconf(cfg)
+    log.info("DeFAUST %s -> %s", bc.source, bc.out)
+    rep = build_defaust(bc)
+    n_hi = [it["info"]["n_vertices_high"] for k, it in rep.manifest["items"].items() if k.endswith("/rest")]
+    log.info("done: %d item(s) built, %d skipped (already complete); %d subject(s); high-res vertices %s",
+             len(rep.built), len(rep.skipped), len(rep.manifest["subjects"]),
+             f"{min(n_hi)}-{max(n_hi)}" if n_hi else "-")
+    for s, t in sorted(rep.subject_seconds.items()):
+        if t > 0:
+            log.info("subject %02d: %.1f s", s, t)
+    log.info("manifest: %s", Path(bc.out) / "manifest.json")
+    return rep
+
+
+def _main(cfg) -> None:
+    logging.getLogger("defaust").setLevel(logging.INFO)
+    try:
+        run(cfg)
+    except SShaDeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def main() -> None:
+    """Console entry point: Hydra parses the overrides."""
+    import hydra
+
+    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(_main)()

@@ -1,0 +1,231 @@
+"""Loading a built DeFAUST folder as deformation cases (the evaluator's entry point).
+
+Each case deforms a subject's rest mesh (low or high resolution) with the handles of one
+target pose. The handles are stored as positions; here they are snapped to the nearest
+vertices of the mesh used (:func:`defaust.handles.snap_handles`) and their targets are
+moved with them: ``targets = target_positions + (V[handles] - rest_positions)`` (for a
+static handle simply ``V[handles]``), so a static handle stays exactly where its vertex
+is and a dynamic one gets the stored displacement (the snap moves a position by well under a millimetre on the high-res
+mesh; at low resolution it is exact).
+
+Example
+-------
+>>> from defaust.dataset import load_defaust
+>>> cases = load_defaust("/tmp/defaust_faust", resolution="low")  # doctest: +SKIP
+>>> c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape  # doctest: +SKIP
+((6890, 3), (178,), (178, 3))
+"""
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+from .build import FORMAT, MANIFEST
+from .handles import HandleSet, handles_from_arrays, snap_handles
+from .meshio import read_mesh
+from .store import read_npz, sha256_file
+
+__all__ = ["DefaustCase", "load_defaust", "load_handles", "read_manifest"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DefaustCase:
+    """One deformation case of a DeFAUST build.
+
+    Attributes
+    ----------
+    name : str, ``"s{subject:02d}_p{pose:02d}"``.
+    subject, pose : int, subject id and target pose (the rest pose is pose 0).
+    V : (n, 3) float64 rest mesh vertices (metres) at the requested resolution.
+    F : (m, 3) int64 faces.
+    handles : (h,) int64 unique handle vertex indices into ``V`` (snapped).
+    targets : (h, 3) float64 handle target positions (metres).
+    static : (h,) bool, the handle's landmark group is static.
+    V_gt : (n, 3) float64 or None, the true target pose on the same mesh: synthetic
+        source at either resolution (skinning applied to that mesh); FAUST at low
+        resolution (the target registration); None for FAUST at high resolution.
+    group : (h,) int64 landmark group of each handle (index into ``landmark_names``).
+    landmark_names : tuple of str.
+    resolution : ``"high"`` or ``"low"``; source : ``"synthetic"`` or ``"faust"``.
+    pose_name : str, e.g. ``"arms_raised"`` (synthetic) or ``"faust_pose_3"``.
+    snap_distance : (h,) float64 distance of each kept handle's stored position to its
+        vertex. n_dropped : int, handles dropped because two snapped to one vertex.
+    rest_path : Path of the rest mesh file.
+    """
+
+    name: str
+    subject: int
+    pose: int
+    V: np.ndarray
+    F: np.ndarray
+    handles: np.ndarray
+    targets: np.ndarray
+    static: np.ndarray
+    V_gt: np.ndarray | None
+    group: np.ndarray = field(repr=False, default=None)
+    landmark_names: tuple = ()
+    resolution: str = "high"
+    source: str = ""
+    pose_name: str = ""
+    snap_distance: np.ndarray = field(repr=False, default=None)
+    n_dropped: int = 0
+    rest_path: Path | None = None
+
+
+def read_manifest(root) -> dict:
+    """The ``manifest.json`` of a DeFAUST build.
+
+    Raises
+    ------
+    SShaDeError if ``root`` is not a folder or has no readable DeFAUST manifest.
+
+    Examples
+    --------
+    >>> m = read_manifest("/tmp/defaust_faust")  # doctest: +SKIP
+    >>> sorted(m["subjects"])  # doctest: +SKIP
+    ['subject_00', 'subject_01']
+    """
+    root = Path(root).expanduser()
+    if not root.is_dir():
+        raise SShaDeError(f"DeFAUST folder not found: {root}")
+    p = root / MANIFEST
+    if not p.is_file():
+        raise SShaDeError(f"{root} has no {MANIFEST}; build it with `python -m defaust out={root}`")
+    try:
+        m = json.loads(p.read_text())
+    except (ValueError, OSError) as e:
+        raise SShaDeError(f"{p}: unreadable manifest ({e}); rebuild with `python -m defaust out={root}`") from None
+    if not isinstance(m, dict) or m.get("format") != FORMAT:
+        raise SShaDeError(f"{p}: not a DeFAUST manifest (format {m.get('format') if isinstance(m, dict) else None!r},"
+                          f" expected {FORMAT!r})")
+    return m
+
+
+def load_handles(path) -> HandleSet:
+    """Read a ``pose_YY_handles.npz`` file.
+
+    Returns
+    -------
+    HandleSet (positions; snap them with :func:`defaust.handles.snap_handles`).
+
+    Raises
+    ------
+    SShaDeError on a missing, unreadable or inconsistent file.
+
+    Examples
+    --------
+    >>> H = load_handles("/tmp/defaust_faust/subject_00/pose_01_handles.npz")  # doctest: +SKIP
+    >>> H.rest.shape == H.target.shape  # doctest: +SKIP
+    True
+    """
+    return handles_from_arrays(read_npz(path), name=str(path))
+
+
+def _check(root: Path, rel: str, files: dict, verify: bool) -> Path:
+    p = root / rel
+    if not p.is_file():
+        raise SShaDeError(f"{p} is missing; resume the build with `python -m defaust ... out={root}`")
+    if verify:
+        want = files.get(rel)
+        if want is None:
+            raise SShaDeError(f"{p} is not listed in {root / MANIFEST}")
+        if sha256_file(p) != want:
+            raise SShaDeError(f"{p}: checksum differs from {MANIFEST} (corrupted or modified); "
+                              f"rebuild it by resuming the build with `python -m defaust ... out={root}`")
+    return p
+
+
+def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
+                 verify: bool = True, tol: float | None = None) -> list[DefaustCase]:
+    """Load the deformation cases of a DeFAUST build.
+
+    Parameters
+    ----------
+    root : str or Path, the build folder (``out=`` of ``python -m defaust``).
+    resolution : ``"high"`` (LS3 Loop + isotropic remesh, the paper's setting) or
+        ``"low"`` (FAUST registration / synthetic base mesh).
+    subjects : int, list of int or None, keep only these subjects.
+    limit : int or None, keep the first ``limit`` cases in (subject, pose) order.
+    verify : bool, check every file read against the manifest's sha256.
+    tol : float or None, snapping tolerance in metres (see
+        :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal).
+
+    Returns
+    -------
+    list of :class:`DefaustCase`, sorted by (subject, pose); the rest mesh of a subject
+    is read once and shared by its cases (do not modify ``V``/``F`` in place).
+
+    Raises
+    ------
+    SShaDeError
+        Missing folder or manifest, bad ``resolution``/``limit``, unknown subject, a
+        missing or corrupted file (checksum mismatch), a handle off the surface.
+
+    Examples
+    --------
+    >>> cases = load_defaust("/tmp/defaust_syn", resolution="high", limit=2)  # doctest: +SKIP
+    >>> [c.name for c in cases]  # doctest: +SKIP
+    ['s00_p01', 's00_p02']
+    """
+    if resolution not in ("high", "low"):
+        raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
+    if limit is not None:
+        limit = int(limit)
+        if limit < 1:
+            raise SShaDeError(f"limit must be a positive integer or None, got {limit}")
+    root = Path(root).expanduser()
+    m = read_manifest(root)
+    files = m.get("files", {})
+    items = m.get("items", {})
+    subj = m.get("subjects", {})
+    plan = sorted((int(rec["subject"]), int(p)) for rec in subj.values() for p in rec["target_poses"])
+    if subjects is not None:
+        want = {int(subjects)} if isinstance(subjects, (int, np.integer)) else {int(s) for s in subjects}
+        have = {s for s, _ in plan}
+        missing = sorted(want - have)
+        if missing:
+            raise SShaDeError(f"subjects {missing} are not in {root} (it has {sorted(have)})")
+        plan = [(s, p) for s, p in plan if s in want]
+    if limit is not None:
+        plan = plan[:limit]
+    rest: dict[int, tuple] = {}
+    cases = []
+    for s, p in plan:
+        sdir = f"subject_{s:02d}"
+        if s not in rest:
+            rp = _check(root, f"{sdir}/rest_{resolution}.ply", files, verify)
+            V, F = read_mesh(rp)
+            rest[s] = (V, F, rp)
+        V, F, rp = rest[s]
+        hp = _check(root, f"{sdir}/pose_{p:02d}_handles.npz", files, verify)
+        H = load_handles(hp)
+        snap = snap_handles(V, H.rest, tol=tol, name=str(hp))
+        k = snap.keep
+        idx = snap.index
+        st = H.static[k]
+        T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
+        T[st] = V[idx[st]]                        # static handles stay exactly in place
+        gt_rel = f"{sdir}/pose_{p:02d}_{resolution}.ply"
+        V_gt = None
+        if gt_rel in files or (root / gt_rel).is_file():
+            Vg, Fg = read_mesh(_check(root, gt_rel, files, verify), validate=False)
+            if len(Vg) != len(V) or not np.array_equal(Fg, F):
+                raise SShaDeError(f"{root / gt_rel}: ground truth does not share the rest mesh's faces")
+            V_gt = Vg
+        item = items.get(f"{sdir}/pose_{p:02d}", {})
+        cases.append(DefaustCase(
+            name=f"s{s:02d}_p{p:02d}", subject=s, pose=p, V=V, F=F, handles=idx, targets=np.ascontiguousarray(T),
+            static=st.copy(), V_gt=V_gt, group=H.group[k].copy(), landmark_names=H.landmark_names,
+            resolution=resolution, source=str(m.get("source", "")), pose_name=str(item.get("pose_name", "")),
+            snap_distance=snap.distance[k], n_dropped=snap.n_dropped, rest_path=rp))
+    if not cases:
+        raise SShaDeError(f"no DeFAUST case in {root}")
+    return cases

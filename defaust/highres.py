@@ -1,0 +1,163 @@
+"""High-resolution rest meshes: LS3 Loop subdivision + isotropic remeshing (paper appendix).
+
+"We produce a high-resolution version of the rest pose shapes using the LS3 Loop
+algorithm [Boye et al. 2010] ... we apply a step of isotropic remeshing [Hoppe et al.
+1993] to the subdivided surfaces, obtaining meshes with a vertex count in the range
+[150k, 200k]." (SShaDe, appendix "DeFAUST dataset").
+
+Both steps are pymeshlab filters:
+
+1. ``meshing_surface_subdivision_ls3_loop`` with ``threshold=PercentageValue(0)`` (the
+   default 1 % threshold skips every edge shorter than 1 % of the bounding box, i.e.
+   most of a fine mesh) and the fewest iterations ``k >= 1`` that reach at least half
+   the target vertex count (each iteration multiplies it by ~4);
+2. ``meshing_isotropic_explicit_remeshing`` with an absolute target edge length
+   ``l = sqrt(2 A / (sqrt(3) n))`` (an equilateral mesh of area ``A`` with ``n``
+   vertices), ``n`` the middle of the requested range; if the result falls outside the
+   range, ``l`` is rescaled by ``sqrt(n_got / n)`` and the remesh redone from the
+   subdivided surface (at most ``max_attempts`` times).
+
+Deterministic: both filters are deterministic for a given input (checked by the tests
+through byte-identical builds). Timing on one core: ~1 s for the subdivision and ~80 s
+for the remesh of a 6890-vertex FAUST registration to ~170k vertices (10 iterations).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["HighResResult", "subdivide_remesh", "ls3_loop"]
+
+
+@dataclass(frozen=True)
+class HighResResult:
+    """Output of :func:`subdivide_remesh`.
+
+    Attributes
+    ----------
+    V : (n, 3) float64 vertices (input units); F : (m, 3) int64 faces.
+    iterations : int, LS3 Loop iterations used.
+    n_subdivided : int, vertex count after subdivision.
+    target_edge : float, final target edge length of the remesh (input units).
+    attempts : int, remeshes run.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    iterations: int
+    n_subdivided: int
+    target_edge: float
+    attempts: int
+
+
+def ls3_loop(V, F, iterations: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """LS3 Loop subdivision of every edge (no length threshold).
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int, closed or open triangle mesh.
+    iterations : int >= 1.
+
+    Returns
+    -------
+    V : (~4^k n, 3) float64; F : (4^k m, 3) int64.
+
+    Examples
+    --------
+    >>> V2, F2 = ls3_loop(V, F, 1)  # doctest: +SKIP
+    >>> len(F2) == 4 * len(F)  # doctest: +SKIP
+    True
+    """
+    ms = _meshset(V, F)
+    _ls3(ms, iterations)
+    m = ms.current_mesh()
+    return np.asarray(m.vertex_matrix(), np.float64), np.asarray(m.face_matrix(), np.int64)
+
+
+def _meshset(V, F):
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int32)))
+    return ms
+
+
+def _ls3(ms, iterations: int) -> None:
+    import pymeshlab
+
+    ms.meshing_surface_subdivision_ls3_loop(loopweight="Loop", iterations=int(iterations),
+                                            threshold=pymeshlab.PercentageValue(0.0))
+
+
+def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations: int = 10,
+                     max_attempts: int = 4) -> HighResResult:
+    """High-resolution version of a mesh: LS3 Loop, then isotropic remeshing.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertex positions (any unit; FAUST and synthetic: metres).
+    F : (m, 3) int faces, a closed or open 2-manifold.
+    vertex_range : (lo, hi) int, accepted vertex counts of the result (paper:
+        [150k, 200k]).
+    remesh_iterations : int, iterations of the isotropic remesh (pymeshlab default 10).
+    max_attempts : int, remeshes tried before giving up.
+
+    Returns
+    -------
+    HighResResult, its mesh validated (:func:`sshade.validate.validate_mesh`) and with
+    ``lo <= len(V) <= hi``.
+
+    Raises
+    ------
+    SShaDeError on a bad range, or if no attempt lands in the range or the remesh is not
+    a manifold single-component mesh.
+
+    Examples
+    --------
+    >>> r = subdivide_remesh(V, F, vertex_range=(8000, 12000))  # doctest: +SKIP
+    >>> 8000 <= len(r.V) <= 12000  # doctest: +SKIP
+    True
+    """
+    import pymeshlab
+
+    from sshade.validate import validate_mesh
+
+    lo, hi = (int(x) for x in vertex_range)
+    if not 0 < lo <= hi:
+        raise SShaDeError(f"high-res vertex range must satisfy 0 < lo <= hi, got [{lo}, {hi}]")
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    target_n = 0.5 * (lo + hi)
+    # fewest LS3 iterations (>= 1) that reach half the target count: the remesh then
+    # mostly collapses/flips instead of splitting long edges of a coarse surface
+    k, n_est = 1, 4 * len(V)
+    while n_est < 0.5 * target_n and k < 8:
+        k, n_est = k + 1, 4 * n_est
+    base = _meshset(V, F)
+    _ls3(base, k)
+    Vs = np.asarray(base.current_mesh().vertex_matrix(), np.float64)
+    Fs = np.asarray(base.current_mesh().face_matrix(), np.int64)
+    n_sub = len(Vs)
+    area = float(base.get_geometric_measures()["surface_area"])
+    del base
+    edge = float(np.sqrt(2.0 * area / (np.sqrt(3.0) * target_n)))
+    tried = []
+    for attempt in range(1, int(max_attempts) + 1):
+        ms = _meshset(Vs, Fs)
+        ms.meshing_isotropic_explicit_remeshing(iterations=int(remesh_iterations),
+                                                targetlen=pymeshlab.PureValue(edge))
+        m = ms.current_mesh()
+        n = m.vertex_number()
+        tried.append((edge, n))
+        if lo <= n <= hi:
+            Vh = np.asarray(m.vertex_matrix(), np.float64)
+            Fh = np.asarray(m.face_matrix(), np.int64)
+            Vh, Fh = validate_mesh(Vh, Fh, name="high-res remesh")
+            return HighResResult(V=Vh, F=Fh, iterations=k, n_subdivided=int(n_sub), target_edge=edge,
+                                 attempts=attempt)
+        edge *= float(np.sqrt(n / target_n))
+    raise SShaDeError(f"isotropic remesh did not reach [{lo}, {hi}] vertices in {max_attempts} attempts "
+                      f"(target edge length -> vertex count: {[(round(e, 6), n) for e, n in tried]})")

@@ -1,0 +1,166 @@
+"""Byte-deterministic files for the DeFAUST builder: binary PLY, NPZ, SHA-256.
+
+The builder promises "same seed -> same bytes". Two common writers break that:
+trimesh's PLY export stores float32 coordinates (so a read-back is not the array that
+was written) and :func:`numpy.savez` stamps every zip member with the current time.
+This module writes both formats with fixed headers and no timestamps, atomically via
+:func:`defaust.meshio.atomic_write`. Meshes are read back with
+:func:`defaust.meshio.read_mesh` (libigl reads ``double`` PLY properties exactly).
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+from .meshio import atomic_write
+
+__all__ = ["write_ply", "ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes"]
+
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # the earliest date a zip entry can hold
+
+
+def ply_bytes(V, F) -> bytes:
+    """Binary little-endian PLY of a triangle mesh: ``double`` x/y/z, ``int`` indices.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float, vertex positions (written as float64, exact).
+    F : (m, 3) array_like of int, triangles (0-based, written as int32).
+
+    Returns
+    -------
+    bytes, identical for identical arrays (no comment, no timestamp).
+
+    Raises
+    ------
+    SShaDeError on wrong shapes or indices that do not fit int32.
+
+    Examples
+    --------
+    >>> b = ply_bytes(np.eye(3), [[0, 1, 2]])
+    >>> b[:3]
+    b'ply'
+    """
+    V = np.ascontiguousarray(V, dtype="<f8")
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
+        raise SShaDeError(f"ply_bytes: need V (n, 3) and F (m, 3), got {V.shape} and {F.shape}")
+    if F.size and (F.min() < 0 or F.max() >= min(len(V), 2**31 - 1)):
+        raise SShaDeError("ply_bytes: face indices out of range")
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"element vertex {len(V)}\nproperty double x\nproperty double y\nproperty double z\n"
+              f"element face {len(F)}\nproperty list uchar int vertex_indices\nend_header\n").encode("ascii")
+    faces = np.zeros(len(F), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    faces["n"] = 3
+    faces["i"] = F
+    return header + V.tobytes() + faces.tobytes()
+
+
+def write_ply(path, V, F) -> str:
+    """Write :func:`ply_bytes` atomically and return the file's SHA-256 (hex).
+
+    Examples
+    --------
+    >>> digest = write_ply("/tmp/t.ply", np.eye(3), [[0, 1, 2]])  # doctest: +SKIP
+    """
+    data = ply_bytes(V, F)
+    with atomic_write(path, "wb") as fh:
+        fh.write(data)
+    return sha256_bytes(data)
+
+
+def write_npz(path, arrays: dict) -> str:
+    """Write arrays as an uncompressed ``.npz`` with fixed member timestamps.
+
+    Readable with :func:`numpy.load` (no pickles: object arrays are refused).
+
+    Parameters
+    ----------
+    path : str or Path.
+    arrays : dict name -> array_like, written in sorted name order.
+
+    Returns
+    -------
+    str, SHA-256 (hex) of the written bytes.
+
+    Raises
+    ------
+    SShaDeError if an array has dtype ``object``.
+
+    Examples
+    --------
+    >>> digest = write_npz("/tmp/t.npz", {"a": np.arange(3)})  # doctest: +SKIP
+    """
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as zf:
+        for name in sorted(arrays):
+            a = np.asanyarray(arrays[name])
+            if a.dtype.hasobject:
+                raise SShaDeError(f"write_npz: array {name!r} has dtype object; use fixed-width types")
+            member = io.BytesIO()
+            np.lib.format.write_array(member, np.asarray(a, order="C"), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE)
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, member.getvalue())
+    data = buf.getvalue()
+    with atomic_write(path, "wb") as fh:
+        fh.write(data)
+    return sha256_bytes(data)
+
+
+def read_npz(path) -> dict[str, np.ndarray]:
+    """Read an ``.npz`` into a dict of arrays (no pickles).
+
+    Raises
+    ------
+    SShaDeError on a missing or unreadable file.
+
+    Examples
+    --------
+    >>> d = read_npz("subject_00/pose_01_handles.npz")  # doctest: +SKIP
+    >>> d["rest_positions"].shape  # doctest: +SKIP
+    (180, 3)
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise SShaDeError(f"file not found: {p}")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except Exception as e:  # zipfile.BadZipFile, ValueError, OSError
+        raise SShaDeError(f"{p}: unreadable npz file ({type(e).__name__}: {e})") from None
+
+
+def sha256_bytes(data: bytes) -> str:
+    """SHA-256 hex digest of ``data``.
+
+    Examples
+    --------
+    >>> sha256_bytes(b"")[:8]
+    'e3b0c442'
+    """
+    return hashlib.sha256(data).hexdigest()
+
+
+def sha256_file(path, chunk: int = 1 << 20) -> str | None:
+    """SHA-256 hex digest of a file, or ``None`` if it does not exist.
+
+    Examples
+    --------
+    >>> sha256_file("/nonexistent") is None
+    True
+    """
+    p = Path(path)
+    if not p.is_file():
+        return None
+    h = hashlib.sha256()
+    with open(p, "rb") as fh:
+        for block in iter(lambda: fh.read(chunk), b""):
+            h.update(block)
+    return h.hexdigest()

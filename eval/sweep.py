@@ -1,0 +1,423 @@
+"""Parameter sweeps of the evaluator (Hydra multirun) and their summary table.
+
+Run a sweep (same config and overrides as ``python -m eval``; ``-m`` = multirun)::
+
+    python -m eval.sweep -m dataset.root=../shared/data/faust_reg dataset.limit=4 \\
+        methods=[SShaDe] sshade.n_low=500,1000,2000 sshade.n_samplings=1,5 \\
+        hydra/launcher=joblib hydra.launcher.n_jobs=2
+    python -m eval.sweep experiment=sweep dataset.root=...           # grid in conf/experiment/sweep.yaml
+    python -m eval.sweep -m ... hydra/launcher=slurm hydra.launcher.partition=NAME   # SLURM (submitit)
+    python -m eval.sweep aggregate results/sweeps/2025-01-01_12-00-00    # rebuild the table
+
+Each job is :func:`sweep_job`: it runs :func:`eval.app.run_experiment` with ``out_dir``
+set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
+``<sweep dir>/<job number>``) and records the outcome in ``status.json`` there::
+
+    {"status": "done" | "partial" | "failed" | "running", "error": "...", "overrides": [...],
+     "job_num": 3, "wall_s": 12.3, "n_cases": 4, "n_errors": 0, ...}
+
+``failed``: the job raised (bad parameter, crash inside a method, ...) or every
+(case, method) row failed (e.g. ``sshade.n_low=2``: "n_low must be at least 4");
+``partial``: some rows failed; ``running``: the job never finished (killed, timed out).
+The job function never raises, so Hydra (and every launcher) goes on with the other
+jobs; the exit status of the sweep is 0 unless Hydra itself fails.
+
+At the end of a multirun, :class:`AggregateSweepCallback` (added automatically by
+``python -m eval.sweep -m``; also set in ``conf/experiment/sweep.yaml``) calls
+:func:`aggregate_sweep`, which writes ``sweep_table.csv`` (one row per job: its
+overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
+every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
+``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.
+
+Why not ``python -m eval -m``: the plain evaluator exits with status 2 on a
+configuration error (:func:`eval.app._main`), which stops a multirun at that job; this
+entry point records the failure and continues.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+import math
+import os
+import socket
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from sshade.errors import SShaDeError
+
+__all__ = ["sweep_job", "aggregate_sweep", "sweep_markdown", "read_status", "write_status",
+           "AggregateSweepCallback", "STATUS_FILE", "main"]
+
+log = logging.getLogger("eval")
+
+STATUS_FILE = "status.json"
+TABLE_CSV = "sweep_table.csv"
+TABLE_MD = "sweep_table.md"
+_CALLBACK_KEY = "hydra.callbacks.sweep_aggregate"
+_CALLBACK_TARGET = "eval.sweep.AggregateSweepCallback"
+_MAX_ERROR = 2000
+
+
+def _now() -> str:
+    return _dt.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+# ----------------------------------------------------------------------------- status.json
+def write_status(out_dir, status: dict) -> Path:
+    """Write ``out_dir/status.json`` atomically; returns its path."""
+    from defaust.meshio import atomic_write
+    p = Path(out_dir) / STATUS_FILE
+    with atomic_write(p, "w") as fh:
+        json.dump(status, fh, indent=2, default=str)
+        fh.write("\n")
+    return p
+
+
+def read_status(job_dir) -> dict | None:
+    """``status.json`` of a job folder, or None when absent or unreadable."""
+    p = Path(job_dir) / STATUS_FILE
+    try:
+        return json.loads(p.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _hydra_job() -> tuple[Path | None, list[str], int | None, str | None]:
+    """(job output dir, task overrides, job number, sweep dir) of the running Hydra job."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        if not HydraConfig.initialized():
+            return None, [], None, None
+        hc = HydraConfig.get()
+    except Exception:  # noqa: BLE001 -- outside Hydra
+        return None, [], None, None
+    out = hc.runtime.output_dir
+    num = hc.job.get("num", None)
+    from hydra.types import RunMode
+    sweep = hc.sweep.dir if hc.mode == RunMode.MULTIRUN else None
+    return (Path(out) if out else None, [str(o) for o in hc.overrides.task],
+            None if num is None else int(num), None if sweep is None else str(sweep))
+
+
+def _rows_status(out_dir: Path, res) -> dict:
+    """done / partial / failed from the evaluator's result and its cases.csv."""
+    if not isinstance(res, dict):
+        return {"status": "done"}
+    out = {k: res[k] for k in ("n_cases", "n_errors") if isinstance(res.get(k), (int, float))}
+    n_err = int(out.get("n_errors", 0) or 0)
+    if n_err == 0:
+        return {"status": "done", **out}
+    msgs, n_rows = [], None
+    try:
+        import pandas as pd
+        df = pd.read_csv(out_dir / "cases.csv", keep_default_na=False)
+        n_rows = len(df)
+        bad = df[df["error"].astype(str).str.len() > 0]
+        for (method, err), g in bad.groupby(["method", "error"], sort=False):
+            msgs.append(f"{method}: {err} ({len(g)} case(s))")
+    except Exception as e:  # noqa: BLE001 -- no cases.csv: keep the count only
+        msgs.append(f"{n_err} failed (case, method) run(s) ({type(e).__name__} reading cases.csv)")
+    status = "failed" if n_rows is not None and n_err >= n_rows else "partial"
+    return {"status": status, "error": "; ".join(msgs)[:_MAX_ERROR], **out}
+
+
+def sweep_job(cfg) -> dict:
+    """Hydra task function of one sweep job: run the experiment into the job's folder,
+    write ``status.json``, never raise (so the other jobs of the sweep go on).
+
+    Returns the status dict (also written to ``<job dir>/status.json``).
+    """
+    from omegaconf import open_dict
+    job_dir, overrides, num, sweep_dir = _hydra_job()
+    if job_dir is None:
+        from .app import _abs
+        job_dir = _abs(cfg.get("out_dir", "results/sweep_job"))
+    job_dir = Path(job_dir).resolve()
+    with open_dict(cfg):
+        cfg.out_dir = str(job_dir)  # every job writes its tables into its own folder
+    status = {"status": "running", "job_num": num, "overrides": overrides, "out_dir": str(job_dir),
+              "sweep_dir": sweep_dir, "host": socket.gethostname(), "pid": os.getpid(), "started": _now()}
+    write_status(job_dir, status)
+    t0 = time.perf_counter()
+    try:
+        from .app import run_experiment
+        res = run_experiment(cfg)
+        status.update(_rows_status(job_dir, res))
+    except (Exception, SystemExit) as e:  # noqa: BLE001 -- record any failure, keep the sweep going
+        msg = str(e) or type(e).__name__
+        if not isinstance(e, SShaDeError):
+            msg = f"{type(e).__name__}: {msg}"
+        status.update(status="failed", error=msg[:_MAX_ERROR],
+                      traceback="".join(traceback.format_exception(e))[-_MAX_ERROR:])
+        log.error("job %s (%s) failed: %s", num, " ".join(overrides), msg)
+    status.update(wall_s=round(time.perf_counter() - t0, 3), finished=_now())
+    try:
+        write_status(job_dir, status)
+    except OSError as e:
+        log.error("cannot write %s in %s: %s", STATUS_FILE, job_dir, e)
+    if status["status"] != "done":
+        print(f"job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
+    return {k: v for k, v in status.items() if k != "traceback"}
+
+
+# ----------------------------------------------------------------------------- aggregation
+def _job_dirs(sweep_dir: Path) -> list[Path]:
+    """Folders under ``sweep_dir`` (itself included) holding a job: a status.json or a
+    Hydra ``.hydra/overrides.yaml``; hidden folders (.submitit, .hydra) are skipped."""
+    found = []
+    for root, dirs, files in os.walk(sweep_dir):
+        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+        r = Path(root)
+        if STATUS_FILE in files or (r / ".hydra" / "overrides.yaml").is_file():
+            found.append(r)
+    return found
+
+
+def _overrides(job_dir: Path, status: dict | None) -> list[str]:
+    if status and isinstance(status.get("overrides"), list):
+        return [str(o) for o in status["overrides"]]
+    p = job_dir / ".hydra" / "overrides.yaml"
+    if p.is_file():
+        import yaml
+        try:
+            v = yaml.safe_load(p.read_text())
+            return [str(o) for o in v] if isinstance(v, list) else []
+        except Exception:  # noqa: BLE001
+            return []
+    return []
+
+
+def _split(override: str) -> tuple[str, str]:
+    key, _, value = override.partition("=")
+    return key.lstrip("+~"), value
+
+
+def _value(v: str):
+    try:
+        f = float(v)
+    except ValueError:
+        return v
+    return int(f) if f.is_integer() and "." not in v and "e" not in v.lower() else f
+
+
+def _job_sort_key(row: dict):
+    n = row.get("job")
+    return (0, n, "") if isinstance(n, int) else (1, 0, str(row.get("dir")))
+
+
+def aggregate_sweep(sweep_dir, *, write: bool = True):
+    """One table for a sweep folder: a row per job (parameter setting).
+
+    Parameters
+    ----------
+    sweep_dir : the multirun folder (``hydra.sweep.dir``), holding one folder per job.
+    write : also write ``sweep_table.csv`` and ``sweep_table.md`` into ``sweep_dir``
+        (atomically).
+
+    Returns
+    -------
+    pandas DataFrame with columns ``job``, ``dir`` (relative to ``sweep_dir``),
+    ``overrides`` (space-separated), one column per overridden key, ``status``
+    (done / partial / failed / running / missing), ``error``, ``wall_s``, ``n_cases``,
+    ``n_errors``, then ``<method>/<column>`` for every column of the job's
+    ``table.csv`` (per-method means over successful cases; NaN where none).
+
+    Raises
+    ------
+    SShaDeError if ``sweep_dir`` is not a folder or holds no job.
+    """
+    import pandas as pd
+    d = Path(sweep_dir).expanduser().resolve()
+    if not d.is_dir():
+        raise SShaDeError(f"sweep folder not found: {d}")
+    jobs = _job_dirs(d)
+    if not jobs:
+        raise SShaDeError(f"no sweep jobs in {d} (no {STATUS_FILE} or .hydra/overrides.yaml below it)")
+    rows, keys = [], []
+    for j in jobs:
+        st = read_status(j)
+        ov = _overrides(j, st)
+        row = {"job": None, "dir": str(j.relative_to(d)) or ".", "overrides": " ".join(ov)}
+        if st and st.get("job_num") is not None:
+            row["job"] = int(st["job_num"])
+        elif j.name.isdigit():
+            row["job"] = int(j.name)
+        for o in ov:
+            k, v = _split(o)
+            if k not in keys:
+                keys.append(k)
+            row[k] = _value(v)
+        if st:
+            row["status"] = str(st.get("status", "missing"))
+            row["error"] = str(st.get("error") or "")
+            if row["status"] == "running" and not row["error"]:
+                row["error"] = "no final status: the job was killed, timed out or is still running"
+        else:
+            run_json = j / "run.json"
+            try:
+                rs = json.loads(run_json.read_text()).get("status") if run_json.is_file() else None
+            except (OSError, ValueError):
+                rs = None
+            row["status"] = {"done": "done", "running": "running"}.get(rs, "missing")
+            row["error"] = "" if rs == "done" else f"no {STATUS_FILE} (not run through eval.sweep?)"
+        for k in ("wall_s", "n_cases", "n_errors"):
+            row[k] = (st or {}).get(k, math.nan)
+        tab = j / "table.csv"
+        if tab.is_file():
+            try:
+                t = pd.read_csv(tab)
+            except Exception as e:  # noqa: BLE001
+                row["error"] = (row["error"] + f"; unreadable table.csv ({e})").lstrip("; ")
+                t = None
+            if t is not None and "method" in t.columns:
+                for _, r in t.iterrows():
+                    for c in t.columns:
+                        if c != "method":
+                            row[f"{r['method']}/{c}"] = r[c]
+        rows.append(row)
+    rows.sort(key=_job_sort_key)
+    head = ["job", "dir", "overrides", *keys, "status", "error", "wall_s", "n_cases", "n_errors"]
+    metric_cols = [c for r in rows for c in r if c not in head]
+    metric_cols = list(dict.fromkeys(metric_cols))
+    df = pd.DataFrame(rows, columns=head + metric_cols)
+    df["job"] = df["job"].astype("Int64")
+    if write:
+        from defaust.meshio import atomic_write
+        with atomic_write(d / TABLE_CSV, "w", newline="") as fh:
+            df.to_csv(fh, index=False, float_format="%.6g")
+        with atomic_write(d / TABLE_MD, "w") as fh:
+            fh.write(sweep_markdown(df, title=_sweep_title(d, df)))
+    return df
+
+
+def _sweep_title(d: Path, df) -> str:
+    counts = df["status"].value_counts()
+    parts = ", ".join(f"{int(counts[s])} {s}" for s in ("done", "partial", "failed", "running", "missing")
+                      if s in counts)
+    spec = ""
+    p = d / "multirun.yaml"
+    if p.is_file():
+        try:
+            import yaml
+            task = (yaml.safe_load(p.read_text()) or {}).get("hydra", {}).get("overrides", {}).get("task")
+            if task:
+                spec = f" ({' '.join(str(t) for t in task)})"
+        except Exception:  # noqa: BLE001
+            pass
+    return f"Sweep {d.name}: {len(df)} job(s), {parts}{spec}"
+
+
+def _md_cell(v, dec: int | None = None) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "--"
+    try:
+        import pandas as pd
+        if pd.isna(v):
+            return "--"
+    except (TypeError, ValueError):
+        pass
+    if dec is not None:
+        try:
+            return f"{float(v):.{dec}f}"
+        except (TypeError, ValueError):
+            pass
+    return str(v).replace("|", "\\|").replace("\n", " ")
+
+
+def sweep_markdown(df, *, title: str | None = None) -> str:
+    """Markdown view of :func:`aggregate_sweep`'s table: job, the overridden keys that
+    vary across jobs (all of them if none varies), status, per method the main metrics
+    of ``eval.tables.TABLE_COLUMNS`` and the number of cases, and the error (shortened)."""
+    from .tables import METHOD_ORDER, TABLE_COLUMNS
+    fixed = {"job", "dir", "overrides", "status", "error", "wall_s", "n_cases", "n_errors"}
+    keys = [c for c in df.columns if c not in fixed and "/" not in c]
+    vary = [k for k in keys if df[k].astype(str).nunique(dropna=False) > 1] or keys
+    methods = list(dict.fromkeys(c.split("/", 1)[0] for c in df.columns if "/" in c))
+    methods.sort(key=lambda m: (METHOD_ORDER.index(m), "") if m in METHOD_ORDER else (len(METHOD_ORDER), m))
+    cols: list[tuple[str, str, int | None]] = []
+    for m in methods:
+        if f"{m}/n_cases" in df.columns:
+            cols.append((f"{m}/n_cases", f"{m} cases", 0))
+        for c, h, _, dec, _ in TABLE_COLUMNS:
+            if f"{m}/{c}" in df.columns:
+                cols.append((f"{m}/{c}", f"{m} {h}", dec))
+    head = ["Job", *vary, "Status", *[h for _, h, _ in cols], "Error"]
+    lines = [f"### {title}", ""] if title else []
+    lines += ["| " + " | ".join(head) + " |",
+              "|" + "|".join(["---:"] + ["---"] * (len(vary) + 1) + ["---:"] * len(cols) + ["---"]) + "|"]
+    for _, r in df.iterrows():
+        err = str(r.get("error") or "")
+        err = err if len(err) <= 100 else err[:97] + "..."
+        cells = [_md_cell(r["job"]), *[_md_cell(r[k]) for k in vary], _md_cell(r["status"]),
+                 *[_md_cell(r[c], d) for c, _, d in cols], _md_cell(err) if err else ""]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------- Hydra callback
+try:
+    from hydra.experimental.callback import Callback as _Callback
+except ImportError:  # pragma: no cover -- hydra-core is a dependency
+    _Callback = object
+
+
+class AggregateSweepCallback(_Callback):
+    """Hydra callback: build ``sweep_table.{csv,md}`` when a multirun ends
+    (``hydra.callbacks.sweep_aggregate._target_=eval.sweep.AggregateSweepCallback``)."""
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        try:
+            d = Path(str(config.hydra.sweep.dir))
+            df = aggregate_sweep(d)
+        except Exception as e:  # noqa: BLE001 -- never fail a finished sweep over its summary
+            log.warning("sweep aggregation failed: %s", e)
+            print(f"sweep aggregation failed: {e}", file=sys.stderr)
+            return
+        print(sweep_markdown(df, title=_sweep_title(d.resolve(), df)))
+        print(f"wrote {TABLE_CSV}, {TABLE_MD} to {d.resolve()}")
+
+
+# ----------------------------------------------------------------------------- CLI
+def _aggregate_cli(args: list[str]) -> int:
+    import argparse
+    ap = argparse.ArgumentParser(prog="python -m eval.sweep aggregate",
+                                 description="Summarise sweep folders into sweep_table.{csv,md}.")
+    ap.add_argument("dirs", nargs="+", help="sweep folder(s) (hydra.sweep.dir)")
+    ap.add_argument("--no-write", action="store_true", help="print only, write nothing")
+    a = ap.parse_args(args)
+    rc = 0
+    for d in a.dirs:
+        try:
+            df = aggregate_sweep(d, write=not a.no_write)
+        except SShaDeError as e:
+            print(f"error: {e}", file=sys.stderr)
+            rc = 2
+            continue
+        print(sweep_markdown(df, title=_sweep_title(Path(d).resolve(), df)))
+        if not a.no_write:
+            print(f"wrote {TABLE_CSV}, {TABLE_MD} to {Path(d).resolve()}")
+    return rc
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m eval.sweep [hydra args and overrides]`` or ``... aggregate DIR...``."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "aggregate":
+        raise SystemExit(_aggregate_cli(argv[1:]))
+    import hydra
+
+    from .app import CONF_DIR
+    if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):
+        argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
+    sys.argv = [sys.argv[0], *argv]
+    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(sweep_job)()
+
+
+if __name__ == "__main__":
+    # Import the module under its real name so launchers pickle eval.sweep.sweep_job by
+    # reference (a __main__ function would not resolve in their worker processes).
+    from eval.sweep import main as _main
+    _main()

@@ -1,0 +1,199 @@
+"""DeFAUST builder: layout, determinism, resume, atomicity, handle snapping after
+remeshing, and the loader (synthetic source, `preset=ci` settings, one subject)."""
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import defaust.build as build_mod
+from defaust.build import build_defaust
+from defaust.cli import compose_config, config_from_omegaconf
+from defaust.dataset import load_defaust, load_handles
+from defaust.handles import snap_handles
+from defaust.meshio import read_mesh
+from defaust.store import sha256_file
+from sshade.errors import SShaDeError
+from sshade.validate import validate_mesh
+
+ROOT = Path(__file__).resolve().parents[1]
+POSES = [1, 2, 3, 4]
+
+
+def _build(out, *extra):
+    cfg = compose_config(["preset=ci", f"out={out}", "n_subjects=1", "progress=false", *extra])
+    return build_defaust(config_from_omegaconf(cfg))
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("defaust_a")
+    return out, _build(out)
+
+
+def _mtimes(out: Path) -> dict:
+    return {str(p.relative_to(out)): p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+
+
+def test_layout_manifest_and_meshes(built):
+    out, rep = built
+    items = ["subject_00/rest"] + [f"subject_00/pose_{p:02d}" for p in POSES]
+    assert rep.built == items and rep.skipped == []
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["source"] == "synthetic" and m["parameters"]["seed"] == 0
+    assert m["parameters"]["vertex_range"] == [8000, 12000]
+    assert m["packages"]["numpy"] and m["packages"]["pymeshlab"]
+    want = {"subject_00/rest_low.ply", "subject_00/rest_high.ply"}
+    for p in POSES:
+        want |= {f"subject_00/pose_{p:02d}_{k}" for k in ("handles.npz", "low.ply", "high.ply")}
+    assert set(m["files"]) == want
+    for rel, h in m["files"].items():
+        assert sha256_file(out / rel) == h
+    assert not list(out.rglob("*.tmp"))
+    Vl, Fl = read_mesh(out / "subject_00/rest_low.ply")
+    Vh, Fh = read_mesh(out / "subject_00/rest_high.ply")
+    assert 8000 <= len(Vh) <= 12000 and len(Vh) > 2 * len(Vl)
+    validate_mesh(Vh, Fh, allow_boundary=False)
+    assert trimesh.Trimesh(Vh, Fh, process=False).is_watertight
+    for p in POSES:  # ground truth poses share the rest meshes' faces
+        Vp, Fp = read_mesh(out / f"subject_00/pose_{p:02d}_low.ply")
+        np.testing.assert_array_equal(Fp, Fl)
+        Vq, Fq = read_mesh(out / f"subject_00/pose_{p:02d}_high.ply")
+        np.testing.assert_array_equal(Fq, Fh)
+    # the last target uses more landmarks (paper appendix)
+    n_lm = [len(load_handles(out / f"subject_00/pose_{p:02d}_handles.npz").landmark_names) for p in POSES]
+    assert n_lm[:-1] == [6, 6, 6] and n_lm[-1] == 11
+
+
+def test_two_builds_are_byte_identical(built, tmp_path):
+    out, _ = built
+    _build(tmp_path)
+    a = json.loads((out / "manifest.json").read_text())
+    b = json.loads((tmp_path / "manifest.json").read_text())
+    assert a["files"] == b["files"]
+    assert (out / "manifest.json").read_bytes() == (tmp_path / "manifest.json").read_bytes()
+
+
+def test_resume_skips_finished_and_rebuilds_damaged(built, tmp_path):
+    src, _ = built
+    out = tmp_path / "copy"
+    shutil.copytree(src, out)
+    before = _mtimes(out)
+    rep = _build(out)
+    assert rep.built == [] and len(rep.skipped) == 5
+    assert _mtimes(out) == before  # nothing rewritten, not even the manifest's content
+    # corrupt one file, delete another: exactly their items are rebuilt
+    (out / "subject_00/pose_02_handles.npz").write_bytes(b"garbage")
+    (out / "subject_00/pose_03_high.ply").unlink()
+    rep = _build(out)
+    assert rep.built == ["subject_00/pose_02", "subject_00/pose_03"]
+    ref = json.loads((src / "manifest.json").read_text())["files"]
+    for rel, h in ref.items():
+        assert sha256_file(out / rel) == h, rel
+    after = _mtimes(out)
+    untouched = [k for k in before if "pose_02" not in k and "pose_03" not in k and k != "manifest.json"]
+    assert all(after[k] == before[k] for k in untouched)
+    # a changed parameter invalidates the items it affects
+    rep = _build(out, "handles.static_threshold=0.05")
+    assert rep.built == [f"subject_00/pose_{p:02d}" for p in POSES]
+
+
+def test_interrupted_build_resumes(built, tmp_path, monkeypatch):
+    src, _ = built
+    real = build_mod._build_pose
+    calls = {"n": 0}
+
+    def flaky(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt("simulated interruption")
+        return real(*a, **k)
+
+    monkeypatch.setattr(build_mod, "_build_pose", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        _build(tmp_path)
+    m = json.loads((tmp_path / "manifest.json").read_text())
+    assert sorted(m["items"]) == ["subject_00/pose_01", "subject_00/pose_02", "subject_00/rest"]
+    assert not list(tmp_path.rglob("*.tmp"))
+    monkeypatch.setattr(build_mod, "_build_pose", real)
+    rep = _build(tmp_path)
+    assert rep.built == ["subject_00/pose_03", "subject_00/pose_04"]
+    assert (tmp_path / "manifest.json").read_bytes() == (src / "manifest.json").read_bytes()
+
+
+def test_handles_snap_to_the_right_vertices_after_remeshing(built):
+    out, _ = built
+    Vl, Fl = read_mesh(out / "subject_00/rest_low.ply")
+    Vh, Fh = read_mesh(out / "subject_00/rest_high.ply")
+    E = np.concatenate([Fh[:, [0, 1]], Fh[:, [1, 2]], Fh[:, [2, 0]]])
+    edge = float(np.linalg.norm(Vh[E[:, 0]] - Vh[E[:, 1]], axis=1).mean())
+    for p in POSES:
+        H = load_handles(out / f"subject_00/pose_{p:02d}_handles.npz")
+        # stored rest positions are exactly the low-res vertices they were drawn on
+        np.testing.assert_array_equal(H.rest, Vl[H.index])
+        s = snap_handles(Vl, H.rest)
+        np.testing.assert_array_equal(s.index, H.index)
+        assert s.distance.max() == 0
+        # on the remeshed high-res surface they land on a vertex within about an edge
+        s = snap_handles(Vh, H.rest)
+        assert s.distance.max() < edge
+        assert s.n_dropped <= 0.02 * len(H)
+        # ... which is the right one: its true (skinned) target position is next to the
+        # stored target (for dynamic handles the whole body part moved)
+        Vg, _ = read_mesh(out / f"subject_00/pose_{p:02d}_high.ply")
+        dyn = ~H.static[s.keep]
+        err = np.linalg.norm(Vg[s.index[dyn]] - H.target[s.keep][dyn], axis=1)
+        assert err.max() < 2 * edge, (p, err.max(), edge)
+
+
+def test_loader(built):
+    out, _ = built
+    hi = load_defaust(out)
+    assert [c.name for c in hi] == [f"s00_p{p:02d}" for p in POSES]
+    c = hi[1]
+    assert c.resolution == "high" and c.pose_name == "knees_bent" and c.V_gt.shape == c.V.shape
+    assert c.handles.dtype == np.int64 and len(np.unique(c.handles)) == len(c.handles)
+    assert c.targets.shape == (len(c.handles), 3) and c.static.shape == (len(c.handles),)
+    np.testing.assert_array_equal(c.targets[c.static], c.V[c.handles[c.static]])  # static = in place
+    lo = load_defaust(out, resolution="low", limit=2)
+    assert len(lo) == 2 and lo[0].n_dropped == 0
+    H = load_handles(out / "subject_00/pose_01_handles.npz")
+    np.testing.assert_array_equal(lo[0].targets, H.target)
+    np.testing.assert_array_equal(lo[0].handles, H.index)
+    with pytest.raises(SShaDeError, match="not in"):
+        load_defaust(out, subjects=[7])
+
+
+def test_loader_detects_corruption(built, tmp_path):
+    src, _ = built
+    out = tmp_path / "c"
+    shutil.copytree(src, out)
+    p = out / "subject_00/rest_high.ply"
+    b = bytearray(p.read_bytes())
+    b[-5] ^= 0xFF
+    p.write_bytes(bytes(b))
+    with pytest.raises(SShaDeError, match="checksum"):
+        load_defaust(out)
+    with pytest.raises(SShaDeError, match="manifest"):
+        load_defaust(tmp_path)
+
+
+def test_bad_input_messages(tmp_path):
+    with pytest.raises(SShaDeError, match=re.escape(str(tmp_path / "nope"))):
+        _build(tmp_path / "o", "source=faust", f"faust.root={tmp_path / 'nope'}")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SShaDeError, match="no FAUST registrations"):
+        _build(tmp_path / "o", "source=faust", f"faust.root={tmp_path / 'empty'}")
+    with pytest.raises(SShaDeError, match="faust.root"):
+        config_from_omegaconf(compose_config(["source=faust", f"out={tmp_path}"]))
+    with pytest.raises(SShaDeError, match="unknown source"):
+        config_from_omegaconf(compose_config(["source=scan", f"out={tmp_path}"]))
+    r = subprocess.run([sys.executable, "-m", "defaust"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "out=DIR" in r.stderr

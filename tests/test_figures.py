@@ -1,0 +1,146 @@
+"""Headless rendering (eval/render.py), case figures (eval/figures.py) and the
+evaluator's optional figure hook (``figures.enabled``)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+import matplotlib.image as mimage  # noqa: E402
+
+from eval.figures import case_figure, face_edge_error, figures_options  # noqa: E402
+from eval.metrics import edge_length_error  # noqa: E402
+from eval.render import figure_row, png_size, render_mesh, save_png  # noqa: E402
+from sshade.errors import SShaDeError  # noqa: E402
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    import trimesh
+    m = trimesh.creation.icosphere(subdivisions=3, radius=1.0)  # 642 vertices, 1280 faces
+    return np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+
+
+def _n_colours(img) -> int:
+    return len(np.unique(np.asarray(img).reshape(-1, img.shape[-1]), axis=0))
+
+
+def test_render_mesh_size_and_content(sphere, tmp_path):
+    V, F = sphere
+    img = render_mesh(V, F, size=(200, 150))
+    assert img.shape == (150, 200, 3) and img.dtype == np.uint8
+    assert _n_colours(img) > 20                       # shaded, not one flat colour
+    assert (img == 255).all(axis=2).any()             # white background around the mesh
+    assert (img.max(axis=2) < 240).mean() > 0.1       # the sphere covers a good part of it
+    p = save_png(tmp_path / "sphere.png", img)
+    back = mimage.imread(p)
+    assert back.shape[:2] == (150, 200)
+    assert png_size(p) == (200, 150)
+    assert np.allclose(back[..., :3], img / 255.0, atol=1 / 255 + 1e-6)
+    assert not list(tmp_path.glob(".*.tmp"))         # atomic write left no temporary file
+
+
+def test_render_scalars_points_title_colorbar(sphere):
+    V, F = sphere
+    img = render_mesh(V, F, colors=V[:, 1], cmap="hot", clim=(-1, 1), title="height",
+                      colorbar_label="y", points=V[:5], point_colors="blue", size=(240, 200),
+                      view=(20, -60))
+    assert img.shape == (200, 240, 3)
+    r, g, b = (img[..., i].astype(int) for i in range(3))
+    assert ((r > 150) & (g < 80) & (b < 80)).any()    # red part of "hot"
+    per_face = render_mesh(V, F, colors=V[F].mean(axis=1)[:, 0], size=(64, 64))
+    assert per_face.shape == (64, 64, 3) and _n_colours(per_face) > 10
+
+
+def test_render_hides_points_behind_the_surface(sphere):
+    V, F = sphere
+    kw = dict(size=(120, 120), view=(0, -90), up="z")
+    plain = render_mesh(V, F, **kw)
+    # up="z", azim=-90: the viewer is on the -y side; +y points are on the far side
+    back = V[V[:, 1] > 0.8]
+    front = V[V[:, 1] < -0.8]
+    assert np.array_equal(render_mesh(V, F, points=back, point_colors="red", point_size=40, **kw), plain)
+    assert not np.array_equal(render_mesh(V, F, points=front, point_colors="red", point_size=40, **kw), plain)
+    shown = render_mesh(V, F, points=back, point_colors="red", point_size=40, hide_occluded_points=False, **kw)
+    assert not np.array_equal(shown, plain)
+
+
+def test_render_rejects_bad_input(sphere):
+    V, F = sphere
+    with pytest.raises(SShaDeError, match="shape"):
+        render_mesh(V[:, :2], F)
+    with pytest.raises(SShaDeError, match="out of range"):
+        render_mesh(V, F + len(V))
+    with pytest.raises(SShaDeError, match="colors"):
+        render_mesh(V, F, colors=np.ones(7))
+    with pytest.raises(SShaDeError, match="size"):
+        render_mesh(V, F, size=(4, 4))
+
+
+def test_figure_row_layout(sphere, tmp_path):
+    V, F = sphere
+    a = render_mesh(V, F, size=(100, 80))
+    b = render_mesh(V, F, colors=V[:, 2], size=(120, 90))
+    p = figure_row([("a", a), {"image": b, "title": "b"}], tmp_path / "row.png",
+                   colorbar={"cmap": "hot", "clim": (0, 1), "label": "err"})
+    assert p.read_bytes()[:8] == PNG_SIGNATURE
+    assert png_size(p) == (100 + 120 + 90, 90 + 28)
+    img = mimage.imread(p)
+    assert img.shape[:2] == (118, 310) and _n_colours(img) > 20
+
+
+def test_face_edge_error_matches_metric(sphere):
+    V, F = sphere
+    Vd = V * np.array([1.3, 1.0, 0.8])
+    e = face_edge_error(V, Vd, F)
+    assert e.shape == (len(F),) and (e >= 0).all()
+    # closed mesh: every edge in two faces, so the face mean equals the edge mean
+    assert np.isclose(e.mean(), edge_length_error(V, Vd, F))
+    assert np.allclose(face_edge_error(V, V + 0.5, F), 0.0)
+
+
+def test_case_figure_png(sphere, tmp_path):
+    V, F = sphere
+    handles = np.array([0, 1, 2, 3, 10, 11])
+    static = np.array([True, True, True, False, False, False])
+    results = {"ARAP": V * [1.2, 1.0, 1.0], "SShaDe": V + 0.05 * np.sin(5 * V), "Broken": None}
+    p = case_figure(V, F, results, handles, static, tmp_path / "figs" / "case.png", title="case",
+                    panel_size=(160, 200))
+    data = p.read_bytes()
+    assert data[:8] == PNG_SIGNATURE
+    assert png_size(p) == (4 * 160 + 90, 200 + 28 + 28)
+    img = mimage.imread(p)
+    assert img.shape[:2] == (256, 730) and _n_colours(img) > 50
+    with pytest.raises(SShaDeError):
+        case_figure(V, F, results, handles, static[:2], tmp_path / "bad.png")
+
+
+def test_figures_options():
+    from omegaconf import OmegaConf
+    assert figures_options(OmegaConf.create({"methods": ["ARAP"]})) == (False, 0)
+    assert figures_options(OmegaConf.create({"figures": {"enabled": False}}))[0] is False
+    assert figures_options(OmegaConf.create({"figures": {"enabled": True}})) == (True, 4)
+    assert figures_options({"figures": {"enabled": True, "max_cases": 2}}) == (True, 2)
+
+
+def test_app_writes_case_figures(shared_data, tmp_path):
+    """The evaluator hook: figures.enabled renders at most figures.max_cases cases."""
+    root = shared_data / "faust_reg"
+    if len(list(root.glob("tr_reg_00[0-9].ply"))) < 3:
+        pytest.skip(f"FAUST subject 0 rest + two poses not found in {root}")
+    from hydra import compose, initialize_config_dir
+
+    from eval.app import CONF_DIR, run
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        cfg = compose(config_name="config", overrides=[
+            f"dataset.root={root}", "dataset.limit=2", "methods=[SShaDe]", "sshade.n_low=300",
+            "sshade.n_samplings=1", f"out_dir={tmp_path / 'run'}", "++figures.enabled=true",
+            "++figures.max_cases=1"])
+    res = run(cfg)
+    figs = sorted((res["out_dir"] / "figures").glob("*.png"))
+    assert [f.name for f in figs] == ["s0_p1.png"]
+    assert figs[0].read_bytes()[:8] == PNG_SIGNATURE
+    w, h = png_size(figs[0])
+    assert w == 2 * 320 + 90 and h == 480 + 56

@@ -1,0 +1,156 @@
+"""Hydra multirun sweeps (eval/sweep.py): a failing job is recorded and the others
+finish; the per-sweep table; the launcher configs (joblib, submitit local/SLURM)."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from eval.app import CONF_DIR
+from eval.sweep import STATUS_FILE, aggregate_sweep, main, read_status, sweep_job
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _compose(overrides, hydra_cfg=False):
+    from hydra import compose, initialize_config_dir
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        return compose(config_name="config", overrides=list(overrides), return_hydra_config=hydra_cfg)
+
+
+def _job(d: Path, num, overrides, status=None, table=None, run_status=None):
+    (d / ".hydra").mkdir(parents=True)
+    (d / ".hydra" / "overrides.yaml").write_text("".join(f"- {o}\n" for o in overrides))
+    if status is not None:
+        (d / STATUS_FILE).write_text(json.dumps({"job_num": num, "overrides": overrides, **status}))
+    if table is not None:
+        pd.DataFrame(table).to_csv(d / "table.csv", index=False)
+    if run_status is not None:
+        (d / "run.json").write_text(json.dumps({"status": run_status}))
+
+
+# ---------------------------------------------------------------- no data needed
+
+def test_aggregate_sweep_table(tmp_path, capsys):
+    sw = tmp_path / "sweep"
+    tab = {"method": ["ARAP", "SShaDe"], "n_cases": [2, 2], "n_failed": [0, 0],
+           "edge_err_pct": [0.9, 1.1], "volume_err_pct": [3.0, 2.5], "time_s": [4.0, 0.5]}
+    _job(sw / "0", 0, ["sshade.n_low=500", "arap.tol=1e-4"], {"status": "done", "wall_s": 3.0}, tab)
+    _job(sw / "1", 1, ["sshade.n_low=2", "arap.tol=1e-4"],
+         {"status": "failed", "error": "SShaDe: n_low must be at least 4, got 2 (2 case(s))"})
+    _job(sw / "2", 2, ["sshade.n_low=1000", "arap.tol=1e-4"], {"status": "running"})   # killed
+    _job(sw / "10", 10, ["sshade.n_low=4000", "arap.tol=1e-4"], run_status="running")  # no status.json
+    (sw / ".submitit" / "123").mkdir(parents=True)
+    df = aggregate_sweep(sw)
+    assert list(df["job"]) == [0, 1, 2, 10]
+    assert list(df["status"]) == ["done", "failed", "running", "running"]
+    assert list(df["sshade.n_low"]) == [500, 2, 1000, 4000]
+    assert "n_low must be at least 4" in df.loc[1, "error"]
+    assert "killed" in df.loc[2, "error"] and STATUS_FILE in df.loc[3, "error"]
+    assert df.loc[0, "SShaDe/edge_err_pct"] == pytest.approx(1.1)
+    assert df.loc[0, "ARAP/time_s"] == pytest.approx(4.0)
+    assert math.isnan(df.loc[1, "SShaDe/edge_err_pct"])
+    back = pd.read_csv(sw / "sweep_table.csv")
+    assert len(back) == 4 and list(back["status"]) == list(df["status"])
+    md = (sw / "sweep_table.md").read_text()
+    assert "| sshade.n_low |" in md.splitlines()[2] and "arap.tol" not in md  # only varying keys
+    assert "SShaDe EL (%)" in md and "1.10" in md and "failed" in md
+    # the CLI rebuilds the same files
+    (sw / "sweep_table.csv").unlink()
+    with pytest.raises(SystemExit) as e:
+        main(["aggregate", str(sw)])
+    assert e.value.code == 0 and (sw / "sweep_table.csv").is_file()
+    assert "Sweep sweep: 4 job(s), 1 done, 1 failed, 2 running" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as e:
+        main(["aggregate", str(tmp_path / "nope")])
+    assert e.value.code == 2
+
+
+def test_sweep_job_records_an_exception(tmp_path):
+    """A job whose experiment raises writes status failed and returns normally."""
+    cfg = _compose([f"out_dir={tmp_path / 'job'}"])          # dataset.root missing -> SShaDeError
+    st = sweep_job(cfg)
+    assert st["status"] == "failed" and "dataset.root" in st["error"]
+    on_disk = read_status(tmp_path / "job")
+    assert on_disk["status"] == "failed" and "dataset.root" in on_disk["error"]
+    assert "Traceback" in on_disk["traceback"] and on_disk["wall_s"] >= 0
+
+
+def test_launcher_and_experiment_configs():
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
+    c = _compose(["hydra/launcher=slurm"], hydra_cfg=True)
+    ln = c.hydra.launcher
+    assert ln._target_.endswith("SlurmLauncher")
+    assert ln.partition is None and ln.cpus_per_task == 8 and ln.timeout_min == 240 and ln.mem_gb == 32
+    c = _compose(["experiment=sweep_slurm", "hydra.launcher.partition=cpu"], hydra_cfg=True)
+    assert c.hydra.launcher._target_.endswith("SlurmLauncher") and c.hydra.launcher.partition == "cpu"
+    assert str(c.hydra.mode) == "RunMode.MULTIRUN" and "sshade.n_low" in c.hydra.sweeper.params
+    assert c.methods == ["SShaDe"] and c.sshade.workers == 8
+    c = _compose(["experiment=sweep", "hydra/launcher=joblib"], hydra_cfg=True)
+    assert c.hydra.launcher._target_.endswith("JoblibLauncher")
+    assert c.hydra.callbacks.sweep_aggregate._target_ == "eval.sweep.AggregateSweepCallback"
+    assert c.dataset.limit == 4 and c.experiment.name == "sweep"
+    c = _compose(["hydra/launcher=submitit_local"], hydra_cfg=True)
+    assert c.hydra.launcher._target_.endswith("LocalLauncher")
+
+
+# ---------------------------------------------------------------- real sweeps (FAUST)
+
+@pytest.fixture(scope="module")
+def faust_root(shared_data):
+    root = shared_data / "faust_reg"
+    if not (root / "tr_reg_000.ply").is_file() or not list(root.glob("tr_reg_00[1-9].ply")):
+        pytest.skip(f"FAUST subject 0 rest + one pose not found in {root}")
+    return root
+
+
+def _sweep(faust_root, sweep_dir, launcher_args, timeout=240):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    args = [sys.executable, "-m", "eval.sweep", "-m", f"dataset.root={faust_root}", "dataset.limit=1",
+            "methods=[SShaDe]", "sshade.n_low=2,300", "sshade.n_samplings=1", "sshade.workers=1",
+            f"hydra.sweep.dir={sweep_dir}", *launcher_args]
+    return subprocess.run(args, cwd=sweep_dir.parent, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def _check_failed_and_done(r, sweep_dir: Path):
+    assert r.returncode == 0, r.stderr[-3000:]
+    for j in ("0", "1"):
+        assert (sweep_dir / j / STATUS_FILE).is_file() and (sweep_dir / j / "table.csv").is_file()
+    # the callback wrote the table at the end of the multirun
+    assert (sweep_dir / "sweep_table.csv").is_file() and (sweep_dir / "sweep_table.md").is_file()
+    df = pd.read_csv(sweep_dir / "sweep_table.csv", keep_default_na=False, na_values=[""])
+    assert len(df) == 2
+    df = df.set_index("sshade.n_low")
+    assert df.loc[2, "status"] == "failed" and "n_low must be at least 4, got 2" in df.loc[2, "error"]
+    assert df.loc[300, "status"] == "done"
+    assert pd.isna(df.loc[300, "error"]) or df.loc[300, "error"] == ""
+    for c in ("SShaDe/edge_err_pct", "SShaDe/volume_err_pct", "SShaDe/angle_err_deg", "SShaDe/time_s"):
+        assert math.isfinite(float(df.loc[300, c])), c
+    assert math.isnan(float(df.loc[2, "SShaDe/edge_err_pct"]))
+    # rebuilding from the folders gives the same rows
+    again = aggregate_sweep(sweep_dir, write=False).set_index("sshade.n_low")
+    assert list(again["status"].sort_index()) == ["failed", "done"]
+    assert "failed" in (sweep_dir / "sweep_table.md").read_text()
+
+
+def test_joblib_sweep_records_failure(faust_root, tmp_path):
+    pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
+    sw = tmp_path / "sweep_joblib"
+    r = _sweep(faust_root, sw, ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"])
+    _check_failed_and_done(r, sw)
+
+
+@pytest.mark.slow
+def test_submitit_local_sweep_records_failure(faust_root, tmp_path):
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    sw = tmp_path / "sweep_submitit"
+    r = _sweep(faust_root, sw, ["hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5"])
+    _check_failed_and_done(r, sw)
+    assert (sw / ".submitit").is_dir()
