@@ -55,9 +55,25 @@ def _dataset_root(cfg) -> Path:
         raise SShaDeError("dataset.root is not set: pass dataset.root=DIR, a folder with FAUST "
                           "registrations tr_reg_XYZ.ply (e.g. dataset.root=../shared/data/faust_reg)")
     root = _abs(ds.root)
+    if str(ds.get("name", "")) == "defaust" and ds.get("build", {}).get("enabled", False):
+        _build_defaust(root, ds)
     if not root.is_dir():
         raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}")
     return root
+
+
+def _build_defaust(root: Path, ds) -> None:
+    """Build (or finish, or verify) the DeFAUST dataset at ``root`` before evaluating
+    (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped."""
+    from omegaconf import OmegaConf
+
+    from defaust.cli import compose_config
+    from defaust.cli import run as build_run
+    extra = ds.get("build", {}).get("overrides") or []
+    extra = OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra)
+    logging.getLogger("defaust").setLevel(logging.INFO)
+    bcfg = compose_config([f"out={root}", *[str(x) for x in extra]])
+    build_run(bcfg)
 
 
 def _metric_functions():
@@ -118,8 +134,9 @@ def run(cfg) -> dict:
     deformation_metrics, ground_truth_metrics = _metric_functions()
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
-    opts = {k: ds.get(k) for k in ("subjects", "poses", "n_per_landmark", "neighbourhood",
-                                   "static_threshold", "seed", "limit") if k in ds}
+    keys = (("subjects", "resolution", "limit") if name == "defaust" else
+            ("subjects", "poses", "n_per_landmark", "neighbourhood", "static_threshold", "seed", "limit"))
+    opts = {k: ds.get(k) for k in keys if k in ds}
     for k in ("subjects", "poses"):
         if opts.get(k) is not None and OmegaConf.is_config(opts[k]):
             opts[k] = OmegaConf.to_container(opts[k])
@@ -130,7 +147,11 @@ def run(cfg) -> dict:
     config = OmegaConf.to_container(cfg, resolve=True)
     config["dataset"]["root"] = str(root)
     seeds = {"dataset": ds.get("seed"), "sshade": cfg.get("sshade", {}).get("seed"),
-             "cases": {c.name: c.seed for c in cases}}
+             "cases": {c.name: getattr(c, "seed", None) for c in cases}}
+    if name == "defaust":
+        from defaust.dataset import read_manifest
+        seeds["defaust_manifest_seed"] = read_manifest(root).get("parameters", {}).get("seed")
+    n_base = ds.get("baseline_cases", None)  # full-res baselines only on the first N cases
     info = collect_runinfo(config, seeds=seeds, extra={"status": "running", "out_dir": str(out_dir)})
     write_runinfo(out_dir / "run.json", info)
 
@@ -138,13 +159,15 @@ def run(cfg) -> dict:
     from .figures import figures_options, write_case_figure
     fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
     with logging_redirect_tqdm():
-        for case in tqdm(cases, desc="cases", unit="case", file=sys.stderr, dynamic_ncols=True):
+        for ci, case in enumerate(tqdm(cases, desc="cases", unit="case", file=sys.stderr, dynamic_ncols=True)):
             deformed = {}  # method -> deformed vertices, for the optional figure
             for m in methods:
+                if n_base is not None and ci >= int(n_base) and m.name != "SShaDe":
+                    continue  # baselines take minutes per high-res case: run on a subset
                 row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": m.name,
                        "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
                        "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
-                       "case_seed": case.seed, "error": ""}
+                       "case_seed": getattr(case, "seed", None), "error": ""}
                 try:
                     t0 = time.perf_counter()
                     Vd = m.deform(case.V, case.F, case.handles, case.targets)

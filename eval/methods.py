@@ -111,7 +111,8 @@ def _make_sshade(sc, tol: float, max_iter: int):
                           "run with methods=[ARAP,Elastic] meanwhile") from None
     workers = _get(sc, "workers")
     try:
-        kw = dict(n_low=int(_get(sc, "n_low", 1000)),
+        n_low = _get(sc, "n_low", "auto")
+        kw = dict(n_low="auto" if n_low in (None, "auto") else int(n_low),
                   n_samplings=int(_get(sc, "n_samplings", 5)),
                   seed=int(_get(sc, "seed", 0)),
                   workers=None if workers is None else int(workers),

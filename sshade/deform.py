@@ -17,7 +17,7 @@ from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
 from .validate import validate_handles, validate_mesh
 
-__all__ = ["deform", "deform_once", "SShaDe"]
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "sampling_seeds"]
 
 # Worker-process state: the high-res mesh is handed to each worker once, at fork.
 _W: dict = {}
@@ -123,6 +123,13 @@ def _task_finish(i: int, prep: dict, V0: np.ndarray):
     return i, Vd, info
 
 
+def auto_n_low(n: int) -> int:
+    """Default low-res size for an n-vertex mesh: min(6000, n // 7), at least 100
+    (6000 is the paper's setting for 150k-200k vertices; n // 7 keeps small meshes
+    such as FAUST's 6890-vertex registrations about 7x coarser)."""
+    return int(max(100, min(6000, n // 7)))
+
+
 def sampling_seeds(seed: int, k: int) -> list[int]:
     """The k first-seed RNG seeds derived from ``seed`` (recorded in every output)."""
     return [int(s) for s in np.random.SeedSequence(seed).generate_state(k, dtype=np.uint32)]
@@ -160,8 +167,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     V : (n, 3) float64 rest vertex positions (any length unit).
     F : (m, 3) int faces of a single-component manifold triangle mesh (boundary allowed).
     handles : (h,) int vertex indices. targets : (h, 3) float target positions.
-    n_low : int, farthest-point samples per low-res mesh (paper: ~6000 for 150k-200k
-        vertices); capped at n. The handles are added to these as low-res vertices.
+    n_low : int or ``"auto"``, farthest-point samples per low-res mesh (paper: ~6000 for
+        150k-200k vertices); capped at n; ``"auto"`` = :func:`auto_n_low`. The handles
+        are added to these as low-res vertices.
     n_samplings : int, k samplings with different first seeds, averaged (paper: 5-10).
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
     workers : int or None, processes (default: min(k, CPU count)); 1 runs in-process.
@@ -194,6 +202,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         raise SShaDeError(f"n_samplings must be >= 1, got {n_samplings}")
     if gradient not in GRADIENTS:
         raise SShaDeError(f"unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
+    if n_low in (None, "auto"):
+        n_low = auto_n_low(len(V))
     if int(n_low) < 4:
         raise SShaDeError(f"n_low must be at least 4, got {n_low}")
     n_low = int(min(n_low, len(V)))

@@ -135,7 +135,7 @@ def test_app_writes_case_figures(shared_data, tmp_path):
     from eval.app import CONF_DIR, run
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=[
-            f"dataset.root={root}", "dataset.limit=2", "methods=[SShaDe]", "sshade.n_low=300",
+            "dataset=faust", f"dataset.root={root}", "dataset.limit=2", "methods=[SShaDe]", "sshade.n_low=300",
             "sshade.n_samplings=1", f"out_dir={tmp_path / 'run'}", "++figures.enabled=true",
             "++figures.max_cases=1"])
     res = run(cfg)

@@ -21,7 +21,10 @@ ROOT = Path(__file__).resolve().parents[1]
 def _compose(overrides, hydra_cfg=False):
     from hydra import compose, initialize_config_dir
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
-        return compose(config_name="config", overrides=list(overrides), return_hydra_config=hydra_cfg)
+        ov = list(overrides)
+        if not any(o.startswith(("dataset=", "experiment=")) for o in ov):
+            ov = ["dataset=faust", *ov]  # default dataset (synthetic DeFAUST) would be built
+        return compose(config_name="config", overrides=ov, return_hydra_config=hydra_cfg)
 
 
 def _job(d: Path, num, overrides, status=None, table=None, run_status=None):
@@ -113,7 +116,7 @@ def faust_root(shared_data):
 
 def _sweep(faust_root, sweep_dir, launcher_args, timeout=240):
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    args = [sys.executable, "-m", "eval.sweep", "-m", f"dataset.root={faust_root}", "dataset.limit=1",
+    args = [sys.executable, "-m", "eval.sweep", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
             "methods=[SShaDe]", "sshade.n_low=2,300", "sshade.n_samplings=1", "sshade.workers=1",
             f"hydra.sweep.dir={sweep_dir}", *launcher_args]
     return subprocess.run(args, cwd=sweep_dir.parent, env=env, capture_output=True, text=True, timeout=timeout)

@@ -2,6 +2,8 @@
 
 - :mod:`eval.datasets.faust`: FAUST registrations -> DeFAUST-style cases
   (:func:`~eval.datasets.faust.faust_cases`).
+- ``defaust``: a DeFAUST build (``python -m defaust``), read by
+  :func:`defaust.dataset.load_defaust` at high or low resolution.
 
 :func:`load_cases` dispatches on ``dataset.name`` from the Hydra config.
 """
@@ -13,7 +15,7 @@ from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
 
 __all__ = ["Case", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases", "DATASETS"]
 
-DATASETS = ("faust",)
+DATASETS = ("faust", "defaust")
 
 
 def load_cases(name: str, root, **kw) -> list[Case]:
@@ -27,4 +29,7 @@ def load_cases(name: str, root, **kw) -> list[Case]:
     """
     if name == "faust":
         return faust_cases(root, **kw)
+    if name == "defaust":
+        from defaust.dataset import load_defaust
+        return load_defaust(root, **kw)
     raise SShaDeError(f"unknown dataset {name!r}; available: {list(DATASETS)}")
