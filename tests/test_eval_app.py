@@ -275,3 +275,24 @@ def test_write_tables_atomic(tmp_path):
     assert {p.name for p in paths.values()} == {"cases.csv", "table.csv", "table.md", "table.tex"}
     assert sorted(x.name for x in (tmp_path / "t").iterdir()) == ["cases.csv", "table.csv", "table.md", "table.tex"]
     assert len(pd.read_csv(paths["cases"])) == 7
+
+
+def test_app_on_a_small_defaust_build(tmp_path):
+    """dataset=defaust builds the synthetic DeFAUST on first use (small preset here) and
+    evaluates it: SShaDe on every case, the full-res baseline on the first case only."""
+    root = tmp_path / "defaust"
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "eval", "dataset=defaust", f"dataset.root={root}",
+                        'dataset.build.overrides=["preset=ci","subjects=[0]"]', "dataset.limit=2",
+                        "dataset.baseline_cases=1", "methods=[Elastic,SShaDe]", "sshade.n_samplings=2",
+                        f"out_dir={out}"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert (root / "manifest.json").is_file()
+    import pandas as pd
+    cases = pd.read_csv(out / "cases.csv")
+    assert sorted(cases.groupby("method").size().to_dict().items()) == [("Elastic", 1), ("SShaDe", 2)]
+    assert (cases["error"].fillna("") == "").all()
+    assert cases["gt_vertex_mean_pct"].notna().all()  # synthetic ground truth is used
+    assert (cases["handle_err_pct"] < 1e-6).all()
+    for f in ("table.csv", "table.md", "table.tex", "run.json"):
+        assert (out / f).is_file()
