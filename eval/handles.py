@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
+from defaust.handles import edge_graph, geodesic_neighbourhood  # one implementation, data stage
 from sshade.errors import SShaDeError
 
 __all__ = ["LandmarkHandles", "landmark_handles", "geodesic_neighbourhood", "edge_graph"]
@@ -72,79 +73,6 @@ class LandmarkHandles:
     def n_dynamic(self) -> int:
         """Number of handles in dynamic groups."""
         return int((~self.static).sum())
-
-
-def edge_graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
-    """Symmetric sparse adjacency of the mesh edges weighted by Euclidean length.
-
-    Parameters
-    ----------
-    V : (n, 3) float64 positions; F : (m, 3) int64 faces.
-
-    Returns
-    -------
-    (n, n) scipy.sparse.csr_matrix, entry ``(i, j) = ||V[i] - V[j]||`` for every edge.
-    """
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    E = np.unique(np.sort(E, axis=1), axis=0)
-    w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-    n = len(V)
-    A = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([E[:, 0], E[:, 1]]),
-                                                 np.concatenate([E[:, 1], E[:, 0]]))), shape=(n, n))
-    return A.tocsr()
-
-
-def geodesic_neighbourhood(V: np.ndarray, F: np.ndarray, landmarks, k: int, *,
-                           graph: sp.csr_matrix | None = None) -> np.ndarray:
-    """The ``k`` vertices geodesically nearest to each landmark (the landmark included).
-
-    Distances are shortest paths over the edge graph (:func:`edge_graph`, Dijkstra); ties
-    are broken by vertex index, so the result is deterministic.
-
-    Parameters
-    ----------
-    V : (n, 3) float64; F : (m, 3) int64.
-    landmarks : (L,) int vertex indices.
-    k : int, 1 <= k <= n.
-    graph : optional precomputed :func:`edge_graph` of ``(V, F)``.
-
-    Returns
-    -------
-    (L, k) int64, row ``i`` sorted by increasing distance from ``landmarks[i]``
-    (``[i, 0] == landmarks[i]``).
-
-    Raises
-    ------
-    SShaDeError if ``k`` is out of range or fewer than ``k`` vertices are reachable
-    from a landmark (disconnected mesh).
-    """
-    n = len(V)
-    if not 1 <= k <= n:
-        raise SShaDeError(f"neighbourhood size must be in [1, {n}], got {k}")
-    L = np.asarray(landmarks, np.int64)
-    G = edge_graph(V, F) if graph is None else graph
-    # Search radius: a disc of k vertices has radius ~ sqrt(k) mean edge lengths; grow
-    # the Dijkstra limit until every landmark reaches k vertices (at most the whole mesh).
-    coo = G.tocoo()
-    mean_edge = float(coo.data.mean()) if coo.nnz else 1.0
-    limit = 3.0 * mean_edge * np.sqrt(k)
-    out = np.empty((len(L), k), np.int64)
-    todo = np.arange(len(L))
-    while len(todo):
-        D = np.atleast_2d(dijkstra(G, directed=False, indices=L[todo], limit=limit))
-        left = []
-        for row, i in zip(D, todo):
-            reach = np.flatnonzero(np.isfinite(row))
-            if len(reach) < k:
-                left.append(i)
-                continue
-            order = np.lexsort((reach, row[reach]))  # by distance, then index
-            out[i] = reach[order[:k]]
-        if left and not np.isfinite(limit):
-            raise SShaDeError(f"fewer than {k} vertices are connected to landmark {int(L[left[0]])}")
-        todo = np.asarray(left, np.int64)
-        limit = np.inf if limit > 1e6 * mean_edge else limit * 2.0
-    return out
 
 
 def landmark_handles(V_rest, F, V_target, landmarks, *, n_per_landmark: int = 30,

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
+from defaust.faust_source import discover_faust
 from sshade.errors import SShaDeError
 
 from ..handles import landmark_handles
@@ -72,22 +74,9 @@ log = logging.getLogger(__name__)
 #: same body part. The indices agree with the usual SMPL vertex
 #: names (2445 = left middle finger tip, 5905 = right middle finger tip, head top next
 #: to SMPL's 411).
-FAUST_LANDMARKS: dict[str, int] = {
-    "head_top": 414,
-    "left_hand": 2445,
-    "right_hand": 5905,
-    "left_elbow": 1623,
-    "right_elbow": 5092,
-    "chest": 3077,
-    "crotch": 1363,
-    "left_knee": 1046,
-    "right_knee": 4530,
-    "left_foot": 3295,
-    "right_foot": 6695,
-}
+FAUST_LANDMARKS = _FAUST_LANDMARKS  # one list, in defaust.faust_source
 
 FAUST_N_VERTICES = 6890
-_NAME = re.compile(r"^tr_reg_(\d{3})\.ply$")
 
 
 @dataclass
@@ -133,42 +122,6 @@ def case_seed(seed: int, subject: int, pose: int) -> int:
     of which other cases are present or of the order they are processed in.
     """
     return int(np.random.SeedSequence([int(seed), int(subject), int(pose)]).generate_state(1)[0])
-
-
-def discover_faust(root) -> dict[tuple[int, int], Path]:
-    """Find FAUST registration files ``tr_reg_XYZ.ply``.
-
-    Looks in ``root`` and in ``root/training/registrations`` (the layout of the official
-    MPI-FAUST archive); any subset of the 100 files may be present.
-
-    Parameters
-    ----------
-    root : str or Path, folder to search.
-
-    Returns
-    -------
-    dict mapping ``(subject, pose)`` to the file path, sorted by key.
-
-    Raises
-    ------
-    SShaDeError if ``root`` is not a folder or holds no ``tr_reg_XYZ.ply`` file.
-    """
-    root = Path(root).expanduser()
-    if not root.is_dir():
-        raise SShaDeError(f"FAUST folder not found: {root}")
-    found: dict[tuple[int, int], Path] = {}
-    for d in (root, root / "training" / "registrations"):
-        if not d.is_dir():
-            continue
-        for p in sorted(d.iterdir()):
-            m = _NAME.match(p.name)
-            if m and p.is_file():
-                i = int(m.group(1))
-                found.setdefault((i // 10, i % 10), p)
-    if not found:
-        raise SShaDeError(f"no FAUST registrations (tr_reg_XYZ.ply) found in {root} "
-                          f"or {root / 'training' / 'registrations'}")
-    return dict(sorted(found.items()))
 
 
 def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
