@@ -29,8 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from defaust.handles import edge_graph, geodesic_neighbourhood  # one implementation, data stage
 from sshade.errors import SShaDeError

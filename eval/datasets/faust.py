@@ -21,7 +21,6 @@ the low-resolution registrations are used as they are (no LS3 Loop subdivision t
 from __future__ import annotations
 
 import logging
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
