@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from sshade.arap import ArapResult, rigid_fit
+from sshade.arap import ArapResult, iterate, rigid_fit
 from sshade.validate import validate_handles, validate_mesh
 
 __all__ = ["arap_sr_deform", "ARAPSR"]
@@ -93,9 +93,9 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
     U = (V @ R0.T + t0_) if V0 is None else np.array(V0, np.float64)
     U[handles] = targets
     R = np.broadcast_to(R0, (n, 3, 3)).copy()
-    it, move, converged = 0, np.inf, False
-    thresh = tol * diag
-    while it < max_iter:
+
+    def step(U):
+        nonlocal R
         # local step
         ed = U[J] - U[I]
         cov = (w[:, None, None] * ed[:, :, None] * e[:, None, :]).reshape(-1, 9)  # w e' e^T
@@ -106,18 +106,12 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
         # global step: L x = b, b_i = sum_j w_ij / 2 (R_i + R_j) e_ij (as in Sorkine & Alexa eq. 9, with e_ij = v_j - v_i)
         rot_e = 0.5 * np.einsum("kab,kb->ka", R[I] + R[J], e)
         b = -(S @ (w[:, None] * rot_e))  # sign: L = -cot (PSD) and e_ij = v_j - v_i
-        rhs = b[fi] - Lfb @ targets
         Un = U.copy()
-        Un[fi] = lu.solve(rhs)
+        Un[fi] = lu.solve(b[fi] - Lfb @ targets)
         Un[handles] = targets
-        it += 1
-        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
-        U = Un
-        if move < thresh:
-            converged = True
-            break
-        if time_budget_s is not None and time.perf_counter() - t1 > time_budget_s:
-            break
+        return Un
+
+    U, it, converged, move = iterate(step, U, thresh=tol * diag, max_iter=max_iter, time_budget_s=time_budget_s)
     t2 = time.perf_counter()
     return ArapResult(V=U, iterations=it, converged=converged, last_move=move, precompute_s=t1 - t0,
                       solve_s=t2 - t1, info={"alpha": alpha})

@@ -196,7 +196,7 @@ def run_tosca(cfg) -> dict:
     from sshade.isometric import isometric_transfer
 
     from .metrics import ground_truth_metrics, hausdorff, chamfer
-    from .runinfo import collect_runinfo, write_runinfo
+    from .runinfo import collect_runinfo, finish_run, write_runinfo
 
     out_dir = _abs(cfg.out_dir)
     classes = _as_list(tc.get("classes"))
@@ -300,14 +300,7 @@ def run_tosca(cfg) -> dict:
         f"(all {k} samplings, workers={table_workers(df)}).",
         f"Excluded: {', '.join(f'{c} ({r})' for c, r in excluded.items()) or 'none'}. "
         f"{len(df)} case(s), {n_err} failed, {wall:.1f} s in all.", ""])
-    with atomic_write(out_dir / "table.md", "w") as fh:
-        fh.write(md)
-    paths["table_md"] = out_dir / "table.md"
-    info.update(status="done", n_cases=len(df), n_errors=n_err, wall_s=round(wall, 3),
-                outputs={key: Path(v).name for key, v in paths.items()})
-    paths["run_json"] = write_runinfo(out_dir / "run.json", info)
-    print(md)
-    print(f"wrote {', '.join(Path(v).name for v in paths.values())} to {out_dir}")
+    finish_run(out_dir, md, paths, info, n_cases=len(df), n_errors=n_err, wall_s=wall)
     return {"out_dir": out_dir, "paths": paths, "cases": df, "table": table, "n_cases": len(df), "n_errors": n_err}
 
 

@@ -38,7 +38,6 @@ import logging
 import math
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -117,7 +116,7 @@ def run_pose_transfer(cfg) -> dict:
 
     from .isometric import gt_stretch_pct
     from .metrics import ground_truth_metrics
-    from .runinfo import collect_runinfo, write_runinfo
+    from .runinfo import collect_runinfo, finish_run, write_runinfo
 
     out_dir = _abs(cfg.out_dir)
     present = sorted({s for s, p in files if p == 0})
@@ -233,12 +232,5 @@ def run_pose_transfer(cfg) -> dict:
                         ("identity", "Identity", "{:.3f}"), ("M'", "M'", "{:.3f}"),
                         ("time_s", "Time (s)", "{:.2f}"))),
         f"{len(df)} case(s), {n_err} failed, {wall:.1f} s in all.", ""])
-    with atomic_write(out_dir / "table.md", "w") as fh:
-        fh.write(md)
-    paths["table_md"] = out_dir / "table.md"
-    info.update(status="done", n_cases=len(df), n_errors=n_err, wall_s=round(wall, 3),
-                outputs={key: Path(v).name for key, v in paths.items()})
-    paths["run_json"] = write_runinfo(out_dir / "run.json", info)
-    print(md)
-    print(f"wrote {', '.join(Path(v).name for v in paths.values())} to {out_dir}")
+    finish_run(out_dir, md, paths, info, n_cases=len(df), n_errors=n_err, wall_s=wall)
     return {"out_dir": out_dir, "paths": paths, "cases": df, "table": table, "n_cases": len(df), "n_errors": n_err}

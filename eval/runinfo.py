@@ -105,3 +105,18 @@ def _jsonable(o):
     if isinstance(o, Path):
         return str(o)
     return repr(o)
+
+
+def finish_run(out_dir, md: str, paths: dict, info: dict, *, n_cases: int, n_errors: int, wall_s: float) -> None:
+    """End of an experiment run: write ``table.md`` (atomically), mark ``run.json`` done
+    with the counts and the output names, print the table and the written files.
+    ``paths`` (name -> Path) gains ``table_md`` and ``run_json``."""
+    out_dir = Path(out_dir)
+    with atomic_write(out_dir / "table.md", "w") as fh:
+        fh.write(md)
+    paths["table_md"] = out_dir / "table.md"
+    info.update(status="done", n_cases=n_cases, n_errors=n_errors, wall_s=round(wall_s, 3),
+                outputs={key: Path(v).name for key, v in paths.items()})
+    paths["run_json"] = write_runinfo(out_dir / "run.json", info)
+    print(md)
+    print(f"wrote {', '.join(Path(v).name for v in paths.values())} to {out_dir}")

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["rigid_fit", "ArapResult", "arap_deform", "ENERGIES"]
+__all__ = ["rigid_fit", "ArapResult", "arap_deform", "iterate", "ENERGIES"]
 
 ENERGIES = ("spokes", "spokes_and_rims")
 
@@ -78,6 +78,36 @@ class ArapResult:
     precompute_s: float
     solve_s: float
     info: dict = field(default_factory=dict)
+
+
+def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
+            time_budget_s: float | None = None) -> tuple[np.ndarray, int, bool, float]:
+    """The paper's stopping rule (§4.1) around any local/global step.
+
+    Parameters
+    ----------
+    step : callable (n, 3) -> (n, 3), one local/global iteration.
+    U : (n, 3) float64 start. thresh : float, stop when the largest vertex move of one
+        iteration is below it (mesh units). max_iter : int.
+    time_budget_s : float or None, also stop (unconverged) after this many seconds.
+
+    Returns
+    -------
+    (U, iterations, converged, last_move).
+    """
+    t0 = time.perf_counter()
+    it, move, converged = 0, np.inf, False
+    while it < max_iter:
+        Un = step(U)
+        it += 1
+        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
+        U = Un
+        if move < thresh:
+            converged = True
+            break
+        if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
+            break
+    return U, it, converged, move
 
 
 def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
@@ -142,18 +172,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     data.max_iter = 1
     igl.arap_precomputation(V, F, 3, b, data)
     t1 = time.perf_counter()
-    it, move, converged = 0, np.inf, False
-    thresh = tol * diag
-    while it < max_iter:
-        Un = igl.arap_solve(bc, data, U)
-        it += 1
-        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
-        U = Un
-        if move < thresh:
-            converged = True
-            break
-        if time_budget_s is not None and time.perf_counter() - t1 > time_budget_s:
-            break
+    U, it, converged, move = iterate(lambda X: igl.arap_solve(bc, data, X), U, thresh=tol * diag,
+                                     max_iter=max_iter, time_budget_s=time_budget_s)
     t2 = time.perf_counter()
     return ArapResult(V=U, iterations=it, converged=converged, last_move=move,
                       precompute_s=t1 - t0, solve_s=t2 - t1)
