@@ -1,5 +1,5 @@
 """FAUST discovery, landmarks and DeFAUST-style handle extraction (eval/datasets/faust.py,
-eval/handles.py) on the real registrations in ../shared/data/faust_reg."""
+defaust/handles.py) on the real registrations in ../shared/data/faust_reg."""
 from __future__ import annotations
 
 import re
@@ -10,11 +10,16 @@ from scipy.sparse.csgraph import dijkstra
 
 from eval.datasets import FAUST_LANDMARKS, discover_faust, faust_cases, load_cases
 from eval.datasets.faust import case_seed
-from eval.handles import edge_graph, geodesic_neighbourhood, landmark_handles
+from defaust.handles import edge_graph, geodesic_neighbourhood, landmark_handles
 from sshade.errors import SShaDeError
 
 L = len(FAUST_LANDMARKS)
 LM = np.array(list(FAUST_LANDMARKS.values()))
+
+
+def _lm(*idx):
+    """Landmark dict {name: vertex} for landmark_handles."""
+    return {f"l{i}": int(v) for i, v in enumerate(idx)}
 
 
 @pytest.fixture(scope="module")
@@ -181,11 +186,11 @@ def test_static_and_dynamic_targets(cases):
 
 def test_threshold_extremes(cases):
     c = cases[0]
-    H = landmark_handles(c.V, c.F, c.V_gt, LM, static_threshold=1e9, seed=c.seed)
-    assert H.static.all() and np.array_equal(H.targets, c.V[H.handles])
-    H = landmark_handles(c.V, c.F, c.V_gt, LM, static_threshold=0.0, seed=c.seed)
-    assert not H.static.any() and np.array_equal(H.targets, c.V_gt[H.handles])
-    np.testing.assert_array_equal(H.handles, c.handles)
+    H = landmark_handles(c.V, c.F, c.V_gt, FAUST_LANDMARKS, static_threshold=1e9, seed=c.seed)
+    assert H.static.all() and np.array_equal(H.target, c.V[H.index])
+    H = landmark_handles(c.V, c.F, c.V_gt, FAUST_LANDMARKS, static_threshold=0.0, seed=c.seed)
+    assert not H.static.any() and np.array_equal(H.target, c.V_gt[H.index])
+    np.testing.assert_array_equal(H.index, c.handles)
 
 
 def test_determinism(faust_root, cases):
@@ -219,21 +224,21 @@ def test_geodesic_neighbourhood_matches_full_dijkstra(cases):
 def test_landmark_handles_bad_input(cases):
     c = cases[0]
     with pytest.raises(SShaDeError, match="out of range"):
-        landmark_handles(c.V, c.F, c.V_gt, [len(c.V)])
-    with pytest.raises(SShaDeError, match="duplicate"):
-        landmark_handles(c.V, c.F, c.V_gt, [5, 5])
+        landmark_handles(c.V, c.F, c.V_gt, _lm(len(c.V)))
+    with pytest.raises(SShaDeError, match="share vertices"):
+        landmark_handles(c.V, c.F, c.V_gt, _lm(5, 5))
     with pytest.raises(SShaDeError, match="n_per_landmark"):
-        landmark_handles(c.V, c.F, c.V_gt, [5], n_per_landmark=91, neighbourhood=90)
+        landmark_handles(c.V, c.F, c.V_gt, _lm(5), n_per_landmark=91, neighbourhood=90)
     with pytest.raises(SShaDeError, match="V_target"):
-        landmark_handles(c.V, c.F, c.V_gt[:-1], [5])
+        landmark_handles(c.V, c.F, c.V_gt[:-1], _lm(5))
     bad = c.V_gt.copy()
     bad[3] = np.nan
     with pytest.raises(SShaDeError, match="NaN"):
-        landmark_handles(c.V, c.F, bad, [5])
+        landmark_handles(c.V, c.F, bad, _lm(5))
     with pytest.raises(SShaDeError, match="static_threshold"):
-        landmark_handles(c.V, c.F, c.V_gt, [5], static_threshold=-1)
-    with pytest.raises(SShaDeError, match="landmarks"):
-        landmark_handles(c.V, c.F, c.V_gt, [])
+        landmark_handles(c.V, c.F, c.V_gt, _lm(5), static_threshold=-1)
+    with pytest.raises(SShaDeError, match="no landmarks"):
+        landmark_handles(c.V, c.F, c.V_gt, {})
 
 
 def test_overlapping_groups_are_deduplicated(cases):
@@ -241,8 +246,8 @@ def test_overlapping_groups_are_deduplicated(cases):
     # two adjacent landmarks with neighbourhoods of 60 drawn whole: heavy overlap
     a = int(LM[0])
     b = int(edge_graph(c.V, c.F)[a].indices[0])  # a neighbour of a
-    H = landmark_handles(c.V, c.F, c.V_gt, [a, b], n_per_landmark=60, neighbourhood=60, seed=0)
-    assert len(np.unique(H.handles)) == len(H.handles) < 120
+    H = landmark_handles(c.V, c.F, c.V_gt, _lm(a, b), n_per_landmark=60, neighbourhood=60, seed=0)
+    assert len(np.unique(H.index)) == len(H.index) < 120
     assert (H.group[:60] == 0).all()  # first group kept whole
     N = geodesic_neighbourhood(c.V, c.F, [a, b], 60)
-    assert set(H.handles) == set(N.ravel().tolist())
+    assert set(H.index) == set(N.ravel().tolist())

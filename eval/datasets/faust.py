@@ -8,7 +8,7 @@ with index ``i = XYZ = 10 * subject + pose`` (subject ``i // 10``, pose ``i % 10
 
 Per subject, pose 0 is the rest pose and every other pose present gives one case: the
 rest mesh is deformed with handles drawn around :data:`FAUST_LANDMARKS`
-(:func:`eval.handles.landmark_handles`), and the target pose itself is the ground
+(:func:`defaust.handles.landmark_handles`), and the target pose itself is the ground
 truth for the deformed shape.
 
 Differences from the paper's DeFAUST (documented, deliberate): the original handle
@@ -30,7 +30,7 @@ from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust
 from sshade.errors import SShaDeError
 
-from ..handles import landmark_handles
+from defaust.handles import landmark_handles  # the DeFAUST builder's (one implementation)
 
 __all__ = ["FAUST_LANDMARKS", "Case", "discover_faust", "faust_cases", "case_seed"]
 
@@ -135,7 +135,7 @@ def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
     poses : iterable of int or None, target poses to use (default: all present except 0;
         pose 0 is always the rest pose and never a target).
     n_per_landmark, neighbourhood, static_threshold : see
-        :func:`eval.handles.landmark_handles` (threshold in metres).
+        :func:`defaust.handles.landmark_handles` (threshold in metres).
     seed : int, dataset seed; each case uses :func:`case_seed` ``(seed, subject, pose)``.
     limit : int or None, keep only the first ``limit`` cases in (subject, pose) order.
     landmarks : dict name -> vertex index, default :data:`FAUST_LANDMARKS`.
@@ -198,10 +198,10 @@ def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
             raise SShaDeError(f"{files[(s, p)]}: connectivity differs from the rest pose {files[(s, 0)]}; "
                               "FAUST registrations must share one face array")
         cs = case_seed(seed, s, p)
-        H = landmark_handles(V0, F0, V1, list(lm.values()), n_per_landmark=n_per_landmark,
+        H = landmark_handles(V0, F0, V1, lm, n_per_landmark=n_per_landmark,
                              neighbourhood=neighbourhood, static_threshold=static_threshold, seed=cs)
-        cases.append(Case(name=f"s{s}_p{p}", subject=s, pose=p, V=V0, F=F0, handles=H.handles,
-                          targets=H.targets, static=H.static, V_gt=V1, group=H.group, delta=H.delta,
+        cases.append(Case(name=f"s{s}_p{p}", subject=s, pose=p, V=V0, F=F0, handles=H.index,
+                          targets=H.target, static=H.static, V_gt=V1, group=H.group, delta=H.delta,
                           seed=cs, rest_path=files[(s, 0)], target_path=files[(s, p)]))
     return cases
 
