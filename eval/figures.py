@@ -11,13 +11,17 @@ error colouring), rendered headless with :mod:`eval.render`.
   blue and dynamic handles in yellow, then one panel per method, all on one scale and
   framing, with one shared colour bar (``0 .. clim``; default: the largest 99th
   percentile of the methods' face errors, values above drawn in the top colour).
-- :func:`write_case_figure`: what the evaluator calls for a case (``figures.enabled``
-  in the config, see ``docs/sweeps.md``); never raises, logs a warning instead.
+- :func:`tosca_figure` (paper §4.2): rest pose, true pose, SShaDe's reconstruction
+  coloured by the per-vertex error; :func:`pose_transfer_figure` (paper §4.3): source,
+  source in the pose, subject, SShaDe's transfer coloured by its error, ground truth.
+- :func:`mesh_row`: the shared machinery (one framing, one colour scale and bar).
+- :func:`write_case_figure` / :func:`safe_figure`: what the experiments call
+  (``figures.enabled`` in the config); they never raise, they log a warning instead.
 """
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +30,9 @@ from sshade.errors import SShaDeError
 
 from .render import DEFAULT_VIEW, figure_row, render_mesh
 
-__all__ = ["face_edge_error", "case_figure", "write_case_figure", "figures_options", "ERROR_CMAP",
-           "STATIC_COLOR", "DYNAMIC_COLOR"]
+__all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "tosca_figure",
+           "pose_transfer_figure", "safe_figure", "write_case_figure", "figures_options", "ERROR_CMAP",
+           "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW"]
 
 log = logging.getLogger("eval")
 
@@ -72,17 +77,87 @@ def face_edge_error(V, Vd, F) -> np.ndarray:
     return 100.0 * np.abs(l0 - l1).mean(axis=1) / lmax
 
 
+def vertex_error_pct(Vd, Vgt) -> np.ndarray:
+    """Per-vertex distance ``||Vd - Vgt||`` in percent of ``Vgt``'s bounding-box diagonal.
+
+    Vd, Vgt : (n, 3) float, in 1:1 correspondence. Returns (n,) float64 (the per-vertex
+    values behind :func:`eval.metrics.ground_truth_metrics`' ``gt_vertex_*_pct``).
+    Raises SShaDeError on mismatched shapes or a zero diagonal.
+    """
+    Vd = np.asarray(Vd, np.float64)
+    Vgt = np.asarray(Vgt, np.float64)
+    if Vd.shape != Vgt.shape or Vd.ndim != 2 or Vd.shape[1] != 3:
+        raise SShaDeError(f"vertex_error_pct: {Vd.shape} and {Vgt.shape} vertices must both be (n, 3)")
+    diag = float(np.linalg.norm(Vgt.max(axis=0) - Vgt.min(axis=0)))
+    if not diag > 0:
+        raise SShaDeError("vertex_error_pct: the ground truth's bounding-box diagonal is 0")
+    return 100.0 * np.linalg.norm(Vd - Vgt, axis=1) / diag
+
+
+def mesh_row(panels: Sequence[Mapping], path, *, title: str | None = None, clim: float | None = None,
+             cmap=None, colorbar_label: str = "error", view=DEFAULT_VIEW, up: str = "y",
+             panel_size=(320, 480)) -> Path:
+    """Render several meshes side by side on one framing and one colour scale, into a PNG.
+
+    Parameters
+    ----------
+    panels : sequence of mappings, one per panel, with keys ``title`` (str), ``V``
+        ((n, 3) vertices, or None for a failed item: an empty panel), ``F`` ((m, 3)),
+        and optionally ``values`` ((m,) per-face or (n,) per-vertex scalars, drawn
+        through the shared colour scale; absent = uniform grey), ``points`` ((k, 3)
+        markers) and ``point_colors`` (one colour or k).
+    path : output PNG (written atomically).
+    title : line above the row. clim : upper end of the shared scale ``0 .. clim``
+        (default: the largest 99th percentile of the panels' values; larger values are
+        drawn in the top colour and the bar gets an arrow). cmap : default
+        :data:`ERROR_CMAP`. colorbar_label : label of the shared bar (drawn only when a
+        panel has values).
+    view, up : camera, see :func:`eval.render.render_mesh`. panel_size : (w, h) px per panel.
+
+    Returns the path. The PNG is ``len(panels) * w (+ 90 with a colour bar)`` wide and
+    ``h + 28 (+ 28 with title)`` high.
+
+    Raises SShaDeError on malformed meshes or values (before anything is written).
+    """
+    cm = cmap if cmap is not None else _error_cmap()
+    vals = [None if p.get("V") is None or p.get("values") is None else np.asarray(p["values"], np.float64)
+            for p in panels]
+    finite = [v[np.isfinite(v)] for v in vals if v is not None]
+    if clim is None:
+        clim = max([float(np.percentile(v, 99)) for v in finite if len(v)] + [0.0])
+    clim = float(clim) if clim and clim > 0 else 1.0
+    extend = "max" if any(len(v) and v.max() > clim for v in finite) else "neither"
+    meshes = [np.asarray(p["V"], np.float64) for p in panels if p.get("V") is not None]
+    if not meshes:
+        raise SShaDeError("mesh_row: no panel has a mesh")
+    frame = np.concatenate([X[::max(1, len(X) // 5000)] for X in meshes])  # one framing for all panels
+    kw = dict(view=view, up=up, size=panel_size, frame=frame)
+    images = []
+    for p, v in zip(panels, vals):
+        if p.get("V") is None:
+            images.append((p.get("title", ""), np.full((panel_size[1], panel_size[0], 3), 255, np.uint8)))
+            continue
+        extra = {} if v is None else {"colors": v, "cmap": cm, "clim": (0.0, clim)}
+        if p.get("points") is not None and len(p["points"]):
+            extra.update(points=p["points"], point_colors=p.get("point_colors"))
+        images.append((p.get("title", ""), render_mesh(np.asarray(p["V"], np.float64), p["F"], **extra, **kw)))
+    bar = {"cmap": cm, "clim": (0.0, clim), "label": colorbar_label, "extend": extend} if finite else None
+    return figure_row(images, path, title=title, colorbar=bar)
+
+
 def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, title: str | None = None,
                 view=DEFAULT_VIEW, up: str = "y", panel_size=(320, 480), clim: float | None = None,
                 cmap=None) -> Path:
-    """Render one case into a PNG row: rest + handles, then each method's deformed mesh.
+    """Render one deformation case into a PNG row: rest + handles, then each method's
+    deformed mesh coloured by its per-face edge error (:func:`face_edge_error`).
 
     Parameters
     ----------
     V_rest : (n, 3) rest vertices; F : (m, 3) faces.
     results : method name -> (n, 3) deformed vertices, in panel order; ``None`` for a
         method that failed (drawn as an empty panel titled "<name>: failed").
-    handles : (h,) handle vertex indices; static_mask : (h,) bool, True = static handle.
+    handles : (h,) handle vertex indices; static_mask : (h,) bool, True = static handle
+        (drawn blue; dynamic ones yellow, paper Fig. 1).
     path : output PNG (written atomically).
     title : line above the row (e.g. the case name).
     view, up : camera, see :func:`eval.render.render_mesh`.
@@ -93,6 +168,8 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
 
     Returns the path. The PNG is ``(1 + len(results)) * panel_w + 90`` px wide and
     ``panel_h + 28`` (+ 28 with ``title``) px high.
+
+    Raises SShaDeError on mismatched handles/flags or bad meshes.
     """
     V = np.asarray(V_rest, np.float64)
     F = np.asarray(F, np.int64)
@@ -102,34 +179,72 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
         raise SShaDeError(f"case_figure: {len(handles)} handles but {len(static)} static flags")
     if len(handles) and (handles.min() < 0 or handles.max() >= len(V)):
         raise SShaDeError(f"case_figure: handle index out of range [0, {len(V)})")
-    cm = cmap if cmap is not None else _error_cmap()
-    errs: dict[str, np.ndarray | None] = {}
-    for name, Vd in results.items():
-        errs[name] = None if Vd is None else face_edge_error(V, Vd, F)
-    finite = [e[np.isfinite(e)] for e in errs.values() if e is not None]
-    if clim is None:
-        clim = max([float(np.percentile(e, 99)) for e in finite if len(e)] + [0.0])
-    clim = float(clim) if clim and clim > 0 else 1.0
-    extend = "max" if any(len(e) and e.max() > clim for e in finite) else "neither"
-
-    # one framing for every panel: all meshes (subsampled) in one box
-    step = max(1, len(V) // 5000)
-    frame = np.concatenate([V[::step]] + [np.asarray(Vd, np.float64)[::step]
-                                          for Vd in results.values() if Vd is not None])
-    kw = dict(view=view, up=up, size=panel_size, frame=frame)
-    pcol = np.where(static, STATIC_COLOR, DYNAMIC_COLOR) if len(handles) else None
-    panels = [("rest + handles", render_mesh(V, F, points=V[handles] if len(handles) else None,
-                                            point_colors=list(pcol) if pcol is not None else None, **kw))]
+    panels = [{"title": "rest + handles", "V": V, "F": F, "points": V[handles],
+               "point_colors": list(np.where(static, STATIC_COLOR, DYNAMIC_COLOR))}]
     for name, Vd in results.items():
         if Vd is None:
-            panels.append((f"{name}: failed", np.full((panel_size[1], panel_size[0], 3), 255, np.uint8)))
+            panels.append({"title": f"{name}: failed", "V": None})
             continue
-        e = errs[name]
-        panels.append((f"{name}  (EL {float(np.mean(e)):.2f}%)",
-                       render_mesh(np.asarray(Vd, np.float64), F, colors=e, cmap=cm, clim=(0.0, clim), **kw)))
-    return figure_row(panels, path, title=title,
-                      colorbar={"cmap": cm, "clim": (0.0, clim), "label": "edge error (% of max rest edge)",
-                                "extend": extend})
+        e = face_edge_error(V, Vd, F)
+        panels.append({"title": f"{name}  (EL {float(np.mean(e)):.2f}%)", "V": Vd, "F": F, "values": e})
+    return mesh_row(panels, path, title=title, clim=clim, cmap=cmap, view=view, up=up, panel_size=panel_size,
+                    colorbar_label="edge error (% of max rest edge)")
+
+
+#: Camera for TOSCA (z-up data): a three-quarter view from the front-left, a little above.
+TOSCA_VIEW = (15.0, -60.0)
+
+
+def tosca_figure(V_rest, V_true, V_pred, F, path, *, title: str | None = None, view=TOSCA_VIEW, up: str = "z",
+                 panel_size=(320, 400), clim: float | None = None) -> Path:
+    """TOSCA isometric case (paper §4.2, Fig. fig:tosca-isometric): rest pose M, true pose M', and
+    SShaDe's reconstruction of M' coloured by the per-vertex error against M'
+    (:func:`vertex_error_pct`, % of M''s bounding-box diagonal), one shared colour bar.
+
+    V_rest, V_true, V_pred : (n, 3) in 1:1 correspondence; F : (m, 3) (the rest pose's).
+    Other parameters as :func:`mesh_row`. Returns the path; PNG ``3 * w + 90`` by
+    ``h + 28 (+ 28)`` px. Raises SShaDeError on mismatched shapes.
+    """
+    e = vertex_error_pct(V_pred, V_true)
+    panels = [{"title": "rest pose M", "V": V_rest, "F": F},
+              {"title": "true pose M'", "V": V_true, "F": F},
+              {"title": f"SShaDe (mean {float(e.mean()):.3f}%)", "V": V_pred, "F": F, "values": e}]
+    return mesh_row(panels, path, title=title, clim=clim, view=view, up=up, panel_size=panel_size,
+                    colorbar_label="vertex error (% of diagonal)")
+
+
+def pose_transfer_figure(M, S, M_pose, S_pred, S_true, F, path, *, title: str | None = None,
+                         view=DEFAULT_VIEW, up: str = "y", panel_size=(240, 400), clim: float | None = None) -> Path:
+    """Pose transfer case (paper §4.3, Fig. fig:pose-transfer): the source M, M in the target
+    pose M', the subject S, SShaDe's S in the target pose coloured by the per-vertex
+    error against the ground truth, and the ground truth.
+
+    M, S, M_pose, S_pred, S_true : (n, 3) in 1:1 correspondence, sharing F (m, 3).
+    ``S_pred`` is drawn as given; its error is taken after moving it rigidly onto
+    ``S_true`` (:func:`sshade.isometric.rigid_align`, as in the table). Returns the path;
+    PNG ``5 * w + 90`` by ``h + 28 (+ 28)`` px. Raises SShaDeError on mismatched shapes.
+    """
+    from sshade.isometric import rigid_align
+    e = vertex_error_pct(rigid_align(np.asarray(S_pred, np.float64), np.asarray(S_true, np.float64)), S_true)
+    panels = [{"title": "source M", "V": M, "F": F},
+              {"title": "M in the pose (M')", "V": M_pose, "F": F},
+              {"title": "subject S", "V": S, "F": F},
+              {"title": f"SShaDe (mean {float(e.mean()):.2f}%)", "V": S_pred, "F": F, "values": e},
+              {"title": "ground truth", "V": S_true, "F": F}]
+    return mesh_row(panels, path, title=title, clim=clim, view=view, up=up, panel_size=panel_size,
+                    colorbar_label="vertex error (% of diagonal)")
+
+
+def safe_figure(name: str, draw, *args, **kwargs) -> Path | None:
+    """Call a figure function; log and return None instead of raising, so a rendering
+    problem never stops an experiment (figures are a by-product)."""
+    try:
+        path = draw(*args, **kwargs)
+    except Exception as e:  # noqa: BLE001
+        log.warning("figure for %s failed: %s: %s", name, type(e).__name__, e)
+        return None
+    log.info("figure %s", path)
+    return path
 
 
 def figures_options(cfg) -> tuple[bool, int]:
@@ -146,11 +261,5 @@ def write_case_figure(case, results: Mapping, fig_dir) -> Path | None:
     """Evaluator hook: ``fig_dir/<case.name>.png`` for one case (attributes ``name``,
     ``V``, ``F``, ``handles``, ``static``). Logs and returns None instead of raising, so
     a rendering problem never stops an evaluation."""
-    path = Path(fig_dir) / f"{case.name}.png"
-    try:
-        case_figure(case.V, case.F, results, case.handles, case.static, path, title=str(case.name))
-    except Exception as e:  # noqa: BLE001 -- figures are a by-product
-        log.warning("figure for %s failed: %s: %s", case.name, type(e).__name__, e)
-        return None
-    log.info("figure %s", path)
-    return path
+    return safe_figure(str(case.name), case_figure, case.V, case.F, results, case.handles, case.static,
+                       Path(fig_dir) / f"{case.name}.png", title=str(case.name))

@@ -17,7 +17,9 @@ isometric; the LRF transfer is rigid per low-res triangle and cannot follow stre
 
 ``table.csv`` / ``table.md``: per-class means, the mean over all cases, and the paper's
 figures (mean over its whole TOSCA set, d_H = 5.66e-3, d_C = 3.76e-8) as a reference
-row. ``run.json``: config, seeds, excluded classes, provenance. All writes atomic.
+row. ``run.json``: config, seeds, excluded classes, provenance. With ``figures.enabled``:
+``figures/<class><pose>.png`` for the first pose of each class (at most
+``figures.max_cases``; :func:`eval.figures.tosca_figure`). All writes atomic.
 
 Classes with fewer than ``tosca.min_vertices`` vertices are excluded (the paper drops
 ``wolf``, < 5000 vertices). Each pose is read with the rest pose's face array (some
@@ -195,6 +197,7 @@ def run_tosca(cfg) -> dict:
     from defaust.meshio import atomic_write, read_mesh
     from sshade.isometric import isometric_transfer
 
+    from .figures import figures_options, safe_figure, tosca_figure
     from .metrics import ground_truth_metrics, hausdorff, chamfer
     from .runinfo import collect_runinfo, finish_run, write_runinfo
 
@@ -239,6 +242,8 @@ def run_tosca(cfg) -> dict:
     write_runinfo(out_dir / "run.json", info)
 
     rows: list[dict] = []
+    fig_on, fig_left = figures_options(cfg)  # one figure per class (first pose), at most max_cases
+    drawn: set[str] = set()
 
     def write_cases():
         with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:
@@ -267,6 +272,10 @@ def run_tosca(cfg) -> dict:
                 row["gt_stretch_pct"] = gt_stretch_pct(V0, V1, F0)
                 log.info("%s%d  %.2fs  d_H %.3e  d_C %.3e  vertex mean %.4f%% max %.3f%%", c, p, row["time_s"],
                          row["hausdorff"], row["chamfer"], row["gt_vertex_mean_pct"], row["gt_vertex_max_pct"])
+                if fig_on and c not in drawn and len(drawn) < fig_left:
+                    drawn.add(c)
+                    safe_figure(f"{c}{p}", tosca_figure, V0, V1, Vp, F0, out_dir / "figures" / f"{c}{p}.png",
+                                title=f"{c}{p}: d_H {row['hausdorff']:.2e}, d_C {row['chamfer']:.2e}")
             except SShaDeError as e:
                 row["error"] = str(e) or type(e).__name__
                 log.warning("%s%d failed: %s", c, p, row["error"])

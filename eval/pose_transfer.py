@@ -30,7 +30,8 @@ M): the rest-pose body difference added in global coordinates, without rotating 
 
 ``table.csv`` / ``table.md``: one row per method with means over the cases, the ground
 truth's own stretch, and a per-case table. ``run.json``: config, seeds, provenance.
-All writes atomic.
+With ``figures.enabled``: ``figures/sA-sB_pP.png`` for the first ``figures.max_cases``
+cases (:func:`eval.figures.pose_transfer_figure`). All writes atomic.
 """
 from __future__ import annotations
 
@@ -115,6 +116,7 @@ def run_pose_transfer(cfg) -> dict:
     from sshade.isometric import pose_transfer, rigid_align
 
     from .isometric import gt_stretch_pct
+    from .figures import figures_options, pose_transfer_figure, safe_figure
     from .metrics import ground_truth_metrics
     from .runinfo import collect_runinfo, finish_run, write_runinfo
 
@@ -161,6 +163,7 @@ def run_pose_transfer(cfg) -> dict:
     write_runinfo(out_dir / "run.json", info)
 
     rows: list[dict] = []
+    fig_on, fig_left = figures_options(cfg)  # the first figures.max_cases cases
 
     def write_cases():
         with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:
@@ -185,6 +188,13 @@ def run_pose_transfer(cfg) -> dict:
                 log.info("%s  %.2fs  vertex mean %.3f%% (naive %.3f%%, identity %.3f%%, M' %.3f%%)  d_H %.3e",
                          row["case"], row["time_s"], row["gt_vertex_mean_pct"], row["naive_gt_vertex_mean_pct"],
                          row["identity_gt_vertex_mean_pct"], row["mprime_gt_vertex_mean_pct"], row["hausdorff"])
+                if fig_on and fig_left > 0:
+                    fig_left -= 1
+                    safe_figure(row["case"], pose_transfer_figure, M, S, Mp, Vs, gt, F,
+                                out_dir / "figures" / f"s{a}-s{b}_p{p}.png",
+                                title=f"subject {b} in subject {a}'s pose {p}: vertex error "
+                                      f"{row['gt_vertex_mean_pct']:.2f}% (identity "
+                                      f"{row['identity_gt_vertex_mean_pct']:.2f}%)")
             except SShaDeError as e:
                 row["error"] = str(e) or type(e).__name__
                 log.warning("%s failed: %s", row["case"], row["error"])

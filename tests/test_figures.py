@@ -8,7 +8,8 @@ import pytest
 pytest.importorskip("matplotlib")
 import matplotlib.image as mimage  # noqa: E402
 
-from eval.figures import case_figure, face_edge_error, figures_options  # noqa: E402
+from eval.figures import (case_figure, face_edge_error, figures_options, mesh_row,  # noqa: E402
+                          pose_transfer_figure, safe_figure, tosca_figure, vertex_error_pct)
 from eval.metrics import edge_length_error  # noqa: E402
 from eval.render import figure_row, png_size, render_mesh, save_png  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402
@@ -115,6 +116,43 @@ def test_case_figure_png(sphere, tmp_path):
     assert img.shape[:2] == (256, 730) and _n_colours(img) > 50
     with pytest.raises(SShaDeError):
         case_figure(V, F, results, handles, static[:2], tmp_path / "bad.png")
+
+
+def test_vertex_error_pct_known_answer():
+    Vgt = np.array([[0.0, 0, 0], [3, 0, 0], [0, 4, 0]])   # bounding-box diagonal 5
+    Vd = Vgt + [[0.05, 0, 0], [0, 0, 0], [0, 0, 0.5]]
+    np.testing.assert_allclose(vertex_error_pct(Vd, Vgt), [1.0, 0.0, 10.0])
+    with pytest.raises(SShaDeError):
+        vertex_error_pct(Vd[:2], Vgt)
+
+
+def test_tosca_and_pose_transfer_figures(sphere, tmp_path):
+    V, F = sphere
+    pose = V * [1.0, 1.4, 0.8]
+    pred = pose + 0.02 * np.sin(7 * V)
+    p = tosca_figure(V, pose, pred, F, tmp_path / "tosca.png", title="t", panel_size=(120, 150))
+    assert p.read_bytes()[:8] == PNG_SIGNATURE and png_size(p) == (3 * 120 + 90, 150 + 56)
+    S = V * 1.1
+    p = pose_transfer_figure(V, S, pose, pred * 1.1, pose * 1.1, F, tmp_path / "pt.png", panel_size=(100, 150))
+    assert png_size(p) == (5 * 100 + 90, 150 + 28)
+    img = mimage.imread(p)
+    assert _n_colours(img) > 50
+
+
+def test_mesh_row_without_values_has_no_colour_bar(sphere, tmp_path):
+    V, F = sphere
+    p = mesh_row([{"title": "a", "V": V, "F": F}, {"title": "failed", "V": None}], tmp_path / "r.png",
+                 panel_size=(100, 120))
+    assert png_size(p) == (2 * 100, 120 + 28)
+    with pytest.raises(SShaDeError, match="no panel"):
+        mesh_row([{"title": "x", "V": None}], tmp_path / "none.png")
+
+
+def test_safe_figure_logs_instead_of_raising(sphere, tmp_path, caplog):
+    V, F = sphere
+    with caplog.at_level("WARNING", logger="eval"):
+        assert safe_figure("bad", tosca_figure, V, V[:-1], V, F, tmp_path / "bad.png") is None
+    assert "figure for bad failed" in caplog.text and not (tmp_path / "bad.png").exists()
 
 
 def test_figures_options():

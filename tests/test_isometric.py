@@ -127,10 +127,17 @@ def _cfg(root, out_dir, **over):
 def test_run_tosca_writes_tables(tmp_path):
     from eval.isometric import PAPER_TOSCA, run_tosca
     data_file("tosca/centaur0.off"), data_file("tosca/centaur1.off"), data_file("tosca/wolf0.off")
+    from eval.render import png_size
     out = tmp_path / "out"
-    res = run_tosca(_cfg(SHARED_DATA / "tosca", out))
+    cfg = _cfg(SHARED_DATA / "tosca", out)
+    cfg.figures = {"enabled": True, "max_cases": 4}
+    res = run_tosca(cfg)
     for f in ("cases.csv", "table.csv", "table.md", "run.json"):
         assert (out / f).is_file(), f
+    # one figure per class that ran: rest, true pose, SShaDe + colour bar (eval.figures.tosca_figure)
+    figs = sorted((out / "figures").glob("*.png"))
+    assert [f.name for f in figs] == ["centaur1.png"]
+    assert figs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png_size(figs[0]) == (3 * 320 + 90, 400 + 56)
     assert not list(out.glob(".*.tmp"))
     cases = pd.read_csv(out / "cases.csv", keep_default_na=False)
     assert cases["case"].tolist() == ["centaur1"] and (cases["error"] == "").all()

@@ -84,10 +84,17 @@ def _cfg(root, out_dir, **over):
 
 def test_run_pose_transfer_writes_tables(tmp_path, faust):
     from eval.pose_transfer import run_pose_transfer
+    from eval.render import png_size
     out = tmp_path / "out"
-    res = run_pose_transfer(_cfg(SHARED_DATA / "faust_reg", out))
+    cfg = _cfg(SHARED_DATA / "faust_reg", out)
+    cfg.figures = {"enabled": True, "max_cases": 1}
+    res = run_pose_transfer(cfg)
     for f in ("cases.csv", "table.csv", "table.md", "run.json"):
         assert (out / f).is_file(), f
+    # the first figures.max_cases cases: M, M', S, SShaDe, truth + colour bar (pose_transfer_figure)
+    figs = sorted((out / "figures").glob("*.png"))
+    assert [f.name for f in figs] == ["s0-s1_p1.png"]
+    assert figs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png_size(figs[0]) == (5 * 240 + 90, 400 + 56)
     assert not list(out.glob(".*.tmp"))
     cases = pd.read_csv(out / "cases.csv", keep_default_na=False)
     assert cases["case"].tolist() == ["s0->s1_p1", "s1->s0_p1"] and (cases["error"] == "").all()
