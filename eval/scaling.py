@@ -24,7 +24,6 @@ import logging
 import math
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -124,7 +123,6 @@ def run_scaling(cfg) -> dict:
     import pandas as pd
     from omegaconf import OmegaConf
 
-    from baselines.arap import FullResArap
     from defaust.meshio import read_mesh, write_mesh
     from sshade.arap import arap_deform
     from sshade import deform

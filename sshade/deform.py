@@ -12,7 +12,7 @@ import numpy as np
 
 from .arap import arap_deform
 from .errors import SShaDeError
-from .lrf import GRADIENTS, frame_functions, transfer
+from .lrf import GRADIENTS, transfer
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
 from .validate import validate_handles, validate_mesh

@@ -159,7 +159,6 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     None, n_flipped)."""
     n = topo.n
     lab = np.concatenate([label, nseeds + np.arange(topo.n_loops)])  # cone vertices: own regions
-    distc = np.concatenate([dist, np.zeros(topo.n_loops)])
     Fc, Ec, FEc = topo.Fc, topo.Ec, topo.FEc
     L = lab[Fc]
     EL = lab[Ec]

@@ -10,7 +10,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ._keys import unique_int
 from .errors import SShaDeError
 from .halfedge import halfedges, vertex_fan_count
 

@@ -24,3 +24,9 @@ def data_file(rel: str) -> Path:
     if not p.is_file():
         pytest.skip(f"shared data file not found: {p}")
     return p
+
+
+def subprocess_env() -> dict:
+    """Environment for ``python -m eval ...`` child processes: this checkout first on
+    PYTHONPATH, so the tests run this tree's code whichever copy pip installed."""
+    return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))

@@ -23,7 +23,7 @@ from defaust.store import sha256_file
 from sshade.errors import SShaDeError
 from sshade.validate import validate_mesh
 
-ROOT = Path(__file__).resolve().parents[1]
+from .conftest import ROOT, subprocess_env  # noqa: E402
 POSES = [1, 2, 3, 4]
 
 
@@ -195,5 +195,5 @@ def test_bad_input_messages(tmp_path):
         config_from_omegaconf(compose_config(["source=faust", f"out={tmp_path}"]))
     with pytest.raises(SShaDeError, match="unknown source"):
         config_from_omegaconf(compose_config(["source=scan", f"out={tmp_path}"]))
-    r = subprocess.run([sys.executable, "-m", "defaust"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "defaust"], cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "out=DIR" in r.stderr

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,7 +17,7 @@ from eval.methods import make_methods
 from eval.tables import summarize, to_latex, to_markdown, write_tables
 from sshade.errors import SShaDeError
 
-ROOT = Path(__file__).resolve().parents[1]
+from .conftest import subprocess_env  # noqa: E402
 METRICS = ["volume_err_pct", "area_err_pct", "edge_err_pct", "angle_err_deg", "angle_err_rel_pct",
            "handle_err_pct", "gt_vertex_mean_pct", "gt_vertex_max_pct", "hausdorff", "chamfer", "time_s"]
 
@@ -40,7 +39,7 @@ def faust_root(shared_data):
 
 
 def _run(args, cwd, timeout=300):
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = subprocess_env()
     return subprocess.run([sys.executable, "-m", "eval", *_faust_first(args)], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=timeout)
 
@@ -285,7 +284,8 @@ def test_app_on_a_small_defaust_build(tmp_path):
     r = subprocess.run([sys.executable, "-m", "eval", "dataset=defaust", f"dataset.root={root}",
                         'dataset.build.overrides=["preset=ci","subjects=[0]"]', "dataset.limit=2",
                         "dataset.baseline_cases=1", "methods=[Elastic,SShaDe]", "sshade.n_samplings=2",
-                        f"out_dir={out}"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+                        f"out_dir={out}"], cwd=tmp_path, env=subprocess_env(), capture_output=True, text=True,
+                       timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert (root / "manifest.json").is_file()
     import pandas as pd

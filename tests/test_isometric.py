@@ -16,7 +16,7 @@ from sshade.deform import sampling_seeds
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer, rigid_align
 
-from .conftest import SHARED_DATA, data_file
+from .conftest import SHARED_DATA, data_file, subprocess_env
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -179,7 +179,7 @@ def test_cli_experiment_tosca(tmp_path):
     data_file("tosca/centaur0.off")
     if Path(os.path.relpath(SHARED_DATA / "tosca", ROOT)) != Path("../shared/data/tosca"):
         pytest.skip("shared data is not at ../shared/data relative to the repository")
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = subprocess_env()
     r = subprocess.run([sys.executable, "-m", "eval", "experiment=tosca", "tosca.classes=[centaur]",
                         "tosca.poses=[2]", "tosca.n_low=300", "tosca.n_samplings=1", "tosca.workers=1",
                         f"out_dir={tmp_path / 'cli'}"], cwd=ROOT, env=env, capture_output=True, text=True,

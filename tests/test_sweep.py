@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +14,7 @@ import pytest
 from eval.app import CONF_DIR
 from eval.sweep import STATUS_FILE, aggregate_sweep, main, read_status, sweep_job
 
-ROOT = Path(__file__).resolve().parents[1]
+from .conftest import subprocess_env  # noqa: E402
 
 
 def _compose(overrides, hydra_cfg=False):
@@ -115,7 +114,7 @@ def faust_root(shared_data):
 
 
 def _sweep(faust_root, sweep_dir, launcher_args, timeout=240):
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = subprocess_env()
     args = [sys.executable, "-m", "eval.sweep", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
             "methods=[SShaDe]", "sshade.n_low=2,300", "sshade.n_samplings=1", "sshade.workers=1",
             f"hydra.sweep.dir={sweep_dir}", *launcher_args]
