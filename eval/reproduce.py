@@ -9,10 +9,13 @@ others still run):
 
 1. DeFAUST (synthetic, built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and
    figures -> ``results/defaust``;
-2. a sweep over SShaDe's n_low x k on DeFAUST -> ``results/sweeps/defaust``;
-3. with ``--faust``: the FAUST table with figures -> ``results/faust``, pose transfer ->
+2. a sweep over SShaDe's n_low (1000, 3000, 6000) x k (1, 3, 5) on 2 DeFAUST cases ->
+   ``results/sweeps/defaust``;
+3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
    ``results/pose_transfer``;
 4. with ``--tosca``: the TOSCA isometric experiment -> ``results/tosca``;
+
+(1, 3, 4 with their figures in ``<folder>/figures``);
 5. with ``--scaling MESH``: the scaling benchmark from that mesh -> ``results/scaling``.
 
 Exit status 1 if any step failed (all steps are attempted).
@@ -28,13 +31,14 @@ import time
 def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     s = [("defaust", py + ["eval", "figures.enabled=true", *a.extra]),
-         ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2",
+         ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"])]
     if a.faust:
         s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true"]))
-        s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}"]))
+        s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}",
+                                           "figures.enabled=true"]))
     if a.tosca:
-        s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}"]))
+        s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true"]))
     if a.scaling:
         s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}"]))
     return s

@@ -1,0 +1,29 @@
+"""The one command that regenerates results/ (eval/reproduce.py): which runs it makes."""
+from __future__ import annotations
+
+from eval.reproduce import main
+
+
+def _steps(capsys, *argv) -> dict[str, str]:
+    assert main(["--dry-run", *argv]) == 0
+    out = capsys.readouterr().out.splitlines()
+    return {line.split(":")[0][3:]: line.split(": ", 1)[1] for line in out if line.startswith("== ")}
+
+
+def test_default_runs_defaust_and_its_sweep(capsys):
+    steps = _steps(capsys)
+    assert list(steps) == ["defaust", "sweep"]
+    assert steps["defaust"] == "-m eval figures.enabled=true"
+    sweep = steps["sweep"]
+    assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
+    assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
+
+
+def test_every_experiment_with_folders_and_figures(capsys):
+    steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--scaling", "M.obj", "sshade.n_samplings=3")
+    assert list(steps) == ["defaust", "sweep", "faust", "pose_transfer", "tosca", "scaling"]
+    assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
+    for name in ("defaust", "faust", "pose_transfer", "tosca"):
+        assert "figures.enabled=true" in steps[name], name
+    assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
+    assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
