@@ -14,9 +14,9 @@ others still run):
 3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
    ``results/pose_transfer``;
 4. with ``--tosca``: the TOSCA isometric experiment -> ``results/tosca``;
-
-(1, 3, 4 with their figures in ``<folder>/figures``);
 5. with ``--scaling MESH``: the scaling benchmark from that mesh -> ``results/scaling``.
+
+Steps 1, 3 and 4 also render their figures into ``<folder>/figures``.
 
 Exit status 1 if any step failed (all steps are attempted).
 """
