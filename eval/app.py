@@ -103,6 +103,15 @@ def _scalar(v):
     return _SKIP
 
 
+#: dataset.name -> the config keys passed to its case builder (eval.datasets.load_cases).
+_DATASET_KEYS = {
+    "faust": ("subjects", "poses", "n_per_landmark", "neighbourhood", "static_threshold", "seed", "limit"),
+    "defaust": ("subjects", "resolution", "limit"),
+    "shapes": ("files", "vertex_range", "cache", "n_per_group", "region_radius", "rotate_deg", "translate",
+               "seed", "limit"),
+}
+
+
 def run(cfg) -> dict:
     """Run the evaluation described by ``cfg`` (an OmegaConf DictConfig).
 
@@ -134,12 +143,12 @@ def run(cfg) -> dict:
     deformation_metrics, ground_truth_metrics = _metric_functions()
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
-    keys = (("subjects", "resolution", "limit") if name == "defaust" else
-            ("subjects", "poses", "n_per_landmark", "neighbourhood", "static_threshold", "seed", "limit"))
-    opts = {k: ds.get(k) for k in keys if k in ds}
-    for k in ("subjects", "poses"):
+    opts = {k: ds.get(k) for k in _DATASET_KEYS.get(name, _DATASET_KEYS["faust"]) if k in ds}
+    for k in ("subjects", "poses", "files", "vertex_range"):
         if opts.get(k) is not None and OmegaConf.is_config(opts[k]):
             opts[k] = OmegaConf.to_container(opts[k])
+    if opts.get("cache") is not None:
+        opts["cache"] = _abs(opts["cache"])
     cases = load_cases(name, root, **opts)
     log.info("%d case(s) from %s; methods %s; output %s", len(cases), root,
              [m.name for m in methods], out_dir)

@@ -2,7 +2,7 @@
 
     python -m eval.reproduce                                   # embedded synthetic DeFAUST only
     python -m eval.reproduce --faust DIR --tosca DIR           # + FAUST and TOSCA experiments
-    python -m eval.reproduce --faust DIR --tosca DIR --scaling MESH
+    python -m eval.reproduce --faust DIR --tosca DIR --shapes DIR --scaling MESH
 
 Runs, each as its own ``python -m eval`` process (so a failure is reported and the
 others still run):
@@ -14,9 +14,12 @@ others still run):
 3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
    ``results/pose_transfer``;
 4. with ``--tosca``: the TOSCA isometric experiment -> ``results/tosca``;
-5. with ``--scaling MESH``: the scaling benchmark from that mesh -> ``results/scaling``.
+5. with ``--shapes DIR`` (a folder with armadillo.obj, bunny.off, dragon.obj): the
+   user-defined deformations of Stanford models at 150k-200k vertices (paper §4.1,
+   Fig. arap-examples) -> ``results/shapes``;
+6. with ``--scaling MESH``: the scaling benchmark from that mesh -> ``results/scaling``.
 
-Steps 1, 3 and 4 also render their figures into ``<folder>/figures``.
+Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``.
 
 Exit status 1 if any step failed (all steps are attempted).
 """
@@ -39,6 +42,8 @@ def _steps(a) -> list[tuple[str, list[str]]]:
                                            "figures.enabled=true"]))
     if a.tosca:
         s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true"]))
+    if a.shapes:
+        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}"]))
     if a.scaling:
         s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}"]))
     return s
@@ -48,6 +53,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     p.add_argument("--faust", help="folder of FAUST registrations tr_reg_XYZ.ply")
     p.add_argument("--tosca", help="folder of TOSCA .off meshes")
+    p.add_argument("--shapes", help="folder with the Stanford models (armadillo.obj, bunny.off, dragon.obj)")
     p.add_argument("--scaling", help="a real mesh for the scaling benchmark")
     p.add_argument("--dry-run", action="store_true", help="print the commands only")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")

@@ -31,7 +31,7 @@ from sshade.errors import SShaDeError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["build_mesh", "scaling_handles", "run_scaling"]
+__all__ = ["build_mesh", "run_scaling"]
 
 
 def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = True,
@@ -67,57 +67,6 @@ def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = Tr
     return np.ascontiguousarray(m.vertex_matrix(), np.float64), np.ascontiguousarray(m.face_matrix(), np.int64)
 
 
-def _landmarks(V: np.ndarray):
-    c = V.mean(0)
-    _, _, Wt = np.linalg.svd(V - c, full_matrices=False)
-    a1, a2, a3 = Wt
-    p1, p2 = (V - c) @ a1, (V - c) @ a2
-    pts = np.stack([V[p1.argmin()], V[p1.argmax()], V[p2.argmin()], V[p2.argmax()]])
-    return pts, c, (a1, a2, a3)
-
-
-def scaling_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes, *, n_per_group: int = 30,
-                    region_radius: float = 0.06, rotate_deg: float = 20.0, translate: float = 0.05,
-                    seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The fixed handle rule of the module docstring.
-
-    Parameters
-    ----------
-    V : (n, 3) float64 mesh. landmarks : (4, 3) landmark points; center : (3,);
-    axes : (a1, a2, a3) unit vectors (from the base mesh).
-
-    Returns
-    -------
-    handles : (h,) int64; targets : (h, 3) float64; static : (h,) bool.
-    """
-    from scipy.spatial import cKDTree
-    from scipy.spatial.transform import Rotation
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
-    tree = cKDTree(V)
-    a3 = axes[2]
-    R = Rotation.from_rotvec(np.deg2rad(rotate_deg) * a3).as_matrix()
-    hs, ts, st = [], [], []
-    taken: set = set()
-    for g, p in enumerate(landmarks):
-        cand = np.array(sorted(set(tree.query_ball_point(p, region_radius * diag)) - taken), np.int64)
-        if len(cand) == 0:
-            raise SShaDeError(f"scaling handles: no vertex within {region_radius} diag of landmark {g}")
-        rng = np.random.default_rng([seed, g])
-        pick = rng.choice(cand, min(n_per_group, len(cand)), replace=False)
-        taken.update(pick.tolist())
-        P = V[pick]
-        if g == 1:
-            T = (P - center) @ R.T + center
-        elif g == 3:
-            T = P + translate * diag * a3
-        else:
-            T = P.copy()
-        hs.append(pick)
-        ts.append(T)
-        st.append(np.full(len(pick), g in (0, 2)))
-    return np.concatenate(hs), np.concatenate(ts), np.concatenate(st)
-
-
 def run_scaling(cfg) -> dict:
     """Run the scaling experiment described by ``cfg.scaling`` (see conf/experiment/scaling.yaml)."""
     import pandas as pd
@@ -129,6 +78,7 @@ def run_scaling(cfg) -> dict:
     from sshade.validate import validate_mesh
 
     from .app import _abs
+    from .datasets.shapes import axis_handles, axis_landmarks
     from .memory import PeakMemory
     from .metrics import deformation_metrics
     from .runinfo import collect_runinfo, write_runinfo
@@ -140,7 +90,7 @@ def run_scaling(cfg) -> dict:
     if not base_path.is_file():
         raise SShaDeError(f"scaling.base_mesh not found: {base_path} (set scaling.base_mesh=PATH)")
     V0, F0 = read_mesh(base_path)
-    lm, center, axes = _landmarks(V0)
+    lm, center, axes = axis_landmarks(V0)
     cache = out_dir / "meshes"
     config = OmegaConf.to_container(cfg, resolve=True)
     info = collect_runinfo(config, seeds={"scaling": int(sc.seed), "sshade": int(sc.seed)},
@@ -158,9 +108,9 @@ def run_scaling(cfg) -> dict:
             V, F = validate_mesh(V, F, name=f"{base_path.name} at {size}")
             write_mesh(mp, V, F)
         build_s = time.perf_counter() - t0
-        h, T, static = scaling_handles(V, lm, center, axes, n_per_group=int(sc.n_per_group),
-                                       region_radius=float(sc.region_radius), rotate_deg=float(sc.rotate_deg),
-                                       translate=float(sc.translate), seed=int(sc.seed))
+        h, T, static, _ = axis_handles(V, lm, center, axes, n_per_group=int(sc.n_per_group),
+                                    region_radius=float(sc.region_radius), rotate_deg=float(sc.rotate_deg),
+                                    translate=float(sc.translate), seed=int(sc.seed))
         row = {"target": size, "vertices": len(V), "faces": len(F), "handles": len(h), "build_s": build_s}
         print(f"[scaling] {len(V)} vertices: SShaDe ...", file=sys.stderr, flush=True)
         with PeakMemory() as pm:

@@ -20,10 +20,11 @@ def test_default_runs_defaust_and_its_sweep(capsys):
 
 
 def test_every_experiment_with_folders_and_figures(capsys):
-    steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--scaling", "M.obj", "sshade.n_samplings=3")
-    assert list(steps) == ["defaust", "sweep", "faust", "pose_transfer", "tosca", "scaling"]
+    steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj", "sshade.n_samplings=3")
+    assert list(steps) == ["defaust", "sweep", "faust", "pose_transfer", "tosca", "shapes", "scaling"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
+    assert steps["shapes"] == "-m eval experiment=shapes dataset.root=S"  # figures on in experiment/shapes.yaml
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]

@@ -4,6 +4,8 @@
   (:func:`~eval.datasets.faust.faust_cases`).
 - ``defaust``: a DeFAUST build (``python -m defaust``), read by
   :func:`defaust.dataset.load_defaust` at high or low resolution.
+- :mod:`eval.datasets.shapes`: single shapes (Stanford models) with a fixed user-defined
+  edit (:func:`~eval.datasets.shapes.shape_cases`; paper §4.1, Fig. arap-examples).
 
 :func:`load_cases` dispatches on ``dataset.name`` from the Hydra config.
 """
@@ -15,7 +17,7 @@ from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
 
 __all__ = ["Case", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases", "DATASETS"]
 
-DATASETS = ("faust", "defaust")
+DATASETS = ("faust", "defaust", "shapes")
 
 
 def load_cases(name: str, root, **kw) -> list[Case]:
@@ -32,4 +34,7 @@ def load_cases(name: str, root, **kw) -> list[Case]:
     if name == "defaust":
         from defaust.dataset import load_defaust
         return load_defaust(root, **kw)
+    if name == "shapes":
+        from .shapes import shape_cases
+        return shape_cases(root, **kw)
     raise SShaDeError(f"unknown dataset {name!r}; available: {list(DATASETS)}")

@@ -1,0 +1,199 @@
+"""User-defined deformations of single shapes (paper §4.1, Fig. arap-examples).
+
+The paper compares the methods on "user-defined deformations" of Stanford 3D Scanning
+Repository models taken from Implicit-ARAP (Baieri et al. 2024). Those edits are not
+available here, so each shape gets a fixed, reproducible edit instead (:func:`axis_handles`,
+the rule of the scaling benchmark): from the principal axes ``a1, a2, a3`` of the shape
+(PCA of its vertices), four handle regions around the vertices of smallest and largest
+coordinate along ``a1`` and ``a2``; the regions at the smallest ``a1`` and ``a2`` stay
+where they are, the region at the largest ``a1`` is rotated by ``rotate_deg`` about
+``a3`` through the centroid and the one at the largest ``a2`` is moved by
+``translate * bbox diagonal`` along ``a3``. Each region is ``n_per_group`` random
+vertices (seeded by ``[seed, group]``) within ``region_radius * bbox diagonal`` of its
+landmark.
+
+With ``vertex_range`` set, each shape is first brought to high resolution like the
+DeFAUST rest poses (LS3 Loop + isotropic remeshing, :func:`defaust.highres.subdivide_remesh`)
+and the result is cached as ``<cache>/<stem>_<lo>-<hi>.ply``, so later runs only read it.
+There is no ground-truth pose: cases have ``V_gt = None`` and are scored with the
+deformation metrics (volume, area, edge length, face angles, handle error) only.
+
+>>> cases = shape_cases("../shared/data/classic", files=["armadillo.obj"])  # doctest: +SKIP
+>>> c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape  # doctest: +SKIP
+((43243, 3), (120,), (120, 3))
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
+
+log = logging.getLogger(__name__)
+
+#: Stanford models of ../shared/data/classic (libigl tutorial data), the paper's S3D set.
+DEFAULT_SHAPES = ("armadillo.obj", "bunny.off", "dragon.obj")
+
+
+@dataclass
+class ShapeCase:
+    """One user-defined deformation of one shape.
+
+    Attributes
+    ----------
+    name : str, the file's stem. subject : str (= name); pose : int (always 1).
+    V : (n, 3) float64; F : (m, 3) int64 (high-res version when ``vertex_range`` is set).
+    handles : (h,) int64; targets : (h, 3) float64; static : (h,) bool.
+    V_gt : None (no ground truth). group : (h,) int64 region (0..3) of each handle.
+    seed : int; path : Path of the source file; n_source : int, its vertex count.
+    """
+
+    name: str
+    subject: str
+    pose: int
+    V: np.ndarray
+    F: np.ndarray
+    handles: np.ndarray
+    targets: np.ndarray
+    static: np.ndarray
+    V_gt: None = None
+    group: np.ndarray = field(repr=False, default=None)
+    seed: int = 0
+    path: Path | None = None
+    n_source: int = 0
+
+
+def axis_landmarks(V: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Landmarks of the fixed edit: the vertices of smallest and largest coordinate along
+    the first two principal axes.
+
+    V : (n, 3) float64. Returns ``points`` (4, 3) in the order (min a1, max a1, min a2,
+    max a2), ``center`` (3,) the centroid, ``axes`` (a1, a2, a3) unit (3,) vectors.
+    """
+    c = V.mean(0)
+    _, _, Wt = np.linalg.svd(V - c, full_matrices=False)
+    a1, a2, a3 = Wt
+    p1, p2 = (V - c) @ a1, (V - c) @ a2
+    pts = np.stack([V[p1.argmin()], V[p1.argmax()], V[p2.argmin()], V[p2.argmax()]])
+    return pts, c, (a1, a2, a3)
+
+
+def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes, *, n_per_group: int = 30,
+                 region_radius: float = 0.06, rotate_deg: float = 20.0, translate: float = 0.05,
+                 seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Handles and targets of the fixed edit (module docstring) on the mesh ``V``.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 mesh vertices. landmarks : (4, 3) points, center : (3,), axes :
+        (a1, a2, a3), from :func:`axis_landmarks` (of ``V`` or of a coarser version of
+        the same shape, so every resolution gets the same edit).
+    n_per_group : vertices per region; region_radius : fraction of the bbox diagonal;
+    rotate_deg : degrees; translate : fraction of the bbox diagonal; seed : int.
+
+    Returns
+    -------
+    handles : (h,) int64, targets : (h, 3) float64, static : (h,) bool, group : (h,)
+    int64 region (0..3) of each handle; regions in landmark order,
+    ``min(n_per_group, free vertices in the region)`` handles each.
+
+    Raises
+    ------
+    SShaDeError if a region holds no vertex (not already taken by an earlier region).
+    """
+    from scipy.spatial import cKDTree
+    from scipy.spatial.transform import Rotation
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    tree = cKDTree(V)
+    R = Rotation.from_rotvec(np.deg2rad(rotate_deg) * axes[2]).as_matrix()
+    hs, ts, st = [], [], []
+    taken: set = set()
+    for g, p in enumerate(landmarks):
+        cand = np.array(sorted(set(tree.query_ball_point(p, region_radius * diag)) - taken), np.int64)
+        if len(cand) == 0:
+            raise SShaDeError(f"axis handles: no free vertex within {region_radius} x diagonal of landmark {g}")
+        rng = np.random.default_rng([seed, g])
+        pick = rng.choice(cand, min(n_per_group, len(cand)), replace=False)
+        taken.update(pick.tolist())
+        P = V[pick]
+        if g == 1:
+            T = (P - center) @ R.T + center
+        elif g == 3:
+            T = P + translate * diag * axes[2]
+        else:
+            T = P.copy()
+        hs.append(pick)
+        ts.append(T)
+        st.append(np.full(len(pick), g in (0, 2)))
+    group = np.repeat(np.arange(len(hs), dtype=np.int64), [len(x) for x in hs])
+    return np.concatenate(hs), np.concatenate(ts), np.concatenate(st), group
+
+
+def _highres(path: Path, V, F, vertex_range, cache: Path | None):
+    from defaust.highres import subdivide_remesh
+    from defaust.meshio import read_mesh, write_mesh
+    lo, hi = (int(x) for x in vertex_range)
+    cached = None if cache is None else Path(cache) / f"{path.stem}_{lo}-{hi}.ply"
+    if cached is not None and cached.is_file():
+        return read_mesh(cached)
+    log.info("%s: LS3 Loop + isotropic remesh to [%d, %d] vertices (cached in %s)", path.name, lo, hi, cached)
+    r = subdivide_remesh(V, F, vertex_range=(lo, hi))
+    if cached is not None:
+        write_mesh(cached, r.V, r.F)
+    return r.V, r.F
+
+
+def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group: int = 30,
+                region_radius: float = 0.06, rotate_deg: float = 20.0, translate: float = 0.05, seed: int = 0,
+                limit: int | None = None) -> list[ShapeCase]:
+    """One deformation case per shape file in ``root``.
+
+    Parameters
+    ----------
+    root : str or Path, a folder of meshes (any format :func:`defaust.meshio.read_mesh` reads).
+    files : list of file names in ``root`` (default :data:`DEFAULT_SHAPES`).
+    vertex_range : None (native resolution) or (lo, hi): high-res version first.
+    cache : folder for the high-res meshes (None: rebuilt every time).
+    n_per_group, region_radius, rotate_deg, translate, seed : the edit, see :func:`axis_handles`.
+    limit : keep the first ``limit`` files.
+
+    Returns
+    -------
+    list of :class:`ShapeCase`, in ``files`` order.
+
+    Raises
+    ------
+    SShaDeError on a missing folder or file, an unreadable or invalid mesh (the
+    message names it), a bad ``limit`` or an empty selection.
+    """
+    from defaust.meshio import read_mesh
+    root = Path(root)
+    if not root.is_dir():
+        raise SShaDeError(f"shapes: dataset.root is not a folder: {root}")
+    names = list(DEFAULT_SHAPES if files is None else files)
+    if limit is not None:
+        if int(limit) < 1:
+            raise SShaDeError(f"limit must be a positive integer or null, got {limit}")
+        names = names[:int(limit)]
+    if not names:
+        raise SShaDeError("shapes: no file selected (dataset.files is empty)")
+    missing = [n for n in names if not (root / n).is_file()]
+    if missing:
+        raise SShaDeError(f"shapes: {missing} not found in {root}")
+    cases = []
+    for n in names:
+        path = root / n
+        V0, F0 = read_mesh(path)
+        lm, center, axes = axis_landmarks(V0)  # from the source shape: same edit at every resolution
+        V, F = (V0, F0) if vertex_range is None else _highres(path, V0, F0, vertex_range, cache)
+        h, T, st, group = axis_handles(V, lm, center, axes, n_per_group=n_per_group, region_radius=region_radius,
+                                rotate_deg=rotate_deg, translate=translate, seed=seed)
+        cases.append(ShapeCase(name=path.stem, subject=path.stem, pose=1, V=V, F=F, handles=h, targets=T,
+                               static=st, group=group, seed=int(seed), path=path,
+                               n_source=len(V0)))
+    return cases

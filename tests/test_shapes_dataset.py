@@ -1,0 +1,100 @@
+"""Stanford shapes with the fixed user-defined edit (eval/datasets/shapes.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from eval.datasets import load_cases
+from eval.datasets.shapes import axis_handles, axis_landmarks, shape_cases
+from sshade.errors import SShaDeError
+
+from .conftest import data_file
+
+
+@pytest.fixture(scope="module")
+def classic():
+    return data_file("classic/bunny.off").parent
+
+
+def test_the_edit_is_what_the_docstring_says(classic):
+    (c,) = shape_cases(classic, files=["bunny.off"], seed=3)
+    assert c.V_gt is None and c.n_source == len(c.V) == 3485
+    g = c.group
+    assert len(c.handles) == len(np.unique(c.handles)) == len(g)
+    counts = np.bincount(g, minlength=4)
+    assert len(counts) == 4 and (counts >= 25).all() and (counts <= 30).all()  # a small region may hold < 30
+    lm, center, axes = axis_landmarks(c.V)
+    diag = np.linalg.norm(c.V.max(0) - c.V.min(0))
+    # regions: within 6% of the diagonal of their landmark
+    assert (np.linalg.norm(c.V[c.handles] - lm[g], axis=1) <= 0.06 * diag + 1e-12).all()
+    # regions 0 and 2 static (targets = rest), 1 rotated 20 deg about a3, 3 moved 5% of the diagonal along a3
+    np.testing.assert_array_equal(c.static, np.isin(g, [0, 2]))
+    P = c.V[c.handles]
+    np.testing.assert_array_equal(c.targets[c.static], P[c.static])
+    R = Rotation.from_rotvec(np.deg2rad(20.0) * axes[2]).as_matrix()
+    np.testing.assert_allclose(c.targets[g == 1], (P[g == 1] - center) @ R.T + center, atol=1e-12)
+    np.testing.assert_allclose(c.targets[g == 3] - P[g == 3], np.tile(0.05 * diag * axes[2], (counts[3], 1)), atol=1e-12)
+    # principal axes are orthonormal
+    A = np.stack(axes)
+    np.testing.assert_allclose(A @ A.T, np.eye(3), atol=1e-12)
+
+
+def test_seeded_and_dispatched(classic):
+    a = load_cases("shapes", classic, files=["bunny.off"], seed=0)[0]
+    b = shape_cases(classic, files=["bunny.off"], seed=0)[0]
+    c = shape_cases(classic, files=["bunny.off"], seed=1)[0]
+    np.testing.assert_array_equal(a.handles, b.handles)
+    assert not np.array_equal(a.handles, c.handles)
+
+
+def test_high_resolution_version_is_cached(classic, tmp_path):
+    (c,) = shape_cases(classic, files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path)
+    assert 8000 <= len(c.V) <= 12000 and c.n_source == 3485
+    cached = tmp_path / "bunny_8000-12000.ply"
+    assert cached.is_file()
+    (again,) = shape_cases(classic, files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path)
+    np.testing.assert_array_equal(again.F, c.F)
+    np.testing.assert_allclose(again.V, c.V)
+    # the edit is defined on the source shape: the same regions at every resolution
+    lm, _, _ = axis_landmarks(shape_cases(classic, files=["bunny.off"])[0].V)
+    diag = np.linalg.norm(c.V.max(0) - c.V.min(0))
+    assert np.bincount(c.group).tolist() == [30] * 4
+    assert (np.linalg.norm(c.V[c.handles] - lm[c.group], axis=1) <= 0.06 * diag + 1e-12).all()
+
+
+def test_bad_input(classic, tmp_path):
+    with pytest.raises(SShaDeError, match="not a folder"):
+        shape_cases(tmp_path / "nowhere")
+    with pytest.raises(SShaDeError, match="not found"):
+        shape_cases(classic, files=["teapot.obj"])
+    with pytest.raises(SShaDeError, match="limit"):
+        shape_cases(classic, files=["bunny.off"], limit=0)
+    with pytest.raises(SShaDeError, match="no file"):
+        shape_cases(classic, files=[])
+    (c,) = shape_cases(classic, files=["bunny.off"])
+    lm, center, axes = axis_landmarks(c.V)
+    with pytest.raises(SShaDeError, match="no free vertex"):
+        axis_handles(c.V, lm + 1e3, center, axes)
+
+
+def test_app_runs_experiment_shapes(classic, tmp_path):
+    """`python -m eval experiment=shapes` on the bunny at its own resolution: every method
+    scored, no ground truth, a figure."""
+    import pandas as pd
+    from hydra import compose, initialize_config_dir
+
+    from eval.app import CONF_DIR, run
+    from eval.render import png_size
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        cfg = compose(config_name="config", overrides=[
+            "experiment=shapes", f"dataset.root={classic}", "dataset.files=[bunny.off]", "dataset.vertex_range=null",
+            "methods=[Elastic,SShaDe]", "sshade.n_low=500", "sshade.n_samplings=2", f"out_dir={tmp_path / 'run'}"])
+    res = run(cfg)
+    cases = pd.read_csv(res["out_dir"] / "cases.csv", keep_default_na=False)
+    assert cases["method"].tolist() == ["Elastic", "SShaDe"] and (cases["error"] == "").all()
+    assert (cases["n_vertices"] == 3485).all() and "gt_vertex_mean_pct" not in cases.columns
+    assert (cases["handle_err_pct"].astype(float) < 1e-3).all()
+    assert (cases["edge_err_pct"].astype(float) < 2.0).all()
+    fig = res["out_dir"] / "figures" / "bunny.png"
+    assert png_size(fig) == (3 * 320 + 90, 480 + 56)
