@@ -31,34 +31,25 @@ from .handles import HandleSet, handles_from_arrays, snap_handles
 from .meshio import read_mesh
 from .store import read_npz, sha256_file
 
-__all__ = ["DefaustCase", "load_defaust", "load_handles", "read_manifest"]
+__all__ = ["DeformationCase", "DefaustCase", "load_defaust", "load_handles", "read_manifest"]
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
-class DefaustCase:
-    """One deformation case of a DeFAUST build.
+class DeformationCase:
+    """What every evaluator dataset yields: one rest mesh, its handles and targets.
 
     Attributes
     ----------
-    name : str, ``"s{subject:02d}_p{pose:02d}"``.
-    subject, pose : int, subject id and target pose (the rest pose is pose 0).
-    V : (n, 3) float64 rest mesh vertices (metres) at the requested resolution.
-    F : (m, 3) int64 faces.
-    handles : (h,) int64 unique handle vertex indices into ``V`` (snapped).
-    targets : (h, 3) float64 handle target positions (metres).
-    static : (h,) bool, the handle's landmark group is static.
-    V_gt : (n, 3) float64 or None, the true target pose on the same mesh: synthetic
-        source at either resolution (skinning applied to that mesh); FAUST at low
-        resolution (the target registration); None for FAUST at high resolution.
-    group : (h,) int64 landmark group of each handle (index into ``landmark_names``).
-    landmark_names : tuple of str.
-    resolution : ``"high"`` or ``"low"``; source : ``"synthetic"`` or ``"faust"``.
-    pose_name : str, e.g. ``"arms_raised"`` (synthetic) or ``"faust_pose_3"``.
-    snap_distance : (h,) float64 distance of each kept handle's stored position to its
-        vertex. n_dropped : int, handles dropped because two snapped to one vertex.
-    rest_path : Path of the rest mesh file.
+    name : str, the case's name in tables and figure files.
+    subject, pose : subject id (int; a shape name for single shapes) and target pose.
+    V : (n, 3) float64 rest mesh vertices. F : (m, 3) int64 faces.
+    handles : (h,) int64 unique handle vertex indices into ``V``.
+    targets : (h, 3) float64 handle target positions (units of ``V``).
+    static : (h,) bool, the handle's group stays at its rest position.
+    V_gt : (n, 3) float64 true target pose on the same mesh, or None (no ground truth).
+    group : (h,) int64 handle group of each handle, or None.
     """
 
     name: str
@@ -71,6 +62,27 @@ class DefaustCase:
     static: np.ndarray
     V_gt: np.ndarray | None
     group: np.ndarray = field(repr=False, default=None)
+
+
+@dataclass
+class DefaustCase(DeformationCase):
+    """One deformation case of a DeFAUST build (fields of :class:`DeformationCase`, plus
+    the ones below).
+
+    Attributes
+    ----------
+    name : ``"s{subject:02d}_p{pose:02d}"``; V in metres at the requested resolution;
+    handles snapped to it; V_gt: synthetic source at either resolution (skinning applied
+    to that mesh), FAUST at low resolution (the target registration), None for FAUST at
+    high resolution; group indexes ``landmark_names``.
+    landmark_names : tuple of str.
+    resolution : ``"high"`` or ``"low"``; source : ``"synthetic"`` or ``"faust"``.
+    pose_name : str, e.g. ``"arms_raised"`` (synthetic) or ``"faust_pose_3"``.
+    snap_distance : (h,) float64 distance of each kept handle's stored position to its
+        vertex. n_dropped : int, handles dropped because two snapped to one vertex.
+    rest_path : Path of the rest mesh file.
+    """
+
     landmark_names: tuple = ()
     resolution: str = "high"
     source: str = ""

@@ -30,6 +30,7 @@ from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust
 from sshade.errors import SShaDeError
 
+from defaust.dataset import DeformationCase
 from defaust.handles import landmark_handles  # the DeFAUST builder's (one implementation)
 
 __all__ = ["FAUST_LANDMARKS", "Case", "discover_faust", "faust_cases", "case_seed"]
@@ -79,35 +80,19 @@ FAUST_N_VERTICES = 6890
 
 
 @dataclass
-class Case:
-    """One deformation case: deform the rest pose with handles towards a target pose.
+class Case(DeformationCase):
+    """One FAUST deformation case: deform the rest pose with handles towards a target
+    pose (fields of :class:`defaust.dataset.DeformationCase`, plus the ones below).
 
     Attributes
     ----------
-    name : str, ``"s{subject}_p{pose}"``.
-    subject, pose : int, FAUST subject and target pose (rest pose is pose 0).
-    V : (n, 3) float64 rest-pose positions (metres).
-    F : (m, 3) int64 faces (shared by rest and target).
-    handles : (h,) int64 handle vertex indices.
-    targets : (h, 3) float64 handle targets (metres).
-    static : (h,) bool, handle belongs to a static group (target = rest position).
-    V_gt : (n, 3) float64 target-pose positions (ground truth for the deformed shape).
-    group : (h,) int64 index into :data:`FAUST_LANDMARKS` order of each handle's group.
+    name : ``"s{subject}_p{pose}"``; V in metres; V_gt : (n, 3) the target-pose
+    registration (ground truth); group indexes :data:`FAUST_LANDMARKS` order.
     delta : (L,) float64 summed group displacement per landmark (metres).
     seed : int, seed of the handle draw (:func:`case_seed`).
     rest_path, target_path : Path, source files.
     """
 
-    name: str
-    subject: int
-    pose: int
-    V: np.ndarray
-    F: np.ndarray
-    handles: np.ndarray
-    targets: np.ndarray
-    static: np.ndarray
-    V_gt: np.ndarray
-    group: np.ndarray = field(repr=False, default=None)
     delta: np.ndarray = field(repr=False, default=None)
     seed: int = 0
     rest_path: Path | None = None

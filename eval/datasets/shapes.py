@@ -25,11 +25,12 @@ deformation metrics (volume, area, edge length, face angles, handle error) only.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from defaust.dataset import DeformationCase
 from sshade.errors import SShaDeError
 
 __all__ = ["ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
@@ -41,28 +42,17 @@ DEFAULT_SHAPES = ("armadillo.obj", "bunny.off", "dragon.obj")
 
 
 @dataclass
-class ShapeCase:
-    """One user-defined deformation of one shape.
+class ShapeCase(DeformationCase):
+    """One user-defined deformation of one shape (fields of
+    :class:`defaust.dataset.DeformationCase`, plus the ones below).
 
     Attributes
     ----------
-    name : str, the file's stem. subject : str (= name); pose : int (always 1).
-    V : (n, 3) float64; F : (m, 3) int64 (high-res version when ``vertex_range`` is set).
-    handles : (h,) int64; targets : (h, 3) float64; static : (h,) bool.
-    V_gt : None (no ground truth). group : (h,) int64 region (0..3) of each handle.
+    name, subject : the file's stem; pose : 1. V, F : the high-res version when
+    ``vertex_range`` is set. V_gt : None (no ground truth). group : region (0..3).
     seed : int; path : Path of the source file; n_source : int, its vertex count.
     """
 
-    name: str
-    subject: str
-    pose: int
-    V: np.ndarray
-    F: np.ndarray
-    handles: np.ndarray
-    targets: np.ndarray
-    static: np.ndarray
-    V_gt: None = None
-    group: np.ndarray = field(repr=False, default=None)
     seed: int = 0
     path: Path | None = None
     n_source: int = 0
@@ -194,6 +184,6 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
         h, T, st, group = axis_handles(V, lm, center, axes, n_per_group=n_per_group, region_radius=region_radius,
                                 rotate_deg=rotate_deg, translate=translate, seed=seed)
         cases.append(ShapeCase(name=path.stem, subject=path.stem, pose=1, V=V, F=F, handles=h, targets=T,
-                               static=st, group=group, seed=int(seed), path=path,
+                               static=st, V_gt=None, group=group, seed=int(seed), path=path,
                                n_source=len(V0)))
     return cases
