@@ -41,7 +41,7 @@ from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
 from .meshio import atomic_write, read_mesh
 from .store import sha256_file, write_npz, write_ply
 
-__all__ = ["BuildConfig", "BuildReport", "build_defaust", "handle_seed", "MANIFEST", "FORMAT"]
+__all__ = ["BuildConfig", "BuildReport", "build_defaust", "check_out_folder", "handle_seed", "MANIFEST", "FORMAT"]
 
 log = logging.getLogger("defaust")
 
@@ -165,18 +165,73 @@ def _key(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
 
 
-def _load_manifest(out: Path) -> dict:
-    p = out / MANIFEST
-    if not p.is_file():
+#: Parameters that may change between two builds into one folder: building more (or
+#: other) subjects extends a build, it does not contradict it.
+_EXTENDABLE = ("subjects",)
+
+
+def check_out_folder(out, source: str, parameters: dict) -> dict:
+    """Refuse to build into a folder that holds something else; return its manifest.
+
+    A build may write into ``out`` only when ``out`` does not exist, is empty, or holds
+    a DeFAUST manifest of the same ``source`` and the same ``parameters`` (all but
+    ``subjects``, which a later build may extend): an interrupted or partial build of
+    the same dataset is resumed, anything else is left untouched. This protects a
+    user's folder (e.g. a DeFAUST built from their FAUST scans) from being overwritten
+    by a build with other settings.
+
+    Parameters
+    ----------
+    out : str or Path, the output folder (need not exist).
+    source : ``"synthetic"`` or ``"faust"``, the source of the build about to run.
+    parameters : dict, :meth:`BuildConfig.parameters` of that build.
+
+    Returns
+    -------
+    dict, the folder's manifest (empty for a new or empty folder).
+
+    Raises
+    ------
+    SShaDeError
+        ``out`` is not empty and has no ``manifest.json``; its manifest is unreadable or
+        not a DeFAUST manifest; it names another source or other parameters (the
+        message lists both values of every differing key and how to proceed).
+
+    Examples
+    --------
+    >>> check_out_folder("/tmp/new_folder_xyz", "synthetic", {"seed": 0})  # doctest: +SKIP
+    {}
+    """
+    out = Path(out)
+    if not out.exists() or not any(out.iterdir()):
         return {}
+    p = out / MANIFEST
+    how = f"choose another out= folder (or, if {out} holds nothing you need, delete it first)"
+    if not p.is_file():
+        raise SShaDeError(f"refusing to build into {out}: the folder is not empty and holds no DeFAUST "
+                          f"{MANIFEST}, so it was not made by this builder; {how}")
     try:
         m = json.loads(p.read_text())
-        if not isinstance(m, dict) or m.get("format") != FORMAT:
-            raise ValueError("not a DeFAUST manifest")
-        return m
     except (ValueError, OSError) as e:
-        log.warning("%s is unreadable (%s); every item will be checked by rebuilding it", p, e)
-        return {}
+        raise SShaDeError(f"refusing to build into {out}: {p} is unreadable ({e}); {how}") from None
+    if not isinstance(m, dict) or m.get("format") != FORMAT:
+        raise SShaDeError(f"refusing to build into {out}: {p} is not a DeFAUST manifest "
+                          f"(format {m.get('format') if isinstance(m, dict) else None!r}); {how}")
+    old_src, old_par = m.get("source"), dict(m.get("parameters") or {})
+    diff = []
+    if old_src != source:  # the parameters of two sources differ anyway: name the source only
+        diff.append(f"source: {old_src!r} there, {source!r} asked")
+    for k in [] if diff else sorted(set(old_par) | set(parameters)):
+        if k in _EXTENDABLE or k == "source":
+            continue
+        a, b = old_par.get(k), parameters.get(k)
+        if json.dumps(a, sort_keys=True, default=str) != json.dumps(b, sort_keys=True, default=str):
+            diff.append(f"{k}: {a!r} there, {b!r} asked")
+    if diff:
+        raise SShaDeError(f"refusing to build into {out}: it holds a DeFAUST build with other settings "
+                          f"({'; '.join(diff)}). To evaluate that build: python -m eval dataset.root={out} "
+                          f"(no build); to build these settings: {how}")
+    return m
 
 
 def _write_manifest(out: Path, m: dict) -> None:
@@ -399,10 +454,9 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
     if not 0 < lo <= hi:
         raise SShaDeError(f"high-res vertex range must satisfy 0 < lo <= hi, got {list(cfg.vertex_range)}")
     plan = src.plan()
-    out.mkdir(parents=True, exist_ok=True)
-
     params = cfg.parameters()
-    old = _load_manifest(out)
+    old = check_out_folder(out, cfg.source, params)
+    out.mkdir(parents=True, exist_ok=True)
     items_old = old.get("items", {})
     manifest = {
         "format": FORMAT,

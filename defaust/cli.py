@@ -17,11 +17,13 @@ from pathlib import Path
 
 from sshade.errors import SShaDeError
 
+from eval.confdir import config_dir
+
 from .build import BuildConfig, build_defaust
 
 __all__ = ["CONF_DIR", "config_from_omegaconf", "compose_config", "run", "main"]
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf" / "defaust")
+CONF_DIR = config_dir("defaust")  # conf/defaust of a source checkout, else the installed package data
 
 log = logging.getLogger("defaust")
 

@@ -81,6 +81,8 @@ class DefaustCase(DeformationCase):
     snap_distance : (h,) float64 distance of each kept handle's stored position to its
         vertex. n_dropped : int, handles dropped because two snapped to one vertex.
     rest_path : Path of the rest mesh file.
+    seed : int or None, the seed of this case's handle draw (the manifest item's
+        ``handle_seed``, :func:`defaust.build.handle_seed`); None for an old manifest.
     """
 
     landmark_names: tuple = ()
@@ -90,6 +92,7 @@ class DefaustCase(DeformationCase):
     snap_distance: np.ndarray = field(repr=False, default=None)
     n_dropped: int = 0
     rest_path: Path | None = None
+    seed: int | None = None
 
 
 def read_manifest(root) -> dict:
@@ -237,7 +240,8 @@ def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | 
             name=f"s{s:02d}_p{p:02d}", subject=s, pose=p, V=V, F=F, handles=idx, targets=np.ascontiguousarray(T),
             static=st.copy(), V_gt=V_gt, group=H.group[k].copy(), landmark_names=H.landmark_names,
             resolution=resolution, source=str(m.get("source", "")), pose_name=str(item.get("pose_name", "")),
-            snap_distance=snap.distance[k], n_dropped=snap.n_dropped, rest_path=rp))
+            snap_distance=snap.distance[k], n_dropped=snap.n_dropped, rest_path=rp,
+            seed=None if item.get("handle_seed") is None else int(item["handle_seed"])))
     if not cases:
         raise SShaDeError(f"no DeFAUST case in {root}")
     return cases

@@ -12,7 +12,7 @@ For each case (:mod:`eval.datasets`) and each method (:mod:`eval.methods`) the
 :func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
 :func:`eval.metrics.ground_truth_metrics`. A method that raises
 :class:`~sshade.errors.SShaDeError` on a case gets its message in the ``error`` column
-and the run goes on. Outputs in ``out_dir`` (default ``results/<experiment.name>``):
+and the run goes on. Outputs in ``out_dir`` (default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
 (:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
 ``.hydra/`` folder. All tables and ``run.json`` are written atomically.
@@ -27,15 +27,18 @@ import logging
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from sshade.errors import SShaDeError
 
+from .confdir import config_dir
+
 __all__ = ["CONF_DIR", "run", "main"]
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = config_dir()  # conf/ of a source checkout, else the installed package data
 
 log = logging.getLogger("eval")
 
@@ -55,11 +58,34 @@ def _dataset_root(cfg) -> Path:
         raise SShaDeError("dataset.root is not set: pass dataset.root=DIR, a folder with FAUST "
                           "registrations tr_reg_XYZ.ply (e.g. dataset.root=../shared/data/faust_reg)")
     root = _abs(ds.root)
-    if str(ds.get("name", "")) == "defaust" and ds.get("build", {}).get("enabled", False):
+    if str(ds.get("name", "")) == "defaust" and _build_wanted(root, ds):
         _build_defaust(root, ds)
     if not root.is_dir():
-        raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}")
+        hint = ""
+        if str(ds.get("name", "")) == "defaust":
+            hint = (f"; the evaluator builds a DeFAUST only into the default folder {DEFAULT_DEFAUST_ROOT} "
+                    f"or with dataset.build.enabled=true (python -m defaust out=DIR builds one)")
+        raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}{hint}")
     return root
+
+
+#: The only folder the evaluator builds the embedded DeFAUST into on its own
+#: (``dataset.build.enabled: auto``), relative to where the command runs.
+DEFAULT_DEFAUST_ROOT = "data/defaust"
+
+
+def _build_wanted(root: Path, ds) -> bool:
+    """``dataset.build.enabled``: ``auto`` (default) builds only when ``root`` is
+    :data:`DEFAULT_DEFAUST_ROOT`; ``true`` builds into any folder (the builder still
+    refuses a folder holding another build or other files); ``false`` never builds.
+    A user's own folder (e.g. a DeFAUST built from their FAUST scans, or a typo) is
+    therefore read, never written, unless they ask for a build."""
+    enabled = (ds.get("build", {}) or {}).get("enabled", "auto")
+    if isinstance(enabled, str) and enabled.strip().lower() == "auto":
+        return root == _abs(DEFAULT_DEFAUST_ROOT)
+    if not isinstance(enabled, bool):
+        raise SShaDeError(f"dataset.build.enabled must be auto, true or false, got {enabled!r}")
+    return enabled
 
 
 def _build_defaust(root: Path, ds) -> None:
@@ -126,7 +152,9 @@ def run(cfg) -> dict:
     unknown method, ...), before any method runs.
     """
     t_start = time.perf_counter()
-    root = _dataset_root(cfg)  # fail fast, before the heavier imports
+    from .methods import make_methods
+    methods = make_methods(cfg)  # every method's parameters are checked before any work
+    root = _dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
 
     import pandas as pd
     from omegaconf import OmegaConf
@@ -134,12 +162,10 @@ def run(cfg) -> dict:
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     from .datasets import load_cases
-    from .methods import make_methods
     from .runinfo import collect_runinfo, write_runinfo
-    from .tables import summarize, to_markdown, write_cases, write_tables
+    from .tables import compare, write_cases, write_tables
 
     out_dir = _abs(cfg.out_dir)
-    methods = make_methods(cfg)
     deformation_metrics, ground_truth_metrics = _metric_functions()
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
@@ -167,20 +193,32 @@ def run(cfg) -> dict:
     rows: list[dict] = []
     from .figures import figures_options, write_case_figure
     fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
-    with logging_redirect_tqdm():
-        for ci, case in enumerate(tqdm(cases, desc="cases", unit="case", file=sys.stderr, dynamic_ncols=True)):
+    def runs_on(ci: int, m) -> bool:  # baselines take minutes per high-res case: run on a subset
+        return n_base is None or ci < int(n_base) or m.name == "SShaDe"
+
+    n_runs = sum(runs_on(ci, m) for ci in range(len(cases)) for m in methods)
+    bar = tqdm(total=n_runs, desc="runs", unit="run", file=sys.stderr, dynamic_ncols=True)
+    with logging_redirect_tqdm(), bar:
+        for ci, case in enumerate(cases):
             deformed = {}  # method -> deformed vertices, for the optional figure
             for m in methods:
-                if n_base is not None and ci >= int(n_base) and m.name != "SShaDe":
-                    continue  # baselines take minutes per high-res case: run on a subset
+                if not runs_on(ci, m):
+                    continue
+                bar.set_postfix_str(f"{case.name} {m.name}")
                 row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": m.name,
                        "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
                        "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
                        "case_seed": getattr(case, "seed", None), "error": ""}
                 try:
-                    t0 = time.perf_counter()
-                    Vd = m.deform(case.V, case.F, case.handles, case.targets)
-                    row["time_s"] = time.perf_counter() - t0
+                    with warnings.catch_warnings(record=True) as caught:
+                        warnings.simplefilter("always")
+                        t0 = time.perf_counter()
+                        Vd = m.deform(case.V, case.F, case.handles, case.targets)
+                        row["time_s"] = time.perf_counter() - t0
+                    for w in caught:  # e.g. sshade.deform.LowResSkippedWarning: logged and recorded
+                        log.warning("%s %s: %s", case.name, m.name, w.message)
+                    if caught:
+                        row["warnings"] = " | ".join(dict.fromkeys(str(w.message) for w in caught))
                     Vd = np.asarray(Vd, np.float64)
                     deformed[m.name] = Vd
                     row.update(deformation_metrics(case.V, Vd, case.F, case.handles, case.targets))
@@ -197,22 +235,24 @@ def run(cfg) -> dict:
                     row["error"] = str(e) or type(e).__name__
                     log.warning("%s %s failed: %s", case.name, m.name, row["error"])
                 rows.append(row)
+                bar.update(1)
             write_cases(pd.DataFrame(rows), out_dir)  # partial results survive a crash
             if fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
                 fig_left -= 1
-                write_case_figure(case, {m.name: deformed.get(m.name) for m in methods}, out_dir / "figures")
+                write_case_figure(case, {m.name: deformed.get(m.name) for m in methods}, out_dir / "figures",
+                                  not_run=[m.name for m in methods if not runs_on(ci, m)])  # "not run", not "failed"
 
     df = pd.DataFrame(rows)
     exp = cfg.get("experiment", {}).get("name", name)
-    title = f"{exp}: {len(cases)} {name} case(s), mean over successful cases"
+    title = f"{exp}: {len(cases)} {name} case(s)"
     paths = write_tables(df, out_dir, title=title)
-    summ = summarize(df)
+    summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     info.update(status="done", n_cases=len(cases), n_rows=len(df), n_errors=n_err,
                 wall_s=round(time.perf_counter() - t_start, 3),
                 outputs={k: Path(v).name for k, v in paths.items()})
     paths["run_json"] = write_runinfo(out_dir / "run.json", info)
-    print(to_markdown(summ, title=title))
+    print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {out_dir}")
     return {"out_dir": out_dir, "paths": paths, "n_cases": len(cases), "n_errors": n_err, "summary": summ}
 
@@ -236,8 +276,22 @@ def run_experiment(cfg):
     return getattr(importlib.import_module(mod), fn)(cfg)
 
 
+def _pin_out_dir(cfg) -> None:
+    """Resolve ``out_dir`` once, to the folder Hydra created for this run (its
+    ``hydra.run.dir`` is ``${out_dir}``), so a ``${now:...}`` in it cannot name two
+    different folders for Hydra's files and ours."""
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import open_dict
+    if HydraConfig.initialized():
+        out = HydraConfig.get().runtime.output_dir
+        if out:
+            with open_dict(cfg):
+                cfg.out_dir = str(out)
+
+
 def _main(cfg) -> None:
     try:
+        _pin_out_dir(cfg)
         run_experiment(cfg)
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -10,7 +10,10 @@ error colouring), rendered headless with :mod:`eval.render`.
 - :func:`case_figure`: one PNG per case: panel 1 the rest mesh with static handles in
   blue and dynamic handles in yellow, then one panel per method, all on one scale and
   framing, with one shared colour bar (``0 .. clim``; default: the largest 99th
-  percentile of the methods' face errors, values above drawn in the top colour).
+  percentile of the methods' face errors, values above drawn in the top colour). A
+  method that failed (``None``) gets an empty panel "<name>: failed", one that was not
+  run on the case (:data:`NOT_RUN`, e.g. outside ``dataset.baseline_cases``) an empty
+  panel "<name>: not run".
 - :func:`tosca_figure` (paper §4.2): rest pose, true pose, SShaDe's reconstruction
   coloured by the per-vertex error; :func:`pose_transfer_figure` (paper §4.3): source,
   source in the pose, subject, SShaDe's transfer coloured by its error, ground truth.
@@ -30,9 +33,9 @@ from sshade.errors import SShaDeError
 
 from .render import DEFAULT_VIEW, figure_row, render_mesh
 
-__all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "tosca_figure",
+__all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
            "pose_transfer_figure", "safe_figure", "write_case_figure", "figures_options", "ERROR_CMAP",
-           "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW"]
+           "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN"]
 
 log = logging.getLogger("eval")
 
@@ -42,6 +45,28 @@ DYNAMIC_COLOR = "#ffd000"
 #: Error colours: matplotlib's "hot", reversed (low error light, high error dark red to
 #: black) and cut before pure white so the shading of error-free regions stays readable.
 ERROR_CMAP = "sshade_hot"
+
+
+class _NotRun:
+    """Type of :data:`NOT_RUN` (a singleton)."""
+
+    _instance = None
+
+    def __new__(cls):
+        if cls._instance is None:
+            cls._instance = super().__new__(cls)
+        return cls._instance
+
+    def __repr__(self) -> str:
+        return "NOT_RUN"
+
+    def __reduce__(self):
+        return (_NotRun, ())
+
+
+#: Value of a method in :func:`case_figure`'s ``results`` that was not run on the case
+#: (drawn "<name>: not run"), as opposed to ``None``, a method that ran and failed.
+NOT_RUN = _NotRun()
 
 
 def _error_cmap():
@@ -155,7 +180,9 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
     ----------
     V_rest : (n, 3) rest vertices; F : (m, 3) faces.
     results : method name -> (n, 3) deformed vertices, in panel order; ``None`` for a
-        method that failed (drawn as an empty panel titled "<name>: failed").
+        method that failed (drawn as an empty panel titled "<name>: failed");
+        :data:`NOT_RUN` for a method that was not run on this case (an empty panel
+        titled "<name>: not run").
     handles : (h,) handle vertex indices; static_mask : (h,) bool, True = static handle
         (drawn blue; dynamic ones yellow, paper Fig. 1).
     path : output PNG (written atomically).
@@ -171,6 +198,23 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
 
     Raises SShaDeError on mismatched handles/flags or bad meshes.
     """
+    panels = case_panels(V_rest, F, results, handles, static_mask)
+    return mesh_row(panels, path, title=title, clim=clim, cmap=cmap, view=view, up=up, panel_size=panel_size,
+                    colorbar_label="edge error (% of max rest edge)")
+
+
+def case_panels(V_rest, F, results: Mapping, handles, static_mask) -> list[dict]:
+    """The :func:`mesh_row` panels of :func:`case_figure` (same parameters).
+
+    Returns
+    -------
+    list of ``1 + len(results)`` dicts: the rest mesh with its handles (``points``,
+    ``point_colors``), then per method either its deformed mesh with the per-face edge
+    error as ``values`` (title "<name>  (EL x.xx%)"), or an empty panel (``V`` None)
+    titled "<name>: failed" (value ``None``) or "<name>: not run" (value :data:`NOT_RUN`).
+
+    Raises SShaDeError on mismatched handles/flags or bad meshes.
+    """
     V = np.asarray(V_rest, np.float64)
     F = np.asarray(F, np.int64)
     handles = np.asarray(handles, np.int64).ravel()
@@ -182,13 +226,15 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
     panels = [{"title": "rest + handles", "V": V, "F": F, "points": V[handles],
                "point_colors": list(np.where(static, STATIC_COLOR, DYNAMIC_COLOR))}]
     for name, Vd in results.items():
+        if Vd is NOT_RUN:
+            panels.append({"title": f"{name}: not run", "V": None})
+            continue
         if Vd is None:
             panels.append({"title": f"{name}: failed", "V": None})
             continue
         e = face_edge_error(V, Vd, F)
         panels.append({"title": f"{name}  (EL {float(np.mean(e)):.2f}%)", "V": Vd, "F": F, "values": e})
-    return mesh_row(panels, path, title=title, clim=clim, cmap=cmap, view=view, up=up, panel_size=panel_size,
-                    colorbar_label="edge error (% of max rest edge)")
+    return panels
 
 
 #: Camera for TOSCA (z-up data): a three-quarter view from the front-left, a little above.
@@ -257,9 +303,16 @@ def figures_options(cfg) -> tuple[bool, int]:
     return enabled, int(4 if max_cases is None else max_cases)
 
 
-def write_case_figure(case, results: Mapping, fig_dir) -> Path | None:
+def write_case_figure(case, results: Mapping, fig_dir, *, not_run=()) -> Path | None:
     """Evaluator hook: ``fig_dir/<case.name>.png`` for one case (attributes ``name``,
     ``V``, ``F``, ``handles``, ``static``). Logs and returns None instead of raising, so
-    a rendering problem never stops an evaluation."""
+    a rendering problem never stops an evaluation.
+
+    results : method name -> deformed vertices, ``None`` (failed) or :data:`NOT_RUN`, as
+    :func:`case_figure`. not_run : names of methods not run on this case; their value
+    becomes :data:`NOT_RUN` (panel "<name>: not run"), appended after ``results`` when
+    absent from it.
+    """
+    results = {**dict(results), **{name: NOT_RUN for name in not_run}}
     return safe_figure(str(case.name), case_figure, case.V, case.F, results, case.handles, case.static,
                        Path(fig_dir) / f"{case.name}.png", title=str(case.name))

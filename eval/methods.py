@@ -13,6 +13,7 @@ Config keys read (see ``conf/config.yaml``)::
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 from sshade.errors import SShaDeError
@@ -55,8 +56,9 @@ def make_methods(cfg) -> list:
     Raises
     ------
     SShaDeError
-        Empty or non-list ``methods``, unknown or repeated name, bad parameter values,
-        or ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
+        Empty or non-list ``methods``, unknown or repeated name, bad parameter values
+        (every method's parameters are checked here, before any case is loaded or
+        built), or ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
 
     Examples
     --------
@@ -96,7 +98,13 @@ def make_methods(cfg) -> list:
             out.append(Elastic(tol=tol, max_iter=max_iter))
         elif n == "ARAP-SR":
             from baselines import ARAPSR
-            alpha = float(_get(_get(cfg, "arap_sr", {}) or {}, "alpha", 0.01))
+            alpha = _get(_get(cfg, "arap_sr", {}) or {}, "alpha", 0.01)
+            try:
+                alpha = float(alpha)
+            except (TypeError, ValueError):
+                raise SShaDeError(f"arap_sr.alpha must be a number >= 0, got {alpha!r}") from None
+            if not (alpha >= 0 and math.isfinite(alpha)):
+                raise SShaDeError(f"arap_sr.alpha must be a finite number >= 0, got {alpha!r}")
             out.append(ARAPSR(alpha=alpha, tol=tol, max_iter=max_iter))
         else:
             out.append(_make_sshade(_get(cfg, "sshade", {}) or {}, tol, max_iter))
@@ -109,17 +117,8 @@ def _make_sshade(sc, tol: float, max_iter: int):
     except ImportError as e:
         raise SShaDeError(f"method SShaDe is not available (cannot import sshade.SShaDe: {e}); "
                           "run with methods=[ARAP,Elastic] meanwhile") from None
-    workers = _get(sc, "workers")
-    try:
-        n_low = _get(sc, "n_low", "auto")
-        kw = dict(n_low="auto" if n_low in (None, "auto") else int(n_low),
-                  n_samplings=int(_get(sc, "n_samplings", 5)),
-                  seed=int(_get(sc, "seed", 0)),
-                  workers=None if workers is None else int(workers),
-                  tol=float(_get(sc, "tol", tol)),
-                  max_iter=int(_get(sc, "max_iter", max_iter)),
-                  gradient=str(_get(sc, "gradient", "normalized")),
+    # SShaDe checks its own parameters (sshade.deform.check_params) when it is built
+    return SShaDe(n_low=_get(sc, "n_low", "auto"), n_samplings=_get(sc, "n_samplings", 5),
+                  seed=_get(sc, "seed", 0), workers=_get(sc, "workers"), tol=_get(sc, "tol", tol),
+                  max_iter=_get(sc, "max_iter", max_iter), gradient=str(_get(sc, "gradient", "normalized")),
                   warm_start=bool(_get(sc, "warm_start", True)))
-    except (TypeError, ValueError) as e:
-        raise SShaDeError(f"bad sshade parameters: {e}") from None
-    return SShaDe(**kw)

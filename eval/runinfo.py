@@ -1,9 +1,9 @@
 """Provenance of an evaluation run, written as ``run.json`` beside the tables.
 
 Records: the resolved config, the seeds used (dataset seed, per-case handle seeds,
-method seeds), the git commit of the project (and whether the tree had local changes),
-the Python version, the platform and the versions of the numerical packages (numpy,
-scipy, libigl, pymeshlab, trimesh, pandas, hydra-core, omegaconf, numba, tqdm).
+method seeds), the git commit of the project (and which tracked files had local
+changes), the Python version, the platform and the versions of the packages in
+:data:`PACKAGES` (numerical libraries, Hydra and its launchers, matplotlib).
 """
 from __future__ import annotations
 
@@ -23,7 +23,8 @@ __all__ = ["PACKAGES", "package_versions", "git_info", "collect_runinfo", "write
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
             "trimesh": "trimesh", "pandas": "pandas", "hydra-core": "hydra", "omegaconf": "omegaconf",
-            "numba": "numba", "tqdm": "tqdm"}
+            "numba": "numba", "tqdm": "tqdm", "matplotlib": "matplotlib", "hydra-joblib-launcher": "hydra_plugins",
+            "hydra-submitit-launcher": "hydra_plugins", "submitit": "submitit"}
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,16 +44,28 @@ def package_versions() -> dict[str, str | None]:
 
 
 def git_info(root=REPO_ROOT) -> dict:
-    """``{"commit": sha or None, "dirty": bool or None}`` of the git checkout at ``root``."""
+    """The git state of the checkout at ``root``.
+
+    Returns
+    -------
+    dict ``{"commit": sha or None, "dirty": bool or None, "modified": [paths]}``:
+    ``dirty`` is True when a tracked file differs from the commit (staged or not);
+    ``modified`` names those files (relative to the repository root). Untracked files
+    (e.g. a run's own output folder) do not make a checkout dirty. All None/empty
+    outside a git checkout or without git.
+    """
     def git(*args):
         r = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
-        return r.stdout.strip() if r.returncode == 0 else None
+        return r.stdout if r.returncode == 0 else None
     try:
         sha = git("rev-parse", "HEAD")
-        status = git("status", "--porcelain") if sha else None
+        status = git("status", "--porcelain", "--untracked-files=no") if sha else None
     except (OSError, subprocess.SubprocessError):
-        return {"commit": None, "dirty": None}
-    return {"commit": sha, "dirty": None if status is None else bool(status)}
+        return {"commit": None, "dirty": None, "modified": []}
+    if status is None:
+        return {"commit": sha.strip() if sha else None, "dirty": None, "modified": []}
+    modified = [line[3:].strip() for line in status.splitlines() if line.strip()]
+    return {"commit": sha.strip(), "dirty": bool(modified), "modified": modified}
 
 
 def collect_runinfo(config: dict, *, seeds: dict | None = None, extra: dict | None = None) -> dict:

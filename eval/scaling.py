@@ -91,7 +91,7 @@ def run_scaling(cfg) -> dict:
         raise SShaDeError(f"scaling.base_mesh not found: {base_path} (set scaling.base_mesh=PATH)")
     V0, F0 = read_mesh(base_path)
     lm, center, axes = axis_landmarks(V0)
-    cache = out_dir / "meshes"
+    cache = _abs(sc.get("cache", None) or "data/scaling")  # built meshes, reused by later runs
     config = OmegaConf.to_container(cfg, resolve=True)
     info = collect_runinfo(config, seeds={"scaling": int(sc.seed), "sshade": int(sc.seed)},
                            extra={"status": "running"})

@@ -134,7 +134,7 @@ def sweep_job(cfg) -> dict:
     job_dir, overrides, num, sweep_dir = _hydra_job()
     if job_dir is None:
         from .app import _abs
-        job_dir = _abs(cfg.get("out_dir", "results/sweep_job"))
+        job_dir = _abs(cfg.get("out_dir", "outputs/sweep_job"))
     job_dir = Path(job_dir).resolve()
     with open_dict(cfg):
         cfg.out_dir = str(job_dir)  # every job writes its tables into its own folder
@@ -409,11 +409,11 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(_aggregate_cli(argv[1:]))
     import hydra
 
-    from .app import CONF_DIR
+    from .confdir import config_dir
     if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):
         argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
     sys.argv = [sys.argv[0], *argv]
-    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(sweep_job)()
+    hydra.main(version_base=None, config_path=config_dir(), config_name="config")(sweep_job)()
 
 
 if __name__ == "__main__":

@@ -7,29 +7,53 @@ Input: a pandas DataFrame with one row per (case, method) as produced by
 ``angle_err_rel_pct``, ``handle_err_pct``, ``gt_vertex_mean_pct``,
 ``gt_vertex_max_pct``, ``hausdorff``, ``chamfer``), ``time_s`` (seconds of the
 ``deform`` call), method info (``iterations``, ``remesh_s``, ...) and ``error``
-(empty when the method succeeded).
+(empty or missing when the method succeeded).
 
-Outputs (in ``out_dir``):
+Fair comparison. Methods need not run on the same cases (on a high-res dataset the
+full-resolution baselines run only on the first ``dataset.baseline_cases`` cases,
+SShaDe on all), and a method may fail on some. The main table therefore averages every
+method over the same cases, the *common set*: the cases on which every method of the
+frame has a successful row (:func:`common_cases`, :func:`compare`). ``Failed`` counts a
+method's failed runs over all the cases it was run on (by construction none of them is
+in the common set).
+
+Outputs (in ``out_dir``, :func:`write_tables`):
 
 - ``cases.csv``: the rows as given;
-- ``table.csv``: per-method means over the successful cases of every numeric column,
-  with ``n_cases`` (successful) and ``n_failed``;
-- ``table.md``: the main columns as a Markdown table;
-- ``table.tex``: the paper's Table 1 layout (Method | Volume | Area | EL | FA | Time),
-  booktabs, best (lowest) value per column in bold. Needs ``\\usepackage{booktabs}``.
+- ``table.csv``: the main table, per-method means over the common set of every numeric
+  column, with ``n_cases`` (the common set's size, the same for every method) and
+  ``n_failed``;
+- ``table_all.csv``: only when some method succeeded on cases outside the common set:
+  per-method means over each method's own successful cases (``n_cases`` differs
+  between rows);
+- ``table.md``: the main columns as Markdown: the main table (best value per column in
+  bold) and, when ``table_all.csv`` is written, a second table "all cases each method
+  ran on" without bold (its rows average different cases);
+- ``table.tex``: the paper's Table 1 layout (Method | Volume | Area | EL | FA | Time) of
+  the main table, booktabs, best (lowest) value per column in bold, and a note row
+  naming the number of cases each row averages. Needs ``\\usepackage{booktabs}``.
 
-Rows are ordered ARAP, Elastic, SShaDe, then any other method by name.
+When no case has a successful row of every method (the common set is empty), table.md
+and table.tex say so and the main table falls back to per-method means over each
+method's own successful cases, without bold. A frame without a ``case`` column is
+summarised per method, as :func:`summarize` always did.
+
+Rows are ordered ARAP, Elastic, ARAP-SR, Implicit-ARAP, SShaDe, then any other method
+by name.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
 from defaust.meshio import atomic_write
 
-__all__ = ["summarize", "write_tables", "to_markdown", "to_latex", "METHOD_ORDER", "TABLE_COLUMNS"]
+__all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
+           "Comparison", "comparison_markdown", "main_note", "ALL_CASES_HEADING",
+           "COMMON_CASES_HEADING", "METHOD_ORDER", "TABLE_COLUMNS"]
 
 METHOD_ORDER = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe")
 
@@ -52,28 +76,45 @@ _MD_EXTRA = (
     ("chamfer", "Chamfer", 5),
 )
 
+#: Heading of table.md's second table.
+ALL_CASES_HEADING = "All cases each method ran on"
+#: Heading of table.md's main table when a second table follows and no title is given.
+COMMON_CASES_HEADING = "Cases every method succeeded on"
+
 
 def _order_key(m: str):
     return (METHOD_ORDER.index(m), "") if m in METHOD_ORDER else (len(METHOD_ORDER), m)
 
 
-def summarize(df: pd.DataFrame) -> pd.DataFrame:
-    """Per-method means over successful cases.
+def _methods(df: pd.DataFrame) -> list:
+    """The frame's methods in table order (ARAP, Elastic, ..., SShaDe, others by name)."""
+    return sorted(df["method"].unique(), key=_order_key)
+
+
+def ok_mask(df: pd.DataFrame) -> pd.Series:
+    """Which rows are successful runs.
 
     Parameters
     ----------
-    df : per-case rows (see module docstring); needs a ``method`` column.
+    df : per-case rows; the ``error`` column (optional) holds the failure message, empty
+        or missing (NaN, e.g. an all-empty column read back from ``cases.csv``) on success.
 
     Returns
     -------
-    DataFrame, one row per method (ordered ARAP, Elastic, SShaDe, others), columns
-    ``method``, ``n_cases``, ``n_failed`` and the mean of every numeric (or boolean)
-    column except identifiers. A method that failed everywhere has NaN means.
+    bool Series aligned with ``df.index``; all True without an ``error`` column.
+    (No ``fillna("")``: on the float64 column that ``pd.read_csv`` makes of an all-empty
+    ``error`` column, that is deprecated in pandas and will raise.)
     """
-    if "method" not in df.columns:
-        raise ValueError("results have no 'method' column")
-    err = df["error"].fillna("").astype(str) if "error" in df.columns else pd.Series("", index=df.index)
-    ok = err.str.len() == 0
+    if "error" not in df.columns:
+        return pd.Series(True, index=df.index)
+    err = df["error"]
+    return err.isna() | (err.astype(str).str.len() == 0)
+
+
+def _numeric_columns(df: pd.DataFrame) -> list[str]:
+    """Columns averaged by :func:`summarize`: numeric or boolean ones, and object ones
+    that convert to float (e.g. booleans mixed with NaN where a method failed), except
+    identifiers (:data:`_ID_COLUMNS`)."""
     num_cols = []
     for c in df.columns:
         if c in _ID_COLUMNS:
@@ -82,22 +123,115 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
         if pd.api.types.is_bool_dtype(s) or pd.api.types.is_numeric_dtype(s):
             num_cols.append(c)
         elif s.dtype == object and len(s.dropna()):
-            # e.g. booleans mixed with NaN where a method failed
             try:
                 s.dropna().astype(float)
             except (TypeError, ValueError):
                 continue
             num_cols.append(c)
+    return num_cols
+
+
+def summarize(df: pd.DataFrame, *, cases=None) -> pd.DataFrame:
+    """Per-method means over successful cases.
+
+    Parameters
+    ----------
+    df : per-case rows (see module docstring); needs a ``method`` column.
+    cases : optional collection of case names (values of the ``case`` column): average
+        only the successful rows of these cases (e.g. :func:`common_cases`). Default
+        None: every successful row, as before (each method over its own cases).
+
+    Returns
+    -------
+    DataFrame, one row per method (ordered ARAP, Elastic, SShaDe, others), columns
+    ``method``, ``n_cases`` (successful rows averaged), ``n_failed`` (failed rows of
+    the method over all the cases it was run on, also with ``cases``) and the mean of
+    every numeric (or boolean) column except identifiers. A method with no successful
+    row averaged has NaN means.
+    """
+    if "method" not in df.columns:
+        raise ValueError("results have no 'method' column")
+    if cases is not None and "case" not in df.columns:
+        raise ValueError("summarize(cases=...) needs a 'case' column")
+    ok = ok_mask(df)
+    use = ok if cases is None else ok & df["case"].isin(list(cases))
+    num_cols = _numeric_columns(df)
     rows = []
-    for m in sorted(df["method"].unique(), key=_order_key):
+    for m in _methods(df):
         sel = df["method"] == m
-        good = df[sel & ok]
+        good = df[sel & use]
         row = {"method": m, "n_cases": int(len(good)), "n_failed": int((sel & ~ok).sum())}
         for c in num_cols:
             v = good[c].dropna().astype(float)
-            row[c] = float(v.mean()) if len(v.dropna()) else float("nan")
+            row[c] = float(v.mean()) if len(v) else float("nan")
         rows.append(row)
     return pd.DataFrame(rows, columns=["method", "n_cases", "n_failed", *num_cols])
+
+
+def common_cases(df: pd.DataFrame) -> list | None:
+    """The cases on which every method of ``df`` has a successful row.
+
+    Parameters
+    ----------
+    df : per-case rows with ``case``, ``method`` and (optional) ``error`` columns.
+
+    Returns
+    -------
+    list of case names in order of first appearance (empty when no case qualifies), or
+    None when ``df`` has no ``case`` column.
+    """
+    if "case" not in df.columns or "method" not in df.columns:
+        return None
+    good = df[ok_mask(df)]
+    per_method = [set(good.loc[good["method"] == m, "case"]) for m in df["method"].unique()]
+    common = set.intersection(*per_method) if per_method else set()
+    return [c for c in dict.fromkeys(df["case"]) if c in common]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What :func:`compare` found.
+
+    Attributes
+    ----------
+    main : the main table (:func:`summarize` layout): means over ``cases`` when that is
+        non-empty, else (fallback) each method's means over its own successful cases.
+    all : each method's means over all its own successful cases, when that differs from
+        ``main`` for some method (it succeeded on cases outside the common set); else None.
+    cases : the common set (case names), empty when no case qualifies, None when the
+        frame has no ``case`` column (then ``main`` is the plain per-method summary).
+    methods : the methods of the frame, in table order.
+    """
+    main: pd.DataFrame
+    all: pd.DataFrame | None
+    cases: list | None
+    methods: list
+
+    @property
+    def same_cases(self) -> bool:
+        """Whether ``main`` may bold its best values: its rows average the same cases
+        (the common set), or the frame has no ``case`` column (legacy summary, bolded as
+        before). False in the empty-common-set fallback."""
+        return self.cases is None or bool(self.cases)
+
+
+def compare(df: pd.DataFrame) -> Comparison:
+    """Main and all-cases tables of ``df`` (per-case rows, see the module docstring).
+
+    Returns a :class:`Comparison`: ``main`` averages every method over the common set
+    (:func:`common_cases`); ``all`` (or None) each method over its own successful cases,
+    given only when some method succeeded on a case outside the common set. With an empty
+    common set ``main`` is the per-method summary and ``all`` is None.
+    """
+    methods = _methods(df) if "method" in df.columns else []
+    cases = common_cases(df)
+    own = summarize(df)
+    if not cases:
+        return Comparison(main=own, all=None, cases=cases, methods=methods)
+    ok = ok_mask(df)
+    common = set(cases)
+    extra = bool((ok & ~df["case"].isin(list(common))).any())
+    return Comparison(main=summarize(df, cases=cases), all=own if extra else None, cases=cases, methods=methods)
 
 
 def _fmt(v, dec: int) -> str:
@@ -114,8 +248,19 @@ def _best(values: list[float], dec: int) -> set[int]:
     return {i for i, x in enumerate(r) if x == lo}
 
 
-def to_markdown(summary: pd.DataFrame, *, title: str | None = None) -> str:
-    """Markdown table of the main columns (best per column in bold)."""
+def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool = True,
+                note: str | None = None) -> str:
+    """Markdown table of the main columns.
+
+    Parameters
+    ----------
+    summary : per-method table (:func:`summarize` layout: ``method``, ``n_cases``,
+        ``n_failed`` and metric columns).
+    title : ``### title`` line above the table. note : a paragraph between the title and
+        the table (e.g. which cases the rows average).
+    bold : mark the best (lowest) value per column in bold; pass False when the rows
+        average different cases (the comparison would not be fair).
+    """
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
     cols += [(c, h, d) for c, h, d in _MD_EXTRA if c in summary.columns]
     head = ["Method", "Cases", *[h for _, h, _ in cols]]
@@ -124,8 +269,10 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None) -> str:
     lines = []
     if title:
         lines += [f"### {title}", ""]
+    if note:
+        lines += [note, ""]
     lines += ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
-    best = {c: _best(list(summary[c]), d) for c, _, d in cols}
+    best = {c: _best(list(summary[c]), d) if bold else set() for c, _, d in cols}
     for i, (_, r) in enumerate(summary.iterrows()):
         cells = [str(r["method"]), str(int(r["n_cases"]))]
         if "Failed" in head:
@@ -137,17 +284,21 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def to_latex(summary: pd.DataFrame) -> str:
+def to_latex(summary: pd.DataFrame, *, note: str | None = None, bold: bool = True) -> str:
     """The paper's Table 1 layout: ``Method & Volume & Area & EL & FA & Time``.
 
     Percentages with ``\\%``, FA in degrees with ``\\textdegree``, time in seconds;
-    lowest value per column in ``\\textbf``; ``--`` where a value is missing.
+    lowest value per column in ``\\textbf`` (unless ``bold`` is False); ``--`` where a
+    value is missing. ``note`` (plain text, escaped here): a footnote-size row below
+    the table and a ``%`` comment line on top, e.g. the number of cases averaged.
     """
     cols = list(TABLE_COLUMNS)
-    best = {c: _best(list(summary[c]) if c in summary.columns else [], d) for c, _, _, d, _ in cols}
-    out = ["% Generated by eval.tables: mean over successful cases; needs \\usepackage{booktabs}",
-           "\\begin{tabular}{l cccc c}", "\\toprule",
-           "Method & " + " & ".join(t for _, _, t, _, _ in cols) + " \\\\", "\\midrule"]
+    best = {c: _best(list(summary[c]) if c in summary.columns and bold else [], d) for c, _, _, d, _ in cols}
+    out = ["% Generated by eval.tables: mean over successful cases; needs \\usepackage{booktabs}"]
+    if note:
+        out.append(f"% {note}")
+    out += ["\\begin{tabular}{l cccc c}", "\\toprule",
+            "Method & " + " & ".join(t for _, _, t, _, _ in cols) + " \\\\", "\\midrule"]
     for i, (_, r) in enumerate(summary.iterrows()):
         cells = [_tex_escape(str(r["method"]))]
         for c, _, _, d, unit in cols:
@@ -159,7 +310,10 @@ def to_latex(summary: pd.DataFrame) -> str:
                     s = f"\\textbf{{{s}}}"
             cells.append(s)
         out.append(" & ".join(cells) + " \\\\")
-    out += ["\\bottomrule", "\\end{tabular}"]
+    out.append("\\bottomrule")
+    if note:
+        out.append(f"\\multicolumn{{{1 + len(cols)}}}{{l}}{{\\footnotesize {_tex_escape(note)}}} \\\\")
+    out.append("\\end{tabular}")
     return "\n".join(out) + "\n"
 
 
@@ -167,6 +321,54 @@ def _tex_escape(s: str) -> str:
     for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_"), ("#", r"\#")):
         s = s.replace(a, b)
     return s
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+def _own_counts(summary: pd.DataFrame) -> str:
+    """``"ARAP 2, SShaDe 4"``: each method's number of averaged cases."""
+    return ", ".join(f"{r['method']} {int(r['n_cases'])}" for _, r in summary.iterrows())
+
+
+def main_note(comp: Comparison) -> str | None:
+    """One sentence saying which cases the main table's rows average (None: no ``case``
+    column, the legacy per-method summary)."""
+    if comp.cases is None:
+        return None
+    if not comp.cases:
+        return (f"No case on which every method ({', '.join(map(str, comp.methods))}) succeeded: each row is "
+                f"that method's mean over its own successful cases ({_own_counts(comp.main)}), not comparable "
+                "across rows.")
+    who = "the method" if len(comp.methods) == 1 else f"every method ({', '.join(map(str, comp.methods))})"
+    return f"Mean over the {_plural(len(comp.cases), 'case')} on which {who} succeeded."
+
+
+def comparison_markdown(comp: Comparison, *, title: str | None = None) -> str:
+    """``table.md``'s text for a :class:`Comparison`.
+
+    The main table (bold: best per column, all rows on the same cases) under ``title``
+    and a one-line note naming the common set's size and that ``Failed`` counts failed
+    runs over all the cases a method was run on; then, when ``comp.all`` is given, the
+    second table ``"All cases each method ran on"``: each method's means over its own
+    successful cases, without bold, since its rows average different cases (the fair
+    comparison is the first table). Without ``title`` the main table is headed
+    :data:`COMMON_CASES_HEADING` when the second table follows. With an empty common
+    set: the note says so and the (per-method, fallback) main table has no bold.
+    """
+    if title is None and comp.all is not None:
+        title = COMMON_CASES_HEADING
+    note = main_note(comp)
+    if note and comp.cases and (comp.main["n_failed"] > 0).any():
+        note += " Failed: failed runs over all the cases the method was run on."
+    text = to_markdown(comp.main, title=title, note=note, bold=comp.same_cases)
+    if comp.all is not None:
+        text += "\n" + to_markdown(
+            comp.all, title=ALL_CASES_HEADING, bold=False,
+            note=("Each row: that method's mean over all its own successful cases (Cases), so rows may average "
+                  "different cases and nothing is bold; compare methods in the table above."))
+    return text
 
 
 def write_cases(df: pd.DataFrame, out_dir) -> Path:
@@ -177,31 +379,97 @@ def write_cases(df: pd.DataFrame, out_dir) -> Path:
     return p
 
 
-def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None) -> dict[str, Path]:
-    """Write ``cases.csv``, ``table.csv``, ``table.md`` and ``table.tex`` into ``out_dir``.
+def _write_csv(summary: pd.DataFrame, p: Path) -> Path:
+    with atomic_write(p, "w", newline="") as fh:
+        summary.to_csv(fh, index=False, float_format="%.6g")
+    return p
+
+
+def _write_text(text: str, p: Path) -> Path:
+    with atomic_write(p, "w") as fh:
+        fh.write(text)
+    return p
+
+
+def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: bool = True) -> dict[str, Path]:
+    """Write ``cases.csv``, ``table.csv``, ``table.md``, ``table.tex`` and, when some
+    method has successful cases outside the common set, ``table_all.csv`` into ``out_dir``
+    (see the module docstring and :func:`compare`).
 
     Every file is written to a temporary file and renamed into place
     (:func:`defaust.meshio.atomic_write`), so a crash never leaves a half-written table.
+    A ``table_all.csv`` left by an earlier run into the same folder is removed when this
+    run has no second table, so it never describes other results.
+
+    With ``cases=False`` the rows are not written back (``cases.csv`` is the input, see
+    :func:`retabulate`).
 
     Returns
     -------
-    dict name -> path (``cases``, ``table_csv``, ``table_md``, ``table_tex``); the
-    per-method means themselves come from :func:`summarize`.
+    dict name -> path of every file written (``cases``, ``table_csv``, ``table_md``,
+    ``table_tex``, and ``table_all_csv`` when written).
     """
     out_dir = Path(out_dir)
-    paths = {"cases": write_cases(df, out_dir)}
-    summ = summarize(df)
-    p = out_dir / "table.csv"
-    with atomic_write(p, "w", newline="") as fh:
-        summ.to_csv(fh, index=False, float_format="%.6g")
-    paths["table_csv"] = p
-    p = out_dir / "table.md"
-    with atomic_write(p, "w") as fh:
-        fh.write(to_markdown(summ, title=title))
-    paths["table_md"] = p
-    p = out_dir / "table.tex"
-    with atomic_write(p, "w") as fh:
-        fh.write(to_latex(summ))
-    paths["table_tex"] = p
+    paths = {"cases": write_cases(df, out_dir)} if cases else {}
+    comp = compare(df)
+    paths["table_csv"] = _write_csv(comp.main, out_dir / "table.csv")
+    p_all = out_dir / "table_all.csv"
+    if comp.all is not None:
+        paths["table_all_csv"] = _write_csv(comp.all, p_all)
+    else:
+        p_all.unlink(missing_ok=True)
+    paths["table_md"] = _write_text(comparison_markdown(comp, title=title), out_dir / "table.md")
+    paths["table_tex"] = _write_text(to_latex(comp.main, note=main_note(comp), bold=comp.same_cases),
+                                     out_dir / "table.tex")
     return paths
 
+
+def retabulate(run_dir) -> dict[str, Path]:
+    """Rebuild the tables of a finished evaluator run from its ``cases.csv`` (e.g. after
+    a change of the table layout), without rerunning any method; ``cases.csv`` itself
+    is left as it is. The title is taken from the run's ``run.json`` when present.
+
+    ``python -m eval.tables RUN_DIR [RUN_DIR ...]`` does the same from the shell.
+
+    Parameters
+    ----------
+    run_dir : str or Path, a folder written by ``python -m eval`` (with ``cases.csv``).
+
+    Returns
+    -------
+    dict name -> path of the tables written (see :func:`write_tables`).
+
+    Raises
+    ------
+    FileNotFoundError if ``run_dir/cases.csv`` is missing.
+    """
+    import json
+
+    run_dir = Path(run_dir)
+    df = pd.read_csv(run_dir / "cases.csv")
+    title = None
+    try:
+        cfg = json.loads((run_dir / "run.json").read_text()).get("config", {})
+        exp, ds = cfg.get("experiment", {}).get("name"), cfg.get("dataset", {}).get("name")
+        if exp:
+            title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
+    except (OSError, ValueError, AttributeError):
+        pass
+    return write_tables(df, run_dir, title=title, cases=False)
+
+
+def main(argv=None) -> int:
+    """``python -m eval.tables RUN_DIR [...]``: :func:`retabulate` each folder."""
+    import sys
+    dirs = list(sys.argv[1:] if argv is None else argv)
+    if not dirs:
+        print("usage: python -m eval.tables RUN_DIR [RUN_DIR ...]", file=sys.stderr)
+        return 2
+    for d in dirs:
+        paths = retabulate(d)
+        print(f"{d}: wrote {', '.join(p.name for p in paths.values())}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -6,6 +6,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -17,7 +18,7 @@ from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
 from .validate import validate_handles, validate_mesh
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "sampling_seeds"]
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "sampling_seeds", "check_params", "LowResSkippedWarning"]
 
 # Worker-process state: the high-res mesh is handed to each worker once, at fork.
 _W: dict = {}
@@ -123,6 +124,71 @@ def _task_finish(i: int, prep: dict, V0: np.ndarray):
     return i, Vd, info
 
 
+class LowResSkippedWarning(UserWarning):
+    """``n_low`` is at or above the mesh's vertex count: SShaDe has no low-resolution
+    step (the "low-res" ARAP runs on the whole mesh). Recorded as ``low_res_skipped``
+    in :func:`deform`'s info."""
+
+
+def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
+                 max_iter: int = 1000, gradient: str = "normalized", warm_start: bool = True) -> dict:
+    """Validate SShaDe's parameters without touching a mesh (so a bad value fails before
+    any work, e.g. before an evaluator spends minutes on the baselines).
+
+    Parameters
+    ----------
+    As :func:`deform`: n_low (int >= 4 or ``"auto"``/None), n_samplings (int >= 1),
+    seed (int >= 0), workers (int >= 1 or None), tol (float > 0), max_iter (int >= 1),
+    gradient (one of :data:`sshade.lrf.GRADIENTS`), warm_start (bool).
+
+    Returns
+    -------
+    dict of the same keys, normalised (ints as int, ``n_low`` as int or ``"auto"``).
+
+    Raises
+    ------
+    SShaDeError naming the first bad parameter and its value.
+
+    Examples
+    --------
+    >>> check_params(n_low=6000)["n_low"]
+    6000
+    >>> check_params(n_low=2)
+    Traceback (most recent call last):
+    ...
+    sshade.errors.SShaDeError: SShaDe: n_low must be at least 4 (or 'auto'), got 2
+    """
+    def as_int(name, v, lo):
+        if isinstance(v, bool):
+            raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
+        try:
+            iv = int(v)
+        except (TypeError, ValueError):
+            raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}") from None
+        if iv != v and not (isinstance(v, str) and str(iv) == v.strip()):
+            raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
+        if iv < lo:
+            extra = " (or 'auto')" if name == "n_low" else ""
+            raise SShaDeError(f"SShaDe: {name} must be at least {lo}{extra}, got {v!r}")
+        return iv
+
+    out = {"n_low": "auto" if n_low in (None, "auto") else as_int("n_low", n_low, 4),
+           "n_samplings": as_int("n_samplings", n_samplings, 1), "seed": as_int("seed", seed, 0),
+           "workers": None if workers is None else as_int("workers", workers, 1),
+           "max_iter": as_int("max_iter", max_iter, 1)}
+    try:
+        out["tol"] = float(tol)
+    except (TypeError, ValueError):
+        raise SShaDeError(f"SShaDe: tol must be a number, got {tol!r}") from None
+    if not out["tol"] > 0 or not np.isfinite(out["tol"]):
+        raise SShaDeError(f"SShaDe: tol must be a finite number > 0, got {tol!r}")
+    if gradient not in GRADIENTS:
+        raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
+    out["gradient"] = gradient
+    out["warm_start"] = bool(warm_start)
+    return out
+
+
 def auto_n_low(n: int) -> int:
     """Default low-res size for an n-vertex mesh: min(6000, n // 7), at least 100
     (6000 is the paper's setting for 150k-200k vertices; n // 7 keeps small meshes
@@ -186,27 +252,34 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
 
     Raises
     ------
-    SShaDeError on invalid mesh or handles (see :func:`sshade.validate.validate_mesh`),
-    n_samplings < 1, n_low < 4, unknown gradient mode.
+    SShaDeError on invalid mesh or handles (see :func:`sshade.validate.validate_mesh`)
+    or a bad parameter (:func:`check_params`: n_samplings < 1, n_low < 4, tol <= 0,
+    unknown gradient mode, ...), before any work.
+
+    Warns
+    -----
+    LowResSkippedWarning when ``n_low`` is at or above the vertex count (no low-res
+    step; recorded as ``low_res_skipped`` and ``n_low_requested`` in the info).
 
     Examples
     --------
     >>> from sshade import deform
     >>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
     """
+    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
+                     max_iter=max_iter, gradient=gradient, warm_start=warm_start)
+    n_samplings, workers = p["n_samplings"], p["workers"]
     t0 = time.perf_counter()
     _warmup()
     V, F, he = validate_mesh(V, F, return_halfedges=True)
     handles, targets = validate_handles(V, handles, targets)
-    if n_samplings < 1:
-        raise SShaDeError(f"n_samplings must be >= 1, got {n_samplings}")
-    if gradient not in GRADIENTS:
-        raise SShaDeError(f"unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
-    if n_low in (None, "auto"):
-        n_low = auto_n_low(len(V))
-    if int(n_low) < 4:
-        raise SShaDeError(f"n_low must be at least 4, got {n_low}")
-    n_low = int(min(n_low, len(V)))
+    n_low_asked = auto_n_low(len(V)) if p["n_low"] == "auto" else p["n_low"]
+    full_res = n_low_asked >= len(V)
+    if full_res:
+        warnings.warn(f"SShaDe: n_low={n_low_asked} is not below the mesh's {len(V)} vertices: there is no "
+                      "low-resolution step, the low-res ARAP runs on the whole mesh (pass a smaller n_low)",
+                      LowResSkippedWarning, stacklevel=2)
+    n_low = int(min(n_low_asked, len(V)))
     topo = mesh_topology(V, F, he)
     seeds = sampling_seeds(seed, n_samplings)
     state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, seeds=seeds, topology=topo,
@@ -246,7 +319,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     if not return_info:
         return Vd
     info = {"total_s": t2 - t0, "setup_s": t1 - t0, "workers": workers, "seed": seed, "sampling_seeds": seeds,
-            "warm_start": bool(warm_start), "samplings": infos}
+            "warm_start": bool(warm_start), "n_low_requested": int(n_low_asked), "low_res_skipped": bool(full_res),
+            "samplings": infos}
     for k in ("remesh_s", "project_s", "arap_s", "transfer_s", "iterations"):
         info[k] = float(np.sum([d[k] for d in infos]))
     info["n_low"] = int(np.mean([d["n_low"] for d in infos]))
@@ -270,8 +344,9 @@ class SShaDe:
 
     def __init__(self, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, workers: int | None = None,
                  tol: float = 1e-4, max_iter: int = 1000, gradient: str = "normalized", warm_start: bool = True):
-        self.params = dict(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                           max_iter=max_iter, gradient=gradient, warm_start=warm_start)
+        # validated here, so a bad parameter fails when the method is built, before any work
+        self.params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
+                                   max_iter=max_iter, gradient=gradient, warm_start=warm_start)
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:

@@ -100,9 +100,11 @@ def test_resume_skips_finished_and_rebuilds_damaged(built, tmp_path):
     after = _mtimes(out)
     untouched = [k for k in before if "pose_02" not in k and "pose_03" not in k and k != "manifest.json"]
     assert all(after[k] == before[k] for k in untouched)
-    # a changed parameter invalidates the items it affects
-    rep = _build(out, "handles.static_threshold=0.05")
-    assert rep.built == [f"subject_00/pose_{p:02d}" for p in POSES]
+    # other parameters: the folder holds another dataset, which is never overwritten
+    after = _mtimes(out)
+    with pytest.raises(SShaDeError, match=r"static_threshold: 0.02 there, 0.05 asked"):
+        _build(out, "handles.static_threshold=0.05")
+    assert _mtimes(out) == after
 
 
 def test_interrupted_build_resumes(built, tmp_path, monkeypatch):

@@ -13,7 +13,7 @@ def _steps(capsys, *argv) -> dict[str, str]:
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
     assert list(steps) == ["defaust", "sweep"]
-    assert steps["defaust"] == "-m eval figures.enabled=true"
+    assert steps["defaust"] == "-m eval figures.enabled=true out_dir=results/defaust"
     sweep = steps["sweep"]
     assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
@@ -26,5 +26,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
-    assert steps["shapes"] == "-m eval experiment=shapes dataset.root=S"  # figures on in experiment/shapes.yaml
+    assert steps["shapes"] == "-m eval experiment=shapes dataset.root=S out_dir=results/shapes"  # figures: shapes.yaml
+    for name, cmd in steps.items():  # only this command writes results/: each step names its folder
+        want = "hydra.sweep.dir=results/sweeps/defaust" if name == "sweep" else f"out_dir=results/{name}"
+        assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]

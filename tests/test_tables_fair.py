@@ -1,0 +1,258 @@
+"""Fair method comparison in the evaluator's tables (eval/tables.py: every method on the
+same cases, the second "all cases" table, the LaTeX case count, failures) and the case
+figures' "not run" panels (eval/figures.py). Synthetic frames; the figure tests use a
+small sphere."""
+from __future__ import annotations
+
+import io
+import json
+import re
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.tables import (ALL_CASES_HEADING, COMMON_CASES_HEADING, common_cases, compare, ok_mask, summarize, to_markdown,
+                         write_tables)
+
+
+def _row(case, method, vol, *, edge=0.5, time_s=1.0, error=""):
+    return dict(case=case, subject=0, pose=int(case[1:]), method=method, n_vertices=10, n_handles=3,
+                volume_err_pct=vol, area_err_pct=0.1, edge_err_pct=edge, angle_err_deg=0.2, time_s=time_s,
+                error=error)
+
+
+def _frame(sshade_error_on: str | None = None) -> pd.DataFrame:
+    """ARAP on c0, c1 (the baseline subset); SShaDe on c0..c3.
+
+    On the common cases c0, c1 ARAP has the lower volume error (2.0 vs 3.0); SShaDe is
+    perfect on c2, c3, so averaging it over its own 4 cases (1.5) would wrongly beat ARAP.
+    """
+    rows = []
+    for i in range(4):
+        c = f"c{i}"
+        if i < 2:
+            rows.append(_row(c, "ARAP", 2.0, edge=0.4, time_s=50.0))
+        err = "SShaDeError: boom" if c == sshade_error_on else ""
+        rows.append(_row(c, "SShaDe", 3.0 if i < 2 else 0.0, time_s=2.0, error=err) if not err else
+                    dict(case=c, subject=0, pose=i, method="SShaDe", n_vertices=10, n_handles=3, error=err))
+    return pd.DataFrame(rows)
+
+
+def _tables(md: str) -> list[str]:
+    """table.md split before each ``### `` heading line (each part: one table)."""
+    return [part for part in re.split(r"(?m)^(?=### )", md) if part.strip()]
+
+
+def _md_row(table: str, method: str) -> list[str]:
+    line = next(ln for ln in table.splitlines() if ln.startswith(f"| {method} |"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+# ---------------------------------------------------------------- main table: common cases
+
+def test_main_table_uses_only_the_common_cases(tmp_path):
+    df = _frame()
+    assert common_cases(df) == ["c0", "c1"]
+    paths = write_tables(df, tmp_path, title="demo")
+    main = pd.read_csv(paths["table_csv"]).set_index("method")
+    assert main.index.tolist() == ["ARAP", "SShaDe"]
+    assert main["n_cases"].tolist() == [2, 2] and main["n_failed"].tolist() == [0, 0]
+    assert main.loc["ARAP", "volume_err_pct"] == pytest.approx(2.0)
+    assert main.loc["SShaDe", "volume_err_pct"] == pytest.approx(3.0)  # not 1.5 (its 4 own cases)
+
+    first, second = _tables(paths["table_md"].read_text())
+    assert first.startswith("### demo")
+    assert "Mean over the 2 cases on which every method (ARAP, SShaDe) succeeded." in first
+    arap, ssh = _md_row(first, "ARAP"), _md_row(first, "SShaDe")
+    assert arap[:3] == ["ARAP", "2", "**2.00**"]        # the best volume on the same cases
+    assert ssh[:3] == ["SShaDe", "2", "3.00"]
+    assert ssh[-1] == "**2.00**" and arap[-1] == "50.00"  # time: SShaDe best
+    # legacy per-method means would bold SShaDe's 1.50 instead
+    assert "**1.50**" in to_markdown(summarize(df))
+
+
+def test_second_table_all_cases_each_method_ran_on(tmp_path):
+    paths = write_tables(_frame(), tmp_path)
+    assert set(paths) == {"cases", "table_csv", "table_all_csv", "table_md", "table_tex"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in paths.values())
+    assert all(p.is_file() for p in paths.values())
+    own = pd.read_csv(paths["table_all_csv"]).set_index("method")
+    assert own["n_cases"].to_dict() == {"ARAP": 2, "SShaDe": 4}
+    assert own.loc["SShaDe", "volume_err_pct"] == pytest.approx(1.5)
+    assert own.loc["ARAP", "volume_err_pct"] == pytest.approx(2.0)
+
+    md = paths["table_md"].read_text()
+    tables = _tables(md)
+    assert len(tables) == 2 and tables[1].startswith(f"### {ALL_CASES_HEADING}")
+    assert tables[0].startswith(f"### {COMMON_CASES_HEADING}")  # no title given: still labelled
+    assert ALL_CASES_HEADING == "All cases each method ran on"
+    assert "nothing is bold" in tables[1] and "**" not in tables[1]
+    assert _md_row(tables[1], "ARAP")[:3] == ["ARAP", "2", "2.00"]
+    assert _md_row(tables[1], "SShaDe")[:3] == ["SShaDe", "4", "1.50"]
+
+
+def test_latex_names_the_case_count(tmp_path):
+    tex = write_tables(_frame(), tmp_path)["table_tex"].read_text()
+    note = "Mean over the 2 cases on which every method (ARAP, SShaDe) succeeded."
+    assert f"% {note}" in tex                                            # comment on top
+    assert f"\\multicolumn{{6}}{{l}}{{\\footnotesize {note}}} \\\\" in tex  # visible note row
+    assert tex.index("\\bottomrule") < tex.index("\\multicolumn") < tex.index("\\end{tabular}")
+    assert "ARAP & \\textbf{2.00\\%}" in tex and "SShaDe & 3.00\\%" in tex
+    assert "Method & Volume & Area & EL & FA & Time \\\\" in tex          # Table 1 layout kept
+
+
+def test_a_failed_run_removes_its_case_from_the_common_set(tmp_path):
+    df = _frame(sshade_error_on="c1")
+    assert common_cases(df) == ["c0"]
+    paths = write_tables(df, tmp_path)
+    main = pd.read_csv(paths["table_csv"]).set_index("method")
+    assert main["n_cases"].to_dict() == {"ARAP": 1, "SShaDe": 1}
+    assert main["n_failed"].to_dict() == {"ARAP": 0, "SShaDe": 1}  # over all the cases it ran on
+    own = pd.read_csv(paths["table_all_csv"]).set_index("method")
+    assert own["n_cases"].to_dict() == {"ARAP": 2, "SShaDe": 3}
+    assert own["n_failed"].to_dict() == {"ARAP": 0, "SShaDe": 1}
+    first, second = _tables(paths["table_md"].read_text())
+    assert "Mean over the 1 case on which every method" in first
+    assert "Failed: failed runs over all the cases the method was run on." in first
+    assert "| Method | Cases | Failed |" in first
+    assert _md_row(first, "SShaDe")[:3] == ["SShaDe", "1", "1"]
+    assert _md_row(second, "SShaDe")[:3] == ["SShaDe", "3", "1"]
+    assert "Mean over the 1 case on which" in paths["table_tex"].read_text()
+
+
+def test_empty_common_set_falls_back_to_labelled_per_method_means(tmp_path):
+    (tmp_path / "table_all.csv").write_text("stale\n")  # from an earlier run into the same folder
+    df = pd.DataFrame([_row("c0", "ARAP", 1.0, error="SShaDeError: nope"), _row("c0", "SShaDe", 2.0),
+                       _row("c1", "SShaDe", 4.0)])
+    assert common_cases(df) == []
+    paths = write_tables(df, tmp_path)
+    assert "table_all_csv" not in paths and not (tmp_path / "table_all.csv").exists()
+    main = pd.read_csv(paths["table_csv"]).set_index("method")
+    assert main["n_cases"].to_dict() == {"ARAP": 0, "SShaDe": 2} and main.loc["ARAP", "n_failed"] == 1
+    assert np.isnan(main.loc["ARAP", "volume_err_pct"]) and main.loc["SShaDe", "volume_err_pct"] == 3.0
+    md = paths["table_md"].read_text()
+    assert len(_tables(md)) == 1 and "**" not in md
+    note = [ln for ln in md.splitlines() if ln.startswith("No case on which every method")]
+    assert len(note) == 1 and "(ARAP 0, SShaDe 2)" in note[0]
+    tex = paths["table_tex"].read_text()
+    assert "No case on which every method" in tex and "\\textbf" not in tex
+
+
+def test_homogeneous_and_legacy_frames_are_unchanged(tmp_path):
+    df = _frame()
+    same = df[df["case"].isin(["c0", "c1"])]
+    comp = compare(same)
+    assert comp.all is None and comp.cases == ["c0", "c1"]
+    pd.testing.assert_frame_equal(comp.main, summarize(same))
+    # summarize(df) keeps its meaning: each method over its own successful cases
+    s = summarize(df).set_index("method")
+    assert s["n_cases"].to_dict() == {"ARAP": 2, "SShaDe": 4}
+    assert summarize(df, cases=["c0", "c1"]).set_index("method")["n_cases"].to_dict() == {"ARAP": 2, "SShaDe": 2}
+    # one method, or no case column: no second table, the plain summary
+    paths = write_tables(df[df["method"] == "SShaDe"], tmp_path / "one")
+    assert "table_all_csv" not in paths
+    assert "Mean over the 4 cases on which the method succeeded." in paths["table_md"].read_text()
+    no_case = df.drop(columns=["case"])
+    comp = compare(no_case)
+    assert comp.cases is None and comp.all is None
+    pd.testing.assert_frame_equal(comp.main, summarize(no_case))
+
+
+def test_sweep_reads_the_main_table(tmp_path):
+    from eval.sweep import STATUS_FILE, aggregate_sweep
+    job = tmp_path / "sweep" / "0"
+    (job / ".hydra").mkdir(parents=True)
+    (job / ".hydra" / "overrides.yaml").write_text("- sshade.n_low=500\n")
+    (job / STATUS_FILE).write_text(json.dumps({"job_num": 0, "overrides": ["sshade.n_low=500"], "status": "done"}))
+    write_tables(_frame(), job)
+    agg = aggregate_sweep(tmp_path / "sweep", write=False)
+    assert agg.loc[0, "SShaDe/n_cases"] == 2 and agg.loc[0, "SShaDe/volume_err_pct"] == pytest.approx(3.0)
+    assert not any(c.startswith("table_all") for c in agg.columns)
+
+
+# ---------------------------------------------------------------- read-back CSV, pandas warnings
+
+def test_ok_mask_on_an_error_column_read_back_from_csv():
+    csv = "case,method,error,volume_err_pct\nc0,ARAP,,1.0\nc0,SShaDe,,2.0\nc1,SShaDe,boom,\n"
+    df = pd.read_csv(io.StringIO(csv))
+    assert df["error"].dtype != np.float64
+    empty = pd.read_csv(io.StringIO("case,method,error,volume_err_pct\nc0,ARAP,,1.0\nc0,SShaDe,,2.0\n"))
+    assert empty["error"].dtype == np.float64  # all-empty column: NaN float64
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # pandas' fillna("") on float64 warns (and will raise)
+        assert ok_mask(df).tolist() == [True, True, False]
+        assert ok_mask(empty).tolist() == [True, True]
+        assert compare(empty).main["n_cases"].tolist() == [1, 1]
+        assert summarize(empty)["n_failed"].tolist() == [0, 0]
+
+
+# ---------------------------------------------------------------- figures: "not run" vs "failed"
+
+@pytest.fixture(scope="module")
+def sphere():
+    trimesh = pytest.importorskip("trimesh")
+    m = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    return np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+
+
+def _results(V):
+    from eval.figures import NOT_RUN
+    Vd = V.copy()
+    Vd[:, 1] *= 1.1
+    return {"ARAP": None, "Elastic": NOT_RUN, "SShaDe": Vd}
+
+
+def test_case_panels_label_not_run_and_failed(sphere):
+    from eval.figures import NOT_RUN, case_panels
+    V, F = sphere
+    panels = case_panels(V, F, _results(V), [0, 1], [True, False])
+    titles = [p["title"] for p in panels]
+    assert titles[:3] == ["rest + handles", "ARAP: failed", "Elastic: not run"]
+    assert titles[3].startswith("SShaDe  (EL ")
+    assert panels[1]["V"] is None and panels[2]["V"] is None and panels[3]["values"].shape == (len(F),)
+    assert repr(NOT_RUN) == "NOT_RUN" and NOT_RUN is not None
+
+
+def test_case_figure_with_a_not_run_method_writes_a_png(sphere, tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import eval.figures as figs
+    from eval.render import png_size
+    V, F = sphere
+    seen = []
+    real = figs.mesh_row
+    monkeypatch.setattr(figs, "mesh_row", lambda panels, path, **kw: seen.append(panels) or real(panels, path, **kw))
+    p = figs.case_figure(V, F, _results(V), [0, 1], [True, False], tmp_path / "c.png", title="c",
+                         panel_size=(120, 160))
+    assert p.is_file() and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png_size(p) == (4 * 120 + 90, 160 + 28 + 28)
+    assert [q["title"] for q in seen[0]][1:3] == ["ARAP: failed", "Elastic: not run"]
+
+
+def test_write_case_figure_marks_not_run_methods(tmp_path, monkeypatch):
+    """eval.app passes the methods skipped by dataset.baseline_cases as ``not_run``."""
+    import types
+
+    import eval.figures as figs
+    got = {}
+    monkeypatch.setattr(figs, "case_figure", lambda V, F, results, *a, **kw: got.update(results) or "ok")
+    case = types.SimpleNamespace(name="c7", V=None, F=None, handles=None, static=None)
+    out = figs.write_case_figure(case, {"ARAP": None, "Elastic": None, "SShaDe": "Vd"}, tmp_path,
+                                 not_run=["ARAP"])
+    assert out == "ok"
+    assert list(got) == ["ARAP", "Elastic", "SShaDe"]  # panel order kept
+    assert got["ARAP"] is figs.NOT_RUN and got["Elastic"] is None and got["SShaDe"] == "Vd"
+
+
+def test_retabulate_rebuilds_tables_from_cases_csv_only(tmp_path):
+    from eval.tables import main as tables_main
+    from eval.tables import write_cases
+    write_cases(_frame(), tmp_path)
+    (tmp_path / "run.json").write_text('{"config": {"experiment": {"name": "demo"}, "dataset": {"name": "x"}}}')
+    before = (tmp_path / "cases.csv").read_bytes()
+    assert tables_main([str(tmp_path)]) == 0
+    assert (tmp_path / "cases.csv").read_bytes() == before  # the input is not rewritten
+    md = (tmp_path / "table.md").read_text()
+    assert md.startswith("### demo: 4 x case(s)") and (tmp_path / "table_all.csv").is_file()
+    assert _md_row(_tables(md)[0], "SShaDe")[1] == "2"  # the common set, as write_tables
