@@ -10,14 +10,20 @@ __all__ = ["FullResArap", "ARAP", "Elastic"]
 
 
 class FullResArap:
-    """libigl ARAP on the full-resolution mesh, run to convergence.
+    """ARAP on the full-resolution mesh, under one of the protocols of
+    :func:`sshade.arap.arap_deform`.
 
     Parameters
     ----------
     energy : ``"spokes"`` or ``"spokes_and_rims"``.
-    tol : float, relative move tolerance (fraction of the bounding-box diagonal).
-    max_iter : int, iteration cap (paper: 1000).
+    tol : float, ``"paper"`` protocol: move tolerance (fraction of the bounding-box
+        diagonal).
+    max_iter : int or None, iteration cap (None: the protocol's default; paper: 1000).
     name : str, the table row label.
+    protocol : ``"converged"`` (default: Anderson-accelerated local/global to the
+        energy-and-gradient criterion) or ``"paper"`` (libigl, paper §4.1 move rule).
+    etol, gtol : floats or None, the ``"converged"`` criterion
+        (:class:`sshade.arap_solver.Criterion`; None: its defaults).
 
     Examples
     --------
@@ -26,11 +32,18 @@ class FullResArap:
     >>> m.info["iterations"]  # doctest: +SKIP
     """
 
-    def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int = 1000, name: str | None = None):
+    def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int | None = None, name: str | None = None,
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
+        from sshade.arap import PROTOCOLS
+        from sshade.errors import SShaDeError
+        if protocol not in PROTOCOLS:
+            raise SShaDeError(f"{name or energy}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
         self.energy = energy
         self.tol = float(tol)
-        self.max_iter = int(max_iter)
+        self.max_iter = None if max_iter is None else int(max_iter)
         self.name = name or energy
+        self.protocol = protocol
+        self.criterion = _criterion(etol, gtol)
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
@@ -40,22 +53,38 @@ class FullResArap:
         """
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
-        res = arap_deform(V, F, handles, targets, energy=self.energy, tol=self.tol, max_iter=self.max_iter)
-        self.info = {"iterations": res.iterations, "converged": res.converged,
-                     "precompute_s": res.precompute_s, "solve_s": res.solve_s,
+        res = arap_deform(V, F, handles, targets, energy=self.energy, tol=self.tol, max_iter=self.max_iter,
+                          protocol=self.protocol, criterion=self.criterion)
+        self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": self.protocol,
+                     "status": res.info.get("status"), "precompute_s": res.precompute_s, "solve_s": res.solve_s,
                      "s_per_iter": res.solve_s / max(res.iterations, 1)}
+        for k in ("energy", "gnorm", "rel_decrease", "n_fallback", "linear_solver"):
+            if k in res.info:
+                self.info[k] = res.info[k]
         return res.V
+
+
+def _criterion(etol, gtol):
+    """A :class:`sshade.arap_solver.Criterion` from optional thresholds (None: defaults)."""
+    from sshade.arap_solver import DEFAULT_CRITERION, Criterion
+    if etol is None and gtol is None:
+        return DEFAULT_CRITERION
+    return Criterion(etol=DEFAULT_CRITERION.etol if etol is None else float(etol),
+                     gtol=DEFAULT_CRITERION.gtol if gtol is None else float(gtol))
 
 
 class ARAP(FullResArap):
     """ARAP, spokes energy (Sorkine & Alexa 2007), full resolution."""
 
-    def __init__(self, *, tol: float = 1e-4, max_iter: int = 1000):
-        super().__init__("spokes", tol=tol, max_iter=max_iter, name="ARAP")
+    def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
+                 etol: float | None = None, gtol: float | None = None):
+        super().__init__("spokes", tol=tol, max_iter=max_iter, name="ARAP", protocol=protocol, etol=etol, gtol=gtol)
 
 
 class Elastic(FullResArap):
     """Elastic = spokes-and-rims ARAP (Chao et al. 2010), full resolution."""
 
-    def __init__(self, *, tol: float = 1e-4, max_iter: int = 1000):
-        super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name="Elastic")
+    def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
+                 etol: float | None = None, gtol: float | None = None):
+        super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name="Elastic", protocol=protocol,
+                         etol=etol, gtol=gtol)

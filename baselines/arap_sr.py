@@ -135,6 +135,7 @@ class ARAPSR:
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
         res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, tol=self.tol, max_iter=self.max_iter)
-        self.info = {"iterations": res.iterations, "converged": res.converged, "precompute_s": res.precompute_s,
+        self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": "move-rule",
+                     "precompute_s": res.precompute_s,
                      "solve_s": res.solve_s, "alpha": self.alpha}
         return res.V

@@ -154,6 +154,7 @@ def run(cfg) -> dict:
     t_start = time.perf_counter()
     from .methods import make_methods
     methods = make_methods(cfg)  # every method's parameters are checked before any work
+    refs = _References(cfg, (cfg.get("dataset") or {}).get("baseline_cases", None))  # config checked here too
     root = _dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
 
     import pandas as pd
@@ -201,6 +202,7 @@ def run(cfg) -> dict:
     with logging_redirect_tqdm(), bar:
         for ci, case in enumerate(cases):
             deformed = {}  # method -> deformed vertices, for the optional figure
+            refs.start_case(ci, case)
             for m in methods:
                 if not runs_on(ci, m):
                     continue
@@ -222,6 +224,7 @@ def run(cfg) -> dict:
                     Vd = np.asarray(Vd, np.float64)
                     deformed[m.name] = Vd
                     row.update(deformation_metrics(case.V, Vd, case.F, case.handles, case.targets))
+                    row.update(refs.metrics(m, Vd))
                     if getattr(case, "V_gt", None) is not None:
                         row.update(ground_truth_metrics(Vd, case.F, case.V_gt))
                     for k, v in (getattr(m, "info", None) or {}).items():
@@ -257,12 +260,63 @@ def run(cfg) -> dict:
     return {"out_dir": out_dir, "paths": paths, "n_cases": len(cases), "n_errors": n_err, "summary": summ}
 
 
+class _References:
+    """The ``reference`` config section at work: for the cases it selects
+    (``reference.cases``: ``baseline`` = the cases the full-resolution baselines run on,
+    ``dataset.baseline_cases``; ``all``; ``none``), the deep-converged full-resolution
+    minimiser of the energy each method is compared with
+    (:func:`eval.reference.method_energy`), computed once per (case, energy), cached in
+    ``reference.cache`` and reused by later runs; :meth:`metrics` gives a row's
+    ``ref_mean_pct``, ``ref_max_pct``, ``energy_gap`` columns (none outside the selection).
+    The reference's own solve is not part of any method's ``time_s``."""
+
+    def __init__(self, cfg, n_base):
+        rc = cfg.get("reference", None) or {}
+        self.mode = str(rc.get("cases", "baseline"))
+        if self.mode not in ("baseline", "all", "none"):
+            raise SShaDeError(f"reference.cases must be baseline, all or none, got {self.mode!r}")
+        self.cache = _abs(rc.get("cache", "data/references"))
+        self.max_iter = int(rc.get("max_iter", 50000))
+        tb = rc.get("time_budget_s", 3600)
+        self.time_budget_s = None if tb is None else float(tb)
+        self.n_base = n_base
+        self.case = None
+        self.refs: dict = {}
+        self.ops: dict = {}
+
+    def start_case(self, ci: int, case) -> None:
+        self.refs, self.ops = {}, {}
+        on = self.mode == "all" or (self.mode == "baseline" and (self.n_base is None or ci < int(self.n_base)))
+        self.case = case if on else None
+
+    def metrics(self, method, Vd) -> dict:
+        if self.case is None:
+            return {}
+        from sshade.arap_energy import build_operators
+
+        from .reference import method_energy, reference_metrics, reference_solution
+        c, e = self.case, method_energy(method)
+        if e not in self.refs:
+            self.refs[e] = reference_solution(c.V, c.F, c.handles, c.targets, energy=e, cache_dir=self.cache,
+                                              max_iter=self.max_iter, time_budget_s=self.time_budget_s)
+            self.ops[e] = build_operators(c.V, c.F, e)
+            ref = self.refs[e]
+            log.info("%s reference (%s): %s, %s iterations, %s", c.name, e,
+                     "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
+                     ref.info.get("iterations"), ref.info.get("status"))
+        ref = self.refs[e]
+        out = reference_metrics(c.V, Vd, c.F, ref, operators=self.ops[e])
+        out.update(ref_energy_type=e, ref_status=ref.info.get("status"), ref_iterations=ref.info.get("iterations"))
+        return out
+
+
 #: experiment.kind -> "module:function" running that experiment from the config.
 EXPERIMENTS = {
     "cases": "eval.app:run",                         # methods x dataset cases (FAUST, DeFAUST)
     "scaling": "eval.scaling:run_scaling",           # issue 4 scaling benchmark
     "tosca": "eval.isometric:run_tosca",             # paper §4.2 non-rigid isometric (TOSCA)
     "pose_transfer": "eval.pose_transfer:run_pose_transfer",  # paper §4.3 pose transfer
+    "convergence": "eval.convergence:run_convergence",  # time to accuracy of the ARAP solvers
 }
 
 

@@ -67,6 +67,10 @@ def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = Tr
     return np.ascontiguousarray(m.vertex_matrix(), np.float64), np.ascontiguousarray(m.face_matrix(), np.int64)
 
 
+def _opt_int(v):
+    return None if v is None else int(v)
+
+
 def run_scaling(cfg) -> dict:
     """Run the scaling experiment described by ``cfg.scaling`` (see conf/experiment/scaling.yaml)."""
     import pandas as pd
@@ -116,7 +120,8 @@ def run_scaling(cfg) -> dict:
         with PeakMemory() as pm:
             t0 = time.perf_counter()
             Vd, si = deform(V, F, h, T, n_low=int(sc.n_low), n_samplings=int(sc.n_samplings), seed=int(sc.seed),
-                            workers=sc.workers, tol=float(sc.tol), max_iter=int(sc.max_iter), return_info=True)
+                            workers=sc.workers, tol=float(sc.tol), max_iter=_opt_int(sc.max_iter),
+                            protocol=str(sc.get("protocol", "converged")), return_info=True)
             total = time.perf_counter() - t0
         k = int(sc.n_samplings)
         row.update({"n_low": si["n_low"], "k": k, "workers": si["workers"],
@@ -131,11 +136,12 @@ def run_scaling(cfg) -> dict:
         if bool(sc.elastic) and (sc.elastic_max_vertices is None or len(V) <= int(sc.elastic_max_vertices)):
             print(f"[scaling] {len(V)} vertices: full-res Elastic (budget {sc.elastic_budget_s}s) ...",
                   file=sys.stderr, flush=True)
-            res = arap_deform(V, F, h, T, energy="spokes_and_rims", tol=float(sc.tol), max_iter=int(sc.max_iter),
-                              time_budget_s=float(sc.elastic_budget_s))
+            res = arap_deform(V, F, h, T, energy="spokes_and_rims", tol=float(sc.tol), max_iter=_opt_int(sc.max_iter),
+                              time_budget_s=float(sc.elastic_budget_s), protocol=str(sc.get("protocol", "converged")))
             per_it = res.solve_s / max(res.iterations, 1)
             row.update({"elastic_precompute_s": res.precompute_s, "elastic_s_per_iter": per_it,
                         "elastic_iters": res.iterations, "elastic_converged": res.converged,
+                        "elastic_status": res.info.get("status"), "protocol": res.info.get("protocol"),
                         "elastic_total_s": res.precompute_s + res.solve_s if res.converged else math.nan,
                         "elastic_total_lower_bound_s": res.precompute_s + res.solve_s})
             row["speedup"] = (row["elastic_total_s"] if res.converged else row["elastic_total_lower_bound_s"]) / total

@@ -55,7 +55,7 @@ __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex",
            "Comparison", "comparison_markdown", "main_note", "ALL_CASES_HEADING",
            "COMMON_CASES_HEADING", "METHOD_ORDER", "TABLE_COLUMNS"]
 
-METHOD_ORDER = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe")
+METHOD_ORDER = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe+refine")
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
@@ -74,7 +74,23 @@ _MD_EXTRA = (
     ("handle_err_pct", "Handle (%)", 3),
     ("gt_vertex_mean_pct", "GT mean (%)", 2),
     ("chamfer", "Chamfer", 5),
+    ("ref_mean_pct", "Ref mean (%)", 3),
+    ("ref_max_pct", "Ref max (%)", 2),
+    ("energy_gap", "E gap", 4),
+    ("iterations", "Iters", 0),
+    ("converged", "Converged", 0),
 )
+#: Columns where the lowest value is not "best": never bold.
+_NO_BOLD = ("iterations", "converged")
+
+#: How a method stopped, per protocol (``protocol`` column of the rows).
+PROTOCOL_TEXT = {
+    "converged": "converged protocol: Anderson-accelerated local/global until the relative energy decrease and "
+                 "the scale-free gradient norm are both below their thresholds",
+    "paper": "paper protocol (§4.1): libigl local/global until the largest vertex move of one iteration is "
+             "below tol x diagonal, at most 1000 iterations",
+    "move-rule": "move rule: until the largest vertex move of one iteration is below tol x diagonal",
+}
 
 #: Heading of table.md's second table.
 ALL_CASES_HEADING = "All cases each method ran on"
@@ -272,13 +288,18 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
     if note:
         lines += [note, ""]
     lines += ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
-    best = {c: _best(list(summary[c]), d) if bold else set() for c, _, d in cols}
+    best = {c: _best(list(summary[c]), d) if bold and c not in _NO_BOLD else set() for c, _, d in cols}
     for i, (_, r) in enumerate(summary.iterrows()):
         cells = [str(r["method"]), str(int(r["n_cases"]))]
         if "Failed" in head:
             cells.append(str(int(r["n_failed"])))
         for c, _, d in cols:
-            s = _fmt(r[c], d)
+            if c == "converged":  # mean of a boolean: show as k/n
+                v = r[c]
+                s = "--" if v is None or not math.isfinite(float(v)) else \
+                    f"{int(round(float(v) * int(r['n_cases'])))}/{int(r['n_cases'])}"
+            else:
+                s = _fmt(r[c], d)
             cells.append(f"**{s}**" if i in best[c] else s)
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -312,7 +333,8 @@ def to_latex(summary: pd.DataFrame, *, note: str | None = None, bold: bool = Tru
         out.append(" & ".join(cells) + " \\\\")
     out.append("\\bottomrule")
     if note:
-        out.append(f"\\multicolumn{{{1 + len(cols)}}}{{l}}{{\\footnotesize {_tex_escape(note)}}} \\\\")
+        # a paragraph cell, so a long note wraps instead of widening the table
+        out.append(f"\\multicolumn{{{1 + len(cols)}}}{{p{{0.9\\columnwidth}}}}{{\\footnotesize {_tex_escape(note)}}} \\\\")
     out.append("\\end{tabular}")
     return "\n".join(out) + "\n"
 
@@ -345,7 +367,45 @@ def main_note(comp: Comparison) -> str | None:
     return f"Mean over the {_plural(len(comp.cases), 'case')} on which {who} succeeded."
 
 
-def comparison_markdown(comp: Comparison, *, title: str | None = None) -> str:
+def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
+    """One line per method saying how it stopped, from the per-case rows: its protocol
+    (``protocol`` column, :data:`PROTOCOL_TEXT`), the iteration range and how many of its
+    successful runs met their stopping criterion (``iterations``, ``converged``), e.g.
+    ``"Elastic: converged protocol: ...; 58-69 iterations; converged on 2/2 runs"``.
+    ``short``: protocol names and ``"it."`` only (for the LaTeX footnote). Empty when
+    the rows carry none of these columns."""
+    if "method" not in df.columns or not {"iterations", "converged", "protocol"} & set(df.columns):
+        return []
+    ok = ok_mask(df)
+    lines = []
+    for m in _methods(df):
+        g = df[(df["method"] == m) & ok]
+        if not len(g):
+            continue
+        parts = []
+        if "protocol" in g.columns and g["protocol"].notna().any():
+            protos = sorted({str(p) for p in g["protocol"].dropna()})
+            parts.append("/".join(protos) + " protocol" if short else "; ".join(PROTOCOL_TEXT.get(p, p) for p in protos))
+        if "iterations" in g.columns and g["iterations"].notna().any():
+            it = g["iterations"].dropna().astype(float)
+            word = "it." if short else "iterations"
+            parts.append(f"{int(it.min())}-{int(it.max())} {word}" if it.min() != it.max()
+                         else f"{int(it.min())} {word}")
+            if m == "SShaDe" and not short:
+                parts[-1] += " (low-res, summed over the samplings)"
+        if "converged" in g.columns and g["converged"].notna().any():
+            c = g["converged"].dropna().map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
+            if short:
+                parts.append(f"{int(c.sum())}/{len(c)} converged")
+            else:
+                parts.append(f"stopping criterion met on {int(c.sum())}/{len(c)} runs"
+                             + ("" if c.all() else " (the others hit the iteration cap or time budget)"))
+        if parts:
+            lines.append(f"{m}: " + (", " if short else "; ").join(parts))
+    return lines
+
+
+def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None) -> str:
     """``table.md``'s text for a :class:`Comparison`.
 
     The main table (bold: best per column, all rows on the same cases) under ``title``
@@ -363,6 +423,8 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None) -> str:
     if note and comp.cases and (comp.main["n_failed"] > 0).any():
         note += " Failed: failed runs over all the cases the method was run on."
     text = to_markdown(comp.main, title=title, note=note, bold=comp.same_cases)
+    if stops:
+        text += "\nHow each method stopped:\n\n" + "".join(f"- {s}\n" for s in stops)
     if comp.all is not None:
         text += "\n" + to_markdown(
             comp.all, title=ALL_CASES_HEADING, bold=False,
@@ -418,9 +480,10 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
         paths["table_all_csv"] = _write_csv(comp.all, p_all)
     else:
         p_all.unlink(missing_ok=True)
-    paths["table_md"] = _write_text(comparison_markdown(comp, title=title), out_dir / "table.md")
-    paths["table_tex"] = _write_text(to_latex(comp.main, note=main_note(comp), bold=comp.same_cases),
-                                     out_dir / "table.tex")
+    stops = stop_lines(df)
+    paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops), out_dir / "table.md")
+    note = " ".join(x for x in [main_note(comp), "; ".join(stop_lines(df, short=True))] if x) or None
+    paths["table_tex"] = _write_text(to_latex(comp.main, note=note, bold=comp.same_cases), out_dir / "table.tex")
     return paths
 
 

@@ -63,23 +63,35 @@ def _prepare(V, F, handles, n_low, seed, topology):
     return prep, info
 
 
-def _finish(V, targets, handles, prep, *, tol, max_iter, gradient, V0=None):
-    """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling."""
+def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
+    """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step."""
+    from .arap_solver import DEFAULT_CRITERION, Criterion
+    crit = None
+    if protocol == "converged" and (etol is not None or gtol is not None):
+        crit = Criterion(etol=DEFAULT_CRITERION.etol if etol is None else float(etol),
+                         gtol=DEFAULT_CRITERION.gtol if gtol is None else float(gtol))
+    return {"tol": tol, "max_iter": max_iter, "protocol": protocol, "criterion": crit}
+
+
+def _finish(V, targets, handles, prep, *, arap: dict, gradient, V0=None):
+    """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling.
+    ``arap``: keyword arguments of :func:`sshade.arap.arap_deform` (:func:`_arap_options`)."""
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
-    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", tol=tol,
-                      max_iter=max_iter, V0=V0)
+    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", V0=V0, **arap)
     t1 = time.perf_counter()
     Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=gradient)
     # handles are low-res vertices: the transfer reproduces them up to round-off
     Vd[handles] = targets
     t2 = time.perf_counter()
     return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
-                "converged": res.converged, "warm_start": V0 is not None}
+                "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None,
+                "energy": res.info.get("energy"), "gnorm": res.info.get("gnorm")}
 
 
 def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None, tol: float = 1e-4,
-                max_iter: int = 1000, gradient: str = "normalized", V_init=None) -> tuple[np.ndarray, dict]:
+                max_iter: int | None = None, gradient: str = "normalized", V_init=None, protocol: str = "converged",
+                etol: float | None = None, gtol: float | None = None) -> tuple[np.ndarray, dict]:
     """One sampling of SShaDe (no averaging): remesh, low-res ARAP, transfer.
 
     Parameters
@@ -87,7 +99,8 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64; targets : (h, 3) float64
         (all validated). n_low : farthest-point samples. seed : first-seed RNG seed.
     topology : optional :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
-    tol, max_iter : ARAP convergence rule (§4.1). gradient : LRF mode (§3.2).
+    tol, max_iter, protocol, etol, gtol : the low-res ARAP's protocol and stopping rule
+        (:func:`sshade.arap.arap_deform`). gradient : LRF mode (§3.2).
     V_init : (n, 3) float64 or None, a deformed high-res shape whose values at the
         low-res vertices start the ARAP iterations (default: rigid fit of the handles).
 
@@ -99,15 +112,17 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     """
     prep, info = _prepare(V, F, handles, n_low, seed, topology)
     V0 = None if V_init is None else V_init[prep["seeds"]]
-    Vd, info2 = _finish(V, targets, handles, prep, tol=tol, max_iter=max_iter, gradient=gradient, V0=V0)
+    Vd, info2 = _finish(V, targets, handles, prep, arap=_arap_options(tol, max_iter, protocol, etol, gtol),
+                        gradient=gradient, V0=V0)
     info.update(info2)
     return Vd, info
 
 
 def _task_full(i: int):
     w = _W
-    Vd, info = deform_once(w["V"], w["F"], w["handles"], w["targets"], n_low=w["n_low"], seed=w["seeds"][i],
-                           topology=w["topology"], tol=w["tol"], max_iter=w["max_iter"], gradient=w["gradient"])
+    prep, info = _prepare(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
+    Vd, info2 = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"])
+    info.update(info2)
     return i, Vd, info
 
 
@@ -119,8 +134,7 @@ def _task_prepare(i: int):
 
 def _task_finish(i: int, prep: dict, V0: np.ndarray):
     w = _W
-    Vd, info = _finish(w["V"], w["targets"], w["handles"], prep, tol=w["tol"], max_iter=w["max_iter"],
-                       gradient=w["gradient"], V0=V0)
+    Vd, info = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"], V0=V0)
     return i, Vd, info
 
 
@@ -131,15 +145,17 @@ class LowResSkippedWarning(UserWarning):
 
 
 def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
-                 max_iter: int = 1000, gradient: str = "normalized", warm_start: bool = True) -> dict:
+                 max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None) -> dict:
     """Validate SShaDe's parameters without touching a mesh (so a bad value fails before
     any work, e.g. before an evaluator spends minutes on the baselines).
 
     Parameters
     ----------
     As :func:`deform`: n_low (int >= 4 or ``"auto"``/None), n_samplings (int >= 1),
-    seed (int >= 0), workers (int >= 1 or None), tol (float > 0), max_iter (int >= 1),
-    gradient (one of :data:`sshade.lrf.GRADIENTS`), warm_start (bool).
+    seed (int >= 0), workers (int >= 1 or None), tol (float > 0), max_iter (int >= 1 or
+    None), gradient (one of :data:`sshade.lrf.GRADIENTS`), warm_start (bool), protocol
+    (one of :data:`sshade.arap.PROTOCOLS`), etol / gtol (floats >= 0 or None).
 
     Returns
     -------
@@ -175,7 +191,7 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     out = {"n_low": "auto" if n_low in (None, "auto") else as_int("n_low", n_low, 4),
            "n_samplings": as_int("n_samplings", n_samplings, 1), "seed": as_int("seed", seed, 0),
            "workers": None if workers is None else as_int("workers", workers, 1),
-           "max_iter": as_int("max_iter", max_iter, 1)}
+           "max_iter": None if max_iter is None else as_int("max_iter", max_iter, 1)}
     try:
         out["tol"] = float(tol)
     except (TypeError, ValueError):
@@ -186,6 +202,21 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
         raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
     out["gradient"] = gradient
     out["warm_start"] = bool(warm_start)
+    from .arap import PROTOCOLS
+    if protocol not in PROTOCOLS:
+        raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
+    out["protocol"] = protocol
+    for name, v in (("etol", etol), ("gtol", gtol)):
+        if v is None:
+            out[name] = None
+            continue
+        try:
+            fv = float(v)
+        except (TypeError, ValueError):
+            raise SShaDeError(f"SShaDe: {name} must be a number >= 0, got {v!r}") from None
+        if not (fv >= 0 and np.isfinite(fv)):
+            raise SShaDeError(f"SShaDe: {name} must be a finite number >= 0, got {v!r}")
+        out[name] = fv
     return out
 
 
@@ -219,8 +250,9 @@ class _Serial:
 
 
 def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0,
-           workers: int | None = None, tol: float = 1e-4, max_iter: int = 1000,
-           gradient: str = "normalized", warm_start: bool = True, return_info: bool = False):
+           workers: int | None = None, tol: float = 1e-4, max_iter: int | None = None,
+           gradient: str = "normalized", warm_start: bool = True, return_info: bool = False,
+           protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
     """Deform a high-resolution mesh with SShaDe (paper §3, Alg. 1, §3.3 averaging).
 
     Sampling 0 runs its low-res ARAP from the rigid fit of the handles; with
@@ -239,8 +271,12 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     n_samplings : int, k samplings with different first seeds, averaged (paper: 5-10).
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
     workers : int or None, processes (default: min(k, CPU count)); 1 runs in-process.
-    tol, max_iter : low-res ARAP stops when the largest move in one iteration is below
-        ``tol * bbox_diag``, at most ``max_iter`` iterations (paper: 1000).
+    protocol : the low-res ARAP's protocol (:func:`sshade.arap.arap_deform`):
+        ``"converged"`` (default; Anderson-accelerated, stopped by the energy-and-gradient
+        criterion with thresholds ``etol``/``gtol``, None = defaults) or ``"paper"``
+        (libigl, stops when the largest move in one iteration is below
+        ``tol * bbox_diag``). max_iter : int or None, cap (None: protocol default;
+        paper: 1000).
     gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
     warm_start : bool, start samplings 1..k-1 from sampling 0's result.
     return_info : also return a dict of timings, seeds and per-sampling details.
@@ -267,7 +303,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     >>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
     """
     p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                     max_iter=max_iter, gradient=gradient, warm_start=warm_start)
+                     max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
+                     gtol=gtol)
     n_samplings, workers = p["n_samplings"], p["workers"]
     t0 = time.perf_counter()
     _warmup()
@@ -283,7 +320,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     topo = mesh_topology(V, F, he)
     seeds = sampling_seeds(seed, n_samplings)
     state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, seeds=seeds, topology=topo,
-                 tol=tol, max_iter=max_iter, gradient=gradient)
+                 arap=_arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]), gradient=gradient)
     if workers is None:
         workers = min(n_samplings, os.cpu_count() or 1)
     workers = max(1, min(int(workers), n_samplings))
@@ -324,6 +361,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     for k in ("remesh_s", "project_s", "arap_s", "transfer_s", "iterations"):
         info[k] = float(np.sum([d[k] for d in infos]))
     info["n_low"] = int(np.mean([d["n_low"] for d in infos]))
+    info["protocol"] = p["protocol"]
+    info["converged"] = bool(all(d["converged"] for d in infos))  # every sampling's low-res ARAP
+    info["iterations_max"] = int(max(d["iterations"] for d in infos))
     return Vd, info
 
 
@@ -343,10 +383,13 @@ class SShaDe:
     name = "SShaDe"
 
     def __init__(self, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, workers: int | None = None,
-                 tol: float = 1e-4, max_iter: int = 1000, gradient: str = "normalized", warm_start: bool = True):
+                 tol: float = 1e-4, max_iter: int | None = None, gradient: str = "normalized",
+                 warm_start: bool = True, protocol: str = "converged", etol: float | None = None,
+                 gtol: float | None = None):
         # validated here, so a bad parameter fails when the method is built, before any work
         self.params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                                   max_iter=max_iter, gradient=gradient, warm_start=warm_start)
+                                   max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol,
+                                   etol=etol, gtol=gtol)
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:

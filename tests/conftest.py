@@ -10,6 +10,20 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("SSHADE_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _reference_cache(tmp_path_factory):
+    """Reference solutions computed by tests go to a temporary folder, never into the
+    checkout's data/references (conf/config.yaml reads SSHADE_REFERENCE_CACHE); child
+    processes inherit it through the environment."""
+    old = os.environ.get("SSHADE_REFERENCE_CACHE")
+    os.environ["SSHADE_REFERENCE_CACHE"] = str(tmp_path_factory.mktemp("references"))
+    yield
+    if old is None:
+        os.environ.pop("SSHADE_REFERENCE_CACHE", None)
+    else:
+        os.environ["SSHADE_REFERENCE_CACHE"] = old
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """Path of ../shared/data, or skip the test if it is absent."""

@@ -188,7 +188,8 @@ def test_method_failure_is_recorded_and_run_continues(tmp_path, faust_root, monk
 def test_config_defaults_and_ci_experiment():
     cfg = _compose(["dataset.root=x"])
     assert list(cfg.methods) == ["ARAP", "Elastic", "ARAP-SR", "SShaDe"]
-    assert cfg.arap.tol == pytest.approx(1e-4) and isinstance(cfg.arap.tol, float) and cfg.arap.max_iter == 1000
+    assert cfg.arap.tol == pytest.approx(1e-4) and isinstance(cfg.arap.tol, float) and cfg.arap.max_iter is None
+    assert cfg.arap.protocol == "converged"
     assert dict(cfg.sshade) == {"n_low": "auto", "n_samplings": 5, "seed": 0, "workers": None, "gradient": "normalized",
                                  "warm_start": True}
     d = cfg.dataset
@@ -225,7 +226,10 @@ def test_make_methods_sshade_from_config():
     params = getattr(m, "params", None)
     if params is not None:
         assert params["n_low"] == 321 and params["workers"] == 1 and params["n_samplings"] == 5
-        assert params["tol"] == pytest.approx(1e-4) and params["max_iter"] == 1000
+        assert params["tol"] == pytest.approx(1e-4) and params["max_iter"] is None  # the protocol's cap
+        assert params["protocol"] == "converged" and params["etol"] is None and params["gtol"] is None
+    m = make_methods(_compose(["dataset.root=x", "arap.protocol=paper", "arap.max_iter=1000"]))[-1]
+    assert m.params["protocol"] == "paper" and m.params["max_iter"] == 1000
 
 
 # ---------------------------------------------------------------- tables

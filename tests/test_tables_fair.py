@@ -97,7 +97,7 @@ def test_latex_names_the_case_count(tmp_path):
     tex = write_tables(_frame(), tmp_path)["table_tex"].read_text()
     note = "Mean over the 2 cases on which every method (ARAP, SShaDe) succeeded."
     assert f"% {note}" in tex                                            # comment on top
-    assert f"\\multicolumn{{6}}{{l}}{{\\footnotesize {note}}} \\\\" in tex  # visible note row
+    assert f"\\multicolumn{{6}}{{p{{0.9\\columnwidth}}}}{{\\footnotesize {note}}} \\\\" in tex  # visible note row
     assert tex.index("\\bottomrule") < tex.index("\\multicolumn") < tex.index("\\end{tabular}")
     assert "ARAP & \\textbf{2.00\\%}" in tex and "SShaDe & 3.00\\%" in tex
     assert "Method & Volume & Area & EL & FA & Time \\\\" in tex          # Table 1 layout kept

@@ -1,0 +1,307 @@
+"""Time to accuracy of the ARAP solvers: ``python -m eval experiment=convergence``.
+
+For each case (a subdivided plane with its boundary fixed and a central disc lifted,
+:func:`sshade.arap_cases.lifted_plane`; the first case of the configured dataset, by
+default a DeFAUST case at 150k-200k vertices), the distance to the deep-converged
+full-resolution spokes-and-rims minimiser (:func:`eval.reference.reference_solution`,
+cached) is traced against wall time for:
+
+- ``libigl local/global``: ``igl.arap_solve`` one iteration at a time from the rigid fit
+  of the handles (the paper's baselines; :func:`sshade.arap.arap_deform` protocol
+  ``paper`` without its stopping rule);
+- ``Anderson (ours)``: :func:`sshade.arap_solver.solve_arap` (protocol ``converged``),
+  until its criterion stops it;
+- ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`);
+- ``SShaDe + refine``: SShaDe (k = 5) then ``solve_arap`` started from its result.
+
+Times exclude the distance evaluations (measured outside the timed calls) and include
+each solver's precomputation. Outputs in ``out_dir``: ``curves.csv`` (solver, case,
+iteration, time_s, ref_mean_pct, ref_max_pct), ``table.csv`` / ``table.md`` (per
+solver and case: iterations, total time, time to reach ``target_pct`` mean distance,
+final distances, how it stopped), ``convergence.png`` (one log-log panel per case) and
+``run.json``.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["run_convergence", "libigl_curve", "anderson_curve", "time_to"]
+
+log = logging.getLogger("eval")
+
+
+def _dist(U, ref_U, diag) -> tuple[float, float]:
+    d = np.linalg.norm(U - ref_U, axis=1) / diag * 100.0
+    return float(d.mean()), float(d.max())
+
+
+def libigl_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rims", time_budget_s: float = 300.0,
+                 stop_pct: float = 1e-3, max_iter: int = 100000) -> list[dict]:
+    """libigl's local/global (``igl.arap_solve``, one iteration per call) from the rigid
+    fit of the handles, traced against a reference.
+
+    Parameters
+    ----------
+    V : (n, 3) float64, F : (m, 3) int64, handles : (h,) int64, targets : (h, 3) float64.
+    ref_U : (n, 3) float64, the reference minimiser.
+    energy : ``"spokes"`` or ``"spokes_and_rims"``.
+    time_budget_s : stop once the timed iterations have taken this long (seconds).
+    stop_pct : stop once the mean distance is below this (% of the diagonal).
+    max_iter : iteration cap.
+
+    Returns
+    -------
+    list of dicts ``iteration``, ``time_s`` (precomputation + iterations, distance
+    evaluations excluded), ``ref_mean_pct``, ``ref_max_pct``; the first row is the start.
+    """
+    import igl
+
+    from sshade.arap import rigid_fit
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    b = np.ascontiguousarray(handles, np.int32)
+    bc = np.ascontiguousarray(targets, np.float64)
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    t0 = time.perf_counter()
+    R, t = rigid_fit(V[handles], bc)
+    U = V @ R.T + t
+    U[b] = bc
+    data = igl.ARAPData()
+    data.energy = igl.ARAP_ENERGY_TYPE_SPOKES if energy == "spokes" else igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS
+    data.max_iter = 1
+    igl.arap_precomputation(V, F, 3, b, data)
+    elapsed = time.perf_counter() - t0
+    m, x = _dist(U, ref_U, diag)
+    rows = [{"iteration": 0, "time_s": elapsed, "ref_mean_pct": m, "ref_max_pct": x}]
+    for it in range(1, max_iter + 1):
+        t1 = time.perf_counter()
+        U = igl.arap_solve(bc, data, U)
+        elapsed += time.perf_counter() - t1
+        m, x = _dist(U, ref_U, diag)
+        rows.append({"iteration": it, "time_s": elapsed, "ref_mean_pct": m, "ref_max_pct": x})
+        if m < stop_pct or elapsed > time_budget_s:
+            break
+    return rows
+
+
+def anderson_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rims", U0=None,
+                   accelerate: bool = True, time_budget_s: float = 300.0, t_offset: float = 0.0,
+                   criterion=None) -> tuple[list[dict], object]:
+    """:func:`sshade.arap_solver.solve_arap` traced against a reference (arguments as
+    :func:`libigl_curve`; ``U0`` a start, ``t_offset`` seconds added to every time, e.g.
+    the time SShaDe took to produce ``U0``). Returns ``(rows, result)``; the last row is
+    the returned result."""
+    from sshade.arap import rigid_fit
+    from sshade.arap_solver import solve_arap
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    if U0 is None:
+        R, t = rigid_fit(V[handles], targets)
+        start = V @ R.T + t
+        start[handles] = targets
+    else:
+        start = np.asarray(U0, np.float64)
+    m0, x0 = _dist(start, ref_U, diag)
+    rows: list[dict] = [{"iteration": 0, "time_s": t_offset, "ref_mean_pct": m0, "ref_max_pct": x0}]
+    spent = {"cb": 0.0}
+    t0 = time.perf_counter()
+
+    def cb(k, U, E, gn):
+        t1 = time.perf_counter()
+        m, x = _dist(U, ref_U, diag)
+        rows.append({"iteration": int(k), "time_s": t_offset + (t1 - t0) - spent["cb"], "ref_mean_pct": m,
+                     "ref_max_pct": x, "energy": float(E), "gnorm": float(gn)})
+        spent["cb"] += time.perf_counter() - t1
+        return False
+
+    res = solve_arap(V, F, handles, targets, energy=energy, U0=U0, accelerate=accelerate, criterion=criterion,
+                     time_budget_s=time_budget_s, callback=cb)
+    total = t_offset + (time.perf_counter() - t0) - spent["cb"]
+    m, x = _dist(res.V, ref_U, diag)
+    rows.append({"iteration": int(res.iterations), "time_s": total, "ref_mean_pct": m, "ref_max_pct": x,
+                 "energy": float(res.info.get("energy", math.nan)), "gnorm": float(res.info.get("gnorm", math.nan))})
+    return rows, res
+
+
+def time_to(rows: list[dict], pct: float) -> float:
+    """First ``time_s`` at which ``ref_mean_pct`` is below ``pct`` (NaN if never)."""
+    for r in rows:
+        if r["ref_mean_pct"] < pct:
+            return float(r["time_s"])
+    return float("nan")
+
+
+def _cases(cfg) -> list[tuple[str, tuple]]:
+    """(name, (V, F, handles, targets)) of the configured cases."""
+    from omegaconf import OmegaConf
+    cc = cfg.convergence
+    want = OmegaConf.to_container(cc.cases) if OmegaConf.is_config(cc.cases) else list(cc.cases)
+    out = []
+    for name in want:
+        if name == "plane":
+            from sshade.arap_cases import lifted_plane
+            p = cc.plane
+            out.append((f"plane_{int(p.n_target // 1000)}k", lifted_plane(float(p.lift), n_target=int(p.n_target))))
+        elif name == "dataset":
+            from .app import _DATASET_KEYS, _dataset_root
+            from .datasets import load_cases
+            root = _dataset_root(cfg)
+            ds = cfg.dataset
+            dname = str(ds.get("name", "defaust"))
+            opts = {k: ds.get(k) for k in _DATASET_KEYS.get(dname, ()) if k in ds and k != "limit"}
+            for k, v in list(opts.items()):
+                if OmegaConf.is_config(v):
+                    opts[k] = OmegaConf.to_container(v)
+            i = int(cc.get("dataset_case", 0))
+            cases = load_cases(dname, root, limit=i + 1, **opts)
+            c = cases[i]
+            out.append((f"{dname}_{c.name}", (c.V, c.F, c.handles, c.targets)))
+        else:
+            raise SShaDeError(f"convergence.cases: unknown case {name!r}; use plane and/or dataset")
+    return out
+
+
+def run_convergence(cfg) -> dict:
+    """The experiment (module docstring) from the Hydra config (``conf/experiment/convergence.yaml``).
+
+    Returns dict ``out_dir``, ``table`` (DataFrame), ``curves`` (DataFrame), ``paths``.
+
+    Raises
+    ------
+    SShaDeError on a bad configuration (unknown case), before any solver runs.
+    """
+    import pandas as pd
+    from omegaconf import OmegaConf
+
+    from defaust.meshio import atomic_write
+    from sshade import deform
+
+    from .app import _abs
+    from .reference import reference_solution
+    from .runinfo import collect_runinfo, finish_run, write_runinfo
+    cc = cfg.convergence
+    out_dir = _abs(cfg.out_dir)
+    budget = float(cc.time_budget_s)
+    target = float(cc.target_pct)
+    energy = str(cc.get("energy", "spokes_and_rims"))
+    cases = _cases(cfg)
+    info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(cc.seed)},
+                           extra={"status": "running"})
+    write_runinfo(out_dir / "run.json", info)
+    t_start = time.perf_counter()
+    curves, table = [], []
+    for cname, (V, F, h, T) in cases:
+        V = np.asarray(V, np.float64)
+        F = np.asarray(F, np.int64)
+        ref = reference_solution(V, F, h, T, energy=energy, cache_dir=_abs(cfg.reference.cache),
+                                 max_iter=int(cfg.reference.max_iter), time_budget_s=cfg.reference.time_budget_s)
+        log.info("%s: %d vertices; reference %s (%s, %s iterations)", cname, len(V),
+                 "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
+                 ref.info.get("status"), ref.info.get("iterations"))
+
+        def add(solver, rows, *, iterations, stopped):
+            for r in rows:
+                curves.append({"case": cname, "solver": solver, **r})
+            last = rows[-1]
+            table.append({"case": cname, "n_vertices": len(V), "solver": solver, "iterations": iterations,
+                          "time_s": last["time_s"], "time_to_target_s": time_to(rows, target),
+                          "ref_mean_pct": last["ref_mean_pct"], "ref_max_pct": last["ref_max_pct"],
+                          "stopped": stopped})
+            log.info("%s %-22s %6s it. %8.2f s  mean %.4f%%  max %.3f%%  (%s)", cname, solver, iterations,
+                     last["time_s"], last["ref_mean_pct"], last["ref_max_pct"], stopped)
+
+        if cc.get("libigl", True):
+            rows = libigl_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, stop_pct=float(cc.stop_pct))
+            last = rows[-1]
+            add("libigl local/global", rows, iterations=last["iteration"],
+                stopped=("reached stop_pct" if last["ref_mean_pct"] < float(cc.stop_pct) else
+                         f"time budget {budget:g} s"))
+        rows, res = anderson_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget)
+        add("Anderson (ours)", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
+        for k in list(cc.sshade.k):
+            t0 = time.perf_counter()
+            Vs, si = deform(V, F, h, T, n_low=cc.sshade.n_low, n_samplings=int(k), seed=int(cc.seed),
+                            workers=cc.sshade.workers, return_info=True)
+            dt = time.perf_counter() - t0
+            m, x = _dist(Vs, ref.U, float(np.linalg.norm(V.max(0) - V.min(0))))
+            add(f"SShaDe k={int(k)}", [{"iteration": int(si["iterations"]), "time_s": dt, "ref_mean_pct": m,
+                                        "ref_max_pct": x}],
+                iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
+            if int(k) == int(cc.sshade.refine_k):
+                rows, res = anderson_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
+                                           t_offset=dt)
+                add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
+    cdf = pd.DataFrame(curves)
+    tdf = pd.DataFrame(table)
+    paths = {}
+    for name, df in (("curves.csv", cdf), ("table.csv", tdf)):
+        with atomic_write(out_dir / name, "w", newline="") as fh:
+            df.to_csv(fh, index=False, float_format="%.6g")
+        paths[name] = out_dir / name
+    from .figures import safe_figure
+    p = safe_figure("convergence", convergence_figure, cdf, tdf, out_dir / "convergence.png", target_pct=target)
+    if p is not None:
+        paths["figure"] = p
+    md = _markdown(tdf, target, budget)
+    finish_run(out_dir, md, paths, info, n_cases=len(cases), n_errors=0, wall_s=time.perf_counter() - t_start)
+    return {"out_dir": out_dir, "table": tdf, "curves": cdf, "paths": paths}
+
+
+def _markdown(tdf, target: float, budget: float) -> str:
+    lines = ["### convergence: distance to the deep-converged spokes-and-rims minimiser against wall time", "",
+             f"Distances in % of the bounding-box diagonal; 'to {target:g}%': first time the mean distance is "
+             f"below {target:g}% (-- never within the {budget:g} s budget). Times include precomputation, "
+             "exclude the distance evaluations.", "",
+             f"| Case | Vertices | Solver | Iterations | Time (s) | To {target:g}% (s) | Mean (%) | Max (%) | Stopped |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---|"]
+    for _, r in tdf.iterrows():
+        tt = "--" if not math.isfinite(r["time_to_target_s"]) else f"{r['time_to_target_s']:.2f}"
+        lines.append(f"| {r['case']} | {int(r['n_vertices'])} | {r['solver']} | {int(r['iterations'])} | "
+                     f"{r['time_s']:.2f} | {tt} | {r['ref_mean_pct']:.4f} | {r['ref_max_pct']:.3f} | {r['stopped']} |")
+    return "\n".join(lines) + "\n"
+
+
+def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path:
+    """One log-log panel per case: mean distance to the reference (% of the diagonal)
+    against wall time (s), a line per iterative solver, a marker per SShaDe run, the
+    target as a dashed line. Written atomically as a PNG; returns the path."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from defaust.meshio import atomic_write
+    cases = list(dict.fromkeys(curves["case"]))
+    fig, axes = plt.subplots(1, len(cases), figsize=(6.0 * len(cases), 4.4), squeeze=False)
+    styles = {"libigl local/global": ("tab:gray", "-"), "Anderson (ours)": ("tab:blue", "-"),
+              "SShaDe + refine": ("tab:red", "-")}
+    for ax, c in zip(axes[0], cases):
+        g = curves[curves["case"] == c]
+        for solver, s in g.groupby("solver", sort=False):
+            y = np.maximum(s["ref_mean_pct"].to_numpy(), 1e-8)
+            if solver in styles:
+                col, ls = styles[solver]
+                ax.plot(s["time_s"], y, ls, color=col, label=solver, lw=1.6)
+            else:
+                ax.plot(s["time_s"], y, "o", ms=8, label=solver,
+                        color="tab:orange" if solver.endswith("=1") else "tab:green")
+        ax.axhline(target_pct, color="k", ls="--", lw=0.8, label=f"{target_pct:g}% of diagonal")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        n = int(table[table["case"] == c]["n_vertices"].iloc[0])
+        ax.set_title(f"{c} ({n:,} vertices)")
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("mean distance to minimiser (% of diagonal)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
+    plt.close(fig)
+    return path
