@@ -7,8 +7,12 @@
 Runs, each as its own ``python -m eval`` process (so a failure is reported and the
 others still run):
 
-1. DeFAUST (synthetic, built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and
-   figures -> ``results/defaust``;
+1. DeFAUST (built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and figures, the
+   converged ARAP protocol and the distances to the cached references ->
+   ``results/defaust``; the same methods on the first 2 cases under the paper's protocol
+   (§4.1 move rule, libigl, 1000-iteration cap) -> ``results/defaust_paper``; the
+   time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
+   ``results/convergence``;
 2. a sweep over SShaDe's n_low (1000, 3000, 6000) x k (1, 3, 5) on 2 DeFAUST cases ->
    ``results/sweeps/defaust``;
 3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
@@ -35,6 +39,9 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
     s = [("defaust", py + ["eval", "figures.enabled=true", "out_dir=results/defaust", *a.extra]),
+         ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.limit=2", "reference.cases=none",
+                                 "out_dir=results/defaust_paper"]),
+         ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"])]
     if a.faust:

@@ -12,7 +12,8 @@ def _steps(capsys, *argv) -> dict[str, str]:
 
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
-    assert list(steps) == ["defaust", "sweep"]
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep"]
+    assert "arap.protocol=paper" in steps["defaust_paper"]
     assert steps["defaust"] == "-m eval figures.enabled=true out_dir=results/defaust"
     sweep = steps["sweep"]
     assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
@@ -21,7 +22,8 @@ def test_default_runs_defaust_and_its_sweep(capsys):
 
 def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj", "sshade.n_samplings=3")
-    assert list(steps) == ["defaust", "sweep", "faust", "pose_transfer", "tosca", "shapes", "scaling"]
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "faust", "pose_transfer", "tosca",
+                           "shapes", "scaling"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
