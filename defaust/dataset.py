@@ -72,12 +72,12 @@ class DefaustCase(DeformationCase):
     Attributes
     ----------
     name : ``"s{subject:02d}_p{pose:02d}"``; V in metres at the requested resolution;
-    handles snapped to it; V_gt: synthetic source at either resolution (skinning applied
-    to that mesh), FAUST at low resolution (the target registration), None for FAUST at
-    high resolution; group indexes ``landmark_names``.
+    handles snapped to it; V_gt: anny and synthetic sources at either resolution
+    (skinning applied to that mesh), FAUST at low resolution (the target registration),
+    None for FAUST at high resolution; group indexes ``landmark_names``.
     landmark_names : tuple of str.
-    resolution : ``"high"`` or ``"low"``; source : ``"synthetic"`` or ``"faust"``.
-    pose_name : str, e.g. ``"arms_raised"`` (synthetic) or ``"faust_pose_3"``.
+    resolution : ``"high"`` or ``"low"``; source : ``"anny"``, ``"faust"`` or ``"synthetic"``.
+    pose_name : str, e.g. ``"arms_raised"`` (anny, synthetic) or ``"faust_pose_3"``.
     snap_distance : (h,) float64 distance of each kept handle's stored position to its
         vertex. n_dropped : int, handles dropped because two snapped to one vertex.
     rest_path : Path of the rest mesh file.

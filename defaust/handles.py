@@ -39,8 +39,8 @@ __all__ = ["BASE_LANDMARKS", "HandleSet", "Snap", "edge_graph", "geodesic_neighb
 log = logging.getLogger(__name__)
 
 #: Landmarks used for every target pose but the last (which uses all of its source's
-#: landmarks, paper appendix). Names as in :data:`defaust.faust_source.FAUST_LANDMARKS`
-#: and :data:`defaust.synthetic.LANDMARK_NAMES`.
+#: landmarks, paper appendix). Names as in :data:`defaust.faust_source.FAUST_LANDMARKS`,
+#: :data:`defaust.anny_source.LANDMARK_NAMES` and :data:`defaust.synthetic.LANDMARK_NAMES`.
 BASE_LANDMARKS: tuple[str, ...] = ("head_top", "left_hand", "right_hand", "crotch", "left_foot", "right_foot")
 
 

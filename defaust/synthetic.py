@@ -52,6 +52,11 @@ import scipy.sparse as sp
 
 from sshade.errors import SShaDeError
 
+# moved to the generic defaust.skinning (also used by defaust.anny_source); re-exported
+# here so that existing imports keep working
+from .skinning import barycentric as _barycentric  # noqa: F401
+from .skinning import lbs, transfer_weights  # noqa: F401
+
 __all__ = [
     "JOINTS", "PARENT", "POSE_NAMES", "LANDMARK_NAMES", "BodyParams", "Primitive", "Body",
     "SyntheticSubject", "sample_body_params", "body_model", "primitive_sdfs", "body_sdf",
@@ -619,54 +624,6 @@ def skinning_weights(body: Body, V, F, *, blend: float = 0.07) -> np.ndarray:
     return np.ascontiguousarray(W)
 
 
-def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
-    """Interpolate per-vertex weights at the closest points of ``P`` on a source mesh.
-
-    Parameters
-    ----------
-    V_src : (n, 3) float64; F_src : (m, 3) int64; W_src : (n, k) weights.
-    P : (p, 3) query points (e.g. the vertices of a remesh of the same surface).
-
-    Returns
-    -------
-    (p, k) float64, barycentric interpolation on the closest triangle, rows
-    renormalised to sum to 1.
-
-    Examples
-    --------
-    >>> W_hi = transfer_weights(V_lo, F_lo, W_lo, V_hi)  # doctest: +SKIP
-    """
-    import igl
-
-    V_src = np.asarray(V_src, np.float64)
-    F_src = np.asarray(F_src, np.int64)
-    P = np.ascontiguousarray(P, np.float64)
-    _, fi, C = igl.point_mesh_squared_distance(P, V_src, F_src)
-    fi = np.asarray(fi, np.int64)
-    A, B, Cc = V_src[F_src[fi, 0]], V_src[F_src[fi, 1]], V_src[F_src[fi, 2]]
-    bc = _barycentric(np.asarray(C, np.float64), A, B, Cc)
-    W = np.asarray(W_src, np.float64)
-    out = (bc[:, 0:1] * W[F_src[fi, 0]] + bc[:, 1:2] * W[F_src[fi, 1]] + bc[:, 2:3] * W[F_src[fi, 2]])
-    out = np.maximum(out, 0.0)
-    out /= out.sum(axis=1, keepdims=True)
-    return out
-
-
-def _barycentric(P, A, B, C) -> np.ndarray:
-    v0, v1, v2 = B - A, C - A, P - A
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    den = np.where(den == 0, 1.0, den)
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    bc = np.stack([1 - v - w, v, w], axis=1)
-    return np.clip(bc, 0.0, 1.0)
-
-
 # ----------------------------------------------------------------------------- posing
 
 
@@ -823,33 +780,6 @@ def pose_transforms(body: Body, rotvecs, root_translation=None) -> tuple[np.ndar
             Pg[j] = Pg[p] + Rg[p] @ (J[j] - J[p])
     t = Pg - np.einsum("jab,jb->ja", Rg, J)
     return Rg, t
-
-
-def lbs(V, W, R, t) -> np.ndarray:
-    """Linear blend skinning ``v' = sum_j W[v, j] (R[j] v + t[j])``.
-
-    Parameters
-    ----------
-    V : (n, 3) rest positions; W : (n, k) weights; R : (k, 3, 3); t : (k, 3).
-
-    Returns
-    -------
-    (n, 3) float64 posed positions (same units as V).
-
-    Examples
-    --------
-    >>> lbs(np.zeros((1, 3)), np.ones((1, 1)), np.eye(3)[None], np.ones((1, 3)))
-    array([[1., 1., 1.]])
-    """
-    V = np.asarray(V, np.float64)
-    W = np.asarray(W, np.float64)
-    out = np.zeros_like(V)
-    for j in range(W.shape[1]):
-        w = W[:, j]
-        nz = w > 0
-        if nz.any():
-            out[nz] += w[nz, None] * (V[nz] @ R[j].T + t[j])
-    return out
 
 
 def body_landmarks(body: Body, V) -> dict[str, int]:

