@@ -31,6 +31,34 @@ libigl ``min_quad_with_fixed`` 0.7 s / 0.06 s / 170 MB; sksparse-minimal 0.6 s /
 qdldl 0.8 s / 0.06 s; pypardiso 0.7 s / 0.16 s (pulls ~940 MB of MKL). scikit-sparse has
 no binary wheel. The default is cholespy (fastest solve, which is paid every iteration)
 with scipy's ``splu`` as the fallback when cholespy cannot be imported.
+
+Cost of one iteration
+---------------------
+Everything per iteration runs in preallocated arrays: the fused local step and the
+``K(R)`` kernel of :mod:`sshade.arap_energy`, CHOLMOD's solve, a numba CSR kernel for the
+stopping test's gradient ``2 L_ff (x - G(x))``, and Anderson's history (``DF``/``DG`` ring
+buffers; the Gram matrix gains one row per iteration, computed in the same pass that
+writes the new differences and ``DF f``, with the dot products summed over fixed chunks so
+that the floats do not depend on the number of threads). From 20k vertices the iteration
+runs in a cache-friendly vertex numbering (:func:`sshade.arap_energy.locality_order`) and
+the numba kernels use ``threads`` (default automatic: 1 or ``NUMBA_NUM_THREADS``, serial
+below 20k vertices and inside worker processes). On the 200k-vertex armadillo (spokes-and-rims,
+2-core machine, ``benchmarks/arap_iteration.py``), seconds per accelerated iteration:
+
+===========================  =======  ======  ======  ========  ========  =====
+                             local    K(R)    solve   gradient  Anderson  total
+===========================  =======  ======  ======  ========  ========  =====
+before these kernels         0.134    0.031   0.035   0.002     (0.037)   0.239
+1 thread                     0.046    0.009   0.034   0.004     0.007     0.102
+2 threads (quiet machine)    0.026    0.005   0.034   0.003     0.005     0.074
+libigl ``arap_solve``                                                     0.311
+===========================  =======  ======  ======  ========  ========  =====
+
+(before: local = covariances 0.019 + polar 0.069 + energy 0.046; the gradient's sparse
+product and Anderson's einsums were in the 0.037 of loop glue.) With the other core busy,
+2 threads made the iterations slower, not faster (straggling parallel regions, and
+OpenMP workers spinning during the serial solve): the automatic mode (``threads=None``)
+therefore times both and keeps the faster (:class:`_ThreadPicker`).
 """
 from __future__ import annotations
 
@@ -41,13 +69,276 @@ import numpy as np
 import scipy.sparse as sp
 
 from .arap import ArapResult, rigid_fit
-from .arap_energy import ENERGIES, ArapOperators, build_operators
+from .arap_energy import (ENERGIES, ArapOperators, _fused, _note_launch, _numba_threads, build_operators,
+                          resolve_threads)
 from .errors import SShaDeError
 
-__all__ = ["Criterion", "DEFAULT_CRITERION", "DEEP_CRITERION", "LaplacianSolver", "solve_arap",
+__all__ = ["Criterion", "DEFAULT_CRITERION", "DEEP_CRITERION", "LaplacianSolver", "solve_arap", "warmup_kernels",
            "gradient_norm", "LINEAR_SOLVERS"]
 
 LINEAR_SOLVERS = ("auto", "cholespy", "scipy", "igl")
+
+# ------------------------------------------------------------- numba helpers of the loop
+try:  # numba is a dependency of the package; without it the numpy paths are used
+    import numba as _nb
+except ImportError:  # pragma: no cover
+    _nb = None
+
+#: vertices from which :func:`solve_arap` renumbers the mesh for locality by default
+#: (:func:`sshade.arap_energy.locality_order`; below, everything fits in the L2 cache).
+REORDER_MIN_VERTICES = 20_000
+
+# The Anderson dot products are summed over fixed chunks of _CHUNK entries, then over the
+# chunks: the same floats whatever the number of threads.
+_CHUNK = 8192
+
+if _nb is not None:
+    _prange = _nb.prange
+    _njit = _nb.njit(cache=True, nogil=True, error_model="numpy")
+    _njit_par = _nb.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+
+    @_njit
+    def _set_rows(U, rows, x):
+        """``U[rows] = x`` for (r, 3) ``x``."""
+        for i in range(rows.shape[0]):
+            r = rows[i]
+            U[r, 0] = x[i, 0]; U[r, 1] = x[i, 1]; U[r, 2] = x[i, 2]
+
+    @_njit
+    def _max_move(a, b):
+        """``max_i ||a_i - b_i||^2`` over the rows of two (r, 3) arrays."""
+        m = 0.0
+        for i in range(a.shape[0]):
+            d0 = a[i, 0] - b[i, 0]; d1 = a[i, 1] - b[i, 1]; d2 = a[i, 2] - b[i, 2]
+            v = d0 * d0 + d1 * d1 + d2 * d2
+            if v > m:
+                m = v
+        return m
+
+    @_njit
+    def _grad_rows(r0, r1, ptr, idx, val, x, g, mass, q):
+        """Rows ``r0:r1`` of the gradient ``2 A (x - g)`` (``A`` in CSR, scipy's order of
+        summation): ``q[i] = ||grad_i||^2 / (4 mass[i])``."""
+        for i in range(r0, r1):
+            a0 = 0.0; a1 = 0.0; a2 = 0.0
+            for jj in range(ptr[i], ptr[i + 1]):
+                j = idx[jj]
+                v = val[jj]
+                a0 += v * (x[j, 0] - g[j, 0]); a1 += v * (x[j, 1] - g[j, 1]); a2 += v * (x[j, 2] - g[j, 2])
+            a0 = 2.0 * a0; a1 = 2.0 * a1; a2 = 2.0 * a2
+            q[i] = (a0 * a0 + a1 * a1 + a2 * a2) / (4.0 * mass[i])
+
+    @_njit
+    def _grad_serial(ptr, idx, val, x, g, mass, q):
+        _grad_rows(0, q.shape[0], ptr, idx, val, x, g, mass, q)
+
+    @_njit_par
+    def _grad_parallel(ptr, idx, val, x, g, mass, q):
+        n = q.shape[0]
+        for c in _prange((n + 2047) // 2048):
+            _grad_rows(c * 2048, min(n, (c + 1) * 2048), ptr, idx, val, x, g, mass, q)
+
+    @_nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+    def _dot(a, b, n):
+        """``sum_{i < n} a_i b_i``, vectorised (the summation order is fixed by ``n`` and
+        the machine's vector width: the same floats for the same chunk, whatever the
+        number of threads)."""
+        s = 0.0
+        for i in range(n):
+            s += a[i] * b[i]
+        return s
+
+    @_njit
+    def _push_chunk(c, x, g, x_prev, g_prev, DF, DG, slot, nh, part):
+        """Chunk ``c`` (entries ``c _CHUNK ...``) of the Anderson update with the accepted
+        ``(x, g)`` after ``(x_prev, g_prev)`` (flat (N,) arrays), ``f = g - x``:
+        ``DF[slot] = f - f_prev``, ``DG[slot] = g - g_prev``, and the chunk's partial dot
+        products ``part[c, j] = DF[slot] . DF[j]``, ``part[c, m + j] = DF[j] . f``
+        (``j < nh``)."""
+        N = x.shape[0]
+        i0 = c * _CHUNK
+        n = min(N, i0 + _CHUNK) - i0
+        f = np.empty(n)
+        for i in range(n):
+            k = i0 + i
+            fi = g[k] - x[k]
+            f[i] = fi
+            DF[slot, k] = fi - (g_prev[k] - x_prev[k])
+            DG[slot, k] = g[k] - g_prev[k]
+        m = DF.shape[0]
+        new = DF[slot, i0:i0 + n]
+        for j in range(nh):
+            row = DF[j, i0:i0 + n]
+            part[c, j] = _dot(new, row, n)
+            part[c, m + j] = _dot(row, f, n)
+
+    @_njit
+    def _push_serial(x, g, x_prev, g_prev, DF, DG, slot, nh, part):
+        for c in range(part.shape[0]):
+            _push_chunk(c, x, g, x_prev, g_prev, DF, DG, slot, nh, part)
+
+    @_njit_par
+    def _push_parallel(x, g, x_prev, g_prev, DF, DG, slot, nh, part):
+        for c in _prange(part.shape[0]):
+            _push_chunk(c, x, g, x_prev, g_prev, DF, DG, slot, nh, part)
+
+    @_njit
+    def _mix_range(i0, i1, g, DG, theta, nh, out):
+        """``out = g - sum_{j < nh} theta_j DG[j]`` on entries ``i0:i1``."""
+        for i in range(i0, i1):
+            t = 0.0
+            for j in range(nh):
+                t += theta[j] * DG[j, i]
+            out[i] = g[i] - t
+
+    @_njit
+    def _mix_serial(g, DG, theta, nh, out):
+        _mix_range(0, out.shape[0], g, DG, theta, nh, out)
+
+    @_njit_par
+    def _mix_parallel(g, DG, theta, nh, out):
+        N = out.shape[0]
+        for c in _prange((N + _CHUNK - 1) // _CHUNK):
+            _mix_range(c * _CHUNK, min(N, (c + 1) * _CHUNK), g, DG, theta, nh, out)
+
+
+_HELPERS = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
+
+
+def _helpers(parallel: bool):
+    """``dict`` of the compiled loop kernels (serial or parallel variants), or False."""
+    key = 2 if parallel else 1
+    if _HELPERS[key] is None:
+        try:
+            if parallel:
+                _note_launch()
+            k = {"set_rows": _set_rows, "max_move": _max_move,
+                 "grad": _grad_parallel if parallel else _grad_serial,
+                 "push": _push_parallel if parallel else _push_serial,
+                 "mix": _mix_parallel if parallel else _mix_serial}
+            x = np.zeros((2, 3)); xf = x.reshape(-1)
+            k["set_rows"](np.zeros((2, 3)), np.arange(2, dtype=np.uint32), x)
+            k["max_move"](x, x)
+            k["grad"](np.array([0, 1, 2], np.uint64), np.array([0, 1], np.uint32), np.ones(2), x, x, np.ones(2),
+                      np.empty(2))
+            DF = np.zeros((2, 6)); part = np.empty((1, 4))
+            k["push"](xf, xf, xf, xf, DF, DF.copy(), 0, 1, part)
+            k["mix"](xf, DF, np.zeros(2), 1, np.empty(6))
+            _HELPERS[key] = k
+        except Exception:  # pragma: no cover - numba missing or broken
+            _HELPERS[key] = False
+    return _HELPERS[key]
+
+
+def warmup_kernels() -> bool:
+    """Compile (or load from numba's cache) the serial kernels of the solver and of
+    :mod:`sshade.arap_energy`, e.g. before forking worker processes. Returns whether numba
+    is usable."""
+    from .arap_energy import warmup_kernels as _warm_energy
+    return bool(_warm_energy() and _helpers(False))
+
+
+class _ThreadPicker:
+    """Threads of the loop's kernels in the automatic mode: 1 or ``tmax``, whichever ran
+    the iterations faster (the results are the same to the bit). The other choice is
+    re-timed every ``probe`` iterations, so that the pick follows the load of a shared
+    machine: there a parallel region waits for its slowest thread, and numba's OpenMP
+    workers spin after each region, taking CPU from the serial Cholesky solve (measured
+    on the 2-core machine with one other job running: 2.6x slower iterations with 2
+    threads than with 1).
+    """
+
+    def __init__(self, tmax: int, probe: int = 16):
+        self.tmax, self.probe = tmax, probe
+        self.cost = {tmax: None, 1: None}  # smoothed seconds per local step
+        self.cur, self.best, self.count, self.n_par = tmax, tmax, 0, 0
+
+    def record(self, t: int, dt: float) -> None:
+        """Account an iteration run with ``t`` threads in ``dt`` seconds; pick the next."""
+        c = self.cost[t]
+        self.cost[t] = dt if c is None else 0.5 * (c + dt)
+        self.count += 1
+        self.n_par += t > 1
+        other = 1 if t > 1 else self.tmax
+        if self.cost[other] is None:
+            self.cur = other
+            return
+        self.best = min(self.cost, key=self.cost.get)
+        worse = 1 if self.best > 1 else self.tmax
+        self.cur = worse if self.count % self.probe == 0 else self.best
+
+
+class _Anderson:
+    """Anderson acceleration's history in preallocated arrays (Peng et al. 2018, Alg. 2).
+
+    ``DF``/``DG`` (m, N) hold the last ``m`` differences of ``f = G(x) - x`` and of
+    ``G(x)`` between consecutive accepted iterates (ring buffer, slot ``pos``); the Gram
+    matrix ``DF DF^T`` is updated one row per iteration instead of recomputed, in the
+    same pass as the new differences and ``DF f``. The previous accepted ``(x, g)`` are
+    kept by reference (never overwritten: the candidates go to two alternating buffers,
+    the one not holding the current ``x``). ``kerns``: ``{threads: kernels}``
+    (:func:`_helpers`) or None (numpy); ``threads`` may change between steps.
+    """
+
+    def __init__(self, m: int, N: int, kerns, threads: int):
+        self.m, self.N, self.kerns, self.threads = m, N, kerns, threads
+        self.kern = kerns[1] if kerns else None
+        self.DF = np.empty((m, N))
+        self.DG = np.empty((m, N))
+        self.gram = np.zeros((m, m))
+        self.part = np.empty(((N + _CHUNK - 1) // _CHUNK, 2 * m))
+        self.buf = (np.empty(N), np.empty(N))
+        self.reset()
+
+    def reset(self):
+        """Forget the history (after a rejected accelerated step)."""
+        self.n_hist, self.pos, self.prev = 0, 0, None
+
+    def _run(self, name, *args):
+        if self.threads > 1:
+            with _numba_threads(self.threads):
+                return self.kerns[self.threads][name](*args)
+        return self.kern[name](*args)
+
+    def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray | None:
+        """Push the accepted iterate ``x`` and its plain step ``g = G(x)`` ((nf, 3) each,
+        C-contiguous, not modified afterwards); return the accelerated candidate
+        ``G(x) - dG theta`` ((nf, 3), in a buffer of this object, never aliasing ``x``)
+        or None (no history yet, or a degenerate one)."""
+        m, xv, gv = self.m, x.reshape(-1), g.reshape(-1)
+        prev, self.prev = self.prev, (xv, gv)
+        if prev is None:
+            return None
+        slot = self.pos
+        nh = min(self.n_hist + 1, m)
+        self.pos = (slot + 1) % m
+        self.n_hist = nh
+        dF = self.DF[:nh]
+        if self.kern:
+            self._run("push", xv, gv, prev[0], prev[1], self.DF, self.DG, slot, nh, self.part)
+            sums = self.part.sum(0)
+            row, fdot = sums[:nh], sums[m:m + nh]
+        else:  # einsum rather than BLAS: single-threaded, no thread-spinning outliers
+            f = gv - xv
+            np.subtract(f, prev[1] - prev[0], out=self.DF[slot])
+            np.subtract(gv, prev[1], out=self.DG[slot])
+            row = np.einsum("ik,k->i", dF, self.DF[slot])
+            fdot = np.einsum("ij,j->i", dF, f)
+        self.gram[slot, :nh] = row
+        self.gram[:nh, slot] = row
+        G = self.gram[:nh, :nh]
+        s = np.sqrt(np.diag(G))
+        if not (s > 0).all():
+            return None
+        theta = np.linalg.lstsq(G / np.outer(s, s), fdot / s, rcond=1e-12)[0] / s
+        if not np.isfinite(theta).all():
+            return None
+        out = self.buf[1] if np.may_share_memory(x, self.buf[0]) else self.buf[0]
+        if self.kern:
+            self._run("mix", gv, self.DG, np.ascontiguousarray(theta), nh, out)
+        else:
+            np.subtract(gv, np.einsum("i,ij->j", theta, self.DG[:nh]), out=out)
+        return out.reshape(x.shape)
 
 
 @dataclass(frozen=True)
@@ -221,7 +512,8 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
                U0: np.ndarray | None = None, criterion: Criterion | None = None, max_iter: int = 5000,
                accelerate: bool = True, anderson_m: int = 5, time_budget_s: float | None = None,
                callback=None, linear_solver: str = "auto",
-               operators: ArapOperators | None = None) -> ArapResult:
+               operators: ArapOperators | None = None, threads: int | None = None,
+               reorder: bool | None = None) -> ArapResult:
     """Handle-driven ARAP deformation run to a certified convergence.
 
     Parameters
@@ -247,6 +539,18 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         (:class:`LaplacianSolver`).
     operators : :class:`sshade.arap_energy.ArapOperators` or None, precomputed for
         ``(V, F, energy)`` to reuse across calls (then ``V``/``F`` are not re-read).
+    threads : int >= 1 or None, threads of the numba kernels (local step, right-hand
+        side, gradient, Anderson products; the Cholesky solve is CHOLMOD's own). None:
+        1 below 20k vertices or inside a worker process, else 1 or ``NUMBA_NUM_THREADS``
+        (:func:`sshade.arap_energy.resolve_threads`), whichever runs the iterations
+        faster, re-timed every 16 iterations (on a loaded machine parallel regions can be
+        much slower than one thread: :class:`_ThreadPicker`). The iterates do not depend
+        on it.
+    reorder : bool or None, iterate in a cache-friendly vertex numbering
+        (:func:`sshade.arap_energy.locality_order`; the result is returned in the mesh's
+        numbering). None: from :data:`REORDER_MIN_VERTICES` vertices when numba is
+        usable. Same iterates up to rounding (the Cholesky factor of the renumbered
+        matrix rounds differently).
 
     Returns
     -------
@@ -260,7 +564,10 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     Anderson steps), ``status`` (``"converged"``, ``"max_iter"``, ``"time_budget"``,
     ``"stalled"`` = the energy no longer decreases in float64, ``"callback"``,
     ``"rigid"``), ``linear_solver``, ``factor_s``, ``etol``, ``gtol``, ``accelerate``,
-    ``anderson_m``, ``energy_type``.
+    ``anderson_m``, ``energy_type``, ``threads`` (the most threads used), ``reordered``,
+    ``stage_s`` (seconds spent in the local steps, right-hand sides, Cholesky solves,
+    gradient norms and Anderson bookkeeping), ``parallel_fraction`` (automatic threads
+    only: the fraction of iterations run with ``threads`` threads).
 
     Raises
     ------
@@ -324,48 +631,113 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
             raise SShaDeError(f"{len(lacking)} of the mesh's {ncomp} connected components hold no handle "
                               f"(e.g. the one with vertex {int(np.flatnonzero(label == lacking[0])[0])}); "
                               "their position is undetermined")
-    Lff = ops.L[free][:, free].tocsc()
-    Lfb = ops.L[free][:, h]
+    # ---- numbering: the mesh's, or a cache-friendly one (everything below lives in it)
+    nthreads = resolve_threads(threads, n)
+    kern = _helpers(False) if _fused(1) else False
+    if not kern or (nthreads > 1 and not (_fused(nthreads) and _helpers(True))):
+        nthreads = 1  # numpy paths, or parallel kernels unusable
+    kerns = {1: kern, nthreads: _helpers(True)} if kern and nthreads > 1 else {1: kern}
+    picker = _ThreadPicker(nthreads) if threads is None and nthreads > 1 else None
+    cur = [nthreads]  # threads of the next kernel calls
+    if reorder is None:
+        reorder = n >= REORDER_MIN_VERTICES
+    reorder = bool(reorder) and bool(kern)
+    kdata = ops.kernel_data(reorder) if kern else None
+    perm = None if kdata is None else kdata.perm
+    if perm is not None:
+        Lp = ops.L[perm][:, perm].tocsr()
+        hp = kdata.inv[h]
+        U = np.ascontiguousarray(U[perm])
+        mass = ops.mass[perm]
+    else:
+        Lp, hp, mass = ops.L, h, ops.mass
+    free = np.setdiff1d(np.arange(n), hp)
+    Lf = Lp[free]
+    Lff = Lf[:, free].tocsc()
+    Lfb = Lf[:, hp]
     lin = LaplacianSolver(Lff, linear_solver)
-    c_f = Lfb @ T  # (n_f, 3)
-    mass_f = ops.mass[free]
-    info.update(linear_solver=lin.backend, factor_s=lin.factor_s)
+    c_f = np.ascontiguousarray(Lfb @ T)  # (n_f, 3)
+    mass_f = mass[free]
+    mass_sum = mass_f.sum()
+    info.update(linear_solver=lin.backend, factor_s=lin.factor_s, threads=nthreads, reordered=perm is not None)
+    if kern:
+        Lc = Lff.tocsr()
+        Lc.sort_indices()
+        L_ptr, L_idx = Lc.indptr.astype(np.uint64), Lc.indices.astype(np.uint32)
+        L_val = np.ascontiguousarray(Lc.data, np.float64)
+        free_u = free.astype(np.uint32)
     t_iter = time.perf_counter()
     precompute_s = t_iter - t_start
 
     nf = len(free)
-    N = 3 * nf
+    m = int(anderson_m)
+
+    def run(name, *args):
+        t = cur[0]
+        if t > 1:
+            with _numba_threads(t):
+                return kerns[t][name](*args)
+        return kern[name](*args)
+
+    def to_mesh(Ux):
+        """Positions in the mesh's numbering."""
+        return Ux if perm is None else Ux[kdata.inv]
 
     warm = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()  # polar kernel warm start
+    R = np.empty((n, 3, 3))  # rotations of the last local step (one buffer: see the loop)
+    Ek = np.empty(n)
+    B = np.empty((nf, 3))
+    q = np.empty(nf)
+
+    tm = dict.fromkeys(("local", "rhs", "solve", "gradient", "anderson"), 0.0)  # seconds per stage
+    clock = time.perf_counter
 
     def local(x):
-        """Rotations and energy at free positions x (nf, 3)."""
-        U[free] = x
-        R, E = ops.rotations(U, return_energy=True, warm=warm)
+        """Rotations (into R) and energy at free positions x (nf, 3)."""
+        t0 = clock()
+        if kern:
+            kern["set_rows"](U, free_u, x)
+        else:
+            U[free] = x
         info["n_local"] += 1
-        return R, E
+        E = ops.local_step(U, R, Ek, warm, cur[0], kdata)
+        tm["local"] += clock() - t0
+        return E
 
-    def glob(R):
-        B = ops.rhs(R)[free] - c_f
-        return lin.solve(B)
+    def glob():
+        """Global step with the rotations in R: the plain iterate G(x) (nf, 3)."""
+        t0 = clock()
+        ops.rhs_rows(R, free_u if kern else free, c_f, B, cur[0], kdata)
+        t1 = clock()
+        X = np.ascontiguousarray(lin.solve(B))
+        tm["rhs"] += t1 - t0
+        tm["solve"] += clock() - t1
+        return X
+
+    def gnorm(x, g):
+        """Scale-free gradient norm at x, whose plain step is g (grad = 2 Lff (x - g))."""
+        t0 = clock()
+        if kern:
+            run("grad", L_ptr, L_idx, L_val, x, g, mass_f, q)
+            gn = float(diag * np.sqrt(q.sum() / mass_sum))
+        else:
+            gn = gradient_norm(2.0 * (Lff @ (x - g)), mass_f, diag)
+        tm["gradient"] += clock() - t0
+        return gn
 
     # ---- start point
+    anderson = _Anderson(m, 3 * nf, kerns if kern else None, nthreads) if accelerate else None
     x = U[free].copy()
-    R, E = local(x)
-    g = glob(R)
+    E = local(x)
+    g = glob()
     E_hist, G_hist = [E], []
     E_prev = np.inf
     it, last_move, status = 0, 0.0, None
-    m = int(anderson_m)
-    DF = np.empty((m, N))
-    DG = np.empty((m, N))
-    n_hist, pos = 0, 0
-    f_last = g_last = None
+    t_pass = clock()
 
     while True:
         # ---- convergence test at the accepted iterate x (energy E, plain step g = G(x))
-        grad_f = 2.0 * (Lff @ (x - g))
-        gn = gradient_norm(grad_f, mass_f, diag)
+        gn = gnorm(x, g)
         G_hist.append(gn)
         if E <= zero_E:
             rel = 0.0
@@ -376,7 +748,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
             break
         if callback is not None and it > 0:
             U[free] = x
-            if callback(it, U, E, gn):
+            if callback(it, to_mesh(U), E, gn):
                 status = "callback"
                 break
         if it >= max_iter:
@@ -385,58 +757,57 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         if time_budget_s is not None and time.perf_counter() - t_iter > time_budget_s:
             status = "time_budget"
             break
-        # ---- Anderson history update with the accepted (x, g)
-        f = (g - x).ravel()
-        gv = g.ravel()
-        if accelerate and f_last is not None:
-            DF[pos] = f - f_last
-            DG[pos] = gv - g_last
-            pos = (pos + 1) % m
-            n_hist = min(n_hist + 1, m)
-        f_last, g_last = f, gv.copy()
-        # ---- candidate
-        x_new, accelerated = g, False
-        if accelerate and n_hist > 0:
-            # einsum rather than BLAS: single-threaded and free of the thread-spinning
-            # outliers OpenBLAS shows for these skinny products on a loaded 2-core machine
-            dF, dG = DF[:n_hist], DG[:n_hist]
-            Gram = np.einsum("ik,jk->ij", dF, dF)
-            s = np.sqrt(np.diag(Gram))
-            if (s > 0).all():
-                Gn = Gram / np.outer(s, s)
-                theta = np.linalg.lstsq(Gn, np.einsum("ij,j->i", dF, f) / s, rcond=1e-12)[0] / s
-                if np.isfinite(theta).all():
-                    x_new = (gv - np.einsum("i,ij->j", theta, dG)).reshape(nf, 3)
-                    accelerated = True
-        R_new, E_new = local(x_new)
+        # ---- Anderson history update with the accepted (x, g), candidate
+        t0 = clock()
+        x_new = anderson.step(x, g) if accelerate else None
+        tm["anderson"] += clock() - t0
+        accelerated = x_new is not None
+        if not accelerated:
+            x_new = g
+        # R is overwritten by every local step: it holds the rotations of the last
+        # evaluated candidate, which is the accepted one when glob() runs below
+        E_new = local(x_new)
         if accelerated and not E_new < E:
             # safeguard: plain step from the last accepted point, reset the history
             info["n_fallback"] += 1
-            n_hist, pos = 0, 0
-            f_last = g_last = None
+            anderson.reset()
             x_new = g
-            R_new, E_new = local(x_new)
+            E_new = local(x_new)
             accelerated = False
         if not accelerated and E_new > E:
             # a plain local/global step cannot increase E: only rounding does -> stop
             U[free] = x
             status = "stalled"
             break
-        last_move = float(np.sqrt(((x_new - x) ** 2).sum(1).max()))
+        t0 = clock()
+        if kern:
+            last_move = float(np.sqrt(kern["max_move"](x_new, x)))
+        else:
+            last_move = float(np.sqrt(((x_new - x) ** 2).sum(1).max()))
+        tm["anderson"] += clock() - t0
         E_prev, E = E, E_new
         x = x_new
-        R = R_new
-        g = glob(R)
+        g = glob()
         it += 1
         E_hist.append(E)
+        if picker is not None:  # automatic threads: time the iteration, pick the next mode
+            now = clock()
+            picker.record(cur[0], now - t_pass)
+            t_pass = now
+            cur[0] = picker.cur
+            if anderson is not None:
+                anderson.threads = cur[0]
 
     U[free] = x
     if status == "stalled":
         converged = bool(G_hist[-1] < crit.gtol)
     else:
         converged = status in ("converged", "rigid")
+    if picker is not None:
+        info["parallel_fraction"] = picker.n_par / max(picker.count, 1)
     info.update(status=status, energy=float(E), gnorm=float(G_hist[-1]),
                 rel_decrease=float(rel) if status != "stalled" else 0.0,
-                energy_history=[float(e) for e in E_hist], gnorm_history=[float(v) for v in G_hist])
-    return ArapResult(V=U.copy(), iterations=it, converged=converged, last_move=last_move,
+                energy_history=[float(e) for e in E_hist], gnorm_history=[float(v) for v in G_hist],
+                stage_s=tm)
+    return ArapResult(V=np.array(to_mesh(U)), iterations=it, converged=converged, last_move=last_move,
                       precompute_s=precompute_s, solve_s=time.perf_counter() - t_iter, info=info)

@@ -42,6 +42,8 @@ def _warmup() -> None:
     project_to_fans(V, np.zeros(5, np.int64), V[:3], np.array([[0, 1, 2]]))
     from .halfedge import halfedges, vertex_fan_count
     vertex_fan_count(F, halfedges(F, 5), 5)
+    from .arap_solver import warmup_kernels
+    warmup_kernels()  # the low-res ARAP's serial kernels, inherited by the forked workers
     _WARM = True
 
 

@@ -163,3 +163,124 @@ def test_bad_input_raises(bar):
         build_operators(Vd, F)
     with pytest.raises(SShaDeError):
         fit_rotations(np.eye(3)[None], backend="lapack")
+
+
+# ------------------------------------------------------------------ numba kernels
+def test_polar_kernel_special_inputs():
+    rng = np.random.default_rng(7)
+    M = rng.normal(size=(300, 3, 3))  # not a multiple of the kernel's block of cells
+    M[:10] = 0.0
+    M[10:20] = rng.normal(size=(10, 3, 1)) * rng.normal(size=(10, 1, 3))  # rank one
+    M[20:30] = np.eye(3)
+    M[30:40] = np.diag([2.0, 2.0, 0.0])
+    R, tr = fit_rotations(M, return_trace=True, backend="numba")
+    np.testing.assert_array_equal(R[:10], np.broadcast_to(np.eye(3), (10, 3, 3)))
+    np.testing.assert_array_equal(tr[:10], 0.0)
+    np.testing.assert_allclose(np.einsum("kab,kcb->kac", R, R), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("kab,kab->k", R, M), tr, atol=1e-12)
+    Rn, trn = fit_rotations(M[40:], return_trace=True, backend="numpy")
+    np.testing.assert_allclose(tr[40:], trn, atol=1e-12)
+    np.testing.assert_allclose(R[40:], Rn, atol=1e-9)
+
+
+@pytest.mark.parametrize("energy", ENERGIES)
+def test_fused_local_step_matches_separate_steps(bar, energy):
+    V, F, _, _ = bar
+    ops = build_operators(V, F, energy)
+    rng = np.random.default_rng(8)
+    U = V + 0.05 * rng.normal(size=V.shape)
+    n = ops.n
+    W = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    W2 = W.copy()
+    R, Ek = np.empty((n, 3, 3)), np.empty(n)
+    for step in range(3):
+        E = ops.local_step(U, R, Ek, W, 1)
+        M = np.ascontiguousarray(ops.covariances(U))
+        R2 = fit_rotations(M, warm=W2)
+        # same covariances, same polar arithmetic, same warm start: the same floats
+        np.testing.assert_array_equal(R, R2)
+        np.testing.assert_array_equal(W, W2)
+        assert E == pytest.approx(ops.energy_direct(U, R), rel=1e-12)
+        assert E == ops.energy(U, R)  # the same per-cell sums in the same order
+        U = U + 1e-3 * rng.normal(size=V.shape)
+    # right-hand side kernel = scipy's K @ Rs up to rounding
+    Rs = np.ascontiguousarray(R.transpose(2, 0, 1)).reshape(3 * n, 3)
+    B = ops.rhs(R, threads=1)
+    np.testing.assert_allclose(B, ops.K @ Rs, rtol=0, atol=1e-13 * np.abs(B).max())
+
+
+@pytest.mark.parametrize("energy", ENERGIES)
+def test_kernels_independent_of_threads_and_numbering(bar, energy):
+    V, F, _, _ = bar
+    ops = build_operators(V, F, energy)
+    n = ops.n
+    U = V + 0.05 * np.random.default_rng(9).normal(size=V.shape)
+    out = {}
+    for reorder in (False, True):
+        kd = ops.kernel_data(reorder)
+        perm = np.arange(n) if kd.perm is None else kd.perm
+        for t in (1, 2):
+            W = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+            R, Ek = np.empty((n, 3, 3)), np.empty(n)
+            E = ops.local_step(np.ascontiguousarray(U[perm]), R, Ek, W, t, kd)
+            rows = np.arange(n, dtype=np.uint32)
+            B = ops.rhs_rows(R, rows, np.zeros((n, 3)), np.empty((n, 3)), t, kd)
+            inv = np.argsort(perm)
+            out[reorder, t] = (R[inv], Ek[inv], E, W[inv], B[inv])
+    ref = out[False, 1]
+    for key, val in out.items():
+        for a, b in zip(ref[:4], val[:4]):  # rotations, cell energies, energy, warm start: bit-identical
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(val[4], ref[4], rtol=0, atol=1e-13 * np.abs(ref[4]).max())
+    np.testing.assert_array_equal(out[True, 1][4], out[True, 2][4])  # same numbering: same floats
+
+
+def test_numpy_fallbacks_when_numba_is_off(monkeypatch, bar):
+    import sshade.arap_energy as ae
+    V, F, _, _ = bar
+    ops = build_operators(V, F, "spokes_and_rims")
+    U = V + 0.05 * np.random.default_rng(10).normal(size=V.shape)
+    R1, E1 = ops.rotations(U, return_energy=True)
+    B1 = ops.rhs(R1)
+    monkeypatch.setattr(ae, "_NUMBA_KERNEL", False)
+    monkeypatch.setattr(ae, "_NUMBA_ENERGY", False)
+    R2, E2 = ops.rotations(U, return_energy=True)
+    np.testing.assert_allclose(R2, R1, atol=1e-9)
+    assert E2 == pytest.approx(E1, rel=1e-10)
+    np.testing.assert_allclose(ops.rhs(R1), B1, atol=1e-13 * np.abs(B1).max())
+    # the numpy path in a renumbered KernelData
+    kd = ops.kernel_data(True)
+    n = ops.n
+    R3, Ek = np.empty((n, 3, 3)), np.empty(n)
+    E3 = ops.local_step(np.ascontiguousarray(U[kd.perm]), R3, Ek, None, 1, kd)
+    np.testing.assert_allclose(R3, R1[kd.perm], atol=1e-9)
+    assert E3 == pytest.approx(E1, rel=1e-10)
+    B3 = ops.rhs_rows(R3, np.arange(n), np.zeros((n, 3)), np.empty((n, 3)), 1, kd)
+    np.testing.assert_allclose(B3, B1[kd.perm], atol=1e-9 * np.abs(B1).max())
+
+
+def test_resolve_threads():
+    from sshade.arap_energy import PARALLEL_MIN_CELLS, max_threads, resolve_threads
+    assert resolve_threads(None, 100) == 1
+    assert resolve_threads(None, PARALLEL_MIN_CELLS) == max_threads()
+    assert resolve_threads(1, 10 ** 6) == 1
+    assert resolve_threads(10 ** 6, 100) == max_threads()
+    for bad in (0, -1, 1.5):
+        with pytest.raises(SShaDeError):
+            resolve_threads(bad, 100)
+
+
+def test_kernel_entry_points_check_their_arrays(bar):
+    V, F, _, _ = bar
+    ops = build_operators(V, F, "spokes_and_rims")
+    n = ops.n
+    with pytest.raises(SShaDeError):
+        ops.local_step(V, np.empty((n - 1, 3, 3)), np.empty(n))
+    with pytest.raises(SShaDeError):
+        ops.local_step(V, np.empty((n, 3, 3)), np.empty(n), warm=np.empty((n, 3, 3), np.float32))
+    R = ops.rotations(V)
+    with pytest.raises(SShaDeError):
+        ops.rhs_rows(R, np.array([n]), np.zeros((1, 3)), np.empty((1, 3)))
+    with pytest.raises(SShaDeError):
+        ops.rhs_rows(R, np.array([0, 1]), np.zeros((1, 3)), np.empty((2, 3)))

@@ -187,3 +187,62 @@ def test_bad_input_raises(bar):
         solve_arap(V, F, h, T, energy="spokes", operators=build_operators(V, F, "spokes_and_rims"))
     with pytest.raises(SShaDeError):
         LaplacianSolver(np.eye(3), backend="nope")
+
+
+def test_threads_and_numbering_do_not_change_the_iterates(bar):
+    V, F, h, T = bar
+    ops = build_operators(V, F, "spokes_and_rims")
+    runs = {}
+    for threads in (1, 2):
+        for reorder in (False, True):
+            runs[threads, reorder] = solve_arap(V, F, h, T, operators=ops, criterion=Criterion(0.0, 0.0), max_iter=30,
+                                                threads=threads, reorder=reorder)
+    a = runs[1, False]
+    assert a.info["threads"] == 1 and not a.info["reordered"] and runs[2, True].info["reordered"]
+    assert set(a.info["stage_s"]) == {"local", "rhs", "solve", "gradient", "anderson"}
+    for reorder in (False, True):  # threads: bit-identical
+        np.testing.assert_array_equal(runs[1, reorder].V, runs[2, reorder].V)
+        assert runs[1, reorder].info["energy_history"] == runs[2, reorder].info["energy_history"]
+    b = runs[1, True]  # renumbering: the Cholesky factor rounds differently
+    assert np.abs(a.V - b.V).max() <= 1e-9 * bbox_diag(V)
+    np.testing.assert_allclose(b.info["energy_history"], a.info["energy_history"], rtol=1e-9)
+
+
+def test_numpy_fallback_solver_agrees(monkeypatch, bar):
+    import sshade.arap_energy as ae
+    V, F, h, T = bar
+    ref = solve_arap(V, F, h, T, criterion=Criterion(1e-10, 1e-6))
+    monkeypatch.setattr(ae, "_NUMBA_KERNEL", False)
+    monkeypatch.setattr(ae, "_NUMBA_ENERGY", False)
+    res = solve_arap(V, F, h, T, criterion=Criterion(1e-10, 1e-6), reorder=True)
+    assert not res.info["reordered"]  # numpy path: mesh numbering
+    assert res.converged
+    assert np.abs(res.V - ref.V).max() <= 1e-6 * bbox_diag(V)
+    assert res.info["energy"] == pytest.approx(ref.info["energy"], rel=1e-8)
+
+
+def test_thread_picker_follows_the_faster_mode():
+    from sshade.arap_solver import _ThreadPicker
+    p = _ThreadPicker(2, probe=4)
+    assert p.cur == 2
+    p.record(2, 1.0)
+    assert p.cur == 1  # the other mode is timed once
+    seen = []
+    for _ in range(12):
+        p.record(p.cur, 0.5 if p.cur == 1 else 1.0)
+        seen.append(p.cur)
+    assert p.best == 1 and seen.count(2) == 3  # serial faster: parallel re-timed every 4th
+    for _ in range(12):
+        p.record(p.cur, 0.5 if p.cur == 2 else 1.0)  # the load changed
+    assert p.best == 2 and p.cur in (1, 2)
+
+
+def test_automatic_threads_same_iterates():
+    V, F, h, T = lifted_plane(0.2, n_target=22000)  # above the parallel threshold
+    a = solve_arap(V, F, h, T, criterion=Criterion(0.0, 0.0), max_iter=20)
+    b = solve_arap(V, F, h, T, criterion=Criterion(0.0, 0.0), max_iter=20, threads=1)
+    assert a.info["reordered"]
+    if a.info["threads"] > 1:  # NUMBA_NUM_THREADS > 1: the automatic mode timed both
+        assert 0.0 < a.info["parallel_fraction"] < 1.0
+    np.testing.assert_array_equal(a.V, b.V)
+    assert a.info["energy_history"] == b.info["energy_history"]
