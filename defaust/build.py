@@ -376,7 +376,25 @@ class _FaustSource(_Source):
         return {"rest_file": str(self.files[(s, 0)]), "target_files": {str(p): str(self.files[(s, p)]) for p in poses}}
 
 
-class _SyntheticSource(_Source):
+class _ModelSource(_Source):
+    """A source whose subject is a posable body model (``model(s)`` with ``V``, ``F``,
+    ``landmarks`` and ``posed(p)``): the synthetic bodies and ANNY."""
+
+    def model(self, s):
+        raise NotImplementedError
+
+    def rest_low(self, s):
+        m = self.model(s)
+        return m.V, m.F
+
+    def landmarks(self, s):
+        return dict(self.model(s).landmarks)
+
+    def target_low(self, s, p):
+        return self.model(s).posed(p)
+
+
+class _SyntheticSource(_ModelSource):
     has_high_gt = True
 
     def __init__(self, cfg):
@@ -408,16 +426,6 @@ class _SyntheticSource(_Source):
                                                remesh_iterations=c.synthetic_remesh_iterations)
         return self._cache[k]
 
-    def rest_low(self, s):
-        m = self.model(s)
-        return m.V, m.F
-
-    def landmarks(self, s):
-        return dict(self.model(s).landmarks)
-
-    def target_low(self, s, p):
-        return self.model(s).posed(p)
-
     def target_high(self, s, p, Vh):
         from .synthetic import transfer_weights
 
@@ -443,7 +451,7 @@ class _SyntheticSource(_Source):
                 "pose_names": {str(p): self.names[p] for p in [0] + list(poses)}}
 
 
-class _AnnySource(_Source):
+class _AnnySource(_ModelSource):
     """ANNY bodies (:mod:`defaust.anny_source`); the model is loaded only when an item
     is built (a complete build is verified without it)."""
 
@@ -482,16 +490,6 @@ class _AnnySource(_Source):
         if k not in self._cache:
             self._cache[k] = anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
         return self._cache[k]
-
-    def rest_low(self, s):
-        m = self.model(s)
-        return m.V, m.F
-
-    def landmarks(self, s):
-        return dict(self.model(s).landmarks)
-
-    def target_low(self, s, p):
-        return self.model(s).posed(p)
 
     def target_high(self, s, p, Vh):
         from .anny_source import high_res_weights
