@@ -10,12 +10,12 @@ Mesh: an ``.npz`` with arrays ``V``, ``F`` (default: the 200k armadillo that
 (:func:`eval.datasets.shapes.axis_landmarks` / :func:`~eval.datasets.shapes.axis_handles`).
 
 Ours: for every ``--threads`` value (an int, or ``auto``: ``threads=None``, the solver
-picks 1 or ``NUMBA_NUM_THREADS`` by timing its iterations), ``solve_arap`` (accelerated,
+picks 1 or ``NUMBA_NUM_THREADS`` by timing its iterations), ``solve_arap`` (L-BFGS, Anderson,
 then plain local/global) run for ``--iters`` iterations with the criterion switched off,
 after a warm-up solve (numba cache load, operators). Printed per iteration: the stages
 from ``info["stage_s"]`` (local = covariances + rotations + energy, fused; rhs = ``K(R)``;
-solve = CHOLMOD; gradient = the stopping test's gradient norm; anderson = history update
-and mixing), the rest of the loop ("other") and the total (``solve_s / iterations``);
+solve = CHOLMOD; gradient = the stopping test's gradient norm; anderson = Anderson's history
+update and mixing, or L-BFGS's direction: gradient, two-loop recursion), the rest of the loop ("other") and the total (``solve_s / iterations``);
 ``locals/it`` is the number of local steps per iteration (the accelerated loop evaluates a
 second candidate after a rejected Anderson step) and ``parallel`` the fraction of
 iterations run with more than one thread. Each figure is the best of ``--repeat`` runs.
@@ -56,7 +56,7 @@ def load_case(path: Path):
     return V, F, np.asarray(h, np.int64), np.asarray(T, np.float64)
 
 
-def bench_ours(V, F, h, T, ops, *, iters: int, repeat: int, threads: int, accelerate: bool) -> dict:
+def bench_ours(V, F, h, T, ops, *, iters: int, repeat: int, threads: int, accelerate: str) -> dict:
     """Best-of-``repeat`` seconds per iteration of each stage, other and total."""
     from sshade.arap_solver import Criterion, solve_arap
     best = {}
@@ -127,10 +127,10 @@ def main(argv=None) -> None:
     cols = STAGES + ("other", "total")
     print("\nours, milliseconds per iteration (stage_s / iterations; total = solve_s / iterations)")
     print(f"{'variant':<26}" + "".join(f"{c:>10}" for c in cols) + f"{'locals/it':>11}{'parallel':>10}")
-    for accelerate in (True, False):
+    for accelerate in ("lbfgs", "anderson", "none"):
         for t in threads:
             b = bench_ours(V, F, h, T, ops, iters=args.iters, repeat=args.repeat, threads=t, accelerate=accelerate)
-            name = f"{'anderson' if accelerate else 'plain'} threads={'auto' if t is None else b['threads']}"
+            name = f"{'plain' if accelerate == 'none' else accelerate} threads={'auto' if t is None else b['threads']}"
             print(f"{name:<26}" + "".join(f"{1e3 * b[c]:>10.1f}" for c in cols) + f"{b['locals/it']:>11.2f}"
                   f"{b['parallel']:>10.2f}")
     print(f"(precompute incl. factorisation {b['precompute']:.2f} s, factorisation {b['factor']:.2f} s, "

@@ -9,8 +9,9 @@ cached) is traced against wall time for:
 - ``libigl local/global``: ``igl.arap_solve`` one iteration at a time from the rigid fit
   of the handles (the paper's baselines; :func:`sshade.arap.arap_deform` protocol
   ``paper`` without its stopping rule);
-- ``Anderson (ours)``: :func:`sshade.arap_solver.solve_arap` (protocol ``converged``),
-  until its criterion stops it;
+- ``L-BFGS (ours)``: :func:`sshade.arap_solver.solve_arap` (protocol ``converged``, its
+  default iteration), until its criterion stops it;
+- ``Anderson (ours)``: the same solver with ``accelerate="anderson"`` (Peng et al. 2018);
 - ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`);
 - ``SShaDe + refine``: SShaDe (k = 5) then ``solve_arap`` started from its result.
 
@@ -32,7 +33,7 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 
-__all__ = ["run_convergence", "libigl_curve", "anderson_curve", "time_to"]
+__all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to"]
 
 log = logging.getLogger("eval")
 
@@ -91,13 +92,13 @@ def libigl_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
     return rows
 
 
-def anderson_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rims", U0=None,
-                   accelerate: bool = True, time_budget_s: float = 300.0, t_offset: float = 0.0,
-                   criterion=None) -> tuple[list[dict], object]:
+def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rims", U0=None,
+                 accelerate: str = "lbfgs", time_budget_s: float = 300.0, t_offset: float = 0.0,
+                 criterion=None) -> tuple[list[dict], object]:
     """:func:`sshade.arap_solver.solve_arap` traced against a reference (arguments as
-    :func:`libigl_curve`; ``U0`` a start, ``t_offset`` seconds added to every time, e.g.
-    the time SShaDe took to produce ``U0``). Returns ``(rows, result)``; the last row is
-    the returned result."""
+    :func:`libigl_curve`; ``accelerate`` as in ``solve_arap``; ``U0`` a start,
+    ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
+    ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
     from sshade.arap import rigid_fit
     from sshade.arap_solver import solve_arap
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
@@ -222,8 +223,9 @@ def run_convergence(cfg) -> dict:
             add("libigl local/global", rows, iterations=last["iteration"],
                 stopped=("reached stop_pct" if last["ref_mean_pct"] < float(cc.stop_pct) else
                          f"time budget {budget:g} s"))
-        rows, res = anderson_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget)
-        add("Anderson (ours)", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
+        for acc, label in (("lbfgs", "L-BFGS (ours)"), ("anderson", "Anderson (ours)")):
+            rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, accelerate=acc)
+            add(label, rows, iterations=res.iterations, stopped=str(res.info.get("status")))
         for k in list(cc.sshade.k):
             t0 = time.perf_counter()
             Vs, si = deform(V, F, h, T, n_low=cc.sshade.n_low, n_samplings=int(k), seed=int(cc.seed),
@@ -234,8 +236,8 @@ def run_convergence(cfg) -> dict:
                                         "ref_max_pct": x}],
                 iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
             if int(k) == int(cc.sshade.refine_k):
-                rows, res = anderson_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
-                                           t_offset=dt)
+                rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
+                                         t_offset=dt)
                 add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
     cdf = pd.DataFrame(curves)
     tdf = pd.DataFrame(table)
@@ -278,7 +280,8 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
     from defaust.meshio import atomic_write
     cases = list(dict.fromkeys(curves["case"]))
     fig, axes = plt.subplots(1, len(cases), figsize=(6.0 * len(cases), 4.4), squeeze=False)
-    styles = {"libigl local/global": ("tab:gray", "-"), "Anderson (ours)": ("tab:blue", "-"),
+    styles = {"libigl local/global": ("tab:gray", "-"), "Anderson (ours)": ("tab:blue", ":"),
+              "L-BFGS (ours)": ("tab:blue", "-"),
               "SShaDe + refine": ("tab:red", "-")}
     for ax, c in zip(axes[0], cases):
         g = curves[curves["case"] == c]

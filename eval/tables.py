@@ -85,7 +85,7 @@ _NO_BOLD = ("iterations", "converged")
 
 #: How a method stopped, per protocol (``protocol`` column of the rows).
 PROTOCOL_TEXT = {
-    "converged": "converged protocol: Anderson-accelerated local/global until the relative energy decrease and "
+    "converged": "converged protocol: L-BFGS-accelerated local/global (Laplacian as initial Hessian) until the relative energy decrease and "
                  "the scale-free gradient norm are both below their thresholds",
     "paper": "paper protocol (§4.1): libigl local/global until the largest vertex move of one iteration is "
              "below tol x diagonal, at most 1000 iterations",

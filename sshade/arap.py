@@ -7,8 +7,9 @@ the full-resolution baselines. Wraps libigl's ``ARAPData`` / ``arap_precomputati
 Two protocols (:data:`PROTOCOLS`), both starting from the best rigid fit of the handles
 (so a rigid motion of the handles is reproduced exactly):
 
-- ``"converged"`` (default): :func:`sshade.arap_solver.solve_arap`, Anderson-accelerated
-  local/global with an energy safeguard and one prefactored Laplacian, stopped when the
+- ``"converged"`` (default): :func:`sshade.arap_solver.solve_arap`, L-BFGS-accelerated
+  local/global (the Laplacian as initial Hessian, Armijo line search; or Anderson with an
+  energy safeguard) and one prefactored Laplacian, stopped when the
   relative energy decrease and a scale-free gradient norm are both small
   (:class:`sshade.arap_solver.Criterion`): a result reported converged is within 0.05 %
   (mean) / 0.5 % (max) of the bounding-box diagonal from the true minimiser on the
@@ -126,7 +127,8 @@ def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
 def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
                 energy: str = "spokes_and_rims", tol: float = 1e-4, max_iter: int | None = None,
                 V0: np.ndarray | None = None, time_budget_s: float | None = None,
-                protocol: str = "converged", criterion=None, anderson_m: int = 5) -> ArapResult:
+                protocol: str = "converged", criterion=None, accelerate: str = "lbfgs",
+                anderson_m: int | None = None) -> ArapResult:
     """Handle-driven ARAP deformation under one of the two protocols (module docstring).
 
     Parameters
@@ -146,7 +148,9 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     protocol : ``"converged"`` or ``"paper"`` (:data:`PROTOCOLS`).
     criterion : :class:`sshade.arap_solver.Criterion` or None (its default), the
         ``"converged"`` protocol's stopping thresholds.
-    anderson_m : int, Anderson window of the ``"converged"`` protocol.
+    accelerate : ``"lbfgs"`` (default), ``"anderson"`` or ``"none"``, the ``"converged"``
+        protocol's iteration (:func:`sshade.arap_solver.solve_arap`).
+    anderson_m : int or None, its history window (None: 10 for L-BFGS, 5 for Anderson).
 
     Returns
     -------
@@ -191,7 +195,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     if protocol == "converged":
         from .arap_solver import solve_arap
         res = solve_arap(V, F, handles, targets, energy=energy, U0=V0, criterion=criterion, max_iter=max_iter,
-                         anderson_m=anderson_m, time_budget_s=time_budget_s)
+                         accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s)
         res.info["protocol"] = "converged"
         return res
     if V0 is None:

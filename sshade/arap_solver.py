@@ -74,9 +74,11 @@ from .arap_energy import (ENERGIES, ArapOperators, _fused, _note_launch, _numba_
 from .errors import SShaDeError
 
 __all__ = ["Criterion", "DEFAULT_CRITERION", "DEEP_CRITERION", "LaplacianSolver", "solve_arap", "warmup_kernels",
-           "gradient_norm", "LINEAR_SOLVERS"]
+           "gradient_norm", "LINEAR_SOLVERS", "ACCELERATIONS"]
 
 LINEAR_SOLVERS = ("auto", "cholespy", "scipy", "igl")
+#: the iterations of :func:`solve_arap` (``accelerate``)
+ACCELERATIONS = ("lbfgs", "anderson", "none")
 
 # ------------------------------------------------------------- numba helpers of the loop
 try:  # numba is a dependency of the package; without it the numpy paths are used
@@ -203,6 +205,85 @@ if _nb is not None:
 
 
 _HELPERS = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
+
+
+if _nb is not None:
+    @_njit
+    def _lbfgs_two_loop(S, Y, Z, rho, order, grad, z, q, r, alpha):
+        """L-BFGS two-loop recursion (Nocedal & Wright, Alg. 7.4) with ``H0 y_i = Z_i``
+        and ``H0 grad = z``: writes the quasi-Newton step ``r = H grad`` (N,) and returns
+        ``grad . r``. ``order``: ring slots, newest first. Serial and deterministic."""
+        N = grad.shape[0]
+        for j in range(N):
+            q[j] = grad[j]
+            r[j] = z[j]
+        for t in range(order.shape[0]):
+            i = order[t]
+            a = 0.0
+            for j in range(N):
+                a += S[i, j] * q[j]
+            a *= rho[i]
+            alpha[t] = a
+            for j in range(N):
+                q[j] -= a * Y[i, j]
+                r[j] -= a * Z[i, j]
+        for t in range(order.shape[0] - 1, -1, -1):
+            i = order[t]
+            b = 0.0
+            for j in range(N):
+                b += Y[i, j] * r[j]
+            c = alpha[t] - rho[i] * b
+            for j in range(N):
+                r[j] += c * S[i, j]
+        sl = 0.0
+        for j in range(N):
+            sl += grad[j] * r[j]
+        return sl
+
+    @_njit
+    def _lbfgs_pair(x, grad, z, x_prev, grad_prev, z_prev, s, y, zz):
+        """New curvature pair into (s, y, zz) and the previous point updated to
+        (x, grad, z); returns (s.y, s.s, y.y)."""
+        sy = 0.0
+        ss = 0.0
+        yy = 0.0
+        for j in range(x.shape[0]):
+            a = x[j] - x_prev[j]
+            b = grad[j] - grad_prev[j]
+            s[j] = a
+            y[j] = b
+            zz[j] = z[j] - z_prev[j]
+            sy += a * b
+            ss += a * a
+            yy += b * b
+            x_prev[j] = x[j]
+            grad_prev[j] = grad[j]
+            z_prev[j] = z[j]
+        return sy, ss, yy
+
+
+else:  # pragma: no cover - numpy versions of the two L-BFGS kernels
+    def _lbfgs_two_loop(S, Y, Z, rho, order, grad, z, q, r, alpha):
+        q[:] = grad
+        r[:] = z
+        for t, i in enumerate(order):
+            alpha[t] = rho[i] * np.einsum("j,j->", S[i], q)
+            q -= alpha[t] * Y[i]
+            r -= alpha[t] * Z[i]
+        for t in range(len(order) - 1, -1, -1):
+            i = order[t]
+            r += (alpha[t] - rho[i] * np.einsum("j,j->", Y[i], r)) * S[i]
+        return float(np.einsum("j,j->", grad, r))
+
+    def _lbfgs_pair(x, grad, z, x_prev, grad_prev, z_prev, s, y, zz):
+        np.subtract(x, x_prev, out=s)
+        np.subtract(grad, grad_prev, out=y)
+        np.subtract(z, z_prev, out=zz)
+        x_prev[:] = x
+        grad_prev[:] = grad
+        z_prev[:] = z
+        return (float(np.einsum("j,j->", s, y)), float(np.einsum("j,j->", s, s)),
+                float(np.einsum("j,j->", y, y)))
 
 
 def _helpers(parallel: bool):
@@ -339,6 +420,63 @@ class _Anderson:
         else:
             np.subtract(gv, np.einsum("i,ij->j", theta, self.DG[:nh]), out=out)
         return out.reshape(x.shape)
+
+
+class _LBFGS:
+    """L-BFGS two-loop recursion with the global step's matrix as initial Hessian
+    (Liu, Bouaziz, Kavan, "Quasi-Newton Methods for Real-time Simulation of Hyperelastic
+    Materials", ACM TOG 36(3), 2017; Nocedal & Wright, Algorithm 7.4): ``H0 = (2 L_ff)^-1``,
+    so ``H0 grad(x) = z = x - G(x)`` and ``H0 y_i`` is the difference of two ``z``: no solve
+    beyond the global step's own. History in (m, N) ring buffers, ``N = 3 n_free``; the
+    recursion runs in serial numba kernels (BLAS calls were 100x slower on a loaded
+    2-core machine: their threads spin), about ``4 m + 4`` passes over ``N`` numbers.
+    """
+
+    def __init__(self, m: int, Lff):
+        self.m, self.L = m, Lff.tocsr()
+        N = 3 * Lff.shape[0]
+        self.S, self.Y, self.Z = np.zeros((m, N)), np.zeros((m, N)), np.zeros((m, N))
+        self.rho = np.zeros(m)
+        self.x_prev, self.grad_prev, self.z_prev = np.zeros(N), np.zeros(N), np.zeros(N)
+        self.q, self.alpha = np.empty(N), np.empty(m)
+        self.reset()
+
+    def reset(self):
+        """Forget the curvature pairs (the next direction is the plain step's)."""
+        self.n_hist, self.pos, self.have_prev = 0, 0, False
+
+    def direction(self, x: np.ndarray, g: np.ndarray):
+        """Descent direction ``d`` ((nf, 3), new array) at the accepted iterate ``x`` whose
+        plain step is ``g = G(x)``, and the slope ``grad(x) . d < 0``."""
+        m = self.m
+        z = np.subtract(x, g)
+        grad = (self.L @ z).reshape(-1)
+        grad *= 2.0
+        z = z.reshape(-1)
+        xv = np.ascontiguousarray(x).reshape(-1)
+        k = self.pos
+        if self.have_prev:  # new curvature pair (s, y, H0 y) into the ring
+            sy, ss, yy = _lbfgs_pair(xv, grad, z, self.x_prev, self.grad_prev, self.z_prev,
+                                     self.S[k], self.Y[k], self.Z[k])
+            if sy > 1e-12 * np.sqrt(ss * yy):  # curvature condition
+                self.rho[k] = 1.0 / sy
+                self.pos = (k + 1) % m
+                self.n_hist = min(self.n_hist + 1, m)
+            elif self.n_hist == m:  # the rejected pair overwrote the oldest one
+                self.n_hist -= 1
+        else:
+            self.x_prev[:] = xv
+            self.grad_prev[:] = grad
+            self.z_prev[:] = z
+            self.have_prev = True
+        order = np.array([(self.pos - 1 - i) % m for i in range(self.n_hist)], np.int64)
+        r = np.empty_like(z)
+        slope = -_lbfgs_two_loop(self.S, self.Y, self.Z, self.rho, order, grad, z, self.q, r, self.alpha)
+        if not slope < 0:  # not a descent direction: plain step, fresh history
+            self.n_hist, self.pos = 0, 0
+            r = z
+            slope = -float(grad @ z)
+        return (-r).reshape(x.shape), slope
 
 
 @dataclass(frozen=True)
@@ -510,7 +648,7 @@ class LaplacianSolver:
 
 def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = "spokes_and_rims",
                U0: np.ndarray | None = None, criterion: Criterion | None = None, max_iter: int = 5000,
-               accelerate: bool = True, anderson_m: int = 5, time_budget_s: float | None = None,
+               accelerate: bool | str = "lbfgs", anderson_m: int | None = None, time_budget_s: float | None = None,
                callback=None, linear_solver: str = "auto",
                operators: ArapOperators | None = None, threads: int | None = None,
                reorder: bool | None = None) -> ArapResult:
@@ -527,9 +665,21 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         reproduced exactly). The handle rows are overwritten by ``targets``.
     criterion : :class:`Criterion` or None (:data:`DEFAULT_CRITERION`).
     max_iter : int >= 0, cap on accepted iterations (global solves).
-    accelerate : bool, Anderson acceleration with the energy safeguard (False: plain
-        local/global, i.e. libigl's iteration in float64).
-    anderson_m : int >= 1, Anderson window (Peng et al. use 5-6).
+    accelerate : ``"lbfgs"`` (default), ``"anderson"`` (``True`` is the same), or
+        ``False`` / ``"none"``: plain local/global, i.e. libigl's iteration in float64.
+        ``"lbfgs"``: L-BFGS on the free vertices with the global step's matrix as initial
+        Hessian (Liu, Bouaziz & Kavan 2017), i.e. a quasi-Newton correction of the
+        local/global step, with Armijo backtracking (every accepted step lowers the
+        energy); its memory pairs with non-positive curvature are skipped. ``"anderson"``:
+        Anderson acceleration with the energy safeguard (Peng et al. 2018). Measured
+        (iterations to the criterion; distance of the result to the deep reference, mean %
+        of the diagonal): DeFAUST s00_p01, 168,897 vertices, spokes-and-rims: L-BFGS 792
+        iterations, 0.0008 %; Anderson not converged after 1,648 iterations (150 s),
+        0.26 %. FAUST s1_p3 (6,890 vertices): L-BFGS 157, Anderson 1,265 (566 safeguard
+        rejections). Bent cylinder 90 deg: 206 against 533; twisted bar 135 deg: 55
+        against 57; lifted plane 40k: 49 against 38.
+    anderson_m : int >= 1 or None, history window: Anderson's (Peng et al. use 5-6;
+        default 5) or L-BFGS's memory (default 10).
     time_budget_s : float or None, stop (unconverged, status ``"time_budget"``) once the
         iterations have taken this many seconds.
     callback : callable or None, ``callback(k, U, E, gnorm) -> bool`` after every accepted
@@ -592,6 +742,12 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     crit = DEFAULT_CRITERION if criterion is None else criterion
     if not isinstance(crit, Criterion):
         raise SShaDeError(f"criterion must be a Criterion, got {type(crit).__name__}")
+    acc = {True: "anderson", False: "none", None: "none"}.get(accelerate, accelerate) \
+        if isinstance(accelerate, (bool, type(None))) else str(accelerate)
+    if acc not in ACCELERATIONS:
+        raise SShaDeError(f"accelerate must be one of {ACCELERATIONS} (or True/False), got {accelerate!r}")
+    if anderson_m is None:
+        anderson_m = 10 if acc == "lbfgs" else 5
     if int(anderson_m) < 1:
         raise SShaDeError(f"anderson_m must be >= 1, got {anderson_m}")
     if int(max_iter) < 0:
@@ -615,7 +771,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
             raise SShaDeError(f"U0 must be a finite (n, 3) array with n={n}, got shape {U.shape}")
     U[h] = T
 
-    info = {"energy_type": energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": bool(accelerate),
+    info = {"energy_type": energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": acc,
             "anderson_m": int(anderson_m), "n_local": 0, "n_fallback": 0}
     if len(free) == 0:
         info.update(status="converged", energy=ops.energy(U), gnorm=0.0, rel_decrease=0.0,
@@ -725,8 +881,20 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         tm["gradient"] += clock() - t0
         return gn
 
+    def tick(t_pass):
+        """Automatic threads: time the iteration just done, pick the next mode."""
+        if picker is None:
+            return t_pass
+        now = clock()
+        picker.record(cur[0], now - t_pass)
+        cur[0] = picker.cur
+        if anderson is not None:
+            anderson.threads = cur[0]
+        return now
+
     # ---- start point
-    anderson = _Anderson(m, 3 * nf, kerns if kern else None, nthreads) if accelerate else None
+    lbfgs = _LBFGS(m, Lff) if acc == "lbfgs" else None
+    anderson = _Anderson(m, 3 * nf, kerns if kern else None, nthreads) if acc == "anderson" else None
     x = U[free].copy()
     E = local(x)
     g = glob()
@@ -757,9 +925,41 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         if time_budget_s is not None and time.perf_counter() - t_iter > time_budget_s:
             status = "time_budget"
             break
+        if lbfgs is not None:  # ---- quasi-Newton step with Armijo backtracking
+            t0 = clock()
+            d, slope = lbfgs.direction(x, g)
+            tm["anderson"] += clock() - t0
+            alpha, E_new = 1.0, None
+            while True:
+                x_new = x + alpha * d
+                E_try = local(x_new)
+                if E_try <= E + 1e-4 * alpha * slope:
+                    E_new = E_try
+                    break
+                if alpha < 1e-6:
+                    break
+                alpha *= 0.5
+            if E_new is None:
+                if lbfgs.n_hist:  # a bad quasi-Newton direction: forget it, plain step
+                    info["n_fallback"] += 1
+                    lbfgs.reset()
+                    continue
+                U[free] = x
+                status = "stalled"
+                break
+            if alpha < 1.0:
+                info["n_fallback"] += 1
+            last_move = float(np.sqrt(((x_new - x) ** 2).sum(1).max()))
+            E_prev, E = E, E_new
+            x = x_new
+            g = glob()
+            it += 1
+            E_hist.append(E)
+            t_pass = tick(t_pass)
+            continue
         # ---- Anderson history update with the accepted (x, g), candidate
         t0 = clock()
-        x_new = anderson.step(x, g) if accelerate else None
+        x_new = anderson.step(x, g) if anderson is not None else None
         tm["anderson"] += clock() - t0
         accelerated = x_new is not None
         if not accelerated:
@@ -790,13 +990,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         g = glob()
         it += 1
         E_hist.append(E)
-        if picker is not None:  # automatic threads: time the iteration, pick the next mode
-            now = clock()
-            picker.record(cur[0], now - t_pass)
-            t_pass = now
-            cur[0] = picker.cur
-            if anderson is not None:
-                anderson.threads = cur[0]
+        t_pass = tick(t_pass)
 
     U[free] = x
     if status == "stalled":

@@ -1,5 +1,6 @@
-"""Converged ARAP solver (sshade.arap_solver): safeguarded Anderson acceleration, the
-convergence criterion's guarantee, rigid motions, linear-solver backends."""
+"""Converged ARAP solver (sshade.arap_solver): L-BFGS with the Laplacian as initial
+Hessian (default) and safeguarded Anderson acceleration, the convergence criterion's
+guarantee, rigid motions, linear-solver backends."""
 import numpy as np
 import pytest
 
@@ -35,7 +36,8 @@ def _dist(U, Uref, diag):
 @pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
 def test_safeguard_never_increases_energy(bar, energy):
     V, F, h, T = bar
-    res = solve_arap(V, F, h, T, energy=energy, criterion=Criterion(1e-10, 1e-6), anderson_m=5)
+    res = solve_arap(V, F, h, T, energy=energy, criterion=Criterion(1e-10, 1e-6), accelerate="anderson",
+                     anderson_m=5)
     assert isinstance(res, ArapResult)
     E = np.array(res.info["energy_history"])
     assert len(E) == res.iterations + 1
@@ -47,10 +49,22 @@ def test_safeguard_never_increases_energy(bar, energy):
 
 def test_safeguard_fallback_path_is_exercised(bent):
     V, F, h, T = bent
-    res = solve_arap(V, F, h, T, criterion=DEFAULT_CRITERION)
+    res = solve_arap(V, F, h, T, criterion=DEFAULT_CRITERION, accelerate="anderson")
     assert res.info["n_fallback"] > 0  # Anderson steps were rejected on this case
     E = np.array(res.info["energy_history"])
     assert (np.diff(E) <= 0).all()
+
+
+@pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
+def test_lbfgs_line_search_never_increases_energy(bent, energy):
+    V, F, h, T = bent
+    res = solve_arap(V, F, h, T, energy=energy, criterion=Criterion(1e-10, 1e-6))
+    assert res.info["accelerate"] == "lbfgs" and res.converged
+    E = np.array(res.info["energy_history"])
+    assert len(E) == res.iterations + 1
+    assert (np.diff(E) < 0).all()  # Armijo: every accepted step lowers the energy
+    # one local step per accepted iterate, plus the start and the backtracking trials
+    assert res.info["n_local"] >= res.iterations + 1
 
 
 @pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
@@ -73,7 +87,7 @@ def test_criterion_guarantee_on_bent_bar(bent, energy):
     diag = ops.diag
     ref = solve_arap(V, F, h, T, energy=energy, criterion=DEEP_CRITERION, max_iter=20000, operators=ops)
     assert ref.info["gnorm"] < 1e-6
-    for accelerate in (True, False):
+    for accelerate in ("lbfgs", "anderson", False):
         res = solve_arap(V, F, h, T, energy=energy, accelerate=accelerate, max_iter=20000, operators=ops)
         assert res.converged, res.info["status"]
         assert res.info["gnorm"] < DEFAULT_CRITERION.gtol
@@ -182,6 +196,8 @@ def test_bad_input_raises(bar):
     with pytest.raises(SShaDeError):
         solve_arap(V, F, h, T, anderson_m=0)
     with pytest.raises(SShaDeError):
+        solve_arap(V, F, h, T, accelerate="newton")
+    with pytest.raises(SShaDeError):
         Criterion(etol=-1.0)
     with pytest.raises(SShaDeError):
         solve_arap(V, F, h, T, energy="spokes", operators=build_operators(V, F, "spokes_and_rims"))
@@ -189,14 +205,15 @@ def test_bad_input_raises(bar):
         LaplacianSolver(np.eye(3), backend="nope")
 
 
-def test_threads_and_numbering_do_not_change_the_iterates(bar):
+@pytest.mark.parametrize("accelerate", ["lbfgs", "anderson"])
+def test_threads_and_numbering_do_not_change_the_iterates(bar, accelerate):
     V, F, h, T = bar
     ops = build_operators(V, F, "spokes_and_rims")
     runs = {}
     for threads in (1, 2):
         for reorder in (False, True):
             runs[threads, reorder] = solve_arap(V, F, h, T, operators=ops, criterion=Criterion(0.0, 0.0), max_iter=30,
-                                                threads=threads, reorder=reorder)
+                                                threads=threads, reorder=reorder, accelerate=accelerate)
     a = runs[1, False]
     assert a.info["threads"] == 1 and not a.info["reordered"] and runs[2, True].info["reordered"]
     assert set(a.info["stage_s"]) == {"local", "rhs", "solve", "gradient", "anderson"}
