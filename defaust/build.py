@@ -62,9 +62,9 @@ class BuildConfig:
     Attributes
     ----------
     out : output folder.
-    source : ``"anny"`` (ANNY bodies, :mod:`defaust.anny_source`; the command line's
-        default), ``"faust"`` or ``"synthetic"`` (embedded implicit bodies; this
-        dataclass's default until that source is removed).
+    source : ``"anny"`` (default: ANNY bodies, :mod:`defaust.anny_source`), ``"faust"``
+        or ``"synthetic"`` (the former implicit bodies, kept because they build in seconds
+        without the ANNY assets: the builder's resume/corruption tests use them).
     seed : int, dataset seed (handle draws; synthetic bodies and poses).
     subjects : list of int or None, build only these subjects.
     n_subjects : int, anny / synthetic subjects ``0 .. n_subjects - 1`` (anny: at most
@@ -93,7 +93,7 @@ class BuildConfig:
     """
 
     out: str | Path
-    source: str = "synthetic"
+    source: str = "anny"
     seed: int = 0
     subjects: list | None = None
     n_subjects: int = 10
