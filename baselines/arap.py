@@ -20,7 +20,7 @@ class FullResArap:
         diagonal).
     max_iter : int or None, iteration cap (None: the protocol's default; paper: 1000).
     name : str, the table row label.
-    protocol : ``"converged"`` (default: Anderson-accelerated local/global to the
+    protocol : ``"converged"`` (default: L-BFGS-accelerated local/global to the
         energy-and-gradient criterion) or ``"paper"`` (libigl, paper §4.1 move rule).
     etol, gtol : floats or None, the ``"converged"`` criterion
         (:class:`sshade.arap_solver.Criterion`; None: its defaults).
@@ -62,6 +62,14 @@ class FullResArap:
             if k in res.info:
                 self.info[k] = res.info[k]
         return res.V
+
+    def warmup(self, n_vertices: int | None = None) -> float:
+        """Compile (or load from numba's cache) the kernels :meth:`deform` runs for this
+        energy and protocol (parallel variants too when an ``n_vertices`` mesh uses them),
+        outside any timed call (:func:`sshade.warmup.warm_fullres`). Returns the seconds
+        spent (0.0 when warm)."""
+        from sshade.warmup import warm_fullres
+        return warm_fullres(self.energy, self.protocol, n_vertices)
 
 
 def _criterion(etol, gtol):

@@ -142,7 +142,10 @@ def atomic_write(path, mode: str = "w", **kw):
 
 
 def write_mesh(path, V: np.ndarray, F: np.ndarray) -> None:
-    """Write a triangle mesh atomically (format from the extension: .obj, .off, .ply).
+    """Write a triangle mesh atomically (format from the extension: .obj, .off, .ply),
+    without losing precision: libigl's writers (OBJ and OFF as text with 17 significant
+    digits, PLY as binary little-endian doubles), so :func:`read_mesh` gives ``V`` back
+    bit for bit.
 
     Parameters
     ----------
@@ -151,14 +154,20 @@ def write_mesh(path, V: np.ndarray, F: np.ndarray) -> None:
 
     Raises
     ------
-    SShaDeError on an unsupported extension.
+    SShaDeError on an unsupported extension; OSError if the file cannot be written
+    (``path`` then keeps its previous content, :func:`atomic_write`).
     """
-    import trimesh
+    import igl
     path = Path(path)
     ext = path.suffix.lower()
     if ext not in {".obj", ".off", ".ply"}:
         raise SShaDeError(f"{path}: unsupported output mesh format {ext!r}")
-    mesh = trimesh.Trimesh(np.asarray(V, np.float64), np.asarray(F, np.int64), process=False)
-    data = mesh.export(file_type=ext[1:])
-    with atomic_write(path, "wb" if isinstance(data, bytes) else "w") as fh:
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    with tempfile.TemporaryDirectory() as tmp:  # libigl writes a path: render there, then move atomically
+        t = Path(tmp) / f"mesh{ext}"
+        enc = igl.FileEncoding.Binary if ext == ".ply" else igl.FileEncoding.Ascii
+        igl.write_triangle_mesh(str(t), V, F, enc)
+        data = t.read_bytes()
+    with atomic_write(path, "wb") as fh:
         fh.write(data)

@@ -8,11 +8,16 @@ Usage (from the repository root)::
 
 Config: ``conf/config.yaml`` (+ ``conf/dataset/faust.yaml``, ``conf/experiment/*.yaml``).
 For each case (:mod:`eval.datasets`) and each method (:mod:`eval.methods`) the
-``deform`` call is timed with :func:`time.perf_counter`, the result is scored with
+``deform`` call is timed with :func:`time.perf_counter` into ``time_s``, after the method's
+optional ``warmup()`` has compiled its numba kernels (the seconds go to the ``compile_s``
+column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
+:mod:`sshade.warmup`), the result is scored with
 :func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
 :func:`eval.metrics.ground_truth_metrics`. A method that raises
-:class:`~sshade.errors.SShaDeError` on a case gets its message in the ``error`` column
-and the run goes on. Outputs in ``out_dir`` (default ``outputs/<experiment.name>/<date_time>``):
+:class:`~sshade.errors.SShaDeError` on a case (a plug-in method: any exception,
+:func:`eval.methods.is_plugin`) gets its message in the ``error`` column and the run goes
+on. A case mesh with several connected components is deformed component by component
+(:class:`sshade.components.ComponentWise`). Outputs in ``out_dir`` (default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
 (:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
 ``.hydra/`` folder. All tables and ``run.json`` are written atomically.
@@ -152,7 +157,9 @@ def run(cfg) -> dict:
     unknown method, ...), before any method runs.
     """
     t_start = time.perf_counter()
-    from .methods import make_methods
+    from sshade.components import ComponentWise, n_components
+
+    from .methods import is_plugin, make_methods
     methods = make_methods(cfg)  # every method's parameters are checked before any work
     refs = _References(cfg, (cfg.get("dataset") or {}).get("baseline_cases", None))  # config checked here too
     root = _dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
@@ -192,6 +199,7 @@ def run(cfg) -> dict:
     write_runinfo(out_dir / "run.json", info)
 
     rows: list[dict] = []
+    compile_s: dict[str, float] = {}  # method -> seconds of warm-up/compilation (run.json)
     from .figures import figures_options, write_case_figure
     fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
     def runs_on(ci: int, m) -> bool:  # baselines take minutes per high-res case: run on a subset
@@ -203,20 +211,27 @@ def run(cfg) -> dict:
         for ci, case in enumerate(cases):
             deformed = {}  # method -> deformed vertices, for the optional figure
             refs.start_case(ci, case)
+            split = n_components(case.F, len(case.V)) > 1  # each component apart (sshade.components)
             for m in methods:
                 if not runs_on(ci, m):
                     continue
                 bar.set_postfix_str(f"{case.name} {m.name}")
+                runner = ComponentWise(m) if split else m
                 row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": m.name,
                        "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
                        "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
                        "case_seed": getattr(case, "seed", None), "error": ""}
                 try:
+                    row["compile_s"] = _warm(m, len(case.V))  # compilation: never inside time_s
                     with warnings.catch_warnings(record=True) as caught:
                         warnings.simplefilter("always")
                         t0 = time.perf_counter()
-                        Vd = m.deform(case.V, case.F, case.handles, case.targets)
+                        Vd = runner.deform(case.V, case.F, case.handles, case.targets)
                         row["time_s"] = time.perf_counter() - t0
+                    late = _info_compile_s(runner)  # compiled inside deform after all (a new code path)
+                    row["compile_s"] += late
+                    row["time_s"] -= late
+                    compile_s[m.name] = compile_s.get(m.name, 0.0) + row["compile_s"]
                     for w in caught:  # e.g. sshade.deform.LowResSkippedWarning: logged and recorded
                         log.warning("%s %s: %s", case.name, m.name, w.message)
                     if caught:
@@ -227,15 +242,18 @@ def run(cfg) -> dict:
                     row.update(refs.metrics(m, Vd))
                     if getattr(case, "V_gt", None) is not None:
                         row.update(ground_truth_metrics(Vd, case.F, case.V_gt))
-                    for k, v in (getattr(m, "info", None) or {}).items():
+                    for k, v in (getattr(runner, "info", None) or {}).items():
                         v = _scalar(v)
-                        if v is not _SKIP:
+                        if v is not _SKIP and k != "compile_s":
                             row[k if k not in row else f"info_{k}"] = v
                     log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", case.name, m.name,
                              row["time_s"], row.get("volume_err_pct", math.nan),
                              row.get("edge_err_pct", math.nan), row.get("angle_err_deg", math.nan))
-                except SShaDeError as e:
-                    row["error"] = str(e) or type(e).__name__
+                except Exception as e:  # SShaDeError, or anything a plug-in raises; else a bug of ours
+                    if not (isinstance(e, SShaDeError) or is_plugin(m)):
+                        raise
+                    row["error"] = (str(e) if isinstance(e, SShaDeError) else f"{type(e).__name__}: {e}") \
+                        or type(e).__name__
                     log.warning("%s %s failed: %s", case.name, m.name, row["error"])
                 rows.append(row)
                 bar.update(1)
@@ -252,12 +270,29 @@ def run(cfg) -> dict:
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     info.update(status="done", n_cases=len(cases), n_rows=len(df), n_errors=n_err,
-                wall_s=round(time.perf_counter() - t_start, 3),
+                wall_s=round(time.perf_counter() - t_start, 3), compile_s={k: round(v, 3) for k, v in compile_s.items()},
                 outputs={k: Path(v).name for k, v in paths.items()})
     paths["run_json"] = write_runinfo(out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {out_dir}")
     return {"out_dir": out_dir, "paths": paths, "n_cases": len(cases), "n_errors": n_err, "summary": summ}
+
+
+def _warm(method, n_vertices: int) -> float:
+    """Seconds of ``method.warmup(n_vertices)`` (the optional first-call compilation of a
+    method, :class:`sshade.method.Deformer`; 0.0 when it has none or is already warm)."""
+    warm = getattr(method, "warmup", None)
+    return float(warm(n_vertices) or 0.0) if callable(warm) else 0.0
+
+
+def _info_compile_s(method) -> float:
+    """``compile_s`` a method reported for its last call (e.g. :func:`sshade.deform`'s
+    kernel loads), 0.0 when none."""
+    v = (getattr(method, "info", None) or {}).get("compile_s", 0.0)
+    try:
+        return max(0.0, float(v or 0.0))
+    except (TypeError, ValueError):
+        return 0.0
 
 
 class _References:

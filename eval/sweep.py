@@ -8,23 +8,33 @@ Run a sweep (same config and overrides as ``python -m eval``; ``-m`` = multirun)
     python -m eval.sweep experiment=sweep dataset.root=...           # grid in conf/experiment/sweep.yaml
     python -m eval.sweep -m ... hydra/launcher=slurm hydra.launcher.partition=NAME   # SLURM (submitit)
     python -m eval.sweep aggregate results/sweeps/2025-01-01_12-00-00    # rebuild the table
+    python -m eval.sweep resume results/sweeps/2025-01-01_12-00-00       # re-run killed/failed/missing jobs
 
 Each job is :func:`sweep_job`: it runs :func:`eval.app.run_experiment` with ``out_dir``
 set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
 ``<sweep dir>/<job number>``) and records the outcome in ``status.json`` there::
 
-    {"status": "done" | "partial" | "failed" | "running", "error": "...", "overrides": [...],
+    {"status": "done" | "partial" | "failed" | "killed" | "running", "error": "...", "overrides": [...],
      "job_num": 3, "wall_s": 12.3, "n_cases": 4, "n_errors": 0, ...}
 
-``failed``: the job raised (bad parameter, crash inside a method, ...) or every
-(case, method) row failed (e.g. ``sshade.n_low=2``: "n_low must be at least 4");
-``partial``: some rows failed; ``running``: the job never finished (killed, timed out).
-The job function never raises, so Hydra (and every launcher) goes on with the other
-jobs; the exit status of the sweep is 0 unless Hydra itself fails.
+Every job of a sweep ends in the table with one outcome (:data:`OUTCOMES`):
+``done``; ``partial``: some (case, method) rows failed; ``failed``: the job raised (bad
+parameter, crash inside a method, ...) or every row failed (e.g. ``sshade.n_low=2``:
+"n_low must be at least 4"); ``killed``: the job started but died without a result (out
+of memory, time limit, node lost, ``scancel``, ``kill -9``): its ``status.json`` still
+says ``running`` after the sweep ended, or the SLURM launcher saw it leave the queue
+without result; ``missing``: a point of the grid that never started (no folder).
+``running`` only appears while the sweep runs. The job function never raises, and the
+SLURM launcher (:mod:`eval.sweep_launcher`, ``hydra/launcher=slurm``) waits on the jobs
+itself without ever waiting on a dead one, with or without ``sacct``; so the sweep
+command exits with 0 once every job has an outcome (unless Hydra itself fails).
 
-At the end of a multirun, :class:`AggregateSweepCallback` (added automatically by
-``python -m eval.sweep -m``; also set in ``conf/experiment/sweep.yaml``) calls
-:func:`aggregate_sweep`, which writes ``sweep_table.csv`` (one row per job: its
+Before any job starts, :class:`AggregateSweepCallback` (added automatically by
+``python -m eval.sweep -m``; also set in ``conf/experiment/sweep.yaml``) writes
+``sweep.json`` into the sweep folder: the command, its folder and the grid (job number
+-> overrides), so that a point without folder is listed as missing and
+:func:`resume_sweep` can run the same command again for the jobs without result. At the
+end of the multirun it calls :func:`aggregate_sweep`, which writes ``sweep_table.csv`` (one row per job: its
 overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
 every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
 ``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.
@@ -49,11 +59,17 @@ from pathlib import Path
 from sshade.errors import SShaDeError
 
 __all__ = ["sweep_job", "aggregate_sweep", "sweep_markdown", "read_status", "write_status",
-           "AggregateSweepCallback", "STATUS_FILE", "main"]
+           "AggregateSweepCallback", "STATUS_FILE", "MANIFEST", "OUTCOMES", "read_manifest", "sweep_points",
+           "start_manifest", "finish_manifest", "record_outcome", "resume_sweep", "main"]
 
 log = logging.getLogger("eval")
 
 STATUS_FILE = "status.json"
+MANIFEST = "sweep.json"      # the sweep's grid and command, written before any job starts
+RESUME_ENV = "SSHADE_SWEEP_RESUME"  # "1" in a resumed sweep: jobs already done are skipped
+#: Final outcome of a job in the table ("running" only while the sweep still runs).
+OUTCOMES = ("done", "partial", "failed", "killed", "missing")
+KEEP = ("done", "partial")   # outcomes a resume keeps; the others are run again
 TABLE_CSV = "sweep_table.csv"
 TABLE_MD = "sweep_table.md"
 _CALLBACK_KEY = "hydra.callbacks.sweep_aggregate"
@@ -83,6 +99,99 @@ def read_status(job_dir) -> dict | None:
         return json.loads(p.read_text())
     except (OSError, ValueError):
         return None
+
+
+# ----------------------------------------------------------------------------- sweep.json
+def read_manifest(sweep_dir) -> dict | None:
+    """``sweep_dir/sweep.json`` (the sweep's grid and command, see :func:`start_manifest`),
+    or None when absent or unreadable."""
+    try:
+        m = json.loads((Path(sweep_dir) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    return m if isinstance(m, dict) else None
+
+
+def _write_manifest(sweep_dir, m: dict) -> Path:
+    from defaust.meshio import atomic_write
+    p = Path(sweep_dir) / MANIFEST
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(p, "w") as fh:
+        json.dump(m, fh, indent=2, default=str)
+        fh.write("\n")
+    return p
+
+
+def sweep_points(config) -> list[list[str]] | None:
+    """Every job's overrides of a multirun, in job-number order, expanded as Hydra's
+    ``BasicSweeper`` does (``hydra.sweeper.params`` then the command-line task overrides,
+    the Cartesian product of the sweeps). None for another sweeper or an override it
+    cannot parse (then a missing job cannot be told from a job never asked for)."""
+    try:
+        from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+        from hydra.core.override_parser.overrides_parser import OverridesParser
+        from omegaconf import OmegaConf
+        sw = config.hydra.sweeper
+        if not str(sw.get("_target_", "")).endswith("BasicSweeper") or sw.get("max_batch_size") is not None:
+            return None
+        params = sw.get("params", None)
+        params = OmegaConf.to_container(params, resolve=False) if OmegaConf.is_config(params) else dict(params or {})
+        conf = [f"{k}={v}" for k, v in params.items()] + [str(o) for o in config.hydra.overrides.task]
+        batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(conf), None)
+        return [[str(o) for o in job] for job in batches[0]]
+    except Exception as e:  # noqa: BLE001 -- the table simply lists no missing job
+        log.warning("cannot expand the sweep's grid (%s): jobs that never start will not be listed", e)
+        return None
+
+
+def start_manifest(config) -> Path:
+    """Write (or, on a resume, update) ``<hydra.sweep.dir>/sweep.json`` before any job
+    starts: the command (``argv``, ``cwd``) that :func:`resume_sweep` replays, the
+    launcher, the grid (``points``: job number -> overrides, :func:`sweep_points`) and a
+    ``runs`` entry (started, resume) that :func:`finish_manifest` closes."""
+    d = Path(str(config.hydra.sweep.dir)).resolve()
+    m = read_manifest(d) or {"created": _now(), "argv": sys.argv[1:], "cwd": os.getcwd(), "python": sys.executable}
+    pts = sweep_points(config)
+    if pts is not None:
+        m["points"] = pts
+    m["launcher"] = str(config.hydra.launcher.get("_target_", ""))
+    m.setdefault("runs", []).append({"started": _now(), "argv": sys.argv[1:],
+                                     "resume": os.environ.get(RESUME_ENV) == "1"})
+    return _write_manifest(d, m)
+
+
+def finish_manifest(sweep_dir) -> None:
+    """Mark the last run of ``sweep.json`` finished: from now on a job whose
+    ``status.json`` still says ``running`` is reported as killed."""
+    m = read_manifest(sweep_dir)
+    if m and m.get("runs"):
+        m["runs"][-1]["finished"] = _now()
+        _write_manifest(sweep_dir, m)
+
+
+def record_outcome(sweep_dir, job_num: int, outcome: str, error: str = "", *, missing_error: str = "",
+                   **fields) -> str:
+    """Record what the launcher saw of job ``job_num`` (e.g. ``killed``, with the SLURM
+    state and job id in ``fields``): turn the job's ``status.json`` from ``running`` into
+    ``outcome`` (a job that died cannot write it itself), and note it in ``sweep.json``
+    under ``jobs``. A job without such a folder never started: it is noted as
+    ``missing`` with ``missing_error`` (the table lists it so).
+
+    Returns the outcome noted (``outcome`` or ``missing``)."""
+    d = Path(sweep_dir)
+    started = False
+    for j in _job_dirs(d):
+        st = read_status(j)
+        if st and st.get("job_num") == job_num and st.get("status") == "running":
+            st.update(status=outcome, error=error, finished=_now(), **fields)
+            write_status(j, st)
+            started = True
+    if not started and missing_error:
+        outcome, error = "missing", missing_error
+    m = read_manifest(d) or {}
+    m.setdefault("jobs", {})[str(job_num)] = {"outcome": outcome, "error": error, "time": _now(), **fields}
+    _write_manifest(d, m)
+    return outcome
 
 
 def _hydra_job() -> tuple[Path | None, list[str], int | None, str | None]:
@@ -138,6 +247,11 @@ def sweep_job(cfg) -> dict:
     job_dir = Path(job_dir).resolve()
     with open_dict(cfg):
         cfg.out_dir = str(job_dir)  # every job writes its tables into its own folder
+    if os.environ.get(RESUME_ENV) == "1":  # resume_sweep: keep what already has a result
+        old = read_status(job_dir)
+        if old and old.get("status") in KEEP and old.get("overrides") == overrides:
+            log.info("job %s (%s): %s before, not run again", num, " ".join(overrides), old["status"])
+            return {k: v for k, v in old.items() if k != "traceback"}
     status = {"status": "running", "job_num": num, "overrides": overrides, "out_dir": str(job_dir),
               "sweep_dir": sweep_dir, "host": socket.gethostname(), "pid": os.getpid(), "started": _now()}
     write_status(job_dir, status)
@@ -219,9 +333,10 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
 
     Returns
     -------
-    pandas DataFrame with columns ``job``, ``dir`` (relative to ``sweep_dir``),
-    ``overrides`` (space-separated), one column per overridden key, ``status``
-    (done / partial / failed / running / missing), ``error``, ``wall_s``, ``n_cases``,
+    pandas DataFrame with columns ``job``, ``dir`` (relative to ``sweep_dir``; empty for
+    a missing job), ``overrides`` (space-separated), one column per overridden key,
+    ``status`` (:data:`OUTCOMES`, or running while the sweep runs; a point of
+    ``sweep.json``'s grid without folder is missing), ``error``, ``wall_s``, ``n_cases``,
     ``n_errors``, then ``<method>/<column>`` for every column of the job's
     ``table.csv`` (per-method means over successful cases; NaN where none).
 
@@ -234,8 +349,13 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     if not d.is_dir():
         raise SShaDeError(f"sweep folder not found: {d}")
     jobs = _job_dirs(d)
-    if not jobs:
-        raise SShaDeError(f"no sweep jobs in {d} (no {STATUS_FILE} or .hydra/overrides.yaml below it)")
+    man = read_manifest(d) or {}
+    points = man.get("points") if isinstance(man.get("points"), list) else []
+    if not jobs and not points:
+        raise SShaDeError(f"no sweep jobs in {d} (no {STATUS_FILE} or .hydra/overrides.yaml below it, "
+                          f"no {MANIFEST})")
+    ended = _last_run_end(man)
+    seen = {"jobs": dict(man.get("jobs") or {})}
     rows, keys = [], []
     for j in jobs:
         st = read_status(j)
@@ -253,8 +373,11 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
         if st:
             row["status"] = str(st.get("status", "missing"))
             row["error"] = str(st.get("error") or "")
-            if row["status"] == "running" and not row["error"]:
-                row["error"] = "no final status: the job was killed, timed out or is still running"
+            if row["status"] == "running" and ended is not None and _before(st.get("started"), ended):
+                row["status"] = "killed"  # the sweep is over and the job never wrote its result
+                row["error"] = _launcher_note(seen, row["job"]) or _KILLED
+            elif row["status"] == "running" and not row["error"]:
+                row["error"] = "no final status yet: the job is still running (or was killed, if the sweep is over)"
         else:
             run_json = j / "run.json"
             try:
@@ -278,6 +401,20 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
                         if c != "method":
                             row[f"{r['method']}/{c}"] = r[c]
         rows.append(row)
+    have = {r["overrides"] for r in rows} | {r["job"] for r in rows if r["job"] is not None}
+    for num, ov in enumerate(points):  # points of the grid that have no folder: never started
+        ov = [str(o) for o in ov]
+        if " ".join(ov) in have or num in have:
+            continue
+        row = {"job": num, "dir": "", "overrides": " ".join(ov), "status": "missing",
+               "error": _launcher_note(seen, num) or "never started (no job folder): cancelled or not scheduled"
+               + ("" if ended is not None else ", or not started yet")}
+        for o in ov:
+            k, v = _split(o)
+            if k not in keys:
+                keys.append(k)
+            row[k] = _value(v)
+        rows.append(row)
     rows.sort(key=_job_sort_key)
     head = ["job", "dir", "overrides", *keys, "status", "error", "wall_s", "n_cases", "n_errors"]
     metric_cols = [c for r in rows for c in r if c not in head]
@@ -293,10 +430,39 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     return df
 
 
+_KILLED = "died without a result (killed: out of memory, time limit, node failure or cancelled)"
+
+
+def _last_run_end(man: dict):
+    """End time (datetime) of the sweep's last run in ``sweep.json``, None while it runs
+    or without a manifest."""
+    runs = man.get("runs") or []
+    end = runs[-1].get("finished") if runs and isinstance(runs[-1], dict) else None
+    try:
+        return _dt.datetime.fromisoformat(end) if end else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _before(started, end) -> bool:
+    """``started`` (ISO time of a job's start, may be missing) is before ``end``."""
+    try:
+        return _dt.datetime.fromisoformat(str(started)) <= end
+    except (TypeError, ValueError):
+        return True  # no start time: the job cannot still be running after its sweep ended
+
+
+def _launcher_note(seen: dict, num) -> str:
+    """The launcher's record of job ``num`` (``sweep.json`` ``jobs``), as an error text."""
+    j = seen["jobs"].get(str(num)) if num is not None else None
+    if not isinstance(j, dict):
+        return ""
+    return str(j.get("error") or "")
+
+
 def _sweep_title(d: Path, df) -> str:
     counts = df["status"].value_counts()
-    parts = ", ".join(f"{int(counts[s])} {s}" for s in ("done", "partial", "failed", "running", "missing")
-                      if s in counts)
+    parts = ", ".join(f"{int(counts[s])} {s}" for s in (*OUTCOMES, "running") if s in counts)
     spec = ""
     p = d / "multirun.yaml"
     if p.is_file():
@@ -365,12 +531,20 @@ except ImportError:  # pragma: no cover -- hydra-core is a dependency
 
 
 class AggregateSweepCallback(_Callback):
-    """Hydra callback: build ``sweep_table.{csv,md}`` when a multirun ends
-    (``hydra.callbacks.sweep_aggregate._target_=eval.sweep.AggregateSweepCallback``)."""
+    """Hydra callback (``hydra.callbacks.sweep_aggregate._target_=eval.sweep.AggregateSweepCallback``):
+    writes ``sweep.json`` (grid and command, :func:`start_manifest`) when a multirun
+    starts, and builds ``sweep_table.{csv,md}`` when it ends."""
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        try:
+            start_manifest(config)
+        except Exception as e:  # noqa: BLE001 -- a sweep without manifest still runs
+            log.warning("cannot write %s: %s", MANIFEST, e)
 
     def on_multirun_end(self, config, **kwargs) -> None:
         try:
             d = Path(str(config.hydra.sweep.dir))
+            finish_manifest(d)
             df = aggregate_sweep(d)
         except Exception as e:  # noqa: BLE001 -- never fail a finished sweep over its summary
             log.warning("sweep aggregation failed: %s", e)
@@ -402,11 +576,73 @@ def _aggregate_cli(args: list[str]) -> int:
     return rc
 
 
+def _resume_argv(man: dict, sweep_dir: Path) -> list[str]:
+    """The sweep's command line with ``hydra.sweep.dir`` pinned to ``sweep_dir`` (the
+    original may hold a ``${now:...}`` default or another spelling of the folder)."""
+    argv = [str(a) for a in man.get("argv") or []]
+    argv = [a for a in argv if a.lstrip("+~").split("=", 1)[0] != "hydra.sweep.dir"]
+    if not any(a in ("-m", "--multirun") for a in argv):
+        argv.insert(0, "-m")
+    return [*argv, f"hydra.sweep.dir={sweep_dir}"]
+
+
+def resume_sweep(sweep_dir) -> int:
+    """Run again the killed, failed and missing jobs of a sweep, with the same command
+    (config, overrides, launcher) as recorded in ``sweep.json``, into the same folders;
+    the jobs that are done or partial are not run again (:data:`RESUME_ENV`: the SLURM
+    launcher does not submit them, the job function of the other launchers returns at
+    once). ``sweep_table.{csv,md}`` are rebuilt at the end.
+
+    Returns the exit status: 0 (also when nothing is left to run), 2 when the folder
+    holds no ``sweep.json`` (a sweep not started by ``python -m eval.sweep``).
+
+    Raises
+    ------
+    SShaDeError when ``sweep_dir`` is not a folder.
+    """
+    d = Path(sweep_dir).expanduser().resolve()
+    if not d.is_dir():
+        raise SShaDeError(f"sweep folder not found: {d}")
+    man = read_manifest(d)
+    if not man or not man.get("argv") and not man.get("points"):
+        print(f"error: {d / MANIFEST} not found or empty: only sweeps started by python -m eval.sweep "
+              "can be resumed", file=sys.stderr)
+        return 2
+    df = aggregate_sweep(d)
+    todo = df[~df["status"].isin(KEEP)]
+    if todo.empty:
+        print(sweep_markdown(df, title=_sweep_title(d, df)))
+        print(f"resume: every job of {d} is done or partial; nothing to run")
+        return 0
+    print(f"resume: running again {len(todo)} of {len(df)} job(s): "
+          + ", ".join(f"{j} ({s})" for j, s in zip(todo["job"], todo["status"])), flush=True)
+    cwd = man.get("cwd") or os.getcwd()
+    os.environ[RESUME_ENV] = "1"  # inherited by the jobs (SLURM exports the environment)
+    old = os.getcwd()
+    try:
+        os.chdir(cwd)  # relative paths of the command (dataset.root, ...) mean what they meant
+        main(_resume_argv(man, d))
+    finally:
+        os.chdir(old)
+        os.environ.pop(RESUME_ENV, None)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> None:
-    """``python -m eval.sweep [hydra args and overrides]`` or ``... aggregate DIR...``."""
+    """``python -m eval.sweep [hydra args and overrides]``, ``... aggregate DIR...`` or
+    ``... resume DIR`` (:func:`resume_sweep`)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "aggregate":
         raise SystemExit(_aggregate_cli(argv[1:]))
+    if argv and argv[0] == "resume":
+        if len(argv) != 2 or argv[1].startswith("-"):
+            print("usage: python -m eval.sweep resume SWEEP_DIR", file=sys.stderr)
+            raise SystemExit(2)
+        try:
+            raise SystemExit(resume_sweep(argv[1]))
+        except SShaDeError as e:
+            print(f"error: {e}", file=sys.stderr)
+            raise SystemExit(2) from None
     import hydra
 
     from .confdir import config_dir

@@ -13,6 +13,7 @@ import numpy as np
 
 from .arap import arap_deform
 from .errors import SShaDeError
+from .halfedge import count_components
 from .lrf import GRADIENTS, transfer
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
@@ -27,12 +28,14 @@ _W: dict = {}
 _WARM = False
 
 
-def _warmup() -> None:
+def _warmup() -> float:
     """Compile (or load from cache) the numba kernels in this process, so forked
-    workers inherit them instead of each compiling its own."""
+    workers inherit them instead of each compiling its own. Returns the seconds spent
+    (0.0 when already done in this process)."""
     global _WARM
     if _WARM:
-        return
+        return 0.0
+    t0 = time.perf_counter()
     V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 4], [2, 3, 4], [3, 1, 4]])
     from .geodesic import VoronoiState
@@ -45,6 +48,7 @@ def _warmup() -> None:
     from .arap_solver import warmup_kernels
     warmup_kernels()  # the low-res ARAP's serial kernels, inherited by the forked workers
     _WARM = True
+    return time.perf_counter() - t0
 
 
 def _init_worker(state: dict) -> None:
@@ -265,7 +269,10 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     Parameters
     ----------
     V : (n, 3) float64 rest vertex positions (any length unit).
-    F : (m, 3) int faces of a single-component manifold triangle mesh (boundary allowed).
+    F : (m, 3) int faces of a manifold triangle mesh (boundary allowed). With several
+        connected components, each one holding handles is deformed apart and each one
+        without follows its nearest deformed component rigidly
+        (:func:`sshade.components.deform_components`; info gains ``n_components``).
     handles : (h,) int vertex indices. targets : (h, 3) float target positions.
     n_low : int or ``"auto"``, farthest-point samples per low-res mesh (paper: ~6000 for
         150k-200k vertices); capped at n; ``"auto"`` = :func:`auto_n_low`. The handles
@@ -274,14 +281,17 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
     workers : int or None, processes (default: min(k, CPU count)); 1 runs in-process.
     protocol : the low-res ARAP's protocol (:func:`sshade.arap.arap_deform`):
-        ``"converged"`` (default; Anderson-accelerated, stopped by the energy-and-gradient
+        ``"converged"`` (default; L-BFGS-accelerated, stopped by the energy-and-gradient
         criterion with thresholds ``etol``/``gtol``, None = defaults) or ``"paper"``
         (libigl, stops when the largest move in one iteration is below
         ``tol * bbox_diag``). max_iter : int or None, cap (None: protocol default;
         paper: 1000).
     gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
     warm_start : bool, start samplings 1..k-1 from sampling 0's result.
-    return_info : also return a dict of timings, seeds and per-sampling details.
+    return_info : also return a dict of timings, seeds and per-sampling details;
+        ``total_s`` (wall seconds) excludes ``compile_s``, the seconds this call spent
+        compiling or loading numba's kernels (0.0 once a call or :meth:`SShaDe.warmup`
+        did it in this process).
 
     Returns
     -------
@@ -308,10 +318,13 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
                      max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
                      gtol=gtol)
     n_samplings, workers = p["n_samplings"], p["workers"]
+    compile_s = _warmup()  # numba compilation / cache loads: not part of the timings below
     t0 = time.perf_counter()
-    _warmup()
-    V, F, he = validate_mesh(V, F, return_halfedges=True)
+    V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
     handles, targets = validate_handles(V, handles, targets)
+    if count_components(he.E, len(V)) > 1:  # each component apart, handle-less ones rigidly (sshade.components)
+        from .components import deform_components
+        return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
     n_low_asked = auto_n_low(len(V)) if p["n_low"] == "auto" else p["n_low"]
     full_res = n_low_asked >= len(V)
     if full_res:
@@ -357,7 +370,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     t2 = time.perf_counter()
     if not return_info:
         return Vd
-    info = {"total_s": t2 - t0, "setup_s": t1 - t0, "workers": workers, "seed": seed, "sampling_seeds": seeds,
+    info = {"total_s": t2 - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers, "seed": seed,
+            "sampling_seeds": seeds,
             "warm_start": bool(warm_start), "n_low_requested": int(n_low_asked), "low_res_skipped": bool(full_res),
             "samplings": infos}
     for k in ("remesh_s", "project_s", "arap_s", "transfer_s", "iterations"):
@@ -398,3 +412,12 @@ class SShaDe:
         """See :func:`deform`; returns (n, 3) float64."""
         Vd, self.info = deform(V, F, handles, targets, return_info=True, **self.params)
         return Vd
+
+    def warmup(self, n_vertices: int | None = None) -> float:
+        """Compile (or load from numba's cache) every kernel :meth:`deform` runs, by one
+        in-process run on a tiny mesh with this method's protocol and gradient mode
+        (:func:`sshade.warmup.warm_once`), so that a timed call measures no compilation.
+        ``n_vertices`` is accepted for the common interface (SShaDe's kernels run on the
+        low-resolution meshes, serially). Returns the seconds spent (0.0 when warm)."""
+        from .warmup import warm_sshade
+        return warm_sshade(self.params)

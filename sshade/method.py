@@ -26,6 +26,11 @@ class Deformer(Protocol):
         ``V`` (n,3) float64 rest positions, ``F`` (m,3) int64, ``handles`` (h,) int64
         vertex indices, ``targets`` (h,3) float64 positions. Returns deformed positions
         with the same connectivity ``F``. Raises ``SShaDeError`` on bad input.
+    warmup(n_vertices=None) -> float, optional
+        Compile or load whatever the first :meth:`deform` on an ``n_vertices`` mesh
+        would (numba kernels, lazy imports), returning the seconds spent (0.0 when
+        already warm). The evaluator calls it before the timed call and reports the
+        seconds as ``compile_s``, never inside ``time_s`` (:mod:`sshade.warmup`).
     """
 
     name: str

@@ -2,7 +2,7 @@
 spokes-and-rims solve.
 
 SShaDe (paper §3) gives a deformation close to the full-resolution ARAP minimiser in a
-fraction of its time; the Anderson-accelerated local/global of
+fraction of its time; the L-BFGS-accelerated local/global of
 :func:`sshade.arap_solver.solve_arap` started there needs fewer iterations than from
 the rigid fit of the handles. This method measures how many (``refine_iterations``
 against a full-resolution Elastic row's ``iterations``), and gives the converged
@@ -75,3 +75,11 @@ class SShaDeRefine:
                     energy=res.info.get("energy"), gnorm=res.info.get("gnorm"))
         self.info = info
         return res.V
+
+    def warmup(self, n_vertices: int | None = None) -> float:
+        """Compile (or load from numba's cache) the kernels of SShaDe and of the converged
+        full-resolution spokes-and-rims solve (parallel variants too when an ``n_vertices``
+        mesh uses them), outside any timed call (:mod:`sshade.warmup`). Returns the
+        seconds spent (0.0 when warm)."""
+        from .warmup import warm_fullres, warm_sshade
+        return warm_sshade(self.params) + warm_fullres(self.energy, "converged", n_vertices)

@@ -24,7 +24,7 @@ __all__ = ["validate_mesh", "validate_handles"]
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
-                  area_tol: float = 1e-14, return_halfedges: bool = False):
+                  area_tol: float = 1e-14, return_halfedges: bool = False, allow_components: bool = False):
     """Check that ``(V, F)`` is a single-component 2-manifold triangle mesh.
 
     Parameters
@@ -37,6 +37,9 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
 
     return_halfedges : bool, also return the :class:`sshade.halfedge.HalfEdges` built
         for the checks (reused by :func:`sshade.remesh.mesh_topology`).
+    allow_components : bool, accept several connected components (each still has to
+        pass every other check); used by :func:`sshade.components.deform_components`,
+        which deforms each component apart.
 
     Returns
     -------
@@ -50,7 +53,7 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         Wrong shapes, non-triangle faces, NaN/inf coordinates, out-of-range or repeated
         indices in a face, degenerate faces, duplicate faces, non-manifold edges
         (>2 faces or inconsistent orientation), non-manifold vertices, unreferenced
-        vertices, several connected components.
+        vertices, several connected components (unless ``allow_components``).
 
     Examples
     --------
@@ -78,9 +81,9 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         if not np.all(np.isfinite(F)) or np.any(F != np.round(F)):
             raise SShaDeError(f"{name}: face indices are not integers")
     F = np.ascontiguousarray(F, dtype=np.int64)
-    he = _fast_checks(V, F, allow_boundary, area_tol)
+    he = _fast_checks(V, F, allow_boundary, area_tol, allow_components)
     if he is None:  # something looks wrong: the reference checks name it (or pass a borderline case)
-        he = _reference_checks(V, F, name, allow_boundary, area_tol)
+        he = _reference_checks(V, F, name, allow_boundary, area_tol, allow_components)
     if return_halfedges:
         return V, F, he
     return V, F
@@ -140,7 +143,7 @@ def _twin_faces(twin):
     return False
 
 
-def _fast_checks(V, F, allow_boundary, area_tol):
+def _fast_checks(V, F, allow_boundary, area_tol, allow_components=False):
     """The checks of :func:`validate_mesh`, compiled; the mesh's HalfEdges if it passes,
     None if any check fails (then :func:`_reference_checks` names the problem)."""
     n = len(V)
@@ -161,12 +164,12 @@ def _fast_checks(V, F, allow_boundary, area_tol):
         return None
     if not allow_boundary and (he.count == 1).any():
         return None
-    if count_components(he.E, n) != 1 or count_pinched_vertices(F, he, n):
+    if (not allow_components and count_components(he.E, n) != 1) or count_pinched_vertices(F, he, n):
         return None
     return he
 
 
-def _reference_checks(V, F, name, allow_boundary, area_tol):
+def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=False):
     """The checks of :func:`validate_mesh` in numpy/scipy, in order; raise SShaDeError
     naming the first problem. ``V`` (n, 3) float64, ``F`` (m, 3) int64 (contiguous).
     Returns the HalfEdges of a mesh that passes."""
@@ -186,7 +189,9 @@ def _reference_checks(V, F, name, allow_boundary, area_tol):
     used[F.ravel()] = True
     if not used.all():
         raise SShaDeError(f"{name}: {int((~used).sum())} unreferenced vertices (first: vertex {np.flatnonzero(~used)[0]}); "
-                          "remove them before deforming")
+                          "remove them before deforming (sshade.components.drop_unreferenced(V, F) returns the "
+                          "mesh without them and the old index of each kept vertex; `python -m sshade deform` "
+                          "drops them itself)")
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     if diag == 0:
         raise SShaDeError(f"{name}: all vertices coincide")
@@ -215,8 +220,10 @@ def _reference_checks(V, F, name, allow_boundary, area_tol):
     E = he.E
     A = sp.coo_matrix((np.ones(len(E), np.int8), (E[:, 0], E[:, 1])), shape=(n, n))
     ncomp, _ = connected_components(A, directed=False)
-    if ncomp != 1:
-        raise SShaDeError(f"{name}: has {ncomp} connected components; SShaDe needs a single component (paper §2)")
+    if ncomp != 1 and not allow_components:
+        raise SShaDeError(f"{name}: has {ncomp} connected components; this solver needs a single component "
+                          "(paper §2): sshade.deform, sshade.components.deform_components(method, V, F, handles, "
+                          "targets), the evaluator and `python -m sshade deform` deform each component apart")
     # vertex manifoldness: the faces around each vertex form a single fan (corners linked
     # across interior edges at both ends; a pinch vertex has several groups of corners)
     fans = vertex_fan_count(F, he, n)

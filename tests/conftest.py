@@ -32,6 +32,15 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
+@pytest.fixture(scope="session")
+def faust_root(shared_data) -> Path:
+    """../shared/data/faust_reg with subject 0's rest pose and one other pose, or skip."""
+    root = shared_data / "faust_reg"
+    if not (root / "tr_reg_000.ply").is_file() or not list(root.glob("tr_reg_00[1-9].ply")):
+        pytest.skip(f"FAUST subject 0 rest + one pose not found in {root}")
+    return root
+
+
 def data_file(rel: str) -> Path:
     """Path of one file in shared data, skipping the test if it is missing."""
     p = SHARED_DATA / rel

@@ -18,12 +18,13 @@ from eval.confdir import config_dir
 from sshade.errors import SShaDeError
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_ROOTS = ("sshade", "baselines", "defaust", "eval")
+PACKAGE_ROOTS = ("sshade", "baselines", "defaust", "eval", "hydra_plugins")  # hydra_plugins: the sweep launcher
 # the configs the commands and the README name, at their place in the wheel
 EXPECTED_CONF = ["config.yaml", "dataset/faust.yaml", "dataset/defaust.yaml", "dataset/shapes.yaml",
                  "experiment/ci.yaml", "experiment/main.yaml", "experiment/sweep.yaml",
                  "experiment/sweep_slurm.yaml", "defaust/config.yaml", "defaust/preset/ci.yaml",
-                 "defaust/preset/full.yaml", "hydra/launcher/slurm.yaml"]
+                 "defaust/preset/full.yaml", "hydra/launcher/slurm.yaml", "method/ARAP.yaml", "method/Elastic.yaml",
+                 "method/ARAP-SR.yaml", "method/SShaDe.yaml", "method/SShaDe+refine.yaml"]
 _IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info", "build")
 
 
@@ -137,3 +138,7 @@ def test_installed_wheel_runs_outside_checkout(wheel, tmp_path):
     if importlib.util.find_spec("hydra_plugins.hydra_submitit_launcher") is not None:
         cfg = run("-m", "eval", "--cfg", "hydra", "hydra/launcher=slurm", f"dataset.root={tmp_path}")
         assert "array_parallelism: 64" in cfg  # conf/hydra/launcher/slurm.yaml was found
+        # and the sweep launcher plugin of the wheel (hydra_plugins/sshade_sweep_launcher)
+        assert "_target_: hydra_plugins.sshade_sweep_launcher.SweepSlurmLauncher" in cfg
+        out = run("-c", "import hydra_plugins.sshade_sweep_launcher as p; print(p.__file__)")
+        assert out.strip() == str(site / "hydra_plugins" / "sshade_sweep_launcher" / "__init__.py")

@@ -1,0 +1,257 @@
+"""``python -m sshade deform``: deform one mesh file with handles read from a file.
+
+Usage::
+
+    python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def
+                                         | --handles F.json|F.csv)
+        [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--repair]
+
+- ``MESH``: .obj, .off, .ply or .stl (:func:`defaust.meshio.read_mesh`); ``OUT``: .obj,
+  .off or .ply, written atomically (temporary file + rename) in that format.
+- Handles (:mod:`eval.handle_files`): the deformation benchmark's ``.sel`` + ``.def``
+  (Botsch & Sorkine 2008), libigl's ``.dmat`` selection + ``.def``, or a ``.json`` /
+  ``.csv`` of vertex indices and target positions. Indices refer to MESH's vertices as
+  stored in the file.
+- ``--method``: ``SShaDe`` (default), ``SShaDe+refine``, ``ARAP``, ``Elastic``, ``ARAP-SR``
+  (their definitions in ``conf/method/``, defaults of ``conf/config.yaml``) or a plug-in
+  ``pkg.module.Class`` (:func:`eval.methods.named_or_plugin`); ``--n-low``, ``--k``
+  (samplings) and ``--seed`` set SShaDe's ``n_low``, ``n_samplings``, ``seed`` (also given
+  to a plug-in that takes them); ``--param KEY=VALUE`` sets any other parameter.
+- Several connected components are deformed apart, those without handles follow
+  rigidly (:mod:`sshade.components`). Unreferenced vertices are dropped with a warning
+  (OUT then has fewer vertices; handles on them are dropped). ``--repair`` first applies
+  pymeshlab's filters that never move a vertex (:mod:`sshade.repair`) and prints what
+  they changed; without it a non-manifold mesh is refused with its clear error.
+
+Prints the time of each stage (read, handles, repair, deform, write) on stdout; a
+progress bar on stderr when it is a terminal. Exit status 0 on success, 2 on bad input
+or usage (one ``error: ...`` line on stderr, no traceback).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["main", "build_parser", "deform_file", "parse_param"]
+
+OUT_EXTS = (".obj", ".off", ".ply")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors on one line (``error: ...``) and exit status 2."""
+
+    def error(self, message):  # noqa: D102 -- argparse hook
+        print(f"error: {message} (python -m sshade deform --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m sshade deform`` (module docstring)."""
+    p = _Parser(prog="python -m sshade deform",
+                description="Deform one mesh with handles read from a file (SShaDe by default).")
+    p.add_argument("mesh", help="input mesh (.obj, .off, .ply, .stl)")
+    p.add_argument("-o", "--out", required=True, help="output mesh (.obj, .off, .ply), written atomically")
+    g = p.add_argument_group("handles (one of)")
+    g.add_argument("--sel", help="deformation-benchmark selection: one line per vertex, 0 fixed, 1 free, 2 handle")
+    g.add_argument("--dmat", help="libigl .dmat selection: -1 free, 0 fixed, >= 1 handle")
+    g.add_argument("--def", dest="def_", metavar="DEF", help="4x4 matrix applied to the handle vertices")
+    g.add_argument("--handles", help=".json {handles: [...], targets: [[x,y,z],...]} or .csv rows index,x,y,z")
+    p.add_argument("--method", default="SShaDe",
+                   help="SShaDe (default), SShaDe+refine, ARAP, Elastic, ARAP-SR or a plug-in pkg.module.Class")
+    p.add_argument("--n-low", help="SShaDe's low-resolution vertex count (int or auto; default auto)")
+    p.add_argument("--k", type=int, help="SShaDe's number of samplings (default 5)")
+    p.add_argument("--seed", type=int, help="SShaDe's seed (default 0)")
+    p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="any other parameter of the method (repeatable), e.g. --param workers=1")
+    p.add_argument("--repair", action="store_true",
+                   help="apply pymeshlab's vertex-preserving repair filters first and report what changed")
+    return p
+
+
+def parse_param(text: str) -> tuple[str, object]:
+    """``"key=value"`` -> ``(key, value)`` with value an int, float, bool, None
+    (``null``/``none``) or str. Raises SShaDeError on a missing ``=`` or key."""
+    key, sep, val = str(text).partition("=")
+    if not sep or not key.strip():
+        raise SShaDeError(f"--param {text!r}: expected KEY=VALUE")
+    v = val.strip()
+    low = v.lower()
+    if low in ("null", "none"):
+        return key.strip(), None
+    if low in ("true", "false"):
+        return key.strip(), low == "true"
+    for cast in (int, float):
+        try:
+            return key.strip(), cast(v)
+        except ValueError:
+            pass
+    return key.strip(), v
+
+
+def _check_args(a) -> None:
+    """Usage checks that need no file: one handle source, output extension."""
+    sources = [bool(a.sel), bool(a.dmat), bool(a.handles)]
+    if sum(sources) != 1:
+        raise SShaDeError("give exactly one of --sel F.sel --def F.def, --dmat F.dmat --def F.def, "
+                          "--handles F.json|F.csv")
+    if (a.sel or a.dmat) and not a.def_:
+        raise SShaDeError(f"--{'sel' if a.sel else 'dmat'} needs --def F.def (the matrix moving the handles)")
+    if a.handles and a.def_:
+        raise SShaDeError("--def goes with --sel or --dmat, not with --handles (which holds the targets)")
+    if Path(a.out).suffix.lower() not in OUT_EXTS:
+        raise SShaDeError(f"output {a.out}: unsupported format {Path(a.out).suffix or '(none)'!r}; "
+                          f"use one of {list(OUT_EXTS)}")
+
+
+def _method(a):
+    """The method of ``--method`` with ``--n-low``/``--k``/``--seed``/``--param``."""
+    from .methods import named_or_plugin
+    params = dict(parse_param(t) for t in a.param)
+    for key, val in (("n_low", a.n_low), ("n_samplings", a.k), ("seed", a.seed)):
+        if val is not None:
+            params[key] = parse_param(f"x={val}")[1] if key == "n_low" else val
+    return named_or_plugin(a.method, params)
+
+
+def _read_handles(a, V):
+    """(handles, targets) of the chosen handle files, for the mesh as read."""
+    from .handle_files import read_def, read_dmat_selection, read_handle_file, read_sel, selection_handles
+    if a.handles:
+        return read_handle_file(a.handles, len(V))
+    M = read_def(a.def_)
+    status = read_sel(a.sel, len(V)) if a.sel else read_dmat_selection(a.dmat, len(V))
+    return selection_handles(V, status, M)
+
+
+def _carry(origin, handles, targets, n_old):
+    """Handles of the input's vertices carried to new vertices (``origin[i]``: the input
+    vertex of new vertex ``i``): a new vertex is a handle when its origin is one."""
+    tgt = np.full((n_old, 3), np.nan)
+    tgt[handles] = targets
+    is_h = np.zeros(n_old, bool)
+    is_h[handles] = True
+    new_h = np.flatnonzero(is_h[origin]).astype(np.int64)
+    return new_h, tgt[origin[new_h]]
+
+
+def deform_file(a, log=print, warn=None) -> dict:
+    """Run ``python -m sshade deform`` for parsed arguments ``a`` (:func:`build_parser`).
+
+    Parameters
+    ----------
+    a : argparse.Namespace. log : callable printing a line (stage times, report).
+    warn : callable printing a warning line (default: ``warning: ...`` on stderr).
+
+    Returns
+    -------
+    dict with ``times`` (stage -> seconds), ``n_vertices``, ``n_faces``, ``n_handles``,
+    ``info`` (the method's info, with ``n_components`` for several components), ``out``.
+
+    Raises
+    ------
+    SShaDeError on bad input (files, handles, mesh), before the output is written.
+    """
+    from tqdm import tqdm
+
+    from defaust.meshio import read_mesh, write_mesh
+    from sshade.components import deform_components, drop_unreferenced
+    warn = warn or (lambda s: print(f"warning: {s}", file=sys.stderr))
+    _check_args(a)
+    method = _method(a)  # a bad method or parameter fails before any file is read
+    times: dict[str, float] = {}
+    stages = ["read", "handles", *(["repair"] if a.repair else []), "deform", "write"]
+    bar = tqdm(total=len(stages), desc="sshade deform", unit="stage", file=sys.stderr, disable=None, leave=False)
+
+    def stage(name):
+        bar.set_postfix_str(name)
+        return time.perf_counter()
+
+    def done(name, t0):
+        times[name] = time.perf_counter() - t0
+        bar.update(1)
+
+    with bar:
+        t = stage("read")
+        V, F = read_mesh(a.mesh, validate=False)
+        done("read", t)
+        n_in = len(V)
+        t = stage("handles")
+        handles, targets = _read_handles(a, V)
+        done("handles", t)
+        origin = np.arange(n_in)
+        if a.repair:
+            from sshade.repair import repair_mesh
+            t = stage("repair")
+            V, F, origin, report = repair_mesh(V, F)
+            done("repair", t)
+            changes = [f"{what}: {abs(dv) if dv else abs(df)}" for what, dv, df in report if dv or df]
+            log(f"repair: {'; '.join(changes) if changes else 'nothing to repair'} "
+                f"({n_in} -> {len(V)} vertices, {len(F)} faces)")
+        V, F, kept = drop_unreferenced(V, F)
+        if len(kept) < len(origin):
+            lost = np.setdiff1d(handles, origin[kept]).size
+            warn(f"dropped {len(origin) - len(kept)} unreferenced vertices (on no face)"
+                 f"{f', {lost} of them handles' if lost else ''}; {a.out} has {len(V)} vertices, not {n_in}")
+        origin = origin[kept]
+        if len(V) != n_in or not np.array_equal(origin, np.arange(n_in)):
+            handles, targets = _carry(origin, handles, targets, n_in)
+            if len(handles) == 0:
+                raise SShaDeError("no handle is left on the mesh's faces")
+        t = stage("deform")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                Vd, info = deform_components(method, V, F, handles, targets, return_info=True)
+            except SShaDeError as e:
+                hint = " (--repair applies pymeshlab's safe repair filters)" if not a.repair and str(e).startswith(
+                    "mesh:") and any(w in str(e) for w in ("non-manifold", "duplicate", "degenerate")) else ""
+                raise SShaDeError(f"{e}{hint}") from None
+        done("deform", t)
+        for w in dict.fromkeys(str(w.message) for w in caught):
+            warn(w)
+        t = stage("write")
+        try:
+            write_mesh(a.out, Vd, F)
+        except OSError as e:
+            raise SShaDeError(f"cannot write {a.out} ({e.strerror or e})") from None
+        done("write", t)
+    ncomp = info.get("n_components", 1)
+    log(f"{method.name}: {a.mesh} ({len(V)} vertices, {len(F)} faces, {ncomp} component"
+        f"{'s' if ncomp > 1 else ''}), {len(handles)} handles -> {a.out}")
+    for k, v in times.items():
+        log(f"  {k:<8} {v:8.3f} s")
+    log(f"  {'total':<8} {sum(times.values()):8.3f} s")
+    return {"times": times, "n_vertices": len(V), "n_faces": len(F), "n_handles": len(handles), "info": info,
+            "out": Path(a.out)}
+
+
+def main(argv=None) -> int:
+    """Entry point of ``python -m sshade``: ``deform ...`` (module docstring).
+
+    Returns the exit status (0 success, 2 bad input or usage, after one ``error:``
+    line on stderr).
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def | "
+              "--handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE] "
+              "[--repair]\n(python -m sshade deform --help for details)", file=sys.stderr if not argv else sys.stdout)
+        return 2 if not argv else 0
+    if argv[0] != "deform":
+        print(f"error: unknown command {argv[0]!r}; the command is `python -m sshade deform MESH -o OUT ...`",
+              file=sys.stderr)
+        return 2
+    a = build_parser().parse_args(argv[1:])
+    try:
+        deform_file(a)
+    except SShaDeError as e:
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,283 @@
+"""Handle files of the field, read into ``(handles, targets)`` for a mesh of ``n`` vertices.
+
+- Botsch & Sorkine's deformation benchmark ("On linear variational surface deformation
+  methods", IEEE TVCG 2008; data at igl.ethz.ch/projects/deformation-survey):
+  ``FILE.sel``, one integer per vertex and line, ``0`` fixed, ``1`` free (deformable
+  region), ``2`` handle, lines starting with ``#`` are comments (the files start with
+  ``# per vertex status: 0=fixed, 1=deformable-region, 2=handle`` and ``# N vertices``);
+  ``FILE.def``, the 4x4 homogeneous matrix (row-major, translation in the last column,
+  ``#`` comment lines) applied to the handle vertices. The fixed vertices are handles
+  too, held at their rest positions; the free ones are the unknowns.
+- libigl's tutorial format (tutorials 401/405, ``igl::readDMAT``): ``FILE.dmat``, a
+  header ``ncols nrows`` then the values column by column (or libigl's binary variant),
+  here one column (or row) with one value per vertex: ``-1`` free, ``0`` fixed, ``1`` or
+  more handle (libigl's constrained vertices are those ``>= 0``; the groups ``>= 1`` all
+  move by the one ``.def`` matrix), with ``--def`` as above.
+- ``FILE.json`` ``{"handles": [i, ...], "targets": [[x, y, z], ...]}`` or ``FILE.csv``
+  with rows ``index,x,y,z`` (an optional header line ``index,x,y,z``): vertex indices
+  (0-based) and target positions in mesh units.
+
+Every reader raises :class:`SShaDeError` with one line naming the file and the problem
+(unreadable file, wrong vertex count, a value that is not allowed, a matrix that is not
+a finite invertible affine 4x4, an index out of range, NaN).
+"""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+from sshade.validate import validate_handles
+
+__all__ = ["read_sel", "read_dmat_selection", "read_def", "apply_def", "selection_handles", "read_handle_file",
+           "write_sel", "write_def", "FIXED", "FREE", "HANDLE"]
+
+#: Per-vertex status codes (those of the ``.sel`` format).
+FIXED, FREE, HANDLE = 0, 1, 2
+
+
+def _text_lines(path, what: str) -> list[tuple[int, str]]:
+    """(line number, stripped text) of the non-empty, non-comment lines of a text file."""
+    p = Path(path)
+    if not p.is_file():
+        raise SShaDeError(f"{what} file not found: {p}")
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise SShaDeError(f"{p}: unreadable {what} file ({type(e).__name__})") from None
+    return [(i, s) for i, ln in enumerate(text.splitlines(), 1) if (s := ln.strip()) and not s.startswith("#")]
+
+
+def read_sel(path, n: int) -> np.ndarray:
+    """Per-vertex status of a ``.sel`` file (deformation benchmark, module docstring).
+
+    Parameters
+    ----------
+    path : str or Path. n : int, the mesh's vertex count.
+
+    Returns
+    -------
+    (n,) int8 status: :data:`FIXED` (0), :data:`FREE` (1), :data:`HANDLE` (2).
+
+    Raises
+    ------
+    SShaDeError naming the file: missing or unreadable, a line that is not one of 0, 1,
+    2, a number of values other than ``n``, or neither a fixed nor a handle vertex.
+    """
+    rows = _text_lines(path, ".sel")
+    vals = np.empty(len(rows), np.int8)
+    for k, (i, s) in enumerate(rows):
+        if s not in ("0", "1", "2"):
+            raise SShaDeError(f"{path}: line {i} is {s[:40]!r}; a .sel line is 0 (fixed), 1 (free) or 2 (handle)")
+        vals[k] = int(s)
+    if len(vals) != n:
+        raise SShaDeError(f"{path}: {len(vals)} vertex values but the mesh has {n} vertices")
+    if not (vals != FREE).any():
+        raise SShaDeError(f"{path}: every vertex is free (1); mark fixed (0) or handle (2) vertices")
+    return vals
+
+
+def read_dmat_selection(path, n: int) -> np.ndarray:
+    """Per-vertex status from a libigl ``.dmat`` selection (module docstring), in the
+    ``.sel`` codes: ``-1`` -> :data:`FREE`, ``0`` -> :data:`FIXED`, ``>= 1`` -> :data:`HANDLE`.
+
+    Parameters
+    ----------
+    path : str or Path (ASCII or binary ``.dmat``, read by libigl's ``readDMAT``).
+    n : int, the mesh's vertex count.
+
+    Returns
+    -------
+    (n,) int8 status codes.
+
+    Raises
+    ------
+    SShaDeError naming the file: missing or unreadable, not one value per vertex (an
+    (n, 1) or (1, n) matrix), values that are not integers >= -1 or not finite, or no
+    fixed and no handle vertex.
+    """
+    import igl
+    p = Path(path)
+    if not p.is_file():
+        raise SShaDeError(f".dmat file not found: {p}")
+    try:
+        head = p.read_bytes()[:200].split(b"\n", 1)[0].split()
+        if len(head) != 2 or not all(t.lstrip(b"-").isdigit() for t in head):
+            raise ValueError("no 'ncols nrows' header")
+        S = np.asarray(igl.readDMAT(str(p)), np.float64)
+    except Exception as e:  # libigl raises RuntimeError/ValueError on garbage
+        raise SShaDeError(f"{p}: unreadable .dmat file ({' '.join(str(e).split()) or type(e).__name__})") from None
+    if S.ndim != 2 or 1 not in S.shape or S.size != n:
+        raise SShaDeError(f"{p}: a selection needs one value per vertex ({n}), got a {S.shape[0]}x{S.shape[1]} "
+                          "matrix" if S.ndim == 2 else f"{p}: unreadable .dmat file")
+    S = S.ravel()
+    if not np.isfinite(S).all():
+        raise SShaDeError(f"{p}: NaN/inf in the selection (first: vertex {int(np.flatnonzero(~np.isfinite(S))[0])})")
+    bad = (S != np.round(S)) | (S < -1)
+    if bad.any():
+        v = int(np.flatnonzero(bad)[0])
+        raise SShaDeError(f"{p}: vertex {v} has selection value {S[v]:g}; use -1 (free), 0 (fixed) or >= 1 (handle)")
+    out = np.where(S < 0, FREE, np.where(S == 0, FIXED, HANDLE)).astype(np.int8)
+    if not (out != FREE).any():
+        raise SShaDeError(f"{p}: every vertex is free (-1); mark fixed (0) or handle (>= 1) vertices")
+    return out
+
+
+def read_def(path) -> np.ndarray:
+    """The 4x4 handle transformation of a ``.def`` file (module docstring).
+
+    Returns
+    -------
+    (4, 4) float64 M, acting on homogeneous column vectors: ``p' = M[:3, :3] p + M[:3, 3]``.
+
+    Raises
+    ------
+    SShaDeError naming the file: missing or unreadable, not 4 rows of 4 numbers, NaN/inf,
+    a last row other than ``0 0 0 1`` (not affine), or a singular 3x3 part
+    (non-invertible: it would flatten the handle).
+    """
+    rows = _text_lines(path, ".def")
+    try:
+        M = np.array([[float(x) for x in s.split()] for _, s in rows], np.float64)
+    except ValueError as e:
+        raise SShaDeError(f"{path}: not a 4x4 matrix of numbers ({e})") from None
+    if M.shape != (4, 4):
+        raise SShaDeError(f"{path}: a .def file holds a 4x4 matrix (4 lines of 4 numbers), got "
+                          f"{[len(s.split()) for _, s in rows]} numbers per line")
+    if not np.isfinite(M).all():
+        raise SShaDeError(f"{path}: the matrix has NaN/inf entries")
+    if not np.allclose(M[3], [0, 0, 0, 1], rtol=0, atol=1e-12):
+        raise SShaDeError(f"{path}: last row is {M[3].tolist()}, not [0, 0, 0, 1]: only affine transformations "
+                          "are supported")
+    A = M[:3, :3]
+    if abs(np.linalg.det(A)) <= 1e-12 * max(1.0, np.abs(A).max()) ** 3:
+        raise SShaDeError(f"{path}: the 3x3 part of the matrix is singular (det {np.linalg.det(A):.3g}): a "
+                          "non-invertible transformation would flatten the handle")
+    return M
+
+
+def apply_def(M: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """(k, 3) float64 ``P`` mapped by the 4x4 affine ``M``: ``P @ M[:3, :3].T + M[:3, 3]``."""
+    return np.asarray(P, np.float64) @ M[:3, :3].T + M[:3, 3]
+
+
+def selection_handles(V: np.ndarray, status: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Handles and targets of a per-vertex selection: fixed vertices stay at their rest
+    positions, handle vertices move by ``M``, free vertices are not handles.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions; status : (n,) codes (:data:`FIXED`, :data:`FREE`,
+    :data:`HANDLE`); M : (4, 4) float64 affine matrix (:func:`read_def`).
+
+    Returns
+    -------
+    handles : (h,) int64 sorted vertex indices; targets : (h, 3) float64.
+    """
+    handles = np.flatnonzero(np.asarray(status) != FREE).astype(np.int64)
+    targets = np.array(V[handles], np.float64)
+    moved = status[handles] == HANDLE
+    targets[moved] = apply_def(M, targets[moved])
+    return handles, targets
+
+
+def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Handles and targets of a ``.json`` or ``.csv`` file (module docstring).
+
+    Parameters
+    ----------
+    path : str or Path. n : int, the mesh's vertex count.
+
+    Returns
+    -------
+    handles : (h,) int64; targets : (h, 3) float64 (mesh units).
+
+    Raises
+    ------
+    SShaDeError naming the file: missing or unreadable, another extension, a missing
+    key or column, non-integer indices, and every problem of
+    :func:`sshade.validate.validate_handles` (index out of range, duplicates, NaN, ...).
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in (".json", ".csv"):
+        raise SShaDeError(f"{p}: handle file must be .json or .csv, got {ext or 'no extension'!r}")
+    if not p.is_file():
+        raise SShaDeError(f"handle file not found: {p}")
+    try:
+        if ext == ".json":
+            h, T = _json_handles(p)
+        else:
+            h, T = _csv_handles(p)
+        return validate_handles(np.empty((n, 3)), h, T)
+    except SShaDeError as e:
+        msg = str(e)
+        raise SShaDeError(msg if msg.startswith(str(p)) else f"{p}: {msg}") from None
+
+
+def _json_handles(p: Path):
+    try:
+        d = json.loads(p.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise SShaDeError(f"{p}: unreadable JSON ({' '.join(str(e).split())})") from None
+    if not isinstance(d, dict) or "handles" not in d or "targets" not in d:
+        raise SShaDeError(f"{p}: expected an object with keys \"handles\" (vertex indices) and \"targets\" "
+                          "(one [x, y, z] per handle)")
+    h, T = d["handles"], d["targets"]
+    if not isinstance(h, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in h):
+        raise SShaDeError(f"{p}: \"handles\" must be a list of integer vertex indices")
+    try:
+        T = np.array(T, np.float64)
+    except (TypeError, ValueError):
+        raise SShaDeError(f"{p}: \"targets\" must be a list of [x, y, z] numbers") from None
+    return np.array(h, np.int64), T
+
+
+def _csv_handles(p: Path):
+    try:
+        with open(p, newline="") as fh:
+            rows = [(i, r) for i, r in enumerate(csv.reader(fh), 1) if r and any(c.strip() for c in r)
+                    and not r[0].lstrip().startswith("#")]
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise SShaDeError(f"{p}: unreadable CSV ({type(e).__name__}: {e})") from None
+    if rows and [c.strip().lower() for c in rows[0][1]] == ["index", "x", "y", "z"]:
+        rows = rows[1:]
+    h, T = [], []
+    for i, r in rows:
+        if len(r) != 4:
+            raise SShaDeError(f"{p}: line {i} has {len(r)} fields; rows are index,x,y,z")
+        try:
+            h.append(int(r[0]))
+        except ValueError:
+            raise SShaDeError(f"{p}: line {i}: vertex index {r[0].strip()!r} is not an integer") from None
+        try:
+            T.append([float(x) for x in r[1:]])
+        except ValueError:
+            raise SShaDeError(f"{p}: line {i}: target {r[1:]} is not three numbers") from None
+    return np.array(h, np.int64), np.array(T, np.float64).reshape(-1, 3)
+
+
+def write_sel(path, status) -> None:
+    """Write a ``.sel`` file atomically: the benchmark's two comment lines, then one
+    status per line. ``status`` : (n,) ints in {0 fixed, 1 free, 2 handle}.
+    Raises SShaDeError on another value."""
+    from defaust.meshio import atomic_write
+    st = np.asarray(status).ravel()
+    if not np.isin(st, (FIXED, FREE, HANDLE)).all():
+        raise SShaDeError("a .sel status is 0 (fixed), 1 (free) or 2 (handle)")
+    with atomic_write(path) as fh:
+        fh.write(f"# per vertex status: 0=fixed, 1=deformable-region, 2=handle\n# {len(st)} vertices\n")
+        fh.write("\n".join(str(int(x)) for x in st) + "\n")
+
+
+def write_def(path, M) -> None:
+    """Write a ``.def`` file atomically: a comment line, then the (4, 4) matrix ``M``,
+    row by row, each value with 17 significant digits (exact round trip)."""
+    from defaust.meshio import atomic_write
+    M = np.asarray(M, np.float64).reshape(4, 4)
+    with atomic_write(path) as fh:
+        fh.write("# 4x4 handle transformation matrix\n")
+        fh.write("".join(" ".join(f"{x:.17g}" for x in row) + "\n" for row in M))

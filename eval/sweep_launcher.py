@@ -1,0 +1,343 @@
+"""Sweeps on SLURM that end, whatever happens to their jobs.
+
+hydra-submitit-launcher collects its jobs with ``[j.results()[0] for j in jobs]``: a job
+that dies without writing its result (out of memory, time limit, node failure,
+``scancel``, ``kill -9``) raises ``submitit.core.utils.UncompletedJobError`` there, so the
+sweep command fails and no table is written; without SLURM accounting (no working
+``sacct``) submitit cannot learn the job's fate and the command waits forever.
+
+:class:`TolerantLauncherMixin` replaces that ``launch``: it submits the jobs as the plugin
+does (one job array), then waits on them itself with :func:`wait_for_jobs`: a job is over
+when its result pickle exists, or when SLURM no longer runs nor queues it
+(:func:`slurm_states`: ``sacct`` when it works, else ``squeue`` and ``scontrol``); such a
+job without result is *killed*. Killed and failed jobs are recorded in the sweep's
+``sweep.json`` and in their ``status.json`` (:func:`eval.sweep.record_outcome`), and the
+launcher returns normally, so Hydra runs the aggregation callback and exits with 0.
+
+In a resumed sweep (:func:`eval.sweep.resume_sweep`, environment
+``SSHADE_SWEEP_RESUME=1``) the jobs whose folder already holds a done or partial
+``status.json`` are not submitted again.
+
+The Hydra plugin class is ``hydra_plugins.sshade_sweep_launcher.SweepSlurmLauncher``
+(Hydra only loads launchers from the ``hydra_plugins`` package), selected by
+``hydra/launcher=slurm`` (``conf/hydra/launcher/slurm.yaml``).
+"""
+from __future__ import annotations
+
+import logging
+import os
+import re
+import shutil
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["ACTIVE_STATES", "SlurmQueryError", "slurm_states", "expand_job_ids", "JobOutcome",
+           "wait_for_jobs", "TolerantLauncherMixin"]
+
+log = logging.getLogger(__name__)
+
+#: SLURM job states of a job that is queued or still running (``squeue --states``).
+ACTIVE_STATES = frozenset({"PENDING", "CONFIGURING", "RUNNING", "COMPLETING", "SUSPENDED", "REQUEUED",
+                           "REQUEUE_FED", "REQUEUE_HOLD", "RESIZING", "SIGNALING", "STAGE_OUT", "STOPPED",
+                           "RESV_DEL_HOLD", "POWER_UP_NODE", "SPECIAL_EXIT"})
+
+
+class SlurmQueryError(RuntimeError):
+    """SLURM could not be asked (``squeue`` missing or failing for another reason than
+    jobs that left the queue)."""
+
+
+def expand_job_ids(spec: str) -> list[str]:
+    """``"16_[1-3,5%2]"`` -> ``["16_1", "16_2", "16_3", "16_5"]`` (the form ``sacct`` and
+    ``squeue`` print for pending array tasks); any other id is returned as is."""
+    m = re.fullmatch(r"(\d+)_\[([^\]]*)\]", spec.strip())
+    if not m:
+        return [spec.strip()]
+    out = []
+    for part in m.group(2).split("%", 1)[0].split(","):
+        lo, _, hi = part.partition("-")
+        if lo.isdigit() and (not hi or hi.isdigit()):
+            out += [f"{m.group(1)}_{i}" for i in range(int(lo), int(hi or lo) + 1)]
+    return out
+
+
+def _run(cmd: list[str], runner) -> tuple[int, str, str] | None:
+    """(returncode, stdout, stderr) of ``cmd``, None when the program is not installed."""
+    if runner is None and shutil.which(cmd[0]) is None:
+        return None
+    try:
+        r = (runner or subprocess.run)(cmd, capture_output=True, text=True, timeout=60)
+    except FileNotFoundError:
+        return None
+    except subprocess.TimeoutExpired:
+        return 1, "", f"{cmd[0]} timed out"
+    return r.returncode, r.stdout or "", r.stderr or ""
+
+
+def _parse_pairs(text: str) -> dict[str, str]:
+    """``id|STATE ...`` lines -> {id: STATE} (array ranges expanded; ``CANCELLED by 0`` ->
+    ``CANCELLED``)."""
+    out = {}
+    for line in text.splitlines():
+        if "|" not in line:
+            continue
+        jid, state = line.split("|", 1)
+        state = (state.split() or [""])[0].rstrip("+")
+        for j in expand_job_ids(jid):
+            out[j] = state
+    return out
+
+
+def slurm_states(job_ids: Sequence[str], *, runner: Callable | None = None) -> dict[str, str | None]:
+    """Current SLURM state of each job id (``"16_1"`` for task 1 of array 16).
+
+    ``sacct -X`` first (when accounting works); for the ids it does not know (no
+    accounting: ``sacct`` exits non-zero; or not recorded yet) ``squeue`` (queued or
+    running jobs), then ``scontrol show job`` (jobs that ended in the last
+    ``MinJobAge`` seconds, 300 by default). None: SLURM knows nothing of the job any
+    more (neither queued, running nor recently ended).
+
+    Parameters
+    ----------
+    job_ids : the ids as submitit reports them (``job.job_id``).
+    runner : ``subprocess.run``-like callable (tests); default runs the SLURM commands.
+
+    Returns
+    -------
+    dict id -> state (``RUNNING``, ``PENDING``, ``COMPLETED``, ``FAILED``, ``CANCELLED``,
+    ``OUT_OF_MEMORY``, ``TIMEOUT``, ``NODE_FAIL``, ...) or None.
+
+    Raises
+    ------
+    SlurmQueryError when ``squeue`` is not installed or fails (controller unreachable).
+    """
+    ids = [str(j) for j in job_ids]
+    states: dict[str, str | None] = {}
+    r = _run(["sacct", "-n", "-P", "-X", "-o", "JobID,State", "-j", ",".join(ids)], runner)
+    if r is not None and r[0] == 0:
+        got = _parse_pairs(r[1])
+        states.update({j: got[j] for j in ids if got.get(j)})
+    rest = [j for j in ids if j not in states]
+    if not rest:
+        return states
+    parents = sorted({j.split("_", 1)[0] for j in rest})
+    r = _run(["squeue", "-h", "-r", "-o", "%i|%T", "-j", ",".join(parents)], runner)
+    if r is None:
+        raise SlurmQueryError("squeue not found: is this a SLURM cluster?")
+    if r[0] != 0 and "invalid job id" not in r[2].lower():
+        raise SlurmQueryError(f"squeue failed: {r[2].strip() or r[1].strip()}")
+    queued = _parse_pairs(r[1]) if r[0] == 0 else {}
+    for j in rest:
+        if j in queued:
+            states[j] = queued[j]
+            continue
+        sc = _run(["scontrol", "-o", "show", "job", j], runner)
+        m = re.search(r"\bJobState=(\S+)", sc[1]) if sc is not None and sc[0] == 0 else None
+        states[j] = m.group(1) if m else None
+    return states
+
+
+@dataclass
+class JobOutcome:
+    """How a submitted job ended: ``kind`` ``result`` (``value``: what the job returned),
+    ``error`` (``value``: the traceback text of an exception raised in the job) or
+    ``killed`` (no result; ``state``: SLURM's last known state, None when gone)."""
+
+    kind: str
+    value: object = None
+    state: str | None = None
+
+
+def _load_result(job) -> JobOutcome | None:
+    """The job's result pickle as a :class:`JobOutcome`, None while it is absent or
+    still being written."""
+    p = Path(job.paths.result_pickle)
+    if not p.exists():
+        return None
+    try:
+        from submitit.core.utils import pickle_load
+        tag, value = pickle_load(p)
+    except Exception:  # noqa: BLE001 -- partly written: read it at the next poll
+        return None
+    return JobOutcome("result" if tag == "success" else "error", value)
+
+
+def wait_for_jobs(jobs: Sequence, *, states: Callable = slurm_states, poll_s: float = 10.0,
+                  grace_polls: int = 2, unreachable_s: float = 1800.0, sleep: Callable = time.sleep,
+                  clock: Callable = time.monotonic, report: Callable | None = None) -> list[JobOutcome]:
+    """Wait until every job has an outcome; never raises for a job and never waits on
+    a job that SLURM no longer runs.
+
+    A job is over when its result pickle exists (``result`` or ``error``), or when for
+    ``grace_polls`` polls in a row it has no result and is neither queued nor running
+    (``states`` gives a state outside :data:`ACTIVE_STATES`, or None): ``killed``. The
+    grace polls let a result written on a shared file system appear. If ``states``
+    raises :class:`SlurmQueryError` for ``unreachable_s`` seconds in a row, the jobs
+    still without result are reported killed (state ``UNREACHABLE``).
+
+    Parameters
+    ----------
+    jobs : submitit jobs (``job_id``, ``paths.result_pickle``).
+    states : ``(job_ids) -> {id: state or None}`` (:func:`slurm_states`).
+    poll_s : seconds between polls. report : called as ``report(index, outcome)`` when a
+        job's outcome is known (e.g. to log it at once).
+
+    Returns
+    -------
+    list of :class:`JobOutcome`, in the order of ``jobs``.
+    """
+    out: list[JobOutcome | None] = [None] * len(jobs)
+    strikes = [0] * len(jobs)
+    failing_since = None
+    while True:
+        left = [i for i, o in enumerate(out) if o is None]
+        for i in left:
+            out[i] = _load_result(jobs[i])
+            if out[i] is not None and report:
+                report(i, out[i])
+        left = [i for i in left if out[i] is None]
+        if not left:
+            return out  # type: ignore[return-value]
+        try:
+            st = states([str(jobs[i].job_id) for i in left])
+            failing_since = None
+        except SlurmQueryError as e:
+            now = clock()
+            failing_since = now if failing_since is None else failing_since
+            log.warning("cannot query SLURM (%s); %d job(s) without result", e, len(left))
+            if now - failing_since >= unreachable_s:
+                for i in left:
+                    out[i] = JobOutcome("killed", state="UNREACHABLE")
+                    if report:
+                        report(i, out[i])
+                continue
+            sleep(poll_s)
+            continue
+        for i in left:
+            s = st.get(str(jobs[i].job_id))
+            if s in ACTIVE_STATES:
+                strikes[i] = 0
+                continue
+            strikes[i] += 1
+            if strikes[i] >= grace_polls and _load_result(jobs[i]) is None:
+                out[i] = JobOutcome("killed", state=s)
+                if report:
+                    report(i, out[i])
+        if any(o is None for o in out):
+            sleep(poll_s)
+
+
+def _state_text(state: str | None, job_id: str) -> str:
+    return f"{f'SLURM state {state}' if state else 'no longer known to SLURM'}, job {job_id}"
+
+
+def _killed_message(state: str | None, job_id: str) -> str:
+    """The error text of a job that died without a result, naming the likely cause."""
+    why = {"OUT_OF_MEMORY": "out of memory", "TIMEOUT": "time limit", "NODE_FAIL": "node failure",
+           "CANCELLED": "cancelled", "PREEMPTED": "preempted", "BOOT_FAIL": "node boot failure",
+           "DEADLINE": "deadline", "UNREACHABLE": "SLURM unreachable"}.get(state or "", "")
+    return f"died without a result ({_state_text(state, job_id)}): {why or 'killed, OOM, time limit, node lost or cancelled'}"
+
+
+class TolerantLauncherMixin:
+    """``launch`` of hydra-submitit-launcher's launchers (same submission: one job array,
+    the plugin's executor parameters), waiting with :func:`wait_for_jobs` instead of
+    ``job.results()``. Mixed in before ``SlurmLauncher``; its own settings (``poll_s``,
+    ``grace_polls``, ``unreachable_s``) are taken out of the executor parameters."""
+
+    OWN_KEYS = {"poll_s": 10.0, "grace_polls": 2, "unreachable_s": 1800.0}
+
+    def __init__(self, **params) -> None:
+        own = {k: params.pop(k, None) for k in self.OWN_KEYS}
+        self.wait_params = {k: v if own[k] is None else type(v)(own[k]) for k, v in self.OWN_KEYS.items()}
+        super().__init__(**params)
+
+    # the submission, as hydra_submitit_launcher.BaseSubmititLauncher.launch (1.2) does it
+    def _executor(self):
+        import submitit
+        from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
+        from omegaconf import OmegaConf
+        init = {"folder": self.params["submitit_folder"]}
+        init.update({f"{self._EXECUTOR}_{k}": v for k, v in self.params.items() if k == "max_num_timeout"})
+        executor = submitit.AutoExecutor(cluster=self._EXECUTOR, **init)
+        base = set(OmegaConf.structured(BaseQueueConf).keys())
+        executor.update_parameters(**{k if k in base else f"{self._EXECUTOR}_{k}": v for k, v in self.params.items()
+                                      if k not in ("max_num_timeout", "submitit_folder")})
+        return executor
+
+    def launch(self, job_overrides, initial_job_idx):
+        """Submit the jobs (those without a done/partial result in a resumed sweep) and
+        wait until each has an outcome; returns one ``JobReturn`` per job, all
+        ``COMPLETED`` (a job's failure is in its return value and ``status.json``)."""
+        from hydra.core.singleton import Singleton
+        from hydra.core.utils import JobReturn, JobStatus, filter_overrides
+
+        from . import sweep as sw
+        assert self.config is not None
+        sweep_dir = Path(str(self.config.hydra.sweep.dir))
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        if "mode" in self.config.hydra.sweep:
+            os.chmod(sweep_dir, mode=int(str(self.config.hydra.sweep.mode), 8))
+        log.info("Submitit '%s' sweep output dir : %s", self._EXECUTOR, self.config.hydra.sweep.dir)
+        keep = _kept_jobs(sweep_dir) if os.environ.get(sw.RESUME_ENV) == "1" else {}
+        returns: list = [None] * len(job_overrides)
+        params, where = [], []
+        for pos, overrides in enumerate(job_overrides):
+            idx = initial_job_idx + pos
+            st = keep.get(idx)
+            if st is not None and st.get("overrides") == list(overrides):
+                log.info("\t#%d : %s (%s before: not submitted)", idx, " ".join(filter_overrides(overrides)),
+                         st["status"])
+                returns[pos] = JobReturn(overrides=list(overrides), status=JobStatus.COMPLETED, _return_value=st)
+                continue
+            log.info("\t#%d : %s", idx, " ".join(filter_overrides(overrides)))
+            params.append((list(overrides), "hydra.sweep.dir", idx, f"job_id_for_{idx}", Singleton.get_state()))
+            where.append((pos, idx))
+        if not params:
+            return returns
+        jobs = self._executor().map_array(self, *zip(*params))
+        log.info("submitted %d job(s): %s", len(jobs), ", ".join(str(j.job_id) for j in jobs))
+
+        def report(i, outcome: JobOutcome):
+            pos, idx = where[i]
+            jid = str(jobs[i].job_id)
+            if outcome.kind == "result":
+                ret = outcome.value
+                if getattr(ret, "status", None) == JobStatus.FAILED:  # the task raised (not sweep_job)
+                    err = f"{type(ret._return_value).__name__}: {ret._return_value}"
+                    sw.record_outcome(sweep_dir, idx, "failed", err, slurm_job_id=jid)
+                    ret = JobReturn(overrides=list(job_overrides[pos]), status=JobStatus.COMPLETED,
+                                    _return_value={"status": "failed", "error": err})
+                returns[pos] = ret
+                return
+            if outcome.kind == "error":
+                err = str(outcome.value).strip().splitlines()[-1:] or ["error"]
+                status, msg, never = "failed", f"the job raised before or after its task: {err[0]}", ""
+            else:
+                status, msg = "killed", _killed_message(outcome.state, jid)
+                never = f"never started ({_state_text(outcome.state, jid)})"
+            status = sw.record_outcome(sweep_dir, idx, status, msg, missing_error=never, slurm_job_id=jid,
+                                       slurm_state=outcome.state)
+            msg = never if status == "missing" else msg
+            log.warning("job #%d (%s): %s: %s", idx, jid, status, msg)
+            returns[pos] = JobReturn(overrides=list(job_overrides[pos]), status=JobStatus.COMPLETED,
+                                     _return_value={"status": status, "error": msg})
+
+        wp = self.wait_params
+        wait_for_jobs(jobs, states=slurm_states, poll_s=wp["poll_s"], grace_polls=int(wp["grace_polls"]),
+                      unreachable_s=wp["unreachable_s"], report=report)
+        return returns
+
+
+def _kept_jobs(sweep_dir: Path) -> dict[int, dict]:
+    """job number -> status of the jobs of ``sweep_dir`` whose result a resume keeps."""
+    from .sweep import KEEP, _job_dirs, read_status
+    out = {}
+    for d in _job_dirs(sweep_dir):
+        st = read_status(d)
+        if st and st.get("status") in KEEP and isinstance(st.get("job_num"), int):
+            out[st["job_num"]] = st
+    return out

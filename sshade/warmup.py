@@ -1,0 +1,116 @@
+"""Compile-before-timing: run a method once on a tiny mesh so that numba's compilation
+(or its cache loads) and the first-call costs of lazy imports (libigl, SciPy's sparse
+solvers, cholespy) happen outside the timed call.
+
+Every method of the evaluator (:class:`sshade.SShaDe`, :class:`sshade.refine.SShaDeRefine`,
+the baselines of :mod:`baselines`) has a ``warmup(n_vertices=None) -> float`` built on
+:func:`warm_once`; :func:`eval.app.run` calls it before a method's first timed
+``deform`` and records the seconds as ``compile_s`` (table row and ``run.json``), and
+:func:`eval.scaling.run_scaling` does the same before its timed calls. On a cold numba
+cache (a fresh clone, a cluster node, ``NUMBA_CACHE_DIR`` pointing to an empty folder) the
+compilation takes 10-20 s, about 40x SShaDe's run on a 6,890-vertex FAUST case.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = ["tiny_problem", "warm_once", "warm_fullres", "warm_sshade", "warm_parallel_kernels", "uses_parallel_kernels"]
+
+_TINY: tuple | None = None
+_DONE: set = set()  # keys of the warm-ups done in this process (forked workers inherit it)
+
+
+def tiny_problem() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A small deformation problem: a 162-vertex icosphere (unit radius), 6 handles,
+    three of them static and three moved by a rotation of 30 degrees and a shift.
+
+    Returns
+    -------
+    V : (162, 3) float64; F : (320, 3) int64; handles : (6,) int64; targets : (6, 3)
+    float64. Fresh copies on every call.
+    """
+    global _TINY
+    if _TINY is None:
+        import trimesh
+        m = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+        V = np.ascontiguousarray(m.vertices, np.float64)
+        F = np.ascontiguousarray(m.faces, np.int64)
+        lo = np.argsort(V[:, 2])[:3]                 # bottom: static
+        hi = np.argsort(V[:, 2])[-3:]                # top: rotated about z, shifted
+        c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+        R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+        handles = np.concatenate([lo, hi]).astype(np.int64)
+        targets = np.concatenate([V[lo], V[hi] @ R.T + [0.1, 0, 0.2]])
+        _TINY = (V, F, handles, targets)
+    return tuple(np.array(a) for a in _TINY)
+
+
+def uses_parallel_kernels(n_vertices: int | None) -> bool:
+    """Whether a full-resolution ARAP solve on an ``n_vertices`` mesh runs numba's parallel
+    kernels (:func:`sshade.arap_energy.resolve_threads` in the automatic mode: at least
+    ``PARALLEL_MIN_CELLS`` rotation cells = vertices, more than one thread, not inside a
+    worker process). False for None."""
+    if n_vertices is None:
+        return False
+    from .arap_energy import PARALLEL_MIN_CELLS, resolve_threads
+    return int(n_vertices) >= PARALLEL_MIN_CELLS and resolve_threads(None, int(n_vertices)) > 1
+
+
+def warm_parallel_kernels() -> None:
+    """Compile (or load from numba's cache) the parallel variants of the ARAP kernels
+    (:mod:`sshade.arap_energy`, :mod:`sshade.arap_solver`). Starts numba's thread pool:
+    call it only where a parallel solve follows anyway (:func:`uses_parallel_kernels`)."""
+    from . import arap_energy, arap_solver
+    arap_energy._numba_fused(True)
+    arap_solver._helpers(True)
+
+
+def warm_once(done: set, key, run: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], object],
+              *, parallel: bool = False) -> float:
+    """Run ``run(V, F, handles, targets)`` on :func:`tiny_problem` once per ``key`` (kept
+    in the caller's ``done`` set), plus :func:`warm_parallel_kernels` when ``parallel``.
+
+    Returns
+    -------
+    float, seconds spent (0.0 when ``key`` was already warm). Errors of ``run`` propagate
+    (a method that cannot run on the tiny problem would fail on the real one too).
+    """
+    if key in done and (not parallel or (key, "parallel") in done):
+        return 0.0
+    t0 = time.perf_counter()
+    if key not in done:
+        run(*tiny_problem())
+        done.add(key)
+    if parallel and (key, "parallel") not in done:
+        warm_parallel_kernels()
+        done.add((key, "parallel"))
+    return time.perf_counter() - t0
+
+
+def warm_fullres(energy: str, protocol: str, n_vertices: int | None = None) -> float:
+    """Warm a full-resolution ARAP solve (:func:`sshade.arap.arap_deform`) of ``energy``
+    (``"spokes"`` or ``"spokes_and_rims"``) under ``protocol`` (``"converged"`` or
+    ``"paper"``), with the parallel kernels too when an ``n_vertices`` mesh uses them
+    (:func:`uses_parallel_kernels`). Returns the seconds spent (0.0 when warm)."""
+    from .arap import arap_deform
+    from .validate import validate_handles, validate_mesh
+
+    def run(V, F, h, T):  # as the baselines' deform: validation, then the solve
+        V, F = validate_mesh(V, F)
+        h, T = validate_handles(V, h, T)
+        return arap_deform(V, F, h, T, energy=energy, protocol=protocol)
+    return warm_once(_DONE, ("fullres", energy, protocol), run,
+                     parallel=protocol == "converged" and uses_parallel_kernels(n_vertices))
+
+
+def warm_sshade(params: dict) -> float:
+    """Warm :func:`sshade.deform` with SShaDe's checked ``params``
+    (:func:`sshade.deform.check_params`): one in-process run on :func:`tiny_problem` with
+    the same ARAP protocol and gradient mode (two samplings, warm-started, so every stage
+    runs). Returns the seconds spent (0.0 when warm)."""
+    from .deform import deform
+    p = dict(params, n_low=40, n_samplings=2, workers=1, warm_start=True, seed=0)
+    return warm_once(_DONE, ("sshade", p["protocol"], p["gradient"]), lambda V, F, h, T: deform(V, F, h, T, **p))
