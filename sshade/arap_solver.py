@@ -316,7 +316,13 @@ def warmup_kernels() -> bool:
     :mod:`sshade.arap_energy`, e.g. before forking worker processes. Returns whether numba
     is usable."""
     from .arap_energy import warmup_kernels as _warm_energy
-    return bool(_warm_energy() and _helpers(False))
+    ok = bool(_warm_energy() and _helpers(False))
+    if ok:  # the L-BFGS kernels
+        N, z = 3, np.zeros(3)
+        _lbfgs_pair(z, z, z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
+        _lbfgs_two_loop(np.zeros((1, N)), np.zeros((1, N)), np.zeros((1, N)), np.zeros(1), np.zeros(1, np.int64),
+                        z, z, np.empty(N), np.empty(N), np.empty(1))
+    return ok
 
 
 class _ThreadPicker:
