@@ -19,13 +19,15 @@ __all__ = ["read_mesh", "write_mesh", "atomic_write"]
 _EXTS = {".obj", ".off", ".ply", ".stl"}
 
 
-def read_mesh(path, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def read_mesh(path, *, validate: bool = True, allow_components: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Read a triangle mesh.
 
     Parameters
     ----------
     path : str or Path, an ``.obj``, ``.off``, ``.ply`` or ``.stl`` file.
     validate : bool, run :func:`sshade.validate.validate_mesh` on the result.
+    allow_components : bool, with ``validate``: accept several connected components
+        (scans, character models; deformed per component, :mod:`sshade.components`).
 
     Returns
     -------
@@ -69,7 +71,7 @@ def read_mesh(path, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray]:
         raise SShaDeError(f"{p}: faces have {F.shape[1]} vertices; only triangle meshes are supported")
     if validate:
         from sshade.validate import validate_mesh
-        V, F = validate_mesh(V, F, name=str(p))
+        V, F = validate_mesh(V, F, name=str(p), allow_components=allow_components)
     return V, F
 
 

@@ -142,3 +142,15 @@ def test_evaluator_deforms_a_case_with_two_components(tmp_path, two, monkeypatch
     assert res["n_errors"] == 0
     row = pd.read_csv(tmp_path / "out" / "cases.csv", keep_default_na=False).iloc[0]
     assert row["error"] == "" and int(row["n_components"]) == 2 and int(row["n_rigid_components"]) == 1
+
+
+def test_read_mesh_refuses_components_unless_allowed(tmp_path, two):
+    from defaust.meshio import read_mesh, write_mesh
+    V, F, _, _, n_body = two
+    p = tmp_path / "two.ply"
+    write_mesh(p, V, F)
+    with pytest.raises(SShaDeError, match="component"):
+        read_mesh(p)
+    V2, F2 = read_mesh(p, allow_components=True)  # what the shapes loader uses
+    assert V2.shape == V.shape and F2.shape == F.shape
+    assert component_labels(F2, len(V2))[0] == 2

@@ -178,7 +178,7 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
     cases = []
     for n in names:
         path = root / n
-        V0, F0 = read_mesh(path)
+        V0, F0 = read_mesh(path, allow_components=True)  # the evaluator deforms each component
         lm, center, axes = axis_landmarks(V0)  # from the source shape: same edit at every resolution
         V, F = (V0, F0) if vertex_range is None else _highres(path, V0, F0, vertex_range, cache)
         h, T, st, group = axis_handles(V, lm, center, axes, n_per_group=n_per_group, region_radius=region_radius,
