@@ -903,6 +903,12 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         tm["gradient"] += clock() - t0
         return gn
 
+    def max_move(a, b):
+        """Largest vertex move between two (nf, 3) iterates (mesh units)."""
+        if kern:
+            return float(np.sqrt(kern["max_move"](a, b)))
+        return float(np.sqrt(((a - b) ** 2).sum(1).max()))
+
     def tick(t_pass):
         """Automatic threads: time the iteration just done, pick the next mode."""
         if picker is None:
@@ -971,7 +977,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
                 break
             if alpha < 1.0:
                 info["n_fallback"] += 1
-            last_move = float(np.sqrt(((x_new - x) ** 2).sum(1).max()))
+            last_move = max_move(x_new, x)
             E_prev, E = E, E_new
             x = x_new
             g = glob()
@@ -1002,10 +1008,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
             status = "stalled"
             break
         t0 = clock()
-        if kern:
-            last_move = float(np.sqrt(kern["max_move"](x_new, x)))
-        else:
-            last_move = float(np.sqrt(((x_new - x) ** 2).sum(1).max()))
+        last_move = max_move(x_new, x)
         tm["anderson"] += clock() - t0
         E_prev, E = E, E_new
         x = x_new
