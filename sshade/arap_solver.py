@@ -977,36 +977,29 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
                 break
             if alpha < 1.0:
                 info["n_fallback"] += 1
-            last_move = max_move(x_new, x)
-            E_prev, E = E, E_new
-            x = x_new
-            g = glob()
-            it += 1
-            E_hist.append(E)
-            t_pass = tick(t_pass)
-            continue
-        # ---- Anderson history update with the accepted (x, g), candidate
-        t0 = clock()
-        x_new = anderson.step(x, g) if anderson is not None else None
-        tm["anderson"] += clock() - t0
-        accelerated = x_new is not None
-        if not accelerated:
-            x_new = g
-        # R is overwritten by every local step: it holds the rotations of the last
-        # evaluated candidate, which is the accepted one when glob() runs below
-        E_new = local(x_new)
-        if accelerated and not E_new < E:
-            # safeguard: plain step from the last accepted point, reset the history
-            info["n_fallback"] += 1
-            anderson.reset()
-            x_new = g
+        else:  # ---- Anderson history update with the accepted (x, g), candidate
+            t0 = clock()
+            x_new = anderson.step(x, g) if anderson is not None else None
+            tm["anderson"] += clock() - t0
+            accelerated = x_new is not None
+            if not accelerated:
+                x_new = g
+            # R is overwritten by every local step: it holds the rotations of the last
+            # evaluated candidate, which is the accepted one when glob() runs below
             E_new = local(x_new)
-            accelerated = False
-        if not accelerated and E_new > E:
-            # a plain local/global step cannot increase E: only rounding does -> stop
-            U[free] = x
-            status = "stalled"
-            break
+            if accelerated and not E_new < E:
+                # safeguard: plain step from the last accepted point, reset the history
+                info["n_fallback"] += 1
+                anderson.reset()
+                x_new = g
+                E_new = local(x_new)
+                accelerated = False
+            if not accelerated and E_new > E:
+                # a plain local/global step cannot increase E: only rounding does -> stop
+                U[free] = x
+                status = "stalled"
+                break
+        # ---- accept x_new (energy E_new; R holds its rotations)
         t0 = clock()
         last_move = max_move(x_new, x)
         tm["anderson"] += clock() - t0
