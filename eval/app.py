@@ -359,33 +359,48 @@ EXPERIMENTS = {
 }
 
 
-def run_experiment(cfg):
-    """Dispatch on ``experiment.kind`` (default ``cases``); see :data:`EXPERIMENTS`."""
+def run_experiment(cfg, *, fresh: bool = False):
+    """Dispatch on ``experiment.kind`` (default ``cases``); see :data:`EXPERIMENTS`.
+
+    The experiment runs in its claimed output folder ``cfg.out_dir``
+    (:func:`eval.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
+    refused before any work; ``fresh``: ``out_dir`` is the default dated name, which gets
+    a suffix rather than being reused)."""
     import importlib
+
+    from .outdir import claimed_run
     kind = str(cfg.get("experiment", {}).get("kind", "cases"))
     if kind not in EXPERIMENTS:
         raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(EXPERIMENTS)}")
     mod, fn = EXPERIMENTS[kind].split(":")
-    return getattr(importlib.import_module(mod), fn)(cfg)
+    with claimed_run(cfg, fresh=fresh):
+        return getattr(importlib.import_module(mod), fn)(cfg)
 
 
-def _pin_out_dir(cfg) -> None:
-    """Resolve ``out_dir`` once, to the folder Hydra created for this run (its
-    ``hydra.run.dir`` is ``${out_dir}``), so a ``${now:...}`` in it cannot name two
-    different folders for Hydra's files and ours."""
+def _pin_out_dir(cfg) -> bool:
+    """Pin ``out_dir`` once. In a multirun (``python -m eval -m``) it is the job's folder
+    Hydra made (``hydra.sweep.dir/subdir``); in a single run it is ``out_dir`` resolved
+    once (a ``${now:...}`` in it cannot name two folders). Returns True when ``out_dir``
+    is the config's default (not given on the command line): a fresh name."""
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
     from omegaconf import open_dict
-    if HydraConfig.initialized():
-        out = HydraConfig.get().runtime.output_dir
-        if out:
-            with open_dict(cfg):
-                cfg.out_dir = str(out)
+    if not HydraConfig.initialized():
+        return False
+    hc = HydraConfig.get()
+    with open_dict(cfg):
+        if hc.mode == RunMode.MULTIRUN and hc.runtime.output_dir:
+            cfg.out_dir = str(hc.runtime.output_dir)
+            return False
+        cfg.out_dir = str(cfg.out_dir)
+    given = {str(o).lstrip("+~").split("=", 1)[0] for o in hc.overrides.task}
+    return "out_dir" not in given
 
 
 def _main(cfg) -> None:
     try:
-        _pin_out_dir(cfg)
-        run_experiment(cfg)
+        fresh = _pin_out_dir(cfg)
+        run_experiment(cfg, fresh=fresh)
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

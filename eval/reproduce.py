@@ -25,11 +25,18 @@ others still run):
 
 Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``.
 
+This is the only command that writes ``results/``: it sets
+:data:`eval.outdir.REPRODUCE_ENV` for the commands it runs, and every other command
+refuses a folder inside ``results/`` (:func:`eval.outdir.claim_output_dir`). Each step
+replaces the files its previous run wrote in its folder and says which; files written
+there by something else (e.g. ``results/convergence/libigl_long.md``) are kept.
+
 Exit status 1 if any step failed (all steps are attempted).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
@@ -72,7 +79,8 @@ def main(argv=None) -> int:
         if a.dry_run:
             continue
         t = time.perf_counter()
-        rc = subprocess.call(cmd)
+        from .outdir import REPRODUCE_ENV
+        rc = subprocess.call(cmd, env=dict(os.environ, **{REPRODUCE_ENV: "1"}))
         print(f"== {name}: exit {rc} after {time.perf_counter() - t:.0f} s", flush=True)
         if rc != 0:
             failed.append(name)

@@ -254,12 +254,16 @@ def sweep_job(cfg) -> dict:
             return {k: v for k, v in old.items() if k != "traceback"}
     status = {"status": "running", "job_num": num, "overrides": overrides, "out_dir": str(job_dir),
               "sweep_dir": sweep_dir, "host": socket.gethostname(), "pid": os.getpid(), "started": _now()}
-    write_status(job_dir, status)
+    from .outdir import OutputDirError, claimed_run
     t0 = time.perf_counter()
+    claimed = False
     try:
-        from .app import run_experiment
-        res = run_experiment(cfg)
-        status.update(_rows_status(job_dir, res))
+        with claimed_run(cfg):  # the job's folder (eval.outdir): new, or this job's earlier attempt
+            claimed = True
+            write_status(job_dir, status)
+            from .app import run_experiment
+            res = run_experiment(cfg)
+            status.update(_rows_status(job_dir, res))
     except (Exception, SystemExit) as e:  # noqa: BLE001 -- record any failure, keep the sweep going
         msg = str(e) or type(e).__name__
         if not isinstance(e, SShaDeError):
@@ -267,6 +271,9 @@ def sweep_job(cfg) -> dict:
         status.update(status="failed", error=msg[:_MAX_ERROR],
                       traceback="".join(traceback.format_exception(e))[-_MAX_ERROR:])
         log.error("job %s (%s) failed: %s", num, " ".join(overrides), msg)
+        if isinstance(e, OutputDirError) and not claimed:
+            print(f"job {num}: failed: {msg}", file=sys.stderr)
+            return {k: v for k, v in status.items() if k != "traceback"}
     status.update(wall_s=round(time.perf_counter() - t0, 3), finished=_now())
     try:
         write_status(job_dir, status)
@@ -523,6 +530,42 @@ def sweep_markdown(df, *, title: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+# ----------------------------------------------------------------------------- the sweep folder
+_sweep_claim: list = []  # the claim of this process's sweep folder (released when the sweep ends)
+
+
+def claim_sweep_dir(config) -> None:
+    """Claim ``hydra.sweep.dir`` for this sweep before any job starts
+    (:func:`eval.outdir.claim_output_dir`, kind ``sweep``): a new or empty folder, or an
+    earlier sweep's folder (its files are removed first; a resume, :data:`RESUME_ENV`,
+    keeps them); any other folder is refused unless ``overwrite=true``; the default dated
+    folder gets a suffix when the name exists. On refusal: one ``error:`` line, exit 2.
+    The sweep's jobs write into folders of their own below it."""
+    from omegaconf import open_dict
+
+    from .outdir import _flag, claim_output_dir
+    d = str(config.hydra.sweep.dir)
+    given = {str(o).lstrip("+~").split("=", 1)[0] for o in config.hydra.overrides.hydra}
+    try:
+        c = claim_output_dir(d, "sweep", overwrite=_flag(config.get("overwrite", False)),
+                             fresh="hydra.sweep.dir" not in given and os.environ.get(RESUME_ENV) != "1",
+                             keep=os.environ.get(RESUME_ENV) == "1")
+    except SShaDeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+    if str(c.path) != str(Path(d).resolve()):
+        with open_dict(config):
+            config.hydra.sweep.dir = str(c.path)
+    log.info(c.message)
+    _sweep_claim.append(c)
+
+
+def release_sweep_dir(status: str = "done") -> None:
+    """Mark this process's sweep folder ended and release it (:func:`claim_sweep_dir`)."""
+    while _sweep_claim:
+        _sweep_claim.pop().finish(status)
+
+
 # ----------------------------------------------------------------------------- Hydra callback
 try:
     from hydra.experimental.callback import Callback as _Callback
@@ -536,6 +579,7 @@ class AggregateSweepCallback(_Callback):
     starts, and builds ``sweep_table.{csv,md}`` when it ends."""
 
     def on_multirun_start(self, config, **kwargs) -> None:
+        claim_sweep_dir(config)  # refuses a folder that is not this sweep's (exit 2), before any job
         try:
             start_manifest(config)
         except Exception as e:  # noqa: BLE001 -- a sweep without manifest still runs
@@ -549,7 +593,9 @@ class AggregateSweepCallback(_Callback):
         except Exception as e:  # noqa: BLE001 -- never fail a finished sweep over its summary
             log.warning("sweep aggregation failed: %s", e)
             print(f"sweep aggregation failed: {e}", file=sys.stderr)
+            release_sweep_dir("done")
             return
+        release_sweep_dir("done")
         print(sweep_markdown(df, title=_sweep_title(d.resolve(), df)))
         print(f"wrote {TABLE_CSV}, {TABLE_MD} to {d.resolve()}")
 

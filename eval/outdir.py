@@ -1,0 +1,395 @@
+"""Output folders: a command writes only where it may (DEVELOPERS.md "No harm, ever").
+
+Every command of the harness that writes a folder of results (the evaluator
+``python -m eval``, the sweeps ``python -m eval.sweep``, ``python -m eval.reproduce``)
+first *claims* it with :func:`claim_output_dir`, before any work. A folder may be
+claimed when it is
+
+- new (created here, atomically: :func:`os.mkdir`),
+- empty,
+- one of this command's own earlier outputs of the same kind (it holds the marker
+  file :data:`MARKER` naming that kind): the files that earlier run wrote (listed in
+  the marker) are removed first and the command says which, files added by a person
+  stay; a folder that another live process is writing into (it holds the lock
+  :data:`LOCK`, an ``flock`` released when that process ends, even by ``kill -9``) is
+  refused;
+- anything else only with ``overwrite=true`` (the evaluator) or ``--force``.
+
+``results/`` of this checkout is written only by ``python -m eval.reproduce``, which
+sets :data:`REPRODUCE_ENV` for the commands it runs; other commands are refused there.
+A default dated folder (``outputs/<experiment>/<date_time>``) never collides with
+another run started in the same second: :func:`claim_output_dir` with ``fresh=True``
+adds ``_2``, ``_3``, ... to a name that exists.
+
+Refusals raise :class:`OutputDirError` (an :class:`~sshade.errors.SShaDeError`): the
+command prints one ``error:`` line saying how to proceed and exits with status 2.
+"""
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import errno
+import json
+import os
+import shutil
+import socket
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sshade.errors import SShaDeError
+
+__all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
+           "results_dir", "read_marker"]
+
+MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and its files
+LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
+REPRODUCE_ENV = "SSHADE_REPRODUCE"  #: "1" in the commands eval.reproduce runs: results/ allowed
+_OWN = {MARKER, LOCK}
+_REPO = Path(__file__).resolve().parents[1]
+
+class OutputDirError(SShaDeError):
+    """An output folder that this command may not write into."""
+
+
+def results_dir() -> Path | None:
+    """The ``results/`` folder of this source checkout (None for an installed copy)."""
+    return _REPO / "results" if (_REPO / "pyproject.toml").is_file() else None
+
+
+def read_marker(path) -> dict | None:
+    """The marker of folder ``path`` (:data:`MARKER`), or None when absent/unreadable."""
+    try:
+        m = json.loads((Path(path) / MARKER).read_text())
+    except (OSError, ValueError):
+        return None
+    return m if isinstance(m, dict) else None
+
+
+@dataclass
+class OutputClaim:
+    """A claimed output folder (:func:`claim_output_dir`).
+
+    Attributes
+    ----------
+    path : the folder (absolute).
+    kind : the kind of output (``eval``, ``sweep``).
+    replaced : names of the earlier run's files removed before this run.
+    foreign : names that were in the folder before and are not ours (kept).
+    message : one line saying what was claimed (new folder, replaced files, ...).
+    created : the folder was created by this claim.
+    """
+    path: Path
+    kind: str
+    replaced: list = field(default_factory=list)
+    foreign: list = field(default_factory=list)
+    message: str = ""
+    created: bool = False
+    fd: int | None = None
+
+    def finish(self, status: str, *, drop_if_unused: str | None = None, **extra) -> None:
+        """Record the run's end in the marker (``status`` done / failed / interrupted) with
+        the names this run wrote (every entry of the folder but the foreign ones), and
+        release the lock. With ``drop_if_unused`` (a file name, e.g. ``run.json``): a
+        folder this claim created and in which that file was never written is removed
+        (a run refused before any work leaves nothing behind). Never raises."""
+        try:
+            if drop_if_unused and self.created and not (self.path / drop_if_unused).exists():
+                shutil.rmtree(self.path, ignore_errors=True)
+            elif self.path.is_dir():
+                names = sorted(set(os.listdir(self.path)) - set(self.foreign) - _OWN)
+                m = read_marker(self.path) or {}
+                m.update(kind=self.kind, status=status, files=names, finished=_now(), **extra)
+                _write_marker(self.path, m)
+        except OSError:
+            pass
+        finally:
+            self.release()
+
+    def release(self) -> None:
+        """Release the folder's lock (also released when the process ends)."""
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+            self.fd = None
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _write_marker(path: Path, m: dict) -> None:
+    tmp = path / f".{MARKER}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(m, indent=1) + "\n")
+    os.replace(tmp, path / MARKER)
+
+
+def _inside(p: Path, root: Path | None) -> bool:
+    if root is None:
+        return False
+    try:
+        p.relative_to(root.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def _how(kind: str) -> str:
+    return "--force" if kind == "deform" else "overwrite=true"
+
+
+def _mkdir_fresh(path: Path) -> Path:
+    """Create ``path``, or ``path_2``, ``path_3``, ... when it exists (atomic: two
+    processes never get the same folder)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for i in range(1, 10000):
+        p = path if i == 1 else path.with_name(f"{path.name}_{i}")
+        try:
+            os.mkdir(p)
+            return p
+        except FileExistsError:
+            continue
+    raise OutputDirError(f"cannot create a new folder next to {path}: 10000 names taken")
+
+
+def _lock(path: Path) -> int:
+    """Take the folder's lock or refuse: another live process writes into it."""
+    import fcntl
+    fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as e:
+        other = (os.pread(fd, 200, 0) or b"").decode(errors="replace").strip()
+        os.close(fd)
+        if e.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+            raise OutputDirError(f"another run is writing into {path} ({other or 'a live process'}); "
+                                 "wait for it to end or choose another folder") from None
+        raise
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}".encode(), 0)
+    return fd
+
+
+def _remove_earlier(path: Path, names) -> list[str]:
+    """Remove the entries ``names`` (an earlier run's own files) from ``path``."""
+    gone = []
+    for n in names or []:
+        n = str(n)
+        if not n or "/" in n or n in (".", "..") or n in _OWN:
+            continue  # never anything outside the folder, never the marker/lock
+        p = path / n
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        elif p.exists() or p.is_symlink():
+            p.unlink()
+        else:
+            continue
+        gone.append(n)
+    return gone
+
+
+def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = False,
+                     keep: bool = False, option: str | None = None, name: str = "out_dir") -> OutputClaim:
+    """Claim folder ``path`` for an output of ``kind`` (module docstring), before any work.
+
+    Parameters
+    ----------
+    path : str or Path, the folder (relative paths against the current directory).
+    kind : str, the kind of output (``eval``: one evaluator run; ``sweep``: a sweep folder).
+    overwrite : bool, write into a non-empty folder that is not ours (the user asked).
+    fresh : bool, ``path`` is a default name: never reuse it, add ``_2``, ``_3``, ... instead.
+    keep : bool, an own earlier output is continued, not replaced (a sweep's resume).
+    option : str, how the user says ``overwrite`` on this command (for the message).
+    name : str, how the user names the folder on this command (for the message).
+
+    Returns
+    -------
+    OutputClaim; the folder exists, is writable, holds the marker (status ``running``)
+    and this process holds its lock until it exits.
+
+    Raises
+    ------
+    OutputDirError
+        ``path`` is a file; inside this checkout's ``results/`` without
+        :data:`REPRODUCE_ENV`; not writable; another live run writes into it; a non-empty
+        folder that is not this command's earlier output of the same kind (unless
+        ``overwrite``).
+    """
+    how = option or _how(kind)
+    raw = str(path).strip()
+    if not raw:
+        raise OutputDirError(f"the output folder is empty: name a new folder ({name}=DIR)")
+    p = Path(os.path.abspath(Path(raw).expanduser()))
+    res = results_dir()
+    if _inside(p, res) and os.environ.get(REPRODUCE_ENV) != "1":
+        raise OutputDirError(f"refusing to write into {p}: {res} holds the committed results and is written only "
+                             "by python -m eval.reproduce; choose a folder outside it (e.g. under outputs/)")
+    if p.exists() and not p.is_dir():
+        raise OutputDirError(f"output folder {p} is a file; choose a folder")
+    try:
+        if fresh:
+            p = _mkdir_fresh(p)
+            return _take(p, kind, [], [], f"writing into the new folder {p}", created=True)
+        created = False
+        if not p.exists():
+            p.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.mkdir(p)
+                created = True
+            except FileExistsError:
+                pass
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise OutputDirError(f"output folder {p} is not writable; choose another folder")
+        return _claim_existing(p, kind, created, overwrite, keep, how)
+    except OSError as e:
+        raise OutputDirError(f"cannot create or use output folder {p}: {e.strerror or e}") from None
+
+
+def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bool, how: str) -> OutputClaim:
+    names = sorted(set(os.listdir(p)) - _OWN)
+    if created or not names:
+        return _take(p, kind, [], [], f"writing into the {'new' if created else 'empty'} folder {p}", created=created)
+    m = read_marker(p)
+    reproducing = os.environ.get(REPRODUCE_ENV) == "1" and _inside(p, results_dir())
+    if m is not None and m.get("kind") == kind or reproducing and m is None:
+        fd = _lock(p)  # refuse while another run writes here, before removing anything
+        if keep:
+            return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}", fd=fd)
+        earlier = (m or {}).get("files") or []
+        gone = _remove_earlier(p, earlier)
+        rest = sorted(set(os.listdir(p)) - _OWN)
+        msg = (f"replacing the earlier {kind} output in {p}" +
+               (f" (removed {len(gone)}: {', '.join(gone[:8])}{' ...' if len(gone) > 8 else ''})" if gone else ""))
+        return _take(p, kind, gone, rest, msg, fd=fd)
+    if not overwrite:
+        what = (f"another kind of output ({m.get('kind')})" if m else
+                f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote ({', '.join(names[:4])}"
+                f"{' ...' if len(names) > 4 else ''})")
+        raise OutputDirError(f"refusing to write into {p}: it holds {what}. Choose a new or empty folder, "
+                             f"or pass {how} to write into it anyway (files of the same name are replaced)")
+    return _take(p, kind, [], names, f"writing into {p} ({how}: {len(names)} entries there kept unless "
+                                      "replaced by files of the same name)")
+
+
+def _command() -> list[str]:
+    """The command line, ``python -m pkg`` for a package's ``__main__.py``."""
+    prog = Path(sys.argv[0]) if sys.argv and sys.argv[0] else Path("python")
+    if prog.suffix == ".py" and (prog.parent / "__init__.py").is_file():
+        mod = prog.parent.name if prog.name == "__main__.py" else f"{prog.parent.name}.{prog.stem}"
+        return ["python", "-m", mod, *sys.argv[1:]]
+    return [prog.name, *sys.argv[1:]]
+
+
+def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: int | None = None,
+          created: bool = False) -> OutputClaim:
+    fd = _lock(p) if fd is None else fd
+    old = read_marker(p) or {}
+    m = {"kind": kind, "status": "running", "pid": os.getpid(), "host": socket.gethostname(), "started": _now(),
+         "command": _command(),
+         "files": [f for f in old.get("files", []) if f not in gone and (p / f).exists()]}
+    _write_marker(p, m)
+    return OutputClaim(path=p, kind=kind, replaced=gone, foreign=foreign, message=message, created=created, fd=fd)
+
+
+# ----------------------------------------------------------------------------- one run's folder
+_claimed: dict[str, OutputClaim] = {}  # folders this process claimed and still writes into
+_LOG_FORMAT = "[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"
+
+
+def _hydra_record(out: Path, cfg) -> None:
+    """``out/.hydra/{config,hydra,overrides}.yaml``, as Hydra writes them (Hydra itself
+    writes nothing: ``hydra.output_subdir`` is null, so nothing lands before the claim)."""
+    from omegaconf import OmegaConf
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        hc = HydraConfig.get() if HydraConfig.initialized() else None
+    except ImportError:  # pragma: no cover -- hydra-core is a dependency
+        hc = None
+    d = out / ".hydra"
+    d.mkdir(exist_ok=True)
+    OmegaConf.save(cfg, d / "config.yaml", resolve=False)
+    if hc is not None:
+        OmegaConf.save(OmegaConf.create({"hydra": hc}), d / "hydra.yaml", resolve=False)
+        OmegaConf.save(OmegaConf.create(list(hc.overrides.task)), d / "overrides.yaml")
+
+
+def _end_runinfo(out: Path, status: str, error: str) -> None:
+    """A ``run.json`` still saying ``running`` gets the run's real end (failed,
+    interrupted) and the error: it never stays ``running`` after a failure."""
+    p = out / "run.json"
+    try:
+        info = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(info, dict) and info.get("status") == "running":
+        from .runinfo import write_runinfo
+        info.update(status=status, error=error[:2000], ended_utc=_now())
+        with contextlib.suppress(OSError):
+            write_runinfo(p, info)
+
+
+@contextlib.contextmanager
+def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str = "eval.log"):
+    """Run one experiment in its claimed output folder ``cfg.out_dir``.
+
+    Claims the folder (:func:`claim_output_dir`, ``cfg.overwrite``), pins ``cfg.out_dir``
+    to the folder claimed (a fresh name may have gained a suffix), records Hydra's
+    config in ``.hydra/``, logs into ``out/eval.log``; at the end marks the folder done,
+    failed or interrupted (``run.json`` too) and releases it. A folder this run created
+    and in which no ``run.json`` was written (refused before any work) is removed.
+    Nested use on a folder this process already claimed does nothing.
+
+    Yields
+    ------
+    OutputClaim (or None when the folder was already claimed by this process).
+
+    Raises
+    ------
+    OutputDirError before any work (see :func:`claim_output_dir`).
+    """
+    import logging
+
+    from omegaconf import open_dict
+    target = os.path.abspath(Path(str(cfg.get("out_dir", "") or "")).expanduser()) if cfg.get("out_dir") else ""
+    if target and target in _claimed:
+        yield None
+        return
+    claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=_flag(cfg.get("overwrite", False)), fresh=fresh)
+    with open_dict(cfg):
+        cfg.out_dir = str(claim.path)
+    _claimed[str(claim.path)] = claim
+    handler = None
+    status, error = "failed", ""
+    try:
+        logging.getLogger("eval").info(claim.message)
+        _hydra_record(claim.path, cfg)
+        handler = logging.FileHandler(claim.path / log_name)
+        handler.setFormatter(logging.Formatter(_LOG_FORMAT))
+        logging.getLogger().addHandler(handler)
+        yield claim
+        status = "done"
+    except KeyboardInterrupt:
+        status, error = "interrupted", "interrupted (Ctrl-C)"
+        raise
+    except BaseException as e:
+        error = " ".join(str(e).split()) or type(e).__name__
+        raise
+    finally:
+        if handler is not None:
+            logging.getLogger().removeHandler(handler)
+            handler.close()
+        _end_runinfo(claim.path, status, error)
+        _claimed.pop(str(claim.path), None)
+        claim.finish(status, drop_if_unused="run.json" if status != "done" else None)
+
+
+def _flag(v) -> bool:
+    """``overwrite`` as a bool (true/false, yes/no, 1/0). Raises OutputDirError otherwise."""
+    if isinstance(v, bool):
+        return v
+    s = str(v).strip().lower()
+    if s in ("true", "yes", "1"):
+        return True
+    if s in ("false", "no", "0", "none", "null", ""):
+        return False
+    raise OutputDirError(f"overwrite must be true or false, got {v!r}")

@@ -1,0 +1,214 @@
+"""Issue 19, "data changed or lost": a command writes only into a folder that is new,
+empty or its own earlier output of the same kind (eval/outdir.py); ``results/`` only
+under ``python -m eval.reproduce``; two runs never share a folder."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from eval import outdir
+from eval.outdir import MARKER, OutputDirError, claim_output_dir, claimed_run
+from tests.conftest import ROOT, subprocess_env
+
+EVAL = [sys.executable, "-m", "eval", "experiment=ci", "dataset.root=../shared/data/faust_reg",
+        "dataset.limit=1", "methods=[SShaDe]"]
+
+
+def _snapshot(folder: Path) -> dict:
+    """relative path -> (sha256, mtime_ns) of every file below ``folder``."""
+    return {str(p.relative_to(folder)): (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _run(args, cwd=ROOT, timeout=240):
+    return subprocess.run(args, cwd=cwd, env=subprocess_env(), capture_output=True, text=True, timeout=timeout)
+
+
+def _one_error(r) -> str:
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert "Traceback" not in r.stderr
+    assert lines and lines[-1].startswith("error: "), r.stderr
+    return lines[-1]
+
+
+# ----------------------------------------------------------------------------- end to end
+def test_eval_refuses_results_folder_and_changes_nothing():
+    res = ROOT / "results" / "faust"
+    if not res.is_dir():
+        pytest.skip("no committed results/faust")
+    before = _snapshot(res)
+    r = _run([*EVAL, "out_dir=results/faust"])
+    msg = _one_error(r)
+    assert "python -m eval.reproduce" in msg
+    assert _snapshot(res) == before and not (res / ".hydra").exists() and not (res / MARKER).exists()
+
+
+def test_eval_refuses_a_users_folder_and_the_current_directory(tmp_path):
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "cases.csv").write_text("my own data\n")
+    (user / "notes.txt").write_text("keep me\n")
+    before = _snapshot(user)
+    msg = _one_error(_run([*EVAL, f"out_dir={user}"]))
+    assert "overwrite=true" in msg and str(user) in msg
+    assert _snapshot(user) == before and sorted(os.listdir(user)) == ["cases.csv", "notes.txt"]
+    cwd = tmp_path / "cwd"  # out_dir= (empty) used to write everything into the current directory
+    cwd.mkdir()
+    (cwd / "keep.txt").write_text("x")
+    env = subprocess_env()
+    r = subprocess.run([*EVAL[:4], f"dataset.root={ROOT.parent / 'shared/data/faust_reg'}", *EVAL[5:], "out_dir="],
+                       cwd=cwd, env=env, capture_output=True, text=True, timeout=240)
+    _one_error(r)
+    assert sorted(os.listdir(cwd)) == ["keep.txt"]
+
+
+def test_sweep_refuses_a_users_folder(tmp_path):
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "sweep.json").write_text("{\"mine\": true}\n")
+    before = _snapshot(user)
+    r = _run([sys.executable, "-m", "eval.sweep", "-m", "dataset=faust", "dataset.root=../shared/data/faust_reg",
+              "dataset.limit=1", "methods=[SShaDe]", "sshade.n_low=300,500", f"hydra.sweep.dir={user}"])
+    msg = _one_error(r)
+    assert "refusing to write into" in msg and str(user) in msg
+    assert _snapshot(user) == before and os.listdir(user) == ["sweep.json"]
+
+
+def test_refused_run_leaves_no_folder(tmp_path):
+    new = tmp_path / "new"
+    r = _run([*EVAL, "sshade.n_low=2", f"out_dir={new}"])
+    assert "n_low" in _one_error(r)
+    assert not new.exists()
+
+
+# ----------------------------------------------------------------------------- the rule itself
+def test_new_empty_and_file(tmp_path):
+    c = claim_output_dir(tmp_path / "a" / "b", "eval")
+    assert c.created and c.path.is_dir() and json.loads((c.path / MARKER).read_text())["status"] == "running"
+    c.finish("done")
+    (tmp_path / "empty").mkdir()
+    c = claim_output_dir(tmp_path / "empty", "eval")
+    assert not c.created
+    c.finish("done")
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(OutputDirError, match="is a file"):
+        claim_output_dir(tmp_path / "f", "eval")
+    assert (tmp_path / "f").read_text() == "x"
+    with pytest.raises(OutputDirError, match="empty"):
+        claim_output_dir("", "eval")
+
+
+def test_own_earlier_output_is_replaced_and_named(tmp_path):
+    c = claim_output_dir(tmp_path / "run", "eval")
+    (c.path / "cases.csv").write_text("old")
+    (c.path / "figures").mkdir()
+    (c.path / "figures" / "old.png").write_bytes(b"png")
+    c.finish("done")
+    (c.path / "my_notes.txt").write_text("added by a person")  # not the run's: kept
+    c2 = claim_output_dir(tmp_path / "run", "eval")
+    assert sorted(c2.replaced) == ["cases.csv", "figures"] and "replacing" in c2.message
+    assert "cases.csv" in c2.message and sorted(os.listdir(c2.path)) == sorted([MARKER, outdir.LOCK, "my_notes.txt"])
+    c2.finish("done")
+    with pytest.raises(OutputDirError, match="another kind of output"):  # an eval folder is no sweep folder
+        claim_output_dir(tmp_path / "run", "sweep")
+
+
+def test_foreign_folder_needs_overwrite(tmp_path):
+    (tmp_path / "data.ply").write_text("mine")
+    with pytest.raises(OutputDirError, match="overwrite=true"):
+        claim_output_dir(tmp_path, "eval")
+    assert os.listdir(tmp_path) == ["data.ply"]
+    c = claim_output_dir(tmp_path, "eval", overwrite=True)
+    (c.path / "table.md").write_text("t")
+    c.finish("done")
+    assert json.loads((tmp_path / MARKER).read_text())["files"] == ["table.md"]  # data.ply stays the user's
+    c = claim_output_dir(tmp_path, "eval")  # now an earlier eval output: only table.md goes
+    assert c.replaced == ["table.md"] and (tmp_path / "data.ply").read_text() == "mine"
+    c.finish("done")
+
+
+def test_two_runs_never_share_a_folder(tmp_path):
+    c = claim_output_dir(tmp_path / "run", "eval")
+    with pytest.raises(OutputDirError, match="another run is writing"):
+        claim_output_dir(tmp_path / "run", "eval")
+    c.finish("done")
+    claim_output_dir(tmp_path / "run", "eval").finish("done")  # free again once the first run ended
+
+
+def test_lock_dies_with_its_process(tmp_path):
+    """A run killed with SIGKILL leaves a folder 'running' but unlocked: the next run replaces it."""
+    code = (f"import time; from eval.outdir import claim_output_dir; c = claim_output_dir({str(tmp_path / 'r')!r}, "
+            "'eval'); open(c.path / 'cases.csv', 'w').write('x'); print('claimed', flush=True); time.sleep(60)")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=subprocess_env(), stdout=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "claimed"
+        with pytest.raises(OutputDirError, match="another run is writing"):
+            claim_output_dir(tmp_path / "r", "eval")
+    finally:
+        p.send_signal(signal.SIGKILL)
+        p.wait(10)
+    claim_output_dir(tmp_path / "r", "eval").finish("done")
+
+
+def test_default_dated_folder_gets_a_suffix(tmp_path):
+    a = claim_output_dir(tmp_path / "2026-01-01_00-00-00", "eval", fresh=True)
+    b = claim_output_dir(tmp_path / "2026-01-01_00-00-00", "eval", fresh=True)
+    assert a.path.name == "2026-01-01_00-00-00" and b.path.name == "2026-01-01_00-00-00_2"
+    a.finish("done")
+    b.finish("done")
+
+
+def test_results_only_under_reproduce(tmp_path, monkeypatch):
+    monkeypatch.setattr(outdir, "results_dir", lambda: tmp_path / "results")
+    (tmp_path / "results" / "faust").mkdir(parents=True)
+    (tmp_path / "results" / "faust" / "table.md").write_text("committed")
+    monkeypatch.delenv(outdir.REPRODUCE_ENV, raising=False)
+    with pytest.raises(OutputDirError, match="eval.reproduce"):
+        claim_output_dir(tmp_path / "results" / "new", "eval")
+    assert not (tmp_path / "results" / "new").exists()
+    monkeypatch.setenv(outdir.REPRODUCE_ENV, "1")
+    c = claim_output_dir(tmp_path / "results" / "faust", "eval")  # committed folder: rewritten in place
+    assert c.replaced == [] and (tmp_path / "results" / "faust" / "table.md").read_text() == "committed"
+    c.finish("done")
+
+
+def test_reproduce_marks_its_commands(monkeypatch):
+    import eval.reproduce as rep
+    seen = []
+    monkeypatch.setattr(rep.subprocess, "call", lambda cmd, env=None: seen.append(env) or 0)
+    assert rep.main([]) == 0
+    assert seen and all(e.get(outdir.REPRODUCE_ENV) == "1" for e in seen)
+
+
+def test_failed_run_never_stays_running(tmp_path):
+    from omegaconf import OmegaConf
+    cfg = OmegaConf.create({"out_dir": str(tmp_path / "run"), "overwrite": False})
+    with pytest.raises(RuntimeError):
+        with claimed_run(cfg):
+            (tmp_path / "run" / "run.json").write_text(json.dumps({"status": "running"}))
+            raise RuntimeError("a bug in a method")
+    info = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert info["status"] == "failed" and "a bug in a method" in info["error"]
+    cfg = OmegaConf.create({"out_dir": str(tmp_path / "run2"), "overwrite": False})
+    with pytest.raises(KeyboardInterrupt):
+        with claimed_run(cfg):
+            (tmp_path / "run2" / "run.json").write_text(json.dumps({"status": "running"}))
+            raise KeyboardInterrupt
+    assert json.loads((tmp_path / "run2" / "run.json").read_text())["status"] == "interrupted"
+    assert json.loads((tmp_path / "run2" / MARKER).read_text())["status"] == "interrupted"
+
+
+def test_anny_figures_refuses_results(capsys):
+    from eval.anny_figures import main
+    t = time.time()
+    assert main([str(ROOT / "results" / "defaust" / "figures")]) == 2
+    assert "eval.reproduce" in capsys.readouterr().err and time.time() - t < 5
