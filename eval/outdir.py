@@ -40,7 +40,7 @@ from pathlib import Path
 from sshade.errors import SShaDeError
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
-           "results_dir", "read_marker"]
+           "claimed_run", "results_dir", "refuse_results", "read_marker"]
 
 MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and its files
 LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
@@ -55,6 +55,17 @@ class OutputDirError(SShaDeError):
 def results_dir() -> Path | None:
     """The ``results/`` folder of this source checkout (None for an installed copy)."""
     return _REPO / "results" if (_REPO / "pyproject.toml").is_file() else None
+
+
+def refuse_results(path, what: str) -> None:
+    """Raise :class:`OutputDirError` when ``path`` lies inside this checkout's
+    ``results/`` and the command does not run under ``python -m eval.reproduce``
+    (:data:`REPRODUCE_ENV`). ``what`` names the command for the message."""
+    p = Path(os.path.abspath(Path(str(path)).expanduser()))
+    res = results_dir()
+    if _inside(p, res) and os.environ.get(REPRODUCE_ENV) != "1":
+        raise OutputDirError(f"refusing to write into {p}: {res} holds the committed results and is written only "
+                             f"by python -m eval.reproduce; {what} (e.g. under outputs/)")
 
 
 def read_marker(path) -> dict | None:
@@ -199,7 +210,8 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     overwrite : bool, write into a non-empty folder that is not ours (the user asked).
     fresh : bool, ``path`` is a default name: never reuse it, add ``_2``, ``_3``, ... instead.
     keep : bool, an own earlier output is continued, not replaced (a sweep's resume).
-    option : str, how the user says ``overwrite`` on this command (for the message).
+    option : str, how the user says ``overwrite`` on this command (for the message; ""
+        when the command has no such option).
     name : str, how the user names the folder on this command (for the message).
 
     Returns
@@ -215,15 +227,12 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
         folder that is not this command's earlier output of the same kind (unless
         ``overwrite``).
     """
-    how = option or _how(kind)
+    how = _how(kind) if option is None else option
     raw = str(path).strip()
     if not raw:
         raise OutputDirError(f"the output folder is empty: name a new folder ({name}=DIR)")
     p = Path(os.path.abspath(Path(raw).expanduser()))
-    res = results_dir()
-    if _inside(p, res) and os.environ.get(REPRODUCE_ENV) != "1":
-        raise OutputDirError(f"refusing to write into {p}: {res} holds the committed results and is written only "
-                             "by python -m eval.reproduce; choose a folder outside it (e.g. under outputs/)")
+    refuse_results(p, "choose a folder outside it")
     if p.exists() and not p.is_dir():
         raise OutputDirError(f"output folder {p} is a file; choose a folder")
     try:
@@ -265,8 +274,8 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bo
         what = (f"another kind of output ({m.get('kind')})" if m else
                 f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote ({', '.join(names[:4])}"
                 f"{' ...' if len(names) > 4 else ''})")
-        raise OutputDirError(f"refusing to write into {p}: it holds {what}. Choose a new or empty folder, "
-                             f"or pass {how} to write into it anyway (files of the same name are replaced)")
+        alt = f", or pass {how} to write into it anyway (files of the same name are replaced)" if how else ""
+        raise OutputDirError(f"refusing to write into {p}: it holds {what}. Choose a new or empty folder{alt}")
     return _take(p, kind, [], names, f"writing into {p} ({how}: {len(names)} entries there kept unless "
                                       "replaced by files of the same name)")
 

@@ -355,6 +355,9 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     d = Path(sweep_dir).expanduser().resolve()
     if not d.is_dir():
         raise SShaDeError(f"sweep folder not found: {d}")
+    if write:
+        from .outdir import refuse_results
+        refuse_results(d, "use --no-write to print the table only")
     jobs = _job_dirs(d)
     man = read_manifest(d) or {}
     points = man.get("points") if isinstance(man.get("points"), list) else []

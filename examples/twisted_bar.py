@@ -12,6 +12,7 @@ The handles and targets are exactly those of ``twisted_bar(angle)`` (tests/test_
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -51,5 +52,13 @@ if __name__ == "__main__":
     ap.add_argument("--angle", type=float, default=135.0)
     ap.add_argument("--h", type=float, default=0.06, help="edge length (0.06: about 5,000 vertices)")
     args = ap.parse_args()
-    case = write_case(args.out, args.angle, args.h)
+    from eval.outdir import claim_output_dir
+    from sshade.errors import SShaDeError
+    try:  # a new, empty or earlier twisted-bar folder (eval/outdir.py), never a user's folder
+        claim = claim_output_dir(args.out, "twisted-bar", option="", name="OUT")
+    except SShaDeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+    case = write_case(claim.path, args.angle, args.h)
+    claim.finish("done")
     print(f"{len(case['V'])} vertices, {len(case['handles'])} handles: " + ", ".join(map(str, case["paths"].values())))

@@ -24,7 +24,7 @@ def test_readme_api_example_runs(tmp_path, monkeypatch):
     ns: dict = {}
     exec(compile(code, "README.md", "exec"), ns)  # noqa: S102 -- our own README
     V, V2, handles, targets = ns["V"], ns["V2"], ns["handles"], ns["targets"]
-    assert (tmp_path / "bunny_deformed.obj").is_file()
+    assert (tmp_path / "outputs" / "bunny_deformed.obj").is_file()
     assert V2.shape == V.shape and np.isfinite(V2).all()
     np.testing.assert_allclose(V2[handles], targets, atol=1e-9)
     moved = np.linalg.norm(V2 - V, axis=1)
