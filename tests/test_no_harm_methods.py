@@ -258,14 +258,14 @@ def test_handle_error_threshold_config(tmp_path, faust_root):
 
 
 def test_all_failed_method_keeps_the_common_set():
-    from eval.tables import compare, comparison_markdown, write_tables  # noqa: F401
+    from eval.tables import compare, comparison_markdown, failure_lines
     df = pd.DataFrame([
         {"case": c, "method": m, "volume_err_pct": v, "time_s": 1.0 + v, "error": e}
         for c in ("c1", "c2")
         for m, v, e in (("ARAP", 1.0, ""), ("SShaDe", 0.5, ""), ("Bad", 0.0, "timed out after 1 s"))])
     comp = compare(df)
     assert comp.cases == ["c1", "c2"] and comp.same_cases
-    md = comparison_markdown(comp)
+    md = comparison_markdown(comp, failures=failure_lines(df))
     assert "| Bad | 0 | 2 | -- |" in md and "**0.50**" in md
     assert "Bad: 2 of 2 cases failed: timed out after 1 s (2)" in md
 
@@ -307,7 +307,7 @@ def test_weird_info_does_not_break_cases_or_tables(tmp_path, faust_root):
     assert list(cases.index) == ["WeirdInfo", "Mine"] and (cases["error"] == "").all()
     assert all(re.fullmatch(r"[A-Za-z0-9_]+", c) for c in cases.columns), list(cases.columns)
     w = cases.loc["WeirdInfo"]
-    assert w["info_n_cases"] == "99" and w["info_error"] == "not an error" and w["info_method"] == "Other"
+    assert float(w["info_n_cases"]) == 99 and w["info_error"] == "not an error" and w["info_method"] == "Other"
     assert w["text"] == "line one line two | cell" and w["ok_value"] == "2.5"
     assert w["nan_value"] == "" and w["inf_value"] == "" and w["huge_int"] == ""
     assert float(w["big_int"]) == 2.0 ** 70 and json.loads(w["list_nan"]) == [1.0, None]
