@@ -80,7 +80,8 @@ def make_methods(cfg) -> list:
     SShaDeError
         Empty or non-list ``methods``, unknown name, a mapping without ``_target_``, a
         target that cannot be imported or built, an object without a ``name`` (str) or
-        a callable ``deform``, a name listed twice, bad parameter values (every
+        a callable ``deform``, a name breaking :data:`NAME_RULE`, a name listed twice
+        (ignoring case and repeated spaces), bad parameter values (every
         method's parameters are checked here, before any case is loaded or built), or
         ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
 
@@ -245,8 +246,9 @@ def build_method(spec, *, where: str = "method"):
     ------
     SShaDeError naming ``where`` and the target: no ``_target_``, an import or
     construction failure (a :class:`SShaDeError` raised by the constructor is re-raised
-    unchanged, e.g. ``SShaDe: n_low must be at least 4``), or an object lacking the
-    :class:`sshade.method.Deformer` interface.
+    unchanged, e.g. ``SShaDe: n_low must be at least 4``), an object lacking the
+    :class:`sshade.method.Deformer` interface, or a ``name`` breaking :data:`NAME_RULE`
+    (:func:`check_name`; a newline or ``|`` would break a table row).
 
     Examples
     --------
