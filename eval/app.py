@@ -13,11 +13,17 @@ optional ``warmup()`` has compiled its numba kernels (the seconds go to the ``co
 column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
 :mod:`sshade.warmup`), the result is scored with
 :func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
-:func:`eval.metrics.ground_truth_metrics`. A method that raises
-:class:`~sshade.errors.SShaDeError` on a case (a plug-in method: any exception,
-:func:`eval.methods.is_plugin`) gets its message in the ``error`` column and the run goes
-on. A case mesh with several connected components is deformed component by component
-(:class:`sshade.components.ComponentWise`). Outputs in ``out_dir`` (default ``outputs/<experiment.name>/<date_time>``):
+:func:`eval.metrics.ground_truth_metrics`. Every method runs through
+:func:`eval.guard.run_method` (issue 19): on read-only copies of the case, with the
+optional ``timeout_s`` of each call, its output checked
+(:func:`sshade.validate.validate_deformed`) before any metric. A method that fails on a
+case (our methods: :class:`~sshade.errors.SShaDeError`; a plug-in: any exception,
+``SystemExit`` included, :func:`eval.methods.is_plugin`; a time-out; a refused output)
+gets its message in the ``error`` column and the run goes on; so does a result whose
+handle error exceeds ``handle_error_max_pct`` (% of the diagonal; its metrics stay in
+the row). Ctrl-C stops the run. A case mesh with several connected components is
+deformed component by component (:func:`sshade.components.deform_components`). Method
+info values become cells through :func:`_info_columns` (safe names and values). Outputs in ``out_dir`` (default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
 (:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
 ``.hydra/`` folder. All tables and ``run.json`` are written atomically.
@@ -32,7 +38,6 @@ import logging
 import math
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -117,21 +122,65 @@ def _metric_functions():
 
 _SKIP = object()
 
+#: Info keys whose values feed the tables (eval.tables.stop_lines): kept under their
+#: name only with a value of the expected type, else renamed ``info_<key>``.
+_TYPED_INFO = {
+    "iterations": lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
+    "converged": lambda v: v is None or isinstance(v, (bool, int, float)),
+    "protocol": lambda v: v is None or isinstance(v, str),
+}
+#: Column names of the summary tables an info key must not take (eval.tables.summarize).
+_RESERVED = ("n_cases", "n_failed", "warnings", "error", "method", "case")
+
 
 def _scalar(v):
-    """Method info value -> a CSV cell: scalars as they are, flat lists/arrays of
-    scalars as JSON (e.g. SShaDe's per-sampling seeds); nested structures (per-sampling
-    dicts) are left out of the table (their sums are separate info keys)."""
+    """Method info value -> a CSV cell (issue 19: no value may break cases.csv or a
+    table): bools, ints (beyond int64: as float, or left empty when not finite), finite
+    floats (NaN/inf: empty), strings on one line (at most 200 characters), flat
+    lists/arrays of such scalars as JSON (NaN -> null; e.g. SShaDe's per-sampling
+    seeds); nested structures (per-sampling dicts) and other objects are left out
+    (their sums are separate info keys)."""
     if isinstance(v, np.generic):
         v = v.item()
-    if v is None or isinstance(v, (bool, int, float, str)):
+    if v is None or isinstance(v, bool):
         return v
-    if isinstance(v, np.ndarray):
+    if isinstance(v, int):
+        if abs(v) < 2 ** 63:
+            return v
+        try:
+            v = float(v)
+        except OverflowError:
+            return None
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, str):
+        return " ".join(v.split())[:200]
+    if isinstance(v, np.ndarray) and v.ndim == 1:
         v = v.tolist()
-    if isinstance(v, (list, tuple)) and all(
-            x is None or isinstance(x, (bool, int, float, str, np.generic)) for x in v):
-        return json.dumps([x.item() if isinstance(x, np.generic) else x for x in v])
+    if isinstance(v, (list, tuple)):
+        items = [_scalar(x) if x is None or isinstance(x, (bool, int, float, str, np.generic)) else _SKIP for x in v]
+        return _SKIP if any(x is _SKIP for x in items) else json.dumps(items)
     return _SKIP
+
+
+def _info_columns(info, taken) -> dict:
+    """The cells of a method's ``info`` for its row: keys made safe column names
+    (letters, digits, ``_``; at most 64 characters; non-string keys by their text),
+    values by :func:`_scalar`; a key clashing with ``taken`` (the row's columns), a
+    summary column or a typed key with a value of another type (:data:`_TYPED_INFO`)
+    becomes ``info_<key>``; ``compile_s`` (already in the row) is left out."""
+    import re
+    out: dict = {}
+    for k, v in info.items():
+        key = re.sub(r"[^A-Za-z0-9_]+", "_", k if isinstance(k, str) else str(k)).strip("_")[:64]
+        v = _scalar(v)
+        if not key or k == "compile_s" or v is _SKIP:
+            continue
+        if key in taken or key in _RESERVED or not _TYPED_INFO.get(key, lambda _: True)(v):
+            key = f"info_{key}"
+        if key not in taken and key not in out:
+            out[key] = v
+    return out
 
 
 #: dataset.name -> the config keys passed to its case builder (eval.datasets.load_cases).
@@ -157,10 +206,9 @@ def run(cfg) -> dict:
     unknown method, ...), before any method runs.
     """
     t_start = time.perf_counter()
-    from sshade.components import ComponentWise, n_components
-
-    from .methods import is_plugin, make_methods
+    from .methods import make_methods
     methods = make_methods(cfg)  # every method's parameters are checked before any work
+    guard = _guard_options(cfg)  # timeout_s, handle_error_max_pct
     refs = _References(cfg, (cfg.get("dataset") or {}).get("baseline_cases", None))  # config checked here too
     root = _dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
 
@@ -174,7 +222,7 @@ def run(cfg) -> dict:
     from .tables import compare, write_cases, write_tables
 
     out_dir = _abs(cfg.out_dir)
-    deformation_metrics, ground_truth_metrics = _metric_functions()
+    _metric_functions()  # eval.metrics importable, before any work
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
     opts = {k: ds.get(k) for k in _DATASET_KEYS.get(name, _DATASET_KEYS["faust"]) if k in ds}
@@ -205,63 +253,27 @@ def run(cfg) -> dict:
     def runs_on(ci: int, m) -> bool:  # baselines take minutes per high-res case: run on a subset
         return n_base is None or ci < int(n_base) or m.name == "SShaDe"
 
+    names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
     n_runs = sum(runs_on(ci, m) for ci in range(len(cases)) for m in methods)
     bar = tqdm(total=n_runs, desc="runs", unit="run", file=sys.stderr, dynamic_ncols=True)
     with logging_redirect_tqdm(), bar:
         for ci, case in enumerate(cases):
             deformed = {}  # method -> deformed vertices, for the optional figure
             refs.start_case(ci, case)
-            split = n_components(case.F, len(case.V)) > 1  # each component apart (sshade.components)
-            for m in methods:
+            for m, m_name in zip(methods, names):
                 if not runs_on(ci, m):
                     continue
-                bar.set_postfix_str(f"{case.name} {m.name}")
-                runner = ComponentWise(m) if split else m
-                row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": m.name,
-                       "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
-                       "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
-                       "case_seed": getattr(case, "seed", None), "error": ""}
-                try:
-                    row["compile_s"] = _warm(m, len(case.V))  # compilation: never inside time_s
-                    with warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always")
-                        t0 = time.perf_counter()
-                        Vd = runner.deform(case.V, case.F, case.handles, case.targets)
-                        row["time_s"] = time.perf_counter() - t0
-                    late = _info_compile_s(runner)  # compiled inside deform after all (a new code path)
-                    row["compile_s"] += late
-                    row["time_s"] -= late
-                    compile_s[m.name] = compile_s.get(m.name, 0.0) + row["compile_s"]
-                    for w in caught:  # e.g. sshade.deform.LowResSkippedWarning: logged and recorded
-                        log.warning("%s %s: %s", case.name, m.name, w.message)
-                    if caught:
-                        row["warnings"] = " | ".join(dict.fromkeys(str(w.message) for w in caught))
-                    Vd = np.asarray(Vd, np.float64)
-                    deformed[m.name] = Vd
-                    row.update(deformation_metrics(case.V, Vd, case.F, case.handles, case.targets))
-                    row.update(refs.metrics(m, Vd))
-                    if getattr(case, "V_gt", None) is not None:
-                        row.update(ground_truth_metrics(Vd, case.F, case.V_gt))
-                    for k, v in (getattr(runner, "info", None) or {}).items():
-                        v = _scalar(v)
-                        if v is not _SKIP and k != "compile_s":
-                            row[k if k not in row else f"info_{k}"] = v
-                    log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", case.name, m.name,
-                             row["time_s"], row.get("volume_err_pct", math.nan),
-                             row.get("edge_err_pct", math.nan), row.get("angle_err_deg", math.nan))
-                except Exception as e:  # SShaDeError, or anything a plug-in raises; else a bug of ours
-                    if not (isinstance(e, SShaDeError) or is_plugin(m)):
-                        raise
-                    row["error"] = (str(e) if isinstance(e, SShaDeError) else f"{type(e).__name__}: {e}") \
-                        or type(e).__name__
-                    log.warning("%s %s failed: %s", case.name, m.name, row["error"])
+                bar.set_postfix_str(f"{case.name} {m_name}")
+                row, deformed[m_name] = _run_one(m, m_name, case, refs, guard)
+                if "compile_s" in row:
+                    compile_s[m_name] = compile_s.get(m_name, 0.0) + row["compile_s"]
                 rows.append(row)
                 bar.update(1)
             write_cases(pd.DataFrame(rows), out_dir)  # partial results survive a crash
             if fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
                 fig_left -= 1
-                write_case_figure(case, {m.name: deformed.get(m.name) for m in methods}, out_dir / "figures",
-                                  not_run=[m.name for m in methods if not runs_on(ci, m)])  # "not run", not "failed"
+                write_case_figure(case, {n: deformed.get(n) for n in names}, out_dir / "figures",
+                                  not_run=[n for m, n in zip(methods, names) if not runs_on(ci, m)])  # "not run", not "failed"
 
     df = pd.DataFrame(rows)
     exp = cfg.get("experiment", {}).get("name", name)
@@ -278,21 +290,56 @@ def run(cfg) -> dict:
     return {"out_dir": out_dir, "paths": paths, "n_cases": len(cases), "n_errors": n_err, "summary": summ}
 
 
-def _warm(method, n_vertices: int) -> float:
-    """Seconds of ``method.warmup(n_vertices)`` (the optional first-call compilation of a
-    method, :class:`sshade.method.Deformer`; 0.0 when it has none or is already warm)."""
-    warm = getattr(method, "warmup", None)
-    return float(warm(n_vertices) or 0.0) if callable(warm) else 0.0
+def _guard_options(cfg) -> dict:
+    """``timeout_s`` (positive seconds or null: the limit of each method call,
+    :func:`eval.guard.run_method`) and ``handle_error_max_pct`` (positive, % of the
+    bounding-box diagonal, or null: the largest handle error of a successful run) of
+    the config, checked; SShaDeError naming the key."""
+    from .guard import HANDLE_ERROR_MAX_PCT, check_timeout
+    hmax = cfg.get("handle_error_max_pct", HANDLE_ERROR_MAX_PCT)
+    if hmax is not None:
+        try:
+            hmax = check_timeout(hmax, "handle_error_max_pct")
+        except SShaDeError:
+            raise SShaDeError(f"handle_error_max_pct must be a positive number (% of the bounding-box diagonal) "
+                              f"or null for no limit, got {hmax!r}") from None
+    return {"timeout_s": check_timeout(cfg.get("timeout_s", None), "timeout_s"), "handle_error_max_pct": hmax}
 
 
-def _info_compile_s(method) -> float:
-    """``compile_s`` a method reported for its last call (e.g. :func:`sshade.deform`'s
-    kernel loads), 0.0 when none."""
-    v = (getattr(method, "info", None) or {}).get("compile_s", 0.0)
+def _run_one(m, name: str, case, refs, guard: dict):
+    """One (case, method) run: :func:`eval.guard.run_method`, the metrics, the method's
+    info; returns ``(row, U)`` (``U`` None when the method failed). A failure (the
+    method's, or a handle error above ``guard['handle_error_max_pct']``: its metrics
+    stay in the row) is the row's ``error``; the run goes on."""
+    from .guard import handles_not_reached, run_method
+    from .metrics import deformation_metrics, ground_truth_metrics
+    row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": name,
+           "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
+           "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
+           "case_seed": getattr(case, "seed", None), "error": ""}
     try:
-        return max(0.0, float(v or 0.0))
-    except (TypeError, ValueError):
-        return 0.0
+        r = run_method(m, case.V, case.F, case.handles, case.targets, timeout_s=guard["timeout_s"])
+        row["compile_s"], row["time_s"] = r.compile_s, r.seconds  # compilation: never inside time_s
+        for w in r.warnings:  # e.g. sshade.deform.LowResSkippedWarning: logged and recorded
+            log.warning("%s %s: %s", case.name, name, w)
+        if r.warnings:
+            row["warnings"] = " | ".join(" ".join(w.split()) for w in r.warnings)
+        row.update(deformation_metrics(case.V, r.U, case.F, case.handles, case.targets))
+        row.update(refs.metrics(m, r.U))
+        if getattr(case, "V_gt", None) is not None:
+            row.update(ground_truth_metrics(r.U, case.F, case.V_gt))
+    except SShaDeError as e:  # the method failed (eval.guard.MethodFailure), or a metric refused its result
+        row["error"] = " ".join(str(e).split()) or type(e).__name__
+        log.warning("%s %s failed: %s", case.name, name, row["error"])
+        return row, None
+    row.update(_info_columns(r.info, row))
+    row["error"] = handles_not_reached(row.get("handle_err_pct"), guard["handle_error_max_pct"]) or ""
+    if row["error"]:
+        log.warning("%s %s failed: %s", case.name, name, row["error"])
+    log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", case.name, name, row["time_s"],
+             row.get("volume_err_pct", math.nan), row.get("edge_err_pct", math.nan),
+             row.get("angle_err_deg", math.nan))
+    return row, r.U
 
 
 class _References:

@@ -4,7 +4,7 @@ Usage::
 
     python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def
                                          | --handles F.json|F.csv)
-        [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--repair]
+        [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--timeout SECONDS] [--repair]
 
 - ``MESH``: .obj, .off, .ply or .stl (:func:`defaust.meshio.read_mesh`); ``OUT``: .obj,
   .off or .ply, written atomically (temporary file + rename) in that format.
@@ -16,7 +16,10 @@ Usage::
   (their definitions in ``conf/method/``, defaults of ``conf/config.yaml``) or a plug-in
   ``pkg.module.Class`` (:func:`eval.methods.named_or_plugin`); ``--n-low``, ``--k``
   (samplings) and ``--seed`` set SShaDe's ``n_low``, ``n_samplings``, ``seed`` (also given
-  to a plug-in that takes them); ``--param KEY=VALUE`` sets any other parameter.
+  to a plug-in that takes them); ``--param KEY=VALUE`` sets any other parameter. The
+  method runs guarded (:func:`eval.guard.run_method`): on read-only inputs, its output
+  checked (shape, finite, real), its handles within 1% of the diagonal of their
+  targets, ``--timeout SECONDS`` enforced; any failure is an ``error:`` line, no OUT.
 - Several connected components are deformed apart, those without handles follow
   rigidly (:mod:`sshade.components`). Unreferenced vertices are dropped with a warning
   (OUT then has fewer vertices; handles on them are dropped). ``--repair`` first applies
@@ -70,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="SShaDe's seed (default 0)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="any other parameter of the method (repeatable), e.g. --param workers=1")
+    p.add_argument("--timeout", metavar="SECONDS",
+                   help="limit of the method's run in seconds (main thread, Python code; eval/guard.py); "
+                        "a longer run is an error and no output is written")
     p.add_argument("--repair", action="store_true",
                    help="apply pymeshlab's vertex-preserving repair filters first and report what changed")
     return p
@@ -161,10 +167,14 @@ def deform_file(a, log=print, warn=None) -> dict:
     from tqdm import tqdm
 
     from defaust.meshio import read_mesh, write_mesh
-    from sshade.components import deform_components, drop_unreferenced
+    from sshade.components import drop_unreferenced
+
+    from .guard import check_timeout, handles_not_reached, run_method
+    from .metrics import handle_error
     warn = warn or (lambda s: print(f"warning: {s}", file=sys.stderr))
     _check_args(a)
     method = _method(a)  # a bad method or parameter fails before any file is read
+    timeout_s = check_timeout(getattr(a, "timeout", None), "--timeout")
     times: dict[str, float] = {}
     stages = ["read", "handles", *(["repair"] if a.repair else []), "deform", "write"]
     bar = tqdm(total=len(stages), desc="sshade deform", unit="stage", file=sys.stderr, disable=None, leave=False)
@@ -205,16 +215,18 @@ def deform_file(a, log=print, warn=None) -> dict:
             if len(handles) == 0:
                 raise SShaDeError("no handle is left on the mesh's faces")
         t = stage("deform")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                Vd, info = deform_components(method, V, F, handles, targets, return_info=True)
-            except SShaDeError as e:
-                hint = " (--repair applies pymeshlab's safe repair filters)" if not a.repair and str(e).startswith(
-                    "mesh:") and any(w in str(e) for w in ("non-manifold", "duplicate", "degenerate")) else ""
-                raise SShaDeError(f"{e}{hint}") from None
+        try:  # guarded: read-only inputs, exceptions and time-out, output checked (eval/guard.py)
+            res = run_method(method, V, F, handles, targets, timeout_s=timeout_s)
+        except SShaDeError as e:
+            hint = " (--repair applies pymeshlab's safe repair filters)" if not a.repair and str(e).startswith(
+                "mesh:") and any(w in str(e) for w in ("non-manifold", "duplicate", "degenerate")) else ""
+            raise SShaDeError(f"{e}{hint}") from None
+        Vd, info = res.U, res.info
+        miss = handles_not_reached(handle_error(Vd, handles, targets, float(np.linalg.norm(np.ptp(V, axis=0)))))
+        if miss:
+            raise SShaDeError(f"{method.name}: {miss}")
         done("deform", t)
-        for w in dict.fromkeys(str(w.message) for w in caught):
+        for w in res.warnings:
             warn(w)
         t = stage("write")
         try:

@@ -27,13 +27,14 @@ when it is built (:func:`build_method`).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 
 from sshade.errors import SShaDeError
 
 __all__ = ["METHODS", "make_methods", "build_method", "named_or_plugin", "method_spec", "method_key", "canonical_name",
-           "arap_params", "is_plugin"]
+           "arap_params", "is_plugin", "check_name", "NAME_RULE"]
 
 METHODS = ("ARAP", "Elastic", "ARAP-SR", "SShaDe", "SShaDe+refine")
 
@@ -79,7 +80,8 @@ def make_methods(cfg) -> list:
     SShaDeError
         Empty or non-list ``methods``, unknown name, a mapping without ``_target_``, a
         target that cannot be imported or built, an object without a ``name`` (str) or
-        a callable ``deform``, a name listed twice, bad parameter values (every
+        a callable ``deform``, a name breaking :data:`NAME_RULE`, a name listed twice
+        (ignoring case and repeated spaces), bad parameter values (every
         method's parameters are checked here, before any case is loaded or built), or
         ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
 
@@ -105,10 +107,11 @@ def make_methods(cfg) -> list:
             _alpha(_get(_get(cfg, "arap_sr", {}) or {}, "alpha", 0.01), "arap_sr.alpha")
     out = [build_method(it, where=f"methods[{i}]") if c is None else _build_ours(cfg, c)
            for i, (it, c) in enumerate(zip(items, canon))]
-    names = [m.name for m in out]
-    dup = {n for n in names if names.count(n) > 1}
+    keys = [" ".join(m.name.split()).lower() for m in out]  # "SShaDe" and "sshade" would be two confusing rows
+    dup = {m.name for m, k in zip(out, keys) if keys.count(k) > 1}
     if dup:
-        raise SShaDeError(f"method(s) listed twice: {sorted(dup)} (give a plug-in another `name`)")
+        raise SShaDeError(f"method(s) listed twice: {sorted(dup)} (names are compared ignoring case; give a "
+                          "plug-in another `name`)")
     return out
 
 
@@ -243,8 +246,9 @@ def build_method(spec, *, where: str = "method"):
     ------
     SShaDeError naming ``where`` and the target: no ``_target_``, an import or
     construction failure (a :class:`SShaDeError` raised by the constructor is re-raised
-    unchanged, e.g. ``SShaDe: n_low must be at least 4``), or an object lacking the
-    :class:`sshade.method.Deformer` interface.
+    unchanged, e.g. ``SShaDe: n_low must be at least 4``), an object lacking the
+    :class:`sshade.method.Deformer` interface, or a ``name`` breaking :data:`NAME_RULE`
+    (:func:`check_name`; a newline or ``|`` would break a table row).
 
     Examples
     --------
@@ -282,6 +286,7 @@ def build_method(spec, *, where: str = "method"):
     if not isinstance(name, str) or not name.strip():
         raise SShaDeError(f"{where}: {target} built an object without a `name` (non-empty str), got {name!r}; "
                           "a method needs `name` and deform(V, F, handles, targets) (sshade.method.Deformer)")
+    check_name(name, where=f"{where}: {target}")
     if not callable(getattr(m, "deform", None)):
         raise SShaDeError(f"{where}: {target} ({name!r}) has no callable deform(V, F, handles, targets) "
                           "(sshade.method.Deformer)")
@@ -291,6 +296,21 @@ def build_method(spec, *, where: str = "method"):
     elif not isinstance(info, Mapping):
         raise SShaDeError(f"{where}: {target} ({name!r}) has an `info` that is not a dict: {type(info).__name__}")
     return m
+
+
+#: A method name: the row label of cases.csv, table.md and table.tex (issue 19).
+_NAME_RE = re.compile(r"[A-Za-z0-9_+.()/-]([A-Za-z0-9 _+.()/-]{0,62}[A-Za-z0-9_+.()/-])?")
+NAME_RULE = ("method names are 1-64 characters among ASCII letters, digits, space and _ - + . ( ) /, "
+             "not starting or ending with a space")
+
+
+def check_name(name, *, where: str = "method") -> str:
+    """``name`` if it is a valid method name (:data:`NAME_RULE`), else SShaDeError
+    (one line: ``where``, the name as Python writes it, the rule). A name with a
+    newline, ``|``, ``&``, ``%`` ... would break a row of table.md or table.tex."""
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
+        raise SShaDeError(f"{where}: bad name {name!r}: {NAME_RULE}")
+    return name
 
 
 def _one_line(e: BaseException) -> str:

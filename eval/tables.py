@@ -52,7 +52,7 @@ import pandas as pd
 from defaust.meshio import atomic_write
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
-           "Comparison", "comparison_markdown", "main_note", "ALL_CASES_HEADING",
+           "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
            "COMMON_CASES_HEADING", "METHOD_ORDER", "TABLE_COLUMNS"]
 
 METHOD_ORDER = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe+refine")
@@ -185,7 +185,9 @@ def summarize(df: pd.DataFrame, *, cases=None) -> pd.DataFrame:
 
 
 def common_cases(df: pd.DataFrame) -> list | None:
-    """The cases on which every method of ``df`` has a successful row.
+    """The cases on which every method of ``df`` that succeeded somewhere has a
+    successful row (a method that failed on every case it ran on is not asked: it is
+    reported apart, :func:`failed_everywhere`, and its row averages no case).
 
     Parameters
     ----------
@@ -199,7 +201,9 @@ def common_cases(df: pd.DataFrame) -> list | None:
     if "case" not in df.columns or "method" not in df.columns:
         return None
     good = df[ok_mask(df)]
-    per_method = [set(good.loc[good["method"] == m, "case"]) for m in df["method"].unique()]
+    # a method that failed everywhere is left out here, else it would empty the set
+    # (it keeps its row, 0 cases and a note: failed_everywhere, comparison_markdown)
+    per_method = [set(good.loc[good["method"] == m, "case"]) for m in good["method"].unique()]
     common = set.intersection(*per_method) if per_method else set()
     return [c for c in dict.fromkeys(df["case"]) if c in common]
 
@@ -363,8 +367,51 @@ def main_note(comp: Comparison) -> str | None:
         return (f"No case on which every method ({', '.join(map(str, comp.methods))}) succeeded: each row is "
                 f"that method's mean over its own successful cases ({_own_counts(comp.main)}), not comparable "
                 "across rows.")
-    who = "the method" if len(comp.methods) == 1 else f"every method ({', '.join(map(str, comp.methods))})"
-    return f"Mean over the {_plural(len(comp.cases), 'case')} on which {who} succeeded."
+    dead = _dead(comp)
+    alive = [m for m in comp.methods if m not in dead]
+    who = "the method" if len(alive) == 1 else f"every method ({', '.join(map(str, alive))})"
+    note = f"Mean over the {_plural(len(comp.cases), 'case')} on which {who} succeeded."
+    if dead:
+        note += (f" {', '.join(map(str, dead))} failed on every case {'it' if len(dead) == 1 else 'they'} ran on: "
+                 f"{'its row averages' if len(dead) == 1 else 'their rows average'} no case.")
+    return note
+
+
+def _dead(comp: Comparison) -> list:
+    """Methods of ``comp.main`` that failed on every case they ran on (failed runs, no
+    successful one: a row averaging no case)."""
+    t = comp.main
+    if "n_failed" not in t.columns:
+        return []
+    return [r["method"] for _, r in t.iterrows() if int(r["n_failed"]) > 0 and int(r["n_cases"]) == 0]
+
+
+def _reason(msg: str) -> str:
+    """A failure message reduced to its kind (``handles not reached``; others as they
+    are, on one line, at most 160 characters) to count failures per method."""
+    msg = " ".join(str(msg).split())
+    if msg.startswith("handles not reached"):
+        return "handles not reached"
+    return msg if len(msg) <= 160 else msg[:157] + "..."
+
+
+def failure_lines(df: pd.DataFrame) -> list[str]:
+    """One line per method with failed runs: how many of its runs failed and why, e.g.
+    ``"Mine: 2 of 3 cases failed: handles not reached (1); timed out after 60 s (1)"``.
+    Failed runs are left out of every mean and of the bold (:func:`ok_mask`)."""
+    if "method" not in df.columns or "error" not in df.columns:
+        return []
+    ok = ok_mask(df)
+    lines = []
+    for m in _methods(df):
+        sel = df["method"] == m
+        bad = df.loc[sel & ~ok, "error"]
+        if not len(bad):
+            continue
+        counts = bad.map(_reason).value_counts(sort=True)
+        why = "; ".join(f"{r} ({int(c)})" for r, c in counts.items())
+        lines.append(f"{m}: {int(len(bad))} of {_plural(int(sel.sum()), 'case')} failed: {why}")
+    return lines
 
 
 def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
@@ -405,7 +452,8 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
     return lines
 
 
-def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None) -> str:
+def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None,
+                        failures: list[str] | None = None) -> str:
     """``table.md``'s text for a :class:`Comparison`.
 
     The main table (bold: best per column, all rows on the same cases) under ``title``
@@ -416,6 +464,7 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
     comparison is the first table). Without ``title`` the main table is headed
     :data:`COMMON_CASES_HEADING` when the second table follows. With an empty common
     set: the note says so and the (per-method, fallback) main table has no bold.
+    ``failures`` (:func:`failure_lines`): a "Failed runs" list under the main table.
     """
     if title is None and comp.all is not None:
         title = COMMON_CASES_HEADING
@@ -425,6 +474,9 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
     text = to_markdown(comp.main, title=title, note=note, bold=comp.same_cases)
     if stops:
         text += "\nHow each method stopped:\n\n" + "".join(f"- {s}\n" for s in stops)
+    if failures:
+        text += ("\nFailed runs (left out of every mean and of the bold):\n\n"
+                 + "".join(f"- {s}\n" for s in failures))
     if comp.all is not None:
         text += "\n" + to_markdown(
             comp.all, title=ALL_CASES_HEADING, bold=False,
@@ -481,7 +533,8 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     else:
         p_all.unlink(missing_ok=True)
     stops = stop_lines(df)
-    paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops), out_dir / "table.md")
+    paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df)),
+                                    out_dir / "table.md")
     note = " ".join(x for x in [main_note(comp), "; ".join(stop_lines(df, short=True))] if x) or None
     paths["table_tex"] = _write_text(to_latex(comp.main, note=note, bold=comp.same_cases), out_dir / "table.tex")
     return paths

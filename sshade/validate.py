@@ -20,7 +20,7 @@ from scipy.sparse.csgraph import connected_components
 from .errors import SShaDeError
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
-__all__ = ["validate_mesh", "validate_handles"]
+__all__ = ["validate_mesh", "validate_handles", "validate_deformed", "MAX_DIAGONALS"]
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
@@ -65,6 +65,8 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         V = np.ascontiguousarray(V, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise SShaDeError(f"{name}: vertex array is not numeric ({e})") from None
+    if not V.flags.writeable:  # a read-only array (eval.guard) would make numba compile a second signature
+        V = V.copy()
     try:
         F = np.asarray(F)
     except (TypeError, ValueError) as e:
@@ -81,6 +83,8 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         if not np.all(np.isfinite(F)) or np.any(F != np.round(F)):
             raise SShaDeError(f"{name}: face indices are not integers")
     F = np.ascontiguousarray(F, dtype=np.int64)
+    if not F.flags.writeable:
+        F = F.copy()
     he = _fast_checks(V, F, allow_boundary, area_tol, allow_components)
     if he is None:  # something looks wrong: the reference checks name it (or pass a borderline case)
         he = _reference_checks(V, F, name, allow_boundary, area_tol, allow_components)
@@ -273,6 +277,8 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
     if len(np.unique(h)) != len(h):
         raise SShaDeError("handles contain duplicate vertex indices")
     T = np.ascontiguousarray(targets, dtype=np.float64)
+    if not T.flags.writeable:  # see validate_mesh
+        T = T.copy()
     if T.ndim != 2 or T.shape[1] != 3:
         raise SShaDeError(f"targets must have shape (h, 3), got {T.shape}")
     if len(T) != len(h):
@@ -280,3 +286,81 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
     if not np.isfinite(T).all():
         raise SShaDeError("targets contain NaN/inf")
     return h, T
+
+
+#: A deformed vertex farther than this many rest bounding-box diagonals from the rest
+#: pose's bounding-box centre is refused by :func:`validate_deformed`.
+MAX_DIAGONALS = 1e6
+
+
+def validate_deformed(U, n_vertices: int, *, V=None, name: str = "method") -> np.ndarray:
+    """Check a deformation method's output before anything measures or writes it.
+
+    The one check of every method's result (the evaluator and ``python -m sshade
+    deform`` both call it through :func:`eval.guard.run_method`; issue 19).
+
+    Parameters
+    ----------
+    U : (n, 3) array_like of real numbers, the deformed vertex positions (mesh units).
+    n_vertices : int, the rest mesh's vertex count ``n``.
+    V : optional (n, 3) float rest positions; with it, a vertex farther than
+        :data:`MAX_DIAGONALS` (1e6) rest bounding-box diagonals from the rest
+        bounding-box centre is refused (an absurd result, e.g. an overflow).
+    name : str, the method's name, first word of every message.
+
+    Returns
+    -------
+    (n, 3) float64, C-contiguous, writeable: always a new array (the method keeps no
+    reference to what is measured or written).
+
+    Raises
+    ------
+    SShaDeError
+        ``name returned ...``: not an array of real numbers (None, ragged lists,
+        strings, objects, booleans, complex numbers even with a zero imaginary part),
+        a shape other than ``(n_vertices, 3)``, NaN/inf coordinates (also after the
+        conversion to float64), or an absurd magnitude (with ``V``).
+
+    Examples
+    --------
+    >>> V = np.zeros((4, 3)); V[1:, :] = np.eye(3)
+    >>> validate_deformed(V.astype(np.float32), 4, V=V).dtype
+    dtype('float64')
+    """
+    try:
+        A = np.asarray(U)
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"{name} returned something that is not numeric ({' '.join(str(e).split())})") from None
+    if A.dtype.kind == "c":
+        raise SShaDeError(f"{name} returned complex numbers (dtype {A.dtype}); return real (n, 3) coordinates")
+    if A.dtype.kind not in "iuf":
+        raise SShaDeError(f"{name} returned something that is not numeric ({type(U).__name__} of dtype {A.dtype}); "
+                          "return an (n, 3) float array")
+    if A.shape != (int(n_vertices), 3):
+        raise SShaDeError(f"{name} returned an array of shape {A.shape} for a mesh of {int(n_vertices)} vertices; "
+                          f"expected ({int(n_vertices)}, 3)")
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.array(A, dtype=np.float64, order="C", copy=True)
+    bad = ~np.isfinite(out).all(axis=1)
+    if bad.any():
+        raise SShaDeError(f"{name} returned {int(bad.sum())} vertices with NaN/inf coordinates "
+                          f"(first: vertex {int(np.flatnonzero(bad)[0])})")
+    if V is not None:
+        _check_magnitude(out, V, name)
+    return out
+
+
+def _check_magnitude(U: np.ndarray, V, name: str) -> None:
+    """SShaDeError if a row of ``U`` is farther than :data:`MAX_DIAGONALS` bounding-box
+    diagonals of ``V`` from ``V``'s bounding-box centre."""
+    V = np.asarray(V, dtype=np.float64)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    diag = float(np.linalg.norm(hi - lo))
+    if not np.isfinite(diag) or diag <= 0:
+        return
+    dist = np.linalg.norm(U - (lo + hi) / 2, axis=1)
+    far = dist > MAX_DIAGONALS * diag
+    if far.any():
+        i = int(np.argmax(dist))
+        raise SShaDeError(f"{name} returned {int(far.sum())} vertices farther than {MAX_DIAGONALS:g} bounding-box "
+                          f"diagonals from the mesh (vertex {i} at {dist[i] / diag:.3g} diagonals)")

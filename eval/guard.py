@@ -1,0 +1,283 @@
+"""One guarded way to run a deformation method on one input (issue 19), used by the
+evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`eval.deform_cli`).
+
+:func:`run_method` gives the method read-only copies of the mesh and handles (a method
+that writes into them fails alone instead of corrupting every later method on the
+case), deforms each connected component apart when there are several
+(:func:`sshade.components.deform_components`), turns whatever the method raises or does
+(an exception, ``sys.exit``, a time-out) into a :class:`MethodFailure`, except
+``KeyboardInterrupt``, which stops the run, and checks the result with
+:func:`sshade.validate.validate_deformed` before anyone measures or writes it.
+
+Time-outs use ``SIGALRM`` (``signal.setitimer``) and therefore work only in the main
+thread of a POSIX process, and only while the method runs Python code: a compiled loop
+(numba, C) that never returns to the interpreter cannot be interrupted this way; the
+alarm is raised as soon as it does return. Off the main thread (or without
+``SIGALRM``) a time-out is not enforced and a :class:`RuntimeWarning` says so.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import threading
+import time
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+__all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "handles_not_reached",
+           "HANDLE_ERROR_MAX_PCT"]
+
+#: Default largest handle error (% of the rest bounding-box diagonal, the
+#: ``handle_err_pct`` of :func:`eval.metrics.deformation_metrics`) of a successful run.
+HANDLE_ERROR_MAX_PCT = 1.0
+
+
+class MethodFailure(SShaDeError):
+    """A method failed on one input: it raised, exited, timed out or returned an
+    unusable result. The message (one line) is what the evaluator's ``error`` column
+    and the command line's ``error:`` line say."""
+
+
+class _Timeout(BaseException):
+    """Raised in the method by the alarm; a BaseException so that a method's
+    ``except Exception`` does not swallow it."""
+
+
+@dataclass(frozen=True)
+class MethodRun:
+    """What :func:`run_method` returns; unpacks as ``U, seconds = run_method(...)``.
+
+    Attributes
+    ----------
+    U : (n, 3) float64, the checked deformed positions (a new array).
+    seconds : float, wall seconds of the ``deform`` call minus the compilation it
+        reported in ``info['compile_s']`` (the evaluator's ``time_s``).
+    compile_s : float, seconds of the method's ``warmup()`` plus that reported
+        compilation (the evaluator's ``compile_s``; never part of ``seconds``).
+    info : dict, the method's ``info`` after the call (components merged,
+        :func:`sshade.components.deform_components`); ``{}`` when it is not a mapping.
+    warnings : list of str, the distinct warning messages the call issued.
+    """
+    U: np.ndarray
+    seconds: float
+    compile_s: float = 0.0
+    info: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    def __iter__(self):
+        return iter((self.U, self.seconds))
+
+
+def check_timeout(value, where: str = "timeout_s"):
+    """``value`` as a positive finite float, or None for None (no limit).
+
+    Raises SShaDeError naming ``where``: a bool, a non-number, zero, negative, NaN, inf.
+    """
+    if value is None:
+        return None
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise SShaDeError(f"{where} must be a positive number of seconds (or null for no limit), got {value!r}")
+    return v
+
+
+def handles_not_reached(handle_err_pct, max_pct=HANDLE_ERROR_MAX_PCT) -> str | None:
+    """The failure message of a result whose handle error (``handle_err_pct``: largest
+    handle-to-target distance in % of the rest bounding-box diagonal,
+    :func:`eval.metrics.handle_error`) exceeds ``max_pct`` (None: no limit), else None."""
+    if max_pct is None or handle_err_pct is None:
+        return None
+    e = float(handle_err_pct)
+    if not (e > float(max_pct)) and not math.isnan(e):
+        return None
+    return f"handles not reached: handle error {e:.3g}% of the diagonal > {float(max_pct):g}%"
+
+
+def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
+    """Run ``method`` (a :class:`sshade.method.Deformer`) on one input, guarded.
+
+    Parameters
+    ----------
+    method : object with ``name``, ``deform(V, F, handles, targets)``, optional
+        ``warmup(n_vertices)`` and ``info``.
+    V : (n, 3) float rest positions (any unit); F : (m, 3) int triangles (several
+        connected components allowed: each is deformed apart); handles : (h,) int
+        vertex indices; targets : (h, 3) float positions. Never modified.
+    timeout_s : positive float or None, the wall-clock limit of each of the
+        ``warmup`` and ``deform`` calls (main thread only, see the module docstring).
+
+    Returns
+    -------
+    :class:`MethodRun` (``U, seconds = run_method(...)`` also works).
+
+    Raises
+    ------
+    SShaDeError (not a MethodFailure) on an invalid mesh or handles, before the method
+    runs (:func:`sshade.validate.validate_mesh`, ``validate_handles``).
+    MethodFailure on anything the method raises or does: our methods' SShaDeError
+    (its message), a plug-in's exception (``Type: message``), SystemExit and other
+    BaseException (``SystemExit: 0 (...)``), ``timed out after N s``, or an output
+    :func:`sshade.validate.validate_deformed` refuses.
+    KeyboardInterrupt, unchanged; any other exception of one of our own methods (a bug,
+    :func:`eval.methods.is_plugin`), unchanged.
+    """
+    from sshade.components import deform_components, n_components
+    from sshade.validate import validate_deformed, validate_handles, validate_mesh
+
+    from .methods import is_plugin
+    name = str(getattr(method, "name", type(method).__name__))
+    timeout_s = check_timeout(timeout_s)
+    V, F = validate_mesh(V, F, allow_components=True)
+    handles, targets = validate_handles(V, handles, targets)
+    n = len(V)
+    Vr, Fr, hr, tr = (_read_only(a) for a in (V, F, handles, targets))
+    plugin = is_plugin(method)
+    split = n_components(F, n) > 1
+    compile_s = _guarded(lambda: _warm(method, n), timeout_s, plugin)
+    checked = _Checked(method, name)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        t0 = time.perf_counter()
+        if split:
+            raw, info = _guarded(lambda: deform_components(checked, Vr, Fr, hr, tr, return_info=True),
+                                 timeout_s, plugin)
+        else:
+            raw = _guarded(lambda: method.deform(Vr, Fr, hr, tr), timeout_s, plugin)
+            info = getattr(method, "info", None)
+        elapsed = time.perf_counter() - t0
+    info = dict(info) if isinstance(info, Mapping) else {}
+    late = min(_info_compile_s(info), elapsed)  # compiled inside deform after all (a new code path)
+    try:
+        U = validate_deformed(raw, n, V=V, name=name)
+    except SShaDeError as e:
+        raise MethodFailure(str(e)) from None
+    return MethodRun(U=U, seconds=elapsed - late, compile_s=compile_s + late, info=info,
+                     warnings=list(dict.fromkeys(str(w.message) for w in caught)))
+
+
+class _Checked:
+    """``method`` whose every ``deform`` output is checked (one component's, when
+    :func:`sshade.components.deform_components` splits the mesh)."""
+
+    def __init__(self, method, name: str):
+        self.method, self.name = method, name
+
+    @property
+    def info(self):
+        info = getattr(self.method, "info", None)
+        return info if isinstance(info, Mapping) else {}
+
+    def deform(self, V, F, handles, targets):
+        from sshade.validate import validate_deformed
+        U = self.method.deform(_read_only(V), _read_only(F), _read_only(handles), _read_only(targets))
+        return validate_deformed(U, len(V), V=V, name=self.name)
+
+
+def _read_only(a) -> np.ndarray:
+    """A read-only C-contiguous copy of ``a`` (no copy when ``a`` already is one)."""
+    a = np.asarray(a)
+    if a.flags.writeable or not a.flags.c_contiguous:
+        a = np.array(a, order="C", copy=True)
+        a.flags.writeable = False
+    return a
+
+
+def _describe(e: BaseException) -> str:
+    """``Type: message`` on one line; never raises (a broken ``__str__`` included)."""
+    try:
+        msg = str(e)
+    except Exception:  # noqa: BLE001 -- a plug-in's exception may fail to print
+        msg = "(message unavailable)"
+    return " ".join(f"{type(e).__name__}: {msg}".split()).rstrip(": ")
+
+
+def _guarded(fn, timeout_s, plugin: bool):
+    """``fn()``, with every way out but a return or KeyboardInterrupt turned into a
+    :class:`MethodFailure` (see :func:`run_method`)."""
+    limit = f"timed out after {timeout_s:g} s" if timeout_s is not None else ""
+    try:
+        with _alarm(timeout_s) as fired:
+            try:
+                out = fn()
+            except (KeyboardInterrupt, _Timeout):
+                raise
+            except MethodFailure:
+                raise
+            except SShaDeError as e:
+                raise MethodFailure(" ".join(str(e).split()) or type(e).__name__) from None
+            except Exception as e:
+                if not plugin:
+                    raise
+                raise MethodFailure(_describe(e)) from None
+            except BaseException as e:  # SystemExit, GeneratorExit, ...: the run goes on
+                raise MethodFailure(f"{_describe(e)} (a method must return, not end the program)") from None
+    except _Timeout:
+        raise MethodFailure(limit) from None
+    if fired[0]:  # the method swallowed the alarm and returned
+        raise MethodFailure(limit)
+    return out
+
+
+@contextlib.contextmanager
+def _alarm(timeout_s):
+    """Raise :class:`_Timeout` in this thread after ``timeout_s`` seconds (then again
+    every 0.5 s, in case the method swallows it); yields a one-item list, True once it
+    fired. No-op for None; a RuntimeWarning where SIGALRM cannot be used."""
+    fired = [False]
+    usable = hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+    if timeout_s is None or not usable:
+        if timeout_s is not None:
+            warnings.warn(f"timeout of {timeout_s:g} s not enforced: time-outs need SIGALRM in the main thread",
+                          RuntimeWarning, stacklevel=4)
+        yield fired
+        return
+
+    def handler(signum, frame):
+        fired[0] = True
+        raise _Timeout()
+
+    old = signal.signal(signal.SIGALRM, handler)
+    old_delay, _ = signal.setitimer(signal.ITIMER_REAL, timeout_s, 0.5)
+    t0 = time.monotonic()
+    try:
+        yield fired
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+        if old_delay > 0:  # someone else's alarm: re-armed with what is left of it
+            signal.setitimer(signal.ITIMER_REAL, max(old_delay - (time.monotonic() - t0), 1e-3))
+
+
+def _warm(method, n_vertices: int) -> float:
+    """Seconds of ``method.warmup(n_vertices)`` (the optional first-call compilation of a
+    method, :class:`sshade.method.Deformer`; 0.0 when it has none or is already warm,
+    or reports something that is not a finite number >= 0)."""
+    warm = getattr(method, "warmup", None)
+    if not callable(warm):
+        return 0.0
+    return _seconds(warm(n_vertices))
+
+
+def _info_compile_s(info) -> float:
+    """``compile_s`` a method reported in its ``info`` for its last call (e.g.
+    :func:`sshade.deform`'s kernel loads), 0.0 when none or not a finite number >= 0."""
+    return _seconds(info.get("compile_s", 0.0))
+
+
+def _seconds(v) -> float:
+    try:
+        v = float(v or 0.0)
+    except (TypeError, ValueError, OverflowError):
+        return 0.0
+    return v if math.isfinite(v) and v > 0 else 0.0
