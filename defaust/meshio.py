@@ -7,14 +7,16 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from sshade.errors import SShaDeError
 
-__all__ = ["read_mesh", "write_mesh", "atomic_write"]
+__all__ = ["read_mesh", "write_mesh", "atomic_write", "written_by_sshade", "SIGNATURE"]
 
 _EXTS = {".obj", ".off", ".ply", ".stl"}
 
@@ -51,66 +53,384 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
     ext = p.suffix.lower()
     if ext not in _EXTS:
         raise SShaDeError(f"{p}: unsupported mesh format {ext!r} (use one of {sorted(_EXTS)})")
-    _check_polygon_faces(p, ext)
     try:
-        if ext == ".stl":
-            # STL is a triangle soup: merge coincident vertices to recover connectivity
-            import trimesh
-            tm = trimesh.load(str(p), file_type="stl", process=True, force="mesh")
-            V, F = np.asarray(tm.vertices), np.asarray(tm.faces)
-        else:
-            import igl
-            V, F = igl.read_triangle_mesh(str(p))
-    except Exception as e:  # libigl raises RuntimeError/ValueError on garbage
-        raise SShaDeError(f"{p}: unreadable mesh file ({type(e).__name__}: {e})") from None
-    V = np.ascontiguousarray(V, dtype=np.float64)
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    if V.size == 0 or F.size == 0 or V.ndim != 2 or F.ndim != 2:
+        data = p.read_bytes()
+    except OSError as e:
+        raise SShaDeError(f"{p}: unreadable mesh file ({e.strerror or type(e).__name__})") from None
+    # pure-Python/numpy readers: a truncated or lying file is an SShaDeError, never a
+    # native abort (libigl's readers double-free on some of them) nor a huge allocation
+    reader = {".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".stl": _read_stl}[ext]
+    try:
+        V, F = reader(data, p)
+    except SShaDeError:
+        raise
+    except (ValueError, IndexError, KeyError, OverflowError, TypeError, MemoryError) as e:
+        raise SShaDeError(f"{p}: unreadable {ext[1:].upper()} file (malformed: {_short(e)})") from None
+    V = np.ascontiguousarray(V, dtype=np.float64).reshape(-1, 3)
+    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
+    if len(V) == 0 or len(F) == 0:
         raise SShaDeError(f"{p}: unreadable mesh file (no vertices or no faces found)")
-    if F.shape[1] != 3:
-        raise SShaDeError(f"{p}: faces have {F.shape[1]} vertices; only triangle meshes are supported")
     if validate:
         from sshade.validate import validate_mesh
         V, F = validate_mesh(V, F, name=str(p), allow_components=allow_components)
     return V, F
 
 
-def _data_lines(p: Path):
-    """Lines of a text mesh file with comments and blank lines removed, split in tokens."""
-    with open(p, "rb") as fh:
-        for i, line in enumerate(fh, 1):
-            toks = line.split(b"#", 1)[0].split()
-            if toks:
-                yield i, toks
+def _short(e: BaseException) -> str:
+    """One short line describing an exception."""
+    s = " ".join(str(e).split())
+    return (s[:120] + "...") if len(s) > 120 else (s or type(e).__name__)
 
 
-def _check_polygon_faces(p: Path, ext: str) -> None:
-    """libigl would fan-triangulate polygons silently; refuse them instead."""
+def _bad(p: Path, what: str) -> SShaDeError:
+    return SShaDeError(f"{p}: unreadable {p.suffix[1:].upper()} file ({what})")
+
+
+def _floats(rows, p: Path, what: str) -> np.ndarray:
+    """(k, 3) float64 from the first three tokens of each row ``(line, tokens)``
+    (correctly rounded: Python's float); an SShaDeError names the first bad line."""
     try:
-        if ext == ".obj":
-            for i, toks in _data_lines(p):
-                if toks[0] == b"f" and len(toks) != 4:
-                    raise SShaDeError(f"{p}: line {i} is a face with {len(toks) - 1} vertices; "
-                                      "only triangle meshes are supported")
-        elif ext == ".off":
-            it = _data_lines(p)
-            _, toks = next(it)
-            if toks[0].upper().endswith(b"OFF"):
-                toks = toks[1:]
-                if not toks:
-                    _, toks = next(it)
-            nv, nf = int(toks[0]), int(toks[1])
-            for _ in range(nv):
-                next(it)
-            for j in range(nf):
-                i, toks = next(it)
-                if int(toks[0]) != 3:
-                    raise SShaDeError(f"{p}: face {j} (line {i}) has {int(toks[0])} vertices; "
-                                      "only triangle meshes are supported")
-    except SShaDeError:
+        return np.array([(float(t[0]), float(t[1]), float(t[2])) for _, t in rows], np.float64).reshape(-1, 3)
+    except (ValueError, IndexError):
+        for i, t in rows:
+            try:
+                float(t[0]), float(t[1]), float(t[2])
+            except (ValueError, IndexError):
+                raise SShaDeError(f"{p}: line {i}: {what} {_show(t)} is not three numbers") from None
         raise
-    except (StopIteration, ValueError, IndexError) as e:
-        raise SShaDeError(f"{p}: unreadable {ext[1:].upper()} file (truncated or malformed: {e!r})") from None
+
+
+def _show(toks) -> str:
+    return repr(b" ".join(toks)[:60])[1:]  # ASCII only: raw bytes never reach the terminal
+
+
+_WS = np.zeros(256, bool)
+_WS[[9, 10, 11, 12, 13, 32]] = True
+
+
+def _table(lines: list, ncols: int, dtype):
+    """(k, ncols) array of the numbers on ``lines`` (bytes, one row each), vectorised;
+    None when some line does not hold exactly ``ncols`` numbers (the caller's per-line
+    path then names the problem). Floats are correctly rounded (bit-exact round trip)."""
+    if not lines:
+        return np.zeros((0, ncols), dtype)
+    blob = b"\n".join(lines)
+    a = np.frombuffer(blob, np.uint8)
+    sp = _WS[a]
+    start = ~sp
+    start[1:] &= sp[:-1]
+    counts = np.bincount(np.cumsum(a == 10)[start], minlength=len(lines))
+    if len(counts) != len(lines) or (counts != ncols).any():
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            vals = np.fromstring(blob, dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    return vals.reshape(-1, ncols) if vals.size == len(lines) * ncols else None
+
+
+def _lines(data: bytes) -> list:
+    """Lines of a text file, ``#`` comments removed."""
+    lines = data.splitlines()
+    if b"#" in data:
+        lines = [ln.split(b"#", 1)[0] if b"#" in ln else ln for ln in lines]
+    return lines
+
+
+def _read_obj(data: bytes, p: Path):
+    """OBJ ``v`` and ``f`` statements (other statements ignored; ``f a/b/c`` keeps the
+    vertex index; negative indices count back from the last vertex so far)."""
+    lines = _lines(data)
+    fast = (b"v ", b"f ", b"vn", b"vt", b"")
+    for i, ln in enumerate(lines):
+        if ln[:2] not in fast:  # unusual line: check its keyword, normalise v/f statements
+            t = ln.split()
+            if t and t[0] in (b"v", b"f"):
+                lines[i] = t[0] + b" " + b" ".join(t[1:])
+            elif t and not t[0].replace(b"_", b"").isalpha():
+                raise _bad(p, f"line {i + 1} is not an OBJ statement: {_show(t)}")
+    vi = [i for i, ln in enumerate(lines) if ln[:2] == b"v "]
+    fi = [i for i, ln in enumerate(lines) if ln[:2] == b"f "]
+    V = _table([lines[i][2:] for i in vi], 3, np.float64)
+    if V is None:
+        V = _floats([(i + 1, lines[i].split()[1:]) for i in vi], p, "vertex")
+    fl = [lines[i][2:] for i in fi]
+    if any(b"/" in s for s in fl):
+        fl = [re.sub(rb"/\S*", b"", s) for s in fl]
+    F = _table(fl, 3, np.int64)
+    if F is None:
+        F = _obj_faces(p, [(i + 1, fl[k].split()) for k, i in enumerate(fi)])
+    if (F == 0).any():
+        i = fi[int(np.flatnonzero((F == 0).any(1))[0])] + 1
+        raise SShaDeError(f"{p}: line {i}: vertex index 0 (OBJ indices start at 1)")
+    neg = F < 0
+    F = F - 1
+    if neg.any():  # relative indices: -1 is the last vertex defined before the face
+        before = np.searchsorted(np.asarray(vi), np.asarray(fi))
+        F[neg] += np.repeat(before, 3).reshape(-1, 3)[neg] + 1
+    return V, F
+
+
+def _obj_faces(p: Path, rows) -> np.ndarray:
+    """Per-line parse of OBJ face rows ``(line, index tokens)``: names the first bad line."""
+    for i, t in rows:
+        if len(t) != 3:
+            raise SShaDeError(f"{p}: line {i} is a face with {len(t)} vertices; only triangle meshes are supported")
+        try:
+            np.array([int(s) for s in t], np.int64)
+        except (ValueError, OverflowError):
+            raise SShaDeError(f"{p}: line {i}: face {_show(t)} does not hold three vertex indices") from None
+    return np.array([[int(s) for s in t] for _, t in rows], np.int64).reshape(-1, 3)
+
+
+def _read_off(data: bytes, p: Path):
+    """OFF (also COFF/NOFF/CNOFF: extra values per line ignored): header counts checked
+    against the lines present before anything is allocated."""
+    lines = _lines(data)
+    keep = [i for i, ln in enumerate(lines) if ln.strip()]
+    if not keep:
+        raise _bad(p, "empty file")
+    t = lines[keep[0]].split()
+    start = 1
+    if t[0].upper().endswith(b"OFF"):
+        if t[0].upper().startswith(b"ST") or b"4" in t[0] or t[0].upper().startswith(b"N") and len(t[0]) > 5:
+            raise _bad(p, f"unsupported OFF variant {t[0][:20]!r}")
+        t = t[1:]
+        if not t:
+            if len(keep) < 2:
+                raise _bad(p, "truncated: no counts line after OFF")
+            t = lines[keep[1]].split()
+            start = 2
+    if len(t) < 2 or not (t[0].isdigit() and t[1].isdigit()):
+        raise _bad(p, f"line {keep[start - 1] + 1}: expected the counts 'nvertices nfaces nedges', got {_show(t)}")
+    nv, nf = int(t[0]), int(t[1])
+    have = len(keep) - start
+    if nv + nf > have:
+        raise _bad(p, f"truncated: the header announces {nv} vertices and {nf} faces but only {have} "
+                      "data lines follow")
+    vk, fk = keep[start:start + nv], keep[start + nv:start + nv + nf]
+    V = _table([lines[i] for i in vk], 3, np.float64)
+    if V is None:
+        V = _floats([(i + 1, lines[i].split()) for i in vk], p, "vertex")
+    F4 = _table([lines[i] for i in fk], 4, np.int64)
+    if F4 is not None and (F4[:, 0] == 3).all():
+        return V, F4[:, 1:]
+    frows = [(i + 1, lines[i].split()) for i in fk]
+    for j, (i, t) in enumerate(frows):
+        if t[0] != b"3":
+            try:
+                k = int(t[0])
+            except ValueError:
+                raise SShaDeError(f"{p}: line {i}: face {_show(t)} does not start with a vertex count") from None
+            raise SShaDeError(f"{p}: face {j} (line {i}) has {k} vertices; only triangle meshes are supported")
+    try:
+        F = np.array([(int(t[1]), int(t[2]), int(t[3])) for _, t in frows], np.int64).reshape(-1, 3)
+    except (ValueError, IndexError, OverflowError):
+        for i, t in frows:
+            try:
+                np.array([int(t[1]), int(t[2]), int(t[3])], np.int64)
+            except (ValueError, IndexError, OverflowError):
+                raise SShaDeError(f"{p}: line {i}: face {_show(t)} does not hold three vertex indices") from None
+        raise
+    return V, F
+
+
+_PLY_TYPES = {b"char": "i1", b"int8": "i1", b"uchar": "u1", b"uint8": "u1", b"short": "i2", b"int16": "i2",
+              b"ushort": "u2", b"uint16": "u2", b"int": "i4", b"int32": "i4", b"uint": "u4", b"uint32": "u4",
+              b"float": "f4", b"float32": "f4", b"double": "f8", b"float64": "f8"}
+
+
+def _ply_header(data: bytes, p: Path):
+    """(format, [(element name, count, [(prop name, type, list count type or None)])], body offset)."""
+    if not data.startswith(b"ply"):
+        raise _bad(p, "no 'ply' magic line")
+    end = data.find(b"end_header", 0, 1 << 16)
+    if end < 0:
+        raise _bad(p, "no end_header line in the first 64 KiB")
+    nl = data.find(b"\n", end)
+    body = len(data) if nl < 0 else nl + 1
+    fmt, elems = None, []
+    for i, ln in enumerate(data[:end].splitlines()[1:], 2):
+        t = ln.split()
+        if not t or t[0] in (b"comment", b"obj_info"):
+            continue
+        if t[0] == b"format" and len(t) >= 2:
+            fmt = t[1]
+        elif t[0] == b"element" and len(t) == 3 and t[2].isdigit():
+            elems.append((t[1], int(t[2]), []))
+        elif t[0] == b"property" and elems and len(t) == 3 and t[1] in _PLY_TYPES:
+            elems[-1][2].append((t[2], _PLY_TYPES[t[1]], None))
+        elif (t[0] == b"property" and elems and len(t) == 5 and t[1] == b"list" and t[2] in _PLY_TYPES
+              and t[3] in _PLY_TYPES):
+            elems[-1][2].append((t[4], _PLY_TYPES[t[3]], _PLY_TYPES[t[2]]))
+        else:
+            raise _bad(p, f"header line {i} not understood: {_show(t)}")
+    if fmt not in (b"ascii", b"binary_little_endian", b"binary_big_endian"):
+        raise _bad(p, f"format {fmt!r} (ascii, binary_little_endian or binary_big_endian)")
+    return fmt, elems, body
+
+
+def _read_ply(data: bytes, p: Path):
+    """PLY (ASCII or binary): the ``vertex`` element's x, y, z and the ``face``
+    element's vertex index list; element counts checked against the file size first."""
+    fmt, elems, pos = _ply_header(data, p)
+    names = [e[0] for e in elems]
+    if b"vertex" not in names or b"face" not in names:
+        raise _bad(p, "no vertex or no face element")
+    if fmt == b"ascii":
+        return _ply_ascii(data[pos:], elems, p)
+    bo = "<" if fmt == b"binary_little_endian" else ">"
+    out = {}
+    for name, count, props in elems:
+        if name not in (b"vertex", b"face"):
+            if any(c for _, _, c in props):
+                if not {b"vertex", b"face"} <= set(out):
+                    raise _bad(p, f"element {name!r} with a list property before the mesh (unsupported)")
+                break
+        lists = [k for k, (_, _, c) in enumerate(props) if c]
+        if name == b"vertex" and lists:
+            raise _bad(p, "list property in the vertex element (unsupported)")
+        if name == b"face" and len(lists) != 1:
+            raise _bad(p, "the face element needs exactly one list property (vertex_indices)")
+        fields = []
+        for pname, typ, ctyp in props:
+            if ctyp:
+                fields += [("n", bo + ctyp), ("idx", bo + typ, (3,))]
+            else:
+                fields.append(("_" + pname.decode("ascii", "replace"), bo + typ))
+        dt = np.dtype(fields)
+        if count * dt.itemsize > len(data) - pos:
+            raise _bad(p, f"truncated: element {name.decode('ascii', 'replace')} announces {count} items "
+                          f"({count * dt.itemsize} bytes at least) but {len(data) - pos} bytes follow")
+        arr = np.frombuffer(data, dt, count, pos)
+        if lists:
+            bad = np.flatnonzero(arr["n"] != 3)
+            if bad.size:
+                raise SShaDeError(f"{p}: face {int(bad[0])} has {int(arr['n'][bad[0]])} vertices; "
+                                  "only triangle meshes are supported")
+        out[name] = (arr, props)
+        pos += count * dt.itemsize
+    return _ply_arrays(out[b"vertex"][0], out[b"face"][0], p)
+
+
+def _ply_arrays(varr, farr, p: Path):
+    """(V, F) from structured vertex and face arrays."""
+    missing = [c for c in ("_x", "_y", "_z") if c not in varr.dtype.names]
+    if missing:
+        raise _bad(p, f"vertex element lacks {', '.join(m[1:] for m in missing)}")
+    V = np.stack([varr[c].astype(np.float64) for c in ("_x", "_y", "_z")], axis=1)
+    idx = farr["idx"]
+    if idx.dtype.kind == "f":
+        if not (np.isfinite(idx).all() and (idx == np.round(idx)).all()):
+            raise _bad(p, "face indices are not integers")
+    elif idx.dtype.kind == "u" and idx.dtype.itemsize == 8:
+        raise _bad(p, "64-bit unsigned face indices")
+    return V, idx.astype(np.int64)
+
+
+def _ply_ascii(body: bytes, elems, p: Path):
+    """ASCII PLY body: one element item per non-blank line, in header order."""
+    lines = [ln for ln in body.splitlines() if ln.strip()]
+    total = sum(c for _, c, _ in elems)
+    if total > len(lines):
+        raise _bad(p, f"truncated: the header announces {total} items but {len(lines)} lines follow")
+    out, at = {}, 0
+    for name, count, props in elems:
+        chunk, at = lines[at:at + count], at + count
+        if name == b"vertex":
+            out[name] = _ply_ascii_vertices(chunk, props, p)
+        elif name == b"face":
+            out[name] = _ply_ascii_faces(chunk, props, p)
+    return _ply_arrays(out[b"vertex"], out[b"face"], p)
+
+
+def _ply_ascii_vertices(chunk: list, props, p: Path) -> np.ndarray:
+    """Structured array (fields ``_<property>``, float64) of ASCII PLY vertex lines."""
+    if any(c for _, _, c in props):
+        raise _bad(p, "list property in the vertex element (unsupported)")
+    want = len(props)
+    vals = _table(chunk, want, np.float64)
+    if vals is None:
+        rows = [ln.split() for ln in chunk]
+        for j, t in enumerate(rows):
+            if len(t) != want:
+                raise _bad(p, f"vertex {j} has {len(t)} values, the header says {want}")
+        try:
+            vals = np.array([float(x) for t in rows for x in t], np.float64).reshape(len(rows), want)
+        except ValueError as e:
+            raise _bad(p, f"a vertex value is not a number ({_short(e)})") from None
+    arr = np.zeros(len(chunk), np.dtype([("_" + pn.decode("ascii", "replace"), "f8") for pn, _, _ in props]))
+    for c, name in enumerate(arr.dtype.names):
+        arr[name] = vals[:, c]
+    return arr
+
+
+def _ply_ascii_faces(chunk: list, props, p: Path) -> np.ndarray:
+    """Structured array (``n``, ``idx`` (3,) int64) of ASCII PLY face lines, triangles only."""
+    ks = [j for j, (_, _, c) in enumerate(props) if c]
+    if len(ks) != 1 or any(props[j][2] for j in range(ks[0])):
+        raise _bad(p, "the face element needs exactly one list property (vertex_indices)")
+    k = ks[0]
+    tab = _table(chunk, len(props) + 3, np.int64)
+    if tab is None or (tab[:, k] != 3).any():
+        for j, t in enumerate(ln.split() for ln in chunk):
+            m = int(t[k]) if len(t) > k and t[k].isdigit() else -1
+            if m < 0:
+                raise _bad(p, f"face {j}: {_show(t)} is not a vertex count and indices")
+            if m != 3:
+                raise SShaDeError(f"{p}: face {j} has {m} vertices; only triangle meshes are supported")
+            if len(t) != len(props) + 3:
+                raise _bad(p, f"face {j} has {len(t)} values, expected {len(props) + 3}")
+            try:
+                np.array([int(x) for x in t[k + 1:k + 4]], np.int64)
+            except (ValueError, OverflowError):
+                raise _bad(p, f"face {j}: {_show(t)} does not hold three vertex indices") from None
+        raise _bad(p, "face values are not integers")
+    arr = np.zeros(len(chunk), np.dtype([("n", "i8"), ("idx", "i8", (3,))]))
+    arr["n"] = 3
+    arr["idx"] = tab[:, k + 1:k + 4]
+    return arr
+
+
+def _read_stl(data: bytes, p: Path):
+    """Binary STL (size 84 + 50 n) or ASCII STL (``vertex x y z`` lines); corners with
+    identical coordinates merged into one vertex (STL is a triangle soup), vertices in
+    order of first appearance."""
+    n = int.from_bytes(data[80:84], "little") if len(data) >= 84 else -1
+    if n >= 0 and len(data) == 84 + 50 * n:
+        dt = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+        corners = np.frombuffer(data, dt, n, 84)["v"].astype(np.float64).reshape(-1, 3)
+    else:
+        head = data[:512].lstrip().lower()
+        if not head.startswith(b"solid"):
+            raise SShaDeError(f"{p}: unreadable STL file (neither binary: its size, {len(data)} bytes, does not "
+                              "match the triangle count in its header; nor ASCII: no 'solid' line)")
+        try:
+            text = data.decode("ascii")
+        except UnicodeDecodeError as e:
+            raise SShaDeError(f"{p}: unreadable STL file (ASCII STL with a non-ASCII byte at {e.start})") from None
+        rows = [(i, t[1:]) for i, ln in enumerate(text.encode().splitlines(), 1)
+                if (t := ln.split()) and t[0].lower() == b"vertex"]
+        if len(rows) % 3:
+            raise SShaDeError(f"{p}: unreadable STL file ({len(rows)} vertex lines, not a multiple of 3)")
+        corners = _floats(rows, p, "vertex")
+    if not np.isfinite(corners).all():
+        raise SShaDeError(f"{p}: NaN/inf vertex coordinates in the STL file")
+    # merge corners with identical coordinates (STL has no vertex indices); vertices in
+    # order of first appearance
+    order = np.lexsort((np.arange(len(corners)), corners[:, 2], corners[:, 1], corners[:, 0]))
+    c = corners[order]
+    new = np.ones(len(c), bool)
+    new[1:] = (c[1:] != c[:-1]).any(axis=1)
+    group = np.cumsum(new) - 1  # group of each sorted corner; its first corner is the earliest
+    first = order[new]
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    F = np.empty(len(corners), np.int64)
+    F[order] = rank[group]
+    return corners[np.sort(first)], F.reshape(-1, 3)
 
 
 @contextlib.contextmanager
@@ -143,33 +463,77 @@ def atomic_write(path, mode: str = "w", **kw):
         raise
 
 
+SIGNATURE = "written by sshade"
+
+
 def write_mesh(path, V: np.ndarray, F: np.ndarray) -> None:
     """Write a triangle mesh atomically (format from the extension: .obj, .off, .ply),
-    without losing precision: libigl's writers (OBJ and OFF as text with 17 significant
-    digits, PLY as binary little-endian doubles), so :func:`read_mesh` gives ``V`` back
-    bit for bit.
+    without losing precision: OBJ and OFF as text with 17 significant digits
+    (``%.17g``), PLY as binary little-endian doubles (faces: uchar count + int32
+    indices), so :func:`read_mesh` gives ``V`` back bit for bit. Each file carries the
+    comment ``written by sshade`` (:func:`written_by_sshade`), which readers ignore.
 
     Parameters
     ----------
     path : str or Path.
-    V : (n, 3) float64; F : (m, 3) int.
+    V : (n, 3) float64 (any unit); F : (m, 3) int, 0-based vertex indices.
 
     Raises
     ------
-    SShaDeError on an unsupported extension; OSError if the file cannot be written
-    (``path`` then keeps its previous content, :func:`atomic_write`).
+    SShaDeError on an unsupported extension, wrong shapes or face indices that do not
+    fit in int32 (PLY); OSError if the file cannot be written (``path`` then keeps its
+    previous content, :func:`atomic_write`).
     """
-    import igl
     path = Path(path)
     ext = path.suffix.lower()
     if ext not in {".obj", ".off", ".ply"}:
         raise SShaDeError(f"{path}: unsupported output mesh format {ext!r}")
     V = np.ascontiguousarray(V, np.float64)
     F = np.ascontiguousarray(F, np.int64)
-    with tempfile.TemporaryDirectory() as tmp:  # libigl writes a path: render there, then move atomically
-        t = Path(tmp) / f"mesh{ext}"
-        enc = igl.FileEncoding.Binary if ext == ".ply" else igl.FileEncoding.Ascii
-        igl.write_triangle_mesh(str(t), V, F, enc)
-        data = t.read_bytes()
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
+        raise SShaDeError(f"{path}: cannot write V {V.shape} and F {F.shape}; expected (n, 3) and (m, 3)")
+    if F.size and (F.min() < 0 or F.max() >= max(len(V), 1) or F.max() > np.iinfo(np.int32).max):
+        raise SShaDeError(f"{path}: face indices outside [0, {len(V)})")
+    if ext == ".ply":
+        data = _ply_bytes(V, F)
+    elif ext == ".obj":
+        data = (f"# {SIGNATURE}\n" + ("v %.17g %.17g %.17g\n" * len(V)) % tuple(V.ravel().tolist())
+                + ("f %d %d %d\n" * len(F)) % tuple((F + 1).ravel().tolist())).encode("ascii")
+    else:
+        data = (f"OFF\n# {SIGNATURE}\n{len(V)} {len(F)} 0\n"
+                + ("%.17g %.17g %.17g\n" * len(V)) % tuple(V.ravel().tolist())
+                + ("3 %d %d %d\n" * len(F)) % tuple(F.ravel().tolist())).encode("ascii")
     with atomic_write(path, "wb") as fh:
         fh.write(data)
+
+
+def _ply_bytes(V: np.ndarray, F: np.ndarray) -> bytes:
+    """Binary little-endian PLY: double x y z, faces as uchar 3 + int32 indices."""
+    head = (f"ply\nformat binary_little_endian 1.0\ncomment {SIGNATURE}\nelement vertex {len(V)}\n"
+            "property double x\nproperty double y\nproperty double z\n"
+            f"element face {len(F)}\nproperty list uchar int vertex_indices\nend_header\n").encode("ascii")
+    fa = np.empty(len(F), np.dtype([("n", "u1"), ("idx", "<i4", (3,))]))
+    fa["n"] = 3
+    fa["idx"] = F
+    return head + V.astype("<f8").tobytes() + fa.tobytes()
+
+
+def written_by_sshade(path) -> bool:
+    """True if ``path`` is a mesh file that :func:`write_mesh` wrote (its signature
+    comment is in the file's header: first line of an OBJ, second of an OFF, a PLY
+    ``comment`` line). False for any other file, a missing one or a folder."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(512)
+    except OSError:
+        return False
+    sig = SIGNATURE.encode()
+    lines = head.split(b"\n")
+    ext = Path(path).suffix.lower()
+    if ext == ".obj":
+        return lines[0] == b"# " + sig
+    if ext == ".off":
+        return len(lines) > 2 and lines[0] == b"OFF" and lines[1] == b"# " + sig
+    if ext == ".ply":
+        return lines[0] == b"ply" and b"comment " + sig in lines[:4]
+    return False

@@ -4,10 +4,16 @@ Usage::
 
     python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def
                                          | --handles F.json|F.csv)
-        [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--timeout SECONDS] [--repair]
+        [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--timeout SECONDS]
+        [--repair] [--force]
 
-- ``MESH``: .obj, .off, .ply or .stl (:func:`defaust.meshio.read_mesh`); ``OUT``: .obj,
-  .off or .ply, written atomically (temporary file + rename) in that format.
+- ``MESH``: .obj, .off or .ply (:func:`defaust.meshio.read_mesh`; an .stl is refused:
+  it has no vertex indices for the handle files to refer to); ``OUT``: .obj, .off or
+  .ply, written atomically (temporary file + rename) in that format, at full double
+  precision, with a ``written by sshade`` comment. OUT must not be an input file, nor
+  an existing file that sshade did not write (``--force`` allows both); an OUT that
+  sshade wrote earlier is replaced (``replacing OUT`` on stdout). These checks, and
+  that OUT's folder exists and is writable, happen before any work.
 - Handles (:mod:`eval.handle_files`): the deformation benchmark's ``.sel`` + ``.def``
   (Botsch & Sorkine 2008), libigl's ``.dmat`` selection + ``.def``, or a ``.json`` /
   ``.csv`` of vertex indices and target positions. Indices refer to MESH's vertices as
@@ -33,7 +39,9 @@ or usage (one ``error: ...`` line on stderr, no traceback).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -59,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m sshade deform`` (module docstring)."""
     p = _Parser(prog="python -m sshade deform",
                 description="Deform one mesh with handles read from a file (SShaDe by default).")
-    p.add_argument("mesh", help="input mesh (.obj, .off, .ply, .stl)")
+    p.add_argument("mesh", help="input mesh (.obj, .off, .ply)")
     p.add_argument("-o", "--out", required=True, help="output mesh (.obj, .off, .ply), written atomically")
     g = p.add_argument_group("handles (one of)")
     g.add_argument("--sel", help="deformation-benchmark selection: one line per vertex, 0 fixed, 1 free, 2 handle")
@@ -78,6 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "a longer run is an error and no output is written")
     p.add_argument("--repair", action="store_true",
                    help="apply pymeshlab's vertex-preserving repair filters first and report what changed")
+    p.add_argument("--force", action="store_true",
+                   help="allow OUT to be the input mesh or an existing file that sshade did not write")
     return p
 
 
@@ -114,6 +124,47 @@ def _check_args(a) -> None:
     if Path(a.out).suffix.lower() not in OUT_EXTS:
         raise SShaDeError(f"output {a.out}: unsupported format {Path(a.out).suffix or '(none)'!r}; "
                           f"use one of {list(OUT_EXTS)}")
+    if Path(a.mesh).suffix.lower() == ".stl":
+        raise SShaDeError(f"{a.mesh}: an STL file has no vertex indices (a triangle soup, merged on reading), so "
+                          "the vertex indices of --sel/--dmat/--handles would land on other vertices; convert "
+                          "the mesh to OBJ, OFF or PLY first and make the handle file for that")
+    _check_out(a)
+
+
+def _same_file(a_path: Path, b_path: Path) -> bool:
+    try:
+        return a_path.resolve() == b_path.resolve() or os.path.samefile(a_path, b_path)
+    except OSError:
+        return False
+
+
+def _check_out(a) -> None:
+    """Checks of ``-o OUT`` before any work: its folder exists and takes a new file; OUT
+    is not an input file, nor an existing file sshade did not write, unless ``--force``.
+    Sets ``a.replacing`` when OUT exists (and may be replaced)."""
+    from defaust.meshio import written_by_sshade
+    out = Path(a.out)
+    force = getattr(a, "force", False)
+    a.replacing = out.exists()
+    if out.is_dir():
+        raise SShaDeError(f"output {out} is a folder; give a file path")
+    inputs = [(k, getattr(a, k, None)) for k in ("mesh", "sel", "dmat", "def_", "handles")]
+    for k, path in inputs:
+        if path and a.replacing and _same_file(out, Path(path)) and not force:
+            raise SShaDeError(f"output {out} is the input {'mesh' if k == 'mesh' else k.rstrip('_') + ' file'} "
+                              "itself; choose another -o path (or pass --force to overwrite it)")
+    if a.replacing and not force and not written_by_sshade(out):
+        raise SShaDeError(f"output {out} exists and was not written by sshade; choose another -o path (or pass "
+                          "--force to replace it)")
+    folder = out.parent
+    if not folder.is_dir():
+        raise SShaDeError(f"output folder {folder} does not exist")
+    try:  # the real test of "can a file be created there" (permissions, read-only mounts)
+        fd, probe = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise SShaDeError(f"output folder {folder} is not writable ({e.strerror or type(e).__name__})") from None
 
 
 def _method(a):
@@ -229,6 +280,8 @@ def deform_file(a, log=print, warn=None) -> dict:
         for w in res.warnings:
             warn(w)
         t = stage("write")
+        if getattr(a, "replacing", False):
+            log(f"replacing {a.out}")
         try:
             write_mesh(a.out, Vd, F)
         except OSError as e:

@@ -39,11 +39,26 @@ __all__ = ["read_sel", "read_dmat_selection", "read_def", "apply_def", "selectio
 FIXED, FREE, HANDLE = 0, 1, 2
 
 
-def _text_lines(path, what: str) -> list[tuple[int, str]]:
-    """(line number, stripped text) of the non-empty, non-comment lines of a text file."""
+#: Largest handle file read (bytes): a selection or handle list of a mesh of n vertices
+#: needs far less than 64 MiB + 256 bytes per vertex; a .def holds 16 numbers.
+MAX_BYTES, PER_VERTEX_BYTES, MAX_DEF_BYTES = 64 << 20, 256, 1 << 16
+
+
+def _check_size(p: Path, what: str, limit: int) -> None:
+    """Refuse a file larger than ``limit`` bytes before reading it."""
+    size = p.stat().st_size
+    if size > limit:
+        raise SShaDeError(f"{p}: {size} bytes is too large for a {what} file (at most {limit} here); "
+                          "is it the right file?")
+
+
+def _text_lines(path, what: str, limit: int = MAX_BYTES) -> list[tuple[int, str]]:
+    """(line number, stripped text) of the non-empty, non-comment lines of a text file
+    of at most ``limit`` bytes."""
     p = Path(path)
     if not p.is_file():
         raise SShaDeError(f"{what} file not found: {p}")
+    _check_size(p, what, limit)
     try:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as e:
@@ -67,7 +82,7 @@ def read_sel(path, n: int) -> np.ndarray:
     SShaDeError naming the file: missing or unreadable, a line that is not one of 0, 1,
     2, a number of values other than ``n``, or neither a fixed nor a handle vertex.
     """
-    rows = _text_lines(path, ".sel")
+    rows = _text_lines(path, ".sel", MAX_BYTES + PER_VERTEX_BYTES * n)
     vals = np.empty(len(rows), np.int8)
     for k, (i, s) in enumerate(rows):
         if s not in ("0", "1", "2"):
@@ -86,7 +101,7 @@ def read_dmat_selection(path, n: int) -> np.ndarray:
 
     Parameters
     ----------
-    path : str or Path (ASCII or binary ``.dmat``, read by libigl's ``readDMAT``).
+    path : str or Path (ASCII or binary ``.dmat``, libigl's ``readDMAT`` formats).
     n : int, the mesh's vertex count.
 
     Returns
@@ -99,17 +114,11 @@ def read_dmat_selection(path, n: int) -> np.ndarray:
     (n, 1) or (1, n) matrix), values that are not integers >= -1 or not finite, or no
     fixed and no handle vertex.
     """
-    import igl
     p = Path(path)
     if not p.is_file():
         raise SShaDeError(f".dmat file not found: {p}")
-    try:
-        head = p.read_bytes()[:200].split(b"\n", 1)[0].split()
-        if len(head) != 2 or not all(t.lstrip(b"-").isdigit() for t in head):
-            raise ValueError("no 'ncols nrows' header")
-        S = np.asarray(igl.readDMAT(str(p)), np.float64)
-    except Exception as e:  # libigl raises RuntimeError/ValueError on garbage
-        raise SShaDeError(f"{p}: unreadable .dmat file ({' '.join(str(e).split()) or type(e).__name__})") from None
+    _check_size(p, ".dmat", MAX_BYTES + PER_VERTEX_BYTES * n)
+    S = _read_dmat(p)
     if S.ndim != 2 or 1 not in S.shape or S.size != n:
         raise SShaDeError(f"{p}: a selection needs one value per vertex ({n}), got a {S.shape[0]}x{S.shape[1]} "
                           "matrix" if S.ndim == 2 else f"{p}: unreadable .dmat file")
@@ -126,6 +135,46 @@ def read_dmat_selection(path, n: int) -> np.ndarray:
     return out
 
 
+def _read_dmat(p: Path) -> np.ndarray:
+    """(rows, cols) float64 of a libigl ``.dmat``: ASCII ``ncols nrows`` then the values
+    column by column, or binary (``0 0`` line, ``ncols nrows`` line, little-endian
+    doubles). Counts are checked against the file before anything is allocated; no
+    native reader runs (libigl's prints on stderr)."""
+    data = p.read_bytes()
+    lines = data.split(b"\n", 2)
+    head = lines[0].split()
+
+    def dims(toks):
+        if len(toks) != 2 or not all(t.isdigit() for t in toks):
+            raise SShaDeError(f"{p}: unreadable .dmat file (no 'ncols nrows' header)")
+        return int(toks[1]), int(toks[0])
+    rows, cols = dims(head)
+    if rows == 0 and cols == 0 and len(lines) == 3:  # binary variant
+        rows, cols = dims(lines[1].split())
+        body = lines[2]
+        if len(body) != 8 * rows * cols:
+            raise SShaDeError(f"{p}: unreadable .dmat file (header says {cols}x{rows} doubles, "
+                              f"{len(body)} bytes follow)")
+        return np.frombuffer(body, "<f8").reshape(cols, rows).T.astype(np.float64)
+    toks = data.split(b"\n", 1)[1].split() if len(lines) > 1 else []
+    if len(toks) != rows * cols:
+        raise SShaDeError(f"{p}: unreadable .dmat file (header says {cols}x{rows} values, {len(toks)} found)")
+    try:
+        vals = np.array([float(t) for t in toks], np.float64)
+    except ValueError:
+        bad = next(t for t in toks if not _is_float(t))
+        raise SShaDeError(f"{p}: unreadable .dmat file (value {repr(bad[:30])[1:]} is not a number)") from None
+    return vals.reshape(cols, rows).T
+
+
+def _is_float(t: bytes) -> bool:
+    try:
+        float(t)
+        return True
+    except ValueError:
+        return False
+
+
 def read_def(path) -> np.ndarray:
     """The 4x4 handle transformation of a ``.def`` file (module docstring).
 
@@ -139,7 +188,7 @@ def read_def(path) -> np.ndarray:
     a last row other than ``0 0 0 1`` (not affine), or a singular 3x3 part
     (non-invertible: it would flatten the handle).
     """
-    rows = _text_lines(path, ".def")
+    rows = _text_lines(path, ".def", MAX_DEF_BYTES)
     try:
         M = np.array([[float(x) for x in s.split()] for _, s in rows], np.float64)
     except ValueError as e:
@@ -153,8 +202,10 @@ def read_def(path) -> np.ndarray:
         raise SShaDeError(f"{path}: last row is {M[3].tolist()}, not [0, 0, 0, 1]: only affine transformations "
                           "are supported")
     A = M[:3, :3]
-    if abs(np.linalg.det(A)) <= 1e-12 * max(1.0, np.abs(A).max()) ** 3:
-        raise SShaDeError(f"{path}: the 3x3 part of the matrix is singular (det {np.linalg.det(A):.3g}): a "
+    s = float(np.abs(A).max())
+    det = float(np.linalg.det(A / s)) if s > 0 else 0.0  # scale-free: a 1e200 scaling is not singular
+    if abs(det) <= 1e-12:
+        raise SShaDeError(f"{path}: the 3x3 part of the matrix is singular (det {det:.3g} after scaling to max 1): a "
                           "non-invertible transformation would flatten the handle")
     return M
 
@@ -209,18 +260,21 @@ def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise SShaDeError(f"handle file not found: {p}")
     try:
         if ext == ".json":
-            h, T = _json_handles(p)
+            h, T = _json_handles(p, n)
         else:
-            h, T = _csv_handles(p)
-        return validate_handles(np.empty((n, 3)), h, T)
+            h, T = _csv_handles(p, n)
+        return validate_handles(np.zeros((n, 3)), h, T)  # the target scale is checked against the mesh later
     except SShaDeError as e:
         msg = str(e)
         raise SShaDeError(msg if msg.startswith(str(p)) else f"{p}: {msg}") from None
 
 
-def _json_handles(p: Path):
+def _json_handles(p: Path, n: int):
+    _check_size(p, "handle", MAX_BYTES + PER_VERTEX_BYTES * n)
     try:
         d = json.loads(p.read_text())
+    except RecursionError:
+        raise SShaDeError(f"{p}: unreadable JSON (nested too deeply)") from None
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise SShaDeError(f"{p}: unreadable JSON ({' '.join(str(e).split())})") from None
     if not isinstance(d, dict) or "handles" not in d or "targets" not in d:
@@ -229,14 +283,27 @@ def _json_handles(p: Path):
     h, T = d["handles"], d["targets"]
     if not isinstance(h, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in h):
         raise SShaDeError(f"{p}: \"handles\" must be a list of integer vertex indices")
+    _check_indices(p, h, n)
+    if not isinstance(T, list) or not all(isinstance(t, list) and len(t) == 3 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in t) for t in T):
+        raise SShaDeError(f"{p}: \"targets\" must be a list of [x, y, z] numbers")
     try:
-        T = np.array(T, np.float64)
-    except (TypeError, ValueError):
-        raise SShaDeError(f"{p}: \"targets\" must be a list of [x, y, z] numbers") from None
+        T = np.array(T, np.float64).reshape(-1, 3)
+    except OverflowError:
+        raise SShaDeError(f"{p}: a target coordinate overflows float64 (|x| > 1.8e308)") from None
     return np.array(h, np.int64), T
 
 
-def _csv_handles(p: Path):
+def _check_indices(p: Path, h, n: int) -> None:
+    """Refuse an index outside [0, n) while it is still a Python int (no int64 overflow)."""
+    for i in h:
+        if not 0 <= i < n:
+            shown = str(i) if len(str(i)) < 30 else f"{str(i)[:12]}...({len(str(i))} digits)"
+            raise SShaDeError(f"{p}: handle index {shown} is out of range [0, {n}) (handle off the surface)")
+
+
+def _csv_handles(p: Path, n: int):
+    _check_size(p, "handle", MAX_BYTES + PER_VERTEX_BYTES * n)
     try:
         with open(p, newline="") as fh:
             rows = [(i, r) for i, r in enumerate(csv.reader(fh), 1) if r and any(c.strip() for c in r)
@@ -257,6 +324,7 @@ def _csv_handles(p: Path):
             T.append([float(x) for x in r[1:]])
         except ValueError:
             raise SShaDeError(f"{p}: line {i}: target {r[1:]} is not three numbers") from None
+    _check_indices(p, h, n)
     return np.array(h, np.int64), np.array(T, np.float64).reshape(-1, 3)
 
 

@@ -20,7 +20,18 @@ from scipy.sparse.csgraph import connected_components
 from .errors import SShaDeError
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
-__all__ = ["validate_mesh", "validate_handles", "validate_deformed", "MAX_DIAGONALS"]
+__all__ = ["validate_mesh", "validate_handles", "validate_deformed", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
+
+#: Largest coordinate magnitude accepted. The methods form products of up to about
+#: eight lengths (squared areas, circumradii, energies): beyond ~1e38 they overflow
+#: float64 (max 1.8e308; SShaDe's remesh fails at 1e40, the area test at 1e77).
+COORD_MAX = 1e30
+#: Smallest bounding-box diagonal accepted: the same products underflow below ~1e-45.
+DIAG_MIN = 1e-30
+#: Targets (validate_handles) and deformed vertices (validate_deformed) farther than
+#: this many bounding-box diagonals from the mesh are refused as out of scale (a units
+#: mix-up, an overflow); no real edit moves a handle a million diagonals.
+MAX_DIAGONALS = 1e6
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
@@ -157,7 +168,11 @@ def _fast_checks(V, F, allow_boundary, area_tol, allow_components=False):
     in_range, no_repeat, all_used, mindbl = _face_pass(V, F)
     if not (in_range and no_repeat and all_used):
         return None
+    if max(np.abs(lo).max(), np.abs(hi).max()) > COORD_MAX:
+        return None
     diag = float(np.linalg.norm(hi - lo))
+    if diag < DIAG_MIN:
+        return None
     # the reference rejects dbl <= 2 tol diag^2; anything within round-off of it goes there
     if diag == 0 or mindbl <= 2 * area_tol * diag * diag * (1 + 1e-9):
         return None
@@ -196,9 +211,8 @@ def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=Fal
                           "remove them before deforming (sshade.components.drop_unreferenced(V, F) returns the "
                           "mesh without them and the old index of each kept vertex; `python -m sshade deform` "
                           "drops them itself)")
+    _check_scale(V, F, name)
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
-    if diag == 0:
-        raise SShaDeError(f"{name}: all vertices coincide")
     dbl = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     deg = dbl <= 2 * area_tol * diag * diag
     if deg.any():
@@ -239,6 +253,21 @@ def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=Fal
     return he
 
 
+def _check_scale(V, F, name) -> None:
+    """Coordinates whose squares overflow or underflow float64 (:data:`COORD_MAX`,
+    :data:`DIAG_MIN`): say so rather than report the faces as degenerate."""
+    big = float(np.abs(V).max())
+    if big > COORD_MAX:
+        raise SShaDeError(f"{name}: coordinates overflow in float64 (largest |x| = {big:.3g}, above {COORD_MAX:g}: "
+                          "products of lengths in the methods would overflow; rescale the mesh)")
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    if diag == 0:
+        raise SShaDeError(f"{name}: all vertices coincide")
+    if diag < DIAG_MIN:
+        raise SShaDeError(f"{name}: coordinates underflow in float64 (bounding-box diagonal {diag:.3g}, below "
+                          f"{DIAG_MIN:g}: products of lengths in the methods would underflow to zero; rescale the mesh)")
+
+
 def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.ndarray]:
     """Check handle indices and target positions against a mesh.
 
@@ -256,7 +285,9 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
     ------
     SShaDeError
         Empty handle set, non-integer, out-of-range or duplicate indices, length
-        mismatch, NaN/inf targets.
+        mismatch, NaN/inf targets, targets out of scale: farther than
+        :data:`MAX_DIAGONALS` (1e6) bounding-box diagonals from the mesh (checked when ``V``
+        spans a positive, finite box; a units mix-up, not an edit).
 
     Examples
     --------
@@ -285,12 +316,8 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
         raise SShaDeError(f"handles and targets differ in length: {len(h)} handles, {len(T)} targets")
     if not np.isfinite(T).all():
         raise SShaDeError("targets contain NaN/inf")
+    _check_target_scale(V, T)
     return h, T
-
-
-#: A deformed vertex farther than this many rest bounding-box diagonals from the rest
-#: pose's bounding-box centre is refused by :func:`validate_deformed`.
-MAX_DIAGONALS = 1e6
 
 
 def validate_deformed(U, n_vertices: int, *, V=None, name: str = "method") -> np.ndarray:
@@ -364,3 +391,21 @@ def _check_magnitude(U: np.ndarray, V, name: str) -> None:
         i = int(np.argmax(dist))
         raise SShaDeError(f"{name} returned {int(far.sum())} vertices farther than {MAX_DIAGONALS:g} bounding-box "
                           f"diagonals from the mesh (vertex {i} at {dist[i] / diag:.3g} diagonals)")
+
+
+def _check_target_scale(V, T) -> None:
+    """Refuse targets more than :data:`MAX_DIAGONALS` bounding-box diagonals away from
+    the mesh (max-norm distances: no overflow at any finite scale)."""
+    V = np.asarray(V, np.float64)
+    if V.ndim != 2 or V.shape[1] != 3 or not len(V) or not np.isfinite(V).all():
+        return
+    lo, hi = V.min(0), V.max(0)
+    ext = float((hi - lo).max())
+    if not ext > 0 or not np.isfinite(ext):
+        return
+    diag = ext * float(np.linalg.norm((hi - lo) / ext))
+    away = float(np.abs(T - np.clip(T, lo, hi)).max(1).max()) / diag
+    if away > MAX_DIAGONALS:
+        raise SShaDeError(f"targets are out of scale: they lie {away:.3g} x the mesh's bounding-box diagonal "
+                          f"({diag:.3g}) away (at most {MAX_DIAGONALS:g}); are the mesh and the targets in the "
+                          "same units?")
