@@ -311,9 +311,10 @@ class _References:
         if self.mode not in ("baseline", "all", "none"):
             raise SShaDeError(f"reference.cases must be baseline, all or none, got {self.mode!r}")
         self.cache = _abs(rc.get("cache", "data/references"))
-        self.max_iter = int(rc.get("max_iter", 50000))
-        tb = rc.get("time_budget_s", 3600)
-        self.time_budget_s = None if tb is None else float(tb)
+        from .config_check import config_number
+        self.max_iter = config_number(cfg, "reference.max_iter", min=1, default=50000)
+        self.time_budget_s = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True,
+                                           default=3600)
         self.n_base = n_base
         self.case = None
         self.refs: dict = {}
@@ -360,8 +361,17 @@ EXPERIMENTS = {
 
 
 def run_experiment(cfg):
-    """Dispatch on ``experiment.kind`` (default ``cases``); see :data:`EXPERIMENTS`."""
+    """Dispatch on ``experiment.kind`` (default ``cases``); see :data:`EXPERIMENTS`.
+
+    Raises
+    ------
+    SShaDeError for a bad config value (:func:`eval.config_check.check_config`, before
+    any work) or an unknown ``experiment.kind``.
+    """
     import importlib
+
+    from .config_check import check_config
+    check_config(cfg)  # every number of the config, before any work (also for sweep jobs)
     kind = str(cfg.get("experiment", {}).get("kind", "cases"))
     if kind not in EXPERIMENTS:
         raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(EXPERIMENTS)}")
@@ -383,15 +393,25 @@ def _pin_out_dir(cfg) -> None:
 
 
 def _main(cfg) -> None:
-    try:
-        _pin_out_dir(cfg)
-        run_experiment(cfg)
-    except SShaDeError as e:
-        print(f"error: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+    """Hydra task of ``python -m eval``: run the experiment; a bad config or input, an
+    OSError (``error: ...``, status 2) or Ctrl-C (``interrupted``, 130) ends the process
+    through :func:`eval.clirun.run_command`."""
+    from .clirun import run_command
+
+    _pin_out_dir(cfg)
+    rc = run_command(lambda: run_experiment(cfg), where=cfg.get("out_dir"))
+    if rc:
+        raise SystemExit(rc)
 
 
 def main() -> None:
-    """Console entry point (``python -m eval``): Hydra parses the overrides."""
-    import hydra
-    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(_main)()
+    """Console entry point (``python -m eval``): Hydra parses the overrides.
+
+    The command line is composed and every config value checked
+    (:func:`eval.config_check.check_config`) before Hydra makes the run folder; a bad
+    one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
+    (:func:`eval.clirun.hydra_main`).
+    """
+    from .clirun import hydra_main
+    from .config_check import check_config
+    hydra_main(_main, CONF_DIR, check=check_config)
