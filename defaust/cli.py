@@ -73,7 +73,9 @@ def config_from_omegaconf(cfg) -> BuildConfig:
     d = BuildConfig(out="x")
 
     def num(key, default, kind=int):  # a number of the config, or SShaDeError naming its key
-        return config_number(cfg, key, kind=kind, default=default, min=None, max=2**63 - 1 if key == "seed" else None)
+        seed = key == "seed"
+        return config_number(cfg, key, kind=kind, default=default, min=0 if seed else None,
+                             max=2**63 - 1 if seed else None)
 
     def ints(key):
         return config_int_list(cfg, key, min=-2**31, allow_none=True)

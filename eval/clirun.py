@@ -87,29 +87,77 @@ def hydra_message(e: BaseException) -> str:
     return one_line(msg) or type(e).__name__
 
 
+_SIGINT = {"seen": False, "said": False}
+
+
+def _on_sigint(signum, frame):
+    """SIGINT handler of :func:`run_command`: as Python's own (KeyboardInterrupt), and
+    remembered, so an interrupt that a library swallows (trimesh wraps its optional
+    imports in ``except BaseException``) still ends the command as interrupted."""
+    _SIGINT["seen"] = True
+    raise KeyboardInterrupt
+
+
+def _interrupted() -> int:
+    if not _SIGINT["said"]:  # once, also when nested run_command calls see it
+        _SIGINT["said"] = True
+        _say("interrupted")
+    return INTERRUPTED
+
+
+def _install_sigint():
+    """Install :func:`_on_sigint` when SIGINT has Python's default handler (not ignored,
+    main thread); returns the handler to restore, or None when nothing was installed."""
+    import signal
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    old = signal.getsignal(signal.SIGINT)
+    if old is not signal.default_int_handler:
+        return None
+    _SIGINT.update(seen=False, said=False)
+    signal.signal(signal.SIGINT, _on_sigint)
+    return old
+
+
 def run_command(work, *, where=None) -> int:
     """Run ``work()`` (returning an exit status or None) and map what escapes it.
 
     Returns
     -------
-    int: ``work``'s status (None -> 0); 2 after one ``error: ...`` line on stderr for a
-    bad input or configuration (:class:`SShaDeError`, Hydra's and OmegaConf's errors) or
-    an :class:`OSError` (:func:`os_error_line`, ``where`` naming the output when the
-    error names no file); 130 after ``interrupted`` on Ctrl-C. ``SystemExit`` passes
-    through; any other exception is a bug and propagates with its traceback.
+    int: ``work``'s status (None or a non-int -> 0); 2 after one ``error: ...`` line on
+    stderr for a bad input or configuration (:class:`SShaDeError`, Hydra's and
+    OmegaConf's errors) or an :class:`OSError` (:func:`os_error_line`, ``where`` naming
+    the output when the error names no file); 130 after ``interrupted`` on Ctrl-C (also
+    when a library swallowed the KeyboardInterrupt). ``SystemExit`` passes through; any
+    other exception is a bug and propagates with its traceback.
     """
+    import signal
+    old = _install_sigint()
     try:
         rc = work()
+        if _SIGINT["seen"]:
+            return _interrupted()
         return rc if isinstance(rc, int) and not isinstance(rc, bool) else 0
     except KeyboardInterrupt:
-        _say("interrupted")
-        return INTERRUPTED
-    except OSError as e:
-        _say(os_error_line(e, where))
-        return 2
-    except _config_error_types() as e:
+        return _interrupted()
+    except _config_error_types() as e:  # first: Hydra's MissingConfigException is an IOError
+        if _SIGINT["seen"]:
+            return _interrupted()
         _say(f"error: {one_line(e) if isinstance(e, SShaDeError) else hydra_message(e)}")
         return 2
+    except OSError as e:
+        if _SIGINT["seen"]:
+            return _interrupted()
+        _say(os_error_line(e, where))
+        return 2
+    except Exception:
+        if _SIGINT["seen"]:  # e.g. a swallowed interrupt resurfacing as another error
+            return _interrupted()
+        raise
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
 
 
 def _say(line: str) -> None:

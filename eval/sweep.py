@@ -273,7 +273,8 @@ def sweep_job(cfg) -> dict:
     except OSError as e:
         log.error("cannot write %s in %s: %s", STATUS_FILE, job_dir, e)
     if status["status"] != "done":
-        print(f"job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
+        level = "warning" if status["status"] == "partial" else "error"  # one prefix style (issue 19)
+        print(f"{level}: job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
     return {k: v for k, v in status.items() if k != "traceback"}
 
 

@@ -47,6 +47,7 @@ def _one_error_line(r, *needles):
     assert r.returncode == 2, (r.args, r.returncode, r.stderr[-2000:])
     assert len(lines) == 1 and lines[0].startswith("error: "), (r.args, r.stderr[-2000:])
     assert "Traceback" not in r.stderr and "HYDRA_FULL_ERROR" not in r.stderr
+    assert "search path" not in lines[0] and "cannot write" not in lines[0], lines[0]  # Hydra's text, one line
     for n in needles:
         assert n in lines[0], (n, lines[0])
     return lines[0]
@@ -250,6 +251,23 @@ def test_sigint_eval_prints_interrupted(tmp_path, faust_root):
     assert lines[-1] == "interrupted" and "Traceback" not in err, err[-3000:]
 
 
+def test_swallowed_ctrl_c_still_ends_as_interrupted(capsys):
+    """A library that swallows the KeyboardInterrupt (trimesh's optional imports catch
+    BaseException) does not turn a Ctrl-C into a successful exit."""
+    from eval.clirun import run_command
+
+    def work():
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)
+        except BaseException:  # noqa: BLE001 -- as trimesh does
+            pass
+        return 0
+    assert run_command(work) == 130
+    assert _stderr_lines(capsys) == ["interrupted"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+
+
 def _raise(exc):
     def f(*a, **k):
         raise exc
@@ -369,3 +387,7 @@ def test_argparse_errors_and_failures_start_with_error(tmp_path, monkeypatch, ca
     assert eval.reproduce.main([]) == 1
     err = _stderr_lines(capsys)
     assert err[-1].startswith("error: ") and "defaust" in err[-1], err
+    monkeypatch.setattr(eval.sweep, "_hydra_job", lambda: (tmp_path / "job", ["sshade.n_low=2"], 3, None))
+    monkeypatch.setattr("eval.app.run_experiment", _raise(SShaDeError("n_low must be at least 4")))
+    assert eval.sweep.sweep_job(_compose_eval(CI))["status"] == "failed"
+    assert _stderr_lines(capsys)[-1] == "error: job 3: failed: n_low must be at least 4"
