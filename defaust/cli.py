@@ -13,7 +13,6 @@ Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
 from __future__ import annotations
 
 import logging
-import sys
 from pathlib import Path
 
 from sshade.errors import SShaDeError
