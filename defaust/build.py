@@ -147,6 +147,80 @@ class BuildConfig:
             d.pop("anny_poses")
         return d
 
+    def validate(self) -> "BuildConfig":
+        """Check every parameter before anything is built or any folder made.
+
+        Integers: ``seed`` in [0, 2**63 - 1]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
+        ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
+        ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
+        count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;
+        subject and FAUST pose ids >= 0. Floats, finite: ``static_threshold`` >= 0
+        (metres), ``synthetic_voxel`` and ``synthetic_blend`` > 0 (metres). ``progress``
+        a bool. (Bounds that need the source, e.g. anny's 10 subjects, are checked by the
+        source before the output folder is made.)
+
+        Returns
+        -------
+        self.
+
+        Raises
+        ------
+        SShaDeError naming the first bad parameter and its value (never a late failure
+        after minutes of building, nor a partial build).
+        """
+        for name, lo, hi in (("seed", 0, 2**63 - 1), ("n_subjects", 1, _MAX_INT), ("n_poses", 2, 10_000),
+                             ("remesh_iterations", 1, 10_000), ("n_per_landmark", 1, _MAX_INT),
+                             ("neighbourhood", 1, _MAX_INT), ("synthetic_vertices", 100, _MAX_INT),
+                             ("synthetic_remesh_iterations", 0, 10_000)):
+            _check_int(name, getattr(self, name), lo, hi)
+        vr = self.vertex_range
+        if not isinstance(vr, (list, tuple)) or len(vr) != 2:
+            raise SShaDeError(f"vertex_range must be [lo, hi] (high-res vertex counts), got {vr!r}")
+        lo, hi = (_check_int("vertex_range", x, 4, _MAX_INT) for x in vr)
+        if lo > hi:
+            raise SShaDeError(f"vertex_range must satisfy 4 <= lo <= hi, got {list(vr)}")
+        if self.n_per_landmark > self.neighbourhood:
+            raise SShaDeError(f"n_per_landmark must be in [1, neighbourhood={self.neighbourhood}], "
+                              f"got {self.n_per_landmark}")
+        if self.source == "faust" and self.neighbourhood > 6890:
+            raise SShaDeError(f"neighbourhood={self.neighbourhood} exceeds the 6890 vertices of a FAUST registration")
+        _check_float("static_threshold", self.static_threshold, 0.0, strict=False)
+        _check_float("synthetic_voxel", self.synthetic_voxel, 0.0, strict=True)
+        _check_float("synthetic_blend", self.synthetic_blend, 0.0, strict=True)
+        for name in ("subjects", "faust_target_poses"):
+            v = getattr(self, name)
+            if v is not None:
+                if not isinstance(v, (list, tuple)):
+                    raise SShaDeError(f"{name} must be a list of integers or null, got {v!r}")
+                for x in v:
+                    _check_int(name, x, 0, _MAX_INT)
+        if not isinstance(self.progress, (bool, np.bool_)):
+            raise SShaDeError(f"progress must be true or false, got {self.progress!r}")
+        return self
+
+
+_MAX_INT = 2**31 - 1
+
+
+def _check_int(name: str, v, lo: int, hi: int) -> int:
+    """``v`` as an int in [lo, hi] (an integral float is accepted; bool, NaN, inf, text are
+    not); SShaDeError naming ``name`` otherwise."""
+    bad = SShaDeError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise bad
+    if not np.isfinite(v) or v != int(v) or not lo <= int(v) <= hi:
+        raise bad
+    return int(v)
+
+
+def _check_float(name: str, v, lo: float, *, strict: bool) -> float:
+    """``v`` as a finite float > lo (``strict``) or >= lo; SShaDeError naming ``name``."""
+    ok = (not isinstance(v, (bool, np.bool_)) and isinstance(v, (int, float, np.integer, np.floating))
+          and np.isfinite(v) and (v > lo if strict else v >= lo))
+    if not ok:
+        raise SShaDeError(f"{name} must be a finite number {'>' if strict else '>='} {lo}, got {v!r}")
+    return float(v)
+
 
 @dataclass
 class BuildReport:
@@ -585,10 +659,9 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
     >>> rep.built[:2]  # doctest: +SKIP
     ['subject_00/rest', 'subject_00/pose_01']
     """
-    from tqdm import tqdm
-
     if cfg.out is None or str(cfg.out) == "":
         raise SShaDeError("no output folder: pass out=DIR")
+    cfg.validate()  # every parameter, before any work or folder
     out = Path(cfg.out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise SShaDeError(f"output path exists and is not a folder: {out}")
@@ -602,7 +675,21 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
     if not 0 < lo <= hi:
         raise SShaDeError(f"high-res vertex range must satisfy 0 < lo <= hi, got {list(cfg.vertex_range)}")
     plan = src.plan()
+    made = not out.exists()  # removed again if the build fails before writing anything
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _build_into(out, cfg, src, params, old, plan, lo, hi)
+    except BaseException:
+        if made and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
+        raise
+
+
+def _build_into(out: Path, cfg: BuildConfig, src, params: dict, old: dict, plan: dict, lo: int,
+                hi: int) -> BuildReport:
+    """The body of :func:`build_defaust` once the folder exists: every item, the manifest."""
+    from tqdm import tqdm
+
     items_old = old.get("items", {})
     manifest = {
         "format": FORMAT,

@@ -13,11 +13,11 @@ Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
 from __future__ import annotations
 
 import logging
-import sys
 from pathlib import Path
 
 from sshade.errors import SShaDeError
 
+from eval.config_check import config_int_list, config_number
 from eval.confdir import config_dir
 
 from .build import BuildConfig, build_defaust
@@ -47,8 +47,10 @@ def config_from_omegaconf(cfg) -> BuildConfig:
 
     Raises
     ------
-    SShaDeError if ``out`` is missing, the source unknown or, for ``source=faust``,
-    ``faust.root`` is missing.
+    SShaDeError if ``out`` is missing, the source unknown, a number is not a number
+    (``seed=abc``, ``synthetic.voxel_size=inf``: the message names the key) or, for
+    ``source=faust``, ``faust.root`` is missing. The ranges are checked by
+    :meth:`BuildConfig.validate`.
 
     Examples
     --------
@@ -66,29 +68,38 @@ def config_from_omegaconf(cfg) -> BuildConfig:
     if src == "faust" and faust.get("root") in (None, ""):
         raise SShaDeError("source=faust needs faust.root=DIR (a folder with tr_reg_XYZ.ply files or an "
                           "MPI-FAUST folder with training/registrations/)")
-    hr, hd, sy = c.get("high_res") or {}, c.get("handles") or {}, c.get("synthetic") or {}
     an = c.get("anny") or {}
     d = BuildConfig(out="x")
+
+    def num(key, default, kind=int):  # a number of the config, or SShaDeError naming its key
+        seed = key == "seed"
+        return config_number(cfg, key, kind=kind, default=default, min=0 if seed else None,
+                             max=2**63 - 1 if seed else None)
+
+    def ints(key):
+        return config_int_list(cfg, key, min=-2**31, allow_none=True)
+    progress = c.get("progress", True)
+    if not isinstance(progress, bool):
+        raise SShaDeError(f"progress must be true or false, got {progress!r}")
     return BuildConfig(
-        out=_abs(c["out"]), source=src, seed=int(c.get("seed", 0)),
-        subjects=None if c.get("subjects") is None else [int(s) for s in _as_list(c["subjects"])],
-        n_subjects=int(c.get("n_subjects", d.n_subjects)), n_poses=int(c.get("n_poses", d.n_poses)),
-        vertex_range=tuple(int(x) for x in hr.get("vertex_range", d.vertex_range)),
-        remesh_iterations=int(hr.get("remesh_iterations", d.remesh_iterations)),
-        n_per_landmark=int(hd.get("n_per_landmark", d.n_per_landmark)),
-        neighbourhood=int(hd.get("neighbourhood", d.neighbourhood)),
-        static_threshold=float(hd.get("static_threshold", d.static_threshold)),
+        out=_abs(c["out"]), source=src, seed=num("seed", 0),
+        subjects=ints("subjects"), n_subjects=num("n_subjects", d.n_subjects), n_poses=num("n_poses", d.n_poses),
+        vertex_range=tuple(config_int_list(cfg, "high_res.vertex_range", min=-2**31, allow_none=False)
+                           if OmegaConf.select(cfg, "high_res.vertex_range") is not None else d.vertex_range),
+        remesh_iterations=num("high_res.remesh_iterations", d.remesh_iterations),
+        n_per_landmark=num("handles.n_per_landmark", d.n_per_landmark),
+        neighbourhood=num("handles.neighbourhood", d.neighbourhood),
+        static_threshold=num("handles.static_threshold", d.static_threshold, float),
         faust_root=None if faust.get("root") in (None, "") else _abs(faust["root"]),
-        faust_target_poses=(None if faust.get("target_poses") is None
-                            else [int(p) for p in _as_list(faust["target_poses"])]),
-        synthetic_vertices=int(sy.get("n_vertices", d.synthetic_vertices)),
-        synthetic_voxel=float(sy.get("voxel_size", d.synthetic_voxel)),
-        synthetic_blend=float(sy.get("skin_blend", d.synthetic_blend)),
-        synthetic_remesh_iterations=int(sy.get("remesh_iterations", d.synthetic_remesh_iterations)),
+        faust_target_poses=ints("faust.target_poses"),
+        synthetic_vertices=num("synthetic.n_vertices", d.synthetic_vertices),
+        synthetic_voxel=num("synthetic.voxel_size", d.synthetic_voxel, float),
+        synthetic_blend=num("synthetic.skin_blend", d.synthetic_blend, float),
+        synthetic_remesh_iterations=num("synthetic.remesh_iterations", d.synthetic_remesh_iterations),
         anny_poses=None if an.get("poses") is None else _as_list(an["poses"]),
         anny_root=None if an.get("root") in (None, "") else _abs(an["root"]),
         anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
-        progress=bool(c.get("progress", True)),
+        progress=progress,
     )
 
 
@@ -133,16 +144,23 @@ def run(cfg):
 
 
 def _main(cfg) -> None:
+    """Hydra task of ``python -m defaust``: build; a bad parameter, an OSError (one
+    ``error: ...`` line, status 2) or Ctrl-C (``interrupted``, 130) ends the process
+    through :func:`eval.clirun.run_command`."""
+    from eval.clirun import run_command
     logging.getLogger("defaust").setLevel(logging.INFO)
-    try:
-        run(cfg)
-    except SShaDeError as e:
-        print(f"error: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+    rc = run_command(lambda: run(cfg), where=cfg.get("out"))
+    if rc:
+        raise SystemExit(rc)
 
 
 def main() -> None:
-    """Console entry point: Hydra parses the overrides."""
-    import hydra
+    """Console entry point: Hydra parses the overrides. The command line is composed
+    and every builder parameter checked (:func:`config_from_omegaconf`,
+    :meth:`BuildConfig.validate`) before anything is built or any folder made
+    (:func:`eval.clirun.hydra_main`)."""
+    from eval.clirun import hydra_main
 
-    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(_main)()
+    def check(cfg):
+        config_from_omegaconf(cfg).validate()
+    hydra_main(_main, CONF_DIR, check=check)

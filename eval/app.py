@@ -358,9 +358,10 @@ class _References:
         if self.mode not in ("baseline", "all", "none"):
             raise SShaDeError(f"reference.cases must be baseline, all or none, got {self.mode!r}")
         self.cache = _abs(rc.get("cache", "data/references"))
-        self.max_iter = int(rc.get("max_iter", 50000))
-        tb = rc.get("time_budget_s", 3600)
-        self.time_budget_s = None if tb is None else float(tb)
+        from .config_check import config_number
+        self.max_iter = config_number(cfg, "reference.max_iter", min=1, default=50000)
+        self.time_budget_s = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True,
+                                           default=3600)
         self.n_base = n_base
         self.case = None
         self.refs: dict = {}
@@ -409,13 +410,22 @@ EXPERIMENTS = {
 def run_experiment(cfg, *, fresh: bool = False):
     """Dispatch on ``experiment.kind`` (default ``cases``); see :data:`EXPERIMENTS`.
 
-    The experiment runs in its claimed output folder ``cfg.out_dir``
+    Every number of the config is checked first (:func:`eval.config_check.check_config`),
+    then the experiment runs in its claimed output folder ``cfg.out_dir``
     (:func:`eval.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
     refused before any work; ``fresh``: ``out_dir`` is the default dated name, which gets
-    a suffix rather than being reused)."""
+    a suffix rather than being reused).
+
+    Raises
+    ------
+    SShaDeError for a bad config value or an unknown ``experiment.kind`` (before any
+    work), :class:`eval.outdir.OutputDirError` for a folder it may not write into.
+    """
     import importlib
 
+    from .config_check import check_config
     from .outdir import claimed_run
+    check_config(cfg)  # every number of the config, before any work (also for sweep jobs)
     kind = str(cfg.get("experiment", {}).get("kind", "cases"))
     if kind not in EXPERIMENTS:
         raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(EXPERIMENTS)}")
@@ -445,15 +455,29 @@ def _pin_out_dir(cfg) -> bool:
 
 
 def _main(cfg) -> None:
-    try:
-        fresh = _pin_out_dir(cfg)
-        run_experiment(cfg, fresh=fresh)
-    except SShaDeError as e:
-        print(f"error: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+    """Hydra task of ``python -m eval``: run the experiment; a bad config or input, an
+    OSError (``error: ...``, status 2) or Ctrl-C (``interrupted``, 130) ends the process
+    through :func:`eval.clirun.run_command`."""
+    from .clirun import run_command
+
+    fresh = _pin_out_dir(cfg)
+    rc = run_command(lambda: run_experiment(cfg, fresh=fresh), where=cfg.get("out_dir"))
+    if rc:
+        raise SystemExit(rc)
 
 
 def main() -> None:
-    """Console entry point (``python -m eval``): Hydra parses the overrides."""
-    import hydra
-    hydra.main(version_base=None, config_path=CONF_DIR, config_name="config")(_main)()
+    """Console entry point (``python -m eval``): Hydra parses the overrides.
+
+    The command line is composed and every config value checked
+    (:func:`eval.config_check.check_config`) before Hydra makes the run folder; a bad
+    one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
+    (:func:`eval.clirun.hydra_main`).
+    """
+    from .clirun import hydra_main
+    from .config_check import check_config
+    argv = sys.argv[1:]
+    if any(a in ("-m", "--multirun") for a in argv) and not any("hydra.callbacks.sweep_aggregate" in a for a in argv):
+        # a multirun claims its hydra.sweep.dir like eval.sweep does (eval.sweep.claim_sweep_dir)
+        argv = [*argv, "++hydra.callbacks.sweep_aggregate._target_=eval.sweep.AggregateSweepCallback"]
+    hydra_main(_main, CONF_DIR, argv=argv, check=check_config)

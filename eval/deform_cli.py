@@ -300,8 +300,8 @@ def deform_file(a, log=print, warn=None) -> dict:
 def main(argv=None) -> int:
     """Entry point of ``python -m sshade``: ``deform ...`` (module docstring).
 
-    Returns the exit status (0 success, 2 bad input or usage, after one ``error:``
-    line on stderr).
+    Returns the exit status (0 success, 2 bad input, usage or an OSError, after one
+    ``error:`` line on stderr; 130 after ``interrupted`` on Ctrl-C).
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
@@ -314,9 +314,5 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     a = build_parser().parse_args(argv[1:])
-    try:
-        deform_file(a)
-    except SShaDeError as e:
-        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    return 0
+    from .clirun import run_command
+    return run_command(lambda: deform_file(a), where=a.out)  # error:/interrupted (eval.clirun)

@@ -35,7 +35,6 @@ Exit status 1 if any step failed (all steps are attempted).
 """
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -65,7 +64,16 @@ def _steps(a) -> list[tuple[str, list[str]]]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
+    """``python -m eval.reproduce [--faust DIR] [--tosca DIR] [--shapes DIR] [--scaling MESH]``.
+
+    Returns
+    -------
+    0 when every step succeeded; 1 after ``error: step(s) failed: ...`` when one did
+    (all are attempted); 2 after one ``error: ...`` line on a usage error or an OSError;
+    130 after ``interrupted`` on Ctrl-C (the running step gets the same Ctrl-C).
+    """
+    from .clirun import ArgumentParser, run_command
+    p = ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     p.add_argument("--faust", help="folder of FAUST registrations tr_reg_XYZ.ply")
     p.add_argument("--tosca", help="folder of TOSCA .off meshes")
     p.add_argument("--shapes", help="folder with the Stanford models (armadillo.obj, bunny.off, dragon.obj)")
@@ -73,6 +81,11 @@ def main(argv=None) -> int:
     p.add_argument("--dry-run", action="store_true", help="print the commands only")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")
     a = p.parse_args(argv)
+    return run_command(lambda: _run_steps(a), where="results/")
+
+
+def _run_steps(a) -> int:
+    """Run every step as its own process; 1 (after one ``error:`` line) if any failed."""
     failed = []
     for name, cmd in _steps(a):
         print(f"== {name}: {' '.join(cmd[1:])}", flush=True)
@@ -85,7 +98,7 @@ def main(argv=None) -> int:
         if rc != 0:
             failed.append(name)
     if failed:
-        print(f"failed: {', '.join(failed)}", file=sys.stderr)
+        print(f"error: step(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
     return 0
 

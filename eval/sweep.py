@@ -280,7 +280,8 @@ def sweep_job(cfg) -> dict:
     except OSError as e:
         log.error("cannot write %s in %s: %s", STATUS_FILE, job_dir, e)
     if status["status"] != "done":
-        print(f"job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
+        level = "warning" if status["status"] == "partial" else "error"  # one prefix style (issue 19)
+        print(f"{level}: job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
     return {k: v for k, v in status.items() if k != "traceback"}
 
 
@@ -595,7 +596,7 @@ class AggregateSweepCallback(_Callback):
             df = aggregate_sweep(d)
         except Exception as e:  # noqa: BLE001 -- never fail a finished sweep over its summary
             log.warning("sweep aggregation failed: %s", e)
-            print(f"sweep aggregation failed: {e}", file=sys.stderr)
+            print(f"error: sweep aggregation failed: {e}", file=sys.stderr)
             release_sweep_dir("done")
             return
         release_sweep_dir("done")
@@ -605,8 +606,8 @@ class AggregateSweepCallback(_Callback):
 
 # ----------------------------------------------------------------------------- CLI
 def _aggregate_cli(args: list[str]) -> int:
-    import argparse
-    ap = argparse.ArgumentParser(prog="python -m eval.sweep aggregate",
+    from .clirun import ArgumentParser
+    ap = ArgumentParser(prog="python -m eval.sweep aggregate",
                                  description="Summarise sweep folders into sweep_table.{csv,md}.")
     ap.add_argument("dirs", nargs="+", help="sweep folder(s) (hydra.sweep.dir)")
     ap.add_argument("--no-write", action="store_true", help="print only, write nothing")
@@ -679,26 +680,26 @@ def resume_sweep(sweep_dir) -> int:
 
 def main(argv: list[str] | None = None) -> None:
     """``python -m eval.sweep [hydra args and overrides]``, ``... aggregate DIR...`` or
-    ``... resume DIR`` (:func:`resume_sweep`)."""
+    ``... resume DIR`` (:func:`resume_sweep`).
+
+    Exits with 0 once every job has an outcome; 2 after one ``error: ...`` line for a bad
+    command line (an unknown key or config group option, a malformed override: refused
+    before any job starts, :func:`eval.clirun.precheck`) or an OSError; 130 after
+    ``interrupted`` on Ctrl-C.
+    """
+    from .clirun import hydra_main, run_command
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "aggregate":
-        raise SystemExit(_aggregate_cli(argv[1:]))
+        raise SystemExit(run_command(lambda: _aggregate_cli(argv[1:]), where=argv[1] if len(argv) > 1 else None))
     if argv and argv[0] == "resume":
         if len(argv) != 2 or argv[1].startswith("-"):
-            print("usage: python -m eval.sweep resume SWEEP_DIR", file=sys.stderr)
+            print("error: usage: python -m eval.sweep resume SWEEP_DIR", file=sys.stderr)
             raise SystemExit(2)
-        try:
-            raise SystemExit(resume_sweep(argv[1]))
-        except SShaDeError as e:
-            print(f"error: {e}", file=sys.stderr)
-            raise SystemExit(2) from None
-    import hydra
-
+        raise SystemExit(run_command(lambda: resume_sweep(argv[1]), where=argv[1]))
     from .confdir import config_dir
     if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):
         argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
-    sys.argv = [sys.argv[0], *argv]
-    hydra.main(version_base=None, config_path=config_dir(), config_name="config")(sweep_job)()
+    hydra_main(sweep_job, config_dir(), argv=argv)
 
 
 if __name__ == "__main__":

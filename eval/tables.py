@@ -575,16 +575,43 @@ def retabulate(run_dir) -> dict[str, Path]:
 
 
 def main(argv=None) -> int:
-    """``python -m eval.tables RUN_DIR [...]``: :func:`retabulate` each folder."""
+    """``python -m eval.tables RUN_DIR [...]``: :func:`retabulate` each folder.
+
+    Every folder is checked (a folder holding ``cases.csv``) before any table is written.
+
+    Returns
+    -------
+    0; 2 after one ``error: ...`` line (no folder given, a folder without ``cases.csv``,
+    an unknown option, an OSError such as a full disk: ``error: cannot write ...``);
+    130 after ``interrupted`` on Ctrl-C. ``--help`` prints the usage (``SystemExit(0)``).
+    """
     import sys
-    dirs = list(sys.argv[1:] if argv is None else argv)
-    if not dirs:
-        print("usage: python -m eval.tables RUN_DIR [RUN_DIR ...]", file=sys.stderr)
+
+    from .clirun import ArgumentParser, run_command
+    ap = ArgumentParser(prog="python -m eval.tables",
+                        description="Rebuild table.{csv,md,tex} of finished evaluator runs from their cases.csv "
+                                    "(no method is rerun).")
+    ap.add_argument("dirs", nargs="*", metavar="RUN_DIR", help="a folder written by python -m eval")
+    a = ap.parse_args(list(sys.argv[1:] if argv is None else argv))
+    if not a.dirs:
+        print("usage: python -m eval.tables RUN_DIR [RUN_DIR ...] (--help for details)", file=sys.stderr)
         return 2
-    for d in dirs:
-        paths = retabulate(d)
-        print(f"{d}: wrote {', '.join(p.name for p in paths.values())}")
-    return 0
+    missing = [d for d in a.dirs if not (Path(d) / "cases.csv").is_file()]
+    if missing:
+        print(f"error: no cases.csv in {', '.join(missing)} (python -m eval.tables takes folders written by "
+              "python -m eval)", file=sys.stderr)
+        return 2
+
+    def work():
+        for d in a.dirs:
+            try:
+                paths = retabulate(d)
+            except OSError as e:  # e.g. ENOSPC from a write names no file: name the folder
+                if e.filename is None:
+                    e.filename = str(d)
+                raise
+            print(f"{d}: wrote {', '.join(p.name for p in paths.values())}")
+    return run_command(work)
 
 
 if __name__ == "__main__":

@@ -150,6 +150,11 @@ class LowResSkippedWarning(UserWarning):
     in :func:`deform`'s info."""
 
 
+_MAX_COUNT = 2**31 - 1    # n_low, workers, max_iter: int32 range (numba kernels, libigl)
+_MAX_SAMPLINGS = 10_000   # k remeshings, each a full low-res solve
+_MAX_SEED = 2**63 - 1     # int64: recorded in JSON/CSV and passed to numpy
+
+
 def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
                  max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None) -> dict:
@@ -158,10 +163,13 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
 
     Parameters
     ----------
-    As :func:`deform`: n_low (int >= 4 or ``"auto"``/None), n_samplings (int >= 1),
-    seed (int >= 0), workers (int >= 1 or None), tol (float > 0), max_iter (int >= 1 or
-    None), gradient (one of :data:`sshade.lrf.GRADIENTS`), warm_start (bool), protocol
-    (one of :data:`sshade.arap.PROTOCOLS`), etol / gtol (floats >= 0 or None).
+    As :func:`deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None), n_samplings
+    (int in [1, 10000]), seed (int in [0, 2**63 - 1]), workers (int in [1, 2**31 - 1] or
+    None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or None), gradient (one
+    of :data:`sshade.lrf.GRADIENTS`), warm_start (bool), protocol (one of
+    :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None). An
+    integer may be given as an integral float (``1e3``) but never as a bool, NaN, inf
+    or a float beyond the range.
 
     Returns
     -------
@@ -169,7 +177,8 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
 
     Raises
     ------
-    SShaDeError naming the first bad parameter and its value.
+    SShaDeError naming the first bad parameter and its value (never OverflowError or
+    TypeError).
 
     Examples
     --------
@@ -180,34 +189,39 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     ...
     sshade.errors.SShaDeError: SShaDe: n_low must be at least 4 (or 'auto'), got 2
     """
-    def as_int(name, v, lo):
-        if isinstance(v, bool):
+    def as_int(name, v, lo, hi=_MAX_COUNT):
+        if isinstance(v, (bool, np.bool_)):
             raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
         try:
             iv = int(v)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # OverflowError: inf
             raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}") from None
         if iv != v and not (isinstance(v, str) and str(iv) == v.strip()):
             raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
         if iv < lo:
             extra = " (or 'auto')" if name == "n_low" else ""
             raise SShaDeError(f"SShaDe: {name} must be at least {lo}{extra}, got {v!r}")
+        if iv > hi:
+            raise SShaDeError(f"SShaDe: {name} must be at most {hi}, got {v!r}")
         return iv
 
     out = {"n_low": "auto" if n_low in (None, "auto") else as_int("n_low", n_low, 4),
-           "n_samplings": as_int("n_samplings", n_samplings, 1), "seed": as_int("seed", seed, 0),
+           "n_samplings": as_int("n_samplings", n_samplings, 1, _MAX_SAMPLINGS),
+           "seed": as_int("seed", seed, 0, _MAX_SEED),
            "workers": None if workers is None else as_int("workers", workers, 1),
            "max_iter": None if max_iter is None else as_int("max_iter", max_iter, 1)}
     try:
         out["tol"] = float(tol)
     except (TypeError, ValueError):
         raise SShaDeError(f"SShaDe: tol must be a number, got {tol!r}") from None
-    if not out["tol"] > 0 or not np.isfinite(out["tol"]):
+    if isinstance(tol, (bool, np.bool_)) or not out["tol"] > 0 or not np.isfinite(out["tol"]):
         raise SShaDeError(f"SShaDe: tol must be a finite number > 0, got {tol!r}")
+    if not isinstance(warm_start, (bool, np.bool_)):
+        raise SShaDeError(f"SShaDe: warm_start must be true or false, got {warm_start!r}")
     if gradient not in GRADIENTS:
         raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
     out["gradient"] = gradient
-    out["warm_start"] = bool(warm_start)
+    out["warm_start"] = bool(warm_start)  # a bool (checked above)
     from .arap import PROTOCOLS
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
@@ -220,7 +234,7 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
             fv = float(v)
         except (TypeError, ValueError):
             raise SShaDeError(f"SShaDe: {name} must be a number >= 0, got {v!r}") from None
-        if not (fv >= 0 and np.isfinite(fv)):
+        if isinstance(v, (bool, np.bool_)) or not (fv >= 0 and np.isfinite(fv)):
             raise SShaDeError(f"SShaDe: {name} must be a finite number >= 0, got {v!r}")
         out[name] = fv
     return out
