@@ -561,7 +561,9 @@ def retabulate(run_dir) -> dict[str, Path]:
     """
     import json
 
+    from .outdir import refuse_results
     run_dir = Path(run_dir)
+    refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
     df = pd.read_csv(run_dir / "cases.csv")
     title = None
     try:

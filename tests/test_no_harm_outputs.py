@@ -212,3 +212,20 @@ def test_anny_figures_refuses_results(capsys):
     t = time.time()
     assert main([str(ROOT / "results" / "defaust" / "figures")]) == 2
     assert "eval.reproduce" in capsys.readouterr().err and time.time() - t < 5
+
+
+def test_tables_and_sweep_aggregate_refuse_results(capsys):
+    from eval.sweep import main as sweep_main
+    from eval.tables import main as tables_main
+    res = ROOT / "results"
+    targets = [(tables_main, [str(res / "faust")]), (sweep_main, ["aggregate", str(res / "sweeps" / "defaust")])]
+    for fn, argv in targets:
+        if not Path(argv[-1]).is_dir():
+            continue
+        before = _snapshot(Path(argv[-1]))
+        try:
+            rc = fn(argv)
+        except SystemExit as e:
+            rc = e.code
+        assert rc == 2 and "eval.reproduce" in capsys.readouterr().err
+        assert _snapshot(Path(argv[-1])) == before
