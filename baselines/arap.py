@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sshade.arap import arap_deform
+from sshade.arap import arap_deform, make_criterion
 from sshade.validate import validate_handles, validate_mesh
 
 __all__ = ["FullResArap", "ARAP", "Elastic"]
@@ -23,7 +23,7 @@ class FullResArap:
     protocol : ``"converged"`` (default: L-BFGS-accelerated local/global to the
         energy-and-gradient criterion) or ``"paper"`` (libigl, paper §4.1 move rule).
     etol, gtol : floats or None, the ``"converged"`` criterion
-        (:class:`sshade.arap_solver.Criterion`; None: its defaults).
+        (:class:`sshade.arap.criterion.Criterion`; None: its defaults).
 
     Examples
     --------
@@ -43,7 +43,7 @@ class FullResArap:
         self.max_iter = None if max_iter is None else int(max_iter)
         self.name = name or energy
         self.protocol = protocol
-        self.criterion = _criterion(etol, gtol)
+        self.criterion = make_criterion(etol, gtol)
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
@@ -70,15 +70,6 @@ class FullResArap:
         spent (0.0 when warm)."""
         from sshade.warmup import warm_fullres
         return warm_fullres(self.energy, self.protocol, n_vertices)
-
-
-def _criterion(etol, gtol):
-    """A :class:`sshade.arap_solver.Criterion` from optional thresholds (None: defaults)."""
-    from sshade.arap_solver import DEFAULT_CRITERION, Criterion
-    if etol is None and gtol is None:
-        return DEFAULT_CRITERION
-    return Criterion(etol=DEFAULT_CRITERION.etol if etol is None else float(etol),
-                     gtol=DEFAULT_CRITERION.gtol if gtol is None else float(gtol))
 
 
 class ARAP(FullResArap):

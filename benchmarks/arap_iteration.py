@@ -1,4 +1,4 @@
-"""Per-iteration cost of SShaDe's converged ARAP solver (:func:`sshade.arap_solver.solve_arap`,
+"""Per-iteration cost of SShaDe's converged ARAP solver (:func:`sshade.arap.solve_arap`,
 spokes-and-rims) and of libigl's ``igl.arap_solve`` on a ~200k-vertex mesh.
 
     python benchmarks/arap_iteration.py [--mesh data/benchmarks/armadillo_200k.npz]
@@ -26,7 +26,7 @@ seconds per call.
 
 Timings are wall-clock: run on a quiet machine (the load average is printed before and
 after; on a 2-core machine with one other job running, parallel kernels are SLOWER than
-one thread: see :class:`sshade.arap_solver._ThreadPicker`). The thread count of the numba
+one thread: see :class:`sshade.arap.threads.ThreadPicker`). The thread count of the numba
 kernels is ``--threads`` (capped at ``NUMBA_NUM_THREADS``); the iterates do not depend on
 it.
 """
@@ -58,7 +58,7 @@ def load_case(path: Path):
 
 def bench_ours(V, F, h, T, ops, *, iters: int, repeat: int, threads: int, accelerate: str) -> dict:
     """Best-of-``repeat`` seconds per iteration of each stage, other and total."""
-    from sshade.arap_solver import Criterion, solve_arap
+    from sshade.arap import Criterion, solve_arap
     best = {}
     for _ in range(repeat):
         r = solve_arap(V, F, h, T, energy=ops.energy_type, operators=ops, max_iter=iters,
@@ -112,8 +112,7 @@ def main(argv=None) -> None:
     ap.add_argument("--no-igl", action="store_true", help="skip libigl")
     args = ap.parse_args(argv)
 
-    from sshade.arap_energy import build_operators, max_threads
-    from sshade.arap_solver import solve_arap
+    from sshade.arap import build_operators, max_threads, solve_arap
     V, F, h, T = load_case(args.mesh)
     print(f"mesh {args.mesh.name}: {len(V)} vertices, {len(F)} faces, {len(h)} handles; energy {args.energy}; "
           f"{args.iters} iterations, best of {args.repeat}; load average {os.getloadavg()[0]:.2f}")

@@ -375,7 +375,7 @@ class _References:
     def metrics(self, method, Vd) -> dict:
         if self.case is None:
             return {}
-        from sshade.arap_energy import build_operators
+        from sshade.arap import build_operators
 
         from .reference import method_energy, reference_metrics, reference_solution
         c, e = self.case, method_energy(method)

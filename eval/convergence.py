@@ -1,7 +1,7 @@
 """Time to accuracy of the ARAP solvers: ``python -m eval experiment=convergence``.
 
 For each case (a subdivided plane with its boundary fixed and a central disc lifted,
-:func:`sshade.arap_cases.lifted_plane`; the first case of the configured dataset, by
+:func:`sshade.arap.cases.lifted_plane`; the first case of the configured dataset, by
 default a DeFAUST case at 150k-200k vertices), the distance to the deep-converged
 full-resolution spokes-and-rims minimiser (:func:`eval.reference.reference_solution`,
 cached) is traced against wall time for:
@@ -9,7 +9,7 @@ cached) is traced against wall time for:
 - ``libigl local/global``: ``igl.arap_solve`` one iteration at a time from the rigid fit
   of the handles (the paper's baselines; :func:`sshade.arap.arap_deform` protocol
   ``paper`` without its stopping rule);
-- ``L-BFGS (ours)``: :func:`sshade.arap_solver.solve_arap` (protocol ``converged``, its
+- ``L-BFGS (ours)``: :func:`sshade.arap.solve_arap` (protocol ``converged``, its
   default iteration), until its criterion stops it;
 - ``Anderson (ours)``: the same solver with ``accelerate="anderson"`` (Peng et al. 2018);
 - ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`);
@@ -95,12 +95,12 @@ def libigl_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
 def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rims", U0=None,
                  accelerate: str = "lbfgs", time_budget_s: float = 300.0, t_offset: float = 0.0,
                  criterion=None) -> tuple[list[dict], object]:
-    """:func:`sshade.arap_solver.solve_arap` traced against a reference (arguments as
+    """:func:`sshade.arap.solve_arap` traced against a reference (arguments as
     :func:`libigl_curve`; ``accelerate`` as in ``solve_arap``; ``U0`` a start,
     ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
     ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
     from sshade.arap import rigid_fit
-    from sshade.arap_solver import solve_arap
+    from sshade.arap import solve_arap
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     if U0 is None:
         R, t = rigid_fit(V[handles], targets)
@@ -146,7 +146,7 @@ def _cases(cfg) -> list[tuple[str, tuple]]:
     out = []
     for name in want:
         if name == "plane":
-            from sshade.arap_cases import lifted_plane
+            from sshade.arap.cases import lifted_plane
             p = cc.plane
             out.append((f"plane_{int(p.n_target // 1000)}k", lifted_plane(float(p.lift), n_target=int(p.n_target))))
         elif name == "dataset":

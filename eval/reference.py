@@ -4,8 +4,8 @@ computed once, cached on disk, and the distance of any method's result to it.
 A benchmark row is only as good as its reference. For every case (rest mesh, handles,
 targets) and ARAP energy (``"spokes"``: ARAP, Sorkine & Alexa 2007; ``"spokes_and_rims"``:
 Elastic, Chao et al. 2010), :func:`reference_solution` runs
-:func:`sshade.arap_solver.solve_arap` (L-BFGS-accelerated local/global, Armijo line
-search) with :data:`sshade.arap_solver.DEEP_CRITERION` (until the energy stops
+:func:`sshade.arap.solve_arap` (L-BFGS-accelerated local/global, Armijo line
+search) with :data:`sshade.arap.DEEP_CRITERION` (until the energy stops
 changing in float64; on the FAUST cases L-BFGS reaches the same energy as the
 Anderson-accelerated iteration to 12 digits, or a lower one: s0_p1 spokes -0.0822362
 against -0.0822274, and on DeFAUST s00_p01 spokes -0.0273515 where a 4,836-iteration
@@ -17,7 +17,7 @@ against it:
 - ``ref_mean_pct`` / ``ref_max_pct``: mean / max vertex distance to the reference, in %
   of the rest mesh's bounding-box diagonal;
 - ``energy_gap``: ``(E(U) - E(U*)) / |E(U*)|``, i.e. ``E(U) / E(U*) - 1`` for a positive
-  minimum, with ``E`` the reference's energy (libigl's weights, :mod:`sshade.arap_energy`);
+  minimum, with ``E`` the reference's energy (libigl's weights, :mod:`sshade.arap.operators`);
   ``>= 0`` up to the reference's own tolerance. (libigl's cotangent weights are negative
   on obtuse triangles, so the spokes energy of a mesh with many of them, e.g. FAUST's,
   can be negative at its minimum: hence ``|E(U*)|``.)
@@ -50,10 +50,10 @@ _METHOD_ENERGY = {"ARAP": "spokes", "ARAP-SR": "spokes", "Elastic": "spokes_and_
 
 def method_energy(method) -> str:
     """The ARAP energy a method's result is scored against: its own ``energy`` attribute
-    when it names one of :data:`sshade.arap_energy.ENERGIES`, else by name (ARAP and
+    when it names one of :data:`sshade.arap.ENERGIES`, else by name (ARAP and
     ARAP-SR: spokes; Elastic, SShaDe and any other method: spokes-and-rims, the energy of
     SShaDe's low-resolution step, paper §4.1)."""
-    from sshade.arap_energy import ENERGIES
+    from sshade.arap import ENERGIES
     e = getattr(method, "energy", None)
     if e in ENERGIES:
         return str(e)
@@ -94,7 +94,7 @@ def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
 
 
 def _solver_settings(max_iter: int, time_budget_s: float | None) -> dict:
-    from sshade.arap_solver import DEEP_CRITERION
+    from sshade.arap import DEEP_CRITERION
     return {"etol": DEEP_CRITERION.etol, "gtol": DEEP_CRITERION.gtol, "max_iter": int(max_iter),
             "time_budget_s": time_budget_s, "accelerate": "lbfgs"}
 
@@ -123,8 +123,7 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     ------
     SShaDeError on an unknown energy or an unreadable cache file (delete it to recompute).
     """
-    from sshade.arap_energy import ENERGIES
-    from sshade.arap_solver import DEEP_CRITERION, solve_arap
+    from sshade.arap import DEEP_CRITERION, ENERGIES, solve_arap
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
     solver = _solver_settings(max_iter, time_budget_s)
@@ -161,7 +160,7 @@ def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None) -> dict:
     V_rest : (n, 3) float64 rest positions (for the bounding-box diagonal and the energy).
     Vd : (n, 3) float64 the method's result. F : (m, 3) int64 faces.
     ref : :class:`Reference` of the same case.
-    operators : :class:`sshade.arap_energy.ArapOperators` of ``(V_rest, F, ref.energy_type)``
+    operators : :class:`sshade.arap.ArapOperators` of ``(V_rest, F, ref.energy_type)``
         or None (built here).
 
     Returns
@@ -173,7 +172,7 @@ def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None) -> dict:
     ------
     SShaDeError when ``Vd`` and the reference have different shapes.
     """
-    from sshade.arap_energy import build_operators
+    from sshade.arap import build_operators
     V_rest = np.asarray(V_rest, np.float64)
     Vd = np.asarray(Vd, np.float64)
     if Vd.shape != ref.U.shape:

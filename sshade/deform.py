@@ -45,7 +45,7 @@ def _warmup() -> float:
     project_to_fans(V, np.zeros(5, np.int64), V[:3], np.array([[0, 1, 2]]))
     from .halfedge import halfedges, vertex_fan_count
     vertex_fan_count(F, halfedges(F, 5), 5)
-    from .arap_solver import warmup_kernels
+    from .arap import warmup_kernels
     warmup_kernels()  # the low-res ARAP's serial kernels, inherited by the forked workers
     _WARM = True
     return time.perf_counter() - t0
@@ -71,11 +71,10 @@ def _prepare(V, F, handles, n_low, seed, topology):
 
 def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
     """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step."""
-    from .arap_solver import DEFAULT_CRITERION, Criterion
+    from .arap import make_criterion
     crit = None
     if protocol == "converged" and (etol is not None or gtol is not None):
-        crit = Criterion(etol=DEFAULT_CRITERION.etol if etol is None else float(etol),
-                         gtol=DEFAULT_CRITERION.gtol if gtol is None else float(gtol))
+        crit = make_criterion(etol, gtol)
     return {"tol": tol, "max_iter": max_iter, "protocol": protocol, "criterion": crit}
 
 

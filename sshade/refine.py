@@ -3,7 +3,7 @@ spokes-and-rims solve.
 
 SShaDe (paper §3) gives a deformation close to the full-resolution ARAP minimiser in a
 fraction of its time; the L-BFGS-accelerated local/global of
-:func:`sshade.arap_solver.solve_arap` started there needs fewer iterations than from
+:func:`sshade.arap.solver.solve_arap` started there needs fewer iterations than from
 the rigid fit of the handles. This method measures how many (``refine_iterations``
 against a full-resolution Elastic row's ``iterations``), and gives the converged
 full-resolution answer when SShaDe's approximation is not enough.
@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .arap_solver import DEFAULT_CRITERION, Criterion, solve_arap
+from .arap import make_criterion, solve_arap
 from .deform import check_params, deform
 from .validate import validate_handles, validate_mesh
 
@@ -27,7 +27,7 @@ class SShaDeRefine:
     Parameters
     ----------
     refine_etol, refine_gtol : float or None, the refinement's criterion
-        (:class:`sshade.arap_solver.Criterion`; None: its defaults).
+        (:class:`sshade.arap.criterion.Criterion`; None: its defaults).
     refine_max_iter : int, cap on the refinement's iterations.
     **sshade : the parameters of :func:`sshade.deform` (n_low, n_samplings, seed,
         workers, protocol, ...), checked at construction (:func:`sshade.deform.check_params`).
@@ -52,8 +52,7 @@ class SShaDeRefine:
     def __init__(self, *, refine_etol: float | None = None, refine_gtol: float | None = None,
                  refine_max_iter: int = 10000, **sshade):
         self.params = check_params(**sshade)
-        self.criterion = Criterion(etol=DEFAULT_CRITERION.etol if refine_etol is None else float(refine_etol),
-                                   gtol=DEFAULT_CRITERION.gtol if refine_gtol is None else float(refine_gtol))
+        self.criterion = make_criterion(refine_etol, refine_gtol)
         self.refine_max_iter = int(refine_max_iter)
         self.info: dict = {}
 

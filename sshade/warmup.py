@@ -50,22 +50,22 @@ def tiny_problem() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 def uses_parallel_kernels(n_vertices: int | None) -> bool:
     """Whether a full-resolution ARAP solve on an ``n_vertices`` mesh runs numba's parallel
-    kernels (:func:`sshade.arap_energy.resolve_threads` in the automatic mode: at least
+    kernels (:func:`sshade.arap.threads.resolve_threads` in the automatic mode: at least
     ``PARALLEL_MIN_CELLS`` rotation cells = vertices, more than one thread, not inside a
     worker process). False for None."""
     if n_vertices is None:
         return False
-    from .arap_energy import PARALLEL_MIN_CELLS, resolve_threads
+    from .arap.threads import PARALLEL_MIN_CELLS, resolve_threads
     return int(n_vertices) >= PARALLEL_MIN_CELLS and resolve_threads(None, int(n_vertices)) > 1
 
 
 def warm_parallel_kernels() -> None:
     """Compile (or load from numba's cache) the parallel variants of the ARAP kernels
-    (:mod:`sshade.arap_energy`, :mod:`sshade.arap_solver`). Starts numba's thread pool:
+    (:mod:`sshade.arap.kernels`, :mod:`sshade.arap.solver_kernels`). Starts numba's thread pool:
     call it only where a parallel solve follows anyway (:func:`uses_parallel_kernels`)."""
-    from . import arap_energy, arap_solver
-    arap_energy._numba_fused(True)
-    arap_solver._helpers(True)
+    from .arap import kernels, solver_kernels
+    kernels.fused_kernels(True)
+    solver_kernels.loop_kernels(True)
 
 
 def warm_once(done: set, key, run: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], object],

@@ -1,13 +1,12 @@
-"""ARAP energies with libigl's weights (sshade.arap_energy): energy, gradient, local and
+"""ARAP energies with libigl's weights (sshade.arap.operators): energy, gradient, local and
 global steps against libigl and finite differences."""
 import igl
 import numpy as np
 import pytest
 from scipy.sparse.linalg import splu
 
-from sshade.arap import rigid_fit
-from sshade.arap_cases import bent_cylinder, twisted_bar
-from sshade.arap_energy import ENERGIES, build_operators, fit_rotations
+from sshade.arap import ENERGIES, build_operators, fit_rotations, rigid_fit
+from sshade.arap.cases import bent_cylinder, twisted_bar
 from sshade.errors import SShaDeError
 
 IGL_ENERGY = {"spokes": igl.ARAP_ENERGY_TYPE_SPOKES, "spokes_and_rims": igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS}
@@ -237,14 +236,14 @@ def test_kernels_independent_of_threads_and_numbering(bar, energy):
 
 
 def test_numpy_fallbacks_when_numba_is_off(monkeypatch, bar):
-    import sshade.arap_energy as ae
+    from sshade.arap import kernels
     V, F, _, _ = bar
     ops = build_operators(V, F, "spokes_and_rims")
     U = V + 0.05 * np.random.default_rng(10).normal(size=V.shape)
     R1, E1 = ops.rotations(U, return_energy=True)
     B1 = ops.rhs(R1)
-    monkeypatch.setattr(ae, "_NUMBA_KERNEL", False)
-    monkeypatch.setattr(ae, "_NUMBA_ENERGY", False)
+    monkeypatch.setattr(kernels, "_POLAR", False)
+    monkeypatch.setattr(kernels, "_ENERGY", False)
     R2, E2 = ops.rotations(U, return_energy=True)
     np.testing.assert_allclose(R2, R1, atol=1e-9)
     assert E2 == pytest.approx(E1, rel=1e-10)
@@ -261,7 +260,7 @@ def test_numpy_fallbacks_when_numba_is_off(monkeypatch, bar):
 
 
 def test_resolve_threads():
-    from sshade.arap_energy import PARALLEL_MIN_CELLS, max_threads, resolve_threads
+    from sshade.arap import PARALLEL_MIN_CELLS, max_threads, resolve_threads
     assert resolve_threads(None, 100) == 1
     assert resolve_threads(None, PARALLEL_MIN_CELLS) == max_threads()
     assert resolve_threads(1, 10 ** 6) == 1

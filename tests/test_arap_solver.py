@@ -1,14 +1,12 @@
-"""Converged ARAP solver (sshade.arap_solver): L-BFGS with the Laplacian as initial
+"""Converged ARAP solver (sshade.arap.solver): L-BFGS with the Laplacian as initial
 Hessian (default) and safeguarded Anderson acceleration, the convergence criterion's
 guarantee, rigid motions, linear-solver backends."""
 import numpy as np
 import pytest
 
-from sshade.arap import ArapResult
-from sshade.arap_cases import bent_cylinder, lifted_plane, twisted_bar
-from sshade.arap_energy import bbox_diag, build_operators
-from sshade.arap_solver import (DEEP_CRITERION, DEFAULT_CRITERION, Criterion, LaplacianSolver,
-                                solve_arap)
+from sshade.arap import (DEEP_CRITERION, DEFAULT_CRITERION, ArapResult, Criterion, LaplacianSolver, bbox_diag,
+                         build_operators, solve_arap)
+from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
 from sshade.errors import SShaDeError
 
 try:
@@ -126,15 +124,8 @@ def test_cholesky_and_scipy_fallback_agree(bar):
 
 
 def test_auto_backend_falls_back_to_scipy(monkeypatch, bar):
-    import builtins
-    real_import = builtins.__import__
-
-    def fake_import(name, *args, **kwargs):
-        if name == "cholespy":
-            raise ImportError("no cholespy")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", fake_import)
+    from sshade.arap import linear
+    monkeypatch.setattr(linear, "CholeskySolverD", None)  # as when cholespy cannot be imported
     V, F, h, T = bar
     res = solve_arap(V, F, h, T, max_iter=3, criterion=Criterion(0.0, 0.0))
     assert res.info["linear_solver"] == "scipy"
@@ -226,11 +217,11 @@ def test_threads_and_numbering_do_not_change_the_iterates(bar, accelerate):
 
 
 def test_numpy_fallback_solver_agrees(monkeypatch, bar):
-    import sshade.arap_energy as ae
+    from sshade.arap import kernels
     V, F, h, T = bar
     ref = solve_arap(V, F, h, T, criterion=Criterion(1e-10, 1e-6))
-    monkeypatch.setattr(ae, "_NUMBA_KERNEL", False)
-    monkeypatch.setattr(ae, "_NUMBA_ENERGY", False)
+    monkeypatch.setattr(kernels, "_POLAR", False)
+    monkeypatch.setattr(kernels, "_ENERGY", False)
     res = solve_arap(V, F, h, T, criterion=Criterion(1e-10, 1e-6), reorder=True)
     assert not res.info["reordered"]  # numpy path: mesh numbering
     assert res.converged
@@ -239,8 +230,8 @@ def test_numpy_fallback_solver_agrees(monkeypatch, bar):
 
 
 def test_thread_picker_follows_the_faster_mode():
-    from sshade.arap_solver import _ThreadPicker
-    p = _ThreadPicker(2, probe=4)
+    from sshade.arap.threads import ThreadPicker
+    p = ThreadPicker(2, probe=4)
     assert p.cur == 2
     p.record(2, 1.0)
     assert p.cur == 1  # the other mode is timed once

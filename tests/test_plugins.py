@@ -14,7 +14,7 @@ import pytest
 
 from eval.app import CONF_DIR
 from eval.methods import build_method, make_methods, method_spec
-from sshade.arap_cases import box_surface
+from sshade.arap.cases import box_surface
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env

@@ -9,7 +9,7 @@ import pytest
 
 from eval.reference import method_energy, reference_metrics, reference_solution
 from sshade.arap import arap_deform
-from sshade.arap_cases import bent_cylinder, lifted_plane
+from sshade.arap.cases import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
 
 

@@ -15,7 +15,7 @@ from sshade.validate import validate_handles, validate_mesh
 from sshade.warmup import tiny_problem, uses_parallel_kernels
 
 _KERNEL_MODULES = ["sshade.geodesic", "sshade.remesh", "sshade.halfedge", "sshade.validate", "sshade.projection",
-                   "sshade.arap_energy", "sshade.arap_solver", "sshade.lrf"]
+                   "sshade.arap.kernels", "sshade.arap.solver_kernels", "sshade.lrf"]
 
 
 def _specialisations() -> dict[str, int]:

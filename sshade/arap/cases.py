@@ -21,8 +21,9 @@ smooth, low-frequency deformations of long or wide shapes):
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import Delaunay
 
-from .errors import SShaDeError
+from ..errors import SShaDeError
 
 __all__ = ["box_surface", "capped_cylinder", "plane_sheet", "twisted_bar", "bent_cylinder",
            "lifted_plane", "rotation_x", "rotation_y", "CASES"]
@@ -118,7 +119,6 @@ def capped_cylinder(radius: float = 0.5, height: float = 4.0, h: float = 0.06) -
     SShaDeError on non-positive parameters or ``h`` too large (fewer than 8 vertices per
     ring).
     """
-    from scipy.spatial import Delaunay
 
     if not (radius > 0 and height > 0 and h > 0):
         raise SShaDeError("capped_cylinder needs positive radius, height and h")
@@ -191,7 +191,6 @@ def plane_sheet(side: float = 1.0, n_target: int = 40000) -> tuple[np.ndarray, n
     ------
     SShaDeError on bad parameters.
     """
-    from scipy.spatial import Delaunay
 
     if not side > 0 or n_target < 16:
         raise SShaDeError("plane_sheet needs side > 0 and n_target >= 16")

@@ -1,97 +1,43 @@
-"""As-rigid-as-possible deformation driven by handles, run to convergence.
+"""As-rigid-as-possible deformation driven by handles under one of two protocols
+(:func:`arap_deform`).
 
 Used both for SShaDe's low-resolution step (paper §3.3, §4.1: spokes-and-rims) and for
-the full-resolution baselines. Wraps libigl's ``ARAPData`` / ``arap_precomputation`` /
-``arap_solve`` (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes and rims").
+the full-resolution baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes
+and rims"). Two protocols (:data:`PROTOCOLS`), both starting from the best rigid fit of
+the handles (so a rigid motion of the handles is reproduced exactly):
 
-Two protocols (:data:`PROTOCOLS`), both starting from the best rigid fit of the handles
-(so a rigid motion of the handles is reproduced exactly):
-
-- ``"converged"`` (default): :func:`sshade.arap_solver.solve_arap`, L-BFGS-accelerated
+- ``"converged"`` (default): :func:`sshade.arap.solver.solve_arap`, L-BFGS-accelerated
   local/global (the Laplacian as initial Hessian, Armijo line search; or Anderson with an
-  energy safeguard) and one prefactored Laplacian, stopped when the
-  relative energy decrease and a scale-free gradient norm are both small
-  (:class:`sshade.arap_solver.Criterion`): a result reported converged is within 0.05 %
-  (mean) / 0.5 % (max) of the bounding-box diagonal from the true minimiser on the
-  calibration cases of :mod:`sshade.arap_cases`.
-- ``"paper"`` (paper §4.1, to reproduce its Table 1): libigl's local/global, one
-  iteration at a time, stopped when the largest vertex move of one iteration is below
-  ``tol * bbox_diag``, at most ``max_iter`` (1000) iterations. This rule fires long
-  before the minimiser on low-frequency bends (thousands of iterations short), so its
-  "converged" flag only means "the rule fired".
+  energy safeguard) and one prefactored Laplacian, stopped when the relative energy
+  decrease and a scale-free gradient norm are both small
+  (:class:`sshade.arap.criterion.Criterion`, calibrated so that a result reported
+  converged is within 0.05 % (mean) / 0.5 % (max) of the bounding-box diagonal from the
+  true minimiser on the cases of :mod:`sshade.arap.cases`).
+- ``"paper"`` (paper §4.1, to reproduce its Table 1): libigl's ``ARAPData`` /
+  ``arap_precomputation`` / ``arap_solve``, one iteration at a time (:func:`iterate`),
+  stopped when the largest vertex move of one iteration is below ``tol * bbox_diag``, at
+  most ``max_iter`` (1000) iterations. This rule fires long before the minimiser on
+  low-frequency bends (thousands of iterations short), so its "converged" flag only
+  means "the rule fired".
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
+import igl
 import numpy as np
 
-__all__ = ["rigid_fit", "ArapResult", "arap_deform", "iterate", "ENERGIES", "PROTOCOLS", "DEFAULT_MAX_ITER"]
+from ..errors import SShaDeError
+from .operators import ENERGIES, bbox_diag
+from .result import ArapResult
+from .rigid import rigid_fit
+from .solver import solve_arap
 
-ENERGIES = ("spokes", "spokes_and_rims")
+__all__ = ["arap_deform", "iterate", "PROTOCOLS", "DEFAULT_MAX_ITER"]
+
 PROTOCOLS = ("converged", "paper")
 #: Iteration cap of each protocol when none is given (paper §4.1: 1000).
 DEFAULT_MAX_ITER = {"converged": 10000, "paper": 1000}
-
-
-def rigid_fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Best rigid motion (rotation, no reflection) taking points ``P`` to ``Q``.
-
-    Kabsch/Umeyama without scaling: minimises ``sum ||R p_i + t - q_i||^2``.
-
-    Parameters
-    ----------
-    P, Q : (h, 3) float64 corresponding points, h >= 1.
-
-    Returns
-    -------
-    R : (3, 3) float64 rotation, det(R) = +1. With fewer than 3 non-collinear points the
-        rotation is the minimum-norm one SVD gives (identity for a single point).
-    t : (3,) float64 translation.
-
-    Examples
-    --------
-    >>> P = np.random.default_rng(0).normal(size=(10, 3))
-    >>> R, t = rigid_fit(P, P + 1.0)
-    >>> np.allclose(R, np.eye(3)), np.allclose(t, 1.0)
-    (True, True)
-    """
-    P = np.asarray(P, np.float64)
-    Q = np.asarray(Q, np.float64)
-    cp, cq = P.mean(0), Q.mean(0)
-    if len(P) == 1:
-        return np.eye(3), cq - cp
-    H = (P - cp).T @ (Q - cq)
-    U, S, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    if d == 0:
-        d = 1.0
-    D = np.diag([1.0, 1.0, d])
-    R = Vt.T @ D @ U.T
-    return R, cq - R @ cp
-
-
-@dataclass
-class ArapResult:
-    """Result of :func:`arap_deform`.
-
-    Attributes
-    ----------
-    V : (n, 3) float64 deformed vertex positions.
-    iterations : int, local/global iterations run.
-    converged : bool, the move criterion was met before ``max_iter``.
-    last_move : float, largest vertex move of the last iteration (mesh units).
-    precompute_s, solve_s : float, seconds in precomputation and in the iterations.
-    """
-
-    V: np.ndarray
-    iterations: int
-    converged: bool
-    last_move: float
-    precompute_s: float
-    solve_s: float
-    info: dict = field(default_factory=dict)
 
 
 def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
@@ -142,21 +88,21 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     max_iter : int or None, iteration cap (None: :data:`DEFAULT_MAX_ITER` of the
         protocol; paper: 1000).
     V0 : (n, 3) float64 or None, initial guess; default the best rigid fit of the
-        handles (:func:`rigid_fit`) applied to ``V``.
+        handles (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V``.
     time_budget_s : float or None, stop (unconverged) once the iterations have taken
         this many seconds (for benchmarks of slow full-resolution runs).
     protocol : ``"converged"`` or ``"paper"`` (:data:`PROTOCOLS`).
-    criterion : :class:`sshade.arap_solver.Criterion` or None (its default), the
+    criterion : :class:`sshade.arap.criterion.Criterion` or None (its default), the
         ``"converged"`` protocol's stopping thresholds.
     accelerate : ``"lbfgs"`` (default), ``"anderson"`` or ``"none"``, the ``"converged"``
-        protocol's iteration (:func:`sshade.arap_solver.solve_arap`).
+        protocol's iteration (:func:`sshade.arap.solver.solve_arap`).
     anderson_m : int or None, its history window (None: 10 for L-BFGS, 5 for Anderson).
 
     Returns
     -------
     ArapResult (``info["protocol"]`` names the protocol; the ``"converged"`` protocol adds
     the final energy, gradient norm, status and histories, see
-    :func:`sshade.arap_solver.solve_arap`).
+    :func:`sshade.arap.solver.solve_arap`).
 
     Raises
     ------
@@ -168,9 +114,6 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     >>> import igl  # doctest: +SKIP
     >>> res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1)  # doctest: +SKIP
     """
-    import igl
-
-    from .errors import SShaDeError
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
     if protocol not in PROTOCOLS:
@@ -181,7 +124,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     F = np.ascontiguousarray(F, np.int64)
     b = np.ascontiguousarray(handles, np.int32)
     bc = np.ascontiguousarray(targets, np.float64)
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    diag = bbox_diag(V)
     R, t = rigid_fit(V[handles], bc)
     rigid_resid = float(np.abs(V[handles] @ R.T + t - bc).max())
     if rigid_resid <= 1e-12 * diag:
@@ -193,15 +136,18 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         return ArapResult(V=V @ R.T + t, iterations=0, converged=True, last_move=0.0,
                           precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol, "status": "rigid"})
     if protocol == "converged":
-        from .arap_solver import solve_arap
         res = solve_arap(V, F, handles, targets, energy=energy, U0=V0, criterion=criterion, max_iter=max_iter,
                          accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s)
         res.info["protocol"] = "converged"
         return res
-    if V0 is None:
-        U = V @ R.T + t
-    else:
-        U = np.ascontiguousarray(V0, np.float64).copy()
+    U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()
+    return _paper(V, F, b, bc, U, energy=energy, thresh=tol * diag, max_iter=max_iter, time_budget_s=time_budget_s)
+
+
+def _paper(V: np.ndarray, F: np.ndarray, b: np.ndarray, bc: np.ndarray, U: np.ndarray, *, energy: str,
+           thresh: float, max_iter: int, time_budget_s: float | None) -> ArapResult:
+    """The ``"paper"`` protocol: libigl's local/global from ``U`` (n, 3) (its handle rows
+    ``b`` (h,) int32 set to ``bc`` (h, 3) here), stopped by :func:`iterate`."""
     U[b] = bc
     t0 = time.perf_counter()
     data = igl.ARAPData()
@@ -210,7 +156,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     data.max_iter = 1
     igl.arap_precomputation(V, F, 3, b, data)
     t1 = time.perf_counter()
-    U, it, converged, move = iterate(lambda X: igl.arap_solve(bc, data, X), U, thresh=tol * diag,
+    U, it, converged, move = iterate(lambda X: igl.arap_solve(bc, data, X), U, thresh=thresh,
                                      max_iter=max_iter, time_budget_s=time_budget_s)
     t2 = time.perf_counter()
     return ArapResult(V=U, iterations=it, converged=converged, last_move=move,

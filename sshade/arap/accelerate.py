@@ -1,0 +1,155 @@
+"""Accelerators of the local/global iteration of :func:`sshade.arap.solver.solve_arap`.
+
+* :class:`LBFGS` (the default): L-BFGS on the free vertices with the global step's matrix
+  as initial Hessian (Liu, Bouaziz & Kavan, "Quasi-Newton Methods for Real-time
+  Simulation of Hyperelastic Materials", ACM TOG 36(3), 2017); the solver adds Armijo
+  backtracking, so every accepted step lowers the energy.
+* :class:`Anderson`: Anderson acceleration with window ``m`` (Peng, Deng, Zhang, Liu,
+  "Anderson Acceleration for Geometry Optimization and Physics Simulation", ACM TOG
+  37(4), SIGGRAPH 2018, Algorithm 2): ``x+ = G(x_k) - dG theta`` with ``theta = argmin
+  ||f_k - dF theta||``, ``f = G(x) - x``, over the last ``m`` differences of accepted
+  iterates; the solver applies the paper's energy safeguard.
+
+Both keep their histories in preallocated ring buffers; their passes over the ``N = 3
+n_free`` numbers run in the kernels of :mod:`sshade.arap.solver_kernels`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .solver_kernels import CHUNK, lbfgs_pair, lbfgs_two_loop
+from .threads import numba_threads
+
+__all__ = ["Anderson", "LBFGS"]
+
+
+class Anderson:
+    """Anderson acceleration's history in preallocated arrays (Peng et al. 2018, Alg. 2).
+
+    ``DF``/``DG`` (m, N) hold the last ``m`` differences of ``f = G(x) - x`` and of
+    ``G(x)`` between consecutive accepted iterates (ring buffer, slot ``pos``); the Gram
+    matrix ``DF DF^T`` is updated one row per iteration instead of recomputed, in the
+    same pass as the new differences and ``DF f``. The previous accepted ``(x, g)`` are
+    kept by reference (never overwritten: the candidates go to two alternating buffers,
+    the one not holding the current ``x``). ``kerns``: ``{threads: kernels}``
+    (:func:`sshade.arap.solver_kernels.loop_kernels`) or None (numpy); ``threads`` may
+    change between steps.
+    """
+
+    def __init__(self, m: int, N: int, kerns, threads: int):
+        self.m, self.N, self.kerns, self.threads = m, N, kerns, threads
+        self.kern = kerns[1] if kerns else None
+        self.DF = np.empty((m, N))
+        self.DG = np.empty((m, N))
+        self.gram = np.zeros((m, m))
+        self.part = np.empty(((N + CHUNK - 1) // CHUNK, 2 * m))
+        self.buf = (np.empty(N), np.empty(N))
+        self.reset()
+
+    def reset(self):
+        """Forget the history (after a rejected accelerated step)."""
+        self.n_hist, self.pos, self.prev = 0, 0, None
+
+    def _run(self, name, *args):
+        if self.threads > 1:
+            with numba_threads(self.threads):
+                return self.kerns[self.threads][name](*args)
+        return self.kern[name](*args)
+
+    def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray | None:
+        """Push the accepted iterate ``x`` and its plain step ``g = G(x)`` ((nf, 3) each,
+        C-contiguous, not modified afterwards); return the accelerated candidate
+        ``G(x) - dG theta`` ((nf, 3), in a buffer of this object, never aliasing ``x``)
+        or None (no history yet, or a degenerate one)."""
+        m, xv, gv = self.m, x.reshape(-1), g.reshape(-1)
+        prev, self.prev = self.prev, (xv, gv)
+        if prev is None:
+            return None
+        slot = self.pos
+        nh = min(self.n_hist + 1, m)
+        self.pos = (slot + 1) % m
+        self.n_hist = nh
+        dF = self.DF[:nh]
+        if self.kern:
+            self._run("push", xv, gv, prev[0], prev[1], self.DF, self.DG, slot, nh, self.part)
+            sums = self.part.sum(0)
+            row, fdot = sums[:nh], sums[m:m + nh]
+        else:  # einsum rather than BLAS: single-threaded, no thread-spinning outliers
+            f = gv - xv
+            np.subtract(f, prev[1] - prev[0], out=self.DF[slot])
+            np.subtract(gv, prev[1], out=self.DG[slot])
+            row = np.einsum("ik,k->i", dF, self.DF[slot])
+            fdot = np.einsum("ij,j->i", dF, f)
+        self.gram[slot, :nh] = row
+        self.gram[:nh, slot] = row
+        G = self.gram[:nh, :nh]
+        s = np.sqrt(np.diag(G))
+        if not (s > 0).all():
+            return None
+        theta = np.linalg.lstsq(G / np.outer(s, s), fdot / s, rcond=1e-12)[0] / s
+        if not np.isfinite(theta).all():
+            return None
+        out = self.buf[1] if np.may_share_memory(x, self.buf[0]) else self.buf[0]
+        if self.kern:
+            self._run("mix", gv, self.DG, np.ascontiguousarray(theta), nh, out)
+        else:
+            np.subtract(gv, np.einsum("i,ij->j", theta, self.DG[:nh]), out=out)
+        return out.reshape(x.shape)
+
+
+class LBFGS:
+    """L-BFGS two-loop recursion with the global step's matrix as initial Hessian
+    (Liu, Bouaziz, Kavan, "Quasi-Newton Methods for Real-time Simulation of Hyperelastic
+    Materials", ACM TOG 36(3), 2017; Nocedal & Wright, Algorithm 7.4): ``H0 = (2 L_ff)^-1``,
+    so ``H0 grad(x) = z = x - G(x)`` and ``H0 y_i`` is the difference of two ``z``: no solve
+    beyond the global step's own. History in (m, N) ring buffers, ``N = 3 n_free``; the
+    recursion runs in serial numba kernels (BLAS calls were much slower on a loaded
+    machine: their threads spin), about ``4 m + 4`` passes over ``N`` numbers.
+    """
+
+    def __init__(self, m: int, Lff):
+        self.m, self.L = m, Lff.tocsr()
+        N = 3 * Lff.shape[0]
+        self.S, self.Y, self.Z = np.zeros((m, N)), np.zeros((m, N)), np.zeros((m, N))
+        self.rho = np.zeros(m)
+        self.x_prev, self.grad_prev, self.z_prev = np.zeros(N), np.zeros(N), np.zeros(N)
+        self.q, self.alpha = np.empty(N), np.empty(m)
+        self.reset()
+
+    def reset(self):
+        """Forget the curvature pairs (the next direction is the plain step's)."""
+        self.n_hist, self.pos, self.have_prev = 0, 0, False
+
+    def direction(self, x: np.ndarray, g: np.ndarray):
+        """Descent direction ``d`` ((nf, 3), new array) at the accepted iterate ``x`` whose
+        plain step is ``g = G(x)``, and the slope ``grad(x) . d < 0``."""
+        m = self.m
+        z = np.subtract(x, g)
+        grad = (self.L @ z).reshape(-1)
+        grad *= 2.0
+        z = z.reshape(-1)
+        xv = np.ascontiguousarray(x).reshape(-1)
+        k = self.pos
+        if self.have_prev:  # new curvature pair (s, y, H0 y) into the ring
+            sy, ss, yy = lbfgs_pair(xv, grad, z, self.x_prev, self.grad_prev, self.z_prev,
+                                     self.S[k], self.Y[k], self.Z[k])
+            if sy > 1e-12 * np.sqrt(ss * yy):  # curvature condition
+                self.rho[k] = 1.0 / sy
+                self.pos = (k + 1) % m
+                self.n_hist = min(self.n_hist + 1, m)
+            elif self.n_hist == m:  # the rejected pair overwrote the oldest one
+                self.n_hist -= 1
+        else:
+            self.x_prev[:] = xv
+            self.grad_prev[:] = grad
+            self.z_prev[:] = z
+            self.have_prev = True
+        order = np.array([(self.pos - 1 - i) % m for i in range(self.n_hist)], np.int64)
+        r = np.empty_like(z)
+        slope = -lbfgs_two_loop(self.S, self.Y, self.Z, self.rho, order, grad, z, self.q, r, self.alpha)
+        if not slope < 0:  # not a descent direction: plain step, fresh history
+            self.n_hist, self.pos = 0, 0
+            r = z
+            slope = -float(grad @ z)
+        return (-r).reshape(x.shape), slope
+

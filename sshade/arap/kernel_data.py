@@ -1,0 +1,143 @@
+"""The arrays of the fused numba kernels (:mod:`sshade.arap.kernels`) in one vertex
+numbering: the mesh's, or a cache-friendly one (:func:`rcm_order`, reverse Cuthill-McKee of
+the Laplacian's pattern), in which the kernels' gathers from neighbouring vertices and
+cells hit the cache.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from ..errors import SShaDeError
+
+__all__ = ["KernelData", "rcm_order", "as_u32"]
+
+
+def rcm_order(L) -> np.ndarray:
+    """A cache-friendly vertex numbering: reverse Cuthill-McKee of the pattern of ``L``.
+
+    Parameters
+    ----------
+    L : (n, n) scipy.sparse matrix with a symmetric pattern (the cotangent Laplacian).
+
+    Returns
+    -------
+    perm : (n,) int64, ``perm[new] = old``.
+    """
+    return np.asarray(reverse_cuthill_mckee(sp.csr_matrix(L), symmetric_mode=True), np.int64)
+
+
+def _permute_csr(ptr, idx, val, perm, inv):
+    """Rows of a CSR taken in the order ``perm`` (row ``i`` of the result is row
+    ``perm[i]``), column indices mapped by ``inv``; the entries of a row keep their order.
+    ``val`` (nnz, ...) may be None. Returns ``(ptr, idx, val, src)`` with ``src`` the old
+    position of every entry."""
+    lens = np.diff(ptr)[perm]
+    nptr = np.zeros(len(perm) + 1, np.int64)
+    np.cumsum(lens, out=nptr[1:])
+    src = np.repeat(ptr[:-1][perm] - nptr[:-1], lens) + np.arange(nptr[-1], dtype=np.int64)
+    nidx = None if idx is None else (idx[src] if inv is None else inv[idx[src]])
+    return nptr, nidx, None if val is None else np.ascontiguousarray(val[src]), src
+
+
+@dataclass(eq=False)
+class KernelData:
+    """The arrays of the fused numba kernels, in one vertex numbering.
+
+    Attributes
+    ----------
+    perm : (n,) int64 or None, ``perm[new] = old`` (None: the mesh's numbering); ``inv``
+        its inverse (``inv[old] = new``). Cells are numbered as vertices.
+    kt : ``(ptr (n + 1,) uint64, idx (nnz,) uint32, val (nnz, 3) float64)``, the three
+        blocks of ``K^T`` as one CSR with 3-vector values: the covariance of cell ``k`` is
+        ``M_k[c, d] = sum_jj val[jj, d] U[idx[jj], c]`` (``scipy``'s ``KT @ U``, same
+        entries in the same order).
+    kv : same for ``K``: ``K(R)[v] = sum_d sum_jj val[jj, d] R[idx[jj], :, d]``.
+    edges, edge_vec, cell_ptr, pair_edge, pair_w : the operators' arrays renumbered
+        (edges sorted by their smaller new end point; every edge keeps its orientation and
+        every cell the order of its pairs, so the cell energies are summed term by term in
+        the same order in every numbering).
+
+    Index arrays (``idx``, ``edges``, ``pair_edge``) are uint32 and pointer arrays
+    (``ptr``, ``cell_ptr``) uint64: unsigned indices spare numba's negative-index
+    wraparound (a quarter of the energy kernel's time).
+    """
+
+    perm: np.ndarray | None
+    inv: np.ndarray | None
+    kt: tuple
+    kv: tuple
+    edges: np.ndarray
+    edge_vec: np.ndarray
+    cell_ptr: np.ndarray
+    pair_edge: np.ndarray
+    pair_w: np.ndarray
+
+    @classmethod
+    def build(cls, ops, perm: np.ndarray | None = None) -> KernelData:
+        """From ``ops`` (:class:`sshade.arap.operators.ArapOperators`) in the numbering
+        ``perm`` (``perm[new] = old``; None: identity)."""
+        n = ops.n
+        kt = _csr3([ops.KT[d::3] for d in range(3)])
+        kv = _csr3([ops.K[:, d * n:(d + 1) * n] for d in range(3)])
+        if perm is None:
+            return cls(None, None, _u32csr(kt), _u32csr(kv), as_u32(ops.edges), ops.edge_vec,
+                       np.ascontiguousarray(ops.cell_ptr, np.uint64), as_u32(ops.pair_edge), ops.pair_w)
+        perm = np.ascontiguousarray(perm, np.int64)
+        inv = np.empty(n, np.int64)
+        inv[perm] = np.arange(n, dtype=np.int64)
+        kt = _permute_csr(*kt, perm, inv)[:3]
+        kv = _permute_csr(*kv, perm, inv)[:3]
+        es, ed = inv[ops.edges[:, 0]], inv[ops.edges[:, 1]]
+        eperm = np.argsort(np.minimum(es, ed) * n + np.maximum(es, ed), kind="stable")
+        einv = np.empty(len(eperm), np.int64)
+        einv[eperm] = np.arange(len(eperm), dtype=np.int64)
+        edges = np.ascontiguousarray(np.stack([es, ed], 1)[eperm])
+        cell_ptr, pair_edge, _, src = _permute_csr(ops.cell_ptr, ops.pair_edge, None, perm, einv)
+        return cls(perm, inv, _u32csr(kt), _u32csr(kv), as_u32(edges), np.ascontiguousarray(ops.edge_vec[eperm]),
+                   np.ascontiguousarray(cell_ptr, np.uint64), as_u32(pair_edge), np.ascontiguousarray(ops.pair_w[src]))
+
+    def local_arrays(self) -> tuple:
+        """Arguments of the local kernel after ``U``."""
+        return (*self.kt, self.edges, self.edge_vec, self.cell_ptr, self.pair_edge, self.pair_w)
+
+
+def as_u32(a) -> np.ndarray:
+    """C-contiguous uint32 copy of a non-negative index array (< 2^32)."""
+    a = np.asarray(a)
+    if a.size and (a.min() < 0 or a.max() >= 2 ** 32):
+        raise SShaDeError("index out of the uint32 range")
+    return np.ascontiguousarray(a, np.uint32)
+
+
+def _u32csr(c) -> tuple:
+    """``(ptr uint64, idx uint32, val)``."""
+    return np.ascontiguousarray(c[0], np.uint64), as_u32(c[1]), np.ascontiguousarray(c[2], np.float64)
+
+
+def _csr3(blocks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Three (r, c) CSR matrices as one CSR with 3-vector values (union of the patterns,
+    entries in row-major order, missing ones 0): ``(ptr, idx, val)``."""
+    blocks = [sp.csr_matrix(b) for b in blocks]
+    for b in blocks:
+        if not b.has_canonical_format:
+            b.sum_duplicates()
+    b0 = blocks[0]
+    if all(np.array_equal(b.indptr, b0.indptr) and np.array_equal(b.indices, b0.indices) for b in blocks[1:]):
+        val = np.stack([b.data for b in blocks], 1)
+        return b0.indptr.astype(np.int64), b0.indices.astype(np.int64), np.ascontiguousarray(val, np.float64)
+    r, c = b0.shape  # patterns differ (explicit zeros dropped somewhere): merge
+    coo = [b.tocoo() for b in blocks]
+    key = np.concatenate([x.row.astype(np.int64) * c + x.col for x in coo])
+    ukey, inv = np.unique(key, return_inverse=True)
+    val = np.zeros((len(ukey), 3))
+    o = 0
+    for d, x in enumerate(coo):
+        val[inv[o:o + x.nnz], d] = x.data
+        o += x.nnz
+    ptr = np.zeros(r + 1, np.int64)
+    np.cumsum(np.bincount(ukey // c, minlength=r), out=ptr[1:])
+    return ptr, (ukey % c).astype(np.int64), val

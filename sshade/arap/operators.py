@@ -1,0 +1,571 @@
+"""ARAP energies with libigl's cotangent weights: operators, energy and gradient.
+
+Two energies, both with one rotation per vertex (libigl's ``ARAP_ENERGY_TYPE_SPOKES`` and
+``ARAP_ENERGY_TYPE_SPOKES_AND_RIMS``):
+
+* ``"spokes"`` (Sorkine & Alexa 2007, "As-rigid-as-possible surface modeling", SGP):
+  the cell of vertex ``i`` is its one-ring of edges (the spokes ``(i, j)``).
+* ``"spokes_and_rims"`` (Chao, Pinkall, Sanan, Schröder 2010, "A simple geometric model
+  for elastic deformations", SIGGRAPH): the cell of vertex ``i`` is every edge of every
+  triangle incident to ``i`` (the spokes plus the rims).
+
+Conventions (match libigl's ``arap_linear_block`` / ``arap_rhs`` /
+``covariance_scatter_matrix``, so the global step below *is* libigl's global step):
+
+* ``c_{f,e} = cot(angle opposite e in f) / 2`` (``igl.cotmatrix_entries``), and the
+  cotangent weight of an edge is ``w_sd = sum_f c_{f,e} = -igl.cotmatrix(V, F)[s, d]``.
+* Rest edge ``e = v_s - v_d``, deformed edge ``e' = u_s - u_d``.
+* ``"spokes"``: every face-edge ``(f, e)`` enters the cells of its two end points with
+  weight ``c_{f,e} / 2`` (libigl: ``0.5 * C(f, e)``); ``"spokes_and_rims"``: it enters
+  the cells of the three corners of ``f`` with weight ``c_{f,e} / 3`` (libigl:
+  ``C(f, e) / 3``). Hence in both cases the weights of an edge over all cells sum to
+  ``w_sd``, and
+
+      E(U, R) = sum_k sum_{e in cell k} a_ke || e'_e - R_k e_e ||^2
+              = tr(U^T L U) - 2 tr(U^T K(R)) + sum_e w_e ||e_e||^2,
+
+  with ``L = -igl.cotmatrix`` (positive semi-definite) and ``K(R)`` linear in the
+  rotations. For spokes this is ``E = 1/2 sum_i sum_{j in N(i)} w_ij ||e'_ij - R_i e_ij||^2``
+  (i.e. exactly one half of Sorkine & Alexa's eq. 3 with their ``w_ij = 1/2(cot a +
+  cot b)``); for spokes-and-rims it is ``1/3 sum_i sum_{f ni i} sum_{e in f} c_fe ||.||^2``.
+  libigl minimises ``1/2 tr(U^T L U) - tr(U^T K(R))``, i.e. ``E / 2`` up to a constant,
+  so both have the same minimiser and the same local/global iterates.
+* The global step with fixed rotations is ``L U = K(R)`` with the handle rows fixed; the
+  gradient of ``E(U) = min_R E(U, R)`` is ``dE/dU = 2 (L U - K(R*(U)))`` with ``R*`` the
+  optimal rotations (envelope theorem: ``dE/dR = 0`` at the optimum over ``SO(3)``).
+
+The local step (:meth:`ArapOperators.local_step`) and the right-hand side
+(:meth:`ArapOperators.rhs_rows`) run the numba kernels of :mod:`sshade.arap.kernels` on the
+arrays of :class:`sshade.arap.kernel_data.KernelData` (in the mesh's numbering or a
+cache-friendly one, :func:`sshade.arap.kernel_data.rcm_order`), with numpy / scipy.sparse
+fallbacks when numba is unusable; :func:`sshade.arap.threads.resolve_threads` picks the
+threads. Per-stage costs: ``benchmarks/arap_iteration.py``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import igl
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import SShaDeError
+from .kernel_data import KernelData, as_u32, rcm_order
+from .kernels import energy_kernel, fused, polar_kernel
+from .threads import numba_threads, resolve_threads
+
+__all__ = ["ENERGIES", "ArapOperators", "build_operators", "fit_rotations", "bbox_diag"]
+
+#: the ARAP energies (libigl's ``ARAP_ENERGY_TYPE_SPOKES`` / ``..._SPOKES_AND_RIMS``)
+ENERGIES = ("spokes", "spokes_and_rims")
+
+
+def bbox_diag(V: np.ndarray) -> float:
+    """Length of the bounding-box diagonal of ``V`` ((n, 3) float64), mesh units."""
+    V = np.asarray(V, np.float64)
+    return float(np.linalg.norm(V.max(0) - V.min(0)))
+
+
+def _polar_numpy(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    U, s, Vt = np.linalg.svd(M)
+    d = np.sign(np.linalg.det(U) * np.linalg.det(Vt))
+    d[d == 0] = 1.0
+    U[:, :, 2] *= d[:, None]
+    return U @ Vt, s[:, 0] + s[:, 1] + d * s[:, 2]
+
+
+
+def fit_rotations(M: np.ndarray, *, return_trace: bool = False, backend: str = "auto",
+                  warm: np.ndarray | None = None):
+    """Closest rotations to a batch of 3x3 matrices (polar decomposition, det fixed).
+
+    ``R_k = argmax_{R in SO(3)} tr(R^T M_k)`` = ``U_k diag(1, 1, det(U_k V_k^T)) V_k^T``
+    for ``M_k = U_k S_k V_k^T`` (Sorkine & Alexa 2007, §2; the reflection case flips the
+    singular vector of the smallest singular value, as libigl's ``polar_svd`` does).
+
+    Parameters
+    ----------
+    M : (k, 3, 3) float64, e.g. ``M_k = sum a e' e^T`` (deformed times rest).
+    return_trace : bool, also return ``tr(R_k^T M_k)`` = ``s1 + s2 + sign * s3``.
+    backend : ``"auto"`` (numba kernel when numba works, else numpy), ``"numba"`` or
+        ``"numpy"`` (``numpy.linalg.svd`` on the stack). The numba kernel (cyclic Jacobi
+        on ``M^T M`` in float64, vectorised across matrices, then ``U`` by Gram-Schmidt of
+        ``M V``) agrees with the SVD to ~1e-13 and is much faster than the SVD.
+
+    warm : (k, 3, 3) float64 C-contiguous array or None (numba backend only): right
+        singular vectors of a previous, nearby ``M``, used as the Jacobi start and
+        overwritten with the new ones (about halves the cost inside an iteration). Start
+        it as ``np.broadcast_to(np.eye(3), (k, 3, 3)).copy()``.
+
+    Returns
+    -------
+    R : (k, 3, 3) float64 rotations (det = +1).
+    tr : (k,) float64, only with ``return_trace``.
+
+    Raises
+    ------
+    SShaDeError on an unknown backend or ``"numba"`` when numba is unusable, or a ``warm``
+    array of the wrong shape.
+    """
+    if backend not in ("auto", "numba", "numpy"):
+        raise SShaDeError(f"unknown rotation backend {backend!r}")
+    M = np.asarray(M, np.float64)
+    kern = polar_kernel() if backend != "numpy" else False
+    if backend == "numba" and not kern:
+        raise SShaDeError("numba rotation backend requested but numba is unusable")
+    if warm is not None and (not isinstance(warm, np.ndarray) or warm.shape != M.shape
+                             or warm.dtype != np.float64 or not warm.flags.c_contiguous):
+        raise SShaDeError(f"warm must be a C-contiguous float64 array of shape {M.shape}")
+    if kern:
+        R = np.empty((len(M), 3, 3))
+        tr = np.empty(len(M))
+        kern(M, R, tr, M if warm is None else warm, warm is not None)
+    else:
+        R, tr = _polar_numpy(M)
+    return (R, tr) if return_trace else R
+
+
+@dataclass(eq=False)
+class ArapOperators:
+    """Precomputed ARAP operators of a rest mesh for one energy (built once).
+
+    Attributes
+    ----------
+    energy_type : str, ``"spokes"`` or ``"spokes_and_rims"``.
+    n : int, number of vertices (= number of rotation cells).
+    V : (n, 3) float64 rest positions. F : (m, 3) int64 faces.
+    edges : (ne, 2) int64 undirected edges ``(s, d)``, ``s < d``.
+    edge_vec : (ne, 3) float64 rest edge vectors ``v_s - v_d`` (mesh units).
+    edge_w : (ne,) float64 cotangent weights ``w_sd = -cotmatrix[s, d]`` (dimensionless).
+    pair_cell, pair_edge : (p,) int64, the (cell, edge) incidences of the energy.
+    pair_w : (p,) float64 weight of edge ``pair_edge`` in cell ``pair_cell``
+        (``w/2`` per end point for spokes; sums of ``c/3`` for spokes-and-rims).
+    cell_ptr : (n + 1,) int64, the pairs of cell ``k`` are ``cell_ptr[k]:cell_ptr[k+1]``
+        (pairs are sorted by cell).
+    L : (n, n) scipy.sparse.csr_matrix, ``-igl.cotmatrix(V, F)`` (PSD, rows sum to 0).
+    K : (n, 3n) scipy.sparse.csr_matrix, ``[K_0 K_1 K_2]``: the right-hand side is
+        ``K(R)[:, c] = sum_d K_d @ R[:, c, d]`` (libigl's ``arap_rhs`` up to sign and
+        layout).
+    KT : (3n, n) scipy.sparse.csr_matrix, row ``3k + d`` is row ``k`` of ``K_d^T``: the
+        covariances are ``M[k, c, d] = (K_d^T U)[k, c]`` (libigl's
+        ``covariance_scatter_matrix``).
+    rest_term : float, ``sum_e w_e ||e_e||^2`` (mesh units^2).
+    mass : (n,) float64 Voronoi-hybrid vertex areas (``igl.massmatrix``), mesh units^2.
+    diag : float, bounding-box diagonal of ``V``.
+
+    The numba kernels use :class:`KernelData` (:meth:`kernel_data`), built on first use.
+    """
+
+    energy_type: str
+    n: int
+    V: np.ndarray
+    F: np.ndarray
+    edges: np.ndarray
+    edge_vec: np.ndarray
+    edge_w: np.ndarray
+    pair_cell: np.ndarray
+    pair_edge: np.ndarray
+    pair_w: np.ndarray
+    cell_ptr: np.ndarray
+    L: sp.csr_matrix
+    K: sp.csr_matrix
+    KT: sp.csr_matrix
+    rest_term: float
+    mass: np.ndarray
+    diag: float
+    _kdata: dict = field(default_factory=dict, repr=False)
+
+    def kernel_data(self, reorder: bool = False) -> KernelData:
+        """The arrays of the numba kernels (:class:`KernelData`), built once per numbering.
+
+        Parameters
+        ----------
+        reorder : bool, False: the mesh's own vertex numbering; True: the reverse
+            Cuthill-McKee numbering of ``L`` (:func:`sshade.arap.kernel_data.rcm_order`),
+            in which the kernels' gathers from neighbouring vertices and cells hit the
+            cache (faster on large, randomly numbered meshes).
+        """
+        key = bool(reorder)
+        if key not in self._kdata:
+            perm = rcm_order(self.L) if key else None
+            self._kdata[key] = KernelData.build(self, perm)
+        return self._kdata[key]
+
+    # ------------------------------------------------------------------ local step
+    def covariances(self, U: np.ndarray) -> np.ndarray:
+        """Per-cell matrices ``M_k = sum_{e in cell k} a_ke e'_e e_e^T``.
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+
+        Returns
+        -------
+        M : (n, 3, 3) float64, ``M[k, c, d] = sum a e'_c e_d``. The covariance in Sorkine
+            & Alexa's notation is ``S_k = sum w e e'^T = M_k^T``; the optimal rotation is
+            ``R_k = polar(M_k)`` (:func:`fit_rotations`).
+        """
+        out = self.KT @ np.asarray(U, np.float64)  # (3n, 3): row 3k + d, column c
+        return out.reshape(self.n, 3, 3).transpose(0, 2, 1)
+
+    def local_step(self, U: np.ndarray, R: np.ndarray, Ek: np.ndarray, warm: np.ndarray | None = None,
+                   threads: int = 1, data: KernelData | None = None) -> float:
+        """The local step into preallocated arrays: optimal rotations ``R*(U)`` and ``E(U)``.
+
+        With numba, ONE kernel over the cells does the covariance, the polar decomposition
+        and the cell's energy summed term by term (parallel over blocks of cells for
+        ``threads > 1``; the results do not depend on ``threads``); without, the numpy
+        path of :meth:`rotations`.
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+        R : (n, 3, 3) float64 C-contiguous, overwritten with the rotations.
+        Ek : (n,) float64 C-contiguous scratch, overwritten with the cell energies (numba)
+            or left untouched (numpy).
+        warm : (n, 3, 3) float64 C-contiguous or None, polar warm start, updated in place
+            (:func:`fit_rotations`).
+        threads : int >= 1, threads of the kernel (:func:`resolve_threads`).
+        data : :class:`KernelData` or None (:meth:`kernel_data`, mesh numbering); all the
+            arrays above are in its numbering.
+
+        Returns
+        -------
+        E : float, ``E(U, R*(U))`` (mesh units^2; the sum of ``Ek``).
+        """
+        kern = fused(threads)
+        if not kern:
+            if data is None or data.perm is None:
+                Rn, E = self._rotations_numpy(U, True, warm)
+                R[...] = Rn
+                return E
+            inv, perm = data.inv, data.perm  # numpy path in the mesh's numbering
+            Wo = None if warm is None else warm[inv]
+            Rn, E = self._rotations_numpy(np.asarray(U)[inv], True, Wo)
+            R[...] = Rn[perm]
+            if warm is not None:
+                warm[...] = Wo[perm]
+            return E
+        if data is None:
+            data = self.kernel_data(False)
+        U = np.ascontiguousarray(U, np.float64)
+        n = self.n
+        for name, a, shape in (("U", U, (n, 3)), ("R", R, (n, 3, 3)), ("Ek", Ek, (n,)),
+                               ("warm", R if warm is None else warm, (n, 3, 3))):
+            if not (isinstance(a, np.ndarray) and a.shape == shape and a.dtype == np.float64
+                    and a.flags.c_contiguous):
+                raise SShaDeError(f"{name} must be a C-contiguous float64 array of shape {shape}")
+        args = (U, *data.local_arrays(), R if warm is None else warm, warm is not None, R, Ek)
+        if threads > 1:
+            with numba_threads(threads):
+                kern[0](*args)
+        else:
+            kern[0](*args)
+        # summed in the mesh's cell order: the same float in every numbering
+        return float((Ek if data.perm is None else Ek[data.inv]).sum())
+
+    def rotations(self, U: np.ndarray, *, return_energy: bool = False, warm: np.ndarray | None = None,
+                  threads: int | None = None):
+        """Optimal rotations for ``U`` (the local step), optionally with ``E(U)``.
+
+        Parameters
+        ----------
+        U : (n, 3) float64.
+        return_energy : bool, also return the energy with these rotations.
+        warm : (n, 3, 3) float64 or None, warm start of the polar kernel, updated in place
+            (:func:`fit_rotations`).
+        threads : int or None, threads of the numba kernel (:func:`resolve_threads`).
+
+        Returns
+        -------
+        R : (n, 3, 3) float64 rotations. E : float, only with ``return_energy``
+            (mesh units^2; :meth:`energy`).
+        """
+        t = resolve_threads(threads, self.n)
+        if fused(t):
+            if warm is not None and (not isinstance(warm, np.ndarray) or warm.shape != (self.n, 3, 3)
+                                     or warm.dtype != np.float64 or not warm.flags.c_contiguous):
+                raise SShaDeError(f"warm must be a C-contiguous float64 array of shape {(self.n, 3, 3)}")
+            R = np.empty((self.n, 3, 3))
+            E = self.local_step(U, R, np.empty(self.n), warm, t)
+            return (R, E) if return_energy else R
+        return self._rotations_numpy(U, return_energy, warm)
+
+    def _rotations_numpy(self, U, return_energy, warm):
+        """Local step with scipy's ``KT @ U`` and :func:`fit_rotations` (no fused kernel)."""
+        M = self.covariances(U)
+        R, tr = fit_rotations(M, return_trace=True, warm=warm if polar_kernel() else None)
+        if not return_energy:
+            return R
+        return R, self._energy(U, R, tr)
+
+    def _energy_from_trace(self, U: np.ndarray, tr: np.ndarray) -> float:
+        """Closed form on edge differences (translation-invariant; ~1e-13 relative noise)."""
+        ed = U[self.edges[:, 0]] - U[self.edges[:, 1]]
+        return float((self.edge_w * np.einsum("ij,ij->i", ed, ed)).sum() + self.rest_term - 2.0 * tr.sum())
+
+    def _energy(self, U: np.ndarray, R: np.ndarray, tr: np.ndarray | None) -> float:
+        """Energy ``E(U, R)``: the numba term-by-term sum when available (~1e-15 relative
+        noise, needed to compare energies of iterates near the minimum), else the closed
+        form (``tr[k] = tr(R_k^T M_k)`` required)."""
+        kern = energy_kernel()
+        if kern:
+            out = np.empty(self.n)
+            kern(np.ascontiguousarray(U, np.float64), self.edges, self.edge_vec, self.cell_ptr, self.pair_edge,
+                 self.pair_w, np.ascontiguousarray(R), out)
+            return float(out.sum())
+        if tr is None:
+            tr = np.einsum("kab,kab->k", R, self.covariances(U))
+        return self._energy_from_trace(U, tr)
+
+    # ----------------------------------------------------------------- global step
+    def rhs(self, R: np.ndarray, *, threads: int | None = None) -> np.ndarray:
+        """Right-hand side ``K(R)`` of the global step ``L U = K(R)``.
+
+        Parameters
+        ----------
+        R : (n, 3, 3) float64 per-cell rotations.
+        threads : int or None, threads of the numba kernel (:func:`resolve_threads`).
+
+        Returns
+        -------
+        B : (n, 3) float64, ``B_s = sum_{(k,e), e=(s,d)} a_ke R_k (v_s - v_d)`` (and the
+            negative for the other end point).
+        """
+        out = np.empty((self.n, 3))
+        return self.rhs_rows(R, np.arange(self.n, dtype=np.uint32), np.zeros((self.n, 3)), out,
+                             resolve_threads(threads, self.n))
+
+    def rhs_rows(self, R: np.ndarray, rows: np.ndarray, sub: np.ndarray, out: np.ndarray,
+                 threads: int = 1, data: KernelData | None = None) -> np.ndarray:
+        """``out = K(R)[rows] - sub``, the global step's right-hand side on some rows.
+
+        Numba: a kernel over the rows (parallel for ``threads > 1``) gathering the
+        rotations of the neighbouring cells; else scipy's ``K @ Rs``.
+
+        Parameters
+        ----------
+        R : (n, 3, 3) float64 rotations. rows : (r,) integer vertex indices (uint32 spares a
+            conversion).
+        sub : (r, 3) float64. out : (r, 3) float64 C-contiguous, written.
+        threads : int >= 1.
+        data : :class:`KernelData` or None (mesh numbering); ``R`` and ``rows`` are in its
+            numbering.
+
+        Returns
+        -------
+        out.
+        """
+        kern = fused(threads)
+        if not kern:
+            if data is not None and data.perm is not None:  # numpy path in the mesh's numbering
+                R = np.asarray(R)[data.inv]
+                rows = data.perm[rows]
+            Rs = np.ascontiguousarray(np.asarray(R, np.float64).transpose(2, 0, 1)).reshape(3 * self.n, 3)
+            np.subtract((self.K @ Rs)[rows], sub, out=out)
+            return out
+        if data is None:
+            data = self.kernel_data(False)
+        rows = rows if rows.dtype == np.uint32 and rows.flags.c_contiguous else as_u32(rows)
+        R = np.ascontiguousarray(R, np.float64)
+        sub = np.ascontiguousarray(sub, np.float64)
+        r = len(rows)
+        if (r and rows.max() >= self.n) or R.shape != (self.n, 3, 3) or sub.shape != (r, 3) \
+                or not (isinstance(out, np.ndarray) and out.shape == (r, 3) and out.dtype == np.float64
+                        and out.flags.c_contiguous):
+            raise SShaDeError("rhs_rows: rows must index vertices, R be (n, 3, 3), sub and out (len(rows), 3) "
+                              "float64 (out C-contiguous)")
+        args = (rows, *data.kv, R, sub, out)
+        if threads > 1:
+            with numba_threads(threads):
+                kern[1](*args)
+        else:
+            kern[1](*args)
+        return out
+
+    # ------------------------------------------------------------ energy/gradient
+    def energy(self, U: np.ndarray, R: np.ndarray | None = None) -> float:
+        """ARAP energy ``E(U) = min_R E(U, R)`` (or ``E(U, R)`` for given ``R``).
+
+        Summed term by term (numba kernel, relative rounding noise ~1e-15) or, without
+        numba, in closed form ``E = sum_e w_e (||e'_e||^2 + ||e_e||^2) - 2 sum_k
+        tr(R_k^T M_k)`` (rotations preserve lengths; the edge weights over all cells sum
+        to ``w_e``; noise ~1e-13 relative from cancellation).
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+        R : (n, 3, 3) float64 or None; None: the optimal rotations.
+
+        Returns
+        -------
+        float, mesh units^2 (``0`` for a rigid motion of ``V``).
+        """
+        U = np.asarray(U, np.float64)
+        if R is None:
+            return self.rotations(U, return_energy=True)[1]
+        return self._energy(U, np.asarray(R, np.float64), None)
+
+    def energy_direct(self, U: np.ndarray, R: np.ndarray | None = None) -> float:
+        """Same as :meth:`energy` but summed term by term,
+        ``sum_k sum_e a_ke ||e'_e - R_k e_e||^2`` (for tests; O(p) memory)."""
+        U = np.asarray(U, np.float64)
+        if R is None:
+            R = self.rotations(U)
+        ed = U[self.edges[:, 0]] - U[self.edges[:, 1]]
+        r = ed[self.pair_edge] - np.einsum("kab,kb->ka", R[self.pair_cell], self.edge_vec[self.pair_edge])
+        return float((self.pair_w * (r * r).sum(1)).sum())
+
+    def gradient(self, U: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
+        """Gradient ``dE/dU = 2 (L U - K(R))`` with the optimal rotations ``R*(U)``.
+
+        Parameters
+        ----------
+        U : (n, 3) float64. R : (n, 3, 3) or None (None: optimal rotations for ``U``;
+            then this is the gradient of ``E(U) = min_R E(U, R)`` by the envelope theorem).
+
+        Returns
+        -------
+        (n, 3) float64, mesh units (energy units / length).
+        """
+        U = np.asarray(U, np.float64)
+        if R is None:
+            R = self.rotations(U)
+        return 2.0 * (self.L @ U - self.rhs(R))
+
+    def local_global_step(self, U: np.ndarray, handles: np.ndarray, targets: np.ndarray,
+                          solve) -> np.ndarray:
+        """One local/global iteration (for tests and simple use).
+
+        Parameters
+        ----------
+        U : (n, 3) float64 current positions. handles : (h,) int64; targets : (h, 3).
+        solve : callable, ``X = solve(B)`` solving ``L_ff X = B`` for ``(n_f, 3)`` ``B``
+            on the free vertices (``np.setdiff1d(arange(n), handles)``, sorted).
+
+        Returns
+        -------
+        (n, 3) float64 next iterate (handles at their targets).
+        """
+        free = np.setdiff1d(np.arange(self.n), handles)
+        R = self.rotations(U)
+        B = self.rhs(R)
+        Ut = np.array(U, np.float64)
+        Ut[handles] = targets
+        Ut[free] = 0.0
+        B = B - self.L @ Ut
+        Un = Ut.copy()
+        Un[free] = solve(B[free])
+        return Un
+
+
+
+
+def _check_mesh(V, F) -> tuple[np.ndarray, np.ndarray]:
+    V = np.ascontiguousarray(V, np.float64)
+    if V.ndim != 2 or V.shape[1] != 3 or len(V) < 3:
+        raise SShaDeError(f"V must have shape (n, 3) with n >= 3, got {np.shape(V)}")
+    if not np.isfinite(V).all():
+        raise SShaDeError("V contains NaN/inf")
+    F = np.asarray(F)
+    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+        raise SShaDeError(f"F must have shape (m, 3) with m >= 1, got {np.shape(F)}")
+    if not np.issubdtype(F.dtype, np.integer):
+        raise SShaDeError(f"F must hold integer vertex indices, got dtype {F.dtype}")
+    F = np.ascontiguousarray(F, np.int64)
+    if F.min() < 0 or F.max() >= len(V):
+        raise SShaDeError(f"F has a vertex index out of range [0, {len(V)})")
+    return V, F
+
+
+def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims") -> ArapOperators:
+    """Precompute the ARAP operators of the rest mesh ``(V, F)`` for ``energy``.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions (any length unit). F : (m, 3) int faces.
+    energy : ``"spokes"`` (Sorkine & Alexa 2007) or ``"spokes_and_rims"`` (Chao et al.
+        2010), with libigl's weights (module docstring).
+
+    Returns
+    -------
+    ArapOperators
+
+    Raises
+    ------
+    SShaDeError
+        Unknown energy; bad shapes, NaN/inf, indices out of range; a degenerate face (its
+        cotangent weights are not finite); a vertex that is in no face.
+
+    Examples
+    --------
+    >>> ops = build_operators(V, F, "spokes")  # doctest: +SKIP
+    >>> ops.energy(V)  # rest pose: 0  # doctest: +SKIP
+    """
+    if energy not in ENERGIES:
+        raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
+    V, F = _check_mesh(V, F)
+    n = len(V)
+    if np.bincount(F.ravel(), minlength=n).min() == 0:
+        raise SShaDeError("a vertex is referenced by no face (unreferenced vertex)")
+    C = igl.cotmatrix_entries(V, F)  # (m, 3): cot/2 for edges [1,2], [2,0], [0,1]
+    if not np.isfinite(C).all():
+        bad = int(np.flatnonzero(~np.isfinite(C).all(1))[0])
+        raise SShaDeError(f"face {bad} is degenerate (non-finite cotangent weight)")
+    L = (-igl.cotmatrix(V, F)).tocsr()
+    edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr = _cell_pairs(V, F, C, energy)
+    K, KT = _rhs_operators(n, edges, edge_vec, pair_cell, pair_edge, pair_w)
+    rest_term = float((edge_w * (edge_vec ** 2).sum(1)).sum())
+    mass = np.asarray(igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_VORONOI).diagonal(), np.float64)
+    return ArapOperators(energy_type=energy, n=n, V=V, F=F, edges=edges, edge_vec=edge_vec, edge_w=edge_w,
+                         pair_cell=pair_cell, pair_edge=pair_edge, pair_w=pair_w, cell_ptr=cell_ptr, L=L, K=K, KT=KT,
+                         rest_term=rest_term, mass=mass, diag=bbox_diag(V))
+
+
+def _cell_pairs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str) -> tuple:
+    """Edges and (cell, edge) incidences of ``energy`` (module docstring) from the
+    cotangent entries ``C`` (m, 3). Returns ``(edges, edge_vec, edge_w, pair_cell,
+    pair_edge, pair_w, cell_ptr)`` as the attributes of :class:`ArapOperators`."""
+    n = len(V)
+    # face-edges: edge e of face f goes from S to D, opposite corner X
+    S = F[:, [1, 2, 0]].ravel()
+    D = F[:, [2, 0, 1]].ravel()
+    X = F[:, [0, 1, 2]].ravel()
+    c = C.ravel()
+    lo, hi = np.minimum(S, D), np.maximum(S, D)
+    key = lo * n + hi
+    ukey, fe2e = np.unique(key, return_inverse=True)
+    edges = np.stack([ukey // n, ukey % n], 1)
+    ne = len(edges)
+    edge_vec = V[edges[:, 0]] - V[edges[:, 1]]
+    edge_w = np.bincount(fe2e, weights=c, minlength=ne)
+    if energy == "spokes":
+        cells = np.concatenate([S, D])
+        pe = np.concatenate([fe2e, fe2e])
+        pw = np.concatenate([c, c]) / 2.0
+    else:
+        cells = np.concatenate([S, D, X])
+        pe = np.concatenate([fe2e, fe2e, fe2e])
+        pw = np.concatenate([c, c, c]) / 3.0
+    P = sp.coo_matrix((pw, (cells, pe)), shape=(n, ne)).tocsr()  # sums duplicates
+    P.sort_indices()
+    cell_ptr = P.indptr.astype(np.int64)
+    P = P.tocoo()
+    pair_cell, pair_edge, pair_w = P.row.astype(np.int64), P.col.astype(np.int64), P.data
+    return edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr
+
+
+def _rhs_operators(n, edges, edge_vec, pair_cell, pair_edge, pair_w) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """``(K, KT)`` of :class:`ArapOperators` from the (cell, edge) incidences."""
+    # K_d[s, k] += a e_d ; K_d[d, k] -= a e_d   for every pair (k, e = (s, d))
+    s_, d_ = edges[pair_edge, 0], edges[pair_edge, 1]
+    rows = np.concatenate([s_, d_])
+    blocks = []
+    for dd in range(3):
+        val = pair_w * edge_vec[pair_edge, dd]
+        blocks.append(sp.coo_matrix((np.concatenate([val, -val]),
+                                     (rows, np.concatenate([pair_cell, pair_cell]))), shape=(n, n)).tocsr())
+    K = sp.hstack(blocks, format="csr")
+    KT = sp.vstack([b.T for b in blocks], format="csr")
+    perm = (np.arange(3)[None, :] * n + np.arange(n)[:, None]).ravel()  # row 3k + d <- d n + k
+    return K, KT[perm]

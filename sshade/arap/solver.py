@@ -1,0 +1,512 @@
+"""Converged ARAP: local/global with one prefactored Laplacian, accelerated (L-BFGS or
+Anderson), stopped by an energy-and-gradient criterion (:func:`solve_arap`).
+
+Energy and operators: :mod:`sshade.arap.operators` (libigl's "spokes" and
+"spokes_and_rims" with libigl's cotangent weights, so one plain iteration here equals one
+``igl.arap_solve`` iteration up to libigl's single-precision rotation fit).
+
+Algorithm
+---------
+* Fixed-point map ``G`` on the free vertices ``x``: local step (optimal rotations
+  ``R*(x)``, batched 3x3 polar decomposition) then global step
+  ``L_ff G(x) = K(R*(x))_f - L_fb t`` with ONE sparse Cholesky factorisation of the
+  free-free block of the cotangent Laplacian (:class:`sshade.arap.linear.LaplacianSolver`),
+  reused by every iteration and solved for the 3 coordinate columns at once.
+* Default iteration (``accelerate="lbfgs"``): L-BFGS on the free vertices with the global
+  step's matrix as initial Hessian (Liu, Bouaziz & Kavan 2017;
+  :class:`sshade.arap.accelerate.LBFGS`) and Armijo backtracking (:meth:`_Loop.lbfgs_step`).
+* ``accelerate="anderson"``: Anderson acceleration with window ``m`` (Peng, Deng, Zhang,
+  Liu 2018, Algorithm 2; :class:`sshade.arap.accelerate.Anderson`). Safeguard (same
+  paper): the accelerated point is accepted only if its energy is below the energy of
+  the last accepted iterate; otherwise the plain step ``G(x_k)`` (already computed) is
+  taken and the history is reset (:meth:`_Loop.anderson_step`). Accepted energies are
+  therefore monotonically non-increasing (local/global never increases the energy).
+* Stopping (:class:`sshade.arap.criterion.Criterion`, :meth:`_Loop.stop_test`): both the
+  relative energy decrease over the last accepted iteration and a scale-free gradient
+  norm are below their thresholds.
+
+Phases of :func:`solve_arap`: options and start point (:func:`_check_options`,
+:func:`_start_point`, :func:`_check_components`), set-up (:class:`_Stepper`: numbering,
+kernels, threads, factorisation), the iterations (:class:`_Loop`), the result
+(:meth:`_Loop.result`).
+
+Cost of one iteration
+---------------------
+Everything per iteration runs in preallocated arrays: the fused local step and the
+``K(R)`` kernel of :mod:`sshade.arap.kernels`, CHOLMOD's solve, a numba CSR kernel for the
+stopping test's gradient ``2 L_ff (x - G(x))``, and the accelerator's history
+(:mod:`sshade.arap.solver_kernels`). From :data:`REORDER_MIN_VERTICES` vertices the
+iteration runs in a cache-friendly vertex numbering
+(:func:`sshade.arap.kernel_data.rcm_order`) and the numba kernels use ``threads``
+(automatic: :class:`sshade.arap.threads.ThreadPicker` times 1 thread against
+``NUMBA_NUM_THREADS`` and keeps the faster, since on a loaded machine parallel regions
+can be slower than one thread). Per-stage costs: ``benchmarks/arap_iteration.py``
+(``info["stage_s"]``); iterations and time to convergence against libigl:
+``results/convergence/table.md``.
+
+Result info
+-----------
+``info`` of the :class:`sshade.arap.result.ArapResult`: ``energy`` (final E, mesh
+units^2), ``gnorm``, ``rel_decrease``, ``energy_history`` / ``gnorm_history`` (lists over
+accepted iterates, starting at ``U0``), ``n_local`` (local steps), ``n_fallback``
+(rejected Anderson steps, backtracked or dropped L-BFGS steps), ``status``
+(``"converged"``, ``"max_iter"``, ``"time_budget"``, ``"stalled"`` = the energy no longer
+decreases in float64, ``"callback"``, ``"rigid"``), ``linear_solver``, ``factor_s``,
+``etol``, ``gtol``, ``accelerate``, ``anderson_m``, ``energy_type``, ``threads`` (the most
+threads used), ``reordered``, ``stage_s`` (seconds spent in the local steps, right-hand
+sides, Cholesky solves, gradient norms and accelerator bookkeeping),
+``parallel_fraction`` (automatic threads only: the fraction of iterations run with
+``threads`` threads).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+
+from ..errors import SShaDeError
+from ..validate import validate_handles
+from .accelerate import LBFGS, Anderson
+from .criterion import DEFAULT_CRITERION, Criterion, gradient_norm
+from .kernels import fused
+from .linear import LaplacianSolver
+from .operators import ENERGIES, ArapOperators, build_operators
+from .result import ArapResult
+from .rigid import rigid_fit
+from .solver_kernels import loop_kernels
+from .threads import ThreadPicker, numba_threads, resolve_threads
+
+__all__ = ["solve_arap", "ACCELERATIONS", "REORDER_MIN_VERTICES"]
+
+#: the iterations of :func:`solve_arap` (``accelerate``)
+ACCELERATIONS = ("lbfgs", "anderson", "none")
+#: vertices from which :func:`solve_arap` renumbers the mesh for locality by default
+#: (:func:`sshade.arap.kernel_data.rcm_order`; below, everything fits in the L2 cache).
+REORDER_MIN_VERTICES = 20_000
+
+clock = time.perf_counter
+
+
+def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = "spokes_and_rims",
+               U0: np.ndarray | None = None, criterion: Criterion | None = None, max_iter: int = 5000,
+               accelerate: bool | str = "lbfgs", anderson_m: int | None = None, time_budget_s: float | None = None,
+               callback=None, linear_solver: str = "auto",
+               operators: ArapOperators | None = None, threads: int | None = None,
+               reorder: bool | None = None) -> ArapResult:
+    """Handle-driven ARAP deformation run to a certified convergence (module docstring).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions (mesh units). F : (m, 3) int faces.
+    handles : (h,) int unique vertex indices; targets : (h, 3) float64 their positions.
+    energy : ``"spokes"`` (Sorkine & Alexa 2007) or ``"spokes_and_rims"`` (Chao et al.
+        2010), libigl's definitions (:mod:`sshade.arap.operators`).
+    U0 : (n, 3) float64 or None, start; default the best rigid fit of the handles
+        (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V`` (so a rigid handle motion
+        is reproduced exactly). The handle rows are overwritten by ``targets``.
+    criterion : :class:`Criterion` or None (:data:`DEFAULT_CRITERION`).
+    max_iter : int >= 0, cap on accepted iterations (global solves).
+    accelerate : ``"lbfgs"`` (default; Armijo backtracking, memory pairs with non-positive
+        curvature skipped), ``"anderson"`` (``True``; energy safeguard) or ``False`` /
+        ``"none"``: plain local/global, libigl's iteration in float64. On human bodies
+        L-BFGS needs far fewer iterations (``results/convergence/table.md``).
+    anderson_m : int >= 1 or None, history window: Anderson's (Peng et al. use 5-6;
+        default 5) or L-BFGS's memory (default 10).
+    time_budget_s : float or None, stop (unconverged, status ``"time_budget"``) once the
+        iterations have taken this many seconds.
+    callback : callable or None, ``callback(k, U, E, gnorm) -> bool`` after every accepted
+        iterate ``k`` (``U`` (n, 3) must not be modified); a true return value stops
+        (status ``"callback"``).
+    linear_solver : ``"auto"``, ``"cholespy"``, ``"scipy"`` or ``"igl"``
+        (:class:`sshade.arap.linear.LaplacianSolver`).
+    operators : :class:`sshade.arap.operators.ArapOperators` or None, precomputed for
+        ``(V, F, energy)`` to reuse across calls (then ``V``/``F`` are not re-read).
+    threads : int >= 1 or None, threads of the numba kernels (the Cholesky solve is
+        CHOLMOD's own). None: :func:`sshade.arap.threads.resolve_threads`, then 1 or
+        ``NUMBA_NUM_THREADS``, whichever runs the iterations faster
+        (:class:`sshade.arap.threads.ThreadPicker`). The iterates do not depend on it.
+    reorder : bool or None, iterate in a cache-friendly vertex numbering (result in the
+        mesh's). None: from :data:`REORDER_MIN_VERTICES` vertices when numba is usable.
+        Same iterates up to rounding (the renumbered Cholesky factor rounds differently).
+
+    Returns
+    -------
+    :class:`sshade.arap.result.ArapResult`: ``V`` (n, 3) the last accepted iterate (the
+    one the reported energy and gradient belong to), ``iterations`` (accepted iterations
+    = global solves), ``converged`` (the criterion was met), ``last_move`` (mesh units),
+    ``precompute_s`` (operators + factorisation), ``solve_s``, ``info`` (module docstring).
+
+    Raises
+    ------
+    SShaDeError
+        Unknown energy or linear solver, bad mesh / handles / targets / ``U0`` shapes or
+        values, ``operators`` built for another energy, a connected component without a
+        handle.
+
+    Examples
+    --------
+    >>> from sshade.arap.cases import twisted_bar
+    >>> V, F, h, T = twisted_bar(90.0, h=0.25)
+    >>> solve_arap(V, F, h, T, energy="spokes").converged
+    True
+    """
+    t_start = clock()
+    crit, acc, m = _check_options(energy, criterion, accelerate, anderson_m, max_iter)
+    ops = operators if operators is not None else build_operators(V, F, energy)
+    if ops.energy_type != energy:
+        raise SShaDeError(f"operators were built for {ops.energy_type!r}, not {energy!r}")
+    h, T = validate_handles(ops.V, handles, targets)
+    U = _start_point(ops, h, T, U0)
+    info = {"energy_type": energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": acc,
+            "anderson_m": m, "n_local": 0, "n_fallback": 0}
+    if len(np.setdiff1d(np.arange(ops.n), h)) == 0:  # every vertex is a handle
+        return _all_handles(ops, U, info, t_start)
+    _check_components(ops.L, h)
+    st = _Stepper(ops, U, h, T, threads=threads, reorder=reorder, linear_solver=linear_solver, info=info)
+    loop = _Loop(st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback)
+    loop.run()
+    return loop.result(precompute_s=loop.t_iter - t_start)
+
+
+def _check_options(energy, criterion, accelerate, anderson_m, max_iter) -> tuple[Criterion, str, int]:
+    """``(criterion, accelerate, anderson_m)`` of :func:`solve_arap` checked and resolved
+    (defaults filled in, ``accelerate`` one of :data:`ACCELERATIONS`)."""
+    if energy not in ENERGIES:
+        raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
+    crit = DEFAULT_CRITERION if criterion is None else criterion
+    if not isinstance(crit, Criterion):
+        raise SShaDeError(f"criterion must be a Criterion, got {type(crit).__name__}")
+    acc = {True: "anderson", False: "none", None: "none"}.get(accelerate, accelerate) \
+        if isinstance(accelerate, (bool, type(None))) else str(accelerate)
+    if acc not in ACCELERATIONS:
+        raise SShaDeError(f"accelerate must be one of {ACCELERATIONS} (or True/False), got {accelerate!r}")
+    if anderson_m is None:
+        anderson_m = 10 if acc == "lbfgs" else 5
+    if int(anderson_m) < 1:
+        raise SShaDeError(f"anderson_m must be >= 1, got {anderson_m}")
+    if int(max_iter) < 0:
+        raise SShaDeError(f"max_iter must be >= 0, got {max_iter}")
+    return crit, acc, int(anderson_m)
+
+
+def _start_point(ops: ArapOperators, h: np.ndarray, T: np.ndarray, U0) -> np.ndarray:
+    """The first iterate (n, 3): ``U0`` or the rigid fit of the handles applied to the rest
+    mesh, handle rows at their targets (a new array)."""
+    V, n = ops.V, ops.n
+    if U0 is None:
+        Rr, tr_ = rigid_fit(V[h], T)
+        U = V @ Rr.T + tr_
+    else:
+        U = np.array(U0, dtype=np.float64)
+        if U.shape != (n, 3) or not np.isfinite(U).all():
+            raise SShaDeError(f"U0 must be a finite (n, 3) array with n={n}, got shape {U.shape}")
+    U[h] = T
+    return U
+
+
+def _all_handles(ops: ArapOperators, U: np.ndarray, info: dict, t_start: float) -> ArapResult:
+    """The result when every vertex is a handle: ``U``, converged, no iteration."""
+    info.update(status="converged", energy=ops.energy(U), gnorm=0.0, rel_decrease=0.0,
+                energy_history=[], gnorm_history=[], linear_solver=None, factor_s=0.0)
+    return ArapResult(V=U, iterations=0, converged=True, last_move=0.0,
+                      precompute_s=clock() - t_start, solve_s=0.0, info=info)
+
+
+def _check_components(L, h: np.ndarray) -> None:
+    """Raise SShaDeError when a connected component of the mesh (the pattern of ``L``)
+    holds no handle: its position would be undetermined (singular ``L_ff``)."""
+    ncomp, label = connected_components(L, directed=False)
+    if ncomp > 1:
+        lacking = np.setdiff1d(np.arange(ncomp), label[h])
+        if len(lacking):
+            raise SShaDeError(f"{len(lacking)} of the mesh's {ncomp} connected components hold no handle "
+                              f"(e.g. the one with vertex {int(np.flatnonzero(label == lacking[0])[0])}); "
+                              "their position is undetermined")
+
+
+class _Stepper:
+    """The set-up of :func:`solve_arap` and the four operations of its iterations.
+
+    Holds the iteration's vertex numbering (the mesh's, or a cache-friendly one: every
+    array here lives in it; :meth:`to_mesh` maps back), the numba kernels and their
+    threads (``cur``: threads of the next kernel calls; ``picker`` in the automatic
+    mode), the factorised ``L_ff`` and the preallocated buffers. Operations on free
+    positions ``x`` (n_f, 3): :meth:`local` (rotations into ``R``, energy),
+    :meth:`glob` (the plain iterate ``G(x)`` from the rotations in ``R``),
+    :meth:`gnorm`, :meth:`max_move`; ``tm`` accumulates their seconds per stage.
+    """
+
+    def __init__(self, ops: ArapOperators, U: np.ndarray, h: np.ndarray, T: np.ndarray, *, threads,
+                 reorder, linear_solver: str, info: dict):
+        self.ops, self.info = ops, info
+        self.diag = ops.diag
+        self.zero_E = 1e-12 * ops.rest_term
+        self._pick_kernels(threads, ops.n)
+        self._renumber(U, h, reorder)
+        self.lin = LaplacianSolver(self.Lff, linear_solver)
+        self.c_f = np.ascontiguousarray(self.Lfb @ T)  # (n_f, 3)
+        info.update(linear_solver=self.lin.backend, factor_s=self.lin.factor_s, threads=self.nthreads,
+                    reordered=self.perm is not None)
+        if self.kern:
+            Lc = self.Lff.tocsr()
+            Lc.sort_indices()
+            self.L_csr = (Lc.indptr.astype(np.uint64), Lc.indices.astype(np.uint32),
+                          np.ascontiguousarray(Lc.data, np.float64))
+            self.free_u = self.free.astype(np.uint32)
+        self.rows = self.free_u if self.kern else self.free
+        self.tm = dict.fromkeys(("local", "rhs", "solve", "gradient", "anderson"), 0.0)  # seconds per stage
+
+    def _pick_kernels(self, threads, n: int) -> None:
+        """The loop's kernels (False: numpy paths) and threads (:class:`ThreadPicker` in
+        the automatic mode)."""
+        nthreads = resolve_threads(threads, n)
+        kern = loop_kernels(False) if fused(1) else False
+        if not kern or (nthreads > 1 and not (fused(nthreads) and loop_kernels(True))):
+            nthreads = 1  # numpy paths, or parallel kernels unusable
+        self.kern = kern
+        self.kerns = {1: kern, nthreads: loop_kernels(True)} if kern and nthreads > 1 else {1: kern}
+        self.picker = ThreadPicker(nthreads) if threads is None and nthreads > 1 else None
+        self.nthreads = self.cur = nthreads
+
+    def _renumber(self, U: np.ndarray, h: np.ndarray, reorder) -> None:
+        """The iteration's numbering (cache-friendly from :data:`REORDER_MIN_VERTICES`
+        vertices with numba), ``U`` in it, the free vertices and the blocks of ``L``."""
+        ops, n = self.ops, self.ops.n
+        if reorder is None:
+            reorder = n >= REORDER_MIN_VERTICES
+        reorder = bool(reorder) and bool(self.kern)
+        self.kdata = ops.kernel_data(reorder) if self.kern else None
+        self.perm = perm = None if self.kdata is None else self.kdata.perm
+        if perm is not None:
+            Lp = ops.L[perm][:, perm].tocsr()
+            hp = self.kdata.inv[h]
+            self.U = np.ascontiguousarray(U[perm])
+            mass = ops.mass[perm]
+        else:
+            Lp, hp, mass, self.U = ops.L, h, ops.mass, U
+        self.free = np.setdiff1d(np.arange(n), hp)
+        Lf = Lp[self.free]
+        self.Lff = Lf[:, self.free].tocsc()
+        self.Lfb = Lf[:, hp]
+        self.mass_f = mass[self.free]
+        self.mass_sum = self.mass_f.sum()
+
+    def allocate(self) -> None:
+        """The buffers of the iterations: polar warm start, rotations ``R`` of the last
+        local step, cell energies, right-hand side, gradient scratch."""
+        n, nf = self.ops.n, len(self.free)
+        self.warm = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        self.R = np.empty((n, 3, 3))
+        self.Ek = np.empty(n)
+        self.B = np.empty((nf, 3))
+        self.q = np.empty(nf)
+
+    def run(self, name: str, *args):
+        """Loop kernel ``name`` with ``cur`` threads."""
+        t = self.cur
+        if t > 1:
+            with numba_threads(t):
+                return self.kerns[t][name](*args)
+        return self.kern[name](*args)
+
+    def to_mesh(self, Ux: np.ndarray) -> np.ndarray:
+        """Positions in the mesh's numbering."""
+        return Ux if self.perm is None else Ux[self.kdata.inv]
+
+    def local(self, x: np.ndarray) -> float:
+        """Rotations (into ``R``) and energy at free positions ``x`` (n_f, 3)."""
+        t0 = clock()
+        if self.kern:
+            self.kern["set_rows"](self.U, self.free_u, x)
+        else:
+            self.U[self.free] = x
+        self.info["n_local"] += 1
+        E = self.ops.local_step(self.U, self.R, self.Ek, self.warm, self.cur, self.kdata)
+        self.tm["local"] += clock() - t0
+        return E
+
+    def glob(self) -> np.ndarray:
+        """Global step with the rotations in ``R``: the plain iterate ``G(x)`` (n_f, 3)."""
+        t0 = clock()
+        self.ops.rhs_rows(self.R, self.rows, self.c_f, self.B, self.cur, self.kdata)
+        t1 = clock()
+        X = np.ascontiguousarray(self.lin.solve(self.B))
+        self.tm["rhs"] += t1 - t0
+        self.tm["solve"] += clock() - t1
+        return X
+
+    def gnorm(self, x: np.ndarray, g: np.ndarray) -> float:
+        """Scale-free gradient norm at ``x``, whose plain step is ``g`` (``grad = 2 L_ff
+        (x - g)``; :func:`sshade.arap.criterion.gradient_norm`)."""
+        t0 = clock()
+        if self.kern:
+            self.run("grad", *self.L_csr, x, g, self.mass_f, self.q)
+            gn = float(self.diag * np.sqrt(self.q.sum() / self.mass_sum))
+        else:
+            gn = gradient_norm(2.0 * (self.Lff @ (x - g)), self.mass_f, self.diag)
+        self.tm["gradient"] += clock() - t0
+        return gn
+
+    def max_move(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Largest vertex move between two (n_f, 3) iterates (mesh units)."""
+        if self.kern:
+            return float(np.sqrt(self.kern["max_move"](a, b)))
+        return float(np.sqrt(((a - b) ** 2).sum(1).max()))
+
+
+class _Loop:
+    """The iterations of :func:`solve_arap` on a :class:`_Stepper`: from the start point,
+    repeat the stopping test (:meth:`stop_test`), a step (:meth:`lbfgs_step` or
+    :meth:`anderson_step`, the latter also for the plain iteration) and its acceptance
+    (:meth:`accept`). State: the accepted iterate ``x`` (energy ``E``, plain step ``g =
+    G(x)``), the energy and gradient-norm histories, ``status`` once stopped."""
+
+    def __init__(self, st: _Stepper, crit: Criterion, acc: str, m: int, *, max_iter, time_budget_s, callback):
+        self.st, self.crit = st, crit
+        self.max_iter, self.time_budget_s, self.callback = max_iter, time_budget_s, callback
+        self.t_iter = clock()
+        st.allocate()
+        self.lbfgs = LBFGS(m, st.Lff) if acc == "lbfgs" else None
+        self.anderson = (Anderson(m, 3 * len(st.free), st.kerns if st.kern else None, st.nthreads)
+                         if acc == "anderson" else None)
+        self.x = st.U[st.free].copy()
+        self.E = st.local(self.x)
+        self.g = st.glob()
+        self.E_hist, self.G_hist = [self.E], []
+        self.E_prev, self.rel = np.inf, np.inf
+        self.it, self.last_move, self.status = 0, 0.0, None
+
+    def run(self) -> None:
+        """Iterate until :attr:`status` is set."""
+        t_pass = clock()
+        while True:
+            self.status = self.stop_test()
+            if self.status is not None:
+                break
+            step = self.lbfgs_step() if self.lbfgs is not None else self.anderson_step()
+            if self.status is not None:  # stalled
+                break
+            if step is None:  # L-BFGS history dropped: test again, then the plain direction
+                continue
+            self.accept(*step)
+            t_pass = self.tick(t_pass)
+
+    def stop_test(self) -> str | None:
+        """Convergence test at the accepted iterate, then the callback, the iteration cap
+        and the time budget: the status to stop with, or None."""
+        st, crit, E = self.st, self.crit, self.E
+        gn = st.gnorm(self.x, self.g)
+        self.G_hist.append(gn)
+        if E <= st.zero_E:
+            self.rel = 0.0
+        else:
+            self.rel = (self.E_prev - E) / E if np.isfinite(self.E_prev) else np.inf
+        if self.rel < crit.etol and gn < crit.gtol:
+            return "converged" if self.it > 0 or E > st.zero_E else "rigid"
+        if self.callback is not None and self.it > 0:
+            st.U[st.free] = self.x
+            if self.callback(self.it, st.to_mesh(st.U), E, gn):
+                return "callback"
+        if self.it >= self.max_iter:
+            return "max_iter"
+        if self.time_budget_s is not None and clock() - self.t_iter > self.time_budget_s:
+            return "time_budget"
+        return None
+
+    def lbfgs_step(self):
+        """Quasi-Newton step with Armijo backtracking: ``(x_new, E_new)``; None with the
+        history dropped (a bad direction: test again, then a plain one), or None with
+        status ``"stalled"`` (no decrease even along the plain direction)."""
+        st, x, E = self.st, self.x, self.E
+        t0 = clock()
+        d, slope = self.lbfgs.direction(x, self.g)
+        st.tm["anderson"] += clock() - t0
+        alpha, E_new = 1.0, None
+        while True:
+            x_new = x + alpha * d
+            E_try = st.local(x_new)
+            if E_try <= E + 1e-4 * alpha * slope:
+                E_new = E_try
+                break
+            if alpha < 1e-6:
+                break
+            alpha *= 0.5
+        if E_new is None:
+            if self.lbfgs.n_hist:  # a bad quasi-Newton direction: forget it, plain step
+                st.info["n_fallback"] += 1
+                self.lbfgs.reset()
+                return None
+            self.status = "stalled"
+            return None
+        if alpha < 1.0:
+            st.info["n_fallback"] += 1
+        return x_new, E_new
+
+    def anderson_step(self):
+        """Anderson history update with the accepted ``(x, g)`` and its candidate, under
+        the energy safeguard (plain step ``g`` when rejected; always without Anderson):
+        ``(x_new, E_new)``, or None with status ``"stalled"`` (a plain step raised the
+        energy: only rounding does)."""
+        st, g, E = self.st, self.g, self.E
+        t0 = clock()
+        x_new = self.anderson.step(self.x, g) if self.anderson is not None else None
+        st.tm["anderson"] += clock() - t0
+        accelerated = x_new is not None
+        if not accelerated:
+            x_new = g
+        # R is overwritten by every local step: it holds the rotations of the last
+        # evaluated candidate, which is the accepted one when glob() runs in accept()
+        E_new = st.local(x_new)
+        if accelerated and not E_new < E:  # safeguard: plain step, reset the history
+            st.info["n_fallback"] += 1
+            self.anderson.reset()
+            x_new = g
+            E_new = st.local(x_new)
+            accelerated = False
+        if not accelerated and E_new > E:
+            self.status = "stalled"
+            return None
+        return x_new, E_new
+
+    def accept(self, x_new: np.ndarray, E_new: float) -> None:
+        """Accept ``x_new`` (energy ``E_new``; ``R`` holds its rotations): its plain step."""
+        st = self.st
+        t0 = clock()
+        self.last_move = st.max_move(x_new, self.x)
+        st.tm["anderson"] += clock() - t0
+        self.E_prev, self.E = self.E, E_new
+        self.x = x_new
+        self.g = st.glob()
+        self.it += 1
+        self.E_hist.append(self.E)
+
+    def tick(self, t_pass: float) -> float:
+        """Automatic threads: time the iteration just done, pick the next mode."""
+        st = self.st
+        if st.picker is None:
+            return t_pass
+        now = clock()
+        st.picker.record(st.cur, now - t_pass)
+        st.cur = st.picker.cur
+        if self.anderson is not None:
+            self.anderson.threads = st.cur
+        return now
+
+    def result(self, precompute_s: float) -> ArapResult:
+        """The :class:`ArapResult` of the stopped iterations (module docstring)."""
+        st, status = self.st, self.status
+        st.U[st.free] = self.x
+        if status == "stalled":
+            converged = bool(self.G_hist[-1] < self.crit.gtol)
+        else:
+            converged = status in ("converged", "rigid")
+        info = st.info
+        if st.picker is not None:
+            info["parallel_fraction"] = st.picker.n_par / max(st.picker.count, 1)
+        info.update(status=status, energy=float(self.E), gnorm=float(self.G_hist[-1]),
+                    rel_decrease=float(self.rel) if status != "stalled" else 0.0,
+                    energy_history=[float(e) for e in self.E_hist], gnorm_history=[float(v) for v in self.G_hist],
+                    stage_s=st.tm)
+        return ArapResult(V=np.array(st.to_mesh(st.U)), iterations=self.it, converged=converged,
+                          last_move=self.last_move, precompute_s=precompute_s, solve_s=clock() - self.t_iter, info=info)

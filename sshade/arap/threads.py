@@ -1,0 +1,142 @@
+"""Thread policy of the ARAP kernels: how many threads numba's parallel kernels use.
+
+* :func:`max_threads`: numba's ``NUMBA_NUM_THREADS`` (1 without numba).
+* :func:`resolve_threads`: the threads of a problem (serial below
+  :data:`PARALLEL_MIN_CELLS` cells and in worker processes; capped at 1 in a forked child
+  of a process that ran numba's OpenMP pool, see :func:`fork_unsafe`).
+* :func:`numba_threads`: context manager setting numba's thread count for the calls
+  inside (records the process as the pool's owner, :func:`note_launch`).
+* :class:`ThreadPicker`: the automatic mode of :func:`sshade.arap.solver.solve_arap`,
+  which times 1 thread against ``tmax`` and keeps the faster.
+
+The results of every kernel do not depend on the thread count (every parallel block
+writes only its own outputs, sums run over fixed chunks).
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+from contextlib import contextmanager
+
+from ..errors import SShaDeError
+
+try:  # numba is a dependency of the package; without it the numpy paths are used
+    import numba as nb
+    from numba.np.ufunc import parallel as nb_parallel
+except ImportError:  # pragma: no cover
+    nb = None
+    nb_parallel = None
+
+__all__ = ["PARALLEL_MIN_CELLS", "max_threads", "resolve_threads", "fork_unsafe", "note_launch", "numba_threads",
+           "ThreadPicker"]
+
+#: problems below this many cells use the serial kernels by default (no numba threading
+#: layer; a parallel region costs ~10-50 us, which small meshes do not pay back, and the
+#: low-res solves already run one per core in worker processes).
+PARALLEL_MIN_CELLS = 20_000
+
+_LAUNCH_PID = None  # process that started numba's thread pool through this package
+
+
+def max_threads() -> int:
+    """Threads the parallel kernels may use: numba's ``NUMBA_NUM_THREADS`` (its
+    environment variable, default the CPU count); 1 without numba."""
+    return int(nb.config.NUMBA_NUM_THREADS) if nb is not None else 1
+
+
+def fork_unsafe() -> bool:
+    """True in a forked child whose parent had started numba's OpenMP thread pool: GNU
+    libgomp is not fork-safe and numba aborts the process ("fork() called from a process
+    already using GNU OpenMP") at the child's first parallel region."""
+    if not getattr(nb_parallel, "_is_initialized", False):
+        return False  # no pool yet: this process would start its own
+    if _LAUNCH_PID == os.getpid():
+        return False
+    try:
+        return nb.threading_layer() == "omp"
+    except Exception:  # pragma: no cover - unknown state: stay serial
+        return True
+
+
+def note_launch() -> None:
+    """Record that this process runs numba's thread pool (see :func:`fork_unsafe`)."""
+    global _LAUNCH_PID
+    if _LAUNCH_PID is None:
+        _LAUNCH_PID = os.getpid()
+
+
+def resolve_threads(threads: int | None, n_cells: int) -> int:
+    """Threads for the per-cell kernels of a problem with ``n_cells`` cells (1 = serial).
+
+    ``threads=None`` (automatic): 1 below :data:`PARALLEL_MIN_CELLS` cells or inside a
+    child process (``multiprocessing`` workers: the caller already parallelises over
+    processes), else :func:`max_threads` (``NUMBA_NUM_THREADS``). An explicit
+    ``threads >= 1`` is capped at :func:`max_threads`, and at 1 in a forked child of a
+    process that ran numba's OpenMP threads (a parallel region would abort it).
+
+    Raises
+    ------
+    SShaDeError on ``threads < 1``.
+    """
+    if threads is not None and (int(threads) != threads or int(threads) < 1):
+        raise SShaDeError(f"threads must be an integer >= 1 or None, got {threads!r}")
+    child = multiprocessing.parent_process() is not None
+    if threads is None:
+        if n_cells < PARALLEL_MIN_CELLS or child:
+            return 1
+        t = max_threads()
+    else:
+        t = min(int(threads), max_threads())
+    if t > 1 and child and fork_unsafe():
+        return 1
+    return t
+
+
+@contextmanager
+def numba_threads(t: int):
+    """Context manager: numba's thread count set to ``t`` for the calls inside (restored
+    after). Only entered for parallel kernels (``t > 1``)."""
+    t = int(t)
+    note_launch()
+    prev = nb.get_num_threads()
+    if prev != t:
+        nb.set_num_threads(t)
+    try:
+        yield
+    finally:
+        if prev != t:
+            nb.set_num_threads(prev)
+
+
+class ThreadPicker:
+    """Threads of the solver's kernels in the automatic mode: 1 or ``tmax``, whichever ran
+    the iterations faster (the results are the same to the bit). The other choice is
+    re-timed every ``probe`` iterations, so that the pick follows the load of a shared
+    machine: there a parallel region waits for its slowest thread, and numba's OpenMP
+    workers spin after each region, taking CPU from the serial Cholesky solve (so that
+    parallel iterations can be slower than serial ones).
+
+    Attributes
+    ----------
+    cur : int, threads of the next iteration. best : int, the faster mode so far.
+    count, n_par : int, iterations recorded, of which with ``tmax`` threads.
+    """
+
+    def __init__(self, tmax: int, probe: int = 16):
+        self.tmax, self.probe = tmax, probe
+        self.cost = {tmax: None, 1: None}  # smoothed seconds per iteration
+        self.cur, self.best, self.count, self.n_par = tmax, tmax, 0, 0
+
+    def record(self, t: int, dt: float) -> None:
+        """Account an iteration run with ``t`` threads in ``dt`` seconds; pick the next."""
+        c = self.cost[t]
+        self.cost[t] = dt if c is None else 0.5 * (c + dt)
+        self.count += 1
+        self.n_par += t > 1
+        other = 1 if t > 1 else self.tmax
+        if self.cost[other] is None:
+            self.cur = other
+            return
+        self.best = min(self.cost, key=self.cost.get)
+        worse = 1 if self.best > 1 else self.tmax
+        self.cur = worse if self.count % self.probe == 0 else self.best
