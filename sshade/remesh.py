@@ -207,8 +207,32 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
     lab : (n + loops,) labels with the cone vertices as their own regions.
     Returns (bad, cand, f3): whether the property fails, the sorted unique seed
     candidates and the faces carrying three labels, in face order."""
+    chi, kind, ncross, n3 = _region_euler(Fc, Ec, lab, nlab)
+    pair, parent, arc, np_ = _cross_pairs(Ec, lab, nlab, ncross)
+    cyc = np.zeros(np_, np.bool_)
+    f3, tri, nt = _link_faces(Fc, FEc, lab, nlab, kind, n3, pair, parent, arc, cyc)
+    tcnt = np.zeros(nt, np.int64)
+    for j in range(n3):
+        tcnt[tri[j]] += 1
+    bad = False
+    for r in range(nlab):
+        bad |= chi[r] != 1
+    for p in range(np_):
+        bad |= arc[p] != 1 or cyc[p]
+    for t in range(nt):
+        bad |= tcnt[t] != 1
+    if not bad:
+        return False, np.empty(0, np.int64), f3
+    pick = _repair_candidates(Fc, Ec, lab, dist, n, nlab, chi, pair, arc, cyc, np_, f3, tri, tcnt, nt)
+    return True, np.flatnonzero(pick), f3
+
+
+@njit(cache=True)
+def _region_euler(Fc, Ec, lab, nlab):
+    """1. regions are disks: chi = V - E + F == 1 per label. Returns chi (nlab,), the
+    number of distinct labels of each face (nf,) int8, the cross-edge count and the
+    count of faces with three labels."""
     ne, nf = Ec.shape[0], Fc.shape[0]
-    # 1. regions are disks: chi = V - E + F == 1
     chi = np.zeros(nlab, np.int64)
     for v in range(lab.shape[0]):
         chi[lab[v]] += 1
@@ -230,9 +254,17 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
             n3 += 1
         else:
             kind[f] = 2
-    # 2. two regions meet along one arc: the cross edges of a pair, linked through the
-    # faces with two labels, form paths and cycles; one arc <=> (edges - links) == 1 and
-    # no link closes a cycle (union-find over the cross edges)
+    return chi, kind, ncross, n3
+
+
+@njit(cache=True)
+def _cross_pairs(Ec, lab, nlab, ncross):
+    """2. two regions meet along one arc: the cross edges of a pair, linked through the
+    faces with two labels, form paths and cycles; one arc <=> (edges - links) == 1 and
+    no link closes a cycle (union-find over the cross edges). Returns each edge's pair
+    id (-1 inside a region), the union-find parents, the per-pair cross-edge counts
+    (links are subtracted by :func:`_link_faces`) and the number of pairs."""
+    ne = Ec.shape[0]
     pkeys, pids, pmask = _table(ncross)
     pair = np.full(ne, -1, np.int64)
     parent = np.empty(ne, np.int64)
@@ -243,17 +275,24 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
             pair[e], np_ = _table_id(pkeys, pids, min(a, b) * nlab + max(a, b), pmask, np_)
             parent[e] = e
     arc = np.zeros(np_, np.int64)  # cross edges - links: 1 for a single path
-    cyc = np.zeros(np_, np.bool_)
     for e in range(ne):
         if pair[e] >= 0:
             arc[pair[e]] += 1
-    # 3. three regions meet at one point: each label triple on exactly one face
+    return pair, parent, arc, np_
+
+
+@njit(cache=True)
+def _link_faces(Fc, FEc, lab, nlab, kind, n3, pair, parent, arc, cyc):
+    """Links of the cross edges through the two-label faces (updates ``arc``, ``cyc``,
+    ``parent`` in place) and 3. three regions meet at one point: each label triple on
+    exactly one face. Returns the three-label faces (n3,), their triple ids and the
+    number of triples."""
     tkeys, tids, tmask = _table(n3)
     f3 = np.empty(n3, np.int64)
     tri = np.empty(n3, np.int64)
     nt = 0
     j = 0
-    for f in range(nf):
+    for f in range(Fc.shape[0]):
         if kind[f] == 2:
             e1 = -1
             for k in range(3):
@@ -276,20 +315,14 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
             f3[j] = f
             tri[j], nt = _table_id(tkeys, tids, (a * nlab + b) * nlab + c, tmask, nt)
             j += 1
-    tcnt = np.zeros(nt, np.int64)
-    for j in range(n3):
-        tcnt[tri[j]] += 1
-    bad = False
-    for r in range(nlab):
-        bad |= chi[r] != 1
-    for p in range(np_):
-        bad |= arc[p] != 1 or cyc[p]
-    for t in range(nt):
-        bad |= tcnt[t] != 1
-    if not bad:
-        return False, np.empty(0, np.int64), f3
-    # candidates: per bad region / pair / triple, its farthest vertex from its seed
-    # (first one met on ties, in vertex / edge / face order), if not a seed already
+    return f3, tri, nt
+
+
+@njit(cache=True)
+def _repair_candidates(Fc, Ec, lab, dist, n, nlab, chi, pair, arc, cyc, np_, f3, tri, tcnt, nt):
+    """Candidates: per bad region / pair / triple, its farthest vertex from its seed
+    (first one met on ties, in vertex / edge / face order), if not a seed already.
+    Returns a (n,) bool mask."""
     pick = np.zeros(n, np.bool_)
     best = np.full(max(nlab, np_, nt), -1, np.int64)
     for v in range(n):
@@ -299,7 +332,7 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
         if best[r] >= 0 and dist[best[r]] > 0:
             pick[best[r]] = True
     best[:] = -1
-    for e in range(ne):
+    for e in range(Ec.shape[0]):
         p = pair[e]
         if p >= 0 and (arc[p] != 1 or cyc[p]):
             for k in range(2):
@@ -309,7 +342,7 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
         if best[p] >= 0 and dist[best[p]] > 0:
             pick[best[p]] = True
     best[:] = -1
-    for j in range(n3):
+    for j in range(f3.shape[0]):
         t = tri[j]
         if tcnt[t] != 1:
             for k in range(3):
@@ -318,7 +351,7 @@ def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
     for t in range(nt):
         if best[t] >= 0 and dist[best[t]] > 0:
             pick[best[t]] = True
-    return True, np.flatnonzero(pick), f3
+    return pick
 
 
 @njit(cache=True)
