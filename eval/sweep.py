@@ -557,9 +557,12 @@ def claim_sweep_dir(config) -> None:
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
-    if str(c.path) != str(Path(d).resolve()):
+    if str(c.path) != str(Path(d).resolve()):  # a fresh name got a suffix: the jobs follow it
         with open_dict(config):
             config.hydra.sweep.dir = str(c.path)
+            # each job's config is composed again from these overrides (Hydra's
+            # load_sweep_config), so the new folder must be among them
+            config.hydra.overrides.hydra.append(f"hydra.sweep.dir='{c.path}'")
     log.info(c.message)
     _sweep_claim.append(c)
 

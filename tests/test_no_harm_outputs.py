@@ -229,3 +229,27 @@ def test_tables_and_sweep_aggregate_refuse_results(capsys):
             rc = e.code
         assert rc == 2 and "eval.reproduce" in capsys.readouterr().err
         assert _snapshot(Path(argv[-1])) == before
+
+
+def test_sweep_default_folder_taken_gets_a_suffix_and_jobs_follow(tmp_path):
+    """Two sweeps started in the same second: the second's default dated folder exists
+    (here: every name of the next minute holds a user's file); the sweep goes to
+    ``<name>_2`` and so do its jobs; the user's folders are untouched."""
+    import datetime
+    now = datetime.datetime.now()
+    taken = []
+    for s in range(90):
+        d = tmp_path / "outputs" / "multirun" / (now + datetime.timedelta(seconds=s)).strftime("%Y-%m-%d_%H-%M-%S")
+        d.mkdir(parents=True)
+        (d / "mine.txt").write_text("x")
+        taken.append(d)
+    r = subprocess.run([sys.executable, "-m", "eval.sweep", "-m", "dataset=faust",
+                        f"dataset.root={ROOT.parent / 'shared/data/faust_reg'}", "dataset.limit=1", "methods=[SShaDe]",
+                        "sshade.n_low=300", "sshade.n_samplings=1"], cwd=tmp_path, env=subprocess_env(),
+                       capture_output=True, text=True, timeout=240)
+    if not (ROOT.parent / "shared/data/faust_reg").is_dir():
+        pytest.skip("no FAUST registrations")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert all(os.listdir(d) == ["mine.txt"] for d in taken)
+    new = [d for d in (tmp_path / "outputs" / "multirun").iterdir() if d.name.endswith("_2")]
+    assert len(new) == 1 and (new[0] / "0" / "status.json").is_file() and (new[0] / "sweep_table.md").is_file()
