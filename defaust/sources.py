@@ -24,7 +24,8 @@ from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, fau
 from .meshio import read_mesh
 from .skinning import transfer_weights
 from .store import sha256_file
-from .synthetic import POSE_NAMES, pose_names, synthetic_subject
+from .synthetic import synthetic_subject
+from .synthetic_poses import POSE_NAMES, pose_names
 
 __all__ = ["Source", "FaustSource", "ModelSource", "SyntheticSource", "AnnySource", "SOURCES"]
 
