@@ -74,7 +74,12 @@ def test_arap_stopping_rule_reaches_scaling_and_convergence():
 
 def test_convergence_sampling_counts_follow_n_samplings():
     cfg = _compose(["experiment=convergence", "sshade.n_samplings=7"])
-    assert list(cfg.convergence.sshade.k) == [1, 7] and cfg.convergence.sshade.refine_k == 7
+    sp = convergence.sshade_params(cfg)
+    assert convergence.sampling_counts(cfg, sp) == [1, 7] and cfg.convergence.sshade.refine_k == 7
+    cfg = _compose(["experiment=convergence"])
+    assert convergence.sampling_counts(cfg, convergence.sshade_params(cfg)) == [1, 5]  # as before
+    cfg = _compose(["experiment=convergence", "convergence.sshade.k=[2,3]"])
+    assert convergence.sampling_counts(cfg, convergence.sshade_params(cfg)) == [2, 3]
 
 
 @pytest.mark.parametrize("exp,key", [("scaling", "scaling.n_low"), ("tosca", "tosca.n_low"),

@@ -13,7 +13,7 @@ cached) is traced against wall time for:
   default iteration), until its criterion stops it;
 - ``Anderson (ours)``: the same solver with ``accelerate="anderson"`` (Peng et al. 2018);
 - ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`; the
-  sampling counts ``convergence.sshade.k``, default ``[1, sshade.n_samplings]``; every
+  sampling counts ``convergence.sshade.k``, null = ``[1, sshade.n_samplings]``; every
   other parameter from the method config ``method.SShaDe``, :func:`sshade_params`);
 - ``SShaDe + refine``: SShaDe (k = ``convergence.sshade.refine_k``, default
   ``sshade.n_samplings``) then ``solve_arap`` started from its result.
@@ -39,7 +39,7 @@ from sshade.errors import SShaDeError
 
 from .. import datasets
 from ..paths import abs_path
-from .common import sshade_spec
+from .common import as_list, sshade_spec
 from .registry import register_experiment
 
 __all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to", "sshade_params"]
@@ -175,8 +175,15 @@ def _cases(cfg) -> list[tuple[str, tuple]]:
 def sshade_params(cfg) -> dict:
     """Keyword parameters of :func:`sshade.deform` in this experiment: the method config
     ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`); its ``n_samplings``
-    is replaced by each of ``convergence.sshade.k`` in turn."""
+    is replaced by each of :func:`sampling_counts` in turn."""
     return sshade_spec(cfg)
+
+
+def sampling_counts(cfg, sp: dict) -> list[int]:
+    """The sampling counts SShaDe runs with: ``convergence.sshade.k``, or when it is null
+    ``[1, n_samplings]`` (``n_samplings`` of ``sp``, :func:`sshade_params`)."""
+    ks = as_list(cfg.convergence.get("sshade", {}).get("k"))
+    return [int(k) for k in (ks if ks is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
 
 
 def run_convergence(cfg) -> dict:
@@ -262,7 +269,7 @@ def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], lis
     for acc, label in (("lbfgs", "L-BFGS (ours)"), ("anderson", "Anderson (ours)")):
         rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, accelerate=acc)
         add(label, rows, iterations=res.iterations, stopped=str(res.info.get("status")))
-    for k in list(cc.sshade.k):
+    for k in sampling_counts(cfg, sp):
         t0 = time.perf_counter()
         Vs, si = deform(V, F, h, T, return_info=True, **{**sp, "n_samplings": int(k)})
         dt = time.perf_counter() - t0 - si["compile_s"]  # numba's first-call compilation is not SShaDe's time
