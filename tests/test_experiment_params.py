@@ -9,7 +9,14 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
-from eval.experiments import cases, convergence, experiments, pose_transfer, scaling, tosca
+from eval.experiments import (
+    cases,
+    convergence,
+    experiments,
+    pose_transfer,
+    scaling,
+    tosca,
+)
 from eval.methods import make_methods
 
 #: experiment (conf/experiment/NAME.yaml) -> its experiment module.

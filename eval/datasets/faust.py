@@ -28,7 +28,9 @@ import numpy as np
 
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust
-from defaust.handles import landmark_handles  # the DeFAUST builder's (one implementation)
+from defaust.handles import (
+    landmark_handles,  # the DeFAUST builder's (one implementation)
+)
 from sshade.errors import SShaDeError
 
 from .case import DeformationCase

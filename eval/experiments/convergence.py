@@ -108,8 +108,7 @@ def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
     :func:`libigl_curve`; ``accelerate`` as in ``solve_arap``; ``U0`` a start,
     ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
     ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
-    from sshade.arap import rigid_fit
-    from sshade.arap import solve_arap
+    from sshade.arap import rigid_fit, solve_arap
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     if U0 is None:
         R, t = rigid_fit(V[handles], targets)

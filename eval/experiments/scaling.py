@@ -111,8 +111,8 @@ def run_scaling(cfg) -> dict:
     from sshade.deform import check_params
     from sshade.warmup import warm_sshade
 
-    from ..runinfo import collect_runinfo, write_runinfo
     from ..datasets.shapes import axis_landmarks
+    from ..runinfo import collect_runinfo, write_runinfo
 
     sc = cfg.scaling
     out_dir = abs_path(cfg.out_dir)

@@ -124,6 +124,7 @@ def group_table(df, by: str, columns, *, all_label: str = "all (mean over cases)
     DataFrame with ``by``, ``n_cases`` (successful), ``n_failed`` and the means.
     """
     import pandas as pd
+
     from ..tables import ok_mask
     ok = ok_mask(df)  # NaN-safe: no fillna("") on an all-empty error column read back as float64
     cols = [c for c in columns if c in df.columns]
