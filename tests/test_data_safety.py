@@ -119,9 +119,10 @@ def test_a_typo_in_dataset_root_builds_nothing(tmp_path, monkeypatch):
 def test_build_policy(tmp_path, monkeypatch):
     from omegaconf import OmegaConf
 
-    from eval.app import _abs, _build_wanted
+    from eval.datasets.defaust import build_wanted as _build_wanted
+    from eval.paths import abs_path
     monkeypatch.chdir(tmp_path)
-    default, other = _abs("data/defaust"), _abs("elsewhere")
+    default, other = abs_path("data/defaust"), abs_path("elsewhere")
     ds = OmegaConf.create({"build": {"enabled": "auto"}})
     assert _build_wanted(default, ds) and not _build_wanted(other, ds)
     assert _build_wanted(other, OmegaConf.create({"build": {"enabled": True}}))

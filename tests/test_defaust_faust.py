@@ -9,7 +9,7 @@ import pytest
 
 from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
-from defaust.dataset import load_defaust, load_handles
+from eval.datasets.defaust import load_defaust, load_handles
 from defaust.faust_source import FAUST_LANDMARKS, discover_faust, faust_subjects
 from defaust.meshio import read_mesh
 from sshade.errors import SShaDeError

@@ -117,15 +117,15 @@ def test_tosca_cat_pair(cat):
 
 def _cfg(root, out_dir, **over):
     from omegaconf import OmegaConf
-    tosca = {"root": str(root), "n_low": 300, "n_samplings": 2, "seed": 0, "min_vertices": 5000,
-             "classes": ["centaur", "wolf"], "poses": [1], "gradient": "normalized", "workers": 1}
+    tosca = {"root": str(root), "min_vertices": 5000, "classes": ["centaur", "wolf"], "poses": [1]}
     tosca.update(over)
+    sshade = {"n_low": 300, "n_samplings": 2, "seed": 0, "gradient": "normalized", "workers": 1}
     return OmegaConf.create({"experiment": {"name": "tosca", "kind": "tosca"}, "out_dir": str(out_dir),
-                             "tosca": tosca})
+                             "tosca": tosca, "sshade": sshade})
 
 
 def test_run_tosca_writes_tables(tmp_path):
-    from eval.isometric import PAPER_TOSCA, run_tosca
+    from eval.experiments.tosca import PAPER_TOSCA, run_tosca
     data_file("tosca/centaur0.off"), data_file("tosca/centaur1.off"), data_file("tosca/wolf0.off")
     from eval.render import png_size
     out = tmp_path / "out"
@@ -160,7 +160,7 @@ def test_run_tosca_writes_tables(tmp_path):
 
 
 def test_run_tosca_bad_config(tmp_path):
-    from eval.isometric import run_tosca
+    from eval.experiments.tosca import run_tosca
     with pytest.raises(SShaDeError, match="tosca.root"):
         run_tosca(_cfg(tmp_path / "nowhere", tmp_path / "out"))
     (tmp_path / "empty").mkdir()
@@ -181,7 +181,7 @@ def test_cli_experiment_tosca(tmp_path):
         pytest.skip("shared data is not at ../shared/data relative to the repository")
     env = subprocess_env()
     r = subprocess.run([sys.executable, "-m", "eval", "experiment=tosca", "tosca.classes=[centaur]",
-                        "tosca.poses=[2]", "tosca.n_low=300", "tosca.n_samplings=1", "tosca.workers=1",
+                        "tosca.poses=[2]", "sshade.n_low=300", "sshade.n_samplings=1", "sshade.workers=1",
                         f"out_dir={tmp_path / 'cli'}"], cwd=ROOT, env=env, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]

@@ -111,8 +111,8 @@ def test_check_config_rejects_junk_numbers(override, key):
 
 def test_check_config_experiment_sections():
     from eval.config_check import check_config
-    for exp, bad in [("scaling", "scaling.n_low=inf"), ("tosca", "tosca.n_samplings=abc"),
-                     ("pose_transfer", "pose_transfer.seed=nan"), ("convergence", "convergence.time_budget_s=abc"),
+    for exp, bad in [("scaling", "scaling.elastic_budget_s=inf"), ("tosca", "tosca.min_vertices=abc"),
+                     ("tosca", "sshade.n_samplings=abc"), ("pose_transfer", "sshade.seed=nan"), ("convergence", "convergence.time_budget_s=abc"),
                      ("shapes", "dataset.vertex_range=[10,abc]")]:
         check_config(_compose_eval([f"experiment={exp}"]))
         with pytest.raises(SShaDeError, match=bad.split("=")[0].replace(".", r"\.")):

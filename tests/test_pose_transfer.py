@@ -1,5 +1,5 @@
 """Pose transfer (paper §4.3): sshade.isometric.pose_transfer and the FAUST experiment
-(eval/pose_transfer.py)."""
+(eval/experiments/pose_transfer.py)."""
 from __future__ import annotations
 
 import json
@@ -75,15 +75,15 @@ def test_bad_input(faust):
 
 def _cfg(root, out_dir, **over):
     from omegaconf import OmegaConf
-    pt = {"root": str(root), "n_low": 300, "n_samplings": 2, "seed": 0, "subjects": [0, 1], "poses": [1],
-          "gradient": "normalized", "workers": 1, "align": True}
+    pt = {"root": str(root), "subjects": [0, 1], "poses": [1], "align": True}
     pt.update(over)
+    sshade = {"n_low": 300, "n_samplings": 2, "seed": 0, "gradient": "normalized", "workers": 1}
     return OmegaConf.create({"experiment": {"name": "pose_transfer", "kind": "pose_transfer"},
-                             "out_dir": str(out_dir), "pose_transfer": pt})
+                             "out_dir": str(out_dir), "pose_transfer": pt, "sshade": sshade})
 
 
 def test_run_pose_transfer_writes_tables(tmp_path, faust):
-    from eval.pose_transfer import run_pose_transfer
+    from eval.experiments.pose_transfer import run_pose_transfer
     from eval.render import png_size
     out = tmp_path / "out"
     cfg = _cfg(SHARED_DATA / "faust_reg", out)
@@ -112,7 +112,7 @@ def test_run_pose_transfer_writes_tables(tmp_path, faust):
 
 
 def test_run_pose_transfer_bad_config(tmp_path):
-    from eval.pose_transfer import run_pose_transfer
+    from eval.experiments.pose_transfer import run_pose_transfer
     with pytest.raises(SShaDeError, match="pose_transfer.root"):
         run_pose_transfer(_cfg(tmp_path / "nowhere", tmp_path / "out"))
     data_file("faust_reg/tr_reg_000.ply")

@@ -95,7 +95,7 @@ def test_convergence_experiment_writes_table_and_figure(tmp_path):
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=[
             "experiment=convergence", "convergence.cases=[plane]", "convergence.plane.n_target=2000",
-            "convergence.time_budget_s=10", "convergence.sshade.n_low=300", "convergence.sshade.workers=1",
+            "convergence.time_budget_s=10", "sshade.n_low=300", "sshade.workers=1",
             f"out_dir={tmp_path / 'out'}", f"reference.cache={tmp_path / 'refs'}"])
     res = run_experiment(cfg)
     t = res["table"]

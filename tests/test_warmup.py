@@ -140,7 +140,7 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
 
 
 def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, monkeypatch):
-    """eval.scaling: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
+    """eval.experiments.scaling: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
     base = shared_data / "classic" / "armadillo.obj"
     if not base.is_file():
         pytest.skip(f"{base} not found")
@@ -148,7 +148,7 @@ def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, mon
     from hydra import compose, initialize_config_dir
 
     from eval.app import CONF_DIR
-    from eval.scaling import run_scaling
+    from eval.experiments.scaling import run_scaling
     real_s, real_f = sw.warm_sshade, sw.warm_fullres
 
     def slow(real):
@@ -161,8 +161,8 @@ def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, mon
     monkeypatch.setattr(sw, "warm_fullres", slow(real_f))
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=[
-            "experiment=scaling", f"scaling.base_mesh={base}", "scaling.sizes=[3000]", "scaling.n_low=300",
-            "scaling.n_samplings=2", "scaling.workers=1", "scaling.elastic_budget_s=30", f"scaling.cache={tmp_path}/c",
+            "experiment=scaling", f"scaling.base_mesh={base}", "scaling.sizes=[3000]", "sshade.n_low=300",
+            "sshade.n_samplings=2", "sshade.workers=1", "scaling.elastic_budget_s=30", f"scaling.cache={tmp_path}/c",
             f"out_dir={tmp_path}/out"])
     res = run_scaling(cfg)
     row = res["table"].iloc[0]

@@ -1,40 +1,97 @@
-"""Datasets of deformation cases for the evaluator.
+"""Datasets of deformation cases for the evaluator (``dataset.name`` in the config).
+
+Every case is a :class:`~eval.datasets.case.DeformationCase` (or a subclass). One
+module per dataset, each registering itself (:func:`eval.datasets.registry.register_dataset`:
+its loader and the ``dataset.*`` config keys it takes):
 
 - :mod:`eval.datasets.faust`: FAUST registrations -> DeFAUST-style cases
   (:func:`~eval.datasets.faust.faust_cases`).
-- ``defaust``: a DeFAUST build (``python -m defaust``), read by
-  :func:`defaust.dataset.load_defaust` at high or low resolution.
+- :mod:`eval.datasets.defaust`: a DeFAUST build (``python -m defaust``), read by
+  :func:`~eval.datasets.defaust.load_defaust` at high or low resolution (and built
+  first into the default folder, ``dataset.build.enabled``).
 - :mod:`eval.datasets.shapes`: single shapes (Stanford models) with a fixed user-defined
   edit (:func:`~eval.datasets.shapes.shape_cases`; paper §4.1, Fig. arap-examples).
 
-:func:`load_cases` dispatches on ``dataset.name`` from the Hydra config.
+The registry imports every module of this package (no list to update): a new dataset is
+one module here calling ``register_dataset`` plus ``conf/dataset/NAME.yaml``.
+:func:`load_cases` dispatches on the name; :func:`dataset_root` and
+:func:`dataset_options` read the ``dataset`` config section for it.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from sshade.errors import SShaDeError
 
+from ..paths import abs_path
+from .case import DeformationCase
 from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
+from .registry import Dataset, datasets, find_dataset, register_dataset
 
-__all__ = ["Case", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases", "DATASETS"]
+__all__ = ["Case", "DeformationCase", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases",
+           "dataset_names", "dataset_root", "dataset_options", "Dataset", "datasets", "find_dataset",
+           "register_dataset"]
 
-DATASETS = ("faust", "defaust", "shapes")
+
+def dataset_names() -> list[str]:
+    """Names of the registered datasets, sorted."""
+    return list(datasets())
 
 
-def load_cases(name: str, root, **kw) -> list[Case]:
-    """Cases of dataset ``name`` (one of :data:`DATASETS`) found under ``root``.
+def load_cases(name: str, root, **kw) -> list[DeformationCase]:
+    """Cases of dataset ``name`` (one of :func:`dataset_names`) found under ``root``.
 
-    Keyword arguments go to the dataset's builder (e.g. :func:`faust_cases`).
+    Keyword arguments go to the dataset's loader (e.g. :func:`faust_cases`).
 
     Raises
     ------
-    SShaDeError on an unknown dataset name or whatever the builder raises.
+    SShaDeError on an unknown dataset name or whatever the loader raises.
     """
-    if name == "faust":
-        return faust_cases(root, **kw)
-    if name == "defaust":
-        from defaust.dataset import load_defaust
-        return load_defaust(root, **kw)
-    if name == "shapes":
-        from .shapes import shape_cases
-        return shape_cases(root, **kw)
-    raise SShaDeError(f"unknown dataset {name!r}; available: {list(DATASETS)}")
+    d = find_dataset(name)
+    if d is None:
+        raise SShaDeError(f"unknown dataset {name!r}; available: {dataset_names()}")
+    return d.load(root, **kw)
+
+
+def dataset_root(cfg) -> Path:
+    """``dataset.root`` of ``cfg`` resolved against the launch directory, after the
+    dataset's ``prepare`` step (the DeFAUST build into its default folder).
+
+    Raises
+    ------
+    SShaDeError when no dataset is configured, ``dataset.root`` is unset or is not a folder.
+    """
+    from omegaconf import OmegaConf
+    ds = cfg.get("dataset")
+    if ds is None:
+        raise SShaDeError("no dataset configured; pass dataset=faust dataset.root=DIR")
+    if OmegaConf.is_missing(ds, "root") or ds.get("root") in (None, ""):
+        raise SShaDeError("dataset.root is not set: pass dataset.root=DIR, a folder with FAUST "
+                          "registrations tr_reg_XYZ.ply (e.g. dataset.root=../shared/data/faust_reg)")
+    root = abs_path(ds.root)
+    d = find_dataset(ds.get("name", ""))
+    if d is not None and d.prepare is not None:
+        d.prepare(root, ds)
+    if not root.is_dir():
+        hint = d.root_hint if d is not None else ""
+        raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}{hint}")
+    return root
+
+
+def dataset_options(ds, *, skip=()) -> dict:
+    """The keyword options of the loader of dataset section ``ds`` (its registered
+    ``keys`` present in ``ds``, except ``skip``): list/mapping values as plain Python,
+    path keys resolved against the launch directory. An unknown name gives ``{}``
+    (:func:`load_cases` then names the known datasets)."""
+    from omegaconf import OmegaConf
+    d = find_dataset(ds.get("name", ""))
+    if d is None:
+        return {}
+    opts = {k: ds.get(k) for k in d.keys if k in ds and k not in skip}
+    for k, v in opts.items():
+        if OmegaConf.is_config(v):
+            opts[k] = OmegaConf.to_container(v)
+    for k in d.path_keys:
+        if opts.get(k) is not None:
+            opts[k] = abs_path(opts[k])
+    return opts

@@ -28,10 +28,13 @@ import numpy as np
 
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust
+from defaust.handles import (
+    landmark_handles,  # the DeFAUST builder's (one implementation)
+)
 from sshade.errors import SShaDeError
 
-from defaust.dataset import DeformationCase
-from defaust.handles import landmark_handles  # the DeFAUST builder's (one implementation)
+from .case import DeformationCase
+from .registry import register_dataset
 
 __all__ = ["FAUST_LANDMARKS", "Case", "discover_faust", "faust_cases", "case_seed"]
 
@@ -82,7 +85,7 @@ FAUST_N_VERTICES = 6890
 @dataclass
 class Case(DeformationCase):
     """One FAUST deformation case: deform the rest pose with handles towards a target
-    pose (fields of :class:`defaust.dataset.DeformationCase`, plus the ones below).
+    pose (fields of :class:`eval.datasets.case.DeformationCase`, plus the ones below).
 
     Attributes
     ----------
@@ -202,3 +205,7 @@ def _as_list(x) -> list:
 
 def _fmt(sel) -> str:
     return "all" if sel is None else str(sorted(sel))
+
+
+register_dataset("faust", faust_cases, keys=("subjects", "poses", "n_per_landmark", "neighbourhood",
+                                             "static_threshold", "seed", "limit"))

@@ -30,8 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from defaust.dataset import DeformationCase
 from sshade.errors import SShaDeError
+
+from .case import DeformationCase
+from .registry import register_dataset
 
 __all__ = ["ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
 
@@ -44,7 +46,7 @@ DEFAULT_SHAPES = ("armadillo.obj", "bunny.off", "dragon.obj")
 @dataclass
 class ShapeCase(DeformationCase):
     """One user-defined deformation of one shape (fields of
-    :class:`defaust.dataset.DeformationCase`, plus the ones below).
+    :class:`eval.datasets.case.DeformationCase`, plus the ones below).
 
     Attributes
     ----------
@@ -187,3 +189,7 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
                                static=st, V_gt=None, group=group, seed=int(seed), path=path,
                                n_source=len(V0)))
     return cases
+
+
+register_dataset("shapes", shape_cases, keys=("files", "vertex_range", "cache", "n_per_group", "region_radius",
+                                              "rotate_deg", "translate", "seed", "limit"), path_keys=("cache",))

@@ -11,7 +11,9 @@ both: M = a pose 0, S = b pose 0, M' = a pose p; the prediction
 ``S' = pose_transfer(M, F, S, M', align=True)`` (:func:`sshade.isometric.pose_transfer`:
 S first moved rigidly onto M, since FAUST subjects stand at different places; M
 remeshed to ``n_low`` vertices, ``n_samplings`` samplings averaged) is compared with b
-pose p.
+pose p. SShaDe's parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``,
+``workers``) come from the method config ``method.SShaDe`` (the ``sshade`` section;
+``conf/experiment/pose_transfer.yaml`` sets ``sshade.n_low: 1000``; :func:`sshade_params`).
 
 The ground truth is approximate: two subjects never hold "pose p" identically, so
 even a perfect transfer keeps the difference between a's and b's pose p; and the
@@ -42,9 +44,17 @@ import time
 
 import numpy as np
 
+from defaust.meshio import atomic_write, read_mesh
 from sshade.errors import SShaDeError
 
-__all__ = ["run_pose_transfer", "METRICS"]
+from ..datasets.faust import discover_faust
+from ..paths import abs_path
+from .common import as_list
+from .registry import register_experiment
+from .tosca import gt_stretch_pct, markdown_table, transfer_n_low
+from .tosca import sshade_params as _tosca_sshade_params
+
+__all__ = ["run_pose_transfer", "METRICS", "sshade_params"]
 
 log = logging.getLogger(__name__)
 
@@ -68,15 +78,22 @@ _COLUMNS = (
 )
 
 
+def sshade_params(cfg) -> dict:
+    """Keyword parameters of :func:`sshade.isometric.pose_transfer` from the method config
+    ``method.SShaDe``: ``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``workers``
+    (the same keys as TOSCA's, :func:`eval.experiments.tosca.sshade_params`)."""
+    return _tosca_sshade_params(cfg)
+
+
 def run_pose_transfer(cfg) -> dict:
     """Run the FAUST pose-transfer experiment of ``cfg.pose_transfer``.
 
     Config keys (``cfg.pose_transfer``, see conf/experiment/pose_transfer.yaml):
-    ``root`` (FAUST registrations; relative to the launch directory), ``n_low``,
-    ``n_samplings``, ``seed``, ``subjects`` (list or null = all with a pose 0),
-    ``poses`` (target poses or null = all but 0), ``gradient``, ``workers``, ``align``
-    (rigidly align S onto M first; default true). Outputs go
-    to ``cfg.out_dir``. ``cfg.dataset`` is not used.
+    ``root`` (FAUST registrations; relative to the launch directory), ``subjects``
+    (list or null = all with a pose 0), ``poses`` (target poses or null = all but 0),
+    ``align`` (rigidly align S onto M first; default true). SShaDe's ``n_low``,
+    ``n_samplings``, ``seed``, ``gradient``, ``workers``: :func:`sshade_params`. Outputs
+    go to ``cfg.out_dir``. ``cfg.dataset`` is not used.
 
     Returns
     -------
@@ -91,38 +108,50 @@ def run_pose_transfer(cfg) -> dict:
     t_start = time.perf_counter()
     from omegaconf import OmegaConf
 
-    from .app import _abs
-    from .datasets.faust import discover_faust
-    from .isometric import _as_list, markdown_table
+    from sshade.deform import sampling_seeds
 
+    from ..runinfo import collect_runinfo, write_runinfo
+    pc, root, files = _pose_transfer_root(cfg)
+    out_dir = abs_path(cfg.out_dir)
+    jobs = _pose_transfer_jobs(pc, root, files)
+    sp = sshade_params(cfg)
+    k, seed = int(sp["n_samplings"]), int(sp["seed"])
+    align = bool(pc.get("align", True))
+    log.info("%d pose-transfer case(s) from %s; n_low=%s k=%d; output %s", len(jobs), root, sp["n_low"], k,
+             out_dir)
+    F, V = _read_meshes(files, jobs)
+
+    config = OmegaConf.to_container(cfg, resolve=True)
+    config["pose_transfer"]["root"] = str(root)
+    info = collect_runinfo(config, seeds={"pose_transfer": seed, "sampling_seeds": sampling_seeds(seed, k)},
+                           extra={"status": "running", "out_dir": str(out_dir)})
+    write_runinfo(out_dir / "run.json", info)
+    rows = _run_pose_transfer_cases(cfg, jobs, F, V, sp, align, out_dir)
+    return _pose_transfer_tables(rows, sp, align, info, out_dir, t_start)
+
+
+def _pose_transfer_root(cfg):
+    """``(section, root, files)``: ``pose_transfer.root`` resolved and its registrations
+    (:func:`eval.datasets.faust.discover_faust`)."""
+    from omegaconf import OmegaConf
     pc = cfg.get("pose_transfer")
     if pc is None:
         raise SShaDeError("no `pose_transfer` section in the config; use experiment=pose_transfer")
     if OmegaConf.is_missing(pc, "root") or pc.get("root") in (None, ""):
         raise SShaDeError("pose_transfer.root is not set: pass pose_transfer.root=DIR "
                           "(a folder of FAUST registrations tr_reg_XYZ.ply)")
-    root = _abs(pc.root)
+    root = abs_path(pc.root)
     if not root.is_dir():
         raise SShaDeError(f"pose_transfer.root does not exist or is not a folder: {root} "
                           "(pass pose_transfer.root=DIR, e.g. ../shared/data/faust_reg)")
-    files = discover_faust(root)
+    return pc, root, discover_faust(root)
 
-    import pandas as pd
-    from tqdm import tqdm
-    from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from defaust.meshio import atomic_write, read_mesh
-    from sshade.deform import sampling_seeds
-    from sshade.isometric import pose_transfer, rigid_align
-
-    from .isometric import gt_stretch_pct
-    from .figures import figures_options, pose_transfer_figure, safe_figure
-    from .metrics import ground_truth_metrics
-    from .runinfo import collect_runinfo, finish_run, write_runinfo
-
-    out_dir = _abs(cfg.out_dir)
+def _pose_transfer_jobs(pc, root, files) -> list[tuple[int, int, int]]:
+    """The cases ``(a, b, p)``: ordered pairs of selected subjects with a pose 0 and
+    the target poses present for both."""
     present = sorted({s for s, p in files if p == 0})
-    subjects = _as_list(pc.get("subjects"))
+    subjects = as_list(pc.get("subjects"))
     if subjects is None:
         subjects = present
     else:
@@ -131,7 +160,7 @@ def run_pose_transfer(cfg) -> dict:
         if miss:
             raise SShaDeError(f"pose_transfer.subjects: no rest pose (pose 0) for subject(s) {miss} in {root} "
                               f"(subjects with pose 0: {present})")
-    poses = _as_list(pc.get("poses"))
+    poses = as_list(pc.get("poses"))
     poses = None if poses is None else [int(p) for p in poses]
     jobs = [(a, b, p) for a in subjects for b in subjects if a != b
             for p in sorted({q for s, q in files if s == a and q != 0})
@@ -139,12 +168,12 @@ def run_pose_transfer(cfg) -> dict:
     if not jobs:
         raise SShaDeError(f"no pose-transfer case in {root}: need two subjects with pose 0 and a common "
                           f"target pose (subjects {subjects}, poses {poses}, files {sorted(files)})")
-    n_low, k, seed = int(pc.n_low), int(pc.n_samplings), int(pc.seed)
-    gradient, workers = str(pc.get("gradient", "normalized")), pc.get("workers")
-    align = bool(pc.get("align", True))
-    log.info("%d pose-transfer case(s) from %s; n_low=%d k=%d; output %s", len(jobs), root, n_low, k, out_dir)
+    return jobs
 
-    # the meshes used, read once; the shared face array is the first rest pose's
+
+def _read_meshes(files, jobs):
+    """The meshes the cases use, read once: ``(F, V)`` with ``V[(subject, pose)]``; the
+    shared face array is the first rest pose's (every file must have it)."""
     need = sorted({(a, 0) for a, _, _ in jobs} | {(b, 0) for _, b, _ in jobs} | {(a, p) for a, _, p in jobs}
                   | {(b, p) for _, b, p in jobs})
     _, F = read_mesh(files[need[0]])
@@ -155,52 +184,75 @@ def run_pose_transfer(cfg) -> dict:
             raise SShaDeError(f"{files[key].name}: its faces differ from {files[need[0]].name}'s; FAUST "
                               "registrations must share one face array")
         V[key] = Vk
+    return F, V
 
-    config = OmegaConf.to_container(cfg, resolve=True)
-    config["pose_transfer"]["root"] = str(root)
-    info = collect_runinfo(config, seeds={"pose_transfer": seed, "sampling_seeds": sampling_seeds(seed, k)},
-                           extra={"status": "running", "out_dir": str(out_dir)})
-    write_runinfo(out_dir / "run.json", info)
 
+def _run_pose_transfer_cases(cfg, jobs, F, V, sp: dict, align: bool, out_dir) -> list[dict]:
+    """Every case (:func:`_pose_transfer_case`), ``cases.csv`` rewritten after each,
+    the figures of the first ``figures.max_cases``; returns the rows."""
+    import pandas as pd
+    from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
+    from ..figures import figures_options, pose_transfer_figure, safe_figure
     rows: list[dict] = []
     fig_on, fig_left = figures_options(cfg)  # the first figures.max_cases cases
-
-    def write_cases():
-        with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:
-            pd.DataFrame(rows).to_csv(fh, index=False)
-
     with logging_redirect_tqdm():
         for a, b, p in tqdm(jobs, desc="pose transfer", unit="case", file=sys.stderr, dynamic_ncols=True):
-            row = {"case": f"s{a}->s{b}_p{p}", "source": a, "subject": b, "pose": p, "n_vertices": len(V[(a, 0)]),
-                   "n_samplings": k, "seed": seed, "error": ""}
-            try:
-                M, S, Mp, gt = V[(a, 0)], V[(b, 0)], V[(a, p)], V[(b, p)]
-                t0 = time.perf_counter()
-                Vs, ti = pose_transfer(M, F, S, Mp, n_low=n_low, n_samplings=k, seed=seed, gradient=gradient,
-                                       workers=workers, align=align, return_info=True)
-                row["time_s"] = time.perf_counter() - t0
-                row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s", "workers")})
-                S_on_M = rigid_align(S, M) if align else S
-                for prefix, X in (("", Vs), ("naive_", Mp + (S_on_M - M)), ("identity_", S), ("mprime_", Mp)):
-                    row.update({prefix + key: v for key, v in ground_truth_metrics(rigid_align(X, gt), F, gt).items()})
-                    row[prefix + "stretch_vs_S_pct"] = gt_stretch_pct(S, X, F)
-                row["truth_stretch_vs_S_pct"] = gt_stretch_pct(S, gt, F)
-                log.info("%s  %.2fs  vertex mean %.3f%% (naive %.3f%%, identity %.3f%%, M' %.3f%%)  d_H %.3e",
-                         row["case"], row["time_s"], row["gt_vertex_mean_pct"], row["naive_gt_vertex_mean_pct"],
-                         row["identity_gt_vertex_mean_pct"], row["mprime_gt_vertex_mean_pct"], row["hausdorff"])
-                if fig_on and fig_left > 0:
-                    fig_left -= 1
-                    safe_figure(row["case"], pose_transfer_figure, M, S, Mp, Vs, gt, F,
-                                out_dir / "figures" / f"s{a}-s{b}_p{p}.png",
-                                title=f"subject {b} in subject {a}'s pose {p}: vertex error "
-                                      f"{row['gt_vertex_mean_pct']:.2f}% (identity "
-                                      f"{row['identity_gt_vertex_mean_pct']:.2f}%)")
-            except SShaDeError as e:
-                row["error"] = str(e) or type(e).__name__
-                log.warning("%s failed: %s", row["case"], row["error"])
+            row, Vs = _pose_transfer_case(a, b, p, F, V, sp, align)
+            if Vs is not None and fig_on and fig_left > 0:
+                fig_left -= 1
+                safe_figure(row["case"], pose_transfer_figure, V[(a, 0)], V[(b, 0)], V[(a, p)], Vs, V[(b, p)], F,
+                            out_dir / "figures" / f"s{a}-s{b}_p{p}.png",
+                            title=f"subject {b} in subject {a}'s pose {p}: vertex error "
+                                  f"{row['gt_vertex_mean_pct']:.2f}% (identity "
+                                  f"{row['identity_gt_vertex_mean_pct']:.2f}%)")
             rows.append(row)
-            write_cases()
+            with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:
+                pd.DataFrame(rows).to_csv(fh, index=False)
+    return rows
 
+
+def _pose_transfer_case(a: int, b: int, p: int, F, V: dict, sp: dict, align: bool):
+    """One case: subject ``b`` put in subject ``a``'s pose ``p``, with the references
+    (naive, identity, M'); returns ``(row, Vs)`` (``Vs`` None when it failed: its
+    message in ``error``)."""
+    from sshade.isometric import pose_transfer, rigid_align
+
+    from ..metrics import ground_truth_metrics
+    k, seed = int(sp["n_samplings"]), int(sp["seed"])
+    row = {"case": f"s{a}->s{b}_p{p}", "source": a, "subject": b, "pose": p, "n_vertices": len(V[(a, 0)]),
+           "n_samplings": k, "seed": seed, "error": ""}
+    try:
+        M, S, Mp, gt = V[(a, 0)], V[(b, 0)], V[(a, p)], V[(b, p)]
+        t0 = time.perf_counter()
+        Vs, ti = pose_transfer(M, F, S, Mp, n_low=transfer_n_low(sp["n_low"], len(M)), n_samplings=k, seed=seed,
+                               gradient=str(sp.get("gradient") or "normalized"), workers=sp.get("workers"),
+                               align=align, return_info=True)
+        row["time_s"] = time.perf_counter() - t0
+        row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s", "workers")})
+        S_on_M = rigid_align(S, M) if align else S
+        for prefix, X in (("", Vs), ("naive_", Mp + (S_on_M - M)), ("identity_", S), ("mprime_", Mp)):
+            row.update({prefix + key: v for key, v in ground_truth_metrics(rigid_align(X, gt), F, gt).items()})
+            row[prefix + "stretch_vs_S_pct"] = gt_stretch_pct(S, X, F)
+        row["truth_stretch_vs_S_pct"] = gt_stretch_pct(S, gt, F)
+        log.info("%s  %.2fs  vertex mean %.3f%% (naive %.3f%%, identity %.3f%%, M' %.3f%%)  d_H %.3e",
+                 row["case"], row["time_s"], row["gt_vertex_mean_pct"], row["naive_gt_vertex_mean_pct"],
+                 row["identity_gt_vertex_mean_pct"], row["mprime_gt_vertex_mean_pct"], row["hausdorff"])
+    except SShaDeError as e:
+        row["error"] = str(e) or type(e).__name__
+        log.warning("%s failed: %s", row["case"], row["error"])
+        return row, None
+    return row, Vs
+
+
+def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, out_dir, t_start: float) -> dict:
+    """``table.csv`` / ``table.md`` (one row per method, a per-case table), ``run.json``
+    finished; the return value of :func:`run_pose_transfer`."""
+    import pandas as pd
+
+    from ..runinfo import finish_run
+    n_low, k, seed, gradient = sp["n_low"], int(sp["n_samplings"]), int(sp["seed"]), str(sp.get("gradient"))
     df = pd.DataFrame(rows)
     ok = df["error"].astype(str).str.len() == 0
     good = df[ok]
@@ -244,3 +296,6 @@ def run_pose_transfer(cfg) -> dict:
         f"{len(df)} case(s), {n_err} failed, {wall:.1f} s in all.", ""])
     finish_run(out_dir, md, paths, info, n_cases=len(df), n_errors=n_err, wall_s=wall)
     return {"out_dir": out_dir, "paths": paths, "cases": df, "table": table, "n_cases": len(df), "n_errors": n_err}
+
+
+register_experiment("pose_transfer", run_pose_transfer)

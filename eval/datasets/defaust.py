@@ -1,4 +1,5 @@
-"""Loading a built DeFAUST folder as deformation cases (the evaluator's entry point).
+"""The ``defaust`` dataset: a built DeFAUST folder (``python -m defaust``, :mod:`defaust`)
+read as deformation cases.
 
 Each case deforms a subject's rest mesh (low or high resolution) with the handles of one
 target pose. The handles are stored as positions; here they are snapped to the nearest
@@ -10,10 +11,14 @@ mesh; at low resolution it is exact).
 
 Example
 -------
->>> from defaust.dataset import load_defaust
+>>> from eval.datasets.defaust import load_defaust
 >>> cases = load_defaust("/tmp/defaust_faust", resolution="low")  # doctest: +SKIP
 >>> c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape  # doctest: +SKIP
 ((6890, 3), (178,), (178, 3))
+
+When ``dataset.root`` is the default folder :data:`DEFAULT_DEFAUST_ROOT` (or with
+``dataset.build.enabled=true``) the evaluator first builds, finishes or verifies the
+build there (:func:`prepare_root`); any other folder is only read.
 """
 from __future__ import annotations
 
@@ -24,44 +29,20 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.manifest import FORMAT, MANIFEST
+from defaust.handles import HandleSet, handles_from_arrays, snap_handles
+from defaust.meshio import read_mesh
+from defaust.store import read_npz, sha256_file
 from sshade.errors import SShaDeError
 
-from .build import FORMAT, MANIFEST
-from .handles import HandleSet, handles_from_arrays, snap_handles
-from .meshio import read_mesh
-from .store import read_npz, sha256_file
+from ..paths import abs_path
+from .case import DeformationCase
+from .registry import register_dataset
 
-__all__ = ["DeformationCase", "DefaustCase", "load_defaust", "load_handles", "read_manifest"]
+__all__ = ["DefaustCase", "load_defaust", "load_handles", "read_manifest", "DEFAULT_DEFAUST_ROOT", "build_wanted",
+           "prepare_root"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class DeformationCase:
-    """What every evaluator dataset yields: one rest mesh, its handles and targets.
-
-    Attributes
-    ----------
-    name : str, the case's name in tables and figure files.
-    subject, pose : subject id (int; a shape name for single shapes) and target pose.
-    V : (n, 3) float64 rest mesh vertices. F : (m, 3) int64 faces.
-    handles : (h,) int64 unique handle vertex indices into ``V``.
-    targets : (h, 3) float64 handle target positions (units of ``V``).
-    static : (h,) bool, the handle's group stays at its rest position.
-    V_gt : (n, 3) float64 true target pose on the same mesh, or None (no ground truth).
-    group : (h,) int64 handle group of each handle, or None.
-    """
-
-    name: str
-    subject: int
-    pose: int
-    V: np.ndarray
-    F: np.ndarray
-    handles: np.ndarray
-    targets: np.ndarray
-    static: np.ndarray
-    V_gt: np.ndarray | None
-    group: np.ndarray = field(repr=False, default=None)
 
 
 @dataclass
@@ -245,3 +226,59 @@ def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | 
     if not cases:
         raise SShaDeError(f"no DeFAUST case in {root}")
     return cases
+
+
+#: The only folder the evaluator builds the embedded DeFAUST into on its own
+#: (``dataset.build.enabled: auto``), relative to where the command runs.
+DEFAULT_DEFAUST_ROOT = "data/defaust"
+
+
+def build_wanted(root: Path, ds) -> bool:
+    """``dataset.build.enabled``: ``auto`` (default) builds only when ``root`` is
+    :data:`DEFAULT_DEFAUST_ROOT`; ``true`` builds into any folder (the builder still
+    refuses a folder holding another build or other files); ``false`` never builds.
+    A user's own folder (e.g. a DeFAUST built from their FAUST scans, or a typo) is
+    therefore read, never written, unless they ask for a build.
+
+    Raises
+    ------
+    SShaDeError on a value other than auto, true or false.
+    """
+    enabled = (ds.get("build", {}) or {}).get("enabled", "auto")
+    if isinstance(enabled, str) and enabled.strip().lower() == "auto":
+        return root == abs_path(DEFAULT_DEFAUST_ROOT)
+    if not isinstance(enabled, bool):
+        raise SShaDeError(f"dataset.build.enabled must be auto, true or false, got {enabled!r}")
+    return enabled
+
+
+def _build(root: Path, ds) -> None:
+    """Build (or finish, or verify) the DeFAUST dataset at ``root`` before evaluating
+    (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped."""
+    from omegaconf import OmegaConf
+
+    from defaust.cli import compose_config
+    from defaust.cli import run as build_run
+    extra = ds.get("build", {}).get("overrides") or []
+    extra = OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra)
+    logging.getLogger("defaust").setLevel(logging.INFO)
+    bcfg = compose_config([f"out={root}", *[str(x) for x in extra]])
+    build_run(bcfg)
+
+
+def prepare_root(root: Path, ds) -> None:
+    """The dataset's ``prepare`` step (:func:`eval.datasets.dataset_root`): build into
+    ``root`` when :func:`build_wanted` says so."""
+    if build_wanted(root, ds):
+        _build(root, ds)
+
+
+def _seeds(root: Path) -> dict:
+    """Extra seeds of ``run.json``: the build's own seed (its manifest's parameters)."""
+    return {"defaust_manifest_seed": read_manifest(root).get("parameters", {}).get("seed")}
+
+
+register_dataset("defaust", load_defaust, keys=("subjects", "resolution", "limit"), prepare=prepare_root,
+                 root_hint=(f"; the evaluator builds a DeFAUST only into the default folder {DEFAULT_DEFAUST_ROOT} "
+                            f"or with dataset.build.enabled=true (python -m defaust out=DIR builds one)"),
+                 seeds=_seeds)

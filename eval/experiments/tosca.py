@@ -2,9 +2,12 @@
 
 For every TOSCA class (files ``NAMEk.off`` in ``tosca.root``, vertices 1:1 within a
 class) pose 0 is the rest pose M and every other pose M' one case: M is remeshed to
-``tosca.n_low`` vertices, the low-res mesh is taken into the pose through the
+``n_low`` vertices, the low-res mesh is taken into the pose through the
 correspondence and M is rebuilt in that pose with the per-triangle LRFs, averaged over
-``tosca.n_samplings`` samplings (:func:`sshade.isometric.isometric_transfer`).
+``n_samplings`` samplings (:func:`sshade.isometric.isometric_transfer`). SShaDe's
+parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``workers``) come from
+the method config ``method.SShaDe`` (the ``sshade`` section; ``conf/experiment/tosca.yaml``
+sets the paper's ``sshade.n_low: 6000``, ``sshade.n_samplings: 10``; :func:`sshade_params`).
 
 Per case (``cases.csv``): the paper's Hausdorff ``d_H`` and Chamfer ``d_C`` between the
 prediction and the true pose (vertex-to-surface, both shapes centred and scaled into
@@ -36,9 +39,15 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.meshio import atomic_write, read_mesh
 from sshade.errors import SShaDeError
 
-__all__ = ["PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table", "markdown_table", "run_tosca"]
+from ..paths import abs_path
+from .common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
+from .registry import register_experiment
+
+__all__ = ["PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table", "markdown_table", "run_tosca",
+           "sshade_params", "transfer_n_low"]
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +124,8 @@ def group_table(df, by: str, columns, *, all_label: str = "all (mean over cases)
     DataFrame with ``by``, ``n_cases`` (successful), ``n_failed`` and the means.
     """
     import pandas as pd
-    from .tables import ok_mask
+
+    from ..tables import ok_mask
     ok = ok_mask(df)  # NaN-safe: no fillna("") on an all-empty error column read back as float64
     cols = [c for c in columns if c in df.columns]
 
@@ -151,23 +161,42 @@ def markdown_table(table, first: tuple[str, str], columns) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _as_list(x):
-    from omegaconf import OmegaConf
-    if x is None:
-        return None
-    if OmegaConf.is_config(x):
-        x = OmegaConf.to_container(x)
-    return list(x) if isinstance(x, (list, tuple)) else [x]
+def sshade_params(cfg) -> dict:
+    """Keyword parameters of SShaDe's correspondence transfers
+    (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
+    ``n_low`` (int or ``"auto"``, see :func:`transfer_n_low`), ``n_samplings``, ``seed``,
+    ``gradient``, ``workers`` of the method config ``method.SShaDe``
+    (:func:`eval.experiments.common.sshade_spec`)."""
+    spec = sshade_spec(cfg)
+    return {k: spec[k] for k in SSHADE_TRANSFER_KEYS if k in spec}
+
+
+def transfer_n_low(n_low, n_vertices: int) -> int:
+    """``n_low`` for a mesh of ``n_vertices``: the int itself, or for ``"auto"``/None
+    :func:`sshade.deform.auto_n_low` (as :func:`sshade.deform` does).
+
+    Raises
+    ------
+    SShaDeError on a value that is neither an integer nor ``"auto"``.
+    """
+    from sshade.deform import auto_n_low
+    if n_low is None or (isinstance(n_low, str) and n_low.strip().lower() == "auto"):
+        return auto_n_low(int(n_vertices))
+    try:
+        return int(n_low)
+    except (TypeError, ValueError):
+        raise SShaDeError(f"sshade.n_low must be an integer or auto, got {n_low!r}") from None
 
 
 def run_tosca(cfg) -> dict:
     """Run the TOSCA experiment of ``cfg.tosca`` (see conf/experiment/tosca.yaml).
 
     Config keys (``cfg.tosca``): ``root`` (folder of NAMEk.off files; relative to the
-    launch directory), ``n_low`` (paper: 6000), ``n_samplings`` (paper: 10), ``seed``,
-    ``min_vertices`` (classes below are excluded; paper: wolf), ``classes`` (list or
-    null = all), ``poses`` (target pose indices or null = all but 0), ``gradient``,
-    ``workers``. Outputs go to ``cfg.out_dir``. ``cfg.dataset`` is not used.
+    launch directory), ``min_vertices`` (classes below are excluded; paper: wolf),
+    ``classes`` (list or null = all), ``poses`` (target pose indices or null = all but
+    0). SShaDe's ``n_low`` (paper: 6000), ``n_samplings`` (paper: 10), ``seed``,
+    ``gradient``, ``workers``: :func:`sshade_params`. Outputs go to ``cfg.out_dir``.
+    ``cfg.dataset`` is not used.
 
     Returns
     -------
@@ -182,39 +211,51 @@ def run_tosca(cfg) -> dict:
     t_start = time.perf_counter()
     from omegaconf import OmegaConf
 
-    from .app import _abs
+    from sshade.deform import sampling_seeds
+
+    from ..runinfo import collect_runinfo, write_runinfo
+    root, found = _tosca_root(cfg)
+    out_dir = abs_path(cfg.out_dir)
+    sp = sshade_params(cfg)
+    k, seed = int(sp["n_samplings"]), int(sp["seed"])
+    rests, excluded, jobs = _tosca_jobs(cfg.tosca, root, found)
+    log.info("%d TOSCA case(s) from %s (classes %s; excluded %s); n_low=%s k=%d; output %s",
+             len(jobs), root, sorted(rests), sorted(excluded), sp["n_low"], k, out_dir)
+
+    config = OmegaConf.to_container(cfg, resolve=True)
+    config["tosca"]["root"] = str(root)
+    info = collect_runinfo(config, seeds={"tosca": seed, "sampling_seeds": sampling_seeds(seed, k)},
+                           extra={"status": "running", "out_dir": str(out_dir), "excluded": excluded,
+                                  "paper": PAPER_TOSCA})
+    write_runinfo(out_dir / "run.json", info)
+    df = _run_tosca_cases(cfg, jobs, rests, found, sp, out_dir)
+    return _tosca_tables(df, sp, excluded, info, out_dir, t_start)
+
+
+def _tosca_root(cfg):
+    """``tosca.root`` resolved and its classes (:func:`discover_tosca`)."""
+    from omegaconf import OmegaConf
     tc = cfg.get("tosca")
     if tc is None:
         raise SShaDeError("no `tosca` section in the config; use experiment=tosca")
     if OmegaConf.is_missing(tc, "root") or tc.get("root") in (None, ""):
         raise SShaDeError("tosca.root is not set: pass tosca.root=DIR (a folder of TOSCA NAMEk.off files)")
-    root = _abs(tc.root)
-    found = discover_tosca(root)
+    root = abs_path(tc.root)
+    return root, discover_tosca(root)
 
-    import pandas as pd
-    from tqdm import tqdm
-    from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from defaust.meshio import atomic_write, read_mesh
-    from sshade.isometric import isometric_transfer
-
-    from .figures import figures_options, safe_figure, tosca_figure
-    from .metrics import ground_truth_metrics, hausdorff, chamfer
-    from .runinfo import collect_runinfo, finish_run, write_runinfo
-
-    out_dir = _abs(cfg.out_dir)
-    classes = _as_list(tc.get("classes"))
+def _tosca_jobs(tc, root, found):
+    """The selected classes' rest poses (read and validated; classes below
+    ``tosca.min_vertices`` excluded) and the (class, pose) cases; returns
+    ``(rests, excluded, jobs)``."""
+    classes = as_list(tc.get("classes"))
     if classes is not None:
         unknown = [c for c in classes if c not in found]
         if unknown:
             raise SShaDeError(f"tosca.classes: {unknown} not found in {root} (present: {sorted(found)})")
         found = {c: found[c] for c in classes}
-    poses = _as_list(tc.get("poses"))
-    n_low, k, seed = int(tc.n_low), int(tc.n_samplings), int(tc.seed)
-    gradient, workers = str(tc.get("gradient", "normalized")), tc.get("workers")
+    poses = as_list(tc.get("poses"))
     min_v = int(tc.get("min_vertices") or 0)
-
-    # rest poses: read + validated; exclusion by vertex count
     rests, excluded, jobs = {}, {}, []
     for c, files in found.items():
         if 0 not in files:
@@ -231,59 +272,78 @@ def run_tosca(cfg) -> dict:
     if not jobs:
         raise SShaDeError(f"no TOSCA case to run in {root} (classes {sorted(found)}, excluded {excluded}, "
                           f"poses {poses})")
-    log.info("%d TOSCA case(s) from %s (classes %s; excluded %s); n_low=%d k=%d; output %s",
-             len(jobs), root, sorted(rests), sorted(excluded), n_low, k, out_dir)
+    return rests, excluded, jobs
 
-    config = OmegaConf.to_container(cfg, resolve=True)
-    config["tosca"]["root"] = str(root)
-    from sshade.deform import sampling_seeds
-    info = collect_runinfo(config, seeds={"tosca": seed, "sampling_seeds": sampling_seeds(seed, k)},
-                           extra={"status": "running", "out_dir": str(out_dir), "excluded": excluded,
-                                  "paper": PAPER_TOSCA})
-    write_runinfo(out_dir / "run.json", info)
 
+def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
+    """Every case (:func:`_tosca_case`), ``cases.csv`` rewritten after each, the
+    optional figures (one per class, its first pose); returns the cases' DataFrame."""
+    import pandas as pd
+    from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
+    from ..figures import figures_options, safe_figure, tosca_figure
     rows: list[dict] = []
     fig_on, fig_left = figures_options(cfg)  # one figure per class (first pose), at most max_cases
     drawn: set[str] = set()
-
-    def write_cases():
-        with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:
-            pd.DataFrame(rows).to_csv(fh, index=False)
-
     with logging_redirect_tqdm():
         for c, p in tqdm(jobs, desc="tosca", unit="case", file=sys.stderr, dynamic_ncols=True):
             V0, F0 = rests[c]
-            row = {"case": f"{c}{p}", "class": c, "pose": p, "n_vertices": len(V0), "n_faces": len(F0),
-                   "n_samplings": k, "seed": seed, "error": ""}
-            try:
-                V1, F1 = read_mesh(found[c][p], validate=False)
-                if len(V1) != len(V0):
-                    raise SShaDeError(f"{found[c][p].name} has {len(V1)} vertices, {c}0.off has {len(V0)}: "
-                                      "not in 1:1 correspondence")
-                row["faces_rewound"] = int((F1 != F0).any(axis=1).sum()) if F1.shape == F0.shape else -1
-                t0 = time.perf_counter()
-                Vp, ti = isometric_transfer(V0, F0, V1, n_low=n_low, n_samplings=k, seed=seed,
-                                            gradient=gradient, workers=workers)
-                row["time_s"] = time.perf_counter() - t0
-                row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s",
-                                                     "n_flipped", "workers")})
-                row.update(ground_truth_metrics(Vp, F0, V1))
-                row["rest_hausdorff"] = hausdorff(V0, F0, V1, F0)
-                row["rest_chamfer"] = chamfer(V0, F0, V1, F0)
-                row["gt_stretch_pct"] = gt_stretch_pct(V0, V1, F0)
-                log.info("%s%d  %.2fs  d_H %.3e  d_C %.3e  vertex mean %.4f%% max %.3f%%", c, p, row["time_s"],
-                         row["hausdorff"], row["chamfer"], row["gt_vertex_mean_pct"], row["gt_vertex_max_pct"])
-                if fig_on and c not in drawn and len(drawn) < fig_left:
-                    drawn.add(c)
-                    safe_figure(f"{c}{p}", tosca_figure, V0, V1, Vp, F0, out_dir / "figures" / f"{c}{p}.png",
-                                title=f"{c}{p}: d_H {row['hausdorff']:.2e}, d_C {row['chamfer']:.2e}")
-            except SShaDeError as e:
-                row["error"] = str(e) or type(e).__name__
-                log.warning("%s%d failed: %s", c, p, row["error"])
+            row, V1, Vp = _tosca_case(c, p, V0, F0, found[c][p], sp)
+            if Vp is not None and fig_on and c not in drawn and len(drawn) < fig_left:
+                drawn.add(c)
+                safe_figure(f"{c}{p}", tosca_figure, V0, V1, Vp, F0, out_dir / "figures" / f"{c}{p}.png",
+                            title=f"{c}{p}: d_H {row['hausdorff']:.2e}, d_C {row['chamfer']:.2e}")
             rows.append(row)
-            write_cases()  # partial results survive a crash
+            with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:  # partial results survive a crash
+                pd.DataFrame(rows).to_csv(fh, index=False)
+    return pd.DataFrame(rows)
 
-    df = pd.DataFrame(rows)
+
+def _tosca_case(c: str, p: int, V0, F0, path, sp: dict):
+    """One case: class ``c`` pose ``p`` (file ``path``) rebuilt from its rest pose
+    ``(V0, F0)`` with SShaDe's parameters ``sp``; returns ``(row, V1, Vp)`` (the true
+    and the predicted pose; ``Vp`` None when the case failed: its message in ``error``)."""
+    from sshade.isometric import isometric_transfer
+
+    from ..metrics import chamfer, ground_truth_metrics, hausdorff
+    k, seed = int(sp["n_samplings"]), int(sp["seed"])
+    row = {"case": f"{c}{p}", "class": c, "pose": p, "n_vertices": len(V0), "n_faces": len(F0),
+           "n_samplings": k, "seed": seed, "error": ""}
+    V1 = Vp = None
+    try:
+        V1, F1 = read_mesh(path, validate=False)
+        if len(V1) != len(V0):
+            raise SShaDeError(f"{path.name} has {len(V1)} vertices, {c}0.off has {len(V0)}: "
+                              "not in 1:1 correspondence")
+        row["faces_rewound"] = int((F1 != F0).any(axis=1).sum()) if F1.shape == F0.shape else -1
+        t0 = time.perf_counter()
+        Vp, ti = isometric_transfer(V0, F0, V1, n_low=transfer_n_low(sp["n_low"], len(V0)), n_samplings=k,
+                                    seed=seed, gradient=str(sp.get("gradient") or "normalized"),
+                                    workers=sp.get("workers"))
+        row["time_s"] = time.perf_counter() - t0
+        row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s",
+                                             "n_flipped", "workers")})
+        row.update(ground_truth_metrics(Vp, F0, V1))
+        row["rest_hausdorff"] = hausdorff(V0, F0, V1, F0)
+        row["rest_chamfer"] = chamfer(V0, F0, V1, F0)
+        row["gt_stretch_pct"] = gt_stretch_pct(V0, V1, F0)
+        log.info("%s%d  %.2fs  d_H %.3e  d_C %.3e  vertex mean %.4f%% max %.3f%%", c, p, row["time_s"],
+                 row["hausdorff"], row["chamfer"], row["gt_vertex_mean_pct"], row["gt_vertex_max_pct"])
+    except SShaDeError as e:
+        row["error"] = str(e) or type(e).__name__
+        log.warning("%s%d failed: %s", c, p, row["error"])
+        Vp = None
+    return row, V1, Vp
+
+
+def _tosca_tables(df, sp: dict, excluded: dict, info: dict, out_dir, t_start: float) -> dict:
+    """``table.csv`` / ``table.md`` (per-class means, the paper's row), ``run.json``
+    finished (:func:`eval.runinfo.finish_run`); the return value of :func:`run_tosca`."""
+    import pandas as pd
+
+    from ..runinfo import finish_run
+    n_low, k, seed, gradient = sp["n_low"], int(sp["n_samplings"]), int(sp["seed"]), str(sp.get("gradient"))
     cols = [c for c, _, _ in TOSCA_COLUMNS if c not in ("n_cases", "n_failed")] + \
         ["rest_chamfer", "remesh_s", "project_s", "transfer_s"]
     table = group_table(df, "class", cols)
@@ -320,3 +380,6 @@ def table_workers(df) -> str:
         return "-"
     w = sorted({int(x) for x in df["workers"].dropna()})
     return ",".join(map(str, w)) or "-"
+
+
+register_experiment("tosca", run_tosca)

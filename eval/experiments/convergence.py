@@ -12,8 +12,11 @@ cached) is traced against wall time for:
 - ``L-BFGS (ours)``: :func:`sshade.arap.solve_arap` (protocol ``converged``, its
   default iteration), until its criterion stops it;
 - ``Anderson (ours)``: the same solver with ``accelerate="anderson"`` (Peng et al. 2018);
-- ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`);
-- ``SShaDe + refine``: SShaDe (k = 5) then ``solve_arap`` started from its result.
+- ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`; the
+  sampling counts ``convergence.sshade.k``, null = ``[1, sshade.n_samplings]``; every
+  other parameter from the method config ``method.SShaDe``, :func:`sshade_params`);
+- ``SShaDe + refine``: SShaDe (k = ``convergence.sshade.refine_k``, default
+  ``sshade.n_samplings``) then ``solve_arap`` started from its result.
 
 Times exclude the distance evaluations (measured outside the timed calls) and include
 each solver's precomputation. Outputs in ``out_dir``: ``curves.csv`` (solver, case,
@@ -31,9 +34,15 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.meshio import atomic_write
 from sshade.errors import SShaDeError
 
-__all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to"]
+from .. import datasets
+from ..paths import abs_path
+from .common import as_list, sshade_spec
+from .registry import register_experiment
+
+__all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to", "sshade_params"]
 
 log = logging.getLogger("eval")
 
@@ -99,8 +108,7 @@ def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
     :func:`libigl_curve`; ``accelerate`` as in ``solve_arap``; ``U0`` a start,
     ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
     ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
-    from sshade.arap import rigid_fit
-    from sshade.arap import solve_arap
+    from sshade.arap import rigid_fit, solve_arap
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     if U0 is None:
         R, t = rigid_fit(V[handles], targets)
@@ -150,22 +158,31 @@ def _cases(cfg) -> list[tuple[str, tuple]]:
             p = cc.plane
             out.append((f"plane_{int(p.n_target // 1000)}k", lifted_plane(float(p.lift), n_target=int(p.n_target))))
         elif name == "dataset":
-            from .app import _DATASET_KEYS, _dataset_root
-            from .datasets import load_cases
-            root = _dataset_root(cfg)
+            root = datasets.dataset_root(cfg)
             ds = cfg.dataset
             dname = str(ds.get("name", "defaust"))
-            opts = {k: ds.get(k) for k in _DATASET_KEYS.get(dname, ()) if k in ds and k != "limit"}
-            for k, v in list(opts.items()):
-                if OmegaConf.is_config(v):
-                    opts[k] = OmegaConf.to_container(v)
+            opts = datasets.dataset_options(ds, skip=("limit",))
             i = int(cc.get("dataset_case", 0))
-            cases = load_cases(dname, root, limit=i + 1, **opts)
+            cases = datasets.load_cases(dname, root, limit=i + 1, **opts)
             c = cases[i]
             out.append((f"{dname}_{c.name}", (c.V, c.F, c.handles, c.targets)))
         else:
             raise SShaDeError(f"convergence.cases: unknown case {name!r}; use plane and/or dataset")
     return out
+
+
+def sshade_params(cfg) -> dict:
+    """Keyword parameters of :func:`sshade.deform` in this experiment: the method config
+    ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`); its ``n_samplings``
+    is replaced by each of :func:`sampling_counts` in turn."""
+    return sshade_spec(cfg)
+
+
+def sampling_counts(cfg, sp: dict) -> list[int]:
+    """The sampling counts SShaDe runs with: ``convergence.sshade.k``, or when it is null
+    ``[1, n_samplings]`` (``n_samplings`` of ``sp``, :func:`sshade_params`)."""
+    ks = as_list(cfg.convergence.get("sshade", {}).get("k"))
+    return [int(k) for k in (ks if ks is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
 
 
 def run_convergence(cfg) -> dict:
@@ -180,65 +197,25 @@ def run_convergence(cfg) -> dict:
     import pandas as pd
     from omegaconf import OmegaConf
 
-    from defaust.meshio import atomic_write
-    from sshade import deform
+    from sshade.deform import check_params
 
-    from .app import _abs
-    from .reference import reference_solution
-    from .runinfo import collect_runinfo, finish_run, write_runinfo
+    from ..figures import safe_figure
+    from ..runinfo import collect_runinfo, finish_run, write_runinfo
     cc = cfg.convergence
-    out_dir = _abs(cfg.out_dir)
+    out_dir = abs_path(cfg.out_dir)
+    sp = check_params(**sshade_params(cfg))
     budget = float(cc.time_budget_s)
     target = float(cc.target_pct)
-    energy = str(cc.get("energy", "spokes_and_rims"))
     cases = _cases(cfg)
-    info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(cc.seed)},
+    info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running"})
     write_runinfo(out_dir / "run.json", info)
     t_start = time.perf_counter()
     curves, table = [], []
     for cname, (V, F, h, T) in cases:
-        V = np.asarray(V, np.float64)
-        F = np.asarray(F, np.int64)
-        ref = reference_solution(V, F, h, T, energy=energy, cache_dir=_abs(cfg.reference.cache),
-                                 max_iter=int(cfg.reference.max_iter), time_budget_s=cfg.reference.time_budget_s)
-        log.info("%s: %d vertices; reference %s (%s, %s iterations)", cname, len(V),
-                 "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
-                 ref.info.get("status"), ref.info.get("iterations"))
-
-        def add(solver, rows, *, iterations, stopped):
-            for r in rows:
-                curves.append({"case": cname, "solver": solver, **r})
-            last = rows[-1]
-            table.append({"case": cname, "n_vertices": len(V), "solver": solver, "iterations": iterations,
-                          "time_s": last["time_s"], "time_to_target_s": time_to(rows, target),
-                          "ref_mean_pct": last["ref_mean_pct"], "ref_max_pct": last["ref_max_pct"],
-                          "stopped": stopped})
-            log.info("%s %-22s %6s it. %8.2f s  mean %.4f%%  max %.3f%%  (%s)", cname, solver, iterations,
-                     last["time_s"], last["ref_mean_pct"], last["ref_max_pct"], stopped)
-
-        if cc.get("libigl", True):
-            rows = libigl_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, stop_pct=float(cc.stop_pct))
-            last = rows[-1]
-            add("libigl local/global", rows, iterations=last["iteration"],
-                stopped=("reached stop_pct" if last["ref_mean_pct"] < float(cc.stop_pct) else
-                         f"time budget {budget:g} s"))
-        for acc, label in (("lbfgs", "L-BFGS (ours)"), ("anderson", "Anderson (ours)")):
-            rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, accelerate=acc)
-            add(label, rows, iterations=res.iterations, stopped=str(res.info.get("status")))
-        for k in list(cc.sshade.k):
-            t0 = time.perf_counter()
-            Vs, si = deform(V, F, h, T, n_low=cc.sshade.n_low, n_samplings=int(k), seed=int(cc.seed),
-                            workers=cc.sshade.workers, return_info=True)
-            dt = time.perf_counter() - t0 - si["compile_s"]  # numba's first-call compilation is not SShaDe's time
-            m, x = _dist(Vs, ref.U, float(np.linalg.norm(V.max(0) - V.min(0))))
-            add(f"SShaDe k={int(k)}", [{"iteration": int(si["iterations"]), "time_s": dt, "ref_mean_pct": m,
-                                        "ref_max_pct": x}],
-                iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
-            if int(k) == int(cc.sshade.refine_k):
-                rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
-                                         t_offset=dt)
-                add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
+        c_curves, c_table = _case_curves(cfg, cname, np.asarray(V, np.float64), np.asarray(F, np.int64), h, T, sp)
+        curves += c_curves
+        table += c_table
     cdf = pd.DataFrame(curves)
     tdf = pd.DataFrame(table)
     paths = {}
@@ -246,13 +223,64 @@ def run_convergence(cfg) -> dict:
         with atomic_write(out_dir / name, "w", newline="") as fh:
             df.to_csv(fh, index=False, float_format="%.6g")
         paths[name] = out_dir / name
-    from .figures import safe_figure
     p = safe_figure("convergence", convergence_figure, cdf, tdf, out_dir / "convergence.png", target_pct=target)
     if p is not None:
         paths["figure"] = p
     md = _markdown(tdf, target, budget)
     finish_run(out_dir, md, paths, info, n_cases=len(cases), n_errors=0, wall_s=time.perf_counter() - t_start)
     return {"out_dir": out_dir, "table": tdf, "curves": cdf, "paths": paths}
+
+
+def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], list[dict]]:
+    """One case: its reference, then every solver's curve; returns the curve rows and
+    the table rows (one per solver)."""
+    from sshade import deform
+
+    from ..reference import reference_solution
+    cc = cfg.convergence
+    budget = float(cc.time_budget_s)
+    target = float(cc.target_pct)
+    energy = str(cc.get("energy", "spokes_and_rims"))
+    curves, table = [], []
+    ref = reference_solution(V, F, h, T, energy=energy, cache_dir=abs_path(cfg.reference.cache),
+                             max_iter=int(cfg.reference.max_iter), time_budget_s=cfg.reference.time_budget_s)
+    log.info("%s: %d vertices; reference %s (%s, %s iterations)", cname, len(V),
+             "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
+             ref.info.get("status"), ref.info.get("iterations"))
+
+    def add(solver, rows, *, iterations, stopped):
+        for r in rows:
+            curves.append({"case": cname, "solver": solver, **r})
+        last = rows[-1]
+        table.append({"case": cname, "n_vertices": len(V), "solver": solver, "iterations": iterations,
+                      "time_s": last["time_s"], "time_to_target_s": time_to(rows, target),
+                      "ref_mean_pct": last["ref_mean_pct"], "ref_max_pct": last["ref_max_pct"],
+                      "stopped": stopped})
+        log.info("%s %-22s %6s it. %8.2f s  mean %.4f%%  max %.3f%%  (%s)", cname, solver, iterations,
+                 last["time_s"], last["ref_mean_pct"], last["ref_max_pct"], stopped)
+
+    if cc.get("libigl", True):
+        rows = libigl_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, stop_pct=float(cc.stop_pct))
+        last = rows[-1]
+        add("libigl local/global", rows, iterations=last["iteration"],
+            stopped=("reached stop_pct" if last["ref_mean_pct"] < float(cc.stop_pct) else
+                     f"time budget {budget:g} s"))
+    for acc, label in (("lbfgs", "L-BFGS (ours)"), ("anderson", "Anderson (ours)")):
+        rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, accelerate=acc)
+        add(label, rows, iterations=res.iterations, stopped=str(res.info.get("status")))
+    for k in sampling_counts(cfg, sp):
+        t0 = time.perf_counter()
+        Vs, si = deform(V, F, h, T, return_info=True, **{**sp, "n_samplings": int(k)})
+        dt = time.perf_counter() - t0 - si["compile_s"]  # numba's first-call compilation is not SShaDe's time
+        m, x = _dist(Vs, ref.U, float(np.linalg.norm(V.max(0) - V.min(0))))
+        add(f"SShaDe k={int(k)}", [{"iteration": int(si["iterations"]), "time_s": dt, "ref_mean_pct": m,
+                                    "ref_max_pct": x}],
+            iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
+        if int(k) == int(cc.sshade.refine_k):
+            rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
+                                     t_offset=dt)
+            add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
+    return curves, table
 
 
 def _markdown(tdf, target: float, budget: float) -> str:
@@ -277,7 +305,6 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from defaust.meshio import atomic_write
     cases = list(dict.fromkeys(curves["case"]))
     fig, axes = plt.subplots(1, len(cases), figsize=(6.0 * len(cases), 4.4), squeeze=False)
     styles = {"libigl local/global": ("tab:gray", "-"), "Anderson (ours)": ("tab:blue", ":"),
@@ -308,3 +335,6 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
         fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
+
+
+register_experiment("convergence", run_convergence)

@@ -1,0 +1,83 @@
+"""The evaluator's datasets by name (``dataset.name``): each dataset module of
+:mod:`eval.datasets` registers itself with :func:`register_dataset`; the registry finds
+those modules on its own (every module of the package, :func:`datasets`), so a new
+dataset is one module calling :func:`register_dataset` plus one ``conf/dataset/NAME.yaml``.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
+
+__all__ = ["Dataset", "register_dataset", "datasets", "find_dataset"]
+
+#: Modules of the package that are not datasets.
+_NOT_DATASETS = ("registry", "case")
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """One registered dataset.
+
+    Attributes
+    ----------
+    name : ``dataset.name`` in the config (``conf/dataset/<name>.yaml``).
+    load : ``load(root: Path, **options) -> list[DeformationCase]``; raises SShaDeError.
+    keys : the ``dataset.<key>`` config keys passed to ``load`` (when present), as lists /
+        mappings for list-valued keys.
+    path_keys : those of ``keys`` that are paths, resolved against the launch directory.
+    prepare : optional ``prepare(root: Path, ds) -> None`` run on the resolved root before
+        it is checked (e.g. the DeFAUST build), ``ds`` the ``dataset`` config section.
+    root_hint : text added to the "does not exist" error of ``dataset.root``.
+    seeds : optional ``seeds(root: Path) -> dict``, extra seeds recorded in ``run.json``.
+    """
+
+    name: str
+    load: Callable
+    keys: tuple[str, ...]
+    path_keys: tuple[str, ...] = ()
+    prepare: Callable | None = None
+    root_hint: str = ""
+    seeds: Callable | None = None
+
+
+_REGISTRY: dict[str, Dataset] = {}
+_discovered = False
+
+
+def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=None, root_hint: str = "",
+                     seeds=None) -> Dataset:
+    """Register dataset ``name`` (fields of :class:`Dataset`); called at the bottom of a
+    dataset module. Registering a name twice with another loader raises ValueError (a
+    programming error, not a user's)."""
+    d = Dataset(name=str(name), load=load, keys=tuple(keys), path_keys=tuple(path_keys), prepare=prepare,
+                root_hint=root_hint, seeds=seeds)
+    old = _REGISTRY.get(d.name)
+    if old is not None and old.load is not load:
+        raise ValueError(f"dataset {name!r} registered twice ({old.load.__module__} and {load.__module__})")
+    _REGISTRY[d.name] = d
+    return d
+
+
+def _discover() -> None:
+    """Import every module of :mod:`eval.datasets` once (each registers its dataset)."""
+    global _discovered
+    if _discovered:
+        return
+    pkg = importlib.import_module(__package__)
+    for m in pkgutil.iter_modules(pkg.__path__):
+        if not m.name.startswith("_") and m.name not in _NOT_DATASETS and not m.ispkg:
+            importlib.import_module(f"{__package__}.{m.name}")
+    _discovered = True
+
+
+def datasets() -> dict[str, Dataset]:
+    """Every registered dataset, name -> :class:`Dataset`, sorted by name."""
+    _discover()
+    return dict(sorted(_REGISTRY.items()))
+
+
+def find_dataset(name) -> Dataset | None:
+    """The dataset registered as ``name``, or None."""
+    return datasets().get(str(name))

@@ -1,0 +1,41 @@
+"""Helpers shared by the experiments of :mod:`eval.experiments`."""
+from __future__ import annotations
+
+from ..methods import method_spec
+
+__all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
+
+#: SShaDe's parameters that its correspondence transfers take
+#: (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
+#: no ARAP runs there, so no stopping rule.
+SSHADE_TRANSFER_KEYS = ("n_low", "n_samplings", "seed", "gradient", "workers")
+
+
+def as_list(x):
+    """A config list (ListConfig, list, tuple) or a scalar as a plain list; None stays None."""
+    from omegaconf import OmegaConf
+    if x is None:
+        return None
+    if OmegaConf.is_config(x):
+        x = OmegaConf.to_container(x)
+    return list(x) if isinstance(x, (list, tuple)) else [x]
+
+
+def sshade_spec(cfg) -> dict:
+    """SShaDe's parameters from the one place every experiment reads them: the method
+    definition ``method.SShaDe`` (``conf/method/SShaDe.yaml``, whose values default to the
+    ``sshade`` section and, for the low-res ARAP's stopping rule, to ``arap``), resolved
+    (:func:`eval.methods.method_spec`); ``_target_`` and ``name`` left out.
+
+    Returns
+    -------
+    dict with ``n_low`` (int or ``"auto"``), ``n_samplings``, ``seed``, ``workers``,
+    ``gradient``, ``warm_start``, ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
+    (unchecked; :func:`sshade.deform.check_params` checks them).
+
+    Raises
+    ------
+    SShaDeError when the definition does not resolve.
+    """
+    spec = method_spec(cfg, "SShaDe")
+    return {k: v for k, v in spec.items() if k not in ("_target_", "name")}

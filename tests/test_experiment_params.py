@@ -1,0 +1,100 @@
+"""Issue 20: every experiment reads SShaDe's parameters from one place, the method config
+``method.SShaDe`` (default: the ``sshade`` section), so ``sshade.*`` overrides reach each
+of them; no experiment keeps a private copy (``tosca.n_low``, ...). Cheap: the configs are
+composed and each experiment's ``sshade_params(cfg)`` is read, nothing runs."""
+from __future__ import annotations
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from eval.app import CONF_DIR
+from eval.experiments import (
+    cases,
+    convergence,
+    experiments,
+    pose_transfer,
+    scaling,
+    tosca,
+)
+from eval.methods import make_methods
+
+#: experiment (conf/experiment/NAME.yaml) -> its experiment module.
+EXPERIMENTS = {"main": cases, "ci": cases, "faust": cases, "shapes": cases, "scaling": scaling, "tosca": tosca,
+               "pose_transfer": pose_transfer, "convergence": convergence}
+
+#: The defaults the committed tables used (results/*/run.json) and the paper's.
+DEFAULT_N_LOW = {"main": "auto", "ci": "auto", "faust": "auto", "shapes": "auto", "scaling": 6000, "tosca": 6000,
+                 "pose_transfer": 1000, "convergence": "auto"}
+DEFAULT_N_SAMPLINGS = {"ci": 2, "tosca": 10}
+
+
+def _compose(overrides):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+def test_every_experiment_kind_is_covered():
+    kinds = {str(OmegaConf.select(_compose([f"experiment={e}"]), "experiment.kind", default="cases"))
+             for e in EXPERIMENTS}
+    assert kinds == set(experiments())
+
+
+@pytest.mark.parametrize("exp", sorted(EXPERIMENTS))
+def test_defaults_unchanged(exp):
+    p = EXPERIMENTS[exp].sshade_params(_compose([f"experiment={exp}"]))
+    assert p["n_low"] == DEFAULT_N_LOW[exp]
+    assert p["n_samplings"] == DEFAULT_N_SAMPLINGS.get(exp, 5) and p["seed"] == 0
+
+
+OVERRIDES = {"sshade.n_low": 123, "sshade.n_samplings": 3, "sshade.seed": 7, "sshade.workers": 1,
+             "sshade.gradient": "raw"}
+
+
+@pytest.mark.parametrize("exp", sorted(EXPERIMENTS))
+def test_sshade_overrides_reach_every_experiment(exp):
+    cfg = _compose([f"experiment={exp}", *(f"{k}={v}" for k, v in OVERRIDES.items())])
+    p = EXPERIMENTS[exp].sshade_params(cfg)
+    for k, v in OVERRIDES.items():
+        assert p[k.split(".", 1)[1]] == v, (exp, k, p)
+    # method.SShaDe.* (the method's own key) is the same place
+    p = EXPERIMENTS[exp].sshade_params(_compose([f"experiment={exp}", "method.SShaDe.n_low=321"]))
+    assert p["n_low"] == 321
+
+
+@pytest.mark.parametrize("exp", ["main", "ci", "shapes"])
+def test_cases_experiment_builds_sshade_with_the_overrides(exp):
+    """The cases experiment's SShaDe row is the method make_methods builds."""
+    cfg = _compose([f"experiment={exp}", "methods=[SShaDe]", "sshade.n_low=123", "sshade.n_samplings=3"])
+    (m,) = make_methods(cfg)
+    assert m.params["n_low"] == 123 and m.params["n_samplings"] == 3
+
+
+def test_arap_stopping_rule_reaches_scaling_and_convergence():
+    """SShaDe's low-res ARAP stopping rule: sshade.tol, else arap.tol (conf/method/SShaDe.yaml)."""
+    for exp, mod in (("scaling", scaling), ("convergence", convergence)):
+        assert mod.sshade_params(_compose([f"experiment={exp}", "arap.tol=1e-3"]))["tol"] == 1e-3
+        assert mod.sshade_params(_compose([f"experiment={exp}", "+sshade.tol=2e-3"]))["tol"] == 2e-3
+    ep = scaling.elastic_params(_compose(["experiment=scaling", "arap.protocol=paper", "arap.max_iter=50"]))
+    assert ep["protocol"] == "paper" and ep["max_iter"] == 50
+
+
+def test_convergence_sampling_counts_follow_n_samplings():
+    cfg = _compose(["experiment=convergence", "sshade.n_samplings=7"])
+    sp = convergence.sshade_params(cfg)
+    assert convergence.sampling_counts(cfg, sp) == [1, 7] and cfg.convergence.sshade.refine_k == 7
+    cfg = _compose(["experiment=convergence"])
+    assert convergence.sampling_counts(cfg, convergence.sshade_params(cfg)) == [1, 5]  # as before
+    cfg = _compose(["experiment=convergence", "convergence.sshade.k=[2,3]"])
+    assert convergence.sampling_counts(cfg, convergence.sshade_params(cfg)) == [2, 3]
+
+
+@pytest.mark.parametrize("exp,key", [("scaling", "scaling.n_low"), ("tosca", "tosca.n_low"),
+                                     ("pose_transfer", "pose_transfer.n_low"),
+                                     ("convergence", "convergence.sshade.n_low")])
+def test_no_private_copy_left(exp, key):
+    """The former private copies are gone: setting one is an error, not silently ignored."""
+    cfg = _compose([f"experiment={exp}"])
+    assert OmegaConf.select(cfg, key, default="absent") == "absent"
+    with pytest.raises(Exception, match="n_low"):
+        _compose([f"experiment={exp}", f"{key}=500"])

@@ -1,0 +1,149 @@
+"""The house rules of DEVELOPERS.md, checked on the source (AST, nothing imported):
+sshade/ (the method) at the bottom, baselines/ and defaust/ above it, eval/ on top;
+imports only go down, never in a cycle, never a private name across modules, and a
+project module is imported at the top of a module, not hidden inside a function."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+from .conftest import ROOT
+
+#: package -> floor; a module may import from its own floor's package or a lower floor.
+FLOORS = {"sshade": 0, "baselines": 1, "defaust": 1, "eval": 2}
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for pkg in FLOORS:
+        for p in sorted((ROOT / pkg).rglob("*.py")):
+            parts = p.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            mods[name] = p
+    return mods
+
+
+MODULES = _modules()
+
+
+def _resolve(name: str) -> str | None:
+    """The project module ``name`` refers to (itself, or its parent for ``pkg.mod.attr``)."""
+    while name and name not in MODULES:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _imports(mod: str, path: Path):
+    """(line, target module, imported names, at module level?) of every project import."""
+    tree = ast.parse(path.read_text(), str(path))
+    top = set(map(id, tree.body))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] in FLOORS:
+                    yield node.lineno, a.name, [], id(node) in top
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = mod.split(".") if path.name == "__init__.py" else mod.split(".")[:-1]
+                base = base[:len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] in FLOORS:
+                names = [a.name for a in node.names]
+                yield node.lineno, target, names, id(node) in top or _guarded_top(tree, node)
+
+
+def _guarded_top(tree, node) -> bool:
+    """An import inside a module-level ``try:`` / ``if TYPE_CHECKING:`` counts as top level."""
+    for stmt in tree.body:
+        if isinstance(stmt, (ast.Try, ast.If)) and any(n is node for n in ast.walk(stmt)):
+            return True
+    return False
+
+
+EDGES = [(m, ln, t, names, top) for m, p in MODULES.items() for ln, t, names, top in _imports(m, p)]
+
+
+def test_imports_only_go_down():
+    up = [f"{m}:{ln} imports {t}" for m, ln, t, _, _ in EDGES
+          if FLOORS[t.split(".")[0]] > FLOORS[m.split(".")[0]]
+          or (FLOORS[t.split(".")[0]] == FLOORS[m.split(".")[0]] and t.split(".")[0] != m.split(".")[0])]
+    assert not up, "imports that climb or cross a floor:\n" + "\n".join(up)
+
+
+def test_no_private_name_across_modules():
+    bad = []
+    for m, ln, t, names, _ in EDGES:
+        target = _resolve(t)
+        for n in names:
+            private = n.startswith("_") and not n.startswith("__")
+            sub = _resolve(f"{t}.{n}")  # `from pkg import _mod` is a module, still private
+            if private and (sub or target) != m:
+                bad.append(f"{m}:{ln} imports {n} from {t}")
+    assert not bad, "private names imported across modules:\n" + "\n".join(bad)
+
+
+def test_project_imports_at_module_top():
+    hidden = [f"{m}:{ln} imports {t} inside a function" for m, ln, t, _, top in EDGES if not top]
+    assert not hidden, "\n".join(hidden)
+
+
+def test_no_import_cycles():
+    graph: dict[str, set[str]] = {m: set() for m in MODULES}
+    for m, _, t, names, _ in EDGES:
+        for target in {_resolve(f"{t}.{n}") or _resolve(t) for n in names} if names else {_resolve(t)}:
+            if target and target != m and not m.startswith(target + "."):  # a package's own __init__
+                graph[m].add(target)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    cycles = []
+
+    def visit(v):  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+@pytest.mark.parametrize("pkg", list(FLOORS))
+def test_modules_and_functions_stay_small(pkg):
+    """Modules under ~600 lines, functions under ~80 (DEVELOPERS.md), with the numba
+    kernels that must stay one function named here."""
+    big_modules, big_functions = [], []
+    for m, p in MODULES.items():
+        if not m.startswith(pkg):
+            continue
+        text = p.read_text()
+        if len(text.splitlines()) > 650:
+            big_modules.append(f"{m}: {len(text.splitlines())} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > 100:
+                    big_functions.append(f"{m}.{node.name}: {n} lines")
+    assert not big_modules and not big_functions, "\n".join(big_modules + big_functions)
