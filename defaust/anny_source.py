@@ -24,7 +24,7 @@ A subject (:func:`anny_subject`):
   genders, young adult to old, slim to heavy, 1.56 m to 1.93 m). ANNY's quads are split
   into triangles (``[0, 1, 2]`` and ``[0, 2, 3]``) and only the body is kept: the largest
   connected component (13,348 of ANNY's 13,718 vertices; eyes and tongue dropped), a
-  closed genus-0 2-manifold, checked (:func:`sshade.validate.validate_mesh`, Euler
+  closed genus-0 2-manifold, checked (:func:`sshade.mesh.validate.validate_mesh`, Euler
   characteristic 2).
 - **Frame**: metres, +x = the subject's left, +y = up, +z = forward (FAUST's); the rest
   pose stands on ``y = 0`` with ANNY's root (pelvis) above ``x = z = 0``.
@@ -696,7 +696,7 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     """
     from scipy.spatial.transform import Rotation
 
-    from sshade.validate import validate_mesh
+    from sshade.mesh.validate import validate_mesh
 
     subject = int(subject)
     if not 0 <= subject < len(SUBJECTS):

@@ -25,7 +25,7 @@ after every item) records each item's key (a hash of everything it depends on,
 including its inputs' checksums) and its files' sha256. On a rerun, an item whose key
 matches and whose files all exist with the recorded checksums is skipped; any other
 (missing, corrupted, stale) is rebuilt. Every file is written with
-:func:`defaust.meshio.atomic_write`, so an interrupted build leaves no partial file.
+:func:`sshade.mesh.io.atomic_write`, so an interrupted build leaves no partial file.
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ import numpy as np
 from sshade.errors import SShaDeError
 
 from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
-from .meshio import atomic_write, read_mesh
+from sshade.mesh.io import atomic_write, read_mesh
 from .store import sha256_file, write_npz, write_ply
 
 __all__ = ["BuildConfig", "BuildReport", "build_defaust", "check_out_folder", "handle_seed", "MANIFEST", "FORMAT"]

@@ -28,7 +28,7 @@ from sshade.errors import SShaDeError
 
 from .build import FORMAT, MANIFEST
 from .handles import HandleSet, handles_from_arrays, snap_handles
-from .meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from .store import read_npz, sha256_file
 
 __all__ = ["DeformationCase", "DefaustCase", "load_defaust", "load_handles", "read_manifest"]

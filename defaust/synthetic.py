@@ -20,7 +20,7 @@ Model (units: metres; axes: +x = subject's left, +y = up, +z = forward; feet nea
 - **Mesh**: the SDF is sampled on a grid and meshed by marching cubes
   (``igl.marching_cubes``), the largest component is kept and it is isotropically
   remeshed with pymeshlab to about ``n_vertices`` vertices; the result is checked to be
-  a single-component closed 2-manifold (:func:`sshade.validate.validate_mesh`).
+  a single-component closed 2-manifold (:func:`sshade.mesh.validate.validate_mesh`).
 - **Skinning weights**: each vertex is first given to one part (:func:`part_labels`:
   the part of the nearest primitive, limbs not claiming points behind their proximal
   joint, the torso split by height at the spine and chest joints), then the one-hot
@@ -479,7 +479,7 @@ def mesh_body(body: Body, *, voxel_size: float = 0.01, n_vertices: int = 7000,
     import igl
     import pymeshlab
 
-    from sshade.validate import validate_mesh
+    from sshade.mesh.validate import validate_mesh
 
     J = body.joints
     r = max(max(p.ra, p.rb) for p in body.primitives)

@@ -180,7 +180,7 @@ def run_convergence(cfg) -> dict:
     import pandas as pd
     from omegaconf import OmegaConf
 
-    from defaust.meshio import atomic_write
+    from sshade.mesh.io import atomic_write
     from sshade import deform
 
     from .app import _abs
@@ -277,7 +277,7 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from defaust.meshio import atomic_write
+    from sshade.mesh.io import atomic_write
     cases = list(dict.fromkeys(curves["case"]))
     fig, axes = plt.subplots(1, len(cases), figsize=(6.0 * len(cases), 4.4), squeeze=False)
     styles = {"libigl local/global": ("tab:gray", "-"), "Anderson (ours)": ("tab:blue", ":"),

@@ -195,7 +195,7 @@ def run_tosca(cfg) -> dict:
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from defaust.meshio import atomic_write, read_mesh
+    from sshade.mesh.io import atomic_write, read_mesh
     from sshade.isometric import isometric_transfer
 
     from .figures import figures_options, safe_figure, tosca_figure
@@ -236,7 +236,7 @@ def run_tosca(cfg) -> dict:
 
     config = OmegaConf.to_container(cfg, resolve=True)
     config["tosca"]["root"] = str(root)
-    from sshade.deform import sampling_seeds
+    from sshade.sampling import sampling_seeds
     info = collect_runinfo(config, seeds={"tosca": seed, "sampling_seeds": sampling_seeds(seed, k)},
                            extra={"status": "running", "out_dir": str(out_dir), "excluded": excluded,
                                   "paper": PAPER_TOSCA})

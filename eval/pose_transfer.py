@@ -111,8 +111,8 @@ def run_pose_transfer(cfg) -> dict:
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from defaust.meshio import atomic_write, read_mesh
-    from sshade.deform import sampling_seeds
+    from sshade.mesh.io import atomic_write, read_mesh
+    from sshade.sampling import sampling_seeds
     from sshade.isometric import pose_transfer, rigid_align
 
     from .isometric import gt_stretch_pct

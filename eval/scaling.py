@@ -78,19 +78,19 @@ def run_scaling(cfg) -> dict:
     import pandas as pd
     from omegaconf import OmegaConf
 
-    from defaust.meshio import read_mesh, write_mesh
+    from sshade.mesh.io import read_mesh, write_mesh
     from sshade.arap import arap_deform
     from sshade import deform
-    from sshade.deform import check_params
-    from sshade.validate import validate_mesh
-    from sshade.warmup import warm_fullres, warm_sshade
+    from sshade.deform import check_params, warm_sshade
+    from sshade.mesh.validate import validate_mesh
+    from sshade.warmup import warm_fullres
 
     from .app import _abs
     from .datasets.shapes import axis_handles, axis_landmarks
     from .memory import PeakMemory
     from .metrics import deformation_metrics
     from .runinfo import collect_runinfo, write_runinfo
-    from defaust.meshio import atomic_write
+    from sshade.mesh.io import atomic_write
 
     sc = cfg.scaling
     out_dir = _abs(cfg.out_dir)

@@ -9,7 +9,7 @@ import trimesh
 from defaust.synthetic import (JOINTS, LANDMARK_NAMES, BodyParams, body_model, body_sdf, lbs, pose_names,
                                pose_transforms, synthetic_subject, transfer_weights)
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 SMALL = dict(n_vertices=2500, voxel_size=0.02)
 
