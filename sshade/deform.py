@@ -281,9 +281,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     if count_components(he.E, len(V)) > 1:  # each component apart, handle-less ones rigidly (sshade.components)
         return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
     n_low_asked, n_low = _low_res_size(len(V), p["n_low"])
-    seeds = sampling_seeds(p["seed"], p["n_samplings"])
-    state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, seeds=seeds,
-                 topology=mesh_topology(V, F, he), gradient=p["gradient"],
+    state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, topology=mesh_topology(V, F, he),
+                 seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"],
                  arap=_arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
     workers = pool_size(p["workers"], p["n_samplings"])
     t1 = time.perf_counter()
@@ -291,14 +290,12 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
     Vd = np.mean(results, axis=0)
     Vd[handles] = targets
-    t2 = time.perf_counter()
     if not return_info:
         return Vd
-    info = {"total_s": t2 - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers, "seed": p["seed"],
-            "sampling_seeds": seeds, "warm_start": p["warm_start"], "n_low_requested": int(n_low_asked),
-            "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
-    info.update(_summary(infos), protocol=p["protocol"])
-    return Vd, info
+    info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
+            "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
+            "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
+    return Vd, {**info, **_summary(infos), "protocol": p["protocol"]}
 
 
 def _low_res_size(n: int, n_low) -> tuple[int, int]:
