@@ -16,7 +16,7 @@ The 200k mesh is built once from ``../shared/data/classic/armadillo.obj`` with
 git-ignored). Handles: the scaling benchmark's fixed edit (4 groups of 30 vertices,
 :func:`eval.datasets.shapes.axis_handles`), which ``sshade.deform._prepare`` adds as
 required low-res vertices. For each of ``--seeds`` sampling seeds (the first ones
-:func:`sshade.deform.sampling_seeds` gives for master seed 0) the script runs
+:func:`sshade.sampling.sampling_seeds` gives for master seed 0) the script runs
 ``remesh`` + ``project_to_fans`` exactly as ``_prepare`` does, ``--repeat`` times, and
 prints the best time of each stage (single thread; stages from ``RemeshResult.timings``)
 and digests of the seeds, low-res faces and projection triangles (to compare versions).

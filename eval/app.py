@@ -18,7 +18,7 @@ column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
 optional ``timeout_s`` of each call, its output checked
 (:func:`sshade.mesh.validate.validate_deformed`) before any metric. A method that fails on a
 case (our methods: :class:`~sshade.errors.SShaDeError`; a plug-in: any exception,
-``SystemExit`` included, :func:`eval.methods.is_plugin`; a time-out; a refused output)
+``SystemExit`` included, :func:`sshade.method.is_plugin`; a time-out; a refused output)
 gets its message in the ``error`` column and the run goes on; so does a result whose
 handle error exceeds ``handle_error_max_pct`` (% of the diagonal; its metrics stay in
 the row). Ctrl-C stops the run. A case mesh with several connected components is
