@@ -1,12 +1,50 @@
 """Full-resolution ARAP baselines (paper §4.1): ARAP (spokes) and Elastic (spokes and rims)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from sshade.arap import arap_deform, make_criterion
-from sshade.validate import validate_handles, validate_mesh
+from sshade.arap import PROTOCOLS, arap_deform, make_criterion
+from sshade.errors import SShaDeError
+from sshade.mesh.validate import validate_handles, validate_mesh
 
-__all__ = ["FullResArap", "ARAP", "Elastic"]
+__all__ = ["FullResArap", "ARAP", "Elastic", "check_arap_args"]
+
+
+def check_arap_args(name: str, tol, max_iter, etol=None, gtol=None, alpha=None) -> dict:
+    """A full-resolution baseline's parameters, checked when it is built (so the command
+    line and the evaluator refuse a bad value before any work): ``tol`` a finite number
+    > 0 (fraction of the bounding-box diagonal), ``max_iter`` an int >= 1 or None,
+    ``etol`` / ``gtol`` / ``alpha`` finite numbers >= 0 or None.
+
+    Returns
+    -------
+    dict of the same keys, as float / int / None.
+
+    Raises
+    ------
+    SShaDeError naming ``name``, the parameter and its value.
+    """
+    def number(key, v, positive):
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise SShaDeError(f"{name}: {key} must be a number, got {v!r}") from None
+        if isinstance(v, bool) or not math.isfinite(f) or (f <= 0 if positive else f < 0):
+            raise SShaDeError(f"{name}: {key} must be a finite number {'>' if positive else '>='} 0, got {v!r}")
+        return f
+    out = {"tol": number("tol", tol, True), "max_iter": None}
+    if max_iter is not None:
+        try:
+            out["max_iter"] = int(max_iter)
+        except (TypeError, ValueError, OverflowError):
+            raise SShaDeError(f"{name}: max_iter must be an integer >= 1 or null, got {max_iter!r}") from None
+        if isinstance(max_iter, bool) or out["max_iter"] != max_iter or out["max_iter"] < 1:
+            raise SShaDeError(f"{name}: max_iter must be an integer >= 1 or null, got {max_iter!r}")
+    for key, v in (("etol", etol), ("gtol", gtol), ("alpha", alpha)):
+        out[key] = None if v is None else number(key, v, False)
+    return out
 
 
 class FullResArap:
@@ -34,13 +72,12 @@ class FullResArap:
 
     def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int | None = None, name: str | None = None,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
-        from sshade.arap import PROTOCOLS
-        from sshade.errors import SShaDeError
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{name or energy}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
+        args = check_arap_args(name or energy, tol, max_iter, etol, gtol)
         self.energy = energy
-        self.tol = float(tol)
-        self.max_iter = None if max_iter is None else int(max_iter)
+        self.tol = args["tol"]
+        self.max_iter = args["max_iter"]
         self.name = name or energy
         self.protocol = protocol
         self.criterion = make_criterion(etol, gtol)

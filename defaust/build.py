@@ -25,7 +25,7 @@ after every item) records each item's key (a hash of everything it depends on,
 including its inputs' checksums) and its files' sha256. On a rerun, an item whose key
 matches and whose files all exist with the recorded checksums is skipped; any other
 (missing, corrupted, stale) is rebuilt. Every file is written with
-:func:`defaust.meshio.atomic_write`, so an interrupted build leaves no partial file.
+:func:`sshade.mesh.io.atomic_write`, so an interrupted build leaves no partial file.
 """
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ from .config import BuildConfig
 from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
 from .manifest import (BUILDER_VERSION, FORMAT, MANIFEST, check_out_folder, item_key, item_valid, package_versions,
                        write_manifest, write_partial)
-from .meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from .sources import SOURCES, Source
 from .store import write_npz, write_ply
 

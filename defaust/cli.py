@@ -18,7 +18,7 @@ from pathlib import Path
 from sshade.errors import SShaDeError
 
 from eval.config_check import config_int_list, config_number
-from eval.confdir import config_dir
+from sshade.confdir import config_dir
 
 from .build import build_defaust
 from .config import BuildConfig
@@ -147,8 +147,8 @@ def run(cfg):
 def _main(cfg) -> None:
     """Hydra task of ``python -m defaust``: build; a bad parameter, an OSError (one
     ``error: ...`` line, status 2) or Ctrl-C (``interrupted``, 130) ends the process
-    through :func:`eval.clirun.run_command`."""
-    from eval.clirun import run_command
+    through :func:`sshade.clirun.run_command`."""
+    from sshade.clirun import run_command
     logging.getLogger("defaust").setLevel(logging.INFO)
     rc = run_command(lambda: run(cfg), where=cfg.get("out"))
     if rc:
@@ -159,8 +159,8 @@ def main() -> None:
     """Console entry point: Hydra parses the overrides. The command line is composed
     and every builder parameter checked (:func:`config_from_omegaconf`,
     :meth:`BuildConfig.validate`) before anything is built or any folder made
-    (:func:`eval.clirun.hydra_main`)."""
-    from eval.clirun import hydra_main
+    (:func:`sshade.clirun.hydra_main`)."""
+    from sshade.clirun import hydra_main
 
     def check(cfg):
         config_from_omegaconf(cfg).validate()

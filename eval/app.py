@@ -24,7 +24,7 @@ import sys
 
 from sshade.errors import SShaDeError
 
-from .confdir import config_dir
+from sshade.confdir import config_dir
 from .experiments import experiments, find_experiment
 from .experiments.cases import run
 
@@ -82,8 +82,8 @@ def _pin_out_dir(cfg) -> bool:
 def _main(cfg) -> None:
     """Hydra task of ``python -m eval``: run the experiment; a bad config or input, an
     OSError (``error: ...``, status 2) or Ctrl-C (``interrupted``, 130) ends the process
-    through :func:`eval.clirun.run_command`."""
-    from .clirun import run_command
+    through :func:`sshade.clirun.run_command`."""
+    from sshade.clirun import run_command
 
     fresh = _pin_out_dir(cfg)
     rc = run_command(lambda: run_experiment(cfg, fresh=fresh), where=cfg.get("out_dir"))
@@ -97,9 +97,9 @@ def main() -> None:
     The command line is composed and every config value checked
     (:func:`eval.config_check.check_config`) before Hydra makes the run folder; a bad
     one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
-    (:func:`eval.clirun.hydra_main`).
+    (:func:`sshade.clirun.hydra_main`).
     """
-    from .clirun import hydra_main
+    from sshade.clirun import hydra_main
     from .config_check import check_config
     argv = sys.argv[1:]
     if any(a in ("-m", "--multirun") for a in argv) and not any("hydra.callbacks.sweep_aggregate" in a for a in argv):

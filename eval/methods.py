@@ -1,11 +1,12 @@
-"""Build the deformation methods listed in the evaluator's config: ours by name, anyone's
-as a plug-in.
+"""Build the deformation methods listed in the evaluator's Hydra config: ours by name,
+anyone's as a plug-in.
 
-Names (case-insensitive): ``ARAP`` (spokes, Sorkine & Alexa 2007), ``Elastic``
-(spokes and rims, Chao et al. 2010), ``ARAP-SR`` (Levi & Gotsman 2015) from
-:mod:`baselines`, ``SShaDe`` and ``SShaDe+refine`` from :mod:`sshade`. Each is defined
-by a file of the ``method`` config group (``conf/method/<name>.yaml``: a ``_target_``
-class and its parameters), composed as ``method.<name>`` (``SShaDe+refine`` as
+Names (case-insensitive) are those of :func:`sshade.registry.builtin_methods`, one per
+file of the ``method`` config group: ``ARAP`` (spokes, Sorkine & Alexa 2007),
+``Elastic`` (spokes and rims, Chao et al. 2010), ``ARAP-SR`` (Levi & Gotsman 2015) from
+:mod:`baselines`, ``SShaDe`` and ``SShaDe+refine`` from :mod:`sshade`. Each file
+(``conf/method/<name>.yaml``: a ``_target_`` class, its table ``order`` and its
+parameters) is composed as ``method.<name>`` (``SShaDe+refine`` as
 ``method.SShaDe_refine``), whose values default to the shared sections::
 
     methods: [ARAP, Elastic, SShaDe]
@@ -22,31 +23,21 @@ A plug-in is an item of ``methods`` that is a mapping built by
 :func:`hydra.utils.instantiate`, e.g. ``{_target_: mypkg.MyMethod, name: Mine,
 iterations: 20}``; the object needs what :class:`sshade.method.Deformer` documents
 (``name``, ``deform(V, F, handles, targets) -> (n, 3)``, optional ``info`` dict), checked
-when it is built (:func:`build_method`).
+when it is built (:func:`sshade.method.build_method`, shared with ``python -m sshade
+deform``). This module is the Hydra-config part: the ``methods`` list, the composed
+``method.<key>`` sections and the shared sections' checks (:func:`arap_params`).
 """
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
-from pathlib import Path
 
 from sshade.errors import SShaDeError
+from sshade.method import as_dict, build_method, is_mapping
+from sshade.registry import SECTIONS, build_builtin, builtin_methods, canonical_name, method_key, strip_meta
+from sshade.registry import method_spec as file_spec
 
-__all__ = ["METHODS", "make_methods", "build_method", "named_or_plugin", "method_spec", "method_key", "canonical_name",
-           "arap_params", "is_plugin", "check_name", "NAME_RULE"]
-
-METHODS = ("ARAP", "Elastic", "ARAP-SR", "SShaDe", "SShaDe+refine")
-
-
-def canonical_name(name) -> str:
-    """``"arap"`` -> ``"ARAP"`` etc.; raises SShaDeError on an unknown name."""
-    key = str(name).strip().lower()
-    for m in METHODS:
-        if m.lower() == key:
-            return m
-    raise SShaDeError(f"unknown method {name!r}; choose among {list(METHODS)} or give a plug-in mapping "
-                      "{_target_: pkg.Class, ...}")
+__all__ = ["make_methods", "method_spec", "arap_params"]
 
 
 def _get(cfg, key, default=None):
@@ -61,9 +52,9 @@ def _get(cfg, key, default=None):
 def make_methods(cfg) -> list:
     """Instantiate the methods listed in ``cfg.methods``, in that order.
 
-    An item is one of our names (:data:`METHODS`, case-insensitive), built from its
+    An item is one of our names (:func:`sshade.registry.builtin_methods`, any case), built from its
     definition ``cfg.method.<key>`` (:func:`method_spec`), or a plug-in: a mapping with
-    ``_target_`` (``pkg.module.Class``) and keyword arguments (:func:`build_method`).
+    ``_target_`` (``pkg.module.Class``) and keyword arguments (:func:`sshade.method.build_method`).
 
     Parameters
     ----------
@@ -80,7 +71,7 @@ def make_methods(cfg) -> list:
     SShaDeError
         Empty or non-list ``methods``, unknown name, a mapping without ``_target_``, a
         target that cannot be imported or built, an object without a ``name`` (str) or
-        a callable ``deform``, a name breaking :data:`NAME_RULE`, a name listed twice
+        a callable ``deform``, a name breaking :data:`sshade.method.NAME_RULE`, a name listed twice
         (ignoring case and repeated spaces), bad parameter values (every
         method's parameters are checked here, before any case is loaded or built), or
         ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
@@ -96,11 +87,11 @@ def make_methods(cfg) -> list:
     try:
         items = list(items) if items is not None else []
     except TypeError:
-        raise SShaDeError(f"methods must be a list of names among {list(METHODS)} or _target_ mappings, "
+        raise SShaDeError(f"methods must be a list of names among {list(builtin_methods())} or _target_ mappings, "
                           f"got {items!r}") from None
     if not items:
-        raise SShaDeError(f"methods is empty; choose among {list(METHODS)} or give a _target_ mapping")
-    canon = [None if _is_mapping(it) else canonical_name(it) for it in items]
+        raise SShaDeError(f"methods is empty; choose among {list(builtin_methods())} or give a _target_ mapping")
+    canon = [None if is_mapping(it) else canonical_name(it) for it in items]
     if any(c is not None for c in canon):  # the shared sections, checked under their own names
         arap_params(_get(cfg, "arap", {}) or {})
         if "ARAP-SR" in canon:
@@ -115,31 +106,15 @@ def make_methods(cfg) -> list:
     return out
 
 
-def _is_mapping(x) -> bool:
-    return isinstance(x, Mapping) or (hasattr(x, "keys") and hasattr(x, "get"))
-
-
-def _container(x) -> dict:
-    """A mapping (DictConfig or dict) as a plain dict, interpolations resolved."""
-    from omegaconf import OmegaConf
-    if OmegaConf.is_config(x):
-        return OmegaConf.to_container(x, resolve=True)
-    return dict(x)
-
-
-def method_key(name: str) -> str:
-    """Key of our method ``name`` under ``method`` in the config (``SShaDe+refine`` ->
-    ``SShaDe_refine``: a ``+`` cannot appear in an override key)."""
-    return canonical_name(name).replace("+", "_")
-
-
 def method_spec(cfg, name: str) -> dict:
     """The resolved definition (``_target_`` and parameters) of our method ``name``.
 
     ``cfg.method.<key>`` when the config has it (composed from ``conf/method/`` by
     ``conf/config.yaml``), else ``conf/method/<name>.yaml`` resolved against ``cfg``'s
     ``arap`` / ``arap_sr`` / ``sshade`` sections merged over the defaults of
-    ``conf/config.yaml`` (so a plain dict config works as before).
+    ``conf/config.yaml`` (:func:`sshade.registry.method_spec`; so a plain dict config
+    works, and so does a method file that the defaults list does not name). Without the
+    file's ``order`` (:data:`sshade.registry.META_KEYS`).
 
     Raises
     ------
@@ -150,216 +125,28 @@ def method_spec(cfg, name: str) -> dict:
     >>> method_spec({"arap": {"tol": 1e-3}}, "elastic")["tol"]
     0.001
     """
-    from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
-
-    from .confdir import config_dir
     name = canonical_name(name)
-    key = method_key(name)
-    section = _get(_get(cfg, "method", None), key, None)
+    section = _get(_get(cfg, "method", None), method_key(name), None)
+    if section is None:
+        return file_spec(name, {k: _get(cfg, k) for k in SECTIONS})
     try:
-        if section is not None:
-            return _container(section)
-        base = OmegaConf.load(Path(config_dir(), "config.yaml"))
-        node = OmegaConf.create({k: base.get(k) for k in ("arap", "arap_sr", "sshade")})
-        mine = {k: _container(_get(cfg, k)) for k in ("arap", "arap_sr", "sshade") if _get(cfg, k) is not None}
-        node = OmegaConf.merge(node, OmegaConf.create(mine))
-        node["_method"] = OmegaConf.load(Path(config_dir("method"), f"{name}.yaml"))
-        return OmegaConf.to_container(node["_method"], resolve=True)
+        return strip_meta(as_dict(section))
     except OmegaConfBaseException as e:
-        raise SShaDeError(f"method.{key}: bad definition ({e})") from None
+        raise SShaDeError(f"method.{method_key(name)}: bad definition ({e})") from None
 
 
-def _build_ours(cfg, name: str, overrides: Mapping | None = None):
-    """One of our methods from its definition (with ``overrides`` of its parameters,
-    e.g. from the command line), its parameters checked first."""
+def _build_ours(cfg, name: str):
+    """One of our methods from its definition in ``cfg``, its parameters checked first."""
     spec = method_spec(cfg, name)
     where = f"method.{method_key(name)}"
-    unknown = sorted(set(overrides or {}) - set(spec) - {"name"})
-    if unknown:
-        raise SShaDeError(f"{name} has no parameter(s) {unknown}; its parameters: "
-                          f"{sorted(k for k in spec if k != '_target_')}")
-    spec.update(overrides or {})
     if name in ("ARAP", "Elastic"):
         arap_params(spec, where=where)
     elif name == "ARAP-SR":
         _alpha(spec.get("alpha", 0.01), f"{where}.alpha")
         arap_params({"tol": spec.get("tol", 1e-4), "max_iter": spec.get("max_iter")}, where=where)
-    elif name == "SShaDe":
-        try:
-            from sshade import SShaDe  # noqa: F401
-        except ImportError as e:
-            raise SShaDeError(f"method SShaDe is not available (cannot import sshade.SShaDe: {e}); "
-                              "run with methods=[ARAP,Elastic] meanwhile") from None
-    # SShaDe and SShaDe+refine check their own parameters (sshade.deform.check_params) when built
-    return build_method(spec, where=where)
-
-
-def named_or_plugin(method: str, params: Mapping | None = None, cfg=None):
-    """One method from a name or a dotted path (the command line's ``--method``).
-
-    Parameters
-    ----------
-    method : str, one of :data:`METHODS` (case-insensitive; its definition from
-        ``conf/method/``, resolved against ``cfg``) or ``pkg.module.Class`` (a plug-in).
-    params : mapping of keyword parameters: for our methods overrides of their
-        definition's keys (``n_low``, ``tol``, ...), for a plug-in its constructor's
-        arguments.
-    cfg : optional config mapping (``arap`` / ``sshade`` sections) for our methods.
-
-    Returns
-    -------
-    The built method (:func:`build_method`).
-
-    Raises
-    ------
-    SShaDeError on an unknown name that is not a dotted path, a parameter our method
-    does not have, and everything :func:`build_method` raises.
-    """
-    params = dict(params or {})
-    try:
-        name = canonical_name(method)
-    except SShaDeError:
-        if "." not in str(method):
-            raise
-        return build_method({"_target_": str(method), **params}, where=f"method {method}")
-    return _build_ours(cfg or {}, name, params)
-
-
-def build_method(spec, *, where: str = "method"):
-    """Build one method from a ``_target_`` mapping and check its interface.
-
-    Parameters
-    ----------
-    spec : mapping (dict or DictConfig) with ``_target_`` (dotted path of a class or
-        factory) and its keyword arguments; a ``name`` the target does not accept as an
-        argument is set on the built object instead (so ``{_target_: sshade.SShaDe,
-        name: SShaDe-500, n_low: 500}`` is a second SShaDe row).
-    where : str, names the item in error messages (e.g. ``methods[1]``).
-
-    Returns
-    -------
-    The built object, with a ``name`` (non-empty str), a callable ``deform`` and an
-    ``info`` mapping (set to ``{}`` when the object has none).
-
-    Raises
-    ------
-    SShaDeError naming ``where`` and the target: no ``_target_``, an import or
-    construction failure (a :class:`SShaDeError` raised by the constructor is re-raised
-    unchanged, e.g. ``SShaDe: n_low must be at least 4``), an object lacking the
-    :class:`sshade.method.Deformer` interface, or a ``name`` breaking :data:`NAME_RULE`
-    (:func:`check_name`; a newline or ``|`` would break a table row).
-
-    Examples
-    --------
-    >>> build_method({"_target_": "baselines.Elastic", "tol": 1e-3}).name
-    'Elastic'
-    """
-    from hydra.errors import InstantiationException
-    from hydra.utils import instantiate
-    if not _is_mapping(spec):
-        raise SShaDeError(f"{where}: a method is a name among {list(METHODS)} or a mapping with _target_, "
-                          f"got {spec!r}")
-    spec = _container(spec)
-    target = spec.get("_target_")
-    if not isinstance(target, str) or not target.strip():
-        raise SShaDeError(f"{where}: a method mapping needs _target_ (e.g. mypkg.MyMethod), got keys {sorted(spec)}")
-    try:
-        obj = _locate(target)
-    except Exception as e:  # ImportError, AttributeError, ...: whatever the import raised
-        raise SShaDeError(f"{where}: cannot import _target_ {target!r} ({_one_line(e)})") from None
-    rename = spec.pop("name") if "name" in spec and not _takes(obj, "name") else None
-    try:
-        m = instantiate(spec, _convert_="all")
-    except InstantiationException as e:
-        cause = e.__cause__
-        if isinstance(cause, SShaDeError):
-            raise cause from None
-        raise SShaDeError(f"{where}: cannot build {target} ({_one_line(cause or e)})") from None
-    except SShaDeError:
-        raise
-    except Exception as e:
-        raise SShaDeError(f"{where}: cannot build {target} ({_one_line(e)})") from None
-    if rename is not None:
-        m.name = str(rename)
-    name = getattr(m, "name", None)
-    if not isinstance(name, str) or not name.strip():
-        raise SShaDeError(f"{where}: {target} built an object without a `name` (non-empty str), got {name!r}; "
-                          "a method needs `name` and deform(V, F, handles, targets) (sshade.method.Deformer)")
-    check_name(name, where=f"{where}: {target}")
-    if not callable(getattr(m, "deform", None)):
-        raise SShaDeError(f"{where}: {target} ({name!r}) has no callable deform(V, F, handles, targets) "
-                          "(sshade.method.Deformer)")
-    info = getattr(m, "info", None)
-    if info is None:
-        m.info = {}
-    elif not isinstance(info, Mapping):
-        raise SShaDeError(f"{where}: {target} ({name!r}) has an `info` that is not a dict: {type(info).__name__}")
-    return m
-
-
-#: A method name: the row label of cases.csv, table.md and table.tex (issue 19).
-_NAME_RE = re.compile(r"[A-Za-z0-9_+.()/-]([A-Za-z0-9 _+.()/-]{0,62}[A-Za-z0-9_+.()/-])?")
-NAME_RULE = ("method names are 1-64 characters among ASCII letters, digits, space and _ - + . ( ) /, "
-             "not starting or ending with a space")
-
-
-def check_name(name, *, where: str = "method") -> str:
-    """``name`` if it is a valid method name (:data:`NAME_RULE`), else SShaDeError
-    (one line: ``where``, the name as Python writes it, the rule). A name with a
-    newline, ``|``, ``&``, ``%`` ... would break a row of table.md or table.tex."""
-    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
-        raise SShaDeError(f"{where}: bad name {name!r}: {NAME_RULE}")
-    return name
-
-
-def _one_line(e: BaseException) -> str:
-    """``Type: message`` of an exception on one line (whitespace runs collapsed)."""
-    return " ".join(f"{type(e).__name__}: {e}".split())
-
-
-def _locate(path: str):
-    """The object at the dotted ``path`` (``pkg.module.Class``): the longest importable
-    module prefix, then attributes. An ImportError raised inside an existing module (a
-    missing dependency of the user's code) is not mistaken for a wrong path."""
-    import importlib
-    parts = path.strip().split(".")
-    obj, i = None, len(parts)
-    while i > 0:
-        mod = ".".join(parts[:i])
-        try:
-            obj = importlib.import_module(mod)
-            break
-        except ModuleNotFoundError as e:
-            if e.name is None or not (mod == e.name or mod.startswith(e.name + ".")):
-                raise
-            i -= 1
-    if obj is None:
-        raise ImportError(f"no module named {parts[0]!r} (is it on the Python path? the folder the command "
-                          "runs in is)")
-    for j, p in enumerate(parts[i:], i):
-        if not hasattr(obj, p):
-            raise ImportError(f"{'.'.join(parts[:j])} has no attribute {p!r}")
-        obj = getattr(obj, p)
-    return obj
-
-
-def _takes(obj, arg: str) -> bool:
-    """Whether calling ``obj`` accepts the keyword ``arg`` (True when unknown)."""
-    import inspect
-    try:
-        params = inspect.signature(obj).parameters
-    except (TypeError, ValueError):
-        return True
-    return arg in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
-
-
-def is_plugin(method) -> bool:
-    """True for a method that is not one of this project's (its class is defined outside
-    the ``sshade`` and ``baselines`` packages): the evaluator records any exception such
-    a method raises on a case, not only :class:`SShaDeError`."""
-    mod = type(method).__module__ or ""
-    return mod.split(".")[0] not in ("sshade", "baselines")
+    # the others check their own parameters when built (SShaDe: sshade.deform.check_params)
+    return build_builtin(name, spec=spec)
 
 
 def _alpha(alpha, where: str) -> float:

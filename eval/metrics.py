@@ -21,6 +21,9 @@ from __future__ import annotations
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.guard import handle_error
+from sshade.mesh.validate import check_faces as _faces
+from sshade.mesh.validate import check_points as _points
 
 __all__ = [
     "volume", "surface_area", "volume_error", "area_error", "edge_length_error",
@@ -30,41 +33,6 @@ __all__ = [
 
 
 # ----------------------------------------------------------------------------- checks
-def _points(P, name: str) -> np.ndarray:
-    """(k, 3) finite float64 array or SShaDeError."""
-    try:
-        P = np.ascontiguousarray(P, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise SShaDeError(f"{name}: not a numeric array ({e})") from None
-    if P.ndim != 2 or P.shape[1] != 3:
-        raise SShaDeError(f"{name}: must have shape (n, 3), got {P.shape}")
-    if len(P) == 0:
-        raise SShaDeError(f"{name}: is empty")
-    bad = ~np.isfinite(P).all(axis=1)
-    if bad.any():
-        raise SShaDeError(f"{name}: {int(bad.sum())} rows have NaN/inf coordinates "
-                          f"(first: row {int(np.flatnonzero(bad)[0])})")
-    return P
-
-
-def _faces(F, n: int, name: str = "F") -> np.ndarray:
-    """(m, 3) int64 array with indices in [0, n) or SShaDeError."""
-    F = np.asarray(F)
-    if F.ndim != 2 or F.shape[1] != 3:
-        raise SShaDeError(f"{name}: must have shape (m, 3) (triangles only), got {F.shape}")
-    if len(F) == 0:
-        raise SShaDeError(f"{name}: has no faces")
-    if not np.issubdtype(F.dtype, np.integer):
-        if not np.isfinite(F).all() or np.any(F != np.round(F)):
-            raise SShaDeError(f"{name}: face indices are not integers")
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    out = (F < 0) | (F >= n)
-    if out.any():
-        f = int(np.flatnonzero(out.any(axis=1))[0])
-        raise SShaDeError(f"{name}: face {f} has vertex index out of range [0, {n}): {F[f].tolist()}")
-    return F
-
-
 def _mesh(V, F, name: str = "V") -> tuple[np.ndarray, np.ndarray]:
     V = _points(V, name)
     return V, _faces(F, len(V))
@@ -300,46 +268,6 @@ def face_angle_error(V, Vd, F) -> tuple[float, float]:
                           "the relative angle error is undefined")
     d = np.abs(a0 - a1)
     return float(np.degrees(d.mean())), float(100.0 * np.mean(d / a0))
-
-
-def handle_error(Vd, handles, targets, diag: float) -> float:
-    """Largest handle-to-target distance, in % of a bounding-box diagonal.
-
-    ``100 max_i ||Vd[handles[i]] - targets[i]|| / diag``. Not a paper equation: it
-    checks that the handle constraints of §4.1 are met.
-
-    Parameters
-    ----------
-    Vd : (n, 3) float, deformed vertices.
-    handles : (h,) int, unique vertex indices in ``[0, n)``.
-    targets : (h, 3) float, target positions, same unit as ``Vd``.
-    diag : float > 0, reference length (usually the rest bounding-box diagonal).
-
-    Returns
-    -------
-    float, percent of ``diag``.
-
-    Raises
-    ------
-    SShaDeError on bad handles (see :func:`sshade.validate.validate_handles`), NaN
-    coordinates, or a non-positive / non-finite ``diag``.
-
-    Examples
-    --------
-    >>> Vd = np.zeros((3, 3))
-    >>> handle_error(Vd, [1], [[0., 0.5, 0]], 10.0)
-    5.0
-    """
-    from sshade.validate import validate_handles
-    Vd = _points(Vd, "Vd (deformed)")
-    h, T = validate_handles(Vd, handles, targets)
-    try:
-        diag = float(diag)
-    except (TypeError, ValueError):
-        raise SShaDeError(f"diag must be a number, got {diag!r}") from None
-    if not np.isfinite(diag) or diag <= 0:
-        raise SShaDeError(f"diag must be a positive finite length, got {diag}")
-    return float(100.0 * np.linalg.norm(Vd[h] - T, axis=1).max() / diag)
 
 
 def _diag(V: np.ndarray) -> float:

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.mesh.validate import check_arrays
 
 __all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "DEFAULT_VIEW"]
 
@@ -52,24 +53,6 @@ def _mpl():
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     return matplotlib, Figure, FigureCanvasAgg
-
-
-def _mesh(V, F) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        V = np.asarray(V, dtype=np.float64)
-        F = np.asarray(F)
-    except (TypeError, ValueError) as e:
-        raise SShaDeError(f"render: V/F are not numeric arrays ({e})") from None
-    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
-        raise SShaDeError(f"render: V must have shape (n, 3) with n > 0, got {V.shape}")
-    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
-        raise SShaDeError(f"render: F must have shape (m, 3) (triangles) with m > 0, got {F.shape}")
-    F = F.astype(np.int64)
-    if F.min() < 0 or F.max() >= len(V):
-        raise SShaDeError(f"render: face indices out of range [0, {len(V)})")
-    if not np.isfinite(V).all():
-        raise SShaDeError("render: V has NaN/inf coordinates")
-    return V, F
 
 
 def _points(X, what: str) -> np.ndarray:
@@ -256,7 +239,7 @@ def render_mesh(V, F, *, colors=None, cmap="hot", clim=None, view=DEFAULT_VIEW, 
     ------
     SShaDeError on malformed V/F/colors/size.
     """
-    V, F = _mesh(V, F)
+    V, F = check_arrays(V, F, name="render")
     w, h = _size(size)
     _, Figure, FigureCanvasAgg = _mpl()
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: F401  (registers projection)
@@ -356,7 +339,7 @@ def _png_bytes(fig, canvas) -> bytes:
 
 
 def _write_bytes(path, data: bytes) -> Path:
-    from defaust.meshio import atomic_write
+    from sshade.mesh.io import atomic_write
     path = Path(path)
     with atomic_write(path, "wb") as fh:
         fh.write(data)

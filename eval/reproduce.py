@@ -72,7 +72,7 @@ def main(argv=None) -> int:
     (all are attempted); 2 after one ``error: ...`` line on a usage error or an OSError;
     130 after ``interrupted`` on Ctrl-C (the running step gets the same Ctrl-C).
     """
-    from .clirun import ArgumentParser, run_command
+    from sshade.clirun import ArgumentParser, run_command
     p = ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     p.add_argument("--faust", help="folder of FAUST registrations tr_reg_XYZ.ply")
     p.add_argument("--tosca", help="folder of TOSCA .off meshes")

@@ -16,7 +16,7 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
-from defaust.meshio import atomic_write
+from sshade.mesh.io import atomic_write
 
 __all__ = ["PACKAGES", "package_versions", "git_info", "collect_runinfo", "write_runinfo"]
 

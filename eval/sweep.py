@@ -84,7 +84,7 @@ def _now() -> str:
 # ----------------------------------------------------------------------------- status.json
 def write_status(out_dir, status: dict) -> Path:
     """Write ``out_dir/status.json`` atomically; returns its path."""
-    from defaust.meshio import atomic_write
+    from sshade.mesh.io import atomic_write
     p = Path(out_dir) / STATUS_FILE
     with atomic_write(p, "w") as fh:
         json.dump(status, fh, indent=2, default=str)
@@ -113,7 +113,7 @@ def read_manifest(sweep_dir) -> dict | None:
 
 
 def _write_manifest(sweep_dir, m: dict) -> Path:
-    from defaust.meshio import atomic_write
+    from sshade.mesh.io import atomic_write
     p = Path(sweep_dir) / MANIFEST
     p.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(p, "w") as fh:
@@ -433,7 +433,7 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     df = pd.DataFrame(rows, columns=head + metric_cols)
     df["job"] = df["job"].astype("Int64")
     if write:
-        from defaust.meshio import atomic_write
+        from sshade.mesh.io import atomic_write
         with atomic_write(d / TABLE_CSV, "w", newline="") as fh:
             df.to_csv(fh, index=False, float_format="%.6g")
         with atomic_write(d / TABLE_MD, "w") as fh:
@@ -508,12 +508,12 @@ def sweep_markdown(df, *, title: str | None = None) -> str:
     """Markdown view of :func:`aggregate_sweep`'s table: job, the overridden keys that
     vary across jobs (all of them if none varies), status, per method the main metrics
     of ``eval.tables.TABLE_COLUMNS`` and the number of cases, and the error (shortened)."""
-    from .tables import METHOD_ORDER, TABLE_COLUMNS
+    from .tables import TABLE_COLUMNS, method_order_key
     fixed = {"job", "dir", "overrides", "status", "error", "wall_s", "n_cases", "n_errors"}
     keys = [c for c in df.columns if c not in fixed and "/" not in c]
     vary = [k for k in keys if df[k].astype(str).nunique(dropna=False) > 1] or keys
     methods = list(dict.fromkeys(c.split("/", 1)[0] for c in df.columns if "/" in c))
-    methods.sort(key=lambda m: (METHOD_ORDER.index(m), "") if m in METHOD_ORDER else (len(METHOD_ORDER), m))
+    methods.sort(key=method_order_key)
     cols: list[tuple[str, str, int | None]] = []
     for m in methods:
         if f"{m}/n_cases" in df.columns:
@@ -609,7 +609,7 @@ class AggregateSweepCallback(_Callback):
 
 # ----------------------------------------------------------------------------- CLI
 def _aggregate_cli(args: list[str]) -> int:
-    from .clirun import ArgumentParser
+    from sshade.clirun import ArgumentParser
     ap = ArgumentParser(prog="python -m eval.sweep aggregate",
                                  description="Summarise sweep folders into sweep_table.{csv,md}.")
     ap.add_argument("dirs", nargs="+", help="sweep folder(s) (hydra.sweep.dir)")
@@ -687,10 +687,10 @@ def main(argv: list[str] | None = None) -> None:
 
     Exits with 0 once every job has an outcome; 2 after one ``error: ...`` line for a bad
     command line (an unknown key or config group option, a malformed override: refused
-    before any job starts, :func:`eval.clirun.precheck`) or an OSError; 130 after
+    before any job starts, :func:`sshade.clirun.precheck`) or an OSError; 130 after
     ``interrupted`` on Ctrl-C.
     """
-    from .clirun import hydra_main, run_command
+    from sshade.clirun import hydra_main, run_command
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "aggregate":
         raise SystemExit(run_command(lambda: _aggregate_cli(argv[1:]), where=argv[1] if len(argv) > 1 else None))
@@ -699,7 +699,7 @@ def main(argv: list[str] | None = None) -> None:
             print("error: usage: python -m eval.sweep resume SWEEP_DIR", file=sys.stderr)
             raise SystemExit(2)
         raise SystemExit(run_command(lambda: resume_sweep(argv[1]), where=argv[1]))
-    from .confdir import config_dir
+    from sshade.confdir import config_dir
     if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):
         argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
     hydra_main(sweep_job, config_dir(), argv=argv)

@@ -38,8 +38,9 @@ and table.tex say so and the main table falls back to per-method means over each
 method's own successful cases, without bold. A frame without a ``case`` column is
 summarised per method, as :func:`summarize` always did.
 
-Rows are ordered ARAP, Elastic, ARAP-SR, Implicit-ARAP, SShaDe, then any other method
-by name.
+Rows are ordered as :func:`sshade.registry.table_order` says (ARAP, Elastic, ARAP-SR,
+Implicit-ARAP, SShaDe, SShaDe+refine: the ``order`` keys of ``conf/method/*.yaml``), then
+any other method by name.
 """
 from __future__ import annotations
 
@@ -49,13 +50,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from defaust.meshio import atomic_write
+from sshade.mesh.io import atomic_write
+from sshade.registry import table_order
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
-           "COMMON_CASES_HEADING", "METHOD_ORDER", "TABLE_COLUMNS"]
-
-METHOD_ORDER = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe+refine")
+           "COMMON_CASES_HEADING", "TABLE_COLUMNS", "method_order_key"]
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
@@ -98,13 +98,16 @@ ALL_CASES_HEADING = "All cases each method ran on"
 COMMON_CASES_HEADING = "Cases every method succeeded on"
 
 
-def _order_key(m: str):
-    return (METHOD_ORDER.index(m), "") if m in METHOD_ORDER else (len(METHOD_ORDER), m)
+def method_order_key(m: str) -> tuple:
+    """Sort key of a method's rows: its place in :func:`sshade.registry.table_order`,
+    any other method after those, by name."""
+    order = table_order()
+    return (order.index(m), "") if m in order else (len(order), m)
 
 
 def _methods(df: pd.DataFrame) -> list:
     """The frame's methods in table order (ARAP, Elastic, ..., SShaDe, others by name)."""
-    return sorted(df["method"].unique(), key=_order_key)
+    return sorted(df["method"].unique(), key=method_order_key)
 
 
 def ok_mask(df: pd.DataFrame) -> pd.Series:
@@ -511,7 +514,7 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     (see the module docstring and :func:`compare`).
 
     Every file is written to a temporary file and renamed into place
-    (:func:`defaust.meshio.atomic_write`), so a crash never leaves a half-written table.
+    (:func:`sshade.mesh.io.atomic_write`), so a crash never leaves a half-written table.
     A ``table_all.csv`` left by an earlier run into the same folder is removed when this
     run has no second table, so it never describes other results.
 
@@ -589,7 +592,7 @@ def main(argv=None) -> int:
     """
     import sys
 
-    from .clirun import ArgumentParser, run_command
+    from sshade.clirun import ArgumentParser, run_command
     ap = ArgumentParser(prog="python -m eval.tables",
                         description="Rebuild table.{csv,md,tex} of finished evaluator runs from their cases.csv "
                                     "(no method is rerun).")

@@ -1,15 +1,16 @@
-"""``python -m sshade deform MESH -o OUT ...``: a thin shim. The argument parsing, the
-handle-file readers and the mesh I/O live in :mod:`eval.deform_cli` (file formats stay
-out of the geometry core); this module only calls it. See that module for the options.
+"""``python -m sshade deform MESH -o OUT ...``: runs :func:`sshade.cli.main` (the argument
+parsing, the handle-file readers of :mod:`sshade.mesh.handle_files` and the mesh I/O of
+:mod:`sshade.mesh.io`). See :mod:`sshade.cli` for the options.
 """
 from __future__ import annotations
 
 import sys
 
+from .cli import main as cli_main
+
 
 def main() -> int:
-    """Run :func:`eval.deform_cli.main` on the command line's arguments."""
-    from eval.deform_cli import main as cli_main
+    """Run :func:`sshade.cli.main` on the command line's arguments."""
     return cli_main(sys.argv[1:])
 
 

@@ -4,7 +4,7 @@ each component without handles follows its nearest deformed component rigidly.
 
 Pure functions over ``(V, F)`` arrays plus a small :class:`ComponentWise` wrapper that
 gives any :class:`sshade.method.Deformer` this behaviour. Used by :func:`sshade.deform`,
-the evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`eval.deform_cli`).
+the evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`sshade.cli`).
 
 Rigid following (documented choice). A component ``C`` without handles gets the motion
 of the handled component ``H`` whose vertices are nearest to it (smallest
@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from .errors import SShaDeError
-from .validate import validate_handles, validate_mesh
+from .mesh.validate import validate_handles, validate_mesh
 
 __all__ = ["component_labels", "n_components", "drop_unreferenced", "rigid_follow", "deform_components",
            "ComponentWise", "MIN_PATCH_FACES"]
@@ -194,7 +194,7 @@ def deform_components(method, V, F, handles, targets, *, return_info: bool = Fal
 
     Raises
     ------
-    SShaDeError on an invalid mesh (every check of :func:`sshade.validate.validate_mesh`
+    SShaDeError on an invalid mesh (every check of :func:`sshade.mesh.validate.validate_mesh`
     but the component count: unreferenced vertices, non-manifold edges, ...) or invalid
     handles, before any work; whatever ``method.deform`` raises on a component.
 

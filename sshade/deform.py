@@ -1,59 +1,27 @@
 """SShaDe: the whole pipeline (paper §3, Fig. 1): remesh -> low-res spokes-and-rims ARAP
--> LRF transfer, averaged over k samplings run in parallel processes (§3.3).
+-> LRF transfer, averaged over k samplings run in parallel processes (§3.3, the pool of
+:mod:`sshade.sampling`). :func:`check_params` is the one check of SShaDe's parameters
+(also used by :mod:`sshade.isometric` and :mod:`sshade.refine`).
 """
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from .arap import arap_deform
+from .arap import PROTOCOLS, arap_deform, make_criterion
+from .components import deform_components
 from .errors import SShaDeError
-from .halfedge import count_components
 from .lrf import GRADIENTS, transfer
+from .mesh.halfedge import count_components
+from .mesh.validate import validate_handles, validate_mesh
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
-from .validate import validate_handles, validate_mesh
+from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels, worker_state
+from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "sampling_seeds", "check_params", "LowResSkippedWarning"]
-
-# Worker-process state: the high-res mesh is handed to each worker once, at fork.
-_W: dict = {}
-
-
-_WARM = False
-
-
-def _warmup() -> float:
-    """Compile (or load from cache) the numba kernels in this process, so forked
-    workers inherit them instead of each compiling its own. Returns the seconds spent
-    (0.0 when already done in this process)."""
-    global _WARM
-    if _WARM:
-        return 0.0
-    t0 = time.perf_counter()
-    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
-    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 4], [2, 3, 4], [3, 1, 4]])
-    from .geodesic import VoronoiState
-    st = VoronoiState(V, F)
-    st.sample(3, 0)
-    st.add([4])
-    project_to_fans(V, np.zeros(5, np.int64), V[:3], np.array([[0, 1, 2]]))
-    from .halfedge import halfedges, vertex_fan_count
-    vertex_fan_count(F, halfedges(F, 5), 5)
-    from .arap import warmup_kernels
-    warmup_kernels()  # the low-res ARAP's serial kernels, inherited by the forked workers
-    _WARM = True
-    return time.perf_counter() - t0
-
-
-def _init_worker(state: dict) -> None:
-    _W.clear()
-    _W.update(state)
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning"]
 
 
 def _prepare(V, F, handles, n_low, seed, topology):
@@ -71,7 +39,6 @@ def _prepare(V, F, handles, n_low, seed, topology):
 
 def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
     """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step."""
-    from .arap import make_criterion
     crit = None
     if protocol == "converged" and (etol is not None or gtol is not None):
         crit = make_criterion(etol, gtol)
@@ -124,7 +91,7 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
 
 
 def _task_full(i: int):
-    w = _W
+    w = worker_state()
     prep, info = _prepare(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
     Vd, info2 = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"])
     info.update(info2)
@@ -132,13 +99,13 @@ def _task_full(i: int):
 
 
 def _task_prepare(i: int):
-    w = _W
+    w = worker_state()
     prep, info = _prepare(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
     return i, prep, info
 
 
 def _task_finish(i: int, prep: dict, V0: np.ndarray):
-    w = _W
+    w = worker_state()
     Vd, info = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"], V0=V0)
     return i, Vd, info
 
@@ -221,7 +188,6 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
         raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
     out["gradient"] = gradient
     out["warm_start"] = bool(warm_start)  # a bool (checked above)
-    from .arap import PROTOCOLS
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
     out["protocol"] = protocol
@@ -244,28 +210,6 @@ def auto_n_low(n: int) -> int:
     (6000 is the paper's setting for 150k-200k vertices; n // 7 keeps small meshes
     such as FAUST's 6890-vertex registrations about 7x coarser)."""
     return int(max(100, min(6000, n // 7)))
-
-
-def sampling_seeds(seed: int, k: int) -> list[int]:
-    """The k first-seed RNG seeds derived from ``seed`` (recorded in every output)."""
-    return [int(s) for s in np.random.SeedSequence(seed).generate_state(k, dtype=np.uint32)]
-
-
-class _Serial:
-    """Executor stand-in running tasks in this process (workers=1)."""
-
-    def submit(self, fn, *args):
-        from concurrent.futures import Future
-        f = Future()
-        f.set_result(fn(*args))
-        return f
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        _W.clear()
-        return False
 
 
 def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0,
@@ -313,7 +257,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
 
     Raises
     ------
-    SShaDeError on invalid mesh or handles (see :func:`sshade.validate.validate_mesh`)
+    SShaDeError on invalid mesh or handles (see :func:`sshade.mesh.validate.validate_mesh`)
     or a bad parameter (:func:`check_params`: n_samplings < 1, n_low < 4, tol <= 0,
     unknown gradient mode, ...), before any work.
 
@@ -330,70 +274,84 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                      max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
                      gtol=gtol)
-    n_samplings, workers = p["n_samplings"], p["workers"]
-    compile_s = _warmup()  # numba compilation / cache loads: not part of the timings below
+    compile_s = warm_kernels()  # numba compilation / cache loads: not part of the timings below
     t0 = time.perf_counter()
     V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
     handles, targets = validate_handles(V, handles, targets)
     if count_components(he.E, len(V)) > 1:  # each component apart, handle-less ones rigidly (sshade.components)
-        from .components import deform_components
         return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
-    n_low_asked = auto_n_low(len(V)) if p["n_low"] == "auto" else p["n_low"]
-    full_res = n_low_asked >= len(V)
-    if full_res:
-        warnings.warn(f"SShaDe: n_low={n_low_asked} is not below the mesh's {len(V)} vertices: there is no "
-                      "low-resolution step, the low-res ARAP runs on the whole mesh (pass a smaller n_low)",
-                      LowResSkippedWarning, stacklevel=2)
-    n_low = int(min(n_low_asked, len(V)))
-    topo = mesh_topology(V, F, he)
-    seeds = sampling_seeds(seed, n_samplings)
-    state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, seeds=seeds, topology=topo,
-                 arap=_arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]), gradient=gradient)
-    if workers is None:
-        workers = min(n_samplings, os.cpu_count() or 1)
-    workers = max(1, min(int(workers), n_samplings))
+    n_low_asked, n_low = _low_res_size(len(V), p["n_low"])
+    state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, topology=mesh_topology(V, F, he),
+                 seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"],
+                 arap=_arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
+    workers = pool_size(p["workers"], p["n_samplings"])
     t1 = time.perf_counter()
-    results: list = [None] * n_samplings
-    infos: list = [None] * n_samplings
-    if workers == 1 or "fork" not in mp.get_all_start_methods():
-        _init_worker(state)
-        pool = _Serial()
-    else:
-        # fork: workers inherit the mesh and the compiled numba code without pickling
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"),
-                                   initializer=_init_worker, initargs=(state,))
-    with pool as ex:
-        if not warm_start or n_samplings == 1:
-            for f in [ex.submit(_task_full, i) for i in range(n_samplings)]:
-                i, results[i], infos[i] = f.result()
-        else:
-            f0 = ex.submit(_task_full, 0)
-            preps = [ex.submit(_task_prepare, i) for i in range(1, n_samplings)]
-            _, results[0], infos[0] = f0.result()
-            fins = []
-            for f in preps:
-                i, prep, info = f.result()
-                infos[i] = info
-                fins.append(ex.submit(_task_finish, i, prep, results[0][prep["seeds"]]))
-            for f in fins:
-                i, results[i], info2 = f.result()
-                infos[i].update(info2)
+    with SamplingPool(state, workers) as pool:
+        results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
     Vd = np.mean(results, axis=0)
     Vd[handles] = targets
-    t2 = time.perf_counter()
     if not return_info:
         return Vd
-    info = {"total_s": t2 - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers, "seed": seed,
-            "sampling_seeds": seeds,
-            "warm_start": bool(warm_start), "n_low_requested": int(n_low_asked), "low_res_skipped": bool(full_res),
-            "samplings": infos}
-    for k in ("remesh_s", "project_s", "arap_s", "transfer_s", "iterations"):
-        info[k] = float(np.sum([d[k] for d in infos]))
-    info["n_low"] = int(np.mean([d["n_low"] for d in infos]))
-    info["protocol"] = p["protocol"]
-    info["converged"] = bool(all(d["converged"] for d in infos))  # every sampling's low-res ARAP
-    info["iterations_max"] = int(max(d["iterations"] for d in infos))
-    return Vd, info
+    info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
+            "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
+            "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
+    return Vd, {**info, **_summary(infos), "protocol": p["protocol"]}
+
+
+def _low_res_size(n: int, n_low) -> tuple[int, int]:
+    """(requested, actual) low-res vertex count of an ``n``-vertex mesh for the checked
+    ``n_low`` (int or ``"auto"``: :func:`auto_n_low`); warns :class:`LowResSkippedWarning`
+    (at :func:`deform`'s caller) when the request is not below ``n``."""
+    asked = auto_n_low(n) if n_low == "auto" else n_low
+    if asked >= n:
+        warnings.warn(f"SShaDe: n_low={asked} is not below the mesh's {n} vertices: there is no "
+                      "low-resolution step, the low-res ARAP runs on the whole mesh (pass a smaller n_low)",
+                      LowResSkippedWarning, stacklevel=3)
+    return asked, int(min(asked, n))
+
+
+def _run_samplings(pool: SamplingPool, k: int, warm_start: bool) -> tuple[list, list]:
+    """The k samplings' deformed meshes ((n, 3) each) and info dicts, in order. With
+    ``warm_start``, sampling 0 runs first while the others remesh and project; their
+    low-res ARAP then starts from sampling 0's result."""
+    results: list = [None] * k
+    infos: list = [None] * k
+    if not warm_start or k == 1:
+        for f in [pool.submit(_task_full, i) for i in range(k)]:
+            i, results[i], infos[i] = f.result()
+        return results, infos
+    f0 = pool.submit(_task_full, 0)
+    preps = [pool.submit(_task_prepare, i) for i in range(1, k)]
+    _, results[0], infos[0] = f0.result()
+    fins = []
+    for f in preps:
+        i, prep, info = f.result()
+        infos[i] = info
+        fins.append(pool.submit(_task_finish, i, prep, results[0][prep["seeds"]]))
+    for f in fins:
+        i, results[i], info2 = f.result()
+        infos[i].update(info2)
+    return results, infos
+
+
+def _summary(infos: list) -> dict:
+    """Per-stage seconds and iterations summed over the samplings' ``infos``, mean
+    ``n_low``, ``converged`` (every sampling's low-res ARAP) and ``iterations_max``."""
+    out = {k: float(np.sum([d[k] for d in infos])) for k in ("remesh_s", "project_s", "arap_s", "transfer_s",
+                                                                 "iterations")}
+    out["n_low"] = int(np.mean([d["n_low"] for d in infos]))
+    out["converged"] = bool(all(d["converged"] for d in infos))
+    out["iterations_max"] = int(max(d["iterations"] for d in infos))
+    return out
+
+
+def warm_sshade(params: dict) -> float:
+    """Warm :func:`deform` with SShaDe's checked ``params`` (:func:`check_params`): one
+    in-process run on :func:`sshade.warmup.tiny_problem` with the same ARAP protocol and
+    gradient mode (two samplings, warm-started, so every stage runs), once per process
+    (:func:`sshade.warmup.warm_once`). Returns the seconds spent (0.0 when warm)."""
+    p = dict(params, n_low=40, n_samplings=2, workers=1, warm_start=True, seed=0)
+    return warm_once(WARMED, ("sshade", p["protocol"], p["gradient"]), lambda V, F, h, T: deform(V, F, h, T, **p))
 
 
 class SShaDe:
@@ -429,8 +387,7 @@ class SShaDe:
     def warmup(self, n_vertices: int | None = None) -> float:
         """Compile (or load from numba's cache) every kernel :meth:`deform` runs, by one
         in-process run on a tiny mesh with this method's protocol and gradient mode
-        (:func:`sshade.warmup.warm_once`), so that a timed call measures no compilation.
+        (:func:`warm_sshade`), so that a timed call measures no compilation.
         ``n_vertices`` is accepted for the common interface (SShaDe's kernels run on the
         low-resolution meshes, serially). Returns the seconds spent (0.0 when warm)."""
-        from .warmup import warm_sshade
         return warm_sshade(self.params)

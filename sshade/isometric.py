@@ -13,7 +13,8 @@ Isometric deformation (§4.2), per sampling:
 4. encode ``M`` in the per-triangle frames of ``N`` (projection P: V_M -> T_N,
    :func:`sshade.projection.project_to_fans`) and decode on ``N'`` (Alg. 1, LRFT).
 
-The k samplings (seeds from :func:`sshade.deform.sampling_seeds`) are averaged (§3.3).
+The k samplings (seeds from :func:`sshade.sampling.sampling_seeds`) are averaged (§3.3),
+in the process pool of :mod:`sshade.sampling` (that of :func:`sshade.deform`).
 
 Pose transfer (§4.3): a third shape ``S`` (pose 0 of another subject, 1:1 with ``M``,
 same connectivity, aligned with ``M`` in space) is to be put in the pose of ``M'``. The
@@ -27,47 +28,28 @@ All positions are in the input's length unit; nothing here reads or writes files
 """
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from .deform import _warmup, sampling_seeds
+from .deform import auto_n_low, check_params
 from .errors import SShaDeError
-from .lrf import GRADIENTS, decode, encode, frame_functions
+from .lrf import decode, encode, frame_functions
+from .mesh.validate import check_points, validate_mesh
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
-from .validate import validate_mesh
+from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels, worker_state
 
 __all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "rigid_align"]
 
-# Worker-process state, handed to forked workers once (pattern of sshade.deform).
-_W: dict = {}
-
-
-def _init_worker(state: dict) -> None:
-    _W.clear()
-    _W.update(state)
-
 
 def _positions(X, n: int | None, name: str, ref: str = "the rest mesh") -> np.ndarray:
-    """(n, 3) float64 finite positions in 1:1 correspondence with ``ref`` (n vertices;
-    None: any count)."""
-    try:
-        X = np.ascontiguousarray(X, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise SShaDeError(f"{name}: vertex array is not numeric ({e})") from None
-    if X.ndim != 2 or X.shape[1] != 3:
-        raise SShaDeError(f"{name}: expected an (n, 3) vertex array, got shape {X.shape}")
+    """(n, 3) float64 finite positions (:func:`sshade.mesh.validate.check_points`) in 1:1
+    correspondence with ``ref`` (n vertices; None: any count)."""
+    X = check_points(X, name)
     if n is not None and len(X) != n:
         raise SShaDeError(f"{name} has {len(X)} vertices but {ref} has {n}: the shapes must be "
                           "in 1:1 vertex correspondence (same vertex count and order)")
-    bad = ~np.isfinite(X).all(axis=1)
-    if bad.any():
-        raise SShaDeError(f"{name}: vertex {int(np.flatnonzero(bad)[0])} has a NaN/inf coordinate "
-                          f"({int(bad.sum())} such vertices)")
     return X
 
 
@@ -104,7 +86,7 @@ def rigid_align(X, Y) -> np.ndarray:
 
 def _one(i: int) -> tuple[int, np.ndarray, dict]:
     """Sampling i: remesh M, project M onto N, encode S on N, decode on N' (Alg. 1)."""
-    w = _W
+    w = worker_state()
     V, F = w["V"], w["F"]
     t0 = time.perf_counter()
     rm = remesh(V, F, w["n_low"], seed=w["seeds"][i], topology=w["topology"])
@@ -134,12 +116,15 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
         a single-component 2-manifold (boundary allowed).
     V_S : (n, 3) float, positions encoded (1:1 with M, aligned with M in space).
     V_Mprime : (n, 3) float, M in the target pose (1:1 with M).
-    n_low : int >= 4, farthest-point samples per low-res mesh (capped at n).
+    n_low : int >= 4, farthest-point samples per low-res mesh (capped at n), or
+        ``"auto"`` (:func:`sshade.deform.auto_n_low`).
     n_samplings : int >= 1, samplings averaged (paper: 5-10).
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, n_samplings)[i]``.
     gradient : ``"normalized"`` (orthonormal frames) or ``"raw"`` (paper's g_t).
     workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
         The result does not depend on it.
+    n_low, n_samplings, seed, gradient and workers are checked as :func:`sshade.deform`
+    checks them (:func:`sshade.deform.check_params`).
 
     Returns
     -------
@@ -150,7 +135,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
 
     Raises
     ------
-    SShaDeError on an invalid mesh (:func:`sshade.validate.validate_mesh`), position
+    SShaDeError on an invalid mesh (:func:`sshade.mesh.validate.validate_mesh`), position
     arrays of the wrong shape / vertex count / with NaN, n_samplings < 1, n_low < 4,
     unknown gradient mode.
     """
@@ -159,37 +144,21 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     n = len(V)
     S = _positions(V_S, n, "V_S")
     T = _positions(V_Mprime, n, "target pose V_Mprime")
-    if int(n_samplings) < 1:
-        raise SShaDeError(f"n_samplings must be >= 1, got {n_samplings}")
-    if int(n_low) < 4:
-        raise SShaDeError(f"n_low must be at least 4, got {n_low}")
-    if gradient not in GRADIENTS:
-        raise SShaDeError(f"unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
-    n_samplings = int(n_samplings)
-    seeds = sampling_seeds(int(seed), n_samplings)
-    _warmup()
-    state = dict(V=V, F=F, S=S, T=T, n_low=int(min(int(n_low), n)), seeds=seeds,
+    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient)
+    n_samplings = p["n_samplings"]
+    seeds = sampling_seeds(p["seed"], n_samplings)
+    warm_kernels()
+    n_low = auto_n_low(n) if p["n_low"] == "auto" else p["n_low"]
+    state = dict(V=V, F=F, S=S, T=T, n_low=int(min(n_low, n)), seeds=seeds,
                  topology=mesh_topology(V, F, he), gradient=gradient)
-    if workers is None:
-        workers = os.cpu_count() or 1
-    workers = max(1, min(int(workers), n_samplings))
+    workers = pool_size(p["workers"], n_samplings)
     results: list = [None] * n_samplings
     infos: list = [None] * n_samplings
-    if workers == 1 or "fork" not in mp.get_all_start_methods():
-        _init_worker(state)
-        try:
-            for i in range(n_samplings):
-                _, results[i], infos[i] = _one(i)
-        finally:
-            _W.clear()
-    else:
-        # fork: workers inherit the meshes and the compiled numba kernels without pickling
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"),
-                                 initializer=_init_worker, initargs=(state,)) as ex:
-            for f in [ex.submit(_one, i) for i in range(n_samplings)]:
-                i, results[i], infos[i] = f.result()
+    with SamplingPool(state, workers) as pool:
+        for f in [pool.submit(_one, i) for i in range(n_samplings)]:
+            i, results[i], infos[i] = f.result()
     out = np.mean(results, axis=0)  # fixed order: independent of the worker count
-    info = {"total_s": time.perf_counter() - t0, "seed": int(seed), "sampling_seeds": seeds,
+    info = {"total_s": time.perf_counter() - t0, "seed": p["seed"], "sampling_seeds": seeds,
             "n_samplings": n_samplings, "workers": workers, "gradient": gradient, "samplings": infos}
     for k in ("remesh_s", "project_s", "transfer_s"):
         info[k] = float(np.sum([d[k] for d in infos]))

@@ -15,8 +15,9 @@ import time
 import numpy as np
 
 from .arap import make_criterion, solve_arap
-from .deform import check_params, deform
-from .validate import validate_handles, validate_mesh
+from .deform import check_params, deform, warm_sshade
+from .mesh.validate import validate_handles, validate_mesh
+from .warmup import warm_fullres
 
 __all__ = ["SShaDeRefine"]
 
@@ -80,5 +81,4 @@ class SShaDeRefine:
         full-resolution spokes-and-rims solve (parallel variants too when an ``n_vertices``
         mesh uses them), outside any timed call (:mod:`sshade.warmup`). Returns the
         seconds spent (0.0 when warm)."""
-        from .warmup import warm_fullres, warm_sshade
         return warm_sshade(self.params) + warm_fullres(self.energy, "converged", n_vertices)

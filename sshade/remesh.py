@@ -1,7 +1,7 @@
 """Topology-preserving low-resolution remesh (paper §3.1; ReMatching, Maggioli et al. 2023).
 
 Pipeline: geodesic farthest-point sampling of ``n_low`` seeds from a random first seed
-(:mod:`sshade.geodesic`), then the required vertices (handles) are added as seeds (they
+(:mod:`sshade.mesh.geodesic`), then the required vertices (handles) are added as seeds (they
 do not drive the sampling, so different first seeds give different samplings), then the
 *closed-ball property* (Edelsbrunner & Shah 1997) of the Voronoi decomposition is
 checked and seeds are added where it fails, until it holds:
@@ -22,7 +22,7 @@ the high-res surface they stand for are detected and also repaired by adding see
 
 Speed (issue 13): the connectivity (:func:`mesh_topology`) is built once per mesh and
 shared by the samplings; the sampling runs on the edge graph in a cache-friendly vertex
-order (:mod:`sshade.geodesic`); each check round is one compiled pass over the faces
+order (:mod:`sshade.mesh.geodesic`); each check round is one compiled pass over the faces
 when the property holds (the common case at 6000 seeds) and a compiled pass over edges
 and faces that also picks the repair seeds when it does not.
 """
@@ -35,8 +35,8 @@ import numpy as np
 from numba import njit
 
 from .errors import SShaDeError
-from .geodesic import VoronoiState, edge_graph_from_edges, locality_order
-from .halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
+from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
+from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
 
 __all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
 
@@ -56,7 +56,7 @@ class MeshTopology:
     graph : CSR edge graph of the input (indptr, indices, weights), in ``order``.
     vnormals : (n, 3) float64 area-weighted vertex normals of the input.
     order : (n,) int64 locality order of the vertices (graph vertex i = mesh vertex
-        ``order[i]``; :func:`sshade.geodesic.locality_order`).
+        ``order[i]``; :func:`sshade.mesh.geodesic.locality_order`).
     """
 
     n: int
@@ -77,7 +77,7 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64, a validated manifold mesh.
-    he : its :class:`~sshade.halfedge.HalfEdges` if already built (see
+    he : its :class:`~sshade.mesh.halfedge.HalfEdges` if already built (see
         ``validate_mesh(..., return_halfedges=True)``).
     """
     n, m = len(V), len(F)
@@ -516,7 +516,7 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64, a validated single-component manifold mesh
-        (see :func:`sshade.validate.validate_mesh`).
+        (see :func:`sshade.mesh.validate.validate_mesh`).
     n_low : int, number of farthest-point samples (the low-res mesh gets this many
         vertices plus the required ones plus the few repair seeds).
     seed : int, seeds the RNG that picks the first sample; different seeds give

@@ -4,8 +4,9 @@ solvers, cholespy) happen outside the timed call.
 
 Every method of the evaluator (:class:`sshade.SShaDe`, :class:`sshade.refine.SShaDeRefine`,
 the baselines of :mod:`baselines`) has a ``warmup(n_vertices=None) -> float`` built on
-:func:`warm_once`; :func:`eval.experiments.cases.run` calls it before a method's first timed
-``deform`` and records the seconds as ``compile_s`` (table row and ``run.json``), and
+:func:`warm_once` (SShaDe's: :func:`sshade.deform.warm_sshade`, which runs
+:func:`sshade.deform.deform`; this module imports nothing above the ARAP solver);
+:func:`eval.experiments.cases.run` calls it before a method's first timed ``deform`` and records the seconds as ``compile_s`` (table row and ``run.json``), and
 :func:`eval.experiments.scaling.run_scaling` does the same before its timed calls. On a cold numba
 cache (a fresh clone, a cluster node, ``NUMBA_CACHE_DIR`` pointing to an empty folder) the
 compilation takes 10-20 s, about 40x SShaDe's run on a 6,890-vertex FAUST case.
@@ -17,10 +18,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["tiny_problem", "warm_once", "warm_fullres", "warm_sshade", "warm_parallel_kernels", "uses_parallel_kernels"]
+from .arap import arap_deform, kernels, solver_kernels
+from .arap.threads import PARALLEL_MIN_CELLS, resolve_threads
+from .mesh.validate import validate_handles, validate_mesh
+
+__all__ = ["tiny_problem", "warm_once", "warm_fullres", "warm_parallel_kernels", "uses_parallel_kernels", "WARMED"]
 
 _TINY: tuple | None = None
-_DONE: set = set()  # keys of the warm-ups done in this process (forked workers inherit it)
+#: Keys of the warm-ups done in this process (forked workers inherit it): the ``done``
+#: set of :func:`warm_once` shared by every method of this project.
+WARMED: set = set()
 
 
 def tiny_problem() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -55,7 +62,6 @@ def uses_parallel_kernels(n_vertices: int | None) -> bool:
     worker process). False for None."""
     if n_vertices is None:
         return False
-    from .arap.threads import PARALLEL_MIN_CELLS, resolve_threads
     return int(n_vertices) >= PARALLEL_MIN_CELLS and resolve_threads(None, int(n_vertices)) > 1
 
 
@@ -63,7 +69,6 @@ def warm_parallel_kernels() -> None:
     """Compile (or load from numba's cache) the parallel variants of the ARAP kernels
     (:mod:`sshade.arap.kernels`, :mod:`sshade.arap.solver_kernels`). Starts numba's thread pool:
     call it only where a parallel solve follows anyway (:func:`uses_parallel_kernels`)."""
-    from .arap import kernels, solver_kernels
     kernels.fused_kernels(True)
     solver_kernels.loop_kernels(True)
 
@@ -95,22 +100,10 @@ def warm_fullres(energy: str, protocol: str, n_vertices: int | None = None) -> f
     (``"spokes"`` or ``"spokes_and_rims"``) under ``protocol`` (``"converged"`` or
     ``"paper"``), with the parallel kernels too when an ``n_vertices`` mesh uses them
     (:func:`uses_parallel_kernels`). Returns the seconds spent (0.0 when warm)."""
-    from .arap import arap_deform
-    from .validate import validate_handles, validate_mesh
 
     def run(V, F, h, T):  # as the baselines' deform: validation, then the solve
         V, F = validate_mesh(V, F)
         h, T = validate_handles(V, h, T)
         return arap_deform(V, F, h, T, energy=energy, protocol=protocol)
-    return warm_once(_DONE, ("fullres", energy, protocol), run,
+    return warm_once(WARMED, ("fullres", energy, protocol), run,
                      parallel=protocol == "converged" and uses_parallel_kernels(n_vertices))
-
-
-def warm_sshade(params: dict) -> float:
-    """Warm :func:`sshade.deform` with SShaDe's checked ``params``
-    (:func:`sshade.deform.check_params`): one in-process run on :func:`tiny_problem` with
-    the same ARAP protocol and gradient mode (two samplings, warm-started, so every stage
-    runs). Returns the seconds spent (0.0 when warm)."""
-    from .deform import deform
-    p = dict(params, n_low=40, n_samplings=2, workers=1, warm_start=True, seed=0)
-    return warm_once(_DONE, ("sshade", p["protocol"], p["gradient"]), lambda V, F, h, T: deform(V, F, h, T, **p))

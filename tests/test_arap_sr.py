@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from baselines import ARAPSR
 from baselines.arap_sr import arap_sr_deform
-from defaust.meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from sshade.arap import arap_deform
 
 from .conftest import data_file

@@ -1,7 +1,7 @@
 """Every bad input raises SShaDeError, naming the problem, before any work is done.
 
-Checked through :func:`sshade.validate.validate_mesh` / :func:`validate_handles`,
-:func:`defaust.meshio.read_mesh`, and the full-resolution baseline
+Checked through :func:`sshade.mesh.validate.validate_mesh` / :func:`validate_handles`,
+:func:`sshade.mesh.io.read_mesh`, and the full-resolution baseline
 ``baselines.Elastic().deform`` (whose solver is replaced by a tripwire, so a test
 fails if the method gets as far as deforming).
 
@@ -19,9 +19,9 @@ import pytest
 
 import baselines.arap
 from baselines import Elastic
-from defaust.meshio import atomic_write, read_mesh, write_mesh
+from sshade.mesh.io import atomic_write, read_mesh, write_mesh
 from sshade.errors import SShaDeError
-from sshade.validate import validate_handles, validate_mesh
+from sshade.mesh.validate import validate_handles, validate_mesh
 from tests.conftest import data_file
 
 # ----------------------------------------------------------------------------- meshes

@@ -16,7 +16,7 @@ from sshade.arap import rigid_fit
 from sshade.arap.cases import bent_cylinder
 from sshade.components import ComponentWise, component_labels, deform_components, drop_unreferenced
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 
 def _body_and_sphere():
@@ -145,7 +145,7 @@ def test_evaluator_deforms_a_case_with_two_components(tmp_path, two, monkeypatch
 
 
 def test_read_mesh_refuses_components_unless_allowed(tmp_path, two):
-    from defaust.meshio import read_mesh, write_mesh
+    from sshade.mesh.io import read_mesh, write_mesh
     V, F, _, _, n_body = two
     p = tmp_path / "two.ply"
     write_mesh(p, V, F)

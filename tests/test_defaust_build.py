@@ -18,10 +18,10 @@ from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
 from eval.datasets.defaust import load_defaust, load_handles
 from defaust.handles import snap_handles
-from defaust.meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from defaust.store import sha256_file
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 from .conftest import ROOT, subprocess_env  # noqa: E402
 POSES = [1, 2, 3, 4]

@@ -11,7 +11,7 @@ from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
 from eval.datasets.defaust import load_defaust, load_handles
 from defaust.faust_source import FAUST_LANDMARKS, discover_faust, faust_subjects
-from defaust.meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from sshade.errors import SShaDeError
 
 from .conftest import SHARED_DATA

@@ -12,7 +12,7 @@ from defaust.synthetic_body import JOINTS, LANDMARK_NAMES, BodyParams, body_mode
 from defaust.synthetic_mesh import body_sdf
 from defaust.synthetic_poses import pose_names, pose_transforms
 from sshade.errors import SShaDeError
-from sshade.validate import validate_mesh
+from sshade.mesh.validate import validate_mesh
 
 SMALL = dict(n_vertices=2500, voxel_size=0.02)
 

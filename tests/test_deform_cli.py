@@ -1,4 +1,4 @@
-"""``python -m sshade deform`` (eval/deform_cli.py, eval/handle_files.py): every handle
+"""``python -m sshade deform`` (sshade/cli.py, sshade/mesh/handle_files.py): every handle
 format gives what sshade.deform gives on the same handles and targets; unreferenced
 vertices, components and --repair; every bad file gets one ``error:`` line and status 2."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from defaust.meshio import read_mesh, write_mesh
-from eval.deform_cli import main
-from eval.handle_files import FIXED, FREE, HANDLE, apply_def, write_def, write_sel
+from sshade.mesh.io import read_mesh, write_mesh
+from sshade.cli import main
+from sshade.mesh.handle_files import FIXED, FREE, HANDLE, apply_def, write_def, write_sel
 from examples.twisted_bar import twist_matrix, write_case
 from sshade import deform
 
@@ -236,5 +236,5 @@ def test_python_m_sshade_deform_subprocess(bar, tmp_path):
 def test_def_file_round_trip(tmp_path):
     M = twist_matrix(37.0)
     write_def(tmp_path / "m.def", M)
-    from eval.handle_files import read_def
+    from sshade.mesh.handle_files import read_def
     assert np.array_equal(read_def(tmp_path / "m.def"), M)

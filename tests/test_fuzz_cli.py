@@ -4,7 +4,7 @@ Small valid inputs (a subdivided icosahedron as OBJ, OFF, ASCII and binary PLY, 
 ``.sel`` + ``.def``, ``.json``, ``.csv``) are mutated a few hundred times (seeded:
 truncation, flipped bytes, numbers scaled by 1e+-200, permuted, dropped and duplicated
 lines, inserted garbage). All cases run in ONE child process (a driver calling
-:func:`eval.deform_cli.main` in-process, C-level fds 1 and 2 redirected per case) which
+:func:`sshade.cli.main` in-process, C-level fds 1 and 2 redirected per case) which
 logs each case before and after, so a native abort or a hang names its mutation.
 Each case must either exit 0 with an output mesh that reads back finite with the input's
 referenced vertex count, or exit 2 with exactly one ``error: `` line on stderr; never a
@@ -27,7 +27,7 @@ FAST = ["--n-low", "20", "--k", "1", "--param", "workers=1"]
 
 DRIVER = r'''
 import json, os, signal, sys, traceback
-from eval.deform_cli import main
+from sshade.cli import main
 
 cases = json.load(open(sys.argv[1]))
 log = open(sys.argv[2], "a")
@@ -72,8 +72,8 @@ def _inputs(d):
     import igl
     import trimesh
 
-    from defaust.meshio import write_mesh
-    from eval.handle_files import write_def, write_sel
+    from sshade.mesh.io import write_mesh
+    from sshade.mesh.handle_files import write_def, write_sel
     t = (1 + 5 ** 0.5) / 2
     V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
                   [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
@@ -171,7 +171,7 @@ def _snapshot(folder, skip) -> dict:
 
 
 def _referenced(mesh) -> int | None:
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     try:
         _, F = read_mesh(mesh, validate=False)
     except ValueError:
@@ -180,7 +180,7 @@ def _referenced(mesh) -> int | None:
 
 
 def test_fuzzed_inputs_never_crash_hang_or_write_a_wrong_mesh(tmp_path):
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     base, work = tmp_path / "base", tmp_path / "work"
     base.mkdir()
     work.mkdir()

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sshade.deform import sampling_seeds
+from sshade.sampling import sampling_seeds
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer, rigid_align
 
@@ -31,7 +31,7 @@ def sphere():
 
 @pytest.fixture(scope="module")
 def cat():
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     V0, F0 = read_mesh(data_file("tosca/cat0.off"))
     V1, _ = read_mesh(data_file("tosca/cat1.off"), validate=False)  # cat0's faces for every pose
     return V0, F0, V1

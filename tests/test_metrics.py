@@ -250,7 +250,7 @@ def test_ground_truth_shape_mismatch():
 
 # ----------------------------------------------------------------------------- real mesh
 def test_bunny_volume_matches_trimesh():
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     V, F = read_mesh(data_file("classic/bunny.off"))
     vol = M.volume(V, F)
     ref = trimesh.Trimesh(V, F, process=False).volume

@@ -13,16 +13,16 @@ import sys
 import numpy as np
 import pytest
 
-from defaust.meshio import read_mesh, write_mesh
-from eval.deform_cli import main
+from sshade.mesh.io import read_mesh, write_mesh
+from sshade.cli import main
 from sshade.errors import SShaDeError
-from sshade.validate import validate_handles, validate_mesh
+from sshade.mesh.validate import validate_handles, validate_mesh
 from tests.conftest import ROOT, subprocess_env
 
 
 def written_by_sshade(path) -> bool:
-    """defaust.meshio.written_by_sshade, imported per test (each test fails on its own)."""
-    from defaust.meshio import written_by_sshade as ours
+    """sshade.mesh.io.written_by_sshade, imported per test (each test fails on its own)."""
+    from sshade.mesh.io import written_by_sshade as ours
     return ours(path)
 
 
@@ -82,7 +82,7 @@ def test_no_mesh_file_aborts_or_prints_reader_noise(tmp_path):
     (libigl aborted with a double free on truncated PLYs), quickly, with nothing printed
     on the C-level stdout/stderr (libigl's 'readOBJ() ignored ...' and raw bytes)."""
     files = _bad_mesh_files(tmp_path)
-    code = ("import json, sys\nfrom defaust.meshio import read_mesh\nfrom sshade.errors import SShaDeError\n"
+    code = ("import json, sys\nfrom sshade.mesh.io import read_mesh\nfrom sshade.errors import SShaDeError\n"
             "for name, p in json.loads(sys.argv[1]).items():\n"
             "    try:\n        read_mesh(p)\n        res = 'read'\n"
             "    except SShaDeError as e:\n        res = 'error: ' + str(e)\n"
@@ -137,7 +137,7 @@ def test_write_read_round_trip_is_bit_exact_and_signed(tmp_path, ext):
 @pytest.fixture
 def case(tmp_path):
     """A small mesh (.off, written by sshade) with a .sel/.def and a .json/.csv."""
-    from eval.handle_files import write_def, write_sel
+    from sshade.mesh.handle_files import write_def, write_sel
     V, F = _mesh()
     d = tmp_path / "in"
     d.mkdir()
@@ -180,7 +180,7 @@ def test_stl_input_with_index_handles_is_refused(case, tmp_path, capsys):
 
 
 def test_output_checks_before_any_work(case, tmp_path, capsys, monkeypatch):
-    import defaust.meshio as mio
+    import sshade.mesh.io as mio
 
     def boom(*a, **k):
         raise AssertionError("read the mesh before checking -o")
@@ -250,7 +250,7 @@ def test_huge_handle_file_refused_before_reading(case, capsys):
 
 
 def test_dmat_reader_is_quiet_and_checks_counts(case, capfd):
-    from eval.handle_files import read_dmat_selection
+    from sshade.mesh.handle_files import read_dmat_selection
     p = case["d"] / "short.dmat"
     p.write_text("1 1000\n0\n1\n2\n")
     with pytest.raises(SShaDeError, match="1000 values, 3 found"):
@@ -277,7 +277,7 @@ def test_targets_out_of_scale_named(case):
 
 
 def test_def_scaled_by_1e200_is_out_of_scale_not_singular(case, capsys):
-    from eval.handle_files import read_def
+    from sshade.mesh.handle_files import read_def
     p = case["d"] / "big.def"
     M = np.eye(4)
     M[:3, :3] *= 1e200

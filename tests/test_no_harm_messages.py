@@ -254,7 +254,7 @@ def test_sigint_eval_prints_interrupted(tmp_path, faust_root):
 def test_swallowed_ctrl_c_still_ends_as_interrupted(capsys):
     """A library that swallows the KeyboardInterrupt (trimesh's optional imports catch
     BaseException) does not turn a Ctrl-C into a successful exit."""
-    from eval.clirun import run_command
+    from sshade.clirun import run_command
 
     def work():
         try:
@@ -278,7 +278,7 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
     """(name, callable returning the exit status) for every command, its work raising ``exc``."""
     import defaust.cli
     import eval.app
-    import eval.deform_cli
+    import sshade.cli
     import eval.reproduce
     import eval.sweep
     import eval.tables
@@ -297,14 +297,14 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
 
     monkeypatch.setattr(eval.app, "run_experiment", _raise(exc))
     monkeypatch.setattr(defaust.cli, "run", _raise(exc))
-    monkeypatch.setattr(eval.deform_cli, "deform_file", _raise(exc))
+    monkeypatch.setattr(sshade.cli, "deform_file", _raise(exc))
     monkeypatch.setattr(eval.tables, "retabulate", _raise(exc))
     monkeypatch.setattr(eval.sweep, "aggregate_sweep", _raise(exc))
     monkeypatch.setattr(subprocess, "call", _raise(exc))
     run_dir = _cases_dir(tmp_path / "run")
     return [("eval", exit_code(eval.app.main, ["eval", "experiment=ci", "dataset.root=/x", f"out_dir={tmp_path / 'o'}"])),
             ("defaust", exit_code(defaust.cli.main, ["defaust", "source=synthetic", f"out={tmp_path / 'd'}"])),
-            ("deform", exit_code(lambda: eval.deform_cli.main(["deform", "m.obj", "-o", "o.obj", "--handles", "h.json"]))),
+            ("deform", exit_code(lambda: sshade.cli.main(["deform", "m.obj", "-o", "o.obj", "--handles", "h.json"]))),
             ("tables", exit_code(lambda: eval.tables.main([str(run_dir)]))),
             ("sweep", exit_code(lambda: eval.sweep.main(["aggregate", str(tmp_path)]))),
             ("reproduce", exit_code(lambda: eval.reproduce.main([])))]

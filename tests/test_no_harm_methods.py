@@ -1,6 +1,6 @@
 """Issue 19: a plug-in method must never corrupt results. Its output is checked in one
-place (sshade.validate.validate_deformed) before anything is measured or written; it
-runs through one guard (eval.guard.run_method) on read-only copies, its exceptions
+place (sshade.mesh.validate.validate_deformed) before anything is measured or written; it
+runs through one guard (sshade.guard.run_method) on read-only copies, its exceptions
 (SystemExit included) and time-outs become a failed case, a result whose handles miss
 their targets is a failed case, names and info values cannot break a table. The
 misbehaving plug-ins are in tests/bad_methods.py; each is tried in the evaluator and in
@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.deform_cli import main as cli_main
+from sshade.cli import main as cli_main
 from examples.twisted_bar import write_case
 from sshade.errors import SShaDeError
 
@@ -86,7 +86,7 @@ def _one_error_line(rc, err, out, fragment):
     (np.r_[np.zeros((499, 3)), [[1e12, 0, 0]]], "bounding-box diagonals"),
 ])
 def test_validate_deformed_refuses_bad_output(U, fragment):
-    from sshade.validate import validate_deformed
+    from sshade.mesh.validate import validate_deformed
     V = np.random.default_rng(0).random((500, 3))
     with pytest.raises(SShaDeError, match=re.escape(fragment)) as e:
         validate_deformed(U, 500, V=V, name="Mine")
@@ -94,7 +94,7 @@ def test_validate_deformed_refuses_bad_output(U, fragment):
 
 
 def test_validate_deformed_converts_good_output():
-    from sshade.validate import validate_deformed
+    from sshade.mesh.validate import validate_deformed
     V = np.random.default_rng(0).random((10, 3))
     src = np.asfortranarray(V.astype(np.float32))
     U = validate_deformed(src, 10, V=V)
@@ -139,7 +139,7 @@ def _tet():
 
 def test_run_method_read_only_copies_and_every_exception():
     import tests.bad_methods as bm
-    from eval.guard import MethodFailure, run_method
+    from sshade.guard import MethodFailure, run_method
     V, F, h, t = _tet()
     keep = [a.copy() for a in (V, F, h, t)]
     with pytest.raises(MethodFailure, match="read-only"):
@@ -157,7 +157,7 @@ def test_run_method_read_only_copies_and_every_exception():
 
 def test_run_method_timeout():
     import tests.bad_methods as bm
-    from eval.guard import MethodFailure, run_method
+    from sshade.guard import MethodFailure, run_method
     V, F, h, t = _tet()
     for m in (bm.Sleeper(), bm.SwallowsAll()):
         t0 = time.perf_counter()
@@ -280,14 +280,15 @@ def test_cli_rest_pose_is_refused(bar, tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["Bad\nName", "a|b", "x" * 65, "tab\tname", "a&b", "50%", " lead", "$x$"])
 def test_bad_method_names_are_refused(name):
-    from eval.methods import build_method
+    from sshade.method import build_method
     with pytest.raises(SShaDeError, match="method names are 1-64 characters") as e:
         build_method({"_target_": "tests.plugin_example.MyMethod", "name": name})
     assert "\n" not in str(e.value)
 
 
 def test_good_method_names_and_case_insensitive_duplicates():
-    from eval.methods import build_method, make_methods
+    from eval.methods import make_methods
+    from sshade.method import build_method
     for name in ("SShaDe+refine", "Mine (v2)", "ARAP-SR", "a/b 1.0", "x" * 64):
         assert build_method({"_target_": "tests.plugin_example.MyMethod", "name": name}).name == name
     with pytest.raises(SShaDeError, match="listed twice"):

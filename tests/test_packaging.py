@@ -1,5 +1,5 @@
 """Packaging: the wheel ships the Hydra configs of ``conf/`` as ``eval/conf/`` and an
-install that is not this checkout finds them (:func:`eval.confdir.config_dir`)."""
+install that is not this checkout finds them (:func:`sshade.confdir.config_dir`)."""
 from __future__ import annotations
 
 import importlib.util
@@ -9,12 +9,11 @@ import subprocess
 import sys
 import zipfile
 from pathlib import Path
-from types import SimpleNamespace
 
 import pytest
 
-import eval.confdir as confdir
-from eval.confdir import config_dir
+import sshade.confdir as confdir
+from sshade.confdir import config_dir
 from sshade.errors import SShaDeError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,7 +48,7 @@ def test_config_dir_installed_package_data(tmp_path, monkeypatch):
     (site / "eval" / "conf" / "defaust").mkdir(parents=True)
     (site / "eval" / "conf" / "config.yaml").write_text("a: 1\n")
     monkeypatch.setattr(confdir, "_REPO_ROOT", site)
-    monkeypatch.setattr(confdir, "resources", SimpleNamespace(files=lambda pkg: site / pkg))
+    monkeypatch.setattr(confdir, "_package_conf", lambda: site / "eval" / "conf")
     assert Path(config_dir()) == (site / "eval" / "conf").resolve()
     assert Path(config_dir("defaust")) == (site / "eval" / "conf" / "defaust").resolve()
     # a stray site-packages/conf (another distribution's) is not mistaken for a checkout
@@ -60,7 +59,7 @@ def test_config_dir_installed_package_data(tmp_path, monkeypatch):
 
 def test_config_dir_missing_everywhere(tmp_path, monkeypatch):
     monkeypatch.setattr(confdir, "_REPO_ROOT", tmp_path)
-    monkeypatch.setattr(confdir, "resources", SimpleNamespace(files=lambda pkg: tmp_path / pkg))
+    monkeypatch.setattr(confdir, "_package_conf", lambda: tmp_path / "eval" / "conf")
     with pytest.raises(SShaDeError, match="Hydra configs not found"):
         config_dir()
 
@@ -128,8 +127,11 @@ def test_installed_wheel_runs_outside_checkout(wheel, tmp_path):
         assert p.returncode == 0, f"{args}: {p.stdout}{p.stderr}"
         return p.stdout
 
-    out = run("-c", "import eval, eval.confdir as c; print(eval.__file__); print(c.config_dir())")
-    assert out.splitlines() == [str(site / "eval" / "__init__.py"),
+    out = run("-c", "import sys, sshade.confdir as c, sshade.registry as r; d = c.config_dir(); "
+                    "print(r.builtin_methods()); assert 'eval' not in sys.modules; import eval; "
+                    "print(eval.__file__); print(d)")
+    assert out.splitlines() == ["('ARAP', 'Elastic', 'ARAP-SR', 'SShaDe', 'SShaDe+refine')",
+                                str(site / "eval" / "__init__.py"),
                                 str((site / "eval" / "conf").resolve())]
     assert "out: " in run("-m", "defaust", "--cfg", "job", "preset=ci", f"out={tmp_path / 'x'}")
     help_ = run("-m", "eval", "--help")

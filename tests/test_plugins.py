@@ -13,7 +13,8 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.methods import build_method, make_methods, method_spec
+from eval.methods import make_methods, method_spec
+from sshade.method import build_method
 from sshade.arap.cases import box_surface
 from sshade.errors import SShaDeError
 

@@ -18,7 +18,7 @@ from .conftest import SHARED_DATA, data_file
 @pytest.fixture(scope="module")
 def faust():
     """Subjects 0 and 1 in poses 0 and 1 (one shared face array)."""
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     V = {}
     for s in (0, 1):
         for p in (0, 1):

@@ -9,13 +9,13 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from defaust.meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from sshade._keys import unique_int
-from sshade.geodesic import VoronoiState, edge_graph, edge_graph_from_edges, locality_order
-from sshade.halfedge import (boundary_loops, count_components, count_pinched_vertices, halfedges,
+from sshade.mesh.geodesic import VoronoiState, edge_graph, edge_graph_from_edges, locality_order
+from sshade.mesh.halfedge import (boundary_loops, count_components, count_pinched_vertices, halfedges,
                              vertex_fan_count, vertex_normals)
 from sshade.remesh import _check, _closed_ball_full, _closed_ball_holds, mesh_topology, remesh
-from sshade.validate import _fast_checks, validate_mesh
+from sshade.mesh.validate import _fast_checks, validate_mesh
 
 from .conftest import data_file
 from .test_bad_input import BAD_MESHES, KNOWN_BAD_MESH_BUGS, _bowtie, _double_cone

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from baselines import ARAP, Elastic
-from defaust.meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from sshade import SShaDe, deform
 from sshade.lrf import transfer
 from sshade.projection import project_to_fans

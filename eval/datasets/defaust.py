@@ -31,7 +31,7 @@ import numpy as np
 
 from defaust.manifest import FORMAT, MANIFEST
 from defaust.handles import HandleSet, handles_from_arrays, snap_handles
-from defaust.meshio import read_mesh
+from sshade.mesh.io import read_mesh
 from defaust.store import read_npz, sha256_file
 from sshade.errors import SShaDeError
 

@@ -166,7 +166,7 @@ def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
         raise SShaDeError(f"no FAUST case in {Path(root)} for subjects={_fmt(subj_sel)} poses={_fmt(pose_sel)} "
                           f"(found subject/pose {sorted(files)}; rest pose 0 and at least one other pose are needed)")
 
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
 
     rest: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     cases: list[Case] = []

@@ -128,7 +128,7 @@ def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes,
 
 def _highres(path: Path, V, F, vertex_range, cache: Path | None):
     from defaust.highres import subdivide_remesh
-    from defaust.meshio import read_mesh, write_mesh
+    from sshade.mesh.io import read_mesh, write_mesh
     lo, hi = (int(x) for x in vertex_range)
     cached = None if cache is None else Path(cache) / f"{path.stem}_{lo}-{hi}.ply"
     if cached is not None and cached.is_file():
@@ -147,7 +147,7 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
 
     Parameters
     ----------
-    root : str or Path, a folder of meshes (any format :func:`defaust.meshio.read_mesh` reads).
+    root : str or Path, a folder of meshes (any format :func:`sshade.mesh.io.read_mesh` reads).
     files : list of file names in ``root`` (default :data:`DEFAULT_SHAPES`).
     vertex_range : None (native resolution) or (lo, hi): high-res version first.
     cache : folder for the high-res meshes (None: rebuilt every time).
@@ -163,7 +163,7 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
     SShaDeError on a missing folder or file, an unreadable or invalid mesh (the
     message names it), a bad ``limit`` or an empty selection.
     """
-    from defaust.meshio import read_mesh
+    from sshade.mesh.io import read_mesh
     root = Path(root)
     if not root.is_dir():
         raise SShaDeError(f"shapes: dataset.root is not a folder: {root}")

@@ -14,11 +14,11 @@ column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
 :mod:`sshade.warmup`), the result is scored with
 :func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
 :func:`eval.metrics.ground_truth_metrics`. Every method runs through
-:func:`eval.guard.run_method` (issue 19): on read-only copies of the case, with the
+:func:`sshade.guard.run_method` (issue 19): on read-only copies of the case, with the
 optional ``timeout_s`` of each call, its output checked
-(:func:`sshade.validate.validate_deformed`) before any metric. A method that fails on a
+(:func:`sshade.mesh.validate.validate_deformed`) before any metric. A method that fails on a
 case (our methods: :class:`~sshade.errors.SShaDeError`; a plug-in: any exception,
-``SystemExit`` included, :func:`eval.methods.is_plugin`; a time-out; a refused output)
+``SystemExit`` included, :func:`sshade.method.is_plugin`; a time-out; a refused output)
 gets its message in the ``error`` column and the run goes on; so does a result whose
 handle error exceeds ``handle_error_max_pct`` (% of the diagonal; its metrics stay in
 the row). Ctrl-C stops the run. A case mesh with several connected components is
@@ -269,10 +269,10 @@ def _finish(cfg, s: _Setup, rows, compile_s, info, t_start) -> dict:
 
 def _guard_options(cfg) -> dict:
     """``timeout_s`` (positive seconds or null: the limit of each method call,
-    :func:`eval.guard.run_method`) and ``handle_error_max_pct`` (positive, % of the
+    :func:`sshade.guard.run_method`) and ``handle_error_max_pct`` (positive, % of the
     bounding-box diagonal, or null: the largest handle error of a successful run) of
     the config, checked; SShaDeError naming the key."""
-    from ..guard import HANDLE_ERROR_MAX_PCT, check_timeout
+    from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout
     hmax = cfg.get("handle_error_max_pct", HANDLE_ERROR_MAX_PCT)
     if hmax is not None:
         try:
@@ -284,11 +284,11 @@ def _guard_options(cfg) -> dict:
 
 
 def _run_one(m, name: str, case, refs, guard: dict):
-    """One (case, method) run: :func:`eval.guard.run_method`, the metrics, the method's
+    """One (case, method) run: :func:`sshade.guard.run_method`, the metrics, the method's
     info; returns ``(row, U)`` (``U`` None when the method failed). A failure (the
     method's, or a handle error above ``guard['handle_error_max_pct']``: its metrics
     stay in the row) is the row's ``error``; the run goes on."""
-    from ..guard import handles_not_reached, run_method
+    from sshade.guard import handles_not_reached, run_method
     from ..metrics import deformation_metrics, ground_truth_metrics
     row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": name,
            "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
@@ -305,7 +305,7 @@ def _run_one(m, name: str, case, refs, guard: dict):
         row.update(refs.metrics(m, r.U))
         if getattr(case, "V_gt", None) is not None:
             row.update(ground_truth_metrics(r.U, case.F, case.V_gt))
-    except SShaDeError as e:  # the method failed (eval.guard.MethodFailure), or a metric refused its result
+    except SShaDeError as e:  # the method failed (sshade.guard.MethodFailure), or a metric refused its result
         row["error"] = " ".join(str(e).split()) or type(e).__name__
         log.warning("%s %s failed: %s", case.name, name, row["error"])
         return row, None

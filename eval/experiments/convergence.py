@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from defaust.meshio import atomic_write
+from sshade.mesh.io import atomic_write
 from sshade.errors import SShaDeError
 
 from .. import datasets

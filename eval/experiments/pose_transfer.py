@@ -44,7 +44,7 @@ import time
 
 import numpy as np
 
-from defaust.meshio import atomic_write, read_mesh
+from sshade.mesh.io import atomic_write, read_mesh
 from sshade.errors import SShaDeError
 
 from ..datasets.faust import discover_faust
@@ -108,7 +108,7 @@ def run_pose_transfer(cfg) -> dict:
     t_start = time.perf_counter()
     from omegaconf import OmegaConf
 
-    from sshade.deform import sampling_seeds
+    from sshade.sampling import sampling_seeds
 
     from ..runinfo import collect_runinfo, write_runinfo
     pc, root, files = _pose_transfer_root(cfg)

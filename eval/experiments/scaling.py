@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 
-from defaust.meshio import atomic_write, read_mesh, write_mesh
+from sshade.mesh.io import atomic_write, read_mesh, write_mesh
 from sshade.errors import SShaDeError
 
 from ..methods import method_spec
@@ -109,7 +109,7 @@ def run_scaling(cfg) -> dict:
     from omegaconf import OmegaConf
 
     from sshade.deform import check_params
-    from sshade.warmup import warm_sshade
+    from sshade.deform import warm_sshade
 
     from ..datasets.shapes import axis_landmarks
     from ..runinfo import collect_runinfo, write_runinfo
@@ -158,7 +158,7 @@ def run_scaling(cfg) -> dict:
 def _size_mesh(sc, base, size: int, cache):
     """The mesh of about ``size`` vertices built from the base mesh (cached in
     ``cache``); returns ``(V, F, seconds to build or read)``."""
-    from sshade.validate import validate_mesh
+    from sshade.mesh.validate import validate_mesh
     base_path, V0, F0, _ = base
     mp = cache / f"{base_path.stem}_{size}.ply"
     t0 = time.perf_counter()

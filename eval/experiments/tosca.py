@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from defaust.meshio import atomic_write, read_mesh
+from sshade.mesh.io import atomic_write, read_mesh
 from sshade.errors import SShaDeError
 
 from ..paths import abs_path
@@ -211,7 +211,7 @@ def run_tosca(cfg) -> dict:
     t_start = time.perf_counter()
     from omegaconf import OmegaConf
 
-    from sshade.deform import sampling_seeds
+    from sshade.sampling import sampling_seeds
 
     from ..runinfo import collect_runinfo, write_runinfo
     root, found = _tosca_root(cfg)

@@ -50,6 +50,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SShaDeError
+from ..mesh.validate import check_arrays
 from .kernel_data import KernelData, as_u32, rcm_order
 from .kernels import energy_kernel, fused, polar_kernel
 from .threads import numba_threads, resolve_threads
@@ -459,25 +460,6 @@ class ArapOperators:
         return Un
 
 
-
-
-def _check_mesh(V, F) -> tuple[np.ndarray, np.ndarray]:
-    V = np.ascontiguousarray(V, np.float64)
-    if V.ndim != 2 or V.shape[1] != 3 or len(V) < 3:
-        raise SShaDeError(f"V must have shape (n, 3) with n >= 3, got {np.shape(V)}")
-    if not np.isfinite(V).all():
-        raise SShaDeError("V contains NaN/inf")
-    F = np.asarray(F)
-    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
-        raise SShaDeError(f"F must have shape (m, 3) with m >= 1, got {np.shape(F)}")
-    if not np.issubdtype(F.dtype, np.integer):
-        raise SShaDeError(f"F must hold integer vertex indices, got dtype {F.dtype}")
-    F = np.ascontiguousarray(F, np.int64)
-    if F.min() < 0 or F.max() >= len(V):
-        raise SShaDeError(f"F has a vertex index out of range [0, {len(V)})")
-    return V, F
-
-
 def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims") -> ArapOperators:
     """Precompute the ARAP operators of the rest mesh ``(V, F)`` for ``energy``.
 
@@ -504,7 +486,7 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
     """
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
-    V, F = _check_mesh(V, F)
+    V, F = check_arrays(V, F, min_vertices=3)
     n = len(V)
     if np.bincount(F.ravel(), minlength=n).min() == 0:
         raise SShaDeError("a vertex is referenced by no face (unreferenced vertex)")

@@ -66,7 +66,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import SShaDeError
-from ..validate import validate_handles
+from ..mesh.validate import validate_handles
 from .accelerate import LBFGS, Anderson
 from .criterion import DEFAULT_CRITERION, Criterion, gradient_norm
 from .kernels import fused

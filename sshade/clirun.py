@@ -19,16 +19,18 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import signal
 import sys
+import threading
 from pathlib import Path
 
-from sshade.errors import SShaDeError
+from .errors import SShaDeError
 
 __all__ = ["INTERRUPTED", "run_command", "hydra_main", "precheck", "os_error_line", "one_line",
            "ArgumentParser"]
 
 INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
-_TMP = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")  # defaust.meshio.atomic_write's temporary files
+_TMP = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")  # sshade.mesh.io.atomic_write's temporary files
 
 
 def one_line(text) -> str:
@@ -108,8 +110,6 @@ def _interrupted() -> int:
 def _install_sigint():
     """Install :func:`_on_sigint` when SIGINT has Python's default handler (not ignored,
     main thread); returns the handler to restore, or None when nothing was installed."""
-    import signal
-    import threading
     if threading.current_thread() is not threading.main_thread():
         return None
     old = signal.getsignal(signal.SIGINT)
@@ -132,7 +132,6 @@ def run_command(work, *, where=None) -> int:
     when a library swallowed the KeyboardInterrupt). ``SystemExit`` passes through; any
     other exception is a bug and propagates with its traceback.
     """
-    import signal
     old = _install_sigint()
     try:
         rc = work()

@@ -5,19 +5,30 @@ The configs live in the top-level ``conf/`` folder of the repository (``conf/con
 An install from a wheel or ``pip install .`` ships the same files as package data of
 ``eval.conf`` (``site-packages/eval/conf/``, see ``pyproject.toml``), where
 ``Path(__file__).parents[1] / "conf"`` would point into ``site-packages``.
-:func:`config_dir` finds whichever copy applies; :mod:`eval.app`, :mod:`eval.sweep` and
-:mod:`defaust.cli` use it for Hydra's ``config_path``.
+:func:`config_dir` finds whichever copy applies, by path (the installed copy through
+:func:`importlib.util.find_spec`, which locates the ``eval`` package without importing
+it: this module is of the bottom layer); :mod:`eval.app`, :mod:`eval.sweep` and
+:mod:`defaust.cli` use it for Hydra's ``config_path``, :mod:`sshade.registry` for the
+method definitions of ``conf/method/``.
 """
 from __future__ import annotations
 
-from importlib import resources
+import importlib.util
 from pathlib import Path
 
-from sshade.errors import SShaDeError
+from .errors import SShaDeError
 
 __all__ = ["config_dir"]
 
 _REPO_ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_DATA = "eval"  # the package whose conf/ subfolder holds the installed configs (pyproject.toml)
+
+
+def _package_conf() -> Path:
+    """``conf/`` of the installed package :data:`PACKAGE_DATA` (found, not imported)."""
+    spec = importlib.util.find_spec(PACKAGE_DATA)
+    locations = list(spec.submodule_search_locations or []) if spec is not None else []
+    return Path(locations[0] if locations else _REPO_ROOT / PACKAGE_DATA) / "conf"
 
 
 def _source_conf() -> Path | None:
@@ -53,7 +64,7 @@ def config_dir(sub: str = "") -> str:
 
     Examples
     --------
-    >>> from eval.confdir import config_dir
+    >>> from sshade.confdir import config_dir
     >>> Path(config_dir(), "config.yaml").is_file()
     True
     >>> Path(config_dir("defaust"), "preset", "ci.yaml").is_file()
@@ -61,7 +72,7 @@ def config_dir(sub: str = "") -> str:
     """
     base = _source_conf()
     if base is None:
-        base = Path(str(resources.files("eval") / "conf"))
+        base = _package_conf()
         if not (base / "config.yaml").is_file():
             raise SShaDeError(f"Hydra configs not found: neither {_REPO_ROOT / 'conf'} (source "
                               f"checkout) nor {base} (installed package data); reinstall sshade")

@@ -7,30 +7,35 @@ Usage::
         [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--timeout SECONDS]
         [--repair] [--force]
 
-- ``MESH``: .obj, .off or .ply (:func:`defaust.meshio.read_mesh`; an .stl is refused:
+- ``MESH``: .obj, .off or .ply (:func:`sshade.mesh.io.read_mesh`; an .stl is refused:
   it has no vertex indices for the handle files to refer to); ``OUT``: .obj, .off or
   .ply, written atomically (temporary file + rename) in that format, at full double
   precision, with a ``written by sshade`` comment. OUT must not be an input file, nor
   an existing file that sshade did not write (``--force`` allows both); an OUT that
   sshade wrote earlier is replaced (``replacing OUT`` on stdout). These checks, and
   that OUT's folder exists and is writable, happen before any work.
-- Handles (:mod:`eval.handle_files`): the deformation benchmark's ``.sel`` + ``.def``
+- Handles (:mod:`sshade.mesh.handle_files`): the deformation benchmark's ``.sel`` + ``.def``
   (Botsch & Sorkine 2008), libigl's ``.dmat`` selection + ``.def``, or a ``.json`` /
   ``.csv`` of vertex indices and target positions. Indices refer to MESH's vertices as
   stored in the file.
 - ``--method``: ``SShaDe`` (default), ``SShaDe+refine``, ``ARAP``, ``Elastic``, ``ARAP-SR``
-  (their definitions in ``conf/method/``, defaults of ``conf/config.yaml``) or a plug-in
-  ``pkg.module.Class`` (:func:`eval.methods.named_or_plugin`); ``--n-low``, ``--k``
+  (any of :func:`sshade.registry.builtin_methods`: their definitions in ``conf/method/``,
+  defaults of ``conf/config.yaml``, classes imported by their dotted path) or a plug-in
+  ``pkg.module.Class`` (:func:`sshade.registry.named_or_plugin`); ``--n-low``, ``--k``
   (samplings) and ``--seed`` set SShaDe's ``n_low``, ``n_samplings``, ``seed`` (also given
   to a plug-in that takes them); ``--param KEY=VALUE`` sets any other parameter. The
-  method runs guarded (:func:`eval.guard.run_method`): on read-only inputs, its output
+  method runs guarded (:func:`sshade.guard.run_method`): on read-only inputs, its output
   checked (shape, finite, real), its handles within 1% of the diagonal of their
   targets, ``--timeout SECONDS`` enforced; any failure is an ``error:`` line, no OUT.
 - Several connected components are deformed apart, those without handles follow
   rigidly (:mod:`sshade.components`). Unreferenced vertices are dropped with a warning
   (OUT then has fewer vertices; handles on them are dropped). ``--repair`` first applies
-  pymeshlab's filters that never move a vertex (:mod:`sshade.repair`) and prints what
+  pymeshlab's filters that never move a vertex (:mod:`sshade.mesh.repair`) and prints what
   they changed; without it a non-manifold mesh is refused with its clear error.
+
+The entry point of ``python -m sshade`` (:mod:`sshade.__main__`); it imports nothing of
+the layers above (``baselines`` is imported by its dotted path when ``--method`` names
+one of them).
 
 Prints the time of each stage (read, handles, repair, deform, write) on stdout; a
 progress bar on stderr when it is a terminal. Exit status 0 on success, 2 on bad input
@@ -48,7 +53,16 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.errors import SShaDeError
+from tqdm import tqdm
+
+from .clirun import run_command
+from .components import drop_unreferenced
+from .errors import SShaDeError
+from .guard import check_timeout, handle_error, handles_not_reached, run_method
+from .mesh.handle_files import read_def, read_dmat_selection, read_handle_file, read_sel, selection_handles
+from .mesh.io import read_mesh, write_mesh, written_by_sshade
+from .mesh.repair import repair_mesh
+from .registry import named_or_plugin
 
 __all__ = ["main", "build_parser", "deform_file", "parse_param"]
 
@@ -82,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="any other parameter of the method (repeatable), e.g. --param workers=1")
     p.add_argument("--timeout", metavar="SECONDS",
-                   help="limit of the method's run in seconds (main thread, Python code; eval/guard.py); "
+                   help="limit of the method's run in seconds (main thread, Python code; sshade/guard.py); "
                         "a longer run is an error and no output is written")
     p.add_argument("--repair", action="store_true",
                    help="apply pymeshlab's vertex-preserving repair filters first and report what changed")
@@ -142,7 +156,6 @@ def _check_out(a) -> None:
     """Checks of ``-o OUT`` before any work: its folder exists and takes a new file; OUT
     is not an input file, nor an existing file sshade did not write, unless ``--force``.
     Sets ``a.replacing`` when OUT exists (and may be replaced)."""
-    from defaust.meshio import written_by_sshade
     out = Path(a.out)
     force = getattr(a, "force", False)
     a.replacing = out.exists()
@@ -169,7 +182,6 @@ def _check_out(a) -> None:
 
 def _method(a):
     """The method of ``--method`` with ``--n-low``/``--k``/``--seed``/``--param``."""
-    from .methods import named_or_plugin
     params = dict(parse_param(t) for t in a.param)
     for key, val in (("n_low", a.n_low), ("n_samplings", a.k), ("seed", a.seed)):
         if val is not None:
@@ -179,7 +191,6 @@ def _method(a):
 
 def _read_handles(a, V):
     """(handles, targets) of the chosen handle files, for the mesh as read."""
-    from .handle_files import read_def, read_dmat_selection, read_handle_file, read_sel, selection_handles
     if a.handles:
         return read_handle_file(a.handles, len(V))
     M = read_def(a.def_)
@@ -215,13 +226,6 @@ def deform_file(a, log=print, warn=None) -> dict:
     ------
     SShaDeError on bad input (files, handles, mesh), before the output is written.
     """
-    from tqdm import tqdm
-
-    from defaust.meshio import read_mesh, write_mesh
-    from sshade.components import drop_unreferenced
-
-    from .guard import check_timeout, handles_not_reached, run_method
-    from .metrics import handle_error
     warn = warn or (lambda s: print(f"warning: {s}", file=sys.stderr))
     _check_args(a)
     method = _method(a)  # a bad method or parameter fails before any file is read
@@ -248,7 +252,6 @@ def deform_file(a, log=print, warn=None) -> dict:
         done("handles", t)
         origin = np.arange(n_in)
         if a.repair:
-            from sshade.repair import repair_mesh
             t = stage("repair")
             V, F, origin, report = repair_mesh(V, F)
             done("repair", t)
@@ -266,7 +269,7 @@ def deform_file(a, log=print, warn=None) -> dict:
             if len(handles) == 0:
                 raise SShaDeError("no handle is left on the mesh's faces")
         t = stage("deform")
-        try:  # guarded: read-only inputs, exceptions and time-out, output checked (eval/guard.py)
+        try:  # guarded: read-only inputs, exceptions and time-out, output checked (sshade/guard.py)
             res = run_method(method, V, F, handles, targets, timeout_s=timeout_s)
         except SShaDeError as e:
             hint = " (--repair applies pymeshlab's safe repair filters)" if not a.repair and str(e).startswith(
@@ -314,5 +317,4 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     a = build_parser().parse_args(argv[1:])
-    from .clirun import run_command
-    return run_command(lambda: deform_file(a), where=a.out)  # error:/interrupted (eval.clirun)
+    return run_command(lambda: deform_file(a), where=a.out)  # error:/interrupted (sshade.clirun)

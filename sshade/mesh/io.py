@@ -1,7 +1,8 @@
-"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL) with clear errors and
-atomic writes.
+"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL) with clear errors, and
+atomic writes of any file (:func:`atomic_write`).
 
-File formats live here (the data stage), not in the geometry core.
+Generic mesh I/O of every layer (the DeFAUST builder, the evaluator, ``python -m sshade
+deform``); the geometry core (remesh, ARAP, transfer) never reads or writes files.
 """
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.errors import SShaDeError
+from ..errors import SShaDeError
+from .validate import validate_mesh
 
 __all__ = ["read_mesh", "write_mesh", "atomic_write", "written_by_sshade", "SIGNATURE"]
 
@@ -27,7 +29,7 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
     Parameters
     ----------
     path : str or Path, an ``.obj``, ``.off``, ``.ply`` or ``.stl`` file.
-    validate : bool, run :func:`sshade.validate.validate_mesh` on the result.
+    validate : bool, run :func:`sshade.mesh.validate.validate_mesh` on the result.
     allow_components : bool, with ``validate``: accept several connected components
         (scans, character models; deformed per component, :mod:`sshade.components`).
 
@@ -41,7 +43,7 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
     SShaDeError
         Missing or unreadable file, unknown extension, non-triangle faces (polygons are
         not silently triangulated), and with ``validate`` every problem
-        :func:`~sshade.validate.validate_mesh` names.
+        :func:`~sshade.mesh.validate.validate_mesh` names.
 
     Examples
     --------
@@ -71,7 +73,6 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
     if len(V) == 0 or len(F) == 0:
         raise SShaDeError(f"{p}: unreadable mesh file (no vertices or no faces found)")
     if validate:
-        from sshade.validate import validate_mesh
         V, F = validate_mesh(V, F, name=str(p), allow_components=allow_components)
     return V, F
 

@@ -29,8 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.errors import SShaDeError
-from sshade.validate import validate_handles
+from ..errors import SShaDeError
+from .io import atomic_write
+from .validate import validate_handles
 
 __all__ = ["read_sel", "read_dmat_selection", "read_def", "apply_def", "selection_handles", "read_handle_file",
            "write_sel", "write_def", "FIXED", "FREE", "HANDLE"]
@@ -250,7 +251,7 @@ def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
     ------
     SShaDeError naming the file: missing or unreadable, another extension, a missing
     key or column, non-integer indices, and every problem of
-    :func:`sshade.validate.validate_handles` (index out of range, duplicates, NaN, ...).
+    :func:`sshade.mesh.validate.validate_handles` (index out of range, duplicates, NaN, ...).
     """
     p = Path(path)
     ext = p.suffix.lower()
@@ -332,7 +333,6 @@ def write_sel(path, status) -> None:
     """Write a ``.sel`` file atomically: the benchmark's two comment lines, then one
     status per line. ``status`` : (n,) ints in {0 fixed, 1 free, 2 handle}.
     Raises SShaDeError on another value."""
-    from defaust.meshio import atomic_write
     st = np.asarray(status).ravel()
     if not np.isin(st, (FIXED, FREE, HANDLE)).all():
         raise SShaDeError("a .sel status is 0 (fixed), 1 (free) or 2 (handle)")
@@ -344,7 +344,6 @@ def write_sel(path, status) -> None:
 def write_def(path, M) -> None:
     """Write a ``.def`` file atomically: a comment line, then the (4, 4) matrix ``M``,
     row by row, each value with 17 significant digits (exact round trip)."""
-    from defaust.meshio import atomic_write
     M = np.asarray(M, np.float64).reshape(4, 4)
     with atomic_write(path) as fh:
         fh.write("# 4x4 handle transformation matrix\n")

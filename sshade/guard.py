@@ -1,5 +1,5 @@
-"""One guarded way to run a deformation method on one input (issue 19), used by the
-evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`eval.deform_cli`).
+"""One guarded way to run any deformation method on one input (issue 19), used by the
+evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`sshade.cli`).
 
 :func:`run_method` gives the method read-only copies of the mesh and handles (a method
 that writes into them fails alone instead of corrupting every later method on the
@@ -7,7 +7,7 @@ case), deforms each connected component apart when there are several
 (:func:`sshade.components.deform_components`), turns whatever the method raises or does
 (an exception, ``sys.exit``, a time-out) into a :class:`MethodFailure`, except
 ``KeyboardInterrupt``, which stops the run, and checks the result with
-:func:`sshade.validate.validate_deformed` before anyone measures or writes it.
+:func:`sshade.mesh.validate.validate_deformed` before anyone measures or writes it.
 
 Time-outs use ``SIGALRM`` (``signal.setitimer``) and therefore work only in the main
 thread of a POSIX process, and only while the method runs Python code: a compiled loop
@@ -28,9 +28,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sshade.errors import SShaDeError
+from .components import deform_components, n_components
+from .errors import SShaDeError
+from .mesh.validate import check_points, validate_deformed, validate_handles, validate_mesh
+from .method import is_plugin
 
-__all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "handles_not_reached",
+__all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "handle_error", "handles_not_reached",
            "HANDLE_ERROR_MAX_PCT"]
 
 #: Default largest handle error (% of the rest bounding-box diagonal, the
@@ -92,10 +95,50 @@ def check_timeout(value, where: str = "timeout_s"):
     return v
 
 
+def handle_error(Vd, handles, targets, diag: float) -> float:
+    """Largest handle-to-target distance, in % of a bounding-box diagonal.
+
+    ``100 max_i ||Vd[handles[i]] - targets[i]|| / diag``. Not a paper equation: it
+    checks that the handle constraints of §4.1 are met (:func:`handles_not_reached`;
+    the evaluator's ``handle_err_pct``, :func:`eval.metrics.deformation_metrics`).
+
+    Parameters
+    ----------
+    Vd : (n, 3) float, deformed vertices.
+    handles : (h,) int, unique vertex indices in ``[0, n)``.
+    targets : (h, 3) float, target positions, same unit as ``Vd``.
+    diag : float > 0, reference length (usually the rest bounding-box diagonal).
+
+    Returns
+    -------
+    float, percent of ``diag``.
+
+    Raises
+    ------
+    SShaDeError on bad handles (see :func:`sshade.mesh.validate.validate_handles`), NaN
+    coordinates, or a non-positive / non-finite ``diag``.
+
+    Examples
+    --------
+    >>> Vd = np.zeros((3, 3))
+    >>> handle_error(Vd, [1], [[0., 0.5, 0]], 10.0)
+    5.0
+    """
+    Vd = check_points(Vd, "Vd (deformed)")
+    h, T = validate_handles(Vd, handles, targets)
+    try:
+        diag = float(diag)
+    except (TypeError, ValueError):
+        raise SShaDeError(f"diag must be a number, got {diag!r}") from None
+    if not np.isfinite(diag) or diag <= 0:
+        raise SShaDeError(f"diag must be a positive finite length, got {diag}")
+    return float(100.0 * np.linalg.norm(Vd[h] - T, axis=1).max() / diag)
+
+
 def handles_not_reached(handle_err_pct, max_pct=HANDLE_ERROR_MAX_PCT) -> str | None:
     """The failure message of a result whose handle error (``handle_err_pct``: largest
     handle-to-target distance in % of the rest bounding-box diagonal,
-    :func:`eval.metrics.handle_error`) exceeds ``max_pct`` (None: no limit), else None."""
+    :func:`handle_error`) exceeds ``max_pct`` (None: no limit), else None."""
     if max_pct is None or handle_err_pct is None:
         return None
     e = float(handle_err_pct)
@@ -124,18 +167,14 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     Raises
     ------
     SShaDeError (not a MethodFailure) on an invalid mesh or handles, before the method
-    runs (:func:`sshade.validate.validate_mesh`, ``validate_handles``).
+    runs (:func:`sshade.mesh.validate.validate_mesh`, ``validate_handles``).
     MethodFailure on anything the method raises or does: our methods' SShaDeError
     (its message), a plug-in's exception (``Type: message``), SystemExit and other
     BaseException (``SystemExit: 0 (...)``), ``timed out after N s``, or an output
-    :func:`sshade.validate.validate_deformed` refuses.
+    :func:`sshade.mesh.validate.validate_deformed` refuses.
     KeyboardInterrupt, unchanged; any other exception of one of our own methods (a bug,
-    :func:`eval.methods.is_plugin`), unchanged.
+    :func:`sshade.method.is_plugin`), unchanged.
     """
-    from sshade.components import deform_components, n_components
-    from sshade.validate import validate_deformed, validate_handles, validate_mesh
-
-    from .methods import is_plugin
     name = str(getattr(method, "name", type(method).__name__))
     timeout_s = check_timeout(timeout_s)
     V, F = validate_mesh(V, F, allow_components=True)
@@ -179,7 +218,6 @@ class _Checked:
         return info if isinstance(info, Mapping) else {}
 
     def deform(self, V, F, handles, targets):
-        from sshade.validate import validate_deformed
         U = self.method.deform(_read_only(V), _read_only(F), _read_only(handles), _read_only(targets))
         return validate_deformed(U, len(V), V=V, name=self.name)
 

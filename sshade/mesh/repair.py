@@ -6,7 +6,7 @@ remove duplicate faces, remove null faces (zero area), repair non-manifold edges
 removing the fewest faces, MeshLab's "Remove Faces"), repair non-manifold vertices (by
 splitting them, no displacement: ``vertdispratio=0``), remove unreferenced vertices.
 Faces are never re-wound and no hole is filled: inconsistent orientation and the like
-keep their clear error from :func:`sshade.validate.validate_mesh`.
+keep their clear error from :func:`sshade.mesh.validate.validate_mesh`.
 
 Because no filter moves a vertex, every vertex of the result has the rest position of
 an input vertex; :func:`repair_mesh` returns that input vertex (``origin``) so per-vertex
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import SShaDeError
+from ..errors import SShaDeError
 
 __all__ = ["repair_mesh", "REPAIR_FILTERS"]
 

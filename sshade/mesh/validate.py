@@ -1,8 +1,12 @@
-"""Input validation for meshes and handles (paper §2, "Manifoldness").
+"""Input validation for meshes and handles (paper §2, "Manifoldness"): the one
+validator of every layer (the method, the baselines, the builder, the evaluator's
+metrics and renders, the command line).
 
 The method assumes a single-component, 2-manifold triangle mesh, possibly with
 boundary. These checks run before any work and raise :class:`SShaDeError` naming the
-problem and where it is.
+problem and where it is. :func:`check_arrays` (with :func:`check_points` and
+:func:`check_faces`) is the array part alone (shapes, dtypes, finite coordinates, index
+range), for callers that take any triangle soup (metrics, renders, ARAP operators).
 
 :func:`validate_mesh` first runs compiled O(n + m) checks (numba: one pass over the
 vertices, one over the faces, the half-edge structure, union-find components and a walk
@@ -17,10 +21,11 @@ import scipy.sparse as sp
 from numba import njit
 from scipy.sparse.csgraph import connected_components
 
-from .errors import SShaDeError
+from ..errors import SShaDeError
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
-__all__ = ["validate_mesh", "validate_handles", "validate_deformed", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
+__all__ = ["validate_mesh", "validate_handles", "validate_deformed", "check_arrays", "check_points", "check_faces",
+           "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
 
 #: Largest coordinate magnitude accepted. The methods form products of up to about
 #: eight lengths (squared areas, circumradii, energies): beyond ~1e38 they overflow
@@ -32,6 +37,118 @@ DIAG_MIN = 1e-30
 #: this many bounding-box diagonals from the mesh are refused as out of scale (a units
 #: mix-up, an overflow); no real edit moves a handle a million diagonals.
 MAX_DIAGONALS = 1e6
+
+
+def check_points(P, name: str = "V", *, min_rows: int = 1) -> np.ndarray:
+    """Check an array of 3-D points (vertex positions) and return it as float64.
+
+    Parameters
+    ----------
+    P : (k, 3) array_like of real numbers (any length unit).
+    name : str, first word of the error messages.
+    min_rows : int, the fewest rows accepted.
+
+    Returns
+    -------
+    (k, 3) float64, C-contiguous (a copy only if the input was not already).
+
+    Raises
+    ------
+    SShaDeError: not numeric, a shape other than (k, 3), fewer than ``min_rows`` rows,
+    NaN/inf coordinates (naming the first such row).
+
+    Examples
+    --------
+    >>> check_points([[0, 0, 1]]).dtype
+    dtype('float64')
+    """
+    try:
+        P = np.ascontiguousarray(P, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"{name}: not a numeric array ({e})") from None
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise SShaDeError(f"{name}: must have shape (n, 3), got {P.shape}")
+    if len(P) < min_rows:
+        raise SShaDeError(f"{name}: is empty" if len(P) == 0 and min_rows <= 1 else
+                          f"{name}: needs at least {min_rows} points, got {len(P)}")
+    bad = ~np.isfinite(P).all(axis=1)
+    if bad.any():
+        raise SShaDeError(f"{name}: {int(bad.sum())} rows have NaN/inf coordinates "
+                          f"(first: row {int(np.flatnonzero(bad)[0])})")
+    return P
+
+
+def check_faces(F, n: int, name: str = "F") -> np.ndarray:
+    """Check triangle indices into ``n`` vertices and return them as int64.
+
+    Parameters
+    ----------
+    F : (m, 3) array_like of integers (or of integral floats), m >= 1.
+    n : int, the vertex count the indices refer to.
+    name : str, first word of the error messages.
+
+    Returns
+    -------
+    (m, 3) int64, C-contiguous.
+
+    Raises
+    ------
+    SShaDeError: not numeric, a shape other than (m, 3), no face, non-integer values, an
+    index outside ``[0, n)`` (naming the first such face).
+
+    Examples
+    --------
+    >>> check_faces([[0, 1, 2]], 3).tolist()
+    [[0, 1, 2]]
+    """
+    try:
+        F = np.asarray(F)
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"{name}: face array is ragged or not numeric ({e}); triangles only") from None
+    if F.dtype.kind not in "iuf":
+        raise SShaDeError(f"{name}: face indices must be integers, got dtype {F.dtype}")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise SShaDeError(f"{name}: must have shape (m, 3) (triangles only), got {F.shape}")
+    if len(F) == 0:
+        raise SShaDeError(f"{name}: has no faces")
+    if not np.issubdtype(F.dtype, np.integer):
+        if not np.isfinite(F).all() or np.any(F != np.round(F)):
+            raise SShaDeError(f"{name}: face indices are not integers")
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    out = (F < 0) | (F >= n)
+    if out.any():
+        f = int(np.flatnonzero(out.any(axis=1))[0])
+        raise SShaDeError(f"{name}: face {f} has vertex index out of range [0, {n}): {F[f].tolist()}")
+    return F
+
+
+def check_arrays(V, F, *, name: str | None = None, min_vertices: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The array checks of a triangle mesh, without the manifold checks of
+    :func:`validate_mesh`: :func:`check_points` on ``V``, :func:`check_faces` on ``F``.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float, vertex positions (any length unit).
+    F : (m, 3) array_like of int, triangles (0-based indices into V).
+    name : str or None, prefixes the messages (``"render"`` -> ``render: V: ...``).
+    min_vertices : int, the fewest vertices accepted.
+
+    Returns
+    -------
+    V : (n, 3) float64; F : (m, 3) int64 (both C-contiguous).
+
+    Raises
+    ------
+    SShaDeError as :func:`check_points` and :func:`check_faces` (NaN/inf, shapes,
+    non-integer or out-of-range indices, no vertex or face).
+
+    Examples
+    --------
+    >>> V, F = check_arrays(np.eye(3), [[0, 1, 2]])
+    """
+    pre = f"{name}: " if name else ""
+    V = check_points(V, f"{pre}V", min_rows=min_vertices)
+    return V, check_faces(F, len(V), f"{pre}F")
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
@@ -46,7 +163,7 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     allow_boundary : bool, if False a mesh with boundary edges is rejected.
     area_tol : float, a face with area below ``area_tol * bbox_diag**2`` is degenerate.
 
-    return_halfedges : bool, also return the :class:`sshade.halfedge.HalfEdges` built
+    return_halfedges : bool, also return the :class:`sshade.mesh.halfedge.HalfEdges` built
         for the checks (reused by :func:`sshade.remesh.mesh_topology`).
     allow_components : bool, accept several connected components (each still has to
         pass every other check); used by :func:`sshade.components.deform_components`,
@@ -76,7 +193,7 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
         V = np.ascontiguousarray(V, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise SShaDeError(f"{name}: vertex array is not numeric ({e})") from None
-    if not V.flags.writeable:  # a read-only array (eval.guard) would make numba compile a second signature
+    if not V.flags.writeable:  # a read-only array (sshade.guard) would make numba compile a second signature
         V = V.copy()
     try:
         F = np.asarray(F)
@@ -324,7 +441,7 @@ def validate_deformed(U, n_vertices: int, *, V=None, name: str = "method") -> np
     """Check a deformation method's output before anything measures or writes it.
 
     The one check of every method's result (the evaluator and ``python -m sshade
-    deform`` both call it through :func:`eval.guard.run_method`; issue 19).
+    deform`` both call it through :func:`sshade.guard.run_method`; issue 19).
 
     Parameters
     ----------
