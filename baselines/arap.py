@@ -8,6 +8,7 @@ import numpy as np
 from sshade.arap import PROTOCOLS, arap_deform, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles, validate_mesh
+from sshade.warmup import warm_fullres
 
 __all__ = ["FullResArap", "ARAP", "Elastic", "check_arap_args"]
 
@@ -105,7 +106,6 @@ class FullResArap:
         energy and protocol (parallel variants too when an ``n_vertices`` mesh uses them),
         outside any timed call (:func:`sshade.warmup.warm_fullres`). Returns the seconds
         spent (0.0 when warm)."""
-        from sshade.warmup import warm_fullres
         return warm_fullres(self.energy, self.protocol, n_vertices)
 
 

@@ -25,6 +25,7 @@ from scipy.sparse.linalg import splu
 
 from sshade.arap import ArapResult, iterate, rigid_fit
 from sshade.mesh.validate import validate_handles, validate_mesh
+from sshade.warmup import WARMED, warm_once
 
 from .arap import check_arap_args
 
@@ -149,5 +150,4 @@ class ARAPSR:
         """First-call costs (libigl, SciPy's SuperLU, mesh validation kernels) paid once on
         a tiny mesh outside any timed call (:func:`sshade.warmup.warm_once`); ARAP-SR has
         no size-dependent kernels, ``n_vertices`` is ignored. Returns the seconds spent."""
-        from sshade.warmup import WARMED, warm_once
         return warm_once(WARMED, ("arap_sr",), lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5).deform(V, F, h, T))

@@ -60,8 +60,7 @@ from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh
 
 from .anny_model import body_topology, load_anny
-from .anny_poses import (LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec,
-                         resolve_poses)
+from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec, resolve_poses
 from .skinning import apply_blended, blend_transforms
 
 __all__ = ["Phenotype", "SUBJECTS", "LANDMARK_NAMES", "AnnySubject", "anny_subject", "anny_landmarks",

@@ -39,13 +39,22 @@ import numpy as np
 from tqdm import tqdm
 
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
 
 from . import highres
 from .config import BuildConfig
 from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
-from .manifest import (BUILDER_VERSION, FORMAT, MANIFEST, check_out_folder, item_key, item_valid, package_versions,
-                       write_manifest, write_partial)
-from sshade.mesh.io import read_mesh
+from .manifest import (
+    BUILDER_VERSION,
+    FORMAT,
+    MANIFEST,
+    check_out_folder,
+    item_key,
+    item_valid,
+    package_versions,
+    write_manifest,
+    write_partial,
+)
 from .sources import SOURCES, Source
 from .store import write_npz, write_ply
 

@@ -15,10 +15,10 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from sshade.errors import SShaDeError
-
-from eval.config_check import config_int_list, config_number
+from sshade.checks import config_int_list, config_number
+from sshade.clirun import hydra_main, run_command
 from sshade.confdir import config_dir
+from sshade.errors import SShaDeError
 
 from .build import build_defaust
 from .config import BuildConfig
@@ -148,7 +148,6 @@ def _main(cfg) -> None:
     """Hydra task of ``python -m defaust``: build; a bad parameter, an OSError (one
     ``error: ...`` line, status 2) or Ctrl-C (``interrupted``, 130) ends the process
     through :func:`sshade.clirun.run_command`."""
-    from sshade.clirun import run_command
     logging.getLogger("defaust").setLevel(logging.INFO)
     rc = run_command(lambda: run(cfg), where=cfg.get("out"))
     if rc:
@@ -160,8 +159,6 @@ def main() -> None:
     and every builder parameter checked (:func:`config_from_omegaconf`,
     :meth:`BuildConfig.validate`) before anything is built or any folder made
     (:func:`sshade.clirun.hydra_main`)."""
-    from sshade.clirun import hydra_main
-
     def check(cfg):
         config_from_omegaconf(cfg).validate()
     hydra_main(_main, CONF_DIR, check=check)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.mesh.validate import validate_mesh
 
 __all__ = ["HighResResult", "subdivide_remesh", "ls3_loop"]
 
@@ -123,7 +124,6 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
     """
     import pymeshlab
 
-    from sshade.mesh.validate import validate_mesh
 
     lo, hi = (int(x) for x in vertex_range)
     if not 0 < lo <= hi:

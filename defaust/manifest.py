@@ -17,8 +17,8 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from sshade.errors import SShaDeError
-
 from sshade.mesh.io import atomic_write
+
 from .store import sha256_file
 
 __all__ = ["MANIFEST", "FORMAT", "BUILDER_VERSION", "ManifestError", "read_manifest_file", "check_out_folder",

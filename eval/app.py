@@ -22,11 +22,14 @@ from __future__ import annotations
 
 import sys
 
+from sshade.clirun import hydra_main, run_command
+from sshade.confdir import config_dir
 from sshade.errors import SShaDeError
 
-from sshade.confdir import config_dir
+from .config_check import check_config
 from .experiments import experiments, find_experiment
 from .experiments.cases import run
+from .outdir import claimed_run
 
 __all__ = ["CONF_DIR", "run", "run_experiment", "main"]
 
@@ -48,8 +51,6 @@ def run_experiment(cfg, *, fresh: bool = False):
     SShaDeError for a bad config value or an unknown ``experiment.kind`` (before any
     work), :class:`eval.outdir.OutputDirError` for a folder it may not write into.
     """
-    from .config_check import check_config
-    from .outdir import claimed_run
     check_config(cfg)  # every number of the config, before any work (also for sweep jobs)
     kind = str(cfg.get("experiment", {}).get("kind", "cases"))
     run_fn = find_experiment(kind)
@@ -83,8 +84,6 @@ def _main(cfg) -> None:
     """Hydra task of ``python -m eval``: run the experiment; a bad config or input, an
     OSError (``error: ...``, status 2) or Ctrl-C (``interrupted``, 130) ends the process
     through :func:`sshade.clirun.run_command`."""
-    from sshade.clirun import run_command
-
     fresh = _pin_out_dir(cfg)
     rc = run_command(lambda: run_experiment(cfg, fresh=fresh), where=cfg.get("out_dir"))
     if rc:
@@ -99,8 +98,6 @@ def main() -> None:
     one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
     (:func:`sshade.clirun.hydra_main`).
     """
-    from sshade.clirun import hydra_main
-    from .config_check import check_config
     argv = sys.argv[1:]
     if any(a in ("-m", "--multirun") for a in argv) and not any("hydra.callbacks.sweep_aggregate" in a for a in argv):
         # a multirun claims its hydra.sweep.dir like eval.sweep does (eval.sweep.claim_sweep_dir)

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.isometric import rigid_align
 
 from .render import DEFAULT_VIEW, figure_row, render_mesh
 
@@ -270,7 +271,6 @@ def pose_transfer_figure(M, S, M_pose, S_pred, S_true, F, path, *, title: str | 
     ``S_true`` (:func:`sshade.isometric.rigid_align`, as in the table). Returns the path;
     PNG ``5 * w + 90`` by ``h + 28 (+ 28)`` px. Raises SShaDeError on mismatched shapes.
     """
-    from sshade.isometric import rigid_align
     e = vertex_error_pct(rigid_align(np.asarray(S_pred, np.float64), np.asarray(S_true, np.float64)), S_true)
     panels = [{"title": "source M", "V": M, "F": F},
               {"title": "M in the pose (M')", "V": M_pose, "F": F},

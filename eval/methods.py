@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+from sshade.arap import PROTOCOLS
 from sshade.errors import SShaDeError
 from sshade.method import as_dict, build_method, is_mapping
 from sshade.registry import SECTIONS, build_builtin, builtin_methods, canonical_name, method_key, strip_meta
@@ -171,7 +172,6 @@ def arap_params(arap, *, where: str = "arap") -> dict:
     ------
     SShaDeError naming the bad key and value.
     """
-    from sshade.arap import PROTOCOLS
     protocol = str(_get(arap, "protocol", "converged"))
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"{where}.protocol must be one of {list(PROTOCOLS)}, got {protocol!r}")

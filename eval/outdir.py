@@ -39,6 +39,8 @@ from pathlib import Path
 
 from sshade.errors import SShaDeError
 
+from .runinfo import write_runinfo
+
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
            "claimed_run", "results_dir", "refuse_results", "read_marker"]
 
@@ -331,7 +333,6 @@ def _end_runinfo(out: Path, status: str, error: str) -> None:
     except (OSError, ValueError):
         return
     if isinstance(info, dict) and info.get("status") == "running":
-        from .runinfo import write_runinfo
         info.update(status=status, error=error[:2000], ended_utc=_now())
         with contextlib.suppress(OSError):
             write_runinfo(p, info)
@@ -363,7 +364,7 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     if target and target in _claimed:
         yield None
         return
-    claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=_flag(cfg.get("overwrite", False)), fresh=fresh)
+    claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)), fresh=fresh)
     with open_dict(cfg):
         cfg.out_dir = str(claim.path)
     _claimed[str(claim.path)] = claim
@@ -392,7 +393,7 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
         claim.finish(status, drop_if_unused="run.json" if status != "done" else None)
 
 
-def _flag(v) -> bool:
+def overwrite_flag(v) -> bool:
     """``overwrite`` as a bool (true/false, yes/no, 1/0). Raises OutputDirError otherwise."""
     if isinstance(v, bool):
         return v

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from defaust.store import read_npz, write_npz
+from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 
 __all__ = ["REFERENCE_VERSION", "Reference", "reference_key", "reference_solution", "reference_metrics",
@@ -53,7 +54,6 @@ def method_energy(method) -> str:
     when it names one of :data:`sshade.arap.ENERGIES`, else by name (ARAP and
     ARAP-SR: spokes; Elastic, SShaDe and any other method: spokes-and-rims, the energy of
     SShaDe's low-resolution step, paper §4.1)."""
-    from sshade.arap import ENERGIES
     e = getattr(method, "energy", None)
     if e in ENERGIES:
         return str(e)
@@ -94,7 +94,6 @@ def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
 
 
 def _solver_settings(max_iter: int, time_budget_s: float | None) -> dict:
-    from sshade.arap import DEEP_CRITERION
     return {"etol": DEEP_CRITERION.etol, "gtol": DEEP_CRITERION.gtol, "max_iter": int(max_iter),
             "time_budget_s": time_budget_s, "accelerate": "lbfgs"}
 
@@ -123,7 +122,6 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     ------
     SShaDeError on an unknown energy or an unreadable cache file (delete it to recompute).
     """
-    from sshade.arap import DEEP_CRITERION, ENERGIES, solve_arap
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
     solver = _solver_settings(max_iter, time_budget_s)
@@ -172,7 +170,6 @@ def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None) -> dict:
     ------
     SShaDeError when ``Vd`` and the reference have different shapes.
     """
-    from sshade.arap import build_operators
     V_rest = np.asarray(V_rest, np.float64)
     Vd = np.asarray(Vd, np.float64)
     if Vd.shape != ref.U.shape:

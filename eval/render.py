@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write
 from sshade.mesh.validate import check_arrays
 
 __all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "DEFAULT_VIEW"]
@@ -339,7 +340,6 @@ def _png_bytes(fig, canvas) -> bytes:
 
 
 def _write_bytes(path, data: bytes) -> Path:
-    from sshade.mesh.io import atomic_write
     path = Path(path)
     with atomic_write(path, "wb") as fh:
         fh.write(data)

@@ -40,6 +40,10 @@ import subprocess
 import sys
 import time
 
+from sshade.clirun import ArgumentParser, run_command
+
+from .outdir import REPRODUCE_ENV
+
 
 def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
@@ -72,7 +76,6 @@ def main(argv=None) -> int:
     (all are attempted); 2 after one ``error: ...`` line on a usage error or an OSError;
     130 after ``interrupted`` on Ctrl-C (the running step gets the same Ctrl-C).
     """
-    from sshade.clirun import ArgumentParser, run_command
     p = ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     p.add_argument("--faust", help="folder of FAUST registrations tr_reg_XYZ.ply")
     p.add_argument("--tosca", help="folder of TOSCA .off meshes")
@@ -92,7 +95,6 @@ def _run_steps(a) -> int:
         if a.dry_run:
             continue
         t = time.perf_counter()
-        from .outdir import REPRODUCE_ENV
         rc = subprocess.call(cmd, env=dict(os.environ, **{REPRODUCE_ENV: "1"}))
         print(f"== {name}: exit {rc} after {time.perf_counter() - t:.0f} s", flush=True)
         if rc != 0:

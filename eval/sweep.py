@@ -17,7 +17,7 @@ set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
     {"status": "done" | "partial" | "failed" | "killed" | "running", "error": "...", "overrides": [...],
      "job_num": 3, "wall_s": 12.3, "n_cases": 4, "n_errors": 0, ...}
 
-Every job of a sweep ends in the table with one outcome (:data:`OUTCOMES`):
+Every job of a sweep ends in the table with one outcome (:data:`eval.sweep_files.OUTCOMES`):
 ``done``; ``partial``: some (case, method) rows failed; ``failed``: the job raised (bad
 parameter, crash inside a method, ...) or every row failed (e.g. ``sshade.n_low=2``:
 "n_low must be at least 4"); ``killed``: the job started but died without a result (out
@@ -34,10 +34,12 @@ Before any job starts, :class:`AggregateSweepCallback` (added automatically by
 ``sweep.json`` into the sweep folder: the command, its folder and the grid (job number
 -> overrides), so that a point without folder is listed as missing and
 :func:`resume_sweep` can run the same command again for the jobs without result. At the
-end of the multirun it calls :func:`aggregate_sweep`, which writes ``sweep_table.csv`` (one row per job: its
+end of the multirun it calls :func:`eval.sweep_table.aggregate_sweep`, which writes ``sweep_table.csv`` (one row per job: its
 overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
 every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
 ``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.
+The folder's files (``status.json``, ``sweep.json``, the job folders) are read and
+written by :mod:`eval.sweep_files`, the table is built by :mod:`eval.sweep_table`.
 
 Why not ``python -m eval -m``: the plain evaluator exits with status 2 on a
 configuration error (:func:`eval.app._main`), which stops a multirun at that job; this
@@ -45,10 +47,7 @@ entry point records the failure and continues.
 """
 from __future__ import annotations
 
-import datetime as _dt
-import json
 import logging
-import math
 import os
 import socket
 import sys
@@ -56,72 +55,37 @@ import time
 import traceback
 from pathlib import Path
 
+from sshade.clirun import ArgumentParser, hydra_main, run_command
+from sshade.confdir import config_dir
 from sshade.errors import SShaDeError
 
-__all__ = ["sweep_job", "aggregate_sweep", "sweep_markdown", "read_status", "write_status",
-           "AggregateSweepCallback", "STATUS_FILE", "MANIFEST", "OUTCOMES", "read_manifest", "sweep_points",
-           "start_manifest", "finish_manifest", "record_outcome", "resume_sweep", "main"]
+from . import app
+from .outdir import OutputDirError, claim_output_dir, claimed_run, overwrite_flag
+from .paths import abs_path
+from .sweep_files import (
+    KEEP,
+    MANIFEST,
+    RESUME_ENV,
+    STATUS_FILE,
+    now_iso,
+    read_manifest,
+    read_status,
+    write_manifest,
+    write_status,
+)
+from .sweep_table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
+
+__all__ = ["sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
+           "claim_sweep_dir", "release_sweep_dir", "resume_sweep", "main"]
 
 log = logging.getLogger("eval")
 
-STATUS_FILE = "status.json"
-MANIFEST = "sweep.json"      # the sweep's grid and command, written before any job starts
-RESUME_ENV = "SSHADE_SWEEP_RESUME"  # "1" in a resumed sweep: jobs already done are skipped
-#: Final outcome of a job in the table ("running" only while the sweep still runs).
-OUTCOMES = ("done", "partial", "failed", "killed", "missing")
-KEEP = ("done", "partial")   # outcomes a resume keeps; the others are run again
-TABLE_CSV = "sweep_table.csv"
-TABLE_MD = "sweep_table.md"
 _CALLBACK_KEY = "hydra.callbacks.sweep_aggregate"
 _CALLBACK_TARGET = "eval.sweep.AggregateSweepCallback"
 _MAX_ERROR = 2000
 
 
-def _now() -> str:
-    return _dt.datetime.now().astimezone().isoformat(timespec="seconds")
-
-
-# ----------------------------------------------------------------------------- status.json
-def write_status(out_dir, status: dict) -> Path:
-    """Write ``out_dir/status.json`` atomically; returns its path."""
-    from sshade.mesh.io import atomic_write
-    p = Path(out_dir) / STATUS_FILE
-    with atomic_write(p, "w") as fh:
-        json.dump(status, fh, indent=2, default=str)
-        fh.write("\n")
-    return p
-
-
-def read_status(job_dir) -> dict | None:
-    """``status.json`` of a job folder, or None when absent or unreadable."""
-    p = Path(job_dir) / STATUS_FILE
-    try:
-        return json.loads(p.read_text())
-    except (OSError, ValueError):
-        return None
-
-
 # ----------------------------------------------------------------------------- sweep.json
-def read_manifest(sweep_dir) -> dict | None:
-    """``sweep_dir/sweep.json`` (the sweep's grid and command, see :func:`start_manifest`),
-    or None when absent or unreadable."""
-    try:
-        m = json.loads((Path(sweep_dir) / MANIFEST).read_text())
-    except (OSError, ValueError):
-        return None
-    return m if isinstance(m, dict) else None
-
-
-def _write_manifest(sweep_dir, m: dict) -> Path:
-    from sshade.mesh.io import atomic_write
-    p = Path(sweep_dir) / MANIFEST
-    p.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(p, "w") as fh:
-        json.dump(m, fh, indent=2, default=str)
-        fh.write("\n")
-    return p
-
-
 def sweep_points(config) -> list[list[str]] | None:
     """Every job's overrides of a multirun, in job-number order, expanded as Hydra's
     ``BasicSweeper`` does (``hydra.sweeper.params`` then the command-line task overrides,
@@ -150,14 +114,14 @@ def start_manifest(config) -> Path:
     launcher, the grid (``points``: job number -> overrides, :func:`sweep_points`) and a
     ``runs`` entry (started, resume) that :func:`finish_manifest` closes."""
     d = Path(str(config.hydra.sweep.dir)).resolve()
-    m = read_manifest(d) or {"created": _now(), "argv": sys.argv[1:], "cwd": os.getcwd(), "python": sys.executable}
+    m = read_manifest(d) or {"created": now_iso(), "argv": sys.argv[1:], "cwd": os.getcwd(), "python": sys.executable}
     pts = sweep_points(config)
     if pts is not None:
         m["points"] = pts
     m["launcher"] = str(config.hydra.launcher.get("_target_", ""))
-    m.setdefault("runs", []).append({"started": _now(), "argv": sys.argv[1:],
+    m.setdefault("runs", []).append({"started": now_iso(), "argv": sys.argv[1:],
                                      "resume": os.environ.get(RESUME_ENV) == "1"})
-    return _write_manifest(d, m)
+    return write_manifest(d, m)
 
 
 def finish_manifest(sweep_dir) -> None:
@@ -165,33 +129,8 @@ def finish_manifest(sweep_dir) -> None:
     ``status.json`` still says ``running`` is reported as killed."""
     m = read_manifest(sweep_dir)
     if m and m.get("runs"):
-        m["runs"][-1]["finished"] = _now()
-        _write_manifest(sweep_dir, m)
-
-
-def record_outcome(sweep_dir, job_num: int, outcome: str, error: str = "", *, missing_error: str = "",
-                   **fields) -> str:
-    """Record what the launcher saw of job ``job_num`` (e.g. ``killed``, with the SLURM
-    state and job id in ``fields``): turn the job's ``status.json`` from ``running`` into
-    ``outcome`` (a job that died cannot write it itself), and note it in ``sweep.json``
-    under ``jobs``. A job without such a folder never started: it is noted as
-    ``missing`` with ``missing_error`` (the table lists it so).
-
-    Returns the outcome noted (``outcome`` or ``missing``)."""
-    d = Path(sweep_dir)
-    started = False
-    for j in _job_dirs(d):
-        st = read_status(j)
-        if st and st.get("job_num") == job_num and st.get("status") == "running":
-            st.update(status=outcome, error=error, finished=_now(), **fields)
-            write_status(j, st)
-            started = True
-    if not started and missing_error:
-        outcome, error = "missing", missing_error
-    m = read_manifest(d) or {}
-    m.setdefault("jobs", {})[str(job_num)] = {"outcome": outcome, "error": error, "time": _now(), **fields}
-    _write_manifest(d, m)
-    return outcome
+        m["runs"][-1]["finished"] = now_iso()
+        write_manifest(sweep_dir, m)
 
 
 def _hydra_job() -> tuple[Path | None, list[str], int | None, str | None]:
@@ -242,7 +181,6 @@ def sweep_job(cfg) -> dict:
     from omegaconf import open_dict
     job_dir, overrides, num, sweep_dir = _hydra_job()
     if job_dir is None:
-        from .paths import abs_path
         job_dir = abs_path(cfg.get("out_dir", "outputs/sweep_job"))
     job_dir = Path(job_dir).resolve()
     with open_dict(cfg):
@@ -253,16 +191,14 @@ def sweep_job(cfg) -> dict:
             log.info("job %s (%s): %s before, not run again", num, " ".join(overrides), old["status"])
             return {k: v for k, v in old.items() if k != "traceback"}
     status = {"status": "running", "job_num": num, "overrides": overrides, "out_dir": str(job_dir),
-              "sweep_dir": sweep_dir, "host": socket.gethostname(), "pid": os.getpid(), "started": _now()}
-    from .outdir import OutputDirError, claimed_run
+              "sweep_dir": sweep_dir, "host": socket.gethostname(), "pid": os.getpid(), "started": now_iso()}
     t0 = time.perf_counter()
     claimed = False
     try:
         with claimed_run(cfg):  # the job's folder (eval.outdir): new, or this job's earlier attempt
             claimed = True
             write_status(job_dir, status)
-            from .app import run_experiment
-            res = run_experiment(cfg)
+            res = app.run_experiment(cfg)
             status.update(_rows_status(job_dir, res))
     except (Exception, SystemExit) as e:  # noqa: BLE001 -- record any failure, keep the sweep going
         msg = str(e) or type(e).__name__
@@ -274,7 +210,7 @@ def sweep_job(cfg) -> dict:
         if isinstance(e, OutputDirError) and not claimed:
             print(f"job {num}: failed: {msg}", file=sys.stderr)
             return {k: v for k, v in status.items() if k != "traceback"}
-    status.update(wall_s=round(time.perf_counter() - t0, 3), finished=_now())
+    status.update(wall_s=round(time.perf_counter() - t0, 3), finished=now_iso())
     try:
         write_status(job_dir, status)
     except OSError as e:
@@ -283,255 +219,6 @@ def sweep_job(cfg) -> dict:
         level = "warning" if status["status"] == "partial" else "error"  # one prefix style (issue 19)
         print(f"{level}: job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
     return {k: v for k, v in status.items() if k != "traceback"}
-
-
-# ----------------------------------------------------------------------------- aggregation
-def _job_dirs(sweep_dir: Path) -> list[Path]:
-    """Folders under ``sweep_dir`` (itself included) holding a job: a status.json or a
-    Hydra ``.hydra/overrides.yaml``; hidden folders (.submitit, .hydra) are skipped."""
-    found = []
-    for root, dirs, files in os.walk(sweep_dir):
-        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
-        r = Path(root)
-        if STATUS_FILE in files or (r / ".hydra" / "overrides.yaml").is_file():
-            found.append(r)
-    return found
-
-
-def _overrides(job_dir: Path, status: dict | None) -> list[str]:
-    if status and isinstance(status.get("overrides"), list):
-        return [str(o) for o in status["overrides"]]
-    p = job_dir / ".hydra" / "overrides.yaml"
-    if p.is_file():
-        import yaml
-        try:
-            v = yaml.safe_load(p.read_text())
-            return [str(o) for o in v] if isinstance(v, list) else []
-        except Exception:  # noqa: BLE001
-            return []
-    return []
-
-
-def _split(override: str) -> tuple[str, str]:
-    key, _, value = override.partition("=")
-    return key.lstrip("+~"), value
-
-
-def _value(v: str):
-    try:
-        f = float(v)
-    except ValueError:
-        return v
-    return int(f) if f.is_integer() and "." not in v and "e" not in v.lower() else f
-
-
-def _job_sort_key(row: dict):
-    n = row.get("job")
-    return (0, n, "") if isinstance(n, int) else (1, 0, str(row.get("dir")))
-
-
-def aggregate_sweep(sweep_dir, *, write: bool = True):
-    """One table for a sweep folder: a row per job (parameter setting).
-
-    Parameters
-    ----------
-    sweep_dir : the multirun folder (``hydra.sweep.dir``), holding one folder per job.
-    write : also write ``sweep_table.csv`` and ``sweep_table.md`` into ``sweep_dir``
-        (atomically).
-
-    Returns
-    -------
-    pandas DataFrame with columns ``job``, ``dir`` (relative to ``sweep_dir``; empty for
-    a missing job), ``overrides`` (space-separated), one column per overridden key,
-    ``status`` (:data:`OUTCOMES`, or running while the sweep runs; a point of
-    ``sweep.json``'s grid without folder is missing), ``error``, ``wall_s``, ``n_cases``,
-    ``n_errors``, then ``<method>/<column>`` for every column of the job's
-    ``table.csv`` (per-method means over successful cases; NaN where none).
-
-    Raises
-    ------
-    SShaDeError if ``sweep_dir`` is not a folder or holds no job.
-    """
-    import pandas as pd
-    d = Path(sweep_dir).expanduser().resolve()
-    if not d.is_dir():
-        raise SShaDeError(f"sweep folder not found: {d}")
-    if write:
-        from .outdir import refuse_results
-        refuse_results(d, "use --no-write to print the table only")
-    jobs = _job_dirs(d)
-    man = read_manifest(d) or {}
-    points = man.get("points") if isinstance(man.get("points"), list) else []
-    if not jobs and not points:
-        raise SShaDeError(f"no sweep jobs in {d} (no {STATUS_FILE} or .hydra/overrides.yaml below it, "
-                          f"no {MANIFEST})")
-    ended = _last_run_end(man)
-    seen = {"jobs": dict(man.get("jobs") or {})}
-    rows, keys = [], []
-    for j in jobs:
-        st = read_status(j)
-        ov = _overrides(j, st)
-        row = {"job": None, "dir": str(j.relative_to(d)) or ".", "overrides": " ".join(ov)}
-        if st and st.get("job_num") is not None:
-            row["job"] = int(st["job_num"])
-        elif j.name.isdigit():
-            row["job"] = int(j.name)
-        for o in ov:
-            k, v = _split(o)
-            if k not in keys:
-                keys.append(k)
-            row[k] = _value(v)
-        if st:
-            row["status"] = str(st.get("status", "missing"))
-            row["error"] = str(st.get("error") or "")
-            if row["status"] == "running" and ended is not None and _before(st.get("started"), ended):
-                row["status"] = "killed"  # the sweep is over and the job never wrote its result
-                row["error"] = _launcher_note(seen, row["job"]) or _KILLED
-            elif row["status"] == "running" and not row["error"]:
-                row["error"] = "no final status yet: the job is still running (or was killed, if the sweep is over)"
-        else:
-            run_json = j / "run.json"
-            try:
-                rs = json.loads(run_json.read_text()).get("status") if run_json.is_file() else None
-            except (OSError, ValueError):
-                rs = None
-            row["status"] = {"done": "done", "running": "running"}.get(rs, "missing")
-            row["error"] = "" if rs == "done" else f"no {STATUS_FILE} (not run through eval.sweep?)"
-        for k in ("wall_s", "n_cases", "n_errors"):
-            row[k] = (st or {}).get(k, math.nan)
-        tab = j / "table.csv"
-        if tab.is_file():
-            try:
-                t = pd.read_csv(tab)
-            except Exception as e:  # noqa: BLE001
-                row["error"] = (row["error"] + f"; unreadable table.csv ({e})").lstrip("; ")
-                t = None
-            if t is not None and "method" in t.columns:
-                for _, r in t.iterrows():
-                    for c in t.columns:
-                        if c != "method":
-                            row[f"{r['method']}/{c}"] = r[c]
-        rows.append(row)
-    have = {r["overrides"] for r in rows} | {r["job"] for r in rows if r["job"] is not None}
-    for num, ov in enumerate(points):  # points of the grid that have no folder: never started
-        ov = [str(o) for o in ov]
-        if " ".join(ov) in have or num in have:
-            continue
-        row = {"job": num, "dir": "", "overrides": " ".join(ov), "status": "missing",
-               "error": _launcher_note(seen, num) or "never started (no job folder): cancelled or not scheduled"
-               + ("" if ended is not None else ", or not started yet")}
-        for o in ov:
-            k, v = _split(o)
-            if k not in keys:
-                keys.append(k)
-            row[k] = _value(v)
-        rows.append(row)
-    rows.sort(key=_job_sort_key)
-    head = ["job", "dir", "overrides", *keys, "status", "error", "wall_s", "n_cases", "n_errors"]
-    metric_cols = [c for r in rows for c in r if c not in head]
-    metric_cols = list(dict.fromkeys(metric_cols))
-    df = pd.DataFrame(rows, columns=head + metric_cols)
-    df["job"] = df["job"].astype("Int64")
-    if write:
-        from sshade.mesh.io import atomic_write
-        with atomic_write(d / TABLE_CSV, "w", newline="") as fh:
-            df.to_csv(fh, index=False, float_format="%.6g")
-        with atomic_write(d / TABLE_MD, "w") as fh:
-            fh.write(sweep_markdown(df, title=_sweep_title(d, df)))
-    return df
-
-
-_KILLED = "died without a result (killed: out of memory, time limit, node failure or cancelled)"
-
-
-def _last_run_end(man: dict):
-    """End time (datetime) of the sweep's last run in ``sweep.json``, None while it runs
-    or without a manifest."""
-    runs = man.get("runs") or []
-    end = runs[-1].get("finished") if runs and isinstance(runs[-1], dict) else None
-    try:
-        return _dt.datetime.fromisoformat(end) if end else None
-    except (TypeError, ValueError):
-        return None
-
-
-def _before(started, end) -> bool:
-    """``started`` (ISO time of a job's start, may be missing) is before ``end``."""
-    try:
-        return _dt.datetime.fromisoformat(str(started)) <= end
-    except (TypeError, ValueError):
-        return True  # no start time: the job cannot still be running after its sweep ended
-
-
-def _launcher_note(seen: dict, num) -> str:
-    """The launcher's record of job ``num`` (``sweep.json`` ``jobs``), as an error text."""
-    j = seen["jobs"].get(str(num)) if num is not None else None
-    if not isinstance(j, dict):
-        return ""
-    return str(j.get("error") or "")
-
-
-def _sweep_title(d: Path, df) -> str:
-    counts = df["status"].value_counts()
-    parts = ", ".join(f"{int(counts[s])} {s}" for s in (*OUTCOMES, "running") if s in counts)
-    spec = ""
-    p = d / "multirun.yaml"
-    if p.is_file():
-        try:
-            import yaml
-            task = (yaml.safe_load(p.read_text()) or {}).get("hydra", {}).get("overrides", {}).get("task")
-            if task:
-                spec = f" ({' '.join(str(t) for t in task)})"
-        except Exception:  # noqa: BLE001
-            pass
-    return f"Sweep {d.name}: {len(df)} job(s), {parts}{spec}"
-
-
-def _md_cell(v, dec: int | None = None) -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "--"
-    try:
-        import pandas as pd
-        if pd.isna(v):
-            return "--"
-    except (TypeError, ValueError):
-        pass
-    if dec is not None:
-        try:
-            return f"{float(v):.{dec}f}"
-        except (TypeError, ValueError):
-            pass
-    return str(v).replace("|", "\\|").replace("\n", " ")
-
-
-def sweep_markdown(df, *, title: str | None = None) -> str:
-    """Markdown view of :func:`aggregate_sweep`'s table: job, the overridden keys that
-    vary across jobs (all of them if none varies), status, per method the main metrics
-    of ``eval.tables.TABLE_COLUMNS`` and the number of cases, and the error (shortened)."""
-    from .tables import TABLE_COLUMNS, method_order_key
-    fixed = {"job", "dir", "overrides", "status", "error", "wall_s", "n_cases", "n_errors"}
-    keys = [c for c in df.columns if c not in fixed and "/" not in c]
-    vary = [k for k in keys if df[k].astype(str).nunique(dropna=False) > 1] or keys
-    methods = list(dict.fromkeys(c.split("/", 1)[0] for c in df.columns if "/" in c))
-    methods.sort(key=method_order_key)
-    cols: list[tuple[str, str, int | None]] = []
-    for m in methods:
-        if f"{m}/n_cases" in df.columns:
-            cols.append((f"{m}/n_cases", f"{m} cases", 0))
-        for c, h, _, dec, _ in TABLE_COLUMNS:
-            if f"{m}/{c}" in df.columns:
-                cols.append((f"{m}/{c}", f"{m} {h}", dec))
-    head = ["Job", *vary, "Status", *[h for _, h, _ in cols], "Error"]
-    lines = [f"### {title}", ""] if title else []
-    lines += ["| " + " | ".join(head) + " |",
-              "|" + "|".join(["---:"] + ["---"] * (len(vary) + 1) + ["---:"] * len(cols) + ["---"]) + "|"]
-    for _, r in df.iterrows():
-        err = str(r.get("error") or "")
-        err = err if len(err) <= 100 else err[:97] + "..."
-        cells = [_md_cell(r["job"]), *[_md_cell(r[k]) for k in vary], _md_cell(r["status"]),
-                 *[_md_cell(r[c], d) for c, _, d in cols], _md_cell(err) if err else ""]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
 
 
 # ----------------------------------------------------------------------------- the sweep folder
@@ -547,11 +234,10 @@ def claim_sweep_dir(config) -> None:
     The sweep's jobs write into folders of their own below it."""
     from omegaconf import open_dict
 
-    from .outdir import _flag, claim_output_dir
     d = str(config.hydra.sweep.dir)
     given = {str(o).lstrip("+~").split("=", 1)[0] for o in config.hydra.overrides.hydra}
     try:
-        c = claim_output_dir(d, "sweep", overwrite=_flag(config.get("overwrite", False)),
+        c = claim_output_dir(d, "sweep", overwrite=overwrite_flag(config.get("overwrite", False)),
                              fresh="hydra.sweep.dir" not in given and os.environ.get(RESUME_ENV) != "1",
                              keep=os.environ.get(RESUME_ENV) == "1")
     except SShaDeError as e:
@@ -603,13 +289,12 @@ class AggregateSweepCallback(_Callback):
             release_sweep_dir("done")
             return
         release_sweep_dir("done")
-        print(sweep_markdown(df, title=_sweep_title(d.resolve(), df)))
+        print(sweep_markdown(df, title=sweep_title(d.resolve(), df)))
         print(f"wrote {TABLE_CSV}, {TABLE_MD} to {d.resolve()}")
 
 
 # ----------------------------------------------------------------------------- CLI
 def _aggregate_cli(args: list[str]) -> int:
-    from sshade.clirun import ArgumentParser
     ap = ArgumentParser(prog="python -m eval.sweep aggregate",
                                  description="Summarise sweep folders into sweep_table.{csv,md}.")
     ap.add_argument("dirs", nargs="+", help="sweep folder(s) (hydra.sweep.dir)")
@@ -623,7 +308,7 @@ def _aggregate_cli(args: list[str]) -> int:
             print(f"error: {e}", file=sys.stderr)
             rc = 2
             continue
-        print(sweep_markdown(df, title=_sweep_title(Path(d).resolve(), df)))
+        print(sweep_markdown(df, title=sweep_title(Path(d).resolve(), df)))
         if not a.no_write:
             print(f"wrote {TABLE_CSV}, {TABLE_MD} to {Path(d).resolve()}")
     return rc
@@ -664,7 +349,7 @@ def resume_sweep(sweep_dir) -> int:
     df = aggregate_sweep(d)
     todo = df[~df["status"].isin(KEEP)]
     if todo.empty:
-        print(sweep_markdown(df, title=_sweep_title(d, df)))
+        print(sweep_markdown(df, title=sweep_title(d, df)))
         print(f"resume: every job of {d} is done or partial; nothing to run")
         return 0
     print(f"resume: running again {len(todo)} of {len(df)} job(s): "
@@ -690,7 +375,6 @@ def main(argv: list[str] | None = None) -> None:
     before any job starts, :func:`sshade.clirun.precheck`) or an OSError; 130 after
     ``interrupted`` on Ctrl-C.
     """
-    from sshade.clirun import hydra_main, run_command
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "aggregate":
         raise SystemExit(run_command(lambda: _aggregate_cli(argv[1:]), where=argv[1] if len(argv) > 1 else None))
@@ -699,7 +383,6 @@ def main(argv: list[str] | None = None) -> None:
             print("error: usage: python -m eval.sweep resume SWEEP_DIR", file=sys.stderr)
             raise SystemExit(2)
         raise SystemExit(run_command(lambda: resume_sweep(argv[1]), where=argv[1]))
-    from sshade.confdir import config_dir
     if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):
         argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
     hydra_main(sweep_job, config_dir(), argv=argv)

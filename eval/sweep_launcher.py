@@ -34,6 +34,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from .sweep_files import KEEP, RESUME_ENV, job_dirs, read_status, record_outcome
+
 __all__ = ["ACTIVE_STATES", "SlurmQueryError", "slurm_states", "expand_job_ids", "JobOutcome",
            "wait_for_jobs", "TolerantLauncherMixin"]
 
@@ -275,14 +277,13 @@ class TolerantLauncherMixin:
         from hydra.core.singleton import Singleton
         from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 
-        from . import sweep as sw
         assert self.config is not None
         sweep_dir = Path(str(self.config.hydra.sweep.dir))
         sweep_dir.mkdir(parents=True, exist_ok=True)
         if "mode" in self.config.hydra.sweep:
             os.chmod(sweep_dir, mode=int(str(self.config.hydra.sweep.mode), 8))
         log.info("Submitit '%s' sweep output dir : %s", self._EXECUTOR, self.config.hydra.sweep.dir)
-        keep = _kept_jobs(sweep_dir) if os.environ.get(sw.RESUME_ENV) == "1" else {}
+        keep = _kept_jobs(sweep_dir) if os.environ.get(RESUME_ENV) == "1" else {}
         returns: list = [None] * len(job_overrides)
         params, where = [], []
         for pos, overrides in enumerate(job_overrides):
@@ -308,7 +309,7 @@ class TolerantLauncherMixin:
                 ret = outcome.value
                 if getattr(ret, "status", None) == JobStatus.FAILED:  # the task raised (not sweep_job)
                     err = f"{type(ret._return_value).__name__}: {ret._return_value}"
-                    sw.record_outcome(sweep_dir, idx, "failed", err, slurm_job_id=jid)
+                    record_outcome(sweep_dir, idx, "failed", err, slurm_job_id=jid)
                     ret = JobReturn(overrides=list(job_overrides[pos]), status=JobStatus.COMPLETED,
                                     _return_value={"status": "failed", "error": err})
                 returns[pos] = ret
@@ -319,7 +320,7 @@ class TolerantLauncherMixin:
             else:
                 status, msg = "killed", _killed_message(outcome.state, jid)
                 never = f"never started ({_state_text(outcome.state, jid)})"
-            status = sw.record_outcome(sweep_dir, idx, status, msg, missing_error=never, slurm_job_id=jid,
+            status = record_outcome(sweep_dir, idx, status, msg, missing_error=never, slurm_job_id=jid,
                                        slurm_state=outcome.state)
             msg = never if status == "missing" else msg
             log.warning("job #%d (%s): %s: %s", idx, jid, status, msg)
@@ -334,9 +335,8 @@ class TolerantLauncherMixin:
 
 def _kept_jobs(sweep_dir: Path) -> dict[int, dict]:
     """job number -> status of the jobs of ``sweep_dir`` whose result a resume keeps."""
-    from .sweep import KEEP, _job_dirs, read_status
     out = {}
-    for d in _job_dirs(sweep_dir):
+    for d in job_dirs(sweep_dir):
         st = read_status(d)
         if st and st.get("status") in KEEP and isinstance(st.get("job_num"), int):
             out[st["job_num"]] = st

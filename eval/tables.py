@@ -47,11 +47,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
-
+from sshade.clirun import ArgumentParser, run_command
 from sshade.mesh.io import atomic_write
 from sshade.registry import table_order
+
+from .outdir import refuse_results
+
+if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
+    import pandas as pd
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
@@ -124,6 +129,7 @@ def ok_mask(df: pd.DataFrame) -> pd.Series:
     (No ``fillna("")``: on the float64 column that ``pd.read_csv`` makes of an all-empty
     ``error`` column, that is deprecated in pandas and will raise.)
     """
+    import pandas as pd
     if "error" not in df.columns:
         return pd.Series(True, index=df.index)
     err = df["error"]
@@ -134,6 +140,7 @@ def _numeric_columns(df: pd.DataFrame) -> list[str]:
     """Columns averaged by :func:`summarize`: numeric or boolean ones, and object ones
     that convert to float (e.g. booleans mixed with NaN where a method failed), except
     identifiers (:data:`_ID_COLUMNS`)."""
+    import pandas as pd
     num_cols = []
     for c in df.columns:
         if c in _ID_COLUMNS:
@@ -168,6 +175,7 @@ def summarize(df: pd.DataFrame, *, cases=None) -> pd.DataFrame:
     every numeric (or boolean) column except identifiers. A method with no successful
     row averaged has NaN means.
     """
+    import pandas as pd
     if "method" not in df.columns:
         raise ValueError("results have no 'method' column")
     if cases is not None and "case" not in df.columns:
@@ -284,6 +292,7 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
     bold : mark the best (lowest) value per column in bold; pass False when the rows
         average different cases (the comparison would not be fair).
     """
+    import pandas as pd
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
     cols += [(c, h, d) for c, h, d in _MD_EXTRA if c in summary.columns]
     head = ["Method", "Cases", *[h for _, h, _ in cols]]
@@ -564,7 +573,8 @@ def retabulate(run_dir) -> dict[str, Path]:
     """
     import json
 
-    from .outdir import refuse_results
+    import pandas as pd
+
     run_dir = Path(run_dir)
     refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
     df = pd.read_csv(run_dir / "cases.csv")
@@ -592,7 +602,6 @@ def main(argv=None) -> int:
     """
     import sys
 
-    from sshade.clirun import ArgumentParser, run_command
     ap = ArgumentParser(prog="python -m eval.tables",
                         description="Rebuild table.{csv,md,tex} of finished evaluator runs from their cases.csv "
                                     "(no method is rerun).")

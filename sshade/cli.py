@@ -48,11 +48,9 @@ import os
 import sys
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
-
 from tqdm import tqdm
 
 from .clirun import run_command

@@ -218,10 +218,9 @@ def precheck(conf_dir: str, argv: list[str], check=None) -> None:
     group option or a malformed override; whatever ``check`` raises.
     """
     from hydra import compose, initialize_config_dir
+    from hydra._internal.utils import get_args_parser
     from hydra.core.global_hydra import GlobalHydra
     from hydra.types import RunMode
-
-    from hydra._internal.utils import get_args_parser
     args, unknown = get_args_parser().parse_known_args(argv)
     if unknown:
         raise SShaDeError(f"unrecognized arguments: {' '.join(unknown)} (--help lists the options)")

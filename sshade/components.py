@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from .arap import rigid_fit
 from .errors import SShaDeError
 from .mesh.validate import validate_handles, validate_mesh
 
@@ -139,7 +140,6 @@ def rigid_follow(V, Vd, F, labels, comp: int, near: int, *, min_faces: int = MIN
     """
     from scipy.spatial import cKDTree
 
-    from .arap import rigid_fit
     C = V[labels == comp]
     Hidx = np.flatnonzero(labels == near)
     d, j = cKDTree(V[Hidx]).query(C)

@@ -122,7 +122,7 @@ def test_check_config_experiment_sections():
 def test_config_number_helper():
     from omegaconf import OmegaConf
 
-    from eval.config_check import config_number
+    from sshade.checks import config_number
     cfg = OmegaConf.create({"a": {"n": 5, "x": 2.5, "s": "7", "none": None, "big": 1e300, "b": True}})
     assert config_number(cfg, "a.n", kind=int, min=1) == 5
     assert config_number(cfg, "a.x", kind=float, min=0) == 2.5

@@ -12,7 +12,9 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.sweep import STATUS_FILE, aggregate_sweep, main, read_status, sweep_job
+from eval.sweep import main, sweep_job
+from eval.sweep_files import STATUS_FILE, read_status
+from eval.sweep_table import aggregate_sweep
 
 from .conftest import subprocess_env  # noqa: E402
 

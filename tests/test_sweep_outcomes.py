@@ -4,7 +4,6 @@ hanging), the SLURM launcher's launch with fake jobs, missing and killed rows of
 table, and resume. The real one-node SLURM run is .ci/slurm_sweep.sh."""
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -16,12 +15,20 @@ import pytest
 
 import eval.sweep as sw
 import eval.sweep_launcher as sl
-from eval.sweep import MANIFEST, RESUME_ENV, STATUS_FILE, aggregate_sweep, read_manifest, read_status
-from eval.sweep_launcher import (ACTIVE_STATES, JobOutcome, SlurmQueryError, expand_job_ids, slurm_states,
-                                 wait_for_jobs)
+from eval.sweep_files import (
+    MANIFEST,
+    RESUME_ENV,
+    STATUS_FILE,
+    now_iso,
+    read_manifest,
+    read_status,
+    write_manifest,
+    write_status,
+)
+from eval.sweep_launcher import ACTIVE_STATES, SlurmQueryError, expand_job_ids, slurm_states, wait_for_jobs
+from eval.sweep_table import aggregate_sweep
 
 from .conftest import subprocess_env  # noqa: E402
-
 
 # ---------------------------------------------------------------- SLURM state queries
 
@@ -175,10 +182,10 @@ def _fake_submit(monkeypatch, ln, folder: Path, behaviour: dict):
                 kind = behaviour[num]
                 d = folder / str(num)
                 if kind != "never":  # the job started: sweep_job wrote status running
-                    sw.write_status(d, {"status": "running", "job_num": num, "overrides": ov,
-                                        "started": sw._now()})
+                    write_status(d, {"status": "running", "job_num": num, "overrides": ov,
+                                        "started": now_iso()})
                 if kind == "done":
-                    sw.write_status(d, {"status": "done", "job_num": num, "overrides": ov})
+                    write_status(d, {"status": "done", "job_num": num, "overrides": ov})
                     job.finish("success", JobReturn(overrides=ov, status=JobStatus.COMPLETED,
                                                     _return_value={"status": "done"}))
                 elif kind == "raise":
@@ -194,7 +201,7 @@ def test_launcher_returns_every_job_and_records_the_dead(launcher, tmp_path, mon
     from hydra.core.utils import JobStatus
     d = tmp_path / "sw"
     grid = [[f"sshade.n_low={n}"] for n in (300, 500, 800, 900)]
-    sw._write_manifest(d, {"argv": ["-m"], "points": grid, "runs": [{"started": sw._now()}]})
+    write_manifest(d, {"argv": ["-m"], "points": grid, "runs": [{"started": now_iso()}]})
     submitted = _fake_submit(monkeypatch, launcher, d, {0: "done", 1: "killed", 2: "raise", 3: "never"})
     rets = launcher.launch(grid, initial_job_idx=0)
     assert submitted == [0, 1, 2, 3]
@@ -215,9 +222,9 @@ def test_launcher_returns_every_job_and_records_the_dead(launcher, tmp_path, mon
 def test_launcher_resume_submits_only_jobs_without_result(launcher, tmp_path, monkeypatch):
     d = tmp_path / "sw"
     grid = [[f"sshade.n_low={n}"] for n in (300, 500, 800)]
-    sw.write_status(d / "0", {"status": "done", "job_num": 0, "overrides": grid[0]})
-    sw.write_status(d / "1", {"status": "partial", "job_num": 1, "overrides": grid[1]})
-    sw.write_status(d / "2", {"status": "killed", "job_num": 2, "overrides": grid[2]})
+    write_status(d / "0", {"status": "done", "job_num": 0, "overrides": grid[0]})
+    write_status(d / "1", {"status": "partial", "job_num": 1, "overrides": grid[1]})
+    write_status(d / "2", {"status": "killed", "job_num": 2, "overrides": grid[2]})
     monkeypatch.setenv(RESUME_ENV, "1")
     submitted = _fake_submit(monkeypatch, launcher, d, {2: "done"})
     rets = launcher.launch(grid, initial_job_idx=0)
@@ -230,17 +237,17 @@ def test_launcher_resume_submits_only_jobs_without_result(launcher, tmp_path, mo
 def test_table_lists_missing_points_and_killed_jobs(tmp_path, capsys):
     d = tmp_path / "sweep"
     grid = [["a=1", "b=x"], ["a=2", "b=x"], ["a=3", "b=x"]]
-    sw._write_manifest(d, {"argv": ["-m", "a=1,2,3", "b=x"], "points": grid,
+    write_manifest(d, {"argv": ["-m", "a=1,2,3", "b=x"], "points": grid,
                            "runs": [{"started": "2026-01-01T10:00:00+00:00"}]})
-    sw.write_status(d / "0", {"status": "done", "job_num": 0, "overrides": grid[0]})
-    sw.write_status(d / "1", {"status": "running", "job_num": 1, "overrides": grid[1],
+    write_status(d / "0", {"status": "done", "job_num": 0, "overrides": grid[0]})
+    write_status(d / "1", {"status": "running", "job_num": 1, "overrides": grid[1],
                               "started": "2026-01-01T10:00:05+00:00"})
     df = aggregate_sweep(d, write=False)  # the sweep still runs: running, and not started yet
     assert list(df["status"]) == ["done", "running", "missing"] and "not started yet" in df.loc[2, "error"]
     assert list(df["a"]) == [1, 2, 3]
     man = read_manifest(d)
     man["runs"][-1]["finished"] = "2026-01-01T10:05:00+00:00"
-    sw._write_manifest(d, man)
+    write_manifest(d, man)
     df = aggregate_sweep(d)  # the sweep is over: a job still "running" died
     assert list(df["status"]) == ["done", "killed", "missing"]
     assert "died without a result" in df.loc[1, "error"] and "never started" in df.loc[2, "error"]
@@ -265,10 +272,10 @@ def test_resume_replays_the_command_for_the_jobs_without_result(tmp_path, monkey
     grid = [["a=1"], ["a=2"]]
     run_dir = tmp_path / "where"
     run_dir.mkdir()
-    sw._write_manifest(d, {"argv": ["-m", "a=1,2", "hydra.sweep.dir=outputs/x", "hydra/launcher=slurm"],
+    write_manifest(d, {"argv": ["-m", "a=1,2", "hydra.sweep.dir=outputs/x", "hydra/launcher=slurm"],
                            "cwd": str(run_dir), "points": grid,
-                           "runs": [{"started": sw._now(), "finished": sw._now()}]})
-    sw.write_status(d / "0", {"status": "done", "job_num": 0, "overrides": grid[0]})
+                           "runs": [{"started": now_iso(), "finished": now_iso()}]})
+    write_status(d / "0", {"status": "done", "job_num": 0, "overrides": grid[0]})
     seen = {}
 
     def fake_main(argv):
@@ -281,7 +288,7 @@ def test_resume_replays_the_command_for_the_jobs_without_result(tmp_path, monkey
     assert os.getcwd() == here and RESUME_ENV not in os.environ
     assert "running again 1 of 2 job(s): 1 (missing)" in capsys.readouterr().out
     # nothing left: no run
-    sw.write_status(d / "1", {"status": "done", "job_num": 1, "overrides": grid[1]})
+    write_status(d / "1", {"status": "done", "job_num": 1, "overrides": grid[1]})
     seen.clear()
     assert sw.resume_sweep(d) == 0 and not seen
     assert "nothing to run" in capsys.readouterr().out

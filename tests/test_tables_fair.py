@@ -13,8 +13,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.tables import (ALL_CASES_HEADING, COMMON_CASES_HEADING, common_cases, compare, ok_mask, summarize, to_markdown,
-                         write_tables)
+from eval.tables import (
+    ALL_CASES_HEADING,
+    COMMON_CASES_HEADING,
+    common_cases,
+    compare,
+    ok_mask,
+    summarize,
+    to_markdown,
+    write_tables,
+)
 
 
 def _row(case, method, vol, *, edge=0.5, time_s=1.0, error=""):
@@ -163,7 +171,8 @@ def test_homogeneous_and_legacy_frames_are_unchanged(tmp_path):
 
 
 def test_sweep_reads_the_main_table(tmp_path):
-    from eval.sweep import STATUS_FILE, aggregate_sweep
+    from eval.sweep_files import STATUS_FILE
+    from eval.sweep_table import aggregate_sweep
     job = tmp_path / "sweep" / "0"
     (job / ".hydra").mkdir(parents=True)
     (job / ".hydra" / "overrides.yaml").write_text("- sshade.n_low=500\n")

@@ -99,11 +99,10 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
     seconds and any compile_s the method reports go to compile_s (row and run.json),
     never to time_s."""
     root = faust_root
-    import eval.methods as em
-    from eval.app import run
     from hydra import compose, initialize_config_dir
 
-    from eval.app import CONF_DIR
+    import eval.methods as em
+    from eval.app import CONF_DIR, run
 
     class Slow:
         name = "Slow"
@@ -144,13 +143,12 @@ def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, mon
     base = shared_data / "classic" / "armadillo.obj"
     if not base.is_file():
         pytest.skip(f"{base} not found")
-    import sshade.warmup as sw
     from hydra import compose, initialize_config_dir
 
+    import eval.experiments.scaling as sc
     from eval.app import CONF_DIR
     from eval.experiments.scaling import run_scaling
-    sdm = importlib.import_module("sshade.deform")  # the module (sshade.deform is also the function)
-    real_s, real_f = sdm.warm_sshade, sw.warm_fullres
+    real_s, real_f = sc.warm_sshade, sc.warm_fullres  # sshade.deform's and sshade.warmup's, as scaling calls them
 
     def slow(real):
         def f(*a, **k):
@@ -158,8 +156,8 @@ def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, mon
             time.sleep(0.5)
             return 0.5
         return f
-    monkeypatch.setattr(sdm, "warm_sshade", slow(real_s))
-    monkeypatch.setattr(sw, "warm_fullres", slow(real_f))
+    monkeypatch.setattr(sc, "warm_sshade", slow(real_s))
+    monkeypatch.setattr(sc, "warm_fullres", slow(real_f))
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=[
             "experiment=scaling", f"scaling.base_mesh={base}", "scaling.sizes=[3000]", "sshade.n_low=300",

@@ -29,11 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-from defaust.manifest import FORMAT, MANIFEST
+from defaust.cli import compose_config
+from defaust.cli import run as build_run
 from defaust.handles import HandleSet, handles_from_arrays, snap_handles
-from sshade.mesh.io import read_mesh
+from defaust.manifest import FORMAT, MANIFEST
 from defaust.store import read_npz, sha256_file
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
 
 from ..paths import abs_path
 from .case import DeformationCase
@@ -257,8 +259,6 @@ def _build(root: Path, ds) -> None:
     (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped."""
     from omegaconf import OmegaConf
 
-    from defaust.cli import compose_config
-    from defaust.cli import run as build_run
     extra = ds.get("build", {}).get("overrides") or []
     extra = OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra)
     logging.getLogger("defaust").setLevel(logging.INFO)

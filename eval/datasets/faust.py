@@ -32,6 +32,7 @@ from defaust.handles import (
     landmark_handles,  # the DeFAUST builder's (one implementation)
 )
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
 
 from .case import DeformationCase
 from .registry import register_dataset
@@ -166,7 +167,6 @@ def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
         raise SShaDeError(f"no FAUST case in {Path(root)} for subjects={_fmt(subj_sel)} poses={_fmt(pose_sel)} "
                           f"(found subject/pose {sorted(files)}; rest pose 0 and at least one other pose are needed)")
 
-    from sshade.mesh.io import read_mesh
 
     rest: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     cases: list[Case] = []

@@ -30,7 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh, write_mesh
 
 from .case import DeformationCase
 from .registry import register_dataset
@@ -127,14 +129,12 @@ def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes,
 
 
 def _highres(path: Path, V, F, vertex_range, cache: Path | None):
-    from defaust.highres import subdivide_remesh
-    from sshade.mesh.io import read_mesh, write_mesh
     lo, hi = (int(x) for x in vertex_range)
     cached = None if cache is None else Path(cache) / f"{path.stem}_{lo}-{hi}.ply"
     if cached is not None and cached.is_file():
         return read_mesh(cached)
     log.info("%s: LS3 Loop + isotropic remesh to [%d, %d] vertices (cached in %s)", path.name, lo, hi, cached)
-    r = subdivide_remesh(V, F, vertex_range=(lo, hi))
+    r = highres.subdivide_remesh(V, F, vertex_range=(lo, hi))
     if cached is not None:
         write_mesh(cached, r.V, r.F)
     return r.V, r.F
@@ -163,7 +163,6 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
     SShaDeError on a missing folder or file, an unreadable or invalid mesh (the
     message names it), a bad ``limit`` or an empty selection.
     """
-    from sshade.mesh.io import read_mesh
     root = Path(root)
     if not root.is_dir():
         raise SShaDeError(f"shapes: dataset.root is not a folder: {root}")

@@ -46,11 +46,19 @@ from pathlib import Path
 
 import numpy as np
 
+from sshade.arap import build_operators
 from sshade.errors import SShaDeError
+from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
 
 from .. import datasets
 from .. import methods as method_table
+from ..config_check import config_number
+from ..figures import figures_options, write_case_figure
+from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
+from ..reference import method_energy, reference_metrics, reference_solution
+from ..runinfo import collect_runinfo, write_runinfo
+from ..tables import compare, write_cases, write_tables
 from .common import sshade_spec
 from .registry import register_experiment
 
@@ -64,14 +72,6 @@ def sshade_params(cfg) -> dict:
     config ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`), the very
     definition :func:`eval.methods.make_methods` builds SShaDe from."""
     return sshade_spec(cfg)
-
-
-def _metric_functions():
-    try:
-        from ..metrics import deformation_metrics, ground_truth_metrics
-    except ImportError as e:
-        raise SShaDeError(f"eval.metrics is not available ({e})") from None
-    return deformation_metrics, ground_truth_metrics
 
 
 _SKIP = object()
@@ -179,7 +179,6 @@ def _setup(cfg) -> _Setup:
     refs = _References(cfg, n_base)  # config checked here too
     root = datasets.dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
     out_dir = abs_path(cfg.out_dir)
-    _metric_functions()  # eval.metrics importable, before any work
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
     cases = datasets.load_cases(name, root, **datasets.dataset_options(ds))
@@ -195,7 +194,6 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
     SShaDe, each case's, the dataset's own, e.g. a DeFAUST build's)."""
     from omegaconf import OmegaConf
 
-    from ..runinfo import collect_runinfo, write_runinfo
     config = OmegaConf.to_container(cfg, resolve=True)
     config["dataset"]["root"] = str(s.root)
     seeds = {"dataset": cfg.dataset.get("seed"), "sshade": cfg.get("sshade", {}).get("seed"),
@@ -216,8 +214,6 @@ def _run_cases(cfg, s: _Setup) -> tuple[list[dict], dict[str, float]]:
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from ..figures import figures_options, write_case_figure
-    from ..tables import write_cases
     rows: list[dict] = []
     compile_s: dict[str, float] = {}  # method -> seconds of warm-up/compilation (run.json)
     fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
@@ -250,8 +246,6 @@ def _finish(cfg, s: _Setup, rows, compile_s, info, t_start) -> dict:
     Markdown table on stdout; the return value of :func:`run`."""
     import pandas as pd
 
-    from ..runinfo import write_runinfo
-    from ..tables import compare, write_tables
     df = pd.DataFrame(rows)
     exp = cfg.get("experiment", {}).get("name", s.name)
     title = f"{exp}: {len(s.cases)} {s.name} case(s)"
@@ -272,7 +266,6 @@ def _guard_options(cfg) -> dict:
     :func:`sshade.guard.run_method`) and ``handle_error_max_pct`` (positive, % of the
     bounding-box diagonal, or null: the largest handle error of a successful run) of
     the config, checked; SShaDeError naming the key."""
-    from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout
     hmax = cfg.get("handle_error_max_pct", HANDLE_ERROR_MAX_PCT)
     if hmax is not None:
         try:
@@ -288,8 +281,6 @@ def _run_one(m, name: str, case, refs, guard: dict):
     info; returns ``(row, U)`` (``U`` None when the method failed). A failure (the
     method's, or a handle error above ``guard['handle_error_max_pct']``: its metrics
     stay in the row) is the row's ``error``; the run goes on."""
-    from sshade.guard import handles_not_reached, run_method
-    from ..metrics import deformation_metrics, ground_truth_metrics
     row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": name,
            "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
            "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
@@ -335,7 +326,6 @@ class _References:
         if self.mode not in ("baseline", "all", "none"):
             raise SShaDeError(f"reference.cases must be baseline, all or none, got {self.mode!r}")
         self.cache = abs_path(rc.get("cache", "data/references"))
-        from ..config_check import config_number
         self.max_iter = config_number(cfg, "reference.max_iter", min=1, default=50000)
         self.time_budget_s = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True,
                                            default=3600)
@@ -352,9 +342,7 @@ class _References:
     def metrics(self, method, Vd) -> dict:
         if self.case is None:
             return {}
-        from sshade.arap import build_operators
 
-        from ..reference import method_energy, reference_metrics, reference_solution
         c, e = self.case, method_energy(method)
         if e not in self.refs:
             # a full-resolution solve of this very energy from the rigid fit (ARAP, Elastic

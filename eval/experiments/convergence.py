@@ -34,11 +34,18 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.mesh.io import atomic_write
+from sshade import deform
+from sshade.arap import rigid_fit, solve_arap
+from sshade.arap.cases import lifted_plane
+from sshade.deform import check_params
 from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write
 
 from .. import datasets
+from ..figures import safe_figure
 from ..paths import abs_path
+from ..reference import reference_solution
+from ..runinfo import collect_runinfo, finish_run, write_runinfo
 from .common import as_list, sshade_spec
 from .registry import register_experiment
 
@@ -73,7 +80,6 @@ def libigl_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
     """
     import igl
 
-    from sshade.arap import rigid_fit
     V = np.ascontiguousarray(V, np.float64)
     F = np.ascontiguousarray(F, np.int64)
     b = np.ascontiguousarray(handles, np.int32)
@@ -108,7 +114,6 @@ def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
     :func:`libigl_curve`; ``accelerate`` as in ``solve_arap``; ``U0`` a start,
     ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
     ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
-    from sshade.arap import rigid_fit, solve_arap
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     if U0 is None:
         R, t = rigid_fit(V[handles], targets)
@@ -154,7 +159,6 @@ def _cases(cfg) -> list[tuple[str, tuple]]:
     out = []
     for name in want:
         if name == "plane":
-            from sshade.arap.cases import lifted_plane
             p = cc.plane
             out.append((f"plane_{int(p.n_target // 1000)}k", lifted_plane(float(p.lift), n_target=int(p.n_target))))
         elif name == "dataset":
@@ -197,10 +201,7 @@ def run_convergence(cfg) -> dict:
     import pandas as pd
     from omegaconf import OmegaConf
 
-    from sshade.deform import check_params
 
-    from ..figures import safe_figure
-    from ..runinfo import collect_runinfo, finish_run, write_runinfo
     cc = cfg.convergence
     out_dir = abs_path(cfg.out_dir)
     sp = check_params(**sshade_params(cfg))
@@ -234,9 +235,7 @@ def run_convergence(cfg) -> dict:
 def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], list[dict]]:
     """One case: its reference, then every solver's curve; returns the curve rows and
     the table rows (one per solver)."""
-    from sshade import deform
 
-    from ..reference import reference_solution
     cc = cfg.convergence
     budget = float(cc.time_budget_s)
     target = float(cc.target_pct)

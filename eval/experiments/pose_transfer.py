@@ -44,11 +44,16 @@ import time
 
 import numpy as np
 
-from sshade.mesh.io import atomic_write, read_mesh
 from sshade.errors import SShaDeError
+from sshade.isometric import pose_transfer, rigid_align
+from sshade.mesh.io import atomic_write, read_mesh
+from sshade.sampling import sampling_seeds
 
 from ..datasets.faust import discover_faust
+from ..figures import figures_options, pose_transfer_figure, safe_figure
+from ..metrics import ground_truth_metrics
 from ..paths import abs_path
+from ..runinfo import collect_runinfo, finish_run, write_runinfo
 from .common import as_list
 from .registry import register_experiment
 from .tosca import gt_stretch_pct, markdown_table, transfer_n_low
@@ -108,9 +113,7 @@ def run_pose_transfer(cfg) -> dict:
     t_start = time.perf_counter()
     from omegaconf import OmegaConf
 
-    from sshade.sampling import sampling_seeds
 
-    from ..runinfo import collect_runinfo, write_runinfo
     pc, root, files = _pose_transfer_root(cfg)
     out_dir = abs_path(cfg.out_dir)
     jobs = _pose_transfer_jobs(pc, root, files)
@@ -194,7 +197,6 @@ def _run_pose_transfer_cases(cfg, jobs, F, V, sp: dict, align: bool, out_dir) ->
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from ..figures import figures_options, pose_transfer_figure, safe_figure
     rows: list[dict] = []
     fig_on, fig_left = figures_options(cfg)  # the first figures.max_cases cases
     with logging_redirect_tqdm():
@@ -217,9 +219,7 @@ def _pose_transfer_case(a: int, b: int, p: int, F, V: dict, sp: dict, align: boo
     """One case: subject ``b`` put in subject ``a``'s pose ``p``, with the references
     (naive, identity, M'); returns ``(row, Vs)`` (``Vs`` None when it failed: its
     message in ``error``)."""
-    from sshade.isometric import pose_transfer, rigid_align
 
-    from ..metrics import ground_truth_metrics
     k, seed = int(sp["n_samplings"]), int(sp["seed"])
     row = {"case": f"s{a}->s{b}_p{p}", "source": a, "subject": b, "pose": p, "n_vertices": len(V[(a, 0)]),
            "n_samplings": k, "seed": seed, "error": ""}
@@ -251,7 +251,6 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
     finished; the return value of :func:`run_pose_transfer`."""
     import pandas as pd
 
-    from ..runinfo import finish_run
     n_low, k, seed, gradient = sp["n_low"], int(sp["n_samplings"]), int(sp["seed"]), str(sp.get("gradient"))
     df = pd.DataFrame(rows)
     ok = df["error"].astype(str).str.len() == 0

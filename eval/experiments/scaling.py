@@ -35,11 +35,20 @@ import time
 
 import numpy as np
 
-from sshade.mesh.io import atomic_write, read_mesh, write_mesh
+from sshade import deform
+from sshade.arap import arap_deform, make_criterion
+from sshade.deform import check_params, warm_sshade
 from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write, read_mesh, write_mesh
+from sshade.mesh.validate import validate_mesh
+from sshade.warmup import warm_fullres
 
+from ..datasets.shapes import axis_handles, axis_landmarks
+from ..memory import PeakMemory
 from ..methods import method_spec
+from ..metrics import deformation_metrics
 from ..paths import abs_path
+from ..runinfo import collect_runinfo, write_runinfo
 from .common import sshade_spec
 from .registry import register_experiment
 
@@ -108,11 +117,7 @@ def run_scaling(cfg) -> dict:
     import pandas as pd
     from omegaconf import OmegaConf
 
-    from sshade.deform import check_params
-    from sshade.deform import warm_sshade
 
-    from ..datasets.shapes import axis_landmarks
-    from ..runinfo import collect_runinfo, write_runinfo
 
     sc = cfg.scaling
     out_dir = abs_path(cfg.out_dir)
@@ -158,7 +163,6 @@ def run_scaling(cfg) -> dict:
 def _size_mesh(sc, base, size: int, cache):
     """The mesh of about ``size`` vertices built from the base mesh (cached in
     ``cache``); returns ``(V, F, seconds to build or read)``."""
-    from sshade.mesh.validate import validate_mesh
     base_path, V0, F0, _ = base
     mp = cache / f"{base_path.stem}_{size}.ply"
     t0 = time.perf_counter()
@@ -173,7 +177,6 @@ def _size_mesh(sc, base, size: int, cache):
 
 def _size_handles(sc, base, V):
     """The handles and targets at one size (module docstring's rule, ``scaling.seed``)."""
-    from ..datasets.shapes import axis_handles
     lm, center, axes = base[3]
     h, T, _, _ = axis_handles(V, lm, center, axes, n_per_group=int(sc.n_per_group),
                               region_radius=float(sc.region_radius), rotate_deg=float(sc.rotate_deg),
@@ -185,10 +188,7 @@ def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
     """SShaDe's timed run with the checked parameters ``sp`` under the memory probe:
     the seconds of compilation it still reported (0 after the warm-up) and its columns
     of the table row (times in seconds, compilation excluded)."""
-    from sshade import deform
 
-    from ..memory import PeakMemory
-    from ..metrics import deformation_metrics
     with PeakMemory() as pm:
         t0 = time.perf_counter()
         Vd, si = deform(V, F, h, T, return_info=True, **sp)
@@ -209,10 +209,7 @@ def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
 def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -> dict:
     """Full-resolution Elastic (spokes and rims) under ``ep`` (:func:`elastic_params`)
     and the time budget: its columns of the table row and the speed-up over SShaDe."""
-    from sshade.arap import arap_deform, make_criterion
-    from sshade.warmup import warm_fullres
 
-    from ..metrics import deformation_metrics
     print(f"[scaling] {len(V)} vertices: full-res Elastic (budget {budget_s:g}s) ...", file=sys.stderr, flush=True)
     protocol = str(ep["protocol"])
     row = {"elastic_compile_s": warm_fullres("spokes_and_rims", protocol, len(V))}

@@ -39,10 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.mesh.io import atomic_write, read_mesh
+from sshade.deform import auto_n_low
 from sshade.errors import SShaDeError
+from sshade.isometric import isometric_transfer
+from sshade.mesh.io import atomic_write, read_mesh
+from sshade.sampling import sampling_seeds
 
+from ..figures import figures_options, safe_figure, tosca_figure
+from ..metrics import chamfer, ground_truth_metrics, hausdorff
 from ..paths import abs_path
+from ..runinfo import collect_runinfo, finish_run, write_runinfo
+from ..tables import ok_mask
 from .common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
 from .registry import register_experiment
 
@@ -125,7 +132,6 @@ def group_table(df, by: str, columns, *, all_label: str = "all (mean over cases)
     """
     import pandas as pd
 
-    from ..tables import ok_mask
     ok = ok_mask(df)  # NaN-safe: no fillna("") on an all-empty error column read back as float64
     cols = [c for c in columns if c in df.columns]
 
@@ -179,7 +185,6 @@ def transfer_n_low(n_low, n_vertices: int) -> int:
     ------
     SShaDeError on a value that is neither an integer nor ``"auto"``.
     """
-    from sshade.deform import auto_n_low
     if n_low is None or (isinstance(n_low, str) and n_low.strip().lower() == "auto"):
         return auto_n_low(int(n_vertices))
     try:
@@ -211,9 +216,7 @@ def run_tosca(cfg) -> dict:
     t_start = time.perf_counter()
     from omegaconf import OmegaConf
 
-    from sshade.sampling import sampling_seeds
 
-    from ..runinfo import collect_runinfo, write_runinfo
     root, found = _tosca_root(cfg)
     out_dir = abs_path(cfg.out_dir)
     sp = sshade_params(cfg)
@@ -282,7 +285,6 @@ def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from ..figures import figures_options, safe_figure, tosca_figure
     rows: list[dict] = []
     fig_on, fig_left = figures_options(cfg)  # one figure per class (first pose), at most max_cases
     drawn: set[str] = set()
@@ -304,9 +306,7 @@ def _tosca_case(c: str, p: int, V0, F0, path, sp: dict):
     """One case: class ``c`` pose ``p`` (file ``path``) rebuilt from its rest pose
     ``(V0, F0)`` with SShaDe's parameters ``sp``; returns ``(row, V1, Vp)`` (the true
     and the predicted pose; ``Vp`` None when the case failed: its message in ``error``)."""
-    from sshade.isometric import isometric_transfer
 
-    from ..metrics import chamfer, ground_truth_metrics, hausdorff
     k, seed = int(sp["n_samplings"]), int(sp["seed"])
     row = {"case": f"{c}{p}", "class": c, "pose": p, "n_vertices": len(V0), "n_faces": len(F0),
            "n_samplings": k, "seed": seed, "error": ""}
@@ -342,7 +342,6 @@ def _tosca_tables(df, sp: dict, excluded: dict, info: dict, out_dir, t_start: fl
     finished (:func:`eval.runinfo.finish_run`); the return value of :func:`run_tosca`."""
     import pandas as pd
 
-    from ..runinfo import finish_run
     n_low, k, seed, gradient = sp["n_low"], int(sp["n_samplings"]), int(sp["seed"]), str(sp.get("gradient"))
     cols = [c for c, _, _ in TOSCA_COLUMNS if c not in ("n_cases", "n_failed")] + \
         ["rest_chamfer", "remesh_s", "project_s", "transfer_s"]
