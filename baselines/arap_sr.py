@@ -106,7 +106,8 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
         if alpha > 0:
             M += 2.0 * alpha * A * (Adj @ R.reshape(n, 9)).reshape(n, 3, 3)
         R = _polar(M)
-        # global step: L x = b, b_i = sum_j w_ij / 2 (R_i + R_j) e_ij (as in Sorkine & Alexa eq. 9, with e_ij = v_j - v_i)
+        # global step: L x = b, b_i = sum_j w_ij / 2 (R_i + R_j) e_ij (as in Sorkine & Alexa eq. 9,
+        # with e_ij = v_j - v_i)
         rot_e = 0.5 * np.einsum("kab,kb->ka", R[I] + R[J], e)
         b = -(S @ (w[:, None] * rot_e))  # sign: L = -cot (PSD) and e_ij = v_j - v_i
         Un = U.copy()
@@ -150,4 +151,5 @@ class ARAPSR:
         """First-call costs (libigl, SciPy's SuperLU, mesh validation kernels) paid once on
         a tiny mesh outside any timed call (:func:`sshade.warmup.warm_once`); ARAP-SR has
         no size-dependent kernels, ``n_vertices`` is ignored. Returns the seconds spent."""
-        return warm_once(WARMED, ("arap_sr",), lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5).deform(V, F, h, T))
+        return warm_once(WARMED, ("arap_sr",),
+                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5).deform(V, F, h, T))

@@ -8,10 +8,15 @@ data/references. Measured on the 2-core VM (results/convergence/libigl_long.md):
 iterations in 1,500 s reach 0.442% (mean), never 0.05%; our L-BFGS solver reaches 0.442% after
 31 s and 0.05% after 75 s (results/convergence/table.md).
 """
-import sys, time, json, numpy as np
+import json
+import sys
+
+import numpy as np
+
 from eval.datasets.defaust import load_defaust
 from eval.experiments.convergence import libigl_curve
 from eval.reference import reference_solution
+
 c = load_defaust('data/defaust', limit=1)[0]
 V, F, h, T = np.asarray(c.V, np.float64), np.asarray(c.F, np.int64), c.handles, c.targets
 ref = reference_solution(V, F, h, T, energy="spokes_and_rims", cache_dir="data/references")

@@ -99,10 +99,10 @@ def main(argv=None):
         sys.path.insert(0, tmp)
 
     from sshade.deform import auto_n_low
-    from sshade.sampling import sampling_seeds, warm_kernels
+    from sshade.mesh.validate import validate_mesh
     from sshade.projection import project_to_fans
     from sshade.remesh import mesh_topology, remesh
-    from sshade.mesh.validate import validate_mesh
+    from sshade.sampling import sampling_seeds, warm_kernels
 
     V, F = load_mesh(Path(a.cache), a.mesh)
     n_low = a.n_low or auto_n_low(len(V))

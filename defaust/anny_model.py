@@ -201,7 +201,8 @@ def load_anny(root=None, cache=None):
             try:
                 _MODELS[key] = ANNY(model_path=root, rig="default", topology="default")
             except (OSError, ValueError, KeyError) as e:
-                raise SShaDeError(f"loading ANNY from {root} failed ({type(e).__name__}: {e}); {INSTALL_HINT}") from None
+                raise SShaDeError(f"loading ANNY from {root} failed ({type(e).__name__}: {e}); "
+                                  f"{INSTALL_HINT}") from None
     return _MODELS[key]
 
 

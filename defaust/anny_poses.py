@@ -329,7 +329,8 @@ def pose_from_spec(spec) -> AnnyPose:
         rots = []
         for r in spec.get("rotations") or []:
             if not isinstance(r, Sequence) or isinstance(r, str) or len(r) != 4:
-                raise SShaDeError(f"pose {spec['name']!r}: each rotation is [kind, joint, [x, y, z], degrees], got {r!r}")
+                raise SShaDeError(f"pose {spec['name']!r}: each rotation is [kind, joint, [x, y, z], degrees], "
+                                  f"got {r!r}")
             kind, joint, vec, deg = r
             rots.append(JointRotation(str(joint), str(kind), tuple(vec), float(deg)))
         kw = {}

@@ -10,8 +10,8 @@ A subject (:func:`anny_subject`):
 - **Body**: phenotype ``SUBJECTS[i]`` (:class:`Phenotype`, a fixed table of 10: both
   genders, young adult to old, slim to heavy, 1.56 m to 1.93 m). ANNY's quads are split
   into triangles (``[0, 1, 2]`` and ``[0, 2, 3]``) and only the body is kept: the largest
-  connected component (eyes and tongue dropped), a closed genus-0 2-manifold, checked (:func:`sshade.mesh.validate.validate_mesh`, Euler
-  characteristic 2).
+  connected component (eyes and tongue dropped), a closed genus-0 2-manifold, checked
+  (:func:`sshade.mesh.validate.validate_mesh`, Euler characteristic 2).
 - **Frame**: metres, +x = the subject's left, +y = up, +z = forward (FAUST's); the rest
   pose stands on ``y = 0`` with ANNY's root (pelvis) above ``x = z = 0``.
 - **Poses**: ANNY's LBS, exactly as body-models evaluates it: vertex ``u`` of the

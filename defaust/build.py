@@ -244,8 +244,9 @@ def _build_subject(run: _Run, s: int, poses: list[int]) -> None:
         pkey = item_key({**run.common, "item": "pose", "subject": s, "pose": p, "handles": hparams,
                          "landmarks": [[k, v] for k, v in lm.items()], "handle_seed": hseed,
                          "rest_files": rest_files, **src.pose_inputs(s, p)})
-        t_subject += _item(run, f"{sdir}/pose_{p:02d}", pkey,
-                           lambda: _build_pose(run.out, sdir, s, p, src, cfg, pkey, lm, hseed))
+        t_subject += _item(run, f"{sdir}/pose_{p:02d}", pkey,  # _item calls make() at once, in this iteration
+                           lambda p=p, pkey=pkey, lm=lm, hseed=hseed:
+                           _build_pose(run.out, sdir, s, p, src, cfg, pkey, lm, hseed))
     run.manifest["subjects"][sdir] = {"subject": s, "target_poses": list(poses), "landmarks": items[rid]["landmarks"],
                                       **src.subject_record(s, poses)}
     run.report.subject_seconds[s] = t_subject

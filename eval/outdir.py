@@ -274,7 +274,8 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bo
         return _take(p, kind, gone, rest, msg, fd=fd)
     if not overwrite:
         what = (f"another kind of output ({m.get('kind')})" if m else
-                f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote ({', '.join(names[:4])}"
+                f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote "
+                f"({', '.join(names[:4])}"
                 f"{' ...' if len(names) > 4 else ''})")
         alt = f", or pass {how} to write into it anyway (files of the same name are replaced)" if how else ""
         raise OutputDirError(f"refusing to write into {p}: it holds {what}. Choose a new or empty folder{alt}")
@@ -364,7 +365,8 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     if target and target in _claimed:
         yield None
         return
-    claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)), fresh=fresh)
+    claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)),
+                             fresh=fresh)
     with open_dict(cfg):
         cfg.out_dir = str(claim.path)
     _claimed[str(claim.path)] = claim

@@ -55,15 +55,18 @@ def _steps(a) -> list[tuple[str, list[str]]]:
          ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"])]
     if a.faust:
-        s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true", "out_dir=results/faust"]))
+        s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true",
+                                  "out_dir=results/faust"]))
         s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}",
                                            "figures.enabled=true", "out_dir=results/pose_transfer"]))
     if a.tosca:
-        s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true", "out_dir=results/tosca"]))
+        s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true",
+                                  "out_dir=results/tosca"]))
     if a.shapes:
         s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "out_dir=results/shapes"]))
     if a.scaling:
-        s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}", "out_dir=results/scaling"]))
+        s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}",
+                                    "out_dir=results/scaling"]))
     return s
 
 

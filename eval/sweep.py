@@ -34,7 +34,8 @@ Before any job starts, :class:`AggregateSweepCallback` (added automatically by
 ``sweep.json`` into the sweep folder: the command, its folder and the grid (job number
 -> overrides), so that a point without folder is listed as missing and
 :func:`resume_sweep` can run the same command again for the jobs without result. At the
-end of the multirun it calls :func:`eval.sweep_table.aggregate_sweep`, which writes ``sweep_table.csv`` (one row per job: its
+end of the multirun it calls :func:`eval.sweep_table.aggregate_sweep`, which writes
+``sweep_table.csv`` (one row per job: its
 overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
 every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
 ``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.

@@ -241,7 +241,8 @@ def _killed_message(state: str | None, job_id: str) -> str:
     why = {"OUT_OF_MEMORY": "out of memory", "TIMEOUT": "time limit", "NODE_FAIL": "node failure",
            "CANCELLED": "cancelled", "PREEMPTED": "preempted", "BOOT_FAIL": "node boot failure",
            "DEADLINE": "deadline", "UNREACHABLE": "SLURM unreachable"}.get(state or "", "")
-    return f"died without a result ({_state_text(state, job_id)}): {why or 'killed, OOM, time limit, node lost or cancelled'}"
+    why = why or "killed, OOM, time limit, node lost or cancelled"
+    return f"died without a result ({_state_text(state, job_id)}): {why}"
 
 
 class TolerantLauncherMixin:

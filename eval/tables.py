@@ -90,7 +90,8 @@ _NO_BOLD = ("iterations", "converged")
 
 #: How a method stopped, per protocol (``protocol`` column of the rows).
 PROTOCOL_TEXT = {
-    "converged": "converged protocol: L-BFGS-accelerated local/global (Laplacian as initial Hessian) until the relative energy decrease and "
+    "converged": "converged protocol: L-BFGS-accelerated local/global (Laplacian as initial Hessian) until the "
+                 "relative energy decrease and "
                  "the scale-free gradient norm are both below their thresholds",
     "paper": "paper protocol (§4.1): libigl local/global until the largest vertex move of one iteration is "
              "below tol x diagonal, at most 1000 iterations",
@@ -350,7 +351,8 @@ def to_latex(summary: pd.DataFrame, *, note: str | None = None, bold: bool = Tru
     out.append("\\bottomrule")
     if note:
         # a paragraph cell, so a long note wraps instead of widening the table
-        out.append(f"\\multicolumn{{{1 + len(cols)}}}{{p{{0.9\\columnwidth}}}}{{\\footnotesize {_tex_escape(note)}}} \\\\")
+        out.append(f"\\multicolumn{{{1 + len(cols)}}}{{p{{0.9\\columnwidth}}}}"
+                   f"{{\\footnotesize {_tex_escape(note)}}} \\\\")
     out.append("\\end{tabular}")
     return "\n".join(out) + "\n"
 
@@ -444,7 +446,8 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
         parts = []
         if "protocol" in g.columns and g["protocol"].notna().any():
             protos = sorted({str(p) for p in g["protocol"].dropna()})
-            parts.append("/".join(protos) + " protocol" if short else "; ".join(PROTOCOL_TEXT.get(p, p) for p in protos))
+            parts.append("/".join(protos) + " protocol" if short
+                         else "; ".join(PROTOCOL_TEXT.get(p, p) for p in protos))
         if "iterations" in g.columns and g["iterations"].notna().any():
             it = g["iterations"].dropna().astype(float)
             word = "it." if short else "iterations"

@@ -31,9 +31,9 @@ def twist_matrix(angle_deg: float, width: float = 1.0) -> np.ndarray:
 
 def write_case(out: Path, angle: float = 135.0, h: float = 0.06) -> dict:
     """Write bar.off, bar.sel, bar.def into ``out``; returns their paths and the case."""
+    from sshade.arap.cases import twisted_bar
     from sshade.mesh.handle_files import FIXED, FREE, HANDLE, write_def, write_sel
     from sshade.mesh.io import write_mesh
-    from sshade.arap.cases import twisted_bar
     V, F, handles, targets = twisted_bar(angle, h=h)
     status = np.full(len(V), FREE, np.int8)
     status[handles] = FIXED

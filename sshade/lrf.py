@@ -74,7 +74,8 @@ def triangle_gradients(P: np.ndarray, FN: np.ndarray, f: np.ndarray) -> tuple[np
     return g, n, (a + b_ + c) / 3.0
 
 
-def local_frames(P: np.ndarray, FN: np.ndarray, f: np.ndarray, gradient: str = "normalized") -> tuple[np.ndarray, np.ndarray]:
+def local_frames(P: np.ndarray, FN: np.ndarray, f: np.ndarray,
+                 gradient: str = "normalized") -> tuple[np.ndarray, np.ndarray]:
     """L_t = (g_t, g_t x n_t, n_t) per triangle (paper §3.2 eq. for L_t).
 
     Parameters

@@ -193,7 +193,7 @@ def test_fused_local_step_matches_separate_steps(bar, energy):
     W = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
     W2 = W.copy()
     R, Ek = np.empty((n, 3, 3)), np.empty(n)
-    for step in range(3):
+    for _step in range(3):
         E = ops.local_step(U, R, Ek, W, 1)
         M = np.ascontiguousarray(ops.covariances(U))
         R2 = fit_rotations(M, warm=W2)
@@ -228,7 +228,7 @@ def test_kernels_independent_of_threads_and_numbering(bar, energy):
             inv = np.argsort(perm)
             out[reorder, t] = (R[inv], Ek[inv], E, W[inv], B[inv])
     ref = out[False, 1]
-    for key, val in out.items():
+    for val in out.values():
         for a, b in zip(ref[:4], val[:4]):  # rotations, cell energies, energy, warm start: bit-identical
             np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(val[4], ref[4], rtol=0, atol=1e-13 * np.abs(ref[4]).max())

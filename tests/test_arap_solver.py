@@ -4,8 +4,16 @@ guarantee, rigid motions, linear-solver backends."""
 import numpy as np
 import pytest
 
-from sshade.arap import (DEEP_CRITERION, DEFAULT_CRITERION, ArapResult, Criterion, LaplacianSolver, bbox_diag,
-                         build_operators, solve_arap)
+from sshade.arap import (
+    DEEP_CRITERION,
+    DEFAULT_CRITERION,
+    ArapResult,
+    Criterion,
+    LaplacianSolver,
+    bbox_diag,
+    build_operators,
+    solve_arap,
+)
 from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
 from sshade.errors import SShaDeError
 

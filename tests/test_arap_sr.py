@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from baselines import ARAPSR
 from baselines.arap_sr import arap_sr_deform
-from sshade.mesh.io import read_mesh
 from sshade.arap import arap_deform
+from sshade.mesh.io import read_mesh
 
 from .conftest import data_file
 

@@ -19,8 +19,8 @@ import pytest
 
 import baselines.arap
 from baselines import Elastic
-from sshade.mesh.io import atomic_write, read_mesh, write_mesh
 from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write, read_mesh, write_mesh
 from sshade.mesh.validate import validate_handles, validate_mesh
 from tests.conftest import data_file
 

@@ -17,9 +17,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from defaust.anny_poses import (DEFAULT_TARGETS, POSES, AnnyPose, bend, pose_from_spec, resolve_poses, sym,
-                                turn)
 from defaust.anny_model import INSTALL_HINT, find_anny_assets, load_anny
+from defaust.anny_poses import DEFAULT_TARGETS, POSES, AnnyPose, bend, pose_from_spec, resolve_poses, sym, turn
 from defaust.anny_source import LANDMARK_NAMES, SUBJECTS, anny_subject, self_intersections
 from defaust.skinning import high_res_weights, subdivision_weights, transfer_weights
 from sshade.errors import SShaDeError

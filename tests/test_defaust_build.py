@@ -16,14 +16,15 @@ import trimesh
 import defaust.build as build_mod
 from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
-from eval.datasets.defaust import load_defaust, load_handles
 from defaust.handles import snap_handles
-from sshade.mesh.io import read_mesh
 from defaust.store import sha256_file
+from eval.datasets.defaust import load_defaust, load_handles
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import validate_mesh
 
 from .conftest import ROOT, subprocess_env  # noqa: E402
+
 POSES = [1, 2, 3, 4]
 
 
@@ -198,5 +199,6 @@ def test_bad_input_messages(tmp_path):
         config_from_omegaconf(compose_config(["source=faust", f"out={tmp_path}"]))
     with pytest.raises(SShaDeError, match="unknown source"):
         config_from_omegaconf(compose_config(["source=scan", f"out={tmp_path}"]))
-    r = subprocess.run([sys.executable, "-m", "defaust"], cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "defaust"], cwd=ROOT, env=subprocess_env(), capture_output=True,
+                       text=True, timeout=120)
     assert r.returncode == 2 and "out=DIR" in r.stderr

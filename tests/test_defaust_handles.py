@@ -5,8 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from defaust.handles import (BASE_LANDMARKS, classify_groups, geodesic_neighbourhood, handles_from_arrays,
-                             handles_to_arrays, landmark_handles, landmarks_for_target, snap_handles)
+from defaust.handles import (
+    BASE_LANDMARKS,
+    classify_groups,
+    geodesic_neighbourhood,
+    handles_from_arrays,
+    handles_to_arrays,
+    landmark_handles,
+    landmarks_for_target,
+    snap_handles,
+)
 from sshade.errors import SShaDeError
 
 

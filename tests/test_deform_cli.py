@@ -10,11 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from sshade.mesh.io import read_mesh, write_mesh
-from sshade.cli import main
-from sshade.mesh.handle_files import FIXED, FREE, HANDLE, apply_def, write_def, write_sel
 from examples.twisted_bar import twist_matrix, write_case
 from sshade import deform
+from sshade.cli import main
+from sshade.mesh.handle_files import FIXED, FREE, HANDLE, apply_def, write_def, write_sel
+from sshade.mesh.io import read_mesh, write_mesh
 
 from .conftest import ROOT, subprocess_env
 
@@ -83,7 +83,8 @@ def test_handle_file_matches_the_api(bar, tmp_path, capsys, fmt):
     if fmt == "json":
         f.write_text(json.dumps({"handles": h.tolist(), "targets": t.tolist()}))
     else:
-        f.write_text("index,x,y,z\n" + "".join(f"{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in zip(h.tolist(), t.tolist())))
+        rows = (f"{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in zip(h.tolist(), t.tolist()))
+        f.write_text("index,x,y,z\n" + "".join(rows))
     out = tmp_path / "d.obj"
     rc, _, err = _cli([bar["off"], "--handles", f, "-o", out, *SSHADE], capsys)
     assert rc == 0, err

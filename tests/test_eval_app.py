@@ -18,6 +18,7 @@ from eval.tables import ok_mask, summarize, to_latex, to_markdown, write_tables
 from sshade.errors import SShaDeError
 
 from .conftest import subprocess_env  # noqa: E402
+
 METRICS = ["volume_err_pct", "area_err_pct", "edge_err_pct", "angle_err_deg", "angle_err_rel_pct",
            "handle_err_pct", "gt_vertex_mean_pct", "gt_vertex_max_pct", "hausdorff", "chamfer", "time_s"]
 
@@ -287,7 +288,8 @@ def test_app_on_a_small_defaust_build(tmp_path):
     root = tmp_path / "defaust"
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "eval", "dataset=defaust", f"dataset.root={root}",
-                        "dataset.build.enabled=true", 'dataset.build.overrides=["preset=ci","subjects=[0]"]', "dataset.limit=2",
+                        "dataset.build.enabled=true", 'dataset.build.overrides=["preset=ci","subjects=[0]"]',
+                        "dataset.limit=2",
                         "dataset.baseline_cases=1", "methods=[Elastic,SShaDe]", "sshade.n_samplings=2",
                         f"out_dir={out}"], cwd=tmp_path, env=subprocess_env(), capture_output=True, text=True,
                        timeout=600)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
+from defaust.handles import edge_graph, geodesic_neighbourhood, landmark_handles
 from eval.datasets import FAUST_LANDMARKS, discover_faust, faust_cases, load_cases
 from eval.datasets.faust import case_seed
-from defaust.handles import edge_graph, geodesic_neighbourhood, landmark_handles
 from sshade.errors import SShaDeError
 
 L = len(FAUST_LANDMARKS)

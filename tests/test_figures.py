@@ -8,8 +8,16 @@ import pytest
 pytest.importorskip("matplotlib")
 import matplotlib.image as mimage  # noqa: E402
 
-from eval.figures import (case_figure, face_edge_error, figures_options, mesh_row,  # noqa: E402
-                          pose_transfer_figure, safe_figure, tosca_figure, vertex_error_pct)
+from eval.figures import (  # noqa: E402
+    case_figure,
+    face_edge_error,
+    figures_options,
+    mesh_row,
+    pose_transfer_figure,
+    safe_figure,
+    tosca_figure,
+    vertex_error_pct,
+)
 from eval.metrics import edge_length_error  # noqa: E402
 from eval.render import figure_row, png_size, render_mesh, save_png  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402

@@ -72,8 +72,8 @@ def _inputs(d):
     import igl
     import trimesh
 
-    from sshade.mesh.io import write_mesh
     from sshade.mesh.handle_files import write_def, write_sel
+    from sshade.mesh.io import write_mesh
     t = (1 + 5 ** 0.5) / 2
     V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
                   [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)

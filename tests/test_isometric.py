@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sshade.sampling import sampling_seeds
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer, rigid_align
+from sshade.sampling import sampling_seeds
 
 from .conftest import SHARED_DATA, data_file, subprocess_env
 

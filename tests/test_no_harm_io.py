@@ -13,9 +13,9 @@ import sys
 import numpy as np
 import pytest
 
-from sshade.mesh.io import read_mesh, write_mesh
 from sshade.cli import main
 from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_handles, validate_mesh
 from tests.conftest import ROOT, subprocess_env
 

@@ -90,11 +90,13 @@ BAD_EVAL = [
     ("dataset.limit=abc", "dataset.limit"), ("dataset.limit=0", "dataset.limit"),
     ("dataset.limit=true", "dataset.limit"), ("dataset.baseline_cases=abc", "dataset.baseline_cases"),
     ("dataset.baseline_cases=-1", "dataset.baseline_cases"), ("dataset.seed=abc", "dataset.seed"),
-    ("dataset.n_per_landmark=inf", "dataset.n_per_landmark"), ("dataset.static_threshold=nan", "dataset.static_threshold"),
+    ("dataset.n_per_landmark=inf", "dataset.n_per_landmark"),
+    ("dataset.static_threshold=nan", "dataset.static_threshold"),
     ("dataset.subjects=[0,abc]", "dataset.subjects"),
     ("figures.max_cases=abc", "figures.max_cases"), ("figures.enabled=maybe", "figures.enabled"),
     ("reference.max_iter=junk", "reference.max_iter"), ("reference.max_iter=inf", "reference.max_iter"),
-    ("reference.time_budget_s=junk", "reference.time_budget_s"), ("reference.time_budget_s=-5", "reference.time_budget_s"),
+    ("reference.time_budget_s=junk", "reference.time_budget_s"),
+    ("reference.time_budget_s=-5", "reference.time_budget_s"),
     ("sshade.n_low=inf", "n_low"), ("sshade.n_low=1e300", "n_low"), ("sshade.n_samplings=abc", "n_samplings"),
     ("sshade.seed=-1", "seed"), ("sshade.workers=0", "workers"), ("sshade.warm_start=abc", "warm_start"),
     ("+sshade.max_iter=nan", "max_iter"),
@@ -112,7 +114,8 @@ def test_check_config_rejects_junk_numbers(override, key):
 def test_check_config_experiment_sections():
     from eval.config_check import check_config
     for exp, bad in [("scaling", "scaling.elastic_budget_s=inf"), ("tosca", "tosca.min_vertices=abc"),
-                     ("tosca", "sshade.n_samplings=abc"), ("pose_transfer", "sshade.seed=nan"), ("convergence", "convergence.time_budget_s=abc"),
+                     ("tosca", "sshade.n_samplings=abc"), ("pose_transfer", "sshade.seed=nan"),
+                     ("convergence", "convergence.time_budget_s=abc"),
                      ("shapes", "dataset.vertex_range=[10,abc]")]:
         check_config(_compose_eval([f"experiment={exp}"]))
         with pytest.raises(SShaDeError, match=bad.split("=")[0].replace(".", r"\.")):
@@ -223,7 +226,7 @@ def test_hydra_errors_are_one_line(tmp_path):
              (["eval.sweep", "foo=1"], "foo"), (["eval.sweep", "-m", "sshade.n_low=1,2", "foo=1"], "foo"),
              (["eval.sweep", "-m", "dataset=faust,nope"], "dataset/nope"), (["eval", "--cfg", "job", "foo=1"], "foo")]
     res = _run_many([c for c, _ in cases] + [["eval", "--cfg", "job", "experiment=ci"]], tmp_path)
-    for (cmd, key), r in zip(cases, res):
+    for (_cmd, key), r in zip(cases, res):
         _one_error_line(r, key)
     ok = res[-1]  # Hydra's own flags still work
     assert ok.returncode == 0 and "experiment:" in ok.stdout and "name: ci" in ok.stdout, ok.stderr[-2000:]
@@ -278,10 +281,10 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
     """(name, callable returning the exit status) for every command, its work raising ``exc``."""
     import defaust.cli
     import eval.app
-    import sshade.cli
     import eval.reproduce
     import eval.sweep
     import eval.tables
+    import sshade.cli
 
     def exit_code(fn, argv=None):
         def call():
@@ -302,7 +305,8 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
     monkeypatch.setattr(eval.sweep, "aggregate_sweep", _raise(exc))
     monkeypatch.setattr(subprocess, "call", _raise(exc))
     run_dir = _cases_dir(tmp_path / "run")
-    return [("eval", exit_code(eval.app.main, ["eval", "experiment=ci", "dataset.root=/x", f"out_dir={tmp_path / 'o'}"])),
+    return [("eval", exit_code(eval.app.main,
+                               ["eval", "experiment=ci", "dataset.root=/x", f"out_dir={tmp_path / 'o'}"])),
             ("defaust", exit_code(defaust.cli.main, ["defaust", "source=synthetic", f"out={tmp_path / 'd'}"])),
             ("deform", exit_code(lambda: sshade.cli.main(["deform", "m.obj", "-o", "o.obj", "--handles", "h.json"]))),
             ("tables", exit_code(lambda: eval.tables.main([str(run_dir)]))),

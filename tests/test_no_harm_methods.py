@@ -19,8 +19,8 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from sshade.cli import main as cli_main
 from examples.twisted_bar import write_case
+from sshade.cli import main as cli_main
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env

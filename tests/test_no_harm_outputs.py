@@ -148,7 +148,8 @@ def test_lock_dies_with_its_process(tmp_path):
     """A run killed with SIGKILL leaves a folder 'running' but unlocked: the next run replaces it."""
     code = (f"import time; from eval.outdir import claim_output_dir; c = claim_output_dir({str(tmp_path / 'r')!r}, "
             "'eval'); open(c.path / 'cases.csv', 'w').write('x'); print('claimed', flush=True); time.sleep(60)")
-    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=subprocess_env(), stdout=subprocess.PIPE, text=True)
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=subprocess_env(), stdout=subprocess.PIPE,
+                         text=True)
     try:
         assert p.stdout.readline().strip() == "claimed"
         with pytest.raises(OutputDirError, match="another run is writing"):

@@ -9,13 +9,19 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from sshade.mesh.io import read_mesh
 from sshade._keys import unique_int
 from sshade.mesh.geodesic import VoronoiState, edge_graph, edge_graph_from_edges, locality_order
-from sshade.mesh.halfedge import (boundary_loops, count_components, count_pinched_vertices, halfedges,
-                             vertex_fan_count, vertex_normals)
-from sshade.remesh import _check, _closed_ball_full, _closed_ball_holds, mesh_topology, remesh
+from sshade.mesh.halfedge import (
+    boundary_loops,
+    count_components,
+    count_pinched_vertices,
+    halfedges,
+    vertex_fan_count,
+    vertex_normals,
+)
+from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import _fast_checks, validate_mesh
+from sshade.remesh import _check, _closed_ball_full, _closed_ball_holds, mesh_topology, remesh
 
 from .conftest import data_file
 from .test_bad_input import BAD_MESHES, KNOWN_BAD_MESH_BUGS, _bowtie, _double_cone
@@ -284,7 +290,7 @@ def test_closed_ball_candidates_equal_numpy_reference(rel, k):
     st = VoronoiState(V, F, graph=topo.graph, order=topo.order)
     st.sample(k, first=7)
     rounds = 0
-    for rounds in range(1, 60):
+    for rounds in range(1, 60):  # noqa: B007 -- read after the loop
         label, dist, seeds = st.label, st.dist, st.seeds
         new, FN, _ = _check(topo, label, dist, st.nseeds, V, seeds, False)
         bad, ref = _candidates_ref(topo, label, dist, st.nseeds)

@@ -8,11 +8,11 @@ import igl
 import numpy as np
 import pytest
 
-from sshade.mesh.io import read_mesh
 from sshade.mesh.halfedge import boundary_loops, halfedges
+from sshade.mesh.io import read_mesh
+from sshade.mesh.validate import validate_mesh
 from sshade.projection import project_to_fans
 from sshade.remesh import mesh_topology, remesh
-from sshade.mesh.validate import validate_mesh
 
 from .conftest import data_file
 

@@ -21,7 +21,8 @@ def test_default_runs_defaust_and_its_sweep(capsys):
 
 
 def test_every_experiment_with_folders_and_figures(capsys):
-    steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj", "sshade.n_samplings=3")
+    steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
+                   "sshade.n_samplings=3")
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "faust", "pose_transfer", "tosca",
                            "shapes", "scaling"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run

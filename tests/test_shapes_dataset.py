@@ -34,7 +34,8 @@ def test_the_edit_is_what_the_docstring_says(classic):
     np.testing.assert_array_equal(c.targets[c.static], P[c.static])
     R = Rotation.from_rotvec(np.deg2rad(20.0) * axes[2]).as_matrix()
     np.testing.assert_allclose(c.targets[g == 1], (P[g == 1] - center) @ R.T + center, atol=1e-12)
-    np.testing.assert_allclose(c.targets[g == 3] - P[g == 3], np.tile(0.05 * diag * axes[2], (counts[3], 1)), atol=1e-12)
+    np.testing.assert_allclose(c.targets[g == 3] - P[g == 3], np.tile(0.05 * diag * axes[2], (counts[3], 1)),
+                               atol=1e-12)
     # principal axes are orthonormal
     A = np.stack(axes)
     np.testing.assert_allclose(A @ A.T, np.eye(3), atol=1e-12)

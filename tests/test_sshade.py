@@ -6,9 +6,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from baselines import ARAP, Elastic
-from sshade.mesh.io import read_mesh
 from sshade import SShaDe, deform
 from sshade.lrf import transfer
+from sshade.mesh.io import read_mesh
 from sshade.projection import project_to_fans
 from sshade.remesh import remesh
 

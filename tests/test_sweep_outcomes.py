@@ -86,7 +86,8 @@ def test_states_without_accounting_fall_back_to_squeue_and_scontrol():
     st = slurm_states(["16_1"], runner=FakeSlurm(ended={"16_1": "OUT_OF_MEMORY"}))
     assert st == {"16_1": "OUT_OF_MEMORY"}
     with pytest.raises(SlurmQueryError, match="Unable to contact"):
-        slurm_states(["16_1"], runner=FakeSlurm(squeue_error="slurm_load_jobs error: Unable to contact slurm controller"))
+        slurm_states(["16_1"],
+                     runner=FakeSlurm(squeue_error="slurm_load_jobs error: Unable to contact slurm controller"))
 
 
 # ---------------------------------------------------------------- the wait loop

@@ -7,7 +7,8 @@ Run through ``python -m eval`` (:mod:`eval.app`); usage (from the repository roo
     python -m eval dataset.root=DIR methods=[ARAP,Elastic] out_dir=/tmp/run
 
 Config: ``conf/config.yaml`` (+ ``conf/dataset/faust.yaml``, ``conf/experiment/*.yaml``).
-For each case (:mod:`eval.datasets`, ``dataset.name`` looked up in its registry) and each method (:mod:`eval.methods`) the
+For each case (:mod:`eval.datasets`, ``dataset.name`` looked up in its registry) and each method
+(:mod:`eval.methods`) the
 ``deform`` call is timed with :func:`time.perf_counter` into ``time_s``, after the method's
 optional ``warmup()`` has compiled its numba kernels (the seconds go to the ``compile_s``
 column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
@@ -23,7 +24,8 @@ gets its message in the ``error`` column and the run goes on; so does a result w
 handle error exceeds ``handle_error_max_pct`` (% of the diagonal; its metrics stay in
 the row). Ctrl-C stops the run. A case mesh with several connected components is
 deformed component by component (:func:`sshade.components.deform_components`). Method
-info values become cells through :func:`_info_columns` (safe names and values). Outputs in ``out_dir`` (default ``outputs/<experiment.name>/<date_time>``):
+info values become cells through :func:`_info_columns` (safe names and values). Outputs in ``out_dir``
+(default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
 (:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
 ``.hydra/`` folder. All tables and ``run.json`` are written atomically.
@@ -237,7 +239,8 @@ def _run_cases(cfg, s: _Setup) -> tuple[list[dict], dict[str, float]]:
             if fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
                 fig_left -= 1
                 write_case_figure(case, {n: deformed.get(n) for n in names}, s.out_dir / "figures",
-                                  not_run=[n for m, n in zip(methods, names) if not s.runs_on(ci, m)])  # "not run", not "failed"
+                                  # "not run", not "failed"
+                                  not_run=[n for m, n in zip(methods, names) if not s.runs_on(ci, m)])
     return rows, compile_s
 
 
@@ -253,7 +256,8 @@ def _finish(cfg, s: _Setup, rows, compile_s, info, t_start) -> dict:
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     info.update(status="done", n_cases=len(s.cases), n_rows=len(df), n_errors=n_err,
-                wall_s=round(time.perf_counter() - t_start, 3), compile_s={k: round(v, 3) for k, v in compile_s.items()},
+                wall_s=round(time.perf_counter() - t_start, 3),
+                compile_s={k: round(v, 3) for k, v in compile_s.items()},
                 outputs={k: Path(v).name for k, v in paths.items()})
     paths["run_json"] = write_runinfo(s.out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())

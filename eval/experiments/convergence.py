@@ -287,7 +287,8 @@ def _markdown(tdf, target: float, budget: float) -> str:
              f"Distances in % of the bounding-box diagonal; 'to {target:g}%': first time the mean distance is "
              f"below {target:g}% (-- never within the {budget:g} s budget). Times include precomputation, "
              "exclude the distance evaluations.", "",
-             f"| Case | Vertices | Solver | Iterations | Time (s) | To {target:g}% (s) | Mean (%) | Max (%) | Stopped |",
+             f"| Case | Vertices | Solver | Iterations | Time (s) | To {target:g}% (s) "
+             "| Mean (%) | Max (%) | Stopped |",
              "|---|---:|---|---:|---:|---:|---:|---:|---|"]
     for _, r in tdf.iterrows():
         tt = "--" if not math.isfinite(r["time_to_target_s"]) else f"{r['time_to_target_s']:.2f}"

@@ -74,7 +74,7 @@ def box_surface(size=(4.0, 1.0, 1.0), h: float = 0.06) -> tuple[np.ndarray, np.n
         gb, gc = np.meshgrid(np.arange(N[b]), np.arange(N[c]), indexing="ij")
         gb, gc = gb.ravel(), gc.ravel()
         for side in (0, 1):
-            def idx(db, dc):
+            def idx(db, dc, a=a, b=b, c=c, gb=gb, gc=gc, side=side):  # called at once, in this iteration
                 ijk = [None, None, None]
                 ijk[a] = np.full_like(gb, side * N[a])
                 ijk[b] = gb + db

@@ -119,7 +119,7 @@ if nb is not None:
         with ``a_pq = 0``, and updating the full ``A`` (columns, then rows). A finished or
         skipped lane gets the rotation ``(c, s) = (1, 0)``, which leaves it unchanged.
         """
-        for sweep in range(30):
+        for _sweep in range(30):
             nact = 0
             for l in range(LANES):
                 a00 = S[_SA + 0 * LANES + l]; a01 = S[_SA + 1 * LANES + l]; a02 = S[_SA + 2 * LANES + l]

@@ -238,12 +238,14 @@ def loop_kernels(parallel: bool):
                  "grad": _grad_parallel if parallel else _grad_serial,
                  "push": _push_parallel if parallel else _push_serial,
                  "mix": _mix_parallel if parallel else _mix_serial}
-            x = np.zeros((2, 3)); xf = x.reshape(-1)
+            x = np.zeros((2, 3))
+            xf = x.reshape(-1)
             k["set_rows"](np.zeros((2, 3)), np.arange(2, dtype=np.uint32), x)
             k["max_move"](x, x)
             k["grad"](np.array([0, 1, 2], np.uint64), np.array([0, 1], np.uint32), np.ones(2), x, x, np.ones(2),
                       np.empty(2))
-            DF = np.zeros((2, 6)); part = np.empty((1, 4))
+            DF = np.zeros((2, 6))
+            part = np.empty((1, 4))
             k["push"](xf, xf, xf, xf, DF, DF.copy(), 0, 1, part)
             k["mix"](xf, DF, np.zeros(2), 1, np.empty(6))
             _LOOP[key] = k

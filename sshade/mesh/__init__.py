@@ -24,15 +24,15 @@ from .halfedge import HalfEdges, halfedges
 from .io import SIGNATURE, atomic_write, read_mesh, write_mesh, written_by_sshade
 from .repair import repair_mesh
 from .validate import (
-                       COORD_MAX,
-                       DIAG_MIN,
-                       MAX_DIAGONALS,
-                       check_arrays,
-                       check_faces,
-                       check_points,
-                       validate_deformed,
-                       validate_handles,
-                       validate_mesh,
+    COORD_MAX,
+    DIAG_MIN,
+    MAX_DIAGONALS,
+    check_arrays,
+    check_faces,
+    check_points,
+    validate_deformed,
+    validate_handles,
+    validate_mesh,
 )
 
 __all__ = ["read_mesh", "write_mesh", "atomic_write", "written_by_sshade", "SIGNATURE", "validate_mesh",

@@ -546,7 +546,8 @@ class VoronoiState:
             self._tie, self._settled, self._mark)
 
 
-def farthest_point_sampling(V: np.ndarray, F: np.ndarray, k: int, *, first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def farthest_point_sampling(V: np.ndarray, F: np.ndarray, k: int, *,
+                            first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Geodesic farthest-point sampling on the edge graph (paper §3.1).
 
     Parameters

@@ -311,7 +311,8 @@ def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=Fal
     Returns the HalfEdges of a mesh that passes."""
     bad = ~np.isfinite(V).all(axis=1)
     if bad.any():
-        raise SShaDeError(f"{name}: {bad.sum()} vertices have NaN/inf coordinates (first: vertex {np.flatnonzero(bad)[0]})")
+        raise SShaDeError(f"{name}: {bad.sum()} vertices have NaN/inf coordinates "
+                          f"(first: vertex {np.flatnonzero(bad)[0]})")
     n = len(V)
     out = (F < 0) | (F >= n)
     if out.any():
@@ -324,7 +325,8 @@ def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=Fal
     used = np.zeros(n, bool)
     used[F.ravel()] = True
     if not used.all():
-        raise SShaDeError(f"{name}: {int((~used).sum())} unreferenced vertices (first: vertex {np.flatnonzero(~used)[0]}); "
+        raise SShaDeError(f"{name}: {int((~used).sum())} unreferenced vertices "
+                          f"(first: vertex {np.flatnonzero(~used)[0]}); "
                           "remove them before deforming (sshade.components.drop_unreferenced(V, F) returns the "
                           "mesh without them and the old index of each kept vertex; `python -m sshade deform` "
                           "drops them itself)")
@@ -382,7 +384,8 @@ def _check_scale(V, F, name) -> None:
         raise SShaDeError(f"{name}: all vertices coincide")
     if diag < DIAG_MIN:
         raise SShaDeError(f"{name}: coordinates underflow in float64 (bounding-box diagonal {diag:.3g}, below "
-                          f"{DIAG_MIN:g}: products of lengths in the methods would underflow to zero; rescale the mesh)")
+                          f"{DIAG_MIN:g}: products of lengths in the methods would underflow to zero; "
+                          "rescale the mesh)")
 
 
 def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.ndarray]:
