@@ -66,9 +66,11 @@ class FullResArap:
 
     Examples
     --------
-    >>> m = Elastic()  # doctest: +SKIP
-    >>> Vd = m.deform(V, F, handles, targets)  # doctest: +SKIP
-    >>> m.info["iterations"]  # doctest: +SKIP
+    Example::
+
+        m = Elastic()
+        Vd = m.deform(V, F, handles, targets)
+        m.info["iterations"]
     """
 
     def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int | None = None, name: str | None = None,

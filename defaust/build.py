@@ -118,10 +118,12 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
 
     Examples
     --------
-    >>> rep = build_defaust(BuildConfig(out="/tmp/defaust_ci", n_subjects=2,
-    ...                                 vertex_range=(8000, 12000)))  # doctest: +SKIP
-    >>> rep.built[:2]  # doctest: +SKIP
-    ['subject_00/rest', 'subject_00/pose_01']
+    Example::
+
+        rep = build_defaust(BuildConfig(out="/tmp/defaust_ci", n_subjects=2,
+                                        vertex_range=(8000, 12000)))
+        rep.built[:2]
+        # -> ['subject_00/rest', 'subject_00/pose_01']
     """
     if cfg.out is None or str(cfg.out) == "":
         raise SShaDeError("no output folder: pass out=DIR")

@@ -55,7 +55,9 @@ def config_from_omegaconf(cfg) -> BuildConfig:
 
     Examples
     --------
-    >>> bc = config_from_omegaconf(compose_config(["preset=ci", "out=/tmp/x"]))  # doctest: +SKIP
+    Example::
+
+        bc = config_from_omegaconf(compose_config(["preset=ci", "out=/tmp/x"]))
     """
     from omegaconf import OmegaConf
 
@@ -116,8 +118,10 @@ def compose_config(overrides=()):
 
     Examples
     --------
-    >>> cfg = compose_config(["preset=ci", "out=/tmp/x"]); cfg.high_res.vertex_range  # doctest: +SKIP
-    [8000, 12000]
+    Example::
+
+        cfg = compose_config(["preset=ci", "out=/tmp/x"]); cfg.high_res.vertex_range
+        # -> [8000, 12000]
     """
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra

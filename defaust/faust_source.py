@@ -79,9 +79,11 @@ def discover_faust(root) -> dict[tuple[int, int], Path]:
 
     Examples
     --------
-    >>> files = discover_faust("../shared/data/faust_reg")  # doctest: +SKIP
-    >>> sorted(files)[:2]  # doctest: +SKIP
-    [(0, 0), (0, 1)]
+    Example::
+
+        files = discover_faust("../shared/data/faust_reg")
+        sorted(files)[:2]
+        # -> [(0, 0), (0, 1)]
     """
     if root is None or str(root) == "":
         raise SShaDeError("FAUST folder not given: pass faust.root=DIR (a folder with tr_reg_XYZ.ply files "

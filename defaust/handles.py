@@ -167,7 +167,9 @@ def geodesic_neighbourhood(V, F, landmarks, k: int, *, graph: sp.csr_matrix | No
 
     Examples
     --------
-    >>> nb = geodesic_neighbourhood(V, F, [414], 90)  # doctest: +SKIP
+    Example::
+
+        nb = geodesic_neighbourhood(V, F, [414], 90)
     """
     V = np.asarray(V, np.float64)
     n = len(V)
@@ -245,9 +247,11 @@ def landmark_handles(V_rest, F, V_target, landmarks: dict[str, int], *, n_per_la
 
     Examples
     --------
-    >>> H = landmark_handles(V0, F, V1, {"head_top": 414, "left_hand": 2445})  # doctest: +SKIP
-    >>> H.rest.shape  # doctest: +SKIP
-    (60, 3)
+    Example::
+
+        H = landmark_handles(V0, F, V1, {"head_top": 414, "left_hand": 2445})
+        H.rest.shape
+        # -> (60, 3)
     """
     V = np.asarray(V_rest, np.float64)
     W = np.asarray(V_target, np.float64)
@@ -312,8 +316,10 @@ def handles_to_arrays(H: HandleSet) -> dict[str, np.ndarray]:
 
     Examples
     --------
-    >>> from defaust.store import write_npz
-    >>> write_npz("/tmp/h.npz", handles_to_arrays(H))  # doctest: +SKIP
+    Example::
+
+        from defaust.store import write_npz
+        write_npz("/tmp/h.npz", handles_to_arrays(H))
     """
     return {
         "rest_positions": H.rest, "target_positions": H.target, "static": H.static.astype(bool),
@@ -334,8 +340,10 @@ def handles_from_arrays(d: dict, *, name: str = "handles") -> HandleSet:
 
     Examples
     --------
-    >>> from defaust.store import read_npz
-    >>> H = handles_from_arrays(read_npz("subject_00/pose_01_handles.npz"))  # doctest: +SKIP
+    Example::
+
+        from defaust.store import read_npz
+        H = handles_from_arrays(read_npz("subject_00/pose_01_handles.npz"))
     """
     need = ("rest_positions", "target_positions", "static", "group", "landmark_names", "delta", "group_static")
     miss = [k for k in need if k not in d]

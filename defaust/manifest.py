@@ -60,9 +60,11 @@ def read_manifest_file(path) -> dict:
 
     Examples
     --------
-    >>> m = read_manifest_file("data/defaust/manifest.json")  # doctest: +SKIP
-    >>> m["format"]  # doctest: +SKIP
-    'defaust-1'
+    Example::
+
+        m = read_manifest_file("data/defaust/manifest.json")
+        m["format"]
+        # -> 'defaust-1'
     """
     try:
         m = json.loads(Path(path).read_text())
@@ -136,8 +138,10 @@ def check_out_folder(out, source: str, parameters: dict) -> dict:
 
     Examples
     --------
-    >>> check_out_folder("/tmp/new_folder_xyz", "synthetic", {"seed": 0})  # doctest: +SKIP
-    {}
+    Example::
+
+        check_out_folder("/tmp/new_folder_xyz", "synthetic", {"seed": 0})
+        # -> {}
     """
     out = Path(out)
     if not out.exists() or not any(out.iterdir()):

@@ -213,9 +213,11 @@ def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarra
 
     Examples
     --------
-    >>> Vs, Fs, Ws = subdivision_weights(V, F, W, 2)  # doctest: +SKIP
-    >>> np.array_equal(Ws[:len(W)], W)  # doctest: +SKIP
-    True
+    Example::
+
+        Vs, Fs, Ws = subdivision_weights(V, F, W, 2)
+        np.array_equal(Ws[:len(W)], W)
+        # -> True
     """
     iterations = int(iterations)
     if iterations < 1:
@@ -256,7 +258,9 @@ def high_res_weights(V, F, W, V_high, iterations: int) -> np.ndarray:
 
     Examples
     --------
-    >>> Wh = high_res_weights(sub.V, sub.F, sub.W, Vh, 2)  # doctest: +SKIP
+    Example::
+
+        Wh = high_res_weights(sub.V, sub.F, sub.W, Vh, 2)
     """
     Vs, Fs, Ws = subdivision_weights(V, F, W, iterations)
     return transfer_weights(Vs, Fs, Ws, V_high)

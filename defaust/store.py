@@ -66,7 +66,9 @@ def write_ply(path, V, F) -> str:
 
     Examples
     --------
-    >>> digest = write_ply("/tmp/t.ply", np.eye(3), [[0, 1, 2]])  # doctest: +SKIP
+    Example::
+
+        digest = write_ply("/tmp/t.ply", np.eye(3), [[0, 1, 2]])
     """
     data = ply_bytes(V, F)
     with atomic_write(path, "wb") as fh:
@@ -94,7 +96,9 @@ def write_npz(path, arrays: dict) -> str:
 
     Examples
     --------
-    >>> digest = write_npz("/tmp/t.npz", {"a": np.arange(3)})  # doctest: +SKIP
+    Example::
+
+        digest = write_npz("/tmp/t.npz", {"a": np.arange(3)})
     """
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as zf:
@@ -122,9 +126,11 @@ def read_npz(path) -> dict[str, np.ndarray]:
 
     Examples
     --------
-    >>> d = read_npz("subject_00/pose_01_handles.npz")  # doctest: +SKIP
-    >>> d["rest_positions"].shape  # doctest: +SKIP
-    (180, 3)
+    Example::
+
+        d = read_npz("subject_00/pose_01_handles.npz")
+        d["rest_positions"].shape
+        # -> (180, 3)
     """
     p = Path(path)
     if not p.is_file():

@@ -109,7 +109,9 @@ def skinning_weights(body: Body, V, F, *, blend: float = 0.07) -> np.ndarray:
 
     Examples
     --------
-    >>> W = skinning_weights(body, V, F)  # doctest: +SKIP
+    Example::
+
+        W = skinning_weights(body, V, F)
     """
     if not blend >= 0:
         raise SShaDeError(f"skinning blend width must be >= 0, got {blend}")
@@ -200,9 +202,11 @@ def synthetic_subject(seed: int, subject: int, *, n_poses: int = 5, voxel_size: 
 
     Examples
     --------
-    >>> sub = synthetic_subject(0, 3, voxel_size=0.02, n_vertices=2000)  # doctest: +SKIP
-    >>> sub.posed(1).shape == sub.V.shape  # doctest: +SKIP
-    True
+    Example::
+
+        sub = synthetic_subject(0, 3, voxel_size=0.02, n_vertices=2000)
+        sub.posed(1).shape == sub.V.shape
+        # -> True
     """
     names = pose_names(n_poses)
     body_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xB0D1, int(subject)]))

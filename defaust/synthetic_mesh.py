@@ -186,7 +186,9 @@ def mesh_body(body: Body, *, voxel_size: float = 0.01, n_vertices: int = 7000,
 
     Examples
     --------
-    >>> V, F = mesh_body(body_model(BodyParams()), voxel_size=0.02, n_vertices=1500)  # doctest: +SKIP
+    Example::
+
+        V, F = mesh_body(body_model(BodyParams()), voxel_size=0.02, n_vertices=1500)
     """
     import pymeshlab  # heavy: only when meshing
 
@@ -263,9 +265,11 @@ def body_landmarks(body: Body, V) -> dict[str, int]:
 
     Examples
     --------
-    >>> lm = body_landmarks(body, V)  # doctest: +SKIP
-    >>> V[lm["head_top"], 1] == V[:, 1].max()  # doctest: +SKIP
-    True
+    Example::
+
+        lm = body_landmarks(body, V)
+        V[lm["head_top"], 1] == V[:, 1].max()
+        # -> True
     """
     tree = cKDTree(np.asarray(V, np.float64))
     out = {}

@@ -56,9 +56,11 @@ class PeakMemory:
 
     Examples
     --------
-    >>> with PeakMemory() as pm:  # doctest: +SKIP
-    ...     work()
-    >>> pm.peak_mb  # doctest: +SKIP
+    Example::
+
+        with PeakMemory() as pm:
+            work()
+        pm.peak_mb
     """
 
     def __init__(self, interval: float = 0.02):

@@ -21,8 +21,10 @@ convention). ``view=(elev, azim)`` in degrees as in :meth:`Axes3D.view_init`.
 Speed (2-core VM, 480x640 px, every face drawn, no edge strokes, no anti-aliasing):
 ~0.1 s for 7k faces, ~0.2-0.3 s for FAUST (13.8k), ~0.5 s for 55k, ~2 s for 220k.
 
->>> img = render_mesh(V, F, colors=err, clim=(0, 5), colorbar_label="EL (%)")  # doctest: +SKIP
->>> save_png("out.png", img)  # doctest: +SKIP
+Example::
+
+    img = render_mesh(V, F, colors=err, clim=(0, 5), colorbar_label="EL (%)")
+    save_png("out.png", img)
 """
 from __future__ import annotations
 

@@ -140,7 +140,7 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     -------
     pandas DataFrame with columns ``job``, ``dir`` (relative to ``sweep_dir``; empty for
     a missing job), ``overrides`` (space-separated), one column per overridden key,
-    ``status`` (:data:`OUTCOMES`, or running while the sweep runs; a point of
+    ``status`` (:data:`eval.sweep_files.OUTCOMES`, or running while the sweep runs; a point of
     ``sweep.json``'s grid without folder is missing), ``error``, ``wall_s``, ``n_cases``,
     ``n_errors``, then ``<method>/<column>`` for every column of the job's
     ``table.csv`` (per-method means over successful cases; NaN where none).

@@ -6,8 +6,10 @@ representations". The pipeline (paper §3): topology-preserving remesh
 low-res spokes-and-rims ARAP (:mod:`sshade.arap`), per-triangle LRF transfer
 (:mod:`sshade.lrf`), averaged over k samplings (:mod:`sshade.deform`).
 
->>> from sshade import deform
->>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
+Example::
+
+    from sshade import deform
+    Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)
 """
 from .deform import SShaDe, deform, deform_once
 from .errors import SShaDeError

@@ -200,8 +200,10 @@ def deform_components(method, V, F, handles, targets, *, return_info: bool = Fal
 
     Examples
     --------
-    >>> from baselines import Elastic  # doctest: +SKIP
-    >>> Vd = deform_components(Elastic(), V, F, handles, targets)  # doctest: +SKIP
+    Example::
+
+        from baselines import Elastic
+        Vd = deform_components(Elastic(), V, F, handles, targets)
     """
     V, F = validate_mesh(V, F, allow_components=True)
     handles, targets = validate_handles(V, handles, targets)
@@ -254,8 +256,10 @@ class ComponentWise:
 
     Examples
     --------
-    >>> from baselines import Elastic  # doctest: +SKIP
-    >>> Vd = ComponentWise(Elastic()).deform(V, F, handles, targets)  # doctest: +SKIP
+    Example::
+
+        from baselines import Elastic
+        Vd = ComponentWise(Elastic()).deform(V, F, handles, targets)
     """
 
     def __init__(self, method):

@@ -268,8 +268,10 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
 
     Examples
     --------
-    >>> from sshade import deform
-    >>> Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
+    Example::
+
+        from sshade import deform
+        Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)
     """
     p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                      max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
@@ -363,8 +365,10 @@ class SShaDe:
 
     Examples
     --------
-    >>> m = SShaDe(n_low=6000, n_samplings=5, seed=0)  # doctest: +SKIP
-    >>> Vd = m.deform(V, F, handles, targets)  # doctest: +SKIP
+    Example::
+
+        m = SShaDe(n_low=6000, n_samplings=5, seed=0)
+        Vd = m.deform(V, F, handles, targets)
     """
 
     name = "SShaDe"

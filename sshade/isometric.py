@@ -206,8 +206,10 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
 
     Examples
     --------
-    >>> from sshade.isometric import isometric_transfer
-    >>> V_pred, info = isometric_transfer(V0, F0, V1, n_low=6000, n_samplings=10)  # doctest: +SKIP
+    Example::
+
+        from sshade.isometric import isometric_transfer
+        V_pred, info = isometric_transfer(V0, F0, V1, n_low=6000, n_samplings=10)
     """
     n_rest = len(_positions(V_rest, None, "V_rest"))
     T = _positions(V_target, n_rest, "target pose V_target")
@@ -255,8 +257,10 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
 
     Examples
     --------
-    >>> from sshade.isometric import pose_transfer
-    >>> V_Sp = pose_transfer(V_M, F, V_S, V_Mp, n_low=1000, n_samplings=5)  # doctest: +SKIP
+    Example::
+
+        from sshade.isometric import pose_transfer
+        V_Sp = pose_transfer(V_M, F, V_S, V_Mp, n_low=1000, n_samplings=5)
     """
     if align:
         V_S = rigid_align(V_S, V_M)

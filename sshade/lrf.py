@@ -157,7 +157,9 @@ def transfer(V: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.nda
 
     Examples
     --------
-    >>> Vd = transfer(V, proj.tri, V[rm.seeds], VN_def, rm.F)  # doctest: +SKIP
+    Example::
+
+        Vd = transfer(V, proj.tri, V[rm.seeds], VN_def, rm.F)
     """
     if axis is None:
         axis = frame_functions(VN_rest, FN)

@@ -150,7 +150,9 @@ def project_to_fans(V: np.ndarray, label: np.ndarray, VN: np.ndarray, FN: np.nda
 
     Examples
     --------
-    >>> P = project_to_fans(V, rm.label, V[rm.seeds], rm.F)  # doctest: +SKIP
+    Example::
+
+        P = project_to_fans(V, rm.label, V[rm.seeds], rm.F)
     """
     k = len(VN)
     ptr, faces = vertex_fans(FN, k)

@@ -43,8 +43,10 @@ class SShaDeRefine:
 
     Examples
     --------
-    >>> m = SShaDeRefine(n_low=6000, n_samplings=5)  # doctest: +SKIP
-    >>> Vd = m.deform(V, F, handles, targets); m.info["refine_iterations"]  # doctest: +SKIP
+    Example::
+
+        m = SShaDeRefine(n_low=6000, n_samplings=5)
+        Vd = m.deform(V, F, handles, targets); m.info["refine_iterations"]
     """
 
     name = "SShaDe+refine"

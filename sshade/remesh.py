@@ -540,8 +540,10 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
 
     Examples
     --------
-    >>> rm = remesh(V, F, 1000, seed=0)  # doctest: +SKIP
-    >>> VN, FN = V[rm.seeds], rm.F  # doctest: +SKIP
+    Example::
+
+        rm = remesh(V, F, 1000, seed=0)
+        VN, FN = V[rm.seeds], rm.F
     """
     t0 = time.perf_counter()
     n = len(V)

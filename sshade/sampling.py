@@ -9,8 +9,10 @@ a task with :func:`worker_state`) and the numba kernels compiled before the fork
 (:func:`warm_kernels`) without pickling; with one worker, or where ``fork`` is not
 available, they run in this process, in the same order, with the same results.
 
->>> with SamplingPool({"x": 2}, workers=1) as pool:  # doctest: +SKIP
-...     pool.submit(task, 0).result()
+Example::
+
+    with SamplingPool({"x": 2}, workers=1) as pool:
+        pool.submit(task, 0).result()
 """
 from __future__ import annotations
 

@@ -11,10 +11,12 @@ mesh; at low resolution it is exact).
 
 Example
 -------
->>> from eval.datasets.defaust import load_defaust
->>> cases = load_defaust("/tmp/defaust_faust", resolution="low")  # doctest: +SKIP
->>> c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape  # doctest: +SKIP
-((6890, 3), (178,), (178, 3))
+Example::
+
+    from eval.datasets.defaust import load_defaust
+    cases = load_defaust("/tmp/defaust_faust", resolution="low")
+    c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape
+    # -> ((6890, 3), (178,), (178, 3))
 
 When ``dataset.root`` is the default folder :data:`DEFAULT_DEFAUST_ROOT` (or with
 ``dataset.build.enabled=true``) the evaluator first builds, finishes or verifies the
@@ -87,9 +89,11 @@ def read_manifest(root) -> dict:
 
     Examples
     --------
-    >>> m = read_manifest("/tmp/defaust_faust")  # doctest: +SKIP
-    >>> sorted(m["subjects"])  # doctest: +SKIP
-    ['subject_00', 'subject_01']
+    Example::
+
+        m = read_manifest("/tmp/defaust_faust")
+        sorted(m["subjects"])
+        # -> ['subject_00', 'subject_01']
     """
     root = Path(root).expanduser()
     if not root.is_dir():
@@ -120,9 +124,11 @@ def load_handles(path) -> HandleSet:
 
     Examples
     --------
-    >>> H = load_handles("/tmp/defaust_faust/subject_00/pose_01_handles.npz")  # doctest: +SKIP
-    >>> H.rest.shape == H.target.shape  # doctest: +SKIP
-    True
+    Example::
+
+        H = load_handles("/tmp/defaust_faust/subject_00/pose_01_handles.npz")
+        H.rest.shape == H.target.shape
+        # -> True
     """
     return handles_from_arrays(read_npz(path), name=str(path))
 
@@ -169,9 +175,11 @@ def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | 
 
     Examples
     --------
-    >>> cases = load_defaust("/tmp/defaust_syn", resolution="high", limit=2)  # doctest: +SKIP
-    >>> [c.name for c in cases]  # doctest: +SKIP
-    ['s00_p01', 's00_p02']
+    Example::
+
+        cases = load_defaust("/tmp/defaust_syn", resolution="high", limit=2)
+        [c.name for c in cases]
+        # -> ['s00_p01', 's00_p02']
     """
     if resolution not in ("high", "low"):
         raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")

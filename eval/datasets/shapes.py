@@ -18,9 +18,11 @@ and the result is cached as ``<cache>/<stem>_<lo>-<hi>.ply``, so later runs only
 There is no ground-truth pose: cases have ``V_gt = None`` and are scored with the
 deformation metrics (volume, area, edge length, face angles, handle error) only.
 
->>> cases = shape_cases("../shared/data/classic", files=["armadillo.obj"])  # doctest: +SKIP
->>> c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape  # doctest: +SKIP
-((43243, 3), (120,), (120, 3))
+Example::
+
+    cases = shape_cases("../shared/data/classic", files=["armadillo.obj"])
+    c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape
+    # -> ((43243, 3), (120,), (120, 3))
 """
 from __future__ import annotations
 

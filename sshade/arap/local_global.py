@@ -111,8 +111,10 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
 
     Examples
     --------
-    >>> import igl  # doctest: +SKIP
-    >>> res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1)  # doctest: +SKIP
+    Example::
+
+        import igl
+        res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1)
     """
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")

@@ -481,8 +481,10 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
 
     Examples
     --------
-    >>> ops = build_operators(V, F, "spokes")  # doctest: +SKIP
-    >>> ops.energy(V)  # rest pose: 0  # doctest: +SKIP
+    Example::
+
+        ops = build_operators(V, F, "spokes")
+        ops.energy(V)  # rest pose: 0
     """
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")

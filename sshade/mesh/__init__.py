@@ -17,8 +17,10 @@ One concept per module (imports only downwards, in this order):
 - :mod:`~sshade.mesh.handle_files`: the handle files of ``python -m sshade deform``
   (``.sel`` + ``.def``, ``.dmat``, ``.json``, ``.csv``); not imported here.
 
->>> from sshade.mesh import read_mesh, write_mesh
->>> V, F = read_mesh("bunny.off")  # doctest: +SKIP
+Example::
+
+    from sshade.mesh import read_mesh, write_mesh
+    V, F = read_mesh("bunny.off")
 """
 from .halfedge import HalfEdges, halfedges
 from .io import SIGNATURE, atomic_write, read_mesh, write_mesh, written_by_sshade

@@ -476,8 +476,10 @@ class VoronoiState:
 
     Examples
     --------
-    >>> st = VoronoiState(V, F)  # doctest: +SKIP
-    >>> st.sample(100, first=0); st.add([5, 17])  # doctest: +SKIP
+    Example::
+
+        st = VoronoiState(V, F)
+        st.sample(100, first=0); st.add([5, 17])
     """
 
     def __init__(self, V: np.ndarray, F: np.ndarray, graph=None, order: np.ndarray | None = None,
@@ -560,7 +562,9 @@ def farthest_point_sampling(V: np.ndarray, F: np.ndarray, k: int, *,
 
     Examples
     --------
-    >>> seeds, label, dist = farthest_point_sampling(V, F, 500)  # doctest: +SKIP
+    Example::
+
+        seeds, label, dist = farthest_point_sampling(V, F, 500)
     """
     st = VoronoiState(V, F)
     st.sample(k, first)

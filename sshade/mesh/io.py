@@ -47,7 +47,9 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
 
     Examples
     --------
-    >>> V, F = read_mesh("../shared/data/classic/bunny.off")  # doctest: +SKIP
+    Example::
+
+        V, F = read_mesh("../shared/data/classic/bunny.off")
     """
     p = Path(path)
     if not p.is_file():
@@ -443,8 +445,12 @@ def atomic_write(path, mode: str = "w", **kw):
 
     Examples
     --------
-    >>> with atomic_write("/tmp/x.txt") as fh:  # doctest: +SKIP
-    ...     fh.write("hello")
+    >>> import pathlib, tempfile
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "x.txt"
+    >>> with atomic_write(p) as fh:
+    ...     _ = fh.write("hello")
+    >>> p.read_text()
+    'hello'
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

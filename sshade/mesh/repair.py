@@ -53,7 +53,9 @@ def repair_mesh(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[st
 
     Examples
     --------
-    >>> V2, F2, origin, report = repair_mesh(V, F)  # doctest: +SKIP
+    Example::
+
+        V2, F2, origin, report = repair_mesh(V, F)
     """
     import pymeshlab
     from scipy.spatial import cKDTree
