@@ -5,15 +5,13 @@ dataset is one module calling :func:`register_dataset` plus one ``conf/dataset/N
 """
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ..registry import Registry
+
 __all__ = ["Dataset", "register_dataset", "datasets", "find_dataset"]
 
-#: Modules of the package that are not datasets.
-_NOT_DATASETS = ("registry", "case")
 
 
 @dataclass(frozen=True)
@@ -42,8 +40,7 @@ class Dataset:
     seeds: Callable | None = None
 
 
-_REGISTRY: dict[str, Dataset] = {}
-_discovered = False
+_REGISTRY = Registry(__package__, "dataset", skip=("registry", "case"))
 
 
 def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=None, root_hint: str = "",
@@ -53,31 +50,14 @@ def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=N
     programming error, not a user's)."""
     d = Dataset(name=str(name), load=load, keys=tuple(keys), path_keys=tuple(path_keys), prepare=prepare,
                 root_hint=root_hint, seeds=seeds)
-    old = _REGISTRY.get(d.name)
-    if old is not None and old.load is not load:
-        raise ValueError(f"dataset {name!r} registered twice ({old.load.__module__} and {load.__module__})")
-    _REGISTRY[d.name] = d
-    return d
-
-
-def _discover() -> None:
-    """Import every module of :mod:`eval.datasets` once (each registers its dataset)."""
-    global _discovered
-    if _discovered:
-        return
-    pkg = importlib.import_module(__package__)
-    for m in pkgutil.iter_modules(pkg.__path__):
-        if not m.name.startswith("_") and m.name not in _NOT_DATASETS and not m.ispkg:
-            importlib.import_module(f"{__package__}.{m.name}")
-    _discovered = True
+    return _REGISTRY.add(d.name, d, same=lambda old, new: old.load is new.load)
 
 
 def datasets() -> dict[str, Dataset]:
     """Every registered dataset, name -> :class:`Dataset`, sorted by name."""
-    _discover()
-    return dict(sorted(_REGISTRY.items()))
+    return _REGISTRY.all()
 
 
 def find_dataset(name) -> Dataset | None:
     """The dataset registered as ``name``, or None."""
-    return datasets().get(str(name))
+    return _REGISTRY.find(name)
