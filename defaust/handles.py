@@ -32,7 +32,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from sshade.errors import SShaDeError
 
-__all__ = ["BASE_LANDMARKS", "HandleSet", "Snap", "edge_graph", "geodesic_neighbourhood",
+__all__ = ["BASE_LANDMARKS", "HandleSet", "Snap", "edge_length_matrix", "geodesic_neighbourhood",
            "landmark_handles", "classify_groups", "snap_handles", "handles_to_arrays",
            "handles_from_arrays", "landmarks_for_target"]
 
@@ -118,7 +118,7 @@ class HandleSet:
         return len(self.rest)
 
 
-def edge_graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
+def edge_length_matrix(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
     """Symmetric sparse adjacency of the mesh edges weighted by Euclidean length.
 
     Parameters
@@ -131,7 +131,7 @@ def edge_graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
 
     Examples
     --------
-    >>> G = edge_graph(np.eye(3), np.array([[0, 1, 2]])); G.nnz
+    >>> G = edge_length_matrix(np.eye(3), np.array([[0, 1, 2]])); G.nnz
     6
     """
     F = np.asarray(F, np.int64)
@@ -147,13 +147,13 @@ def edge_graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
 def geodesic_neighbourhood(V, F, landmarks, k: int, *, graph: sp.csr_matrix | None = None) -> np.ndarray:
     """The ``k`` vertices geodesically nearest to each landmark (the landmark included).
 
-    Distances are shortest paths over :func:`edge_graph` (Dijkstra); ties are broken by
+    Distances are shortest paths over :func:`edge_length_matrix` (Dijkstra); ties are broken by
     vertex index, so the result is deterministic.
 
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64; landmarks : (L,) int vertex indices;
-    k : int, ``1 <= k <= n``; graph : optional precomputed :func:`edge_graph`.
+    k : int, ``1 <= k <= n``; graph : optional precomputed :func:`edge_length_matrix`.
 
     Returns
     -------
@@ -177,7 +177,7 @@ def geodesic_neighbourhood(V, F, landmarks, k: int, *, graph: sp.csr_matrix | No
     if not 1 <= k <= n:
         raise SShaDeError(f"neighbourhood size must be in [1, {n}], got {k}")
     L = np.asarray(landmarks, np.int64).ravel()
-    G = edge_graph(V, F) if graph is None else graph
+    G = edge_length_matrix(V, F) if graph is None else graph
     mean_edge = float(G.data.mean()) if G.nnz else 1.0
     limit = 3.0 * mean_edge * np.sqrt(k)  # a disc of k vertices has radius ~ sqrt(k) edges
     out = np.empty((len(L), k), np.int64)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from defaust.handles import edge_graph, geodesic_neighbourhood, landmark_handles
+from defaust.handles import edge_length_matrix, geodesic_neighbourhood, landmark_handles
 from eval.datasets import FAUST_LANDMARKS, discover_faust, faust_cases, load_cases
 from eval.datasets.faust import case_seed
 from sshade.errors import SShaDeError
@@ -131,8 +131,8 @@ def test_landmarks_keep_intrinsic_distances_across_poses(cases):
     by_subject: dict[int, list[np.ndarray]] = {}
     for c in cases:
         if c.subject not in by_subject:
-            by_subject[c.subject] = [dijkstra(edge_graph(c.V, c.F), directed=False, indices=LM)[:, LM]]
-        by_subject[c.subject].append(dijkstra(edge_graph(c.V_gt, c.F), directed=False, indices=LM)[:, LM])
+            by_subject[c.subject] = [dijkstra(edge_length_matrix(c.V, c.F), directed=False, indices=LM)[:, LM]]
+        by_subject[c.subject].append(dijkstra(edge_length_matrix(c.V_gt, c.F), directed=False, indices=LM)[:, LM])
     for s, Ds in by_subject.items():
         ref = Ds[0]
         off = ~np.eye(L, dtype=bool)
@@ -211,7 +211,7 @@ def test_determinism(faust_root, cases):
 
 def test_geodesic_neighbourhood_matches_full_dijkstra(cases):
     c = cases[0]
-    G = edge_graph(c.V, c.F)
+    G = edge_length_matrix(c.V, c.F)
     D = dijkstra(G, directed=False, indices=LM[:3])
     N = geodesic_neighbourhood(c.V, c.F, LM[:3], 90, graph=G)
     for i in range(3):
@@ -245,7 +245,7 @@ def test_overlapping_groups_are_deduplicated(cases):
     c = cases[0]
     # two adjacent landmarks with neighbourhoods of 60 drawn whole: heavy overlap
     a = int(LM[0])
-    b = int(edge_graph(c.V, c.F)[a].indices[0])  # a neighbour of a
+    b = int(edge_length_matrix(c.V, c.F)[a].indices[0])  # a neighbour of a
     H = landmark_handles(c.V, c.F, c.V_gt, _lm(a, b), n_per_landmark=60, neighbourhood=60, seed=0)
     assert len(np.unique(H.index)) == len(H.index) < 120
     assert (H.group[:60] == 0).all()  # first group kept whole
