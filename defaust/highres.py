@@ -18,8 +18,7 @@ Both steps are pymeshlab filters:
    subdivided surface (at most ``max_attempts`` times).
 
 Deterministic: both filters are deterministic for a given input (checked by the tests
-through byte-identical builds). Timing on one core: ~1 s for the subdivision and ~80 s
-for the remesh of a 6890-vertex FAUST registration to ~170k vertices (10 iterations).
+through byte-identical builds). The remesh dominates a subject's build time.
 """
 from __future__ import annotations
 

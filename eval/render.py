@@ -18,8 +18,8 @@ Coordinates: ``up="y"`` (default; FAUST, most scanned meshes) shows +y upwards a
 at the +z side for ``view=(0, -90)``; ``up="z"`` uses the data as they are (matplotlib's
 convention). ``view=(elev, azim)`` in degrees as in :meth:`Axes3D.view_init`.
 
-Speed (2-core VM, 480x640 px, every face drawn, no edge strokes, no anti-aliasing):
-~0.1 s for 7k faces, ~0.2-0.3 s for FAUST (13.8k), ~0.5 s for 55k, ~2 s for 220k.
+Every face is drawn (no edge strokes, no anti-aliasing); the cost grows linearly with the
+face count.
 
 Example::
 

@@ -2,7 +2,8 @@
 
 numpy >= 2.3 routes ``np.unique`` on integers through a hash table that is several times
 slower than sorting for the million-element edge-key arrays of 100k+ vertex meshes
-(measured: 0.74 s vs 0.07 s at 173k vertices), so the hot paths use this instead.
+(about ten times slower at 170k vertices, benchmarks/remesh_speed.py), so the hot paths use
+this instead.
 """
 from __future__ import annotations
 

@@ -10,7 +10,8 @@ the baselines of :mod:`baselines`) has a ``warmup(n_vertices=None) -> float`` bu
 records the seconds as ``compile_s`` (table row and ``run.json``), and
 :func:`eval.experiments.scaling.run_scaling` does the same before its timed calls. On a cold numba
 cache (a fresh clone, a cluster node, ``NUMBA_CACHE_DIR`` pointing to an empty folder) the
-compilation takes 10-20 s, about 40x SShaDe's run on a 6,890-vertex FAUST case.
+compilation takes many times SShaDe's run on a FAUST-size case (docs/outputs.md, "Timings
+exclude compilation").
 """
 from __future__ import annotations
 
