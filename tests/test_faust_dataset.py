@@ -8,9 +8,16 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from defaust.handles import edge_length_matrix, geodesic_neighbourhood, landmark_handles
+from defaust.build import handle_seed
+from defaust.handles import (
+    BASE_LANDMARKS,
+    edge_length_matrix,
+    geodesic_neighbourhood,
+    landmark_handles,
+    landmarks_for_target,
+)
 from eval.datasets import FAUST_LANDMARKS, discover_faust, faust_cases, load_cases
-from eval.datasets.faust import case_seed
+from eval.datasets.faust import case_seed, faust_plan
 from sshade.errors import SShaDeError
 
 L = len(FAUST_LANDMARKS)
@@ -43,6 +50,12 @@ def present(faust_root):
 
 @pytest.fixture(scope="module")
 def cases(faust_root):
+    """Every non-rest pose with all 11 landmarks (most checks below need every group)."""
+    return faust_cases(faust_root, protocol="all_landmarks")
+
+
+@pytest.fixture(scope="module")
+def paper_cases(faust_root):
     return faust_cases(faust_root)
 
 
@@ -91,6 +104,68 @@ def test_subject_pose_filters_and_limit(faust_root, cases):
         faust_cases(faust_root, subjects=[9999])
     with pytest.raises(SShaDeError, match="limit"):
         faust_cases(faust_root, limit=0)
+
+
+# ---------------------------------------------------------------- protocols
+
+def test_paper_protocol_landmark_counts_per_target(paper_cases, present):
+    """Default protocol = the paper's (the DeFAUST builder's rule): per subject the first
+    4 non-rest poses, 6 landmarks (BASE_LANDMARKS) for targets 1-3, all 11 for the last."""
+    by_subject: dict[int, list] = {}
+    for c in paper_cases:
+        by_subject.setdefault(c.subject, []).append(c)
+    rest = {s for s, p in present if p == 0}
+    assert sorted(by_subject) == sorted(s for s in rest if any(q != 0 for s2, q in present if s2 == s))
+    for s, cs in by_subject.items():
+        expect = sorted(p for s2, p in present if s2 == s and p != 0)[:4]
+        assert [c.pose for c in cs] == expect
+        n = len(cs)
+        for i, c in enumerate(cs):
+            names = list(FAUST_LANDMARKS) if i == n - 1 else list(BASE_LANDMARKS)
+            assert list(c.landmark_names) == names
+            assert c.delta.shape == (len(names),)
+            assert np.bincount(c.group, minlength=len(names)).tolist() == [30] * len(names)
+            assert len(c.handles) == 30 * len(names)
+        if n == 4:
+            assert [len(c.landmark_names) for c in cs] == [6, 6, 6, 11]
+
+
+def test_paper_cases_are_the_builders_low_res_handles(paper_cases):
+    """Same rule, same seeds as ``defaust.build`` (landmarks_for_target, handle_seed)."""
+    for c in paper_cases[:4]:
+        assert c.seed == handle_seed(0, c.subject, c.pose) == case_seed(0, c.subject, c.pose)
+        ps = [d.pose for d in paper_cases if d.subject == c.subject]
+        lm = landmarks_for_target(dict(FAUST_LANDMARKS), ps.index(c.pose), len(ps))
+        H = landmark_handles(c.V, c.F, c.V_gt, lm, seed=handle_seed(0, c.subject, c.pose))
+        np.testing.assert_array_equal(H.index, c.handles)
+        np.testing.assert_array_equal(H.target, c.targets)
+
+
+def test_protocol_plans_without_files():
+    files = {(s, p): f"tr_reg_{10 * s + p:03d}.ply" for s in (0, 1) for p in range(7)}
+    del files[(1, 0)]  # subject 1 has no rest pose
+    plan = faust_plan(files)
+    assert [(s, p, len(lm)) for s, p, lm in plan] == [(0, 1, 6), (0, 2, 6), (0, 3, 6), (0, 4, 11)]
+    plan = faust_plan(files, n_targets=2)
+    assert [(p, len(lm)) for _, p, lm in plan] == [(1, 6), (2, 11)]
+    # explicit targets, as the builder's faust_target_poses: the last one listed gets all
+    assert [(p, len(lm)) for _, p, lm in faust_plan(files, poses=[5, 2])] == [(2, 6), (5, 11)]
+    plan = faust_plan(files, protocol="all_landmarks")
+    assert [(s, p) for s, p, _ in plan] == [(0, p) for p in range(1, 7)]
+    assert all(len(lm) == len(FAUST_LANDMARKS) for _, _, lm in plan)
+    with pytest.raises(SShaDeError, match="protocol must be one of"):
+        faust_plan(files, protocol="nope")
+    with pytest.raises(SShaDeError, match="no FAUST case"):
+        faust_plan(files, subjects=[1])
+    with pytest.raises(SShaDeError, match="no FAUST case"):
+        faust_plan(files, subjects=[1], protocol="all_landmarks")
+
+
+def test_protocol_through_the_registry(faust_root, cases):
+    alt = load_cases("faust", faust_root, protocol="all_landmarks", limit=1)[0]
+    assert alt.name == cases[0].name and len(alt.landmark_names) == len(FAUST_LANDMARKS)
+    with pytest.raises(SShaDeError, match="protocol"):
+        load_cases("faust", faust_root, protocol="sideways")
 
 
 # ---------------------------------------------------------------- landmarks
@@ -194,7 +269,7 @@ def test_threshold_extremes(cases):
 
 
 def test_determinism(faust_root, cases):
-    again = faust_cases(faust_root)
+    again = faust_cases(faust_root, protocol="all_landmarks")
     for a, b in zip(cases, again):
         np.testing.assert_array_equal(a.handles, b.handles)
         np.testing.assert_array_equal(a.targets, b.targets)

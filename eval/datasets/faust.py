@@ -6,17 +6,26 @@ with index ``i = XYZ = 10 * subject + pose`` (subject ``i // 10``, pose ``i % 10
 6890 vertices each, all sharing ONE face array and in vertex-to-vertex correspondence
 (the SMPL template topology). Units: metres.
 
-Per subject, pose 0 is the rest pose and every other pose present gives one case: the
-rest mesh is deformed with handles drawn around :data:`FAUST_LANDMARKS`
+Per subject, pose 0 is the rest pose and each target pose gives one case: the rest
+mesh is deformed with handles drawn around landmarks of :data:`FAUST_LANDMARKS`
 (:func:`defaust.handles.landmark_handles`), and the target pose itself is the ground
 truth for the deformed shape.
 
-Differences from the paper's DeFAUST (documented, deliberate): the original handle
-sets are not distributed, so they are regenerated here from a fixed landmark list with
-a seeded draw; every non-rest pose present is used (the paper picks 4 per subject);
-the same landmarks are used for every pose (the paper adds landmarks for one pose);
-the low-resolution registrations are used as they are (no LS3 Loop subdivision to
-150k-200k vertices).
+Protocols (``dataset.protocol``):
+
+- ``paper`` (default): the paper's DeFAUST protocol (appendix "DeFAUST dataset"), the
+  DeFAUST builder's rule: per subject the first ``n_targets`` (4) non-rest poses present
+  (:func:`defaust.faust_source.faust_subjects`), the first three with the 6
+  :data:`defaust.handles.BASE_LANDMARKS`, the last with all 11 landmarks
+  (:func:`defaust.handles.landmarks_for_target`). The handle seeds are the builder's
+  (:func:`case_seed` = :func:`defaust.build.handle_seed`'s formula), so these cases have
+  the low-resolution handles of a ``python -m defaust source=faust`` build.
+- ``all_landmarks``: every non-rest pose present, every pose with all 11 landmarks.
+
+Remaining differences from the paper's DeFAUST (documented in docs/differences.md): the
+original handle sets are not distributed, so they are regenerated from a fixed landmark
+list with a seeded draw; the low-resolution registrations are used as they are (no LS3
+Loop subdivision to 150k-200k vertices; ``dataset=defaust`` has those).
 """
 from __future__ import annotations
 
@@ -27,17 +36,15 @@ from pathlib import Path
 import numpy as np
 
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
-from defaust.faust_source import discover_faust
-from defaust.handles import (
-    landmark_handles,  # the DeFAUST builder's (one implementation)
-)
+from defaust.faust_source import discover_faust, faust_subjects
+from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUST builder's (one implementation)
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
 from .case import DeformationCase
 from .registry import register_dataset
 
-__all__ = ["FAUST_LANDMARKS", "Case", "discover_faust", "faust_cases", "case_seed"]
+__all__ = ["FAUST_LANDMARKS", "PROTOCOLS", "Case", "discover_faust", "faust_cases", "case_seed", "faust_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -82,6 +89,9 @@ FAUST_LANDMARKS = _FAUST_LANDMARKS  # one list, in defaust.faust_source
 
 FAUST_N_VERTICES = 6890
 
+#: ``dataset.protocol`` values, see the module docstring.
+PROTOCOLS = ("paper", "all_landmarks")
+
 
 @dataclass
 class Case(DeformationCase):
@@ -91,13 +101,16 @@ class Case(DeformationCase):
     Attributes
     ----------
     name : ``"s{subject}_p{pose}"``; V in metres; V_gt : (n, 3) the target-pose
-    registration (ground truth); group indexes :data:`FAUST_LANDMARKS` order.
+    registration (ground truth); group indexes ``landmark_names``.
+    landmark_names : tuple of str, (L,) the landmarks of this case (6 or 11 names,
+        :data:`FAUST_LANDMARKS` order).
     delta : (L,) float64 summed group displacement per landmark (metres).
     seed : int, seed of the handle draw (:func:`case_seed`).
     rest_path, target_path : Path, source files.
     """
 
     delta: np.ndarray = field(repr=False, default=None)
+    landmark_names: tuple = ()
     seed: int = 0
     rest_path: Path | None = None
     target_path: Path | None = None
@@ -112,86 +125,133 @@ def case_seed(seed: int, subject: int, pose: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(subject), int(pose)]).generate_state(1)[0])
 
 
+def faust_plan(files: dict, *, protocol: str = "paper", subjects=None, poses=None, n_targets: int = 4,
+               landmarks: dict[str, int] | None = None) -> list[tuple[int, int, dict[str, int]]]:
+    """The cases of a protocol: ``(subject, pose, landmarks)`` in (subject, pose) order.
+
+    Parameters
+    ----------
+    files : output of :func:`discover_faust`.
+    protocol : ``"paper"`` or ``"all_landmarks"`` (module docstring).
+    subjects : iterable of int or None, subjects to use (default: all present).
+    poses : iterable of int or None. ``all_landmarks``: the target poses kept (default:
+        all present except 0). ``paper``: the explicit target list, as the builder's
+        ``faust_target_poses`` (the last one listed that a subject has gets all landmarks);
+        default: the first ``n_targets`` non-rest poses present.
+    n_targets : int, targets per subject of the ``paper`` protocol (paper: 4).
+    landmarks : dict name -> vertex index, default :data:`FAUST_LANDMARKS`.
+
+    Returns
+    -------
+    list of ``(subject, pose, {name: vertex})``; subjects without a pose-0 file are
+    skipped (with a warning under ``all_landmarks``).
+
+    Raises
+    ------
+    SShaDeError on an unknown protocol or when no case is left ("no FAUST case ...").
+
+    Examples
+    --------
+    >>> files = {(0, p): f"tr_reg_00{p}.ply" for p in range(6)}
+    >>> [(s, p, len(lm)) for s, p, lm in faust_plan(files)]
+    [(0, 1, 6), (0, 2, 6), (0, 3, 6), (0, 4, 11)]
+    """
+    lm = dict(FAUST_LANDMARKS if landmarks is None else landmarks)
+    subj_sel = None if subjects is None else sorted({int(s) for s in _as_list(subjects)})
+    pose_sel = None if poses is None else sorted({int(p) for p in _as_list(poses)})
+    if protocol == "paper":
+        try:
+            plan = faust_subjects(files, n_targets=int(n_targets), target_poses=pose_sel, subjects=subj_sel)
+        except SShaDeError as e:
+            raise SShaDeError(f"no FAUST case for the paper protocol: {e}") from None
+        return [(s, p, landmarks_for_target(lm, ti, len(ps))) for s, ps in plan.items() for ti, p in enumerate(ps)]
+    if protocol != "all_landmarks":
+        raise SShaDeError(f"dataset.protocol must be one of {list(PROTOCOLS)}, got {protocol!r}")
+    out = []
+    for s in sorted({s for s, _ in files}):
+        if subj_sel is not None and s not in subj_sel:
+            continue
+        targets = [p for (s2, p) in files if s2 == s and p != 0 and (pose_sel is None or p in pose_sel)]
+        if targets and (s, 0) not in files:
+            log.warning("FAUST subject %d has no rest pose (tr_reg_%d0.ply); skipped", s, s)
+            continue
+        out += [(s, p, dict(lm)) for p in targets]
+    if not out:
+        raise SShaDeError(f"no FAUST case for subjects={_fmt(subj_sel)} poses={_fmt(pose_sel)} "
+                          f"(found subject/pose {sorted(files)}; rest pose 0 and at least one other pose are needed)")
+    return out
+
+
 def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
                 neighbourhood: int = 90, static_threshold: float = 0.02, seed: int = 0,
-                limit: int | None = None, landmarks: dict[str, int] | None = None) -> list[Case]:
+                limit: int | None = None, landmarks: dict[str, int] | None = None,
+                protocol: str = "paper", n_targets: int = 4) -> list[Case]:
     """Build the deformation cases from a folder of FAUST registrations.
 
     Parameters
     ----------
     root : str or Path, see :func:`discover_faust`.
-    subjects : iterable of int or None, subjects to use (default: all present).
-    poses : iterable of int or None, target poses to use (default: all present except 0;
-        pose 0 is always the rest pose and never a target).
+    subjects, poses, protocol, n_targets, landmarks : which cases and which landmarks,
+        see :func:`faust_plan` (``protocol`` ``"paper"`` by default: 4 targets per subject,
+        6 landmarks for the first three, 11 for the last).
     n_per_landmark, neighbourhood, static_threshold : see
         :func:`defaust.handles.landmark_handles` (threshold in metres).
     seed : int, dataset seed; each case uses :func:`case_seed` ``(seed, subject, pose)``.
     limit : int or None, keep only the first ``limit`` cases in (subject, pose) order.
-    landmarks : dict name -> vertex index, default :data:`FAUST_LANDMARKS`.
 
     Returns
     -------
-    list of :class:`Case`, sorted by (subject, pose). Subjects without a pose-0 file are
-    skipped with a warning.
+    list of :class:`Case`, sorted by (subject, pose).
 
     Raises
     ------
     SShaDeError
         No registrations found, unreadable/invalid mesh, a mesh whose faces differ from
-        its rest pose's (not a FAUST registration), a bad ``limit``, or no case left
-        after filtering.
+        its rest pose's (not a FAUST registration), a bad ``limit`` or ``protocol``, or
+        no case left after filtering.
     """
     files = discover_faust(root)
-    lm = dict(FAUST_LANDMARKS if landmarks is None else landmarks)
-    subj_sel = None if subjects is None else {int(s) for s in _as_list(subjects)}
-    pose_sel = None if poses is None else {int(p) for p in _as_list(poses)}
     if limit is not None:
         limit = int(limit)
         if limit < 1:
             raise SShaDeError(f"limit must be a positive integer or null, got {limit}")
-    present_subjects = sorted({s for s, _ in files})
-    plan: list[tuple[int, int]] = []
-    for s in present_subjects:
-        if subj_sel is not None and s not in subj_sel:
-            continue
-        targets = [p for (s2, p) in files if s2 == s and p != 0 and (pose_sel is None or p in pose_sel)]
-        if not targets:
-            continue
-        if (s, 0) not in files:
-            log.warning("FAUST subject %d has no rest pose (tr_reg_%d0.ply); skipped", s, s)
-            continue
-        plan += [(s, p) for p in targets]
+    try:
+        plan = faust_plan(files, protocol=protocol, subjects=subjects, poses=poses, n_targets=n_targets,
+                          landmarks=landmarks)
+    except SShaDeError as e:
+        raise SShaDeError(f"{Path(root)}: {e}") from None
     if limit is not None:
         plan = plan[:limit]
-    if not plan:
-        raise SShaDeError(f"no FAUST case in {Path(root)} for subjects={_fmt(subj_sel)} poses={_fmt(pose_sel)} "
-                          f"(found subject/pose {sorted(files)}; rest pose 0 and at least one other pose are needed)")
-
-
     rest: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     cases: list[Case] = []
-    for s, p in plan:
+    for s, p, lm in plan:
         if s not in rest:
-            rest[s] = read_mesh(files[(s, 0)])
-            V0, F0 = rest[s]
-            if len(V0) != FAUST_N_VERTICES:
-                log.warning("%s has %d vertices, not the FAUST template's %d; landmark indices may be meaningless",
-                            files[(s, 0)], len(V0), FAUST_N_VERTICES)
-            bad = [k for k, v in lm.items() if not 0 <= v < len(V0)]
-            if bad:
-                raise SShaDeError(f"{files[(s, 0)]}: landmark(s) {bad} out of range for {len(V0)} vertices")
+            rest[s] = _read_rest(files[(s, 0)])
         V0, F0 = rest[s]
         V1, F1 = read_mesh(files[(s, p)])
         if V1.shape != V0.shape or F1.shape != F0.shape or not np.array_equal(F1, F0):
             raise SShaDeError(f"{files[(s, p)]}: connectivity differs from the rest pose {files[(s, 0)]}; "
                               "FAUST registrations must share one face array")
+        bad = [k for k, v in lm.items() if not 0 <= v < len(V0)]
+        if bad:
+            raise SShaDeError(f"{files[(s, 0)]}: landmark(s) {bad} out of range for {len(V0)} vertices")
         cs = case_seed(seed, s, p)
         H = landmark_handles(V0, F0, V1, lm, n_per_landmark=n_per_landmark,
                              neighbourhood=neighbourhood, static_threshold=static_threshold, seed=cs)
         cases.append(Case(name=f"s{s}_p{p}", subject=s, pose=p, V=V0, F=F0, handles=H.index,
                           targets=H.target, static=H.static, V_gt=V1, group=H.group, delta=H.delta,
-                          seed=cs, rest_path=files[(s, 0)], target_path=files[(s, p)]))
+                          landmark_names=H.landmark_names, seed=cs, rest_path=files[(s, 0)],
+                          target_path=files[(s, p)]))
     return cases
+
+
+def _read_rest(path) -> tuple[np.ndarray, np.ndarray]:
+    """A subject's rest mesh, with a warning when it is not the 6890-vertex template."""
+    V0, F0 = read_mesh(path)
+    if len(V0) != FAUST_N_VERTICES:
+        log.warning("%s has %d vertices, not the FAUST template's %d; landmark indices may be meaningless",
+                    path, len(V0), FAUST_N_VERTICES)
+    return V0, F0
 
 
 def _as_list(x) -> list:
@@ -208,4 +268,4 @@ def _fmt(sel) -> str:
 
 
 register_dataset("faust", faust_cases, keys=("subjects", "poses", "n_per_landmark", "neighbourhood",
-                                             "static_threshold", "seed", "limit"))
+                                             "static_threshold", "seed", "limit", "protocol", "n_targets"))
