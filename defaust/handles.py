@@ -441,7 +441,8 @@ def snap_handles(V, rest_positions, *, tol: float | None = None, name: str = "ha
     keep = np.zeros(len(P), bool)
     keep[order[first]] = True
     n_drop = int((~keep).sum())
-    if n_drop:
-        log.warning("%s: %d of %d handles snapped to a vertex already taken by a nearer handle; dropped",
-                    name, n_drop, len(P))
+    if n_drop:  # two stored positions (low-res vertices) closer than the mesh's spacing share a nearest vertex
+        log.warning("%s: %d of %d handles snapped to a vertex already taken by a nearer handle; dropped (their "
+                    "low-res vertices are closer together than this mesh's vertex spacing; counted per case as "
+                    "n_handles_dropped, docs/differences.md)", name, n_drop, len(P))
     return Snap(index=idx[keep], keep=keep, distance=dist, n_dropped=n_drop)

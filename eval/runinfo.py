@@ -1,6 +1,7 @@
 """Provenance of an evaluation run, written as ``run.json`` beside the tables.
 
-Records: the resolved config, the seeds used (dataset seed, per-case handle seeds,
+Records: the resolved config, the departures from the paper that the config selects
+(:func:`departures`, docs/differences.md), the seeds used (dataset seed, per-case handle seeds,
 method seeds), the git commit of the project (and which tracked files had local
 changes), the Python version, the platform and the versions of the packages in
 :data:`PACKAGES` (numerical libraries, Hydra and its launchers, matplotlib).
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from sshade.mesh.io import atomic_write
 
-__all__ = ["PACKAGES", "package_versions", "git_info", "collect_runinfo", "write_runinfo"]
+__all__ = ["PACKAGES", "package_versions", "git_info", "departures", "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
@@ -68,6 +69,61 @@ def git_info(root=REPO_ROOT) -> dict:
     return {"commit": sha.strip(), "dirty": bool(modified), "modified": modified}
 
 
+#: method option -> (the paper's value, short reason); docs/differences.md explains each.
+_PAPER_METHOD_OPTIONS = {
+    "gradient": ("raw", "orthonormalised LRF instead of the raw gradient frame of §3.2 eq. (2)"),
+    "warm_start": (False, "samplings 1..k-1 start from sampling 0's result (§3.3: independent)"),
+    "protocol": ("paper", "ARAP run to the converged criterion, not the 1000-iteration move rule of §4.1"),
+}
+
+
+def departures(config: dict) -> list[str]:
+    """Departures from the paper selected by a resolved config (docs/differences.md).
+
+    Parameters
+    ----------
+    config : the resolved config as plain containers. Read: ``methods`` and their
+        ``method.<name>`` sections (``gradient``, ``warm_start``, ``protocol``), else the
+        ``sshade`` / ``arap`` sections; ``dataset.name`` with ``dataset.protocol`` and
+        ``dataset.n_targets`` (FAUST).
+
+    Returns
+    -------
+    list of short strings ``"<where>.<key>=<value> (paper: <value>): <why>"``, one per
+    switch at a non-paper value, in a fixed order; empty when every switch has the
+    paper's value. Departures without a switch (docs/differences.md) are not listed.
+
+    Examples
+    --------
+    >>> departures({"sshade": {"gradient": "raw", "warm_start": False}, "arap": {"protocol": "paper"}})
+    []
+    >>> departures({"arap": {"protocol": "converged"}})[0].split(":")[0]
+    'arap.protocol=converged (paper'
+    """
+    out: list[str] = []
+    sections = config.get("method") or {}
+    names = [n for n in (config.get("methods") or []) if isinstance(sections.get(n), dict)]
+    where = {f"method.{n}": sections[n] for n in names} or {
+        "sshade": config.get("sshade") or {}, "arap": config.get("arap") or {}}
+    for prefix, sec in where.items():
+        for key, (paper, why) in _PAPER_METHOD_OPTIONS.items():
+            if key in sec and sec[key] is not None and sec[key] != paper:
+                out.append(f"{prefix}.{key}={_fmt(sec[key])} (paper: {_fmt(paper)}): {why}")
+    ds = config.get("dataset") or {}
+    if ds.get("name") == "faust":
+        if ds.get("protocol", "paper") != "paper":
+            out.append(f"dataset.protocol={ds['protocol']} (paper: paper): every pose with all 11 landmarks, "
+                       "not 6 for targets 1-3 (appendix A)")
+        if ds.get("n_targets", 4) != 4:
+            out.append(f"dataset.n_targets={ds['n_targets']} (paper: 4): targets per subject (appendix A)")
+    return out
+
+
+def _fmt(v) -> str:
+    """A config value as written on the command line (true/false for bools)."""
+    return str(v).lower() if isinstance(v, bool) else str(v)
+
+
 def collect_runinfo(config: dict, *, seeds: dict | None = None, extra: dict | None = None) -> dict:
     """Provenance dict (JSON-serialisable).
 
@@ -83,6 +139,7 @@ def collect_runinfo(config: dict, *, seeds: dict | None = None, extra: dict | No
         "command": _command(),
         "cwd": os.getcwd(),
         "config": config,
+        "departures": departures(config),
         "seeds": seeds or {},
         "git": git_info(),
         "python": sys.version.split()[0],

@@ -53,7 +53,8 @@ def _finish(V, targets, handles, prep, *, arap: dict, gradient, V0=None):
     res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", V0=V0, **arap)
     t1 = time.perf_counter()
     Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=gradient)
-    # handles are low-res vertices: the transfer reproduces them up to round-off
+    # handles are low-res vertices, but the transfer reproduces one only where its triangle
+    # P(v) moves rigidly (the frame is not the triangle's affine map): overwritten here
     Vd[handles] = targets
     t2 = time.perf_counter()
     return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
@@ -291,7 +292,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     with SamplingPool(state, workers) as pool:
         results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
     Vd = np.mean(results, axis=0)
-    Vd[handles] = targets
+    Vd[handles] = targets  # overwritten after averaging (the paper does not say; docs/differences.md)
     if not return_info:
         return Vd
     info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,

@@ -288,7 +288,7 @@ def _run_one(m, name: str, case, refs, guard: dict):
     row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": name,
            "n_vertices": len(case.V), "n_faces": len(case.F), "n_handles": len(case.handles),
            "n_static": int(case.static.sum()), "n_dynamic": int((~case.static).sum()),
-           "case_seed": getattr(case, "seed", None), "error": ""}
+           "case_seed": getattr(case, "seed", None), "n_handles_dropped": getattr(case, "n_dropped", None), "error": ""}
     try:
         r = run_method(m, case.V, case.F, case.handles, case.targets, timeout_s=guard["timeout_s"])
         row["compile_s"], row["time_s"] = r.compile_s, r.seconds  # compilation: never inside time_s
