@@ -153,6 +153,9 @@ def test_protocol_plans_without_files():
     plan = faust_plan(files, protocol="all_landmarks")
     assert [(s, p) for s, p, _ in plan] == [(0, p) for p in range(1, 7)]
     assert all(len(lm) == len(FAUST_LANDMARKS) for _, _, lm in plan)
+    for bad in (0, "2", 1.5, True):
+        with pytest.raises(SShaDeError, match="n_targets"):
+            faust_plan(files, n_targets=bad)
     with pytest.raises(SShaDeError, match="protocol must be one of"):
         faust_plan(files, protocol="nope")
     with pytest.raises(SShaDeError, match="no FAUST case"):

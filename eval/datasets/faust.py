@@ -148,7 +148,8 @@ def faust_plan(files: dict, *, protocol: str = "paper", subjects=None, poses=Non
 
     Raises
     ------
-    SShaDeError on an unknown protocol or when no case is left ("no FAUST case ...").
+    SShaDeError on an unknown protocol, a bad ``n_targets`` or when no case is left
+    ("no FAUST case ...").
 
     Examples
     --------
@@ -160,6 +161,8 @@ def faust_plan(files: dict, *, protocol: str = "paper", subjects=None, poses=Non
     subj_sel = None if subjects is None else sorted({int(s) for s in _as_list(subjects)})
     pose_sel = None if poses is None else sorted({int(p) for p in _as_list(poses)})
     if protocol == "paper":
+        if isinstance(n_targets, bool) or not isinstance(n_targets, (int, np.integer)) or n_targets < 1:
+            raise SShaDeError(f"dataset.n_targets must be a positive integer, got {n_targets!r}")
         try:
             plan = faust_subjects(files, n_targets=int(n_targets), target_poses=pose_sel, subjects=subj_sel)
         except SShaDeError as e:
