@@ -71,7 +71,7 @@ def _steps(a) -> list[tuple[str, list[str]]]:
 
 
 def main(argv=None) -> int:
-    """``python -m eval.reproduce [--faust DIR] [--tosca DIR] [--shapes DIR] [--scaling MESH]``.
+    """``python -m eval.reproduce [--faust DIR] [--tosca DIR] [--shapes DIR] [--scaling MESH] [--only STEPS]``.
 
     Returns
     -------
@@ -85,6 +85,7 @@ def main(argv=None) -> int:
     p.add_argument("--shapes", help="folder with the Stanford models (armadillo.obj, bunny.off, dragon.obj)")
     p.add_argument("--scaling", help="a real mesh for the scaling benchmark")
     p.add_argument("--dry-run", action="store_true", help="print the commands only")
+    p.add_argument("--only", help="comma-separated step names to run (e.g. faust,tosca); default every step")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")
     a = p.parse_args(argv)
     return run_command(lambda: _run_steps(a), where="results/")
@@ -93,7 +94,16 @@ def main(argv=None) -> int:
 def _run_steps(a) -> int:
     """Run every step as its own process; 1 (after one ``error:`` line) if any failed."""
     failed = []
-    for name, cmd in _steps(a):
+    steps = _steps(a)
+    only = [x.strip() for x in (a.only or "").split(",") if x.strip()]
+    unknown = sorted(set(only) - {name for name, _ in steps})
+    if unknown:
+        print(f"error: --only names no step of this command: {', '.join(unknown)} "
+              f"(steps: {', '.join(name for name, _ in steps)})", file=sys.stderr)
+        return 2
+    for name, cmd in steps:
+        if only and name not in only:
+            continue
         print(f"== {name}: {' '.join(cmd[1:])}", flush=True)
         if a.dry_run:
             continue

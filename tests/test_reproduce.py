@@ -34,3 +34,10 @@ def test_every_experiment_with_folders_and_figures(capsys):
         want = "hydra.sweep.dir=results/sweeps/defaust" if name == "sweep" else f"out_dir=results/{name}"
         assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
+
+
+def test_only_runs_the_named_steps(capsys):
+    steps = _steps(capsys, "--faust", "F", "--only", "faust,pose_transfer")
+    assert list(steps) == ["faust", "pose_transfer"]
+    assert main(["--dry-run", "--only", "nope"]) == 2
+    assert "nope" in capsys.readouterr().err
