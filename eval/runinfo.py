@@ -102,7 +102,7 @@ def departures(config: dict) -> list[str]:
     """
     out: list[str] = []
     sections = config.get("method") or {}
-    names = [n for n in (config.get("methods") or []) if isinstance(sections.get(n), dict)]
+    names = [n for n in (config.get("methods") or []) if isinstance(n, str) and isinstance(sections.get(n), dict)]
     where = {f"method.{n}": sections[n] for n in names} or {
         "sshade": config.get("sshade") or {}, "arap": config.get("arap") or {}}
     for prefix, sec in where.items():

@@ -38,3 +38,11 @@ def test_recorded_in_runinfo():
     info = collect_runinfo({"arap": {"protocol": "converged"}})
     assert info["departures"] == departures({"arap": {"protocol": "converged"}})
     assert list(info).index("departures") == list(info).index("config") + 1
+
+
+def test_plugin_methods_are_skipped():
+    """A plug-in in ``methods`` is a mapping (no ``method.<name>`` section): no departure, no crash."""
+    from eval.runinfo import departures
+    cfg = {"methods": ["SShaDe", {"_target_": "x.Y", "name": "Mine"}],
+           "method": {"SShaDe": {"gradient": "raw", "warm_start": False, "protocol": "paper"}}}
+    assert departures(cfg) == []
