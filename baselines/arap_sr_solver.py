@@ -105,7 +105,8 @@ class SRProblem:
     Parameters
     ----------
     V : (n, 3) float64 rest positions; F : (m, 3) int faces. handles : (h,) int;
-    targets : (h, 3) float64. alpha : float >= 0, smoothness weight (times the area).
+    targets : (h, 3) float64 (both None: energies only, no global step).
+    alpha : float >= 0, smoothness weight (times the area).
     linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
 
     Raises
@@ -117,7 +118,11 @@ class SRProblem:
         if not (np.isfinite(alpha) and alpha >= 0):
             raise SShaDeError(f"ARAP-SR: alpha must be a finite number >= 0, got {alpha!r}")
         self.ops = ops = build_operators(V, F, "spokes")
-        self.h, self.T = validate_handles(ops.V, handles, targets)
+        if handles is None:  # energy evaluation only (no global step)
+            handles, targets = np.zeros(0, np.int64), np.zeros((0, 3))
+        else:
+            handles, targets = validate_handles(ops.V, handles, targets)
+        self.h, self.T = handles, targets
         self.n, self.alpha = ops.n, float(alpha)
         Vr, Fr = ops.V, ops.F
         self.area = 0.5 * float(np.linalg.norm(np.cross(Vr[Fr[:, 1]] - Vr[Fr[:, 0]], Vr[Fr[:, 2]] - Vr[Fr[:, 0]]),
@@ -132,7 +137,7 @@ class SRProblem:
         free[self.h] = False
         self.free = np.flatnonzero(free)
         t0 = clock()
-        self.solver = LaplacianSolver(ops.L[self.free][:, self.free], linear_solver)
+        self.solver = LaplacianSolver(ops.L[self.free][:, self.free], linear_solver) if len(self.h) else None
         self.factor_s = clock() - t0
         self.Lfb_T = ops.L[self.free][:, self.h] @ self.T
 
