@@ -135,7 +135,8 @@ class ARAPSR:
     protocol : ``"converged"`` (default, ``info["protocol"] = "converged-sr"``:
         :func:`baselines.arap_sr_solver.solve_arap_sr`, Gauss-Seidel local step and
         Anderson acceleration, stopped by the energy-and-gradient criterion ``etol`` /
-        ``gtol``) or ``"paper"`` (:func:`arap_sr_deform`, the §4.1 move rule ``tol``; ``info["protocol"] = "move-rule"``).
+        ``gtol``) or ``"paper"`` (:func:`arap_sr_deform`,
+        the §4.1 move rule ``tol``; ``info["protocol"] = "move-rule"``).
     tol : float > 0, ``"paper"``: move tolerance (fraction of the bounding-box diagonal).
     max_iter : int or None, iteration cap (None: 10000 converged, 1000 paper).
     etol, gtol : floats or None, the ``"converged"`` criterion (None: the defaults of
