@@ -23,11 +23,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from sshade.arap import ArapResult, iterate, rigid_fit
+from sshade.arap import PROTOCOLS, ArapResult, iterate, make_criterion, rigid_fit
+from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
 
 from .arap import check_arap_args
+from .arap_sr_solver import solve_arap_sr
 
 __all__ = ["arap_sr_deform", "ARAPSR"]
 
@@ -46,7 +48,8 @@ def _polar(M: np.ndarray) -> np.ndarray:
 def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
                    alpha: float = 0.01, tol: float = 1e-4, max_iter: int = 1000,
                    V0: np.ndarray | None = None, time_budget_s: float | None = None) -> ArapResult:
-    """ARAP with smooth rotations, run to convergence (paper §4.1 protocol).
+    """ARAP with smooth rotations under the paper's §4.1 move rule (``arap.protocol=paper``;
+    the converged protocol is :func:`baselines.arap_sr_solver.solve_arap_sr`).
 
     Parameters
     ----------
@@ -126,16 +129,35 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
 class ARAPSR:
     """ARAP-SR baseline behind the :class:`sshade.method.Deformer` interface.
 
-    Parameters: ``alpha`` (rotation smoothness), ``tol``, ``max_iter`` (paper §4.1;
-    None = 1000).
+    Parameters
+    ----------
+    alpha : float >= 0, rotation smoothness (times the surface area).
+    protocol : ``"converged"`` (default, ``info["protocol"] = "converged-sr"``:
+        :func:`baselines.arap_sr_solver.solve_arap_sr`, Gauss-Seidel local step and
+        Anderson acceleration, stopped by the energy-and-gradient criterion ``etol`` /
+        ``gtol``) or ``"paper"`` (:func:`arap_sr_deform`,
+        the §4.1 move rule ``tol``; ``info["protocol"] = "move-rule"``).
+    tol : float > 0, ``"paper"``: move tolerance (fraction of the bounding-box diagonal).
+    max_iter : int or None, iteration cap (None: 10000 converged, 1000 paper).
+    etol, gtol : floats or None, the ``"converged"`` criterion (None: the defaults of
+        :data:`sshade.arap.DEFAULT_CRITERION`).
+
+    Raises
+    ------
+    SShaDeError on a bad value.
     """
 
     name = "ARAP-SR"
 
-    def __init__(self, *, alpha: float = 0.01, tol: float = 1e-4, max_iter: int | None = 1000):
-        args = check_arap_args(self.name, tol, max_iter, alpha=alpha)  # SShaDeError on a bad value
-        self.alpha, self.tol = args["alpha"], args["tol"]
-        self.max_iter = 1000 if args["max_iter"] is None else args["max_iter"]
+    def __init__(self, *, alpha: float = 0.01, tol: float = 1e-4, max_iter: int | None = None,
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
+        if protocol not in PROTOCOLS:
+            raise SShaDeError(f"{self.name}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
+        args = check_arap_args(self.name, tol, max_iter, etol, gtol, alpha=alpha)  # SShaDeError on a bad value
+        self.alpha, self.tol, self.protocol = args["alpha"], args["tol"], protocol
+        self.max_iter = ({"converged": 10000, "paper": 1000}[protocol] if args["max_iter"] is None
+                         else args["max_iter"])
+        self.criterion = make_criterion(etol, gtol)
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
@@ -143,15 +165,25 @@ class ARAPSR:
         Raises ``SShaDeError`` on invalid mesh or handles."""
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
-        res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, tol=self.tol, max_iter=self.max_iter)
-        self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": "move-rule",
-                     "precompute_s": res.precompute_s,
-                     "solve_s": res.solve_s, "alpha": self.alpha}
+        if self.protocol == "paper":
+            res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, tol=self.tol, max_iter=self.max_iter)
+        else:
+            res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, criterion=self.criterion,
+                                max_iter=self.max_iter)
+        proto = "move-rule" if self.protocol == "paper" else "converged-sr"
+        self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": proto,
+                     "precompute_s": res.precompute_s, "solve_s": res.solve_s, "alpha": self.alpha,
+                     "s_per_iter": res.solve_s / max(res.iterations, 1)}
+        for k in ("status", "energy", "gnorm", "rel_decrease", "n_fallback"):
+            if k in res.info:
+                self.info[k] = res.info[k]
         return res.V
 
     def warmup(self, n_vertices: int | None = None) -> float:
-        """First-call costs (libigl, SciPy's SuperLU, mesh validation kernels) paid once on
-        a tiny mesh outside any timed call (:func:`sshade.warmup.warm_once`); ARAP-SR has
-        no size-dependent kernels, ``n_vertices`` is ignored. Returns the seconds spent."""
-        return warm_once(WARMED, ("arap_sr",),
-                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5).deform(V, F, h, T))
+        """First-call costs (libigl, the linear solver, the polar and energy kernels, mesh
+        validation) paid once on a tiny mesh outside any timed call
+        (:func:`sshade.warmup.warm_once`); ``n_vertices`` is ignored. Returns the seconds
+        spent."""
+        return warm_once(WARMED, ("arap_sr", self.protocol),
+                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5, protocol=self.protocol).deform(
+                             V, F, h, T))

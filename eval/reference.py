@@ -3,7 +3,9 @@ computed once, cached on disk, and the distance of any method's result to it.
 
 A benchmark row is only as good as its reference. For every case (rest mesh, handles,
 targets) and ARAP energy (``"spokes"``: ARAP, Sorkine & Alexa 2007; ``"spokes_and_rims"``:
-Elastic, Chao et al. 2010), :func:`reference_solution` runs
+Elastic, Chao et al. 2010; ARAP-SR's own energy with its alpha, :func:`sr_energy`, Levi &
+Gotsman 2015, deep-solved by :func:`baselines.arap_sr_solver.solve_arap_sr`),
+:func:`reference_solution` runs
 :func:`sshade.arap.solve_arap` (L-BFGS-accelerated local/global, Armijo line
 search) with :data:`sshade.arap.DEEP_CRITERION` (until the energy stops
 changing in float64; on the FAUST cases L-BFGS reaches the same energy as the
@@ -33,12 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
+from baselines.arap_sr_solver import SRProblem, solve_arap_sr
 from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 
 __all__ = ["REFERENCE_VERSION", "Reference", "reference_key", "reference_solution", "reference_metrics",
-           "method_energy"]
+           "method_energy", "sr_energy", "sr_alpha", "energy_operators"]
 
 log = logging.getLogger("eval")
 
@@ -46,18 +49,73 @@ log = logging.getLogger("eval")
 REFERENCE_VERSION = 1
 
 #: Method name -> the ARAP energy its result is compared with.
-_METHOD_ENERGY = {"ARAP": "spokes", "ARAP-SR": "spokes", "Elastic": "spokes_and_rims", "SShaDe": "spokes_and_rims"}
+_METHOD_ENERGY = {"ARAP": "spokes", "Elastic": "spokes_and_rims", "SShaDe": "spokes_and_rims"}
+#: prefix of the ARAP-SR energies (:func:`sr_energy`)
+_SR = "arap_sr_alpha_"
+
+
+def sr_energy(alpha: float) -> str:
+    """The name of ARAP-SR's energy with smoothness weight ``alpha`` (Levi & Gotsman
+    2015; :mod:`baselines.arap_sr_solver`), e.g. ``"arap_sr_alpha_0.01"``: the alpha is
+    part of the name, hence of the cache key and file name."""
+    return f"{_SR}{float(alpha)!r}"
+
+
+def sr_alpha(energy: str) -> float | None:
+    """``alpha`` of an ARAP-SR energy name (:func:`sr_energy`), None for another energy.
+    Raises SShaDeError on a malformed ARAP-SR name."""
+    if not str(energy).startswith(_SR):
+        return None
+    try:
+        a = float(str(energy)[len(_SR):])
+    except ValueError:
+        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}") from None
+    if not (np.isfinite(a) and a >= 0):
+        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}")
+    return a
+
+
+def _check_energy(energy: str) -> None:
+    if energy not in ENERGIES and sr_alpha(energy) is None:
+        raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES} or sr_energy(alpha)")
 
 
 def method_energy(method) -> str:
-    """The ARAP energy a method's result is scored against: its own ``energy`` attribute
-    when it names one of :data:`sshade.arap.ENERGIES`, else by name (ARAP and
-    ARAP-SR: spokes; Elastic, SShaDe and any other method: spokes-and-rims, the energy of
-    SShaDe's low-resolution step, paper §4.1)."""
+    """The energy a method's result is scored against: its own ``energy`` attribute when
+    it names one of :data:`sshade.arap.ENERGIES`, ARAP-SR's own energy with its ``alpha``
+    (:func:`sr_energy`; default 0.01), else by name (ARAP: spokes; Elastic, SShaDe and
+    any other method: spokes-and-rims, the energy of SShaDe's low-resolution step, paper
+    §4.1)."""
     e = getattr(method, "energy", None)
     if e in ENERGIES:
         return str(e)
-    return _METHOD_ENERGY.get(str(getattr(method, "name", method)), "spokes_and_rims")
+    name = str(getattr(method, "name", method))
+    if name == "ARAP-SR":
+        return sr_energy(getattr(method, "alpha", 0.01))
+    return _METHOD_ENERGY.get(name, "spokes_and_rims")
+
+
+def energy_operators(V, F, energy: str):
+    """What :func:`reference_metrics` evaluates ``energy`` with: the
+    :class:`sshade.arap.ArapOperators` of ``(V, F)`` for an ARAP energy, an energy-only
+    :class:`baselines.arap_sr_solver.SRProblem` for an ARAP-SR one. Raises SShaDeError on
+    an unknown energy."""
+    _check_energy(energy)
+    a = sr_alpha(energy)
+    return build_operators(V, F, energy) if a is None else SRProblem(V, F, None, None, a)
+
+
+def _deep_solve(V, F, handles, targets, energy, solver, U0):
+    """The deep solve of ``energy``: ``(U, E, result)``."""
+    a = sr_alpha(energy)
+    if a is None:
+        res = solve_arap(V, F, handles, targets, energy=energy, U0=U0, criterion=DEEP_CRITERION,
+                         max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"],
+                         accelerate=solver["accelerate"])
+    else:
+        res = solve_arap_sr(V, F, handles, targets, alpha=a, U0=U0, criterion=DEEP_CRITERION,
+                            max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"])
+    return np.asarray(res.V, np.float64), float(res.info.get("energy", np.nan)), res
 
 
 @dataclass
@@ -93,9 +151,9 @@ def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
     return h.hexdigest()
 
 
-def _solver_settings(max_iter: int, time_budget_s: float | None) -> dict:
+def _solver_settings(max_iter: int, time_budget_s: float | None, energy: str) -> dict:
     return {"etol": DEEP_CRITERION.etol, "gtol": DEEP_CRITERION.gtol, "max_iter": int(max_iter),
-            "time_budget_s": time_budget_s, "accelerate": "lbfgs"}
+            "time_budget_s": time_budget_s, "accelerate": "lbfgs" if sr_alpha(energy) is None else "anderson"}
 
 
 def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims", cache_dir="data/references",
@@ -107,7 +165,9 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     ----------
     V : (n, 3) float64 rest positions. F : (m, 3) int64 faces (validated by the caller).
     handles : (h,) int64 vertex indices. targets : (h, 3) float64 target positions.
-    energy : ``"spokes"`` or ``"spokes_and_rims"``.
+    energy : ``"spokes"``, ``"spokes_and_rims"`` (:func:`sshade.arap.solve_arap`) or an
+        ARAP-SR energy :func:`sr_energy` (``alpha``; :func:`baselines.arap_sr_solver.solve_arap_sr`,
+        Anderson-accelerated block descent; ``energy`` = ``E(U, R)`` at the final state).
     cache_dir : folder of the cache files (created; one ``<energy>_<key>.npz`` each).
     max_iter, time_budget_s : caps of the deep solve (recorded in the key and ``info``).
     U0 : (n, 3) float64 or None, a start for the deep solve (e.g. a method's result;
@@ -122,9 +182,8 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     ------
     SShaDeError on an unknown energy or an unreadable cache file (delete it to recompute).
     """
-    if energy not in ENERGIES:
-        raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
-    solver = _solver_settings(max_iter, time_budget_s)
+    _check_energy(energy)
+    solver = _solver_settings(max_iter, time_budget_s, energy)
     key = reference_key(V, F, handles, targets, energy, solver)
     path = Path(cache_dir) / f"{energy}_{key[:24]}.npz"
     if path.is_file():
@@ -135,19 +194,17 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
         info["cached"] = True
         return Reference(U=d["U"], energy=float(d["energy"]), energy_type=energy, key=key, path=path, info=info)
     t0 = time.perf_counter()
-    res = solve_arap(V, F, handles, targets, energy=energy, U0=U0, criterion=DEEP_CRITERION, max_iter=max_iter,
-                     time_budget_s=time_budget_s, accelerate=solver["accelerate"])
+    U, E, res = _deep_solve(V, F, handles, targets, energy, solver, U0)
     dt = time.perf_counter() - t0
     info = {"iterations": int(res.iterations), "status": str(res.info.get("status")),
             "gnorm": float(res.info.get("gnorm", np.nan)), "rel_decrease": float(res.info.get("rel_decrease", np.nan)),
             "seconds": round(dt, 3), "solver": solver, "n_vertices": int(len(V)), "cached": False}
-    E = float(res.info.get("energy", np.nan))
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_npz(path, {"U": np.asarray(res.V, np.float64), "energy": np.float64(E), "key": np.array(key),
+    write_npz(path, {"U": U, "energy": np.float64(E), "key": np.array(key),
                      "info": np.array(json.dumps(info))})
     log.info("reference %s for %d vertices: %d iterations, %s, %.1f s -> %s", energy, len(V), res.iterations,
              info["status"], dt, path)
-    return Reference(U=np.asarray(res.V, np.float64), energy=E, energy_type=energy, key=key, path=path, info=info)
+    return Reference(U=U, energy=E, energy_type=energy, key=key, path=path, info=info)
 
 
 def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None) -> dict:
@@ -158,8 +215,9 @@ def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None) -> dict:
     V_rest : (n, 3) float64 rest positions (for the bounding-box diagonal and the energy).
     Vd : (n, 3) float64 the method's result. F : (m, 3) int64 faces.
     ref : :class:`Reference` of the same case.
-    operators : :class:`sshade.arap.ArapOperators` of ``(V_rest, F, ref.energy_type)``
-        or None (built here).
+    operators : :func:`energy_operators` of ``(V_rest, F, ref.energy_type)`` or None
+        (built here). For ARAP-SR ``E(Vd) = min_R E(Vd, R)`` by Gauss-Seidel sweeps
+        (:meth:`baselines.arap_sr_solver.SRProblem.reduced_energy`).
 
     Returns
     -------
@@ -176,8 +234,8 @@ def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None) -> dict:
         raise SShaDeError(f"result has shape {Vd.shape}, the reference {ref.U.shape}")
     diag = float(np.linalg.norm(V_rest.max(0) - V_rest.min(0)))
     d = np.linalg.norm(Vd - ref.U, axis=1) / diag * 100.0
-    ops = operators if operators is not None else build_operators(V_rest, F, ref.energy_type)
-    E = float(ops.energy(Vd))
+    ops = operators if operators is not None else energy_operators(V_rest, F, ref.energy_type)
+    E = float(ops.reduced_energy(Vd)[0] if sr_alpha(ref.energy_type) is not None else ops.energy(Vd))
     gap = (E - ref.energy) / abs(ref.energy) if ref.energy != 0 else float("nan")
     return {"ref_mean_pct": float(d.mean()), "ref_max_pct": float(d.max()), "energy_gap": float(gap),
             "ref_energy": float(ref.energy)}

@@ -95,6 +95,8 @@ PROTOCOL_TEXT = {
                  "the scale-free gradient norm are both below their thresholds",
     "paper": "paper protocol (§4.1): libigl local/global until the largest vertex move of one iteration is "
              "below tol x diagonal, at most 1000 iterations",
+    "converged-sr": "converged protocol (ARAP-SR): Gauss-Seidel local step, Anderson-accelerated, until the "
+                    "relative energy decrease and the scale-free gradient norm are both below their thresholds",
     "move-rule": "move rule: until the largest vertex move of one iteration is below tol x diagonal",
 }
 

@@ -1,13 +1,19 @@
 """ARAP-SR baseline (Levi & Gotsman 2015): reduces to ARAP at alpha = 0, reproduces
-rigid motions, smooths rotations for alpha > 0."""
+rigid motions, smooths rotations for alpha > 0; the converged protocol
+(baselines/arap_sr_solver.py) never increases the energy and matches a deep solve of its
+own energy; the paper protocol is the move rule as before."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from baselines import ARAPSR
 from baselines.arap_sr import arap_sr_deform
-from sshade.arap import arap_deform
+from baselines.arap_sr_solver import SRProblem, solve_arap_sr
+from eval.reference import energy_operators, method_energy, reference_metrics, reference_solution, sr_alpha, sr_energy
+from sshade.arap import DEEP_CRITERION, arap_deform, solve_arap
+from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
 from sshade.mesh.io import read_mesh
 
 from .conftest import data_file
@@ -52,3 +58,82 @@ def test_smoothing_makes_rotations_vary_less():
     b = arap_sr_deform(V, F, h, T, alpha=0.05)
     assert np.allclose(b.V[h], T)
     assert np.abs(a.V - b.V).max() > 1e-3 * np.linalg.norm(V.max(0) - V.min(0))
+
+
+# --------------------------------------------------------------- converged protocol
+# Small survey-style cases (sshade.arap.cases) so each test takes seconds.
+SMALL = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),
+         "lifted_plane": lambda: lifted_plane(n_target=2500)}
+
+
+def _mean_dist(A, B, V):
+    return float(np.linalg.norm(A - B, axis=1).mean() / np.linalg.norm(V.max(0) - V.min(0)))
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_converged_energy_monotone_and_matches_deep_solve(name):
+    V, F, h, T = SMALL[name]()
+    pb = SRProblem(V, F, h, T, 0.01)
+    deep = solve_arap_sr(V, F, h, T, alpha=0.01, criterion=DEEP_CRITERION, max_iter=20000, problem=pb)
+    assert deep.info["status"] in ("converged", "stalled")
+    for acc in ("anderson", "none"):
+        res = solve_arap_sr(V, F, h, T, alpha=0.01, accelerate=acc, problem=pb)
+        assert res.converged and res.info["status"] == "converged"
+        E = np.array(res.info["energy_history"])
+        assert (np.diff(E) <= 1e-12 * np.abs(E[1:])).all(), "the energy increased"
+        assert np.allclose(res.V[h], T)
+        assert _mean_dist(res.V, deep.V, V) < 5e-4  # 0.05 % of the diagonal (mean)
+        assert res.info["energy"] >= deep.info["energy"] * (1 - 1e-9)
+
+
+def test_gauss_seidel_sweep_never_increases_energy():
+    """Each colour class is an independent set: a sweep is exact block minimisation."""
+    V, F, h, T = SMALL["bent_cylinder"]()
+    pb = SRProblem(V, F, h, T, 0.05)
+    for c in pb.classes:  # no edge inside a class
+        inside = np.zeros(pb.n, bool)
+        inside[c] = True
+        assert not (inside[pb.ops.edges[:, 0]] & inside[pb.ops.edges[:, 1]]).any()
+    rng = np.random.default_rng(0)
+    U = V + 0.05 * rng.standard_normal(V.shape)
+    R = pb.ops.rotations(U)
+    E = pb.energy(U, R)
+    for _ in range(5):
+        pb.sweep(U, R)
+        En = pb.energy(U, R)
+        assert En <= E * (1 + 1e-13)
+        E = En
+
+
+def test_alpha_zero_reproduces_converged_arap():
+    V, F, h, T = SMALL["twisted_bar"]()
+    a = solve_arap(V, F, h, T, energy="spokes")
+    b = solve_arap_sr(V, F, h, T, alpha=0.0)
+    assert a.converged and b.converged
+    assert _mean_dist(a.V, b.V, V) < 5e-4
+    assert abs(b.info["energy"] - 2 * a.info["energy"]) < 1e-6 * abs(a.info["energy"])  # E_SR = 2 E_spokes
+
+
+def test_paper_protocol_unchanged():
+    """arap.protocol=paper keeps the move rule: the result of the code before the
+    converged protocol (commit efab37e) on a small case, bit for bit up to rounding."""
+    V, F, h, T = bent_cylinder(h=0.25)
+    m = ARAPSR(alpha=0.05, protocol="paper")
+    U = m.deform(V, F, h, T)
+    assert m.info["iterations"] == 186 and m.info["protocol"] == "move-rule"
+    assert abs(float(np.abs(U).sum()) - 765.8985681041385) < 1e-9
+
+
+def test_converged_is_default_and_reference_is_its_own(tmp_path):
+    V, F, h, T = SMALL["bent_cylinder"]()
+    m = ARAPSR(alpha=0.01)
+    U = m.deform(V, F, h, T)
+    assert m.info["protocol"] == "converged-sr" and m.info["converged"]
+    e = method_energy(m)
+    assert e == sr_energy(0.01) and sr_alpha(e) == 0.01 and method_energy(ARAPSR(alpha=0.05)) != e
+    ref = reference_solution(V, F, h, T, energy=e, cache_dir=tmp_path)
+    assert reference_solution(V, F, h, T, energy=e, cache_dir=tmp_path).info["cached"]
+    met = reference_metrics(V, U, F, ref, operators=energy_operators(V, F, e))
+    assert met["ref_mean_pct"] < 0.05 and -1e-9 < met["energy_gap"] < 1e-4
+    spokes = reference_solution(V, F, h, T, energy="spokes", cache_dir=tmp_path)
+    assert np.abs(spokes.U - ref.U).max() > 1e-3  # ARAP's minimiser is another shape

@@ -48,7 +48,6 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.arap import build_operators
 from sshade.errors import SShaDeError
 from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
 
@@ -58,7 +57,7 @@ from ..config_check import config_number
 from ..figures import figures_options, write_case_figure
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
-from ..reference import method_energy, reference_metrics, reference_solution
+from ..reference import energy_operators, method_energy, reference_metrics, reference_solution
 from ..runinfo import collect_runinfo, write_runinfo
 from ..tables import compare, write_cases, write_tables
 from .common import sshade_spec
@@ -355,7 +354,7 @@ class _References:
             self.refs[e] = reference_solution(c.V, c.F, c.handles, c.targets, energy=e, cache_dir=self.cache,
                                               max_iter=self.max_iter, time_budget_s=self.time_budget_s,
                                               U0=Vd if same_path else None)
-            self.ops[e] = build_operators(c.V, c.F, e)
+            self.ops[e] = energy_operators(c.V, c.F, e)
             ref = self.refs[e]
             log.info("%s reference (%s): %s, %s iterations, %s", c.name, e,
                      "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",

@@ -1,0 +1,308 @@
+"""Converged ARAP-SR: block-coordinate descent on ARAP with smooth rotations (Levi &
+Gotsman 2015, "Smooth rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG),
+with an energy-verified stopping criterion (:func:`solve_arap_sr`).
+
+Energy (spokes, libigl's cotangent weights ``w_ij``, ``A`` the total surface area):
+
+    E(U, R) = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
+              + alpha * A * sum_i sum_{j in N(i)} || R_i - R_j ||_F^2
+            = 2 E_spokes(U, R) + 2 alpha A sum_{edges (s, d)} || R_s - R_d ||_F^2
+
+with ``E_spokes`` the energy of :mod:`sshade.arap.operators` (which counts each spoke with
+half its weight). At ``alpha = 0`` it is twice ARAP's spokes energy: same minimiser.
+
+Iteration (every sub-step is an exact minimisation over one block of variables, so the
+energy never increases):
+
+* local step, Gauss-Seidel over a vertex colouring (:class:`SRProblem`): the vertices are
+  split into independent sets of the mesh graph (:func:`colour_classes`); one sweep
+  solves ``R_i = polar(M_i + alpha A sum_{j in N(i)} R_j)``, ``M_i`` the spokes
+  covariance of ``U``, for one class at a time with the neighbours' latest rotations.
+  Within a class the rotations do not interact, so each class update is the exact
+  minimiser of its block. (Solving all ``R_i`` at once from the previous rotations,
+  Jacobi, as :func:`baselines.arap_sr.arap_sr_deform` does, can increase the smoothness
+  term; ``benchmarks/arap_sr_local.py`` measures both.)
+* global step: ``L_ff U_f = K(R)_f - L_fb T``, ARAP's global step with the rotations
+  fixed (one Cholesky factorisation, :class:`sshade.arap.LaplacianSolver`).
+* acceleration (default ``accelerate="anderson"``): Anderson acceleration on the free
+  vertices (Peng et al. 2018, :class:`sshade.arap.Anderson`), the rotations carried
+  along; a candidate ``U_a`` is accepted only if ``E(U_a, sweep(U_a))`` is below the
+  energy after the plain global step, else the plain step is taken and the history
+  reset. L-BFGS on ``U`` (ARAP's default) needs the reduced energy ``min_R E(U, R)`` at
+  every line-search point, which here is an inner iterative solve (the rotations are
+  coupled), so it is not used.
+
+What "converged" certifies (:class:`sshade.arap.Criterion`, thresholds ``etol`` /
+``gtol``): at the accepted state ``(U_k, R_k)``, ``R_k`` being the local step at ``U_k``,
+(1) the relative energy decrease over the last accepted iteration is below ``etol`` and
+(2) the scale-free norm (:func:`sshade.arap.gradient_norm`) of ``dE/dU (U_k, R_k) / 2 =
+2 (L U_k - K(R_k))`` (the ARAP spokes gradient with those rotations, so ``alpha = 0``
+gives ARAP's number) is below ``gtol``. The rotations' own stationarity is not tested
+separately: a Gauss-Seidel sweep leaves every class optimal given its neighbours at the
+time, and (1) bounds what further sweeps could gain. Like ARAP the energy is not convex:
+this certifies closeness to a stationary point, not the global minimum.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+from sshade.arap import (
+    DEFAULT_CRITERION,
+    Anderson,
+    ArapResult,
+    Criterion,
+    LaplacianSolver,
+    build_operators,
+    fit_rotations,
+    gradient_norm,
+    rigid_fit,
+)
+from sshade.errors import SShaDeError
+from sshade.mesh.validate import validate_handles
+
+__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "SR_ACCELERATIONS"]
+
+#: the iterations of :func:`solve_arap_sr`
+SR_ACCELERATIONS = ("anderson", "none")
+
+clock = time.perf_counter
+
+
+def colour_classes(n: int, edges: np.ndarray, seed: int = 0) -> list[np.ndarray]:
+    """Split the vertices of a graph into independent sets (Jones & Plassmann 1993:
+    in each round, the uncoloured vertices whose random priority beats every uncoloured
+    neighbour's form one class).
+
+    Parameters
+    ----------
+    n : int, vertex count. edges : (ne, 2) int undirected edges. seed : int, priorities.
+
+    Returns
+    -------
+    list of (k_c,) int64 sorted arrays partitioning ``arange(n)``, no edge inside a class.
+    """
+    s, d = np.asarray(edges[:, 0], np.int64), np.asarray(edges[:, 1], np.int64)
+    p = np.random.default_rng(seed).permutation(n).astype(np.int64)
+    left = np.ones(n, bool)
+    out = []
+    while left.any():
+        q = np.where(left, p, -1)
+        best = np.full(n, -1, np.int64)
+        np.maximum.at(best, s, q[d])
+        np.maximum.at(best, d, q[s])
+        pick = left & (p > best)
+        out.append(np.flatnonzero(pick))
+        left &= ~pick
+    return out
+
+
+class SRProblem:
+    """ARAP-SR's operators on one mesh and handle set (built once per solve).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions; F : (m, 3) int faces. handles : (h,) int;
+    targets : (h, 3) float64 (both None: energies only, no global step).
+    alpha : float >= 0, smoothness weight (times the area).
+    linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
+
+    Raises
+    ------
+    SShaDeError on a bad mesh, handles, or a component without a handle.
+    """
+
+    def __init__(self, V, F, handles, targets, alpha: float, linear_solver: str = "auto"):
+        if not (np.isfinite(alpha) and alpha >= 0):
+            raise SShaDeError(f"ARAP-SR: alpha must be a finite number >= 0, got {alpha!r}")
+        self.ops = ops = build_operators(V, F, "spokes")
+        if handles is None:  # energy evaluation only (no global step)
+            handles, targets = np.zeros(0, np.int64), np.zeros((0, 3))
+        else:
+            handles, targets = validate_handles(ops.V, handles, targets)
+        self.h, self.T = handles, targets
+        self.n, self.alpha = ops.n, float(alpha)
+        Vr, Fr = ops.V, ops.F
+        self.area = 0.5 * float(np.linalg.norm(np.cross(Vr[Fr[:, 1]] - Vr[Fr[:, 0]], Vr[Fr[:, 2]] - Vr[Fr[:, 0]]),
+                                               axis=1).sum())
+        self.wR = self.alpha * self.area  # weight of sum_j R_j in the local step
+        self.rs = np.sqrt(self.wR) if self.wR > 0 else 1.0
+        s, d = ops.edges[:, 0], ops.edges[:, 1]
+        self.adj = sp.csr_matrix((np.ones(2 * len(s)), (np.r_[s, d], np.r_[d, s])), shape=(self.n, self.n))
+        self.classes = colour_classes(self.n, ops.edges)
+        self.adj_rows = [self.adj[c] for c in self.classes]
+        free = np.ones(self.n, bool)
+        free[self.h] = False
+        self.free = np.flatnonzero(free)
+        t0 = clock()
+        self.solver = LaplacianSolver(ops.L[self.free][:, self.free], linear_solver) if len(self.h) else None
+        self.factor_s = clock() - t0
+        self.Lfb_T = ops.L[self.free][:, self.h] @ self.T
+
+    def smoothness(self, R: np.ndarray) -> float:
+        """``sum_i sum_{j in N(i)} ||R_i - R_j||_F^2`` (each edge twice), dimensionless."""
+        dR = R[self.ops.edges[:, 0]] - R[self.ops.edges[:, 1]]
+        return 2.0 * float(np.einsum("kab,kab->", dR, dR))
+
+    def energy(self, U: np.ndarray, R: np.ndarray) -> float:
+        """``E(U, R)`` of the module docstring, mesh units^2."""
+        return 2.0 * self.ops.energy(U, R) + self.wR * self.smoothness(R)
+
+    def sweep(self, U: np.ndarray, R: np.ndarray, jacobi: bool = False) -> np.ndarray:
+        """One Gauss-Seidel sweep of the local step over the colour classes (``jacobi``:
+        every rotation at once from the previous ones, which may increase the energy; for
+        measurements). ``R`` (n, 3, 3) float64 is updated in place and returned; ``U``
+        (n, 3)."""
+        M = self.ops.covariances(U)
+        if self.wR == 0:
+            R[...] = fit_rotations(M)
+            return R
+        Rf = R.reshape(self.n, 9)
+        if jacobi:
+            R[...] = fit_rotations(M + self.wR * (self.adj @ Rf).reshape(-1, 3, 3))
+            return R
+        for c, A in zip(self.classes, self.adj_rows, strict=True):
+            R[c] = fit_rotations(M[c] + self.wR * (A @ Rf).reshape(-1, 3, 3))
+        return R
+
+    def pack(self, U: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """The state ``(U_free, R)`` as one vector (Anderson's unknowns); the rotations are
+        scaled by ``sqrt(alpha A)`` (their weight in the energy). Shape (3 n_f + 9 n,)."""
+        return np.concatenate([U[self.free].ravel(), self.rs * R.ravel()])
+
+    def unpack(self, x: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Inverse of :meth:`pack`: ``(U', R')`` with ``U'`` a copy of ``U`` whose free rows
+        come from ``x``; ``R'`` (n, 3, 3) not necessarily rotations."""
+        nf = 3 * len(self.free)
+        Un = np.array(U, np.float64)
+        Un[self.free] = x[:nf].reshape(-1, 3)
+        return Un, np.ascontiguousarray(x[nf:].reshape(self.n, 3, 3) / self.rs)
+
+    def global_step(self, U: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """``argmin_U E(U, R)`` with the handles at their targets: a new (n, 3) array."""
+        Un = np.array(U, np.float64)
+        Un[self.h] = self.T
+        Un[self.free] = self.solver.solve(self.ops.rhs(R)[self.free] - self.Lfb_T)
+        return Un
+
+    def gnorm(self, U: np.ndarray, R: np.ndarray) -> float:
+        """Scale-free norm of ``dE/dU / 2 = 2 (L U - K(R))`` on the free vertices
+        (:func:`sshade.arap.gradient_norm`), dimensionless."""
+        g = 2.0 * (self.ops.L @ U - self.ops.rhs(R))[self.free]
+        return gradient_norm(g, self.ops.mass[self.free], self.ops.diag)
+
+    def reduced_energy(self, U: np.ndarray, R: np.ndarray | None = None, *, rtol: float = 1e-13,
+                       max_sweeps: int = 2000) -> tuple[float, np.ndarray]:
+        """``min_R E(U, R)`` for a fixed ``U`` (n, 3) by sweeps from ``R`` (default ARAP's
+        optimal rotations) until the relative decrease of a sweep is below ``rtol``.
+        Returns ``(E, R)``."""
+        R = self.ops.rotations(U) if R is None else np.array(R, np.float64)
+        E = self.energy(U, R)
+        for _ in range(max_sweeps):
+            self.sweep(U, R)
+            En = self.energy(U, R)
+            done = E - En <= rtol * abs(En)
+            E = En
+            if done:
+                break
+        return E, R
+
+
+def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Criterion | None = None,
+                  max_iter: int = 10000, accelerate: str = "anderson", anderson_m: int = 5,
+                  U0: np.ndarray | None = None, time_budget_s: float | None = None, jacobi: bool = False,
+                  problem: SRProblem | None = None, linear_solver: str = "auto") -> ArapResult:
+    """ARAP-SR run to a certified convergence (module docstring).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions (mesh units); F : (m, 3) int faces.
+    handles : (h,) int unique vertex indices; targets : (h, 3) float64.
+    alpha : float >= 0, smoothness weight (times the surface area; 0: ARAP spokes).
+    criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
+    max_iter : int >= 0, cap on accepted iterations (global solves).
+    accelerate : ``"anderson"`` (default) or ``"none"`` (plain block descent).
+    anderson_m : int >= 1, Anderson's window.
+    U0 : (n, 3) float64 or None, start (default: the rigid fit of the handles, rotations
+        that fit's rotation); handle rows are set to ``targets``.
+    time_budget_s : float or None, stop (status ``"time_budget"``) after this many seconds.
+    jacobi : bool, Jacobi local step instead of Gauss-Seidel (measurements only: the
+        energy may then increase; steps are not safeguarded).
+    problem : :class:`SRProblem` or None, prebuilt for the same inputs.
+    linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
+
+    Returns
+    -------
+    :class:`sshade.arap.ArapResult` with ``info``: ``energy`` (``E(U, R)``, mesh
+    units^2), ``gnorm``, ``rel_decrease``, ``energy_history`` (accepted states, starting
+    at ``U0`` after one local step), ``status`` (``"converged"``, ``"max_iter"``,
+    ``"time_budget"``, ``"stalled"``: no decrease in float64, ``"rigid"``),
+    ``n_fallback`` (rejected Anderson candidates), ``n_sweeps``, ``n_colours``, ``alpha``.
+
+    Raises
+    ------
+    SShaDeError on bad inputs or options (:class:`SRProblem`).
+    """
+    t0 = clock()
+    crit = DEFAULT_CRITERION if criterion is None else criterion
+    if accelerate not in SR_ACCELERATIONS:
+        raise SShaDeError(f"accelerate must be one of {SR_ACCELERATIONS}, got {accelerate!r}")
+    pb = problem if problem is not None else SRProblem(V, F, handles, targets, alpha, linear_solver)
+    Rr, tr_ = rigid_fit(pb.ops.V[pb.h], pb.T)
+    U = pb.ops.V @ Rr.T + tr_ if U0 is None else np.array(U0, np.float64)
+    if U.shape != (pb.n, 3) or not np.isfinite(U).all():
+        raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
+    U[pb.h] = pb.T
+    R = np.broadcast_to(Rr, (pb.n, 3, 3)).copy()
+    t1 = clock()
+    info = {"alpha": pb.alpha, "etol": crit.etol, "gtol": crit.gtol, "accelerate": accelerate,
+            "n_colours": len(pb.classes), "n_fallback": 0, "n_sweeps": 1, "linear_solver": pb.solver.backend}
+    U, R, it, status = _iterate(pb, U, pb.sweep(U, R, jacobi), crit, max_iter, accelerate, anderson_m,
+                                time_budget_s, jacobi, info)
+    t2 = clock()
+    return ArapResult(V=U, iterations=it, converged=status in ("converged", "rigid"), last_move=info.pop("move"),
+                      precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status))
+
+
+def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, m, time_budget_s, jacobi, info):
+    """The iterations of :func:`solve_arap_sr` from the state ``(U, R)`` (``R`` the local
+    step at ``U``): returns ``(U, R, iterations, status)``, fills ``info``."""
+    t0 = clock()
+    zero_E = 1e-12 * 2.0 * pb.ops.rest_term
+    acc = Anderson(m, 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
+    E, E_prev, it, move = pb.energy(U, R), np.inf, 0, 0.0
+    hist = [E]
+    while True:
+        gn = pb.gnorm(U, R)
+        rel = 0.0 if abs(E) <= zero_E else ((E_prev - E) / abs(E) if np.isfinite(E_prev) else np.inf)
+        status = ("converged" if it > 0 or abs(E) > zero_E else "rigid") if rel < crit.etol and gn < crit.gtol \
+            else "max_iter" if it >= max_iter \
+            else "time_budget" if time_budget_s is not None and clock() - t0 > time_budget_s else None
+        if status is None and it > 0 and E >= E_prev and not jacobi:
+            status = "stalled"
+        if status is not None:
+            break
+        Ug = pb.global_step(U, R)
+        Rg = pb.sweep(Ug, R.copy(), jacobi)
+        Eg = pb.energy(Ug, Rg)
+        info["n_sweeps"] += 1
+        Un, R, En = Ug, Rg, Eg
+        if acc is not None:
+            cand = acc.step(pb.pack(U, R), pb.pack(Ug, Rg))
+            if cand is not None:
+                Ua, Ra = pb.unpack(cand, Ug)
+                Ra = pb.sweep(Ua, Ra, jacobi)
+                Ea = pb.energy(Ua, Ra)
+                info["n_sweeps"] += 1
+                if Ea < Eg:
+                    Un, R, En = Ua, Ra, Ea
+                else:
+                    info["n_fallback"] += 1
+                    acc.reset()
+        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
+        U, E_prev, E, it = Un, E, En, it + 1
+        hist.append(E)
+    info.update(energy=E, gnorm=gn, rel_decrease=rel, energy_history=hist, move=move)
+    return U, R, it, status

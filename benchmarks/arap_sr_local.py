@@ -1,0 +1,41 @@
+"""ARAP-SR's local step and acceleration compared on small cases of sshade.arap.cases
+(baselines/arap_sr_solver.py): Jacobi local step (all rotations at once from the previous
+ones), Gauss-Seidel over a vertex colouring, and Gauss-Seidel with Anderson on the joint
+(U, R) state, each to the default criterion.
+
+    python benchmarks/arap_sr_local.py [alpha]     # prints one row per case and scheme
+
+Columns: iterations (global solves), local sweeps, status, final energy, the largest
+energy increase between accepted states (> 0: the energy went up), rejected Anderson
+candidates, seconds. Measured rows: results/arap_sr/local_step.md.
+"""
+import sys
+import time
+
+import numpy as np
+
+from baselines.arap_sr_solver import SRProblem, solve_arap_sr
+from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
+
+CASES = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),
+         "lifted_plane": lambda: lifted_plane(n_target=2500)}
+SCHEMES = {"jacobi": ("none", True), "gauss-seidel": ("none", False), "gs+anderson": ("anderson", False)}
+
+
+def main(alpha: float = 0.01) -> None:
+    print("| case | n | scheme | iters | sweeps | status | energy | max increase | rejected | s |")
+    print("|---|---:|---|---:|---:|---|---:|---:|---:|---:|")
+    for name, make in CASES.items():
+        V, F, h, T = make()
+        pb = SRProblem(V, F, h, T, alpha)
+        for scheme, (acc, jac) in SCHEMES.items():
+            t = time.perf_counter()
+            r = solve_arap_sr(V, F, h, T, alpha=alpha, accelerate=acc, jacobi=jac, problem=pb, max_iter=5000)
+            dt = time.perf_counter() - t
+            inc = float(np.diff(r.info["energy_history"]).max())
+            print(f"| {name} | {len(V)} | {scheme} | {r.iterations} | {r.info['n_sweeps']} | {r.info['status']} | "
+                  f"{r.info['energy']:.10g} | {inc:.2g} | {r.info['n_fallback']} | {dt:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main(float(sys.argv[1]) if len(sys.argv) > 1 else 0.01)
