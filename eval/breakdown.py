@@ -79,8 +79,11 @@ def group_breakdown(df: pd.DataFrame, by=("pose", "subject")) -> pd.DataFrame:
                             x.median(), x.min(), x.max()])
     res = pd.DataFrame(out, columns=cols)
     if len(res):
+        order = [c for c, _ in BREAKDOWN_METRICS]
+        res["_b"] = res["by"].map(list(by).index)
+        res["_m"] = res["metric"].map(order.index)
         res["_k"] = res["method"].map(method_order_key)
-        res = res.sort_values(["by", "metric", "group", "_k"], kind="stable").drop(columns="_k")
+        res = res.sort_values(["_b", "_m", "group", "_k"], kind="stable").drop(columns=["_b", "_m", "_k"])
     return res.reset_index(drop=True)
 
 
