@@ -176,8 +176,8 @@ def write_breakdown(df: pd.DataFrame, out_dir, *, figure: bool = False) -> dict[
     with atomic_write(out_dir / "breakdown.md", "w") as fh:
         fh.write(breakdown_markdown(df, br))
     paths["breakdown_md"] = out_dir / "breakdown.md"
-    if figure and len(df):
-        ok = df[ok_mask(df)]
+    ok = df[ok_mask(df)] if len(df) else df
+    if figure and len(ok):
         p = safe_figure("distribution", distribution_figure, ok, out_dir / "figures" / "distribution.png",
                         metrics=_metrics(ok))
         if p is not None:

@@ -109,8 +109,9 @@ def test_cost_model_weights_by_method():
 
 # ----------------------------------------------------------------------------- resume after kill -9
 def _eval(out, methods, *extra, env=None, popen=False):
+    items = ",".join(m if "{" in m else PLUGIN % m for m in methods)
     cmd = [sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={out.parent / 'faust'}",
-           "dataset.limit=2", "reference.cases=none", f"methods=[{','.join(m if '{' in m else PLUGIN % m for m in methods)}]",
+           "dataset.limit=2", "reference.cases=none", f"methods=[{items}]",
            f"out_dir={out}", *extra]
     kw = dict(cwd=ROOT, env=dict(subprocess_env(), **(env or {})), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
               text=True)

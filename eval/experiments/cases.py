@@ -27,8 +27,21 @@ deformed component by component (:func:`sshade.components.deform_components`). M
 info values become cells through :func:`_info_columns` (safe names and values). Outputs in ``out_dir``
 (default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
-(:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
-``.hydra/`` folder. All tables and ``run.json`` are written atomically.
+(:mod:`eval.tables`), ``breakdown.csv``, ``breakdown.md`` (per pose, per subject, the
+paired SShaDe-Elastic comparison; :mod:`eval.breakdown`; with figures also
+``figures/distribution.png``), ``run.json`` (:mod:`eval.runinfo`), ``eval.log``, Hydra's
+``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.store`).
+All tables and ``run.json`` are written atomically.
+
+Result store and resume (issue 21): each (case, method) run is stored as soon as it
+finishes, keyed by the method's definition, the case's identity and the guard/reference
+options; the tables are built from the stored rows. ``resume=true`` with ``out_dir`` =
+an earlier run's folder continues it (the claim keeps its files, :mod:`eval.outdir`):
+only the pairs missing from the store, or stored under another key, run; a method added
+later runs only its own cases. Without ``resume`` the store starts empty. The baselines
+run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.subset`; the rule is
+stated in the table's title); the progress bar's remaining time is weighted by each
+method's expected cost (:mod:`eval.progress`).
 
 Exit status of ``python -m eval``: 0 on success (even if some method failed on some
 case), 2 on a configuration or input error (one ``error: ...`` line on stderr).
@@ -281,10 +294,12 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     with logging_redirect_tqdm(), bar:
         for ci, case in enumerate(cases):
             s.refs.start_case(ci, case, s.base is None or ci in s.base)
-            deformed = {}  # method -> deformed vertices, for the optional figure
+            deformed, unknown = {}, []  # method -> deformed vertices, for the optional figure
             for mi in plan[ci]:
                 if (ci, mi) in done:
                     deformed[names[mi]] = s.store.load_mesh(done[ci, mi]) if fig_on and fig_left > 0 else None
+                    if deformed[names[mi]] is None and not done[ci, mi]["row"].get("error"):
+                        unknown.append(names[mi])  # restored without its mesh (store.meshes=false)
                     continue
                 bar.set_postfix_str(f"{todo.index((ci, mi)) + 1}/{len(todo)} runs: {case.name} {names[mi]}")
                 done[ci, mi], deformed[names[mi]] = _run_stored(s, ci, mi, keys[ci][mi], cost, bar)
@@ -293,7 +308,11 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
                 bar.refresh()
             rows = [done[cj, mj]["row"] for cj in range(ci + 1) for mj in plan[cj]]
             write_cases(pd.DataFrame(rows), s.out_dir)  # partial results survive a crash
-            if fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
+            if fig_on and fig_left > 0 and unknown:
+                fig_left -= 1
+                log.info("%s: figure not redrawn (restored runs of %s have no stored mesh; store.meshes=true keeps "
+                         "them)", case.name, ", ".join(unknown))
+            elif fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
                 fig_left -= 1
                 write_case_figure(case, {n: deformed.get(n) for n in names}, s.out_dir / "figures",
                                   # "not run", not "failed"
