@@ -16,8 +16,9 @@ Outputs (:func:`write_breakdown`):
   how many SShaDe's volume error (``volume_err_pct``, % of the rest volume) is below
   Elastic's, and the median of the differences SShaDe - Elastic with a seeded
   percentile-bootstrap interval (default 95 %, 2000 resamples, seed 0);
-- with ``figure=True``: ``figures/distribution.png``, the per-case distribution of each
-  metric per method (:func:`eval.figures.distribution_figure`).
+- with ``figure=True``: ``breakdown.png`` (next to ``breakdown.md``; ``figures/``
+  holds one PNG per case), the per-case distribution of each metric per method
+  (:func:`eval.figures.distribution_figure`).
 
 Metrics (:data:`BREAKDOWN_METRICS`, those present): volume, area, edge-length errors
 (%), face-angle error (degrees), ground-truth vertex error (% of the diagonal).
@@ -164,9 +165,9 @@ def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: s
 
 def write_breakdown(df: pd.DataFrame, out_dir, *, figure: bool = False) -> dict[str, Path]:
     """Write ``breakdown.csv`` and ``breakdown.md`` (atomically) into ``out_dir`` and,
-    with ``figure``, ``figures/distribution.png`` (never raises for the figure: a
-    warning is logged). Returns name -> path of the files written (``breakdown_csv``,
-    ``breakdown_md``, ``distribution_png``)."""
+    with ``figure``, ``breakdown.png`` (never raises for the figure: a warning is
+    logged). Returns name -> path of the files written (``breakdown_csv``,
+    ``breakdown_md``, ``breakdown_png``)."""
     out_dir = Path(out_dir)
     br = group_breakdown(df)
     paths = {}
@@ -178,8 +179,8 @@ def write_breakdown(df: pd.DataFrame, out_dir, *, figure: bool = False) -> dict[
     paths["breakdown_md"] = out_dir / "breakdown.md"
     ok = df[ok_mask(df)] if len(df) else df
     if figure and len(ok):
-        p = safe_figure("distribution", distribution_figure, ok, out_dir / "figures" / "distribution.png",
+        p = safe_figure("distribution", distribution_figure, ok, out_dir / "breakdown.png",
                         metrics=_metrics(ok))
         if p is not None:
-            paths["distribution_png"] = Path(p)
+            paths["breakdown_png"] = Path(p)
     return paths

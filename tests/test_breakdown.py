@@ -68,14 +68,14 @@ def test_breakdown_files_and_figure(tmp_path):
     df.to_csv(tmp_path / "cases.csv", index=False)
     df2 = pd.read_csv(tmp_path / "cases.csv")  # as read back: error NaN, ints
     paths = write_breakdown(df2, tmp_path, figure=True)
-    assert set(paths) == {"breakdown_csv", "breakdown_md", "distribution_png"}
+    assert set(paths) == {"breakdown_csv", "breakdown_md", "breakdown_png"}
     md = (tmp_path / "breakdown.md").read_text()
     assert "## Per pose: Volume (%)" in md and "## Per subject: EL (%)" in md
     assert "## Paired comparison: SShaDe vs Elastic (volume_err_pct)" in md
     assert "On 7 case(s) where both succeeded, SShaDe's volume_err_pct is below Elastic's on 6" in md
     assert "95% bootstrap interval" in md and "seed 0" in md
     assert pd.read_csv(tmp_path / "breakdown.csv")["n"].sum() > 0
-    png = (tmp_path / "figures" / "distribution.png").read_bytes()
+    png = (tmp_path / "breakdown.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     assert md == breakdown_markdown(df2)
 
@@ -84,4 +84,4 @@ def test_breakdown_without_pairs_or_groups(tmp_path):
     df = pd.DataFrame({"case": ["a"], "method": ["SShaDe"], "error": ["boom"], "volume_err_pct": [1.0]})
     write_breakdown(df, tmp_path, figure=True)  # nothing successful: no figure, no exception
     md = (tmp_path / "breakdown.md").read_text()
-    assert "no paired comparison" in md and not (tmp_path / "figures" / "distribution.png").exists()
+    assert "no paired comparison" in md and not (tmp_path / "breakdown.png").exists()

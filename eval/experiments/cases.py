@@ -29,7 +29,7 @@ info values become cells through :func:`_info_columns` (safe names and values). 
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
 (:mod:`eval.tables`), ``breakdown.csv``, ``breakdown.md`` (per pose, per subject, the
 paired SShaDe-Elastic comparison; :mod:`eval.breakdown`; with figures also
-``figures/distribution.png``), ``run.json`` (:mod:`eval.runinfo`), ``eval.log``, Hydra's
+``breakdown.png``), ``run.json`` (:mod:`eval.runinfo`), ``eval.log``, Hydra's
 ``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.store`).
 All tables and ``run.json`` are written atomically.
 
