@@ -13,6 +13,8 @@ from sshade.checks import config_bool, config_int_list, config_number, config_va
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 
+from .subset import check_baseline_cases
+
 __all__ = ["check_config"]
 
 MAX_SEED = 2**63 - 1  # int64: seeds are recorded in CSV/JSON and passed to numpy
@@ -62,7 +64,7 @@ def _check_dataset(cfg) -> None:
     _check_list(cfg, _DATASET_NUMBERS.get(name, []), "dataset")
     for k in ("limit",):
         config_number(cfg, f"dataset.{k}", min=1, allow_none=True, default=None)
-    config_number(cfg, "dataset.baseline_cases", min=0, allow_none=True, default=None)
+    check_baseline_cases(config_value(cfg, "dataset.baseline_cases", None))
     for k in ("subjects", "poses"):
         if name != "shapes":
             config_int_list(cfg, f"dataset.{k}")
@@ -118,6 +120,9 @@ def check_config(cfg) -> None:
     _check_dataset(cfg)
     if config_value(cfg, "figures", None) is not None:
         config_bool(cfg, "figures.enabled", default=False)
+    config_bool(cfg, "resume", default=False)
+    if config_value(cfg, "store", None) is not None:
+        config_bool(cfg, "store.meshes", default=False)
         config_number(cfg, "figures.max_cases", min=0, allow_none=True, default=None)
     if config_value(cfg, "reference", None) is not None:
         config_number(cfg, "reference.max_iter", min=1, default=50000)

@@ -36,7 +36,7 @@ from .render import DEFAULT_VIEW, figure_row, render_mesh
 
 __all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
            "pose_transfer_figure", "safe_figure", "write_case_figure", "figures_options", "ERROR_CMAP",
-           "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN"]
+           "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure"]
 
 log = logging.getLogger("eval")
 
@@ -316,3 +316,45 @@ def write_case_figure(case, results: Mapping, fig_dir, *, not_run=()) -> Path | 
     results = {**dict(results), **{name: NOT_RUN for name in not_run}}
     return safe_figure(str(case.name), case_figure, case.V, case.F, results, case.handles, case.static,
                        Path(fig_dir) / f"{case.name}.png", title=str(case.name))
+
+
+def distribution_figure(df, path, *, metrics, methods=None, seed: int = 0) -> Path:
+    """The per-case distribution of each metric per method: one panel per metric, a box
+    (quartiles, whiskers at 1.5 IQR) per method with every case drawn over it as a dot
+    (horizontal jitter from :func:`numpy.random.default_rng` (``seed``)).
+
+    df : per-case rows (``method`` and the metric columns; successful rows only, the
+    caller filters). metrics : sequence of (column, label). methods : the methods, in
+    order (default: those of ``df``, sorted). Writes a PNG (matplotlib Agg, created
+    folders); returns ``path``. Raises ValueError when no metric has a finite value.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    methods = list(methods) if methods is not None else sorted(df["method"].unique())
+    panels = []
+    for col, label in metrics:
+        data = [np.asarray(df.loc[df["method"] == m, col], dtype=float) for m in methods]
+        data = [x[np.isfinite(x)] for x in data]
+        if any(len(x) for x in data):
+            panels.append((label, data))
+    if not panels:
+        raise ValueError("no metric with a finite value to draw")
+    rng = np.random.default_rng(seed)
+    fig = Figure(figsize=(3.2 * len(panels), 3.4), dpi=120)
+    FigureCanvasAgg(fig)
+    for k, (label, data) in enumerate(panels):
+        ax = fig.add_subplot(1, len(panels), k + 1)
+        pos = [i + 1 for i, x in enumerate(data) if len(x)]
+        ax.boxplot([x for x in data if len(x)], positions=pos, widths=0.6, showfliers=False)
+        for i, x in enumerate(data):
+            ax.plot(i + 1 + rng.uniform(-0.15, 0.15, len(x)), x, "o", ms=3, alpha=0.6, color="#d62728")
+        ax.set_xticks(range(1, len(methods) + 1), methods, rotation=45, ha="right", fontsize=8)
+        ax.set_xlim(0.4, len(methods) + 0.6)
+        ax.set_title(label, fontsize=9)
+        ax.tick_params(axis="y", labelsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path

@@ -343,7 +343,8 @@ def _end_runinfo(out: Path, status: str, error: str) -> None:
 def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str = "eval.log"):
     """Run one experiment in its claimed output folder ``cfg.out_dir``.
 
-    Claims the folder (:func:`claim_output_dir`, ``cfg.overwrite``), pins ``cfg.out_dir``
+    Claims the folder (:func:`claim_output_dir`, ``cfg.overwrite``; ``cfg.resume``
+    true: ``keep``, the earlier output of the same kind is continued), pins ``cfg.out_dir``
     to the folder claimed (a fresh name may have gained a suffix), records Hydra's
     config in ``.hydra/``, logs into ``out/eval.log``; at the end marks the folder done,
     failed or interrupted (``run.json`` too) and releases it. A folder this run created
@@ -365,8 +366,9 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     if target and target in _claimed:
         yield None
         return
+    # resume=true (the evaluator's result store, eval/store.py): the earlier output is continued, not replaced
     claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)),
-                             fresh=fresh)
+                             fresh=fresh, keep=overwrite_flag(cfg.get("resume", False)))
     with open_dict(cfg):
         cfg.out_dir = str(claim.path)
     _claimed[str(claim.path)] = claim

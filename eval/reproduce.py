@@ -7,10 +7,14 @@
 Runs, each as its own ``python -m eval`` process (so a failure is reported and the
 others still run):
 
-1. DeFAUST (built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and figures, the
-   converged ARAP protocol and the distances to the cached references ->
-   ``results/defaust``; the same methods on the first 2 cases under the paper's protocol
-   (§4.1 move rule, libigl, 1000-iteration cap) -> ``results/defaust_paper``; the
+1. DeFAUST (built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and figures, every
+   method on all 40 cases (``dataset.baseline_cases=all``), the converged ARAP protocol
+   and the distances to the cached references -> ``results/defaust``; the same methods
+   on all 40 cases under the paper's protocol (§4.1 move rule, libigl, 1000-iteration
+   cap) -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
+   or a kill runs only the (case, method) pairs missing from the folder's result store
+   (:mod:`eval.store`), while a finished folder reruns nothing unless the configuration
+   changed; the
    time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
    ``results/convergence``;
 2. a sweep over SShaDe's n_low (1000, 3000, 6000) x k (1, 3, 5) on 2 DeFAUST cases ->
@@ -48,9 +52,12 @@ from .outdir import REPRODUCE_ENV
 def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
-    s = [("defaust", py + ["eval", "figures.enabled=true", "out_dir=results/defaust", *a.extra]),
-         ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.limit=2", "reference.cases=none",
-                                 "out_dir=results/defaust_paper"]),
+    # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
+    # per_pose subset, eval/subset.py); resume=true: a rerun after a crash continues (eval/store.py)
+    s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "resume=true",
+                           "out_dir=results/defaust", *a.extra]),
+         ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all", "reference.cases=none",
+                                 "resume=true", "out_dir=results/defaust_paper"]),
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"])]

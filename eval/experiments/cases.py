@@ -27,8 +27,21 @@ deformed component by component (:func:`sshade.components.deform_components`). M
 info values become cells through :func:`_info_columns` (safe names and values). Outputs in ``out_dir``
 (default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
-(:mod:`eval.tables`), ``run.json`` (:mod:`eval.runinfo`), ``eval.log`` and Hydra's
-``.hydra/`` folder. All tables and ``run.json`` are written atomically.
+(:mod:`eval.tables`), ``breakdown.csv``, ``breakdown.md`` (per pose, per subject, the
+paired SShaDe-Elastic comparison; :mod:`eval.breakdown`; with figures also
+``breakdown.png``), ``run.json`` (:mod:`eval.runinfo`), ``eval.log``, Hydra's
+``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.store`).
+All tables and ``run.json`` are written atomically.
+
+Result store and resume (issue 21): each (case, method) run is stored as soon as it
+finishes, keyed by the method's definition, the case's identity and the guard/reference
+options; the tables are built from the stored rows. ``resume=true`` with ``out_dir`` =
+an earlier run's folder continues it (the claim keeps its files, :mod:`eval.outdir`):
+only the pairs missing from the store, or stored under another key, run; a method added
+later runs only its own cases. Without ``resume`` the store starts empty. The baselines
+run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.subset`; the rule is
+stated in the table's title); the progress bar's remaining time is weighted by each
+method's expected cost (:mod:`eval.progress`).
 
 Exit status of ``python -m eval``: 0 on success (even if some method failed on some
 case), 2 on a configuration or input error (one ``error: ...`` line on stderr).
@@ -42,25 +55,30 @@ from __future__ import annotations
 import json
 import logging
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from sshade.checks import config_bool
 from sshade.errors import SShaDeError
 from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
 
 from .. import datasets
 from .. import methods as method_table
+from ..breakdown import write_breakdown
 from ..config_check import config_number
 from ..figures import figures_options, write_case_figure
+from ..methods import method_spec
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
+from ..progress import CostModel, weighted_bar
 from ..reference import energy_operators, method_energy, reference_metrics, reference_solution
 from ..runinfo import collect_runinfo, write_runinfo
+from ..store import ResultStore, case_identity, json_safe, pair_key
+from ..subset import baseline_selection, check_baseline_cases
 from ..tables import compare, write_cases, write_tables
-from .common import sshade_spec
+from .common import as_list, sshade_spec
 from .registry import register_experiment
 
 __all__ = ["run", "sshade_params"]
@@ -154,40 +172,70 @@ def run(cfg) -> dict:
     t_start = time.perf_counter()
     s = _setup(cfg)
     info = _start_runinfo(cfg, s)
-    rows, compile_s = _run_cases(cfg, s)
-    return _finish(cfg, s, rows, compile_s, info, t_start)
+    rows = _run_cases(cfg, s)
+    return _finish(cfg, s, rows, info, t_start)
 
 
 class _Setup:
-    """What :func:`_setup` prepared: ``methods``, ``names``, ``guard``, ``refs``,
-    ``root``, ``out_dir``, ``name`` (dataset), ``cases``, ``n_base``."""
+    """What :func:`_setup` prepared: ``methods``, ``names``, ``specs`` (each method's
+    resolved definition), ``guard``, ``refs``, ``root``, ``out_dir``, ``name``
+    (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
+    all) and ``base_rule`` (that rule in words), ``store`` and ``resume``."""
 
     def __init__(self, **kw):
         self.__dict__.update(kw)
 
     def runs_on(self, ci: int, m) -> bool:
-        """Baselines take minutes per high-res case: they run on the first
-        ``dataset.baseline_cases`` cases only (SShaDe on all)."""
-        return self.n_base is None or ci < int(self.n_base) or m.name == "SShaDe"
+        """Baselines take minutes per high-res case: they run on the cases
+        ``dataset.baseline_cases`` selects (:func:`eval.subset.baseline_selection`;
+        SShaDe on all)."""
+        return self.base is None or ci in self.base or m.name == "SShaDe"
+
+
+def _method_specs(cfg, methods) -> list[dict]:
+    """Each method's resolved definition (what its result depends on; :mod:`eval.store`):
+    ours from :func:`eval.methods.method_spec`, a plug-in's ``_target_`` mapping as given."""
+    from omegaconf import OmegaConf
+    items = cfg.get("methods")
+    items = [n for n in items.replace(",", " ").split() if n] if isinstance(items, str) else as_list(items)
+    out = []
+    for it, m in zip(items, methods):
+        if OmegaConf.is_config(it) or isinstance(it, dict):
+            spec = OmegaConf.to_container(it, resolve=True) if OmegaConf.is_config(it) else dict(it)
+        else:
+            spec = method_spec(cfg, str(it))
+        out.append({"class": f"{type(m).__module__}.{type(m).__qualname__}", "name": m.name, **json_safe(spec)})
+    return out
 
 
 def _setup(cfg) -> _Setup:
     """Every method built and checked, the guard and reference options, the dataset's
-    root (may build DeFAUST) and cases, before any method runs."""
+    root (may build DeFAUST) and cases, the baseline subset, the result store (emptied
+    unless ``resume``), before any method runs."""
     methods = method_table.make_methods(cfg)  # every method's parameters are checked before any work
+    specs = _method_specs(cfg, methods)
     guard = _guard_options(cfg)  # timeout_s, handle_error_max_pct
-    n_base = (cfg.get("dataset") or {}).get("baseline_cases", None)  # full-res baselines on the first N cases
-    refs = _References(cfg, n_base)  # config checked here too
+    base_spec = (cfg.get("dataset") or {}).get("baseline_cases", None)
+    check_baseline_cases(base_spec)
+    refs = _References(cfg)  # config checked here too
+    resume = config_bool(cfg, "resume", default=False)
+    meshes = config_bool(cfg, "store.meshes", default=False)
     root = datasets.dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
     out_dir = abs_path(cfg.out_dir)
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
     cases = datasets.load_cases(name, root, **datasets.dataset_options(ds))
-    log.info("%d case(s) from %s; methods %s; output %s", len(cases), root,
-             [m.name for m in methods], out_dir)
+    base, base_rule = baseline_selection(cases, base_spec)
+    log.info("%d case(s) from %s; methods %s; baselines on %s; output %s", len(cases), root,
+             [m.name for m in methods], base_rule, out_dir)
+    store = ResultStore(out_dir, meshes=meshes)
+    if not resume:
+        n = store.clear()
+        if n:
+            log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
     names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
-    return _Setup(methods=methods, names=names, guard=guard, refs=refs, root=root, out_dir=out_dir, name=name,
-                  cases=cases, n_base=n_base)
+    return _Setup(methods=methods, names=names, specs=specs, guard=guard, refs=refs, root=root, out_dir=out_dir,
+                  name=name, cases=cases, base=base, base_rule=base_rule, store=store, resume=resume)
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -207,51 +255,107 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
     return info
 
 
-def _run_cases(cfg, s: _Setup) -> tuple[list[dict], dict[str, float]]:
-    """Every (case, method) run (:func:`_run_one`) with a progress bar; ``cases.csv``
-    rewritten after each case, the optional figures. Returns the rows and the
-    compilation seconds per method."""
+def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
+    """The store keys (:func:`eval.store.pair_key`) of every method on case ``ci``: the
+    method's definition, the case's identity, the guard and reference options."""
+    ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
+    extra = {"guard": s.guard, "reference": s.refs.settings(ci in s.base if s.base is not None else True)}
+    return [pair_key(spec, ident, extra) for spec in s.specs]
+
+
+def _run_cases(cfg, s: _Setup) -> list[dict]:
+    """Every (case, method) run (:func:`_run_one`) not already in the result store
+    (``resume``; :mod:`eval.store`), each stored as soon as it finishes, with a progress
+    bar weighted by each method's expected cost (:mod:`eval.progress`); ``cases.csv``
+    rewritten after each case, the optional figures. Returns the rows of every pair, in
+    (case, method) order, as stored (an interrupted and resumed run gives the rows of an
+    uninterrupted one)."""
     import pandas as pd
-    from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    rows: list[dict] = []
-    compile_s: dict[str, float] = {}  # method -> seconds of warm-up/compilation (run.json)
     fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
-    methods, names = s.methods, s.names
-    n_runs = sum(s.runs_on(ci, m) for ci in range(len(s.cases)) for m in methods)
-    bar = tqdm(total=n_runs, desc="runs", unit="run", file=sys.stderr, dynamic_ncols=True)
+    methods, names, cases = s.methods, s.names, s.cases
+    plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
+    keys = {ci: _pair_keys(cfg, s, ci, c) for ci, c in enumerate(cases)}
+    cost = CostModel({m.name: CostModel.scale_of(m) for m in methods})
+    done: dict = {}  # (ci, mi) -> stored record
+    for ci, mis in plan.items():
+        for mi in mis if s.resume else ():
+            rec = s.store.load(cases[ci].name, names[mi], keys[ci][mi][0])
+            if rec is not None:
+                done[ci, mi] = rec
+                cost.observe(names[mi], len(cases[ci].V), rec["row"].get("time_s"))
+    todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
+    if s.resume:
+        log.info("resume: %d run(s) restored from %s, %d to run", len(done), s.store.root, len(todo))
+    bar = weighted_bar(sum(cost.estimate(names[mi], len(cases[ci].V)) for ci, mi in todo), len(todo))
+    rows: list[dict] = []
     with logging_redirect_tqdm(), bar:
-        for ci, case in enumerate(s.cases):
-            deformed = {}  # method -> deformed vertices, for the optional figure
-            s.refs.start_case(ci, case)
-            for m, m_name in zip(methods, names):
-                if not s.runs_on(ci, m):
+        for ci, case in enumerate(cases):
+            s.refs.start_case(ci, case, s.base is None or ci in s.base)
+            deformed, unknown = {}, []  # method -> deformed vertices, for the optional figure
+            for mi in plan[ci]:
+                if (ci, mi) in done:
+                    deformed[names[mi]] = s.store.load_mesh(done[ci, mi]) if fig_on and fig_left > 0 else None
+                    if deformed[names[mi]] is None and not done[ci, mi]["row"].get("error"):
+                        unknown.append(names[mi])  # restored without its mesh (store.meshes=false)
                     continue
-                bar.set_postfix_str(f"{case.name} {m_name}")
-                row, deformed[m_name] = _run_one(m, m_name, case, s.refs, s.guard)
-                if "compile_s" in row:
-                    compile_s[m_name] = compile_s.get(m_name, 0.0) + row["compile_s"]
-                rows.append(row)
-                bar.update(1)
+                bar.set_postfix_str(f"{todo.index((ci, mi)) + 1}/{len(todo)} runs: {case.name} {names[mi]}")
+                done[ci, mi], deformed[names[mi]] = _run_stored(s, ci, mi, keys[ci][mi], cost, bar)
+                bar.total = bar.n + sum(cost.estimate(names[mj], len(cases[cj].V))
+                                        for cj, mj in todo[todo.index((ci, mi)) + 1:]) + 1e-9
+                bar.refresh()
+            rows = [done[cj, mj]["row"] for cj in range(ci + 1) for mj in plan[cj]]
             write_cases(pd.DataFrame(rows), s.out_dir)  # partial results survive a crash
-            if fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
+            if fig_on and fig_left > 0 and unknown:
+                fig_left -= 1
+                log.info("%s: figure not redrawn (restored runs of %s have no stored mesh; store.meshes=true keeps "
+                         "them)", case.name, ", ".join(unknown))
+            elif fig_on and fig_left > 0:  # out_dir/figures/<case>.png (eval/figures.py)
                 fig_left -= 1
                 write_case_figure(case, {n: deformed.get(n) for n in names}, s.out_dir / "figures",
                                   # "not run", not "failed"
                                   not_run=[n for m, n in zip(methods, names) if not s.runs_on(ci, m)])
-    return rows, compile_s
+    return rows
 
 
-def _finish(cfg, s: _Setup, rows, compile_s, info, t_start) -> dict:
-    """Tables (:func:`eval.tables.write_tables`), ``run.json`` with status ``done``, the
-    Markdown table on stdout; the return value of :func:`run`."""
+def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostModel, bar):
+    """One pair run (:func:`_run_one`), timed into ``cost`` and ``bar``, and stored
+    (:meth:`eval.store.ResultStore.save`; a store that cannot be written is logged and the
+    run goes on). Returns ``(record, U)``."""
+    case, m, name = s.cases[ci], s.methods[mi], s.names[mi]
+    t0 = time.perf_counter()
+    row, U, info = _run_one(m, name, case, s.refs, s.guard)
+    wall = time.perf_counter() - t0
+    c = row.get("compile_s")  # a one-off (numba compilation): not a cost of the later runs
+    cost.observe(name, len(case.V), wall - (c if isinstance(c, (int, float)) and c == c else 0.0))
+    bar.update(wall)
+    rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name}
+    try:
+        s.store.save(case.name, name, key[0], key[1], row, info, U)
+    except OSError as e:
+        log.warning("%s %s: result not stored (%s); a resume will run it again", case.name, name, e)
+    return rec, U
+
+
+def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
+    """Tables (:func:`eval.tables.write_tables`; the title states the baseline rule) and
+    breakdowns (:func:`eval.breakdown.write_breakdown`, with its figure when figures
+    are enabled) from the stored rows, ``run.json`` with status ``done``, the Markdown
+    table on stdout; the return value of :func:`run`."""
     import pandas as pd
 
     df = pd.DataFrame(rows)
+    compile_s: dict[str, float] = {}  # method -> seconds of warm-up/compilation (run.json)
+    for r in rows:
+        if isinstance(r.get("compile_s"), (int, float)):
+            compile_s[r["method"]] = compile_s.get(r["method"], 0.0) + r["compile_s"]
     exp = cfg.get("experiment", {}).get("name", s.name)
     title = f"{exp}: {len(s.cases)} {s.name} case(s)"
+    if s.base is not None and any(not s.runs_on(ci, m) for ci in range(len(s.cases)) for m in s.methods):
+        title += f"; full-resolution baselines on {s.base_rule}"
     paths = write_tables(df, s.out_dir, title=title)
+    paths.update(write_breakdown(df, s.out_dir, figure=figures_options(cfg)[0]))
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     info.update(status="done", n_cases=len(s.cases), n_rows=len(df), n_errors=n_err,
@@ -281,7 +385,7 @@ def _guard_options(cfg) -> dict:
 
 def _run_one(m, name: str, case, refs, guard: dict):
     """One (case, method) run: :func:`sshade.guard.run_method`, the metrics, the method's
-    info; returns ``(row, U)`` (``U`` None when the method failed). A failure (the
+    info; returns ``(row, U, info)`` (``U`` None and ``info`` empty when the method failed). A failure (the
     method's, or a handle error above ``guard['handle_error_max_pct']``: its metrics
     stay in the row) is the row's ``error``; the run goes on."""
     row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": name,
@@ -302,7 +406,7 @@ def _run_one(m, name: str, case, refs, guard: dict):
     except SShaDeError as e:  # the method failed (sshade.guard.MethodFailure), or a metric refused its result
         row["error"] = " ".join(str(e).split()) or type(e).__name__
         log.warning("%s %s failed: %s", case.name, name, row["error"])
-        return row, None
+        return row, None, {}
     row.update(_info_columns(r.info, row))
     row["error"] = handles_not_reached(row.get("handle_err_pct"), guard["handle_error_max_pct"]) or ""
     if row["error"]:
@@ -310,7 +414,7 @@ def _run_one(m, name: str, case, refs, guard: dict):
     log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", case.name, name, row["time_s"],
              row.get("volume_err_pct", math.nan), row.get("edge_err_pct", math.nan),
              row.get("angle_err_deg", math.nan))
-    return row, r.U
+    return row, r.U, r.info
 
 
 class _References:
@@ -323,7 +427,7 @@ class _References:
     ``ref_mean_pct``, ``ref_max_pct``, ``energy_gap`` columns (none outside the selection).
     The reference's own solve is not part of any method's ``time_s``."""
 
-    def __init__(self, cfg, n_base):
+    def __init__(self, cfg):
         rc = cfg.get("reference", None) or {}
         self.mode = str(rc.get("cases", "baseline"))
         if self.mode not in ("baseline", "all", "none"):
@@ -332,15 +436,20 @@ class _References:
         self.max_iter = config_number(cfg, "reference.max_iter", min=1, default=50000)
         self.time_budget_s = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True,
                                            default=3600)
-        self.n_base = n_base
         self.case = None
         self.refs: dict = {}
         self.ops: dict = {}
 
-    def start_case(self, ci: int, case) -> None:
+    def settings(self, in_base: bool) -> dict:
+        """What of this section changes a row on a case (in the baseline subset or not):
+        whether references are computed there and with which limits (:mod:`eval.store`)."""
+        on = self.mode == "all" or (self.mode == "baseline" and in_base)
+        return {"on": on, "max_iter": self.max_iter, "time_budget_s": self.time_budget_s} if on else {"on": False}
+
+    def start_case(self, ci: int, case, in_base: bool = True) -> None:
+        """Case ``ci`` starts (``in_base``: the baselines run on it); earlier solutions dropped."""
         self.refs, self.ops = {}, {}
-        on = self.mode == "all" or (self.mode == "baseline" and (self.n_base is None or ci < int(self.n_base)))
-        self.case = case if on else None
+        self.case = case if self.settings(in_base)["on"] else None
 
     def metrics(self, method, Vd) -> dict:
         if self.case is None:

@@ -1,0 +1,186 @@
+"""Breakdowns of an evaluator run next to its ``table.md`` (issue 21): per target pose
+and per subject, and a paired comparison of SShaDe with Elastic.
+
+Input: the per-case rows of ``cases.csv`` (columns ``case``, ``subject``, ``pose``,
+``method``, ``error`` and the metrics; :mod:`eval.experiments.cases`). Only successful
+rows (:func:`eval.tables.ok_mask`) with a finite value of a metric count for it.
+
+Outputs (:func:`write_breakdown`):
+
+- ``breakdown.csv``: long format, one line per (``by`` = ``pose`` / ``subject``,
+  ``group`` value, ``method``, ``metric``) with ``n``, ``mean``, ``std`` (sample
+  standard deviation, ddof 1; empty for n = 1), ``median``, ``min``, ``max``;
+- ``breakdown.md``: the same as tables of "mean ± std" per group (rows) and method
+  (columns), one per (``by``, metric), then the paired comparison
+  (:func:`paired_comparison`): on the cases where both SShaDe and Elastic succeeded, on
+  how many SShaDe's volume error (``volume_err_pct``, % of the rest volume) is below
+  Elastic's, and the median of the differences SShaDe - Elastic with a seeded
+  percentile-bootstrap interval (default 95 %, 2000 resamples, seed 0);
+- with ``figure=True``: ``breakdown.png`` (next to ``breakdown.md``; ``figures/``
+  holds one PNG per case), the per-case distribution of each metric per method
+  (:func:`eval.figures.distribution_figure`).
+
+Metrics (:data:`BREAKDOWN_METRICS`, those present): volume, area, edge-length errors
+(%), face-angle error (degrees), ground-truth vertex error (% of the diagonal).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sshade.mesh.io import atomic_write
+
+from .figures import distribution_figure, safe_figure
+from .tables import method_order_key, ok_mask
+
+__all__ = ["BREAKDOWN_METRICS", "group_breakdown", "paired_comparison", "breakdown_markdown", "write_breakdown"]
+
+#: (column, label) of the metrics broken down, in this order (when present).
+BREAKDOWN_METRICS = (
+    ("volume_err_pct", "Volume (%)"),
+    ("area_err_pct", "Area (%)"),
+    ("edge_err_pct", "EL (%)"),
+    ("angle_err_deg", "FA (deg)"),
+    ("gt_vertex_mean_pct", "GT mean (%)"),
+)
+
+
+def _metrics(df: pd.DataFrame) -> list[tuple[str, str]]:
+    return [(c, lab) for c, lab in BREAKDOWN_METRICS if c in df.columns]
+
+
+def group_breakdown(df: pd.DataFrame, by=("pose", "subject")) -> pd.DataFrame:
+    """Per-group statistics of every metric per method.
+
+    Parameters
+    ----------
+    df : per-case rows (``cases.csv``). by : the grouping columns, each on its own.
+
+    Returns
+    -------
+    DataFrame with columns ``by``, ``group``, ``method``, ``metric``, ``n``, ``mean``,
+    ``std`` (ddof 1, NaN for n = 1), ``median``, ``min``, ``max``; methods in table
+    order; groups sorted. Empty (those columns) when nothing qualifies.
+    """
+    cols = ["by", "group", "method", "metric", "n", "mean", "std", "median", "min", "max"]
+    ok = df[ok_mask(df)] if len(df) else df
+    out = []
+    for b in by:
+        if b not in ok.columns or ok[b].isna().all():
+            continue
+        for col, _ in _metrics(ok):
+            v = ok[[b, "method", col]].copy()
+            v[col] = pd.to_numeric(v[col], errors="coerce")
+            v = v[np.isfinite(v[col])]
+            for (g, m), x in v.groupby([b, "method"], sort=True)[col]:
+                out.append([b, g, m, col, len(x), x.mean(), x.std(ddof=1) if len(x) > 1 else math.nan,
+                            x.median(), x.min(), x.max()])
+    res = pd.DataFrame(out, columns=cols)
+    if len(res):
+        order = [c for c, _ in BREAKDOWN_METRICS]
+        res["_b"] = res["by"].map(list(by).index)
+        res["_m"] = res["metric"].map(order.index)
+        res["_k"] = res["method"].map(method_order_key)
+        res = res.sort_values(["_b", "_m", "group", "_k"], kind="stable").drop(columns=["_b", "_m", "_k"])
+    return res.reset_index(drop=True)
+
+
+def paired_comparison(df: pd.DataFrame, a: str = "SShaDe", b: str = "Elastic", metric: str = "volume_err_pct", *,
+                      n_boot: int = 2000, seed: int = 0, level: float = 0.95) -> dict | None:
+    """Method ``a`` against ``b`` on their common successful cases (finite ``metric``).
+
+    Returns
+    -------
+    None when either method or the metric is absent or they share no case; else a dict
+    with ``a``, ``b``, ``metric``, ``n`` (common cases), ``n_a_lower`` (cases where a's
+    value is below b's), ``n_ties``, ``median_diff`` (median of a - b, the metric's
+    unit), ``ci_lo``, ``ci_hi`` (percentile bootstrap of that median: ``n_boot``
+    resamples of the cases with :func:`numpy.random.default_rng` (``seed``), interval
+    ``level``), ``n_boot``, ``seed``, ``level``.
+
+    >>> d = pd.DataFrame({"case": ["c1", "c2", "c1", "c2"], "method": ["SShaDe"] * 2 + ["Elastic"] * 2,
+    ...                   "error": "", "volume_err_pct": [1.0, 3.0, 2.0, 2.0]})
+    >>> r = paired_comparison(d); (r["n"], r["n_a_lower"], r["median_diff"])
+    (2, 1, 0.0)
+    """
+    if metric not in df.columns or "method" not in df.columns:
+        return None
+    ok = df[ok_mask(df)]
+    vals = {}
+    for m in (a, b):
+        x = ok[ok["method"] == m].drop_duplicates("case").set_index("case")[metric]
+        vals[m] = pd.to_numeric(x, errors="coerce")
+    j = pd.concat([vals[a].rename("a"), vals[b].rename("b")], axis=1, join="inner").dropna()
+    j = j[np.isfinite(j["a"]) & np.isfinite(j["b"])]
+    if not len(j):
+        return None
+    d = (j["a"] - j["b"]).to_numpy(float)
+    rng = np.random.default_rng(seed)
+    boots = np.median(d[rng.integers(0, len(d), size=(int(n_boot), len(d)))], axis=1)
+    lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
+    return {"a": a, "b": b, "metric": metric, "n": len(d), "n_a_lower": int((d < 0).sum()),
+            "n_ties": int((d == 0).sum()), "median_diff": float(np.median(d)), "ci_lo": float(lo),
+            "ci_hi": float(hi), "n_boot": int(n_boot), "seed": int(seed), "level": float(level)}
+
+
+def _cell(r) -> str:
+    if r is None:
+        return "-"
+    s = f"{r['mean']:.3g}"
+    return s + (f" ± {r['std']:.2g}" if r["std"] == r["std"] else "") + (f" (n={r['n']})" if r["n"] != 1 else "")
+
+
+def _paired_text(p: dict | None, a: str, b: str, metric: str) -> list[str]:
+    if p is None:
+        return [f"No case where both {a} and {b} succeeded with a {metric} value: no paired comparison."]
+    return [f"On {p['n']} case(s) where both succeeded, {a}'s {p['metric']} is below {b}'s on {p['n_a_lower']}"
+            f" ({p['n_ties']} tie(s)). Median of the differences {a} - {b}: {p['median_diff']:.4g}"
+            f" ({p['level']:.0%} bootstrap interval {p['ci_lo']:.4g} .. {p['ci_hi']:.4g}; "
+            f"{p['n_boot']} resamples of the cases, seed {p['seed']})."]
+
+
+def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: str = "SShaDe", b: str = "Elastic",
+                       metric: str = "volume_err_pct", seed: int = 0) -> str:
+    """``breakdown.md``'s text: per (``by``, metric) a table of "mean ± std (n)" with the
+    groups as rows and the methods (table order) as columns, then the paired comparison."""
+    br = group_breakdown(df) if br is None else br
+    lines = ["# Breakdowns", "", "Mean ± sample standard deviation (n cases when not 1) over the successful cases "
+             "of each group.", ""]
+    labels = dict(BREAKDOWN_METRICS)
+    for (by, col), t in br.groupby(["by", "metric"], sort=False):
+        methods = sorted(t["method"].unique(), key=method_order_key)
+        lines += [f"## Per {by}: {labels.get(col, col)}", "", "| " + " | ".join([by, *methods]) + " |",
+                  "|" + "---|" * (len(methods) + 1)]
+        for g, tg in t.groupby("group", sort=True):
+            by_m = {r["method"]: r for r in tg.to_dict("records")}
+            lines.append("| " + " | ".join([str(g), *[_cell(by_m.get(m)) for m in methods]]) + " |")
+        lines.append("")
+    lines += [f"## Paired comparison: {a} vs {b} ({metric})", ""]
+    lines += _paired_text(paired_comparison(df, a, b, metric, seed=seed), a, b, metric)
+    return "\n".join(lines) + "\n"
+
+
+def write_breakdown(df: pd.DataFrame, out_dir, *, figure: bool = False) -> dict[str, Path]:
+    """Write ``breakdown.csv`` and ``breakdown.md`` (atomically) into ``out_dir`` and,
+    with ``figure``, ``breakdown.png`` (never raises for the figure: a warning is
+    logged). Returns name -> path of the files written (``breakdown_csv``,
+    ``breakdown_md``, ``breakdown_png``)."""
+    out_dir = Path(out_dir)
+    br = group_breakdown(df)
+    paths = {}
+    with atomic_write(out_dir / "breakdown.csv", "w", newline="") as fh:
+        br.to_csv(fh, index=False, float_format="%.6g")
+    paths["breakdown_csv"] = out_dir / "breakdown.csv"
+    with atomic_write(out_dir / "breakdown.md", "w") as fh:
+        fh.write(breakdown_markdown(df, br))
+    paths["breakdown_md"] = out_dir / "breakdown.md"
+    ok = df[ok_mask(df)] if len(df) else df
+    if figure and len(ok):
+        p = safe_figure("distribution", distribution_figure, ok, out_dir / "breakdown.png",
+                        metrics=_metrics(ok))
+        if p is not None:
+            paths["breakdown_png"] = Path(p)
+    return paths

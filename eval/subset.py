@@ -1,0 +1,84 @@
+"""Which cases the full-resolution baselines run on (``dataset.baseline_cases``; issue 21).
+
+The baselines (ARAP, Elastic, ARAP-SR at 150k-200k vertices) take minutes per case, so
+the DeFAUST main job may run them on a subset while SShaDe runs on every case. The
+subset is chosen by a rule that is stated in the run's table title
+(:func:`baseline_selection` returns the rule's text):
+
+- ``per_pose`` (DeFAUST's default): one case per target pose, from different subjects.
+  With the target poses present sorted ``p_0 < p_1 < ...`` and the subjects present
+  sorted ``s_0 < s_1 < ...`` (``n`` of them), pose ``p_j`` is taken from subject
+  ``s_(j mod n)`` (for DeFAUST's poses 1..4 and subjects 0..9: pose ``p`` from subject
+  ``(p - 1) mod 10``, i.e. s00_p01, s01_p02, s02_p03, s03_p04); when that subject has no
+  such case (e.g. after ``dataset.limit``), the next subject in that cyclic order that
+  has it.
+- an integer ``N``: the first ``N`` cases (the dataset's order); ``0``: none.
+- ``all`` or null: every case.
+"""
+from __future__ import annotations
+
+from sshade.errors import SShaDeError
+
+__all__ = ["baseline_selection", "check_baseline_cases", "PER_POSE"]
+
+PER_POSE = "per_pose"
+
+
+def check_baseline_cases(v):
+    """``dataset.baseline_cases`` checked: None (= all), ``"all"``, ``"per_pose"`` or an
+    int >= 0 (bools refused; numeric strings accepted). Raises SShaDeError naming the key.
+
+    >>> check_baseline_cases("per_pose"), check_baseline_cases("3"), check_baseline_cases(None)
+    ('per_pose', 3, None)
+    """
+    if v is None or isinstance(v, str) and v.strip().lower() in ("all", "null", "none"):
+        return None
+    if isinstance(v, str) and v.strip().lower() == PER_POSE:
+        return PER_POSE
+    if not isinstance(v, bool):
+        try:
+            n = int(str(v).strip())
+            if n >= 0 and str(n) == str(v).strip():
+                return n
+        except ValueError:
+            pass
+    raise SShaDeError(f"dataset.baseline_cases must be all, per_pose or an integer >= 0 (the first N cases), "
+                      f"got {v!r}")
+
+
+def _per_pose(cases) -> set[int]:
+    poses = sorted({c.pose for c in cases if c.pose is not None})
+    subjects = sorted({c.subject for c in cases if c.subject is not None})
+    where = {(c.subject, c.pose): i for i, c in reversed(list(enumerate(cases)))}  # the first case of a pair
+    out = set()
+    for j, p in enumerate(poses):
+        for k in range(len(subjects)):
+            i = where.get((subjects[(j + k) % len(subjects)], p))
+            if i is not None:
+                out.add(i)
+                break
+    return out
+
+
+def baseline_selection(cases, spec) -> tuple[set[int] | None, str]:
+    """``(indices, rule)``: the indices of ``cases`` (objects with ``subject`` and
+    ``pose``) the baselines run on (None: every case) and the rule in words, for the table.
+
+    >>> from types import SimpleNamespace as C
+    >>> cs = [C(subject=s, pose=p) for s in range(3) for p in (1, 2)]
+    >>> baseline_selection(cs, "per_pose")
+    ({0, 3}, 'per_pose: one case per target pose, pose p_j from subject s_(j mod 3) (2 cases)')
+    >>> baseline_selection(cs, 1)[1], baseline_selection(cs, "all")
+    ('the first 1 case(s)', (None, 'all cases'))
+
+    Raises SShaDeError for a bad ``spec`` (:func:`check_baseline_cases`).
+    """
+    spec = check_baseline_cases(spec)
+    if spec is None:
+        return None, "all cases"
+    if spec == PER_POSE:
+        sel = _per_pose(cases)
+        n_subj = len({c.subject for c in cases if c.subject is not None})
+        return sel, (f"per_pose: one case per target pose, pose p_j from subject s_(j mod {n_subj}) "
+                     f"({len(sel)} cases)")
+    return set(range(min(spec, len(cases)))), f"the first {spec} case(s)"

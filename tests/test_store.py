@@ -1,0 +1,194 @@
+"""Issue 21: the evaluator's per-(case, method) result store (eval/store.py), resume after
+a kill -9, a method added later, the baseline subset rule (eval/subset.py) and the
+cost-weighted progress estimate (eval/progress.py)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.progress import CostModel
+from eval.reproduce import main as reproduce_main
+from eval.store import ResultStore, case_identity, pair_key
+from eval.subset import baseline_selection, check_baseline_cases
+from sshade.errors import SShaDeError
+
+from .conftest import ROOT, subprocess_env
+
+PLUGIN = "{_target_:tests.store_methods.Counted,name:%s}"
+TIME_COLUMNS = ("time_s", "compile_s")
+
+
+def _case(name="c", seed=0):
+    rng = np.random.default_rng(seed)
+    return SimpleNamespace(name=name, seed=seed, V=rng.random((5, 3)), F=np.array([[0, 1, 2]]),
+                           handles=np.array([0, 1]), targets=rng.random((2, 3)))
+
+
+# ----------------------------------------------------------------------------- store, unit
+def test_store_keys_round_trip_and_clear(tmp_path):
+    c = _case()
+    ident = case_identity(c, dataset="faust", root="/d", seed=0)
+    k1, f1 = pair_key({"_target_": "x.A", "tol": 1e-4}, ident, {"guard": {"timeout_s": None}})
+    assert k1 == pair_key({"tol": 1e-4, "_target_": "x.A"}, dict(ident), {"guard": {"timeout_s": None}})[0]
+    assert k1 != pair_key({"_target_": "x.A", "tol": 1e-3}, ident)[0]  # another parameter: another key
+    c2 = _case()
+    c2.targets = c2.targets + 1e-9  # another handle target: another case
+    assert k1 != pair_key({"_target_": "x.A", "tol": 1e-4}, case_identity(c2, dataset="faust", root="/d", seed=0),
+                          {"guard": {"timeout_s": None}})[0]
+    st = ResultStore(tmp_path, meshes=True)
+    row = {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": float("nan"), "n": np.int64(3), "error": ""}
+    p = st.save("c/1", "SShaDe+refine", k1, f1, row, {"per": [{"a": np.float32(1.5)}]}, np.ones((5, 3)))
+    assert p == tmp_path / "runs" / "c_1" / "SShaDe+refine.json"
+    rec = st.load("c/1", "SShaDe+refine", k1)
+    assert rec["row"] == {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": None, "n": 3, "error": ""}
+    assert rec["info"] == {"per": [{"a": 1.5}]} and np.array_equal(st.load_mesh(rec), np.ones((5, 3)))
+    assert st.load("c/1", "SShaDe+refine", "other") is None  # stale key
+    assert st.load("c/1", "ARAP", k1) is None
+    (tmp_path / "runs" / "c_1" / "notes.txt").write_text("mine")
+    assert st.clear() == 1
+    assert sorted(p.name for p in (tmp_path / "runs" / "c_1").iterdir()) == ["notes.txt"]  # not a record: kept
+    assert not list(tmp_path.glob("*.tmp")) and not list((tmp_path / "runs").rglob("*.tmp"))
+
+
+# ----------------------------------------------------------------------------- subset rule
+def test_baseline_subset_rules():
+    cases = [SimpleNamespace(subject=s, pose=p) for s in range(10) for p in (1, 2, 3, 4)]  # DeFAUST: 40
+    sel, rule = baseline_selection(cases, "per_pose")
+    picked = sorted((cases[i].subject, cases[i].pose) for i in sel)
+    assert picked == [(0, 1), (1, 2), (2, 3), (3, 4)]  # pose p from subject (p - 1) mod 10
+    assert "per_pose" in rule and "4 cases" in rule
+    assert baseline_selection(cases, 2) == ({0, 1}, "the first 2 case(s)")
+    assert baseline_selection(cases, "all")[0] is None and baseline_selection(cases, None)[0] is None
+    # a limited set (subject 0 only): every pose still from some subject that has it
+    sel, _ = baseline_selection(cases[:4], "per_pose")
+    assert sorted(cases[i].pose for i in sel) == [1, 2, 3, 4]
+    # subjects 0-1 only: pose p_j from subject j mod 2
+    two = [c for c in cases if c.subject < 2]
+    assert sorted((two[i].subject, two[i].pose) for i in baseline_selection(two, "per_pose")[0]) == \
+        [(0, 1), (0, 3), (1, 2), (1, 4)]
+    for bad in ("abc", -1, True, 1.5):
+        with pytest.raises(SShaDeError, match="baseline_cases"):
+            check_baseline_cases(bad)
+
+
+def test_defaust_default_is_per_pose(capsys):
+    from omegaconf import OmegaConf
+    assert OmegaConf.load(ROOT / "conf" / "dataset" / "defaust.yaml").baseline_cases == "per_pose"
+    assert reproduce_main(["--dry-run"]) == 0
+    lines = {ln.split(":")[0]: ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("== ")}
+    for step in ("== defaust", "== defaust_paper"):  # every method on all 40 DeFAUST cases
+        assert "dataset.baseline_cases=all" in lines[step] and "dataset.limit" not in lines[step]
+
+
+# ----------------------------------------------------------------------------- progress
+def test_cost_model_weights_by_method():
+    m = CostModel({"ARAP": "vertices", "SShaDe": "const"}, prior_s_per_vertex=1e-3, prior_const_s=20)
+    assert CostModel.scale_of(SimpleNamespace(name="SShaDe")) == "const"
+    assert CostModel.scale_of(SimpleNamespace(name="Elastic")) == "vertices"
+    assert CostModel.scale_of(SimpleNamespace(name="X", cost_scale="const")) == "const"
+    # 4 baseline cases + 40 SShaDe cases at 150k: the baselines dominate from the start
+    total = 4 * m.estimate("ARAP", 150_000) + 40 * m.estimate("SShaDe", 150_000)
+    assert total == pytest.approx(4 * 150 + 40 * 20)
+    m.observe("SShaDe", 150_000, 10.0)
+    m.observe("SShaDe", 170_000, 30.0)
+    assert m.estimate("SShaDe", 10) == 20.0  # constant: the mean of the measured runs
+    m.observe("ARAP", 100_000, 200.0)
+    assert m.estimate("ARAP", 150_000) == pytest.approx(300.0)  # per vertex
+    m.observe("ARAP", 100_000, float("nan"))  # ignored
+    assert m.estimate("ARAP", 150_000) == pytest.approx(300.0)
+
+
+# ----------------------------------------------------------------------------- resume after kill -9
+def _eval(out, methods, *extra, env=None, popen=False):
+    items = ",".join(m if "{" in m else PLUGIN % m for m in methods)
+    cmd = [sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={out.parent / 'faust'}",
+           "dataset.limit=2", "reference.cases=none", f"methods=[{items}]",
+           f"out_dir={out}", *extra]
+    kw = dict(cwd=ROOT, env=dict(subprocess_env(), **(env or {})), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+              text=True)
+    if popen:
+        return subprocess.Popen(cmd, **kw)
+    r = subprocess.run(cmd, timeout=600, **kw)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+def _snapshot(out):
+    return {str(p.relative_to(out)): (p.stat().st_mtime_ns, p.read_bytes()) for p in sorted((out / "runs").rglob("*"))
+            if p.is_file()}
+
+
+def _no_time(md: str) -> str:
+    """table.md without its Time column (the only cells a rerun may change)."""
+    out, drop = [], None
+    for line in md.splitlines():
+        cells = line.split("|")
+        if line.startswith("| Method"):
+            drop = [i for i, c in enumerate(cells) if "Time" in c]
+        if drop and line.startswith("|"):
+            cells = [c for i, c in enumerate(cells) if i not in drop]
+        out.append("|".join(cells))
+    return "\n".join(out)
+
+
+def _counts(path):
+    return pd.Series([ln.split()[1] for ln in path.read_text().splitlines()]).value_counts().to_dict() \
+        if path.exists() else {}
+
+
+def test_resume_after_kill_runs_only_missing_pairs(tmp_path, faust_root):
+    (tmp_path / "faust").symlink_to(faust_root)
+    out, full = tmp_path / "out", tmp_path / "full"
+    counter = tmp_path / "calls.txt"
+    # 1. killed (SIGKILL) while its third pair runs: two pairs (s0_p1 A and B) are stored
+    p = _eval(out, ["A", "B"], env={"SSHADE_TEST_COUNTER": str(counter), "SSHADE_TEST_HANG_AFTER": "2"}, popen=True)
+    try:
+        t0 = time.time()
+        while not (counter.exists() and len(counter.read_text().splitlines()) >= 3):
+            assert p.poll() is None, p.communicate()[1][-3000:]
+            assert time.time() - t0 < 300
+            time.sleep(0.2)
+        assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]
+    finally:
+        os.kill(p.pid, signal.SIGKILL)
+        p.communicate()
+    before = _snapshot(out)
+    counter.unlink()
+    # 2. resume: the earlier run's files are kept, only the two missing pairs run
+    r = _eval(out, ["A", "B"], "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert "continuing the earlier eval output" in r.stdout + r.stderr
+    assert _counts(counter) == {"A": 1, "B": 1}
+    after = _snapshot(out)
+    assert all(after[k] == v for k, v in before.items())  # same bytes, same mtime: not recomputed
+    assert len(after) == 4
+    # 3. the tables equal an uninterrupted run's (time columns excluded)
+    _eval(full, ["A", "B"])
+    a, b = pd.read_csv(out / "cases.csv"), pd.read_csv(full / "cases.csv")
+    pd.testing.assert_frame_equal(a.drop(columns=list(TIME_COLUMNS)), b.drop(columns=list(TIME_COLUMNS)))
+    assert _no_time((out / "table.md").read_text()) == _no_time((full / "table.md").read_text())
+    assert (out / "breakdown.md").read_text() == (full / "breakdown.md").read_text()
+    assert json.loads((out / "run.json").read_text())["status"] == "done"
+    # 4. a method added later runs only its own cases; a changed parameter reruns that method
+    counter.unlink()
+    _eval(out, ["A", "B", "C"], "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"C": 2}
+    assert len(pd.read_csv(out / "cases.csv")) == 6
+    counter.unlink()
+    _eval(out, ["{_target_:tests.store_methods.Counted,name:A,iterations:5}"], "resume=true",
+          env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"A": 2}
+    # 5. without resume the store starts empty: everything runs again
+    counter.unlink()
+    _eval(out, ["A", "B"], env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"A": 2, "B": 2}
+    assert sorted(str(p.relative_to(out)) for p in (out / "runs").rglob("*.json")) == \
+        ["runs/s0_p1/A.json", "runs/s0_p1/B.json", "runs/s0_p2/A.json", "runs/s0_p2/B.json"]
