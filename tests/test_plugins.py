@@ -123,7 +123,7 @@ def test_method_group_is_composed_and_follows_the_shared_sections():
                                                     "methods=[ARAP,Elastic,ARAP-SR,SShaDe,SShaDe+refine]"]))}
     assert ms["ARAP"].tol == 1e-3 and ms["ARAP"].max_iter is None
     assert ms["Elastic"].max_iter == 7  # set on the method only
-    assert ms["ARAP-SR"].max_iter == 1000  # arap.max_iter null -> ARAP-SR's cap
+    assert ms["ARAP-SR"].max_iter == 10000  # arap.max_iter null -> the converged protocol's cap
     assert ms["SShaDe"].params["n_low"] == 321 and ms["SShaDe"].params["n_samplings"] == 2
     assert ms["SShaDe"].params["tol"] == 1e-3  # arap.tol, no sshade.tol given
     assert ms["SShaDe+refine"].params["n_samplings"] == 5

@@ -14,7 +14,8 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep"]
     assert "arap.protocol=paper" in steps["defaust_paper"]
-    assert steps["defaust"] == "-m eval figures.enabled=true out_dir=results/defaust"
+    assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all resume=true "
+                                "out_dir=results/defaust")  # every method on every case, resumable
     sweep = steps["sweep"]
     assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
