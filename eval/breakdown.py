@@ -180,7 +180,7 @@ def write_breakdown(df: pd.DataFrame, out_dir, *, figure: bool = False) -> dict[
     ok = df[ok_mask(df)] if len(df) else df
     if figure and len(ok):
         p = safe_figure("distribution", distribution_figure, ok, out_dir / "breakdown.png",
-                        metrics=_metrics(ok))
+                        metrics=_metrics(ok), methods=sorted(ok["method"].unique(), key=method_order_key))
         if p is not None:
             paths["breakdown_png"] = Path(p)
     return paths

@@ -63,7 +63,7 @@ def _steps(a) -> list[tuple[str, list[str]]]:
                          "hydra.sweep.dir=results/sweeps/defaust"])]
     if a.faust:
         s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true",
-                                  "out_dir=results/faust"]))
+                                  "resume=true", "out_dir=results/faust"]))
         s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}",
                                            "figures.enabled=true", "out_dir=results/pose_transfer"]))
     if a.tosca:
