@@ -41,9 +41,9 @@ __all__ = ["builtin_methods", "table_order", "canonical_name", "method_key", "me
 
 #: Keys of a method file that describe the method instead of being its parameters.
 META_KEYS = ("order",)
-#: Table slots of methods without a config file in this repository: Implicit-ARAP
-#: (Baieri et al. 2024), whose rows come from its authors' code (no method of ours).
-RESERVED_ORDER = {"Implicit-ARAP": 40}
+#: Table slots of methods without a config file in this repository (none since
+#: Implicit-ARAP got its file, conf/method/Implicit-ARAP.yaml, issue 22).
+RESERVED_ORDER: dict[str, float] = {}
 #: The shared sections of ``conf/config.yaml`` the method files' values default to.
 SECTIONS = ("arap", "arap_sr", "sshade")
 
@@ -80,7 +80,7 @@ def builtin_methods() -> tuple[str, ...]:
     """The names of our methods (one per ``conf/method/*.yaml``), in table order.
 
     >>> builtin_methods()
-    ('ARAP', 'Elastic', 'ARAP-SR', 'SShaDe', 'SShaDe+refine')
+    ('ARAP', 'Elastic', 'ARAP-SR', 'Implicit-ARAP', 'SShaDe', 'SShaDe+refine')
     """
     return tuple(sorted(_definitions(), key=_order))
 

@@ -130,7 +130,7 @@ def test_installed_wheel_runs_outside_checkout(wheel, tmp_path):
     out = run("-c", "import sys, sshade.confdir as c, sshade.registry as r; d = c.config_dir(); "
                     "print(r.builtin_methods()); assert 'eval' not in sys.modules; import eval; "
                     "print(eval.__file__); print(d)")
-    assert out.splitlines() == ["('ARAP', 'Elastic', 'ARAP-SR', 'SShaDe', 'SShaDe+refine')",
+    assert out.splitlines() == ["('ARAP', 'Elastic', 'ARAP-SR', 'Implicit-ARAP', 'SShaDe', 'SShaDe+refine')",
                                 str(site / "eval" / "__init__.py"),
                                 str((site / "eval" / "conf").resolve())]
     assert "out: " in run("-m", "defaust", "--cfg", "job", "preset=ci", f"out={tmp_path / 'x'}")

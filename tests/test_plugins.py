@@ -116,7 +116,7 @@ def test_plugin_exception_is_recorded_and_run_goes_on(tmp_path, shared_data, mon
 
 def test_method_group_is_composed_and_follows_the_shared_sections():
     cfg = _compose(["sshade.n_low=321", "arap.tol=1e-3", "method.Elastic.max_iter=7"])
-    assert set(cfg.method) == {"ARAP", "Elastic", "ARAP-SR", "SShaDe", "SShaDe_refine"}
+    assert set(cfg.method) == {"ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe_refine"}
     assert cfg.method.SShaDe._target_ == "sshade.SShaDe" and cfg.method.SShaDe.n_low == 321
     ms = {m.name: m for m in make_methods(_compose(["sshade.n_low=321", "arap.tol=1e-3", "method.Elastic.max_iter=7",
                                                     "method.SShaDe.n_samplings=2",

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_names_and_order_come_from_the_files():
-    assert reg.builtin_methods() == ("ARAP", "Elastic", "ARAP-SR", "SShaDe", "SShaDe+refine")
+    assert reg.builtin_methods() == ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe+refine")
     assert reg.table_order() == ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe+refine")
     assert reg.canonical_name(" sshade+REFINE ") == "SShaDe+refine"
     assert reg.method_key("SShaDe+refine") == "SShaDe_refine"
@@ -40,7 +40,7 @@ def test_a_new_method_is_one_file(tmp_path, monkeypatch):
     text = (conf / "method" / "Elastic.yaml").read_text().replace("order: 20", "order: 45")
     (conf / "method" / "Mine.yaml").write_text(text + "name: Mine\n")
     monkeypatch.setattr(reg, "config_dir", lambda sub="": str(conf / sub) if sub else str(conf))
-    assert reg.builtin_methods() == ("ARAP", "Elastic", "ARAP-SR", "Mine", "SShaDe", "SShaDe+refine")
+    assert reg.builtin_methods() == ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "Mine", "SShaDe", "SShaDe+refine")
     assert reg.table_order().index("Mine") == 4  # after Implicit-ARAP (40), before SShaDe (50)
     m = reg.named_or_plugin("mine", {"tol": 1e-3})
     assert m.name == "Mine" and m.tol == 1e-3
