@@ -209,11 +209,11 @@ class ImplicitARAP:
     SShaDeError at construction: PyTorch missing (one line: ``Implicit-ARAP needs
     PyTorch: pip install -e .[neural]``), a bad parameter, ``device="cuda"`` without CUDA.
 
-    Examples
-    --------
-    >>> m = ImplicitARAP(preset="cpu")  # doctest: +SKIP
-    >>> Vd = m.deform(V, F, handles, targets)  # doctest: +SKIP
-    >>> m.info["sdf_fit_s"], m.info["deform_s"]  # doctest: +SKIP
+    Example::
+
+        m = ImplicitARAP(preset="cpu")
+        Vd = m.deform(V, F, handles, targets)
+        m.info["sdf_fit_s"], m.info["deform_s"]
     """
 
     def __init__(self, *, preset: str = "cpu", device: str = "auto", seed: int = 0, reference_weights: bool = False,
