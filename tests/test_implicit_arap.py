@@ -200,3 +200,18 @@ def test_registered_and_ordered():
     assert table_order().index("Implicit-ARAP") == table_order().index("ARAP-SR") + 1
     spec = method_spec("Implicit-ARAP")
     assert spec["_target_"] == "baselines.implicit_arap.ImplicitARAP" and spec["preset"] == "cpu"
+
+
+def test_patch_centres_both_samplers_on_the_zero_level_set():
+    """The reference's rejection sampling (paper preset) and the cpu preset's mesh draw
+    both give zero-level centres after the handles, then points of the box."""
+    from baselines.implicit_arap.method import patch_centres
+    from baselines.implicit_arap.sdf import SurfaceSampler
+    X, F = _sphere_mesh()
+    H = torch.as_tensor(X[:5], dtype=torch.float32)
+    for centres in ("rejection", "mesh"):
+        s = _settings(centres=centres, surface_patches=40, space_patches=7, handle_patches=0)
+        C = patch_centres(sphere_sdf(0.5), H, s, SurfaceSampler(X, F), torch.Generator().manual_seed(0))
+        assert C.shape == (47, 3) and torch.equal(C[:5], H)
+        assert (C[5:40].norm(dim=1) - 0.5).abs().max() < 1e-5, centres
+        assert C[40:].abs().max() <= 1.0
