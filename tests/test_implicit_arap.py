@@ -42,12 +42,17 @@ def test_without_torch_the_evaluator_exits_2_before_any_work(tmp_path):
 torch = pytest.importorskip("torch", reason="PyTorch not installed (extra [neural]): Implicit-ARAP tests skipped")
 torch.set_num_threads(min(2, torch.get_num_threads()))
 
-from baselines.implicit_arap import ImplicitARAP  # noqa: E402  (after the skip: needs torch)
-from baselines.implicit_arap.field import DeformationField, rodrigues  # noqa: E402
-from baselines.implicit_arap.method import fit_field  # noqa: E402
-from baselines.implicit_arap.patches import disk, edge_structure, mesh_patches, patch_energy  # noqa: E402
-from baselines.implicit_arap.sdf import sphere_sdf  # noqa: E402
-from sshade.errors import SShaDeError  # noqa: E402
+from baselines.implicit_arap import ImplicitARAP
+from baselines.implicit_arap.field import DeformationField, rodrigues
+from baselines.implicit_arap.method import fit_field
+from baselines.implicit_arap.patches import (
+    disk,
+    edge_structure,
+    mesh_patches,
+    patch_energy,
+)
+from baselines.implicit_arap.sdf import sphere_sdf
+from sshade.errors import SShaDeError
 
 #: Small settings: seconds per call on 2 cores.
 SMALL = dict(layers=3, width=32, skip=0, octaves=2, sdf_steps=0, deform_steps=60, surface_patches=24,
@@ -200,3 +205,18 @@ def test_registered_and_ordered():
     assert table_order().index("Implicit-ARAP") == table_order().index("ARAP-SR") + 1
     spec = method_spec("Implicit-ARAP")
     assert spec["_target_"] == "baselines.implicit_arap.ImplicitARAP" and spec["preset"] == "cpu"
+
+
+def test_patch_centres_both_samplers_on_the_zero_level_set():
+    """The reference's rejection sampling (paper preset) and the cpu preset's mesh draw
+    both give zero-level centres after the handles, then points of the box."""
+    from baselines.implicit_arap.method import patch_centres
+    from baselines.implicit_arap.sdf import SurfaceSampler
+    X, F = _sphere_mesh()
+    H = torch.as_tensor(X[:5], dtype=torch.float32)
+    for centres in ("rejection", "mesh"):
+        s = _settings(centres=centres, surface_patches=40, space_patches=7, handle_patches=0)
+        C = patch_centres(sphere_sdf(0.5), H, s, SurfaceSampler(X, F), torch.Generator().manual_seed(0))
+        assert C.shape == (47, 3) and torch.equal(C[:5], H)
+        assert (C[5:40].norm(dim=1) - 0.5).abs().max() < 1e-5, centres
+        assert C[40:].abs().max() <= 1.0

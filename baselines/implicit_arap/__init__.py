@@ -7,4 +7,4 @@ package does not (:mod:`.backend`).
 """
 from .method import PRESETS, ImplicitARAP
 
-__all__ = ["ImplicitARAP", "PRESETS"]
+__all__ = ["PRESETS", "ImplicitARAP"]

@@ -15,7 +15,7 @@ try:  # optional dependency: pip install -e .[neural]
 except ImportError:
     torch = None
 
-__all__ = ["torch", "require_torch", "NO_TORCH"]
+__all__ = ["NO_TORCH", "require_torch", "torch"]
 
 #: The one line a build without PyTorch fails with.
 NO_TORCH = "Implicit-ARAP needs PyTorch: pip install -e .[neural]"

@@ -20,7 +20,7 @@ from sshade.errors import SShaDeError
 
 from .backend import torch
 
-__all__ = ["encode", "MLP", "rodrigues", "DeformationField"]
+__all__ = ["MLP", "DeformationField", "encode", "rodrigues"]
 
 
 def encode(x, octaves: int):
@@ -112,7 +112,7 @@ class MLP:
         """The trainable tensors (weight directions, gains, biases)."""
         return [t for layer in self.layers for t in layer.values()]
 
-    def freeze(self) -> "MLP":
+    def freeze(self) -> MLP:
         """Stop tracking gradients of the parameters (the fitted SDF during the
         deformation); returns self."""
         for t in self.parameters():

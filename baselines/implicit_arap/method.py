@@ -29,9 +29,15 @@ from sshade.mesh.validate import validate_handles, validate_mesh
 from .backend import require_torch, torch
 from .field import DeformationField
 from .patches import disk, edge_structure, mesh_patches, patch_energy
-from .sdf import SurfaceSampler, fit_sdf, normalisation, project_to_level, sample_zero_level
+from .sdf import (
+    SurfaceSampler,
+    fit_sdf,
+    normalisation,
+    project_to_level,
+    sample_zero_level,
+)
 
-__all__ = ["ImplicitARAP", "PRESETS", "fit_field", "patch_centres", "deterministic"]
+__all__ = ["PRESETS", "ImplicitARAP", "deterministic", "fit_field", "patch_centres"]
 
 #: The two configurations. ``paper``: the reference code's (GPU-sized). ``cpu``: smaller
 #: networks, fewer samples, steps and patches, zero-level centres drawn on the mesh and

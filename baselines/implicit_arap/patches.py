@@ -31,8 +31,15 @@ from sshade.errors import SShaDeError
 from .backend import torch
 from .sdf import project_to_level, value_and_grad
 
-__all__ = ["disk", "tangent_frames", "mesh_patches", "edge_structure", "corner_cotangents", "cot_weights",
-           "patch_energy"]
+__all__ = [
+    "corner_cotangents",
+    "cot_weights",
+    "disk",
+    "edge_structure",
+    "mesh_patches",
+    "patch_energy",
+    "tangent_frames",
+]
 
 
 def disk(k: int, radius: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -19,8 +19,17 @@ from sshade.errors import SShaDeError
 from .backend import torch
 from .field import MLP
 
-__all__ = ["normalisation", "SurfaceSampler", "NeuralSDF", "fit_sdf", "sphere_sdf", "value_and_grad",
-           "project_to_level", "sample_zero_level", "IGR_WEIGHTS"]
+__all__ = [
+    "IGR_WEIGHTS",
+    "NeuralSDF",
+    "SurfaceSampler",
+    "fit_sdf",
+    "normalisation",
+    "project_to_level",
+    "sample_zero_level",
+    "sphere_sdf",
+    "value_and_grad",
+]
 
 #: Loss weights of the SDF fit (reference ``train-sdf``): zero on the surface, eikonal,
 #: normals, off-surface zero penalty (``exp(-100 |f|)``).
