@@ -42,17 +42,12 @@ def test_without_torch_the_evaluator_exits_2_before_any_work(tmp_path):
 torch = pytest.importorskip("torch", reason="PyTorch not installed (extra [neural]): Implicit-ARAP tests skipped")
 torch.set_num_threads(min(2, torch.get_num_threads()))
 
-from baselines.implicit_arap import ImplicitARAP
-from baselines.implicit_arap.field import DeformationField, rodrigues
-from baselines.implicit_arap.method import fit_field
-from baselines.implicit_arap.patches import (
-    disk,
-    edge_structure,
-    mesh_patches,
-    patch_energy,
-)
-from baselines.implicit_arap.sdf import sphere_sdf
-from sshade.errors import SShaDeError
+from baselines.implicit_arap import ImplicitARAP  # noqa: E402 -- after the importorskip above
+from baselines.implicit_arap.field import DeformationField, rodrigues  # noqa: E402 -- after the importorskip above
+from baselines.implicit_arap.method import fit_field  # noqa: E402 -- after the importorskip above
+from baselines.implicit_arap.patches import disk, edge_structure, mesh_patches, patch_energy  # noqa: E402 -- after the importorskip above
+from baselines.implicit_arap.sdf import sphere_sdf  # noqa: E402 -- after the importorskip above
+from sshade.errors import SShaDeError  # noqa: E402 -- after the importorskip above
 
 #: Small settings: seconds per call on 2 cores.
 SMALL = dict(layers=3, width=32, skip=0, octaves=2, sdf_steps=0, deform_steps=60, surface_patches=24,
