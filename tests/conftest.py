@@ -53,3 +53,19 @@ def subprocess_env() -> dict:
     """Environment for ``python -m eval ...`` child processes: this checkout first on
     PYTHONPATH, so the tests run this tree's code whichever copy pip installed."""
     return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def icosphere():
+    """A small closed mesh for file tests: a once-subdivided icosahedron.
+
+    Returns V (42, 3) float64, F (80, 3) int64."""
+    import igl
+    import numpy as np
+    t = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
+                  [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+                  [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+                  [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    V, F = igl.upsample(V, F)
+    return np.asarray(V, float), np.asarray(F, np.int64)

@@ -19,7 +19,7 @@ import sys
 
 import numpy as np
 
-from tests.conftest import ROOT, subprocess_env
+from tests.conftest import ROOT, icosphere, subprocess_env
 
 N_CASES = 400
 SEED = 19
@@ -69,19 +69,11 @@ for c in cases:
 
 def _inputs(d):
     """Write the valid inputs into ``d``; returns {kind: file name}, vertex count."""
-    import igl
     import trimesh
 
     from sshade.mesh.handle_files import write_def, write_sel
     from sshade.mesh.io import write_mesh
-    t = (1 + 5 ** 0.5) / 2
-    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
-                  [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
-    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-                  [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-                  [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
-    V, F = igl.upsample(V, F)
-    V, F = np.asarray(V, float), np.asarray(F, np.int64)
+    V, F = icosphere()
     write_mesh(d / "m.obj", V, F)
     write_mesh(d / "m.off", V, F)
     write_mesh(d / "mb.ply", V, F)

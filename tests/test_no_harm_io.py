@@ -17,7 +17,7 @@ from sshade.cli import main
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_handles, validate_mesh
-from tests.conftest import ROOT, subprocess_env
+from tests.conftest import ROOT, icosphere, subprocess_env
 
 
 def written_by_sshade(path) -> bool:
@@ -28,15 +28,7 @@ def written_by_sshade(path) -> bool:
 
 def _mesh():
     """A small closed mesh: a once-subdivided icosahedron (42 vertices, 80 faces)."""
-    import igl
-    t = (1 + 5 ** 0.5) / 2
-    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
-                  [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
-    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-                  [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-                  [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
-    V, F = igl.upsample(V, F)
-    return np.asarray(V, float), np.asarray(F, np.int64)
+    return icosphere()
 
 
 PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n"
