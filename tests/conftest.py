@@ -69,3 +69,21 @@ def icosphere():
                   [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
     V, F = igl.upsample(V, F)
     return np.asarray(V, float), np.asarray(F, np.int64)
+
+
+def write_lift_selection(d, V):
+    """``d/m.sel`` and ``d/m.def`` for :func:`icosphere`-like meshes: vertices below
+    z = -0.5 fixed, above z = 0.7 a handle lifted by 0.3 along z, the rest free.
+
+    Returns the (n,) int8 status (0 fixed, 1 free, 2 handle)."""
+    import numpy as np
+
+    from sshade.mesh.handle_files import write_def, write_sel
+    status = np.ones(len(V), np.int8)
+    status[V[:, 2] < -0.5] = 0
+    status[V[:, 2] > 0.7] = 2
+    write_sel(d / "m.sel", status)
+    M = np.eye(4)
+    M[2, 3] = 0.3
+    write_def(d / "m.def", M)
+    return status

@@ -19,7 +19,7 @@ import sys
 
 import numpy as np
 
-from tests.conftest import ROOT, icosphere, subprocess_env
+from tests.conftest import ROOT, icosphere, subprocess_env, write_lift_selection
 
 N_CASES = 400
 SEED = 19
@@ -71,7 +71,6 @@ def _inputs(d):
     """Write the valid inputs into ``d``; returns {kind: file name}, vertex count."""
     import trimesh
 
-    from sshade.mesh.handle_files import write_def, write_sel
     from sshade.mesh.io import write_mesh
     V, F = icosphere()
     write_mesh(d / "m.obj", V, F)
@@ -79,13 +78,7 @@ def _inputs(d):
     write_mesh(d / "mb.ply", V, F)
     trimesh.Trimesh(V, F, process=False).export(d / "m.ply", encoding="ascii")
     trimesh.Trimesh(V, F, process=False).export(d / "m.stl")
-    status = np.ones(len(V), np.int8)
-    status[V[:, 2] < -0.5] = 0
-    status[V[:, 2] > 0.7] = 2
-    write_sel(d / "m.sel", status)
-    M = np.eye(4)
-    M[2, 3] = 0.3
-    write_def(d / "m.def", M)
+    status = write_lift_selection(d, V)
     h = np.flatnonzero(status != 1)
     T = V[h] + (status[h] == 2)[:, None] * [0, 0, 0.3]
     (d / "m.json").write_text(json.dumps({"handles": h.tolist(), "targets": T.tolist()}))

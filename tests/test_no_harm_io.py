@@ -17,7 +17,7 @@ from sshade.cli import main
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_handles, validate_mesh
-from tests.conftest import ROOT, icosphere, subprocess_env
+from tests.conftest import ROOT, icosphere, subprocess_env, write_lift_selection
 
 
 def written_by_sshade(path) -> bool:
@@ -129,18 +129,11 @@ def test_write_read_round_trip_is_bit_exact_and_signed(tmp_path, ext):
 @pytest.fixture
 def case(tmp_path):
     """A small mesh (.off, written by sshade) with a .sel/.def and a .json/.csv."""
-    from sshade.mesh.handle_files import write_def, write_sel
     V, F = _mesh()
     d = tmp_path / "in"
     d.mkdir()
     write_mesh(d / "m.off", V, F)
-    status = np.ones(len(V), np.int8)
-    status[V[:, 2] < -0.5] = 0
-    status[V[:, 2] > 0.7] = 2
-    write_sel(d / "m.sel", status)
-    M = np.eye(4)
-    M[2, 3] = 0.3
-    write_def(d / "m.def", M)
+    write_lift_selection(d, V)
     return {"V": V, "F": F, "d": d, "off": d / "m.off", "sel": d / "m.sel", "def": d / "m.def"}
 
 
