@@ -400,8 +400,9 @@ def snap_handles(V, rest_positions, *, tol: float | None = None, name: str = "ha
     Returns
     -------
     Snap. When several handles snap to one vertex the one nearest to it is kept (ties:
-    the first in order) and the others are dropped, with a logged warning; ``keep``
-    says which.
+    the first in order) and the others are dropped, logged at DEBUG level (the
+    evaluator says it once per run, :func:`eval.datasets.defaust.summarise_dropped`);
+    ``keep`` says which and ``n_dropped`` how many.
 
     Raises
     ------
@@ -442,7 +443,8 @@ def snap_handles(V, rest_positions, *, tol: float | None = None, name: str = "ha
     keep[order[first]] = True
     n_drop = int((~keep).sum())
     if n_drop:  # two stored positions (low-res vertices) closer than the mesh's spacing share a nearest vertex
-        log.warning("%s: %d of %d handles snapped to a vertex already taken by a nearer handle; dropped (their "
-                    "low-res vertices are closer together than this mesh's vertex spacing; counted per case as "
-                    "n_handles_dropped, docs/differences.md)", name, n_drop, len(P))
+        # DEBUG: by design of the dataset; the evaluator says it once per run (eval.datasets.defaust)
+        log.debug("%s: %d of %d handles share their nearest vertex with a nearer handle; dropped (their "
+                  "low-res vertices are closer together than this mesh's vertex spacing; counted per case as "
+                  "n_handles_dropped, docs/differences.md)", name, n_drop, len(P))
     return Snap(index=idx[keep], keep=keep, distance=dist, n_dropped=n_drop)

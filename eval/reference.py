@@ -40,7 +40,7 @@ from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 
-__all__ = ["REFERENCE_VERSION", "Reference", "reference_key", "reference_solution", "reference_metrics",
+__all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_solution", "reference_metrics",
            "method_energy", "sr_energy", "sr_alpha", "energy_operators"]
 
 log = logging.getLogger("eval")
@@ -138,6 +138,19 @@ class Reference:
     info: dict = field(default_factory=dict)
 
 
+#: how a solver status reads in a log line; the status itself (``info["status"]``,
+#: ``ref_status`` in cases.csv) keeps the solvers' names.
+_STATUS_WORDS = {"stalled": "reached float64 precision", "max_iter": "stopped at max_iter",
+                 "time_budget": "stopped at the time budget"}
+
+
+def status_words(status) -> str:
+    """A solver status (:func:`sshade.arap.solve_arap`) in words for a log line:
+    ``stalled`` (the energy stopped decreasing in float64 round-off, a success) reads
+    ``reached float64 precision``; ``converged`` and unknown values are kept."""
+    return _STATUS_WORDS.get(str(status), str(status))
+
+
 def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
     """SHA-256 (hex) of everything a reference depends on: the bytes of ``V`` (n, 3)
     float64, ``F`` (m, 3) int64, ``handles`` (h,) int64, ``targets`` (h, 3) float64, the
@@ -203,7 +216,7 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     write_npz(path, {"U": U, "energy": np.float64(E), "key": np.array(key),
                      "info": np.array(json.dumps(info))})
     log.info("reference %s for %d vertices: %d iterations, %s, %.1f s -> %s", energy, len(V), res.iterations,
-             info["status"], dt, path)
+             status_words(info["status"]), dt, path)
     return Reference(U=U, energy=E, energy_type=energy, key=key, path=path, info=info)
 
 

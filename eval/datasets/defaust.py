@@ -43,7 +43,7 @@ from ..paths import abs_path
 from .case import DeformationCase
 from .registry import register_dataset
 
-__all__ = ["DefaustCase", "load_defaust", "load_handles", "read_manifest", "DEFAULT_DEFAUST_ROOT", "build_wanted",
+__all__ = ["DefaustCase", "load_defaust", "summarise_dropped", "load_handles", "read_manifest", "DEFAULT_DEFAUST_ROOT", "build_wanted",
            "prepare_root"]
 
 log = logging.getLogger(__name__)
@@ -235,7 +235,39 @@ def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | 
             seed=None if item.get("handle_seed") is None else int(item["handle_seed"])))
     if not cases:
         raise SShaDeError(f"no DeFAUST case in {root}")
+    line = summarise_dropped([c.n_dropped for c in cases], [len(c.handles) + c.n_dropped for c in cases],
+                             resolution=resolution)
+    if line:
+        log.info(line)
     return cases
+
+
+def summarise_dropped(n_dropped, n_handles, *, resolution: str = "high") -> str | None:
+    """One line for the handles dropped over a run's cases, or None when none was.
+
+    Parameters
+    ----------
+    n_dropped : sequence of int, per case, handles dropped because a nearer handle took
+        their nearest vertex (:func:`defaust.handles.snap_handles`).
+    n_handles : sequence of int, per case, handles stored (before dropping).
+    resolution : ``"high"`` or ``"low"``, the meshes the handles were snapped to.
+
+    Examples
+    --------
+    >>> summarise_dropped([9, 15], [180, 180])[:58]
+    'DeFAUST: 9-15 of 180 handles per case (2 of 2 cases) share'
+    """
+    d = [int(x) for x in n_dropped]
+    hit = [x for x in d if x > 0]
+    if not hit:
+        return None
+    lo, hi = min(hit), max(hit)
+    tot = sorted({int(x) for x in n_handles})
+    count = f"{lo}-{hi}" if lo != hi else f"{lo}"
+    of = f"{tot[0]}" if len(tot) == 1 else f"{tot[0]}-{tot[-1]}"
+    return (f"DeFAUST: {count} of {of} handles per case ({len(hit)} of {len(d)} cases) share a {resolution}-res "
+            "vertex with a nearer handle and are dropped (dataset design: their low-res vertices are closer than "
+            "the mesh's spacing; per case in cases.csv n_handles_dropped, see README Troubleshooting)")
 
 
 #: The only folder the evaluator builds the embedded DeFAUST into on its own

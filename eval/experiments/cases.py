@@ -73,7 +73,7 @@ from ..methods import method_spec
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
 from ..progress import CostModel, weighted_bar
-from ..reference import energy_operators, method_energy, reference_metrics, reference_solution
+from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, status_words
 from ..runinfo import collect_runinfo, write_runinfo
 from ..store import ResultStore, case_identity, json_safe, pair_key
 from ..subset import baseline_selection, check_baseline_cases
@@ -467,7 +467,7 @@ class _References:
             ref = self.refs[e]
             log.info("%s reference (%s): %s, %s iterations, %s", c.name, e,
                      "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
-                     ref.info.get("iterations"), ref.info.get("status"))
+                     ref.info.get("iterations"), status_words(ref.info.get("status")))
         ref = self.refs[e]
         out = reference_metrics(c.V, Vd, c.F, ref, operators=self.ops[e])
         out.update(ref_energy_type=e, ref_status=ref.info.get("status"), ref_iterations=ref.info.get("iterations"))

@@ -44,7 +44,7 @@ from sshade.mesh.io import atomic_write
 from .. import datasets
 from ..figures import safe_figure
 from ..paths import abs_path
-from ..reference import reference_solution
+from ..reference import reference_solution, status_words
 from ..runinfo import collect_runinfo, finish_run, write_runinfo
 from .common import as_list, sshade_spec
 from .registry import register_experiment
@@ -245,7 +245,7 @@ def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], lis
                              max_iter=int(cfg.reference.max_iter), time_budget_s=cfg.reference.time_budget_s)
     log.info("%s: %d vertices; reference %s (%s, %s iterations)", cname, len(V),
              "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
-             ref.info.get("status"), ref.info.get("iterations"))
+             status_words(ref.info.get("status")), ref.info.get("iterations"))
 
     def add(solver, rows, *, iterations, stopped):
         for r in rows:

@@ -11,11 +11,20 @@
 
 The results of every kernel do not depend on the thread count (every parallel block
 writes only its own outputs, sums run over fixed chunks).
+
+Threading layer: numba tries TBB first; where a ``libtbb.so.12`` older than 2021.6 is
+installed (e.g. Ubuntu 22.04's libtbb12) it then warns ``The TBB threading layer requires
+TBB version 2021 update 6 or later ...`` and falls back to OpenMP. :func:`avoid_old_tbb`
+(run at import) puts OpenMP and numba's own workqueue before TBB in that case, so the
+same layer is chosen without the warning; a user's ``NUMBA_THREADING_LAYER`` or
+``NUMBA_THREADING_LAYER_PRIORITY`` is left as is.
 """
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
+import sys
 from contextlib import contextmanager
 
 from ..errors import SShaDeError
@@ -27,7 +36,7 @@ except ImportError:  # pragma: no cover
     nb = None
     nb_parallel = None
 
-__all__ = ["PARALLEL_MIN_CELLS", "max_threads", "resolve_threads", "fork_unsafe", "note_launch", "numba_threads",
+__all__ = ["PARALLEL_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads", "resolve_threads", "fork_unsafe", "note_launch", "numba_threads",
            "ThreadPicker"]
 
 #: problems below this many cells use the serial kernels by default (no numba threading
@@ -36,6 +45,41 @@ __all__ = ["PARALLEL_MIN_CELLS", "max_threads", "resolve_threads", "fork_unsafe"
 PARALLEL_MIN_CELLS = 20_000
 
 _LAUNCH_PID = None  # process that started numba's thread pool through this package
+
+#: the oldest TBB interface numba's TBB layer accepts (numba/np/ufunc/parallel.py)
+TBB_MIN_INTERFACE = 12060
+_TBB_LIB = {"win32": "tbb12.dll", "darwin": "libtbb.12.dylib"}
+
+
+def tbb_usable() -> bool:
+    """True when a TBB runtime that numba's TBB layer accepts can be loaded (the check
+    numba makes, without its warning): ``libtbb.so.12`` with interface >= 12060."""
+    try:
+        lib = ctypes.CDLL(_TBB_LIB.get(sys.platform, "libtbb.so.12"))
+        fn = lib.TBB_runtime_interface_version
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes, fn.restype = [], ctypes.c_int
+    return int(fn()) >= TBB_MIN_INTERFACE
+
+
+def avoid_old_tbb() -> bool:
+    """Without a usable TBB (:func:`tbb_usable`), make numba try OpenMP, then its
+    workqueue, before TBB: the layer numba would fall back to anyway, minus the
+    NumbaWarning an old ``libtbb`` triggers. Does nothing when the user chose a layer or
+    an order (``NUMBA_THREADING_LAYER``, ``NUMBA_THREADING_LAYER_PRIORITY``), when TBB
+    is usable, or once numba's thread pool runs. Returns True when the order was set."""
+    if nb is None or getattr(nb_parallel, "_is_initialized", False):
+        return False
+    if os.environ.get("NUMBA_THREADING_LAYER") or os.environ.get("NUMBA_THREADING_LAYER_PRIORITY"):
+        return False
+    if tbb_usable():
+        return False
+    nb.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+    return True
+
+
+avoid_old_tbb()
 
 
 def max_threads() -> int:
