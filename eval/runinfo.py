@@ -3,12 +3,16 @@
 Records: the resolved config, the departures from the paper that the config selects
 (:func:`departures`, docs/differences.md), the seeds used (dataset seed, per-case handle seeds,
 method seeds), the git commit of the project (and which tracked files had local
-changes), the Python version, the platform and the versions of the packages in
-:data:`PACKAGES` (numerical libraries, Hydra and its launchers, matplotlib).
+changes), the Python version, the platform, the versions of the packages in
+:data:`PACKAGES` (numerical libraries, Hydra and its launchers, matplotlib) and, per
+method, the source file of its class with its sha256 and git state
+(:func:`method_sources`: a plug-in's code is identified even outside this repository).
 """
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
+import inspect
 import json
 import os
 import platform
@@ -19,7 +23,7 @@ from pathlib import Path
 
 from sshade.mesh.io import atomic_write
 
-__all__ = ["PACKAGES", "package_versions", "git_info", "departures", "collect_runinfo", "write_runinfo"]
+__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "source_record", "departures", "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
@@ -67,6 +71,60 @@ def git_info(root=REPO_ROOT) -> dict:
         return {"commit": sha.strip() if sha else None, "dirty": None, "modified": []}
     modified = [line[3:].strip() for line in status.splitlines() if line.strip()]
     return {"commit": sha.strip(), "dirty": bool(modified), "modified": modified}
+
+
+def _git_file_state(path: Path) -> dict | None:
+    """``{"work_tree", "tracked", "dirty"}`` of ``path`` in the git work tree holding it,
+    None outside one (or without git). ``dirty``: tracked and differing from HEAD
+    (staged or not); an untracked or ignored file is ``tracked: false``."""
+    def git(*args):
+        r = subprocess.run(["git", "-C", str(path.parent), *args], capture_output=True, text=True, timeout=10)
+        return r.stdout if r.returncode == 0 else None
+    try:
+        top = git("rev-parse", "--show-toplevel")
+        st = git("status", "--porcelain", "--ignored", "--", path.name) if top else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if top is None or st is None:
+        return None
+    code = st[:2] if st.strip() else ""
+    tracked = code not in ("??", "!!")
+    return {"work_tree": top.strip(), "tracked": tracked, "dirty": bool(code) and tracked}
+
+
+def source_record(path) -> dict:
+    """What identifies one source file: ``file`` (absolute), ``sha256`` of its bytes,
+    ``in_repo`` (inside this checkout), ``git`` (:func:`_git_file_state`, None outside a
+    work tree). An unreadable file gets ``sha256: None``."""
+    p = Path(path).resolve()
+    try:
+        digest = hashlib.sha256(p.read_bytes()).hexdigest()
+    except OSError:
+        digest = None
+    return {"file": str(p), "sha256": digest, "in_repo": p.is_relative_to(REPO_ROOT),
+            "git": _git_file_state(p)}
+
+
+def method_sources(methods) -> list[dict]:
+    """Per method (objects with a ``name``), the source of its class: ``name``, ``class``
+    (``module.QualName``) and :func:`source_record` of the module's file (``file: None``
+    for a class without a Python file). Built-in methods too: one rule for all."""
+    out, seen = [], {}
+    for m in methods:
+        cls = type(m)
+        rec = {"name": str(getattr(m, "name", cls.__name__)), "class": f"{cls.__module__}.{cls.__qualname__}"}
+        try:
+            f = inspect.getsourcefile(cls) or inspect.getfile(cls)
+        except (TypeError, OSError):
+            f = None
+        if f is None:
+            rec.update(file=None, sha256=None, in_repo=False, git=None)
+        else:
+            if f not in seen:
+                seen[f] = source_record(f)
+            rec.update(seen[f])
+        out.append(rec)
+    return out
 
 
 #: method option -> (the paper's value, short reason); docs/differences.md explains each.

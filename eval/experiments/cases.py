@@ -74,7 +74,7 @@ from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
 from ..progress import CostModel, weighted_bar
 from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, status_words
-from ..runinfo import collect_runinfo, write_runinfo
+from ..runinfo import collect_runinfo, method_sources, write_runinfo
 from ..store import ResultStore, case_identity, json_safe, pair_key
 from ..subset import baseline_selection, check_baseline_cases
 from ..tables import compare, write_cases, write_tables
@@ -240,7 +240,8 @@ def _setup(cfg) -> _Setup:
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
     """``run.json`` with status ``running``: the resolved config, the seeds (dataset,
-    SShaDe, each case's, the dataset's own, e.g. a DeFAUST build's)."""
+    SShaDe, each case's, the dataset's own, e.g. a DeFAUST build's), each method's source
+    file with its sha256 and git state (:func:`eval.runinfo.method_sources`)."""
     from omegaconf import OmegaConf
 
     config = OmegaConf.to_container(cfg, resolve=True)
@@ -250,7 +251,8 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
     d = datasets.find_dataset(s.name)
     if d is not None and d.seeds is not None:
         seeds.update(d.seeds(s.root))
-    info = collect_runinfo(config, seeds=seeds, extra={"status": "running", "out_dir": str(s.out_dir)})
+    info = collect_runinfo(config, seeds=seeds, extra={"status": "running", "out_dir": str(s.out_dir),
+                                                       "method_sources": method_sources(s.methods)})
     write_runinfo(s.out_dir / "run.json", info)
     return info
 
