@@ -91,6 +91,7 @@ class OutputClaim:
     foreign : names that were in the folder before and are not ours (kept).
     message : one line saying what was claimed (new folder, replaced files, ...).
     created : the folder was created by this claim.
+    parents : the folders above it that this claim created (outermost first).
     """
     path: Path
     kind: str
@@ -99,16 +100,19 @@ class OutputClaim:
     message: str = ""
     created: bool = False
     fd: int | None = None
+    parents: list = field(default_factory=list)
 
     def finish(self, status: str, *, drop_if_unused: str | None = None, **extra) -> None:
         """Record the run's end in the marker (``status`` done / failed / interrupted) with
         the names this run wrote (every entry of the folder but the foreign ones), and
-        release the lock. With ``drop_if_unused`` (a file name, e.g. ``run.json``): a
-        folder this claim created and in which that file was never written is removed
-        (a run refused before any work leaves nothing behind). Never raises."""
+        release the lock. With ``drop_if_unused`` (a file name, e.g. ``run.json``): when
+        that file was never written (a run refused before any work, e.g. a bad config
+        value), what this run wrote is removed (``.hydra/``, the log; the folder itself
+        and the parents this claim created, when nothing else is left in them), so such a
+        run leaves nothing behind. Never raises."""
         try:
-            if drop_if_unused and self.created and not (self.path / drop_if_unused).exists():
-                shutil.rmtree(self.path, ignore_errors=True)
+            if drop_if_unused and self.path.is_dir() and not (self.path / drop_if_unused).exists():
+                self._drop_own()
             elif self.path.is_dir():
                 names = sorted(set(os.listdir(self.path)) - set(self.foreign) - _OWN)
                 m = read_marker(self.path) or {}
@@ -118,6 +122,26 @@ class OutputClaim:
             pass
         finally:
             self.release()
+
+    def _drop_own(self) -> None:
+        """Remove what this claim wrote (every entry but the foreign ones); then the
+        marker and lock when nothing else is left, the folder if this claim created it,
+        and the created parents that are empty."""
+        for n in sorted(set(os.listdir(self.path)) - set(self.foreign) - _OWN):
+            q = self.path / n
+            with contextlib.suppress(OSError):
+                shutil.rmtree(q) if q.is_dir() and not q.is_symlink() else q.unlink()
+        if set(os.listdir(self.path)) - _OWN:
+            m = read_marker(self.path) or {}
+            m.update(kind=self.kind, status="failed", files=[], finished=_now())
+            _write_marker(self.path, m)
+            return
+        for n in _OWN:
+            with contextlib.suppress(OSError):
+                (self.path / n).unlink()
+        for d in ([self.path] if self.created else []) + list(reversed(self.parents)):
+            with contextlib.suppress(OSError):
+                d.rmdir()  # only when empty
 
     def release(self) -> None:
         """Release the folder's lock (also released when the process ends)."""
@@ -237,23 +261,31 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     refuse_results(p, "choose a folder outside it")
     if p.exists() and not p.is_dir():
         raise OutputDirError(f"output folder {p} is a file; choose a folder")
+    made = [a for a in reversed(p.parents) if not a.exists()]  # created below; removed by a run refused early
     try:
-        if fresh:
-            p = _mkdir_fresh(p)
-            return _take(p, kind, [], [], f"writing into the new folder {p}", created=True)
-        created = False
-        if not p.exists():
-            p.parent.mkdir(parents=True, exist_ok=True)
-            try:
-                os.mkdir(p)
-                created = True
-            except FileExistsError:
-                pass
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise OutputDirError(f"output folder {p} is not writable; choose another folder")
-        return _claim_existing(p, kind, created, overwrite, keep, how)
+        claim = _claim(p, kind, overwrite, fresh, keep, how)
     except OSError as e:
         raise OutputDirError(f"cannot create or use output folder {p}: {e.strerror or e}") from None
+    claim.parents = made
+    return claim
+
+
+def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: str) -> OutputClaim:
+    """:func:`claim_output_dir` once ``p`` is checked: create or take the folder."""
+    if fresh:
+        p = _mkdir_fresh(p)
+        return _take(p, kind, [], [], f"writing into the new folder {p}", created=True)
+    created = False
+    if not p.exists():
+        p.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.mkdir(p)
+            created = True
+        except FileExistsError:
+            pass
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise OutputDirError(f"output folder {p} is not writable; choose another folder")
+    return _claim_existing(p, kind, created, overwrite, keep, how)
 
 
 def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bool, how: str) -> OutputClaim:
@@ -347,8 +379,10 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     true: ``keep``, the earlier output of the same kind is continued), pins ``cfg.out_dir``
     to the folder claimed (a fresh name may have gained a suffix), records Hydra's
     config in ``.hydra/``, logs into ``out/eval.log``; at the end marks the folder done,
-    failed or interrupted (``run.json`` too) and releases it. A folder this run created
-    and in which no ``run.json`` was written (refused before any work) is removed.
+    failed or interrupted (``run.json`` too) and releases it. A run that ends before writing
+    ``run.json`` (refused before any work: a bad config value, an unknown method, a
+    missing dataset) leaves nothing: what it wrote is removed, with the folder and its
+    parents when this run created them (:meth:`OutputClaim.finish`).
     Nested use on a folder this process already claimed does nothing.
 
     Yields
