@@ -9,7 +9,7 @@ Columns: iterations (global solves), local sweeps, status, final energy, the lar
 energy increase between accepted states (> 0: the energy went up), rejected Anderson
 candidates, seconds. Measured rows: results/arap_sr/local_step.md.
 """
-import sys
+import argparse
 import time
 
 import numpy as np
@@ -38,4 +38,6 @@ def main(alpha: float = 0.01) -> None:
 
 
 if __name__ == "__main__":
-    main(float(sys.argv[1]) if len(sys.argv) > 1 else 0.01)
+    ap = argparse.ArgumentParser(prog="python benchmarks/arap_sr_local.py", description=__doc__.splitlines()[0])
+    ap.add_argument("alpha", type=float, nargs="?", default=0.01, help="ARAP-SR smoothness weight (default 0.01)")
+    main(ap.parse_args().alpha)

@@ -21,6 +21,7 @@ import numpy as np
 
 from defaust.anny_poses import POSES
 from defaust.anny_source import SUBJECTS, anny_subject, load_anny
+from sshade.clirun import ArgumentParser
 from sshade.errors import SShaDeError
 
 from .figures import mesh_row
@@ -60,13 +61,17 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
 
 
 def main(argv=None) -> int:
-
-    args = sys.argv[1:] if argv is None else list(argv)
-    if len(args) > 1 or args and args[0].startswith("-"):
-        print("usage: python -m eval.anny_figures [OUT_DIR]  (default outputs/anny_figures)", file=sys.stderr)
-        return 0 if args and args[0] in ("-h", "--help") else 2
+    """``python -m eval.anny_figures [OUT_DIR]``: returns 0, or 2 after one ``error: ...``
+    line; ``--help`` prints the usage and exits 0 (``SystemExit``), a bad command line
+    exits 2 (:class:`sshade.clirun.ArgumentParser`)."""
+    ap = ArgumentParser(prog="python -m eval.anny_figures",
+                        description="PNG figures of the ANNY DeFAUST source: the 10 subjects at rest, subject 0 in "
+                                    "the dataset's poses and in the whole pose library. Needs the ANNY assets.")
+    ap.add_argument("out_dir", nargs="?", default="outputs/anny_figures", metavar="OUT_DIR",
+                    help="a new, empty or earlier anny_figures folder (default outputs/anny_figures)")
+    a = ap.parse_args(sys.argv[1:] if argv is None else list(argv))
     try:
-        claim = claim_output_dir(args[0] if args else "outputs/anny_figures", "anny-figures")
+        claim = claim_output_dir(a.out_dir, "anny-figures")
         print(claim.message)
         status = "failed"
         try:

@@ -23,7 +23,8 @@ from pathlib import Path
 
 from sshade.mesh.io import atomic_write
 
-__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "source_record", "departures", "collect_runinfo", "write_runinfo"]
+__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "source_record", "departures",
+           "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",

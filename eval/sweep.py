@@ -7,8 +7,9 @@ Run a sweep (same config and overrides as ``python -m eval``; ``-m`` = multirun)
         hydra/launcher=joblib hydra.launcher.n_jobs=2
     python -m eval.sweep experiment=sweep dataset.root=...           # grid in conf/experiment/sweep.yaml
     python -m eval.sweep -m ... hydra/launcher=slurm hydra.launcher.partition=NAME   # SLURM (submitit)
-    python -m eval.sweep aggregate results/sweeps/2025-01-01_12-00-00    # rebuild the table
-    python -m eval.sweep resume results/sweeps/2025-01-01_12-00-00       # re-run killed/failed/missing jobs
+    python -m eval.sweep aggregate outputs/sweeps/2025-01-01_12-00-00    # rebuild the table
+    python -m eval.sweep resume outputs/sweeps/2025-01-01_12-00-00       # re-run killed/failed/missing jobs
+    python -m eval.sweep --help                                          # this command's help (HELP)
 
 Each job is :func:`sweep_job`: it runs :func:`eval.app.run_experiment` with ``out_dir``
 set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
@@ -76,10 +77,37 @@ from .sweep_files import (
 )
 from .sweep_table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
 
-__all__ = ["sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
+__all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
            "claim_sweep_dir", "release_sweep_dir", "resume_sweep", "main"]
 
 log = logging.getLogger("eval")
+
+#: ``python -m eval.sweep --help``: the command's own help (Hydra's would be the evaluator's)
+HELP = """\
+usage: python -m eval.sweep [-m] [KEY=VALUE ...]      run a parameter sweep (Hydra multirun)
+       python -m eval.sweep resume SWEEP_DIR          run again a sweep's killed, failed and missing jobs
+       python -m eval.sweep aggregate SWEEP_DIR ...   rebuild sweep_table.{csv,md} of sweep folders
+
+A parameter sweep of the evaluator (python -m eval): every combination of comma-separated
+values is one job, the evaluator run into its own folder <sweep dir>/<job number>, its
+outcome (done, partial, failed, killed, missing) in status.json there. A failing job is
+recorded and the sweep goes on; at the end sweep_table.{csv,md} summarise the jobs.
+
+How to sweep (-m = multirun):
+  python -m eval.sweep -m dataset=faust dataset.root=../shared/data/faust_reg dataset.limit=4 \\
+      methods=[SShaDe] sshade.n_low=500,1000,2000 sshade.n_samplings=1,5
+  python -m eval.sweep experiment=sweep dataset=faust dataset.root=DIR   ready grid, no -m (conf/experiment/sweep.yaml)
+  add hydra/launcher=joblib hydra.launcher.n_jobs=2                      jobs side by side
+  add hydra/launcher=slurm hydra.launcher.partition=NAME                 jobs on SLURM
+
+Output: hydra.sweep.dir=DIR (default outputs/multirun/<date_time>; experiment=sweep:
+outputs/sweeps/<date_time>), one folder per job below it.
+
+Every override of python -m eval works here (python -m eval --help lists the config
+groups and keys; --hydra-help Hydra's options). Details: docs/sweeps.md.
+"""
+_RESUME_USAGE = "usage: python -m eval.sweep resume SWEEP_DIR"
+_HELP_FLAGS = ("-h", "--help")
 
 _CALLBACK_KEY = "hydra.callbacks.sweep_aggregate"
 _CALLBACK_TARGET = "eval.sweep.AggregateSweepCallback"
@@ -369,7 +397,7 @@ def resume_sweep(sweep_dir) -> int:
 
 def main(argv: list[str] | None = None) -> None:
     """``python -m eval.sweep [hydra args and overrides]``, ``... aggregate DIR...`` or
-    ``... resume DIR`` (:func:`resume_sweep`).
+    ``... resume DIR`` (:func:`resume_sweep`); ``--help`` prints :data:`HELP` and exits 0.
 
     Exits with 0 once every job has an outcome; 2 after one ``error: ...`` line for a bad
     command line (an unknown key or config group option, a malformed override: refused
@@ -377,11 +405,18 @@ def main(argv: list[str] | None = None) -> None:
     ``interrupted`` on Ctrl-C.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] not in ("aggregate", "resume") and any(a in _HELP_FLAGS for a in argv):
+        print(HELP, end="")
+        raise SystemExit(0)
     if argv and argv[0] == "aggregate":
         raise SystemExit(run_command(lambda: _aggregate_cli(argv[1:]), where=argv[1] if len(argv) > 1 else None))
     if argv and argv[0] == "resume":
+        if len(argv) == 2 and argv[1] in _HELP_FLAGS:
+            print(f"{_RESUME_USAGE}\n\nRun again the killed, failed and missing jobs of the sweep in SWEEP_DIR "
+                  "with its recorded command,\ninto the same folders; sweep_table.{csv,md} are rebuilt at the end.")
+            raise SystemExit(0)
         if len(argv) != 2 or argv[1].startswith("-"):
-            print("error: usage: python -m eval.sweep resume SWEEP_DIR", file=sys.stderr)
+            print(f"error: {_RESUME_USAGE} (python -m eval.sweep --help)", file=sys.stderr)
             raise SystemExit(2)
         raise SystemExit(run_command(lambda: resume_sweep(argv[1]), where=argv[1]))
     if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):

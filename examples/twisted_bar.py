@@ -47,8 +47,11 @@ def write_case(out: Path, angle: float = 135.0, h: float = 0.06) -> dict:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", type=Path)
+    ap = argparse.ArgumentParser(prog="python -m examples.twisted_bar",
+                                 description="Write the twisted bar bar.off, bar.sel, bar.def (the deformation "
+                                             "benchmark's format) for python -m sshade deform.")
+    ap.add_argument("out", type=Path, nargs="?", default=Path("outputs/twisted_bar"),
+                    help="a new, empty or earlier twisted-bar folder (default outputs/twisted_bar)")
     ap.add_argument("--angle", type=float, default=135.0)
     ap.add_argument("--h", type=float, default=0.06, help="edge length (0.06: about 5,000 vertices)")
     args = ap.parse_args()

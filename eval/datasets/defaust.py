@@ -43,8 +43,8 @@ from ..paths import abs_path
 from .case import DeformationCase
 from .registry import register_dataset
 
-__all__ = ["DefaustCase", "load_defaust", "summarise_dropped", "load_handles", "read_manifest", "DEFAULT_DEFAUST_ROOT", "build_wanted",
-           "prepare_root"]
+__all__ = ["DefaustCase", "load_defaust", "summarise_dropped", "load_handles", "read_manifest",
+           "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root"]
 
 log = logging.getLogger(__name__)
 

@@ -36,8 +36,8 @@ except ImportError:  # pragma: no cover
     nb = None
     nb_parallel = None
 
-__all__ = ["PARALLEL_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads", "resolve_threads", "fork_unsafe", "note_launch", "numba_threads",
-           "ThreadPicker"]
+__all__ = ["PARALLEL_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads",
+           "resolve_threads", "fork_unsafe", "note_launch", "numba_threads", "ThreadPicker"]
 
 #: problems below this many cells use the serial kernels by default (no numba threading
 #: layer; a parallel region costs ~10-50 us, which small meshes do not pay back, and the

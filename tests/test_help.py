@@ -1,0 +1,90 @@
+"""Every command's ``--help`` prints its own usage and exits 0, writing nothing (issue
+23, items 1-3): the list below covers every entry point of the repository (a module with
+``if __name__ == "__main__"`` or a package's ``__main__.py``), checked by
+:func:`test_every_entry_point_is_listed`."""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+
+import pytest
+
+from .conftest import ROOT, subprocess_env
+
+#: command (arguments after ``python``) -> texts its --help must print on stdout
+HELP = {
+    "-m eval": ["usage: python -m eval [KEY=VALUE ...]", "Evaluate deformation methods", "out_dir=DIR",
+                "outputs/<experiment>/<date_time>", "== Configuration groups ==", "dataset: defaust, faust, shapes",
+                "experiment: ci,", "== Config ==", "methods:"],
+    "-m eval.sweep": ["usage: python -m eval.sweep", "resume SWEEP_DIR", "aggregate SWEEP_DIR", "-m dataset=faust",
+                      "hydra/launcher=joblib", "outputs/multirun/<date_time>"],
+    "-m eval.sweep resume": ["usage: python -m eval.sweep resume SWEEP_DIR", "killed, failed and missing"],
+    "-m eval.sweep aggregate": ["usage: python -m eval.sweep aggregate", "sweep_table"],
+    "-m eval.tables": ["usage: python -m eval.tables", "RUN_DIR"],
+    "-m eval.reproduce": ["usage: python -m eval.reproduce", "--dry-run"],
+    "-m eval.anny_figures": ["usage: python -m eval.anny_figures", "OUT_DIR", "outputs/anny_figures"],
+    "-m defaust": ["usage: python -m defaust out=DIR", "Build the DeFAUST dataset", "== Configuration groups ==",
+                   "preset: ci, full", "source: anny"],
+    "-m sshade": ["usage: python -m sshade deform MESH -o OUT"],
+    "-m sshade deform": ["usage: python -m sshade deform", "--sel", "--force"],
+    "-m examples.twisted_bar": ["usage: python -m examples.twisted_bar", "outputs/twisted_bar"],
+    "benchmarks/arap_iteration.py": ["usage:", "--mesh"],
+    "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
+    "benchmarks/remesh_speed.py": ["usage:", "--mesh"],
+}
+
+
+def _argv(cmd: str) -> list[str]:
+    head, *rest = cmd.split()
+    if head.endswith(".py"):
+        return [sys.executable, str(ROOT / head), *rest]
+    return [sys.executable, head, *rest]
+
+
+def _entry_points() -> set[str]:
+    """Every command of the repository, spelled as in :data:`HELP`."""
+    found = set()
+    for p in sorted(ROOT.glob("*/**/*.py")):
+        rel = p.relative_to(ROOT)
+        if rel.parts[0] in ("tests", "results", "outputs", "data", "hydra_plugins") or rel.parts[0].startswith("."):
+            continue
+        text = p.read_text(errors="replace")
+        if p.name == "__main__.py":
+            found.add("-m " + ".".join(rel.parts[:-1]))
+        elif re.search(r"^if __name__ == .__main__.:", text, re.M):
+            found.add(str(rel) if rel.parts[0] == "benchmarks" else "-m " + ".".join(rel.with_suffix("").parts))
+    return found
+
+
+def test_every_entry_point_is_listed():
+    """A new command gets its line in HELP."""
+    found = _entry_points()
+    assert "-m eval.sweep" in found and "benchmarks/remesh_speed.py" in found  # the search works
+    assert found <= set(HELP), sorted(found - set(HELP))
+
+
+@pytest.mark.parametrize("cmd", sorted(HELP))
+def test_help_prints_usage_and_exits_0(cmd, tmp_path):
+    r = subprocess.run([*_argv(cmd), "--help"], cwd=tmp_path, env=subprocess_env(), capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, f"{cmd} --help: rc {r.returncode}\n{r.stderr[-3000:]}"
+    assert "Traceback" not in r.stderr and "error" not in r.stderr.lower(), r.stderr[-3000:]
+    for text in HELP[cmd]:
+        assert text in r.stdout, f"{cmd} --help lacks {text!r}:\n{r.stdout[:3000]}"
+    assert "powered by Hydra" not in r.stdout
+    assert list(tmp_path.iterdir()) == [], f"{cmd} --help wrote {list(tmp_path.iterdir())}"
+
+
+def test_short_h_is_help_too(tmp_path):
+    r = subprocess.run([*_argv("-m eval.sweep"), "-h"], cwd=tmp_path, env=subprocess_env(), capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0 and r.stdout.startswith("usage: python -m eval.sweep")
+
+
+def test_sweep_resume_without_folder_is_one_error_line(tmp_path):
+    r = subprocess.run([*_argv("-m eval.sweep"), "resume"], cwd=tmp_path, env=subprocess_env(),
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == ["error: usage: python -m eval.sweep resume SWEEP_DIR "
+                                             "(python -m eval.sweep --help)"]
