@@ -4,7 +4,7 @@ Usage (from the repository root)::
 
     python -m eval dataset=faust dataset.root=../shared/data/faust_reg
     python -m eval experiment=ci dataset.root=DIR             # 2 cases, small settings
-    python -m eval dataset.root=DIR methods=[ARAP,Elastic] out_dir=/tmp/run
+    python -m eval dataset.root=DIR methods=[ARAP,Elastic] out_dir=outputs/run
     python -m eval experiment=tosca                           # another experiment kind
 
 Config: ``conf/config.yaml`` (+ ``conf/dataset/*.yaml``, ``conf/experiment/*.yaml``,
