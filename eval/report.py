@@ -63,7 +63,8 @@ from .tables import (
     stop_lines,
 )
 
-__all__ = ["PAGE", "GENERATOR", "write_report", "safe_report", "write_index", "find_chromium", "screenshot", "main"]
+__all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
+           "find_chromium", "chromium", "screenshot", "main"]
 
 log = logging.getLogger("eval")
 
@@ -283,13 +284,15 @@ def render_page(run_dir) -> str:
              _provenance_section(info)]
     files = sorted(p.name + ("/" if p.is_dir() else "") for p in run_dir.iterdir() if not p.name.startswith("."))
     parts.append('<h2 id="files">Files</h2><p>' + " ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files) + "</p>")
+    body = "\n".join(p for p in parts if p)
     nav = " ".join(f'<a href="#{a}">{b}</a>' for a, b in (("main", "table"), ("views", "3D"),
-                   ("breakdown", "breakdown"), ("figures", "figures"), ("provenance", "provenance")))
+                   ("breakdown", "breakdown"), ("figures", "figures"), ("provenance", "provenance"))
+                   if f'id="{a}"' in body)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="generator" '
             f'content="{GENERATOR}"><title>{_e(title)}</title><style>{_CSS}</style>\n'
             f"<script>{_asset('errors.js')}</script>\n</head><body>\n"
             f'<div id="js-errors" data-count="0" hidden><b>JavaScript errors on this page:</b></div>\n'
-            f"<h1>{_e(title)}</h1><nav>{nav}</nav>\n" + "\n".join(p for p in parts if p) +
+            f"<h1>{_e(title)}</h1><nav>{nav}</nav>\n{body}"
             f"\n{tags}\n<script>{_asset('report.js')}</script>\n</body></html>\n")
 
 
