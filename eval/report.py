@@ -43,6 +43,7 @@ from pathlib import Path
 from sshade.clirun import ArgumentParser, run_command
 from sshade.mesh.io import atomic_write
 
+from .breakdown import BREAKDOWN_METRICS
 from .meshview import VIEW_DIR, read_view
 from .outdir import (
     REPRODUCE_ENV,
@@ -72,8 +73,8 @@ PAGE = "index.html"  #: the report's file name in a run folder
 GENERATOR = "sshade eval.report"  #: the generator meta tag: a page with another one is never replaced
 _ASSETS = Path(__file__).resolve().parent / "report_assets"
 _CSS = """body{font:14px/1.45 system-ui,sans-serif;margin:1.5em auto;max-width:1250px;padding:0 1em;color:#222}
-table{border-collapse:collapse;margin:.5em 0 1em}th,td{border:1px solid #ccc;padding:.2em .5em;text-align:right}
-th{background:#f3f3f3;cursor:pointer;user-select:none}td:first-child,th:first-child{text-align:left}
+table{border-collapse:collapse;margin:.5em 0 1em}th,td{border:1px solid #ccc;padding:.2em .5em;text-align:left}
+th{background:#f3f3f3;cursor:pointer;user-select:none}td[data-v]{text-align:right}
 th[data-dir=asc]::after{content:" \\25B2"}th[data-dir=desc]::after{content:" \\25BC"}
 #js-errors{background:#fee;border:1px solid #c00;padding:.5em;color:#900}pre{background:#f7f7f7;padding:.6em;
 overflow:auto;max-height:30em}img{max-width:100%;border:1px solid #ddd}.view canvas{width:100%;display:block;
@@ -179,6 +180,7 @@ def _breakdown_section(run_dir: Path) -> str:
         return ""
     df = pd.read_csv(p)
     out = ['<h2 id="breakdown">Breakdown per pose and subject</h2>']
+    labels = dict(BREAKDOWN_METRICS)
     for (by, metric), g in df.groupby(["by", "metric"], sort=False):
         methods = list(dict.fromkeys(g["method"]))
         rows = []
@@ -193,7 +195,7 @@ def _breakdown_section(run_dir: Path) -> str:
                 sd = "" if pd.isna(r["std"]) else f" &plusmn; {float(r['std']):.3g}"
                 cells.append(f'<td data-v="{float(r["mean"])!r}">{float(r["mean"]):.3g}{sd} ({int(r["n"])})</td>')
             rows.append(cells)
-        out.append(f"<details{' open' if len(out) == 1 else ''}><summary>{_e(metric)} per {_e(by)} "
+        out.append(f"<details{' open' if len(out) == 1 else ''}><summary>{_e(labels.get(metric, metric))} per {_e(by)} "
                    f"(mean &plusmn; std (n))</summary>{_table([str(by), *map(str, methods)], rows)}</details>")
     if (run_dir / "breakdown.png").is_file():
         out.append('<p><img src="breakdown.png" alt="breakdown"></p>')
