@@ -213,3 +213,18 @@ def test_screenshot_shows_the_meshes(run_dir, tmp_path):
     blue = (b > r + 0.2) & (b > 0.4) & (g > 0.3)  # the results (link text is thin)
     assert green.sum() > 2000, f"no target mesh drawn ({int(green.sum())} green pixels)"
     assert blue.sum() > 2000, f"no result mesh drawn ({int(blue.sum())} blue pixels)"
+
+
+@pytest.mark.parametrize("bad", ["report.max_faces=0", "report.view_cases=-1", "report.enabled=maybe",
+                                 "report.max_faces=1e9"])
+def test_report_options_are_checked_before_any_work(bad):
+    from hydra import compose, initialize_config_dir
+
+    from eval.config_check import check_config
+    from sshade.errors import SShaDeError
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        good = compose(config_name="config", overrides=["dataset=faust", "dataset.root=x"])
+        cfg = compose(config_name="config", overrides=["dataset=faust", "dataset.root=x", bad])
+    check_config(good)
+    with pytest.raises(SShaDeError, match=bad.split("=")[0]):
+        check_config(cfg)
