@@ -228,3 +228,24 @@ def test_report_options_are_checked_before_any_work(bad):
     check_config(good)
     with pytest.raises(SShaDeError, match=bad.split("=")[0]):
         check_config(cfg)
+
+
+def test_a_click_on_a_header_sorts_the_table(tmp_path):
+    _need_chromium()
+    assets = Path(__file__).resolve().parents[1] / "eval" / "report_assets"
+    page = tmp_path / "t.html"
+    page.write_text(
+        f"<html><head><script>{(assets / 'errors.js').read_text()}</script></head><body>"
+        '<div id="js-errors" data-count="0" hidden></div><table class="sortable" id="t"><thead><tr><th>Method</th>'
+        '<th>Time</th></tr></thead><tbody><tr><td>A</td><td data-v="3.5">3.5</td></tr><tr><td>B</td>'
+        '<td data-v="">--</td></tr><tr><td>C</td><td data-v="0.25">0.25</td></tr></tbody></table>'
+        f"<script>{(assets / 'report.js').read_text()}</script><script>"  # after report.js's own listener:
+        "document.addEventListener('DOMContentLoaded', function () {"
+        "var th = document.querySelectorAll('#t th')[1]; var order = [];"
+        "function names() { return Array.from(document.querySelectorAll('#t tbody td:first-child'))"
+        ".map(c => c.textContent).join(''); }"
+        "th.click(); order.push(names()); th.click(); order.push(names());"
+        "document.body.setAttribute('data-order', order.join(',')); });</script></body></html>")
+    dom = chromium(page, "--dump-dom").stdout
+    assert re.search(r'<body[^>]*data-order="CAB,ACB"', dom), dom[-300:]  # ascending (no value last), descending
+    assert re.search(r'id="js-errors" data-count="0"', dom)
