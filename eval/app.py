@@ -30,6 +30,7 @@ from .config_check import check_config
 from .experiments import experiments, find_experiment
 from .experiments.cases import run
 from .outdir import claimed_run
+from .report import safe_report
 
 __all__ = ["CONF_DIR", "run", "run_experiment", "main"]
 
@@ -44,7 +45,8 @@ def run_experiment(cfg, *, fresh: bool = False):
     then the experiment runs in its claimed output folder ``cfg.out_dir``
     (:func:`eval.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
     refused before any work; ``fresh``: ``out_dir`` is the default dated name, which gets
-    a suffix rather than being reused).
+    a suffix rather than being reused), which gets its browser report ``index.html`` at
+    the end (:func:`eval.report.safe_report`, unless ``report.enabled`` is false).
 
     Raises
     ------
@@ -57,7 +59,15 @@ def run_experiment(cfg, *, fresh: bool = False):
     if run_fn is None:
         raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(experiments())}")
     with claimed_run(cfg, fresh=fresh):
-        return run_fn(cfg)
+        out = run_fn(cfg)
+        if _report_on(cfg):  # index.html, after the tables (eval/report.py; never fails the run)
+            safe_report(cfg.out_dir)
+        return out
+
+
+def _report_on(cfg) -> bool:
+    rep = cfg.get("report", None)
+    return rep is None or bool(rep.get("enabled", True))
 
 
 def _pin_out_dir(cfg) -> bool:

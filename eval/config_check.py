@@ -99,7 +99,7 @@ def check_config(cfg) -> None:
 
     Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.deform.check_params`),
     the dataset's numbers (``limit``, ``baseline_cases``, ``seed``, handle parameters,
-    subject/pose lists, ``vertex_range``), ``figures.enabled`` / ``max_cases``,
+    subject/pose lists, ``vertex_range``), ``figures.enabled`` / ``max_cases``, ``report.*``,
     ``reference.max_iter`` / ``time_budget_s`` and the section of the experiment kind
     (``scaling``, ``tosca``, ``pose_transfer``, ``convergence``). Absent keys are left to
     their readers' defaults.
@@ -121,6 +121,10 @@ def check_config(cfg) -> None:
     if config_value(cfg, "figures", None) is not None:
         config_bool(cfg, "figures.enabled", default=False)
     config_bool(cfg, "resume", default=False)
+    if config_value(cfg, "report", None) is not None:
+        config_bool(cfg, "report.enabled", default=True)
+        config_number(cfg, "report.view_cases", min=0, allow_none=True, default=2)
+        config_number(cfg, "report.max_faces", min=100, max=2_000_000, default=30000)
     if config_value(cfg, "store", None) is not None:
         config_bool(cfg, "store.meshes", default=False)
         config_number(cfg, "figures.max_cases", min=0, allow_none=True, default=None)

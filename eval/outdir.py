@@ -42,7 +42,8 @@ from sshade.errors import SShaDeError
 from .runinfo import write_runinfo
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
-           "claimed_run", "results_dir", "refuse_results", "read_marker"]
+           "claimed_run", "results_dir", "refuse_results", "read_marker", "check_earlier_output",
+           "record_output_files"]
 
 MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and its files
 LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
@@ -77,6 +78,40 @@ def read_marker(path) -> dict | None:
     except (OSError, ValueError):
         return None
     return m if isinstance(m, dict) else None
+
+
+def check_earlier_output(path, kind: str, what: str) -> Path:
+    """The folder ``path`` (absolute) when a command may add files to it afterwards
+    (e.g. ``python -m eval.report`` its page): an earlier output of ``kind`` (its marker
+    says so), or, under ``python -m eval.reproduce`` (:data:`REPRODUCE_ENV`), a folder of
+    ``results/`` without a marker (written before markers existed).
+
+    Raises
+    ------
+    OutputDirError: not a folder; inside ``results/`` outside ``eval.reproduce``
+        (:func:`refuse_results`, ``what`` ends that message); no output of ``kind``.
+    """
+    p = Path(os.path.abspath(Path(str(path)).expanduser()))
+    refuse_results(p, what)
+    if not p.is_dir():
+        raise OutputDirError(f"{p} is not a folder")
+    m = read_marker(p)
+    reproducing = os.environ.get(REPRODUCE_ENV) == "1" and _inside(p, results_dir())
+    if not (m is not None and m.get("kind") == kind or reproducing and m is None):
+        raise OutputDirError(f"refusing to write into {p}: it is not an earlier {kind} output (its {MARKER} "
+                             f"{'names ' + repr(m.get('kind')) if m else 'is missing'}); name a folder that "
+                             f"python -m {kind} wrote")
+    return p
+
+
+def record_output_files(path, names) -> None:
+    """Add ``names`` (entries of folder ``path``) to its marker's ``files``, so the next
+    run that replaces the folder removes them too (nothing without a marker)."""
+    m = read_marker(path)
+    if m is None:
+        return
+    m["files"] = sorted(set(m.get("files") or []) | {str(n) for n in names})
+    _write_marker(Path(path), m)
 
 
 @dataclass

@@ -27,7 +27,9 @@ others still run):
    Fig. arap-examples) -> ``results/shapes``;
 6. with ``--scaling MESH``: the scaling benchmark from that mesh -> ``results/scaling``.
 
-Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``.
+Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``. Every step's
+folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
+``results/index.html`` links them all (``python -m eval.report --index results``, run last).
 
 This is the only command that writes ``results/``: it sets
 :data:`eval.outdir.REPRODUCE_ENV` for the commands it runs, and every other command
@@ -119,6 +121,10 @@ def _run_steps(a) -> int:
         print(f"== {name}: exit {rc} after {time.perf_counter() - t:.0f} s", flush=True)
         if rc != 0:
             failed.append(name)
+    if not a.dry_run:  # results/index.html: a link to every folder's page (eval/report.py)
+        idx = [sys.executable, "-m", "eval.report", "--index", "results"]
+        if subprocess.call(idx, env=dict(os.environ, **{REPRODUCE_ENV: "1"})) != 0:
+            failed.append("index")
     if failed:
         print(f"error: step(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1

@@ -60,7 +60,7 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
-           "COMMON_CASES_HEADING", "TABLE_COLUMNS", "method_order_key"]
+           "COMMON_CASES_HEADING", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines"]
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
@@ -74,7 +74,7 @@ TABLE_COLUMNS = (
     ("time_s", "Time (s)", "Time", 2, "s"),
 )
 #: Extra columns shown in Markdown only (when present).
-_MD_EXTRA = (
+EXTRA_COLUMNS = (
     ("angle_err_rel_pct", "FA rel (%)", 2),
     ("handle_err_pct", "Handle (%)", 3),
     ("gt_vertex_mean_pct", "GT mean (%)", 2),
@@ -297,7 +297,7 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
     """
     import pandas as pd
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
-    cols += [(c, h, d) for c, h, d in _MD_EXTRA if c in summary.columns]
+    cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns]
     head = ["Method", "Cases", *[h for _, h, _ in cols]]
     if (summary.get("n_failed", pd.Series(dtype=int)) > 0).any():
         head.insert(2, "Failed")

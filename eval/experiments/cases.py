@@ -69,6 +69,7 @@ from .. import methods as method_table
 from ..breakdown import write_breakdown
 from ..config_check import config_number
 from ..figures import figures_options, write_case_figure
+from ..meshview import view_options, write_case_view
 from ..methods import method_spec
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
@@ -276,6 +277,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     fig_on, fig_left = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
+    view_left, max_faces = view_options(cfg)  # report.view_cases: 3D views of the first cases (eval/meshview.py)
     methods, names, cases = s.methods, s.names, s.cases
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(cfg, s, ci, c) for ci, c in enumerate(cases)}
@@ -298,7 +300,8 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
             deformed, unknown = {}, []  # method -> deformed vertices, for the optional figure
             for mi in plan[ci]:
                 if (ci, mi) in done:
-                    deformed[names[mi]] = s.store.load_mesh(done[ci, mi]) if fig_on and fig_left > 0 else None
+                    want = (fig_on and fig_left > 0) or view_left > 0
+                    deformed[names[mi]] = s.store.load_mesh(done[ci, mi]) if want else None
                     if deformed[names[mi]] is None and not done[ci, mi]["row"].get("error"):
                         unknown.append(names[mi])  # restored without its mesh (store.meshes=false)
                     continue
@@ -318,6 +321,10 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
                 write_case_figure(case, {n: deformed.get(n) for n in names}, s.out_dir / "figures",
                                   # "not run", not "failed"
                                   not_run=[n for m, n in zip(methods, names) if not s.runs_on(ci, m)])
+            if view_left > 0:  # out_dir/report/<case>.js, for index.html (eval/report.py)
+                view_left -= 1
+                write_case_view(case, {n: deformed.get(n) for n in names}, s.out_dir, max_faces=max_faces,
+                                not_run=[n for m, n in zip(methods, names) if not s.runs_on(ci, m)], stored=unknown)
     return rows
 
 

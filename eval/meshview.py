@@ -1,0 +1,204 @@
+"""Display meshes for the HTML report (:mod:`eval.report`): one case's rest mesh, its
+target (ground truth) and every method's result, decimated and quantised for a small
+file, written next to the report as a script the page loads from ``file://``.
+
+- :func:`cluster_decimate`: vertex clustering on a grid laid over the rest mesh, the
+  cell size grown until at most ``max_faces`` faces remain. Every mesh of a case (rest,
+  target, results: the same connectivity) is shown on the *same* clusters, each
+  cluster at the mean of its vertices in that mesh, so the panels stay in
+  correspondence. For display only: thin parts closer than a cell may fuse.
+- :func:`case_view`: the JSON-able view of one case: the clusters' faces (base64
+  ``Uint16``/``Uint32``), every mesh's cluster positions quantised to ``uint16`` on the
+  case's common bounding box (base64), labels and sizes.
+- :func:`write_case_view`: ``report/<case>.js`` (:data:`VIEW_DIR`), which sets
+  ``window.SSHADE_VIEWS[<case>]``; never raises (a warning in the log instead), like
+  the figures.
+
+Size: about ``4/3 * (6 * clusters * meshes + (2 or 4) * 3 * faces)`` bytes per case
+(clusters ~ faces / 2); 30000 faces and 7 meshes: about 1.6 MB.
+"""
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write
+
+from .store import json_safe, safe_name
+
+__all__ = ["VIEW_DIR", "DEFAULT_MAX_FACES", "cluster_decimate", "cluster_positions", "case_view",
+           "write_case_view", "read_view", "view_options"]
+
+log = logging.getLogger("eval")
+
+VIEW_DIR = "report"  #: the views' folder inside a run folder (next to index.html)
+DEFAULT_MAX_FACES = 30000  #: faces shown per mesh unless ``report.max_faces`` says otherwise
+
+
+def cluster_decimate(V, F, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex clustering of the mesh ``(V, F)`` down to at most ``max_faces`` faces.
+
+    Parameters
+    ----------
+    V : (n, 3) float, the rest vertices (the clusters are cells of a grid over them).
+    F : (m, 3) int, faces. max_faces : int >= 1.
+
+    Returns
+    -------
+    labels : (n,) int64, each vertex's cluster in ``0 .. c-1``.
+    faces : (k, 3) int64 over the clusters, ``k <= max_faces``, no face with a repeated
+        cluster, each kept once (orientation of its first occurrence). Without
+        decimation (``m <= max_faces``): ``arange(n)`` and ``F``.
+
+    Raises SShaDeError on bad shapes or indices, or ``max_faces < 1``.
+    """
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+        raise SShaDeError(f"cluster_decimate: need (n, 3) vertices and (m, 3) faces, got {V.shape}, {F.shape}")
+    if F.min() < 0 or F.max() >= len(V) or int(max_faces) < 1:
+        raise SShaDeError(f"cluster_decimate: bad faces for {len(V)} vertices or max_faces {max_faces!r}")
+    if len(F) <= max_faces:
+        return np.arange(len(V)), F
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+    lo = V.min(axis=0)
+    h = math.sqrt(2.0 * max(area, 1e-300) / max_faces)  # a grid triangulation of spacing h: ~2 A / h^2 faces
+    for _ in range(30):
+        cells = np.floor((V - lo) / h).astype(np.int64)
+        dims = cells.max(axis=0) + 1
+        _, labels = np.unique((cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2], return_inverse=True)
+        labels = labels.reshape(-1)
+        G = labels[F]
+        G = G[(G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 2] != G[:, 0])]
+        S, c = np.sort(G, axis=1), int(labels.max()) + 1  # c < 2**21 here: the key fits in int64
+        _, first = np.unique((S[:, 0] * c + S[:, 1]) * c + S[:, 2], return_index=True)
+        G = G[np.sort(first)]
+        if len(G) <= max_faces:
+            return labels, G
+        h *= max(1.05, 1.02 * math.sqrt(len(G) / max_faces))
+    raise SShaDeError(f"cluster_decimate: could not reach {max_faces} faces")  # pragma: no cover
+
+
+def cluster_positions(X, labels, n_clusters: int) -> np.ndarray:
+    """(c, 3) float64: the mean of ``X`` (n, 3) over each cluster of ``labels`` (n,);
+    a cluster without vertices (never from :func:`cluster_decimate`) at 0."""
+    X = np.asarray(X, np.float64)
+    cnt = np.maximum(np.bincount(labels, minlength=n_clusters), 1)
+    return np.stack([np.bincount(labels, X[:, k], minlength=n_clusters) / cnt for k in range(3)], axis=1)
+
+
+def _b64(a: np.ndarray) -> str:
+    return base64.b64encode(np.ascontiguousarray(a).astype(a.dtype.newbyteorder("<")).tobytes()).decode("ascii")
+
+
+def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_FACES) -> dict:
+    """The view of one case (module docstring).
+
+    Parameters
+    ----------
+    name : the case's name. V : (n, 3) rest vertices. F : (m, 3) faces.
+    meshes : label -> ``(kind, X)`` in panel order, ``kind`` one of ``rest``, ``target``,
+        ``result`` (colours), ``X`` (n, 3) vertices, or None with ``kind`` the text
+        shown instead (``failed``, ``not run``, ``not stored``).
+    max_faces : faces shown (:func:`cluster_decimate`).
+
+    Returns a JSON-able dict: ``case``, ``n_vertices``, ``n_faces`` (the mesh's),
+    ``shown_faces``, ``clusters``, ``idx32``, ``faces`` (base64), ``lo`` / ``step`` (the
+    quantisation: ``x = lo + q * step``), ``meshes`` (``label``, ``kind``, ``pos``
+    base64 ``uint16`` or None). Raises SShaDeError on bad shapes, or when no mesh has
+    finite vertices.
+    """
+    labels, G = cluster_decimate(V, F, max_faces)
+    c = int(labels.max()) + 1
+    pos = {}
+    for label, (_kind, X) in meshes.items():
+        if X is None:
+            continue
+        X = np.asarray(X, np.float64)
+        if X.shape != np.shape(V):
+            raise SShaDeError(f"case_view: {label} has {X.shape} vertices, the rest mesh {np.shape(V)}")
+        P = cluster_positions(X, labels, c)
+        if np.isfinite(P).all():
+            pos[label] = P
+    if not pos:
+        raise SShaDeError(f"case_view: no mesh of {name} to show")
+    allp = np.concatenate(list(pos.values()))
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    step = np.where(hi > lo, (hi - lo) / 65535.0, 1.0)
+    idx32 = c > 65535
+    out = []
+    for label, (kind, _) in meshes.items():
+        q = None
+        if label in pos:
+            q = _b64(np.clip(np.rint((pos[label] - lo) / step), 0, 65535).astype(np.uint16))
+        out.append({"label": str(label), "kind": str(kind), "pos": q})
+    return {"case": str(name), "n_vertices": int(len(V)), "n_faces": int(len(F)), "shown_faces": int(len(G)),
+            "clusters": c, "idx32": bool(idx32), "faces": _b64(G.astype(np.uint32 if idx32 else np.uint16)),
+            "lo": json_safe(lo), "step": json_safe(step), "meshes": out}
+
+
+_PREFIX = "(window.SSHADE_VIEWS = window.SSHADE_VIEWS || {})["
+
+
+def read_view(path) -> dict:
+    """The view (:func:`case_view`'s dict) in a file :func:`write_case_view` wrote.
+    Raises ValueError when the file is not such a view, OSError when unreadable."""
+    text = Path(path).read_text()
+    if not text.startswith(_PREFIX):
+        raise ValueError(f"{path} is not a view file")
+    dec = json.JSONDecoder()
+    _, i = dec.raw_decode(text, len(_PREFIX))
+    if not text.startswith("] = ", i):
+        raise ValueError(f"{path} is not a view file")
+    view, _ = dec.raw_decode(text, i + 4)
+    if not isinstance(view, dict) or "meshes" not in view:
+        raise ValueError(f"{path} is not a view file")
+    return view
+
+
+def view_options(cfg) -> tuple[int, int]:
+    """``(view_cases, max_faces)`` from ``cfg.report`` (defaults 2 and
+    :data:`DEFAULT_MAX_FACES`; ``report.enabled`` false: no view)."""
+    rep = cfg.get("report", None) if cfg is not None else None
+    if rep is None:
+        return 2, DEFAULT_MAX_FACES
+    if not bool(rep.get("enabled", True)):
+        return 0, DEFAULT_MAX_FACES
+    n, mf = rep.get("view_cases", 2), rep.get("max_faces", DEFAULT_MAX_FACES)
+    return int(0 if n is None else n), int(DEFAULT_MAX_FACES if mf is None else mf)
+
+
+def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: int = DEFAULT_MAX_FACES,
+                    stored=()) -> Path | None:
+    """``run_dir/report/<case>.js`` for one evaluated case (attributes ``name``, ``V``,
+    ``F``, optional ``V_gt``): panels rest, target (when the case has a ground truth),
+    then every method of ``results`` (name -> deformed vertices (n, 3), or None: failed;
+    names in ``not_run``: not run; in ``stored``: restored without a mesh). Returns the
+    path, or None after a logged warning (a view never stops an evaluation)."""
+    meshes = {"rest": ("rest", case.V)}
+    if getattr(case, "V_gt", None) is not None:
+        meshes["target (ground truth)"] = ("target", case.V_gt)
+    for n, U in results.items():
+        kind = "not run" if n in not_run else "not stored" if n in stored else "failed"
+        meshes[str(n)] = ("result", U) if U is not None else (kind, None)
+    for n in not_run:
+        meshes.setdefault(str(n), ("not run", None))
+    try:
+        view = case_view(case.name, case.V, case.F, meshes, max_faces=max_faces)
+        p = Path(run_dir) / VIEW_DIR / f"{safe_name(case.name)}.js"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        text = json.dumps(view, separators=(",", ":"))
+        with atomic_write(p, "w") as fh:
+            fh.write(f"{_PREFIX}{json.dumps(str(case.name))}] = {text};\n")
+    except (SShaDeError, OSError, ValueError) as e:
+        log.warning("3D view of %s not written: %s", getattr(case, "name", "?"), e)
+        return None
+    log.info("3D view %s (%d of %d faces, %.0f kB)", p, view["shown_faces"], view["n_faces"], p.stat().st_size / 1e3)
+    return p

@@ -1,0 +1,468 @@
+"""The browser report of an evaluator run: ``index.html`` in the run folder, opened from
+``file://`` (no server, no network: every script is inline or a file next to it).
+
+The page (:func:`write_report`) shows, from the files the run wrote:
+
+- the main table (``table.csv``; for the ``cases`` experiment rebuilt from ``cases.csv``
+  with :func:`eval.tables.compare`, its note, and the second table over each method's
+  own cases when there is one); every table sorts by a click on a column header;
+- how each method stopped and its failed runs (:func:`eval.tables.stop_lines`,
+  :func:`eval.tables.failure_lines`);
+- the 3D views written during the run (``report/<case>.js``, :mod:`eval.meshview`): rest
+  mesh, target and every method's result of the first ``report.view_cases`` cases,
+  decimated for display, in a small WebGL viewer (``eval/report_assets/report.js``:
+  drag rotates, wheel zooms);
+- the per-pose / per-subject breakdown (``breakdown.csv``, ``breakdown.png``,
+  ``breakdown.md``), the figures (``*.png``, ``figures/*.png``);
+- the provenance of ``run.json``: command, git commit and dirty flag, seeds, config.
+
+Every JavaScript error is written into ``<div id="js-errors">`` (``data-count``), so a
+headless browser's ``--dump-dom`` shows it. ``index.html`` is replaced only when this
+module wrote it (its ``generator`` meta tag): a page put there by a person is kept.
+
+Command line (:func:`main`)::
+
+    python -m eval.report RUN_DIR [RUN_DIR ...]     # (re)write RUN_DIR/index.html
+    python -m eval.report --index results           # results/index.html: a link per folder
+    python -m eval.report --screenshot OUT.png RUN_DIR   # also a PNG of the page (chromium)
+
+It writes only into an earlier evaluator output (:func:`eval.outdir.check_earlier_output`)
+and into ``results/`` only under ``python -m eval.reproduce``, which runs ``--index``.
+"""
+from __future__ import annotations
+
+import html
+import json
+import logging
+import math
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+from sshade.clirun import ArgumentParser, run_command
+from sshade.mesh.io import atomic_write
+
+from .breakdown import BREAKDOWN_METRICS
+from .meshview import VIEW_DIR, read_view
+from .outdir import (
+    REPRODUCE_ENV,
+    OutputDirError,
+    check_earlier_output,
+    read_marker,
+    record_output_files,
+    refuse_results,
+    results_dir,
+)
+from .tables import (
+    ALL_CASES_HEADING,
+    EXTRA_COLUMNS,
+    TABLE_COLUMNS,
+    compare,
+    failure_lines,
+    main_note,
+    stop_lines,
+)
+
+__all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
+           "find_chromium", "chromium", "screenshot", "main"]
+
+log = logging.getLogger("eval")
+
+PAGE = "index.html"  #: the report's file name in a run folder
+GENERATOR = "sshade eval.report"  #: the generator meta tag: a page with another one is never replaced
+_ASSETS = Path(__file__).resolve().parent / "report_assets"
+_CSS = """body{font:14px/1.45 system-ui,sans-serif;margin:1.5em auto;max-width:1250px;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:.5em 0 1em}th,td{border:1px solid #ccc;padding:.2em .5em;text-align:left}
+th{background:#f3f3f3;cursor:pointer;user-select:none}td[data-v]{text-align:right}
+th[data-dir=asc]::after{content:" \\25B2"}th[data-dir=desc]::after{content:" \\25BC"}
+#js-errors{background:#fee;border:1px solid #c00;padding:.5em;color:#900}pre{background:#f7f7f7;padding:.6em;
+overflow:auto;max-height:30em}img{max-width:100%;border:1px solid #ddd}.view canvas{width:100%;display:block;
+border:1px solid #ccc;cursor:grab}.view-labels{display:grid;text-align:center;font-size:13px}
+.note{color:#555}nav a{margin-right:1em}"""
+
+
+def _e(x) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _cell(v, dec: int | None = None) -> str:
+    """``<td>`` of one value: numbers with ``dec`` decimals (else 4 significant digits)
+    and their full value in ``data-v`` (the sort key); missing values ``--``."""
+    if v is None or isinstance(v, float) and not math.isfinite(v):
+        return '<td data-v="">--</td>'
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return f"<td>{_e(v)}</td>"
+    text = f"{v:.{dec}f}" if dec is not None else (str(v) if isinstance(v, int) else f"{v:.4g}")
+    return f'<td data-v="{v!r}">{text}</td>'
+
+
+def _table(head: list[str], rows: list[list[str]], table_id: str = "") -> str:
+    """A sortable table: ``head`` texts, ``rows`` of ready ``<td>`` cells."""
+    tid = f' id="{_e(table_id)}"' if table_id else ""
+    ths = "".join(f"<th>{_e(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(r) + "</tr>" for r in rows)
+    return f'<table class="sortable"{tid}><thead><tr>{ths}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _num(v):
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return v
+    return int(f) if f.is_integer() and abs(f) < 2 ** 53 else f
+
+
+def _summary_table(summary, table_id: str) -> str:
+    """The main columns (:data:`eval.tables.TABLE_COLUMNS` and ``EXTRA_COLUMNS``) of a
+    per-method summary (:func:`eval.tables.summarize` layout)."""
+    cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
+    cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns and c != "converged"]
+    head = ["Method", "Cases", "Failed", *[h for _, h, _ in cols]]
+    rows = []
+    for _, r in summary.iterrows():
+        cells = [f"<td>{_e(r['method'])}</td>", _cell(int(r["n_cases"])), _cell(int(r.get("n_failed", 0) or 0))]
+        cells += [_cell(_num(r[c]), d) for c, _, d in cols]
+        rows.append(cells)
+    return _table(head, rows, table_id)
+
+
+def _csv_table(path: Path, table_id: str = "") -> str:
+    """Every column of a CSV file as a sortable table (other experiments' ``table.csv``)."""
+    import pandas as pd
+    df = pd.read_csv(path)
+    rows = [[_cell(_num(v)) if not isinstance(v, str) else f"<td>{_e(v)}</td>" for v in r]
+            for r in df.itertuples(index=False)]
+    return _table([str(c) for c in df.columns], rows, table_id)
+
+
+def _items(lines: list[str]) -> str:
+    return "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in lines) + "</ul>" if lines else ""
+
+
+def _main_section(run_dir: Path, kind: str) -> str:
+    """The main table(s), stopping record and failures (``cases`` experiment), else
+    ``table.csv`` as it is."""
+    import pandas as pd
+    out = ['<h2 id="main">Main table</h2>']
+    cases = run_dir / "cases.csv"
+    if kind == "cases" and cases.is_file():
+        df = pd.read_csv(cases)
+        if "method" in df.columns and len(df):
+            comp = compare(df)
+            note = main_note(comp)
+            out += [f'<p class="note">{_e(note)}</p>' if note else "", _summary_table(comp.main, "main-table")]
+            stops, fails = stop_lines(df), failure_lines(df)
+            if stops:
+                out += ['<h3 id="stopping">How each method stopped</h3>', _items(stops)]
+            if fails:
+                out += ["<h3>Failed runs (left out of every mean)</h3>", _items(fails)]
+            if comp.all is not None:
+                out += [f"<h3>{_e(ALL_CASES_HEADING)}</h3>", '<p class="note">Each row: that method\'s mean over '
+                        "its own successful cases; rows may average different cases.</p>",
+                        _summary_table(comp.all, "all-table")]
+            return "\n".join(out)
+    if (run_dir / "table.csv").is_file():
+        out.append(_csv_table(run_dir / "table.csv", "main-table"))
+    else:
+        out.append("<p>No table.csv in this folder.</p>")
+    if (run_dir / "table.md").is_file():
+        out.append(f"<details><summary>table.md</summary><pre>{_e((run_dir / 'table.md').read_text())}</pre></details>")
+    return "\n".join(out)
+
+
+def _breakdown_section(run_dir: Path) -> str:
+    """``breakdown.csv`` as one "mean ± std (n)" table per (grouping, metric), then
+    ``breakdown.png`` and ``breakdown.md`` (with the paired comparison)."""
+    import pandas as pd
+    p = run_dir / "breakdown.csv"
+    if not p.is_file():
+        return ""
+    df = pd.read_csv(p)
+    out = ['<h2 id="breakdown">Breakdown per pose and subject</h2>']
+    labels = dict(BREAKDOWN_METRICS)
+    for (by, metric), g in df.groupby(["by", "metric"], sort=False):
+        methods = list(dict.fromkeys(g["method"]))
+        rows = []
+        for grp, gg in g.groupby("group", sort=False):
+            cells = [f"<td>{_e(grp)}</td>"]
+            for m in methods:
+                r = gg[gg["method"] == m]
+                if not len(r):
+                    cells.append('<td data-v="">--</td>')
+                    continue
+                r = r.iloc[0]
+                sd = "" if pd.isna(r["std"]) else f" &plusmn; {float(r['std']):.3g}"
+                cells.append(f'<td data-v="{float(r["mean"])!r}">{float(r["mean"]):.3g}{sd} ({int(r["n"])})</td>')
+            rows.append(cells)
+        out.append(f"<details{' open' if len(out) == 1 else ''}><summary>{_e(labels.get(metric, metric))} per {_e(by)} "
+                   f"(mean &plusmn; std (n))</summary>{_table([str(by), *map(str, methods)], rows)}</details>")
+    if (run_dir / "breakdown.png").is_file():
+        out.append('<p><img src="breakdown.png" alt="breakdown"></p>')
+    if (run_dir / "breakdown.md").is_file():
+        out.append("<details><summary>breakdown.md (with the paired SShaDe-Elastic comparison)</summary>"
+                   f"<pre>{_e((run_dir / 'breakdown.md').read_text())}</pre></details>")
+    return "\n".join(out)
+
+
+def _figures_section(run_dir: Path) -> str:
+    pngs = sorted(p for p in run_dir.glob("*.png") if p.name != "breakdown.png")
+    pngs += sorted((run_dir / "figures").glob("*.png")) if (run_dir / "figures").is_dir() else []
+    if not pngs:
+        return ""
+    out = ['<h2 id="figures">Figures</h2>']
+    for p in pngs:
+        rel = p.relative_to(run_dir).as_posix()
+        out.append(f'<figure><a href="{_e(rel)}"><img src="{_e(rel)}" alt="{_e(rel)}" loading="lazy"></a>'
+                   f"<figcaption>{_e(rel)}</figcaption></figure>")
+    return "\n".join(out)
+
+
+def _views_section(run_dir: Path) -> tuple[str, str]:
+    """(section, script tags) of the 3D views ``report/*.js`` (:mod:`eval.meshview`)."""
+    views = sorted((run_dir / VIEW_DIR).glob("*.js")) if (run_dir / VIEW_DIR).is_dir() else []
+    if not views:
+        return "", ""
+    out, tags, total = ['<h2 id="views">3D views</h2>'], [], 0
+    for p in views:
+        try:
+            data = read_view(p)
+        except (OSError, ValueError):
+            log.warning("report: %s is not a view file; left out", p)
+            continue
+        total += p.stat().st_size
+        rel = p.relative_to(run_dir).as_posix()
+        tags.append(f'<script src="{_e(rel)}"></script>')
+        shown = ("shown in full" if data["shown_faces"] == data["n_faces"] else
+                 f"shown with {data['shown_faces']} faces (vertex clustering, for display only)")
+        labels = "".join(f"<div>{_e(m['label'])}{'' if m.get('pos') else ': ' + _e(m['kind'])}</div>"
+                         for m in data["meshes"])
+        out.append(f'<div class="view" data-case="{_e(data["case"])}"><h3>{_e(data["case"])}</h3>'
+                   f'<div class="view-labels">{labels}</div><canvas></canvas>'
+                   f'<p class="note">{data["n_vertices"]} vertices, {data["n_faces"]} faces; {shown}, '
+                   f"{p.stat().st_size / 1e6:.2f} MB ({_e(rel)})</p></div>")
+    out.insert(1, f'<p class="note" id="views-status" data-drawn="0">{len(tags)} case(s), {total / 1e6:.2f} MB of '
+                  "mesh data next to this page (report.max_faces caps the faces of each mesh). Drag to rotate, wheel "
+                  "to zoom, double-click to reset.</p>")
+    return "\n".join(out), "\n".join(tags)
+
+
+def _provenance_section(info: dict) -> str:
+    if not info:
+        return "<h2 id=\"provenance\">Provenance</h2><p>No run.json in this folder.</p>"
+    git = info.get("git") or {}
+    rows = [("command", " ".join(map(str, info.get("command") or []))), ("status", info.get("status")),
+            ("git commit", git.get("commit")), ("dirty", git.get("dirty")),
+            ("modified", ", ".join(git.get("modified") or [])), ("created (UTC)", info.get("created_utc")),
+            ("wall (s)", info.get("wall_s")), ("python", info.get("python")), ("platform", info.get("platform")),
+            ("cpu count", info.get("cpu_count"))]
+    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows if v not in (None, ""))
+    out = ['<h2 id="provenance">Provenance (run.json)</h2>', f'<table id="provenance-table">{body}</table>']
+    for key in ("seeds", "departures", "compile_s", "packages", "config"):
+        if info.get(key):
+            text = json.dumps(info[key], indent=1, sort_keys=key != "config")
+            out.append(f"<details{' open' if key == 'seeds' else ''}><summary>{key}</summary><pre>{_e(text)}</pre>"
+                       "</details>")
+    return "\n".join(out)
+
+
+def _asset(name: str) -> str:
+    return (_ASSETS / name).read_text().replace("</script", "<\\/script")
+
+
+def render_page(run_dir) -> str:
+    """The text of ``run_dir/index.html`` (module docstring); reads, writes nothing."""
+    run_dir = Path(run_dir)
+    try:
+        info = json.loads((run_dir / "run.json").read_text())
+    except (OSError, ValueError):
+        info = {}
+    cfg = info.get("config") or {}
+    exp = cfg.get("experiment") or {}
+    kind = str(exp.get("kind", "cases"))
+    title = f"{exp.get('name', run_dir.name)}: {(cfg.get('dataset') or {}).get('name', '')} ({run_dir.name})"
+    views, tags = _views_section(run_dir)
+    parts = [_main_section(run_dir, kind), views, _breakdown_section(run_dir), _figures_section(run_dir),
+             _provenance_section(info)]
+    files = sorted(p.name + ("/" if p.is_dir() else "") for p in run_dir.iterdir() if not p.name.startswith("."))
+    parts.append('<h2 id="files">Files</h2><p>' + " ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files) + "</p>")
+    body = "\n".join(p for p in parts if p)
+    nav = " ".join(f'<a href="#{a}">{b}</a>' for a, b in (("main", "table"), ("views", "3D"),
+                   ("breakdown", "breakdown"), ("figures", "figures"), ("provenance", "provenance"))
+                   if f'id="{a}"' in body)
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="generator" '
+            f'content="{GENERATOR}"><title>{_e(title)}</title><style>{_CSS}</style>\n'
+            f"<script>{_asset('errors.js')}</script>\n</head><body>\n"
+            f'<div id="js-errors" data-count="0" hidden><b>JavaScript errors on this page:</b></div>\n'
+            f"<h1>{_e(title)}</h1><nav>{nav}</nav>\n{body}"
+            f"\n{tags}\n<script>{_asset('report.js')}</script>\n</body></html>\n")
+
+
+def _ours(page: Path) -> bool:
+    """Whether ``page`` is absent or was written by this module (generator tag)."""
+    try:
+        head = page.read_text(errors="replace")[:2000]
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    return f'content="{GENERATOR}"' in head
+
+
+def write_report(run_dir) -> Path:
+    """Write ``run_dir/index.html`` (atomically) from the files of the run folder; returns
+    its path. Checks nothing about who may write there (the caller: the running
+    evaluator, or :func:`main` through :func:`eval.outdir.check_earlier_output`).
+
+    Raises OutputDirError when ``index.html`` exists and this module did not write it
+    (kept), OSError when the page cannot be written.
+    """
+    run_dir = Path(run_dir)
+    page = run_dir / PAGE
+    if not _ours(page):
+        raise OutputDirError(f"{page} was not written by python -m eval.report: left as it is")
+    with atomic_write(page, "w") as fh:
+        fh.write(render_page(run_dir))
+    return page
+
+
+def safe_report(run_dir) -> Path | None:
+    """:func:`write_report` for the end of an evaluator run: logs and returns None
+    instead of raising (the report never fails a run)."""
+    try:
+        p = write_report(run_dir)
+    except Exception as e:  # noqa: BLE001 -- a by-product, like the figures
+        log.warning("report not written: %s: %s", type(e).__name__, e)
+        return None
+    log.info("report %s (%.0f kB; open it in a browser)", p, p.stat().st_size / 1e3)
+    return p
+
+
+def write_index(root) -> Path:
+    """``root/index.html``: a link to the page (or the folder) of every run folder
+    below ``root`` (a folder with ``run.json``, up to three levels down), with its
+    experiment and status. Raises OutputDirError when ``root/index.html`` is not ours."""
+    root = Path(root)
+    runs = sorted({p.parent for p in root.glob("*/run.json")} | {p.parent for p in root.glob("*/*/run.json")}
+                  | {p.parent for p in root.glob("*/*/*/run.json")})
+    rows = []
+    for d in runs:
+        try:
+            info = json.loads((d / "run.json").read_text())
+        except (OSError, ValueError):
+            info = {}
+        rel = d.relative_to(root).as_posix()
+        href = f"{rel}/{PAGE}" if (d / PAGE).is_file() else f"{rel}/"
+        exp = ((info.get("config") or {}).get("experiment") or {}).get("name", "")
+        rows.append([f'<td><a href="{_e(href)}">{_e(rel)}</a></td>', f"<td>{_e(exp)}</td>",
+                     f"<td>{_e(info.get('status', ''))}</td>", _cell(info.get("n_cases")),
+                     f"<td>{_e((info.get('git') or {}).get('commit', ''))[:12]}</td>"])
+    if not rows:
+        raise OutputDirError(f"no run folder (with run.json) below {root}: no index written")
+    page = root / PAGE
+    if not _ours(page):
+        raise OutputDirError(f"{page} was not written by python -m eval.report: left as it is")
+    text = (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="generator" '
+            f'content="{GENERATOR}"><title>{_e(root.name)}</title><style>{_CSS}</style>\n'
+            f"<script>{_asset('errors.js')}</script></head><body>\n"
+            '<div id="js-errors" data-count="0" hidden><b>JavaScript errors on this page:</b></div>\n'
+            f"<h1>{_e(root.name)}: {len(rows)} run folder(s)</h1>\n"
+            f"{_table(['Folder', 'Experiment', 'Status', 'Cases', 'Commit'], rows, 'runs-table')}\n"
+            f"<script>{_asset('report.js')}</script>\n</body></html>\n")
+    with atomic_write(page, "w") as fh:
+        fh.write(text)
+    return page
+
+
+def find_chromium() -> str | None:
+    """A headless-capable Chromium/Chrome on PATH (``chromium``, ``chromium-browser``,
+    ``google-chrome``), or None."""
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        exe = shutil.which(name)
+        if exe:
+            return exe
+    return None
+
+
+#: Flags that give a working WebGL (SwiftShader, software) in headless Chromium.
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--use-gl=angle", "--use-angle=swiftshader",
+                  "--enable-unsafe-swiftshader", "--hide-scrollbars", "--no-first-run", "--disable-extensions",
+                  "--allow-file-access-from-files")
+
+
+def chromium(page, *args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """Run headless Chromium (:func:`find_chromium`, :data:`CHROMIUM_FLAGS`) on the file
+    ``page`` with extra ``args`` (e.g. ``--dump-dom``); a private profile folder.
+    Raises FileNotFoundError without a Chromium, subprocess.TimeoutExpired."""
+    import tempfile
+    exe = find_chromium()
+    if exe is None:
+        raise FileNotFoundError("no chromium on PATH (Debian: apt-get install chromium)")
+    with tempfile.TemporaryDirectory(prefix="sshade-chromium-") as prof:
+        cmd = [exe, *CHROMIUM_FLAGS, f"--user-data-dir={prof}", "--virtual-time-budget=5000", *args,
+               Path(page).resolve().as_uri()]
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
+                              env=dict(os.environ, HOME=prof))
+
+
+def screenshot(page, png, *, size=(1200, 900)) -> Path:
+    """A PNG of ``page`` as headless Chromium draws it (3D views included, SwiftShader
+    WebGL), ``size`` = (width, height) pixels; returns ``png``. Raises
+    FileNotFoundError without a Chromium, RuntimeError when no PNG was made."""
+    png = Path(png).resolve()
+    r = chromium(page, f"--screenshot={png}", f"--window-size={size[0]},{size[1]}")
+    if not png.is_file():
+        raise RuntimeError(f"chromium made no screenshot (exit {r.returncode}): {r.stderr[-500:]}")
+    return png
+
+
+def _check_index_dir(path) -> None:
+    """``--index DIR`` writes into ``results/`` under ``eval.reproduce``, or into a folder
+    of ours (one with an output marker, e.g. a sweep's); OutputDirError otherwise."""
+    refuse_results(path, "python -m eval.report --index writes elsewhere only")
+    p = Path(os.path.abspath(Path(str(path)).expanduser()))
+    res = results_dir()
+    if not (res is not None and p == res.resolve() and os.environ.get(REPRODUCE_ENV) == "1") and read_marker(p) is None:
+        raise OutputDirError(f"refusing to write {p / PAGE}: {p} is neither results/ (under python -m eval.reproduce) "
+                             "nor an output folder of python -m eval or eval.sweep")
+
+
+def main(argv=None) -> int:
+    """``python -m eval.report [--index DIR] [--screenshot PNG] [RUN_DIR ...]``.
+
+    Returns 0; 2 after one ``error: ...`` line (nothing to do, a folder that is no
+    earlier evaluator output, ``results/`` outside ``eval.reproduce``, a page not ours,
+    an OSError); 130 on Ctrl-C.
+    """
+    import sys
+    ap = ArgumentParser(prog="python -m eval.report",
+                        description="(Re)write index.html, the browser report, of finished evaluator runs.")
+    ap.add_argument("dirs", nargs="*", metavar="RUN_DIR", help="a folder written by python -m eval")
+    ap.add_argument("--index", metavar="DIR", help="also write DIR/index.html linking every run folder below DIR")
+    ap.add_argument("--screenshot", metavar="PNG", help="also save a PNG of the (last) page with headless chromium")
+    a = ap.parse_args(list(sys.argv[1:] if argv is None else argv))
+    if not a.dirs and not a.index:
+        print("usage: python -m eval.report RUN_DIR [RUN_DIR ...] [--index DIR] (--help for details)",
+              file=sys.stderr)
+        return 2
+
+    def work():
+        dirs = [check_earlier_output(d, "eval", "python -m eval.report writes pages of runs outside it")
+                for d in a.dirs]  # every folder checked before any page is written
+        if a.index:
+            _check_index_dir(a.index)
+        last = None
+        for d in dirs:
+            last = write_report(d)
+            record_output_files(d, [PAGE])
+            print(f"{d}: wrote {PAGE} ({last.stat().st_size / 1e3:.0f} kB)")
+        if a.index:
+            last = write_index(a.index)
+            print(f"wrote {last}")
+        if a.screenshot and last is not None:
+            print(f"wrote {screenshot(last, a.screenshot)}")
+    return run_command(work)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

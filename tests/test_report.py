@@ -1,0 +1,251 @@
+"""The browser report (eval/report.py, eval/meshview.py): index.html of a tiny evaluator
+run (2 FAUST cases, a toy plug-in method and one that always fails), its tables parsed
+with html.parser, the CLI's no-harm rules, the display decimation; and, when a
+``chromium`` is on PATH, the page in headless Chromium (SwiftShader WebGL): no JS error,
+the table rows in the DOM, both 3D views drawn, mesh pixels on the screenshot."""
+from __future__ import annotations
+
+import json
+import re
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eval.app import CONF_DIR, run_experiment
+from eval.meshview import case_view, cluster_decimate, cluster_positions, read_view
+from eval.outdir import REPRODUCE_ENV, read_marker, results_dir
+from eval.report import PAGE, chromium, find_chromium, main, screenshot, write_index, write_report
+
+METHODS = ["Mine", "NaNOutput"]
+
+
+class _Tables(HTMLParser):
+    """Rows (lists of cell texts) of every ``<table id=...>``, and the ``<script src>``s."""
+
+    def __init__(self):
+        super().__init__()
+        self.tables, self.scripts, self.views = {}, [], []
+        self._id, self._row, self._cell = None, None, None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "table" and a.get("id"):
+            self._id = a["id"]
+            self.tables[self._id] = []
+        elif tag == "tr" and self._id:
+            self._row = []
+        elif tag in ("td", "th") and self._row is not None:
+            self._cell = ""
+        elif tag == "script" and a.get("src"):
+            self.scripts.append(a["src"])
+        elif tag == "div" and "view" in (a.get("class") or "").split():
+            self.views.append(a.get("data-case"))
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell += data
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self._row.append(self._cell.strip())
+            self._cell = None
+        elif tag == "tr" and self._row is not None:
+            self.tables[self._id].append(self._row)
+            self._row = None
+        elif tag == "table":
+            self._id = None
+
+
+def _parse(text: str) -> _Tables:
+    p = _Tables()
+    p.feed(text)
+    return p
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory, faust_root):
+    """A finished evaluator run: 2 FAUST cases, ``Mine`` (5 Jacobi steps) and
+    ``NaNOutput`` (fails on every case), a figure of the first case, 2 views."""
+    from hydra import compose, initialize_config_dir
+    out = tmp_path_factory.mktemp("report") / "run"
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        cfg = compose(config_name="config", overrides=[
+            "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=2", "reference.cases=none",
+            "methods=[{_target_:tests.plugin_example.MyMethod,name:Mine,iterations:5},"
+            "{_target_:tests.bad_methods.NaNOutput}]",
+            "figures.enabled=true", "figures.max_cases=1", f"out_dir={out}"])
+    run_experiment(cfg)
+    return out
+
+
+def test_page_tables_views_and_provenance(run_dir):
+    text = (run_dir / PAGE).read_text()
+    p = _parse(text)
+    head, *rows = p.tables["main-table"]
+    assert head[:3] == ["Method", "Cases", "Failed"] and "Volume (%)" in head
+    assert [r[0] for r in rows] == METHODS
+    assert [(r[1], r[2]) for r in rows] == [("2", "0"), ("0", "2")]  # cases averaged, failed runs
+    assert "How each method stopped" in text and "NaNOutput: 2 of 2 cases failed" in text
+    # the 3D views: one per case (report.view_cases=2), their data next to the page
+    cases = json.loads((run_dir / "run.json").read_text())["seeds"]["cases"]
+    assert p.views == list(cases)
+    for src in p.scripts:
+        assert (run_dir / src).is_file() and src.startswith("report/")
+    view = read_view(run_dir / p.scripts[0])
+    assert [m["label"] for m in view["meshes"]] == ["rest", "target (ground truth)", *METHODS]
+    assert [m["kind"] for m in view["meshes"]] == ["rest", "target", "result", "failed"]
+    assert view["meshes"][-1]["pos"] is None and view["n_vertices"] == 6890
+    # breakdown, figure, provenance
+    assert "breakdown-table" not in p.tables and "per pose" in text
+    assert 'src="figures/' in text
+    commit = json.loads((run_dir / "run.json").read_text())["git"]["commit"]
+    prov = dict((r[0], r[1]) for r in p.tables["provenance-table"] if len(r) == 2)
+    assert prov["git commit"] == commit and prov["dirty"] in ("True", "False") and "python" in prov
+    assert "<summary>seeds</summary>" in text and "<summary>config</summary>" in text
+    # sizes: the page itself is small, each view well under the cap
+    assert (run_dir / PAGE).stat().st_size < 200_000
+    assert all((run_dir / s).stat().st_size < 2_000_000 for s in p.scripts)
+    assert PAGE in read_marker(run_dir)["files"]  # a later run into the folder replaces it
+
+
+def test_cli_rewrites_a_run_and_refuses_other_folders(run_dir, tmp_path, monkeypatch, capsys):
+    page = run_dir / PAGE
+    page.write_text(page.read_text().replace("Main table", "OLD"))
+    assert main([str(run_dir)]) == 0 and "OLD" not in page.read_text()
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "notes.txt").write_text("x")
+    assert main([str(other)]) == 2 and not (other / PAGE).exists()  # no earlier evaluator output
+    assert "not an earlier eval output" in capsys.readouterr().err
+    assert main(["--index", str(tmp_path)]) == 2 and not (tmp_path / PAGE).exists()
+    res = results_dir()
+    if res is not None and (res / "faust").is_dir():
+        monkeypatch.delenv(REPRODUCE_ENV, raising=False)
+        before = sorted(p.name for p in (res / "faust").iterdir())
+        assert main([str(res / "faust")]) == 2  # results/ only under eval.reproduce
+        assert sorted(p.name for p in (res / "faust").iterdir()) == before
+    assert main([]) == 2
+
+
+def test_a_page_written_by_someone_else_is_kept(tmp_path):
+    (tmp_path / "run.json").write_text("{}")
+    (tmp_path / PAGE).write_text("<html>my notes</html>")
+    with pytest.raises(Exception, match="not written by"):
+        write_report(tmp_path)
+    assert (tmp_path / PAGE).read_text() == "<html>my notes</html>"
+
+
+def test_index_links_every_run(run_dir):
+    page = write_index(run_dir.parent)
+    rows = _parse(page.read_text()).tables["runs-table"]
+    assert rows[1][0] == "run" and f'href="run/{PAGE}"' in page.read_text()
+
+
+def _sphere(level: int):
+    """An icosphere subdivided ``level`` times (trimesh): 20 * 4**level faces."""
+    import trimesh
+    m = trimesh.creation.icosphere(subdivisions=level)
+    return np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+
+
+def test_cluster_decimate_keeps_correspondence_and_the_cap():
+    V, F = _sphere(6)  # 81920 faces
+    labels, G = cluster_decimate(V, F, 5000)
+    c = int(labels.max()) + 1
+    assert 2000 < len(G) <= 5000 and labels.shape == (len(V),) and G.max() < c
+    assert (G[:, 0] != G[:, 1]).all() and len(np.unique(np.sort(G, 1), axis=0)) == len(G)
+    P = cluster_positions(2 * V, labels, c)  # a scaled copy: the same clusters, scaled
+    assert np.allclose(P, 2 * cluster_positions(V, labels, c))
+    assert np.allclose(np.linalg.norm(cluster_positions(V, labels, c), axis=1), 1, atol=0.05)
+    lab, G2 = cluster_decimate(V, F, len(F))  # nothing to do
+    assert (G2 == F).all() and (lab == np.arange(len(V))).all()
+
+
+def test_case_view_quantises_on_a_common_box():
+    V, F = _sphere(5)
+    view = case_view("s", V, F, {"rest": ("rest", V), "moved": ("result", V + 3.0), "x": ("failed", None)},
+                     max_faces=2000)
+    assert view["shown_faces"] <= 2000 and not view["idx32"] and view["meshes"][2]["pos"] is None
+    import base64
+    q = np.frombuffer(base64.b64decode(view["meshes"][1]["pos"]), "<u2").reshape(-1, 3)
+    x = np.asarray(view["lo"]) + q * np.asarray(view["step"])
+    assert q.shape == (view["clusters"], 3) and x.min() > 1.9 and x.max() < 4.1
+    nbytes = sum(len(m["pos"] or "") for m in view["meshes"]) + len(view["faces"])
+    assert nbytes < 4 / 3 * (6 * view["clusters"] * 2 + 6 * view["shown_faces"]) + 16
+
+
+# ----------------------------------------------------------------------------- headless Chromium
+def _need_chromium():
+    if find_chromium() is None:
+        pytest.skip("no chromium on PATH (Debian: apt-get install chromium): the page is not checked in a browser")
+
+
+def test_page_in_headless_chromium(run_dir):
+    _need_chromium()
+    dom = chromium(run_dir / PAGE, "--dump-dom").stdout
+    assert 'id="js-errors"' in dom, "chromium gave no DOM"
+    box = re.search(r'<div id="js-errors"[^>]*>.*?</div>(?!\s*<div class="js-error")', dom, re.S).group(0)
+    assert 'data-count="0"' in box, f"JavaScript errors: {box}"
+    rows = _parse(dom).tables["main-table"][1:]
+    assert [r[0] for r in rows] == METHODS
+    assert re.search(r'id="views-status"[^>]*data-drawn="2"', dom), "the two 3D views were not drawn"
+
+
+def test_js_errors_are_written_into_the_page(tmp_path):
+    _need_chromium()
+    hook = (Path(__file__).resolve().parents[1] / "eval" / "report_assets" / "errors.js").read_text()
+    page = tmp_path / "e.html"
+    page.write_text(f'<html><head><script>{hook}</script></head><body><div id="js-errors" data-count="0" hidden>'
+                    '</div><script>console.error("bad thing"); undefinedFunction();</script></body></html>')
+    dom = chromium(page, "--dump-dom").stdout
+    assert 'data-count="2"' in dom and "console.error: bad thing" in dom and "undefinedFunction" in dom
+
+
+def test_screenshot_shows_the_meshes(run_dir, tmp_path):
+    _need_chromium()
+    png = screenshot(run_dir / PAGE, tmp_path / "page.png", size=(1200, 1500))
+    from matplotlib.image import imread
+    img = imread(png)[..., :3].astype(float)
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    green = (g > r + 0.12) & (g > b + 0.12)  # the target mesh: nothing else on the page is green
+    blue = (b > r + 0.2) & (b > 0.4) & (g > 0.3)  # the results (link text is thin)
+    assert green.sum() > 2000, f"no target mesh drawn ({int(green.sum())} green pixels)"
+    assert blue.sum() > 2000, f"no result mesh drawn ({int(blue.sum())} blue pixels)"
+
+
+@pytest.mark.parametrize("bad", ["report.max_faces=0", "report.view_cases=-1", "report.enabled=maybe",
+                                 "report.max_faces=1e9"])
+def test_report_options_are_checked_before_any_work(bad):
+    from hydra import compose, initialize_config_dir
+
+    from eval.config_check import check_config
+    from sshade.errors import SShaDeError
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        good = compose(config_name="config", overrides=["dataset=faust", "dataset.root=x"])
+        cfg = compose(config_name="config", overrides=["dataset=faust", "dataset.root=x", bad])
+    check_config(good)
+    with pytest.raises(SShaDeError, match=bad.split("=")[0]):
+        check_config(cfg)
+
+
+def test_a_click_on_a_header_sorts_the_table(tmp_path):
+    _need_chromium()
+    assets = Path(__file__).resolve().parents[1] / "eval" / "report_assets"
+    page = tmp_path / "t.html"
+    page.write_text(
+        f"<html><head><script>{(assets / 'errors.js').read_text()}</script></head><body>"
+        '<div id="js-errors" data-count="0" hidden></div><table class="sortable" id="t"><thead><tr><th>Method</th>'
+        '<th>Time</th></tr></thead><tbody><tr><td>A</td><td data-v="3.5">3.5</td></tr><tr><td>B</td>'
+        '<td data-v="">--</td></tr><tr><td>C</td><td data-v="0.25">0.25</td></tr></tbody></table>'
+        f"<script>{(assets / 'report.js').read_text()}</script><script>"  # after report.js's own listener:
+        "document.addEventListener('DOMContentLoaded', function () {"
+        "var th = document.querySelectorAll('#t th')[1]; var order = [];"
+        "function names() { return Array.from(document.querySelectorAll('#t tbody td:first-child'))"
+        ".map(c => c.textContent).join(''); }"
+        "th.click(); order.push(names()); th.click(); order.push(names());"
+        "document.body.setAttribute('data-order', order.join(',')); });</script></body></html>")
+    dom = chromium(page, "--dump-dom").stdout
+    assert re.search(r'<body[^>]*data-order="CAB,ACB"', dom), dom[-300:]  # ascending (no value last), descending
+    assert re.search(r'id="js-errors" data-count="0"', dom)
