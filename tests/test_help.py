@@ -22,6 +22,7 @@ HELP = {
     "-m eval.sweep resume": ["usage: python -m eval.sweep resume SWEEP_DIR", "killed, failed and missing"],
     "-m eval.sweep aggregate": ["usage: python -m eval.sweep aggregate", "sweep_table"],
     "-m eval.tables": ["usage: python -m eval.tables", "RUN_DIR"],
+    "-m eval.report": ["usage: python -m eval.report", "--index", "--screenshot"],
     "-m eval.reproduce": ["usage: python -m eval.reproduce", "--dry-run"],
     "-m eval.anny_figures": ["usage: python -m eval.anny_figures", "OUT_DIR", "outputs/anny_figures"],
     "-m defaust": ["usage: python -m defaust out=DIR", "Build the DeFAUST dataset", "== Configuration groups ==",
