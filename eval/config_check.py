@@ -13,7 +13,7 @@ from sshade.checks import config_bool, config_int_list, config_number, config_va
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 
-from .subset import check_baseline_cases
+from .subset import check_baseline_cases, check_method_cases
 
 __all__ = ["check_config"]
 
@@ -65,6 +65,7 @@ def _check_dataset(cfg) -> None:
     for k in ("limit",):
         config_number(cfg, f"dataset.{k}", min=1, allow_none=True, default=None)
     check_baseline_cases(config_value(cfg, "dataset.baseline_cases", None))
+    check_method_cases(config_value(cfg, "method_cases", None))
     for k in ("subjects", "poses"):
         if name != "shapes":
             config_int_list(cfg, f"dataset.{k}")

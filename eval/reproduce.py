@@ -8,7 +8,8 @@ Runs, each as its own ``python -m eval`` process (so a failure is reported and t
 others still run):
 
 1. DeFAUST (built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and figures, every
-   method on all 40 cases (``dataset.baseline_cases=all``), the converged ARAP protocol
+   method on all 40 cases (and, where PyTorch is installed, Implicit-ARAP's cpu preset on
+   the per_pose subset; on FAUST on every case) (``dataset.baseline_cases=all``), the converged ARAP protocol
    and the distances to the cached references -> ``results/defaust``; the same methods
    on all 40 cases under the paper's protocol (§4.1 move rule, libigl, 1000-iteration
    cap) -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
@@ -41,6 +42,7 @@ Exit status 1 if any step failed (all steps are attempted).
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -56,7 +58,12 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     # the one command that writes results/: every other run goes to outputs/ by default
     # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
     # per_pose subset, eval/subset.py); resume=true: a rerun after a crash continues (eval/store.py)
-    s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "resume=true",
+    # Implicit-ARAP (the [neural] extra) where PyTorch is installed: on DeFAUST only on the
+    # per_pose subset (its cpu preset takes minutes per case; eval/subset.py method_cases)
+    neural = importlib.util.find_spec("torch") is not None
+    ia = (["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]", "method_cases={Implicit-ARAP: per_pose}"]
+          if neural else [])
+    s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "resume=true", *ia,
                            "out_dir=results/defaust", *a.extra]),
          ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all", "reference.cases=none",
                                  "resume=true", "out_dir=results/defaust_paper"]),
@@ -65,14 +72,15 @@ def _steps(a) -> list[tuple[str, list[str]]]:
                          "hydra.sweep.dir=results/sweeps/defaust"])]
     if a.faust:
         s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true",
-                                  "resume=true", "out_dir=results/faust"]))
+                                  "resume=true", *ia[:1], "out_dir=results/faust"]))
         s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}",
                                            "figures.enabled=true", "out_dir=results/pose_transfer"]))
     if a.tosca:
         s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true",
                                   "out_dir=results/tosca"]))
     if a.shapes:
-        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "out_dir=results/shapes"]))
+        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", *ia[:1],
+                                   "out_dir=results/shapes"]))
     if a.scaling:
         s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}",
                                     "out_dir=results/scaling"]))

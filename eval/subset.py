@@ -14,12 +14,17 @@ subset is chosen by a rule that is stated in the run's table title
   has it.
 - an integer ``N``: the first ``N`` cases (the dataset's order); ``0``: none.
 - ``all`` or null: every case.
+
+``method_cases`` (a mapping, method name -> one of these rules) gives a method its own
+rule instead, e.g. ``method_cases={Implicit-ARAP: per_pose}`` in ``eval.reproduce``'s
+full DeFAUST run, where the baselines run on every case but Implicit-ARAP's CPU preset
+would take hours (:func:`method_selections`).
 """
 from __future__ import annotations
 
 from sshade.errors import SShaDeError
 
-__all__ = ["baseline_selection", "check_baseline_cases", "PER_POSE"]
+__all__ = ["baseline_selection", "check_baseline_cases", "check_method_cases", "method_selections", "PER_POSE"]
 
 PER_POSE = "per_pose"
 
@@ -82,3 +87,46 @@ def baseline_selection(cases, spec) -> tuple[set[int] | None, str]:
         return sel, (f"per_pose: one case per target pose, pose p_j from subject s_(j mod {n_subj}) "
                      f"({len(sel)} cases)")
     return set(range(min(spec, len(cases)))), f"the first {spec} case(s)"
+
+
+def check_method_cases(spec, names=None) -> dict:
+    """``method_cases`` checked: None / empty = {}; else a mapping of method names (among
+    ``names`` when given) to :func:`check_baseline_cases` rules. Returns a plain dict.
+
+    >>> check_method_cases({"Implicit-ARAP": "per_pose"}, ["SShaDe", "Implicit-ARAP"])
+    {'Implicit-ARAP': 'per_pose'}
+
+    Raises SShaDeError for a value that is not a mapping, a name not among ``names``, or
+    a bad rule.
+    """
+    if spec is None:
+        return {}
+    try:
+        items = dict(spec.items())
+    except AttributeError:
+        raise SShaDeError(f"method_cases must be a mapping of method names to case rules (all, per_pose or an "
+                          f"integer), e.g. {{Implicit-ARAP: per_pose}}; got {spec!r}") from None
+    out = {}
+    for k, v in items.items():
+        if names is not None and str(k) not in names:
+            raise SShaDeError(f"method_cases names {k!r}, which is not among the methods run ({list(names)})")
+        try:
+            out[str(k)] = check_baseline_cases(v)
+        except SShaDeError as e:
+            raise SShaDeError(f"method_cases.{k}: {e}") from None
+    return out
+
+
+def method_selections(cases, spec, names) -> dict:
+    """``{name: (indices or None, rule in words)}`` for each method ``spec``
+    (``method_cases``, :func:`check_method_cases`) gives its own rule; see
+    :func:`baseline_selection`.
+
+    >>> from types import SimpleNamespace as C
+    >>> cs = [C(subject=s, pose=p) for s in range(3) for p in (1, 2)]
+    >>> method_selections(cs, {"Implicit-ARAP": 1}, ["SShaDe", "Implicit-ARAP"])
+    {'Implicit-ARAP': ({0}, 'the first 1 case(s)')}
+
+    Raises SShaDeError as :func:`check_method_cases`.
+    """
+    return {k: baseline_selection(cases, v) for k, v in check_method_cases(spec, names).items()}

@@ -306,3 +306,21 @@ def test_app_on_a_small_defaust_build(tmp_path):
     info = json.loads((out / "run.json").read_text())
     assert all(isinstance(v, int) for v in info["seeds"]["cases"].values()) and len(info["seeds"]["cases"]) == 2
     assert info["packages"]["matplotlib"] and "modified" in info["git"]
+
+
+def test_method_cases_gives_a_method_its_own_rule(tmp_path, faust_root):
+    """method_cases={ARAP: 1}: ARAP runs on the first case only, Elastic (the dataset's
+    rule: every case) on both; the table title states ARAP's rule; a method name that is
+    not run is one error line before any work."""
+    (tmp_path / "faust").symlink_to(faust_root, target_is_directory=True)
+    if len(list(faust_root.glob("tr_reg_00[1-9].ply"))) < 2:
+        pytest.skip("needs two FAUST poses of subject 0")
+    r = _run(["dataset.root=faust", "dataset.limit=2", "methods=[ARAP,Elastic]", "arap.protocol=paper",
+              "reference.cases=none", "method_cases={ARAP: 1}", "out_dir=out"], cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    cases = pd.read_csv(tmp_path / "out" / "cases.csv")
+    assert cases.groupby("method").size().to_dict() == {"ARAP": 1, "Elastic": 2}
+    assert "ARAP on the first 1 case(s)" in (tmp_path / "out" / "table.md").read_text().splitlines()[0]
+    bad = _run(["dataset.root=faust", "methods=[ARAP]", "method_cases={Elastic: 1}", "out_dir=bad"], cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error: method_cases names")
+    assert not (tmp_path / "bad").exists()

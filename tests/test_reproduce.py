@@ -1,6 +1,8 @@
 """The one command that regenerates results/ (eval/reproduce.py): which runs it makes."""
 from __future__ import annotations
 
+import importlib.util
+
 from eval.reproduce import main
 
 
@@ -14,8 +16,10 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep"]
     assert "arap.protocol=paper" in steps["defaust_paper"]
+    ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] method_cases={Implicit-ARAP: per_pose} "
+          if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on the per_pose subset
     assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all resume=true "
-                                "out_dir=results/defaust")  # every method on every case, resumable
+                                f"{ia}out_dir=results/defaust")  # every method on every case, resumable
     sweep = steps["sweep"]
     assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
@@ -30,7 +34,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
-    assert steps["shapes"] == "-m eval experiment=shapes dataset.root=S out_dir=results/shapes"  # figures: shapes.yaml
+    ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if importlib.util.find_spec("torch") else ""
+    assert steps["shapes"] == f"-m eval experiment=shapes dataset.root=S {ia}out_dir=results/shapes"  # shapes.yaml
     for name, cmd in steps.items():  # only this command writes results/: each step names its folder
         want = "hydra.sweep.dir=results/sweeps/defaust" if name == "sweep" else f"out_dir=results/{name}"
         assert want in cmd, name

@@ -77,7 +77,7 @@ from ..progress import CostModel, weighted_bar
 from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, status_words
 from ..runinfo import collect_runinfo, method_sources, write_runinfo
 from ..store import ResultStore, case_identity, json_safe, pair_key
-from ..subset import baseline_selection, check_baseline_cases
+from ..subset import baseline_selection, check_baseline_cases, method_selections
 from ..tables import compare, write_cases, write_tables
 from .common import as_list, sshade_spec
 from .registry import register_experiment
@@ -181,7 +181,9 @@ class _Setup:
     """What :func:`_setup` prepared: ``methods``, ``names``, ``specs`` (each method's
     resolved definition), ``guard``, ``refs``, ``root``, ``out_dir``, ``name``
     (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
-    all) and ``base_rule`` (that rule in words), ``store`` and ``resume``."""
+    all) and ``base_rule`` (that rule in words), ``own`` (method name -> (indices or
+    None, rule in words) for the methods ``method_cases`` gives a rule of their own),
+    ``store`` and ``resume``."""
 
     def __init__(self, **kw):
         self.__dict__.update(kw)
@@ -189,7 +191,11 @@ class _Setup:
     def runs_on(self, ci: int, m) -> bool:
         """Baselines take minutes per high-res case: they run on the cases
         ``dataset.baseline_cases`` selects (:func:`eval.subset.baseline_selection`;
-        SShaDe on all)."""
+        SShaDe on all), except a method ``method_cases`` gives its own rule
+        (:func:`eval.subset.method_selections`)."""
+        if m.name in self.own:
+            sel = self.own[m.name][0]
+            return sel is None or ci in sel
         return self.base is None or ci in self.base or m.name == "SShaDe"
 
 
@@ -227,16 +233,17 @@ def _setup(cfg) -> _Setup:
     name = str(ds.get("name", "faust"))
     cases = datasets.load_cases(name, root, **datasets.dataset_options(ds))
     base, base_rule = baseline_selection(cases, base_spec)
-    log.info("%d case(s) from %s; methods %s; baselines on %s; output %s", len(cases), root,
-             [m.name for m in methods], base_rule, out_dir)
+    names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
+    own = method_selections(cases, cfg.get("method_cases"), names)
+    log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
+             "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
     store = ResultStore(out_dir, meshes=meshes)
     if not resume:
         n = store.clear()
         if n:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
-    names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
     return _Setup(methods=methods, names=names, specs=specs, guard=guard, refs=refs, root=root, out_dir=out_dir,
-                  name=name, cases=cases, base=base, base_rule=base_rule, store=store, resume=resume)
+                  name=name, cases=cases, base=base, base_rule=base_rule, own=own, store=store, resume=resume)
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -361,8 +368,10 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
             compile_s[r["method"]] = compile_s.get(r["method"], 0.0) + r["compile_s"]
     exp = cfg.get("experiment", {}).get("name", s.name)
     title = f"{exp}: {len(s.cases)} {s.name} case(s)"
-    if s.base is not None and any(not s.runs_on(ci, m) for ci in range(len(s.cases)) for m in s.methods):
+    if s.base is not None and any(not s.runs_on(ci, m) for ci in range(len(s.cases)) for m in s.methods
+                                  if m.name not in s.own):
         title += f"; full-resolution baselines on {s.base_rule}"
+    title += "".join(f"; {n} on {rule}" for n, (sel, rule) in s.own.items() if sel is not None)
     paths = write_tables(df, s.out_dir, title=title)
     paths.update(write_breakdown(df, s.out_dir, figure=figures_options(cfg)[0]))
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
