@@ -47,14 +47,20 @@ SR_REFERENCE_S_PER_VERTEX = 5e-3
 
 
 def duration_words(seconds: float, *, about: bool = False) -> str:
-    """``seconds`` in words: ``"45 s"``, ``"12 min"``, ``"1.5 h"``; ``about`` prefixes ``~``
-    (not to 0).
+    """``seconds`` in words: ``"0.4 s"``, ``"45 s"``, ``"12 min"``, ``"1.5 h"``; ``about``
+    prefixes ``~`` (not to 0).
 
-    >>> duration_words(44.6), duration_words(700, about=True), duration_words(5400), duration_words(0, about=True)
-    ('45 s', '~12 min', '1.5 h', '0 s')
+    >>> duration_words(0.44, about=True), duration_words(44.6), duration_words(700, about=True), duration_words(5400)
+    ('~0.4 s', '45 s', '~12 min', '1.5 h')
+    >>> duration_words(0, about=True), duration_words(100)
+    ('0 s', '100 s')
     """
     s = max(float(seconds), 0.0)
-    if s < 90:
+    if s == 0:
+        text = "0 s"
+    elif s < 9.95:
+        text = f"{s:.1f} s"
+    elif s < 120:
         text = f"{s:.0f} s"
     elif s < 90 * 60:
         text = f"{s / 60:.0f} min"
@@ -102,12 +108,13 @@ def _basis(cost, name: str) -> str:
 
 
 def _references_stage(references) -> dict:
-    cached = to_compute = unknown = 0
+    cached = to_compute = unknown = guessed = 0
     seconds = 0.0
     for n_vertices, energy, is_cached in references:
         if is_cached:
             cached += 1
             continue
+        guessed += sr_alpha(energy) is not None
         rate = SR_REFERENCE_S_PER_VERTEX if sr_alpha(energy) is not None else REFERENCE_S_PER_VERTEX
         seconds += rate * max(int(n_vertices), 1)
         if is_cached is None:
@@ -116,7 +123,7 @@ def _references_stage(references) -> dict:
             to_compute += 1
     n = cached + to_compute + unknown
     return {"stage": "references", "count": n, "cached": cached, "to_compute": to_compute, "unknown": unknown,
-            "seconds": seconds, "each_s": seconds / (n - cached) if n > cached else 0.0}
+            "guessed": guessed, "seconds": seconds, "each_s": seconds / (n - cached) if n > cached else 0.0}
 
 
 def make_plan(cases, names, pairs, cost, *, build: dict | None = None, references=(), restored: int = 0) -> dict:
@@ -166,7 +173,7 @@ def _build_words(b: dict) -> str:
     if not b["count"]:
         return f"{b['what']}{where} complete"
     workers = f"{b['workers']} worker" + ("s" if b["workers"] != 1 else "")
-    return (f"building {b['what']} (once,{where}): {b['count']} subject(s) x "
+    return (f"building {b['what']} (once{',' + where if where else ''}): {b['count']} subject(s) x "
             f"{duration_words(b['s_per_subject'], about=True)} on {workers}, "
             f"about {duration_words(b['seconds'])}")
 
@@ -184,11 +191,12 @@ def _runs_words(r: dict, then: bool) -> str:
 def _refs_words(f: dict) -> str:
     if not f["count"]:
         return "references: none"
+    note = f" (ARAP-SR's {f['guessed']}: a guess, not measured yet)" if f.get("guessed") else ""
     if f["unknown"]:
-        return f"references: up to {f['unknown']} to compute, {duration_words(f['each_s'], about=True)} each"
+        return f"references: up to {f['unknown']} to compute, {duration_words(f['each_s'], about=True)} each{note}"
     if f["to_compute"]:
         return (f"references: {f['cached']} cached, {f['to_compute']} to compute, "
-                f"{duration_words(f['each_s'], about=True)} each")
+                f"{duration_words(f['each_s'], about=True)} each{note}")
     return f"references: {f['cached']} cached, 0 to compute"
 
 

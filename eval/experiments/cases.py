@@ -343,6 +343,7 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
     wall = time.perf_counter() - t0
     c = row.get("compile_s")  # a one-off (numba compilation): not a cost of the later runs
     cost.observe(name, len(case.V), wall - (c if isinstance(c, (int, float)) and c == c else 0.0))
+    bar.total = max(bar.total, bar.n + wall)  # a run longer than estimated never overfills the bar
     bar.update(wall)
     rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name}
     try:
