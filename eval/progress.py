@@ -17,20 +17,47 @@ The bar (:func:`weighted_bar`) counts seconds: after each run it advances by the
 measured wall time and its total becomes done + the estimate of what remains, so its
 remaining time is the weighted estimate. Runs restored from the result store
 (:mod:`eval.store`) are not counted, but their stored ``time_s`` feed the model.
+
+:func:`default_cost_model` is the evaluator's model: per-method priors measured on
+DeFAUST (:data:`METHOD_PRIORS`) plus the per-pair overhead of the metrics
+(:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan (:mod:`eval.plan`) uses it too.
 """
 from __future__ import annotations
 
-__all__ = ["CostModel", "weighted_bar"]
+__all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "GUESSED_PRIORS",
+           "OVERHEAD_S_PER_VERTEX"]
+
+#: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
+#: method, seconds for ``SShaDe``): the mean ``time_s`` of the committed
+#: ``results/defaust/cases.csv`` at 168,897 vertices (2 cores): ARAP 70.8 s, Elastic
+#: 68.1 s, SShaDe 2.0 s. ARAP-SR under the converged protocol (the default) has not been
+#: measured at that size yet (its paper protocol took 3.6 s there; converged, 5-11 s at
+#: FAUST's 6,890 vertices, 0.7-1.6e-3 s/vertex, with more iterations on larger meshes):
+#: a conservative 3e-3 s/vertex, about 8.5 minutes at 169k; replace it once measured.
+METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-3, "SShaDe": 2.0}
+#: The priors of :data:`METHOD_PRIORS` that are guesses, not measurements.
+GUESSED_PRIORS = ("ARAP-SR",)
+#: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
+#: reading a cached reference): about 7 s per pair at 169k vertices (the SShaDe pairs of
+#: ``results/defaust/eval.log`` finish ~9 s apart with ``time_s`` ~2 s).
+OVERHEAD_S_PER_VERTEX = 4e-5
 
 
 class CostModel:
     """Per-method cost estimates (seconds) from priors and measured runs (module docstring)."""
 
     def __init__(self, scales: dict[str, str] | None = None, *, prior_s_per_vertex: float = 1e-3,
-                 prior_const_s: float = 20.0):
+                 prior_const_s: float = 20.0, priors: dict[str, float] | None = None,
+                 overhead_s_per_vertex: float = 0.0):
+        """``scales``: method -> ``"const"`` / ``"vertices"`` (:meth:`scale_of`);
+        ``priors``: method -> its own prior in its unit, before ``prior_s_per_vertex`` /
+        ``prior_const_s``; ``overhead_s_per_vertex``: added to a prior (not to a
+        measured cost, which includes it)."""
         self.scales = dict(scales or {})
         self.prior_s_per_vertex = float(prior_s_per_vertex)
         self.prior_const_s = float(prior_const_s)
+        self.priors = {str(k): float(v) for k, v in (priors or {}).items()}
+        self.overhead_s_per_vertex = float(overhead_s_per_vertex)
         self.seen: dict[str, list[float]] = {}
 
     @staticmethod
@@ -64,9 +91,36 @@ class CostModel:
         seen = self.seen.get(method)
         if seen:
             return sum(seen) / len(seen) * unit
+        overhead = self.overhead_s_per_vertex * max(int(n_vertices), 1)
+        if method in self.priors:
+            return self.priors[method] * unit + overhead
         if self.scales.get(method, "vertices") == "const":
-            return self.prior_const_s
-        return self.prior_s_per_vertex * unit
+            return self.prior_const_s + overhead
+        return self.prior_s_per_vertex * unit + overhead
+
+    def basis(self, method: str) -> str:
+        """What ``method``'s estimate rests on: ``"measured"`` (runs it has observed),
+        ``"prior"`` (a per-method prior measured earlier), ``"guess"`` (a prior not
+        measured yet, :data:`GUESSED_PRIORS`, or the generic one)."""
+        if self.seen.get(method):
+            return "measured"
+        return "prior" if method in self.priors and method not in GUESSED_PRIORS else "guess"
+
+
+def default_cost_model(methods) -> CostModel:
+    """The evaluator's :class:`CostModel` for ``methods`` (objects with ``name``): their
+    scales (:meth:`CostModel.scale_of`), :data:`METHOD_PRIORS` (those of a method whose
+    scale is not the one the prior is in are left out) and :data:`OVERHEAD_S_PER_VERTEX`.
+
+    >>> from types import SimpleNamespace as M
+    >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
+    >>> round(cm.estimate("ARAP", 100_000)), round(cm.estimate("SShaDe", 100_000))
+    (46, 6)
+    """
+    scales = {m.name: CostModel.scale_of(m) for m in methods}
+    want = {"SShaDe": "const"}
+    priors = {k: v for k, v in METHOD_PRIORS.items() if k in scales and scales[k] == want.get(k, "vertices")}
+    return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX)
 
 
 def weighted_bar(total_s: float, n_runs: int, **kw):

@@ -40,7 +40,8 @@ from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 
-__all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_solution", "reference_metrics",
+__all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
+           "reference_solution", "reference_metrics",
            "method_energy", "sr_energy", "sr_alpha", "energy_operators"]
 
 log = logging.getLogger("eval")
@@ -169,6 +170,17 @@ def _solver_settings(max_iter: int, time_budget_s: float | None, energy: str) ->
             "time_budget_s": time_budget_s, "accelerate": "lbfgs" if sr_alpha(energy) is None else "anderson"}
 
 
+def reference_path(V, F, handles, targets, *, energy: str, cache_dir, max_iter: int = 50000,
+                   time_budget_s: float | None = 3600.0) -> tuple[str, Path]:
+    """``(key, path)``: the cache key (:func:`reference_key`) of a case's reference and
+    the file :func:`reference_solution` reads or writes for it (arguments as there); a
+    hash of the arrays, no solve: ``path.is_file()`` tells cheaply whether it is cached.
+    Raises SShaDeError on an unknown energy."""
+    _check_energy(energy)
+    key = reference_key(V, F, handles, targets, energy, _solver_settings(max_iter, time_budget_s, energy))
+    return key, Path(cache_dir) / f"{energy}_{key[:24]}.npz"
+
+
 def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims", cache_dir="data/references",
                        max_iter: int = 50000, time_budget_s: float | None = 3600.0,
                        U0: np.ndarray | None = None) -> Reference:
@@ -195,10 +207,9 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     ------
     SShaDeError on an unknown energy or an unreadable cache file (delete it to recompute).
     """
-    _check_energy(energy)
     solver = _solver_settings(max_iter, time_budget_s, energy)
-    key = reference_key(V, F, handles, targets, energy, solver)
-    path = Path(cache_dir) / f"{energy}_{key[:24]}.npz"
+    key, path = reference_path(V, F, handles, targets, energy=energy, cache_dir=cache_dir, max_iter=max_iter,
+                               time_budget_s=time_budget_s)
     if path.is_file():
         d = read_npz(path)
         if str(d.get("key", "")) != key or d["U"].shape != np.shape(V):

@@ -29,7 +29,7 @@ from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
 from .registry import Dataset, datasets, find_dataset, register_dataset
 
 __all__ = ["Case", "DeformationCase", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases",
-           "dataset_names", "dataset_root", "dataset_options", "Dataset", "datasets", "find_dataset",
+           "dataset_names", "dataset_root", "dataset_outlook", "dataset_options", "Dataset", "datasets", "find_dataset",
            "register_dataset"]
 
 
@@ -76,6 +76,26 @@ def dataset_root(cfg) -> Path:
         hint = d.root_hint if d is not None else ""
         raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}{hint}")
     return root
+
+
+def dataset_outlook(cfg) -> dict | None:
+    """What the dataset's ``prepare`` step (:func:`dataset_root`) is about to do, found
+    without doing it (its registered ``outlook``, e.g. the DeFAUST build still to run:
+    :func:`eval.datasets.defaust.build_outlook`); None when there is nothing long to do,
+    no ``outlook``, or no usable ``dataset.root`` (:func:`dataset_root` then says why).
+
+    Raises
+    ------
+    SShaDeError from the ``outlook`` (e.g. a bad ``dataset.build`` setting).
+    """
+    from omegaconf import OmegaConf
+    ds = cfg.get("dataset")
+    if ds is None or OmegaConf.is_missing(ds, "root") or ds.get("root") in (None, ""):
+        return None
+    d = find_dataset(ds.get("name", ""))
+    if d is None or d.outlook is None:
+        return None
+    return d.outlook(abs_path(ds.root), ds)
 
 
 def dataset_options(ds, *, skip=()) -> dict:

@@ -20,31 +20,38 @@ Example::
 
 When ``dataset.root`` is the default folder :data:`DEFAULT_DEFAUST_ROOT` (or with
 ``dataset.build.enabled=true``) the evaluator first builds, finishes or verifies the
-build there (:func:`prepare_root`); any other folder is only read.
+build there (:func:`prepare_root`); any other folder is only read. What that build is
+about to do, for the evaluator's plan (:mod:`eval.plan`), comes from :func:`build_outlook`
+(no work); while it runs, each subject built logs one progress line with the elapsed time
+and an estimate of the time left (:class:`BuildProgress`).
 """
 from __future__ import annotations
 
 import json
 import logging
+import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from defaust.cli import compose_config
+from defaust.anny_poses import DEFAULT_TARGETS
+from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.handles import HandleSet, handles_from_arrays, snap_handles
-from defaust.manifest import FORMAT, MANIFEST
+from defaust.manifest import FORMAT, MANIFEST, check_out_folder
 from defaust.store import read_npz, sha256_file
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
 from ..paths import abs_path
+from ..plan import BUILD_S_PER_SUBJECT, duration_words
 from .case import DeformationCase
 from .registry import register_dataset
 
 __all__ = ["DefaustCase", "load_defaust", "summarise_dropped", "load_handles", "read_manifest",
-           "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root"]
+           "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root", "build_outlook", "BuildProgress"]
 
 log = logging.getLogger(__name__)
 
@@ -294,16 +301,56 @@ def build_wanted(root: Path, ds) -> bool:
     return enabled
 
 
-def _build(root: Path, ds) -> None:
-    """Build (or finish, or verify) the DeFAUST dataset at ``root`` before evaluating
-    (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped."""
+def _build_config(root: Path, ds):
+    """The builder's config (OmegaConf) for ``root`` with ``dataset.build.overrides``."""
     from omegaconf import OmegaConf
 
     extra = ds.get("build", {}).get("overrides") or []
     extra = OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra)
+    return compose_config([f"out={root}", *[str(x) for x in extra]])
+
+
+def _build(root: Path, ds) -> None:
+    """Build (or finish, or verify) the DeFAUST dataset at ``root`` before evaluating
+    (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped.
+    Each subject built logs a progress line (:class:`BuildProgress`)."""
     logging.getLogger("defaust").setLevel(logging.INFO)
-    bcfg = compose_config([f"out={root}", *[str(x) for x in extra]])
-    build_run(bcfg)
+    bcfg = _build_config(root, ds)
+    out = build_outlook(root, ds)
+    progress = BuildProgress(out["subjects"] if out else 0)
+    logging.getLogger("defaust").addHandler(progress)
+    try:
+        build_run(bcfg)
+    finally:
+        logging.getLogger("defaust").removeHandler(progress)
+
+
+class BuildProgress(logging.Handler):
+    """Turns the builder's per-subject lines (``subject_XX: built in S s``, logger
+    ``defaust``) into progress lines of the evaluator: subjects done of ``n_todo``, the
+    elapsed time and the time left (subjects left x the mean wall time per subject so
+    far, so a parallel build's workers are counted). Other records are ignored; a builder
+    that stops logging that line only loses these progress lines."""
+
+    _LINE = re.compile(r"^(subject_\d+): built in ([0-9.]+) s$")
+
+    def __init__(self, n_todo: int):
+        super().__init__(level=logging.INFO)
+        self.n_todo, self.done, self.t0 = max(int(n_todo), 0), 0, time.perf_counter()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            m = self._LINE.match(record.getMessage())
+        except (TypeError, ValueError):
+            return
+        if m is None:
+            return
+        self.done += 1
+        elapsed = time.perf_counter() - self.t0
+        total = max(self.n_todo, self.done)
+        left = (total - self.done) * elapsed / self.done
+        log.info("DeFAUST build: %s done (%s), %d of %d subject(s); %s elapsed, about %s left", m.group(1),
+                 duration_words(float(m.group(2))), self.done, total, duration_words(elapsed), duration_words(left))
 
 
 def prepare_root(root: Path, ds) -> None:
@@ -311,6 +358,71 @@ def prepare_root(root: Path, ds) -> None:
     ``root`` when :func:`build_wanted` says so."""
     if build_wanted(root, ds):
         _build(root, ds)
+
+
+#: Vertices per case at low resolution, by source (rough: for the plan only).
+_LOW_RES_VERTICES = {"faust": 6890, "anny": 14000}
+
+
+def build_outlook(root: Path, ds) -> dict | None:
+    """What :func:`prepare_root` is about to build, found without building (the builder's
+    config and ``root/manifest.json``; no mesh read, no ANNY model loaded).
+
+    Returns
+    -------
+    None when no build is wanted (:func:`build_wanted`) or every subject is complete in
+    the manifest (the build then only verifies it); else a dict: ``root``, ``source``,
+    ``subjects`` (int, to build), ``complete`` (int, already built), ``workers`` (the
+    builder's ``workers`` setting when it has one, an int >= 1; else 1),
+    ``s_per_subject`` (:data:`eval.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
+    ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and
+    ``dataset.limit``) and ``n_vertices`` (estimated per case: the middle of the
+    high-res vertex range, or a rough low-res count).
+
+    Raises
+    ------
+    SShaDeError on a bad ``dataset.build.enabled`` or builder setting (as the build would).
+    """
+    if not build_wanted(root, ds):
+        return None
+    bcfg = _build_config(root, ds)
+    bc = config_from_omegaconf(bcfg)
+    if bc.subjects is not None:
+        subjects = [int(x) for x in bc.subjects]
+    else:
+        subjects = list(range(10 if bc.source == "faust" else int(bc.n_subjects)))  # FAUST: its 10 subjects
+    if bc.source == "anny":
+        n_poses = len(bc.anny_poses or DEFAULT_TARGETS)
+    else:
+        n_poses = len(bc.faust_target_poses) if bc.source == "faust" and bc.faust_target_poses else bc.n_poses - 1
+    complete = _complete_subjects(root, bc.source, bc.parameters())
+    todo = [x for x in subjects if x not in complete]
+    if not todo:
+        return None
+    workers = bcfg.get("workers", None)
+    workers = workers if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
+    cases = [(x, p) for x in subjects for p in range(1, n_poses + 1)]
+    want = (ds.get("subjects", None))
+    if want is not None:
+        want = {int(want)} if isinstance(want, int) else {int(x) for x in want}
+        cases = [c for c in cases if c[0] in want]
+    if ds.get("limit", None) is not None:
+        cases = cases[:max(int(ds.get("limit")), 0)]
+    high = str(ds.get("resolution", "high")) != "low"
+    n_low = bc.synthetic_vertices if bc.source == "synthetic" else _LOW_RES_VERTICES.get(bc.source, 7000)
+    return {"root": str(root), "source": bc.source, "subjects": len(todo), "complete": len(subjects) - len(todo),
+            "workers": workers, "s_per_subject": BUILD_S_PER_SUBJECT, "cases": cases,
+            "n_vertices": int(sum(bc.vertex_range) / 2) if high else int(n_low)}
+
+
+def _complete_subjects(root: Path, source: str, parameters: dict) -> set[int]:
+    """Subjects recorded complete in ``root``'s manifest (each is recorded as it
+    finishes); the builder's own check of the folder first
+    (:func:`defaust.manifest.check_out_folder`: a folder holding other data or another
+    build raises its SShaDeError here, before the plan, as the build would)."""
+    m = check_out_folder(root, source, parameters)
+    return {int(rec["subject"]) for rec in (m.get("subjects") or {}).values()
+            if isinstance(rec, dict) and "subject" in rec}
 
 
 def _seeds(root: Path) -> dict:
@@ -321,4 +433,4 @@ def _seeds(root: Path) -> dict:
 register_dataset("defaust", load_defaust, keys=("subjects", "resolution", "limit"), prepare=prepare_root,
                  root_hint=(f"; the evaluator builds a DeFAUST only into the default folder {DEFAULT_DEFAUST_ROOT} "
                             f"or with dataset.build.enabled=true (python -m defaust out=DIR builds one)"),
-                 seeds=_seeds)
+                 seeds=_seeds, outlook=build_outlook)

@@ -29,6 +29,10 @@ class Dataset:
         it is checked (e.g. the DeFAUST build), ``ds`` the ``dataset`` config section.
     root_hint : text added to the "does not exist" error of ``dataset.root``.
     seeds : optional ``seeds(root: Path) -> dict``, extra seeds recorded in ``run.json``.
+    outlook : optional ``outlook(root: Path, ds) -> dict | None``: what ``prepare`` is
+        about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.plan`):
+        None when it has nothing long to do, else a dict (e.g.
+        :func:`eval.datasets.defaust.build_outlook`).
     """
 
     name: str
@@ -38,18 +42,19 @@ class Dataset:
     prepare: Callable | None = None
     root_hint: str = ""
     seeds: Callable | None = None
+    outlook: Callable | None = None
 
 
 _REGISTRY = Registry(__package__, "dataset", skip=("registry", "case"))
 
 
 def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=None, root_hint: str = "",
-                     seeds=None) -> Dataset:
+                     seeds=None, outlook=None) -> Dataset:
     """Register dataset ``name`` (fields of :class:`Dataset`); called at the bottom of a
     dataset module. Registering a name twice with another loader raises ValueError (a
     programming error, not a user's)."""
     d = Dataset(name=str(name), load=load, keys=tuple(keys), path_keys=tuple(path_keys), prepare=prepare,
-                root_hint=root_hint, seeds=seeds)
+                root_hint=root_hint, seeds=seeds, outlook=outlook)
     return _REGISTRY.add(d.name, d, same=lambda old, new: old.load is new.load)
 
 

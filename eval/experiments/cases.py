@@ -73,12 +73,13 @@ from ..meshview import view_options, write_case_view
 from ..methods import method_spec
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
-from ..progress import CostModel, weighted_bar
+from ..progress import CostModel, default_cost_model, weighted_bar
 from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, status_words
 from ..runinfo import collect_runinfo, method_sources, write_runinfo
 from ..store import ResultStore, case_identity, json_safe, pair_key
 from ..subset import baseline_selection, check_baseline_cases, method_selections
 from ..tables import compare, write_cases, write_tables
+from .cases_plan import plan_runs, planned_root
 from .common import as_list, sshade_spec
 from .registry import register_experiment
 
@@ -183,7 +184,9 @@ class _Setup:
     (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
     all) and ``base_rule`` (that rule in words), ``own`` (method name -> (indices or
     None, rule in words) for the methods ``method_cases`` gives a rule of their own),
-    ``store`` and ``resume``."""
+    ``store`` and ``resume``; ``build``: the dataset's build stage when one ran
+    (:func:`eval.experiments.cases_plan.planned_root`), ``plan``: the runs'
+    :class:`~eval.experiments.cases_plan.PlanRecord` once logged."""
 
     def __init__(self, **kw):
         self.__dict__.update(kw)
@@ -227,7 +230,10 @@ def _setup(cfg) -> _Setup:
     refs = _References(cfg)  # config checked here too
     resume = config_bool(cfg, "resume", default=False)
     meshes = config_bool(cfg, "store.meshes", default=False)
-    root = datasets.dataset_root(cfg)  # fail fast, before the heavier imports (may build DeFAUST)
+    # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first (eval/experiments/cases_plan.py)
+    mc = cfg.get("method_cases")
+    root, build = planned_root(cfg, methods, refs, lambda cs, base, ci, m: _Setup(
+        base=base, own=method_selections(cs, mc, [x.name for x in methods])).runs_on(ci, m))
     out_dir = abs_path(cfg.out_dir)
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
@@ -243,7 +249,8 @@ def _setup(cfg) -> _Setup:
         if n:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
     return _Setup(methods=methods, names=names, specs=specs, guard=guard, refs=refs, root=root, out_dir=out_dir,
-                  name=name, cases=cases, base=base, base_rule=base_rule, own=own, store=store, resume=resume)
+                  name=name, cases=cases, base=base, base_rule=base_rule, own=own, store=store, resume=resume,
+                  build=build)
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -288,7 +295,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     methods, names, cases = s.methods, s.names, s.cases
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(cfg, s, ci, c) for ci, c in enumerate(cases)}
-    cost = CostModel({m.name: CostModel.scale_of(m) for m in methods})
+    cost = default_cost_model(methods)  # measured per-method priors (eval/progress.py)
     done: dict = {}  # (ci, mi) -> stored record
     for ci, mis in plan.items():
         for mi in mis if s.resume else ():
@@ -299,6 +306,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     if s.resume:
         log.info("resume: %d run(s) restored from %s, %d to run", len(done), s.store.root, len(todo))
+    s.plan = plan_runs(s, todo, len(done), cost)  # the plan, before any run (eval/experiments/cases_plan.py)
     bar = weighted_bar(sum(cost.estimate(names[mi], len(cases[ci].V)) for ci, mi in todo), len(todo))
     rows: list[dict] = []
     with logging_redirect_tqdm(), bar:
@@ -345,6 +353,7 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
     wall = time.perf_counter() - t0
     c = row.get("compile_s")  # a one-off (numba compilation): not a cost of the later runs
     cost.observe(name, len(case.V), wall - (c if isinstance(c, (int, float)) and c == c else 0.0))
+    bar.total = max(bar.total, bar.n + wall)  # a run longer than estimated never overfills the bar
     bar.update(wall)
     rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name}
     try:
@@ -379,7 +388,7 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
     info.update(status="done", n_cases=len(s.cases), n_rows=len(df), n_errors=n_err,
                 wall_s=round(time.perf_counter() - t_start, 3),
                 compile_s={k: round(v, 3) for k, v in compile_s.items()},
-                outputs={k: Path(v).name for k, v in paths.items()})
+                outputs={k: Path(v).name for k, v in paths.items()}, plan=s.plan.finish(s.refs.computed_s))
     paths["run_json"] = write_runinfo(s.out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {s.out_dir}")
@@ -457,6 +466,7 @@ class _References:
         self.case = None
         self.refs: dict = {}
         self.ops: dict = {}
+        self.computed_s = 0.0  # seconds spent computing references (not read from the cache)
 
     def settings(self, in_base: bool) -> dict:
         """What of this section changes a row on a case (in the baseline subset or not):
@@ -483,6 +493,8 @@ class _References:
                                               U0=Vd if same_path else None)
             self.ops[e] = energy_operators(c.V, c.F, e)
             ref = self.refs[e]
+            if not ref.info.get("cached"):
+                self.computed_s += float(ref.info.get("seconds") or 0.0)
             log.info("%s reference (%s): %s, %s iterations, %s", c.name, e,
                      "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
                      ref.info.get("iterations"), status_words(ref.info.get("status")))

@@ -12,7 +12,7 @@ from ..registry import Registry
 
 __all__ = ["register_experiment", "experiments", "find_experiment"]
 
-_REGISTRY = Registry(__package__, "experiment kind", skip=("registry", "common"))
+_REGISTRY = Registry(__package__, "experiment kind", skip=("registry", "common", "cases_plan"))
 
 
 def register_experiment(kind: str, run: Callable) -> Callable:

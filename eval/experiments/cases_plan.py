@@ -1,0 +1,110 @@
+"""The ``cases`` experiment's plan at work (issue 23; the plan itself: :mod:`eval.plan`).
+
+:func:`planned_root` stands for :func:`eval.datasets.dataset_root` in the experiment's
+setup: when the dataset's preparation has long work ahead (a DeFAUST build,
+:func:`eval.datasets.dataset_outlook`) it logs the plan first (the build, and the runs
+and references estimated on the cases the build will make), then prepares the dataset
+and times it. :func:`plan_runs` logs the plan of the runs once the pairs to run are known
+(exact counts; the references found cached or not), before any method runs, and returns a
+:class:`PlanRecord`, whose :meth:`PlanRecord.finish` logs each stage's actual time beside
+its estimate and gives the ``plan`` entry of ``run.json``.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+from .. import datasets
+from ..plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
+from ..progress import default_cost_model
+from ..reference import method_energy, reference_path
+from ..subset import baseline_selection
+
+__all__ = ["planned_root", "plan_runs", "PlanRecord"]
+
+log = logging.getLogger("eval")
+
+
+def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
+    """``(root, build)``: :func:`eval.datasets.dataset_root` of ``cfg``, with the plan
+    logged first when the dataset has a build ahead; ``build`` is that build's stage
+    (:func:`eval.plan.build_stage`, with ``actual_s``) or None when nothing was built.
+
+    ``methods``: the built methods; ``refs``: the experiment's reference options (an
+    object with ``settings(in_base) -> {"on": bool, ...}``); ``runs_on(cases, base, ci, m)``:
+    whether method ``m`` runs on case ``ci`` of ``cases`` given the baseline subset ``base``.
+
+    Raises
+    ------
+    SShaDeError from the outlook or the preparation (before any run).
+    """
+    out = datasets.dataset_outlook(cfg)
+    if out is None:
+        return datasets.dataset_root(cfg), None
+    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"],
+                        what="DeFAUST", root=_short(out["root"]))
+    cases = [SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]]
+    base, _ = baseline_selection(cases, (cfg.get("dataset") or {}).get("baseline_cases", None)) if cases else (None, "")
+    names = [m.name for m in methods]
+    pairs = [(ci, mi) for ci in range(len(cases)) for mi, m in enumerate(methods) if runs_on(cases, base, ci, m)]
+    on, need = set(pairs), []
+    for ci, c in enumerate(cases):
+        if refs.settings(base is None or ci in base)["on"]:
+            energies = dict.fromkeys(method_energy(m) for mi, m in enumerate(methods) if (ci, mi) in on)
+            need += [(c.n_vertices, e, None) for e in energies]
+    plan = make_plan(cases, names, pairs, default_cost_model(methods), build=build, references=need)
+    log.info(render_plan(plan))
+    t0 = time.perf_counter()
+    root = datasets.dataset_root(cfg)
+    build["actual_s"] = round(time.perf_counter() - t0, 3)
+    return root, build
+
+
+def _short(path) -> str:
+    """``path`` relative to the working directory when it is below it."""
+    try:
+        return str(Path(path).relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+class PlanRecord:
+    """A logged plan and the clock of its runs: ``plan`` (:func:`eval.plan.make_plan`),
+    ``t0`` (when the runs started)."""
+
+    def __init__(self, plan: dict):
+        self.plan, self.t0 = plan, time.perf_counter()
+
+    def finish(self, references_s: float = 0.0) -> dict:
+        """The plan with each stage's actual seconds (:func:`eval.plan.add_actuals`: the
+        runs = the wall time since :attr:`t0` less ``references_s``, the seconds spent
+        computing references), logged beside the estimates; for ``run.json``."""
+        runs = time.perf_counter() - self.t0
+        out = add_actuals(self.plan, {"runs": max(runs - references_s, 0.0), "references": references_s})
+        log.info(render_actuals(out))
+        return out
+
+
+def plan_runs(s, todo, restored: int, cost) -> PlanRecord:
+    """Log the plan of the runs about to start (before the first) and return its record.
+
+    ``s``: the experiment's setup (``cases``, ``methods``, ``names``, ``base``, ``refs``
+    with ``settings(in_base)``, ``cache``, ``max_iter``, ``time_budget_s``; ``build``:
+    the build stage of :func:`planned_root` or None); ``todo``: the ``(ci, mi)`` pairs
+    to run; ``restored``: pairs restored from the store; ``cost``: the cost model.
+    """
+    need = []
+    for ci in dict.fromkeys(ci for ci, _ in todo):
+        c = s.cases[ci]
+        if not s.refs.settings(s.base is None or ci in s.base)["on"]:
+            continue
+        for e in dict.fromkeys(method_energy(s.methods[mi]) for cj, mi in todo if cj == ci):
+            _, path = reference_path(c.V, c.F, c.handles, c.targets, energy=e, cache_dir=s.refs.cache,
+                                     max_iter=s.refs.max_iter, time_budget_s=s.refs.time_budget_s)
+            need.append((len(c.V), e, path.is_file()))
+    build = getattr(s, "build", None)
+    plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored)
+    log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
+    return PlanRecord(plan)

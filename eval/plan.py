@@ -1,0 +1,234 @@
+"""The evaluator's plan, up front (issue 23): what a run is about to do, and about how long.
+
+Before any work the main job (:mod:`eval.experiments.cases`, through
+:mod:`eval.experiments.cases_plan`) logs one ``plan:`` line, e.g. ::
+
+    plan: building DeFAUST (once, into data/defaust): 10 subjects x ~160 s on 1 worker, about 27 min;
+    then 46 runs: ARAP 4 x ~78 s, Elastic 4 x ~75 s, ARAP-SR 4 x ~4 min (a guess, not measured yet),
+    SShaDe 40 x ~9 s; references: up to 12 to compute, ~51 s each; about 50 min in all.
+
+and writes it into ``run.json`` (``plan``); at the end it logs each stage's actual
+seconds beside its estimate (:func:`render_actuals`) and records them in ``run.json``
+(each stage's ``actual_s``). The stages (:func:`make_plan`), each ``{"stage", "count",
+"seconds", ...}``:
+
+- ``build``: a dataset's one-time preparation (the DeFAUST build): subjects x the
+  measured per-subject seconds (:data:`BUILD_S_PER_SUBJECT`) in rounds of ``workers``;
+- ``runs``: the (case, method) pairs to run, each at its cost-model estimate
+  (:class:`eval.progress.CostModel`: measured runs, else the method's prior), per method
+  under ``methods``;
+- ``references``: the reference solutions the runs need (:mod:`eval.reference`): a cached
+  one costs nothing, one to compute :data:`REFERENCE_S_PER_VERTEX` x vertices (known
+  cached or not once the cases exist; before a build, "up to" every one).
+
+Everything here is pure (no config, no files): the numbers come in, a plan and its
+text go out.
+"""
+from __future__ import annotations
+
+import math
+
+from .reference import sr_alpha
+
+__all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "make_plan",
+           "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words"]
+
+#: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
+#: poses) with one worker on a 2-core machine: the build of 10 subjects took ~25 min
+#: (issue 23). A parallel build takes rounds of ``workers`` subjects.
+BUILD_S_PER_SUBJECT = 160.0
+#: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
+#: rigid fit: 24-63 s (mean 42 s) at 168,897 vertices in ``results/defaust/eval.log``.
+REFERENCE_S_PER_VERTEX = 3e-4
+#: The same for ARAP-SR's energy (Anderson-accelerated block descent, thousands of
+#: iterations): 21-48 s at FAUST's 6,890 vertices (``experiment=ci``, 2 busy cores), i.e.
+#: 3-7e-3 s/vertex; not measured at DeFAUST's size yet.
+SR_REFERENCE_S_PER_VERTEX = 5e-3
+
+
+def duration_words(seconds: float, *, about: bool = False) -> str:
+    """``seconds`` in words: ``"0.4 s"``, ``"45 s"``, ``"12 min"``, ``"1.5 h"``; ``about``
+    prefixes ``~`` (not to 0).
+
+    >>> duration_words(0.44, about=True), duration_words(44.6), duration_words(700, about=True), duration_words(5400)
+    ('~0.4 s', '45 s', '~12 min', '1.5 h')
+    >>> duration_words(0, about=True), duration_words(100)
+    ('0 s', '100 s')
+    """
+    s = max(float(seconds), 0.0)
+    if s == 0:
+        text = "0 s"
+    elif s < 9.95:
+        text = f"{s:.1f} s"
+    elif s < 120:
+        text = f"{s:.0f} s"
+    elif s < 90 * 60:
+        text = f"{s / 60:.0f} min"
+    else:
+        text = f"{s / 3600:.1f} h"
+    return f"~{text}" if about and text != "0 s" else text
+
+
+def _n_vertices(case) -> int:
+    n = getattr(case, "n_vertices", None)
+    return int(n) if n is not None else len(case.V)
+
+
+def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD_S_PER_SUBJECT,
+                what: str = "DeFAUST", root: str = "") -> dict:
+    """The ``build`` stage: ``subjects`` to build, in rounds of ``workers`` (>= 1; others
+    count as 1), ``s_per_subject`` each.
+
+    >>> build_stage(10, workers=4)["seconds"]
+    480.0
+    """
+    w = int(workers) if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
+    n = max(int(subjects), 0)
+    return {"stage": "build", "what": str(what), "root": str(root), "count": n, "workers": w,
+            "s_per_subject": float(s_per_subject), "seconds": float(math.ceil(n / w) * s_per_subject)}
+
+
+def _runs_stage(cases, names, pairs, cost, restored: int) -> dict:
+    per: dict[str, dict] = {}
+    for ci, mi in pairs:
+        name = names[mi]
+        d = per.setdefault(name, {"count": 0, "seconds": 0.0, "basis": _basis(cost, name)})
+        d["count"] += 1
+        d["seconds"] += float(cost.estimate(name, _n_vertices(cases[ci])))
+    for d in per.values():
+        d["each_s"] = d["seconds"] / d["count"]
+    order = [n for n in dict.fromkeys(names) if n in per]
+    return {"stage": "runs", "count": len(pairs), "restored": int(restored),
+            "seconds": sum(d["seconds"] for d in per.values()), "methods": {n: per[n] for n in order}}
+
+
+def _basis(cost, name: str) -> str:
+    f = getattr(cost, "basis", None)
+    return f(name) if callable(f) else "prior"
+
+
+def _references_stage(references) -> dict:
+    cached = to_compute = unknown = guessed = 0
+    seconds = 0.0
+    for n_vertices, energy, is_cached in references:
+        if is_cached:
+            cached += 1
+            continue
+        guessed += sr_alpha(energy) is not None
+        rate = SR_REFERENCE_S_PER_VERTEX if sr_alpha(energy) is not None else REFERENCE_S_PER_VERTEX
+        seconds += rate * max(int(n_vertices), 1)
+        if is_cached is None:
+            unknown += 1
+        else:
+            to_compute += 1
+    n = cached + to_compute + unknown
+    return {"stage": "references", "count": n, "cached": cached, "to_compute": to_compute, "unknown": unknown,
+            "guessed": guessed, "seconds": seconds, "each_s": seconds / (n - cached) if n > cached else 0.0}
+
+
+def make_plan(cases, names, pairs, cost, *, build: dict | None = None, references=(), restored: int = 0) -> dict:
+    """The plan of a run.
+
+    Parameters
+    ----------
+    cases : sequence of cases (objects with ``V`` (n, 3), or an int ``n_vertices``).
+    names : sequence of str, the method names; ``pairs`` index it.
+    pairs : sequence of ``(ci, mi)``, the (case, method) pairs about to run.
+    cost : an :class:`eval.progress.CostModel` (``estimate(name, n_vertices)`` seconds;
+        ``basis(name)`` if it has one).
+    build : None (nothing to build) or a :func:`build_stage` dict (an ``actual_s`` in it:
+        already done).
+    references : sequence of ``(n_vertices, energy, cached)``, one per reference the runs
+        need; ``cached`` True, False or None (not known yet: the cases are not built).
+    restored : int, pairs restored from the result store (resume), not run again.
+
+    Returns
+    -------
+    dict ``{"stages": [build?, runs, references], "total_s": float}``; every stage has
+    ``stage``, ``count`` and ``seconds`` (estimated), ``total_s`` their sum.
+
+    Raises
+    ------
+    IndexError when a pair indexes outside ``cases`` or ``names``.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as C
+    >>> from eval.progress import CostModel
+    >>> p = make_plan([C(n_vertices=1000)] * 2, ["A", "S"], [(0, 0), (0, 1), (1, 1)],
+    ...               CostModel({"S": "const"}, prior_const_s=2.0))
+    >>> [(s["stage"], s["count"], s["seconds"]) for s in p["stages"]], p["total_s"]
+    ([('runs', 3, 5.0), ('references', 0, 0.0)], 5.0)
+    """
+    stages = [dict(build)] if build is not None else []
+    stages.append(_runs_stage(cases, names, pairs, cost, restored))
+    stages.append(_references_stage(references))
+    return {"stages": stages, "total_s": sum(s["seconds"] for s in stages if "actual_s" not in s)}
+
+
+def _build_words(b: dict) -> str:
+    where = f" into {b['root']}" if b.get("root") else ""
+    if "actual_s" in b:
+        return f"{b['what']} built{where} ({b['count']} subject(s), {duration_words(b['actual_s'])})"
+    if not b["count"]:
+        return f"{b['what']}{where} complete"
+    workers = f"{b['workers']} worker" + ("s" if b["workers"] != 1 else "")
+    return (f"building {b['what']} (once{',' + where if where else ''}): {b['count']} subject(s) x "
+            f"{duration_words(b['s_per_subject'], about=True)} on {workers}, "
+            f"about {duration_words(b['seconds'])}")
+
+
+def _runs_words(r: dict, then: bool) -> str:
+    items = []
+    for name, d in r["methods"].items():
+        note = " (a guess, not measured yet)" if d["basis"] == "guess" else ""
+        items.append(f"{name} {d['count']} x {duration_words(d['each_s'], about=True)}{note}")
+    restored = f" ({r['restored']} restored from the store)" if r.get("restored") else ""
+    head = f"{'then ' if then else ''}{r['count']} run(s){restored}"
+    return f"{head}: {', '.join(items)}" if items else head
+
+
+def _refs_words(f: dict) -> str:
+    if not f["count"]:
+        return "references: none"
+    note = f" (ARAP-SR's {f['guessed']}: a guess, not measured yet)" if f.get("guessed") else ""
+    if f["unknown"]:
+        return f"references: up to {f['unknown']} to compute, {duration_words(f['each_s'], about=True)} each{note}"
+    if f["to_compute"]:
+        return (f"references: {f['cached']} cached, {f['to_compute']} to compute, "
+                f"{duration_words(f['each_s'], about=True)} each{note}")
+    return f"references: {f['cached']} cached, 0 to compute"
+
+
+def render_plan(plan: dict, *, head: str = "plan") -> str:
+    """The plan on one line, ``head: stage; stage; ...; about T in all.`` (module
+    docstring); a finished build stage reads as done and is not in the total."""
+    parts = []
+    by = {s["stage"]: s for s in plan["stages"]}
+    b = by.get("build")
+    if b is not None:
+        parts.append(_build_words(b))
+    parts.append(_runs_words(by["runs"], then=b is not None and "actual_s" not in b and b["count"] > 0))
+    parts.append(_refs_words(by["references"]))
+    return f"{head}: {'; '.join(parts)}; about {duration_words(plan['total_s'])} in all."
+
+
+def add_actuals(plan: dict, actual: dict) -> dict:
+    """A copy of ``plan`` with ``actual_s`` (seconds) on each stage named in ``actual``
+    (stage -> seconds; a build stage keeps the one it has) and ``actual_total_s``."""
+    out = {**plan, "stages": [dict(s) for s in plan["stages"]]}
+    for s in out["stages"]:
+        if s["stage"] in actual and "actual_s" not in s:
+            s["actual_s"] = round(float(actual[s["stage"]]), 3)
+    out["actual_total_s"] = round(sum(s.get("actual_s", 0.0) for s in out["stages"]), 3)
+    return out
+
+
+def render_actuals(plan: dict) -> str:
+    """One line: each stage's actual time beside its estimate (a plan from
+    :func:`add_actuals`), e.g. ``time per stage: runs 3 s (planned ~5 s); ...``."""
+    parts = [f"{s['stage']} {duration_words(s.get('actual_s', 0.0))} "
+             f"(planned {duration_words(s['seconds'], about=True)})" for s in plan["stages"]]
+    total = sum(s["seconds"] for s in plan["stages"])
+    return (f"time per stage: {'; '.join(parts)}; in all {duration_words(plan.get('actual_total_s', 0.0))} "
+            f"(planned {duration_words(total, about=True)})")
