@@ -78,7 +78,7 @@ th{background:#f3f3f3;cursor:pointer;user-select:none}td[data-v]{text-align:righ
 th[data-dir=asc]::after{content:" \\25B2"}th[data-dir=desc]::after{content:" \\25BC"}
 #js-errors{background:#fee;border:1px solid #c00;padding:.5em;color:#900}pre{background:#f7f7f7;padding:.6em;
 overflow:auto;max-height:30em}img{max-width:100%;border:1px solid #ddd}.view canvas{width:100%;display:block;
-border:1px solid #ccc;cursor:grab}.view-labels{display:grid;text-align:center;font-size:13px}
+border:1px solid #ccc;cursor:grab}.view-labels{text-align:center;font-size:13px}
 .note{color:#555}nav a{margin-right:1em}"""
 
 

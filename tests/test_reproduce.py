@@ -14,7 +14,8 @@ def _steps(capsys, *argv) -> dict[str, str]:
 
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
-    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep"]
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "report"]
+    assert steps["report"].startswith("-m eval.report --index results")  # results/index.html, last
     assert "arap.protocol=paper" in steps["defaust_paper"]
     ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] method_cases={Implicit-ARAP: per_pose} "
           if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on the per_pose subset
@@ -29,7 +30,7 @@ def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
                    "sshade.n_samplings=3")
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "faust", "pose_transfer", "tosca",
-                           "shapes", "scaling"]
+                           "shapes", "scaling", "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
@@ -37,6 +38,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
     ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if importlib.util.find_spec("torch") else ""
     assert steps["shapes"] == f"-m eval experiment=shapes dataset.root=S {ia}out_dir=results/shapes"  # shapes.yaml
     for name, cmd in steps.items():  # only this command writes results/: each step names its folder
+        if name == "report":
+            continue
         want = "hydra.sweep.dir=results/sweeps/defaust" if name == "sweep" else f"out_dir=results/{name}"
         assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]

@@ -139,8 +139,13 @@
         gl.drawArrays(gl.TRIANGLES, 0, m.count);
       });
     }
+    // each label over its own panel (the panels wrap to rows of `cols`)
     var labels = root.querySelector(".view-labels");
-    labels.style.gridTemplateColumns = "repeat(" + cols + ", 1fr)";
+    labels.style.position = "relative"; labels.style.height = "0";
+    Array.prototype.forEach.call(labels.children, function (el, i) {
+      el.style.position = "absolute"; el.style.width = (100 / cols) + "%";
+      el.style.left = ((i % cols) * 100 / cols) + "%"; el.style.top = (Math.floor(i / cols) * 300 + 4) + "px";
+    });
     canvas.style.height = (rows * 300) + "px";
     var drag = null, queued = false;
     function redraw() {
