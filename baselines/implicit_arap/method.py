@@ -42,8 +42,8 @@ __all__ = ["PRESETS", "ImplicitARAP", "deterministic", "fit_field", "patch_centr
 #: The two configurations. ``paper``: the reference code's (GPU-sized). ``cpu``: smaller
 #: networks, fewer samples, steps and patches, zero-level centres drawn on the mesh and
 #: projected (instead of rejection sampling in the box) and at most 128 handle patches
-#: per step, so one FAUST case takes about a minute on 2 idle CPU cores (FAUST cases:
-#: the same result within 0.1% of the diagonal as 768 patches and 300 steps, measured).
+#: per step, so one FAUST case takes under 2 minutes on 2 CPU cores (measured times and
+#: errors of both presets, and what the cpu preset loses: docs/methods.md).
 #: ``handle_patches`` 0 = every handle is a patch centre at every step (the reference);
 #: n > 0 = a random n of them per step when there are more.
 PRESETS = {
