@@ -148,7 +148,8 @@ class ARAPSR:
     start : ``"converged"`` protocol's start: ``"rigid"`` (the rigid fit of the handles),
         ``"coarse"`` (:func:`baselines.arap_sr_start.coarse_start`: the rotations of the
         same energy solved on a ``coarse_n_low``-vertex remesh), ``"auto"`` (default:
-        coarse when the mesh has at least ``COARSE_MIN_RATIO * coarse_n_low`` vertices).
+        coarse when the mesh has at least ``COARSE_MIN_RATIO * coarse_n_low`` vertices,
+        falling back to rigid if the remesh or the low-res solve raises SShaDeError).
         Either start is stopped by the same full-resolution criterion (issue 21).
     coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
 
@@ -197,12 +198,19 @@ class ARAPSR:
 
     def _converged(self, V, F, handles, targets):
         """The converged protocol from the start of ``self.start``; a coarse start's
-        seconds count in ``precompute_s`` and its numbers go to ``info``."""
+        seconds count in ``precompute_s`` and its numbers go to ``info``. With ``"auto"``
+        a remesh or low-res solve that fails (SShaDeError) falls back to the rigid start;
+        with ``"coarse"`` the error propagates."""
         coarse = self.start == "coarse" or (self.start == "auto" and len(V) >= COARSE_MIN_RATIO * self.coarse_n_low)
         R0, cinfo = None, {}
         if coarse:
-            R0, cinfo = coarse_start(V, F, handles, targets, alpha=self.alpha, n_low=self.coarse_n_low,
-                                     criterion=self.criterion)
+            try:
+                R0, cinfo = coarse_start(V, F, handles, targets, alpha=self.alpha, n_low=self.coarse_n_low,
+                                         criterion=self.criterion)
+            except SShaDeError:  # "auto" is best effort: the rigid start
+                if self.start == "coarse":
+                    raise
+                coarse = False
         res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, criterion=self.criterion,
                             max_iter=self.max_iter, R0=R0)
         if coarse:

@@ -65,7 +65,6 @@ from sshade.arap import (
     gradient_norm,
     rigid_fit,
 )
-from sshade.arap.solver_kernels import loop_kernels
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles
 
@@ -302,13 +301,6 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
                       precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status, R=R))
 
 
-def _anderson(pb: SRProblem, m: int) -> Anderson:
-    """Anderson's history on the packed state (:meth:`SRProblem.pack`), with the numba
-    loop kernels of :mod:`sshade.arap.solver_kernels` when they work (serial)."""
-    kern = loop_kernels(False)
-    return Anderson(m, 3 * len(pb.free) + 9 * pb.n, {1: kern} if kern else None, 1)
-
-
 def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opts, info):
     """The iterations of :func:`solve_arap_sr` from the state ``(U, R)`` (``R`` the local
     step at ``U``; ``opts``: ``m``, ``jacobi``, ``reset``): returns ``(U, R, iterations,
@@ -317,7 +309,8 @@ def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opt
     t0 = clock()
     jacobi = opts["jacobi"]
     zero_E = 1e-12 * 2.0 * pb.ops.rest_term
-    acc = _anderson(pb, opts["m"]) if accelerate == "anderson" else None
+    # numpy passes: the serial loop kernels of sshade.arap were measured slower on this 12 n-long state
+    acc = Anderson(opts["m"], 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
     E, E_prev, it, move = pb.energy(U, R), np.inf, 0, 0.0
     hist = [E]
     while True:
