@@ -88,6 +88,31 @@ def _edge_sq_sum(Rf, s, d):  # pragma: no cover - compiled
     return tot
 
 
+@njit(cache=True, nogil=True)
+def _class_targets(M, Rf, indptr, indices, cls, wR, out):  # pragma: no cover - compiled
+    """``out[k] = M[i] + wR sum_{j in N(i)} R_j`` for ``i = cls[k]`` (the matrices whose
+    polar factors are the class's new rotations); ``M`` (n, 9), ``Rf`` (n, 9), the graph
+    as CSR ``(indptr, indices)``, ``out`` (len(cls), 9)."""
+    for k in range(len(cls)):
+        i = cls[k]
+        for a in range(9):
+            out[k, a] = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            for a in range(9):
+                out[k, a] += Rf[j, a]
+        for a in range(9):
+            out[k, a] = M[i, a] + wR * out[k, a]
+
+
+@njit(cache=True, nogil=True)
+def _scatter_rows(Rf, cls, Rc):  # pragma: no cover - compiled
+    """``Rf[cls[k]] = Rc[k]`` for (n, 9) ``Rf`` and (len(cls), 9) ``Rc``."""
+    for k in range(len(cls)):
+        for a in range(9):
+            Rf[cls[k], a] = Rc[k, a]
+
+
 def colour_classes(n: int, edges: np.ndarray, seed: int = 0) -> list[np.ndarray]:
     """Split the vertices of a graph into independent sets (Jones & Plassmann 1993:
     in each round, the uncoloured vertices whose random priority beats every uncoloured
@@ -149,7 +174,7 @@ class SRProblem:
         s, d = ops.edges[:, 0], ops.edges[:, 1]
         self.adj = sp.csr_matrix((np.ones(2 * len(s)), (np.r_[s, d], np.r_[d, s])), shape=(self.n, self.n))
         self.classes = colour_classes(self.n, ops.edges)
-        self.adj_rows = [self.adj[c] for c in self.classes]
+        self.adj.sort_indices()
         free = np.ones(self.n, bool)
         free[self.h] = False
         self.free = np.flatnonzero(free)
@@ -176,12 +201,19 @@ class SRProblem:
         if self.wR == 0:
             R[...] = fit_rotations(M)
             return R
-        Rf = R.reshape(self.n, 9)
+        Rf = np.ascontiguousarray(R).reshape(self.n, 9)
         if jacobi:
             R[...] = fit_rotations(M + self.wR * (self.adj @ Rf).reshape(-1, 3, 3))
             return R
-        for c, A in zip(self.classes, self.adj_rows, strict=True):
-            R[c] = fit_rotations(M[c] + self.wR * (A @ Rf).reshape(-1, 3, 3))
+        Mf = np.ascontiguousarray(M).reshape(self.n, 9)
+        buf = np.empty((max(len(c) for c in self.classes), 9))
+        ip, ix = self.adj.indptr, self.adj.indices
+        for c in self.classes:  # compiled gather / scatter, batched polar decompositions
+            X = buf[:len(c)]
+            _class_targets(Mf, Rf, ip, ix, c, self.wR, X)
+            _scatter_rows(Rf, c, np.ascontiguousarray(fit_rotations(X.reshape(-1, 3, 3))).reshape(-1, 9))
+        if not np.shares_memory(Rf, R):  # R was not C-contiguous: Rf is a copy
+            R[...] = Rf.reshape(self.n, 3, 3)
         return R
 
     def pack(self, U: np.ndarray, R: np.ndarray) -> np.ndarray:
