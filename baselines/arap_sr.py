@@ -30,8 +30,12 @@ from sshade.warmup import WARMED, warm_once
 
 from .arap import check_arap_args
 from .arap_sr_solver import solve_arap_sr
+from .arap_sr_start import COARSE_MIN_RATIO, coarse_start
 
-__all__ = ["arap_sr_deform", "ARAPSR"]
+__all__ = ["arap_sr_deform", "ARAPSR", "SR_STARTS"]
+
+#: starts of the converged protocol (:class:`ARAPSR`)
+SR_STARTS = ("auto", "rigid", "coarse")
 
 
 def _polar(M: np.ndarray) -> np.ndarray:
@@ -141,6 +145,13 @@ class ARAPSR:
     max_iter : int or None, iteration cap (None: 10000 converged, 1000 paper).
     etol, gtol : floats or None, the ``"converged"`` criterion (None: the defaults of
         :data:`sshade.arap.DEFAULT_CRITERION`).
+    start : ``"converged"`` protocol's start: ``"rigid"`` (the rigid fit of the handles),
+        ``"coarse"`` (:func:`baselines.arap_sr_start.coarse_start`: the rotations of the
+        same energy solved on a ``coarse_n_low``-vertex remesh), ``"auto"`` (default:
+        coarse when the mesh has at least ``COARSE_MIN_RATIO * coarse_n_low`` vertices,
+        falling back to rigid if the remesh or the low-res solve raises SShaDeError).
+        Either start is stopped by the same full-resolution criterion (issue 21).
+    coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
 
     Raises
     ------
@@ -150,9 +161,15 @@ class ARAPSR:
     name = "ARAP-SR"
 
     def __init__(self, *, alpha: float = 0.01, tol: float = 1e-4, max_iter: int | None = None,
-                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
+                 start: str = "auto", coarse_n_low: int = 6000):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{self.name}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
+        if start not in SR_STARTS:
+            raise SShaDeError(f"{self.name}: unknown start {start!r}; use one of {SR_STARTS}")
+        if isinstance(coarse_n_low, bool) or not isinstance(coarse_n_low, int | np.integer) or coarse_n_low < 4:
+            raise SShaDeError(f"{self.name}: coarse_n_low must be an integer >= 4, got {coarse_n_low!r}")
+        self.start, self.coarse_n_low = start, int(coarse_n_low)
         args = check_arap_args(self.name, tol, max_iter, etol, gtol, alpha=alpha)  # SShaDeError on a bad value
         self.alpha, self.tol, self.protocol = args["alpha"], args["tol"], protocol
         self.max_iter = ({"converged": 10000, "paper": 1000}[protocol] if args["max_iter"] is None
@@ -168,22 +185,46 @@ class ARAPSR:
         if self.protocol == "paper":
             res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, tol=self.tol, max_iter=self.max_iter)
         else:
-            res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, criterion=self.criterion,
-                                max_iter=self.max_iter)
+            res = self._converged(V, F, handles, targets)
         proto = "move-rule" if self.protocol == "paper" else "converged-sr"
         self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": proto,
                      "precompute_s": res.precompute_s, "solve_s": res.solve_s, "alpha": self.alpha,
                      "s_per_iter": res.solve_s / max(res.iterations, 1)}
-        for k in ("status", "energy", "gnorm", "rel_decrease", "n_fallback"):
+        for k in ("status", "energy", "gnorm", "rel_decrease", "n_fallback", "coarse_n", "coarse_iterations",
+                  "coarse_s"):
             if k in res.info:
                 self.info[k] = res.info[k]
         return res.V
 
+    def _converged(self, V, F, handles, targets):
+        """The converged protocol from the start of ``self.start``; a coarse start's
+        seconds count in ``precompute_s`` and its numbers go to ``info``. With ``"auto"``
+        a remesh or low-res solve that fails (SShaDeError) falls back to the rigid start;
+        with ``"coarse"`` the error propagates."""
+        coarse = self.start == "coarse" or (self.start == "auto" and len(V) >= COARSE_MIN_RATIO * self.coarse_n_low)
+        R0, cinfo = None, {}
+        if coarse:
+            try:
+                R0, cinfo = coarse_start(V, F, handles, targets, alpha=self.alpha, n_low=self.coarse_n_low,
+                                         criterion=self.criterion)
+            except SShaDeError:  # "auto" is best effort: the rigid start
+                if self.start == "coarse":
+                    raise
+                coarse = False
+        res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, criterion=self.criterion,
+                            max_iter=self.max_iter, R0=R0)
+        if coarse:
+            res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
+            res.info.update(cinfo)
+        return res
+
     def warmup(self, n_vertices: int | None = None) -> float:
         """First-call costs (libigl, the linear solver, the polar and energy kernels, mesh
-        validation) paid once on a tiny mesh outside any timed call
+        validation, the remesh of a coarse start) paid once on a tiny mesh outside any timed call
         (:func:`sshade.warmup.warm_once`); ``n_vertices`` is ignored. Returns the seconds
         spent."""
-        return warm_once(WARMED, ("arap_sr", self.protocol),
-                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5, protocol=self.protocol).deform(
-                             V, F, h, T))
+        coarse = self.protocol == "converged" and self.start != "rigid"  # + the remesh's kernels
+        return warm_once(WARMED, ("arap_sr", self.protocol, coarse),
+                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5, protocol=self.protocol,
+                                                   start="coarse" if coarse else "rigid",
+                                                   coarse_n_low=40).deform(V, F, h, T))

@@ -24,13 +24,17 @@ energy never increases):
   term; ``benchmarks/arap_sr_local.py`` measures both.)
 * global step: ``L_ff U_f = K(R)_f - L_fb T``, ARAP's global step with the rotations
   fixed (one Cholesky factorisation, :class:`sshade.arap.LaplacianSolver`).
-* acceleration (default ``accelerate="anderson"``): Anderson acceleration on the free
-  vertices (Peng et al. 2018, :class:`sshade.arap.Anderson`), the rotations carried
-  along; a candidate ``U_a`` is accepted only if ``E(U_a, sweep(U_a))`` is below the
-  energy after the plain global step, else the plain step is taken and the history
-  reset. L-BFGS on ``U`` (ARAP's default) needs the reduced energy ``min_R E(U, R)`` at
-  every line-search point, which here is an inner iterative solve (the rotations are
-  coupled), so it is not used.
+* acceleration (default ``accelerate="anderson"``): Anderson acceleration (Peng et al.
+  2018, :class:`sshade.arap.Anderson`) of the fixed-point map ``G(U, R) = (U_g,
+  sweep(U_g, R))``, ``U_g`` the global step, on the joint state ``(U_free, sqrt(alpha A)
+  R)``: its residual holds the rotations' change as well as the positions' (the slow
+  modes are the smoothed rotations, spreading by one ring per sweep). A candidate
+  ``(U_a, R_a)`` is accepted only if ``E(U_a, sweep(U_a, R_a))`` is below the energy
+  after the plain step, else the plain step is taken; the history is kept (``reset_on_reject``:
+  forget it, the scheme before issue 21, which rejected about every other candidate at
+  169k vertices). L-BFGS on ``U`` with one sweep per trial point (ARAP's default) was
+  measured as slow as no acceleration (issue 21: the rotations, not ``U``, lag), so it is
+  not offered.
 
 What "converged" certifies (:class:`sshade.arap.Criterion`, thresholds ``etol`` /
 ``gtol``): at the accepted state ``(U_k, R_k)``, ``R_k`` being the local step at ``U_k``,
@@ -48,6 +52,7 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from sshade.arap import (
     DEFAULT_CRITERION,
@@ -69,6 +74,43 @@ __all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "SR_ACCELERATIONS"]
 SR_ACCELERATIONS = ("anderson", "none")
 
 clock = time.perf_counter
+
+
+@njit(cache=True, nogil=True)
+def _edge_sq_sum(Rf, s, d):  # pragma: no cover - compiled
+    """``sum_e ||Rf[s_e] - Rf[d_e]||^2`` for (n, 9) ``Rf``, term by term."""
+    tot = 0.0
+    for e in range(len(s)):
+        a, b = s[e], d[e]
+        for k in range(9):
+            x = Rf[a, k] - Rf[b, k]
+            tot += x * x
+    return tot
+
+
+@njit(cache=True, nogil=True)
+def _class_targets(M, Rf, indptr, indices, cls, wR, out):  # pragma: no cover - compiled
+    """``out[k] = M[i] + wR sum_{j in N(i)} R_j`` for ``i = cls[k]`` (the matrices whose
+    polar factors are the class's new rotations); ``M`` (n, 9), ``Rf`` (n, 9), the graph
+    as CSR ``(indptr, indices)``, ``out`` (len(cls), 9)."""
+    for k in range(len(cls)):
+        i = cls[k]
+        for a in range(9):
+            out[k, a] = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            for a in range(9):
+                out[k, a] += Rf[j, a]
+        for a in range(9):
+            out[k, a] = M[i, a] + wR * out[k, a]
+
+
+@njit(cache=True, nogil=True)
+def _scatter_rows(Rf, cls, Rc):  # pragma: no cover - compiled
+    """``Rf[cls[k]] = Rc[k]`` for (n, 9) ``Rf`` and (len(cls), 9) ``Rc``."""
+    for k in range(len(cls)):
+        for a in range(9):
+            Rf[cls[k], a] = Rc[k, a]
 
 
 def colour_classes(n: int, edges: np.ndarray, seed: int = 0) -> list[np.ndarray]:
@@ -132,7 +174,7 @@ class SRProblem:
         s, d = ops.edges[:, 0], ops.edges[:, 1]
         self.adj = sp.csr_matrix((np.ones(2 * len(s)), (np.r_[s, d], np.r_[d, s])), shape=(self.n, self.n))
         self.classes = colour_classes(self.n, ops.edges)
-        self.adj_rows = [self.adj[c] for c in self.classes]
+        self.adj.sort_indices()
         free = np.ones(self.n, bool)
         free[self.h] = False
         self.free = np.flatnonzero(free)
@@ -143,8 +185,8 @@ class SRProblem:
 
     def smoothness(self, R: np.ndarray) -> float:
         """``sum_i sum_{j in N(i)} ||R_i - R_j||_F^2`` (each edge twice), dimensionless."""
-        dR = R[self.ops.edges[:, 0]] - R[self.ops.edges[:, 1]]
-        return 2.0 * float(np.einsum("kab,kab->", dR, dR))
+        Rf = np.ascontiguousarray(R, np.float64).reshape(self.n, 9)
+        return 2.0 * float(_edge_sq_sum(Rf, self.ops.edges[:, 0], self.ops.edges[:, 1]))
 
     def energy(self, U: np.ndarray, R: np.ndarray) -> float:
         """``E(U, R)`` of the module docstring, mesh units^2."""
@@ -159,12 +201,19 @@ class SRProblem:
         if self.wR == 0:
             R[...] = fit_rotations(M)
             return R
-        Rf = R.reshape(self.n, 9)
+        Rf = np.ascontiguousarray(R).reshape(self.n, 9)
         if jacobi:
             R[...] = fit_rotations(M + self.wR * (self.adj @ Rf).reshape(-1, 3, 3))
             return R
-        for c, A in zip(self.classes, self.adj_rows, strict=True):
-            R[c] = fit_rotations(M[c] + self.wR * (A @ Rf).reshape(-1, 3, 3))
+        Mf = np.ascontiguousarray(M).reshape(self.n, 9)
+        buf = np.empty((max(len(c) for c in self.classes), 9))
+        ip, ix = self.adj.indptr, self.adj.indices
+        for c in self.classes:  # compiled gather / scatter, batched polar decompositions
+            X = buf[:len(c)]
+            _class_targets(Mf, Rf, ip, ix, c, self.wR, X)
+            _scatter_rows(Rf, c, np.ascontiguousarray(fit_rotations(X.reshape(-1, 3, 3))).reshape(-1, 9))
+        if not np.shares_memory(Rf, R):  # R was not C-contiguous: Rf is a copy
+            R[...] = Rf.reshape(self.n, 3, 3)
         return R
 
     def pack(self, U: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -180,17 +229,21 @@ class SRProblem:
         Un[self.free] = x[:nf].reshape(-1, 3)
         return Un, np.ascontiguousarray(x[nf:].reshape(self.n, 3, 3) / self.rs)
 
-    def global_step(self, U: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """``argmin_U E(U, R)`` with the handles at their targets: a new (n, 3) array."""
+    def global_step(self, U: np.ndarray, R: np.ndarray, B: np.ndarray | None = None) -> np.ndarray:
+        """``argmin_U E(U, R)`` with the handles at their targets: a new (n, 3) array.
+        ``B``: ``ops.rhs(R)`` if already computed."""
         Un = np.array(U, np.float64)
         Un[self.h] = self.T
-        Un[self.free] = self.solver.solve(self.ops.rhs(R)[self.free] - self.Lfb_T)
+        B = self.ops.rhs(R) if B is None else B
+        Un[self.free] = self.solver.solve(B[self.free] - self.Lfb_T)
         return Un
 
-    def gnorm(self, U: np.ndarray, R: np.ndarray) -> float:
+    def gnorm(self, U: np.ndarray, R: np.ndarray, B: np.ndarray | None = None) -> float:
         """Scale-free norm of ``dE/dU / 2 = 2 (L U - K(R))`` on the free vertices
-        (:func:`sshade.arap.gradient_norm`), dimensionless."""
-        g = 2.0 * (self.ops.L @ U - self.ops.rhs(R))[self.free]
+        (:func:`sshade.arap.gradient_norm`), dimensionless. ``B``: ``ops.rhs(R)`` if
+        already computed."""
+        B = self.ops.rhs(R) if B is None else B
+        g = 2.0 * (self.ops.L @ U - B)[self.free]
         return gradient_norm(g, self.ops.mass[self.free], self.ops.diag)
 
     def reduced_energy(self, U: np.ndarray, R: np.ndarray | None = None, *, rtol: float = 1e-13,
@@ -213,7 +266,8 @@ class SRProblem:
 def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Criterion | None = None,
                   max_iter: int = 10000, accelerate: str = "anderson", anderson_m: int = 5,
                   U0: np.ndarray | None = None, time_budget_s: float | None = None, jacobi: bool = False,
-                  problem: SRProblem | None = None, linear_solver: str = "auto") -> ArapResult:
+                  problem: SRProblem | None = None, linear_solver: str = "auto",
+                  reset_on_reject: bool = False, R0: np.ndarray | None = None) -> ArapResult:
     """ARAP-SR run to a certified convergence (module docstring).
 
     Parameters
@@ -226,12 +280,17 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
     accelerate : ``"anderson"`` (default) or ``"none"`` (plain block descent).
     anderson_m : int >= 1, Anderson's window.
     U0 : (n, 3) float64 or None, start (default: the rigid fit of the handles, rotations
-        that fit's rotation); handle rows are set to ``targets``.
+        that fit's rotation; with ``R0``: the global step of ``R0``); handle rows are set
+        to ``targets``.
+    R0 : (n, 3, 3) float64 or None, start rotations (default: the rigid fit's), e.g.
+        :func:`baselines.arap_sr_start.coarse_start`'s; one sweep at ``U0`` follows.
     time_budget_s : float or None, stop (status ``"time_budget"``) after this many seconds.
     jacobi : bool, Jacobi local step instead of Gauss-Seidel (measurements only: the
         energy may then increase; steps are not safeguarded).
     problem : :class:`SRProblem` or None, prebuilt for the same inputs.
     linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
+    reset_on_reject : bool, forget Anderson's history after a rejected candidate (the
+        scheme before issue 21; default False: keep it).
 
     Returns
     -------
@@ -239,7 +298,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
     units^2), ``gnorm``, ``rel_decrease``, ``energy_history`` (accepted states, starting
     at ``U0`` after one local step), ``status`` (``"converged"``, ``"max_iter"``,
     ``"time_budget"``, ``"stalled"``: no decrease in float64, ``"rigid"``),
-    ``n_fallback`` (rejected Anderson candidates), ``n_sweeps``, ``n_colours``, ``alpha``.
+    ``n_fallback`` (rejected Anderson candidates), ``n_sweeps``, ``n_colours``, ``alpha``,
+    ``R`` ((n, 3, 3) the final rotations).
 
     Raises
     ------
@@ -251,31 +311,43 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
         raise SShaDeError(f"accelerate must be one of {SR_ACCELERATIONS}, got {accelerate!r}")
     pb = problem if problem is not None else SRProblem(V, F, handles, targets, alpha, linear_solver)
     Rr, tr_ = rigid_fit(pb.ops.V[pb.h], pb.T)
-    U = pb.ops.V @ Rr.T + tr_ if U0 is None else np.array(U0, np.float64)
+    if R0 is None:
+        R = np.broadcast_to(Rr, (pb.n, 3, 3)).copy()
+    else:
+        R = np.array(R0, np.float64)
+        if R.shape != (pb.n, 3, 3) or not np.isfinite(R).all():
+            raise SShaDeError(f"R0 must be a finite ({pb.n}, 3, 3) array")
+    U = (pb.ops.V @ Rr.T + tr_ if R0 is None else pb.global_step(pb.ops.V, R)) if U0 is None \
+        else np.array(U0, np.float64)
     if U.shape != (pb.n, 3) or not np.isfinite(U).all():
         raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
     U[pb.h] = pb.T
-    R = np.broadcast_to(Rr, (pb.n, 3, 3)).copy()
     t1 = clock()
     info = {"alpha": pb.alpha, "etol": crit.etol, "gtol": crit.gtol, "accelerate": accelerate,
             "n_colours": len(pb.classes), "n_fallback": 0, "n_sweeps": 1, "linear_solver": pb.solver.backend}
-    U, R, it, status = _iterate(pb, U, pb.sweep(U, R, jacobi), crit, max_iter, accelerate, anderson_m,
-                                time_budget_s, jacobi, info)
+    opts = {"m": anderson_m, "jacobi": jacobi, "reset": reset_on_reject}
+    U, R, it, status = _iterate(pb, U, pb.sweep(U, R, jacobi), crit, max_iter, accelerate, time_budget_s, opts,
+                                info)
     t2 = clock()
     return ArapResult(V=U, iterations=it, converged=status in ("converged", "rigid"), last_move=info.pop("move"),
-                      precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status))
+                      precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status, R=R))
 
 
-def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, m, time_budget_s, jacobi, info):
+def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opts, info):
     """The iterations of :func:`solve_arap_sr` from the state ``(U, R)`` (``R`` the local
-    step at ``U``): returns ``(U, R, iterations, status)``, fills ``info``."""
+    step at ``U``; ``opts``: ``m``, ``jacobi``, ``reset``): returns ``(U, R, iterations,
+    status)``, fills ``info``. ``K(R)`` of the accepted state is computed once, for the
+    gradient test and the next global step."""
     t0 = clock()
+    jacobi = opts["jacobi"]
     zero_E = 1e-12 * 2.0 * pb.ops.rest_term
-    acc = Anderson(m, 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
+    # numpy passes: the serial loop kernels of sshade.arap were measured slower on this 12 n-long state
+    acc = Anderson(opts["m"], 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
     E, E_prev, it, move = pb.energy(U, R), np.inf, 0, 0.0
     hist = [E]
     while True:
-        gn = pb.gnorm(U, R)
+        B = pb.ops.rhs(R)
+        gn = pb.gnorm(U, R, B)
         rel = 0.0 if abs(E) <= zero_E else ((E_prev - E) / abs(E) if np.isfinite(E_prev) else np.inf)
         status = ("converged" if it > 0 or abs(E) > zero_E else "rigid") if rel < crit.etol and gn < crit.gtol \
             else "max_iter" if it >= max_iter \
@@ -284,25 +356,26 @@ def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, m, time_budget_s, 
             status = "stalled"
         if status is not None:
             break
-        Ug = pb.global_step(U, R)
+        Ug = pb.global_step(U, R, B)
         Rg = pb.sweep(Ug, R.copy(), jacobi)
         Eg = pb.energy(Ug, Rg)
         info["n_sweeps"] += 1
-        Un, R, En = Ug, Rg, Eg
-        if acc is not None:
-            cand = acc.step(pb.pack(U, R), pb.pack(Ug, Rg))
+        Un, Rn, En = Ug, Rg, Eg
+        if acc is not None:  # residual of the joint map (U, R) -> (Ug, Rg); alpha = 0: R = R*(U), U's only
+            cand = acc.step(pb.pack(U, R if pb.wR > 0 else Rg), pb.pack(Ug, Rg))
             if cand is not None:
                 Ua, Ra = pb.unpack(cand, Ug)
                 Ra = pb.sweep(Ua, Ra, jacobi)
                 Ea = pb.energy(Ua, Ra)
                 info["n_sweeps"] += 1
                 if Ea < Eg:
-                    Un, R, En = Ua, Ra, Ea
+                    Un, Rn, En = Ua, Ra, Ea
                 else:
                     info["n_fallback"] += 1
-                    acc.reset()
+                    if opts["reset"]:
+                        acc.reset()
         move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
-        U, E_prev, E, it = Un, E, En, it + 1
+        U, R, E_prev, E, it = Un, Rn, E, En, it + 1
         hist.append(E)
     info.update(energy=E, gnorm=gn, rel_decrease=rel, energy_history=hist, move=move)
     return U, R, it, status

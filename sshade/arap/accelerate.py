@@ -42,7 +42,7 @@ class Anderson:
         self.DF = np.empty((m, N))
         self.DG = np.empty((m, N))
         self.gram = np.zeros((m, m))
-        self.part = np.empty(((N + CHUNK - 1) // CHUNK, 2 * m))
+        self.part = np.zeros(((N + CHUNK - 1) // CHUNK, 2 * m))  # unwritten columns stay finite
         self.buf = (np.empty(N), np.empty(N))
         self.reset()
 
