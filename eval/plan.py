@@ -4,7 +4,7 @@ Before any work the main job (:mod:`eval.experiments.cases`, through
 :mod:`eval.experiments.cases_plan`) logs one ``plan:`` line, e.g. ::
 
     plan: building DeFAUST (once, into data/defaust): 10 subjects x ~160 s on 1 worker, about 27 min;
-    then 46 runs: ARAP 4 x ~78 s, Elastic 4 x ~75 s, ARAP-SR 4 x ~4 min (a guess, not measured yet),
+    then 46 runs: ARAP 4 x ~78 s, Elastic 4 x ~75 s, ARAP-SR 4 x ~51 s,
     SShaDe 40 x ~9 s; references: up to 12 to compute, ~51 s each; about 50 min in all.
 
 and writes it into ``run.json`` (``plan``); at the end it logs each stage's actual

@@ -30,13 +30,12 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "
 #: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
 #: method, seconds for ``SShaDe``): the mean ``time_s`` of the committed
 #: ``results/defaust/cases.csv`` at 168,897 vertices (2 cores): ARAP 70.8 s, Elastic
-#: 68.1 s, SShaDe 2.0 s. ARAP-SR under the converged protocol (the default) has not been
-#: measured at that size yet (its paper protocol took 3.6 s there; converged, 5-11 s at
-#: FAUST's 6,890 vertices, 0.7-1.6e-3 s/vertex, with more iterations on larger meshes):
-#: a conservative 3e-3 s/vertex, about 8.5 minutes at 169k; replace it once measured.
-METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-3, "SShaDe": 2.0}
+#: 68.1 s, SShaDe 2.0 s; ARAP-SR (converged, coarse start: baselines/arap_sr_start.py)
+#: 41-112 s on the first four DeFAUST cases, 43-54 s on s00_p01 (machine shared): 3e-4
+#: s/vertex, about 51 s at 169k.
+METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0}
 #: The priors of :data:`METHOD_PRIORS` that are guesses, not measurements.
-GUESSED_PRIORS = ("ARAP-SR",)
+GUESSED_PRIORS: tuple[str, ...] = ()
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
 #: reading a cached reference): about 7 s per pair at 169k vertices (the SShaDe pairs of
 #: ``results/defaust/eval.log`` finish ~9 s apart with ``time_s`` ~2 s).

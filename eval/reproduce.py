@@ -30,7 +30,9 @@ others still run):
 
 Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``. Every step's
 folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
-``results/index.html`` links them all (step ``report``, last: ``python -m eval.report --index results``, with a screenshot ``results/index.png`` where Chromium is installed; ``--only faust,report`` reruns one experiment and the index).
+``results/index.html`` links them all (step ``report``, last: ``python -m eval.report
+--index results``, with a screenshot ``results/index.png`` where Chromium is installed;
+``--only faust,report`` reruns one experiment and the index).
 
 This is the only command that writes ``results/``: it sets
 :data:`eval.outdir.REPRODUCE_ENV` for the commands it runs, and every other command
