@@ -1,0 +1,166 @@
+"""Jobs of a DeFAUST build in worker processes (the builder's subjects side by side).
+
+:func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in a
+``ProcessPoolExecutor`` with the ``spawn`` context (pymeshlab and numba are not known to
+be fork-safe): every worker process starts fresh, runs ``init(*init_args)`` once and then
+its jobs. A job reports progress with :func:`send` (delivered in the main process to
+``on_message``, while the jobs run) and returns its result (delivered to ``on_result``
+with the job's index). Results are whatever the jobs return, in the order they finish:
+callers that need a fixed order (the manifest) sort them by index.
+
+Each worker's BLAS/OpenMP/numba threads are limited so that ``workers x threads`` does not
+exceed the cores of this process (:func:`available_cores`, the affinity mask), through the
+environment variables the libraries read at import (:data:`THREAD_VARIABLES`), set while
+the workers start.
+
+Example::
+
+    run_jobs(square, [(1,), (2,)], workers=2, on_result=lambda i, r: print(i, r))
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+
+from sshade.errors import SShaDeError
+
+__all__ = ["THREAD_VARIABLES", "available_cores", "pool_size", "thread_limit", "run_jobs", "send", "in_worker"]
+
+#: Environment variables that cap the threads of OpenBLAS, MKL, OpenMP, Accelerate, numexpr and numba.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
+                    "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+_CHANNEL: list = [None]  # in a worker: the queue to the main process
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one), >= 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
+def pool_size(workers: int | None, n_jobs: int) -> int:
+    """Worker processes for ``n_jobs`` jobs: ``workers`` (None: :func:`available_cores`),
+    capped at ``n_jobs``, at least 1.
+
+    Examples
+    --------
+    >>> pool_size(4, 2), pool_size(3, 0)
+    (2, 1)
+    """
+    w = available_cores() if workers is None else int(workers)
+    return max(1, min(w, int(n_jobs)))
+
+
+def thread_limit(workers: int) -> int:
+    """Threads per worker so that ``workers x threads <= available_cores()`` (>= 1)."""
+    return max(1, available_cores() // max(1, int(workers)))
+
+
+def in_worker() -> bool:
+    """Whether this process is a worker of :func:`run_jobs`."""
+    return _CHANNEL[0] is not None
+
+
+def send(message) -> None:
+    """From a job: deliver ``message`` (picklable) to ``on_message`` in the main process.
+
+    Raises
+    ------
+    SShaDeError outside a worker of :func:`run_jobs`.
+    """
+    if _CHANNEL[0] is None:
+        raise SShaDeError("defaust.parallel.send: not in a worker of run_jobs")
+    _CHANNEL[0].put(message)
+
+
+def _init_worker(channel, init, init_args) -> None:
+    _CHANNEL[0] = channel
+    if init is not None:
+        init(*init_args)
+
+
+@contextmanager
+def _thread_env(threads: int):
+    """Set :data:`THREAD_VARIABLES` to ``threads`` in this process's environment (inherited
+    by processes started meanwhile), restored on exit."""
+    old = {k: os.environ.get(k) for k in THREAD_VARIABLES}
+    os.environ.update({k: str(int(threads)) for k in THREAD_VARIABLES})
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _drain(channel, on_message) -> None:
+    while True:
+        try:
+            msg = channel.get_nowait()
+        except queue.Empty:
+            return
+        if on_message is not None:
+            on_message(msg)
+
+
+def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None) -> None:
+    """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
+
+    Parameters
+    ----------
+    job : a module-level function (picklable by reference); its arguments and result picklable.
+    args_list : list of tuples. workers : int >= 1, processes (capped at ``len(args_list)``).
+    init, init_args : run once in every worker before its first job (module-level function).
+    on_message : called in this process with every :func:`send` message, while jobs run.
+    on_result : called in this process as ``on_result(index, result)`` when a job finishes.
+
+    Raises
+    ------
+    The first failing job's exception (after the jobs already running have finished, so
+    that their work is kept; jobs not started are cancelled). SShaDeError if a worker
+    process dies (killed, out of memory).
+    """
+    n = pool_size(workers, len(args_list))
+    ctx = mp.get_context("spawn")
+    channel = ctx.Queue()
+    with _thread_env(thread_limit(n)):  # the workers start at submit() and inherit it
+        ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
+                                 initargs=(channel, init, tuple(init_args)))
+        futures = {ex.submit(job, *args): i for i, args in enumerate(args_list)}
+    pending, error, finished = set(futures), None, False
+    try:
+        while pending:
+            done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+            _drain(channel, on_message)
+            for f in sorted(done, key=futures.get):
+                try:
+                    result = f.result()
+                except CancelledError:
+                    continue
+                except BrokenProcessPool as e:
+                    error = error or SShaDeError(f"a build worker process died ({e}); run the same command again "
+                                                 "to resume (finished items are kept)")
+                except BaseException as e:  # noqa: BLE001 - re-raised below, after the running jobs
+                    error = error or e
+                else:
+                    if on_result is not None:
+                        on_result(futures[f], result)
+                if error is not None:
+                    for g in pending:
+                        g.cancel()
+        _drain(channel, on_message)
+        finished = True
+    finally:  # Ctrl-C: do not wait (the workers got the signal too)
+        ex.shutdown(wait=finished, cancel_futures=True)
+        channel.close()
+    if error is not None:
+        raise error
