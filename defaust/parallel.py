@@ -4,7 +4,8 @@
 ``ProcessPoolExecutor`` with the ``spawn`` context (pymeshlab and numba are not known to
 be fork-safe): every worker process starts fresh, runs ``init(*init_args)`` once and then
 its jobs. A job reports progress with :func:`send` (delivered in the main process to
-``on_message``, while the jobs run) and returns its result (delivered to ``on_result``
+``on_message``, while the jobs run; every message of a job before :func:`run_jobs`
+returns) and returns its result (delivered to ``on_result``
 with the job's index). Results are whatever the jobs return, in the order they finish:
 callers that need a fixed order (the manifest) sort them by index.
 
@@ -22,7 +23,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import queue
-from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 
@@ -102,18 +103,40 @@ def _thread_env(threads: int):
                 os.environ[k] = v
 
 
-def _drain(channel, on_message) -> None:
+_DONE = "__defaust.parallel: job done__"
+
+
+def _call(job, index: int, args: tuple):
+    """A job in a worker, then its end marker on the channel (after all its messages)."""
+    try:
+        return job(*args)
+    finally:
+        _CHANNEL[0].put((_DONE, index))
+
+
+def _drain(channel, on_message, ended: set, *, until: set | None = None) -> None:
+    """Deliver the channel's messages; note the jobs whose end marker came in ``ended``.
+    With ``until``: wait (at most 30 s per message) until those jobs' markers came."""
     while True:
         try:
-            msg = channel.get_nowait()
+            if until is not None and not until <= ended:
+                msg = channel.get(timeout=30)
+            else:
+                msg = channel.get_nowait()
         except queue.Empty:
             return
-        if on_message is not None:
+        if isinstance(msg, tuple) and len(msg) == 2 and msg[0] == _DONE:
+            ended.add(msg[1])
+        elif on_message is not None:
             on_message(msg)
 
 
 def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None) -> None:
     """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
+
+    At most ``workers`` jobs are handed out at a time, so that after a failure or Ctrl-C
+    no new job starts; on Ctrl-C (or any exception in this process) the workers are
+    terminated before it propagates.
 
     Parameters
     ----------
@@ -126,41 +149,55 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     Raises
     ------
     The first failing job's exception (after the jobs already running have finished, so
-    that their work is kept; jobs not started are cancelled). SShaDeError if a worker
+    that their work is kept; the others are not started). SShaDeError if a worker
     process dies (killed, out of memory).
     """
     n = pool_size(workers, len(args_list))
     ctx = mp.get_context("spawn")
     channel = ctx.Queue()
+    before = set(mp.active_children())
+    todo = list(enumerate(args_list))[::-1]
+    futures, errors, finished, ended, collected = {}, [], False, set(), set()
     with _thread_env(thread_limit(n)):  # the workers start at submit() and inherit it
         ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
                                  initargs=(channel, init, tuple(init_args)))
-        futures = {ex.submit(job, *args): i for i, args in enumerate(args_list)}
-    pending, error, finished = set(futures), None, False
+        try:
+            while todo or futures:
+                while todo and len(futures) < n and not errors:
+                    i, args = todo.pop()
+                    futures[ex.submit(_call, job, i, args)] = i
+                if not futures:
+                    break
+                done, _ = wait(futures, timeout=0.25, return_when=FIRST_COMPLETED)
+                _drain(channel, on_message, ended)
+                for f in sorted(done, key=futures.get):
+                    i = futures.pop(f)
+                    if _collect(f, i, on_result, errors):
+                        collected.add(i)
+            _drain(channel, on_message, ended, until=collected)  # every message of the jobs that ran
+            finished = True
+        finally:
+            if not finished:  # Ctrl-C or an error here: stop the workers now (a remesh ignores signals)
+                for p in set(mp.active_children()) - before:
+                    p.terminate()
+            ex.shutdown(wait=True, cancel_futures=True)
+            channel.close()
+    if errors:
+        raise errors[0]
+
+
+def _collect(f, index: int, on_result, errors: list) -> bool:
+    """A finished job: its result to ``on_result``, or its exception to ``errors``; False
+    if its worker died (no end marker will come)."""
     try:
-        while pending:
-            done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
-            _drain(channel, on_message)
-            for f in sorted(done, key=futures.get):
-                try:
-                    result = f.result()
-                except CancelledError:
-                    continue
-                except BrokenProcessPool as e:
-                    error = error or SShaDeError(f"a build worker process died ({e}); run the same command again "
-                                                 "to resume (finished items are kept)")
-                except BaseException as e:  # noqa: BLE001 - re-raised below, after the running jobs
-                    error = error or e
-                else:
-                    if on_result is not None:
-                        on_result(futures[f], result)
-                if error is not None:
-                    for g in pending:
-                        g.cancel()
-        _drain(channel, on_message)
-        finished = True
-    finally:  # Ctrl-C: do not wait (the workers got the signal too)
-        ex.shutdown(wait=finished, cancel_futures=True)
-        channel.close()
-    if error is not None:
-        raise error
+        result = f.result()
+    except BrokenProcessPool as e:
+        errors.append(SShaDeError(f"a build worker process died ({e}); run the same command again to resume "
+                                  "(finished items are kept)"))
+        return False
+    except Exception as e:  # noqa: BLE001 - raised by run_jobs once the running jobs are done
+        errors.append(e)
+    else:
+        if on_result is not None:
+            on_result(index, result)
+    return True

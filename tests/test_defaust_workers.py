@@ -6,6 +6,9 @@ every file, ``manifest.json`` included, is compared byte for byte.
 """
 from __future__ import annotations
 
+import multiprocessing as mp
+import time
+
 import pytest
 
 from defaust.build import build_defaust
@@ -90,8 +93,27 @@ def test_run_jobs_results_messages_and_thread_limit():
     assert all(env == {k: want for k in THREAD_VARIABLES} for _, env in results.values())
 
 
-def test_a_failing_job_raises_its_error_once():
-    got = []
+def _sleep(x):
+    send(("started", x))
+    time.sleep(120)
+
+
+def test_a_failing_job_raises_its_error_once_and_stops_the_rest():
     with pytest.raises(SShaDeError, match="^job 2 failed$"):
-        run_jobs(_fail_on_two, [(1,), (2,)], workers=2, on_result=lambda i, r: got.append(r))
-    assert got in ([], [1])
+        run_jobs(_fail_on_two, [(2,), (1,)], workers=2)
+    got = []
+    with pytest.raises(SShaDeError, match="^job 2 failed$"):  # one worker: jobs in order
+        run_jobs(_fail_on_two, [(1,), (2,), (3,), (4,)], workers=1, on_result=lambda i, r: got.append(r))
+    assert got == [1]  # jobs 3 and 4 were never started
+
+
+def test_ctrl_c_terminates_the_workers_at_once():
+    def interrupt(msg):
+        raise KeyboardInterrupt
+
+    before = set(mp.active_children())
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        run_jobs(_sleep, [(1,), (2,)], workers=2, on_message=interrupt)
+    assert time.perf_counter() - t0 < 60  # not the jobs' 120 s
+    assert set(mp.active_children()) <= before
