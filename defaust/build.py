@@ -26,6 +26,11 @@ including its inputs' checksums) and its files' sha256. On a rerun, an item whos
 matches and whose files all exist with the recorded checksums is skipped; any other
 (missing, corrupted, stale) is rebuilt. Every file is written with
 :func:`sshade.mesh.io.atomic_write`, so an interrupted build leaves no partial file.
+
+Subjects are built side by side, each in its own worker process (``workers``, default
+every core; :mod:`defaust.parallel`): the same files and manifest for any worker count,
+since every seed depends on the subject and pose only and the manifest is merged in
+subject order. Each finished item still reaches the partial manifest at once.
 """
 from __future__ import annotations
 
@@ -61,7 +66,7 @@ from .sources import SOURCES, Source
 from .store import write_npz, write_ply
 
 __all__ = ["BuildConfig", "BuildReport", "build_defaust", "check_out_folder", "handle_seed", "init_subject_worker",
-           "subject_job", "subject_result", "MANIFEST", "FORMAT"]
+           "subject_job", "MANIFEST", "FORMAT"]
 
 log = logging.getLogger("defaust")
 
@@ -211,13 +216,13 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
             todo = {}
             for s, poses in plan.items():
                 try:
-                    done(subject_result(run_for({"items": {}, "subjects": {}}, lambda *a: None, True), s, poses))
+                    done(_subject_result(run_for({"items": {}, "subjects": {}}, lambda *a: None, True), s, poses))
                 except _Unfinished:
                     todo[s] = poses
         n = pool_size(cfg.workers, len(todo))
         if n == 1:
             for s, poses in todo.items():
-                done(subject_result(run_for({"items": {}, "subjects": {}}, notify), s, poses))
+                done(_subject_result(run_for({"items": {}, "subjects": {}}, notify), s, poses))
         else:
             run_jobs(subject_job, [(s, list(p)) for s, p in todo.items()], workers=n, init=init_subject_worker,
                      init_args=(out, cfg, old, common), on_message=lambda msg: notify(*msg),
@@ -254,7 +259,7 @@ class _Unfinished(Exception):
     """Raised by an item to build in a verify-only run (the subject needs work)."""
 
 
-def subject_result(run: _Run, s: int, poses: list[int]) -> dict:
+def _subject_result(run: _Run, s: int, poses: list[int]) -> dict:
     """Subject ``s``'s items (:func:`_build_subject`) as a picklable dict.
 
     Returns
@@ -278,7 +283,7 @@ def init_subject_worker(out: Path, cfg: BuildConfig, old: dict, common: dict) ->
 
 
 def subject_job(s: int, poses: list[int]) -> dict:
-    """:func:`subject_result` of subject ``s`` in a worker process (after
+    """:func:`_subject_result` of subject ``s`` in a worker process (after
     :func:`init_subject_worker`); each item is sent to the main process as it finishes
     (``(item_id, entry, built)``, :func:`defaust.parallel.send`).
 
@@ -292,7 +297,7 @@ def subject_job(s: int, poses: list[int]) -> dict:
                common=w["common"], report=BuildReport(out=w["out"]),
                notify=lambda iid, entry, built: send((iid, entry, built)))
     try:
-        return subject_result(run, s, poses)
+        return _subject_result(run, s, poses)
     except SShaDeError as e:
         raise SShaDeError(str(e)) from None
 
