@@ -120,9 +120,9 @@ class BuildConfig:
         ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
         ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
         count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;
-        subject and FAUST pose ids >= 0; ``workers`` None or in [1, 4096]. Floats, finite: ``static_threshold`` >= 0
-        (metres), ``synthetic_voxel`` and ``synthetic_blend`` > 0 (metres). ``progress``
-        a bool. (Bounds that need the source, e.g. anny's 10 subjects, are checked by the
+        subject and FAUST pose ids >= 0; ``workers`` None or in [1, 4096]. Floats, finite:
+        ``static_threshold`` >= 0 (metres), ``synthetic_voxel`` and ``synthetic_blend`` > 0
+        (metres). ``progress`` a bool. (Bounds that need the source, e.g. anny's 10 subjects, are checked by the
         source before the output folder is made.)
 
         Returns
