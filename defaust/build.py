@@ -226,7 +226,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
         else:
             run_jobs(subject_job, [(s, list(p)) for s, p in todo.items()], workers=n, init=init_subject_worker,
                      init_args=(out, cfg, old, common), on_message=lambda msg: notify(*msg),
-                     on_result=lambda i, r: done(r))
+                     on_result=lambda i, r: done(r), thread_variables=_WORKER_THREAD_VARIABLES)
     finally:
         bar.close()
     _merge(manifest, report, [results[s] for s in sorted(results)])
@@ -272,6 +272,13 @@ def _subject_result(run: _Run, s: int, poses: list[int]) -> dict:
     return {"subject": s, "items": run.manifest["items"], "subjects": run.manifest["subjects"],
             "built": rep.built, "skipped": rep.skipped, "seconds_per_item": rep.seconds, "seconds": t}
 
+
+#: The thread limits of the worker processes: numba and numexpr only. OpenBLAS keeps its
+#: default thread count (this process's, i.e. the cores): ANNY's body (float32 blend
+#: shapes) differs in the last bit with the BLAS thread count (subjects 3 and 6: 6e-8 m
+#: with 1 thread instead of 2), so capping it per worker would change the dataset. The
+#: BLAS work is a few seconds per subject; the remesh (single-threaded) is most of it.
+_WORKER_THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 
 _WORKER: dict = {}  # in a worker process: the build's folder, config, source, earlier manifest, key common
 

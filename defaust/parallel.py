@@ -9,10 +9,10 @@ returns) and returns its result (delivered to ``on_result``
 with the job's index). Results are whatever the jobs return, in the order they finish:
 callers that need a fixed order (the manifest) sort them by index.
 
-Each worker's BLAS/OpenMP/numba threads are limited so that ``workers x threads`` does not
-exceed the cores of this process (:func:`available_cores`, the affinity mask), through the
-environment variables the libraries read at import (:data:`THREAD_VARIABLES`), set while
-the workers start.
+Each worker's threads are limited so that ``workers x threads`` does not exceed the cores
+of this process (:func:`available_cores`, the affinity mask), through the environment
+variables the libraries read at import (:data:`THREAD_VARIABLES`, or those the caller
+names), set while the workers start.
 
 Example::
 
@@ -88,11 +88,11 @@ def _init_worker(channel, init, init_args) -> None:
 
 
 @contextmanager
-def _thread_env(threads: int):
-    """Set :data:`THREAD_VARIABLES` to ``threads`` in this process's environment (inherited
+def _thread_env(threads: int, names=THREAD_VARIABLES):
+    """Set the variables ``names`` to ``threads`` in this process's environment (inherited
     by processes started meanwhile), restored on exit."""
-    old = {k: os.environ.get(k) for k in THREAD_VARIABLES}
-    os.environ.update({k: str(int(threads)) for k in THREAD_VARIABLES})
+    old = {k: os.environ.get(k) for k in names}
+    os.environ.update({k: str(int(threads)) for k in names})
     try:
         yield
     finally:
@@ -131,7 +131,8 @@ def _drain(channel, on_message, ended: set, *, until: set | None = None) -> None
             on_message(msg)
 
 
-def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None) -> None:
+def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None,
+             thread_variables=THREAD_VARIABLES) -> None:
     """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
 
     At most ``workers`` jobs are handed out at a time, so that after a failure or Ctrl-C
@@ -145,6 +146,8 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     init, init_args : run once in every worker before its first job (module-level function).
     on_message : called in this process with every :func:`send` message, while jobs run.
     on_result : called in this process as ``on_result(index, result)`` when a job finishes.
+    thread_variables : the variables of :data:`THREAD_VARIABLES` set to the workers'
+        thread limit (the others keep this process's values).
 
     Raises
     ------
@@ -158,7 +161,7 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     before = set(mp.active_children())
     todo = list(enumerate(args_list))[::-1]
     futures, errors, finished, ended, collected = {}, [], False, set(), set()
-    with _thread_env(thread_limit(n)):  # the workers start at submit() and inherit it
+    with _thread_env(thread_limit(n), thread_variables):  # the workers start at submit() and inherit it
         ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
                                  initargs=(channel, init, tuple(init_args)))
         try:

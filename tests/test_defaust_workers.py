@@ -7,6 +7,7 @@ every file, ``manifest.json`` included, is compared byte for byte.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import time
 
 import pytest
@@ -73,7 +74,6 @@ def test_pool_size_and_threads():
 
 def _square(x):
     send(("seen", x))
-    import os
     return x * x, {k: os.environ.get(k) for k in THREAD_VARIABLES}
 
 
@@ -91,6 +91,11 @@ def test_run_jobs_results_messages_and_thread_limit():
     assert sorted(messages) == [("seen", 1), ("seen", 2), ("seen", 3)]
     want = str(thread_limit(2))
     assert all(env == {k: want for k in THREAD_VARIABLES} for _, env in results.values())
+    results.clear()  # only the variables named are set; the others keep this process's values
+    run_jobs(_square, [(1,), (2,)], workers=2, on_result=lambda i, r: results.__setitem__(i, r),
+             thread_variables=("NUMBA_NUM_THREADS",))
+    here = os.environ.get("OPENBLAS_NUM_THREADS")
+    assert all(env["NUMBA_NUM_THREADS"] == want and env["OPENBLAS_NUM_THREADS"] == here for _, env in results.values())
 
 
 def _sleep(x):
