@@ -26,6 +26,11 @@ including its inputs' checksums) and its files' sha256. On a rerun, an item whos
 matches and whose files all exist with the recorded checksums is skipped; any other
 (missing, corrupted, stale) is rebuilt. Every file is written with
 :func:`sshade.mesh.io.atomic_write`, so an interrupted build leaves no partial file.
+
+Subjects are built side by side, each in its own worker process (``workers``, default
+every core; :mod:`defaust.parallel`): the same files and manifest for any worker count,
+since every seed depends on the subject and pose only and the manifest is merged in
+subject order. Each finished item still reaches the partial manifest at once.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -55,10 +61,12 @@ from .manifest import (
     write_manifest,
     write_partial,
 )
+from .parallel import pool_size, run_jobs, send
 from .sources import SOURCES, Source
 from .store import write_npz, write_ply
 
-__all__ = ["BuildConfig", "BuildReport", "build_defaust", "check_out_folder", "handle_seed", "MANIFEST", "FORMAT"]
+__all__ = ["BuildConfig", "BuildReport", "build_defaust", "check_out_folder", "handle_seed", "init_subject_worker",
+           "subject_job", "MANIFEST", "FORMAT"]
 
 log = logging.getLogger("defaust")
 
@@ -152,7 +160,9 @@ def build_defaust(cfg: BuildConfig) -> BuildReport:
 @dataclass
 class _Run:
     """A build in progress: its folder, source, the earlier build's manifest (``old``),
-    the manifest being made, what every item key shares (``common``) and the report."""
+    the subject's manifest being made, what every item key shares (``common``), the
+    report, and ``notify(item_id, entry, built)``, called after every item (in this
+    process: writes the partial manifest; in a worker process: sends the item to it)."""
 
     out: Path
     cfg: BuildConfig
@@ -161,27 +171,142 @@ class _Run:
     manifest: dict
     common: dict
     report: BuildReport
-    bar: tqdm
+    notify: Callable[[str, dict, bool], None]
+    verify_only: bool = False  # an item to build raises _Unfinished instead
 
 
 def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dict, plan: dict) -> BuildReport:
-    """The body of :func:`build_defaust` once the folder exists: every item, the manifest."""
+    """The body of :func:`build_defaust` once the folder exists: every item, the manifest.
+
+    Subjects are built one after the other in this process (``workers=1``, or one subject
+    to build) or each in its own worker process (:mod:`defaust.parallel`); either way the
+    same files, and the manifest's subjects merged in subject order once all are done.
+    Every finished item is written to the partial manifest at once (resumable)."""
     n_items = sum(1 + len(p) for p in plan.values())
     bar = tqdm(total=n_items, desc=f"DeFAUST {cfg.source}", unit="item", disable=not cfg.progress)
-    run = _Run(out=out, cfg=cfg, src=src, old=old, manifest=_new_manifest(cfg, src, params),
-               common=_key_common(cfg, src, params), report=BuildReport(out=out), bar=bar)
+    manifest, report = _new_manifest(cfg, src, params), BuildReport(out=out)
+    common = _key_common(cfg, src, params)
+    seen: set = set()  # items notified (a worker's message and its job's result both carry them)
+    results: dict[int, dict] = {}
+
+    def notify(iid: str, entry: dict, built: bool) -> None:  # after every item, in this process
+        if iid in seen:
+            return
+        seen.add(iid)
+        bar.set_postfix_str(iid)
+        manifest["items"][iid] = entry
+        if built:
+            write_partial(out, manifest, old)
+        bar.update(1)
+
+    def done(r: dict) -> None:  # a subject's result, in this process
+        for iid, entry in r["items"].items():
+            notify(iid, entry, iid in r["built"])
+        manifest["subjects"].update(r["subjects"])
+        results[r["subject"]] = r
+        _log_subject(r["subject"], r["seconds"])
+
+    def run_for(manifest_, notify_, verify_only=False) -> _Run:
+        return _Run(out=out, cfg=cfg, src=src, old=old, manifest=manifest_, common=common,
+                    report=BuildReport(out=out), notify=notify_, verify_only=verify_only)
+
     try:
-        for s, poses in plan.items():
-            _build_subject(run, s, poses)
+        todo = dict(plan)
+        if pool_size(cfg.workers, len(plan)) > 1:  # complete subjects are verified here, without a worker
+            todo = {}
+            for s, poses in plan.items():
+                try:
+                    done(_subject_result(run_for({"items": {}, "subjects": {}}, lambda *a: None, True), s, poses))
+                except _Unfinished:
+                    todo[s] = poses
+        n = pool_size(cfg.workers, len(todo))
+        if n == 1:
+            for s, poses in todo.items():
+                done(_subject_result(run_for({"items": {}, "subjects": {}}, notify), s, poses))
+        else:
+            run_jobs(subject_job, [(s, list(p)) for s, p in todo.items()], workers=n, init=init_subject_worker,
+                     init_args=(out, cfg, old, common), on_message=lambda msg: notify(*msg),
+                     on_result=lambda i, r: done(r), thread_variables=_WORKER_THREAD_VARIABLES)
     finally:
         bar.close()
-    stale = sorted(set(old.get("items", {})) - set(run.manifest["items"]))
+    _merge(manifest, report, [results[s] for s in sorted(results)])
+    stale = sorted(set(old.get("items", {})) - set(manifest["items"]))
     if stale:
         log.info("%d item(s) of an earlier build are not part of this one and are left out of the manifest "
                  "(their files are kept): %s", len(stale), ", ".join(stale[:5]) + (" ..." if len(stale) > 5 else ""))
-    write_manifest(out, run.manifest)
-    run.report.manifest = json.loads((out / MANIFEST).read_text())
-    return run.report
+    write_manifest(out, manifest)
+    report.manifest = json.loads((out / MANIFEST).read_text())
+    return report
+
+
+def _log_subject(s: int, seconds: float) -> None:
+    if seconds > 0:
+        log.info("subject_%02d: built in %.1f s", s, seconds)
+
+
+def _merge(manifest: dict, report: BuildReport, results: list[dict]) -> None:
+    """The subjects' items, records and timings, in subject order, into the manifest and report."""
+    manifest["items"] = {iid: e for r in results for iid, e in r["items"].items()}
+    manifest["subjects"] = {k: v for r in results for k, v in r["subjects"].items()}
+    for r in results:
+        report.built += r["built"]
+        report.skipped += r["skipped"]
+        report.seconds.update(r["seconds_per_item"])
+        report.subject_seconds[r["subject"]] = r["seconds"]
+
+
+class _Unfinished(Exception):
+    """Raised by an item to build in a verify-only run (the subject needs work)."""
+
+
+def _subject_result(run: _Run, s: int, poses: list[int]) -> dict:
+    """Subject ``s``'s items (:func:`_build_subject`) as a picklable dict.
+
+    Returns
+    -------
+    dict: ``subject``, ``items`` (item id -> manifest entry), ``subjects`` (the subject's
+    record), ``built``, ``skipped`` (item ids), ``seconds_per_item``, ``seconds``.
+    """
+    t = _build_subject(run, s, poses)
+    rep = run.report
+    return {"subject": s, "items": run.manifest["items"], "subjects": run.manifest["subjects"],
+            "built": rep.built, "skipped": rep.skipped, "seconds_per_item": rep.seconds, "seconds": t}
+
+
+#: The thread limits of the worker processes: numba and numexpr only. OpenBLAS keeps its
+#: default thread count (this process's, i.e. the cores): ANNY's body (float32 blend
+#: shapes) differs in the last bit with the BLAS thread count (subjects 3 and 6: 6e-8 m
+#: with 1 thread instead of 2), so capping it per worker would change the dataset. The
+#: BLAS work is a few seconds per subject; the remesh (single-threaded) is most of it.
+_WORKER_THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+_WORKER: dict = {}  # in a worker process: the build's folder, config, source, earlier manifest, key common
+
+
+def init_subject_worker(out: Path, cfg: BuildConfig, old: dict, common: dict) -> None:
+    """Set up a worker process of the build: its source is made once per process (an anny
+    worker loads the model at its first item to build)."""
+    _WORKER.update(out=out, cfg=cfg, src=SOURCES[cfg.source](cfg), old=old, common=common)
+
+
+def subject_job(s: int, poses: list[int]) -> dict:
+    """:func:`_subject_result` of subject ``s`` in a worker process (after
+    :func:`init_subject_worker`); each item is sent to the main process as it finishes
+    (``(item_id, entry, built)``, :func:`defaust.parallel.send`).
+
+    Raises
+    ------
+    SShaDeError as the build raises it (as a plain SShaDeError with its message, which
+    crosses the process boundary whatever its subclass).
+    """
+    w = _WORKER
+    run = _Run(out=w["out"], cfg=w["cfg"], src=w["src"], old=w["old"], manifest={"items": {}, "subjects": {}},
+               common=w["common"], report=BuildReport(out=w["out"]),
+               notify=lambda iid, entry, built: send((iid, entry, built)))
+    try:
+        return _subject_result(run, s, poses)
+    except SShaDeError as e:
+        raise SShaDeError(str(e)) from None
 
 
 def _new_manifest(cfg: BuildConfig, src: Source, params: dict) -> dict:
@@ -225,8 +350,9 @@ def _key_common(cfg: BuildConfig, src: Source, params: dict) -> dict:
     return common
 
 
-def _build_subject(run: _Run, s: int, poses: list[int]) -> None:
-    """Subject ``s``: its rest item, then one item per target pose, then its record."""
+def _build_subject(run: _Run, s: int, poses: list[int]) -> float:
+    """Subject ``s``: its rest item, then one item per target pose, then its record;
+    returns the seconds spent building (0: every item was kept)."""
     cfg, src, items = run.cfg, run.src, run.manifest["items"]
     sdir = f"subject_{s:02d}"
     src.start_subject(s)
@@ -252,27 +378,27 @@ def _build_subject(run: _Run, s: int, poses: list[int]) -> None:
     run.manifest["subjects"][sdir] = {"subject": s, "target_poses": list(poses), "landmarks": items[rid]["landmarks"],
                                       **src.subject_record(s, poses)}
     run.report.subject_seconds[s] = t_subject
-    if t_subject > 0:
-        log.info("%s: built in %.1f s", sdir, t_subject)
+    return t_subject
 
 
 def _item(run: _Run, iid: str, key: str, make) -> float:
     """Item ``iid``: kept from the earlier build if still valid (same key, files intact),
-    else built by ``make()`` and the manifest rewritten; returns the seconds spent."""
-    run.bar.set_postfix_str(iid)
+    else built by ``make()``; ``run.notify`` is told either way. Returns the seconds spent."""
     entry = run.old.get("items", {}).get(iid)
     dt = 0.0
-    if item_valid(run.out, entry, key):
-        run.manifest["items"][iid] = entry
-        run.report.skipped.append(iid)
-    else:
+    built = not item_valid(run.out, entry, key)
+    if built and run.verify_only:
+        raise _Unfinished(iid)
+    if built:
         t0 = time.perf_counter()
-        run.manifest["items"][iid] = make()
+        entry = make()
         dt = time.perf_counter() - t0
         run.report.built.append(iid)
         run.report.seconds[iid] = dt
-        write_partial(run.out, run.manifest, run.old)
-    run.bar.update(1)
+    else:
+        run.report.skipped.append(iid)
+    run.manifest["items"][iid] = entry
+    run.notify(iid, entry, built)
     return dt
 
 

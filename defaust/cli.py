@@ -102,7 +102,7 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         anny_poses=None if an.get("poses") is None else _as_list(an["poses"]),
         anny_root=None if an.get("root") in (None, "") else _abs(an["root"]),
         anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
-        progress=progress,
+        progress=progress, workers=config_number(cfg, "workers", min=1, max=4096, allow_none=True, default=None),
     )
 
 

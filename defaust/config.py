@@ -54,6 +54,9 @@ class BuildConfig:
         Neither path is a dataset parameter: the assets enter the items' keys through
         their checksum (:func:`defaust.anny_model.assets_fingerprint`).
     progress : bool, show a tqdm progress bar.
+    workers : int or None, subjects built at once, each in its own process (None: every
+        core this process may use, :func:`defaust.parallel.available_cores`; 1: one after
+        the other in this process). Not a dataset parameter: any count gives the same files.
     """
 
     out: str | Path
@@ -77,18 +80,19 @@ class BuildConfig:
     anny_root: str | Path | None = None
     anny_cache: str | Path | None = None
     progress: bool = True
+    workers: int | None = None
 
     def parameters(self) -> dict:
-        """JSON-able parameters (everything but ``out``, ``progress`` and the parameters of
-        the other sources; anny: the target poses resolved, without the asset and cache
-        folders).
+        """JSON-able parameters (everything but ``out``, ``progress``, ``workers`` and the
+        parameters of the other sources; anny: the target poses resolved, without the asset
+        and cache folders).
 
         Raises
         ------
         SShaDeError on a malformed anny pose (source ``"anny"`` only).
         """
         d = asdict(self)
-        for k in ("out", "progress", "anny_root", "anny_cache"):
+        for k in ("out", "progress", "workers", "anny_root", "anny_cache"):
             d.pop(k)
         d["vertex_range"] = [int(x) for x in self.vertex_range]
         if d["faust_root"] is not None:
@@ -116,9 +120,9 @@ class BuildConfig:
         ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
         ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
         count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;
-        subject and FAUST pose ids >= 0. Floats, finite: ``static_threshold`` >= 0
-        (metres), ``synthetic_voxel`` and ``synthetic_blend`` > 0 (metres). ``progress``
-        a bool. (Bounds that need the source, e.g. anny's 10 subjects, are checked by the
+        subject and FAUST pose ids >= 0; ``workers`` None or in [1, 4096]. Floats, finite:
+        ``static_threshold`` >= 0 (metres), ``synthetic_voxel`` and ``synthetic_blend`` > 0
+        (metres). ``progress`` a bool. (Bounds that need the source, e.g. anny's 10 subjects, are checked by the
         source before the output folder is made.)
 
         Returns
@@ -156,6 +160,8 @@ class BuildConfig:
                     raise SShaDeError(f"{name} must be a list of integers or null, got {v!r}")
                 for x in v:
                     _check_int(name, x, 0, _MAX_INT)
+        if self.workers is not None:
+            _check_int("workers", self.workers, 1, 4096)
         if not isinstance(self.progress, (bool, np.bool_)):
             raise SShaDeError(f"progress must be true or false, got {self.progress!r}")
         return self

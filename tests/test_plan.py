@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 from types import SimpleNamespace as C
 
@@ -106,7 +107,10 @@ def test_build_outlook(tmp_path):
     ds = OmegaConf.create({"name": "defaust", "build": {"enabled": True, "overrides": ["preset=ci", "subjects=[0,2]"]},
                            "limit": 5})
     out = build_outlook(tmp_path / "new", ds)
-    assert out["subjects"] == 2 and out["complete"] == 0 and out["workers"] == 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert out["subjects"] == 2 and out["complete"] == 0 and out["workers"] == cores  # the builder's default
+    ds.build.overrides.append("workers=1")
+    assert build_outlook(tmp_path / "new", ds)["workers"] == 1
     assert out["cases"] == [(0, 1), (0, 2), (0, 3), (0, 4), (2, 1)]  # 4 anny poses each, dataset.limit=5
     assert 8000 <= out["n_vertices"] <= 12000  # the ci preset's vertex range
     assert build_outlook(tmp_path / "new", OmegaConf.create({"build": {"enabled": False}})) is None

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import re
 import time
 from dataclasses import dataclass, field
@@ -400,6 +401,8 @@ def build_outlook(root: Path, ds) -> dict | None:
     if not todo:
         return None
     workers = bcfg.get("workers", None)
+    if workers is None and "workers" in bcfg:  # the builder's default: every core (defaust/config.py)
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     workers = workers if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
     cases = [(x, p) for x in subjects for p in range(1, n_poses + 1)]
     want = (ds.get("subjects", None))

@@ -1,0 +1,206 @@
+"""Jobs of a DeFAUST build in worker processes (the builder's subjects side by side).
+
+:func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in a
+``ProcessPoolExecutor`` with the ``spawn`` context (pymeshlab and numba are not known to
+be fork-safe): every worker process starts fresh, runs ``init(*init_args)`` once and then
+its jobs. A job reports progress with :func:`send` (delivered in the main process to
+``on_message``, while the jobs run; every message of a job before :func:`run_jobs`
+returns) and returns its result (delivered to ``on_result``
+with the job's index). Results are whatever the jobs return, in the order they finish:
+callers that need a fixed order (the manifest) sort them by index.
+
+Each worker's threads are limited so that ``workers x threads`` does not exceed the cores
+of this process (:func:`available_cores`, the affinity mask), through the environment
+variables the libraries read at import (:data:`THREAD_VARIABLES`, or those the caller
+names), set while the workers start.
+
+Example::
+
+    run_jobs(square, [(1,), (2,)], workers=2, on_result=lambda i, r: print(i, r))
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+
+from sshade.errors import SShaDeError
+
+__all__ = ["THREAD_VARIABLES", "available_cores", "pool_size", "thread_limit", "run_jobs", "send", "in_worker"]
+
+#: Environment variables that cap the threads of OpenBLAS, MKL, OpenMP, Accelerate, numexpr and numba.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
+                    "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+_CHANNEL: list = [None]  # in a worker: the queue to the main process
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one), >= 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
+def pool_size(workers: int | None, n_jobs: int) -> int:
+    """Worker processes for ``n_jobs`` jobs: ``workers`` (None: :func:`available_cores`),
+    capped at ``n_jobs``, at least 1.
+
+    Examples
+    --------
+    >>> pool_size(4, 2), pool_size(3, 0)
+    (2, 1)
+    """
+    w = available_cores() if workers is None else int(workers)
+    return max(1, min(w, int(n_jobs)))
+
+
+def thread_limit(workers: int) -> int:
+    """Threads per worker so that ``workers x threads <= available_cores()`` (>= 1)."""
+    return max(1, available_cores() // max(1, int(workers)))
+
+
+def in_worker() -> bool:
+    """Whether this process is a worker of :func:`run_jobs`."""
+    return _CHANNEL[0] is not None
+
+
+def send(message) -> None:
+    """From a job: deliver ``message`` (picklable) to ``on_message`` in the main process.
+
+    Raises
+    ------
+    SShaDeError outside a worker of :func:`run_jobs`.
+    """
+    if _CHANNEL[0] is None:
+        raise SShaDeError("defaust.parallel.send: not in a worker of run_jobs")
+    _CHANNEL[0].put(message)
+
+
+def _init_worker(channel, init, init_args) -> None:
+    _CHANNEL[0] = channel
+    if init is not None:
+        init(*init_args)
+
+
+@contextmanager
+def _thread_env(threads: int, names=THREAD_VARIABLES):
+    """Set the variables ``names`` to ``threads`` in this process's environment (inherited
+    by processes started meanwhile), restored on exit."""
+    old = {k: os.environ.get(k) for k in names}
+    os.environ.update({k: str(int(threads)) for k in names})
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+_DONE = "__defaust.parallel: job done__"
+
+
+def _call(job, index: int, args: tuple):
+    """A job in a worker, then its end marker on the channel (after all its messages)."""
+    try:
+        return job(*args)
+    finally:
+        _CHANNEL[0].put((_DONE, index))
+
+
+def _drain(channel, on_message, ended: set, *, until: set | None = None) -> None:
+    """Deliver the channel's messages; note the jobs whose end marker came in ``ended``.
+    With ``until``: wait (at most 30 s per message) until those jobs' markers came."""
+    while True:
+        try:
+            if until is not None and not until <= ended:
+                msg = channel.get(timeout=30)
+            else:
+                msg = channel.get_nowait()
+        except queue.Empty:
+            return
+        if isinstance(msg, tuple) and len(msg) == 2 and msg[0] == _DONE:
+            ended.add(msg[1])
+        elif on_message is not None:
+            on_message(msg)
+
+
+def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None,
+             thread_variables=THREAD_VARIABLES) -> None:
+    """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
+
+    At most ``workers`` jobs are handed out at a time, so that after a failure or Ctrl-C
+    no new job starts; on Ctrl-C (or any exception in this process) the workers are
+    terminated before it propagates.
+
+    Parameters
+    ----------
+    job : a module-level function (picklable by reference); its arguments and result picklable.
+    args_list : list of tuples. workers : int >= 1, processes (capped at ``len(args_list)``).
+    init, init_args : run once in every worker before its first job (module-level function).
+    on_message : called in this process with every :func:`send` message, while jobs run.
+    on_result : called in this process as ``on_result(index, result)`` when a job finishes.
+    thread_variables : the variables of :data:`THREAD_VARIABLES` set to the workers'
+        thread limit (the others keep this process's values).
+
+    Raises
+    ------
+    The first failing job's exception (after the jobs already running have finished, so
+    that their work is kept; the others are not started). SShaDeError if a worker
+    process dies (killed, out of memory).
+    """
+    n = pool_size(workers, len(args_list))
+    ctx = mp.get_context("spawn")
+    channel = ctx.Queue()
+    before = set(mp.active_children())
+    todo = list(enumerate(args_list))[::-1]
+    futures, errors, finished, ended, collected = {}, [], False, set(), set()
+    with _thread_env(thread_limit(n), thread_variables):  # the workers start at submit() and inherit it
+        ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
+                                 initargs=(channel, init, tuple(init_args)))
+        try:
+            while todo or futures:
+                while todo and len(futures) < n and not errors:
+                    i, args = todo.pop()
+                    futures[ex.submit(_call, job, i, args)] = i
+                if not futures:
+                    break
+                done, _ = wait(futures, timeout=0.25, return_when=FIRST_COMPLETED)
+                _drain(channel, on_message, ended)
+                for f in sorted(done, key=futures.get):
+                    i = futures.pop(f)
+                    if _collect(f, i, on_result, errors):
+                        collected.add(i)
+            _drain(channel, on_message, ended, until=collected)  # every message of the jobs that ran
+            finished = True
+        finally:
+            if not finished:  # Ctrl-C or an error here: stop the workers now (a remesh ignores signals)
+                for p in set(mp.active_children()) - before:
+                    p.terminate()
+            ex.shutdown(wait=True, cancel_futures=True)
+            channel.close()
+    if errors:
+        raise errors[0]
+
+
+def _collect(f, index: int, on_result, errors: list) -> bool:
+    """A finished job: its result to ``on_result``, or its exception to ``errors``; False
+    if its worker died (no end marker will come)."""
+    try:
+        result = f.result()
+    except BrokenProcessPool as e:
+        errors.append(SShaDeError(f"a build worker process died ({e}); run the same command again to resume "
+                                  "(finished items are kept)"))
+        return False
+    except Exception as e:  # noqa: BLE001 - raised by run_jobs once the running jobs are done
+        errors.append(e)
+    else:
+        if on_result is not None:
+            on_result(index, result)
+    return True
