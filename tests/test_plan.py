@@ -133,8 +133,8 @@ def test_plan_logged_before_the_build(monkeypatch, caplog, tmp_path):
     refs = C(settings=lambda in_base: {"on": in_base})
     methods = [C(name="ARAP"), C(name="SShaDe")]
     with caplog.at_level(logging.INFO, logger="eval"):
-        root, build = cases_plan.planned_root(cfg, methods, refs,
-                                              lambda cs, base, ci, m: base is None or ci in base or m.name == "SShaDe")
+        root, build = cases_plan.planned_root(
+            cfg, methods, refs, lambda cs, base: lambda ci, m: base is None or ci in base or m.name == "SShaDe")
     msgs = [r.getMessage() for r in caplog.records if r.name == "eval"]
     assert root == tmp_path and build["count"] == 2 and build["actual_s"] >= 0
     assert msgs[0].startswith("plan: building DeFAUST (once, into ") and msgs[1] == "building now"

@@ -232,8 +232,8 @@ def _setup(cfg) -> _Setup:
     meshes = config_bool(cfg, "store.meshes", default=False)
     # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first (eval/experiments/cases_plan.py)
     mc = cfg.get("method_cases")
-    root, build = planned_root(cfg, methods, refs, lambda cs, base, ci, m: _Setup(
-        base=base, own=method_selections(cs, mc, [x.name for x in methods])).runs_on(ci, m))
+    root, build = planned_root(cfg, methods, refs, lambda cs, base: _Setup(
+        base=base, own=method_selections(cs, mc, [x.name for x in methods])).runs_on)
     out_dir = abs_path(cfg.out_dir)
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))

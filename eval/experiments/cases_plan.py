@@ -33,8 +33,9 @@ def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
     (:func:`eval.plan.build_stage`, with ``actual_s``) or None when nothing was built.
 
     ``methods``: the built methods; ``refs``: the experiment's reference options (an
-    object with ``settings(in_base) -> {"on": bool, ...}``); ``runs_on(cases, base, ci, m)``:
-    whether method ``m`` runs on case ``ci`` of ``cases`` given the baseline subset ``base``.
+    object with ``settings(in_base) -> {"on": bool, ...}``); ``runs_on(cases, base)``:
+    a predicate ``(ci, m) -> bool``, whether method ``m`` runs on case ``ci`` of ``cases``
+    given the baseline subset ``base`` (built once, so per-method rules are computed once).
 
     Raises
     ------
@@ -48,7 +49,8 @@ def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
     cases = [SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]]
     base, _ = baseline_selection(cases, (cfg.get("dataset") or {}).get("baseline_cases", None)) if cases else (None, "")
     names = [m.name for m in methods]
-    pairs = [(ci, mi) for ci in range(len(cases)) for mi, m in enumerate(methods) if runs_on(cases, base, ci, m)]
+    runs = runs_on(cases, base)
+    pairs = [(ci, mi) for ci in range(len(cases)) for mi, m in enumerate(methods) if runs(ci, m)]
     on, need = set(pairs), []
     for ci, c in enumerate(cases):
         if refs.settings(base is None or ci in base)["on"]:
