@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import re
 import time
 from dataclasses import dataclass, field
@@ -42,6 +41,7 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.handles import HandleSet, handles_from_arrays, snap_handles
 from defaust.manifest import FORMAT, MANIFEST, check_out_folder
+from defaust.parallel import pool_size
 from defaust.store import read_npz, sha256_file
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
@@ -374,7 +374,8 @@ def build_outlook(root: Path, ds) -> dict | None:
     None when no build is wanted (:func:`build_wanted`) or every subject is complete in
     the manifest (the build then only verifies it); else a dict: ``root``, ``source``,
     ``subjects`` (int, to build), ``complete`` (int, already built), ``workers`` (the
-    builder's ``workers`` setting when it has one, an int >= 1; else 1),
+    processes the builder will use: :func:`defaust.parallel.pool_size` of its ``workers``
+    setting, null = every core, capped at the subjects to build; 1 without the setting),
     ``s_per_subject`` (:data:`eval.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
     ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and
     ``dataset.limit``) and ``n_vertices`` (estimated per case: the middle of the
@@ -401,9 +402,9 @@ def build_outlook(root: Path, ds) -> dict | None:
     if not todo:
         return None
     workers = bcfg.get("workers", None)
-    if workers is None and "workers" in bcfg:  # the builder's default: every core (defaust/config.py)
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    workers = workers if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
+    ok = workers is None or (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1)
+    # the builder's own worker count (None: every core, capped at the subjects to build)
+    workers = pool_size(workers, len(todo)) if "workers" in bcfg and ok else 1
     cases = [(x, p) for x in subjects for p in range(1, n_poses + 1)]
     want = (ds.get("subjects", None))
     if want is not None:
