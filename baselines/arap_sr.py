@@ -176,16 +176,22 @@ class ARAPSR:
                          else args["max_iter"])
         self.criterion = make_criterion(etol, gtol)
         self.info: dict = {}
+        #: (n, 3, 3) float64 or None: the rotations of the last converged-protocol result
+        #: (its reduced energy and a reference's continued solve start there; not in ``info``,
+        #: which is stored as JSON)
+        self.rotations: np.ndarray | None = None
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` reach ``targets``; (n, 3) float64.
         Raises ``SShaDeError`` on invalid mesh or handles."""
+        self.rotations = None
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
         if self.protocol == "paper":
             res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, tol=self.tol, max_iter=self.max_iter)
         else:
             res = self._converged(V, F, handles, targets)
+        self.rotations = res.info.get("R") if self.protocol == "converged" else None
         proto = "move-rule" if self.protocol == "paper" else "converged-sr"
         self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": proto,
                      "precompute_s": res.precompute_s, "solve_s": res.solve_s, "alpha": self.alpha,

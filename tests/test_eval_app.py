@@ -324,3 +324,20 @@ def test_method_cases_gives_a_method_its_own_rule(tmp_path, faust_root):
     bad = _run(["dataset.root=faust", "methods=[ARAP]", "method_cases={Elastic: 1}", "out_dir=bad"], cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error: method_cases names")
     assert not (tmp_path / "bad").exists()
+
+
+def test_reference_cases_takes_a_rule_of_its_own(tmp_path, faust_root):
+    """reference.cases=1: the references (and their columns) on the first case only,
+    while the baselines run on both; a bad rule is one error line before any work."""
+    (tmp_path / "faust").symlink_to(faust_root, target_is_directory=True)
+    if len(list(faust_root.glob("tr_reg_00[1-9].ply"))) < 2:
+        pytest.skip("needs two FAUST poses of subject 0")
+    r = _run(["dataset.root=faust", "dataset.limit=2", "methods=[Elastic]", "arap.protocol=paper",
+              "reference.cases=1", f"reference.cache={tmp_path / 'refs'}", "out_dir=out"], cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    cases = pd.read_csv(tmp_path / "out" / "cases.csv")
+    assert len(cases) == 2 and cases["ref_mean_pct"].notna().tolist() == [True, False]
+    assert len(list((tmp_path / "refs").glob("*.npz"))) == 1
+    bad = _run(["dataset.root=faust", "methods=[Elastic]", "reference.cases=some", "out_dir=bad"], cwd=tmp_path)
+    assert bad.returncode == 2 and "error: reference.cases must be" in bad.stderr.strip().splitlines()[-1]
+    assert not (tmp_path / "bad").exists()

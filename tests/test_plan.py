@@ -130,7 +130,7 @@ def test_plan_logged_before_the_build(monkeypatch, caplog, tmp_path):
     monkeypatch.setattr(cases_plan.datasets, "dataset_root",
                         lambda cfg: logging.getLogger("eval").info("building now") or tmp_path)
     cfg = OmegaConf.create({"dataset": {"baseline_cases": "per_pose"}})
-    refs = C(settings=lambda in_base: {"on": in_base})
+    refs = C(covers=lambda ci, cases, base: base is None or ci in base)
     methods = [C(name="ARAP"), C(name="SShaDe")]
     with caplog.at_level(logging.INFO, logger="eval"):
         root, build = cases_plan.planned_root(

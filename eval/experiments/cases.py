@@ -74,7 +74,7 @@ from ..methods import method_spec
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
 from ..progress import CostModel, default_cost_model, weighted_bar
-from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, status_words
+from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, sr_alpha, status_words
 from ..runinfo import collect_runinfo, method_sources, write_runinfo
 from ..store import ResultStore, case_identity, json_safe, pair_key
 from ..subset import baseline_selection, check_baseline_cases, method_selections
@@ -276,7 +276,7 @@ def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     """The store keys (:func:`eval.store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options."""
     ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
-    extra = {"guard": s.guard, "reference": s.refs.settings(ci in s.base if s.base is not None else True)}
+    extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
     return [pair_key(spec, ident, extra) for spec in s.specs]
 
 
@@ -311,7 +311,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     rows: list[dict] = []
     with logging_redirect_tqdm(), bar:
         for ci, case in enumerate(cases):
-            s.refs.start_case(ci, case, s.base is None or ci in s.base)
+            s.refs.start_case(ci, case, s.refs.covers(ci, cases, s.base))
             deformed, unknown = {}, []  # method -> deformed vertices, for the optional figure
             for mi in plan[ci]:
                 if (ci, mi) in done:
@@ -447,7 +447,8 @@ def _run_one(m, name: str, case, refs, guard: dict):
 class _References:
     """The ``reference`` config section at work: for the cases it selects
     (``reference.cases``: ``baseline`` = the cases the full-resolution baselines run on,
-    ``dataset.baseline_cases``; ``all``; ``none``), the deep-converged full-resolution
+    ``dataset.baseline_cases``; ``all``; ``none``; or a rule of its own, ``per_pose`` or
+    an integer, as for ``dataset.baseline_cases``), the deep-converged full-resolution
     minimiser of the energy each method is compared with
     (:func:`eval.reference.method_energy`), computed once per (case, energy), cached in
     ``reference.cache`` and reused by later runs; :meth:`metrics` gives a row's
@@ -456,9 +457,14 @@ class _References:
 
     def __init__(self, cfg):
         rc = cfg.get("reference", None) or {}
-        self.mode = str(rc.get("cases", "baseline"))
+        self.mode = str(rc.get("cases", "baseline")).strip()
         if self.mode not in ("baseline", "all", "none"):
-            raise SShaDeError(f"reference.cases must be baseline, all or none, got {self.mode!r}")
+            try:  # a case rule of its own, as dataset.baseline_cases (eval/subset.py)
+                self.rule = check_baseline_cases(self.mode)
+            except SShaDeError:
+                raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
+                                  f"got {self.mode!r}") from None
+        self._sel = None  # (cases, indices) of the own rule, computed once per case list
         self.cache = abs_path(rc.get("cache", "data/references"))
         self.max_iter = config_number(cfg, "reference.max_iter", min=1, default=50000)
         self.time_budget_s = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True,
@@ -468,16 +474,25 @@ class _References:
         self.ops: dict = {}
         self.computed_s = 0.0  # seconds spent computing references (not read from the cache)
 
-    def settings(self, in_base: bool) -> dict:
-        """What of this section changes a row on a case (in the baseline subset or not):
-        whether references are computed there and with which limits (:mod:`eval.store`)."""
-        on = self.mode == "all" or (self.mode == "baseline" and in_base)
-        return {"on": on, "max_iter": self.max_iter, "time_budget_s": self.time_budget_s} if on else {"on": False}
+    def covers(self, ci: int, cases, base) -> bool:
+        """Whether case ``ci`` of ``cases`` gets references: ``base`` is the baseline
+        subset (indices, None = every case) that ``baseline`` follows; ``per_pose`` or an
+        integer select as :func:`eval.subset.baseline_selection` does."""
+        if self.mode in ("all", "none", "baseline"):
+            return self.mode == "all" or (self.mode == "baseline" and (base is None or ci in base))
+        if self._sel is None or self._sel[0] is not cases:
+            self._sel = (cases, baseline_selection(cases, self.rule)[0])
+        return self._sel[1] is None or ci in self._sel[1]
 
-    def start_case(self, ci: int, case, in_base: bool = True) -> None:
-        """Case ``ci`` starts (``in_base``: the baselines run on it); earlier solutions dropped."""
+    def settings(self, on: bool) -> dict:
+        """What of this section changes a row on a case (covered or not, :meth:`covers`):
+        whether references are computed there and with which limits (:mod:`eval.store`)."""
+        return {"on": True, "max_iter": self.max_iter, "time_budget_s": self.time_budget_s} if on else {"on": False}
+
+    def start_case(self, ci: int, case, on: bool = True) -> None:
+        """Case ``ci`` starts (``on``: :meth:`covers` it); earlier solutions dropped."""
         self.refs, self.ops = {}, {}
-        self.case = case if self.settings(in_base)["on"] else None
+        self.case = case if on else None
 
     def metrics(self, method, Vd) -> dict:
         if self.case is None:
@@ -487,10 +502,13 @@ class _References:
         if e not in self.refs:
             # a full-resolution solve of this very energy from the rigid fit (ARAP, Elastic
             # under the converged protocol) is on the deep solve's own path: continue from it
-            same_path = getattr(method, "energy", None) == e and getattr(method, "protocol", None) == "converged"
+            # (ARAP-SR's converged protocol: the deep solve continues from its result and rotations)
+            converged = getattr(method, "protocol", None) == "converged"
+            same_path = converged and (getattr(method, "energy", None) == e or sr_alpha(e) is not None)
             self.refs[e] = reference_solution(c.V, c.F, c.handles, c.targets, energy=e, cache_dir=self.cache,
                                               max_iter=self.max_iter, time_budget_s=self.time_budget_s,
-                                              U0=Vd if same_path else None)
+                                              U0=Vd if same_path else None,
+                                              R0=getattr(method, "rotations", None) if same_path else None)
             self.ops[e] = energy_operators(c.V, c.F, e)
             ref = self.refs[e]
             if not ref.info.get("cached"):
@@ -499,7 +517,8 @@ class _References:
                      "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
                      ref.info.get("iterations"), status_words(ref.info.get("status")))
         ref = self.refs[e]
-        out = reference_metrics(c.V, Vd, c.F, ref, operators=self.ops[e])
+        R = getattr(method, "rotations", None) if sr_alpha(e) is not None else None
+        out = reference_metrics(c.V, Vd, c.F, ref, operators=self.ops[e], R0=R)
         out.update(ref_energy_type=e, ref_status=ref.info.get("status"), ref_iterations=ref.info.get("iterations"))
         return out
 

@@ -53,7 +53,7 @@ def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
     pairs = [(ci, mi) for ci in range(len(cases)) for mi, m in enumerate(methods) if runs(ci, m)]
     on, need = set(pairs), []
     for ci, c in enumerate(cases):
-        if refs.settings(base is None or ci in base)["on"]:
+        if refs.covers(ci, cases, base):
             energies = dict.fromkeys(method_energy(m) for mi, m in enumerate(methods) if (ci, mi) in on)
             need += [(c.n_vertices, e, None) for e in energies]
     plan = make_plan(cases, names, pairs, default_cost_model(methods), build=build, references=need)
@@ -93,14 +93,14 @@ def plan_runs(s, todo, restored: int, cost) -> PlanRecord:
     """Log the plan of the runs about to start (before the first) and return its record.
 
     ``s``: the experiment's setup (``cases``, ``methods``, ``names``, ``base``, ``refs``
-    with ``settings(in_base)``, ``cache``, ``max_iter``, ``time_budget_s``; ``build``:
+    with ``covers(ci, cases, base)``, ``cache``, ``max_iter``, ``time_budget_s``; ``build``:
     the build stage of :func:`planned_root` or None); ``todo``: the ``(ci, mi)`` pairs
     to run; ``restored``: pairs restored from the store; ``cost``: the cost model.
     """
     need = []
     for ci in dict.fromkeys(ci for ci, _ in todo):
         c = s.cases[ci]
-        if not s.refs.settings(s.base is None or ci in s.base)["on"]:
+        if not s.refs.covers(ci, s.cases, s.base):
             continue
         for e in dict.fromkeys(method_energy(s.methods[mi]) for cj, mi in todo if cj == ci):
             _, path = reference_path(c.V, c.F, c.handles, c.targets, energy=e, cache_dir=s.refs.cache,
