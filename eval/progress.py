@@ -24,7 +24,7 @@ DeFAUST (:data:`METHOD_PRIORS`) plus the per-pair overhead of the metrics
 """
 from __future__ import annotations
 
-__all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "GUESSED_PRIORS",
+__all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "PAPER_PRIORS", "GUESSED_PRIORS",
            "OVERHEAD_S_PER_VERTEX"]
 
 #: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
@@ -34,6 +34,10 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "
 #: 41-112 s on the first four DeFAUST cases, 43-54 s on s00_p01 (machine shared): 3e-4
 #: s/vertex, about 51 s at 169k.
 METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0}
+#: Priors that replace :data:`METHOD_PRIORS` for a method run under ``arap.protocol=paper``
+#: (its ``protocol`` attribute): ARAP-SR's move rule stops after 2 iterations, 3.6-3.7 s at
+#: 168,897 vertices (the committed ``results/defaust_paper/cases.csv``): 2.2e-5 s/vertex.
+PAPER_PRIORS = {"ARAP-SR": 2.2e-5}
 #: The priors of :data:`METHOD_PRIORS` that are guesses, not measurements.
 GUESSED_PRIORS: tuple[str, ...] = ()
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
@@ -109,7 +113,8 @@ class CostModel:
 def default_cost_model(methods) -> CostModel:
     """The evaluator's :class:`CostModel` for ``methods`` (objects with ``name``): their
     scales (:meth:`CostModel.scale_of`), :data:`METHOD_PRIORS` (those of a method whose
-    scale is not the one the prior is in are left out) and :data:`OVERHEAD_S_PER_VERTEX`.
+    scale is not the one the prior is in are left out; :data:`PAPER_PRIORS` for a method
+    whose ``protocol`` is ``"paper"``) and :data:`OVERHEAD_S_PER_VERTEX`.
 
     >>> from types import SimpleNamespace as M
     >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
@@ -119,6 +124,9 @@ def default_cost_model(methods) -> CostModel:
     scales = {m.name: CostModel.scale_of(m) for m in methods}
     want = {"SShaDe": "const"}
     priors = {k: v for k, v in METHOD_PRIORS.items() if k in scales and scales[k] == want.get(k, "vertices")}
+    for m in methods:  # the paper protocol's move rule stops early (ARAP-SR: 2 iterations)
+        if getattr(m, "protocol", None) == "paper" and m.name in PAPER_PRIORS and m.name in priors:
+            priors[m.name] = PAPER_PRIORS[m.name]
     return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX)
 
 
