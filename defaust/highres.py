@@ -15,7 +15,9 @@ Both steps are pymeshlab filters:
    ``l = sqrt(2 A / (sqrt(3) n))`` (an equilateral mesh of area ``A`` with ``n``
    vertices), ``n`` the middle of the requested range; if the result falls outside the
    range, ``l`` is rescaled by ``sqrt(n_got / n)`` and the remesh redone from the
-   subdivided surface (at most ``max_attempts`` times).
+   subdivided surface (at most ``max_attempts`` times); without pymeshlab's
+   per-collapse surface-distance check (``checksurfdist=False``, ``check_distance``:
+   half the remesh time, the same spread of edges and angles; builder version 2).
 
 Deterministic: both filters are deterministic for a given input (checked by the tests
 through byte-identical builds). The remesh dominates a subject's build time.
@@ -95,7 +97,7 @@ def _ls3(ms, iterations: int) -> None:
 
 
 def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations: int = 10,
-                     max_attempts: int = 4) -> HighResResult:
+                     max_attempts: int = 4, check_distance: bool = False) -> HighResResult:
     """High-resolution version of a mesh: LS3 Loop, then isotropic remeshing.
 
     Parameters
@@ -106,6 +108,16 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
         [150k, 200k]).
     remesh_iterations : int, iterations of the isotropic remesh (pymeshlab default 10).
     max_attempts : int, remeshes tried before giving up.
+    check_distance : bool, pymeshlab's ``checksurfdist`` (its default True; ours False
+        since builder version 2): test every collapse and flip against the subdivided
+        surface with a tolerance of 1% of the bounding box (about 2 cm on a body), looser
+        than the reprojection onto that surface that follows every iteration. It costs
+        half of the remesh: 150 s against 78 s on ANNY subject 0 (213,538 -> 168,855
+        vertices, 10 iterations), with the same edge-length spread (coefficient of
+        variation 0.123, 1st/99th percentile ratio 0.574) and minimum angles (1st
+        percentile 35.3 deg, 0.14% of the faces below 20 deg); the largest distance of a
+        subdivided vertex to the result goes from 1.97 to 3.47 mm (mean 0.112 -> 0.116
+        mm, about one edge length at most); issue 23.
 
     Returns
     -------
@@ -151,7 +163,8 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
     for attempt in range(1, int(max_attempts) + 1):
         ms = _meshset(Vs, Fs)
         ms.meshing_isotropic_explicit_remeshing(iterations=int(remesh_iterations),
-                                                targetlen=pymeshlab.PureValue(edge))
+                                                targetlen=pymeshlab.PureValue(edge),
+                                                checksurfdist=bool(check_distance))
         m = ms.current_mesh()
         n = m.vertex_number()
         tried.append((edge, n))
