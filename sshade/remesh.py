@@ -458,7 +458,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     keepf, FN = nerve_faces(topo.Fc, lab, f3, nseeds, unique_only=bad)
     flipped = flipped_faces(V, topo.vnormals, seeds, FN)
     nflip = int(flipped.sum())
-    new = voronoi_vertex_seeds(topo.Fc, keepf[flipped], dist) if nflip and fix_flips else cand[:0]
+    new = voronoi_vertex_seeds(topo.Fc, keepf[flipped], FN[flipped], label, dist) if nflip and fix_flips else cand[:0]
     if bad:
         return unique_int(np.concatenate([cand, new])), None, nflip
     return new, FN, nflip

@@ -75,21 +75,41 @@ def flipped_faces(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np
     return np.einsum("ij,ij->i", nN, nM) <= 0
 
 
-def voronoi_vertex_seeds(Fc: np.ndarray, faces: np.ndarray, dist: np.ndarray) -> np.ndarray:
+def voronoi_vertex_seeds(Fc: np.ndarray, faces: np.ndarray, FN: np.ndarray, label: np.ndarray,
+                         dist: np.ndarray) -> np.ndarray:
     """Repair seeds for flipped low-res faces: the Voronoi vertex of each (see module).
 
     Parameters
     ----------
     Fc : (m + b, 3) int64 coned high-res faces; faces : (f,) int64 the three-label
         high-res face of each flipped low-res face (``keepf[flipped]`` of
-        :func:`nerve_faces`; no cone vertex on them).
-    dist : (n,) float64 distance of every high-res vertex to its seed.
+        :func:`nerve_faces`; no cone vertex on them); FN : (f, 3) int64 the flipped
+        low-res faces (labels).
+    label : (n,) int Voronoi region and dist : (n,) float64 distance to its seed of
+        every high-res vertex.
 
     Returns
     -------
-    (s,) int64 sorted unique high-res vertices, s <= f: on each face the vertex
-    farthest from its seed (the first on ties), unless already a seed (distance 0).
+    (s,) int64 sorted unique high-res vertices, s <= f: on each face the vertex farthest
+    from its seed (the first on ties); where all three are seeds already (distance 0),
+    the farthest vertex of the union of the three regions instead.
     """
     T = Fc[faces]
     v = T[np.arange(len(T)), dist[T].argmax(axis=1)]
+    dead = dist[v] == 0
+    if dead.any():
+        v[dead] = _farthest_in_regions(FN[dead], label, dist)
     return unique_int(v[dist[v] > 0])
+
+
+def _farthest_in_regions(FN: np.ndarray, label: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(f,) int64, for each low-res face of FN (f, 3), the vertex of largest ``dist`` in
+    the union of its three regions (the first on ties)."""
+    vv = np.flatnonzero(np.isin(label, FN.ravel()))
+    best = np.full(int(FN.max()) + 1, -1, np.int64)
+    order = np.lexsort((vv, -dist[vv], label[vv]))  # per region: farthest, then smallest index
+    reg = label[vv[order]]
+    first = np.r_[True, reg[1:] != reg[:-1]]
+    best[reg[first]] = vv[order][first]
+    per_face = best[FN]
+    return per_face[np.arange(len(FN)), dist[per_face].argmax(axis=1)]
