@@ -85,7 +85,8 @@ def child(a) -> None:
         assert np.isin(h, rm.seeds).all() and rm.n_flipped >= 0
         out.append(dict(seed=int(s), rounds=rm.iterations, repair=rm.n_repair, k=len(rm.seeds),
                         flipped=rm.n_flipped, s=min(ts), check=rm.timings["check_s"], add=rm.timings["add_s"]))
-    print("RESULT " + json.dumps(dict(n=len(V), runs=out)))
+    import sshade
+    print("RESULT " + json.dumps(dict(n=len(V), runs=out, package=str(Path(sshade.__file__).parent))))
 
 
 def package_path(ref: str) -> str:
@@ -98,7 +99,7 @@ def package_path(ref: str) -> str:
 
 def run_child(pkg: str, mesh: str, a) -> dict:
     code = (f"import sys; sys.path[:0] = [{pkg!r}, {str(ROOT)!r}]; "
-            "from benchmarks.remesh_hard import main; main()")
+            "import sshade; from benchmarks.remesh_hard import main; main()")
     cmd = [sys.executable, "-c", code, "--child", "--meshes", mesh, "--n-low", str(a.n_low),
            "--seeds", str(a.seeds), "--repeat", "1", "--cache-dir", a.cache_dir]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
@@ -131,7 +132,7 @@ def main(argv=None):
                 res[m, r].append(run_child(pkgs[r], m, a))
         for r in refs:
             runs = res[m, r]
-            print(f"{m} ({runs[0]['n']} vertices, n_low {a.n_low}) version {r}:")
+            print(f"{m} ({runs[0]['n']} vertices, n_low {a.n_low}) version {r} ({runs[0]['package']}):")
             for i, x in enumerate(runs[0]["runs"]):
                 t = min(rr["runs"][i]["s"] for rr in runs)
                 print(f"  seed {x['seed']:>10}: {x['rounds']:>3} rounds, {x['repair']:>4} repair seeds, "
