@@ -18,7 +18,9 @@ holds, the dual (nerve) of the decomposition is a triangulation homeomorphic to 
 so the low-res mesh ``N`` (vertex i = high-res vertex ``seeds[i]``, faces = the region
 triples of high-res faces, orientation kept) is manifold, with the same Euler
 characteristic and the same number of boundary loops. Low-res faces whose normal opposes
-the high-res surface they stand for are detected and also repaired by adding seeds.
+the high-res surface they stand for are detected and also repaired by adding seeds, at
+their Voronoi vertices (:mod:`sshade.remesh_repair`; a departure from the paper).
+Each round repairs every violation it finds, of the property and flips alike (issue 24).
 
 Speed (issue 13): the connectivity (:func:`mesh_topology`) is built once per mesh and
 shared by the samplings; the sampling runs on the edge graph in a cache-friendly vertex
@@ -34,9 +36,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from ._keys import unique_int
 from .errors import SShaDeError
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
+from .remesh_repair import flipped_faces, nerve_faces, voronoi_vertex_seeds
 
 __all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
 
@@ -433,63 +437,31 @@ def _closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
     return _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab)
 
 
-def _group_argmax(groups: np.ndarray, verts: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """For each distinct group id, the vertex in ``verts`` with the largest ``dist``.
-    Groups whose best vertex has dist 0 (already seeds) are dropped."""
-    if len(groups) == 0:
-        return np.empty(0, np.int64)
-    order = np.lexsort((-dist[verts], groups))
-    g = groups[order]
-    first = np.ones(len(g), bool)
-    first[1:] = g[1:] != g[:-1]
-    best = verts[order][first]
-    return best[dist[best] > 0]
-
-
 def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
            seeds: np.ndarray, fix_flips: bool):
-    """One round of closed-ball checks. Returns (new seed candidates, low-res faces or
-    None, n_flipped).
+    """One round of closed-ball checks and flipped-face repair (paper §3.1; flips:
+    :mod:`sshade.remesh_repair`). Returns (new seed candidates (c,) int64, low-res faces
+    (t, 3) int64 or None while the property fails, number of flipped faces: of the
+    nerve when it holds, else of its already valid faces, -1 when not looked at).
 
     - every Voronoi region is a topological disk (connectivity holds by construction:
       every vertex's shortest-path predecessor is in its region, so chi == 1 suffices);
     - two regions meet along one arc; three regions meet at one point;
     candidates are the farthest vertex of every failing region, pair and triple
-    (compiled: :func:`_closed_ball`)."""
-    n = topo.n
+    (compiled: :func:`_closed_ball`), and with ``fix_flips`` the Voronoi vertex of every
+    flipped low-res face, in the same round (issue 24: the property's and the flips'
+    repairs do not wait for each other)."""
     lab = np.concatenate([label, nseeds + np.arange(topo.n_loops, dtype=label.dtype)])  # cone vertices: own regions
-    bad, cand, f3 = _closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, n, nseeds + topo.n_loops)
-    if bad:
+    bad, cand, f3 = _closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, topo.n, nseeds + topo.n_loops)
+    if bad and not fix_flips:
         return cand, None, -1
-
-    # Closed-ball property holds: the nerve. Drop faces touching cone vertices.
-    Fc = topo.Fc
-    L3 = lab[Fc[f3]]
-    keepf = f3[(L3 < nseeds).all(axis=1)]
-    FN = label[Fc[keepf]].astype(np.int64)
-    # flipped faces: low-res normal vs. high-res vertex normals at the three seeds
-    P = V[seeds]
-    nN = np.cross(P[FN[:, 1]] - P[FN[:, 0]], P[FN[:, 2]] - P[FN[:, 0]])
-    nM = topo.vnormals[seeds[FN]].sum(axis=1)
-    flipped = np.einsum("ij,ij->i", nN, nM) <= 0
+    keepf, FN = nerve_faces(topo.Fc, lab, f3, nseeds, unique_only=bad)
+    flipped = flipped_faces(V, topo.vnormals, seeds, FN)
     nflip = int(flipped.sum())
-    if nflip and fix_flips:
-        ff = keepf[flipped]
-        vv = np.flatnonzero(np.isin(label, FN[flipped].ravel()))
-        # farthest vertex in the union of the three regions of each flipped face
-        regs = FN[flipped].ravel()
-        # map each vertex to flipped faces through its region: take best per region
-        best_in_region = _group_argmax(label[vv], vv, dist)
-        reg_of = label[best_in_region]
-        lookup = np.full(nseeds, -1, np.int64)
-        lookup[reg_of] = best_in_region
-        per_face = lookup[regs].reshape(-1, 3)
-        dd = np.where(per_face >= 0, dist[np.maximum(per_face, 0)], -1)
-        pick = per_face[np.arange(len(ff)), dd.argmax(axis=1)]
-        pick = pick[pick >= 0]
-        if len(pick):
-            return np.unique(pick), FN, nflip
-    return np.empty(0, np.int64), FN, nflip
+    new = voronoi_vertex_seeds(topo.Fc, keepf[flipped], FN[flipped], label, dist) if nflip and fix_flips else cand[:0]
+    if bad:
+        return unique_int(np.concatenate([cand, new])), None, nflip
+    return new, FN, nflip
 
 
 _WARM = False
@@ -568,11 +540,12 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
         rounds += 1
         tc = time.perf_counter()
         label, dist, seeds = st.label, st.dist, st.seeds
-        new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix_flips and flip_rounds < max_flip_rounds)
+        fix = fix_flips and flip_rounds < max_flip_rounds
+        new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix)
         t_check += time.perf_counter() - tc
         if len(new) == 0:
             break
-        if FN is not None:
+        if fix and nflip > 0:
             flip_rounds += 1
         st.add(new)
     else:
