@@ -34,16 +34,17 @@ __all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_
            "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words"]
 
 #: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
-#: poses) with one worker on a 2-core machine: the build of 10 subjects took ~25 min
-#: (issue 23). A parallel build takes rounds of ``workers`` subjects.
-BUILD_S_PER_SUBJECT = 160.0
+#: poses) on a 2-core machine, two subjects at once: 59-90 s (builder version 2; 10
+#: subjects in 344 s with 2 workers, issue 23). A parallel build takes rounds of
+#: ``workers`` subjects.
+BUILD_S_PER_SUBJECT = 69.0
 #: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
 #: rigid fit: 24-63 s (mean 42 s) at 168,897 vertices in ``results/defaust/eval.log``.
 REFERENCE_S_PER_VERTEX = 3e-4
-#: The same for ARAP-SR's energy (Anderson-accelerated block descent, thousands of
-#: iterations): 21-48 s at FAUST's 6,890 vertices (``experiment=ci``, 2 busy cores), i.e.
-#: 3-7e-3 s/vertex; not measured at DeFAUST's size yet.
-SR_REFERENCE_S_PER_VERTEX = 5e-3
+#: The same for ARAP-SR's energy (Anderson-accelerated block descent, continued from the
+#: method's converged result): 474 s, 1,269 iterations at DeFAUST s00_p01's 168,897
+#: vertices (2 cores, one busy with another job): 2.8e-3 s/vertex (FAUST: 3-7e-3).
+SR_REFERENCE_S_PER_VERTEX = 2.8e-3
 
 
 def duration_words(seconds: float, *, about: bool = False) -> str:

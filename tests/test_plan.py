@@ -71,7 +71,7 @@ def test_plan_without_build_before_the_cases_exist_and_on_resume():
 
 def test_actuals_beside_the_estimates():
     plan = P.make_plan([C(n_vertices=10)], ["S"], [(0, 0)], CostModel({"S": "const"}, priors={"S": 3.0}),
-                     build={**P.build_stage(2), "actual_s": 100.0})
+                     build={**P.build_stage(2, s_per_subject=160.0), "actual_s": 100.0})
     assert plan["total_s"] == 3.0  # a build already done is not ahead any more
     assert "DeFAUST built (2 subject(s), 100 s)" in P.render_plan(plan, head="plan, the cases built")
     out = P.add_actuals(plan, {"runs": 4.0, "references": 0.0, "build": 1.0})
@@ -125,7 +125,7 @@ def test_plan_logged_before_the_build(monkeypatch, caplog, tmp_path):
     """planned_root logs the plan (build, runs on the cases to come, references) before
     the dataset's preparation starts, and times it."""
     outlook = {"root": str(tmp_path), "source": "anny", "subjects": 2, "complete": 0, "workers": 2,
-               "s_per_subject": 160.0, "cases": [(0, 1), (0, 2), (1, 1), (1, 2)], "n_vertices": 1000}
+               "s_per_subject": 69.0, "cases": [(0, 1), (0, 2), (1, 1), (1, 2)], "n_vertices": 1000}
     monkeypatch.setattr(cases_plan.datasets, "dataset_outlook", lambda cfg: outlook)
     monkeypatch.setattr(cases_plan.datasets, "dataset_root",
                         lambda cfg: logging.getLogger("eval").info("building now") or tmp_path)
