@@ -8,7 +8,9 @@ import numpy as np
 from sshade.arap import PROTOCOLS, arap_deform, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles, validate_mesh
-from sshade.warmup import warm_fullres
+from sshade.warmup import WARMED, warm_fullres, warm_once
+
+from .coarse_start import check_start, coarse_start, start_rotations, uses_coarse
 
 __all__ = ["FullResArap", "ARAP", "Elastic", "check_arap_args"]
 
@@ -63,6 +65,18 @@ class FullResArap:
         energy-and-gradient criterion) or ``"paper"`` (libigl, paper §4.1 move rule).
     etol, gtol : floats or None, the ``"converged"`` criterion
         (:class:`sshade.arap.criterion.Criterion`; None: its defaults).
+    start : ``"converged"`` protocol's start: ``"rigid"`` (the rigid fit of the handles),
+        ``"coarse"`` (:func:`baselines.coarse_start.coarse_start`: the global step of the
+        rotations of the same energy solved on a ``coarse_n_low``-vertex remesh),
+        ``"auto"`` (default: coarse when the mesh has at least ``COARSE_MIN_RATIO *
+        coarse_n_low`` vertices, falling back to rigid if the coarse start raises
+        SShaDeError). Either start is stopped by the same full-resolution criterion
+        (issue 23).
+    coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
+
+    Raises
+    ------
+    SShaDeError on a bad parameter value.
 
     Examples
     --------
@@ -74,9 +88,11 @@ class FullResArap:
     """
 
     def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int | None = None, name: str | None = None,
-                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
+                 start: str = "auto", coarse_n_low: int = 6000):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{name or energy}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
+        self.start, self.coarse_n_low = check_start(name or energy, start, coarse_n_low)
         args = check_arap_args(name or energy, tol, max_iter, etol, gtol)
         self.energy = energy
         self.tol = args["tol"]
@@ -93,36 +109,50 @@ class FullResArap:
         """
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
+        R0, cinfo = None, {}
+        if self.protocol == "converged":
+            R0, cinfo = start_rotations(self.start, V, F, handles, targets, energy=self.energy,
+                                        coarse_n_low=self.coarse_n_low, criterion=self.criterion)
         res = arap_deform(V, F, handles, targets, energy=self.energy, tol=self.tol, max_iter=self.max_iter,
-                          protocol=self.protocol, criterion=self.criterion)
+                          protocol=self.protocol, criterion=self.criterion, R0=R0)
+        if cinfo:  # the coarse start's seconds count as set-up
+            res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
         self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": self.protocol,
                      "status": res.info.get("status"), "precompute_s": res.precompute_s, "solve_s": res.solve_s,
                      "s_per_iter": res.solve_s / max(res.iterations, 1)}
         for k in ("energy", "gnorm", "rel_decrease", "n_fallback", "linear_solver"):
             if k in res.info:
                 self.info[k] = res.info[k]
+        self.info.update({k: cinfo[k] for k in ("coarse_n", "coarse_iterations", "coarse_s") if k in cinfo})
         return res.V
 
     def warmup(self, n_vertices: int | None = None) -> float:
         """Compile (or load from numba's cache) the kernels :meth:`deform` runs for this
         energy and protocol (parallel variants too when an ``n_vertices`` mesh uses them),
-        outside any timed call (:func:`sshade.warmup.warm_fullres`). Returns the seconds
-        spent (0.0 when warm)."""
-        return warm_fullres(self.energy, self.protocol, n_vertices)
+        outside any timed call (:func:`sshade.warmup.warm_fullres`), and the remesh and
+        low-res solve of a coarse start when one runs (``n_vertices`` None: whenever
+        ``start`` is not ``"rigid"``). Returns the seconds spent (0.0 when warm)."""
+        s = warm_fullres(self.energy, self.protocol, n_vertices)
+        if self.protocol == "converged" and self.start != "rigid" and (
+                n_vertices is None or uses_coarse(self.start, int(n_vertices), self.coarse_n_low)):
+            s += warm_once(WARMED, ("coarse_start", self.energy),
+                           lambda V, F, h, T: coarse_start(V, F, h, T, energy=self.energy, n_low=40))
+        return s
 
 
 class ARAP(FullResArap):
     """ARAP, spokes energy (Sorkine & Alexa 2007), full resolution."""
 
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
-                 etol: float | None = None, gtol: float | None = None):
-        super().__init__("spokes", tol=tol, max_iter=max_iter, name="ARAP", protocol=protocol, etol=etol, gtol=gtol)
+                 etol: float | None = None, gtol: float | None = None, start: str = "auto", coarse_n_low: int = 6000):
+        super().__init__("spokes", tol=tol, max_iter=max_iter, name="ARAP", protocol=protocol, etol=etol, gtol=gtol,
+                         start=start, coarse_n_low=coarse_n_low)
 
 
 class Elastic(FullResArap):
     """Elastic = spokes-and-rims ARAP (Chao et al. 2010), full resolution."""
 
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
-                 etol: float | None = None, gtol: float | None = None):
+                 etol: float | None = None, gtol: float | None = None, start: str = "auto", coarse_n_low: int = 6000):
         super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name="Elastic", protocol=protocol,
-                         etol=etol, gtol=gtol)
+                         etol=etol, gtol=gtol, start=start, coarse_n_low=coarse_n_low)

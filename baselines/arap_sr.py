@@ -30,12 +30,9 @@ from sshade.warmup import WARMED, warm_once
 
 from .arap import check_arap_args
 from .arap_sr_solver import solve_arap_sr
-from .arap_sr_start import COARSE_MIN_RATIO, coarse_start
+from .coarse_start import SR_ENERGY, check_start, start_rotations
 
-__all__ = ["arap_sr_deform", "ARAPSR", "SR_STARTS"]
-
-#: starts of the converged protocol (:class:`ARAPSR`)
-SR_STARTS = ("auto", "rigid", "coarse")
+__all__ = ["arap_sr_deform", "ARAPSR"]
 
 
 def _polar(M: np.ndarray) -> np.ndarray:
@@ -146,7 +143,7 @@ class ARAPSR:
     etol, gtol : floats or None, the ``"converged"`` criterion (None: the defaults of
         :data:`sshade.arap.DEFAULT_CRITERION`).
     start : ``"converged"`` protocol's start: ``"rigid"`` (the rigid fit of the handles),
-        ``"coarse"`` (:func:`baselines.arap_sr_start.coarse_start`: the rotations of the
+        ``"coarse"`` (:func:`baselines.coarse_start.coarse_start`: the rotations of the
         same energy solved on a ``coarse_n_low``-vertex remesh), ``"auto"`` (default:
         coarse when the mesh has at least ``COARSE_MIN_RATIO * coarse_n_low`` vertices,
         falling back to rigid if the remesh or the low-res solve raises SShaDeError).
@@ -165,11 +162,7 @@ class ARAPSR:
                  start: str = "auto", coarse_n_low: int = 6000):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{self.name}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
-        if start not in SR_STARTS:
-            raise SShaDeError(f"{self.name}: unknown start {start!r}; use one of {SR_STARTS}")
-        if isinstance(coarse_n_low, bool) or not isinstance(coarse_n_low, int | np.integer) or coarse_n_low < 4:
-            raise SShaDeError(f"{self.name}: coarse_n_low must be an integer >= 4, got {coarse_n_low!r}")
-        self.start, self.coarse_n_low = start, int(coarse_n_low)
+        self.start, self.coarse_n_low = check_start(self.name, start, coarse_n_low)
         args = check_arap_args(self.name, tol, max_iter, etol, gtol, alpha=alpha)  # SShaDeError on a bad value
         self.alpha, self.tol, self.protocol = args["alpha"], args["tol"], protocol
         self.max_iter = ({"converged": 10000, "paper": 1000}[protocol] if args["max_iter"] is None
@@ -203,23 +196,14 @@ class ARAPSR:
         return res.V
 
     def _converged(self, V, F, handles, targets):
-        """The converged protocol from the start of ``self.start``; a coarse start's
-        seconds count in ``precompute_s`` and its numbers go to ``info``. With ``"auto"``
-        a remesh or low-res solve that fails (SShaDeError) falls back to the rigid start;
-        with ``"coarse"`` the error propagates."""
-        coarse = self.start == "coarse" or (self.start == "auto" and len(V) >= COARSE_MIN_RATIO * self.coarse_n_low)
-        R0, cinfo = None, {}
-        if coarse:
-            try:
-                R0, cinfo = coarse_start(V, F, handles, targets, alpha=self.alpha, n_low=self.coarse_n_low,
-                                         criterion=self.criterion)
-            except SShaDeError:  # "auto" is best effort: the rigid start
-                if self.start == "coarse":
-                    raise
-                coarse = False
+        """The converged protocol from the start of ``self.start``
+        (:func:`baselines.coarse_start.start_rotations`); a coarse start's seconds count in
+        ``precompute_s`` and its numbers go to ``info``."""
+        R0, cinfo = start_rotations(self.start, V, F, handles, targets, energy=SR_ENERGY, alpha=self.alpha,
+                                    coarse_n_low=self.coarse_n_low, criterion=self.criterion)
         res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, criterion=self.criterion,
                             max_iter=self.max_iter, R0=R0)
-        if coarse:
+        if cinfo:
             res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
             res.info.update(cinfo)
         return res

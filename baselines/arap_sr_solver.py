@@ -283,7 +283,7 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
         that fit's rotation; with ``R0``: the global step of ``R0``); handle rows are set
         to ``targets``.
     R0 : (n, 3, 3) float64 or None, start rotations (default: the rigid fit's), e.g.
-        :func:`baselines.arap_sr_start.coarse_start`'s; one sweep at ``U0`` follows.
+        :func:`baselines.coarse_start.coarse_start`'s; one sweep at ``U0`` follows.
     time_budget_s : float or None, stop (status ``"time_budget"``) after this many seconds.
     jacobi : bool, Jacobi local step instead of Gauss-Seidel (measurements only: the
         energy may then increase; steps are not safeguarded).

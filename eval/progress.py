@@ -30,7 +30,7 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "
 #: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
 #: method, seconds for ``SShaDe``): the mean ``time_s`` of the committed
 #: ``results/defaust/cases.csv`` at 168,897 vertices (2 cores): ARAP 70.8 s, Elastic
-#: 68.1 s, SShaDe 2.0 s; ARAP-SR (converged, coarse start: baselines/arap_sr_start.py)
+#: 68.1 s, SShaDe 2.0 s; ARAP-SR (converged, coarse start: baselines/coarse_start.py)
 #: 41-112 s on the first four DeFAUST cases, 43-54 s on s00_p01 (machine shared): 3e-4
 #: s/vertex, about 51 s at 169k.
 METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0}

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from baselines.arap_sr_solver import SRProblem, solve_arap_sr
-from baselines.arap_sr_start import COARSE_MIN_RATIO, coarse_start
+from baselines.coarse_start import COARSE_MIN_RATIO, SR_ENERGY, coarse_start
 from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
@@ -130,12 +130,12 @@ def _sr_start(V, F, handles, targets, alpha, U0, R0):
     rotations ``R0``, so the deep solve continues that path; else (no ``R0``: sweeps for
     the rotations of a given ``U0`` crawl at 169k vertices), on a mesh of at least
     ``COARSE_MIN_RATIO`` x 6,000 vertices, the method's own coarse start
-    (:func:`baselines.arap_sr_start.coarse_start`; from the rigid fit the solve takes
+    (:func:`baselines.coarse_start.coarse_start`; from the rigid fit the solve takes
     hours at 169k vertices); else the rigid fit (``(None, None)``)."""
     if U0 is not None and R0 is not None:
         return U0, R0
     if len(V) >= COARSE_MIN_RATIO * 6000:
-        return None, coarse_start(V, F, handles, targets, alpha=alpha, n_low=6000)[0]
+        return None, coarse_start(V, F, handles, targets, energy=SR_ENERGY, alpha=alpha, n_low=6000)[0]
     return None, None
 
 
@@ -221,7 +221,7 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     U0 : (n, 3) float64 or None, a start for the deep solve (e.g. a method's result;
         the minimiser does not depend on it, only the time to reach it). Not part of
         the key. For an ARAP-SR energy, without ``U0`` the deep solve starts from the
-        coarse start on meshes of at least 24,000 vertices (:func:`baselines.arap_sr_start.coarse_start`).
+        coarse start on meshes of at least 24,000 vertices (:func:`baselines.coarse_start.coarse_start`).
     R0 : (n, 3, 3) float64 or None, ARAP-SR's rotations at ``U0``; ARAP-SR's deep solve
         continues from ``(U0, R0)`` only when both are given; ignored for the other energies.
 

@@ -165,12 +165,12 @@ def test_anderson_on_joint_residual_needs_fewer_iterations():
 def test_coarse_start_same_minimiser():
     """Issue 21: the coarse start (the rotations of a low-res solve of the same energy)
     ends at the same minimiser as the rigid start, certified by the same criterion."""
-    from baselines.arap_sr_start import coarse_start
+    from baselines.coarse_start import SR_ENERGY, coarse_start
 
     V, F, h, T = SMALL["lifted_plane"]()
     pb = SRProblem(V, F, h, T, 0.01)
     deep = solve_arap_sr(V, F, h, T, alpha=0.01, criterion=DEEP_CRITERION, max_iter=20000, problem=pb)
-    R0, info = coarse_start(V, F, h, T, alpha=0.01, n_low=300)
+    R0, info = coarse_start(V, F, h, T, energy=SR_ENERGY, alpha=0.01, n_low=300)
     assert R0.shape == (len(V), 3, 3) and info["coarse_status"] == "converged" and info["coarse_n"] >= 300
     assert np.allclose(np.einsum("kab,kcb->kac", R0, R0), np.eye(3), atol=1e-9)
     res = solve_arap_sr(V, F, h, T, alpha=0.01, R0=R0, problem=pb)

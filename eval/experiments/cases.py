@@ -500,8 +500,9 @@ class _References:
 
         c, e = self.case, method_energy(method)
         if e not in self.refs:
-            # a full-resolution solve of this very energy from the rigid fit (ARAP, Elastic
-            # under the converged protocol) is on the deep solve's own path: continue from it
+            # a full-resolution solve of this very energy (ARAP, Elastic under the converged
+            # protocol, from the rigid fit or their coarse start) is on the deep solve's own
+            # path: continue from it
             # (ARAP-SR's converged protocol: the deep solve continues from its result and rotations)
             converged = getattr(method, "protocol", None) == "converged"
             same_path = converged and (getattr(method, "energy", None) == e or sr_alpha(e) is not None)

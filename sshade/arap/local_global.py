@@ -74,7 +74,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
                 energy: str = "spokes_and_rims", tol: float = 1e-4, max_iter: int | None = None,
                 V0: np.ndarray | None = None, time_budget_s: float | None = None,
                 protocol: str = "converged", criterion=None, accelerate: str = "lbfgs",
-                anderson_m: int | None = None) -> ArapResult:
+                anderson_m: int | None = None, R0: np.ndarray | None = None) -> ArapResult:
     """Handle-driven ARAP deformation under one of the two protocols (module docstring).
 
     Parameters
@@ -97,6 +97,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     accelerate : ``"lbfgs"`` (default), ``"anderson"`` or ``"none"``, the ``"converged"``
         protocol's iteration (:func:`sshade.arap.solver.solve_arap`).
     anderson_m : int or None, its history window (None: 10 for L-BFGS, 5 for Anderson).
+    R0 : (n, 3, 3) float64 or None, ``"converged"`` protocol only: start from the global
+        step of these rotations (:func:`sshade.arap.solver.solve_arap`), not with ``V0``.
 
     Returns
     -------
@@ -106,8 +108,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
 
     Raises
     ------
-    SShaDeError on an unknown energy or protocol (inputs are assumed validated by the
-    caller).
+    SShaDeError on an unknown energy or protocol, ``R0`` under the ``"paper"`` protocol
+    (inputs are assumed validated by the caller).
 
     Examples
     --------
@@ -120,6 +122,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
+    if R0 is not None and protocol != "converged":
+        raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
     if max_iter is None:
         max_iter = DEFAULT_MAX_ITER[protocol]
     V = np.ascontiguousarray(V, np.float64)
@@ -138,7 +142,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         return ArapResult(V=V @ R.T + t, iterations=0, converged=True, last_move=0.0,
                           precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol, "status": "rigid"})
     if protocol == "converged":
-        res = solve_arap(V, F, handles, targets, energy=energy, U0=V0, criterion=criterion, max_iter=max_iter,
+        res = solve_arap(V, F, handles, targets, energy=energy, U0=V0, R0=R0, criterion=criterion, max_iter=max_iter,
                          accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s)
         res.info["protocol"] = "converged"
         return res

@@ -89,7 +89,8 @@ clock = time.perf_counter
 
 
 def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = "spokes_and_rims",
-               U0: np.ndarray | None = None, criterion: Criterion | None = None, max_iter: int = 5000,
+               U0: np.ndarray | None = None, R0: np.ndarray | None = None,
+               criterion: Criterion | None = None, max_iter: int = 5000,
                accelerate: bool | str = "lbfgs", anderson_m: int | None = None, time_budget_s: float | None = None,
                callback=None, linear_solver: str = "auto",
                operators: ArapOperators | None = None, threads: int | None = None,
@@ -105,6 +106,10 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     U0 : (n, 3) float64 or None, start; default the best rigid fit of the handles
         (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V`` (so a rigid handle motion
         is reproduced exactly). The handle rows are overwritten by ``targets``.
+    R0 : (n, 3, 3) float64 or None, start rotations (one per vertex = rotation cell),
+        e.g. those of a solve on a low-resolution remesh (the baselines' coarse start): the
+        first iterate is their global step, the minimiser of ``E(U, R0)`` with the handles
+        at ``targets``. Not together with ``U0``.
     criterion : :class:`Criterion` or None (:data:`DEFAULT_CRITERION`).
     max_iter : int >= 0, cap on accepted iterations (global solves).
     accelerate : ``"lbfgs"`` (default; Armijo backtracking, memory pairs with non-positive
@@ -140,9 +145,9 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     Raises
     ------
     SShaDeError
-        Unknown energy or linear solver, bad mesh / handles / targets / ``U0`` shapes or
-        values, ``operators`` built for another energy, a connected component without a
-        handle.
+        Unknown energy or linear solver, bad mesh / handles / targets / ``U0`` / ``R0``
+        shapes or values, both ``U0`` and ``R0`` given, ``operators`` built for another
+        energy, a connected component without a handle.
 
     Examples
     --------
@@ -158,13 +163,14 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         raise SShaDeError(f"operators were built for {ops.energy_type!r}, not {energy!r}")
     h, T = validate_handles(ops.V, handles, targets)
     U = _start_point(ops, h, T, U0)
+    R0 = _start_rotations(ops.n, U0, R0)
     info = {"energy_type": energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": acc,
             "anderson_m": m, "n_local": 0, "n_fallback": 0}
     if len(np.setdiff1d(np.arange(ops.n), h)) == 0:  # every vertex is a handle
         return _all_handles(ops, U, info, t_start)
     _check_components(ops.L, h)
     st = _Stepper(ops, U, h, T, threads=threads, reorder=reorder, linear_solver=linear_solver, info=info)
-    loop = _Loop(st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback)
+    loop = _Loop(st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback, R0=R0)
     loop.run()
     return loop.result(precompute_s=loop.t_iter - t_start)
 
@@ -203,6 +209,19 @@ def _start_point(ops: ArapOperators, h: np.ndarray, T: np.ndarray, U0) -> np.nda
             raise SShaDeError(f"U0 must be a finite (n, 3) array with n={n}, got shape {U.shape}")
     U[h] = T
     return U
+
+
+def _start_rotations(n: int, U0, R0) -> np.ndarray | None:
+    """``R0`` of :func:`solve_arap` checked: None, or a finite (n, 3, 3) float64 array
+    (``U0`` not given)."""
+    if R0 is None:
+        return None
+    if U0 is not None:
+        raise SShaDeError("give U0 (start positions) or R0 (start rotations), not both")
+    R = np.asarray(R0, dtype=np.float64)
+    if R.shape != (n, 3, 3) or not np.isfinite(R).all():
+        raise SShaDeError(f"R0 must be a finite (n, 3, 3) array with n={n}, got shape {R.shape}")
+    return R
 
 
 def _all_handles(ops: ArapOperators, U: np.ndarray, info: dict, t_start: float) -> ArapResult:
@@ -360,9 +379,11 @@ class _Loop:
     repeat the stopping test (:meth:`stop_test`), a step (:meth:`lbfgs_step` or
     :meth:`anderson_step`, the latter also for the plain iteration) and its acceptance
     (:meth:`accept`). State: the accepted iterate ``x`` (energy ``E``, plain step ``g =
-    G(x)``), the energy and gradient-norm histories, ``status`` once stopped."""
+    G(x)``), the energy and gradient-norm histories, ``status`` once stopped. With start
+    rotations ``R0`` (mesh numbering) the start point is their global step."""
 
-    def __init__(self, st: _Stepper, crit: Criterion, acc: str, m: int, *, max_iter, time_budget_s, callback):
+    def __init__(self, st: _Stepper, crit: Criterion, acc: str, m: int, *, max_iter, time_budget_s, callback,
+                 R0=None):
         self.st, self.crit = st, crit
         self.max_iter, self.time_budget_s, self.callback = max_iter, time_budget_s, callback
         self.t_iter = clock()
@@ -371,6 +392,9 @@ class _Loop:
         self.anderson = (Anderson(m, 3 * len(st.free), st.kerns if st.kern else None, st.nthreads)
                          if acc == "anderson" else None)
         self.x = st.U[st.free].copy()
+        if R0 is not None:  # the global step of the start rotations
+            st.R[:] = R0 if st.perm is None else R0[st.perm]
+            self.x = st.glob()
         self.E = st.local(self.x)
         self.g = st.glob()
         self.E_hist, self.G_hist = [self.E], []

@@ -1,0 +1,130 @@
+"""A coarse-to-fine start for the converged protocol of the full-resolution baselines
+(ARAP-SR, issue 21; ARAP and Elastic, issue 23): solve the same energy on a
+low-resolution remesh (SShaDe's, :func:`sshade.remesh.remesh`, the handles kept as
+vertices), give every full-resolution vertex the rotation of its low-res Voronoi region,
+and start the full-resolution solve from those rotations and their global step
+(:func:`sshade.arap.solve_arap` / :func:`baselines.arap_sr_solver.solve_arap_sr`, ``R0``).
+
+Why: a local/global iteration spreads a change by about one ring, so the smooth
+(low-frequency) part of the solution, a bend of a limb, is what takes the iterations at
+full resolution; for ARAP-SR the smoothness term couples neighbouring rotations the same
+way. The energies approximate resolution-independent integrals (the ARAP term an area
+integral; ARAP-SR's uniform edge sum of ``||R_s - R_d||^2`` a Dirichlet energy of the
+rotation field on a regular triangulation), so the low-res minimiser carries that smooth
+part. The result is still certified by the full-resolution criterion: the start changes
+the time to converge, not what "converged" means. ARAP is not convex: the two starts can
+end at different stationary points (docs/protocols.md).
+
+:func:`check_start` checks the ``start`` / ``coarse_n_low`` options of the baselines,
+:func:`start_rotations` applies them (``"auto"``: coarse on meshes of at least
+:data:`COARSE_MIN_RATIO` x ``coarse_n_low`` vertices, rigid where the coarse start fails),
+:func:`coarse_start` is the start itself.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from sshade.arap import ENERGIES, Criterion, build_operators, solve_arap
+from sshade.errors import SShaDeError
+from sshade.remesh import remesh
+
+from .arap_sr_solver import solve_arap_sr
+
+__all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO",
+           "SR_ENERGY"]
+
+#: the converged protocol's starts: ``auto``, the rigid fit of the handles, the coarse start
+STARTS = ("auto", "rigid", "coarse")
+#: ``"auto"`` starts coarse only when the mesh has at least this many times ``n_low`` vertices
+COARSE_MIN_RATIO = 4
+#: ``energy`` of :func:`coarse_start` naming ARAP-SR's energy (its ``alpha`` given apart)
+SR_ENERGY = "arap_sr"
+
+
+def check_start(name: str, start, coarse_n_low) -> tuple[str, int]:
+    """A baseline's ``start`` (one of :data:`STARTS`) and ``coarse_n_low`` (an int >= 4),
+    checked when it is built. Returns ``(start, coarse_n_low)``; raises SShaDeError
+    naming ``name``, the parameter and its value."""
+    if not isinstance(start, str) or start not in STARTS:
+        raise SShaDeError(f"{name}: unknown start {start!r}; use one of {STARTS}")
+    if isinstance(coarse_n_low, bool) or not isinstance(coarse_n_low, int | np.integer) or coarse_n_low < 4:
+        raise SShaDeError(f"{name}: coarse_n_low must be an integer >= 4, got {coarse_n_low!r}")
+    return start, int(coarse_n_low)
+
+
+def uses_coarse(start: str, n_vertices: int, coarse_n_low: int) -> bool:
+    """Whether ``start`` begins with a coarse solve on an ``n_vertices`` mesh."""
+    return start == "coarse" or (start == "auto" and n_vertices >= COARSE_MIN_RATIO * coarse_n_low)
+
+
+def start_rotations(start: str, V, F, handles, targets, *, energy: str, coarse_n_low: int, alpha: float = 0.0,
+                    criterion: Criterion | None = None) -> tuple[np.ndarray | None, dict]:
+    """The start rotations of the converged protocol under ``start``
+    (:func:`check_start`): ``(R0, info)`` from :func:`coarse_start` when
+    :func:`uses_coarse`, else ``(None, {})`` (the rigid fit). With ``"auto"`` a remesh or
+    low-res solve that fails (SShaDeError) falls back to the rigid start; with
+    ``"coarse"`` the error propagates."""
+    if not uses_coarse(start, len(V), coarse_n_low):
+        return None, {}
+    try:
+        return coarse_start(V, F, handles, targets, energy=energy, alpha=alpha, n_low=coarse_n_low,
+                            criterion=criterion)
+    except SShaDeError:  # "auto" is best effort: the rigid start
+        if start == "coarse":
+            raise
+        return None, {}
+
+
+def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_low: int = 6000, seed: int = 0,
+                 criterion: Criterion | None = None) -> tuple[np.ndarray, dict]:
+    """Start rotations for a full-resolution solve from a low-resolution solve of the same
+    energy.
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64, a validated single-component manifold mesh.
+    handles : (h,) int64 unique; targets : (h, 3) float64.
+    energy : ``"spokes"`` or ``"spokes_and_rims"`` (:func:`sshade.arap.solve_arap`), or
+        :data:`SR_ENERGY` (ARAP-SR, :func:`baselines.arap_sr_solver.solve_arap_sr`).
+    alpha : float >= 0, ARAP-SR's smoothness weight (the same at both resolutions).
+    n_low : int >= 4, farthest-point samples of the remesh (the handles are added).
+    seed : int, the remesh's first sample. criterion : the low-res solve's (default
+        :data:`sshade.arap.DEFAULT_CRITERION`).
+
+    Returns
+    -------
+    R0 : (n, 3, 3) float64 rotations (vertex ``i`` gets its region's ``R``).
+    info : dict ``coarse_n``, ``coarse_iterations``, ``coarse_status``, ``remesh_s``,
+        ``coarse_s`` (seconds).
+
+    Raises
+    ------
+    SShaDeError from the remesh or the low-res solve (bad mesh, handles, options), or an
+    unknown ``energy``.
+
+    Examples
+    --------
+    Example::
+
+        R0, info = coarse_start(V, F, handles, targets, energy="spokes", n_low=6000)
+        res = solve_arap(V, F, handles, targets, energy="spokes", R0=R0)
+    """
+    if energy not in ENERGIES and energy != SR_ENERGY:
+        raise SShaDeError(f"coarse start: unknown energy {energy!r}; use one of {(*ENERGIES, SR_ENERGY)}")
+    t0 = time.perf_counter()
+    rm = remesh(V, F, int(n_low), seed=seed, required=handles)
+    t1 = time.perf_counter()
+    Vl, hl = V[rm.seeds], rm.label[handles]
+    if energy == SR_ENERGY:
+        res = solve_arap_sr(Vl, rm.F, hl, targets, alpha=alpha, criterion=criterion)
+        R = res.info["R"]
+    else:
+        ops = build_operators(Vl, rm.F, energy)
+        res = solve_arap(Vl, rm.F, hl, targets, energy=energy, criterion=criterion, operators=ops)
+        R = ops.rotations(res.V)
+    R0 = np.ascontiguousarray(R[rm.label])
+    info = {"coarse_n": int(len(rm.seeds)), "coarse_iterations": int(res.iterations),
+            "coarse_status": str(res.info["status"]), "remesh_s": t1 - t0, "coarse_s": time.perf_counter() - t1}
+    return R0, info
