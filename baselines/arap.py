@@ -65,13 +65,16 @@ class FullResArap:
         energy-and-gradient criterion) or ``"paper"`` (libigl, paper §4.1 move rule).
     etol, gtol : floats or None, the ``"converged"`` criterion
         (:class:`sshade.arap.criterion.Criterion`; None: its defaults).
-    start : ``"converged"`` protocol's start: ``"rigid"`` (the rigid fit of the handles),
-        ``"coarse"`` (:func:`baselines.coarse_start.coarse_start`: the global step of the
-        rotations of the same energy solved on a ``coarse_n_low``-vertex remesh),
-        ``"auto"`` (default: coarse when the mesh has at least ``COARSE_MIN_RATIO *
+    start : ``"converged"`` protocol's start: ``"rigid"`` (default: the rigid fit of the
+        handles), ``"coarse"`` (:func:`baselines.coarse_start.coarse_start`: the global
+        step of the rotations of the same energy solved on a ``coarse_n_low``-vertex
+        remesh), ``"auto"`` (coarse when the mesh has at least ``COARSE_MIN_RATIO *
         coarse_n_low`` vertices, falling back to rigid if the coarse start raises
         SShaDeError). Either start is stopped by the same full-resolution criterion
-        (issue 23).
+        (issue 23). Rigid by default: on DeFAUST the coarse start saves only 15-35% of
+        the iterations (823 -> 550, 820 -> 697 on s00_p01) and lands on another
+        stationary point, 0.2-0.65% of the diagonal away (ARAP-SR, whose sweeps crawl
+        from the rigid start, keeps ``auto``).
     coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
 
     Raises
@@ -89,7 +92,7 @@ class FullResArap:
 
     def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int | None = None, name: str | None = None,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 start: str = "auto", coarse_n_low: int = 6000):
+                 start: str = "rigid", coarse_n_low: int = 6000):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{name or energy}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
         self.start, self.coarse_n_low = check_start(name or energy, start, coarse_n_low)
@@ -144,7 +147,7 @@ class ARAP(FullResArap):
     """ARAP, spokes energy (Sorkine & Alexa 2007), full resolution."""
 
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
-                 etol: float | None = None, gtol: float | None = None, start: str = "auto", coarse_n_low: int = 6000):
+                 etol: float | None = None, gtol: float | None = None, start: str = "rigid", coarse_n_low: int = 6000):
         super().__init__("spokes", tol=tol, max_iter=max_iter, name="ARAP", protocol=protocol, etol=etol, gtol=gtol,
                          start=start, coarse_n_low=coarse_n_low)
 
@@ -153,6 +156,6 @@ class Elastic(FullResArap):
     """Elastic = spokes-and-rims ARAP (Chao et al. 2010), full resolution."""
 
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
-                 etol: float | None = None, gtol: float | None = None, start: str = "auto", coarse_n_low: int = 6000):
+                 etol: float | None = None, gtol: float | None = None, start: str = "rigid", coarse_n_low: int = 6000):
         super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name="Elastic", protocol=protocol,
                          etol=etol, gtol=gtol, start=start, coarse_n_low=coarse_n_low)

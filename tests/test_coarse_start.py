@@ -69,9 +69,10 @@ def test_fullres_start_option(cls):
     Ur = r.deform(V, F, h, T)
     assert r.info["converged"] and "coarse_n" not in r.info
     assert m.info["energy"] <= r.info["energy"] * (1 + 1e-6) or _mean_dist(U, Ur, V) < 5e-4
-    a = cls()  # auto: a mesh below COARSE_MIN_RATIO x coarse_n_low starts rigid
+    assert cls().start == "rigid" and cls(protocol="paper").start == "rigid"  # the default (issue 23: coarse saves 15-35%)
+    a = cls(start="auto")  # auto: a mesh below COARSE_MIN_RATIO x coarse_n_low starts rigid
     assert np.array_equal(a.deform(V, F, h, T), Ur) and "coarse_n" not in a.info
-    a = cls(coarse_n_low=len(V) // COARSE_MIN_RATIO)  # ... and at least that starts coarse
+    a = cls(start="auto", coarse_n_low=len(V) // COARSE_MIN_RATIO)  # ... and at least that starts coarse
     a.deform(V, F, h, T)
     assert "coarse_n" in a.info
     p = cls(protocol="paper", start="coarse", max_iter=3)  # the paper protocol has no start
