@@ -25,10 +25,22 @@ from sshade.guard import handle_error
 from sshade.mesh.validate import check_faces as _faces
 from sshade.mesh.validate import check_points as _points
 
+from .metric_meshes import (
+    RestMesh,
+    TargetMesh,
+    bbox_diagonal,
+    corner_angles,
+    face_areas,
+    mesh_volume,
+    squared_distances,
+    unique_edges,
+    unit_sphere_transform,
+)
+
 __all__ = [
     "volume", "surface_area", "volume_error", "area_error", "edge_length_error",
     "face_angle_error", "handle_error", "normalize_unit_sphere", "point_surface_distance",
-    "hausdorff", "chamfer", "deformation_metrics", "ground_truth_metrics",
+    "hausdorff", "chamfer", "deformation_metrics", "ground_truth_metrics", "RestMesh", "TargetMesh",
 ]
 
 
@@ -86,16 +98,9 @@ def volume(V, F) -> float:
     return _volume(V, F)
 
 
-def _volume(V: np.ndarray, F: np.ndarray) -> float:
-    # centring at the mean vertex reduces cancellation; the result is unchanged for a
-    # closed mesh (and for an open one it is the cone volume about that point)
-    c = V.mean(axis=0)
-    a, b, d = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
-    return float(np.einsum("ij,ij->", a, np.cross(b, d)) / 6.0)
-
-
-def _face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+# centring at the mean vertex reduces cancellation; the result is unchanged for a closed
+# mesh (and for an open one it is the cone volume about that point)
+_volume, _face_areas, _angles, _diag = mesh_volume, face_areas, corner_angles, bbox_diagonal
 
 
 def surface_area(V, F) -> float:
@@ -181,12 +186,6 @@ def area_error(V, Vd, F) -> float:
     return _pct_change(float(_face_areas(V, F).sum()), float(_face_areas(Vd, F).sum()), "area")
 
 
-def _edges(F: np.ndarray) -> np.ndarray:
-    """Unique undirected edges (e, 2) of the faces."""
-    he = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=0)
-    return np.unique(np.sort(he, axis=1), axis=0)
-
-
 def edge_length_error(V, Vd, F) -> float:
     """Mean absolute edge-length change in % of the longest rest edge.
 
@@ -212,24 +211,17 @@ def edge_length_error(V, Vd, F) -> float:
     80.473785
     """
     V, Vd, F = _pair(V, Vd, F)
-    E = _edges(F)
+    E = unique_edges(F, len(V))
     l0 = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-    l1 = np.linalg.norm(Vd[E[:, 0]] - Vd[E[:, 1]], axis=1)
-    lmax = float(l0.max())
+    return _edge_error(l0, float(l0.max()), E, Vd)
+
+
+def _edge_error(l0: np.ndarray, lmax: float, E: np.ndarray, Vd: np.ndarray) -> float:
+    """:func:`edge_length_error` from the rest lengths ``l0`` of edges ``E``, their maximum."""
     if lmax == 0:
         raise SShaDeError("all rest edges have zero length; the edge length error is undefined")
+    l1 = np.linalg.norm(Vd[E[:, 0]] - Vd[E[:, 1]], axis=1)
     return float(100.0 * np.mean(np.abs(l0 - l1)) / lmax)
-
-
-def _angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(m, 3) internal angles in radians, column k at corner ``F[:, k]`` (atan2 form,
-    accurate for tiny and near-straight angles)."""
-    P = V[F]                                   # (m, 3, 3)
-    a = np.roll(P, -1, axis=1) - P             # to next corner
-    b = np.roll(P, 1, axis=1) - P              # to previous corner
-    s = np.linalg.norm(np.cross(a, b), axis=2)
-    c = np.einsum("ijk,ijk->ij", a, b)
-    return np.arctan2(s, c)
 
 
 def face_angle_error(V, Vd, F) -> tuple[float, float]:
@@ -260,7 +252,11 @@ def face_angle_error(V, Vd, F) -> tuple[float, float]:
     (0.0, 0.0)
     """
     V, Vd, F = _pair(V, Vd, F)
-    a0 = _angles(V, F)
+    return _angle_error(_angles(V, F), Vd, F)
+
+
+def _angle_error(a0: np.ndarray, Vd: np.ndarray, F: np.ndarray) -> tuple[float, float]:
+    """:func:`face_angle_error` from the rest angles ``a0``."""
     a1 = _angles(Vd, F)
     if (a0 <= 0).any():
         f = int(np.flatnonzero((a0 <= 0).any(axis=1))[0])
@@ -268,10 +264,6 @@ def face_angle_error(V, Vd, F) -> tuple[float, float]:
                           "the relative angle error is undefined")
     d = np.abs(a0 - a1)
     return float(np.degrees(d.mean())), float(100.0 * np.mean(d / a0))
-
-
-def _diag(V: np.ndarray) -> float:
-    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
 
 
 # ----------------------------------------------------------------------------- surface distances
@@ -303,11 +295,7 @@ def normalize_unit_sphere(V, ref=None) -> tuple[np.ndarray, np.ndarray, float]:
     ([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [1.0, 0.0, 0.0], 1.0)
     """
     V = _points(V, "V")
-    R = V if ref is None else _points(ref, "ref")
-    center = 0.5 * (R.min(axis=0) + R.max(axis=0))
-    scale = float(np.linalg.norm(R - center, axis=1).max())
-    if scale == 0:
-        raise SShaDeError("normalize_unit_sphere: the reference shape is a single point")
+    center, scale = unit_sphere_transform(V if ref is None else _points(ref, "ref"))
     return (V - center) / scale, center, scale
 
 
@@ -334,20 +322,27 @@ def point_surface_distance(P, V, F) -> np.ndarray:
     >>> point_surface_distance([[0.2, 0.2, 0.5]], V, [[0, 1, 2]]).tolist()
     [0.5]
     """
-    import igl
     P = _points(P, "P")
     V, F = _mesh(V, F)
-    sq = igl.point_mesh_squared_distance(P, V, F)[0]
-    return np.sqrt(np.maximum(np.asarray(sq, np.float64), 0.0))
+    return _root(squared_distances(P, V, F))
+
+
+def _root(sq: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.maximum(sq, 0.0))
 
 
 def _two_way(VX, FX, VY, FY, normalize: bool) -> tuple[np.ndarray, np.ndarray]:
     VX, FX = _mesh(VX, FX, "VX")
     VY, FY = _mesh(VY, FY, "VY")
     if normalize:
-        _, c, s = normalize_unit_sphere(VY)
+        c, s = unit_sphere_transform(VY)
         VX, VY = (VX - c) / s, (VY - c) / s
-    return point_surface_distance(VX, VY, FY), point_surface_distance(VY, VX, FX)
+    return _root(squared_distances(VX, VY, FY)), _root(squared_distances(VY, VX, FX))
+
+
+def _hausdorff_chamfer(dxy: np.ndarray, dyx: np.ndarray) -> tuple[float, float]:
+    """:func:`hausdorff` and :func:`chamfer` from the two one-way distances."""
+    return float(max(dxy.max(), dyx.max())), float(np.mean(dxy ** 2) + np.mean(dyx ** 2))
 
 
 def hausdorff(VX, FX, VY, FY, normalize: bool = True) -> float:
@@ -377,8 +372,7 @@ def hausdorff(VX, FX, VY, FY, normalize: bool = True) -> float:
     >>> hausdorff(V + [0, 0, 0.25], F, V, F, normalize=False)
     0.25
     """
-    dxy, dyx = _two_way(VX, FX, VY, FY, normalize)
-    return float(max(dxy.max(), dyx.max()))
+    return _hausdorff_chamfer(*_two_way(VX, FX, VY, FY, normalize))[0]
 
 
 def chamfer(VX, FX, VY, FY, normalize: bool = True) -> float:
@@ -405,18 +399,19 @@ def chamfer(VX, FX, VY, FY, normalize: bool = True) -> float:
     >>> chamfer(V + [0, 0, 0.25], F, V, F, normalize=False)
     0.125
     """
-    dxy, dyx = _two_way(VX, FX, VY, FY, normalize)
-    return float(np.mean(dxy ** 2) + np.mean(dyx ** 2))
+    return _hausdorff_chamfer(*_two_way(VX, FX, VY, FY, normalize))[1]
 
 
 # ----------------------------------------------------------------------------- bundles
-def deformation_metrics(V, Vd, F, handles=None, targets=None) -> dict:
+def deformation_metrics(V, Vd, F, handles=None, targets=None, *, rest: RestMesh | None = None) -> dict:
     """All §4.1 errors of a deformation ``V -> Vd`` (same connectivity ``F``).
 
     Parameters
     ----------
     V, Vd : (n, 3) float, rest and deformed vertices; F : (m, 3) int triangles.
     handles, targets : optional (h,) int and (h, 3) float handle constraints.
+    rest : :class:`~eval.metric_meshes.RestMesh` of ``(V, F)`` or None: what the errors
+        need of the rest mesh, computed once for every result on it (same numbers).
 
     Returns
     -------
@@ -426,8 +421,8 @@ def deformation_metrics(V, Vd, F, handles=None, targets=None) -> dict:
 
     Raises
     ------
-    SShaDeError as the individual metrics, or ``targets`` missing when ``handles`` is
-    given.
+    SShaDeError as the individual metrics, ``targets`` missing when ``handles`` is
+    given, or a ``rest`` of another mesh.
 
     Examples
     --------
@@ -437,28 +432,35 @@ def deformation_metrics(V, Vd, F, handles=None, targets=None) -> dict:
     0.0
     """
     V, Vd, F = _pair(V, Vd, F)
-    deg, rel = face_angle_error(V, Vd, F)
+    if rest is None:
+        rest = RestMesh(V, F)
+    elif not rest.matches(V, F):
+        raise SShaDeError("deformation_metrics: rest is a RestMesh of another mesh than (V, F)")
+    deg, rel = _angle_error(rest.angles, Vd, F)
     out = {
-        "volume_err_pct": volume_error(V, Vd, F),
-        "area_err_pct": area_error(V, Vd, F),
-        "edge_err_pct": edge_length_error(V, Vd, F),
+        "volume_err_pct": _pct_change(rest.volume, _volume(Vd, F), "volume"),
+        "area_err_pct": _pct_change(rest.area, float(_face_areas(Vd, F).sum()), "area"),
+        "edge_err_pct": _edge_error(rest.lengths, rest.longest, rest.edges, Vd),
         "angle_err_deg": deg,
         "angle_err_rel_pct": rel,
     }
     if handles is not None or targets is not None:
         if handles is None or targets is None:
             raise SShaDeError("handle error needs both handles and targets")
-        out["handle_err_pct"] = handle_error(Vd, handles, targets, _diag(V))
+        out["handle_err_pct"] = handle_error(Vd, handles, targets, rest.diagonal)
     return out
 
 
-def ground_truth_metrics(Vd, F, Vgt) -> dict:
+def ground_truth_metrics(Vd, F, Vgt, *, target: TargetMesh | None = None) -> dict:
     """Errors of a deformed mesh against a ground-truth pose with the same vertices.
 
     Parameters
     ----------
     Vd : (n, 3) float, deformed vertices; F : (m, 3) int triangles shared by both;
     Vgt : (n, 3) float, ground-truth vertices in 1:1 correspondence with ``Vd``.
+    target : :class:`~eval.metric_meshes.TargetMesh` of ``(Vgt, F)`` or None: what the
+        errors need of the ground truth (diagonal, normalisation, AABB tree), computed
+        once for every result compared with it (same numbers).
 
     Returns
     -------
@@ -468,7 +470,8 @@ def ground_truth_metrics(Vd, F, Vgt) -> dict:
 
     Raises
     ------
-    SShaDeError on shape mismatch, NaN/inf, bad indices, or a one-point ``Vgt``.
+    SShaDeError on shape mismatch, NaN/inf, bad indices, a one-point ``Vgt``, or a
+    ``target`` of another mesh.
 
     Examples
     --------
@@ -477,13 +480,19 @@ def ground_truth_metrics(Vd, F, Vgt) -> dict:
     0.0
     """
     Vgt, Vd, F = _pair(Vgt, Vd, F, ("Vgt (ground truth)", "Vd (deformed)"))
-    diag = _diag(Vgt)
-    if diag == 0:
-        raise SShaDeError("ground truth vertices all coincide; bounding-box diagonal is 0")
+    if target is None:
+        target = TargetMesh(Vgt, F)
+    elif not target.matches(Vgt, F):
+        raise SShaDeError("ground_truth_metrics: target is a TargetMesh of another mesh than (Vgt, F)")
     d = np.linalg.norm(Vd - Vgt, axis=1)
+    # hausdorff(Vd, F, Vgt, F) and chamfer(Vd, F, Vgt, F) from one pair of one-way distances
+    Vn = (Vd - target.center) / target.scale
+    dxy = _root(squared_distances(Vn, target.normalized, F, tree=target.tree))
+    dyx = _root(squared_distances(target.normalized, Vn, F, order=target.order))
+    h, c = _hausdorff_chamfer(dxy, dyx)
     return {
-        "gt_vertex_mean_pct": float(100.0 * d.mean() / diag),
-        "gt_vertex_max_pct": float(100.0 * d.max() / diag),
-        "hausdorff": hausdorff(Vd, F, Vgt, F),
-        "chamfer": chamfer(Vd, F, Vgt, F),
+        "gt_vertex_mean_pct": float(100.0 * d.mean() / target.diagonal),
+        "gt_vertex_max_pct": float(100.0 * d.max() / target.diagonal),
+        "hausdorff": h,
+        "chamfer": c,
     }

@@ -71,6 +71,7 @@ from ..config_check import config_number
 from ..figures import figures_options, write_case_figure
 from ..meshview import view_options, write_case_view
 from ..methods import method_spec
+from ..metric_meshes import CaseMeshes
 from ..metrics import deformation_metrics, ground_truth_metrics
 from ..paths import abs_path
 from ..progress import CostModel, default_cost_model, weighted_bar
@@ -184,7 +185,8 @@ class _Setup:
     (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
     all) and ``base_rule`` (that rule in words), ``own`` (method name -> (indices or
     None, rule in words) for the methods ``method_cases`` gives a rule of their own),
-    ``store`` and ``resume``; ``build``: the dataset's build stage when one ran
+    ``store`` and ``resume``; ``meshes``: the metrics' kept rest and ground-truth meshes
+    (:class:`~eval.metric_meshes.CaseMeshes`); ``build``: the dataset's build stage when one ran
     (:func:`eval.experiments.cases_plan.planned_root`), ``plan``: the runs'
     :class:`~eval.experiments.cases_plan.PlanRecord` once logged."""
 
@@ -250,7 +252,7 @@ def _setup(cfg) -> _Setup:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
     return _Setup(methods=methods, names=names, specs=specs, guard=guard, refs=refs, root=root, out_dir=out_dir,
                   name=name, cases=cases, base=base, base_rule=base_rule, own=own, store=store, resume=resume,
-                  build=build)
+                  build=build, meshes=CaseMeshes())
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -349,7 +351,7 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
     run goes on). Returns ``(record, U)``."""
     case, m, name = s.cases[ci], s.methods[mi], s.names[mi]
     t0 = time.perf_counter()
-    row, U, info = _run_one(m, name, case, s.refs, s.guard)
+    row, U, info = _run_one(m, name, case, s.refs, s.guard, s.meshes)
     wall = time.perf_counter() - t0
     c = row.get("compile_s")  # a one-off (numba compilation): not a cost of the later runs
     cost.observe(name, len(case.V), wall - (c if isinstance(c, (int, float)) and c == c else 0.0))
@@ -410,9 +412,11 @@ def _guard_options(cfg) -> dict:
     return {"timeout_s": check_timeout(cfg.get("timeout_s", None), "timeout_s"), "handle_error_max_pct": hmax}
 
 
-def _run_one(m, name: str, case, refs, guard: dict):
-    """One (case, method) run: :func:`sshade.guard.run_method`, the metrics, the method's
-    info; returns ``(row, U, info)`` (``U`` None and ``info`` empty when the method failed). A failure (the
+def _run_one(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = None):
+    """One (case, method) run: :func:`sshade.guard.run_method`, the metrics (what they need
+    of the rest mesh and the ground truth kept in ``meshes`` for the next pairs on them,
+    :mod:`eval.metric_meshes`), the method's info; returns ``(row, U, info)`` (``U`` None
+    and ``info`` empty when the method failed). A failure (the
     method's, or a handle error above ``guard['handle_error_max_pct']``: its metrics
     stay in the row) is the row's ``error``; the run goes on."""
     row = {"case": case.name, "subject": case.subject, "pose": case.pose, "method": name,
@@ -426,10 +430,12 @@ def _run_one(m, name: str, case, refs, guard: dict):
             log.warning("%s %s: %s", case.name, name, w)
         if r.warnings:
             row["warnings"] = " | ".join(" ".join(w.split()) for w in r.warnings)
-        row.update(deformation_metrics(case.V, r.U, case.F, case.handles, case.targets))
+        meshes = meshes or CaseMeshes()
+        row.update(deformation_metrics(case.V, r.U, case.F, case.handles, case.targets,
+                                       rest=meshes.rest(case.V, case.F)))
         row.update(refs.metrics(m, r.U))
         if getattr(case, "V_gt", None) is not None:
-            row.update(ground_truth_metrics(r.U, case.F, case.V_gt))
+            row.update(ground_truth_metrics(r.U, case.F, case.V_gt, target=meshes.target(case.V_gt, case.F)))
     except SShaDeError as e:  # the method failed (sshade.guard.MethodFailure), or a metric refused its result
         row["error"] = " ".join(str(e).split()) or type(e).__name__
         log.warning("%s %s failed: %s", case.name, name, row["error"])
