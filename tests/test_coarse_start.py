@@ -69,7 +69,7 @@ def test_fullres_start_option(cls):
     Ur = r.deform(V, F, h, T)
     assert r.info["converged"] and "coarse_n" not in r.info
     assert m.info["energy"] <= r.info["energy"] * (1 + 1e-6) or _mean_dist(U, Ur, V) < 5e-4
-    assert cls().start == "rigid" and cls(protocol="paper").start == "rigid"  # the default (issue 23: coarse saves 15-35%)
+    assert cls().start == "rigid" and cls(protocol="paper").start == "rigid"  # the default (issue 23)
     a = cls(start="auto")  # auto: a mesh below COARSE_MIN_RATIO x coarse_n_low starts rigid
     assert np.array_equal(a.deform(V, F, h, T), Ur) and "coarse_n" not in a.info
     a = cls(start="auto", coarse_n_low=len(V) // COARSE_MIN_RATIO)  # ... and at least that starts coarse
