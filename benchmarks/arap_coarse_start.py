@@ -9,16 +9,19 @@ Prints one JSON line per run (and per deep continuation with --deep).
 """
 import argparse
 import json
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from baselines import ARAP, Elastic
-from eval import datasets
-from eval.reference import reference_metrics, reference_solution
-from sshade.arap import bbox_diag
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
+
+from baselines import ARAP, Elastic  # noqa: E402
+from eval import datasets  # noqa: E402
+from eval.reference import reference_metrics, reference_solution  # noqa: E402
+from sshade.arap import bbox_diag  # noqa: E402
 
 METHODS = {"ARAP": (ARAP, "spokes"), "Elastic": (Elastic, "spokes_and_rims")}
 

@@ -413,7 +413,8 @@ def _landmarks(manifest, rid, src, s) -> dict[str, int]:
 def _build_rest(out: Path, sdir: str, s: int, src: Source, cfg: BuildConfig, key: str) -> dict:
     V, F = src.rest_low(s)
     lm = src.landmarks(s)
-    hr = highres.subdivide_remesh(V, F, vertex_range=cfg.vertex_range, remesh_iterations=cfg.remesh_iterations)
+    hr = highres.subdivide_remesh(V, F, vertex_range=cfg.vertex_range, remesh_iterations=cfg.remesh_iterations,
+                                  check_distance=cfg.remesh_check_distance)
     files = {}
     files[f"{sdir}/rest_low.ply"] = write_ply(out / sdir / "rest_low.ply", V, F)
     files[f"{sdir}/rest_high.ply"] = write_ply(out / sdir / "rest_high.ply", hr.V, hr.F)

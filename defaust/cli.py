@@ -90,6 +90,7 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         vertex_range=tuple(config_int_list(cfg, "high_res.vertex_range", min=-2**31, allow_none=False)
                            if OmegaConf.select(cfg, "high_res.vertex_range") is not None else d.vertex_range),
         remesh_iterations=num("high_res.remesh_iterations", d.remesh_iterations),
+        remesh_check_distance=(c.get("high_res") or {}).get("check_distance", d.remesh_check_distance),
         n_per_landmark=num("handles.n_per_landmark", d.n_per_landmark),
         neighbourhood=num("handles.neighbourhood", d.neighbourhood),
         static_threshold=num("handles.static_threshold", d.static_threshold, float),

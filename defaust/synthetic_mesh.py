@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh
 
+from .highres import isotropic_remesh
 from .synthetic_body import LANDMARK_NAMES, Body, Primitive
 
 __all__ = ["primitive_sdfs", "body_sdf", "mesh_body", "body_landmarks"]
@@ -214,8 +215,7 @@ def mesh_body(body: Body, *, voxel_size: float = 0.01, n_vertices: int = 7000,
     ms.meshing_remove_unreferenced_vertices()
     area = ms.get_geometric_measures()["surface_area"]
     target = float(np.sqrt(2.0 * area / (np.sqrt(3.0) * int(n_vertices))))
-    ms.meshing_isotropic_explicit_remeshing(targetlen=pymeshlab.PureValue(target),
-                                            iterations=int(remesh_iterations))
+    isotropic_remesh(ms, target, remesh_iterations, check_distance=True)  # every parameter given
     m = ms.current_mesh()
     V, F = _largest_component(np.asarray(m.vertex_matrix(), np.float64), np.asarray(m.face_matrix(), np.int64))
     if _signed_volume(V, F) < 0:

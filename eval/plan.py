@@ -81,7 +81,7 @@ def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD
     count as 1), ``s_per_subject`` each.
 
     >>> build_stage(10, workers=4)["seconds"]
-    480.0
+    207.0
     """
     w = int(workers) if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
     n = max(int(subjects), 0)

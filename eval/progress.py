@@ -126,7 +126,7 @@ def default_cost_model(methods) -> CostModel:
     >>> from types import SimpleNamespace as M
     >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
     >>> round(cm.estimate("ARAP", 100_000)), round(cm.estimate("SShaDe", 100_000))
-    (46, 6)
+    (44, 4)
     """
     scales = {m.name: CostModel.scale_of(m) for m in methods}
     want = {"SShaDe": "const"}

@@ -161,7 +161,7 @@ def _fast_highres(monkeypatch):
     seconds, not minutes."""
     import defaust.highres as hr
 
-    def fake(V, F, *, vertex_range=(0, 0), remesh_iterations=0, max_attempts=1):
+    def fake(V, F, *, vertex_range=(0, 0), remesh_iterations=0, max_attempts=1, check_distance=False):
         Vs, Fs = hr.ls3_loop(V, F, 1)
         return hr.HighResResult(V=Vs, F=Fs, iterations=1, n_subdivided=len(Vs), target_edge=0.0, attempts=1)
 

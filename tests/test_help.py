@@ -33,6 +33,8 @@ HELP = {
     "benchmarks/arap_iteration.py": ["usage:", "--mesh"],
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
     "benchmarks/remesh_speed.py": ["usage:", "--mesh"],
+    "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
+    "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
 }
 
 

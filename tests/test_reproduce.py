@@ -19,7 +19,8 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     assert "arap.protocol=paper" in steps["defaust_paper"]
     ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] method_cases={Implicit-ARAP: per_pose} "
           if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on the per_pose subset
-    assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all resume=true "
+    assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all reference.cases=per_pose "
+                                "resume=true "
                                 f"{ia}out_dir=results/defaust")  # every method on every case, resumable
     sweep = steps["sweep"]
     assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
