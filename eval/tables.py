@@ -235,11 +235,15 @@ class Comparison:
     cases : the common set (case names), empty when no case qualifies, None when the
         frame has no ``case`` column (then ``main`` is the plain per-method summary).
     methods : the methods of the frame, in table order.
+    ref_cases : how many of ``cases`` have reference columns (``ref_mean_pct``) in a
+        successful row; None without that column (issue 21: ``reference.cases`` may cover
+        a subset, and the note then says so).
     """
     main: pd.DataFrame
     all: pd.DataFrame | None
     cases: list | None
     methods: list
+    ref_cases: int | None = None
 
     @property
     def same_cases(self) -> bool:
@@ -265,7 +269,11 @@ def compare(df: pd.DataFrame) -> Comparison:
     ok = ok_mask(df)
     common = set(cases)
     extra = bool((ok & ~df["case"].isin(list(common))).any())
-    return Comparison(main=summarize(df, cases=cases), all=own if extra else None, cases=cases, methods=methods)
+    ref = None
+    if "ref_mean_pct" in df.columns:
+        ref = int(df.loc[ok & df["case"].isin(list(common)) & df["ref_mean_pct"].notna(), "case"].nunique())
+    return Comparison(main=summarize(df, cases=cases), all=own if extra else None, cases=cases, methods=methods,
+                      ref_cases=ref)
 
 
 def _fmt(v, dec: int) -> str:
@@ -387,6 +395,9 @@ def main_note(comp: Comparison) -> str | None:
     alive = [m for m in comp.methods if m not in dead]
     who = "the method" if len(alive) == 1 else f"every method ({', '.join(map(str, alive))})"
     note = f"Mean over the {_plural(len(comp.cases), 'case')} on which {who} succeeded."
+    if comp.ref_cases is not None and 0 < comp.ref_cases < len(comp.cases):
+        note += (f" Ref mean, Ref max and E gap: over the {comp.ref_cases} of them with a reference solution "
+                 "(reference.cases).")
     if dead:
         note += (f" {', '.join(map(str, dead))} failed on every case {'it' if len(dead) == 1 else 'they'} ran on: "
                  f"{'its row averages' if len(dead) == 1 else 'their rows average'} no case.")

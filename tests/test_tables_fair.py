@@ -170,6 +170,25 @@ def test_homogeneous_and_legacy_frames_are_unchanged(tmp_path):
     pd.testing.assert_frame_equal(comp.main, summarize(no_case))
 
 
+def test_reference_subset_is_stated(tmp_path):
+    """Reference columns on a subset of the common cases (reference.cases=per_pose): the
+    note under the table says over how many cases they average; none when every case has
+    them or the column is absent."""
+    df = pd.DataFrame([_row(f"c{i}", m, 1.0 + i) for i in range(4) for m in ("ARAP", "SShaDe")])
+    df["ref_mean_pct"] = [0.01 if r.case in ("c0", "c2") else np.nan for r in df.itertuples()]
+    comp = compare(df)
+    assert comp.ref_cases == 2
+    write_tables(df, tmp_path)
+    text = (tmp_path / "table.md").read_text()
+    assert "Ref mean, Ref max and E gap: over the 2 of them with a reference solution" in text
+    assert "over the 2 of them" in (tmp_path / "table.tex").read_text()
+    df["ref_mean_pct"] = 0.01
+    assert compare(df).ref_cases == 4
+    write_tables(df, tmp_path)
+    assert "with a reference solution" not in (tmp_path / "table.md").read_text()
+    assert compare(df.drop(columns="ref_mean_pct")).ref_cases is None
+
+
 def test_sweep_reads_the_main_table(tmp_path):
     from eval.sweep_files import STATUS_FILE
     from eval.sweep_table import aggregate_sweep
