@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from baselines.arap_sr_solver import SRProblem, solve_arap_sr
-from baselines.coarse_start import COARSE_MIN_RATIO, SR_ENERGY, coarse_start
+from baselines.coarse_start import SR_ENERGY, coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
@@ -134,7 +134,7 @@ def _sr_start(V, F, handles, targets, alpha, U0, R0):
     hours at 169k vertices); else the rigid fit (``(None, None)``)."""
     if U0 is not None and R0 is not None:
         return U0, R0
-    if len(V) >= COARSE_MIN_RATIO * 6000:
+    if uses_coarse("auto", len(V), 6000):  # the method's own rule (baselines/coarse_start.py)
         return None, coarse_start(V, F, handles, targets, energy=SR_ENERGY, alpha=alpha, n_low=6000)[0]
     return None, None
 
