@@ -101,7 +101,7 @@ def check_config(cfg) -> None:
     Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.deform.check_params`),
     the dataset's numbers (``limit``, ``baseline_cases``, ``seed``, handle parameters,
     subject/pose lists, ``vertex_range``), ``figures.enabled`` / ``max_cases``, ``report.*``,
-    ``reference.max_iter`` / ``time_budget_s`` and the section of the experiment kind
+    ``reference.max_iter`` / ``time_budget_s``, ``jobs`` and the section of the experiment kind
     (``scaling``, ``tosca``, ``pose_transfer``, ``convergence``). Absent keys are left to
     their readers' defaults.
 
@@ -122,6 +122,10 @@ def check_config(cfg) -> None:
     if config_value(cfg, "figures", None) is not None:
         config_bool(cfg, "figures.enabled", default=False)
     config_bool(cfg, "resume", default=False)
+    jobs = config_value(cfg, "jobs", "auto")  # eval/experiments/cases_jobs.py
+    if not (jobs is None or (isinstance(jobs, str) and jobs.strip().lower() == "auto")
+            or (isinstance(jobs, int) and not isinstance(jobs, bool) and 1 <= jobs <= 1024)):
+        raise SShaDeError(f"jobs must be an integer from 1 to 1024 or auto, got {jobs!r}")
     if config_value(cfg, "report", None) is not None:
         config_bool(cfg, "report.enabled", default=True)
         config_number(cfg, "report.view_cases", min=0, allow_none=True, default=2)

@@ -89,18 +89,28 @@ def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD
             "s_per_subject": float(s_per_subject), "seconds": float(math.ceil(n / w) * s_per_subject)}
 
 
-def _runs_stage(cases, names, pairs, cost, restored: int) -> dict:
+def _runs_stage(cases, names, pairs, cost, restored: int, jobs: int) -> dict:
     per: dict[str, dict] = {}
+    per_case: dict[int, float] = {}
     for ci, mi in pairs:
         name = names[mi]
         d = per.setdefault(name, {"count": 0, "seconds": 0.0, "basis": _basis(cost, name)})
         d["count"] += 1
-        d["seconds"] += float(cost.estimate(name, _n_vertices(cases[ci])))
+        t = float(cost.estimate(name, _n_vertices(cases[ci])))
+        d["seconds"] += t
+        per_case[ci] = per_case.get(ci, 0.0) + t
     for d in per.values():
         d["each_s"] = d["seconds"] / d["count"]
     order = [n for n in dict.fromkeys(names) if n in per]
-    return {"stage": "runs", "count": len(pairs), "restored": int(restored),
-            "seconds": sum(d["seconds"] for d in per.values()), "methods": {n: per[n] for n in order}}
+    total = sum(d["seconds"] for d in per.values())
+    return {"stage": "runs", "count": len(pairs), "restored": int(restored), "jobs": jobs,
+            "seconds": _wall(total, per_case.values(), jobs), "methods": {n: per[n] for n in order}}
+
+
+def _wall(total: float, items, jobs: int) -> float:
+    """Wall seconds of work ``total`` (the sum of ``items``, whole cases) on ``jobs``
+    workers: the larger of ``total / jobs`` and the longest item."""
+    return max(total / jobs, max(items, default=0.0)) if jobs > 1 else total
 
 
 def _basis(cost, name: str) -> str:
@@ -108,7 +118,7 @@ def _basis(cost, name: str) -> str:
     return f(name) if callable(f) else "prior"
 
 
-def _references_stage(references) -> dict:
+def _references_stage(references, jobs: int = 1) -> dict:
     cached = to_compute = unknown = guessed = 0
     seconds = 0.0
     for n_vertices, energy, is_cached in references:
@@ -123,11 +133,13 @@ def _references_stage(references) -> dict:
         else:
             to_compute += 1
     n = cached + to_compute + unknown
+    each = seconds / (n - cached) if n > cached else 0.0
     return {"stage": "references", "count": n, "cached": cached, "to_compute": to_compute, "unknown": unknown,
-            "guessed": guessed, "seconds": seconds, "each_s": seconds / (n - cached) if n > cached else 0.0}
+            "guessed": guessed, "seconds": _wall(seconds, [each], jobs), "each_s": each}
 
 
-def make_plan(cases, names, pairs, cost, *, build: dict | None = None, references=(), restored: int = 0) -> dict:
+def make_plan(cases, names, pairs, cost, *, build: dict | None = None, references=(), restored: int = 0,
+              jobs: int = 1) -> dict:
     """The plan of a run.
 
     Parameters
@@ -142,6 +154,10 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     references : sequence of ``(n_vertices, energy, cached)``, one per reference the runs
         need; ``cached`` True, False or None (not known yet: the cases are not built).
     restored : int, pairs restored from the result store (resume), not run again.
+    jobs : int >= 1, worker processes running whole cases side by side
+        (:mod:`eval.experiments.cases_jobs`): the runs' and references' wall time is the
+        larger of their sum / ``jobs`` and the costliest case (each run's estimate stays
+        the cost model's, measured on the whole machine).
 
     Returns
     -------
@@ -162,8 +178,9 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     ([('runs', 3, 5.0), ('references', 0, 0.0)], 5.0)
     """
     stages = [dict(build)] if build is not None else []
-    stages.append(_runs_stage(cases, names, pairs, cost, restored))
-    stages.append(_references_stage(references))
+    jobs = max(int(jobs), 1)
+    stages.append(_runs_stage(cases, names, pairs, cost, restored, jobs))
+    stages.append(_references_stage(references, jobs))
     return {"stages": stages, "total_s": sum(s["seconds"] for s in stages if "actual_s" not in s)}
 
 
@@ -185,7 +202,8 @@ def _runs_words(r: dict, then: bool) -> str:
         note = " (a guess, not measured yet)" if d["basis"] == "guess" else ""
         items.append(f"{name} {d['count']} x {duration_words(d['each_s'], about=True)}{note}")
     restored = f" ({r['restored']} restored from the store)" if r.get("restored") else ""
-    head = f"{'then ' if then else ''}{r['count']} run(s){restored}"
+    side = f", {r['jobs']} at a time" if r.get("jobs", 1) > 1 else ""
+    head = f"{'then ' if then else ''}{r['count']} run(s){restored}{side}"
     return f"{head}: {', '.join(items)}" if items else head
 
 

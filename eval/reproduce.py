@@ -69,23 +69,25 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     # the deep references (a minute or more each at 169k vertices, three energies) on the
     # per_pose subset, the main job's baseline cases: the check that each converged
     # method lands on its minimiser, not a column over all 40 cases (eval/reference.py)
+    # jobs=1: one run at a time on the whole machine, so that the time columns of results/
+    # are each method's own (the main job's jobs=auto runs cases side by side)
     s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "reference.cases=per_pose",
-                           "resume=true", *ia, "out_dir=results/defaust", *a.extra]),
+                           "resume=true", "jobs=1", *ia, "out_dir=results/defaust", *a.extra]),
          ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all", "reference.cases=none",
-                                 "resume=true", "out_dir=results/defaust_paper"]),
+                                 "resume=true", "jobs=1", "out_dir=results/defaust_paper"]),
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"])]
     if a.faust:
         s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true",
-                                  "resume=true", *ia[:1], "out_dir=results/faust"]))
+                                  "resume=true", "jobs=1", *ia[:1], "out_dir=results/faust"]))
         s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}",
                                            "figures.enabled=true", "out_dir=results/pose_transfer"]))
     if a.tosca:
         s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true",
                                   "out_dir=results/tosca"]))
     if a.shapes:
-        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", *ia[:1],
+        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "jobs=1", *ia[:1],
                                    "out_dir=results/shapes"]))
     if a.scaling:
         s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}",

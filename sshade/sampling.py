@@ -17,13 +17,13 @@ Example::
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
 
 import numpy as np
 
 from .arap import warmup_kernels
+from .jobs import pool_size  # noqa: F401 - the samplings' worker count (None: the cores this process may use)
 from .mesh.geodesic import VoronoiState
 from .mesh.halfedge import halfedges, vertex_fan_count
 from .projection import project_to_fans
@@ -49,14 +49,6 @@ def _init_worker(state: dict) -> None:
 def sampling_seeds(seed: int, k: int) -> list[int]:
     """The k first-seed RNG seeds derived from ``seed`` (recorded in every output)."""
     return [int(s) for s in np.random.SeedSequence(seed).generate_state(k, dtype=np.uint32)]
-
-
-def pool_size(workers: int | None, n_samplings: int) -> int:
-    """Worker processes for ``n_samplings`` samplings: ``workers`` (None: the CPU count),
-    capped at ``n_samplings``, at least 1."""
-    if workers is None:
-        workers = os.cpu_count() or 1
-    return max(1, min(int(workers), int(n_samplings)))
 
 
 def warm_kernels() -> float:
@@ -90,7 +82,8 @@ class SamplingPool:
     ----------
     state : dict, what every task reads through :func:`worker_state` (meshes, seeds,
         options); handed to each forked worker once, at fork.
-    workers : int >= 1, processes (:func:`pool_size`); 1 runs the tasks in this process
+    workers : int >= 1, processes (:func:`sshade.jobs.pool_size`: None = the cores this
+        process may use, :func:`sshade.jobs.available_cores`); 1 runs the tasks in this process
         (so does a platform without ``fork``).
 
     ``submit(fn, *args)`` returns a :class:`concurrent.futures.Future`; ``fn`` must be a

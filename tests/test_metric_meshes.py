@@ -11,7 +11,7 @@ import trimesh
 
 from eval import metric_meshes as MM
 from eval import metrics as M
-from eval.experiments.cases import _run_one
+from eval.experiments.pair import run_pair
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 from tests.conftest import data_file
@@ -148,8 +148,8 @@ def test_evaluator_rows_with_kept_meshes_equal_rows_without():
     guard = {"timeout_s": None, "handle_error_max_pct": None}
     meshes = MM.CaseMeshes()
     for case in cases:
-        kept = _run_one(_Shift(), "Shift", case, _NoRefs(), guard, meshes)[0]
-        direct = _run_one(_Shift(), "Shift", case, _NoRefs(), guard)[0]
+        kept = run_pair(_Shift(), "Shift", case, _NoRefs(), guard, meshes)[0]
+        direct = run_pair(_Shift(), "Shift", case, _NoRefs(), guard)[0]
         kept.pop("time_s"), direct.pop("time_s")
         assert kept == direct and "hausdorff" in kept and kept["error"] == ""
         assert meshes.rest(V, F).V is V or np.array_equal(meshes.rest(V, F).V, V)

@@ -12,13 +12,13 @@ import pandas as pd
 import pytest
 from omegaconf import OmegaConf
 
-from defaust.parallel import available_cores
 from eval import plan as P
 from eval.datasets.defaust import BuildProgress, build_outlook
 from eval.experiments import cases_plan
 from eval.progress import CostModel, default_cost_model
 from eval.reference import sr_energy
 from sshade.errors import SShaDeError
+from sshade.jobs import available_cores
 
 
 def _fake_defaust(n_subjects=10, n_poses=4, n_vertices=169_000):

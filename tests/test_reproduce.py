@@ -20,8 +20,8 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] method_cases={Implicit-ARAP: per_pose} "
           if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on the per_pose subset
     assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all reference.cases=per_pose "
-                                "resume=true "
-                                f"{ia}out_dir=results/defaust")  # every method on every case, resumable
+                                "resume=true jobs=1 "
+                                f"{ia}out_dir=results/defaust")  # every method on every case, resumable, one at a time
     sweep = steps["sweep"]
     assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
@@ -37,7 +37,7 @@ def test_every_experiment_with_folders_and_figures(capsys):
         assert "figures.enabled=true" in steps[name], name
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
     ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if importlib.util.find_spec("torch") else ""
-    assert steps["shapes"] == f"-m eval experiment=shapes dataset.root=S {ia}out_dir=results/shapes"  # shapes.yaml
+    assert steps["shapes"] == f"-m eval experiment=shapes dataset.root=S jobs=1 {ia}out_dir=results/shapes"
     for name, cmd in steps.items():  # only this command writes results/: each step names its folder
         if name == "report":
             continue

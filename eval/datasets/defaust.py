@@ -41,9 +41,9 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.handles import HandleSet, handles_from_arrays, snap_handles
 from defaust.manifest import FORMAT, MANIFEST, check_out_folder
-from defaust.parallel import pool_size
 from defaust.store import read_npz, sha256_file
 from sshade.errors import SShaDeError
+from sshade.jobs import pool_size
 from sshade.mesh.io import read_mesh
 
 from ..paths import abs_path
@@ -374,7 +374,7 @@ def build_outlook(root: Path, ds) -> dict | None:
     None when no build is wanted (:func:`build_wanted`) or every subject is complete in
     the manifest (the build then only verifies it); else a dict: ``root``, ``source``,
     ``subjects`` (int, to build), ``complete`` (int, already built), ``workers`` (the
-    processes the builder will use: :func:`defaust.parallel.pool_size` of its ``workers``
+    processes the builder will use: :func:`sshade.jobs.pool_size` of its ``workers``
     setting, null = every core, capped at the subjects to build; 1 without the setting),
     ``s_per_subject`` (:data:`eval.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
     ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and

@@ -16,11 +16,14 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+from sshade.errors import SShaDeError
+
 from .. import datasets
 from ..plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
 from ..progress import default_cost_model
 from ..reference import method_energy, reference_path
 from ..subset import baseline_selection
+from .cases_jobs import job_count
 
 __all__ = ["planned_root", "plan_runs", "PlanRecord"]
 
@@ -56,7 +59,13 @@ def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
         if refs.covers(ci, cases, base):
             energies = dict.fromkeys(method_energy(m) for mi, m in enumerate(methods) if (ci, mi) in on)
             need += [(c.n_vertices, e, None) for e in energies]
-    plan = make_plan(cases, names, pairs, default_cost_model(methods), build=build, references=need)
+    cost = default_cost_model(methods)
+    est = sum(cost.estimate(names[mi], cases[ci].n_vertices) for ci, mi in pairs)
+    try:
+        jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in pairs}), estimate_s=est)
+    except SShaDeError:
+        jobs = 1  # an invalid value is refused in the experiment's setup, before any work
+    plan = make_plan(cases, names, pairs, cost, build=build, references=need, jobs=jobs)
     log.info(render_plan(plan))
     t0 = time.perf_counter()
     root = datasets.dataset_root(cfg)
@@ -89,13 +98,15 @@ class PlanRecord:
         return out
 
 
-def plan_runs(s, todo, restored: int, cost) -> PlanRecord:
+def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
     """Log the plan of the runs about to start (before the first) and return its record.
 
     ``s``: the experiment's setup (``cases``, ``methods``, ``names``, ``base``, ``refs``
     with ``covers(ci, cases, base)``, ``cache``, ``max_iter``, ``time_budget_s``; ``build``:
     the build stage of :func:`planned_root` or None); ``todo``: the ``(ci, mi)`` pairs
-    to run; ``restored``: pairs restored from the store; ``cost``: the cost model.
+    to run; ``restored``: pairs restored from the store; ``cost``: the cost model;
+    ``jobs``: worker processes running whole cases side by side
+    (:mod:`eval.experiments.cases_jobs`).
     """
     need = []
     for ci in dict.fromkeys(ci for ci, _ in todo):
@@ -107,6 +118,6 @@ def plan_runs(s, todo, restored: int, cost) -> PlanRecord:
                                      max_iter=s.refs.max_iter, time_budget_s=s.refs.time_budget_s)
             need.append((len(c.V), e, path.is_file()))
     build = getattr(s, "build", None)
-    plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored)
+    plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs)
     log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
     return PlanRecord(plan)

@@ -1,4 +1,4 @@
-"""Jobs of a DeFAUST build in worker processes (the builder's subjects side by side).
+"""Jobs in worker processes: a DeFAUST build's subjects, an evaluation's cases side by side.
 
 :func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in a
 ``ProcessPoolExecutor`` with the ``spawn`` context (pymeshlab and numba are not known to
@@ -12,7 +12,11 @@ callers that need a fixed order (the manifest) sort them by index.
 Each worker's threads are limited so that ``workers x threads`` does not exceed the cores
 of this process (:func:`available_cores`, the affinity mask), through the environment
 variables the libraries read at import (:data:`THREAD_VARIABLES`, or those the caller
-names), set while the workers start.
+names), set while the workers start; :data:`CORES_VARIABLE` tells the worker's own code
+(:func:`available_cores`, e.g. SShaDe's sampling pool, :func:`sshade.sampling.pool_size`)
+that it has that many cores.
+
+Users: :mod:`defaust.build` (``workers``) and :mod:`eval.experiments.cases_jobs` (``jobs``).
 
 Example::
 
@@ -29,26 +33,34 @@ from contextlib import contextmanager
 
 from sshade.errors import SShaDeError
 
-__all__ = ["THREAD_VARIABLES", "available_cores", "pool_size", "thread_limit", "run_jobs", "send", "in_worker"]
+__all__ = ["THREAD_VARIABLES", "CORES_VARIABLE", "available_cores", "pool_size", "thread_limit", "run_jobs", "send",
+           "in_worker"]
 
 #: Environment variables that cap the threads of OpenBLAS, MKL, OpenMP, Accelerate, numexpr and numba.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
                     "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS")
 
+#: Set in the workers of :func:`run_jobs` to their share of the cores (:func:`thread_limit`);
+#: :func:`available_cores` reads it.
+CORES_VARIABLE = "SSHADE_JOB_CORES"
+
 _CHANNEL: list = [None]  # in a worker: the queue to the main process
 
 
 def available_cores() -> int:
-    """CPU cores this process may run on (its affinity mask where the OS has one), >= 1."""
+    """CPU cores this process may use, >= 1: its affinity mask where the OS has one (else
+    the CPU count), at most :data:`CORES_VARIABLE` when set (a worker of :func:`run_jobs`)."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        n = max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
-        return max(1, os.cpu_count() or 1)
+        n = max(1, os.cpu_count() or 1)
+    share = os.environ.get(CORES_VARIABLE, "")
+    return max(1, min(n, int(share))) if share.isdigit() and int(share) > 0 else n
 
 
 def pool_size(workers: int | None, n_jobs: int) -> int:
-    """Worker processes for ``n_jobs`` jobs: ``workers`` (None: :func:`available_cores`),
-    capped at ``n_jobs``, at least 1.
+    """Worker processes (or threads) for ``n_jobs`` jobs: ``workers`` (None:
+    :func:`available_cores`), capped at ``n_jobs``, at least 1.
 
     Examples
     --------
@@ -77,7 +89,7 @@ def send(message) -> None:
     SShaDeError outside a worker of :func:`run_jobs`.
     """
     if _CHANNEL[0] is None:
-        raise SShaDeError("defaust.parallel.send: not in a worker of run_jobs")
+        raise SShaDeError("sshade.jobs.send: not in a worker of run_jobs")
     _CHANNEL[0].put(message)
 
 
@@ -103,7 +115,7 @@ def _thread_env(threads: int, names=THREAD_VARIABLES):
                 os.environ[k] = v
 
 
-_DONE = "__defaust.parallel: job done__"
+_DONE = "__sshade.jobs: job done__"
 
 
 def _call(job, index: int, args: tuple):
@@ -132,7 +144,7 @@ def _drain(channel, on_message, ended: set, *, until: set | None = None) -> None
 
 
 def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None,
-             thread_variables=THREAD_VARIABLES) -> None:
+             thread_variables=THREAD_VARIABLES, what: str = "build") -> None:
     """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
 
     At most ``workers`` jobs are handed out at a time, so that after a failure or Ctrl-C
@@ -147,7 +159,9 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     on_message : called in this process with every :func:`send` message, while jobs run.
     on_result : called in this process as ``on_result(index, result)`` when a job finishes.
     thread_variables : the variables of :data:`THREAD_VARIABLES` set to the workers'
-        thread limit (the others keep this process's values).
+        thread limit (the others keep this process's values); :data:`CORES_VARIABLE` is
+        always set to it.
+    what : the workers' purpose, in the message when one dies (``"build"``, ``"job"``).
 
     Raises
     ------
@@ -161,7 +175,8 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     before = set(mp.active_children())
     todo = list(enumerate(args_list))[::-1]
     futures, errors, finished, ended, collected = {}, [], False, set(), set()
-    with _thread_env(thread_limit(n), thread_variables):  # the workers start at submit() and inherit it
+    # the workers start at submit() and inherit these variables
+    with _thread_env(thread_limit(n), (*thread_variables, CORES_VARIABLE)):
         ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
                                  initargs=(channel, init, tuple(init_args)))
         try:
@@ -175,7 +190,7 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
                 _drain(channel, on_message, ended)
                 for f in sorted(done, key=futures.get):
                     i = futures.pop(f)
-                    if _collect(f, i, on_result, errors):
+                    if _collect(f, i, on_result, errors, what):
                         collected.add(i)
             _drain(channel, on_message, ended, until=collected)  # every message of the jobs that ran
             finished = True
@@ -189,13 +204,13 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
         raise errors[0]
 
 
-def _collect(f, index: int, on_result, errors: list) -> bool:
+def _collect(f, index: int, on_result, errors: list, what: str = "build") -> bool:
     """A finished job: its result to ``on_result``, or its exception to ``errors``; False
     if its worker died (no end marker will come)."""
     try:
         result = f.result()
     except BrokenProcessPool as e:
-        errors.append(SShaDeError(f"a build worker process died ({e}); run the same command again to resume "
+        errors.append(SShaDeError(f"a {what} worker process died ({e}); run the same command again to resume "
                                   "(finished items are kept)"))
         return False
     except Exception as e:  # noqa: BLE001 - raised by run_jobs once the running jobs are done
