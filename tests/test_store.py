@@ -87,6 +87,14 @@ def test_defaust_default_is_per_pose(capsys):
     lines = {ln.split(":")[0]: ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("== ")}
     for step in ("== defaust", "== defaust_paper"):  # every method on all 40 DeFAUST cases
         assert "dataset.baseline_cases=all" in lines[step] and "dataset.limit" not in lines[step]
+    # the main job's references: none on DeFAUST (its deep solves would add ~30 min; the
+    # reproduce run computes them on the per_pose cases), the baseline cases elsewhere
+    from hydra import compose, initialize_config_dir
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base=None):
+        assert compose("config").reference.cases == "none"
+        assert compose("config", overrides=["dataset=faust"]).reference.cases == "baseline"
+        assert compose("config", overrides=["reference.cases=2"]).reference.cases == 2
+    assert "reference.cases=per_pose" in lines["== defaust"]
 
 
 # ----------------------------------------------------------------------------- progress
