@@ -44,7 +44,6 @@ any other method by name.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -54,6 +53,7 @@ from sshade.mesh.io import atomic_write
 from sshade.registry import table_order
 
 from .outdir import refuse_results
+from .table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
     import pandas as pd
@@ -64,29 +64,6 @@ __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex",
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
-
-#: (column, Markdown header, LaTeX header, decimals, LaTeX unit suffix) of the main table.
-TABLE_COLUMNS = (
-    ("volume_err_pct", "Volume (%)", "Volume", 2, r"\%"),
-    ("area_err_pct", "Area (%)", "Area", 2, r"\%"),
-    ("edge_err_pct", "EL (%)", "EL", 2, r"\%"),
-    ("angle_err_deg", "FA (deg)", "FA", 3, r"\textdegree"),
-    ("time_s", "Time (s)", "Time", 2, "s"),
-)
-#: Extra columns shown in Markdown only (when present).
-EXTRA_COLUMNS = (
-    ("angle_err_rel_pct", "FA rel (%)", 2),
-    ("handle_err_pct", "Handle (%)", 3),
-    ("gt_vertex_mean_pct", "GT mean (%)", 2),
-    ("chamfer", "Chamfer", 5),
-    ("ref_mean_pct", "Ref mean (%)", 3),
-    ("ref_max_pct", "Ref max (%)", 2),
-    ("energy_gap", "E gap", 4),
-    ("iterations", "Iters", 0),
-    ("converged", "Converged", 0),
-)
-#: Columns where the lowest value is not "best": never bold.
-_NO_BOLD = ("iterations", "converged")
 
 #: How a method stopped, per protocol (``protocol`` column of the rows).
 PROTOCOL_TEXT = {
@@ -274,103 +251,6 @@ def compare(df: pd.DataFrame) -> Comparison:
         ref = int(df.loc[ok & df["case"].isin(list(common)) & df["ref_mean_pct"].notna(), "case"].nunique())
     return Comparison(main=summarize(df, cases=cases), all=own if extra else None, cases=cases, methods=methods,
                       ref_cases=ref)
-
-
-def _fmt(v, dec: int) -> str:
-    return "--" if v is None or not math.isfinite(float(v)) else f"{float(v):.{dec}f}"
-
-
-def _best(values: list[float], dec: int) -> set[int]:
-    """Indices of the lowest value after rounding to ``dec`` decimals (ties: all)."""
-    r = [round(float(v), dec) if v is not None and math.isfinite(float(v)) else None for v in values]
-    fin = [x for x in r if x is not None]
-    if len(fin) < 2:
-        return set()
-    lo = min(fin)
-    return {i for i, x in enumerate(r) if x == lo}
-
-
-def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool = True,
-                note: str | None = None) -> str:
-    """Markdown table of the main columns.
-
-    Parameters
-    ----------
-    summary : per-method table (:func:`summarize` layout: ``method``, ``n_cases``,
-        ``n_failed`` and metric columns).
-    title : ``### title`` line above the table. note : a paragraph between the title and
-        the table (e.g. which cases the rows average).
-    bold : mark the best (lowest) value per column in bold; pass False when the rows
-        average different cases (the comparison would not be fair).
-    """
-    import pandas as pd
-    cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
-    cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns]
-    head = ["Method", "Cases", *[h for _, h, _ in cols]]
-    if (summary.get("n_failed", pd.Series(dtype=int)) > 0).any():
-        head.insert(2, "Failed")
-    lines = []
-    if title:
-        lines += [f"### {title}", ""]
-    if note:
-        lines += [note, ""]
-    lines += ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
-    best = {c: _best(list(summary[c]), d) if bold and c not in _NO_BOLD else set() for c, _, d in cols}
-    for i, (_, r) in enumerate(summary.iterrows()):
-        cells = [str(r["method"]), str(int(r["n_cases"]))]
-        if "Failed" in head:
-            cells.append(str(int(r["n_failed"])))
-        for c, _, d in cols:
-            if c == "converged":  # mean of a boolean: show as k/n
-                v = r[c]
-                s = "--" if v is None or not math.isfinite(float(v)) else \
-                    f"{int(round(float(v) * int(r['n_cases'])))}/{int(r['n_cases'])}"
-            else:
-                s = _fmt(r[c], d)
-            cells.append(f"**{s}**" if i in best[c] else s)
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def to_latex(summary: pd.DataFrame, *, note: str | None = None, bold: bool = True) -> str:
-    """The paper's Table 1 layout: ``Method & Volume & Area & EL & FA & Time``.
-
-    Percentages with ``\\%``, FA in degrees with ``\\textdegree``, time in seconds;
-    lowest value per column in ``\\textbf`` (unless ``bold`` is False); ``--`` where a
-    value is missing. ``note`` (plain text, escaped here): a footnote-size row below
-    the table and a ``%`` comment line on top, e.g. the number of cases averaged.
-    """
-    cols = list(TABLE_COLUMNS)
-    best = {c: _best(list(summary[c]) if c in summary.columns and bold else [], d) for c, _, _, d, _ in cols}
-    out = ["% Generated by eval.tables: mean over successful cases; needs \\usepackage{booktabs}"]
-    if note:
-        out.append(f"% {note}")
-    out += ["\\begin{tabular}{l cccc c}", "\\toprule",
-            "Method & " + " & ".join(t for _, _, t, _, _ in cols) + " \\\\", "\\midrule"]
-    for i, (_, r) in enumerate(summary.iterrows()):
-        cells = [_tex_escape(str(r["method"]))]
-        for c, _, _, d, unit in cols:
-            v = r[c] if c in summary.columns else float("nan")
-            s = _fmt(v, d)
-            if s != "--":
-                s += unit
-                if i in best[c]:
-                    s = f"\\textbf{{{s}}}"
-            cells.append(s)
-        out.append(" & ".join(cells) + " \\\\")
-    out.append("\\bottomrule")
-    if note:
-        # a paragraph cell, so a long note wraps instead of widening the table
-        out.append(f"\\multicolumn{{{1 + len(cols)}}}{{p{{0.9\\columnwidth}}}}"
-                   f"{{\\footnotesize {_tex_escape(note)}}} \\\\")
-    out.append("\\end{tabular}")
-    return "\n".join(out) + "\n"
-
-
-def _tex_escape(s: str) -> str:
-    for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_"), ("#", r"\#")):
-        s = s.replace(a, b)
-    return s
 
 
 def _plural(n: int, word: str) -> str:
