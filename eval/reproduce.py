@@ -87,8 +87,8 @@ def _steps(a) -> list[tuple[str, list[str]]]:
         s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true",
                                   "out_dir=results/tosca"]))
     if a.shapes:
-        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "jobs=1", *ia[:1],
-                                   "out_dir=results/shapes"]))
+        s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "resume=true", "jobs=1",
+                                   *ia[:1], "out_dir=results/shapes"]))
     if a.scaling:
         s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}",
                                     "out_dir=results/scaling"]))

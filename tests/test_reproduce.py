@@ -37,7 +37,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
         assert "figures.enabled=true" in steps[name], name
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
     ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if importlib.util.find_spec("torch") else ""
-    assert steps["shapes"] == f"-m eval experiment=shapes dataset.root=S jobs=1 {ia}out_dir=results/shapes"
+    assert steps["shapes"] == (f"-m eval experiment=shapes dataset.root=S resume=true jobs=1 {ia}"
+                               "out_dir=results/shapes")
     for name, cmd in steps.items():  # only this command writes results/: each step names its folder
         if name == "report":
             continue
