@@ -13,6 +13,7 @@ from sshade.checks import config_bool, config_int_list, config_number, config_va
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 
+from .experiments.scaling_set import mesh_entries
 from .subset import check_baseline_cases, check_method_cases
 
 __all__ = ["check_config"]
@@ -35,7 +36,8 @@ _EXPERIMENT_NUMBERS = {
                             ("workers", int, 1, True), ("tol", float, 0, False), ("max_iter", int, 1, True),
                             ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
                             ("rotate_deg", float, None, False), ("translate", float, None, False),
-                            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True)]),
+                            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
+                            ("first_call_timeout_s", float, 0, False)]),
     "tosca": ("tosca", [("n_low", int, 4, False), ("n_samplings", int, 1, False), ("seed", int, 0, False),
                         ("min_vertices", int, 0, True), ("workers", int, 1, True)]),
     "pose_transfer": ("pose_transfer", [("n_low", int, 4, False), ("n_samplings", int, 1, False),
@@ -102,7 +104,8 @@ def check_config(cfg) -> None:
     the dataset's numbers (``limit``, ``baseline_cases``, ``seed``, handle parameters,
     subject/pose lists, ``vertex_range``), ``figures.enabled`` / ``max_cases``, ``report.*``,
     ``reference.max_iter`` / ``time_budget_s``, ``jobs`` and the section of the experiment kind
-    (``scaling``, ``tosca``, ``pose_transfer``, ``convergence``). Absent keys are left to
+    (``scaling``, with its ``meshes`` entries, :func:`eval.experiments.scaling_set.mesh_entries`;
+    ``tosca``, ``pose_transfer``, ``convergence``). Absent keys are left to
     their readers' defaults.
 
     Raises
@@ -146,5 +149,8 @@ def check_config(cfg) -> None:
         config_int_list(cfg, "convergence.sshade.k", min=1, max=10_000)
     if kind == "scaling":
         config_int_list(cfg, "scaling.sizes", min=4)
+        config_bool(cfg, "scaling.first_call", default=True)
+        config_bool(cfg, "scaling.elastic", default=True)
+        mesh_entries(cfg)  # every scaling.meshes entry's keys, before any mesh is built
     if kind in ("tosca", "pose_transfer"):
         config_int_list(cfg, f"{kind}.poses")

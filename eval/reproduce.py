@@ -26,7 +26,8 @@ others still run):
 5. with ``--shapes DIR`` (a folder with armadillo.obj, bunny.off, dragon.obj): the
    user-defined deformations of Stanford models at 150k-200k vertices (paper §4.1,
    Fig. arap-examples) -> ``results/shapes``;
-6. with ``--scaling MESH``: the scaling benchmark from that mesh -> ``results/scaling``.
+6. with ``--scaling MESH``: the scaling benchmark on that one mesh (``scaling.meshes=null``,
+   not the experiment's default set) -> ``results/scaling``.
 
 Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``. Every step's
 folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
@@ -90,8 +91,9 @@ def _steps(a) -> list[tuple[str, list[str]]]:
         s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "resume=true", "jobs=1",
                                    *ia[:1], "out_dir=results/shapes"]))
     if a.scaling:
-        s.append(("scaling", py + ["eval", "experiment=scaling", f"scaling.base_mesh={a.scaling}",
-                                    "out_dir=results/scaling"]))
+        # one mesh instead of the experiment's default set (scaling.meshes)
+        s.append(("scaling", py + ["eval", "experiment=scaling", "scaling.meshes=null",
+                                    f"scaling.base_mesh={a.scaling}", "out_dir=results/scaling"]))
     # last: results/index.html, a link to every folder's page, and its screenshot where a
     # Chromium is installed (eval/report.py); `--only report` rebuilds just these
     shot = ["--screenshot", "results/index.png"] if find_chromium() else []

@@ -33,7 +33,7 @@ def _prepare(V, F, handles, n_low, seed, topology):
     t2 = time.perf_counter()
     prep = {"seeds": rm.seeds, "F": rm.F, "tri": proj.tri.astype(np.int32), "low_handles": rm.label[handles]}
     info = {"remesh_s": t1 - t0, "project_s": t2 - t1, "n_low": int(len(rm.seeds)), "n_repair": rm.n_repair,
-            "n_flipped": rm.n_flipped, "seed": int(seed), "first": rm.first}
+            "rounds": int(rm.iterations), "n_flipped": rm.n_flipped, "seed": int(seed), "first": rm.first}
     return prep, info
 
 
@@ -81,7 +81,8 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     -------
     Vd : (n, 3) float64 deformed positions; info : dict with per-stage seconds
     (remesh_s, project_s, arap_s, transfer_s), n_low (actual low-res vertex count),
-    iterations, converged, seed, first (first seed vertex), n_flipped.
+    iterations (low-res ARAP), converged, seed, first (first seed vertex), n_repair (seeds
+    added by the remesh's repairs), rounds (its check-and-repair rounds), n_flipped.
     """
     prep, info = _prepare(V, F, handles, n_low, seed, topology)
     V0 = None if V_init is None else V_init[prep["seeds"]]

@@ -160,9 +160,9 @@ def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, mon
     monkeypatch.setattr(sc, "warm_fullres", slow(real_f))
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=[
-            "experiment=scaling", f"scaling.base_mesh={base}", "scaling.sizes=[3000]", "sshade.n_low=300",
-            "sshade.n_samplings=2", "sshade.workers=1", "scaling.elastic_budget_s=30", f"scaling.cache={tmp_path}/c",
-            f"out_dir={tmp_path}/out"])
+            "experiment=scaling", "scaling.meshes=null", f"scaling.base_mesh={base}", "scaling.sizes=[3000]",
+            "sshade.n_low=300", "sshade.n_samplings=2", "sshade.workers=1", "scaling.elastic_budget_s=30",
+            "scaling.first_call=false", f"scaling.cache={tmp_path}/c", f"out_dir={tmp_path}/out"])
     res = run_scaling(cfg)
     row = res["table"].iloc[0]
     assert row["sshade_compile_s"] == pytest.approx(0.5) and row["elastic_compile_s"] == pytest.approx(0.5)

@@ -4,7 +4,7 @@ kind (:mod:`eval.experiments.registry`; :func:`eval.app.run_experiment` dispatch
 - ``cases`` (:mod:`eval.experiments.cases`): every method on every case of the
   configured dataset (FAUST, DeFAUST, shapes), metrics and tables; the default.
 - ``scaling`` (:mod:`eval.experiments.scaling`): SShaDe against full-resolution Elastic
-  on meshes of ~25k-450k vertices.
+  on a set of meshes (one clean, two hard) at 200k and 1M vertices.
 - ``tosca`` (:mod:`eval.experiments.tosca`): paper §4.2, non-rigid isometric deformations.
 - ``pose_transfer`` (:mod:`eval.experiments.pose_transfer`): paper §4.3 on FAUST.
 - ``convergence`` (:mod:`eval.experiments.convergence`): time to accuracy of the ARAP solvers.

@@ -1,15 +1,28 @@
 """Scaling benchmark (issue "Scalable SShaDe"; paper abstract, §1, Table 1):
 ``python -m eval experiment=scaling``.
 
-Builds test meshes of about 25k, 50k, 100k, 200k and 450k vertices from one real mesh
-(LS3 Loop subdivision, then isotropic remeshing to the target size, both pymeshlab; or
-isotropic remeshing alone for sizes below the base mesh), deforms each with SShaDe and
-with full-resolution Elastic (spokes and rims) under the same handles, and writes
-``table.csv`` / ``table.md`` into ``out_dir`` with, per size: vertices, n_low, k,
-seconds for remesh / low-res ARAP / transfer / total (numba's compilation excluded: it
+Runs a set of base meshes (``scaling.meshes``, :mod:`eval.experiments.scaling_set`;
+the default set: one clean mesh, the Stanford armadillo, and two hard ones, TOSCA's
+centaur and wolf) at each of ``scaling.sizes`` vertices (default 200k and 1M). A clean
+entry (``remesh: true``) is LS3 Loop subdivided, then isotropically remeshed to the
+target size (both pymeshlab; remeshing alone for sizes below the base mesh); a hard
+entry (``remesh: false``) is LS3 Loop subdivided only, until it has at least the target
+(its row gives the real vertex count), keeping the thin parts and anisotropy of the
+base mesh. Each mesh is deformed with SShaDe and, up to ``elastic_max_vertices``, with
+full-resolution Elastic (spokes and rims) under the same handles. ``table.csv`` (every
+column, one row per (mesh, size), ``mesh`` first) and ``table.md`` (one table per mesh,
+:mod:`eval.experiments.scaling_table`) in ``out_dir`` give: vertices, n_low, k, seconds
+for remesh / low-res ARAP / transfer / total, warm (numba's compilation excluded: it
 runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
-``elastic_compile_s``; :mod:`sshade.warmup`), peak memory of the process tree
-(PSS, MB), SShaDe's errors, Elastic's precompute time, time per iteration and time to
+``elastic_compile_s``; :mod:`sshade.warmup`), the remesh's check-and-repair rounds
+(``repair_rounds``: sum over the k samplings, ``repair_rounds_max``) and repair seeds
+(``repair_seeds``, summed), the low-res ARAP iterations (first sampling and mean of the
+warm-started ones), peak memory of the process tree (PSS, MB), SShaDe's errors, with
+``scaling.first_call`` the seconds of the first ``sshade.deform`` call in a fresh
+process (``first_call_s``: what a command-line user pays, numba's on-disk cache warm;
+interpreter start and imports apart in ``first_call_import_s``, the mesh read in
+``first_call_read_s``; :mod:`eval.experiments.scaling_probe`; NaN with a warning when
+the probe fails), and Elastic's precompute time, time per iteration and time to
 convergence (when it converges within ``elastic_budget_s``), and the speed-up.
 
 Parameters: the meshes, handles and budgets from ``scaling.*``
@@ -18,7 +31,7 @@ Parameters: the meshes, handles and budgets from ``scaling.*``
 :func:`sshade_params`); Elastic's stopping rule from ``method.Elastic`` (the ``arap``
 section; :func:`elastic_params`).
 
-Handle rule (fixed, so runs are comparable): the base mesh's principal axes a1, a2, a3
+Handle rule (fixed, so runs are comparable), per base mesh: its principal axes a1, a2, a3
 (PCA of the vertices); four landmark points = the base vertices of smallest and largest
 coordinate along a1 and along a2. At each size, group g takes 30 random vertices (seeded
 by ``[seed, g]``) within ``region_radius * bbox_diag`` of its landmark point. Groups at
@@ -39,7 +52,7 @@ from sshade import deform
 from sshade.arap import arap_deform, make_criterion
 from sshade.deform import check_params, warm_sshade
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write, read_mesh, write_mesh
+from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_mesh
 from sshade.warmup import warm_fullres
 
@@ -51,6 +64,9 @@ from ..paths import abs_path
 from ..runinfo import collect_runinfo, write_runinfo
 from .common import sshade_spec
 from .registry import register_experiment
+from .scaling_probe import probe_first_call
+from .scaling_set import MeshEntry, cache_name, mesh_entries
+from .scaling_table import write_csv, write_markdown
 
 log = logging.getLogger(__name__)
 
@@ -107,72 +123,88 @@ def elastic_params(cfg) -> dict:
 def run_scaling(cfg) -> dict:
     """Run the scaling experiment described by ``cfg.scaling`` (see conf/experiment/scaling.yaml).
 
-    Returns dict ``out_dir``, ``table`` (DataFrame, one row per size).
+    Returns dict ``out_dir``, ``table`` (DataFrame, one row per (mesh, size)).
 
     Raises
     ------
-    SShaDeError on a missing ``scaling.base_mesh`` or a bad SShaDe parameter, before any
-    mesh is built.
+    SShaDeError on a bad ``scaling.meshes`` entry (:func:`mesh_entries`), a base mesh file
+    that is not there or a bad SShaDe parameter, before any mesh is built.
     """
     import pandas as pd
     from omegaconf import OmegaConf
 
-
-
     sc = cfg.scaling
     out_dir = abs_path(cfg.out_dir)
-    base_path = abs_path(sc.base_mesh)
-    if not base_path.is_file():
-        raise SShaDeError(f"scaling.base_mesh not found: {base_path} (set scaling.base_mesh=PATH)")
+    entries = mesh_entries(cfg)
+    for e in entries:
+        if not abs_path(e.path).is_file():
+            raise SShaDeError(f"scaling: base mesh of {e.name!r} not found: {abs_path(e.path)} "
+                              "(scaling.meshes[].path, or scaling.base_mesh=PATH with scaling.meshes=null)")
     sp = check_params(**sshade_params(cfg))
     ep = elastic_params(cfg)
-    V0, F0 = read_mesh(base_path)
-    base = (base_path, V0, F0, axis_landmarks(V0))
     cache = abs_path(sc.get("cache", None) or "data/scaling")  # built meshes, reused by later runs
     config = OmegaConf.to_container(cfg, resolve=True)
     info = collect_runinfo(config, seeds={"scaling": int(sc.seed), "sshade": int(sp["seed"])},
                            extra={"status": "running"})
     write_runinfo(out_dir / "run.json", info)
     rows = []
-    for size in list(sc.sizes):
-        V, F, build_s = _size_mesh(sc, base, int(size), cache)
-        h, T = _size_handles(sc, base, V)
-        row = {"target": int(size), "vertices": len(V), "faces": len(F), "handles": len(h), "build_s": build_s}
-        print(f"[scaling] {len(V)} vertices: SShaDe ...", file=sys.stderr, flush=True)
-        row["sshade_compile_s"] = warm_sshade(sp)  # outside the timings and the memory peak
-        late_compile_s, srow = _sshade_row(V, F, h, T, sp)
-        row["sshade_compile_s"] += late_compile_s
-        row.update(srow)
-        if bool(sc.elastic) and (sc.elastic_max_vertices is None or len(V) <= int(sc.elastic_max_vertices)):
-            row.update(_elastic_row(V, F, h, T, ep, float(sc.elastic_budget_s), row["sshade_total_s"]))
-        rows.append(row)
-        print(f"[scaling] {row}", file=sys.stderr, flush=True)
-        df = pd.DataFrame(rows)
-        with atomic_write(out_dir / "table.csv", "w", newline="") as fh:
-            df.to_csv(fh, index=False, float_format="%.6g")
+    for e in entries:
+        base = _read_base(e)
+        for size in list(sc.sizes):
+            rows.append(_size_row(sc, e, base, int(size), cache, sp, ep))
+            print(f"[scaling] {rows[-1]}", file=sys.stderr, flush=True)
+            write_csv(out_dir / "table.csv", pd.DataFrame(rows))
     df = pd.DataFrame(rows)
-    md = _markdown(df)
-    with atomic_write(out_dir / "table.md", "w") as fh:
-        fh.write(md)
-    info.update(status="done", n_sizes=len(rows))
+    md = write_markdown(out_dir / "table.md", df)
+    info.update(status="done", n_rows=len(rows), meshes=[e.name for e in entries])
     write_runinfo(out_dir / "run.json", info)
     print(md)
     return {"out_dir": out_dir, "table": df}
 
 
-def _size_mesh(sc, base, size: int, cache):
-    """The mesh of about ``size`` vertices built from the base mesh (cached in
-    ``cache``); returns ``(V, F, seconds to build or read)``."""
-    base_path, V0, F0, _ = base
-    mp = cache / f"{base_path.stem}_{size}.ply"
+def _read_base(entry: MeshEntry):
+    """``(path, V0, F0, axis landmarks)`` of an entry's base mesh."""
+    path = abs_path(entry.path)
+    V0, F0 = read_mesh(path)
+    return path, V0, F0, axis_landmarks(V0)
+
+
+def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) -> dict:
+    """One row of the table: the mesh of ``entry`` at ``size``, SShaDe warm (compilation
+    apart), its first call in a fresh process (``scaling.first_call``) and full-res
+    Elastic (``scaling.elastic``, up to ``scaling.elastic_max_vertices``)."""
+    mp, V, F, build_s = _size_mesh(entry, base, size, cache)
+    h, T = _size_handles(sc, base, V)
+    row = {"mesh": entry.name, "remesh": entry.remesh, "target": size, "vertices": len(V), "faces": len(F),
+           "handles": len(h), "build_s": build_s}
+    print(f"[scaling] {entry.name}, {len(V)} vertices: SShaDe ...", file=sys.stderr, flush=True)
+    row["sshade_compile_s"] = warm_sshade(sp)  # outside the timings and the memory peak
+    late_compile_s, srow = _sshade_row(V, F, h, T, sp)
+    row["sshade_compile_s"] += late_compile_s
+    row.update(srow)
+    if bool(sc.get("first_call", True)):
+        print(f"[scaling] {entry.name}, {len(V)} vertices: first call in a fresh process ...",
+              file=sys.stderr, flush=True)
+        row.update(probe_first_call(mp, h, T, sp, timeout_s=float(sc.get("first_call_timeout_s", 600))))
+    emax = sc.get("elastic_max_vertices", None)
+    if bool(sc.elastic) and (emax is None or len(V) <= int(emax)):
+        row.update(_elastic_row(V, F, h, T, ep, float(sc.elastic_budget_s), row["sshade_total_s"]))
+    return row
+
+
+def _size_mesh(entry: MeshEntry, base, size: int, cache):
+    """The mesh of about ``size`` vertices built from an entry's base mesh (cached in
+    ``cache`` as :func:`cache_name`); returns ``(its file, V, F, seconds to build or read)``."""
+    _, V0, F0, _ = base
+    mp = cache / cache_name(entry, size)
     t0 = time.perf_counter()
     if mp.is_file():
         V, F = read_mesh(mp)
     else:
-        V, F = build_mesh(V0, F0, size, remesh=bool(sc.remesh))
-        V, F = validate_mesh(V, F, name=f"{base_path.name} at {size}")
+        V, F = build_mesh(V0, F0, size, remesh=entry.remesh)
+        V, F = validate_mesh(V, F, name=f"{entry.name} at {size}")
         write_mesh(mp, V, F)
-    return V, F, time.perf_counter() - t0
+    return mp, V, F, time.perf_counter() - t0
 
 
 def _size_handles(sc, base, V):
@@ -200,6 +232,9 @@ def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
            "transfer_s": si["transfer_s"], "lowres_iters_first": si["samplings"][0]["iterations"],
            "lowres_iters_mean_warm": float(np.mean([s["iterations"] for s in si["samplings"][1:]]))
            if k > 1 else math.nan,
+           "repair_rounds": int(sum(s["rounds"] for s in si["samplings"])),
+           "repair_rounds_max": int(max(s["rounds"] for s in si["samplings"])),
+           "repair_seeds": int(sum(s["n_repair"] for s in si["samplings"])),
            "peak_mem_mb": pm.peak_mb}
     m = deformation_metrics(V, Vd, F, h, T)
     row.update({f"sshade_{k_}": v for k_, v in m.items()})
@@ -228,36 +263,6 @@ def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -
         me = deformation_metrics(V, res.V, F, h, T)
         row.update({f"elastic_{k_}": v for k_, v in me.items()})
     return row
-
-
-def _markdown(df) -> str:
-    cols = [("vertices", "Vertices", "{:.0f}"), ("n_low", "n_low", "{:.0f}"), ("k", "k", "{:.0f}"),
-            ("remesh_s", "Remesh (s)", "{:.2f}"), ("lowres_arap_s", "Low-res ARAP (s)", "{:.2f}"),
-            ("transfer_s", "Transfer (s)", "{:.2f}"), ("sshade_total_s", "SShaDe total (s)", "{:.2f}"),
-            ("peak_mem_mb", "Peak mem (MB)", "{:.0f}"),
-            ("sshade_volume_err_pct", "Vol (%)", "{:.2f}"), ("sshade_edge_err_pct", "EL (%)", "{:.2f}"),
-            ("sshade_angle_err_deg", "FA (deg)", "{:.3f}"),
-            ("elastic_precompute_s", "Elastic precompute (s)", "{:.2f}"),
-            ("elastic_s_per_iter", "Elastic s/iter", "{:.3f}"), ("elastic_iters", "Elastic iters", "{:.0f}"),
-            ("elastic_total_s", "Elastic total (s)", "{:.1f}"), ("speedup", "Speed-up", "{:.1f}x")]
-    cols = [c for c in cols if c[0] in df.columns]
-    lines = ["| " + " | ".join(c[1] for c in cols) + " |", "|" + "---:|" * len(cols)]
-    for _, r in df.iterrows():
-        cells = []
-        for key, _, fmt in cols:
-            v = r.get(key)
-            if v is None or (isinstance(v, float) and math.isnan(v)):
-                if key == "elastic_total_s" and "elastic_total_lower_bound_s" in r:
-                    cells.append(f"> {r['elastic_total_lower_bound_s']:.0f} (not converged)")
-                else:
-                    cells.append("-")
-            else:
-                s = fmt.format(v)
-                if key == "speedup" and r.get("speedup_is_lower_bound"):
-                    s = "> " + s
-                cells.append(s)
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
 
 
 register_experiment("scaling", run_scaling)

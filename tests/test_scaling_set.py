@@ -1,0 +1,131 @@
+"""The scaling benchmark on a set of meshes (issue 24): one row per (mesh, size), a clean
+(remeshed) and a hard (LS3 Loop only) entry, repair rounds, the first call of a fresh
+process, one table per mesh; a bad ``scaling.meshes`` entry refused before any mesh is built."""
+from __future__ import annotations
+
+import logging
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.experiments.scaling_probe import probe_first_call
+from eval.experiments.scaling_set import MeshEntry, cache_name, mesh_entries
+from sshade.errors import SShaDeError
+from sshade.mesh.io import write_mesh
+
+from .conftest import subprocess_env
+
+SIZES = [1500, 3000]
+
+
+def _ls3_count(n: int, target: int) -> int:
+    """Vertices after LS3 Loop steps on a closed genus-0 mesh (each step adds one vertex
+    per edge: n -> n + (3n - 6)) until at least ``target``."""
+    while n < target:
+        n = 4 * n - 6
+    return n
+
+
+def _compose(overrides):
+    from hydra import compose, initialize_config_dir
+
+    from eval.app import CONF_DIR
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        return compose(config_name="config", overrides=["experiment=scaling", *overrides])
+
+
+@pytest.fixture(scope="module")
+def set_run(tmp_path_factory):
+    """The experiment on two tiny meshes: a sphere (remeshed) and an ellipsoid (LS3 Loop
+    only), 642 vertices each, at SIZES; SShaDe with n_low 300, k 2; no Elastic."""
+    import trimesh
+
+    from eval.experiments.scaling import run_scaling
+    d = tmp_path_factory.mktemp("scaling_set")
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    V, F = np.asarray(ico.vertices, float), np.asarray(ico.faces, np.int64)
+    write_mesh(d / "ball.ply", V, F)
+    write_mesh(d / "egg.ply", V * [1.0, 0.5, 0.25], F)  # anisotropic
+    meshes = f"[{{name:ball,path:'{d / 'ball.ply'}',remesh:true}},{{name:egg,path:'{d / 'egg.ply'}',remesh:false}}]"
+    cfg = _compose([f"scaling.meshes={meshes}", f"scaling.sizes={SIZES}", "sshade.n_low=300", "sshade.n_samplings=2",
+                    "sshade.workers=1", "scaling.elastic=false", "scaling.first_call=true",
+                    f"scaling.cache={d}/cache", f"out_dir={d}/out"])
+    res = run_scaling(cfg)
+    return d, len(V), res
+
+
+def test_one_row_per_mesh_and_size(set_run):
+    d, n0, res = set_run
+    df = pd.read_csv(d / "out" / "table.csv")
+    assert list(zip(df["mesh"], df["target"])) == [("ball", s) for s in SIZES] + [("egg", s) for s in SIZES]
+    assert list(df["remesh"]) == [True, True, False, False]
+    egg = df[df["mesh"] == "egg"]
+    assert list(egg["vertices"]) == [_ls3_count(n0, s) for s in SIZES]  # LS3 Loop only: the exact count, >= target
+    ball = df[df["mesh"] == "ball"]
+    assert all(abs(v - s) < 0.2 * s for v, s in zip(ball["vertices"], SIZES))  # remeshed to about the target
+    assert sorted(p.name for p in (d / "cache").iterdir()) == sorted(
+        cache_name(MeshEntry(m, "", r), s) for m, r in (("ball", True), ("egg", False)) for s in SIZES)
+
+
+def test_repair_rounds_iterations_and_first_call(set_run):
+    _, _, res = set_run
+    df = res["table"]
+    for _, r in df.iterrows():
+        assert isinstance(r["repair_rounds"], (int, np.integer)) and r["repair_rounds"] >= 2  # >= 1 per sampling
+        assert 1 <= r["repair_rounds_max"] <= r["repair_rounds"] and r["repair_seeds"] >= 0
+        assert r["lowres_iters_first"] >= 1 and r["lowres_iters_mean_warm"] >= 0
+        assert math.isfinite(r["first_call_s"]) and r["first_call_s"] > 0
+        assert math.isfinite(r["first_call_import_s"]) and r["first_call_import_s"] > 0
+        assert r["sshade_total_s"] > 0 and r["peak_mem_mb"] > 0
+    assert "elastic_total_s" not in df.columns
+
+
+def test_markdown_has_one_table_per_mesh(set_run):
+    d, _, _ = set_run
+    md = (d / "out" / "table.md").read_text()
+    heads = [line for line in md.splitlines() if line.startswith("### ")]
+    assert heads == ["### ball (clean: LS3 Loop + isotropic remesh)", "### egg (hard: LS3 Loop only)"]
+    for block in md.split("### ")[1:]:
+        rows = [line for line in block.splitlines() if line.startswith("| ") and not line.startswith("| Vertices")]
+        assert len(rows) == len(SIZES)
+    header = next(line for line in md.splitlines() if line.startswith("| Vertices"))
+    for col in ("Repair rounds (max)", "Iters (first / warm mean)", "First call (s)", "Compile (s)", "Peak mem (MB)"):
+        assert col in header
+
+
+@pytest.mark.parametrize("bad, what", [("[{name:a,remesh:true}]", "scaling.meshes[0] lacks path"),
+                                       ("[{name:a,path:x.ply,remesh:true,size:3}]", "unknown key(s) size")])
+def test_bad_entry_is_refused_before_any_mesh(tmp_path, bad, what):
+    r = subprocess.run([sys.executable, "-m", "eval", "experiment=scaling", f"scaling.meshes={bad}",
+                        f"scaling.cache={tmp_path}/cache", f"out_dir={tmp_path}/out"],
+                       cwd=tmp_path, env=subprocess_env(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr[-2000:]
+    errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and what in errors[0], r.stderr[-2000:]
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
+
+
+def test_entries_checked_and_base_mesh_fallback():
+    es = mesh_entries(_compose([]))  # the default set: one clean mesh, two hard ones
+    assert [(e.name, e.remesh) for e in es] == [("armadillo", True), ("centaur", False), ("wolf", False)]
+    old = mesh_entries(_compose(["scaling.meshes=null", "scaling.base_mesh=some/dir/bunny.off",
+                                 "scaling.remesh=false"]))
+    assert old == [MeshEntry("bunny", "some/dir/bunny.off", False)]
+    for bad, what in [("[{name:a,path:x,remesh:1}]", r"meshes\[0\]\.remesh must be true or false"),
+                      ("[{name:a,path:x,remesh:true},{name:a,path:y,remesh:true}]", "repeats"),
+                      ("[{name:'a b',path:x,remesh:true}]", "file-name token"), ("[]", "non-empty list")]:
+        with pytest.raises(SShaDeError, match=what):
+            mesh_entries(_compose([f"scaling.meshes={bad}"]))
+    assert cache_name(MeshEntry("m", "p", True), 200000) != cache_name(MeshEntry("m", "p", False), 200000)
+
+
+def test_failing_probe_gives_nan_and_a_warning(tmp_path, caplog):
+    with caplog.at_level(logging.WARNING, logger="eval.experiments.scaling_probe"):
+        r = probe_first_call(tmp_path / "missing.ply", np.array([0]), np.zeros((1, 3)), {"n_low": 10}, timeout_s=60)
+    assert all(math.isnan(v) for v in r.values()) and "first_call_s" in r
+    assert "first-call probe" in caplog.text and "NaN" in caplog.text
