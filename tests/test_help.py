@@ -34,6 +34,7 @@ HELP = {
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
     "benchmarks/remesh_speed.py": ["usage:", "--mesh"],
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
+    "-m eval.experiments.scaling_probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
 }
 

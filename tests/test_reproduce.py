@@ -45,6 +45,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
         want = "hydra.sweep.dir=results/sweeps/defaust" if name == "sweep" else f"out_dir=results/{name}"
         assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
+    assert "scaling.meshes=null" in steps["scaling"]  # one mesh instead of the set
+    assert _steps(capsys, "--scaling", "set")["scaling"] == "-m eval experiment=scaling out_dir=results/scaling"
 
 
 def test_only_runs_the_named_steps(capsys):
