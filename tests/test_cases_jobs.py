@@ -88,3 +88,36 @@ def test_plan_wall_time_on_workers():
     assert "8 run(s), 2 at a time:" in render_plan(two) and "at a time" not in render_plan(one)
     # the costliest case bounds it from below: one case of 8 runs on 4 workers
     assert make_plan(cases, ["A", "S"], [(0, 0), (0, 1)], cost, jobs=4)["total_s"] == 20.0
+
+
+def test_ctrl_c_stops_the_workers(tmp_path, faust_root):
+    """Ctrl-C while two workers run (each sleeping in a plug-in's deform): one line
+    ``interrupted``, exit 130, no worker process left behind."""
+    import os
+    import signal
+    import time
+    (tmp_path / "faust").symlink_to(faust_root)
+    calls = tmp_path / "calls.txt"
+    env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(calls), SSHADE_TEST_HANG_AFTER="0")
+    p = subprocess.Popen([sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={tmp_path / 'faust'}",
+                          "dataset.limit=2", "reference.cases=none", f"methods=[{PLUGIN % 'A'}]", "jobs=2",
+                          f"out_dir={tmp_path / 'out'}"], cwd=ROOT, env=env, text=True, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    try:
+        t_end = time.monotonic() + 120
+        while not (calls.is_file() and len(calls.read_text().splitlines()) >= 2) and p.poll() is None \
+                and time.monotonic() < t_end:
+            time.sleep(0.1)
+        assert p.poll() is None, p.communicate()
+        kids = [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
+                                               text=True).stdout.split()]
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err[-3000:]
+    assert "Traceback" not in err
+    time.sleep(0.5)
+    alive = [k for k in kids if os.path.exists(f"/proc/{k}") and "Z" not in open(f"/proc/{k}/stat").read().split()[2]]
+    assert not alive, alive

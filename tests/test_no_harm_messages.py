@@ -235,13 +235,17 @@ def test_hydra_errors_are_one_line(tmp_path):
 
 # ----------------------------------------------------------------------------- 4. Ctrl-C
 def test_sigint_eval_prints_interrupted(tmp_path, faust_root):
-    out = tmp_path / "run"
+    """Ctrl-C while a method runs (a plug-in that sleeps in its first deform call, so the
+    signal always lands mid-run, however loaded the machine): one line, exit 130."""
+    out, calls = tmp_path / "run", tmp_path / "calls.txt"
+    env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(calls), SSHADE_TEST_HANG_AFTER="0")
     p = subprocess.Popen([sys.executable, "-m", "eval", "experiment=ci", f"dataset.root={faust_root}",
-                          f"out_dir={out}", "dataset.limit=1"], cwd=ROOT, env=subprocess_env(), text=True,
+                          f"out_dir={out}", "dataset.limit=1", "reference.cases=none",
+                          "methods=[{_target_:tests.store_methods.Counted,name:Hang}]"], cwd=ROOT, env=env, text=True,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         t_end = time.monotonic() + 120
-        while not (out / "run.json").is_file() and p.poll() is None and time.monotonic() < t_end:
+        while not calls.is_file() and p.poll() is None and time.monotonic() < t_end:
             time.sleep(0.1)
         assert p.poll() is None, p.communicate()
         p.send_signal(signal.SIGINT)
