@@ -111,7 +111,7 @@ def probe_first_call(mesh_path, handles: np.ndarray, targets: np.ndarray, params
 
 def main(argv=None) -> int:
     """Command line of the probe: print :func:`first_call`'s dict as one JSON line
-    (with ``import_s`` when ``--t0`` is given); exit status 0, or 1 after one
+    (with ``import_s`` when ``--t0`` is given); exit status 0, or 2 after one
     ``error: ...`` line on stderr."""
     t_main = time.time()
     ap = ArgumentParser(prog="python -m eval.experiments.scaling_probe", description=__doc__.split("\n\n")[0])
@@ -124,7 +124,7 @@ def main(argv=None) -> int:
         r = first_call(a.mesh, a.handles_npz, a.params_json)
     except Exception as e:  # noqa: BLE001 - reported to the parent as one line
         print(f"error: {type(e).__name__}: {e}", file=sys.stderr)
-        return 1
+        return 2
     r["import_s"] = (t_main - a.t0) if a.t0 is not None else math.nan
     print(json.dumps(r))
     return 0
