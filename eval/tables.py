@@ -328,7 +328,7 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
     ``"Elastic: converged protocol: ...; 58-69 iterations; converged on 2/2 runs"``.
     ``short``: protocol names and ``"it."`` only (for the LaTeX footnote). Empty when
     the rows carry none of these columns."""
-    if "method" not in df.columns or not {"iterations", "converged", "protocol"} & set(df.columns):
+    if "method" not in df.columns or not {"iterations", "converged", "protocol", "preset"} & set(df.columns):
         return []
     ok = ok_mask(df)
     lines = []
@@ -355,9 +355,29 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
             else:
                 parts.append(f"stopping criterion met on {int(c.sum())}/{len(c)} runs"
                              + ("" if c.all() else " (the others hit the iteration cap or time budget)"))
+        parts += _preset_words(g, short)
         if parts:
             lines.append(f"{m}: " + (", " if short else "; ").join(parts))
     return lines
+
+
+def _preset_words(g: pd.DataFrame, short: bool) -> list[str]:
+    """A method's preset (``preset`` column, e.g. Implicit-ARAP's ``cpu``) and, where the
+    rows give them, its fixed step counts (``sdf_steps``, ``deform_steps``): such a method
+    stops after a set number of optimiser steps, and its time includes its SDF fit."""
+    if "preset" not in g.columns or not g["preset"].notna().any():
+        return []
+    words = "/".join(sorted({str(p) for p in g["preset"].dropna()})) + " preset"
+    if short:
+        return [words]
+    steps = [f"{'/'.join(str(int(x)) for x in sorted(set(g[c].dropna())))} {what}"
+             for c, what in (("sdf_steps", "SDF-fit steps"), ("deform_steps", "deformation steps"))
+             if c in g.columns and g[c].notna().any()]
+    if steps:
+        words += f": a fixed {' + '.join(steps)}, no stopping criterion"
+    if "sdf_fit_s" in g.columns and g["sdf_fit_s"].notna().any():
+        words += f"; its Time includes the SDF fit (mean {g['sdf_fit_s'].mean():.1f} s)"
+    return [words]
 
 
 def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None,

@@ -19,6 +19,7 @@ from eval.tables import (
     common_cases,
     compare,
     ok_mask,
+    stop_lines,
     summarize,
     to_markdown,
     write_tables,
@@ -286,3 +287,15 @@ def test_retabulate_rebuilds_tables_from_cases_csv_only(tmp_path):
     md = (tmp_path / "table.md").read_text()
     assert md.startswith("### demo: 4 x case(s)") and (tmp_path / "table_all.csv").is_file()
     assert _md_row(_tables(md)[0], "SShaDe")[1] == "2"  # the common set, as write_tables
+
+
+def test_a_preset_method_says_its_preset_and_steps():
+    """Implicit-ARAP-like rows (a preset, fixed step counts, an SDF fit inside the time):
+    the table's stop line says so (issue 22: every row says which preset made it)."""
+    import pandas as pd
+    rows = [{"case": f"c{i}", "method": "Implicit-ARAP", "volume_err_pct": 1.0, "time_s": 60.0, "error": "",
+             "preset": "cpu", "sdf_steps": 1000, "deform_steps": 250, "sdf_fit_s": 40.0 + i} for i in range(2)]
+    lines = stop_lines(pd.DataFrame(rows))
+    assert lines == ["Implicit-ARAP: cpu preset: a fixed 1000 SDF-fit steps + 250 deformation steps, no stopping "
+                     "criterion; its Time includes the SDF fit (mean 40.5 s)"]
+    assert stop_lines(pd.DataFrame(rows), short=True) == ["Implicit-ARAP: cpu preset"]
