@@ -249,3 +249,25 @@ def test_a_click_on_a_header_sorts_the_table(tmp_path):
     dom = chromium(page, "--dump-dom").stdout
     assert re.search(r'<body[^>]*data-order="CAB,ACB"', dom), dom[-300:]  # ascending (no value last), descending
     assert re.search(r'id="js-errors" data-count="0"', dom)
+
+
+def test_committed_results_pages_open_in_headless_chromium():
+    """The committed ``results/index.html`` and every page it links to (each folder's
+    ``index.html``, written by ``python -m eval.reproduce``) load in headless Chromium
+    without a JavaScript error, and every link of the index leads to something committed
+    (issue 23)."""
+    _need_chromium()
+    root = Path(__file__).resolve().parents[1] / "results"
+    index = root / PAGE
+    if not index.is_file():
+        pytest.skip("no results/index.html in this checkout")
+    links = re.findall(r'href="([^"#:]+)"', index.read_text())
+    assert links, "results/index.html links to nothing"
+    missing = [h for h in links if not (root / h).exists()]
+    assert not missing, missing
+    pages = [index, *sorted({(root / h).resolve() for h in links if h.endswith(PAGE)})]
+    for page in pages:
+        dom = chromium(page, "--dump-dom").stdout
+        assert 'id="js-errors"' in dom, f"{page}: chromium gave no DOM"
+        box = re.search(r'<div id="js-errors"[^>]*>.*?</div>(?!\s*<div class="js-error")', dom, re.S).group(0)
+        assert 'data-count="0"' in box, f"{page}: JavaScript errors: {box}"
