@@ -24,7 +24,8 @@ DeFAUST (:data:`METHOD_PRIORS`) plus the per-pair overhead of the metrics
 """
 from __future__ import annotations
 
-__all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "PAPER_PRIORS", "GUESSED_PRIORS",
+__all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "PAPER_PRIORS", "PRESET_PRIORS",
+           "GUESSED_PRIORS",
            "OVERHEAD_S_PER_VERTEX"]
 
 #: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
@@ -33,7 +34,12 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "
 #: 68.1 s, SShaDe 2.0 s; ARAP-SR (converged, coarse start: baselines/coarse_start.py)
 #: 41-112 s on the first four DeFAUST cases, 43-54 s on s00_p01 (machine shared): 3e-4
 #: s/vertex, about 51 s at 169k.
-METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0}
+#: Implicit-ARAP's cpu preset (a constant): 53.5 s mean over the 8 FAUST cases of the
+#: committed results/faust, 46 s over the 3 shapes at 164-166k vertices (its cost does not
+#: grow with the mesh); another preset (paper: hours per case on a CPU) has no prior.
+METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0, "Implicit-ARAP": 50.0}
+#: Methods whose prior holds for one preset only (their ``preset`` attribute).
+PRESET_PRIORS = {"Implicit-ARAP": "cpu"}
 #: Priors that replace :data:`METHOD_PRIORS` for a method run under ``arap.protocol=paper``
 #: (its ``protocol`` attribute): ARAP-SR's move rule stops after 2 iterations, 3.6-3.7 s at
 #: 168,897 vertices (the committed ``results/defaust_paper/cases.csv``): 2.2e-5 s/vertex.
@@ -129,8 +135,11 @@ def default_cost_model(methods) -> CostModel:
     (44, 4)
     """
     scales = {m.name: CostModel.scale_of(m) for m in methods}
-    want = {"SShaDe": "const"}
+    want = {"SShaDe": "const", "Implicit-ARAP": "const"}
     priors = {k: v for k, v in METHOD_PRIORS.items() if k in scales and scales[k] == want.get(k, "vertices")}
+    for m in methods:  # a prior measured on one preset says nothing of another
+        if m.name in PRESET_PRIORS and getattr(m, "preset", PRESET_PRIORS[m.name]) != PRESET_PRIORS[m.name]:
+            priors.pop(m.name, None)
     for m in methods:  # the paper protocol's move rule stops early (ARAP-SR: 2 iterations)
         if getattr(m, "protocol", None) == "paper" and m.name in PAPER_PRIORS and m.name in priors:
             priors[m.name] = PAPER_PRIORS[m.name]

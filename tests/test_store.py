@@ -125,6 +125,18 @@ def test_paper_protocol_has_its_own_prior():
     assert paper.priors["ARAP-SR"] == PAPER_PRIORS["ARAP-SR"] and conv.priors["ARAP-SR"] == METHOD_PRIORS["ARAP-SR"]
 
 
+def test_implicit_arap_cpu_preset_prior_is_constant():
+    """Implicit-ARAP's cost does not grow with the mesh: its cpu preset is planned at a
+    measured constant, any other preset (paper: hours on a CPU) at the generic guess."""
+    from eval.progress import METHOD_PRIORS, default_cost_model
+    cpu = default_cost_model([SimpleNamespace(name="Implicit-ARAP", preset="cpu", cost_scale="const")])
+    assert cpu.basis("Implicit-ARAP") == "prior"
+    assert cpu.estimate("Implicit-ARAP", 169_000) - cpu.estimate("Implicit-ARAP", 6_890) < 5  # only the overhead grows
+    assert cpu.estimate("Implicit-ARAP", 6_890) == pytest.approx(METHOD_PRIORS["Implicit-ARAP"], abs=1.0)
+    paper = default_cost_model([SimpleNamespace(name="Implicit-ARAP", preset="paper", cost_scale="const")])
+    assert paper.basis("Implicit-ARAP") == "guess"
+
+
 # ----------------------------------------------------------------------------- resume after kill -9
 def _eval(out, methods, *extra, env=None, popen=False):
     items = ",".join(m if "{" in m else PLUGIN % m for m in methods)
