@@ -16,7 +16,7 @@ from sshade.errors import SShaDeError
 from .experiments.scaling_set import mesh_entries
 from .subset import check_baseline_cases, check_method_cases
 
-__all__ = ["check_config"]
+__all__ = ["check_config", "check_jobs"]
 
 MAX_SEED = 2**63 - 1  # int64: seeds are recorded in CSV/JSON and passed to numpy
 _ABSENT = object()   # a default that tells an absent key apart from null
@@ -97,6 +97,24 @@ def _check_sshade(cfg) -> None:
         raise SShaDeError(str(e).replace("SShaDe: ", "sshade.", 1)) from None
 
 
+def check_jobs(value) -> int | None:
+    """``jobs`` (:mod:`eval.experiments.cases_jobs`) checked: an integer from 1 to 1024, or
+    None for ``auto`` / null.
+
+    Raises
+    ------
+    SShaDeError for any other value.
+
+    >>> check_jobs("auto"), check_jobs(2)
+    (None, 2)
+    """
+    if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
+        return None
+    if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 1024:
+        return value
+    raise SShaDeError(f"jobs must be an integer from 1 to 1024 or auto, got {value!r}")
+
+
 def check_config(cfg) -> None:
     """Check every number and flag of an evaluator config before any work.
 
@@ -125,10 +143,7 @@ def check_config(cfg) -> None:
     if config_value(cfg, "figures", None) is not None:
         config_bool(cfg, "figures.enabled", default=False)
     config_bool(cfg, "resume", default=False)
-    jobs = config_value(cfg, "jobs", "auto")  # eval/experiments/cases_jobs.py
-    if not (jobs is None or (isinstance(jobs, str) and jobs.strip().lower() == "auto")
-            or (isinstance(jobs, int) and not isinstance(jobs, bool) and 1 <= jobs <= 1024)):
-        raise SShaDeError(f"jobs must be an integer from 1 to 1024 or auto, got {jobs!r}")
+    check_jobs(config_value(cfg, "jobs", "auto"))
     if config_value(cfg, "report", None) is not None:
         config_bool(cfg, "report.enabled", default=True)
         config_number(cfg, "report.view_cases", min=0, allow_none=True, default=2)

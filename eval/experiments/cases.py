@@ -77,7 +77,7 @@ from .case_references import CaseReferences
 from .cases_jobs import describe, job_count, run_case_jobs
 from .cases_plan import plan_runs, planned_root
 from .common import as_list, sshade_spec
-from .pair import guard_options, run_pair
+from .pair import guard_options, run_and_store
 from .registry import register_experiment
 
 __all__ = ["run", "sshade_params"]
@@ -277,9 +277,8 @@ def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: di
               s.refs.covers(ci, s.cases, s.base), out.wants_meshes(ci)) for ci in order]
     n_done = [0]
 
-    def on_pair(ci, mi, wall, compile_s):
-        c = compile_s if isinstance(compile_s, (int, float)) and compile_s == compile_s else 0.0
-        cost.observe(s.names[mi], len(s.cases[ci].V), wall - c)
+    def on_pair(ci, mi, wall, cost_s):
+        cost.observe(s.names[mi], len(s.cases[ci].V), cost_s)
         n_done[0] += 1
         bar.total = max(bar.total, bar.n + wall)
         bar.set_postfix_str(f"{n_done[0]}/{len(todo)} runs: {s.cases[ci].name} {s.names[mi]}")
@@ -346,22 +345,13 @@ class _CaseOutputs:
 
 
 def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostModel, bar):
-    """One pair run (:func:`eval.experiments.pair.run_pair`), timed into ``cost`` and ``bar``, and stored
-    (:meth:`eval.store.ResultStore.save`; a store that cannot be written is logged and the
-    run goes on). Returns ``(record, U)``."""
-    case, m, name = s.cases[ci], s.methods[mi], s.names[mi]
-    t0 = time.perf_counter()
-    row, U, info = run_pair(m, name, case, s.refs, s.guard, s.meshes)
-    wall = time.perf_counter() - t0
-    c = row.get("compile_s")  # a one-off (numba compilation): not a cost of the later runs
-    cost.observe(name, len(case.V), wall - (c if isinstance(c, (int, float)) and c == c else 0.0))
+    """One pair run and stored (:func:`eval.experiments.pair.run_and_store`), timed into
+    ``cost`` and ``bar``. Returns ``(record, U)``."""
+    case, name = s.cases[ci], s.names[mi]
+    rec, U, wall, cost_s = run_and_store(s.methods[mi], name, case, s.refs, s.guard, s.meshes, s.store, *key)
+    cost.observe(name, len(case.V), cost_s)
     bar.total = max(bar.total, bar.n + wall)  # a run longer than estimated never overfills the bar
     bar.update(wall)
-    rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name}
-    try:
-        s.store.save(case.name, name, key[0], key[1], row, info, U)
-    except OSError as e:
-        log.warning("%s %s: result not stored (%s); a resume will run it again", case.name, name, e)
     return rec, U
 
 

@@ -26,17 +26,17 @@ Example::
 from __future__ import annotations
 
 import logging
-import time
 
 from sshade.errors import SShaDeError
 from sshade.jobs import available_cores, in_worker, pool_size, run_jobs, send, thread_limit
 
 from .. import methods as method_table
+from ..config_check import check_jobs
 from ..metric_meshes import CaseMeshes
 from ..paths import abs_path
-from ..store import ResultStore, json_safe
+from ..store import ResultStore
 from .case_references import CaseReferences
-from .pair import guard_options, run_pair
+from .pair import guard_options, run_and_store
 
 __all__ = ["AUTO_MIN_S", "job_count", "describe", "run_case_jobs", "init_worker", "case_job"]
 
@@ -60,12 +60,9 @@ def job_count(value, *, cases: int, estimate_s: float) -> int:
     >>> job_count("auto", cases=40, estimate_s=10.0), job_count(4, cases=3, estimate_s=0)
     (1, 3)
     """
-    if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
+    n = check_jobs(value)  # eval.config_check.check_config refuses a bad value first, before any work
+    if n is None:  # auto
         n = available_cores() if estimate_s >= AUTO_MIN_S and cases >= 2 else 1
-    elif isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 1024:
-        n = value
-    else:  # eval.config_check.check_config refuses it first, before any work
-        raise SShaDeError(f"jobs must be an integer from 1 to 1024 or auto, got {value!r}")
     return pool_size(n, max(int(cases), 1))
 
 
@@ -106,23 +103,16 @@ def init_worker(config: dict) -> None:
 def case_job(ci: int, case, pairs, ref_on: bool, want_meshes: bool) -> dict:
     """In a worker: the methods ``pairs`` (``(mi, key, key_fields)``, in table order) on
     case ``ci``, each stored as it finishes and its seconds sent to the main process
-    (``("pair", ci, mi, seconds, compile_s)``). Returns ``{"ci", "pairs": [(mi, record,
+    (``("pair", ci, mi, seconds, seconds less compilation)``). Returns ``{"ci", "pairs": [(mi, record,
     U or None), ...], "references_s"}``."""
     w = _W
     w["refs"].start_case(ci, case, ref_on)
     ref0, out = w["refs"].computed_s, []
     for mi, key, fields in pairs:
         m = w["methods"][mi]
-        t0 = time.perf_counter()
-        row, U, info = run_pair(m, m.name, case, w["refs"], w["guard"], w["meshes"])
-        row["cores"] = available_cores()
-        wall = time.perf_counter() - t0
-        rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": m.name}
-        try:
-            w["store"].save(case.name, m.name, key, fields, row, info, U)
-        except OSError as e:
-            log.warning("%s %s: result not stored (%s); a resume will run it again", case.name, m.name, e)
-        send(("pair", ci, mi, wall, row.get("compile_s")))
+        rec, U, wall, cost_s = run_and_store(m, m.name, case, w["refs"], w["guard"], w["meshes"], w["store"], key,
+                                             fields, extra={"cores": available_cores()})
+        send(("pair", ci, mi, wall, cost_s))
         out.append((mi, rec, U if want_meshes else None))
     return {"ci": ci, "pairs": out, "references_s": w["refs"].computed_s - ref0}
 
@@ -135,7 +125,8 @@ def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case) -> float:
     config : the run's config as a resolved mapping (each worker builds its methods from it).
     tasks : list of ``(ci, case, pairs, ref_on, want_meshes)`` (:func:`case_job`'s
         arguments), in the order they are handed out (costliest first).
-    on_pair : called ``on_pair(ci, mi, seconds, compile_s)`` as each pair ends.
+    on_pair : called ``on_pair(ci, mi, seconds, cost_s)`` as each pair ends (``cost_s``:
+        the seconds less the method's one-off compilation).
     on_case : called ``on_case(ci, [(mi, record, U or None), ...])`` as each case ends.
 
     Returns

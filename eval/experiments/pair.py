@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import time
 
 import numpy as np
 
@@ -14,8 +15,9 @@ from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reache
 
 from ..metric_meshes import CaseMeshes
 from ..metrics import deformation_metrics, ground_truth_metrics
+from ..store import json_safe
 
-__all__ = ["run_pair", "guard_options"]
+__all__ = ["run_pair", "run_and_store", "guard_options"]
 
 log = logging.getLogger("eval")
 
@@ -133,3 +135,29 @@ def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = 
              row.get("volume_err_pct", math.nan), row.get("edge_err_pct", math.nan),
              row.get("angle_err_deg", math.nan))
     return row, r.U, r.info
+
+
+def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str, fields: dict, *,
+                  extra: dict | None = None):
+    """:func:`run_pair`, timed, then stored at once (:meth:`eval.store.ResultStore.save`; a
+    store that cannot be written is logged and the run goes on). ``extra``: cells added to
+    the row before it is stored (e.g. a worker's ``cores``).
+
+    Returns
+    -------
+    ``(record, U, wall_s, cost_s)``: the record as the store holds it, the deformed
+    vertices (n, 3) or None, the pair's wall seconds, and those less the method's one-off
+    compilation (``compile_s``: not a cost of the later runs; for the cost model).
+    """
+    t0 = time.perf_counter()
+    row, U, info = run_pair(m, name, case, refs, guard, meshes)
+    row.update(extra or {})
+    wall = time.perf_counter() - t0
+    c = row.get("compile_s")
+    cost_s = wall - (c if isinstance(c, (int, float)) and c == c else 0.0)
+    rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name}
+    try:
+        store.save(case.name, name, key, fields, row, info, U)
+    except OSError as e:
+        log.warning("%s %s: result not stored (%s); a resume will run it again", case.name, name, e)
+    return rec, U, wall, cost_s
