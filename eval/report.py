@@ -58,6 +58,7 @@ from .tables import (
     ALL_CASES_HEADING,
     EXTRA_COLUMNS,
     TABLE_COLUMNS,
+    all_note,
     compare,
     failure_lines,
     main_note,
@@ -158,8 +159,7 @@ def _main_section(run_dir: Path, kind: str) -> str:
             if fails:
                 out += ["<h3>Failed runs (left out of every mean)</h3>", _items(fails)]
             if comp.all is not None:
-                out += [f"<h3>{_e(ALL_CASES_HEADING)}</h3>", '<p class="note">Each row: that method\'s mean over '
-                        "its own successful cases; rows may average different cases.</p>",
+                out += [f"<h3>{_e(ALL_CASES_HEADING)}</h3>", f'<p class="note">{_e(all_note(comp))}</p>',
                         _summary_table(comp.all, "all-table")]
             return "\n".join(out)
     if (run_dir / "table.csv").is_file():

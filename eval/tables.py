@@ -59,7 +59,7 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
     import pandas as pd
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
-           "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
+           "all_note", "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
            "COMMON_CASES_HEADING", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines"]
 
 #: Columns never averaged (identifiers, seeds).
@@ -215,12 +215,16 @@ class Comparison:
     ref_cases : how many of ``cases`` have reference columns (``ref_mean_pct``) in a
         successful row; None without that column (issue 21: ``reference.cases`` may cover
         a subset, and the note then says so).
+    ref_cases_all : as ``ref_cases`` over every successful row's case (the ``all`` table).
+    n_cases_all : the number of distinct cases with a successful row.
     """
     main: pd.DataFrame
     all: pd.DataFrame | None
     cases: list | None
     methods: list
     ref_cases: int | None = None
+    ref_cases_all: int | None = None
+    n_cases_all: int | None = None
 
     @property
     def same_cases(self) -> bool:
@@ -246,11 +250,13 @@ def compare(df: pd.DataFrame) -> Comparison:
     ok = ok_mask(df)
     common = set(cases)
     extra = bool((ok & ~df["case"].isin(list(common))).any())
-    ref = None
+    ref = ref_all = None
     if "ref_mean_pct" in df.columns:
-        ref = int(df.loc[ok & df["case"].isin(list(common)) & df["ref_mean_pct"].notna(), "case"].nunique())
+        has_ref = ok & df["ref_mean_pct"].notna()
+        ref = int(df.loc[has_ref & df["case"].isin(list(common)), "case"].nunique())
+        ref_all = int(df.loc[has_ref, "case"].nunique())
     return Comparison(main=summarize(df, cases=cases), all=own if extra else None, cases=cases, methods=methods,
-                      ref_cases=ref)
+                      ref_cases=ref, ref_cases_all=ref_all, n_cases_all=int(df.loc[ok, "case"].nunique()))
 
 
 def _plural(n: int, word: str) -> str:
@@ -281,6 +287,18 @@ def main_note(comp: Comparison) -> str | None:
     if dead:
         note += (f" {', '.join(map(str, dead))} failed on every case {'it' if len(dead) == 1 else 'they'} ran on: "
                  f"{'its row averages' if len(dead) == 1 else 'their rows average'} no case.")
+    return note
+
+
+def all_note(comp: Comparison) -> str:
+    """The note of the all-cases table (``comp.all``): its rows average different cases,
+    and the reference columns only the cases with a reference solution, when those are
+    fewer than the cases (issue 21)."""
+    note = ("Each row: that method's mean over all its own successful cases (Cases), so rows may average "
+            "different cases and nothing is bold; compare methods in the table above.")
+    if comp.ref_cases_all is not None and comp.n_cases_all and 0 < comp.ref_cases_all < comp.n_cases_all:
+        note += (f" Ref mean, Ref max and E gap: over the {comp.ref_cases_all} of the {comp.n_cases_all} cases "
+                 "with a reference solution (reference.cases), not over Cases.")
     return note
 
 
@@ -407,9 +425,7 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
                  + "".join(f"- {s}\n" for s in failures))
     if comp.all is not None:
         text += "\n" + to_markdown(
-            comp.all, title=ALL_CASES_HEADING, bold=False,
-            note=("Each row: that method's mean over all its own successful cases (Cases), so rows may average "
-                  "different cases and nothing is bold; compare methods in the table above."))
+            comp.all, title=ALL_CASES_HEADING, bold=False, note=all_note(comp))
     return text
 
 

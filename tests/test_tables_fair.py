@@ -16,6 +16,7 @@ import pytest
 from eval.tables import (
     ALL_CASES_HEADING,
     COMMON_CASES_HEADING,
+    all_note,
     common_cases,
     compare,
     ok_mask,
@@ -188,6 +189,24 @@ def test_reference_subset_is_stated(tmp_path):
     write_tables(df, tmp_path)
     assert "with a reference solution" not in (tmp_path / "table.md").read_text()
     assert compare(df.drop(columns="ref_mean_pct")).ref_cases is None
+
+
+def test_reference_subset_of_the_all_cases_table_is_stated(tmp_path):
+    """The all-cases table (a method ran on more cases than the common set) says over how
+    many of its cases the reference columns average, when fewer than all (results/defaust:
+    4 per_pose references, 40 cases)."""
+    rows = [_row(f"c{i}", m, 1.0 + i) for i in range(4) for m in ("ARAP", "SShaDe")]
+    rows += [_row("c0", "Mine", 2.0)]
+    df = pd.DataFrame(rows)
+    df["ref_mean_pct"] = [0.01 if r.case == "c0" else np.nan for r in df.itertuples()]
+    comp = compare(df)
+    assert comp.cases == ["c0"] and comp.all is not None
+    assert (comp.ref_cases_all, comp.n_cases_all) == (1, 4)
+    write_tables(df, tmp_path)
+    all_part = (tmp_path / "table.md").read_text().split("All cases each method ran on")[1]
+    assert "over the 1 of the 4 cases with a reference solution" in all_part
+    df["ref_mean_pct"] = 0.01
+    assert "reference solution" not in all_note(compare(df))
 
 
 def test_sweep_reads_the_main_table(tmp_path):
