@@ -270,6 +270,42 @@ def test_sampling_independent_of_vertex_order_and_queue(mesh):
     assert len(st._head) > 0  # these meshes use Dial's buckets by default
 
 
+def test_dial_ring_rule_follows_the_mean_edge():
+    """Dial's ring is chosen from the mean edge against the shortest (issue 24: the
+    longest one, an outlier on LS3 meshes, sent 1M-vertex TOSCA meshes to the slower
+    heap), and never longer than DIAL_MAX_BUCKETS; a heap for bad lengths."""
+    from sshade.mesh.geodesic import DIAL_MAX_BUCKETS, DIAL_MAX_RATIO, _dial_ring
+    w = np.ones(10_000)
+    w[0] = 3000.0  # longest / shortest 3000 > DIAL_MAX_RATIO, mean / shortest ~1.3
+    head, inv = _dial_ring(w)
+    assert len(head) >= 3000 / 0.99 + 2 and inv == pytest.approx(1 / 0.99)
+    w[0] = DIAL_MAX_BUCKETS * 2.0  # ring too long
+    assert len(_dial_ring(w)[0]) == 0
+    w = np.full(100, 2 * DIAL_MAX_RATIO)
+    w[0] = 1.0  # mean / shortest above the ratio
+    assert len(_dial_ring(w)[0]) == 0
+    for bad in ([0.0, 1.0], [1.0, np.inf], [1.0, np.nan], []):
+        assert len(_dial_ring(np.asarray(bad, float))[0]) == 0
+    assert len(_dial_ring(np.ones(5), 0.0)[0]) == 0  # queue="heap"
+
+
+def test_stretched_mesh_same_sampling_with_ring_and_heap():
+    """A grid with one row of very thin triangles (longest / shortest edge > 1024, the
+    old threshold): the ring is used, and gives the heap's seeds, distances and labels."""
+    V, F = _grid(40)
+    V = V.copy()
+    V[V[:, 1] > V[:, 1].min() + 1e-9, 1] += 2000.0 * np.ptp(V[:, 0]) / 39  # stretch the first row
+    g = edge_graph(V, F)
+    assert g[2].max() / g[2].min() > 1024
+    runs = []
+    for q in ("heap", "auto"):
+        st = VoronoiState(V, F, queue=q)
+        st.sample(150, first=7)
+        runs.append((st.seeds.copy(), st.dist.copy(), st.label.copy(), len(st._head)))
+    assert runs[0][3] == 0 and runs[1][3] > 0
+    assert all(np.array_equal(a, b) for a, b in zip(runs[0][:3], runs[1][:3]))
+
+
 def test_farthest_point_ties_go_to_smallest_index():
     V, F = _grid(9)  # diagonals run from corner 0 to corner 80
     st = VoronoiState(V, F)
