@@ -436,10 +436,9 @@ def _add_seeds(indptr, indices, weights, dist, label, seeds, nseeds, new, hk, hv
 #: Dial's buckets are used when the *mean* edge is at most this many times the shortest
 #: (else a binary heap). The ring's extra cost is the empty buckets it steps over, about
 #: (distance a propagation travels) / (shortest edge) per propagation, so it is the
-#: typical edge against the shortest that matters, not the longest (issue 24: on the LS3
-#: centaur at 1,009,026 vertices, longest / shortest 2,674, mean / shortest 357, the
-#: 6000-seed sampling took 1.03 s with the ring and 1.25 s with the heap, the same seeds
-#: and labels; before, the longest edge decided and the heap ran).
+#: typical edge against the shortest that matters, not the longest (issue 24: on LS3
+#: Loop subdivisions of TOSCA models an outlier edge had sent the sampling to the slower
+#: heap; ``benchmarks/remesh_hard.py`` compares the two, the same seeds and labels).
 DIAL_MAX_RATIO = 1024.0
 #: ... and when the ring (longest edge / bucket width buckets) is at most this long.
 DIAL_MAX_BUCKETS = 1 << 20
