@@ -27,6 +27,8 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import queue
+import signal
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -118,6 +120,35 @@ def _thread_env(threads: int, names=THREAD_VARIABLES):
 _DONE = "__sshade.jobs: job done__"
 
 
+@contextmanager
+def _deferred_sigint():
+    """Ctrl-C while jobs run is noted, and re-delivered by :func:`run_jobs`'s loop at a
+    safe point (``hit`` non-empty: call :func:`_deliver`). A KeyboardInterrupt raised
+    inside ``concurrent.futures.wait`` can leave a future's lock held, and the executor's
+    shutdown then waits forever (seen once in the test suite under load). Does nothing
+    off the main thread or when SIGINT is ignored; the previous handler is restored."""
+    hit: list = []
+    if threading.current_thread() is not threading.main_thread():
+        yield hit
+        return
+    old = signal.getsignal(signal.SIGINT)
+    if not callable(old):  # SIG_IGN / SIG_DFL: leave it
+        yield hit
+        return
+    signal.signal(signal.SIGINT, lambda signum, frame: hit.append((old, signum, frame)))
+    try:
+        yield hit
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _deliver(hit: list) -> None:
+    """Run the handler a deferred Ctrl-C was meant for (raises KeyboardInterrupt)."""
+    handler, signum, frame = hit[0]
+    handler(signum, frame)
+    raise KeyboardInterrupt  # a handler that returned: still stop the jobs
+
+
 def _call(job, index: int, args: tuple):
     """A job in a worker, then its end marker on the channel (after all its messages)."""
     try:
@@ -176,11 +207,13 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     todo = list(enumerate(args_list))[::-1]
     futures, errors, finished, ended, collected = {}, [], False, set(), set()
     # the workers start at submit() and inherit these variables
-    with _thread_env(thread_limit(n), (*thread_variables, CORES_VARIABLE)):
+    with _thread_env(thread_limit(n), (*thread_variables, CORES_VARIABLE)), _deferred_sigint() as hit:
         ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
                                  initargs=(channel, init, tuple(init_args)))
         try:
             while todo or futures:
+                if hit:
+                    _deliver(hit)
                 while todo and len(futures) < n and not errors:
                     i, args = todo.pop()
                     futures[ex.submit(_call, job, i, args)] = i
@@ -193,6 +226,8 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
                     if _collect(f, i, on_result, errors, what):
                         collected.add(i)
             _drain(channel, on_message, ended, until=collected)  # every message of the jobs that ran
+            if hit:
+                _deliver(hit)
             finished = True
         finally:
             if not finished:  # Ctrl-C or an error here: stop the workers now (a remesh ignores signals)
