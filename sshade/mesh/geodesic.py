@@ -452,11 +452,12 @@ def _dial_ring(weights: np.ndarray, max_ratio: float = DIAL_MAX_RATIO) -> tuple[
     if len(weights) == 0:
         return np.empty(0, np.int32), 0.0
     wmin, wmax = float(weights.min()), float(weights.max())
-    if not (wmin > 0 and np.isfinite(wmax) and float(weights.mean()) <= max_ratio * wmin
-            and wmax <= 0.99 * wmin * (DIAL_MAX_BUCKETS - 3)):
+    if not (wmin > 0 and np.isfinite(wmax) and float(weights.mean()) <= max_ratio * wmin):
         return np.empty(0, np.int32), 0.0
     width = 0.99 * wmin  # strictly below every edge, with room for round-off
     nb = 1 << int(np.ceil(wmax / width) + 2).bit_length()  # a power of two > wmax / width + 2
+    if nb > DIAL_MAX_BUCKETS:
+        return np.empty(0, np.int32), 0.0
     return np.full(nb, -1, np.int32), 1.0 / width
 
 
