@@ -64,7 +64,7 @@ def build_mesh(name: str, cache_dir: Path):
 
 def child(a) -> None:
     """Run one version on one mesh (``sys.path`` already set); print one JSON line."""
-    from benchmarks.remesh_speed import handles_for
+    from benchmarks.remesh_speed import digest, handles_for
     from sshade.mesh.validate import validate_mesh
     from sshade.remesh import mesh_topology, remesh
     from sshade.sampling import sampling_seeds, warm_kernels
@@ -84,7 +84,8 @@ def child(a) -> None:
             ts.append(time.perf_counter() - t)
         assert np.isin(h, rm.seeds).all() and rm.n_flipped >= 0
         out.append(dict(seed=int(s), rounds=rm.iterations, repair=rm.n_repair, k=len(rm.seeds),
-                        flipped=rm.n_flipped, s=min(ts), check=rm.timings["check_s"], add=rm.timings["add_s"]))
+                        flipped=rm.n_flipped, s=min(ts), check=rm.timings["check_s"], add=rm.timings["add_s"],
+                        digest=digest(rm.seeds, rm.F)))
     import sshade
     print("RESULT " + json.dumps(dict(n=len(V), runs=out, package=str(Path(sshade.__file__).parent))))
 
@@ -136,7 +137,8 @@ def main(argv=None):
             for i, x in enumerate(runs[0]["runs"]):
                 t = min(rr["runs"][i]["s"] for rr in runs)
                 print(f"  seed {x['seed']:>10}: {x['rounds']:>3} rounds, {x['repair']:>4} repair seeds, "
-                      f"{x['k']} low-res vertices, {x['flipped']} flipped, remesh {t:.3f} s (best of {len(runs)})")
+                      f"{x['k']} low-res vertices, {x['flipped']} flipped, remesh {t:.3f} s (best of {len(runs)}), "
+                      f"check {min(rr['runs'][i]['check'] for rr in runs):.3f} s, seeds+faces {x.get('digest', '-')}")
         if len(refs) > 1:
             tb = [np.mean([min(rr["runs"][i]["s"] for rr in res[m, r]) for i in range(a.seeds)]) for r in refs]
             print("  mean remesh time per version: " + ", ".join(f"{r} {t:.3f} s" for r, t in zip(refs, tb))

@@ -26,7 +26,10 @@ Speed (issue 13): the connectivity (:func:`mesh_topology`) is built once per mes
 shared by the samplings; the sampling runs on the edge graph in a cache-friendly vertex
 order (:mod:`sshade.mesh.geodesic`); each check round is one compiled pass over the faces
 when the property holds (the common case at 6000 seeds) and a compiled pass over edges
-and faces that also picks the repair seeds when it does not.
+and faces that also picks the repair seeds when it does not (:mod:`sshade.closed_ball`).
+A round after seeds were added first checks only the regions they changed and the pairs
+and triples involving them (issue 24; the same repair seeds as a full check); the full
+check runs when that finds nothing, so the remesh is accepted only by a full check.
 """
 from __future__ import annotations
 
@@ -34,9 +37,9 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from ._keys import unique_int
+from .closed_ball import closed_ball, closed_ball_local, vertex_faces
 from .errors import SShaDeError
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
@@ -61,6 +64,8 @@ class MeshTopology:
     vnormals : (n, 3) float64 area-weighted vertex normals of the input.
     order : (n,) int64 locality order of the vertices (graph vertex i = mesh vertex
         ``order[i]``; :func:`sshade.mesh.geodesic.locality_order`).
+    vf_ptr : (n + 1,) int64, vf_idx : (3 (m + b) - b,) int32, the faces of ``Fc`` around
+        each vertex (:func:`sshade.closed_ball.vertex_faces`), for the local checks.
     """
 
     n: int
@@ -73,6 +78,8 @@ class MeshTopology:
     graph: tuple
     vnormals: np.ndarray
     order: np.ndarray
+    vf_ptr: np.ndarray
+    vf_idx: np.ndarray
 
 
 def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> MeshTopology:
@@ -114,8 +121,10 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
     euler = n - e + m
     order = locality_order(V)
     _warm_check()
+    vf_ptr, vf_idx = vertex_faces(Fc, n)
     return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec, FEc=FEc, n_loops=len(loops), euler=int(euler),
-                        graph=edge_graph_from_edges(V, he.E, order), vnormals=vertex_normals(V, F), order=order)
+                        graph=edge_graph_from_edges(V, he.E, order), vnormals=vertex_normals(V, F), order=order,
+                        vf_ptr=vf_ptr, vf_idx=vf_idx)
 
 
 @dataclass
@@ -155,288 +164,6 @@ class RemeshResult:
         return V[self.seeds]
 
 
-# ------------------------------------------------------------ closed-ball check
-# Pairs and triples of region labels are numbered through open-addressing hash tables
-# (int64 keys, -1 = empty slot, linear probing, Fibonacci hashing).
-_HASH_MULT = -7046029254386353131  # 0x9E3779B97F4A7C15 as int64
-
-
-@njit(cache=True, inline="always")
-def _slot(keys, key, mask):
-    i = ((key * _HASH_MULT) >> 24) & mask
-    while keys[i] != -1 and keys[i] != key:
-        i = (i + 1) & mask
-    return i
-
-
-@njit(cache=True, inline="always")
-def _table_id(keys, ids, key, mask, nxt):
-    """Id of ``key`` in the table (keys, ids), inserting it with id ``nxt`` if new.
-    Returns (id, next free id)."""
-    i = _slot(keys, key, mask)
-    if keys[i] == -1:
-        keys[i] = key
-        ids[i] = nxt
-        nxt += 1
-    return ids[i], nxt
-
-
-@njit(cache=True)
-def _table(n_keys):
-    cap = 16
-    while cap < 2 * n_keys:
-        cap *= 2
-    return np.full(cap, -1, np.int64), np.empty(cap, np.int64), cap - 1
-
-
-@njit(cache=True, inline="always")
-def _find(parent, x):
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]
-        x = parent[x]
-    return x
-
-
-@njit(cache=True, inline="always")
-def _better(best, g, v, dist):
-    """Keep the first vertex of largest distance per group (ties: the earlier one)."""
-    if best[g] < 0 or dist[v] > dist[best[g]]:
-        best[g] = v
-
-
-@njit(cache=True)
-def _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
-    """One round of closed-ball checks with the repair candidates (see :func:`_check`).
-
-    lab : (n + loops,) labels with the cone vertices as their own regions.
-    Returns (bad, cand, f3): whether the property fails, the sorted unique seed
-    candidates and the faces carrying three labels, in face order."""
-    chi, kind, ncross, n3 = _region_euler(Fc, Ec, lab, nlab)
-    pair, parent, arc, np_ = _cross_pairs(Ec, lab, nlab, ncross)
-    cyc = np.zeros(np_, np.bool_)
-    f3, tri, nt = _link_faces(Fc, FEc, lab, nlab, kind, n3, pair, parent, arc, cyc)
-    tcnt = np.zeros(nt, np.int64)
-    for j in range(n3):
-        tcnt[tri[j]] += 1
-    bad = False
-    for r in range(nlab):
-        bad |= chi[r] != 1
-    for p in range(np_):
-        bad |= arc[p] != 1 or cyc[p]
-    for t in range(nt):
-        bad |= tcnt[t] != 1
-    if not bad:
-        return False, np.empty(0, np.int64), f3
-    pick = _repair_candidates(Fc, Ec, lab, dist, n, nlab, chi, pair, arc, cyc, np_, f3, tri, tcnt, nt)
-    return True, np.flatnonzero(pick), f3
-
-
-@njit(cache=True)
-def _region_euler(Fc, Ec, lab, nlab):
-    """1. regions are disks: chi = V - E + F == 1 per label. Returns chi (nlab,), the
-    number of distinct labels of each face (nf,) int8, the cross-edge count and the
-    count of faces with three labels."""
-    ne, nf = Ec.shape[0], Fc.shape[0]
-    chi = np.zeros(nlab, np.int64)
-    for v in range(lab.shape[0]):
-        chi[lab[v]] += 1
-    ncross = 0
-    for e in range(ne):
-        if lab[Ec[e, 0]] == lab[Ec[e, 1]]:
-            chi[lab[Ec[e, 0]]] -= 1
-        else:
-            ncross += 1
-    kind = np.empty(nf, np.int8)  # number of distinct labels of each face
-    n3 = 0
-    for f in range(nf):
-        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
-        if l0 == l1 and l1 == l2:
-            kind[f] = 1
-            chi[l0] += 1
-        elif l0 != l1 and l1 != l2 and l0 != l2:
-            kind[f] = 3
-            n3 += 1
-        else:
-            kind[f] = 2
-    return chi, kind, ncross, n3
-
-
-@njit(cache=True)
-def _cross_pairs(Ec, lab, nlab, ncross):
-    """2. two regions meet along one arc: the cross edges of a pair, linked through the
-    faces with two labels, form paths and cycles; one arc <=> (edges - links) == 1 and
-    no link closes a cycle (union-find over the cross edges). Returns each edge's pair
-    id (-1 inside a region), the union-find parents, the per-pair cross-edge counts
-    (links are subtracted by :func:`_link_faces`) and the number of pairs."""
-    ne = Ec.shape[0]
-    pkeys, pids, pmask = _table(ncross)
-    pair = np.full(ne, -1, np.int64)
-    parent = np.empty(ne, np.int64)
-    np_ = 0
-    for e in range(ne):
-        a, b = lab[Ec[e, 0]], lab[Ec[e, 1]]
-        if a != b:
-            pair[e], np_ = _table_id(pkeys, pids, min(a, b) * nlab + max(a, b), pmask, np_)
-            parent[e] = e
-    arc = np.zeros(np_, np.int64)  # cross edges - links: 1 for a single path
-    for e in range(ne):
-        if pair[e] >= 0:
-            arc[pair[e]] += 1
-    return pair, parent, arc, np_
-
-
-@njit(cache=True)
-def _link_faces(Fc, FEc, lab, nlab, kind, n3, pair, parent, arc, cyc):
-    """Links of the cross edges through the two-label faces (updates ``arc``, ``cyc``,
-    ``parent`` in place) and 3. three regions meet at one point: each label triple on
-    exactly one face. Returns the three-label faces (n3,), their triple ids and the
-    number of triples."""
-    tkeys, tids, tmask = _table(n3)
-    f3 = np.empty(n3, np.int64)
-    tri = np.empty(n3, np.int64)
-    nt = 0
-    j = 0
-    for f in range(Fc.shape[0]):
-        if kind[f] == 2:
-            e1 = -1
-            for k in range(3):
-                e = FEc[f, k]
-                if pair[e] >= 0:
-                    if e1 < 0:
-                        e1 = e
-                    else:
-                        arc[pair[e]] -= 1
-                        r1, r2 = _find(parent, e1), _find(parent, e)
-                        if r1 == r2:
-                            cyc[pair[e]] = True
-                        else:
-                            parent[r1] = r2
-        elif kind[f] == 3:
-            l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
-            a = min(l0, l1, l2)
-            c = max(l0, l1, l2)
-            b = l0 + l1 + l2 - a - c
-            f3[j] = f
-            tri[j], nt = _table_id(tkeys, tids, (a * nlab + b) * nlab + c, tmask, nt)
-            j += 1
-    return f3, tri, nt
-
-
-@njit(cache=True)
-def _repair_candidates(Fc, Ec, lab, dist, n, nlab, chi, pair, arc, cyc, np_, f3, tri, tcnt, nt):
-    """Candidates: per bad region / pair / triple, its farthest vertex from its seed
-    (first one met on ties, in vertex / edge / face order), if not a seed already.
-    Returns a (n,) bool mask."""
-    pick = np.zeros(n, np.bool_)
-    best = np.full(max(nlab, np_, nt), -1, np.int64)
-    for v in range(n):
-        if chi[lab[v]] != 1:
-            _better(best, lab[v], v, dist)
-    for r in range(nlab):
-        if best[r] >= 0 and dist[best[r]] > 0:
-            pick[best[r]] = True
-    best[:] = -1
-    for e in range(Ec.shape[0]):
-        p = pair[e]
-        if p >= 0 and (arc[p] != 1 or cyc[p]):
-            for k in range(2):
-                if Ec[e, k] < n:
-                    _better(best, p, Ec[e, k], dist)
-    for p in range(np_):
-        if best[p] >= 0 and dist[best[p]] > 0:
-            pick[best[p]] = True
-    best[:] = -1
-    for j in range(f3.shape[0]):
-        t = tri[j]
-        if tcnt[t] != 1:
-            for k in range(3):
-                if Fc[f3[j], k] < n:
-                    _better(best, t, Fc[f3[j], k], dist)
-    for t in range(nt):
-        if best[t] >= 0 and dist[best[t]] > 0:
-            pick[best[t]] = True
-    return pick
-
-
-@njit(cache=True)
-def _closed_ball_holds(Fc, FEc, lab, nlab, ne):
-    """Whether the closed-ball property holds, from one pass over the faces (the common
-    case once the sampling is dense enough; :func:`_closed_ball_full` otherwise).
-
-    On the coned mesh every edge lies on exactly two faces, so the edge counts follow
-    from the faces: a region's same-label edges number (3 F1 + F2) / 2 (F1: faces of
-    that label only, F2: faces with it twice), so 2 chi = 2 V - F1 - F2; and a pair's
-    cross edges minus its two-label faces (the number of its arcs that are paths) is
-    half its three-label faces F3. The property holds iff 2 chi == 2 for every
-    region, F3 == 2 and no closed loop for every pair (union-find over the cross edges
-    linked by the two-label faces: a pair whose edges only form loops has F3 == 0 but
-    is caught by its loop), and every label triple is on one face.
-    Returns (holds, f3 = the three-label faces in face order)."""
-    nf = Fc.shape[0]
-    chi2 = np.zeros(nlab, np.int64)
-    for v in range(lab.shape[0]):
-        chi2[lab[v]] += 2
-    parent = np.arange(ne)
-    f3 = np.empty(nf, np.int64)
-    n3 = 0
-    for f in range(nf):
-        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
-        if l0 == l1 and l1 == l2:
-            chi2[l0] -= 1
-        elif l0 != l1 and l1 != l2 and l0 != l2:
-            f3[n3] = f
-            n3 += 1
-        else:
-            chi2[l1 if (l0 == l1 or l1 == l2) else l0] -= 1
-            # the two cross edges: the sides whose end points have different labels
-            e1 = FEc[f, 0] if l0 != l1 else FEc[f, 1]
-            e2 = FEc[f, 2] if l2 != l0 else FEc[f, 1]
-            r1, r2 = _find(parent, e1), _find(parent, e2)
-            if r1 == r2:
-                return False, f3[:n3]  # a loop
-            parent[r1] = r2
-    for r in range(nlab):
-        if chi2[r] != 2:
-            return False, f3[:n3]
-    keys, ids, mask = _table(3 * n3)
-    cnt = np.zeros(3 * n3, np.int64)
-    np_ = 0
-    for j in range(n3):
-        f = f3[j]
-        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
-        a = min(l0, l1, l2)
-        c = max(l0, l1, l2)
-        b = l0 + l1 + l2 - a - c
-        for key in (a * nlab + b, b * nlab + c, a * nlab + c):
-            p, np_ = _table_id(keys, ids, key, mask, np_)
-            cnt[p] += 1
-    for p in range(np_):
-        if cnt[p] != 2:
-            return False, f3[:n3]
-    tkeys, _, tmask = _table(n3)
-    for j in range(n3):
-        f = f3[j]
-        l0, l1, l2 = lab[Fc[f, 0]], lab[Fc[f, 1]], lab[Fc[f, 2]]
-        a = min(l0, l1, l2)
-        c = max(l0, l1, l2)
-        b = l0 + l1 + l2 - a - c
-        i = _slot(tkeys, (a * nlab + b) * nlab + c, tmask)
-        if tkeys[i] != -1:
-            return False, f3[:n3]  # a triple on two faces
-        tkeys[i] = (a * nlab + b) * nlab + c
-    return True, f3[:n3].copy()
-
-
-@njit(cache=True)
-def _closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
-    """One round of closed-ball checks (see :func:`_check`): the one-pass test, and the
-    full check with repair candidates when it fails. Returns (bad, cand, f3)."""
-    ok, f3 = _closed_ball_holds(Fc, FEc, lab, nlab, Ec.shape[0])
-    if ok:
-        return False, np.empty(0, np.int64), f3
-    return _closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab)
-
-
 def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
            seeds: np.ndarray, fix_flips: bool):
     """One round of closed-ball checks and flipped-face repair (paper §3.1; flips:
@@ -448,11 +175,11 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
       every vertex's shortest-path predecessor is in its region, so chi == 1 suffices);
     - two regions meet along one arc; three regions meet at one point;
     candidates are the farthest vertex of every failing region, pair and triple
-    (compiled: :func:`_closed_ball`), and with ``fix_flips`` the Voronoi vertex of every
+    (compiled: :func:`sshade.closed_ball.closed_ball`), and with ``fix_flips`` the Voronoi vertex of every
     flipped low-res face, in the same round (issue 24: the property's and the flips'
     repairs do not wait for each other)."""
     lab = np.concatenate([label, nseeds + np.arange(topo.n_loops, dtype=label.dtype)])  # cone vertices: own regions
-    bad, cand, f3 = _closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, topo.n, nseeds + topo.n_loops)
+    bad, cand, f3 = closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, topo.n, nseeds + topo.n_loops)
     if bad and not fix_flips:
         return cand, None, -1
     keepf, FN = nerve_faces(topo.Fc, lab, f3, nseeds, unique_only=bad)
@@ -462,6 +189,32 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     if bad:
         return unique_int(np.concatenate([cand, new])), None, nflip
     return new, FN, nflip
+
+
+def _check_local(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
+                 seeds: np.ndarray, fix_flips: bool, before: np.ndarray):
+    """A round after seeds were added (issue 24): :func:`_check` restricted to the
+    regions whose vertices changed label since ``before`` (the labels (n,) of the
+    previous round; :func:`sshade.closed_ball.closed_ball_local`), the flips among the
+    triples involving them. Returns (new seed candidates (c,) int64, flipped faces found).
+    No candidate does not mean the property holds: :func:`remesh` then runs :func:`_check`."""
+    nlab = nseeds + topo.n_loops
+    lab = np.concatenate([label, nseeds + np.arange(topo.n_loops, dtype=label.dtype)])
+    changed = label != before
+    in_a = np.zeros(nlab, np.bool_)
+    in_a[before[changed]] = True
+    in_a[label[changed]] = True
+    _, cand, f3u = closed_ball_local(topo.Fc, topo.Ec, topo.FEc, topo.vf_ptr, topo.vf_idx, lab, dist, topo.n,
+                                     nlab, in_a)
+    if not fix_flips:
+        return cand, 0
+    keepf, FN = nerve_faces(topo.Fc, lab, f3u, nseeds)
+    flipped = flipped_faces(V, topo.vnormals, seeds, FN)
+    nflip = int(flipped.sum())
+    if not nflip:
+        return cand, 0
+    new = voronoi_vertex_seeds(topo.Fc, keepf[flipped], FN[flipped], label, dist)
+    return unique_int(np.concatenate([cand, new])), nflip
 
 
 _WARM = False
@@ -476,7 +229,10 @@ def _warm_check() -> None:
         return
     Fc = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
     he = halfedges(Fc, 4)
-    _closed_ball(Fc, he.E, he.FE, np.arange(4, dtype=np.int32), np.zeros(4), 4, 4)
+    lab = np.arange(4, dtype=np.int32)
+    closed_ball(Fc, he.E, he.FE, lab, np.zeros(4), 4, 4)
+    ptr, idx = vertex_faces(Fc, 4)
+    closed_ball_local(Fc, he.E, he.FE, ptr, idx, lab, np.zeros(4), 4, 4, np.ones(4, np.bool_))
     _WARM = True
 
 
@@ -536,17 +292,23 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     FN, nflip, rounds = None, 0, 0
     flip_rounds = 0
     t_check = 0.0
+    before = None  # the labels before the last round's seeds: later rounds check near them first
     while rounds < max_rounds:
         rounds += 1
         tc = time.perf_counter()
         label, dist, seeds = st.label, st.dist, st.seeds
         fix = fix_flips and flip_rounds < max_flip_rounds
-        new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix)
+        new = None
+        if before is not None:
+            new, nflip = _check_local(topo, label, dist, st.nseeds, V, seeds, fix, before)
+        if new is None or len(new) == 0:  # the first round, or nothing left near the changes
+            new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix)
         t_check += time.perf_counter() - tc
         if len(new) == 0:
             break
         if fix and nflip > 0:
             flip_rounds += 1
+        before = label
         st.add(new)
     else:
         raise SShaDeError(f"remesh: closed-ball property not reached after {max_rounds} rounds "

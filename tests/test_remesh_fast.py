@@ -10,6 +10,9 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from sshade._keys import unique_int
+from sshade.closed_ball import closed_ball_full as _closed_ball_full
+from sshade.closed_ball import closed_ball_holds as _closed_ball_holds
+from sshade.closed_ball import closed_ball_local
 from sshade.mesh.geodesic import VoronoiState, edge_graph, edge_graph_from_edges, locality_order
 from sshade.mesh.halfedge import (
     boundary_loops,
@@ -21,7 +24,7 @@ from sshade.mesh.halfedge import (
 )
 from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import _fast_checks, validate_mesh
-from sshade.remesh import _check, _closed_ball_full, _closed_ball_holds, mesh_topology, remesh
+from sshade.remesh import _check, mesh_topology, remesh
 
 from .conftest import data_file
 from .test_bad_input import BAD_MESHES, KNOWN_BAD_MESH_BUGS, _bowtie, _double_cone
@@ -342,6 +345,45 @@ def test_closed_ball_candidates_equal_numpy_reference(rel, k):
             break
         st.add(new)
     assert rounds > 1 and FN is not None
+
+
+@pytest.mark.parametrize("rel,k", [("classic/armadillo.obj", 40), ("tosca/cat0.off", 60),
+                                   ("faust_reg/tr_reg_000.ply", 300)])
+def test_local_check_equals_the_full_check(rel, k):
+    """Issue 24: in every round of a coarse remesh, the check restricted to the regions
+    whose vertices changed label (and the pairs and triples involving them) finds the
+    same repair candidates as the full check, and over all regions the same verdict,
+    candidates and single-face triples."""
+    V, F = read_mesh(data_file(rel))
+    topo = mesh_topology(V, F)
+    st = VoronoiState(V, F, graph=topo.graph, order=topo.order)
+    st.sample(k, first=7)
+    before, rounds, local_rounds = None, 0, 0
+    for rounds in range(1, 60):  # noqa: B007 -- read after the loop
+        label, dist = st.label, st.dist
+        nlab = st.nseeds + topo.n_loops
+        lab = np.concatenate([label, st.nseeds + np.arange(topo.n_loops, dtype=label.dtype)])
+        bad, cand, f3 = _closed_ball_full(topo.Fc, topo.Ec, topo.FEc, lab, dist, topo.n, nlab)
+        args = (topo.Fc, topo.Ec, topo.FEc, topo.vf_ptr, topo.vf_idx, lab, dist, topo.n, nlab)
+        bad_all, cand_all, f3u = closed_ball_local(*args, np.ones(nlab, np.bool_))  # cone regions: left out
+        assert bad_all == bad and np.array_equal(cand_all, cand)
+        S = np.sort(lab[topo.Fc[f3]], axis=1)
+        _, inv, cnt = unique_int((S[:, 0] * nlab + S[:, 1]) * nlab + S[:, 2], return_inverse=True,
+                                 return_counts=True)
+        assert np.array_equal(f3u, f3[cnt[inv] == 1])
+        if before is not None:
+            changed = label != before
+            in_a = np.zeros(nlab, np.bool_)
+            in_a[before[changed]] = in_a[label[changed]] = True
+            assert in_a.sum() < nlab
+            _, cand_local, _ = closed_ball_local(*args, in_a)
+            assert np.array_equal(cand_local, cand)
+            local_rounds += 1
+        if not len(cand):
+            break
+        before = label
+        st.add(cand)
+    assert local_rounds >= 1 and not bad
 
 
 def test_remesh_deterministic_with_shared_topology():
