@@ -18,7 +18,7 @@ from .mesh.halfedge import count_components
 from .mesh.validate import validate_handles, validate_mesh
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
-from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels, worker_state
+from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
 __all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning"]
@@ -292,7 +292,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     t1 = time.perf_counter()
     with SamplingPool(state, workers) as pool:
         results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
-    Vd = np.mean(results, axis=0)
+    Vd = average(results)
     Vd[handles] = targets  # overwritten after averaging (the paper does not say; docs/differences.md)
     if not return_info:
         return Vd

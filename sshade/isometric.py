@@ -38,7 +38,7 @@ from .lrf import decode, encode, frame_functions
 from .mesh.validate import check_points, validate_mesh
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh
-from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels, worker_state
+from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 
 __all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "rigid_align"]
 
@@ -157,7 +157,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     with SamplingPool(state, workers) as pool:
         for f in [pool.submit(_one, i) for i in range(n_samplings)]:
             i, results[i], infos[i] = f.result()
-    out = np.mean(results, axis=0)  # fixed order: independent of the worker count
+    out = average(results)  # fixed order: independent of the worker count
     info = {"total_s": time.perf_counter() - t0, "seed": p["seed"], "sampling_seeds": seeds,
             "n_samplings": n_samplings, "workers": workers, "gradient": gradient, "samplings": infos}
     for k in ("remesh_s", "project_s", "transfer_s"):
