@@ -342,7 +342,7 @@ def closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
     return closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def vertex_faces(Fc, n):
     """The faces around each vertex ``v < n`` of ``Fc`` (m, 3) int64, as a CSR:
     ``(ptr (n + 1,) int64, idx (c,) int32)``, the faces of ``v`` in increasing order at

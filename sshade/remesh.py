@@ -34,6 +34,7 @@ check runs when that finds nothing, so the remesh is accepted only by a full che
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,7 @@ import numpy as np
 from ._keys import unique_int
 from .closed_ball import closed_ball, closed_ball_local, vertex_faces
 from .errors import SShaDeError
+from .jobs import available_cores
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
 from .remesh_repair import flipped_faces, nerve_faces, voronoi_vertex_seeds
@@ -96,6 +98,44 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
     F = np.ascontiguousarray(F, np.int64)
     if he is None:
         he = halfedges(F, n)
+    # the sampling's graph (locality order, then the CSR: compiled without the GIL) is
+    # built in a second thread, where a second core is there, while this one builds the
+    # rest (issue 24: this setup is the serial part of a SShaDe call)
+    with ThreadPoolExecutor(1) if available_cores() > 1 else _InPlace() as ex:
+        graph = ex.submit(_sampling_graph, V, he.E)
+        Fc, Ec, FEc, n_loops = _coned(F, he, n)
+        _warm_check()
+        vnormals = vertex_normals(V, F)
+        vf_ptr, vf_idx = vertex_faces(Fc, n)
+        order, csr = graph.result()
+    return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec, FEc=FEc, n_loops=n_loops, euler=int(n - len(he.E) + m),
+                        graph=csr, vnormals=vnormals, order=order, vf_ptr=vf_ptr, vf_idx=vf_idx)
+
+
+class _InPlace:
+    """An executor that runs a task at once, in this thread (one core)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        return False
+
+    def submit(self, fn, *args) -> Future:
+        f: Future = Future()
+        f.set_result(fn(*args))
+        return f
+
+
+def _sampling_graph(V: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """(locality order (n,) int64, CSR edge graph in that order) of the sampling."""
+    order = locality_order(V)
+    return order, edge_graph_from_edges(V, E, order)
+
+
+def _coned(F: np.ndarray, he: HalfEdges, n: int):
+    """(Fc, Ec, FEc, loops): faces, edges and face edges with every boundary loop coned
+    to a virtual vertex ``n + loop index`` (see :class:`MeshTopology`)."""
     loops = boundary_loops(F, he)
     e = len(he.E)
     Ec, FEc, Fc = [he.E], [he.FE], [F]
@@ -118,13 +158,7 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
         off += nl
     # (no copy for a closed mesh)
     Fc, Ec, FEc = (x[0] if len(x) == 1 else np.concatenate(x).astype(np.int64, copy=False) for x in (Fc, Ec, FEc))
-    euler = n - e + m
-    order = locality_order(V)
-    _warm_check()
-    vf_ptr, vf_idx = vertex_faces(Fc, n)
-    return MeshTopology(n=n, m=m, Fc=Fc, Ec=Ec, FEc=FEc, n_loops=len(loops), euler=int(euler),
-                        graph=edge_graph_from_edges(V, he.E, order), vnormals=vertex_normals(V, F), order=order,
-                        vf_ptr=vf_ptr, vf_idx=vf_idx)
+    return Fc, Ec, FEc, len(loops)
 
 
 @dataclass

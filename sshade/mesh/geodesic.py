@@ -34,7 +34,7 @@ from .._keys import unique_int
 __all__ = ["edge_graph", "edge_graph_from_edges", "locality_order", "VoronoiState", "farthest_point_sampling"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _csr_from_edges(V, E, rank):
     """Symmetric CSR (indptr int64, indices int32, weights float32) of the undirected
     edges ``E`` with the vertices renumbered by ``rank`` (old -> new). Row i lists the
@@ -112,7 +112,7 @@ def _inverse(order: np.ndarray) -> np.ndarray:
     return rank
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _morton_sort(V):
     """Vertices sorted by their 30-bit Morton code (10 bits per axis of the bounding
     box), by two stable 15-bit counting-sort passes."""

@@ -224,7 +224,7 @@ def count_components(E: np.ndarray, n: int) -> int:
     return int(_components(np.ascontiguousarray(E, np.int64), int(n)))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vertex_normals(V, F):
     N = np.zeros_like(V)
     for f in range(F.shape[0]):
