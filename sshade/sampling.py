@@ -46,6 +46,44 @@ def _init_worker(state: dict) -> None:
     _STATE.update(state)
 
 
+def _init_forked(state: dict) -> None:
+    """Initializer of a forked sampling worker: the state, and glibc's allocator told
+    to keep freed memory (:func:`keep_freed_memory`)."""
+    keep_freed_memory()
+    _init_worker(state)
+
+
+#: glibc's mallopt parameters (malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def keep_freed_memory(mmap_threshold: int = 1 << 28, trim_threshold: int = 1 << 30) -> bool:
+    """Tell glibc's allocator (this process only) to serve blocks below
+    ``mmap_threshold`` bytes from its heap and to give freed heap memory back to the OS
+    only above ``trim_threshold`` bytes, so that the arrays a sampling allocates and
+    frees again and again (tens of MB each at a million vertices) reuse memory already
+    mapped instead of a fresh ``mmap`` each time, whose first-touch page faults and
+    ``munmap`` are a large part of a SShaDe call at a million vertices (issue 24; the
+    figures are in this change's commit message and ``results/scaling``).
+
+    Called in the samplings' forked workers only (they end with the pool), never in the
+    caller's process, whose memory behaviour stays its own. A no-op returning False
+    where the C library has no ``mallopt`` (not glibc).
+
+    Returns
+    -------
+    bool, whether both settings were taken.
+    """
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return False
+    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return bool(mallopt(_M_MMAP_THRESHOLD, int(mmap_threshold)) and mallopt(_M_TRIM_THRESHOLD, int(trim_threshold)))
+
+
 def sampling_seeds(seed: int, k: int) -> list[int]:
     """The k first-seed RNG seeds derived from ``seed`` (recorded in every output)."""
     return [int(s) for s in np.random.SeedSequence(seed).generate_state(k, dtype=np.uint32)]
@@ -127,7 +165,7 @@ class SamplingPool:
         else:
             # fork: workers inherit the mesh and the compiled numba code without pickling
             self._ex = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("fork"),
-                                           initializer=_init_worker, initargs=(self.state,)).__enter__()
+                                           initializer=_init_forked, initargs=(self.state,)).__enter__()
         return self
 
     def submit(self, fn, *args) -> Future:
