@@ -17,7 +17,10 @@ runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
 ``elastic_compile_s``; :mod:`sshade.warmup`), the remesh's check-and-repair rounds
 (``repair_rounds``: sum over the k samplings, ``repair_rounds_max``) and repair seeds
 (``repair_seeds``, summed), the low-res ARAP iterations (first sampling and mean of the
-warm-started ones), peak memory of the process tree (PSS, MB), SShaDe's errors, with
+warm-started ones), peak memory of the process tree (PSS, MB), SShaDe's errors, the
+spread of its sampling (``seed_spread_pct``: mean distance between the results of two
+master seeds, ``seed`` and ``seed + 1``, each a k-sampling average, in % of the bounding
+box diagonal; the second run is not timed), with
 ``scaling.first_call`` the seconds of the first ``sshade.deform`` call in a fresh
 process (``first_call_s``: what a command-line user pays, numba's on-disk cache warm;
 interpreter start and imports apart in ``first_call_import_s``, the mesh read in
@@ -219,7 +222,8 @@ def _size_handles(sc, base, V):
 def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
     """SShaDe's timed run with the checked parameters ``sp`` under the memory probe:
     the seconds of compilation it still reported (0 after the warm-up) and its columns
-    of the table row (times in seconds, compilation excluded)."""
+    of the table row (times in seconds, compilation excluded), with the untimed run of
+    the next master seed for ``seed_spread_pct``."""
 
     with PeakMemory() as pm:
         t0 = time.perf_counter()
@@ -238,6 +242,10 @@ def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
            "peak_mem_mb": pm.peak_mb}
     m = deformation_metrics(V, Vd, F, h, T)
     row.update({f"sshade_{k_}": v for k_, v in m.items()})
+    seed = int(sp["seed"])
+    Vd2 = deform(V, F, h, T, **dict(sp, seed=seed + 1 if seed < 2**63 - 1 else seed - 1))
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    row["seed_spread_pct"] = 100.0 * float(np.linalg.norm(Vd - Vd2, axis=1).mean()) / diag
     return si["compile_s"], row
 
 

@@ -20,7 +20,7 @@ _COLS = [("vertices", "Vertices", "{:.0f}"), ("n_low", "n_low", "{:.0f}"), ("k",
          ("first_call_s", "First call (s)", "{:.2f}"), ("sshade_compile_s", "Compile (s)", "{:.2f}"),
          ("peak_mem_mb", "Peak mem (MB)", "{:.0f}"),
          ("sshade_volume_err_pct", "Vol (%)", "{:.2f}"), ("sshade_edge_err_pct", "EL (%)", "{:.2f}"),
-         ("sshade_angle_err_deg", "FA (deg)", "{:.3f}"),
+         ("sshade_angle_err_deg", "FA (deg)", "{:.3f}"), ("seed_spread_pct", "Seed spread (% diag)", "{:.3f}"),
          ("elastic_precompute_s", "Elastic precompute (s)", "{:.2f}"),
          ("elastic_s_per_iter", "Elastic s/iter", "{:.3f}"), ("elastic_iters", "Elastic iters", "{:.0f}"),
          ("elastic_total_s", "Elastic total (s)", "{:.1f}"), ("speedup", "Speed-up", "{:.1f}x")]
