@@ -83,6 +83,7 @@ def test_repair_rounds_iterations_and_first_call(set_run):
         assert r["sshade_total_s"] > 0 and r["peak_mem_mb"] > 0
         # two master seeds give different samplings, close results (a fraction of the diagonal)
         assert 0 < r["seed_spread_pct"] < 5
+        assert 0 < r["call_mem_mb"] <= r["peak_mem_mb"]
     assert "elastic_total_s" not in df.columns
 
 

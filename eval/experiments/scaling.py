@@ -17,7 +17,9 @@ runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
 ``elastic_compile_s``; :mod:`sshade.warmup`), the remesh's check-and-repair rounds
 (``repair_rounds``: sum over the k samplings, ``repair_rounds_max``) and repair seeds
 (``repair_seeds``, summed), the low-res ARAP iterations (first sampling and mean of the
-warm-started ones), peak memory of the process tree (PSS, MB), SShaDe's errors, the
+warm-started ones), peak memory of the process tree (PSS, MB, of the untimed run
+below: the probe slows the call it watches; ``call_mem_mb``: what the call adds to the
+tree's PSS at its peak), SShaDe's errors, the
 spread of its sampling (``seed_spread_pct``: mean distance between the results of two
 master seeds, ``seed`` and ``seed + 1``, each a k-sampling average, in % of the bounding
 box diagonal; the second run is not timed), with
@@ -60,7 +62,7 @@ from sshade.mesh.validate import validate_mesh
 from sshade.warmup import warm_fullres
 
 from ..datasets.shapes import axis_handles, axis_landmarks
-from ..memory import PeakMemory
+from ..memory import PeakMemory, release_freed
 from ..methods import method_spec
 from ..metrics import deformation_metrics
 from ..paths import abs_path
@@ -220,15 +222,18 @@ def _size_handles(sc, base, V):
 
 
 def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
-    """SShaDe's timed run with the checked parameters ``sp`` under the memory probe:
-    the seconds of compilation it still reported (0 after the warm-up) and its columns
-    of the table row (times in seconds, compilation excluded), with the untimed run of
-    the next master seed for ``seed_spread_pct``."""
+    """SShaDe's timed run with the checked parameters ``sp``: the seconds of compilation
+    it still reported (0 after the warm-up) and its columns of the table row (times in
+    seconds, compilation excluded). The untimed run of the next master seed gives
+    ``seed_spread_pct`` and, under the memory probe, ``peak_mem_mb``: the probe reads
+    every process's page tables 50 times a second, which slows the call it watches, so
+    it never watches the timed one. ``peak_mem_mb`` is the process tree's peak, this
+    process's live data included (the mesh, the benchmark's state), ``call_mem_mb`` that
+    peak less the tree's PSS when the call starts."""
 
-    with PeakMemory() as pm:
-        t0 = time.perf_counter()
-        Vd, si = deform(V, F, h, T, return_info=True, **sp)
-        total = time.perf_counter() - t0 - si["compile_s"]  # 0 after the warm-up
+    t0 = time.perf_counter()
+    Vd, si = deform(V, F, h, T, return_info=True, **sp)
+    total = time.perf_counter() - t0 - si["compile_s"]  # 0 after the warm-up
     k = int(sp["n_samplings"])
     row = {"n_low": si["n_low"], "k": k, "workers": si["workers"],
            "sshade_total_s": total, "setup_s": si["setup_s"],
@@ -238,12 +243,14 @@ def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
            if k > 1 else math.nan,
            "repair_rounds": int(sum(s["rounds"] for s in si["samplings"])),
            "repair_rounds_max": int(max(s["rounds"] for s in si["samplings"])),
-           "repair_seeds": int(sum(s["n_repair"] for s in si["samplings"])),
-           "peak_mem_mb": pm.peak_mb}
+           "repair_seeds": int(sum(s["n_repair"] for s in si["samplings"]))}
     m = deformation_metrics(V, Vd, F, h, T)
     row.update({f"sshade_{k_}": v for k_, v in m.items()})
     seed = int(sp["seed"])
-    Vd2 = deform(V, F, h, T, **dict(sp, seed=seed + 1 if seed < 2**63 - 1 else seed - 1))
+    release_freed()  # what earlier rows left in this process's heap is not this call's
+    with PeakMemory() as pm:
+        Vd2 = deform(V, F, h, T, **dict(sp, seed=seed + 1 if seed < 2**63 - 1 else seed - 1))
+    row["peak_mem_mb"], row["call_mem_mb"] = pm.peak_mb, pm.peak_mb - pm.start_mb
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     row["seed_spread_pct"] = 100.0 * float(np.linalg.norm(Vd - Vd2, axis=1).mean()) / diag
     return si["compile_s"], row
