@@ -37,7 +37,7 @@ _EXPERIMENT_NUMBERS = {
                             ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
                             ("rotate_deg", float, None, False), ("translate", float, None, False),
                             ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
-                            ("first_call_timeout_s", float, 0, False)]),
+                            ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]),
     "tosca": ("tosca", [("n_low", int, 4, False), ("n_samplings", int, 1, False), ("seed", int, 0, False),
                         ("min_vertices", int, 0, True), ("workers", int, 1, True)]),
     "pose_transfer": ("pose_transfer", [("n_low", int, 4, False), ("n_samplings", int, 1, False),

@@ -12,7 +12,8 @@ base mesh. Each mesh is deformed with SShaDe and, up to ``elastic_max_vertices``
 full-resolution Elastic (spokes and rims) under the same handles. ``table.csv`` (every
 column, one row per (mesh, size), ``mesh`` first) and ``table.md`` (one table per mesh,
 :mod:`eval.experiments.scaling_table`) in ``out_dir`` give: vertices, n_low, k, seconds
-for remesh / low-res ARAP / transfer / total, warm (numba's compilation excluded: it
+for remesh / low-res ARAP / transfer / total, warm (the median of ``scaling.repeat``
+timed calls, their range beside it; numba's compilation excluded: it
 runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
 ``elastic_compile_s``; :mod:`sshade.warmup`), the remesh's check-and-repair rounds
 (``repair_rounds``: sum over the k samplings, ``repair_rounds_max``) and repair seeds
@@ -184,7 +185,7 @@ def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) 
            "handles": len(h), "build_s": build_s}
     print(f"[scaling] {entry.name}, {len(V)} vertices: SShaDe ...", file=sys.stderr, flush=True)
     row["sshade_compile_s"] = warm_sshade(sp)  # outside the timings and the memory peak
-    late_compile_s, srow = _sshade_row(V, F, h, T, sp)
+    late_compile_s, srow = _sshade_row(V, F, h, T, sp, int(sc.get("repeat", 1)))
     row["sshade_compile_s"] += late_compile_s
     row.update(srow)
     if bool(sc.get("first_call", True)):
@@ -221,22 +222,30 @@ def _size_handles(sc, base, V):
     return h, T
 
 
-def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
-    """SShaDe's timed run with the checked parameters ``sp``: the seconds of compilation
-    it still reported (0 after the warm-up) and its columns of the table row (times in
-    seconds, compilation excluded). The untimed run of the next master seed gives
-    ``seed_spread_pct`` and, under the memory probe, ``peak_mem_mb``: the probe reads
+def _sshade_row(V, F, h, T, sp: dict, repeat: int = 1) -> tuple[float, dict]:
+    """SShaDe's ``repeat`` timed runs with the checked parameters ``sp``: the seconds of
+    compilation they still reported (0 after the warm-up) and the columns of the table
+    row (times in seconds, compilation excluded) of the median run (the lower one for
+    an even count), with the fastest and slowest totals (``sshade_total_min_s``,
+    ``sshade_total_max_s``): one timing on a shared machine can be far off. The untimed
+    run of the next master seed gives ``seed_spread_pct`` and, under the memory probe, ``peak_mem_mb``: the probe reads
     every process's page tables 50 times a second, which slows the call it watches, so
     it never watches the timed one. ``peak_mem_mb`` is the process tree's peak, this
     process's live data included (the mesh, the benchmark's state), ``call_mem_mb`` that
     peak less the tree's PSS when the call starts."""
 
-    t0 = time.perf_counter()
-    Vd, si = deform(V, F, h, T, return_info=True, **sp)
-    total = time.perf_counter() - t0 - si["compile_s"]  # 0 after the warm-up
+    runs, compile_s = [], 0.0
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        Vd, si = deform(V, F, h, T, return_info=True, **sp)  # the same result every time (seeded)
+        runs.append((time.perf_counter() - t0 - si["compile_s"], si))  # compilation: 0 after the warm-up
+        compile_s += si["compile_s"]
+    times = sorted(t for t, _ in runs)
+    total, si = sorted(runs, key=lambda r: r[0])[(repeat - 1) // 2]  # the (lower) median run
     k = int(sp["n_samplings"])
-    row = {"n_low": si["n_low"], "k": k, "workers": si["workers"],
-           "sshade_total_s": total, "setup_s": si["setup_s"],
+    row = {"n_low": si["n_low"], "k": k, "workers": si["workers"], "repeat": repeat,
+           "sshade_total_s": total, "sshade_total_min_s": times[0], "sshade_total_max_s": times[-1],
+           "setup_s": si["setup_s"],
            "remesh_s": si["remesh_s"] + si["project_s"], "lowres_arap_s": si["arap_s"],
            "transfer_s": si["transfer_s"], "lowres_iters_first": si["samplings"][0]["iterations"],
            "lowres_iters_mean_warm": float(np.mean([s["iterations"] for s in si["samplings"][1:]]))
@@ -253,7 +262,7 @@ def _sshade_row(V, F, h, T, sp: dict) -> tuple[float, dict]:
     row["peak_mem_mb"], row["call_mem_mb"] = pm.peak_mb, pm.peak_mb - pm.start_mb
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     row["seed_spread_pct"] = 100.0 * float(np.linalg.norm(Vd - Vd2, axis=1).mean()) / diag
-    return si["compile_s"], row
+    return compile_s, row
 
 
 def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -> dict:
