@@ -80,6 +80,7 @@ def test_repair_rounds_iterations_and_first_call(set_run):
         assert 1 <= r["repair_rounds_max"] <= r["repair_rounds"] and r["repair_seeds"] >= 0
         assert r["lowres_iters_first"] >= 1 and r["lowres_iters_mean_warm"] >= 0
         assert math.isfinite(r["first_call_s"]) and r["first_call_s"] > 0
+        assert r["first_call_min_s"] <= r["first_call_s"] <= r["first_call_max_s"]
         assert math.isfinite(r["first_call_import_s"]) and r["first_call_import_s"] > 0
         assert r["sshade_total_s"] > 0 and r["peak_mem_mb"] > 0
         # two master seeds give different samplings, close results (a fraction of the diagonal)
@@ -99,8 +100,8 @@ def test_markdown_has_one_table_per_mesh(set_run):
         rows = [line for line in block.splitlines() if line.startswith("| ") and not line.startswith("| Vertices")]
         assert len(rows) == len(SIZES)
     header = next(line for line in md.splitlines() if line.startswith("| Vertices"))
-    for col in ("Repair rounds (max)", "Iters (first / warm mean)", "First call (s)", "Compile (s)", "Peak mem (MB)",
-                "Seed spread (% diag)", "Range (s)"):
+    for col in ("Repair rounds (max)", "Iters (first / warm mean)", "First call (s, median)", "Compile (s)",
+                "Peak mem (MB)", "Seed spread (% diag)", "Range (s)", "First call range (s)"):
         assert col in header
 
 
@@ -129,6 +130,20 @@ def test_entries_checked_and_base_mesh_fallback():
         with pytest.raises(SShaDeError, match=what):
             mesh_entries(_compose([f"scaling.meshes={bad}"]))
     assert cache_name(MeshEntry("m", "p", True), 200000) != cache_name(MeshEntry("m", "p", False), 200000)
+
+
+def test_first_call_median_skips_failed_probes(monkeypatch):
+    """The row's first call is the median of the probes that gave a time; NaN only when
+    none did."""
+    from eval.experiments import scaling
+
+    times = iter([3.0, math.nan, 1.0, 2.0])
+    monkeypatch.setattr(scaling, "probe_first_call", lambda *a, **k: {"first_call_s": next(times)})
+    r = scaling._first_call_row("m.ply", None, None, {}, 4, 60)
+    assert (r["first_call_s"], r["first_call_min_s"], r["first_call_max_s"]) == (2.0, 1.0, 3.0)
+    monkeypatch.setattr(scaling, "probe_first_call", lambda *a, **k: {"first_call_s": math.nan})
+    r = scaling._first_call_row("m.ply", None, None, {}, 2, 60)
+    assert all(math.isnan(r[k]) for k in ("first_call_s", "first_call_min_s", "first_call_max_s"))
 
 
 def test_failing_probe_gives_nan_and_a_warning(tmp_path, caplog):

@@ -25,8 +25,9 @@ spread of its sampling (``seed_spread_pct``: mean distance between the results o
 master seeds, ``seed`` and ``seed + 1``, each a k-sampling average, in % of the bounding
 box diagonal; the second run is not timed), with
 ``scaling.first_call`` the seconds of the first ``sshade.deform`` call in a fresh
-process (``first_call_s``: what a command-line user pays, numba's on-disk cache warm;
-interpreter start and imports apart in ``first_call_import_s``, the mesh read in
+process (``first_call_s``, the median of ``scaling.repeat`` processes, their range
+beside it: what a command-line user pays, numba's on-disk cache warm; interpreter
+start and imports apart in ``first_call_import_s``, the mesh read in
 ``first_call_read_s``; :mod:`eval.experiments.scaling_probe`; NaN with a warning when
 the probe fails), and Elastic's precompute time, time per iteration and time to
 convergence (when it converges within ``elastic_budget_s``), and the speed-up.
@@ -185,17 +186,29 @@ def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) 
            "handles": len(h), "build_s": build_s}
     print(f"[scaling] {entry.name}, {len(V)} vertices: SShaDe ...", file=sys.stderr, flush=True)
     row["sshade_compile_s"] = warm_sshade(sp)  # outside the timings and the memory peak
-    late_compile_s, srow = _sshade_row(V, F, h, T, sp, int(sc.get("repeat", 1)))
+    repeat = int(sc.get("repeat", 1))
+    late_compile_s, srow = _sshade_row(V, F, h, T, sp, repeat)
     row["sshade_compile_s"] += late_compile_s
     row.update(srow)
     if bool(sc.get("first_call", True)):
         print(f"[scaling] {entry.name}, {len(V)} vertices: first call in a fresh process ...",
               file=sys.stderr, flush=True)
-        row.update(probe_first_call(mp, h, T, sp, timeout_s=float(sc.get("first_call_timeout_s", 600))))
+        row.update(_first_call_row(mp, h, T, sp, repeat, float(sc.get("first_call_timeout_s", 600))))
     emax = sc.get("elastic_max_vertices", None)
     if bool(sc.elastic) and (emax is None or len(V) <= int(emax)):
         row.update(_elastic_row(V, F, h, T, ep, float(sc.elastic_budget_s), row["sshade_total_s"]))
     return row
+
+
+def _first_call_row(mp, h, T, sp: dict, repeat: int, timeout_s: float) -> dict:
+    """The first-call probe (:func:`probe_first_call`) run ``repeat`` times, each in a
+    fresh process: the median probe's columns, with ``first_call_min_s`` and
+    ``first_call_max_s`` (failed probes, NaN, left out; all NaN when every one fails)."""
+    probes = [probe_first_call(mp, h, T, sp, timeout_s=timeout_s) for _ in range(repeat)]
+    ok = sorted((p for p in probes if math.isfinite(p["first_call_s"])), key=lambda p: p["first_call_s"])
+    if not ok:
+        return dict(probes[0], first_call_min_s=math.nan, first_call_max_s=math.nan)
+    return dict(ok[(len(ok) - 1) // 2], first_call_min_s=ok[0]["first_call_s"], first_call_max_s=ok[-1]["first_call_s"])
 
 
 def _size_mesh(entry: MeshEntry, base, size: int, cache):

@@ -18,7 +18,8 @@ _COLS = [("vertices", "Vertices", "{:.0f}"), ("n_low", "n_low", "{:.0f}"), ("k",
          ("lowres_iters_first", "Iters (first / warm mean)", None),
          ("transfer_s", "Transfer (s)", "{:.2f}"), ("sshade_total_s", "SShaDe total (s, median)", "{:.2f}"),
          ("sshade_total_min_s", "Range (s)", None),
-         ("first_call_s", "First call (s)", "{:.2f}"), ("sshade_compile_s", "Compile (s)", "{:.2f}"),
+         ("first_call_s", "First call (s, median)", "{:.2f}"), ("first_call_min_s", "First call range (s)", None),
+         ("sshade_compile_s", "Compile (s)", "{:.2f}"),
          ("peak_mem_mb", "Peak mem (MB)", "{:.0f}"), ("call_mem_mb", "Call mem (MB)", "{:.0f}"),
          ("sshade_volume_err_pct", "Vol (%)", "{:.2f}"), ("sshade_edge_err_pct", "EL (%)", "{:.2f}"),
          ("sshade_angle_err_deg", "FA (deg)", "{:.3f}"), ("seed_spread_pct", "Seed spread (% diag)", "{:.3f}"),
@@ -34,8 +35,8 @@ def _missing(v) -> bool:
 def _cell(r, key: str, fmt) -> str:
     """One cell of table.md for row ``r`` (a pandas Series)."""
     v = r.get(key)
-    if key == "sshade_total_min_s" and not _missing(v):
-        return f"{v:.2f}-{r.get('sshade_total_max_s'):.2f}"
+    if key in ("sshade_total_min_s", "first_call_min_s") and not _missing(v):
+        return f"{v:.2f}-{r.get(key.replace('_min_s', '_max_s')):.2f}"
     if key == "lowres_iters_first" and not _missing(v):
         warm = r.get("lowres_iters_mean_warm")
         return f"{v:.0f} / {'-' if _missing(warm) else format(warm, '.1f')}"
