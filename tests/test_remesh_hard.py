@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sshade.closed_ball import closed_ball_full
 from sshade.mesh.validate import validate_mesh
 from sshade.remesh import mesh_topology, remesh
 from sshade.remesh_repair import voronoi_vertex_seeds
@@ -67,6 +68,10 @@ def test_remesh_of_thin_spikes_keeps_guarantees_in_few_rounds(spiky):
         assert np.array_equal(np.unique(rm.F), np.arange(len(rm.seeds)))
         assert len(np.unique(rm.seeds)) == len(rm.seeds) and np.isin(req, rm.seeds).all()
         assert np.array_equal(rm.label[rm.seeds], np.arange(len(rm.seeds)))
+        # the closed-ball property itself, by the full check (rounds after the first
+        # look only near the seeds they added: issue 24)
+        bad, _, f3 = closed_ball_full(topo.Fc, topo.Ec, topo.FEc, rm.label, rm.dist, topo.n, len(rm.seeds))
+        assert not bad and len(f3) == len(rm.F)
         rounds.append(rm.iterations)
     assert max(rounds) <= 5 and sum(rounds) <= 20, rounds
 
