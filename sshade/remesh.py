@@ -66,8 +66,9 @@ class MeshTopology:
     vnormals : (n, 3) float64 area-weighted vertex normals of the input.
     order : (n,) int64 locality order of the vertices (graph vertex i = mesh vertex
         ``order[i]``; :func:`sshade.mesh.geodesic.locality_order`).
-    vf_ptr : (n + 1,) int64, vf_idx : (3 (m + b) - b,) int32, the faces of ``Fc`` around
-        each vertex (:func:`sshade.closed_ball.vertex_faces`), for the local checks.
+    vf_ptr : (n + 1,) int64, vf_idx : (3 m + 2 c,) int32 (c cone faces), the faces of
+        ``Fc`` around each vertex (:func:`sshade.closed_ball.vertex_faces`), for the local
+        checks.
     """
 
     n: int
