@@ -12,6 +12,8 @@ import resource
 import threading
 from pathlib import Path
 
+from sshade.allocator import release_freed  # re-exported: the probe's users trim before measuring
+
 __all__ = ["PeakMemory", "tree_pss_mb", "release_freed"]
 
 
@@ -45,23 +47,6 @@ def tree_pss_mb(pid: int | None = None) -> float:
         total += _pss_kb(p)
         todo.extend(_children(p))
     return total * 1024 / 1e6
-
-
-def release_freed() -> bool:
-    """Give the memory this process has freed back to the OS (glibc ``malloc_trim(0)``,
-    after a garbage collection), so that a PSS measured next counts live data, not what
-    earlier work left in the allocator's heap. Returns whether ``malloc_trim`` was
-    called (False without glibc)."""
-    import ctypes
-    import gc
-    gc.collect()
-    try:
-        trim = ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError, TypeError):  # pragma: no cover - not glibc (TypeError: Windows)
-        return False
-    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
-    trim(0)
-    return True
 
 
 class PeakMemory:

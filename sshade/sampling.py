@@ -22,6 +22,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 
 import numpy as np
 
+from .allocator import keep_freed_memory
 from .arap import warmup_kernels
 from .jobs import pool_size  # noqa: F401 - the samplings' worker count (None: the cores this process may use)
 from .mesh.geodesic import VoronoiState
@@ -51,37 +52,6 @@ def _init_forked(state: dict) -> None:
     to keep freed memory (:func:`keep_freed_memory`)."""
     keep_freed_memory()
     _init_worker(state)
-
-
-#: glibc's mallopt parameters (malloc.h)
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-
-
-def keep_freed_memory(mmap_threshold: int = 1 << 28, trim_threshold: int = 1 << 30) -> bool:
-    """Tell glibc's allocator (this process only) to serve blocks below
-    ``mmap_threshold`` bytes from its heap and to give freed heap memory back to the OS
-    only above ``trim_threshold`` bytes, so that the arrays a sampling allocates and
-    frees again and again (tens of MB each at a million vertices) reuse memory already
-    mapped instead of a fresh ``mmap`` each time, whose first-touch page faults and
-    ``munmap`` are a large part of a SShaDe call at a million vertices (issue 24; the
-    figures are in this change's commit message and ``results/scaling``).
-
-    Called in the samplings' forked workers only (they end with the pool), never in the
-    caller's process, whose memory behaviour stays its own. A no-op returning False
-    where the C library has no ``mallopt`` (not glibc).
-
-    Returns
-    -------
-    bool, whether both settings were taken.
-    """
-    try:
-        import ctypes
-        libc = ctypes.CDLL(None)
-        mallopt = libc.mallopt
-    except (OSError, AttributeError, TypeError):  # pragma: no cover - not glibc (TypeError: Windows)
-        return False
-    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
-    return bool(mallopt(_M_MMAP_THRESHOLD, int(mmap_threshold)) and mallopt(_M_TRIM_THRESHOLD, int(trim_threshold)))
 
 
 def sampling_seeds(seed: int, k: int) -> list[int]:

@@ -38,16 +38,7 @@ def test_sampling_seeds_are_recorded_values():
 def test_keep_freed_memory_only_in_forked_workers(monkeypatch):
     """glibc's allocator is tuned in the forked workers (they end with the pool), never
     in the caller's process: a pool run in-process does not call it."""
-    import subprocess
-    import sys
-
     import sshade.sampling as sampling
-
-    code = "from sshade.sampling import keep_freed_memory; print(keep_freed_memory())"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
-    assert out in ("True", "False")  # True on glibc; never an exception
-    if sys.platform.startswith("linux"):
-        assert out == "True"
 
     def refuse(*a, **k):
         raise AssertionError("keep_freed_memory called in the caller's process")

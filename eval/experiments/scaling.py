@@ -205,10 +205,18 @@ def _first_call_row(mp, h, T, sp: dict, repeat: int, timeout_s: float) -> dict:
     fresh process: the median probe's columns, with ``first_call_min_s`` and
     ``first_call_max_s`` (failed probes, NaN, left out; all NaN when every one fails)."""
     probes = [probe_first_call(mp, h, T, sp, timeout_s=timeout_s) for _ in range(repeat)]
-    ok = sorted((p for p in probes if math.isfinite(p["first_call_s"])), key=lambda p: p["first_call_s"])
+    ok = [p for p in probes if math.isfinite(p["first_call_s"])]
     if not ok:
         return dict(probes[0], first_call_min_s=math.nan, first_call_max_s=math.nan)
-    return dict(ok[(len(ok) - 1) // 2], first_call_min_s=ok[0]["first_call_s"], first_call_max_s=ok[-1]["first_call_s"])
+    mid, lo, hi = _median_of(ok, lambda p: p["first_call_s"])
+    return dict(mid, first_call_min_s=lo, first_call_max_s=hi)
+
+
+def _median_of(items: list, key) -> tuple:
+    """(the median item by ``key``, the lower one for an even count; the smallest key;
+    the largest key) of a non-empty list."""
+    items = sorted(items, key=key)
+    return items[(len(items) - 1) // 2], key(items[0]), key(items[-1])
 
 
 def _size_mesh(entry: MeshEntry, base, size: int, cache):
@@ -241,9 +249,9 @@ def _sshade_row(V, F, h, T, sp: dict, repeat: int = 1) -> tuple[float, dict]:
     row (times in seconds, compilation excluded) of the median run (the lower one for
     an even count), with the fastest and slowest totals (``sshade_total_min_s``,
     ``sshade_total_max_s``): one timing on a shared machine can be far off. The untimed
-    run of the next master seed gives ``seed_spread_pct`` and, under the memory probe, ``peak_mem_mb``: the probe reads
-    every process's page tables 50 times a second, which slows the call it watches, so
-    it never watches the timed one. ``peak_mem_mb`` is the process tree's peak, this
+    run of the next master seed gives ``seed_spread_pct`` and, under the memory probe,
+    ``peak_mem_mb``: the probe reads every process's page tables 50 times a second,
+    which slows the call it watches, so it never watches the timed one. ``peak_mem_mb`` is the process tree's peak, this
     process's live data included (the mesh, the benchmark's state), ``call_mem_mb`` that
     peak less the tree's PSS when the call starts."""
 
@@ -253,11 +261,10 @@ def _sshade_row(V, F, h, T, sp: dict, repeat: int = 1) -> tuple[float, dict]:
         Vd, si = deform(V, F, h, T, return_info=True, **sp)  # the same result every time (seeded)
         runs.append((time.perf_counter() - t0 - si["compile_s"], si))  # compilation: 0 after the warm-up
         compile_s += si["compile_s"]
-    times = sorted(t for t, _ in runs)
-    total, si = sorted(runs, key=lambda r: r[0])[(repeat - 1) // 2]  # the (lower) median run
+    (total, si), t_min, t_max = _median_of(runs, lambda r: r[0])
     k = int(sp["n_samplings"])
     row = {"n_low": si["n_low"], "k": k, "workers": si["workers"], "repeat": repeat,
-           "sshade_total_s": total, "sshade_total_min_s": times[0], "sshade_total_max_s": times[-1],
+           "sshade_total_s": total, "sshade_total_min_s": t_min, "sshade_total_max_s": t_max,
            "setup_s": si["setup_s"],
            "remesh_s": si["remesh_s"] + si["project_s"], "lowres_arap_s": si["arap_s"],
            "transfer_s": si["transfer_s"], "lowres_iters_first": si["samplings"][0]["iterations"],
