@@ -88,7 +88,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     max_iter : int or None, iteration cap (None: :data:`DEFAULT_MAX_ITER` of the
         protocol; paper: 1000).
     V0 : (n, 3) float64 or None, initial guess; default the best rigid fit of the
-        handles (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V``.
+        handles (:func:`sshade.arap.rigid.rigid_fit`; for two or collinear handles the
+        fit turning the mesh least) applied to ``V``.
     time_budget_s : float or None, stop (unconverged) once the iterations have taken
         this many seconds (for benchmarks of slow full-resolution runs).
     protocol : ``"converged"`` or ``"paper"`` (:data:`PROTOCOLS`).

@@ -105,7 +105,9 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         2010), libigl's definitions (:mod:`sshade.arap.operators`).
     U0 : (n, 3) float64 or None, start; default the best rigid fit of the handles
         (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V`` (so a rigid handle motion
-        is reproduced exactly). The handle rows are overwritten by ``targets``.
+        is reproduced exactly; for two or collinear handles, about whose axis the energy
+        is blind, the fit turning the mesh least). The handle rows are overwritten by
+        ``targets``.
     R0 : (n, 3, 3) float64 or None, start rotations (one per vertex = rotation cell),
         e.g. those of a solve on a low-resolution remesh (the baselines' coarse start): the
         first iterate is their global step, the minimiser of ``E(U, R0)`` with the handles
