@@ -14,7 +14,12 @@ Layout, under the run's ``out_dir`` (:mod:`eval.outdir`)::
   method's resolved definition (``_target_`` and parameters, :func:`eval.methods.method_spec`;
   a plug-in's mapping), the case's identity (dataset name, root, seed, case name and
   seed, hashes of the vertex/face arrays and of the handles and targets: :func:`case_identity`),
-  the guard options and the reference options of the row (:func:`pair_key`);
+  the guard options and the reference options of the row, and the identity of the code
+  that computed it (the project's sources, the numerical libraries' versions, a plug-in's
+  file: :func:`eval.code_identity.code_identity`) (:func:`pair_key`);
+- ``git``: the checkout's commit and dirty flag when it was written (information, not key);
+- ``digest``: SHA-256 of the record's key, row, info and mesh name (:func:`record_digest`):
+  a record edited by hand no longer matches it;
 - ``row``: the row of ``cases.csv`` (JSON: NaN/inf as null);
 - ``info``: the method's own ``info`` (its stopping record: iterations, converged,
   protocol, per-sampling details ...), made JSON-safe (arrays as lists, other objects
@@ -22,9 +27,13 @@ Layout, under the run's ``out_dir`` (:mod:`eval.outdir`)::
 - ``mesh``: the file name of the deformed vertices, or null;
 - ``written_utc``.
 
-Semantics: :meth:`ResultStore.load` returns a stored record only when its ``key`` equals
-the pair's key now (a changed parameter, dataset or handle set makes the earlier record
-stale: the pair is recomputed and its record replaced). The store never removes a record
+Semantics: :meth:`ResultStore.lookup` returns a stored record only when its ``key`` equals
+the pair's key now (a changed parameter, dataset, handle set or code makes the earlier
+record stale: the pair is recomputed and its record replaced), and only when the record
+is valid: read like any other input, it must name that pair, match its digest, and hold
+a row of the right types (:func:`check_row`: finite numbers in numeric columns,
+non-negative times and counts). Otherwise it says why not, in words, so that a resume can
+report how many pairs it recomputes and why. The store never removes a record
 it did not replace, except :meth:`ResultStore.clear` (a run without ``resume`` starts
 from an empty store). Records are written with :func:`sshade.mesh.io.atomic_write`
 (temporary file + rename): a killed run leaves whole records only.
@@ -38,16 +47,18 @@ import logging
 import math
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from sshade.mesh.io import atomic_write
 
-__all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "safe_name", "case_identity", "pair_key", "json_safe"]
+__all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "safe_name", "case_identity", "pair_key",
+           "json_safe", "check_row", "cell_problem", "record_digest", "numeric_column"]
 
 log = logging.getLogger("eval")
 
-STORE_VERSION = 1  #: bumped when the record layout changes (an older record is then stale)
+STORE_VERSION = 2  #: bumped when the record layout changes (an older record is then stale)
 STORE_DIR = "runs"  #: the store's folder inside out_dir
 
 
@@ -105,14 +116,109 @@ def case_identity(case, *, dataset: str, root, seed) -> dict:
             "handles": _digest(case.handles), "targets": _digest(case.targets)}
 
 
-def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None) -> tuple[str, dict]:
+def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None, code: dict | None = None
+             ) -> tuple[str, dict]:
     """``(key, fields)``: the SHA-256 (hex) of the canonical JSON of ``fields`` =
-    ``{"method": method_spec, "case": case_id, "extra": extra}`` (``extra``: the other
-    options that change the row, e.g. the guard and reference settings)."""
+    ``{"method": method_spec, "case": case_id, "extra": extra, "code": code}``
+    (``extra``: the other options that change the row, e.g. the guard and reference
+    settings; ``code``: :func:`eval.code_identity.code_identity` of the method)."""
     fields = {"version": STORE_VERSION, "method": json_safe(method_spec), "case": json_safe(case_id),
-              "extra": json_safe(extra or {})}
+              "extra": json_safe(extra or {}), "code": json_safe(code)}
     text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest(), fields
+
+
+_NUMERIC = re.compile(r"^(n_\w+|\w+_(pct|s|deg|mb|err))$")
+_NON_NEGATIVE = re.compile(r"^(n_\w+|time_s|compile_s|\w+_deg|\w+_mb)$")
+
+
+def numeric_column(name: str) -> bool:
+    """Whether a row column must hold a number (or be empty): counts ``n_*``, seconds
+    ``*_s``, percentages ``*_pct``, angles ``*_deg``, megabytes ``*_mb``, errors ``*_err``;
+    a method's own info columns renamed ``info_*`` are free.
+
+    >>> numeric_column("volume_err_pct"), numeric_column("time_s"), numeric_column("info_time_s")
+    (True, True, False)
+    """
+    return not name.startswith("info_") and bool(_NUMERIC.match(name))
+
+
+def cell_problem(name: str, v) -> str:
+    """``""`` when ``v`` may stand in column ``name`` of a stored row, else why not: a
+    cell is None, a bool, a finite number or a text; a numeric column
+    (:func:`numeric_column`) holds a number or nothing, non-negative for counts, times,
+    angles and megabytes.
+
+    >>> cell_problem("volume_err_pct", "abc"), cell_problem("n_handles", 3)
+    ("volume_err_pct is not a number ('abc')", '')
+    """
+    if v is not None and not isinstance(v, (bool, int, float, str)):
+        return f"{name} is not a table cell ({type(v).__name__})"
+    if isinstance(v, float) and not math.isfinite(v):
+        return f"{name} is not finite"
+    if numeric_column(name) and v is not None:
+        if isinstance(v, (bool, str)):
+            return f"{name} is not a number ({v!r:.40})"
+        if _NON_NEGATIVE.match(name) and v < 0:
+            return f"{name} is negative ({v})"
+    return ""
+
+
+def check_row(row, case: str, method: str) -> str:
+    """``""`` when ``row`` is a valid stored row of (``case``, ``method``), else what is
+    wrong, in words: a mapping naming that case and method, with a text ``error``; every
+    cell None, a bool, a finite number or a text; numeric columns (:func:`numeric_column`)
+    numbers or empty, times, counts, angles and megabytes non-negative; a row without an
+    error has its ``time_s``.
+
+    >>> check_row({"case": "c", "method": "A", "error": "", "time_s": -1.0}, "c", "A")
+    'time_s is negative (-1.0)'
+    """
+    if not isinstance(row, dict) or not row:
+        return "no row"
+    if row.get("case") != str(case) or row.get("method") != str(method):
+        return f"its row names another pair ({row.get('case')!r}, {row.get('method')!r})"
+    if not isinstance(row.get("error"), str):
+        return "its row has no error text"
+    for k, v in row.items():
+        bad = cell_problem(str(k), v)
+        if bad:
+            return bad
+    if not row["error"] and not isinstance(row.get("time_s"), (int, float)):
+        return "a successful row without time_s"
+    return ""
+
+
+def record_digest(rec: dict) -> str:
+    """SHA-256 (hex) of a record's ``key``, ``case``, ``method``, ``row``, ``info`` and
+    ``mesh`` (canonical JSON): what :meth:`ResultStore.save` writes as ``digest``."""
+    body = {k: rec.get(k) for k in ("key", "case", "method", "row", "info", "mesh")}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+class Lookup(NamedTuple):
+    """What :meth:`ResultStore.lookup` found: ``record`` (the valid record, or None) and
+    ``why`` (None when found; else ``"absent"``, or ``"other code: <what changed>"``,
+    ``"other settings: <sections>"``, ``"invalid: <what is wrong>"``)."""
+    record: dict | None
+    why: str | None
+
+
+def _stale_why(old, new: dict | None) -> str:
+    """Why a record under another key is stale: ``"other code: ..."`` when its code
+    identity differs (:func:`eval.code_identity.describe_change`), else ``"other
+    settings: <the differing sections>"``."""
+    from .code_identity import describe_change
+
+    if new is None:
+        return "other settings"
+    old = old if isinstance(old, dict) else {}
+    change = describe_change(old.get("code"), new.get("code") or {})
+    if change:
+        return f"other code: {change}"
+    names = {"method": "method definition", "case": "case data", "extra": "guard or reference options"}
+    diff = [w for k, w in names.items() if json_safe(old.get(k)) != new.get(k)]
+    return f"other settings: {', '.join(diff) or 'key'}"
 
 
 class ResultStore:
@@ -127,36 +233,73 @@ class ResultStore:
     def __init__(self, out_dir, *, meshes: bool = False):
         self.root = Path(out_dir) / STORE_DIR
         self.meshes = bool(meshes)
+        self._git = None  # the checkout's state, read once at the first save
 
     def path(self, case: str, method: str) -> Path:
         """``runs/<case>/<method>.json`` (names through :func:`safe_name`)."""
         return self.root / safe_name(case) / f"{safe_name(method)}.json"
 
     def load(self, case: str, method: str, key: str) -> dict | None:
-        """The stored record of (``case``, ``method``) when its key is ``key`` and it names
-        that pair, else None (absent, unreadable, another version or a stale key)."""
-        try:
-            rec = json.loads(self.path(case, method).read_text())
-        except (OSError, ValueError):
-            return None
-        ok = (isinstance(rec, dict) and rec.get("version") == STORE_VERSION and rec.get("key") == key
-              and rec.get("case") == str(case) and rec.get("method") == str(method)
-              and isinstance(rec.get("row"), dict))
-        return rec if ok else None
+        """The stored record of (``case``, ``method``) when its key is ``key`` and it is
+        valid (:meth:`lookup`), else None."""
+        return self.lookup(case, method, key).record
 
-    def load_mesh(self, rec: dict) -> np.ndarray | None:
-        """The deformed vertices (n, 3) a record names, or None (not stored, unreadable)."""
+    def lookup(self, case: str, method: str, key: str, fields: dict | None = None) -> Lookup:
+        """The stored record of (``case``, ``method``) under ``key``, read as untrusted
+        input: :class:`Lookup` with the record when it is whole, of this store version,
+        names that pair, matches its digest (:func:`record_digest`) and holds a valid row
+        (:func:`check_row`), else None and why. ``fields``: the pair's key fields now
+        (:func:`pair_key`), to say what differs in a stale record (code or settings)."""
+        p = self.path(case, method)
+        if not p.is_file():
+            return Lookup(None, "absent")
+        try:
+            rec = json.loads(p.read_text())
+        except (OSError, ValueError) as e:
+            return Lookup(None, f"invalid: unreadable ({type(e).__name__})")
+        if not isinstance(rec, dict):
+            return Lookup(None, "invalid: not a record")
+        if rec.get("version") != STORE_VERSION:
+            return Lookup(None, f"other code: store version {rec.get('version')!r}, now {STORE_VERSION}")
+        if rec.get("case") != str(case) or rec.get("method") != str(method):
+            return Lookup(None, f"invalid: it names another pair ({rec.get('case')!r}, {rec.get('method')!r})")
+        if rec.get("key") != key:
+            return Lookup(None, _stale_why(rec.get("key_fields"), fields))
+        if rec.get("digest") != record_digest(rec):
+            return Lookup(None, "invalid: edited (its digest does not match)")
+        bad = check_row(rec.get("row"), case, method)
+        if bad or not isinstance(rec.get("info"), dict):
+            return Lookup(None, f"invalid: {bad or 'info is not a mapping'}")
+        if rec.get("mesh") not in (None, self.path(case, method).with_suffix(".npy").name):
+            return Lookup(None, "invalid: it names another mesh file")
+        return Lookup(rec, None)
+
+    def load_mesh(self, rec: dict, n: int | None = None) -> np.ndarray | None:
+        """The deformed vertices (n, 3) float64 a record names, or None (not stored,
+        unreadable, not a finite (n, 3) float64 array; ``n``: the case's vertex count)."""
         name = rec.get("mesh")
         if not name:
             return None
         try:
-            return np.load(self.path(rec["case"], rec["method"]).with_name(str(name)), allow_pickle=False)
-        except (OSError, ValueError):
+            U = np.load(self.path(rec["case"], rec["method"]).with_name(str(name)), allow_pickle=False)
+        except (OSError, ValueError, EOFError):
             return None
+        ok = (isinstance(U, np.ndarray) and U.dtype == np.float64 and U.ndim == 2 and U.shape[1] == 3
+              and (n is None or len(U) == n) and bool(np.isfinite(U).all()))
+        return U if ok else None
 
-    def save(self, case: str, method: str, key: str, fields: dict, row: dict, info=None, U=None) -> Path:
-        """Store one finished run atomically (the mesh first, then the record naming it);
-        returns the record's path. OSError propagates (the caller decides)."""
+    def save(self, case: str, method: str, key: str, fields: dict, row: dict, info=None, U=None,
+             git: dict | None = None) -> Path:
+        """Store one finished run atomically (the mesh first, then the record naming it,
+        with its :func:`record_digest`); ``git``: the checkout's state, recorded beside
+        (default: :func:`eval.runinfo.git_info`, read once per store).
+        Returns the record's path. OSError propagates (the caller decides)."""
+        if git is None:
+            if self._git is None:
+                from .runinfo import git_info
+                g = git_info()
+                self._git = {"commit": g.get("commit"), "dirty": g.get("dirty")}
+            git = self._git
         p = self.path(case, method)
         p.parent.mkdir(parents=True, exist_ok=True)
         mesh = None
@@ -165,8 +308,9 @@ class ResultStore:
             with atomic_write(p.with_suffix(".npy"), "wb") as fh:
                 np.save(fh, np.asarray(U, dtype=np.float64), allow_pickle=False)
         rec = {"version": STORE_VERSION, "case": str(case), "method": str(method), "key": key, "key_fields": fields,
-               "row": json_safe(row), "info": json_safe(info or {}), "mesh": mesh,
+               "row": json_safe(row), "info": json_safe(info or {}), "mesh": mesh, "git": json_safe(git),
                "written_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+        rec["digest"] = record_digest(rec)
         with atomic_write(p, "w") as fh:
             fh.write(json.dumps(rec, indent=1) + "\n")
         return p

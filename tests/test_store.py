@@ -45,11 +45,13 @@ def test_store_keys_round_trip_and_clear(tmp_path):
     assert k1 != pair_key({"_target_": "x.A", "tol": 1e-4}, case_identity(c2, dataset="faust", root="/d", seed=0),
                           {"guard": {"timeout_s": None}})[0]
     st = ResultStore(tmp_path, meshes=True)
-    row = {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": float("nan"), "n": np.int64(3), "error": ""}
+    row = {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": float("nan"), "n": np.int64(3), "error": "",
+           "time_s": 1.5}
     p = st.save("c/1", "SShaDe+refine", k1, f1, row, {"per": [{"a": np.float32(1.5)}]}, np.ones((5, 3)))
     assert p == tmp_path / "runs" / "c_1" / "SShaDe+refine.json"
     rec = st.load("c/1", "SShaDe+refine", k1)
-    assert rec["row"] == {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": None, "n": 3, "error": ""}
+    assert rec["row"] == {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": None, "n": 3, "error": "",
+                          "time_s": 1.5}
     assert rec["info"] == {"per": [{"a": 1.5}]} and np.array_equal(st.load_mesh(rec), np.ones((5, 3)))
     assert st.load("c/1", "SShaDe+refine", "other") is None  # stale key
     assert st.load("c/1", "ARAP", k1) is None

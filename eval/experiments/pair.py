@@ -15,7 +15,7 @@ from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reache
 
 from ..metric_meshes import CaseMeshes
 from ..metrics import deformation_metrics, ground_truth_metrics
-from ..store import json_safe
+from ..store import cell_problem, json_safe
 
 __all__ = ["run_pair", "run_and_store", "guard_options"]
 
@@ -68,8 +68,9 @@ def _info_columns(info, taken) -> dict:
     """The cells of a method's ``info`` for its row: keys made safe column names
     (letters, digits, ``_``; at most 64 characters; non-string keys by their text),
     values by :func:`_scalar`; a key clashing with ``taken`` (the row's columns), a
-    summary column or a typed key with a value of another type (:data:`_TYPED_INFO`)
-    becomes ``info_<key>``; ``compile_s`` (already in the row) is left out."""
+    summary column, a typed key with a value of another type (:data:`_TYPED_INFO`) or a
+    value its name does not allow in a stored row (:func:`eval.store.cell_problem`, e.g. a
+    text in ``*_pct``) becomes ``info_<key>``; ``compile_s`` (already in the row) is left out."""
     import re
     out: dict = {}
     for k, v in info.items():
@@ -77,7 +78,8 @@ def _info_columns(info, taken) -> dict:
         v = _scalar(v)
         if not key or k == "compile_s" or v is _SKIP:
             continue
-        if key in taken or key in _RESERVED or not _TYPED_INFO.get(key, lambda _: True)(v):
+        if (key in taken or key in _RESERVED or not _TYPED_INFO.get(key, lambda _: True)(v)
+                or cell_problem(key, v)):
             key = f"info_{key}"
         if key not in taken and key not in out:
             out[key] = v

@@ -1,0 +1,144 @@
+"""eval/code_identity.py: a stored row is reused only by the code that computed it.
+
+A resumed run recomputes every pair a plug-in's changed file or a change to the project's
+sources (a commit between two halves of a run) would compute differently, says how many
+and why, and never tabulates rows of two codes together.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pandas as pd
+
+from eval.code_identity import code_identity, describe_change, sources_digest
+
+from .conftest import ROOT, subprocess_env
+
+PLUGIN_SRC = '''
+import os
+import numpy as np
+
+
+class Scaled:
+    """A toy plug-in: moves every vertex by the handles' mean displacement, times FACTOR."""
+    FACTOR = {factor}
+
+    def __init__(self, name="Scaled"):
+        self.name = name
+        self.info = {{}}
+
+    def deform(self, V, F, handles, targets):
+        path = os.environ.get("SSHADE_TEST_COUNTER")
+        if path:
+            with open(path, "a") as fh:
+                fh.write(f"{{len(V)}} {{self.name}}\\n")
+        U = V + (targets - V[handles]).mean(0) * self.FACTOR
+        U[handles] = targets
+        return U
+'''
+
+
+def _counts(path):
+    return pd.Series([ln.split()[1] for ln in path.read_text().splitlines()]).value_counts().to_dict() \
+        if path.exists() else {}
+
+
+def _eval(root, out, methods, *extra, env=None, popen=False):
+    cmd = [sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={out.parent / 'faust'}",
+           "dataset.limit=2", "reference.cases=none", "report.enabled=false", f"methods=[{methods}]",
+           f"out_dir={out}", "jobs=1", *extra]
+    e = dict(subprocess_env(), **(env or {}))
+    e["PYTHONPATH"] = os.pathsep.join([str(root), str(out.parent), e.get("PYTHONPATH", "")])
+    kw = dict(cwd=root, env=e, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if popen:
+        return subprocess.Popen(cmd, **kw)
+    r = subprocess.run(cmd, timeout=600, **kw)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
+    from baselines import Elastic
+    ident = code_identity(Elastic())
+    assert ident["plugin"] is None and len(ident["sources"]) == 64 and "numpy" in ident["versions"]
+    (tmp_path / "myplug.py").write_text(PLUGIN_SRC.format(factor=1.0))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import myplug
+    a = code_identity(myplug.Scaled())["plugin"]
+    (tmp_path / "myplug.py").write_text(PLUGIN_SRC.format(factor=2.0))
+    assert code_identity(myplug.Scaled())["plugin"] != a  # the file, not the loaded class, is hashed
+    # a copy of the sources with one metric file edited has another digest
+    src = tmp_path / "src"
+    for pkg in ("sshade", "baselines", "defaust", "eval"):
+        shutil.copytree(ROOT / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    d0 = sources_digest(root=str(src))
+    assert d0 == sources_digest()  # the same bytes under another folder: the same code
+    with open(src / "eval" / "metrics.py", "a") as fh:
+        fh.write("\n# edited\n")
+    sources_digest.cache_clear()
+    assert sources_digest(root=str(src)) != d0
+    assert describe_change(None, ident).startswith("a record without")
+    assert describe_change(ident, dict(ident, versions=dict(ident["versions"], numpy="0.0"))) == \
+        f"numpy {ident['versions']['numpy']} -> 0.0"
+
+
+def test_changed_plugin_file_is_recomputed_on_resume(tmp_path, faust_root):
+    (tmp_path / "faust").symlink_to(faust_root)
+    plug = tmp_path / "scaledplug.py"
+    plug.write_text(PLUGIN_SRC.format(factor=0.0))
+    out, counter = tmp_path / "out", tmp_path / "calls.txt"
+    method = "{_target_:scaledplug.Scaled,name:Scaled}"
+    _eval(ROOT, out, method, env={"SSHADE_TEST_COUNTER": str(counter)})
+    before = pd.read_csv(out / "cases.csv")
+    plug.write_text(PLUGIN_SRC.format(factor=1.05))
+    counter.unlink()
+    r = _eval(ROOT, out, method, "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"Scaled": 2}  # both pairs recomputed, none restored
+    assert "2 stored run(s) recomputed, other code: the plug-in's source changed" in r.stdout + r.stderr
+    after = pd.read_csv(out / "cases.csv")
+    fresh = tmp_path / "fresh"
+    _eval(ROOT, fresh, method)
+    ref = pd.read_csv(fresh / "cases.csv")
+    assert not after["volume_err_pct"].equals(before["volume_err_pct"])
+    pd.testing.assert_series_equal(after["volume_err_pct"], ref["volume_err_pct"])
+    info = json.loads((out / "run.json").read_text())
+    assert info["resumed"]["restored"] == 0 and sum(info["resumed"]["recomputed"].values()) == 2
+
+
+def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, faust_root):
+    """A run killed after its first case, the project's sources changed (a metric file
+    edited, as a commit would), then resumed: the first case's pairs run again, so the
+    table holds rows of one code only."""
+    (tmp_path / "faust").symlink_to(faust_root)
+    tree = tmp_path / "tree"
+    for d in ("sshade", "baselines", "defaust", "eval", "conf", "tests", "hydra_plugins"):
+        shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tree / "pyproject.toml")  # marks a source checkout (sshade/confdir.py)
+    out, counter = tmp_path / "out", tmp_path / "calls.txt"
+    methods = "{_target_:tests.store_methods.Counted,name:A},{_target_:tests.store_methods.Counted,name:B}"
+    p = _eval(tree, out, methods, env={"SSHADE_TEST_COUNTER": str(counter), "SSHADE_TEST_HANG_AFTER": "2"},
+              popen=True)
+    try:
+        t0 = time.time()
+        while not (counter.exists() and len(counter.read_text().splitlines()) >= 3):
+            assert p.poll() is None, p.communicate()[1][-3000:]
+            assert time.time() - t0 < 300
+            time.sleep(0.2)
+    finally:
+        os.kill(p.pid, signal.SIGKILL)
+        p.communicate()
+    assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]  # the first case
+    with open(tree / "eval" / "metrics.py", "a") as fh:
+        fh.write("\n# a commit between the two halves\n")
+    counter.unlink()
+    r = _eval(tree, out, methods, "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"A": 2, "B": 2}  # the first half too
+    assert "2 stored run(s) recomputed, other code: the project's sources changed" in r.stdout + r.stderr
+    keys = {json.loads(p.read_text())["key_fields"]["code"]["sources"] for p in (out / "runs").rglob("*.json")}
+    assert len(keys) == 1
