@@ -41,6 +41,8 @@ from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 
+from .code_identity import numerical_versions, sources_digest
+
 __all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
            "reference_solution", "reference_metrics",
            "method_energy", "sr_energy", "sr_alpha", "energy_operators"]
@@ -172,15 +174,24 @@ def status_words(status) -> str:
     return _STATUS_WORDS.get(str(status), str(status))
 
 
+#: The source folders whose code decides a reference: the energies, their operators and
+#: solvers (ARAP's and Elastic's in ``sshade/arap``, ARAP-SR's in ``baselines``).
+REFERENCE_CODE = ("sshade/arap", "baselines")
+
+
 def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
     """SHA-256 (hex) of everything a reference depends on: the bytes of ``V`` (n, 3)
     float64, ``F`` (m, 3) int64, ``handles`` (h,) int64, ``targets`` (h, 3) float64, the
-    energy, the solver settings and :data:`REFERENCE_VERSION`."""
+    energy, the solver settings, :data:`REFERENCE_VERSION` and the code that defines the
+    energies and solves them (:data:`REFERENCE_CODE`: the sources of ``sshade/arap`` and
+    ``baselines``, and the numerical libraries' versions, :mod:`eval.code_identity`): a
+    reference cached by other code is computed again, never reused."""
     h = hashlib.sha256()
     for a, dt in ((V, np.float64), (F, np.int64), (handles, np.int64), (targets, np.float64)):
         h.update(np.ascontiguousarray(a, dt).tobytes())
         h.update(str(np.shape(a)).encode())
-    h.update(json.dumps({"energy": energy, "solver": solver, "version": REFERENCE_VERSION},
+    code = {"sources": sources_digest(REFERENCE_CODE), "versions": numerical_versions()}
+    h.update(json.dumps({"energy": energy, "solver": solver, "version": REFERENCE_VERSION, "code": code},
                         sort_keys=True).encode())
     return h.hexdigest()
 

@@ -134,3 +134,19 @@ def test_arap_sr_reference_continues_the_methods_path(plane, tmp_path):
     # on this small mesh ARAP's rotations + 2,000 sweeps reach min_R E: the method's
     # rotations + 20 sweeps give an upper bound of it, and a tiny one
     assert -1e-12 <= arap["energy_gap"] <= own["energy_gap"] + 1e-15 and own["energy_gap"] < 1e-6
+
+
+def test_reference_key_changes_with_the_solver_code(monkeypatch):
+    """A cached reference computed by other solver code (sshade/arap, baselines) or other
+    numerical libraries is not reused: both are part of its key."""
+    import eval.reference as reference
+
+    V = np.eye(3)
+    F = np.array([[0, 1, 2]])
+    args = (V, F, np.array([0]), V[:1], "spokes_and_rims", {"etol": 1e-12})
+    k0 = reference.reference_key(*args)
+    assert reference.REFERENCE_CODE == ("sshade/arap", "baselines")
+    monkeypatch.setattr(reference, "sources_digest", lambda packages: "edited")
+    k1 = reference.reference_key(*args)
+    monkeypatch.setattr(reference, "numerical_versions", lambda: {"numpy": "0"})
+    assert len({k0, k1, reference.reference_key(*args)}) == 3
