@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import sys
 
+from sshade.checks import config_bool
 from sshade.clirun import hydra_main, run_command
 from sshade.confdir import config_dir
 from sshade.errors import SShaDeError
@@ -90,12 +91,24 @@ def _pin_out_dir(cfg) -> bool:
     return "out_dir" not in given
 
 
+def _refuse_fresh_resume(cfg, fresh: bool) -> None:
+    """``resume=true`` continues the run of a folder named by ``out_dir=``; with the
+    default dated ``out_dir`` (``fresh``) there is none to continue: SShaDeError."""
+    if fresh and config_bool(cfg, "resume", default=False):
+        raise SShaDeError("resume=true needs the folder of the run to continue: pass out_dir=DIR, the folder "
+                          "to resume (the default out_dir is a new folder)")
+
+
 def _main(cfg) -> None:
-    """Hydra task of ``python -m eval``: run the experiment; a bad config or input, an
-    OSError (``error: ...``, status 2) or Ctrl-C (``interrupted``, 130) ends the process
-    through :func:`sshade.clirun.run_command`."""
+    """Hydra task of ``python -m eval``: run the experiment; a bad config or input (e.g.
+    ``resume=true`` without ``out_dir``), an OSError (``error: ...``, status 2) or Ctrl-C
+    (``interrupted``, 130) ends the process through :func:`sshade.clirun.run_command`."""
     fresh = _pin_out_dir(cfg)
-    rc = run_command(lambda: run_experiment(cfg, fresh=fresh), where=cfg.get("out_dir"))
+
+    def work():
+        _refuse_fresh_resume(cfg, fresh)  # before the folder is claimed: nothing is made
+        return run_experiment(cfg, fresh=fresh)
+    rc = run_command(work, where=cfg.get("out_dir"))
     if rc:
         raise SystemExit(rc)
 

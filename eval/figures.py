@@ -33,10 +33,11 @@ from sshade.errors import SShaDeError
 from sshade.isometric import rigid_align
 
 from .render import DEFAULT_VIEW, figure_row, render_mesh
+from .store import safe_name
 
 __all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
-           "pose_transfer_figure", "safe_figure", "write_case_figure", "figures_options", "ERROR_CMAP",
-           "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure"]
+           "pose_transfer_figure", "safe_figure", "write_case_figure", "case_figure_path", "figures_options",
+           "ERROR_CMAP", "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure"]
 
 log = logging.getLogger("eval")
 
@@ -303,10 +304,16 @@ def figures_options(cfg) -> tuple[bool, int]:
     return enabled, int(4 if max_cases is None else max_cases)
 
 
+def case_figure_path(fig_dir, name) -> Path:
+    """``fig_dir/<name>.png``, the figure file of case ``name`` (:func:`write_case_figure`;
+    the name through :func:`eval.store.safe_name`: never a path outside ``fig_dir``)."""
+    return Path(fig_dir) / f"{safe_name(name)}.png"
+
+
 def write_case_figure(case, results: Mapping, fig_dir, *, not_run=()) -> Path | None:
-    """Evaluator hook: ``fig_dir/<case.name>.png`` for one case (attributes ``name``,
-    ``V``, ``F``, ``handles``, ``static``). Logs and returns None instead of raising, so
-    a rendering problem never stops an evaluation.
+    """Evaluator hook: ``fig_dir/<case>.png`` (:func:`case_figure_path`) for one case
+    (attributes ``name``, ``V``, ``F``, ``handles``, ``static``). Logs and returns None
+    instead of raising, so a rendering problem never stops an evaluation.
 
     results : method name -> deformed vertices, ``None`` (failed) or :data:`NOT_RUN`, as
     :func:`case_figure`. not_run : names of methods not run on this case; their value
@@ -315,7 +322,7 @@ def write_case_figure(case, results: Mapping, fig_dir, *, not_run=()) -> Path | 
     """
     results = {**dict(results), **{name: NOT_RUN for name in not_run}}
     return safe_figure(str(case.name), case_figure, case.V, case.F, results, case.handles, case.static,
-                       Path(fig_dir) / f"{case.name}.png", title=str(case.name))
+                       case_figure_path(fig_dir, case.name), title=str(case.name))
 
 
 def distribution_figure(df, path, *, metrics, methods=None, seed: int = 0) -> Path:

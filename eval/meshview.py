@@ -13,6 +13,9 @@ file, written next to the report as a script the page loads from ``file://``.
 - :func:`write_case_view`: ``report/<case>.js`` (:data:`VIEW_DIR`), which sets
   ``window.SSHADE_VIEWS[<case>]``; never raises (a warning in the log instead), like
   the figures.
+- :func:`write_outputs` / :func:`read_outputs`: ``report/outputs.json``, which of those
+  views and of the case figures the run wrote, for which cases, and why others were
+  not (re)drawn: the report shows only those (a resumed run keeps an earlier run's files).
 
 Size: about ``4/3 * (6 * clusters * meshes + (2 or 4) * 3 * faces)`` bytes per case
 (clusters ~ faces / 2); 30000 faces and 7 meshes: about 1.6 MB.
@@ -33,13 +36,14 @@ from sshade.mesh.io import atomic_write
 
 from .store import json_safe, safe_name
 
-__all__ = ["VIEW_DIR", "DEFAULT_MAX_FACES", "cluster_decimate", "cluster_positions", "case_view",
-           "write_case_view", "read_view", "view_options"]
+__all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "cluster_decimate", "cluster_positions", "case_view",
+           "case_view_path", "write_case_view", "read_view", "view_options", "write_outputs", "read_outputs"]
 
 log = logging.getLogger("eval")
 
 VIEW_DIR = "report"  #: the views' folder inside a run folder (next to index.html)
 DEFAULT_MAX_FACES = 30000  #: faces shown per mesh unless ``report.max_faces`` says otherwise
+OUTPUTS = "outputs.json"  #: in VIEW_DIR: the per-case views and figures the run wrote (write_outputs)
 
 
 def cluster_decimate(V, F, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
@@ -175,6 +179,12 @@ def view_options(cfg) -> tuple[int, int]:
     return int(0 if n is None else n), int(DEFAULT_MAX_FACES if mf is None else mf)
 
 
+def case_view_path(run_dir, name) -> Path:
+    """``run_dir/report/<name>.js``, the view file of case ``name`` (:func:`write_case_view`;
+    the name through :func:`eval.store.safe_name`)."""
+    return Path(run_dir) / VIEW_DIR / f"{safe_name(name)}.js"
+
+
 def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: int = DEFAULT_MAX_FACES,
                     stored=()) -> Path | None:
     """``run_dir/report/<case>.js`` for one evaluated case (attributes ``name``, ``V``,
@@ -192,7 +202,7 @@ def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: i
         meshes.setdefault(str(n), ("not run", None))
     try:
         view = case_view(case.name, case.V, case.F, meshes, max_faces=max_faces)
-        p = Path(run_dir) / VIEW_DIR / f"{safe_name(case.name)}.js"
+        p = case_view_path(run_dir, case.name)
         p.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(view, separators=(",", ":"))
         with atomic_write(p, "w") as fh:
@@ -202,3 +212,36 @@ def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: i
         return None
     log.info("3D view %s (%d of %d faces, %.0f kB)", p, view["shown_faces"], view["n_faces"], p.stat().st_size / 1e3)
     return p
+
+
+def write_outputs(run_dir, cases, views: Mapping, figures: Mapping, notes) -> Path:
+    """``run_dir/report/outputs.json`` (atomically): the per-case files of the run.
+
+    Parameters
+    ----------
+    cases : the run's case names, in order. views, figures : case name -> path of its
+        3D view / figure relative to ``run_dir`` (posix), only those this run wrote.
+    notes : texts saying which view or figure was not (re)drawn and why.
+
+    Returns the path. Raises OSError when it cannot be written.
+    """
+    p = Path(run_dir) / VIEW_DIR / OUTPUTS
+    p.parent.mkdir(parents=True, exist_ok=True)
+    rec = {"cases": [str(c) for c in cases], "views": {str(k): str(v) for k, v in views.items()},
+           "figures": {str(k): str(v) for k, v in figures.items()}, "notes": [str(n) for n in notes]}
+    with atomic_write(p, "w") as fh:
+        fh.write(json.dumps(rec, indent=1) + "\n")
+    return p
+
+
+def read_outputs(run_dir) -> dict | None:
+    """What :func:`write_outputs` recorded in ``run_dir`` (keys ``cases`` list, ``views``
+    and ``figures`` dicts, ``notes`` list), or None when the file is absent, unreadable
+    or not such a record (a run folder written before it existed)."""
+    try:
+        rec = json.loads((Path(run_dir) / VIEW_DIR / OUTPUTS).read_text())
+    except (OSError, ValueError):
+        return None
+    ok = (isinstance(rec, dict) and isinstance(rec.get("cases"), list) and isinstance(rec.get("views"), dict)
+          and isinstance(rec.get("figures"), dict) and isinstance(rec.get("notes"), list))
+    return rec if ok else None

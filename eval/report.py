@@ -14,7 +14,17 @@ The page (:func:`write_report`) shows, from the files the run wrote:
   drag rotates, wheel zooms);
 - the per-pose / per-subject breakdown (``breakdown.csv``, ``breakdown.png``,
   ``breakdown.md``), the figures (``*.png``, ``figures/*.png``);
+- which views and figures in the folder were left out, and why;
 - the provenance of ``run.json``: command, git commit and dirty flag, seeds, config.
+
+Only the cases of the run the folder holds now are shown (its ``run.json``, else
+``cases.csv``; :mod:`eval.report_scope`): a resumed run keeps an earlier run's files,
+so a view or case figure is shown only when it is of one of these cases and, where
+the run recorded them (``report/outputs.json``, :func:`eval.meshview.write_outputs`),
+when this run wrote it; every other one is listed as left out, with the run's own
+notes (e.g. a figure not redrawn). Every link and script source is a relative path
+inside the run folder, percent-encoded (:func:`eval.report_scope.link_target`): a file
+named ``javascript:...`` gets a plain file link, a path leaving the folder no link.
 
 Every JavaScript error is written into ``<div id="js-errors">`` (``data-count``), so a
 headless browser's ``--dump-dom`` shows it. ``index.html`` is replaced only when this
@@ -44,7 +54,7 @@ from sshade.clirun import ArgumentParser, run_command
 from sshade.mesh.io import atomic_write
 
 from .breakdown import BREAKDOWN_METRICS
-from .meshview import VIEW_DIR, read_view
+from .meshview import VIEW_DIR, read_outputs, read_view
 from .outdir import (
     REPRODUCE_ENV,
     OutputDirError,
@@ -54,6 +64,7 @@ from .outdir import (
     refuse_results,
     results_dir,
 )
+from .report_scope import link_target, not_current, run_cases
 from .tables import (
     ALL_CASES_HEADING,
     EXTRA_COLUMNS,
@@ -205,46 +216,88 @@ def _breakdown_section(run_dir: Path) -> str:
     return "\n".join(out)
 
 
-def _figures_section(run_dir: Path) -> str:
+def _link(base: Path, rel: str, inner: str) -> str:
+    """``<a href=...>inner</a>`` (:func:`eval.report_scope.link_target`), or ``inner``
+    alone when ``rel`` may not be linked."""
+    href = link_target(base, rel)
+    return inner if href is None else f'<a href="{_e(href)}">{inner}</a>'
+
+
+def _figures_section(run_dir: Path, kind: str, cases, outputs) -> tuple[str, list[str]]:
+    """(section, notes): the figures ``*.png`` and ``figures/*.png``; for the ``cases``
+    experiment, a case figure only when it is this run's (:func:`eval.report_scope.not_current`)."""
     pngs = sorted(p for p in run_dir.glob("*.png") if p.name != "breakdown.png")
-    pngs += sorted((run_dir / "figures").glob("*.png")) if (run_dir / "figures").is_dir() else []
-    if not pngs:
-        return ""
+    per_case = sorted((run_dir / "figures").glob("*.png")) if (run_dir / "figures").is_dir() else []
+    notes = []
+    for p in per_case:
+        rel = p.relative_to(run_dir).as_posix()
+        why = (not_current("figure", p.stem, rel, cases, None if outputs is None else outputs["figures"], stem=True)
+               if kind == "cases" else None)
+        if why is None:
+            pngs.append(p)
+        else:
+            notes.append(why)
     out = ['<h2 id="figures">Figures</h2>']
     for p in pngs:
         rel = p.relative_to(run_dir).as_posix()
-        out.append(f'<figure><a href="{_e(rel)}"><img src="{_e(rel)}" alt="{_e(rel)}" loading="lazy"></a>'
-                   f"<figcaption>{_e(rel)}</figcaption></figure>")
-    return "\n".join(out)
+        src = link_target(run_dir, rel)
+        if src is not None:
+            out.append(f'<figure><a href="{_e(src)}"><img src="{_e(src)}" alt="{_e(rel)}" loading="lazy"></a>'
+                       f"<figcaption>{_e(rel)}</figcaption></figure>")
+    return ("\n".join(out) if len(out) > 1 else ""), notes
 
 
-def _views_section(run_dir: Path) -> tuple[str, str]:
-    """(section, script tags) of the 3D views ``report/*.js`` (:mod:`eval.meshview`)."""
-    views = sorted((run_dir / VIEW_DIR).glob("*.js")) if (run_dir / VIEW_DIR).is_dir() else []
-    if not views:
-        return "", ""
-    out, tags, total = ['<h2 id="views">3D views</h2>'], [], 0
-    for p in views:
+def _view_files(run_dir: Path, cases, outputs) -> tuple[list, list[str]]:
+    """([(path, view)] of this run's views, in case order; notes on the others)."""
+    views, notes = [], []
+    for p in sorted((run_dir / VIEW_DIR).glob("*.js")) if (run_dir / VIEW_DIR).is_dir() else []:
+        rel = p.relative_to(run_dir).as_posix()
         try:
             data = read_view(p)
         except (OSError, ValueError):
             log.warning("report: %s is not a view file; left out", p)
             continue
+        why = not_current("3D view", str(data["case"]), rel, cases, None if outputs is None else outputs["views"])
+        if why is None and link_target(run_dir, rel) is not None:
+            views.append((p, data))
+        elif why is not None:
+            notes.append(why)
+    order = {c: i for i, c in enumerate(cases or [])}
+    views.sort(key=lambda v: order.get(str(v[1]["case"]), len(order)))
+    return views, notes
+
+
+def _views_section(run_dir: Path, cases, outputs) -> tuple[str, str, list[str]]:
+    """(section, script tags, notes) of the 3D views ``report/*.js`` (:mod:`eval.meshview`)
+    of this run (:func:`_view_files`)."""
+    views, notes = _view_files(run_dir, cases, outputs)
+    if not views:
+        return "", "", notes
+    out, tags, total = ['<h2 id="views">3D views</h2>'], [], 0
+    for p, data in views:
         total += p.stat().st_size
         rel = p.relative_to(run_dir).as_posix()
-        tags.append(f'<script src="{_e(rel)}"></script>')
+        tags.append(f'<script src="{_e(link_target(run_dir, rel))}"></script>')
         shown = ("shown in full" if data["shown_faces"] == data["n_faces"] else
                  f"shown with {data['shown_faces']} faces (vertex clustering, for display only)")
         labels = "".join(f"<div>{_e(m['label'])}{'' if m.get('pos') else ': ' + _e(m['kind'])}</div>"
                          for m in data["meshes"])
         out.append(f'<div class="view" data-case="{_e(data["case"])}"><h3>{_e(data["case"])}</h3>'
                    f'<div class="view-labels">{labels}</div><canvas></canvas>'
-                   f'<p class="note">{data["n_vertices"]} vertices, {data["n_faces"]} faces; {shown}, '
+                   f'<p class="note">{_e(data["n_vertices"])} vertices, {_e(data["n_faces"])} faces; {_e(shown)}, '
                    f"{p.stat().st_size / 1e6:.2f} MB ({_e(rel)})</p></div>")
     out.insert(1, f'<p class="note" id="views-status" data-drawn="0">{len(tags)} case(s), {total / 1e6:.2f} MB of '
                   "mesh data next to this page (report.max_faces caps the faces of each mesh). Drag to rotate, wheel "
                   "to zoom, double-click to reset.</p>")
-    return "\n".join(out), "\n".join(tags)
+    return "\n".join(out), "\n".join(tags), notes
+
+
+def _left_out_section(notes: list[str]) -> str:
+    """The views and figures not shown (or not redrawn), one line each."""
+    if not notes:
+        return ""
+    return ('<h2 id="left-out">Views and figures left out</h2><ul id="left-out-list">'
+            + "".join(f"<li>{_e(n)}</li>" for n in notes) + "</ul>")
 
 
 def _provenance_section(info: dict) -> str:
@@ -281,14 +334,19 @@ def render_page(run_dir) -> str:
     exp = cfg.get("experiment") or {}
     kind = str(exp.get("kind", "cases"))
     title = f"{exp.get('name', run_dir.name)}: {(cfg.get('dataset') or {}).get('name', '')} ({run_dir.name})"
-    views, tags = _views_section(run_dir)
-    parts = [_main_section(run_dir, kind), views, _breakdown_section(run_dir), _figures_section(run_dir),
+    cases = run_cases(run_dir, info) if kind == "cases" else None
+    outputs = read_outputs(run_dir) if kind == "cases" else None
+    views, tags, view_notes = _views_section(run_dir, cases, outputs)
+    figures, figure_notes = _figures_section(run_dir, kind, cases, outputs)
+    notes = [*(outputs["notes"] if outputs is not None else []), *view_notes, *figure_notes]
+    parts = [_main_section(run_dir, kind), views, _breakdown_section(run_dir), figures, _left_out_section(notes),
              _provenance_section(info)]
     files = sorted(p.name + ("/" if p.is_dir() else "") for p in run_dir.iterdir() if not p.name.startswith("."))
-    parts.append('<h2 id="files">Files</h2><p>' + " ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files) + "</p>")
+    parts.append('<h2 id="files">Files</h2><p>' + " ".join(_link(run_dir, f, _e(f)) for f in files) + "</p>")
     body = "\n".join(p for p in parts if p)
     nav = " ".join(f'<a href="#{a}">{b}</a>' for a, b in (("main", "table"), ("views", "3D"),
-                   ("breakdown", "breakdown"), ("figures", "figures"), ("provenance", "provenance"))
+                   ("breakdown", "breakdown"), ("figures", "figures"), ("left-out", "left out"),
+                   ("provenance", "provenance"))
                    if f'id="{a}"' in body)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="generator" '
             f'content="{GENERATOR}"><title>{_e(title)}</title><style>{_CSS}</style>\n'
@@ -352,9 +410,10 @@ def write_index(root) -> Path:
         except (OSError, ValueError):
             info = {}
         rel = d.relative_to(root).as_posix()
-        href = f"{rel}/{PAGE}" if (d / PAGE).is_file() else f"{rel}/"
+        target = f"{rel}/{PAGE}" if (d / PAGE).is_file() else f"{rel}/"
+        info = info if isinstance(info, dict) else {}
         exp = ((info.get("config") or {}).get("experiment") or {}).get("name", "")
-        rows.append([f'<td><a href="{_e(href)}">{_e(rel)}</a></td>', f"<td>{_e(exp)}</td>",
+        rows.append([f"<td>{_link(root, target, _e(rel))}</td>", f"<td>{_e(exp)}</td>",
                      f"<td>{_e(info.get('status', ''))}</td>", _cell(info.get("n_cases")),
                      f"<td>{_e((info.get('git') or {}).get('commit', ''))[:12]}</td>"])
     if not rows:

@@ -53,6 +53,9 @@ import numpy as np
 
 from sshade.mesh.io import atomic_write
 
+from .code_identity import describe_change
+from .runinfo import git_info
+
 __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "safe_name", "case_identity", "pair_key",
            "json_safe", "check_row", "cell_problem", "record_digest", "numeric_column"]
 
@@ -208,8 +211,6 @@ def _stale_why(old, new: dict | None) -> str:
     """Why a record under another key is stale: ``"other code: ..."`` when its code
     identity differs (:func:`eval.code_identity.describe_change`), else ``"other
     settings: <the differing sections>"``."""
-    from .code_identity import describe_change
-
     if new is None:
         return "other settings"
     old = old if isinstance(old, dict) else {}
@@ -296,7 +297,6 @@ class ResultStore:
         Returns the record's path. OSError propagates (the caller decides)."""
         if git is None:
             if self._git is None:
-                from .runinfo import git_info
                 g = git_info()
                 self._git = {"commit": g.get("commit"), "dirty": g.get("dirty")}
             git = self._git

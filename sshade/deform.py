@@ -119,6 +119,7 @@ class LowResSkippedWarning(UserWarning):
 
 
 _MAX_COUNT = 2**31 - 1    # n_low, workers, max_iter: int32 range (numba kernels, libigl)
+_MIN_N_LOW = 4            # the smallest n_low check_params accepts (its as_int("n_low", n_low, 4))
 _MAX_SAMPLINGS = 10_000   # k remeshings, each a full low-res solve
 _MAX_SEED = 2**63 - 1     # int64: recorded in JSON/CSV and passed to numpy
 
@@ -308,8 +309,11 @@ def _low_res_size(n: int, n_low) -> tuple[int, int]:
     (at :func:`deform`'s caller) when the request is not below ``n``."""
     asked = auto_n_low(n) if n_low == "auto" else n_low
     if asked >= n:
+        # a valid n_low is at least _MIN_N_LOW (check_params) and below n: advise one only when it exists
+        advice = (f"pass n_low between {_MIN_N_LOW} and {n - 1}" if n - 1 >= _MIN_N_LOW else
+                  f"no n_low gives one: it must be at least {_MIN_N_LOW} and below the vertex count")
         warnings.warn(f"SShaDe: n_low={asked} is not below the mesh's {n} vertices: there is no "
-                      "low-resolution step, the low-res ARAP runs on the whole mesh (pass a smaller n_low)",
+                      f"low-resolution step, the low-res ARAP runs on the whole mesh ({advice})",
                       LowResSkippedWarning, stacklevel=3)
     return asked, int(min(asked, n))
 

@@ -341,3 +341,15 @@ def test_reference_cases_takes_a_rule_of_its_own(tmp_path, faust_root):
     bad = _run(["dataset.root=faust", "methods=[Elastic]", "reference.cases=some", "out_dir=bad"], cwd=tmp_path)
     assert bad.returncode == 2 and "error: reference.cases must be" in bad.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "bad").exists()
+
+
+def test_resume_without_out_dir_is_refused_and_makes_no_folder(tmp_path, faust_root):
+    """resume=true continues the run of a folder named by out_dir: with the default
+    (a new dated folder) there is nothing to continue."""
+    r = _run(["experiment=ci", f"dataset.root={faust_root}", "dataset.limit=1", "reference.cases=none",
+              "methods=[{_target_:tests.plugin_example.MyMethod,name:Mine,iterations:2}]", "resume=true"],
+             cwd=tmp_path)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr[-2000:]
+    assert lines[0].startswith("error: ") and "resume=true" in lines[0] and "out_dir=" in lines[0]
+    assert list(tmp_path.iterdir()) == []  # no outputs/ folder, nothing at all

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.store import ResultStore, case_identity, check_row, pair_key, record_digest
+from eval.store import ResultStore, check_row, pair_key, record_digest
 
 from .conftest import ROOT, subprocess_env
 

@@ -271,3 +271,102 @@ def test_committed_results_pages_open_in_headless_chromium():
         assert 'id="js-errors"' in dom, f"{page}: chromium gave no DOM"
         box = re.search(r'<div id="js-errors"[^>]*>.*?</div>(?!\s*<div class="js-error")', dom, re.S).group(0)
         assert 'data-count="0"' in box, f"{page}: JavaScript errors: {box}"
+
+
+# ----------------------------------------------------------------------------- only this run's outputs
+def _faust_run(faust_root, out, *extra):
+    """``run_experiment`` on FAUST with toy plug-in methods (``extra``: more overrides)."""
+    from hydra import compose, initialize_config_dir
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        cfg = compose(config_name="config", overrides=[
+            "dataset=faust", f"dataset.root={faust_root}", "reference.cases=none", "jobs=1", f"out_dir={out}",
+            *extra])
+    run_experiment(cfg)
+    return _parse((out / PAGE).read_text()), (out / PAGE).read_text()
+
+
+_MINE = "{_target_:tests.plugin_example.MyMethod,name:Mine,iterations:3}"
+
+
+def test_a_resumed_run_with_fewer_cases_shows_only_its_cases(tmp_path, faust_root):
+    out = tmp_path / "run"
+    p, _ = _faust_run(faust_root, out, "dataset.limit=2", f"methods=[{_MINE}]")
+    first, second = p.views
+    p, text = _faust_run(faust_root, out, "dataset.limit=1", f"methods=[{_MINE}]", "resume=true")
+    assert p.views == [first] and len(p.scripts) == 1  # the dropped case's view is neither shown nor loaded
+    assert read_view(out / p.scripts[0])["case"] == first
+    assert second not in text.split('id="left-out"')[0]  # named only in the list of what was left out
+    assert re.search(rf"3D view report/{second}\.js left out: not of a case of this run", text)
+
+
+def test_a_figure_not_redrawn_is_not_shown_as_current(tmp_path, faust_root):
+    """A resume where one method runs again (another parameter) and the other is restored
+    without its mesh (store.meshes=false): the case figure cannot be redrawn, so the
+    earlier one is gone from the page (and the folder) and the page says why."""
+    out = tmp_path / "run"
+    other = "{_target_:tests.plugin_example.MyMethod,name:Other,iterations:%d}"
+    opts = ("dataset.limit=1", "figures.enabled=true", "figures.max_cases=1")
+    p, text = _faust_run(faust_root, out, *opts, f"methods=[{_MINE},{other % 2}]")
+    (case,) = p.views
+    assert f'src="figures/{case}.png"' in text
+    p, text = _faust_run(faust_root, out, *opts, f"methods=[{_MINE},{other % 4}]", "resume=true")
+    assert f"figures/{case}.png" not in text.split('id="left-out"')[0]  # no img, no link: not shown
+    assert not (out / "figures" / f"{case}.png").exists()  # the earlier run's figure removed
+    assert f"figure of case {case} not redrawn: its restored runs of Mine have no stored mesh" in text
+    assert "store.meshes=true keeps them" in text
+    assert p.views == [case]  # the 3D view is redrawn (Mine's panel: not stored)
+    assert [m["kind"] for m in read_view(out / p.scripts[0])["meshes"]][-2:] == ["not stored", "result"]
+
+
+class _Links(HTMLParser):
+    """Every ``href`` and ``src`` value of a page."""
+
+    def __init__(self):
+        super().__init__()
+        self.targets = []
+
+    def handle_starttag(self, tag, attrs):
+        self.targets += [v for k, v in attrs if k in ("href", "src") and v is not None]
+
+
+def _links(page: Path) -> list[str]:
+    p = _Links()
+    p.feed(page.read_text())
+    return p.targets
+
+
+def _assert_inside(page: Path, targets) -> None:
+    """Each link of ``page`` a relative path to a file inside its folder (or an anchor)."""
+    from urllib.parse import unquote, urlsplit
+    base = page.parent.resolve()
+    for t in targets:
+        if t.startswith("#"):
+            continue
+        u = urlsplit(t)
+        assert not u.scheme and not u.netloc and not u.query and not t.startswith("/"), t
+        target = (base / unquote(u.path)).resolve()
+        assert target.is_relative_to(base) and target.exists(), t
+
+
+def test_links_are_relative_paths_inside_the_run_folder(run_dir, tmp_path):
+    import shutil
+    d = tmp_path / "run"
+    shutil.copytree(run_dir, d, symlinks=True)
+    for name in ("javascript:alert(1)", "javascript:alert(2).png", "data:text,x", "a b#c?d.txt"):
+        (d / name).write_text("x")
+    (d / "outside").symlink_to(tmp_path, target_is_directory=True)  # a link leaving the folder
+    assert main([str(d)]) == 0
+    targets = _links(d / PAGE)
+    assert not [t for t in targets if re.match(r"\s*[a-z][a-z0-9+.-]*:", t, re.I)], targets  # no scheme at all
+    _assert_inside(d / PAGE, targets)
+    assert "javascript%3Aalert%281%29" in targets and "javascript%3Aalert%282%29.png" in targets
+    assert not [t for t in targets if t.startswith("outside")]
+    # the index of run folders: a folder named like a URL
+    (tmp_path / "javascript:alert(3)").mkdir()
+    (tmp_path / "javascript:alert(3)" / "run.json").write_text("{}")
+    _assert_inside(write_index(tmp_path), _links(tmp_path / PAGE))
+    # what the page's links go through: no path that leaves the folder is ever a link target
+    from eval.report_scope import link_target
+    for rel in ("../x", "a/../../x", "/etc/passwd", "//host/x", "a\\..\\x", "a\nb", "", "outside/x"):
+        assert link_target(d, rel) is None, rel
+    assert link_target(d, "figures/s0 p1.png") == "figures/s0%20p1.png"

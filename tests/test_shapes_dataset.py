@@ -52,7 +52,7 @@ def test_seeded_and_dispatched(classic):
 def test_high_resolution_version_is_cached(classic, tmp_path):
     (c,) = shape_cases(classic, files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path)
     assert 8000 <= len(c.V) <= 12000 and c.n_source == 3485
-    cached = tmp_path / "bunny_8000-12000.ply"
+    cached = tmp_path / "bunny.off_8000-12000.ply"  # the whole file name: bunny.obj would have its own
     assert cached.is_file()
     (again,) = shape_cases(classic, files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path)
     np.testing.assert_array_equal(again.F, c.F)
@@ -99,3 +99,92 @@ def test_app_runs_experiment_shapes(classic, tmp_path):
     assert (cases["edge_err_pct"].astype(float) < 2.0).all()
     fig = res["out_dir"] / "figures" / "bunny.png"
     assert png_size(fig) == (3 * 320 + 90, 480 + 56)
+
+
+# ------------------------------------------------------------ case names and files of their own
+def _write_shapes(d, names):
+    """Each of ``names`` in ``d`` as a small closed mesh (an icosphere stretched along x,
+    a different length per file, so the files differ); returns ``d``."""
+    from sshade.mesh.io import write_mesh
+
+    from .conftest import icosphere
+    V, F = icosphere()
+    for k, n in enumerate(names):
+        write_mesh(d / n, V * np.array([2.0 + 0.25 * k, 1.0, 0.6]), F)
+    return d
+
+
+COLLIDING = ["a b.off", "a_b.off", "bunny.off", "bunny.obj", "solo.off"]
+
+
+def test_colliding_case_names_become_distinct_file_names(tmp_path):
+    from eval.store import safe_name
+    cases = load_cases("shapes", _write_shapes(tmp_path, COLLIDING), files=COLLIDING, n_per_group=3,
+                       region_radius=0.3)
+    names = [c.name for c in cases]
+    assert len({safe_name(n).casefold() for n in names}) == len(COLLIDING), names
+    assert names[-1] == "solo" and cases[-1].subject == "solo"  # a name without a twin is kept
+    assert [n.rsplit("-", 1)[0] for n in names[:4]] == ["a b", "a_b", "bunny", "bunny"]
+    assert all(len(n.rsplit("-", 1)[1]) == 8 for n in names[:4])
+    assert [c.subject for c in cases[:4]] == names[:4]  # the stem was the subject: it follows the name
+    again = load_cases("shapes", tmp_path, files=COLLIDING, n_per_group=3, region_radius=0.3)
+    assert [c.name for c in again] == names  # from the source paths: the same names every time
+
+
+def test_a_file_listed_twice_is_refused(tmp_path):
+    _write_shapes(tmp_path, ["x.off", "y.off"])
+    for files in (["x.off", "y.off", "x.off"], ["x.off", "./x.off"]):
+        with pytest.raises(SShaDeError, match="listed once"):
+            shape_cases(tmp_path, files=files, limit=1)  # the whole list is checked, not the first file
+
+
+def test_the_app_refuses_a_file_listed_twice_before_any_work(tmp_path):
+    import subprocess
+    import sys
+
+    from .conftest import ROOT, subprocess_env
+    _write_shapes(tmp_path, ["x.off"])
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "eval", "dataset=shapes", f"dataset.root={tmp_path}",
+                        "dataset.files=[x.off,x.off]", "dataset.vertex_range=null", "methods=[ARAP]",
+                        "reference.cases=none", f"out_dir={out}"], cwd=ROOT, env=subprocess_env(),
+                       capture_output=True, text=True, timeout=300)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), r.stderr[-2000:]
+    assert "x.off" in lines[0] and "twice" in lines[0]
+    assert not out.exists()
+
+
+def test_colliding_cases_keep_their_own_results_and_views(tmp_path):
+    """``a b`` / ``a_b`` and ``bunny.off`` / ``bunny.obj``: a stored record and a 3D view
+    each, every view on the page, and a resume restores every pair (none recomputed)."""
+    import json
+    import re
+
+    from hydra import compose, initialize_config_dir
+
+    from eval.app import CONF_DIR, run_experiment
+    from eval.meshview import read_view
+    root = tmp_path / "shapes"
+    root.mkdir()
+    _write_shapes(root, COLLIDING)
+    out = tmp_path / "run"
+    files = "[" + ",".join(f"'{f}'" for f in COLLIDING) + "]"
+    overrides = ["dataset=shapes", f"dataset.root={root}", f"dataset.files={files}", "dataset.vertex_range=null",
+                 "dataset.n_per_group=3", "dataset.region_radius=0.3", "reference.cases=none",
+                 "methods=[{_target_:tests.plugin_example.MyMethod,name:Mine,iterations:3}]",
+                 "report.view_cases=5", "jobs=1", f"out_dir={out}"]
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        cfg = compose(config_name="config", overrides=overrides)
+        again = compose(config_name="config", overrides=[*overrides, "resume=true"])
+    run_experiment(cfg)
+    records = sorted((out / "runs").glob("*/Mine.json"))
+    cases = [json.loads(p.read_text())["case"] for p in records]
+    assert len(records) == len(set(cases)) == len(COLLIDING)
+    views = sorted((out / "report").glob("*.js"))
+    assert sorted(read_view(p)["case"] for p in views) == sorted(cases)
+    page = (out / "index.html").read_text()
+    assert sorted(re.findall(r'<div class="view" data-case="([^"]+)"', page)) == sorted(cases)
+    stamps = {p: p.stat().st_mtime_ns for p in records}
+    run_experiment(again)
+    assert {p: p.stat().st_mtime_ns for p in records} == stamps  # every pair restored, none run again

@@ -19,18 +19,21 @@ one module here calling ``register_dataset`` plus ``conf/dataset/NAME.yaml``.
 """
 from __future__ import annotations
 
+import hashlib
+import itertools
 from pathlib import Path
 
 from sshade.errors import SShaDeError
 
 from ..paths import abs_path
+from ..store import safe_name
 from .case import DeformationCase
 from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
 from .registry import Dataset, datasets, find_dataset, register_dataset
 
 __all__ = ["Case", "DeformationCase", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases",
-           "dataset_names", "dataset_root", "dataset_outlook", "dataset_options", "Dataset", "datasets", "find_dataset",
-           "register_dataset"]
+           "dataset_names", "unique_case_names", "dataset_root", "dataset_outlook", "dataset_options", "Dataset",
+           "datasets", "find_dataset", "register_dataset"]
 
 
 def dataset_names() -> list[str]:
@@ -41,7 +44,9 @@ def dataset_names() -> list[str]:
 def load_cases(name: str, root, **kw) -> list[DeformationCase]:
     """Cases of dataset ``name`` (one of :func:`dataset_names`) found under ``root``.
 
-    Keyword arguments go to the dataset's loader (e.g. :func:`faust_cases`).
+    Keyword arguments go to the dataset's loader (e.g. :func:`faust_cases`). The names
+    are made collision-free (:func:`unique_case_names`), so every case has files of its
+    own (``runs/<case>/``, ``report/<case>.js``, ``figures/<case>.png``).
 
     Raises
     ------
@@ -50,7 +55,52 @@ def load_cases(name: str, root, **kw) -> list[DeformationCase]:
     d = find_dataset(name)
     if d is None:
         raise SShaDeError(f"unknown dataset {name!r}; available: {dataset_names()}")
-    return d.load(root, **kw)
+    return unique_case_names(d.load(root, **kw))
+
+
+def _source_of(case, index: int) -> str:
+    """The text a case's name hash is made of: its source file when it has one, else
+    its name and its position in the list."""
+    for attr in ("path", "target_path", "source", "rest_path"):
+        v = getattr(case, attr, None)
+        if v not in (None, ""):
+            return str(v)
+    return f"{case.name}#{index}"
+
+
+def unique_case_names(cases: list) -> list:
+    """``cases`` (in place, and returned) with collision-free names: every case whose
+    file name (:func:`eval.store.safe_name`, compared without case, as on a
+    case-insensitive file system) is shared with another case gets ``-`` and 8 hex
+    digits of the SHA-256 of its source path appended (and its position in ``cases``
+    when that name is taken too, e.g. two cases of one source; the prefix cut so that
+    the whole name stays within ``safe_name``'s 120 characters); a ``subject`` equal to
+    the old name follows it. Names already unique are kept. E.g. ``bunny.off`` and
+    ``bunny.obj`` (both ``bunny``) become ``bunny-1a2b3c4d`` and ``bunny-5e6f7a8b``;
+    ``a b`` and ``a_b`` (both ``a_b`` on disk) get one hash each.
+    """
+    def key(name) -> str:
+        return safe_name(name).casefold()
+
+    count: dict[str, int] = {}
+    for c in cases:
+        count[key(c.name)] = count.get(key(c.name), 0) + 1
+    taken = {key(c.name) for c in cases}
+    for i, c in enumerate(cases):
+        if count[key(c.name)] < 2:
+            continue
+        old = str(c.name)
+        digest = hashlib.sha256(_source_of(c, i).encode()).hexdigest()[:8]
+        for j in itertools.count():  # the digest, then with the case's position, until the name is free
+            h = digest if j == 0 else f"{digest}-{i}" if j == 1 else f"{digest}-{i}-{j}"
+            new = f"{old[:120 - len(h) - 1]}-{h}"
+            if key(new) not in taken:
+                break
+        taken.add(key(new))
+        c.name = new
+        if isinstance(getattr(c, "subject", None), str) and c.subject == old:
+            c.subject = new
+    return cases
 
 
 def dataset_root(cfg) -> Path:

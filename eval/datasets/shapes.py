@@ -14,7 +14,8 @@ landmark.
 
 With ``vertex_range`` set, each shape is first brought to high resolution like the
 DeFAUST rest poses (LS3 Loop + isotropic remeshing, :func:`defaust.highres.subdivide_remesh`)
-and the result is cached as ``<cache>/<stem>_<lo>-<hi>.ply``, so later runs only read it.
+and the result is cached as ``<cache>/<file name>_<lo>-<hi>.ply`` (e.g.
+``bunny.off_150000-200000.ply``), so later runs only read it.
 There is no ground-truth pose: cases have ``V_gt = None`` and are scored with the
 deformation metrics (volume, area, edge length, face angles, handle error) only.
 
@@ -36,6 +37,7 @@ from defaust import highres  # the module: tests replace highres.subdivide_remes
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 
+from ..store import safe_name
 from .case import DeformationCase
 from .registry import register_dataset
 
@@ -132,7 +134,8 @@ def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes,
 
 def _highres(path: Path, V, F, vertex_range, cache: Path | None):
     lo, hi = (int(x) for x in vertex_range)
-    cached = None if cache is None else Path(cache) / f"{path.stem}_{lo}-{hi}.ply"
+    # the whole file name: bunny.off and bunny.obj never share a cached version
+    cached = None if cache is None else Path(cache) / f"{safe_name(path.name)}_{lo}-{hi}.ply"
     if cached is not None and cached.is_file():
         return read_mesh(cached)
     log.info("%s: LS3 Loop + isotropic remesh to [%d, %d] vertices (cached in %s)", path.name, lo, hi, cached)
@@ -140,6 +143,18 @@ def _highres(path: Path, V, F, vertex_range, cache: Path | None):
     if cached is not None:
         write_mesh(cached, r.V, r.F)
     return r.V, r.F
+
+
+def _refuse_repeats(root: Path, names: list) -> None:
+    """SShaDeError when two entries of ``names`` are the same file of ``root`` (the same
+    name twice, or two spellings of one path such as ``x.off`` and ``./x.off``)."""
+    seen: dict = {}
+    for n in names:
+        p = (root / str(n)).resolve()
+        if p in seen:
+            same = f"{n!r} twice" if str(seen[p]) == str(n) else f"{seen[p]!r} and {n!r}, the same file,"
+            raise SShaDeError(f"shapes: dataset.files lists {same}: each file may be listed once")
+        seen[p] = n
 
 
 def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group: int = 30,
@@ -158,17 +173,20 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
 
     Returns
     -------
-    list of :class:`ShapeCase`, in ``files`` order.
+    list of :class:`ShapeCase`, in ``files`` order, named by the file's stem (two
+    files of one stem, e.g. ``bunny.off`` and ``bunny.obj``, get distinct names from
+    :func:`eval.datasets.load_cases`).
 
     Raises
     ------
-    SShaDeError on a missing folder or file, an unreadable or invalid mesh (the
-    message names it), a bad ``limit`` or an empty selection.
+    SShaDeError on a missing folder or file, a file listed twice, an unreadable or
+    invalid mesh (the message names it), a bad ``limit`` or an empty selection.
     """
     root = Path(root)
     if not root.is_dir():
         raise SShaDeError(f"shapes: dataset.root is not a folder: {root}")
     names = list(DEFAULT_SHAPES if files is None else files)
+    _refuse_repeats(root, names)  # the whole list, before limit
     if limit is not None:
         if int(limit) < 1:
             raise SShaDeError(f"limit must be a positive integer or null, got {limit}")
