@@ -24,3 +24,22 @@ class Counted(MyMethod):
             if hang and n > int(hang):
                 time.sleep(600)
         return super().deform(V, F, handles, targets)
+
+
+def kill_at_call(proc, counter, n: int, timeout_s: float = 300.0) -> None:
+    """Wait until the run ``proc`` (a Popen of ``python -m eval`` with
+    ``$SSHADE_TEST_COUNTER`` = ``counter`` and ``$SSHADE_TEST_HANG_AFTER`` = ``n - 1``) has
+    made its ``n``-th call, which sleeps, then kill it (SIGKILL). AssertionError if it
+    ends first or takes longer than ``timeout_s``."""
+    import signal
+
+    try:
+        t0 = time.time()
+        while not (counter.exists() and len(counter.read_text().splitlines()) >= n):
+            assert proc.poll() is None, proc.communicate()[1][-3000:]
+            assert time.time() - t0 < timeout_s
+            time.sleep(0.2)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+        proc.communicate()

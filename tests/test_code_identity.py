@@ -9,16 +9,15 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 
 import pandas as pd
 
 from eval.code_identity import code_identity, describe_change, sources_digest
 
 from .conftest import ROOT, subprocess_env
+from .store_methods import kill_at_call
 
 PLUGIN_SRC = '''
 import os
@@ -124,15 +123,7 @@ def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, 
     methods = "{_target_:tests.store_methods.Counted,name:A},{_target_:tests.store_methods.Counted,name:B}"
     p = _eval(tree, out, methods, env={"SSHADE_TEST_COUNTER": str(counter), "SSHADE_TEST_HANG_AFTER": "2"},
               popen=True)
-    try:
-        t0 = time.time()
-        while not (counter.exists() and len(counter.read_text().splitlines()) >= 3):
-            assert p.poll() is None, p.communicate()[1][-3000:]
-            assert time.time() - t0 < 300
-            time.sleep(0.2)
-    finally:
-        os.kill(p.pid, signal.SIGKILL)
-        p.communicate()
+    kill_at_call(p, counter, 3)
     assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]  # the first case
     with open(tree / "eval" / "metrics.py", "a") as fh:
         fh.write("\n# a commit between the two halves\n")

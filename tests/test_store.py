@@ -4,11 +4,8 @@ cost-weighted progress estimate (eval/progress.py)."""
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
-import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,6 +19,7 @@ from eval.subset import baseline_selection, check_baseline_cases
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env
+from .store_methods import kill_at_call
 
 PLUGIN = "{_target_:tests.store_methods.Counted,name:%s}"
 TIME_COLUMNS = ("time_s", "compile_s")
@@ -183,16 +181,8 @@ def test_resume_after_kill_runs_only_missing_pairs(tmp_path, faust_root):
     counter = tmp_path / "calls.txt"
     # 1. killed (SIGKILL) while its third pair runs: two pairs (s0_p1 A and B) are stored
     p = _eval(out, ["A", "B"], env={"SSHADE_TEST_COUNTER": str(counter), "SSHADE_TEST_HANG_AFTER": "2"}, popen=True)
-    try:
-        t0 = time.time()
-        while not (counter.exists() and len(counter.read_text().splitlines()) >= 3):
-            assert p.poll() is None, p.communicate()[1][-3000:]
-            assert time.time() - t0 < 300
-            time.sleep(0.2)
-        assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]
-    finally:
-        os.kill(p.pid, signal.SIGKILL)
-        p.communicate()
+    kill_at_call(p, counter, 3)
+    assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]
     before = _snapshot(out)
     counter.unlink()
     # 2. resume: the earlier run's files are kept, only the two missing pairs run
