@@ -43,7 +43,7 @@ from .runinfo import write_runinfo
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
            "claimed_run", "results_dir", "refuse_results", "read_marker", "check_earlier_output",
-           "record_output_files"]
+           "record_output_files", "resume_command"]
 
 MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and its files
 LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
@@ -359,6 +359,28 @@ def _command() -> list[str]:
     return [prog.name, *sys.argv[1:]]
 
 
+def resume_command(out_dir) -> str:
+    """The command line that continues this evaluator run in ``out_dir`` (its stored
+    pairs kept, :mod:`eval.store`): ``python -m eval`` with the run's own overrides
+    (Hydra's, else the command line's) and ``resume=true out_dir=<out_dir>`` in place of
+    any ``resume`` or ``out_dir`` given, quoted for a POSIX shell. Running the command
+    again without ``resume=true`` would clear the stored pairs."""
+    import re
+    import shlex
+    args = None
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        if HydraConfig.initialized():
+            args = [str(o) for o in HydraConfig.get().overrides.task]
+    except (ImportError, ValueError):  # pragma: no cover -- hydra-core is a dependency
+        pass
+    if args is None:
+        cmd = _command()
+        args = [a for a in cmd[3 if cmd[1:2] == ["-m"] else 1:] if a not in ("-m", "--multirun")]
+    keep = [a for a in args if not re.match(r"^[+~]*(resume|out_dir)(=|$)", a)]
+    return shlex.join(["python", "-m", "eval", *keep, "resume=true", f"out_dir={os.path.abspath(str(out_dir))}"])
+
+
 def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: int | None = None,
           created: bool = False) -> OutputClaim:
     fd = _lock(p) if fd is None else fd
@@ -451,8 +473,11 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
         logging.getLogger().addHandler(handler)
         yield claim
         status = "done"
-    except KeyboardInterrupt:
-        status, error = "interrupted", "interrupted (Ctrl-C)"
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (sshade.clirun.Terminated)
+        status, error = "interrupted", f"interrupted ({getattr(e, 'signal_name', 'Ctrl-C')})"
+        if kind == "eval" and (claim.path / "run.json").is_file():
+            logging.getLogger("eval").warning("interrupted; the finished runs are stored; to continue: %s",
+                                              resume_command(claim.path))
         raise
     except BaseException as e:
         error = " ".join(str(e).split()) or type(e).__name__

@@ -7,7 +7,9 @@ Shared by ``python -m eval``, ``eval.sweep``, ``eval.tables``, ``eval.reproduce`
   :class:`~sshade.errors.SShaDeError`, Hydra's and OmegaConf's errors -> ``error: <one
   line>``, status 2; :class:`OSError` (disk full, read-only folder, permission denied)
   -> ``error: cannot write <file>: <reason>``, status 2; Ctrl-C -> ``interrupted``,
-  status 130. Anything else is a bug and keeps its traceback.
+  status 130; SIGTERM (``kill``, ``timeout``, SLURM's ``scancel``) the same way
+  (:class:`Terminated`, a KeyboardInterrupt, so that the run is stopped and marked
+  interrupted as on Ctrl-C), status 143. Anything else is a bug and keeps its traceback.
 * :func:`hydra_main` composes the config with the command line's overrides through
   Hydra's compose API first (:func:`precheck`: unknown key, unknown group option,
   malformed override, and the command's own value check), so a bad command line is
@@ -26,10 +28,11 @@ from pathlib import Path
 
 from .errors import SShaDeError
 
-__all__ = ["INTERRUPTED", "run_command", "hydra_main", "precheck", "os_error_line", "one_line",
-           "ArgumentParser"]
+__all__ = ["INTERRUPTED", "TERMINATED", "Terminated", "run_command", "hydra_main", "precheck", "os_error_line",
+           "one_line", "ArgumentParser"]
 
 INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
+TERMINATED = 143  # 128 + SIGTERM
 _TMP = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")  # sshade.mesh.io.atomic_write's temporary files
 
 
@@ -89,7 +92,14 @@ def hydra_message(e: BaseException) -> str:
     return one_line(msg) or type(e).__name__
 
 
-_SIGINT = {"seen": False, "said": False}
+class Terminated(KeyboardInterrupt):
+    """Raised by :func:`run_command`'s SIGTERM handler: a KeyboardInterrupt, so that
+    whatever stops and records a run on Ctrl-C does so on SIGTERM too; the command then
+    exits with :data:`TERMINATED`."""
+    signal_name = "SIGTERM"
+
+
+_SIGINT = {"seen": False, "said": False, "status": INTERRUPTED}
 
 
 def _on_sigint(signum, frame):
@@ -100,23 +110,37 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt
 
 
-def _interrupted() -> int:
+def _on_sigterm(signum, frame):
+    """SIGTERM handler of :func:`run_command`: :class:`Terminated`, remembered as
+    :func:`_on_sigint` does."""
+    _SIGINT.update(seen=True, status=TERMINATED)
+    raise Terminated
+
+
+def _interrupted(e: BaseException | None = None) -> int:
+    if isinstance(e, Terminated):
+        _SIGINT["status"] = TERMINATED
     if not _SIGINT["said"]:  # once, also when nested run_command calls see it
         _SIGINT["said"] = True
         _say("interrupted")
-    return INTERRUPTED
+    return _SIGINT["status"]
 
 
 def _install_sigint():
-    """Install :func:`_on_sigint` when SIGINT has Python's default handler (not ignored,
-    main thread); returns the handler to restore, or None when nothing was installed."""
+    """Install :func:`_on_sigint` when SIGINT has Python's default handler (not ignored)
+    and :func:`_on_sigterm` when SIGTERM has the default action, in the main thread;
+    returns the handlers to restore ({} when nothing was installed)."""
     if threading.current_thread() is not threading.main_thread():
-        return None
-    old = signal.getsignal(signal.SIGINT)
-    if old is not signal.default_int_handler:
-        return None
-    _SIGINT.update(seen=False, said=False)
-    signal.signal(signal.SIGINT, _on_sigint)
+        return {}
+    old = {}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        old[signal.SIGINT] = signal.default_int_handler
+    if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        old[signal.SIGTERM] = signal.SIG_DFL
+    if old:
+        _SIGINT.update(seen=False, said=False, status=INTERRUPTED)
+    for s in old:
+        signal.signal(s, _on_sigint if s == signal.SIGINT else _on_sigterm)
     return old
 
 
@@ -129,8 +153,9 @@ def run_command(work, *, where=None) -> int:
     stderr for a bad input or configuration (:class:`SShaDeError`, Hydra's and
     OmegaConf's errors) or an :class:`OSError` (:func:`os_error_line`, ``where`` naming
     the output when the error names no file); 130 after ``interrupted`` on Ctrl-C (also
-    when a library swallowed the KeyboardInterrupt). ``SystemExit`` passes through; any
-    other exception is a bug and propagates with its traceback.
+    when a library swallowed the KeyboardInterrupt), 143 after ``interrupted`` on
+    SIGTERM (:class:`Terminated`). ``SystemExit`` passes through; any other exception is
+    a bug and propagates with its traceback.
     """
     old = _install_sigint()
     try:
@@ -138,8 +163,8 @@ def run_command(work, *, where=None) -> int:
         if _SIGINT["seen"]:
             return _interrupted()
         return rc if isinstance(rc, int) and not isinstance(rc, bool) else 0
-    except KeyboardInterrupt:
-        return _interrupted()
+    except KeyboardInterrupt as e:
+        return _interrupted(e)
     except _config_error_types() as e:  # first: Hydra's MissingConfigException is an IOError
         if _SIGINT["seen"]:
             return _interrupted()
@@ -155,8 +180,8 @@ def run_command(work, *, where=None) -> int:
             return _interrupted()
         raise
     finally:
-        if old is not None:
-            signal.signal(signal.SIGINT, old)
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def _say(line: str) -> None:

@@ -9,6 +9,15 @@ case), deforms each connected component apart when there are several
 ``KeyboardInterrupt``, which stops the run, and checks the result with
 :func:`sshade.mesh.validate.validate_deformed` before anyone measures or writes it.
 
+A plug-in that ends the process from the thread running it with ``os._exit`` fails like
+one that calls ``sys.exit``: while a plug-in runs, ``os._exit`` called from that thread
+of this process raises instead (:func:`_no_process_exit`; other threads, and processes
+the plug-in forks, exit as usual; a plug-in that bound ``os._exit`` under another name
+at import is not caught). A crash (a segmentation fault, ``os.abort``, a signal) cannot
+be caught inside the process: the evaluator's worker processes (``jobs`` >= 2,
+:mod:`eval.experiments.cases_jobs`) turn it into that pair's failure; in one process it
+ends the run.
+
 Time-outs use ``SIGALRM`` (``signal.setitimer``) and therefore work only in the main
 thread of a POSIX process, and only while the method runs Python code: a compiled loop
 (numba, C) that never returns to the interpreter cannot be interrupted this way; the
@@ -19,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import signal
 import threading
 import time
@@ -50,6 +60,51 @@ class MethodFailure(SShaDeError):
 class _Timeout(BaseException):
     """Raised in the method by the alarm; a BaseException so that a method's
     ``except Exception`` does not swallow it."""
+
+
+class _ProcessExit(BaseException):
+    """Raised in place of ``os._exit(code)`` called by a plug-in (:func:`_no_process_exit`)."""
+
+    def __init__(self, code):
+        super().__init__(code)
+        self.code = code
+
+
+_EXIT_GUARD = {"lock": threading.Lock(), "active": set(), "real": None}
+_REAL_EXIT = os._exit
+
+
+def _guarded_exit(code):
+    """``os._exit`` while :func:`_no_process_exit` is active somewhere in this process:
+    raises :class:`_ProcessExit` in a thread that runs a plug-in, else exits."""
+    if (os.getpid(), threading.get_ident()) in _EXIT_GUARD["active"]:
+        raise _ProcessExit(code)
+    (_EXIT_GUARD["real"] or _REAL_EXIT)(code)
+
+
+@contextlib.contextmanager
+def _no_process_exit(active: bool):
+    """While the block runs (``active``: a plug-in's code), ``os._exit`` called from this
+    thread of this process raises :class:`_ProcessExit`; other threads, and a child the
+    plug-in forks (same thread id, another pid), exit as usual. ``os._exit`` is restored
+    once no such block is left."""
+    if not active:
+        yield
+        return
+    g, me = _EXIT_GUARD, (os.getpid(), threading.get_ident())
+    with g["lock"]:
+        if not g["active"]:
+            g["real"], os._exit = os._exit, _guarded_exit
+        nested = me in g["active"]
+        g["active"].add(me)
+    try:
+        yield
+    finally:
+        with g["lock"]:
+            if not nested:
+                g["active"].discard(me)
+            if not g["active"] and g["real"] is not None:
+                os._exit, g["real"] = g["real"], None
 
 
 @dataclass(frozen=True)
@@ -170,8 +225,9 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     runs (:func:`sshade.mesh.validate.validate_mesh`, ``validate_handles``).
     MethodFailure on anything the method raises or does: our methods' SShaDeError
     (its message), a plug-in's exception (``Type: message``), SystemExit and other
-    BaseException (``SystemExit: 0 (...)``), ``timed out after N s``, or an output
-    :func:`sshade.mesh.validate.validate_deformed` refuses.
+    BaseException (``SystemExit: 0 (...)``), a plug-in's ``os._exit`` (``os._exit(0)
+    called (...)``; not a crash, see the module docstring), ``timed out after N s``, or
+    an output :func:`sshade.mesh.validate.validate_deformed` refuses.
     KeyboardInterrupt, unchanged; any other exception of one of our own methods (a bug,
     :func:`sshade.method.is_plugin`), unchanged.
     """
@@ -247,11 +303,15 @@ def _guarded(fn, timeout_s, plugin: bool):
     try:
         with _alarm(timeout_s) as fired:
             try:
-                out = fn()
+                with _no_process_exit(plugin):
+                    out = fn()
             except (KeyboardInterrupt, _Timeout):
                 raise
             except MethodFailure:
                 raise
+            except _ProcessExit as e:
+                raise MethodFailure(f"os._exit({e.code!r}) called (a method must return, not end the "
+                                    "program)") from None
             except SShaDeError as e:
                 raise MethodFailure(" ".join(str(e).split()) or type(e).__name__) from None
             except Exception as e:

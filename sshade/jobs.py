@@ -1,13 +1,13 @@
 """Jobs in worker processes: a DeFAUST build's subjects, an evaluation's cases side by side.
 
-:func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in a
-``ProcessPoolExecutor`` with the ``spawn`` context (pymeshlab and numba are not known to
-be fork-safe): every worker process starts fresh, runs ``init(*init_args)`` once and then
-its jobs. A job reports progress with :func:`send` (delivered in the main process to
-``on_message``, while the jobs run; every message of a job before :func:`run_jobs`
-returns) and returns its result (delivered to ``on_result``
-with the job's index). Results are whatever the jobs return, in the order they finish:
-callers that need a fixed order (the manifest) sort them by index.
+:func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in worker processes
+started with the ``spawn`` method (pymeshlab and numba are not known to be fork-safe):
+every worker starts fresh, runs ``init(*init_args)`` once and then its jobs, one at a
+time, each handed to it over a pipe of its own (so this process knows which job every
+worker runs). A job reports progress with :func:`send` (delivered in the main process to
+``on_message``, in the order sent, before the job's result) and returns its result
+(delivered to ``on_result`` with the job's index). Results come in the order the jobs
+finish: callers that need a fixed order (the manifest) sort them by index.
 
 Each worker's threads are limited so that ``workers x threads`` does not exceed the cores
 of this process (:func:`available_cores`, the affinity mask), through the environment
@@ -15,6 +15,23 @@ variables the libraries read at import (:data:`THREAD_VARIABLES`, or those the c
 names), set while the workers start; :data:`CORES_VARIABLE` tells the worker's own code
 (:func:`available_cores`, e.g. SShaDe's sampling pool, :func:`sshade.sampling.pool_size`)
 that it has that many cores.
+
+Workers never outlive the main process and never report a Ctrl-C themselves:
+
+- they ignore SIGINT (a Ctrl-C at a terminal reaches the whole process group; only the
+  main process reports it, no worker prints a traceback);
+- on Linux the kernel kills a worker when the main process ends, even by ``kill -9``
+  (``prctl(PR_SET_PDEATHSIG, SIGKILL)``), and so are the processes a worker forks (a
+  sampling pool); elsewhere a thread of the worker that watches the main process ends
+  it; multiprocessing's resource tracker exits once the last of them has ended;
+- on Ctrl-C, SIGTERM (as :func:`sshade.clirun.run_command` turns it into an interrupt)
+  or any exception in the main process, the workers are terminated at once (a stopped
+  one is continued so that it can end) and killed after :data:`GRACE_S` seconds.
+
+A worker that dies (killed, out of memory, a crash in compiled code) loses only the job
+it was running: with ``on_lost`` that job is the caller's to record (and to continue,
+e.g. with the items it had not reached) and a fresh worker takes the remaining jobs;
+without, the run ends with an error once the other running jobs have finished.
 
 Users: :mod:`defaust.build` (``workers``) and :mod:`eval.experiments.cases_jobs` (``jobs``).
 
@@ -24,19 +41,23 @@ Example::
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import multiprocessing as mp
 import os
+import pickle
 import queue
 import signal
+import sys
 import threading
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
+import time
+import traceback
 from contextlib import contextmanager
 
 from sshade.errors import SShaDeError
 
-__all__ = ["THREAD_VARIABLES", "CORES_VARIABLE", "available_cores", "pool_size", "thread_limit", "run_jobs", "send",
-           "in_worker"]
+__all__ = ["THREAD_VARIABLES", "CORES_VARIABLE", "GRACE_S", "available_cores", "pool_size", "thread_limit",
+           "run_jobs", "send", "in_worker", "death_reason"]
 
 #: Environment variables that cap the threads of OpenBLAS, MKL, OpenMP, Accelerate, numexpr and numba.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
@@ -46,7 +67,12 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 #: :func:`available_cores` reads it.
 CORES_VARIABLE = "SSHADE_JOB_CORES"
 
-_CHANNEL: list = [None]  # in a worker: the queue to the main process
+#: Seconds a terminated worker is given to end before it is killed (SIGKILL).
+GRACE_S = 3.0
+
+_CHANNEL: list = [None, 0, None]  # in a worker: its connection to the main process, its pid, a send lock
+_hard_exit = os._exit  # bound once: a guarded plug-in may replace os._exit meanwhile (sshade.guard)
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 def available_cores() -> int:
@@ -79,26 +105,236 @@ def thread_limit(workers: int) -> int:
 
 
 def in_worker() -> bool:
-    """Whether this process is a worker of :func:`run_jobs`."""
-    return _CHANNEL[0] is not None
+    """Whether this process is a worker of :func:`run_jobs` (not a process it forked)."""
+    return _CHANNEL[0] is not None and _CHANNEL[1] == os.getpid()
 
 
 def send(message) -> None:
-    """From a job: deliver ``message`` (picklable) to ``on_message`` in the main process.
+    """From a job: deliver ``message`` (picklable) to ``on_message`` in the main process
+    (from any thread of the worker).
 
     Raises
     ------
-    SShaDeError outside a worker of :func:`run_jobs`.
+    SShaDeError outside a worker of :func:`run_jobs` (a process a worker forked included).
     """
-    if _CHANNEL[0] is None:
+    if not in_worker():
         raise SShaDeError("sshade.jobs.send: not in a worker of run_jobs")
-    _CHANNEL[0].put(message)
+    _reply(("msg", message))
 
 
-def _init_worker(channel, init, init_args) -> None:
-    _CHANNEL[0] = channel
-    if init is not None:
-        init(*init_args)
+def death_reason(exitcode) -> str:
+    """How a worker ended, from its exit code: ``"worker process died (SIGKILL)"`` for a
+    signal, ``"worker process exited with status 1"`` for an exit.
+
+    >>> death_reason(-9), death_reason(3)
+    ('worker process died (SIGKILL)', 'worker process exited with status 3')
+    """
+    if exitcode is None:
+        return "worker process vanished"
+    if exitcode < 0:
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = f"signal {-exitcode}"
+        return f"worker process died ({name})"
+    return f"worker process exited with status {exitcode}"
+
+
+# ----------------------------------------------------------------------------- in a worker
+def _reply(item) -> None:
+    with _CHANNEL[2]:
+        _CHANNEL[0].send(item)
+
+
+def _set_death_signal() -> bool:
+    """Linux: the kernel sends SIGKILL to this process when the thread that started it
+    ends (its parent's, for our processes: the whole process). False where unavailable."""
+    if not sys.platform.startswith("linux"):  # pragma: no cover
+        return False
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError, TypeError):  # pragma: no cover
+        return False
+
+
+def _watch_parent(sentinel) -> None:
+    """A worker's watchdog thread: ends the worker when the main process has ended (the
+    pipe ``sentinel`` reads end-of-file once the main process's end of it is closed)."""
+    from multiprocessing.connection import wait
+    wait([sentinel])
+    _hard_exit(1)
+
+
+def _forked_from_worker() -> None:
+    """In a process a worker forks (a sampling pool): dies with the worker, and holds no
+    copy of the worker's pipe (so the main process sees the pipe close when the worker
+    dies)."""
+    _set_death_signal()
+    conn = _CHANNEL[0]
+    _CHANNEL[:] = [None, 0, None]
+    if conn is not None:
+        with contextlib.suppress(OSError):
+            conn.close()
+
+
+def _worker_main(conn, parent_pid: int, init, init_args) -> None:
+    """A worker process: ignore SIGINT, die with the main process, ``init``, then the jobs
+    the main process sends (``(job, args)``; None: end), one reply each (``("done",
+    result)`` or ``("error", exception, traceback text)``), after the job's messages."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # discards a Ctrl-C pending since the start
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    _set_death_signal()
+    if os.getppid() != parent_pid:  # the main process ended before the death signal was set
+        _hard_exit(1)
+    parent = mp.parent_process()
+    if parent is not None and getattr(parent, "sentinel", None) is not None:
+        threading.Thread(target=_watch_parent, args=(parent.sentinel,), daemon=True, name="sshade-watchdog").start()
+    _CHANNEL[:] = [conn, os.getpid(), threading.Lock()]
+    os.register_at_fork(after_in_child=_forked_from_worker)
+    try:
+        if init is not None:
+            init(*init_args)
+    except BaseException as e:  # noqa: BLE001 - reported to the main process, which raises it
+        _reply(("error", *_portable(e)))
+        return
+    _reply(("ready",))
+    while True:
+        try:
+            item = conn.recv()
+        except (EOFError, OSError):  # the main process ended
+            return
+        except Exception as e:  # noqa: BLE001 - a job that cannot be unpickled here
+            _reply(("error", *_portable(e)))
+            continue
+        if item is None:
+            return
+        job, args = item
+        try:
+            result = job(*args)
+        except BaseException as e:  # noqa: BLE001 - the job's failure, raised in the main process
+            _reply(("error", *_portable(e)))
+            continue
+        try:
+            _reply(("done", result))
+        except Exception as e:  # noqa: BLE001 - a result that cannot be pickled
+            _reply(("error", *_portable(e)))
+
+
+def _portable(e: BaseException) -> tuple:
+    """``(exception, traceback text)`` that crosses to the main process: ``e`` itself
+    when it pickles and unpickles, else a RuntimeError (an SShaDeError for ours) with its
+    ``Type: message``. An exit (SystemExit) becomes a RuntimeError: it must not end the
+    main process."""
+    tb = "".join(traceback.format_exception(type(e), e, e.__traceback__))
+    if isinstance(e, (Exception, KeyboardInterrupt)):
+        try:
+            pickle.loads(pickle.dumps(e))
+            return e, tb
+        except Exception:  # noqa: BLE001 - any pickling problem
+            pass
+    kind = SShaDeError if isinstance(e, SShaDeError) else RuntimeError
+    return kind(f"{type(e).__name__}: {e} (in a worker process)"), tb
+
+
+# ----------------------------------------------------------------------------- in the main process
+class _RemoteTraceback(Exception):
+    """The worker's traceback of an exception raised in a job (its ``__cause__``)."""
+
+    def __str__(self):
+        return f'\n"""\n{self.args[0]}"""'
+
+
+@contextmanager
+def _sigint_blocked():
+    """SIGINT blocked in this thread (a signal meanwhile is delivered at the end)."""
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+class _Worker:
+    """A worker process, its end of the pipe (read by a thread into ``inbox``), the job it
+    runs (index or None) and whether it said it is ready."""
+
+    def __init__(self, ctx, inbox: queue.Queue, init, init_args):
+        self.conn, child = ctx.Pipe(duplex=True)
+        self.proc = ctx.Process(target=_worker_main, args=(child, os.getpid(), init, tuple(init_args)),
+                                name="sshade-worker")
+        try:
+            with _sigint_blocked():  # inherited: no Ctrl-C reaches the worker before it ignores SIGINT
+                self.proc.start()
+        finally:
+            child.close()
+        self.index, self.ready = None, False
+        self.reader = threading.Thread(target=self._read, args=(inbox,), daemon=True, name="sshade-worker-reader")
+        self.reader.start()
+
+    def _read(self, inbox: queue.Queue) -> None:
+        """Every message of the worker into ``inbox`` as ``(self, message)``, then
+        ``(self, None)`` once its pipe closed (it ended; a message cut short by its death
+        included). A message that arrived whole but cannot be unpickled here is an error
+        of the job."""
+        while True:
+            try:
+                msg = self.conn.recv()
+            except (EOFError, OSError):
+                inbox.put((self, None))
+                return
+            except Exception as e:  # noqa: BLE001 - e.g. a result whose class this process cannot import
+                msg = ("error", SShaDeError(f"a message of a worker process could not be read: {e}"), "")
+            inbox.put((self, msg))
+
+    def give(self, job, index: int, args) -> None:
+        """Hand job ``index`` to the worker (from a thread: a stopped worker never blocks
+        this process on a full pipe)."""
+        self.index = index
+
+        def hand():
+            with contextlib.suppress(Exception):  # a worker that died meanwhile: its reader reports it
+                self.conn.send((job, args))
+        threading.Thread(target=hand, daemon=True, name="sshade-worker-sender").start()
+
+    def stop(self) -> None:
+        """Ask the worker to end after its current job (no effect on a dead one)."""
+        with contextlib.suppress(Exception):
+            self.conn.send(None)
+
+    def close(self) -> None:
+        """Release the pipe once the worker has ended and its reader has read the end."""
+        self.reader.join(timeout=1.0)
+        if not self.reader.is_alive():
+            with contextlib.suppress(OSError):
+                self.conn.close()
+        with contextlib.suppress(ValueError):
+            self.proc.close()
+
+
+def _end_all(workers: list, *, grace: float, ask: bool) -> None:
+    """End ``workers``: asked to (``ask``: after their current job), else terminated
+    (continued if stopped, so that the signal acts); any still alive after ``grace``
+    seconds killed; each one reaped and its pipe released."""
+    for w in workers:
+        if ask:
+            w.stop()
+        elif w.proc.exitcode is None:
+            with contextlib.suppress(OSError, ValueError):
+                w.proc.terminate()
+                os.kill(w.proc.pid, signal.SIGCONT)
+    deadline = time.monotonic() + grace
+    for w in workers:
+        w.proc.join(timeout=max(0.0, deadline - time.monotonic()))
+        if w.proc.exitcode is None:
+            with contextlib.suppress(OSError, ValueError):
+                w.proc.kill()
+            w.proc.join(timeout=10.0)
+    for w in workers:
+        w.close()
 
 
 @contextmanager
@@ -117,70 +353,51 @@ def _thread_env(threads: int, names=THREAD_VARIABLES):
                 os.environ[k] = v
 
 
-_DONE = "__sshade.jobs: job done__"
-
-
 @contextmanager
-def _deferred_sigint():
-    """Ctrl-C while jobs run is noted, and re-delivered by :func:`run_jobs`'s loop at a
-    safe point (``hit`` non-empty: call :func:`_deliver`). A KeyboardInterrupt raised
-    inside ``concurrent.futures.wait`` can leave a future's lock held, and the executor's
-    shutdown then waits forever (seen once in the test suite under load). Does nothing
-    off the main thread or when SIGINT is ignored; the previous handler is restored."""
+def _deferred_signals():
+    """Ctrl-C (SIGINT) and SIGTERM while jobs run are noted, and re-delivered by the
+    pool's loop at a safe point (``hit`` non-empty: call :func:`_deliver`), never in the
+    middle of its bookkeeping. A signal whose handler is not a Python function
+    (ignored, or the default) keeps it; off the main thread nothing changes. The
+    previous handlers are restored."""
     hit: list = []
     if threading.current_thread() is not threading.main_thread():
         yield hit
         return
-    old = signal.getsignal(signal.SIGINT)
-    if not callable(old):  # SIG_IGN / SIG_DFL: leave it
-        yield hit
-        return
-    signal.signal(signal.SIGINT, lambda signum, frame: hit.append((old, signum, frame)))
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s, h in old.items():
+        if callable(h):
+            signal.signal(s, lambda signum, frame, h=h: hit.append((h, signum, frame)))
     try:
         yield hit
     finally:
-        signal.signal(signal.SIGINT, old)
+        for s, h in old.items():
+            if callable(h):
+                signal.signal(s, h)
 
 
 def _deliver(hit: list) -> None:
-    """Run the handler a deferred Ctrl-C was meant for (raises KeyboardInterrupt)."""
-    handler, signum, frame = hit[0]
-    handler(signum, frame)
-    raise KeyboardInterrupt  # a handler that returned: still stop the jobs
-
-
-def _call(job, index: int, args: tuple):
-    """A job in a worker, then its end marker on the channel (after all its messages)."""
-    try:
-        return job(*args)
-    finally:
-        _CHANNEL[0].put((_DONE, index))
-
-
-def _drain(channel, on_message, ended: set, *, until: set | None = None) -> None:
-    """Deliver the channel's messages; note the jobs whose end marker came in ``ended``.
-    With ``until``: wait (at most 30 s per message) until those jobs' markers came."""
-    while True:
-        try:
-            if until is not None and not until <= ended:
-                msg = channel.get(timeout=30)
-            else:
-                msg = channel.get_nowait()
-        except queue.Empty:
-            return
-        if isinstance(msg, tuple) and len(msg) == 2 and msg[0] == _DONE:
-            ended.add(msg[1])
-        elif on_message is not None:
-            on_message(msg)
+    """Run the handlers the deferred signals were meant for, in order (run_command's
+    raise KeyboardInterrupt). A SIGINT handler that returns still stops the jobs
+    (KeyboardInterrupt); a SIGTERM handler that returns (a scheduler's that ignores it)
+    lets them go on."""
+    pending = list(hit)
+    hit.clear()
+    for handler, signum, frame in pending:
+        handler(signum, frame)
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
 
 
 def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None,
-             thread_variables=THREAD_VARIABLES, what: str = "build") -> None:
+             on_lost=None, thread_variables=THREAD_VARIABLES, what: str = "build",
+             advice: str = "run the same command again to resume (finished items are kept)") -> None:
     """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
 
-    At most ``workers`` jobs are handed out at a time, so that after a failure or Ctrl-C
-    no new job starts; on Ctrl-C (or any exception in this process) the workers are
-    terminated before it propagates.
+    A job is handed out only when a worker is free, so that after a failure or Ctrl-C
+    no new job starts; on Ctrl-C, SIGTERM (see :func:`_deferred_signals`) or any
+    exception in this process the workers are ended (module docstring) before it
+    propagates.
 
     Parameters
     ----------
@@ -189,68 +406,131 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     init, init_args : run once in every worker before its first job (module-level function).
     on_message : called in this process with every :func:`send` message, while jobs run.
     on_result : called in this process as ``on_result(index, result)`` when a job finishes.
+    on_lost : called in this process as ``on_lost(index, reason)`` when the worker running
+        job ``index`` dies (``reason``: :func:`death_reason`, e.g. ``"worker process died
+        (SIGKILL)"``); returns the arguments of a job to run in its place under the same
+        index (e.g. the items it had not reached), or None. None: a dying worker is an error.
     thread_variables : the variables of :data:`THREAD_VARIABLES` set to the workers'
         thread limit (the others keep this process's values); :data:`CORES_VARIABLE` is
         always set to it.
-    what : the workers' purpose, in the message when one dies (``"build"``, ``"job"``).
+    what, advice : the workers' purpose (``"build"``) and what to do next, in the message
+        when a worker dies without ``on_lost`` or while starting.
 
     Raises
     ------
     The first failing job's exception (after the jobs already running have finished, so
-    that their work is kept; the others are not started). SShaDeError if a worker
-    process dies (killed, out of memory).
+    that their work is kept; the others are not started), with the worker's traceback as
+    its ``__cause__``; what ``init`` raised; SShaDeError if a worker process dies while
+    starting, or while running a job without ``on_lost``; KeyboardInterrupt (a job's
+    own, or Ctrl-C / SIGTERM) after the workers are ended.
     """
+    if not len(args_list):
+        return
     n = pool_size(workers, len(args_list))
-    ctx = mp.get_context("spawn")
-    channel = ctx.Queue()
-    before = set(mp.active_children())
-    todo = list(enumerate(args_list))[::-1]
-    futures, errors, finished, ended, collected = {}, [], False, set(), set()
-    # the workers start at submit() and inherit these variables
-    with _thread_env(thread_limit(n), (*thread_variables, CORES_VARIABLE)), _deferred_sigint() as hit:
-        ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(channel, init, tuple(init_args)))
+    pool = _Pool(job, n, init, tuple(init_args), on_message, on_result, on_lost, what, advice)
+    pool.todo = [(i, tuple(a)) for i, a in enumerate(args_list)][::-1]
+    finished = False
+    with _thread_env(thread_limit(n), (*thread_variables, CORES_VARIABLE)), _deferred_signals() as hit:
         try:
-            while todo or futures:
-                if hit:
-                    _deliver(hit)
-                while todo and len(futures) < n and not errors:
-                    i, args = todo.pop()
-                    futures[ex.submit(_call, job, i, args)] = i
-                if not futures:
-                    break
-                done, _ = wait(futures, timeout=0.25, return_when=FIRST_COMPLETED)
-                _drain(channel, on_message, ended)
-                for f in sorted(done, key=futures.get):
-                    i = futures.pop(f)
-                    if _collect(f, i, on_result, errors, what):
-                        collected.add(i)
-            _drain(channel, on_message, ended, until=collected)  # every message of the jobs that ran
+            pool.run(hit)
+            finished = True
+        finally:  # Ctrl-C, SIGTERM or an error here: terminate the workers now, mid-job
+            _end_all(pool.workers, grace=GRACE_S, ask=finished)
+    if pool.errors:
+        raise pool.errors[0]
+
+
+class _Pool:
+    """:func:`run_jobs`'s workers and bookkeeping: ``todo`` (a stack of ``(index,
+    args)``), ``workers`` (:class:`_Worker`), ``errors``."""
+
+    def __init__(self, job, n, init, init_args, on_message, on_result, on_lost, what, advice):
+        self.job, self.n, self.init, self.init_args = job, n, init, init_args
+        self.on_message, self.on_result, self.on_lost = on_message, on_result, on_lost
+        self.what, self.advice = what, advice
+        self.ctx = mp.get_context("spawn")
+        self.inbox: queue.Queue = queue.Queue()
+        self.todo: list = []
+        self.workers: list[_Worker] = []
+        self.errors: list = []
+
+    def busy(self) -> int:
+        return sum(w.index is not None for w in self.workers)
+
+    def run(self, hit: list) -> None:
+        """Hand out the jobs and handle the workers' messages until every job has ended
+        (or, after an error, the running ones)."""
+        while (self.todo and not self.errors) or self.busy():
             if hit:
                 _deliver(hit)
-            finished = True
-        finally:
-            if not finished:  # Ctrl-C or an error here: stop the workers now (a remesh ignores signals)
-                for p in set(mp.active_children()) - before:
-                    p.terminate()
-            ex.shutdown(wait=True, cancel_futures=True)
-            channel.close()
-    if errors:
-        raise errors[0]
+            want = 0 if self.errors else min(self.n, len(self.todo) + self.busy())
+            while len(self.workers) < want:
+                self.workers.append(_Worker(self.ctx, self.inbox, self.init, self.init_args))
+            for w in self.workers:
+                if w.ready and w.index is None and self.todo and not self.errors:
+                    w.give(self.job, *self.todo.pop())
+            try:
+                w, msg = self.inbox.get(timeout=0.25)
+            except queue.Empty:
+                continue
+            while True:
+                if hit:
+                    _deliver(hit)
+                self._handle(w, msg)
+                try:
+                    w, msg = self.inbox.get_nowait()
+                except queue.Empty:
+                    break
+        if hit:
+            _deliver(hit)
+
+    def _handle(self, w: _Worker, msg) -> None:
+        """One message of worker ``w`` (None: its pipe closed); none of a retired worker."""
+        if w not in self.workers:
+            return
+        if msg is None:
+            self._ended(w)
+        elif msg[0] == "msg":
+            if self.on_message is not None:
+                self.on_message(msg[1])
+        elif msg[0] == "ready":
+            w.ready = True
+        elif msg[0] == "done":
+            i, w.index = w.index, None
+            if self.on_result is not None:
+                self.on_result(i, msg[1])
+        elif msg[0] == "error":
+            exc, tb = msg[1], msg[2]
+            exc.__cause__ = _RemoteTraceback(tb)
+            if isinstance(exc, KeyboardInterrupt):  # a job's own KeyboardInterrupt: stop now
+                raise exc
+            self.errors.append(exc)
+            if w.index is None:  # init failed: this worker takes no job
+                self._retire(w)
+            w.index = None
+
+    def _retire(self, w: _Worker) -> None:
+        self.workers.remove(w)
+        _end_all([w], grace=GRACE_S, ask=False)
+
+    def _ended(self, w: _Worker) -> None:
+        """Worker ``w``'s pipe closed: it died (or cut a message short). Its job, if any,
+        is lost (``on_lost``, or an error); a worker that died before it was ready is an
+        error (no new worker is started for it)."""
+        w.proc.join(timeout=5.0)
+        reason = death_reason(w.proc.exitcode)
+        i, ready = w.index, w.ready
+        self._retire(w)
+        if not ready:
+            self.errors.append(SShaDeError(f"{_a(self.what)} {reason} while starting; {self.advice}"))
+        elif i is not None and self.on_lost is not None:
+            again = self.on_lost(i, reason)
+            if again is not None:
+                self.todo.append((i, tuple(again)))
+        elif i is not None:
+            self.errors.append(SShaDeError(f"{_a(self.what)} {reason}; {self.advice}"))
 
 
-def _collect(f, index: int, on_result, errors: list, what: str = "build") -> bool:
-    """A finished job: its result to ``on_result``, or its exception to ``errors``; False
-    if its worker died (no end marker will come)."""
-    try:
-        result = f.result()
-    except BrokenProcessPool as e:
-        errors.append(SShaDeError(f"a {what} worker process died ({e}); run the same command again to resume "
-                                  "(finished items are kept)"))
-        return False
-    except Exception as e:  # noqa: BLE001 - raised by run_jobs once the running jobs are done
-        errors.append(e)
-    else:
-        if on_result is not None:
-            on_result(index, result)
-    return True
+def _a(word: str) -> str:
+    """``word`` after its indefinite article: ``"a build"``, ``"an evaluation"``."""
+    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"

@@ -63,8 +63,9 @@ from sshade.checks import config_bool
 from .. import datasets
 from .. import methods as method_table
 from ..breakdown import write_breakdown
-from ..figures import figures_options, write_case_figure
-from ..meshview import view_options, write_case_view
+from ..code_identity import code_identity
+from ..figures import case_figure_path, figures_options, write_case_figure
+from ..meshview import OUTPUTS, VIEW_DIR, case_view_path, view_options, write_case_view, write_outputs
 from ..methods import method_spec
 from ..metric_meshes import CaseMeshes
 from ..paths import abs_path
@@ -202,17 +203,19 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
     if d is not None and d.seeds is not None:
         seeds.update(d.seeds(s.root))
     info = collect_runinfo(config, seeds=seeds, extra={"status": "running", "out_dir": str(s.out_dir),
-                                                       "method_sources": method_sources(s.methods)})
+                                                       "method_sources": method_sources(s.methods),
+                                                       "code": code_identity(None)})
     write_runinfo(s.out_dir / "run.json", info)
     return info
 
 
 def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     """The store keys (:func:`eval.store.pair_key`) of every method on case ``ci``: the
-    method's definition, the case's identity, the guard and reference options."""
+    method's definition, the case's identity, the guard and reference options, and the
+    identity of the code that computes the row (:func:`eval.code_identity.code_identity`)."""
     ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
     extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
-    return [pair_key(spec, ident, extra) for spec in s.specs]
+    return [pair_key(spec, ident, extra, code_identity(m)) for spec, m in zip(s.specs, s.methods)]
 
 
 def _run_cases(cfg, s: _Setup) -> list[dict]:
@@ -230,16 +233,8 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(cfg, s, ci, c) for ci, c in enumerate(cases)}
     cost = default_cost_model(methods)  # measured per-method priors (eval/progress.py)
-    done: dict = {}  # (ci, mi) -> stored record
-    for ci, mis in plan.items():
-        for mi in mis if s.resume else ():
-            rec = s.store.load(cases[ci].name, names[mi], keys[ci][mi][0])
-            if rec is not None:
-                done[ci, mi] = rec
-                cost.observe(names[mi], len(cases[ci].V), rec["row"].get("time_s"))
+    done = _restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
-    if s.resume:
-        log.info("resume: %d run(s) restored from %s, %d to run", len(done), s.store.root, len(todo))
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
     s.jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in todo}), estimate_s=sum(est.values()))
     s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (cases_plan.py)
@@ -261,6 +256,33 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
                         bar.refresh()
                 out.case_done(ci, fresh)
     return out.rows(len(cases))
+
+
+def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
+    """The stored records a resumed run reuses (:meth:`eval.store.ResultStore.lookup`:
+    same key, code included, and a valid record), observed by ``cost``; every other
+    pair runs. Logs how many are restored and how many recomputed, and why (records of
+    other code, of other settings, invalid ones: the first few named), and keeps that
+    count in ``s.resumed`` for ``run.json``. Returns ``{(ci, mi): record}``."""
+    done, why = {}, {}
+    for ci, mis in plan.items():
+        for mi in mis:
+            found = s.store.lookup(s.cases[ci].name, s.names[mi], *keys[ci][mi])
+            if found.record is not None:
+                done[ci, mi] = found.record
+                cost.observe(s.names[mi], len(s.cases[ci].V), found.record["row"].get("time_s"))
+            elif found.why != "absent":
+                why.setdefault(found.why, []).append(f"{s.cases[ci].name} {s.names[mi]}")
+    n_todo = sum(len(mis) for mis in plan.values()) - len(done)
+    n_stale = sum(len(v) for v in why.values())
+    log.info("resume: %d run(s) restored from %s, %d to run (%d not stored, %d recomputed)", len(done),
+             s.store.root, n_todo, n_todo - n_stale, n_stale)
+    for w, pairs in sorted(why.items(), key=lambda kv: -len(kv[1])):
+        more = f" and {len(pairs) - 3} more" if len(pairs) > 3 else ""
+        log.warning("resume: %d stored run(s) recomputed, %s: %s%s", len(pairs), w, ", ".join(pairs[:3]), more)
+    s.resumed = {"restored": len(done), "recomputed": {w: len(p) for w, p in why.items()},
+                 "not_stored": n_todo - n_stale}
+    return done
 
 
 def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
@@ -291,7 +313,8 @@ def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: di
 
     log.info("%d case(s) with runs to do in %d worker processes (%s)", len(tasks), s.jobs, describe(s.jobs))
     config = OmegaConf.to_container(cfg, resolve=True)
-    s.refs.computed_s += run_case_jobs(config, tasks, jobs=s.jobs, on_pair=on_pair, on_case=on_case)
+    s.refs.computed_s += run_case_jobs(config, tasks, jobs=s.jobs, on_pair=on_pair, on_case=on_case,
+                                       names=s.names)
     for ci in range(len(s.cases)):
         if ci not in by_case:
             out.case_done(ci, {})
@@ -300,13 +323,19 @@ def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: di
 class _CaseOutputs:
     """What follows each finished case: ``cases.csv`` (the rows of every finished pair, in
     (case, method) order) and, for the first ``figures.max_cases`` / ``report.view_cases``
-    cases, the figure and the 3D view (restored pairs' meshes read from the store)."""
+    cases, the figure and the 3D view (restored pairs' meshes read from the store), with
+    ``report/outputs.json`` (:func:`eval.meshview.write_outputs`) naming the views and
+    figures this run wrote and saying why the others were not: the report shows only
+    those. A figure or view of this run's case that is not (re)drawn has its earlier
+    file removed (a resumed run keeps an earlier run's files)."""
 
     def __init__(self, cfg, s: _Setup, plan: dict, done: dict):
         self.s, self.plan, self.done = s, plan, done
         fig_on, n_fig = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
         self.n_fig = n_fig if fig_on else 0
         self.n_view, self.max_faces = view_options(cfg)  # report.view_cases (eval/meshview.py)
+        self.views, self.figures, self.notes = {}, {}, {}  # case index -> relative path; -> texts
+        self._record()  # at once: an earlier run's record never speaks for this run
 
     def wants_meshes(self, ci: int) -> bool:
         return ci < max(self.n_fig, self.n_view)
@@ -334,14 +363,49 @@ class _CaseOutputs:
                 unknown.append(name)  # restored without its mesh (store.meshes=false)
         case = s.cases[ci]
         not_run = [n for m, n in zip(s.methods, s.names) if not s.runs_on(ci, m)]  # "not run", not "failed"
+        results = {n: deformed.get(n) for n in s.names}
         if ci < self.n_fig and unknown:
-            log.info("%s: figure not redrawn (restored runs of %s have no stored mesh; store.meshes=true keeps "
-                     "them)", case.name, ", ".join(unknown))
+            self._kept(ci, "figure", None, case_figure_path(s.out_dir / "figures", case.name),
+                       f"not redrawn: its restored runs of {', '.join(unknown)} have no stored mesh "
+                       "(store.meshes=true keeps them)")
         elif ci < self.n_fig:  # out_dir/figures/<case>.png (eval/figures.py)
-            write_case_figure(case, {n: deformed.get(n) for n in s.names}, s.out_dir / "figures", not_run=not_run)
+            p = write_case_figure(case, results, s.out_dir / "figures", not_run=not_run)
+            self._kept(ci, "figure", p, case_figure_path(s.out_dir / "figures", case.name))
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
-            write_case_view(case, {n: deformed.get(n) for n in s.names}, s.out_dir, max_faces=self.max_faces,
-                            not_run=not_run, stored=unknown)
+            p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown)
+            self._kept(ci, "3D view", p, case_view_path(s.out_dir, case.name))
+        self._record()
+
+    def _kept(self, ci: int, what: str, path, earlier: Path, why: str = "not drawn (eval.log says why)") -> None:
+        """Record case ``ci``'s ``what`` (figure, 3D view) at ``path`` as this run's; when
+        ``path`` is None (not drawn), a note saying ``why``, and the file ``earlier`` of an
+        earlier run removed, so that it is never shown as this run's."""
+        if path is not None:
+            (self.figures if what == "figure" else self.views)[ci] = Path(path).relative_to(self.s.out_dir).as_posix()
+            return
+        note = f"{what} of case {self.s.cases[ci].name} {why}"
+        if earlier.is_file():
+            try:
+                earlier.unlink()
+                note += f"; the earlier run's {earlier.relative_to(self.s.out_dir).as_posix()} was removed"
+            except OSError as e:
+                note += f"; the earlier run's file could not be removed ({e.strerror})"
+        log.info("%s", note)
+        self.notes.setdefault(ci, []).append(note)
+
+    def _record(self) -> None:
+        """``report/outputs.json`` (when this run draws figures or views, or an earlier
+        run left one); a failure to write it is logged, the run goes on."""
+        s = self.s
+        if not (self.n_fig or self.n_view or (s.out_dir / VIEW_DIR / OUTPUTS).exists()):
+            return
+        names = [c.name for c in s.cases]
+        try:
+            write_outputs(s.out_dir, names, {names[ci]: p for ci, p in sorted(self.views.items())},
+                          {names[ci]: p for ci, p in sorted(self.figures.items())},
+                          [n for ci in sorted(self.notes) for n in self.notes[ci]])
+        except OSError as e:
+            log.warning("%s not written: %s", s.out_dir / VIEW_DIR / OUTPUTS, e)
 
 
 def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostModel, bar):
@@ -381,7 +445,8 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
     info.update(status="done", n_cases=len(s.cases), n_rows=len(df), n_errors=n_err,
                 wall_s=round(time.perf_counter() - t_start, 3), jobs=s.jobs,
                 compile_s={k: round(v, 3) for k, v in compile_s.items()},
-                outputs={k: Path(v).name for k, v in paths.items()}, plan=s.plan.finish(s.refs.computed_s))
+                outputs={k: Path(v).name for k, v in paths.items()}, plan=s.plan.finish(s.refs.computed_s),
+                resumed=getattr(s, "resumed", None))
     paths["run_json"] = write_runinfo(s.out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {s.out_dir}")

@@ -1,4 +1,4 @@
-"""The ``cases`` experiment's runs side by side (issue 23): whole cases in worker processes.
+"""The ``cases`` experiment's runs side by side: whole cases in worker processes.
 
 ``jobs`` (config) worker processes (:func:`sshade.jobs.run_jobs`: spawned, each with
 ``cores / jobs`` threads) take the cases with runs to do, the costliest first (their
@@ -6,12 +6,20 @@ estimated seconds, :class:`eval.progress.CostModel`); a worker runs a case's met
 table order (:func:`eval.experiments.pair.run_pair`), so that a reference solution still
 continues from the method on its energy's path (:class:`~eval.experiments.case_references.CaseReferences`),
 and stores each pair as soon as it finishes (:class:`eval.store.ResultStore`), as the
-one-process loop does. The main process gets every pair's seconds as it ends (the
-progress bar), every log record of the workers (``eval.log`` and the console) and each
-finished case's rows (and deformed meshes, for the figures and 3D views of the first
-cases). Results do not depend on ``jobs``; timings do: each run has ``cores / jobs``
-cores (the row's ``cores`` column, set only for runs made in a worker; the table's
-title says so).
+one-process loop does. The main process gets every pair's seconds and row as it ends
+(the progress bar), every log record of the workers (``eval.log`` and the console) and
+the deformed meshes of the first cases (figures and 3D views). Results do not depend on
+``jobs``; timings do: each run has ``cores / jobs`` cores (the row's ``cores`` column,
+set only for runs made in a worker; the table's title says so).
+
+A worker process that dies (``kill -9``, the out-of-memory killer, a plug-in that
+crashes in compiled code, e.g. a segmentation fault) fails only the pair it was running:
+that row's ``error`` names the signal (``worker process died (SIGKILL) while running
+this pair``), the row is not stored (``resume=true`` runs the pair again), the case's
+other pairs go on in a fresh worker and the run ends normally, with a warning that lists
+the pairs lost and the command that runs them again. In one process (``jobs: 1``) such a
+crash ends the evaluation itself (only ``os._exit`` is caught there,
+:func:`sshade.guard.run_method`); the stored pairs are kept either way.
 
 ``jobs: auto`` (the default) takes one worker per core when the runs to do are estimated
 at :data:`AUTO_MIN_S` seconds or more and there are at least two cases, else runs in
@@ -33,12 +41,13 @@ from sshade.jobs import available_cores, in_worker, pool_size, run_jobs, send, t
 from .. import methods as method_table
 from ..config_check import check_jobs
 from ..metric_meshes import CaseMeshes
+from ..outdir import resume_command
 from ..paths import abs_path
-from ..store import ResultStore
+from ..store import ResultStore, json_safe
 from .case_references import CaseReferences
-from .pair import guard_options, run_and_store
+from .pair import guard_options, run_and_store, run_pair
 
-__all__ = ["AUTO_MIN_S", "job_count", "describe", "run_case_jobs", "init_worker", "case_job"]
+__all__ = ["AUTO_MIN_S", "job_count", "describe", "run_case_jobs", "init_worker", "case_job", "lost_record"]
 
 log = logging.getLogger("eval")
 
@@ -102,23 +111,101 @@ def init_worker(config: dict) -> None:
 
 def case_job(ci: int, case, pairs, ref_on: bool, want_meshes: bool) -> dict:
     """In a worker: the methods ``pairs`` (``(mi, key, key_fields)``, in table order) on
-    case ``ci``, each stored as it finishes and its seconds sent to the main process
-    (``("pair", ci, mi, seconds, seconds less compilation)``). Returns ``{"ci", "pairs": [(mi, record,
-    U or None), ...], "references_s"}``."""
+    case ``ci``, each stored as it finishes. Sends ``("start", ci, mi)`` as each pair
+    starts and ``("pair", ci, mi, seconds, seconds less compilation, record, U or None)``
+    as it ends (:func:`sshade.jobs.send`). Returns ``{"ci", "references_s"}``."""
     w = _W
     w["refs"].start_case(ci, case, ref_on)
-    ref0, out = w["refs"].computed_s, []
+    ref0 = w["refs"].computed_s
     for mi, key, fields in pairs:
+        send(("start", ci, mi))
         m = w["methods"][mi]
         rec, U, wall, cost_s = run_and_store(m, m.name, case, w["refs"], w["guard"], w["meshes"], w["store"], key,
                                              fields, extra={"cores": available_cores()})
-        send(("pair", ci, mi, wall, cost_s))
-        out.append((mi, rec, U if want_meshes else None))
-    return {"ci": ci, "pairs": out, "references_s": w["refs"].computed_s - ref0}
+        send(("pair", ci, mi, wall, cost_s, rec, U if want_meshes else None))
+    return {"ci": ci, "references_s": w["refs"].computed_s - ref0}
 
 
-def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case) -> float:
+class _Lost:
+    """Stands in for a method whose worker process died while it ran: fails with
+    ``message``, so that its row is the one :func:`eval.experiments.pair.run_pair` writes
+    for any failed run."""
+
+    def __init__(self, name: str, message: str):
+        self.name, self.message = name, message
+
+    def deform(self, V, F, handles, targets):
+        raise SShaDeError(self.message)
+
+
+def lost_record(case, name: str, reason: str, cores: int) -> dict:
+    """The record (``row``, ``info``, ``case``, ``method``) of method ``name`` on ``case``
+    when its worker died (``reason``, :func:`sshade.jobs.death_reason`): a failed row
+    whose ``error`` is ``"<reason> while running this pair"``. Never stored: a resume
+    runs the pair again."""
+    row, _, _ = run_pair(_Lost(name, f"{reason} while running this pair"), name, case, None,
+                         {"timeout_s": None, "handle_error_max_pct": None})
+    row["cores"] = cores
+    return {"row": json_safe(row), "info": {}, "case": case.name, "method": name}
+
+
+class _Cases:
+    """The main process's side of :func:`run_case_jobs`: each job's case arguments (a job
+    lost with its worker continues with the pairs it had not reached), the pairs each
+    case finished, the pair each case is running, the pairs lost."""
+
+    def __init__(self, tasks, names: list, jobs: int, on_pair, on_case):
+        self.tasks, self.names, self.cores = list(tasks), names, thread_limit(jobs)
+        self.on_pair, self.on_case = on_pair, on_case
+        self.got: dict = {}  # ci -> [(mi, record, U or None), ...]
+        self.running: dict = {}  # ci -> mi
+        self.lost: list = []  # (case name, method name, reason)
+        self.references_s = 0.0
+
+    def message(self, msg) -> None:
+        if msg[0] == "log":
+            logging.getLogger(msg[2]).log(msg[1], msg[3])
+        elif msg[0] == "start":
+            self.running[msg[1]] = msg[2]
+        elif msg[0] == "pair":
+            ci, mi, wall, cost_s, rec, U = msg[1:]
+            self.running.pop(ci, None)
+            self.got.setdefault(ci, []).append((mi, rec, U))
+            self.on_pair(ci, mi, wall, cost_s)
+
+    def result(self, _i: int, res: dict) -> None:
+        self.references_s += float(res.get("references_s") or 0.0)
+        self.on_case(res["ci"], self.got.pop(res["ci"], []))
+
+    def lost_job(self, i: int, reason: str):
+        """Job ``i``'s worker died: the pair it ran fails (its row names ``reason``), the
+        pairs it had not reached run in a fresh worker (returned: the job's new
+        arguments), or the case ends here when none is left."""
+        ci, case, pairs, ref_on, want = self.tasks[i]
+        mi = self.running.pop(ci, None)
+        got = self.got.setdefault(ci, [])
+        if mi is not None:
+            name = self.names[mi]
+            got.append((mi, lost_record(case, name, reason, self.cores), None))
+            self.lost.append((case.name, name, reason))
+            self.on_pair(ci, mi, 0.0, None)
+        finished = {m for m, _, _ in got}
+        rest = [p for p in pairs if p[0] not in finished]
+        if rest:
+            self.tasks[i] = (ci, case, rest, ref_on, want)
+            return self.tasks[i]
+        self.on_case(ci, self.got.pop(ci))
+        return None
+
+
+def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case, names=None) -> float:
     """Run ``tasks`` in ``jobs`` worker processes (:func:`sshade.jobs.run_jobs`).
+
+    A worker that dies (killed, out of memory, a plug-in's crash in compiled code) fails
+    the pair it was running: its row's ``error`` names the signal
+    (:func:`lost_record`; the row is not stored, so ``resume=true`` runs it again), the
+    case's other pairs run in a fresh worker, and the run goes on; the pairs lost are
+    listed at the end with the command that runs them again.
 
     Parameters
     ----------
@@ -126,8 +213,9 @@ def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case) -> float:
     tasks : list of ``(ci, case, pairs, ref_on, want_meshes)`` (:func:`case_job`'s
         arguments), in the order they are handed out (costliest first).
     on_pair : called ``on_pair(ci, mi, seconds, cost_s)`` as each pair ends (``cost_s``:
-        the seconds less the method's one-off compilation).
+        the seconds less the method's one-off compilation; None for a pair lost with its worker).
     on_case : called ``on_case(ci, [(mi, record, U or None), ...])`` as each case ends.
+    names : the methods' names, by index (for a lost pair's row); default: built from ``config``.
 
     Returns
     -------
@@ -135,23 +223,21 @@ def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case) -> float:
 
     Raises
     ------
-    SShaDeError when a worker dies (finished pairs stay stored: resume=true continues);
-    KeyboardInterrupt after the workers are stopped.
+    SShaDeError when a worker dies while starting (finished pairs stay stored: the
+    message gives the command that continues the run); KeyboardInterrupt after the
+    workers are ended.
     """
     if in_worker():  # pragma: no cover - never nested
         raise SShaDeError("eval: jobs > 1 inside a worker")
-    refs_s = [0.0]
-
-    def message(msg):
-        if msg[0] == "log":
-            logging.getLogger(msg[2]).log(msg[1], msg[3])
-        elif msg[0] == "pair":
-            on_pair(*msg[1:])
-
-    def result(_i, res):
-        refs_s[0] += float(res.get("references_s") or 0.0)
-        on_case(res["ci"], res["pairs"])
-
-    run_jobs(case_job, tasks, workers=jobs, init=init_worker, init_args=(config,), on_message=message,
-             on_result=result, what="evaluation")
-    return refs_s[0]
+    if names is None:
+        from omegaconf import OmegaConf
+        names = [m.name for m in method_table.make_methods(OmegaConf.create(config))]
+    again = resume_command(config.get("out_dir", ""))
+    c = _Cases(tasks, list(names), jobs, on_pair, on_case)
+    run_jobs(case_job, c.tasks, workers=jobs, init=init_worker, init_args=(config,), on_message=c.message,
+             on_result=c.result, on_lost=c.lost_job, what="evaluation",
+             advice=f"the finished runs are stored; to continue: {again}")
+    if c.lost:
+        log.warning("%d run(s) failed with their worker process: %s; their rows are not stored, to run them "
+                    "again: %s", len(c.lost), "; ".join(f"{a} {b}: {r}" for a, b, r in c.lost), again)
+    return c.references_s
