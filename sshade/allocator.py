@@ -1,4 +1,4 @@
-"""glibc's memory allocator, told how to treat freed memory (issue 24).
+"""glibc's memory allocator, told how to treat freed memory.
 
 - :func:`keep_freed_memory` : keep it for reuse (SShaDe's forked sampling workers);
 - :func:`release_freed` : give it back to the OS (before a memory measurement).
@@ -33,8 +33,8 @@ def keep_freed_memory(mmap_threshold: int = 1 << 28, trim_threshold: int = 1 << 
     only above ``trim_threshold`` bytes, so that the arrays a sampling allocates and
     frees again and again (tens of MB each at a million vertices) reuse memory already
     mapped instead of a fresh ``mmap`` each time, whose first-touch page faults and
-    ``munmap`` are a large part of a SShaDe call at a million vertices (issue 24; the
-    figures are in this change's commit message and ``results/scaling``).
+    ``munmap`` are a large part of a SShaDe call at a million vertices (the
+    figures: ``results/scaling``).
 
     Called in the samplings' forked workers only (:mod:`sshade.sampling`; they end with
     the pool), never in the caller's process, whose memory behaviour stays its own. A
