@@ -199,7 +199,7 @@ def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
 def _solver_settings(max_iter: int, time_budget_s: float | None, energy: str) -> dict:
     out = {"etol": DEEP_CRITERION.etol, "gtol": DEEP_CRITERION.gtol, "max_iter": int(max_iter),
            "time_budget_s": time_budget_s, "accelerate": "lbfgs" if sr_alpha(energy) is None else "anderson"}
-    if sr_alpha(energy) is not None:  # issue 21: Anderson on (U, R) keeping its history; coarse or continued start
+    if sr_alpha(energy) is not None:  # Anderson on (U, R) keeping its history; coarse or continued start
         out["scheme"] = 2
     return out
 

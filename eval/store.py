@@ -1,5 +1,5 @@
 """The evaluator's per-(case, method) result store: a run that stops (crash, ``kill -9``,
-Ctrl-C, time limit) loses at most the pair it was computing (issue 21).
+Ctrl-C, time limit) loses at most the pair it was computing.
 
 Layout, under the run's ``out_dir`` (:mod:`eval.outdir`)::
 

@@ -1,4 +1,4 @@
-"""One guarded way to run any deformation method on one input (issue 19), used by the
+"""One guarded way to run any deformation method on one input, used by the
 evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`sshade.cli`).
 
 :func:`run_method` gives the method read-only copies of the mesh and handles (a method

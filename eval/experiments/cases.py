@@ -15,7 +15,7 @@ column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
 :mod:`sshade.warmup`), the result is scored with
 :func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
 :func:`eval.metrics.ground_truth_metrics`. Every method runs through
-:func:`sshade.guard.run_method` (issue 19): on read-only copies of the case, with the
+:func:`sshade.guard.run_method`: on read-only copies of the case, with the
 optional ``timeout_s`` of each call, its output checked
 (:func:`sshade.mesh.validate.validate_deformed`) before any metric. A method that fails on a
 case (our methods: :class:`~sshade.errors.SShaDeError`; a plug-in: any exception,
@@ -33,7 +33,7 @@ paired SShaDe-Elastic comparison; :mod:`eval.breakdown`; with figures also
 ``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.store`).
 All tables and ``run.json`` are written atomically.
 
-Result store and resume (issue 21): each (case, method) run is stored as soon as it
+Result store and resume: each (case, method) run is stored as soon as it
 finishes, keyed by the method's definition, the case's identity and the guard/reference
 options; the tables are built from the stored rows. ``resume=true`` with ``out_dir`` =
 an earlier run's folder continues it (the claim keeps its files, :mod:`eval.outdir`):

@@ -35,7 +35,7 @@ _RESERVED = ("n_cases", "n_failed", "warnings", "error", "method", "case")
 
 
 def _scalar(v):
-    """Method info value -> a CSV cell (issue 19: no value may break cases.csv or a
+    """Method info value -> a CSV cell (no value may break cases.csv or a
     table): bools, ints (beyond int64: as float, or left empty when not finite), finite
     floats (NaN/inf: empty), strings on one line (at most 200 characters), flat
     lists/arrays of such scalars as JSON (NaN -> null; e.g. SShaDe's per-sampling
