@@ -19,6 +19,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 
 import pandas as pd
 
@@ -81,6 +82,24 @@ def _kill_all(pids) -> None:
     for q in pids:
         if _alive(q):
             os.kill(q, signal.SIGKILL)
+
+
+@contextmanager
+def _two_workers_mid_run(faust_root, out, ready):
+    """A ``jobs=2`` run with both workers mid-run in :class:`tests.worker_methods.Waits`:
+    yields ``(p, workers, kids)`` (the main process, the workers' pids, every child of the
+    main process with the workers: the resource tracker too); whatever is left of them is
+    killed afterwards."""
+    p = _start(_cmd(faust_root, out, [WAITS]), ready)
+    kids: list[int] = []
+    try:
+        workers = _wait_ready(p, ready, 2)
+        kids = sorted(set(_children(p.pid)) | set(workers))
+        yield p, workers, kids
+    finally:
+        if p.poll() is None:
+            p.kill()
+        _kill_all(kids)
 
 
 def _stored(out) -> dict:
@@ -152,37 +171,20 @@ def test_os_exit_and_segfault_in_workers_are_failed_pairs(tmp_path, faust_root):
 
 
 def test_killing_the_main_process_leaves_no_process(tmp_path, faust_root):
-    out, ready = tmp_path / "out", tmp_path / "ready"
-    p = _start(_cmd(faust_root, out, [WAITS]), ready)
-    kids: list[int] = []
-    try:
-        workers = _wait_ready(p, ready, 2)
-        kids = sorted(set(_children(p.pid)) | set(workers))  # the workers and the resource tracker
-        assert len(kids) >= 3, kids
+    with _two_workers_mid_run(faust_root, tmp_path / "out", tmp_path / "ready") as (p, _, kids):
+        assert len(kids) >= 3, kids  # the workers and the resource tracker
         p.kill()
         p.communicate(timeout=60)
         left = _all_gone(kids, 5.0)
-    finally:
-        if p.poll() is None:
-            p.kill()
-        _kill_all(kids)
     assert not left, left
 
 
 def test_sigterm_ends_the_run_as_interrupted(tmp_path, faust_root):
-    out, ready = tmp_path / "out", tmp_path / "ready"
-    p = _start(_cmd(faust_root, out, [WAITS]), ready)
-    kids: list[int] = []
-    try:
-        workers = _wait_ready(p, ready, 2)
-        kids = sorted(set(_children(p.pid)) | set(workers))
+    out = tmp_path / "out"
+    with _two_workers_mid_run(faust_root, out, tmp_path / "ready") as (p, _, kids):
         p.terminate()
         o, e = p.communicate(timeout=60)
         left = _all_gone(kids, 5.0)
-    finally:
-        if p.poll() is None:
-            p.kill()
-        _kill_all(kids)
     assert p.returncode == 143 and _lines(e)[-1] == "interrupted" and "Traceback" not in e, e[-3000:]
     assert not left, left
     info = json.loads((out / "run.json").read_text())
@@ -193,12 +195,7 @@ def test_sigterm_ends_the_run_as_interrupted(tmp_path, faust_root):
 
 
 def test_ctrl_c_with_a_stopped_worker_ends_within_seconds(tmp_path, faust_root):
-    out, ready = tmp_path / "out", tmp_path / "ready"
-    p = _start(_cmd(faust_root, out, [WAITS]), ready)
-    kids: list[int] = []
-    try:
-        workers = _wait_ready(p, ready, 2)
-        kids = sorted(set(_children(p.pid)) | set(workers))
+    with _two_workers_mid_run(faust_root, tmp_path / "out", tmp_path / "ready") as (p, workers, kids):
         os.kill(workers[0], signal.SIGSTOP)
         t0 = time.monotonic()
         p.send_signal(signal.SIGINT)
@@ -208,10 +205,6 @@ def test_ctrl_c_with_a_stopped_worker_ends_within_seconds(tmp_path, faust_root):
             e = "not ended within 10 s"
         took = time.monotonic() - t0
         left = _all_gone(kids, 5.0)
-    finally:
-        if p.poll() is None:
-            p.kill()
-        _kill_all(kids)
     assert took < 10 and p.returncode == 130 and _lines(e)[-1] == "interrupted", (took, e[-3000:])
     assert not left, left
 
