@@ -115,8 +115,8 @@ def run(cfg) -> dict:
 
 class _Setup:
     """What :func:`_setup` prepared: ``methods``, ``names``, ``specs`` (each method's
-    resolved definition), ``guard``, ``refs``, ``root``, ``out_dir``, ``name``
-    (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
+    resolved definition), ``codes`` (each method's code identity), ``guard``, ``refs``,
+    ``root``, ``out_dir``, ``name`` (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
     all) and ``base_rule`` (that rule in words), ``own`` (method name -> (indices or
     None, rule in words) for the methods ``method_cases`` gives a rule of their own),
     ``store`` and ``resume``; ``meshes``: the metrics' kept rest and ground-truth meshes
@@ -160,6 +160,7 @@ def _setup(cfg) -> _Setup:
     unless ``resume``), before any method runs."""
     methods = method_table.make_methods(cfg)  # every method's parameters are checked before any work
     specs = _method_specs(cfg, methods)
+    codes = [code_identity(m) for m in methods]  # each method's code identity, once (eval/code_identity.py)
     guard = guard_options(cfg)  # timeout_s, handle_error_max_pct
     base_spec = (cfg.get("dataset") or {}).get("baseline_cases", None)
     check_baseline_cases(base_spec)
@@ -186,7 +187,7 @@ def _setup(cfg) -> _Setup:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
     return _Setup(methods=methods, names=names, specs=specs, guard=guard, refs=refs, root=root, out_dir=out_dir,
                   name=name, cases=cases, base=base, base_rule=base_rule, own=own, store=store, resume=resume,
-                  build=build, meshes=CaseMeshes())
+                  codes=codes, build=build, meshes=CaseMeshes())
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -215,7 +216,7 @@ def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     identity of the code that computes the row (:func:`eval.code_identity.code_identity`)."""
     ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
     extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
-    return [pair_key(spec, ident, extra, code_identity(m)) for spec, m in zip(s.specs, s.methods)]
+    return [pair_key(spec, ident, extra, code) for spec, code in zip(s.specs, s.codes)]
 
 
 def _run_cases(cfg, s: _Setup) -> list[dict]:
