@@ -34,9 +34,9 @@ import inspect
 from importlib import metadata
 from pathlib import Path
 
-__all__ = ["PACKAGES", "NUMERICAL", "sources_digest", "numerical_versions", "code_identity", "describe_change"]
+from .runinfo import REPO_ROOT
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+__all__ = ["PACKAGES", "NUMERICAL", "sources_digest", "numerical_versions", "code_identity", "describe_change"]
 
 #: The project's packages whose source makes a row (the four floors of the house).
 PACKAGES = ("sshade", "baselines", "defaust", "eval")
