@@ -121,6 +121,7 @@ class FullResArap:
         if cinfo:  # the coarse start's seconds count as set-up
             res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
         self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": self.protocol,
+                     "handles": "hard",
                      "status": res.info.get("status"), "precompute_s": res.precompute_s, "solve_s": res.solve_s,
                      "s_per_iter": res.solve_s / max(res.iterations, 1)}
         for k in ("energy", "gnorm", "rel_decrease", "n_fallback", "linear_solver"):

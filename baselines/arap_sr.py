@@ -1,71 +1,91 @@
 """ARAP-SR: as-rigid-as-possible with smooth rotations (Levi & Gotsman 2015,
 "Smooth rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG).
 
-Energy (spokes, cotangent weights w_ij, A = total surface area):
+Energy (spokes, cotangent weights w_ij, A = total surface area, c_i = 1 / valence for
+``alpha_scaling="valence"``, Open3D's definition of alpha, or 1 for ``"none"``;
+:mod:`baselines.arap_sr_solver` states both and their sources):
 
     E = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
-        + alpha * A * sum_i sum_{j in N(i)} || R_i - R_j ||_F^2
+        + alpha * A * sum_i c_i sum_{j in N(i)} || R_i - R_j ||_F^2
 
-Local step: each R_i maximises tr(R_i^T M_i) with
-M_i = sum_j w_ij e'_ij e_ij^T + 2 alpha A sum_j R_j (neighbours' rotations from the
-previous iteration), i.e. R_i = polar(M_i) (batched SVD, det fixed to +1).
-Global step: the cotangent Laplacian system of ARAP with the handles fixed, prefactored
-once (SuperLU, COLAMD ordering). At alpha = 0 this is ARAP (spokes, Sorkine & Alexa 2007).
-Written on libigl's cotangent matrix because no maintained Python package offers the
-smoothed energy (Open3D's ``deform_as_rigid_as_possible`` has a "smoothed" ARAP variant,
-but it is a 300+ MB dependency for one baseline).
+Two protocols (:class:`ARAPSR`): ``"converged"``
+(:func:`baselines.arap_sr_solver.solve_arap_sr`: Gauss-Seidel local step, Anderson
+acceleration, the energy-and-gradient criterion) and ``"paper"`` (:func:`arap_sr_deform`:
+the plain iteration of Open3D's Smoothed ARAP, a Jacobi local step from the previous
+rotations then the global step, run as paper §4.1 says, "until convergence with a cutoff
+of 1000 iterations").
+
+Written on libigl's cotangent matrix: Open3D's ``deform_as_rigid_as_possible`` (its
+Smoothed energy) is the outside implementation, but a 300+ MB dependency for one baseline
+and a fixed iteration count with no stopping test; the test extra installs it to check
+this module against it (``tests/test_arap_sr_open3d.py``).
 """
 from __future__ import annotations
 
 import time
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
-from sshade.arap import PROTOCOLS, ArapResult, iterate, make_criterion, rigid_fit
+from sshade.arap import DEFAULT_CRITERION, PROTOCOLS, ArapResult, make_criterion, rigid_fit
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
 
 from .arap import check_arap_args
-from .arap_sr_solver import solve_arap_sr
+from .arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
 from .coarse_start import SR_ENERGY, check_start, start_rotations
 
-__all__ = ["arap_sr_deform", "ARAPSR"]
+__all__ = ["arap_sr_deform", "ARAPSR", "PAPER_STOPS"]
 
-
-def _polar(M: np.ndarray) -> np.ndarray:
-    """Closest rotations to a batch of 3x3 matrices (k, 3, 3)."""
-    U, _, Vt = np.linalg.svd(M)
-    R = U @ Vt
-    neg = np.linalg.det(R) < 0
-    if neg.any():
-        U[neg, :, 2] *= -1
-        R[neg] = U[neg] @ Vt[neg]
-    return R
+#: stopping rules of the paper protocol (:func:`arap_sr_deform`); the first is the default
+PAPER_STOPS = ("energy", "move")
 
 
 def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
-                   alpha: float = 0.01, tol: float = 1e-4, max_iter: int = 1000,
-                   V0: np.ndarray | None = None, time_budget_s: float | None = None) -> ArapResult:
-    """ARAP with smooth rotations under the paper's §4.1 move rule (``arap.protocol=paper``;
-    the converged protocol is :func:`baselines.arap_sr_solver.solve_arap_sr`).
+                   alpha: float = 0.01, alpha_scaling: str = "valence", stop: str = "energy",
+                   tol: float = 1e-4, criterion=None, max_iter: int = 1000,
+                   time_budget_s: float | None = None) -> ArapResult:
+    """ARAP with smooth rotations under the paper protocol (§4.1; the converged protocol
+    is :func:`baselines.arap_sr_solver.solve_arap_sr`).
+
+    The plain iteration of Open3D's Smoothed ARAP: from the rigid fit of the handles,
+    each iteration takes every rotation at once from the previous ones (Jacobi local
+    step, :meth:`baselines.arap_sr_solver.SRProblem.sweep`) and then the global step.
+    It stops by ``stop``:
+
+    * ``"energy"`` (default; §4.1's "until convergence with a cutoff of 1000
+      iterations"): when the relative change of ``E`` over one iteration is below
+      ``criterion.etol``;
+    * ``"move"``: when the largest vertex move of one iteration is below
+      ``tol * bbox_diag`` (this package's paper protocol before the energy stop; on a
+      stiff iteration it fires after two iterations, far from the minimiser).
+
+    Either way the stop is then tested as the converged protocol tests it: ``status`` is
+    ``"converged"`` when the gradient norm is below ``criterion.gtol`` (and, for the
+    energy stop, the relative decrease below ``criterion.etol``), else ``"stalled"``;
+    ``"max_iter"`` / ``"time_budget"`` at the caps.
 
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64 (validated). handles : (h,) int64;
     targets : (h, 3) float64.
-    alpha : float >= 0, rotation-smoothness weight (multiplied by the surface area A so
-        it is scale-free); 0 gives plain ARAP (spokes).
-    tol, max_iter : stop when the largest vertex move in one iteration is below
-        ``tol * bbox_diag``, at most ``max_iter`` iterations.
-    V0 : (n, 3) initial guess, default the rigid fit of the handles.
-    time_budget_s : optional cap on iteration time (benchmarks).
+    alpha : float >= 0, rotation-smoothness weight (times the surface area A, so it is
+        scale-free); 0 gives plain ARAP (spokes).
+    alpha_scaling : one of :data:`baselines.arap_sr_solver.ALPHA_SCALINGS` (default
+        ``"valence"``: Open3D's alpha).
+    stop : one of :data:`PAPER_STOPS`. tol : float > 0, the move rule's tolerance
+        (fraction of the bounding-box diagonal).
+    criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
+    max_iter : int >= 0, iteration cap. time_budget_s : optional cap on iteration time.
 
     Returns
     -------
-    :class:`sshade.arap.ArapResult`.
+    :class:`sshade.arap.ArapResult`; ``info``: ``status``, ``stop``, ``energy`` (``E``,
+    mesh units^2), ``gnorm``, ``rel_decrease``, ``alpha``, ``alpha_scaling``.
+
+    Raises
+    ------
+    SShaDeError on a bad ``stop``, ``alpha`` or ``alpha_scaling``.
 
     Examples
     --------
@@ -73,58 +93,51 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
 
         res = arap_sr_deform(V, F, handles, targets, alpha=0.01)
     """
-    import igl
+    if stop not in PAPER_STOPS:
+        raise SShaDeError(f"ARAP-SR: stop must be one of {PAPER_STOPS}, got {stop!r}")
+    crit = DEFAULT_CRITERION if criterion is None else criterion
     V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    n = len(V)
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     R0, t0_ = rigid_fit(V[handles], targets)
+    info = {"alpha": alpha, "alpha_scaling": alpha_scaling, "stop": stop}
     if float(np.abs(V[handles] @ R0.T + t0_ - targets).max()) <= 1e-12 * diag:
         return ArapResult(V=V @ R0.T + t0_, iterations=0, converged=True, last_move=0.0, precompute_s=0.0,
-                          solve_s=0.0, info={"rigid": True})
+                          solve_s=0.0, info=dict(info, rigid=True, status="rigid"))
     t0 = time.perf_counter()
-    L = -igl.cotmatrix(V, F).tocsr()  # positive semi-definite, L_ij = -w_ij off-diagonal
-    W = (-L).tocoo()
-    off = W.row != W.col
-    I, J, w = W.row[off], W.col[off], W.data[off]  # directed spokes i -> j with weight w_ij
-    A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
-    e = V[J] - V[I]  # rest spokes e_ij
-    free = np.ones(n, bool)
-    free[handles] = False
-    fi = np.flatnonzero(free)
-    Lff = L[fi][:, fi].tocsc()
-    Lfb = L[fi][:, handles]
-    lu = splu(Lff, permc_spec="COLAMD")
-    # incidence for sums over spokes of vertex i: S (n x nnz) with S[i, k] = 1 for spoke k = (I[k], J[k])
-    S = sp.csr_matrix((np.ones(len(I)), (I, np.arange(len(I)))), shape=(n, len(I)))
-    Adj = sp.csr_matrix((np.ones(len(I)), (I, J)), shape=(n, n))
+    pb = SRProblem(V, F, handles, targets, alpha, alpha_scaling=alpha_scaling)
     t1 = time.perf_counter()
-    U = (V @ R0.T + t0_) if V0 is None else np.array(V0, np.float64)
-    U[handles] = targets
-    R = np.broadcast_to(R0, (n, 3, 3)).copy()
-
-    def step(U):
-        nonlocal R
-        # local step
-        ed = U[J] - U[I]
-        cov = (w[:, None, None] * ed[:, :, None] * e[:, None, :]).reshape(-1, 9)  # w e' e^T
-        M = (S @ cov).reshape(n, 3, 3)
-        if alpha > 0:
-            M += 2.0 * alpha * A * (Adj @ R.reshape(n, 9)).reshape(n, 3, 3)
-        R = _polar(M)
-        # global step: L x = b, b_i = sum_j w_ij / 2 (R_i + R_j) e_ij (as in Sorkine & Alexa eq. 9,
-        # with e_ij = v_j - v_i)
-        rot_e = 0.5 * np.einsum("kab,kb->ka", R[I] + R[J], e)
-        b = -(S @ (w[:, None] * rot_e))  # sign: L = -cot (PSD) and e_ij = v_j - v_i
-        Un = U.copy()
-        Un[fi] = lu.solve(b[fi] - Lfb @ targets)
-        Un[handles] = targets
-        return Un
-
-    U, it, converged, move = iterate(step, U, thresh=tol * diag, max_iter=max_iter, time_budget_s=time_budget_s)
+    U = V @ R0.T + t0_
+    U[pb.h] = pb.T
+    R = pb.sweep(U, np.broadcast_to(R0, (pb.n, 3, 3)).copy(), jacobi=True)
+    U, R, it, move, rel, status = _paper_iterations(pb, U, R, stop, tol * diag, crit, max_iter, time_budget_s)
     t2 = time.perf_counter()
-    return ArapResult(V=U, iterations=it, converged=converged, last_move=move, precompute_s=t1 - t0,
-                      solve_s=t2 - t1, info={"alpha": alpha})
+    gn = pb.gnorm(U, R)
+    if status == "rule":
+        status = "converged" if gn < crit.gtol and (stop == "move" or abs(rel) < crit.etol) else "stalled"
+    info.update(status=status, energy=pb.energy(U, R), gnorm=gn, rel_decrease=rel)
+    return ArapResult(V=U, iterations=it, converged=status == "converged", last_move=move, precompute_s=t1 - t0,
+                      solve_s=t2 - t1, info=dict(info, R=R))
+
+
+def _paper_iterations(pb: SRProblem, U, R, stop, thresh, crit, max_iter, time_budget_s):
+    """The iterations of :func:`arap_sr_deform` from ``(U, R)`` (``R`` the local step at
+    ``U``): ``(U, R, iterations, last_move, rel_decrease, status)`` with status ``"rule"``
+    (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
+    t0 = time.perf_counter()
+    E, it, move, rel = pb.energy(U, R), 0, np.inf, np.inf
+    while True:
+        if it >= max_iter:
+            return U, R, it, move, rel, "max_iter"
+        if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
+            return U, R, it, move, rel, "time_budget"
+        Un = pb.global_step(U, R)
+        R = pb.sweep(Un, R.copy(), jacobi=True)
+        En = pb.energy(Un, R)
+        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
+        rel = (E - En) / abs(En) if En != 0 else 0.0
+        U, E, it = Un, En, it + 1
+        if (move < thresh) if stop == "move" else (abs(rel) < crit.etol):
+            return U, R, it, move, rel, "rule"
 
 
 class ARAPSR:
@@ -133,21 +146,32 @@ class ARAPSR:
     Parameters
     ----------
     alpha : float >= 0, rotation smoothness (times the surface area).
+    alpha_scaling : ``"valence"`` (default: alpha as Open3D's Smoothed ARAP defines it, the
+        neighbour term divided by the valence) or ``"none"`` (without the valence: about 6x
+        stiffer at the same alpha); :mod:`baselines.arap_sr_solver`.
     protocol : ``"converged"`` (default, ``info["protocol"] = "converged-sr"``:
         :func:`baselines.arap_sr_solver.solve_arap_sr`, Gauss-Seidel local step and
         Anderson acceleration, stopped by the energy-and-gradient criterion ``etol`` /
-        ``gtol``) or ``"paper"`` (:func:`arap_sr_deform`,
-        the §4.1 move rule ``tol``; ``info["protocol"] = "move-rule"``).
-    tol : float > 0, ``"paper"``: move tolerance (fraction of the bounding-box diagonal).
+        ``gtol``) or ``"paper"`` (:func:`arap_sr_deform`: Open3D's plain iteration run
+        until the stop rule ``stop`` fires, at most 1000 iterations, then the stop
+        classified converged or stalled by the gradient; ``info["protocol"] =
+        "paper-sr"``, or ``"move-rule"`` with ``stop="move"``).
+    stop : ``"paper"`` protocol's stop rule, :data:`PAPER_STOPS`: ``"energy"`` (default,
+        relative energy change below ``etol``) or ``"move"`` (largest vertex move below
+        ``tol`` x diagonal).
+    tol : float > 0, ``"paper"`` with ``stop="move"``: move tolerance (fraction of the
+        bounding-box diagonal).
     max_iter : int or None, iteration cap (None: 10000 converged, 1000 paper).
-    etol, gtol : floats or None, the ``"converged"`` criterion (None: the defaults of
-        :data:`sshade.arap.DEFAULT_CRITERION`).
+    etol, gtol : floats or None, the criterion (None: the defaults of
+        :data:`sshade.arap.DEFAULT_CRITERION`): the ``"converged"`` protocol's stop, and
+        under ``"paper"`` the energy stop (``etol``) and the converged/stalled test
+        (``gtol``).
     start : ``"converged"`` protocol's start: ``"rigid"`` (the rigid fit of the handles),
         ``"coarse"`` (:func:`baselines.coarse_start.coarse_start`: the rotations of the
         same energy solved on a ``coarse_n_low``-vertex remesh), ``"auto"`` (default:
         coarse when the mesh has at least ``COARSE_MIN_RATIO * coarse_n_low`` vertices,
         falling back to rigid if the remesh or the low-res solve raises SShaDeError).
-        Either start is stopped by the same full-resolution criterion (issue 21).
+        Either start is stopped by the same full-resolution criterion.
     coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
 
     Raises
@@ -159,12 +183,19 @@ class ARAPSR:
 
     def __init__(self, *, alpha: float = 0.01, tol: float = 1e-4, max_iter: int | None = None,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 start: str = "auto", coarse_n_low: int = 6000):
+                 start: str = "auto", coarse_n_low: int = 6000, alpha_scaling: str = "valence",
+                 stop: str = "energy"):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{self.name}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
+        if stop not in PAPER_STOPS:
+            raise SShaDeError(f"{self.name}: stop must be one of {PAPER_STOPS}, got {stop!r}")
+        self.stop = stop
         self.start, self.coarse_n_low = check_start(self.name, start, coarse_n_low)
         args = check_arap_args(self.name, tol, max_iter, etol, gtol, alpha=alpha)  # SShaDeError on a bad value
         self.alpha, self.tol, self.protocol = args["alpha"], args["tol"], protocol
+        if alpha_scaling not in ALPHA_SCALINGS:
+            raise SShaDeError(f"{self.name}: alpha_scaling must be one of {ALPHA_SCALINGS}, got {alpha_scaling!r}")
+        self.alpha_scaling = alpha_scaling
         self.max_iter = ({"converged": 10000, "paper": 1000}[protocol] if args["max_iter"] is None
                          else args["max_iter"])
         self.criterion = make_criterion(etol, gtol)
@@ -181,13 +212,16 @@ class ARAPSR:
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
         if self.protocol == "paper":
-            res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, tol=self.tol, max_iter=self.max_iter)
+            res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, alpha_scaling=self.alpha_scaling,
+                                 stop=self.stop, tol=self.tol, criterion=self.criterion, max_iter=self.max_iter)
         else:
             res = self._converged(V, F, handles, targets)
         self.rotations = res.info.get("R") if self.protocol == "converged" else None
-        proto = "move-rule" if self.protocol == "paper" else "converged-sr"
-        self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": proto,
+        proto = ("converged-sr" if self.protocol == "converged" else
+                 "move-rule" if self.stop == "move" else "paper-sr")
+        self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": proto, "handles": "hard",
                      "precompute_s": res.precompute_s, "solve_s": res.solve_s, "alpha": self.alpha,
+                     "alpha_scaling": self.alpha_scaling,
                      "s_per_iter": res.solve_s / max(res.iterations, 1)}
         for k in ("status", "energy", "gnorm", "rel_decrease", "n_fallback", "coarse_n", "coarse_iterations",
                   "coarse_s"):
@@ -200,8 +234,10 @@ class ARAPSR:
         (:func:`baselines.coarse_start.start_rotations`); a coarse start's seconds count in
         ``precompute_s`` and its numbers go to ``info``."""
         R0, cinfo = start_rotations(self.start, V, F, handles, targets, energy=SR_ENERGY, alpha=self.alpha,
+                                    alpha_scaling=self.alpha_scaling,
                                     coarse_n_low=self.coarse_n_low, criterion=self.criterion)
-        res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, criterion=self.criterion,
+        res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, alpha_scaling=self.alpha_scaling,
+                            criterion=self.criterion,
                             max_iter=self.max_iter, R0=R0)
         if cinfo:
             res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
@@ -215,6 +251,7 @@ class ARAPSR:
         spent."""
         coarse = self.protocol == "converged" and self.start != "rigid"  # + the remesh's kernels
         return warm_once(WARMED, ("arap_sr", self.protocol, coarse),
-                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, max_iter=5, protocol=self.protocol,
+                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, alpha_scaling=self.alpha_scaling,
+                                                   max_iter=5, protocol=self.protocol,
                                                    start="coarse" if coarse else "rigid",
                                                    coarse_n_low=40).deform(V, F, h, T))

@@ -5,19 +5,36 @@ with an energy-verified stopping criterion (:func:`solve_arap_sr`).
 Energy (spokes, libigl's cotangent weights ``w_ij``, ``A`` the total surface area):
 
     E(U, R) = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
-              + alpha * A * sum_i sum_{j in N(i)} || R_i - R_j ||_F^2
-            = 2 E_spokes(U, R) + 2 alpha A sum_{edges (s, d)} || R_s - R_d ||_F^2
+              + alpha * A * sum_i c_i sum_{j in N(i)} || R_i - R_j ||_F^2
+            = 2 E_spokes(U, R) + alpha A sum_{edges (s, d)} (c_s + c_d) || R_s - R_d ||_F^2
 
 with ``E_spokes`` the energy of :mod:`sshade.arap.operators` (which counts each spoke with
-half its weight). At ``alpha = 0`` it is twice ARAP's spokes energy: same minimiser.
+half its weight) and ``c_i`` set by ``alpha_scaling`` (:data:`ALPHA_SCALINGS`):
+
+* ``"valence"`` (default): ``c_i = 1 / d_i``, ``d_i`` the valence of vertex ``i``. This is
+  alpha as Open3D's Smoothed ARAP defines it (``TriangleMesh::DeformAsRigidAsPossible``
+  with ``energy=Smoothed``, whose default 0.01 is ours): in the scale of ``E`` its local
+  step is ``R_i = polar(M_i + (alpha A / d_i) sum_{j in N(i)} R_j)``, iterated (Jacobi)
+  without an energy of its own. ``E`` is the energy whose exact local step that is
+  wherever neighbouring valences agree (``E``'s local step weighs ``R_j`` by
+  ``alpha A (c_i + c_j) / 2``), and converged results agree with a converged Open3D run
+  (``tests/test_arap_sr_open3d.py``). CGAL's ``SRE_ARAP`` also divides its neighbour term
+  by the valence, with its own default (0.02) and weight scale.
+* ``"none"``: ``c_i = 1``, the neighbour term without the valence (this package's
+  definition before it followed Open3D's). On a mesh of valence 6 its alpha is about 6x
+  Open3D's.
+
+At ``alpha = 0`` ``E`` is twice ARAP's spokes energy: same minimiser. Open3D's cotangent
+weights equal libigl's on closed meshes (the mean of the two opposite cotangents) but are
+clamped at 0 and doubled on boundary edges; ours are libigl's everywhere.
 
 Iteration (every sub-step is an exact minimisation over one block of variables, so the
 energy never increases):
 
 * local step, Gauss-Seidel over a vertex colouring (:class:`SRProblem`): the vertices are
   split into independent sets of the mesh graph (:func:`colour_classes`); one sweep
-  solves ``R_i = polar(M_i + alpha A sum_{j in N(i)} R_j)``, ``M_i`` the spokes
-  covariance of ``U``, for one class at a time with the neighbours' latest rotations.
+  solves ``R_i = polar(M_i + alpha A sum_{j in N(i)} (c_i + c_j) / 2 R_j)``, ``M_i``
+  the spokes covariance of ``U``, for one class at a time with the neighbours' latest rotations.
   Within a class the rotations do not interact, so each class update is the exact
   minimiser of its block. (Solving all ``R_i`` at once from the previous rotations,
   Jacobi, as :func:`baselines.arap_sr.arap_sr_deform` does, can increase the smoothness
@@ -68,39 +85,45 @@ from sshade.arap import (
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles
 
-__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "SR_ACCELERATIONS"]
+__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "SR_ACCELERATIONS", "ALPHA_SCALINGS",
+           "smoothness_weights"]
 
 #: the iterations of :func:`solve_arap_sr`
 SR_ACCELERATIONS = ("anderson", "none")
+#: definitions of alpha (module docstring): the first is the default
+ALPHA_SCALINGS = ("valence", "none")
 
 clock = time.perf_counter
 
 
 @njit(cache=True, nogil=True)
-def _edge_sq_sum(Rf, s, d):  # pragma: no cover - compiled
-    """``sum_e ||Rf[s_e] - Rf[d_e]||^2`` for (n, 9) ``Rf``, term by term."""
+def _edge_sq_sum(Rf, s, d, we):  # pragma: no cover - compiled
+    """``sum_e we_e ||Rf[s_e] - Rf[d_e]||^2`` for (n, 9) ``Rf``, term by term."""
     tot = 0.0
     for e in range(len(s)):
         a, b = s[e], d[e]
+        sq = 0.0
         for k in range(9):
             x = Rf[a, k] - Rf[b, k]
-            tot += x * x
+            sq += x * x
+        tot += we[e] * sq
     return tot
 
 
 @njit(cache=True, nogil=True)
-def _class_targets(M, Rf, indptr, indices, cls, wR, out):  # pragma: no cover - compiled
-    """``out[k] = M[i] + wR sum_{j in N(i)} R_j`` for ``i = cls[k]`` (the matrices whose
-    polar factors are the class's new rotations); ``M`` (n, 9), ``Rf`` (n, 9), the graph
-    as CSR ``(indptr, indices)``, ``out`` (len(cls), 9)."""
+def _class_targets(M, Rf, indptr, indices, data, cls, wR, out):  # pragma: no cover - compiled
+    """``out[k] = M[i] + wR sum_{j in N(i)} a_ij R_j`` for ``i = cls[k]`` (the matrices whose
+    polar factors are the class's new rotations); ``M`` (n, 9), ``Rf`` (n, 9), the weighted
+    graph as CSR ``(indptr, indices, data)``, ``out`` (len(cls), 9)."""
     for k in range(len(cls)):
         i = cls[k]
         for a in range(9):
             out[k, a] = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = indices[p]
+            c = data[p]
             for a in range(9):
-                out[k, a] += Rf[j, a]
+                out[k, a] += c * Rf[j, a]
         for a in range(9):
             out[k, a] = M[i, a] + wR * out[k, a]
 
@@ -111,6 +134,34 @@ def _scatter_rows(Rf, cls, Rc):  # pragma: no cover - compiled
     for k in range(len(cls)):
         for a in range(9):
             Rf[cls[k], a] = Rc[k, a]
+
+
+def smoothness_weights(n: int, edges: np.ndarray, alpha_scaling: str = "valence") -> np.ndarray:
+    """Per-edge weights ``(c_s + c_d) / 2`` of the rotation-smoothness term (module
+    docstring): ``c_i = 1 / d_i`` for ``"valence"`` (Open3D's Smoothed ARAP), 1 for
+    ``"none"``.
+
+    Parameters
+    ----------
+    n : int, vertex count. edges : (ne, 2) int undirected edges, each once.
+    alpha_scaling : one of :data:`ALPHA_SCALINGS`.
+
+    Returns
+    -------
+    (ne,) float64, dimensionless.
+
+    Raises
+    ------
+    SShaDeError on an unknown ``alpha_scaling``.
+    """
+    if alpha_scaling not in ALPHA_SCALINGS:
+        raise SShaDeError(f"ARAP-SR: alpha_scaling must be one of {ALPHA_SCALINGS}, got {alpha_scaling!r}")
+    s, d = np.asarray(edges[:, 0], np.int64), np.asarray(edges[:, 1], np.int64)
+    if alpha_scaling == "none":
+        return np.ones(len(s))
+    deg = np.bincount(np.r_[s, d], minlength=n).astype(np.float64)
+    c = 1.0 / np.maximum(deg, 1.0)
+    return 0.5 * (c[s] + c[d])
 
 
 def colour_classes(n: int, edges: np.ndarray, seed: int = 0) -> list[np.ndarray]:
@@ -150,13 +201,16 @@ class SRProblem:
     targets : (h, 3) float64 (both None: energies only, no global step).
     alpha : float >= 0, smoothness weight (times the area).
     linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
+    alpha_scaling : one of :data:`ALPHA_SCALINGS` (module docstring; default Open3D's).
 
     Raises
     ------
-    SShaDeError on a bad mesh, handles, or a component without a handle.
+    SShaDeError on a bad mesh, handles, alpha or alpha_scaling, or a component without a
+    handle.
     """
 
-    def __init__(self, V, F, handles, targets, alpha: float, linear_solver: str = "auto"):
+    def __init__(self, V, F, handles, targets, alpha: float, linear_solver: str = "auto",
+                 alpha_scaling: str = "valence"):
         if not (np.isfinite(alpha) and alpha >= 0):
             raise SShaDeError(f"ARAP-SR: alpha must be a finite number >= 0, got {alpha!r}")
         self.ops = ops = build_operators(V, F, "spokes")
@@ -165,14 +219,16 @@ class SRProblem:
         else:
             handles, targets = validate_handles(ops.V, handles, targets)
         self.h, self.T = handles, targets
-        self.n, self.alpha = ops.n, float(alpha)
+        self.n, self.alpha, self.alpha_scaling = ops.n, float(alpha), alpha_scaling
         Vr, Fr = ops.V, ops.F
         self.area = 0.5 * float(np.linalg.norm(np.cross(Vr[Fr[:, 1]] - Vr[Fr[:, 0]], Vr[Fr[:, 2]] - Vr[Fr[:, 0]]),
                                                axis=1).sum())
-        self.wR = self.alpha * self.area  # weight of sum_j R_j in the local step
+        self.wR = self.alpha * self.area  # times a_ij: the weight of R_j in the local step
         self.rs = np.sqrt(self.wR) if self.wR > 0 else 1.0
         s, d = ops.edges[:, 0], ops.edges[:, 1]
-        self.adj = sp.csr_matrix((np.ones(2 * len(s)), (np.r_[s, d], np.r_[d, s])), shape=(self.n, self.n))
+        self.edge_w = smoothness_weights(self.n, ops.edges, alpha_scaling)  # a_ij = (c_s + c_d) / 2
+        self.adj = sp.csr_matrix((np.r_[self.edge_w, self.edge_w], (np.r_[s, d], np.r_[d, s])),
+                                 shape=(self.n, self.n))
         self.classes = colour_classes(self.n, ops.edges)
         self.adj.sort_indices()
         free = np.ones(self.n, bool)
@@ -184,9 +240,10 @@ class SRProblem:
         self.Lfb_T = ops.L[self.free][:, self.h] @ self.T
 
     def smoothness(self, R: np.ndarray) -> float:
-        """``sum_i sum_{j in N(i)} ||R_i - R_j||_F^2`` (each edge twice), dimensionless."""
+        """``sum_i c_i sum_{j in N(i)} ||R_i - R_j||_F^2`` (module docstring),
+        dimensionless."""
         Rf = np.ascontiguousarray(R, np.float64).reshape(self.n, 9)
-        return 2.0 * float(_edge_sq_sum(Rf, self.ops.edges[:, 0], self.ops.edges[:, 1]))
+        return 2.0 * float(_edge_sq_sum(Rf, self.ops.edges[:, 0], self.ops.edges[:, 1], self.edge_w))
 
     def energy(self, U: np.ndarray, R: np.ndarray) -> float:
         """``E(U, R)`` of the module docstring, mesh units^2."""
@@ -207,10 +264,10 @@ class SRProblem:
             return R
         Mf = np.ascontiguousarray(M).reshape(self.n, 9)
         buf = np.empty((max(len(c) for c in self.classes), 9))
-        ip, ix = self.adj.indptr, self.adj.indices
+        ip, ix, iw = self.adj.indptr, self.adj.indices, self.adj.data
         for c in self.classes:  # compiled gather / scatter, batched polar decompositions
             X = buf[:len(c)]
-            _class_targets(Mf, Rf, ip, ix, c, self.wR, X)
+            _class_targets(Mf, Rf, ip, ix, iw, c, self.wR, X)
             _scatter_rows(Rf, c, np.ascontiguousarray(fit_rotations(X.reshape(-1, 3, 3))).reshape(-1, 9))
         if not np.shares_memory(Rf, R):  # R was not C-contiguous: Rf is a copy
             R[...] = Rf.reshape(self.n, 3, 3)
@@ -263,7 +320,8 @@ class SRProblem:
         return E, R
 
 
-def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Criterion | None = None,
+def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling: str = "valence",
+                  criterion: Criterion | None = None,
                   max_iter: int = 10000, accelerate: str = "anderson", anderson_m: int = 5,
                   U0: np.ndarray | None = None, time_budget_s: float | None = None, jacobi: bool = False,
                   problem: SRProblem | None = None, linear_solver: str = "auto",
@@ -275,6 +333,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
     V : (n, 3) float64 rest positions (mesh units); F : (m, 3) int faces.
     handles : (h,) int unique vertex indices; targets : (h, 3) float64.
     alpha : float >= 0, smoothness weight (times the surface area; 0: ARAP spokes).
+    alpha_scaling : one of :data:`ALPHA_SCALINGS` (module docstring; default ``"valence"``,
+        Open3D's definition of ``alpha``).
     criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
     max_iter : int >= 0, cap on accepted iterations (global solves).
     accelerate : ``"anderson"`` (default) or ``"none"`` (plain block descent).
@@ -287,7 +347,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
     time_budget_s : float or None, stop (status ``"time_budget"``) after this many seconds.
     jacobi : bool, Jacobi local step instead of Gauss-Seidel (measurements only: the
         energy may then increase; steps are not safeguarded).
-    problem : :class:`SRProblem` or None, prebuilt for the same inputs.
+    problem : :class:`SRProblem` or None, prebuilt for the same inputs (its ``alpha`` and
+        ``alpha_scaling`` are used).
     linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
     reset_on_reject : bool, forget Anderson's history after a rejected candidate (the
         scheme before issue 21; default False: keep it).
@@ -299,6 +360,7 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
     at ``U0`` after one local step), ``status`` (``"converged"``, ``"max_iter"``,
     ``"time_budget"``, ``"stalled"``: no decrease in float64, ``"rigid"``),
     ``n_fallback`` (rejected Anderson candidates), ``n_sweeps``, ``n_colours``, ``alpha``,
+    ``alpha_scaling``,
     ``R`` ((n, 3, 3) the final rotations).
 
     Raises
@@ -309,7 +371,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
     crit = DEFAULT_CRITERION if criterion is None else criterion
     if accelerate not in SR_ACCELERATIONS:
         raise SShaDeError(f"accelerate must be one of {SR_ACCELERATIONS}, got {accelerate!r}")
-    pb = problem if problem is not None else SRProblem(V, F, handles, targets, alpha, linear_solver)
+    pb = problem if problem is not None else SRProblem(V, F, handles, targets, alpha, linear_solver,
+                                                                alpha_scaling)
     Rr, tr_ = rigid_fit(pb.ops.V[pb.h], pb.T)
     if R0 is None:
         R = np.broadcast_to(Rr, (pb.n, 3, 3)).copy()
@@ -323,7 +386,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, criterion: Cri
         raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
     U[pb.h] = pb.T
     t1 = clock()
-    info = {"alpha": pb.alpha, "etol": crit.etol, "gtol": crit.gtol, "accelerate": accelerate,
+    info = {"alpha": pb.alpha, "alpha_scaling": pb.alpha_scaling, "etol": crit.etol, "gtol": crit.gtol,
+            "accelerate": accelerate,
             "n_colours": len(pb.classes), "n_fallback": 0, "n_sweeps": 1, "linear_solver": pb.solver.backend}
     opts = {"m": anderson_m, "jacobi": jacobi, "reset": reset_on_reject}
     U, R, it, status = _iterate(pb, U, pb.sweep(U, R, jacobi), crit, max_iter, accelerate, time_budget_s, opts,

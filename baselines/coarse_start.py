@@ -60,7 +60,8 @@ def uses_coarse(start: str, n_vertices: int, coarse_n_low: int) -> bool:
 
 
 def start_rotations(start: str, V, F, handles, targets, *, energy: str, coarse_n_low: int, alpha: float = 0.0,
-                    criterion: Criterion | None = None) -> tuple[np.ndarray | None, dict]:
+                    criterion: Criterion | None = None,
+                    alpha_scaling: str = "valence") -> tuple[np.ndarray | None, dict]:
     """The start rotations of the converged protocol under ``start``
     (:func:`check_start`): ``(R0, info)`` from :func:`coarse_start` when
     :func:`uses_coarse`, else ``(None, {})`` (the rigid fit). With ``"auto"`` a remesh or
@@ -70,7 +71,7 @@ def start_rotations(start: str, V, F, handles, targets, *, energy: str, coarse_n
         return None, {}
     try:
         return coarse_start(V, F, handles, targets, energy=energy, alpha=alpha, n_low=coarse_n_low,
-                            criterion=criterion)
+                            criterion=criterion, alpha_scaling=alpha_scaling)
     except SShaDeError:  # "auto" is best effort: the rigid start
         if start == "coarse":
             raise
@@ -78,7 +79,7 @@ def start_rotations(start: str, V, F, handles, targets, *, energy: str, coarse_n
 
 
 def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_low: int = 6000, seed: int = 0,
-                 criterion: Criterion | None = None) -> tuple[np.ndarray, dict]:
+                 criterion: Criterion | None = None, alpha_scaling: str = "valence") -> tuple[np.ndarray, dict]:
     """Start rotations for a full-resolution solve from a low-resolution solve of the same
     energy.
 
@@ -89,6 +90,8 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
     energy : ``"spokes"`` or ``"spokes_and_rims"`` (:func:`sshade.arap.solve_arap`), or
         :data:`SR_ENERGY` (ARAP-SR, :func:`baselines.arap_sr_solver.solve_arap_sr`).
     alpha : float >= 0, ARAP-SR's smoothness weight (the same at both resolutions).
+    alpha_scaling : ARAP-SR's definition of alpha
+        (:data:`baselines.arap_sr_solver.ALPHA_SCALINGS`).
     n_low : int >= 4, farthest-point samples of the remesh (the handles are added).
     seed : int, the remesh's first sample. criterion : the low-res solve's (default
         :data:`sshade.arap.DEFAULT_CRITERION`).
@@ -118,7 +121,7 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
     t1 = time.perf_counter()
     Vl, hl = V[rm.seeds], rm.label[handles]
     if energy == SR_ENERGY:
-        res = solve_arap_sr(Vl, rm.F, hl, targets, alpha=alpha, criterion=criterion)
+        res = solve_arap_sr(Vl, rm.F, hl, targets, alpha=alpha, alpha_scaling=alpha_scaling, criterion=criterion)
         R = res.info["R"]
     else:
         ops = build_operators(Vl, rm.F, energy)

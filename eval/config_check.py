@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+from baselines.arap_sr_solver import ALPHA_SCALINGS
 from sshade.checks import config_bool, config_int_list, config_number, config_value
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
@@ -138,6 +139,9 @@ def check_config(cfg) -> None:
         for k in ("etol", "gtol"):
             config_number(cfg, f"arap.{k}", kind=float, min=0, allow_none=True, default=None)
     config_number(cfg, "arap_sr.alpha", kind=float, min=0, default=0.01)
+    scaling = config_value(cfg, "arap_sr.alpha_scaling", "valence")
+    if scaling not in ALPHA_SCALINGS:
+        raise SShaDeError(f"arap_sr.alpha_scaling must be one of {list(ALPHA_SCALINGS)}, got {scaling!r}")
     _check_sshade(cfg)
     _check_dataset(cfg)
     if config_value(cfg, "figures", None) is not None:

@@ -12,7 +12,7 @@ parameters) is composed as ``method.<name>`` (``SShaDe+refine`` as
     methods: [ARAP, Elastic, SShaDe]
     arap:   {protocol: converged, tol: 1e-4, max_iter: null, etol: null, gtol: null}
             # ARAP, Elastic, and SShaDe's low-res ARAP (ARAP-SR: tol / max_iter only)
-    arap_sr: {alpha: 0.01}
+    arap_sr: {alpha: 0.01, alpha_scaling: valence}
     sshade: {n_low: auto, n_samplings: 5, seed: 0, workers: null, gradient: normalized, warm_start: true}
             # optional sshade.tol / sshade.max_iter / sshade.protocol / sshade.etol /
             # sshade.gtol override the arap values for SShaDe

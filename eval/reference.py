@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.arap_sr_solver import SRProblem, solve_arap_sr
+from baselines.arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
 from baselines.coarse_start import SR_ENERGY, coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
@@ -45,7 +45,7 @@ from .code_identity import numerical_versions, sources_digest
 
 __all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
            "reference_solution", "reference_metrics",
-           "method_energy", "sr_energy", "sr_alpha", "energy_operators"]
+           "method_energy", "sr_energy", "sr_alpha", "sr_params", "energy_operators"]
 
 log = logging.getLogger("eval")
 
@@ -59,28 +59,39 @@ SR_GAP_SWEEPS = 20
 #: Method name -> the ARAP energy its result is compared with.
 _METHOD_ENERGY = {"ARAP": "spokes", "Elastic": "spokes_and_rims", "SShaDe": "spokes_and_rims"}
 #: prefix of the ARAP-SR energies (:func:`sr_energy`)
-_SR = "arap_sr_alpha_"
+_SR = "arap_sr_"
 
 
-def sr_energy(alpha: float) -> str:
-    """The name of ARAP-SR's energy with smoothness weight ``alpha`` (Levi & Gotsman
-    2015; :mod:`baselines.arap_sr_solver`), e.g. ``"arap_sr_alpha_0.01"``: the alpha is
-    part of the name, hence of the cache key and file name."""
-    return f"{_SR}{float(alpha)!r}"
+def sr_energy(alpha: float, alpha_scaling: str = "valence") -> str:
+    """The name of ARAP-SR's energy with smoothness weight ``alpha`` under the definition
+    ``alpha_scaling`` (Levi & Gotsman 2015; :mod:`baselines.arap_sr_solver`), e.g.
+    ``"arap_sr_valence_0.01"``: both are part of the name, hence of the cache key and file
+    name. Raises SShaDeError on an unknown ``alpha_scaling``."""
+    if alpha_scaling not in ALPHA_SCALINGS:
+        raise SShaDeError(f"ARAP-SR: alpha_scaling must be one of {ALPHA_SCALINGS}, got {alpha_scaling!r}")
+    return f"{_SR}{alpha_scaling}_{float(alpha)!r}"
+
+
+def sr_params(energy: str) -> tuple[float, str] | None:
+    """``(alpha, alpha_scaling)`` of an ARAP-SR energy name (:func:`sr_energy`), None for
+    another energy. Raises SShaDeError on a malformed ARAP-SR name."""
+    if not str(energy).startswith(_SR):
+        return None
+    scaling, _, a = str(energy)[len(_SR):].rpartition("_")
+    try:
+        a = float(a)
+    except ValueError:
+        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}") from None
+    if not (np.isfinite(a) and a >= 0) or scaling not in ALPHA_SCALINGS:
+        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}")
+    return a, scaling
 
 
 def sr_alpha(energy: str) -> float | None:
     """``alpha`` of an ARAP-SR energy name (:func:`sr_energy`), None for another energy.
     Raises SShaDeError on a malformed ARAP-SR name."""
-    if not str(energy).startswith(_SR):
-        return None
-    try:
-        a = float(str(energy)[len(_SR):])
-    except ValueError:
-        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}") from None
-    if not (np.isfinite(a) and a >= 0):
-        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}")
-    return a
+    p = sr_params(energy)
+    return None if p is None else p[0]
 
 
 def _check_energy(energy: str) -> None:
@@ -91,15 +102,15 @@ def _check_energy(energy: str) -> None:
 def method_energy(method) -> str:
     """The energy a method's result is scored against: its own ``energy`` attribute when
     it names one of :data:`sshade.arap.ENERGIES`, ARAP-SR's own energy with its ``alpha``
-    (:func:`sr_energy`; default 0.01), else by name (ARAP: spokes; Elastic, SShaDe and
-    any other method: spokes-and-rims, the energy of SShaDe's low-resolution step, paper
-    §4.1)."""
+    and ``alpha_scaling`` (:func:`sr_energy`; default 0.01, ``"valence"``), else by name
+    (ARAP: spokes; Elastic, SShaDe and any other method: spokes-and-rims, the energy of
+    SShaDe's low-resolution step, paper §4.1)."""
     e = getattr(method, "energy", None)
     if e in ENERGIES:
         return str(e)
     name = str(getattr(method, "name", method))
     if name == "ARAP-SR":
-        return sr_energy(getattr(method, "alpha", 0.01))
+        return sr_energy(getattr(method, "alpha", 0.01), getattr(method, "alpha_scaling", "valence"))
     return _METHOD_ENERGY.get(name, "spokes_and_rims")
 
 
@@ -109,35 +120,38 @@ def energy_operators(V, F, energy: str):
     :class:`baselines.arap_sr_solver.SRProblem` for an ARAP-SR one. Raises SShaDeError on
     an unknown energy."""
     _check_energy(energy)
-    a = sr_alpha(energy)
-    return build_operators(V, F, energy) if a is None else SRProblem(V, F, None, None, a)
+    p = sr_params(energy)
+    return build_operators(V, F, energy) if p is None else SRProblem(V, F, None, None, p[0], alpha_scaling=p[1])
 
 
 def _deep_solve(V, F, handles, targets, energy, solver, U0, R0=None):
     """The deep solve of ``energy``: ``(U, E, result)``."""
-    a = sr_alpha(energy)
-    if a is None:
+    p = sr_params(energy)
+    if p is None:
         res = solve_arap(V, F, handles, targets, energy=energy, U0=U0, criterion=DEEP_CRITERION,
                          max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"],
                          accelerate=solver["accelerate"])
     else:
-        U0, R0 = _sr_start(V, F, handles, targets, a, U0, R0)
-        res = solve_arap_sr(V, F, handles, targets, alpha=a, U0=U0, R0=R0, criterion=DEEP_CRITERION,
+        U0, R0 = _sr_start(V, F, handles, targets, p, U0, R0)
+        res = solve_arap_sr(V, F, handles, targets, alpha=p[0], alpha_scaling=p[1], U0=U0, R0=R0,
+                            criterion=DEEP_CRITERION,
                             max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"])
     return np.asarray(res.V, np.float64), float(res.info.get("energy", np.nan)), res
 
 
-def _sr_start(V, F, handles, targets, alpha, U0, R0):
+def _sr_start(V, F, handles, targets, params, U0, R0):
     """``(U0, R0)`` for ARAP-SR's deep solve: a converged ARAP-SR result ``U0`` with its
     rotations ``R0``, so the deep solve continues that path; else (no ``R0``: sweeps for
     the rotations of a given ``U0`` crawl at 169k vertices), on a mesh of at least
     ``COARSE_MIN_RATIO`` x 6,000 vertices, the method's own coarse start
     (:func:`baselines.coarse_start.coarse_start`; from the rigid fit the solve takes
-    hours at 169k vertices); else the rigid fit (``(None, None)``)."""
+    hours at 169k vertices); else the rigid fit (``(None, None)``). ``params``:
+    ``(alpha, alpha_scaling)``."""
     if U0 is not None and R0 is not None:
         return U0, R0
     if uses_coarse("auto", len(V), 6000):  # the method's own rule (baselines/coarse_start.py)
-        return None, coarse_start(V, F, handles, targets, energy=SR_ENERGY, alpha=alpha, n_low=6000)[0]
+        return None, coarse_start(V, F, handles, targets, energy=SR_ENERGY, alpha=params[0], n_low=6000,
+                                  alpha_scaling=params[1])[0]
     return None, None
 
 

@@ -24,6 +24,7 @@ TABLE_COLUMNS = (
 EXTRA_COLUMNS = (
     ("angle_err_rel_pct", "FA rel (%)", 2),
     ("handle_err_pct", "Handle (%)", 3),
+    ("handle_pre_pct", "Handle pre (%)", 3),
     ("gt_vertex_mean_pct", "GT mean (%)", 2),
     ("chamfer", "Chamfer", 5),
     ("ref_mean_pct", "Ref mean (%)", 3),

@@ -71,10 +71,15 @@ PROTOCOL_TEXT = {
                  "relative energy decrease and "
                  "the scale-free gradient norm are both below their thresholds",
     "paper": "paper protocol (§4.1): libigl local/global until the largest vertex move of one iteration is "
-             "below tol x diagonal, at most 1000 iterations",
+             "below tol x diagonal, at most 1000 iterations; a stop counts as converged only if the scale-free "
+             "gradient norm is below the converged protocol's gtol, else as stalled",
     "converged-sr": "converged protocol (ARAP-SR): Gauss-Seidel local step, Anderson-accelerated, until the "
                     "relative energy decrease and the scale-free gradient norm are both below their thresholds",
-    "move-rule": "move rule: until the largest vertex move of one iteration is below tol x diagonal",
+    "move-rule": "move rule (ARAP-SR): Open3D's plain iteration until the largest vertex move of one iteration "
+                 "is below tol x diagonal; converged only if the gradient norm is below gtol, else stalled",
+    "paper-sr": "paper protocol (§4.1, ARAP-SR): Open3D's plain iteration (Jacobi local step) until the relative "
+                "energy change of one iteration is below etol, at most 1000 iterations; converged only if the "
+                "scale-free gradient norm is below gtol too, else stalled",
 }
 
 #: Heading of table.md's second table.
@@ -371,12 +376,56 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
             if short:
                 parts.append(f"{int(c.sum())}/{len(c)} converged")
             else:
-                parts.append(f"stopping criterion met on {int(c.sum())}/{len(c)} runs"
-                             + ("" if c.all() else " (the others hit the iteration cap or time budget)"))
+                parts.append(f"converged on {int(c.sum())}/{len(c)} runs" + _other_stops(g, c))
         parts += _preset_words(g, short)
+        if not short:
+            parts += _handle_words(g) + _reference_words(g)
         if parts:
             lines.append(f"{m}: " + (", " if short else "; ").join(parts))
     return lines
+
+
+#: What a method's ``handles`` column says, in words (the Handle column's meaning per row).
+HANDLE_TEXT = {"hard": "handles are hard constraints (Handle is 0 by construction)",
+               "overwritten": "handle vertices overwritten with their targets after averaging (Handle is 0 by "
+                              "construction; Handle pre: the error before the overwrite)",
+               "soft": "soft handles (a penalty term: Handle is what it reached)"}
+
+
+def _handle_words(g: pd.DataFrame) -> list[str]:
+    """The method's handle kind (``handles`` column, :data:`HANDLE_TEXT`), if stated."""
+    if "handles" not in g.columns or not g["handles"].notna().any():
+        return []
+    return ["/".join(HANDLE_TEXT.get(str(k), str(k)) for k in sorted({str(x) for x in g["handles"].dropna()}))]
+
+
+def _reference_words(g: pd.DataFrame) -> list[str]:
+    """Which minimiser Ref mean / Ref max / E gap measure against (``ref_energy_type``,
+    ``ref_own_energy`` columns): the method's own energy, or one it does not minimise."""
+    if "ref_energy_type" not in g.columns or not g["ref_energy_type"].notna().any():
+        return []
+    e = "/".join(sorted({str(x) for x in g["ref_energy_type"].dropna()}))
+    own = "ref_own_energy" in g.columns and g["ref_own_energy"].dropna().map(
+        lambda x: str(x).strip().lower() in ("true", "1", "1.0")).all()
+    return [f"Ref/E gap against the minimiser of its own energy ({e})" if own else
+            f"Ref/E gap: distance to the full-resolution {e} minimiser, an energy it does not minimise"]
+
+
+#: How a run that did not converge stopped (``status`` column), in words.
+STATUS_TEXT = {"stalled": "stalled (the stop rule fired with the gradient above gtol)",
+               "max_iter": "hit the iteration cap", "time_budget": "hit the time budget"}
+
+
+def _other_stops(g: pd.DataFrame, conv: pd.Series) -> str:
+    """``" (stalled on 3, hit the iteration cap on 1)"``: how the runs of ``g`` that did
+    not converge (``conv`` False) stopped, from the ``status`` column; empty when all
+    converged."""
+    if conv.all():
+        return ""
+    if "status" not in g.columns:
+        return " (the others stopped without meeting it)"
+    st = g.loc[conv.index[~conv.to_numpy()], "status"].fillna("unknown").astype(str).value_counts()
+    return " (" + ", ".join(f"{STATUS_TEXT.get(k, k)} on {v}" for k, v in st.items()) + ")"
 
 
 def _preset_words(g: pd.DataFrame, short: bool) -> list[str]:

@@ -40,7 +40,7 @@ def _prepare(V, F, handles, n_low, seed, topology):
 def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
     """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step."""
     crit = None
-    if protocol == "converged" and (etol is not None or gtol is not None):
+    if etol is not None or gtol is not None:  # paper protocol: gtol tells converged from stalled
         crit = make_criterion(etol, gtol)
     return {"tol": tol, "max_iter": max_iter, "protocol": protocol, "criterion": crit}
 
@@ -54,12 +54,14 @@ def _finish(V, targets, handles, prep, *, arap: dict, gradient, V0=None):
     t1 = time.perf_counter()
     Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=gradient)
     # handles are low-res vertices, but the transfer reproduces one only where its triangle
-    # P(v) moves rigidly (the frame is not the triangle's affine map): overwritten here
+    # P(v) moves rigidly (the frame is not the triangle's affine map): overwritten here,
+    # the residual kept for the handle error before the overwrite
+    resid = Vd[handles] - targets
     Vd[handles] = targets
     t2 = time.perf_counter()
     return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
                 "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None,
-                "energy": res.info.get("energy"), "gnorm": res.info.get("gnorm")}
+                "energy": res.info.get("energy"), "gnorm": res.info.get("gnorm"), "handle_resid": resid}
 
 
 def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None, tol: float = 1e-4,
@@ -82,13 +84,15 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     Vd : (n, 3) float64 deformed positions; info : dict with per-stage seconds
     (remesh_s, project_s, arap_s, transfer_s), n_low (actual low-res vertex count),
     iterations (low-res ARAP), converged, seed, first (first seed vertex), n_repair (seeds
-    added by the remesh's repairs), rounds (its check-and-repair rounds), n_flipped.
+    added by the remesh's repairs), rounds (its check-and-repair rounds), n_flipped,
+    handle_pre_pct (largest handle error before the handles are overwritten with their
+    targets, % of the bounding-box diagonal).
     """
     prep, info = _prepare(V, F, handles, n_low, seed, topology)
     V0 = None if V_init is None else V_init[prep["seeds"]]
     Vd, info2 = _finish(V, targets, handles, prep, arap=_arap_options(tol, max_iter, protocol, etol, gtol),
                         gradient=gradient, V0=V0)
-    info.update(info2)
+    info.update(info2, handle_pre_pct=_handle_pre_pct(info2.pop("handle_resid"), V))
     return Vd, info
 
 
@@ -251,7 +255,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     return_info : also return a dict of timings, seeds and per-sampling details;
         ``total_s`` (wall seconds) excludes ``compile_s``, the seconds this call spent
         compiling or loading numba's kernels (0.0 once a call or :meth:`SShaDe.warmup`
-        did it in this process).
+        did it in this process); ``handles`` is ``"overwritten"`` (the averaged result's
+        handle vertices are set to their targets) and ``handle_pre_pct`` the largest handle
+        error before that, % of the bounding-box diagonal.
 
     Returns
     -------
@@ -295,12 +301,22 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
     Vd = average(results)
     Vd[handles] = targets  # overwritten after averaging (the paper does not say; docs/differences.md)
+    pre = average([d.pop("handle_resid") for d in infos])  # the averaged result's residual before it
     if not return_info:
         return Vd
     info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
             "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
             "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
-    return Vd, {**info, **_summary(infos), "protocol": p["protocol"]}
+    return Vd, {**info, **_summary(infos), "protocol": p["protocol"], "handles": "overwritten",
+                "handle_pre_pct": _handle_pre_pct(pre, V)}
+
+
+def _handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
+    """Largest handle residual (h, 3) of the averaged result before the handles are
+    overwritten, in % of the bounding-box diagonal of ``V`` (n, 3)."""
+    if not len(resid):
+        return 0.0
+    return float(100.0 * np.linalg.norm(resid, axis=1).max() / np.linalg.norm(V.max(0) - V.min(0)))
 
 
 def _low_res_size(n: int, n_low) -> tuple[int, int]:
@@ -344,11 +360,15 @@ def _run_samplings(pool: SamplingPool, k: int, warm_start: bool) -> tuple[list, 
 
 def _summary(infos: list) -> dict:
     """Per-stage seconds and iterations summed over the samplings' ``infos``, mean
-    ``n_low``, ``converged`` (every sampling's low-res ARAP) and ``iterations_max``."""
+    ``n_low``, ``converged`` (every sampling's low-res ARAP), ``status`` (``"converged"``,
+    else the first other status among the samplings', e.g. ``"stalled"``) and
+    ``iterations_max``."""
     out = {k: float(np.sum([d[k] for d in infos])) for k in ("remesh_s", "project_s", "arap_s", "transfer_s",
                                                                  "iterations")}
     out["n_low"] = int(np.mean([d["n_low"] for d in infos]))
     out["converged"] = bool(all(d["converged"] for d in infos))
+    others = [str(d.get("status")) for d in infos if not d["converged"]]
+    out["status"] = others[0] if others else "converged"
     out["iterations_max"] = int(max(d["iterations"] for d in infos))
     return out
 

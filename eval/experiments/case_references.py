@@ -93,5 +93,6 @@ class CaseReferences:
         ref = self.refs[e]
         R = getattr(method, "rotations", None) if sr_alpha(e) is not None else None
         out = reference_metrics(c.V, Vd, c.F, ref, operators=self.ops[e], R0=R)
-        out.update(ref_energy_type=e, ref_status=ref.info.get("status"), ref_iterations=ref.info.get("iterations"))
+        out.update(ref_energy_type=e, ref_status=ref.info.get("status"), ref_iterations=ref.info.get("iterations"),
+                   ref_own_energy=bool(getattr(method, "energy", None) == e or sr_alpha(e) is not None))
         return out
