@@ -39,7 +39,10 @@ from .sdf import (
 
 __all__ = ["PRESETS", "ImplicitARAP", "deterministic", "fit_field", "patch_centres"]
 
-#: The two configurations. ``paper``: the reference code's (GPU-sized). ``cpu``: smaller
+#: The two configurations. ``paper``: the reference code's as of its last commit before the
+#: paper (fa0cb78, 2024-05-02; GPU-sized): its loss weights (ARAP 1000, each handle MSE
+#: 1000) and its cotangent weights (``reference_weights``: wrong edges, overwritten
+#: repeats; the later clean-up commit d6efd08 set the ARAP weight to 10). ``cpu``: smaller
 #: networks, fewer samples, steps and patches, zero-level centres drawn on the mesh and
 #: projected (instead of rejection sampling in the box) and at most 128 handle patches
 #: per step, so one FAUST case takes under 2 minutes on 2 CPU cores (measured times and
@@ -50,11 +53,11 @@ PRESETS = {
     "paper": dict(layers=8, width=256, skip=4, octaves=6, sdf_steps=10000, sdf_lr=1e-4, sdf_samples=16384,
                   deform_steps=1000, deform_lr=1e-3, surface_patches=1000, handle_patches=0, space_patches=1000,
                   patch_points=30, patch_radius=math.sqrt(1e-3), projections=5, level_threshold=0.01,
-                  centres="rejection", arap_weight=10.0, handle_weight=1000.0),
+                  centres="rejection", arap_weight=1000.0, handle_weight=1000.0, reference_weights=True),
     "cpu": dict(layers=4, width=128, skip=2, octaves=6, sdf_steps=1000, sdf_lr=5e-4, sdf_samples=2048,
                 deform_steps=250, deform_lr=1e-3, surface_patches=256, handle_patches=128, space_patches=128,
                 patch_points=16, patch_radius=math.sqrt(1e-3), projections=2, level_threshold=0.01,
-                centres="mesh", arap_weight=10.0, handle_weight=1000.0),
+                centres="mesh", arap_weight=10.0, handle_weight=1000.0, reference_weights=False),
 }
 _INTS = {"layers": 2, "width": 1, "skip": 0, "octaves": 0, "sdf_steps": 0, "sdf_samples": 1, "deform_steps": 0,
          "surface_patches": 0, "handle_patches": 0, "space_patches": 0, "patch_points": 4, "projections": 0}
@@ -69,7 +72,7 @@ def check_settings(preset: str, given: dict) -> dict:
     SShaDeError naming the parameter and its value: an unknown preset, an integer below
     its minimum (``layers`` 2, ``patch_points`` 4, ``skip`` a hidden layer or 0, ...), a
     float that is not finite and > 0 (``arap_weight`` may be 0), ``centres`` not
-    ``mesh`` / ``rejection``.
+    ``mesh`` / ``rejection``, ``reference_weights`` not a bool.
     """
     if preset not in PRESETS:
         raise SShaDeError(f"Implicit-ARAP: unknown preset {preset!r}; use one of {sorted(PRESETS)}")
@@ -89,6 +92,9 @@ def check_settings(preset: str, given: dict) -> dict:
         raise SShaDeError(f"Implicit-ARAP: skip must be 0 or in [1, layers - 2 = {s['layers'] - 2}], got {s['skip']}")
     if s["centres"] not in ("mesh", "rejection"):
         raise SShaDeError(f"Implicit-ARAP: centres must be 'mesh' or 'rejection', got {s['centres']!r}")
+    if not isinstance(s["reference_weights"], (bool, np.bool_)):
+        raise SShaDeError(f"Implicit-ARAP: reference_weights must be true or false, got {s['reference_weights']!r}")
+    s["reference_weights"] = bool(s["reference_weights"])
     return s
 
 
@@ -203,8 +209,9 @@ class ImplicitARAP:
     device : ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
     seed : int, seeds every draw (torch and numpy); the same seed on the same device
         and thread count gives bit-identical output.
-    reference_weights : bool, the reference code's cotangent weights (wrong edges,
-        overwritten repeats) instead of the correct ones (docs/methods.md).
+    reference_weights : bool or None, the reference code's cotangent weights (wrong edges,
+        overwritten repeats) instead of the correct ones (docs/methods.md); None: the
+        preset's (paper: True, cpu: False).
     layers, width, skip, octaves, sdf_steps, sdf_lr, sdf_samples, deform_steps,
     deform_lr, surface_patches, handle_patches, space_patches, patch_points,
     patch_radius, projections, level_threshold, centres, arap_weight, handle_weight :
@@ -226,7 +233,7 @@ class ImplicitARAP:
     #: vertex mapping is per vertex): the evaluator's cost model (eval/progress.py)
     cost_scale = "const"
 
-    def __init__(self, *, preset: str = "cpu", device: str = "auto", seed: int = 0, reference_weights: bool = False,
+    def __init__(self, *, preset: str = "cpu", device: str = "auto", seed: int = 0, reference_weights=None,
                  name: str = "Implicit-ARAP", layers=None, width=None, skip=None, octaves=None, sdf_steps=None,
                  sdf_lr=None, sdf_samples=None, deform_steps=None, deform_lr=None, surface_patches=None,
                  handle_patches=None, space_patches=None, patch_points=None, patch_radius=None, projections=None,
@@ -241,7 +248,7 @@ class ImplicitARAP:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise SShaDeError(f"Implicit-ARAP: seed must be an integer >= 0, got {seed!r}")
         self.preset, self.device, self.seed = str(preset), device, int(seed)
-        self.reference_weights = bool(reference_weights)
+        self.reference_weights = self.settings["reference_weights"]
         self.name = name
         self.info: dict = {}
 
@@ -274,7 +281,8 @@ class ImplicitARAP:
                                                reference_weights=self.reference_weights)
             t2 = time.perf_counter()
             out = apply_field(field, X, dev) / scale + centre
-        self.info = {"preset": self.preset, "device": dev, "seed": self.seed, "sdf_steps": s["sdf_steps"],
+        self.info = {"preset": self.preset, "device": dev, "seed": self.seed, "handles": "soft",
+                     "sdf_steps": s["sdf_steps"],
                      "deform_steps": s["deform_steps"], "sdf_fit_s": t1 - t0, "deform_s": t2 - t1,
                      "map_s": time.perf_counter() - t2, "sdf_loss": _tail(sdf_hist), "loss": _tail(hist),
                      "loss_first": hist[0] if hist else None, "patches_per_step": n_patches,
