@@ -8,18 +8,22 @@ Runs, each as its own ``python -m eval`` process (so a failure is reported and t
 others still run):
 
 1. DeFAUST (built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and figures, every
-   method on all 40 cases (and, where PyTorch is installed, Implicit-ARAP's cpu preset on
-   the per_pose subset; on FAUST on every case) (``dataset.baseline_cases=all``), the converged ARAP protocol
+   method on all 40 cases (and, where PyTorch is installed, Implicit-ARAP's cpu preset,
+   on FAUST too) (``dataset.baseline_cases=all``), the converged ARAP protocol
    and, on the per_pose subset, the distances to the cached references -> ``results/defaust``; the same methods
    on all 40 cases under the paper's protocol (§4.1 move rule, libigl, 1000-iteration
-   cap) -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
+   cap; ARAP-SR's energy stop; each stop reported converged or stalled) and its
+   references on the per_pose subset -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
    or a kill runs only the (case, method) pairs missing from the folder's result store
    (:mod:`eval.store`), while a finished folder reruns nothing unless the configuration
    changed; the
    time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
    ``results/convergence``;
 2. a sweep over SShaDe's n_low (1000, 3000, 6000) x k (1, 3, 5) on 2 DeFAUST cases ->
-   ``results/sweeps/defaust``;
+   ``results/sweeps/defaust``; ARAP-SR's alpha (:data:`SR_ALPHAS`) on the per_pose cases
+   -> ``results/sweeps/arap_sr_alpha``; where PyTorch is installed, Implicit-ARAP's cpu
+   preset over :data:`IA_GRID` on the per_pose cases -> ``results/sweeps/implicit_arap_defaust``
+   (with ``--faust``, also on FAUST -> ``results/sweeps/implicit_arap_faust``);
 3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
    ``results/pose_transfer``;
 4. with ``--tosca``: the TOSCA isometric experiment -> ``results/tosca``;
@@ -57,17 +61,23 @@ from sshade.clirun import ArgumentParser, run_command
 from .outdir import REPRODUCE_ENV
 from .report import find_chromium
 
+#: ARAP-SR's alpha values of the sweep step (Open3D's definition; 0.06 is about the
+#: stiffness of 0.01 without the valence, this package's earlier definition)
+SR_ALPHAS = "0.001,0.003,0.01,0.03,0.06,0.1"
+#: Implicit-ARAP's cpu-preset grid of the sweep steps: the ARAP weight (10: the preset's,
+#: the reference's weight at its HEAD; 1000: the reference's at the paper's time) and the
+#: deformation steps (a stiffer field needs more to reach its handles)
+IA_GRID = ("method.Implicit-ARAP.arap_weight=10,100,1000", "method.Implicit-ARAP.deform_steps=250,500")
+
 
 def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
     # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
     # per_pose subset, eval/subset.py); resume=true: a rerun after a crash continues (eval/store.py)
-    # Implicit-ARAP (the [neural] extra) where PyTorch is installed: on DeFAUST only on the
-    # per_pose subset (its cpu preset takes minutes per case; eval/subset.py method_cases)
+    # Implicit-ARAP (the [neural] extra, its cpu preset) where PyTorch is installed, on every case too
     neural = importlib.util.find_spec("torch") is not None
-    ia = (["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]", "method_cases={Implicit-ARAP: per_pose}"]
-          if neural else [])
+    ia = ["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]"] if neural else []
     # the deep references (a minute or more each at 169k vertices, three energies) on the
     # per_pose subset, the main job's baseline cases: the check that each converged
     # method lands on its minimiser, not a column over all 40 cases (eval/reference.py)
@@ -75,11 +85,22 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     # are each method's own (the main job's jobs=auto runs cases side by side)
     s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "reference.cases=per_pose",
                            "resume=true", "jobs=1", *ia, "out_dir=results/defaust", *a.extra]),
-         ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all", "reference.cases=none",
-                                 "resume=true", "jobs=1", "out_dir=results/defaust_paper"]),
+         ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all",
+                                 "reference.cases=per_pose", "resume=true", "jobs=1", "out_dir=results/defaust_paper"]),
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
-                         "hydra.sweep.dir=results/sweeps/defaust"])]
+                         "hydra.sweep.dir=results/sweeps/defaust"]),
+         # ARAP-SR's alpha (Open3D's definition) on the per_pose cases (the dataset's baseline_cases)
+         ("sweep_arap_sr_alpha", py + ["eval.sweep", "-m", "methods=[ARAP-SR]", "reference.cases=none", "jobs=1",
+                                       f"arap_sr.alpha={SR_ALPHAS}", "hydra.sweep.dir=results/sweeps/arap_sr_alpha"])]
+    if neural:  # Implicit-ARAP's cpu preset, its ARAP weight and step count, on DeFAUST's per_pose cases
+        s.append(("sweep_implicit_arap", py + ["eval.sweep", "-m", "methods=[Implicit-ARAP]", "reference.cases=none",
+                                               "jobs=1", *IA_GRID,
+                                               "hydra.sweep.dir=results/sweeps/implicit_arap_defaust"]))
+    if a.faust and neural:  # the same grid on the 8 FAUST cases
+        s.append(("sweep_implicit_arap_faust", py + ["eval.sweep", "-m", "dataset=faust", f"dataset.root={a.faust}",
+                                                     "methods=[Implicit-ARAP]", "reference.cases=none", "jobs=1",
+                                                     *IA_GRID, "hydra.sweep.dir=results/sweeps/implicit_arap_faust"]))
     if a.faust:
         s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true",
                                   "resume=true", "jobs=1", *ia[:1], "out_dir=results/faust"]))

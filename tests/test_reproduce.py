@@ -14,11 +14,16 @@ def _steps(capsys, *argv) -> dict[str, str]:
 
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
-    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "report"]
+    neural = ["sweep_implicit_arap"] if importlib.util.find_spec("torch") else []
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "sweep_arap_sr_alpha", *neural,
+                           "report"]
     assert steps["report"].startswith("-m eval.report --index results")  # results/index.html, last
     assert "arap.protocol=paper" in steps["defaust_paper"]
-    ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] method_cases={Implicit-ARAP: per_pose} "
-          if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on the per_pose subset
+    assert "reference.cases=per_pose" in steps["defaust_paper"]  # its E gap / Ref columns, as the converged table's
+    assert "arap_sr.alpha=0.001,0.003,0.01,0.03,0.06,0.1" in steps["sweep_arap_sr_alpha"]
+    assert "methods=[ARAP-SR]" in steps["sweep_arap_sr_alpha"]
+    ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] "
+          if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on every case too
     assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all reference.cases=per_pose "
                                 "resume=true jobs=1 "
                                 f"{ia}out_dir=results/defaust")  # every method on every case, resumable, one at a time
@@ -30,8 +35,10 @@ def test_default_runs_defaust_and_its_sweep(capsys):
 def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
                    "sshade.n_samplings=3")
-    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "faust", "pose_transfer", "tosca",
-                           "shapes", "scaling", "report"]
+    neural = importlib.util.find_spec("torch") is not None
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "sweep_arap_sr_alpha",
+                           *(["sweep_implicit_arap", "sweep_implicit_arap_faust"] if neural else []),
+                           "faust", "pose_transfer", "tosca", "shapes", "scaling", "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
@@ -42,7 +49,9 @@ def test_every_experiment_with_folders_and_figures(capsys):
     for name, cmd in steps.items():  # only this command writes results/: each step names its folder
         if name == "report":
             continue
-        want = "hydra.sweep.dir=results/sweeps/defaust" if name == "sweep" else f"out_dir=results/{name}"
+        sweeps = {"sweep": "defaust", "sweep_arap_sr_alpha": "arap_sr_alpha",
+                  "sweep_implicit_arap": "implicit_arap_defaust", "sweep_implicit_arap_faust": "implicit_arap_faust"}
+        want = f"hydra.sweep.dir=results/sweeps/{sweeps[name]}" if name in sweeps else f"out_dir=results/{name}"
         assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
     assert "scaling.meshes=null" in steps["scaling"]  # one mesh instead of the set

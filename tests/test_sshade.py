@@ -76,6 +76,17 @@ def test_handles_reach_targets_and_real_deformation_is_close_to_ground_truth(fau
     assert err < 0.5 * np.linalg.norm(V - V2, axis=1).mean()
     assert len(info["sampling_seeds"]) == 2 and info["workers"] == 2
     assert all(s["converged"] for s in info["samplings"])
+    # the handle error before the overwrite: what the transfer left, recorded apart
+    assert info["handles"] == "overwritten" and 0 < info["handle_pre_pct"] < 5
+    assert all("handle_resid" not in s for s in info["samplings"])  # no arrays in the stored info
+
+
+def test_handle_error_before_overwrite_is_zero_for_a_rigid_motion(faust):
+    """The transfer reproduces a rigid motion, so nothing is left for the overwrite."""
+    V, F, h = faust
+    R = Rotation.from_euler("xyz", [0.4, -0.7, 1.3]).as_matrix()
+    _, info = deform(V, F, h, V[h] @ R.T + 1.0, n_low=400, n_samplings=2, workers=1, return_info=True)
+    assert info["handle_pre_pct"] < 1e-8
 
 
 def test_averaging_is_deterministic_and_parallel_matches_serial(faust):

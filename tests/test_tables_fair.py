@@ -318,3 +318,25 @@ def test_a_preset_method_says_its_preset_and_steps():
     assert lines == ["Implicit-ARAP: cpu preset: a fixed 1000 SDF-fit steps + 250 deformation steps, no stopping "
                      "criterion; its Time includes the SDF fit (mean 40.5 s)"]
     assert stop_lines(pd.DataFrame(rows), short=True) == ["Implicit-ARAP: cpu preset"]
+
+
+def test_stop_lines_count_stalled_runs_and_say_what_handle_and_ref_columns_mean():
+    """A paper-protocol method with stalled and capped runs: the line counts each status,
+    not "converged"; each method says how its handles are held and which minimiser its
+    Ref / E gap columns measure against (its own energy or one it does not minimise)."""
+    import pandas as pd
+    base = {"volume_err_pct": 1.0, "time_s": 1.0, "error": "", "protocol": "paper", "iterations": 10}
+    rows = [dict(base, case="a", method="ARAP", converged=True, status="converged", handles="hard",
+                 ref_energy_type="spokes", ref_own_energy=True),
+            dict(base, case="b", method="ARAP", converged=False, status="stalled", handles="hard",
+                 ref_energy_type="spokes", ref_own_energy=True),
+            dict(base, case="c", method="ARAP", converged=False, status="max_iter", handles="hard",
+                 ref_energy_type="spokes", ref_own_energy=True),
+            dict(base, case="a", method="SShaDe", converged=True, status="converged", handles="overwritten",
+                 ref_energy_type="spokes_and_rims", ref_own_energy=False)]
+    arap, ours = stop_lines(pd.DataFrame(rows))
+    assert "converged on 1/3 runs (stalled (the stop rule fired with the gradient above gtol) on 1, " \
+           "hit the iteration cap on 1)" in arap
+    assert "handles are hard constraints" in arap and "against the minimiser of its own energy (spokes)" in arap
+    assert "converged on 1/1 runs" in ours and "overwritten with their targets" in ours
+    assert "distance to the full-resolution spokes_and_rims minimiser, an energy it does not minimise" in ours

@@ -438,7 +438,7 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
                                   if m.name not in s.own):
         title += f"; full-resolution baselines on {s.base_rule}"
     title += "".join(f"; {n} on {rule}" for n, (sel, rule) in s.own.items() if sel is not None)
-    title += _side_by_side(rows)
+    title += _side_by_side(rows) + _presets(rows)
     paths = write_tables(df, s.out_dir, title=title)
     paths.update(write_breakdown(df, s.out_dir, figure=figures_options(cfg)[0]))
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
@@ -452,6 +452,17 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {s.out_dir}")
     return {"out_dir": s.out_dir, "paths": paths, "n_cases": len(s.cases), "n_errors": n_err, "summary": summ}
+
+
+def _presets(rows) -> str:
+    """The title's words naming each method's preset (``preset`` column, e.g.
+    Implicit-ARAP's), e.g. ``"; Implicit-ARAP: cpu preset"``: its row is that
+    configuration, not the method's paper configuration."""
+    got: dict[str, set] = {}
+    for r in rows:
+        if isinstance(r.get("preset"), str) and r["preset"]:
+            got.setdefault(str(r["method"]), set()).add(r["preset"])
+    return "".join(f"; {m}: {'/'.join(sorted(p))} preset" for m, p in sorted(got.items()))
 
 
 def _side_by_side(rows) -> str:
