@@ -160,5 +160,6 @@ class WeirdInfo(_Base):
                      "big_int": 2 ** 70, "nested": {"a": {"b": [1, 2]}}, 3: "int key", ("t", 1): "tuple key",
                      "bad\nkey": 1.5, "n_cases": 99, "n_failed": 7, "method": "Other", "error": "not an error",
                      "iterations": "many", "text": "line one\nline two | cell", "ok_value": 2.5,
-                     "list_nan": [1.0, float("nan")], "obj": object()}
+                     "list_nan": [1.0, float("nan")], "obj": object(), "status": 3, "handles": 7,
+                     "handle_pre_pct": "small"}
         return self._moved(V, handles, targets)

@@ -313,6 +313,8 @@ def test_weird_info_does_not_break_cases_or_tables(tmp_path, faust_root):
     assert w["nan_value"] == "" and w["inf_value"] == "" and w["huge_int"] == ""
     assert float(w["big_int"]) == 2.0 ** 70 and json.loads(w["list_nan"]) == [1.0, None]
     assert w["info_iterations"] == "many" and "nested" not in cases.columns and "obj" not in cases.columns
+    # the keys the stop lines read: kept under their name only with the expected type
+    assert float(w["info_status"]) == 3 and w["info_handle_pre_pct"] == "small" and float(w["info_handles"]) == 7
     assert (table["n_cases"] == 1).all() and (table["n_failed"] == 0).all()
     rows = [ln for ln in md.splitlines() if ln.startswith("|")]
     assert len({ln.count("|") for ln in rows}) == 1 and len(rows) == 4

@@ -29,6 +29,9 @@ _TYPED_INFO = {
     "iterations": lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
     "converged": lambda v: v is None or isinstance(v, (bool, int, float)),
     "protocol": lambda v: v is None or isinstance(v, str),
+    "status": lambda v: v is None or isinstance(v, str),
+    "handles": lambda v: v is None or isinstance(v, str),
+    "handle_pre_pct": lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
 }
 #: Column names of the summary tables an info key must not take (eval.tables.summarize).
 _RESERVED = ("n_cases", "n_failed", "warnings", "error", "method", "case")
