@@ -32,6 +32,7 @@ HELP = {
     "-m examples.twisted_bar": ["usage: python -m examples.twisted_bar", "outputs/twisted_bar"],
     "benchmarks/arap_iteration.py": ["usage:", "--mesh"],
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
+    "benchmarks/implicit_arap_weights.py": ["usage:", "trials"],
     "benchmarks/remesh_speed.py": ["usage:", "--mesh"],
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
     "-m eval.experiments.scaling_probe": ["usage:", "handles_npz"],
