@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from sshade.arap import DEFAULT_CRITERION, PROTOCOLS, ArapResult, make_criterion, rigid_fit
+from sshade.arap import DEFAULT_CRITERION, PROTOCOLS, ArapResult, bbox_diag, make_criterion, rigid_fit
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
@@ -97,7 +97,7 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
         raise SShaDeError(f"ARAP-SR: stop must be one of {PAPER_STOPS}, got {stop!r}")
     crit = DEFAULT_CRITERION if criterion is None else criterion
     V = np.ascontiguousarray(V, np.float64)
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    diag = bbox_diag(V)
     R0, t0_ = rigid_fit(V[handles], targets)
     info = {"alpha": alpha, "alpha_scaling": alpha_scaling, "stop": stop}
     if float(np.abs(V[handles] @ R0.T + t0_ - targets).max()) <= 1e-12 * diag:

@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from .arap import PROTOCOLS, arap_deform, make_criterion
+from .arap import PROTOCOLS, arap_deform, bbox_diag, make_criterion
 from .components import deform_components
 from .errors import SShaDeError
 from .lrf import GRADIENTS, transfer
@@ -316,7 +316,7 @@ def _handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
     overwritten, in % of the bounding-box diagonal of ``V`` (n, 3)."""
     if not len(resid):
         return 0.0
-    return float(100.0 * np.linalg.norm(resid, axis=1).max() / np.linalg.norm(V.max(0) - V.min(0)))
+    return float(100.0 * np.linalg.norm(resid, axis=1).max() / bbox_diag(V))
 
 
 def _low_res_size(n: int, n_low) -> tuple[int, int]:
