@@ -45,7 +45,8 @@ __all__ = ["PRESETS", "ImplicitARAP", "deterministic", "fit_field", "patch_centr
 #: repeats; the later clean-up commit d6efd08 set the ARAP weight to 10). ``cpu``: smaller
 #: networks, fewer samples, steps and patches, zero-level centres drawn on the mesh and
 #: projected (instead of rejection sampling in the box) and at most 128 handle patches
-#: per step, so one FAUST case takes under 2 minutes on 2 CPU cores (measured times and
+#: per step, so one case takes under 2 minutes on 2 CPU cores; its ARAP weight and step
+#: count were chosen by the measured grid in results/sweeps/implicit_arap_* (times and
 #: errors of both presets, and what the cpu preset loses: docs/methods.md).
 #: ``handle_patches`` 0 = every handle is a patch centre at every step (the reference);
 #: n > 0 = a random n of them per step when there are more.
@@ -55,7 +56,7 @@ PRESETS = {
                   patch_points=30, patch_radius=math.sqrt(1e-3), projections=5, level_threshold=0.01,
                   centres="rejection", arap_weight=1000.0, handle_weight=1000.0, reference_weights=True),
     "cpu": dict(layers=4, width=128, skip=2, octaves=6, sdf_steps=1000, sdf_lr=5e-4, sdf_samples=2048,
-                deform_steps=250, deform_lr=1e-3, surface_patches=256, handle_patches=128, space_patches=128,
+                deform_steps=500, deform_lr=1e-3, surface_patches=256, handle_patches=128, space_patches=128,
                 patch_points=16, patch_radius=math.sqrt(1e-3), projections=2, level_threshold=0.01,
                 centres="mesh", arap_weight=10.0, handle_weight=1000.0, reference_weights=False),
 }
