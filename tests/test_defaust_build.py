@@ -16,9 +16,10 @@ import trimesh
 import defaust.build as build_mod
 from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
+from defaust.dataset import load_handles
 from defaust.handles import snap_handles
 from defaust.store import sha256_file
-from eval.datasets.defaust import load_defaust, load_handles
+from eval.datasets.defaust import load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import validate_mesh

@@ -9,8 +9,9 @@ import pytest
 
 from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
+from defaust.dataset import load_handles
 from defaust.faust_source import FAUST_LANDMARKS, discover_faust, faust_subjects
-from eval.datasets.defaust import load_defaust, load_handles
+from eval.datasets.defaust import load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 

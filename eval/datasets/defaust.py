@@ -1,13 +1,6 @@
 """The ``defaust`` dataset: a built DeFAUST folder (``python -m defaust``, :mod:`defaust`)
-read as deformation cases.
-
-Each case deforms a subject's rest mesh (low or high resolution) with the handles of one
-target pose. The handles are stored as positions; here they are snapped to the nearest
-vertices of the mesh used (:func:`defaust.handles.snap_handles`) and their targets are
-moved with them: ``targets = target_positions + (V[handles] - rest_positions)`` (for a
-static handle simply ``V[handles]``), so a static handle stays exactly where its vertex
-is and a dynamic one gets the stored displacement (the snap moves a position by well under a millimetre on the high-res
-mesh; at low resolution it is exact).
+read as deformation cases through the dataset's public reader :mod:`defaust.dataset`
+(which says how the stored handles become vertex handles and targets).
 
 Example
 -------
@@ -27,222 +20,53 @@ and an estimate of the time left (:class:`BuildProgress`).
 """
 from __future__ import annotations
 
-import json
 import logging
 import re
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from pathlib import Path
-
-import numpy as np
 
 from defaust.anny_poses import DEFAULT_TARGETS
 from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
-from defaust.handles import HandleSet, handles_from_arrays, snap_handles
-from defaust.manifest import FORMAT, MANIFEST, check_out_folder
-from defaust.store import read_npz, sha256_file
+from defaust.dataset import Case, load, read_manifest
+from defaust.manifest import check_out_folder
 from sshade.errors import SShaDeError
 from sshade.jobs import pool_size
-from sshade.mesh.io import read_mesh
 
 from ..paths import abs_path
 from ..plan import BUILD_S_PER_SUBJECT, duration_words
 from .case import DeformationCase
 from .registry import register_dataset
 
-__all__ = ["DefaustCase", "load_defaust", "summarise_dropped", "load_handles", "read_manifest",
+__all__ = ["DefaustCase", "load_defaust", "summarise_dropped",
            "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root", "build_outlook", "BuildProgress"]
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
-class DefaustCase(DeformationCase):
-    """One deformation case of a DeFAUST build (fields of :class:`DeformationCase`, plus
-    the ones below).
-
-    Attributes
-    ----------
-    name : ``"s{subject:02d}_p{pose:02d}"``; V in metres at the requested resolution;
-    handles snapped to it; V_gt: anny and synthetic sources at either resolution
-    (skinning applied to that mesh), FAUST at low resolution (the target registration),
-    None for FAUST at high resolution; group indexes ``landmark_names``.
-    landmark_names : tuple of str.
-    resolution : ``"high"`` or ``"low"``; source : ``"anny"``, ``"faust"`` or ``"synthetic"``.
-    pose_name : str, e.g. ``"arms_raised"`` (anny, synthetic) or ``"faust_pose_3"``.
-    snap_distance : (h,) float64 distance of each kept handle's stored position to its
-        vertex. n_dropped : int, handles dropped because two snapped to one vertex.
-    rest_path : Path of the rest mesh file.
-    seed : int or None, the seed of this case's handle draw (the manifest item's
-        ``handle_seed``, :func:`defaust.build.handle_seed`); None for an old manifest.
-    """
-
-    landmark_names: tuple = ()
-    resolution: str = "high"
-    source: str = ""
-    pose_name: str = ""
-    snap_distance: np.ndarray = field(repr=False, default=None)
-    n_dropped: int = 0
-    rest_path: Path | None = None
-    seed: int | None = None
-
-
-def read_manifest(root) -> dict:
-    """The ``manifest.json`` of a DeFAUST build.
-
-    Raises
-    ------
-    SShaDeError if ``root`` is not a folder or has no readable DeFAUST manifest.
-
-    Examples
-    --------
-    Example::
-
-        m = read_manifest("/tmp/defaust_faust")
-        sorted(m["subjects"])
-        # -> ['subject_00', 'subject_01']
-    """
-    root = Path(root).expanduser()
-    if not root.is_dir():
-        raise SShaDeError(f"DeFAUST folder not found: {root}")
-    p = root / MANIFEST
-    if not p.is_file():
-        raise SShaDeError(f"{root} has no {MANIFEST}; build it with `python -m defaust out={root}`")
-    try:
-        m = json.loads(p.read_text())
-    except (ValueError, OSError) as e:
-        raise SShaDeError(f"{p}: unreadable manifest ({e}); rebuild with `python -m defaust out={root}`") from None
-    if not isinstance(m, dict) or m.get("format") != FORMAT:
-        raise SShaDeError(f"{p}: not a DeFAUST manifest (format {m.get('format') if isinstance(m, dict) else None!r},"
-                          f" expected {FORMAT!r})")
-    return m
-
-
-def load_handles(path) -> HandleSet:
-    """Read a ``pose_YY_handles.npz`` file.
-
-    Returns
-    -------
-    HandleSet (positions; snap them with :func:`defaust.handles.snap_handles`).
-
-    Raises
-    ------
-    SShaDeError on a missing, unreadable or inconsistent file.
-
-    Examples
-    --------
-    Example::
-
-        H = load_handles("/tmp/defaust_faust/subject_00/pose_01_handles.npz")
-        H.rest.shape == H.target.shape
-        # -> True
-    """
-    return handles_from_arrays(read_npz(path), name=str(path))
-
-
-def _check(root: Path, rel: str, files: dict, verify: bool) -> Path:
-    p = root / rel
-    if not p.is_file():
-        raise SShaDeError(f"{p} is missing; resume the build with `python -m defaust ... out={root}`")
-    if verify:
-        want = files.get(rel)
-        if want is None:
-            raise SShaDeError(f"{p} is not listed in {root / MANIFEST}")
-        if sha256_file(p) != want:
-            raise SShaDeError(f"{p}: checksum differs from {MANIFEST} (corrupted or modified); "
-                              f"rebuild it by resuming the build with `python -m defaust ... out={root}`")
-    return p
+class DefaustCase(DeformationCase, Case):
+    """One deformation case of a DeFAUST build: the fields of :class:`defaust.dataset.Case`
+    (shapes and units there; the same names as :class:`DeformationCase`'s and the
+    DeFAUST-only ones after them), as the evaluator's :class:`DeformationCase`."""
 
 
 def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
                  verify: bool = True, tol: float | None = None) -> list[DefaustCase]:
-    """Load the deformation cases of a DeFAUST build.
+    """The cases of a DeFAUST build as the evaluator's :class:`DefaustCase`: read by the
+    dataset's public reader :func:`defaust.dataset.load` (parameters, order, errors:
+    there), plus one log line counting the handles dropped by the snap
+    (:func:`summarise_dropped`).
 
-    Parameters
-    ----------
-    root : str or Path, the build folder (``out=`` of ``python -m defaust``).
-    resolution : ``"high"`` (LS3 Loop + isotropic remesh, the paper's setting) or
-        ``"low"`` (FAUST registration / synthetic base mesh).
-    subjects : int, list of int or None, keep only these subjects.
-    limit : int or None, keep the first ``limit`` cases in (subject, pose) order.
-    verify : bool, check every file read against the manifest's sha256.
-    tol : float or None, snapping tolerance in metres (see
-        :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal).
-
-    Returns
-    -------
-    list of :class:`DefaustCase`, sorted by (subject, pose); the rest mesh of a subject
-    is read once and shared by its cases (do not modify ``V``/``F`` in place).
-
-    Raises
-    ------
-    SShaDeError
-        Missing folder or manifest, bad ``resolution``/``limit``, unknown subject, a
-        missing or corrupted file (checksum mismatch), a handle off the surface.
-
-    Examples
-    --------
     Example::
 
         cases = load_defaust("/tmp/defaust_syn", resolution="high", limit=2)
         [c.name for c in cases]
         # -> ['s00_p01', 's00_p02']
     """
-    if resolution not in ("high", "low"):
-        raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
-    if limit is not None:
-        limit = int(limit)
-        if limit < 1:
-            raise SShaDeError(f"limit must be a positive integer or None, got {limit}")
-    root = Path(root).expanduser()
-    m = read_manifest(root)
-    files = m.get("files", {})
-    items = m.get("items", {})
-    subj = m.get("subjects", {})
-    plan = sorted((int(rec["subject"]), int(p)) for rec in subj.values() for p in rec["target_poses"])
-    if subjects is not None:
-        want = {int(subjects)} if isinstance(subjects, (int, np.integer)) else {int(s) for s in subjects}
-        have = {s for s, _ in plan}
-        missing = sorted(want - have)
-        if missing:
-            raise SShaDeError(f"subjects {missing} are not in {root} (it has {sorted(have)})")
-        plan = [(s, p) for s, p in plan if s in want]
-    if limit is not None:
-        plan = plan[:limit]
-    rest: dict[int, tuple] = {}
-    cases = []
-    for s, p in plan:
-        sdir = f"subject_{s:02d}"
-        if s not in rest:
-            rp = _check(root, f"{sdir}/rest_{resolution}.ply", files, verify)
-            V, F = read_mesh(rp)
-            rest[s] = (V, F, rp)
-        V, F, rp = rest[s]
-        hp = _check(root, f"{sdir}/pose_{p:02d}_handles.npz", files, verify)
-        H = load_handles(hp)
-        snap = snap_handles(V, H.rest, tol=tol, name=str(hp))
-        k = snap.keep
-        idx = snap.index
-        st = H.static[k]
-        T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
-        T[st] = V[idx[st]]                        # static handles stay exactly in place
-        gt_rel = f"{sdir}/pose_{p:02d}_{resolution}.ply"
-        V_gt = None
-        if gt_rel in files or (root / gt_rel).is_file():
-            Vg, Fg = read_mesh(_check(root, gt_rel, files, verify), validate=False)
-            if len(Vg) != len(V) or not np.array_equal(Fg, F):
-                raise SShaDeError(f"{root / gt_rel}: ground truth does not share the rest mesh's faces")
-            V_gt = Vg
-        item = items.get(f"{sdir}/pose_{p:02d}", {})
-        cases.append(DefaustCase(
-            name=f"s{s:02d}_p{p:02d}", subject=s, pose=p, V=V, F=F, handles=idx, targets=np.ascontiguousarray(T),
-            static=st.copy(), V_gt=V_gt, group=H.group[k].copy(), landmark_names=H.landmark_names,
-            resolution=resolution, source=str(m.get("source", "")), pose_name=str(item.get("pose_name", "")),
-            snap_distance=snap.distance[k], n_dropped=snap.n_dropped, rest_path=rp,
-            seed=None if item.get("handle_seed") is None else int(item["handle_seed"])))
-    if not cases:
-        raise SShaDeError(f"no DeFAUST case in {root}")
+    read = load(root, resolution=resolution, subjects=subjects, limit=limit, verify=verify, tol=tol)
+    cases = [DefaustCase(**{f.name: getattr(c, f.name) for f in fields(c)}) for c in read]
     line = summarise_dropped([c.n_dropped for c in cases], [len(c.handles) + c.n_dropped for c in cases],
                              resolution=resolution)
     if line:

