@@ -50,6 +50,7 @@ from sshade.mesh.io import read_mesh
 
 from . import highres
 from .config import BuildConfig
+from .croissant import write_croissant
 from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
 from .manifest import (
     BUILDER_VERSION,
@@ -235,6 +236,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
         log.info("%d item(s) of an earlier build are not part of this one and are left out of the manifest "
                  "(their files are kept): %s", len(stale), ", ".join(stale[:5]) + (" ..." if len(stale) > 5 else ""))
     write_manifest(out, manifest)
+    write_croissant(out)
     report.manifest = json.loads((out / MANIFEST).read_text())
     return report
 

@@ -32,6 +32,7 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
+from .croissant import CROISSANT, croissant_manifest_sha256
 from .handles import HandleSet, handles_from_arrays, snap_handles
 from .manifest import FORMAT, MANIFEST
 from .store import read_npz, sha256_file
@@ -245,7 +246,8 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
 
 def verify(root) -> list[str]:
     """Check a DeFAUST copy against its manifest: every listed file present with its
-    sha256, and no other file beside them (``manifest.json`` aside).
+    sha256, no other file beside them (``manifest.json`` and ``croissant.json`` aside), and
+    a ``croissant.json``, when there is one, naming this manifest's sha256.
 
     Parameters
     ----------
@@ -254,8 +256,8 @@ def verify(root) -> list[str]:
     Returns
     -------
     list of str, one line per problem (``"<path>: missing"``, ``"<path>: checksum
-    differs from manifest.json"``, ``"<path>: not in manifest.json"``, or the manifest's
-    own problem); empty for a good copy.
+    differs from manifest.json"``, ``"<path>: not in manifest.json"``, ``"<path>: does not
+    describe this manifest.json ..."``, or the manifest's own problem); empty for a good copy.
 
     Example::
 
@@ -277,7 +279,10 @@ def verify(root) -> list[str]:
             problems.append(f"{p}: missing")
         elif sha256_file(p) != files[rel]:
             problems.append(f"{p}: checksum differs from {MANIFEST}")
-    listed = {str(Path(rel)) for rel in files} | {MANIFEST}
+    named = croissant_manifest_sha256(root)
+    if (root / CROISSANT).is_file() and named != sha256_file(root / MANIFEST):
+        problems.append(f"{root / CROISSANT}: does not describe this {MANIFEST} (its sha256 differs)")
+    listed = {str(Path(rel)) for rel in files} | {MANIFEST, CROISSANT}
     for dirpath, _, names in os.walk(root):
         for n in names:
             rel = str((Path(dirpath) / n).relative_to(root))
