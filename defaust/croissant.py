@@ -68,7 +68,8 @@ def _file_sets() -> list[dict]:
                "each subject's rest mesh, rest_high.ply (the paper's high resolution) and rest_low.ply; "
                "binary PLY, vertices in metres"),
             fs("pose-meshes", "application/x-ply", "subject_*/pose_*_*.ply",
-               "the true target poses, pose_YY_high.ply and pose_YY_low.ply, on the rest meshes' faces"),
+               "the true target poses on the rest meshes' faces: pose_YY_low.ply, and pose_YY_high.ply where "
+               "the source gives a high-resolution ground truth (anny, synthetic; not faust)"),
             fs("handles", "application/x-npz", "subject_*/pose_*_handles.npz",
                "each case's handles as stored positions (rest and target, metres), static flags and landmark "
                "groups (docs/defaust.md)")]
@@ -103,7 +104,8 @@ def croissant_metadata(manifest: dict, *, manifest_sha256: str) -> dict:
         "name": f"DeFAUST-{src}" if src else "DeFAUST",
         "description": (f"DeFAUST (SShaDe paper, appendix): handle-guided deformation cases built from "
                         f"{_SOURCES.get(src, src)}; {n_sub} subject(s), {n_cases} case(s), each a rest mesh at "
-                        "two resolutions, handles with their targets and the true target pose. Built by "
+                        "two resolutions, handles with their targets and the true target pose (for a FAUST "
+                        "build at low resolution only). Built by "
                         "`python -m defaust`; the file format: docs/defaust.md of the SShaDe harness."),
         "license": LICENCES.get(src, "unknown"),
         "citeAs": _CITE,
