@@ -48,9 +48,9 @@ energy never increases):
   modes are the smoothed rotations, spreading by one ring per sweep). A candidate
   ``(U_a, R_a)`` is accepted only if ``E(U_a, sweep(U_a, R_a))`` is below the energy
   after the plain step, else the plain step is taken; the history is kept (``reset_on_reject``:
-  forget it, the scheme before issue 21, which rejected about every other candidate at
-  169k vertices). L-BFGS on ``U`` with one sweep per trial point (ARAP's default) was
-  measured as slow as no acceleration (issue 21: the rotations, not ``U``, lag), so it is
+  forget it, an older scheme, which rejected about every other candidate at 169k
+  vertices). L-BFGS on ``U`` with one sweep per trial point (ARAP's default) was
+  measured as slow as no acceleration (the rotations, not ``U``, lag), so it is
   not offered.
 
 What "converged" certifies (:class:`sshade.arap.Criterion`, thresholds ``etol`` /
@@ -351,7 +351,7 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling:
         ``alpha_scaling`` are used).
     linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
     reset_on_reject : bool, forget Anderson's history after a rejected candidate (the
-        scheme before issue 21; default False: keep it).
+        older scheme; default False: keep it).
 
     Returns
     -------

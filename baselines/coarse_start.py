@@ -1,5 +1,5 @@
 """A coarse-to-fine start for the converged protocol of the full-resolution baselines
-(ARAP-SR, issue 21; ARAP and Elastic, issue 23): solve the same energy on a
+(ARAP-SR, ARAP and Elastic): solve the same energy on a
 low-resolution remesh (SShaDe's, :func:`sshade.remesh.remesh`, the handles kept as
 vertices), give every full-resolution vertex the rotation of its low-res Voronoi region,
 and start the full-resolution solve from those rotations and their global step

@@ -1,5 +1,5 @@
 """ARAP and Elastic (converged protocol) from the rigid fit of the handles against the
-coarse start (issue 23; baselines/coarse_start.py) on DeFAUST cases: iterations, seconds
+coarse start (baselines/coarse_start.py) on DeFAUST cases: iterations, seconds
 (interleaved: rigid then coarse per case and method), energy, and optionally the distance
 of each result to a deep solve continued from it (eval.reference) and between the two.
 

@@ -2,7 +2,7 @@
 (baselines/arap_sr_solver.py): Jacobi local step (all rotations at once from the previous
 ones), Gauss-Seidel over a vertex colouring, Gauss-Seidel with Anderson on the joint
 (U, R) residual (the default) and with the history reset after every rejected candidate
-(the scheme before issue 21), each to the default criterion.
+(an older scheme), each to the default criterion.
 
     python benchmarks/arap_sr_local.py [alpha]     # prints one row per case and scheme
 

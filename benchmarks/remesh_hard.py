@@ -1,4 +1,4 @@
-"""Check-and-repair rounds of the remesher on hard meshes (issue 24): LS3 Loop
+"""Check-and-repair rounds of the remesher on hard meshes: LS3 Loop
 subdivisions of TOSCA models (thin fingers and tails, stretched triangles) against the
 clean 200k armadillo of ``benchmarks/remesh_speed.py``.
 

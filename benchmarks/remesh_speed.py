@@ -1,4 +1,4 @@
-"""Speed of one SShaDe sampling's remesh + projection (issue 13) and of the once-per-call
+"""Speed of one SShaDe sampling's remesh + projection and of the once-per-call
 validation/topology pass, on a ~200k-vertex mesh.
 
     python benchmarks/remesh_speed.py [--cache data/benchmarks/armadillo_200k.npz]
@@ -148,7 +148,7 @@ def main(argv=None):
               f"+ projection {b['projection']:.3f}")
         print(f"{'':>17} {len(rm.seeds)} low-res vertices ({rm.n_repair} repair), {len(rm.F)} faces, "
               f"{rm.iterations} check rounds; digest seeds+F {digest(rm.seeds, rm.F)}, tri {digest(P.tri)}")
-    print(f"mean over seeds of the best totals: {np.mean(tot):.3f} s (issue 13 target: 0.4 s at 200k); "
+    print(f"mean over seeds of the best totals: {np.mean(tot):.3f} s (target: 0.4 s at 200k); "
           "per stage: best of the repeats")
 
 

@@ -135,7 +135,7 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
         variation 0.123, 1st/99th percentile ratio 0.574) and minimum angles (1st
         percentile 35.3 deg, 0.14% of the faces below 20 deg); the largest distance of a
         subdivided vertex to the result goes from 1.97 to 3.47 mm (mean 0.112 -> 0.116
-        mm, about one edge length at most); issue 23.
+        mm, about one edge length at most).
 
     Returns
     -------

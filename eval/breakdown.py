@@ -1,4 +1,4 @@
-"""Breakdowns of an evaluator run next to its ``table.md`` (issue 21): per target pose
+"""Breakdowns of an evaluator run next to its ``table.md``: per target pose
 and per subject, and a paired comparison of SShaDe with Elastic.
 
 Input: the per-case rows of ``cases.csv`` (columns ``case``, ``subject``, ``pose``,

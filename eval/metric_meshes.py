@@ -1,5 +1,5 @@
 """What the metrics of :mod:`eval.metrics` need of a mesh that every result is compared
-with, computed once (issue 23): :class:`RestMesh` (the rest side of
+with, computed once: :class:`RestMesh` (the rest side of
 :func:`eval.metrics.deformation_metrics`) and :class:`TargetMesh` (the ground-truth side
 of :func:`eval.metrics.ground_truth_metrics`), and the geometric kernels both use.
 

@@ -1,4 +1,4 @@
-"""The evaluator's plan, up front (issue 23): what a run is about to do, and about how long.
+"""The evaluator's plan, up front: what a run is about to do, and about how long.
 
 Before any work the main job (:mod:`eval.experiments.cases`, through
 :mod:`eval.experiments.cases_plan`) logs one ``plan:`` line, e.g. ::
@@ -35,7 +35,7 @@ __all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_
 
 #: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
 #: poses) on a 2-core machine, two subjects at once: 59-90 s (builder version 2; 10
-#: subjects in 344 s with 2 workers, issue 23). A parallel build takes rounds of
+#: subjects in 344 s with 2 workers). A parallel build takes rounds of
 #: ``workers`` subjects.
 BUILD_S_PER_SUBJECT = 69.0
 #: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the

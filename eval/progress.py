@@ -1,4 +1,4 @@
-"""The evaluator's progress estimate weighted by each method's expected cost (issue 21).
+"""The evaluator's progress estimate weighted by each method's expected cost.
 
 Counting (case, method) runs makes the estimate jump: on DeFAUST a full-resolution
 baseline takes minutes per case, SShaDe seconds, so after a few SShaDe runs the bar
@@ -48,14 +48,15 @@ PAPER_PRIORS = {"ARAP-SR": 2.2e-5}
 GUESSED_PRIORS: tuple[str, ...] = ()
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
 #: reading a cached reference, the store, cases.csv, the report's 3D views): about 2.5 s per
-#: pair at 169k vertices. Before issue 23 it was ~7 s (the SShaDe pairs of
-#: ``results/defaust/eval.log`` finish ~9 s apart with ``time_s`` ~2 s), mostly the
-#: ground-truth Hausdorff and Chamfer (four point-to-surface queries, now two, against a
-#: tree built once per case) and the rest-mesh quantities (now once per rest mesh,
-#: :mod:`eval.metric_meshes`). Measured interleaved, nice 19 on the 2-core machine while
-#: another benchmark ran (pairs' log spacing minus ``time_s``, DeFAUST s00_p02..p04, 169k
-#: vertices, SShaDe): 10.3-11.5 s per pair before, 3.5-3.9 s after (x0.34); x0.34 of the
-#: unloaded 7 s is 2.4 s: 1.5e-5 s/vertex.
+#: pair at 169k vertices, mostly the ground-truth Hausdorff and Chamfer (two
+#: point-to-surface queries against a tree built once per case) and the rest-mesh
+#: quantities (once per rest mesh, :mod:`eval.metric_meshes`). The committed
+#: ``results/defaust/eval.log`` was written by an earlier version of these metrics (four
+#: queries, rest-mesh quantities per pair): its SShaDe pairs finish ~9 s apart with
+#: ``time_s`` ~2 s, ~7 s of overhead. Measured interleaved, nice 19 on the 2-core machine
+#: while another benchmark ran (pairs' log spacing minus ``time_s``, DeFAUST s00_p02..p04,
+#: 169k vertices, SShaDe): 10.3-11.5 s per pair with the earlier metrics, 3.5-3.9 s with
+#: the current ones (x0.34); x0.34 of the unloaded 7 s is 2.4 s: 1.5e-5 s/vertex.
 OVERHEAD_S_PER_VERTEX = 1.5e-5
 
 

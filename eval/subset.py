@@ -1,4 +1,4 @@
-"""Which cases the full-resolution baselines run on (``dataset.baseline_cases``; issue 21).
+"""Which cases the full-resolution baselines run on (``dataset.baseline_cases``).
 
 The baselines (ARAP, Elastic, ARAP-SR at 150k-200k vertices) take minutes per case, so
 the DeFAUST main job may run them on a subset while SShaDe runs on every case. The

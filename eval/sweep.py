@@ -245,7 +245,7 @@ def sweep_job(cfg) -> dict:
     except OSError as e:
         log.error("cannot write %s in %s: %s", STATUS_FILE, job_dir, e)
     if status["status"] != "done":
-        level = "warning" if status["status"] == "partial" else "error"  # one prefix style (issue 19)
+        level = "warning" if status["status"] == "partial" else "error"  # one prefix style
         print(f"{level}: job {num}: {status['status']}: {status.get('error', '')}", file=sys.stderr)
     return {k: v for k, v in status.items() if k != "traceback"}
 

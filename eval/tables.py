@@ -218,8 +218,8 @@ class Comparison:
         frame has no ``case`` column (then ``main`` is the plain per-method summary).
     methods : the methods of the frame, in table order.
     ref_cases : how many of ``cases`` have reference columns (``ref_mean_pct``) in a
-        successful row; None without that column (issue 21: ``reference.cases`` may cover
-        a subset, and the note then says so).
+        successful row; None without that column (``reference.cases`` may cover a
+        subset, and the note then says so).
     ref_cases_all : as ``ref_cases`` over every successful row's case (the ``all`` table).
     n_cases_all : the number of distinct cases with a successful row.
     """
@@ -298,7 +298,7 @@ def main_note(comp: Comparison) -> str | None:
 def all_note(comp: Comparison) -> str:
     """The note of the all-cases table (``comp.all``): its rows average different cases,
     and the reference columns only the cases with a reference solution, when those are
-    fewer than the cases (issue 21)."""
+    fewer than the cases."""
     note = ("Each row: that method's mean over all its own successful cases (Cases), so rows may average "
             "different cases and nothing is bold; compare methods in the table above.")
     if comp.ref_cases_all is not None and comp.n_cases_all and 0 < comp.ref_cases_all < comp.n_cases_all:

@@ -16,7 +16,7 @@ its seed (the first one met on ties, in vertex / edge / face order), if not a se
 - :func:`closed_ball` : one full round: :func:`closed_ball_holds` (one pass over the
   faces, the common case once the sampling is dense) and :func:`closed_ball_full`
   (edges and faces, with the candidates) when it fails.
-- :func:`closed_ball_local` : a round after seeds were added (issue 24): only the
+- :func:`closed_ball_local` : a round after seeds were added: only the
   regions whose vertices changed label, and the pairs and triples involving them, are
   looked at (a region, pair or triple of unchanged regions keeps its vertices, edges and
   faces, so its verdict); the same candidates as the full check for those. The

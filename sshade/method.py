@@ -137,7 +137,7 @@ def build_method(spec, *, where: str = "method"):
     return m
 
 
-#: A method name: the row label of cases.csv, table.md and table.tex (issue 19).
+#: A method name: the row label of cases.csv, table.md and table.tex.
 _NAME_RE = re.compile(r"[A-Za-z0-9_+.()/-]([A-Za-z0-9 _+.()/-]{0,62}[A-Za-z0-9_+.()/-])?")
 NAME_RULE = ("method names are 1-64 characters among ASCII letters, digits, space and _ - + . ( ) /, "
              "not starting or ending with a space")

@@ -42,7 +42,7 @@ __all__ = ["builtin_methods", "table_order", "canonical_name", "method_key", "me
 #: Keys of a method file that describe the method instead of being its parameters.
 META_KEYS = ("order",)
 #: Table slots of methods without a config file in this repository (none since
-#: Implicit-ARAP got its file, conf/method/Implicit-ARAP.yaml, issue 22).
+#: Implicit-ARAP got its file, conf/method/Implicit-ARAP.yaml).
 RESERVED_ORDER: dict[str, float] = {}
 #: The shared sections of ``conf/config.yaml`` the method files' values default to.
 SECTIONS = ("arap", "arap_sr", "sshade")

@@ -20,15 +20,15 @@ triples of high-res faces, orientation kept) is manifold, with the same Euler
 characteristic and the same number of boundary loops. Low-res faces whose normal opposes
 the high-res surface they stand for are detected and also repaired by adding seeds, at
 their Voronoi vertices (:mod:`sshade.remesh_repair`; a departure from the paper).
-Each round repairs every violation it finds, of the property and flips alike (issue 24).
+Each round repairs every violation it finds, of the property and flips alike.
 
-Speed (issue 13): the connectivity (:func:`mesh_topology`) is built once per mesh and
+Speed: the connectivity (:func:`mesh_topology`) is built once per mesh and
 shared by the samplings; the sampling runs on the edge graph in a cache-friendly vertex
 order (:mod:`sshade.mesh.geodesic`); each check round is one compiled pass over the faces
 when the property holds (the common case at 6000 seeds) and a compiled pass over edges
 and faces that also picks the repair seeds when it does not (:mod:`sshade.closed_ball`).
 A round after seeds were added first checks only the regions they changed and the pairs
-and triples involving them (issue 24; the same repair seeds as a full check); the full
+and triples involving them (the same repair seeds as a full check); the full
 check runs when that finds nothing, so the remesh is accepted only by a full check.
 """
 from __future__ import annotations
@@ -101,7 +101,7 @@ def mesh_topology(V: np.ndarray, F: np.ndarray, he: HalfEdges | None = None) -> 
         he = halfedges(F, n)
     # the sampling's graph (locality order, then the CSR: compiled without the GIL) is
     # built in a second thread, where a second core is there, while this one builds the
-    # rest (issue 24: this setup is the serial part of a SShaDe call)
+    # rest (this setup is the serial part of a SShaDe call)
     with ThreadPoolExecutor(1) if available_cores() > 1 else _InPlace() as ex:
         graph = ex.submit(_sampling_graph, V, he.E)
         Fc, Ec, FEc, n_loops = _coned(F, he, n)
@@ -211,7 +211,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     - two regions meet along one arc; three regions meet at one point;
     candidates are the farthest vertex of every failing region, pair and triple
     (compiled: :func:`sshade.closed_ball.closed_ball`), and with ``fix_flips`` the Voronoi vertex of every
-    flipped low-res face, in the same round (issue 24: the property's and the flips'
+    flipped low-res face, in the same round (the property's and the flips'
     repairs do not wait for each other)."""
     lab = np.concatenate([label, nseeds + np.arange(topo.n_loops, dtype=label.dtype)])  # cone vertices: own regions
     bad, cand, f3 = closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, topo.n, nseeds + topo.n_loops)
@@ -228,7 +228,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
 
 def _check_local(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
                  seeds: np.ndarray, fix_flips: bool, before: np.ndarray):
-    """A round after seeds were added (issue 24): :func:`_check` restricted to the
+    """A round after seeds were added: :func:`_check` restricted to the
     regions whose vertices changed label since ``before`` (the labels (n,) of the
     previous round; :func:`sshade.closed_ball.closed_ball_local`), the flips among the
     triples involving them. Returns (new seed candidates (c,) int64, flipped faces found).

@@ -6,7 +6,7 @@ normal opposes the high-res surface it stands for (:func:`flipped_faces`); the r
 then adds seeds until none is left (:mod:`sshade.remesh`, at most ``max_flip_rounds``
 rounds).
 
-Departure from the paper (issue 24): the paper (after ReMatching, Maggioli et al. 2023)
+Departure from the paper: the paper (after ReMatching, Maggioli et al. 2023)
 adds seeds until the closed-ball property holds; flipped faces are our addition, and
 their repair follows Delaunay refinement (Chew 1989; Ruppert 1995): a bad triangle is
 removed by inserting its circumcentre, which on the surface is the *Voronoi vertex* of

@@ -170,7 +170,7 @@ def test_smoothness_kernel_matches_numpy():
 
 
 def test_anderson_on_joint_residual_needs_fewer_iterations():
-    """Issue 21: Anderson on the joint (U, R) residual with the history kept after a
+    """Anderson on the joint (U, R) residual with the history kept after a
     rejection converges in fewer iterations than the scheme before (history reset), to the
     same minimiser (0.05 % of the diagonal); measured 21 against 48 iterations."""
     V, F, h, T = SMALL["bent_cylinder"]()
@@ -183,7 +183,7 @@ def test_anderson_on_joint_residual_needs_fewer_iterations():
 
 
 def test_coarse_start_same_minimiser():
-    """Issue 21: the coarse start (the rotations of a low-res solve of the same energy)
+    """The coarse start (the rotations of a low-res solve of the same energy)
     ends at the same minimiser as the rigid start, certified by the same criterion."""
     from baselines.coarse_start import SR_ENERGY, coarse_start
 
@@ -221,7 +221,7 @@ def test_arapsr_start_option():
 
 def test_compiled_sweep_matches_sparse_formula():
     """The compiled Gauss-Seidel sweep equals the class-by-class scipy formula
-    ``R[c] = polar(M[c] + alpha A (adj[c] @ R))`` (issue 21), also on a strided ``R``."""
+    ``R[c] = polar(M[c] + alpha A (adj[c] @ R))``, also on a strided ``R``."""
     from sshade.arap import fit_rotations
 
     V, F, h, T = SMALL["bent_cylinder"]()

@@ -1,4 +1,4 @@
-"""Issue 21: breakdowns per target pose and per subject, the paired SShaDe-Elastic
+"""Breakdowns per target pose and per subject, the paired SShaDe-Elastic
 comparison and the distribution figure (eval/breakdown.py), on synthetic cases.csv rows."""
 from __future__ import annotations
 

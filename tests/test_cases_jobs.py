@@ -1,4 +1,4 @@
-"""Issue 23: the evaluator's runs side by side (``jobs``, eval/experiments/cases_jobs.py):
+"""The evaluator's runs side by side (``jobs``, eval/experiments/cases_jobs.py):
 the same rows as one process, every pair run once and stored, the workers' log lines in
 eval.log, the rule of ``jobs=auto``, a bad value refused before any work, the plan's
 wall time on several workers (eval/plan.py)."""

@@ -1,6 +1,6 @@
-"""The coarse start of the converged protocol (baselines/coarse_start.py; issue 21 for
-ARAP-SR, issue 23 for ARAP and Elastic) and the start rotations ``R0`` of
-:func:`sshade.arap.solve_arap` it feeds."""
+"""The coarse start of the converged protocol (baselines/coarse_start.py; for ARAP-SR,
+ARAP and Elastic) and the start rotations ``R0`` of :func:`sshade.arap.solve_arap` it
+feeds."""
 from __future__ import annotations
 
 import numpy as np
@@ -69,7 +69,7 @@ def test_fullres_start_option(cls):
     Ur = r.deform(V, F, h, T)
     assert r.info["converged"] and "coarse_n" not in r.info
     assert m.info["energy"] <= r.info["energy"] * (1 + 1e-6) or _mean_dist(U, Ur, V) < 5e-4
-    assert cls().start == "rigid" and cls(protocol="paper").start == "rigid"  # the default (issue 23)
+    assert cls().start == "rigid" and cls(protocol="paper").start == "rigid"  # the default
     a = cls(start="auto")  # auto: a mesh below COARSE_MIN_RATIO x coarse_n_low starts rigid
     assert np.array_equal(a.deform(V, F, h, T), Ur) and "coarse_n" not in a.info
     a = cls(start="auto", coarse_n_low=len(V) // COARSE_MIN_RATIO)  # ... and at least that starts coarse

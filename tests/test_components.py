@@ -1,4 +1,4 @@
-"""Meshes with several connected components (issue 12): the components holding handles
+"""Meshes with several connected components: the components holding handles
 are deformed, the others follow their nearest deformed component rigidly
 (sshade/components.py), in the API, through any method and in the evaluator."""
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """A user's folder is never written unless they ask: the evaluator reads a DeFAUST it
 did not build, the builder refuses a folder holding another build or other files.
 
-Reproduces the data loss of issue 14: ``python -m eval dataset.root=DIR`` on a DeFAUST
-built from FAUST scans used to start a synthetic build into DIR, overwriting the user's
+Guards against a data loss: ``python -m eval dataset.root=DIR`` on a DeFAUST built from
+FAUST scans must not start a synthetic build into DIR, overwriting the user's
 ``subject_XX`` files and manifest.
 """
 from __future__ import annotations

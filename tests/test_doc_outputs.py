@@ -1,5 +1,5 @@
 """The documentation's examples write under ``outputs/`` (git-ignored), never into the
-repository root (issue 23, item 5): every output path in the code blocks of README.md and
+repository root: every output path in the code blocks of README.md and
 docs/*.md, and the examples' default output folder."""
 from __future__ import annotations
 

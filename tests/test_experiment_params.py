@@ -1,4 +1,4 @@
-"""Issue 20: every experiment reads SShaDe's parameters from one place, the method config
+"""Every experiment reads SShaDe's parameters from one place, the method config
 ``method.SShaDe`` (default: the ``sshade`` section), so ``sshade.*`` overrides reach each
 of them; no experiment keeps a private copy (``tosca.n_low``, ...). Cheap: the configs are
 composed and each experiment's ``sshade_params(cfg)`` is read, nothing runs."""

@@ -1,4 +1,4 @@
-"""Issue 19: fuzz ``python -m sshade deform`` with mutated mesh and handle files.
+"""Fuzz ``python -m sshade deform`` with mutated mesh and handle files.
 
 Small valid inputs (a subdivided icosahedron as OBJ, OFF, ASCII and binary PLY, STL;
 ``.sel`` + ``.def``, ``.json``, ``.csv``) are mutated a few hundred times (seeded:

@@ -1,4 +1,4 @@
-"""Implicit-ARAP (issue 22; baselines/implicit_arap/): the one-line refusal without
+"""Implicit-ARAP (baselines/implicit_arap/): the one-line refusal without
 PyTorch, then (PyTorch installed, extra [neural]) the parts on small inputs: an analytic
 sphere SDF in place of the fitted one, the identity field when no handle moves, a rigid
 motion of every handle, the patch energy (zero for a rigid map, a hand computation on one

@@ -5,6 +5,7 @@ project module is imported at the top of a module, not hidden inside a function.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -147,3 +148,21 @@ def test_modules_and_functions_stay_small(pkg):
                 if n > 100:
                     big_functions.append(f"{m}.{node.name}: {n} lines")
     assert not big_modules and not big_functions, "\n".join(big_modules + big_functions)
+
+
+#: Where the prose lives that the tracker rule covers: source, tests, configs, docs.
+_PROSE_GLOBS = ("sshade/**/*.py", "baselines/**/*.py", "defaust/**/*.py", "eval/**/*.py", "tests/**/*.py",
+                "benchmarks/**/*.py", "conf/**/*.yaml", "docs/**/*.md", "*.md", "pyproject.toml")
+
+
+def test_no_issue_numbers_in_code_or_docs():
+    """The tracker is not part of the repository (DEVELOPERS.md): code, tests, configs and
+    docs say what a thing does, never which issue made it; history lives in git log."""
+    pattern = re.compile(r"\bissues?\s+#?\d+", re.I)
+    hits = []
+    for glob in _PROSE_GLOBS:
+        for p in sorted(ROOT.glob(glob)):
+            for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1):
+                if pattern.search(line):
+                    hits.append(f"{p.relative_to(ROOT)}:{n}: {line.strip()[:100]}")
+    assert not hits, "\n".join(hits)

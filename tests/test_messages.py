@@ -1,4 +1,4 @@
-"""Messages a user sees in a normal run (issue 23, item 7): no NumbaWarning about an old
+"""Messages a user sees in a normal run: no NumbaWarning about an old
 TBB, one summary line for DeFAUST's dropped handles, reference solves that reached
 float64 precision said so rather than ``stalled``."""
 from __future__ import annotations

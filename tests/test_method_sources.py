@@ -1,5 +1,5 @@
-"""run.json records each method's source file, its sha256 and its git state (issue 23,
-item 6): a plug-in's code is identified even when it lives outside this repository."""
+"""run.json records each method's source file, its sha256 and its git state: a
+plug-in's code is identified even when it lives outside this repository."""
 from __future__ import annotations
 
 import hashlib

@@ -1,4 +1,4 @@
-"""The metrics' per-mesh state (eval/metric_meshes.py, issue 23): kept rest and ground-truth
+"""The metrics' per-mesh state (eval/metric_meshes.py): kept rest and ground-truth
 meshes give the numbers of the direct computation, bit for bit, and those of the code they
 replaced (reimplemented here: np.unique over edge rows, igl.point_mesh_squared_distance,
 hausdorff and chamfer each from their own two one-way distances)."""
@@ -39,7 +39,7 @@ def _old_distances(P, V, F):
 
 
 def _old_metrics(V, Vd, F, Vgt, handles, targets):
-    """The bundles as computed before issue 23 (same formulas, no kept state)."""
+    """The bundles as computed without kept state (same formulas)."""
     he = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=0)
     E = np.unique(np.sort(he, axis=1), axis=0)
     l0, l1 = (np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1) for X in (V, Vd))

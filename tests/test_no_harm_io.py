@@ -1,4 +1,4 @@
-"""Issue 19, file side: no input kills the interpreter, no wrong mesh is ever written.
+"""No harm, file side: no input kills the interpreter, no wrong mesh is ever written.
 
 Readers never abort natively nor print a reader's noise, writers are bit exact and
 signed, index handles are refused on STL, handle files fail on one line, scale

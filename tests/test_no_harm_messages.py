@@ -1,4 +1,4 @@
-"""Issue 19, the command wrappers' part: bad numbers, Hydra's own errors, Ctrl-C, OSError
+"""No harm, the command wrappers' part: bad numbers, Hydra's own errors, Ctrl-C, OSError
 and the builder's checks give ONE ``error: ...`` line (or ``interrupted``), the documented
 exit status, no traceback, and happen before any work (no folder, no partial build).
 

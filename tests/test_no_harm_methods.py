@@ -1,4 +1,4 @@
-"""Issue 19: a plug-in method must never corrupt results. Its output is checked in one
+"""A plug-in method must never corrupt results. Its output is checked in one
 place (sshade.mesh.validate.validate_deformed) before anything is measured or written; it
 runs through one guard (sshade.guard.run_method) on read-only copies, its exceptions
 (SystemExit included) and time-outs become a failed case, a result whose handles miss

@@ -1,4 +1,4 @@
-"""Issue 19, "data changed or lost": a command writes only into a folder that is new,
+"""No data changed or lost: a command writes only into a folder that is new,
 empty or its own earlier output of the same kind (eval/outdir.py); ``results/`` only
 under ``python -m eval.reproduce``; two runs never share a folder."""
 from __future__ import annotations

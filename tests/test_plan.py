@@ -1,4 +1,4 @@
-"""Issue 23 item 3: the plan printed up front (eval/plan.py, eval/experiments/cases_plan.py)
+"""The plan printed up front (eval/plan.py, eval/experiments/cases_plan.py)
 and the DeFAUST build's per-subject progress (eval/datasets/defaust.py BuildProgress).
 Structure and order are checked, never timings."""
 from __future__ import annotations

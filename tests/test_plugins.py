@@ -1,4 +1,4 @@
-"""Plug-in methods (issue 12): an item of ``methods`` that is a ``_target_`` mapping is
+"""Plug-in methods: an item of ``methods`` that is a ``_target_`` mapping is
 built by hydra.utils.instantiate and runs through ``python -m eval`` beside ours; our
 methods come from the ``method`` config group; the README's "Add your method" example is
 the plug-in of tests/plugin_example.py and runs as printed."""

@@ -1,4 +1,4 @@
-"""A run refused for a bad config value leaves no output behind (issue 23, item 4): no
+"""A run refused for a bad config value leaves no output behind: no
 dated folder, no parents made for it, no ``.hydra/`` or empty ``eval.log`` in a folder
 the user gave; a user's own files stay."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""sshade.registry: our methods are the files of conf/method/ (issue 20): names, table
+"""sshade.registry: our methods are the files of conf/method/: names, table
 order, specs without their `order`, a new file picked up with no other edit, and no
 upward import from the bottom layer."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The compiled fast paths of the remesher (issue 13) against plain numpy/scipy
+"""The compiled fast paths of the remesher against plain numpy/scipy
 references: half-edges, pinch vertices, components, boundary loops, the fast
 validation, the edge graph, the closed-ball check, and the farthest-point sampling's
 independence from the vertex order and the priority queue (with exact distance ties)."""
@@ -274,8 +274,8 @@ def test_sampling_independent_of_vertex_order_and_queue(mesh):
 
 
 def test_dial_ring_rule_follows_the_mean_edge():
-    """Dial's ring is chosen from the mean edge against the shortest (issue 24: the
-    longest one, an outlier on LS3 meshes, sent 1M-vertex TOSCA meshes to the slower
+    """Dial's ring is chosen from the mean edge against the shortest (not the
+    longest one: an outlier on LS3 meshes would send 1M-vertex TOSCA meshes to the slower
     heap), and never longer than DIAL_MAX_BUCKETS; a heap for bad lengths."""
     from sshade.mesh.geodesic import DIAL_MAX_BUCKETS, DIAL_MAX_RATIO, _dial_ring
     w = np.ones(10_000)
@@ -350,7 +350,7 @@ def test_closed_ball_candidates_equal_numpy_reference(rel, k):
 @pytest.mark.parametrize("rel,k", [("classic/armadillo.obj", 40), ("tosca/cat0.off", 60),
                                    ("faust_reg/tr_reg_000.ply", 300)])
 def test_local_check_equals_the_full_check(rel, k):
-    """Issue 24: in every round of a coarse remesh, the check restricted to the regions
+    """In every round of a coarse remesh, the check restricted to the regions
     whose vertices changed label (and the pairs and triples involving them) finds the
     same repair candidates as the full check, and over all regions the same verdict,
     candidates and single-face triples."""

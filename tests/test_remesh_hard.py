@@ -1,4 +1,4 @@
-"""The remesher on a hard mesh built here (issue 24): a sphere with long thin spikes
+"""The remesher on a hard mesh built here: a sphere with long thin spikes
 (fingers, tails) whose latitude-longitude triangles are stretched along them. The
 closed-ball property, the low-res vertices a subset of the high-res ones, and few
 check-and-repair rounds (the flips' repair at Voronoi vertices,
@@ -69,7 +69,7 @@ def test_remesh_of_thin_spikes_keeps_guarantees_in_few_rounds(spiky):
         assert len(np.unique(rm.seeds)) == len(rm.seeds) and np.isin(req, rm.seeds).all()
         assert np.array_equal(rm.label[rm.seeds], np.arange(len(rm.seeds)))
         # the closed-ball property itself, by the full check (rounds after the first
-        # look only near the seeds they added: issue 24)
+        # look only near the seeds they added)
         bad, _, f3 = closed_ball_full(topo.Fc, topo.Ec, topo.FEc, rm.label, rm.dist, topo.n, len(rm.seeds))
         assert not bad and len(f3) == len(rm.F)
         rounds.append(rm.iterations)

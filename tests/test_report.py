@@ -254,8 +254,7 @@ def test_a_click_on_a_header_sorts_the_table(tmp_path):
 def test_committed_results_pages_open_in_headless_chromium():
     """The committed ``results/index.html`` and every page it links to (each folder's
     ``index.html``, written by ``python -m eval.reproduce``) load in headless Chromium
-    without a JavaScript error, and every link of the index leads to something committed
-    (issue 23)."""
+    without a JavaScript error, and every link of the index leads to something committed."""
     _need_chromium()
     root = Path(__file__).resolve().parents[1] / "results"
     index = root / PAGE

@@ -1,4 +1,4 @@
-"""The scaling benchmark on a set of meshes (issue 24): one row per (mesh, size), a clean
+"""The scaling benchmark on a set of meshes: one row per (mesh, size), a clean
 (remeshed) and a hard (LS3 Loop only) entry, repair rounds, the first call of a fresh
 process, one table per mesh; a bad ``scaling.meshes`` entry refused before any mesh is built."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 21: the evaluator's per-(case, method) result store (eval/store.py), resume after
+"""The evaluator's per-(case, method) result store (eval/store.py), resume after
 a kill -9, a method added later, the baseline subset rule (eval/subset.py) and the
 cost-weighted progress estimate (eval/progress.py)."""
 from __future__ import annotations

@@ -135,7 +135,7 @@ def test_a_failed_run_removes_its_case_from_the_common_set(tmp_path):
 def test_empty_common_set_falls_back_to_labelled_per_method_means(tmp_path):
     (tmp_path / "table_all.csv").write_text("stale\n")  # from an earlier run into the same folder
     # each method succeeded somewhere, never on the same case (a method that failed
-    # everywhere does not empty the common set: issue 19, tests/test_no_harm_methods.py)
+    # everywhere does not empty the common set: tests/test_no_harm_methods.py)
     df = pd.DataFrame([_row("c0", "ARAP", 1.0), _row("c1", "ARAP", 9.0, error="SShaDeError: nope"),
                        _row("c0", "SShaDe", 2.0, error="SShaDeError: nope"), _row("c1", "SShaDe", 4.0)])
     assert common_cases(df) == []
@@ -310,7 +310,7 @@ def test_retabulate_rebuilds_tables_from_cases_csv_only(tmp_path):
 
 def test_a_preset_method_says_its_preset_and_steps():
     """Implicit-ARAP-like rows (a preset, fixed step counts, an SDF fit inside the time):
-    the table's stop line says so (issue 22: every row says which preset made it)."""
+    the table's stop line says so (every row says which preset made it)."""
     import pandas as pd
     rows = [{"case": f"c{i}", "method": "Implicit-ARAP", "volume_err_pct": 1.0, "time_s": 60.0, "error": "",
              "preset": "cpu", "sdf_steps": 1000, "deform_steps": 250, "sdf_fit_s": 40.0 + i} for i in range(2)]

@@ -1,4 +1,4 @@
-"""The ``cases`` experiment's plan at work (issue 23; the plan itself: :mod:`eval.plan`).
+"""The ``cases`` experiment's plan at work (the plan itself: :mod:`eval.plan`).
 
 :func:`planned_root` stands for :func:`eval.datasets.dataset_root` in the experiment's
 setup: when the dataset's preparation has long work ahead (a DeFAUST build,

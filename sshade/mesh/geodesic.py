@@ -6,7 +6,7 @@ new seed runs an *incremental* Dijkstra that only visits vertices that get close
 than to their current seed, so sampling k seeds costs about O(|V| log k log |V|) rather
 than k full Dijkstra runs. The hot loops are compiled with numba.
 
-Speed (issue 13): sampling 6000 seeds visits every vertex about ln(6000) ~ 9 times, so
+Speed: sampling 6000 seeds visits every vertex about ln(6000) ~ 9 times, so
 the propagation is memory- and branch-bound. What keeps it fast:
 
 - the graph can be stored in a *locality order* (:func:`locality_order`, a Morton
@@ -436,8 +436,8 @@ def _add_seeds(indptr, indices, weights, dist, label, seeds, nseeds, new, hk, hv
 #: Dial's buckets are used when the *mean* edge is at most this many times the shortest
 #: (else a binary heap). The ring's extra cost is the empty buckets it steps over, about
 #: (distance a propagation travels) / (shortest edge) per propagation, so it is the
-#: typical edge against the shortest that matters, not the longest (issue 24: on LS3
-#: Loop subdivisions of TOSCA models an outlier edge had sent the sampling to the slower
+#: typical edge against the shortest that matters, not the longest (on LS3
+#: Loop subdivisions of TOSCA models an outlier edge would send the sampling to the slower
 #: heap; ``benchmarks/remesh_hard.py`` compares the two, the same seeds and labels).
 DIAL_MAX_RATIO = 1024.0
 #: ... and when the ring (longest edge / bucket width buckets) is at most this long.

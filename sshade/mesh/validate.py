@@ -444,7 +444,7 @@ def validate_deformed(U, n_vertices: int, *, V=None, name: str = "method") -> np
     """Check a deformation method's output before anything measures or writes it.
 
     The one check of every method's result (the evaluator and ``python -m sshade
-    deform`` both call it through :func:`sshade.guard.run_method`; issue 19).
+    deform`` both call it through :func:`sshade.guard.run_method`).
 
     Parameters
     ----------
