@@ -34,15 +34,23 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
+from .metric_meshes import unique_edges
 from .store import json_safe, safe_name
 
-__all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "cluster_decimate", "cluster_positions", "case_view",
+__all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "COLOUR_MODES", "cluster_decimate", "cluster_positions",
+           "cluster_means", "vertex_edge_error", "case_view",
            "case_view_path", "write_case_view", "read_view", "view_options", "write_outputs", "read_outputs"]
 
 log = logging.getLogger("eval")
 
 VIEW_DIR = "report"  #: the views' folder inside a run folder (next to index.html)
 DEFAULT_MAX_FACES = 30000  #: faces shown per mesh unless ``report.max_faces`` says otherwise
+#: The per-vertex quantities a view colours its meshes by (:func:`case_view`): key -> legend.
+COLOUR_MODES = {"edge": "edge-length error, % of the longest rest edge (paper Fig. 4)",
+                "gt": "distance to the ground truth, % of the bounding-box diagonal"}
+#: Percentile of the per-cluster values that sets a case's colour scale (one per case and
+#: quantity, shared by its meshes); larger values show saturated.
+SCALE_PERCENTILE = 99.0
 OUTPUTS = "outputs.json"  #: in VIEW_DIR: the per-case views and figures the run wrote (write_outputs)
 
 
@@ -98,6 +106,60 @@ def cluster_positions(X, labels, n_clusters: int) -> np.ndarray:
     return np.stack([np.bincount(labels, X[:, k], minlength=n_clusters) / cnt for k in range(3)], axis=1)
 
 
+def cluster_means(x, labels, n_clusters: int) -> np.ndarray:
+    """(c,) float64: the mean of the per-vertex values ``x`` (n,) over each cluster of
+    ``labels`` (n,); 0 for a cluster without vertices."""
+    s = np.bincount(labels, weights=np.asarray(x, np.float64), minlength=n_clusters)
+    k = np.bincount(labels, minlength=n_clusters)
+    return s / np.maximum(k, 1)
+
+
+def vertex_edge_error(V, X, F) -> np.ndarray:
+    """(n,) float64 per-vertex edge-length error in % of the longest rest edge: the mean,
+    over the vertex's incident edges, of ``| ||u - v|| - ||u' - v'|| | / max_e ||e||`` (the
+    per-edge term of paper eq. (eq:edge-error), whose mean over all edges is
+    :func:`eval.metrics.edge_length_error`). ``V``, ``X``: (n, 3) rest and deformed
+    vertices; ``F``: (m, 3) faces. An isolated vertex gets 0; all rest edges of length 0
+    give zeros.
+
+    >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> np.round(vertex_edge_error(V, 2 * V, np.array([[0, 1, 2]])), 4)  # edges 1, sqrt2, 1 over sqrt2
+    array([70.7107, 85.3553, 85.3553])
+    """
+    E = unique_edges(np.asarray(F, np.int64), len(V))
+    l0 = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    l1 = np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1)
+    lmax = float(l0.max()) if len(l0) else 0.0
+    e = 100.0 * np.abs(l1 - l0) / lmax if lmax > 0 else np.zeros(len(E))
+    s = np.bincount(E.ravel(), weights=np.repeat(e, 2), minlength=len(V))
+    k = np.bincount(E.ravel(), minlength=len(V))
+    return s / np.maximum(k, 1)
+
+
+def _colour_values(V, F, meshes: Mapping, pos: dict, labels, c: int) -> tuple[dict, dict]:
+    """Per-cluster colour values of the shown meshes and one scale per quantity
+    (:data:`COLOUR_MODES`): ``({label: {mode: (c,) values}}, {mode: {"max", "legend"}})``.
+    ``edge`` for the target and the results; ``gt`` for the results when a target is shown
+    (the distance of each vertex to its ground-truth position, same connectivity)."""
+    target = next((X for _l, (k, X) in meshes.items() if k == "target" and X is not None), None)
+    diag = float(np.linalg.norm(np.ptp(np.asarray(V, np.float64), axis=0))) or 1.0
+    vals: dict = {}
+    for label, (kind, X) in meshes.items():
+        if label not in pos or kind not in ("target", "result"):
+            continue
+        X = np.asarray(X, np.float64)
+        v = {"edge": cluster_means(vertex_edge_error(V, X, F), labels, c)}
+        if target is not None and kind == "result":
+            v["gt"] = cluster_means(100.0 * np.linalg.norm(X - target, axis=1) / diag, labels, c)
+        vals[label] = v
+    scales = {}
+    for mode, legend in COLOUR_MODES.items():
+        top = [float(np.percentile(v[mode], SCALE_PERCENTILE)) for v in vals.values() if mode in v]
+        if top:
+            scales[mode] = {"max": max(max(top), 1e-12), "legend": legend}
+    return vals, scales
+
+
 def _b64(a: np.ndarray) -> str:
     return base64.b64encode(np.ascontiguousarray(a).astype(a.dtype.newbyteorder("<")).tobytes()).decode("ascii")
 
@@ -116,8 +178,11 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     Returns a JSON-able dict: ``case``, ``n_vertices``, ``n_faces`` (the mesh's),
     ``shown_faces``, ``clusters``, ``idx32``, ``faces`` (base64), ``lo`` / ``step`` (the
     quantisation: ``x = lo + q * step``), ``meshes`` (``label``, ``kind``, ``pos``
-    base64 ``uint16`` or None). Raises SShaDeError on bad shapes, or when no mesh has
-    finite vertices.
+    base64 ``uint16`` or None, and per colour quantity of :data:`COLOUR_MODES` the
+    per-cluster values as base64 ``uint8``, ``255 * value / scale max`` clipped, or None),
+    ``scales`` (quantity -> ``max`` (the case's :data:`SCALE_PERCENTILE` percentile over
+    its meshes, one scale for all of them) and ``legend``). Raises SShaDeError on bad
+    shapes, or when no mesh has finite vertices.
     """
     labels, G = cluster_decimate(V, F, max_faces)
     c = int(labels.max()) + 1
@@ -137,15 +202,21 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     step = np.where(hi > lo, (hi - lo) / 65535.0, 1.0)
     idx32 = c > 65535
+    vals, scales = _colour_values(np.asarray(V, np.float64), F, meshes, pos, labels, c)
     out = []
     for label, (kind, _) in meshes.items():
         q = None
         if label in pos:
             q = _b64(np.clip(np.rint((pos[label] - lo) / step), 0, 65535).astype(np.uint16))
-        out.append({"label": str(label), "kind": str(kind), "pos": q})
+        m = {"label": str(label), "kind": str(kind), "pos": q}
+        for mode in COLOUR_MODES:
+            v = vals.get(label, {}).get(mode)
+            m[mode] = None if v is None else _b64(np.clip(np.rint(255 * v / scales[mode]["max"]), 0, 255)
+                                                   .astype(np.uint8))
+        out.append(m)
     return {"case": str(name), "n_vertices": int(len(V)), "n_faces": int(len(F)), "shown_faces": int(len(G)),
             "clusters": c, "idx32": bool(idx32), "faces": _b64(G.astype(np.uint32 if idx32 else np.uint16)),
-            "lo": json_safe(lo), "step": json_safe(step), "meshes": out}
+            "lo": json_safe(lo), "step": json_safe(step), "scales": scales, "meshes": out}
 
 
 _PREFIX = "(window.SSHADE_VIEWS = window.SSHADE_VIEWS || {})["

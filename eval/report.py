@@ -91,6 +91,8 @@ th[data-dir=asc]::after{content:" \\25B2"}th[data-dir=desc]::after{content:" \\2
 #js-errors{background:#fee;border:1px solid #c00;padding:.5em;color:#900}pre{background:#f7f7f7;padding:.6em;
 overflow:auto;max-height:30em}img{max-width:100%;border:1px solid #ddd}.view canvas{width:100%;display:block;
 border:1px solid #ccc;cursor:grab}.view-labels{text-align:center;font-size:13px}
+.view-colour{font-size:13px;margin:.3em 0}.view-colour button{margin-right:.4em}
+.view-ramp{display:inline-block;width:120px;height:10px;vertical-align:middle;border:1px solid #999}
 .note{color:#555}nav a{margin-right:1em}"""
 
 
@@ -287,8 +289,10 @@ def _views_section(run_dir: Path, cases, outputs) -> tuple[str, str, list[str]]:
                    f'<p class="note">{_e(data["n_vertices"])} vertices, {_e(data["n_faces"])} faces; {_e(shown)}, '
                    f"{p.stat().st_size / 1e6:.2f} MB ({_e(rel)})</p></div>")
     out.insert(1, f'<p class="note" id="views-status" data-drawn="0">{len(tags)} case(s), {total / 1e6:.2f} MB of '
-                  "mesh data next to this page (report.max_faces caps the faces of each mesh). Drag to rotate, wheel "
-                  "to zoom, double-click to reset.</p>")
+                  "mesh data next to this page (report.max_faces caps the faces of each mesh). Each mesh is coloured "
+                  "by its per-vertex edge-length error (the paper's Fig. 4 measure) on one scale per case, or by its "
+                  "distance to the ground truth (buttons above each view). Drag to rotate, wheel to zoom, "
+                  "double-click to reset.</p>")
     return "\n".join(out), "\n".join(tags), notes
 
 
@@ -449,9 +453,10 @@ CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--use-gl=angle
                   "--allow-file-access-from-files")
 
 
-def chromium(page, *args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+def chromium(page, *args: str, timeout: float = 60, fragment: str = "") -> subprocess.CompletedProcess:
     """Run headless Chromium (:func:`find_chromium`, :data:`CHROMIUM_FLAGS`) on the file
-    ``page`` with extra ``args`` (e.g. ``--dump-dom``); a private profile folder.
+    ``page`` (its URL with ``fragment``, e.g. ``"#mode=plain"``) with extra ``args`` (e.g.
+    ``--dump-dom``); a private profile folder.
     Raises FileNotFoundError without a Chromium, subprocess.TimeoutExpired."""
     import tempfile
     exe = find_chromium()
@@ -459,17 +464,18 @@ def chromium(page, *args: str, timeout: float = 60) -> subprocess.CompletedProce
         raise FileNotFoundError("no chromium on PATH (Debian: apt-get install chromium)")
     with tempfile.TemporaryDirectory(prefix="sshade-chromium-") as prof:
         cmd = [exe, *CHROMIUM_FLAGS, f"--user-data-dir={prof}", "--virtual-time-budget=5000", *args,
-               Path(page).resolve().as_uri()]
+               Path(page).resolve().as_uri() + fragment]
         return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
                               env=dict(os.environ, HOME=prof))
 
 
-def screenshot(page, png, *, size=(1200, 900)) -> Path:
+def screenshot(page, png, *, size=(1200, 900), fragment: str = "") -> Path:
     """A PNG of ``page`` as headless Chromium draws it (3D views included, SwiftShader
-    WebGL), ``size`` = (width, height) pixels; returns ``png``. Raises
+    WebGL), ``size`` = (width, height) pixels, ``fragment`` as in :func:`chromium`
+    (``"#mode=gt"``: the views coloured by the distance to the ground truth); returns ``png``. Raises
     FileNotFoundError without a Chromium, RuntimeError when no PNG was made."""
     png = Path(png).resolve()
-    r = chromium(page, f"--screenshot={png}", f"--window-size={size[0]},{size[1]}")
+    r = chromium(page, f"--screenshot={png}", f"--window-size={size[0]},{size[1]}", fragment=fragment)
     if not png.is_file():
         raise RuntimeError(f"chromium made no screenshot (exit {r.returncode}): {r.stderr[-500:]}")
     return png

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from eval.app import CONF_DIR, run_experiment
-from eval.meshview import case_view, cluster_decimate, cluster_positions, read_view
+from eval.meshview import case_view, cluster_decimate, cluster_means, cluster_positions, read_view, vertex_edge_error
 from eval.outdir import REPRODUCE_ENV, read_marker, results_dir
 from eval.report import PAGE, chromium, find_chromium, main, screenshot, write_index, write_report
 
@@ -205,7 +205,7 @@ def test_js_errors_are_written_into_the_page(tmp_path):
 
 def test_screenshot_shows_the_meshes(run_dir, tmp_path):
     _need_chromium()
-    png = screenshot(run_dir / PAGE, tmp_path / "page.png", size=(1200, 1500))
+    png = screenshot(run_dir / PAGE, tmp_path / "page.png", size=(1200, 1500), fragment="#mode=plain")
     from matplotlib.image import imread
     img = imread(png)[..., :3].astype(float)
     r, g, b = img[..., 0], img[..., 1], img[..., 2]
@@ -213,6 +213,58 @@ def test_screenshot_shows_the_meshes(run_dir, tmp_path):
     blue = (b > r + 0.2) & (b > 0.4) & (g > 0.3)  # the results (link text is thin)
     assert green.sum() > 2000, f"no target mesh drawn ({int(green.sum())} green pixels)"
     assert blue.sum() > 2000, f"no result mesh drawn ({int(blue.sum())} blue pixels)"
+
+
+def test_views_are_coloured_by_edge_error_with_a_legend(run_dir, tmp_path):
+    _need_chromium()
+    dom = chromium(run_dir / PAGE, "--dump-dom").stdout
+    assert len(re.findall(r'<div class="view" [^>]*data-mode="edge"', dom)) == 2, "views not in edge-error mode"
+    assert dom.count('class="view-ramp"') == 2 and "edge-length error, % of the longest rest edge" in dom
+    assert 'data-mode="gt"' in dom  # the ground-truth toggle, where the case has a ground truth
+    png = screenshot(run_dir / PAGE, tmp_path / "edge.png", size=(1200, 1500))
+    from matplotlib.image import imread
+    img = imread(png)[..., :3].astype(float)
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    low = (b > 0.55) & (r < 0.35)                 # the ramp's low end (blue)
+    high = (r > 0.6) & (g > 0.5) & (b < 0.35)     # its upper half (yellow to red): where the error is large
+    assert low.sum() > 2000 and high.sum() > 50, (int(low.sum()), int(high.sum()))
+
+
+def test_case_view_colours_share_one_scale_per_case():
+    V, F = _sphere(4)
+    stretched = V * np.array([1.3, 1.0, 1.0])
+    view = case_view("s", V, F, {"rest": ("rest", V), "target (ground truth)": ("target", V),
+                                 "a": ("result", stretched), "b": ("result", V * 1.01)}, max_faces=2000)
+    import base64
+    vals = {m["label"]: m for m in view["meshes"]}
+    assert vals["rest"]["edge"] is None and vals["rest"]["gt"] is None and vals["target (ground truth)"]["gt"] is None
+    ea = np.frombuffer(base64.b64decode(vals["a"]["edge"]), np.uint8)
+    eb = np.frombuffer(base64.b64decode(vals["b"]["edge"]), np.uint8)
+    assert ea.shape == (view["clusters"],) and ea.mean() > 5 * eb.mean()  # one scale: b's 1 % is faint beside a
+    e_max = view["scales"]["edge"]["max"]
+    want = np.percentile(cluster_means(vertex_edge_error(V, stretched, F), *_labels(V, F, 2000)), 99)
+    assert e_max == pytest.approx(want)
+    et = np.frombuffer(base64.b64decode(vals["target (ground truth)"]["edge"]), np.uint8)
+    assert et.max() == 0  # the target is the rest shape: no edge changes length
+    assert view["scales"]["gt"]["legend"].startswith("distance to the ground truth")
+
+
+def _labels(V, F, max_faces):
+    labels, _ = cluster_decimate(V, F, max_faces)
+    return labels, int(labels.max()) + 1
+
+
+def test_vertex_edge_error_averages_to_the_table_metric_on_a_regular_mesh():
+    from eval.metrics import edge_length_error
+    V, F = _sphere(3)
+    X = V * np.array([1.2, 0.9, 1.0])
+    per_vertex = vertex_edge_error(V, X, F)
+    # every edge counted at its two ends: the valence-weighted mean of the per-vertex
+    # values is the mean over edges, which is the table's EL
+    from eval.metric_meshes import unique_edges
+    k = np.bincount(unique_edges(F, len(V)).ravel(), minlength=len(V))
+    assert np.sum(per_vertex * k) / np.sum(k) == pytest.approx(edge_length_error(V, X, F), rel=1e-12)
+    assert np.array_equal(vertex_edge_error(V, V, F), np.zeros(len(V)))
 
 
 @pytest.mark.parametrize("bad", ["report.max_faces=0", "report.view_cases=-1", "report.enabled=maybe",
