@@ -136,14 +136,15 @@ def vertex_edge_error(V, X, F) -> np.ndarray:
     return s / np.maximum(k, 1)
 
 
-def _colour_values(V, F, meshes: Mapping, pos: dict, labels, c: int) -> tuple[dict, dict]:
+def _colour_values(V, F, meshes: Mapping, pos: dict, labels, c: int, carried=None) -> tuple[dict, dict]:
     """Per-cluster colour values of the shown meshes and one scale per quantity
     (:data:`COLOUR_MODES`): ``({label: {mode: (c,) values}}, {mode: {"max", "legend"}})``.
     ``edge`` for the target and the results; ``gt`` for the results when a target is shown
-    (the distance of each vertex to its ground-truth position, same connectivity)."""
+    (the distance of each vertex to its ground-truth position, same connectivity);
+    ``carried``: label -> the values of a panel taken from an earlier view."""
     target = next((X for _l, (k, X) in meshes.items() if k == "target" and X is not None), None)
     diag = float(np.linalg.norm(np.ptp(np.asarray(V, np.float64), axis=0))) or 1.0
-    vals: dict = {}
+    vals: dict = dict(carried or {})
     for label, (kind, X) in meshes.items():
         if label not in pos or kind not in ("target", "result"):
             continue
@@ -164,7 +165,35 @@ def _b64(a: np.ndarray) -> str:
     return base64.b64encode(np.ascontiguousarray(a).astype(a.dtype.newbyteorder("<")).tobytes()).decode("ascii")
 
 
-def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_FACES) -> dict:
+def _carried(earlier, meshes: Mapping, keys: Mapping, faces: str, c: int) -> dict:
+    """Panels of an ``earlier`` view of the same case (:func:`read_view`) for the meshes
+    restored without their vertices (kind ``not stored``): ``{label: (P (c, 3) cluster
+    positions, {quantity: (c,) values})}`` for each whose earlier panel shows the same
+    stored record (its ``key`` equals ``keys[label]``) on the same clusters (the same
+    ``faces``, ``c`` clusters); nothing else is taken from it."""
+    if not isinstance(earlier, Mapping) or earlier.get("faces") != faces or earlier.get("clusters") != c:
+        return {}
+    try:
+        lo, step = np.asarray(earlier["lo"], np.float64), np.asarray(earlier["step"], np.float64)
+        scales = earlier.get("scales") or {}
+        old = {m["label"]: m for m in earlier["meshes"] if isinstance(m, Mapping) and m.get("pos")}
+        out = {}
+        for label, (kind, X) in meshes.items():
+            m = old.get(label)
+            if X is not None or kind != "not stored" or m is None or not keys.get(label) or m.get("key") != keys[label]:
+                continue
+            q = np.frombuffer(base64.b64decode(m["pos"]), "<u2").reshape(-1, 3)
+            vals = {k: np.frombuffer(base64.b64decode(m[k]), np.uint8) / 255.0 * float(scales[k]["max"])
+                    for k in COLOUR_MODES if m.get(k) and k in scales}
+            if len(q) == c and all(len(v) == c for v in vals.values()):
+                out[label] = (lo + q * step, vals)
+        return out
+    except (KeyError, TypeError, ValueError):
+        return {}
+
+
+def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_FACES, keys=None,
+              earlier=None) -> dict:
     """The view of one case (module docstring).
 
     Parameters
@@ -174,6 +203,11 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
         ``result`` (colours), ``X`` (n, 3) vertices, or None with ``kind`` the text
         shown instead (``failed``, ``not run``, ``not stored``).
     max_faces : faces shown (:func:`cluster_decimate`).
+    keys : mapping label -> the store record key of that result (each panel keeps its
+        ``key``), or None.
+    earlier : the case's earlier view (:func:`read_view`) or None: a ``not stored``
+        mesh whose record key it shows on the same clusters is taken from it (its
+        panel's ``carried`` is true) instead of being left out (:func:`_carried`).
 
     Returns a JSON-able dict: ``case``, ``n_vertices``, ``n_faces`` (the mesh's),
     ``shown_faces``, ``clusters``, ``idx32``, ``faces`` (base64), ``lo`` / ``step`` (the
@@ -186,7 +220,11 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     """
     labels, G = cluster_decimate(V, F, max_faces)
     c = int(labels.max()) + 1
-    pos = {}
+    idx32 = c > 65535
+    faces = _b64(G.astype(np.uint32 if idx32 else np.uint16))
+    keys = dict(keys or {})
+    carried = _carried(earlier, meshes, keys, faces, c)
+    pos = {label: P for label, (P, _) in carried.items()}
     for label, (_kind, X) in meshes.items():
         if X is None:
             continue
@@ -201,21 +239,22 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     allp = np.concatenate(list(pos.values()))
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     step = np.where(hi > lo, (hi - lo) / 65535.0, 1.0)
-    idx32 = c > 65535
-    vals, scales = _colour_values(np.asarray(V, np.float64), F, meshes, pos, labels, c)
+    vals, scales = _colour_values(np.asarray(V, np.float64), F, meshes, pos, labels, c,
+                                  {label: v for label, (_, v) in carried.items()})
     out = []
     for label, (kind, _) in meshes.items():
         q = None
         if label in pos:
             q = _b64(np.clip(np.rint((pos[label] - lo) / step), 0, 65535).astype(np.uint16))
-        m = {"label": str(label), "kind": str(kind), "pos": q}
+        m = {"label": str(label), "kind": "result" if label in carried else str(kind), "pos": q,
+             "key": keys.get(label), "carried": label in carried}
         for mode in COLOUR_MODES:
             v = vals.get(label, {}).get(mode)
             m[mode] = None if v is None else _b64(np.clip(np.rint(255 * v / scales[mode]["max"]), 0, 255)
                                                    .astype(np.uint8))
         out.append(m)
     return {"case": str(name), "n_vertices": int(len(V)), "n_faces": int(len(F)), "shown_faces": int(len(G)),
-            "clusters": c, "idx32": bool(idx32), "faces": _b64(G.astype(np.uint32 if idx32 else np.uint16)),
+            "clusters": c, "idx32": bool(idx32), "faces": faces,
             "lo": json_safe(lo), "step": json_safe(step), "scales": scales, "meshes": out}
 
 
@@ -257,12 +296,14 @@ def case_view_path(run_dir, name) -> Path:
 
 
 def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: int = DEFAULT_MAX_FACES,
-                    stored=()) -> Path | None:
+                    stored=(), keys=None) -> Path | None:
     """``run_dir/report/<case>.js`` for one evaluated case (attributes ``name``, ``V``,
     ``F``, optional ``V_gt``): panels rest, target (when the case has a ground truth),
     then every method of ``results`` (name -> deformed vertices (n, 3), or None: failed;
-    names in ``not_run``: not run; in ``stored``: restored without a mesh). Returns the
-    path, or None after a logged warning (a view never stops an evaluation)."""
+    names in ``not_run``: not run; in ``stored``: restored without a mesh, shown from the
+    earlier view file when it shows the same record, ``keys``: name -> store record key,
+    :func:`case_view`). Returns the path, or None after a logged warning (a view never
+    stops an evaluation)."""
     meshes = {"rest": ("rest", case.V)}
     if getattr(case, "V_gt", None) is not None:
         meshes["target (ground truth)"] = ("target", case.V_gt)
@@ -271,9 +312,15 @@ def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: i
         meshes[str(n)] = ("result", U) if U is not None else (kind, None)
     for n in not_run:
         meshes.setdefault(str(n), ("not run", None))
+    p = case_view_path(run_dir, case.name)
+    earlier = None
+    if stored and keys:
+        try:
+            earlier = read_view(p)
+        except (OSError, ValueError):
+            earlier = None
     try:
-        view = case_view(case.name, case.V, case.F, meshes, max_faces=max_faces)
-        p = case_view_path(run_dir, case.name)
+        view = case_view(case.name, case.V, case.F, meshes, max_faces=max_faces, keys=keys, earlier=earlier)
         p.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(view, separators=(",", ":"))
         with atomic_write(p, "w") as fh:

@@ -282,7 +282,8 @@ def _views_section(run_dir: Path, cases, outputs) -> tuple[str, str, list[str]]:
         tags.append(f'<script src="{_e(link_target(run_dir, rel))}"></script>')
         shown = ("shown in full" if data["shown_faces"] == data["n_faces"] else
                  f"shown with {data['shown_faces']} faces (vertex clustering, for display only)")
-        labels = "".join(f"<div>{_e(m['label'])}{'' if m.get('pos') else ': ' + _e(m['kind'])}</div>"
+        labels = "".join(f"<div>{_e(m['label'])}{'' if m.get('pos') else ': ' + _e(m['kind'])}"
+                         f"{' (restored: its earlier view)' if m.get('carried') else ''}</div>"
                          for m in data["meshes"])
         out.append(f'<div class="view" data-case="{_e(data["case"])}"><h3>{_e(data["case"])}</h3>'
                    f'<div class="view-labels">{labels}</div><canvas></canvas>'

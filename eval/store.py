@@ -61,7 +61,7 @@ __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "safe_name", "
 
 log = logging.getLogger("eval")
 
-STORE_VERSION = 2  #: bumped when the record layout changes (an older record is then stale)
+STORE_VERSION = 3  #: bumped when the record layout changes (an older record is then stale)
 STORE_DIR = "runs"  #: the store's folder inside out_dir
 
 
@@ -108,15 +108,18 @@ def _digest(a) -> str:
 
 def case_identity(case, *, dataset: str, root, seed) -> dict:
     """What identifies a case: ``dataset`` (name), ``root`` (its folder, as text),
-    ``seed`` (the dataset's seed), the case's ``name`` and ``seed``, and short SHA-256
-    digests of its vertices ``V`` (n, 3), faces ``F`` (m, 3), ``handles`` (h,),
-    ``targets`` (h, 3) (so a changed handle set is another case) and ground truth
-    ``V_gt`` (n, 3) when it has one."""
+    ``seed`` (the dataset's seed), the case's ``name``, ``seed``, ``subject``, ``pose`` and
+    ``n_dropped`` (the row's columns taken from the case), and short SHA-256 digests of
+    its vertices ``V`` (n, 3), faces ``F`` (m, 3), ``handles`` (h,), ``targets`` (h, 3)
+    (so a changed handle set is another case) and ground truth ``V_gt`` (n, 3) when it
+    has one. The dataset's reader is not part of the code identity: what it gives is."""
     gt = getattr(case, "V_gt", None)
     return {"V_gt": None if gt is None else _digest(gt), "dataset": str(dataset), "root": str(root),
             "dataset_seed": json_safe(seed), "case": str(case.name),
             "case_seed": json_safe(getattr(case, "seed", None)), "V": _digest(case.V), "F": _digest(case.F),
-            "handles": _digest(case.handles), "targets": _digest(case.targets)}
+            "handles": _digest(case.handles), "targets": _digest(case.targets),
+            "subject": json_safe(getattr(case, "subject", None)), "pose": json_safe(getattr(case, "pose", None)),
+            "n_dropped": json_safe(getattr(case, "n_dropped", None))}
 
 
 def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None, code: dict | None = None

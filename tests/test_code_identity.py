@@ -1,8 +1,9 @@
 """eval/code_identity.py: a stored row is reused only by the code that computed it.
 
-A resumed run recomputes every pair a plug-in's changed file or a change to the project's
-sources (a commit between two halves of a run) would compute differently, says how many
-and why, and never tabulates rows of two codes together.
+A resumed run recomputes every pair a plug-in's changed file or a change to the modules
+a row's code imports (a commit between two halves of a run) would compute differently,
+says how many and why, and never tabulates rows of two codes together; a change to code
+no row imports (tables, report, builder) leaves the rows valid.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import sys
 
 import pandas as pd
 
-from eval.code_identity import code_identity, describe_change, sources_digest
+from eval.code_identity import ROW_HARNESS, code_identity, describe_change, import_closure, sources_digest
 
 from .conftest import ROOT, subprocess_env
 from .store_methods import kill_at_call
@@ -62,6 +63,64 @@ def _eval(root, out, methods, *extra, env=None, popen=False):
     return r
 
 
+def _tree_copy(dst):
+    for pkg in ("sshade", "baselines", "defaust", "eval"):
+        shutil.copytree(ROOT / pkg, dst / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    return dst
+
+
+def _touch(path):
+    """A change to the code (a statement), as a commit would make."""
+    with open(path, "a") as fh:
+        fh.write("\n_EDITED = 1\n")
+
+
+def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
+    from baselines import ARAP
+    from baselines.implicit_arap import ImplicitARAP
+    arap = import_closure(("baselines.arap",))
+    assert {"sshade.arap.solver", "sshade.mesh.validate", "baselines"} <= set(arap)
+    harness = import_closure(ROW_HARNESS)
+    assert {"eval.metrics", "eval.reference", "sshade.guard", "eval.store"} <= set(harness)
+    presentation = {"eval.tables", "eval.report", "eval.meshview", "eval.plan", "defaust.build", "defaust.export",
+                    "eval.reproduce", "eval.app"}
+    assert not presentation & (set(arap) | set(harness))
+    src = _tree_copy(tmp_path / "src")
+    root = str(src)
+    a0, i0 = code_identity(ARAP(), root=root), code_identity(ImplicitARAP(), root=root)
+    assert a0["sources"] == code_identity(ARAP())["sources"]  # the same bytes under another folder
+    assert "baselines.implicit_arap.field" in i0["modules"] and "baselines.implicit_arap.field" not in a0["modules"]
+    _touch(src / "eval" / "tables.py")  # presentation: no row changes
+    _touch(src / "defaust" / "export.py")
+    import_closure.cache_clear()
+    assert code_identity(ARAP(), root=root) == a0 and code_identity(ImplicitARAP(), root=root) == i0
+    _touch(src / "baselines" / "implicit_arap" / "field.py")  # one method's own module: its rows only
+    assert code_identity(ARAP(), root=root) == a0 and code_identity(ImplicitARAP(), root=root) != i0
+    _touch(src / "eval" / "metrics.py")  # a metric: every row
+    assert code_identity(ARAP(), root=root)["sources"] != a0["sources"]
+
+
+def test_comments_docstrings_and_layout_do_not_change_the_identity(tmp_path):
+    from baselines import ARAP
+    src = _tree_copy(tmp_path / "src")
+    a0 = code_identity(ARAP(), root=str(src))
+    f = src / "sshade" / "arap" / "solver.py"
+    text = f.read_text()
+    prose = text.replace('"""', '"""Reworded. ', 1) + "\n# a comment\n\n\n"
+    f.write_text(prose.replace("import numpy as np", "import numpy  as np", 1))
+    assert code_identity(ARAP(), root=str(src)) == a0
+    f.write_text(text.replace("import numpy as np", "import numpy as np\n_X = 2", 1))
+    assert code_identity(ARAP(), root=str(src))["sources"] != a0["sources"]
+
+
+def test_nested_targets_of_a_definition_add_their_modules():
+    from baselines import ARAP
+    plain = code_identity(ARAP(), {"_target_": "baselines.ARAP"})
+    nested = code_identity(ARAP(), {"_target_": "baselines.ARAP", "helper": {"_target_": "defaust.export.export"}})
+    assert "defaust.export" in nested["modules"] and "defaust.export" not in plain["modules"]
+    assert nested["sources"] != plain["sources"]
+
+
 def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
     from baselines import Elastic
     ident = code_identity(Elastic())
@@ -78,8 +137,7 @@ def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
         shutil.copytree(ROOT / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     d0 = sources_digest(root=str(src))
     assert d0 == sources_digest()  # the same bytes under another folder: the same code
-    with open(src / "eval" / "metrics.py", "a") as fh:
-        fh.write("\n# edited\n")
+    _touch(src / "eval" / "metrics.py")
     sources_digest.cache_clear()
     assert sources_digest(root=str(src)) != d0
     assert describe_change(None, ident).startswith("a record without")
@@ -126,7 +184,7 @@ def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, 
     kill_at_call(p, counter, 3)
     assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]  # the first case
     with open(tree / "eval" / "metrics.py", "a") as fh:
-        fh.write("\n# a commit between the two halves\n")
+        fh.write("\n_A_COMMIT_BETWEEN_THE_TWO_HALVES = 1\n")
     counter.unlink()
     r = _eval(tree, out, methods, "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
     assert _counts(counter) == {"A": 2, "B": 2}  # the first half too

@@ -40,8 +40,8 @@ def test_two_workers_build_the_same_files_as_one(serial, tmp_path):
     out1, rep1 = serial
     rep2 = _build(tmp_path, 2)
     d1, d2 = _digests(out1), _digests(tmp_path)
-    assert len(d1) == 1 + 2 * (2 + 4 * 3)  # manifest + per subject 2 rest files + 4 poses x 3 files
-    assert d2 == d1  # every file, manifest.json included
+    assert len(d1) == 2 + 2 * (2 + 4 * 3)  # manifest, croissant + per subject 2 rest files + 4 poses x 3 files
+    assert d2 == d1  # every file, manifest.json and croissant.json included
     assert rep2.built == rep1.built and rep2.skipped == [] and sorted(rep2.subject_seconds) == [0, 1]
     assert rep2.manifest == rep1.manifest
 

@@ -350,6 +350,44 @@ def test_a_resumed_run_with_fewer_cases_shows_only_its_cases(tmp_path, faust_roo
     assert re.search(rf"3D view report/{second}\.js left out: not of a case of this run", text)
 
 
+def test_a_resumed_run_shows_restored_results_from_the_earlier_view_of_the_same_record(tmp_path, faust_root):
+    """Every pair restored without its mesh (store.meshes=false): each panel is taken
+    from the earlier view, which showed the same stored record (its key); one whose
+    record was recomputed with another parameter is drawn fresh; none says not stored."""
+    out = tmp_path / "run"
+    other = "{_target_:tests.plugin_example.MyMethod,name:Other,iterations:%d}"
+    p, _ = _faust_run(faust_root, out, "dataset.limit=1", f"methods=[{_MINE},{other % 2}]")
+    (case,) = p.views
+    before = read_view(out / "report" / f"{case}.js")
+    p, text = _faust_run(faust_root, out, "dataset.limit=1", f"methods=[{_MINE},{other % 4}]", "resume=true")
+    after = read_view(out / "report" / f"{case}.js")
+    panels = {m["label"]: m for m in after["meshes"]}
+    assert panels["Mine"]["carried"] and not panels["Other"]["carried"]
+    assert all(m["pos"] for m in after["meshes"]) and "not stored" not in text
+    old = {m["label"]: m for m in before["meshes"]}
+    assert panels["Mine"]["key"] == old["Mine"]["key"] and panels["Other"]["key"] != old["Other"]["key"]
+    def xyz(v, m):
+        q = np.frombuffer(__import__("base64").b64decode(m["pos"]), "<u2").reshape(-1, 3)
+        return np.asarray(v["lo"]) + q * np.asarray(v["step"])
+    # the carried positions are the earlier ones, up to one quantisation step of either box
+    tol = 2 * (np.asarray(before["step"]) + np.asarray(after["step"]))
+    assert (np.abs(xyz(after, panels["Mine"]) - xyz(before, old["Mine"])) <= tol).all()
+
+
+def test_an_earlier_view_of_another_record_is_not_carried():
+    V, F = _sphere(3)
+    first = case_view("s", V, F, {"rest": ("rest", V), "A": ("result", V * 1.1)}, max_faces=500, keys={"A": "k1"})
+    later = case_view("s", V, F, {"rest": ("rest", V), "A": ("not stored", None)}, max_faces=500, keys={"A": "k2"},
+                      earlier=first)
+    assert later["meshes"][1]["pos"] is None and later["meshes"][1]["kind"] == "not stored"
+    same = case_view("s", V, F, {"rest": ("rest", V), "A": ("not stored", None)}, max_faces=500, keys={"A": "k1"},
+                     earlier=first)
+    assert same["meshes"][1]["carried"] and same["meshes"][1]["kind"] == "result"
+    other_clusters = case_view("s", V, F, {"rest": ("rest", V), "A": ("not stored", None)}, max_faces=200,
+                               keys={"A": "k1"}, earlier=first)
+    assert other_clusters["meshes"][1]["pos"] is None  # another decimation: nothing carried
+
+
 def test_a_figure_not_redrawn_is_not_shown_as_current(tmp_path, faust_root):
     """A resume where one method runs again (another parameter) and the other is restored
     without its mesh (store.meshes=false): the case figure cannot be redrawn, so the
@@ -365,8 +403,9 @@ def test_a_figure_not_redrawn_is_not_shown_as_current(tmp_path, faust_root):
     assert not (out / "figures" / f"{case}.png").exists()  # the earlier run's figure removed
     assert f"figure of case {case} not redrawn: its restored runs of Mine have no stored mesh" in text
     assert "store.meshes=true keeps them" in text
-    assert p.views == [case]  # the 3D view is redrawn (Mine's panel: not stored)
-    assert [m["kind"] for m in read_view(out / p.scripts[0])["meshes"]][-2:] == ["not stored", "result"]
+    assert p.views == [case]  # the 3D view is redrawn, Mine's panel from the earlier view of its record
+    meshes = read_view(out / p.scripts[0])["meshes"]
+    assert [(m["kind"], m["carried"]) for m in meshes][-2:] == [("result", True), ("result", False)]
 
 
 class _Links(HTMLParser):

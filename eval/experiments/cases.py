@@ -160,7 +160,7 @@ def _setup(cfg) -> _Setup:
     unless ``resume``), before any method runs."""
     methods = method_table.make_methods(cfg)  # every method's parameters are checked before any work
     specs = _method_specs(cfg, methods)
-    codes = [code_identity(m) for m in methods]  # each method's code identity, once (eval/code_identity.py)
+    codes = [code_identity(m, sp) for m, sp in zip(methods, specs)]  # once each (eval/code_identity.py)
     guard = guard_options(cfg)  # timeout_s, handle_error_max_pct
     base_spec = (cfg.get("dataset") or {}).get("baseline_cases", None)
     check_baseline_cases(base_spec)
@@ -373,7 +373,9 @@ class _CaseOutputs:
             p = write_case_figure(case, results, s.out_dir / "figures", not_run=not_run)
             self._kept(ci, "figure", p, case_figure_path(s.out_dir / "figures", case.name))
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
-            p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown)
+            keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
+            p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown,
+                                keys=keys)
             self._kept(ci, "3D view", p, case_view_path(s.out_dir, case.name))
         self._record()
 

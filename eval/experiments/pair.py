@@ -150,7 +150,8 @@ def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str
 
     Returns
     -------
-    ``(record, U, wall_s, cost_s)``: the record as the store holds it, the deformed
+    ``(record, U, wall_s, cost_s)``: the record as the store holds it (its row, info,
+    names and key), the deformed
     vertices (n, 3) or None, the pair's wall seconds, and those less the method's one-off
     compilation (``compile_s``: not a cost of the later runs; for the cost model).
     """
@@ -160,7 +161,7 @@ def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str
     wall = time.perf_counter() - t0
     c = row.get("compile_s")
     cost_s = wall - (c if isinstance(c, (int, float)) and c == c else 0.0)
-    rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name}
+    rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name, "key": key}
     try:
         store.save(case.name, name, key, fields, row, info, U)
     except OSError as e:
