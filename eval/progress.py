@@ -34,16 +34,18 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "
 #: 68.1 s, SShaDe 2.0 s; ARAP-SR (converged, coarse start: baselines/coarse_start.py)
 #: 41-112 s on the first four DeFAUST cases, 43-54 s on s00_p01 (machine shared): 3e-4
 #: s/vertex, about 51 s at 169k.
-#: Implicit-ARAP's cpu preset (a constant): 53.5 s mean over the 8 FAUST cases of the
-#: committed results/faust, 46 s over the 3 shapes at 164-166k vertices (its cost does not
-#: grow with the mesh); another preset (paper: hours per case on a CPU) has no prior.
-METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0, "Implicit-ARAP": 50.0}
+#: Implicit-ARAP's cpu preset (a constant: its cost does not grow with the mesh): 105 s
+#: mean over the 4 DeFAUST per-pose cases and 103 s over the 8 FAUST cases at its 500
+#: deformation steps (results/sweeps/implicit_arap_defaust and _faust, job 1); another
+#: preset (paper: hours per case on a CPU) has no prior.
+METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0, "Implicit-ARAP": 105.0}
 #: Methods whose prior holds for one preset only (their ``preset`` attribute).
 PRESET_PRIORS = {"Implicit-ARAP": "cpu"}
 #: Priors that replace :data:`METHOD_PRIORS` for a method run under ``arap.protocol=paper``
-#: (its ``protocol`` attribute): ARAP-SR's move rule stops after 2 iterations, 3.6-3.7 s at
-#: 168,897 vertices (the committed ``results/defaust_paper/cases.csv``): 2.2e-5 s/vertex.
-PAPER_PRIORS = {"ARAP-SR": 2.2e-5}
+#: (its ``protocol`` attribute): ARAP-SR's paper iteration runs to its energy stop or
+#: the 1000-iteration cap, which it reaches on DeFAUST: 0.24 s per iteration at 168,855
+#: vertices (s00_p01, 30 iterations, 2 cores, machine shared), about 240 s: 1.4e-3 s/vertex.
+PAPER_PRIORS = {"ARAP-SR": 1.4e-3}
 #: The priors of :data:`METHOD_PRIORS` that are guesses, not measurements.
 GUESSED_PRIORS: tuple[str, ...] = ()
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,

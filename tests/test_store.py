@@ -116,12 +116,12 @@ def test_cost_model_weights_by_method():
 
 
 def test_paper_protocol_has_its_own_prior():
-    """ARAP-SR under the paper's move rule (2 iterations) is planned at its own measured
-    prior, not at the converged solve's (~14x more)."""
+    """ARAP-SR under the paper protocol (its plain iteration to the 1000-iteration cap) is
+    planned at its own measured prior, not at the converged solve's (~5x less)."""
     from eval.progress import METHOD_PRIORS, PAPER_PRIORS, default_cost_model
     conv = default_cost_model([SimpleNamespace(name="ARAP-SR", protocol="converged")])
     paper = default_cost_model([SimpleNamespace(name="ARAP-SR", protocol="paper")])
-    assert conv.estimate("ARAP-SR", 169_000) > 5 * paper.estimate("ARAP-SR", 169_000)  # both with ~2.5 s overhead
+    assert paper.estimate("ARAP-SR", 169_000) > 3 * conv.estimate("ARAP-SR", 169_000)  # both with ~2.5 s overhead
     assert paper.priors["ARAP-SR"] == PAPER_PRIORS["ARAP-SR"] and conv.priors["ARAP-SR"] == METHOD_PRIORS["ARAP-SR"]
 
 
