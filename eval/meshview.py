@@ -101,17 +101,17 @@ def cluster_decimate(V, F, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
 def cluster_positions(X, labels, n_clusters: int) -> np.ndarray:
     """(c, 3) float64: the mean of ``X`` (n, 3) over each cluster of ``labels`` (n,);
     a cluster without vertices (never from :func:`cluster_decimate`) at 0."""
-    X = np.asarray(X, np.float64)
-    cnt = np.maximum(np.bincount(labels, minlength=n_clusters), 1)
-    return np.stack([np.bincount(labels, X[:, k], minlength=n_clusters) / cnt for k in range(3)], axis=1)
+    return cluster_means(X, labels, n_clusters)
 
 
 def cluster_means(x, labels, n_clusters: int) -> np.ndarray:
-    """(c,) float64: the mean of the per-vertex values ``x`` (n,) over each cluster of
-    ``labels`` (n,); 0 for a cluster without vertices."""
-    s = np.bincount(labels, weights=np.asarray(x, np.float64), minlength=n_clusters)
-    k = np.bincount(labels, minlength=n_clusters)
-    return s / np.maximum(k, 1)
+    """(c,) or (c, d) float64: the mean of the values ``x`` (n,) or (n, d) over each
+    group of ``labels`` (n,) int in ``0 .. c-1``; 0 for a group without members."""
+    x = np.asarray(x, np.float64)
+    cnt = np.maximum(np.bincount(labels, minlength=n_clusters), 1)
+    if x.ndim == 1:
+        return np.bincount(labels, x, minlength=n_clusters) / cnt
+    return np.stack([np.bincount(labels, x[:, k], minlength=n_clusters) / cnt for k in range(x.shape[1])], axis=1)
 
 
 def vertex_edge_error(V, X, F) -> np.ndarray:
@@ -131,9 +131,7 @@ def vertex_edge_error(V, X, F) -> np.ndarray:
     l1 = np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1)
     lmax = float(l0.max()) if len(l0) else 0.0
     e = 100.0 * np.abs(l1 - l0) / lmax if lmax > 0 else np.zeros(len(E))
-    s = np.bincount(E.ravel(), weights=np.repeat(e, 2), minlength=len(V))
-    k = np.bincount(E.ravel(), minlength=len(V))
-    return s / np.maximum(k, 1)
+    return cluster_means(np.repeat(e, 2), E.ravel(), len(V))  # each edge at both its ends
 
 
 def _colour_values(V, F, meshes: Mapping, pos: dict, labels, c: int, carried=None) -> tuple[dict, dict]:
