@@ -14,9 +14,7 @@ Example::
 """
 from __future__ import annotations
 
-import argparse
-
-from sshade.clirun import run_command
+from sshade.clirun import ArgumentParser, run_command
 
 from .dataset import RESOLUTIONS, verify
 from .export import FORMATS, export
@@ -27,8 +25,8 @@ __all__ = ["COMMANDS", "main"]
 COMMANDS = ("verify", "export")
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m defaust", description="Check or export a built DeFAUST dataset.")
+def _parser() -> ArgumentParser:
+    p = ArgumentParser(prog="python -m defaust", description="Check or export a built DeFAUST dataset.")
     sub = p.add_subparsers(dest="command", required=True)
     v = sub.add_parser("verify", help="check every file of a build against its manifest")
     v.add_argument("root", help="the build folder (out= of the build)")
@@ -61,7 +59,7 @@ def _export(a) -> int:
 
 def main(argv: list[str]) -> int:
     """Run ``verify`` or ``export`` with ``argv`` (the words after ``python -m defaust``);
-    returns the exit status (argparse's own 2 on a bad command line)."""
+    returns the exit status (a bad command line: one ``error:`` line, exit 2)."""
     a = _parser().parse_args(argv)
     if a.command == "verify":
         return run_command(lambda: _verify(a.root), where=a.root)

@@ -82,6 +82,15 @@ def test_a_foreign_folder_or_the_build_itself_is_refused_unchanged(defaust_ci, t
     assert _tree(mine) == before
 
 
+@pytest.mark.parametrize("argv", [["export", "DIR"], ["export", "DIR", "--to", "X", "--format", "stl"], ["verify"]])
+def test_cli_usage_errors_are_one_line(argv, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "defaust", *argv], capture_output=True, text=True, cwd=tmp_path,
+                       env=subprocess_env(), timeout=300)
+    assert r.returncode == 2 and r.stdout == ""
+    assert len(r.stderr.strip().splitlines()) == 1 and r.stderr.startswith("error: ")
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
 def test_cli_export_writes_and_reports_the_size(defaust_ci, tmp_path):
     r = subprocess.run([sys.executable, "-m", "defaust", "export", str(defaust_ci), "--to", str(tmp_path / "o"),
                         "--format", "obj", "--resolution", "low"], capture_output=True, text=True, cwd=ROOT,
