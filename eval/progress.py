@@ -25,7 +25,6 @@ DeFAUST (:data:`METHOD_PRIORS`) plus the per-pair overhead of the metrics
 from __future__ import annotations
 
 __all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "PAPER_PRIORS", "PRESET_PRIORS",
-           "GUESSED_PRIORS",
            "OVERHEAD_S_PER_VERTEX"]
 
 #: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
@@ -46,8 +45,6 @@ PRESET_PRIORS = {"Implicit-ARAP": "cpu"}
 #: the 1000-iteration cap, which it reaches on DeFAUST: 0.24 s per iteration at 168,855
 #: vertices (s00_p01, 30 iterations, 2 cores, machine shared), about 240 s: 1.4e-3 s/vertex.
 PAPER_PRIORS = {"ARAP-SR": 1.4e-3}
-#: The priors of :data:`METHOD_PRIORS` that are guesses, not measurements.
-GUESSED_PRIORS: tuple[str, ...] = ()
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
 #: reading a cached reference, the store, cases.csv, the report's 3D views): about 2.5 s per
 #: pair at 169k vertices, mostly the ground-truth Hausdorff and Chamfer (two
@@ -119,11 +116,10 @@ class CostModel:
 
     def basis(self, method: str) -> str:
         """What ``method``'s estimate rests on: ``"measured"`` (runs it has observed),
-        ``"prior"`` (a per-method prior measured earlier), ``"guess"`` (a prior not
-        measured yet, :data:`GUESSED_PRIORS`, or the generic one)."""
+        ``"prior"`` (a per-method prior measured earlier), ``"guess"`` (the generic one)."""
         if self.seen.get(method):
             return "measured"
-        return "prior" if method in self.priors and method not in GUESSED_PRIORS else "guess"
+        return "prior" if method in self.priors else "guess"
 
 
 def default_cost_model(methods) -> CostModel:
