@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -22,6 +23,22 @@ def _reference_cache(tmp_path_factory):
         os.environ.pop("SSHADE_REFERENCE_CACHE", None)
     else:
         os.environ["SSHADE_REFERENCE_CACHE"] = old
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _ctrl_c_as_at_a_terminal():
+    """Ctrl-C reaches the tests' commands as at a terminal, also where the suite starts
+    with SIGINT ignored (a CI runner's background job): Python then installs no
+    KeyboardInterrupt handler and every child inherits the ignore, so the Ctrl-C tests
+    could not deliver theirs. Python's default handler for the session (children start
+    with SIGINT at its default, as exec resets a caught signal); the ignore comes back
+    after."""
+    ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    if ignored:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    if ignored:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @pytest.fixture(scope="session")
