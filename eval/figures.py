@@ -37,9 +37,15 @@ from .store import safe_name
 
 __all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
            "pose_transfer_figure", "safe_figure", "write_case_figure", "case_figure_path", "figures_options",
-           "ERROR_CMAP", "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure"]
+           "ERROR_CMAP", "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure",
+           "FIGURE_RECORDS"]
 
 log = logging.getLogger("eval")
+
+#: PNG text keyword of a case figure's stamp: the store record key of each result it
+#: shows (method name -> key) and the methods not run, as JSON; a resumed run keeps a
+#: figure whose stamp equals its restored records (eval/experiments/cases.py).
+FIGURE_RECORDS = "sshade-records"
 
 #: Handle colours of the paper's Fig. 1: static blue, dynamic yellow.
 STATIC_COLOR = "#1f3fff"

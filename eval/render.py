@@ -13,6 +13,8 @@ so this works on servers, in Hydra jobs and in worker processes whatever
 - :func:`save_png`: an image array to a PNG file, atomically.
 - :func:`figure_row`: several images side by side with titles (and one optional shared
   colour bar) into one PNG.
+- :func:`png_text` / :func:`set_png_text`: a PNG's ``tEXt`` chunks (what a figure was
+  drawn from), read and written with the standard library.
 
 Coordinates: ``up="y"`` (default; FAUST, most scanned meshes) shows +y upwards and looks
 at the +z side for ``view=(0, -90)``; ``up="z"`` uses the data as they are (matplotlib's
@@ -38,7 +40,8 @@ from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 from sshade.mesh.validate import check_arrays
 
-__all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "DEFAULT_VIEW"]
+__all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "png_text", "set_png_text",
+           "DEFAULT_VIEW"]
 
 #: Default camera: slightly from above, turned a little to the side of a y-up mesh's front.
 DEFAULT_VIEW = (10.0, -75.0)
@@ -369,6 +372,74 @@ def png_size(path) -> tuple[int, int]:
     if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
         raise SShaDeError(f"not a PNG file: {path}")
     return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_chunks(data: bytes) -> list[tuple[bytes, bytes]]:
+    """(type, payload) of every chunk of the PNG ``data``; SShaDeError when it is not one
+    (bad signature, a truncated chunk, a wrong CRC, no IEND at the end)."""
+    import zlib
+    if data[:8] != _PNG_SIGNATURE:
+        raise SShaDeError("not a PNG file")
+    chunks, i = [], 8
+    while i < len(data):
+        if i + 12 > len(data):
+            raise SShaDeError("truncated PNG chunk")
+        n, kind = int.from_bytes(data[i:i + 4], "big"), data[i + 4:i + 8]
+        body, crc = data[i + 8:i + 8 + n], data[i + 8 + n:i + 12 + n]
+        if len(crc) != 4 or zlib.crc32(kind + body) != int.from_bytes(crc, "big"):
+            raise SShaDeError(f"damaged PNG chunk {kind!r}")
+        chunks.append((kind, body))
+        i += 12 + n
+    if not chunks or chunks[-1][0] != b"IEND":
+        raise SShaDeError("PNG file without its IEND chunk")
+    return chunks
+
+
+def png_text(path) -> dict[str, str]:
+    """The ``tEXt`` chunks of the PNG file ``path``, keyword -> text (Latin-1, as the PNG
+    specification defines them). Raises SShaDeError when the file is not a whole PNG,
+    OSError when it cannot be read."""
+    out = {}
+    for kind, body in _png_chunks(Path(path).read_bytes()):
+        if kind == b"tEXt" and b"\0" in body:
+            key, text = body.split(b"\0", 1)
+            out[key.decode("latin-1")] = text.decode("latin-1")
+    return out
+
+
+def set_png_text(path, texts: Mapping[str, str]) -> Path:
+    """Rewrite the PNG file ``path`` (atomically) with a ``tEXt`` chunk per item of
+    ``texts`` (keyword: 1-79 Latin-1 characters; text: Latin-1), replacing chunks of the
+    same keywords; the image itself is unchanged. Returns the path.
+
+    Raises SShaDeError for a keyword or text that PNG cannot hold, or a file that is not
+    a whole PNG; OSError when it cannot be read or written.
+
+    Example::
+
+        set_png_text("case.png", {"sshade-records": json.dumps(keys)})
+        png_text("case.png")["sshade-records"]
+    """
+    import zlib
+    new = []
+    for key, text in texts.items():
+        try:
+            k, t = str(key).encode("latin-1"), str(text).encode("latin-1")
+        except UnicodeEncodeError as e:
+            raise SShaDeError(f"set_png_text: not Latin-1: {e}") from None
+        if not 1 <= len(k) <= 79 or b"\0" in k or b"\0" in t:
+            raise SShaDeError(f"set_png_text: bad keyword {key!r}")
+        new.append((b"tEXt", k + b"\0" + t))
+    keys = {body.split(b"\0", 1)[0] for _, body in new}
+    chunks = [(kind, body) for kind, body in _png_chunks(Path(path).read_bytes())
+              if not (kind == b"tEXt" and body.split(b"\0", 1)[0] in keys)]
+    chunks[-1:-1] = new  # before IEND
+    data = _PNG_SIGNATURE + b"".join(len(body).to_bytes(4, "big") + kind + body
+                                     + zlib.crc32(kind + body).to_bytes(4, "big") for kind, body in chunks)
+    return _write_bytes(path, data)
 
 
 def _panel(p) -> tuple[np.ndarray, str | None]:

@@ -408,6 +408,28 @@ def test_a_figure_not_redrawn_is_not_shown_as_current(tmp_path, faust_root):
     assert [(m["kind"], m["carried"]) for m in meshes][-2:] == [("result", True), ("result", False)]
 
 
+def test_a_resumed_run_keeps_the_figure_stamped_with_its_restored_records(tmp_path, faust_root):
+    """Every pair restored without its mesh: the earlier figure, stamped with the records
+    it shows, stays this run's figure, byte for byte; a figure whose stamp names other
+    records (here: edited by hand) is removed, as one that cannot be redrawn."""
+    from eval.figures import FIGURE_RECORDS
+    from eval.render import png_text, set_png_text
+    out = tmp_path / "run"
+    opts = ("dataset.limit=1", "figures.enabled=true", "figures.max_cases=1", f"methods=[{_MINE}]")
+    p, _ = _faust_run(faust_root, out, *opts)
+    (case,) = p.views
+    fig = out / "figures" / f"{case}.png"
+    stamp = json.loads(png_text(fig)[FIGURE_RECORDS])
+    assert set(stamp["records"]) == {"Mine"} and stamp["records"]["Mine"] and stamp["not_run"] == []
+    before = fig.read_bytes()
+    p, text = _faust_run(faust_root, out, *opts, "resume=true")
+    assert fig.read_bytes() == before and f'src="figures/{case}.png"' in text
+    assert f"figure of case {case} kept from the earlier run: it shows the same stored records" in text
+    set_png_text(fig, {FIGURE_RECORDS: json.dumps({**stamp, "records": {"Mine": "another record"}})})
+    p, text = _faust_run(faust_root, out, *opts, "resume=true")
+    assert not fig.exists() and f"figure of case {case} not redrawn" in text
+
+
 class _Links(HTMLParser):
     """Every ``href`` and ``src`` value of a page."""
 

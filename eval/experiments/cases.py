@@ -54,22 +54,25 @@ before any work), :func:`_start_runinfo`, :func:`_run_cases`, :func:`_finish` (t
 """
 from __future__ import annotations
 
+import json
 import logging
 import time
 from pathlib import Path
 
 from sshade.checks import config_bool
+from sshade.errors import SShaDeError
 
 from .. import datasets
 from .. import methods as method_table
 from ..breakdown import write_breakdown
 from ..code_identity import code_identity
-from ..figures import case_figure_path, figures_options, write_case_figure
+from ..figures import FIGURE_RECORDS, case_figure_path, figures_options, write_case_figure
 from ..meshview import OUTPUTS, VIEW_DIR, case_view_path, view_options, write_case_view, write_outputs
 from ..methods import method_spec
 from ..metric_meshes import CaseMeshes
 from ..paths import abs_path
 from ..progress import CostModel, default_cost_model, weighted_bar
+from ..render import png_text, set_png_text
 from ..runinfo import collect_runinfo, method_sources, write_runinfo
 from ..store import ResultStore, case_identity, json_safe, pair_key
 from ..subset import baseline_selection, check_baseline_cases, method_selections
@@ -328,7 +331,8 @@ class _CaseOutputs:
     ``report/outputs.json`` (:func:`eval.meshview.write_outputs`) naming the views and
     figures this run wrote and saying why the others were not: the report shows only
     those. A figure or view of this run's case that is not (re)drawn has its earlier
-    file removed (a resumed run keeps an earlier run's files)."""
+    file removed (a resumed run keeps an earlier run's files), except a figure stamped
+    with exactly the records this run restored (:meth:`_figure`)."""
 
     def __init__(self, cfg, s: _Setup, plan: dict, done: dict):
         self.s, self.plan, self.done = s, plan, done
@@ -365,19 +369,42 @@ class _CaseOutputs:
         case = s.cases[ci]
         not_run = [n for m, n in zip(s.methods, s.names) if not s.runs_on(ci, m)]  # "not run", not "failed"
         results = {n: deformed.get(n) for n in s.names}
-        if ci < self.n_fig and unknown:
-            self._kept(ci, "figure", None, case_figure_path(s.out_dir / "figures", case.name),
-                       f"not redrawn: its restored runs of {', '.join(unknown)} have no stored mesh "
-                       "(store.meshes=true keeps them)")
-        elif ci < self.n_fig:  # out_dir/figures/<case>.png (eval/figures.py)
-            p = write_case_figure(case, results, s.out_dir / "figures", not_run=not_run)
-            self._kept(ci, "figure", p, case_figure_path(s.out_dir / "figures", case.name))
+        keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
+        if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/figures.py)
+            self._figure(ci, results, not_run, unknown, keys)
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
-            keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
             p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown,
                                 keys=keys)
             self._kept(ci, "3D view", p, case_view_path(s.out_dir, case.name))
         self._record()
+
+    def _figure(self, ci: int, results: dict, not_run: list, unknown: list, keys: dict) -> None:
+        """Case ``ci``'s figure, stamped with the records it shows (:data:`FIGURE_RECORDS`,
+        a PNG text chunk). When some restored run has no stored mesh, an earlier run's
+        figure stamped with exactly these records is kept (noted as such); else removed."""
+        s, case = self.s, self.s.cases[ci]
+        path = case_figure_path(s.out_dir / "figures", case.name)
+        stamp = json.dumps({"records": keys, "not_run": sorted(not_run)}, sort_keys=True)
+        if not unknown:
+            p = write_case_figure(case, results, s.out_dir / "figures", not_run=not_run)
+            try:
+                p = p and set_png_text(p, {FIGURE_RECORDS: stamp})
+            except (OSError, SShaDeError) as e:
+                log.warning("figure %s not stamped with its records: %s", p, e)
+            return self._kept(ci, "figure", p, path)
+        try:
+            same = all(keys.values()) and png_text(path).get(FIGURE_RECORDS) == stamp
+        except (OSError, SShaDeError):
+            same = False
+        if same:
+            self._kept(ci, "figure", path, path)
+            note = (f"figure of case {case.name} kept from the earlier run: it shows the same stored records "
+                    f"(the restored runs of {', '.join(unknown)} have no stored mesh)")
+            log.info("%s", note)
+            self.notes.setdefault(ci, []).append(note)
+            return None
+        return self._kept(ci, "figure", None, path, f"not redrawn: its restored runs of {', '.join(unknown)} have "
+                          "no stored mesh (store.meshes=true keeps them)")
 
     def _kept(self, ci: int, what: str, path, earlier: Path, why: str = "not drawn (eval.log says why)") -> None:
         """Record case ``ci``'s ``what`` (figure, 3D view) at ``path`` as this run's; when
