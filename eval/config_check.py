@@ -85,7 +85,7 @@ def _check_sshade(cfg) -> None:
     if sc is None:
         return
     kw = {}
-    for k in ("n_low", "n_samplings", "seed", "workers", "gradient", "warm_start",
+    for k in ("n_low", "n_samplings", "seed", "workers", "gradient", "anchor", "warm_start",
               "tol", "max_iter", "protocol", "etol", "gtol"):
         v = config_value(cfg, f"sshade.{k}", _ABSENT)
         if v is _ABSENT and k in ("tol", "max_iter", "protocol", "etol", "gtol"):

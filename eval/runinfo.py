@@ -131,6 +131,8 @@ def method_sources(methods) -> list[dict]:
 #: method option -> (the paper's value, short reason); docs/differences.md explains each.
 _PAPER_METHOD_OPTIONS = {
     "gradient": ("raw", "orthonormalised LRF instead of the raw gradient frame of §3.2 eq. (2)"),
+    "anchor": ("barycenter", "each vertex anchored at its projection onto its triangle, not at the barycenter "
+                             "of Alg. 1"),
     "warm_start": (False, "samplings 1..k-1 start from sampling 0's result (§3.3: independent)"),
     "protocol": ("paper", "ARAP run to the converged criterion, not the 1000-iteration move rule of §4.1"),
 }
@@ -142,7 +144,7 @@ def departures(config: dict) -> list[str]:
     Parameters
     ----------
     config : the resolved config as plain containers. Read: ``methods`` and their
-        ``method.<name>`` sections (``gradient``, ``warm_start``, ``protocol``), else the
+        ``method.<name>`` sections (``gradient``, ``anchor``, ``warm_start``, ``protocol``), else the
         ``sshade`` / ``arap`` sections; ``dataset.name`` with ``dataset.protocol`` and
         ``dataset.n_targets`` (FAUST).
 

@@ -13,7 +13,7 @@ import numpy as np
 from .arap import PROTOCOLS, arap_deform, bbox_diag, make_criterion
 from .components import deform_components
 from .errors import SShaDeError
-from .lrf import GRADIENTS, transfer
+from .lrf import ANCHORS, GRADIENTS, transfer
 from .mesh.halfedge import count_components
 from .mesh.validate import validate_handles, validate_mesh
 from .projection import project_to_fans
@@ -31,7 +31,8 @@ def _prepare(V, F, handles, n_low, seed, topology):
     t1 = time.perf_counter()
     proj = project_to_fans(V, rm.label, V[rm.seeds], rm.F)
     t2 = time.perf_counter()
-    prep = {"seeds": rm.seeds, "F": rm.F, "tri": proj.tri.astype(np.int32), "low_handles": rm.label[handles]}
+    prep = {"seeds": rm.seeds, "F": rm.F, "tri": proj.tri.astype(np.int32), "low_handles": rm.label[handles],
+            "bary": proj.bary}
     info = {"remesh_s": t1 - t0, "project_s": t2 - t1, "n_low": int(len(rm.seeds)), "n_repair": rm.n_repair,
             "rounds": int(rm.iterations), "n_flipped": rm.n_flipped, "seed": int(seed), "first": rm.first}
     return prep, info
@@ -45,17 +46,20 @@ def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
     return {"tol": tol, "max_iter": max_iter, "protocol": protocol, "criterion": crit}
 
 
-def _finish(V, targets, handles, prep, *, arap: dict, gradient, V0=None):
+def _finish(V, targets, handles, prep, *, arap: dict, gradient, anchor, V0=None):
     """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling.
-    ``arap``: keyword arguments of :func:`sshade.arap.arap_deform` (:func:`_arap_options`)."""
+    ``arap``: keyword arguments of :func:`sshade.arap.arap_deform` (:func:`_arap_options`);
+    ``anchor``: one of :data:`sshade.lrf.ANCHORS`."""
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
     res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", V0=V0, **arap)
     t1 = time.perf_counter()
-    Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=gradient)
-    # handles are low-res vertices, but the transfer reproduces one only where its triangle
-    # P(v) moves rigidly (the frame is not the triangle's affine map): overwritten here,
-    # the residual kept for the handle error before the overwrite
+    Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=gradient,
+                  bary=prep["bary"] if anchor == "projection" else None)
+    # handles are low-res vertices: anchored at their projection (themselves) the transfer
+    # rebuilds them exactly; at the barycenter (Alg. 1) only where P(v) moves rigidly (the
+    # frame is not the triangle's affine map). Overwritten here, the residual kept for the
+    # handle error before the overwrite
     resid = Vd[handles] - targets
     Vd[handles] = targets
     t2 = time.perf_counter()
@@ -66,7 +70,8 @@ def _finish(V, targets, handles, prep, *, arap: dict, gradient, V0=None):
 
 def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None, tol: float = 1e-4,
                 max_iter: int | None = None, gradient: str = "normalized", V_init=None, protocol: str = "converged",
-                etol: float | None = None, gtol: float | None = None) -> tuple[np.ndarray, dict]:
+                etol: float | None = None, gtol: float | None = None,
+                anchor: str = "projection") -> tuple[np.ndarray, dict]:
     """One sampling of SShaDe (no averaging): remesh, low-res ARAP, transfer.
 
     Parameters
@@ -75,7 +80,8 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
         (all validated). n_low : farthest-point samples. seed : first-seed RNG seed.
     topology : optional :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
     tol, max_iter, protocol, etol, gtol : the low-res ARAP's protocol and stopping rule
-        (:func:`sshade.arap.arap_deform`). gradient : LRF mode (§3.2).
+        (:func:`sshade.arap.arap_deform`). gradient : LRF mode (§3.2). anchor : where a
+        vertex is anchored in its triangle (:data:`sshade.lrf.ANCHORS`, see :func:`deform`).
     V_init : (n, 3) float64 or None, a deformed high-res shape whose values at the
         low-res vertices start the ARAP iterations (default: rigid fit of the handles).
 
@@ -91,7 +97,7 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     prep, info = _prepare(V, F, handles, n_low, seed, topology)
     V0 = None if V_init is None else V_init[prep["seeds"]]
     Vd, info2 = _finish(V, targets, handles, prep, arap=_arap_options(tol, max_iter, protocol, etol, gtol),
-                        gradient=gradient, V0=V0)
+                        gradient=gradient, anchor=anchor, V0=V0)
     info.update(info2, handle_pre_pct=_handle_pre_pct(info2.pop("handle_resid"), V))
     return Vd, info
 
@@ -99,7 +105,8 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
 def _task_full(i: int):
     w = worker_state()
     prep, info = _prepare(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
-    Vd, info2 = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"])
+    Vd, info2 = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"],
+                        anchor=w["anchor"])
     info.update(info2)
     return i, Vd, info
 
@@ -112,7 +119,8 @@ def _task_prepare(i: int):
 
 def _task_finish(i: int, prep: dict, V0: np.ndarray):
     w = worker_state()
-    Vd, info = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"], V0=V0)
+    Vd, info = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"],
+                       anchor=w["anchor"], V0=V0)
     return i, Vd, info
 
 
@@ -130,7 +138,8 @@ _MAX_SEED = 2**63 - 1     # int64: recorded in JSON/CSV and passed to numpy
 
 def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
                  max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
-                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None) -> dict:
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
+                 anchor: str = "projection") -> dict:
     """Validate SShaDe's parameters without touching a mesh (so a bad value fails before
     any work, e.g. before an evaluator spends minutes on the baselines).
 
@@ -139,7 +148,8 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     As :func:`deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None), n_samplings
     (int in [1, 10000]), seed (int in [0, 2**63 - 1]), workers (int in [1, 2**31 - 1] or
     None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or None), gradient (one
-    of :data:`sshade.lrf.GRADIENTS`), warm_start (bool), protocol (one of
+    of :data:`sshade.lrf.GRADIENTS`), anchor (one of :data:`sshade.lrf.ANCHORS`),
+    warm_start (bool), protocol (one of
     :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None). An
     integer may be given as an integral float (``1e3``) but never as a bool, NaN, inf
     or a float beyond the range.
@@ -194,6 +204,9 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     if gradient not in GRADIENTS:
         raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
     out["gradient"] = gradient
+    if anchor not in ANCHORS:
+        raise SShaDeError(f"SShaDe: unknown anchor {anchor!r}; use one of {ANCHORS}")
+    out["anchor"] = anchor
     out["warm_start"] = bool(warm_start)  # a bool (checked above)
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
@@ -222,7 +235,8 @@ def auto_n_low(n: int) -> int:
 def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0,
            workers: int | None = None, tol: float = 1e-4, max_iter: int | None = None,
            gradient: str = "normalized", warm_start: bool = True, return_info: bool = False,
-           protocol: str = "converged", etol: float | None = None, gtol: float | None = None):
+           protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
+           anchor: str = "projection"):
     """Deform a high-resolution mesh with SShaDe (paper §3, Alg. 1, §3.3 averaging).
 
     Sampling 0 runs its low-res ARAP from the rigid fit of the handles; with
@@ -251,6 +265,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         ``tol * bbox_diag``). max_iter : int or None, cap (None: protocol default;
         paper: 1000).
     gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
+    anchor : ``"projection"`` (default: each high-res vertex anchored at its projection
+        onto its low-res triangle, whose affine map carries it; docs/differences.md) or
+        ``"barycenter"`` (paper Alg. 1: at the triangle's barycenter) (:mod:`sshade.lrf`).
     warm_start : bool, start samplings 1..k-1 from sampling 0's result.
     return_info : also return a dict of timings, seeds and per-sampling details;
         ``total_s`` (wall seconds) excludes ``compile_s``, the seconds this call spent
@@ -284,7 +301,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     """
     p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                      max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
-                     gtol=gtol)
+                     gtol=gtol, anchor=anchor)
     compile_s = warm_kernels()  # numba compilation / cache loads: not part of the timings below
     t0 = time.perf_counter()
     V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
@@ -293,7 +310,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
     n_low_asked, n_low = _low_res_size(len(V), p["n_low"])
     state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, topology=mesh_topology(V, F, he),
-                 seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"],
+                 seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"], anchor=p["anchor"],
                  arap=_arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
     workers = pool_size(p["workers"], p["n_samplings"])
     t1 = time.perf_counter()
@@ -307,8 +324,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
             "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
             "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
-    return Vd, {**info, **_summary(infos), "protocol": p["protocol"], "handles": "overwritten",
-                "handle_pre_pct": _handle_pre_pct(pre, V)}
+    return Vd, {**info, **_summary(infos), "protocol": p["protocol"], "anchor": p["anchor"],
+                "handles": "overwritten", "handle_pre_pct": _handle_pre_pct(pre, V)}
 
 
 def _handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
@@ -402,11 +419,11 @@ class SShaDe:
     def __init__(self, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, workers: int | None = None,
                  tol: float = 1e-4, max_iter: int | None = None, gradient: str = "normalized",
                  warm_start: bool = True, protocol: str = "converged", etol: float | None = None,
-                 gtol: float | None = None):
+                 gtol: float | None = None, anchor: str = "projection"):
         # validated here, so a bad parameter fails when the method is built, before any work
         self.params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                                    max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol,
-                                   etol=etol, gtol=gtol)
+                                   etol=etol, gtol=gtol, anchor=anchor)
         self.info: dict = {}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:

@@ -95,8 +95,9 @@ def _one(i: int) -> tuple[int, np.ndarray, dict]:
     proj = project_to_fans(V, rm.label, VN, rm.F)
     t2 = time.perf_counter()
     axis = frame_functions(VN, rm.F)
-    C = encode(w["S"], proj.tri, VN, rm.F, axis, w["gradient"])
-    out = decode(C, proj.tri, VN, w["T"][rm.seeds], rm.F, axis, w["gradient"])
+    bary = proj.bary if w["anchor"] == "projection" else None  # M's own projection, also for S
+    C = encode(w["S"], proj.tri, VN, rm.F, axis, w["gradient"], bary)
+    out = decode(C, proj.tri, VN, w["T"][rm.seeds], rm.F, axis, w["gradient"], bary)
     t3 = time.perf_counter()
     return i, out, {"seed": int(w["seeds"][i]), "first": int(rm.first), "n_low": int(len(rm.seeds)),
                     "n_repair": int(rm.n_repair), "n_flipped": int(rm.n_flipped),
@@ -104,7 +105,8 @@ def _one(i: int) -> tuple[int, np.ndarray, dict]:
 
 
 def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
-                            gradient: str = "normalized", workers: int | None = None) -> tuple[np.ndarray, dict]:
+                            gradient: str = "normalized", workers: int | None = None,
+                            anchor: str = "projection") -> tuple[np.ndarray, dict]:
     """Encode ``V_S`` in the LRFs of the remeshed ``M`` and decode them on ``M'`` (§4.2-4.3).
 
     The common core of :func:`isometric_transfer` (``V_S = V_M``) and
@@ -121,9 +123,12 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     n_samplings : int >= 1, samplings averaged (paper: 5-10).
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, n_samplings)[i]``.
     gradient : ``"normalized"`` (orthonormal frames) or ``"raw"`` (paper's g_t).
+    anchor : ``"projection"`` (default) or ``"barycenter"`` (paper Alg. 1): where each
+        vertex is anchored in its triangle (:mod:`sshade.lrf`); for pose transfer, S's
+        vertex v is anchored at M's vertex v's projection.
     workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
         The result does not depend on it.
-    n_low, n_samplings, seed, gradient and workers are checked as :func:`sshade.deform`
+    n_low, n_samplings, seed, gradient, anchor and workers are checked as :func:`sshade.deform`
     checks them (:func:`sshade.deform.check_params`).
 
     Returns
@@ -144,13 +149,14 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     n = len(V)
     S = _positions(V_S, n, "V_S")
     T = _positions(V_Mprime, n, "target pose V_Mprime")
-    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient)
+    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient,
+                     anchor=anchor)
     n_samplings = p["n_samplings"]
     seeds = sampling_seeds(p["seed"], n_samplings)
     warm_kernels()
     n_low = auto_n_low(n) if p["n_low"] == "auto" else p["n_low"]
     state = dict(V=V, F=F, S=S, T=T, n_low=int(min(n_low, n)), seeds=seeds,
-                 topology=mesh_topology(V, F, he), gradient=gradient)
+                 topology=mesh_topology(V, F, he), gradient=gradient, anchor=p["anchor"])
     workers = pool_size(p["workers"], n_samplings)
     results: list = [None] * n_samplings
     infos: list = [None] * n_samplings
@@ -159,7 +165,8 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
             i, results[i], infos[i] = f.result()
     out = average(results)  # fixed order: independent of the worker count
     info = {"total_s": time.perf_counter() - t0, "seed": p["seed"], "sampling_seeds": seeds,
-            "n_samplings": n_samplings, "workers": workers, "gradient": gradient, "samplings": infos}
+            "n_samplings": n_samplings, "workers": workers, "gradient": gradient, "anchor": p["anchor"],
+            "samplings": infos}
     for k in ("remesh_s", "project_s", "transfer_s"):
         info[k] = float(np.sum([d[k] for d in infos]))
     info["n_low"] = int(round(np.mean([d["n_low"] for d in infos])))
@@ -168,7 +175,8 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
 
 
 def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
-                       gradient: str = "normalized", workers: int | None = None) -> tuple[np.ndarray, dict]:
+                       gradient: str = "normalized", workers: int | None = None,
+                       anchor: str = "projection") -> tuple[np.ndarray, dict]:
     """Rebuild a pose of a subject from its rest pose and a low-res copy of the pose (paper §4.2).
 
     Steps (per sampling, then averaged over ``n_samplings``, §3.3): remesh the rest
@@ -185,7 +193,8 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     n_low : int, farthest-point samples per low-res mesh (paper: ~6000); capped at n.
     n_samplings : int, samplings averaged (paper: 10).
     seed : int, master seed (per-sampling seeds in ``info["sampling_seeds"]``).
-    gradient : ``"normalized"`` (default) or ``"raw"``.
+    gradient : ``"normalized"`` (default) or ``"raw"``. anchor : ``"projection"``
+        (default) or ``"barycenter"`` (paper), see :func:`correspondence_transfer`.
     workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
 
     Returns
@@ -202,7 +211,7 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     Notes
     -----
     A rigid motion of the rest pose (``V_target = V_rest @ R.T + t``) is reproduced
-    exactly, in either gradient mode.
+    exactly, in either gradient mode and with either anchor.
 
     Examples
     --------
@@ -214,19 +223,20 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     n_rest = len(_positions(V_rest, None, "V_rest"))
     T = _positions(V_target, n_rest, "target pose V_target")
     return correspondence_transfer(V_rest, F, V_rest, T, n_low=n_low, n_samplings=n_samplings, seed=seed,
-                                   gradient=gradient, workers=workers)
+                                   gradient=gradient, workers=workers, anchor=anchor)
 
 
 def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
                   gradient: str = "normalized", workers: int | None = None, align: bool = False,
-                  return_info: bool = False):
+                  return_info: bool = False, anchor: str = "projection"):
     """Put shape S in the pose of M' (paper §4.3, Fig. "diagrams" b).
 
     M is remeshed to N and projected onto it (P: V_M -> T_N) exactly as in
     :func:`isometric_transfer`; then, through the 1:1 correspondence M <-> S, each S
     vertex v is written in the frame of ``t = P(v)`` built on N (M's positions):
-    ``s_t = L_t^-1 (v_S - b_t)``, and rebuilt on ``N' = (V_M'[seeds], T_N)``:
-    ``v_S' = L'_t s_t + b'_t``. Averaged over ``n_samplings`` samplings (§3.3).
+    ``s_t = L_t^-1 (v_S - a(v))``, and rebuilt on ``N' = (V_M'[seeds], T_N)``:
+    ``v_S' = L'_t s_t + a'(v)``, the anchor a(v) the projection of M's vertex v onto t
+    (``anchor="projection"``) or b_t (``"barycenter"``, paper). Averaged over ``n_samplings`` samplings (§3.3).
     With ``V_S = V_M`` the result is :func:`isometric_transfer`'s.
 
     S must be aligned with M in space (paper §4.3): the offsets ``v_S - b_t`` are
@@ -241,7 +251,7 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
     V_S : (n, 3) float, the shape to pose (1:1 with M, same connectivity, aligned with M
         in space, e.g. another subject in the same rest pose).
     V_Mprime : (n, 3) float, M in the target pose (1:1 with M).
-    n_low, n_samplings, seed, gradient, workers : as in :func:`isometric_transfer`.
+    n_low, n_samplings, seed, gradient, workers, anchor : as in :func:`isometric_transfer`.
     align : bool, rigidly align S onto M first (for shapes not already aligned).
     return_info : bool, also return the info dict (timings, seeds).
 
@@ -265,5 +275,5 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
     if align:
         V_S = rigid_align(V_S, V_M)
     out, info = correspondence_transfer(V_M, F, V_S, V_Mprime, n_low=n_low, n_samplings=n_samplings, seed=seed,
-                                        gradient=gradient, workers=workers)
+                                        gradient=gradient, workers=workers, anchor=anchor)
     return (out, info) if return_info else out

@@ -8,6 +8,14 @@ stored as v_t = L_t^-1 (v - b_t) and rebuilt on the deformed N' as v' = L'_t v_t
 
 ``gradient="raw"`` uses g_t as in the paper; ``gradient="normalized"`` divides it by its
 length, so L_t is orthonormal (a rotation) and the transfer is rigid per triangle.
+
+The anchor of v in t: the paper anchors every vertex at the barycenter b_t
+(``anchor="barycenter"``, Alg. 1). ``anchor="projection"`` (this package's default, a
+departure: docs/differences.md) anchors it at its own projection p(v) = sum_i beta_i N_i
+onto t (beta: the barycentric coordinates of :func:`sshade.projection.project_to_fans`)
+and rebuilds p'(v) = sum_i beta_i N'_i, so only the short offset v - p(v) goes through
+the frames: v' = L'_t L_t^-1 (v - p(v)) + p'(v). The in-plane position then follows the
+triangle's own affine map, which the frames do not reproduce when t stretches.
 Where |grad f| is small (the coordinate axis is nearly normal to t; Poincaré-Hopf, §3.2)
 the frame falls back to the rest coordinate whose gradient is largest on t.
 """
@@ -17,9 +25,13 @@ import numpy as np
 
 from .errors import SShaDeError
 
-__all__ = ["frame_functions", "triangle_gradients", "local_frames", "encode", "decode", "transfer"]
+__all__ = ["frame_functions", "triangle_gradients", "local_frames", "anchor_points", "encode", "decode", "transfer",
+           "GRADIENTS", "ANCHORS"]
 
 GRADIENTS = ("normalized", "raw")
+#: Where a high-res vertex is anchored in its triangle: its projection (default) or the
+#: barycenter b_t (paper Alg. 1).
+ANCHORS = ("projection", "barycenter")
 
 
 def frame_functions(VN: np.ndarray, FN: np.ndarray, *, primary: int = 0, min_gradient: float = 0.5) -> np.ndarray:
@@ -104,44 +116,68 @@ def _corner_values(VN_rest: np.ndarray, FN: np.ndarray, axis: np.ndarray) -> np.
     return VN_rest[FN, axis[:, None]]  # (t, 3): rest coordinate `axis[t]` at each corner
 
 
+def anchor_points(P: np.ndarray, FN: np.ndarray, tri: np.ndarray, bary: np.ndarray | None) -> np.ndarray:
+    """The anchor of each high-res vertex in its triangle, on positions ``P``.
+
+    Parameters
+    ----------
+    P : (k, 3) low-res positions (N or N'). FN : (t, 3). tri : (n,) int triangle P(v).
+    bary : (n, 3) barycentric coordinates of each anchor in its triangle (the
+        projection's, ``anchor="projection"``), or None for the barycenters b_t (paper).
+
+    Returns
+    -------
+    (n, 3) float64 points ``sum_i bary[:, i] * P[FN[tri, i]]``.
+    """
+    C = P[FN[tri]]  # (n, 3 corners, 3)
+    if bary is None:
+        return C.mean(axis=1)
+    return np.einsum("ni,nij->nj", bary, C)
+
+
 def encode(V: np.ndarray, tri: np.ndarray, VN: np.ndarray, FN: np.ndarray, axis: np.ndarray,
-           gradient: str = "normalized") -> np.ndarray:
-    """Local coordinates v_t = L_t^-1 (v - b_t) of each high-res vertex (Alg. 1, line 11).
+           gradient: str = "normalized", bary: np.ndarray | None = None) -> np.ndarray:
+    """Local coordinates v_t = L_t^-1 (v - a(v)) of each high-res vertex (Alg. 1, line 11,
+    where the anchor a(v) is the barycenter b_t).
 
     Parameters
     ----------
     V : (n, 3) high-res positions. tri : (n,) int64 triangle P(v).
     VN : (k, 3) rest low-res positions. FN : (t, 3). axis : (t,) frame function per triangle.
+    bary : (n, 3) or None, the anchor's barycentric coordinates (:func:`anchor_points`;
+        None: the barycenter, as the paper).
 
     Returns
     -------
     C : (n, 3) float64 local coordinates.
     """
-    L, b = local_frames(VN, FN, _corner_values(VN, FN, axis), gradient)
+    L, _ = local_frames(VN, FN, _corner_values(VN, FN, axis), gradient)
     Linv = np.linalg.inv(L) if gradient == "raw" else np.transpose(L, (0, 2, 1))
-    return np.einsum("nij,nj->ni", Linv[tri], V - b[tri])
+    return np.einsum("nij,nj->ni", Linv[tri], V - anchor_points(VN, FN, tri, bary))
 
 
 def decode(C: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
-           axis: np.ndarray, gradient: str = "normalized") -> np.ndarray:
-    """Rebuild positions v' = L'_t v_t + b'_t on the deformed low-res mesh (Alg. 1, line 12).
+           axis: np.ndarray, gradient: str = "normalized", bary: np.ndarray | None = None) -> np.ndarray:
+    """Rebuild positions v' = L'_t v_t + a'(v) on the deformed low-res mesh (Alg. 1, line 12).
 
     Parameters
     ----------
     C : (n, 3) local coordinates from :func:`encode`. tri : (n,) int64.
     VN_rest : (k, 3) rest low-res positions (the frame function's values).
     VN_def : (k, 3) deformed low-res positions (N'). FN : (t, 3). axis : (t,).
+    bary : (n, 3) or None, as given to :func:`encode`.
 
     Returns
     -------
     (n, 3) float64 deformed high-res positions.
     """
-    L, b = local_frames(VN_def, FN, _corner_values(VN_rest, FN, axis), gradient)
-    return np.einsum("nij,nj->ni", L[tri], C) + b[tri]
+    L, _ = local_frames(VN_def, FN, _corner_values(VN_rest, FN, axis), gradient)
+    return np.einsum("nij,nj->ni", L[tri], C) + anchor_points(VN_def, FN, tri, bary)
 
 
 def transfer(V: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
-             *, gradient: str = "normalized", axis: np.ndarray | None = None) -> np.ndarray:
+             *, gradient: str = "normalized", axis: np.ndarray | None = None,
+             bary: np.ndarray | None = None) -> np.ndarray:
     """Algorithm 1 (LRFT): deform high-res ``V`` following ``N -> N'``.
 
     Parameters
@@ -150,18 +186,23 @@ def transfer(V: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.nda
     VN_rest, VN_def : (k, 3) float64 low-res rest / deformed positions. FN : (t, 3) int64.
     gradient : ``"normalized"`` or ``"raw"``. axis : (t,) frame function per triangle,
         default :func:`frame_functions` on ``VN_rest``.
+    bary : (n, 3) float64 or None: anchor each vertex at these barycentric coordinates of
+        its triangle (the projection's, ``anchor="projection"``); None anchors it at the
+        barycenter b_t as Alg. 1 does.
 
     Returns
     -------
-    (n, 3) float64 deformed positions. A rigid motion of N is reproduced exactly on M.
+    (n, 3) float64 deformed positions. A rigid motion of N is reproduced exactly on M,
+    with either anchor; with the projection's ``bary``, a vertex lying on its triangle
+    follows the triangle's affine map exactly, whatever N' is.
 
     Examples
     --------
     Example::
 
-        Vd = transfer(V, proj.tri, V[rm.seeds], VN_def, rm.F)
+        Vd = transfer(V, proj.tri, V[rm.seeds], VN_def, rm.F, bary=proj.bary)
     """
     if axis is None:
         axis = frame_functions(VN_rest, FN)
-    C = encode(V, tri, VN_rest, FN, axis, gradient)
-    return decode(C, tri, VN_rest, VN_def, FN, axis, gradient)
+    C = encode(V, tri, VN_rest, FN, axis, gradient, bary)
+    return decode(C, tri, VN_rest, VN_def, FN, axis, gradient, bary)

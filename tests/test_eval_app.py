@@ -192,7 +192,7 @@ def test_config_defaults_and_ci_experiment():
     assert cfg.arap.tol == pytest.approx(1e-4) and isinstance(cfg.arap.tol, float) and cfg.arap.max_iter is None
     assert cfg.arap.protocol == "converged"
     assert dict(cfg.sshade) == {"n_low": "auto", "n_samplings": 5, "seed": 0, "workers": None, "gradient": "normalized",
-                                 "warm_start": True}
+                                 "anchor": "projection", "warm_start": True}
     d = cfg.dataset
     assert (d.name, d.subjects, d.poses, d.n_per_landmark, d.neighbourhood, d.static_threshold, d.seed, d.limit) == \
         ("faust", None, None, 30, 90, 0.02, 0, None)

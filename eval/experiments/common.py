@@ -8,7 +8,7 @@ __all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
 #: SShaDe's parameters that its correspondence transfers take
 #: (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
 #: no ARAP runs there, so no stopping rule.
-SSHADE_TRANSFER_KEYS = ("n_low", "n_samplings", "seed", "gradient", "workers")
+SSHADE_TRANSFER_KEYS = ("n_low", "n_samplings", "seed", "gradient", "anchor", "workers")
 
 
 def as_list(x):
@@ -30,7 +30,7 @@ def sshade_spec(cfg) -> dict:
     Returns
     -------
     dict with ``n_low`` (int or ``"auto"``), ``n_samplings``, ``seed``, ``workers``,
-    ``gradient``, ``warm_start``, ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
+    ``gradient``, ``anchor``, ``warm_start``, ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
     (unchecked; :func:`sshade.deform.check_params` checks them).
 
     Raises

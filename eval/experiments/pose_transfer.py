@@ -228,6 +228,7 @@ def _pose_transfer_case(a: int, b: int, p: int, F, V: dict, sp: dict, align: boo
         t0 = time.perf_counter()
         Vs, ti = pose_transfer(M, F, S, Mp, n_low=transfer_n_low(sp["n_low"], len(M)), n_samplings=k, seed=seed,
                                gradient=str(sp.get("gradient") or "normalized"), workers=sp.get("workers"),
+                               **{k: sp[k] for k in ("anchor",) if sp.get(k)},
                                align=align, return_info=True)
         row["time_s"] = time.perf_counter() - t0
         row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s", "workers")})

@@ -5,7 +5,7 @@ class) pose 0 is the rest pose M and every other pose M' one case: M is remeshed
 ``n_low`` vertices, the low-res mesh is taken into the pose through the
 correspondence and M is rebuilt in that pose with the per-triangle LRFs, averaged over
 ``n_samplings`` samplings (:func:`sshade.isometric.isometric_transfer`). SShaDe's
-parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``workers``) come from
+parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``anchor``, ``workers``) come from
 the method config ``method.SShaDe`` (the ``sshade`` section; ``conf/experiment/tosca.yaml``
 sets the paper's ``sshade.n_low: 6000``, ``sshade.n_samplings: 10``; :func:`sshade_params`).
 
@@ -320,6 +320,7 @@ def _tosca_case(c: str, p: int, V0, F0, path, sp: dict):
         t0 = time.perf_counter()
         Vp, ti = isometric_transfer(V0, F0, V1, n_low=transfer_n_low(sp["n_low"], len(V0)), n_samplings=k,
                                     seed=seed, gradient=str(sp.get("gradient") or "normalized"),
+                                    **{k: sp[k] for k in ("anchor",) if sp.get(k)},
                                     workers=sp.get("workers"))
         row["time_s"] = time.perf_counter() - t0
         row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s",
@@ -356,7 +357,7 @@ def _tosca_tables(df, sp: dict, excluded: dict, info: dict, out_dir, t_start: fl
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     wall = time.perf_counter() - t_start
     title = (f"### TOSCA non-rigid isometric deformations (paper §4.2): n_low={n_low}, k={k}, seed={seed}, "
-             f"gradient={gradient}")
+             f"gradient={gradient}, anchor={sp.get('anchor')}")
     md = "\n".join([
         title, "",
         markdown_table(table, ("class", "Class"), TOSCA_COLUMNS),
