@@ -139,6 +139,11 @@ def test_run_tosca_writes_tables(tmp_path):
     assert [f.name for f in figs] == ["centaur1.png"]
     assert figs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png_size(figs[0]) == (3 * 320 + 90, 400 + 56)
     assert not list(out.glob(".*.tmp"))
+    # one 3D view per class: rest, true pose, SShaDe coloured by its distance to the true pose
+    from eval.meshview import read_view
+    view = read_view(out / "report" / "centaur1.js")
+    assert [m["label"] for m in view["meshes"]] == ["rest", "target (ground truth)", "SShaDe"]
+    assert view["meshes"][2]["gt"] is not None and view["meshes"][2]["kind"] == "result"
     cases = pd.read_csv(out / "cases.csv", keep_default_na=False)
     assert cases["case"].tolist() == ["centaur1"] and (cases["error"] == "").all()
     assert cases["n_vertices"].tolist() == [15768]

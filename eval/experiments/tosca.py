@@ -36,6 +36,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -46,6 +47,7 @@ from sshade.mesh.io import atomic_write, read_mesh
 from sshade.sampling import sampling_seeds
 
 from ..figures import figures_options, safe_figure, tosca_figure
+from ..meshview import view_options, write_case_view
 from ..metrics import chamfer, ground_truth_metrics, hausdorff
 from ..paths import abs_path
 from ..runinfo import collect_runinfo, finish_run, write_runinfo
@@ -280,14 +282,17 @@ def _tosca_jobs(tc, root, found):
 
 def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
     """Every case (:func:`_tosca_case`), ``cases.csv`` rewritten after each, the
-    optional figures (one per class, its first pose); returns the cases' DataFrame."""
+    optional figures and 3D views (:func:`eval.meshview.write_case_view`; one per class,
+    its first pose); returns the cases' DataFrame."""
     import pandas as pd
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     rows: list[dict] = []
     fig_on, fig_left = figures_options(cfg)  # one figure per class (first pose), at most max_cases
+    n_view, max_faces = view_options(cfg)  # one 3D view per class (first pose), at most report.view_cases
     drawn: set[str] = set()
+    viewed: set[str] = set()
     with logging_redirect_tqdm():
         for c, p in tqdm(jobs, desc="tosca", unit="case", file=sys.stderr, dynamic_ncols=True):
             V0, F0 = rests[c]
@@ -296,6 +301,13 @@ def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
                 drawn.add(c)
                 safe_figure(f"{c}{p}", tosca_figure, V0, V1, Vp, F0, out_dir / "figures" / f"{c}{p}.png",
                             title=f"{c}{p}: d_H {row['hausdorff']:.2e}, d_C {row['chamfer']:.2e}")
+            if Vp is not None and c not in viewed and len(viewed) < n_view:
+                # rest, the true pose and SShaDe's rebuild; "distance to ground truth" is the
+                # error map of the figure, "edge error" on the true pose shows where TOSCA's
+                # pose is not isometric
+                viewed.add(c)
+                write_case_view(SimpleNamespace(name=f"{c}{p}", V=V0, F=F0, V_gt=V1), {"SShaDe": Vp}, out_dir,
+                                max_faces=max_faces)
             rows.append(row)
             with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:  # partial results survive a crash
                 pd.DataFrame(rows).to_csv(fh, index=False)
