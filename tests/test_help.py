@@ -35,6 +35,7 @@ HELP = {
     "benchmarks/implicit_arap_weights.py": ["usage:", "trials"],
     "benchmarks/remesh_speed.py": ["usage:", "--mesh"],
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
+    "benchmarks/tosca_transfer_factors.py": ["usage:", "--classes"],
     "-m eval.experiments.scaling_probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
 }

@@ -54,7 +54,7 @@ def _job(kind: str, x: int = 0, flag: str = ""):
         send(("pid", os.getpid(), child))
         time.sleep(120)
     if kind == "flag":
-        send(("pid", os.getpid()))
+        send(("pid", os.getpid(), "flag"))
         t_end = time.monotonic() + 60
         while not os.path.exists(flag) and time.monotonic() < t_end:
             time.sleep(0.05)
@@ -80,15 +80,22 @@ def test_a_dead_worker_loses_only_its_job_and_a_fresh_worker_continues_it():
     assert results == {0: 49, 1: 4, 2: 9, 3: 16}
 
 
-def test_a_dead_worker_without_on_lost_is_one_error_naming_the_signal():
+def test_a_dead_worker_without_on_lost_is_one_error_naming_the_signal(tmp_path):
+    """Worker 0 dies while job 1 runs beside it (both have reported, so neither order nor
+    load decides): one error naming the signal, after job 1 finished."""
+    flag, pids = tmp_path / "flag", {}
+
     def message(msg):
-        os.kill(msg[1], signal.SIGKILL)
+        pids[msg[2] if len(msg) > 2 else "wait"] = msg[1]
+        if len(pids) == 2:  # both jobs running: kill the waiting one, let the other finish
+            os.kill(pids["wait"], signal.SIGKILL)
+            flag.touch()
 
     results = {}
     with pytest.raises(SShaDeError, match=r"^a build worker process died \(SIGKILL\); run the same command again"):
-        run_jobs(_job, [("wait",), ("square", 2)], workers=2, on_message=message,
+        run_jobs(_job, [("wait",), ("flag", 0, str(flag))], workers=2, on_message=message,
                  on_result=lambda i, r: results.__setitem__(i, r))
-    assert results == {1: 4}  # the job running beside it finished
+    assert results == {1: "finished"}  # the job running beside it finished
 
 
 def test_workers_ignore_ctrl_c(tmp_path):
