@@ -57,15 +57,16 @@ def git_info(root=REPO_ROOT) -> dict:
     dict ``{"commit": sha or None, "dirty": bool or None, "modified": [paths]}``:
     ``dirty`` is True when a tracked file differs from the commit (staged or not);
     ``modified`` names those files (relative to the repository root). Untracked files
-    (e.g. a run's own output folder) do not make a checkout dirty. All None/empty
-    outside a git checkout or without git.
+    (e.g. a run's own output folder) and the committed results under ``results/`` (what
+    runs write, not code) do not make a checkout dirty. All None/empty outside a git
+    checkout or without git.
     """
     def git(*args):
         r = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
         return r.stdout if r.returncode == 0 else None
     try:
         sha = git("rev-parse", "HEAD")
-        status = git("status", "--porcelain", "--untracked-files=no") if sha else None
+        status = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)results") if sha else None
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None, "modified": []}
     if status is None:

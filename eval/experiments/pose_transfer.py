@@ -277,7 +277,8 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
     n_err = int((~ok).sum())
     wall = time.perf_counter() - t_start
     md = "\n".join([
-        f"### FAUST pose transfer (paper §4.3): n_low={n_low}, k={k}, seed={seed}, gradient={gradient}", "",
+        f"### FAUST pose transfer (paper §4.3): n_low={n_low}, k={k}, seed={seed}, gradient={gradient}, "
+        f"anchor={sp.get('anchor')}", "",
         markdown_table(table, ("method", "Method"), _COLUMNS),
         "Mean over the cases. Every shape is first moved rigidly onto the ground truth (b pose p). Vertex "
         "errors in % of the ground truth's bounding-box diagonal; d_H, d_C: vertex-to-surface Hausdorff / "
