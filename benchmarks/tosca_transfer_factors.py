@@ -18,9 +18,12 @@ mean / max (% of the true pose's diagonal), two columns locate the error on the 
 ``d_C share``: the part of the one-way (result -> truth) Chamfer sum that those vertices
 carry. ``iso max``: the vertex max over the other vertices.
 
-    python benchmarks/tosca_transfer_factors.py ../shared/data/tosca [--classes cat centaur]
+    python benchmarks/tosca_transfer_factors.py ../shared/data/tosca [--classes cat centaur] [--out DIR]
 
-Prints one line per case and variant, then a Markdown table of the means over the cases.
+Prints one line per case and variant, then a Markdown table of the means over the cases;
+with ``--out`` also writes them to DIR/cases.csv and DIR/table.md (a folder that is new,
+empty or this benchmark's earlier output; ``results/tosca_factors`` under
+``python -m eval.reproduce``).
 """
 import argparse
 import sys
@@ -32,6 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 
 from eval.experiments.tosca import discover_tosca  # noqa: E402
 from eval.metrics import chamfer, hausdorff, normalize_unit_sphere, point_surface_distance  # noqa: E402
+from eval.outdir import claim_output_dir  # noqa: E402
+from sshade.clirun import run_command  # noqa: E402
 from sshade.lrf import frame_functions, transfer  # noqa: E402
 from sshade.mesh.io import read_mesh  # noqa: E402
 from sshade.mesh.validate import validate_mesh  # noqa: E402
@@ -105,40 +110,69 @@ def _metrics(Vp, V1, F, stretched) -> dict:
             "iso_max": e[~stretched].max(), "dC_share": d[stretched].sum() / d.sum(), "stretched": stretched.mean()}
 
 
-def main(root, classes):
+def main(root, classes, out=None):
     found = discover_tosca(root)
-    rows = {name: [] for name in VARIANTS}
-    for c in classes:
-        V0, F0 = read_mesh(found[c][0], validate=False)
-        V0, F0, he = validate_mesh(V0, F0, return_halfedges=True)
-        topo = mesh_topology(V0, F0, he)
-        for p, path in found[c].items():
-            if p == 0:
-                continue
-            V1, _ = read_mesh(path, validate=False)
-            st = _stretched(V0, V1, F0)
-            cache = {}
-            for name, (n_low, k, *rest) in VARIANTS.items():
-                key = n_low
-                if key not in cache or len(cache[key]) < k:
-                    cache[key] = _samplings(V0, F0, V1, topo, n_low, max(k, 10))
-                m = _metrics(_result(V0, cache[key][:k], *rest), V1, F0, st)
-                rows[name].append(m)
-                print(f"{c}{p} {name:26s} " + " ".join(f"{kk} {v:.4g}" for kk, v in m.items()), flush=True)
+    claim = claim_output_dir(out, "tosca_factors", option="", name="--out") if out else None
+    rows, lines = {name: [] for name in VARIANTS}, []
+    try:
+        for c in classes:
+            _class_rows(c, found[c], rows, lines)
+        table = _table(rows, classes)
+        print("\n" + table)
+        if claim is not None:
+            import pandas as pd
+            pd.DataFrame(lines).to_csv(claim.path / "cases.csv", index=False, float_format="%.6g")
+            (claim.path / "table.md").write_text(
+                f"### Where the TOSCA transfer loses accuracy (paper §4.2), one factor at a time\n\n{table}\n"
+                f"Made by `python benchmarks/tosca_transfer_factors.py {root} --classes {' '.join(classes)}`; "
+                f"the factors and columns: the benchmark's docstring. 'stretched': vertices with an incident "
+                f"edge whose length changes by more than {STRETCH:g} % from the rest pose to TOSCA's pose.\n")
+            claim.finish("done")
+    except BaseException:
+        if claim is not None:
+            claim.finish("failed")
+        raise
+
+
+def _class_rows(c, files, rows, lines):
+    """Every pose of class ``c`` (``files``: pose -> path) under every variant: appended to
+    ``rows`` (variant -> metrics) and ``lines`` (one dict per case and variant)."""
+    V0, F0 = read_mesh(files[0], validate=False)
+    V0, F0, he = validate_mesh(V0, F0, return_halfedges=True)
+    topo = mesh_topology(V0, F0, he)
+    for p, path in files.items():
+        if p == 0:
+            continue
+        V1, _ = read_mesh(path, validate=False)
+        st = _stretched(V0, V1, F0)
+        cache = {}
+        for name, (n_low, k, *rest) in VARIANTS.items():
+            if n_low not in cache or len(cache[n_low]) < k:
+                cache[n_low] = _samplings(V0, F0, V1, topo, n_low, max(k, 10))
+            m = _metrics(_result(V0, cache[n_low][:k], *rest), V1, F0, st)
+            rows[name].append(m)
+            lines.append({"case": f"{c}{p}", "variant": name, **m})
+            print(f"{c}{p} {name:26s} " + " ".join(f"{kk} {v:.4g}" for kk, v in m.items()), flush=True)
+
+
+def _table(rows, classes) -> str:
     cols = ["d_H", "d_C", "v_mean", "v_max", "iso_max", "dC_share", "stretched"]
-    print(f"\n| variant ({', '.join(classes)}: {len(rows['default'])} cases) | d_H | d_C | vertex mean (%) | "
-          "vertex max (%) | iso max (%) | d_C share of stretched | stretched vertices |")
-    print("|---|" + "---:|" * len(cols))
+    out = [f"| variant ({', '.join(classes)}: {len(rows['default'])} cases) | d_H | d_C | vertex mean (%) | "
+           "vertex max (%) | iso max (%) | d_C share of stretched | stretched vertices |",
+           "|---|" + "---:|" * len(cols)]
     for name, r in rows.items():
         mean = {k: np.mean([x[k] for x in r]) for k in cols}
-        print(f"| {name} | {mean['d_H']:.3e} | {mean['d_C']:.3e} | {mean['v_mean']:.4f} | {mean['v_max']:.3f} | "
-              f"{mean['iso_max']:.3f} | {mean['dC_share']:.2f} | {mean['stretched']:.3f} |")
-    print("| paper §4.2 (all TOSCA classes but wolf, gorilla) | 5.660e-03 | 3.760e-08 | | | | | |")
+        out.append(f"| {name} | {mean['d_H']:.3e} | {mean['d_C']:.3e} | {mean['v_mean']:.4f} | "
+                   f"{mean['v_max']:.3f} | {mean['iso_max']:.3f} | {mean['dC_share']:.2f} | "
+                   f"{mean['stretched']:.3f} |")
+    out.append("| paper §4.2 (all TOSCA classes but wolf, gorilla) | 5.660e-03 | 3.760e-08 | | | | | |")
+    return "\n".join(out) + "\n"
 
 
 if __name__ == "__main__":
     a = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     a.add_argument("root", help="folder of TOSCA NAMEk.off meshes")
     a.add_argument("--classes", nargs="+", default=["cat", "centaur"])
+    a.add_argument("--out", help="also write cases.csv and table.md into this folder")
     args = a.parse_args()
-    main(args.root, args.classes)
+    raise SystemExit(run_command(lambda: main(args.root, args.classes, args.out), where=args.out))

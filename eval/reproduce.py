@@ -55,6 +55,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from sshade.clirun import ArgumentParser, run_command
 
@@ -109,6 +110,10 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     if a.tosca:
         s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true",
                                   "out_dir=results/tosca"]))
+        # where the transfer loses accuracy, one factor at a time (anchor, frames, n_low, k, ...)
+        s.append(("tosca_factors", [sys.executable, str(Path(__file__).resolve().parents[1] / "benchmarks" /
+                                                        "tosca_transfer_factors.py"), a.tosca,
+                                    "--out", "results/tosca_factors"]))
     if a.shapes:
         s.append(("shapes", py + ["eval", "experiment=shapes", f"dataset.root={a.shapes}", "resume=true", "jobs=1",
                                    *ia[:1], "out_dir=results/shapes"]))
