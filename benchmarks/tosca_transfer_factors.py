@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 from eval.experiments.tosca import discover_tosca  # noqa: E402
 from eval.metrics import chamfer, hausdorff, normalize_unit_sphere, point_surface_distance  # noqa: E402
 from eval.outdir import claim_output_dir  # noqa: E402
+from eval.runinfo import git_info  # noqa: E402
 from sshade.clirun import run_command  # noqa: E402
 from sshade.lrf import frame_functions, transfer  # noqa: E402
 from sshade.mesh.io import read_mesh  # noqa: E402
@@ -124,7 +125,8 @@ def main(root, classes, out=None):
             pd.DataFrame(lines).to_csv(claim.path / "cases.csv", index=False, float_format="%.6g")
             (claim.path / "table.md").write_text(
                 f"### Where the TOSCA transfer loses accuracy (paper §4.2), one factor at a time\n\n{table}\n"
-                f"Made by `python benchmarks/tosca_transfer_factors.py {root} --classes {' '.join(classes)}`; "
+                f"Made by `python benchmarks/tosca_transfer_factors.py {root} --classes {' '.join(classes)}` "
+                f"at git commit {git_info().get('commit')} (dirty: {git_info().get('dirty')}), seed 0; "
                 f"the factors and columns: the benchmark's docstring. 'stretched': vertices with an incident "
                 f"edge whose length changes by more than {STRETCH:g} % from the rest pose to TOSCA's pose.\n")
             claim.finish("done")
