@@ -14,10 +14,10 @@ The 200k mesh is built once from ``../shared/data/classic/armadillo.obj`` with
 :func:`defaust.highres.subdivide_remesh` (LS3 Loop + isotropic remesh, vertex range
 190k-210k; a minute or two) and cached as an ``.npz`` (``--cache``; ``data/`` is
 git-ignored). Handles: the scaling benchmark's fixed edit (4 groups of 30 vertices,
-:func:`eval.datasets.shapes.axis_handles`), which ``sshade.deform._prepare`` adds as
+:func:`eval.datasets.shapes.axis_handles`), which ``sshade.deform.prepare_sampling`` adds as
 required low-res vertices. For each of ``--seeds`` sampling seeds (the first ones
 :func:`sshade.sampling.sampling_seeds` gives for master seed 0) the script runs
-``remesh`` + ``project_to_fans`` exactly as ``_prepare`` does, ``--repeat`` times, and
+``remesh`` + ``project_to_fans`` exactly as ``prepare_sampling`` does, ``--repeat`` times, and
 prints the best time of each stage (single thread; stages from ``RemeshResult.timings``)
 and digests of the seeds, low-res faces and projection triangles (to compare versions).
 Timings are wall-clock, with the process CPU time of the totals next to them (less

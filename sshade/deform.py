@@ -21,11 +21,26 @@ from .remesh import mesh_topology, remesh
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning"]
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning",
+           "prepare_sampling", "arap_options", "low_res_size", "handle_pre_pct"]
 
 
-def _prepare(V, F, handles, n_low, seed, topology):
-    """Remesh + projection of one sampling (paper §3.1)."""
+def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[dict, dict]:
+    """Remesh + projection of one sampling (paper §3.1): what does not depend on the targets.
+
+    Parameters
+    ----------
+    V : (n, 3) float64, F : (m, 3) int64 (validated); handles : (h,) int64 (added to the
+    low-res vertices); n_low : int farthest-point samples; seed : int; topology : the
+    :func:`sshade.remesh.mesh_topology` of ``(V, F)`` or None.
+
+    Returns
+    -------
+    prep : dict ``seeds`` (k,) low-res vertex indices into V, ``F`` (t, 3) low-res faces,
+    ``tri`` (n,) int32 triangle P(v), ``bary`` (n, 3) its barycentric coordinates,
+    ``low_handles`` (h,) the handles' low-res indices; info : dict of seconds and counts
+    (remesh_s, project_s, n_low, n_repair, rounds, n_flipped, seed, first).
+    """
     t0 = time.perf_counter()
     rm = remesh(V, F, n_low, seed=seed, required=handles, topology=topology)
     t1 = time.perf_counter()
@@ -38,8 +53,10 @@ def _prepare(V, F, handles, n_low, seed, topology):
     return prep, info
 
 
-def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
-    """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step."""
+def arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
+    """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step, from
+    SShaDe's checked parameters (:func:`check_params`): ``tol``, ``max_iter``,
+    ``protocol`` and, when ``etol`` or ``gtol`` is given, the criterion."""
     crit = None
     if etol is not None or gtol is not None:  # paper protocol: gtol tells converged from stalled
         crit = make_criterion(etol, gtol)
@@ -48,7 +65,7 @@ def _arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
 
 def _finish(V, targets, handles, prep, *, arap: dict, gradient, anchor, V0=None):
     """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling.
-    ``arap``: keyword arguments of :func:`sshade.arap.arap_deform` (:func:`_arap_options`);
+    ``arap``: keyword arguments of :func:`sshade.arap.arap_deform` (:func:`arap_options`);
     ``anchor``: one of :data:`sshade.lrf.ANCHORS`."""
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
@@ -94,17 +111,17 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     handle_pre_pct (largest handle error before the handles are overwritten with their
     targets, % of the bounding-box diagonal).
     """
-    prep, info = _prepare(V, F, handles, n_low, seed, topology)
+    prep, info = prepare_sampling(V, F, handles, n_low, seed, topology)
     V0 = None if V_init is None else V_init[prep["seeds"]]
-    Vd, info2 = _finish(V, targets, handles, prep, arap=_arap_options(tol, max_iter, protocol, etol, gtol),
+    Vd, info2 = _finish(V, targets, handles, prep, arap=arap_options(tol, max_iter, protocol, etol, gtol),
                         gradient=gradient, anchor=anchor, V0=V0)
-    info.update(info2, handle_pre_pct=_handle_pre_pct(info2.pop("handle_resid"), V))
+    info.update(info2, handle_pre_pct=handle_pre_pct(info2.pop("handle_resid"), V))
     return Vd, info
 
 
 def _task_full(i: int):
     w = worker_state()
-    prep, info = _prepare(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
+    prep, info = prepare_sampling(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
     Vd, info2 = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"],
                         anchor=w["anchor"])
     info.update(info2)
@@ -113,7 +130,7 @@ def _task_full(i: int):
 
 def _task_prepare(i: int):
     w = worker_state()
-    prep, info = _prepare(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
+    prep, info = prepare_sampling(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
     return i, prep, info
 
 
@@ -308,10 +325,10 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     handles, targets = validate_handles(V, handles, targets)
     if count_components(he.E, len(V)) > 1:  # each component apart, handle-less ones rigidly (sshade.components)
         return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
-    n_low_asked, n_low = _low_res_size(len(V), p["n_low"])
+    n_low_asked, n_low = low_res_size(len(V), p["n_low"])
     state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, topology=mesh_topology(V, F, he),
                  seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"], anchor=p["anchor"],
-                 arap=_arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
+                 arap=arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
     workers = pool_size(p["workers"], p["n_samplings"])
     t1 = time.perf_counter()
     with SamplingPool(state, workers) as pool:
@@ -325,21 +342,22 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
             "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
             "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
     return Vd, {**info, **_summary(infos), "protocol": p["protocol"], "anchor": p["anchor"],
-                "handles": "overwritten", "handle_pre_pct": _handle_pre_pct(pre, V)}
+                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, V)}
 
 
-def _handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
+def handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
     """Largest handle residual (h, 3) of the averaged result before the handles are
-    overwritten, in % of the bounding-box diagonal of ``V`` (n, 3)."""
+    overwritten, in % of the bounding-box diagonal of ``V`` (n, 3); 0.0 without handles."""
     if not len(resid):
         return 0.0
     return float(100.0 * np.linalg.norm(resid, axis=1).max() / bbox_diag(V))
 
 
-def _low_res_size(n: int, n_low) -> tuple[int, int]:
+def low_res_size(n: int, n_low) -> tuple[int, int]:
     """(requested, actual) low-res vertex count of an ``n``-vertex mesh for the checked
     ``n_low`` (int or ``"auto"``: :func:`auto_n_low`); warns :class:`LowResSkippedWarning`
-    (at :func:`deform`'s caller) when the request is not below ``n``."""
+    (at the caller of :func:`deform` or :func:`sshade.prepared.prepare`) when the request
+    is not below ``n``."""
     asked = auto_n_low(n) if n_low == "auto" else n_low
     if asked >= n:
         # a valid n_low is at least _MIN_N_LOW (check_params) and below n: advise one only when it exists

@@ -35,9 +35,9 @@ from .criterion import DEFAULT_CRITERION, gradient_norm
 from .operators import ENERGIES, bbox_diag, build_operators
 from .result import ArapResult
 from .rigid import rigid_fit
-from .solver import solve_arap
+from .solver import ArapSolver
 
-__all__ = ["arap_deform", "iterate", "PROTOCOLS", "DEFAULT_MAX_ITER"]
+__all__ = ["arap_deform", "ArapDeformer", "iterate", "PROTOCOLS", "DEFAULT_MAX_ITER"]
 
 PROTOCOLS = ("converged", "paper")
 #: Iteration cap of each protocol when none is given (paper §4.1: 1000).
@@ -126,70 +126,128 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     """
     if energy not in ENERGIES:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
-    if protocol not in PROTOCOLS:
-        raise SShaDeError(f"unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
-    if R0 is not None and protocol != "converged":
-        raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
-    if max_iter is None:
-        max_iter = DEFAULT_MAX_ITER[protocol]
-    V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    b = np.ascontiguousarray(handles, np.int32)
-    bc = np.ascontiguousarray(targets, np.float64)
-    diag = bbox_diag(V)
-    R, t = rigid_fit(V[handles], bc)
-    rigid_resid = float(np.abs(V[handles] @ R.T + t - bc).max())
-    if rigid_resid <= 1e-12 * diag:
-        # The handles move rigidly: the rigid motion (no distortion at all) is the answer,
-        # under both protocols. It is the minimiser wherever the cotangent weights are
-        # positive; on meshes with obtuse triangles libigl's weights turn negative and the
-        # raw energy could be lowered by distorting, which no user asks for. (Also avoids
-        # libigl's single-precision 3x3 polar decomposition adding ~1e-6 noise.)
-        return ArapResult(V=V @ R.T + t, iterations=0, converged=True, last_move=0.0,
-                          precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol, "status": "rigid"})
-    if protocol == "converged":
-        res = solve_arap(V, F, handles, targets, energy=energy, U0=V0, R0=R0, criterion=criterion, max_iter=max_iter,
-                         accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s)
-        res.info["protocol"] = "converged"
+    return ArapDeformer(V, F, handles, energy=energy, protocol=protocol).deform(
+        targets, tol=tol, max_iter=max_iter, V0=V0, time_budget_s=time_budget_s, criterion=criterion,
+        accelerate=accelerate, anderson_m=anderson_m, R0=R0)
+
+
+class ArapDeformer:
+    """:func:`arap_deform` prepared once for a mesh and a handle set, then run for any
+    targets (an animation's frames): the ``"converged"`` protocol keeps its
+    :class:`sshade.arap.solver.ArapSolver` (operators, numbering, Cholesky factor), the
+    ``"paper"`` protocol libigl's ``ARAPData`` after ``arap_precomputation``. Each is made
+    on the first call whose handles do not move rigidly (a rigid motion needs neither).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions. F : (m, 3) int64 faces. handles : (h,) int64
+        constrained vertex indices (validated by the caller, as for :func:`arap_deform`).
+    energy : ``"spokes"`` or ``"spokes_and_rims"``. protocol : one of :data:`PROTOCOLS`.
+
+    Raises
+    ------
+    SShaDeError on an unknown energy or protocol.
+
+    Examples
+    --------
+    >>> from sshade.arap.cases import twisted_bar
+    >>> V, F, h, T = twisted_bar(60.0, h=0.25)
+    >>> d = ArapDeformer(V, F, h, energy="spokes")
+    >>> d.deform(T).converged and d.deform(T * 1.01).converged
+    True
+    """
+
+    def __init__(self, V, F, handles, *, energy: str = "spokes_and_rims", protocol: str = "converged"):
+        if energy not in ENERGIES:
+            raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
+        if protocol not in PROTOCOLS:
+            raise SShaDeError(f"unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
+        self.V = np.ascontiguousarray(V, np.float64)
+        self.F = np.ascontiguousarray(F, np.int64)
+        self.handles = handles
+        self.energy, self.protocol = energy, protocol
+        self.diag = bbox_diag(self.V)
+        self._solver = self._data = self._ops = None
+
+    @property
+    def factorisation(self):
+        """The converged protocol's factorised ``L_ff``
+        (:attr:`sshade.arap.solver.ArapSolver.factorisation`), None until a solve made it."""
+        return None if self._solver is None else self._solver.factorisation
+
+    def deform(self, targets, *, tol: float = 1e-4, max_iter: int | None = None, V0: np.ndarray | None = None,
+               time_budget_s: float | None = None, criterion=None, accelerate: str = "lbfgs",
+               anderson_m: int | None = None, R0: np.ndarray | None = None) -> ArapResult:
+        """The deformation for ``targets`` ((h, 3) float64); parameters and result as
+        :func:`arap_deform`. Raises SShaDeError for ``R0`` under the ``"paper"`` protocol."""
+        protocol, V, handles = self.protocol, self.V, self.handles
+        if R0 is not None and protocol != "converged":
+            raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
+        if max_iter is None:
+            max_iter = DEFAULT_MAX_ITER[protocol]
+        bc = np.ascontiguousarray(targets, np.float64)
+        R, t = rigid_fit(V[handles], bc)
+        rigid_resid = float(np.abs(V[handles] @ R.T + t - bc).max())
+        if rigid_resid <= 1e-12 * self.diag:
+            # The handles move rigidly: the rigid motion (no distortion at all) is the answer,
+            # under both protocols. It is the minimiser wherever the cotangent weights are
+            # positive; on meshes with obtuse triangles libigl's weights turn negative and the
+            # raw energy could be lowered by distorting, which no user asks for. (Also avoids
+            # libigl's single-precision 3x3 polar decomposition adding ~1e-6 noise.)
+            return ArapResult(V=V @ R.T + t, iterations=0, converged=True, last_move=0.0,
+                              precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol,
+                                                                   "status": "rigid"})
+        if protocol == "converged":
+            if self._solver is None:
+                self._solver = ArapSolver(V, self.F, handles, energy=self.energy)
+            res = self._solver.solve(targets, U0=V0, R0=R0, criterion=criterion, max_iter=max_iter,
+                                     accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s)
+            res.info["protocol"] = "converged"
+            return res
+        U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()
+        res = self._paper(bc, U, thresh=tol * self.diag, max_iter=max_iter, time_budget_s=time_budget_s)
+        return self._classify(res, DEFAULT_CRITERION if criterion is None else criterion)
+
+    def _paper(self, bc: np.ndarray, U: np.ndarray, *, thresh: float, max_iter: int,
+               time_budget_s: float | None) -> ArapResult:
+        """The ``"paper"`` protocol: libigl's local/global from ``U`` (n, 3) (its handle
+        rows set to ``bc`` (h, 3) here), stopped by :func:`iterate`; libigl's
+        precomputation on the first call (its seconds in that result's ``precompute_s``)."""
+        b = np.ascontiguousarray(self.handles, np.int32)
+        U[b] = bc
+        t0 = time.perf_counter()
+        if self._data is None:
+            data = igl.ARAPData()
+            data.energy = (igl.ARAP_ENERGY_TYPE_SPOKES if self.energy == "spokes"
+                           else igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS)
+            data.max_iter = 1
+            igl.arap_precomputation(self.V, self.F, 3, b, data)
+            self._data = data
+        t1 = time.perf_counter()
+        U, it, converged, move = iterate(lambda X: igl.arap_solve(bc, self._data, X), U, thresh=thresh,
+                                         max_iter=max_iter, time_budget_s=time_budget_s)
+        t2 = time.perf_counter()
+        return ArapResult(V=U, iterations=it, converged=converged, last_move=move,
+                          precompute_s=t1 - t0, solve_s=t2 - t1,
+                          info={"protocol": "paper", "status": ("converged" if converged else
+                                                               "max_iter" if it >= max_iter else "time_budget")})
+
+    def _classify(self, res: ArapResult, criterion) -> ArapResult:
+        """Under the ``"paper"`` protocol, tell a converged stop of the move rule from a
+        stalled one by the gradient norm at the result (``criterion.gtol``, the converged
+        protocol's test); sets ``res.converged``, ``info["status"]`` and ``info["gnorm"]``.
+        Not timed (outside ``solve_s``)."""
+        if self._ops is None:
+            self._ops = build_operators(self.V, self.F, self.energy)
+        ops = self._ops
+        free = np.ones(len(self.V), bool)
+        free[self.handles] = False
+        g = 2.0 * (ops.L @ res.V - ops.rhs(ops.rotations(res.V)))[free]
+        gn = gradient_norm(g, ops.mass[free], ops.diag)
+        res.info["gnorm"] = gn
+        if res.info["status"] == "converged" and not gn < criterion.gtol:
+            res.info["status"] = "stalled"
+            res.converged = False
         return res
-    U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()
-    res = _paper(V, F, b, bc, U, energy=energy, thresh=tol * diag, max_iter=max_iter, time_budget_s=time_budget_s)
-    return _classify(res, V, F, handles, energy, DEFAULT_CRITERION if criterion is None else criterion)
 
 
-def _classify(res: ArapResult, V, F, handles, energy: str, criterion) -> ArapResult:
-    """Under the ``"paper"`` protocol, tell a converged stop of the move rule from a
-    stalled one by the gradient norm at the result (``criterion.gtol``, the converged
-    protocol's test); sets ``res.converged``, ``info["status"]`` and ``info["gnorm"]``.
-    Not timed (outside ``solve_s``)."""
-    ops = build_operators(V, F, energy)
-    free = np.ones(len(V), bool)
-    free[handles] = False
-    g = 2.0 * (ops.L @ res.V - ops.rhs(ops.rotations(res.V)))[free]
-    gn = gradient_norm(g, ops.mass[free], ops.diag)
-    res.info["gnorm"] = gn
-    if res.info["status"] == "converged" and not gn < criterion.gtol:
-        res.info["status"] = "stalled"
-        res.converged = False
-    return res
-
-
-def _paper(V: np.ndarray, F: np.ndarray, b: np.ndarray, bc: np.ndarray, U: np.ndarray, *, energy: str,
-           thresh: float, max_iter: int, time_budget_s: float | None) -> ArapResult:
-    """The ``"paper"`` protocol: libigl's local/global from ``U`` (n, 3) (its handle rows
-    ``b`` (h,) int32 set to ``bc`` (h, 3) here), stopped by :func:`iterate`."""
-    U[b] = bc
-    t0 = time.perf_counter()
-    data = igl.ARAPData()
-    data.energy = (igl.ARAP_ENERGY_TYPE_SPOKES if energy == "spokes"
-                   else igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS)
-    data.max_iter = 1
-    igl.arap_precomputation(V, F, 3, b, data)
-    t1 = time.perf_counter()
-    U, it, converged, move = iterate(lambda X: igl.arap_solve(bc, data, X), U, thresh=thresh,
-                                     max_iter=max_iter, time_budget_s=time_budget_s)
-    t2 = time.perf_counter()
-    return ArapResult(V=U, iterations=it, converged=converged, last_move=move,
-                      precompute_s=t1 - t0, solve_s=t2 - t1,
-                      info={"protocol": "paper", "status": ("converged" if converged else
-                                                           "max_iter" if it >= max_iter else "time_budget")})

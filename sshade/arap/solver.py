@@ -25,10 +25,11 @@ Algorithm
   relative energy decrease over the last accepted iteration and a scale-free gradient
   norm are below their thresholds.
 
-Phases of :func:`solve_arap`: options and start point (:func:`_check_options`,
-:func:`_start_point`, :func:`_check_components`), set-up (:class:`_Stepper`: numbering,
-kernels, threads, factorisation), the iterations (:class:`_Loop`), the result
-(:meth:`_Loop.result`).
+Phases of :func:`solve_arap`: the set-up for the mesh and its handle set (:class:`ArapSolver`:
+operators, :func:`_check_components`, :class:`_Stepper`: numbering, kernels, threads,
+factorisation), then per solve the options and start point (:func:`_check_options`,
+:func:`_start_point`, :meth:`_Stepper.start`), the iterations (:class:`_Loop`) and the
+result (:meth:`_Loop.result`). :class:`ArapSolver` keeps the set-up for many solves.
 
 Cost of one iteration
 ---------------------
@@ -66,7 +67,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import SShaDeError
-from ..mesh.validate import validate_handles
+from ..mesh.validate import validate_handle_indices, validate_handles
 from .accelerate import LBFGS, Anderson
 from .criterion import DEFAULT_CRITERION, Criterion, gradient_norm
 from .kernels import fused
@@ -77,7 +78,7 @@ from .rigid import rigid_fit
 from .solver_kernels import loop_kernels
 from .threads import ThreadPicker, numba_threads, resolve_threads
 
-__all__ = ["solve_arap", "ACCELERATIONS", "REORDER_MIN_VERTICES"]
+__all__ = ["solve_arap", "ArapSolver", "ACCELERATIONS", "REORDER_MIN_VERTICES"]
 
 #: the iterations of :func:`solve_arap` (``accelerate``)
 ACCELERATIONS = ("lbfgs", "anderson", "none")
@@ -159,22 +160,106 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     True
     """
     t_start = clock()
-    crit, acc, m = _check_options(energy, criterion, accelerate, anderson_m, max_iter)
-    ops = operators if operators is not None else build_operators(V, F, energy)
-    if ops.energy_type != energy:
-        raise SShaDeError(f"operators were built for {ops.energy_type!r}, not {energy!r}")
-    h, T = validate_handles(ops.V, handles, targets)
-    U = _start_point(ops, h, T, U0)
-    R0 = _start_rotations(ops.n, U0, R0)
-    info = {"energy_type": energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": acc,
-            "anderson_m": m, "n_local": 0, "n_fallback": 0}
-    if len(np.setdiff1d(np.arange(ops.n), h)) == 0:  # every vertex is a handle
-        return _all_handles(ops, U, info, t_start)
-    _check_components(ops.L, h)
-    st = _Stepper(ops, U, h, T, threads=threads, reorder=reorder, linear_solver=linear_solver, info=info)
-    loop = _Loop(st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback, R0=R0)
-    loop.run()
-    return loop.result(precompute_s=loop.t_iter - t_start)
+    _check_options(energy, criterion, accelerate, anderson_m, max_iter)
+    solver = ArapSolver(V, F, handles, energy=energy, linear_solver=linear_solver, operators=operators,
+                        threads=threads, reorder=reorder)
+    return solver._solve(targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
+                         t_start)
+
+
+class ArapSolver:
+    """ARAP for one mesh and one handle set, prepared once and solved for any targets:
+    libigl's ``arap_precomputation`` / ``arap_solve`` split, with :func:`solve_arap`'s
+    iteration and stopping rule. The operators, the vertex numbering and the Cholesky
+    factorisation of ``L_ff`` depend on the handles, not on where they go, so a sequence
+    of solves (an animation's frames, a dragged handle) pays them once.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions. F : (m, 3) int faces. handles : (h,) int unique
+        vertex indices (their targets are given to :meth:`solve`).
+    energy, linear_solver, operators, threads, reorder : as :func:`solve_arap`.
+
+    Attributes
+    ----------
+    n : int, vertices. handles : (h,) int64. energy : str. precompute_s : float, seconds of
+    the set-up (reported in the first solve's ``precompute_s``).
+
+    Raises
+    ------
+    SShaDeError as :func:`solve_arap` for the mesh, the handle indices, the energy, the
+    linear solver and a component without a handle.
+
+    Examples
+    --------
+    >>> from sshade.arap.cases import twisted_bar
+    >>> V, F, h, T = twisted_bar(90.0, h=0.25)
+    >>> solver = ArapSolver(V, F, h, energy="spokes")
+    >>> r1 = solver.solve(T)                  # the first frame
+    >>> r2 = solver.solve(T * 1.01, U0=r1.V)  # the next one, warm-started from the first
+    >>> r1.converged and r2.converged
+    True
+    """
+
+    def __init__(self, V, F, handles, *, energy: str = "spokes_and_rims", linear_solver: str = "auto",
+                 operators: ArapOperators | None = None, threads: int | None = None, reorder: bool | None = None):
+        t0 = clock()
+        if energy not in ENERGIES:
+            raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
+        self.ops = operators if operators is not None else build_operators(V, F, energy)
+        if self.ops.energy_type != energy:
+            raise SShaDeError(f"operators were built for {self.ops.energy_type!r}, not {energy!r}")
+        self.energy, self.n = energy, self.ops.n
+        self.handles = validate_handle_indices(self.ops.V, handles)
+        self._st = None
+        if len(np.setdiff1d(np.arange(self.n), self.handles)):  # not every vertex a handle
+            _check_components(self.ops.L, self.handles)
+            self._st = _Stepper(self.ops, self.handles, threads=threads, reorder=reorder,
+                                linear_solver=linear_solver)
+        self.precompute_s = clock() - t0
+        self._first = True
+
+    @property
+    def factorisation(self) -> LaplacianSolver | None:
+        """The factorised ``L_ff`` every solve uses (None when every vertex is a handle)."""
+        return None if self._st is None else self._st.lin
+
+    def solve(self, targets, *, U0: np.ndarray | None = None, R0: np.ndarray | None = None,
+              criterion: Criterion | None = None, max_iter: int = 5000, accelerate: bool | str = "lbfgs",
+              anderson_m: int | None = None, time_budget_s: float | None = None, callback=None) -> ArapResult:
+        """The converged deformation for ``targets`` ((h, 3) float64, one per handle, in
+        :attr:`handles`' order); the other parameters and the result as :func:`solve_arap`
+        (``U0``: e.g. the previous frame's result). The result's ``precompute_s`` holds
+        the set-up's seconds in the first solve only.
+
+        Raises
+        ------
+        SShaDeError on bad targets, ``U0`` / ``R0`` or options (:func:`solve_arap`).
+        """
+        return self._solve(targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
+                           clock())
+
+    def _solve(self, targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
+               t_start: float) -> ArapResult:
+        """:meth:`solve`, its set-up time counted from ``t_start`` (plus the
+        preparation's on the first solve)."""
+        crit, acc, m = _check_options(self.energy, criterion, accelerate, anderson_m, max_iter)
+        h, T = validate_handles(self.ops.V, self.handles, targets)
+        U = _start_point(self.ops, h, T, U0)
+        R0 = _start_rotations(self.n, U0, R0)
+        extra = self.precompute_s if self._first else 0.0
+        self._first = False
+        info = {"energy_type": self.energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": acc,
+                "anderson_m": m, "n_local": 0, "n_fallback": 0}
+        if self._st is None:  # every vertex is a handle
+            res = _all_handles(self.ops, U, info, t_start)
+            res.precompute_s += extra
+            return res
+        self._st.start(U, T, info)
+        loop = _Loop(self._st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback,
+                     R0=R0)
+        loop.run()
+        return loop.result(precompute_s=loop.t_iter - t_start + extra)
 
 
 def _check_options(energy, criterion, accelerate, anderson_m, max_iter) -> tuple[Criterion, str, int]:
@@ -258,17 +343,13 @@ class _Stepper:
     :meth:`gnorm`, :meth:`max_move`; ``tm`` accumulates their seconds per stage.
     """
 
-    def __init__(self, ops: ArapOperators, U: np.ndarray, h: np.ndarray, T: np.ndarray, *, threads,
-                 reorder, linear_solver: str, info: dict):
-        self.ops, self.info = ops, info
+    def __init__(self, ops: ArapOperators, h: np.ndarray, *, threads, reorder, linear_solver: str):
+        self.ops = ops
         self.diag = ops.diag
         self.zero_E = 1e-12 * ops.rest_term
         self._pick_kernels(threads, ops.n)
-        self._renumber(U, h, reorder)
+        self._renumber(h, reorder)
         self.lin = LaplacianSolver(self.Lff, linear_solver)
-        self.c_f = np.ascontiguousarray(self.Lfb @ T)  # (n_f, 3)
-        info.update(linear_solver=self.lin.backend, factor_s=self.lin.factor_s, threads=self.nthreads,
-                    reordered=self.perm is not None)
         if self.kern:
             Lc = self.Lff.tocsr()
             Lc.sort_indices()
@@ -276,6 +357,15 @@ class _Stepper:
                           np.ascontiguousarray(Lc.data, np.float64))
             self.free_u = self.free.astype(np.uint32)
         self.rows = self.free_u if self.kern else self.free
+
+    def start(self, U: np.ndarray, T: np.ndarray, info: dict) -> None:
+        """A solve's problem: start positions ``U`` (n, 3) (mesh numbering, handle rows at
+        their targets), targets ``T`` (h, 3), its ``info`` (the set-up's facts added)."""
+        self.info = info
+        self.U = U if self.perm is None else np.ascontiguousarray(U[self.perm])
+        self.c_f = np.ascontiguousarray(self.Lfb @ T)  # (n_f, 3)
+        info.update(linear_solver=self.lin.backend, factor_s=self.lin.factor_s, threads=self.nthreads,
+                    reordered=self.perm is not None)
         self.tm = dict.fromkeys(("local", "rhs", "solve", "gradient", "anderson"), 0.0)  # seconds per stage
 
     def _pick_kernels(self, threads, n: int) -> None:
@@ -290,9 +380,9 @@ class _Stepper:
         self.picker = ThreadPicker(nthreads) if threads is None and nthreads > 1 else None
         self.nthreads = self.cur = nthreads
 
-    def _renumber(self, U: np.ndarray, h: np.ndarray, reorder) -> None:
+    def _renumber(self, h: np.ndarray, reorder) -> None:
         """The iteration's numbering (cache-friendly from :data:`REORDER_MIN_VERTICES`
-        vertices with numba), ``U`` in it, the free vertices and the blocks of ``L``."""
+        vertices with numba), the free vertices and the blocks of ``L`` in it."""
         ops, n = self.ops, self.ops.n
         if reorder is None:
             reorder = n >= REORDER_MIN_VERTICES
@@ -302,10 +392,9 @@ class _Stepper:
         if perm is not None:
             Lp = ops.L[perm][:, perm].tocsr()
             hp = self.kdata.inv[h]
-            self.U = np.ascontiguousarray(U[perm])
             mass = ops.mass[perm]
         else:
-            Lp, hp, mass, self.U = ops.L, h, ops.mass, U
+            Lp, hp, mass = ops.L, h, ops.mass
         self.free = np.setdiff1d(np.arange(n), hp)
         Lf = Lp[self.free]
         self.Lff = Lf[:, self.free].tocsc()

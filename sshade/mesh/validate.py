@@ -24,8 +24,8 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import SShaDeError
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
-__all__ = ["validate_mesh", "validate_handles", "validate_deformed", "check_arrays", "check_points", "check_faces",
-           "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
+__all__ = ["validate_mesh", "validate_handles", "validate_handle_indices", "validate_deformed",
+           "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
 
 #: Largest coordinate magnitude accepted. The methods form products of up to about
 #: eight lengths (squared areas, circumradii, energies): beyond ~1e38 they overflow
@@ -388,6 +388,45 @@ def _check_scale(V, F, name) -> None:
                           "rescale the mesh)")
 
 
+def validate_handle_indices(V: np.ndarray, handles) -> np.ndarray:
+    """Check handle indices against a mesh (the index part of :func:`validate_handles`).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertex positions. handles : (h,) array_like of int (an (h, 1) or
+        (1, h) array is flattened).
+
+    Returns
+    -------
+    (h,) int64, in the given order.
+
+    Raises
+    ------
+    SShaDeError
+        Empty handle set, non-integer, out-of-range or duplicate indices.
+
+    Examples
+    --------
+    >>> validate_handle_indices(np.zeros((4, 3)), [[2], [0]]).tolist()
+    [2, 0]
+    """
+    h = np.asarray(handles)
+    if h.ndim == 2 and 1 in h.shape:
+        h = h.ravel()
+    if h.ndim != 1 or h.size == 0:
+        raise SShaDeError(f"handles must be a non-empty 1-D index array, got shape {np.shape(handles)}")
+    if not np.issubdtype(h.dtype, np.integer):
+        raise SShaDeError(f"handles must be integer vertex indices, got dtype {h.dtype}")
+    h = h.astype(np.int64)
+    n = len(V)
+    oob = (h < 0) | (h >= n)
+    if oob.any():
+        raise SShaDeError(f"handle index {int(h[oob][0])} is out of range [0, {n}) (handle off the surface)")
+    if len(np.unique(h)) != len(h):
+        raise SShaDeError("handles contain duplicate vertex indices")
+    return h
+
+
 def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.ndarray]:
     """Check handle indices and target positions against a mesh.
 
@@ -413,20 +452,7 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
     --------
     >>> V = np.zeros((4, 3)); h, t = validate_handles(V, [0, 2], np.zeros((2, 3)))
     """
-    h = np.asarray(handles)
-    if h.ndim == 2 and 1 in h.shape:
-        h = h.ravel()
-    if h.ndim != 1 or h.size == 0:
-        raise SShaDeError(f"handles must be a non-empty 1-D index array, got shape {np.shape(handles)}")
-    if not np.issubdtype(h.dtype, np.integer):
-        raise SShaDeError(f"handles must be integer vertex indices, got dtype {h.dtype}")
-    h = h.astype(np.int64)
-    n = len(V)
-    oob = (h < 0) | (h >= n)
-    if oob.any():
-        raise SShaDeError(f"handle index {int(h[oob][0])} is out of range [0, {n}) (handle off the surface)")
-    if len(np.unique(h)) != len(h):
-        raise SShaDeError("handles contain duplicate vertex indices")
+    h = validate_handle_indices(V, handles)
     T = np.ascontiguousarray(targets, dtype=np.float64)
     if not T.flags.writeable:  # see validate_mesh
         T = T.copy()

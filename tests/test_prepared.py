@@ -1,0 +1,72 @@
+"""sshade/prepared.py: prepare once, solve per frame. The first solve is deform bit for
+bit; a sequence of frames lands on the one-shot deform of each frame; the set-up is
+made once; bad targets and meshes are refused."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sshade import deform, prepare
+from sshade.errors import SShaDeError
+from sshade.mesh.io import read_mesh
+
+from .conftest import SHARED_DATA
+
+
+@pytest.fixture(scope="module")
+def faust_pair():
+    a, b = SHARED_DATA / "faust_reg" / "tr_reg_000.ply", SHARED_DATA / "faust_reg" / "tr_reg_001.ply"
+    if not (a.is_file() and b.is_file()):
+        pytest.skip(f"FAUST registrations not found in {a.parent}")
+    V, F = read_mesh(a)
+    V2, _ = read_mesh(b)
+    return V, F, np.arange(0, len(V), 41), V2
+
+
+@pytest.mark.parametrize("anchor", ["projection", "barycenter"])
+def test_the_first_solve_is_deform_bit_for_bit(faust_pair, anchor):
+    V, F, h, V2 = faust_pair
+    kw = dict(n_low=500, n_samplings=3, seed=7, anchor=anchor)
+    prepared = prepare(V, F, h, **kw)
+    Vd, info = prepared.solve(V2[h], return_info=True)
+    for workers in (1, 2):  # deform's samplings in processes or in this one: the same numbers
+        assert np.array_equal(Vd, deform(V, F, h, V2[h], workers=workers, **kw))
+    assert info["converged"] and info["solve"] == 0 and np.array_equal(Vd[h], V2[h])
+
+
+def test_sixty_frames_match_one_shot_deforms_and_reuse_the_set_up(faust_pair):
+    """Rest pose to pose 1 in 60 frames, each solve warm-started from the previous frame:
+    every frame converged and within 0.05 % of the diagonal (mean) of deform on its targets;
+    the low-res Cholesky factors are the ones of the first frame."""
+    V, F, h, V2 = faust_pair
+    kw = dict(n_low=500, n_samplings=2, seed=0)
+    prepared = prepare(V, F, h, **kw)
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    factors = None
+    for t in np.linspace(1 / 60, 1.0, 60):
+        T = V[h] + t * (V2[h] - V[h])
+        Vd, info = prepared.solve(T, return_info=True)
+        assert info["converged"], info["status"]
+        if round(t * 60) % 10 == 0:  # every 10th frame against a one-shot deform
+            assert np.linalg.norm(Vd - deform(V, F, h, T, workers=1, **kw), axis=1).mean() < 5e-4 * diag
+        now = prepared.factorisations
+        factors = factors or now
+        assert all(a is b and a is not None for a, b in zip(now, factors, strict=True))
+    assert prepared.n_solves == 60
+
+
+def test_refused_inputs(faust_pair):
+    V, F, h, V2 = faust_pair
+    prepared = prepare(V, F, h, n_low=500, n_samplings=1)
+    with pytest.raises(SShaDeError, match="targets"):
+        prepared.solve(V2[h][:-1])
+    with pytest.raises(SShaDeError, match="NaN"):
+        prepared.solve(np.full((len(h), 3), np.nan))
+    assert prepared.n_solves == 0  # nothing was solved
+    with pytest.raises(SShaDeError, match="out of range"):
+        prepare(V, F, [0, len(V)], n_low=500)
+    two = np.r_[V, V + [2.0, 0, 0]], np.r_[F, F + len(V)]
+    with pytest.raises(SShaDeError, match="several connected components"):
+        prepare(*two, h, n_low=500)
+    with pytest.raises(SShaDeError, match="anchor"):
+        prepare(V, F, h, anchor="corner")
