@@ -34,7 +34,7 @@ from .io import atomic_write
 from .validate import validate_handles
 
 __all__ = ["read_sel", "read_dmat_selection", "read_def", "apply_def", "selection_handles", "read_handle_file",
-           "write_sel", "write_def", "FIXED", "FREE", "HANDLE"]
+           "write_sel", "write_def", "FIXED", "FREE", "HANDLE", "check_affine"]
 
 #: Per-vertex status codes (those of the ``.sel`` format).
 FIXED, FREE, HANDLE = 0, 1, 2
@@ -197,17 +197,33 @@ def read_def(path) -> np.ndarray:
     if M.shape != (4, 4):
         raise SShaDeError(f"{path}: a .def file holds a 4x4 matrix (4 lines of 4 numbers), got "
                           f"{[len(s.split()) for _, s in rows]} numbers per line")
+    return check_affine(M, str(path))
+
+
+def check_affine(M: np.ndarray, where: str) -> np.ndarray:
+    """Check a (4, 4) float64 matrix as a handle transformation: finite, last row
+    ``0 0 0 1`` (affine), invertible 3x3 part (scale-free test). Returns ``M``.
+
+    Raises
+    ------
+    SShaDeError naming ``where`` (a file, a frame) on any of these.
+
+    Examples
+    --------
+    >>> check_affine(np.eye(4), "frame 0").shape
+    (4, 4)
+    """
     if not np.isfinite(M).all():
-        raise SShaDeError(f"{path}: the matrix has NaN/inf entries")
+        raise SShaDeError(f"{where}: the matrix has NaN/inf entries")
     if not np.allclose(M[3], [0, 0, 0, 1], rtol=0, atol=1e-12):
-        raise SShaDeError(f"{path}: last row is {M[3].tolist()}, not [0, 0, 0, 1]: only affine transformations "
+        raise SShaDeError(f"{where}: last row is {M[3].tolist()}, not [0, 0, 0, 1]: only affine transformations "
                           "are supported")
     A = M[:3, :3]
     s = float(np.abs(A).max())
     det = float(np.linalg.det(A / s)) if s > 0 else 0.0  # scale-free: a 1e200 scaling is not singular
     if abs(det) <= 1e-12:
-        raise SShaDeError(f"{path}: the 3x3 part of the matrix is singular (det {det:.3g} after scaling to max 1): a "
-                          "non-invertible transformation would flatten the handle")
+        raise SShaDeError(f"{where}: the 3x3 part of the matrix is singular (det {det:.3g} after scaling to max 1): "
+                          "a non-invertible transformation would flatten the handle")
     return M
 
 
