@@ -146,11 +146,10 @@ def animate_file(a, log=print) -> dict:
     if sum(map(bool, (a.sel, a.dmat, a.handles))) != 1:
         raise SShaDeError("give exactly one of --sel F.sel, --dmat F.dmat, --handles F.json|F.csv")
     _check_out(a)
-    n_low = a.n_low if a.n_low == "auto" else _int(a.n_low, "--n-low")
     V, F = read_mesh(a.mesh, validate=False)  # prepare validates it
     handles, T = _frames(a, V)
     t0 = time.perf_counter()
-    prepared = prepare(V, F, handles, n_low=n_low, n_samplings=a.k, seed=a.seed)
+    prepared = prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed)  # n_low checked there
     prepare_s = time.perf_counter() - t0
     out = np.empty((len(T), len(V), 3))
     frame_s = np.empty(len(T))
@@ -163,13 +162,6 @@ def animate_file(a, log=print) -> dict:
     log(f"  prepare  {prepare_s:8.3f} s")
     log(f"  frame    {np.median(frame_s):8.3f} s median ({frame_s.min():.3f}-{frame_s.max():.3f})")
     return {"prepare_s": prepare_s, "frame_s": frame_s, "n_frames": len(T), "out": Path(a.out)}
-
-
-def _int(text: str, name: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise SShaDeError(f"{name} must be an integer or auto, got {text!r}") from None
 
 
 def _write(a, out: np.ndarray, F: np.ndarray, frame_s: np.ndarray) -> None:

@@ -310,15 +310,20 @@ def main(argv=None) -> int:
         print("usage: python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def | "
               "--handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE] "
               "[--repair]\n       python -m sshade animate MESH (--sel F.sel | --dmat F.dmat | --handles F.json) "
-              "--frames FRAMES.npy -o OUT\n(python -m sshade deform --help, python -m sshade animate --help for "
-              "details)", file=sys.stderr if not argv else sys.stdout)
+              "--frames FRAMES.npy -o OUT\n       python -m sshade view MESH (--sel F.sel | --dmat F.dmat | --handles "
+              "F.json)\n(python -m sshade deform|animate|view --help for details)",
+              file=sys.stderr if not argv else sys.stdout)
         return 2 if not argv else 0
     if argv[0] == "animate":
         from .animate import main as animate_main
         return animate_main(argv[1:])
+    if argv[0] == "view":
+        from .view import main as view_main
+        return view_main(argv[1:])
     if argv[0] != "deform":
-        print(f"error: unknown command {argv[0]!r}; the commands are `python -m sshade deform MESH -o OUT ...` "
-              "and `python -m sshade animate MESH ... --frames FRAMES.npy -o OUT`", file=sys.stderr)
+        print(f"error: unknown command {argv[0]!r}; the commands are `python -m sshade deform MESH -o OUT ...`, "
+              "`python -m sshade animate MESH ... --frames FRAMES.npy -o OUT` and `python -m sshade view MESH ...`",
+              file=sys.stderr)
         return 2
     a = build_parser().parse_args(argv[1:])
     return run_command(lambda: deform_file(a), where=a.out)  # error:/interrupted (sshade.clirun)

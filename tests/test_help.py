@@ -30,6 +30,7 @@ HELP = {
     "-m sshade": ["usage: python -m sshade deform MESH -o OUT"],
     "-m sshade deform": ["usage: python -m sshade deform", "--sel", "--force"],
     "-m sshade animate": ["usage: python -m sshade animate", "--frames", "--handles"],
+    "-m sshade view": ["usage: python -m sshade view", "--sel", "--handles"],
     "-m examples.twisted_bar": ["usage: python -m examples.twisted_bar", "outputs/twisted_bar"],
     "benchmarks/arap_iteration.py": ["usage:", "--mesh"],
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
