@@ -12,8 +12,9 @@ average over the samplings and the handles set to their targets, as :func:`sshad
 
 The first solve is :func:`sshade.deform` of the same parameters, bit for bit: sampling 0
 starts from the rigid fit of the handles, the others (``warm_start``) from sampling 0's
-result. Every later solve starts each sampling from its own previous result (the previous
-frame), and still runs to the same stopping rule.
+result. Every later solve starts each sampling from its previous result moved on as its last
+two results moved (linear extrapolation of the frames; the previous result alone at the
+second solve), and still runs to the same stopping rule.
 
 The samplings run in this process, one after the other (``deform`` spreads them over
 processes).
@@ -54,7 +55,7 @@ class _Sampling:
         self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, gradient, self.bary)
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy="spokes_and_rims",
                                  protocol=protocol)
-        self.last = None  # (k, 3) low-res result of the previous solve
+        self.last = self.before = None  # (k, 3) low-res results of the previous two solves
 
     def solve(self, targets, V0, arap: dict, gradient: str) -> tuple[np.ndarray, dict]:
         """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit) and the decoding:
@@ -63,7 +64,7 @@ class _Sampling:
         res = self.arap.deform(targets, V0=V0, **arap)
         t1 = time.perf_counter()
         Vd = decode(self.C, self.prep["tri"], self.VN, res.V, self.prep["F"], self.axis, gradient, self.bary)
-        self.last = res.V
+        self.last, self.before = res.V, self.last
         t2 = time.perf_counter()
         return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
                     "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None}
@@ -114,8 +115,8 @@ class Prepared:
         first, k = self.n_solves == 0, len(self._samplings)
         results, infos = [None] * k, [None] * k
         for i, s in enumerate(self._samplings):
-            if not first:
-                V0 = s.last  # the previous frame
+            if not first:  # the previous frame, moved on as the last two frames moved
+                V0 = s.last if s.before is None else 2.0 * s.last - s.before
             elif i > 0 and self.params["warm_start"]:
                 V0 = results[0][s.prep["seeds"]]  # as deform: sampling 0's result
             else:
