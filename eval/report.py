@@ -338,7 +338,8 @@ def render_page(run_dir) -> str:
     cfg = info.get("config") or {}
     exp = cfg.get("experiment") or {}
     kind = str(exp.get("kind", "cases"))
-    title = f"{exp.get('name', run_dir.name)}: {(cfg.get('dataset') or {}).get('name', '')} ({run_dir.name})"
+    dataset = (cfg.get("dataset") or {}).get("name", "") if kind == "cases" else ""  # other kinds read their own data
+    title = f"{exp.get('name', run_dir.name)}{': ' + dataset if dataset else ''} ({run_dir.name})"
     cases = run_cases(run_dir, info) if kind == "cases" else None
     outputs = read_outputs(run_dir) if kind == "cases" else None
     views, tags, view_notes = _views_section(run_dir, cases, outputs)

@@ -306,8 +306,9 @@ def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
                 # error map of the figure, "edge error" on the true pose shows where TOSCA's
                 # pose is not isometric
                 viewed.add(c)
-                write_case_view(SimpleNamespace(name=f"{c}{p}", V=V0, F=F0, V_gt=V1), {"SShaDe": Vp}, out_dir,
-                                max_faces=max_faces)
+                y_up = [[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]  # (x, y, z) -> (x, z, -y): TOSCA z-up, the viewer y-up
+                write_case_view(SimpleNamespace(name=f"{c}{p}", V=V0 @ y_up, F=F0, V_gt=V1 @ y_up),
+                                {"SShaDe": Vp @ y_up}, out_dir, max_faces=max_faces)
             rows.append(row)
             with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:  # partial results survive a crash
                 pd.DataFrame(rows).to_csv(fh, index=False)
