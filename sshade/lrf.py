@@ -22,6 +22,7 @@ the frame falls back to the rest coordinate whose gradient is largest on t.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .errors import SShaDeError
 
@@ -172,7 +173,32 @@ def decode(C: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarr
     (n, 3) float64 deformed high-res positions.
     """
     L, _ = local_frames(VN_def, FN, _corner_values(VN_rest, FN, axis), gradient)
-    return np.einsum("nij,nj->ni", L[tri], C) + anchor_points(VN_def, FN, tri, bary)
+    P = np.ascontiguousarray(VN_def, np.float64)
+    out = np.empty((len(tri), 3))
+    if bary is None:
+        third = np.full((1, 3), 1.0 / 3.0)  # one row, reused: the barycenter
+        _decode_kernel(np.ascontiguousarray(L), np.ascontiguousarray(C, np.float64), np.ascontiguousarray(tri),
+                       third, P, np.ascontiguousarray(FN, np.int64), False, out)
+    else:
+        _decode_kernel(np.ascontiguousarray(L), np.ascontiguousarray(C, np.float64), np.ascontiguousarray(tri),
+                       np.ascontiguousarray(bary, np.float64), P, np.ascontiguousarray(FN, np.int64), True, out)
+    return out
+
+
+@njit(cache=True)
+def _decode_kernel(L, C, tri, bary, P, FN, per_vertex, out):
+    """``out[i] = L[tri[i]] @ C[i] + sum_k w_k P[FN[tri[i], k]]`` with ``w = bary[i]``
+    (``per_vertex``) or ``bary[0]`` (the barycenter's thirds): :func:`decode` in one pass,
+    without the (n, 3, 3) gather of ``L[tri]``."""
+    for i in range(tri.shape[0]):
+        t = tri[i]
+        r = i if per_vertex else 0
+        a, b, c = FN[t, 0], FN[t, 1], FN[t, 2]
+        w0, w1, w2 = bary[r, 0], bary[r, 1], bary[r, 2]
+        c0, c1, c2 = C[i, 0], C[i, 1], C[i, 2]
+        for d in range(3):
+            out[i, d] = (L[t, d, 0] * c0 + L[t, d, 1] * c1 + L[t, d, 2] * c2
+                         + (w0 * P[a, d] + w1 * P[b, d] + w2 * P[c, d]))
 
 
 def transfer(V: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
