@@ -10,8 +10,9 @@ Usage::
 With a selection (``.sel``/``.dmat``) the gizmo moves the handle vertices (status 2) and
 the fixed ones stay; with ``--handles`` it moves every listed handle (their stored targets
 are not used). The gizmo starts at the moved vertices' centroid, so it turns them about it.
-Each change re-solves; the window shows the last solve's time. Exit status 0 when the
-window is closed, 2 after one ``error:`` line (no polyscope, bad input).
+Each change re-solves; the window shows the last solve's time. Nothing is written (no
+polyscope preference files). Exit status 0 when the window is closed, 2 after one
+``error:`` line (no polyscope, bad input).
 """
 from __future__ import annotations
 
@@ -129,6 +130,7 @@ def open_viewer(a, ps, backend: str | None = None) -> Viewer:
         if not moved.any():
             raise SShaDeError("the selection has no handle vertex (status 2) for the gizmo to move")
     prepared = prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed)  # n_low checked there
+    ps.set_use_prefs_file(False)  # no .polyscope.ini / imgui.ini in the user's folder
     ps.init(backend) if backend else ps.init()
     viewer = Viewer(ps, prepared.V, prepared.F, prepared.handles, moved, prepared)
     ps.set_user_callback(viewer.callback)

@@ -16,7 +16,7 @@ MESH = SHARED_DATA / "faust_reg" / "tr_reg_000.ply"
 
 
 @pytest.mark.view
-def test_a_moved_gizmo_moves_the_handle_region_and_the_mesh_with_it(tmp_path):
+def test_a_moved_gizmo_moves_the_handle_region_and_the_mesh_with_it(tmp_path, monkeypatch):
     ps = pytest.importorskip("polyscope", reason="polyscope (the [view] extra) is not installed")
     if not MESH.is_file():
         pytest.skip(f"FAUST registration not found: {MESH}")
@@ -26,6 +26,9 @@ def test_a_moved_gizmo_moves_the_handle_region_and_the_mesh_with_it(tmp_path):
     status[V[:, 1] > np.quantile(V[:, 1], 0.95)] = 2
     write_sel(tmp_path / "s.sel", status)
     a = build_parser().parse_args([str(MESH), "--sel", str(tmp_path / "s.sel"), "--n-low", "300", "--k", "2"])
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
     viewer = open_viewer(a, ps, backend="openGL_mock")
     assert not viewer.refresh() and viewer.solves == 0  # nothing moved: no solve
     T = viewer.gizmo.get_transform()
@@ -40,6 +43,7 @@ def test_a_moved_gizmo_moves_the_handle_region_and_the_mesh_with_it(tmp_path):
     handles = np.flatnonzero(status != 1)
     expected = prepare(V, F, handles, n_low=300, n_samplings=2).solve(viewer.targets(T))
     assert np.array_equal(viewer.Vd, expected)  # what the window shows is SShaDe's result
+    assert list(cwd.iterdir()) == []  # no preference files written where it ran
 
 
 def test_without_polyscope_the_command_is_one_error_line(tmp_path, monkeypatch, capsys):
