@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .animate import main as animate_main
 from .clirun import run_command
 from .components import drop_unreferenced
 from .errors import SShaDeError
@@ -61,6 +62,7 @@ from .mesh.handle_files import read_def, read_dmat_selection, read_handle_file, 
 from .mesh.io import read_mesh, write_mesh, written_by_sshade
 from .mesh.repair import repair_mesh
 from .registry import named_or_plugin
+from .view import main as view_main
 
 __all__ = ["main", "build_parser", "deform_file", "parse_param"]
 
@@ -315,10 +317,8 @@ def main(argv=None) -> int:
               file=sys.stderr if not argv else sys.stdout)
         return 2 if not argv else 0
     if argv[0] == "animate":
-        from .animate import main as animate_main
         return animate_main(argv[1:])
     if argv[0] == "view":
-        from .view import main as view_main
         return view_main(argv[1:])
     if argv[0] != "deform":
         print(f"error: unknown command {argv[0]!r}; the commands are `python -m sshade deform MESH -o OUT ...`, "
