@@ -8,7 +8,7 @@ Usage::
 
 - ``FRAMES.npy``: either (f, h, 3) float targets, one row per handle in the order of the
   handle selection (``--sel``/``--dmat``: the selected vertices in increasing order,
-  :func:`sshade.mesh.handle_files.selection_handles`; ``--handles``: the file's order),
+  :func:`sshade.mesh.handle_files.read_moving_handles`; ``--handles``: the file's order),
   or, with ``--sel``/``--dmat``, (f, 4, 4) affine matrices moving the handle region of each
   frame (fixed vertices stay), as a ``.def`` file moves it once.
 - ``OUT``: a ``.npz`` file with ``V`` (f, n, 3) float64, ``F`` (m, 3) int64 and
@@ -33,14 +33,7 @@ from tqdm import tqdm
 
 from .clirun import ArgumentParser, run_command
 from .errors import SShaDeError
-from .mesh.handle_files import (
-    apply_def,
-    check_affine,
-    read_dmat_selection,
-    read_handle_file,
-    read_sel,
-    selection_handles,
-)
+from .mesh.handle_files import apply_def, check_affine, read_moving_handles
 from .mesh.io import atomic_write, read_mesh, write_mesh, written_by_sshade
 from .prepared import prepare
 
@@ -111,23 +104,18 @@ def _frames(a, V) -> tuple[np.ndarray, np.ndarray]:
         raise SShaDeError(f"{a.frames}: expected (f, h, 3) targets or (f, 4, 4) matrices, got "
                           f"{getattr(X, 'shape', None)} of {getattr(X, 'dtype', None)}")
     X = np.asarray(X, np.float64)
-    if a.handles:
-        handles, _ = read_handle_file(a.handles, len(V))
-        if X.shape[1:] != (len(handles), 3):
-            raise SShaDeError(f"{a.frames}: with --handles the frames are (f, {len(handles)}, 3) targets, one per "
-                              f"handle of {a.handles}; got {X.shape}")
-        return handles, X
-    status = read_sel(a.sel, len(V)) if a.sel else read_dmat_selection(a.dmat, len(V))
-    handles, rest = selection_handles(V, status, np.eye(4))
-    if X.shape[1:] == (4, 4):
-        moved = status[handles] == 2
+    handles, moved = read_moving_handles(len(V), sel=a.sel, dmat=a.dmat, handles=a.handles)
+    rest = V[handles]
+    if X.shape[1:] == (4, 4) and not a.handles:
         T = np.repeat(rest[None], len(X), axis=0)
         for i, M in enumerate(X):
             T[i, moved] = apply_def(check_affine(M, f"{a.frames} frame {i}"), rest[moved])
         return handles, T
     if X.shape[1:] != (len(handles), 3):
-        raise SShaDeError(f"{a.frames}: expected (f, {len(handles)}, 3) targets (one per selected vertex) or "
-                          f"(f, 4, 4) matrices; got {X.shape}")
+        what = (f"with --handles the frames are (f, {len(handles)}, 3) targets, one per handle of {a.handles}"
+                if a.handles else f"expected (f, {len(handles)}, 3) targets (one per selected vertex) or "
+                                  "(f, 4, 4) matrices")
+        raise SShaDeError(f"{a.frames}: {what}; got {X.shape}")
     return handles, X
 
 

@@ -80,9 +80,9 @@ class Prepared:
     prepare_s : float, seconds :func:`prepare` took. n_solves : int, solves so far.
     """
 
-    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float, n_low_asked: int):
+    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float):
         self.V, self.F, self.handles, self.params = V, F, handles, params
-        self._samplings, self.prepare_s, self._n_low_asked = samplings, prepare_s, n_low_asked
+        self._samplings, self.prepare_s = samplings, prepare_s
         self._arap = arap_options(params["tol"], params["max_iter"], params["protocol"], params["etol"],
                                   params["gtol"])
         self._arap.pop("protocol")  # the deformers were made for it
@@ -182,10 +182,10 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     h = validate_handle_indices(V, handles)
     if count_components(he.E, len(V)) > 1:
         raise SShaDeError("prepare: the mesh has several connected components; deform it with sshade.deform")
-    n_low_asked, n_low_used = low_res_size(len(V), p["n_low"])
+    _, n_low_used = low_res_size(len(V), p["n_low"])  # warns when there is no low-res step
     topology = mesh_topology(V, F, he)
     samplings = []
     for s in sampling_seeds(p["seed"], p["n_samplings"]):
         prep, info = prepare_sampling(V, F, h, n_low_used, s, topology)
         samplings.append(_Sampling(V, prep, info, p["gradient"], p["anchor"], p["protocol"]))
-    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, n_low_asked)
+    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0)

@@ -22,7 +22,7 @@ import numpy as np
 
 from .clirun import ArgumentParser, run_command
 from .errors import SShaDeError
-from .mesh.handle_files import FIXED, HANDLE, apply_def, read_dmat_selection, read_handle_file, read_sel
+from .mesh.handle_files import apply_def, read_moving_handles
 from .mesh.io import read_mesh
 from .prepared import prepare
 
@@ -120,15 +120,9 @@ def open_viewer(a, ps, backend: str | None = None) -> Viewer:
     if sum(map(bool, (a.sel, a.dmat, a.handles))) != 1:
         raise SShaDeError("give exactly one of --sel F.sel, --dmat F.dmat, --handles F.json|F.csv")
     V, F = read_mesh(a.mesh, validate=False)
-    if a.handles:
-        handles, _ = read_handle_file(a.handles, len(V))
-        moved = np.ones(len(handles), bool)
-    else:
-        status = read_sel(a.sel, len(V)) if a.sel else read_dmat_selection(a.dmat, len(V))
-        handles = np.flatnonzero((status == FIXED) | (status == HANDLE)).astype(np.int64)
-        moved = status[handles] == HANDLE
-        if not moved.any():
-            raise SShaDeError("the selection has no handle vertex (status 2) for the gizmo to move")
+    handles, moved = read_moving_handles(len(V), sel=a.sel, dmat=a.dmat, handles=a.handles)
+    if not moved.any():
+        raise SShaDeError("the selection has no handle vertex (status 2) for the gizmo to move")
     prepared = prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed)  # n_low checked there
     ps.set_use_prefs_file(False)  # no .polyscope.ini / imgui.ini in the user's folder
     ps.init(backend) if backend else ps.init()

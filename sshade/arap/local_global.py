@@ -124,8 +124,6 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         import igl
         res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1)
     """
-    if energy not in ENERGIES:
-        raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
     return ArapDeformer(V, F, handles, energy=energy, protocol=protocol).deform(
         targets, tol=tol, max_iter=max_iter, V0=V0, time_budget_s=time_budget_s, criterion=criterion,
         accelerate=accelerate, anderson_m=anderson_m, R0=R0)

@@ -34,7 +34,7 @@ from .io import atomic_write
 from .validate import validate_handles
 
 __all__ = ["read_sel", "read_dmat_selection", "read_def", "apply_def", "selection_handles", "read_handle_file",
-           "write_sel", "write_def", "FIXED", "FREE", "HANDLE", "check_affine"]
+           "write_sel", "write_def", "FIXED", "FREE", "HANDLE", "check_affine", "read_moving_handles"]
 
 #: Per-vertex status codes (those of the ``.sel`` format).
 FIXED, FREE, HANDLE = 0, 1, 2
@@ -250,6 +250,34 @@ def selection_handles(V: np.ndarray, status: np.ndarray, M: np.ndarray) -> tuple
     moved = status[handles] == HANDLE
     targets[moved] = apply_def(M, targets[moved])
     return handles, targets
+
+
+def read_moving_handles(n: int, *, sel=None, dmat=None, handles=None) -> tuple[np.ndarray, np.ndarray]:
+    """The handle vertices of one handle source and which of them a motion moves.
+
+    Parameters
+    ----------
+    n : int, the mesh's vertex count. sel, dmat : path of a ``.sel`` / ``.dmat`` selection
+        (its fixed and handle vertices are the handles, the handle ones move); handles :
+        path of a ``.json`` / ``.csv`` handle file (every handle moves; its targets are not
+        used). The first of ``sel``, ``dmat``, ``handles`` given is read.
+
+    Returns
+    -------
+    handles : (h,) int64 (a selection's in increasing order, a file's in its order);
+    moved : (h,) bool.
+
+    Raises
+    ------
+    SShaDeError on a bad file (as :func:`read_sel`, :func:`read_dmat_selection`,
+    :func:`read_handle_file`).
+    """
+    if sel or dmat:
+        status = read_sel(sel, n) if sel else read_dmat_selection(dmat, n)
+        h = np.flatnonzero(status != FREE).astype(np.int64)
+        return h, status[h] == HANDLE
+    h, _ = read_handle_file(handles, n)
+    return h, np.ones(len(h), bool)
 
 
 def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
