@@ -9,7 +9,7 @@ fixed, one turned 20 degrees, one moved 5 % of the diagonal). Frame i of f moves
 handles to ``rest + s(i / f) (final - rest)``, s the smoothstep.
 
     python benchmarks/frames.py --mesh ../shared/data/classic/armadillo.obj --size 200000 [--frames 60]
-        [--k 5] [--n-low 6000] [--no-remesh] [--cache data/scaling]
+        [--k 5] [--n-low 6000] [--workers W] [--no-remesh] [--cache data/scaling]
 
 Prints the prepare time; per frame the solve time and low-res iterations (summed over the
 samplings), then their median and range; the one-shot deform of the last frame (default
@@ -66,8 +66,8 @@ def main(a) -> int:
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     print(f"mesh {a.mesh} -> {len(V)} vertices, {len(F)} faces; {len(h)} handles; k={a.k}, n_low={a.n_low}")
     t0 = time.perf_counter()
-    p = prepare(V, F, h, n_low=a.n_low, n_samplings=a.k, seed=a.seed)
-    print(f"prepare {time.perf_counter() - t0:.3f} s")
+    p = prepare(V, F, h, n_low=a.n_low, n_samplings=a.k, seed=a.seed, workers=a.workers)
+    print(f"prepare {time.perf_counter() - t0:.3f} s on {p.workers} threads")
     rest = V[h]
     secs, its = [], []
     for i in range(1, a.frames + 1):
@@ -99,5 +99,6 @@ if __name__ == "__main__":
     ap.add_argument("--k", type=int, default=5)
     ap.add_argument("--n-low", type=int, default=6000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=None, help="threads of the prepared samplings (default: the cores)")
     args = ap.parse_args()
     raise SystemExit(run_command(lambda: main(args)))

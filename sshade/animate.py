@@ -137,14 +137,14 @@ def animate_file(a, log=print) -> dict:
     V, F = read_mesh(a.mesh, validate=False)  # prepare validates it
     handles, T = _frames(a, V)
     t0 = time.perf_counter()
-    prepared = prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed)  # n_low checked there
-    prepare_s = time.perf_counter() - t0
-    out = np.empty((len(T), len(V), 3))
-    frame_s = np.empty(len(T))
-    for i in tqdm(range(len(T)), desc="sshade animate", unit="frame", file=sys.stderr, disable=None):
-        t = time.perf_counter()
-        out[i] = prepared.solve(T[i])
-        frame_s[i] = time.perf_counter() - t
+    with prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed) as prepared:  # n_low checked there
+        prepare_s = time.perf_counter() - t0
+        out = np.empty((len(T), len(V), 3))
+        frame_s = np.empty(len(T))
+        for i in tqdm(range(len(T)), desc="sshade animate", unit="frame", file=sys.stderr, disable=None):
+            t = time.perf_counter()
+            out[i] = prepared.solve(T[i])
+            frame_s[i] = time.perf_counter() - t
     _write(a, out, prepared.F, frame_s)
     log(f"SShaDe: {a.mesh} ({len(V)} vertices), {len(handles)} handles, {len(T)} frames -> {a.out}")
     log(f"  prepare  {prepare_s:8.3f} s")

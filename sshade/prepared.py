@@ -12,28 +12,36 @@ average over the samplings and the handles set to their targets, as :func:`sshad
 
 The first solve is :func:`sshade.deform` of the same parameters, bit for bit: sampling 0
 starts from the rigid fit of the handles, the others (``warm_start``) from sampling 0's
-result. Every later solve starts each sampling from its previous result moved on as its last
-two results moved (linear extrapolation of the frames; the previous result alone at the
-second solve), and still runs to the same stopping rule.
+result. Every later solve starts each sampling from its earlier results extrapolated
+(:meth:`_Sampling.start`: the previous result, the line through the last two or the
+quadratic through the last three, whichever best predicted the previous solve's result),
+and still runs to the same stopping rule; a start nearer the minimiser saves iterations,
+not accuracy.
 
-The samplings run in this process, one after the other (``deform`` spreads them over
-processes).
+The samplings run side by side on a pool of ``workers`` threads of this process (the
+numba kernels, the Cholesky solves and most numpy work release the GIL), both in
+:func:`prepare` and in every solve; the average runs in sampling order, so the result does
+not depend on ``workers``. Threads rather than :func:`sshade.deform.deform`'s forked
+processes: a prepared object lives across many calls, and threads keep its state in one
+process (no worker to end, no result to copy back).
 
 Example::
 
     from sshade.prepared import prepare
-    prepared = prepare(V, F, handles, n_low=6000, n_samplings=5, seed=0)
-    frames = [prepared.solve(T) for T in targets_per_frame]   # (n, 3) each
+    with prepare(V, F, handles, n_low=6000, n_samplings=5, seed=0) as prepared:
+        frames = [prepared.solve(T) for T in targets_per_frame]   # (n, 3) each
 """
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
 from .arap import ArapDeformer
 from .deform import arap_options, check_params, handle_pre_pct, low_res_size, prepare_sampling
 from .errors import SShaDeError
+from .jobs import pool_size
 from .lrf import decode, encode, frame_functions
 from .mesh.halfedge import count_components
 from .mesh.validate import validate_handle_indices, validate_handles, validate_mesh
@@ -43,9 +51,19 @@ from .sampling import average, sampling_seeds, warm_kernels
 __all__ = ["prepare", "Prepared"]
 
 
+def _extrapolate(h: list, degree: int) -> np.ndarray:
+    """One step on from the results ``h`` ((k, 3) each, newest first) along the polynomial
+    of ``degree`` (0, 1 or 2) through the newest ``degree + 1`` of them."""
+    if degree == 0:
+        return h[0]
+    if degree == 1:
+        return 2.0 * h[0] - h[1]
+    return 3.0 * (h[0] - h[1]) + h[2]
+
+
 class _Sampling:
     """One sampling's prepared state: its low-res mesh and projection (``prep``), the
-    frames' axis and local coordinates, its ARAP deformer, its last low-res result."""
+    frames' axis and local coordinates, its ARAP deformer, its last low-res results."""
 
     def __init__(self, V, prep: dict, info: dict, gradient: str, anchor: str, protocol: str):
         self.prep, self.info = prep, info
@@ -55,7 +73,20 @@ class _Sampling:
         self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, gradient, self.bary)
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy="spokes_and_rims",
                                  protocol=protocol)
-        self.last = self.before = None  # (k, 3) low-res results of the previous two solves
+        self.history: list = []  # (k, 3) low-res results of the last four solves, newest first
+
+    def start(self) -> tuple[np.ndarray, int]:
+        """The next solve's start, (k, 3), and its order: the polynomial of degree 0, 1 or 2
+        through the newest results, evaluated one step on (frames taken as equally
+        spaced), of the degree that, from the results before it, best predicted the
+        newest one (least Euclidean distance; a smooth path picks 2, a handle that stops
+        picks 0 after one solve, a jittery one the degree that copes)."""
+        h = self.history
+        if len(h) == 1:
+            return h[0], 0
+        errs = [np.linalg.norm(_extrapolate(h[1:], d) - h[0]) for d in range(min(3, len(h) - 1))]
+        d = int(np.argmin(errs))
+        return _extrapolate(h, d), d
 
     def solve(self, targets, V0, arap: dict, gradient: str) -> tuple[np.ndarray, dict]:
         """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit) and the decoding:
@@ -64,35 +95,65 @@ class _Sampling:
         res = self.arap.deform(targets, V0=V0, **arap)
         t1 = time.perf_counter()
         Vd = decode(self.C, self.prep["tri"], self.VN, res.V, self.prep["F"], self.axis, gradient, self.bary)
-        self.last, self.before = res.V, self.last
+        self.history = [res.V] + self.history[:3]
         t2 = time.perf_counter()
         return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
                     "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None}
 
 
 class Prepared:
-    """SShaDe prepared for one mesh and one handle set (:func:`prepare`).
+    """SShaDe prepared for one mesh and one handle set (:func:`prepare`); a context manager
+    (leaving it, or :meth:`close`, ends the worker threads; a later solve refuses).
 
     Attributes
     ----------
     V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64 (the validated inputs).
     params : dict, the checked parameters (:func:`sshade.deform.check_params`).
-    prepare_s : float, seconds :func:`prepare` took. n_solves : int, solves so far.
+    workers : int, threads the samplings run on. prepare_s : float, seconds
+    :func:`prepare` took. n_solves : int, solves so far.
     """
 
-    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float):
+    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float, pool, workers: int):
         self.V, self.F, self.handles, self.params = V, F, handles, params
         self._samplings, self.prepare_s = samplings, prepare_s
+        self._pool, self.workers, self._pending = pool, workers, []
         self._arap = arap_options(params["tol"], params["max_iter"], params["protocol"], params["etol"],
                                   params["gtol"])
         self._arap.pop("protocol")  # the deformers were made for it
         self.n_solves = 0
+
+    def __enter__(self) -> Prepared:
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False
+
+    def __del__(self):
+        self.close()
+
+    def close(self) -> None:
+        """End the worker threads (after the sampling they run, if any)."""
+        pool, self._pool = getattr(self, "_pool", None), None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
 
     @property
     def factorisations(self) -> list:
         """Each sampling's factorised low-res ``L_ff`` (None before its first solve that
         needs one, and under the paper protocol): the same objects for every solve."""
         return [s.arap.factorisation for s in self._samplings]
+
+    def _map(self, fn, items) -> list:
+        """``[fn(x) for x in items]`` on the worker threads (here when one); waits for
+        every task even when one fails (no sampling keeps running into the next solve)."""
+        if self._pool is None:
+            raise SShaDeError("this prepared SShaDe was closed; prepare again")
+        if self.workers == 1 or len(items) == 1:
+            return [fn(x) for x in items]
+        wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
+        self._pending = [self._pool.submit(fn, x) for x in items]
+        return [f.result() for f in self._pending]
 
     def solve(self, targets, *, return_info: bool = False):
         """Deform for ``targets`` ((h, 3) float, one per handle, in :attr:`handles`' order).
@@ -103,26 +164,39 @@ class Prepared:
         ``(Vd, info)``: ``total_s`` (wall seconds of this solve), ``arap_s`` /
         ``transfer_s`` / ``iterations`` summed over the samplings, ``converged`` (every
         sampling's low-res ARAP met its stopping rule), ``status``, ``handle_pre_pct``,
-        ``solve`` (0 for the first), per-sampling details in ``samplings``.
+        ``solve`` (0 for the first), ``workers``, per-sampling details in ``samplings``
+        (``start_degree`` from the second solve on: :meth:`_Sampling.start`).
 
         Raises
         ------
         SShaDeError on targets of the wrong shape or with NaN/inf
-        (:func:`sshade.mesh.validate.validate_handles`).
+        (:func:`sshade.mesh.validate.validate_handles`), or after :meth:`close`.
         """
         t0 = time.perf_counter()
         _, T = validate_handles(self.V, self.handles, targets)
         first, k = self.n_solves == 0, len(self._samplings)
-        results, infos = [None] * k, [None] * k
-        for i, s in enumerate(self._samplings):
-            if not first:  # the previous frame, moved on as the last two frames moved
-                V0 = s.last if s.before is None else 2.0 * s.last - s.before
-            elif i > 0 and self.params["warm_start"]:
-                V0 = results[0][s.prep["seeds"]]  # as deform: sampling 0's result
-            else:
-                V0 = None  # the rigid fit of the handles
-            results[i], infos[i] = s.solve(T, V0, self._arap, self.params["gradient"])
-            infos[i]["handle_resid"] = results[i][self.handles] - T
+        gradient, arap = self.params["gradient"], self._arap
+
+        def run(i: int, V0):
+            Vd, info = self._samplings[i].solve(T, V0, arap, gradient)
+            info["handle_resid"] = Vd[self.handles] - T
+            return Vd, info
+
+        def later(i: int):  # the earlier frames extrapolated
+            V0, degree = self._samplings[i].start()
+            Vd, info = run(i, V0)
+            info["start_degree"] = degree
+            return Vd, info
+
+        if not first:
+            out = self._map(later, list(range(k)))
+        elif self.params["warm_start"] and k > 1:  # as deform: sampling 0 first, the others from it
+            out = self._map(lambda i: run(i, None), [0])
+            V_0 = out[0][0]
+            out += self._map(lambda i: run(i, V_0[self._samplings[i].prep["seeds"]]), list(range(1, k)))
+        else:  # from the rigid fit of the handles
+            out = self._map(lambda i: run(i, None), list(range(k)))
+        results, infos = [o[0] for o in out], [o[1] for o in out]
         Vd = average(results)
         Vd[self.handles] = T
         pre = average([d.pop("handle_resid") for d in infos])
@@ -131,7 +205,7 @@ class Prepared:
             return Vd
         others = [str(d["status"]) for d in infos if not d["converged"]]
         info = {"total_s": time.perf_counter() - t0, "solve": self.n_solves - 1, "samplings": infos,
-                "arap_s": float(sum(d["arap_s"] for d in infos)),
+                "workers": self.workers, "arap_s": float(sum(d["arap_s"] for d in infos)),
                 "transfer_s": float(sum(d["transfer_s"] for d in infos)),
                 "iterations": int(sum(d["iterations"] for d in infos)),
                 "converged": not others, "status": others[0] if others else "converged",
@@ -142,19 +216,22 @@ class Prepared:
 def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,
             max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
             protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-            anchor: str = "projection") -> Prepared:
+            anchor: str = "projection", workers: int | None = None) -> Prepared:
     """Everything of SShaDe that does not depend on the handles' targets (module docstring).
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions; F : (m, 3) int faces of a connected manifold
         triangle mesh; handles : (h,) int vertex indices (a new selection needs a new
-        :func:`prepare`). The other parameters as :func:`sshade.deform.deform` (no
-        ``workers``: the samplings run in this process).
+        :func:`prepare`). workers : int >= 1 or None, threads the samplings run on
+        (:func:`sshade.jobs.pool_size`: None = the cores this process may use, at most
+        ``n_samplings``); the results do not depend on it. The other parameters as
+        :func:`sshade.deform.deform`.
 
     Returns
     -------
-    :class:`Prepared`; ``prepared.solve(targets)`` deforms.
+    :class:`Prepared`; ``prepared.solve(targets)`` deforms; ``prepared.close()`` (or a
+    ``with`` block) ends its threads.
 
     Raises
     ------
@@ -170,12 +247,12 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     --------
     >>> from sshade.arap.cases import twisted_bar
     >>> V, F, h, T = twisted_bar(45.0, h=0.25)
-    >>> p = prepare(V, F, h, n_low=100, n_samplings=2)
-    >>> bool(np.allclose(p.solve(T)[h], T))
+    >>> with prepare(V, F, h, n_low=100, n_samplings=2) as p:
+    ...     bool(np.allclose(p.solve(T)[h], T))
     True
     """
     t0 = time.perf_counter()
-    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, tol=tol, max_iter=max_iter,
+    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol, max_iter=max_iter,
                      gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol, gtol=gtol, anchor=anchor)
     warm_kernels()
     V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
@@ -184,8 +261,16 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
         raise SShaDeError("prepare: the mesh has several connected components; deform it with sshade.deform")
     _, n_low_used = low_res_size(len(V), p["n_low"])  # warns when there is no low-res step
     topology = mesh_topology(V, F, he)
-    samplings = []
-    for s in sampling_seeds(p["seed"], p["n_samplings"]):
+
+    def one(s: int) -> _Sampling:
         prep, info = prepare_sampling(V, F, h, n_low_used, s, topology)
-        samplings.append(_Sampling(V, prep, info, p["gradient"], p["anchor"], p["protocol"]))
-    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0)
+        return _Sampling(V, prep, info, p["gradient"], p["anchor"], p["protocol"])
+
+    n_workers = pool_size(p["workers"], p["n_samplings"])
+    pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-sampling")
+    try:
+        samplings = list(pool.map(one, sampling_seeds(p["seed"], p["n_samplings"])))
+    except BaseException:
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, pool, n_workers)

@@ -138,7 +138,10 @@ def main(argv: list[str]) -> int:
 
     def run():
         ps = _polyscope()
-        open_viewer(a, ps)
-        ps.show()
+        viewer = open_viewer(a, ps)
+        try:
+            ps.show()
+        finally:
+            viewer.prepared.close()
         return 0
     return run_command(run, where=None)

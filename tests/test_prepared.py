@@ -70,3 +70,35 @@ def test_refused_inputs(faust_pair):
         prepare(*two, h, n_low=500)
     with pytest.raises(SShaDeError, match="anchor"):
         prepare(V, F, h, anchor="corner")
+
+
+def test_threads_do_not_change_the_results(faust_pair):
+    """The samplings on one thread or on three: the same numbers, first solve and later
+    ones (their starts extrapolated from the earlier results)."""
+    V, F, h, V2 = faust_pair
+    kw = dict(n_low=500, n_samplings=3, seed=3)
+    with prepare(V, F, h, workers=1, **kw) as one, prepare(V, F, h, workers=3, **kw) as three:
+        assert (one.workers, three.workers) == (1, 3)
+        for t in (0.25, 0.5, 0.75, 1.0):
+            T = V[h] + t * (V2[h] - V[h])
+            assert np.array_equal(one.solve(T), three.solve(T))
+
+
+def test_the_start_follows_the_path_and_stops_with_the_handles(faust_pair):
+    """A steady path is extrapolated (degree 2 once three results exist); handles that stop
+    moving are followed by the previous result (degree 0) from the solve after the stop."""
+    V, F, h, V2 = faust_pair
+    with prepare(V, F, h, n_low=500, n_samplings=1) as p:
+        degrees = []
+        for t in [0.1, 0.2, 0.3, 0.4, 0.5, 0.5, 0.5]:
+            _, info = p.solve(V[h] + t * (V2[h] - V[h]), return_info=True)
+            degrees.append(info["samplings"][0].get("start_degree"))
+    assert degrees[:2] == [None, 0] and degrees[4] == 2 and degrees[6] == 0, degrees
+
+
+def test_a_closed_prepared_refuses_to_solve(faust_pair):
+    V, F, h, V2 = faust_pair
+    with prepare(V, F, h, n_low=500, n_samplings=2, workers=2) as p:
+        p.solve(V2[h])
+    with pytest.raises(SShaDeError, match="closed"):
+        p.solve(V2[h])
