@@ -18,16 +18,23 @@ from .conftest import SHARED_DATA
 MESH = SHARED_DATA / "faust_reg" / "tr_reg_000.ply"
 
 
-@pytest.mark.view
-def test_a_moved_gizmo_moves_the_handle_region_and_the_mesh_with_it(tmp_path, monkeypatch):
-    ps = pytest.importorskip("polyscope", reason="polyscope (the [view] extra) is not installed")
+def _head_and_feet(sel: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """FAUST's first registration and a selection written to ``sel``: the feet fixed
+    (status 0, the lowest 10 %), the head moved (status 2, the top 5 %): (V, F, status)."""
     if not MESH.is_file():
         pytest.skip(f"FAUST registration not found: {MESH}")
     V, F = read_mesh(MESH)
     status = np.ones(len(V), int)
     status[V[:, 1] < np.quantile(V[:, 1], 0.1)] = 0
     status[V[:, 1] > np.quantile(V[:, 1], 0.95)] = 2
-    write_sel(tmp_path / "s.sel", status)
+    write_sel(sel, status)
+    return V, F, status
+
+
+@pytest.mark.view
+def test_a_moved_gizmo_moves_the_handle_region_and_the_mesh_with_it(tmp_path, monkeypatch):
+    ps = pytest.importorskip("polyscope", reason="polyscope (the [view] extra) is not installed")
+    V, F, status = _head_and_feet(tmp_path / "s.sel")
     a = build_parser().parse_args([str(MESH), "--sel", str(tmp_path / "s.sel"), "--n-low", "300", "--k", "2"])
     cwd = tmp_path / "cwd"
     cwd.mkdir()
@@ -93,14 +100,8 @@ def _screenshots(tmp_path, move) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     pytest.importorskip("polyscope", reason="polyscope (the [view] extra) is not installed")
     if shutil.which("xvfb-run") is None:
         pytest.skip("xvfb-run not found (Debian: apt-get install xvfb xauth)")
-    if not MESH.is_file():
-        pytest.skip(f"FAUST registration not found: {MESH}")
     from matplotlib.image import imread
-    V, _ = read_mesh(MESH)
-    status = np.ones(len(V), int)
-    status[V[:, 1] < np.quantile(V[:, 1], 0.1)] = 0
-    status[V[:, 1] > np.quantile(V[:, 1], 0.95)] = 2
-    write_sel(tmp_path / "s.sel", status)
+    _, _, status = _head_and_feet(tmp_path / "s.sel")
     (tmp_path / "shots.py").write_text(f"MOVE = {list(map(float, move))}\n{_SCREENSHOTS}")
     env = {**os.environ, "LIBGL_ALWAYS_SOFTWARE": "1",
            "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")])}
