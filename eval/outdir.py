@@ -116,7 +116,8 @@ def record_output_files(path, names) -> None:
 
 @dataclass
 class OutputClaim:
-    """A claimed output folder (:func:`claim_output_dir`).
+    """A claimed output folder (:func:`claim_output_dir`); a context manager that finishes
+    the claim (``done``, or ``failed`` on an exception).
 
     Attributes
     ----------
@@ -157,6 +158,15 @@ class OutputClaim:
             pass
         finally:
             self.release()
+
+    def __enter__(self) -> OutputClaim:
+        return self
+
+    def __exit__(self, exc_type, *exc) -> bool:
+        """As a ``with`` block: :meth:`finish` with ``done``, or ``failed`` when the block
+        raised (an interrupt included); the exception propagates."""
+        self.finish("done" if exc_type is None else "failed")
+        return False
 
     def _drop_own(self) -> None:
         """Remove what this claim wrote (every entry but the foreign ones); then the

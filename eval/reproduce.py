@@ -32,7 +32,9 @@ others still run):
    Fig. arap-examples) -> ``results/shapes``;
 6. with ``--scaling set``: the scaling benchmark on its set of meshes (a clean one and two
    hard TOSCA ones at 200k and 1M vertices, ``conf/experiment/scaling.yaml``; ``--scaling
-   MESH``: that one mesh instead) -> ``results/scaling``.
+   MESH``: that one mesh instead) -> ``results/scaling``; then the frames of a handle path
+   with SShaDe prepared once (``benchmarks/frames.py``: the clean armadillo and the hard
+   centaur, or that one mesh) -> ``results/frames``.
 
 Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``. Every step's
 folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
@@ -122,6 +124,10 @@ def _steps(a) -> list[tuple[str, list[str]]]:
         # hard TOSCA ones, at 200k and 1M vertices); a path: that one mesh instead
         one = [] if a.scaling == "set" else ["scaling.meshes=null", f"scaling.base_mesh={a.scaling}"]
         s.append(("scaling", py + ["eval", "experiment=scaling", *one, "out_dir=results/scaling"]))
+        # SShaDe prepared once and solved per frame on the set's clean and hard mesh (or that one mesh)
+        mesh = [] if a.scaling == "set" else ["--mesh", f"{Path(a.scaling).stem}={a.scaling}"]
+        s.append(("frames", [sys.executable, str(Path(__file__).resolve().parents[1] / "benchmarks" / "frames.py"),
+                             *mesh, "--out", "results/frames"]))
     # last: results/index.html, a link to every folder's page, and its screenshot where a
     # Chromium is installed (eval/report.py); `--only report` rebuilds just these
     shot = ["--screenshot", "results/index.png"] if find_chromium() else []

@@ -208,6 +208,17 @@ def test_failed_run_never_stays_running(tmp_path):
     assert json.loads((tmp_path / "run2" / MARKER).read_text())["status"] == "interrupted"
 
 
+def test_a_claim_as_a_with_block_ends_done_or_failed_and_releases_its_lock(tmp_path):
+    with claim_output_dir(tmp_path / "ok", "bench", option="") as claim:
+        (claim.path / "table.md").write_text("x")
+    m = json.loads((tmp_path / "ok" / MARKER).read_text())
+    assert m["status"] == "done" and m["files"] == ["table.md"] and claim.fd is None
+    with pytest.raises(KeyboardInterrupt), claim_output_dir(tmp_path / "bad", "bench", option="") as claim:
+        raise KeyboardInterrupt
+    assert json.loads((tmp_path / "bad" / MARKER).read_text())["status"] == "failed" and claim.fd is None
+    claim_output_dir(tmp_path / "ok", "bench", option="").finish("done")  # its own earlier output: reusable
+
+
 def test_anny_figures_refuses_results(capsys):
     from eval.anny_figures import main
     t = time.time()

@@ -38,7 +38,7 @@ def test_every_experiment_with_folders_and_figures(capsys):
     neural = importlib.util.find_spec("torch") is not None
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "sweep_arap_sr_alpha",
                            *(["sweep_implicit_arap", "sweep_implicit_arap_faust"] if neural else []),
-                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "report"]
+                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames", "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
@@ -52,11 +52,14 @@ def test_every_experiment_with_folders_and_figures(capsys):
         sweeps = {"sweep": "defaust", "sweep_arap_sr_alpha": "arap_sr_alpha",
                   "sweep_implicit_arap": "implicit_arap_defaust", "sweep_implicit_arap_faust": "implicit_arap_faust"}
         want = (f"hydra.sweep.dir=results/sweeps/{sweeps[name]}" if name in sweeps else
-                "T --out results/tosca_factors" if name == "tosca_factors" else f"out_dir=results/{name}")
+                "T --out results/tosca_factors" if name == "tosca_factors" else
+                "--mesh M=M.obj --out results/frames" if name == "frames" else f"out_dir=results/{name}")
         assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
     assert "scaling.meshes=null" in steps["scaling"]  # one mesh instead of the set
-    assert _steps(capsys, "--scaling", "set")["scaling"] == "-m eval experiment=scaling out_dir=results/scaling"
+    every = _steps(capsys, "--scaling", "set")
+    assert every["scaling"] == "-m eval experiment=scaling out_dir=results/scaling"
+    assert every["frames"].endswith("benchmarks/frames.py --out results/frames")  # its default set
 
 
 def test_only_runs_the_named_steps(capsys):
