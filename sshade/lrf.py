@@ -26,8 +26,8 @@ from numba import njit
 
 from .errors import SShaDeError
 
-__all__ = ["frame_functions", "triangle_gradients", "local_frames", "anchor_points", "encode", "decode", "transfer",
-           "GRADIENTS", "ANCHORS"]
+__all__ = ["frame_functions", "triangle_gradients", "local_frames", "anchor_points", "encode", "decode",
+           "deformed_frames", "decode_with_frames", "transfer", "GRADIENTS", "ANCHORS"]
 
 GRADIENTS = ("normalized", "raw")
 #: Where a high-res vertex is anchored in its triangle: its projection (default) or the
@@ -170,35 +170,88 @@ def decode(C: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarr
 
     Returns
     -------
-    (n, 3) float64 deformed high-res positions.
+    (n, 3) float64 deformed high-res positions: :func:`decode_with_frames` with
+    :func:`deformed_frames`.
     """
+    return decode_with_frames(deformed_frames(VN_rest, VN_def, FN, axis, gradient), C, tri, VN_def, FN, bary)
+
+
+def deformed_frames(VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray, axis: np.ndarray,
+                    gradient: str = "normalized") -> np.ndarray:
+    """The frames L'_t of the deformed low-res mesh (§3.2; the frame function's values are
+    the rest coordinates ``VN_rest`` (k, 3) chosen by ``axis`` (t,)): (t, 3, 3) float64,
+    C-contiguous, for :func:`decode_with_frames`."""
     L, _ = local_frames(VN_def, FN, _corner_values(VN_rest, FN, axis), gradient)
-    P = np.ascontiguousarray(VN_def, np.float64)
-    out = np.empty((len(tri), 3))
-    if bary is None:
-        third = np.full((1, 3), 1.0 / 3.0)  # one row, reused: the barycenter
-        _decode_kernel(np.ascontiguousarray(L), np.ascontiguousarray(C, np.float64), np.ascontiguousarray(tri),
-                       third, P, np.ascontiguousarray(FN, np.int64), False, out)
+    return np.ascontiguousarray(L, np.float64)
+
+
+def decode_with_frames(L: np.ndarray, C: np.ndarray, tri: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
+                       bary: np.ndarray | None = None, *, rows=None, out: np.ndarray | None = None,
+                       add: bool = False) -> np.ndarray:
+    """:func:`decode` with the deformed frames ``L`` given, for some rows, into or onto ``out``.
+
+    Parameters
+    ----------
+    L : (t, 3, 3) float64 from :func:`deformed_frames`. C, tri, bary : as :func:`decode`
+        ((n, 3), (n,), (n, 3) or None). VN_def : (k, 3) deformed low-res positions. FN : (t, 3).
+    rows : None (every vertex), a ``slice(lo, hi)`` with step 1 (no copy), or (r,) int
+        vertex indices.
+    out : (r, 3) float64 C-contiguous, or None for a new array.
+    add : add the rebuilt positions to ``out`` instead of writing them (the samplings'
+        sum of :func:`sshade.sampling.average`, term by term the same additions).
+
+    Returns
+    -------
+    ``out`` (r, 3), r the number of rows. The kernel releases the GIL (threads may
+    decode disjoint rows side by side).
+
+    Raises
+    ------
+    SShaDeError when ``out`` has the wrong shape or layout, or ``add`` without ``out``.
+    """
+    n = len(tri)
+    if rows is None or isinstance(rows, slice):
+        lo, hi, step = (0, n, 1) if rows is None else rows.indices(n)
+        if step != 1:
+            raise SShaDeError("decode_with_frames: a slice of rows must have step 1")
+        C_, tri_, bary_ = C, tri, bary
     else:
-        _decode_kernel(np.ascontiguousarray(L), np.ascontiguousarray(C, np.float64), np.ascontiguousarray(tri),
-                       np.ascontiguousarray(bary, np.float64), P, np.ascontiguousarray(FN, np.int64), True, out)
+        idx = np.asarray(rows, np.int64)
+        C_, tri_, bary_ = C[idx], tri[idx], None if bary is None else bary[idx]
+        lo, hi = 0, len(idx)
+    r = max(hi - lo, 0)
+    if out is None:
+        if add:
+            raise SShaDeError("decode_with_frames: add=True needs an out array")
+        out = np.empty((r, 3))
+    elif out.shape != (r, 3) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise SShaDeError(f"decode_with_frames: out must be a C-contiguous ({r}, 3) float64 array")
+    per_vertex = bary_ is not None
+    w = np.ascontiguousarray(bary_, np.float64) if per_vertex else np.full((1, 3), 1.0 / 3.0)  # barycenter
+    _decode_kernel(L, np.ascontiguousarray(C_, np.float64), np.ascontiguousarray(tri_), w,
+                   np.ascontiguousarray(VN_def, np.float64), np.ascontiguousarray(FN, np.int64), per_vertex,
+                   lo, hi, add, out)
     return out
 
 
-@njit(cache=True)
-def _decode_kernel(L, C, tri, bary, P, FN, per_vertex, out):
-    """``out[i] = L[tri[i]] @ C[i] + sum_k w_k P[FN[tri[i], k]]`` with ``w = bary[i]``
-    (``per_vertex``) or ``bary[0]`` (the barycenter's thirds): :func:`decode` in one pass,
-    without the (n, 3, 3) gather of ``L[tri]``."""
-    for i in range(tri.shape[0]):
+@njit(cache=True, nogil=True)
+def _decode_kernel(L, C, tri, bary, P, FN, per_vertex, lo, hi, add, out):
+    """``out[i - lo] (+)= L[tri[i]] @ C[i] + sum_k w_k P[FN[tri[i], k]]`` for ``lo <= i <
+    hi`` with ``w = bary[i]`` (``per_vertex``) or ``bary[0]`` (the barycenter's thirds):
+    :func:`decode` in one pass, without the (n, 3, 3) gather of ``L[tri]``."""
+    for i in range(lo, hi):
         t = tri[i]
         r = i if per_vertex else 0
         a, b, c = FN[t, 0], FN[t, 1], FN[t, 2]
         w0, w1, w2 = bary[r, 0], bary[r, 1], bary[r, 2]
         c0, c1, c2 = C[i, 0], C[i, 1], C[i, 2]
         for d in range(3):
-            out[i, d] = (L[t, d, 0] * c0 + L[t, d, 1] * c1 + L[t, d, 2] * c2
-                         + (w0 * P[a, d] + w1 * P[b, d] + w2 * P[c, d]))
+            v = (L[t, d, 0] * c0 + L[t, d, 1] * c1 + L[t, d, 2] * c2
+                 + (w0 * P[a, d] + w1 * P[b, d] + w2 * P[c, d]))
+            if add:
+                out[i - lo, d] += v
+            else:
+                out[i - lo, d] = v
 
 
 def transfer(V: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,

@@ -20,8 +20,9 @@ not accuracy.
 
 The samplings run side by side on a pool of ``workers`` threads of this process (the
 numba kernels, the Cholesky solves and most numpy work release the GIL), both in
-:func:`prepare` and in every solve; the average runs in sampling order, so the result does
-not depend on ``workers``. Threads rather than :func:`sshade.deform.deform`'s forked
+:func:`prepare` and in every solve's low-res ARAP; the decoding and the average are then
+split over the threads by blocks of vertices, each block summed over the samplings in
+sampling order, so the result does not depend on ``workers``. Threads rather than :func:`sshade.deform.deform`'s forked
 processes: a prepared object lives across many calls, and threads keep its state in one
 process (no worker to end, no result to copy back).
 
@@ -42,7 +43,7 @@ from .arap import ArapDeformer
 from .deform import arap_options, check_params, handle_pre_pct, low_res_size, prepare_sampling
 from .errors import SShaDeError
 from .jobs import pool_size
-from .lrf import decode, encode, frame_functions
+from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.halfedge import count_components
 from .mesh.validate import validate_handle_indices, validate_handles, validate_mesh
 from .remesh import mesh_topology
@@ -88,17 +89,22 @@ class _Sampling:
         d = int(np.argmin(errs))
         return _extrapolate(h, d), d
 
-    def solve(self, targets, V0, arap: dict, gradient: str) -> tuple[np.ndarray, dict]:
-        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit) and the decoding:
-        ``(Vd (n, 3), info)`` with the handle residual before any overwrite."""
+    def solve(self, targets, V0, arap: dict, gradient: str) -> dict:
+        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit) and the frames of
+        its result (kept for :meth:`decode`): the info of the ARAP run."""
         t0 = time.perf_counter()
         res = self.arap.deform(targets, V0=V0, **arap)
-        t1 = time.perf_counter()
-        Vd = decode(self.C, self.prep["tri"], self.VN, res.V, self.prep["F"], self.axis, gradient, self.bary)
+        self.low = res.V
+        self.frames = deformed_frames(self.VN, res.V, self.prep["F"], self.axis, gradient)
         self.history = [res.V] + self.history[:3]
-        t2 = time.perf_counter()
-        return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
-                    "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None}
+        return {"arap_s": time.perf_counter() - t0, "iterations": res.iterations, "converged": res.converged,
+                "status": res.info.get("status"), "warm_start": V0 is not None}
+
+    def decode(self, rows=None, out: np.ndarray | None = None, add: bool = False) -> np.ndarray:
+        """The last solve's high-res positions at ``rows`` (Alg. 1;
+        :func:`sshade.lrf.decode_with_frames`: rows, out and add as there)."""
+        return decode_with_frames(self.frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
+                                  rows=rows, out=out, add=add)
 
 
 class Prepared:
@@ -161,8 +167,9 @@ class Prepared:
         Returns
         -------
         (n, 3) float64 deformed positions (handles at their targets); with ``return_info``
-        ``(Vd, info)``: ``total_s`` (wall seconds of this solve), ``arap_s`` /
-        ``transfer_s`` / ``iterations`` summed over the samplings, ``converged`` (every
+        ``(Vd, info)``: ``total_s`` (wall seconds of this solve), ``arap_s`` and
+        ``iterations`` summed over the samplings, ``transfer_s`` (wall seconds of the
+        decoding and the average, all samplings), ``converged`` (every
         sampling's low-res ARAP met its stopping rule), ``status``, ``handle_pre_pct``,
         ``solve`` (0 for the first), ``workers``, per-sampling details in ``samplings``
         (``start_degree`` from the second solve on: :meth:`_Sampling.start`).
@@ -177,40 +184,52 @@ class Prepared:
         first, k = self.n_solves == 0, len(self._samplings)
         gradient, arap = self.params["gradient"], self._arap
 
-        def run(i: int, V0):
-            Vd, info = self._samplings[i].solve(T, V0, arap, gradient)
-            info["handle_resid"] = Vd[self.handles] - T
-            return Vd, info
+        def run(i: int, V0) -> dict:
+            return self._samplings[i].solve(T, V0, arap, gradient)
 
-        def later(i: int):  # the earlier frames extrapolated
+        def later(i: int) -> dict:  # the earlier frames extrapolated
             V0, degree = self._samplings[i].start()
-            Vd, info = run(i, V0)
-            info["start_degree"] = degree
-            return Vd, info
+            return {**run(i, V0), "start_degree": degree}
 
         if not first:
-            out = self._map(later, list(range(k)))
+            infos = self._map(later, list(range(k)))
         elif self.params["warm_start"] and k > 1:  # as deform: sampling 0 first, the others from it
-            out = self._map(lambda i: run(i, None), [0])
-            V_0 = out[0][0]
-            out += self._map(lambda i: run(i, V_0[self._samplings[i].prep["seeds"]]), list(range(1, k)))
+            infos = self._map(lambda i: run(i, None), [0])
+            s0 = self._samplings[0]
+            infos += self._map(lambda i: run(i, s0.decode(self._samplings[i].prep["seeds"])), list(range(1, k)))
         else:  # from the rigid fit of the handles
-            out = self._map(lambda i: run(i, None), list(range(k)))
-        results, infos = [o[0] for o in out], [o[1] for o in out]
-        Vd = average(results)
+            infos = self._map(lambda i: run(i, None), list(range(k)))
+        t1 = time.perf_counter()
+        Vd = self._decode_average()
+        pre = average([s.decode(self.handles) - T for s in self._samplings])
         Vd[self.handles] = T
-        pre = average([d.pop("handle_resid") for d in infos])
         self.n_solves += 1
         if not return_info:
             return Vd
         others = [str(d["status"]) for d in infos if not d["converged"]]
         info = {"total_s": time.perf_counter() - t0, "solve": self.n_solves - 1, "samplings": infos,
                 "workers": self.workers, "arap_s": float(sum(d["arap_s"] for d in infos)),
-                "transfer_s": float(sum(d["transfer_s"] for d in infos)),
-                "iterations": int(sum(d["iterations"] for d in infos)),
+                "transfer_s": time.perf_counter() - t1, "iterations": int(sum(d["iterations"] for d in infos)),
                 "converged": not others, "status": others[0] if others else "converged",
                 "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, self.V)}
         return Vd, info
+
+    def _decode_average(self) -> np.ndarray:
+        """The samplings' decodings averaged, (n, 3): the vertices split into one block
+        per thread, each block summed over the samplings in order (the additions of
+        :func:`sshade.sampling.average`), without a full (n, 3) array per sampling."""
+        n, k = len(self.V), len(self._samplings)
+        out = np.empty((n, 3))
+        bounds = np.linspace(0, n, self.workers + 1).astype(np.int64)
+
+        def block(j: int) -> None:
+            lo, hi = int(bounds[j]), int(bounds[j + 1])
+            part = out[lo:hi]
+            for i, s in enumerate(self._samplings):
+                s.decode(slice(lo, hi), part, add=i > 0)
+            part /= k
+        self._map(block, list(range(self.workers)))
+        return out
 
 
 def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,

@@ -5,7 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sshade.lrf import ANCHORS, anchor_points, frame_functions, transfer
+from sshade.errors import SShaDeError
+from sshade.lrf import (
+    ANCHORS,
+    anchor_points,
+    decode,
+    decode_with_frames,
+    deformed_frames,
+    encode,
+    frame_functions,
+    transfer,
+)
 from sshade.projection import closest_point_triangle
 
 
@@ -90,3 +100,30 @@ def test_the_frame_fallback_fires_only_where_the_x_axis_is_near_the_normal():
     axis = frame_functions(VN, FN)
     far = np.abs(n[:, 0]) < np.cos(np.radians(30)) - 1e-9
     assert (axis[far] == 0).all() and (axis[~far] != 0).all() and (~far).any()
+
+
+@pytest.mark.parametrize("anchor", ANCHORS)
+def test_decoding_some_rows_into_or_onto_an_array_is_decode_bit_for_bit(anchor):
+    """decode_with_frames on a block of rows, on chosen rows, and added onto an array: the
+    same numbers as the whole decode (the blocks of Prepared's threaded average)."""
+    rng = np.random.default_rng(3)
+    VN, FN = _grid(4)
+    VN[:, 2] = 0.1 * rng.normal(size=len(VN))
+    V = rng.uniform(0, 1, size=(50, 3)) * [1, 1, 0.1]
+    tri, bary = _on_coarse(V, VN, FN)
+    bary = bary if anchor == "projection" else None
+    axis = frame_functions(VN, FN)
+    C = encode(V, tri, VN, FN, axis, "normalized", bary)
+    VNd = VN + 0.05 * rng.normal(size=VN.shape)
+    whole = decode(C, tri, VN, VNd, FN, axis, "normalized", bary)
+    L = deformed_frames(VN, VNd, FN, axis)
+    assert np.array_equal(decode_with_frames(L, C, tri, VNd, FN, bary, rows=slice(10, 30)), whole[10:30])
+    rows = np.array([49, 0, 7])
+    assert np.array_equal(decode_with_frames(L, C, tri, VNd, FN, bary, rows=rows), whole[rows])
+    acc = np.ones((20, 3))
+    decode_with_frames(L, C, tri, VNd, FN, bary, rows=slice(10, 30), out=acc, add=True)
+    assert np.array_equal(acc, 1.0 + whole[10:30])
+    with pytest.raises(SShaDeError, match="out must be"):
+        decode_with_frames(L, C, tri, VNd, FN, bary, rows=slice(0, 5), out=np.empty((4, 3)))
+    with pytest.raises(SShaDeError, match="add=True"):
+        decode_with_frames(L, C, tri, VNd, FN, bary, add=True)
