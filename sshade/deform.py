@@ -21,7 +21,7 @@ from .remesh import mesh_topology, remesh
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning",
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "prepare_samplings", "warm_sshade", "LowResSkippedWarning",
            "prepare_sampling", "arap_options", "low_res_size", "handle_pre_pct"]
 
 
@@ -51,6 +51,25 @@ def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[di
     info = {"remesh_s": t1 - t0, "project_s": t2 - t1, "n_low": int(len(rm.seeds)), "n_repair": rm.n_repair,
             "rounds": int(rm.iterations), "n_flipped": rm.n_flipped, "seed": int(seed), "first": rm.first}
     return prep, info
+
+
+def prepare_samplings(V, F, handles, n_low: int, seeds: list, topology, workers: int) -> list[tuple[dict, dict]]:
+    """:func:`prepare_sampling` of every seed, side by side on ``workers`` forked
+    processes (:class:`sshade.sampling.SamplingPool`; one: in this process), in seed order.
+
+    Parameters
+    ----------
+    V, F, handles, n_low, topology : as :func:`prepare_sampling`. seeds : list of k ints
+    (:func:`sshade.sampling.sampling_seeds`). workers : int >= 1.
+
+    Returns
+    -------
+    list of k ``(prep, info)`` pairs, the same as :func:`prepare_sampling` of each seed.
+    """
+    state = dict(V=V, F=F, handles=handles, n_low=n_low, topology=topology, seeds=list(seeds))
+    with SamplingPool(state, workers) as pool:
+        futures = [pool.submit(_task_prepare, i) for i in range(len(seeds))]
+        return [f.result()[1:] for f in futures]
 
 
 def arap_options(tol, max_iter, protocol, etol, gtol) -> dict:

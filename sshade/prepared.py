@@ -18,9 +18,10 @@ quadratic through the last three, whichever best predicted the previous solve's 
 and still runs to the same stopping rule; a start nearer the minimiser saves iterations,
 not accuracy.
 
-The samplings run side by side on a pool of ``workers`` threads of this process (the
-numba kernels, the Cholesky solves and most numpy work release the GIL), both in
-:func:`prepare` and in every solve's low-res ARAP; the decoding and the average are then
+:func:`prepare` runs the samplings' remeshes and projections on ``workers`` forked
+processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the rest on a pool
+of ``workers`` threads of this process, which then runs every solve's low-res ARAP side by
+side (the numba kernels, the Cholesky solves and most numpy work release the GIL); the decoding and the average are then
 split over the threads by blocks of vertices, each block summed over the samplings in
 sampling order, so the result does not depend on ``workers``. Threads rather than :func:`sshade.deform.deform`'s forked
 processes: a prepared object lives across many calls, and threads keep its state in one
@@ -40,7 +41,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 import numpy as np
 
 from .arap import ArapDeformer
-from .deform import arap_options, check_params, handle_pre_pct, low_res_size, prepare_sampling
+from .deform import arap_options, check_params, handle_pre_pct, low_res_size, prepare_samplings
 from .errors import SShaDeError
 from .jobs import pool_size
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
@@ -280,15 +281,12 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
         raise SShaDeError("prepare: the mesh has several connected components; deform it with sshade.deform")
     _, n_low_used = low_res_size(len(V), p["n_low"])  # warns when there is no low-res step
     topology = mesh_topology(V, F, he)
-
-    def one(s: int) -> _Sampling:
-        prep, info = prepare_sampling(V, F, h, n_low_used, s, topology)
-        return _Sampling(V, prep, info, p["gradient"], p["anchor"], p["protocol"])
-
     n_workers = pool_size(p["workers"], p["n_samplings"])
+    # the remeshes and projections on forked processes (as deform: they hold the GIL), the rest on threads
+    preps = prepare_samplings(V, F, h, n_low_used, sampling_seeds(p["seed"], p["n_samplings"]), topology, n_workers)
     pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-sampling")
     try:
-        samplings = list(pool.map(one, sampling_seeds(p["seed"], p["n_samplings"])))
+        samplings = list(pool.map(lambda pi: _Sampling(V, *pi, p["gradient"], p["anchor"], p["protocol"]), preps))
     except BaseException:
         pool.shutdown(wait=True, cancel_futures=True)
         raise
