@@ -21,8 +21,8 @@ from .remesh import mesh_topology, remesh
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "prepare_samplings", "warm_sshade", "LowResSkippedWarning",
-           "prepare_sampling", "arap_options", "low_res_size", "handle_pre_pct"]
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning",
+           "prepare_sampling", "prepare_samplings", "arap_options", "low_res_size", "handle_pre_pct"]
 
 
 def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[dict, dict]:
