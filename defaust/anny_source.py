@@ -63,11 +63,11 @@ from .anny_model import body_topology, load_anny
 from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec, resolve_poses
 from .skinning import apply_blended, blend_transforms
 
-__all__ = ["Phenotype", "SUBJECTS", "LANDMARK_NAMES", "AnnySubject", "anny_subject", "anny_landmarks",
-           "self_intersections"]
+__all__ = ["Phenotype", "SUBJECTS", "LANDMARK_NAMES", "BODY_FRAME", "AnnySubject", "anny_subject", "anny_landmarks",
+           "self_intersections", "body_transform", "placement"]
 
 #: Body frame (x left, y up, z forward) from ANNY's (x left, y backward, z up).
-_M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+BODY_FRAME = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 #: Landmark names, as FAUST's (:data:`defaust.faust_source.FAUST_LANDMARKS`) and in its order.
 LANDMARK_NAMES: tuple[str, ...] = ("head_top", "left_hand", "right_hand", "left_elbow", "right_elbow", "chest",
@@ -309,18 +309,35 @@ class AnnySubject:
         """
         if not 0 <= int(pose) < len(self.T):
             raise SShaDeError(f"pose {pose} out of range [0, {len(self.T)})")
+        if V is None and pose == 0:
+            return self.V.copy()
+        if V is not None and W is None:
+            raise SShaDeError("posed(): pass the weights W of V (transfer_weights)")
+        if V is not None and pose == 0:
+            return np.array(V, np.float64)
+        return self.posed_by(self.T[pose], V, W)
+
+    def posed_by(self, T: np.ndarray, V=None, W=None) -> np.ndarray:
+        """Vertices under the joint maps ``T`` ((k, 3, 4), as one pose of :attr:`T`, e.g. a
+        frame of :func:`defaust.anny_path.path_transforms`): the low-res mesh, or ``V``
+        ((p, 3) rest positions, with their weights ``W`` (p, k)) unposed by the rest pose's
+        skinning first (:meth:`posed`).
+
+        Returns
+        -------
+        (p, 3) float64 metres.
+
+        Raises
+        ------
+        SShaDeError on V without W.
+        """
         if V is None:
-            if pose == 0:
-                return self.V.copy()
-            return apply_blended(blend_transforms(self.W, self.T[pose]), self.U)
+            return apply_blended(blend_transforms(self.W, T), self.U)
         if W is None:
             raise SShaDeError("posed(): pass the weights W of V (transfer_weights)")
-        V = np.asarray(V, np.float64)
-        if pose == 0:
-            return V.copy()
         W = np.asarray(W, np.float64)
-        U = apply_blended(blend_transforms(W, self.T[0]), V, inverse=True)
-        return apply_blended(blend_transforms(W, self.T[pose]), U)
+        U = apply_blended(blend_transforms(W, self.T[0]), np.asarray(V, np.float64), inverse=True)
+        return apply_blended(blend_transforms(W, T), U)
 
     def record(self) -> dict:
         """JSON-able description (manifest): phenotype, stature, poses and placement."""
@@ -342,7 +359,7 @@ def _pose_arrays(model, local_world: dict, B: np.ndarray, names: list) -> dict:
         if j not in where:
             raise SShaDeError(f"ANNY joint {name!r} cannot be rotated by a pose (use 'planted' to move the body)")
         Bj = B[j, :3, :3]
-        Rl = Bj.T @ (_M.T @ Rw @ _M) @ Bj
+        Rl = Bj.T @ (BODY_FRAME.T @ Rw @ BODY_FRAME) @ Bj
         g, pos = where[j]
         arrays[g][pos] = Rotation.from_matrix(Rl).as_rotvec()
     return arrays
@@ -399,22 +416,20 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     W /= W.sum(axis=1, keepdims=True)
     S, K, params = _prepare_poses(model, plist, ident, B, names)
     V, F, off = _rest_mesh(subject, apply_blended(blend_transforms(W, S[0][used, :3, :]), V0), F)
-    A = np.eye(4)
-    A[:3, :3] = _M
-    A[:3, 3] = off
+    A = body_transform(off)
     joints_rest = {n: (A @ K[0][j, :, 3])[:3] for j, n in enumerate(names)}
     Ainv = np.linalg.inv(A)
-    Ts, placement = [], []
+    Ts, placements = [], []
     for i, p in enumerate(plist):
         X = A @ S[i][used] @ Ainv  # unposed -> pose, body frame
-        G, where = _placement(i, p, len(plist) - 1, K[i], A, names, joints_rest, off)
+        G, where = placement(i, p, len(plist) - 1, K[i], A, names, joints_rest, off)
         Ts.append((X if G is None else G @ X)[:, :3, :])
-        placement.append(where)
+        placements.append(where)
     jn = tuple(names[j] for j in used)
     lm = anny_landmarks(V, joints_rest, np.argmax(W, axis=1), jn)
     sub = AnnySubject(subject=subject, phenotype=phen, V=V, F=F, W=W, joint_names=jn, T=np.stack(Ts),
-                      U=V0 @ _M.T + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
-                      placement=placement, stature=float(V[:, 1].max() - V[:, 1].min()), pose_params=params,
+                      U=V0 @ BODY_FRAME.T + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
+                      placement=placements, stature=float(V[:, 1].max() - V[:, 1].min()), pose_params=params,
                       offset=off)
     if check_intersections:
         _check_intersections(sub)
@@ -424,7 +439,7 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
 def _prepare_poses(model, plist: list, ident: dict, B: np.ndarray, names: list) -> tuple[list, list, list]:
     """Per pose: body-models' skinning transforms and joint frames (ANNY's frame, all
     163 joints) and its pose arrays (:attr:`AnnySubject.pose_params`)."""
-    dirs = {n: _M @ B[j, :3, 1] for j, n in enumerate(names)}
+    dirs = {n: BODY_FRAME @ B[j, :3, 1] for j, n in enumerate(names)}
     parents = {n: (names[int(q)] if int(q) >= 0 else None) for n, q in zip(names, model.parents)}
     S, K, params = [], [], []
     for p in plist:
@@ -439,7 +454,7 @@ def _prepare_poses(model, plist: list, ident: dict, B: np.ndarray, names: list) 
 def _rest_mesh(subject: int, Vposed: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rest mesh in the body frame, feet on y = 0, checked closed genus 0; and the
     frame's offset (``x_body = M x_anny + offset``)."""
-    Vr = Vposed @ _M.T
+    Vr = Vposed @ BODY_FRAME.T
     floor = float(Vr[:, 1].min())
     off = np.array([0.0, -floor, 0.0])
     Vr = Vr + off
@@ -451,11 +466,34 @@ def _rest_mesh(subject: int, Vposed: np.ndarray, F: np.ndarray) -> tuple[np.ndar
     return V, F, off
 
 
-def _placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, joints_rest: dict,
-               off: np.ndarray) -> tuple[np.ndarray | None, dict]:
+def body_transform(offset: np.ndarray) -> np.ndarray:
+    """The (4, 4) map from ANNY's frame to the body frame: ``x_body = BODY_FRAME x_anny +
+    offset`` (``offset`` (3,), :attr:`AnnySubject.offset`)."""
+    A = np.eye(4)
+    A[:3, :3] = BODY_FRAME
+    A[:3, 3] = offset
+    return A
+
+
+def placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, joints_rest: dict,
+              off: np.ndarray, *, fraction: float = 1.0) -> tuple[np.ndarray | None, dict]:
     """The rigid move ``G`` (4, 4, body frame) of pose ``i`` that keeps its planted joints
     at their rest positions (the last target also turned and shifted; None for the rest
-    pose, which stays where it is), and its record."""
+    pose, which stays where it is), and its record.
+
+    Parameters
+    ----------
+    i : int, the pose's index (0: the rest pose); p : its AnnyPose; last : the last
+    target's index. K : (163, 4, 4) body-models' skeleton transforms of the posed body
+    (ANNY's frame). A : (4, 4) :func:`body_transform`. names : ANNY's joint names;
+    joints_rest : name -> (3,) rest position (body frame); off : (3,) the body frame's
+    offset. fraction : float in [0, 1], the share of the last target's turn and shift
+    (1: the target's own; a frame on the way from the rest pose: :mod:`defaust.anny_path`).
+
+    Raises
+    ------
+    SShaDeError on a planted joint ANNY does not have.
+    """
     if i == 0:
         return None, {"translation": [0.0, 0.0, 0.0], "turn_deg": 0.0, "shift": [0.0, 0.0, 0.0]}
     missing = [j for j in p.planted if j not in names]
@@ -468,7 +506,8 @@ def _placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, 
     G[:3, 3] = tau
     turn_deg, shift = 0.0, np.zeros(3)
     if i == last:
-        turn_deg, shift = float(LAST_TARGET_TURN_DEG), np.asarray(LAST_TARGET_SHIFT, np.float64)
+        turn_deg = float(fraction) * float(LAST_TARGET_TURN_DEG)
+        shift = float(fraction) * np.asarray(LAST_TARGET_SHIFT, np.float64)
         c = np.array([0.0, off[1], 0.0])  # the vertical through the rest pose's root
         T = np.eye(4)
         T[:3, :3] = Rotation.from_rotvec([0.0, np.radians(turn_deg), 0.0]).as_matrix()

