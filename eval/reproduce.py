@@ -18,7 +18,8 @@ others still run):
    (:mod:`eval.store`), while a finished folder reruns nothing unless the configuration
    changed; the
    time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
-   ``results/convergence``;
+   ``results/convergence``; the animated DeFAUST cases (``experiment=animation``: SShaDe
+   prepared once and solved per frame, Elastic warm-started) -> ``results/animation``;
 2. a sweep over SShaDe's n_low (1000, 3000, 6000) x k (1, 3, 5) on 2 DeFAUST cases ->
    ``results/sweeps/defaust``; ARAP-SR's alpha (:data:`SR_ALPHAS`) on the per_pose cases
    -> ``results/sweeps/arap_sr_alpha``; where PyTorch is installed, Implicit-ARAP's cpu
@@ -91,6 +92,8 @@ def _steps(a) -> list[tuple[str, list[str]]]:
          ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all",
                                  "reference.cases=per_pose", "resume=true", "jobs=1", "out_dir=results/defaust_paper"]),
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
+         # SShaDe prepared once and solved per frame on animated DeFAUST cases (ANNY's frames), beside Elastic
+         ("animation", py + ["eval", "experiment=animation", "out_dir=results/animation"]),
          ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"]),
          # ARAP-SR's alpha (Open3D's definition) on the per_pose cases (the dataset's baseline_cases)

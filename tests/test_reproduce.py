@@ -15,7 +15,7 @@ def _steps(capsys, *argv) -> dict[str, str]:
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
     neural = ["sweep_implicit_arap"] if importlib.util.find_spec("torch") else []
-    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "sweep_arap_sr_alpha", *neural,
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha", *neural,
                            "report"]
     assert steps["report"].startswith("-m eval.report --index results")  # results/index.html, last
     assert "arap.protocol=paper" in steps["defaust_paper"]
@@ -36,7 +36,7 @@ def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
                    "sshade.n_samplings=3")
     neural = importlib.util.find_spec("torch") is not None
-    assert list(steps) == ["defaust", "defaust_paper", "convergence", "sweep", "sweep_arap_sr_alpha",
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha",
                            *(["sweep_implicit_arap", "sweep_implicit_arap_faust"] if neural else []),
                            "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames", "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
