@@ -15,8 +15,8 @@ def _steps(capsys, *argv) -> dict[str, str]:
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
     neural = ["sweep_implicit_arap"] if importlib.util.find_spec("torch") else []
-    assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha", *neural,
-                           "report"]
+    assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha",
+                           *neural, "report"]
     assert steps["report"].startswith("-m eval.report --index results")  # results/index.html, last
     assert "arap.protocol=paper" in steps["defaust_paper"]
     assert "reference.cases=per_pose" in steps["defaust_paper"]  # its E gap / Ref columns, as the converged table's
