@@ -37,8 +37,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
 from eval.datasets.shapes import axis_handles, axis_landmarks  # noqa: E402
-from eval.experiments.scaling import build_mesh  # noqa: E402
-from eval.experiments.scaling_set import MeshEntry, cache_name  # noqa: E402
+from eval.experiments.scaling import size_mesh  # noqa: E402
+from eval.experiments.scaling_set import MeshEntry  # noqa: E402
 from eval.memory import release_freed, tree_pss_mb  # noqa: E402
 from eval.outdir import claim_output_dir  # noqa: E402
 from eval.runinfo import git_info  # noqa: E402
@@ -46,7 +46,7 @@ from sshade import deform, prepare  # noqa: E402
 from sshade.clirun import run_command  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402
 from sshade.jobs import available_cores  # noqa: E402
-from sshade.mesh.io import read_mesh, write_mesh  # noqa: E402
+from sshade.mesh.io import read_mesh  # noqa: E402
 
 DEFAULT_MESHES = ["armadillo=../shared/data/classic/armadillo.obj", "centaur=../shared/data/tosca/centaur0.off:hard"]
 TARGETS = {200_000: 0.100, 1_000_000: 0.300}  # the frame targets (s) at about these sizes
@@ -64,13 +64,7 @@ def _entry(spec: str) -> MeshEntry:
 def _mesh(entry: MeshEntry, size: int, cache: Path):
     """The entry's mesh at ``size`` (built and cached on first use) and its base mesh."""
     V0, F0 = read_mesh(entry.path)
-    mp = cache / cache_name(entry, size)
-    if mp.is_file():
-        V, F = read_mesh(mp)
-    else:
-        V, F = build_mesh(V0, F0, size, remesh=entry.remesh)
-        mp.parent.mkdir(parents=True, exist_ok=True)
-        write_mesh(mp, V, F)
+    _, V, F, _ = size_mesh(entry, V0, F0, size, cache)
     return V, F, V0
 
 

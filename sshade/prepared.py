@@ -159,9 +159,9 @@ class Prepared:
         every task even when one fails (no sampling keeps running into the next solve)."""
         if self._pool is None:
             raise SShaDeError("this prepared SShaDe was closed; prepare again")
+        wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
         if self.workers == 1 or len(items) == 1:
             return [fn(x) for x in items]
-        wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
         self._pending = [self._pool.submit(fn, x) for x in items]
         return [f.result() for f in self._pending]
 

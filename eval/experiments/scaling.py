@@ -52,6 +52,7 @@ import logging
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -77,7 +78,7 @@ from .scaling_table import write_csv, write_markdown
 
 log = logging.getLogger(__name__)
 
-__all__ = ["build_mesh", "run_scaling", "sshade_params", "elastic_params"]
+__all__ = ["build_mesh", "size_mesh", "run_scaling", "sshade_params", "elastic_params"]
 
 
 def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = True,
@@ -180,7 +181,7 @@ def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) 
     """One row of the table: the mesh of ``entry`` at ``size``, SShaDe warm (compilation
     apart), its first call in a fresh process (``scaling.first_call``) and full-res
     Elastic (``scaling.elastic``, up to ``scaling.elastic_max_vertices``)."""
-    mp, V, F, build_s = _size_mesh(entry, base, size, cache)
+    mp, V, F, build_s = size_mesh(entry, base[1], base[2], size, cache)
     h, T = _size_handles(sc, base, V)
     row = {"mesh": entry.name, "remesh": entry.remesh, "target": size, "vertices": len(V), "faces": len(F),
            "handles": len(h), "build_s": build_s}
@@ -219,17 +220,28 @@ def _median_of(items: list, key) -> tuple:
     return items[(len(items) - 1) // 2], key(items[0]), key(items[-1])
 
 
-def _size_mesh(entry: MeshEntry, base, size: int, cache):
-    """The mesh of about ``size`` vertices built from an entry's base mesh (cached in
-    ``cache`` as :func:`cache_name`); returns ``(its file, V, F, seconds to build or read)``."""
-    _, V0, F0, _ = base
-    mp = cache / cache_name(entry, size)
+def size_mesh(entry: MeshEntry, V0: np.ndarray, F0: np.ndarray, size: int, cache) -> tuple:
+    """The mesh of about ``size`` vertices built from an entry's base mesh ``(V0, F0)``
+    (:func:`build_mesh`; (n, 3) float64, (m, 3) int64), cached in the folder ``cache``
+    (created when missing) as :func:`eval.experiments.scaling_set.cache_name` and read
+    from there by later calls.
+
+    Returns
+    -------
+    ``(its file, V (p, 3) float64, F (q, 3) int64, seconds to build or read)``.
+
+    Raises
+    ------
+    SShaDeError when the built mesh fails validation.
+    """
+    mp = Path(cache) / cache_name(entry, size)
     t0 = time.perf_counter()
     if mp.is_file():
         V, F = read_mesh(mp)
     else:
         V, F = build_mesh(V0, F0, size, remesh=entry.remesh)
         V, F = validate_mesh(V, F, name=f"{entry.name} at {size}")
+        mp.parent.mkdir(parents=True, exist_ok=True)
         write_mesh(mp, V, F)
     return mp, V, F, time.perf_counter() - t0
 
