@@ -155,7 +155,9 @@ class ARAP(FullResArap):
 class Elastic(FullResArap):
     """Elastic = spokes-and-rims ARAP (Chao et al. 2010), full resolution."""
 
+    name = "Elastic"
+
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
                  etol: float | None = None, gtol: float | None = None, start: str = "rigid", coarse_n_low: int = 6000):
-        super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name="Elastic", protocol=protocol,
+        super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name=Elastic.name, protocol=protocol,
                          etol=etol, gtol=gtol, start=start, coarse_n_low=coarse_n_low)

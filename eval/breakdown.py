@@ -31,6 +31,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from baselines.arap import Elastic
+from sshade.deform import SShaDe
 from sshade.mesh.io import atomic_write
 
 from .figures import distribution_figure, safe_figure
@@ -88,7 +90,7 @@ def group_breakdown(df: pd.DataFrame, by=("pose", "subject")) -> pd.DataFrame:
     return res.reset_index(drop=True)
 
 
-def paired_comparison(df: pd.DataFrame, a: str = "SShaDe", b: str = "Elastic", metric: str = "volume_err_pct", *,
+def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.name, metric: str = "volume_err_pct", *,
                       n_boot: int = 2000, seed: int = 0, level: float = 0.95) -> dict | None:
     """Method ``a`` against ``b`` on their common successful cases (finite ``metric``).
 
@@ -142,7 +144,7 @@ def _paired_text(p: dict | None, a: str, b: str, metric: str) -> list[str]:
             f"{p['n_boot']} resamples of the cases, seed {p['seed']})."]
 
 
-def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: str = "SShaDe", b: str = "Elastic",
+def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: str = SShaDe.name, b: str = Elastic.name,
                        metric: str = "volume_err_pct", seed: int = 0) -> str:
     """``breakdown.md``'s text: per (``by``, metric) a table of "mean ± std (n)" with the
     groups as rows and the methods (table order) as columns, then the paired comparison."""

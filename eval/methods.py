@@ -35,7 +35,15 @@ from collections.abc import Mapping
 from sshade.arap import PROTOCOLS
 from sshade.errors import SShaDeError
 from sshade.method import as_dict, build_method, is_mapping
-from sshade.registry import SECTIONS, build_builtin, builtin_methods, canonical_name, method_key, strip_meta
+from sshade.registry import (
+    SECTIONS,
+    build_builtin,
+    builtin_methods,
+    canonical_name,
+    method_key,
+    method_meta,
+    strip_meta,
+)
 from sshade.registry import method_spec as file_spec
 
 __all__ = ["make_methods", "method_spec", "arap_params"]
@@ -95,7 +103,7 @@ def make_methods(cfg) -> list:
     canon = [None if is_mapping(it) else canonical_name(it) for it in items]
     if any(c is not None for c in canon):  # the shared sections, checked under their own names
         arap_params(_get(cfg, "arap", {}) or {})
-        if "ARAP-SR" in canon:
+        if any(c is not None and method_meta(c)["checks"] == "arap_sr" for c in canon):
             _alpha(_get(_get(cfg, "arap_sr", {}) or {}, "alpha", 0.01), "arap_sr.alpha")
     out = [build_method(it, where=f"methods[{i}]") if c is None else _build_ours(cfg, c)
            for i, (it, c) in enumerate(zip(items, canon))]
@@ -138,12 +146,14 @@ def method_spec(cfg, name: str) -> dict:
 
 
 def _build_ours(cfg, name: str):
-    """One of our methods from its definition in ``cfg``, its parameters checked first."""
+    """One of our methods from its definition in ``cfg``, its parameters checked first by
+    the checks its file names (``checks``, :func:`sshade.registry.method_meta`)."""
     spec = method_spec(cfg, name)
     where = f"method.{method_key(name)}"
-    if name in ("ARAP", "Elastic"):
+    checks = method_meta(name)["checks"]
+    if checks == "arap":
         arap_params(spec, where=where)
-    elif name == "ARAP-SR":
+    elif checks == "arap_sr":
         _alpha(spec.get("alpha", 0.01), f"{where}.alpha")
         arap_params({"tol": spec.get("tol", 1e-4), "max_iter": spec.get("max_iter")}, where=where)
     # the others check their own parameters when built (SShaDe: sshade.deform.check_params)

@@ -5,10 +5,12 @@ baseline takes minutes per case, SShaDe seconds, so after a few SShaDe runs the 
 promises minutes and after a baseline it says hours. :class:`CostModel` instead
 estimates the seconds of each remaining run:
 
-- before any run of a method has finished, a prior: a full-resolution method (every
-  method but ``SShaDe``; a plug-in may say ``cost_scale = "const"`` or ``"vertices"``)
-  costs ``prior_s_per_vertex`` x n_vertices (default 1e-3 s/vertex: ~2.5 min at 150k),
-  ``SShaDe`` a constant ``prior_const_s`` (default 20 s: it works at ~6000 vertices);
+- before any run of a method has finished, a prior: its file's ``cost`` (a method's
+  facts, :func:`sshade.registry.method_meta`): ``scale`` ``vertices`` (full resolution,
+  ``prior`` seconds per vertex) or ``const`` (``prior`` seconds per case); a plug-in may
+  say ``cost_scale = "const"`` or ``"vertices"``; without a prior, a full-resolution
+  method costs ``prior_s_per_vertex`` x n_vertices (default 1e-3 s/vertex: ~2.5 min at
+  150k), a constant one ``prior_const_s`` (default 20 s);
 - once runs of the method have finished, their measured wall seconds (the method, its
   metrics and references): the mean of ``seconds / n_vertices`` (full resolution) or
   of ``seconds`` (constant) over them, times the case's scale.
@@ -18,33 +20,16 @@ measured wall time and its total becomes done + the estimate of what remains, so
 remaining time is the weighted estimate. Runs restored from the result store
 (:mod:`eval.store`) are not counted, but their stored ``time_s`` feed the model.
 
-:func:`default_cost_model` is the evaluator's model: per-method priors measured on
-DeFAUST (:data:`METHOD_PRIORS`) plus the per-pair overhead of the metrics
-(:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan (:mod:`eval.plan`) uses it too.
+:func:`default_cost_model` is the evaluator's model: the methods' priors plus the
+per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan
+(:mod:`eval.plan`) uses it too.
 """
 from __future__ import annotations
 
-__all__ = ["CostModel", "weighted_bar", "default_cost_model", "METHOD_PRIORS", "PAPER_PRIORS", "PRESET_PRIORS",
-           "OVERHEAD_S_PER_VERTEX"]
+from sshade.registry import method_meta
 
-#: Per-method priors, in the method's unit (seconds per vertex for a full-resolution
-#: method, seconds for ``SShaDe``): the mean ``time_s`` of the committed
-#: ``results/defaust/cases.csv`` at 168,897 vertices (2 cores): ARAP 70.8 s, Elastic
-#: 68.1 s, SShaDe 2.0 s; ARAP-SR (converged, coarse start: baselines/coarse_start.py)
-#: 41-112 s on the first four DeFAUST cases, 43-54 s on s00_p01 (machine shared): 3e-4
-#: s/vertex, about 51 s at 169k.
-#: Implicit-ARAP's cpu preset (a constant: its cost does not grow with the mesh): 105 s
-#: mean over the 4 DeFAUST per-pose cases and 103 s over the 8 FAUST cases at its 500
-#: deformation steps (results/sweeps/implicit_arap_defaust and _faust, job 1); another
-#: preset (paper: hours per case on a CPU) has no prior.
-METHOD_PRIORS = {"ARAP": 4.2e-4, "Elastic": 4.0e-4, "ARAP-SR": 3e-4, "SShaDe": 2.0, "Implicit-ARAP": 105.0}
-#: Methods whose prior holds for one preset only (their ``preset`` attribute).
-PRESET_PRIORS = {"Implicit-ARAP": "cpu"}
-#: Priors that replace :data:`METHOD_PRIORS` for a method run under ``arap.protocol=paper``
-#: (its ``protocol`` attribute): ARAP-SR's paper iteration runs to its energy stop or
-#: the 1000-iteration cap, which it reaches on DeFAUST: 0.24 s per iteration at 168,855
-#: vertices (s00_p01, 30 iterations, 2 cores, machine shared), about 240 s: 1.4e-3 s/vertex.
-PAPER_PRIORS = {"ARAP-SR": 1.4e-3}
+__all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VERTEX"]
+
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
 #: reading a cached reference, the store, cases.csv, the report's 3D views): about 2.5 s per
 #: pair at 169k vertices, mostly the ground-truth Hausdorff and Chamfer (two
@@ -79,12 +64,12 @@ class CostModel:
     @staticmethod
     def scale_of(method) -> str:
         """``"const"`` or ``"vertices"``: a method's ``cost_scale`` attribute when it has
-        a valid one, else ``"const"`` for ``SShaDe`` (low-resolution work) and
-        ``"vertices"`` for every other method (full resolution)."""
+        a valid one, else its file's ``cost.scale`` (:func:`sshade.registry.method_meta`;
+        ``"vertices"``, full resolution, for a plug-in)."""
         s = getattr(method, "cost_scale", None)
         if s in ("const", "vertices"):
             return s
-        return "const" if getattr(method, "name", "") == "SShaDe" else "vertices"
+        return method_meta(getattr(method, "name", ""))["cost"]["scale"]
 
     def _unit(self, method: str, n_vertices: int) -> float:
         return 1.0 if self.scales.get(method, "vertices") == "const" else max(int(n_vertices), 1)
@@ -124,9 +109,11 @@ class CostModel:
 
 def default_cost_model(methods) -> CostModel:
     """The evaluator's :class:`CostModel` for ``methods`` (objects with ``name``): their
-    scales (:meth:`CostModel.scale_of`), :data:`METHOD_PRIORS` (those of a method whose
-    scale is not the one the prior is in are left out; :data:`PAPER_PRIORS` for a method
-    whose ``protocol`` is ``"paper"``) and :data:`OVERHEAD_S_PER_VERTEX`.
+    scales (:meth:`CostModel.scale_of`), the ``cost.prior`` of their files
+    (:func:`sshade.registry.method_meta`; left out where the method's scale is not the
+    prior's, or its ``preset`` attribute is not the prior's ``cost.preset``;
+    ``cost.paper`` instead for a method whose ``protocol`` is ``"paper"``) and
+    :data:`OVERHEAD_S_PER_VERTEX`.
 
     >>> from types import SimpleNamespace as M
     >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
@@ -134,14 +121,15 @@ def default_cost_model(methods) -> CostModel:
     (44, 4)
     """
     scales = {m.name: CostModel.scale_of(m) for m in methods}
-    want = {"SShaDe": "const", "Implicit-ARAP": "const"}
-    priors = {k: v for k, v in METHOD_PRIORS.items() if k in scales and scales[k] == want.get(k, "vertices")}
-    for m in methods:  # a prior measured on one preset says nothing of another
-        if m.name in PRESET_PRIORS and getattr(m, "preset", PRESET_PRIORS[m.name]) != PRESET_PRIORS[m.name]:
-            priors.pop(m.name, None)
-    for m in methods:  # the paper protocol's move rule stops early (ARAP-SR: 2 iterations)
-        if getattr(m, "protocol", None) == "paper" and m.name in PAPER_PRIORS and m.name in priors:
-            priors[m.name] = PAPER_PRIORS[m.name]
+    priors = {}
+    for m in methods:
+        cost = method_meta(m.name)["cost"]
+        if cost.get("prior") is None or scales[m.name] != cost["scale"]:
+            continue
+        if "preset" in cost and getattr(m, "preset", cost["preset"]) != cost["preset"]:
+            continue  # a prior measured on one preset says nothing of another
+        paper = getattr(m, "protocol", None) == "paper" and cost.get("paper") is not None
+        priors[m.name] = float(cost["paper"] if paper else cost["prior"])
     return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX)
 
 

@@ -40,6 +40,7 @@ from baselines.coarse_start import SR_ENERGY, coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
+from sshade.registry import method_meta
 
 from .code_identity import numerical_versions, sources_digest
 
@@ -56,8 +57,6 @@ REFERENCE_VERSION = 1
 #: rotations, before its energy gap is read (:func:`reference_metrics`).
 SR_GAP_SWEEPS = 20
 
-#: Method name -> the ARAP energy its result is compared with.
-_METHOD_ENERGY = {"ARAP": "spokes", "Elastic": "spokes_and_rims", "SShaDe": "spokes_and_rims"}
 #: prefix of the ARAP-SR energies (:func:`sr_energy`)
 _SR = "arap_sr_"
 
@@ -101,17 +100,25 @@ def _check_energy(energy: str) -> None:
 
 def method_energy(method) -> str:
     """The energy a method's result is scored against: its own ``energy`` attribute when
-    it names one of :data:`sshade.arap.ENERGIES`, ARAP-SR's own energy with its ``alpha``
-    and ``alpha_scaling`` (:func:`sr_energy`; default 0.01, ``"valence"``), else by name
-    (ARAP: spokes; Elastic, SShaDe and any other method: spokes-and-rims, the energy of
-    SShaDe's low-resolution step, paper §4.1)."""
+    it names one of :data:`sshade.arap.ENERGIES`, else its file's ``reference``
+    (:func:`sshade.registry.method_meta`): an energy of :data:`sshade.arap.ENERGIES`, or
+    ``arap_sr``, the method's own ARAP-SR energy with its ``alpha`` and ``alpha_scaling``
+    (:func:`sr_energy`; default 0.01, ``"valence"``); a plug-in's, spokes-and-rims (the
+    energy of SShaDe's low-resolution step, paper §4.1).
+
+    Raises
+    ------
+    SShaDeError on a ``reference`` that names no energy."""
     e = getattr(method, "energy", None)
     if e in ENERGIES:
         return str(e)
-    name = str(getattr(method, "name", method))
-    if name == "ARAP-SR":
+    ref = method_meta(str(getattr(method, "name", method)))["reference"]
+    if ref == "arap_sr":
         return sr_energy(getattr(method, "alpha", 0.01), getattr(method, "alpha_scaling", "valence"))
-    return _METHOD_ENERGY.get(name, "spokes_and_rims")
+    if ref not in ENERGIES:
+        raise SShaDeError(f"method {getattr(method, 'name', method)}: reference must be one of "
+                          f"{[*ENERGIES, 'arap_sr']}, got {ref!r}")
+    return str(ref)
 
 
 def energy_operators(V, F, energy: str):

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING
 
 from sshade.clirun import ArgumentParser, run_command
 from sshade.mesh.io import atomic_write
-from sshade.registry import table_order
+from sshade.registry import method_meta, table_order
 
 from .outdir import refuse_results
 from .table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
@@ -369,8 +369,9 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
             word = "it." if short else "iterations"
             parts.append(f"{int(it.min())}-{int(it.max())} {word}" if it.min() != it.max()
                          else f"{int(it.min())} {word}")
-            if m == "SShaDe" and not short:
-                parts[-1] += " (low-res, summed over the samplings)"
+            note = method_meta(m)["iterations"]
+            if note and not short:
+                parts[-1] += f" ({note})"
         if "converged" in g.columns and g["converged"].notna().any():
             c = g["converged"].dropna().map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
             if short:

@@ -24,8 +24,14 @@ the defaults list of ``conf/config.yaml``, lets Hydra compose the file as
 only the group options its defaults list names; without the line the evaluator loads
 the file itself, :func:`method_spec`).
 
-Rows of methods that have no config file here keep a slot in the table order:
-:data:`RESERVED_ORDER`.
+Beside its parameters a method file holds what the evaluator knows of the method,
+under ``harness`` (:func:`method_meta`; it never reaches the class)::
+
+    harness:
+      cost: {scale: vertices, prior: 4.2e-4}   # plan prior: s per vertex (vertices) or per case (const)
+      reference: spokes                        # the energy its reference columns score it against
+      cases: baseline                          # the cases it runs on: dataset.baseline_cases, or all
+      checks: arap                             # the shared section whose checks its parameters take
 """
 from __future__ import annotations
 
@@ -37,13 +43,23 @@ from .errors import SShaDeError
 from .method import as_dict, build_method
 
 __all__ = ["builtin_methods", "table_order", "canonical_name", "method_key", "method_file", "method_spec",
-           "strip_meta", "build_builtin", "named_or_plugin", "META_KEYS", "RESERVED_ORDER", "SECTIONS"]
+           "method_meta", "strip_meta", "build_builtin", "named_or_plugin", "META_KEYS", "META_DEFAULTS", "SECTIONS"]
 
-#: Keys of a method file that describe the method instead of being its parameters.
-META_KEYS = ("order",)
-#: Table slots of methods without a config file in this repository (none since
-#: Implicit-ARAP got its file, conf/method/Implicit-ARAP.yaml).
-RESERVED_ORDER: dict[str, float] = {}
+#: Keys of a method file that describe the method instead of being its parameters:
+#: ``order`` (table row order, smaller first) and ``harness``, the evaluator's facts of it
+#: (:func:`method_meta`, :data:`META_DEFAULTS`).
+META_KEYS = ("order", "harness")
+#: The keys of a method file's ``harness`` and what a file that leaves one out (and a
+#: plug-in) gets: ``cost`` (the plan's prior: ``scale`` ``vertices`` or ``const``,
+#: ``prior`` in seconds per vertex or per case, optional ``preset``: the only preset the
+#: prior holds for, optional ``paper``: the prior under ``arap.protocol=paper``),
+#: ``reference`` (an energy of :data:`sshade.arap.ENERGIES`, or ``arap_sr``: ARAP-SR's
+#: own with the method's ``alpha``), ``cases`` (``baseline`` or ``all``), ``checks``
+#: (``arap``, ``arap_sr`` or ``none``), ``iterations`` (what its iteration count counts,
+#: said beside it in the tables; empty: plain iterations).
+META_DEFAULTS = {"cost": {"scale": "vertices"}, "reference": "spokes_and_rims", "cases": "baseline",
+                 "checks": "none", "iterations": ""}
+_META_CHOICES = {"cases": ("baseline", "all"), "checks": ("arap", "arap_sr", "none")}
 #: The shared sections of ``conf/config.yaml`` the method files' values default to.
 SECTIONS = ("arap", "arap_sr", "sshade")
 
@@ -69,7 +85,7 @@ def _definitions() -> dict[str, dict]:
 
 def _order(name: str) -> tuple:
     node = _definitions().get(name)
-    v = RESERVED_ORDER.get(name) if node is None else node.get("order", None)
+    v = None if node is None else node.get("order", None)
     try:
         return (float(v), name) if v is not None else (float("inf"), name)
     except (TypeError, ValueError):
@@ -86,14 +102,14 @@ def builtin_methods() -> tuple[str, ...]:
 
 
 def table_order() -> tuple[str, ...]:
-    """Row order of the tables: our methods and the :data:`RESERVED_ORDER` slots, by
-    their ``order`` (methods without one last, by name). Any other method (a plug-in)
-    comes after these, by name (:mod:`eval.tables`).
+    """Row order of the tables: our methods by their ``order`` (methods without one
+    last, by name). Any other method (a plug-in) comes after these, by name
+    (:mod:`eval.tables`).
 
     >>> table_order()
     ('ARAP', 'Elastic', 'ARAP-SR', 'Implicit-ARAP', 'SShaDe', 'SShaDe+refine')
     """
-    return tuple(sorted({*_definitions(), *RESERVED_ORDER}, key=_order))
+    return tuple(sorted(_definitions(), key=_order))
 
 
 def canonical_name(name) -> str:
@@ -121,6 +137,52 @@ def method_key(name: str) -> str:
 def method_file(name: str) -> Path:
     """``conf/method/<name>.yaml`` of our method ``name`` (any case)."""
     return Path(config_dir("method"), f"{canonical_name(name)}.yaml")
+
+
+def method_meta(name) -> dict:
+    """What the evaluator knows of method ``name`` beside its parameters: the ``harness``
+    of its file, each missing key from :data:`META_DEFAULTS`; a name that is none of
+    :func:`builtin_methods` (a plug-in) gets the defaults.
+
+    Returns
+    -------
+    dict with every key of :data:`META_DEFAULTS` (``cost`` a dict with ``scale``).
+
+    Raises
+    ------
+    SShaDeError naming the file on a ``harness`` that is not a mapping of those keys, a
+    value outside its choices (``cost.scale``, ``cases``, ``checks``) or a ``cost.prior``
+    or ``cost.paper`` that is not a number >= 0.
+
+    Examples
+    --------
+    >>> method_meta("SShaDe")["cases"], method_meta("ARAP")["reference"], method_meta("Mine")["cases"]
+    ('all', 'spokes', 'baseline')
+    """
+    from omegaconf import OmegaConf
+    try:
+        name = canonical_name(name)
+    except SShaDeError:
+        return {k: (dict(v) if isinstance(v, dict) else v) for k, v in META_DEFAULTS.items()}
+    where = f"conf/method/{name}.yaml"
+    node = _definitions()[name].get("harness", None)
+    node = {} if node is None else OmegaConf.to_container(node) if OmegaConf.is_config(node) else node
+    if not isinstance(node, dict) or set(node) - set(META_DEFAULTS):
+        raise SShaDeError(f"{where}: harness must be a mapping with keys among {list(META_DEFAULTS)}, got {node!r}")
+    out = {k: node.get(k, d) for k, d in META_DEFAULTS.items()}
+    cost = out["cost"] = dict(out["cost"] or {})
+    cost.setdefault("scale", "vertices")
+    for k, choices in [("cases", _META_CHOICES["cases"]), ("checks", _META_CHOICES["checks"])]:
+        if out[k] not in choices:
+            raise SShaDeError(f"{where}: {k} must be one of {list(choices)}, got {out[k]!r}")
+    if cost["scale"] not in ("vertices", "const"):
+        raise SShaDeError(f"{where}: cost.scale must be vertices or const, got {cost['scale']!r}")
+    for k in ("prior", "paper"):
+        v = cost.get(k)
+        if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0):
+            raise SShaDeError(f"{where}: cost.{k} must be a number >= 0 (seconds), got {v!r}")
+    out["iterations"] = str(out["iterations"] or "")
+    return out
 
 
 def strip_meta(spec: Mapping) -> dict:

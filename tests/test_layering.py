@@ -166,3 +166,34 @@ def test_no_issue_numbers_in_code_or_docs():
                 if pattern.search(line):
                     hits.append(f"{p.relative_to(ROOT)}:{n}: {line.strip()[:100]}")
     assert not hits, "\n".join(hits)
+
+
+def _docstrings(tree) -> set[int]:
+    """ids of the docstring constants of a module, its classes and functions."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                out.add(id(first.value))
+    return out
+
+
+def test_no_builtin_method_name_is_a_string_literal_in_eval():
+    """A method's facts live in its conf/method/<name>.yaml and its module: no string of a
+    module of eval/ is a built-in method's name (docstrings aside; prose that mentions
+    one, such as a message or a column title, is not a name), so adding or renaming a
+    method edits no harness code."""
+    from sshade.registry import builtin_methods
+    names = set(builtin_methods())
+    found = []
+    for mod, path in MODULES.items():
+        if not mod.startswith("eval"):
+            continue
+        tree = ast.parse(path.read_text(), str(path))
+        skip = _docstrings(tree)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
+                if node.value.strip() in names:
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.value!r}")
+    assert not found, found

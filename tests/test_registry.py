@@ -55,3 +55,52 @@ def test_bottom_layer_imports_nothing_above():
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+_TOY = """\
+_target_: tests.plugin_example.MyMethod
+order: 45
+harness:
+  cost: {scale: const, prior: 7.0}
+  reference: spokes
+  cases: all
+  iterations: Jacobi steps
+name: Toy
+iterations: 3
+"""
+
+
+def test_a_toy_method_is_its_module_and_its_file(tmp_path, monkeypatch, faust_root, caplog):
+    """A built-in method made of a module (tests/plugin_example.py) and one file in
+    conf/method/ alone gets its table row (in its order, on every case: ``cases: all``),
+    its plan line (its own prior), its reference columns (against its file's energy) and
+    its iteration note, with no edit of the harness."""
+    from hydra import compose, initialize_config_dir
+
+    from eval.app import run_experiment
+    from eval.reference import method_energy
+    conf = tmp_path / "conf"
+    shutil.copytree(ROOT / "conf", conf)
+    (conf / "method" / "Toy.yaml").write_text(_TOY)
+    monkeypatch.setattr(reg, "config_dir", lambda sub="": str(conf / sub) if sub else str(conf))
+    assert reg.method_meta("toy") == {"cost": {"scale": "const", "prior": 7.0}, "reference": "spokes",
+                                      "cases": "all", "checks": "none", "iterations": "Jacobi steps"}
+    out = tmp_path / "run"
+    with initialize_config_dir(config_dir=str(conf), version_base=None):
+        cfg = compose(config_name="config", overrides=[
+            "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=2", "dataset.baseline_cases=1",
+            "methods=[Toy,ARAP]", "arap.tol=1e-2", "arap.protocol=paper", "reference.cases=1", "jobs=1",
+            f"out_dir={out}"])
+    with caplog.at_level("INFO", logger="eval"):
+        run_experiment(cfg)
+    cases = __import__("pandas").read_csv(out / "cases.csv")
+    toy, arap = cases[cases.method == "Toy"], cases[cases.method == "ARAP"]
+    assert len(toy) == 2 and len(arap) == 1  # cases: all, beside a baseline on the first case only
+    assert method_energy(type("M", (), {"name": "Toy"})) == "spokes"
+    assert toy["ref_mean_pct"].notna().sum() == 1 and toy["ref_mean_pct"].dropna().iloc[0] > 0
+    table = (out / "table.md").read_text()
+    rows = [ln.split("|")[1].strip() for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln]
+    assert rows[:3] == ["Method", "ARAP", "Toy"]  # order 45: after ARAP's 10
+    assert "3 iterations (Jacobi steps)" in table
+    plan = [r.getMessage() for r in caplog.records if r.getMessage().startswith("plan:")]
+    assert plan and "Toy 2 x ~7.1 s" in plan[0], plan  # its prior, 7 s, and the metrics at 6,890 vertices

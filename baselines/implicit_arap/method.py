@@ -230,10 +230,6 @@ class ImplicitARAP:
         m.info["sdf_fit_s"], m.info["deform_s"]
     """
 
-    #: its cost does not grow with the mesh (a fixed number of network steps; only the final
-    #: vertex mapping is per vertex): the evaluator's cost model (eval/progress.py)
-    cost_scale = "const"
-
     def __init__(self, *, preset: str = "cpu", device: str = "auto", seed: int = 0, reference_weights=None,
                  name: str = "Implicit-ARAP", layers=None, width=None, skip=None, octaves=None, sdf_steps=None,
                  sdf_lr=None, sdf_samples=None, deform_steps=None, deform_lr=None, surface_patches=None,

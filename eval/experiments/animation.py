@@ -40,10 +40,11 @@ from defaust.anny_path import path_transforms
 from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
 from defaust.skinning import high_res_weights
-from sshade import prepare
+from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
+from sshade.registry import method_meta
 
 from ..methods import make_methods
 from ..paths import abs_path
@@ -201,7 +202,7 @@ def _run_cases(cases, methods, truth: _Truth, ac, sp: dict, out_dir) -> list[dic
         G = truth.frames(case, n)
         diag = float(np.linalg.norm(case.V.max(0) - case.V.min(0)))
         for m in methods:
-            if m.name != "SShaDe" and ci >= int(ac.baseline_cases):
+            if method_meta(m.name)["cases"] != "all" and ci >= int(ac.baseline_cases):
                 continue
             X, secs, conv, how = _method_frames(m, case, G, sp)
             rows += _frame_rows(case, m.name, how, X, G, secs, conv, diag)
@@ -216,7 +217,7 @@ def _method_frames(m, case, G: np.ndarray, sp: dict) -> tuple[np.ndarray, list, 
     """Method ``m`` over the frames 1.. of ``G``: ``(X (f + 1, n, 3) with X[0] the rest
     mesh, seconds per frame, converged per frame (None: not reported), how it ran)``."""
     h, X, secs, conv = case.handles, [case.V], [], []
-    if m.name == "SShaDe":
+    if isinstance(m, SShaDe):
         keys = ("n_low", "n_samplings", "seed", "tol", "max_iter", "gradient", "warm_start", "protocol", "etol",
                 "gtol", "anchor", "workers")
         with prepare(case.V, case.F, h, **{k: sp[k] for k in keys if k in sp}) as p:

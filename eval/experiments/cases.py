@@ -61,6 +61,7 @@ from pathlib import Path
 
 from sshade.checks import config_bool
 from sshade.errors import SShaDeError
+from sshade.registry import method_meta
 
 from .. import datasets
 from .. import methods as method_table
@@ -132,13 +133,14 @@ class _Setup:
 
     def runs_on(self, ci: int, m) -> bool:
         """Baselines take minutes per high-res case: they run on the cases
-        ``dataset.baseline_cases`` selects (:func:`eval.subset.baseline_selection`;
-        SShaDe on all), except a method ``method_cases`` gives its own rule
+        ``dataset.baseline_cases`` selects (:func:`eval.subset.baseline_selection`), a
+        method whose file says ``cases: all`` (:func:`sshade.registry.method_meta`) on
+        all, except a method ``method_cases`` gives its own rule
         (:func:`eval.subset.method_selections`)."""
         if m.name in self.own:
             sel = self.own[m.name][0]
             return sel is None or ci in sel
-        return self.base is None or ci in self.base or m.name == "SShaDe"
+        return self.base is None or ci in self.base or method_meta(m.name)["cases"] == "all"
 
 
 def _method_specs(cfg, methods) -> list[dict]:

@@ -1,6 +1,8 @@
 """Helpers shared by the experiments of :mod:`eval.experiments`."""
 from __future__ import annotations
 
+from sshade.deform import SShaDe
+
 from ..methods import method_spec
 
 __all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
@@ -37,5 +39,5 @@ def sshade_spec(cfg) -> dict:
     ------
     SShaDeError when the definition does not resolve.
     """
-    spec = method_spec(cfg, "SShaDe")
+    spec = method_spec(cfg, SShaDe.name)
     return {k: v for k, v in spec.items() if k not in ("_target_", "name")}

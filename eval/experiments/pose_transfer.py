@@ -44,6 +44,7 @@ import time
 
 import numpy as np
 
+from sshade.deform import SShaDe
 from sshade.errors import SShaDeError
 from sshade.isometric import pose_transfer, rigid_align
 from sshade.mesh.io import atomic_write, read_mesh
@@ -271,7 +272,7 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
     paths["table_csv"] = out_dir / "table.csv"
 
     per_case = pd.DataFrame([{"case": r["case"], **{f"{lab}": r.get(f"{pre}gt_vertex_mean_pct", math.nan)
-                                                    for pre, lab in (("", "SShaDe"), ("naive_", "naive"),
+                                                    for pre, lab in (("", SShaDe.name), ("naive_", "naive"),
                                                                      ("identity_", "identity"), ("mprime_", "M'"))},
                               "time_s": r.get("time_s", math.nan)} for r in rows])
     n_err = int((~ok).sum())
@@ -291,7 +292,7 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
         "without ground truth, ~2 s per example).", "",
         "Per case, mean vertex error (% diag):", "",
         markdown_table(per_case, ("case", "Case (a->b, pose)"),
-                       (("SShaDe", "SShaDe", "{:.3f}"), ("naive", "Naive", "{:.3f}"),
+                       ((SShaDe.name, SShaDe.name, "{:.3f}"), ("naive", "Naive", "{:.3f}"),
                         ("identity", "Identity", "{:.3f}"), ("M'", "M'", "{:.3f}"),
                         ("time_s", "Time (s)", "{:.2f}"))),
         f"{len(df)} case(s), {n_err} failed, {wall:.1f} s in all.", ""])

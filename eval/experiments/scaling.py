@@ -56,6 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
+from baselines.arap import Elastic
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
 from sshade.deform import check_params, warm_sshade
@@ -124,7 +125,7 @@ def elastic_params(cfg) -> dict:
     """Full-resolution Elastic's protocol and stopping rule in this experiment:
     ``protocol``, ``tol``, ``max_iter``, ``etol``, ``gtol`` of the method config
     ``method.Elastic`` (the ``arap`` section)."""
-    spec = method_spec(cfg, "Elastic")
+    spec = method_spec(cfg, Elastic.name)
     return {k: spec.get(k) for k in ("protocol", "tol", "max_iter", "etol", "gtol")}
 
 

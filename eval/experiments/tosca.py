@@ -40,7 +40,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from sshade.deform import auto_n_low
+from sshade.deform import SShaDe, auto_n_low
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer
 from sshade.mesh.io import atomic_write, read_mesh
@@ -308,7 +308,7 @@ def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
                 viewed.add(c)
                 y_up = [[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]  # (x, y, z) -> (x, z, -y): TOSCA z-up, the viewer y-up
                 write_case_view(SimpleNamespace(name=f"{c}{p}", V=V0 @ y_up, F=F0, V_gt=V1 @ y_up),
-                                {"SShaDe": Vp @ y_up}, out_dir, max_faces=max_faces)
+                                {SShaDe.name: Vp @ y_up}, out_dir, max_faces=max_faces)
             rows.append(row)
             with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:  # partial results survive a crash
                 pd.DataFrame(rows).to_csv(fh, index=False)
