@@ -40,11 +40,11 @@ from sshade.registry import (
     build_builtin,
     builtin_methods,
     canonical_name,
+    file_spec,
     method_key,
     method_meta,
     strip_meta,
 )
-from sshade.registry import method_spec as file_spec
 
 __all__ = ["make_methods", "method_spec", "arap_params"]
 
@@ -121,7 +121,7 @@ def method_spec(cfg, name: str) -> dict:
     ``cfg.method.<key>`` when the config has it (composed from ``conf/method/`` by
     ``conf/config.yaml``), else ``conf/method/<name>.yaml`` resolved against ``cfg``'s
     ``arap`` / ``arap_sr`` / ``sshade`` sections merged over the defaults of
-    ``conf/config.yaml`` (:func:`sshade.registry.method_spec`; so a plain dict config
+    ``conf/config.yaml`` (:func:`sshade.registry.file_spec`; so a plain dict config
     works, and so does a method file that the defaults list does not name). Without the
     file's ``order`` (:data:`sshade.registry.META_KEYS`).
 

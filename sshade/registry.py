@@ -22,7 +22,7 @@ line's ``--method`` follow. One optional line more, ``- method@method.<key>: <na
 the defaults list of ``conf/config.yaml``, lets Hydra compose the file as
 ``method.<key>`` so that ``method.<key>.<param>=...`` overrides reach it (Hydra composes
 only the group options its defaults list names; without the line the evaluator loads
-the file itself, :func:`method_spec`).
+the file itself, :func:`file_spec`).
 
 Beside its parameters a method file holds what the evaluator knows of the method,
 under ``harness`` (:func:`method_meta`; it never reaches the class)::
@@ -42,7 +42,7 @@ from .confdir import config_dir
 from .errors import SShaDeError
 from .method import as_dict, build_method
 
-__all__ = ["builtin_methods", "table_order", "canonical_name", "method_key", "method_file", "method_spec",
+__all__ = ["builtin_methods", "table_order", "canonical_name", "method_key", "method_file", "file_spec",
            "method_meta", "strip_meta", "build_builtin", "named_or_plugin", "META_KEYS", "META_DEFAULTS", "SECTIONS"]
 
 #: Keys of a method file that describe the method instead of being its parameters:
@@ -190,7 +190,7 @@ def strip_meta(spec: Mapping) -> dict:
     return {k: v for k, v in spec.items() if k not in META_KEYS}
 
 
-def method_spec(name: str, sections: Mapping | None = None) -> dict:
+def file_spec(name: str, sections: Mapping | None = None) -> dict:
     """The resolved definition (``_target_`` and parameters) of our method ``name``, read
     from its file, its values resolved against the :data:`SECTIONS` of
     ``conf/config.yaml`` with ``sections`` (e.g. ``{"arap": {"tol": 1e-3}}``) merged over
@@ -202,7 +202,7 @@ def method_spec(name: str, sections: Mapping | None = None) -> dict:
 
     Examples
     --------
-    >>> method_spec("elastic", {"arap": {"tol": 1e-3}})["tol"]
+    >>> file_spec("elastic", {"arap": {"tol": 1e-3}})["tol"]
     0.001
     """
     from omegaconf import OmegaConf
@@ -222,7 +222,7 @@ def method_spec(name: str, sections: Mapping | None = None) -> dict:
 def build_builtin(name: str, overrides: Mapping | None = None, *, spec: Mapping | None = None,
                   sections: Mapping | None = None):
     """Build our method ``name`` from its definition (``spec``, default
-    :func:`method_spec` with ``sections``), with ``overrides`` of its parameters.
+    :func:`file_spec` with ``sections``), with ``overrides`` of its parameters.
 
     Raises
     ------
@@ -231,7 +231,7 @@ def build_builtin(name: str, overrides: Mapping | None = None, *, spec: Mapping 
     (the classes check their parameter values when built).
     """
     name = canonical_name(name)
-    spec = strip_meta(spec if spec is not None else method_spec(name, sections))
+    spec = strip_meta(spec if spec is not None else file_spec(name, sections))
     unknown = sorted(set(overrides or {}) - set(spec) - {"name"})
     if unknown:
         raise SShaDeError(f"{name} has no parameter(s) {unknown}; its parameters: "

@@ -196,10 +196,10 @@ def test_field_starts_at_identity():
 
 
 def test_registered_and_ordered():
-    from sshade.registry import builtin_methods, method_spec, table_order
+    from sshade.registry import builtin_methods, file_spec, table_order
     assert "Implicit-ARAP" in builtin_methods()
     assert table_order().index("Implicit-ARAP") == table_order().index("ARAP-SR") + 1
-    spec = method_spec("Implicit-ARAP")
+    spec = file_spec("Implicit-ARAP")
     assert spec["_target_"] == "baselines.implicit_arap.ImplicitARAP" and spec["preset"] == "cpu"
 
 

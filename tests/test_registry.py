@@ -26,7 +26,7 @@ def test_names_and_order_come_from_the_files():
 
 
 def test_spec_has_no_order_and_resolves_sections():
-    spec = reg.method_spec("Elastic", {"arap": {"tol": 1e-3}})
+    spec = reg.file_spec("Elastic", {"arap": {"tol": 1e-3}})
     assert "order" not in spec and spec["_target_"] == "baselines.Elastic" and spec["tol"] == 1e-3
     with pytest.raises(SShaDeError, match=r"ARAP has no parameter\(s\) \['n_low'\]"):
         reg.build_builtin("ARAP", {"n_low": 100})
