@@ -18,6 +18,7 @@ from pathlib import Path
 from sshade.checks import config_int_list, config_number
 from sshade.clirun import hydra_main, run_command
 from sshade.confdir import config_dir
+from sshade.deform import MAX_SEED
 from sshade.errors import SShaDeError
 
 from .build import build_defaust
@@ -77,7 +78,7 @@ def config_from_omegaconf(cfg) -> BuildConfig:
     def num(key, default, kind=int):  # a number of the config, or SShaDeError naming its key
         seed = key == "seed"
         return config_number(cfg, key, kind=kind, default=default, min=0 if seed else None,
-                             max=2**63 - 1 if seed else None)
+                             max=MAX_SEED if seed else None)
 
     def ints(key):
         return config_int_list(cfg, key, min=-2**31, allow_none=True)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sshade.deform import MAX_SEED
 from sshade.errors import SShaDeError
 
 from .anny_poses import POSES, pose_to_spec, resolve_poses
@@ -120,7 +121,7 @@ class BuildConfig:
     def validate(self) -> "BuildConfig":
         """Check every parameter before anything is built or any folder made.
 
-        Integers: ``seed`` in [0, 2**63 - 1]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
+        Integers: ``seed`` in [0, :data:`sshade.deform.MAX_SEED`]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
         ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
         ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
         count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;
@@ -138,7 +139,7 @@ class BuildConfig:
         SShaDeError naming the first bad parameter and its value (never a late failure
         after minutes of building, nor a partial build).
         """
-        for name, lo, hi in (("seed", 0, 2**63 - 1), ("n_subjects", 1, _MAX_INT), ("n_poses", 2, 10_000),
+        for name, lo, hi in (("seed", 0, MAX_SEED), ("n_subjects", 1, _MAX_INT), ("n_poses", 2, 10_000),
                              ("remesh_iterations", 1, 10_000), ("n_per_landmark", 1, _MAX_INT),
                              ("neighbourhood", 1, _MAX_INT), ("synthetic_vertices", 100, _MAX_INT),
                              ("synthetic_remesh_iterations", 0, 10_000)):

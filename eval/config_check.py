@@ -10,72 +10,32 @@
 from __future__ import annotations
 
 from baselines.arap_sr_solver import ALPHA_SCALINGS
-from sshade.checks import config_bool, config_int_list, config_number, config_value
+from sshade.checks import config_bool, config_number, config_value
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 
-from .experiments.scaling_set import mesh_entries
+from .datasets import find_dataset
+from .experiments import experiment_check
+from .meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
 from .subset import check_baseline_cases, check_method_cases
 
 __all__ = ["check_config", "check_jobs"]
 
-MAX_SEED = 2**63 - 1  # int64: seeds are recorded in CSV/JSON and passed to numpy
 _ABSENT = object()   # a default that tells an absent key apart from null
-
-#: dataset.name -> (key, kind, min, allow_none) of its numbers (eval.datasets.load_cases).
-_DATASET_NUMBERS = {
-    "faust": [("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
-              ("static_threshold", float, 0, False), ("seed", int, 0, False)],
-    "defaust": [],
-    "shapes": [("n_per_group", int, 1, False), ("region_radius", float, 0, False),
-               ("rotate_deg", float, None, False), ("translate", float, None, False), ("seed", int, 0, False)],
-}
-
-#: experiment.kind -> (section, [(key, kind, min, allow_none)]) of the other experiments.
-_EXPERIMENT_NUMBERS = {
-    "scaling": ("scaling", [("n_low", int, 4, False), ("n_samplings", int, 1, False), ("seed", int, 0, False),
-                            ("workers", int, 1, True), ("tol", float, 0, False), ("max_iter", int, 1, True),
-                            ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
-                            ("rotate_deg", float, None, False), ("translate", float, None, False),
-                            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
-                            ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]),
-    "tosca": ("tosca", [("n_low", int, 4, False), ("n_samplings", int, 1, False), ("seed", int, 0, False),
-                        ("min_vertices", int, 0, True), ("workers", int, 1, True)]),
-    "pose_transfer": ("pose_transfer", [("n_low", int, 4, False), ("n_samplings", int, 1, False),
-                                        ("seed", int, 0, False), ("workers", int, 1, True)]),
-    "convergence": ("convergence", [("plane.lift", float, None, False), ("plane.n_target", int, 4, False),
-                                    ("dataset_case", int, 0, False), ("time_budget_s", float, 0, False),
-                                    ("stop_pct", float, 0, False), ("target_pct", float, 0, False),
-                                    ("seed", int, 0, False), ("sshade.refine_k", int, 1, False),
-                                    ("sshade.workers", int, 1, True)]),
-}
-
-
-def _check_list(cfg, checks, prefix: str) -> None:
-    for key, kind, lo, none in checks:
-        k = f"{prefix}.{key}"
-        if config_value(cfg, k, _ABSENT) is _ABSENT:
-            continue  # absent: the reader's default applies
-        config_number(cfg, k, kind=kind, min=lo, max=MAX_SEED if key.endswith("seed") else None, allow_none=none)
 
 
 def _check_dataset(cfg) -> None:
+    """The keys every dataset shares, then the dataset's own check (its registration,
+    :class:`eval.datasets.registry.Dataset`)."""
     ds = config_value(cfg, "dataset", None)
     if ds is None:
         return
-    name = str(ds.get("name", "faust"))
-    _check_list(cfg, _DATASET_NUMBERS.get(name, []), "dataset")
-    for k in ("limit",):
-        config_number(cfg, f"dataset.{k}", min=1, allow_none=True, default=None)
+    config_number(cfg, "dataset.limit", min=1, allow_none=True, default=None)
     check_baseline_cases(config_value(cfg, "dataset.baseline_cases", None))
     check_method_cases(config_value(cfg, "method_cases", None))
-    for k in ("subjects", "poses"):
-        if name != "shapes":
-            config_int_list(cfg, f"dataset.{k}")
-    if name == "shapes" and config_value(cfg, "dataset.vertex_range", None) is not None:
-        vr = config_int_list(cfg, "dataset.vertex_range", min=4)
-        if len(vr) != 2 or vr[0] > vr[1]:
-            raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
+    found = find_dataset(str(ds.get("name", "")))
+    if found is not None and found.check is not None:
+        found.check(cfg)
 
 
 def _check_sshade(cfg) -> None:
@@ -120,12 +80,12 @@ def check_config(cfg) -> None:
     """Check every number and flag of an evaluator config before any work.
 
     Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.deform.check_params`),
-    the dataset's numbers (``limit``, ``baseline_cases``, ``seed``, handle parameters,
-    subject/pose lists, ``vertex_range``), ``figures.enabled`` / ``max_cases``, ``report.*``,
-    ``reference.max_iter`` / ``time_budget_s``, ``jobs`` and the section of the experiment kind
-    (``scaling``, with its ``meshes`` entries, :func:`eval.experiments.scaling_set.mesh_entries`;
-    ``tosca``, ``pose_transfer``, ``convergence``). Absent keys are left to
-    their readers' defaults.
+    the dataset's ``limit``, ``baseline_cases`` and ``method_cases`` and then its own
+    check (registered with it, :func:`eval.datasets.register_dataset`), ``figures.enabled``
+    / ``max_cases``, ``report.*``, ``reference.max_iter`` / ``time_budget_s``, ``jobs`` and
+    the experiment kind's own check (registered with it,
+    :func:`eval.experiments.register_experiment`). Absent keys are left to their readers'
+    defaults.
 
     Raises
     ------
@@ -150,8 +110,8 @@ def check_config(cfg) -> None:
     check_jobs(config_value(cfg, "jobs", "auto"))
     if config_value(cfg, "report", None) is not None:
         config_bool(cfg, "report.enabled", default=True)
-        config_number(cfg, "report.view_cases", min=0, allow_none=True, default=2)
-        config_number(cfg, "report.max_faces", min=100, max=2_000_000, default=30000)
+        config_number(cfg, "report.view_cases", min=0, allow_none=True, default=DEFAULT_VIEW_CASES)
+        config_number(cfg, "report.max_faces", min=100, max=2_000_000, default=DEFAULT_MAX_FACES)
     if config_value(cfg, "store", None) is not None:
         config_bool(cfg, "store.meshes", default=False)
         config_number(cfg, "figures.max_cases", min=0, allow_none=True, default=None)
@@ -160,16 +120,6 @@ def check_config(cfg) -> None:
         tb = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True, default=None)
         if tb is not None and tb <= 0:
             raise SShaDeError(f"reference.time_budget_s must be a finite number > 0 (or null), got {tb!r}")
-    kind = str(config_value(cfg, "experiment.kind", "cases"))
-    if kind in _EXPERIMENT_NUMBERS:
-        section, checks = _EXPERIMENT_NUMBERS[kind]
-        _check_list(cfg, checks, section)
-    if kind == "convergence":
-        config_int_list(cfg, "convergence.sshade.k", min=1, max=10_000)
-    if kind == "scaling":
-        config_int_list(cfg, "scaling.sizes", min=4)
-        config_bool(cfg, "scaling.first_call", default=True)
-        config_bool(cfg, "scaling.elastic", default=True)
-        mesh_entries(cfg)  # every scaling.meshes entry's keys, before any mesh is built
-    if kind in ("tosca", "pose_transfer"):
-        config_int_list(cfg, f"{kind}.poses")
+    check = experiment_check(str(config_value(cfg, "experiment.kind", "cases")))
+    if check is not None:
+        check(cfg)

@@ -37,14 +37,15 @@ from sshade.mesh.io import atomic_write
 from .metric_meshes import unique_edges
 from .store import json_safe, safe_name
 
-__all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "COLOUR_MODES", "cluster_decimate", "cluster_positions",
-           "cluster_means", "vertex_edge_error", "case_view",
+__all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
+           "cluster_positions", "cluster_means", "vertex_edge_error", "case_view",
            "case_view_path", "write_case_view", "read_view", "view_options", "write_outputs", "read_outputs"]
 
 log = logging.getLogger("eval")
 
 VIEW_DIR = "report"  #: the views' folder inside a run folder (next to index.html)
 DEFAULT_MAX_FACES = 30000  #: faces shown per mesh unless ``report.max_faces`` says otherwise
+DEFAULT_VIEW_CASES = 2     #: cases with a 3D view unless ``report.view_cases`` says otherwise
 #: The per-vertex quantities a view colours its meshes by (:func:`case_view`): key -> legend.
 COLOUR_MODES = {"edge": "edge-length error, % of the longest rest edge (paper Fig. 4)",
                 "gt": "distance to the ground truth, % of the bounding-box diagonal"}
@@ -276,14 +277,14 @@ def read_view(path) -> dict:
 
 
 def view_options(cfg) -> tuple[int, int]:
-    """``(view_cases, max_faces)`` from ``cfg.report`` (defaults 2 and
-    :data:`DEFAULT_MAX_FACES`; ``report.enabled`` false: no view)."""
+    """``(view_cases, max_faces)`` from ``cfg.report`` (defaults :data:`DEFAULT_VIEW_CASES`
+    and :data:`DEFAULT_MAX_FACES`; ``report.enabled`` false: no view)."""
     rep = cfg.get("report", None) if cfg is not None else None
     if rep is None:
-        return 2, DEFAULT_MAX_FACES
+        return DEFAULT_VIEW_CASES, DEFAULT_MAX_FACES
     if not bool(rep.get("enabled", True)):
         return 0, DEFAULT_MAX_FACES
-    n, mf = rep.get("view_cases", 2), rep.get("max_faces", DEFAULT_MAX_FACES)
+    n, mf = rep.get("view_cases", DEFAULT_VIEW_CASES), rep.get("max_faces", DEFAULT_MAX_FACES)
     return int(0 if n is None else n), int(DEFAULT_MAX_FACES if mf is None else mf)
 
 

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import math
 
+from .deform import MAX_SEED
 from .errors import SShaDeError
 
-__all__ = ["config_value", "config_number", "config_bool", "config_int_list", "MAX_INT"]
+__all__ = ["config_value", "config_number", "config_bool", "config_int_list", "check_numbers", "MAX_INT"]
 
 MAX_INT = 2**31 - 1   # counts and iteration caps: int32 (numba kernels, libigl)
 _MISSING = object()  # "no default": an absent key is an error
@@ -130,3 +131,36 @@ def config_int_list(cfg, key: str, *, min=0, max=MAX_INT, allow_none: bool = Tru
             raise SShaDeError(f"{key} must be a list of integers in [{min}, {max}], got {x!r} in {items!r}")
         out.append(int(x))
     return out
+
+
+def check_numbers(cfg, prefix: str, checks) -> None:
+    """Check the numbers of config section ``prefix`` (:func:`config_number`); a key that
+    is absent is left to its reader's default, a key ending in ``seed`` is at most
+    :data:`sshade.deform.MAX_SEED`.
+
+    Parameters
+    ----------
+    cfg : DictConfig (or anything ``OmegaConf.select`` reads).
+    prefix : str, the section, e.g. ``"dataset"``.
+    checks : iterable of ``(key, kind, min, allow_none)``: ``key`` under ``prefix``
+        (dotted for a nested key), ``kind`` int or float, ``min`` the lower bound (None:
+        none), ``allow_none`` whether null is accepted.
+
+    Raises
+    ------
+    SShaDeError naming the first bad key and its value.
+
+    Examples
+    --------
+    >>> from omegaconf import OmegaConf
+    >>> check_numbers(OmegaConf.create({"tosca": {"min_vertices": -1}}), "tosca", [("min_vertices", int, 0, True)])
+    Traceback (most recent call last):
+    ...
+    sshade.errors.SShaDeError: tosca.min_vertices must be an integer in [0, 2147483647] (or null), got -1
+    """
+    absent = object()
+    for key, kind, lo, none in checks:
+        k = f"{prefix}.{key}"
+        if config_value(cfg, k, absent) is absent:
+            continue
+        config_number(cfg, k, kind=kind, min=lo, max=MAX_SEED if key.endswith("seed") else None, allow_none=none)

@@ -21,8 +21,9 @@ from .remesh import mesh_topology, remesh
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "warm_sshade", "LowResSkippedWarning",
-           "prepare_sampling", "prepare_samplings", "arap_options", "low_res_size", "handle_pre_pct"]
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "MAX_SEED", "warm_sshade",
+           "LowResSkippedWarning", "prepare_sampling", "prepare_samplings", "arap_options", "low_res_size",
+           "handle_pre_pct"]
 
 
 def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[dict, dict]:
@@ -169,7 +170,7 @@ class LowResSkippedWarning(UserWarning):
 _MAX_COUNT = 2**31 - 1    # n_low, workers, max_iter: int32 range (numba kernels, libigl)
 _MIN_N_LOW = 4            # the smallest n_low check_params accepts (its as_int("n_low", n_low, 4))
 _MAX_SAMPLINGS = 10_000   # k remeshings, each a full low-res solve
-_MAX_SEED = 2**63 - 1     # int64: recorded in JSON/CSV and passed to numpy
+MAX_SEED = 2**63 - 1      #: seeds: int64, recorded in JSON/CSV and passed to numpy
 
 
 def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
@@ -226,7 +227,7 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
 
     out = {"n_low": "auto" if n_low in (None, "auto") else as_int("n_low", n_low, 4),
            "n_samplings": as_int("n_samplings", n_samplings, 1, _MAX_SAMPLINGS),
-           "seed": as_int("seed", seed, 0, _MAX_SEED),
+           "seed": as_int("seed", seed, 0, MAX_SEED),
            "workers": None if workers is None else as_int("workers", workers, 1),
            "max_iter": None if max_iter is None else as_int("max_iter", max_iter, 1)}
     try:

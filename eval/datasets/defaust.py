@@ -31,6 +31,7 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.dataset import Case, load, read_manifest
 from defaust.manifest import check_out_folder
+from sshade.checks import config_int_list
 from sshade.errors import SShaDeError
 from sshade.jobs import pool_size
 
@@ -258,7 +259,14 @@ def _seeds(root: Path) -> dict:
     return {"defaust_manifest_seed": read_manifest(root).get("parameters", {}).get("seed")}
 
 
+def check_defaust(cfg) -> None:
+    """``dataset.subjects`` and ``dataset.poses`` (integers or null) checked; SShaDeError
+    naming the key."""
+    config_int_list(cfg, "dataset.subjects")
+    config_int_list(cfg, "dataset.poses")
+
+
 register_dataset("defaust", load_defaust, keys=("subjects", "resolution", "limit"), prepare=prepare_root,
                  root_hint=(f"; the evaluator builds a DeFAUST only into the default folder {DEFAULT_DEFAUST_ROOT} "
                             f"or with dataset.build.enabled=true (python -m defaust out=DIR builds one)"),
-                 seeds=_seeds, outlook=build_outlook)
+                 seeds=_seeds, outlook=build_outlook, check=check_defaust)

@@ -38,6 +38,7 @@ import numpy as np
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust, faust_subjects
 from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUST builder's (one implementation)
+from sshade.checks import check_numbers, config_int_list
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
@@ -270,5 +271,15 @@ def _fmt(sel) -> str:
     return "all" if sel is None else str(sorted(sel))
 
 
+def check_faust(cfg) -> None:
+    """The ``dataset`` section's numbers and subject / pose lists of FAUST checked;
+    SShaDeError naming the key."""
+    check_numbers(cfg, "dataset", [("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
+                                   ("static_threshold", float, 0, False), ("seed", int, 0, False)])
+    config_int_list(cfg, "dataset.subjects")
+    config_int_list(cfg, "dataset.poses")
+
+
 register_dataset("faust", faust_cases, keys=("subjects", "poses", "n_per_landmark", "neighbourhood",
-                                             "static_threshold", "seed", "limit", "protocol", "n_targets"))
+                                             "static_threshold", "seed", "limit", "protocol", "n_targets"),
+                 check=check_faust)

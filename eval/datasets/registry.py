@@ -33,6 +33,9 @@ class Dataset:
         about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.plan`):
         None when it has nothing long to do, else a dict (e.g.
         :func:`eval.datasets.defaust.build_outlook`).
+    check : optional ``check(cfg) -> None``: the dataset's own config values checked
+        before any work (:func:`eval.config_check.check_config`); raises SShaDeError
+        naming the key.
     """
 
     name: str
@@ -43,18 +46,19 @@ class Dataset:
     root_hint: str = ""
     seeds: Callable | None = None
     outlook: Callable | None = None
+    check: Callable | None = None
 
 
 _REGISTRY = Registry(__package__, "dataset", skip=("registry", "case"))
 
 
 def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=None, root_hint: str = "",
-                     seeds=None, outlook=None) -> Dataset:
+                     seeds=None, outlook=None, check=None) -> Dataset:
     """Register dataset ``name`` (fields of :class:`Dataset`); called at the bottom of a
     dataset module. Registering a name twice with another loader raises ValueError (a
     programming error, not a user's)."""
     d = Dataset(name=str(name), load=load, keys=tuple(keys), path_keys=tuple(path_keys), prepare=prepare,
-                root_hint=root_hint, seeds=seeds, outlook=outlook)
+                root_hint=root_hint, seeds=seeds, outlook=outlook, check=check)
     return _REGISTRY.add(d.name, d, same=lambda old, new: old.load is new.load)
 
 

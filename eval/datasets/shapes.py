@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
+from sshade.checks import check_numbers, config_int_list, config_value
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 
@@ -210,5 +211,18 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
     return cases
 
 
+def check_shapes(cfg) -> None:
+    """The ``dataset`` section's numbers and ``vertex_range`` ([lo, hi], 4 <= lo <= hi)
+    of the shapes checked; SShaDeError naming the key."""
+    check_numbers(cfg, "dataset", [("n_per_group", int, 1, False), ("region_radius", float, 0, False),
+                                   ("rotate_deg", float, None, False), ("translate", float, None, False),
+                                   ("seed", int, 0, False)])
+    if config_value(cfg, "dataset.vertex_range", None) is not None:
+        vr = config_int_list(cfg, "dataset.vertex_range", min=4)
+        if len(vr) != 2 or vr[0] > vr[1]:
+            raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
+
+
 register_dataset("shapes", shape_cases, keys=("files", "vertex_range", "cache", "n_per_group", "region_radius",
-                                              "rotate_deg", "translate", "seed", "limit"), path_keys=("cache",))
+                                              "rotate_deg", "translate", "seed", "limit"), path_keys=("cache",),
+                 check=check_shapes)

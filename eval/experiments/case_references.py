@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import logging
 
+from sshade.checks import config_number
 from sshade.errors import SShaDeError
 
-from ..config_check import config_number
 from ..paths import abs_path
 from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, sr_alpha, status_words
 from ..subset import baseline_selection, check_baseline_cases

@@ -37,6 +37,7 @@ import numpy as np
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.cases import lifted_plane
+from sshade.checks import check_numbers, config_int_list
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
@@ -337,4 +338,17 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
     return path
 
 
-register_experiment("convergence", run_convergence)
+#: the numbers of the ``convergence`` section: (key, kind, min, allow_none)
+_NUMBERS = [("plane.lift", float, None, False), ("plane.n_target", int, 4, False), ("dataset_case", int, 0, False),
+            ("time_budget_s", float, 0, False), ("stop_pct", float, 0, False), ("target_pct", float, 0, False),
+            ("sshade.refine_k", int, 1, False)]
+
+
+def check_convergence(cfg) -> None:
+    """The ``convergence`` section's numbers and ``convergence.sshade.k`` checked;
+    SShaDeError naming the key."""
+    check_numbers(cfg, "convergence", _NUMBERS)
+    config_int_list(cfg, "convergence.sshade.k", min=1, max=10_000)
+
+
+register_experiment("convergence", run_convergence, check=check_convergence)

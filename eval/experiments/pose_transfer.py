@@ -44,6 +44,7 @@ import time
 
 import numpy as np
 
+from sshade.checks import config_int_list
 from sshade.deform import SShaDe
 from sshade.errors import SShaDeError
 from sshade.isometric import pose_transfer, rigid_align
@@ -300,4 +301,9 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
     return {"out_dir": out_dir, "paths": paths, "cases": df, "table": table, "n_cases": len(df), "n_errors": n_err}
 
 
-register_experiment("pose_transfer", run_pose_transfer)
+def check_pose_transfer(cfg) -> None:
+    """``pose_transfer.poses`` (integers or null) checked; SShaDeError naming the key."""
+    config_int_list(cfg, "pose_transfer.poses")
+
+
+register_experiment("pose_transfer", run_pose_transfer, check=check_pose_transfer)

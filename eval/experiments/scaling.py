@@ -59,7 +59,8 @@ import numpy as np
 from baselines.arap import Elastic
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
-from sshade.deform import check_params, warm_sshade
+from sshade.checks import check_numbers, config_bool, config_int_list
+from sshade.deform import MAX_SEED, check_params, warm_sshade
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_mesh
@@ -291,7 +292,7 @@ def _sshade_row(V, F, h, T, sp: dict, repeat: int = 1) -> tuple[float, dict]:
     seed = int(sp["seed"])
     release_freed()  # what earlier rows left in this process's heap is not this call's
     with PeakMemory() as pm:
-        Vd2 = deform(V, F, h, T, **dict(sp, seed=seed + 1 if seed < 2**63 - 1 else seed - 1))
+        Vd2 = deform(V, F, h, T, **dict(sp, seed=seed + 1 if seed < MAX_SEED else seed - 1))
     row["peak_mem_mb"], row["call_mem_mb"] = pm.peak_mb, pm.peak_mb - pm.start_mb
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     row["seed_spread_pct"] = 100.0 * float(np.linalg.norm(Vd - Vd2, axis=1).mean()) / diag
@@ -322,4 +323,22 @@ def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -
     return row
 
 
-register_experiment("scaling", run_scaling)
+#: the numbers of the ``scaling`` section: (key, kind, min, allow_none)
+_NUMBERS = [("seed", int, 0, False), ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
+            ("rotate_deg", float, None, False), ("translate", float, None, False),
+            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
+            ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]
+
+
+def check_scaling(cfg) -> None:
+    """The ``scaling`` section's numbers, flags, ``sizes`` and every ``meshes`` entry's
+    keys (:func:`eval.experiments.scaling_set.mesh_entries`), before any mesh is built;
+    SShaDeError naming the key."""
+    check_numbers(cfg, "scaling", _NUMBERS)
+    config_int_list(cfg, "scaling.sizes", min=4)
+    config_bool(cfg, "scaling.first_call", default=True)
+    config_bool(cfg, "scaling.elastic", default=True)
+    mesh_entries(cfg)
+
+
+register_experiment("scaling", run_scaling, check=check_scaling)

@@ -40,6 +40,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from sshade.checks import check_numbers, config_int_list
 from sshade.deform import SShaDe, auto_n_low
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer
@@ -395,4 +396,11 @@ def table_workers(df) -> str:
     return ",".join(map(str, w)) or "-"
 
 
-register_experiment("tosca", run_tosca)
+def check_tosca(cfg) -> None:
+    """``tosca.min_vertices`` (an integer >= 0 or null) and ``tosca.poses`` (integers or
+    null) checked; SShaDeError naming the key."""
+    check_numbers(cfg, "tosca", [("min_vertices", int, 0, True)])
+    config_int_list(cfg, "tosca.poses")
+
+
+register_experiment("tosca", run_tosca, check=check_tosca)
