@@ -1,7 +1,7 @@
 """ARAP and Elastic (converged protocol) from the rigid fit of the handles against the
 coarse start (baselines/coarse_start.py) on DeFAUST cases: iterations, seconds
 (interleaved: rigid then coarse per case and method), energy, and optionally the distance
-of each result to a deep solve continued from it (eval.reference) and between the two.
+of each result to a deep solve continued from it (eval.metrics.reference) and between the two.
 
     python benchmarks/arap_coarse_start.py DEFAUST_DIR s00_p01 s01_p02 [--deep] [--out DIR]
 
@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 
 from baselines import ARAP, Elastic  # noqa: E402
 from eval import datasets  # noqa: E402
-from eval.reference import reference_metrics, reference_solution  # noqa: E402
+from eval.metrics.reference import reference_metrics, reference_solution  # noqa: E402
 from sshade.arap import bbox_diag  # noqa: E402
 
 METHODS = {"ARAP": (ARAP, "spokes"), "Elastic": (Elastic, "spokes_and_rims")}

@@ -39,9 +39,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 from eval.datasets.shapes import axis_handles, axis_landmarks  # noqa: E402
 from eval.experiments.scaling import size_mesh  # noqa: E402
 from eval.experiments.scaling_set import MeshEntry  # noqa: E402
-from eval.memory import release_freed, tree_pss_mb  # noqa: E402
-from eval.outdir import claim_output_dir  # noqa: E402
-from eval.runinfo import git_info  # noqa: E402
+from eval.run.memory import release_freed, tree_pss_mb  # noqa: E402
+from eval.run.outdir import claim_output_dir  # noqa: E402
+from eval.run.runinfo import git_info  # noqa: E402
 from sshade import deform, prepare  # noqa: E402
 from sshade.clirun import run_command  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402

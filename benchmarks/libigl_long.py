@@ -15,7 +15,7 @@ import numpy as np
 
 from eval.datasets.defaust import load_defaust
 from eval.experiments.convergence import libigl_curve
-from eval.reference import reference_solution
+from eval.metrics.reference import reference_solution
 
 c = load_defaust('data/defaust', limit=1)[0]
 V, F, h, T = np.asarray(c.V, np.float64), np.asarray(c.F, np.int64), c.handles, c.targets

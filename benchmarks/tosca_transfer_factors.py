@@ -11,7 +11,7 @@ at a time from the default (anchor=projection, gradient=normalized, frame fallba
 - projection: onto the nearest low-res triangle anywhere (libigl) instead of the own fan;
 - n_low 3000 / 9000; k 1 / 5 / 20; a per-vertex median over the samplings instead of the mean.
 
-Beside d_H and d_C (shapes in the true pose's unit sphere, eval.metrics) and the vertex
+Beside d_H and d_C (shapes in the true pose's unit sphere, eval.metrics.measures) and the vertex
 mean / max (% of the true pose's diagonal), two columns locate the error on the data:
 ``stretched``, the share of the vertices whose 1-ring edges change length by more than
 25 % from the rest pose to the TOSCA pose (the ground truth is not isometric there), and
@@ -35,9 +35,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
 from eval.experiments.tosca import discover_tosca  # noqa: E402
-from eval.metrics import chamfer, hausdorff, normalize_unit_sphere, point_surface_distance  # noqa: E402
-from eval.outdir import claim_output_dir  # noqa: E402
-from eval.runinfo import git_info  # noqa: E402
+from eval.metrics.measures import chamfer, hausdorff, normalize_unit_sphere, point_surface_distance  # noqa: E402
+from eval.run.outdir import claim_output_dir  # noqa: E402
+from eval.run.runinfo import git_info  # noqa: E402
 from sshade.clirun import run_command  # noqa: E402
 from sshade.lrf import frame_functions, transfer  # noqa: E402
 from sshade.mesh.io import read_mesh  # noqa: E402

@@ -1,5 +1,5 @@
 """``python -m eval [overrides]``: run the evaluator (see :mod:`eval.app`)."""
-from .app import main
+from eval.app import main
 
 if __name__ == "__main__":
     main()

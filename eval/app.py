@@ -10,8 +10,8 @@ Usage (from the repository root)::
 Config: ``conf/config.yaml`` (+ ``conf/dataset/*.yaml``, ``conf/experiment/*.yaml``,
 ``conf/method/*.yaml``). :func:`main` composes and checks the command line,
 :func:`run_experiment` checks every number of the config
-(:func:`eval.config_check.check_config`), claims ``out_dir``
-(:func:`eval.outdir.claimed_run`) and runs the experiment of ``experiment.kind`` from
+(:func:`eval.run.config_check.check_config`), claims ``out_dir``
+(:func:`eval.run.outdir.claimed_run`) and runs the experiment of ``experiment.kind`` from
 the registry of :mod:`eval.experiments` (default ``cases``: every method on every case
 of the dataset, :func:`eval.experiments.cases.run`, re-exported here as :func:`run`).
 
@@ -22,16 +22,15 @@ from __future__ import annotations
 
 import sys
 
+from eval.experiments import experiments, find_experiment
+from eval.experiments.cases import run
+from eval.report import safe_report
+from eval.run.config_check import check_config
+from eval.run.outdir import claimed_run
 from sshade.checks import config_bool
 from sshade.clirun import hydra_main, run_command
 from sshade.confdir import config_dir
 from sshade.errors import SShaDeError
-
-from .config_check import check_config
-from .experiments import experiments, find_experiment
-from .experiments.cases import run
-from .outdir import claimed_run
-from .report import safe_report
 
 __all__ = ["CONF_DIR", "run", "run_experiment", "main"]
 
@@ -42,9 +41,9 @@ def run_experiment(cfg, *, fresh: bool = False):
     """Dispatch on ``experiment.kind`` (default ``cases``) through the experiment
     registry (:func:`eval.experiments.experiments`: one module per experiment).
 
-    Every number of the config is checked first (:func:`eval.config_check.check_config`),
+    Every number of the config is checked first (:func:`eval.run.config_check.check_config`),
     then the experiment runs in its claimed output folder ``cfg.out_dir``
-    (:func:`eval.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
+    (:func:`eval.run.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
     refused before any work; ``fresh``: ``out_dir`` is the default dated name, which gets
     a suffix rather than being reused), which gets its browser report ``index.html`` at
     the end (:func:`eval.report.safe_report`, unless ``report.enabled`` is false).
@@ -52,7 +51,7 @@ def run_experiment(cfg, *, fresh: bool = False):
     Raises
     ------
     SShaDeError for a bad config value or an unknown ``experiment.kind`` (before any
-    work), :class:`eval.outdir.OutputDirError` for a folder it may not write into.
+    work), :class:`eval.run.outdir.OutputDirError` for a folder it may not write into.
     """
     check_config(cfg)  # every number of the config, before any work (also for sweep jobs)
     kind = str(cfg.get("experiment", {}).get("kind", "cases"))
@@ -117,7 +116,7 @@ def main() -> None:
     """Console entry point (``python -m eval``): Hydra parses the overrides.
 
     The command line is composed and every config value checked
-    (:func:`eval.config_check.check_config`) before Hydra makes the run folder; a bad
+    (:func:`eval.run.config_check.check_config`) before Hydra makes the run folder; a bad
     one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
     (:func:`sshade.clirun.hydra_main`).
     """

@@ -8,7 +8,7 @@ The page (:func:`write_report`) shows, from the files the run wrote:
   own cases when there is one); every table sorts by a click on a column header;
 - how each method stopped and its failed runs (:func:`eval.tables.stop_lines`,
   :func:`eval.tables.failure_lines`);
-- the 3D views written during the run (``report/<case>.js``, :mod:`eval.meshview`): rest
+- the 3D views written during the run (``report/<case>.js``, :mod:`eval.present.meshview`): rest
   mesh, target and every method's result of the first ``report.view_cases`` cases,
   decimated for display, in a small WebGL viewer (``eval/report_assets/report.js``:
   drag rotates, wheel zooms);
@@ -18,12 +18,12 @@ The page (:func:`write_report`) shows, from the files the run wrote:
 - the provenance of ``run.json``: command, git commit and dirty flag, seeds, config.
 
 Only the cases of the run the folder holds now are shown (its ``run.json``, else
-``cases.csv``; :mod:`eval.report_scope`): a resumed run keeps an earlier run's files,
+``cases.csv``; :mod:`eval.present.report_scope`): a resumed run keeps an earlier run's files,
 so a view or case figure is shown only when it is of one of these cases and, where
-the run recorded them (``report/outputs.json``, :func:`eval.meshview.write_outputs`),
+the run recorded them (``report/outputs.json``, :func:`eval.present.meshview.write_outputs`),
 when this run wrote it; every other one is listed as left out, with the run's own
 notes (e.g. a figure not redrawn). Every link and script source is a relative path
-inside the run folder, percent-encoded (:func:`eval.report_scope.link_target`): a file
+inside the run folder, percent-encoded (:func:`eval.present.report_scope.link_target`): a file
 named ``javascript:...`` gets a plain file link, a path leaving the folder no link.
 
 Every JavaScript error is written into ``<div id="js-errors">`` (``data-count``), so a
@@ -36,7 +36,7 @@ Command line (:func:`main`)::
     python -m eval.report --index results           # results/index.html: a link per folder
     python -m eval.report --screenshot OUT.png RUN_DIR   # also a PNG of the page (chromium)
 
-It writes only into an earlier evaluator output (:func:`eval.outdir.check_earlier_output`)
+It writes only into an earlier evaluator output (:func:`eval.run.outdir.check_earlier_output`)
 and into ``results/`` only under ``python -m eval.reproduce``, which runs ``--index``.
 """
 from __future__ import annotations
@@ -50,12 +50,10 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from sshade.clirun import ArgumentParser, run_command
-from sshade.mesh.io import atomic_write
-
-from .breakdown import BREAKDOWN_METRICS
-from .meshview import VIEW_DIR, read_outputs, read_view
-from .outdir import (
+from eval.present.breakdown import BREAKDOWN_METRICS
+from eval.present.meshview import VIEW_DIR, read_outputs, read_view
+from eval.present.report_scope import link_target, not_current, run_cases
+from eval.run.outdir import (
     REPRODUCE_ENV,
     OutputDirError,
     check_earlier_output,
@@ -64,8 +62,7 @@ from .outdir import (
     refuse_results,
     results_dir,
 )
-from .report_scope import link_target, not_current, run_cases
-from .tables import (
+from eval.tables import (
     ALL_CASES_HEADING,
     EXTRA_COLUMNS,
     TABLE_COLUMNS,
@@ -75,6 +72,8 @@ from .tables import (
     main_note,
     stop_lines,
 )
+from sshade.clirun import ArgumentParser, run_command
+from sshade.mesh.io import atomic_write
 
 __all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
            "find_chromium", "chromium", "screenshot", "main"]
@@ -219,7 +218,7 @@ def _breakdown_section(run_dir: Path) -> str:
 
 
 def _link(base: Path, rel: str, inner: str) -> str:
-    """``<a href=...>inner</a>`` (:func:`eval.report_scope.link_target`), or ``inner``
+    """``<a href=...>inner</a>`` (:func:`eval.present.report_scope.link_target`), or ``inner``
     alone when ``rel`` may not be linked."""
     href = link_target(base, rel)
     return inner if href is None else f'<a href="{_e(href)}">{inner}</a>'
@@ -227,7 +226,7 @@ def _link(base: Path, rel: str, inner: str) -> str:
 
 def _figures_section(run_dir: Path, kind: str, cases, outputs) -> tuple[str, list[str]]:
     """(section, notes): the figures ``*.png`` and ``figures/*.png``; for the ``cases``
-    experiment, a case figure only when it is this run's (:func:`eval.report_scope.not_current`)."""
+    experiment, a case figure only when it is this run's (:func:`eval.present.report_scope.not_current`)."""
     pngs = sorted(p for p in run_dir.glob("*.png") if p.name != "breakdown.png")
     per_case = sorted((run_dir / "figures").glob("*.png")) if (run_dir / "figures").is_dir() else []
     notes = []
@@ -270,7 +269,7 @@ def _view_files(run_dir: Path, cases, outputs) -> tuple[list, list[str]]:
 
 
 def _views_section(run_dir: Path, cases, outputs) -> tuple[str, str, list[str]]:
-    """(section, script tags, notes) of the 3D views ``report/*.js`` (:mod:`eval.meshview`)
+    """(section, script tags, notes) of the 3D views ``report/*.js`` (:mod:`eval.present.meshview`)
     of this run (:func:`_view_files`)."""
     views, notes = _view_files(run_dir, cases, outputs)
     if not views:
@@ -376,7 +375,7 @@ def _ours(page: Path) -> bool:
 def write_report(run_dir) -> Path:
     """Write ``run_dir/index.html`` (atomically) from the files of the run folder; returns
     its path. Checks nothing about who may write there (the caller: the running
-    evaluator, or :func:`main` through :func:`eval.outdir.check_earlier_output`).
+    evaluator, or :func:`main` through :func:`eval.run.outdir.check_earlier_output`).
 
     Raises OutputDirError when ``index.html`` exists and this module did not write it
     (kept), OSError when the page cannot be written.

@@ -15,7 +15,7 @@ others still run):
    cap; ARAP-SR's energy stop; each stop reported converged or stalled) and its
    references on the per_pose subset -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
    or a kill runs only the (case, method) pairs missing from the folder's result store
-   (:mod:`eval.store`), while a finished folder reruns nothing unless the configuration
+   (:mod:`eval.run.store`), while a finished folder reruns nothing unless the configuration
    changed; the
    time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
    ``results/convergence``; the animated DeFAUST cases (``experiment=animation``: SShaDe
@@ -44,8 +44,8 @@ folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
 ``--only faust,report`` reruns one experiment and the index).
 
 This is the only command that writes ``results/``: it sets
-:data:`eval.outdir.REPRODUCE_ENV` for the commands it runs, and every other command
-refuses a folder inside ``results/`` (:func:`eval.outdir.claim_output_dir`). Each step
+:data:`eval.run.outdir.REPRODUCE_ENV` for the commands it runs, and every other command
+refuses a folder inside ``results/`` (:func:`eval.run.outdir.claim_output_dir`). Each step
 replaces the files its previous run wrote in its folder and says which; files written
 there by something else (e.g. ``results/convergence/libigl_long.md``) are kept.
 
@@ -60,10 +60,9 @@ import sys
 import time
 from pathlib import Path
 
+from eval.report import find_chromium
+from eval.run.outdir import REPRODUCE_ENV
 from sshade.clirun import ArgumentParser, run_command
-
-from .outdir import REPRODUCE_ENV
-from .report import find_chromium
 
 #: ARAP-SR's alpha values of the sweep step (Open3D's definition; 0.06 is about the
 #: stiffness of 0.01 without the valence, this package's earlier definition)
@@ -78,13 +77,13 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
     # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
-    # per_pose subset, eval/subset.py); resume=true: a rerun after a crash continues (eval/store.py)
+    # per_pose subset, eval/run/subset.py); resume=true: a rerun after a crash continues (eval/run/store.py)
     # Implicit-ARAP (the [neural] extra, its cpu preset) where PyTorch is installed, on every case too
     neural = importlib.util.find_spec("torch") is not None
     ia = ["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]"] if neural else []
     # the deep references (a minute or more each at 169k vertices, three energies) on the
     # per_pose subset, the main job's baseline cases: the check that each converged
-    # method lands on its minimiser, not a column over all 40 cases (eval/reference.py)
+    # method lands on its minimiser, not a column over all 40 cases (eval/metrics/reference.py)
     # jobs=1: one run at a time on the whole machine, so that the time columns of results/
     # are each method's own (the main job's jobs=auto runs cases side by side)
     s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "reference.cases=per_pose",

@@ -18,7 +18,7 @@ set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
     {"status": "done" | "partial" | "failed" | "killed" | "running", "error": "...", "overrides": [...],
      "job_num": 3, "wall_s": 12.3, "n_cases": 4, "n_errors": 0, ...}
 
-Every job of a sweep ends in the table with one outcome (:data:`eval.sweep_files.OUTCOMES`):
+Every job of a sweep ends in the table with one outcome (:data:`eval.sweeps.files.OUTCOMES`):
 ``done``; ``partial``: some (case, method) rows failed; ``failed``: the job raised (bad
 parameter, crash inside a method, ...) or every row failed (e.g. ``sshade.n_low=2``:
 "n_low must be at least 4"); ``killed``: the job started but died without a result (out
@@ -26,7 +26,7 @@ of memory, time limit, node lost, ``scancel``, ``kill -9``): its ``status.json``
 says ``running`` after the sweep ended, or the SLURM launcher saw it leave the queue
 without result; ``missing``: a point of the grid that never started (no folder).
 ``running`` only appears while the sweep runs. The job function never raises, and the
-SLURM launcher (:mod:`eval.sweep_launcher`, ``hydra/launcher=slurm``) waits on the jobs
+SLURM launcher (:mod:`eval.sweeps.launcher`, ``hydra/launcher=slurm``) waits on the jobs
 itself without ever waiting on a dead one, with or without ``sacct``; so the sweep
 command exits with 0 once every job has an outcome (unless Hydra itself fails).
 
@@ -35,13 +35,13 @@ Before any job starts, :class:`AggregateSweepCallback` (added automatically by
 ``sweep.json`` into the sweep folder: the command, its folder and the grid (job number
 -> overrides), so that a point without folder is listed as missing and
 :func:`resume_sweep` can run the same command again for the jobs without result. At the
-end of the multirun it calls :func:`eval.sweep_table.aggregate_sweep`, which writes
+end of the multirun it calls :func:`eval.sweeps.table.aggregate_sweep`, which writes
 ``sweep_table.csv`` (one row per job: its
 overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
 every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
 ``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.
 The folder's files (``status.json``, ``sweep.json``, the job folders) are read and
-written by :mod:`eval.sweep_files`, the table is built by :mod:`eval.sweep_table`.
+written by :mod:`eval.sweeps.files`, the table is built by :mod:`eval.sweeps.table`.
 
 Why not ``python -m eval -m``: the plain evaluator exits with status 2 on a
 configuration error (:func:`eval.app._main`), which stops a multirun at that job; this
@@ -57,14 +57,10 @@ import time
 import traceback
 from pathlib import Path
 
-from sshade.clirun import ArgumentParser, hydra_main, run_command
-from sshade.confdir import config_dir
-from sshade.errors import SShaDeError
-
-from . import app
-from .outdir import OutputDirError, claim_output_dir, claimed_run, overwrite_flag
-from .paths import abs_path
-from .sweep_files import (
+from eval import app
+from eval.run.outdir import OutputDirError, claim_output_dir, claimed_run, overwrite_flag
+from eval.run.paths import abs_path
+from eval.sweeps.files import (
     KEEP,
     MANIFEST,
     RESUME_ENV,
@@ -75,7 +71,10 @@ from .sweep_files import (
     write_manifest,
     write_status,
 )
-from .sweep_table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
+from eval.sweeps.table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
+from sshade.clirun import ArgumentParser, hydra_main, run_command
+from sshade.confdir import config_dir
+from sshade.errors import SShaDeError
 
 __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
            "claim_sweep_dir", "release_sweep_dir", "resume_sweep", "main"]
@@ -224,7 +223,7 @@ def sweep_job(cfg) -> dict:
     t0 = time.perf_counter()
     claimed = False
     try:
-        with claimed_run(cfg):  # the job's folder (eval.outdir): new, or this job's earlier attempt
+        with claimed_run(cfg):  # the job's folder (eval.run.outdir): new, or this job's earlier attempt
             claimed = True
             write_status(job_dir, status)
             res = app.run_experiment(cfg)
@@ -256,7 +255,7 @@ _sweep_claim: list = []  # the claim of this process's sweep folder (released wh
 
 def claim_sweep_dir(config) -> None:
     """Claim ``hydra.sweep.dir`` for this sweep before any job starts
-    (:func:`eval.outdir.claim_output_dir`, kind ``sweep``): a new or empty folder, or an
+    (:func:`eval.run.outdir.claim_output_dir`, kind ``sweep``): a new or empty folder, or an
     earlier sweep's folder (its files are removed first; a resume, :data:`RESUME_ENV`,
     keeps them); any other folder is refused unless ``overwrite=true``; the default dated
     folder gets a suffix when the name exists. On refusal: one ``error:`` line, exit 2.

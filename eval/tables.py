@@ -2,7 +2,7 @@
 
 Input: a pandas DataFrame with one row per (case, method) as produced by
 :mod:`eval.app`: identifiers (``case``, ``subject``, ``pose``, ``method``), sizes
-(``n_vertices``, ``n_handles``, ``n_static``), the metrics of :mod:`eval.metrics`
+(``n_vertices``, ``n_handles``, ``n_static``), the metrics of :mod:`eval.metrics.measures`
 (``volume_err_pct``, ``area_err_pct``, ``edge_err_pct``, ``angle_err_deg``,
 ``angle_err_rel_pct``, ``handle_err_pct``, ``gt_vertex_mean_pct``,
 ``gt_vertex_max_pct``, ``hausdorff``, ``chamfer``), ``time_s`` (seconds of the
@@ -48,12 +48,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from eval.present.table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
+from eval.run.outdir import refuse_results
 from sshade.clirun import ArgumentParser, run_command
 from sshade.mesh.io import atomic_write
 from sshade.registry import method_meta, table_order
-
-from .outdir import refuse_results
-from .table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
     import pandas as pd

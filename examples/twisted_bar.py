@@ -55,9 +55,9 @@ if __name__ == "__main__":
     ap.add_argument("--angle", type=float, default=135.0)
     ap.add_argument("--h", type=float, default=0.06, help="edge length (0.06: about 5,000 vertices)")
     args = ap.parse_args()
-    from eval.outdir import claim_output_dir
+    from eval.run.outdir import claim_output_dir
     from sshade.errors import SShaDeError
-    try:  # a new, empty or earlier twisted-bar folder (eval/outdir.py), never a user's folder
+    try:  # a new, empty or earlier twisted-bar folder (eval/run/outdir.py), never a user's folder
         claim = claim_output_dir(args.out, "twisted-bar", option="", name="OUT")
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)

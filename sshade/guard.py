@@ -47,7 +47,7 @@ __all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "handle_
            "HANDLE_ERROR_MAX_PCT"]
 
 #: Default largest handle error (% of the rest bounding-box diagonal, the
-#: ``handle_err_pct`` of :func:`eval.metrics.deformation_metrics`) of a successful run.
+#: ``handle_err_pct`` of :func:`eval.metrics.measures.deformation_metrics`) of a successful run.
 HANDLE_ERROR_MAX_PCT = 1.0
 
 
@@ -155,7 +155,7 @@ def handle_error(Vd, handles, targets, diag: float) -> float:
 
     ``100 max_i ||Vd[handles[i]] - targets[i]|| / diag``. Not a paper equation: it
     checks that the handle constraints of §4.1 are met (:func:`handles_not_reached`;
-    the evaluator's ``handle_err_pct``, :func:`eval.metrics.deformation_metrics`).
+    the evaluator's ``handle_err_pct``, :func:`eval.metrics.measures.deformation_metrics`).
 
     Parameters
     ----------

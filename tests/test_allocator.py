@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from eval.memory import tree_pss_mb
+from eval.run.memory import tree_pss_mb
 from sshade.allocator import release_freed
 
 linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc and PSS from /proc")

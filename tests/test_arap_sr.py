@@ -12,7 +12,14 @@ from scipy.spatial.transform import Rotation
 from baselines import ARAPSR
 from baselines.arap_sr import arap_sr_deform
 from baselines.arap_sr_solver import SRProblem, solve_arap_sr
-from eval.reference import energy_operators, method_energy, reference_metrics, reference_solution, sr_alpha, sr_energy
+from eval.metrics.reference import (
+    energy_operators,
+    method_energy,
+    reference_metrics,
+    reference_solution,
+    sr_alpha,
+    sr_energy,
+)
 from sshade.arap import DEEP_CRITERION, DEFAULT_CRITERION, Criterion, arap_deform, solve_arap
 from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
 from sshade.errors import SShaDeError

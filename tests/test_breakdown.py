@@ -1,12 +1,12 @@
 """Breakdowns per target pose and per subject, the paired SShaDe-Elastic
-comparison and the distribution figure (eval/breakdown.py), on synthetic cases.csv rows."""
+comparison and the distribution figure (eval/present/breakdown.py), on synthetic cases.csv rows."""
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from eval.breakdown import breakdown_markdown, group_breakdown, paired_comparison, write_breakdown
+from eval.present.breakdown import breakdown_markdown, group_breakdown, paired_comparison, write_breakdown
 
 
 def _rows(seed=0) -> pd.DataFrame:

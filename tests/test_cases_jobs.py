@@ -1,7 +1,7 @@
 """The evaluator's runs side by side (``jobs``, eval/experiments/cases_jobs.py):
 the same rows as one process, every pair run once and stored, the workers' log lines in
 eval.log, the rule of ``jobs=auto``, a bad value refused before any work, the plan's
-wall time on several workers (eval/plan.py)."""
+wall time on several workers (eval/run/plan.py)."""
 from __future__ import annotations
 
 import json
@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 
 from eval.experiments.cases_jobs import AUTO_MIN_S, describe, job_count
-from eval.plan import make_plan, render_plan
-from eval.progress import CostModel
+from eval.run.plan import make_plan, render_plan
+from eval.run.progress import CostModel
 from sshade.errors import SShaDeError
 from sshade.jobs import available_cores, thread_limit
 

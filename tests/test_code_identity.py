@@ -1,4 +1,4 @@
-"""eval/code_identity.py: a stored row is reused only by the code that computed it.
+"""eval/run/code_identity.py: a stored row is reused only by the code that computed it.
 
 A resumed run recomputes every pair a plug-in's changed file or a change to the modules
 a row's code imports (a commit between two halves of a run) would compute differently,
@@ -15,7 +15,7 @@ import sys
 
 import pandas as pd
 
-from eval.code_identity import ROW_HARNESS, code_identity, describe_change, import_closure, sources_digest
+from eval.run.code_identity import ROW_HARNESS, code_identity, describe_change, import_closure, sources_digest
 
 from .conftest import ROOT, subprocess_env
 from .store_methods import kill_at_call
@@ -81,9 +81,9 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     arap = import_closure(("baselines.arap",))
     assert {"sshade.arap.solver", "sshade.mesh.validate", "baselines"} <= set(arap)
     harness = import_closure(ROW_HARNESS)
-    assert {"eval.metrics", "eval.reference", "sshade.guard", "eval.store"} <= set(harness)
-    presentation = {"eval.tables", "eval.report", "eval.meshview", "eval.plan", "defaust.build", "defaust.export",
-                    "eval.reproduce", "eval.app"}
+    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard", "eval.run.store"} <= set(harness)
+    presentation = {"eval.tables", "eval.report", "eval.present.meshview", "eval.run.plan", "defaust.build",
+                    "defaust.export", "eval.reproduce", "eval.app"}
     assert not presentation & (set(arap) | set(harness))
     src = _tree_copy(tmp_path / "src")
     root = str(src)
@@ -96,7 +96,7 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     assert code_identity(ARAP(), root=root) == a0 and code_identity(ImplicitARAP(), root=root) == i0
     _touch(src / "baselines" / "implicit_arap" / "field.py")  # one method's own module: its rows only
     assert code_identity(ARAP(), root=root) == a0 and code_identity(ImplicitARAP(), root=root) != i0
-    _touch(src / "eval" / "metrics.py")  # a metric: every row
+    _touch(src / "eval" / "metrics" / "measures.py")  # a metric: every row
     assert code_identity(ARAP(), root=root)["sources"] != a0["sources"]
 
 
@@ -137,7 +137,7 @@ def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
         shutil.copytree(ROOT / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     d0 = sources_digest(root=str(src))
     assert d0 == sources_digest()  # the same bytes under another folder: the same code
-    _touch(src / "eval" / "metrics.py")
+    _touch(src / "eval" / "metrics" / "measures.py")
     sources_digest.cache_clear()
     assert sources_digest(root=str(src)) != d0
     assert describe_change(None, ident).startswith("a record without")
@@ -183,7 +183,7 @@ def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, 
               popen=True)
     kill_at_call(p, counter, 3)
     assert sorted(x.name for x in (out / "runs").rglob("*.json")) == ["A.json", "B.json"]  # the first case
-    with open(tree / "eval" / "metrics.py", "a") as fh:
+    with open(tree / "eval" / "metrics" / "measures.py", "a") as fh:
         fh.write("\n_A_COMMIT_BETWEEN_THE_TWO_HALVES = 1\n")
     counter.unlink()
     r = _eval(tree, out, methods, "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})

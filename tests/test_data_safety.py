@@ -120,7 +120,7 @@ def test_build_policy(tmp_path, monkeypatch):
     from omegaconf import OmegaConf
 
     from eval.datasets.defaust import build_wanted as _build_wanted
-    from eval.paths import abs_path
+    from eval.run.paths import abs_path
     monkeypatch.chdir(tmp_path)
     default, other = abs_path("data/defaust"), abs_path("elsewhere")
     ds = OmegaConf.create({"build": {"enabled": "auto"}})

@@ -1,7 +1,7 @@
-"""run.json's `departures` (eval/runinfo.py): the switches at non-paper values."""
+"""run.json's `departures` (eval/run/runinfo.py): the switches at non-paper values."""
 from __future__ import annotations
 
-from eval.runinfo import collect_runinfo, departures
+from eval.run.runinfo import collect_runinfo, departures
 
 PAPER = {"sshade": {"gradient": "raw", "warm_start": False}, "arap": {"protocol": "paper"},
          "dataset": {"name": "faust", "protocol": "paper", "n_targets": 4}}
@@ -42,7 +42,7 @@ def test_recorded_in_runinfo():
 
 def test_plugin_methods_are_skipped():
     """A plug-in in ``methods`` is a mapping (no ``method.<name>`` section): no departure, no crash."""
-    from eval.runinfo import departures
+    from eval.run.runinfo import departures
     cfg = {"methods": ["SShaDe", {"_target_": "x.Y", "name": "Mine"}],
            "method": {"SShaDe": {"gradient": "raw", "warm_start": False, "protocol": "paper"}}}
     assert departures(cfg) == []

@@ -1,4 +1,4 @@
-"""Headless rendering (eval/render.py), case figures (eval/figures.py) and the
+"""Headless rendering (eval/present/render.py), case figures (eval/present/figures.py) and the
 evaluator's optional figure hook (``figures.enabled``)."""
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import pytest
 pytest.importorskip("matplotlib")
 import matplotlib.image as mimage  # noqa: E402
 
-from eval.figures import (  # noqa: E402
+from eval.metrics.measures import edge_length_error  # noqa: E402
+from eval.present.figures import (  # noqa: E402
     case_figure,
     face_edge_error,
     figures_options,
@@ -18,8 +19,7 @@ from eval.figures import (  # noqa: E402
     tosca_figure,
     vertex_error_pct,
 )
-from eval.metrics import edge_length_error  # noqa: E402
-from eval.render import figure_row, png_size, render_mesh, save_png  # noqa: E402
+from eval.present.render import figure_row, png_size, render_mesh, save_png  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

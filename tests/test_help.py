@@ -24,7 +24,7 @@ HELP = {
     "-m eval.tables": ["usage: python -m eval.tables", "RUN_DIR"],
     "-m eval.report": ["usage: python -m eval.report", "--index", "--screenshot"],
     "-m eval.reproduce": ["usage: python -m eval.reproduce", "--dry-run"],
-    "-m eval.anny_figures": ["usage: python -m eval.anny_figures", "OUT_DIR", "outputs/anny_figures"],
+    "-m eval.present.anny_figures": ["usage: python -m eval.present.anny_figures", "OUT_DIR", "outputs/anny_figures"],
     "-m defaust": ["usage: python -m defaust out=DIR", "Build the DeFAUST dataset", "== Configuration groups ==",
                    "preset: ci, full", "source: anny"],
     "-m sshade": ["usage: python -m sshade deform MESH -o OUT"],

@@ -1,5 +1,5 @@
 """Non-rigid isometric deformation transfer (paper §4.2): sshade.isometric and the TOSCA
-experiment (eval/isometric.py)."""
+experiment (eval/experiments/tosca.py)."""
 from __future__ import annotations
 
 import math
@@ -102,7 +102,7 @@ def test_rigid_align(sphere):
 
 def test_tosca_cat_pair(cat):
     """cat0 -> cat1 (paper §4.2 protocol, smaller settings): close to the true pose."""
-    from eval.metrics import chamfer, ground_truth_metrics, hausdorff
+    from eval.metrics.measures import chamfer, ground_truth_metrics, hausdorff
     V0, F0, V1 = cat
     Vp, info = isometric_transfer(V0, F0, V1, n_low=3000, n_samplings=2, seed=0, workers=1)
     m = ground_truth_metrics(Vp, F0, V1)
@@ -127,20 +127,20 @@ def _cfg(root, out_dir, **over):
 def test_run_tosca_writes_tables(tmp_path):
     from eval.experiments.tosca import PAPER_TOSCA, run_tosca
     data_file("tosca/centaur0.off"), data_file("tosca/centaur1.off"), data_file("tosca/wolf0.off")
-    from eval.render import png_size
+    from eval.present.render import png_size
     out = tmp_path / "out"
     cfg = _cfg(SHARED_DATA / "tosca", out)
     cfg.figures = {"enabled": True, "max_cases": 4}
     res = run_tosca(cfg)
     for f in ("cases.csv", "table.csv", "table.md", "run.json"):
         assert (out / f).is_file(), f
-    # one figure per class that ran: rest, true pose, SShaDe + colour bar (eval.figures.tosca_figure)
+    # one figure per class that ran: rest, true pose, SShaDe + colour bar (eval.present.figures.tosca_figure)
     figs = sorted((out / "figures").glob("*.png"))
     assert [f.name for f in figs] == ["centaur1.png"]
     assert figs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png_size(figs[0]) == (3 * 320 + 90, 400 + 56)
     assert not list(out.glob(".*.tmp"))
     # one 3D view per class: rest, true pose, SShaDe coloured by its distance to the true pose
-    from eval.meshview import read_view
+    from eval.present.meshview import read_view
     view = read_view(out / "report" / "centaur1.js")
     assert [m["label"] for m in view["meshes"]] == ["rest", "target (ground truth)", "SShaDe"]
     assert view["meshes"][2]["gt"] is not None and view["meshes"][2]["kind"] == "result"

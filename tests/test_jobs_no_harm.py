@@ -23,7 +23,7 @@ from contextlib import contextmanager
 
 import pandas as pd
 
-from eval.outdir import MARKER
+from eval.run.outdir import MARKER
 
 from .conftest import ROOT, subprocess_env
 

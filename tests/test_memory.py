@@ -1,4 +1,4 @@
-"""Peak memory of the process tree (eval/memory.py)."""
+"""Peak memory of the process tree (eval/run/memory.py)."""
 from __future__ import annotations
 
 import sys
@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from eval.memory import PeakMemory, tree_pss_mb
+from eval.run.memory import PeakMemory, tree_pss_mb
 
 linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PSS from /proc")
 

@@ -102,7 +102,7 @@ def test_defaust_dropped_handles_one_summary_line(caplog, tmp_path):
 
 def test_reference_status_words():
     """The log says what ``stalled`` means; the machine-readable status is unchanged."""
-    from eval.reference import status_words
+    from eval.metrics.reference import status_words
     assert status_words("stalled") == "reached float64 precision"
     assert status_words("converged") == "converged"
     assert status_words("max_iter") == "stopped at max_iter"

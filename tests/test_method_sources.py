@@ -10,7 +10,7 @@ import subprocess
 
 import pytest
 
-from eval.runinfo import method_sources
+from eval.run.runinfo import method_sources
 
 _PLUGIN = '''
 class Pinned:

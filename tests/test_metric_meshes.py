@@ -1,4 +1,4 @@
-"""The metrics' per-mesh state (eval/metric_meshes.py): kept rest and ground-truth
+"""The metrics' per-mesh state (eval/metrics/meshes.py): kept rest and ground-truth
 meshes give the numbers of the direct computation, bit for bit, and those of the code they
 replaced (reimplemented here: np.unique over edge rows, igl.point_mesh_squared_distance,
 hausdorff and chamfer each from their own two one-way distances)."""
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from eval import metric_meshes as MM
-from eval import metrics as M
 from eval.experiments.pair import run_pair
+from eval.metrics import measures as M
+from eval.metrics import meshes as MM
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 from tests.conftest import data_file

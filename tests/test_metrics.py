@@ -1,11 +1,11 @@
-"""Deformation metrics (eval/metrics.py) against answers known by hand."""
+"""Deformation metrics (eval/metrics/measures.py) against answers known by hand."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import trimesh
 
-from eval import metrics as M
+from eval.metrics import measures as M
 from sshade.errors import SShaDeError
 from tests.conftest import data_file
 

@@ -1,5 +1,5 @@
 """No data changed or lost: a command writes only into a folder that is new,
-empty or its own earlier output of the same kind (eval/outdir.py); ``results/`` only
+empty or its own earlier output of the same kind (eval/run/outdir.py); ``results/`` only
 under ``python -m eval.reproduce``; two runs never share a folder."""
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from eval import outdir
-from eval.outdir import MARKER, OutputDirError, claim_output_dir, claimed_run
+from eval.run import outdir
+from eval.run.outdir import MARKER, OutputDirError, claim_output_dir, claimed_run
 from tests.conftest import ROOT, subprocess_env
 
 EVAL = [sys.executable, "-m", "eval", "experiment=ci", "dataset.root=../shared/data/faust_reg",
@@ -146,7 +146,7 @@ def test_two_runs_never_share_a_folder(tmp_path):
 
 def test_lock_dies_with_its_process(tmp_path):
     """A run killed with SIGKILL leaves a folder 'running' but unlocked: the next run replaces it."""
-    code = (f"import time; from eval.outdir import claim_output_dir; c = claim_output_dir({str(tmp_path / 'r')!r}, "
+    code = (f"import time; from eval.run.outdir import claim_output_dir; c = claim_output_dir({str(tmp_path / 'r')!r}, "
             "'eval'); open(c.path / 'cases.csv', 'w').write('x'); print('claimed', flush=True); time.sleep(60)")
     p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=subprocess_env(), stdout=subprocess.PIPE,
                          text=True)
@@ -220,7 +220,7 @@ def test_a_claim_as_a_with_block_ends_done_or_failed_and_releases_its_lock(tmp_p
 
 
 def test_anny_figures_refuses_results(capsys):
-    from eval.anny_figures import main
+    from eval.present.anny_figures import main
     t = time.time()
     assert main([str(ROOT / "results" / "defaust" / "figures")]) == 2
     assert "eval.reproduce" in capsys.readouterr().err and time.time() - t < 5

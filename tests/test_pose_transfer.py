@@ -84,7 +84,7 @@ def _cfg(root, out_dir, **over):
 
 def test_run_pose_transfer_writes_tables(tmp_path, faust):
     from eval.experiments.pose_transfer import run_pose_transfer
-    from eval.render import png_size
+    from eval.present.render import png_size
     out = tmp_path / "out"
     cfg = _cfg(SHARED_DATA / "faust_reg", out)
     cfg.figures = {"enabled": True, "max_cases": 1}

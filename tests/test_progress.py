@@ -1,11 +1,11 @@
-"""The evaluator's cost model (eval/progress.py): priors from the method files, measured runs."""
+"""The evaluator's cost model (eval/run/progress.py): priors from the method files, measured runs."""
 from __future__ import annotations
 
 from types import SimpleNamespace
 
 import pytest
 
-from eval.progress import CostModel, default_cost_model
+from eval.run.progress import CostModel, default_cost_model
 from sshade.registry import method_meta
 
 

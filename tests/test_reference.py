@@ -1,5 +1,5 @@
-"""Reference solutions (eval/reference.py), the two ARAP protocols, SShaDe + refine and
-the time-to-accuracy experiment (eval/convergence.py)."""
+"""Reference solutions (eval/metrics/reference.py), the two ARAP protocols, SShaDe + refine and
+the time-to-accuracy experiment (eval/experiments/convergence.py)."""
 from __future__ import annotations
 
 import json
@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from eval.reference import method_energy, reference_metrics, reference_solution
+from eval.metrics.reference import method_energy, reference_metrics, reference_solution
 from sshade.arap import arap_deform
 from sshade.arap.cases import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
@@ -115,7 +115,7 @@ def test_arap_sr_reference_continues_the_methods_path(plane, tmp_path):
     0.05% of the diagonal of it, and its energy gap read at the method's own rotations
     is tiny, an upper bound of the gap at the optimal rotations."""
     from baselines.arap_sr import ARAPSR
-    from eval.reference import sr_energy
+    from eval.metrics.reference import sr_energy
 
     V, F, h, T = plane
     m = ARAPSR(alpha=0.01)
@@ -139,7 +139,7 @@ def test_arap_sr_reference_continues_the_methods_path(plane, tmp_path):
 def test_reference_key_changes_with_the_solver_code(monkeypatch):
     """A cached reference computed by other solver code (sshade/arap, baselines) or other
     numerical libraries is not reused: both are part of its key."""
-    import eval.reference as reference
+    import eval.metrics.reference as reference
 
     V = np.eye(3)
     F = np.array([[0, 1, 2]])

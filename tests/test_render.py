@@ -1,4 +1,4 @@
-"""eval/render.py: PNG files (text chunks, size) beside the images they hold."""
+"""eval/present/render.py: PNG files (text chunks, size) beside the images they hold."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,7 +10,7 @@ from sshade.errors import SShaDeError
 def test_png_text_round_trips_and_pillow_reads_it(tmp_path):
     from PIL import Image
 
-    from eval.render import png_size, png_text, save_png, set_png_text
+    from eval.present.render import png_size, png_text, save_png, set_png_text
     p = save_png(tmp_path / "a.png", np.full((3, 4, 3), 7, np.uint8))
     set_png_text(p, {"k": "one"})
     set_png_text(p, {"k": "two", "other": "x"})  # replaces k, adds other

@@ -1,4 +1,4 @@
-"""The browser report (eval/report.py, eval/meshview.py): index.html of a tiny evaluator
+"""The browser report (eval/report.py, eval/present/meshview.py): index.html of a tiny evaluator
 run (2 FAUST cases, a toy plug-in method and one that always fails), its tables parsed
 with html.parser, the CLI's no-harm rules, the display decimation; and, when a
 ``chromium`` is on PATH, the page in headless Chromium (SwiftShader WebGL): no JS error,
@@ -14,9 +14,16 @@ import numpy as np
 import pytest
 
 from eval.app import CONF_DIR, run_experiment
-from eval.meshview import case_view, cluster_decimate, cluster_means, cluster_positions, read_view, vertex_edge_error
-from eval.outdir import REPRODUCE_ENV, read_marker, results_dir
+from eval.present.meshview import (
+    case_view,
+    cluster_decimate,
+    cluster_means,
+    cluster_positions,
+    read_view,
+    vertex_edge_error,
+)
 from eval.report import PAGE, chromium, find_chromium, main, screenshot, write_index, write_report
+from eval.run.outdir import REPRODUCE_ENV, read_marker, results_dir
 
 METHODS = ["Mine", "NaNOutput"]
 
@@ -255,13 +262,13 @@ def _labels(V, F, max_faces):
 
 
 def test_vertex_edge_error_averages_to_the_table_metric_on_a_regular_mesh():
-    from eval.metrics import edge_length_error
+    from eval.metrics.measures import edge_length_error
     V, F = _sphere(3)
     X = V * np.array([1.2, 0.9, 1.0])
     per_vertex = vertex_edge_error(V, X, F)
     # every edge counted at its two ends: the valence-weighted mean of the per-vertex
     # values is the mean over edges, which is the table's EL
-    from eval.metric_meshes import unique_edges
+    from eval.metrics.meshes import unique_edges
     k = np.bincount(unique_edges(F, len(V)).ravel(), minlength=len(V))
     assert np.sum(per_vertex * k) / np.sum(k) == pytest.approx(edge_length_error(V, X, F), rel=1e-12)
     assert np.array_equal(vertex_edge_error(V, V, F), np.zeros(len(V)))
@@ -272,7 +279,7 @@ def test_vertex_edge_error_averages_to_the_table_metric_on_a_regular_mesh():
 def test_report_options_are_checked_before_any_work(bad):
     from hydra import compose, initialize_config_dir
 
-    from eval.config_check import check_config
+    from eval.run.config_check import check_config
     from sshade.errors import SShaDeError
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         good = compose(config_name="config", overrides=["dataset=faust", "dataset.root=x"])
@@ -412,8 +419,8 @@ def test_a_resumed_run_keeps_the_figure_stamped_with_its_restored_records(tmp_pa
     """Every pair restored without its mesh: the earlier figure, stamped with the records
     it shows, stays this run's figure, byte for byte; a figure whose stamp names other
     records (here: edited by hand) is removed, as one that cannot be redrawn."""
-    from eval.figures import FIGURE_RECORDS
-    from eval.render import png_text, set_png_text
+    from eval.present.figures import FIGURE_RECORDS
+    from eval.present.render import png_text, set_png_text
     out = tmp_path / "run"
     opts = ("dataset.limit=1", "figures.enabled=true", "figures.max_cases=1", f"methods=[{_MINE}]")
     p, _ = _faust_run(faust_root, out, *opts)
@@ -478,7 +485,7 @@ def test_links_are_relative_paths_inside_the_run_folder(run_dir, tmp_path):
     (tmp_path / "javascript:alert(3)" / "run.json").write_text("{}")
     _assert_inside(write_index(tmp_path), _links(tmp_path / PAGE))
     # what the page's links go through: no path that leaves the folder is ever a link target
-    from eval.report_scope import link_target
+    from eval.present.report_scope import link_target
     for rel in ("../x", "a/../../x", "/etc/passwd", "//host/x", "a\\..\\x", "a\nb", "", "outside/x"):
         assert link_target(d, rel) is None, rel
     assert link_target(d, "figures/s0 p1.png") == "figures/s0%20p1.png"

@@ -1,9 +1,9 @@
-"""eval/runinfo.py: what a run records of the code that made it."""
+"""eval/run/runinfo.py: what a run records of the code that made it."""
 from __future__ import annotations
 
 import subprocess
 
-from eval.runinfo import git_info
+from eval.run.runinfo import git_info
 
 
 def _git(repo, *args):

@@ -86,7 +86,7 @@ def test_app_runs_experiment_shapes(classic, tmp_path):
     from hydra import compose, initialize_config_dir
 
     from eval.app import CONF_DIR, run
-    from eval.render import png_size
+    from eval.present.render import png_size
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=[
             "experiment=shapes", f"dataset.root={classic}", "dataset.files=[bunny.off]", "dataset.vertex_range=null",
@@ -118,7 +118,7 @@ COLLIDING = ["a b.off", "a_b.off", "bunny.off", "bunny.obj", "solo.off"]
 
 
 def test_colliding_case_names_become_distinct_file_names(tmp_path):
-    from eval.store import safe_name
+    from eval.run.store import safe_name
     cases = load_cases("shapes", _write_shapes(tmp_path, COLLIDING), files=COLLIDING, n_per_group=3,
                        region_radius=0.3)
     names = [c.name for c in cases]
@@ -164,7 +164,7 @@ def test_colliding_cases_keep_their_own_results_and_views(tmp_path):
     from hydra import compose, initialize_config_dir
 
     from eval.app import CONF_DIR, run_experiment
-    from eval.meshview import read_view
+    from eval.present.meshview import read_view
     root = tmp_path / "shapes"
     root.mkdir()
     _write_shapes(root, COLLIDING)

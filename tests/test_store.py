@@ -1,6 +1,6 @@
-"""The evaluator's per-(case, method) result store (eval/store.py), resume after
-a kill -9, a method added later, the baseline subset rule (eval/subset.py) and the
-cost-weighted progress estimate (eval/progress.py)."""
+"""The evaluator's per-(case, method) result store (eval/run/store.py), resume after
+a kill -9, a method added later, the baseline subset rule (eval/run/subset.py) and the
+cost-weighted progress estimate (eval/run/progress.py)."""
 from __future__ import annotations
 
 import json
@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 
 from eval.reproduce import main as reproduce_main
-from eval.store import ResultStore, case_identity, pair_key
-from eval.subset import baseline_selection, check_baseline_cases
+from eval.run.store import ResultStore, case_identity, pair_key
+from eval.run.subset import baseline_selection, check_baseline_cases
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env

@@ -13,8 +13,8 @@ import pytest
 
 from eval.app import CONF_DIR
 from eval.sweep import main, sweep_job
-from eval.sweep_files import STATUS_FILE, read_status
-from eval.sweep_table import aggregate_sweep
+from eval.sweeps.files import STATUS_FILE, read_status
+from eval.sweeps.table import aggregate_sweep
 
 from .conftest import subprocess_env  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""Sweeps that end with an outcome for every job (eval/sweep_launcher.py, eval/sweep.py):
+"""Sweeps that end with an outcome for every job (eval/sweeps/launcher.py, eval/sweep.py):
 SLURM state queries with and without accounting, the wait loop (killed jobs, never
 hanging), the SLURM launcher's launch with fake jobs, missing and killed rows of the
 table, and resume. The real one-node SLURM run is .ci/slurm_sweep.sh."""
@@ -14,8 +14,8 @@ import pandas as pd
 import pytest
 
 import eval.sweep as sw
-import eval.sweep_launcher as sl
-from eval.sweep_files import (
+import eval.sweeps.launcher as sl
+from eval.sweeps.files import (
     MANIFEST,
     RESUME_ENV,
     STATUS_FILE,
@@ -25,8 +25,8 @@ from eval.sweep_files import (
     write_manifest,
     write_status,
 )
-from eval.sweep_launcher import ACTIVE_STATES, SlurmQueryError, expand_job_ids, slurm_states, wait_for_jobs
-from eval.sweep_table import aggregate_sweep
+from eval.sweeps.launcher import ACTIVE_STATES, SlurmQueryError, expand_job_ids, slurm_states, wait_for_jobs
+from eval.sweeps.table import aggregate_sweep
 
 from .conftest import subprocess_env  # noqa: E402
 

@@ -1,6 +1,6 @@
 """Fair method comparison in the evaluator's tables (eval/tables.py: every method on the
 same cases, the second "all cases" table, the LaTeX case count, failures) and the case
-figures' "not run" panels (eval/figures.py). Synthetic frames; the figure tests use a
+figures' "not run" panels (eval/present/figures.py). Synthetic frames; the figure tests use a
 small sphere."""
 from __future__ import annotations
 
@@ -209,8 +209,8 @@ def test_reference_subset_of_the_all_cases_table_is_stated(tmp_path):
 
 
 def test_sweep_reads_the_main_table(tmp_path):
-    from eval.sweep_files import STATUS_FILE
-    from eval.sweep_table import aggregate_sweep
+    from eval.sweeps.files import STATUS_FILE
+    from eval.sweeps.table import aggregate_sweep
     job = tmp_path / "sweep" / "0"
     (job / ".hydra").mkdir(parents=True)
     (job / ".hydra" / "overrides.yaml").write_text("- sshade.n_low=500\n")
@@ -247,14 +247,14 @@ def sphere():
 
 
 def _results(V):
-    from eval.figures import NOT_RUN
+    from eval.present.figures import NOT_RUN
     Vd = V.copy()
     Vd[:, 1] *= 1.1
     return {"ARAP": None, "Elastic": NOT_RUN, "SShaDe": Vd}
 
 
 def test_case_panels_label_not_run_and_failed(sphere):
-    from eval.figures import NOT_RUN, case_panels
+    from eval.present.figures import NOT_RUN, case_panels
     V, F = sphere
     panels = case_panels(V, F, _results(V), [0, 1], [True, False])
     titles = [p["title"] for p in panels]
@@ -266,8 +266,8 @@ def test_case_panels_label_not_run_and_failed(sphere):
 
 def test_case_figure_with_a_not_run_method_writes_a_png(sphere, tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
-    import eval.figures as figs
-    from eval.render import png_size
+    import eval.present.figures as figs
+    from eval.present.render import png_size
     V, F = sphere
     seen = []
     real = figs.mesh_row
@@ -283,7 +283,7 @@ def test_write_case_figure_marks_not_run_methods(tmp_path, monkeypatch):
     """eval.app passes the methods skipped by dataset.baseline_cases as ``not_run``."""
     import types
 
-    import eval.figures as figs
+    import eval.present.figures as figs
     got = {}
     monkeypatch.setattr(figs, "case_figure", lambda V, F, results, *a, **kw: got.update(results) or "ok")
     case = types.SimpleNamespace(name="c7", V=None, F=None, handles=None, static=None)

@@ -23,13 +23,12 @@ import hashlib
 import itertools
 from pathlib import Path
 
+from eval.datasets.case import DeformationCase
+from eval.datasets.faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
+from eval.datasets.registry import Dataset, datasets, find_dataset, register_dataset
+from eval.run.paths import abs_path
+from eval.run.store import safe_name
 from sshade.errors import SShaDeError
-
-from ..paths import abs_path
-from ..store import safe_name
-from .case import DeformationCase
-from .faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
-from .registry import Dataset, datasets, find_dataset, register_dataset
 
 __all__ = ["Case", "DeformationCase", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases",
            "dataset_names", "unique_case_names", "dataset_root", "dataset_outlook", "dataset_options", "Dataset",
@@ -70,7 +69,7 @@ def _source_of(case, index: int) -> str:
 
 def unique_case_names(cases: list) -> list:
     """``cases`` (in place, and returned) with collision-free names: every case whose
-    file name (:func:`eval.store.safe_name`, compared without case, as on a
+    file name (:func:`eval.run.store.safe_name`, compared without case, as on a
     case-insensitive file system) is shared with another case gets ``-`` and 8 hex
     digits of the SHA-256 of its source path appended (and its position in ``cases``
     when that name is taken too, e.g. two cases of one source; the prefix cut so that

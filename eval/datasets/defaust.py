@@ -14,7 +14,7 @@ Example::
 When ``dataset.root`` is the default folder :data:`DEFAULT_DEFAUST_ROOT` (or with
 ``dataset.build.enabled=true``) the evaluator first builds, finishes or verifies the
 build there (:func:`prepare_root`); any other folder is only read. What that build is
-about to do, for the evaluator's plan (:mod:`eval.plan`), comes from :func:`build_outlook`
+about to do, for the evaluator's plan (:mod:`eval.run.plan`), comes from :func:`build_outlook`
 (no work); while it runs, each subject built logs one progress line with the elapsed time
 and an estimate of the time left (:class:`BuildProgress`).
 """
@@ -31,14 +31,13 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.dataset import Case, load, read_manifest
 from defaust.manifest import check_out_folder
+from eval.datasets.case import DeformationCase
+from eval.datasets.registry import register_dataset
+from eval.run.paths import abs_path
+from eval.run.plan import BUILD_S_PER_SUBJECT, duration_words
 from sshade.checks import config_int_list
 from sshade.errors import SShaDeError
 from sshade.jobs import pool_size
-
-from ..paths import abs_path
-from ..plan import BUILD_S_PER_SUBJECT, duration_words
-from .case import DeformationCase
-from .registry import register_dataset
 
 __all__ = ["DefaustCase", "load_defaust", "summarise_dropped",
            "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root", "build_outlook", "BuildProgress"]
@@ -201,7 +200,7 @@ def build_outlook(root: Path, ds) -> dict | None:
     ``subjects`` (int, to build), ``complete`` (int, already built), ``workers`` (the
     processes the builder will use: :func:`sshade.jobs.pool_size` of its ``workers``
     setting, null = every core, capped at the subjects to build; 1 without the setting),
-    ``s_per_subject`` (:data:`eval.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
+    ``s_per_subject`` (:data:`eval.run.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
     ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and
     ``dataset.limit``) and ``n_vertices`` (estimated per case: the middle of the
     high-res vertex range, or a rough low-res count).

@@ -38,12 +38,11 @@ import numpy as np
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust, faust_subjects
 from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUST builder's (one implementation)
+from eval.datasets.case import DeformationCase
+from eval.datasets.registry import register_dataset
 from sshade.checks import check_numbers, config_int_list
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
-
-from .case import DeformationCase
-from .registry import register_dataset
 
 __all__ = ["FAUST_LANDMARKS", "PROTOCOLS", "Case", "discover_faust", "faust_cases", "case_seed", "faust_plan"]
 

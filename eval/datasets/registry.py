@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ..registry import Registry
+from eval.registry import Registry
 
 __all__ = ["Dataset", "register_dataset", "datasets", "find_dataset"]
 
@@ -30,11 +30,11 @@ class Dataset:
     root_hint : text added to the "does not exist" error of ``dataset.root``.
     seeds : optional ``seeds(root: Path) -> dict``, extra seeds recorded in ``run.json``.
     outlook : optional ``outlook(root: Path, ds) -> dict | None``: what ``prepare`` is
-        about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.plan`):
+        about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.run.plan`):
         None when it has nothing long to do, else a dict (e.g.
         :func:`eval.datasets.defaust.build_outlook`).
     check : optional ``check(cfg) -> None``: the dataset's own config values checked
-        before any work (:func:`eval.config_check.check_config`); raises SShaDeError
+        before any work (:func:`eval.run.config_check.check_config`); raises SShaDeError
         naming the key.
     """
 

@@ -34,13 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
+from eval.datasets.case import DeformationCase
+from eval.datasets.registry import register_dataset
+from eval.run.store import safe_name
 from sshade.checks import check_numbers, config_int_list, config_value
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
-
-from ..store import safe_name
-from .case import DeformationCase
-from .registry import register_dataset
 
 __all__ = ["ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
 

@@ -16,6 +16,6 @@ the parameters it passes on.
 """
 from __future__ import annotations
 
-from .registry import experiment_check, experiments, find_experiment, register_experiment
+from eval.experiments.registry import experiment_check, experiments, find_experiment, register_experiment
 
 __all__ = ["experiments", "find_experiment", "register_experiment", "experiment_check"]

@@ -40,18 +40,17 @@ from defaust.anny_path import path_transforms
 from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
 from defaust.skinning import high_res_weights
+from eval.experiments.common import as_list, sshade_spec
+from eval.experiments.registry import register_experiment
+from eval.experiments.tosca import markdown_table
+from eval.methods import make_methods
+from eval.run.paths import abs_path
+from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 from sshade.registry import method_meta
-
-from ..methods import make_methods
-from ..paths import abs_path
-from ..runinfo import collect_runinfo, finish_run, write_runinfo
-from .common import as_list, sshade_spec
-from .registry import register_experiment
-from .tosca import markdown_table
 
 __all__ = ["run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
 

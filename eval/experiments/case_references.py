@@ -1,16 +1,22 @@
 """The ``reference`` config section at work in the ``cases`` experiment
 (:class:`CaseReferences`): which cases get reference solutions, computed once per
-(case, energy) and cached (:mod:`eval.reference`), and a row's reference columns."""
+(case, energy) and cached (:mod:`eval.metrics.reference`), and a row's reference columns."""
 from __future__ import annotations
 
 import logging
 
+from eval.metrics.reference import (
+    energy_operators,
+    method_energy,
+    reference_metrics,
+    reference_solution,
+    sr_alpha,
+    status_words,
+)
+from eval.run.paths import abs_path
+from eval.run.subset import baseline_selection, check_baseline_cases
 from sshade.checks import config_number
 from sshade.errors import SShaDeError
-
-from ..paths import abs_path
-from ..reference import energy_operators, method_energy, reference_metrics, reference_solution, sr_alpha, status_words
-from ..subset import baseline_selection, check_baseline_cases
 
 __all__ = ["CaseReferences"]
 
@@ -23,7 +29,7 @@ class CaseReferences:
     ``dataset.baseline_cases``; ``all``; ``none``; or a rule of its own, ``per_pose`` or
     an integer, as for ``dataset.baseline_cases``), the deep-converged full-resolution
     minimiser of the energy each method is compared with
-    (:func:`eval.reference.method_energy`), computed once per (case, energy), cached in
+    (:func:`eval.metrics.reference.method_energy`), computed once per (case, energy), cached in
     ``reference.cache`` and reused by later runs; :meth:`metrics` gives a row's
     ``ref_mean_pct``, ``ref_max_pct``, ``energy_gap`` columns (none outside the selection).
     The reference's own solve is not part of any method's ``time_s``."""
@@ -32,7 +38,7 @@ class CaseReferences:
         rc = cfg.get("reference", None) or {}
         self.mode = str(rc.get("cases", "baseline")).strip()
         if self.mode not in ("baseline", "all", "none"):
-            try:  # a case rule of its own, as dataset.baseline_cases (eval/subset.py)
+            try:  # a case rule of its own, as dataset.baseline_cases (eval/run/subset.py)
                 self.rule = check_baseline_cases(self.mode)
             except SShaDeError:
                 raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
@@ -50,7 +56,7 @@ class CaseReferences:
     def covers(self, ci: int, cases, base) -> bool:
         """Whether case ``ci`` of ``cases`` gets references: ``base`` is the baseline
         subset (indices, None = every case) that ``baseline`` follows; ``per_pose`` or an
-        integer select as :func:`eval.subset.baseline_selection` does."""
+        integer select as :func:`eval.run.subset.baseline_selection` does."""
         if self.mode in ("all", "none", "baseline"):
             return self.mode == "all" or (self.mode == "baseline" and (base is None or ci in base))
         if self._sel is None or self._sel[0] is not cases:
@@ -59,7 +65,7 @@ class CaseReferences:
 
     def settings(self, on: bool) -> dict:
         """What of this section changes a row on a case (covered or not, :meth:`covers`):
-        whether references are computed there and with which limits (:mod:`eval.store`)."""
+        whether references are computed there and with which limits (:mod:`eval.run.store`)."""
         return {"on": True, "max_iter": self.max_iter, "time_budget_s": self.time_budget_s} if on else {"on": False}
 
     def start_case(self, ci: int, case, on: bool = True) -> None:

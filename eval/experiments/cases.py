@@ -13,8 +13,8 @@ For each case (:mod:`eval.datasets`, ``dataset.name`` looked up in its registry)
 optional ``warmup()`` has compiled its numba kernels (the seconds go to the ``compile_s``
 column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
 :mod:`sshade.warmup`), the result is scored with
-:func:`eval.metrics.deformation_metrics` and, when the case has a ground truth,
-:func:`eval.metrics.ground_truth_metrics`. Every method runs through
+:func:`eval.metrics.measures.deformation_metrics` and, when the case has a ground truth,
+:func:`eval.metrics.measures.ground_truth_metrics`. Every method runs through
 :func:`sshade.guard.run_method`: on read-only copies of the case, with the
 optional ``timeout_s`` of each call, its output checked
 (:func:`sshade.mesh.validate.validate_deformed`) before any metric. A method that fails on a
@@ -28,20 +28,20 @@ info values become cells through :func:`_info_columns` (safe names and values). 
 (default ``outputs/<experiment.name>/<date_time>``):
 ``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
 (:mod:`eval.tables`), ``breakdown.csv``, ``breakdown.md`` (per pose, per subject, the
-paired SShaDe-Elastic comparison; :mod:`eval.breakdown`; with figures also
-``breakdown.png``), ``run.json`` (:mod:`eval.runinfo`), ``eval.log``, Hydra's
-``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.store`).
+paired SShaDe-Elastic comparison; :mod:`eval.present.breakdown`; with figures also
+``breakdown.png``), ``run.json`` (:mod:`eval.run.runinfo`), ``eval.log``, Hydra's
+``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.run.store`).
 All tables and ``run.json`` are written atomically.
 
 Result store and resume: each (case, method) run is stored as soon as it
 finishes, keyed by the method's definition, the case's identity and the guard/reference
 options; the tables are built from the stored rows. ``resume=true`` with ``out_dir`` =
-an earlier run's folder continues it (the claim keeps its files, :mod:`eval.outdir`):
+an earlier run's folder continues it (the claim keeps its files, :mod:`eval.run.outdir`):
 only the pairs missing from the store, or stored under another key, run; a method added
 later runs only its own cases. Without ``resume`` the store starts empty. The baselines
-run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.subset`; the rule is
+run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.run.subset`; the rule is
 stated in the table's title); the progress bar's remaining time is weighted by each
-method's expected cost (:mod:`eval.progress`). With ``jobs`` > 1 (``auto``: one per core
+method's expected cost (:mod:`eval.run.progress`). With ``jobs`` > 1 (``auto``: one per core
 for a run of minutes) whole cases run side by side in worker processes
 (:mod:`eval.experiments.cases_jobs`): the same rows, each run timed on its share of the cores.
 
@@ -59,31 +59,30 @@ import logging
 import time
 from pathlib import Path
 
+from eval import datasets
+from eval import methods as method_table
+from eval.experiments.case_references import CaseReferences
+from eval.experiments.cases_jobs import describe, job_count, run_case_jobs
+from eval.experiments.cases_plan import plan_runs, planned_root
+from eval.experiments.common import as_list, sshade_spec
+from eval.experiments.pair import guard_options, run_and_store
+from eval.experiments.registry import register_experiment
+from eval.methods import method_spec
+from eval.metrics.meshes import CaseMeshes
+from eval.present.breakdown import write_breakdown
+from eval.present.figures import FIGURE_RECORDS, case_figure_path, figures_options, write_case_figure
+from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, view_options, write_case_view, write_outputs
+from eval.present.render import png_text, set_png_text
+from eval.run.code_identity import code_identity
+from eval.run.paths import abs_path
+from eval.run.progress import CostModel, default_cost_model, weighted_bar
+from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
+from eval.run.store import ResultStore, case_identity, json_safe, pair_key
+from eval.run.subset import baseline_selection, check_baseline_cases, method_selections
+from eval.tables import compare, write_cases, write_tables
 from sshade.checks import config_bool
 from sshade.errors import SShaDeError
 from sshade.registry import method_meta
-
-from .. import datasets
-from .. import methods as method_table
-from ..breakdown import write_breakdown
-from ..code_identity import code_identity
-from ..figures import FIGURE_RECORDS, case_figure_path, figures_options, write_case_figure
-from ..meshview import OUTPUTS, VIEW_DIR, case_view_path, view_options, write_case_view, write_outputs
-from ..methods import method_spec
-from ..metric_meshes import CaseMeshes
-from ..paths import abs_path
-from ..progress import CostModel, default_cost_model, weighted_bar
-from ..render import png_text, set_png_text
-from ..runinfo import collect_runinfo, method_sources, write_runinfo
-from ..store import ResultStore, case_identity, json_safe, pair_key
-from ..subset import baseline_selection, check_baseline_cases, method_selections
-from ..tables import compare, write_cases, write_tables
-from .case_references import CaseReferences
-from .cases_jobs import describe, job_count, run_case_jobs
-from .cases_plan import plan_runs, planned_root
-from .common import as_list, sshade_spec
-from .pair import guard_options, run_and_store
-from .registry import register_experiment
 
 __all__ = ["run", "sshade_params"]
 
@@ -124,7 +123,7 @@ class _Setup:
     all) and ``base_rule`` (that rule in words), ``own`` (method name -> (indices or
     None, rule in words) for the methods ``method_cases`` gives a rule of their own),
     ``store`` and ``resume``; ``meshes``: the metrics' kept rest and ground-truth meshes
-    (:class:`~eval.metric_meshes.CaseMeshes`); ``build``: the dataset's build stage when one ran
+    (:class:`~eval.metrics.meshes.CaseMeshes`); ``build``: the dataset's build stage when one ran
     (:func:`eval.experiments.cases_plan.planned_root`), ``plan``: the runs'
     :class:`~eval.experiments.cases_plan.PlanRecord` once logged."""
 
@@ -133,10 +132,10 @@ class _Setup:
 
     def runs_on(self, ci: int, m) -> bool:
         """Baselines take minutes per high-res case: they run on the cases
-        ``dataset.baseline_cases`` selects (:func:`eval.subset.baseline_selection`), a
+        ``dataset.baseline_cases`` selects (:func:`eval.run.subset.baseline_selection`), a
         method whose file says ``cases: all`` (:func:`sshade.registry.method_meta`) on
         all, except a method ``method_cases`` gives its own rule
-        (:func:`eval.subset.method_selections`)."""
+        (:func:`eval.run.subset.method_selections`)."""
         if m.name in self.own:
             sel = self.own[m.name][0]
             return sel is None or ci in sel
@@ -144,7 +143,7 @@ class _Setup:
 
 
 def _method_specs(cfg, methods) -> list[dict]:
-    """Each method's resolved definition (what its result depends on; :mod:`eval.store`):
+    """Each method's resolved definition (what its result depends on; :mod:`eval.run.store`):
     ours from :func:`eval.methods.method_spec`, a plug-in's ``_target_`` mapping as given."""
     from omegaconf import OmegaConf
     items = cfg.get("methods")
@@ -165,7 +164,7 @@ def _setup(cfg) -> _Setup:
     unless ``resume``), before any method runs."""
     methods = method_table.make_methods(cfg)  # every method's parameters are checked before any work
     specs = _method_specs(cfg, methods)
-    codes = [code_identity(m, sp) for m, sp in zip(methods, specs)]  # once each (eval/code_identity.py)
+    codes = [code_identity(m, sp) for m, sp in zip(methods, specs)]  # once each (eval/run/code_identity.py)
     guard = guard_options(cfg)  # timeout_s, handle_error_max_pct
     base_spec = (cfg.get("dataset") or {}).get("baseline_cases", None)
     check_baseline_cases(base_spec)
@@ -198,7 +197,7 @@ def _setup(cfg) -> _Setup:
 def _start_runinfo(cfg, s: _Setup) -> dict:
     """``run.json`` with status ``running``: the resolved config, the seeds (dataset,
     SShaDe, each case's, the dataset's own, e.g. a DeFAUST build's), each method's source
-    file with its sha256 and git state (:func:`eval.runinfo.method_sources`)."""
+    file with its sha256 and git state (:func:`eval.run.runinfo.method_sources`)."""
     from omegaconf import OmegaConf
 
     config = OmegaConf.to_container(cfg, resolve=True)
@@ -216,9 +215,9 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
 
 
 def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
-    """The store keys (:func:`eval.store.pair_key`) of every method on case ``ci``: the
+    """The store keys (:func:`eval.run.store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options, and the
-    identity of the code that computes the row (:func:`eval.code_identity.code_identity`)."""
+    identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`)."""
     ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
     extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
     return [pair_key(spec, ident, extra, code) for spec, code in zip(s.specs, s.codes)]
@@ -226,8 +225,8 @@ def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
 
 def _run_cases(cfg, s: _Setup) -> list[dict]:
     """Every (case, method) run (:func:`eval.experiments.pair.run_pair`) not already in
-    the result store (``resume``; :mod:`eval.store`), each stored as soon as it finishes,
-    with a progress bar weighted by each method's expected cost (:mod:`eval.progress`);
+    the result store (``resume``; :mod:`eval.run.store`), each stored as soon as it finishes,
+    with a progress bar weighted by each method's expected cost (:mod:`eval.run.progress`);
     in this process, or whole cases in ``jobs`` worker processes
     (:mod:`eval.experiments.cases_jobs`); ``cases.csv`` rewritten after each case, the
     optional figures and 3D views of the first cases. Returns the rows of every pair, in
@@ -238,7 +237,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     methods, names, cases = s.methods, s.names, s.cases
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(cfg, s, ci, c) for ci, c in enumerate(cases)}
-    cost = default_cost_model(methods)  # measured per-method priors (eval/progress.py)
+    cost = default_cost_model(methods)  # measured per-method priors (eval/run/progress.py)
     done = _restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
@@ -265,7 +264,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
 
 
 def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
-    """The stored records a resumed run reuses (:meth:`eval.store.ResultStore.lookup`:
+    """The stored records a resumed run reuses (:meth:`eval.run.store.ResultStore.lookup`:
     same key, code included, and a valid record), observed by ``cost``; every other
     pair runs. Logs how many are restored and how many recomputed, and why (records of
     other code, of other settings, invalid ones: the first few named), and keeps that
@@ -330,7 +329,7 @@ class _CaseOutputs:
     """What follows each finished case: ``cases.csv`` (the rows of every finished pair, in
     (case, method) order) and, for the first ``figures.max_cases`` / ``report.view_cases``
     cases, the figure and the 3D view (restored pairs' meshes read from the store), with
-    ``report/outputs.json`` (:func:`eval.meshview.write_outputs`) naming the views and
+    ``report/outputs.json`` (:func:`eval.present.meshview.write_outputs`) naming the views and
     figures this run wrote and saying why the others were not: the report shows only
     those. A figure or view of this run's case that is not (re)drawn has its earlier
     file removed (a resumed run keeps an earlier run's files), except a figure stamped
@@ -340,7 +339,7 @@ class _CaseOutputs:
         self.s, self.plan, self.done = s, plan, done
         fig_on, n_fig = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
         self.n_fig = n_fig if fig_on else 0
-        self.n_view, self.max_faces = view_options(cfg)  # report.view_cases (eval/meshview.py)
+        self.n_view, self.max_faces = view_options(cfg)  # report.view_cases (eval/present/meshview.py)
         self.views, self.figures, self.notes = {}, {}, {}  # case index -> relative path; -> texts
         self._record()  # at once: an earlier run's record never speaks for this run
 
@@ -372,7 +371,7 @@ class _CaseOutputs:
         not_run = [n for m, n in zip(s.methods, s.names) if not s.runs_on(ci, m)]  # "not run", not "failed"
         results = {n: deformed.get(n) for n in s.names}
         keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
-        if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/figures.py)
+        if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/present/figures.py)
             self._figure(ci, results, not_run, unknown, keys)
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
             p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown,
@@ -453,7 +452,7 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
 
 def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
     """Tables (:func:`eval.tables.write_tables`; the title states the baseline rule) and
-    breakdowns (:func:`eval.breakdown.write_breakdown`, with its figure when figures
+    breakdowns (:func:`eval.present.breakdown.write_breakdown`, with its figure when figures
     are enabled) from the stored rows, ``run.json`` with status ``done``, the Markdown
     table on stdout; the return value of :func:`run`."""
     import pandas as pd

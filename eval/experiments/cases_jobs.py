@@ -2,10 +2,10 @@
 
 ``jobs`` (config) worker processes (:func:`sshade.jobs.run_jobs`: spawned, each with
 ``cores / jobs`` threads) take the cases with runs to do, the costliest first (their
-estimated seconds, :class:`eval.progress.CostModel`); a worker runs a case's methods in
+estimated seconds, :class:`eval.run.progress.CostModel`); a worker runs a case's methods in
 table order (:func:`eval.experiments.pair.run_pair`), so that a reference solution still
 continues from the method on its energy's path (:class:`~eval.experiments.case_references.CaseReferences`),
-and stores each pair as soon as it finishes (:class:`eval.store.ResultStore`), as the
+and stores each pair as soon as it finishes (:class:`eval.run.store.ResultStore`), as the
 one-process loop does. The main process gets every pair's seconds and row as it ends
 (the progress bar), every log record of the workers (``eval.log`` and the console) and
 the deformed meshes of the first cases (figures and 3D views). Results do not depend on
@@ -35,19 +35,18 @@ from __future__ import annotations
 
 import logging
 
+from eval import methods as method_table
+from eval.experiments.case_references import CaseReferences
+from eval.experiments.pair import guard_options, run_and_store, run_pair
+from eval.metrics.meshes import CaseMeshes
+from eval.run.outdir import resume_command
+from eval.run.paths import abs_path
+from eval.run.store import ResultStore, json_safe
 from sshade.errors import SShaDeError
 from sshade.jobs import available_cores, in_worker, pool_size, run_jobs, send, thread_limit
 
-from .. import methods as method_table
-from ..config_check import check_jobs
-from ..metric_meshes import CaseMeshes
-from ..outdir import resume_command
-from ..paths import abs_path
-from ..store import ResultStore, json_safe
-from .case_references import CaseReferences
-from .pair import guard_options, run_and_store, run_pair
-
-__all__ = ["AUTO_MIN_S", "job_count", "describe", "run_case_jobs", "init_worker", "case_job", "lost_record"]
+__all__ = ["AUTO_MIN_S", "check_jobs", "job_count", "describe", "run_case_jobs", "init_worker", "case_job",
+           "lost_record"]
 
 log = logging.getLogger("eval")
 
@@ -56,6 +55,24 @@ log = logging.getLogger("eval")
 AUTO_MIN_S = 120.0
 
 _W: dict = {}  # a worker's state: its methods, reference options, guard, store, metric meshes
+
+
+def check_jobs(value) -> int | None:
+    """``jobs`` (module docstring) checked: an integer from 1 to 1024, or
+    None for ``auto`` / null.
+
+    Raises
+    ------
+    SShaDeError for any other value.
+
+    >>> check_jobs("auto"), check_jobs(2)
+    (None, 2)
+    """
+    if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
+        return None
+    if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 1024:
+        return value
+    raise SShaDeError(f"jobs must be an integer from 1 to 1024 or auto, got {value!r}")
 
 
 def job_count(value, *, cases: int, estimate_s: float) -> int:
@@ -69,7 +86,7 @@ def job_count(value, *, cases: int, estimate_s: float) -> int:
     >>> job_count("auto", cases=40, estimate_s=10.0), job_count(4, cases=3, estimate_s=0)
     (1, 3)
     """
-    n = check_jobs(value)  # eval.config_check.check_config refuses a bad value first, before any work
+    n = check_jobs(value)  # eval.run.config_check.check_config refuses a bad value first, before any work
     if n is None:  # auto
         n = available_cores() if estimate_s >= AUTO_MIN_S and cases >= 2 else 1
     return pool_size(n, max(int(cases), 1))

@@ -1,4 +1,4 @@
-"""The ``cases`` experiment's plan at work (the plan itself: :mod:`eval.plan`).
+"""The ``cases`` experiment's plan at work (the plan itself: :mod:`eval.run.plan`).
 
 :func:`planned_root` stands for :func:`eval.datasets.dataset_root` in the experiment's
 setup: when the dataset's preparation has long work ahead (a DeFAUST build,
@@ -16,14 +16,13 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+from eval import datasets
+from eval.experiments.cases_jobs import job_count
+from eval.metrics.reference import method_energy, reference_path
+from eval.run.plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
+from eval.run.progress import default_cost_model
+from eval.run.subset import baseline_selection
 from sshade.errors import SShaDeError
-
-from .. import datasets
-from ..plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
-from ..progress import default_cost_model
-from ..reference import method_energy, reference_path
-from ..subset import baseline_selection
-from .cases_jobs import job_count
 
 __all__ = ["planned_root", "plan_runs", "PlanRecord"]
 
@@ -33,7 +32,7 @@ log = logging.getLogger("eval")
 def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
     """``(root, build)``: :func:`eval.datasets.dataset_root` of ``cfg``, with the plan
     logged first when the dataset has a build ahead; ``build`` is that build's stage
-    (:func:`eval.plan.build_stage`, with ``actual_s``) or None when nothing was built.
+    (:func:`eval.run.plan.build_stage`, with ``actual_s``) or None when nothing was built.
 
     ``methods``: the built methods; ``refs``: the experiment's reference options (an
     object with ``settings(in_base) -> {"on": bool, ...}``); ``runs_on(cases, base)``:
@@ -82,14 +81,14 @@ def _short(path) -> str:
 
 
 class PlanRecord:
-    """A logged plan and the clock of its runs: ``plan`` (:func:`eval.plan.make_plan`),
+    """A logged plan and the clock of its runs: ``plan`` (:func:`eval.run.plan.make_plan`),
     ``t0`` (when the runs started)."""
 
     def __init__(self, plan: dict):
         self.plan, self.t0 = plan, time.perf_counter()
 
     def finish(self, references_s: float = 0.0) -> dict:
-        """The plan with each stage's actual seconds (:func:`eval.plan.add_actuals`: the
+        """The plan with each stage's actual seconds (:func:`eval.run.plan.add_actuals`: the
         runs = the wall time since :attr:`t0` less ``references_s``, the seconds spent
         computing references), logged beside the estimates; for ``run.json``."""
         runs = time.perf_counter() - self.t0

@@ -1,9 +1,8 @@
 """Helpers shared by the experiments of :mod:`eval.experiments`."""
 from __future__ import annotations
 
+from eval.methods import method_spec
 from sshade.deform import SShaDe
-
-from ..methods import method_spec
 
 __all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
 

@@ -3,7 +3,7 @@
 For each case (a subdivided plane with its boundary fixed and a central disc lifted,
 :func:`sshade.arap.cases.lifted_plane`; the first case of the configured dataset, by
 default a DeFAUST case at 150k-200k vertices), the distance to the deep-converged
-full-resolution spokes-and-rims minimiser (:func:`eval.reference.reference_solution`,
+full-resolution spokes-and-rims minimiser (:func:`eval.metrics.reference.reference_solution`,
 cached) is traced against wall time for:
 
 - ``libigl local/global``: ``igl.arap_solve`` one iteration at a time from the rigid fit
@@ -34,6 +34,13 @@ from pathlib import Path
 
 import numpy as np
 
+from eval import datasets
+from eval.experiments.common import as_list, sshade_spec
+from eval.experiments.registry import register_experiment
+from eval.metrics.reference import reference_solution, status_words
+from eval.present.figures import safe_figure
+from eval.run.paths import abs_path
+from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.cases import lifted_plane
@@ -41,14 +48,6 @@ from sshade.checks import check_numbers, config_int_list
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
-
-from .. import datasets
-from ..figures import safe_figure
-from ..paths import abs_path
-from ..reference import reference_solution, status_words
-from ..runinfo import collect_runinfo, finish_run, write_runinfo
-from .common import as_list, sshade_spec
-from .registry import register_experiment
 
 __all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to", "sshade_params"]
 

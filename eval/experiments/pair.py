@@ -10,12 +10,11 @@ import time
 
 import numpy as np
 
+from eval.metrics.measures import deformation_metrics, ground_truth_metrics
+from eval.metrics.meshes import CaseMeshes
+from eval.run.store import cell_problem, json_safe
 from sshade.errors import SShaDeError
 from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
-
-from ..metric_meshes import CaseMeshes
-from ..metrics import deformation_metrics, ground_truth_metrics
-from ..store import cell_problem, json_safe
 
 __all__ = ["run_pair", "run_and_store", "guard_options"]
 
@@ -72,7 +71,7 @@ def _info_columns(info, taken) -> dict:
     (letters, digits, ``_``; at most 64 characters; non-string keys by their text),
     values by :func:`_scalar`; a key clashing with ``taken`` (the row's columns), a
     summary column, a typed key with a value of another type (:data:`_TYPED_INFO`) or a
-    value its name does not allow in a stored row (:func:`eval.store.cell_problem`, e.g. a
+    value its name does not allow in a stored row (:func:`eval.run.store.cell_problem`, e.g. a
     text in ``*_pct``) becomes ``info_<key>``; ``compile_s`` (already in the row) is left out."""
     import re
     out: dict = {}
@@ -107,7 +106,7 @@ def guard_options(cfg) -> dict:
 def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = None):
     """One (case, method) run: :func:`sshade.guard.run_method`, the metrics (what they need
     of the rest mesh and the ground truth kept in ``meshes`` for the next pairs on them,
-    :mod:`eval.metric_meshes`), the method's info; returns ``(row, U, info)`` (``U`` None
+    :mod:`eval.metrics.meshes`), the method's info; returns ``(row, U, info)`` (``U`` None
     and ``info`` empty when the method failed). A failure (the
     method's, or a handle error above ``guard['handle_error_max_pct']``: its metrics
     stay in the row) is the row's ``error``; the run goes on."""
@@ -144,7 +143,7 @@ def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = 
 
 def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str, fields: dict, *,
                   extra: dict | None = None):
-    """:func:`run_pair`, timed, then stored at once (:meth:`eval.store.ResultStore.save`; a
+    """:func:`run_pair`, timed, then stored at once (:meth:`eval.run.store.ResultStore.save`; a
     store that cannot be written is logged and the run goes on). ``extra``: cells added to
     the row before it is stored (e.g. a worker's ``cores``).
 

@@ -21,7 +21,7 @@ registrations of different scans are placed differently in space. Hence every sh
 first moved rigidly onto the ground truth (:func:`sshade.isometric.rigid_align`,
 through the correspondence) and the metrics are taken after that.
 
-Metrics (``cases.csv``; :func:`eval.metrics.ground_truth_metrics`): vertex error (mean
+Metrics (``cases.csv``; :func:`eval.metrics.measures.ground_truth_metrics`): vertex error (mean
 / max ``||v - v_gt||`` in % of the ground truth's bounding-box diagonal), Hausdorff and
 Chamfer (paper §4.2 definitions, unit-sphere normalised), ``stretch_vs_S_pct`` (mean
 relative edge-length change from S: how much of S's body is kept; the ground truth's
@@ -33,7 +33,7 @@ M): the rest-pose body difference added in global coordinates, without rotating 
 ``table.csv`` / ``table.md``: one row per method with means over the cases, the ground
 truth's own stretch, and a per-case table. ``run.json``: config, seeds, provenance.
 With ``figures.enabled``: ``figures/sA-sB_pP.png`` for the first ``figures.max_cases``
-cases (:func:`eval.figures.pose_transfer_figure`). All writes atomic.
+cases (:func:`eval.present.figures.pose_transfer_figure`). All writes atomic.
 """
 from __future__ import annotations
 
@@ -44,6 +44,15 @@ import time
 
 import numpy as np
 
+from eval.datasets.faust import discover_faust
+from eval.experiments.common import as_list
+from eval.experiments.registry import register_experiment
+from eval.experiments.tosca import gt_stretch_pct, markdown_table, transfer_n_low
+from eval.experiments.tosca import sshade_params as _tosca_sshade_params
+from eval.metrics.measures import ground_truth_metrics
+from eval.present.figures import figures_options, pose_transfer_figure, safe_figure
+from eval.run.paths import abs_path
+from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from sshade.checks import config_int_list
 from sshade.deform import SShaDe
 from sshade.errors import SShaDeError
@@ -51,21 +60,11 @@ from sshade.isometric import pose_transfer, rigid_align
 from sshade.mesh.io import atomic_write, read_mesh
 from sshade.sampling import sampling_seeds
 
-from ..datasets.faust import discover_faust
-from ..figures import figures_options, pose_transfer_figure, safe_figure
-from ..metrics import ground_truth_metrics
-from ..paths import abs_path
-from ..runinfo import collect_runinfo, finish_run, write_runinfo
-from .common import as_list
-from .registry import register_experiment
-from .tosca import gt_stretch_pct, markdown_table, transfer_n_low
-from .tosca import sshade_params as _tosca_sshade_params
-
 __all__ = ["run_pose_transfer", "METRICS", "sshade_params"]
 
 log = logging.getLogger(__name__)
 
-#: metric keys of :func:`eval.metrics.ground_truth_metrics`.
+#: metric keys of :func:`eval.metrics.measures.ground_truth_metrics`.
 METRICS = ("gt_vertex_mean_pct", "gt_vertex_max_pct", "hausdorff", "chamfer")
 
 #: (prefix in cases.csv, label in the tables).

@@ -57,6 +57,17 @@ from pathlib import Path
 import numpy as np
 
 from baselines.arap import Elastic
+from eval.datasets.shapes import axis_handles, axis_landmarks
+from eval.experiments.common import sshade_spec
+from eval.experiments.registry import register_experiment
+from eval.experiments.scaling_probe import probe_first_call
+from eval.experiments.scaling_set import MeshEntry, cache_name, mesh_entries
+from eval.experiments.scaling_table import write_csv, write_markdown
+from eval.methods import method_spec
+from eval.metrics.measures import deformation_metrics
+from eval.run.memory import PeakMemory, release_freed
+from eval.run.paths import abs_path
+from eval.run.runinfo import collect_runinfo, write_runinfo
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
 from sshade.checks import check_numbers, config_bool, config_int_list
@@ -65,18 +76,6 @@ from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_mesh
 from sshade.warmup import warm_fullres
-
-from ..datasets.shapes import axis_handles, axis_landmarks
-from ..memory import PeakMemory, release_freed
-from ..methods import method_spec
-from ..metrics import deformation_metrics
-from ..paths import abs_path
-from ..runinfo import collect_runinfo, write_runinfo
-from .common import sshade_spec
-from .registry import register_experiment
-from .scaling_probe import probe_first_call
-from .scaling_set import MeshEntry, cache_name, mesh_entries
-from .scaling_table import write_csv, write_markdown
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ sets the paper's ``sshade.n_low: 6000``, ``sshade.n_samplings: 10``; :func:`ssha
 
 Per case (``cases.csv``): the paper's Hausdorff ``d_H`` and Chamfer ``d_C`` between the
 prediction and the true pose (vertex-to-surface, both shapes centred and scaled into
-the unit sphere of the true pose, :func:`eval.metrics.ground_truth_metrics`), the
+the unit sphere of the true pose, :func:`eval.metrics.measures.ground_truth_metrics`), the
 vertex error (mean / max ``||v_pred - v_true||`` in % of the true pose's bounding-box
 diagonal), the wall time of the transfer and its parts, and two references: ``rest_*``
 (d_H / d_C of the rest pose itself against the true pose) and ``gt_stretch_pct`` (mean
@@ -22,7 +22,7 @@ isometric; the LRF transfer is rigid per low-res triangle and cannot follow stre
 figures (mean over its whole TOSCA set, d_H = 5.66e-3, d_C = 3.76e-8) as a reference
 row. ``run.json``: config, seeds, excluded classes, provenance. With ``figures.enabled``:
 ``figures/<class><pose>.png`` for the first pose of each class (at most
-``figures.max_cases``; :func:`eval.figures.tosca_figure`). All writes atomic.
+``figures.max_cases``; :func:`eval.present.figures.tosca_figure`). All writes atomic.
 
 Classes with fewer than ``tosca.min_vertices`` vertices are excluded (the paper drops
 ``wolf``, < 5000 vertices). Each pose is read with the rest pose's face array (some
@@ -40,21 +40,20 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from eval.experiments.common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
+from eval.experiments.registry import register_experiment
+from eval.metrics.measures import chamfer, ground_truth_metrics, hausdorff
+from eval.present.figures import figures_options, safe_figure, tosca_figure
+from eval.present.meshview import view_options, write_case_view
+from eval.run.paths import abs_path
+from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
+from eval.tables import ok_mask
 from sshade.checks import check_numbers, config_int_list
 from sshade.deform import SShaDe, auto_n_low
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer
 from sshade.mesh.io import atomic_write, read_mesh
 from sshade.sampling import sampling_seeds
-
-from ..figures import figures_options, safe_figure, tosca_figure
-from ..meshview import view_options, write_case_view
-from ..metrics import chamfer, ground_truth_metrics, hausdorff
-from ..paths import abs_path
-from ..runinfo import collect_runinfo, finish_run, write_runinfo
-from ..tables import ok_mask
-from .common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
-from .registry import register_experiment
 
 __all__ = ["PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table", "markdown_table", "run_tosca",
            "sshade_params", "transfer_n_low"]
@@ -283,7 +282,7 @@ def _tosca_jobs(tc, root, found):
 
 def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
     """Every case (:func:`_tosca_case`), ``cases.csv`` rewritten after each, the
-    optional figures and 3D views (:func:`eval.meshview.write_case_view`; one per class,
+    optional figures and 3D views (:func:`eval.present.meshview.write_case_view`; one per class,
     its first pose); returns the cases' DataFrame."""
     import pandas as pd
     from tqdm import tqdm
@@ -354,7 +353,7 @@ def _tosca_case(c: str, p: int, V0, F0, path, sp: dict):
 
 def _tosca_tables(df, sp: dict, excluded: dict, info: dict, out_dir, t_start: float) -> dict:
     """``table.csv`` / ``table.md`` (per-class means, the paper's row), ``run.json``
-    finished (:func:`eval.runinfo.finish_run`); the return value of :func:`run_tosca`."""
+    finished (:func:`eval.run.runinfo.finish_run`); the return value of :func:`run_tosca`."""
     import pandas as pd
 
     n_low, k, seed, gradient = sp["n_low"], int(sp["n_samplings"]), int(sp["seed"]), str(sp.get("gradient"))

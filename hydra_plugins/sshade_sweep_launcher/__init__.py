@@ -1,7 +1,7 @@
 """Hydra launcher plugin of this project: ``SweepSlurmLauncher``, hydra-submitit-launcher's
 SLURM launcher with a ``launch`` that tolerates dead jobs and resumes sweeps
-(:mod:`eval.sweep_launcher`). Hydra instantiates launchers only from the ``hydra_plugins``
-namespace package, hence this module; the logic lives in :mod:`eval.sweep_launcher`.
+(:mod:`eval.sweeps.launcher`). Hydra instantiates launchers only from the ``hydra_plugins``
+namespace package, hence this module; the logic lives in :mod:`eval.sweeps.launcher`.
 
 Config ``hydra/launcher=sweep_slurm`` (registered below: the plugin's ``submitit_slurm``
 settings plus ``poll_s``, ``grace_polls``, ``unreachable_s``); the project's
@@ -15,14 +15,14 @@ from hydra.core.config_store import ConfigStore
 from hydra_plugins.hydra_submitit_launcher.config import SlurmQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 
-from eval.sweep_launcher import TolerantLauncherMixin
+from eval.sweeps.launcher import TolerantLauncherMixin
 
 __all__ = ["SweepSlurmLauncher", "SweepSlurmConf"]
 
 
 class SweepSlurmLauncher(TolerantLauncherMixin, SlurmLauncher):
     """SLURM launcher whose sweeps end with every job's outcome (done, partial, failed,
-    killed), with or without SLURM accounting (:class:`eval.sweep_launcher.TolerantLauncherMixin`)."""
+    killed), with or without SLURM accounting (:class:`eval.sweeps.launcher.TolerantLauncherMixin`)."""
 
 
 @dataclass

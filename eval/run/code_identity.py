@@ -1,5 +1,5 @@
 """The identity of the code that produces a result: part of every result-store key
-(:mod:`eval.store`), so that a stored row is reused only by the code that computed it.
+(:mod:`eval.run.store`), so that a stored row is reused only by the code that computed it.
 
 A (case, method) row depends on the method's code, on the harness that runs and scores
 it (:mod:`eval.experiments.pair` with :mod:`sshade.guard`, the metrics, the reference
@@ -22,16 +22,16 @@ them. :func:`code_identity` names all three:
   other modules are not followed: a plug-in spread over several files should name its
   version in a parameter); None for our own methods, which ``sources`` covers.
 
-The git commit and dirty flag are recorded beside (:func:`eval.runinfo.git_info`, in
+The git commit and dirty flag are recorded beside (:func:`eval.run.runinfo.git_info`, in
 ``run.json`` and each record) but are not part of the key: a commit that changes only the
 docs leaves the stored rows valid, an uncommitted edit of a method does not.
 :func:`sources_digest` (every module of some packages or folders) keys the reference
-cache (:mod:`eval.reference`).
+cache (:mod:`eval.metrics.reference`).
 
 Example::
 
     >>> ident = code_identity(None)
-    >>> sorted(ident), len(ident["sources"]), "eval.metrics" in ident["modules"]
+    >>> sorted(ident), len(ident["sources"]), "eval.metrics.measures" in ident["modules"]
     (['modules', 'plugin', 'sources', 'versions'], 64, True)
 """
 from __future__ import annotations
@@ -44,7 +44,7 @@ from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
 
-from .runinfo import REPO_ROOT
+from eval.run.runinfo import REPO_ROOT
 
 __all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "code_text", "sources_digest", "project_modules", "import_closure",
            "modules_digest", "numerical_versions", "code_identity", "describe_change"]
@@ -55,7 +55,7 @@ PACKAGES = ("sshade", "baselines", "defaust", "eval")
 #: The modules that make a stored row besides the method: the pair runner (the guarded
 #: call, the metrics, the info columns), the reference columns, the record format and the
 #: runner of pairs in worker processes (their threads, the ``cores`` column).
-ROW_HARNESS = ("eval.experiments.pair", "eval.experiments.case_references", "eval.store",
+ROW_HARNESS = ("eval.experiments.pair", "eval.experiments.case_references", "eval.run.store",
                "eval.experiments.cases_jobs")
 
 #: Distributions whose version can change a row's numbers: the solvers and mesh

@@ -18,7 +18,7 @@ Outputs (:func:`write_breakdown`):
   percentile-bootstrap interval (default 95 %, 2000 resamples, seed 0);
 - with ``figure=True``: ``breakdown.png`` (next to ``breakdown.md``; ``figures/``
   holds one PNG per case), the per-case distribution of each metric per method
-  (:func:`eval.figures.distribution_figure`).
+  (:func:`eval.present.figures.distribution_figure`).
 
 Metrics (:data:`BREAKDOWN_METRICS`, those present): volume, area, edge-length errors
 (%), face-angle error (degrees), ground-truth vertex error (% of the diagonal).
@@ -32,11 +32,10 @@ import numpy as np
 import pandas as pd
 
 from baselines.arap import Elastic
+from eval.present.figures import distribution_figure, safe_figure
+from eval.tables import method_order_key, ok_mask
 from sshade.deform import SShaDe
 from sshade.mesh.io import atomic_write
-
-from .figures import distribution_figure, safe_figure
-from .tables import method_order_key, ok_mask
 
 __all__ = ["BREAKDOWN_METRICS", "group_breakdown", "paired_comparison", "breakdown_markdown", "write_breakdown"]
 

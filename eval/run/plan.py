@@ -15,9 +15,9 @@ seconds beside its estimate (:func:`render_actuals`) and records them in ``run.j
 - ``build``: a dataset's one-time preparation (the DeFAUST build): subjects x the
   measured per-subject seconds (:data:`BUILD_S_PER_SUBJECT`) in rounds of ``workers``;
 - ``runs``: the (case, method) pairs to run, each at its cost-model estimate
-  (:class:`eval.progress.CostModel`: measured runs, else the method's prior), per method
+  (:class:`eval.run.progress.CostModel`: measured runs, else the method's prior), per method
   under ``methods``;
-- ``references``: the reference solutions the runs need (:mod:`eval.reference`): a cached
+- ``references``: the reference solutions the runs need (:mod:`eval.metrics.reference`): a cached
   one costs nothing, one to compute :data:`REFERENCE_S_PER_VERTEX` x vertices (known
   cached or not once the cases exist; before a build, "up to" every one).
 
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 
-from .reference import sr_alpha
+from eval.metrics.reference import sr_alpha
 
 __all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "make_plan",
            "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words"]
@@ -147,7 +147,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     cases : sequence of cases (objects with ``V`` (n, 3), or an int ``n_vertices``).
     names : sequence of str, the method names; ``pairs`` index it.
     pairs : sequence of ``(ci, mi)``, the (case, method) pairs about to run.
-    cost : an :class:`eval.progress.CostModel` (``estimate(name, n_vertices)`` seconds;
+    cost : an :class:`eval.run.progress.CostModel` (``estimate(name, n_vertices)`` seconds;
         ``basis(name)`` if it has one).
     build : None (nothing to build) or a :func:`build_stage` dict (an ``actual_s`` in it:
         already done).
@@ -171,7 +171,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     Examples
     --------
     >>> from types import SimpleNamespace as C
-    >>> from eval.progress import CostModel
+    >>> from eval.run.progress import CostModel
     >>> p = make_plan([C(n_vertices=1000)] * 2, ["A", "S"], [(0, 0), (0, 1), (1, 1)],
     ...               CostModel({"S": "const"}, prior_const_s=2.0))
     >>> [(s["stage"], s["count"], s["seconds"]) for s in p["stages"]], p["total_s"]

@@ -1,7 +1,7 @@
-"""What the metrics of :mod:`eval.metrics` need of a mesh that every result is compared
+"""What the metrics of :mod:`eval.metrics.measures` need of a mesh that every result is compared
 with, computed once: :class:`RestMesh` (the rest side of
-:func:`eval.metrics.deformation_metrics`) and :class:`TargetMesh` (the ground-truth side
-of :func:`eval.metrics.ground_truth_metrics`), and the geometric kernels both use.
+:func:`eval.metrics.measures.deformation_metrics`) and :class:`TargetMesh` (the ground-truth side
+of :func:`eval.metrics.measures.ground_truth_metrics`), and the geometric kernels both use.
 
 The evaluator builds one :class:`RestMesh` per rest mesh (a DeFAUST subject's four poses
 share it) and one :class:`TargetMesh` per case, and hands them to every method's metrics:
@@ -31,7 +31,7 @@ __all__ = ["RestMesh", "TargetMesh", "CaseMeshes", "mesh_volume", "face_areas", 
 # ----------------------------------------------------------------------------- kernels
 def mesh_volume(V: np.ndarray, F: np.ndarray) -> float:
     """Signed enclosed volume of checked ``(V, F)`` (divergence theorem, centred at the mean
-    vertex to reduce cancellation; :func:`eval.metrics.volume`)."""
+    vertex to reduce cancellation; :func:`eval.metrics.measures.volume`)."""
     c = V.mean(axis=0)
     a, b, d = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
     return float(np.einsum("ij,ij->", a, np.cross(b, d)) / 6.0)
@@ -70,7 +70,7 @@ def bbox_diagonal(V: np.ndarray) -> float:
 
 
 def unit_sphere_transform(R: np.ndarray) -> tuple[np.ndarray, float]:
-    """``(center, scale)`` of :func:`eval.metrics.normalize_unit_sphere`: ``R``'s
+    """``(center, scale)`` of :func:`eval.metrics.measures.normalize_unit_sphere`: ``R``'s
     bounding-box centre and its largest distance from it; SShaDeError for a single point."""
     center = 0.5 * (R.min(axis=0) + R.max(axis=0))
     scale = float(np.linalg.norm(R - center, axis=1).max())
@@ -108,7 +108,7 @@ def squared_distances(P: np.ndarray, V: np.ndarray, F: np.ndarray, tree=None, or
 
 # ----------------------------------------------------------------------------- per-mesh state
 class RestMesh:
-    """The rest mesh of :func:`eval.metrics.deformation_metrics`, with what its errors need
+    """The rest mesh of :func:`eval.metrics.measures.deformation_metrics`, with what its errors need
     of it computed once.
 
     Attributes
@@ -139,7 +139,7 @@ class RestMesh:
 
 
 class TargetMesh:
-    """The ground-truth mesh of :func:`eval.metrics.ground_truth_metrics`, with its
+    """The ground-truth mesh of :func:`eval.metrics.measures.ground_truth_metrics`, with its
     bounding-box diagonal, its unit-sphere transform (:func:`unit_sphere_transform`), its
     normalised vertices ``normalized``, their query order and (on first use) the AABB tree
     of the normalised surface, computed once.

@@ -11,7 +11,7 @@ does (one job array), then waits on them itself with :func:`wait_for_jobs`: a jo
 when its result pickle exists, or when SLURM no longer runs nor queues it
 (:func:`slurm_states`: ``sacct`` when it works, else ``squeue`` and ``scontrol``); such a
 job without result is *killed*. Killed and failed jobs are recorded in the sweep's
-``sweep.json`` and in their ``status.json`` (:func:`eval.sweep_files.record_outcome`), and the
+``sweep.json`` and in their ``status.json`` (:func:`eval.sweeps.files.record_outcome`), and the
 launcher returns normally, so Hydra runs the aggregation callback and exits with 0.
 
 In a resumed sweep (:func:`eval.sweep.resume_sweep`, environment
@@ -34,7 +34,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .sweep_files import KEEP, RESUME_ENV, job_dirs, read_status, record_outcome
+from eval.sweeps.files import KEEP, RESUME_ENV, job_dirs, read_status, record_outcome
 
 __all__ = ["ACTIVE_STATES", "SlurmQueryError", "slurm_states", "expand_job_ids", "JobOutcome",
            "wait_for_jobs", "TolerantLauncherMixin"]

@@ -31,11 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
+from eval.metrics.meshes import unique_edges
+from eval.run.store import json_safe, safe_name
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
-
-from .metric_meshes import unique_edges
-from .store import json_safe, safe_name
 
 __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
            "cluster_positions", "cluster_means", "vertex_edge_error", "case_view",
@@ -119,7 +118,7 @@ def vertex_edge_error(V, X, F) -> np.ndarray:
     """(n,) float64 per-vertex edge-length error in % of the longest rest edge: the mean,
     over the vertex's incident edges, of ``| ||u - v|| - ||u' - v'|| | / max_e ||e||`` (the
     per-edge term of paper eq. (eq:edge-error), whose mean over all edges is
-    :func:`eval.metrics.edge_length_error`). ``V``, ``X``: (n, 3) rest and deformed
+    :func:`eval.metrics.measures.edge_length_error`). ``V``, ``X``: (n, 3) rest and deformed
     vertices; ``F``: (m, 3) faces. An isolated vertex gets 0; all rest edges of length 0
     give zeros.
 
@@ -290,7 +289,7 @@ def view_options(cfg) -> tuple[int, int]:
 
 def case_view_path(run_dir, name) -> Path:
     """``run_dir/report/<name>.js``, the view file of case ``name`` (:func:`write_case_view`;
-    the name through :func:`eval.store.safe_name`)."""
+    the name through :func:`eval.run.store.safe_name`)."""
     return Path(run_dir) / VIEW_DIR / f"{safe_name(name)}.js"
 
 

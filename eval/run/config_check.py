@@ -10,16 +10,16 @@
 from __future__ import annotations
 
 from baselines.arap_sr_solver import ALPHA_SCALINGS
+from eval.datasets import find_dataset
+from eval.experiments import experiment_check
+from eval.experiments.cases_jobs import check_jobs
+from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
+from eval.run.subset import check_baseline_cases, check_method_cases
 from sshade.checks import config_bool, config_number, config_value
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 
-from .datasets import find_dataset
-from .experiments import experiment_check
-from .meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
-from .subset import check_baseline_cases, check_method_cases
-
-__all__ = ["check_config", "check_jobs"]
+__all__ = ["check_config"]
 
 _ABSENT = object()   # a default that tells an absent key apart from null
 
@@ -56,24 +56,6 @@ def _check_sshade(cfg) -> None:
         check_params(**kw)
     except SShaDeError as e:
         raise SShaDeError(str(e).replace("SShaDe: ", "sshade.", 1)) from None
-
-
-def check_jobs(value) -> int | None:
-    """``jobs`` (:mod:`eval.experiments.cases_jobs`) checked: an integer from 1 to 1024, or
-    None for ``auto`` / null.
-
-    Raises
-    ------
-    SShaDeError for any other value.
-
-    >>> check_jobs("auto"), check_jobs(2)
-    (None, 2)
-    """
-    if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
-        return None
-    if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 1024:
-        return value
-    raise SShaDeError(f"jobs must be an integer from 1 to 1024 or auto, got {value!r}")
 
 
 def check_config(cfg) -> None:

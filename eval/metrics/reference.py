@@ -38,11 +38,10 @@ import numpy as np
 from baselines.arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
 from baselines.coarse_start import SR_ENERGY, coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
+from eval.run.code_identity import numerical_versions, sources_digest
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 from sshade.registry import method_meta
-
-from .code_identity import numerical_versions, sources_digest
 
 __all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
            "reference_solution", "reference_metrics",
@@ -205,7 +204,7 @@ def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
     float64, ``F`` (m, 3) int64, ``handles`` (h,) int64, ``targets`` (h, 3) float64, the
     energy, the solver settings, :data:`REFERENCE_VERSION` and the code that defines the
     energies and solves them (:data:`REFERENCE_CODE`: the sources of ``sshade/arap`` and
-    ``baselines``, and the numerical libraries' versions, :mod:`eval.code_identity`): a
+    ``baselines``, and the numerical libraries' versions, :mod:`eval.run.code_identity`): a
     reference cached by other code is computed again, never reused."""
     h = hashlib.sha256()
     for a, dt in ((V, np.float64), (F, np.int64), (handles, np.int64), (targets, np.float64)):

@@ -1,7 +1,7 @@
 """The evaluator's per-(case, method) result store: a run that stops (crash, ``kill -9``,
 Ctrl-C, time limit) loses at most the pair it was computing.
 
-Layout, under the run's ``out_dir`` (:mod:`eval.outdir`)::
+Layout, under the run's ``out_dir`` (:mod:`eval.run.outdir`)::
 
     runs/<case>/<method>.json      one finished (case, method) run (written atomically)
     runs/<case>/<method>.npy       its deformed vertices (n, 3) float64, with store.meshes=true
@@ -16,7 +16,7 @@ Layout, under the run's ``out_dir`` (:mod:`eval.outdir`)::
   seed, hashes of the vertex/face arrays and of the handles and targets: :func:`case_identity`),
   the guard options and the reference options of the row, and the identity of the code
   that computed it (the project's sources, the numerical libraries' versions, a plug-in's
-  file: :func:`eval.code_identity.code_identity`) (:func:`pair_key`);
+  file: :func:`eval.run.code_identity.code_identity`) (:func:`pair_key`);
 - ``git``: the checkout's commit and dirty flag when it was written (information, not key);
 - ``digest``: SHA-256 of the record's key, row, info and mesh name (:func:`record_digest`):
   a record edited by hand no longer matches it;
@@ -51,10 +51,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from eval.run.code_identity import describe_change
+from eval.run.runinfo import git_info
 from sshade.mesh.io import atomic_write
-
-from .code_identity import describe_change
-from .runinfo import git_info
 
 __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "safe_name", "case_identity", "pair_key",
            "json_safe", "check_row", "cell_problem", "record_digest", "numeric_column"]
@@ -127,7 +126,7 @@ def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None, code: 
     """``(key, fields)``: the SHA-256 (hex) of the canonical JSON of ``fields`` =
     ``{"method": method_spec, "case": case_id, "extra": extra, "code": code}``
     (``extra``: the other options that change the row, e.g. the guard and reference
-    settings; ``code``: :func:`eval.code_identity.code_identity` of the method)."""
+    settings; ``code``: :func:`eval.run.code_identity.code_identity` of the method)."""
     fields = {"version": STORE_VERSION, "method": json_safe(method_spec), "case": json_safe(case_id),
               "extra": json_safe(extra or {}), "code": json_safe(code)}
     text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
@@ -212,7 +211,7 @@ class Lookup(NamedTuple):
 
 def _stale_why(old, new: dict | None) -> str:
     """Why a record under another key is stale: ``"other code: ..."`` when its code
-    identity differs (:func:`eval.code_identity.describe_change`), else ``"other
+    identity differs (:func:`eval.run.code_identity.describe_change`), else ``"other
     settings: <the differing sections>"``."""
     if new is None:
         return "other settings"
@@ -296,7 +295,7 @@ class ResultStore:
              git: dict | None = None) -> Path:
         """Store one finished run atomically (the mesh first, then the record naming it,
         with its :func:`record_digest`); ``git``: the checkout's state, recorded beside
-        (default: :func:`eval.runinfo.git_info`, read once per store).
+        (default: :func:`eval.run.runinfo.git_info`, read once per store).
         Returns the record's path. OSError propagates (the caller decides)."""
         if git is None:
             if self._git is None:

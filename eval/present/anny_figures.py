@@ -1,6 +1,6 @@
-"""Figures of the ANNY DeFAUST source: ``python -m eval.anny_figures [OUT_DIR]``.
+"""Figures of the ANNY DeFAUST source: ``python -m eval.present.anny_figures [OUT_DIR]``.
 
-Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.figures.mesh_row`:
+Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.present.figures.mesh_row`:
 
 - ``subjects_rest_0-4.png``, ``subjects_rest_5-9.png``: the 10 subjects in the rest pose,
   titled with their phenotype (:data:`defaust.anny_source.SUBJECTS`);
@@ -9,7 +9,7 @@ Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.figure
 - ``subject00_library.png``: subject 0 in every pose of :data:`defaust.anny_poses.POSES`.
 
 Default ``OUT_DIR``: ``outputs/anny_figures`` (a new, empty or earlier ``anny_figures``
-folder: :func:`eval.outdir.claim_output_dir`; ``results/`` only under ``python -m
+folder: :func:`eval.run.outdir.claim_output_dir`; ``results/`` only under ``python -m
 eval.reproduce``). Needs the ANNY assets (see README).
 """
 from __future__ import annotations
@@ -21,11 +21,10 @@ import numpy as np
 
 from defaust.anny_poses import POSES
 from defaust.anny_source import SUBJECTS, anny_subject, load_anny
+from eval.present.figures import mesh_row
+from eval.run.outdir import claim_output_dir
 from sshade.clirun import ArgumentParser
 from sshade.errors import SShaDeError
-
-from .figures import mesh_row
-from .outdir import claim_output_dir
 
 __all__ = ["anny_figures"]
 
@@ -61,10 +60,10 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    """``python -m eval.anny_figures [OUT_DIR]``: returns 0, or 2 after one ``error: ...``
+    """``python -m eval.present.anny_figures [OUT_DIR]``: returns 0, or 2 after one ``error: ...``
     line; ``--help`` prints the usage and exits 0 (``SystemExit``), a bad command line
     exits 2 (:class:`sshade.clirun.ArgumentParser`)."""
-    ap = ArgumentParser(prog="python -m eval.anny_figures",
+    ap = ArgumentParser(prog="python -m eval.present.anny_figures",
                         description="PNG figures of the ANNY DeFAUST source: the 10 subjects at rest, subject 0 in "
                                     "the dataset's poses and in the whole pose library. Needs the ANNY assets.")
     ap.add_argument("out_dir", nargs="?", default="outputs/anny_figures", metavar="OUT_DIR",

@@ -4,7 +4,7 @@
   earlier run's files, whose cases may differ).
 - :func:`not_current`: why a 3D view or case figure in the folder is not this run's
   (of another case, or not written by this run: ``report/outputs.json``,
-  :func:`eval.meshview.read_outputs`), or None when it is.
+  :func:`eval.present.meshview.read_outputs`), or None when it is.
 - :func:`link_target`: a relative path inside the folder as an ``href`` / ``src``
   value, percent-encoded, or None when it may not be linked.
 """
@@ -14,7 +14,7 @@ import json
 from pathlib import Path, PurePosixPath
 from urllib.parse import quote
 
-from .store import safe_name
+from eval.run.store import safe_name
 
 __all__ = ["link_target", "run_cases", "not_current"]
 
@@ -72,7 +72,7 @@ def not_current(kind: str, name: str, rel: str, cases, recorded, *, stem: bool =
     cases : the run's case names (:func:`run_cases`; None: unknown, any case).
     recorded : case name -> relative path of the file of that kind the run wrote
         (``report/outputs.json``; None: not recorded, any file of a case of the run).
-    stem : ``name`` is a file stem, compared with the cases' :func:`eval.store.safe_name`.
+    stem : ``name`` is a file stem, compared with the cases' :func:`eval.run.store.safe_name`.
     """
     if cases is not None:
         known = {safe_name(c): c for c in cases} if stem else {c: c for c in cases}

@@ -20,12 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sshade.errors import SShaDeError
-from sshade.guard import handle_error
-from sshade.mesh.validate import check_faces as _faces
-from sshade.mesh.validate import check_points as _points
-
-from .metric_meshes import (
+from eval.metrics.meshes import (
     RestMesh,
     TargetMesh,
     bbox_diagonal,
@@ -36,6 +31,10 @@ from .metric_meshes import (
     unique_edges,
     unit_sphere_transform,
 )
+from sshade.errors import SShaDeError
+from sshade.guard import handle_error
+from sshade.mesh.validate import check_faces as _faces
+from sshade.mesh.validate import check_points as _points
 
 __all__ = [
     "volume", "surface_area", "volume_error", "area_error", "edge_length_error",
@@ -410,7 +409,7 @@ def deformation_metrics(V, Vd, F, handles=None, targets=None, *, rest: RestMesh 
     ----------
     V, Vd : (n, 3) float, rest and deformed vertices; F : (m, 3) int triangles.
     handles, targets : optional (h,) int and (h, 3) float handle constraints.
-    rest : :class:`~eval.metric_meshes.RestMesh` of ``(V, F)`` or None: what the errors
+    rest : :class:`~eval.metrics.meshes.RestMesh` of ``(V, F)`` or None: what the errors
         need of the rest mesh, computed once for every result on it (same numbers).
 
     Returns
@@ -458,7 +457,7 @@ def ground_truth_metrics(Vd, F, Vgt, *, target: TargetMesh | None = None) -> dic
     ----------
     Vd : (n, 3) float, deformed vertices; F : (m, 3) int triangles shared by both;
     Vgt : (n, 3) float, ground-truth vertices in 1:1 correspondence with ``Vd``.
-    target : :class:`~eval.metric_meshes.TargetMesh` of ``(Vgt, F)`` or None: what the
+    target : :class:`~eval.metrics.meshes.TargetMesh` of ``(Vgt, F)`` or None: what the
         errors need of the ground truth (diagonal, normalisation, AABB tree), computed
         once for every result compared with it (same numbers).
 

@@ -1,8 +1,8 @@
 """The files of a sweep folder (:mod:`eval.sweep`): each job's ``status.json``, the
 sweep's ``sweep.json`` (grid, command, runs, the launcher's notes) and the job folders.
 
-Read by the summary table (:mod:`eval.sweep_table`), written by the jobs and the Hydra
-callback (:mod:`eval.sweep`) and by the SLURM launcher (:mod:`eval.sweep_launcher`,
+Read by the summary table (:mod:`eval.sweeps.table`), written by the jobs and the Hydra
+callback (:mod:`eval.sweep`) and by the SLURM launcher (:mod:`eval.sweeps.launcher`,
 :func:`record_outcome`), which imports only this light module.
 """
 from __future__ import annotations

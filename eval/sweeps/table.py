@@ -2,7 +2,7 @@
 per job: its overrides, one column per overridden key, status, error, and
 ``<method>/<column>`` for every column of the job's ``table.csv``) and ``sweep_table.md``
 (varying keys, status and the main metrics), built by :func:`aggregate_sweep` from the
-folder's files (:mod:`eval.sweep_files`) at the end of a multirun, by
+folder's files (:mod:`eval.sweeps.files`) at the end of a multirun, by
 ``python -m eval.sweep aggregate DIR`` and by a resume.
 """
 from __future__ import annotations
@@ -12,12 +12,11 @@ import json
 import math
 from pathlib import Path
 
+from eval.run.outdir import refuse_results
+from eval.sweeps.files import MANIFEST, OUTCOMES, STATUS_FILE, job_dirs, read_manifest, read_status
+from eval.tables import TABLE_COLUMNS, method_order_key
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
-
-from .outdir import refuse_results
-from .sweep_files import MANIFEST, OUTCOMES, STATUS_FILE, job_dirs, read_manifest, read_status
-from .tables import TABLE_COLUMNS, method_order_key
 
 __all__ = ["aggregate_sweep", "sweep_markdown", "sweep_title", "TABLE_CSV", "TABLE_MD"]
 
@@ -140,7 +139,7 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     -------
     pandas DataFrame with columns ``job``, ``dir`` (relative to ``sweep_dir``; empty for
     a missing job), ``overrides`` (space-separated), one column per overridden key,
-    ``status`` (:data:`eval.sweep_files.OUTCOMES`, or running while the sweep runs; a point of
+    ``status`` (:data:`eval.sweeps.files.OUTCOMES`, or running while the sweep runs; a point of
     ``sweep.json``'s grid without folder is missing), ``error``, ``wall_s``, ``n_cases``,
     ``n_errors``, then ``<method>/<column>`` for every column of the job's
     ``table.csv`` (per-method means over successful cases; NaN where none).

@@ -18,11 +18,11 @@ estimates the seconds of each remaining run:
 The bar (:func:`weighted_bar`) counts seconds: after each run it advances by the run's
 measured wall time and its total becomes done + the estimate of what remains, so its
 remaining time is the weighted estimate. Runs restored from the result store
-(:mod:`eval.store`) are not counted, but their stored ``time_s`` feed the model.
+(:mod:`eval.run.store`) are not counted, but their stored ``time_s`` feed the model.
 
 :func:`default_cost_model` is the evaluator's model: the methods' priors plus the
 per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan
-(:mod:`eval.plan`) uses it too.
+(:mod:`eval.run.plan`) uses it too.
 """
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VE
 #: reading a cached reference, the store, cases.csv, the report's 3D views): about 2.5 s per
 #: pair at 169k vertices, mostly the ground-truth Hausdorff and Chamfer (two
 #: point-to-surface queries against a tree built once per case) and the rest-mesh
-#: quantities (once per rest mesh, :mod:`eval.metric_meshes`). The committed
+#: quantities (once per rest mesh, :mod:`eval.metrics.meshes`). The committed
 #: ``results/defaust/eval.log`` was written by an earlier version of these metrics (four
 #: queries, rest-mesh quantities per pair): its SShaDe pairs finish ~9 s apart with
 #: ``time_s`` ~2 s, ~7 s of overhead. Measured interleaved, nice 19 on the 2-core machine

@@ -37,9 +37,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.run.runinfo import write_runinfo
 from sshade.errors import SShaDeError
-
-from .runinfo import write_runinfo
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
            "claimed_run", "results_dir", "refuse_results", "read_marker", "check_earlier_output",
@@ -49,7 +48,7 @@ MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and
 LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
 REPRODUCE_ENV = "SSHADE_REPRODUCE"  #: "1" in the commands eval.reproduce runs: results/ allowed
 _OWN = {MARKER, LOCK}
-_REPO = Path(__file__).resolve().parents[1]
+_REPO = Path(__file__).resolve().parents[2]
 
 class OutputDirError(SShaDeError):
     """An output folder that this command may not write into."""
@@ -371,7 +370,7 @@ def _command() -> list[str]:
 
 def resume_command(out_dir) -> str:
     """The command line that continues this evaluator run in ``out_dir`` (its stored
-    pairs kept, :mod:`eval.store`): ``python -m eval`` with the run's own overrides
+    pairs kept, :mod:`eval.run.store`): ``python -m eval`` with the run's own overrides
     (Hydra's, else the command line's) and ``resume=true out_dir=<out_dir>`` in place of
     any ``resume`` or ``out_dir`` given, quoted for a POSIX shell. Running the command
     again without ``resume=true`` would clear the stored pairs."""
@@ -467,7 +466,7 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     if target and target in _claimed:
         yield None
         return
-    # resume=true (the evaluator's result store, eval/store.py): the earlier output is continued, not replaced
+    # resume=true (the evaluator's result store, eval/run/store.py): the earlier output is continued, not replaced
     claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)),
                              fresh=fresh, keep=overwrite_flag(cfg.get("resume", False)))
     with open_dict(cfg):

@@ -32,7 +32,7 @@ PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "p
             "numba": "numba", "tqdm": "tqdm", "matplotlib": "matplotlib", "hydra-joblib-launcher": "hydra_plugins",
             "hydra-submitit-launcher": "hydra_plugins", "submitit": "submitit"}
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def package_versions() -> dict[str, str | None]:

@@ -1,6 +1,6 @@
 """Paper-style case figures: the rest mesh with its handles, then every method's result
 coloured by the per-edge length error (paper Fig. 1 handle colours, Fig. "defaust-volume"
-error colouring), rendered headless with :mod:`eval.render`.
+error colouring), rendered headless with :mod:`eval.present.render`.
 
 - :func:`face_edge_error`: per-face edge error of paper eq. (eq:edge-error): for every
   edge ``|l - l'| / max_e l`` (rest length ``l``, deformed ``l'``, normalised by the
@@ -29,11 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
+from eval.present.render import DEFAULT_VIEW, figure_row, render_mesh
+from eval.run.store import safe_name
 from sshade.errors import SShaDeError
 from sshade.isometric import rigid_align
-
-from .render import DEFAULT_VIEW, figure_row, render_mesh
-from .store import safe_name
 
 __all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
            "pose_transfer_figure", "safe_figure", "write_case_figure", "case_figure_path", "figures_options",
@@ -114,7 +113,7 @@ def vertex_error_pct(Vd, Vgt) -> np.ndarray:
     """Per-vertex distance ``||Vd - Vgt||`` in percent of ``Vgt``'s bounding-box diagonal.
 
     Vd, Vgt : (n, 3) float, in 1:1 correspondence. Returns (n,) float64 (the per-vertex
-    values behind :func:`eval.metrics.ground_truth_metrics`' ``gt_vertex_*_pct``).
+    values behind :func:`eval.metrics.measures.ground_truth_metrics`' ``gt_vertex_*_pct``).
     Raises SShaDeError on mismatched shapes or a zero diagonal.
     """
     Vd = np.asarray(Vd, np.float64)
@@ -145,7 +144,7 @@ def mesh_row(panels: Sequence[Mapping], path, *, title: str | None = None, clim:
         drawn in the top colour and the bar gets an arrow). cmap : default
         :data:`ERROR_CMAP`. colorbar_label : label of the shared bar (drawn only when a
         panel has values).
-    view, up : camera, see :func:`eval.render.render_mesh`. panel_size : (w, h) px per panel.
+    view, up : camera, see :func:`eval.present.render.render_mesh`. panel_size : (w, h) px per panel.
 
     Returns the path. The PNG is ``len(panels) * w (+ 90 with a colour bar)`` wide and
     ``h + 28 (+ 28 with title)`` high.
@@ -195,7 +194,7 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
         (drawn blue; dynamic ones yellow, paper Fig. 1).
     path : output PNG (written atomically).
     title : line above the row (e.g. the case name).
-    view, up : camera, see :func:`eval.render.render_mesh`.
+    view, up : camera, see :func:`eval.present.render.render_mesh`.
     panel_size : (w, h) pixels per mesh panel.
     clim : upper end of the shared colour scale in percent (default: the largest 99th
         percentile over the methods' face errors).
@@ -312,7 +311,7 @@ def figures_options(cfg) -> tuple[bool, int]:
 
 def case_figure_path(fig_dir, name) -> Path:
     """``fig_dir/<name>.png``, the figure file of case ``name`` (:func:`write_case_figure`;
-    the name through :func:`eval.store.safe_name`: never a path outside ``fig_dir``)."""
+    the name through :func:`eval.run.store.safe_name`: never a path outside ``fig_dir``)."""
     return Path(fig_dir) / f"{safe_name(name)}.png"
 
 
