@@ -42,10 +42,10 @@ from eval.experiments.scaling_set import MeshEntry  # noqa: E402
 from eval.run.memory import release_freed, tree_pss_mb  # noqa: E402
 from eval.run.outdir import claim_output_dir  # noqa: E402
 from eval.run.runinfo import git_info  # noqa: E402
+from harness.command import run_command  # noqa: E402
 from sshade import deform, prepare  # noqa: E402
-from sshade.clirun import run_command  # noqa: E402
+from sshade.cores import available_cores  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402
-from sshade.jobs import available_cores  # noqa: E402
 from sshade.mesh.io import read_mesh  # noqa: E402
 
 DEFAULT_MESHES = ["armadillo=../shared/data/classic/armadillo.obj", "centaur=../shared/data/tosca/centaur0.off:hard"]

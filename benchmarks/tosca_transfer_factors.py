@@ -38,7 +38,7 @@ from eval.experiments.tosca import discover_tosca  # noqa: E402
 from eval.metrics.measures import chamfer, hausdorff, normalize_unit_sphere, point_surface_distance  # noqa: E402
 from eval.run.outdir import claim_output_dir  # noqa: E402
 from eval.run.runinfo import git_info  # noqa: E402
-from sshade.clirun import run_command  # noqa: E402
+from harness.command import run_command  # noqa: E402
 from sshade.lrf import frame_functions, transfer  # noqa: E402
 from sshade.mesh.io import read_mesh  # noqa: E402
 from sshade.mesh.validate import validate_mesh  # noqa: E402

@@ -28,7 +28,7 @@ matches and whose files all exist with the recorded checksums is skipped; any ot
 :func:`sshade.mesh.io.atomic_write`, so an interrupted build leaves no partial file.
 
 Subjects are built side by side, each in its own worker process (``workers``, default
-every core; :mod:`sshade.jobs`): the same files and manifest for any worker count,
+every core; :mod:`harness.jobs`): the same files and manifest for any worker count,
 since every seed depends on the subject and pose only and the manifest is merged in
 subject order. Each finished item still reaches the partial manifest at once.
 """
@@ -44,8 +44,9 @@ from typing import Callable
 import numpy as np
 from tqdm import tqdm
 
+from harness.jobs import run_jobs, send
+from sshade.cores import pool_size
 from sshade.errors import SShaDeError
-from sshade.jobs import pool_size, run_jobs, send
 from sshade.mesh.io import read_mesh
 
 from . import highres
@@ -180,7 +181,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
     """The body of :func:`build_defaust` once the folder exists: every item, the manifest.
 
     Subjects are built one after the other in this process (``workers=1``, or one subject
-    to build) or each in its own worker process (:mod:`sshade.jobs`); either way the
+    to build) or each in its own worker process (:mod:`harness.jobs`); either way the
     same files, and the manifest's subjects merged in subject order once all are done.
     Every finished item is written to the partial manifest at once (resumable)."""
     n_items = sum(1 + len(p) for p in plan.values())
@@ -294,7 +295,7 @@ def init_subject_worker(out: Path, cfg: BuildConfig, old: dict, common: dict) ->
 def subject_job(s: int, poses: list[int]) -> dict:
     """:func:`_subject_result` of subject ``s`` in a worker process (after
     :func:`init_subject_worker`); each item is sent to the main process as it finishes
-    (``(item_id, entry, built)``, :func:`sshade.jobs.send`).
+    (``(item_id, entry, built)``, :func:`harness.jobs.send`).
 
     Raises
     ------

@@ -15,9 +15,9 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from sshade.checks import config_int_list, config_number
-from sshade.clirun import hydra_main, run_command
-from sshade.confdir import config_dir
+from harness.checks import config_int_list, config_number
+from harness.command import hydra_main, run_command
+from harness.confdir import config_dir
 from sshade.deform import MAX_SEED
 from sshade.errors import SShaDeError
 
@@ -153,7 +153,7 @@ def run(cfg):
 def _main(cfg) -> None:
     """Hydra task of ``python -m defaust``: build; a bad parameter, an OSError (one
     ``error: ...`` line, status 2) or Ctrl-C (``interrupted``, 130) ends the process
-    through :func:`sshade.clirun.run_command`."""
+    through :func:`harness.command.run_command`."""
     logging.getLogger("defaust").setLevel(logging.INFO)
     rc = run_command(lambda: run(cfg), where=cfg.get("out"))
     if rc:
@@ -164,7 +164,7 @@ def main() -> None:
     """Console entry point: Hydra parses the overrides. The command line is composed
     and every builder parameter checked (:func:`config_from_omegaconf`,
     :meth:`BuildConfig.validate`) before anything is built or any folder made
-    (:func:`sshade.clirun.hydra_main`)."""
+    (:func:`harness.command.hydra_main`)."""
     def check(cfg):
         config_from_omegaconf(cfg).validate()
     hydra_main(_main, CONF_DIR, check=check)

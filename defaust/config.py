@@ -59,7 +59,7 @@ class BuildConfig:
         their checksum (:func:`defaust.anny_model.assets_fingerprint`).
     progress : bool, show a tqdm progress bar.
     workers : int or None, subjects built at once, each in its own process (None: every
-        core this process may use, :func:`sshade.jobs.available_cores`; 1: one after
+        core this process may use, :func:`sshade.cores.available_cores`; 1: one after
         the other in this process). Not a dataset parameter: any count gives the same files.
     """
 

@@ -18,7 +18,8 @@ Example::
 """
 from __future__ import annotations
 
-from sshade.clirun import ArgumentParser, run_command
+from harness.command import run_command
+from sshade.clirun import ArgumentParser
 
 from .dataset import RESOLUTIONS, verify
 from .describe import describe, markdown

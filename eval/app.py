@@ -27,9 +27,9 @@ from eval.experiments.cases import run
 from eval.report import safe_report
 from eval.run.config_check import check_config
 from eval.run.outdir import claimed_run
-from sshade.checks import config_bool
-from sshade.clirun import hydra_main, run_command
-from sshade.confdir import config_dir
+from harness.checks import config_bool
+from harness.command import hydra_main, run_command
+from harness.confdir import config_dir
 from sshade.errors import SShaDeError
 
 __all__ = ["CONF_DIR", "run", "run_experiment", "main"]
@@ -101,7 +101,7 @@ def _refuse_fresh_resume(cfg, fresh: bool) -> None:
 def _main(cfg) -> None:
     """Hydra task of ``python -m eval``: run the experiment; a bad config or input (e.g.
     ``resume=true`` without ``out_dir``), an OSError (``error: ...``, status 2) or Ctrl-C
-    (``interrupted``, 130) ends the process through :func:`sshade.clirun.run_command`."""
+    (``interrupted``, 130) ends the process through :func:`harness.command.run_command`."""
     fresh = _pin_out_dir(cfg)
 
     def work():
@@ -118,7 +118,7 @@ def main() -> None:
     The command line is composed and every config value checked
     (:func:`eval.run.config_check.check_config`) before Hydra makes the run folder; a bad
     one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
-    (:func:`sshade.clirun.hydra_main`).
+    (:func:`harness.command.hydra_main`).
     """
     argv = sys.argv[1:]
     if any(a in ("-m", "--multirun") for a in argv) and not any("hydra.callbacks.sweep_aggregate" in a for a in argv):

@@ -1,7 +1,7 @@
 """Build the deformation methods listed in the evaluator's Hydra config: ours by name,
 anyone's as a plug-in.
 
-Names (case-insensitive) are those of :func:`sshade.registry.builtin_methods`, one per
+Names (case-insensitive) are those of :func:`harness.registry.builtin_methods`, one per
 file of the ``method`` config group: ``ARAP`` (spokes, Sorkine & Alexa 2007),
 ``Elastic`` (spokes and rims, Chao et al. 2010), ``ARAP-SR`` (Levi & Gotsman 2015) from
 :mod:`baselines`, ``SShaDe`` and ``SShaDe+refine`` from :mod:`sshade`. Each file
@@ -23,7 +23,7 @@ A plug-in is an item of ``methods`` that is a mapping built by
 :func:`hydra.utils.instantiate`, e.g. ``{_target_: mypkg.MyMethod, name: Mine,
 iterations: 20}``; the object needs what :class:`sshade.method.Deformer` documents
 (``name``, ``deform(V, F, handles, targets) -> (n, 3)``, optional ``info`` dict), checked
-when it is built (:func:`sshade.method.build_method`, shared with ``python -m sshade
+when it is built (:func:`harness.plugins.build_method`, shared with ``python -m sshade
 deform``). This module is the Hydra-config part: the ``methods`` list, the composed
 ``method.<key>`` sections and the shared sections' checks (:func:`arap_params`).
 """
@@ -32,10 +32,8 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from sshade.arap import PROTOCOLS
-from sshade.errors import SShaDeError
-from sshade.method import as_dict, build_method, is_mapping
-from sshade.registry import (
+from harness.plugins import as_dict, build_method, is_mapping
+from harness.registry import (
     SECTIONS,
     build_builtin,
     builtin_methods,
@@ -45,6 +43,8 @@ from sshade.registry import (
     method_meta,
     strip_meta,
 )
+from sshade.arap import PROTOCOLS
+from sshade.errors import SShaDeError
 
 __all__ = ["make_methods", "method_spec", "arap_params"]
 
@@ -61,9 +61,9 @@ def _get(cfg, key, default=None):
 def make_methods(cfg) -> list:
     """Instantiate the methods listed in ``cfg.methods``, in that order.
 
-    An item is one of our names (:func:`sshade.registry.builtin_methods`, any case), built from its
+    An item is one of our names (:func:`harness.registry.builtin_methods`, any case), built from its
     definition ``cfg.method.<key>`` (:func:`method_spec`), or a plug-in: a mapping with
-    ``_target_`` (``pkg.module.Class``) and keyword arguments (:func:`sshade.method.build_method`).
+    ``_target_`` (``pkg.module.Class``) and keyword arguments (:func:`harness.plugins.build_method`).
 
     Parameters
     ----------
@@ -121,9 +121,9 @@ def method_spec(cfg, name: str) -> dict:
     ``cfg.method.<key>`` when the config has it (composed from ``conf/method/`` by
     ``conf/config.yaml``), else ``conf/method/<name>.yaml`` resolved against ``cfg``'s
     ``arap`` / ``arap_sr`` / ``sshade`` sections merged over the defaults of
-    ``conf/config.yaml`` (:func:`sshade.registry.file_spec`; so a plain dict config
+    ``conf/config.yaml`` (:func:`harness.registry.file_spec`; so a plain dict config
     works, and so does a method file that the defaults list does not name). Without the
-    file's ``order`` (:data:`sshade.registry.META_KEYS`).
+    file's ``order`` (:data:`harness.registry.META_KEYS`).
 
     Raises
     ------
@@ -147,7 +147,7 @@ def method_spec(cfg, name: str) -> dict:
 
 def _build_ours(cfg, name: str):
     """One of our methods from its definition in ``cfg``, its parameters checked first by
-    the checks its file names (``checks``, :func:`sshade.registry.method_meta`)."""
+    the checks its file names (``checks``, :func:`harness.registry.method_meta`)."""
     spec = method_spec(cfg, name)
     where = f"method.{method_key(name)}"
     checks = method_meta(name)["checks"]

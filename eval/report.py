@@ -72,7 +72,8 @@ from eval.tables import (
     main_note,
     stop_lines,
 )
-from sshade.clirun import ArgumentParser, run_command
+from harness.command import run_command
+from sshade.clirun import ArgumentParser
 from sshade.mesh.io import atomic_write
 
 __all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",

@@ -62,7 +62,8 @@ from pathlib import Path
 
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
-from sshade.clirun import ArgumentParser, run_command
+from harness.command import run_command
+from sshade.clirun import ArgumentParser
 
 #: ARAP-SR's alpha values of the sweep step (Open3D's definition; 0.06 is about the
 #: stiffness of 0.01 without the valence, this package's earlier definition)

@@ -72,8 +72,9 @@ from eval.sweeps.files import (
     write_status,
 )
 from eval.sweeps.table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
-from sshade.clirun import ArgumentParser, hydra_main, run_command
-from sshade.confdir import config_dir
+from harness.command import hydra_main, run_command
+from harness.confdir import config_dir
+from sshade.clirun import ArgumentParser
 from sshade.errors import SShaDeError
 
 __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
@@ -400,7 +401,7 @@ def main(argv: list[str] | None = None) -> None:
 
     Exits with 0 once every job has an outcome; 2 after one ``error: ...`` line for a bad
     command line (an unknown key or config group option, a malformed override: refused
-    before any job starts, :func:`sshade.clirun.precheck`) or an OSError; 130 after
+    before any job starts, :func:`harness.command.precheck`) or an OSError; 130 after
     ``interrupted`` on Ctrl-C.
     """
     argv = list(sys.argv[1:] if argv is None else argv)

@@ -38,7 +38,7 @@ and table.tex say so and the main table falls back to per-method means over each
 method's own successful cases, without bold. A frame without a ``case`` column is
 summarised per method, as :func:`summarize` always did.
 
-Rows are ordered as :func:`sshade.registry.table_order` says (ARAP, Elastic, ARAP-SR,
+Rows are ordered as :func:`harness.registry.table_order` says (ARAP, Elastic, ARAP-SR,
 Implicit-ARAP, SShaDe, SShaDe+refine: the ``order`` keys of ``conf/method/*.yaml``), then
 any other method by name.
 """
@@ -50,9 +50,10 @@ from typing import TYPE_CHECKING
 
 from eval.present.table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 from eval.run.outdir import refuse_results
-from sshade.clirun import ArgumentParser, run_command
+from harness.command import run_command
+from harness.registry import method_meta, table_order
+from sshade.clirun import ArgumentParser
 from sshade.mesh.io import atomic_write
-from sshade.registry import method_meta, table_order
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
     import pandas as pd
@@ -88,7 +89,7 @@ COMMON_CASES_HEADING = "Cases every method succeeded on"
 
 
 def method_order_key(m: str) -> tuple:
-    """Sort key of a method's rows: its place in :func:`sshade.registry.table_order`,
+    """Sort key of a method's rows: its place in :func:`harness.registry.table_order`,
     any other method after those, by name."""
     order = table_order()
     return (order.index(m), "") if m in order else (len(order), m)

@@ -18,12 +18,14 @@ Usage::
   (Botsch & Sorkine 2008), libigl's ``.dmat`` selection + ``.def``, or a ``.json`` /
   ``.csv`` of vertex indices and target positions. Indices refer to MESH's vertices as
   stored in the file.
-- ``--method``: ``SShaDe`` (default), ``SShaDe+refine``, ``ARAP``, ``Elastic``, ``ARAP-SR``
-  (any of :func:`sshade.registry.builtin_methods`: their definitions in ``conf/method/``,
-  defaults of ``conf/config.yaml``, classes imported by their dotted path) or a plug-in
-  ``pkg.module.Class`` (:func:`sshade.registry.named_or_plugin`); ``--n-low``, ``--k``
-  (samplings) and ``--seed`` set SShaDe's ``n_low``, ``n_samplings``, ``seed`` (also given
-  to a plug-in that takes them); ``--param KEY=VALUE`` sets any other parameter. The
+- ``--method``: ``SShaDe`` (default) or ``SShaDe+refine`` (:func:`sshade_method`, the
+  defaults of :func:`sshade.deform.check_params`, which ``conf/config.yaml``'s ``sshade``
+  section equals). ``python -m harness deform`` is this command with every built-in method
+  of the harness (``ARAP``, ``Elastic``, ``ARAP-SR``, ...: their definitions in
+  ``conf/method/``) and a plug-in ``pkg.module.Class`` (:func:`harness.registry.named_or_plugin`
+  passed as ``resolve`` to :func:`main`); ``--n-low``, ``--k`` (samplings) and ``--seed`` set
+  SShaDe's ``n_low``, ``n_samplings``, ``seed`` (also given to a plug-in that takes them);
+  ``--param KEY=VALUE`` sets any other parameter. The
   method runs guarded (:func:`sshade.guard.run_method`): on read-only inputs, its output
   checked (shape, finite, real), its handles within 1% of the diagonal of their
   targets, ``--timeout SECONDS`` enforced; any failure is an ``error:`` line, no OUT.
@@ -34,8 +36,7 @@ Usage::
   they changed; without it a non-manifold mesh is refused with its clear error.
 
 The entry point of ``python -m sshade`` (:mod:`sshade.__main__`); it imports nothing of
-the layers above (``baselines`` is imported by its dotted path when ``--method`` names
-one of them).
+the layers above.
 
 Prints the time of each stage (read, handles, repair, deform, write) on stdout; a
 progress bar on stderr when it is a terminal. Exit status 0 on success, 2 on bad input
@@ -56,15 +57,16 @@ from tqdm import tqdm
 from .animate import main as animate_main
 from .clirun import run_command
 from .components import drop_unreferenced
+from .deform import SShaDe, check_params
 from .errors import SShaDeError
 from .guard import check_timeout, handle_error, handles_not_reached, run_method
 from .mesh.handle_files import read_def, read_dmat_selection, read_handle_file, read_sel, selection_handles
 from .mesh.io import read_mesh, write_mesh, written_by_sshade
 from .mesh.repair import repair_mesh
-from .registry import named_or_plugin
+from .refine import SShaDeRefine
 from .view import main as view_main
 
-__all__ = ["main", "build_parser", "deform_file", "parse_param"]
+__all__ = ["main", "deform_main", "build_parser", "deform_file", "parse_param", "sshade_method"]
 
 OUT_EXTS = (".obj", ".off", ".ply")
 
@@ -73,13 +75,13 @@ class _Parser(argparse.ArgumentParser):
     """argparse with usage errors on one line (``error: ...``) and exit status 2."""
 
     def error(self, message):  # noqa: D102 -- argparse hook
-        print(f"error: {message} (python -m sshade deform --help)", file=sys.stderr)
+        print(f"error: {message} ({self.prog} --help)", file=sys.stderr)
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``python -m sshade deform`` (module docstring)."""
-    p = _Parser(prog="python -m sshade deform",
+def build_parser(prog: str = "python -m sshade") -> argparse.ArgumentParser:
+    """The argument parser of ``<prog> deform`` (module docstring)."""
+    p = _Parser(prog=f"{prog} deform",
                 description="Deform one mesh with handles read from a file (SShaDe by default).")
     p.add_argument("mesh", help="input mesh (.obj, .off, .ply)")
     p.add_argument("-o", "--out", required=True, help="output mesh (.obj, .off, .ply), written atomically")
@@ -89,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--def", dest="def_", metavar="DEF", help="4x4 matrix applied to the handle vertices")
     g.add_argument("--handles", help=".json {handles: [...], targets: [[x,y,z],...]} or .csv rows index,x,y,z")
     p.add_argument("--method", default="SShaDe",
-                   help="SShaDe (default), SShaDe+refine, ARAP, Elastic, ARAP-SR or a plug-in pkg.module.Class")
+                   help="SShaDe (default) or SShaDe+refine; python -m harness deform also ARAP, Elastic, "
+                        "ARAP-SR, ... or a plug-in pkg.module.Class")
     p.add_argument("--n-low", help="SShaDe's low-resolution vertex count (int or auto; default auto)")
     p.add_argument("--k", type=int, help="SShaDe's number of samplings (default 5)")
     p.add_argument("--seed", type=int, help="SShaDe's seed (default 0)")
@@ -180,13 +183,38 @@ def _check_out(a) -> None:
         raise SShaDeError(f"output folder {folder} is not writable ({e.strerror or type(e).__name__})") from None
 
 
-def _method(a):
+def sshade_method(name: str, params: dict):
+    """The method of ``--method`` in ``python -m sshade deform``: ``SShaDe`` or
+    ``SShaDe+refine`` (case-insensitive) with ``params`` over the defaults of
+    :func:`sshade.deform.check_params` (``n_low`` auto).
+
+    Raises
+    ------
+    SShaDeError for another name (it names ``python -m harness deform``, which runs every
+    method) or a parameter the method does not have; what the method's checks raise.
+    """
+    key = str(name).strip().lower()
+    if key not in ("sshade", "sshade+refine"):
+        raise SShaDeError(f"--method {name}: python -m sshade deform runs SShaDe and SShaDe+refine; "
+                          f"python -m harness deform runs every method (the same options)")
+    refine = {k: params.pop(k) for k in ("refine_etol", "refine_gtol", "refine_max_iter") if k in params}
+    if refine and key == "sshade":
+        raise SShaDeError(f"SShaDe has no parameter {sorted(refine)[0]!r} (SShaDe+refine has)")
+    label = "SShaDe" if key == "sshade" else "SShaDe+refine"
+    try:
+        p = check_params(**params)
+    except TypeError as e:  # an unexpected keyword
+        raise SShaDeError(f"{label}: {str(e).replace('check_params() ', '')}") from None
+    return SShaDe(**p) if key == "sshade" else SShaDeRefine(**refine, **p)
+
+
+def _method(a, resolve):
     """The method of ``--method`` with ``--n-low``/``--k``/``--seed``/``--param``."""
     params = dict(parse_param(t) for t in a.param)
     for key, val in (("n_low", a.n_low), ("n_samplings", a.k), ("seed", a.seed)):
         if val is not None:
             params[key] = parse_param(f"x={val}")[1] if key == "n_low" else val
-    return named_or_plugin(a.method, params)
+    return resolve(a.method, params)
 
 
 def _read_handles(a, V):
@@ -209,13 +237,15 @@ def _carry(origin, handles, targets, n_old):
     return new_h, tgt[origin[new_h]]
 
 
-def deform_file(a, log=print, warn=None) -> dict:
+def deform_file(a, log=print, warn=None, resolve=sshade_method) -> dict:
     """Run ``python -m sshade deform`` for parsed arguments ``a`` (:func:`build_parser`).
 
     Parameters
     ----------
     a : argparse.Namespace. log : callable printing a line (stage times, report).
     warn : callable printing a warning line (default: ``warning: ...`` on stderr).
+    resolve : callable ``(name, params) -> method`` building ``--method``
+        (:func:`sshade_method`; the harness passes its registry's).
 
     Returns
     -------
@@ -228,7 +258,7 @@ def deform_file(a, log=print, warn=None) -> dict:
     """
     warn = warn or (lambda s: print(f"warning: {s}", file=sys.stderr))
     _check_args(a)
-    method = _method(a)  # a bad method or parameter fails before any file is read
+    method = _method(a, resolve)  # a bad method or parameter fails before any file is read
     timeout_s = check_timeout(getattr(a, "timeout", None), "--timeout")
     times: dict[str, float] = {}
     stages = ["read", "handles", *(["repair"] if a.repair else []), "deform", "write"]
@@ -325,5 +355,13 @@ def main(argv=None) -> int:
               "`python -m sshade animate MESH ... --frames FRAMES.npy -o OUT` and `python -m sshade view MESH ...`",
               file=sys.stderr)
         return 2
-    a = build_parser().parse_args(argv[1:])
-    return run_command(lambda: deform_file(a), where=a.out)  # error:/interrupted (sshade.clirun)
+    return deform_main(argv[1:])
+
+
+def deform_main(argv, *, prog: str = "python -m sshade", resolve=sshade_method, run=run_command) -> int:
+    """``<prog> deform ARGS`` (module docstring) for the arguments after ``deform``:
+    ``--method`` built by ``resolve`` (:func:`sshade_method`; ``python -m harness deform``
+    passes :func:`harness.registry.named_or_plugin`), the work run by ``run``
+    (:func:`sshade.clirun.run_command`: its exit statuses)."""
+    a = build_parser(prog).parse_args(argv)
+    return run(lambda: deform_file(a, resolve=resolve), where=a.out)

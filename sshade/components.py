@@ -202,8 +202,8 @@ def deform_components(method, V, F, handles, targets, *, return_info: bool = Fal
     --------
     Example::
 
-        from baselines import Elastic
-        Vd = deform_components(Elastic(), V, F, handles, targets)
+        from sshade import SShaDe
+        Vd = deform_components(SShaDe(), V, F, handles, targets)
     """
     V, F = validate_mesh(V, F, allow_components=True)
     handles, targets = validate_handles(V, handles, targets)
@@ -258,8 +258,8 @@ class ComponentWise:
     --------
     Example::
 
-        from baselines import Elastic
-        Vd = ComponentWise(Elastic()).deform(V, F, handles, targets)
+        from sshade import SShaDe
+        Vd = ComponentWise(SShaDe()).deform(V, F, handles, targets)
     """
 
     def __init__(self, method):

@@ -44,9 +44,9 @@ from concurrent.futures import ThreadPoolExecutor, wait
 import numpy as np
 
 from .arap import ArapDeformer
+from .cores import pool_size
 from .deform import arap_options, check_params, handle_pre_pct, low_res_size, prepare_samplings
 from .errors import SShaDeError
-from .jobs import pool_size
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.halfedge import count_components
 from .mesh.validate import validate_handle_indices, validate_handles, validate_mesh
@@ -247,7 +247,7 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     V : (n, 3) float64 rest positions; F : (m, 3) int faces of a connected manifold
         triangle mesh; handles : (h,) int vertex indices (a new selection needs a new
         :func:`prepare`). workers : int >= 1 or None, threads the samplings run on
-        (:func:`sshade.jobs.pool_size`: None = the cores this process may use, at most
+        (:func:`sshade.cores.pool_size`: None = the cores this process may use, at most
         ``n_samplings``); the results do not depend on it. The other parameters as
         :func:`sshade.deform.deform`.
 

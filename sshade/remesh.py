@@ -41,8 +41,8 @@ import numpy as np
 
 from ._keys import unique_int
 from .closed_ball import closed_ball, closed_ball_local, vertex_faces
+from .cores import available_cores
 from .errors import SShaDeError
-from .jobs import available_cores
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
 from .remesh_repair import flipped_faces, nerve_faces, voronoi_vertex_seeds

@@ -24,7 +24,7 @@ import numpy as np
 
 from .allocator import keep_freed_memory
 from .arap import warmup_kernels
-from .jobs import pool_size  # noqa: F401 - the samplings' worker count (None: the cores this process may use)
+from .cores import pool_size  # noqa: F401 - the samplings' worker count (None: the cores this process may use)
 from .mesh.geodesic import VoronoiState
 from .mesh.halfedge import halfedges, vertex_fan_count
 from .projection import project_to_fans
@@ -116,8 +116,8 @@ class SamplingPool:
     ----------
     state : dict, what every task reads through :func:`worker_state` (meshes, seeds,
         options); handed to each forked worker once, at fork.
-    workers : int >= 1, processes (:func:`sshade.jobs.pool_size`: None = the cores this
-        process may use, :func:`sshade.jobs.available_cores`); 1 runs the tasks in this process
+    workers : int >= 1, processes (:func:`sshade.cores.pool_size`: None = the cores this
+        process may use, :func:`sshade.cores.available_cores`); 1 runs the tasks in this process
         (so does a platform without ``fork``).
 
     ``submit(fn, *args)`` returns a :class:`concurrent.futures.Future`; ``fn`` must be a

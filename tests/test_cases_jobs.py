@@ -15,8 +15,9 @@ import pytest
 from eval.experiments.cases_jobs import AUTO_MIN_S, describe, job_count
 from eval.run.plan import make_plan, render_plan
 from eval.run.progress import CostModel
+from harness.jobs import thread_limit
+from sshade.cores import available_cores
 from sshade.errors import SShaDeError
-from sshade.jobs import available_cores, thread_limit
 
 from .conftest import ROOT, subprocess_env
 

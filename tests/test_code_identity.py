@@ -176,7 +176,7 @@ def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, 
     tree = tmp_path / "tree"
     for d in ("sshade", "baselines", "defaust", "eval", "conf", "tests", "hydra_plugins"):
         shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
-    shutil.copy(ROOT / "pyproject.toml", tree / "pyproject.toml")  # marks a source checkout (sshade/confdir.py)
+    shutil.copy(ROOT / "pyproject.toml", tree / "pyproject.toml")  # marks a source checkout (harness/confdir.py)
     out, counter = tmp_path / "out", tmp_path / "calls.txt"
     methods = "{_target_:tests.store_methods.Counted,name:A},{_target_:tests.store_methods.Counted,name:B}"
     p = _eval(tree, out, methods, env={"SSHADE_TEST_COUNTER": str(counter), "SSHADE_TEST_HANG_AFTER": "2"},

@@ -16,8 +16,9 @@ from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
 from defaust.config import BuildConfig
 from defaust.store import sha256_file
+from harness.jobs import THREAD_VARIABLES, run_jobs, send, thread_limit
+from sshade.cores import pool_size
 from sshade.errors import SShaDeError
-from sshade.jobs import THREAD_VARIABLES, pool_size, run_jobs, send, thread_limit
 
 
 def _build(out, workers, *extra):

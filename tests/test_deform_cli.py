@@ -91,19 +91,51 @@ def test_handle_file_matches_the_api(bar, tmp_path, capsys, fmt):
     assert np.abs(_out(out) - Vd).max() <= 1e-9
 
 
-def test_other_method_and_plugin(bar, tmp_path, capsys):
+def _harness_cli(args, capsys):
+    from harness.__main__ import main as harness_main
+    rc = harness_main(["deform", *map(str, args)])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_harness_deform_runs_other_methods_and_plugins(bar, tmp_path, capsys):
     from baselines import Elastic
     h, t, _ = _api(bar)
-    rc, _, err = _cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / "e.ply",
-                       "--method", "elastic", "--param", "tol=1e-3"], capsys)
+    rc, _, err = _harness_cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / "e.ply",
+                               "--method", "elastic", "--param", "tol=1e-3"], capsys)
     assert rc == 0, err
     assert np.abs(_out(tmp_path / "e.ply") - Elastic(tol=1e-3).deform(bar["V"], bar["F"], h, t)).max() <= 1e-9
-    rc, stdout, err = _cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / "p.ply",
-                            "--method", "tests.plugin_example.MyMethod", "--param", "iterations=5"], capsys)
+    rc, stdout, err = _harness_cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / "p.ply",
+                                    "--method", "tests.plugin_example.MyMethod", "--param", "iterations=5"], capsys)
     assert rc == 0, err
     from .plugin_example import MyMethod
     assert np.abs(_out(tmp_path / "p.ply") - MyMethod(iterations=5).deform(bar["V"], bar["F"], h, t)).max() <= 1e-9
     assert stdout.startswith("Mine:")
+    rc, _, err = _harness_cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / "a.ply",
+                               "--method", "ARAP", "--n-low", "100"], capsys)
+    assert rc == 2 and err.startswith("error: ARAP has no parameter(s) ['n_low']") and err.count("\n") == 1, err
+
+
+def test_sshade_deform_and_harness_deform_build_the_same_sshade(bar, tmp_path, capsys):
+    """The method package's command builds SShaDe and SShaDe+refine without the harness,
+    with the parameters the harness's registry gives them (conf/method/*.yaml)."""
+    from harness.registry import named_or_plugin
+    from sshade.cli import sshade_method
+    for name in ("SShaDe", "SShaDe+refine"):
+        ours, theirs = sshade_method(name, {"n_samplings": 2}), named_or_plugin(name, {"n_samplings": 2})
+        assert type(ours) is type(theirs) and vars(ours).keys() == vars(theirs).keys()
+        assert {k: v for k, v in vars(ours).items() if k != "criterion"} == \
+            {k: v for k, v in vars(theirs).items() if k != "criterion"}
+    outs = []
+    for i, cli in enumerate((_cli, _harness_cli)):
+        rc, _, err = cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / f"s{i}.ply",
+                          *SSHADE], capsys)
+        assert rc == 0, err
+        outs.append(_out(tmp_path / f"s{i}.ply"))
+    assert np.array_equal(outs[0], outs[1])
+    rc, _, err = _cli([bar["off"], "--sel", bar["sel"], "--def", bar["def"], "-o", tmp_path / "a.ply",
+                       "--method", "ARAP"], capsys)
+    assert rc == 2 and "python -m harness deform runs every method" in err and not (tmp_path / "a.ply").exists()
 
 
 def test_unreferenced_vertices_are_dropped_with_a_warning(bar, tmp_path, capsys):
@@ -194,8 +226,8 @@ def _bad_cases(b, d):
         "output stl": ([*ok[:5], "-o", d / "o.stl"], "unsupported format '.stl'"),
         "no handles": ([off, "-o", d / "o.ply"], "exactly one of"),
         "sel without def": ([off, "--sel", sel, "-o", d / "o.ply"], "needs --def"),
-        "unknown method": ([*ok, "--method", "Nope"], "unknown method 'Nope'"),
-        "n-low for ARAP": ([*ok, "--method", "ARAP", "--n-low", "100"], "ARAP has no parameter(s) ['n_low']"),
+        "unknown method": ([*ok, "--method", "Nope"], "--method Nope: python -m sshade deform runs SShaDe"),
+        "refine param for SShaDe": ([*ok, "--param", "refine_etol=1e-3"], "SShaDe has no parameter 'refine_etol'"),
         "bad n-low": ([*ok, "--n-low", "2"], "n_low must be at least 4"),
         "bad param": ([*ok, "--param", "oops"], "expected KEY=VALUE"),
         "missing -o": ([off, "--sel", sel, "--def", def_], "required: -o/--out"),

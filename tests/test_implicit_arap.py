@@ -19,7 +19,7 @@ BLOCK_TORCH = "import sys; sys.modules['torch'] = None; "  # `import torch` rais
 
 def test_without_torch_the_build_fails_in_one_line():
     """Runs whether or not PyTorch is installed: the import is made to fail."""
-    code = (BLOCK_TORCH + "import baselines; from sshade.registry import build_builtin\n"
+    code = (BLOCK_TORCH + "import baselines; from harness.registry import build_builtin\n"
             "try:\n    build_builtin('Implicit-ARAP')\nexcept Exception as e:\n"
             "    print(type(e).__name__); print(e)\n")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
@@ -196,7 +196,7 @@ def test_field_starts_at_identity():
 
 
 def test_registered_and_ordered():
-    from sshade.registry import builtin_methods, file_spec, table_order
+    from harness.registry import builtin_methods, file_spec, table_order
     assert "Implicit-ARAP" in builtin_methods()
     assert table_order().index("Implicit-ARAP") == table_order().index("ARAP-SR") + 1
     spec = file_spec("Implicit-ARAP")

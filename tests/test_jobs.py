@@ -1,9 +1,9 @@
-"""sshade/jobs.py's worker processes, in this process: a worker that dies loses only its
+"""harness/jobs.py's worker processes, in this process: a worker that dies loses only its
 job (``on_lost``, or one error naming the signal), workers ignore Ctrl-C, a stopped
 worker cannot hang the end of a run, a process a worker forks dies with it; and
 sshade/guard.py turns a plug-in's ``os._exit`` into a failed run.
 
-Every signal is sent once the job said (through :func:`sshade.jobs.send`) that it is
+Every signal is sent once the job said (through :func:`harness.jobs.send`) that it is
 running, never after a guessed delay.
 """
 from __future__ import annotations
@@ -18,8 +18,8 @@ import time
 
 import pytest
 
+from harness.jobs import run_jobs, send
 from sshade.errors import SShaDeError
-from sshade.jobs import run_jobs, send
 
 from .conftest import ROOT, subprocess_env
 

@@ -1,11 +1,14 @@
 """The house rules of DEVELOPERS.md, checked on the source (AST, nothing imported):
-sshade/ (the method) at the bottom, baselines/ and defaust/ above it, eval/ on top;
+sshade/ (the method) at the bottom, harness/ (the shared tools) above it, baselines/ and
+defaust/ above that, eval/ on top;
 imports only go down, never in a cycle, never a private name across modules, and a
 project module is imported at the top of a module, not hidden inside a function."""
 from __future__ import annotations
 
 import ast
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,7 +16,7 @@ import pytest
 from .conftest import ROOT
 
 #: package -> floor; a module may import from its own floor's package or a lower floor.
-FLOORS = {"sshade": 0, "baselines": 1, "defaust": 1, "eval": 2}
+FLOORS = {"sshade": 0, "harness": 1, "baselines": 2, "defaust": 2, "eval": 3}
 
 
 def _modules() -> dict[str, Path]:
@@ -73,6 +76,34 @@ def test_imports_only_go_down():
           if FLOORS[t.split(".")[0]] > FLOORS[m.split(".")[0]]
           or (FLOORS[t.split(".")[0]] == FLOORS[m.split(".")[0]] and t.split(".")[0] != m.split(".")[0])]
     assert not up, "imports that climb or cross a floor:\n" + "\n".join(up)
+
+
+#: What the method package never imports, not even inside a function: the harness's config
+#: and table libraries.
+HARNESS_LIBRARIES = ("hydra", "omegaconf", "pandas", "matplotlib")
+
+
+def test_the_method_package_imports_no_config_or_table_library():
+    bad = []
+    for m, p in MODULES.items():
+        if not m.startswith("sshade"):
+            continue
+        for node in ast.walk(ast.parse(p.read_text(), str(p))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+            bad += [f"{m}:{node.lineno} imports {n}" for n in names if n.split(".")[0] in HARNESS_LIBRARIES]
+    assert not bad, "\n".join(bad)
+
+
+def test_importing_every_module_of_the_method_package_loads_nothing_above_it():
+    code = ("import importlib, pkgutil, sys, sshade\n"
+            "for m in pkgutil.walk_packages(sshade.__path__, 'sshade.'):\n"
+            "    importlib.import_module(m.name)\n"
+            "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    loaded = set(r.stdout.split()) & {*HARNESS_LIBRARIES, *(p for p in FLOORS if p != "sshade")}
+    assert not loaded, loaded
 
 
 def test_no_private_name_across_modules():
@@ -151,8 +182,8 @@ def test_modules_and_functions_stay_small(pkg):
 
 
 #: Where the prose lives that the tracker rule covers: source, tests, configs, docs.
-_PROSE_GLOBS = ("sshade/**/*.py", "baselines/**/*.py", "defaust/**/*.py", "eval/**/*.py", "tests/**/*.py",
-                "benchmarks/**/*.py", "conf/**/*.yaml", "docs/**/*.md", "*.md", "pyproject.toml")
+_PROSE_GLOBS = ("sshade/**/*.py", "harness/**/*.py", "baselines/**/*.py", "defaust/**/*.py", "eval/**/*.py",
+                "tests/**/*.py", "benchmarks/**/*.py", "conf/**/*.yaml", "docs/**/*.md", "*.md", "pyproject.toml")
 
 
 def test_no_issue_numbers_in_code_or_docs():
@@ -184,7 +215,7 @@ def test_no_builtin_method_name_is_a_string_literal_in_eval():
     module of eval/ is a built-in method's name (docstrings aside; prose that mentions
     one, such as a message or a column title, is not a name), so adding or renaming a
     method edits no harness code."""
-    from sshade.registry import builtin_methods
+    from harness.registry import builtin_methods
     names = set(builtin_methods())
     found = []
     for mod, path in MODULES.items():

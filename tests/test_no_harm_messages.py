@@ -125,7 +125,7 @@ def test_check_config_experiment_sections():
 def test_config_number_helper():
     from omegaconf import OmegaConf
 
-    from sshade.checks import config_number
+    from harness.checks import config_number
     cfg = OmegaConf.create({"a": {"n": 5, "x": 2.5, "s": "7", "none": None, "big": 1e300, "b": True}})
     assert config_number(cfg, "a.n", kind=int, min=1) == 5
     assert config_number(cfg, "a.x", kind=float, min=0) == 2.5
@@ -261,7 +261,7 @@ def test_sigint_eval_prints_interrupted(tmp_path, faust_root):
 def test_swallowed_ctrl_c_still_ends_as_interrupted(capsys):
     """A library that swallows the KeyboardInterrupt (trimesh's optional imports catch
     BaseException) does not turn a Ctrl-C into a successful exit."""
-    from sshade.clirun import run_command
+    from harness.command import run_command
 
     def work():
         try:
@@ -288,6 +288,7 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
     import eval.reproduce
     import eval.sweep
     import eval.tables
+    import harness.__main__
     import sshade.cli
 
     def exit_code(fn, argv=None):
@@ -313,12 +314,14 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
                                ["eval", "experiment=ci", "dataset.root=/x", f"out_dir={tmp_path / 'o'}"])),
             ("defaust", exit_code(defaust.cli.main, ["defaust", "source=synthetic", f"out={tmp_path / 'd'}"])),
             ("deform", exit_code(lambda: sshade.cli.main(["deform", "m.obj", "-o", "o.obj", "--handles", "h.json"]))),
+            ("harness deform", exit_code(lambda: harness.__main__.main(["deform", "m.obj", "-o", "o.obj", "--handles",
+                                                                         "h.json", "--method", "ARAP"]))),
             ("tables", exit_code(lambda: eval.tables.main([str(run_dir)]))),
             ("sweep", exit_code(lambda: eval.sweep.main(["aggregate", str(tmp_path)]))),
             ("reproduce", exit_code(lambda: eval.reproduce.main([])))]
 
 
-@pytest.mark.parametrize("name", ["eval", "defaust", "deform", "tables", "sweep", "reproduce"])
+@pytest.mark.parametrize("name", ["eval", "defaust", "deform", "harness deform", "tables", "sweep", "reproduce"])
 def test_wrappers_ctrl_c(tmp_path, monkeypatch, capsys, name):
     call = dict(_wrapper_calls(tmp_path, monkeypatch, KeyboardInterrupt()))[name]
     capsys.readouterr()
@@ -327,7 +330,7 @@ def test_wrappers_ctrl_c(tmp_path, monkeypatch, capsys, name):
 
 
 # ----------------------------------------------------------------------------- 5. OSError
-@pytest.mark.parametrize("name", ["eval", "defaust", "deform", "tables", "sweep", "reproduce"])
+@pytest.mark.parametrize("name", ["eval", "defaust", "deform", "harness deform", "tables", "sweep", "reproduce"])
 def test_wrappers_os_error_one_line(tmp_path, monkeypatch, capsys, name):
     tmp = tmp_path / "out" / ".table.csv.abc123.tmp"  # atomic_write's temporary name
     exc = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))

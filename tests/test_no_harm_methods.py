@@ -20,7 +20,7 @@ import pytest
 
 from eval.app import CONF_DIR
 from examples.twisted_bar import write_case
-from sshade.cli import main as cli_main
+from harness.__main__ import main as cli_main
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env
@@ -215,7 +215,7 @@ def test_cli_guarded(bar, tmp_path, capsys, cls, extra, fragment):
 
 def test_cli_sys_exit_subprocess(bar, tmp_path):
     out = tmp_path / "out.ply"
-    r = subprocess.run([sys.executable, "-m", "sshade", "deform", str(bar["off"]), "-o", str(out), "--sel",
+    r = subprocess.run([sys.executable, "-m", "harness", "deform", str(bar["off"]), "-o", str(out), "--sel",
                         str(bar["sel"]), "--def", str(bar["def"]), "--method", "tests.bad_methods.Exits"],
                        cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=120)
     _one_error_line(r.returncode, r.stderr, out, "SystemExit: 0")
@@ -280,7 +280,7 @@ def test_cli_rest_pose_is_refused(bar, tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["Bad\nName", "a|b", "x" * 65, "tab\tname", "a&b", "50%", " lead", "$x$"])
 def test_bad_method_names_are_refused(name):
-    from sshade.method import build_method
+    from harness.plugins import build_method
     with pytest.raises(SShaDeError, match="method names are 1-64 characters") as e:
         build_method({"_target_": "tests.plugin_example.MyMethod", "name": name})
     assert "\n" not in str(e.value)
@@ -288,7 +288,7 @@ def test_bad_method_names_are_refused(name):
 
 def test_good_method_names_and_case_insensitive_duplicates():
     from eval.methods import make_methods
-    from sshade.method import build_method
+    from harness.plugins import build_method
     for name in ("SShaDe+refine", "Mine (v2)", "ARAP-SR", "a/b 1.0", "x" * 64):
         assert build_method({"_target_": "tests.plugin_example.MyMethod", "name": name}).name == name
     with pytest.raises(SShaDeError, match="listed twice"):

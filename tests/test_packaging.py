@@ -1,5 +1,5 @@
-"""Packaging: the wheel ships the Hydra configs of ``conf/`` as ``eval/conf/`` and an
-install that is not this checkout finds them (:func:`sshade.confdir.config_dir`)."""
+"""Packaging: the wheel ships the Hydra configs of ``conf/`` as ``harness/conf/`` and an
+install that is not this checkout finds them (:func:`harness.confdir.config_dir`)."""
 from __future__ import annotations
 
 import importlib.util
@@ -12,12 +12,13 @@ from pathlib import Path
 
 import pytest
 
-import sshade.confdir as confdir
-from sshade.confdir import config_dir
+import harness.confdir as confdir
+from harness.confdir import config_dir
 from sshade.errors import SShaDeError
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_ROOTS = ("sshade", "baselines", "defaust", "eval", "hydra_plugins")  # hydra_plugins: the sweep launcher
+# hydra_plugins: the sweep launcher
+PACKAGE_ROOTS = ("sshade", "harness", "baselines", "defaust", "eval", "hydra_plugins")
 # the configs the commands and the README name, at their place in the wheel
 EXPECTED_CONF = ["config.yaml", "dataset/faust.yaml", "dataset/defaust.yaml", "dataset/shapes.yaml",
                  "experiment/ci.yaml", "experiment/main.yaml", "experiment/sweep.yaml",
@@ -43,23 +44,23 @@ def test_config_dir_unknown_sub():
 
 def test_config_dir_installed_package_data(tmp_path, monkeypatch):
     """Outside a checkout (no conf/ + pyproject.toml beside the packages) the package data
-    eval/conf is used."""
+    harness/conf is used."""
     site = tmp_path / "site"
-    (site / "eval" / "conf" / "defaust").mkdir(parents=True)
-    (site / "eval" / "conf" / "config.yaml").write_text("a: 1\n")
+    (site / "harness" / "conf" / "defaust").mkdir(parents=True)
+    (site / "harness" / "conf" / "config.yaml").write_text("a: 1\n")
     monkeypatch.setattr(confdir, "_REPO_ROOT", site)
-    monkeypatch.setattr(confdir, "_package_conf", lambda: site / "eval" / "conf")
-    assert Path(config_dir()) == (site / "eval" / "conf").resolve()
-    assert Path(config_dir("defaust")) == (site / "eval" / "conf" / "defaust").resolve()
+    monkeypatch.setattr(confdir, "_package_conf", lambda: site / "harness" / "conf")
+    assert Path(config_dir()) == (site / "harness" / "conf").resolve()
+    assert Path(config_dir("defaust")) == (site / "harness" / "conf" / "defaust").resolve()
     # a stray site-packages/conf (another distribution's) is not mistaken for a checkout
     (site / "conf").mkdir()
     (site / "conf" / "config.yaml").write_text("b: 2\n")
-    assert Path(config_dir()) == (site / "eval" / "conf").resolve()
+    assert Path(config_dir()) == (site / "harness" / "conf").resolve()
 
 
 def test_config_dir_missing_everywhere(tmp_path, monkeypatch):
     monkeypatch.setattr(confdir, "_REPO_ROOT", tmp_path)
-    monkeypatch.setattr(confdir, "_package_conf", lambda: tmp_path / "eval" / "conf")
+    monkeypatch.setattr(confdir, "_package_conf", lambda: tmp_path / "harness" / "conf")
     with pytest.raises(SShaDeError, match="Hydra configs not found"):
         config_dir()
 
@@ -101,10 +102,10 @@ def wheel(tmp_path_factory) -> Path:
 def test_wheel_ships_configs_and_all_modules(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
     for rel in EXPECTED_CONF:
-        assert f"eval/conf/{rel}" in names, f"eval/conf/{rel} missing from {wheel.name}"
+        assert f"harness/conf/{rel}" in names, f"harness/conf/{rel} missing from {wheel.name}"
     # every config of conf/, and nothing at a top-level conf/
     conf = {p.relative_to(ROOT / "conf").as_posix() for p in (ROOT / "conf").rglob("*.yaml")}
-    assert {n[len("eval/conf/"):] for n in names if n.startswith("eval/conf/")} == conf
+    assert {n[len("harness/conf/"):] for n in names if n.startswith("harness/conf/")} == conf
     assert not any(n.startswith("conf/") for n in names)
     # every module of the packages (catches a subpackage missing from pyproject's list)
     mods = {p.relative_to(ROOT).as_posix() for d in PACKAGE_ROOTS for p in (ROOT / d).rglob("*.py")
@@ -127,12 +128,12 @@ def test_installed_wheel_runs_outside_checkout(wheel, tmp_path):
         assert p.returncode == 0, f"{args}: {p.stdout}{p.stderr}"
         return p.stdout
 
-    out = run("-c", "import sys, sshade.confdir as c, sshade.registry as r; d = c.config_dir(); "
-                    "print(r.builtin_methods()); assert 'eval' not in sys.modules; import eval; "
-                    "print(eval.__file__); print(d)")
+    out = run("-c", "import sys, harness.confdir as c, harness.registry as r; d = c.config_dir(); "
+                    "print(r.builtin_methods()); assert 'eval' not in sys.modules; import harness; "
+                    "print(harness.__file__); print(d)")
     assert out.splitlines() == ["('ARAP', 'Elastic', 'ARAP-SR', 'Implicit-ARAP', 'SShaDe', 'SShaDe+refine')",
-                                str(site / "eval" / "__init__.py"),
-                                str((site / "eval" / "conf").resolve())]
+                                str(site / "harness" / "__init__.py"),
+                                str((site / "harness" / "conf").resolve())]
     assert "out: " in run("-m", "defaust", "--cfg", "job", "preset=ci", f"out={tmp_path / 'x'}")
     help_ = run("-m", "eval", "--help")
     assert "ci, convergence, faust, main," in help_ and "defaust/preset: ci, full" in help_

@@ -17,8 +17,8 @@ from eval.experiments import cases_plan
 from eval.metrics.reference import sr_energy
 from eval.run import plan as P
 from eval.run.progress import CostModel, default_cost_model
+from sshade.cores import available_cores
 from sshade.errors import SShaDeError
-from sshade.jobs import available_cores
 
 
 def _fake_defaust(n_subjects=10, n_poses=4, n_vertices=169_000):

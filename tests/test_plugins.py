@@ -14,9 +14,9 @@ import pytest
 
 from eval.app import CONF_DIR
 from eval.methods import make_methods, method_spec
+from harness.plugins import build_method
 from sshade.arap.cases import box_surface
 from sshade.errors import SShaDeError
-from sshade.method import build_method
 
 from .conftest import ROOT, subprocess_env
 from .plugin_example import MyMethod

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import pytest
 
 from eval.run.progress import CostModel, default_cost_model
-from sshade.registry import method_meta
+from harness.registry import method_meta
 
 
 def test_cost_model_weights_by_method():

@@ -1,4 +1,4 @@
-"""sshade.registry: our methods are the files of conf/method/: names, table
+"""harness.registry: our methods are the files of conf/method/: names, table
 order, specs without their `order`, a new file picked up with no other edit, and no
 upward import from the bottom layer."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-import sshade.registry as reg
+import harness.registry as reg
 from sshade.errors import SShaDeError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,8 +49,8 @@ def test_a_new_method_is_one_file(tmp_path, monkeypatch):
 
 
 def test_bottom_layer_imports_nothing_above():
-    code = ("import sys, sshade, sshade.cli, sshade.registry, sshade.guard, sshade.mesh, sshade.isometric;"
-            "sshade.registry.builtin_methods();"
+    code = ("import sys, sshade, sshade.cli, harness.registry, sshade.guard, sshade.mesh, sshade.isometric;"
+            "harness.registry.builtin_methods();"
             "print(sorted({k.split('.')[0] for k in sys.modules} & {'eval', 'baselines', 'defaust'}))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -35,9 +35,9 @@ from eval.datasets.case import DeformationCase
 from eval.datasets.registry import register_dataset
 from eval.run.paths import abs_path
 from eval.run.plan import BUILD_S_PER_SUBJECT, duration_words
-from sshade.checks import config_int_list
+from harness.checks import config_int_list
+from sshade.cores import pool_size
 from sshade.errors import SShaDeError
-from sshade.jobs import pool_size
 
 __all__ = ["DefaustCase", "load_defaust", "summarise_dropped",
            "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root", "build_outlook", "BuildProgress"]
@@ -198,7 +198,7 @@ def build_outlook(root: Path, ds) -> dict | None:
     None when no build is wanted (:func:`build_wanted`) or every subject is complete in
     the manifest (the build then only verifies it); else a dict: ``root``, ``source``,
     ``subjects`` (int, to build), ``complete`` (int, already built), ``workers`` (the
-    processes the builder will use: :func:`sshade.jobs.pool_size` of its ``workers``
+    processes the builder will use: :func:`sshade.cores.pool_size` of its ``workers``
     setting, null = every core, capped at the subjects to build; 1 without the setting),
     ``s_per_subject`` (:data:`eval.run.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
     ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and

@@ -40,7 +40,7 @@ from defaust.faust_source import discover_faust, faust_subjects
 from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUST builder's (one implementation)
 from eval.datasets.case import DeformationCase
 from eval.datasets.registry import register_dataset
-from sshade.checks import check_numbers, config_int_list
+from harness.checks import check_numbers, config_int_list
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 

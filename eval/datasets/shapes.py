@@ -37,7 +37,7 @@ from defaust import highres  # the module: tests replace highres.subdivide_remes
 from eval.datasets.case import DeformationCase
 from eval.datasets.registry import register_dataset
 from eval.run.store import safe_name
-from sshade.checks import check_numbers, config_int_list, config_value
+from harness.checks import check_numbers, config_int_list, config_value
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 

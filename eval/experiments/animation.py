@@ -46,11 +46,11 @@ from eval.experiments.tosca import markdown_table
 from eval.methods import make_methods
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
+from harness.registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
-from sshade.registry import method_meta
 
 __all__ = ["run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
 

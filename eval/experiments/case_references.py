@@ -15,7 +15,7 @@ from eval.metrics.reference import (
 )
 from eval.run.paths import abs_path
 from eval.run.subset import baseline_selection, check_baseline_cases
-from sshade.checks import config_number
+from harness.checks import config_number
 from sshade.errors import SShaDeError
 
 __all__ = ["CaseReferences"]

@@ -80,9 +80,9 @@ from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
 from eval.run.store import ResultStore, case_identity, json_safe, pair_key
 from eval.run.subset import baseline_selection, check_baseline_cases, method_selections
 from eval.tables import compare, write_cases, write_tables
-from sshade.checks import config_bool
+from harness.checks import config_bool
+from harness.registry import method_meta
 from sshade.errors import SShaDeError
-from sshade.registry import method_meta
 
 __all__ = ["run", "sshade_params"]
 
@@ -133,7 +133,7 @@ class _Setup:
     def runs_on(self, ci: int, m) -> bool:
         """Baselines take minutes per high-res case: they run on the cases
         ``dataset.baseline_cases`` selects (:func:`eval.run.subset.baseline_selection`), a
-        method whose file says ``cases: all`` (:func:`sshade.registry.method_meta`) on
+        method whose file says ``cases: all`` (:func:`harness.registry.method_meta`) on
         all, except a method ``method_cases`` gives its own rule
         (:func:`eval.run.subset.method_selections`)."""
         if m.name in self.own:

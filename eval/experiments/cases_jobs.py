@@ -1,6 +1,6 @@
 """The ``cases`` experiment's runs side by side: whole cases in worker processes.
 
-``jobs`` (config) worker processes (:func:`sshade.jobs.run_jobs`: spawned, each with
+``jobs`` (config) worker processes (:func:`harness.jobs.run_jobs`: spawned, each with
 ``cores / jobs`` threads) take the cases with runs to do, the costliest first (their
 estimated seconds, :class:`eval.run.progress.CostModel`); a worker runs a case's methods in
 table order (:func:`eval.experiments.pair.run_pair`), so that a reference solution still
@@ -42,8 +42,9 @@ from eval.metrics.meshes import CaseMeshes
 from eval.run.outdir import resume_command
 from eval.run.paths import abs_path
 from eval.run.store import ResultStore, json_safe
+from harness.jobs import in_worker, run_jobs, send, thread_limit
+from sshade.cores import available_cores, pool_size
 from sshade.errors import SShaDeError
-from sshade.jobs import available_cores, in_worker, pool_size, run_jobs, send, thread_limit
 
 __all__ = ["AUTO_MIN_S", "check_jobs", "job_count", "describe", "run_case_jobs", "init_worker", "case_job",
            "lost_record"]
@@ -130,7 +131,7 @@ def case_job(ci: int, case, pairs, ref_on: bool, want_meshes: bool) -> dict:
     """In a worker: the methods ``pairs`` (``(mi, key, key_fields)``, in table order) on
     case ``ci``, each stored as it finishes. Sends ``("start", ci, mi)`` as each pair
     starts and ``("pair", ci, mi, seconds, seconds less compilation, record, U or None)``
-    as it ends (:func:`sshade.jobs.send`). Returns ``{"ci", "references_s"}``."""
+    as it ends (:func:`harness.jobs.send`). Returns ``{"ci", "references_s"}``."""
     w = _W
     w["refs"].start_case(ci, case, ref_on)
     ref0 = w["refs"].computed_s
@@ -157,7 +158,7 @@ class _Lost:
 
 def lost_record(case, name: str, reason: str, cores: int) -> dict:
     """The record (``row``, ``info``, ``case``, ``method``) of method ``name`` on ``case``
-    when its worker died (``reason``, :func:`sshade.jobs.death_reason`): a failed row
+    when its worker died (``reason``, :func:`harness.jobs.death_reason`): a failed row
     whose ``error`` is ``"<reason> while running this pair"``. Never stored: a resume
     runs the pair again."""
     row, _, _ = run_pair(_Lost(name, f"{reason} while running this pair"), name, case, None,
@@ -216,7 +217,7 @@ class _Cases:
 
 
 def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case, names=None) -> float:
-    """Run ``tasks`` in ``jobs`` worker processes (:func:`sshade.jobs.run_jobs`).
+    """Run ``tasks`` in ``jobs`` worker processes (:func:`harness.jobs.run_jobs`).
 
     A worker that dies (killed, out of memory, a plug-in's crash in compiled code) fails
     the pair it was running: its row's ``error`` names the signal

@@ -41,10 +41,10 @@ from eval.metrics.reference import reference_solution, status_words
 from eval.present.figures import safe_figure
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
+from harness.checks import check_numbers, config_int_list
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.cases import lifted_plane
-from sshade.checks import check_numbers, config_int_list
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write

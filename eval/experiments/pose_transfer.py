@@ -53,7 +53,7 @@ from eval.metrics.measures import ground_truth_metrics
 from eval.present.figures import figures_options, pose_transfer_figure, safe_figure
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
-from sshade.checks import config_int_list
+from harness.checks import config_int_list
 from sshade.deform import SShaDe
 from sshade.errors import SShaDeError
 from sshade.isometric import pose_transfer, rigid_align

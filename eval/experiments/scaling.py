@@ -68,9 +68,9 @@ from eval.metrics.measures import deformation_metrics
 from eval.run.memory import PeakMemory, release_freed
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, write_runinfo
+from harness.checks import check_numbers, config_bool, config_int_list
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
-from sshade.checks import check_numbers, config_bool, config_int_list
 from sshade.deform import MAX_SEED, check_params, warm_sshade
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh

@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from sshade.checks import config_value
+from harness.checks import config_value
 from sshade.errors import SShaDeError
 
 __all__ = ["MeshEntry", "mesh_entries", "cache_name"]

@@ -48,7 +48,7 @@ from eval.present.meshview import view_options, write_case_view
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.tables import ok_mask
-from sshade.checks import check_numbers, config_int_list
+from harness.checks import check_numbers, config_int_list
 from sshade.deform import SShaDe, auto_n_low
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer

@@ -1,7 +1,8 @@
 """Every number (and flag) the evaluator's config holds, checked in one place before any work.
 
-:func:`check_config` reads each value with :func:`sshade.checks.config_number` /
-:func:`sshade.checks.config_bool`, which raise :class:`~sshade.errors.SShaDeError` naming the key and the value, so that
+:func:`check_config` reads each value with :func:`harness.checks.config_number` /
+:func:`harness.checks.config_bool`, which raise :class:`~sshade.errors.SShaDeError` naming
+the key and the value, so that
 ``arap.max_iter=inf``, ``dataset.limit=abc`` or ``reference.time_budget_s=junk`` give one
 ``error: ...`` line and exit status 2 before a folder is made or a method runs
 (:func:`eval.app.main` calls it on the composed config before Hydra starts the run, and
@@ -15,7 +16,7 @@ from eval.experiments import experiment_check
 from eval.experiments.cases_jobs import check_jobs
 from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
 from eval.run.subset import check_baseline_cases, check_method_cases
-from sshade.checks import config_bool, config_number, config_value
+from harness.checks import config_bool, config_number, config_value
 from sshade.deform import check_params
 from sshade.errors import SShaDeError
 

@@ -2,8 +2,8 @@
 
 A built-in method is a module (its class implements :class:`sshade.method.Deformer`)
 plus one file of the ``method`` config group, found in the config folder of
-:func:`sshade.confdir.config_dir` (the repository's ``conf/`` or the installed
-``eval/conf/``)::
+:func:`harness.confdir.config_dir` (the repository's ``conf/`` or the installed
+``harness/conf/``)::
 
     # conf/method/Elastic.yaml
     _target_: baselines.Elastic      # the class, imported by its dotted path (importlib)
@@ -14,11 +14,11 @@ plus one file of the ``method`` config group, found in the config folder of
 The file name is the method's name (the table row label, :func:`sshade.method.check_name`);
 its key in the composed config is the name with ``+`` as ``_`` (:func:`method_key`).
 Nothing here imports a method's module until it is built (:func:`build_builtin`), so the
-bottom layer names the methods of the layers above without a static upward import.
+harness floor names the methods of the floor above (baselines) without a static upward import.
 
 Adding a built-in method therefore takes its module and its config file; the list of
 names (:func:`builtin_methods`), the table order (:func:`table_order`) and the command
-line's ``--method`` follow. One optional line more, ``- method@method.<key>: <name>`` in
+line's ``--method`` (``python -m harness deform``) follow. One optional line more, ``- method@method.<key>: <name>`` in
 the defaults list of ``conf/config.yaml``, lets Hydra compose the file as
 ``method.<key>`` so that ``method.<key>.<param>=...`` overrides reach it (Hydra composes
 only the group options its defaults list names; without the line the evaluator loads
@@ -38,9 +38,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-from .confdir import config_dir
-from .errors import SShaDeError
-from .method import as_dict, build_method
+from harness.confdir import config_dir
+from harness.plugins import as_dict, build_method
+from sshade.errors import SShaDeError
 
 __all__ = ["builtin_methods", "table_order", "canonical_name", "method_key", "method_file", "file_spec",
            "method_meta", "strip_meta", "build_builtin", "named_or_plugin", "META_KEYS", "META_DEFAULTS", "SECTIONS"]
@@ -227,7 +227,7 @@ def build_builtin(name: str, overrides: Mapping | None = None, *, spec: Mapping 
     Raises
     ------
     SShaDeError: an override that is not a parameter of the definition (``ARAP has no
-    parameter(s) ['n_low']``), and everything :func:`sshade.method.build_method` raises
+    parameter(s) ['n_low']``), and everything :func:`harness.plugins.build_method` raises
     (the classes check their parameter values when built).
     """
     name = canonical_name(name)
@@ -254,12 +254,12 @@ def named_or_plugin(method: str, params: Mapping | None = None, sections: Mappin
 
     Returns
     -------
-    The built method (:func:`sshade.method.build_method`).
+    The built method (:func:`harness.plugins.build_method`).
 
     Raises
     ------
     SShaDeError on an unknown name that is not a dotted path, a parameter our method
-    does not have, and everything :func:`sshade.method.build_method` raises.
+    does not have, and everything :func:`harness.plugins.build_method` raises.
     """
     params = dict(params or {})
     try:

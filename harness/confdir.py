@@ -3,32 +3,26 @@
 The configs live in the top-level ``conf/`` folder of the repository (``conf/config.yaml``,
 ``conf/dataset/``, ``conf/experiment/``, ``conf/defaust/``, ``conf/hydra/launcher/``).
 An install from a wheel or ``pip install .`` ships the same files as package data of
-``eval.conf`` (``site-packages/eval/conf/``, see ``pyproject.toml``), where
+``harness.conf`` (``site-packages/harness/conf/``, see ``pyproject.toml``), where
 ``Path(__file__).parents[1] / "conf"`` would point into ``site-packages``.
-:func:`config_dir` finds whichever copy applies, by path (the installed copy through
-:func:`importlib.util.find_spec`, which locates the ``eval`` package without importing
-it: this module is of the bottom layer); :mod:`eval.app`, :mod:`eval.sweep` and
-:mod:`defaust.cli` use it for Hydra's ``config_path``, :mod:`sshade.registry` for the
-method definitions of ``conf/method/``.
+:func:`config_dir` finds whichever copy applies, by path; :mod:`eval.app`,
+:mod:`eval.sweep` and :mod:`defaust.cli` use it for Hydra's ``config_path``,
+:mod:`harness.registry` for the method definitions of ``conf/method/``.
 """
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
-from .errors import SShaDeError
+from sshade.errors import SShaDeError
 
 __all__ = ["config_dir"]
 
 _REPO_ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_DATA = "eval"  # the package whose conf/ subfolder holds the installed configs (pyproject.toml)
 
 
 def _package_conf() -> Path:
-    """``conf/`` of the installed package :data:`PACKAGE_DATA` (found, not imported)."""
-    spec = importlib.util.find_spec(PACKAGE_DATA)
-    locations = list(spec.submodule_search_locations or []) if spec is not None else []
-    return Path(locations[0] if locations else _REPO_ROOT / PACKAGE_DATA) / "conf"
+    """``conf/`` of this installed package (the package data ``harness.conf``, pyproject.toml)."""
+    return Path(__file__).resolve().parent / "conf"
 
 
 def _source_conf() -> Path | None:
@@ -44,7 +38,7 @@ def config_dir(sub: str = "") -> str:
     """Absolute path of the Hydra config folder (or of its subfolder ``sub``).
 
     The repository's ``conf/`` when running from a source checkout (plain or editable
-    install), otherwise the ``eval/conf/`` package data of an installed wheel.
+    install), otherwise the ``harness/conf/`` package data of an installed wheel.
 
     Parameters
     ----------
@@ -64,7 +58,7 @@ def config_dir(sub: str = "") -> str:
 
     Examples
     --------
-    >>> from sshade.confdir import config_dir
+    >>> from harness.confdir import config_dir
     >>> Path(config_dir(), "config.yaml").is_file()
     True
     >>> Path(config_dir("defaust"), "preset", "ci.yaml").is_file()

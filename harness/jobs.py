@@ -10,10 +10,10 @@ worker runs). A job reports progress with :func:`send` (delivered in the main pr
 finish: callers that need a fixed order (the manifest) sort them by index.
 
 Each worker's threads are limited so that ``workers x threads`` does not exceed the cores
-of this process (:func:`available_cores`, the affinity mask), through the environment
+of this process (:func:`sshade.cores.available_cores`, the affinity mask), through the environment
 variables the libraries read at import (:data:`THREAD_VARIABLES`, or those the caller
-names), set while the workers start; :data:`CORES_VARIABLE` tells the worker's own code
-(:func:`available_cores`, e.g. SShaDe's sampling pool, :func:`sshade.sampling.pool_size`)
+names), set while the workers start; :data:`sshade.cores.CORES_VARIABLE` tells the worker's own code
+(:func:`sshade.cores.available_cores`, e.g. SShaDe's sampling pool, :func:`sshade.sampling.pool_size`)
 that it has that many cores.
 
 Workers never outlive the main process and never report a Ctrl-C themselves:
@@ -54,18 +54,14 @@ import time
 import traceback
 from contextlib import contextmanager
 
+from sshade.cores import CORES_VARIABLE, available_cores, pool_size
 from sshade.errors import SShaDeError
 
-__all__ = ["THREAD_VARIABLES", "CORES_VARIABLE", "GRACE_S", "available_cores", "pool_size", "thread_limit",
-           "run_jobs", "send", "in_worker", "death_reason"]
+__all__ = ["THREAD_VARIABLES", "GRACE_S", "thread_limit", "run_jobs", "send", "in_worker", "death_reason"]
 
 #: Environment variables that cap the threads of OpenBLAS, MKL, OpenMP, Accelerate, numexpr and numba.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
                     "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS")
-
-#: Set in the workers of :func:`run_jobs` to their share of the cores (:func:`thread_limit`);
-#: :func:`available_cores` reads it.
-CORES_VARIABLE = "SSHADE_JOB_CORES"
 
 #: Seconds a terminated worker is given to end before it is killed (SIGKILL).
 GRACE_S = 3.0
@@ -73,30 +69,6 @@ GRACE_S = 3.0
 _CHANNEL: list = [None, 0, None]  # in a worker: its connection to the main process, its pid, a send lock
 _hard_exit = os._exit  # bound once: a guarded plug-in may replace os._exit meanwhile (sshade.guard)
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
-
-
-def available_cores() -> int:
-    """CPU cores this process may use, >= 1: its affinity mask where the OS has one (else
-    the CPU count), at most :data:`CORES_VARIABLE` when set (a worker of :func:`run_jobs`)."""
-    try:
-        n = max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
-        n = max(1, os.cpu_count() or 1)
-    share = os.environ.get(CORES_VARIABLE, "")
-    return max(1, min(n, int(share))) if share.isdigit() and int(share) > 0 else n
-
-
-def pool_size(workers: int | None, n_jobs: int) -> int:
-    """Worker processes (or threads) for ``n_jobs`` jobs: ``workers`` (None:
-    :func:`available_cores`), capped at ``n_jobs``, at least 1.
-
-    Examples
-    --------
-    >>> pool_size(4, 2), pool_size(3, 0)
-    (2, 1)
-    """
-    w = available_cores() if workers is None else int(workers)
-    return max(1, min(w, int(n_jobs)))
 
 
 def thread_limit(workers: int) -> int:
@@ -118,7 +90,7 @@ def send(message) -> None:
     SShaDeError outside a worker of :func:`run_jobs` (a process a worker forked included).
     """
     if not in_worker():
-        raise SShaDeError("sshade.jobs.send: not in a worker of run_jobs")
+        raise SShaDeError("harness.jobs.send: not in a worker of run_jobs")
     _reply(("msg", message))
 
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 
-from .deform import MAX_SEED
-from .errors import SShaDeError
+from sshade.deform import MAX_SEED
+from sshade.errors import SShaDeError
 
 __all__ = ["config_value", "config_number", "config_bool", "config_int_list", "check_numbers", "MAX_INT"]
 
