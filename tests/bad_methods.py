@@ -1,4 +1,4 @@
-"""Tiny misbehaving plug-in methods for tests/test_no_harm_methods.py, usable
+"""Tiny misbehaving plug-in methods for tests/test_guard.py, usable
 as ``_target_: tests.bad_methods.<Class>`` in the evaluator's ``methods`` or as
 ``--method tests.bad_methods.<Class>`` in ``python -m sshade deform``.
 

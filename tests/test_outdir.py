@@ -1,6 +1,6 @@
-"""No data changed or lost: a command writes only into a folder that is new,
-empty or its own earlier output of the same kind (eval/run/outdir.py); ``results/`` only
-under ``python -m eval.reproduce``; two runs never share a folder."""
+"""eval/run/outdir.py, no data changed or lost: a command writes only into a folder that is
+new, empty or its own earlier output of the same kind (eval/run/outdir.py); ``results/``
+only under ``python -m eval.reproduce``; two runs never share a folder."""
 from __future__ import annotations
 
 import hashlib

@@ -1,7 +1,6 @@
-"""Fair method comparison in the evaluator's tables (eval/tables.py: every method on the
-same cases, the second "all cases" table, the LaTeX case count, failures) and the case
-figures' "not run" panels (eval/present/figures.py). Synthetic frames; the figure tests use a
-small sphere."""
+"""The evaluator's tables (eval/tables.py): every method on the same cases, the second
+"all cases" table, the LaTeX case count, failures, the stop lines, retabulation from
+cases.csv. Synthetic frames."""
 from __future__ import annotations
 
 import io
@@ -134,7 +133,7 @@ def test_a_failed_run_removes_its_case_from_the_common_set(tmp_path):
 def test_empty_common_set_falls_back_to_labelled_per_method_means(tmp_path):
     (tmp_path / "table_all.csv").write_text("stale\n")  # from an earlier run into the same folder
     # each method succeeded somewhere, never on the same case (a method that failed
-    # everywhere does not empty the common set: tests/test_no_harm_methods.py)
+    # everywhere does not empty the common set: tests/test_guard.py)
     df = pd.DataFrame([_row("c0", "ARAP", 1.0), _row("c1", "ARAP", 9.0, error="SShaDeError: nope"),
                        _row("c0", "SShaDe", 2.0, error="SShaDeError: nope"), _row("c1", "SShaDe", 4.0)])
     assert common_cases(df) == []
@@ -235,63 +234,6 @@ def test_ok_mask_on_an_error_column_read_back_from_csv():
         assert ok_mask(empty).tolist() == [True, True]
         assert compare(empty).main["n_cases"].tolist() == [1, 1]
         assert summarize(empty)["n_failed"].tolist() == [0, 0]
-
-
-# ---------------------------------------------------------------- figures: "not run" vs "failed"
-
-@pytest.fixture(scope="module")
-def sphere():
-    trimesh = pytest.importorskip("trimesh")
-    m = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
-    return np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
-
-
-def _results(V):
-    from eval.present.figures import NOT_RUN
-    Vd = V.copy()
-    Vd[:, 1] *= 1.1
-    return {"ARAP": None, "Elastic": NOT_RUN, "SShaDe": Vd}
-
-
-def test_case_panels_label_not_run_and_failed(sphere):
-    from eval.present.figures import NOT_RUN, case_panels
-    V, F = sphere
-    panels = case_panels(V, F, _results(V), [0, 1], [True, False])
-    titles = [p["title"] for p in panels]
-    assert titles[:3] == ["rest + handles", "ARAP: failed", "Elastic: not run"]
-    assert titles[3].startswith("SShaDe  (EL ")
-    assert panels[1]["V"] is None and panels[2]["V"] is None and panels[3]["values"].shape == (len(F),)
-    assert repr(NOT_RUN) == "NOT_RUN" and NOT_RUN is not None
-
-
-def test_case_figure_with_a_not_run_method_writes_a_png(sphere, tmp_path, monkeypatch):
-    pytest.importorskip("matplotlib")
-    import eval.present.figures as figs
-    from eval.present.render import png_size
-    V, F = sphere
-    seen = []
-    real = figs.mesh_row
-    monkeypatch.setattr(figs, "mesh_row", lambda panels, path, **kw: seen.append(panels) or real(panels, path, **kw))
-    p = figs.case_figure(V, F, _results(V), [0, 1], [True, False], tmp_path / "c.png", title="c",
-                         panel_size=(120, 160))
-    assert p.is_file() and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert png_size(p) == (4 * 120 + 90, 160 + 28 + 28)
-    assert [q["title"] for q in seen[0]][1:3] == ["ARAP: failed", "Elastic: not run"]
-
-
-def test_write_case_figure_marks_not_run_methods(tmp_path, monkeypatch):
-    """eval.app passes the methods skipped by dataset.baseline_cases as ``not_run``."""
-    import types
-
-    import eval.present.figures as figs
-    got = {}
-    monkeypatch.setattr(figs, "case_figure", lambda V, F, results, *a, **kw: got.update(results) or "ok")
-    case = types.SimpleNamespace(name="c7", V=None, F=None, handles=None, static=None)
-    out = figs.write_case_figure(case, {"ARAP": None, "Elastic": None, "SShaDe": "Vd"}, tmp_path,
-                                 not_run=["ARAP"])
-    assert out == "ok"
-    assert list(got) == ["ARAP", "Elastic", "SShaDe"]  # panel order kept
-    assert got["ARAP"] is figs.NOT_RUN and got["Elastic"] is None and got["SShaDe"] == "Vd"
 
 
 def test_retabulate_rebuilds_tables_from_cases_csv_only(tmp_path):

@@ -1,6 +1,7 @@
-"""No harm, the command wrappers' part: bad numbers, Hydra's own errors, Ctrl-C, OSError
-and the builder's checks give ONE ``error: ...`` line (or ``interrupted``), the documented
-exit status, no traceback, and happen before any work (no folder, no partial build).
+"""harness/command.py and sshade/clirun.py, the command wrappers: bad numbers, Hydra's own
+errors, Ctrl-C, OSError and the builder's checks give ONE ``error: ...`` line (or
+``interrupted``), the documented exit status, no traceback, and happen before any work (no
+folder, no partial build).
 
 Most checks call the wrappers in-process with the inner work replaced; the few that need
 a real process (Hydra's argv handling, a real SIGINT) run their commands side by side.

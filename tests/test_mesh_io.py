@@ -1,4 +1,5 @@
-"""No harm, file side: no input kills the interpreter, no wrong mesh is ever written.
+"""sshade/mesh/io.py and the files around it (handle files, ``-o``): no input kills the
+interpreter, no wrong mesh is ever written.
 
 Readers never abort natively nor print a reader's noise, writers are bit exact and
 signed, index handles are refused on STL, handle files fail on one line, scale

@@ -1,10 +1,10 @@
-"""A plug-in method must never corrupt results. Its output is checked in one
-place (sshade.mesh.validate.validate_deformed) before anything is measured or written; it
-runs through one guard (sshade.guard.run_method) on read-only copies, its exceptions
-(SystemExit included) and time-outs become a failed case, a result whose handles miss
-their targets is a failed case, names and info values cannot break a table. The
-misbehaving plug-ins are in tests/bad_methods.py; each is tried in the evaluator and in
-``python -m sshade deform``."""
+"""sshade/guard.py, the guarded run of any method: a plug-in must never corrupt results. Its
+output is checked in one place (sshade.mesh.validate.validate_deformed) before anything is
+measured or written; it runs through one guard (sshade.guard.run_method) on read-only
+copies, its exceptions (SystemExit included) and time-outs become a failed case, a result
+whose handles miss their targets is a failed case, names and info values cannot break a
+table. The misbehaving plug-ins are in tests/bad_methods.py; each is tried in the evaluator
+and in ``python -m sshade deform``."""
 from __future__ import annotations
 
 import json
