@@ -57,6 +57,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval import datasets
@@ -116,30 +117,63 @@ def run(cfg) -> dict:
     return _finish(cfg, s, rows, info, t_start)
 
 
-class _Setup:
-    """What :func:`_setup` prepared: ``methods``, ``names``, ``specs`` (each method's
-    resolved definition), ``codes`` (each method's code identity), ``guard``, ``refs``,
-    ``root``, ``out_dir``, ``name`` (dataset), ``cases``, ``base`` (indices of the cases the baselines run on, None =
-    all) and ``base_rule`` (that rule in words), ``own`` (method name -> (indices or
-    None, rule in words) for the methods ``method_cases`` gives a rule of their own),
-    ``store`` and ``resume``; ``meshes``: the metrics' kept rest and ground-truth meshes
-    (:class:`~eval.metrics.meshes.CaseMeshes`); ``build``: the dataset's build stage when one ran
-    (:func:`eval.experiments.cases_plan.planned_root`), ``plan``: the runs'
-    :class:`~eval.experiments.cases_plan.PlanRecord` once logged."""
+@dataclass
+class CaseSelection:
+    """Which cases each method runs on: ``base`` (indices of the cases the baselines run
+    on, None = all, :func:`eval.run.subset.baseline_selection`) and ``own`` (method name
+    -> (indices or None, rule in words) for the methods ``method_cases`` gives a rule of
+    their own, :func:`eval.run.subset.method_selections`)."""
 
-    def __init__(self, **kw):
-        self.__dict__.update(kw)
+    base: set | None
+    own: dict
 
     def runs_on(self, ci: int, m) -> bool:
         """Baselines take minutes per high-res case: they run on the cases
-        ``dataset.baseline_cases`` selects (:func:`eval.run.subset.baseline_selection`), a
-        method whose file says ``cases: all`` (:func:`harness.registry.method_meta`) on
-        all, except a method ``method_cases`` gives its own rule
-        (:func:`eval.run.subset.method_selections`)."""
+        ``dataset.baseline_cases`` selects, a method whose file says ``cases: all``
+        (:func:`harness.registry.method_meta`) on all, except a method ``method_cases``
+        gives its own rule."""
         if m.name in self.own:
             sel = self.own[m.name][0]
             return sel is None or ci in sel
         return self.base is None or ci in self.base or method_meta(m.name)["cases"] == "all"
+
+
+@dataclass
+class _Setup:
+    """What :func:`_setup` prepared before any method runs; ``jobs``, ``plan`` and
+    ``resumed`` are set by :func:`_run_cases` once the runs to do are known."""
+
+    methods: list                 # the built methods, in table order
+    names: list[str]              # their names (row labels)
+    specs: list[dict]             # each method's resolved definition (eval/run/store.py)
+    codes: list[dict]             # each method's code identity (eval/run/code_identity.py)
+    guard: dict                   # timeout_s, handle_error_max_pct
+    refs: CaseReferences          # the reference columns' options and cache
+    root: Path                    # the dataset's root
+    out_dir: Path
+    name: str                     # the dataset's name
+    cases: list                   # its cases
+    selection: CaseSelection      # which cases each method runs on
+    base_rule: str                # dataset.baseline_cases in words
+    store: ResultStore
+    resume: bool
+    build: dict | None            # the dataset's build stage when one ran (cases_plan.planned_root)
+    meshes: CaseMeshes = field(default_factory=CaseMeshes)  # the metrics' kept rest / ground-truth meshes
+    jobs: int = 1
+    plan: object = None           # cases_plan.PlanRecord once logged
+    resumed: dict | None = None   # restored / recomputed counts for run.json
+
+    @property
+    def base(self) -> set | None:
+        return self.selection.base
+
+    @property
+    def own(self) -> dict:
+        return self.selection.own
+
+    def runs_on(self, ci: int, m) -> bool:
+        """:meth:`CaseSelection.runs_on`."""
+        return self.selection.runs_on(ci, m)
 
 
 def _method_specs(cfg, methods) -> list[dict]:
@@ -173,8 +207,8 @@ def _setup(cfg) -> _Setup:
     meshes = config_bool(cfg, "store.meshes", default=False)
     # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first (eval/experiments/cases_plan.py)
     mc = cfg.get("method_cases")
-    root, build = planned_root(cfg, methods, refs, lambda cs, base: _Setup(
-        base=base, own=method_selections(cs, mc, [x.name for x in methods])).runs_on)
+    root, build = planned_root(cfg, methods, refs, lambda cs, base: CaseSelection(
+        base, method_selections(cs, mc, [x.name for x in methods])).runs_on)
     out_dir = abs_path(cfg.out_dir)
     ds = cfg.dataset
     name = str(ds.get("name", "faust"))
@@ -189,9 +223,9 @@ def _setup(cfg) -> _Setup:
         n = store.clear()
         if n:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
-    return _Setup(methods=methods, names=names, specs=specs, guard=guard, refs=refs, root=root, out_dir=out_dir,
-                  name=name, cases=cases, base=base, base_rule=base_rule, own=own, store=store, resume=resume,
-                  codes=codes, build=build, meshes=CaseMeshes())
+    return _Setup(methods=methods, names=names, specs=specs, codes=codes, guard=guard, refs=refs, root=root,
+                  out_dir=out_dir, name=name, cases=cases, selection=CaseSelection(base, own), base_rule=base_rule,
+                  store=store, resume=resume, build=build)
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -477,7 +511,7 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
                 wall_s=round(time.perf_counter() - t_start, 3), jobs=s.jobs,
                 compile_s={k: round(v, 3) for k, v in compile_s.items()},
                 outputs={k: Path(v).name for k, v in paths.items()}, plan=s.plan.finish(s.refs.computed_s),
-                resumed=getattr(s, "resumed", None))
+                resumed=s.resumed)
     paths["run_json"] = write_runinfo(s.out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {s.out_dir}")
