@@ -13,7 +13,7 @@ Config: ``conf/config.yaml`` (+ ``conf/dataset/*.yaml``, ``conf/experiment/*.yam
 (:func:`eval.run.config_check.check_config`), claims ``out_dir``
 (:func:`eval.run.outdir.claimed_run`) and runs the experiment of ``experiment.kind`` from
 the registry of :mod:`eval.experiments` (default ``cases``: every method on every case
-of the dataset, :func:`eval.experiments.cases.run`, re-exported here as :func:`run`).
+of the dataset, :func:`eval.experiments.cases.experiment.run`, re-exported here as :func:`run`).
 
 Exit status: 0 on success (even if some method failed on some case), 2 on a
 configuration or input error (one ``error: ...`` line on stderr).
@@ -23,7 +23,7 @@ from __future__ import annotations
 import sys
 
 from eval.experiments import experiments, find_experiment
-from eval.experiments.cases import run
+from eval.experiments.cases.experiment import run
 from eval.report import safe_report
 from eval.run.config_check import check_config
 from eval.run.outdir import claimed_run

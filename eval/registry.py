@@ -37,13 +37,14 @@ class Registry:
         return item
 
     def _discover(self) -> None:
-        """Import every module of the package once (each registers its items)."""
+        """Import every module of the package and of its subpackages once (each registers its items)."""
         if self._discovered:
             return
         pkg = importlib.import_module(self.package)
-        for m in pkgutil.iter_modules(pkg.__path__):
-            if not m.name.startswith("_") and m.name not in self.skip and not m.ispkg:
-                importlib.import_module(f"{self.package}.{m.name}")
+        for m in pkgutil.walk_packages(pkg.__path__, f"{self.package}."):
+            last = m.name.rpartition(".")[2]
+            if not last.startswith("_") and last not in self.skip and not m.ispkg:
+                importlib.import_module(m.name)
         self._discovered = True
 
     def all(self) -> dict:

@@ -33,7 +33,7 @@ it was running: with ``on_lost`` that job is the caller's to record (and to cont
 e.g. with the items it had not reached) and a fresh worker takes the remaining jobs;
 without, the run ends with an error once the other running jobs have finished.
 
-Users: :mod:`defaust.build` (``workers``) and :mod:`eval.experiments.cases_jobs` (``jobs``).
+Users: :mod:`defaust.build` (``workers``) and :mod:`eval.experiments.cases.jobs` (``jobs``).
 
 Example::
 

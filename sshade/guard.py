@@ -15,7 +15,7 @@ of this process raises instead (:func:`_no_process_exit`; other threads, and pro
 the plug-in forks, exit as usual; a plug-in that bound ``os._exit`` under another name
 at import is not caught). A crash (a segmentation fault, ``os.abort``, a signal) cannot
 be caught inside the process: the evaluator's worker processes (``jobs`` >= 2,
-:mod:`eval.experiments.cases_jobs`) turn it into that pair's failure; in one process it
+:mod:`eval.experiments.cases.jobs`) turn it into that pair's failure; in one process it
 ends the run.
 
 Time-outs use ``SIGALRM`` (``signal.setitimer``) and therefore work only in the main

@@ -6,9 +6,9 @@ Every method of the evaluator (:class:`sshade.SShaDe`, :class:`sshade.refine.SSh
 the baselines of :mod:`baselines`) has a ``warmup(n_vertices=None) -> float`` built on
 :func:`warm_once` (SShaDe's: :func:`sshade.deform.warm_sshade`, which runs
 :func:`sshade.deform.deform`; this module imports nothing above the ARAP solver);
-:func:`eval.experiments.cases.run` calls it before a method's first timed ``deform`` and
+:func:`eval.experiments.cases.experiment.run` calls it before a method's first timed ``deform`` and
 records the seconds as ``compile_s`` (table row and ``run.json``), and
-:func:`eval.experiments.scaling.run_scaling` does the same before its timed calls. On a cold numba
+:func:`eval.experiments.scaling.experiment.run_scaling` does the same before its timed calls. On a cold numba
 cache (a fresh clone, a cluster node, ``NUMBA_CACHE_DIR`` pointing to an empty folder) the
 compilation takes many times SShaDe's run on a FAUST-size case (docs/outputs.md, "Timings
 exclude compilation").

@@ -9,15 +9,9 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
-from eval.experiments import (
-    animation,
-    cases,
-    convergence,
-    experiments,
-    pose_transfer,
-    scaling,
-    tosca,
-)
+from eval.experiments import animation, convergence, experiments, pose_transfer, tosca
+from eval.experiments.cases import experiment as cases
+from eval.experiments.scaling import experiment as scaling
 from eval.methods import make_methods
 
 #: experiment (conf/experiment/NAME.yaml) -> its experiment module.

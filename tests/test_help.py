@@ -41,7 +41,7 @@ HELP = {
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
     "benchmarks/tosca_transfer_factors.py": ["usage:", "--classes"],
     "benchmarks/frames.py": ["usage:", "--frames"],
-    "-m eval.experiments.scaling_probe": ["usage:", "handles_npz"],
+    "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
 }
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from eval.experiments.pair import run_pair
+from eval.experiments.cases.pair import run_pair
 from eval.metrics import measures as M
 from eval.metrics import meshes as MM
 from sshade.errors import SShaDeError

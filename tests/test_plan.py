@@ -1,4 +1,4 @@
-"""The plan printed up front (eval/run/plan.py, eval/experiments/cases_plan.py)
+"""The plan printed up front (eval/run/plan.py, eval/experiments/cases/plan.py)
 and the DeFAUST build's per-subject progress (eval/datasets/defaust.py BuildProgress).
 Structure and order are checked, never timings."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from eval.datasets.defaust import BuildProgress, build_outlook
-from eval.experiments import cases_plan
+from eval.experiments.cases import plan as cases_plan
 from eval.metrics.reference import sr_energy
 from eval.run import plan as P
 from eval.run.progress import CostModel, default_cost_model

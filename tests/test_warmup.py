@@ -139,15 +139,15 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
 
 
 def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, monkeypatch):
-    """eval.experiments.scaling: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
+    """eval.experiments.scaling.experiment: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
     base = shared_data / "classic" / "armadillo.obj"
     if not base.is_file():
         pytest.skip(f"{base} not found")
     from hydra import compose, initialize_config_dir
 
-    import eval.experiments.scaling as sc
+    import eval.experiments.scaling.experiment as sc
     from eval.app import CONF_DIR
-    from eval.experiments.scaling import run_scaling
+    from eval.experiments.scaling.experiment import run_scaling
     real_s, real_f = sc.warm_sshade, sc.warm_fullres  # sshade.deform's and sshade.warmup's, as scaling calls them
 
     def slow(real):

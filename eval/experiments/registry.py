@@ -12,7 +12,7 @@ from eval.registry import Registry
 
 __all__ = ["register_experiment", "experiments", "find_experiment", "experiment_check"]
 
-_REGISTRY = Registry(__package__, "experiment kind", skip=("registry", "common", "cases_plan"))
+_REGISTRY = Registry(__package__, "experiment kind", skip=("registry", "common"))
 _CHECKS: dict[str, Callable] = {}
 
 

@@ -2,7 +2,7 @@
 and per subject, and a paired comparison of SShaDe with Elastic.
 
 Input: the per-case rows of ``cases.csv`` (columns ``case``, ``subject``, ``pose``,
-``method``, ``error`` and the metrics; :mod:`eval.experiments.cases`). Only successful
+``method``, ``error`` and the metrics; :mod:`eval.experiments.cases.experiment`). Only successful
 rows (:func:`eval.tables.ok_mask`) with a finite value of a metric count for it.
 
 Outputs (:func:`write_breakdown`):

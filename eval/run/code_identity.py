@@ -2,7 +2,7 @@
 (:mod:`eval.run.store`), so that a stored row is reused only by the code that computed it.
 
 A (case, method) row depends on the method's code, on the harness that runs and scores
-it (:mod:`eval.experiments.pair` with :mod:`sshade.guard`, the metrics, the reference
+it (:mod:`eval.experiments.cases.pair` with :mod:`sshade.guard`, the metrics, the reference
 columns, the record format: :data:`ROW_HARNESS`) and on the numerical libraries beneath
 them. :func:`code_identity` names all three:
 
@@ -55,8 +55,8 @@ PACKAGES = ("sshade", "baselines", "defaust", "eval")
 #: The modules that make a stored row besides the method: the pair runner (the guarded
 #: call, the metrics, the info columns), the reference columns, the record format and the
 #: runner of pairs in worker processes (their threads, the ``cores`` column).
-ROW_HARNESS = ("eval.experiments.pair", "eval.experiments.case_references", "eval.run.store",
-               "eval.experiments.cases_jobs")
+ROW_HARNESS = ("eval.experiments.cases.pair", "eval.experiments.cases.references", "eval.run.store",
+               "eval.experiments.cases.jobs")
 
 #: Distributions whose version can change a row's numbers: the solvers and mesh
 #: processing beneath the methods, and PyTorch (Implicit-ARAP, plug-ins).

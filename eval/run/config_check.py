@@ -13,7 +13,7 @@ from __future__ import annotations
 from baselines.arap_sr_solver import ALPHA_SCALINGS
 from eval.datasets import find_dataset
 from eval.experiments import experiment_check
-from eval.experiments.cases_jobs import check_jobs
+from eval.experiments.cases.jobs import check_jobs
 from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
 from eval.run.subset import check_baseline_cases, check_method_cases
 from harness.checks import config_bool, config_number, config_value

@@ -2,7 +2,7 @@
 pays for one :func:`sshade.deform` on a mesh, numba's on-disk cache already warm (the
 benchmark's in-process warm-up fills it) but nothing compiled or loaded in the process.
 
-``python -m eval.experiments.scaling_probe MESH HANDLES.npz PARAMS.json [--t0 EPOCH]``
+``python -m eval.experiments.scaling.probe MESH HANDLES.npz PARAMS.json [--t0 EPOCH]``
 prints one JSON line (:func:`first_call`'s dict, plus ``import_s`` when ``--t0`` gives
 the wall-clock time at which the parent launched it). :func:`probe_first_call` is the
 parent's side: it writes the handles and parameters, runs this module with
@@ -93,7 +93,7 @@ def probe_first_call(mesh_path, handles: np.ndarray, targets: np.ndarray, params
             hp, pp = Path(d) / "handles.npz", Path(d) / "params.json"
             np.savez(hp, handles=np.asarray(handles, np.int64), targets=np.asarray(targets, np.float64))
             pp.write_text(json.dumps(params))
-            cmd = [sys.executable, "-m", "eval.experiments.scaling_probe", str(mesh_path), str(hp), str(pp),
+            cmd = [sys.executable, "-m", "eval.experiments.scaling.probe", str(mesh_path), str(hp), str(pp),
                    "--t0", repr(time.time())]
             p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, env=env, check=False)
         if p.returncode != 0:
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
     (with ``import_s`` when ``--t0`` is given); exit status 0, or 2 after one
     ``error: ...`` line on stderr."""
     t_main = time.time()
-    ap = ArgumentParser(prog="python -m eval.experiments.scaling_probe", description=__doc__.split("\n\n")[0])
+    ap = ArgumentParser(prog="python -m eval.experiments.scaling.probe", description=__doc__.split("\n\n")[0])
     ap.add_argument("mesh")
     ap.add_argument("handles_npz")
     ap.add_argument("params_json")

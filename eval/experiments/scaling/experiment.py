@@ -1,7 +1,7 @@
 """Scaling benchmark (issue "Scalable SShaDe"; paper abstract, §1, Table 1):
 ``python -m eval experiment=scaling``.
 
-Runs a set of base meshes (``scaling.meshes``, :mod:`eval.experiments.scaling_set`;
+Runs a set of base meshes (``scaling.meshes``, :mod:`eval.experiments.scaling.mesh_set`;
 the default set: one clean mesh, the Stanford armadillo, and two hard ones, TOSCA's
 centaur and wolf) at each of ``scaling.sizes`` vertices (default 200k and 1M). A clean
 entry (``remesh: true``) is LS3 Loop subdivided, then isotropically remeshed to the
@@ -11,7 +11,7 @@ entry (``remesh: false``) is LS3 Loop subdivided only, until it has at least the
 base mesh. Each mesh is deformed with SShaDe and, up to ``elastic_max_vertices``, with
 full-resolution Elastic (spokes and rims) under the same handles. ``table.csv`` (every
 column, one row per (mesh, size), ``mesh`` first) and ``table.md`` (one table per mesh,
-:mod:`eval.experiments.scaling_table`) in ``out_dir`` give: vertices, n_low, k, seconds
+:mod:`eval.experiments.scaling.table`) in ``out_dir`` give: vertices, n_low, k, seconds
 for remesh / low-res ARAP / transfer / total, warm (the median of ``scaling.repeat``
 timed calls, their range beside it; numba's compilation excluded: it
 runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
@@ -28,7 +28,7 @@ box diagonal; the second run is not timed), with
 process (``first_call_s``, the median of ``scaling.repeat`` processes, their range
 beside it: what a command-line user pays, numba's on-disk cache warm; interpreter
 start and imports apart in ``first_call_import_s``, the mesh read in
-``first_call_read_s``; :mod:`eval.experiments.scaling_probe`; NaN with a warning when
+``first_call_read_s``; :mod:`eval.experiments.scaling.probe`; NaN with a warning when
 the probe fails), and Elastic's precompute time, time per iteration and time to
 convergence (when it converges within ``elastic_budget_s``), and the speed-up.
 
@@ -60,9 +60,9 @@ from baselines.arap import Elastic
 from eval.datasets.shapes import axis_handles, axis_landmarks
 from eval.experiments.common import sshade_spec
 from eval.experiments.registry import register_experiment
-from eval.experiments.scaling_probe import probe_first_call
-from eval.experiments.scaling_set import MeshEntry, cache_name, mesh_entries
-from eval.experiments.scaling_table import write_csv, write_markdown
+from eval.experiments.scaling.mesh_set import MeshEntry, cache_name, mesh_entries
+from eval.experiments.scaling.probe import probe_first_call
+from eval.experiments.scaling.table import write_csv, write_markdown
 from eval.methods import method_spec
 from eval.metrics.measures import deformation_metrics
 from eval.run.memory import PeakMemory, release_freed
@@ -224,7 +224,7 @@ def _median_of(items: list, key) -> tuple:
 def size_mesh(entry: MeshEntry, V0: np.ndarray, F0: np.ndarray, size: int, cache) -> tuple:
     """The mesh of about ``size`` vertices built from an entry's base mesh ``(V0, F0)``
     (:func:`build_mesh`; (n, 3) float64, (m, 3) int64), cached in the folder ``cache``
-    (created when missing) as :func:`eval.experiments.scaling_set.cache_name` and read
+    (created when missing) as :func:`eval.experiments.scaling.mesh_set.cache_name` and read
     from there by later calls.
 
     Returns
@@ -331,7 +331,7 @@ _NUMBERS = [("seed", int, 0, False), ("n_per_group", int, 1, False), ("region_ra
 
 def check_scaling(cfg) -> None:
     """The ``scaling`` section's numbers, flags, ``sizes`` and every ``meshes`` entry's
-    keys (:func:`eval.experiments.scaling_set.mesh_entries`), before any mesh is built;
+    keys (:func:`eval.experiments.scaling.mesh_set.mesh_entries`), before any mesh is built;
     SShaDeError naming the key."""
     check_numbers(cfg, "scaling", _NUMBERS)
     config_int_list(cfg, "scaling.sizes", min=4)

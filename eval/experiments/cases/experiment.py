@@ -43,7 +43,7 @@ run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.run.subset`; the
 stated in the table's title); the progress bar's remaining time is weighted by each
 method's expected cost (:mod:`eval.run.progress`). With ``jobs`` > 1 (``auto``: one per core
 for a run of minutes) whole cases run side by side in worker processes
-(:mod:`eval.experiments.cases_jobs`): the same rows, each run timed on its share of the cores.
+(:mod:`eval.experiments.cases.jobs`): the same rows, each run timed on its share of the cores.
 
 Exit status of ``python -m eval``: 0 on success (even if some method failed on some
 case), 2 on a configuration or input error (one ``error: ...`` line on stderr).
@@ -62,11 +62,11 @@ from pathlib import Path
 
 from eval import datasets
 from eval import methods as method_table
-from eval.experiments.case_references import CaseReferences
-from eval.experiments.cases_jobs import describe, job_count, run_case_jobs
-from eval.experiments.cases_plan import plan_runs, planned_root
+from eval.experiments.cases.jobs import describe, job_count, run_case_jobs
+from eval.experiments.cases.pair import guard_options, run_and_store
+from eval.experiments.cases.plan import plan_runs, planned_root
+from eval.experiments.cases.references import CaseReferences
 from eval.experiments.common import as_list, sshade_spec
-from eval.experiments.pair import guard_options, run_and_store
 from eval.experiments.registry import register_experiment
 from eval.methods import method_spec
 from eval.metrics.meshes import CaseMeshes
@@ -157,10 +157,10 @@ class _Setup:
     base_rule: str                # dataset.baseline_cases in words
     store: ResultStore
     resume: bool
-    build: dict | None            # the dataset's build stage when one ran (cases_plan.planned_root)
+    build: dict | None            # the dataset's build stage when one ran (plan.planned_root)
     meshes: CaseMeshes = field(default_factory=CaseMeshes)  # the metrics' kept rest / ground-truth meshes
     jobs: int = 1
-    plan: object = None           # cases_plan.PlanRecord once logged
+    plan: object = None           # plan.PlanRecord once logged
     resumed: dict | None = None   # restored / recomputed counts for run.json
 
     @property
@@ -205,7 +205,7 @@ def _setup(cfg) -> _Setup:
     refs = CaseReferences(cfg)  # config checked here too
     resume = config_bool(cfg, "resume", default=False)
     meshes = config_bool(cfg, "store.meshes", default=False)
-    # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first (eval/experiments/cases_plan.py)
+    # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first (eval/experiments/cases/plan.py)
     mc = cfg.get("method_cases")
     root, build = planned_root(cfg, methods, refs, lambda cs, base: CaseSelection(
         base, method_selections(cs, mc, [x.name for x in methods])).runs_on)
@@ -258,11 +258,11 @@ def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
 
 
 def _run_cases(cfg, s: _Setup) -> list[dict]:
-    """Every (case, method) run (:func:`eval.experiments.pair.run_pair`) not already in
+    """Every (case, method) run (:func:`eval.experiments.cases.pair.run_pair`) not already in
     the result store (``resume``; :mod:`eval.run.store`), each stored as soon as it finishes,
     with a progress bar weighted by each method's expected cost (:mod:`eval.run.progress`);
     in this process, or whole cases in ``jobs`` worker processes
-    (:mod:`eval.experiments.cases_jobs`); ``cases.csv`` rewritten after each case, the
+    (:mod:`eval.experiments.cases.jobs`); ``cases.csv`` rewritten after each case, the
     optional figures and 3D views of the first cases. Returns the rows of every pair, in
     (case, method) order, as stored (an interrupted and resumed run, or one with other
     ``jobs``, gives the rows of an uninterrupted one)."""
@@ -276,7 +276,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
     s.jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in todo}), estimate_s=sum(est.values()))
-    s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (cases_plan.py)
+    s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (plan.py)
     out = _CaseOutputs(cfg, s, plan, done)
     bar = weighted_bar(sum(est.values()), len(todo))
     with logging_redirect_tqdm(), bar:
@@ -326,7 +326,7 @@ def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
 
 def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
     """``todo`` in ``s.jobs`` worker processes, whole cases each, the costliest first
-    (:func:`eval.experiments.cases_jobs.run_case_jobs`); the cases without runs to do get
+    (:func:`eval.experiments.cases.jobs.run_case_jobs`); the cases without runs to do get
     their outputs (figures, views) here."""
     from omegaconf import OmegaConf
 
@@ -474,7 +474,7 @@ class _CaseOutputs:
 
 
 def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostModel, bar):
-    """One pair run and stored (:func:`eval.experiments.pair.run_and_store`), timed into
+    """One pair run and stored (:func:`eval.experiments.cases.pair.run_and_store`), timed into
     ``cost`` and ``bar``. Returns ``(record, U)``."""
     case, name = s.cases[ci], s.names[mi]
     rec, U, wall, cost_s = run_and_store(s.methods[mi], name, case, s.refs, s.guard, s.meshes, s.store, *key)

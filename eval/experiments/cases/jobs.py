@@ -3,8 +3,8 @@
 ``jobs`` (config) worker processes (:func:`harness.jobs.run_jobs`: spawned, each with
 ``cores / jobs`` threads) take the cases with runs to do, the costliest first (their
 estimated seconds, :class:`eval.run.progress.CostModel`); a worker runs a case's methods in
-table order (:func:`eval.experiments.pair.run_pair`), so that a reference solution still
-continues from the method on its energy's path (:class:`~eval.experiments.case_references.CaseReferences`),
+table order (:func:`eval.experiments.cases.pair.run_pair`), so that a reference solution still
+continues from the method on its energy's path (:class:`~eval.experiments.cases.references.CaseReferences`),
 and stores each pair as soon as it finishes (:class:`eval.run.store.ResultStore`), as the
 one-process loop does. The main process gets every pair's seconds and row as it ends
 (the progress bar), every log record of the workers (``eval.log`` and the console) and
@@ -36,8 +36,8 @@ from __future__ import annotations
 import logging
 
 from eval import methods as method_table
-from eval.experiments.case_references import CaseReferences
-from eval.experiments.pair import guard_options, run_and_store, run_pair
+from eval.experiments.cases.pair import guard_options, run_and_store, run_pair
+from eval.experiments.cases.references import CaseReferences
 from eval.metrics.meshes import CaseMeshes
 from eval.run.outdir import resume_command
 from eval.run.paths import abs_path
@@ -146,7 +146,7 @@ def case_job(ci: int, case, pairs, ref_on: bool, want_meshes: bool) -> dict:
 
 class _Lost:
     """Stands in for a method whose worker process died while it ran: fails with
-    ``message``, so that its row is the one :func:`eval.experiments.pair.run_pair` writes
+    ``message``, so that its row is the one :func:`eval.experiments.cases.pair.run_pair` writes
     for any failed run."""
 
     def __init__(self, name: str, message: str):

@@ -12,8 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.experiments.scaling_probe import probe_first_call
-from eval.experiments.scaling_set import MeshEntry, cache_name, mesh_entries
+from eval.experiments.scaling.mesh_set import MeshEntry, cache_name, mesh_entries
+from eval.experiments.scaling.probe import probe_first_call
 from sshade.errors import SShaDeError
 from sshade.mesh.io import write_mesh
 
@@ -44,7 +44,7 @@ def set_run(tmp_path_factory):
     only), 642 vertices each, at SIZES; SShaDe with n_low 300, k 2; no Elastic."""
     import trimesh
 
-    from eval.experiments.scaling import run_scaling
+    from eval.experiments.scaling.experiment import run_scaling
     d = tmp_path_factory.mktemp("scaling_set")
     ico = trimesh.creation.icosphere(subdivisions=3)
     V, F = np.asarray(ico.vertices, float), np.asarray(ico.faces, np.int64)
@@ -147,7 +147,7 @@ def test_first_call_median_skips_failed_probes(monkeypatch):
 
 
 def test_failing_probe_gives_nan_and_a_warning(tmp_path, caplog):
-    with caplog.at_level(logging.WARNING, logger="eval.experiments.scaling_probe"):
+    with caplog.at_level(logging.WARNING, logger="eval.experiments.scaling.probe"):
         r = probe_first_call(tmp_path / "missing.ply", np.array([0]), np.zeros((1, 3)), {"n_low": 10}, timeout_s=60)
     assert all(math.isnan(v) for v in r.values()) and "first_call_s" in r
     assert "first-call probe" in caplog.text and "NaN" in caplog.text
