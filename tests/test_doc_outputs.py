@@ -40,12 +40,6 @@ def test_documented_examples_write_under_outputs():
     assert not bad, bad
 
 
-def test_readme_api_example_writes_under_outputs():
-    section = (ROOT / "README.md").read_text().split("## Python API", 1)[1]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
-    assert re.findall(r"write_mesh\(\s*\"([^\"]+)\"", code) == ["outputs/bunny_deformed.obj"]
-
-
 def test_twisted_bar_example_defaults_to_outputs(tmp_path):
     r = subprocess.run([sys.executable, "-m", "examples.twisted_bar", "--h", "0.2"], cwd=tmp_path,
                        env=subprocess_env(), capture_output=True, text=True, timeout=300)
