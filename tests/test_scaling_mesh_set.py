@@ -135,7 +135,7 @@ def test_entries_checked_and_base_mesh_fallback():
 def test_first_call_median_skips_failed_probes(monkeypatch):
     """The row's first call is the median of the probes that gave a time; NaN only when
     none did."""
-    from eval.experiments import scaling
+    from eval.experiments.scaling import experiment as scaling
 
     times = iter([3.0, math.nan, 1.0, 2.0])
     monkeypatch.setattr(scaling, "probe_first_call", lambda *a, **k: {"first_call_s": next(times)})
