@@ -15,7 +15,7 @@ import sys
 
 import pandas as pd
 
-from eval.run.code_identity import ROW_HARNESS, code_identity, describe_change, import_closure, sources_digest
+from eval.run.code_identity import PACKAGES, ROW_HARNESS, code_identity, describe_change, import_closure, sources_digest
 
 from .conftest import ROOT, subprocess_env
 from .store_methods import kill_at_call
@@ -64,7 +64,7 @@ def _eval(root, out, methods, *extra, env=None, popen=False):
 
 
 def _tree_copy(dst):
-    for pkg in ("sshade", "baselines", "defaust", "eval"):
+    for pkg in PACKAGES:
         shutil.copytree(ROOT / pkg, dst / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     return dst
 
@@ -81,7 +81,8 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     arap = import_closure(("baselines.arap",))
     assert {"sshade.arap.solver", "sshade.mesh.validate", "baselines"} <= set(arap)
     harness = import_closure(ROW_HARNESS)
-    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard", "eval.run.store"} <= set(harness)
+    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard", "eval.run.store",
+            "harness.jobs", "harness.registry"} <= set(harness)
     presentation = {"eval.tables", "eval.report", "eval.present.meshview", "eval.run.plan", "defaust.build",
                     "defaust.export", "eval.reproduce", "eval.app"}
     assert not presentation & (set(arap) | set(harness))
@@ -98,6 +99,9 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     assert code_identity(ARAP(), root=root) == a0 and code_identity(ImplicitARAP(), root=root) != i0
     _touch(src / "eval" / "metrics" / "measures.py")  # a metric: every row
     assert code_identity(ARAP(), root=root)["sources"] != a0["sources"]
+    a1 = code_identity(ARAP(), root=root)
+    _touch(src / "harness" / "jobs.py")  # the shared floor's job runner (a row's worker): every row
+    assert code_identity(ARAP(), root=root)["sources"] != a1["sources"]
 
 
 def test_comments_docstrings_and_layout_do_not_change_the_identity(tmp_path):
@@ -133,7 +137,7 @@ def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
     assert code_identity(myplug.Scaled())["plugin"] != a  # the file, not the loaded class, is hashed
     # a copy of the sources with one metric file edited has another digest
     src = tmp_path / "src"
-    for pkg in ("sshade", "baselines", "defaust", "eval"):
+    for pkg in PACKAGES:
         shutil.copytree(ROOT / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     d0 = sources_digest(root=str(src))
     assert d0 == sources_digest()  # the same bytes under another folder: the same code

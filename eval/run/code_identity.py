@@ -49,8 +49,9 @@ from eval.run.runinfo import REPO_ROOT
 __all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "code_text", "sources_digest", "project_modules", "import_closure",
            "modules_digest", "numerical_versions", "code_identity", "describe_change"]
 
-#: The project's packages whose source makes a row (the four floors of the house).
-PACKAGES = ("sshade", "baselines", "defaust", "eval")
+#: The project's packages whose source makes a row (every floor of the house: the method,
+#: the harness's shared tools, the baselines and the builder, the evaluator).
+PACKAGES = ("sshade", "harness", "baselines", "defaust", "eval")
 
 #: The modules that make a stored row besides the method: the pair runner (the guarded
 #: call, the metrics, the info columns), the reference columns, the record format and the
