@@ -63,10 +63,18 @@ def _eval(root, out, methods, *extra, env=None, popen=False):
     return r
 
 
-def _tree_copy(dst):
-    for pkg in PACKAGES:
-        shutil.copytree(ROOT / pkg, dst / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+def _tree_copy(dst, *extra):
+    """A copy of the project's packages (and of the folders ``extra``) under ``dst``."""
+    for d in (*PACKAGES, *extra):
+        shutil.copytree(ROOT / d, dst / d, ignore=shutil.ignore_patterns("__pycache__"))
     return dst
+
+
+def test_packages_are_every_floor_of_the_house():
+    """The code identity hashes every package the layering test knows (a package left
+    out would let an edit of it keep stale rows)."""
+    from .test_layering import FLOORS
+    assert set(PACKAGES) == set(FLOORS)
 
 
 def _touch(path):
@@ -136,9 +144,7 @@ def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
     (tmp_path / "myplug.py").write_text(PLUGIN_SRC.format(factor=2.0))
     assert code_identity(myplug.Scaled())["plugin"] != a  # the file, not the loaded class, is hashed
     # a copy of the sources with one metric file edited has another digest
-    src = tmp_path / "src"
-    for pkg in PACKAGES:
-        shutil.copytree(ROOT / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    src = _tree_copy(tmp_path / "src")
     d0 = sources_digest(root=str(src))
     assert d0 == sources_digest()  # the same bytes under another folder: the same code
     _touch(src / "eval" / "metrics" / "measures.py")
@@ -177,9 +183,7 @@ def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, 
     edited, as a commit would), then resumed: the first case's pairs run again, so the
     table holds rows of one code only."""
     (tmp_path / "faust").symlink_to(faust_root)
-    tree = tmp_path / "tree"
-    for d in ("sshade", "baselines", "defaust", "eval", "conf", "tests", "hydra_plugins"):
-        shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
+    tree = _tree_copy(tmp_path / "tree", "conf", "tests", "hydra_plugins")
     shutil.copy(ROOT / "pyproject.toml", tree / "pyproject.toml")  # marks a source checkout (harness/confdir.py)
     out, counter = tmp_path / "out", tmp_path / "calls.txt"
     methods = "{_target_:tests.store_methods.Counted,name:A},{_target_:tests.store_methods.Counted,name:B}"
