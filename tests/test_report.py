@@ -5,6 +5,7 @@ with html.parser, the CLI's no-harm rules, the display decimation; and, when a
 the table rows in the DOM, both 3D views drawn, mesh pixels on the screenshot."""
 from __future__ import annotations
 
+import csv
 import json
 import re
 from html.parser import HTMLParser
@@ -330,6 +331,48 @@ def test_committed_results_pages_open_in_headless_chromium():
         box = re.search(r'<div id="js-errors"[^>]*>.*?</div>(?!\s*<div class="js-error")', dom, re.S).group(0)
         assert 'data-count="0"' in box, f"{page}: JavaScript errors: {box}"
 
+
+def _committed_run_pages() -> list:
+    """The committed run folders whose page shows 3D views: ``(folder, the methods it
+    ran, the view files the page loads)``. The methods: those of its run.json config,
+    which a comparison's cases.csv (a ``method`` column) must hold every one of; an
+    experiment of SShaDe alone (TOSCA, §4.2: no ``method`` column) ran SShaDe."""
+    root = Path(__file__).resolve().parents[1] / "results"
+    out = []
+    for page in sorted(root.glob(f"*/{PAGE}")):
+        run, cases = page.parent / "run.json", page.parent / "cases.csv"
+        views = sorted(set(re.findall(r"\b(report/[\w.-]+\.js)\b", page.read_text().split('id="left-out"')[0])))
+        if not (run.is_file() and cases.is_file() and views):
+            continue
+        with cases.open(newline="") as f:
+            rows = csv.DictReader(f)
+            ran = {row["method"] for row in rows} if "method" in (rows.fieldnames or ()) else {"SShaDe"}
+        if ran != {"SShaDe"}:
+            assert ran == set(json.loads(run.read_text())["config"]["methods"]), f"{page.parent.name}: {ran}"
+        out.append((page.parent, sorted(ran), views))
+    return out
+
+
+def test_committed_results_pages_show_every_method_in_3d_coloured_by_edge_error():
+    """Every committed run page's 3D views (the view cases of ``python -m eval.reproduce``)
+    show every method of its run as a result mesh with its vertices, each carrying its
+    per-vertex edge error (the colour; paper Fig. 4), and the ground-truth distance where
+    the case has a ground truth (a method that failed or was not run would have no result
+    panel); the page names no view "not stored"."""
+    pages = _committed_run_pages()
+    if not pages:
+        pytest.skip("no committed run page with 3D views in this checkout")
+    for folder, methods, views in pages:
+        text = (folder / PAGE).read_text()
+        assert "not stored" not in text, f"{folder.name}: a panel says not stored"
+        for src in views:
+            view = read_view(folder / src)
+            results = {m["label"]: m for m in view["meshes"] if m["kind"] == "result"}
+            assert sorted(results) == sorted(methods), f"{folder.name}/{src}: panels {sorted(results)}"
+            has_gt = any(m["kind"] == "target" for m in view["meshes"])
+            for label, m in results.items():
+                assert m["pos"] and m["edge"], f"{folder.name}/{src}: {label} has no vertices or no edge error"
+                assert not has_gt or m["gt"], f"{folder.name}/{src}: {label} has no ground-truth distance"
 
 # ----------------------------------------------------------------------------- only this run's outputs
 def _faust_run(faust_root, out, *extra):
