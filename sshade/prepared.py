@@ -17,18 +17,22 @@ result. Every later solve starts each sampling from its earlier results extrapol
 (:meth:`_Sampling.start`: the previous result, the line through the last two or the
 quadratic through the last three, whichever best predicted the previous solve's result),
 and still runs to the same stopping rule; a start nearer the minimiser saves iterations,
-not accuracy.
+not accuracy. From the second solve on, each sampling's L-BFGS also keeps its curvature
+pairs from the solve before (:data:`FRAME_LBFGS_MEMORY` of them; a pair is a difference
+within one solve, which the targets do not enter), which saves iterations on a smooth path.
 
 :func:`prepare` runs the samplings' remeshes and projections on ``workers`` forked
-processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the rest on a
-pool of ``workers`` threads of this process, which then runs every solve's low-res ARAP
-side by side (the numba kernels, the Cholesky solves and most numpy work release the
-GIL); the decoding and the average are then split over the threads by blocks of
-vertices, each block summed over the samplings in sampling order, so the result does not
-depend on ``workers``. Threads rather than forked processes for the solves: a prepared
-object lives across many calls, and threads keep its state in one process (no worker to
-end, no result to copy back). Frame times, memory: ``results/frames/table.md``
-(``benchmarks/frames.py``).
+processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the frames'
+encoding on ``workers`` threads. A solve runs the samplings' low-res ARAP on ``workers -
+1`` threads (in sampling order; on the calling thread with one worker) while the calling
+thread decodes each finished sampling onto the running sum, in sampling order, so the
+result does not depend on ``workers``. Threads rather than forked processes for the
+solves: a prepared object lives across many calls, and threads keep its state in one
+process (no worker to end, no result to copy back). On the 2-core machine of
+``results/frames/table.md`` two samplings' ARAP side by side gained nothing over one after
+the other (the two compete for the cache and the memory bus, processes as much as
+threads), hence one ARAP thread beside the decoding. Frame times, memory:
+``results/frames/table.md`` (``benchmarks/frames.py``).
 
 Example::
 
@@ -49,11 +53,19 @@ from .deform import arap_options, check_params, handle_pre_pct, low_res_size, pr
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.halfedge import count_components
-from .mesh.validate import validate_handle_indices, validate_handles, validate_mesh
+from .mesh.validate import validate_handle_indices, validate_mesh, validate_targets
 from .remesh import mesh_topology
 from .sampling import average, sampling_seeds, warm_kernels
 
-__all__ = ["prepare", "Prepared"]
+__all__ = ["prepare", "Prepared", "FRAME_LBFGS_MEMORY"]
+
+#: The L-BFGS memory (curvature pairs) of the low-res ARAP from the second solve on, whose
+#: pairs carry over from solve to solve (:meth:`sshade.arap.solver.ArapSolver.solve`,
+#: ``carry_curvature``); the first solve keeps :func:`sshade.deform.deform`'s (10), so that
+#: it is ``deform`` bit for bit. Fewer pairs than 10 took fewer iterations per frame on a
+#: smooth handle path (older pairs describe rotations the mesh has left), each of them
+#: cheaper (``benchmarks/frames.py``).
+FRAME_LBFGS_MEMORY = 6
 
 
 def _extrapolate(h: list, degree: int) -> np.ndarray:
@@ -93,11 +105,12 @@ class _Sampling:
         d = int(np.argmin(errs))
         return _extrapolate(h, d), d
 
-    def solve(self, targets, V0, arap: dict, gradient: str) -> dict:
-        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit) and the frames of
-        its result (kept for :meth:`decode`): the info of the ARAP run."""
+    def solve(self, targets, V0, arap: dict, gradient: str, carry: bool = False) -> dict:
+        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit), with the last
+        solve's L-BFGS pairs when ``carry``, and the frames of its result (kept for
+        :meth:`decode`): the info of the ARAP run."""
         t0 = time.perf_counter()
-        res = self.arap.deform(targets, V0=V0, **arap)
+        res = self.arap.deform(targets, V0=V0, carry_curvature=carry, **arap)
         self.low = res.V
         self.frames = deformed_frames(self.VN, res.V, self.prep["F"], self.axis, gradient)
         self.history = [res.V] + self.history[:3]
@@ -130,7 +143,9 @@ class Prepared:
         self._arap = arap_options(params["tol"], params["max_iter"], params["protocol"], params["etol"],
                                   params["gtol"])
         self._arap.pop("protocol")  # the deformers were made for it
+        self._frame_arap = {**self._arap, "anderson_m": FRAME_LBFGS_MEMORY}
         self.n_solves = 0
+        self._corners = np.array([V.min(0), V.max(0)])  # V's bounding box, for the per-solve checks
 
     def __enter__(self) -> Prepared:
         return self
@@ -154,16 +169,16 @@ class Prepared:
         needs one, and under the paper protocol): the same objects for every solve."""
         return [s.arap.factorisation for s in self._samplings]
 
-    def _map(self, fn, items) -> list:
-        """``[fn(x) for x in items]`` on the worker threads (here when one); waits for
-        every task even when one fails (no sampling keeps running into the next solve)."""
+    def _submit(self, fn, items) -> list:
+        """Futures of ``fn(x)`` for the ``items``, on the ARAP threads (``workers - 1`` of
+        them, started in order), or done here in order with one worker."""
         if self._pool is None:
             raise SShaDeError("this prepared SShaDe was closed; prepare again")
-        wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
-        if self.workers == 1 or len(items) == 1:
-            return [fn(x) for x in items]
-        self._pending = [self._pool.submit(fn, x) for x in items]
-        return [f.result() for f in self._pending]
+        if self.workers == 1:
+            return [_Done(fn, x) for x in items]
+        futs = [self._pool.submit(fn, x) for x in items]
+        self._pending += futs
+        return futs
 
     def solve(self, targets, *, return_info: bool = False):
         """Deform for ``targets`` ((h, 3) float, one per handle, in :attr:`handles`' order).
@@ -172,40 +187,45 @@ class Prepared:
         -------
         (n, 3) float64 deformed positions (handles at their targets); with ``return_info``
         ``(Vd, info)``: ``total_s`` (wall seconds of this solve), ``arap_s`` and
-        ``iterations`` summed over the samplings, ``transfer_s`` (wall seconds of the
-        decoding and the average, all samplings), ``converged`` (every
-        sampling's low-res ARAP met its stopping rule), ``status``, ``handle_pre_pct``,
-        ``solve`` (0 for the first), ``workers``, per-sampling details in ``samplings``
-        (``start_degree`` from the second solve on: :meth:`_Sampling.start`).
+        ``iterations`` summed over the samplings, ``transfer_s`` (seconds of the decoding
+        and the average, all samplings; beside later samplings' ARAP with several
+        workers), ``converged`` (every sampling's low-res ARAP met its stopping rule),
+        ``status``, ``handle_pre_pct``, ``solve`` (0 for the first), ``workers``,
+        per-sampling details in ``samplings`` (``start_degree`` from the second solve
+        on: :meth:`_Sampling.start`).
 
         Raises
         ------
         SShaDeError on targets of the wrong shape or with NaN/inf
-        (:func:`sshade.mesh.validate.validate_handles`), or after :meth:`close`.
+        (:func:`sshade.mesh.validate.validate_targets`), or after :meth:`close`.
         """
         t0 = time.perf_counter()
-        _, T = validate_handles(self.V, self.handles, targets)
-        first, k = self.n_solves == 0, len(self._samplings)
+        T = validate_targets(self._corners, len(self.handles), targets)
+        wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
+        self._pending = []
+        first, S = self.n_solves == 0, self._samplings
         gradient, arap = self.params["gradient"], self._arap
 
         def run(i: int, V0) -> dict:
-            return self._samplings[i].solve(T, V0, arap, gradient)
+            return S[i].solve(T, V0, arap, gradient)
 
-        def later(i: int) -> dict:  # the earlier frames extrapolated
-            V0, degree = self._samplings[i].start()
-            return {**run(i, V0), "start_degree": degree}
+        def later(i: int) -> dict:  # the earlier frames extrapolated, their curvature kept
+            V0, degree = S[i].start()
+            return {**S[i].solve(T, V0, self._frame_arap, gradient, carry=True), "start_degree": degree}
+
+        def from_first(i: int) -> dict:  # as deform: from sampling 0's result
+            futs[0].result()
+            return run(i, S[0].decode(S[i].prep["seeds"]))
 
         if not first:
-            infos = self._map(later, list(range(k)))
-        elif self.params["warm_start"] and k > 1:  # as deform: sampling 0 first, the others from it
-            infos = self._map(lambda i: run(i, None), [0])
-            s0 = self._samplings[0]
-            infos += self._map(lambda i: run(i, s0.decode(self._samplings[i].prep["seeds"])), list(range(1, k)))
+            futs = self._submit(later, range(len(S)))
+        elif self.params["warm_start"] and len(S) > 1:
+            futs = self._submit(lambda i: run(i, None), [0])
+            futs += self._submit(from_first, range(1, len(S)))
         else:  # from the rigid fit of the handles
-            infos = self._map(lambda i: run(i, None), list(range(k)))
-        t1 = time.perf_counter()
-        Vd = self._decode_average()
-        pre = average([s.decode(self.handles) - T for s in self._samplings])
+            futs = self._submit(lambda i: run(i, None), range(len(S)))
+        Vd, infos, transfer_s = self._decode_average(futs)
+        pre = average([s.decode(self.handles) - T for s in S])
         Vd[self.handles] = T
         self.n_solves += 1
         if not return_info:
@@ -213,27 +233,45 @@ class Prepared:
         others = [str(d["status"]) for d in infos if not d["converged"]]
         info = {"total_s": time.perf_counter() - t0, "solve": self.n_solves - 1, "samplings": infos,
                 "workers": self.workers, "arap_s": float(sum(d["arap_s"] for d in infos)),
-                "transfer_s": time.perf_counter() - t1, "iterations": int(sum(d["iterations"] for d in infos)),
+                "transfer_s": transfer_s, "iterations": int(sum(d["iterations"] for d in infos)),
                 "converged": not others, "status": others[0] if others else "converged",
-                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, self.V)}
+                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, self._corners)}
         return Vd, info
 
-    def _decode_average(self) -> np.ndarray:
-        """The samplings' decodings averaged, (n, 3): the vertices split into one block
-        per thread, each block summed over the samplings in order (the additions of
-        :func:`sshade.sampling.average`), without a full (n, 3) array per sampling."""
-        n, k = len(self.V), len(self._samplings)
-        out = np.empty((n, 3))
-        bounds = np.linspace(0, n, self.workers + 1).astype(np.int64)
+    def _decode_average(self, futs: list) -> tuple[np.ndarray, list, float]:
+        """The samplings' decodings averaged, (n, 3), each sampling decoded here as soon as
+        its ARAP (future in ``futs``) is done, summed in sampling order (the additions of
+        :func:`sshade.sampling.average`), without a full (n, 3) array per sampling; the
+        ARAP infos and the decoding's seconds. Waits for every ARAP even when one fails."""
+        out, infos, secs = np.empty((len(self.V), 3)), [], 0.0
+        try:
+            for i, (s, f) in enumerate(zip(self._samplings, futs)):
+                infos.append(f.result())
+                t = time.perf_counter()
+                s.decode(slice(0, len(out)), out, add=i > 0)
+                secs += time.perf_counter() - t
+        except BaseException:
+            wait(futs)
+            raise
+        out /= len(futs)
+        return out, infos, secs
 
-        def block(j: int) -> None:
-            lo, hi = int(bounds[j]), int(bounds[j + 1])
-            part = out[lo:hi]
-            for i, s in enumerate(self._samplings):
-                s.decode(slice(lo, hi), part, add=i > 0)
-            part /= k
-        self._map(block, list(range(self.workers)))
-        return out
+
+class _Done:
+    """A finished future: ``fn(x)`` run at once (one worker: no thread), its result or
+    its exception kept for :meth:`result`."""
+
+    def __init__(self, fn, x):
+        self._value = self._error = None
+        try:
+            self._value = fn(x)
+        except Exception as e:  # noqa: BLE001 (re-raised by result, as a future does)
+            self._error = e
+
+    def result(self):
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,
@@ -290,7 +328,7 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-sampling")
     try:
         samplings = list(pool.map(lambda pi: _Sampling(V, *pi, p["gradient"], p["anchor"], p["protocol"]), preps))
-    except BaseException:
+    finally:
         pool.shutdown(wait=True, cancel_futures=True)
-        raise
-    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, pool, n_workers)
+    arap_pool = ThreadPoolExecutor(max(n_workers - 1, 1), thread_name_prefix="sshade-arap")
+    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, arap_pool, n_workers)

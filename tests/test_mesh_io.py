@@ -262,6 +262,24 @@ def test_targets_out_of_scale_named(case):
     validate_handles(V, [0, 1], np.array([V[0], V[1] + [0, 0, 1e3]]))  # a big edit is still allowed
 
 
+def test_targets_checked_against_the_bounding_box_corners_as_against_the_mesh(case):
+    """validate_targets with the two corners of V's bounding box accepts and refuses what
+    validate_handles with V does, with the same message."""
+    from sshade.mesh.validate import validate_targets
+    V = case["V"]
+    corners = np.array([V.min(0), V.max(0)])
+    ok = np.array([V[0], V[1] + [0, 0, 1e3]])
+    assert np.array_equal(validate_targets(corners, 2, ok), validate_handles(V, [0, 1], ok)[1])
+    far = V[1] + [0, 0, 1e30 * np.linalg.norm(np.ptp(V, 0))]
+    bad = [ok[:1], np.array([V[0], [np.nan, 0, 0]]), np.array([V[0], far])]
+    for T in bad:
+        with pytest.raises(SShaDeError) as a:
+            validate_handles(V, [0, 1], T)
+        with pytest.raises(SShaDeError) as b:
+            validate_targets(corners, 2, T)
+        assert str(a.value) == str(b.value)
+
+
 def test_def_scaled_by_1e200_is_out_of_scale_not_singular(case, capsys):
     from sshade.mesh.handle_files import read_def
     p = case["d"] / "big.def"

@@ -62,6 +62,10 @@ def test_refused_inputs(faust_pair):
         prepared.solve(V2[h][:-1])
     with pytest.raises(SShaDeError, match="NaN"):
         prepared.solve(np.full((len(h), 3), np.nan))
+    far = V2[h].copy()
+    far[0, 2] += 1e30 * np.linalg.norm(np.ptp(V, 0))
+    with pytest.raises(SShaDeError, match="targets are out of scale: they lie 1e\\+30 x"):
+        prepared.solve(far)
     assert prepared.n_solves == 0  # nothing was solved
     with pytest.raises(SShaDeError, match="out of range"):
         prepare(V, F, [0, len(V)], n_low=500)

@@ -120,6 +120,13 @@ class LBFGS:
         """Forget the curvature pairs (the next direction is the plain step's)."""
         self.n_hist, self.pos, self.have_prev = 0, 0, False
 
+    def restart(self):
+        """A new problem on the same free vertices and ``L_ff`` (other targets): keep the
+        curvature pairs, which hold differences of positions, gradients and plain steps
+        within one problem (the targets' term cancels in each), and forget the last
+        iterate (a pair across two problems would mix their targets)."""
+        self.have_prev = False
+
     def direction(self, x: np.ndarray, g: np.ndarray):
         """Descent direction ``d`` ((nf, 3), new array) at the accepted iterate ``x`` whose
         plain step is ``g = G(x)``, and the slope ``grad(x) . d < 0``."""

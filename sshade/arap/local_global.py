@@ -175,9 +175,13 @@ class ArapDeformer:
 
     def deform(self, targets, *, tol: float = 1e-4, max_iter: int | None = None, V0: np.ndarray | None = None,
                time_budget_s: float | None = None, criterion=None, accelerate: str = "lbfgs",
-               anderson_m: int | None = None, R0: np.ndarray | None = None) -> ArapResult:
+               anderson_m: int | None = None, R0: np.ndarray | None = None,
+               carry_curvature: bool = False) -> ArapResult:
         """The deformation for ``targets`` ((h, 3) float64); parameters and result as
-        :func:`arap_deform`. Raises SShaDeError for ``R0`` under the ``"paper"`` protocol."""
+        :func:`arap_deform`, and ``carry_curvature`` (``"converged"`` protocol: start
+        L-BFGS with the last solve's curvature pairs, as
+        :meth:`sshade.arap.solver.ArapSolver.solve`). Raises SShaDeError for ``R0`` under the
+        ``"paper"`` protocol."""
         protocol, V, handles = self.protocol, self.V, self.handles
         if R0 is not None and protocol != "converged":
             raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
@@ -199,7 +203,8 @@ class ArapDeformer:
             if self._solver is None:
                 self._solver = ArapSolver(V, self.F, handles, energy=self.energy)
             res = self._solver.solve(targets, U0=V0, R0=R0, criterion=criterion, max_iter=max_iter,
-                                     accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s)
+                                     accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s,
+                                     carry_curvature=carry_curvature)
             res.info["protocol"] = "converged"
             return res
         U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()

@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import SShaDeError
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
-__all__ = ["validate_mesh", "validate_handles", "validate_handle_indices", "validate_deformed",
+__all__ = ["validate_mesh", "validate_handles", "validate_targets", "validate_handle_indices", "validate_deformed",
            "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
 
 #: Largest coordinate magnitude accepted. The methods form products of up to about
@@ -453,17 +453,43 @@ def validate_handles(V: np.ndarray, handles, targets) -> tuple[np.ndarray, np.nd
     >>> V = np.zeros((4, 3)); h, t = validate_handles(V, [0, 2], np.zeros((2, 3)))
     """
     h = validate_handle_indices(V, handles)
+    return h, validate_targets(V, len(h), targets)
+
+
+def validate_targets(V: np.ndarray, n_handles: int, targets) -> np.ndarray:
+    """The target-position checks of :func:`validate_handles`, for handles already checked.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertex positions, or any points with the same bounding box (its two
+        corners: a solve per frame need not scan the mesh again).
+    n_handles : int, the number of handles. targets : (h, 3) array_like of float.
+
+    Returns
+    -------
+    targets : (h, 3) float64.
+
+    Raises
+    ------
+    SShaDeError
+        Shape or length mismatch, NaN/inf targets, targets out of scale (as
+        :func:`validate_handles`).
+
+    Examples
+    --------
+    >>> V = np.zeros((4, 3)); T = validate_targets(V, 2, np.zeros((2, 3)))
+    """
     T = np.ascontiguousarray(targets, dtype=np.float64)
     if not T.flags.writeable:  # see validate_mesh
         T = T.copy()
     if T.ndim != 2 or T.shape[1] != 3:
         raise SShaDeError(f"targets must have shape (h, 3), got {T.shape}")
-    if len(T) != len(h):
-        raise SShaDeError(f"handles and targets differ in length: {len(h)} handles, {len(T)} targets")
+    if len(T) != n_handles:
+        raise SShaDeError(f"handles and targets differ in length: {n_handles} handles, {len(T)} targets")
     if not np.isfinite(T).all():
         raise SShaDeError("targets contain NaN/inf")
     _check_target_scale(V, T)
-    return h, T
+    return T
 
 
 def validate_deformed(U, n_vertices: int, *, V=None, name: str = "method") -> np.ndarray:
