@@ -310,11 +310,13 @@ def test_a_prepared_solver_checks_each_solves_targets():
     assert solver.solve(T).converged  # still usable after refused targets
 
 
-def test_carried_curvature_pairs_converge_to_each_frames_one_shot_solution():
-    """Frames of a twist solved with the last solve's L-BFGS pairs carried over: every
-    frame meets the criterion and is the one-shot solve of its targets within 1e-4 of the
-    diagonal (mean); the carried pairs change the path (other iterates than a fresh
-    memory) and, over the frames, take no more iterations in all."""
+@pytest.mark.parametrize("accelerate, m", [("lbfgs", 6), ("anderson", 8)])
+def test_carried_history_converges_to_each_frames_one_shot_solution(accelerate, m):
+    """Frames of a twist solved with the last solve's accelerator history carried over
+    (L-BFGS pairs, Anderson differences): every frame meets the criterion and is the
+    one-shot solve of its targets within 1e-4 of the diagonal (mean); the carried history
+    changes the path (other iterates than a fresh one) and, over the frames, takes no more
+    iterations in all."""
     from sshade.arap.solver import ArapSolver
     V, F, h, _ = twisted_bar(0.0, h=0.25)
     diag = np.linalg.norm(V.max(0) - V.min(0))
@@ -323,8 +325,8 @@ def test_carried_curvature_pairs_converge_to_each_frames_one_shot_solution():
     its_c = its_f = 0
     for k, angle in enumerate(np.linspace(10.0, 90.0, 9)):
         _, _, _, T = twisted_bar(angle, h=0.25)
-        rc = carried.solve(T, U0=prev_c, anderson_m=6, carry_curvature=True)
-        rf = fresh.solve(T, U0=prev_f, anderson_m=6)
+        rc = carried.solve(T, U0=prev_c, accelerate=accelerate, anderson_m=m, carry_history=True)
+        rf = fresh.solve(T, U0=prev_f, accelerate=accelerate, anderson_m=m)
         ref = solve_arap(V, F, h, T)
         assert rc.converged and rf.converged
         assert np.linalg.norm(rc.V - ref.V, axis=1).mean() < 1e-4 * diag
@@ -337,15 +339,15 @@ def test_carried_curvature_pairs_converge_to_each_frames_one_shot_solution():
     assert its_c <= its_f
 
 
-def test_carried_curvature_needs_the_same_memory_and_lbfgs():
-    """A solve with another L-BFGS memory, or with Anderson, starts afresh: the same
-    iterates as a solver without history."""
+def test_carried_history_needs_the_same_accelerator_and_window():
+    """A solve with another L-BFGS memory, or with Anderson after L-BFGS, starts afresh:
+    the same iterates as a solver without history."""
     from sshade.arap.solver import ArapSolver
     V, F, h, T = twisted_bar(60.0, h=0.25)
     _, _, _, T2 = twisted_bar(70.0, h=0.25)
     for options in ({"anderson_m": 5}, {"accelerate": "anderson"}):
         a, b = ArapSolver(V, F, h), ArapSolver(V, F, h)
         r1 = a.solve(T, anderson_m=6)
-        ra = a.solve(T2, U0=r1.V, carry_curvature=True, **options)
+        ra = a.solve(T2, U0=r1.V, carry_history=True, **options)
         rb = b.solve(T2, U0=r1.V, **options)
         assert np.array_equal(ra.V, rb.V) and ra.iterations == rb.iterations

@@ -50,6 +50,13 @@ class Anderson:
         """Forget the history (after a rejected accelerated step)."""
         self.n_hist, self.pos, self.prev = 0, 0, None
 
+    def restart(self):
+        """A new problem on the same free vertices and ``L_ff`` (other targets): keep the
+        differences and their Gram matrix (differences within one problem, where the
+        targets' term of ``G`` cancels) and forget the last iterate (a difference across
+        two problems would mix their targets)."""
+        self.prev = None
+
     def _run(self, name, *args):
         if self.threads > 1:
             with numba_threads(self.threads):

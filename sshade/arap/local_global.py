@@ -176,9 +176,9 @@ class ArapDeformer:
     def deform(self, targets, *, tol: float = 1e-4, max_iter: int | None = None, V0: np.ndarray | None = None,
                time_budget_s: float | None = None, criterion=None, accelerate: str = "lbfgs",
                anderson_m: int | None = None, R0: np.ndarray | None = None,
-               carry_curvature: bool = False) -> ArapResult:
+               carry_history: bool = False) -> ArapResult:
         """The deformation for ``targets`` ((h, 3) float64); parameters and result as
-        :func:`arap_deform`, and ``carry_curvature`` (``"converged"`` protocol: start
+        :func:`arap_deform`, and ``carry_history`` (``"converged"`` protocol: start
         L-BFGS with the last solve's curvature pairs, as
         :meth:`sshade.arap.solver.ArapSolver.solve`). Raises SShaDeError for ``R0`` under the
         ``"paper"`` protocol."""
@@ -204,7 +204,7 @@ class ArapDeformer:
                 self._solver = ArapSolver(V, self.F, handles, energy=self.energy)
             res = self._solver.solve(targets, U0=V0, R0=R0, criterion=criterion, max_iter=max_iter,
                                      accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s,
-                                     carry_curvature=carry_curvature)
+                                     carry_history=carry_history)
             res.info["protocol"] = "converged"
             return res
         U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()

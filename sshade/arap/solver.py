@@ -218,7 +218,7 @@ class ArapSolver:
                                 linear_solver=linear_solver)
         self.precompute_s = clock() - t0
         self._first = True
-        self._lbfgs = None  # the last solve's L-BFGS memory (carry_curvature)
+        self._acc = None  # the last solve's accelerator and its history (carry_history)
 
     @property
     def factorisation(self) -> LaplacianSolver | None:
@@ -228,27 +228,28 @@ class ArapSolver:
     def solve(self, targets, *, U0: np.ndarray | None = None, R0: np.ndarray | None = None,
               criterion: Criterion | None = None, max_iter: int = 5000, accelerate: bool | str = "lbfgs",
               anderson_m: int | None = None, time_budget_s: float | None = None, callback=None,
-              carry_curvature: bool = False) -> ArapResult:
+              carry_history: bool = False) -> ArapResult:
         """The converged deformation for ``targets`` ((h, 3) float64, one per handle, in
         :attr:`handles`' order); the other parameters and the result as :func:`solve_arap`
         (``U0``: e.g. the previous frame's result). The result's ``precompute_s`` holds
-        the set-up's seconds in the first solve only. ``carry_curvature``: L-BFGS starts
-        with the curvature pairs the last solve of this solver ended with (when it ran
-        L-BFGS with the same memory ``anderson_m``), not with none (Liu et al. 2017's
-        initial Hessian alone): the free vertices and ``L_ff`` are the same, and each pair
-        (differences of positions, gradients and plain steps within one solve) does not
-        depend on the targets, whose term cancels in the differences. The stopping rule is
-        the same; only the path to it changes.
+        the set-up's seconds in the first solve only. ``carry_history``: the accelerator
+        starts with the history the last solve of this solver ended with (when it ran the
+        same accelerator with the same ``anderson_m``), not with none: L-BFGS's curvature
+        pairs, Anderson's differences of iterates and of their plain steps. The free
+        vertices and ``L_ff`` are the same, and each entry (a difference of positions,
+        gradients or plain steps within one solve) does not depend on the targets, whose
+        term cancels in the differences. The stopping rule is the same; only the path to
+        it changes.
 
         Raises
         ------
         SShaDeError on bad targets, ``U0`` / ``R0`` or options (:func:`solve_arap`).
         """
         return self._solve(targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
-                           clock(), carry_curvature)
+                           clock(), carry_history)
 
     def _solve(self, targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
-               t_start: float, carry_curvature: bool = False) -> ArapResult:
+               t_start: float, carry_history: bool = False) -> ArapResult:
         """:meth:`solve`, its set-up time counted from ``t_start`` (plus the
         preparation's on the first solve)."""
         crit, acc, m = _check_options(self.energy, criterion, accelerate, anderson_m, max_iter)
@@ -264,11 +265,13 @@ class ArapSolver:
             res.precompute_s += extra
             return res
         self._st.start(U, T, info)
-        kept = self._lbfgs if carry_curvature and acc == "lbfgs" and getattr(self._lbfgs, "m", None) == m else None
+        kind = {"lbfgs": LBFGS, "anderson": Anderson}.get(acc)
+        kept = self._acc if carry_history and kind is not None and isinstance(self._acc, kind) \
+            and self._acc.m == m else None
         loop = _Loop(self._st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback,
-                     R0=R0, lbfgs=kept)
+                     R0=R0, kept=kept)
         loop.run()
-        self._lbfgs = loop.lbfgs
+        self._acc = loop.lbfgs if loop.lbfgs is not None else loop.anderson
         return loop.result(precompute_s=loop.t_iter - t_start + extra)
 
 
@@ -484,16 +487,19 @@ class _Loop:
     rotations ``R0`` (mesh numbering) the start point is their global step."""
 
     def __init__(self, st: _Stepper, crit: Criterion, acc: str, m: int, *, max_iter, time_budget_s, callback,
-                 R0=None, lbfgs=None):
+                 R0=None, kept=None):
         self.st, self.crit = st, crit
         self.max_iter, self.time_budget_s, self.callback = max_iter, time_budget_s, callback
         self.t_iter = clock()
         st.allocate()
-        if lbfgs is not None:
-            lbfgs.restart()
-        self.lbfgs = lbfgs if lbfgs is not None else LBFGS(m, st.Lff) if acc == "lbfgs" else None
-        self.anderson = (Anderson(m, 3 * len(st.free), st.kerns if st.kern else None, st.nthreads)
-                         if acc == "anderson" else None)
+        if kept is not None:  # the last solve's accelerator, its history kept
+            kept.restart()
+        self.lbfgs = self.anderson = None
+        if acc == "lbfgs":
+            self.lbfgs = kept if kept is not None else LBFGS(m, st.Lff)
+        elif acc == "anderson":
+            self.anderson = kept if kept is not None else Anderson(m, 3 * len(st.free), st.kerns if st.kern else None,
+                                                                    st.nthreads)
         self.x = st.U[st.free].copy()
         if R0 is not None:  # the global step of the start rotations
             st.R[:] = R0 if st.perm is None else R0[st.perm]
