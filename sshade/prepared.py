@@ -43,7 +43,7 @@ Example::
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 
 import numpy as np
 
@@ -76,6 +76,16 @@ def _extrapolate(h: list, degree: int) -> np.ndarray:
     if degree == 1:
         return 2.0 * h[0] - h[1]
     return 3.0 * (h[0] - h[1]) + h[2]
+
+
+def _done(fn, x) -> Future:
+    """``fn(x)`` run here, as a finished future (its result or its exception)."""
+    f = Future()
+    try:
+        f.set_result(fn(x))
+    except Exception as e:  # noqa: BLE001 (re-raised by result, as a pool's future does)
+        f.set_exception(e)
+    return f
 
 
 class _Sampling:
@@ -175,7 +185,7 @@ class Prepared:
         if self._pool is None:
             raise SShaDeError("this prepared SShaDe was closed; prepare again")
         if self.workers == 1:
-            return [_Done(fn, x) for x in items]
+            return [_done(fn, x) for x in items]
         futs = [self._pool.submit(fn, x) for x in items]
         self._pending += futs
         return futs
@@ -255,23 +265,6 @@ class Prepared:
             raise
         out /= len(futs)
         return out, infos, secs
-
-
-class _Done:
-    """A finished future: ``fn(x)`` run at once (one worker: no thread), its result or
-    its exception kept for :meth:`result`."""
-
-    def __init__(self, fn, x):
-        self._value = self._error = None
-        try:
-            self._value = fn(x)
-        except Exception as e:  # noqa: BLE001 (re-raised by result, as a future does)
-            self._error = e
-
-    def result(self):
-        if self._error is not None:
-            raise self._error
-        return self._value
 
 
 def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,

@@ -178,8 +178,8 @@ class ArapDeformer:
                anderson_m: int | None = None, R0: np.ndarray | None = None,
                carry_history: bool = False) -> ArapResult:
         """The deformation for ``targets`` ((h, 3) float64); parameters and result as
-        :func:`arap_deform`, and ``carry_history`` (``"converged"`` protocol: start
-        L-BFGS with the last solve's curvature pairs, as
+        :func:`arap_deform`, and ``carry_history`` (``"converged"`` protocol: start the
+        accelerator with the last solve's history, as
         :meth:`sshade.arap.solver.ArapSolver.solve`). Raises SShaDeError for ``R0`` under the
         ``"paper"`` protocol."""
         protocol, V, handles = self.protocol, self.V, self.handles
