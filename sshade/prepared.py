@@ -23,15 +23,15 @@ within one solve, which the targets do not enter).
 
 :func:`prepare` runs the samplings' remeshes and projections on ``workers`` forked
 processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the frames'
-encoding on ``workers`` threads. A solve runs the samplings' low-res ARAP on ``workers -
-1`` threads (in sampling order; on the calling thread with one worker) while the calling
-thread decodes each finished sampling onto the running sum, in sampling order, so the
-result does not depend on ``workers``. Threads rather than forked processes for the
-solves: a prepared object lives across many calls, and threads keep its state in one
-process (no worker to end, no result to copy back). On the 2-core machine of
-``results/frames/table.md`` two samplings' ARAP side by side gained nothing over one after
-the other (the two compete for the cache and the memory bus, processes as much as
-threads), hence one ARAP thread beside the decoding. Frame times, memory:
+encoding on ``workers`` threads. A solve runs the samplings' low-res ARAP on ``workers``
+threads (those that took most iterations in the last solve first; on the calling thread
+with one worker) while the calling thread makes each finished sampling's frames and
+decodes it onto the running sum, in sampling order, so the result does not depend on
+``workers``. Threads rather than forked processes for the solves: a prepared object lives
+across many calls, and threads keep its state in one process (no worker to end, no result
+to copy back). No threaded BLAS call is made between frames (:func:`_norm`): OpenBLAS's
+worker thread spins for a while after one, and at a frame every tenth of a second it took
+a whole core from the solve's threads. Frame times, memory:
 ``results/frames/table.md`` (``benchmarks/frames.py``).
 
 Example::
@@ -63,9 +63,10 @@ __all__ = ["prepare", "Prepared", "FRAME_ACCELERATION"]
 #: ``anderson_m`` of :meth:`sshade.arap.solver.ArapSolver.solve`), with the history kept
 #: from solve to solve (``carry_history``); the first solve keeps
 #: :func:`sshade.deform.deform`'s L-BFGS, so that it is ``deform`` bit for bit. From a start
-#: as near as the extrapolated one, Anderson acceleration with a window of 8 met the same
-#: stopping rule in fewer iterations than L-BFGS on both meshes of ``benchmarks/frames.py``.
-FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 8}
+#: as near as the extrapolated one, Anderson acceleration met the same stopping rule in
+#: fewer iterations than L-BFGS on both meshes of ``benchmarks/frames.py``, and a window of
+#: 16 in fewer than one of 8 (a longer one costs more per iteration than it saves).
+FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 16}
 
 
 def _extrapolate(h: list, degree: int) -> np.ndarray:
@@ -76,6 +77,13 @@ def _extrapolate(h: list, degree: int) -> np.ndarray:
     if degree == 1:
         return 2.0 * h[0] - h[1]
     return 3.0 * (h[0] - h[1]) + h[2]
+
+
+def _norm(a: np.ndarray) -> float:
+    """Euclidean norm of ``a`` without BLAS: ``np.linalg.norm`` of a large array calls
+    OpenBLAS's threaded dot, whose worker thread then spins for a while after the call,
+    taking a core from the solve's threads at every frame."""
+    return float(np.sqrt(np.einsum("ij,ij->", a, a)))
 
 
 def _done(fn, x) -> Future:
@@ -101,6 +109,7 @@ class _Sampling:
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy="spokes_and_rims",
                                  protocol=protocol)
         self.history: list = []  # (k, 3) low-res results of the last four solves, newest first
+        self.last_iterations = 0  # of the last solve
 
     def start(self) -> tuple[np.ndarray, int]:
         """The next solve's start, (k, 3), and its order: the polynomial of degree 0, 1 or 2
@@ -111,26 +120,29 @@ class _Sampling:
         h = self.history
         if len(h) == 1:
             return h[0], 0
-        errs = [np.linalg.norm(_extrapolate(h[1:], d) - h[0]) for d in range(min(3, len(h) - 1))]
+        errs = [_norm(_extrapolate(h[1:], d) - h[0]) for d in range(min(3, len(h) - 1))]
         d = int(np.argmin(errs))
         return _extrapolate(h, d), d
 
     def solve(self, targets, V0, arap: dict, gradient: str, carry: bool = False) -> dict:
         """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit), with the last
-        solve's accelerator history when ``carry``, and the frames of its result (kept
-        for :meth:`decode`): the info of the ARAP run."""
+        solve's accelerator history when ``carry``: the info of the ARAP run. Its result's
+        frames are made by the first :meth:`decode` after it (on the decoding thread)."""
         t0 = time.perf_counter()
         res = self.arap.deform(targets, V0=V0, carry_history=carry, **arap)
-        self.low = res.V
-        self.frames = deformed_frames(self.VN, res.V, self.prep["F"], self.axis, gradient)
+        self.low, self.frames, self.gradient = res.V, None, gradient
         self.history = [res.V] + self.history[:3]
+        self.last_iterations = res.iterations
         return {"arap_s": time.perf_counter() - t0, "iterations": res.iterations, "converged": res.converged,
                 "status": res.info.get("status"), "warm_start": V0 is not None}
 
     def decode(self, rows=None, out: np.ndarray | None = None, add: bool = False) -> np.ndarray:
         """The last solve's high-res positions at ``rows`` (Alg. 1;
         :func:`sshade.lrf.decode_with_frames`: rows, out and add as there)."""
-        return decode_with_frames(self.frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
+        frames = self.frames
+        if frames is None:  # threads racing here compute the same frames
+            frames = self.frames = deformed_frames(self.VN, self.low, self.prep["F"], self.axis, self.gradient)
+        return decode_with_frames(frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
                                   rows=rows, out=out, add=add)
 
 
@@ -179,14 +191,18 @@ class Prepared:
         needs one, and under the paper protocol): the same objects for every solve."""
         return [s.arap.factorisation for s in self._samplings]
 
-    def _submit(self, fn, items) -> list:
-        """Futures of ``fn(x)`` for the ``items``, on the ARAP threads (``workers - 1`` of
-        them, started in order), or done here in order with one worker."""
+    def _submit(self, fn, items, order=None) -> list:
+        """Futures of ``fn(x)`` for the ``items`` (in their order), on the ARAP threads
+        (``workers`` of them), started in ``order`` (positions in ``items``; default theirs),
+        or done here in order with one worker."""
         if self._pool is None:
             raise SShaDeError("this prepared SShaDe was closed; prepare again")
+        items = list(items)
         if self.workers == 1:
             return [_done(fn, x) for x in items]
-        futs = [self._pool.submit(fn, x) for x in items]
+        futs = [None] * len(items)
+        for j in (range(len(items)) if order is None else order):
+            futs[j] = self._pool.submit(fn, items[j])
         self._pending += futs
         return futs
 
@@ -227,8 +243,8 @@ class Prepared:
             futs[0].result()
             return run(i, S[0].decode(S[i].prep["seeds"]))
 
-        if not first:
-            futs = self._submit(later, range(len(S)))
+        if not first:  # the samplings that took longest last time start first
+            futs = self._submit(later, range(len(S)), order=np.argsort([-s.last_iterations for s in S], kind="stable"))
         elif self.params["warm_start"] and len(S) > 1:
             futs = self._submit(lambda i: run(i, None), [0])
             futs += self._submit(from_first, range(1, len(S)))
@@ -323,5 +339,5 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
         samplings = list(pool.map(lambda pi: _Sampling(V, *pi, p["gradient"], p["anchor"], p["protocol"]), preps))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-    arap_pool = ThreadPoolExecutor(max(n_workers - 1, 1), thread_name_prefix="sshade-arap")
+    arap_pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-arap")
     return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, arap_pool, n_workers)

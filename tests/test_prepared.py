@@ -106,3 +106,46 @@ def test_a_closed_prepared_refuses_to_solve(faust_pair):
         p.solve(V2[h])
     with pytest.raises(SShaDeError, match="closed"):
         p.solve(V2[h])
+
+
+_BLAS_PROBE = r"""
+import os, threading, time, numpy as np, trimesh
+from sshade import prepare
+
+def others_ticks():  # CPU ticks of this process's threads that Python did not start
+    py = {t.native_id for t in threading.enumerate()}
+    total = 0
+    for tid in os.listdir("/proc/self/task"):
+        if int(tid) not in py:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                total += sum(int(v) for v in f.read().rsplit(")", 1)[1].split()[11:13])
+    return total
+
+m = trimesh.creation.icosphere(subdivisions=5)
+V, F = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+h = np.flatnonzero(np.abs(V[:, 2]) > 0.95)
+with prepare(V, F, h, n_low=7000, n_samplings=2, seed=0, workers=2) as p:
+    p.solve(V[h])
+    c0, t0 = others_ticks(), time.perf_counter()
+    for i in range(1, 13):
+        T = V[h].copy()
+        T[V[h, 2] > 0, 2] += 0.02 * i
+        p.solve(T)
+    wall = (time.perf_counter() - t0) * os.sysconf("SC_CLK_TCK")
+print(others_ticks() - c0, wall)
+"""
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/proc/self/task"), reason="needs Linux's /proc")
+def test_solves_leave_native_worker_threads_idle():
+    """A solve's threads are the only busy ones: no library thread (OpenBLAS's, whose
+    workers spin for a while after a threaded call, e.g. ``np.linalg.norm`` of a large
+    array) takes a core from them between frames. Run in a fresh process, where only the
+    solves can have woken such a thread."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _BLAS_PROBE], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    busy, wall = map(float, out.stdout.split()[-2:])
+    assert busy <= 0.1 * wall + 2, f"threads not started by Python ran {busy:.0f} of {wall:.0f} ticks"

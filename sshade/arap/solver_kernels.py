@@ -125,12 +125,16 @@ if nb is not None:
 
     @_njit
     def _mix_range(i0, i1, g, DG, theta, nh, out):
-        """``out = g - sum_{j < nh} theta_j DG[j]`` on entries ``i0:i1``."""
+        """``out = g - sum_{j < nh} theta_j DG[j]`` on entries ``i0:i1``, the sum taken
+        row by row of ``DG`` (contiguous reads; each entry's terms added in ``j`` order)."""
         for i in range(i0, i1):
-            t = 0.0
-            for j in range(nh):
-                t += theta[j] * DG[j, i]
-            out[i] = g[i] - t
+            out[i] = 0.0
+        for j in range(nh):
+            tj = theta[j]
+            for i in range(i0, i1):
+                out[i] += tj * DG[j, i]
+        for i in range(i0, i1):
+            out[i] = g[i] - out[i]
 
     @_njit
     def _mix_serial(g, DG, theta, nh, out):
