@@ -26,8 +26,8 @@ processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the fra
 encoding on ``workers`` threads. A solve runs the samplings' low-res ARAP on ``workers``
 threads (those that took most iterations in the last solve first; on the calling thread
 with one worker) while the calling thread makes each finished sampling's frames and
-decodes it onto the running sum, in sampling order, so the result does not depend on
-``workers``. Threads rather than forked processes for the solves: a prepared object lives
+decodes it, adding the decodings in sampling order (:meth:`Prepared._decode_average`), so
+the result does not depend on ``workers``. Threads rather than forked processes for the solves: a prepared object lives
 across many calls, and threads keep its state in one process (no worker to end, no result
 to copy back). No threaded BLAS call is made between frames (:func:`_norm`): OpenBLAS's
 worker thread spins for a while after one, and at a frame every tenth of a second it took
@@ -43,7 +43,7 @@ Example::
 from __future__ import annotations
 
 import time
-from concurrent.futures import Future, ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor, as_completed, wait
 
 import numpy as np
 
@@ -266,15 +266,26 @@ class Prepared:
 
     def _decode_average(self, futs: list) -> tuple[np.ndarray, list, float]:
         """The samplings' decodings averaged, (n, 3), each sampling decoded here as soon as
-        its ARAP (future in ``futs``) is done, summed in sampling order (the additions of
-        :func:`sshade.sampling.average`), without a full (n, 3) array per sampling; the
-        ARAP infos and the decoding's seconds. Waits for every ARAP even when one fails."""
-        out, infos, secs = np.empty((len(self.V), 3)), [], 0.0
+        its ARAP (future in ``futs``) is done: onto the running sum when it is the next in
+        sampling order, else into an (n, 3) array of its own, added when its turn comes;
+        so the additions are those of :func:`sshade.sampling.average` (sampling order),
+        whatever order the ARAPs end in. The ARAP infos and the decoding's seconds. Waits
+        for every ARAP even when one fails."""
+        out, infos, secs = np.empty((len(self.V), 3)), [None] * len(futs), 0.0
+        early, nxt, index = {}, 0, {f: i for i, f in enumerate(futs)}
         try:
-            for i, (s, f) in enumerate(zip(self._samplings, futs)):
-                infos.append(f.result())
+            for f in as_completed(futs):
+                i = index[f]
+                infos[i] = f.result()
                 t = time.perf_counter()
-                s.decode(slice(0, len(out)), out, add=i > 0)
+                if i != nxt:  # ended before an earlier sampling: decoded aside
+                    early[i] = self._samplings[i].decode(slice(0, len(out)))
+                else:
+                    self._samplings[i].decode(slice(0, len(out)), out, add=i > 0)
+                    nxt += 1
+                    while nxt in early:  # the same additions as decoding onto the sum
+                        out += early.pop(nxt)
+                        nxt += 1
                 secs += time.perf_counter() - t
         except BaseException:
             wait(futs)
