@@ -27,12 +27,12 @@ encoding on ``workers`` threads. A solve runs the samplings' low-res ARAP on ``w
 threads (those that took most iterations in the last solve first; on the calling thread
 with one worker) while the calling thread makes each finished sampling's frames and
 decodes it, adding the decodings in sampling order (:meth:`Prepared._decode_average`), so
-the result does not depend on ``workers``. Threads rather than forked processes for the solves: a prepared object lives
-across many calls, and threads keep its state in one process (no worker to end, no result
-to copy back). No threaded BLAS call is made between frames (:func:`_norm`): OpenBLAS's
-worker thread spins for a while after one, and at a frame every tenth of a second it took
-a whole core from the solve's threads. Frame times, memory:
-``results/frames/table.md`` (``benchmarks/frames.py``).
+the result does not depend on ``workers``. Threads rather than forked processes for the
+solves: a prepared object lives across many calls, and threads keep its state in one
+process (no worker to end, no result to copy back). No threaded BLAS call is made
+between frames (:func:`_norm`): OpenBLAS's worker thread spins for a while after one, and
+at a frame every tenth of a second it took a whole core from the solve's threads. Frame
+times, memory: ``results/frames/table.md`` (``benchmarks/frames.py``).
 
 Example::
 
@@ -244,7 +244,8 @@ class Prepared:
             return run(i, S[0].decode(S[i].prep["seeds"]))
 
         if not first:  # the samplings that took longest last time start first
-            futs = self._submit(later, range(len(S)), order=np.argsort([-s.last_iterations for s in S], kind="stable"))
+            longest_first = np.argsort([-s.last_iterations for s in S], kind="stable")
+            futs = self._submit(later, range(len(S)), order=longest_first)
         elif self.params["warm_start"] and len(S) > 1:
             futs = self._submit(lambda i: run(i, None), [0])
             futs += self._submit(from_first, range(1, len(S)))
@@ -269,8 +270,9 @@ class Prepared:
         its ARAP (future in ``futs``) is done: onto the running sum when it is the next in
         sampling order, else into an (n, 3) array of its own, added when its turn comes;
         so the additions are those of :func:`sshade.sampling.average` (sampling order),
-        whatever order the ARAPs end in. The ARAP infos and the decoding's seconds. Waits
-        for every ARAP even when one fails."""
+        whatever order the ARAPs end in (at most ``k - 1`` such arrays held during a
+        solve). The ARAP infos and the decoding's seconds. Waits for every ARAP even when
+        one fails."""
         out, infos, secs = np.empty((len(self.V), 3)), [None] * len(futs), 0.0
         early, nxt, index = {}, 0, {f: i for i, f in enumerate(futs)}
         try:
