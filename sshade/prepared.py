@@ -105,6 +105,7 @@ class _Sampling:
         self.VN = V[prep["seeds"]]
         self.bary = prep["bary"] if anchor == "projection" else None
         self.axis = frame_functions(self.VN, prep["F"])
+        self.gradient = gradient
         self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, gradient, self.bary)
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy="spokes_and_rims",
                                  protocol=protocol)
@@ -124,13 +125,13 @@ class _Sampling:
         d = int(np.argmin(errs))
         return _extrapolate(h, d), d
 
-    def solve(self, targets, V0, arap: dict, gradient: str, carry: bool = False) -> dict:
+    def solve(self, targets, V0, arap: dict, carry: bool = False) -> dict:
         """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit), with the last
         solve's accelerator history when ``carry``: the info of the ARAP run. Its result's
         frames are made by the first :meth:`decode` after it (on the decoding thread)."""
         t0 = time.perf_counter()
         res = self.arap.deform(targets, V0=V0, carry_history=carry, **arap)
-        self.low, self.frames, self.gradient = res.V, None, gradient
+        self.low, self.frames = res.V, None
         self.history = [res.V] + self.history[:3]
         self.last_iterations = res.iterations
         return {"arap_s": time.perf_counter() - t0, "iterations": res.iterations, "converged": res.converged,
@@ -230,14 +231,14 @@ class Prepared:
         wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
         self._pending = []
         first, S = self.n_solves == 0, self._samplings
-        gradient, arap = self.params["gradient"], self._arap
+        arap = self._arap
 
         def run(i: int, V0) -> dict:
-            return S[i].solve(T, V0, arap, gradient)
+            return S[i].solve(T, V0, arap)
 
         def later(i: int) -> dict:  # the earlier frames extrapolated, the accelerator's history kept
             V0, degree = S[i].start()
-            return {**S[i].solve(T, V0, self._frame_arap, gradient, carry=True), "start_degree": degree}
+            return {**S[i].solve(T, V0, self._frame_arap, carry=True), "start_degree": degree}
 
         def from_first(i: int) -> dict:  # as deform: from sampling 0's result
             futs[0].result()
