@@ -146,7 +146,7 @@ def _derived_cache(cache):
     temporary folder (removed afterwards) while a model loads."""
     try:
         import body_models.anny._io as bm_io
-    except ImportError as e:
+    except (ImportError, OSError) as e:  # not installed, or installed with a library that does not load
         raise SShaDeError(f"body-models is not importable ({e}); install the project's dependencies "
                           "(pip install -e .) or `pip install body-models`") from None
     if not callable(getattr(bm_io, "get_cache_dir", None)):
@@ -201,7 +201,11 @@ def load_anny(root=None, cache=None):
     key = str(root)
     if key not in _MODELS:
         with _derived_cache(cache) as d:
-            from body_models.anny.numpy import ANNY
+            try:
+                from body_models.anny.numpy import ANNY
+            except (ImportError, OSError) as e:
+                raise SShaDeError(f"body-models is not importable ({e}); install the "
+                                  "project's dependencies (pip install -e .)") from None
 
             log.info("loading ANNY from %s (derived cache %s; the first load derives it and takes longer)", root, d)
             try:

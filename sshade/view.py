@@ -34,8 +34,9 @@ def _polyscope():
     try:
         import polyscope
         import polyscope.imgui  # noqa: F401 -- the window's text (Viewer.update)
-    except ImportError:
-        raise SShaDeError("python -m sshade view needs polyscope: pip install 'sshade[view]'") from None
+    except (ImportError, OSError) as e:  # missing, or present but its shared libraries do not load
+        raise SShaDeError(f"python -m sshade view needs polyscope: pip install 'sshade[view]' "
+                          f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})") from None
     return polyscope
 
 

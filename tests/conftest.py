@@ -1,4 +1,6 @@
-"""Shared fixtures: the real meshes of ../shared/data (tests skip cleanly without them)."""
+"""Shared fixtures: the real meshes of ../shared/data, the ANNY body model, a headless
+Chromium (tests skip with one line without them), and the marks that let ``.ci/run``
+rerun the tests that skipped (``anny``, ``browser``)."""
 from __future__ import annotations
 
 import os
@@ -6,6 +8,8 @@ import signal
 from pathlib import Path
 
 import pytest
+
+from .optional import optional_import
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("SSHADE_SHARED_DATA", ROOT.parent / "shared" / "data"))
@@ -99,17 +103,37 @@ def anny_cache(request, tmp_path_factory) -> Path:
 def anny_model(anny_cache, anny_assets):
     """The ANNY model (body-models' NumPy backend), loaded once per session with the
     shared derived cache; skips without body-models or the assets."""
-    pytest.importorskip("body_models")
+    optional_import("body_models")
     from defaust.anny_model import load_anny
     return load_anny(cache=anny_cache)
 
 
+@pytest.fixture(scope="session")
+def chromium_on_path() -> str:
+    """The headless-capable Chromium on PATH (:func:`eval.report.find_chromium`), or skip
+    the test with one line saying how to get it. Session-scoped, so a test that asks for it
+    skips before its other fixtures do any work; such tests carry the ``browser`` mark."""
+    from eval.report import find_chromium
+    exe = find_chromium()
+    if exe is None:
+        pytest.skip("chromium not found on PATH (Debian: apt-get install chromium): the page is not checked "
+                    "in a browser; .ci/run installs it and reruns the tests marked 'browser'")
+    return exe
+
+
+#: fixture -> the mark of every test that uses it (directly or through another fixture)
+_FIXTURE_MARKS = {"anny_assets": "anny", "chromium_on_path": "browser"}
+
+
 def pytest_collection_modifyitems(config, items):
-    """Every test that uses :func:`anny_assets` (directly or through a fixture) carries
-    the ``anny`` mark, so ``pytest -m anny`` reruns exactly those."""
+    """Every test that uses :func:`anny_assets` carries the ``anny`` mark and every test
+    that uses :func:`chromium_on_path` the ``browser`` mark, so ``pytest -m anny`` (or
+    ``-m browser``) reruns exactly those."""
     for item in items:
-        if "anny_assets" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.anny)
+        names = getattr(item, "fixturenames", ())
+        for fixture, mark in _FIXTURE_MARKS.items():
+            if fixture in names:
+                item.add_marker(getattr(pytest.mark, mark))
 
 
 def data_file(rel: str) -> Path:

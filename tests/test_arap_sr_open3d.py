@@ -7,7 +7,8 @@ converged). Our results are the converged protocol's. The meshes are closed and 
 their cotangent weights is negative: there Open3D's weights (clamped at 0, doubled on boundary
 edges) equal libigl's, so the energies are the same.
 
-Needs ``open3d`` (``open3d-cpu`` in the test extra, Linux x86_64); skipped without it.
+Needs ``open3d`` (``open3d-cpu`` in the test extra, Linux x86_64, and the system's libusb);
+each test skips with one line where it cannot be imported (mark ``open3d``).
 """
 from __future__ import annotations
 
@@ -19,7 +20,17 @@ from baselines.arap import ARAP
 from baselines.arap_sr import ARAPSR
 from sshade.arap.cases import bent_cylinder, twisted_bar
 
-o3d = pytest.importorskip("open3d")
+from .optional import optional_import
+
+pytestmark = pytest.mark.open3d
+o3d = None  # the open3d module, set by _import_open3d
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _import_open3d():
+    """Import open3d for this module's tests, or skip each of them with one line."""
+    global o3d
+    o3d = optional_import("open3d")
 
 #: agreement asked of converged results (mean vertex distance, % of the diagonal)
 AGREE_PCT = 0.05

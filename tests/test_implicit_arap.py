@@ -1,54 +1,35 @@
-"""Implicit-ARAP (baselines/implicit_arap/): the one-line refusal without
-PyTorch, then (PyTorch installed, extra [neural]) the parts on small inputs: an analytic
-sphere SDF in place of the fitted one, the identity field when no handle moves, a rigid
-motion of every handle, the patch energy (zero for a rigid map, a hand computation on one
-triangle), a decreasing loss, and bit-identical output under a seed."""
+"""Implicit-ARAP (baselines/implicit_arap/) with PyTorch (extra [neural], mark ``neural``;
+each test skips with one line where ``torch`` cannot be imported): the parts on small
+inputs: an analytic sphere SDF in place of the fitted one, the identity field when no
+handle moves, a rigid motion of every handle, the patch energy (zero for a rigid map, a
+hand computation on one triangle), a decreasing loss, and bit-identical output under a
+seed. Without PyTorch: tests/test_implicit_arap_without_torch.py."""
 from __future__ import annotations
-
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from .conftest import ROOT, subprocess_env
+from baselines.implicit_arap import ImplicitARAP
+from baselines.implicit_arap.field import DeformationField, rodrigues
+from baselines.implicit_arap.method import fit_field
+from baselines.implicit_arap.patches import disk, edge_structure, mesh_patches, patch_energy
+from baselines.implicit_arap.sdf import sphere_sdf
+from sshade.errors import SShaDeError
 
-NO_TORCH = "Implicit-ARAP needs PyTorch: pip install -e .[neural]"
-BLOCK_TORCH = "import sys; sys.modules['torch'] = None; "  # `import torch` raises ImportError
-
-
-def test_without_torch_the_build_fails_in_one_line():
-    """Runs whether or not PyTorch is installed: the import is made to fail."""
-    code = (BLOCK_TORCH + "import baselines; from harness.registry import build_builtin\n"
-            "try:\n    build_builtin('Implicit-ARAP')\nexcept Exception as e:\n"
-            "    print(type(e).__name__); print(e)\n")
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
-                         env=subprocess_env())
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.splitlines() == ["SShaDeError", NO_TORCH]
-
-
-def test_without_torch_the_evaluator_exits_2_before_any_work(tmp_path):
-    code = (BLOCK_TORCH + "import runpy; sys.argv = ['eval', 'methods=[Implicit-ARAP]', "
-            f"'out_dir={tmp_path / 'run'}']; runpy.run_module('eval', run_name='__main__')")
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
-                         env=subprocess_env())
-    assert out.returncode == 2, out.stdout + out.stderr
-    assert NO_TORCH in out.stdout + out.stderr
-    assert len([ln for ln in (out.stdout + out.stderr).splitlines() if "PyTorch" in ln]) == 1
-    assert not (tmp_path / "run" / "cases.csv").exists()
-
+from .optional import optional_import
 
 pytestmark = pytest.mark.neural
-torch = pytest.importorskip("torch", reason="PyTorch not installed (extra [neural]): Implicit-ARAP tests skipped")
-torch.set_num_threads(min(2, torch.get_num_threads()))
+torch = None  # the torch module, set by _import_torch
 
-from baselines.implicit_arap import ImplicitARAP  # noqa: E402 -- after the importorskip above
-from baselines.implicit_arap.field import DeformationField, rodrigues  # noqa: E402 -- after the importorskip above
-from baselines.implicit_arap.method import fit_field  # noqa: E402 -- after the importorskip above
-from baselines.implicit_arap.patches import disk, edge_structure, mesh_patches, patch_energy  # noqa: E402 -- after the importorskip above
-from baselines.implicit_arap.sdf import sphere_sdf  # noqa: E402 -- after the importorskip above
-from sshade.errors import SShaDeError  # noqa: E402 -- after the importorskip above
+
+@pytest.fixture(autouse=True, scope="module")
+def _import_torch():
+    """Import PyTorch for this module's tests (at most 2 threads), or skip each of them
+    with one line."""
+    global torch
+    torch = optional_import("torch")
+    torch.set_num_threads(min(2, torch.get_num_threads()))
+
 
 #: Small settings: seconds per call on 2 cores.
 SMALL = dict(layers=3, width=32, skip=0, octaves=2, sdf_steps=0, deform_steps=60, surface_patches=24,

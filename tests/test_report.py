@@ -2,7 +2,8 @@
 run (2 FAUST cases, a toy plug-in method and one that always fails), its tables parsed
 with html.parser, the CLI's no-harm rules, the display decimation; and, when a
 ``chromium`` is on PATH, the page in headless Chromium (SwiftShader WebGL): no JS error,
-the table rows in the DOM, both 3D views drawn, mesh pixels on the screenshot."""
+the table rows in the DOM, both 3D views drawn, mesh pixels on the screenshot (mark
+``browser``, through the ``chromium_on_path`` fixture: without one they skip with one line)."""
 from __future__ import annotations
 
 import csv
@@ -23,7 +24,7 @@ from eval.present.meshview import (
     read_view,
     vertex_edge_error,
 )
-from eval.report import PAGE, chromium, find_chromium, main, screenshot, write_index, write_report
+from eval.report import PAGE, chromium, main, screenshot, write_index, write_report
 from eval.run.outdir import REPRODUCE_ENV, read_marker, results_dir
 
 METHODS = ["Mine", "NaNOutput"]
@@ -185,13 +186,7 @@ def test_case_view_quantises_on_a_common_box():
 
 
 # ----------------------------------------------------------------------------- headless Chromium
-def _need_chromium():
-    if find_chromium() is None:
-        pytest.skip("no chromium on PATH (Debian: apt-get install chromium): the page is not checked in a browser")
-
-
-def test_page_in_headless_chromium(run_dir):
-    _need_chromium()
+def test_page_in_headless_chromium(chromium_on_path, run_dir):
     dom = chromium(run_dir / PAGE, "--dump-dom").stdout
     assert 'id="js-errors"' in dom, "chromium gave no DOM"
     box = re.search(r'<div id="js-errors"[^>]*>.*?</div>(?!\s*<div class="js-error")', dom, re.S).group(0)
@@ -201,8 +196,7 @@ def test_page_in_headless_chromium(run_dir):
     assert re.search(r'id="views-status"[^>]*data-drawn="2"', dom), "the two 3D views were not drawn"
 
 
-def test_js_errors_are_written_into_the_page(tmp_path):
-    _need_chromium()
+def test_js_errors_are_written_into_the_page(chromium_on_path, tmp_path):
     hook = (Path(__file__).resolve().parents[1] / "eval" / "report_assets" / "errors.js").read_text()
     page = tmp_path / "e.html"
     page.write_text(f'<html><head><script>{hook}</script></head><body><div id="js-errors" data-count="0" hidden>'
@@ -211,8 +205,7 @@ def test_js_errors_are_written_into_the_page(tmp_path):
     assert 'data-count="2"' in dom and "console.error: bad thing" in dom and "undefinedFunction" in dom
 
 
-def test_screenshot_shows_the_meshes(run_dir, tmp_path):
-    _need_chromium()
+def test_screenshot_shows_the_meshes(chromium_on_path, run_dir, tmp_path):
     png = screenshot(run_dir / PAGE, tmp_path / "page.png", size=(1200, 1500), fragment="#mode=plain")
     from matplotlib.image import imread
     img = imread(png)[..., :3].astype(float)
@@ -223,8 +216,7 @@ def test_screenshot_shows_the_meshes(run_dir, tmp_path):
     assert blue.sum() > 2000, f"no result mesh drawn ({int(blue.sum())} blue pixels)"
 
 
-def test_views_are_coloured_by_edge_error_with_a_legend(run_dir, tmp_path):
-    _need_chromium()
+def test_views_are_coloured_by_edge_error_with_a_legend(chromium_on_path, run_dir, tmp_path):
     dom = chromium(run_dir / PAGE, "--dump-dom").stdout
     assert len(re.findall(r'<div class="view" [^>]*data-mode="edge"', dom)) == 2, "views not in edge-error mode"
     assert dom.count('class="view-ramp"') == 2 and "edge-length error, % of the longest rest edge" in dom
@@ -290,8 +282,7 @@ def test_report_options_are_checked_before_any_work(bad):
         check_config(cfg)
 
 
-def test_a_click_on_a_header_sorts_the_table(tmp_path):
-    _need_chromium()
+def test_a_click_on_a_header_sorts_the_table(chromium_on_path, tmp_path):
     assets = Path(__file__).resolve().parents[1] / "eval" / "report_assets"
     page = tmp_path / "t.html"
     page.write_text(
@@ -311,11 +302,10 @@ def test_a_click_on_a_header_sorts_the_table(tmp_path):
     assert re.search(r'id="js-errors" data-count="0"', dom)
 
 
-def test_committed_results_pages_open_in_headless_chromium():
+def test_committed_results_pages_open_in_headless_chromium(chromium_on_path):
     """The committed ``results/index.html`` and every page it links to (each folder's
     ``index.html``, written by ``python -m eval.reproduce``) load in headless Chromium
     without a JavaScript error, and every link of the index leads to something committed."""
-    _need_chromium()
     root = Path(__file__).resolve().parents[1] / "results"
     index = root / PAGE
     if not index.is_file():
