@@ -255,3 +255,10 @@ class ARAPSR:
                                                    max_iter=5, protocol=self.protocol,
                                                    start="coarse" if coarse else "rigid",
                                                    coarse_n_low=40).deform(V, F, h, T))
+
+
+def warmup_kernels() -> float:
+    """Warm ARAP-SR under both protocols (:meth:`ARAPSR.warmup` with the defaults and with
+    ``protocol="paper"``): the entry point ``sshade.warmup`` of ``python -m sshade warmup``.
+    Returns the seconds spent."""
+    return ARAPSR().warmup() + ARAPSR(protocol="paper").warmup()

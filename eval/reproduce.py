@@ -35,7 +35,9 @@ others still run):
    hard TOSCA ones at 200k and 1M vertices, ``conf/experiment/scaling.yaml``; ``--scaling
    MESH``: that one mesh instead) -> ``results/scaling``; then the frames of a handle path
    with SShaDe prepared once (``benchmarks/frames.py``: the clean armadillo and the hard
-   centaur, or that one mesh) -> ``results/frames``.
+   centaur, or that one mesh) -> ``results/frames``; then the first call of a fresh process
+   on a cold and a filled numba cache (``benchmarks/cold_start.py``; ``--before COMMIT``:
+   that commit's code too) -> ``results/cold_start``.
 
 Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``. Every step's
 folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
@@ -74,13 +76,22 @@ SR_ALPHAS = "0.001,0.003,0.01,0.03,0.06,0.1"
 IA_GRID = ("method.Implicit-ARAP.arap_weight=10,100,1000", "method.Implicit-ARAP.deform_steps=250,500")
 
 
+def _installed(name: str) -> bool:
+    """``name`` is installed (found without importing it); a finder that raises while
+    looking for it (a module made unimportable) counts as not installed."""
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, OSError, ValueError):
+        return False
+
+
 def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
     # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
     # per_pose subset, eval/run/subset.py); resume=true: a rerun after a crash continues (eval/run/store.py)
     # Implicit-ARAP (the [neural] extra, its cpu preset) where PyTorch is installed, on every case too
-    neural = importlib.util.find_spec("torch") is not None
+    neural = _installed("torch")
     ia = ["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]"] if neural else []
     # the deep references (a minute or more each at 169k vertices, three energies) on the
     # per_pose subset, the main job's baseline cases: the check that each converged
@@ -131,6 +142,11 @@ def _steps(a) -> list[tuple[str, list[str]]]:
         mesh = [] if a.scaling == "set" else ["--mesh", f"{Path(a.scaling).stem}={a.scaling}"]
         s.append(("frames", [sys.executable, str(Path(__file__).resolve().parents[1] / "benchmarks" / "frames.py"),
                              *mesh, "--out", "results/frames"]))
+        # the first call of a fresh process on a cold and a filled numba cache (the bunny, the
+        # hard centaur at 200k), with --before COMMIT that commit's code beside this one's
+        before = ["--before", a.before] if a.before else []
+        s.append(("cold_start", [sys.executable, str(Path(__file__).resolve().parents[1] / "benchmarks" /
+                                                     "cold_start.py"), *before, "--out", "results/cold_start"]))
     # last: results/index.html, a link to every folder's page, and its screenshot where a
     # Chromium is installed (eval/report.py); `--only report` rebuilds just these
     shot = ["--screenshot", "results/index.png"] if find_chromium() else []
@@ -153,6 +169,7 @@ def main(argv=None) -> int:
     p.add_argument("--shapes", help="folder with the Stanford models (armadillo.obj, bunny.off, dragon.obj)")
     p.add_argument("--scaling", help="'set': the scaling benchmark on its set of meshes (conf/experiment/"
                                      "scaling.yaml); or one real mesh for it")
+    p.add_argument("--before", help="with --scaling: the cold-start step also probes this commit's code")
     p.add_argument("--dry-run", action="store_true", help="print the commands only")
     p.add_argument("--only", help="comma-separated step names to run (e.g. faust,tosca); default every step")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")

@@ -65,6 +65,7 @@ from .mesh.io import read_mesh, write_mesh, written_by_sshade
 from .mesh.repair import repair_mesh
 from .refine import SShaDeRefine
 from .view import main as view_main
+from .warmup_command import main as warmup_main
 
 __all__ = ["main", "deform_main", "build_parser", "deform_file", "parse_param", "sshade_method"]
 
@@ -331,8 +332,9 @@ def deform_file(a, log=print, warn=None, resolve=sshade_method) -> dict:
 
 
 def main(argv=None) -> int:
-    """Entry point of ``python -m sshade``: ``deform ...`` (module docstring) or ``animate ...``
-    (:mod:`sshade.animate`).
+    """Entry point of ``python -m sshade``: ``deform ...`` (module docstring), ``animate ...``
+    (:mod:`sshade.animate`), ``view ...`` (:mod:`sshade.view`) or ``warmup``
+    (:mod:`sshade.warmup_command`).
 
     Returns the exit status (0 success, 2 bad input, usage or an OSError, after one
     ``error:`` line on stderr; 130 after ``interrupted`` on Ctrl-C).
@@ -343,16 +345,20 @@ def main(argv=None) -> int:
               "--handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE] "
               "[--repair]\n       python -m sshade animate MESH (--sel F.sel | --dmat F.dmat | --handles F.json) "
               "--frames FRAMES.npy -o OUT\n       python -m sshade view MESH (--sel F.sel | --dmat F.dmat | --handles "
-              "F.json)\n(python -m sshade deform|animate|view --help for details)",
+              "F.json)\n       python -m sshade warmup\n"
+              "(python -m sshade deform|animate|view|warmup --help for details)",
               file=sys.stderr if not argv else sys.stdout)
         return 2 if not argv else 0
     if argv[0] == "animate":
         return animate_main(argv[1:])
     if argv[0] == "view":
         return view_main(argv[1:])
+    if argv[0] == "warmup":
+        return warmup_main(argv[1:])
     if argv[0] != "deform":
         print(f"error: unknown command {argv[0]!r}; the commands are `python -m sshade deform MESH -o OUT ...`, "
-              "`python -m sshade animate MESH ... --frames FRAMES.npy -o OUT` and `python -m sshade view MESH ...`",
+              "`python -m sshade animate MESH ... --frames FRAMES.npy -o OUT`, `python -m sshade view MESH ...` "
+              "and `python -m sshade warmup`",
               file=sys.stderr)
         return 2
     return deform_main(argv[1:])

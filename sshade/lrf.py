@@ -228,7 +228,7 @@ def decode_with_frames(L: np.ndarray, C: np.ndarray, tri: np.ndarray, VN_def: np
         raise SShaDeError(f"decode_with_frames: out must be a C-contiguous ({r}, 3) float64 array")
     per_vertex = bary_ is not None
     w = np.ascontiguousarray(bary_, np.float64) if per_vertex else np.full((1, 3), 1.0 / 3.0)  # barycenter
-    _decode_kernel(L, np.ascontiguousarray(C_, np.float64), np.ascontiguousarray(tri_), w,
+    _decode_kernel(L, np.ascontiguousarray(C_, np.float64), np.ascontiguousarray(tri_, np.int32), w,
                    np.ascontiguousarray(VN_def, np.float64), np.ascontiguousarray(FN, np.int64), per_vertex,
                    lo, hi, add, out)
     return out

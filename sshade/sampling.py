@@ -25,6 +25,7 @@ import numpy as np
 from .allocator import keep_freed_memory
 from .arap import warmup_kernels
 from .cores import pool_size  # noqa: F401 - the samplings' worker count (None: the cores this process may use)
+from .kernel_cache import compile_kernels
 from .mesh.geodesic import VoronoiState
 from .mesh.halfedge import halfedges, vertex_fan_count
 from .projection import project_to_fans
@@ -97,6 +98,7 @@ def warm_kernels() -> float:
     if _WARM[0]:
         return 0.0
     t0 = time.perf_counter()
+    compile_kernels()  # on a cold cache: half of them in a forked child at the same time
     V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 4], [2, 3, 4], [3, 1, 4]])
     st = VoronoiState(V, F)

@@ -31,6 +31,7 @@ HELP = {
     "-m sshade deform": ["usage: python -m sshade deform", "--sel", "--force"],
     "-m sshade animate": ["usage: python -m sshade animate", "--frames", "--handles"],
     "-m sshade view": ["usage: python -m sshade view", "--sel", "--handles"],
+    "-m sshade warmup": ["usage: python -m sshade warmup"],
     "-m harness": ["usage: python -m harness deform MESH -o OUT", "pkg.module.Class"],
     "-m harness deform": ["usage: python -m harness deform", "--sel", "--force", "ARAP-SR"],
     "-m examples.twisted_bar": ["usage: python -m examples.twisted_bar", "outputs/twisted_bar"],
@@ -41,6 +42,7 @@ HELP = {
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
     "benchmarks/tosca_transfer_factors.py": ["usage:", "--classes"],
     "benchmarks/frames.py": ["usage:", "--frames"],
+    "benchmarks/cold_start.py": ["usage:", "--before"],
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
 }

@@ -1,9 +1,9 @@
 """The one command that regenerates results/ (eval/reproduce.py): which runs it makes."""
 from __future__ import annotations
 
-import importlib.util
-
 from eval.reproduce import main
+
+from .optional import found
 
 
 def _steps(capsys, *argv) -> dict[str, str]:
@@ -14,7 +14,7 @@ def _steps(capsys, *argv) -> dict[str, str]:
 
 def test_default_runs_defaust_and_its_sweep(capsys):
     steps = _steps(capsys)
-    neural = ["sweep_implicit_arap"] if importlib.util.find_spec("torch") else []
+    neural = ["sweep_implicit_arap"] if found("torch") else []
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha",
                            *neural, "report"]
     assert steps["report"].startswith("-m eval.report --index results")  # results/index.html, last
@@ -23,7 +23,7 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     assert "arap_sr.alpha=0.001,0.003,0.01,0.03,0.06,0.1" in steps["sweep_arap_sr_alpha"]
     assert "methods=[ARAP-SR]" in steps["sweep_arap_sr_alpha"]
     ia = ("methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] "
-          if importlib.util.find_spec("torch") else "")  # the [neural] extra: Implicit-ARAP on every case too
+          if found("torch") else "")  # the [neural] extra: Implicit-ARAP on every case too
     assert steps["defaust"] == ("-m eval figures.enabled=true dataset.baseline_cases=all reference.cases=per_pose "
                                 "resume=true jobs=1 "
                                 f"{ia}out_dir=results/defaust")  # every method on every case, resumable, one at a time
@@ -35,15 +35,16 @@ def test_default_runs_defaust_and_its_sweep(capsys):
 def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
                    "sshade.n_samplings=3")
-    neural = importlib.util.find_spec("torch") is not None
+    neural = found("torch")
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha",
                            *(["sweep_implicit_arap", "sweep_implicit_arap_faust"] if neural else []),
-                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames", "report"]
+                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames", "cold_start",
+                           "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
-    ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if importlib.util.find_spec("torch") else ""
+    ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if found("torch") else ""
     assert steps["shapes"] == (f"-m eval experiment=shapes dataset.root=S resume=true jobs=1 {ia}"
                                "out_dir=results/shapes")
     for name, cmd in steps.items():  # only this command writes results/: each step names its folder
@@ -53,13 +54,16 @@ def test_every_experiment_with_folders_and_figures(capsys):
                   "sweep_implicit_arap": "implicit_arap_defaust", "sweep_implicit_arap_faust": "implicit_arap_faust"}
         want = (f"hydra.sweep.dir=results/sweeps/{sweeps[name]}" if name in sweeps else
                 "T --out results/tosca_factors" if name == "tosca_factors" else
-                "--mesh M=M.obj --out results/frames" if name == "frames" else f"out_dir=results/{name}")
+                "--mesh M=M.obj --out results/frames" if name == "frames" else
+                "cold_start.py --out results/cold_start" if name == "cold_start" else f"out_dir=results/{name}")
         assert want in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
     assert "scaling.meshes=null" in steps["scaling"]  # one mesh instead of the set
     every = _steps(capsys, "--scaling", "set")
     assert every["scaling"] == "-m eval experiment=scaling out_dir=results/scaling"
     assert every["frames"].endswith("benchmarks/frames.py --out results/frames")  # its default set
+    before = _steps(capsys, "--scaling", "set", "--before", "abc1234")  # that commit's code beside this one's
+    assert before["cold_start"].endswith("benchmarks/cold_start.py --before abc1234 --out results/cold_start")
 
 
 def test_only_runs_the_named_steps(capsys):

@@ -364,8 +364,9 @@ if nb is not None:
         """Fused local step over all cells (:func:`_local_block`), blocks of cells split
         over threads (every block writes only its own outputs: the results are those of
         :func:`_local_serial`, whatever the number of threads)."""
-        for b in _prange((R.shape[0] + LANES - 1) // LANES):
-            _local_block(b, U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek)
+        for b in _prange((R.shape[0] + LANES - 1) // LANES):  # prange counts in uint64: one callee signature
+            _local_block(np.int64(b), U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W,
+                         warm, R, Ek)
 
     @_njit
     def _rhs_row(i, v, kv_ptr, kv_idx, kv_val, R, sub, out):
@@ -392,7 +393,7 @@ if nb is not None:
     def _rhs_parallel(rows, kv_ptr, kv_idx, kv_val, R, sub, out):
         """``out = K(R)[rows] - sub`` (:func:`_rhs_row`), rows split over threads."""
         for i in _prange(rows.shape[0]):
-            _rhs_row(i, rows[i], kv_ptr, kv_idx, kv_val, R, sub, out)
+            _rhs_row(np.int64(i), rows[i], kv_ptr, kv_idx, kv_val, R, sub, out)
 
 
 _POLAR = None  # None: not tried yet; False: unavailable; else the dispatcher

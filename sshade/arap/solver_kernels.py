@@ -120,8 +120,8 @@ if nb is not None:
 
     @_njit_par
     def _push_parallel(x, g, x_prev, g_prev, DF, DG, slot, nh, part):
-        for c in _prange(part.shape[0]):
-            _push_chunk(c, x, g, x_prev, g_prev, DF, DG, slot, nh, part)
+        for c in _prange(part.shape[0]):  # prange counts in uint64: one callee signature
+            _push_chunk(np.int64(c), x, g, x_prev, g_prev, DF, DG, slot, nh, part)
 
     @_njit
     def _mix_range(i0, i1, g, DG, theta, nh, out):

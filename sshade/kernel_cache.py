@@ -1,0 +1,221 @@
+"""numba's on-disk cache of this package's kernels: where it is, whether it is cold, and
+filling a cold one on two processes at once.
+
+numba keys each cached kernel on its source file's modification time and size and on the
+CPU, so a fresh install, an upgrade, a new machine or an empty ``NUMBA_CACHE_DIR`` leaves
+it cold and the next call compiles every kernel (docs/methods.md, "The first call").
+:func:`compile_kernels` fills it: with two cores or more and ``fork``, a forked child
+compiles one half of the kernels (:data:`GROUPS`) while this process compiles the other,
+then this process loads the child's half from the cache. :func:`notice` prints one line
+the first time a process finds the cache cold. ``python -m sshade warmup`` does it ahead.
+"""
+from __future__ import annotations
+
+import ctypes
+import importlib
+import multiprocessing as mp
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from numba.core.registry import CPUDispatcher
+
+from .arap import warmup_kernels
+from .closed_ball import closed_ball, closed_ball_local, vertex_faces
+from .cores import available_cores
+from .lrf import decode_with_frames
+from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
+from .mesh.halfedge import boundary_loops, halfedges, vertex_fan_count, vertex_normals
+from .mesh.validate import validate_mesh
+from .projection import project_to_fans
+
+__all__ = ["KERNEL_MODULES", "GROUPS", "COLD_COMPILE_S", "kernel_dispatchers", "cache_folder", "cold_kernels",
+           "notice", "compile_kernels"]
+
+#: The modules whose numba kernels one SShaDe call compiles.
+KERNEL_MODULES = ("sshade.mesh.halfedge", "sshade.mesh.geodesic", "sshade.mesh.validate", "sshade.closed_ball",
+                  "sshade.projection", "sshade.lrf", "sshade.arap.kernels", "sshade.arap.solver_kernels")
+#: Seconds a cold first call of SShaDe spends compiling on 2 cores, kernels filled on two
+#: processes (measured by benchmarks/cold_start.py; results/cold_start/table.md); the notice's estimate.
+COLD_COMPILE_S = 15
+#: Seconds the caller waits for the child at least (then three times its own group's time)
+#: before it ends the child and compiles the child's group itself.
+CHILD_MIN_WAIT_S = 60.0
+_NOTICED = [False]
+_FILLED = [False]
+_LOCK = threading.Lock()
+
+
+def kernel_dispatchers() -> dict:
+    """The module-level, cached numba kernels of :data:`KERNEL_MODULES` that numba compiles
+    on their own (``inline="always"`` ones are compiled into their callers).
+
+    Returns
+    -------
+    dict, ``"module.name" -> numba Dispatcher``.
+    """
+    out = {}
+    for m in KERNEL_MODULES:
+        mod = importlib.import_module(m)
+        for name, d in vars(mod).items():
+            if (isinstance(d, CPUDispatcher) and d.py_func.__module__ == m and d._cache is not None
+                    and d.targetoptions.get("inline", "never") == "never"):
+                out[f"{m}.{name}"] = d
+    return out
+
+
+def cache_folder() -> Path | None:
+    """The folder holding the kernels' cache files (``NUMBA_CACHE_DIR`` when set, else
+    beside the sources or numba's user-wide fallback), or None when numba keeps none."""
+    for d in kernel_dispatchers().values():
+        path = getattr(d._cache, "_cache_path", None)
+        if path:
+            return Path(path).parent
+    return None
+
+
+def _is_cached(d) -> bool:
+    """Whether ``d``'s cache index holds an entry for its current source (any signature)."""
+    try:
+        return bool(d._cache._cache_file._load_index())
+    except Exception:  # numba's private cache layout changed, or an unreadable index: say cached
+        return True
+
+
+def cold_kernels() -> list[str]:
+    """The kernels of :data:`GROUPS` whose cache holds nothing for the installed sources
+    (sorted ``"module.name"``); empty when the cache is warm."""
+    names = {n for group in GROUPS.values() for n in group[1]}
+    return sorted(n for n, d in kernel_dispatchers().items() if n in names and not _is_cached(d))
+
+
+def notice(cold: list[str], stream=None) -> None:
+    """Print, once per process, that ``cold`` kernels are being compiled and how to do it ahead."""
+    if not cold or _NOTICED[0]:
+        return
+    _NOTICED[0] = True
+    share = len(cold) / max(1, sum(len(g[1]) for g in GROUPS.values()))
+    print(f"compiling SShaDe's kernels once (about {max(1, round(share * COLD_COMPILE_S))} s); "
+          "python -m sshade warmup does it ahead", file=stream or sys.stderr, flush=True)
+
+
+# ------------------------------------------------------------------ the two halves
+def _tetrahedron():
+    """A closed tetrahedron: V (4, 3) float64, F (4, 3) int64 (outward), and its edges
+    E (6, 2) int64 (lo < hi, sorted) and face edges FE (4, 3) int64, made without any kernel."""
+    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    ends = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    E, FE = np.unique(ends, axis=0, return_inverse=True)
+    return V, F, np.ascontiguousarray(E, np.int64), np.ascontiguousarray(FE.reshape(4, 3), np.int64)
+
+
+def _warm_sampling() -> None:
+    """Geodesic sampling (both queues, mesh and locality order), projection, the low-res
+    ARAP's serial kernels and L-BFGS."""
+    V, F, E, _ = _tetrahedron()
+    order = locality_order(V)
+    for queue in ("auto", "heap"):
+        for graph, o in ((None, None), (edge_graph_from_edges(V, E, order), order)):
+            st = VoronoiState(V, F, graph=graph, order=o, queue=queue)
+            st.sample(2, 0)
+            st.add([3])
+    project_to_fans(V, np.zeros(4, np.int64), V, F)
+    warmup_kernels()
+
+
+def _warm_topology() -> None:
+    """Mesh checks, half-edges, fans, normals, boundary loops, the closed-ball checks (full
+    and local) and the transfer's decoding."""
+    V, F, E, FE = _tetrahedron()
+    validate_mesh(V, F)
+    lab = np.arange(4, dtype=np.int32)
+    closed_ball(F, E, FE, lab, np.zeros(4), 4, 4)
+    ptr, idx = vertex_faces(F, 4)
+    closed_ball_local(F, E, FE, ptr, idx, lab, np.zeros(4), 4, 4, np.ones(4, np.bool_))
+    he = halfedges(F, 4)
+    vertex_fan_count(F, he, 4)
+    boundary_loops(F, he)
+    vertex_normals(V, F)
+    L = np.broadcast_to(np.eye(3), (4, 3, 3)).copy()
+    for bary in (None, np.full((4, 3), 1 / 3)):
+        decode_with_frames(L, np.zeros((4, 3)), np.arange(4), V, F, bary=bary)
+
+
+#: The kernels in two halves of about equal compile time: name -> (warm function, kernels
+#: it compiles). A cold :func:`compile_kernels` runs the first half in a forked child.
+GROUPS = {
+    "sampling and ARAP": (_warm_sampling, (
+        "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._morton_sort", "sshade.mesh.geodesic._fps",
+        "sshade.mesh.geodesic._add_seeds", "sshade.mesh.geodesic._propagate", "sshade.projection._project",
+        "sshade.arap.kernels._polar_batch_nb", "sshade.arap.kernels._local_serial", "sshade.arap.kernels._rhs_serial",
+        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_two_loop")),
+    "topology and transfer": (_warm_topology, (
+        "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
+        "sshade.closed_ball.closed_ball", "sshade.closed_ball.closed_ball_local", "sshade.closed_ball.vertex_faces",
+        "sshade.lrf._decode_kernel")),
+}
+
+
+def _child(name: str) -> None:
+    """Body of the forked child: die with the parent (Linux), compile one group, exit."""
+    try:
+        ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: never outlive the caller
+    except Exception:  # not Linux: the parent's finally still reaps it
+        pass
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C goes to the caller, which ends this child
+    GROUPS[name][0]()
+
+
+def compile_kernels(*, show_notice: bool = True, split: bool | None = None, progress=None) -> float:
+    """Compile (or load from numba's cache) every kernel of :data:`GROUPS` in this process,
+    once per process; on a cold cache, half of them in a forked child at the same time.
+
+    Parameters
+    ----------
+    show_notice : print :func:`notice`'s line when the cache is cold.
+    split : run one group in a child; None: when the cache is cold, two or more cores are
+        available (:func:`sshade.cores.available_cores`) and ``fork`` exists.
+    progress : optional callable taking one line of text per finished group.
+
+    Returns
+    -------
+    float, the seconds spent (0.0 when already done in this process). A child that fails,
+    is killed or hangs past :data:`CHILD_MIN_WAIT_S` (or three times this process's own
+    group) only costs time: this process then compiles its group itself. Thread-safe.
+    """
+    with _LOCK:  # two threads at a cold cache: one fills it, the other then finds it done
+        return 0.0 if _FILLED[0] else _compile(show_notice, split, progress)
+
+
+def _compile(show_notice: bool, split: bool | None, progress) -> float:
+    t0 = time.perf_counter()
+    cold = cold_kernels()
+    if show_notice:
+        notice(cold)
+    if split is None:
+        split = bool(cold) and available_cores() >= 2 and "fork" in mp.get_all_start_methods()
+    names = list(GROUPS)
+    child = None
+    if split:
+        child = mp.get_context("fork").Process(target=_child, args=(names[0],), daemon=True)
+        child.start()
+    try:
+        for name in (names[1:] + names[:1]) if child else names:
+            if child is not None and name == names[0]:
+                # a child stuck (e.g. on a lock another thread held at the fork) is given up
+                child.join(timeout=max(CHILD_MIN_WAIT_S, 3 * (time.perf_counter() - t0)))
+            t = time.perf_counter()
+            GROUPS[name][0]()
+            if progress is not None:
+                progress(f"{name}: {time.perf_counter() - t:.1f} s")
+    finally:
+        if child is not None and child.is_alive():
+            child.terminate()
+            child.join()
+    _FILLED[0] = True
+    return time.perf_counter() - t0
+

@@ -1,0 +1,132 @@
+"""sshade/kernel_cache.py: a cold numba cache is filled on two processes (the child's half
+loaded, not compiled, by the caller), announced by one line, and a failing or interrupted
+child costs only time; every kernel a SShaDe call compiles is in a group."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from sshade import kernel_cache
+
+from .conftest import ROOT
+
+_PROBE = r"""
+import json, sys
+from sshade import kernel_cache as kc
+from sshade import deform
+from sshade.warmup import tiny_problem
+cold = kc.cold_kernels()
+kc.compile_kernels(split=True)
+kc.compile_kernels(split=True)                    # once per process: no second notice
+ds = kc.kernel_dispatchers()
+stats = {n: [sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.values())] for n, d in ds.items()}
+deform(*tiny_problem(), n_low=40, n_samplings=2, workers=1)
+later = [n for n, d in ds.items() if sum(d.stats.cache_misses.values()) > stats[n][1]]
+print(json.dumps({"cold": cold, "stats": stats, "compiled_later": later}))
+"""
+
+
+def _probe(cache):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    r = subprocess.run([sys.executable, "-c", _PROBE], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return json.loads(r.stdout.strip().splitlines()[-1]), [ln for ln in r.stderr.splitlines() if ln.strip()]
+
+
+@pytest.mark.slow
+def test_a_cold_cache_is_announced_once_filled_on_two_processes_and_then_warm(tmp_path):
+    first, err = _probe(tmp_path / "numba")
+    groups = {g: names for g, (_, names) in kernel_cache.GROUPS.items()}
+    assert sorted(first["cold"]) == sorted(n for names in groups.values() for n in names)
+    assert len(err) == 1 and err[0].startswith("compiling SShaDe's kernels once (about ")
+    assert err[0].endswith("python -m sshade warmup does it ahead")
+    child, parent = list(groups)  # the first group runs in the forked child
+    # the child's kernels loaded from the cache it wrote, none compiled here (a kernel called
+    # only from other kernels is neither: it is compiled into its callers)
+    assert all(first["stats"][n][1] == 0 for n in groups[child])
+    assert sum(first["stats"][n][0] for n in groups[child]) >= 1
+    assert sum(first["stats"][n][1] for n in groups[parent]) >= 1
+    assert first["compiled_later"] == []  # a SShaDe call needs no kernel the groups left out
+    second, err = _probe(tmp_path / "numba")
+    assert second["cold"] == [] and err == []
+    assert all(s[1] == 0 for s in second["stats"].values())  # every kernel loaded
+
+
+def _fake_groups(monkeypatch, log, child_body):
+    """Two cheap groups whose runs are logged as (group, pid) lines in ``log``."""
+    def run(name, body=None):
+        def f():
+            with open(log, "a") as fh:
+                fh.write(json.dumps([name, os.getpid()]) + "\n")
+            if body is not None:
+                body()
+        return f
+    monkeypatch.setattr(kernel_cache, "GROUPS", {"a": (run("a", child_body), ()), "b": (run("b"), ())})
+    monkeypatch.setattr(kernel_cache, "_FILLED", [False])
+
+
+def _runs(log):
+    return [tuple(json.loads(ln)) for ln in log.read_text().splitlines()] if log.exists() else []
+
+
+def test_a_failing_child_leaves_its_group_to_the_caller(tmp_path, monkeypatch):
+    log = tmp_path / "runs.jsonl"
+    me = os.getpid()
+
+    def fail_in_child():
+        if os.getpid() != me:
+            raise RuntimeError("child fails")
+    _fake_groups(monkeypatch, log, fail_in_child)
+    assert kernel_cache.compile_kernels(split=True, show_notice=False) >= 0
+    runs = _runs(log)
+    assert ("b", me) in runs and ("a", me) in runs  # the caller ran both groups itself
+    assert any(g == "a" and pid != me for g, pid in runs)  # the child tried its group
+    assert kernel_cache.compile_kernels(split=True) == 0.0  # once per process
+
+
+def test_an_interrupted_caller_leaves_no_child_behind(tmp_path, monkeypatch):
+    log = tmp_path / "runs.jsonl"
+    me = os.getpid()
+    _fake_groups(monkeypatch, log, lambda: time.sleep(60) if os.getpid() != me else None)
+
+    def interrupted():
+        time.sleep(0.5)  # the child has started its group
+        raise KeyboardInterrupt
+    groups = dict(kernel_cache.GROUPS)
+    groups["b"] = (interrupted, ())
+    monkeypatch.setattr(kernel_cache, "GROUPS", groups)
+    t = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        kernel_cache.compile_kernels(split=True, show_notice=False)
+    assert time.perf_counter() - t < 30
+    child = [pid for g, pid in _runs(log) if pid != me]
+    assert len(child) == 1
+    with pytest.raises(ProcessLookupError):
+        os.kill(child[0], 0)  # ended and reaped
+
+
+def test_a_hanging_child_is_given_up_and_its_group_run_by_the_caller(tmp_path, monkeypatch):
+    log = tmp_path / "runs.jsonl"
+    me = os.getpid()
+    _fake_groups(monkeypatch, log, lambda: time.sleep(60) if os.getpid() != me else None)
+    monkeypatch.setattr(kernel_cache, "CHILD_MIN_WAIT_S", 0.5)
+    t = time.perf_counter()
+    kernel_cache.compile_kernels(split=True, show_notice=False)
+    assert time.perf_counter() - t < 30
+    runs = _runs(log)
+    assert ("a", me) in runs and ("b", me) in runs
+    child = [pid for g, pid in runs if pid != me]
+    with pytest.raises(ProcessLookupError):
+        os.kill(child[0], 0)
+
+
+def test_every_group_kernel_is_a_cached_kernel_of_the_package():
+    ds = kernel_cache.kernel_dispatchers()
+    named = [n for _, names in kernel_cache.GROUPS.values() for n in names]
+    assert len(named) == len(set(named)) and set(named) <= set(ds)
+    assert kernel_cache.cache_folder() is not None
