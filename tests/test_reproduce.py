@@ -38,8 +38,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
     neural = found("torch")
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha",
                            *(["sweep_implicit_arap", "sweep_implicit_arap_faust"] if neural else []),
-                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames", "cold_start",
-                           "report"]
+                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames",
+                           "cold_start", "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
     for name in ("defaust", "faust", "pose_transfer", "tosca"):
         assert "figures.enabled=true" in steps[name], name
