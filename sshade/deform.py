@@ -17,7 +17,7 @@ from .lrf import ANCHORS, GRADIENTS, transfer
 from .mesh.halfedge import count_components
 from .mesh.validate import validate_handles, validate_mesh
 from .projection import project_to_fans
-from .remesh import mesh_topology, remesh
+from .remesh import mesh_topology, remesh_drawn
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
@@ -40,17 +40,20 @@ def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[di
     prep : dict ``seeds`` (k,) low-res vertex indices into V, ``F`` (t, 3) low-res faces,
     ``tri`` (n,) int32 triangle P(v), ``bary`` (n, 3) its barycentric coordinates,
     ``low_handles`` (h,) the handles' low-res indices; info : dict of seconds and counts
-    (remesh_s, project_s, n_low, n_repair, rounds, n_flipped, seed, first).
+    (remesh_s, project_s, n_low, n_repair, rounds, n_flipped, seed, first, redrawn: the
+    seeds of the draws given up for a degenerate low-res face, :func:`sshade.remesh.remesh_drawn`;
+    ``first`` is the first sample of the draw kept).
     """
     t0 = time.perf_counter()
-    rm = remesh(V, F, n_low, seed=seed, required=handles, topology=topology)
+    rm, given_up = remesh_drawn(V, F, n_low, seed=seed, required=handles, topology=topology)
     t1 = time.perf_counter()
     proj = project_to_fans(V, rm.label, V[rm.seeds], rm.F)
     t2 = time.perf_counter()
     prep = {"seeds": rm.seeds, "F": rm.F, "tri": proj.tri.astype(np.int32), "low_handles": rm.label[handles],
             "bary": proj.bary}
     info = {"remesh_s": t1 - t0, "project_s": t2 - t1, "n_low": int(len(rm.seeds)), "n_repair": rm.n_repair,
-            "rounds": int(rm.iterations), "n_flipped": rm.n_flipped, "seed": int(seed), "first": rm.first}
+            "rounds": int(rm.iterations), "n_flipped": rm.n_flipped, "seed": int(seed), "first": rm.first,
+            "redrawn": given_up}
     return prep, info
 
 
@@ -128,8 +131,9 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     (remesh_s, project_s, arap_s, transfer_s), n_low (actual low-res vertex count),
     iterations (low-res ARAP), converged, seed, first (first seed vertex), n_repair (seeds
     added by the remesh's repairs), rounds (its check-and-repair rounds), n_flipped,
-    handle_pre_pct (largest handle error before the handles are overwritten with their
-    targets, % of the bounding-box diagonal).
+    redrawn (seeds of draws given up for a degenerate low-res face), handle_pre_pct
+    (largest handle error before the handles are overwritten with their targets, % of the
+    bounding-box diagonal).
     """
     prep, info = prepare_sampling(V, F, handles, n_low, seed, topology)
     V0 = None if V_init is None else V_init[prep["seeds"]]
@@ -417,7 +421,8 @@ def _summary(infos: list) -> dict:
     """Per-stage seconds and iterations summed over the samplings' ``infos``, mean
     ``n_low``, ``converged`` (every sampling's low-res ARAP), ``status`` (``"converged"``,
     else the first other status among the samplings', e.g. ``"stalled"``) and
-    ``iterations_max``."""
+    ``iterations_max``, ``redrawn`` (samplings drawn again for a degenerate low-res face,
+    :func:`sshade.remesh.remesh_drawn`)."""
     out = {k: float(np.sum([d[k] for d in infos])) for k in ("remesh_s", "project_s", "arap_s", "transfer_s",
                                                                  "iterations")}
     out["n_low"] = int(np.mean([d["n_low"] for d in infos]))
@@ -425,6 +430,7 @@ def _summary(infos: list) -> dict:
     others = [str(d.get("status")) for d in infos if not d["converged"]]
     out["status"] = others[0] if others else "converged"
     out["iterations_max"] = int(max(d["iterations"] for d in infos))
+    out["redrawn"] = int(sum(len(d.get("redrawn") or ()) for d in infos))
     return out
 
 

@@ -37,7 +37,7 @@ from .errors import SShaDeError
 from .lrf import decode, encode, frame_functions
 from .mesh.validate import check_points, validate_mesh
 from .projection import project_to_fans
-from .remesh import mesh_topology, remesh
+from .remesh import mesh_topology, remesh_drawn
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 
 __all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "rigid_align"]
@@ -89,7 +89,7 @@ def _one(i: int) -> tuple[int, np.ndarray, dict]:
     w = worker_state()
     V, F = w["V"], w["F"]
     t0 = time.perf_counter()
-    rm = remesh(V, F, w["n_low"], seed=w["seeds"][i], topology=w["topology"])
+    rm, given_up = remesh_drawn(V, F, w["n_low"], seed=w["seeds"][i], topology=w["topology"])
     t1 = time.perf_counter()
     VN = V[rm.seeds]
     proj = project_to_fans(V, rm.label, VN, rm.F)
@@ -100,7 +100,7 @@ def _one(i: int) -> tuple[int, np.ndarray, dict]:
     out = decode(C, proj.tri, VN, w["T"][rm.seeds], rm.F, axis, w["gradient"], bary)
     t3 = time.perf_counter()
     return i, out, {"seed": int(w["seeds"][i]), "first": int(rm.first), "n_low": int(len(rm.seeds)),
-                    "n_repair": int(rm.n_repair), "n_flipped": int(rm.n_flipped),
+                    "n_repair": int(rm.n_repair), "n_flipped": int(rm.n_flipped), "redrawn": given_up,
                     "remesh_s": t1 - t0, "project_s": t2 - t1, "transfer_s": t3 - t2}
 
 

@@ -26,7 +26,7 @@ from numba.core.registry import CPUDispatcher
 from .arap import warmup_kernels
 from .closed_ball import closed_ball, closed_ball_local, vertex_faces
 from .cores import available_cores
-from .lrf import decode_with_frames
+from .lrf import decode_with_frames, encode, frame_functions
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import boundary_loops, halfedges, vertex_fan_count, vertex_normals
 from .mesh.validate import validate_mesh
@@ -129,7 +129,7 @@ def _warm_sampling() -> None:
 
 def _warm_topology() -> None:
     """Mesh checks, half-edges, fans, normals, boundary loops, the closed-ball checks (full
-    and local) and the transfer's decoding."""
+    and local) and the transfer's encoding and decoding."""
     V, F, E, FE = _tetrahedron()
     validate_mesh(V, F)
     lab = np.arange(4, dtype=np.int32)
@@ -143,6 +143,7 @@ def _warm_topology() -> None:
     L = np.broadcast_to(np.eye(3), (4, 3, 3)).copy()
     for bary in (None, np.full((4, 3), 1 / 3)):
         decode_with_frames(L, np.zeros((4, 3)), np.arange(4), V, F, bary=bary)
+        encode(V, np.arange(4), V, F, frame_functions(V, F), "normalized", bary)
 
 
 #: The kernels in two halves of about equal compile time: name -> (warm function, kernels
@@ -156,7 +157,7 @@ GROUPS = {
     "topology and transfer": (_warm_topology, (
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
         "sshade.closed_ball.closed_ball", "sshade.closed_ball.closed_ball_local", "sshade.closed_ball.vertex_faces",
-        "sshade.lrf._decode_kernel")),
+        "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel")),
 }
 
 

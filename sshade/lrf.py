@@ -154,7 +154,36 @@ def encode(V: np.ndarray, tri: np.ndarray, VN: np.ndarray, FN: np.ndarray, axis:
     """
     L, _ = local_frames(VN, FN, _corner_values(VN, FN, axis), gradient)
     Linv = np.linalg.inv(L) if gradient == "raw" else np.transpose(L, (0, 2, 1))
-    return np.einsum("nij,nj->ni", Linv[tri], V - anchor_points(VN, FN, tri, bary))
+    out = np.empty((len(tri), 3))
+    _encode_kernel(np.ascontiguousarray(Linv, np.float64), np.ascontiguousarray(V, np.float64),
+                   np.ascontiguousarray(tri, np.int32), *_anchor_weights(bary),
+                   np.ascontiguousarray(VN, np.float64), np.ascontiguousarray(FN, np.int64), out)
+    return out
+
+
+def _anchor_weights(bary: np.ndarray | None) -> tuple[np.ndarray, bool]:
+    """The kernels' anchor weights: ``(bary (n, 3) C-contiguous float64, True)``, or the
+    barycenter's thirds ``((1, 3), False)`` when ``bary`` is None."""
+    if bary is None:
+        return np.full((1, 3), 1.0 / 3.0), False
+    return np.ascontiguousarray(bary, np.float64), True
+
+
+@njit(cache=True, nogil=True)
+def _encode_kernel(Li, V, tri, bary, per_vertex, P, FN, out):
+    """``out[i] = Li[tri[i]] @ (V[i] - sum_k w_k P[FN[tri[i], k]])`` with ``w = bary[i]``
+    (``per_vertex``) or ``bary[0]``: :func:`encode` in one pass, without the (n, 3, 3)
+    gather of ``Li[tri]`` nor the (n, 3, 3) corners of :func:`anchor_points`."""
+    for i in range(len(tri)):
+        t = tri[i]
+        r = i if per_vertex else 0
+        a, b, c = FN[t, 0], FN[t, 1], FN[t, 2]
+        w0, w1, w2 = bary[r, 0], bary[r, 1], bary[r, 2]
+        x0 = V[i, 0] - (w0 * P[a, 0] + w1 * P[b, 0] + w2 * P[c, 0])
+        x1 = V[i, 1] - (w0 * P[a, 1] + w1 * P[b, 1] + w2 * P[c, 1])
+        x2 = V[i, 2] - (w0 * P[a, 2] + w1 * P[b, 2] + w2 * P[c, 2])
+        for d in range(3):
+            out[i, d] = Li[t, d, 0] * x0 + Li[t, d, 1] * x1 + Li[t, d, 2] * x2
 
 
 def decode(C: np.ndarray, tri: np.ndarray, VN_rest: np.ndarray, VN_def: np.ndarray, FN: np.ndarray,
@@ -226,8 +255,7 @@ def decode_with_frames(L: np.ndarray, C: np.ndarray, tri: np.ndarray, VN_def: np
         out = np.empty((r, 3))
     elif out.shape != (r, 3) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise SShaDeError(f"decode_with_frames: out must be a C-contiguous ({r}, 3) float64 array")
-    per_vertex = bary_ is not None
-    w = np.ascontiguousarray(bary_, np.float64) if per_vertex else np.full((1, 3), 1.0 / 3.0)  # barycenter
+    w, per_vertex = _anchor_weights(bary_)
     _decode_kernel(L, np.ascontiguousarray(C_, np.float64), np.ascontiguousarray(tri_, np.int32), w,
                    np.ascontiguousarray(VN_def, np.float64), np.ascontiguousarray(FN, np.int64), per_vertex,
                    lo, hi, add, out)

@@ -42,6 +42,7 @@ Example::
 """
 from __future__ import annotations
 
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor, as_completed, wait
 
@@ -157,6 +158,10 @@ class Prepared:
     params : dict, the checked parameters (:func:`sshade.deform.check_params`).
     workers : int, threads the samplings run on. prepare_s : float, seconds
     :func:`prepare` took. n_solves : int, solves so far.
+
+    Solves from several threads at once are run one after the other (a lock per object):
+    each starts from the samplings' state the one before left, as in one thread, so each
+    result is that of its own targets.
     """
 
     def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float, pool, workers: int):
@@ -169,6 +174,7 @@ class Prepared:
         self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
         self.n_solves = 0
         self._corners = np.array([V.min(0), V.max(0)])  # V's bounding box, for the per-solve checks
+        self._lock = threading.Lock()  # one solve at a time: the samplings' state is the previous solve's
 
     def __enter__(self) -> Prepared:
         return self
@@ -225,9 +231,15 @@ class Prepared:
         ------
         SShaDeError on targets of the wrong shape or with NaN/inf
         (:func:`sshade.mesh.validate.validate_targets`), or after :meth:`close`.
+
+        Thread-safe: a solve called while another runs on this object waits for it.
         """
-        t0 = time.perf_counter()
         T = validate_targets(self._corners, len(self.handles), targets)
+        with self._lock:
+            return self._solve(T, return_info)
+
+    def _solve(self, T: np.ndarray, return_info: bool):
+        t0 = time.perf_counter()
         wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
         self._pending = []
         first, S = self.n_solves == 0, self._samplings

@@ -18,8 +18,10 @@ holds, the dual (nerve) of the decomposition is a triangulation homeomorphic to 
 so the low-res mesh ``N`` (vertex i = high-res vertex ``seeds[i]``, faces = the region
 triples of high-res faces, orientation kept) is manifold, with the same Euler
 characteristic and the same number of boundary loops. Low-res faces whose normal opposes
-the high-res surface they stand for are detected and also repaired by adding seeds, at
-their Voronoi vertices (:mod:`sshade.remesh_repair`; a departure from the paper).
+the high-res surface they stand for, and those with almost no area for their size (whose
+cotangent weights the low-res ARAP could not use), are detected and also repaired by
+adding seeds, at their Voronoi vertices (:mod:`sshade.remesh_repair`; a departure from
+the paper).
 Each round repairs every violation it finds, of the property and flips alike.
 
 Speed: the connectivity (:func:`mesh_topology`) is built once per mesh and
@@ -45,9 +47,9 @@ from .cores import available_cores
 from .errors import SShaDeError
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
-from .remesh_repair import flipped_faces, nerve_faces, voronoi_vertex_seeds
+from .remesh_repair import degenerate_faces, faces_to_repair, nerve_faces, voronoi_vertex_seeds
 
-__all__ = ["RemeshResult", "remesh", "MeshTopology", "mesh_topology"]
+__all__ = ["RemeshResult", "remesh", "remesh_drawn", "redraw_seed", "MAX_REDRAWS", "MeshTopology", "mesh_topology"]
 
 
 @dataclass
@@ -175,7 +177,8 @@ class RemeshResult:
     n_sampled : int, seeds placed by farthest-point sampling.
     n_required : int, required vertices (handles) that were not already seeds.
     n_repair : int, seeds added to obtain the closed-ball property / fix flipped faces.
-    n_flipped : int, low-res faces whose normal still opposes the high-res surface.
+    n_flipped : int, low-res faces still flipped or degenerate (:func:`sshade.remesh_repair.faces_to_repair`).
+    n_degenerate : int, of those, the degenerate ones (:func:`sshade.remesh_repair.degenerate_faces`).
     iterations : int, check-and-repair rounds.
     timings : dict, seconds per step: topology_s (mesh_topology, when not given),
         sampling_s = fps_s (farthest-point sampling) + required_s (adding the handles),
@@ -192,6 +195,7 @@ class RemeshResult:
     n_flipped: int
     iterations: int
     first: int
+    n_degenerate: int = 0
     timings: dict = field(default_factory=dict)
 
     def vertices(self, V: np.ndarray) -> np.ndarray:
@@ -218,7 +222,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     if bad and not fix_flips:
         return cand, None, -1
     keepf, FN = nerve_faces(topo.Fc, lab, f3, nseeds, unique_only=bad)
-    flipped = flipped_faces(V, topo.vnormals, seeds, FN)
+    flipped = faces_to_repair(V, topo.vnormals, seeds, FN)
     nflip = int(flipped.sum())
     new = voronoi_vertex_seeds(topo.Fc, keepf[flipped], FN[flipped], label, dist) if nflip and fix_flips else cand[:0]
     if bad:
@@ -244,7 +248,7 @@ def _check_local(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds
     if not fix_flips:
         return cand, 0
     keepf, FN = nerve_faces(topo.Fc, lab, f3u, nseeds)
-    flipped = flipped_faces(V, topo.vnormals, seeds, FN)
+    flipped = faces_to_repair(V, topo.vnormals, seeds, FN)
     nflip = int(flipped.sum())
     if not nflip:
         return cand, 0
@@ -288,9 +292,10 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
         they are added after the sampling and do not drive it.
     topology : precomputed :func:`mesh_topology` of ``(V, F)`` (shared between samplings).
     max_rounds : int, cap on check-and-repair rounds.
-    fix_flips : bool, also add seeds where a low-res face's normal opposes the surface.
-    max_flip_rounds : int, at most this many rounds spent on flipped faces; the rest
-        are counted in ``n_flipped``.
+    fix_flips : bool, also add seeds where a low-res face's normal opposes the surface
+        or the face is degenerate (:func:`sshade.remesh_repair.faces_to_repair`).
+    max_flip_rounds : int, at most this many rounds spent on those faces; the rest
+        are counted in ``n_flipped`` (the degenerate ones also in ``n_degenerate``).
 
     Returns
     -------
@@ -354,6 +359,49 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     return RemeshResult(seeds=seeds, F=np.ascontiguousarray(FN, np.int64), label=label,
                         dist=dist, n_sampled=n_sampled, n_required=n_req,
                         n_repair=st.nseeds - n_sampled - n_req, n_flipped=nflip, iterations=rounds, first=first,
+                        n_degenerate=int(degenerate_faces(V[seeds], FN).sum()),
                         timings={"topology_s": t1 - t0, "sampling_s": t2 - t1, "repair_s": t3 - t2,
                                  "fps_s": t_fps - t1, "required_s": t2 - t_fps, "check_s": t_check,
                                  "add_s": t3 - t2 - t_check})
+
+
+#: Draws of a sampling after the first when its low-res mesh keeps a degenerate face
+#: (:func:`remesh_drawn`).
+MAX_REDRAWS = 4
+
+
+def redraw_seed(seed: int, attempt: int) -> int:
+    """The RNG seed of draw ``attempt`` (>= 1) of the sampling seeded ``seed``
+    (:func:`remesh_drawn`), derived from both; recorded in the info."""
+    return int(np.random.SeedSequence([int(seed), int(attempt)]).generate_state(1, dtype=np.uint32)[0])
+
+
+def remesh_drawn(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int, required=None,
+                 topology: MeshTopology | None = None) -> tuple[RemeshResult, list[int]]:
+    """:func:`remesh`, drawn again with a derived seed (:func:`redraw_seed`, at most
+    :data:`MAX_REDRAWS` times) while the low-res mesh keeps a degenerate face (one the
+    repair rounds left: :attr:`RemeshResult.n_degenerate`), whose cotangent weights the
+    low-res ARAP could not use.
+
+    Parameters
+    ----------
+    As :func:`remesh` (``V`` (n, 3) float64, ``F`` (m, 3) int64, ``required`` (h,) int64).
+
+    Returns
+    -------
+    (RemeshResult without a degenerate face, the seeds of the draws given up (list, in order)).
+
+    Raises
+    ------
+    SShaDeError when every draw keeps a degenerate face, or as :func:`remesh`.
+    """
+    given_up = []
+    s = int(seed)
+    for attempt in range(1, MAX_REDRAWS + 2):
+        rm = remesh(V, F, n_low, seed=s, required=required, topology=topology)
+        if rm.n_degenerate == 0:
+            return rm, given_up
+        given_up.append(s)
+        s = redraw_seed(seed, attempt)
+    raise SShaDeError(f"remesh: every one of {MAX_REDRAWS + 1} samplings drawn from seed {seed} kept a "
+                      f"degenerate low-res face (seeds {given_up}); the handles may be too close together")

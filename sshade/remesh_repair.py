@@ -2,9 +2,11 @@
 
 The low-res mesh is the nerve of the Voronoi decomposition: one face per label triple
 carried by a high-res face (:func:`nerve_faces`). A low-res face is *flipped* when its
-normal opposes the high-res surface it stands for (:func:`flipped_faces`); the remesher
-then adds seeds until none is left (:mod:`sshade.remesh`, at most ``max_flip_rounds``
-rounds).
+normal opposes the high-res surface it stands for (:func:`flipped_faces`), *degenerate*
+when it has almost no area for its size (:func:`degenerate_faces`: the low-res ARAP's
+cotangent weights would be huge or not finite); the remesher then adds seeds until none
+is left (:mod:`sshade.remesh`, at most ``max_flip_rounds`` rounds; a sampling left with a
+degenerate face is drawn again, :func:`sshade.deform.prepare_sampling`).
 
 Departure from the paper: the paper (after ReMatching, Maggioli et al. 2023)
 adds seeds until the closed-ball property holds; flipped faces are our addition, and
@@ -25,7 +27,14 @@ import numpy as np
 
 from ._keys import unique_int
 
-__all__ = ["nerve_faces", "flipped_faces", "voronoi_vertex_seeds"]
+__all__ = ["nerve_faces", "flipped_faces", "degenerate_faces", "faces_to_repair", "voronoi_vertex_seeds",
+           "MIN_FACE_QUALITY"]
+
+#: A low-res face is *degenerate* when twice its area is at most this fraction of its
+#: longest edge squared (its height over that edge, relative to the edge): its cotangent
+#: weights then exceed about ``1 / MIN_FACE_QUALITY`` in magnitude, or are not finite
+#: (libigl's Heron formula gives a zero area well before the cross product does).
+MIN_FACE_QUALITY = 1e-4
 
 
 def nerve_faces(Fc: np.ndarray, lab: np.ndarray, f3: np.ndarray, nseeds: int,
@@ -73,6 +82,39 @@ def flipped_faces(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np
     nN = np.cross(P[FN[:, 1]] - P[FN[:, 0]], P[FN[:, 2]] - P[FN[:, 0]])
     nM = vnormals[seeds[FN]].sum(axis=1)
     return np.einsum("ij,ij->i", nN, nM) <= 0
+
+
+def _edges_normal(P: np.ndarray, FN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each face's unnormalised normal (t, 3) and longest squared edge length (t,)."""
+    A, B, C = P[FN[:, 0]], P[FN[:, 1]], P[FN[:, 2]]
+    a, b, c = B - A, C - A, C - B
+    n = np.empty_like(a)
+    n[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    n[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    n[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    sq = np.stack([np.einsum("ij,ij->i", e, e) for e in (a, b, c)])
+    return n, sq.max(axis=0)
+
+
+def degenerate_faces(P: np.ndarray, FN: np.ndarray, min_quality: float = MIN_FACE_QUALITY) -> np.ndarray:
+    """(t,) bool, low-res faces with (almost) no area for their size (:data:`MIN_FACE_QUALITY`).
+
+    Parameters
+    ----------
+    P : (k, 3) float64 low-res vertex positions; FN : (t, 3) int64 low-res faces.
+    min_quality : float, the bound on ``|cross| / longest_edge**2`` (a NaN counts as degenerate).
+    """
+    n, longest = _edges_normal(P, FN)
+    return ~(np.sqrt(np.einsum("ij,ij->i", n, n)) > min_quality * longest)
+
+
+def faces_to_repair(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np.ndarray) -> np.ndarray:
+    """(t,) bool, low-res faces the remesher repairs: flipped (:func:`flipped_faces`) or
+    degenerate (:func:`degenerate_faces`, which the low-res ARAP could not weigh).
+    Arguments as :func:`flipped_faces`; one pass over the faces for both."""
+    n, longest = _edges_normal(V[seeds], FN)
+    nM = vnormals[seeds[FN]].sum(axis=1)
+    return (np.einsum("ij,ij->i", n, nM) <= 0) | ~(np.sqrt(np.einsum("ij,ij->i", n, n)) > MIN_FACE_QUALITY * longest)
 
 
 def voronoi_vertex_seeds(Fc: np.ndarray, faces: np.ndarray, FN: np.ndarray, label: np.ndarray,

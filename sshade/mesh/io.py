@@ -1,5 +1,6 @@
-"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL) with clear errors, and
-atomic writes of any file (:func:`atomic_write`).
+"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL) with clear errors, atomic
+writes of any file (:func:`atomic_write`), and paths checked to lie inside their folder
+(:func:`inside_folder`: no link out).
 
 Generic mesh I/O of every layer (the DeFAUST builder, the evaluator, ``python -m sshade
 deform``); the geometry core (remesh, ARAP, transfer) never reads or writes files.
@@ -18,7 +19,7 @@ import numpy as np
 from ..errors import SShaDeError
 from .validate import validate_mesh
 
-__all__ = ["read_mesh", "write_mesh", "atomic_write", "written_by_sshade", "SIGNATURE"]
+__all__ = ["read_mesh", "write_mesh", "atomic_write", "inside_folder", "written_by_sshade", "SIGNATURE"]
 
 _EXTS = {".obj", ".off", ".ply", ".stl"}
 
@@ -468,6 +469,51 @@ def atomic_write(path, mode: str = "w", **kw):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def inside_folder(root, path, what: str = "path") -> Path:
+    """``path`` checked to lie inside the folder ``root`` with no link on the way.
+
+    Every component of ``path`` below ``root`` that exists must be a real file or folder
+    (not a symbolic link), so that writing or reading ``path`` stays inside ``root``
+    whatever was placed there. ``root`` itself may be a link (the user chose it).
+
+    Parameters
+    ----------
+    root : str or Path, the folder. path : str or Path, absolute or relative to ``root``.
+    what : str, what the path is, for the message.
+
+    Returns
+    -------
+    Path, ``path`` under ``root``'s resolved location (not resolved further).
+
+    Raises
+    ------
+    SShaDeError naming the link (or the path, when it leaves ``root`` through ``..``).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> inside_folder(d, "runs/a.json") == d.resolve() / "runs" / "a.json"
+    True
+    """
+    base = Path(root).resolve()
+    p = Path(path)
+    if p.is_absolute():
+        rel = [p.relative_to(r) for r in (Path(root), base) if p.is_relative_to(r)]
+        if not rel:
+            raise SShaDeError(f"{what} {path} is not inside {root}")
+        p = rel[0]
+    if any(part in ("..", "") for part in p.parts):
+        raise SShaDeError(f"{what} {path} leaves {root} (it has '..')")
+    q = base
+    for part in p.parts:
+        q = q / part
+        if q.is_symlink():
+            raise SShaDeError(f"{what}: {q} is a link (to {os.readlink(q)}); links inside {base} are refused: "
+                              "replace it by a real folder or file")
+    return q
 
 
 SIGNATURE = "written by sshade"

@@ -1,0 +1,64 @@
+"""Degenerate low-res faces (sshade/remesh_repair.py: degenerate_faces; sshade/remesh.py:
+remesh_drawn): a face with almost no area for its size is found, repaired like a flipped
+one, and a sampling that keeps one is drawn again with a derived seed, said in the info.
+No sampling hands the low-res ARAP a triangle it cannot weigh."""
+from __future__ import annotations
+
+import importlib
+
+import igl
+import numpy as np
+import pytest
+
+from sshade.errors import SShaDeError
+from sshade.remesh import MAX_REDRAWS, redraw_seed, remesh_drawn
+from sshade.remesh_repair import MIN_FACE_QUALITY, degenerate_faces
+
+remesh_module = importlib.import_module("sshade.remesh")  # the package's `remesh` is the function
+
+
+def test_degenerate_faces_flags_flat_and_near_flat_triangles_only():
+    h = [1.0, 0.3, 10 * MIN_FACE_QUALITY, 0.3 * MIN_FACE_QUALITY, 1e-12, 0.0, np.nan]
+    P = np.array([[0.0, 0, 0], [1.0, 0, 0]] + [[0.4, y, 0] for y in h])
+    FN = np.array([[0, 1, 2 + i] for i in range(len(h))])
+    flagged = degenerate_faces(P, FN)
+    assert flagged.tolist() == [False, False, False, True, True, True, True]
+    with np.errstate(divide="ignore", invalid="ignore"):  # what the low-res ARAP would have met
+        C = igl.cotmatrix_entries(P[:-1], FN[:-1])
+    huge = ~(np.abs(2 * C) < 1 / MIN_FACE_QUALITY)  # C holds cot / 2; NaN and inf count as huge
+    assert huge.any(axis=1).tolist() == flagged[:-1].tolist()
+
+
+def test_a_sampling_left_with_a_degenerate_face_is_drawn_again_with_a_derived_seed(monkeypatch):
+    """The remesh of the first draw keeps a degenerate face: the second draw (seed
+    derived from the seed and the attempt) is kept and the first is named in the info."""
+    from sshade.arap.cases import lifted_plane
+    V, F, _, _ = lifted_plane(0.2, n_target=600)
+    real, seen = remesh_module.remesh, []
+
+    def first_draw_degenerate(*a, seed, **kw):
+        rm = real(*a, seed=seed, **kw)
+        seen.append(seed)
+        if len(seen) == 1:
+            rm.n_degenerate = 1
+        return rm
+
+    monkeypatch.setattr(remesh_module, "remesh", first_draw_degenerate)
+    rm, given_up = remesh_drawn(V, F, 60, seed=11)
+    assert given_up == [11] and seen == [11, redraw_seed(11, 1)] and rm.n_degenerate == 0
+    assert redraw_seed(11, 1) not in (11, redraw_seed(11, 2), redraw_seed(12, 1))
+
+
+def test_a_sampling_that_stays_degenerate_is_refused_naming_its_seeds(monkeypatch):
+    from sshade.arap.cases import lifted_plane
+    V, F, _, _ = lifted_plane(0.2, n_target=600)
+    real = remesh_module.remesh
+
+    def always_degenerate(*a, **kw):
+        rm = real(*a, **kw)
+        rm.n_degenerate = 2
+        return rm
+
+    monkeypatch.setattr(remesh_module, "remesh", always_degenerate)
+    with pytest.raises(SShaDeError, match=f"every one of {MAX_REDRAWS + 1} samplings drawn from seed 5"):
+        remesh_drawn(V, F, 60, seed=5)
