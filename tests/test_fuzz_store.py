@@ -21,6 +21,7 @@ import pandas as pd
 import pytest
 
 from eval.run.store import ResultStore, check_row, pair_key, record_digest
+from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env
 
@@ -157,13 +158,13 @@ def test_record_of_other_code_is_refused_saying_what_changed(tmp_path):
 PLUGIN = "{_target_:tests.store_methods.Counted,name:%s}"
 
 
-def _eval(out, *extra, env=None):
+def _eval(out, *extra, env=None, rc=0):
     cmd = [sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={out.parent / 'faust'}",
            "dataset.limit=2", "reference.cases=none", "report.enabled=false", "jobs=1",
            f"methods=[{PLUGIN % 'A'},{PLUGIN % 'B'}]", f"out_dir={out}", *extra]
     r = subprocess.run(cmd, cwd=ROOT, env=dict(subprocess_env(), **(env or {})), capture_output=True, text=True,
                        timeout=600)
-    assert r.returncode == 0, r.stderr[-3000:]
+    assert r.returncode == rc, r.stderr[-3000:]
     return r
 
 
@@ -192,3 +193,44 @@ def test_resume_recomputes_edited_truncated_and_foreign_records(tmp_path, faust_
     pd.testing.assert_frame_equal(a.drop(columns=drop), b.drop(columns=drop))
     assert json.loads((out / "run.json").read_text())["resumed"]["restored"] == 1
     assert not os.environ.get("SSHADE_TEST_HANG_AFTER")
+
+
+@pytest.mark.parametrize("linked", ["runs", "runs/s0_p1", "runs/s0_p1/A.json"])
+def test_a_store_with_a_link_out_is_refused_and_nothing_is_written_outside(tmp_path, linked):
+    """A link in runs/ (the store itself, a case folder or a record made a link to a
+    folder elsewhere) is refused before a resume reads or writes a record: the link is
+    named, nothing outside the folder changes."""
+    st, keys = _stored(tmp_path / "out")
+    outside = tmp_path / "elsewhere"
+    src = tmp_path / "out" / linked
+    os.replace(src, outside)
+    src.symlink_to(outside)
+    before = {p: p.read_bytes() for p in sorted(outside.rglob("*")) if p.is_file()} if outside.is_dir() else {
+        outside: outside.read_bytes()}
+    with pytest.raises(SShaDeError, match="is a link"):
+        ResultStore(tmp_path / "out").check_links()
+    with pytest.raises(SShaDeError, match="is a link"):
+        st.save("s0_p1", "A", *keys["s0_p1", "A"], _row("s0_p1", "A"), {}, None, git={})
+    with pytest.raises(SShaDeError, match="is a link"):
+        st.lookup("s0_p1", "A", *keys["s0_p1", "A"])
+    after = {p: p.read_bytes() for p in sorted(outside.rglob("*")) if p.is_file()} if outside.is_dir() else {
+        outside: outside.read_bytes()}
+    assert after == before
+
+
+def test_resume_through_a_linked_case_folder_is_refused_with_one_line(tmp_path, faust_root):
+    (tmp_path / "faust").symlink_to(faust_root)
+    out = tmp_path / "out"
+    _eval(out)
+    outside = tmp_path / "elsewhere"
+    os.replace(out / "runs" / "s0_p1", outside)
+    (out / "runs" / "s0_p1").symlink_to(outside)
+    rec = json.loads((outside / "A.json").read_text())
+    rec["row"]["volume_err_pct"] = 0.5  # edited: a resume would recompute it into the link's target
+    (outside / "A.json").write_text(json.dumps(rec))
+    before = {p.name: p.read_bytes() for p in outside.iterdir()}
+    r = _eval(out, "resume=true", rc=2)
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "is a link" in errors[0] and "s0_p1" in errors[0], r.stderr[-2000:]
+    assert "Traceback" not in r.stderr
+    assert {p.name: p.read_bytes() for p in outside.iterdir()} == before

@@ -36,6 +36,52 @@ def test_reference_is_cached_and_reused(plane, tmp_path):
         reference_solution(V, F, h, T, energy="elastic", cache_dir=tmp_path)
 
 
+def _entry_mutations(d: dict) -> dict:
+    """Damaged or edited versions of a cache entry's arrays ``d`` (what -> arrays)."""
+    shifted = dict(d, U=d["U"] + 0.01)  # the issue's case: the solution moved, key intact
+    return {
+        "info is not JSON": dict(d, info=np.array("{not json")),
+        "solution shifted": shifted,
+        "energy edited": dict(d, energy=np.float64(float(d["energy"]) * 0.5)),
+        "solution has a NaN": dict(d, U=np.where(np.arange(len(d["U"]))[:, None] == 3, np.nan, d["U"])),
+        "no content digest": {k: v for k, v in d.items() if k != "content"},
+        "an array of another case": dict(d, U=d["U"][:-1]),
+    }
+
+
+def test_a_damaged_or_edited_cache_entry_is_recomputed_with_one_warning(plane, tmp_path, caplog):
+    """Each damaged entry (not JSON, solution shifted with its key intact, energy edited,
+    NaN, no digest, wrong shape, truncated, a link to a whole entry elsewhere) is computed
+    again with one warning naming the file and why, and gives the reference itself."""
+    from defaust.store import read_npz, write_npz
+    V, F, h, T = plane
+    good = reference_solution(V, F, h, T, cache_dir=tmp_path / "c")
+    whole, good_bytes = read_npz(good.path), good.path.read_bytes()
+    cases = _entry_mutations(whole)
+    cases["truncated"] = good.path.read_bytes()[:500]
+    for what, content in [*cases.items(), ("a link", "link")]:
+        cache = tmp_path / what.replace(" ", "_")
+        cache.mkdir()
+        p = cache / good.path.name
+        if content == "link":
+            p.symlink_to(good.path)
+        elif isinstance(content, bytes):
+            p.write_bytes(content)
+        else:
+            write_npz(p, content)
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="eval"):
+            ref = reference_solution(V, F, h, T, cache_dir=cache)
+        warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+        assert len(warned) == 1 and str(p) in warned[0] and "computing it again" in warned[0], (what, warned)
+        assert not ref.info["cached"], what
+        np.testing.assert_array_equal(ref.U, good.U, err_msg=what)
+        assert ref.energy == good.energy and not p.is_symlink(), what
+        again = reference_solution(V, F, h, T, cache_dir=cache)  # the entry written anew is whole
+        assert again.info["cached"], what
+    assert good.path.read_bytes() == good_bytes  # the link's target was never written
+
+
 def test_reference_metrics(plane, tmp_path):
     V, F, h, T = plane
     ref = reference_solution(V, F, h, T, cache_dir=tmp_path)

@@ -42,6 +42,7 @@ from eval.run.code_identity import numerical_versions, sources_digest
 from harness.registry import method_meta
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
+from sshade.mesh.io import inside_folder
 
 __all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
            "reference_solution", "reference_metrics",
@@ -262,18 +263,25 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
 
     Raises
     ------
-    SShaDeError on an unknown energy or an unreadable cache file (delete it to recompute).
+    SShaDeError on an unknown energy.
+
+    A cache entry is used only when it is whole (:func:`_read_entry`: a real file, not a
+    link, under its key, of the case's shape, finite, its content digest matching); any
+    other entry is computed again and replaced, with one warning line saying why. The
+    digest tells an edited or damaged entry from a whole one, not a forger's: whoever
+    edits an entry can recompute it.
     """
     solver = _solver_settings(max_iter, time_budget_s, energy)
     key, path = reference_path(V, F, handles, targets, energy=energy, cache_dir=cache_dir, max_iter=max_iter,
                                time_budget_s=time_budget_s)
-    if path.is_file():
-        d = read_npz(path)
-        if str(d.get("key", "")) != key or d["U"].shape != np.shape(V):
-            raise SShaDeError(f"{path}: reference cache entry does not match its key; delete it to recompute")
-        info = json.loads(str(d["info"]))
-        info["cached"] = True
-        return Reference(U=d["U"], energy=float(d["energy"]), energy_type=energy, key=key, path=path, info=info)
+    if path.is_file() or path.is_symlink():
+        found, why = _read_entry(path, cache_dir, key, np.shape(V))
+        if found is not None:
+            U, E, info = found
+            return Reference(U=U, energy=E, energy_type=energy, key=key, path=path, info={**info, "cached": True})
+        log.warning("%s: reference cache entry not used (%s); computing it again", path, why)
+        if path.is_symlink():
+            path.unlink()  # the link, never what it points to
     t0 = time.perf_counter()
     U, E, res = _deep_solve(V, F, handles, targets, energy, solver, U0, R0)
     dt = time.perf_counter() - t0
@@ -281,11 +289,54 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
             "gnorm": float(res.info.get("gnorm", np.nan)), "rel_decrease": float(res.info.get("rel_decrease", np.nan)),
             "seconds": round(dt, 3), "solver": solver, "n_vertices": int(len(V)), "cached": False}
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_npz(path, {"U": U, "energy": np.float64(E), "key": np.array(key),
-                     "info": np.array(json.dumps(info))})
+    text = json.dumps(info)
+    write_npz(inside_folder(cache_dir, path.name, "reference cache"),
+              {"U": U, "energy": np.float64(E), "key": np.array(key), "info": np.array(text),
+               "content": np.array(_content_digest(U, E, key, text))})
     log.info("reference %s for %d vertices: %d iterations, %s, %.1f s -> %s", energy, len(V), res.iterations,
              status_words(info["status"]), dt, path)
     return Reference(U=U, energy=E, energy_type=energy, key=key, path=path, info=info)
+
+
+def _content_digest(U: np.ndarray, E: float, key: str, info: str) -> str:
+    """SHA-256 (hex) of a cache entry's content: ``U`` (n, 3) float64's bytes, the energy,
+    the key and the info text. Stored beside them, it tells an edited or corrupted entry
+    from a whole one; it is no signature (whoever edits the entry can recompute it)."""
+    h = hashlib.sha256(np.ascontiguousarray(U, np.float64).tobytes())
+    h.update(np.float64(E).tobytes())
+    h.update(key.encode() + b"\0" + info.encode())
+    return h.hexdigest()
+
+
+def _read_entry(path: Path, cache_dir, key: str, shape: tuple):
+    """A cache entry read as untrusted input: ``((U, E, info), None)`` when it is a real
+    file inside ``cache_dir`` (no link), a readable npz of the expected arrays, under
+    ``key``, with a finite ``U`` of ``shape``, a finite energy, a JSON mapping as info and
+    a matching :func:`_content_digest`; else ``(None, why)``."""
+    try:
+        inside_folder(cache_dir, path.name, "reference cache entry")
+        d = read_npz(path)
+    except SShaDeError as e:
+        return None, str(e)
+    if set(d) != {"U", "energy", "key", "info", "content"}:
+        return None, f"arrays {sorted(d)}, not U, energy, key, info, content"
+    U, E = d["U"], d["energy"]
+    if d["key"].shape != () or str(d["key"]) != key:
+        return None, "it does not match its key"
+    if U.dtype != np.float64 or U.shape != shape or not np.isfinite(U).all():
+        return None, f"its solution is not a finite float64 array of shape {shape}"
+    if E.shape != () or E.dtype != np.float64 or not np.isfinite(E):
+        return None, "its energy is not a finite float64"
+    text = str(d["info"])
+    try:
+        info = json.loads(text)
+    except ValueError:
+        info = None
+    if not isinstance(info, dict):
+        return None, "its info is not a JSON mapping"
+    if str(d["content"]) != _content_digest(U, float(E), key, text):
+        return None, "edited: its content digest does not match"
+    return (U, float(E), info), None
 
 
 def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None, R0=None) -> dict:

@@ -53,7 +53,8 @@ import numpy as np
 
 from eval.run.code_identity import describe_change
 from eval.run.runinfo import git_info
-from sshade.mesh.io import atomic_write
+from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write, inside_folder
 
 __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "safe_name", "case_identity", "pair_key",
            "json_safe", "check_row", "cell_problem", "record_digest", "numeric_column"]
@@ -234,13 +235,30 @@ class ResultStore:
     """
 
     def __init__(self, out_dir, *, meshes: bool = False):
-        self.root = Path(out_dir) / STORE_DIR
+        self.out_dir = Path(out_dir)
+        self.root = self.out_dir / STORE_DIR
         self.meshes = bool(meshes)
         self._git = None  # the checkout's state, read once at the first save
 
     def path(self, case: str, method: str) -> Path:
-        """``runs/<case>/<method>.json`` (names through :func:`safe_name`)."""
-        return self.root / safe_name(case) / f"{safe_name(method)}.json"
+        """``runs/<case>/<method>.json`` (names through :func:`safe_name`), checked to lie
+        inside the output folder with no link on the way (:func:`sshade.mesh.io.inside_folder`;
+        SShaDeError otherwise)."""
+        rel = Path(STORE_DIR) / safe_name(case) / f"{safe_name(method)}.json"
+        return inside_folder(self.out_dir, rel, "result store")
+
+    def check_links(self) -> None:
+        """Refuse a store that reaches outside its folder: ``runs/`` or anything in it (a
+        case folder, a record, a mesh) that is a symbolic link raises SShaDeError naming
+        it, before a run reads or writes a record."""
+        inside_folder(self.out_dir, STORE_DIR, "result store")
+        if not self.root.is_dir():
+            return
+        for d in sorted(self.root.iterdir()):
+            inside_folder(self.out_dir, d, "result store")
+            if d.is_dir():
+                for f in sorted(d.iterdir()):
+                    inside_folder(self.out_dir, f, "result store")
 
     def load(self, case: str, method: str, key: str) -> dict | None:
         """The stored record of (``case``, ``method``) when its key is ``key`` and it is
@@ -284,8 +302,9 @@ class ResultStore:
         if not name:
             return None
         try:
-            U = np.load(self.path(rec["case"], rec["method"]).with_name(str(name)), allow_pickle=False)
-        except (OSError, ValueError, EOFError):
+            p = self.path(rec["case"], rec["method"]).with_name(str(name))
+            U = np.load(inside_folder(self.out_dir, p, "result store"), allow_pickle=False)
+        except (OSError, ValueError, EOFError, SShaDeError):
             return None
         ok = (isinstance(U, np.ndarray) and U.dtype == np.float64 and U.ndim == 2 and U.shape[1] == 3
               and (n is None or len(U) == n) and bool(np.isfinite(U).all()))

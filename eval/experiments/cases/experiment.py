@@ -219,6 +219,7 @@ def _setup(cfg) -> _Setup:
     log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
     store = ResultStore(out_dir, meshes=meshes)
+    store.check_links()  # a link in runs/ would take a resume's records outside out_dir
     if not resume:
         n = store.clear()
         if n:

@@ -163,6 +163,6 @@ def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str
     rec = {"row": json_safe(row), "info": json_safe(info), "case": case.name, "method": name, "key": key}
     try:
         store.save(case.name, name, key, fields, row, info, U)
-    except OSError as e:
+    except (OSError, SShaDeError) as e:  # SShaDeError: a link placed in runs/ during the run
         log.warning("%s %s: result not stored (%s); a resume will run it again", case.name, name, e)
     return rec, U, wall, cost_s
