@@ -179,6 +179,10 @@ BAD_HANDLES = {
     "empty handles": ([], np.zeros((0, 3)), "non-empty"),
     "float handles": ([0.0, 1.0], np.zeros((2, 3)), "integer"),
     "2-D targets": ([0, 1], np.zeros((2, 2)), "shape"),
+    "complex targets": ([0, 1], np.zeros((2, 3)) + 1j, "complex numbers"),
+    "complex targets, no imaginary part": ([0, 1], np.zeros((2, 3), complex), "complex numbers"),
+    "string targets": ([0, 1], np.array([["0", "0", "0"], ["1", "0", "0"]]), "not real numbers"),
+    "object targets": ([0, 1], np.array([[0, 0, 0], [1, 0, None]], dtype=object), "not real numbers"),
 }
 
 

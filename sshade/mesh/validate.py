@@ -39,6 +39,20 @@ DIAG_MIN = 1e-30
 MAX_DIAGONALS = 1e6
 
 
+def _real_array(A, what: str) -> np.ndarray:
+    """``A`` as a numpy array of real numbers (bool, integer or float dtype), else
+    SShaDeError naming ``what`` and the dtype: complex numbers (whose imaginary part a
+    float64 conversion drops with a warning) and strings (which it would parse) are refused."""
+    try:
+        a = np.asarray(A)
+    except (TypeError, ValueError) as e:
+        raise SShaDeError(f"{what} is not a numeric array ({' '.join(str(e).split())})") from None
+    if a.dtype.kind not in "biuf":
+        kind = "complex numbers" if a.dtype.kind == "c" else f"not real numbers (dtype {a.dtype})"
+        raise SShaDeError(f"{what} holds {kind}; give real (k, 3) coordinates")
+    return a
+
+
 def check_points(P, name: str = "V", *, min_rows: int = 1) -> np.ndarray:
     """Check an array of 3-D points (vertex positions) and return it as float64.
 
@@ -62,10 +76,7 @@ def check_points(P, name: str = "V", *, min_rows: int = 1) -> np.ndarray:
     >>> check_points([[0, 0, 1]]).dtype
     dtype('float64')
     """
-    try:
-        P = np.ascontiguousarray(P, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise SShaDeError(f"{name}: not a numeric array ({e})") from None
+    P = np.ascontiguousarray(_real_array(P, name), dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise SShaDeError(f"{name}: must have shape (n, 3), got {P.shape}")
     if len(P) < min_rows:
@@ -189,10 +200,7 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     >>> V2, F2 = validate_mesh(V, F)
     """
-    try:
-        V = np.ascontiguousarray(V, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise SShaDeError(f"{name}: vertex array is not numeric ({e})") from None
+    V = np.ascontiguousarray(_real_array(V, f"{name}: vertex array"), dtype=np.float64)
     if not V.flags.writeable:  # a read-only array (sshade.guard) would make numba compile a second signature
         V = V.copy()
     try:
@@ -472,14 +480,14 @@ def validate_targets(V: np.ndarray, n_handles: int, targets) -> np.ndarray:
     Raises
     ------
     SShaDeError
-        Shape or length mismatch, NaN/inf targets, targets out of scale (as
-        :func:`validate_handles`).
+        Not real numbers (complex, strings), shape or length mismatch, NaN/inf targets,
+        targets out of scale (as :func:`validate_handles`).
 
     Examples
     --------
     >>> V = np.zeros((4, 3)); T = validate_targets(V, 2, np.zeros((2, 3)))
     """
-    T = np.ascontiguousarray(targets, dtype=np.float64)
+    T = np.ascontiguousarray(_real_array(targets, "targets"), dtype=np.float64)
     if not T.flags.writeable:  # see validate_mesh
         T = T.copy()
     if T.ndim != 2 or T.shape[1] != 3:
