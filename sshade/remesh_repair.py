@@ -78,10 +78,18 @@ def flipped_faces(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np
     seeds : (k,) int64 high-res index of each low-res vertex; FN : (t, 3) int64 low-res
         faces. A face is flipped when its normal has a non-positive dot product with
         the sum of the high-res normals at its three seeds."""
-    P = V[seeds]
-    nN = np.cross(P[FN[:, 1]] - P[FN[:, 0]], P[FN[:, 2]] - P[FN[:, 0]])
-    nM = vnormals[seeds[FN]].sum(axis=1)
-    return np.einsum("ij,ij->i", nN, nM) <= 0
+    return _flipped(_edges_normal(V[seeds], FN)[0], vnormals, seeds, FN)
+
+
+def _flipped(n: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np.ndarray) -> np.ndarray:
+    """(t,) bool, the faces whose normal ``n`` (t, 3) has a non-positive dot product with
+    the sum of the high-res normals at their three seeds."""
+    return np.einsum("ij,ij->i", n, vnormals[seeds[FN]].sum(axis=1)) <= 0
+
+
+def _degenerate(n: np.ndarray, longest: np.ndarray, min_quality: float) -> np.ndarray:
+    """(t,) bool, ``|n| <= min_quality * longest`` (NaN included), from :func:`_edges_normal`."""
+    return ~(np.sqrt(np.einsum("ij,ij->i", n, n)) > min_quality * longest)
 
 
 def _edges_normal(P: np.ndarray, FN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,8 +112,7 @@ def degenerate_faces(P: np.ndarray, FN: np.ndarray, min_quality: float = MIN_FAC
     P : (k, 3) float64 low-res vertex positions; FN : (t, 3) int64 low-res faces.
     min_quality : float, the bound on ``|cross| / longest_edge**2`` (a NaN counts as degenerate).
     """
-    n, longest = _edges_normal(P, FN)
-    return ~(np.sqrt(np.einsum("ij,ij->i", n, n)) > min_quality * longest)
+    return _degenerate(*_edges_normal(P, FN), min_quality)
 
 
 def faces_to_repair(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np.ndarray) -> np.ndarray:
@@ -113,8 +120,7 @@ def faces_to_repair(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: 
     degenerate (:func:`degenerate_faces`, which the low-res ARAP could not weigh).
     Arguments as :func:`flipped_faces`; one pass over the faces for both."""
     n, longest = _edges_normal(V[seeds], FN)
-    nM = vnormals[seeds[FN]].sum(axis=1)
-    return (np.einsum("ij,ij->i", n, nM) <= 0) | ~(np.sqrt(np.einsum("ij,ij->i", n, n)) > MIN_FACE_QUALITY * longest)
+    return _flipped(n, vnormals, seeds, FN) | _degenerate(n, longest, MIN_FACE_QUALITY)
 
 
 def voronoi_vertex_seeds(Fc: np.ndarray, faces: np.ndarray, FN: np.ndarray, label: np.ndarray,
