@@ -7,6 +7,7 @@ import numpy as np
 
 from sshade.arap import PROTOCOLS, arap_deform, make_criterion
 from sshade.errors import SShaDeError
+from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_fullres, warm_once
 
@@ -106,16 +107,21 @@ class FullResArap:
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` reach ``targets``; returns (n, 3) float64.
+        Solved in the mesh's unit frame (:mod:`sshade.mesh.unit_frame`) and mapped back,
+        so a moved or scaled input gives the moved or scaled result; ``info["energy"]``
+        in mesh units.
 
         Raises ``SShaDeError`` on invalid mesh or handles.
         """
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
+        frame = unit_frame(V)  # solved centred and scaled (sshade.mesh.unit_frame), mapped back
+        V, T = frame.to_unit(V), frame.to_unit(targets)
         R0, cinfo = None, {}
         if self.protocol == "converged":
-            R0, cinfo = start_rotations(self.start, V, F, handles, targets, energy=self.energy,
+            R0, cinfo = start_rotations(self.start, V, F, handles, T, energy=self.energy,
                                         coarse_n_low=self.coarse_n_low, criterion=self.criterion)
-        res = arap_deform(V, F, handles, targets, energy=self.energy, tol=self.tol, max_iter=self.max_iter,
+        res = arap_deform(V, F, handles, T, energy=self.energy, tol=self.tol, max_iter=self.max_iter,
                           protocol=self.protocol, criterion=self.criterion, R0=R0)
         if cinfo:  # the coarse start's seconds count as set-up
             res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
@@ -127,7 +133,11 @@ class FullResArap:
             if k in res.info:
                 self.info[k] = res.info[k]
         self.info.update({k: cinfo[k] for k in ("coarse_n", "coarse_iterations", "coarse_s") if k in cinfo})
-        return res.V
+        if "energy" in self.info:
+            self.info["energy"] = frame.energy(self.info["energy"])
+        Vd = frame.from_unit(res.V, out=res.V)
+        Vd[handles] = targets  # hard constraints: exactly the targets given
+        return Vd
 
     def warmup(self, n_vertices: int | None = None) -> float:
         """Compile (or load from numba's cache) the kernels :meth:`deform` runs for this

@@ -28,6 +28,7 @@ import numpy as np
 
 from sshade.arap import DEFAULT_CRITERION, PROTOCOLS, ArapResult, bbox_diag, make_criterion, rigid_fit
 from sshade.errors import SShaDeError
+from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
 
@@ -207,15 +208,19 @@ class ARAPSR:
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` reach ``targets``; (n, 3) float64.
-        Raises ``SShaDeError`` on invalid mesh or handles."""
+        Solved in the mesh's unit frame (:mod:`sshade.mesh.unit_frame`) and mapped back,
+        so a moved or scaled input gives the moved or scaled result; ``info["energy"]``
+        in mesh units. Raises ``SShaDeError`` on invalid mesh or handles."""
         self.rotations = None
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
+        frame = unit_frame(V)  # solved centred and scaled (sshade.mesh.unit_frame), mapped back
+        U, T = frame.to_unit(V), frame.to_unit(targets)
         if self.protocol == "paper":
-            res = arap_sr_deform(V, F, handles, targets, alpha=self.alpha, alpha_scaling=self.alpha_scaling,
+            res = arap_sr_deform(U, F, handles, T, alpha=self.alpha, alpha_scaling=self.alpha_scaling,
                                  stop=self.stop, tol=self.tol, criterion=self.criterion, max_iter=self.max_iter)
         else:
-            res = self._converged(V, F, handles, targets)
+            res = self._converged(U, F, handles, T)
         self.rotations = res.info.get("R") if self.protocol == "converged" else None
         proto = ("converged-sr" if self.protocol == "converged" else
                  "move-rule" if self.stop == "move" else "paper-sr")
@@ -227,7 +232,11 @@ class ARAPSR:
                   "coarse_s"):
             if k in res.info:
                 self.info[k] = res.info[k]
-        return res.V
+        if "energy" in self.info:
+            self.info["energy"] = frame.energy(self.info["energy"])
+        Vd = frame.from_unit(res.V, out=res.V)
+        Vd[handles] = targets  # hard constraints: exactly the targets given
+        return Vd
 
     def _converged(self, V, F, handles, targets):
         """The converged protocol from the start of ``self.start``

@@ -11,21 +11,26 @@ Usage::
   :func:`sshade.mesh.handle_files.read_moving_handles`; ``--handles``: the file's order),
   or, with ``--sel``/``--dmat``, (f, 4, 4) affine matrices moving the handle region of each
   frame (fixed vertices stay), as a ``.def`` file moves it once.
-- ``OUT``: a ``.npz`` file with ``V`` (f, n, 3) float64, ``F`` (m, 3) int64 and
-  ``frame_s`` (f,) the seconds of each frame's solve; or a folder receiving
-  ``frame_0000.obj`` ... (``--format obj|off|ply``), one mesh per frame. A folder must be
-  new, empty, or hold only frame files that sshade wrote (then they are replaced); an
+- ``OUT``: a ``.npz`` file with ``V`` (f, n, 3) float64, ``F`` (m, 3) int64,
+  ``frame_s`` (f,) the seconds of each frame's solve, ``complete`` (bool) and
+  ``n_frames_planned``; or a folder receiving ``frame_0000.obj`` ... (``--format
+  obj|off|ply``), one mesh per frame. A folder must be new, empty, or hold only frame
+  files that sshade wrote (then they are replaced, with a ``replacing`` line); an
   ``OUT.npz`` must be new or an earlier animation's (``--force``: any file). Checked before
-  any work; every file is written atomically.
+  any work; every file is written atomically, each frame as soon as it is solved; a run
+  stopped after k frames leaves frames 0..k-1, marked incomplete (:func:`animate_file`).
 
 Prints the prepare time and the per-frame median and range on stdout; a progress bar on
 stderr when it is a terminal. Exit status 0, or 2 after one ``error:`` line.
 """
 from __future__ import annotations
 
-import io
+import os
+import shutil
 import sys
+import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -97,13 +102,23 @@ def _is_animation(path: Path) -> bool:
 def _frames(a, V) -> tuple[np.ndarray, np.ndarray]:
     """(handles (h,), targets (f, h, 3)) from the handle file and ``--frames``."""
     try:
-        X = np.load(a.frames, allow_pickle=False)
-    except (OSError, ValueError) as e:
+        X = np.load(a.frames, allow_pickle=False, mmap_mode="r")
+    except (OSError, ValueError, EOFError) as e:
         raise SShaDeError(f"{a.frames}: not a readable .npy array ({e})") from None
-    if not isinstance(X, np.ndarray) or X.ndim != 3 or len(X) == 0 or not np.issubdtype(X.dtype, np.number):
-        raise SShaDeError(f"{a.frames}: expected (f, h, 3) targets or (f, 4, 4) matrices, got "
-                          f"{getattr(X, 'shape', None)} of {getattr(X, 'dtype', None)}")
-    X = np.asarray(X, np.float64)
+    if isinstance(X, np.lib.npyio.NpzFile):  # an archive: its members are not read
+        names = ", ".join(X.files[:5]) + (", ..." if len(X.files) > 5 else "")
+        X.close()
+        raise SShaDeError(f"{a.frames}: an .npz archive (arrays {names or 'none'}); --frames takes one .npy array "
+                          "of (f, h, 3) targets or (f, 4, 4) matrices (np.save it)")
+    if X.ndim != 3 or len(X) == 0 or X.dtype.kind not in "iuf":
+        raise SShaDeError(f"{a.frames}: expected (f, h, 3) targets or (f, 4, 4) matrices of real numbers, got "
+                          f"{X.shape} of {X.dtype}")
+    X = np.array(X, np.float64)
+    bad = np.argwhere(~np.isfinite(X))
+    if len(bad):
+        f, r = int(bad[0][0]), int(bad[0][1])
+        raise SShaDeError(f"{a.frames}: frame {f}, row {r} is not finite ({X[f, r].tolist()}); "
+                          f"{len(np.unique(bad[:, 0]))} frame(s) hold NaN or inf")
     handles, moved = read_moving_handles(len(V), sel=a.sel, dmat=a.dmat, handles=a.handles)
     rest = V[handles]
     if X.shape[1:] == (4, 4) and not a.handles:
@@ -122,6 +137,12 @@ def _frames(a, V) -> tuple[np.ndarray, np.ndarray]:
 def animate_file(a, log=print) -> dict:
     """Run ``python -m sshade animate`` for parsed arguments ``a`` (:func:`build_parser`).
 
+    Each frame is written as soon as it is solved (:class:`_FrameSink`): memory holds one
+    frame, not the animation. Interrupted (Ctrl-C, SIGTERM) or failing after ``k`` frames,
+    the output holds frames ``0 .. k-1``, whole, marked incomplete (an ``.npz``'s
+    ``complete`` is False), and one stderr line says so; with no frame done nothing is
+    written.
+
     Returns
     -------
     dict ``prepare_s`` (seconds), ``frame_s`` (f,) seconds per solve, ``n_frames``, ``out``.
@@ -137,36 +158,86 @@ def animate_file(a, log=print) -> dict:
     V, F = read_mesh(a.mesh, validate=False)  # prepare validates it
     handles, T = _frames(a, V)
     t0 = time.perf_counter()
+    frame_s = np.empty(len(T))
     with prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed) as prepared:  # n_low checked there
         prepare_s = time.perf_counter() - t0
-        out = np.empty((len(T), len(V), 3))
-        frame_s = np.empty(len(T))
-        for i in tqdm(range(len(T)), desc="sshade animate", unit="frame", file=sys.stderr, disable=None):
-            t = time.perf_counter()
-            out[i] = prepared.solve(T[i])
-            frame_s[i] = time.perf_counter() - t
-    _write(a, out, prepared.F, frame_s)
+        with _FrameSink(a, prepared.F, len(T), len(V), log) as sink:
+            for i in tqdm(range(len(T)), desc="sshade animate", unit="frame", file=sys.stderr, disable=None):
+                t = time.perf_counter()
+                U = prepared.solve(T[i])
+                frame_s[i] = time.perf_counter() - t
+                sink.add(U, frame_s[i])
     log(f"SShaDe: {a.mesh} ({len(V)} vertices), {len(handles)} handles, {len(T)} frames -> {a.out}")
     log(f"  prepare  {prepare_s:8.3f} s")
     log(f"  frame    {np.median(frame_s):8.3f} s median ({frame_s.min():.3f}-{frame_s.max():.3f})")
     return {"prepare_s": prepare_s, "frame_s": frame_s, "n_frames": len(T), "out": Path(a.out)}
 
 
-def _write(a, out: np.ndarray, F: np.ndarray, frame_s: np.ndarray) -> None:
-    """The frames into ``a.out`` (module docstring), each file atomically."""
-    path = Path(a.out)
-    if path.suffix.lower() == ".npz":
-        buf = io.BytesIO()
-        np.savez(buf, V=out, F=F, frame_s=frame_s, **{NPZ_KEY: np.array(1)})
-        with atomic_write(path, "wb") as fh:
-            fh.write(buf.getvalue())
-        return
-    path.mkdir(exist_ok=True)
-    for q in path.glob("frame_*"):  # an earlier animation's frames (checked: sshade's)
-        if q.is_file():
-            q.unlink()
-    for i, U in enumerate(out):
-        write_mesh(path / f"frame_{i:04d}.{a.format}", U, F)
+class _FrameSink:
+    """The frames into ``a.out`` (module docstring) as they are solved; a context manager
+    that finishes the output on leaving, marked incomplete when left by an exception
+    after at least one frame (and says so on stderr), removed when no frame was done.
+
+    An ``.npz``: frames appended to a temporary file beside it, packed at the end into
+    the ``.npz`` (``V`` streamed in 1 MiB blocks, never held whole) written atomically.
+    A folder: ``frame_0000.<format>`` ... each written atomically as its frame ends; an
+    earlier animation's frames there are removed first, with a ``replacing`` line."""
+
+    def __init__(self, a, F: np.ndarray, n_frames: int, n: int, log):
+        self.path, self.fmt, self.F, self.n_frames, self.n = Path(a.out), a.format, F, n_frames, n
+        self.frame_s: list = []
+        self.npz = self.path.suffix.lower() == ".npz"
+        if self.npz:
+            fd, self.tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".frames", dir=self.path.parent)
+            self.fh = os.fdopen(fd, "wb")
+            return
+        old = [q for q in self.path.glob("frame_*") if q.is_file()] if self.path.is_dir() else []
+        if old:  # an earlier animation's frames (checked: sshade's)
+            log(f"replacing {len(old)} frame file(s) of an earlier animation in {self.path}")
+            for q in old:
+                q.unlink()
+        self.path.mkdir(exist_ok=True)
+
+    def add(self, U: np.ndarray, seconds: float) -> None:
+        """Frame ``len(frame_s)``: (n, 3) float64 positions, solved in ``seconds``."""
+        if self.npz:
+            np.ascontiguousarray(U, "<f8").tofile(self.fh)
+        else:
+            write_mesh(self.path / f"frame_{len(self.frame_s):04d}.{self.fmt}", U, self.F)
+        self.frame_s.append(float(seconds))
+
+    def __enter__(self) -> _FrameSink:
+        return self
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        k, complete = len(self.frame_s), kind is None
+        try:
+            if self.npz:
+                self.fh.close()
+                if k:
+                    self._pack(complete)
+        finally:
+            if self.npz:
+                Path(self.tmp).unlink(missing_ok=True)
+        if k and not complete:
+            print(f"{self.path}: {k} of {self.n_frames} frames written (frames 0-{k - 1}, whole), the animation "
+                  "stopped there" + (" (its .npz says complete=False)" if self.npz else ""), file=sys.stderr)
+        return False
+
+    def _pack(self, complete: bool) -> None:
+        """The ``.npz``: ``V`` (k, n, 3) copied from the temporary file, ``F``, ``frame_s``,
+        ``complete``, ``n_frames_planned`` and the :data:`NPZ_KEY` mark."""
+        k = len(self.frame_s)
+        small = {"F": np.asarray(self.F, np.int64), "frame_s": np.array(self.frame_s), "complete": np.array(complete),
+                 "n_frames_planned": np.array(self.n_frames), NPZ_KEY: np.array(1)}
+        with atomic_write(self.path, "wb") as out, zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as z:
+            with z.open("V.npy", "w", force_zip64=True) as m, open(self.tmp, "rb") as src:
+                np.lib.format.write_array_header_1_0(m, {"descr": "<f8", "fortran_order": False,
+                                                         "shape": (k, self.n, 3)})
+                shutil.copyfileobj(src, m, 1 << 20)
+            for name, arr in small.items():
+                with z.open(f"{name}.npy", "w") as m:
+                    np.lib.format.write_array(m, arr, allow_pickle=False)
 
 
 def main(argv: list[str]) -> int:

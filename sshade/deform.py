@@ -15,6 +15,7 @@ from .components import deform_components
 from .errors import SShaDeError
 from .lrf import ANCHORS, GRADIENTS, transfer
 from .mesh.halfedge import count_components
+from .mesh.unit_frame import unit_frame
 from .mesh.validate import validate_handles, validate_mesh
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
@@ -124,6 +125,9 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
         vertex is anchored in its triangle (:data:`sshade.lrf.ANCHORS`, see :func:`deform`).
     V_init : (n, 3) float64 or None, a deformed high-res shape whose values at the
         low-res vertices start the ARAP iterations (default: rigid fit of the handles).
+
+    Runs in the caller's coordinates (:func:`deform` and :func:`sshade.prepared.prepare`
+    move the mesh to its unit frame first, :mod:`sshade.mesh.unit_frame`).
 
     Returns
     -------
@@ -315,7 +319,10 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         compiling or loading numba's kernels (0.0 once a call or :meth:`SShaDe.warmup`
         did it in this process); ``handles`` is ``"overwritten"`` (the averaged result's
         handle vertices are set to their targets) and ``handle_pre_pct`` the largest handle
-        error before that, % of the bounding-box diagonal.
+        error before that, % of the bounding-box diagonal; ``frame`` the unit frame every
+        stage ran in (:func:`sshade.mesh.unit_frame.unit_frame`: the input centred and
+        scaled by a power of two, so a moved or scaled mesh gives the moved or scaled
+        result); the samplings' ``energy`` in mesh units.
 
     Returns
     -------
@@ -350,7 +357,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     if count_components(he.E, len(V)) > 1:  # each component apart, handle-less ones rigidly (sshade.components)
         return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
     n_low_asked, n_low = low_res_size(len(V), p["n_low"])
-    state = dict(V=V, F=F, handles=handles, targets=targets, n_low=n_low, topology=mesh_topology(V, F, he),
+    frame = unit_frame(V)  # every stage runs centred and scaled (sshade.mesh.unit_frame)
+    U, T = frame.to_unit(V), frame.to_unit(targets)
+    state = dict(V=U, F=F, handles=handles, targets=T, n_low=n_low, topology=mesh_topology(U, F, he),
                  seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"], anchor=p["anchor"],
                  arap=arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
     workers = pool_size(p["workers"], p["n_samplings"])
@@ -358,6 +367,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     with SamplingPool(state, workers) as pool:
         results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
     Vd = average(results)
+    frame.from_unit(Vd, out=Vd)
     Vd[handles] = targets  # overwritten after averaging (the paper does not say; docs/differences.md)
     pre = average([d.pop("handle_resid") for d in infos])  # the averaged result's residual before it
     if not return_info:
@@ -365,8 +375,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
             "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
             "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
-    return Vd, {**info, **_summary(infos), "protocol": p["protocol"], "anchor": p["anchor"],
-                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, V)}
+    return Vd, {**info, **_summary(infos, frame), "protocol": p["protocol"], "anchor": p["anchor"],
+                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, U)}
 
 
 def handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
@@ -417,12 +427,16 @@ def _run_samplings(pool: SamplingPool, k: int, warm_start: bool) -> tuple[list, 
     return results, infos
 
 
-def _summary(infos: list) -> dict:
+def _summary(infos: list, frame) -> dict:
     """Per-stage seconds and iterations summed over the samplings' ``infos``, mean
     ``n_low``, ``converged`` (every sampling's low-res ARAP), ``status`` (``"converged"``,
     else the first other status among the samplings', e.g. ``"stalled"``) and
     ``iterations_max``, ``redrawn`` (samplings drawn again for a degenerate low-res face,
-    :func:`sshade.remesh.remesh_drawn`)."""
+    :func:`sshade.remesh.remesh_drawn`), ``frame`` (the unit frame's numbers); each
+    sampling's ``energy`` is put back in mesh units (``frame``, a
+    :class:`sshade.mesh.unit_frame.UnitFrame`)."""
+    for d in infos:
+        d["energy"] = frame.energy(d.get("energy"))
     out = {k: float(np.sum([d[k] for d in infos])) for k in ("remesh_s", "project_s", "arap_s", "transfer_s",
                                                                  "iterations")}
     out["n_low"] = int(np.mean([d["n_low"] for d in infos]))
@@ -431,6 +445,7 @@ def _summary(infos: list) -> dict:
     out["status"] = others[0] if others else "converged"
     out["iterations_max"] = int(max(d["iterations"] for d in infos))
     out["redrawn"] = int(sum(len(d.get("redrawn") or ()) for d in infos))
+    out["frame"] = frame.as_dict()
     return out
 
 

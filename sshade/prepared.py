@@ -54,6 +54,7 @@ from .deform import arap_options, check_params, handle_pre_pct, low_res_size, pr
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.halfedge import count_components
+from .mesh.unit_frame import UnitFrame, unit_frame
 from .mesh.validate import validate_handle_indices, validate_mesh, validate_targets
 from .remesh import mesh_topology
 from .sampling import average, sampling_seeds, warm_kernels
@@ -157,15 +158,19 @@ class Prepared:
     V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64 (the validated inputs).
     params : dict, the checked parameters (:func:`sshade.deform.check_params`).
     workers : int, threads the samplings run on. prepare_s : float, seconds
-    :func:`prepare` took. n_solves : int, solves so far.
+    :func:`prepare` took. n_solves : int, solves so far. frame : the
+    :class:`sshade.mesh.unit_frame.UnitFrame` the samplings are held in (targets are
+    mapped into it, results out of it).
 
     Solves from several threads at once are run one after the other (a lock per object):
     each starts from the samplings' state the one before left, as in one thread, so each
     result is that of its own targets.
     """
 
-    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float, pool, workers: int):
+    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float, pool, workers: int,
+                 frame: UnitFrame):
         self.V, self.F, self.handles, self.params = V, F, handles, params
+        self.frame = frame  # the samplings live in V's unit frame (sshade.mesh.unit_frame)
         self._samplings, self.prepare_s = samplings, prepare_s
         self._pool, self.workers, self._pending = pool, workers, []
         self._arap = arap_options(params["tol"], params["max_iter"], params["protocol"], params["etol"],
@@ -174,6 +179,7 @@ class Prepared:
         self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
         self.n_solves = 0
         self._corners = np.array([V.min(0), V.max(0)])  # V's bounding box, for the per-solve checks
+        self._unit_corners = frame.to_unit(self._corners)
         self._lock = threading.Lock()  # one solve at a time: the samplings' state is the previous solve's
 
     def __enter__(self) -> Prepared:
@@ -238,7 +244,8 @@ class Prepared:
         with self._lock:
             return self._solve(T, return_info)
 
-    def _solve(self, T: np.ndarray, return_info: bool):
+    def _solve(self, T_mesh: np.ndarray, return_info: bool):
+        T = self.frame.to_unit(T_mesh)
         t0 = time.perf_counter()
         wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
         self._pending = []
@@ -266,7 +273,8 @@ class Prepared:
             futs = self._submit(lambda i: run(i, None), range(len(S)))
         Vd, infos, transfer_s = self._decode_average(futs)
         pre = average([s.decode(self.handles) - T for s in S])
-        Vd[self.handles] = T
+        self.frame.from_unit(Vd, out=Vd)
+        Vd[self.handles] = T_mesh
         self.n_solves += 1
         if not return_info:
             return Vd
@@ -275,7 +283,7 @@ class Prepared:
                 "workers": self.workers, "arap_s": float(sum(d["arap_s"] for d in infos)),
                 "transfer_s": transfer_s, "iterations": int(sum(d["iterations"] for d in infos)),
                 "converged": not others, "status": others[0] if others else "converged",
-                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, self._corners)}
+                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, self._unit_corners)}
         return Vd, info
 
     def _decode_average(self, futs: list) -> tuple[np.ndarray, list, float]:
@@ -356,14 +364,16 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     if count_components(he.E, len(V)) > 1:
         raise SShaDeError("prepare: the mesh has several connected components; deform it with sshade.deform")
     _, n_low_used = low_res_size(len(V), p["n_low"])  # warns when there is no low-res step
-    topology = mesh_topology(V, F, he)
+    frame = unit_frame(V)  # as deform: every stage runs centred and scaled
+    U = frame.to_unit(V)
+    topology = mesh_topology(U, F, he)
     n_workers = pool_size(p["workers"], p["n_samplings"])
     # the remeshes and projections on forked processes (as deform: they hold the GIL), the rest on threads
-    preps = prepare_samplings(V, F, h, n_low_used, sampling_seeds(p["seed"], p["n_samplings"]), topology, n_workers)
+    preps = prepare_samplings(U, F, h, n_low_used, sampling_seeds(p["seed"], p["n_samplings"]), topology, n_workers)
     pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-sampling")
     try:
-        samplings = list(pool.map(lambda pi: _Sampling(V, *pi, p["gradient"], p["anchor"], p["protocol"]), preps))
+        samplings = list(pool.map(lambda pi: _Sampling(U, *pi, p["gradient"], p["anchor"], p["protocol"]), preps))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
     arap_pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-arap")
-    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, arap_pool, n_workers)
+    return Prepared(V, F, h, p, samplings, time.perf_counter() - t0, arap_pool, n_workers, frame)

@@ -15,7 +15,15 @@ from numba import njit
 
 from .errors import SShaDeError
 
-__all__ = ["Projection", "project_to_fans", "vertex_fans", "closest_point_triangle"]
+__all__ = ["Projection", "project_to_fans", "vertex_fans", "closest_point_triangle", "TIE"]
+
+#: Fan triangles whose closest points lie within ``TIE`` times the low-res bounding-box
+#: diagonal of each other's distance count as equally near, and the lowest-numbered one
+#: is taken: a vertex over a fan's edge or seed (equally near both sides, exactly) gets
+#: the same triangle whatever the rounding, so a moved or scaled mesh gets the same
+#: projection (:mod:`sshade.mesh.unit_frame`). Far above float64's rounding of a distance
+#: in a unit-sized frame (1e-16), far below any distance the transfer can tell apart.
+TIE = 1e-10
 
 
 @dataclass
@@ -94,14 +102,18 @@ def _closest(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):
 
 
 @njit(cache=True)
-def _project(V, label, G, ptr, faces, tri, bary, dist):
+def _project(V, label, G, ptr, faces, tri, bary, dist, tie):
     """Closest point of every vertex i in the fan of its seed ``label[i]``: the fan's
-    triangles are ``faces[ptr[s]:ptr[s + 1]]``, their corner coordinates the rows of
-    ``G`` (a0 a1 a2 b0 b1 b2 c0 c1 c2) at the same positions, read in sequence."""
+    triangles are ``faces[ptr[s]:ptr[s + 1]]`` (ascending), their corner coordinates the
+    rows of ``G`` (a0 a1 a2 b0 b1 b2 c0 c1 c2) at the same positions, read in sequence.
+    A later triangle replaces the best so far only when nearer by more than ``tie``
+    (distance units), so of triangles equally near (a closest point on their shared
+    edge or corner) the lowest-numbered one is kept, whatever the rounding."""
     n = V.shape[0]
     for i in range(n):
         s = label[i]
         best = np.inf
+        below = np.inf  # a squared distance below this is nearer than best by more than tie
         bt = -1
         bu = bv = bw = 0.0
         p0, p1, p2 = V[i, 0], V[i, 1], V[i, 2]
@@ -114,8 +126,10 @@ def _project(V, label, G, ptr, faces, tri, bary, dist):
             q1 = u * a1 + v * b1 + w * c1 - p1
             q2 = u * a2 + v * b2 + w * c2 - p2
             d = q0 * q0 + q1 * q1 + q2 * q2
-            if d < best:
+            if d < below:
                 best = d
+                r = np.sqrt(d) - tie
+                below = r * r if r > 0.0 else -1.0
                 bt = faces[j]
                 bu, bv, bw = u, v, w
         tri[i] = bt
@@ -142,7 +156,8 @@ def project_to_fans(V: np.ndarray, label: np.ndarray, VN: np.ndarray, FN: np.nda
 
     Returns
     -------
-    Projection (tri, bary, dist), O(n) work.
+    Projection (tri, bary, dist), O(n) work. Of fan triangles equally near a vertex
+    (within :data:`TIE` of the diagonal) the lowest-numbered one.
 
     Raises
     ------
@@ -165,6 +180,7 @@ def project_to_fans(V: np.ndarray, label: np.ndarray, VN: np.ndarray, FN: np.nda
     VN = np.asarray(VN, np.float64)
     FN = np.asarray(FN, np.int64)
     G = VN[FN[faces]].reshape(-1, 9)  # corners of each fan triangle, in fan order
+    tie = TIE * float(np.linalg.norm(VN.max(0) - VN.min(0)))
     _project(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(label, np.int64), G, ptr, faces,
-             tri, bary, dist)
+             tri, bary, dist, tie)
     return Projection(tri=tri, bary=bary, dist=dist)

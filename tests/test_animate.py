@@ -89,3 +89,94 @@ def test_outputs_it_did_not_write_and_bad_frames_are_one_error_line(body, tmp_pa
     assert main(["animate", *bad, "-o", str(tmp_path / "x.npz")]) == 2
     err = _lines(capsys)
     assert len(err) == 1 and err[0].startswith("error:") and not (tmp_path / "x.npz").exists()
+
+
+def _args(tmp_path, V, h, T):
+    (tmp_path / "h.json").write_text(json.dumps({"handles": h.tolist(), "targets": V[h].tolist()}))
+    np.save(tmp_path / "frames.npy", T)
+    return [str(MESH), "--handles", str(tmp_path / "h.json"), "--frames", str(tmp_path / "frames.npy"), *KW]
+
+
+def test_a_nan_in_frame_3_is_named_with_the_file_and_frame_before_any_solve(body, tmp_path, capsys, monkeypatch):
+    V, F, h, _ = body
+    T = np.repeat(V[h][None], 5, axis=0)
+    T[3, 7, 1] = np.nan
+    args = _args(tmp_path, V, h, T)
+    monkeypatch.setattr("sshade.animate.prepare", lambda *a, **k: pytest.fail("prepared before the frames checked"))
+    assert main(["animate", *args, "-o", str(tmp_path / "x.npz")]) == 2
+    err = _lines(capsys)
+    assert len(err) == 1 and "frames.npy: frame 3, row 7 is not finite" in err[0]
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_an_npz_given_as_frames_is_named_as_an_archive_with_its_arrays(body, tmp_path, capsys):
+    V, F, h, _ = body
+    args = _args(tmp_path, V, h, np.repeat(V[h][None], 2, axis=0))
+    np.savez(tmp_path / "frames.npz", targets=np.zeros((2, len(h), 3)), extra=np.zeros(3))
+    args[4] = str(tmp_path / "frames.npz")
+    assert main(["animate", *args, "-o", str(tmp_path / "x.npz")]) == 2
+    err = _lines(capsys)
+    assert len(err) == 1 and "an .npz archive (arrays targets, extra); --frames takes one .npy" in err[0]
+
+
+@pytest.mark.parametrize("out", ["a.npz", "folder"])
+def test_an_interrupted_animation_keeps_its_solved_frames_whole_and_says_so(body, tmp_path, capsys, monkeypatch, out):
+    from sshade.prepared import Prepared
+    V, F, h, V2 = body
+    T = np.stack([V[h] + t * (V2[h] - V[h]) for t in (0.25, 0.5, 0.75, 1.0)])
+    args = _args(tmp_path, V, h, T)
+    solve, calls = Prepared.solve, []
+
+    def stop_at_third(self, targets, **kw):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return solve(self, targets, **kw)
+    monkeypatch.setattr(Prepared, "solve", stop_at_third)
+    assert main(["animate", *args, "-o", str(tmp_path / out)]) == 130
+    err = _lines(capsys)
+    assert any("2 of 4 frames written (frames 0-1, whole)" in ln for ln in err)
+    p = prepare(V, F, h, n_low=300, n_samplings=2, seed=3)
+    expect = [solve(p, T[i]) for i in range(2)]
+    if out == "a.npz":
+        z = np.load(tmp_path / out)
+        assert z["V"].shape == (2, len(V), 3) and not z["complete"] and int(z["n_frames_planned"]) == 4
+        assert len(z["frame_s"]) == 2 and all(np.array_equal(z["V"][i], expect[i]) for i in range(2))
+    else:
+        files = sorted(q.name for q in (tmp_path / out).iterdir())
+        assert files == ["frame_0000.obj", "frame_0001.obj"]
+        assert np.array_equal(read_mesh(tmp_path / out / "frame_0001.obj")[0], expect[1])
+    assert not [q for q in tmp_path.iterdir() if q.name.startswith(".")]  # no temporary file left
+
+
+def test_frames_stream_to_the_npz_without_holding_the_animation(tmp_path):
+    """200 frames of 10,000 vertices (48 MB): the sink's peak allocation is its 1 MiB copy
+    block and a frame or two, not the animation (before: the whole (f, n, 3) array, copied
+    again to be written)."""
+    import tracemalloc
+    from types import SimpleNamespace
+
+    from sshade.animate import _FrameSink
+    n, f = 10_000, 200
+    F = np.array([[0, 1, 2]])
+    frame = np.random.default_rng(0).normal(size=(n, 3))
+    tracemalloc.start()
+    with _FrameSink(SimpleNamespace(out=str(tmp_path / "a.npz"), format="obj"), F, f, n, print) as sink:
+        for i in range(f):
+            sink.add(frame + i, 0.01)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 3 * 2 ** 20 < f * frame.nbytes / 8
+    z = np.load(tmp_path / "a.npz")
+    assert z["V"].shape == (f, n, 3) and bool(z["complete"]) and np.array_equal(z["V"][57], frame + 57)
+
+
+def test_replacing_an_earlier_animations_frames_says_so(body, tmp_path, capsys):
+    V, F, h, _ = body
+    args = _args(tmp_path, V, h, np.repeat(V[h][None], 3, axis=0))
+    assert main(["animate", *args, "-o", str(tmp_path / "out")]) == 0
+    capsys.readouterr()
+    args = _args(tmp_path, V, h, np.repeat(V[h][None], 2, axis=0))
+    assert main(["animate", *args, "-o", str(tmp_path / "out")]) == 0
+    assert "replacing 3 frame file(s) of an earlier animation" in capsys.readouterr().out
+    assert sorted(q.name for q in (tmp_path / "out").iterdir()) == ["frame_0000.obj", "frame_0001.obj"]

@@ -184,6 +184,28 @@ def test_repair_fixes_and_reports(bar, tmp_path, capsys):
     assert len(Fd) == len(F2) - 2 and len(Vd) <= n + 1
 
 
+def test_repair_removes_a_face_of_rounding_level_area_that_validation_refuses(tmp_path, capsys):
+    """A face whose third corner lies on its first edge up to rounding (area ~1e-17, not
+    exactly 0): refused without --repair, removed with it (MeshLab's null-face filter,
+    an exact test, kept it and the repaired mesh was refused again)."""
+    from sshade.mesh.repair import NEAR_ZERO, repair_mesh
+
+    from .conftest import icosphere
+    V, F = icosphere()
+    a, b, c = F[0]
+    V[c] = 0.3 * V[a] + 0.7 * V[b]
+    V2, F2, origin, report = repair_mesh(V, F)
+    assert report[0] == (NEAR_ZERO, 0, -1) and len(F2) == len(F) - 1 and np.array_equal(V2, V[origin])
+    write_mesh(tmp_path / "z.obj", V, F)
+    (tmp_path / "h.json").write_text(json.dumps({"handles": [1, 2, 3], "targets": V[[1, 2, 3]].tolist()}))
+    args = [tmp_path / "z.obj", "--handles", tmp_path / "h.json", "-o", tmp_path / "o.obj", "--n-low", "20"]
+    rc, _, err = _cli(args, capsys)
+    assert rc == 2 and "degenerate (zero-area) faces" in err
+    rc, stdout, err = _cli([*args, "--repair"], capsys)
+    assert rc == 0, err
+    assert f"repair: {NEAR_ZERO}: 1" in stdout and len(read_mesh(tmp_path / "o.obj")[1]) == len(F) - 1
+
+
 # ------------------------------------------------------------------ bad input
 
 def _bad_cases(b, d):

@@ -61,7 +61,7 @@ def _text_lines(path, what: str, limit: int = MAX_BYTES) -> list[tuple[int, str]
         raise SShaDeError(f"{what} file not found: {p}")
     _check_size(p, what, limit)
     try:
-        text = p.read_text()
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark is not text
     except (OSError, UnicodeDecodeError) as e:
         raise SShaDeError(f"{p}: unreadable {what} file ({type(e).__name__})") from None
     return [(i, s) for i, ln in enumerate(text.splitlines(), 1) if (s := ln.strip()) and not s.startswith("#")]
@@ -317,7 +317,7 @@ def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
 def _json_handles(p: Path, n: int):
     _check_size(p, "handle", MAX_BYTES + PER_VERTEX_BYTES * n)
     try:
-        d = json.loads(p.read_text())
+        d = json.loads(p.read_text(encoding="utf-8-sig"))
     except RecursionError:
         raise SShaDeError(f"{p}: unreadable JSON (nested too deeply)") from None
     except (OSError, UnicodeDecodeError, ValueError) as e:
@@ -350,7 +350,7 @@ def _check_indices(p: Path, h, n: int) -> None:
 def _csv_handles(p: Path, n: int):
     _check_size(p, "handle", MAX_BYTES + PER_VERTEX_BYTES * n)
     try:
-        with open(p, newline="") as fh:
+        with open(p, newline="", encoding="utf-8-sig") as fh:  # a byte-order mark is not a cell
             rows = [(i, r) for i, r in enumerate(csv.reader(fh), 1) if r and any(c.strip() for c in r)
                     and not r[0].lstrip().startswith("#")]
     except (OSError, UnicodeDecodeError, csv.Error) as e:

@@ -62,6 +62,8 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
         data = p.read_bytes()
     except OSError as e:
         raise SShaDeError(f"{p}: unreadable mesh file ({e.strerror or type(e).__name__})") from None
+    if ext != ".stl" and data.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (editors on Windows)
+        data = data[3:]
     # pure-Python/numpy readers: a truncated or lying file is an SShaDeError, never a
     # native abort (libigl's readers double-free on some of them) nor a huge allocation
     reader = {".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".stl": _read_stl}[ext]
@@ -143,9 +145,38 @@ def _lines(data: bytes) -> list:
     return lines
 
 
+#: bytes of an OBJ parsed at once: the parse's memory is this chunk's, not the file's
+OBJ_CHUNK = 1 << 20
+
+
+def _text_chunks(data: bytes, size: int = OBJ_CHUNK):
+    """``data`` in pieces of about ``size`` bytes, each ending at a line break (``\n``)
+    or at the end: yields the pieces in order."""
+    start, n = 0, len(data)
+    while start < n:
+        end = data.find(b"\n", min(start + size, n) - 1)
+        end = n if end < 0 else end + 1
+        yield data[start:end]
+        start = end
+
+
 def _read_obj(data: bytes, p: Path):
     """OBJ ``v`` and ``f`` statements (other statements ignored; ``f a/b/c`` keeps the
-    vertex index; negative indices count back from the last vertex so far)."""
+    vertex index; negative indices count back from the last vertex so far), parsed in
+    chunks of :data:`OBJ_CHUNK` bytes (the first bad line ends the parse)."""
+    Vs, Fs, line, nv = [], [], 0, 0
+    for chunk in _text_chunks(data):
+        V, F, n_lines = _obj_chunk(chunk, p, line, nv)
+        Vs.append(V)
+        Fs.append(F)
+        line, nv = line + n_lines, nv + len(V)
+    return np.concatenate(Vs) if Vs else np.zeros((0, 3)), np.concatenate(Fs) if Fs else np.zeros((0, 3), np.int64)
+
+
+def _obj_chunk(data: bytes, p: Path, line0: int, nv0: int):
+    """One chunk of an OBJ (:func:`_read_obj`) whose first line is line ``line0 + 1`` of
+    the file and follows ``nv0`` vertices: its vertices (k, 3), its faces (j, 3) as
+    0-based indices into the whole file's vertices, and its line count."""
     lines = _lines(data)
     fast = (b"v ", b"f ", b"vn", b"vt", b"")
     for i, ln in enumerate(lines):
@@ -154,27 +185,27 @@ def _read_obj(data: bytes, p: Path):
             if t and t[0] in (b"v", b"f"):
                 lines[i] = t[0] + b" " + b" ".join(t[1:])
             elif t and not t[0].replace(b"_", b"").isalpha():
-                raise _bad(p, f"line {i + 1} is not an OBJ statement: {_show(t)}")
+                raise _bad(p, f"line {line0 + i + 1} is not an OBJ statement: {_show(t)}")
     vi = [i for i, ln in enumerate(lines) if ln[:2] == b"v "]
     fi = [i for i, ln in enumerate(lines) if ln[:2] == b"f "]
     V = _table([lines[i][2:] for i in vi], 3, np.float64)
     if V is None:
-        V = _floats([(i + 1, lines[i].split()[1:]) for i in vi], p, "vertex")
+        V = _floats([(line0 + i + 1, lines[i].split()[1:]) for i in vi], p, "vertex")
     fl = [lines[i][2:] for i in fi]
     if any(b"/" in s for s in fl):
         fl = [re.sub(rb"/\S*", b"", s) for s in fl]
     F = _table(fl, 3, np.int64)
     if F is None:
-        F = _obj_faces(p, [(i + 1, fl[k].split()) for k, i in enumerate(fi)])
+        F = _obj_faces(p, [(line0 + i + 1, fl[k].split()) for k, i in enumerate(fi)])
     if (F == 0).any():
         i = fi[int(np.flatnonzero((F == 0).any(1))[0])] + 1
-        raise SShaDeError(f"{p}: line {i}: vertex index 0 (OBJ indices start at 1)")
+        raise SShaDeError(f"{p}: line {line0 + i}: vertex index 0 (OBJ indices start at 1)")
     neg = F < 0
     F = F - 1
     if neg.any():  # relative indices: -1 is the last vertex defined before the face
-        before = np.searchsorted(np.asarray(vi), np.asarray(fi))
+        before = nv0 + np.searchsorted(np.asarray(vi), np.asarray(fi))
         F[neg] += np.repeat(before, 3).reshape(-1, 3)[neg] + 1
-    return V, F
+    return V, F, len(lines)
 
 
 def _obj_faces(p: Path, rows) -> np.ndarray:
@@ -335,23 +366,30 @@ def _ply_arrays(varr, farr, p: Path):
 
 
 def _ply_ascii(body: bytes, elems, p: Path):
-    """ASCII PLY body: one element item per non-blank line, in header order."""
-    lines = [ln for ln in body.splitlines() if ln.strip()]
-    total = sum(c for _, c, _ in elems)
-    if total > len(lines):
-        raise _bad(p, f"truncated: the header announces {total} items but {len(lines)} lines follow")
-    out, at = {}, 0
+    """ASCII PLY body: one element item per non-blank line, in header order, read in
+    chunks of :data:`OBJ_CHUNK` bytes (each element's rows parsed chunk by chunk)."""
+    batches = ([ln for ln in c.splitlines() if ln.strip()] for c in _text_chunks(body))
+    total, seen, pending, out = sum(c for _, c, _ in elems), 0, [], {}
+    parse = {b"vertex": _ply_ascii_vertices, b"face": _ply_ascii_faces}
     for name, count, props in elems:
-        chunk, at = lines[at:at + count], at + count
-        if name == b"vertex":
-            out[name] = _ply_ascii_vertices(chunk, props, p)
-        elif name == b"face":
-            out[name] = _ply_ascii_faces(chunk, props, p)
+        parts, done = [], 0
+        while done < count:
+            if not pending:
+                pending = next(batches, None)
+                if pending is None:
+                    raise _bad(p, f"truncated: the header announces {total} items but {seen} lines follow")
+            take, pending = pending[:count - done], pending[count - done:]
+            if name in parse:
+                parts.append(parse[name](take, props, p, done))
+            done, seen = done + len(take), seen + len(take)
+        if name in parse:
+            out[name] = np.concatenate(parts) if parts else parse[name]([], props, p)
     return _ply_arrays(out[b"vertex"], out[b"face"], p)
 
 
-def _ply_ascii_vertices(chunk: list, props, p: Path) -> np.ndarray:
-    """Structured array (fields ``_<property>``, float64) of ASCII PLY vertex lines."""
+def _ply_ascii_vertices(chunk: list, props, p: Path, first: int = 0) -> np.ndarray:
+    """Structured array (fields ``_<property>``, float64) of ASCII PLY vertex lines, the
+    first of them vertex ``first``."""
     if any(c for _, _, c in props):
         raise _bad(p, "list property in the vertex element (unsupported)")
     want = len(props)
@@ -360,7 +398,7 @@ def _ply_ascii_vertices(chunk: list, props, p: Path) -> np.ndarray:
         rows = [ln.split() for ln in chunk]
         for j, t in enumerate(rows):
             if len(t) != want:
-                raise _bad(p, f"vertex {j} has {len(t)} values, the header says {want}")
+                raise _bad(p, f"vertex {first + j} has {len(t)} values, the header says {want}")
         try:
             vals = np.array([float(x) for t in rows for x in t], np.float64).reshape(len(rows), want)
         except ValueError as e:
@@ -371,8 +409,9 @@ def _ply_ascii_vertices(chunk: list, props, p: Path) -> np.ndarray:
     return arr
 
 
-def _ply_ascii_faces(chunk: list, props, p: Path) -> np.ndarray:
-    """Structured array (``n``, ``idx`` (3,) int64) of ASCII PLY face lines, triangles only."""
+def _ply_ascii_faces(chunk: list, props, p: Path, first: int = 0) -> np.ndarray:
+    """Structured array (``n``, ``idx`` (3,) int64) of ASCII PLY face lines, triangles
+    only, the first of them face ``first``."""
     ks = [j for j, (_, _, c) in enumerate(props) if c]
     if len(ks) != 1 or any(props[j][2] for j in range(ks[0])):
         raise _bad(p, "the face element needs exactly one list property (vertex_indices)")
@@ -382,15 +421,15 @@ def _ply_ascii_faces(chunk: list, props, p: Path) -> np.ndarray:
         for j, t in enumerate(ln.split() for ln in chunk):
             m = int(t[k]) if len(t) > k and t[k].isdigit() else -1
             if m < 0:
-                raise _bad(p, f"face {j}: {_show(t)} is not a vertex count and indices")
+                raise _bad(p, f"face {first + j}: {_show(t)} is not a vertex count and indices")
             if m != 3:
-                raise SShaDeError(f"{p}: face {j} has {m} vertices; only triangle meshes are supported")
+                raise SShaDeError(f"{p}: face {first + j} has {m} vertices; only triangle meshes are supported")
             if len(t) != len(props) + 3:
-                raise _bad(p, f"face {j} has {len(t)} values, expected {len(props) + 3}")
+                raise _bad(p, f"face {first + j} has {len(t)} values, expected {len(props) + 3}")
             try:
                 np.array([int(x) for x in t[k + 1:k + 4]], np.int64)
             except (ValueError, OverflowError):
-                raise _bad(p, f"face {j}: {_show(t)} does not hold three vertex indices") from None
+                raise _bad(p, f"face {first + j}: {_show(t)} does not hold three vertex indices") from None
         raise _bad(p, "face values are not integers")
     arr = np.zeros(len(chunk), np.dtype([("n", "i8"), ("idx", "i8", (3,))]))
     arr["n"] = 3

@@ -2,7 +2,9 @@
 sshade deform --repair``).
 
 Filters, in order (MeshLab's names): remove duplicate vertices (same position, merged),
-remove duplicate faces, remove null faces (zero area), repair non-manifold edges (by
+remove duplicate faces, remove null faces (zero area; before them, the faces
+:func:`sshade.mesh.validate.validate_mesh` calls zero-area, area at most
+``AREA_TOL * bbox_diag**2``, which MeshLab's exact test keeps), repair non-manifold edges (by
 removing the fewest faces, MeshLab's "Remove Faces"), repair non-manifold vertices (by
 splitting them, no displacement: ``vertdispratio=0``), remove unreferenced vertices.
 Faces are never re-wound and no hole is filled: inconsistent orientation and the like
@@ -18,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SShaDeError
+from .validate import AREA_TOL
 
 __all__ = ["repair_mesh", "REPAIR_FILTERS"]
 
@@ -30,6 +33,21 @@ REPAIR_FILTERS = (
     ("meshing_repair_non_manifold_vertices", {"vertdispratio": 0.0}, "vertices split at non-manifold vertices"),
     ("meshing_remove_unreferenced_vertices", {}, "unreferenced vertices removed"),
 )
+
+
+#: The report's line for the faces removed by :func:`_near_zero_area`.
+NEAR_ZERO = "zero-area faces removed (area at most AREA_TOL x diagonal squared, as validate_mesh)"
+
+
+def _near_zero_area(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(m,) bool: the faces :func:`sshade.mesh.validate.validate_mesh` calls degenerate
+    (twice the area at most ``2 * AREA_TOL * diag**2``)."""
+    if not len(F):
+        return np.zeros(0, bool)
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    T = V[F]
+    dbl = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    return dbl <= 2 * AREA_TOL * diag * diag
 
 
 def repair_mesh(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, int, int]]]:
@@ -68,8 +86,9 @@ def repair_mesh(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[st
     if F.size and (F.min() < 0 or F.max() >= len(V)):
         raise SShaDeError(f"repair: face indices out of range [0, {len(V)})")
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F.astype(np.int32)))
-    report = []
+    keep = ~_near_zero_area(V, F)
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F[keep].astype(np.int32)))
+    report = [] if keep.all() else [(NEAR_ZERO, 0, -int((~keep).sum()))]
     for filt, kw, what in REPAIR_FILTERS:
         nv, nf = ms.current_mesh().vertex_number(), ms.current_mesh().face_number()
         try:

@@ -25,7 +25,8 @@ from ..errors import SShaDeError
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
 __all__ = ["validate_mesh", "validate_handles", "validate_targets", "validate_handle_indices", "validate_deformed",
-           "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN"]
+           "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN",
+           "AREA_TOL"]
 
 #: Largest coordinate magnitude accepted. The methods form products of up to about
 #: eight lengths (squared areas, circumradii, energies): beyond ~1e38 they overflow
@@ -37,6 +38,9 @@ DIAG_MIN = 1e-30
 #: this many bounding-box diagonals from the mesh are refused as out of scale (a units
 #: mix-up, an overflow); no real edit moves a handle a million diagonals.
 MAX_DIAGONALS = 1e6
+#: A face whose area is at most ``AREA_TOL * bbox_diag**2`` is degenerate (zero-area):
+#: :func:`validate_mesh` refuses it and :func:`sshade.mesh.repair.repair_mesh` removes it.
+AREA_TOL = 1e-14
 
 
 def _real_array(A, what: str) -> np.ndarray:
@@ -163,7 +167,7 @@ def check_arrays(V, F, *, name: str | None = None, min_vertices: int = 1) -> tup
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
-                  area_tol: float = 1e-14, return_halfedges: bool = False, allow_components: bool = False):
+                  area_tol: float = AREA_TOL, return_halfedges: bool = False, allow_components: bool = False):
     """Check that ``(V, F)`` is a single-component 2-manifold triangle mesh.
 
     Parameters
@@ -172,7 +176,8 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     F : (m, 3) array_like of int, triangle faces (0-based vertex indices).
     name : str, used in error messages.
     allow_boundary : bool, if False a mesh with boundary edges is rejected.
-    area_tol : float, a face with area below ``area_tol * bbox_diag**2`` is degenerate.
+    area_tol : float, a face with area at most ``area_tol * bbox_diag**2`` is degenerate
+        (default :data:`AREA_TOL`).
 
     return_halfedges : bool, also return the :class:`sshade.mesh.halfedge.HalfEdges` built
         for the checks (reused by :func:`sshade.remesh.mesh_topology`).
