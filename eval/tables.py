@@ -44,12 +44,14 @@ any other method by name.
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from eval.present.table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 from eval.run.outdir import refuse_results
+from eval.run.row_check import check_rows
 from harness.command import run_command
 from harness.registry import method_meta, table_order
 from sshade.clirun import ArgumentParser
@@ -449,7 +451,7 @@ def _preset_words(g: pd.DataFrame, short: bool) -> list[str]:
 
 
 def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None,
-                        failures: list[str] | None = None) -> str:
+                        failures: list[str] | None = None, checked: str | None = None) -> str:
     """``table.md``'s text for a :class:`Comparison`.
 
     The main table (bold: best per column, all rows on the same cases) under ``title``
@@ -461,6 +463,8 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
     :data:`COMMON_CASES_HEADING` when the second table follows. With an empty common
     set: the note says so and the (per-method, fallback) main table has no bold.
     ``failures`` (:func:`failure_lines`): a "Failed runs" list under the main table.
+    ``checked``: the sentence saying whether the rows were checked against the result
+    store (:meth:`eval.run.row_check.RowCheck.line`), under the main table.
     """
     if title is None and comp.all is not None:
         title = COMMON_CASES_HEADING
@@ -468,6 +472,8 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
     if note and comp.cases and (comp.main["n_failed"] > 0).any():
         note += " Failed: failed runs over all the cases the method was run on."
     text = to_markdown(comp.main, title=title, note=note, bold=comp.same_cases)
+    if checked:
+        text += f"\n{checked}\n"
     if stops:
         text += "\nHow each method stopped:\n\n" + "".join(f"- {s}\n" for s in stops)
     if failures:
@@ -507,7 +513,9 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     Every file is written to a temporary file and renamed into place
     (:func:`sshade.mesh.io.atomic_write`), so a crash never leaves a half-written table.
     A ``table_all.csv`` left by an earlier run into the same folder is removed when this
-    run has no second table, so it never describes other results.
+    run has no second table, so it never describes other results. ``table.md`` says
+    whether every row matches its record in the folder's result store
+    (:func:`eval.run.row_check.check_rows`; a warning is logged when one does not).
 
     With ``cases=False`` the rows are not written back (``cases.csv`` is the input, see
     :func:`retabulate`).
@@ -526,9 +534,11 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
         paths["table_all_csv"] = _write_csv(comp.all, p_all)
     else:
         p_all.unlink(missing_ok=True)
-    stops = stop_lines(df)
-    paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df)),
-                                    out_dir / "table.md")
+    stops, checked = stop_lines(df), check_rows(df, out_dir)
+    if not checked.ok and checked.has_store:
+        logging.getLogger("eval").warning("warning: %s: %s", out_dir / "cases.csv", checked.line().replace("**", ""))
+    paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df),
+                                                        checked=checked.line()), out_dir / "table.md")
     note = " ".join(x for x in [main_note(comp), "; ".join(stop_lines(df, short=True))] if x) or None
     paths["table_tex"] = _write_text(to_latex(comp.main, note=note, bold=comp.same_cases), out_dir / "table.tex")
     return paths

@@ -271,6 +271,15 @@ class ResultStore:
         names that pair, matches its digest (:func:`record_digest`) and holds a valid row
         (:func:`check_row`), else None and why. ``fields``: the pair's key fields now
         (:func:`pair_key`), to say what differs in a stale record (code or settings)."""
+        found = self.read(case, method, key=key)
+        if found.record is None or found.why != "stale":
+            return found
+        return Lookup(None, _stale_why(found.record.get("key_fields"), fields))
+
+    def read(self, case: str, method: str, key: str | None = None) -> Lookup:
+        """The record of (``case``, ``method``) read as untrusted input, whatever its key
+        when ``key`` is None: as :meth:`lookup`, except that a record under another key
+        than ``key`` comes back with ``why="stale"``."""
         p = self.path(case, method)
         if not p.is_file():
             return Lookup(None, "absent")
@@ -284,8 +293,8 @@ class ResultStore:
             return Lookup(None, f"other code: store version {rec.get('version')!r}, now {STORE_VERSION}")
         if rec.get("case") != str(case) or rec.get("method") != str(method):
             return Lookup(None, f"invalid: it names another pair ({rec.get('case')!r}, {rec.get('method')!r})")
-        if rec.get("key") != key:
-            return Lookup(None, _stale_why(rec.get("key_fields"), fields))
+        if key is not None and rec.get("key") != key:
+            return Lookup(rec, "stale")
         if rec.get("digest") != record_digest(rec):
             return Lookup(None, "invalid: edited (its digest does not match)")
         bad = check_row(rec.get("row"), case, method)

@@ -1,0 +1,115 @@
+"""Whether a table's rows are the result store's: every row of ``cases.csv`` held against
+the record of its (case, method) in ``runs/`` (:mod:`eval.run.store`).
+
+:func:`check_rows` reads each row's record as untrusted input (:meth:`ResultStore.read`:
+whole, of this store version, naming that pair, its digest holding, a valid row) and
+compares the row's cells with the record's (numbers equal to float64 rounding, text
+equal, empty equal to null). :class:`RowCheck.line` is the sentence ``table.md`` carries
+under its title: checked, not checked (no store), or which rows disagree and how.
+
+What it proves and what not: a row edited in ``cases.csv``, a record edited by hand, or a
+record missing are found. The digest is an unkeyed SHA-256, so a record edited and given
+a new digest (with :func:`eval.run.store.record_digest`) passes: a local store cannot stop
+its owner; docs/protocols.md ("What the store checks").
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
+
+from eval.run.store import STORE_DIR, ResultStore
+from sshade.errors import SShaDeError
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["RowCheck", "check_rows", "MAX_LISTED"]
+
+MAX_LISTED = 3  #: rows named in the line when more disagree
+
+
+class RowCheck(NamedTuple):
+    """The outcome of :func:`check_rows`: ``n_rows`` rows, ``n_checked`` of them matching
+    a valid record, ``problems`` one text per row that does not ("<case> / <method>: why"),
+    ``has_store`` whether the folder has a ``runs/`` store at all."""
+    n_rows: int
+    n_checked: int
+    problems: list
+    has_store: bool
+
+    @property
+    def ok(self) -> bool:
+        """Every row matches its record."""
+        return self.has_store and not self.problems
+
+    def line(self) -> str:
+        """One sentence for ``table.md`` (Markdown)."""
+        if not self.has_store:
+            return (f"Rows not checked: this folder has no result store ({STORE_DIR}/), so nothing says that "
+                    "cases.csv holds what the methods computed.")
+        if not self.problems:
+            return (f"Rows checked: all {self.n_rows} rows of cases.csv match their records in {STORE_DIR}/ "
+                    "(digests hold; a digest catches a record edited by hand, not one re-signed).")
+        listed = "; ".join(self.problems[:MAX_LISTED]) + (" ..." if len(self.problems) > MAX_LISTED else "")
+        n_bad = self.n_rows - self.n_checked
+        return (f"**Rows disagree with the result store:** {n_bad} of {self.n_rows} rows of cases.csv "
+                f"do not match a valid record in {STORE_DIR}/ ({listed}); the table is not what the store holds.")
+
+
+def _missing(v) -> bool:
+    return v is None or (isinstance(v, float) and math.isnan(v)) or (isinstance(v, str) and v == "")
+
+
+def _cell_differs(a, b) -> bool:
+    """Whether a cell read back from ``cases.csv`` (``a``) differs from the record's (``b``)."""
+    if _missing(a) or _missing(b):
+        return not (_missing(a) and _missing(b))
+    if isinstance(b, bool) or isinstance(a, bool):
+        return str(a).lower() != str(b).lower()
+    if isinstance(b, (int, float)):
+        try:
+            fa, fb = float(a), float(b)
+        except (TypeError, ValueError):
+            return True
+        return not (fa == fb or math.isclose(fa, fb, rel_tol=1e-12, abs_tol=0.0))
+    return str(a) != str(b)
+
+
+def _row_problem(store: ResultStore, row: dict) -> str | None:
+    case, method = str(row.get("case")), str(row.get("method"))
+    try:
+        found = store.read(case, method)
+    except SShaDeError as e:
+        return f"{case} / {method}: {e}"
+    if found.record is None:
+        return f"{case} / {method}: record {found.why}"
+    stored = found.record["row"]
+    diff = [k for k in sorted(set(stored) | set(row)) if _cell_differs(row.get(k), stored.get(k))]
+    if diff:
+        k = diff[0]
+        return (f"{case} / {method}: {k} {row.get(k)!r} in cases.csv, {stored.get(k)!r} in the record"
+                + (f" (+{len(diff) - 1} more cells)" if len(diff) > 1 else ""))
+    return None
+
+
+def check_rows(df: pd.DataFrame, out_dir) -> RowCheck:
+    """Hold every row of ``df`` (the rows of ``cases.csv``, with ``case`` and ``method``
+    columns) against the result store of ``out_dir`` (module docstring).
+
+    Parameters
+    ----------
+    df : pandas DataFrame, one row per (case, method).
+    out_dir : str or Path, the run's folder (its store is ``out_dir/runs``).
+
+    Returns
+    -------
+    :class:`RowCheck`. Never raises on a bad record or a link: each is a problem of its row.
+    """
+    store = ResultStore(Path(out_dir))
+    if not (Path(out_dir) / STORE_DIR).is_dir():
+        return RowCheck(len(df), 0, [], False)
+    if "case" not in df.columns or "method" not in df.columns:
+        return RowCheck(len(df), 0, ["cases.csv has no case and method columns to find records by"], True)
+    problems = [p for p in (_row_problem(store, r) for r in df.to_dict("records")) if p]
+    return RowCheck(len(df), len(df) - len(problems), problems, True)
