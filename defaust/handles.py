@@ -34,7 +34,8 @@ from sshade.errors import SShaDeError
 
 __all__ = ["BASE_LANDMARKS", "HandleSet", "Snap", "edge_length_matrix", "geodesic_neighbourhood",
            "landmark_handles", "classify_groups", "snap_handles", "handles_to_arrays",
-           "handles_from_arrays", "landmarks_for_target"]
+           "handles_from_arrays", "landmarks_for_target", "HANDLE_ARRAYS", "HANDLE_OPTIONAL_ARRAYS",
+           "HANDLE_ARRAY_MAX_BYTES", "handle_array_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -331,12 +332,63 @@ def handles_to_arrays(H: HandleSet) -> dict[str, np.ndarray]:
     }
 
 
+#: Arrays of a handles file (:func:`handles_to_arrays`) that :func:`handles_from_arrays`
+#: needs, and those it may hold besides (the builder also stores ``subject`` and ``pose``).
+HANDLE_ARRAYS = ("rest_positions", "target_positions", "static", "group", "landmark_names", "delta", "group_static")
+HANDLE_OPTIONAL_ARRAYS = ("landmark_positions", "low_index", "n_per_landmark", "neighbourhood",
+                          "static_threshold", "seed", "subject", "pose")
+#: Largest accepted array of a handles file when its handle count is not known (bytes).
+HANDLE_ARRAY_MAX_BYTES = 64 << 20
+# bytes per handle and per landmark of each array (a landmark name: up to 64 characters)
+_PER_HANDLE = {"rest_positions": 24, "target_positions": 24, "static": 1, "group": 8, "low_index": 8}
+_PER_LANDMARK = {"landmark_names": 256, "landmark_positions": 24, "delta": 8, "group_static": 1}
+
+
+def handle_array_bytes(n_handles: int | None = None, n_landmarks: int | None = None) -> dict[str, int]:
+    """Upper bound on the uncompressed size of each array of a handles file with
+    ``n_handles`` handles in ``n_landmarks`` groups (``.npy`` header included, with a
+    few KB of slack), at most :data:`HANDLE_ARRAY_MAX_BYTES` (also the bound of a count
+    given as None); for :func:`defaust.store.read_npz`'s ``max_bytes``.
+
+    Examples
+    --------
+    >>> handle_array_bytes(180, 6)["rest_positions"]
+    8416
+    """
+    out = {}
+    for k in HANDLE_ARRAYS + HANDLE_OPTIONAL_ARRAYS:
+        n, per = ((n_handles, _PER_HANDLE[k]) if k in _PER_HANDLE else
+                  (n_landmarks, _PER_LANDMARK[k]) if k in _PER_LANDMARK else (1, 8))
+        out[k] = HANDLE_ARRAY_MAX_BYTES if n is None else min(HANDLE_ARRAY_MAX_BYTES, 4096 + per * int(n))
+    return out
+
+
+_KINDS = {"fiu": "real numbers", "biu": "booleans", "iu": "integers", "U": "strings"}
+
+
+def _field(d: dict, key: str, name: str, kinds: str, *, finite: bool = False, shape=None) -> np.ndarray:
+    """``d[key]`` checked: dtype kind in ``kinds`` (flags: 0 or 1), finite, of ``shape``."""
+    a = np.asarray(d[key])
+    if a.dtype.kind not in kinds:
+        raise SShaDeError(f"{name}: array {key!r} has dtype {a.dtype}; expected {_KINDS[kinds]}")
+    if kinds == "biu" and a.dtype.kind != "b" and not np.isin(a, (0, 1)).all():
+        raise SShaDeError(f"{name}: array {key!r} holds values other than 0 and 1")
+    if finite and not np.isfinite(a).all():
+        raise SShaDeError(f"{name}: array {key!r} holds {int((~np.isfinite(a)).sum())} NaN or infinite value(s)")
+    if shape is not None and a.shape != shape:
+        raise SShaDeError(f"{name}: array {key!r} has shape {a.shape}, expected {shape}")
+    return a
+
+
 def handles_from_arrays(d: dict, *, name: str = "handles") -> HandleSet:
-    """Inverse of :func:`handles_to_arrays`.
+    """Inverse of :func:`handles_to_arrays`, as untrusted input: every array of
+    :data:`HANDLE_ARRAYS` present, positions, targets and ``delta`` finite real numbers,
+    flags booleans (or 0/1), groups integers in ``[0, L)``, shapes consistent.
 
     Raises
     ------
-    SShaDeError if a key is missing or shapes disagree.
+    SShaDeError naming ``name`` and the array: a key missing, a non-real dtype (complex,
+    string, object), NaN or inf, or shapes that disagree.
 
     Examples
     --------
@@ -345,24 +397,35 @@ def handles_from_arrays(d: dict, *, name: str = "handles") -> HandleSet:
         from defaust.store import read_npz
         H = handles_from_arrays(read_npz("subject_00/pose_01_handles.npz"))
     """
-    need = ("rest_positions", "target_positions", "static", "group", "landmark_names", "delta", "group_static")
-    miss = [k for k in need if k not in d]
+    miss = [k for k in HANDLE_ARRAYS if k not in d]
     if miss:
         raise SShaDeError(f"{name}: missing arrays {miss}")
-    R = np.asarray(d["rest_positions"], np.float64)
-    T = np.asarray(d["target_positions"], np.float64)
-    st = np.asarray(d["static"], bool)
-    g = np.asarray(d["group"], np.int64)
-    if R.ndim != 2 or R.shape[1] != 3 or T.shape != R.shape or st.shape != (len(R),) or g.shape != (len(R),):
-        raise SShaDeError(f"{name}: inconsistent shapes rest {R.shape}, target {T.shape}, "
-                          f"static {st.shape}, group {g.shape}")
-    names = tuple(str(x) for x in np.asarray(d["landmark_names"]).tolist())
-    return HandleSet(rest=R, target=T, static=st, group=g, landmark_names=names,
-                     landmark_rest=np.asarray(d.get("landmark_positions", np.zeros((len(names), 3))), np.float64),
-                     delta=np.asarray(d["delta"], np.float64), group_static=np.asarray(d["group_static"], bool),
-                     index=np.asarray(d.get("low_index", np.full(len(R), -1)), np.int64),
-                     n_per_landmark=int(d.get("n_per_landmark", 0)), neighbourhood=int(d.get("neighbourhood", 0)),
-                     static_threshold=float(d.get("static_threshold", np.nan)), seed=int(d.get("seed", 0)))
+    R = _field(d, "rest_positions", name, "fiu", finite=True).astype(np.float64)
+    h = len(R) if R.ndim == 2 and R.shape[1] == 3 else -1
+    if h < 0:
+        raise SShaDeError(f"{name}: array 'rest_positions' has shape {R.shape}, expected (h, 3)")
+    T = _field(d, "target_positions", name, "fiu", finite=True, shape=R.shape).astype(np.float64)
+    st = _field(d, "static", name, "biu", shape=(h,)).astype(bool)
+    g = _field(d, "group", name, "iu", shape=(h,)).astype(np.int64)
+    names = _field(d, "landmark_names", name, "U")
+    if names.ndim != 1:
+        raise SShaDeError(f"{name}: array 'landmark_names' has shape {names.shape}, expected (L,)")
+    L = len(names)
+    if h and (g.min() < 0 or g.max() >= L):
+        raise SShaDeError(f"{name}: array 'group' holds values outside [0, {L}) (the landmark groups)")
+    opt = {k: d[k] for k in HANDLE_OPTIONAL_ARRAYS if k in d}
+    scalar = {k: _field(opt, k, name, "fiu" if k == "static_threshold" else "iu", shape=()).item()
+              for k in ("n_per_landmark", "neighbourhood", "static_threshold", "seed") if k in opt}
+    return HandleSet(
+        rest=R, target=T, static=st, group=g, landmark_names=tuple(str(x) for x in names.tolist()),
+        landmark_rest=(_field(opt, "landmark_positions", name, "fiu", finite=True, shape=(L, 3)).astype(np.float64)
+                       if "landmark_positions" in opt else np.zeros((L, 3))),
+        delta=_field(d, "delta", name, "fiu", finite=True, shape=(L,)).astype(np.float64),
+        group_static=_field(d, "group_static", name, "biu", shape=(L,)).astype(bool),
+        index=(_field(opt, "low_index", name, "iu", shape=(h,)).astype(np.int64) if "low_index" in opt
+               else np.full(h, -1, np.int64)),
+        n_per_landmark=int(scalar.get("n_per_landmark", 0)), neighbourhood=int(scalar.get("neighbourhood", 0)),
+        static_threshold=float(scalar.get("static_threshold", np.nan)), seed=int(scalar.get("seed", 0)))
 
 
 @dataclass(frozen=True)

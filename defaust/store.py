@@ -5,12 +5,15 @@ trimesh's PLY export stores float32 coordinates (so a read-back is not the array
 was written) and :func:`numpy.savez` stamps every zip member with the current time.
 This module writes both formats with fixed headers and no timestamps, atomically via
 :func:`sshade.mesh.io.atomic_write`. Meshes are read back with
-:func:`sshade.mesh.io.read_mesh` (libigl reads ``double`` PLY properties exactly).
+:func:`sshade.mesh.io.read_mesh` (libigl reads ``double`` PLY properties exactly);
+:func:`read_npz` reads an ``.npz`` as untrusted input (expected members only, each
+bounded in size before it is decompressed).
 """
 from __future__ import annotations
 
 import hashlib
 import io
+import math
 import zipfile
 from pathlib import Path
 
@@ -19,7 +22,8 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
-__all__ = ["write_ply", "ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes"]
+__all__ = ["write_ply", "ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes",
+           "MAX_MEMBER_BYTES"]
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # the earliest date a zip entry can hold
 
@@ -117,18 +121,41 @@ def write_npz(path, arrays: dict) -> str:
     return sha256_bytes(data)
 
 
-def read_npz(path) -> dict[str, np.ndarray]:
-    """Read an ``.npz`` into a dict of arrays (no pickles).
+#: Default bound on one member of an ``.npz`` that :func:`read_npz` reads (uncompressed
+#: bytes, the ``.npy`` header included).
+MAX_MEMBER_BYTES = 1 << 30
+
+
+def read_npz(path, keys=None, *, optional=(), max_bytes=MAX_MEMBER_BYTES) -> dict[str, np.ndarray]:
+    """Read an ``.npz`` into a dict of arrays (no pickles), as untrusted input: the
+    members' names and sizes are checked from the zip directory before any member is
+    decompressed, and only the wanted members are read.
+
+    Parameters
+    ----------
+    path : str or Path.
+    keys : iterable of str, the arrays the file must hold; None reads every member.
+    optional : iterable of str, arrays the file may hold besides ``keys`` (read when there).
+        With ``keys`` given, any other member is refused.
+    max_bytes : int, or dict name -> int, the largest uncompressed size in bytes (``.npy``
+        header included) accepted for a member (default :data:`MAX_MEMBER_BYTES`).
+
+    Returns
+    -------
+    dict name -> array (writable copies; names without the ``.npy`` suffix).
 
     Raises
     ------
-    SShaDeError on a missing or unreadable file.
+    SShaDeError, one line naming the file and the member: a missing or unreadable file, an
+    unexpected, missing, repeated or oversized member, a member that is not a ``.npy``
+    array of a fixed-width dtype (object arrays are refused), or one whose data does not
+    match its header's shape.
 
     Examples
     --------
     Example::
 
-        d = read_npz("subject_00/pose_01_handles.npz")
+        d = read_npz("subject_00/pose_01_handles.npz", ["rest_positions"], optional=["seed"])
         d["rest_positions"].shape
         # -> (180, 3)
     """
@@ -136,10 +163,63 @@ def read_npz(path) -> dict[str, np.ndarray]:
     if not p.is_file():
         raise SShaDeError(f"file not found: {p}")
     try:
-        with np.load(p, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except Exception as e:  # zipfile.BadZipFile, ValueError, OSError
+        with zipfile.ZipFile(p) as zf:
+            members = _npz_members(p, zf, keys, optional)
+            return {k: _read_member(p, zf, info, k, max_bytes) for k, info in members.items()}
+    except SShaDeError:  # a ValueError too, already naming the file
+        raise
+    except (zipfile.BadZipFile, ValueError, EOFError, OSError, RuntimeError, NotImplementedError) as e:
+        # RuntimeError: an encrypted member; NotImplementedError: an unknown compression
         raise SShaDeError(f"{p}: unreadable npz file ({type(e).__name__}: {e})") from None
+
+
+def _npz_members(p: Path, zf: zipfile.ZipFile, keys, optional) -> dict:
+    """``{array name: ZipInfo}`` of the members to read, after checking the names."""
+    infos = zf.infolist()
+    names = [i.filename[:-4] if i.filename.endswith(".npy") else i.filename for i in infos]
+    seen = set()
+    for n in names:
+        if n in seen:
+            raise SShaDeError(f"{p}: member {n!r} appears twice")
+        seen.add(n)
+    if keys is not None:
+        need, allowed = list(keys), set(keys) | set(optional)
+        extra = [n for n in names if n not in allowed]
+        if extra:
+            raise SShaDeError(f"{p}: unexpected array {extra[0]!r} (expected {sorted(allowed)})")
+        missing = [k for k in need if k not in seen]
+        if missing:
+            raise SShaDeError(f"{p}: missing array {missing[0]!r}")
+    return dict(zip(names, infos))
+
+
+def _read_member(p: Path, zf: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, max_bytes) -> np.ndarray:
+    """One ``.npy`` member read after checking its declared size against ``max_bytes``;
+    zipfile stops at the declared size and checks the CRC, so no more is decompressed."""
+    cap = max_bytes.get(name, MAX_MEMBER_BYTES) if isinstance(max_bytes, dict) else max_bytes
+    if info.file_size > cap:
+        raise SShaDeError(f"{p}: array {name!r} is {info.file_size} bytes uncompressed, more than the "
+                          f"{cap} bytes it may have")
+    with zf.open(info) as fh:
+        data = fh.read(info.file_size + 1)
+    fh = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(fh)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f".npy version {version}, not 1.0 or 2.0")
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read(fh)
+    except ValueError as e:
+        raise SShaDeError(f"{p}: array {name!r} is not a readable .npy array ({e})") from None
+    if dtype.hasobject:
+        raise SShaDeError(f"{p}: array {name!r} has dtype object (pickles are refused)")
+    start, count = fh.tell(), math.prod(shape)
+    if dtype.itemsize == 0 or len(data) - start != count * dtype.itemsize:
+        raise SShaDeError(f"{p}: array {name!r} holds {len(data) - start} data bytes, its header "
+                          f"({dtype}, shape {shape}) needs {count * dtype.itemsize}")
+    a = np.frombuffer(data, dtype=dtype, count=count, offset=start)
+    a = a.reshape(shape[::-1]).T if fortran else a.reshape(shape)
+    return a.copy(order="K")
 
 
 def sha256_bytes(data: bytes) -> str:
