@@ -265,3 +265,25 @@ def test_sweep_default_folder_taken_gets_a_suffix_and_jobs_follow(tmp_path):
     assert all(os.listdir(d) == ["mine.txt"] for d in taken)
     new = [d for d in (tmp_path / "outputs" / "multirun").iterdir() if d.name.endswith("_2")]
     assert len(new) == 1 and (new[0] / "0" / "status.json").is_file() and (new[0] / "sweep_table.md").is_file()
+
+
+@pytest.mark.parametrize("where", ["report", "figures/old.png", "runs/s0_p1"])
+def test_an_earlier_output_holding_a_link_is_refused_and_nothing_outside_changes(tmp_path, where):
+    """A link anywhere in an earlier output (a folder or a file) would take the next run's
+    writes or removals outside it: the claim is refused, naming the link, before any work."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "keep.txt").write_text("mine")
+    c = claim_output_dir(tmp_path / "run", "eval")
+    (c.path / "figures").mkdir()
+    (c.path / "runs").mkdir()
+    (c.path / "cases.csv").write_text("old")
+    c.finish("done")
+    target = outside / "keep.txt" if where.endswith(".png") else outside
+    os.symlink(target, c.path / where)
+    before = sorted(os.listdir(c.path))
+    for kw in ({}, {"keep": True}, {"overwrite": True}):
+        with pytest.raises(OutputDirError, match=f"{where} is a symbolic link"):
+            claim_output_dir(tmp_path / "run", "eval", **kw)
+    assert (outside / "keep.txt").read_text() == "mine" and sorted(os.listdir(outside)) == ["keep.txt"]
+    assert sorted(os.listdir(c.path)) == before

@@ -295,7 +295,8 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
         ``path`` is a file; inside this checkout's ``results/`` without
         :data:`REPRODUCE_ENV`; not writable; another live run writes into it; a non-empty
         folder that is not this command's earlier output of the same kind (unless
-        ``overwrite``).
+        ``overwrite``); a non-empty folder holding a symbolic link anywhere inside (a
+        write or a removal through it would reach outside).
     """
     how = _how(kind) if option is None else option
     raw = str(path).strip()
@@ -332,10 +333,24 @@ def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: st
     return _claim_existing(p, kind, created, overwrite, keep, how)
 
 
+def _links_inside(p: Path) -> list[str]:
+    """Entries under folder ``p`` (walked without following links) that are symbolic
+    links, as paths relative to ``p``."""
+    out = []
+    for top, dirs, files in os.walk(p, followlinks=False):
+        out += [os.path.relpath(os.path.join(top, n), p) for n in dirs + files if os.path.islink(os.path.join(top, n))]
+    return sorted(out)
+
+
 def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bool, how: str) -> OutputClaim:
     names = sorted(set(os.listdir(p)) - _OWN)
     if created or not names:
         return _take(p, kind, [], [], f"writing into the {'new' if created else 'empty'} folder {p}", created=created)
+    links = _links_inside(p)
+    if links:  # a write or a removal through one would reach outside the folder
+        raise OutputDirError(f"refusing to write into {p}: {links[0]} is a symbolic link (to "
+                             f"{os.readlink(p / links[0])}){f' and {len(links) - 1} more' if len(links) > 1 else ''}; "
+                             "an output folder must hold no links: remove them or choose a new folder")
     m = read_marker(p)
     reproducing = os.environ.get(REPRODUCE_ENV) == "1" and _inside(p, results_dir())
     if m is not None and m.get("kind") == kind or reproducing and m is None:
