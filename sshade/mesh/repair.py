@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SShaDeError
-from .validate import AREA_TOL
+from .validate import zero_area_faces
 
 __all__ = ["repair_mesh", "REPAIR_FILTERS"]
 
@@ -35,19 +35,8 @@ REPAIR_FILTERS = (
 )
 
 
-#: The report's line for the faces removed by :func:`_near_zero_area`.
+#: The report's line for the faces removed by :func:`sshade.mesh.validate.zero_area_faces`.
 NEAR_ZERO = "zero-area faces removed (area at most AREA_TOL x diagonal squared, as validate_mesh)"
-
-
-def _near_zero_area(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(m,) bool: the faces :func:`sshade.mesh.validate.validate_mesh` calls degenerate
-    (twice the area at most ``2 * AREA_TOL * diag**2``)."""
-    if not len(F):
-        return np.zeros(0, bool)
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
-    T = V[F]
-    dbl = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
-    return dbl <= 2 * AREA_TOL * diag * diag
 
 
 def repair_mesh(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, int, int]]]:
@@ -86,7 +75,7 @@ def repair_mesh(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[st
     if F.size and (F.min() < 0 or F.max() >= len(V)):
         raise SShaDeError(f"repair: face indices out of range [0, {len(V)})")
     ms = pymeshlab.MeshSet()
-    keep = ~_near_zero_area(V, F)
+    keep = ~zero_area_faces(V, F)
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F[keep].astype(np.int32)))
     report = [] if keep.all() else [(NEAR_ZERO, 0, -int((~keep).sum()))]
     for filt, kw, what in REPAIR_FILTERS:

@@ -26,7 +26,7 @@ from .halfedge import count_components, count_pinched_vertices, halfedges, verte
 
 __all__ = ["validate_mesh", "validate_handles", "validate_targets", "validate_handle_indices", "validate_deformed",
            "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN",
-           "AREA_TOL"]
+           "AREA_TOL", "zero_area_faces"]
 
 #: Largest coordinate magnitude accepted. The methods form products of up to about
 #: eight lengths (squared areas, circumradii, energies): beyond ~1e38 they overflow
@@ -164,6 +164,26 @@ def check_arrays(V, F, *, name: str | None = None, min_vertices: int = 1) -> tup
     pre = f"{name}: " if name else ""
     V = check_points(V, f"{pre}V", min_rows=min_vertices)
     return V, check_faces(F, len(V), f"{pre}F")
+
+
+def zero_area_faces(V: np.ndarray, F: np.ndarray, area_tol: float = AREA_TOL) -> np.ndarray:
+    """The degenerate (zero-area) faces: area at most ``area_tol * bbox_diag**2``.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 finite positions (mesh units); F : (m, 3) int64 faces, indices in
+    range. area_tol : float >= 0 (dimensionless, default :data:`AREA_TOL`).
+
+    Returns
+    -------
+    (m,) bool, True where twice the face's area is at most ``2 * area_tol * diag**2``:
+    what :func:`validate_mesh` refuses and :func:`sshade.mesh.repair.repair_mesh` removes.
+    """
+    if not len(F):
+        return np.zeros(0, bool)
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    dbl = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    return dbl <= 2 * area_tol * diag * diag
 
 
 def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
@@ -344,9 +364,7 @@ def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=Fal
                           "mesh without them and the old index of each kept vertex; `python -m sshade deform` "
                           "drops them itself)")
     _check_scale(V, F, name)
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
-    dbl = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    deg = dbl <= 2 * area_tol * diag * diag
+    deg = zero_area_faces(V, F, area_tol)
     if deg.any():
         f = np.flatnonzero(deg)[0]
         raise SShaDeError(f"{name}: {int(deg.sum())} degenerate (zero-area) faces (first: face {f} = {F[f].tolist()})")
