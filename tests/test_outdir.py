@@ -287,3 +287,20 @@ def test_an_earlier_output_holding_a_link_is_refused_and_nothing_outside_changes
             claim_output_dir(tmp_path / "run", "eval", **kw)
     assert (outside / "keep.txt").read_text() == "mine" and sorted(os.listdir(outside)) == ["keep.txt"]
     assert sorted(os.listdir(c.path)) == before
+
+
+def test_a_link_that_stays_inside_an_earlier_output_is_accepted(tmp_path):
+    """submitit's ``.submitit/`` keeps links to its own files: a link resolving inside the
+    folder cannot take a write or a removal out of it, so a resumed sweep may go on."""
+    c = claim_output_dir(tmp_path / "sweep", "sweep")
+    (c.path / ".submitit" / "1").mkdir(parents=True)
+    (c.path / ".submitit" / "1" / "1_submission.sh").write_text("#!/bin/sh\n")
+    os.symlink(c.path / ".submitit" / "1" / "1_submission.sh", c.path / ".submitit" / ".submission_file_x.sh")
+    os.symlink("1", c.path / ".submitit" / "relative")  # relative, inside
+    c.finish("done")
+    again = claim_output_dir(tmp_path / "sweep", "sweep", keep=True)
+    assert again.path == c.path and (c.path / ".submitit" / ".submission_file_x.sh").is_symlink()
+    again.finish("done")
+    os.symlink("../..", c.path / ".submitit" / "up")  # relative, but out of the folder
+    with pytest.raises(OutputDirError, match=r"\.submitit/up is a symbolic link out of it"):
+        claim_output_dir(tmp_path / "sweep", "sweep", keep=True)

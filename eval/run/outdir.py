@@ -335,10 +335,16 @@ def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: st
 
 def _links_inside(p: Path) -> list[str]:
     """Entries under folder ``p`` (walked without following links) that are symbolic
-    links, as paths relative to ``p``."""
+    links resolving outside ``p`` (dangling ones by where they point), as paths relative
+    to ``p``. Links that stay inside (e.g. submitit's ``.submitit/`` bookkeeping) are
+    harmless: a write or removal through them stays in the folder."""
+    root = os.path.realpath(p)
     out = []
     for top, dirs, files in os.walk(p, followlinks=False):
-        out += [os.path.relpath(os.path.join(top, n), p) for n in dirs + files if os.path.islink(os.path.join(top, n))]
+        for n in dirs + files:
+            q = os.path.join(top, n)
+            if os.path.islink(q) and os.path.commonpath([root, os.path.realpath(q)]) != root:
+                out.append(os.path.relpath(q, p))
     return sorted(out)
 
 
@@ -348,9 +354,9 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bo
         return _take(p, kind, [], [], f"writing into the {'new' if created else 'empty'} folder {p}", created=created)
     links = _links_inside(p)
     if links:  # a write or a removal through one would reach outside the folder
-        raise OutputDirError(f"refusing to write into {p}: {links[0]} is a symbolic link (to "
+        raise OutputDirError(f"refusing to write into {p}: {links[0]} is a symbolic link out of it (to "
                              f"{os.readlink(p / links[0])}){f' and {len(links) - 1} more' if len(links) > 1 else ''}; "
-                             "an output folder must hold no links: remove them or choose a new folder")
+                             "an output folder must hold no links out: remove them or choose a new folder")
     m = read_marker(p)
     reproducing = os.environ.get(REPRODUCE_ENV) == "1" and _inside(p, results_dir())
     if m is not None and m.get("kind") == kind or reproducing and m is None:
