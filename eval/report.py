@@ -53,6 +53,7 @@ from pathlib import Path
 from eval.present.breakdown import BREAKDOWN_METRICS
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
+from eval.present.table_text import REPORTED_NOTE
 from eval.run.outdir import (
     REPRODUCE_ENV,
     OutputDirError,
@@ -127,6 +128,15 @@ def _num(v):
     return int(f) if f.is_integer() and abs(f) < 2 ** 53 else f
 
 
+def _positive(v, *, zero: bool = False) -> bool:
+    """Whether ``v`` is a finite number > 0 (>= 0 with ``zero``)."""
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(f) and (f >= 0 if zero else f > 0)
+
+
 def _summary_table(summary, table_id: str) -> str:
     """The main columns (:data:`eval.tables.TABLE_COLUMNS` and ``EXTRA_COLUMNS``) of a
     per-method summary (:func:`eval.tables.summarize` layout)."""
@@ -136,9 +146,15 @@ def _summary_table(summary, table_id: str) -> str:
     rows = []
     for _, r in summary.iterrows():
         cells = [f"<td>{_e(r['method'])}</td>", _cell(int(r["n_cases"])), _cell(int(r.get("n_failed", 0) or 0))]
-        cells += [_cell(_num(r[c]), d) for c, _, d in cols]
+        reported = "time_reported" in summary.columns and _positive(r["time_reported"])
+        cells += [_cell(_num(r[c]), d).replace("</td>", " (reported)</td>")
+                  if c == "time_s" and reported and _positive(r[c], zero=True) else _cell(_num(r[c]), d)
+                  for c, _, d in cols]
         rows.append(cells)
-    return _table(head, rows, table_id)
+    out = _table(head, rows, table_id)
+    if "time_reported" in summary.columns and any(_positive(v) for v in summary["time_reported"]):
+        out += f'<p class="note">{_e(REPORTED_NOTE)}</p>'
+    return out
 
 
 def _csv_table(path: Path, table_id: str = "") -> str:

@@ -53,7 +53,7 @@ from eval.present.table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_m
 from eval.run.outdir import refuse_results
 from eval.run.row_check import check_rows
 from harness.command import run_command
-from harness.registry import method_meta, table_order
+from harness.registry import builtin_methods, method_meta, table_order
 from sshade.clirun import ArgumentParser
 from sshade.mesh.io import atomic_write
 
@@ -346,6 +346,15 @@ def failure_lines(df: pd.DataFrame) -> list[str]:
     return lines
 
 
+def _elsewhere_words(g) -> str:
+    """How a scored method (results computed elsewhere) stopped, as far as the harness knows."""
+    machines = sorted({str(x) for x in g.get("time_machine", []) if isinstance(x, str) and x})
+    timed = int(g["time_s"].notna().sum()) if "time_s" in g.columns else 0
+    return ("computed elsewhere: results read from files (eval.exchange.scored), how the method stopped is not "
+            f"known here; Time as the method reported it on {len(g)} run(s): {timed} with a time"
+            + (f" (machine: {', '.join(machines)})" if machines else ""))
+
+
 def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
     """One line per method saying how it stopped, from the per-case rows: its protocol
     (``protocol`` column, :data:`PROTOCOL_TEXT`), the iteration range and how many of its
@@ -353,7 +362,8 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
     ``"Elastic: converged protocol: ...; 58-69 iterations; converged on 2/2 runs"``.
     ``short``: protocol names and ``"it."`` only (for the LaTeX footnote). Empty when
     the rows carry none of these columns."""
-    if "method" not in df.columns or not {"iterations", "converged", "protocol", "preset"} & set(df.columns):
+    if "method" not in df.columns or not {"iterations", "converged", "protocol", "preset",
+                                          "time_reported"} & set(df.columns):
         return []
     ok = ok_mask(df)
     lines = []
@@ -380,9 +390,11 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
                 parts.append(f"{int(c.sum())}/{len(c)} converged")
             else:
                 parts.append(f"converged on {int(c.sum())}/{len(c)} runs" + _other_stops(g, c))
+        if "time_reported" in g.columns and g["time_reported"].fillna(False).astype(bool).any():
+            parts.append("computed elsewhere" if short else _elsewhere_words(g))
         parts += _preset_words(g, short)
         if not short:
-            parts += _handle_words(g) + _reference_words(g)
+            parts += _handle_words(g) + _reference_words(g, ours=m in builtin_methods())
         if parts:
             lines.append(f"{m}: " + (", " if short else "; ").join(parts))
     return lines
@@ -402,16 +414,18 @@ def _handle_words(g: pd.DataFrame) -> list[str]:
     return ["/".join(HANDLE_TEXT.get(str(k), str(k)) for k in sorted({str(x) for x in g["handles"].dropna()}))]
 
 
-def _reference_words(g: pd.DataFrame) -> list[str]:
+def _reference_words(g: pd.DataFrame, *, ours: bool = True) -> list[str]:
     """Which minimiser Ref mean / Ref max / E gap measure against (``ref_energy_type``,
-    ``ref_own_energy`` columns): the method's own energy, or one it does not minimise."""
+    ``ref_own_energy`` columns): the method's own energy, or one it does not minimise
+    (``ours``: one of our methods; of another, one it is not known to minimise)."""
     if "ref_energy_type" not in g.columns or not g["ref_energy_type"].notna().any():
         return []
     e = "/".join(sorted({str(x) for x in g["ref_energy_type"].dropna()}))
     own = "ref_own_energy" in g.columns and g["ref_own_energy"].dropna().map(
         lambda x: str(x).strip().lower() in ("true", "1", "1.0")).all()
     return [f"Ref/E gap against the minimiser of its own energy ({e})" if own else
-            f"Ref/E gap: distance to the full-resolution {e} minimiser, an energy it does not minimise"]
+            f"Ref/E gap: distance to the full-resolution {e} minimiser, an energy it "
+            f"{'does not minimise' if ours else 'is not known to minimise'}"]
 
 
 #: How a run that did not converge stopped (``status`` column), in words.

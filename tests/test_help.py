@@ -16,7 +16,7 @@ from .conftest import ROOT, subprocess_env
 HELP = {
     "-m eval": ["usage: python -m eval [KEY=VALUE ...]", "Evaluate deformation methods", "out_dir=DIR",
                 "outputs/<experiment>/<date_time>", "== Configuration groups ==", "dataset: defaust, faust, shapes",
-                "ci, convergence, faust, main,", "== Config ==", "methods:"],
+                "ci, convergence, export, faust, main,", "== Config ==", "methods:"],
     "-m eval.sweep": ["usage: python -m eval.sweep", "resume SWEEP_DIR", "aggregate SWEEP_DIR", "-m dataset=faust",
                       "hydra/launcher=joblib", "outputs/multirun/<date_time>"],
     "-m eval.sweep resume": ["usage: python -m eval.sweep resume SWEEP_DIR", "killed, failed and missing"],

@@ -1,12 +1,13 @@
 """The case every evaluator dataset yields (:mod:`eval.datasets`): one rest mesh, its
-handles and their targets, and the true deformed shape when the dataset has one."""
+handles and their targets, and the true deformed shape when the dataset has one; and
+what a method may learn of it (:class:`CaseLabel`: never the true shape)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["DeformationCase"]
+__all__ = ["DeformationCase", "CaseLabel", "case_label"]
 
 
 @dataclass
@@ -35,3 +36,32 @@ class DeformationCase:
     static: np.ndarray
     V_gt: np.ndarray | None
     group: np.ndarray = field(repr=False, default=None)
+
+
+@dataclass(frozen=True)
+class CaseLabel:
+    """What the evaluator tells a case-aware method of the case it runs: a method that
+    has a ``case`` attribute gets it set to this before each ``deform`` call
+    (:func:`eval.experiments.cases.pair.run_pair`). The true shape is not in it.
+
+    Attributes
+    ----------
+    name : str, the case's name (as in tables and run folders).
+    subject, pose : its subject and target pose.
+    static : (h,) bool, the handles whose group stays at its rest position.
+    group : (h,) int64 handle groups, or None.
+    """
+
+    name: str
+    subject: object
+    pose: object
+    static: np.ndarray = field(repr=False)
+    group: np.ndarray | None = field(repr=False, default=None)
+
+
+def case_label(case) -> CaseLabel:
+    """What a case-aware method is told of ``case`` (any evaluator case: ``name``,
+    ``subject``, ``pose``, ``static`` (h,) and an optional ``group`` (h,)), copied."""
+    group = getattr(case, "group", None)
+    return CaseLabel(name=str(case.name), subject=case.subject, pose=case.pose, static=np.array(case.static, bool),
+                     group=None if group is None else np.array(group, np.int64))

@@ -178,7 +178,9 @@ class _Setup:
 
 def _method_specs(cfg, methods) -> list[dict]:
     """Each method's resolved definition (what its result depends on; :mod:`eval.run.store`):
-    ours from :func:`eval.methods.method_spec`, a plug-in's ``_target_`` mapping as given."""
+    ours from :func:`eval.methods.method_spec`, a plug-in's ``_target_`` mapping as given,
+    plus the method's ``key_extra`` mapping when it has one (``inputs``: what else its
+    rows depend on, e.g. the files :class:`eval.exchange.scored.ScoredResults` reads)."""
     from omegaconf import OmegaConf
     items = cfg.get("methods")
     items = [n for n in items.replace(",", " ").split() if n] if isinstance(items, str) else as_list(items)
@@ -189,6 +191,9 @@ def _method_specs(cfg, methods) -> list[dict]:
         else:
             spec = method_spec(cfg, str(it))
         out.append({"class": f"{type(m).__module__}.{type(m).__qualname__}", "name": m.name, **json_safe(spec)})
+        inputs = getattr(m, "key_extra", None)  # e.g. the digest of a scored results folder
+        if isinstance(inputs, dict):
+            out[-1]["inputs"] = json_safe(inputs)
     return out
 
 

@@ -1,0 +1,214 @@
+"""The exchange layout: every case of a dataset in files any language reads, and the
+names a folder of results computed elsewhere follows.
+
+An export folder (:func:`write_export`) holds ``cases.json`` (:data:`INDEX`) and one
+folder per case, named exactly as the evaluator names the case (``s0_p1``, ``bunny``)::
+
+    <case>/rest.obj, rest.ply   the rest mesh (V (n, 3), F (m, 3), 0-based in PLY, 1-based in OBJ)
+    <case>/handles.json         handles (h,) 0-based, targets (h, 3), static (h,), group (h,) or null
+    <case>/handles.csv          one line per handle: handle,x,y,z,static,group (0-based handle)
+    <case>/handles.dmat         (h, 1) handle indices, 0-based (libigl's DMAT, igl::readDMAT)
+    <case>/targets.dmat         (h, 3) target positions (units of the rest mesh)
+    <case>/static.dmat          (h, 1) 1 where the handle's group stays at its rest position
+
+A results folder holds one deformed mesh per case, ``<case>.obj`` (or ``.ply``,
+``.off``, ``.stl``; :func:`result_path`), with the rest mesh's vertices in the same
+order, and optionally a times file (:func:`read_times`). The ground truth is never
+exported: it is what the score compares against.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from sshade.errors import SShaDeError
+from sshade.mesh.io import atomic_write, write_mesh
+
+__all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "write_case",
+           "write_export", "result_path", "read_times", "file_sha256"]
+
+FORMAT = "sshade-exchange/1"   #: ``format`` of :data:`INDEX`
+INDEX = "cases.json"           #: the export's index of cases
+#: Files of one case folder, key -> file name (the keys of ``files`` in :data:`INDEX`).
+CASE_FILES = {"rest_obj": "rest.obj", "rest_ply": "rest.ply", "handles_json": "handles.json",
+              "handles_csv": "handles.csv", "handles_dmat": "handles.dmat", "targets_dmat": "targets.dmat",
+              "static_dmat": "static.dmat"}
+#: Extensions of a result mesh, in the order they are looked for (exactly one per case).
+RESULT_EXTS = (".obj", ".ply", ".off", ".stl")
+#: Columns of a times file: the case, the method's own seconds for it, the machine.
+TIMES_COLUMNS = ("case", "time_s", "machine")
+MAX_TIMES_BYTES = 16 << 20     #: a times file larger than this is refused unread
+
+
+def file_sha256(path) -> str:
+    """SHA-256 (hex) of the file at ``path``, read in 1 MiB blocks."""
+    import hashlib
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _write_dmat(path: Path, A: np.ndarray) -> None:
+    """``A`` (r, c) as libigl's ASCII DMAT (``igl.writeDMAT``), written atomically."""
+    import igl
+    tmp = path.with_name(f".{path.name}.tmp")
+    if not igl.writeDMAT(str(tmp), np.ascontiguousarray(A, np.float64), True):
+        raise OSError(f"{tmp}: igl.writeDMAT failed")
+    os.replace(tmp, path)
+
+
+def write_case(folder, case) -> dict:
+    """Write one case (:class:`eval.datasets.case.DeformationCase`) into ``folder`` (created).
+
+    Parameters
+    ----------
+    folder : str or Path, the case's folder (its files: :data:`CASE_FILES`).
+    case : the case: ``name``, ``subject``, ``pose``, ``V`` (n, 3) float64, ``F`` (m, 3)
+        int64, ``handles`` (h,) int64, ``targets`` (h, 3) float64, ``static`` (h,) bool,
+        ``group`` (h,) int64 or None. Its ``V_gt`` is not written.
+
+    Returns
+    -------
+    dict: the case's entry of :data:`INDEX` (name, subject, pose, sizes, ``files`` key ->
+    path relative to the export folder, ``sha256`` key -> digest).
+
+    Raises
+    ------
+    OSError when a file cannot be written; SShaDeError on arrays of the wrong shape.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    h = np.asarray(case.handles, np.int64).reshape(-1)
+    T = np.asarray(case.targets, np.float64).reshape(-1, 3)
+    static = np.asarray(case.static, bool).reshape(-1)
+    group = None if getattr(case, "group", None) is None else np.asarray(case.group, np.int64).reshape(-1)
+    write_mesh(folder / CASE_FILES["rest_obj"], case.V, case.F)
+    write_mesh(folder / CASE_FILES["rest_ply"], case.V, case.F)
+    doc = {"case": case.name, "n_vertices": len(case.V), "n_faces": len(case.F), "index_base": 0,
+           "handles": h.tolist(), "targets": T.tolist(), "static": static.tolist(),
+           "group": None if group is None else group.tolist()}
+    with atomic_write(folder / CASE_FILES["handles_json"]) as f:
+        json.dump(doc, f)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["handle", "x", "y", "z", "static", "group"])
+    for i in range(len(h)):
+        w.writerow([int(h[i]), *(repr(float(x)) for x in T[i]), int(static[i]),
+                    "" if group is None else int(group[i])])
+    with atomic_write(folder / CASE_FILES["handles_csv"]) as f:
+        f.write(buf.getvalue())
+    _write_dmat(folder / CASE_FILES["handles_dmat"], h.reshape(-1, 1))
+    _write_dmat(folder / CASE_FILES["targets_dmat"], T)
+    _write_dmat(folder / CASE_FILES["static_dmat"], static.astype(np.float64).reshape(-1, 1))
+    subject = case.subject if isinstance(case.subject, str) else int(case.subject)
+    pose = case.pose if isinstance(case.pose, str) else int(case.pose)
+    files = {k: f"{folder.name}/{v}" for k, v in CASE_FILES.items()}
+    return {"name": case.name, "subject": subject, "pose": pose, "n_vertices": len(case.V), "n_faces": len(case.F),
+            "n_handles": len(h), "n_static": int(static.sum()), "has_ground_truth": case.V_gt is not None,
+            "files": files, "sha256": {k: file_sha256(folder / v) for k, v in CASE_FILES.items()}}
+
+
+def write_export(out_dir, cases, *, dataset: dict) -> Path:
+    """Write every case of ``cases`` into ``out_dir/<case.name>/`` and the index
+    :data:`INDEX`; returns the index's path.
+
+    Parameters
+    ----------
+    out_dir : str or Path, a folder already claimed for this output (it exists).
+    cases : list of cases (:func:`write_case`), names unique as the evaluator makes them.
+    dataset : what the index says of the data: name, root, options, manifest sha256.
+
+    Raises
+    ------
+    OSError when a file cannot be written.
+    """
+    out = Path(out_dir)
+    entries = [write_case(out / c.name, c) for c in cases]
+    index = {"format": FORMAT, "dataset": dataset, "cases": entries,
+             "results": {"file": "<results>/<name>.obj (or .ply, .off, .stl): the deformed rest mesh, its vertices "
+                                 "in the rest mesh's order; faces, when written, those of the rest mesh",
+                         "times": "optional CSV with columns case,time_s,machine: the method's own seconds per case"}}
+    with atomic_write(out / INDEX) as f:
+        json.dump(index, f, indent=1)
+    return out / INDEX
+
+
+def result_path(results, name: str) -> Path:
+    """The result mesh of case ``name`` in folder ``results``: the one file
+    ``<name>.<ext>`` with ``ext`` in :data:`RESULT_EXTS` (any case of the extension).
+
+    Raises
+    ------
+    SShaDeError when there is none (naming the names looked for) or more than one.
+    """
+    results = Path(results)
+    want = {f"{name}{e}".lower() for e in RESULT_EXTS}
+    try:
+        found = sorted(p for p in os.listdir(results) if p.lower() in want)
+    except OSError as e:
+        raise SShaDeError(f"{results}: cannot list the results folder ({e.strerror or type(e).__name__})") from None
+    if not found:
+        raise SShaDeError(f"no result for case {name}: {results} has no {name}.obj (nor .ply, .off, .stl)")
+    if len(found) > 1:
+        raise SShaDeError(f"two results for case {name} in {results}: {', '.join(found)}; keep one")
+    return results / found[0]
+
+
+def _time(v: str, where: str) -> float:
+    try:
+        t = float(v)
+    except ValueError:
+        raise SShaDeError(f"{where}: time_s {v!r} is not a number") from None
+    if not (math.isfinite(t) and t >= 0):
+        raise SShaDeError(f"{where}: time_s {v!r} must be a finite number of seconds >= 0")
+    return t
+
+
+def read_times(path) -> dict[str, tuple[float, str]]:
+    """The times a method reported for its cases: a CSV with a header line naming the
+    columns ``case`` and ``time_s`` (seconds, >= 0) and optionally ``machine`` (text).
+
+    Returns
+    -------
+    dict: case name -> ``(time_s, machine)`` (machine ``""`` when not given).
+
+    Raises
+    ------
+    SShaDeError naming the file and line: unreadable, larger than
+    :data:`MAX_TIMES_BYTES`, no ``case``/``time_s`` column, a time that is not a finite
+    number >= 0, a case listed twice.
+    """
+    p = Path(path)
+    try:
+        if p.stat().st_size > MAX_TIMES_BYTES:
+            raise SShaDeError(f"{p}: a times file of {p.stat().st_size} bytes is refused (at most {MAX_TIMES_BYTES})")
+        text = p.read_bytes().decode("utf-8-sig")
+    except OSError as e:
+        raise SShaDeError(f"{p}: unreadable times file ({e.strerror or type(e).__name__})") from None
+    except UnicodeDecodeError as e:
+        raise SShaDeError(f"{p}: not a UTF-8 text file (byte {e.start})") from None
+    rows = list(csv.reader(io.StringIO(text)))
+    head = [c.strip().lower() for c in rows[0]] if rows else []
+    if "case" not in head or "time_s" not in head:
+        raise SShaDeError(f"{p}, line 1: the header must name the columns case,time_s[,machine], got {head}")
+    ic, it = head.index("case"), head.index("time_s")
+    im = head.index("machine") if "machine" in head else None
+    out: dict = {}
+    for i, r in enumerate(rows[1:], start=2):
+        if not any(c.strip() for c in r):
+            continue
+        if len(r) != len(head):
+            raise SShaDeError(f"{p}, line {i}: {len(r)} cells, the header has {len(head)}")
+        name = r[ic].strip()
+        if name in out:
+            raise SShaDeError(f"{p}, line {i}: case {name!r} listed twice")
+        out[name] = (_time(r[it].strip(), f"{p}, line {i}"), " ".join(r[im].split())[:200] if im is not None else "")
+    return out
