@@ -4,7 +4,8 @@ SShaDe prepared once (:func:`sshade.prepared.prepare`) and solved per frame.
 Usage::
 
     python -m sshade animate MESH (--sel F.sel | --dmat F.dmat | --handles F.json|F.csv)
-        --frames FRAMES.npy -o OUT [--n-low N] [--k K] [--seed S] [--force]
+        --frames FRAMES.npy -o OUT.npz|OUT.glb|FOLDER [--format obj|off|ply] [--fps FPS]
+        [--n-low N] [--k K] [--seed S] [--force]
 
 - ``FRAMES.npy``: either (f, h, 3) float targets, one row per handle in the order of the
   handle selection (``--sel``/``--dmat``: the selected vertices in increasing order,
@@ -12,13 +13,18 @@ Usage::
   or, with ``--sel``/``--dmat``, (f, 4, 4) affine matrices moving the handle region of each
   frame (fixed vertices stay), as a ``.def`` file moves it once.
 - ``OUT``: a ``.npz`` file with ``V`` (f, n, 3) float64, ``F`` (m, 3) int64,
-  ``frame_s`` (f,) the seconds of each frame's solve, ``complete`` (bool) and
-  ``n_frames_planned``; or a folder receiving ``frame_0000.obj`` ... (``--format
-  obj|off|ply``), one mesh per frame. A folder must be new, empty, or hold only frame
-  files that sshade wrote (then they are replaced, with a ``replacing`` line); an
-  ``OUT.npz`` must be new or an earlier animation's (``--force``: any file). Checked before
-  any work; every file is written atomically, each frame as soon as it is solved; a run
-  stopped after k frames leaves frames 0..k-1, marked incomplete (:func:`animate_file`).
+  ``frame_s`` (f,) the seconds of each frame's solve, ``complete`` (bool),
+  ``n_frames_planned`` and ``fps`` (the playback rate, ``--fps``); or a ``.glb`` (glTF 2.0
+  binary, :class:`sshade.mesh.gltf.GlbAnimationWriter`): the rest mesh as the base
+  positions, one morph target per frame (float32 displacements from the rest mesh), one
+  animation whose weights channel plays them, LINEAR, keyframe i at ``i / fps`` seconds,
+  the fields of the ``.npz`` but ``V`` and ``F`` in ``asset.extras``; or a folder receiving
+  ``frame_0000.obj`` ... (``--format obj|off|ply``), one mesh per frame. A folder must be
+  new, empty, or hold only frame files that sshade wrote (then they are replaced, with a
+  ``replacing`` line); an ``OUT.npz`` / ``OUT.glb`` must be new or an earlier animation's
+  (``--force``: any file); a ``.glb`` holds at most 65,535 frames and 4 GiB. Checked
+  before any work; every file is written atomically, each frame as soon as it is solved; a
+  run stopped after k frames leaves frames 0..k-1, marked incomplete (:func:`animate_file`).
 
 Prints the prepare time and the per-frame median and range on stdout; a progress bar on
 stderr when it is a terminal. Exit status 0, or 2 after one ``error:`` line.
@@ -38,15 +44,21 @@ from tqdm import tqdm
 
 from .clirun import ArgumentParser, run_command
 from .errors import SShaDeError
+from .mesh.gltf import GlbAnimationWriter, check_glb_output, glb_extras
 from .mesh.handle_files import apply_def, check_affine, read_moving_handles
 from .mesh.io import atomic_write, read_mesh, write_mesh, written_by_sshade
+from .mesh.validate import check_faces
 from .prepared import prepare
 
-__all__ = ["build_parser", "animate_file", "NPZ_KEY"]
+__all__ = ["build_parser", "animate_file", "read_animation_npz", "NPZ_KEY", "DEFAULT_FPS"]
 
-#: The key of an animation ``.npz`` that marks it as one (with ``V``, ``F``, ``frame_s``).
+#: The key of an animation ``.npz`` that marks it as one (with ``V``, ``F``, ``frame_s``),
+#: and of a ``.glb``'s ``asset.extras``.
 NPZ_KEY = "sshade_animation"
 FORMATS = ("obj", "off", "ply")
+#: Frames per second of an animation's playback when ``--fps`` is not given (and of an
+#: ``.npz`` written before it stored ``fps``).
+DEFAULT_FPS = 24.0
 
 
 def build_parser() -> ArgumentParser:
@@ -59,27 +71,33 @@ def build_parser() -> ArgumentParser:
     g.add_argument("--dmat", help="libigl .dmat selection: -1 free, 0 fixed, >= 1 handle")
     g.add_argument("--handles", help=".json or .csv of handle indices (their targets there are not used)")
     p.add_argument("--frames", required=True, help=".npy of (f, h, 3) targets or (f, 4, 4) matrices")
-    p.add_argument("-o", "--out", required=True, help="OUT.npz, or a folder for one mesh per frame")
+    p.add_argument("-o", "--out", required=True,
+                   help="OUT.npz, OUT.glb (glTF 2.0, morph targets), or a folder for one mesh per frame")
     p.add_argument("--format", default="obj", choices=FORMATS, help="mesh format of a folder OUT (default obj)")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS,
+                   help=f"frames per second: a .glb's keyframe times, an .npz's playback rate "
+                        f"(default {DEFAULT_FPS:g})")
     p.add_argument("--n-low", default="auto", help="SShaDe's low-resolution vertex count (int or auto)")
     p.add_argument("--k", type=int, default=5, help="SShaDe's number of samplings (default 5)")
     p.add_argument("--seed", type=int, default=0, help="SShaDe's seed (default 0)")
-    p.add_argument("--force", action="store_true", help="replace an OUT.npz that sshade did not write")
+    p.add_argument("--force", action="store_true", help="replace an OUT.npz or OUT.glb that sshade did not write")
     return p
 
 
 def _check_out(a) -> None:
     """The output checks of the module docstring, before any work."""
     out = Path(a.out)
-    if out.suffix.lower() == ".npz":
+    if not (np.isfinite(a.fps) and a.fps > 0):
+        raise SShaDeError(f"--fps must be a positive number, got {a.fps}")
+    if out.suffix.lower() in (".npz", ".glb"):
         if out.is_dir():
-            raise SShaDeError(f"output {out} is a folder; an .npz output is a file")
+            raise SShaDeError(f"output {out} is a folder; an {out.suffix.lower()} output is a file")
         if out.exists() and not a.force and not _is_animation(out):
             raise SShaDeError(f"output {out} exists and is not an animation sshade wrote; choose another -o path "
                               "(or pass --force to replace it)")
         folder = out.parent
     elif out.exists() and not out.is_dir():
-        raise SShaDeError(f"output {out} is a file; give a folder (or an .npz path)")
+        raise SShaDeError(f"output {out} is a file; give a folder (or an .npz or .glb path)")
     else:
         foreign = [q.name for q in out.iterdir() if not (q.name.startswith("frame_") and written_by_sshade(q))] \
             if out.is_dir() else []
@@ -92,11 +110,47 @@ def _check_out(a) -> None:
 
 
 def _is_animation(path: Path) -> bool:
+    if path.suffix.lower() == ".glb":
+        return NPZ_KEY in (glb_extras(path) or {})
     try:
         with np.load(path, allow_pickle=False) as z:
             return NPZ_KEY in z.files
-    except (OSError, ValueError):
+    except (OSError, ValueError, EOFError):
         return False
+
+
+def read_animation_npz(path) -> tuple[np.ndarray, np.ndarray, float]:
+    """The frames of an ``.npz`` that :func:`animate_file` wrote.
+
+    Returns
+    -------
+    V : (f, n, 3) float64, the frames (held in memory: 24 f n bytes). F : (m, 3) int64.
+    fps : float, the playback rate it stores (:data:`DEFAULT_FPS` when it has none).
+
+    Raises
+    ------
+    SShaDeError naming the file and the array: not a readable ``.npz``, not an animation
+    (no ``sshade_animation`` mark), shapes, face indices out of range, a frame with NaN or
+    inf (the first one named), a bad ``fps``.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if NPZ_KEY not in z.files:
+                raise SShaDeError(f"{path}: not an animation of python -m sshade animate (no {NPZ_KEY!r} array; "
+                                  f"it holds {', '.join(z.files[:5]) or 'nothing'})")
+            V, F = z["V"], z["F"]
+            fps = float(z["fps"]) if "fps" in z.files else DEFAULT_FPS
+    except (OSError, ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile) as e:
+        raise SShaDeError(f"{path}: not a readable animation .npz ({type(e).__name__}: {e})") from None
+    if V.ndim != 3 or V.shape[0] == 0 or V.shape[2] != 3 or V.dtype.kind != "f":
+        raise SShaDeError(f"{path}: V: expected (f, n, 3) floats, got {V.shape} of {V.dtype}")
+    F = check_faces(F, V.shape[1], name=f"{path}: F")
+    bad = np.flatnonzero(~np.isfinite(V).all(axis=(1, 2)))
+    if len(bad):
+        raise SShaDeError(f"{path}: V: frame {bad[0]} holds NaN or inf ({len(bad)} such frame(s))")
+    if not (np.isfinite(fps) and fps > 0):
+        raise SShaDeError(f"{path}: fps: expected a positive number, got {fps}")
+    return V, F, fps
 
 
 def _frames(a, V) -> tuple[np.ndarray, np.ndarray]:
@@ -157,11 +211,13 @@ def animate_file(a, log=print) -> dict:
     _check_out(a)
     V, F = read_mesh(a.mesh, validate=False)  # prepare validates it
     handles, T = _frames(a, V)
+    if Path(a.out).suffix.lower() == ".glb":
+        check_glb_output(a.out, len(V), len(F), len(T))
     t0 = time.perf_counter()
     frame_s = np.empty(len(T))
     with prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed) as prepared:  # n_low checked there
         prepare_s = time.perf_counter() - t0
-        with _FrameSink(a, prepared.F, len(T), len(V), log) as sink:
+        with _FrameSink(a.out, a.format, prepared.F, len(T), len(V), log, rest=prepared.V, fps=a.fps) as sink:
             for i in tqdm(range(len(T)), desc="sshade animate", unit="frame", file=sys.stderr, disable=None):
                 t = time.perf_counter()
                 U = prepared.solve(T[i])
@@ -174,20 +230,34 @@ def animate_file(a, log=print) -> dict:
 
 
 class _FrameSink:
-    """The frames into ``a.out`` (module docstring) as they are solved; a context manager
+    """The frames into ``out`` (module docstring) as they are solved; a context manager
     that finishes the output on leaving, marked incomplete when left by an exception
     after at least one frame (and says so on stderr), removed when no frame was done.
 
     An ``.npz``: frames appended to a temporary file beside it, packed at the end into
     the ``.npz`` (``V`` streamed in 1 MiB blocks, never held whole) written atomically.
-    A folder: ``frame_0000.<format>`` ... each written atomically as its frame ends; an
-    earlier animation's frames there are removed first, with a ``replacing`` line."""
+    A ``.glb``: the same through :class:`~sshade.mesh.gltf.GlbAnimationWriter` (base: the
+    rest positions ``rest``, keyframes every ``1 / fps`` s). A folder: ``frame_0000.<fmt>``
+    ... each written atomically as its frame ends; an earlier animation's frames there are
+    removed first, with a ``replacing`` line.
 
-    def __init__(self, a, F: np.ndarray, n_frames: int, n: int, log):
-        self.path, self.fmt, self.F, self.n_frames, self.n = Path(a.out), a.format, F, n_frames, n
+    Parameters
+    ----------
+    out : the output path. fmt : a folder's mesh format. F : (m, 3) int faces.
+    n_frames : the frames planned. n : vertices per frame. log : the stdout printer.
+    rest : (n, 3) float, the rest positions (a ``.glb``'s base; needed for one).
+    fps : float > 0, frames per second (stored in an ``.npz``, a ``.glb``'s keyframes).
+    """
+
+    def __init__(self, out, fmt: str, F: np.ndarray, n_frames: int, n: int, log, *, rest=None,
+                 fps: float = DEFAULT_FPS):
+        self.path, self.fmt, self.F, self.n_frames, self.n, self.fps = Path(out), fmt, F, n_frames, n, float(fps)
         self.frame_s: list = []
-        self.npz = self.path.suffix.lower() == ".npz"
-        if self.npz:
+        self.kind = self.path.suffix.lower() if self.path.suffix.lower() in (".npz", ".glb") else "folder"
+        if self.kind == ".glb":
+            self.glb = GlbAnimationWriter(self.path, rest, F, fps=self.fps)
+            return
+        if self.kind == ".npz":
             fd, self.tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".frames", dir=self.path.parent)
             self.fh = os.fdopen(fd, "wb")
             return
@@ -200,7 +270,9 @@ class _FrameSink:
 
     def add(self, U: np.ndarray, seconds: float) -> None:
         """Frame ``len(frame_s)``: (n, 3) float64 positions, solved in ``seconds``."""
-        if self.npz:
+        if self.kind == ".glb":
+            self.glb.add(U)
+        elif self.kind == ".npz":
             np.ascontiguousarray(U, "<f8").tofile(self.fh)
         else:
             write_mesh(self.path / f"frame_{len(self.frame_s):04d}.{self.fmt}", U, self.F)
@@ -212,24 +284,31 @@ class _FrameSink:
     def __exit__(self, kind, exc, tb) -> bool:
         k, complete = len(self.frame_s), kind is None
         try:
-            if self.npz:
+            if self.kind == ".glb" and k:
+                self.glb.finish({NPZ_KEY: 1, "complete": complete, "n_frames_planned": self.n_frames,
+                                 "frame_s": self.frame_s, "fps": self.fps, "base": "the rest mesh"})
+            elif self.kind == ".npz":
                 self.fh.close()
                 if k:
                     self._pack(complete)
         finally:
-            if self.npz:
+            if self.kind == ".glb":
+                self.glb.close()
+            elif self.kind == ".npz":
                 Path(self.tmp).unlink(missing_ok=True)
         if k and not complete:
+            mark = {".npz": " (its .npz says complete=False)", ".glb": " (its .glb says complete: false in "
+                    "asset.extras)"}.get(self.kind, "")
             print(f"{self.path}: {k} of {self.n_frames} frames written (frames 0-{k - 1}, whole), the animation "
-                  "stopped there" + (" (its .npz says complete=False)" if self.npz else ""), file=sys.stderr)
+                  "stopped there" + mark, file=sys.stderr)
         return False
 
     def _pack(self, complete: bool) -> None:
         """The ``.npz``: ``V`` (k, n, 3) copied from the temporary file, ``F``, ``frame_s``,
-        ``complete``, ``n_frames_planned`` and the :data:`NPZ_KEY` mark."""
+        ``complete``, ``n_frames_planned``, ``fps`` and the :data:`NPZ_KEY` mark."""
         k = len(self.frame_s)
         small = {"F": np.asarray(self.F, np.int64), "frame_s": np.array(self.frame_s), "complete": np.array(complete),
-                 "n_frames_planned": np.array(self.n_frames), NPZ_KEY: np.array(1)}
+                 "n_frames_planned": np.array(self.n_frames), "fps": np.array(self.fps), NPZ_KEY: np.array(1)}
         with atomic_write(self.path, "wb") as out, zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as z:
             with z.open("V.npy", "w", force_zip64=True) as m, open(self.tmp, "rb") as src:
                 np.lib.format.write_array_header_1_0(m, {"descr": "<f8", "fortran_order": False,

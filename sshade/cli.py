@@ -344,8 +344,10 @@ def main(argv=None) -> int:
         print("usage: python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def | "
               "--handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE] "
               "[--repair]\n       python -m sshade animate MESH (--sel F.sel | --dmat F.dmat | --handles F.json) "
-              "--frames FRAMES.npy -o OUT\n       python -m sshade view MESH (--sel F.sel | --dmat F.dmat | --handles "
-              "F.json)\n       python -m sshade warmup\n"
+              "--frames FRAMES.npy -o OUT.npz|OUT.glb|FOLDER [--fps FPS]\n"
+              "       python -m sshade view MESH (--sel F.sel | --dmat F.dmat | --handles F.json)\n"
+              "       python -m sshade view ANIMATION.npz|ANIMATION.glb\n"
+              "       python -m sshade warmup\n"
               "(python -m sshade deform|animate|view|warmup --help for details)",
               file=sys.stderr if not argv else sys.stdout)
         return 2 if not argv else 0

@@ -1,32 +1,46 @@
 """``python -m sshade view``: drag a mesh's handle region with a transformation gizmo in
 polyscope and see SShaDe's result on every change (prepared once, solved per change:
-:func:`sshade.prepared.prepare`). polyscope is the optional ``[view]`` extra.
+:func:`sshade.prepared.prepare`), or play an animation that ``python -m sshade animate``
+wrote. polyscope is the optional ``[view]`` extra.
 
 Usage::
 
     python -m sshade view MESH (--sel F.sel | --dmat F.dmat | --handles F.json|F.csv)
         [--n-low N] [--k K] [--seed S]
+    python -m sshade view ANIMATION.npz|ANIMATION.glb [--fps FPS]
 
 With a selection (``.sel``/``.dmat``) the gizmo moves the handle vertices (status 2) and
 the fixed ones stay; with ``--handles`` it moves every listed handle (their stored targets
 are not used). The gizmo starts at the moved vertices' centroid, so it turns them about it.
-Each change re-solves; the window shows the last solve's time. Nothing is written (no
-polyscope preference files). Exit status 0 when the window is closed, 2 after one
-``error:`` line (no polyscope, bad input).
+Each change re-solves; the window shows the last solve's time.
+
+An animation (:class:`Player`) opens on its first frame with a frame slider and a
+play/pause button; playing loops through the frames at their keyframe times (a ``.glb``'s,
+or ``1 / fps`` apart: the ``.npz``'s stored ``fps``), or at ``--fps``.
+
+Nothing is written (no polyscope preference files). Exit status 0 when the window is
+closed, 2 after one ``error:`` line (no polyscope, bad input: a file that is not such an
+animation is named with the place of its fault).
 """
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
+from .animate import DEFAULT_FPS, read_animation_npz
 from .clirun import ArgumentParser, run_command
 from .errors import SShaDeError
+from .mesh.gltf import read_glb_animation
 from .mesh.handle_files import apply_def, read_moving_handles
 from .mesh.io import read_mesh
 from .prepared import prepare
 
-__all__ = ["Viewer", "build_parser", "main"]
+__all__ = ["Viewer", "Player", "build_parser", "open_viewer", "open_player", "read_animation", "main"]
+
+#: The suffixes of an animation (``python -m sshade animate``'s outputs) to play.
+ANIMATIONS = (".npz", ".glb")
 
 
 def _polyscope():
@@ -100,10 +114,100 @@ class Viewer:
                                   f"last solve {1000 * self.frame_s:.0f} ms ({self.solves} solves)")
 
 
+class Player:
+    """The state behind an animation's window: the frames, the one shown, play/pause.
+
+    Parameters
+    ----------
+    ps : the polyscope module (initialised). frame : callable, ``frame(i)`` -> (n, 3) float
+    positions of frame i. F : (m, 3) int64. times : (f,) float64 seconds of the frames,
+    increasing. clock : callable -> seconds (default ``time.monotonic``).
+
+    Attributes
+    ----------
+    mesh : the registered polyscope surface mesh ("animation"). shown : int, the frame on
+    it. playing : bool.
+    """
+
+    def __init__(self, ps, frame, F, times, clock=time.monotonic):
+        self.ps, self.frame, self.times, self.clock = ps, frame, np.asarray(times, np.float64), clock
+        self.mesh = ps.register_surface_mesh("animation", frame(0), F)
+        self.shown, self.playing, self.start = 0, False, 0.0
+        step = float(np.median(np.diff(self.times))) if len(self.times) > 1 else 1.0
+        self.period = float(self.times[-1] - self.times[0]) + step  # a loop: the last frame is shown for a step
+
+    def show(self, i: int) -> None:
+        """Put frame ``i`` (clipped to the frames) on the mesh."""
+        i = int(np.clip(i, 0, len(self.times) - 1))
+        if i != self.shown:
+            self.mesh.update_vertex_positions(self.frame(i))
+            self.shown = i
+
+    def play(self, on: bool) -> None:
+        """Start (from the shown frame) or stop playing."""
+        self.playing = bool(on) and len(self.times) > 1
+        self.start = self.clock() - (self.times[self.shown] - self.times[0])
+
+    def tick(self) -> None:
+        """While playing, show the frame whose time has come (looping)."""
+        if self.playing:
+            t = self.times[0] + (self.clock() - self.start) % self.period
+            self.show(int(np.searchsorted(self.times, t, side="right")) - 1)
+
+    def callback(self) -> None:
+        """polyscope's per-frame user callback: the frame slider, the play/pause button,
+        :meth:`tick`, the shown frame's time."""
+        imgui = self.ps.imgui
+        changed, i = imgui.SliderInt("frame", self.shown, 0, len(self.times) - 1)
+        if changed:
+            self.show(i)
+            if self.playing:
+                self.play(True)  # go on from the frame chosen
+        if imgui.Button("pause" if self.playing else "play"):
+            self.play(not self.playing)
+        self.tick()
+        imgui.TextUnformatted(f"frame {self.shown} of 0-{len(self.times) - 1}, {self.times[self.shown]:.3f} s")
+
+
+def read_animation(path, fps: float | None = None) -> tuple:
+    """(frame, F, times) of an animation file for :class:`Player`: ``frame(i)`` -> (n, 3)
+    positions, F (m, 3) int64, times (f,) float64 seconds (``i / fps`` with ``fps`` given;
+    else the ``.glb``'s keyframe times or the ``.npz``'s ``fps``). Memory: an ``.npz``'s
+    frames are read whole ((f, n, 3) float64); a ``.glb`` is memory-mapped, each frame made
+    when shown. Raises SShaDeError naming the file and the place on a bad file."""
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise SShaDeError(f"--fps must be a positive number, got {fps}")
+    if Path(path).suffix.lower() == ".npz":
+        V, F, stored = read_animation_npz(path)
+        return V.__getitem__, F, np.arange(len(V)) / (fps or stored)
+    anim = read_glb_animation(path)
+    times = anim.times
+    if fps is not None or times is None:
+        rate = anim.extras.get("fps", DEFAULT_FPS)
+        rate = fps or (rate if isinstance(rate, (int, float)) and np.isfinite(rate) and rate > 0 else DEFAULT_FPS)
+        times = np.arange(anim.n_frames) / rate
+    return anim.frame, anim.F, times
+
+
+def open_player(a, ps, backend: str | None = None, clock=time.monotonic) -> Player:
+    """Read the animation of arguments ``a`` (:func:`read_animation`), initialise ``ps``
+    (``backend`` as in :func:`open_viewer`) and return the :class:`Player`, its callback
+    installed. Raises SShaDeError on bad input (before ``ps`` is initialised)."""
+    if a.sel or a.dmat or a.handles:
+        raise SShaDeError(f"{a.mesh} is an animation, played as it is; --sel, --dmat and --handles are for a mesh")
+    frame, F, times = read_animation(a.mesh, a.fps)
+    ps.set_use_prefs_file(False)  # no .polyscope.ini / imgui.ini in the user's folder
+    ps.init(backend) if backend else ps.init()
+    player = Player(ps, frame, F, times, clock)
+    ps.set_user_callback(player.callback)
+    return player
+
+
 def build_parser() -> ArgumentParser:
     """The argument parser of ``python -m sshade view`` (module docstring)."""
-    p = ArgumentParser(prog="python -m sshade view", description="Drag handles and see SShaDe's result.")
-    p.add_argument("mesh", help="input mesh (.obj, .off, .ply)")
+    p = ArgumentParser(prog="python -m sshade view",
+                       description="Drag handles and see SShaDe's result, or play an animation of sshade animate.")
+    p.add_argument("mesh", help="input mesh (.obj, .off, .ply), or an animation to play (.npz, .glb of sshade animate)")
     g = p.add_argument_group("handles (one of)")
     g.add_argument("--sel", help="deformation-benchmark selection: 0 fixed, 1 free, 2 handle (moved)")
     g.add_argument("--dmat", help="libigl .dmat selection: -1 free, 0 fixed, >= 1 handle (moved)")
@@ -111,6 +215,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--n-low", default="auto", help="SShaDe's low-resolution vertex count (int or auto)")
     p.add_argument("--k", type=int, default=5, help="SShaDe's number of samplings (default 5)")
     p.add_argument("--seed", type=int, default=0, help="SShaDe's seed (default 0)")
+    p.add_argument("--fps", type=float, default=None,
+                   help="an animation's frames per second (default: the file's keyframe times or fps)")
     return p
 
 
@@ -139,6 +245,10 @@ def main(argv: list[str]) -> int:
 
     def run():
         ps = _polyscope()
+        if Path(a.mesh).suffix.lower() in ANIMATIONS:
+            open_player(a, ps)
+            ps.show()
+            return 0
         viewer = open_viewer(a, ps)
         try:
             ps.show()

@@ -1,6 +1,6 @@
 """sshade/animate.py (``python -m sshade animate``): frames from targets or matrices, as
-the prepared solves give them, into an .npz or one mesh per frame; outputs it did not write
-are refused before any work, with one error line."""
+the prepared solves give them, into an .npz, a .glb (glTF morph targets) or one mesh per
+frame; outputs it did not write are refused before any work, with one error line."""
 from __future__ import annotations
 
 import json
@@ -11,13 +11,16 @@ import pytest
 from sshade import prepare
 from sshade.animate import NPZ_KEY
 from sshade.cli import main
+from sshade.mesh.gltf import glb_extras, read_glb_animation
 from sshade.mesh.handle_files import write_sel
 from sshade.mesh.io import read_mesh
 
 from .conftest import SHARED_DATA
+from .optional import optional_import
 
 MESH = SHARED_DATA / "faust_reg" / "tr_reg_000.ply"
 KW = ["--n-low", "300", "--k", "2", "--seed", "3"]
+EPS32 = float(np.finfo(np.float32).eps)
 
 
 @pytest.fixture(scope="module")
@@ -119,7 +122,7 @@ def test_an_npz_given_as_frames_is_named_as_an_archive_with_its_arrays(body, tmp
     assert len(err) == 1 and "an .npz archive (arrays targets, extra); --frames takes one .npy" in err[0]
 
 
-@pytest.mark.parametrize("out", ["a.npz", "folder"])
+@pytest.mark.parametrize("out", ["a.npz", "a.glb", "folder"])
 def test_an_interrupted_animation_keeps_its_solved_frames_whole_and_says_so(body, tmp_path, capsys, monkeypatch, out):
     from sshade.prepared import Prepared
     V, F, h, V2 = body
@@ -142,6 +145,11 @@ def test_an_interrupted_animation_keeps_its_solved_frames_whole_and_says_so(body
         z = np.load(tmp_path / out)
         assert z["V"].shape == (2, len(V), 3) and not z["complete"] and int(z["n_frames_planned"]) == 4
         assert len(z["frame_s"]) == 2 and all(np.array_equal(z["V"][i], expect[i]) for i in range(2))
+    elif out == "a.glb":
+        g = read_glb_animation(tmp_path / out)
+        assert g.n_frames == 2 and len(g.targets) == 2 and g.extras["complete"] is False
+        assert g.extras["n_frames_planned"] == 4 and len(g.extras["frame_s"]) == 2
+        assert all(np.abs(g.frame(i) - expect[i]).max() <= 2 * EPS32 * np.abs(V).max() for i in range(2))
     else:
         files = sorted(q.name for q in (tmp_path / out).iterdir())
         assert files == ["frame_0000.obj", "frame_0001.obj"]
@@ -149,26 +157,31 @@ def test_an_interrupted_animation_keeps_its_solved_frames_whole_and_says_so(body
     assert not [q for q in tmp_path.iterdir() if q.name.startswith(".")]  # no temporary file left
 
 
-def test_frames_stream_to_the_npz_without_holding_the_animation(tmp_path):
+@pytest.mark.parametrize("out", ["a.npz", "a.glb"])
+def test_frames_stream_to_the_file_without_holding_the_animation(tmp_path, out):
     """200 frames of 10,000 vertices (48 MB): the sink's peak allocation is its 1 MiB copy
     block and a frame or two, not the animation (before: the whole (f, n, 3) array, copied
     again to be written)."""
     import tracemalloc
-    from types import SimpleNamespace
 
     from sshade.animate import _FrameSink
     n, f = 10_000, 200
     F = np.array([[0, 1, 2]])
     frame = np.random.default_rng(0).normal(size=(n, 3))
     tracemalloc.start()
-    with _FrameSink(SimpleNamespace(out=str(tmp_path / "a.npz"), format="obj"), F, f, n, print) as sink:
+    with _FrameSink(tmp_path / out, "obj", F, f, n, print, rest=frame) as sink:
         for i in range(f):
             sink.add(frame + i, 0.01)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert peak < 3 * 2 ** 20 < f * frame.nbytes / 8
-    z = np.load(tmp_path / "a.npz")
-    assert z["V"].shape == (f, n, 3) and bool(z["complete"]) and np.array_equal(z["V"][57], frame + 57)
+    if out == "a.npz":
+        z = np.load(tmp_path / out)
+        assert z["V"].shape == (f, n, 3) and bool(z["complete"]) and np.array_equal(z["V"][57], frame + 57)
+    else:
+        g = read_glb_animation(tmp_path / out)
+        assert g.n_frames == f and g.extras["complete"] is True
+        assert np.abs(g.frame(57) - (frame + 57)).max() <= 2 * EPS32 * np.abs(frame + 57).max()
 
 
 def test_replacing_an_earlier_animations_frames_says_so(body, tmp_path, capsys):
@@ -180,3 +193,49 @@ def test_replacing_an_earlier_animations_frames_says_so(body, tmp_path, capsys):
     assert main(["animate", *args, "-o", str(tmp_path / "out")]) == 0
     assert "replacing 3 frame file(s) of an earlier animation" in capsys.readouterr().out
     assert sorted(q.name for q in (tmp_path / "out").iterdir()) == ["frame_0000.obj", "frame_0001.obj"]
+
+
+def test_a_glb_holds_the_npz_frames_to_float32_precision_and_is_replaced_only_when_sshade_wrote_it(
+        body, tmp_path, capsys):
+    trimesh = optional_import("trimesh", how="a dependency: pip install -e .")
+    V, F, h, V2 = body
+    T = np.stack([V[h] + t * (V2[h] - V[h]) for t in (0.0, 0.5, 1.0)])
+    args = _args(tmp_path, V, h, T)
+    assert main(["animate", *args, "-o", str(tmp_path / "a.npz"), "--fps", "30"]) == 0
+    assert main(["animate", *args, "-o", str(tmp_path / "a.glb"), "--fps", "30"]) == 0
+    z, g = np.load(tmp_path / "a.npz"), read_glb_animation(tmp_path / "a.glb")
+    assert float(z["fps"]) == 30.0 and np.array_equal(g.F, z["F"])
+    assert np.array_equal(g.base, V.astype(np.float32))  # the base positions: the rest mesh
+    for i in range(3):
+        assert np.abs(g.frame(i) - z["V"][i]).max() <= 2 * EPS32 * np.abs(z["V"][i]).max()
+    assert np.allclose(g.times, np.arange(3) / 30.0, rtol=1e-7, atol=0)
+    ex = glb_extras(tmp_path / "a.glb")
+    assert ex[NPZ_KEY] == 1 and ex["complete"] is True and ex["n_frames_planned"] == 3 and ex["fps"] == 30.0
+    assert main(["animate", *args, "-o", str(tmp_path / "a.glb")]) == 0  # its own earlier output: replaced
+    capsys.readouterr()
+    trimesh.Trimesh(V, F, process=False).export(tmp_path / "other.glb")  # a .glb sshade did not write
+    before = (tmp_path / "other.glb").read_bytes()
+    assert main(["animate", *args, "-o", str(tmp_path / "other.glb")]) == 2
+    err = _lines(capsys)
+    assert len(err) == 1 and "other.glb exists and is not an animation sshade wrote" in err[0]
+    assert (tmp_path / "other.glb").read_bytes() == before
+    assert main(["animate", *args, "-o", str(tmp_path / "other.glb"), "--force"]) == 0
+    assert read_glb_animation(tmp_path / "other.glb").n_frames == 3
+
+
+@pytest.mark.parametrize("case", ["no pygltflib", "fps 0", "too many frames"])
+def test_a_glb_that_cannot_be_written_is_one_error_line_before_any_solve(body, tmp_path, capsys, monkeypatch, case):
+    V, F, h, _ = body
+    n, h = (65536 if case == "too many frames" else 2), h[:2]  # two handles: a 3 MB frames file
+    args = _args(tmp_path, V, h, np.broadcast_to(V[h][None], (n, len(h), 3)))
+    if case == "no pygltflib":
+        monkeypatch.setattr("sshade.mesh.gltf.pygltflib", None)
+    monkeypatch.setattr("sshade.animate.prepare", lambda *a, **k: pytest.fail("prepared before the output checked"))
+    extra = ["--fps", "0"] if case == "fps 0" else []
+    assert main(["animate", *args, "-o", str(tmp_path / "x.glb"), *extra]) == 2
+    err = _lines(capsys)
+    says = {"no pygltflib": "needs pygltflib, a dependency of sshade: pip install -e .",
+            "fps 0": "--fps must be a positive number, got 0.0",
+            "too many frames": "x.glb: a .glb holds at most 65535 frames, the frames file has 65536"}[case]
+    assert len(err) == 1 and err[0].startswith("error:") and says in err[0], err
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["frames.npy", "h.json"]

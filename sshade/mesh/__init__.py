@@ -14,6 +14,8 @@ One concept per module (imports only downwards, in this order):
   (``repair_mesh``; pymeshlab imported on use);
 - :mod:`~sshade.mesh.io`: ``read_mesh`` / ``write_mesh`` (OBJ, OFF, PLY; STL read only),
   ``atomic_write``, ``written_by_sshade``;
+- :mod:`~sshade.mesh.gltf`: glTF 2.0 binary (``.glb``) animations, one morph target per
+  frame (pygltflib); not imported here;
 - :mod:`~sshade.mesh.handle_files`: the handle files of ``python -m sshade deform``
   (``.sel`` + ``.def``, ``.dmat``, ``.json``, ``.csv``); not imported here.
 
