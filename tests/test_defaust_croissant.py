@@ -1,6 +1,7 @@
 """defaust.croissant: the builder writes croissant.json beside the manifest; mlcroissant
 (the Croissant reference library; mark ``mlcroissant``, the test skips with one line where
-it cannot be imported) validates it without errors; it is deterministic, names the
+it cannot be imported) validates it without errors and iterates its record sets, whose
+records equal defaust.load's cases and the build's files; it is deterministic, names the
 manifest's sha256, and verify tells one that describes another manifest."""
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import sys
 import pytest
 
 from defaust.croissant import CROISSANT, LICENCES, croissant_metadata, write_croissant
-from defaust.dataset import verify
+from defaust.dataset import load, verify
 from defaust.store import sha256_file
 
 from .conftest import ROOT, subprocess_env
@@ -31,6 +32,55 @@ except (ImportError, OSError) as e:  # installed, but does not load: the test sk
 ds = mlc.Dataset(jsonld=sys.argv[1])  # raises ValidationError on any error
 print(json.dumps({"name": ds.metadata.name, "errors": sorted(map(str, ds.metadata.ctx.issues.errors))}))
 """
+
+
+_RECORDS = """
+import json, sys
+try:
+    import mlcroissant as mlc
+except (ImportError, OSError) as e:
+    print(json.dumps({"import_error": f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]}"}))
+    sys.exit(0)
+ds = mlc.Dataset(jsonld=sys.argv[1])
+def plain(v):
+    return v.item() if hasattr(v, "item") else v.decode() if isinstance(v, bytes) else v
+print(json.dumps({rs: [{k: plain(v) for k, v in r.items()} for r in ds.records(rs)] for rs in ("cases", "files")}))
+"""
+
+
+def _mlcroissant_records(path) -> dict:
+    """``{"cases": [...], "files": [...]}``: the records mlcroissant iterates from the
+    Croissant file ``path`` (in its own process, see ``_VALIDATE``), or skip."""
+    r = subprocess.run([sys.executable, "-c", _RECORDS, str(path)], capture_output=True, text=True, timeout=300,
+                       cwd=ROOT, env=subprocess_env())
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = json.loads(r.stdout.strip().splitlines()[-1])
+    if "import_error" in res:
+        pytest.skip(skip_reason("mlcroissant", res["import_error"]))
+    return res
+
+
+@pytest.mark.mlcroissant
+def test_mlcroissant_records_equal_load(request):
+    locate_or_skip("mlcroissant")
+    defaust_ci = request.getfixturevalue("defaust_ci")
+    rec = _mlcroissant_records(defaust_ci / CROISSANT)
+    cases = load(defaust_ci, resolution="low")
+    assert [r["cases/name"] for r in rec["cases"]] == list(cases.names)
+    for r, c in zip(rec["cases"], cases, strict=True):
+        assert (r["cases/subject"], r["cases/pose"], r["cases/pose_name"], r["cases/handle_seed"]) == \
+            (c.subject, c.pose, c.pose_name, c.seed)
+        assert r["cases/n_handles"] == len(c.handles) + c.n_dropped  # every handle kept at low resolution
+        assert cases[r["cases/item"]] is c
+        assert defaust_ci / r["cases/rest_low"] == c.rest_path
+        for k in ("handles_file", "rest_high", "target_low", "target_high"):
+            assert (defaust_ci / r[f"cases/{k}"]).is_file(), k
+    files = json.loads((defaust_ci / "manifest.json").read_text())["files"]
+    assert [r["files/path"] for r in rec["files"]] == sorted(files)
+    for r in rec["files"]:
+        assert r["files/sha256"] == files[r["files/path"]] == sha256_file(defaust_ci / r["files/path"])
+        assert r["files/subject"] == 0 and r["files/file_set"] in ("rest-meshes", "pose-meshes", "handles")
+    assert sum(r["files/file_set"] == "handles" for r in rec["files"]) == len(cases)
 
 
 @pytest.mark.mlcroissant

@@ -3,7 +3,9 @@ input: a link in the build folder, a handles file with NaN/inf or non-real value
 parameter of ``load``, and an ``.npz`` with an unexpected, missing or oversized array
 (even with its checksum recomputed in the manifest) are each one ``SShaDeError`` line
 naming the file and the place (``error: ...`` and exit 2 on the command line), and an
-oversized array is refused before it is decompressed."""
+oversized array is refused before it is decompressed. ``load`` itself refuses a bad
+parameter and a link; a file's content is refused when its case is first read
+(:func:`_read_every_case`)."""
 from __future__ import annotations
 
 import json
@@ -67,6 +69,12 @@ def _one_line_error(fn, *args, **kw) -> str:
     return msg
 
 
+def _read_every_case(root, **kw) -> list:
+    """``load(root, **kw)``, then every case read (``load`` reads a case's files at its
+    first access)."""
+    return list(load(root, **kw))
+
+
 def _cli(*argv):
     return subprocess.run([sys.executable, "-m", "defaust", *map(str, argv)], capture_output=True, text=True,
                           cwd=ROOT, env=subprocess_env(), timeout=300)
@@ -126,7 +134,7 @@ def test_nonfinite_handle_positions_or_targets_are_refused_naming_file_and_array
         a = z[key].copy()
     a[3, 1] = bad
     f = _edit_handles(c, **{key: a})
-    for msg in (_one_line_error(load_handles, f), _one_line_error(load, c, resolution="low")):
+    for msg in (_one_line_error(load_handles, f), _one_line_error(_read_every_case, c, resolution="low")):
         assert str(f) in msg and repr(key) in msg and "NaN or infinite" in msg
     assert verify(c) == [_one_line_error(load_handles, f)]
 
@@ -147,7 +155,7 @@ def test_non_real_handle_dtypes_are_refused_naming_file_and_array(defaust_ci, tm
     assert str(f) in msg and repr(key) in msg and ("dtype" in msg or "values other than 0 and 1" in msg)
     problems = verify(c)  # bounded by the manifest's counts: refused by size, or as load_handles says
     assert len(problems) == 1 and str(f) in problems[0] and repr(key) in problems[0], problems
-    assert _one_line_error(load, c, resolution="low").startswith(f"{f}: array {key!r}")
+    assert _one_line_error(_read_every_case, c, resolution="low").startswith(f"{f}: array {key!r}")
 
 
 def test_describe_and_export_of_a_nan_target_are_one_error_line_and_exit_2(defaust_ci, tmp_path):
@@ -221,7 +229,7 @@ def test_an_unexpected_array_is_refused_without_decompressing_it(defaust_ci, tmp
     _add_zero_member(f, "extra")
     _reseal(c, H01)
     assert f.stat().st_size < 1 << 20  # 50 MiB of zeros, compressed
-    msg, peak = _peak_of(load, c, resolution="low", limit=1)
+    msg, peak = _peak_of(_read_every_case, c, resolution="low", limit=1)
     assert str(f) in msg and "unexpected array 'extra'" in msg
     assert peak < 10 << 20, peak  # the member is 50 MiB: it was never decompressed
     assert verify(c) == [msg]
@@ -238,7 +246,7 @@ def test_an_oversized_expected_array_is_refused_before_decompressing(defaust_ci,
     write_npz(f, d)
     _add_zero_member(f, "delta", (50 if counts else 100) << 20)
     _reseal(c, H01)
-    msg, peak = _peak_of(load, c, resolution="low", limit=1) if counts else _peak_of(load_handles, f)
+    msg, peak = _peak_of(_read_every_case, c, resolution="low", limit=1) if counts else _peak_of(load_handles, f)
     assert str(f) in msg and "array 'delta'" in msg and "bytes uncompressed" in msg
     assert peak < 10 << 20, peak
 
@@ -246,7 +254,7 @@ def test_an_oversized_expected_array_is_refused_before_decompressing(defaust_ci,
 def test_a_missing_array_is_refused_naming_it(defaust_ci, tmp_path):
     c = _copy(defaust_ci, tmp_path)
     f = _edit_handles(c, drop=("group_static",))
-    msg = _one_line_error(load, c, resolution="low")
+    msg = _one_line_error(_read_every_case, c, resolution="low")
     assert str(f) in msg and "missing array 'group_static'" in msg
     assert verify(c) == [msg]
 
@@ -257,7 +265,7 @@ def test_a_handle_count_other_than_the_manifests_is_refused(defaust_ci, tmp_path
         d = {k: z[k] for k in z.files}
     f = _edit_handles(c, **{k: d[k][:-1] for k in ("rest_positions", "target_positions", "static", "group",
                                                     "low_index")})
-    msg = _one_line_error(load, c, resolution="low")
+    msg = _one_line_error(_read_every_case, c, resolution="low")
     assert str(f) in msg and "179 handles, expected 180" in msg
     assert len(load_handles(f)) == 179  # without the manifest's count: a consistent file
 
