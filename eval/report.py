@@ -53,7 +53,7 @@ from pathlib import Path
 from eval.present.breakdown import BREAKDOWN_METRICS
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
-from eval.present.table_text import REPORTED_NOTE
+from eval.present.table_text import time_notes
 from eval.run.outdir import (
     REPRODUCE_ENV,
     OutputDirError,
@@ -146,15 +146,13 @@ def _summary_table(summary, table_id: str) -> str:
     rows = []
     for _, r in summary.iterrows():
         cells = [f"<td>{_e(r['method'])}</td>", _cell(int(r["n_cases"])), _cell(int(r.get("n_failed", 0) or 0))]
-        reported = "time_reported" in summary.columns and _positive(r["time_reported"])
-        cells += [_cell(_num(r[c]), d).replace("</td>", " (reported)</td>")
-                  if c == "time_s" and reported and _positive(r[c], zero=True) else _cell(_num(r[c]), d)
+        mark = "".join(f" {m}" for col, m in (("time_reported", "(reported)"), ("time_other_run", "(other run)"))
+                       if col in summary.columns and _positive(r[col]))
+        cells += [_cell(_num(r[c]), d).replace("</td>", f"{mark}</td>")
+                  if c == "time_s" and mark and _positive(r[c], zero=True) else _cell(_num(r[c]), d)
                   for c, _, d in cols]
         rows.append(cells)
-    out = _table(head, rows, table_id)
-    if "time_reported" in summary.columns and any(_positive(v) for v in summary["time_reported"]):
-        out += f'<p class="note">{_e(REPORTED_NOTE)}</p>'
-    return out
+    return _table(head, rows, table_id) + "".join(f'<p class="note">{_e(n)}</p>' for n in time_notes(summary))
 
 
 def _csv_table(path: Path, table_id: str = "") -> str:

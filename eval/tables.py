@@ -49,11 +49,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from eval.present.rows import method_order_key, methods_in, ok_mask
+from eval.present.stops import PROTOCOL_TEXT, stop_lines
 from eval.present.table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
+from eval.run.compared import COMPARED_CSV
 from eval.run.outdir import refuse_results
 from eval.run.row_check import check_rows
 from harness.command import run_command
-from harness.registry import builtin_methods, method_meta, table_order
 from sshade.clirun import ArgumentParser
 from sshade.mesh.io import atomic_write
 
@@ -62,65 +64,16 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "all_note", "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
-           "COMMON_CASES_HEADING", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines"]
+           "COMMON_CASES_HEADING", "compared_lines", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines",
+           "PROTOCOL_TEXT"]
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
-
-#: How a method stopped, per protocol (``protocol`` column of the rows).
-PROTOCOL_TEXT = {
-    "converged": "converged protocol: L-BFGS-accelerated local/global (Laplacian as initial Hessian) until the "
-                 "relative energy decrease and "
-                 "the scale-free gradient norm are both below their thresholds",
-    "paper": "paper protocol (§4.1): libigl local/global until the largest vertex move of one iteration is "
-             "below tol x diagonal, at most 1000 iterations; a stop counts as converged only if the scale-free "
-             "gradient norm is below the converged protocol's gtol, else as stalled",
-    "converged-sr": "converged protocol (ARAP-SR): Gauss-Seidel local step, Anderson-accelerated, until the "
-                    "relative energy decrease and the scale-free gradient norm are both below their thresholds",
-    "move-rule": "move rule (ARAP-SR): Open3D's plain iteration until the largest vertex move of one iteration "
-                 "is below tol x diagonal; converged only if the gradient norm is below gtol, else stalled",
-    "paper-sr": "paper protocol (§4.1, ARAP-SR): Open3D's plain iteration (Jacobi local step) until the relative "
-                "energy change of one iteration is below etol, at most 1000 iterations; converged only if the "
-                "scale-free gradient norm is below gtol too, else stalled",
-}
 
 #: Heading of table.md's second table.
 ALL_CASES_HEADING = "All cases each method ran on"
 #: Heading of table.md's main table when a second table follows and no title is given.
 COMMON_CASES_HEADING = "Cases every method succeeded on"
-
-
-def method_order_key(m: str) -> tuple:
-    """Sort key of a method's rows: its place in :func:`harness.registry.table_order`,
-    any other method after those, by name."""
-    order = table_order()
-    return (order.index(m), "") if m in order else (len(order), m)
-
-
-def _methods(df: pd.DataFrame) -> list:
-    """The frame's methods in table order (ARAP, Elastic, ..., SShaDe, others by name)."""
-    return sorted(df["method"].unique(), key=method_order_key)
-
-
-def ok_mask(df: pd.DataFrame) -> pd.Series:
-    """Which rows are successful runs.
-
-    Parameters
-    ----------
-    df : per-case rows; the ``error`` column (optional) holds the failure message, empty
-        or missing (NaN, e.g. an all-empty column read back from ``cases.csv``) on success.
-
-    Returns
-    -------
-    bool Series aligned with ``df.index``; all True without an ``error`` column.
-    (No ``fillna("")``: on the float64 column that ``pd.read_csv`` makes of an all-empty
-    ``error`` column, that is deprecated in pandas and will raise.)
-    """
-    import pandas as pd
-    if "error" not in df.columns:
-        return pd.Series(True, index=df.index)
-    err = df["error"]
-    return err.isna() | (err.astype(str).str.len() == 0)
 
 
 def _numeric_columns(df: pd.DataFrame) -> list[str]:
@@ -171,7 +124,7 @@ def summarize(df: pd.DataFrame, *, cases=None) -> pd.DataFrame:
     use = ok if cases is None else ok & df["case"].isin(list(cases))
     num_cols = _numeric_columns(df)
     rows = []
-    for m in _methods(df):
+    for m in methods_in(df):
         sel = df["method"] == m
         good = df[sel & use]
         row = {"method": m, "n_cases": int(len(good)), "n_failed": int((sel & ~ok).sum())}
@@ -249,7 +202,7 @@ def compare(df: pd.DataFrame) -> Comparison:
     given only when some method succeeded on a case outside the common set. With an empty
     common set ``main`` is the per-method summary and ``all`` is None.
     """
-    methods = _methods(df) if "method" in df.columns else []
+    methods = methods_in(df) if "method" in df.columns else []
     cases = common_cases(df)
     own = summarize(df)
     if not cases:
@@ -335,7 +288,7 @@ def failure_lines(df: pd.DataFrame) -> list[str]:
         return []
     ok = ok_mask(df)
     lines = []
-    for m in _methods(df):
+    for m in methods_in(df):
         sel = df["method"] == m
         bad = df.loc[sel & ~ok, "error"]
         if not len(bad):
@@ -344,124 +297,6 @@ def failure_lines(df: pd.DataFrame) -> list[str]:
         why = "; ".join(f"{r} ({int(c)})" for r, c in counts.items())
         lines.append(f"{m}: {int(len(bad))} of {_plural(int(sel.sum()), 'case')} failed: {why}")
     return lines
-
-
-def _elsewhere_words(g) -> str:
-    """How a scored method (results computed elsewhere) stopped, as far as the harness knows."""
-    machines = sorted({str(x) for x in g.get("time_machine", []) if isinstance(x, str) and x})
-    timed = int(g["time_s"].notna().sum()) if "time_s" in g.columns else 0
-    return ("computed elsewhere: results read from files (eval.exchange.scored), how the method stopped is not "
-            f"known here; Time as the method reported it on {len(g)} run(s): {timed} with a time"
-            + (f" (machine: {', '.join(machines)})" if machines else ""))
-
-
-def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
-    """One line per method saying how it stopped, from the per-case rows: its protocol
-    (``protocol`` column, :data:`PROTOCOL_TEXT`), the iteration range and how many of its
-    successful runs met their stopping criterion (``iterations``, ``converged``), e.g.
-    ``"Elastic: converged protocol: ...; 58-69 iterations; converged on 2/2 runs"``.
-    ``short``: protocol names and ``"it."`` only (for the LaTeX footnote). Empty when
-    the rows carry none of these columns."""
-    if "method" not in df.columns or not {"iterations", "converged", "protocol", "preset",
-                                          "time_reported"} & set(df.columns):
-        return []
-    ok = ok_mask(df)
-    lines = []
-    for m in _methods(df):
-        g = df[(df["method"] == m) & ok]
-        if not len(g):
-            continue
-        parts = []
-        if "protocol" in g.columns and g["protocol"].notna().any():
-            protos = sorted({str(p) for p in g["protocol"].dropna()})
-            parts.append("/".join(protos) + " protocol" if short
-                         else "; ".join(PROTOCOL_TEXT.get(p, p) for p in protos))
-        if "iterations" in g.columns and g["iterations"].notna().any():
-            it = g["iterations"].dropna().astype(float)
-            word = "it." if short else "iterations"
-            parts.append(f"{int(it.min())}-{int(it.max())} {word}" if it.min() != it.max()
-                         else f"{int(it.min())} {word}")
-            note = method_meta(m)["iterations"]
-            if note and not short:
-                parts[-1] += f" ({note})"
-        if "converged" in g.columns and g["converged"].notna().any():
-            c = g["converged"].dropna().map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
-            if short:
-                parts.append(f"{int(c.sum())}/{len(c)} converged")
-            else:
-                parts.append(f"converged on {int(c.sum())}/{len(c)} runs" + _other_stops(g, c))
-        if "time_reported" in g.columns and g["time_reported"].fillna(False).astype(bool).any():
-            parts.append("computed elsewhere" if short else _elsewhere_words(g))
-        parts += _preset_words(g, short)
-        if not short:
-            parts += _handle_words(g) + _reference_words(g, ours=m in builtin_methods())
-        if parts:
-            lines.append(f"{m}: " + (", " if short else "; ").join(parts))
-    return lines
-
-
-#: What a method's ``handles`` column says, in words (the Handle column's meaning per row).
-HANDLE_TEXT = {"hard": "handles are hard constraints (Handle is 0 by construction)",
-               "overwritten": "handle vertices overwritten with their targets after averaging (Handle is 0 by "
-                              "construction; Handle pre: the error before the overwrite)",
-               "soft": "soft handles (a penalty term: Handle is what it reached)"}
-
-
-def _handle_words(g: pd.DataFrame) -> list[str]:
-    """The method's handle kind (``handles`` column, :data:`HANDLE_TEXT`), if stated."""
-    if "handles" not in g.columns or not g["handles"].notna().any():
-        return []
-    return ["/".join(HANDLE_TEXT.get(str(k), str(k)) for k in sorted({str(x) for x in g["handles"].dropna()}))]
-
-
-def _reference_words(g: pd.DataFrame, *, ours: bool = True) -> list[str]:
-    """Which minimiser Ref mean / Ref max / E gap measure against (``ref_energy_type``,
-    ``ref_own_energy`` columns): the method's own energy, or one it does not minimise
-    (``ours``: one of our methods; of another, one it is not known to minimise)."""
-    if "ref_energy_type" not in g.columns or not g["ref_energy_type"].notna().any():
-        return []
-    e = "/".join(sorted({str(x) for x in g["ref_energy_type"].dropna()}))
-    own = "ref_own_energy" in g.columns and g["ref_own_energy"].dropna().map(
-        lambda x: str(x).strip().lower() in ("true", "1", "1.0")).all()
-    return [f"Ref/E gap against the minimiser of its own energy ({e})" if own else
-            f"Ref/E gap: distance to the full-resolution {e} minimiser, an energy it "
-            f"{'does not minimise' if ours else 'is not known to minimise'}"]
-
-
-#: How a run that did not converge stopped (``status`` column), in words.
-STATUS_TEXT = {"stalled": "stalled (the stop rule fired with the gradient above gtol)",
-               "max_iter": "hit the iteration cap", "time_budget": "hit the time budget"}
-
-
-def _other_stops(g: pd.DataFrame, conv: pd.Series) -> str:
-    """``" (stalled on 3, hit the iteration cap on 1)"``: how the runs of ``g`` that did
-    not converge (``conv`` False) stopped, from the ``status`` column; empty when all
-    converged."""
-    if conv.all():
-        return ""
-    if "status" not in g.columns:
-        return " (the others stopped without meeting it)"
-    st = g.loc[conv.index[~conv.to_numpy()], "status"].fillna("unknown").astype(str).value_counts()
-    return " (" + ", ".join(f"{STATUS_TEXT.get(k, k)} on {v}" for k, v in st.items()) + ")"
-
-
-def _preset_words(g: pd.DataFrame, short: bool) -> list[str]:
-    """A method's preset (``preset`` column, e.g. Implicit-ARAP's ``cpu``) and, where the
-    rows give them, its fixed step counts (``sdf_steps``, ``deform_steps``): such a method
-    stops after a set number of optimiser steps, and its time includes its SDF fit."""
-    if "preset" not in g.columns or not g["preset"].notna().any():
-        return []
-    words = "/".join(sorted({str(p) for p in g["preset"].dropna()})) + " preset"
-    if short:
-        return [words]
-    steps = [f"{'/'.join(str(int(x)) for x in sorted(set(g[c].dropna())))} {what}"
-             for c, what in (("sdf_steps", "SDF-fit steps"), ("deform_steps", "deformation steps"))
-             if c in g.columns and g[c].notna().any()]
-    if steps:
-        words += f": a fixed {' + '.join(steps)}, no stopping criterion"
-    if "sdf_fit_s" in g.columns and g["sdf_fit_s"].notna().any():
-        words += f"; its Time includes the SDF fit (mean {g['sdf_fit_s'].mean():.1f} s)"
-    return [words]
 
 
 def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None,
@@ -519,7 +354,23 @@ def _write_text(text: str, p: Path) -> Path:
     return p
 
 
-def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: bool = True) -> dict[str, Path]:
+def compared_lines(compared: pd.DataFrame | None) -> list[str]:
+    """One line per earlier run whose rows stand in the table (``compare_with``,
+    :mod:`eval.run.compared`): its folder, commit, machine, methods and record count."""
+    if compared is None or not len(compared) or "run" not in compared.columns:
+        return []
+    out = []
+    for run, g in compared.groupby("run", sort=False):
+        first = g.iloc[0]
+        commit = first.get("run_commit")
+        out.append(f"{', '.join(methods_in(g))}: {len(g)} record(s) read from {run} (commit "
+                   f"{commit if isinstance(commit, str) else 'unknown'}; {first.get('run_machine', '?')}), "
+                   "not recomputed: each record's digest and case identity checked against this run's cases")
+    return out
+
+
+def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: bool = True,
+                 compared: pd.DataFrame | None = None) -> dict[str, Path]:
     """Write ``cases.csv``, ``table.csv``, ``table.md``, ``table.tex`` and, when some
     method has successful cases outside the common set, ``table_all.csv`` into ``out_dir``
     (see the module docstring and :func:`compare`).
@@ -532,15 +383,28 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     (:func:`eval.run.row_check.check_rows`; a warning is logged when one does not).
 
     With ``cases=False`` the rows are not written back (``cases.csv`` is the input, see
-    :func:`retabulate`).
+    :func:`retabulate`). ``compared``: rows read from earlier runs (``compare_with``,
+    :mod:`eval.run.compared`), tabulated beside ``df``'s, kept in ``compared.csv`` (not
+    in ``cases.csv``, which holds this run's rows only) and listed under the table.
 
     Returns
     -------
     dict name -> path of every file written (``cases``, ``table_csv``, ``table_md``,
     ``table_tex``, and ``table_all_csv`` when written).
     """
+    import pandas as pd
     out_dir = Path(out_dir)
     paths = {"cases": write_cases(df, out_dir)} if cases else {}
+    ours = df
+    if compared is not None and len(compared):
+        if cases:
+            p_comp = out_dir / COMPARED_CSV
+            with atomic_write(p_comp, "w", newline="") as fh:
+                compared.to_csv(fh, index=False)
+            paths["compared"] = p_comp
+        df = pd.concat([df, compared], ignore_index=True)
+    elif cases:
+        (out_dir / COMPARED_CSV).unlink(missing_ok=True)  # never rows of an earlier run's comparison
     comp = compare(df)
     paths["table_csv"] = _write_csv(comp.main, out_dir / "table.csv")
     p_all = out_dir / "table_all.csv"
@@ -548,11 +412,15 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
         paths["table_all_csv"] = _write_csv(comp.all, p_all)
     else:
         p_all.unlink(missing_ok=True)
-    stops, checked = stop_lines(df), check_rows(df, out_dir)
+    stops, checked = stop_lines(df), check_rows(ours, out_dir)
     if not checked.ok and checked.has_store:
         logging.getLogger("eval").warning("warning: %s: %s", out_dir / "cases.csv", checked.line().replace("**", ""))
+    line = checked.line()
+    others = compared_lines(compared)
+    if others:
+        line += "\n\nRows from other runs:\n\n" + "".join(f"- {x}\n" for x in others)
     paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df),
-                                                        checked=checked.line()), out_dir / "table.md")
+                                                        checked=line), out_dir / "table.md")
     note = " ".join(x for x in [main_note(comp), "; ".join(stop_lines(df, short=True))] if x) or None
     paths["table_tex"] = _write_text(to_latex(comp.main, note=note, bold=comp.same_cases), out_dir / "table.tex")
     return paths
@@ -584,6 +452,7 @@ def retabulate(run_dir) -> dict[str, Path]:
     run_dir = Path(run_dir)
     refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
     df = pd.read_csv(run_dir / "cases.csv")
+    compared = pd.read_csv(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
     title = None
     try:
         cfg = json.loads((run_dir / "run.json").read_text()).get("config", {})
@@ -592,7 +461,7 @@ def retabulate(run_dir) -> dict[str, Path]:
             title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
     except (OSError, ValueError, AttributeError):
         pass
-    return write_tables(df, run_dir, title=title, cases=False)
+    return write_tables(df, run_dir, title=title, cases=False, compared=compared)
 
 
 def main(argv=None) -> int:

@@ -33,7 +33,7 @@ import pandas as pd
 
 from baselines.arap import Elastic
 from eval.present.figures import distribution_figure, safe_figure
-from eval.tables import method_order_key, ok_mask
+from eval.present.rows import method_order_key, ok_mask
 from sshade.deform import SShaDe
 from sshade.mesh.io import atomic_write
 

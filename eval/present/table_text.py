@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # pandas is imported where a table is built
     import pandas as pd
 
-__all__ = ["TABLE_COLUMNS", "EXTRA_COLUMNS", "NO_BOLD", "REPORTED_NOTE", "to_markdown", "to_latex", "tex_escape"]
+__all__ = ["TABLE_COLUMNS", "EXTRA_COLUMNS", "NO_BOLD", "REPORTED_NOTE", "OTHER_RUN_NOTE", "time_notes",
+           "to_markdown", "to_latex", "tex_escape"]
 
 #: (column, Markdown header, LaTeX header, decimals, LaTeX unit suffix) of the main table.
 TABLE_COLUMNS = (
@@ -36,6 +37,9 @@ EXTRA_COLUMNS = (
 #: The line under a table with a reported Time.
 REPORTED_NOTE = ("(reported): the time the method reported for itself, on its own machine (the times file of "
                  "its scored results); not measured in this run, so never compared in bold with one that was.")
+#: The line under a table with a Time measured by another run (``compare_with``).
+OTHER_RUN_NOTE = ("(other run): measured by the run the row was read from, on its machine (see \"Rows from other "
+                  "runs\"); never compared in bold with this run's times.")
 #: Columns where the lowest value is not "best": never bold.
 NO_BOLD = ("iterations", "converged")
 
@@ -93,20 +97,38 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
             else:
                 s = _fmt(r[c], d)
                 if c == "time_s" and i in reported and s != "--":
-                    s += " (reported)"
+                    s += " " + reported[i]
             cells.append(f"**{s}**" if i in best[c] else s)
         lines.append("| " + " | ".join(cells) + " |")
-    if reported:
-        lines += ["", REPORTED_NOTE]
+    for n in time_notes(summary):
+        lines += ["", n]
     return "\n".join(lines) + "\n"
 
 
-def _reported_rows(summary) -> set[int]:
-    """Positions of the rows whose Time the method reported itself (``time_reported``:
-    computed elsewhere, :class:`eval.exchange.scored.ScoredResults`)."""
-    if "time_reported" not in summary.columns:
-        return set()
-    return {i for i, v in enumerate(summary["time_reported"]) if v is not None and float(v) > 0}
+def _positive(v) -> bool:
+    try:
+        return float(v) > 0
+    except (TypeError, ValueError):
+        return False
+
+
+def _reported_rows(summary) -> dict[int, str]:
+    """Position -> mark of the rows whose Time was not measured in this run: the method
+    reported it itself (``time_reported``: computed elsewhere,
+    :class:`eval.exchange.scored.ScoredResults`; ``(reported)``) or another run measured
+    it (``time_other_run``: a ``compare_with`` row, :mod:`eval.run.compared`; ``(other run)``)."""
+    out = {}
+    for col, mark in (("time_other_run", "(other run)"), ("time_reported", "(reported)")):
+        if col in summary.columns:
+            out.update({i: mark for i, v in enumerate(summary[col]) if _positive(v)})
+    return out
+
+
+def time_notes(summary) -> list[str]:
+    """The notes a table with Time cells not measured in this run needs (:data:`REPORTED_NOTE`,
+    :data:`OTHER_RUN_NOTE`), in that order."""
+    marks = set(_reported_rows(summary).values())
+    return [n for m, n in (("(reported)", REPORTED_NOTE), ("(other run)", OTHER_RUN_NOTE)) if m in marks]
 
 
 def _compared(summary, c: str, reported: set[int]) -> list:
@@ -140,15 +162,14 @@ def to_latex(summary: pd.DataFrame, *, note: str | None = None, bold: bool = Tru
             if s != "--":
                 s += unit
                 if c == "time_s" and i in reported:
-                    s += "$^r$"
+                    s += "$^r$" if reported[i] == "(reported)" else "$^o$"
                 if i in best[c]:
                     s = f"\\textbf{{{s}}}"
             cells.append(s)
         out.append(" & ".join(cells) + " \\\\")
     out.append("\\bottomrule")
-    if reported:
-        note = f"{note} " if note else ""
-        note += "r: " + REPORTED_NOTE.removeprefix("(reported): ")
+    for n in time_notes(summary):
+        note = (f"{note} " if note else "") + n.replace("(reported):", "r:").replace("(other run):", "o:")
     if note:
         # a paragraph cell, so a long note wraps instead of widening the table
         out.append(f"\\multicolumn{{{1 + len(cols)}}}{{p{{0.9\\columnwidth}}}}"

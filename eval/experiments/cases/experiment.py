@@ -75,6 +75,7 @@ from eval.present.figures import FIGURE_RECORDS, case_figure_path, figures_optio
 from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, view_options, write_case_view, write_outputs
 from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
+from eval.run.compared import compared_rows, read_compared
 from eval.run.paths import abs_path
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
@@ -158,6 +159,7 @@ class _Setup:
     store: ResultStore
     resume: bool
     build: dict | None            # the dataset's build stage when one ran (plan.planned_root)
+    compared: list = field(default_factory=list)  # rows of earlier runs (compare_with; eval/run/compared.py)
     meshes: CaseMeshes = field(default_factory=CaseMeshes)  # the metrics' kept rest / ground-truth meshes
     jobs: int = 1
     plan: object = None           # plan.PlanRecord once logged
@@ -223,6 +225,7 @@ def _setup(cfg) -> _Setup:
     own = method_selections(cases, cfg.get("method_cases"), names)
     log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
+    compared = _compared(cfg, cases, name, root, out_dir)  # read and checked before any method runs
     store = ResultStore(out_dir, meshes=meshes)
     store.check_links()  # a link in runs/ would take a resume's records outside out_dir
     if not resume:
@@ -231,7 +234,25 @@ def _setup(cfg) -> _Setup:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
     return _Setup(methods=methods, names=names, specs=specs, codes=codes, guard=guard, refs=refs, root=root,
                   out_dir=out_dir, name=name, cases=cases, selection=CaseSelection(base, own), base_rule=base_rule,
-                  store=store, resume=resume, build=build)
+                  store=store, resume=resume, build=build, compared=compared)
+
+
+def _compared(cfg, cases, name: str, root: Path, out_dir: Path) -> list:
+    """The runs named by ``compare_with`` (a folder or a list of folders, relative to the
+    launch directory), read and checked against ``cases`` (:func:`eval.run.compared.read_compared`);
+    SShaDeError naming the folder when one is this run's own folder or cannot be compared."""
+    items = as_list(cfg.get("compare_with", None)) or []
+    out = []
+    for it in items:
+        if not isinstance(it, str) or not it.strip():
+            raise SShaDeError(f"compare_with must be a list of run folders, got {it!r}")
+        folder = abs_path(it)
+        if folder == out_dir:
+            raise SShaDeError(f"compare_with: {folder} is this run's own folder; name earlier runs")
+        out.append(read_compared(folder, it, cases, dataset=name, root=root, seed=cfg.dataset.get("seed")))
+        log.info("compare_with %s: %d record(s) of %s%s", it, len(out[-1].rows), ", ".join(out[-1].methods),
+                 f"; no record of {len(out[-1].missing)} case(s)" if out[-1].missing else "")
+    return out
 
 
 def _start_runinfo(cfg, s: _Setup) -> dict:
@@ -509,7 +530,8 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
         title += f"; full-resolution baselines on {s.base_rule}"
     title += "".join(f"; {n} on {rule}" for n, (sel, rule) in s.own.items() if sel is not None)
     title += _side_by_side(rows) + _presets(rows)
-    paths = write_tables(df, s.out_dir, title=title)
+    comp_rows = compared_rows(s.compared, s.names)
+    paths = write_tables(df, s.out_dir, title=title, compared=pd.DataFrame(comp_rows) if comp_rows else None)
     paths.update(write_breakdown(df, s.out_dir, figure=figures_options(cfg)[0]))
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())

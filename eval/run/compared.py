@@ -1,0 +1,160 @@
+"""Rows of earlier runs beside a new one (``compare_with=[results/defaust]``): a new
+method's row beside the committed baselines without rerunning them.
+
+:func:`read_compared` reads another run folder's result store (``runs/<case>/<method>.json``)
+as untrusted input, never writing, resuming or recomputing it: every record must be
+valid (its digest holds, :meth:`eval.run.store.ResultStore.read`), and must have been
+made on the very cases of this run: each record's case identity (the digests of the rest
+vertices, faces, handles, targets and ground truth, and the dataset's name,
+:func:`eval.run.store.case_identity`) equals this run's case of the same name. Another
+build of a dataset (other meshes, handles or targets) is refused with one line. The
+rows come back marked with the run they came from (``run``, ``run_commit``,
+``run_machine``) and ``time_other_run``: their Time was measured on another machine or
+in another run, so tables never set it in bold against this run's times.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from eval.run.store import ResultStore, case_identity, safe_name
+from sshade.errors import SShaDeError
+from sshade.method import check_name
+
+__all__ = ["ComparedRun", "read_compared", "compared_rows", "IDENTITY_FIELDS", "COMPARED_CSV"]
+
+#: The fields of a case identity that must agree (not ``root``: the folder differs
+#: between machines; the data digests say whether it is the same data).
+IDENTITY_FIELDS = ("dataset", "case", "V", "F", "handles", "targets", "V_gt")
+#: The file of an evaluator run folder that keeps the compared rows (beside ``cases.csv``).
+COMPARED_CSV = "compared.csv"
+
+
+@dataclass
+class ComparedRun:
+    """The rows read from one earlier run folder.
+
+    Attributes
+    ----------
+    folder : Path, the run folder. label : str, how its rows are named (the path as given).
+    commit : str or None, the commit its ``run.json`` records (``+dirty`` when it was).
+    machine : str, its platform and core count. methods : its method names, in order.
+    rows : list of dict, one per (case, method) record of this run's cases.
+    missing : names of this run's cases it has no record of.
+    """
+    folder: Path
+    label: str
+    commit: str | None
+    machine: str
+    methods: list = field(default_factory=list)
+    rows: list = field(default_factory=list)
+    missing: list = field(default_factory=list)
+
+
+def _run_json(folder: Path) -> dict:
+    try:
+        d = json.loads((folder / "run.json").read_text())
+    except (OSError, ValueError):
+        raise SShaDeError(f"compare_with: {folder} has no readable run.json (is it a python -m eval run "
+                          "folder?)") from None
+    if not isinstance(d, dict):
+        raise SShaDeError(f"compare_with: {folder / 'run.json'} is not a run record")
+    return d
+
+
+def _identity_problem(stored, ours: dict) -> str:
+    """``""`` when a record's case identity ``stored`` agrees with ``ours`` on
+    :data:`IDENTITY_FIELDS`, else the fields that differ, in words."""
+    if not isinstance(stored, dict):
+        return "it records no case identity"
+    bad = [k for k in IDENTITY_FIELDS if stored.get(k) != ours.get(k)]
+    return f"its {', '.join(bad)} differ" if bad else ""
+
+
+def read_compared(folder, label: str, cases, *, dataset: str, root, seed) -> ComparedRun:
+    """The rows of run folder ``folder`` on ``cases`` (this run's), checked (module docstring).
+
+    Parameters
+    ----------
+    folder : str or Path, an earlier ``python -m eval`` run folder (``run.json``, ``runs/``).
+    label : str, the name its rows carry (e.g. ``results/defaust``).
+    cases : this run's cases (``name``, ``V``, ``F``, ``handles``, ``targets``, ``V_gt``).
+    dataset, root, seed : this run's dataset name, root and seed (:func:`case_identity`).
+
+    Returns
+    -------
+    :class:`ComparedRun`.
+
+    Raises
+    ------
+    SShaDeError naming the folder and the file: not a run folder, a link out of it,
+    another dataset, an invalid or edited record, a record made on other data (another
+    build), or no record of any case of this run.
+    """
+    folder = Path(folder)
+    if not (folder / "runs").is_dir():
+        raise SShaDeError(f"compare_with: {folder} is not a python -m eval run folder (no runs/)")
+    store = ResultStore(folder)
+    store.check_links()
+    info = _run_json(folder)
+    theirs = str(((info.get("config") or {}).get("dataset") or {}).get("name", ""))
+    if theirs != str(dataset):
+        raise SShaDeError(f"compare_with: {folder} is a run on dataset {theirs!r}, this one on {dataset!r}")
+    git = info.get("git") if isinstance(info.get("git"), dict) else {}
+    commit = git.get("commit")
+    out = ComparedRun(folder=folder, label=label, commit=(commit[:12] + ("+dirty" if git.get("dirty") else ""))
+                      if isinstance(commit, str) else None,
+                      machine=f"{info.get('platform', '?')}, {info.get('cpu_count', '?')} cores")
+    for c in cases:
+        d = store.root / safe_name(c.name)
+        names = sorted(n for n in os.listdir(d) if n.endswith(".json")) if d.is_dir() else []
+        if not names:
+            out.missing.append(c.name)
+            continue
+        ours = case_identity(c, dataset=dataset, root=root, seed=seed)
+        for n in names:
+            out.rows.append(_one_row(store, d / n, c.name, ours, out))
+    if not out.rows:
+        raise SShaDeError(f"compare_with: {folder} holds no record of this run's cases ({cases[0].name}, ...); "
+                          "compare runs on the same cases")
+    return out
+
+
+def _one_row(store: ResultStore, p: Path, case: str, ours: dict, out: ComparedRun) -> dict:
+    """The row of record file ``p`` of ``case``, checked, marked with its run."""
+    try:
+        method = json.loads(p.read_text()).get("method")
+    except (OSError, ValueError, AttributeError):
+        method = None
+    found = store.read(case, str(method)) if isinstance(method, str) else None
+    if found is None or found.record is None:
+        why = found.why if found is not None else "unreadable"
+        raise SShaDeError(f"compare_with: {p} is not a valid record ({why}); its rows cannot be compared")
+    rec = found.record
+    problem = _identity_problem((rec.get("key_fields") or {}).get("case"), ours)
+    if problem:
+        raise SShaDeError(f"compare_with: {p} was made on other data than this run's case {case} ({problem}): "
+                          "another build of the dataset? Compare runs on the same cases")
+    if method not in out.methods:
+        out.methods.append(method)
+    return {**rec["row"], "method": method, "run": out.label, "run_commit": out.commit, "run_machine": out.machine,
+            "time_other_run": True}
+
+
+def compared_rows(runs: list[ComparedRun], ours: list[str]) -> list[dict]:
+    """The rows of ``runs``, each method named as in its run, or ``NAME (label)`` when
+    that name is taken by one of ``ours`` (this run's methods) or an earlier compared
+    run (checked against :data:`sshade.method.NAME_RULE`; SShaDeError when it cannot be
+    made a valid name)."""
+    taken = {n.lower() for n in ours}
+    rows = []
+    for r in runs:
+        rename = {}
+        for m in r.methods:
+            new = m if m.lower() not in taken else f"{m} ({Path(r.label).name or r.label})"
+            rename[m] = check_name(new, where=f"compare_with {r.label}")
+            taken.add(rename[m].lower())
+        rows += [{**row, "method": rename[row["method"]]} for row in r.rows]
+    return rows
