@@ -51,6 +51,7 @@ import subprocess
 from pathlib import Path
 
 from eval.present.breakdown import BREAKDOWN_METRICS
+from eval.present.leaderboard import HEADING, LEADERBOARD, RANK_COLUMN, collect, leaderboard_markdown, leaderboard_rows
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
 from eval.present.table_text import time_notes
@@ -441,16 +442,43 @@ def write_index(root) -> Path:
     page = root / PAGE
     if not _ours(page):
         raise OutputDirError(f"{page} was not written by python -m eval.report: left as it is")
+    board = _leaderboard(root)
     text = (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="generator" '
             f'content="{GENERATOR}"><title>{_e(root.name)}</title><style>{_CSS}</style>\n'
             f"<script>{_asset('errors.js')}</script></head><body>\n"
             '<div id="js-errors" data-count="0" hidden><b>JavaScript errors on this page:</b></div>\n'
-            f"<h1>{_e(root.name)}: {len(rows)} run folder(s)</h1>\n"
+            f"{board}<h1>{_e(root.name)}: {len(rows)} run folder(s)</h1>\n"
             f"{_table(['Folder', 'Experiment', 'Status', 'Cases', 'Commit'], rows, 'runs-table')}\n"
             f"<script>{_asset('report.js')}</script>\n</body></html>\n")
     with atomic_write(page, "w") as fh:
         fh.write(text)
     return page
+
+
+def _leaderboard(root: Path) -> str:
+    """Write ``root/leaderboard.md`` (:mod:`eval.present.leaderboard`; a file of that name
+    not written by it is left as it is) and return the HTML of its method x dataset
+    matrix for the top of the index ("" when no run folder has a board)."""
+    boards, _ = collect(root)
+    if not boards:
+        return ""
+    md = root / LEADERBOARD
+    try:
+        ours = not md.exists() or md.read_text(errors="replace").startswith(HEADING + "\n")
+    except OSError:
+        ours = False
+    if ours:
+        with atomic_write(md, "w") as fh:
+            fh.write(leaderboard_markdown(root))
+    else:
+        log.warning("%s was not written by python -m eval.report: left as it is", md)
+    head, rows = leaderboard_rows(boards)
+    links = " ".join(_link(root, f"{b.folder}/{PAGE}", _e(b.label)) for b in boards)
+    cells = [[f"<td>{_e(c)}</td>" for c in r] for r in rows]
+    return (f'<h1>Leaderboard</h1>\n<p class="note">Ranked by {_e(RANK_COLUMN[1])} (rank in parentheses; '
+            "no other column ranks); where the data has no ground truth: Volume / EL / FA errors, not ranked. "
+            f"Per dataset, with times and how each method stopped: {_link(root, LEADERBOARD, LEADERBOARD)}; "
+            f"runs: {links}.</p>\n{_table(head, cells, 'leaderboard')}\n")
 
 
 def find_chromium() -> str | None:

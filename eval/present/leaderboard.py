@@ -1,0 +1,227 @@
+"""One leaderboard of method x dataset over the run folders of a results tree
+(``results/leaderboard.md`` and the top of ``results/index.html``, written by
+``python -m eval.report --index results``, the ``report`` step of ``python -m eval.reproduce``).
+
+Each entry comes from one run folder: a ``cases`` run (its ``cases.csv``, every method
+averaged over the cases on which all succeeded, :func:`eval.tables.compare`) or an
+animation run (its ``table.csv``). One column ranks, and says so: the ground-truth error
+(``gt_vertex_mean_pct``, the mean distance to the true pose in % of the diagonal; the
+animation: ``gt_mean_pct`` over its frames). A dataset without a ground truth (the
+Stanford shapes) shows volume / EL / FA and ranks nobody; nor does a run whose methods
+averaged different cases. Time is relative to SShaDe measured in the same run (the same
+machine and load), never across runs. TOSCA (a correspondence transfer, SShaDe's alone)
+is listed apart.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from eval.present.rows import methods_in
+from eval.present.stops import stop_lines
+from eval.tables import compare
+from sshade.deform import SShaDe
+
+__all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "LABELS",
+           "RANK_COLUMN"]
+
+LEADERBOARD = "leaderboard.md"  #: the file written beside ``index.html``
+#: Folder name -> the dataset's name on the board (other folders: their own name).
+LABELS = {"faust": "FAUST", "defaust": "DeFAUST", "defaust_paper": "DeFAUST (paper protocol)",
+          "shapes": "Stanford shapes", "animation": "Animated DeFAUST", "tosca": "TOSCA"}
+#: The column that ranks, and its words.
+RANK_COLUMN = ("gt_vertex_mean_pct", "GT mean (%): mean distance to the true pose, % of the bounding-box diagonal")
+REFERENCE = SShaDe.name  #: times are relative to this method in the same run
+
+
+@dataclass
+class Board:
+    """One dataset's entries. ``rows``: per method ``method``, ``gt`` (or None), ``volume``,
+    ``el``, ``fa``, ``time_rel`` (x SShaDe, or None), ``rank`` (or None), ``stopped``."""
+    folder: str
+    label: str
+    commit: str
+    n_cases: int
+    ranked: bool
+    why_not: str = ""
+    rank_column: str = RANK_COLUMN[0]
+    time_words: str = ""
+    rows: list = field(default_factory=list)
+
+
+def _num(v):
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _ranks(values: list) -> list:
+    """Competition ranks (1, 2, 2, 4) of the finite values, lowest first; None elsewhere."""
+    fin = sorted(v for v in values if v is not None)
+    return [None if v is None else 1 + sum(1 for x in fin if x < v) for v in values]
+
+
+def _run_info(d: Path) -> dict:
+    try:
+        info = json.loads((d / "run.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return info if isinstance(info, dict) else {}
+
+
+def _cases_board(d: Path, info: dict) -> Board | None:
+    """The board of a ``cases`` run folder (its ``cases.csv``), or None without one."""
+    import pandas as pd
+    try:
+        df = pd.read_csv(d / "cases.csv")
+    except (OSError, ValueError):
+        return None
+    if "method" not in df.columns or not len(df):
+        return None
+    comp = compare(df)
+    main = comp.main
+    stops = {ln.split(":", 1)[0]: ln.split(":", 1)[1].strip() for ln in stop_lines(df, short=True)}
+    gt = [_num(v) for v in main.get(RANK_COLUMN[0], [None] * len(main))]
+    has_gt = any(v is not None for v in gt)
+    ranked = has_gt and comp.same_cases
+    why = ("" if ranked else "no ground truth: not ranked" if not has_gt
+           else "methods averaged different cases: not ranked")
+    ref = main.loc[main["method"] == REFERENCE, "time_s"] if "time_s" in main.columns else []
+    ref_t = _num(ref.iloc[0]) if len(ref) else None
+    ranks = _ranks(gt) if ranked else [None] * len(main)
+    b = Board(folder=d.name, label=LABELS.get(d.name, d.name), commit=_commit(info),
+              n_cases=int(main["n_cases"].max()) if len(main) else 0, ranked=ranked, why_not=why)
+    for i, (_, r) in enumerate(main.iterrows()):
+        t = _num(r.get("time_s"))
+        b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": _num(r.get("volume_err_pct")),
+                       "el": _num(r.get("edge_err_pct")), "fa": _num(r.get("angle_err_deg")),
+                       "time_rel": t / ref_t if t is not None and ref_t else None, "rank": ranks[i],
+                       "stopped": stops.get(str(r["method"]), "")})
+    return b
+
+
+def _animation_board(d: Path, info: dict) -> Board | None:
+    """The board of an ``animation`` run folder (its ``table.csv``: one row per method)."""
+    import pandas as pd
+    try:
+        t = pd.read_csv(d / "table.csv")
+    except (OSError, ValueError):
+        return None
+    if not {"method", "gt_mean_pct"} <= set(t.columns):
+        return None
+    gt = [_num(v) for v in t["gt_mean_pct"]]
+    ref = t.loc[t["method"] == REFERENCE, "frame_median_s"] if "frame_median_s" in t.columns else []
+    ref_t = _num(ref.iloc[0]) if len(ref) else None
+    same = t["n_cases"].nunique() == 1 if "n_cases" in t.columns else False
+    ranks = _ranks(gt) if same else [None] * len(t)
+    b = Board(folder=d.name, label=LABELS.get(d.name, d.name), commit=_commit(info),
+              n_cases=int(t["n_cases"].max()) if "n_cases" in t.columns else 0, ranked=same,
+              why_not="" if same else "methods ran on different cases: not ranked",
+              rank_column="gt_mean_pct (the ground-truth error over every frame)",
+              time_words=" (median seconds per frame)")
+    for i, (_, r) in enumerate(t.iterrows()):
+        tm = _num(r.get("frame_median_s"))
+        b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": None, "el": None, "fa": None,
+                       "time_rel": tm / ref_t if tm is not None and ref_t else None, "rank": ranks[i],
+                       "stopped": str(r.get("how", "")) + (f"; {int(r['n_converged'])} frames converged"
+                                                           if _num(r.get("n_converged")) is not None else "")})
+    return b
+
+
+def _commit(info: dict) -> str:
+    c = (info.get("git") or {}).get("commit") if isinstance(info.get("git"), dict) else None
+    return c[:12] if isinstance(c, str) else ""
+
+
+def collect(root) -> tuple[list[Board], list[str]]:
+    """The boards of the run folders directly below ``root`` (``cases`` and ``animation``
+    runs), in the order of :data:`LABELS` then by name, and the lines of the runs listed
+    apart (TOSCA: its classes' ground-truth error, SShaDe's transfer only)."""
+    root = Path(root)
+    order = list(LABELS)
+    boards, apart = [], []
+    for d in sorted((p.parent for p in root.glob("*/run.json")),
+                    key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name)):
+        info = _run_info(d)
+        kind = str(((info.get("config") or {}).get("experiment") or {}).get("kind", "cases"))
+        b = _cases_board(d, info) if kind == "cases" else _animation_board(d, info) if kind == "animation" else None
+        if b is not None and b.rows:
+            boards.append(b)
+        elif kind == "tosca":
+            apart += _tosca_line(d)
+    return boards, apart
+
+
+def _tosca_line(d: Path) -> list[str]:
+    import pandas as pd
+    try:
+        t = pd.read_csv(d / "table.csv")
+        r = t[t["class"].astype(str).str.startswith("all")].iloc[0]
+    except (OSError, ValueError, KeyError, IndexError):
+        return []
+    return [f"{LABELS['tosca']} ([{d.name}/]({d.name}/index.html)): SShaDe's isometric transfer only (no other "
+            f"method does this task here), GT mean {float(r['gt_vertex_mean_pct']):.4f} % over "
+            f"{int(r['n_cases'])} cases"]
+
+
+def _f(v, dec: int, suffix: str = "") -> str:
+    return "--" if v is None else f"{v:.{dec}f}{suffix}"
+
+
+def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
+    """The method x dataset matrix: header and one row per method (each cell ``GT (rank)``,
+    or ``Vol/EL/FA`` where the dataset has no ground truth, ``--`` where it did not run)."""
+    import pandas as pd
+    methods = methods_in(pd.DataFrame({"method": [r["method"] for b in boards for r in b.rows]}))
+    head = ["Method", *[b.label for b in boards]]
+    rows = []
+    for m in methods:
+        cells = [m]
+        for b in boards:
+            r = next((x for x in b.rows if x["method"] == m), None)
+            if r is None:
+                cells.append("--")
+            elif r["gt"] is not None:
+                cells.append(_f(r["gt"], 2) + (f" ({r['rank']})" if r["rank"] is not None else ""))
+            else:
+                cells.append(f"{_f(r['volume'], 2)} / {_f(r['el'], 2)} / {_f(r['fa'], 2)}")
+        rows.append(cells)
+    return head, rows
+
+
+#: The first line of a leaderboard this module wrote (a file that does not start so is not replaced).
+HEADING = "# Leaderboard"
+
+
+def leaderboard_markdown(root) -> str:
+    """``leaderboard.md``'s text for the run folders below ``root`` (module docstring)."""
+    boards, apart = collect(root)
+    head, rows = leaderboard_rows(boards)
+    out = [HEADING, "",
+           f"Written by `python -m eval.report --index {Path(root).name}` (the `report` step of "
+           "`python -m eval.reproduce`) from the run folders below; each cell comes from the run linked under it.",
+           "",
+           f"**The ranking column is {RANK_COLUMN[1]}**, the rank in parentheses (1 = nearest); no other column "
+           "ranks: a method best on volume may be far from the true pose. Where the data has no ground truth the "
+           "cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked.", "",
+           "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    for b in boards:
+        link = f"[{b.folder}/]({b.folder}/index.html)"
+        out += ["", f"## {b.label}", "",
+                f"{link}, commit {b.commit or 'unknown'}; mean over {b.n_cases} case(s) every method ran on; "
+                + (f"ranked by {b.rank_column}" if b.ranked else b.why_not)
+                + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
+                f"| Rank | Method | GT mean (%) | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) | Stopped |",
+                "|---:|---|---:|---:|---:|---:|---:|---|"]
+        for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0)):
+            out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']} | {_f(r['gt'], 2)} | "
+                       f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
+                       f"{r['stopped'].replace('|', '/')} |")
+    if apart:
+        out += ["", "## Listed apart", ""] + [f"- {x}" for x in apart]
+    return "\n".join(out) + "\n"

@@ -1,0 +1,68 @@
+"""eval/present/leaderboard.py: one method x dataset board ranked by the ground-truth error
+only (a method best on volume and worst on the true pose is not first), unranked where
+there is no ground truth, times relative to SShaDe in the same run; written beside the
+index, never over a file it did not write; the committed board is the committed runs'."""
+from __future__ import annotations
+
+import csv
+import json
+
+from eval.present.leaderboard import LEADERBOARD, collect, leaderboard_markdown, leaderboard_rows
+from eval.report import write_index
+from tests.conftest import ROOT
+
+
+def _run(folder, rows, kind="cases", commit="abc123"):
+    folder.mkdir(parents=True)
+    (folder / "run.json").write_text(json.dumps({"config": {"experiment": {"name": folder.name, "kind": kind}},
+                                                 "git": {"commit": commit}, "status": "done"}))
+    with open(folder / "cases.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _row(case, method, vol, gt, t):
+    return {"case": case, "method": method, "error": "", "volume_err_pct": vol, "edge_err_pct": 1.0,
+            "angle_err_deg": 1.0, "gt_vertex_mean_pct": gt, "time_s": t}
+
+
+def test_the_ground_truth_ranks_not_the_best_volume(tmp_path):
+    rows = [_row(c, "Toy", 0.1, 9.0, 0.01) for c in "ab"] + [_row(c, "SShaDe", 2.0, 1.5, 2.0) for c in "ab"]
+    rows += [_row(c, "ARAP", 3.0, 1.7, 6.0) for c in "ab"]
+    _run(tmp_path / "faust", rows)
+    boards, _ = collect(tmp_path)
+    (b,) = boards
+    ranks = {r["method"]: r["rank"] for r in b.rows}
+    assert ranks == {"SShaDe": 1, "ARAP": 2, "Toy": 3} and b.ranked
+    times = {r["method"]: r["time_rel"] for r in b.rows}
+    assert times["ARAP"] == 3.0 and times["SShaDe"] == 1.0  # x SShaDe in the same run
+    head, matrix = leaderboard_rows(boards)
+    assert head == ["Method", "FAUST"] and ["Toy", "9.00 (3)"] in matrix
+    md = leaderboard_markdown(tmp_path)
+    assert "The ranking column is GT mean" in md and "no other column ranks" in md
+
+
+def test_a_dataset_without_ground_truth_ranks_nobody(tmp_path):
+    rows = [_row("bunny", m, v, "", 1.0) for m, v in (("SShaDe", 0.3), ("ARAP", 3.1))]
+    _run(tmp_path / "shapes", rows)
+    (b,) = collect(tmp_path)[0]
+    assert not b.ranked and "no ground truth" in b.why_not and all(r["rank"] is None for r in b.rows)
+    assert ["ARAP", "3.10 / 1.00 / 1.00"] in leaderboard_rows([b])[1]
+
+
+def test_the_index_carries_the_board_and_a_foreign_leaderboard_is_kept(tmp_path):
+    _run(tmp_path / "faust", [_row("a", "SShaDe", 1.0, 1.5, 1.0), _row("a", "ARAP", 1.0, 1.6, 2.0)])
+    page = write_index(tmp_path)
+    text = page.read_text()
+    assert text.index("Leaderboard") < text.index("run folder(s)") and "1.50 (1)" in text
+    assert (tmp_path / LEADERBOARD).read_text() == leaderboard_markdown(tmp_path)
+    (tmp_path / LEADERBOARD).write_text("my notes\n")
+    write_index(tmp_path)
+    assert (tmp_path / LEADERBOARD).read_text() == "my notes\n"
+
+
+def test_the_committed_leaderboard_is_the_committed_runs_board():
+    committed = ROOT / "results" / LEADERBOARD
+    assert committed.is_file(), "results/leaderboard.md: python -m eval.reproduce --only report writes it"
+    assert committed.read_text() == leaderboard_markdown(ROOT / "results")
