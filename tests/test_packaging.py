@@ -136,7 +136,7 @@ def test_installed_wheel_runs_outside_checkout(wheel, tmp_path):
                                 str((site / "harness" / "conf").resolve())]
     assert "out: " in run("-m", "defaust", "--cfg", "job", "preset=ci", f"out={tmp_path / 'x'}")
     help_ = run("-m", "eval", "--help")
-    assert "ci, convergence, faust, main," in help_ and "defaust/preset: ci, full" in help_
+    assert "ci, convergence, export, faust, main," in help_ and "defaust/preset: ci, full" in help_
     run("-m", "eval", "--cfg", "job", "experiment=ci", f"dataset.root={tmp_path}")
     if importlib.util.find_spec("hydra_plugins.hydra_submitit_launcher") is not None:
         cfg = run("-m", "eval", "--cfg", "hydra", "hydra/launcher=slurm", f"dataset.root={tmp_path}")
