@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from sshade.arap import PROTOCOLS, arap_deform, make_criterion
+from sshade.arap import DEFAULT_MAX_ITER, PROTOCOLS, arap_deform, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
@@ -104,6 +104,16 @@ class FullResArap:
         self.protocol = protocol
         self.criterion = make_criterion(etol, gtol)
         self.info: dict = {}
+
+    def effective_params(self) -> dict:
+        """The parameters :meth:`deform` runs with, every default resolved: ``energy``,
+        ``protocol``, ``tol`` (the paper protocol's move rule), ``max_iter`` (None: the
+        protocol's cap, :data:`sshade.arap.DEFAULT_MAX_ITER`), ``etol`` / ``gtol`` (the
+        converged criterion), ``start``, ``coarse_n_low``."""
+        return {"energy": self.energy, "protocol": self.protocol, "tol": self.tol,
+                "max_iter": DEFAULT_MAX_ITER[self.protocol] if self.max_iter is None else self.max_iter,
+                "etol": self.criterion.etol, "gtol": self.criterion.gtol, "start": self.start,
+                "coarse_n_low": self.coarse_n_low}
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` reach ``targets``; returns (n, 3) float64.

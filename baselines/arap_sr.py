@@ -206,6 +206,15 @@ class ARAPSR:
         #: which is stored as JSON)
         self.rotations: np.ndarray | None = None
 
+    def effective_params(self) -> dict:
+        """The parameters :meth:`deform` runs with, every default resolved: ``alpha`` and
+        ``alpha_scaling`` (Open3D's Smoothed ARAP definition with ``valence``), ``protocol``,
+        ``stop`` (the paper protocol's), ``tol``, ``max_iter``, ``etol`` / ``gtol``,
+        ``start``, ``coarse_n_low``."""
+        return {"alpha": self.alpha, "alpha_scaling": self.alpha_scaling, "protocol": self.protocol,
+                "stop": self.stop, "tol": self.tol, "max_iter": self.max_iter, "etol": self.criterion.etol,
+                "gtol": self.criterion.gtol, "start": self.start, "coarse_n_low": self.coarse_n_low}
+
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` reach ``targets``; (n, 3) float64.
         Solved in the mesh's unit frame (:mod:`sshade.mesh.unit_frame`) and mapped back,

@@ -331,6 +331,11 @@ def _provenance_section(info: dict) -> str:
             ("cpu count", info.get("cpu_count"))]
     body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows if v not in (None, ""))
     out = ['<h2 id="provenance">Provenance (run.json)</h2>', f'<table id="provenance-table">{body}</table>']
+    params = {str(r.get("name")): r.get("params") for r in info.get("method_sources") or []
+              if isinstance(r, dict) and r.get("params") is not None}
+    if params:
+        out.append(f"<details open><summary>effective parameters (every default and preset value resolved)</summary>"
+                   f"<pre>{_e(json.dumps(params, indent=1))}</pre></details>")
     for key in ("seeds", "departures", "compile_s", "packages", "config"):
         if info.get(key):
             text = json.dumps(info[key], indent=1, sort_keys=key != "config")

@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from .arap import PROTOCOLS, arap_deform, bbox_diag, make_criterion
+from .arap import DEFAULT_MAX_ITER, PROTOCOLS, arap_deform, bbox_diag, make_criterion
 from .components import deform_components
 from .errors import SShaDeError
 from .lrf import ANCHORS, GRADIENTS, transfer
@@ -22,9 +22,9 @@ from .remesh import mesh_topology, remesh_drawn
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
 from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "MAX_SEED", "warm_sshade",
-           "LowResSkippedWarning", "prepare_sampling", "prepare_samplings", "arap_options", "low_res_size",
-           "handle_pre_pct"]
+__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "effective_params", "MAX_SEED",
+           "warm_sshade", "LowResSkippedWarning", "prepare_sampling", "prepare_samplings", "arap_options",
+           "low_res_size", "handle_pre_pct"]
 
 
 def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[dict, dict]:
@@ -270,6 +270,27 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     return out
 
 
+def effective_params(params: dict) -> dict:
+    """SShaDe's parameters as a run uses them: ``params`` (:func:`check_params`' output)
+    with every None resolved: ``max_iter`` the protocol's cap
+    (:data:`sshade.arap.DEFAULT_MAX_ITER`), ``etol`` / ``gtol`` the converged criterion's
+    (:func:`sshade.arap.make_criterion`), ``workers`` the pool size for ``n_samplings``
+    samplings on this machine; ``n_low`` ``"auto"`` stays the rule (:func:`auto_n_low`,
+    per mesh: each case's value is in its info, ``n_low``).
+
+    Returns
+    -------
+    dict, JSON-serialisable, the keys of :func:`check_params`.
+    """
+    p = dict(params)
+    crit = make_criterion(p.get("etol"), p.get("gtol"))
+    p.update(max_iter=DEFAULT_MAX_ITER[p["protocol"]] if p.get("max_iter") is None else p["max_iter"],
+             etol=crit.etol, gtol=crit.gtol, workers=pool_size(p.get("workers"), p["n_samplings"]))
+    if p.get("n_low") in (None, "auto"):
+        p["n_low"] = "auto: min(6000, n // 7), at least 100"
+    return p
+
+
 def auto_n_low(n: int) -> int:
     """Default low-res size for an n-vertex mesh: min(6000, n // 7), at least 100
     (6000 is the paper's setting for 150k-200k vertices; n // 7 keeps small meshes
@@ -489,6 +510,11 @@ class SShaDe:
         """See :func:`deform`; returns (n, 3) float64."""
         Vd, self.info = deform(V, F, handles, targets, return_info=True, **self.params)
         return Vd
+
+    def effective_params(self) -> dict:
+        """The parameters :meth:`deform` runs with, every default resolved
+        (:func:`effective_params`)."""
+        return effective_params(self.params)
 
     def warmup(self, n_vertices: int | None = None) -> float:
         """Compile (or load from numba's cache) every kernel :meth:`deform` runs, by one

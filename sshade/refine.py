@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from .arap import make_criterion, solve_arap
-from .deform import check_params, deform, warm_sshade
+from .deform import check_params, deform, effective_params, warm_sshade
 from .mesh.validate import validate_handles, validate_mesh
 from .warmup import warm_fullres
 
@@ -77,6 +77,13 @@ class SShaDeRefine:
                     energy=res.info.get("energy"), gnorm=res.info.get("gnorm"))
         self.info = info
         return res.V
+
+    def effective_params(self) -> dict:
+        """The parameters :meth:`deform` runs with: SShaDe's, every default resolved
+        (:func:`sshade.deform.effective_params`), and the refinement's (``refine_energy``,
+        ``refine_etol``, ``refine_gtol``, ``refine_max_iter``)."""
+        return {**effective_params(self.params), "refine_energy": self.energy, "refine_etol": self.criterion.etol,
+                "refine_gtol": self.criterion.gtol, "refine_max_iter": self.refine_max_iter}
 
     def warmup(self, n_vertices: int | None = None) -> float:
         """Compile (or load from numba's cache) the kernels of SShaDe and of the converged

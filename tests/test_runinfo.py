@@ -1,6 +1,7 @@
 """eval/run/runinfo.py: what a run records of the code that made it."""
 from __future__ import annotations
 
+import json
 import subprocess
 
 from eval.run.runinfo import git_info
@@ -25,3 +26,45 @@ def test_a_changed_result_file_is_not_dirty_code_but_a_changed_source_is(tmp_pat
     (repo / "code.py").write_text("x = 2\n")
     info = git_info(repo)
     assert info["dirty"] is True and info["modified"] == ["code.py"]
+
+
+def test_every_builtin_method_reports_its_effective_parameters_without_a_null():
+    """run.json's method_sources give each built-in method's parameters with every default
+    and preset value resolved (no None standing for a preset's or protocol's value)."""
+    from baselines import ARAP, ARAPSR, Elastic
+    from eval.run.runinfo import effective_params, method_sources
+    from sshade import SShaDe
+    from sshade.arap import DEFAULT_CRITERION, DEFAULT_MAX_ITER
+    from sshade.refine import SShaDeRefine
+    methods = [ARAP(), Elastic(protocol="paper"), ARAPSR(), SShaDe(n_low=500), SShaDeRefine(n_low=500)]
+    recs = method_sources(methods)
+    for m, r in zip(methods, recs):
+        assert r["params"] is not None and None not in r["params"].values(), (m.name, r["params"])
+    assert recs[0]["params"]["max_iter"] == DEFAULT_MAX_ITER["converged"]
+    assert recs[1]["params"]["max_iter"] == DEFAULT_MAX_ITER["paper"]
+    assert recs[3]["params"]["gtol"] == DEFAULT_CRITERION.gtol and recs[3]["params"]["n_low"] == 500
+    assert effective_params(SShaDe(n_low="auto"))["n_low"].startswith("auto")
+
+    class Plugin:
+        name = "P"
+
+        def effective_params(self):
+            raise RuntimeError("broken")
+    assert effective_params(Plugin()) is None and effective_params(object()) is None
+
+
+def test_implicit_arap_reports_its_preset_resolved():
+    from tests.optional import optional_import
+    optional_import("torch")
+    from baselines.implicit_arap import PRESETS, ImplicitARAP
+    p = ImplicitARAP(preset="cpu", arap_weight=110.0).effective_params()
+    assert p["arap_weight"] == 110.0 and p["deform_steps"] == PRESETS["cpu"]["deform_steps"]
+    assert None not in p.values() and p["reference_weights"] is False
+
+
+def test_the_page_shows_the_effective_parameters_of_run_json(tmp_path):
+    from eval.report import render_page
+    (tmp_path / "run.json").write_text(json.dumps({"status": "done", "method_sources": [
+        {"name": "ARAP", "params": {"max_iter": 10000, "gtol": 0.001}}, {"name": "Mine", "params": None}]}))
+    page = render_page(tmp_path)
+    assert "effective parameters" in page and "&quot;max_iter&quot;: 10000" in page and "Mine" not in page

@@ -249,6 +249,13 @@ class ImplicitARAP:
         self.name = name
         self.info: dict = {}
 
+    def effective_params(self) -> dict:
+        """The parameters :meth:`deform` runs with: ``preset``, ``device`` (as asked;
+        ``auto``: CUDA when PyTorch sees one, the case's ``device`` info says which),
+        ``seed`` and every setting of :data:`PRESETS` with the given ones over the
+        preset's (:func:`check_settings`): no None stands for a preset's value."""
+        return {"preset": self.preset, "device": self.device, "seed": self.seed, **self.settings}
+
     def torch_device(self) -> str:
         """The device the next :meth:`deform` runs on (``auto`` resolved)."""
         if self.device == "auto":

@@ -45,7 +45,7 @@ from eval.experiments.registry import register_experiment
 from eval.experiments.tosca import markdown_table
 from eval.methods import make_methods
 from eval.run.paths import abs_path
-from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
+from eval.run.runinfo import collect_runinfo, finish_run, method_sources, write_runinfo
 from harness.registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
@@ -118,7 +118,8 @@ def run_animation(cfg) -> dict:
     out_dir = abs_path(cfg.out_dir)
     sp = sshade_params(cfg)
     info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(sp["seed"])},
-                           extra={"status": "running", "out_dir": str(out_dir)})
+                           extra={"status": "running", "out_dir": str(out_dir),
+                                  "method_sources": method_sources(methods)})
     write_runinfo(out_dir / "run.json", info)
     truth = _Truth(manifest, ac)
     rows = _run_cases(cases, methods, truth, ac, sp, out_dir)

@@ -45,7 +45,7 @@ from harness.checks import check_numbers, config_int_list
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.cases import lifted_plane
-from sshade.deform import check_params
+from sshade.deform import check_params, effective_params
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
@@ -209,7 +209,7 @@ def run_convergence(cfg) -> dict:
     target = float(cc.target_pct)
     cases = _cases(cfg)
     info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(sp["seed"])},
-                           extra={"status": "running"})
+                           extra={"status": "running", "sshade_params": effective_params(sp)})
     write_runinfo(out_dir / "run.json", info)
     t_start = time.perf_counter()
     curves, table = [], []

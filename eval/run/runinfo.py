@@ -23,8 +23,8 @@ from pathlib import Path
 
 from sshade.mesh.io import atomic_write
 
-__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "source_record", "departures",
-           "collect_runinfo", "write_runinfo"]
+__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "effective_params", "source_record",
+           "departures", "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
@@ -109,12 +109,14 @@ def source_record(path) -> dict:
 
 def method_sources(methods) -> list[dict]:
     """Per method (objects with a ``name``), the source of its class: ``name``, ``class``
-    (``module.QualName``) and :func:`source_record` of the module's file (``file: None``
-    for a class without a Python file). Built-in methods too: one rule for all."""
+    (``module.QualName``), ``params`` (:func:`effective_params`) and :func:`source_record`
+    of the module's file (``file: None`` for a class without a Python file). Built-in
+    methods too: one rule for all."""
     out, seen = [], {}
     for m in methods:
         cls = type(m)
-        rec = {"name": str(getattr(m, "name", cls.__name__)), "class": f"{cls.__module__}.{cls.__qualname__}"}
+        rec = {"name": str(getattr(m, "name", cls.__name__)), "class": f"{cls.__module__}.{cls.__qualname__}",
+               "params": effective_params(m)}
         try:
             f = inspect.getsourcefile(cls) or inspect.getfile(cls)
         except (TypeError, OSError):
@@ -127,6 +129,20 @@ def method_sources(methods) -> list[dict]:
             rec.update(seen[f])
         out.append(rec)
     return out
+
+
+def effective_params(method) -> dict | None:
+    """The parameters ``method`` runs with, every default and preset value resolved, as
+    its ``effective_params()`` reports them (each built-in method has one: e.g.
+    :meth:`sshade.SShaDe.effective_params`), as JSON values; None for a method without
+    one (a plug-in: its config mapping is in ``run.json``'s config) or whose report fails."""
+    fn = getattr(method, "effective_params", None)
+    if not callable(fn):
+        return None
+    try:
+        return json.loads(json.dumps(fn(), default=str, allow_nan=False))
+    except Exception:  # noqa: BLE001 -- a plug-in's report: never fails the run
+        return None
 
 
 #: method option -> (the paper's value, short reason); docs/differences.md explains each.
