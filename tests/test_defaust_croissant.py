@@ -48,16 +48,22 @@ print(json.dumps({rs: [{k: plain(v) for k, v in r.items()} for r in ds.records(r
 """
 
 
-def _mlcroissant_records(path) -> dict:
-    """``{"cases": [...], "files": [...]}``: the records mlcroissant iterates from the
-    Croissant file ``path`` (in its own process, see ``_VALIDATE``), or skip."""
-    r = subprocess.run([sys.executable, "-c", _RECORDS, str(path)], capture_output=True, text=True, timeout=300,
+def _in_mlcroissant(script: str, path) -> dict:
+    """The JSON last printed by ``script`` run on the Croissant file ``path`` in its own
+    process (mlcroissant is not imported in this one), or skip when it cannot import it."""
+    r = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=300,
                        cwd=ROOT, env=subprocess_env())
     assert r.returncode == 0, r.stderr[-3000:]
     res = json.loads(r.stdout.strip().splitlines()[-1])
     if "import_error" in res:
         pytest.skip(skip_reason("mlcroissant", res["import_error"]))
     return res
+
+
+def _mlcroissant_records(path) -> dict:
+    """``{"cases": [...], "files": [...]}``: the records mlcroissant iterates from the
+    Croissant file ``path`` (in its own process, see ``_VALIDATE``), or skip."""
+    return _in_mlcroissant(_RECORDS, path)
 
 
 @pytest.mark.mlcroissant
@@ -89,13 +95,7 @@ def test_builder_writes_croissant_that_mlcroissant_validates(request):
     defaust_ci = request.getfixturevalue("defaust_ci")
     p = defaust_ci / CROISSANT
     assert p.is_file()
-    r = subprocess.run([sys.executable, "-c", _VALIDATE, str(p)], capture_output=True, text=True, timeout=300,
-                       cwd=ROOT, env=subprocess_env())
-    assert r.returncode == 0, r.stderr[-3000:]
-    res = json.loads(r.stdout.strip().splitlines()[-1])
-    if "import_error" in res:
-        pytest.skip(skip_reason("mlcroissant", res["import_error"]))
-    assert res == {"name": "DeFAUST-synthetic", "errors": []}
+    assert _in_mlcroissant(_VALIDATE, p) == {"name": "DeFAUST-synthetic", "errors": []}
     meta = json.loads(p.read_text())
     assert meta["license"] == LICENCES["synthetic"] and meta["version"] == "1.2.0"
     assert meta["distribution"][0]["sha256"] == sha256_file(defaust_ci / "manifest.json")
