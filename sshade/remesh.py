@@ -47,7 +47,7 @@ from .cores import available_cores
 from .errors import SShaDeError
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
-from .remesh_repair import degenerate_faces, faces_to_repair, nerve_faces, voronoi_vertex_seeds
+from .remesh_repair import degenerate_faces, faces_to_repair, fixed_faces, nerve_faces, voronoi_vertex_seeds
 
 __all__ = ["RemeshResult", "remesh", "remesh_drawn", "redraw_seed", "MAX_REDRAWS", "MeshTopology", "mesh_topology"]
 
@@ -178,7 +178,8 @@ class RemeshResult:
     n_required : int, required vertices (handles) that were not already seeds.
     n_repair : int, seeds added to obtain the closed-ball property / fix flipped faces.
     n_flipped : int, low-res faces still flipped or degenerate (:func:`sshade.remesh_repair.faces_to_repair`).
-    n_degenerate : int, of those, the degenerate ones (:func:`sshade.remesh_repair.degenerate_faces`).
+    n_degenerate : int, of those, the degenerate ones (:func:`sshade.remesh_repair.degenerate_faces`)
+        but those whose corners are all required (:func:`sshade.remesh_repair.fixed_faces`).
     iterations : int, check-and-repair rounds.
     timings : dict, seconds per step: topology_s (mesh_topology, when not given),
         sampling_s = fps_s (farthest-point sampling) + required_s (adding the handles),
@@ -204,7 +205,7 @@ class RemeshResult:
 
 
 def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
-           seeds: np.ndarray, fix_flips: bool):
+           seeds: np.ndarray, fix_flips: bool, fixed: np.ndarray | None = None):
     """One round of closed-ball checks and flipped-face repair (paper §3.1; flips:
     :mod:`sshade.remesh_repair`). Returns (new seed candidates (c,) int64, low-res faces
     (t, 3) int64 or None while the property fails, number of flipped faces: of the
@@ -216,13 +217,14 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
     candidates are the farthest vertex of every failing region, pair and triple
     (compiled: :func:`sshade.closed_ball.closed_ball`), and with ``fix_flips`` the Voronoi vertex of every
     flipped low-res face, in the same round (the property's and the flips'
-    repairs do not wait for each other)."""
+    repairs do not wait for each other); ``fixed`` (n,) bool or None: the required
+    vertices (:func:`sshade.remesh_repair.fixed_faces`)."""
     lab = np.concatenate([label, nseeds + np.arange(topo.n_loops, dtype=label.dtype)])  # cone vertices: own regions
     bad, cand, f3 = closed_ball(topo.Fc, topo.Ec, topo.FEc, lab, dist, topo.n, nseeds + topo.n_loops)
     if bad and not fix_flips:
         return cand, None, -1
     keepf, FN = nerve_faces(topo.Fc, lab, f3, nseeds, unique_only=bad)
-    flipped = faces_to_repair(V, topo.vnormals, seeds, FN)
+    flipped = faces_to_repair(V, topo.vnormals, seeds, FN, fixed)
     nflip = int(flipped.sum())
     new = voronoi_vertex_seeds(topo.Fc, keepf[flipped], FN[flipped], label, dist) if nflip and fix_flips else cand[:0]
     if bad:
@@ -231,7 +233,7 @@ def _check(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int,
 
 
 def _check_local(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds: int, V: np.ndarray,
-                 seeds: np.ndarray, fix_flips: bool, before: np.ndarray):
+                 seeds: np.ndarray, fix_flips: bool, before: np.ndarray, fixed: np.ndarray | None = None):
     """A round after seeds were added: :func:`_check` restricted to the
     regions whose vertices changed label since ``before`` (the labels (n,) of the
     previous round; :func:`sshade.closed_ball.closed_ball_local`), the flips among the
@@ -248,7 +250,7 @@ def _check_local(topo: MeshTopology, label: np.ndarray, dist: np.ndarray, nseeds
     if not fix_flips:
         return cand, 0
     keepf, FN = nerve_faces(topo.Fc, lab, f3u, nseeds)
-    flipped = faces_to_repair(V, topo.vnormals, seeds, FN)
+    flipped = faces_to_repair(V, topo.vnormals, seeds, FN, fixed)
     nflip = int(flipped.sum())
     if not nflip:
         return cand, 0
@@ -325,8 +327,11 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     st.sample(min(n_low, n), first)
     n_sampled = st.nseeds
     t_fps = time.perf_counter()
+    fixed = None
     if required is not None and len(required):
         st.add(np.asarray(required, np.int64))
+        fixed = np.zeros(n, bool)
+        fixed[np.asarray(required, np.int64)] = True
     n_req = st.nseeds - n_sampled
     t2 = time.perf_counter()
     FN, nflip, rounds = None, 0, 0
@@ -340,9 +345,9 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
         fix = fix_flips and flip_rounds < max_flip_rounds
         new = None
         if before is not None:
-            new, nflip = _check_local(topo, label, dist, st.nseeds, V, seeds, fix, before)
+            new, nflip = _check_local(topo, label, dist, st.nseeds, V, seeds, fix, before, fixed)
         if new is None or len(new) == 0:  # the first round, or nothing left near the changes
-            new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix)
+            new, FN, nflip = _check(topo, label, dist, st.nseeds, V, seeds, fix, fixed)
         t_check += time.perf_counter() - tc
         if len(new) == 0:
             break
@@ -359,7 +364,7 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
     return RemeshResult(seeds=seeds, F=np.ascontiguousarray(FN, np.int64), label=label,
                         dist=dist, n_sampled=n_sampled, n_required=n_req,
                         n_repair=st.nseeds - n_sampled - n_req, n_flipped=nflip, iterations=rounds, first=first,
-                        n_degenerate=int(degenerate_faces(V[seeds], FN).sum()),
+                        n_degenerate=_n_degenerate(V, seeds, FN, fixed),
                         timings={"topology_s": t1 - t0, "sampling_s": t2 - t1, "repair_s": t3 - t2,
                                  "fps_s": t_fps - t1, "required_s": t2 - t_fps, "check_s": t_check,
                                  "add_s": t3 - t2 - t_check})
@@ -368,6 +373,15 @@ def remesh(V: np.ndarray, F: np.ndarray, n_low: int, *, seed: int = 0, required=
 #: Draws of a sampling after the first when its low-res mesh keeps a degenerate face
 #: (:func:`remesh_drawn`).
 MAX_REDRAWS = 4
+
+
+def _n_degenerate(V: np.ndarray, seeds: np.ndarray, FN: np.ndarray, fixed: np.ndarray | None) -> int:
+    """Degenerate low-res faces a redraw could remove: not those whose corners are all
+    required (:func:`sshade.remesh_repair.fixed_faces`)."""
+    deg = degenerate_faces(V[seeds], FN)
+    if fixed is not None and deg.any():
+        deg &= ~fixed_faces(fixed, seeds, FN)
+    return int(deg.sum())
 
 
 def redraw_seed(seed: int, attempt: int) -> int:

@@ -27,7 +27,7 @@ import numpy as np
 
 from ._keys import unique_int
 
-__all__ = ["nerve_faces", "flipped_faces", "degenerate_faces", "faces_to_repair", "voronoi_vertex_seeds",
+__all__ = ["nerve_faces", "flipped_faces", "degenerate_faces", "faces_to_repair", "fixed_faces", "voronoi_vertex_seeds",
            "MIN_FACE_QUALITY"]
 
 #: A low-res face is *degenerate* when twice its area is at most this fraction of its
@@ -115,12 +115,27 @@ def degenerate_faces(P: np.ndarray, FN: np.ndarray, min_quality: float = MIN_FAC
     return _degenerate(*_edges_normal(P, FN), min_quality)
 
 
-def faces_to_repair(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np.ndarray) -> np.ndarray:
+def faces_to_repair(V: np.ndarray, vnormals: np.ndarray, seeds: np.ndarray, FN: np.ndarray,
+                    fixed: np.ndarray | None = None) -> np.ndarray:
     """(t,) bool, low-res faces the remesher repairs: flipped (:func:`flipped_faces`) or
-    degenerate (:func:`degenerate_faces`, which the low-res ARAP could not weigh).
-    Arguments as :func:`flipped_faces`; one pass over the faces for both."""
+    degenerate (:func:`degenerate_faces`, which the low-res ARAP could hardly weigh), except
+    degenerate faces whose three corners are ``fixed`` (:func:`fixed_faces`: no seed added
+    removes them). Arguments as :func:`flipped_faces`, ``fixed`` (n,) bool or None; one
+    pass over the faces for both."""
     n, longest = _edges_normal(V[seeds], FN)
-    return _flipped(n, vnormals, seeds, FN) | _degenerate(n, longest, MIN_FACE_QUALITY)
+    deg = _degenerate(n, longest, MIN_FACE_QUALITY)
+    if fixed is not None and deg.any():
+        deg &= ~fixed_faces(fixed, seeds, FN)
+    return _flipped(n, vnormals, seeds, FN) | deg
+
+
+def fixed_faces(fixed: np.ndarray, seeds: np.ndarray, FN: np.ndarray) -> np.ndarray:
+    """(t,) bool, low-res faces whose three corners are ``fixed`` high-res vertices ((n,)
+    bool; the required seeds, i.e. the handles): e.g. an input sliver triangle whose
+    corners are all handles stays a low-res face whatever seeds are added, so the remesher
+    neither repairs nor redraws for it; its cotangent weights are finite (an input face has
+    area, :func:`sshade.mesh.validate.validate_mesh`) and join only handle vertices."""
+    return fixed[seeds[FN]].all(axis=1)
 
 
 def voronoi_vertex_seeds(Fc: np.ndarray, faces: np.ndarray, FN: np.ndarray, label: np.ndarray,

@@ -62,3 +62,40 @@ def test_a_sampling_that_stays_degenerate_is_refused_naming_its_seeds(monkeypatc
     monkeypatch.setattr(remesh_module, "remesh", always_degenerate)
     with pytest.raises(SShaDeError, match=f"every one of {MAX_REDRAWS + 1} samplings drawn from seed 5"):
         remesh_drawn(V, F, 60, seed=5)
+
+
+def _sheet_with_a_handle_sliver(q: float):
+    """A bumpy 30 x 30 sheet whose triangle (a, d, c) is squashed to quality about ``q``
+    (c moved towards the midpoint of a-d: a valid input face with area), and handles on
+    its three corners and the sheet's corners."""
+    n = 30
+    xs, ys = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    V = np.c_[xs.ravel(), ys.ravel(), 0.05 * np.sin(3 * xs.ravel()) * np.cos(2 * ys.ravel())]
+    F = np.array([f for i in range(n - 1) for j in range(n - 1) for f in
+                  ([i * n + j, i * n + j + 1, (i + 1) * n + j + 1], [i * n + j, (i + 1) * n + j + 1, (i + 1) * n + j])])
+    a, d, c = 14 * n + 14, 15 * n + 15, 15 * n + 14
+    mid = 0.5 * (V[a] + V[d])
+    V[c] = mid + q * (V[c] - mid)
+    H = np.array([a, d, c, 0, n - 1, n * n - 1, n * (n - 1)])
+    T = V[H].copy()
+    T[:3, 2] += 0.1
+    return V, F, H, T
+
+
+@pytest.mark.parametrize("q", [1e-5, 1e-7])
+def test_a_sliver_input_face_whose_corners_are_all_handles_is_kept_not_refused(q):
+    """No seed added removes a low-res face made of three handles: it is neither repaired
+    nor redrawn for (it has area, so finite cotangent weights joining handles only), and
+    the deformation reaches its handles. (Refused as "every one of 5 samplings ... kept a
+    degenerate low-res face" before.)"""
+    import sshade
+    from sshade.remesh_repair import fixed_faces
+    V, F, H, T = _sheet_with_a_handle_sliver(q)
+    rm = remesh_module.remesh(V, F, 60, seed=0, required=H)
+    fixed = np.zeros(len(V), bool)
+    fixed[H] = True
+    deg = degenerate_faces(V[rm.seeds], rm.F)
+    assert deg.any() and (deg <= fixed_faces(fixed, rm.seeds, rm.F)).all() and rm.n_degenerate == 0
+    for seed in range(3):
+        U, info = sshade.deform(V, F, H, T, n_low=60, n_samplings=2, seed=seed, return_info=True)
+        assert np.isfinite(U).all() and np.abs(U[H] - T).max() == 0 and info["redrawn"] == 0
