@@ -300,7 +300,7 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
                 return fn()
             except SystemExit as e:
                 return e.code
-            except BaseException as e:  # noqa: BLE001 -- at 26c83ec: escapes the wrapper
+            except BaseException as e:  # noqa: BLE001 -- what escapes the wrapper is the failure
                 return f"{type(e).__name__} escaped"
         return call
 

@@ -1,4 +1,4 @@
-"""The house rules of DEVELOPERS.md, checked on the source (AST, nothing imported):
+"""The house rules, checked on the source (AST, nothing imported):
 sshade/ (the method) at the bottom, harness/ (the shared tools) above it, baselines/ and
 defaust/ above that, eval/ on top;
 imports only go down, never in a cycle, never a private name across modules, and a
@@ -164,7 +164,7 @@ def test_no_import_cycles():
 
 @pytest.mark.parametrize("pkg", list(FLOORS))
 def test_modules_and_functions_stay_small(pkg):
-    """Modules under ~600 lines, functions under ~80 (DEVELOPERS.md), with the numba
+    """Modules under ~600 lines, functions under ~80, with the numba
     kernels that must stay one function named here."""
     big_modules, big_functions = [], []
     for m, p in MODULES.items():
@@ -187,7 +187,7 @@ _PROSE_GLOBS = ("sshade/**/*.py", "harness/**/*.py", "baselines/**/*.py", "defau
 
 
 def test_no_issue_numbers_in_code_or_docs():
-    """The tracker is not part of the repository (DEVELOPERS.md): code, tests, configs and
+    """The tracker is not part of the repository: code, tests, configs and
     docs say what a thing does, never which issue made it; history lives in git log."""
     pattern = re.compile(r"\bissues?\s+#?\d+", re.I)
     hits = []

@@ -1,4 +1,4 @@
-"""Output folders: a command writes only where it may (DEVELOPERS.md "No harm, ever").
+"""Output folders: a command writes only where it may, and never outside its folder.
 
 Every command of the harness that writes a folder of results (the evaluator
 ``python -m eval``, the sweeps ``python -m eval.sweep``, ``python -m eval.reproduce``)
