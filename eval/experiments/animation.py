@@ -24,6 +24,8 @@ over the frames and its value at the last frame), the temporal jitter (the mean 
 inner frames and the vertices of ``||a(X) - a(G)||``, ``a`` the second difference over
 the frames, the same unit: what the result accelerates beyond the ground truth) and the
 frames whose solve reported convergence. ``run.json``: config, seeds, provenance.
+``frames_<method>.png``: the first case's frames of each method, coloured by their
+distance to the ground truth, shown on the run's page.
 """
 from __future__ import annotations
 
@@ -44,8 +46,10 @@ from eval.experiments.common import as_list, sshade_spec
 from eval.experiments.registry import register_experiment
 from eval.experiments.tosca import markdown_table
 from eval.methods import make_methods
+from eval.present.figures import mesh_row, vertex_error_pct
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, method_sources, write_runinfo
+from eval.run.store import safe_name
 from harness.registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
@@ -206,11 +210,31 @@ def _run_cases(cases, methods, truth: _Truth, ac, sp: dict, out_dir) -> list[dic
                 continue
             X, secs, conv, how = _method_frames(m, case, G, sp)
             rows += _frame_rows(case, m.name, how, X, G, secs, conv, diag)
+            if ci == 0:
+                _frames_figure(case, m.name, X, G, out_dir)
             log.info("%s %-10s frame median %.3f s, GT error at the last frame %.3f %%, jitter %.4f %%",
                      case.name, m.name, float(np.median(secs)), rows[-1]["gt_mean_pct"], rows[-1]["jitter_pct"])
         with atomic_write(out_dir / "cases.csv", "w", newline="") as fh:
             pd.DataFrame(rows).to_csv(fh, index=False, float_format="%.6g")
     return rows
+
+
+def _frames_figure(case, name: str, X: np.ndarray, G: np.ndarray, out_dir) -> None:
+    """``frames_<method>.png`` in ``out_dir`` (shown on the run's page): method ``name``'s
+    frames of the first case at 1/3, 2/3 and the end of the path, each coloured by its
+    distance to that frame's ground truth (% of the diagonal, one scale), and the true
+    last frame; logged and skipped when it cannot be drawn (the numbers are in cases.csv)."""
+    f = len(X) - 1
+    picks = sorted({max(1, round(f / 3)), max(1, round(2 * f / 3)), f})
+    panels = [{"title": f"frame {i}/{f}", "V": X[i], "F": case.F, "values": vertex_error_pct(X[i], G[i])}
+              for i in picks]
+    panels.append({"title": "ground truth, last frame", "V": G[f], "F": case.F})
+    path = out_dir / f"frames_{safe_name(name)}.png"
+    try:
+        mesh_row(panels, path, title=f"{case.name}: {name}, {f} frames (colour: distance to the frame's ground truth)",
+                 colorbar_label="% of diagonal")
+    except (OSError, ValueError, RuntimeError, SShaDeError) as e:
+        log.warning("%s %s: frames figure not drawn (%s)", case.name, name, e)
 
 
 def _method_frames(m, case, G: np.ndarray, sp: dict) -> tuple[np.ndarray, list, list, str]:
