@@ -50,8 +50,8 @@ import shutil
 import subprocess
 from pathlib import Path
 
+from eval.leaderboard import HEADING, LEADERBOARD, RANK_COLUMN, collect, leaderboard_markdown, leaderboard_rows
 from eval.present.breakdown import BREAKDOWN_METRICS
-from eval.present.leaderboard import HEADING, LEADERBOARD, RANK_COLUMN, collect, leaderboard_markdown, leaderboard_rows
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
 from eval.present.table_text import time_notes
@@ -461,7 +461,7 @@ def write_index(root) -> Path:
 
 
 def _leaderboard(root: Path) -> str:
-    """Write ``root/leaderboard.md`` (:mod:`eval.present.leaderboard`; a file of that name
+    """Write ``root/leaderboard.md`` (:mod:`eval.leaderboard`; a file of that name
     not written by it is left as it is) and return the HTML of its method x dataset
     matrix for the top of the index ("" when no run folder has a board)."""
     boards, _ = collect(root)

@@ -1,4 +1,4 @@
-"""eval/present/leaderboard.py: one method x dataset board ranked by the ground-truth error
+"""eval/leaderboard.py: one method x dataset board ranked by the ground-truth error
 only (a method best on volume and worst on the true pose is not first), unranked where
 there is no ground truth, times relative to SShaDe in the same run; written beside the
 index, never over a file it did not write; the committed board is the committed runs'."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import json
 
-from eval.present.leaderboard import LEADERBOARD, collect, leaderboard_markdown, leaderboard_rows
+from eval.leaderboard import LEADERBOARD, collect, leaderboard_markdown, leaderboard_rows
 from eval.report import write_index
 from tests.conftest import ROOT
 
