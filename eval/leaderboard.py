@@ -14,13 +14,13 @@ is listed apart.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
+from eval.run.runinfo import read_runinfo
 from eval.tables import compare
 from sshade.deform import SShaDe
 
@@ -63,14 +63,6 @@ def _ranks(values: list) -> list:
     """Competition ranks (1, 2, 2, 4) of the finite values, lowest first; None elsewhere."""
     fin = sorted(v for v in values if v is not None)
     return [None if v is None else 1 + sum(1 for x in fin if x < v) for v in values]
-
-
-def _run_info(d: Path) -> dict:
-    try:
-        info = json.loads((d / "run.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return info if isinstance(info, dict) else {}
 
 
 def _cases_board(d: Path, info: dict) -> Board | None:
@@ -146,7 +138,7 @@ def collect(root) -> tuple[list[Board], list[str]]:
     boards, apart = [], []
     for d in sorted((p.parent for p in root.glob("*/run.json")),
                     key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name)):
-        info = _run_info(d)
+        info = read_runinfo(d)
         kind = str(((info.get("config") or {}).get("experiment") or {}).get("kind", "cases"))
         b = _cases_board(d, info) if kind == "cases" else _animation_board(d, info) if kind == "animation" else None
         if b is not None and b.rows:

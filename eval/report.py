@@ -64,6 +64,7 @@ from eval.run.outdir import (
     refuse_results,
     results_dir,
 )
+from eval.run.runinfo import read_runinfo
 from eval.tables import (
     ALL_CASES_HEADING,
     EXTRA_COLUMNS,
@@ -351,10 +352,7 @@ def _asset(name: str) -> str:
 def render_page(run_dir) -> str:
     """The text of ``run_dir/index.html`` (module docstring); reads, writes nothing."""
     run_dir = Path(run_dir)
-    try:
-        info = json.loads((run_dir / "run.json").read_text())
-    except (OSError, ValueError):
-        info = {}
+    info = read_runinfo(run_dir)
     cfg = info.get("config") or {}
     exp = cfg.get("experiment") or {}
     kind = str(exp.get("kind", "cases"))
@@ -431,13 +429,9 @@ def write_index(root) -> Path:
                   | {p.parent for p in root.glob("*/*/*/run.json")})
     rows = []
     for d in runs:
-        try:
-            info = json.loads((d / "run.json").read_text())
-        except (OSError, ValueError):
-            info = {}
+        info = read_runinfo(d)
         rel = d.relative_to(root).as_posix()
         target = f"{rel}/{PAGE}" if (d / PAGE).is_file() else f"{rel}/"
-        info = info if isinstance(info, dict) else {}
         exp = ((info.get("config") or {}).get("experiment") or {}).get("name", "")
         rows.append([f"<td>{_link(root, target, _e(rel))}</td>", f"<td>{_e(exp)}</td>",
                      f"<td>{_e(info.get('status', ''))}</td>", _cell(info.get("n_cases")),

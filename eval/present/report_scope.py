@@ -10,10 +10,10 @@
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path, PurePosixPath
 from urllib.parse import quote
 
+from eval.run.runinfo import read_runinfo
 from eval.run.store import safe_name
 
 __all__ = ["link_target", "run_cases", "not_current"]
@@ -49,10 +49,7 @@ def run_cases(run_dir, info: dict | None = None) -> list[str] | None:
     (another experiment, a folder without them)."""
     run_dir = Path(run_dir)
     if info is None:
-        try:
-            info = json.loads((run_dir / "run.json").read_text())
-        except (OSError, ValueError):
-            info = {}
+        info = read_runinfo(run_dir)
     seeds = info.get("seeds") if isinstance(info, dict) else None
     cases = seeds.get("cases") if isinstance(seeds, dict) else None
     if isinstance(cases, dict):

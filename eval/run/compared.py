@@ -19,6 +19,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.run.runinfo import read_runinfo
 from eval.run.store import ResultStore, case_identity, safe_name
 from sshade.errors import SShaDeError
 from sshade.method import check_name
@@ -54,13 +55,10 @@ class ComparedRun:
 
 
 def _run_json(folder: Path) -> dict:
-    try:
-        d = json.loads((folder / "run.json").read_text())
-    except (OSError, ValueError):
-        raise SShaDeError(f"compare_with: {folder} has no readable run.json (is it a python -m eval run "
-                          "folder?)") from None
-    if not isinstance(d, dict):
-        raise SShaDeError(f"compare_with: {folder / 'run.json'} is not a run record")
+    d = read_runinfo(folder)
+    if not d:
+        raise SShaDeError(f"compare_with: {folder} has no readable run.json holding a run record (is it a "
+                          "python -m eval run folder?)")
     return d
 
 

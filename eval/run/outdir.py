@@ -37,7 +37,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.run.runinfo import write_runinfo
+from eval.run.runinfo import read_runinfo, write_runinfo
 from sshade.errors import SShaDeError
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
@@ -447,15 +447,11 @@ def _hydra_record(out: Path, cfg) -> None:
 def _end_runinfo(out: Path, status: str, error: str) -> None:
     """A ``run.json`` still saying ``running`` gets the run's real end (failed,
     interrupted) and the error: it never stays ``running`` after a failure."""
-    p = out / "run.json"
-    try:
-        info = json.loads(p.read_text())
-    except (OSError, ValueError):
-        return
-    if isinstance(info, dict) and info.get("status") == "running":
+    info = read_runinfo(out)
+    if info.get("status") == "running":
         info.update(status=status, error=error[:2000], ended_utc=_now())
         with contextlib.suppress(OSError):
-            write_runinfo(p, info)
+            write_runinfo(out / "run.json", info)
 
 
 @contextlib.contextmanager

@@ -23,8 +23,8 @@ from pathlib import Path
 
 from sshade.mesh.io import atomic_write
 
-__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "effective_params", "source_record",
-           "departures", "collect_runinfo", "write_runinfo"]
+__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "read_runinfo", "effective_params",
+           "source_record", "departures", "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
@@ -129,6 +129,16 @@ def method_sources(methods) -> list[dict]:
             rec.update(seen[f])
         out.append(rec)
     return out
+
+
+def read_runinfo(folder) -> dict:
+    """The ``run.json`` of run folder ``folder`` as a dict; ``{}`` when it is missing,
+    unreadable, not JSON or not a mapping (a folder's record read as untrusted input)."""
+    try:
+        info = json.loads((Path(folder) / "run.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return info if isinstance(info, dict) else {}
 
 
 def effective_params(method) -> dict | None:
