@@ -54,7 +54,7 @@ from eval.leaderboard import HEADING, LEADERBOARD, RANK_COLUMN, collect, leaderb
 from eval.present.breakdown import BREAKDOWN_METRICS
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
-from eval.present.table_text import time_notes
+from eval.present.table_text import time_marks, time_notes
 from eval.run.outdir import (
     REPRODUCE_ENV,
     OutputDirError,
@@ -130,29 +130,20 @@ def _num(v):
     return int(f) if f.is_integer() and abs(f) < 2 ** 53 else f
 
 
-def _positive(v, *, zero: bool = False) -> bool:
-    """Whether ``v`` is a finite number > 0 (>= 0 with ``zero``)."""
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return False
-    return math.isfinite(f) and (f >= 0 if zero else f > 0)
-
-
 def _summary_table(summary, table_id: str) -> str:
     """The main columns (:data:`eval.tables.TABLE_COLUMNS` and ``EXTRA_COLUMNS``) of a
     per-method summary (:func:`eval.tables.summarize` layout)."""
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
     cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns and c != "converged"]
     head = ["Method", "Cases", "Failed", *[h for _, h, _ in cols]]
-    rows = []
-    for _, r in summary.iterrows():
+    rows, marks = [], time_marks(summary)
+    for i, (_, r) in enumerate(summary.iterrows()):
         cells = [f"<td>{_e(r['method'])}</td>", _cell(int(r["n_cases"])), _cell(int(r.get("n_failed", 0) or 0))]
-        mark = "".join(f" {m}" for col, m in (("time_reported", "(reported)"), ("time_other_run", "(other run)"))
-                       if col in summary.columns and _positive(r[col]))
-        cells += [_cell(_num(r[c]), d).replace("</td>", f"{mark}</td>")
-                  if c == "time_s" and mark and _positive(r[c], zero=True) else _cell(_num(r[c]), d)
-                  for c, _, d in cols]
+        for c, _, d in cols:
+            cell = _cell(_num(r[c]), d)
+            if c == "time_s" and i in marks and 'data-v=""' not in cell:  # a time not measured in this run
+                cell = cell.replace("</td>", f" {marks[i]}</td>")
+            cells.append(cell)
         rows.append(cells)
     return _table(head, rows, table_id) + "".join(f'<p class="note">{_e(n)}</p>' for n in time_notes(summary))
 

@@ -27,11 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.store import sha256_file
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write, write_mesh
 
 __all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "write_case",
-           "write_export", "result_path", "read_times", "file_sha256"]
+           "write_export", "result_path", "read_times"]
 
 FORMAT = "sshade-exchange/1"   #: ``format`` of :data:`INDEX`
 INDEX = "cases.json"           #: the export's index of cases
@@ -44,16 +45,6 @@ RESULT_EXTS = (".obj", ".ply", ".off", ".stl")
 #: Columns of a times file: the case, the method's own seconds for it, the machine.
 TIMES_COLUMNS = ("case", "time_s", "machine")
 MAX_TIMES_BYTES = 16 << 20     #: a times file larger than this is refused unread
-
-
-def file_sha256(path) -> str:
-    """SHA-256 (hex) of the file at ``path``, read in 1 MiB blocks."""
-    import hashlib
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _write_dmat(path: Path, A: np.ndarray) -> None:
@@ -113,7 +104,7 @@ def write_case(folder, case) -> dict:
     files = {k: f"{folder.name}/{v}" for k, v in CASE_FILES.items()}
     return {"name": case.name, "subject": subject, "pose": pose, "n_vertices": len(case.V), "n_faces": len(case.F),
             "n_handles": len(h), "n_static": int(static.sum()), "has_ground_truth": case.V_gt is not None,
-            "files": files, "sha256": {k: file_sha256(folder / v) for k, v in CASE_FILES.items()}}
+            "files": files, "sha256": {k: sha256_file(folder / v) for k, v in CASE_FILES.items()}}
 
 
 def write_export(out_dir, cases, *, dataset: dict) -> Path:

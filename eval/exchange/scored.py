@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.exchange.layout import RESULT_EXTS, file_sha256, read_times, result_path
+from defaust.store import sha256_file
+from eval.exchange.layout import RESULT_EXTS, read_times, result_path
 from eval.run.paths import abs_path
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
@@ -69,7 +70,7 @@ class ScoredResults:
         self.case = None   # set by the evaluator before each deform (eval.datasets.case.CaseLabel)
         self.info: dict = {}
         self.key_extra = {"results": self._listing_digest(),
-                          "times": None if self.times_path is None else file_sha256(self.times_path)}
+                          "times": None if self.times_path is None else sha256_file(self.times_path)}
 
     def _listing_digest(self) -> str:
         """SHA-256 of the name, size and modification time of every result file: a
@@ -117,6 +118,6 @@ class ScoredResults:
             raise SShaDeError(f"{path.name}: its {len(G)} faces are not the rest mesh's {len(F)} (vertex order "
                               "changed or the mesh was remeshed)")
         t = self.times.get(name)
-        self.info = {"result_file": path.name, "result_sha256": file_sha256(path),
+        self.info = {"result_file": path.name, "result_sha256": sha256_file(path),
                      "reported_time_s": None if t is None else t[0], "time_machine": None if t is None else t[1]}
         return U
