@@ -17,11 +17,15 @@ Needs PyTorch (extra [neural]).
 """
 import argparse
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 
-from baselines.implicit_arap.backend import torch
-from baselines.implicit_arap.patches import disk, edge_structure, patch_energy
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
+
+from baselines.implicit_arap.backend import torch  # noqa: E402
+from baselines.implicit_arap.patches import disk, edge_structure, patch_energy  # noqa: E402
 
 
 def ratios(k: int, trials: int, rng: np.random.Generator) -> np.ndarray:
