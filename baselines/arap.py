@@ -71,10 +71,9 @@ class FullResArap:
         step of the rotations of the same energy solved on a ``coarse_n_low``-vertex
         remesh), ``"auto"`` (coarse when the mesh has at least ``COARSE_MIN_RATIO *
         coarse_n_low`` vertices, falling back to rigid if the coarse start raises
-        SShaDeError). Either start is stopped by the same full-resolution criterion. Rigid
-        by default: on DeFAUST the coarse start saves only 15-35% of the iterations (823 ->
-        550, 820 -> 697 on s00_p01) and lands on another stationary point, 0.2-0.65% of the
-        diagonal away (ARAP-SR, whose sweeps crawl from the rigid start, keeps ``auto``).
+        SShaDeError). Either start is stopped by the same full-resolution criterion; why
+        rigid is the default here: docs/methods.md, "Implementation notes:
+        baselines/coarse_start.py".
     coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
 
     Raises

@@ -1,24 +1,12 @@
-"""ARAP-SR: as-rigid-as-possible with smooth rotations (Levi & Gotsman 2015,
-"Smooth rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG).
+"""ARAP-SR: as-rigid-as-possible with smooth rotations (Levi & Gotsman 2015, "Smooth
+rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG), behind the
+:class:`sshade.method.Deformer` interface (:class:`ARAPSR`).
 
-Energy (spokes, cotangent weights w_ij, A = total surface area, c_i = 1 / valence for
-``alpha_scaling="valence"``, Open3D's definition of alpha, or 1 for ``"none"``;
-:mod:`baselines.arap_sr_solver` states both and their sources):
-
-    E = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
-        + alpha * A * sum_i c_i sum_{j in N(i)} || R_i - R_j ||_F^2
-
-Two protocols (:class:`ARAPSR`): ``"converged"``
-(:func:`baselines.arap_sr_solver.solve_arap_sr`: Gauss-Seidel local step, Anderson
-acceleration, the energy-and-gradient criterion) and ``"paper"`` (:func:`arap_sr_deform`:
-the plain iteration of Open3D's Smoothed ARAP, a Jacobi local step from the previous
-rotations then the global step, run as paper §4.1 says, "until convergence with a cutoff
-of 1000 iterations").
-
-Written on libigl's cotangent matrix: Open3D's ``deform_as_rigid_as_possible`` (its
-Smoothed energy) is the outside implementation, but a 300+ MB dependency for one baseline
-and a fixed iteration count with no stopping test; the test extra installs it to check
-this module against it (``tests/test_arap_sr_open3d.py``).
+Two protocols: ``"converged"`` (:func:`baselines.arap_sr_solver.solve_arap_sr`; that
+module states the energy and both definitions of alpha) and ``"paper"``
+(:func:`arap_sr_deform`: Open3D's plain Smoothed-ARAP iteration, run "until convergence
+with a cutoff of 1000 iterations", paper §4.1). Why it is written on libigl and checked
+against Open3D: docs/methods.md, "Implementation notes: baselines/arap_sr.py".
 """
 from __future__ import annotations
 
@@ -49,22 +37,14 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
     """ARAP with smooth rotations under the paper protocol (§4.1; the converged protocol
     is :func:`baselines.arap_sr_solver.solve_arap_sr`).
 
-    The plain iteration of Open3D's Smoothed ARAP: from the rigid fit of the handles,
-    each iteration takes every rotation at once from the previous ones (Jacobi local
-    step, :meth:`baselines.arap_sr_solver.SRProblem.sweep`) and then the global step.
-    It stops by ``stop``:
-
-    * ``"energy"`` (default; §4.1's "until convergence with a cutoff of 1000
-      iterations"): when the relative change of ``E`` over one iteration is below
-      ``criterion.etol``;
-    * ``"move"``: when the largest vertex move of one iteration is below
-      ``tol * bbox_diag`` (this package's paper protocol before the energy stop; on a
-      stiff iteration it fires after two iterations, far from the minimiser).
-
-    Either way the stop is then tested as the converged protocol tests it: ``status`` is
-    ``"converged"`` when the gradient norm is below ``criterion.gtol`` (and, for the
-    energy stop, the relative decrease below ``criterion.etol``), else ``"stalled"``;
-    ``"max_iter"`` / ``"time_budget"`` at the caps.
+    From the rigid fit of the handles, each iteration takes every rotation at once from the
+    previous ones (Jacobi local step, :meth:`baselines.arap_sr_solver.SRProblem.sweep`), then
+    the global step, until ``stop`` fires: ``"energy"`` (default; the relative change of
+    ``E`` over one iteration below ``criterion.etol``) or ``"move"`` (the largest vertex move
+    of one iteration below ``tol * bbox_diag``). ``status`` is then ``"converged"`` when the
+    gradient norm is below ``criterion.gtol`` (and, for the energy stop, the relative
+    decrease below ``criterion.etol``), else ``"stalled"``; ``"max_iter"`` /
+    ``"time_budget"`` at the caps.
 
     Parameters
     ----------

@@ -1,67 +1,14 @@
-"""Converged ARAP-SR: block-coordinate descent on ARAP with smooth rotations (Levi &
-Gotsman 2015, "Smooth rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG),
-with an energy-verified stopping criterion (:func:`solve_arap_sr`).
-
-Energy (spokes, libigl's cotangent weights ``w_ij``, ``A`` the total surface area):
+"""Converged ARAP-SR (Levi & Gotsman 2015, "Smooth rotation enhanced as-rigid-as-possible
+mesh animation", IEEE TVCG): block-coordinate descent with an energy-verified stop.
 
     E(U, R) = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
               + alpha * A * sum_i c_i sum_{j in N(i)} || R_i - R_j ||_F^2
-            = 2 E_spokes(U, R) + alpha A sum_{edges (s, d)} (c_s + c_d) || R_s - R_d ||_F^2
 
-with ``E_spokes`` the energy of :mod:`sshade.arap.operators` (which counts each spoke with
-half its weight) and ``c_i`` set by ``alpha_scaling`` (:data:`ALPHA_SCALINGS`):
-
-* ``"valence"`` (default): ``c_i = 1 / d_i``, ``d_i`` the valence of vertex ``i``. This is
-  alpha as Open3D's Smoothed ARAP defines it (``TriangleMesh::DeformAsRigidAsPossible``
-  with ``energy=Smoothed``, whose default 0.01 is ours): in the scale of ``E`` its local
-  step is ``R_i = polar(M_i + (alpha A / d_i) sum_{j in N(i)} R_j)``, iterated (Jacobi)
-  without an energy of its own. ``E`` is the energy whose exact local step that is
-  wherever neighbouring valences agree (``E``'s local step weighs ``R_j`` by
-  ``alpha A (c_i + c_j) / 2``), and converged results agree with a converged Open3D run
-  (``tests/test_arap_sr_open3d.py``). CGAL's ``SRE_ARAP`` also divides its neighbour term
-  by the valence, with its own default (0.02) and weight scale.
-* ``"none"``: ``c_i = 1``, the neighbour term without the valence (this package's
-  definition before it followed Open3D's). On a mesh of valence 6 its alpha is about 6x
-  Open3D's.
-
-At ``alpha = 0`` ``E`` is twice ARAP's spokes energy: same minimiser. Open3D's cotangent
-weights equal libigl's on closed meshes (the mean of the two opposite cotangents) but are
-clamped at 0 and doubled on boundary edges; ours are libigl's everywhere.
-
-Iteration (every sub-step is an exact minimisation over one block of variables, so the
-energy never increases):
-
-* local step, Gauss-Seidel over a vertex colouring (:class:`SRProblem`): the vertices are
-  split into independent sets of the mesh graph (:func:`colour_classes`); one sweep
-  solves ``R_i = polar(M_i + alpha A sum_{j in N(i)} (c_i + c_j) / 2 R_j)``, ``M_i``
-  the spokes covariance of ``U``, for one class at a time with the neighbours' latest rotations.
-  Within a class the rotations do not interact, so each class update is the exact
-  minimiser of its block. (Solving all ``R_i`` at once from the previous rotations,
-  Jacobi, as :func:`baselines.arap_sr.arap_sr_deform` does, can increase the smoothness
-  term; ``benchmarks/arap_sr_local.py`` measures both.)
-* global step: ``L_ff U_f = K(R)_f - L_fb T``, ARAP's global step with the rotations
-  fixed (one Cholesky factorisation, :class:`sshade.arap.LaplacianSolver`).
-* acceleration (default ``accelerate="anderson"``): Anderson acceleration (Peng et al.
-  2018, :class:`sshade.arap.Anderson`) of the fixed-point map ``G(U, R) = (U_g,
-  sweep(U_g, R))``, ``U_g`` the global step, on the joint state ``(U_free, sqrt(alpha A)
-  R)``: its residual holds the rotations' change as well as the positions' (the slow
-  modes are the smoothed rotations, spreading by one ring per sweep). A candidate
-  ``(U_a, R_a)`` is accepted only if ``E(U_a, sweep(U_a, R_a))`` is below the energy
-  after the plain step, else the plain step is taken; the history is kept (``reset_on_reject``:
-  forget it, an older scheme, which rejected about every other candidate at 169k
-  vertices). L-BFGS on ``U`` with one sweep per trial point (ARAP's default) was
-  measured as slow as no acceleration (the rotations, not ``U``, lag), so it is
-  not offered.
-
-What "converged" certifies (:class:`sshade.arap.Criterion`, thresholds ``etol`` /
-``gtol``): at the accepted state ``(U_k, R_k)``, ``R_k`` being the local step at ``U_k``,
-(1) the relative energy decrease over the last accepted iteration is below ``etol`` and
-(2) the scale-free norm (:func:`sshade.arap.gradient_norm`) of ``dE/dU (U_k, R_k) / 2 =
-2 (L U_k - K(R_k))`` (the ARAP spokes gradient with those rotations, so ``alpha = 0``
-gives ARAP's number) is below ``gtol``. The rotations' own stationarity is not tested
-separately: a Gauss-Seidel sweep leaves every class optimal given its neighbours at the
-time, and (1) bounds what further sweeps could gain. Like ARAP the energy is not convex:
-this certifies closeness to a stationary point, not the global minimum.
+``w_ij`` libigl's cotangent weights, ``A`` the surface area, ``c_i = 1 / valence``
+(``alpha_scaling="valence"``, Open3D's alpha) or 1 (``"none"``; :data:`ALPHA_SCALINGS`).
+:func:`solve_arap_sr`: Gauss-Seidel local step over a vertex colouring (:class:`SRProblem`),
+global step, Anderson acceleration. Derivation, sources and what "converged" certifies:
+docs/methods.md, "Implementation notes: baselines/arap_sr_solver.py".
 """
 from __future__ import annotations
 
@@ -326,7 +273,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling:
                   U0: np.ndarray | None = None, time_budget_s: float | None = None, jacobi: bool = False,
                   problem: SRProblem | None = None, linear_solver: str = "auto",
                   reset_on_reject: bool = False, R0: np.ndarray | None = None) -> ArapResult:
-    """ARAP-SR run to a certified convergence (module docstring).
+    """ARAP-SR run to a certified convergence (docs/methods.md, "Implementation notes:
+    baselines/arap_sr_solver.py").
 
     Parameters
     ----------
@@ -350,8 +298,8 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling:
     problem : :class:`SRProblem` or None, prebuilt for the same inputs (its ``alpha`` and
         ``alpha_scaling`` are used).
     linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
-    reset_on_reject : bool, forget Anderson's history after a rejected candidate (the
-        older scheme; default False: keep it).
+    reset_on_reject : bool, forget Anderson's history after a rejected candidate (default
+        False: keep it).
 
     Returns
     -------
@@ -360,8 +308,7 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling:
     at ``U0`` after one local step), ``status`` (``"converged"``, ``"max_iter"``,
     ``"time_budget"``, ``"stalled"``: no decrease in float64, ``"rigid"``),
     ``n_fallback`` (rejected Anderson candidates), ``n_sweeps``, ``n_colours``, ``alpha``,
-    ``alpha_scaling``,
-    ``R`` ((n, 3, 3) the final rotations).
+    ``alpha_scaling``, ``R`` ((n, 3, 3) the final rotations).
 
     Raises
     ------

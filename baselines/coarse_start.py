@@ -1,24 +1,13 @@
 """A coarse-to-fine start for the converged protocol of the full-resolution baselines
-(ARAP-SR, ARAP and Elastic): solve the same energy on a
-low-resolution remesh (SShaDe's, :func:`sshade.remesh.remesh`, the handles kept as
-vertices), give every full-resolution vertex the rotation of its low-res Voronoi region,
-and start the full-resolution solve from those rotations and their global step
-(:func:`sshade.arap.solve_arap` / :func:`baselines.arap_sr_solver.solve_arap_sr`, ``R0``).
-
-Why: a local/global iteration spreads a change by about one ring, so the smooth
-(low-frequency) part of the solution, a bend of a limb, is what takes the iterations at
-full resolution; for ARAP-SR the smoothness term couples neighbouring rotations the same
-way. The energies approximate resolution-independent integrals (the ARAP term an area
-integral; ARAP-SR's uniform edge sum of ``||R_s - R_d||^2`` a Dirichlet energy of the
-rotation field on a regular triangulation), so the low-res minimiser carries that smooth
-part. The result is still certified by the full-resolution criterion: the start changes
-the time to converge, not what "converged" means. ARAP is not convex: the two starts can
-end at different stationary points (docs/protocols.md).
-
-:func:`check_start` checks the ``start`` / ``coarse_n_low`` options of the baselines,
-:func:`start_rotations` applies them (``"auto"``: coarse on meshes of at least
-:data:`COARSE_MIN_RATIO` x ``coarse_n_low`` vertices, rigid where the coarse start fails),
-:func:`coarse_start` is the start itself.
+(ARAP, Elastic, ARAP-SR): the same energy solved on a low-resolution remesh
+(:func:`sshade.remesh.remesh`, the handles kept as vertices), every full-resolution vertex
+given the rotation of its low-res Voronoi region, and the full-resolution solve started
+from those rotations (``R0`` of :func:`sshade.arap.solve_arap` /
+:func:`baselines.arap_sr_solver.solve_arap_sr`). :func:`check_start` checks the
+``start`` / ``coarse_n_low`` options, :func:`start_rotations` applies them (``"auto"``:
+coarse on meshes of at least :data:`COARSE_MIN_RATIO` x ``coarse_n_low`` vertices, rigid
+where the coarse start fails), :func:`coarse_start` is the start itself. Why it works and
+what it saves: docs/methods.md, "Implementation notes: baselines/coarse_start.py".
 """
 from __future__ import annotations
 

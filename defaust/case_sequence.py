@@ -1,22 +1,15 @@
-"""The sequence :func:`defaust.load` returns: a DeFAUST build's cases, each read from its
-files when it is first asked for (by position, by name or by iteration), then kept.
-
-A :class:`CaseSequence` behaves as the list :func:`defaust.load` returned before it was
-lazy (``len``, iteration in (subject, pose) order, ``cases[0]``, ``cases[-1]``, slices),
-and is also indexed by case name: the reader's ``"s00_p01"`` or the manifest's item key
-``"subject_00/pose_01"``. Asking for a case reads and checks its files
-(:class:`defaust.dataset.CaseReader`); a file shared by several cases (a subject's rest
-mesh) is read and checked once. Two threads asking for one case read it once; cases of
-different subjects are read in parallel. A pickled copy (a DataLoader worker started by
-*spawn*) holds no array and reads again what it is asked for.
+"""The sequence :func:`defaust.load` returns (:class:`CaseSequence`): a DeFAUST build's
+cases, each read from its files when first asked for (by position, by name or by
+iteration), then kept. Indexed like a list (``len``, iteration in (subject, pose) order,
+negative positions, slices) and by case name (``"s00_p01"`` or the manifest's
+``"subject_00/pose_01"``); a file shared by several cases is read and checked once;
+thread-safe; a pickled copy holds no array. Usage: docs/defaust.md §6, "A lazy, indexed
+sequence".
 
 Example::
 
-    import defaust
     cases = defaust.load("data/defaust", resolution="low")   # reads the manifest only
-    c = cases["s00_p01"]                                      # reads subject 0's rest mesh and case 1
-    c is cases[0], len(cases), cases.names[:2]
-    # -> (True, 40, ('s00_p01', 's00_p02'))
+    c = cases["s00_p01"]; c is cases[0], len(cases)           # -> (True, 40)
 """
 from __future__ import annotations
 

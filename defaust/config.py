@@ -28,8 +28,8 @@ class BuildConfig:
     ----------
     out : output folder.
     source : ``"anny"`` (default: ANNY bodies, :mod:`defaust.anny_source`), ``"faust"``
-        or ``"synthetic"`` (the former implicit bodies, kept because they build in seconds
-        without the ANNY assets: the builder's resume/corruption tests use them).
+        or ``"synthetic"`` (implicit bodies that build in seconds without the ANNY assets;
+        the builder's own tests use them).
     seed : int, dataset seed (handle draws; synthetic bodies and poses).
     subjects : list of int or None, build only these subjects.
     n_subjects : int, anny / synthetic subjects ``0 .. n_subjects - 1`` (anny: at most

@@ -1,21 +1,14 @@
 """The Croissant metadata of a DeFAUST build (``croissant.json`` beside ``manifest.json``):
-the dataset described in MLCommons' Croissant 1.0 vocabulary (JSON-LD, schema.org), so
-that dataset catalogues and loaders that read Croissant find its files, their formats,
-its licence and how to cite it.
-
-The file is derived from the manifest only (deterministic bytes: the same build gives
-the same file), and names the manifest's sha256, so :func:`defaust.dataset.verify` can
-tell a Croissant file that no longer describes its manifest. Its record sets ``cases``
-and ``files`` (:data:`RECORD_SETS`) hold their records inline, so that Croissant loaders
-iterate the cases and files without reading a mesh or an ``.npz``. It is written with the
-standard library; ``mlcroissant`` (test extra) validates it and iterates its records in
-the test suite.
+the dataset in MLCommons' Croissant 1.0 vocabulary (JSON-LD, schema.org), derived from the
+manifest only (the same build gives the same file) and naming its sha256, so
+:func:`defaust.dataset.verify` tells a stale one. Its record sets ``cases`` and ``files``
+(:data:`RECORD_SETS`) hold their records inline, so Croissant loaders iterate them without
+reading a mesh or an ``.npz``. Standard library only; ``mlcroissant`` (test extra)
+validates it in the tests. Fields: docs/defaust.md §2, "croissant.json".
 
 Example::
 
-    from defaust.croissant import croissant_metadata
-    meta = croissant_metadata(read_manifest("data/defaust"), manifest_sha256="...")
-    meta["name"], [d["@id"] for d in meta["distribution"]]
+    croissant_metadata(read_manifest("data/defaust"), manifest_sha256="...")["name"]
 """
 from __future__ import annotations
 

@@ -1,33 +1,12 @@
-"""A built DeFAUST folder (or an archive that ``python -m defaust pack`` wrote, read in
-place: :mod:`defaust.archive`) read as deformation cases, and checked against its
-manifest (paper appendix; the file format: docs/defaust.md).
-
-This is the dataset's public reader: numpy arrays only, no Hydra, OmegaConf or evaluator
-import on its path, so that another framework can take the cases as they are. The
-evaluator's ``defaust`` dataset (:mod:`eval.datasets.defaust`) reads through it.
-
-Each case deforms a subject's rest mesh (low or high resolution) with the handles of one
-target pose. The handles are stored as positions; :func:`load` snaps them to the nearest
-vertices of the mesh read (:func:`defaust.handles.snap_handles`) and moves their targets
-with them: ``targets = target_positions + (V[handles] - rest_positions)`` (for a static
-handle simply ``V[handles]``), so a static handle stays exactly where its vertex is and a
-dynamic one gets the stored displacement (at low resolution the snap is exact).
-
-:func:`load` returns a :class:`defaust.case_sequence.CaseSequence`: it reads the
-manifest, and each case's files when the case is first asked for (:class:`CaseReader`,
-each file checked against the manifest's sha256 at its first read).
-
-The files are read as untrusted input, checksums or not: no symbolic link inside the
-build folder, a handles file holding only its expected arrays, each bounded in size
-before it is decompressed, with finite real values (:func:`load_handles`).
-
-Example::
-
-    import defaust
-    cases = defaust.load("data/defaust", resolution="low")   # reads the manifest only
-    c = cases["s00_p01"]; c.name, c.V.shape, c.handles.shape, c.targets.shape, c.static.sum()
-    # -> ('s00_p01', (14xxx, 3), (180,), (180, 3), 90)
-    problems = defaust.verify("data/defaust")   # [] for a good copy
+"""DeFAUST's public reader (paper appendix A; the file format: docs/defaust.md §2): a
+build folder, or an archive ``python -m defaust pack`` wrote (read in place,
+:mod:`defaust.archive`), read as deformation cases (:func:`load`: a lazy
+:class:`defaust.case_sequence.CaseSequence` of :class:`Case`) and checked against its
+manifest (:func:`verify`). NumPy only, no Hydra, OmegaConf or evaluator import on its
+path; :mod:`eval.datasets.defaust` reads through it. The stored handle positions are
+snapped to the mesh read (:func:`defaust.handles.snap_handles`) and their targets moved
+with them; every file is read as untrusted input (:func:`load_handles`). Usage, checks and
+errors: docs/defaust.md §6.
 """
 from __future__ import annotations
 
@@ -450,11 +429,10 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     """The deformation cases of a DeFAUST build (a folder, or an archive that
     ``python -m defaust pack`` wrote, read in place), each read when first asked for.
 
-    Every parameter is checked before any file is read; then the manifest is read and
-    every file the selected cases need is checked to be there, inside ``root`` with no
-    symbolic link on the way (:func:`sshade.mesh.io.inside_folder`; in an archive, every
-    member is checked, :class:`defaust.archive.ArchiveBuild`). No array is read until a
-    case is asked for (``eager`` aside).
+    Checks every parameter, reads the manifest and checks that every file the selected
+    cases need is there, inside ``root`` with no symbolic link on the way
+    (:func:`sshade.mesh.io.inside_folder`; :class:`defaust.archive.ArchiveBuild`); no
+    array is read until a case is asked for (``eager`` aside). docs/defaust.md §6.
 
     Parameters
     ----------
@@ -473,10 +451,8 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     Returns
     -------
     :class:`defaust.case_sequence.CaseSequence` of :class:`Case`, sorted by (subject,
-    pose): ``cases[i]``, ``cases["s00_p01"]`` or ``cases["subject_00/pose_01"]``, ``len``,
-    iteration, slices. A case is read (its files checked) at its first access and then
-    kept; a subject's rest mesh is read once and shared by its cases (do not modify
-    ``V``/``F`` in place).
+    pose), each read (its files checked) at its first access and then kept; a subject's
+    rest mesh is shared by its cases (do not modify ``V``/``F`` in place).
 
     Raises
     ------

@@ -1,26 +1,12 @@
 """``python -m defaust verify|describe|export|pack DIR ...``: the command line of a built
 dataset (the builder's own is :mod:`defaust.cli`). DIR is a build folder or, for
 ``verify``, ``describe`` and ``export``, an archive that ``pack`` wrote (read in place).
-
-- ``verify DIR``: every file against ``DIR/manifest.json`` (:func:`defaust.dataset.verify`);
-  one line per problem on stdout, exit 0 for a good copy, 2 on any problem.
-- ``describe DIR [--resolution high|low]``: one Markdown table row per case on stdout
-  (:func:`defaust.describe.describe`: handles, the ground truth's volume and area change);
-  writes nothing.
-- ``export DIR --to FOLDER [--format npz|obj|ply] [--resolution high|low]
-  [--subjects 0 1 ...]``: :func:`defaust.export.export`; a refused folder or a bad build
-  is one ``error:`` line and exit 2, before any file is written.
-- ``pack DIR -o ARCHIVE [--force]``: :func:`defaust.packing.pack`, one zip archive of the
-  build with its manifest, Croissant file and datasheet; ``ARCHIVE`` must be new or an
-  earlier pack (``--force``: any file), outside the build; a refused output or a build
-  with a problem is one ``error:`` line and exit 2, and nothing is written.
-
-Example::
-
-    python -m defaust verify data/defaust
-    python -m defaust describe data/defaust
-    python -m defaust export data/defaust --to /tmp/defaust_obj --format obj --resolution low
-    python -m defaust pack data/defaust -o defaust-anny.zip
+``verify`` (:func:`defaust.dataset.verify`: one line per problem, exit 0 for a good copy,
+2 on any problem), ``describe`` (:func:`defaust.describe.describe`: one Markdown row per
+case, writes nothing), ``export`` (:func:`defaust.export.export`) and ``pack``
+(:func:`defaust.packing.pack`); a refused folder, output or build is one ``error:`` line
+and exit 2, before any file is written. Options: ``python -m defaust --help``; usage:
+docs/defaust.md §6 and §7.
 """
 from __future__ import annotations
 

@@ -1,17 +1,13 @@
-"""What a built DeFAUST folder holds, case by case: sizes, handles, and how far its
-ground truth is from volume- and area-preserving (the datasheet's known limitations,
-docs/defaust.md §4, measured on the files themselves).
-
-The ground truth of an ANNY or synthetic build is the skinning of the target pose (paper
-appendix): linear blend skinning does not preserve volume, so a perfect result's volume
-error (paper §4, Eq. of the volume metric) is this change, not zero.
+"""What a built DeFAUST folder holds, case by case (``python -m defaust describe``): sizes,
+handles, and how far the ground truth is from volume- and area-preserving, measured on the
+files (docs/defaust.md §4, known limitations). The ground truth of an ANNY or synthetic
+build is the linear blend skinning of the target pose (paper appendix A), which does not
+preserve volume: a perfect result's volume error (paper §4) is this change, not zero.
 
 Example::
 
-    from defaust.describe import describe, summary
     rows = describe("data/defaust", resolution="high")
-    rows[0]["gt_volume_change_pct"]        # signed, % of the rest volume
-    summary(rows)["gt_volume_change_pct"]  # {"min": ..., "median": ..., "max": ...}
+    rows[0]["gt_volume_change_pct"], summary(rows)["gt_volume_change_pct"]
 """
 from __future__ import annotations
 

@@ -1,20 +1,14 @@
-"""A DeFAUST build written for tools outside this harness: one file set per case, in
-NumPy's ``.npz`` or as meshes (``.obj`` / ``.ply``) with the handles in a JSON beside
-them (the fields: docs/defaust.md, "Export").
-
-The cases are those :func:`defaust.dataset.load` gives (handles snapped to the mesh of
-the chosen resolution, their targets moved with them), so an exported copy holds exactly
-what the evaluator deforms. Every export folder holds ``export.json`` (:data:`MARKER`):
-the export's settings, the source build's manifest sha256 and each file's sha256.
-
-An export writes only into a folder that does not exist, is empty, or holds an earlier
-export (its ``export.json``); anything else is refused before any file is read.
+"""A DeFAUST build written for tools outside this harness (:func:`export`): one file set per
+case, NumPy's ``.npz`` or meshes (``.obj`` / ``.ply``) with the handles in a JSON beside
+them, holding the cases :func:`defaust.dataset.load` gives (handles snapped, targets moved:
+what the evaluator deforms), and ``export.json`` (:data:`MARKER`: the settings, the build's
+manifest sha256, each file's sha256). It writes only into a new or empty folder or an
+earlier export; anything else is refused before any file is read. The fields:
+docs/defaust.md §6, "Export".
 
 Example::
 
-    from defaust.export import export
-    files = export("data/defaust", "/tmp/defaust_npz", fmt="npz", resolution="low")
-    import numpy as np; d = np.load(files[0]); d["V"].shape, d["handles"].shape
+    files = export("data/defaust", "outputs/defaust_npz", fmt="npz", resolution="low")
 """
 from __future__ import annotations
 

@@ -1,25 +1,13 @@
-"""Landmark handle groups of DeFAUST (paper appendix, eq. for Delta_l), stored as positions.
+"""Landmark handle groups of DeFAUST (paper appendix A, eq. for Delta_l), stored as positions.
 
-For each landmark ``l`` on the rest pose ``M`` we draw ``n_per_landmark`` (paper: 30)
-random vertices ``H_l`` among the ``neighbourhood`` (default 90) vertices geodesically
-nearest to ``l`` (Dijkstra on the edge graph with Euclidean edge lengths, ties broken by
-vertex index; draw without replacement with ``numpy.random.default_rng(seed)``, landmark
-by landmark in the given order). With the correspondence ``pi : M -> M'`` of a target
-pose (the identity on vertex indices for FAUST registrations and for the synthetic
-bodies)
-
-    Delta_l = sum_{v in H_l} || v - pi(v) ||                      (paper, appendix)
-
-and the group is *static* (targets = rest positions) when the mean displacement
-``Delta_l / n_per_landmark`` is below ``static_threshold``, *dynamic* (targets = the
-target pose's positions) otherwise. The threshold is in mesh units (metres for FAUST and
-the synthetic bodies; default 0.02 = 2 cm); using the mean makes it independent of the
-group size. A vertex drawn by two landmarks is kept once, in its first group.
-
-Handles are stored as 3D positions, not indices ("so that they can be used with remeshed
-and subdivided shapes"): rest positions (h, 3) and target positions (h, 3), plus the
-static flag and group id per handle. :func:`snap_handles` maps the rest positions to the
-nearest vertices of whichever mesh they are used with.
+Around each landmark ``l``, ``n_per_landmark`` (paper: 30) vertices ``H_l`` are drawn among
+its ``neighbourhood`` geodesically nearest (:func:`landmark_handles`). With the
+correspondence ``pi`` of a target pose, ``Delta_l = sum_{v in H_l} || v - pi(v) ||``; the
+group is static (targets = rest positions) when ``Delta_l / n_per_landmark`` is below
+``static_threshold`` (mesh units), else dynamic (the target pose's positions). Handles are
+stored as positions ("so that they can be used with remeshed and subdivided shapes") and
+snapped to the mesh they are used with (:func:`snap_handles`). docs/defaust.md §2,
+"Handles", and "Implementation notes: defaust/handles.py".
 """
 from __future__ import annotations
 
@@ -456,8 +444,8 @@ def snap_handles(V, rest_positions, *, tol: float | None = None, name: str = "ha
         the rest pose the handles were drawn on; same units).
     rest_positions : (h, 3) float64 stored rest positions of the handles.
     tol : float or None, largest accepted distance to the nearest vertex (mesh units);
-        default ``0.01 * bbox diagonal of V`` (about 2 cm on a human in metres; the
-        high-res remesh moves points by well under 1 mm, its vertices are ~3.4 mm apart).
+        default ``0.01 * bbox diagonal of V`` (why that bound: docs/defaust.md,
+        "Implementation notes: defaust/handles.py").
     name : str, used in messages.
 
     Returns

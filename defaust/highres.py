@@ -1,26 +1,8 @@
-"""High-resolution rest meshes: LS3 Loop subdivision + isotropic remeshing (paper appendix).
-
-"We produce a high-resolution version of the rest pose shapes using the LS3 Loop
-algorithm [Boye et al. 2010] ... we apply a step of isotropic remeshing [Hoppe et al.
-1993] to the subdivided surfaces, obtaining meshes with a vertex count in the range
-[150k, 200k]." (SShaDe, appendix "DeFAUST dataset").
-
-Both steps are pymeshlab filters:
-
-1. ``meshing_surface_subdivision_ls3_loop`` with ``threshold=PercentageValue(0)`` (the
-   default 1 % threshold skips every edge shorter than 1 % of the bounding box, i.e.
-   most of a fine mesh) and the fewest iterations ``k >= 1`` that reach at least half
-   the target vertex count (each iteration multiplies it by ~4);
-2. ``meshing_isotropic_explicit_remeshing`` with an absolute target edge length
-   ``l = sqrt(2 A / (sqrt(3) n))`` (an equilateral mesh of area ``A`` with ``n``
-   vertices), ``n`` the middle of the requested range; if the result falls outside the
-   range, ``l`` is rescaled by ``sqrt(n_got / n)`` and the remesh redone from the
-   subdivided surface (at most ``max_attempts`` times); without pymeshlab's
-   per-collapse surface-distance check (``checksurfdist=False``, ``check_distance``:
-   half the remesh time, the same spread of edges and angles; builder version 2).
-
-Deterministic: both filters are deterministic for a given input (checked by the tests
-through byte-identical builds). The remesh dominates a subject's build time.
+"""High-resolution rest meshes of DeFAUST (paper appendix A): LS3 Loop subdivision (Boye et
+al. 2010) then isotropic remeshing (Hoppe et al. 1993) to a vertex count in [150k, 200k]
+(:func:`subdivide_remesh`), both pymeshlab filters. Deterministic for a given input; the
+remesh dominates a subject's build time. The filters' settings and the measurements behind
+them: docs/defaust.md, "Implementation notes: defaust/highres.py".
 """
 from __future__ import annotations
 
@@ -125,17 +107,11 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
         [150k, 200k]).
     remesh_iterations : int, iterations of the isotropic remesh (pymeshlab default 10).
     max_attempts : int, remeshes tried before giving up.
-    check_distance : bool, pymeshlab's ``checksurfdist`` (its default True; ours False
-        since builder version 2, True in the ``ci`` preset, whose ~10k-vertex meshes lose
-        thin parts without it: handles up to 2.4 cm from the nearest vertex): test every
+    check_distance : bool, pymeshlab's ``checksurfdist`` (its default True): test every
         collapse and flip against the subdivided surface with a tolerance of 1% of the
-        bounding box (about 2 cm on a body). It costs
-        half of the remesh: 150 s against 78 s on ANNY subject 0 (213,538 -> 168,855
-        vertices, 10 iterations), with the same edge-length spread (coefficient of
-        variation 0.123, 1st/99th percentile ratio 0.574) and minimum angles (1st
-        percentile 35.3 deg, 0.14% of the faces below 20 deg); the largest distance of a
-        subdivided vertex to the result goes from 1.97 to 3.47 mm (mean 0.112 -> 0.116
-        mm, about one edge length at most).
+        bounding box. False (the builder's default) halves the remesh time; the ``ci``
+        preset's coarse meshes need True (docs/defaust.md, "Implementation notes:
+        defaust/highres.py").
 
     Returns
     -------

@@ -1,27 +1,11 @@
-"""``python -m defaust pack BUILD -o ARCHIVE``: a DeFAUST build as one zip archive to hand
-on, with its manifest, its Croissant metadata and its datasheet.
-
-The archive holds, in one folder ``DeFAUST-<source>/``: ``manifest.json`` (the build's,
-byte for byte), ``croissant.json`` (:func:`defaust.croissant.croissant_text` of that
-manifest), ``DATASHEET.md`` (:func:`defaust.datasheet.datasheet`) and every file the
-manifest lists. Members are stored (not compressed: the meshes are float64 and hardly
-compress) with fixed dates and permissions, in a fixed order: the same build gives the
-same bytes. :func:`defaust.load` and :func:`defaust.verify` read it in place
-(:class:`defaust.archive.ArchiveBuild`).
-
-The build is checked first (:func:`defaust.verify`: a copy with any problem is refused),
-and every file's sha256 again as it is copied. The output obeys the harness's output
-rules: ``ARCHIVE`` must be new, or an earlier pack (its zip comment,
-:data:`defaust.archive.PACK_COMMENT`), or ``force``; never a folder, a link, or a path
-inside the build; its folder must exist. It is written to a temporary file beside it and
-renamed into place (:func:`sshade.mesh.io.atomic_write`), so an interrupted pack leaves
-no partial archive.
-
-Example::
-
-    from defaust.packing import pack
-    info = pack("data/defaust", "defaust-anny.zip")
-    info["files"], info["bytes"]
+"""``python -m defaust pack BUILD -o ARCHIVE`` (:func:`pack`): a DeFAUST build as one zip
+archive to hand on, in one folder ``DeFAUST-<source>/``: the build's ``manifest.json`` byte
+for byte, ``croissant.json`` (:mod:`defaust.croissant`), ``DATASHEET.md``
+(:mod:`defaust.datasheet`) and every file the manifest lists, stored uncompressed with
+fixed dates and permissions in a fixed order (the same build gives the same bytes). The
+build is verified first and each file's sha256 checked again as it is copied; the archive
+obeys the harness's output rules and is written atomically. :func:`defaust.load` reads it
+in place (:class:`defaust.archive.ArchiveBuild`). docs/defaust.md §7.
 """
 from __future__ import annotations
 
@@ -135,6 +119,11 @@ def pack(root, out, *, force: bool = False) -> dict:
     SShaDeError, one line: ``root`` is not a build folder, ``out`` is refused, or the
     build has a problem (:func:`defaust.verify`, the first one named); OSError when the
     archive cannot be written (nothing is left at ``out`` then).
+
+    Example::
+
+        info = pack("data/defaust", "defaust-anny.zip")
+        info["files"], info["bytes"]
     """
     root, out = Path(root).expanduser(), Path(out).expanduser()
     if root.is_file():

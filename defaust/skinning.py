@@ -1,15 +1,10 @@
-"""Linear blend skinning and the transfer of skinning weights to another mesh of the same
-surface (generic; used by the DeFAUST sources :mod:`defaust.anny_source` and
-:mod:`defaust.synthetic`).
-
-A DeFAUST subject is posed by linear blend skinning (LBS) of its low-resolution rest
-mesh. Its high-resolution rest mesh (LS3 Loop + isotropic remesh,
-:mod:`defaust.highres`) has other vertices; :func:`transfer_weights` gives each of them
-the weights interpolated barycentrically at its closest point on the low-resolution rest
-mesh, so that "the same skinning" (the same per-joint transforms) poses any resolution
-and the high-resolution target pose is exact ground truth for it.
-
-Pure functions over arrays; no file I/O.
+"""Linear blend skinning (:func:`lbs`, :func:`blend_transforms`, :func:`apply_blended`) and
+the transfer of skinning weights to another mesh of the same surface
+(:func:`transfer_weights`, :func:`subdivision_weights`, :func:`high_res_weights`), so that
+"the same skinning" (the same per-joint transforms) poses a DeFAUST subject's
+high-resolution rest mesh (:mod:`defaust.highres`) and its high-resolution target is exact
+ground truth for it. Generic; used by the sources :mod:`defaust.anny_source` and
+:mod:`defaust.synthetic`. Pure functions over arrays; no file I/O.
 """
 from __future__ import annotations
 

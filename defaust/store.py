@@ -1,14 +1,10 @@
-"""Byte-deterministic files for the DeFAUST builder: binary PLY, NPZ, SHA-256.
-
-The builder promises "same seed -> same bytes". Two common writers break that:
-trimesh's PLY export stores float32 coordinates (so a read-back is not the array that
-was written) and :func:`numpy.savez` stamps every zip member with the current time.
-This module writes both formats with fixed headers and no timestamps, atomically via
-:func:`sshade.mesh.io.atomic_write`. Meshes are read back with
-:func:`sshade.mesh.io.read_mesh` (libigl reads ``double`` PLY properties exactly), or
-from bytes (an archive's member) with :func:`read_ply_bytes`; :func:`read_npz` reads an
-``.npz`` (a file or a file object) as untrusted input (expected members only, each
-bounded in size before it is decompressed).
+"""Byte-deterministic files for the DeFAUST builder: binary PLY (:func:`ply_bytes`,
+``double`` coordinates), NPZ with fixed member timestamps (:func:`write_npz`), SHA-256,
+written atomically (:func:`sshade.mesh.io.atomic_write`). Meshes are read back with
+:func:`sshade.mesh.io.read_mesh` or, from bytes (an archive's member), with
+:func:`read_ply_bytes`; :func:`read_npz` reads an ``.npz`` as untrusted input (expected
+members only, each bounded in size before it is decompressed). Why not trimesh's PLY or
+:func:`numpy.savez`: docs/defaust.md, "Implementation notes: defaust/store.py".
 """
 from __future__ import annotations
 

@@ -1,33 +1,12 @@
 """The ``synthetic`` source of DeFAUST: parametric implicit human-like bodies posed by
-linear blend skinning (LBS), built in seconds without any asset.
-
-Not the default source (that is ``anny``, :mod:`defaust.anny_source`): kept because it
-needs no download, which makes it the source of the builder's own tests (resume,
-corruption, determinism). Like FAUST's registrations, all poses of one subject share one
-face array and correspond vertex to vertex (the rest mesh is meshed once and every pose
-is the same vertices moved by LBS).
-
-A subject (:func:`synthetic_subject`) is assembled from:
-
-- **Body** (:mod:`defaust.synthetic_body`): skeleton, proportions drawn from a seeded
-  RNG, round-cone primitives; units metres, +x = subject's left, +y = up, +z = forward.
-- **Mesh and landmarks** (:mod:`defaust.synthetic_mesh`): marching cubes of the smooth
-  union of the primitives, isotropically remeshed; landmark vertices found by rays.
-- **Skinning weights** (here): each vertex is first given to one part
-  (:func:`part_labels`: the part of the nearest primitive, limbs not claiming points
-  behind their proximal joint, the torso split by height at the spine and chest joints),
-  then the one-hot labels are diffused on the surface by one implicit heat step
-  ``(M - t L) W = M W0`` (cotangent Laplacian ``L``, mass matrix ``M``, ``t = s^2 / 2``
-  for a blend width ``s``), which blends neighbouring parts across joints but never
-  leaks between parts that are close in space and far on the surface (hand and thigh).
-  Weights of another mesh of the same body (the high-res remesh) are interpolated
-  barycentrically at its closest points on the low-res rest mesh
-  (:func:`defaust.skinning.transfer_weights`), so "the same skinning" applies at any
-  resolution.
-- **Poses** (:mod:`defaust.synthetic_poses`): rest, then FAUST-like targets with a
-  per-subject jitter, the last one turned and moved.
-
-Pure functions over arrays plus small dataclasses; no file I/O.
+linear blend skinning, built in seconds without any asset (the source of the builder's own
+tests, not a paper dataset). All poses of a subject share one face array and correspond
+vertex to vertex, as FAUST's registrations do. :func:`synthetic_subject` assembles a
+subject from the body (:mod:`defaust.synthetic_body`), its mesh and landmarks
+(:mod:`defaust.synthetic_mesh`), the skinning weights of this module (:func:`part_labels`,
+:func:`skinning_weights`) and the poses (:mod:`defaust.synthetic_poses`). Pure functions
+over arrays plus small dataclasses; no file I/O. The weights and why: docs/defaust.md,
+"Implementation notes: defaust/synthetic.py".
 """
 from __future__ import annotations
 

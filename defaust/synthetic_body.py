@@ -1,22 +1,12 @@
-"""The synthetic bodies' shape: skeleton, proportions and round-cone primitives.
-
-Units: metres; axes: +x = subject's left, +y = up, +z = forward; feet near y=0.
-
-- **Skeleton**: 19 joints (:data:`JOINTS`, tree :data:`PARENT`) placed from the subject's
-  stature ``H`` with anthropometric fractions (Drillis & Contini 1966: knee 0.285 H,
-  hip 0.53 H, shoulder 0.818 H, chin 0.87 H), in an A-pose (arms ~40 degrees from the
-  body, feet slightly apart) so that no two limbs touch.
-- **Shape**: each body part is one or more *round cones* (:class:`Primitive`: capsules
-  whose radius varies linearly along the axis) optionally squashed across their axis
-  (elliptic torso, flat hands and feet); :mod:`defaust.synthetic_mesh` joins them by a
-  smooth minimum and meshes the result. Per-subject proportions (:class:`BodyParams`:
-  stature, girth, shoulder and hip breadth, head size, belly, limb lengths, arm angle)
-  are drawn from a seeded RNG (:func:`sample_body_params`).
-- **Landmark rays** (:attr:`Body.rays`): per landmark of :data:`LANDMARK_NAMES`, a ray
-  from inside the body; the landmark is the mesh vertex nearest to where it leaves the
-  body.
-
-Pure functions over arrays plus small dataclasses.
+"""The synthetic bodies' shape (the ``synthetic`` source, :mod:`defaust.synthetic`):
+skeleton, proportions and round-cone primitives, in metres (+x the subject's left, +y up,
++z forward; feet near y = 0). The skeleton has 19 joints (:data:`JOINTS`, tree
+:data:`PARENT`) placed from the stature with anthropometric fractions (Drillis & Contini
+1966); each body part is one or more round cones (:class:`Primitive`); the per-subject
+proportions (:class:`BodyParams`) are drawn from a seeded RNG
+(:func:`sample_body_params`); the landmarks are found along rays (:attr:`Body.rays`). Pure
+functions over arrays plus small dataclasses. Details: docs/defaust.md, "Implementation
+notes: defaust/synthetic_body.py".
 """
 from __future__ import annotations
 

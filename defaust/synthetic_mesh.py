@@ -1,18 +1,10 @@
-"""The synthetic bodies' surface: an implicit body (smooth union of round cones) and
-its mesh, with the landmark vertices.
-
-- **Implicit body** (:func:`body_sdf`): each :class:`~defaust.synthetic_body.Primitive`
-  is a round cone (exact SDF after Quilez, :func:`primitive_sdfs`), squashed across its
-  axis where the primitive says so; they are combined by a polynomial smooth minimum
-  (compiled with numba).
-- **Mesh** (:func:`mesh_body`): the SDF is sampled on a grid and meshed by marching cubes
-  (``igl.marching_cubes``), the largest component is kept and it is isotropically
-  remeshed with pymeshlab to about ``n_vertices`` vertices; the result is checked to be
-  a single-component closed 2-manifold (:func:`sshade.mesh.validate.validate_mesh`).
-- **Landmarks** (:func:`body_landmarks`): the vertex nearest to where each of the body's
-  landmark rays (:attr:`~defaust.synthetic_body.Body.rays`) leaves the implicit body.
-
-Pure functions over arrays; no file I/O.
+"""The synthetic bodies' surface (:mod:`defaust.synthetic`): the implicit body, a polynomial
+smooth minimum of round-cone SDFs after Quilez, compiled with numba (:func:`body_sdf`,
+:func:`primitive_sdfs`); its mesh, by marching cubes (``igl.marching_cubes``), the largest
+component and pymeshlab's isotropic remesh to about ``n_vertices``, checked to be a closed
+single-component 2-manifold (:func:`mesh_body`); and the landmark vertices, nearest to
+where each landmark ray leaves the body (:func:`body_landmarks`). Pure functions over
+arrays; no file I/O.
 """
 from __future__ import annotations
 

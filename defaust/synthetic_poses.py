@@ -1,15 +1,13 @@
 """The synthetic bodies' poses: a small named pose library and forward kinematics.
 
-**Poses** (:data:`POSE_NAMES`): rest (pose 0), then FAUST-like targets: arms raised,
-knees bent, twisted torso, (arms forward, side bend,) and last a step with a turn of the
-whole body (not aligned with the rest pose, like the paper's last target). The standing
-foot stays in place (the root is translated to keep it there), as in FAUST where the
-subjects stand on the floor. Joint angles are moderate (linear blend skinning
-self-intersects in extreme poses) and jittered per subject by +-20 % with a seeded RNG
-(:func:`pose_rotations`). :func:`pose_transforms` turns local joint rotations into the
-per-part rigid maps that :func:`defaust.skinning.lbs` blends.
-
-Pure functions over arrays; no file I/O.
+:data:`POSE_NAMES`: rest (pose 0), then FAUST-like targets (arms raised, knees bent,
+twisted torso, then arms forward and side bend when more poses are asked for,
+:func:`pose_names`) and last a step with a turn of the whole body (not aligned with the
+rest pose, like the paper's last target). The standing foot stays in place, as in FAUST;
+joint angles are moderate (linear blend skinning self-intersects in extreme poses) and
+jittered per subject by +-20 % with a seeded RNG (:func:`pose_rotations`).
+:func:`pose_transforms` turns local joint rotations into the per-part rigid maps that
+:func:`defaust.skinning.lbs` blends. Pure functions over arrays; no file I/O.
 """
 from __future__ import annotations
 

@@ -1,26 +1,10 @@
 """DeFAUST cases for PyTorch's ``DataLoader`` (the ``[neural]`` extra: ``pip install -e
-.[neural]``): a map-style dataset of dicts of tensors, and a collate function for meshes
-of different vertex counts.
-
-This module imports without PyTorch (one guarded import below); :func:`torch_dataset`
-then raises an SShaDeError saying what to install. :func:`case_item` (a case as a dict
-of NumPy arrays) and :func:`collate_cases` (which batches NumPy items too) need no
-PyTorch.
-
-Batching: a case's arrays differ in size between subjects and resolutions (vertices,
-faces, handles kept after the snap), so :func:`collate_cases` gives each per-case array
-as a **list** of ``B`` tensors (no padding, no mask) and stacks only the scalars into
-``(B,)`` tensors; strings come as lists of ``B`` str.
-
-Example::
-
-    import defaust, torch
-    from torch.utils.data import DataLoader
-    cases = defaust.load("data/defaust", resolution="low")
-    loader = DataLoader(defaust.torch_dataset(cases, float_dtype=torch.float32), batch_size=4,
-                        shuffle=True, num_workers=2, collate_fn=defaust.collate_cases)
-    batch = next(iter(loader))
-    batch["V"][0].shape, batch["subject"].shape      # (n_0, 3) float32, (4,) int64
+.[neural]``): a map-style dataset of dicts of tensors (:func:`torch_dataset`) and a collate
+function for meshes of different vertex counts (:func:`collate_cases`: each per-case array
+a list of ``B`` tensors, no padding; the scalars stacked into ``(B,)`` tensors). The module
+imports without PyTorch: :func:`torch_dataset` then raises an SShaDeError saying what to
+install, while :func:`case_item` and :func:`collate_cases` work on NumPy arrays. Usage:
+docs/defaust.md §6, "With PyTorch".
 """
 from __future__ import annotations
 

@@ -1,21 +1,12 @@
-"""Hydra command lines of the harness: a bad command line refused in one line, before any work.
-
-* :func:`run_command`: :func:`sshade.clirun.run_command` with Hydra's and OmegaConf's
-  errors counted as a bad configuration (``error: <one line>``, :func:`hydra_message`,
-  status 2).
-* :func:`hydra_main` composes the config with the command line's overrides through
-  Hydra's compose API first (:func:`precheck`: unknown key, unknown group option,
-  malformed override, and the command's own value check), so a bad command line is
-  refused in one line before Hydra makes a run folder; then runs ``hydra.main``.
-
-Used by ``python -m eval``, ``eval.sweep``, ``eval.tables``, ``eval.reproduce`` and the
-DeFAUST builder (:mod:`defaust.cli`).
-
-Example::
-
-    from harness.command import hydra_main
-    from harness.confdir import config_dir
-    hydra_main(task, str(config_dir()))   # task(cfg) runs on the composed config
+"""Hydra command lines of the harness: a bad command line refused in one line, before any
+work. :func:`hydra_main` composes the config with the command line's overrides through
+Hydra's compose API first (:func:`precheck`: unknown key or group option, malformed
+override, the command's own value check), so that nothing, not even a run folder, is made
+before a refusal, then runs ``hydra.main``; :func:`run_command` is
+:func:`sshade.clirun.run_command` with Hydra's and OmegaConf's errors counted as a bad
+configuration (``error: <one line>``, :func:`hydra_message`, status 2). Used by
+``python -m eval``, ``eval.sweep``, ``eval.tables``, ``eval.reproduce`` and the DeFAUST
+builder (:mod:`defaust.cli`).
 """
 from __future__ import annotations
 
@@ -149,7 +140,13 @@ def hydra_main(task, conf_dir: str, *, argv=None, check=None, where=None) -> Non
     (default ``sys.argv[1:]``): :func:`precheck`, then ``hydra.main``; returns on success,
     else exits with :func:`run_command`'s status (``SystemExit``). Hydra's exceptions reach
     :func:`run_command` (``HYDRA_FULL_ERROR`` is set while the app runs, so that
-    ``hydra.main`` re-raises instead of printing them over several lines)."""
+    ``hydra.main`` re-raises instead of printing them over several lines).
+
+    Example::
+
+        from harness.confdir import config_dir
+        hydra_main(task, str(config_dir()))   # task(cfg) runs on the composed config
+    """
     import hydra
     argv = list(sys.argv[1:] if argv is None else argv)
 

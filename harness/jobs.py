@@ -1,43 +1,13 @@
-"""Jobs in worker processes: a DeFAUST build's subjects, an evaluation's cases side by side.
+"""Jobs in worker processes: a DeFAUST build's subjects (:mod:`defaust.build`, ``workers``)
+and an evaluation's cases (:mod:`eval.experiments.cases.jobs`, ``jobs``) side by side.
 
-:func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in worker processes
-started with the ``spawn`` method (pymeshlab and numba are not known to be fork-safe):
-every worker starts fresh, runs ``init(*init_args)`` once and then its jobs, one at a
-time, each handed to it over a pipe of its own (so this process knows which job every
-worker runs). A job reports progress with :func:`send` (delivered in the main process to
-``on_message``, in the order sent, before the job's result) and returns its result
-(delivered to ``on_result`` with the job's index). Results come in the order the jobs
-finish: callers that need a fixed order (the manifest) sort them by index.
-
-Each worker's threads are limited so that ``workers x threads`` does not exceed the cores
-of this process (:func:`sshade.cores.available_cores`, the affinity mask), through the environment
-variables the libraries read at import (:data:`THREAD_VARIABLES`, or those the caller
-names), set while the workers start; :data:`sshade.cores.CORES_VARIABLE` tells the worker's own code
-(:func:`sshade.cores.available_cores`, e.g. SShaDe's sampling pool, :func:`sshade.sampling.pool_size`)
-that it has that many cores.
-
-Workers never outlive the main process and never report a Ctrl-C themselves:
-
-- they ignore SIGINT (a Ctrl-C at a terminal reaches the whole process group; only the
-  main process reports it, no worker prints a traceback);
-- on Linux the kernel kills a worker when the main process ends, even by ``kill -9``
-  (``prctl(PR_SET_PDEATHSIG, SIGKILL)``), and so are the processes a worker forks (a
-  sampling pool); elsewhere a thread of the worker that watches the main process ends
-  it; multiprocessing's resource tracker exits once the last of them has ended;
-- on Ctrl-C, SIGTERM (as :func:`sshade.clirun.run_command` turns it into an interrupt)
-  or any exception in the main process, the workers are terminated at once (a stopped
-  one is continued so that it can end) and killed after :data:`GRACE_S` seconds.
-
-A worker that dies (killed, out of memory, a crash in compiled code) loses only the job
-it was running: with ``on_lost`` that job is the caller's to record (and to continue,
-e.g. with the items it had not reached) and a fresh worker takes the remaining jobs;
-without, the run ends with an error once the other running jobs have finished.
-
-Users: :mod:`defaust.build` (``workers``) and :mod:`eval.experiments.cases.jobs` (``jobs``).
-
-Example::
-
-    run_jobs(square, [(1,), (2,)], workers=2, on_result=lambda i, r: print(i, r))
+:func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in workers started with
+``spawn``, each running ``init`` once and then one job at a time; a job reports progress
+with :func:`send`; results arrive in the order the jobs finish. Each worker's threads are
+limited so that workers x threads fits this process's cores (:data:`THREAD_VARIABLES`,
+:data:`sshade.cores.CORES_VARIABLE`). Workers never outlive the main process nor report a
+Ctrl-C, and a dying worker loses only its job (``on_lost``). How, and why:
+docs/layout.md, "Implementation notes: harness/jobs.py".
 """
 from __future__ import annotations
 
@@ -368,8 +338,8 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
 
     A job is handed out only when a worker is free, so that after a failure or Ctrl-C
     no new job starts; on Ctrl-C, SIGTERM (see :func:`_deferred_signals`) or any
-    exception in this process the workers are ended (module docstring) before it
-    propagates.
+    exception in this process the workers are ended (terminated, then killed after
+    :data:`GRACE_S` seconds) before it propagates.
 
     Parameters
     ----------
@@ -395,6 +365,10 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     its ``__cause__``; what ``init`` raised; SShaDeError if a worker process dies while
     starting, or while running a job without ``on_lost``; KeyboardInterrupt (a job's
     own, or Ctrl-C / SIGTERM) after the workers are ended.
+
+    Example::
+
+        run_jobs(square, [(1,), (2,)], workers=2, on_result=lambda i, r: print(i, r))
     """
     if not len(args_list):
         return

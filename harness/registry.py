@@ -1,37 +1,12 @@
-"""Our built-in methods, by name: one config file each, ``conf/method/<name>.yaml``.
-
-A built-in method is a module (its class implements :class:`sshade.method.Deformer`)
-plus one file of the ``method`` config group, found in the config folder of
-:func:`harness.confdir.config_dir` (the repository's ``conf/`` or the installed
-``harness/conf/``)::
-
-    # conf/method/Elastic.yaml
-    _target_: baselines.Elastic      # the class, imported by its dotted path (importlib)
-    order: 20                        # its place in the tables (smaller first)
-    protocol: ${arap.protocol}       # parameters, defaulting to the shared sections
-    tol: ${arap.tol}                 # (arap, arap_sr, sshade) of conf/config.yaml
-
-The file name is the method's name (the table row label, :func:`sshade.method.check_name`);
-its key in the composed config is the name with ``+`` as ``_`` (:func:`method_key`).
-Nothing here imports a method's module until it is built (:func:`build_builtin`), so the
-harness floor names the methods of the floor above (baselines) without a static upward import.
-
-Adding a built-in method therefore takes its module and its config file; the list of
-names (:func:`builtin_methods`), the table order (:func:`table_order`) and the command
-line's ``--method`` (``python -m harness deform``) follow. One optional line more, ``- method@method.<key>: <name>`` in
-the defaults list of ``conf/config.yaml``, lets Hydra compose the file as
-``method.<key>`` so that ``method.<key>.<param>=...`` overrides reach it (Hydra composes
-only the group options its defaults list names; without the line the evaluator loads
-the file itself, :func:`file_spec`).
-
-Beside its parameters a method file holds what the evaluator knows of the method,
-under ``harness`` (:func:`method_meta`; it never reaches the class)::
-
-    harness:
-      cost: {scale: vertices, prior: 4.2e-4}   # plan prior: s per vertex (vertices) or per case (const)
-      reference: spokes                        # the energy its reference columns score it against
-      cases: baseline                          # the cases it runs on: dataset.baseline_cases, or all
-      checks: arap                             # the shared section whose checks its parameters take
+"""Our built-in methods, by name: each a module (its class implements
+:class:`sshade.method.Deformer`) plus one file ``conf/method/<name>.yaml`` of the config
+folder of :func:`harness.confdir.config_dir` (``_target_``, table ``order``, parameters, and
+under ``harness`` what the evaluator knows of it, :func:`method_meta`). The file name is the
+method's name; its config key has ``+`` as ``_`` (:func:`method_key`). No method's module
+is imported until it is built (:func:`build_builtin`), so this floor names the baselines
+without an upward import; :func:`builtin_methods`, :func:`table_order` and ``python -m
+harness deform --method`` follow the files. A method file, and how to add one:
+docs/methods.md, "Adding a method" and "Implementation notes: harness/registry.py".
 """
 from __future__ import annotations
 

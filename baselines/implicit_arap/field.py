@@ -1,16 +1,12 @@
-"""The two networks of Implicit-ARAP: a neural signed distance function of the input
-shape and a neural deformation field (a rotation and a translation per point of space).
+"""The two networks of Implicit-ARAP (Baieri et al. 2024): a neural signed distance function
+of the input shape and a neural deformation field (a rotation and a translation per point).
 
-Source: Baieri, Maggioli, Lähner, Melzi, Rodolà 2024, "Implicit-ARAP: efficient
-handle-guided deformation of high-resolution meshes and neural fields via local patch
-meshing" (reference code github.com/dbaieri/implicit-arap, MIT licence); the network
-is the IGR one (Gropp et al. 2020, "Implicit geometric regularization for learning
+The network is IGR's (Gropp et al. 2020, "Implicit geometric regularization for learning
 shapes"): positional encoding, Softplus(beta=100), weight normalisation, the input
-concatenated again at one layer and the geometric (sphere) initialisation. Our own code.
-
-The networks are plain parameter lists and functions (no ``torch.nn.Module``) so this
-module imports without PyTorch (:mod:`baselines.implicit_arap.backend`). All positions
-are in the normalised box of :func:`baselines.implicit_arap.sdf.normalisation`.
+concatenated again at one layer, geometric (sphere) initialisation. Our own code. The
+networks are plain parameter lists and functions (no ``torch.nn.Module``), so this module
+imports without PyTorch (:mod:`baselines.implicit_arap.backend`); positions are in the
+normalised box of :func:`baselines.implicit_arap.sdf.normalisation`.
 """
 from __future__ import annotations
 

@@ -1,26 +1,13 @@
-"""Local patch meshing and the patch ARAP energy of Implicit-ARAP.
-
-Source: Baieri, Maggioli, Lähner, Melzi, Rodolà 2024, "Implicit-ARAP" §4 (reference
-code github.com/dbaieri/implicit-arap, MIT licence: ``DeformTrainer.train_step`` and
-``PatchARAPLoss``); the energy is the ARAP energy of Sorkine & Alexa 2007 on each
-patch, with the rotation given by the deformation field instead of a local fit. Our
-own code.
+"""Local patch meshing and the patch ARAP energy of Implicit-ARAP (Baieri, Maggioli,
+Lähner, Melzi, Rodolà 2024, §4; reference code github.com/dbaieri/implicit-arap, MIT
+licence: ``DeformTrainer.train_step`` and ``PatchARAPLoss``). Our own code.
 
 A patch is ``k`` points of a disk in the tangent plane of a centre (centre first),
-triangulated once in the plane (Delaunay) and projected onto the centre's level set of
-the SDF. All patches of one step share the disk and its triangles.
-
-Cotangent weights (documented choice, see docs/methods.md): by default the weight of an
-edge is ``(cot a + cot b) / 2`` of the angles opposite it, summed over its one or two
-triangles, and each edge enters the energy in both directions (Sorkine & Alexa 2007).
-``reference=True`` reproduces the reference code instead: the cotangent of the angle at
-a triangle's corner ``v0`` goes to edge ``(v0, v1)`` (at ``v1`` to ``(v1, v2)``, at
-``v2`` to ``(v0, v2)``), a directed edge met again overwrites the earlier value (the
-last one stays), the matrix is symmetrised, and the energy runs over the triangles'
-edge list ``(v0, v1), (v1, v2), (v0, v2)``. At the same ARAP weight the two are not
-equally rigid: on 16-30-point disks the correct weights give an energy several times
-smaller (``benchmarks/implicit_arap_weights.py`` prints the factor). Neither mode adds ``t(x_i)`` to the rotated
-edge (the reference added it once and commented it out in its commit abb4575).
+Delaunay-triangulated once in the plane and projected onto the centre's level set of the
+SDF; all patches of one step share the disk and its triangles. The energy is the ARAP
+energy of Sorkine & Alexa 2007 on each patch, the rotation given by the deformation field.
+Cotangent weights: correct by default, the reference code's with ``reference=True``
+(docs/methods.md, "Implementation notes: baselines/implicit_arap/patches.py").
 """
 from __future__ import annotations
 
@@ -156,7 +143,7 @@ def cot_weights(X, tris: np.ndarray, edges: dict):
     -------
     (P, e) tensor: default ``(cot a + cot b) / 2`` (one cotangent on a boundary edge),
     the same value in both directions; ``reference`` mode: the reference code's weights
-    (module docstring).
+    (docs/methods.md, "Implementation notes: baselines/implicit_arap/patches.py").
     """
     cot = corner_cotangents(X, tris)
     P = X.shape[0]
