@@ -10,7 +10,7 @@ Usage (from the repository root)::
 Config: ``conf/config.yaml`` (+ ``conf/dataset/*.yaml``, ``conf/experiment/*.yaml``,
 ``conf/method/*.yaml``). :func:`main` composes and checks the command line,
 :func:`run_experiment` checks every number of the config
-(:func:`eval.run.config_check.check_config`), claims ``out_dir``
+(:func:`eval.config_check.check_config`), claims ``out_dir``
 (:func:`eval.run.outdir.claimed_run`) and runs the experiment of ``experiment.kind`` from
 the registry of :mod:`eval.experiments` (default ``cases``: every method on every case
 of the dataset, :func:`eval.experiments.cases.experiment.run`, re-exported here as :func:`run`).
@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import sys
 
+from eval.config_check import check_config
 from eval.experiments import experiments, find_experiment
 from eval.experiments.cases.experiment import run
 from eval.report import safe_report
-from eval.run.config_check import check_config
 from eval.run.outdir import claimed_run
 from harness.checks import config_bool
 from harness.command import hydra_main, run_command
@@ -41,7 +41,7 @@ def run_experiment(cfg, *, fresh: bool = False):
     """Dispatch on ``experiment.kind`` (default ``cases``) through the experiment
     registry (:func:`eval.experiments.experiments`: one module per experiment).
 
-    Every number of the config is checked first (:func:`eval.run.config_check.check_config`),
+    Every number of the config is checked first (:func:`eval.config_check.check_config`),
     then the experiment runs in its claimed output folder ``cfg.out_dir``
     (:func:`eval.run.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
     refused before any work; ``fresh``: ``out_dir`` is the default dated name, which gets
@@ -116,7 +116,7 @@ def main() -> None:
     """Console entry point (``python -m eval``): Hydra parses the overrides.
 
     The command line is composed and every config value checked
-    (:func:`eval.run.config_check.check_config`) before Hydra makes the run folder; a bad
+    (:func:`eval.config_check.check_config`) before Hydra makes the run folder; a bad
     one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
     (:func:`harness.command.hydra_main`).
     """

@@ -4,7 +4,7 @@ Each reader raises :class:`~sshade.errors.SShaDeError` naming the key and the va
 (``"<key> must be an integer >= 1 (or null), got 'abc'"``), so that a bad value on a
 command line gives one ``error: ...`` line and exit status 2 before any work. Used by
 the DeFAUST builder's command line (:mod:`defaust.cli`) and by the evaluator's config
-check (:func:`eval.run.config_check.check_config`). OmegaConf is imported only when a value
+check (:func:`eval.config_check.check_config`). OmegaConf is imported only when a value
 is read.
 """
 from __future__ import annotations

@@ -106,14 +106,14 @@ BAD_EVAL = [
 
 @pytest.mark.parametrize("override,key", BAD_EVAL)
 def test_check_config_rejects_junk_numbers(override, key):
-    from eval.run.config_check import check_config
+    from eval.config_check import check_config
     check_config(_compose_eval(CI))  # the same config without the bad value is fine
     with pytest.raises(SShaDeError, match=key.replace(".", r"\.")):
         check_config(_compose_eval([*CI, override]))
 
 
 def test_check_config_experiment_sections():
-    from eval.run.config_check import check_config
+    from eval.config_check import check_config
     for exp, bad in [("scaling", "scaling.elastic_budget_s=inf"), ("tosca", "tosca.min_vertices=abc"),
                      ("tosca", "sshade.n_samplings=abc"), ("pose_transfer", "sshade.seed=nan"),
                      ("convergence", "convergence.time_budget_s=abc"),

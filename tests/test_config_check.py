@@ -1,4 +1,4 @@
-"""eval/run/config_check.py: the checks every run shares; each dataset and experiment kind
+"""eval/config_check.py: the checks every run shares; each dataset and experiment kind
 brings its own (registered with it), so this module names none of them."""
 from __future__ import annotations
 
@@ -7,19 +7,19 @@ import ast
 import pytest
 from omegaconf import OmegaConf
 
+from eval.config_check import check_config
 from eval.datasets import dataset_names
 from eval.experiments import experiment_check, experiments
 from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
-from eval.run.config_check import check_config
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT
 
 
 def test_config_check_names_no_dataset_and_no_experiment():
-    """No string of eval/run/config_check.py (docstrings aside) is a registered dataset's
+    """No string of eval/config_check.py (docstrings aside) is a registered dataset's
     name or an experiment kind: their checks are theirs."""
-    tree = ast.parse((ROOT / "eval" / "run" / "config_check.py").read_text())
+    tree = ast.parse((ROOT / "eval" / "config_check.py").read_text())
     strings = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)}
     assert not strings & (set(dataset_names()) | set(experiments()) - {"cases"})
 

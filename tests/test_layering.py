@@ -1,6 +1,6 @@
 """The house rules, checked on the source (AST, nothing imported):
 sshade/ (the method) at the bottom, harness/ (the shared tools) above it, baselines/ and
-defaust/ above that, eval/ on top;
+defaust/ above that, eval/ on top, and inside eval/ its own floors (:data:`EVAL_FLOORS`);
 imports only go down, never in a cycle, never a private name across modules, and a
 project module is imported at the top of a module, not hidden inside a function."""
 from __future__ import annotations
@@ -76,6 +76,51 @@ def test_imports_only_go_down():
           if FLOORS[t.split(".")[0]] > FLOORS[m.split(".")[0]]
           or (FLOORS[t.split(".")[0]] == FLOORS[m.split(".")[0]] and t.split(".")[0] != m.split(".")[0])]
     assert not up, "imports that climb or cross a floor:\n" + "\n".join(up)
+
+
+#: eval/'s floors, bottom up: subpackage (or top module) -> floor. A module of eval/ belongs
+#: to the longest name here that is it or its package (``eval``: the commands on top, i.e.
+#: app, config_check, report, leaderboard, reproduce, sweep, __main__); it may import its
+#: own part of eval/ or a lower floor, never a part on its own floor or above.
+EVAL_FLOORS = {
+    "eval.run": 0,  # the ground: run folder, store, names, run.json, plan, progress, subsets, code identity
+    "eval.registry": 0,  # the plug-in registries' common part
+    "eval.metrics": 1,  # what a result is scored by
+    "eval.datasets": 1,  # the cases
+    "eval.methods": 1,  # the methods from the config
+    "eval.present": 2,  # presentation: figures, table text, stops, rows, views
+    "eval.exchange": 2,  # results computed outside the harness
+    "eval.tables": 3,  # the comparison tables, written by the experiments and the sweeps
+    "eval.experiments": 4,  # the experiment kinds
+    "eval.sweeps": 4,  # a sweep's files, table and launcher
+    "eval": 5,  # the commands
+}
+
+
+def _eval_part(mod: str) -> str:
+    """The entry of :data:`EVAL_FLOORS` module ``mod`` of eval/ belongs to."""
+    return max((k for k in EVAL_FLOORS if mod == k or mod.startswith(k + ".")), key=len)
+
+
+def test_eval_floors_name_every_subpackage():
+    subs = {f"eval.{p.parent.name}" for p in (ROOT / "eval").glob("*/__init__.py")}
+    missing = sorted(subs - set(EVAL_FLOORS))
+    assert not missing, f"eval subpackages without a floor in EVAL_FLOORS: {missing}"
+    assert not set(EVAL_FLOORS) - set(MODULES), "EVAL_FLOORS names a module that is not there"
+
+
+def test_eval_subpackages_import_only_their_own_floor_or_below():
+    bad = []
+    for m, ln, t, names, _ in EDGES:
+        if not (m + ".").startswith("eval.") or not (t + ".").startswith("eval."):
+            continue
+        own = _eval_part(m)
+        for target in {_resolve(f"{t}.{n}") or _resolve(t) for n in names} if names else {_resolve(t)}:
+            part = _eval_part(target)
+            if part != own and EVAL_FLOORS[part] >= EVAL_FLOORS[own]:
+                bad.append(f"{m}:{ln} imports {target} ({part}, floor {EVAL_FLOORS[part]}; "
+                           f"{own} is on floor {EVAL_FLOORS[own]})")
+    assert not bad, "eval imports that climb or cross a floor:\n" + "\n".join(bad)
 
 
 #: What the method package never imports, not even inside a function: the harness's config

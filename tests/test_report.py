@@ -272,7 +272,7 @@ def test_vertex_edge_error_averages_to_the_table_metric_on_a_regular_mesh():
 def test_report_options_are_checked_before_any_work(bad):
     from hydra import compose, initialize_config_dir
 
-    from eval.run.config_check import check_config
+    from eval.config_check import check_config
     from sshade.errors import SShaDeError
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         good = compose(config_name="config", overrides=["dataset=faust", "dataset.root=x"])

@@ -118,7 +118,7 @@ COLLIDING = ["a b.off", "a_b.off", "bunny.off", "bunny.obj", "solo.off"]
 
 
 def test_colliding_case_names_become_distinct_file_names(tmp_path):
-    from eval.run.store import safe_name
+    from eval.run.names import safe_name
     cases = load_cases("shapes", _write_shapes(tmp_path, COLLIDING), files=COLLIDING, n_per_group=3,
                        region_radius=0.3)
     names = [c.name for c in cases]

@@ -26,8 +26,8 @@ from pathlib import Path
 from eval.datasets.case import DeformationCase
 from eval.datasets.faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
 from eval.datasets.registry import Dataset, datasets, find_dataset, register_dataset
+from eval.run.names import safe_name
 from eval.run.paths import abs_path
-from eval.run.store import safe_name
 from sshade.errors import SShaDeError
 
 __all__ = ["Case", "DeformationCase", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases",
@@ -69,7 +69,7 @@ def _source_of(case, index: int) -> str:
 
 def unique_case_names(cases: list) -> list:
     """``cases`` (in place, and returned) with collision-free names: every case whose
-    file name (:func:`eval.run.store.safe_name`, compared without case, as on a
+    file name (:func:`eval.run.names.safe_name`, compared without case, as on a
     case-insensitive file system) is shared with another case gets ``-`` and 8 hex
     digits of the SHA-256 of its source path appended (and its position in ``cases``
     when that name is taken too, e.g. two cases of one source; the prefix cut so that

@@ -34,7 +34,7 @@ class Dataset:
         None when it has nothing long to do, else a dict (e.g.
         :func:`eval.datasets.defaust.build_outlook`).
     check : optional ``check(cfg) -> None``: the dataset's own config values checked
-        before any work (:func:`eval.run.config_check.check_config`); raises SShaDeError
+        before any work (:func:`eval.config_check.check_config`); raises SShaDeError
         naming the key.
     """
 

@@ -36,7 +36,7 @@ import numpy as np
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
 from eval.datasets.case import DeformationCase
 from eval.datasets.registry import register_dataset
-from eval.run.store import safe_name
+from eval.run.names import safe_name
 from harness.checks import check_numbers, config_int_list, config_value
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh

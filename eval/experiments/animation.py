@@ -47,9 +47,9 @@ from eval.experiments.registry import register_experiment
 from eval.experiments.tosca import markdown_table
 from eval.methods import make_methods
 from eval.present.figures import mesh_row, vertex_error_pct
+from eval.run.names import safe_name
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, method_sources, write_runinfo
-from eval.run.store import safe_name
 from harness.registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer

@@ -19,7 +19,7 @@ _CHECKS: dict[str, Callable] = {}
 def register_experiment(kind: str, run: Callable, *, check: Callable | None = None) -> Callable:
     """Register ``run(cfg) -> dict`` as experiment ``kind``, with ``check(cfg) -> None``,
     its own config values checked before any work (raises SShaDeError naming the key;
-    :func:`eval.run.config_check.check_config`); called at the bottom of an experiment module.
+    :func:`eval.config_check.check_config`); called at the bottom of an experiment module.
     Returns ``run``. Registering a kind twice with another function raises ValueError (a
     programming error, not a user's)."""
     out = _REGISTRY.add(kind, run, same=lambda old, new: old is new)

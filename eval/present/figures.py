@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from eval.present.render import DEFAULT_VIEW, figure_row, render_mesh
-from eval.run.store import safe_name
+from eval.run.names import safe_name
 from sshade.errors import SShaDeError
 from sshade.isometric import rigid_align
 
@@ -311,7 +311,7 @@ def figures_options(cfg) -> tuple[bool, int]:
 
 def case_figure_path(fig_dir, name) -> Path:
     """``fig_dir/<name>.png``, the figure file of case ``name`` (:func:`write_case_figure`;
-    the name through :func:`eval.run.store.safe_name`: never a path outside ``fig_dir``)."""
+    the name through :func:`eval.run.names.safe_name`: never a path outside ``fig_dir``)."""
     return Path(fig_dir) / f"{safe_name(name)}.png"
 
 

@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from eval.metrics.meshes import unique_edges
-from eval.run.store import json_safe, safe_name
+from eval.run.jsonsafe import json_safe
+from eval.run.names import safe_name
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
@@ -289,7 +290,7 @@ def view_options(cfg) -> tuple[int, int]:
 
 def case_view_path(run_dir, name) -> Path:
     """``run_dir/report/<name>.js``, the view file of case ``name`` (:func:`write_case_view`;
-    the name through :func:`eval.run.store.safe_name`)."""
+    the name through :func:`eval.run.names.safe_name`)."""
     return Path(run_dir) / VIEW_DIR / f"{safe_name(name)}.js"
 
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 from pathlib import Path, PurePosixPath
 from urllib.parse import quote
 
+from eval.run.names import safe_name
 from eval.run.runinfo import read_runinfo
-from eval.run.store import safe_name
 
 __all__ = ["link_target", "run_cases", "not_current"]
 
@@ -69,7 +69,7 @@ def not_current(kind: str, name: str, rel: str, cases, recorded, *, stem: bool =
     cases : the run's case names (:func:`run_cases`; None: unknown, any case).
     recorded : case name -> relative path of the file of that kind the run wrote
         (``report/outputs.json``; None: not recorded, any file of a case of the run).
-    stem : ``name`` is a file stem, compared with the cases' :func:`eval.run.store.safe_name`.
+    stem : ``name`` is a file stem, compared with the cases' :func:`eval.run.names.safe_name`.
     """
     if cases is not None:
         known = {safe_name(c): c for c in cases} if stem else {c: c for c in cases}

@@ -19,8 +19,9 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.run.names import safe_name
 from eval.run.runinfo import read_runinfo
-from eval.run.store import ResultStore, case_identity, safe_name
+from eval.run.store import ResultStore, case_identity
 from sshade.errors import SShaDeError
 from sshade.method import check_name
 

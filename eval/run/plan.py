@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import math
 
-from eval.metrics.reference import sr_alpha
-
 __all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "make_plan",
            "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words"]
 
@@ -118,15 +116,16 @@ def _basis(cost, name: str) -> str:
     return f(name) if callable(f) else "prior"
 
 
-def _references_stage(references, jobs: int = 1) -> dict:
+def _references_stage(references, jobs: int = 1, is_sr_energy=None) -> dict:
     cached = to_compute = unknown = guessed = 0
     seconds = 0.0
     for n_vertices, energy, is_cached in references:
         if is_cached:
             cached += 1
             continue
-        guessed += sr_alpha(energy) is not None
-        rate = SR_REFERENCE_S_PER_VERTEX if sr_alpha(energy) is not None else REFERENCE_S_PER_VERTEX
+        sr = is_sr_energy is not None and bool(is_sr_energy(energy))
+        guessed += sr
+        rate = SR_REFERENCE_S_PER_VERTEX if sr else REFERENCE_S_PER_VERTEX
         seconds += rate * max(int(n_vertices), 1)
         if is_cached is None:
             unknown += 1
@@ -139,7 +138,7 @@ def _references_stage(references, jobs: int = 1) -> dict:
 
 
 def make_plan(cases, names, pairs, cost, *, build: dict | None = None, references=(), restored: int = 0,
-              jobs: int = 1) -> dict:
+              jobs: int = 1, is_sr_energy=None) -> dict:
     """The plan of a run.
 
     Parameters
@@ -158,6 +157,10 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
         (:mod:`eval.experiments.cases.jobs`): the runs' and references' wall time is the
         larger of their sum / ``jobs`` and the costliest case (each run's estimate stays
         the cost model's, measured on the whole machine).
+    is_sr_energy : None (no energy is ARAP-SR's) or a callable ``energy -> bool`` telling
+        ARAP-SR's energies, whose references cost :data:`SR_REFERENCE_S_PER_VERTEX` per
+        vertex and count as a guess (the caller's, from :func:`eval.metrics.reference.sr_alpha`:
+        the plan knows no energy names).
 
     Returns
     -------
@@ -180,7 +183,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     stages = [dict(build)] if build is not None else []
     jobs = max(int(jobs), 1)
     stages.append(_runs_stage(cases, names, pairs, cost, restored, jobs))
-    stages.append(_references_stage(references, jobs))
+    stages.append(_references_stage(references, jobs, is_sr_energy))
     return {"stages": stages, "total_s": sum(s["seconds"] for s in stages if "actual_s" not in s)}
 
 

@@ -7,7 +7,7 @@ Layout, under the run's ``out_dir`` (:mod:`eval.run.outdir`)::
     runs/<case>/<method>.npy       its deformed vertices (n, 3) float64, with store.meshes=true
 
 ``<case>`` and ``<method>`` are the names with every character outside
-``[A-Za-z0-9._+-]`` replaced by ``_`` (:func:`safe_name`). A record (JSON object) holds
+``[A-Za-z0-9._+-]`` replaced by ``_`` (:func:`eval.run.names.safe_name`). A record (JSON object) holds
 
 - ``version`` (:data:`STORE_VERSION`), ``case``, ``method`` (the real names);
 - ``key``: SHA-256 (hex) of ``key_fields``, which are what determines the result: the
@@ -52,53 +52,19 @@ from typing import NamedTuple
 import numpy as np
 
 from eval.run.code_identity import describe_change
+from eval.run.jsonsafe import json_safe
+from eval.run.names import safe_name
 from eval.run.runinfo import git_info
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write, inside_folder
 
-__all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "safe_name", "case_identity", "pair_key",
-           "json_safe", "check_row", "cell_problem", "record_digest", "numeric_column"]
+__all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "case_identity", "pair_key",
+           "check_row", "cell_problem", "record_digest", "numeric_column"]
 
 log = logging.getLogger("eval")
 
 STORE_VERSION = 3  #: bumped when the record layout changes (an older record is then stale)
 STORE_DIR = "runs"  #: the store's folder inside out_dir
-
-
-def safe_name(name) -> str:
-    """A file name for a case or method name: characters outside ``[A-Za-z0-9._+-]``
-    become ``_``; a leading dot too (never a hidden file), at most 120 characters.
-
-    >>> safe_name("SShaDe+refine"), safe_name("a/b c"), safe_name(".x")
-    ('SShaDe+refine', 'a_b_c', '_x')
-    """
-    s = re.sub(r"[^A-Za-z0-9._+-]", "_", str(name))[:120]
-    return "_" + s[1:] if s.startswith(".") else (s or "_")
-
-
-def json_safe(v, depth: int = 0):
-    """``v`` as plain JSON data: numpy scalars/arrays as Python numbers/lists, NaN and
-    inf as None, mapping keys as text, anything else by its text (at most 500
-    characters); nesting deeper than 8 levels becomes its text.
-
-    >>> json_safe({"a": np.float64("nan"), 1: np.arange(2), "b": (True, 2.5)})
-    {'a': None, '1': [0, 1], 'b': [True, 2.5]}
-    """
-    if isinstance(v, np.generic):
-        v = v.item()
-    if v is None or isinstance(v, (bool, int, str)):
-        return v
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if depth > 8:
-        return str(v)[:500]
-    if isinstance(v, np.ndarray):
-        v = v.tolist()
-    if isinstance(v, dict):
-        return {str(k): json_safe(x, depth + 1) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [json_safe(x, depth + 1) for x in v]
-    return str(v)[:500]
 
 
 def _digest(a) -> str:

@@ -76,10 +76,11 @@ from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, view_option
 from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
 from eval.run.compared import compared_rows, read_compared
+from eval.run.jsonsafe import json_safe
 from eval.run.paths import abs_path
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
-from eval.run.store import ResultStore, case_identity, json_safe, pair_key
+from eval.run.store import ResultStore, case_identity, pair_key
 from eval.run.subset import baseline_selection, check_baseline_cases, method_selections
 from eval.tables import compare, write_cases, write_tables
 from harness.checks import config_bool

@@ -39,9 +39,10 @@ from eval import methods as method_table
 from eval.experiments.cases.pair import guard_options, run_and_store, run_pair
 from eval.experiments.cases.references import CaseReferences
 from eval.metrics.meshes import CaseMeshes
+from eval.run.jsonsafe import json_safe
 from eval.run.outdir import resume_command
 from eval.run.paths import abs_path
-from eval.run.store import ResultStore, json_safe
+from eval.run.store import ResultStore
 from harness.jobs import in_worker, run_jobs, send, thread_limit
 from sshade.cores import available_cores, pool_size
 from sshade.errors import SShaDeError
@@ -87,7 +88,7 @@ def job_count(value, *, cases: int, estimate_s: float) -> int:
     >>> job_count("auto", cases=40, estimate_s=10.0), job_count(4, cases=3, estimate_s=0)
     (1, 3)
     """
-    n = check_jobs(value)  # eval.run.config_check.check_config refuses a bad value first, before any work
+    n = check_jobs(value)  # eval.config_check.check_config refuses a bad value first, before any work
     if n is None:  # auto
         n = available_cores() if estimate_s >= AUTO_MIN_S and cases >= 2 else 1
     return pool_size(n, max(int(cases), 1))

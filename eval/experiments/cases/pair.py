@@ -13,7 +13,8 @@ import numpy as np
 from eval.datasets.case import case_label
 from eval.metrics.measures import deformation_metrics, ground_truth_metrics
 from eval.metrics.meshes import CaseMeshes
-from eval.run.store import cell_problem, json_safe
+from eval.run.jsonsafe import json_safe
+from eval.run.store import cell_problem
 from sshade.errors import SShaDeError
 from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
 

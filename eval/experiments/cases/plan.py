@@ -18,7 +18,7 @@ from types import SimpleNamespace
 
 from eval import datasets
 from eval.experiments.cases.jobs import job_count
-from eval.metrics.reference import method_energy, reference_path
+from eval.metrics.reference import method_energy, reference_path, sr_alpha
 from eval.run.plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
 from eval.run.subset import baseline_selection
@@ -27,6 +27,12 @@ from sshade.errors import SShaDeError
 __all__ = ["planned_root", "plan_runs", "PlanRecord"]
 
 log = logging.getLogger("eval")
+
+
+def _is_sr_energy(energy: str) -> bool:
+    """Whether ``energy`` is ARAP-SR's (:func:`eval.metrics.reference.sr_alpha`): the plan's
+    rate for its references (:func:`eval.run.plan.make_plan`)."""
+    return sr_alpha(energy) is not None
 
 
 def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
@@ -64,7 +70,7 @@ def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
         jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in pairs}), estimate_s=est)
     except SShaDeError:
         jobs = 1  # an invalid value is refused in the experiment's setup, before any work
-    plan = make_plan(cases, names, pairs, cost, build=build, references=need, jobs=jobs)
+    plan = make_plan(cases, names, pairs, cost, build=build, references=need, jobs=jobs, is_sr_energy=_is_sr_energy)
     log.info(render_plan(plan))
     t0 = time.perf_counter()
     root = datasets.dataset_root(cfg)
@@ -117,6 +123,7 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
                                      max_iter=s.refs.max_iter, time_budget_s=s.refs.time_budget_s)
             need.append((len(c.V), e, path.is_file()))
     build = getattr(s, "build", None)
-    plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs)
+    plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs,
+                     is_sr_energy=_is_sr_energy)
     log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
     return PlanRecord(plan)

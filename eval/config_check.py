@@ -1,5 +1,8 @@
 """Every number (and flag) the evaluator's config holds, checked in one place before any work.
 
+On the evaluator's top floor beside :mod:`eval.app`, since it asks the datasets, the
+experiment kinds, the case jobs and the report's views for their own checks and defaults.
+
 :func:`check_config` reads each value with :func:`harness.checks.config_number` /
 :func:`harness.checks.config_bool`, which raise :class:`~sshade.errors.SShaDeError` naming
 the key and the value, so that
