@@ -7,27 +7,7 @@ Usage::
         --frames FRAMES.npy -o OUT.npz|OUT.glb|FOLDER [--format obj|off|ply] [--fps FPS]
         [--n-low N] [--k K] [--seed S] [--force]
 
-- ``FRAMES.npy``: either (f, h, 3) float targets, one row per handle in the order of the
-  handle selection (``--sel``/``--dmat``: the selected vertices in increasing order,
-  :func:`sshade.mesh.handle_files.read_moving_handles`; ``--handles``: the file's order),
-  or, with ``--sel``/``--dmat``, (f, 4, 4) affine matrices moving the handle region of each
-  frame (fixed vertices stay), as a ``.def`` file moves it once.
-- ``OUT``: a ``.npz`` file with ``V`` (f, n, 3) float64, ``F`` (m, 3) int64,
-  ``frame_s`` (f,) the seconds of each frame's solve, ``complete`` (bool),
-  ``n_frames_planned`` and ``fps`` (the playback rate, ``--fps``); or a ``.glb`` (glTF 2.0
-  binary, :class:`sshade.mesh.gltf.GlbAnimationWriter`): the rest mesh as the base
-  positions, one morph target per frame (float32 displacements from the rest mesh), one
-  animation whose weights channel plays them, LINEAR, keyframe i at ``i / fps`` seconds,
-  the fields of the ``.npz`` but ``V`` and ``F`` in ``asset.extras``; or a folder receiving
-  ``frame_0000.obj`` ... (``--format obj|off|ply``), one mesh per frame. A folder must be
-  new, empty, or hold only frame files that sshade wrote (then they are replaced, with a
-  ``replacing`` line); an ``OUT.npz`` / ``OUT.glb`` must be new or an earlier animation's
-  (``--force``: any file); a ``.glb`` holds at most 65,535 frames and 4 GiB. Checked
-  before any work; every file is written atomically, each frame as soon as it is solved; a
-  run stopped after k frames leaves frames 0..k-1, marked incomplete (:func:`animate_file`).
-
-Prints the prepare time and the per-frame median and range on stdout; a progress bar on
-stderr when it is a terminal. Exit status 0, or 2 after one ``error:`` line.
+Frames, outputs and their rules: docs/methods.md ("Implementation notes: sshade/animate.py").
 """
 from __future__ import annotations
 
@@ -85,7 +65,7 @@ def build_parser() -> ArgumentParser:
 
 
 def _check_out(a) -> None:
-    """The output checks of the module docstring, before any work."""
+    """The output checks (docs/methods.md, "Implementation notes: sshade/animate.py"), before any work."""
     out = Path(a.out)
     if not (np.isfinite(a.fps) and a.fps > 0):
         raise SShaDeError(f"--fps must be a positive number, got {a.fps}")
@@ -230,9 +210,10 @@ def animate_file(a, log=print) -> dict:
 
 
 class _FrameSink:
-    """The frames into ``out`` (module docstring) as they are solved; a context manager
-    that finishes the output on leaving, marked incomplete when left by an exception
-    after at least one frame (and says so on stderr), removed when no frame was done.
+    """The frames into ``out`` as they are solved (the outputs: docs/methods.md,
+    "Implementation notes: sshade/animate.py"); a context manager that finishes the output
+    on leaving, marked incomplete when left by an exception after at least one frame (and
+    says so on stderr), removed when no frame was done.
 
     An ``.npz``: frames appended to a temporary file beside it, packed at the end into
     the ``.npz`` (``V`` streamed in 1 MiB blocks, never held whole) written atomically.

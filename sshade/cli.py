@@ -1,46 +1,13 @@
-"""``python -m sshade deform``: deform one mesh file with handles read from a file.
+"""``python -m sshade deform`` (and :func:`main`, the entry point of ``python -m sshade``):
+deform one mesh file with handles read from a file.
 
 Usage::
 
     python -m sshade deform MESH -o OUT (--sel F.sel --def F.def | --dmat F.dmat --def F.def
-                                         | --handles F.json|F.csv)
-        [--method NAME] [--n-low N] [--k K] [--seed S] [--param KEY=VALUE ...] [--timeout SECONDS]
-        [--repair] [--force]
+        | --handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S]
+        [--param KEY=VALUE ...] [--timeout SECONDS] [--repair] [--force]
 
-- ``MESH``: .obj, .off or .ply (:func:`sshade.mesh.io.read_mesh`; an .stl is refused:
-  it has no vertex indices for the handle files to refer to); ``OUT``: .obj, .off or
-  .ply, written atomically (temporary file + rename) in that format, at full double
-  precision, with a ``written by sshade`` comment. OUT must not be an input file, nor
-  an existing file that sshade did not write (``--force`` allows both); an OUT that
-  sshade wrote earlier is replaced (``replacing OUT`` on stdout). These checks, and
-  that OUT's folder exists and is writable, happen before any work.
-- Handles (:mod:`sshade.mesh.handle_files`): the deformation benchmark's ``.sel`` + ``.def``
-  (Botsch & Sorkine 2008), libigl's ``.dmat`` selection + ``.def``, or a ``.json`` /
-  ``.csv`` of vertex indices and target positions. Indices refer to MESH's vertices as
-  stored in the file.
-- ``--method``: ``SShaDe`` (default) or ``SShaDe+refine`` (:func:`sshade_method`, the
-  defaults of :func:`sshade.deform.check_params`, which ``conf/config.yaml``'s ``sshade``
-  section equals). ``python -m harness deform`` is this command with every built-in method
-  of the harness (``ARAP``, ``Elastic``, ``ARAP-SR``, ...: their definitions in
-  ``conf/method/``) and a plug-in ``pkg.module.Class`` (:func:`harness.registry.named_or_plugin`
-  passed as ``resolve`` to :func:`main`); ``--n-low``, ``--k`` (samplings) and ``--seed`` set
-  SShaDe's ``n_low``, ``n_samplings``, ``seed`` (also given to a plug-in that takes them);
-  ``--param KEY=VALUE`` sets any other parameter. The
-  method runs guarded (:func:`sshade.guard.run_method`): on read-only inputs, its output
-  checked (shape, finite, real), its handles within 1% of the diagonal of their
-  targets, ``--timeout SECONDS`` enforced; any failure is an ``error:`` line, no OUT.
-- Several connected components are deformed apart, those without handles follow
-  rigidly (:mod:`sshade.components`). Unreferenced vertices are dropped with a warning
-  (OUT then has fewer vertices; handles on them are dropped). ``--repair`` first applies
-  pymeshlab's filters that never move a vertex (:mod:`sshade.mesh.repair`) and prints what
-  they changed; without it a non-manifold mesh is refused with its clear error.
-
-The entry point of ``python -m sshade`` (:mod:`sshade.__main__`); it imports nothing of
-the layers above.
-
-Prints the time of each stage (read, handles, repair, deform, write) on stdout; a
-progress bar on stderr when it is a terminal. Exit status 0 on success, 2 on bad input
-or usage (one ``error: ...`` line on stderr, no traceback).
+Files, methods, checks and exit statuses: docs/methods.md ("Implementation notes: sshade/cli.py").
 """
 from __future__ import annotations
 
@@ -57,12 +24,13 @@ from tqdm import tqdm
 from .animate import main as animate_main
 from .clirun import run_command
 from .components import drop_unreferenced
-from .deform import SShaDe, check_params
+from .deform import SShaDe
 from .errors import SShaDeError
 from .guard import check_timeout, handle_error, handles_not_reached, run_method
 from .mesh.handle_files import read_def, read_dmat_selection, read_handle_file, read_sel, selection_handles
 from .mesh.io import read_mesh, write_mesh, written_by_sshade
 from .mesh.repair import repair_mesh
+from .params import check_params
 from .refine import SShaDeRefine
 from .view import main as view_main
 from .warmup_command import main as warmup_main
@@ -206,7 +174,7 @@ def sshade_method(name: str, params: dict):
         p = check_params(**params)
     except TypeError as e:  # an unexpected keyword
         raise SShaDeError(f"{label}: {str(e).replace('check_params() ', '')}") from None
-    return SShaDe(**p) if key == "sshade" else SShaDeRefine(**refine, **p)
+    return SShaDe.from_params(p) if key == "sshade" else SShaDeRefine.from_params(p, **refine)
 
 
 def _method(a, resolve):

@@ -1,25 +1,12 @@
-"""What every command does around its work: one ``error: ...`` line, no traceback.
+"""What every command does around its work: one ``error: ...`` line, no traceback. Used by
+``python -m sshade deform|animate|view|warmup`` and, through
+:func:`harness.command.run_command`, by every command of the harness.
 
-Shared by ``python -m sshade deform|animate|view`` and, through
-:func:`harness.command.run_command` (which adds Hydra's and OmegaConf's errors), by every
-command of the harness (``python -m eval``, ``eval.sweep``, ``eval.tables``,
-``eval.reproduce``, ``defaust``):
-
-* :func:`run_command` runs the work and maps what escapes it to an exit status:
-  :class:`~sshade.errors.SShaDeError` (and the configuration errors its caller names)
-  -> ``error: <one line>``, status 2; :class:`OSError` (disk full, read-only folder,
-  permission denied) -> ``error: cannot write <file>: <reason>``, status 2; Ctrl-C ->
-  ``interrupted``, status 130; SIGTERM (``kill``, ``timeout``, SLURM's ``scancel``) the
-  same way (:class:`Terminated`, a KeyboardInterrupt, so that the run is stopped and
-  marked interrupted as on Ctrl-C), status 143. Anything else is a bug and keeps its
-  traceback.
+* :func:`run_command`: SShaDeError -> ``error: <one line>``, status 2; OSError ->
+  ``error: cannot write <file>: <reason>``, 2; Ctrl-C -> ``interrupted``, 130; SIGTERM
+  (:class:`Terminated`, a KeyboardInterrupt) the same way, 143; anything else is a bug
+  and keeps its traceback.
 * :class:`ArgumentParser`: argparse whose usage errors are one ``error: ...`` line.
-
-Example::
-
-    import sys
-    from sshade.clirun import run_command
-    sys.exit(run_command(lambda: print("done"), where="out.obj"))
 """
 from __future__ import annotations
 

@@ -1,26 +1,12 @@
 """The closed-ball property of a Voronoi decomposition, checked (paper §3.1; Edelsbrunner
 & Shah 1997): compiled kernels of :func:`sshade.remesh.remesh`'s check-and-repair rounds.
 
-On the high-res mesh with every boundary loop coned to a virtual vertex (its own region;
-:class:`sshade.remesh.MeshTopology`), with ``lab`` the region label of every vertex:
-
-- every region is a topological disk (Euler characteristic V - E + F == 1; regions are
-  connected by construction: a vertex's shortest-path predecessor is in its region);
-- every two adjacent regions meet along one arc (their cross edges, linked through the
-  faces carrying both labels, form one path);
-- every three regions meet at one point (each label triple on exactly one face).
-
-A failing region, pair or triple gets one repair candidate: its vertex farthest from
-its seed (the first one met on ties, in vertex / edge / face order), if not a seed.
-
-- :func:`closed_ball` : one full round: :func:`closed_ball_holds` (one pass over the
-  faces, the common case once the sampling is dense) and :func:`closed_ball_full`
-  (edges and faces, with the candidates) when it fails.
-- :func:`closed_ball_local` : a round after seeds were added: only the
-  regions whose vertices changed label, and the pairs and triples involving them, are
-  looked at (a region, pair or triple of unchanged regions keeps its vertices, edges and
-  faces, so its verdict); the same candidates as the full check for those. The
-  remesher accepts a decomposition only from a full check.
+On the high-res mesh with every boundary loop coned to a virtual vertex: every region a
+disk, every two adjacent regions meeting along one arc, every three at one point; a
+failing region, pair or triple gets one repair candidate (its vertex farthest from its
+seed). :func:`closed_ball` is one full round, :func:`closed_ball_local` a round limited
+to the regions that changed. Details: docs/methods.md ("Implementation notes:
+sshade/closed_ball.py").
 """
 from __future__ import annotations
 
@@ -122,7 +108,8 @@ def _face_kind(lab, Fc, f, chi):
 
 @njit(cache=True)
 def closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
-    """One round of closed-ball checks with the repair candidates (module docstring).
+    """One round of closed-ball checks with the repair candidates (the rules:
+    docs/methods.md, "Implementation notes: sshade/closed_ball.py").
 
     lab : (n + loops,) labels with the cone vertices as their own regions.
     Returns (bad, cand, f3): whether the property fails, the sorted unique seed
@@ -334,8 +321,9 @@ def closed_ball_holds(Fc, FEc, lab, nlab, ne):
 
 @njit(cache=True)
 def closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
-    """One round of closed-ball checks (module docstring): the one-pass test, and the
-    full check with repair candidates when it fails. Returns (bad, cand, f3)."""
+    """One round of closed-ball checks (the rules: docs/methods.md, "Implementation notes:
+    sshade/closed_ball.py"): the one-pass test, and the full check with repair candidates
+    when it fails. Returns (bad, cand, f3)."""
     ok, f3 = closed_ball_holds(Fc, FEc, lab, nlab, Ec.shape[0])
     if ok:
         return False, np.empty(0, np.int64), f3
@@ -495,7 +483,7 @@ def _any_bad_region(chi, in_a):
 @njit(cache=True)
 def closed_ball_local(Fc, Ec, FEc, vf_ptr, vf_idx, lab, dist, n, nlab, in_a):
     """The closed-ball check restricted to the regions ``in_a`` (A) and the pairs and
-    triples involving one of them (module docstring).
+    triples involving one of them (docs/methods.md, "Implementation notes: sshade/closed_ball.py").
 
     Parameters
     ----------

@@ -1,23 +1,10 @@
-"""Meshes with several connected components (scans, characters with eyes and teeth,
-TOSCA's gorilla): each component that holds handles is deformed by the chosen method,
-each component without handles follows its nearest deformed component rigidly.
+"""Meshes with several connected components (scans, characters with eyes and teeth):
+each component holding handles is deformed by the chosen method, each one without follows
+its nearest deformed component rigidly (:func:`deform_components`, :func:`rigid_follow`;
+:class:`ComponentWise` wraps any :class:`sshade.method.Deformer`).
 
-Pure functions over ``(V, F)`` arrays plus a small :class:`ComponentWise` wrapper that
-gives any :class:`sshade.method.Deformer` this behaviour. Used by :func:`sshade.deform`,
-the evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`sshade.cli`).
-
-Rigid following (documented choice). A component ``C`` without handles gets the motion
-of the handled component ``H`` whose vertices are nearest to it (smallest
-vertex-to-vertex distance, :class:`scipy.spatial.cKDTree`). Around the vertex ``p`` of
-``H`` nearest to ``C``, the *patch* is the set of triangles of ``H`` whose centroid lies
-within ``r`` of ``p``, where ``r`` is ``C``'s bounding radius (largest distance of its
-vertices from their mean), and at least the :data:`MIN_PATCH_FACES` triangles of ``H``
-nearest to ``p`` (so a tiny component still gets a well-posed fit). The best rigid
-motion (Kabsch, no scaling, no reflection: :func:`sshade.arap.rigid_fit`) taking the
-patch's vertices from their rest to their deformed positions is applied to ``C``, whose
-shape is therefore exactly preserved. The patch is taken on the full-resolution result
-of the method, so this works for any method; for SShaDe that result is the transfer of
-its low-resolution triangles, which the patch follows.
+Used by :func:`sshade.deform`, the evaluator and ``python -m sshade deform``. The rule of
+the rigid following: docs/methods.md ("Implementation notes: sshade/components.py").
 """
 from __future__ import annotations
 
@@ -125,7 +112,7 @@ def _submesh(F: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
 
 def rigid_follow(V, Vd, F, labels, comp: int, near: int, *, min_faces: int = MIN_PATCH_FACES):
     """Rigid motion of the handle-less component ``comp`` from the deformation of
-    component ``near`` (see the module docstring for the patch rule).
+    component ``near`` (the patch rule: docs/methods.md, "Implementation notes: sshade/components.py").
 
     Parameters
     ----------
@@ -172,7 +159,7 @@ def deform_components(method, V, F, handles, targets, *, return_info: bool = Fal
     ``info``). Otherwise each component holding handles is deformed on its own by
     ``method.deform`` (its vertices, faces, handles and targets), and each component
     without handles moves rigidly with its nearest deformed component
-    (:func:`rigid_follow`, rule in the module docstring).
+    (:func:`rigid_follow`).
 
     Parameters
     ----------

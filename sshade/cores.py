@@ -1,9 +1,7 @@
-"""The CPU cores this process may use, and the worker count of a pool over them.
-
-SShaDe's sampling pool (:func:`sshade.sampling.pool_size`) and the remesher's threads
-size themselves with :func:`available_cores`: the process's affinity mask, capped by
-:data:`CORES_VARIABLE` when a job runner (:func:`harness.jobs.run_jobs`) has given this
-process a share of the machine.
+"""The CPU cores this process may use (:func:`available_cores`: the affinity mask, capped
+by :data:`CORES_VARIABLE` when a job runner gave this process a share of the machine) and
+the worker count of a pool over them (:func:`pool_size`), for the sampling pool and the
+remesher's threads.
 
 Example::
 

@@ -1,30 +1,60 @@
 """SShaDe: the whole pipeline (paper §3, Fig. 1): remesh -> low-res spokes-and-rims ARAP
 -> LRF transfer, averaged over k samplings run in parallel processes (§3.3, the pool of
-:mod:`sshade.sampling`). :func:`check_params` is the one check of SShaDe's parameters
-(also used by :mod:`sshade.isometric` and :mod:`sshade.refine`).
+:mod:`sshade.sampling`, every sampling working on one :class:`SamplingJob`).
+:func:`deform` checks its keywords into a :class:`sshade.params.SShaDeParams`
+(:func:`check_params`) and runs :func:`deform_with`; :class:`SShaDe` is the method object.
 """
 from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
-from .arap import DEFAULT_MAX_ITER, PROTOCOLS, arap_deform, bbox_diag, make_criterion
+from .arap import arap_deform, bbox_diag
 from .components import deform_components
-from .errors import SShaDeError
-from .lrf import ANCHORS, GRADIENTS, transfer
+from .lrf import transfer
 from .mesh.halfedge import count_components
 from .mesh.unit_frame import unit_frame
 from .mesh.validate import validate_handles, validate_mesh
+from .params import MAX_SEED, MIN_N_LOW, SShaDeParams, check_params, effective_params
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
-from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
+from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels
 from .warmup import WARMED, warm_once
 
-__all__ = ["deform", "deform_once", "SShaDe", "auto_n_low", "check_params", "effective_params", "MAX_SEED",
-           "warm_sshade", "LowResSkippedWarning", "prepare_sampling", "prepare_samplings", "arap_options",
-           "low_res_size", "handle_pre_pct"]
+__all__ = ["deform", "deform_with", "deform_once", "SShaDe", "SShaDeParams", "SamplingJob", "auto_n_low",
+           "check_params", "effective_params", "MAX_SEED", "warm_sshade", "LowResSkippedWarning", "prepare_sampling",
+           "prepare_samplings", "low_res_size", "handle_pre_pct"]
+
+
+@dataclass(frozen=True)
+class SamplingJob:
+    """What every sampling of one deformation works on (the job of its
+    :class:`sshade.sampling.SamplingPool`, inherited by the forked workers).
+
+    Attributes
+    ----------
+    V : (n, 3) float64 rest positions (in the unit frame); F : (m, 3) int64 faces;
+    handles : (h,) int64 vertex indices; n_low : int, farthest-point samples per low-res
+    mesh; seeds : list of k ints (:func:`sshade.sampling.sampling_seeds`); topology :
+    :func:`sshade.remesh.mesh_topology` of ``(V, F)`` or None; targets : (h, 3) float64
+    or None (:func:`prepare_samplings`: not known yet); gradient, anchor : LRF modes
+    (:data:`sshade.lrf.GRADIENTS`, :data:`sshade.lrf.ANCHORS`); arap : keyword arguments
+    of :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`) or None.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    handles: np.ndarray
+    n_low: int
+    seeds: list
+    topology: object = None
+    targets: np.ndarray | None = None
+    gradient: str = "normalized"
+    anchor: str = "projection"
+    arap: dict | None = None
 
 
 def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[dict, dict]:
@@ -58,45 +88,34 @@ def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[di
     return prep, info
 
 
-def prepare_samplings(V, F, handles, n_low: int, seeds: list, topology, workers: int) -> list[tuple[dict, dict]]:
-    """:func:`prepare_sampling` of every seed, side by side on ``workers`` forked
+def prepare_samplings(job: SamplingJob, workers: int) -> list[tuple[dict, dict]]:
+    """:func:`prepare_sampling` of each of ``job.seeds``, side by side on ``workers`` forked
     processes (:class:`sshade.sampling.SamplingPool`; one: in this process), in seed order.
 
     Parameters
     ----------
-    V, F, handles, n_low, topology : as :func:`prepare_sampling`. seeds : list of k ints
-    (:func:`sshade.sampling.sampling_seeds`). workers : int >= 1.
+    job : :class:`SamplingJob` (its targets, gradient, anchor and arap unused).
+    workers : int >= 1.
 
     Returns
     -------
     list of k ``(prep, info)`` pairs, the same as :func:`prepare_sampling` of each seed.
     """
-    state = dict(V=V, F=F, handles=handles, n_low=n_low, topology=topology, seeds=list(seeds))
-    with SamplingPool(state, workers) as pool:
-        futures = [pool.submit(_task_prepare, i) for i in range(len(seeds))]
+    with SamplingPool(job, workers) as pool:
+        futures = [pool.submit_with_job(_task_prepare, i) for i in range(len(job.seeds))]
         return [f.result()[1:] for f in futures]
 
 
-def arap_options(tol, max_iter, protocol, etol, gtol) -> dict:
-    """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step, from
-    SShaDe's checked parameters (:func:`check_params`): ``tol``, ``max_iter``,
-    ``protocol`` and, when ``etol`` or ``gtol`` is given, the criterion."""
-    crit = None
-    if etol is not None or gtol is not None:  # paper protocol: gtol tells converged from stalled
-        crit = make_criterion(etol, gtol)
-    return {"tol": tol, "max_iter": max_iter, "protocol": protocol, "criterion": crit}
-
-
-def _finish(V, targets, handles, prep, *, arap: dict, gradient, anchor, V0=None):
-    """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling.
-    ``arap``: keyword arguments of :func:`sshade.arap.arap_deform` (:func:`arap_options`);
-    ``anchor``: one of :data:`sshade.lrf.ANCHORS`."""
+def _finish(job: SamplingJob, prep: dict, V0=None):
+    """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling
+    of ``job``, from ``V0`` ((k, 3) or None: the rigid fit of the handles)."""
+    V, targets, handles = job.V, job.targets, job.handles
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
-    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", V0=V0, **arap)
+    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", V0=V0, **job.arap)
     t1 = time.perf_counter()
-    Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=gradient,
-                  bary=prep["bary"] if anchor == "projection" else None)
+    Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=job.gradient,
+                  bary=prep["bary"] if job.anchor == "projection" else None)
     # handles are low-res vertices: anchored at their projection (themselves) the transfer
     # rebuilds them exactly; at the barycenter (Alg. 1) only where P(v) moves rigidly (the
     # frame is not the triangle's affine map). Overwritten here, the residual kept for the
@@ -138,34 +157,39 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     redrawn (seeds of draws given up for a degenerate low-res face), handle_pre_pct
     (largest handle error before the handles are overwritten with their targets, % of the
     bounding-box diagonal).
+
+    Raises
+    ------
+    SShaDeError on a bad parameter (:func:`check_params`), before any work.
     """
-    prep, info = prepare_sampling(V, F, handles, n_low, seed, topology)
+    p = check_params(n_low=n_low, seed=seed, tol=tol, max_iter=max_iter, gradient=gradient, protocol=protocol,
+                     etol=etol, gtol=gtol, anchor=anchor)
+    job = SamplingJob(V=V, F=F, handles=handles, n_low=p.n_low, seeds=[p.seed], topology=topology, targets=targets,
+                      gradient=p.gradient, anchor=p.anchor, arap=p.arap_options())
+    _, prep, info = _task_prepare(job, 0)
     V0 = None if V_init is None else V_init[prep["seeds"]]
-    Vd, info2 = _finish(V, targets, handles, prep, arap=arap_options(tol, max_iter, protocol, etol, gtol),
-                        gradient=gradient, anchor=anchor, V0=V0)
+    Vd, info2 = _finish(job, prep, V0)
     info.update(info2, handle_pre_pct=handle_pre_pct(info2.pop("handle_resid"), V))
     return Vd, info
 
 
-def _task_full(i: int):
-    w = worker_state()
-    prep, info = prepare_sampling(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
-    Vd, info2 = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"],
-                        anchor=w["anchor"])
+def _task_full(job: SamplingJob, i: int):
+    """Sampling i of ``job``: remesh and projection, then ARAP and transfer from the rigid fit."""
+    _, prep, info = _task_prepare(job, i)
+    Vd, info2 = _finish(job, prep)
     info.update(info2)
     return i, Vd, info
 
 
-def _task_prepare(i: int):
-    w = worker_state()
-    prep, info = prepare_sampling(w["V"], w["F"], w["handles"], w["n_low"], w["seeds"][i], w["topology"])
+def _task_prepare(job: SamplingJob, i: int):
+    """Sampling i of ``job``: remesh and projection (:func:`prepare_sampling`)."""
+    prep, info = prepare_sampling(job.V, job.F, job.handles, job.n_low, job.seeds[i], job.topology)
     return i, prep, info
 
 
-def _task_finish(i: int, prep: dict, V0: np.ndarray):
-    w = worker_state()
-    Vd, info = _finish(w["V"], w["targets"], w["handles"], prep, arap=w["arap"], gradient=w["gradient"],
-                       anchor=w["anchor"], V0=V0)
+def _task_finish(job: SamplingJob, i: int, prep: dict, V0: np.ndarray):
+    """Sampling i of ``job`` after :func:`_task_prepare`: ARAP from ``V0`` and transfer."""
+    Vd, info = _finish(job, prep, V0)
     return i, Vd, info
 
 
@@ -173,122 +197,6 @@ class LowResSkippedWarning(UserWarning):
     """``n_low`` is at or above the mesh's vertex count: SShaDe has no low-resolution
     step (the "low-res" ARAP runs on the whole mesh). Recorded as ``low_res_skipped``
     in :func:`deform`'s info."""
-
-
-_MAX_COUNT = 2**31 - 1    # n_low, workers, max_iter: int32 range (numba kernels, libigl)
-_MIN_N_LOW = 4            # the smallest n_low check_params accepts (its as_int("n_low", n_low, 4))
-_MAX_SAMPLINGS = 10_000   # k remeshings, each a full low-res solve
-MAX_SEED = 2**63 - 1      #: seeds: int64, recorded in JSON/CSV and passed to numpy
-
-
-def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
-                 max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
-                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 anchor: str = "projection") -> dict:
-    """Validate SShaDe's parameters without touching a mesh (so a bad value fails before
-    any work, e.g. before an evaluator spends minutes on the baselines).
-
-    Parameters
-    ----------
-    As :func:`deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None), n_samplings
-    (int in [1, 10000]), seed (int in [0, 2**63 - 1]), workers (int in [1, 2**31 - 1] or
-    None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or None), gradient (one
-    of :data:`sshade.lrf.GRADIENTS`), anchor (one of :data:`sshade.lrf.ANCHORS`),
-    warm_start (bool), protocol (one of
-    :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None). An
-    integer may be given as an integral float (``1e3``) but never as a bool, NaN, inf
-    or a float beyond the range.
-
-    Returns
-    -------
-    dict of the same keys, normalised (ints as int, ``n_low`` as int or ``"auto"``).
-
-    Raises
-    ------
-    SShaDeError naming the first bad parameter and its value (never OverflowError or
-    TypeError).
-
-    Examples
-    --------
-    >>> check_params(n_low=6000)["n_low"]
-    6000
-    >>> check_params(n_low=2)
-    Traceback (most recent call last):
-    ...
-    sshade.errors.SShaDeError: SShaDe: n_low must be at least 4 (or 'auto'), got 2
-    """
-    def as_int(name, v, lo, hi=_MAX_COUNT):
-        if isinstance(v, (bool, np.bool_)):
-            raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
-        try:
-            iv = int(v)
-        except (TypeError, ValueError, OverflowError):  # OverflowError: inf
-            raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}") from None
-        if iv != v and not (isinstance(v, str) and str(iv) == v.strip()):
-            raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
-        if iv < lo:
-            extra = " (or 'auto')" if name == "n_low" else ""
-            raise SShaDeError(f"SShaDe: {name} must be at least {lo}{extra}, got {v!r}")
-        if iv > hi:
-            raise SShaDeError(f"SShaDe: {name} must be at most {hi}, got {v!r}")
-        return iv
-
-    out = {"n_low": "auto" if n_low in (None, "auto") else as_int("n_low", n_low, 4),
-           "n_samplings": as_int("n_samplings", n_samplings, 1, _MAX_SAMPLINGS),
-           "seed": as_int("seed", seed, 0, MAX_SEED),
-           "workers": None if workers is None else as_int("workers", workers, 1),
-           "max_iter": None if max_iter is None else as_int("max_iter", max_iter, 1)}
-    try:
-        out["tol"] = float(tol)
-    except (TypeError, ValueError):
-        raise SShaDeError(f"SShaDe: tol must be a number, got {tol!r}") from None
-    if isinstance(tol, (bool, np.bool_)) or not out["tol"] > 0 or not np.isfinite(out["tol"]):
-        raise SShaDeError(f"SShaDe: tol must be a finite number > 0, got {tol!r}")
-    if not isinstance(warm_start, (bool, np.bool_)):
-        raise SShaDeError(f"SShaDe: warm_start must be true or false, got {warm_start!r}")
-    if gradient not in GRADIENTS:
-        raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
-    out["gradient"] = gradient
-    if anchor not in ANCHORS:
-        raise SShaDeError(f"SShaDe: unknown anchor {anchor!r}; use one of {ANCHORS}")
-    out["anchor"] = anchor
-    out["warm_start"] = bool(warm_start)  # a bool (checked above)
-    if protocol not in PROTOCOLS:
-        raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
-    out["protocol"] = protocol
-    for name, v in (("etol", etol), ("gtol", gtol)):
-        if v is None:
-            out[name] = None
-            continue
-        try:
-            fv = float(v)
-        except (TypeError, ValueError):
-            raise SShaDeError(f"SShaDe: {name} must be a number >= 0, got {v!r}") from None
-        if isinstance(v, (bool, np.bool_)) or not (fv >= 0 and np.isfinite(fv)):
-            raise SShaDeError(f"SShaDe: {name} must be a finite number >= 0, got {v!r}")
-        out[name] = fv
-    return out
-
-
-def effective_params(params: dict) -> dict:
-    """SShaDe's parameters as a run uses them: ``params`` (:func:`check_params`' output)
-    with every None resolved: ``max_iter`` the protocol's cap
-    (:data:`sshade.arap.DEFAULT_MAX_ITER`), ``etol`` / ``gtol`` the converged criterion's
-    (:func:`sshade.arap.make_criterion`), ``workers`` the pool size for ``n_samplings``
-    samplings on this machine; ``n_low`` ``"auto"`` stays the rule (:func:`auto_n_low`,
-    per mesh: each case's value is in its info, ``n_low``).
-
-    Returns
-    -------
-    dict, JSON-serialisable, the keys of :func:`check_params`.
-    """
-    p = dict(params)
-    crit = make_criterion(p.get("etol"), p.get("gtol"))
-    p.update(max_iter=DEFAULT_MAX_ITER[p["protocol"]] if p.get("max_iter") is None else p["max_iter"],
-             etol=crit.etol, gtol=crit.gtol, workers=pool_size(p.get("workers"), p["n_samplings"]))
-    if p.get("n_low") in (None, "auto"):
-        p["n_low"] = "auto: min(6000, n // 7), at least 100"
-    return p
 
 
 def auto_n_low(n: int) -> int:
@@ -305,56 +213,38 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
            anchor: str = "projection"):
     """Deform a high-resolution mesh with SShaDe (paper §3, Alg. 1, §3.3 averaging).
 
-    Sampling 0 runs its low-res ARAP from the rigid fit of the handles; with
-    ``warm_start`` the other samplings start theirs from sampling 0's deformed mesh
-    (read at their own low-res vertices), which cuts their iterations 5-10x under the
-    same convergence rule. Their remeshing and projection run while sampling 0 deforms.
-
     Parameters
     ----------
     V : (n, 3) float64 rest vertex positions (any length unit).
-    F : (m, 3) int faces of a manifold triangle mesh (boundary allowed). With several
-        connected components, each one holding handles is deformed apart and each one
-        without follows its nearest deformed component rigidly
-        (:func:`sshade.components.deform_components`; info gains ``n_components``).
+    F : (m, 3) int faces of a manifold triangle mesh (boundary allowed); several connected
+        components are deformed apart (:func:`sshade.components.deform_components`; info
+        gains ``n_components``).
     handles : (h,) int vertex indices. targets : (h, 3) float target positions.
-    n_low : int or ``"auto"``, farthest-point samples per low-res mesh (paper: ~6000 for
-        150k-200k vertices); capped at n; ``"auto"`` = :func:`auto_n_low`. The handles
-        are added to these as low-res vertices.
+    n_low : int or ``"auto"`` (:func:`auto_n_low`), farthest-point samples per low-res mesh
+        (paper: ~6000 for 150k-200k vertices), capped at n; the handles are added to them.
     n_samplings : int, k samplings with different first seeds, averaged (paper: 5-10).
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
     workers : int or None, processes (default: min(k, CPU count)); 1 runs in-process.
-    protocol : the low-res ARAP's protocol (:func:`sshade.arap.arap_deform`):
-        ``"converged"`` (default; L-BFGS-accelerated, stopped by the energy-and-gradient
-        criterion with thresholds ``etol``/``gtol``, None = defaults) or ``"paper"``
-        (libigl, stops when the largest move in one iteration is below
-        ``tol * bbox_diag``). max_iter : int or None, cap (None: protocol default;
-        paper: 1000).
+    protocol : the low-res ARAP's (:func:`sshade.arap.arap_deform`): ``"converged"``
+        (default; stopped by the criterion of thresholds ``etol``/``gtol``, None =
+        defaults) or ``"paper"`` (libigl; stops when the largest move of one iteration is
+        below ``tol * bbox_diag``). max_iter : int or None, cap (None: the protocol's).
     gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
-    anchor : ``"projection"`` (default: each high-res vertex anchored at its projection
-        onto its low-res triangle, whose affine map carries it; docs/differences.md) or
-        ``"barycenter"`` (paper Alg. 1: at the triangle's barycenter) (:mod:`sshade.lrf`).
+    anchor : ``"projection"`` (default) or ``"barycenter"`` (paper Alg. 1) (:mod:`sshade.lrf`).
     warm_start : bool, start samplings 1..k-1 from sampling 0's result.
-    return_info : also return a dict of timings, seeds and per-sampling details;
-        ``total_s`` (wall seconds) excludes ``compile_s``, the seconds this call spent
-        compiling or loading numba's kernels (0.0 once a call or :meth:`SShaDe.warmup`
-        did it in this process); ``handles`` is ``"overwritten"`` (the averaged result's
-        handle vertices are set to their targets) and ``handle_pre_pct`` the largest handle
-        error before that, % of the bounding-box diagonal; ``frame`` the unit frame every
-        stage ran in (:func:`sshade.mesh.unit_frame.unit_frame`: the input centred and
-        scaled by a power of two, so a moved or scaled mesh gives the moved or scaled
-        result); the samplings' ``energy`` in mesh units.
+    return_info : also return a dict of timings (seconds; ``total_s`` excludes
+        ``compile_s``), seeds, per-sampling details, ``handle_pre_pct`` and ``frame``
+        (docs/methods.md, "Implementation notes: sshade/deform.py").
 
     Returns
     -------
-    Vd : (n, 3) float64 deformed positions (same connectivity F); with ``return_info``
-    the tuple ``(Vd, info)``.
+    Vd : (n, 3) float64 deformed positions (same connectivity F), handles at their
+    targets; with ``return_info`` the tuple ``(Vd, info)``.
 
     Raises
     ------
-    SShaDeError on invalid mesh or handles (see :func:`sshade.mesh.validate.validate_mesh`)
-    or a bad parameter (:func:`check_params`: n_samplings < 1, n_low < 4, tol <= 0,
-    unknown gradient mode, ...), before any work.
+    SShaDeError on an invalid mesh or handles (:func:`sshade.mesh.validate.validate_mesh`)
+    or a bad parameter (:func:`check_params`), before any work.
 
     Warns
     -----
@@ -365,28 +255,34 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     --------
     Example::
 
-        from sshade import deform
         Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)
     """
-    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                     max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
-                     gtol=gtol, anchor=anchor)
+    params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
+                          max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
+                          gtol=gtol, anchor=anchor)
+    return deform_with(V, F, handles, targets, params, return_info=return_info)
+
+
+def deform_with(V, F, handles, targets, params: SShaDeParams, *, return_info: bool = False):
+    """:func:`deform` with its parameters checked already (:func:`check_params`): the same
+    arrays, result, info, warnings and errors (paper §3, Alg. 1, §3.3)."""
+    p = params
     compile_s = warm_kernels()  # numba compilation / cache loads: not part of the timings below
     t0 = time.perf_counter()
     V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
     handles, targets = validate_handles(V, handles, targets)
     if count_components(he.E, len(V)) > 1:  # each component apart, handle-less ones rigidly (sshade.components)
-        return deform_components(SShaDe(**p), V, F, handles, targets, return_info=return_info)
-    n_low_asked, n_low = low_res_size(len(V), p["n_low"])
+        return deform_components(SShaDe.from_params(p), V, F, handles, targets, return_info=return_info)
+    n_low_asked, n_low = low_res_size(len(V), p.n_low, stacklevel=4)
     frame = unit_frame(V)  # every stage runs centred and scaled (sshade.mesh.unit_frame)
     U, T = frame.to_unit(V), frame.to_unit(targets)
-    state = dict(V=U, F=F, handles=handles, targets=T, n_low=n_low, topology=mesh_topology(U, F, he),
-                 seeds=sampling_seeds(p["seed"], p["n_samplings"]), gradient=p["gradient"], anchor=p["anchor"],
-                 arap=arap_options(p["tol"], p["max_iter"], p["protocol"], p["etol"], p["gtol"]))
-    workers = pool_size(p["workers"], p["n_samplings"])
+    job = SamplingJob(V=U, F=F, handles=handles, n_low=n_low, seeds=sampling_seeds(p.seed, p.n_samplings),
+                      topology=mesh_topology(U, F, he), targets=T, gradient=p.gradient, anchor=p.anchor,
+                      arap=p.arap_options())
+    workers = pool_size(p.workers, p.n_samplings)
     t1 = time.perf_counter()
-    with SamplingPool(state, workers) as pool:
-        results, infos = _run_samplings(pool, p["n_samplings"], p["warm_start"])
+    with SamplingPool(job, workers) as pool:
+        results, infos = _run_samplings(pool, p.n_samplings, p.warm_start)
     Vd = average(results)
     frame.from_unit(Vd, out=Vd)
     Vd[handles] = targets  # overwritten after averaging (the paper does not say; docs/differences.md)
@@ -394,9 +290,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     if not return_info:
         return Vd
     info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
-            "seed": p["seed"], "sampling_seeds": state["seeds"], "warm_start": p["warm_start"],
+            "seed": p.seed, "sampling_seeds": job.seeds, "warm_start": p.warm_start,
             "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
-    return Vd, {**info, **_summary(infos, frame), "protocol": p["protocol"], "anchor": p["anchor"],
+    return Vd, {**info, **_summary(infos, frame), "protocol": p.protocol, "anchor": p.anchor,
                 "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, U)}
 
 
@@ -408,19 +304,20 @@ def handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
     return float(100.0 * np.linalg.norm(resid, axis=1).max() / bbox_diag(V))
 
 
-def low_res_size(n: int, n_low) -> tuple[int, int]:
+def low_res_size(n: int, n_low, *, stacklevel: int = 3) -> tuple[int, int]:
     """(requested, actual) low-res vertex count of an ``n``-vertex mesh for the checked
     ``n_low`` (int or ``"auto"``: :func:`auto_n_low`); warns :class:`LowResSkippedWarning`
-    (at the caller of :func:`deform` or :func:`sshade.prepared.prepare`) when the request
-    is not below ``n``."""
+    (``stacklevel`` as :func:`warnings.warn`'s, counted from this function's caller: at the
+    caller of :func:`deform` or :func:`sshade.prepared.prepare`) when the request is not
+    below ``n``."""
     asked = auto_n_low(n) if n_low == "auto" else n_low
     if asked >= n:
-        # a valid n_low is at least _MIN_N_LOW (check_params) and below n: advise one only when it exists
-        advice = (f"pass n_low between {_MIN_N_LOW} and {n - 1}" if n - 1 >= _MIN_N_LOW else
-                  f"no n_low gives one: it must be at least {_MIN_N_LOW} and below the vertex count")
+        # a valid n_low is at least MIN_N_LOW (check_params) and below n: advise one only when it exists
+        advice = (f"pass n_low between {MIN_N_LOW} and {n - 1}" if n - 1 >= MIN_N_LOW else
+                  f"no n_low gives one: it must be at least {MIN_N_LOW} and below the vertex count")
         warnings.warn(f"SShaDe: n_low={asked} is not below the mesh's {n} vertices: there is no "
                       f"low-resolution step, the low-res ARAP runs on the whole mesh ({advice})",
-                      LowResSkippedWarning, stacklevel=3)
+                      LowResSkippedWarning, stacklevel=stacklevel)
     return asked, int(min(asked, n))
 
 
@@ -431,17 +328,17 @@ def _run_samplings(pool: SamplingPool, k: int, warm_start: bool) -> tuple[list, 
     results: list = [None] * k
     infos: list = [None] * k
     if not warm_start or k == 1:
-        for f in [pool.submit(_task_full, i) for i in range(k)]:
+        for f in [pool.submit_with_job(_task_full, i) for i in range(k)]:
             i, results[i], infos[i] = f.result()
         return results, infos
-    f0 = pool.submit(_task_full, 0)
-    preps = [pool.submit(_task_prepare, i) for i in range(1, k)]
+    f0 = pool.submit_with_job(_task_full, 0)
+    preps = [pool.submit_with_job(_task_prepare, i) for i in range(1, k)]
     _, results[0], infos[0] = f0.result()
     fins = []
     for f in preps:
         i, prep, info = f.result()
         infos[i] = info
-        fins.append(pool.submit(_task_finish, i, prep, results[0][prep["seeds"]]))
+        fins.append(pool.submit_with_job(_task_finish, i, prep, results[0][prep["seeds"]]))
     for f in fins:
         i, results[i], info2 = f.result()
         infos[i].update(info2)
@@ -470,13 +367,13 @@ def _summary(infos: list, frame) -> dict:
     return out
 
 
-def warm_sshade(params: dict) -> float:
+def warm_sshade(params: SShaDeParams) -> float:
     """Warm :func:`deform` with SShaDe's checked ``params`` (:func:`check_params`): one
     in-process run on :func:`sshade.warmup.tiny_problem` with the same ARAP protocol and
     gradient mode (two samplings, warm-started, so every stage runs), once per process
     (:func:`sshade.warmup.warm_once`). Returns the seconds spent (0.0 when warm)."""
-    p = dict(params, n_low=40, n_samplings=2, workers=1, warm_start=True, seed=0)
-    return warm_once(WARMED, ("sshade", p["protocol"], p["gradient"]), lambda V, F, h, T: deform(V, F, h, T, **p))
+    p = params.replace(n_low=40, n_samplings=2, workers=1, warm_start=True, seed=0)
+    return warm_once(WARMED, ("sshade", p.protocol, p.gradient), lambda V, F, h, T: deform_with(V, F, h, T, p))
 
 
 class SShaDe:
@@ -506,9 +403,14 @@ class SShaDe:
                                    etol=etol, gtol=gtol, anchor=anchor)
         self.info: dict = {}
 
+    @classmethod
+    def from_params(cls, params: SShaDeParams) -> SShaDe:
+        """The method with the checked ``params`` (:func:`check_params`)."""
+        return cls(**params)
+
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """See :func:`deform`; returns (n, 3) float64."""
-        Vd, self.info = deform(V, F, handles, targets, return_info=True, **self.params)
+        Vd, self.info = deform_with(V, F, handles, targets, self.params, return_info=True)
         return Vd
 
     def effective_params(self) -> dict:

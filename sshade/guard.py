@@ -1,28 +1,12 @@
-"""One guarded way to run any deformation method on one input, used by the
-evaluator (:mod:`eval.app`) and ``python -m sshade deform`` (:mod:`sshade.cli`).
+"""One guarded way to run any deformation method on one input (:func:`run_method`), used
+by the evaluator and ``python -m sshade deform``.
 
-:func:`run_method` gives the method read-only copies of the mesh and handles (a method
-that writes into them fails alone instead of corrupting every later method on the
-case), deforms each connected component apart when there are several
-(:func:`sshade.components.deform_components`), turns whatever the method raises or does
-(an exception, ``sys.exit``, a time-out) into a :class:`MethodFailure`, except
-``KeyboardInterrupt``, which stops the run, and checks the result with
-:func:`sshade.mesh.validate.validate_deformed` before anyone measures or writes it.
-
-A plug-in that ends the process from the thread running it with ``os._exit`` fails like
-one that calls ``sys.exit``: while a plug-in runs, ``os._exit`` called from that thread
-of this process raises instead (:func:`_no_process_exit`; other threads, and processes
-the plug-in forks, exit as usual; a plug-in that bound ``os._exit`` under another name
-at import is not caught). A crash (a segmentation fault, ``os.abort``, a signal) cannot
-be caught inside the process: the evaluator's worker processes (``jobs`` >= 2,
-:mod:`eval.experiments.cases.jobs`) turn it into that pair's failure; in one process it
-ends the run.
-
-Time-outs use ``SIGALRM`` (``signal.setitimer``) and therefore work only in the main
-thread of a POSIX process, and only while the method runs Python code: a compiled loop
-(numba, C) that never returns to the interpreter cannot be interrupted this way; the
-alarm is raised as soon as it does return. Off the main thread (or without
-``SIGALRM``) a time-out is not enforced and a :class:`RuntimeWarning` says so.
+The method gets read-only copies of its inputs, each connected component apart
+(:func:`sshade.components.deform_components`); what it raises or does (an exception,
+``sys.exit``, ``os._exit`` from its thread, a time-out) becomes a :class:`MethodFailure`
+(``KeyboardInterrupt`` stops the run), and its result is checked
+(:func:`sshade.mesh.validate.validate_deformed`). What cannot be caught (crashes,
+time-outs off the main thread): docs/methods.md ("Implementation notes: sshade/guard.py").
 """
 from __future__ import annotations
 
@@ -213,7 +197,7 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
         connected components allowed: each is deformed apart); handles : (h,) int
         vertex indices; targets : (h, 3) float positions. Never modified.
     timeout_s : positive float or None, the wall-clock limit of each of the
-        ``warmup`` and ``deform`` calls (main thread only, see the module docstring).
+        ``warmup`` and ``deform`` calls (main thread only: docs/methods.md, "Implementation notes: sshade/guard.py").
 
     Returns
     -------
@@ -226,7 +210,7 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     MethodFailure on anything the method raises or does: our methods' SShaDeError
     (its message), a plug-in's exception (``Type: message``), SystemExit and other
     BaseException (``SystemExit: 0 (...)``), a plug-in's ``os._exit`` (``os._exit(0)
-    called (...)``; not a crash, see the module docstring), ``timed out after N s``, or
+    called (...)``; not a crash), ``timed out after N s``, or
     an output :func:`sshade.mesh.validate.validate_deformed` refuses.
     KeyboardInterrupt, unchanged; any other exception of one of our own methods (a bug,
     :func:`sshade.method.is_plugin`), unchanged.

@@ -1,46 +1,55 @@
-"""Deformation transfer through a known correspondence: non-rigid isometric deformations
-(paper §4.2, Fig. "diagrams" a) and pose transfer (paper §4.3, Fig. "diagrams" b).
+"""Deformation transfer through a known 1:1 correspondence: non-rigid isometric
+deformations (paper §4.2, Fig. "diagrams" a) and pose transfer (§4.3, Fig. "diagrams" b).
 
-Both start from a rest mesh ``M`` and a second shape ``M'`` of the same subject, in
-1:1 vertex correspondence with ``M`` (same connectivity), and skip the low-res ARAP of
-the handle pipeline: the deformed low-res mesh ``N'`` is read off ``M'`` directly.
-
-Isometric deformation (§4.2), per sampling:
-
-1. remesh ``M`` to ``N`` (:func:`sshade.remesh.remesh`; ``V_N = V_M[seeds]``);
-2. ``V_N' = V_M'[seeds]`` (low-res vertices are high-res vertices, and ``M <-> M'`` is 1:1);
-3. ``N' = (V_N', T_N)``: the connectivity of ``N``;
-4. encode ``M`` in the per-triangle frames of ``N`` (projection P: V_M -> T_N,
-   :func:`sshade.projection.project_to_fans`) and decode on ``N'`` (Alg. 1, LRFT).
-
-The k samplings (seeds from :func:`sshade.sampling.sampling_seeds`) are averaged (§3.3),
-in the process pool of :mod:`sshade.sampling` (that of :func:`sshade.deform`).
-
-Pose transfer (§4.3): a third shape ``S`` (pose 0 of another subject, 1:1 with ``M``,
-same connectivity, aligned with ``M`` in space) is to be put in the pose of ``M'``. The
-remesh ``N``, the projection P and the frames are all those of ``M`` (S is never
-remeshed or projected); what is encoded is S's vertex positions: for vertex v with
-``t = P(v)`` (the triangle of M's vertex v), ``s_t = L_t^-1 (v_S - b_t)`` with L_t, b_t
-built on ``N`` (M's positions), then ``v_S' = L'_t s_t + b'_t`` on ``N'`` (M''s
-positions). With ``S = M`` this is exactly the isometric transfer.
-
-All positions are in the input's length unit; nothing here reads or writes files.
+Per sampling: remesh the rest mesh M to N, read the deformed low-res mesh N' off M'
+(``V_M'[seeds]`` with N's faces) instead of running a low-res ARAP, encode M (or a third
+shape S, 1:1 with M and aligned with it) in N's triangle frames and decode on N' (Alg. 1);
+the k samplings (one :class:`TransferJob`) are averaged (§3.3) in the pool of
+:mod:`sshade.sampling`. Steps and formulas: docs/methods.md ("Implementation notes:
+sshade/isometric.py").
 """
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from .deform import auto_n_low, check_params
+from .deform import auto_n_low
 from .errors import SShaDeError
 from .lrf import decode, encode, frame_functions
 from .mesh.validate import check_points, validate_mesh
+from .params import SShaDeParams, check_params
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
-from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels, worker_state
+from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels
 
-__all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "rigid_align"]
+__all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "transfer_with", "TransferJob",
+           "rigid_align"]
+
+
+@dataclass(frozen=True)
+class TransferJob:
+    """What every sampling of one correspondence transfer works on (the job of its
+    :class:`sshade.sampling.SamplingPool`, inherited by the forked workers).
+
+    Attributes
+    ----------
+    V : (n, 3) float64 rest mesh M; F : (m, 3) int64 its faces; S : (n, 3) float64 the
+    positions encoded; T : (n, 3) float64 M in the target pose (M'); n_low : int,
+    farthest-point samples per low-res mesh; seeds : list of k ints; topology :
+    :func:`sshade.remesh.mesh_topology` of ``(V, F)``; gradient, anchor : LRF modes.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    S: np.ndarray
+    T: np.ndarray
+    n_low: int
+    seeds: list
+    topology: object
+    gradient: str
+    anchor: str
 
 
 def _positions(X, n: int | None, name: str, ref: str = "the rest mesh") -> np.ndarray:
@@ -84,22 +93,21 @@ def rigid_align(X, Y) -> np.ndarray:
     return (X - cx) @ R.T + cy
 
 
-def _one(i: int) -> tuple[int, np.ndarray, dict]:
-    """Sampling i: remesh M, project M onto N, encode S on N, decode on N' (Alg. 1)."""
-    w = worker_state()
-    V, F = w["V"], w["F"]
+def _one(job: TransferJob, i: int) -> tuple[int, np.ndarray, dict]:
+    """Sampling i of ``job``: remesh M, project M onto N, encode S on N, decode on N' (Alg. 1)."""
+    V, F = job.V, job.F
     t0 = time.perf_counter()
-    rm, given_up = remesh_drawn(V, F, w["n_low"], seed=w["seeds"][i], topology=w["topology"])
+    rm, given_up = remesh_drawn(V, F, job.n_low, seed=job.seeds[i], topology=job.topology)
     t1 = time.perf_counter()
     VN = V[rm.seeds]
     proj = project_to_fans(V, rm.label, VN, rm.F)
     t2 = time.perf_counter()
     axis = frame_functions(VN, rm.F)
-    bary = proj.bary if w["anchor"] == "projection" else None  # M's own projection, also for S
-    C = encode(w["S"], proj.tri, VN, rm.F, axis, w["gradient"], bary)
-    out = decode(C, proj.tri, VN, w["T"][rm.seeds], rm.F, axis, w["gradient"], bary)
+    bary = proj.bary if job.anchor == "projection" else None  # M's own projection, also for S
+    C = encode(job.S, proj.tri, VN, rm.F, axis, job.gradient, bary)
+    out = decode(C, proj.tri, VN, job.T[rm.seeds], rm.F, axis, job.gradient, bary)
     t3 = time.perf_counter()
-    return i, out, {"seed": int(w["seeds"][i]), "first": int(rm.first), "n_low": int(len(rm.seeds)),
+    return i, out, {"seed": int(job.seeds[i]), "first": int(rm.first), "n_low": int(len(rm.seeds)),
                     "n_repair": int(rm.n_repair), "n_flipped": int(rm.n_flipped), "redrawn": given_up,
                     "remesh_s": t1 - t0, "project_s": t2 - t1, "transfer_s": t3 - t2}
 
@@ -110,7 +118,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     """Encode ``V_S`` in the LRFs of the remeshed ``M`` and decode them on ``M'`` (§4.2-4.3).
 
     The common core of :func:`isometric_transfer` (``V_S = V_M``) and
-    :func:`pose_transfer`; see the module docstring.
+    :func:`pose_transfer` (docs/methods.md, "Implementation notes: sshade/isometric.py").
 
     Parameters
     ----------
@@ -145,30 +153,49 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     unknown gradient mode.
     """
     t0 = time.perf_counter()
+    arrays = _checked_arrays(V_M, F, V_S, V_Mprime)
+    params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient,
+                          anchor=anchor)
+    return _transfer(*arrays, params, t0)
+
+
+def transfer_with(V_M, F, V_S, V_Mprime, params: SShaDeParams) -> tuple[np.ndarray, dict]:
+    """:func:`correspondence_transfer` with its parameters checked already
+    (:func:`sshade.params.check_params`; its n_low, n_samplings, seed, workers, gradient
+    and anchor are used): the same arrays, result, info and errors."""
+    t0 = time.perf_counter()
+    return _transfer(*_checked_arrays(V_M, F, V_S, V_Mprime), params, t0)
+
+
+def _checked_arrays(V_M, F, V_S, V_Mprime) -> tuple:
+    """(V, F, half-edges, S, T) of :func:`correspondence_transfer`'s inputs, validated."""
     V, F, he = validate_mesh(V_M, F, name="rest mesh M", return_halfedges=True)
+    S = _positions(V_S, len(V), "V_S")
+    T = _positions(V_Mprime, len(V), "target pose V_Mprime")
+    return V, F, he, S, T
+
+
+def _transfer(V, F, he, S, T, params: SShaDeParams, t0: float) -> tuple[np.ndarray, dict]:
+    """The samplings of :func:`correspondence_transfer` on validated arrays, averaged; its
+    info with ``total_s`` counted from ``t0``."""
     n = len(V)
-    S = _positions(V_S, n, "V_S")
-    T = _positions(V_Mprime, n, "target pose V_Mprime")
-    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient,
-                     anchor=anchor)
-    n_samplings = p["n_samplings"]
-    seeds = sampling_seeds(p["seed"], n_samplings)
+    k = params.n_samplings
     warm_kernels()
-    n_low = auto_n_low(n) if p["n_low"] == "auto" else p["n_low"]
-    state = dict(V=V, F=F, S=S, T=T, n_low=int(min(n_low, n)), seeds=seeds,
-                 topology=mesh_topology(V, F, he), gradient=gradient, anchor=p["anchor"])
-    workers = pool_size(p["workers"], n_samplings)
-    results: list = [None] * n_samplings
-    infos: list = [None] * n_samplings
-    with SamplingPool(state, workers) as pool:
-        for f in [pool.submit(_one, i) for i in range(n_samplings)]:
+    n_low = auto_n_low(n) if params.n_low == "auto" else params.n_low
+    job = TransferJob(V=V, F=F, S=S, T=T, n_low=int(min(n_low, n)), seeds=sampling_seeds(params.seed, k),
+                      topology=mesh_topology(V, F, he), gradient=params.gradient, anchor=params.anchor)
+    workers = pool_size(params.workers, k)
+    results: list = [None] * k
+    infos: list = [None] * k
+    with SamplingPool(job, workers) as pool:
+        for f in [pool.submit_with_job(_one, i) for i in range(k)]:
             i, results[i], infos[i] = f.result()
     out = average(results)  # fixed order: independent of the worker count
-    info = {"total_s": time.perf_counter() - t0, "seed": p["seed"], "sampling_seeds": seeds,
-            "n_samplings": n_samplings, "workers": workers, "gradient": gradient, "anchor": p["anchor"],
+    info = {"total_s": time.perf_counter() - t0, "seed": params.seed, "sampling_seeds": job.seeds,
+            "n_samplings": k, "workers": workers, "gradient": params.gradient, "anchor": params.anchor,
             "samplings": infos}
-    for k in ("remesh_s", "project_s", "transfer_s"):
-        info[k] = float(np.sum([d[k] for d in infos]))
+    for key in ("remesh_s", "project_s", "transfer_s"):
+        info[key] = float(np.sum([d[key] for d in infos]))
     info["n_low"] = int(round(np.mean([d["n_low"] for d in infos])))
     info["n_flipped"] = int(np.sum([d["n_flipped"] for d in infos]))
     return out, info
@@ -179,11 +206,8 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
                        anchor: str = "projection") -> tuple[np.ndarray, dict]:
     """Rebuild a pose of a subject from its rest pose and a low-res copy of the pose (paper §4.2).
 
-    Steps (per sampling, then averaged over ``n_samplings``, §3.3): remesh the rest
-    pose M to N; take the low-res vertices in the target pose through the 1:1
-    correspondence (``V_target[seeds]``) with N's connectivity as N'; transfer M with
-    the per-triangle LRFs (Alg. 1). Only the ~``n_low`` low-res vertices of the target
-    are used: the rest of ``V_target`` is the ground truth the result is compared with.
+    Only the ~``n_low`` low-res vertices of the target are used (``V_target[seeds]``, per
+    sampling); the rest of ``V_target`` is the ground truth the result is compared with.
 
     Parameters
     ----------
@@ -231,18 +255,11 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
                   return_info: bool = False, anchor: str = "projection"):
     """Put shape S in the pose of M' (paper §4.3, Fig. "diagrams" b).
 
-    M is remeshed to N and projected onto it (P: V_M -> T_N) exactly as in
-    :func:`isometric_transfer`; then, through the 1:1 correspondence M <-> S, each S
-    vertex v is written in the frame of ``t = P(v)`` built on N (M's positions):
-    ``s_t = L_t^-1 (v_S - a(v))``, and rebuilt on ``N' = (V_M'[seeds], T_N)``:
-    ``v_S' = L'_t s_t + a'(v)``, the anchor a(v) the projection of M's vertex v onto t
-    (``anchor="projection"``) or b_t (``"barycenter"``, paper). Averaged over ``n_samplings`` samplings (§3.3).
-    With ``V_S = V_M`` the result is :func:`isometric_transfer`'s.
-
-    S must be aligned with M in space (paper §4.3): the offsets ``v_S - b_t`` are
-    rotated with the local frames, so a global misplacement of S would be rotated too.
-    ``align=True`` first moves S rigidly onto M (:func:`rigid_align`, through the 1:1
-    correspondence); the result is then in M''s placement.
+    S's vertices are encoded in the frames of M's remesh N and decoded on N' (M's
+    low-res vertices in the pose of M'), averaged over ``n_samplings`` samplings (§3.3);
+    with ``V_S = V_M`` the result is :func:`isometric_transfer`'s. S must be aligned with
+    M in space (``align=True`` moves it rigidly onto M first). Formulas: docs/methods.md
+    ("Implementation notes: sshade/isometric.py").
 
     Parameters
     ----------

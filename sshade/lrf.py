@@ -1,23 +1,13 @@
 """Per-triangle local reference frames and the deformation transfer (paper §3.2,
 Algorithm 1 "LRFT").
 
-For a low-res triangle t: L_t = (g_t, w_t, n_t) as columns, with n_t the unit normal,
-g_t the gradient on t of a scalar function f carried by the correspondence (the rest-pose
-coordinates), w_t = g_t x n_t; b_t the barycenter. A high-res vertex v with P(v) = t is
-stored as v_t = L_t^-1 (v - b_t) and rebuilt on the deformed N' as v' = L'_t v_t + b'_t.
-
-``gradient="raw"`` uses g_t as in the paper; ``gradient="normalized"`` divides it by its
-length, so L_t is orthonormal (a rotation) and the transfer is rigid per triangle.
-
-The anchor of v in t: the paper anchors every vertex at the barycenter b_t
-(``anchor="barycenter"``, Alg. 1). ``anchor="projection"`` (this package's default, a
-departure: docs/differences.md) anchors it at its own projection p(v) = sum_i beta_i N_i
-onto t (beta: the barycentric coordinates of :func:`sshade.projection.project_to_fans`)
-and rebuilds p'(v) = sum_i beta_i N'_i, so only the short offset v - p(v) goes through
-the frames: v' = L'_t L_t^-1 (v - p(v)) + p'(v). The in-plane position then follows the
-triangle's own affine map, which the frames do not reproduce when t stretches.
-Where |grad f| is small (the coordinate axis is nearly normal to t; Poincaré-Hopf, §3.2)
-the frame falls back to the rest coordinate whose gradient is largest on t.
+For a low-res triangle t, L_t = (g_t, w_t, n_t): g_t the gradient on t of a rest-pose
+coordinate (as in the paper with ``gradient="raw"``, of unit length with
+``"normalized"``), n_t the unit normal, w_t = g_t x n_t. A high-res vertex v with
+P(v) = t is stored as v_t = L_t^-1 (v - a(v)) and rebuilt as v' = L'_t v_t + a'(v), the
+anchor a(v) the barycenter b_t (``anchor="barycenter"``, paper) or v's projection onto t
+(``"projection"``, the default; docs/differences.md). Details: docs/methods.md
+("Implementation notes: sshade/lrf.py").
 """
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
 """The one small interface every deformation method implements (SShaDe, the baselines,
-anyone's plug-in), so the evaluator and ``python -m sshade deform`` treat them alike:
-:class:`Deformer`, and the rule for a method's name (:func:`check_name`, the row label
-of every table).
-
-Methods are built from their configs by the harness (:func:`harness.plugins.build_method`,
-built-in ones by name through :mod:`harness.registry`).
+plug-ins): :class:`Deformer`, and the rule for a method's name (:func:`check_name`, the
+row label of every table). The harness builds methods from their configs.
 
 Example::
 

@@ -1,44 +1,12 @@
 """Prepare once, solve every frame: SShaDe split by what depends on the handles' targets
 (paper §3), for animations and handles dragged in a viewer.
 
-What depends only on the mesh and on which vertices are handles is done once by
-:func:`prepare`, per sampling (§3.3): the remesh and the projection onto the seed fans
-(§3.1, :func:`sshade.deform.prepare_sampling`), the frames' function and the local
-coordinates of every high-res vertex (§3.2, :func:`sshade.lrf.encode`), and the low-res
-ARAP's deformer (:class:`sshade.arap.ArapDeformer`, whose operators and Cholesky factor
-are made by the first solve and kept for the others). What depends on
-the targets is :meth:`Prepared.solve`: per sampling the low-res spokes-and-rims ARAP run to
-the converged criterion, the decoding on the deformed low-res mesh (Alg. 1), then the
-average over the samplings and the handles set to their targets, as :func:`sshade.deform`.
-
-The first solve is :func:`sshade.deform` of the same parameters, bit for bit: sampling 0
-starts from the rigid fit of the handles, the others (``warm_start``) from sampling 0's
-result. Every later solve starts each sampling from its earlier results extrapolated
-(:meth:`_Sampling.start`: the previous result, the line through the last two or the
-quadratic through the last three, whichever best predicted the previous solve's result),
-and still runs to the same stopping rule; a start nearer the minimiser saves iterations,
-not accuracy. From the second solve on, the low-res ARAP is accelerated as
-:data:`FRAME_ACCELERATION` says, its history kept from the solve before (a difference
-within one solve, which the targets do not enter).
-
-:func:`prepare` runs the samplings' remeshes and projections on ``workers`` forked
-processes, as :func:`sshade.deform.deform` does (they hold the GIL), and the frames'
-encoding on ``workers`` threads. A solve runs the samplings' low-res ARAP on ``workers``
-threads (those that took most iterations in the last solve first; on the calling thread
-with one worker) while the calling thread makes each finished sampling's frames and
-decodes it, adding the decodings in sampling order (:meth:`Prepared._decode_average`), so
-the result does not depend on ``workers``. Threads rather than forked processes for the
-solves: a prepared object lives across many calls, and threads keep its state in one
-process (no worker to end, no result to copy back). No threaded BLAS call is made
-between frames (:func:`_norm`): OpenBLAS's worker thread spins for a while after one, and
-at a frame every tenth of a second it took a whole core from the solve's threads. Frame
-times, memory: ``results/frames/table.md`` (``benchmarks/frames.py``).
-
-Example::
-
-    from sshade.prepared import prepare
-    with prepare(V, F, handles, n_low=6000, n_samplings=5, seed=0) as prepared:
-        frames = [prepared.solve(T) for T in targets_per_frame]   # (n, 3) each
+:func:`prepare` does per sampling what the targets do not enter (remesh and projection
+§3.1, local coordinates §3.2, the low-res ARAP's deformer) and returns a :class:`Prepared`;
+:meth:`Prepared.solve` runs per sampling the low-res ARAP and the decoding (Alg. 1) and
+averages them (§3.3). The first solve is :func:`sshade.deform` of the same parameters, bit
+for bit; later ones start from the earlier results extrapolated (:data:`FRAME_ACCELERATION`).
+Starts, threads and timings: docs/methods.md ("Implementation notes: sshade/prepared.py").
 """
 from __future__ import annotations
 
@@ -50,16 +18,17 @@ import numpy as np
 
 from .arap import ArapDeformer
 from .cores import pool_size
-from .deform import arap_options, check_params, handle_pre_pct, low_res_size, prepare_samplings
+from .deform import SamplingJob, handle_pre_pct, low_res_size, prepare_samplings
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.halfedge import count_components
 from .mesh.unit_frame import UnitFrame, unit_frame
 from .mesh.validate import validate_handle_indices, validate_mesh, validate_targets
+from .params import SShaDeParams, check_params
 from .remesh import mesh_topology
 from .sampling import average, sampling_seeds, warm_kernels
 
-__all__ = ["prepare", "Prepared", "FRAME_ACCELERATION"]
+__all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 
 #: The low-res ARAP's acceleration from the second solve on (``accelerate``,
 #: ``anderson_m`` of :meth:`sshade.arap.solver.ArapSolver.solve`), with the history kept
@@ -156,7 +125,7 @@ class Prepared:
     Attributes
     ----------
     V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64 (the validated inputs).
-    params : dict, the checked parameters (:func:`sshade.deform.check_params`).
+    params : :class:`sshade.params.SShaDeParams`, the checked parameters.
     workers : int, threads the samplings run on. prepare_s : float, seconds
     :func:`prepare` took. n_solves : int, solves so far. frame : the
     :class:`sshade.mesh.unit_frame.UnitFrame` the samplings are held in (targets are
@@ -167,14 +136,13 @@ class Prepared:
     result is that of its own targets.
     """
 
-    def __init__(self, V, F, handles, params: dict, samplings: list, prepare_s: float, pool, workers: int,
+    def __init__(self, V, F, handles, params: SShaDeParams, samplings: list, prepare_s: float, pool, workers: int,
                  frame: UnitFrame):
         self.V, self.F, self.handles, self.params = V, F, handles, params
         self.frame = frame  # the samplings live in V's unit frame (sshade.mesh.unit_frame)
         self._samplings, self.prepare_s = samplings, prepare_s
         self._pool, self.workers, self._pending = pool, workers, []
-        self._arap = arap_options(params["tol"], params["max_iter"], params["protocol"], params["etol"],
-                                  params["gtol"])
+        self._arap = params.arap_options()
         self._arap.pop("protocol")  # the deformers were made for it
         self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
         self.n_solves = 0
@@ -266,7 +234,7 @@ class Prepared:
         if not first:  # the samplings that took longest last time start first
             longest_first = np.argsort([-s.last_iterations for s in S], kind="stable")
             futs = self._submit(later, range(len(S)), order=longest_first)
-        elif self.params["warm_start"] and len(S) > 1:
+        elif self.params.warm_start and len(S) > 1:
             futs = self._submit(lambda i: run(i, None), [0])
             futs += self._submit(from_first, range(1, len(S)))
         else:  # from the rigid fit of the handles
@@ -355,24 +323,33 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     ...     bool(np.allclose(p.solve(T)[h], T))
     True
     """
+    params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
+                          max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
+                          gtol=gtol, anchor=anchor)
+    return prepare_with(V, F, handles, params)
+
+
+def prepare_with(V, F, handles, params: SShaDeParams) -> Prepared:
+    """:func:`prepare` with its parameters checked already (:func:`sshade.params.check_params`):
+    the same result, warnings and errors."""
     t0 = time.perf_counter()
-    p = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol, max_iter=max_iter,
-                     gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol, gtol=gtol, anchor=anchor)
+    p = params
     warm_kernels()
     V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
     h = validate_handle_indices(V, handles)
     if count_components(he.E, len(V)) > 1:
         raise SShaDeError("prepare: the mesh has several connected components; deform it with sshade.deform")
-    _, n_low_used = low_res_size(len(V), p["n_low"])  # warns when there is no low-res step
+    _, n_low_used = low_res_size(len(V), p.n_low, stacklevel=4)  # warns when there is no low-res step
     frame = unit_frame(V)  # as deform: every stage runs centred and scaled
     U = frame.to_unit(V)
-    topology = mesh_topology(U, F, he)
-    n_workers = pool_size(p["workers"], p["n_samplings"])
+    job = SamplingJob(V=U, F=F, handles=h, n_low=n_low_used, seeds=sampling_seeds(p.seed, p.n_samplings),
+                      topology=mesh_topology(U, F, he))
+    n_workers = pool_size(p.workers, p.n_samplings)
     # the remeshes and projections on forked processes (as deform: they hold the GIL), the rest on threads
-    preps = prepare_samplings(U, F, h, n_low_used, sampling_seeds(p["seed"], p["n_samplings"]), topology, n_workers)
+    preps = prepare_samplings(job, n_workers)
     pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-sampling")
     try:
-        samplings = list(pool.map(lambda pi: _Sampling(U, *pi, p["gradient"], p["anchor"], p["protocol"]), preps))
+        samplings = list(pool.map(lambda pi: _Sampling(U, *pi, p.gradient, p.anchor, p.protocol), preps))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
     arap_pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-arap")

@@ -15,8 +15,9 @@ import time
 import numpy as np
 
 from .arap import make_criterion, solve_arap
-from .deform import check_params, deform, effective_params, warm_sshade
+from .deform import deform_with, warm_sshade
 from .mesh.validate import validate_handles, validate_mesh
+from .params import SShaDeParams, check_params, effective_params
 from .warmup import warm_fullres
 
 __all__ = ["SShaDeRefine"]
@@ -59,13 +60,19 @@ class SShaDeRefine:
         self.refine_max_iter = int(refine_max_iter)
         self.info: dict = {}
 
+    @classmethod
+    def from_params(cls, params: SShaDeParams, **refine) -> SShaDeRefine:
+        """The method with SShaDe's checked ``params`` (:func:`sshade.params.check_params`)
+        and the refinement's keyword parameters ``refine`` (as the constructor's)."""
+        return cls(**refine, **params)
+
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` (n, 3) / (m, 3) so ``V[handles]`` reach ``targets`` (h, 3);
         returns (n, 3) float64."""
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
         t0 = time.perf_counter()
-        Vs, info = deform(V, F, handles, targets, return_info=True, **self.params)
+        Vs, info = deform_with(V, F, handles, targets, self.params, return_info=True)
         t1 = time.perf_counter()
         res = solve_arap(V, F, handles, targets, energy=self.energy, U0=Vs, criterion=self.criterion,
                          max_iter=self.refine_max_iter)

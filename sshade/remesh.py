@@ -1,37 +1,13 @@
 """Topology-preserving low-resolution remesh (paper §3.1; ReMatching, Maggioli et al. 2023).
 
-Pipeline: geodesic farthest-point sampling of ``n_low`` seeds from a random first seed
-(:mod:`sshade.mesh.geodesic`), then the required vertices (handles) are added as seeds (they
-do not drive the sampling, so different first seeds give different samplings), then the
-*closed-ball property* (Edelsbrunner & Shah 1997) of the Voronoi decomposition is
-checked and seeds are added where it fails, until it holds:
-
-- every Voronoi region is a topological disk (connected, Euler characteristic 1);
-- every two adjacent regions meet along a single arc (one path of shared edges);
-- every three regions meet at a single point (exactly one high-res face carries the
-  three labels).
-
-Boundaries are handled by coning every boundary loop to a virtual vertex that is a
-region of its own; the same three rules then also force each region to touch a boundary
-loop along at most one arc and each low-res boundary edge to be unique. When the property
-holds, the dual (nerve) of the decomposition is a triangulation homeomorphic to the input,
-so the low-res mesh ``N`` (vertex i = high-res vertex ``seeds[i]``, faces = the region
-triples of high-res faces, orientation kept) is manifold, with the same Euler
-characteristic and the same number of boundary loops. Low-res faces whose normal opposes
-the high-res surface they stand for, and those with almost no area for their size (whose
-cotangent weights the low-res ARAP could not use), are detected and also repaired by
-adding seeds, at their Voronoi vertices (:mod:`sshade.remesh_repair`; a departure from
-the paper).
-Each round repairs every violation it finds, of the property and flips alike.
-
-Speed: the connectivity (:func:`mesh_topology`) is built once per mesh and
-shared by the samplings; the sampling runs on the edge graph in a cache-friendly vertex
-order (:mod:`sshade.mesh.geodesic`); each check round is one compiled pass over the faces
-when the property holds (the common case at 6000 seeds) and a compiled pass over edges
-and faces that also picks the repair seeds when it does not (:mod:`sshade.closed_ball`).
-A round after seeds were added first checks only the regions they changed and the pairs
-and triples involving them (the same repair seeds as a full check); the full
-check runs when that finds nothing, so the remesh is accepted only by a full check.
+:func:`remesh`: geodesic farthest-point sampling of ``n_low`` seeds from a random first
+seed (:mod:`sshade.mesh.geodesic`), the required vertices (handles) added, then seeds
+added until the Voronoi decomposition has the closed-ball property (Edelsbrunner & Shah
+1997; :mod:`sshade.closed_ball`) and no low-res face is flipped or degenerate
+(:mod:`sshade.remesh_repair`, a departure); its nerve is then a manifold low-res mesh
+homeomorphic to the input. :func:`mesh_topology` is built once per mesh; :func:`remesh_drawn`
+draws again when a degenerate face is left. Details: docs/methods.md ("Implementation
+notes: sshade/remesh.py").
 """
 from __future__ import annotations
 

@@ -1,25 +1,11 @@
 """The low-res faces of a Voronoi decomposition and the repair of flipped ones (paper §3.1).
 
-The low-res mesh is the nerve of the Voronoi decomposition: one face per label triple
-carried by a high-res face (:func:`nerve_faces`). A low-res face is *flipped* when its
-normal opposes the high-res surface it stands for (:func:`flipped_faces`), *degenerate*
-when it has almost no area for its size (:func:`degenerate_faces`: the low-res ARAP's
-cotangent weights would be huge or not finite); the remesher then adds seeds until none
-is left (:mod:`sshade.remesh`, at most ``max_flip_rounds`` rounds; a sampling left with a
-degenerate face is drawn again, :func:`sshade.deform.prepare_sampling`).
-
-Departure from the paper: the paper (after ReMatching, Maggioli et al. 2023)
-adds seeds until the closed-ball property holds; flipped faces are our addition, and
-their repair follows Delaunay refinement (Chew 1989; Ruppert 1995): a bad triangle is
-removed by inserting its circumcentre, which on the surface is the *Voronoi vertex* of
-its three regions, the high-res face that carries the triple
-(:func:`voronoi_vertex_seeds`). The new seed is closer to that point than the three
-old ones, so the triple is gone after the insertion; one seed per flipped face, all of
-them in one round. The earlier repair added the farthest vertex of the union of the
-three regions, which on thin parts (fingers, tails) often left the face in place and
-took ~10 rounds, stopping at the round cap with flipped faces left. Flipped faces are
-also repaired in the rounds where the closed-ball property still fails, among the
-triples already carried by a single face (:func:`nerve_faces` with ``unique_only``).
+:func:`nerve_faces` (one low-res face per label triple carried by a high-res face),
+:func:`flipped_faces` (normal opposing the surface they stand for),
+:func:`degenerate_faces` (almost no area for their size) and :func:`voronoi_vertex_seeds`
+(a seed at each bad face's Voronoi vertex, after Delaunay refinement: Chew 1989; Ruppert
+1995). Repairing flipped faces is a departure from the paper; why and how: docs/methods.md
+("Implementation notes: sshade/remesh_repair.py").
 """
 from __future__ import annotations
 

@@ -1,18 +1,11 @@
 """The k samplings of SShaDe run side by side (paper §3.3): one process pool, shared by
-the handle pipeline (:func:`sshade.deform.deform`) and the correspondence transfers
-(:mod:`sshade.isometric`).
-
-Each sampling remeshes the high-resolution mesh with its own first seed
-(:func:`sampling_seeds`) and its results are averaged. The samplings run in forked
-worker processes, which inherit the high-resolution mesh (the pool's ``state``, read in
-a task with :func:`worker_state`) and the numba kernels compiled before the fork
-(:func:`warm_kernels`) without pickling; with one worker, or where ``fork`` is not
-available, they run in this process, in the same order, with the same results.
+the handle pipeline (:mod:`sshade.deform`), :mod:`sshade.prepared` and the
+correspondence transfers (:mod:`sshade.isometric`); the samplings' seeds and average.
 
 Example::
 
-    with SamplingPool({"x": 2}, workers=1) as pool:
-        pool.submit(task, 0).result()
+    with SamplingPool(job, workers=1) as pool:
+        pool.submit_with_job(task, 0).result()   # task(job, 0)
 """
 from __future__ import annotations
 
@@ -32,27 +25,34 @@ from .projection import project_to_fans
 
 __all__ = ["SamplingPool", "worker_state", "pool_size", "sampling_seeds", "warm_kernels", "average"]
 
-# The state of the running pool, in this process (workers=1) or in a forked worker.
-_STATE: dict = {}
+# The job of the running pool, installed in this process (serial pool) or in a forked
+# worker (at its start): empty, or that one job.
+_INSTALLED: list = []
 _WARM = [False]
 
 
-def worker_state() -> dict:
-    """The ``state`` mapping of the :class:`SamplingPool` running the current task (in a
-    forked worker: its inherited copy)."""
-    return _STATE
+def worker_state():
+    """The job of the :class:`SamplingPool` running the current task (in a forked worker:
+    its inherited copy); ``{}`` outside a pool. Tasks submitted with
+    :meth:`SamplingPool.submit_with_job` receive it as their first argument instead."""
+    return _INSTALLED[0] if _INSTALLED else {}
 
 
-def _init_worker(state: dict) -> None:
-    _STATE.clear()
-    _STATE.update(state)
+def _install(job) -> None:
+    _INSTALLED.clear()
+    _INSTALLED.append(job)
 
 
-def _init_forked(state: dict) -> None:
-    """Initializer of a forked sampling worker: the state, and glibc's allocator told
+def _init_forked(job) -> None:
+    """Initializer of a forked sampling worker: the job, and glibc's allocator told
     to keep freed memory (:func:`keep_freed_memory`)."""
     keep_freed_memory()
-    _init_worker(state)
+    _install(job)
+
+
+def _call_with_job(fn, *args):
+    """``fn(job, *args)`` in a forked worker, ``job`` the one installed at its start."""
+    return fn(_INSTALLED[0], *args)
 
 
 def sampling_seeds(seed: int, k: int) -> list[int]:
@@ -116,29 +116,36 @@ class SamplingPool:
 
     Parameters
     ----------
-    state : dict, what every task reads through :func:`worker_state` (meshes, seeds,
-        options); handed to each forked worker once, at fork.
+    job : the object every task works on (e.g. :class:`sshade.deform.SamplingJob`: meshes,
+        seeds, options), handed to each forked worker once, at fork (never pickled per task).
     workers : int >= 1, processes (:func:`sshade.cores.pool_size`: None = the cores this
         process may use, :func:`sshade.cores.available_cores`); 1 runs the tasks in this process
         (so does a platform without ``fork``).
 
-    ``submit(fn, *args)`` returns a :class:`concurrent.futures.Future`; ``fn`` must be a
+    ``submit_with_job(fn, *args)`` runs ``fn(job, *args)`` and ``submit(fn, *args)`` runs
+    ``fn(*args)``, each returning a :class:`concurrent.futures.Future`; ``fn`` must be a
     module-level function (it runs in a worker). Leaving the ``with`` block waits for the
-    workers and clears the state.
+    workers and uninstalls the job.
     """
 
-    def __init__(self, state: dict, workers: int):
-        self.state, self.workers = state, int(workers)
+    def __init__(self, job, workers: int):
+        self.job, self.workers = job, int(workers)
         self._ex = None
 
     def __enter__(self) -> SamplingPool:
         if self.workers == 1 or "fork" not in mp.get_all_start_methods():
-            _init_worker(self.state)
+            _install(self.job)
         else:
-            # fork: workers inherit the mesh and the compiled numba code without pickling
+            # fork: workers inherit the job's arrays and the compiled numba code without pickling
             self._ex = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("fork"),
-                                           initializer=_init_forked, initargs=(self.state,)).__enter__()
+                                           initializer=_init_forked, initargs=(self.job,)).__enter__()
         return self
+
+    def submit_with_job(self, fn, *args) -> Future:
+        """Run ``fn(job, *args)`` in a worker (or here, at once, when serial)."""
+        if self._ex is not None:
+            return self._ex.submit(_call_with_job, fn, *args)
+        return self.submit(fn, self.job, *args)
 
     def submit(self, fn, *args) -> Future:
         """Run ``fn(*args)`` in a worker (or here, at once, when serial)."""
@@ -154,5 +161,5 @@ class SamplingPool:
                 self._ex.__exit__(*exc)
         finally:
             self._ex = None
-            _STATE.clear()
+            _INSTALLED.clear()
         return False

@@ -1,26 +1,13 @@
-"""``python -m sshade view``: drag a mesh's handle region with a transformation gizmo in
-polyscope and see SShaDe's result on every change (prepared once, solved per change:
-:func:`sshade.prepared.prepare`), or play an animation that ``python -m sshade animate``
-wrote. polyscope is the optional ``[view]`` extra.
+"""``python -m sshade view``: drag a mesh's handle region with a gizmo in polyscope (the
+``[view]`` extra) and see SShaDe's result on every change, or play an animation that
+``python -m sshade animate`` wrote (:class:`Player`). Behaviour: docs/methods.md
+("Implementation notes: sshade/view.py").
 
 Usage::
 
     python -m sshade view MESH (--sel F.sel | --dmat F.dmat | --handles F.json|F.csv)
         [--n-low N] [--k K] [--seed S]
     python -m sshade view ANIMATION.npz|ANIMATION.glb [--fps FPS]
-
-With a selection (``.sel``/``.dmat``) the gizmo moves the handle vertices (status 2) and
-the fixed ones stay; with ``--handles`` it moves every listed handle (their stored targets
-are not used). The gizmo starts at the moved vertices' centroid, so it turns them about it.
-Each change re-solves; the window shows the last solve's time.
-
-An animation (:class:`Player`) opens on its first frame with a frame slider and a
-play/pause button; playing loops through the frames at their keyframe times (a ``.glb``'s,
-or ``1 / fps`` apart: the ``.npz``'s stored ``fps``), or at ``--fps``.
-
-Nothing is written (no polyscope preference files). Exit status 0 when the window is
-closed, 2 after one ``error:`` line (no polyscope, bad input: a file that is not such an
-animation is named with the place of its fault).
 """
 from __future__ import annotations
 

@@ -1,17 +1,11 @@
 """Compile-before-timing: run a method once on a tiny mesh so that numba's compilation
-(or its cache loads) and the first-call costs of lazy imports (libigl, SciPy's sparse
-solvers, cholespy) happen outside the timed call.
+(or its cache loads) and lazy imports' first-call costs happen outside the timed call.
 
-Every method of the evaluator (:class:`sshade.SShaDe`, :class:`sshade.refine.SShaDeRefine`,
-the baselines of :mod:`baselines`) has a ``warmup(n_vertices=None) -> float`` built on
-:func:`warm_once` (SShaDe's: :func:`sshade.deform.warm_sshade`, which runs
-:func:`sshade.deform.deform`; this module imports nothing above the ARAP solver);
-:func:`eval.experiments.cases.experiment.run` calls it before a method's first timed ``deform`` and
-records the seconds as ``compile_s`` (table row and ``run.json``), and
-:func:`eval.experiments.scaling.experiment.run_scaling` does the same before its timed calls. On a cold numba
-cache (a fresh clone, a cluster node, ``NUMBA_CACHE_DIR`` pointing to an empty folder) the
-compilation takes many times SShaDe's run on a FAUST-size case (docs/outputs.md, "Timings
-exclude compilation").
+Every method of the evaluator has a ``warmup(n_vertices=None) -> float`` built on
+:func:`warm_once` (SShaDe's: :func:`sshade.deform.warm_sshade`); the evaluator records its
+seconds as ``compile_s``. Also :func:`tiny_problem`, :func:`warm_fullres`,
+:func:`warm_parallel_kernels`. This module imports nothing above the ARAP solver; cold
+caches: docs/methods.md ("Implementation notes: sshade/warmup.py").
 """
 from __future__ import annotations
 

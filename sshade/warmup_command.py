@@ -16,8 +16,9 @@ import time
 from importlib.metadata import entry_points
 
 from .clirun import ArgumentParser, run_command
-from .deform import check_params, warm_sshade
+from .deform import warm_sshade
 from .kernel_cache import cache_folder, compile_kernels
+from .params import check_params
 from .warmup import warm_fullres, warm_parallel_kernels
 
 __all__ = ["ENTRY_POINTS", "warm_everything", "main"]

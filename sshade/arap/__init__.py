@@ -1,29 +1,10 @@
 """As-rigid-as-possible deformation: SShaDe's low-resolution step (paper §3.3, §4.1) and
-the full-resolution baselines.
+the full-resolution baselines (Sorkine & Alexa 2007; Chao et al. 2010).
 
-One concept per module (imports only downwards, in this order):
-
-- :mod:`~sshade.arap.threads`: thread policy of the numba kernels (``resolve_threads``,
-  ``max_threads``, fork safety, ``numba_threads``, ``ThreadPicker``);
-- :mod:`~sshade.arap.kernels`: numba kernels of the energies (fused local step, ``K(R)``)
-  and their lazy compilation; :mod:`~sshade.arap.solver_kernels`: those of the solver's
-  loop and accelerators;
-- :mod:`~sshade.arap.kernel_data`: the kernels' arrays in a vertex numbering
-  (``KernelData``, ``rcm_order``);
-- :mod:`~sshade.arap.operators`: the energies (``ENERGIES``), ``ArapOperators``,
-  ``build_operators``, ``fit_rotations``, ``bbox_diag``;
-- :mod:`~sshade.arap.linear`: ``LaplacianSolver`` (CHOLMOD, scipy, libigl);
-- :mod:`~sshade.arap.criterion`: ``Criterion``, ``DEFAULT_CRITERION``,
-  ``DEEP_CRITERION``, ``make_criterion``, ``gradient_norm``;
-- :mod:`~sshade.arap.accelerate`: L-BFGS (Liu et al. 2017) and Anderson (Peng et al.
-  2018);
-- :mod:`~sshade.arap.rigid`: ``rigid_fit``; :mod:`~sshade.arap.result`: ``ArapResult``;
-- :mod:`~sshade.arap.solver`: ``solve_arap``, the converged solver, and ``ArapSolver``, the
-  same prepared once for a handle set and solved for any targets;
-- :mod:`~sshade.arap.local_global`: ``arap_deform`` under the ``"converged"`` or
-  ``"paper"`` protocol, ``iterate``, ``PROTOCOLS``, ``DEFAULT_MAX_ITER``;
-- :mod:`~sshade.arap.cases`: synthetic calibration problems (twisted bar, bent cylinder,
-  lifted plane); not imported here.
+One concept per module, imports only downwards: threads, kernels, solver_kernels,
+kernel_data, operators, linear, criterion, accelerate, rigid, result, solver,
+local_global; :mod:`~sshade.arap.cases` (synthetic problems) is not imported here. What
+each module holds: docs/layout.md (``sshade/arap/``).
 """
 from .accelerate import LBFGS, Anderson
 from .criterion import DEEP_CRITERION, DEFAULT_CRITERION, Criterion, gradient_norm, make_criterion

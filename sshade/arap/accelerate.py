@@ -1,17 +1,13 @@
 """Accelerators of the local/global iteration of :func:`sshade.arap.solver.solve_arap`.
 
-* :class:`LBFGS` (the default): L-BFGS on the free vertices with the global step's matrix
-  as initial Hessian (Liu, Bouaziz & Kavan, "Quasi-Newton Methods for Real-time
-  Simulation of Hyperelastic Materials", ACM TOG 36(3), 2017); the solver adds Armijo
-  backtracking, so every accepted step lowers the energy.
+* :class:`LBFGS` (the default): L-BFGS on the free vertices, the global step's matrix as
+  initial Hessian (Liu, Bouaziz & Kavan, ACM TOG 36(3), 2017); the solver backtracks (Armijo).
 * :class:`Anderson`: Anderson acceleration with window ``m`` (Peng, Deng, Zhang, Liu,
-  "Anderson Acceleration for Geometry Optimization and Physics Simulation", ACM TOG
-  37(4), SIGGRAPH 2018, Algorithm 2): ``x+ = G(x_k) - dG theta`` with ``theta = argmin
-  ||f_k - dF theta||``, ``f = G(x) - x``, over the last ``m`` differences of accepted
-  iterates; the solver applies the paper's energy safeguard.
+  ACM TOG 37(4), SIGGRAPH 2018, Algorithm 2); the solver applies the energy safeguard.
 
-Both keep their histories in preallocated ring buffers; their passes over the ``N = 3
-n_free`` numbers run in the kernels of :mod:`sshade.arap.solver_kernels`.
+Histories in preallocated ring buffers; their passes over the ``N = 3 n_free`` numbers run
+in :mod:`sshade.arap.solver_kernels`. Formulas: docs/methods.md ("Implementation notes:
+sshade/arap/accelerate.py").
 """
 from __future__ import annotations
 

@@ -1,22 +1,11 @@
 """Synthetic handle-driven deformation cases for ARAP solvers (benchmarks, tests, figures).
 
-Every builder is a pure function (deterministic, no I/O) returning ``(V, F, handles,
-targets)``:
-
-* ``V`` : (n, 3) float64 rest positions (mesh units, sizes given per builder),
-* ``F`` : (m, 3) int64 triangles, consistently oriented (outward normals for closed
-  surfaces, +z for the plane), a single connected 2-manifold,
-* ``handles`` : (h,) int64 sorted unique vertex indices,
-* ``targets`` : (h, 3) float64 target positions of ``V[handles]``.
-
-Cases (chosen to be hard for plain local/global ARAP, whose convergence is slowest on
-smooth, low-frequency deformations of long or wide shapes):
-
-* :func:`twisted_bar` - a square bar twisted about its axis, both end caps as handles;
-* :func:`bent_cylinder` - a capped cylinder ("cactus") bent by 90 degrees, bottom and top
-  bands as handles;
-* :func:`lifted_plane` - a flat square sheet with its boundary fixed and a central disc
-  lifted out of the plane.
+Every builder is pure (deterministic, no I/O) and returns ``(V, F, handles, targets)``:
+V (n, 3) float64 rest positions (mesh units), F (m, 3) int64 consistently oriented
+triangles of one connected 2-manifold, handles (h,) int64 sorted unique, targets (h, 3)
+float64. The cases are hard for plain local/global ARAP (smooth, low-frequency
+deformations of long or wide shapes): :func:`twisted_bar`, :func:`bent_cylinder`,
+:func:`lifted_plane` (:data:`CASES`).
 """
 from __future__ import annotations
 

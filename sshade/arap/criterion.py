@@ -32,24 +32,9 @@ class Criterion:
     etol : float >= 0, relative energy decrease threshold (dimensionless).
     gtol : float >= 0, scale-free gradient threshold (dimensionless).
 
-    The defaults (:data:`DEFAULT_CRITERION`: ``etol = 1e-7``, ``gtol = 1e-3``) were chosen
-    by measurement so that a result reported converged lies within 0.05 % (mean) and 0.5 %
-    (max) of the bounding-box diagonal from a deep reference (this solver run until the
-    energy stops decreasing in float64) on the cases of :mod:`sshade.arap.cases` (twisted
-    bar, bent cylinder, lifted plane, both energies), for the accelerated and the plain
-    iterations, and on human bodies (FAUST, DeFAUST). The measured distances: README
-    ("Converged means converged") and ``results/convergence/table.md``.
-
-    ``gtol`` is the binding condition: a looser one fails on the plain iteration of the
-    bent cylinder, where local/global crawls for hundreds of iterations along a plateau
-    (small gradient, tiny relative decrease) before reaching the minimum; ``etol`` keeps a
-    margin below that plateau's decrease.
-
-    What it certifies: closeness to the stationary point the iteration is converging to.
-    ARAP is not convex: from the same start, plain and accelerated iterations can end at
-    different stationary points (e.g. mirror-symmetric local minima of a bent cylinder, or
-    the symmetric saddle of a coarse, strongly twisted bar that plain local/global leaves
-    only after thousands of iterations).
+    The defaults (:data:`DEFAULT_CRITERION`: ``etol = 1e-7``, ``gtol = 1e-3``), their
+    calibration and what a stop certifies: docs/methods.md ("Implementation notes:
+    sshade/arap/criterion.py").
     """
 
     etol: float = 1e-7

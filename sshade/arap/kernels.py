@@ -1,24 +1,12 @@
-"""Numba kernels of the ARAP energies (local step, right-hand side) and their lazy
-compilation.
+"""Numba kernels of the ARAP energies (the fused local step, the right-hand side ``K(R)``)
+and their lazy compilation, for :mod:`sshade.arap.operators` on the arrays of
+:class:`sshade.arap.kernel_data.KernelData`.
 
-* The local step is ONE kernel over blocks of :data:`LANES` cells: covariances from
-  ``K^T`` stored as a CSR with 3-vector values (the entries and summation order of
-  scipy's ``KT @ U``, so the same floats), the polar decompositions with the Jacobi sweeps
-  vectorised across the cells of a block (cyclic Jacobi on ``M^T M``, warm-started from
-  the previous eigenvectors; bit-identical to a scalar implementation), then the cell
-  energies summed term by term (relative rounding noise ~1e-15 instead of ~1e-13 for the
-  closed form, which matters when comparing the energies of nearly converged iterates).
-  Blocks run in parallel (``numba.prange``) for ``threads > 1``: every block writes only
-  its own cells, so the results do not depend on the number of threads.
-* The right-hand side ``K(R)`` is a kernel over vertices gathering the rotations of the
-  neighbouring cells, parallel over vertices.
-
-The kernels are compiled (or loaded from numba's cache, ``cache=True``) on first use:
 :func:`polar_kernel`, :func:`energy_kernel`, :func:`fused_kernels` (serial and parallel
-apart, so that a process that never runs a parallel kernel never starts numba's threading
-layer) and :func:`fused`; each returns False when numba is unusable, and the callers
-(:mod:`sshade.arap.operators`) then take their numpy / scipy paths. Their arrays:
-:class:`sshade.arap.kernel_data.KernelData`. Per-stage costs: ``benchmarks/arap_iteration.py``.
+apart) and :func:`fused` compile (or load from numba's cache) on first use and return
+False when numba is unusable (the callers then take their numpy / scipy paths). No
+result depends on the thread count. Design: docs/methods.md ("Implementation notes:
+sshade/arap/kernels.py").
 """
 from __future__ import annotations
 

@@ -1,27 +1,13 @@
-"""As-rigid-as-possible deformation driven by handles under one of two protocols
-(:func:`arap_deform`).
+"""Handle-driven ARAP under one of two protocols (:func:`arap_deform`, :data:`PROTOCOLS`):
+SShaDe's low-res step (paper §3.3, §4.1: spokes-and-rims) and the full-resolution
+baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes and rims").
 
-Used both for SShaDe's low-resolution step (paper §3.3, §4.1: spokes-and-rims) and for
-the full-resolution baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes
-and rims"). Two protocols (:data:`PROTOCOLS`), both starting from the best rigid fit of
-the handles (so a rigid motion of the handles is reproduced exactly):
-
-- ``"converged"`` (default): :func:`sshade.arap.solver.solve_arap`, L-BFGS-accelerated
-  local/global (the Laplacian as initial Hessian, Armijo line search; or Anderson with an
-  energy safeguard) and one prefactored Laplacian, stopped when the relative energy
-  decrease and a scale-free gradient norm are both small
-  (:class:`sshade.arap.criterion.Criterion`, calibrated so that a result reported
-  converged is within 0.05 % (mean) / 0.5 % (max) of the bounding-box diagonal from the
-  true minimiser on the cases of :mod:`sshade.arap.cases`).
-- ``"paper"`` (paper §4.1, to reproduce its Table 1): libigl's ``ARAPData`` /
-  ``arap_precomputation`` / ``arap_solve``, one iteration at a time (:func:`iterate`),
-  stopped when the largest vertex move of one iteration is below ``tol * bbox_diag``, at
-  most ``max_iter`` (1000) iterations. This rule fires long before the minimiser on
-  low-frequency bends (thousands of iterations short), so when it fires the gradient at
-  the result is tested as the converged protocol tests it (``gtol`` of the criterion):
-  ``info["status"]`` is ``"converged"`` only where that test passes too, else
-  ``"stalled"`` (the iterates stopped moving far from a stationary point); ``converged``
-  is True only for ``"converged"``; ``info["gnorm"]`` holds the gradient norm.
+- ``"converged"`` (default): :func:`sshade.arap.solver.solve_arap`, stopped by
+  :class:`sshade.arap.criterion.Criterion`;
+- ``"paper"`` (paper §4.1, Table 1): libigl's ``arap_solve`` one iteration at a time
+  (:func:`iterate`), stopped by the largest vertex move; ``"stalled"`` where the gradient
+  test fails. Both start from the rigid fit of the handles. Details: docs/methods.md
+  ("Implementation notes: sshade/arap/local_global.py").
 """
 from __future__ import annotations
 
@@ -79,7 +65,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
                 V0: np.ndarray | None = None, time_budget_s: float | None = None,
                 protocol: str = "converged", criterion=None, accelerate: str = "lbfgs",
                 anderson_m: int | None = None, R0: np.ndarray | None = None) -> ArapResult:
-    """Handle-driven ARAP deformation under one of the two protocols (module docstring).
+    """Handle-driven ARAP deformation under one of the two protocols (:data:`PROTOCOLS`).
 
     Parameters
     ----------
@@ -99,7 +85,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     protocol : ``"converged"`` or ``"paper"`` (:data:`PROTOCOLS`).
     criterion : :class:`sshade.arap.criterion.Criterion` or None (its default), the
         ``"converged"`` protocol's stopping thresholds; under ``"paper"`` its ``gtol``
-        tells a converged stop from a stalled one (module docstring).
+        tells a converged stop from a stalled one (``info["status"]``).
     accelerate : ``"lbfgs"`` (default), ``"anderson"`` or ``"none"``, the ``"converged"``
         protocol's iteration (:func:`sshade.arap.solver.solve_arap`).
     anderson_m : int or None, its history window (None: 10 for L-BFGS, 5 for Anderson).

@@ -1,45 +1,12 @@
 """ARAP energies with libigl's cotangent weights: operators, energy and gradient.
 
-Two energies, both with one rotation per vertex (libigl's ``ARAP_ENERGY_TYPE_SPOKES`` and
-``ARAP_ENERGY_TYPE_SPOKES_AND_RIMS``):
-
-* ``"spokes"`` (Sorkine & Alexa 2007, "As-rigid-as-possible surface modeling", SGP):
-  the cell of vertex ``i`` is its one-ring of edges (the spokes ``(i, j)``).
-* ``"spokes_and_rims"`` (Chao, Pinkall, Sanan, Schröder 2010, "A simple geometric model
-  for elastic deformations", SIGGRAPH): the cell of vertex ``i`` is every edge of every
-  triangle incident to ``i`` (the spokes plus the rims).
-
-Conventions (match libigl's ``arap_linear_block`` / ``arap_rhs`` /
-``covariance_scatter_matrix``, so the global step below *is* libigl's global step):
-
-* ``c_{f,e} = cot(angle opposite e in f) / 2`` (``igl.cotmatrix_entries``), and the
-  cotangent weight of an edge is ``w_sd = sum_f c_{f,e} = -igl.cotmatrix(V, F)[s, d]``.
-* Rest edge ``e = v_s - v_d``, deformed edge ``e' = u_s - u_d``.
-* ``"spokes"``: every face-edge ``(f, e)`` enters the cells of its two end points with
-  weight ``c_{f,e} / 2`` (libigl: ``0.5 * C(f, e)``); ``"spokes_and_rims"``: it enters
-  the cells of the three corners of ``f`` with weight ``c_{f,e} / 3`` (libigl:
-  ``C(f, e) / 3``). Hence in both cases the weights of an edge over all cells sum to
-  ``w_sd``, and
-
-      E(U, R) = sum_k sum_{e in cell k} a_ke || e'_e - R_k e_e ||^2
-              = tr(U^T L U) - 2 tr(U^T K(R)) + sum_e w_e ||e_e||^2,
-
-  with ``L = -igl.cotmatrix`` (positive semi-definite) and ``K(R)`` linear in the
-  rotations. For spokes this is ``E = 1/2 sum_i sum_{j in N(i)} w_ij ||e'_ij - R_i e_ij||^2``
-  (i.e. exactly one half of Sorkine & Alexa's eq. 3 with their ``w_ij = 1/2(cot a +
-  cot b)``); for spokes-and-rims it is ``1/3 sum_i sum_{f ni i} sum_{e in f} c_fe ||.||^2``.
-  libigl minimises ``1/2 tr(U^T L U) - tr(U^T K(R))``, i.e. ``E / 2`` up to a constant,
-  so both have the same minimiser and the same local/global iterates.
-* The global step with fixed rotations is ``L U = K(R)`` with the handle rows fixed; the
-  gradient of ``E(U) = min_R E(U, R)`` is ``dE/dU = 2 (L U - K(R*(U)))`` with ``R*`` the
-  optimal rotations (envelope theorem: ``dE/dR = 0`` at the optimum over ``SO(3)``).
-
-The local step (:meth:`ArapOperators.local_step`) and the right-hand side
-(:meth:`ArapOperators.rhs_rows`) run the numba kernels of :mod:`sshade.arap.kernels` on the
-arrays of :class:`sshade.arap.kernel_data.KernelData` (in the mesh's numbering or a
-cache-friendly one, :func:`sshade.arap.kernel_data.rcm_order`), with numpy / scipy.sparse
-fallbacks when numba is unusable; :func:`sshade.arap.threads.resolve_threads` picks the
-threads. Per-stage costs: ``benchmarks/arap_iteration.py``.
+Two energies (:data:`ENERGIES`), one rotation per vertex: ``"spokes"`` (Sorkine & Alexa
+2007, SGP) and ``"spokes_and_rims"`` (Chao, Pinkall, Sanan, Schröder 2010, SIGGRAPH),
+libigl's ``ARAP_ENERGY_TYPE_SPOKES`` / ``_SPOKES_AND_RIMS``. ``E(U, R) = tr(U^T L U) -
+2 tr(U^T K(R)) + const``, ``L = -igl.cotmatrix``, so the global step is libigl's.
+:class:`ArapOperators`, :func:`build_operators`, :func:`fit_rotations`, :func:`bbox_diag`;
+kernels in :mod:`sshade.arap.kernels`. Conventions and derivation: docs/methods.md
+("Implementation notes: sshade/arap/operators.py").
 """
 from __future__ import annotations
 
@@ -467,7 +434,7 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
     ----------
     V : (n, 3) float64 rest positions (any length unit). F : (m, 3) int faces.
     energy : ``"spokes"`` (Sorkine & Alexa 2007) or ``"spokes_and_rims"`` (Chao et al.
-        2010), with libigl's weights (module docstring).
+        2010), with libigl's weights (:data:`ENERGIES`).
 
     Returns
     -------
@@ -507,9 +474,10 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
 
 
 def _cell_pairs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str) -> tuple:
-    """Edges and (cell, edge) incidences of ``energy`` (module docstring) from the
-    cotangent entries ``C`` (m, 3). Returns ``(edges, edge_vec, edge_w, pair_cell,
-    pair_edge, pair_w, cell_ptr)`` as the attributes of :class:`ArapOperators`."""
+    """Edges and (cell, edge) incidences of ``energy`` (the cells: docs/methods.md,
+    "Implementation notes: sshade/arap/operators.py") from the cotangent entries ``C``
+    (m, 3). Returns ``(edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr)``
+    as the attributes of :class:`ArapOperators`."""
     n = len(V)
     # face-edges: edge e of face f goes from S to D, opposite corner X
     S = F[:, [1, 2, 0]].ravel()

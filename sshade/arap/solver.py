@@ -1,63 +1,11 @@
 """Converged ARAP: local/global with one prefactored Laplacian, accelerated (L-BFGS or
-Anderson), stopped by an energy-and-gradient criterion (:func:`solve_arap`).
+Anderson), stopped by an energy-and-gradient criterion (:func:`solve_arap`;
+:class:`ArapSolver` keeps the set-up for one handle set across solves).
 
-Energy and operators: :mod:`sshade.arap.operators` (libigl's "spokes" and
-"spokes_and_rims" with libigl's cotangent weights, so one plain iteration here equals one
-``igl.arap_solve`` iteration up to libigl's single-precision rotation fit).
-
-Algorithm
----------
-* Fixed-point map ``G`` on the free vertices ``x``: local step (optimal rotations
-  ``R*(x)``, batched 3x3 polar decomposition) then global step
-  ``L_ff G(x) = K(R*(x))_f - L_fb t`` with ONE sparse Cholesky factorisation of the
-  free-free block of the cotangent Laplacian (:class:`sshade.arap.linear.LaplacianSolver`),
-  reused by every iteration and solved for the 3 coordinate columns at once.
-* Default iteration (``accelerate="lbfgs"``): L-BFGS on the free vertices with the global
-  step's matrix as initial Hessian (Liu, Bouaziz & Kavan 2017;
-  :class:`sshade.arap.accelerate.LBFGS`) and Armijo backtracking (:meth:`_Loop.lbfgs_step`).
-* ``accelerate="anderson"``: Anderson acceleration with window ``m`` (Peng, Deng, Zhang,
-  Liu 2018, Algorithm 2; :class:`sshade.arap.accelerate.Anderson`). Safeguard (same
-  paper): the accelerated point is accepted only if its energy is below the energy of
-  the last accepted iterate; otherwise the plain step ``G(x_k)`` (already computed) is
-  taken and the history is reset (:meth:`_Loop.anderson_step`). Accepted energies are
-  therefore monotonically non-increasing (local/global never increases the energy).
-* Stopping (:class:`sshade.arap.criterion.Criterion`, :meth:`_Loop.stop_test`): both the
-  relative energy decrease over the last accepted iteration and a scale-free gradient
-  norm are below their thresholds.
-
-Phases of :func:`solve_arap`: the set-up for the mesh and its handle set (:class:`ArapSolver`:
-operators, :func:`_check_components`, :class:`_Stepper`: numbering, kernels, threads,
-factorisation), then per solve the options and start point (:func:`_check_options`,
-:func:`_start_point`, :meth:`_Stepper.start`), the iterations (:class:`_Loop`) and the
-result (:meth:`_Loop.result`). :class:`ArapSolver` keeps the set-up for many solves.
-
-Cost of one iteration
----------------------
-Everything per iteration runs in preallocated arrays: the fused local step and the
-``K(R)`` kernel of :mod:`sshade.arap.kernels`, CHOLMOD's solve, a numba CSR kernel for the
-stopping test's gradient ``2 L_ff (x - G(x))``, and the accelerator's history
-(:mod:`sshade.arap.solver_kernels`). From :data:`REORDER_MIN_VERTICES` vertices the
-iteration runs in a cache-friendly vertex numbering
-(:func:`sshade.arap.kernel_data.rcm_order`) and the numba kernels use ``threads``
-(automatic: :class:`sshade.arap.threads.ThreadPicker` times 1 thread against
-``NUMBA_NUM_THREADS`` and keeps the faster, since on a loaded machine parallel regions
-can be slower than one thread). Per-stage costs: ``benchmarks/arap_iteration.py``
-(``info["stage_s"]``); iterations and time to convergence against libigl:
-``results/convergence/table.md``.
-
-Result info
------------
-``info`` of the :class:`sshade.arap.result.ArapResult`: ``energy`` (final E, mesh
-units^2), ``gnorm``, ``rel_decrease``, ``energy_history`` / ``gnorm_history`` (lists over
-accepted iterates, starting at ``U0``), ``n_local`` (local steps), ``n_fallback``
-(rejected Anderson steps, backtracked or dropped L-BFGS steps), ``status``
-(``"converged"``, ``"max_iter"``, ``"time_budget"``, ``"stalled"`` = the energy no longer
-decreases in float64, ``"callback"``, ``"rigid"``), ``linear_solver``, ``factor_s``,
-``etol``, ``gtol``, ``accelerate``, ``anderson_m``, ``energy_type``, ``threads`` (the most
-threads used), ``reordered``, ``stage_s`` (seconds spent in the local steps, right-hand
-sides, Cholesky solves, gradient norms and accelerator bookkeeping),
-``parallel_fraction`` (automatic threads only: the fraction of iterations run with
-``threads`` threads).
+Energy and operators: :mod:`sshade.arap.operators`; accelerators:
+:mod:`sshade.arap.accelerate`; stopping rule: :class:`sshade.arap.criterion.Criterion`.
+The algorithm, its phases, the cost of one iteration and the result's ``info`` keys:
+docs/methods.md ("Implementation notes: sshade/arap/solver.py").
 """
 from __future__ import annotations
 
@@ -96,7 +44,8 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
                callback=None, linear_solver: str = "auto",
                operators: ArapOperators | None = None, threads: int | None = None,
                reorder: bool | None = None) -> ArapResult:
-    """Handle-driven ARAP deformation run to a certified convergence (module docstring).
+    """Handle-driven ARAP deformation run to a certified convergence (the algorithm:
+    docs/methods.md, "Implementation notes: sshade/arap/solver.py").
 
     Parameters
     ----------
@@ -105,10 +54,8 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     energy : ``"spokes"`` (Sorkine & Alexa 2007) or ``"spokes_and_rims"`` (Chao et al.
         2010), libigl's definitions (:mod:`sshade.arap.operators`).
     U0 : (n, 3) float64 or None, start; default the best rigid fit of the handles
-        (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V`` (so a rigid handle motion
-        is reproduced exactly; for two or collinear handles, about whose axis the energy
-        is blind, the fit turning the mesh least). The handle rows are overwritten by
-        ``targets``.
+        (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V``. The handle rows are
+        overwritten by ``targets``.
     R0 : (n, 3, 3) float64 or None, start rotations (one per vertex = rotation cell),
         e.g. those of a solve on a low-resolution remesh (the baselines' coarse start): the
         first iterate is their global step, the minimiser of ``E(U, R0)`` with the handles
@@ -117,8 +64,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     max_iter : int >= 0, cap on accepted iterations (global solves).
     accelerate : ``"lbfgs"`` (default; Armijo backtracking, memory pairs with non-positive
         curvature skipped), ``"anderson"`` (``True``; energy safeguard) or ``False`` /
-        ``"none"``: plain local/global, libigl's iteration in float64. On human bodies
-        L-BFGS needs far fewer iterations (``results/convergence/table.md``).
+        ``"none"``: plain local/global, libigl's iteration in float64.
     anderson_m : int >= 1 or None, history window: Anderson's (Peng et al. use 5-6;
         default 5) or L-BFGS's memory (default 10).
     time_budget_s : float or None, stop (unconverged, status ``"time_budget"``) once the
@@ -130,10 +76,8 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         (:class:`sshade.arap.linear.LaplacianSolver`).
     operators : :class:`sshade.arap.operators.ArapOperators` or None, precomputed for
         ``(V, F, energy)`` to reuse across calls (then ``V``/``F`` are not re-read).
-    threads : int >= 1 or None, threads of the numba kernels (the Cholesky solve is
-        CHOLMOD's own). None: :func:`sshade.arap.threads.resolve_threads`, then 1 or
-        ``NUMBA_NUM_THREADS``, whichever runs the iterations faster
-        (:class:`sshade.arap.threads.ThreadPicker`). The iterates do not depend on it.
+    threads : int >= 1 or None, threads of the numba kernels (None: automatic,
+        :class:`sshade.arap.threads.ThreadPicker`). The iterates do not depend on it.
     reorder : bool or None, iterate in a cache-friendly vertex numbering (result in the
         mesh's). None: from :data:`REORDER_MIN_VERTICES` vertices when numba is usable.
         Same iterates up to rounding (the renumbered Cholesky factor rounds differently).
@@ -143,7 +87,8 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     :class:`sshade.arap.result.ArapResult`: ``V`` (n, 3) the last accepted iterate (the
     one the reported energy and gradient belong to), ``iterations`` (accepted iterations
     = global solves), ``converged`` (the criterion was met), ``last_move`` (mesh units),
-    ``precompute_s`` (operators + factorisation), ``solve_s``, ``info`` (module docstring).
+    ``precompute_s`` (operators + factorisation), ``solve_s``, ``info`` (its keys:
+    docs/methods.md, "Implementation notes: sshade/arap/solver.py").
 
     Raises
     ------
@@ -627,7 +572,7 @@ class _Loop:
         return now
 
     def result(self, precompute_s: float) -> ArapResult:
-        """The :class:`ArapResult` of the stopped iterations (module docstring)."""
+        """The :class:`ArapResult` of the stopped iterations (:func:`solve_arap`)."""
         st, status = self.st, self.status
         st.U[st.free] = self.x
         if status == "stalled":

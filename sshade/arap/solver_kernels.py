@@ -1,16 +1,9 @@
-"""Numba kernels of the solver's loop (:mod:`sshade.arap.solver`) and of its
-accelerators (:mod:`sshade.arap.accelerate`), with their lazy compilation.
+"""Numba kernels of the solver's loop (:mod:`sshade.arap.solver`) and of its accelerators
+(:mod:`sshade.arap.accelerate`), with their lazy compilation.
 
-* ``set_rows``, ``max_move``: scatter of the free positions, largest vertex move;
-* ``grad``: the stopping test's gradient ``2 L_ff (x - G(x))`` in CSR (scipy's order of
-  summation), per-vertex ``||g_i||^2 / (4 m_i)`` (:func:`sshade.arap.criterion.gradient_norm`);
-* ``push``, ``mix``: Anderson's history update (new differences, one new row of the Gram
-  matrix and ``DF f`` in one pass) and mixing, with the dot products summed over fixed
-  chunks of :data:`CHUNK` entries, then over the chunks: the same floats whatever the
-  number of threads;
-* :func:`lbfgs_two_loop`, :func:`lbfgs_pair`: the L-BFGS recursion and curvature pairs,
-  serial (numpy versions without numba).
-
+``set_rows``, ``max_move``, ``grad`` (the stopping test's gradient in CSR), ``push`` /
+``mix`` (Anderson's history and mixing; sums over fixed chunks of :data:`CHUNK`, so the
+same floats whatever the thread count), :func:`lbfgs_two_loop`, :func:`lbfgs_pair`.
 :func:`loop_kernels` compiles (or loads from numba's cache) the serial or parallel
 variants on first use; :func:`warmup_kernels` every serial kernel of the solver,
 :mod:`sshade.arap.kernels` included.

@@ -1,23 +1,11 @@
 """Thread policy of the ARAP kernels: how many threads numba's parallel kernels use.
 
-* :func:`max_threads`: numba's ``NUMBA_NUM_THREADS`` (1 without numba).
-* :func:`resolve_threads`: the threads of a problem (serial below
-  :data:`PARALLEL_MIN_CELLS` cells and in worker processes; capped at 1 in a forked child
-  of a process that ran numba's OpenMP pool, see :func:`fork_unsafe`).
-* :func:`numba_threads`: context manager setting numba's thread count for the calls
-  inside (records the process as the pool's owner, :func:`note_launch`).
-* :class:`ThreadPicker`: the automatic mode of :func:`sshade.arap.solver.solve_arap`,
-  which times 1 thread against ``tmax`` and keeps the faster.
-
-The results of every kernel do not depend on the thread count (every parallel block
-writes only its own outputs, sums run over fixed chunks).
-
-Threading layer: numba tries TBB first; where a ``libtbb.so.12`` older than 2021.6 is
-installed (e.g. Ubuntu 22.04's libtbb12) it then warns ``The TBB threading layer requires
-TBB version 2021 update 6 or later ...`` and falls back to OpenMP. :func:`avoid_old_tbb`
-(run at import) puts OpenMP and numba's own workqueue before TBB in that case, so the
-same layer is chosen without the warning; a user's ``NUMBA_THREADING_LAYER`` or
-``NUMBA_THREADING_LAYER_PRIORITY`` is left as is.
+:func:`max_threads`, :func:`resolve_threads` (serial below :data:`PARALLEL_MIN_CELLS`
+cells, in worker processes, and in a forked child of an OpenMP pool's owner:
+:func:`fork_unsafe`), :func:`numba_threads` (context manager), :class:`ThreadPicker`
+(the automatic mode of :func:`sshade.arap.solver.solve_arap`) and :func:`avoid_old_tbb`
+(run at import). No kernel's result depends on the thread count. Threading layers:
+docs/methods.md ("Implementation notes: sshade/arap/threads.py").
 """
 from __future__ import annotations
 

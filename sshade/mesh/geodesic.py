@@ -1,28 +1,12 @@
-"""Geodesic farthest-point sampling and Voronoi regions on the edge graph
-(paper §3.1; Peyré & Cohen 2006 front propagation; ReMatching, Maggioli et al. 2023).
+"""Geodesic farthest-point sampling and Voronoi regions on the edge graph (paper §3.1;
+Peyré & Cohen 2006 front propagation; ReMatching, Maggioli et al. 2023).
 
-Distances are shortest paths on the mesh edge graph with Euclidean edge lengths. Each
-new seed runs an *incremental* Dijkstra that only visits vertices that get closer to it
-than to their current seed, so sampling k seeds costs about O(|V| log k log |V|) rather
-than k full Dijkstra runs. The hot loops are compiled with numba.
-
-Speed: sampling 6000 seeds visits every vertex about ln(6000) ~ 9 times, so
-the propagation is memory- and branch-bound. What keeps it fast:
-
-- the graph can be stored in a *locality order* (:func:`locality_order`, a Morton
-  curve through the vertex positions), so that a region's vertices share cache lines;
-  :class:`VoronoiState` maps seeds, labels and distances back to the mesh's own order;
-- the priority queue is Dial's ring of buckets (width just below the shortest edge:
-  O(1) push and pop) when the mean edge is at most :data:`DIAL_MAX_RATIO` times the
-  shortest one (and the ring at most :data:`DIAL_MAX_BUCKETS` long), else a binary
-  heap that pops bottom-up (Floyd);
-- a vertex that lowered a neighbour's distance in a run has a strictly farther
-  neighbour when the run ends, so it is not tested as a farthest-point candidate.
-
-Distances and labels do not depend on the order in which a propagation settles
-vertices (ties keep the older label), and the farthest point is the vertex of largest
-distance with the smallest mesh index among exact ties, so neither the vertex order
-nor the queue changes the sampling.
+Distances are shortest paths on the edge graph (Euclidean edge lengths); each new seed
+runs an incremental Dijkstra over the vertices it takes over (:class:`VoronoiState`,
+numba), in a cache-friendly vertex order (:func:`locality_order`). Labels, distances and
+the farthest point (the smallest index among exact ties) depend neither on the vertex
+order nor on the queue. Speed: docs/methods.md ("Implementation notes:
+sshade/mesh/geodesic.py").
 """
 from __future__ import annotations
 

@@ -1,16 +1,11 @@
 """glTF 2.0 binary (``.glb``) animations of one triangle mesh: the mesh, one morph target
-per frame, and one animation whose ``weights`` channel plays the targets in order (the
-glTF 2.0 specification, sections "Morph Targets", "Animations" and "GLB File Format").
+per frame, one animation whose ``weights`` channel plays them (glTF 2.0 specification:
+"Morph Targets", "Animations", "GLB File Format").
 
-- :class:`GlbAnimationWriter`: frames in, one at a time; a ``.glb`` out, atomically.
-- :func:`read_glb_animation`: a ``.glb`` of one mesh with morph targets in, a
-  :class:`GlbAnimation` out (its arrays memory-mapped from the file).
-- :func:`glb_extras`: the ``asset.extras`` of a ``.glb`` (its JSON chunk only), or None.
-- :func:`check_glb_output`: whether a ``.glb`` of f frames can be written here (pygltflib
-  importable, glTF's 32-bit limits).
-
-pygltflib (a dependency) builds and parses the JSON document; the binary chunk is
-streamed and mapped here, so that neither side holds the animation in memory.
+:class:`GlbAnimationWriter` (frames in, a ``.glb`` out, atomically),
+:func:`read_glb_animation` (a :class:`GlbAnimation`, its arrays memory-mapped),
+:func:`glb_extras`, :func:`check_glb_output`. pygltflib builds and parses the JSON; the
+binary chunk is streamed and mapped here, so neither side holds the animation in memory.
 """
 from __future__ import annotations
 
@@ -73,18 +68,12 @@ def check_glb_output(path, n: int, m: int, f: int) -> None:
 class GlbAnimationWriter:
     """Write an animation into ``path`` (``.glb``), a frame at a time.
 
-    The file holds one mesh whose base positions are ``base`` (the rest mesh), one morph
-    target per frame (its POSITION displacements from the base: ``base + target i`` is
-    frame i to float32 precision) and one animation: a ``weights`` channel, LINEAR,
-    keyframe i at ``i / fps`` seconds with weight 1 on target i and 0 elsewhere (a sparse
-    accessor: f numbers, not f * f), so a player shows frame i at its keyframe and blends
-    neighbours between them. ``mesh.extras.targetNames`` names the targets ``frame_0000``
-    ...; every POSITION accessor and the keyframe times carry ``min``/``max``.
-
-    Frames go to a temporary file beside ``path`` as they come (float32); :meth:`finish`
-    writes the ``.glb`` atomically from it in 1 MiB blocks. Memory: one frame (n, 3) and
-    O(f) numbers; the disk briefly holds the frames twice. Leaving a ``with`` block
-    removes the temporary file; nothing is written at ``path`` without :meth:`finish`.
+    The file holds one mesh whose base positions are ``base``, one morph target per frame
+    (float32 displacements from the base) and one animation whose ``weights`` channel
+    shows frame i at ``i / fps`` seconds. Frames go to a temporary file beside ``path``
+    as they come; :meth:`finish` writes the ``.glb`` atomically (nothing is written at
+    ``path`` without it). The layout and memory: docs/methods.md ("Implementation notes:
+    sshade/mesh/gltf.py").
 
     Parameters
     ----------

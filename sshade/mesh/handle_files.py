@@ -1,25 +1,10 @@
-"""Handle files of the field, read into ``(handles, targets)`` for a mesh of ``n`` vertices.
+"""Handle files of the field, read into ``(handles, targets)`` for a mesh of ``n`` vertices:
+Botsch & Sorkine's deformation benchmark (IEEE TVCG 2008: ``.sel`` per-vertex status and
+``.def`` 4x4 matrix), libigl's tutorial ``.dmat`` selection (with a ``.def``), and
+``.json`` / ``.csv`` of vertex indices and target positions (mesh units).
 
-- Botsch & Sorkine's deformation benchmark ("On linear variational surface deformation
-  methods", IEEE TVCG 2008; data at igl.ethz.ch/projects/deformation-survey):
-  ``FILE.sel``, one integer per vertex and line, ``0`` fixed, ``1`` free (deformable
-  region), ``2`` handle, lines starting with ``#`` are comments (the files start with
-  ``# per vertex status: 0=fixed, 1=deformable-region, 2=handle`` and ``# N vertices``);
-  ``FILE.def``, the 4x4 homogeneous matrix (row-major, translation in the last column,
-  ``#`` comment lines) applied to the handle vertices. The fixed vertices are handles
-  too, held at their rest positions; the free ones are the unknowns.
-- libigl's tutorial format (tutorials 401/405, ``igl::readDMAT``): ``FILE.dmat``, a
-  header ``ncols nrows`` then the values column by column (or libigl's binary variant),
-  here one column (or row) with one value per vertex: ``-1`` free, ``0`` fixed, ``1`` or
-  more handle (libigl's constrained vertices are those ``>= 0``; the groups ``>= 1`` all
-  move by the one ``.def`` matrix), with ``--def`` as above.
-- ``FILE.json`` ``{"handles": [i, ...], "targets": [[x, y, z], ...]}`` or ``FILE.csv``
-  with rows ``index,x,y,z`` (an optional header line ``index,x,y,z``): vertex indices
-  (0-based) and target positions in mesh units.
-
-Every reader raises :class:`SShaDeError` with one line naming the file and the problem
-(unreadable file, wrong vertex count, a value that is not allowed, a matrix that is not
-a finite invertible affine 4x4, an index out of range, NaN).
+Every reader raises :class:`SShaDeError` with one line naming the file and the problem.
+The formats in detail: docs/methods.md ("Implementation notes: sshade/mesh/handle_files.py").
 """
 from __future__ import annotations
 
@@ -68,7 +53,8 @@ def _text_lines(path, what: str, limit: int = MAX_BYTES) -> list[tuple[int, str]
 
 
 def read_sel(path, n: int) -> np.ndarray:
-    """Per-vertex status of a ``.sel`` file (deformation benchmark, module docstring).
+    """Per-vertex status of a ``.sel`` file (deformation benchmark; the format:
+    docs/methods.md, "Implementation notes: sshade/mesh/handle_files.py").
 
     Parameters
     ----------
@@ -97,8 +83,9 @@ def read_sel(path, n: int) -> np.ndarray:
 
 
 def read_dmat_selection(path, n: int) -> np.ndarray:
-    """Per-vertex status from a libigl ``.dmat`` selection (module docstring), in the
-    ``.sel`` codes: ``-1`` -> :data:`FREE`, ``0`` -> :data:`FIXED`, ``>= 1`` -> :data:`HANDLE`.
+    """Per-vertex status from a libigl ``.dmat`` selection (the format: docs/methods.md,
+    "Implementation notes: sshade/mesh/handle_files.py"), in the ``.sel`` codes: ``-1`` ->
+    :data:`FREE`, ``0`` -> :data:`FIXED`, ``>= 1`` -> :data:`HANDLE`.
 
     Parameters
     ----------
@@ -177,7 +164,8 @@ def _is_float(t: bytes) -> bool:
 
 
 def read_def(path) -> np.ndarray:
-    """The 4x4 handle transformation of a ``.def`` file (module docstring).
+    """The 4x4 handle transformation of a ``.def`` file (the format:
+    docs/methods.md, "Implementation notes: sshade/mesh/handle_files.py").
 
     Returns
     -------
@@ -281,7 +269,8 @@ def read_moving_handles(n: int, *, sel=None, dmat=None, handles=None) -> tuple[n
 
 
 def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Handles and targets of a ``.json`` or ``.csv`` file (module docstring).
+    """Handles and targets of a ``.json`` or ``.csv`` file (the formats:
+    docs/methods.md, "Implementation notes: sshade/mesh/handle_files.py").
 
     Parameters
     ----------

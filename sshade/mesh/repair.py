@@ -1,19 +1,10 @@
 """Opt-in mesh repair with pymeshlab's filters that never move a vertex (``python -m
-sshade deform --repair``).
-
-Filters, in order (MeshLab's names): remove duplicate vertices (same position, merged),
-remove duplicate faces, remove null faces (zero area; before them, the faces
-:func:`sshade.mesh.validate.validate_mesh` calls zero-area, area at most
-``AREA_TOL * bbox_diag**2``, which MeshLab's exact test keeps), repair non-manifold edges (by
-removing the fewest faces, MeshLab's "Remove Faces"), repair non-manifold vertices (by
-splitting them, no displacement: ``vertdispratio=0``), remove unreferenced vertices.
-Faces are never re-wound and no hole is filled: inconsistent orientation and the like
-keep their clear error from :func:`sshade.mesh.validate.validate_mesh`.
-
-Because no filter moves a vertex, every vertex of the result has the rest position of
-an input vertex; :func:`repair_mesh` returns that input vertex (``origin``) so per-vertex
-data (a ``.sel`` selection, handle indices) carries over. Reference: P. Cignoni et al.,
-"MeshLab: an open-source mesh processing tool" (2008); pymeshlab (Muntoni & Cignoni).
+sshade deform --repair``; :func:`repair_mesh`): duplicate vertices and faces, null
+(zero-area) faces, non-manifold edges and vertices, unreferenced vertices; faces are never
+re-wound and no hole is filled. Every output vertex is an input vertex (``origin``), so
+per-vertex data carries over. Reference: P. Cignoni et al., "MeshLab: an open-source mesh
+processing tool" (2008); pymeshlab (Muntoni & Cignoni). The filters in detail:
+docs/methods.md ("Implementation notes: sshade/mesh/repair.py").
 """
 from __future__ import annotations
 

@@ -1,15 +1,10 @@
 """The unit frame: a mesh centred at the origin and scaled by a power of two near its
-bounding-box diagonal, where every solve of SShaDe and the baselines runs.
+bounding-box diagonal, where every solve of SShaDe and the baselines runs
+(:func:`unit_frame`; :class:`UnitFrame`'s ``to_unit`` and ``from_unit``).
 
-A mesh far from the origin (scans in world coordinates: UTM, millimetres) loses its
-edge vectors to cancellation in every product the solvers form, and iterations tuned to
-unit-sized meshes crawl or stall there. :func:`unit_frame` gives the frame; a method maps
-its rest positions and targets in with :meth:`UnitFrame.to_unit`, solves, and maps the
-result back with :meth:`UnitFrame.from_unit`. The scale is a power of two, so scaling is
-exact: a mesh scaled by ``2**k`` gives the same result scaled, bit for bit, and any
-other scale the same up to the rounding of its input. A translation is undone up to the
-precision the moved input coordinates still carry (one unit in the last place of the
-largest coordinate). Measured: docs/differences.md ("Far from the origin").
+A power-of-two scale is exact: a mesh scaled by ``2**k`` gives the same result scaled,
+bit for bit; a translation is undone up to the precision of the moved input. Why:
+docs/methods.md ("Implementation notes: sshade/mesh/unit_frame.py").
 """
 from __future__ import annotations
 

@@ -1,18 +1,11 @@
-"""Input validation for meshes and handles (paper §2, "Manifoldness"): the one
-validator of every layer (the method, the baselines, the builder, the evaluator's
-metrics and renders, the command line).
+"""Input validation for meshes and handles (paper §2, "Manifoldness"): the one validator
+of every layer (the method, the baselines, the builder, the evaluator, the command line).
 
-The method assumes a single-component, 2-manifold triangle mesh, possibly with
-boundary. These checks run before any work and raise :class:`SShaDeError` naming the
-problem and where it is. :func:`check_arrays` (with :func:`check_points` and
-:func:`check_faces`) is the array part alone (shapes, dtypes, finite coordinates, index
-range), for callers that take any triangle soup (metrics, renders, ARAP operators).
-
-:func:`validate_mesh` first runs compiled O(n + m) checks (numba: one pass over the
-vertices, one over the faces, the half-edge structure, union-find components and a walk
-around every vertex). They only tell whether the mesh is valid; when one fails, the
-reference checks (numpy/scipy, in the documented order) run to raise the error naming
-the first problem, so the messages are those of the reference whatever the fast path.
+:func:`validate_mesh` (a single-component 2-manifold, boundary allowed: compiled
+O(n + m) checks, then the reference checks to name the first problem),
+:func:`validate_handles`, :func:`validate_targets`, :func:`validate_deformed` (a method's
+output); :func:`check_arrays` (:func:`check_points`, :func:`check_faces`): shapes, dtypes,
+finite values and index range only. Errors: :class:`SShaDeError` naming what and where.
 """
 from __future__ import annotations
 

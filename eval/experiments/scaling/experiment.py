@@ -195,7 +195,7 @@ def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) 
     if bool(sc.get("first_call", True)):
         print(f"[scaling] {entry.name}, {len(V)} vertices: first call in a fresh process ...",
               file=sys.stderr, flush=True)
-        row.update(_first_call_row(mp, h, T, sp, repeat, float(sc.get("first_call_timeout_s", 600))))
+        row.update(_first_call_row(mp, h, T, sp.as_dict(), repeat, float(sc.get("first_call_timeout_s", 600))))
     emax = sc.get("elastic_max_vertices", None)
     if bool(sc.elastic) and (emax is None or len(V) <= int(emax)):
         row.update(_elastic_row(V, F, h, T, ep, float(sc.elastic_budget_s), row["sshade_total_s"]))

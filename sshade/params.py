@@ -1,0 +1,202 @@
+"""SShaDe's parameters as one checked, frozen object (paper §3, §4.1 settings).
+
+:func:`check_params` checks and normalises the keyword parameters of
+:func:`sshade.deform.deform` into a :class:`SShaDeParams`, which :mod:`sshade.deform`,
+:mod:`sshade.prepared`, :mod:`sshade.isometric` and :mod:`sshade.refine` pass around;
+:func:`effective_params` resolves its defaults for run records.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from .arap import DEFAULT_MAX_ITER, PROTOCOLS, make_criterion
+from .cores import pool_size
+from .errors import SShaDeError
+from .lrf import ANCHORS, GRADIENTS
+
+__all__ = ["SShaDeParams", "check_params", "effective_params", "MAX_SEED", "MIN_N_LOW"]
+
+_MAX_COUNT = 2**31 - 1    # n_low, workers, max_iter: int32 range (numba kernels, libigl)
+MIN_N_LOW = 4             #: the smallest n_low check_params accepts
+_MAX_SAMPLINGS = 10_000   # k remeshings, each a full low-res solve
+MAX_SEED = 2**63 - 1      #: seeds: int64, recorded in JSON/CSV and passed to numpy
+
+
+@dataclass(frozen=True, eq=False)
+class SShaDeParams(Mapping):
+    """SShaDe's checked parameters; made by :func:`check_params`, never by hand.
+
+    Attributes
+    ----------
+    n_low : int >= 4 or ``"auto"``; n_samplings : int >= 1; seed : int in [0, 2**63 - 1];
+    workers : int >= 1 or None; max_iter : int >= 1 or None; tol : float > 0;
+    gradient : one of :data:`sshade.lrf.GRADIENTS`; anchor : one of :data:`sshade.lrf.ANCHORS`;
+    warm_start : bool; protocol : one of :data:`sshade.arap.PROTOCOLS`; etol, gtol : float
+    >= 0 or None. Meanings: :func:`sshade.deform.deform`.
+
+    Read-only mapping of the same keys too (``p["n_low"]``, ``dict(p)``, ``**p``);
+    :meth:`as_dict` is the plain dict for JSON and run records.
+    """
+
+    n_low: int | str
+    n_samplings: int
+    seed: int
+    workers: int | None
+    max_iter: int | None
+    tol: float
+    gradient: str
+    anchor: str
+    warm_start: bool
+    protocol: str
+    etol: float | None
+    gtol: float | None
+
+    def __getitem__(self, key: str):
+        if key not in _FIELDS:
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_FIELDS)
+
+    def __len__(self) -> int:
+        return len(_FIELDS)
+
+    def __hash__(self) -> int:
+        return hash(tuple(self.values()))
+
+    def as_dict(self) -> dict:
+        """The parameters as a plain dict, keys in :func:`check_params`' order."""
+        return {k: getattr(self, k) for k in _FIELDS}
+
+    def replace(self, **changes) -> SShaDeParams:
+        """A copy with ``changes`` (keyword parameters of :func:`check_params`), checked
+        again. Raises SShaDeError as :func:`check_params`."""
+        return check_params(**{**self.as_dict(), **changes})
+
+    def arap_options(self) -> dict:
+        """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step:
+        ``tol``, ``max_iter``, ``protocol`` and, when ``etol`` or ``gtol`` is given, the
+        ``criterion`` (:func:`sshade.arap.make_criterion`; else None)."""
+        crit = None
+        if self.etol is not None or self.gtol is not None:  # paper protocol: gtol tells converged from stalled
+            crit = make_criterion(self.etol, self.gtol)
+        return {"tol": self.tol, "max_iter": self.max_iter, "protocol": self.protocol, "criterion": crit}
+
+
+_FIELDS = tuple(f.name for f in fields(SShaDeParams))
+
+
+def _as_int(name: str, v, lo: int, hi: int = _MAX_COUNT) -> int:
+    """``v`` as an int in [lo, hi] (an integral float or numeric string allowed, a bool
+    never); SShaDeError naming ``name`` otherwise."""
+    if isinstance(v, (bool, np.bool_)):
+        raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
+    try:
+        iv = int(v)
+    except (TypeError, ValueError, OverflowError):  # OverflowError: inf
+        raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}") from None
+    if iv != v and not (isinstance(v, str) and str(iv) == v.strip()):
+        raise SShaDeError(f"SShaDe: {name} must be an integer, got {v!r}")
+    if iv < lo:
+        extra = " (or 'auto')" if name == "n_low" else ""
+        raise SShaDeError(f"SShaDe: {name} must be at least {lo}{extra}, got {v!r}")
+    if iv > hi:
+        raise SShaDeError(f"SShaDe: {name} must be at most {hi}, got {v!r}")
+    return iv
+
+
+def _as_tolerance(name: str, v) -> float | None:
+    """``v`` (etol or gtol) as a finite float >= 0, or None; SShaDeError otherwise."""
+    if v is None:
+        return None
+    try:
+        fv = float(v)
+    except (TypeError, ValueError):
+        raise SShaDeError(f"SShaDe: {name} must be a number >= 0, got {v!r}") from None
+    if isinstance(v, (bool, np.bool_)) or not (fv >= 0 and np.isfinite(fv)):
+        raise SShaDeError(f"SShaDe: {name} must be a finite number >= 0, got {v!r}")
+    return fv
+
+
+def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
+                 max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
+                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
+                 anchor: str = "projection") -> SShaDeParams:
+    """Validate SShaDe's parameters without touching a mesh, so a bad value fails before
+    any work.
+
+    Parameters
+    ----------
+    As :func:`sshade.deform.deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None),
+    n_samplings (int in [1, 10000]), seed (int in [0, 2**63 - 1]), workers (int in
+    [1, 2**31 - 1] or None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or
+    None), gradient (one of :data:`sshade.lrf.GRADIENTS`), anchor (one of
+    :data:`sshade.lrf.ANCHORS`), warm_start (bool), protocol (one of
+    :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None). An
+    integer may be given as an integral float (``1e3``) but never as a bool, NaN, inf
+    or a float beyond the range.
+
+    Returns
+    -------
+    :class:`SShaDeParams`, normalised (ints as int, ``n_low`` as int or ``"auto"``).
+
+    Raises
+    ------
+    SShaDeError naming the first bad parameter and its value (never OverflowError or
+    TypeError).
+
+    Examples
+    --------
+    >>> check_params(n_low=6000).n_low
+    6000
+    >>> check_params(n_low=2)
+    Traceback (most recent call last):
+    ...
+    sshade.errors.SShaDeError: SShaDe: n_low must be at least 4 (or 'auto'), got 2
+    """
+    out = {"n_low": "auto" if n_low in (None, "auto") else _as_int("n_low", n_low, MIN_N_LOW),
+           "n_samplings": _as_int("n_samplings", n_samplings, 1, _MAX_SAMPLINGS),
+           "seed": _as_int("seed", seed, 0, MAX_SEED),
+           "workers": None if workers is None else _as_int("workers", workers, 1),
+           "max_iter": None if max_iter is None else _as_int("max_iter", max_iter, 1)}
+    try:
+        out["tol"] = float(tol)
+    except (TypeError, ValueError):
+        raise SShaDeError(f"SShaDe: tol must be a number, got {tol!r}") from None
+    if isinstance(tol, (bool, np.bool_)) or not out["tol"] > 0 or not np.isfinite(out["tol"]):
+        raise SShaDeError(f"SShaDe: tol must be a finite number > 0, got {tol!r}")
+    if not isinstance(warm_start, (bool, np.bool_)):
+        raise SShaDeError(f"SShaDe: warm_start must be true or false, got {warm_start!r}")
+    if gradient not in GRADIENTS:
+        raise SShaDeError(f"SShaDe: unknown gradient mode {gradient!r}; use one of {GRADIENTS}")
+    if anchor not in ANCHORS:
+        raise SShaDeError(f"SShaDe: unknown anchor {anchor!r}; use one of {ANCHORS}")
+    if protocol not in PROTOCOLS:
+        raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
+    return SShaDeParams(**out, gradient=gradient, anchor=anchor, warm_start=bool(warm_start), protocol=protocol,
+                        etol=_as_tolerance("etol", etol), gtol=_as_tolerance("gtol", gtol))
+
+
+def effective_params(params: SShaDeParams) -> dict:
+    """SShaDe's parameters as a run uses them: ``params`` with every None resolved:
+    ``max_iter`` the protocol's cap (:data:`sshade.arap.DEFAULT_MAX_ITER`), ``etol`` /
+    ``gtol`` the converged criterion's (:func:`sshade.arap.make_criterion`), ``workers``
+    the pool size for ``n_samplings`` samplings on this machine; ``n_low`` ``"auto"``
+    stays the rule (:func:`sshade.deform.auto_n_low`, per mesh: each case's value is in
+    its info, ``n_low``).
+
+    Returns
+    -------
+    dict, JSON-serialisable, the keys of :meth:`SShaDeParams.as_dict`.
+    """
+    crit = make_criterion(params.etol, params.gtol)
+    p = params.as_dict()
+    p.update(max_iter=DEFAULT_MAX_ITER[params.protocol] if params.max_iter is None else params.max_iter,
+             etol=crit.etol, gtol=crit.gtol, workers=pool_size(params.workers, params.n_samplings))
+    if params.n_low == "auto":
+        p["n_low"] = "auto: min(6000, n // 7), at least 100"
+    return p
