@@ -68,7 +68,7 @@ def _file_sets() -> list[dict]:
                "binary PLY, vertices in metres"),
             fs("pose-meshes", "application/x-ply", "subject_*/pose_*_*.ply",
                "the true target poses on the rest meshes' faces: pose_YY_low.ply, and pose_YY_high.ply where "
-               "the source gives a high-resolution ground truth (anny, synthetic; not faust)"),
+               "the build has a high-resolution ground truth (every source; not a FAUST build made before it)"),
             fs("handles", "application/x-npz", "subject_*/pose_*_handles.npz",
                "each case's handles as stored positions (rest and target, metres), static flags and landmark "
                "groups (docs/defaust.md)")]
@@ -89,7 +89,7 @@ RECORD_SETS = {
         "rest_low": ("sc:Text", "the subject's low-resolution rest mesh"),
         "rest_high": ("sc:Text", "the subject's high-resolution rest mesh"),
         "target_low": ("sc:Text", "the true target pose at low resolution (null: none)"),
-        "target_high": ("sc:Text", "the true target pose at high resolution (null: none, e.g. faust)"),
+        "target_high": ("sc:Text", "the true target pose at high resolution (null: none)"),
     },
     "files": {
         "path": ("sc:Text", "the file, relative to the build"),
@@ -207,8 +207,8 @@ def croissant_metadata(manifest: dict, *, manifest_sha256: str) -> dict:
         "name": f"DeFAUST-{src}" if src else "DeFAUST",
         "description": (f"DeFAUST (SShaDe paper, appendix): handle-guided deformation cases built from "
                         f"{_SOURCES.get(src, src)}; {n_sub} subject(s), {n_cases} case(s), each a rest mesh at "
-                        "two resolutions, handles with their targets and the true target pose (for a FAUST "
-                        "build at low resolution only). Built by "
+                        "two resolutions, handles with their targets and the true target pose at both "
+                        "resolutions. Built by "
                         "`python -m defaust`; the file format: docs/defaust.md of the SShaDe harness."),
         "license": LICENCES.get(src, "unknown"),
         "citeAs": CITATION,

@@ -59,8 +59,8 @@ class Case:
     handles : (h,) int64 unique vertex indices, the stored handles snapped to ``V``.
     targets : (h, 3) float64 target positions in metres.
     static : (h,) bool, the handle's landmark group stays at its rest position.
-    V_gt : (n, 3) float64 true target pose on the same mesh (ANNY and synthetic sources at
-        either resolution, FAUST at low resolution), or None.
+    V_gt : (n, 3) float64 true target pose on the same mesh (every source at either
+        resolution; a FAUST build made before its high-res ground truth: low only), or None.
     group : (h,) int64 landmark group of each handle, indexing ``landmark_names``.
     landmark_names : tuple of str. resolution : ``"high"`` or ``"low"``.
     source : ``"anny"``, ``"faust"`` or ``"synthetic"``. pose_name : str, e.g. ``"arms_raised"``.

@@ -50,8 +50,9 @@ def describe(root, resolution: str = "high") -> list[dict]:
     Returns
     -------
     list of dicts; the ground-truth columns are None for a case without ground truth
-    (FAUST source at high resolution). Volumes and areas are of the (n, 3) vertices in
-    metres; the changes are relative, so unitless (%).
+    (a FAUST build made before its high-res ground truth, at high resolution). Volumes
+    and areas are of the (n, 3) vertices in metres; the changes are relative, so
+    unitless (%).
 
     Raises
     ------

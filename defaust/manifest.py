@@ -30,6 +30,9 @@ FORMAT = "defaust-1"
 #: Bumped whenever the builder's output for the same parameters changes. 2: the high-res
 #: isotropic remesh without pymeshlab's per-collapse surface-distance check
 #: (:func:`defaust.highres.subdivide_remesh`, ``check_distance``; the build twice as fast).
+#: A change to one source's items only changes those items' keys instead, so the other
+#: sources' builds stay valid: the faust pose items' ``high_ground_truth`` entry
+#: (:data:`defaust.sources.FAUST_HIGH_GT`, the high-res ground truth of a FAUST build).
 BUILDER_VERSION = 2
 
 

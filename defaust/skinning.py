@@ -14,8 +14,8 @@ from sshade.errors import SShaDeError
 
 from .highres import ls3_loop
 
-__all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "barycentric", "subdivision_weights",
-           "high_res_weights"]
+__all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "closest_barycentric", "barycentric",
+           "subdivision_weights", "high_res_weights"]
 
 
 def lbs(V, W, R, t) -> np.ndarray:
@@ -135,22 +135,49 @@ def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
     >>> transfer_weights(V, F, np.eye(3), [[0.5, 0.0, 0.1]]).round(3)
     array([[0.5, 0.5, 0. ]])
     """
-    import igl
-
     V_src = np.asarray(V_src, np.float64)
     F_src = np.asarray(F_src, np.int64)
     W = np.asarray(W_src, np.float64)
     P = np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3))
     if V_src.ndim != 2 or V_src.shape[1] != 3 or W.ndim != 2 or len(W) != len(V_src):
         raise SShaDeError(f"transfer_weights: need V_src (n, 3) and W_src (n, k), got {V_src.shape} and {W.shape}")
-    _, fi, C = igl.point_mesh_squared_distance(P, V_src, F_src)
-    fi = np.asarray(fi, np.int64)
-    A, B, Cc = V_src[F_src[fi, 0]], V_src[F_src[fi, 1]], V_src[F_src[fi, 2]]
-    bc = barycentric(np.asarray(C, np.float64), A, B, Cc)
+    fi, bc = closest_barycentric(V_src, F_src, P)
     out = (bc[:, 0:1] * W[F_src[fi, 0]] + bc[:, 1:2] * W[F_src[fi, 1]] + bc[:, 2:3] * W[F_src[fi, 2]])
     out = np.maximum(out, 0.0)
     out /= out.sum(axis=1, keepdims=True)
     return out
+
+
+def closest_barycentric(V, F, P) -> tuple[np.ndarray, np.ndarray]:
+    """The closest point of each query point on a triangle mesh, as a triangle and its
+    barycentric coordinates (``igl.point_mesh_squared_distance``, then :func:`barycentric`).
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64; P : (p, 3) float64 query points (same units).
+
+    Returns
+    -------
+    face : (p,) int64 index into ``F`` of the closest triangle; bc : (p, 3) float64 the
+    closest point's barycentric coordinates in it (clipped to [0, 1], as
+    :func:`barycentric`).
+
+    Examples
+    --------
+    >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0]]); F = np.array([[0, 1, 2]])
+    >>> face, bc = closest_barycentric(V, F, np.array([[0.5, 0.0, 0.1]]))
+    >>> face, bc.round(3)
+    (array([0]), array([[0.5, 0.5, 0. ]]))
+    """
+    import igl
+
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    P = np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3))
+    _, fi, C = igl.point_mesh_squared_distance(P, V, F)
+    fi = np.asarray(fi, np.int64)
+    A, B, Cc = V[F[fi, 0]], V[F[fi, 1]], V[F[fi, 2]]
+    return fi, barycentric(np.asarray(C, np.float64), A, B, Cc)
 
 
 def barycentric(P, A, B, C) -> np.ndarray:

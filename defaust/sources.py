@@ -1,9 +1,9 @@
 """The builder's view of its three sources: what each item of a DeFAUST build needs.
 
 A :class:`Source` plans the build (subjects and their target poses) and gives, per
-subject, the low-res rest mesh, its landmarks and each target at low resolution (and,
-for posable bodies, at high resolution), plus what enters the items' keys and the
-manifest. Sources: :class:`AnnySource` (default; :mod:`defaust.anny_source`),
+subject, the low-res rest mesh, its landmarks and each target at low and high resolution
+(posable bodies: the same skinning; FAUST: through the subdivision), plus what enters the
+items' keys and the manifest. Sources: :class:`AnnySource` (default; :mod:`defaust.anny_source`),
 :class:`FaustSource` (a user's MPI-FAUST registrations, :mod:`defaust.faust_source`)
 and :class:`SyntheticSource` (the implicit bodies, :mod:`defaust.synthetic`); see
 :data:`SOURCES`. Each keeps per-subject caches (only the current subject's data).
@@ -22,6 +22,7 @@ from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTION
 from .anny_source import SUBJECTS, anny_subject, self_intersections
 from .config import BuildConfig
 from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, faust_subjects
+from .registration_gt import change_pct, map_target, surface_map
 from .skinning import high_res_weights, transfer_weights
 from .store import sha256_file
 from .synthetic import synthetic_subject
@@ -83,9 +84,29 @@ class Source:
         """Extra entries of a pose item's ``info`` (none by default)."""
         return {}
 
+    def ls3_iterations(self, s: int) -> int:
+        """The LS3 Loop iterations of subject ``s``'s high-res rest (its rest item's
+        ``ls3_iterations``); SShaDeError if the rest item records none."""
+        it = self.recalled(("rest_info", s), {}).get("ls3_iterations")
+        if it is None:
+            raise SShaDeError(f"subject {s}: the rest item records no ls3_iterations; rebuild it "
+                              "(delete its rest_high.ply and rerun)")
+        return int(it)
+
+
+#: How a faust pose's high-res ground truth is made; part of the faust pose items' keys, so
+#: a build made before it (no ``pose_YY_high.ply``) rebuilds its pose items on resume.
+FAUST_HIGH_GT = ("LS3 Loop subdivision of the target registration, read at each rest_high vertex's closest point "
+                 "on the subdivided rest (defaust.registration_gt)")
+
 
 class FaustSource(Source):
-    """A user's MPI-FAUST registrations; each item's key holds its files' checksums."""
+    """A user's MPI-FAUST registrations; each item's key holds its files' checksums. The
+    high-res ground truth is the target registration's LS3 Loop subdivision read at the
+    high-res rest vertices' closest points on the subdivided rest
+    (:mod:`defaust.registration_gt`; docs/defaust.md §2)."""
+
+    has_high_gt = True
 
     def __init__(self, cfg):
         super().__init__(cfg)
@@ -122,11 +143,37 @@ class FaustSource(Source):
                               "FAUST registrations must share one face array")
         return V1
 
+    def surface_map(self, s, Vh):
+        """The high-res rest ``Vh`` ((p, 3) float64 metres) on subject ``s``'s subdivided
+        rest (:func:`defaust.registration_gt.surface_map`), made once per subject."""
+        V0, F0 = self.rest_low(s)
+        return self.cached(("surface_map", s), lambda: surface_map(V0, F0, Vh, self.ls3_iterations(s)))
+
+    def target_high(self, s, p, Vh):
+        """Target pose ``p`` at high resolution: :func:`defaust.registration_gt.map_target`
+        of the target registration; (p, 3) float64 metres on the faces of ``Vh`` (the
+        high-res rest, (p, 3) float64). SShaDeError if the target's faces or subdivided
+        topology differ from the rest's, or the rest item records no ``ls3_iterations``."""
+        return map_target(self.surface_map(s, Vh), self.target_low(s, p), self.rest_low(s)[1])
+
+    def pose_info(self, s, p, Vg, Fh):
+        """Volume and area change of the high-res ground truth (against ``rest_high``) and
+        of the target registration (against the rest registration), in %, and the largest
+        offset of a high-res rest vertex from the subdivided rest (metres). Called after
+        :meth:`target_high` (the build does), whose rest meshes it reuses."""
+        V0, F0 = self.rest_low(s)
+        Vh, _ = self.recalled(("rest_high", s))  # the build cached it for target_high
+        hi, lo = change_pct(Vh, Vg, Fh), change_pct(V0, self.target_low(s, p), F0)
+        return {"gt_volume_change_pct_high": hi["volume_change_pct"], "gt_area_change_pct_high": hi["area_change_pct"],
+                "gt_volume_change_pct_low": lo["volume_change_pct"], "gt_area_change_pct_low": lo["area_change_pct"],
+                "rest_high_offset_max_m": self.recalled(("surface_map", s)).offset_max}
+
     def rest_inputs(self, s):
         return {"rest_file_sha256": self.file_sha(s, 0)}
 
     def pose_inputs(self, s, p):
-        return {"rest_file_sha256": self.file_sha(s, 0), "target_file_sha256": self.file_sha(s, p)}
+        return {"rest_file_sha256": self.file_sha(s, 0), "target_file_sha256": self.file_sha(s, p),
+                "high_ground_truth": FAUST_HIGH_GT}
 
     def pose_name(self, s, p):
         return f"faust_pose_{p}"
@@ -248,11 +295,7 @@ class AnnySource(ModelSource):
         return anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
 
     def high_weights(self, s, m, Vh):
-        it = self.recalled(("rest_info", s), {}).get("ls3_iterations")
-        if it is None:
-            raise SShaDeError(f"subject {s}: the rest item records no ls3_iterations; rebuild it "
-                              "(delete its rest_high.ply and rerun)")
-        return high_res_weights(m.V, m.F, m.W, Vh, int(it))
+        return high_res_weights(m.V, m.F, m.W, Vh, self.ls3_iterations(s))
 
     def rest_info(self, s, Vh, Fh):
         m = self.model(s)

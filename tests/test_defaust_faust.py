@@ -1,5 +1,6 @@
-"""DeFAUST faust source: discovery of tr_reg_XYZ.ply files, landmarks, a small build
-(skips cleanly when ../shared/data/faust_reg is absent)."""
+"""DeFAUST faust source: discovery of tr_reg_XYZ.ply files, landmarks, a small build with
+its high-res ground truth, and its resume (skips cleanly when ../shared/data/faust_reg is
+absent)."""
 from __future__ import annotations
 
 import os
@@ -7,11 +8,12 @@ import os
 import numpy as np
 import pytest
 
+import defaust.sources
 from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
 from defaust.dataset import load_handles
 from defaust.faust_source import FAUST_LANDMARKS, discover_faust, faust_subjects
-from eval.datasets.defaust import load_defaust
+from eval.datasets.defaust_dataset import load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
@@ -77,6 +79,27 @@ def test_small_faust_build(faust_root, tmp_path):
     np.testing.assert_array_equal(H.target[dyn], V4[H.index[dyn]])
     cases = load_defaust(tmp_path, resolution="low")
     np.testing.assert_array_equal(cases[1].V_gt, V4)
+    # the high-res ground truth (defaust.registration_gt): on rest_high's faces, written per pose
+    Vh, Fh = read_mesh(tmp_path / "subject_00/rest_high.ply")
     hi = load_defaust(tmp_path)
-    assert hi[0].V_gt is None and 8000 <= len(hi[0].V) <= 12000
-    assert not (tmp_path / "subject_00/pose_01_high.ply").exists()
+    assert 8000 <= len(hi[0].V) <= 12000
+    for c in hi:
+        Vg, Fg = read_mesh(tmp_path / f"subject_00/pose_{c.pose:02d}_high.ply", validate=False)
+        np.testing.assert_array_equal(Fg, Fh)
+        np.testing.assert_array_equal(c.V_gt, Vg)
+        assert c.V_gt.shape == Vh.shape and np.abs(c.V_gt - Vh).max() > 0.01
+    info = rep.manifest["items"]["subject_00/pose_04"]["info"]
+    assert info["gt_volume_change_pct_high"] == pytest.approx(info["gt_volume_change_pct_low"], abs=0.5)
+
+
+def test_faust_pose_items_rebuild_when_the_ground_truth_changes(faust_root, tmp_path, monkeypatch):
+    """The faust pose keys hold the ground truth's definition (defaust.sources.FAUST_HIGH_GT): a
+    build made with another (e.g. before the high-res ground truth) rebuilds its pose items on
+    resume and keeps its rest item."""
+    args = ["preset=ci", "source=faust", f"faust.root={faust_root}", f"out={tmp_path}", "subjects=[0]",
+            "faust.target_poses=[1]", "progress=false"]
+    monkeypatch.setattr(defaust.sources, "FAUST_HIGH_GT", "an earlier definition")
+    build_defaust(config_from_omegaconf(compose_config(args)))
+    monkeypatch.undo()
+    rep = build_defaust(config_from_omegaconf(compose_config(args)))
+    assert rep.built == ["subject_00/pose_01"] and rep.skipped == ["subject_00/rest"]
