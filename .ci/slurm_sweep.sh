@@ -12,7 +12,7 @@
 # 3. runs a three-point sweep (sshade.n_low=300,500,800) on two FAUST cases through
 #    hydra/launcher=slurm, kills job 2's Python process (kill -9) while it runs, and checks
 #    that the sweep command exits 0 with a table of 2 done + 1 killed;
-# 4. resumes the sweep (python -m eval.sweep resume DIR) and checks 3 done, the killed job
+# 4. resumes the sweep (python -m eval.sweeps resume DIR) and checks 3 done, the killed job
 #    alone re-submitted;
 # 5. stops the daemons it started, by PID (trap on exit), and removes the folder.
 set -euo pipefail
@@ -148,8 +148,8 @@ ARGS=(-m dataset=faust "dataset.root=$FAUST" dataset.limit=2 "methods=[SShaDe]" 
       sshade.n_samplings=2 sshade.workers=1 hydra/launcher=slurm hydra.launcher.partition=debug
       hydra.launcher.cpus_per_task=1 hydra.launcher.mem_gb=1 hydra.launcher.timeout_min=10
       hydra.launcher.poll_s=1 "hydra.sweep.dir=$SW")
-say "sweep: python -m eval.sweep ${ARGS[*]}"
-python -m eval.sweep "${ARGS[@]}" > "$T/sweep.log" 2>&1 &
+say "sweep: python -m eval.sweeps ${ARGS[*]}"
+python -m eval.sweeps "${ARGS[@]}" > "$T/sweep.log" 2>&1 &
 SWEEP=$!
 KILLED=""
 for _ in $(seq 1500); do   # up to 150 s for job 2 to start
@@ -185,7 +185,7 @@ say "sweep with a killed job: exit 0, table 2 done + 1 killed: OK"
 
 # ---- 4. resume
 rc=0
-python -m eval.sweep resume "$SW" > "$T/resume.log" 2>&1 || rc=$?
+python -m eval.sweeps resume "$SW" > "$T/resume.log" 2>&1 || rc=$?
 grep -E "^resume:|submitted|not submitted|### Sweep" "$T/resume.log" || true
 [ "$rc" -eq 0 ] || { say "resume exited with $rc"; exit 1; }
 grep -q "submitted 1 job(s)" "$T/resume.log" || { say "resume did not submit exactly the killed job"; exit 1; }

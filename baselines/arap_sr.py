@@ -1,6 +1,6 @@
 """ARAP-SR: as-rigid-as-possible with smooth rotations (Levi & Gotsman 2015, "Smooth
 rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG), behind the
-:class:`sshade.method.Deformer` interface (:class:`ARAPSR`).
+:class:`sshade.method_interface.Deformer` interface (:class:`ARAPSR`).
 
 Two protocols: ``"converged"`` (:func:`baselines.arap_sr_solver.solve_arap_sr`; that
 module states the energy and both definitions of alpha) and ``"paper"``
@@ -20,9 +20,9 @@ from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
 
-from .arap import check_arap_args
 from .arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
 from .coarse_start import SR_ENERGY, check_start, start_rotations
+from .fullres_arap import check_arap_args
 
 __all__ = ["arap_sr_deform", "ARAPSR", "PAPER_STOPS"]
 
@@ -122,7 +122,7 @@ def _paper_iterations(pb: SRProblem, U, R, stop, thresh, crit, max_iter, time_bu
 
 
 class ARAPSR:
-    """ARAP-SR baseline behind the :class:`sshade.method.Deformer` interface.
+    """ARAP-SR baseline behind the :class:`sshade.method_interface.Deformer` interface.
 
     Parameters
     ----------

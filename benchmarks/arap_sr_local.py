@@ -1,4 +1,4 @@
-"""ARAP-SR's local step and acceleration compared on small cases of sshade.arap.cases
+"""ARAP-SR's local step and acceleration compared on small cases of sshade.arap.problems
 (baselines/arap_sr_solver.py): Jacobi local step (all rotations at once from the previous
 ones), Gauss-Seidel over a vertex colouring, Gauss-Seidel with Anderson on the joint
 (U, R) residual (the default) and with the history reset after every rejected candidate
@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from baselines.arap_sr_solver import SRProblem, solve_arap_sr
-from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
+from sshade.arap.problems import bent_cylinder, lifted_plane, twisted_bar
 
 CASES = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),
          "lifted_plane": lambda: lifted_plane(n_target=2500)}

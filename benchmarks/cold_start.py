@@ -36,8 +36,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the repository, as the other benchmarks
 
 from eval.datasets.shapes import axis_handles, axis_landmarks  # noqa: E402
-from eval.experiments.scaling.experiment import size_mesh  # noqa: E402
 from eval.experiments.scaling.mesh_set import MeshEntry  # noqa: E402
+from eval.experiments.scaling.scaling_experiment import size_mesh  # noqa: E402
 from eval.run.outdir import claim_output_dir  # noqa: E402
 from eval.run.runinfo import git_info  # noqa: E402
 from harness.command import run_command  # noqa: E402

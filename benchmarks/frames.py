@@ -4,7 +4,7 @@ one-shot sshade.deform and libigl's arap_solve on the same mesh.
 The meshes: ``--mesh NAME=PATH[:hard]`` (repeatable; default the scaling experiment's clean
 armadillo and hard centaur), each built to every ``--sizes`` as the scaling experiment
 builds them (``:hard``: LS3 Loop only, else LS3 Loop then isotropic remeshing:
-eval.experiments.scaling.experiment.build_mesh), cached in ``--cache`` under the scaling experiment's
+eval.experiments.scaling.scaling_experiment.build_mesh), cached in ``--cache`` under the scaling experiment's
 file names (eval.experiments.scaling.mesh_set.cache_name), so both share the built meshes. The
 handles and the final targets: the scaling experiment's edit
 (eval.datasets.shapes.axis_handles: two regions fixed, one turned 20 degrees, one moved
@@ -37,8 +37,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
 from eval.datasets.shapes import axis_handles, axis_landmarks  # noqa: E402
-from eval.experiments.scaling.experiment import size_mesh  # noqa: E402
 from eval.experiments.scaling.mesh_set import MeshEntry  # noqa: E402
+from eval.experiments.scaling.scaling_experiment import size_mesh  # noqa: E402
 from eval.run.memory import release_freed, tree_pss_mb  # noqa: E402
 from eval.run.outdir import claim_output_dir  # noqa: E402
 from eval.run.runinfo import git_info  # noqa: E402

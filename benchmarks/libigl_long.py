@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 
-from eval.datasets.defaust import load_defaust
+from eval.datasets.defaust_dataset import load_defaust
 from eval.experiments.convergence import libigl_curve
 from eval.metrics.reference import reference_solution
 

@@ -12,7 +12,7 @@ with ``threshold=PercentageValue(0)``: without it pymeshlab skips the short edge
 once and cached as ``.npz`` under ``--cache-dir`` (``data/`` is git-ignored).
 
 For every mesh and sampling seed the script runs :func:`sshade.remesh.remesh` exactly as
-``sshade.deform.prepare_sampling`` does (the scaling edit's handles as required vertices) and
+``sshade.pipeline.prepare_sampling`` does (the scaling edit's handles as required vertices) and
 prints the check-and-repair rounds, the repair seeds and the best remesh time of
 ``--repeat`` runs. Rounds and repair seeds do not depend on the machine's load; times do.
 

@@ -14,7 +14,7 @@ The 200k mesh is built once from ``../shared/data/classic/armadillo.obj`` with
 :func:`defaust.highres.subdivide_remesh` (LS3 Loop + isotropic remesh, vertex range
 190k-210k; a minute or two) and cached as an ``.npz`` (``--cache``; ``data/`` is
 git-ignored). Handles: the scaling benchmark's fixed edit (4 groups of 30 vertices,
-:func:`eval.datasets.shapes.axis_handles`), which ``sshade.deform.prepare_sampling`` adds as
+:func:`eval.datasets.shapes.axis_handles`), which ``sshade.pipeline.prepare_sampling`` adds as
 required low-res vertices. For each of ``--seeds`` sampling seeds (the first ones
 :func:`sshade.sampling.sampling_seeds` gives for master seed 0) the script runs
 ``remesh`` + ``project_to_fans`` exactly as ``prepare_sampling`` does, ``--repeat`` times, and
@@ -88,7 +88,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cache", default=str(ROOT / "data" / "benchmarks" / "armadillo_200k.npz"))
     ap.add_argument("--mesh", default=None, help="use this mesh file instead (e.g. a FAUST .ply)")
-    ap.add_argument("--n-low", type=int, default=None, help="default: sshade.deform.auto_n_low(n)")
+    ap.add_argument("--n-low", type=int, default=None, help="default: sshade.pipeline.auto_n_low(n)")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--ref", default=None, help="benchmark the sshade package of this git commit")
@@ -98,8 +98,8 @@ def main(argv=None):
         subprocess.run(f"git -C '{ROOT}' archive '{a.ref}' sshade | tar -x -C '{tmp}'", shell=True, check=True)
         sys.path.insert(0, tmp)
 
-    from sshade.deform import auto_n_low
     from sshade.mesh.validate import validate_mesh
+    from sshade.pipeline import auto_n_low
     from sshade.projection import project_to_fans
     from sshade.remesh import mesh_topology, remesh
     from sshade.sampling import sampling_seeds, warm_kernels

@@ -18,8 +18,8 @@ from pathlib import Path
 from harness.checks import config_int_list, config_number
 from harness.command import hydra_main, run_command
 from harness.confdir import config_dir
-from sshade.deform import MAX_SEED
 from sshade.errors import SShaDeError
+from sshade.pipeline import MAX_SEED
 
 from .build import build_defaust
 from .config import BuildConfig

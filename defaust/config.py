@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sshade.deform import MAX_SEED
 from sshade.errors import SShaDeError
+from sshade.pipeline import MAX_SEED
 
 from .anny_poses import POSES, pose_to_spec, resolve_poses
 
@@ -121,7 +121,7 @@ class BuildConfig:
     def validate(self) -> "BuildConfig":
         """Check every parameter before anything is built or any folder made.
 
-        Integers: ``seed`` in [0, :data:`sshade.deform.MAX_SEED`]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
+        Integers: ``seed`` in [0, :data:`sshade.pipeline.MAX_SEED`]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
         ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
         ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
         count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;

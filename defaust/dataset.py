@@ -3,7 +3,7 @@ build folder, or an archive ``python -m defaust pack`` wrote (read in place,
 :mod:`defaust.archive`), read as deformation cases (:func:`load`: a lazy
 :class:`defaust.case_sequence.CaseSequence` of :class:`Case`) and checked against its
 manifest (:func:`verify`). NumPy only, no Hydra, OmegaConf or evaluator import on its
-path; :mod:`eval.datasets.defaust` reads through it. The stored handle positions are
+path; :mod:`eval.datasets.defaust_dataset` reads through it. The stored handle positions are
 snapped to the mesh read (:func:`defaust.handles.snap_handles`) and their targets moved
 with them; every file is read as untrusted input (:func:`load_handles`). Usage, checks and
 errors: docs/defaust.md §6.

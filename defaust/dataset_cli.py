@@ -11,7 +11,7 @@ docs/defaust.md §6 and §7.
 from __future__ import annotations
 
 from harness.command import run_command
-from sshade.clirun import ArgumentParser
+from sshade.command_errors import ArgumentParser
 
 from .dataset import RESOLUTIONS, verify
 from .describe import describe, markdown

@@ -452,7 +452,7 @@ def snap_handles(V, rest_positions, *, tol: float | None = None, name: str = "ha
     -------
     Snap. When several handles snap to one vertex the one nearest to it is kept (ties:
     the first in order) and the others are dropped, logged at DEBUG level (the
-    evaluator says it once per run, :func:`eval.datasets.defaust.summarise_dropped`);
+    evaluator says it once per run, :func:`eval.datasets.defaust_dataset.summarise_dropped`);
     ``keep`` says which and ``n_dropped`` how many.
 
     Raises
@@ -494,7 +494,7 @@ def snap_handles(V, rest_positions, *, tol: float | None = None, name: str = "ha
     keep[order[first]] = True
     n_drop = int((~keep).sum())
     if n_drop:  # two stored positions (low-res vertices) closer than the mesh's spacing share a nearest vertex
-        # DEBUG: by design of the dataset; the evaluator says it once per run (eval.datasets.defaust)
+        # DEBUG: by design of the dataset; the evaluator says it once per run (eval.datasets.defaust_dataset)
         log.debug("%s: %d of %d handles share their nearest vertex with a nearer handle; dropped (their "
                   "low-res vertices are closer together than this mesh's vertex spacing; counted per case as "
                   "n_handles_dropped, docs/differences.md)", name, n_drop, len(P))

@@ -13,7 +13,7 @@ Config: ``conf/config.yaml`` (+ ``conf/dataset/*.yaml``, ``conf/experiment/*.yam
 (:func:`eval.config_check.check_config`), claims ``out_dir``
 (:func:`eval.run.outdir.claimed_run`) and runs the experiment of ``experiment.kind`` from
 the registry of :mod:`eval.experiments` (default ``cases``: every method on every case
-of the dataset, :func:`eval.experiments.cases.experiment.run`, re-exported here as :func:`run`).
+of the dataset, :func:`eval.experiments.cases.cases_experiment.run`, re-exported here as :func:`run`).
 
 Exit status: 0 on success (even if some method failed on some case), 2 on a
 configuration or input error (one ``error: ...`` line on stderr).
@@ -24,7 +24,7 @@ import sys
 
 from eval.config_check import check_config
 from eval.experiments import experiments, find_experiment
-from eval.experiments.cases.experiment import run
+from eval.experiments.cases.cases_experiment import run
 from eval.report import safe_report
 from eval.run.outdir import claimed_run
 from harness.checks import config_bool
@@ -122,6 +122,7 @@ def main() -> None:
     """
     argv = sys.argv[1:]
     if any(a in ("-m", "--multirun") for a in argv) and not any("hydra.callbacks.sweep_aggregate" in a for a in argv):
-        # a multirun claims its hydra.sweep.dir like eval.sweep does (eval.sweep.claim_sweep_dir)
-        argv = [*argv, "++hydra.callbacks.sweep_aggregate._target_=eval.sweep.AggregateSweepCallback"]
+        # a multirun claims its hydra.sweep.dir like python -m eval.sweeps does
+        # (eval.sweeps.sweep_command.claim_sweep_dir)
+        argv = [*argv, "++hydra.callbacks.sweep_aggregate._target_=eval.sweeps.sweep_command.AggregateSweepCallback"]
     hydra_main(_main, CONF_DIR, argv=argv, check=check_config)

@@ -16,12 +16,12 @@ from __future__ import annotations
 from baselines.arap_sr_solver import ALPHA_SCALINGS
 from eval.datasets import find_dataset
 from eval.experiments import experiment_check
-from eval.experiments.cases.jobs import check_jobs
+from eval.experiments.cases.case_jobs import check_jobs
 from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
 from eval.run.subset import check_baseline_cases, check_method_cases
 from harness.checks import config_bool, config_number, config_value
-from sshade.deform import check_params
 from sshade.errors import SShaDeError
+from sshade.pipeline import check_params
 
 __all__ = ["check_config"]
 
@@ -30,7 +30,7 @@ _ABSENT = object()   # a default that tells an absent key apart from null
 
 def _check_dataset(cfg) -> None:
     """The keys every dataset shares, then the dataset's own check (its registration,
-    :class:`eval.datasets.registry.Dataset`)."""
+    :class:`eval.datasets.dataset_registry.Dataset`)."""
     ds = config_value(cfg, "dataset", None)
     if ds is None:
         return
@@ -43,7 +43,7 @@ def _check_dataset(cfg) -> None:
 
 
 def _check_sshade(cfg) -> None:
-    """``sshade.*`` through :func:`sshade.deform.check_params` (with the ``arap.*``
+    """``sshade.*`` through :func:`sshade.pipeline.check_params` (with the ``arap.*``
     fallbacks SShaDe's config uses), each error naming its config key."""
     sc = config_value(cfg, "sshade", None)
     if sc is None:
@@ -65,7 +65,7 @@ def _check_sshade(cfg) -> None:
 def check_config(cfg) -> None:
     """Check every number and flag of an evaluator config before any work.
 
-    Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.deform.check_params`),
+    Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.pipeline.check_params`),
     the dataset's ``limit``, ``baseline_cases`` and ``method_cases`` and then its own
     check (registered with it, :func:`eval.datasets.register_dataset`), ``figures.enabled``
     / ``max_cases``, ``report.*``, ``reference.max_iter`` / ``time_budget_s``, ``jobs`` and

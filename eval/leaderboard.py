@@ -22,7 +22,7 @@ from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
 from eval.run.runinfo import read_runinfo
 from eval.tables import compare
-from sshade.deform import SShaDe
+from sshade.pipeline import SShaDe
 
 __all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "LABELS",
            "RANK_COLUMN"]

@@ -54,7 +54,7 @@ from eval.leaderboard import HEADING, LEADERBOARD, RANK_COLUMN, collect, leaderb
 from eval.present.breakdown import BREAKDOWN_METRICS
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
-from eval.present.table_text import time_marks, time_notes
+from eval.present.table_markup import time_marks, time_notes
 from eval.run.outdir import (
     REPRODUCE_ENV,
     OutputDirError,
@@ -76,7 +76,7 @@ from eval.tables import (
     stop_lines,
 )
 from harness.command import run_command
-from sshade.clirun import ArgumentParser
+from sshade.command_errors import ArgumentParser
 from sshade.mesh.io import atomic_write
 
 __all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
@@ -523,7 +523,7 @@ def _check_index_dir(path) -> None:
     res = results_dir()
     if not (res is not None and p == res.resolve() and os.environ.get(REPRODUCE_ENV) == "1") and read_marker(p) is None:
         raise OutputDirError(f"refusing to write {p / PAGE}: {p} is neither results/ (under python -m eval.reproduce) "
-                             "nor an output folder of python -m eval or eval.sweep")
+                             "nor an output folder of python -m eval or eval.sweeps")
 
 
 def main(argv=None) -> int:

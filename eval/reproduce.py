@@ -15,7 +15,7 @@ others still run):
    cap; ARAP-SR's energy stop; each stop reported converged or stalled) and its
    references on the per_pose subset -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
    or a kill runs only the (case, method) pairs missing from the folder's result store
-   (:mod:`eval.run.store`), while a finished folder reruns nothing unless the configuration
+   (:mod:`eval.run.result_store`), while a finished folder reruns nothing unless the configuration
    changed; the
    time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
    ``results/convergence``; the animated DeFAUST cases (``experiment=animation``: SShaDe
@@ -65,7 +65,7 @@ from pathlib import Path
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
 from harness.command import run_command
-from sshade.clirun import ArgumentParser
+from sshade.command_errors import ArgumentParser
 
 #: ARAP-SR's alpha values of the sweep step (Open3D's definition; 0.06 is about the
 #: stiffness of 0.01 without the valence, this package's earlier definition)
@@ -89,7 +89,7 @@ def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
     # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
-    # per_pose subset, eval/run/subset.py); resume=true: a rerun after a crash continues (eval/run/store.py)
+    # per_pose subset, eval/run/subset.py); resume=true: a rerun after a crash continues (eval/run/result_store.py)
     # Implicit-ARAP (the [neural] extra, its cpu preset) where PyTorch is installed, on every case too
     neural = _installed("torch")
     ia = ["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]"] if neural else []
@@ -105,17 +105,17 @@ def _steps(a) -> list[tuple[str, list[str]]]:
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          # SShaDe prepared once and solved per frame on animated DeFAUST cases (ANNY's frames), beside Elastic
          ("animation", py + ["eval", "experiment=animation", "out_dir=results/animation"]),
-         ("sweep", py + ["eval.sweep", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
+         ("sweep", py + ["eval.sweeps", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"]),
          # ARAP-SR's alpha (Open3D's definition) on the per_pose cases (the dataset's baseline_cases)
-         ("sweep_arap_sr_alpha", py + ["eval.sweep", "-m", "methods=[ARAP-SR]", "reference.cases=none", "jobs=1",
+         ("sweep_arap_sr_alpha", py + ["eval.sweeps", "-m", "methods=[ARAP-SR]", "reference.cases=none", "jobs=1",
                                        f"arap_sr.alpha={SR_ALPHAS}", "hydra.sweep.dir=results/sweeps/arap_sr_alpha"])]
     if neural:  # Implicit-ARAP's cpu preset, its ARAP weight and step count, on DeFAUST's per_pose cases
-        s.append(("sweep_implicit_arap", py + ["eval.sweep", "-m", "methods=[Implicit-ARAP]", "reference.cases=none",
+        s.append(("sweep_implicit_arap", py + ["eval.sweeps", "-m", "methods=[Implicit-ARAP]", "reference.cases=none",
                                                "jobs=1", *IA_GRID,
                                                "hydra.sweep.dir=results/sweeps/implicit_arap_defaust"]))
     if a.faust and neural:  # the same grid on the 8 FAUST cases
-        s.append(("sweep_implicit_arap_faust", py + ["eval.sweep", "-m", "dataset=faust", f"dataset.root={a.faust}",
+        s.append(("sweep_implicit_arap_faust", py + ["eval.sweeps", "-m", "dataset=faust", f"dataset.root={a.faust}",
                                                      "methods=[Implicit-ARAP]", "reference.cases=none", "jobs=1",
                                                      *IA_GRID, "hydra.sweep.dir=results/sweeps/implicit_arap_faust"]))
     if a.faust:

@@ -38,7 +38,7 @@ and table.tex say so and the main table falls back to per-method means over each
 method's own successful cases, without bold. A frame without a ``case`` column is
 summarised per method, as :func:`summarize` always did.
 
-Rows are ordered as :func:`harness.registry.table_order` says (ARAP, Elastic, ARAP-SR,
+Rows are ordered as :func:`harness.method_registry.table_order` says (ARAP, Elastic, ARAP-SR,
 Implicit-ARAP, SShaDe, SShaDe+refine: the ``order`` keys of ``conf/method/*.yaml``), then
 any other method by name.
 """
@@ -51,12 +51,12 @@ from typing import TYPE_CHECKING
 
 from eval.present.rows import method_order_key, methods_in, ok_mask
 from eval.present.stops import PROTOCOL_TEXT, stop_lines
-from eval.present.table_text import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
+from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 from eval.run.compared import COMPARED_CSV
 from eval.run.outdir import refuse_results
 from eval.run.row_check import check_rows
 from harness.command import run_command
-from sshade.clirun import ArgumentParser
+from sshade.command_errors import ArgumentParser
 from sshade.mesh.io import atomic_write
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config

@@ -1,4 +1,4 @@
-"""Build the twisted-bar case of :func:`sshade.arap.cases.twisted_bar` in the
+"""Build the twisted-bar case of :func:`sshade.arap.problems.twisted_bar` in the
 deformation benchmark's format (Botsch & Sorkine 2008): ``bar.off``, ``bar.sel`` (left
 end cap fixed, right end cap handle, the rest free) and ``bar.def`` (the rotation by
 ``--angle`` degrees about the bar's axis, as a 4x4 matrix), then deform it with::
@@ -20,7 +20,7 @@ import numpy as np
 
 def twist_matrix(angle_deg: float, width: float = 1.0) -> np.ndarray:
     """(4, 4) rotation by ``angle_deg`` about the line y = z = width / 2 (the bar's axis)."""
-    from sshade.arap.cases import rotation_x
+    from sshade.arap.problems import rotation_x
     c = np.array([0.0, width / 2, width / 2])
     R = rotation_x(np.radians(angle_deg))
     M = np.eye(4)
@@ -31,7 +31,7 @@ def twist_matrix(angle_deg: float, width: float = 1.0) -> np.ndarray:
 
 def write_case(out: Path, angle: float = 135.0, h: float = 0.06) -> dict:
     """Write bar.off, bar.sel, bar.def into ``out``; returns their paths and the case."""
-    from sshade.arap.cases import twisted_bar
+    from sshade.arap.problems import twisted_bar
     from sshade.mesh.handle_files import FIXED, FREE, HANDLE, write_def, write_sel
     from sshade.mesh.io import write_mesh
     V, F, handles, targets = twisted_bar(angle, h=h)

@@ -1,9 +1,9 @@
 """``python -m harness deform MESH -o OUT ...``: ``python -m sshade deform`` with every
 method of the harness: the built-in ones by name (``ARAP``, ``Elastic``, ``ARAP-SR``,
-``Implicit-ARAP``, ``SShaDe``, ``SShaDe+refine``: :func:`harness.registry.builtin_methods`,
+``Implicit-ARAP``, ``SShaDe``, ``SShaDe+refine``: :func:`harness.method_registry.builtin_methods`,
 their definitions in ``conf/method/``, the defaults of ``conf/config.yaml``) and a plug-in
-``pkg.module.Class`` (:func:`harness.registry.named_or_plugin`). The options, handle
-files, checks and outputs are those of :mod:`sshade.cli`.
+``pkg.module.Class`` (:func:`harness.method_registry.named_or_plugin`). The options, handle
+files, checks and outputs are those of :mod:`sshade.deform_command`.
 
 Example::
 
@@ -14,8 +14,8 @@ from __future__ import annotations
 import sys
 
 from harness.command import run_command
-from harness.registry import named_or_plugin
-from sshade.cli import deform_main
+from harness.method_registry import named_or_plugin
+from sshade.deform_command import deform_main
 
 __all__ = ["main"]
 

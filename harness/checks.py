@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 
-from sshade.deform import MAX_SEED
 from sshade.errors import SShaDeError
+from sshade.pipeline import MAX_SEED
 
 __all__ = ["config_value", "config_number", "config_bool", "config_int_list", "check_numbers", "MAX_INT"]
 
@@ -136,7 +136,7 @@ def config_int_list(cfg, key: str, *, min=0, max=MAX_INT, allow_none: bool = Tru
 def check_numbers(cfg, prefix: str, checks) -> None:
     """Check the numbers of config section ``prefix`` (:func:`config_number`); a key that
     is absent is left to its reader's default, a key ending in ``seed`` is at most
-    :data:`sshade.deform.MAX_SEED`.
+    :data:`sshade.pipeline.MAX_SEED`.
 
     Parameters
     ----------

@@ -3,9 +3,9 @@ work. :func:`hydra_main` composes the config with the command line's overrides t
 Hydra's compose API first (:func:`precheck`: unknown key or group option, malformed
 override, the command's own value check), so that nothing, not even a run folder, is made
 before a refusal, then runs ``hydra.main``; :func:`run_command` is
-:func:`sshade.clirun.run_command` with Hydra's and OmegaConf's errors counted as a bad
+:func:`sshade.command_errors.run_command` with Hydra's and OmegaConf's errors counted as a bad
 configuration (``error: <one line>``, :func:`hydra_message`, status 2). Used by
-``python -m eval``, ``eval.sweep``, ``eval.tables``, ``eval.reproduce`` and the DeFAUST
+``python -m eval``, ``eval.sweeps``, ``eval.tables``, ``eval.reproduce`` and the DeFAUST
 builder (:mod:`defaust.cli`).
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ from __future__ import annotations
 import os
 import sys
 
-from sshade.clirun import one_line
-from sshade.clirun import run_command as _run_command
+from sshade.command_errors import one_line
+from sshade.command_errors import run_command as _run_command
 from sshade.errors import SShaDeError
 
 __all__ = ["run_command", "hydra_main", "precheck", "hydra_message", "config_error_types"]
@@ -28,7 +28,7 @@ def config_error_types() -> tuple:
 
 
 def run_command(work, *, where=None) -> int:
-    """:func:`sshade.clirun.run_command` (its statuses: 0, 2, 130, 143) with Hydra's and
+    """:func:`sshade.command_errors.run_command` (its statuses: 0, 2, 130, 143) with Hydra's and
     OmegaConf's errors as ``error: <one line>`` lines (:func:`hydra_message`), status 2."""
     return _run_command(work, where=where, config_errors=config_error_types(), describe=hydra_message)
 

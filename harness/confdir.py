@@ -6,8 +6,8 @@ An install from a wheel or ``pip install .`` ships the same files as package dat
 ``harness.conf`` (``site-packages/harness/conf/``, see ``pyproject.toml``), where
 ``Path(__file__).parents[1] / "conf"`` would point into ``site-packages``.
 :func:`config_dir` finds whichever copy applies, by path; :mod:`eval.app`,
-:mod:`eval.sweep` and :mod:`defaust.cli` use it for Hydra's ``config_path``,
-:mod:`harness.registry` for the method definitions of ``conf/method/``.
+:mod:`eval.sweeps.sweep_command` and :mod:`defaust.cli` use it for Hydra's ``config_path``,
+:mod:`harness.method_registry` for the method definitions of ``conf/method/``.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Jobs in worker processes: a DeFAUST build's subjects (:mod:`defaust.build`, ``workers``)
-and an evaluation's cases (:mod:`eval.experiments.cases.jobs`, ``jobs``) side by side.
+and an evaluation's cases (:mod:`eval.experiments.cases.case_jobs`, ``jobs``) side by side.
 
 :func:`run_jobs` runs ``job(*args)`` for every ``args`` of a list in workers started with
 ``spawn``, each running ``init`` once and then one job at a time; a job reports progress

@@ -2,9 +2,9 @@
 
 :func:`build_method` locates the class (or factory) by its dotted path (:func:`locate`),
 instantiates it with its parameters through Hydra's ``instantiate``, and checks the
-:class:`sshade.method.Deformer` interface and the name rule
-(:func:`sshade.method.check_name`). The built-in methods are built by name through
-:mod:`harness.registry`; the evaluator's configs through :mod:`eval.methods`.
+:class:`sshade.method_interface.Deformer` interface and the name rule
+(:func:`sshade.method_interface.check_name`). The built-in methods are built by name through
+:mod:`harness.method_registry`; the evaluator's configs through :mod:`eval.method_config`.
 
 Example::
 
@@ -18,7 +18,7 @@ import inspect
 from collections.abc import Mapping
 
 from sshade.errors import SShaDeError
-from sshade.method import check_name
+from sshade.method_interface import check_name
 
 __all__ = ["build_method", "locate", "is_mapping", "as_dict"]
 
@@ -57,7 +57,7 @@ def build_method(spec, *, where: str = "method"):
     SShaDeError naming ``where`` and the target: no ``_target_``, an import or
     construction failure (a :class:`SShaDeError` raised by the constructor is re-raised
     unchanged, e.g. ``SShaDe: n_low must be at least 4``), an object lacking the
-    :class:`sshade.method.Deformer` interface, or a ``name`` breaking :data:`NAME_RULE`
+    :class:`sshade.method_interface.Deformer` interface, or a ``name`` breaking :data:`NAME_RULE`
     (:func:`check_name`; a newline or ``|`` would break a table row).
 
     Examples
@@ -95,11 +95,11 @@ def build_method(spec, *, where: str = "method"):
     name = getattr(m, "name", None)
     if not isinstance(name, str) or not name.strip():
         raise SShaDeError(f"{where}: {target} built an object without a `name` (non-empty str), got {name!r}; "
-                          "a method needs `name` and deform(V, F, handles, targets) (sshade.method.Deformer)")
+                          "a method needs `name` and deform(V, F, handles, targets) (sshade.method_interface.Deformer)")
     check_name(name, where=f"{where}: {target}")
     if not callable(getattr(m, "deform", None)):
         raise SShaDeError(f"{where}: {target} ({name!r}) has no callable deform(V, F, handles, targets) "
-                          "(sshade.method.Deformer)")
+                          "(sshade.method_interface.Deformer)")
     info = getattr(m, "info", None)
     if info is None:
         m.info = {}

@@ -1,16 +1,16 @@
-"""``python -m sshade deform MESH -o OUT ...``: runs :func:`sshade.cli.main` (the argument
+"""``python -m sshade deform MESH -o OUT ...``: runs :func:`sshade.deform_command.main` (the argument
 parsing, the handle-file readers of :mod:`sshade.mesh.handle_files` and the mesh I/O of
-:mod:`sshade.mesh.io`). See :mod:`sshade.cli` for the options.
+:mod:`sshade.mesh.io`). See :mod:`sshade.deform_command` for the options.
 """
 from __future__ import annotations
 
 import sys
 
-from .cli import main as cli_main
+from .deform_command import main as cli_main
 
 
 def main() -> int:
-    """Run :func:`sshade.cli.main` on the command line's arguments."""
+    """Run :func:`sshade.deform_command.main` on the command line's arguments."""
     return cli_main(sys.argv[1:])
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from .clirun import ArgumentParser, run_command
+from .command_errors import ArgumentParser, run_command
 from .errors import SShaDeError
 from .mesh.gltf import GlbAnimationWriter, check_glb_output, glb_extras
 from .mesh.handle_files import apply_def, check_affine, read_moving_handles

@@ -1,7 +1,7 @@
 """Meshes with several connected components (scans, characters with eyes and teeth):
 each component holding handles is deformed by the chosen method, each one without follows
 its nearest deformed component rigidly (:func:`deform_components`, :func:`rigid_follow`;
-:class:`ComponentWise` wraps any :class:`sshade.method.Deformer`).
+:class:`ComponentWise` wraps any :class:`sshade.method_interface.Deformer`).
 
 Used by :func:`sshade.deform`, the evaluator and ``python -m sshade deform``. The rule of
 the rigid following: docs/methods.md ("Implementation notes: sshade/components.py").
@@ -163,7 +163,7 @@ def deform_components(method, V, F, handles, targets, *, return_info: bool = Fal
 
     Parameters
     ----------
-    method : a :class:`sshade.method.Deformer` (``deform(V, F, handles, targets)``,
+    method : a :class:`sshade.method_interface.Deformer` (``deform(V, F, handles, targets)``,
         optional ``info`` dict).
     V : (n, 3) float64 rest positions (mesh units); F : (m, 3) int faces, every component
         a 2-manifold (boundary allowed); handles : (h,) int vertex indices; targets :
@@ -238,7 +238,7 @@ def deform_components(method, V, F, handles, targets, *, return_info: bool = Fal
 
 
 class ComponentWise:
-    """Any :class:`sshade.method.Deformer` made to accept meshes with several connected
+    """Any :class:`sshade.method_interface.Deformer` made to accept meshes with several connected
     components (:func:`deform_components`); same ``name``, ``info`` of the last call.
 
     Examples

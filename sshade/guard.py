@@ -25,7 +25,7 @@ import numpy as np
 from .components import deform_components, n_components
 from .errors import SShaDeError
 from .mesh.validate import check_points, validate_deformed, validate_handles, validate_mesh
-from .method import is_plugin
+from .method_interface import is_plugin
 
 __all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "handle_error", "handles_not_reached",
            "HANDLE_ERROR_MAX_PCT"]
@@ -187,7 +187,7 @@ def handles_not_reached(handle_err_pct, max_pct=HANDLE_ERROR_MAX_PCT) -> str | N
 
 
 def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
-    """Run ``method`` (a :class:`sshade.method.Deformer`) on one input, guarded.
+    """Run ``method`` (a :class:`sshade.method_interface.Deformer`) on one input, guarded.
 
     Parameters
     ----------
@@ -213,7 +213,7 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     called (...)``; not a crash), ``timed out after N s``, or
     an output :func:`sshade.mesh.validate.validate_deformed` refuses.
     KeyboardInterrupt, unchanged; any other exception of one of our own methods (a bug,
-    :func:`sshade.method.is_plugin`), unchanged.
+    :func:`sshade.method_interface.is_plugin`), unchanged.
     """
     name = str(getattr(method, "name", type(method).__name__))
     timeout_s = check_timeout(timeout_s)
@@ -343,7 +343,7 @@ def _alarm(timeout_s):
 
 def _warm(method, n_vertices: int) -> float:
     """Seconds of ``method.warmup(n_vertices)`` (the optional first-call compilation of a
-    method, :class:`sshade.method.Deformer`; 0.0 when it has none or is already warm,
+    method, :class:`sshade.method_interface.Deformer`; 0.0 when it has none or is already warm,
     or reports something that is not a finite number >= 0)."""
     warm = getattr(method, "warmup", None)
     if not callable(warm):

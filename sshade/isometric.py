@@ -15,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .deform import auto_n_low
 from .errors import SShaDeError
 from .lrf import decode, encode, frame_functions
 from .mesh.validate import check_points, validate_mesh
 from .params import SShaDeParams, check_params
+from .pipeline import auto_n_low
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
 from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels
@@ -127,7 +127,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     V_S : (n, 3) float, positions encoded (1:1 with M, aligned with M in space).
     V_Mprime : (n, 3) float, M in the target pose (1:1 with M).
     n_low : int >= 4, farthest-point samples per low-res mesh (capped at n), or
-        ``"auto"`` (:func:`sshade.deform.auto_n_low`).
+        ``"auto"`` (:func:`sshade.pipeline.auto_n_low`).
     n_samplings : int >= 1, samplings averaged (paper: 5-10).
     seed : int, master seed; sampling i uses ``sampling_seeds(seed, n_samplings)[i]``.
     gradient : ``"normalized"`` (orthonormal frames) or ``"raw"`` (paper's g_t).
@@ -137,7 +137,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
         The result does not depend on it.
     n_low, n_samplings, seed, gradient, anchor and workers are checked as :func:`sshade.deform`
-    checks them (:func:`sshade.deform.check_params`).
+    checks them (:func:`sshade.pipeline.check_params`).
 
     Returns
     -------

@@ -1,7 +1,7 @@
 """SShaDe's parameters as one checked, frozen object (paper §3, §4.1 settings).
 
 :func:`check_params` checks and normalises the keyword parameters of
-:func:`sshade.deform.deform` into a :class:`SShaDeParams`, which :mod:`sshade.deform`,
+:func:`sshade.pipeline.deform` into a :class:`SShaDeParams`, which :mod:`sshade.pipeline`,
 :mod:`sshade.prepared`, :mod:`sshade.isometric` and :mod:`sshade.refine` pass around;
 :func:`effective_params` resolves its defaults for run records.
 """
@@ -35,7 +35,7 @@ class SShaDeParams(Mapping):
     workers : int >= 1 or None; max_iter : int >= 1 or None; tol : float > 0;
     gradient : one of :data:`sshade.lrf.GRADIENTS`; anchor : one of :data:`sshade.lrf.ANCHORS`;
     warm_start : bool; protocol : one of :data:`sshade.arap.PROTOCOLS`; etol, gtol : float
-    >= 0 or None. Meanings: :func:`sshade.deform.deform`.
+    >= 0 or None. Meanings: :func:`sshade.pipeline.deform`.
 
     Read-only mapping of the same keys too (``p["n_low"]``, ``dict(p)``, ``**p``);
     :meth:`as_dict` is the plain dict for JSON and run records.
@@ -131,7 +131,7 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
 
     Parameters
     ----------
-    As :func:`sshade.deform.deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None),
+    As :func:`sshade.pipeline.deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None),
     n_samplings (int in [1, 10000]), seed (int in [0, 2**63 - 1]), workers (int in
     [1, 2**31 - 1] or None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or
     None), gradient (one of :data:`sshade.lrf.GRADIENTS`), anchor (one of
@@ -186,7 +186,7 @@ def effective_params(params: SShaDeParams) -> dict:
     ``max_iter`` the protocol's cap (:data:`sshade.arap.DEFAULT_MAX_ITER`), ``etol`` /
     ``gtol`` the converged criterion's (:func:`sshade.arap.make_criterion`), ``workers``
     the pool size for ``n_samplings`` samplings on this machine; ``n_low`` ``"auto"``
-    stays the rule (:func:`sshade.deform.auto_n_low`, per mesh: each case's value is in
+    stays the rule (:func:`sshade.pipeline.auto_n_low`, per mesh: each case's value is in
     its info, ``n_low``).
 
     Returns

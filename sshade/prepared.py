@@ -18,13 +18,13 @@ import numpy as np
 
 from .arap import ArapDeformer
 from .cores import pool_size
-from .deform import SamplingJob, handle_pre_pct, low_res_size, prepare_samplings
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.halfedge import count_components
 from .mesh.unit_frame import UnitFrame, unit_frame
 from .mesh.validate import validate_handle_indices, validate_mesh, validate_targets
 from .params import SShaDeParams, check_params
+from .pipeline import SamplingJob, handle_pre_pct, low_res_size, prepare_samplings
 from .remesh import mesh_topology
 from .sampling import average, sampling_seeds, warm_kernels
 
@@ -33,7 +33,7 @@ __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 #: The low-res ARAP's acceleration from the second solve on (``accelerate``,
 #: ``anderson_m`` of :meth:`sshade.arap.solver.ArapSolver.solve`), with the history kept
 #: from solve to solve (``carry_history``); the first solve keeps
-#: :func:`sshade.deform.deform`'s L-BFGS, so that it is ``deform`` bit for bit. From a start
+#: :func:`sshade.pipeline.deform`'s L-BFGS, so that it is ``deform`` bit for bit. From a start
 #: as near as the extrapolated one, Anderson acceleration met the same stopping rule in
 #: fewer iterations than L-BFGS on both meshes of ``benchmarks/frames.py``, and a window of
 #: 16 in fewer than one of 8 (a longer one costs more per iteration than it saves).
@@ -298,7 +298,7 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
         :func:`prepare`). workers : int >= 1 or None, threads the samplings run on
         (:func:`sshade.cores.pool_size`: None = the cores this process may use, at most
         ``n_samplings``); the results do not depend on it. The other parameters as
-        :func:`sshade.deform.deform`.
+        :func:`sshade.pipeline.deform`.
 
     Returns
     -------
@@ -308,16 +308,16 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     Raises
     ------
     SShaDeError on an invalid mesh or handle indices, a bad parameter
-    (:func:`sshade.deform.check_params`), or a mesh of several connected components
-    (:func:`sshade.deform.deform` handles those).
+    (:func:`sshade.pipeline.check_params`), or a mesh of several connected components
+    (:func:`sshade.pipeline.deform` handles those).
 
     Warns
     -----
-    :class:`sshade.deform.LowResSkippedWarning` when ``n_low`` is not below the vertex count.
+    :class:`sshade.pipeline.LowResSkippedWarning` when ``n_low`` is not below the vertex count.
 
     Examples
     --------
-    >>> from sshade.arap.cases import twisted_bar
+    >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(45.0, h=0.25)
     >>> with prepare(V, F, h, n_low=100, n_samplings=2) as p:
     ...     bool(np.allclose(p.solve(T)[h], T))

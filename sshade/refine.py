@@ -15,9 +15,9 @@ import time
 import numpy as np
 
 from .arap import make_criterion, solve_arap
-from .deform import deform_with, warm_sshade
 from .mesh.validate import validate_handles, validate_mesh
 from .params import SShaDeParams, check_params, effective_params
+from .pipeline import deform_with, warm_sshade
 from .warmup import warm_fullres
 
 __all__ = ["SShaDeRefine"]
@@ -32,7 +32,7 @@ class SShaDeRefine:
         (:class:`sshade.arap.criterion.Criterion`; None: its defaults).
     refine_max_iter : int, cap on the refinement's iterations.
     **sshade : the parameters of :func:`sshade.deform` (n_low, n_samplings, seed,
-        workers, protocol, ...), checked at construction (:func:`sshade.deform.check_params`).
+        workers, protocol, ...), checked at construction (:func:`sshade.pipeline.check_params`).
 
     After :meth:`deform`, ``info`` holds SShaDe's info plus ``sshade_s`` (its wall time),
     ``refine_s``, ``refine_iterations``, ``iterations`` (= refine_iterations),
@@ -87,7 +87,7 @@ class SShaDeRefine:
 
     def effective_params(self) -> dict:
         """The parameters :meth:`deform` runs with: SShaDe's, every default resolved
-        (:func:`sshade.deform.effective_params`), and the refinement's (``refine_energy``,
+        (:func:`sshade.pipeline.effective_params`), and the refinement's (``refine_energy``,
         ``refine_etol``, ``refine_gtol``, ``refine_max_iter``)."""
         return {**effective_params(self.params), "refine_energy": self.energy, "refine_etol": self.criterion.etol,
                 "refine_gtol": self.criterion.gtol, "refine_max_iter": self.refine_max_iter}

@@ -17,13 +17,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._keys import unique_int
 from .closed_ball import closed_ball, closed_ball_local, vertex_faces
 from .cores import available_cores
 from .errors import SShaDeError
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import HalfEdges, boundary_loops, halfedges, vertex_normals
 from .remesh_repair import degenerate_faces, faces_to_repair, fixed_faces, nerve_faces, voronoi_vertex_seeds
+from .unique import unique_int
 
 __all__ = ["RemeshResult", "remesh", "remesh_drawn", "redraw_seed", "MAX_REDRAWS", "MeshTopology", "mesh_topology"]
 

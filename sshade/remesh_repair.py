@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._keys import unique_int
+from .unique import unique_int
 
 __all__ = ["nerve_faces", "flipped_faces", "degenerate_faces", "faces_to_repair", "fixed_faces", "voronoi_vertex_seeds",
            "MIN_FACE_QUALITY"]

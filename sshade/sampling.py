@@ -1,5 +1,5 @@
 """The k samplings of SShaDe run side by side (paper §3.3): one process pool, shared by
-the handle pipeline (:mod:`sshade.deform`), :mod:`sshade.prepared` and the
+the handle pipeline (:mod:`sshade.pipeline`), :mod:`sshade.prepared` and the
 correspondence transfers (:mod:`sshade.isometric`); the samplings' seeds and average.
 
 Example::
@@ -116,7 +116,7 @@ class SamplingPool:
 
     Parameters
     ----------
-    job : the object every task works on (e.g. :class:`sshade.deform.SamplingJob`: meshes,
+    job : the object every task works on (e.g. :class:`sshade.pipeline.SamplingJob`: meshes,
         seeds, options), handed to each forked worker once, at fork (never pickled per task).
     workers : int >= 1, processes (:func:`sshade.cores.pool_size`: None = the cores this
         process may use, :func:`sshade.cores.available_cores`); 1 runs the tasks in this process

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .animate import DEFAULT_FPS, read_animation_npz
-from .clirun import ArgumentParser, run_command
+from .command_errors import ArgumentParser, run_command
 from .errors import SShaDeError
 from .mesh.gltf import read_glb_animation
 from .mesh.handle_files import apply_def, read_moving_handles

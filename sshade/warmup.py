@@ -2,7 +2,7 @@
 (or its cache loads) and lazy imports' first-call costs happen outside the timed call.
 
 Every method of the evaluator has a ``warmup(n_vertices=None) -> float`` built on
-:func:`warm_once` (SShaDe's: :func:`sshade.deform.warm_sshade`); the evaluator records its
+:func:`warm_once` (SShaDe's: :func:`sshade.pipeline.warm_sshade`); the evaluator records its
 seconds as ``compile_s``. Also :func:`tiny_problem`, :func:`warm_fullres`,
 :func:`warm_parallel_kernels`. This module imports nothing above the ARAP solver; cold
 caches: docs/methods.md ("Implementation notes: sshade/warmup.py").

@@ -15,10 +15,10 @@ import sys
 import time
 from importlib.metadata import entry_points
 
-from .clirun import ArgumentParser, run_command
-from .deform import warm_sshade
+from .command_errors import ArgumentParser, run_command
 from .kernel_cache import cache_folder, compile_kernels
 from .params import check_params
+from .pipeline import warm_sshade
 from .warmup import warm_fullres, warm_parallel_kernels
 
 __all__ = ["ENTRY_POINTS", "warm_everything", "main"]

@@ -2,7 +2,7 @@
 as ``_target_: tests.bad_methods.<Class>`` in the evaluator's ``methods`` or as
 ``--method tests.bad_methods.<Class>`` in ``python -m sshade deform``.
 
-Each one breaks one promise of :class:`sshade.method.Deformer`; none of them may
+Each one breaks one promise of :class:`sshade.method_interface.Deformer`; none of them may
 corrupt a written result, stop a run, or put a bold "best" into a table.
 """
 from __future__ import annotations

@@ -10,7 +10,7 @@ import pytest
 
 from sshade import prepare
 from sshade.animate import NPZ_KEY
-from sshade.cli import main
+from sshade.deform_command import main
 from sshade.mesh.gltf import glb_extras, read_glb_animation
 from sshade.mesh.handle_files import write_sel
 from sshade.mesh.io import read_mesh

@@ -6,7 +6,7 @@ import pytest
 from scipy.sparse.linalg import splu
 
 from sshade.arap import ENERGIES, build_operators, fit_rotations, rigid_fit
-from sshade.arap.cases import bent_cylinder, twisted_bar
+from sshade.arap.problems import bent_cylinder, twisted_bar
 from sshade.errors import SShaDeError
 
 IGL_ENERGY = {"spokes": igl.ARAP_ENERGY_TYPE_SPOKES, "spokes_and_rims": igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS}

@@ -14,7 +14,7 @@ from sshade.arap import (
     build_operators,
     solve_arap,
 )
-from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
+from sshade.arap.problems import bent_cylinder, lifted_plane, twisted_bar
 from sshade.errors import SShaDeError
 
 try:

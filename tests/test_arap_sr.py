@@ -21,7 +21,7 @@ from eval.metrics.reference import (
     sr_energy,
 )
 from sshade.arap import DEEP_CRITERION, DEFAULT_CRITERION, Criterion, arap_deform, solve_arap
-from sshade.arap.cases import bent_cylinder, lifted_plane, twisted_bar
+from sshade.arap.problems import bent_cylinder, lifted_plane, twisted_bar
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
@@ -70,7 +70,7 @@ def test_smoothing_makes_rotations_vary_less():
 
 
 # --------------------------------------------------------------- converged protocol
-# Small survey-style cases (sshade.arap.cases) so each test takes seconds.
+# Small survey-style cases (sshade.arap.problems) so each test takes seconds.
 SMALL = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),
          "lifted_plane": lambda: lifted_plane(n_target=2500)}
 

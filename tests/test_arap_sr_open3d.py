@@ -16,9 +16,9 @@ import igl
 import numpy as np
 import pytest
 
-from baselines.arap import ARAP
 from baselines.arap_sr import ARAPSR
-from sshade.arap.cases import bent_cylinder, twisted_bar
+from baselines.fullres_arap import ARAP
+from sshade.arap.problems import bent_cylinder, twisted_bar
 
 from .optional import optional_import
 

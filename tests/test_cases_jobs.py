@@ -1,4 +1,4 @@
-"""The evaluator's runs side by side (``jobs``, eval/experiments/cases/jobs.py):
+"""The evaluator's runs side by side (``jobs``, eval/experiments/cases/case_jobs.py):
 the same rows as one process, every pair run once and stored, the workers' log lines in
 eval.log, the rule of ``jobs=auto``, a bad value refused before any work, the plan's
 wall time on several workers (eval/run/plan.py)."""
@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import pandas as pd
 import pytest
 
-from eval.experiments.cases.jobs import AUTO_MIN_S, describe, job_count
+from eval.experiments.cases.case_jobs import AUTO_MIN_S, describe, job_count
 from eval.run.plan import make_plan, render_plan
 from eval.run.progress import CostModel
 from harness.jobs import thread_limit

@@ -9,7 +9,7 @@ import pytest
 from baselines import ARAP, ARAPSR, Elastic
 from baselines.coarse_start import COARSE_MIN_RATIO, check_start, coarse_start, start_rotations, uses_coarse
 from sshade.arap import DEEP_CRITERION, arap_deform, build_operators, solve_arap
-from sshade.arap.cases import bent_cylinder, lifted_plane
+from sshade.arap.problems import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
 
 ENERGIES = ("spokes", "spokes_and_rims")

@@ -86,11 +86,11 @@ def _touch(path):
 def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     from baselines import ARAP
     from baselines.implicit_arap import ImplicitARAP
-    arap = import_closure(("baselines.arap",))
+    arap = import_closure(("baselines.fullres_arap",))
     assert {"sshade.arap.solver", "sshade.mesh.validate", "baselines"} <= set(arap)
     harness = import_closure(ROW_HARNESS)
-    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard", "eval.run.store",
-            "harness.jobs", "harness.registry"} <= set(harness)
+    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard", "eval.run.result_store",
+            "harness.jobs", "harness.method_registry"} <= set(harness)
     presentation = {"eval.tables", "eval.report", "eval.present.meshview", "eval.run.plan", "defaust.build",
                     "defaust.export", "eval.reproduce", "eval.app"}
     assert not presentation & (set(arap) | set(harness))

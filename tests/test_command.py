@@ -1,4 +1,4 @@
-"""harness/command.py and sshade/clirun.py, the command wrappers: bad numbers, Hydra's own
+"""harness/command.py and sshade/command_errors.py, the command wrappers: bad numbers, Hydra's own
 errors, Ctrl-C, OSError and the builder's checks give ONE ``error: ...`` line (or
 ``interrupted``), the documented exit status, no traceback, and happen before any work (no
 folder, no partial build).
@@ -162,7 +162,7 @@ BAD_DEFORM = [
 
 def test_deform_api_rejects_junk_numbers():
     from sshade import deform
-    from sshade.deform import check_params
+    from sshade.pipeline import check_params
     assert check_params(n_low=4.0, seed=2**32 - 1, n_samplings=3, warm_start=np.bool_(False))["n_low"] == 4
     for kw in BAD_DEFORM:
         with pytest.raises(SShaDeError, match=next(iter(kw))):
@@ -224,8 +224,8 @@ def test_defaust_cli_bad_values_and_hydra_errors(tmp_path):
 def test_hydra_errors_are_one_line(tmp_path):
     cases = [(["eval", "foo=1"], "foo"), (["eval", "dataset=nope"], "dataset/nope"),
              (["eval", "hydra/launcher=nope"], "launcher/nope"), (["eval", "methods=[A"], "[A"),
-             (["eval.sweep", "foo=1"], "foo"), (["eval.sweep", "-m", "sshade.n_low=1,2", "foo=1"], "foo"),
-             (["eval.sweep", "-m", "dataset=faust,nope"], "dataset/nope"), (["eval", "--cfg", "job", "foo=1"], "foo")]
+             (["eval.sweeps", "foo=1"], "foo"), (["eval.sweeps", "-m", "sshade.n_low=1,2", "foo=1"], "foo"),
+             (["eval.sweeps", "-m", "dataset=faust,nope"], "dataset/nope"), (["eval", "--cfg", "job", "foo=1"], "foo")]
     res = _run_many([c for c, _ in cases] + [["eval", "--cfg", "job", "experiment=ci"]], tmp_path)
     for (_cmd, key), r in zip(cases, res):
         _one_error_line(r, key)
@@ -287,10 +287,10 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
     import defaust.cli
     import eval.app
     import eval.reproduce
-    import eval.sweep
+    import eval.sweeps.sweep_command
     import eval.tables
     import harness.__main__
-    import sshade.cli
+    import sshade.deform_command
 
     def exit_code(fn, argv=None):
         def call():
@@ -306,19 +306,20 @@ def _wrapper_calls(tmp_path, monkeypatch, exc):
 
     monkeypatch.setattr(eval.app, "run_experiment", _raise(exc))
     monkeypatch.setattr(defaust.cli, "run", _raise(exc))
-    monkeypatch.setattr(sshade.cli, "deform_file", _raise(exc))
+    monkeypatch.setattr(sshade.deform_command, "deform_file", _raise(exc))
     monkeypatch.setattr(eval.tables, "retabulate", _raise(exc))
-    monkeypatch.setattr(eval.sweep, "aggregate_sweep", _raise(exc))
+    monkeypatch.setattr(eval.sweeps.sweep_command, "aggregate_sweep", _raise(exc))
     monkeypatch.setattr(subprocess, "call", _raise(exc))
     run_dir = _cases_dir(tmp_path / "run")
     return [("eval", exit_code(eval.app.main,
                                ["eval", "experiment=ci", "dataset.root=/x", f"out_dir={tmp_path / 'o'}"])),
             ("defaust", exit_code(defaust.cli.main, ["defaust", "source=synthetic", f"out={tmp_path / 'd'}"])),
-            ("deform", exit_code(lambda: sshade.cli.main(["deform", "m.obj", "-o", "o.obj", "--handles", "h.json"]))),
+            ("deform", exit_code(lambda: sshade.deform_command.main(["deform", "m.obj", "-o", "o.obj",
+                                                                      "--handles", "h.json"]))),
             ("harness deform", exit_code(lambda: harness.__main__.main(["deform", "m.obj", "-o", "o.obj", "--handles",
                                                                          "h.json", "--method", "ARAP"]))),
             ("tables", exit_code(lambda: eval.tables.main([str(run_dir)]))),
-            ("sweep", exit_code(lambda: eval.sweep.main(["aggregate", str(tmp_path)]))),
+            ("sweep", exit_code(lambda: eval.sweeps.sweep_command.main(["aggregate", str(tmp_path)]))),
             ("reproduce", exit_code(lambda: eval.reproduce.main([])))]
 
 
@@ -388,8 +389,8 @@ def test_tables_cli_usage_and_missing_folders(tmp_path, capsys):
 # ----------------------------------------------------------------------------- 7. one prefix
 def test_argparse_errors_and_failures_start_with_error(tmp_path, monkeypatch, capsys):
     import eval.reproduce
-    import eval.sweep
-    for call in (lambda: eval.reproduce.main(["--bogus"]), lambda: eval.sweep.main(["aggregate"])):
+    import eval.sweeps.sweep_command
+    for call in (lambda: eval.reproduce.main(["--bogus"]), lambda: eval.sweeps.sweep_command.main(["aggregate"])):
         with pytest.raises(SystemExit) as e:
             call()
         assert e.value.code == 2
@@ -399,7 +400,8 @@ def test_argparse_errors_and_failures_start_with_error(tmp_path, monkeypatch, ca
     assert eval.reproduce.main([]) == 1
     err = _stderr_lines(capsys)
     assert err[-1].startswith("error: ") and "defaust" in err[-1], err
-    monkeypatch.setattr(eval.sweep, "_hydra_job", lambda: (tmp_path / "job", ["sshade.n_low=2"], 3, None))
+    monkeypatch.setattr(eval.sweeps.sweep_command, "_hydra_job",
+                        lambda: (tmp_path / "job", ["sshade.n_low=2"], 3, None))
     monkeypatch.setattr("eval.app.run_experiment", _raise(SShaDeError("n_low must be at least 4")))
-    assert eval.sweep.sweep_job(_compose_eval(CI))["status"] == "failed"
+    assert eval.sweeps.sweep_command.sweep_job(_compose_eval(CI))["status"] == "failed"
     assert _stderr_lines(capsys)[-1] == "error: job 3: failed: n_low must be at least 4"

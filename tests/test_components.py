@@ -13,7 +13,7 @@ from scipy.spatial.distance import pdist
 from baselines import Elastic
 from sshade import deform
 from sshade.arap import rigid_fit
-from sshade.arap.cases import bent_cylinder
+from sshade.arap.problems import bent_cylinder
 from sshade.components import ComponentWise, component_labels, deform_components, drop_unreferenced
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh
@@ -72,7 +72,7 @@ def test_any_method_through_deform_components(two):
 def test_handles_on_both_components_and_a_far_free_one():
     """Two handled boxes and a free one near the second: each handled box is deformed on
     its own, the free box follows the nearer (second) box, not the first."""
-    from sshade.arap.cases import box_surface
+    from sshade.arap.problems import box_surface
     B, FB = box_surface((1.0, 1.0, 1.0), 0.34)
     n = len(B)
     V = np.vstack([B, B + [3.0, 0, 0], B * 0.3 + [3.2, 2.0, 0.3]])

@@ -31,7 +31,7 @@ def test_every_experiment_but_the_cases_one_registers_a_check():
 def test_a_registered_check_is_what_check_config_runs(monkeypatch):
     """check_config calls the experiment kind's registered check, whatever it is."""
     seen = []
-    import eval.experiments.registry as reg
+    import eval.experiments.experiment_registry as reg
     monkeypatch.setitem(reg._CHECKS, "tosca", lambda cfg: seen.append(cfg.tosca.min_vertices))
     check_config(OmegaConf.create({"experiment": {"kind": "tosca"}, "tosca": {"min_vertices": "abc"}}))
     assert seen == ["abc"]  # the stand-in accepted what the real check refuses

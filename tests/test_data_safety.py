@@ -119,7 +119,7 @@ def test_a_typo_in_dataset_root_builds_nothing(tmp_path, monkeypatch):
 def test_build_policy(tmp_path, monkeypatch):
     from omegaconf import OmegaConf
 
-    from eval.datasets.defaust import build_wanted as _build_wanted
+    from eval.datasets.defaust_dataset import build_wanted as _build_wanted
     from eval.run.paths import abs_path
     monkeypatch.chdir(tmp_path)
     default, other = abs_path("data/defaust"), abs_path("elsewhere")

@@ -165,7 +165,7 @@ def _build(out, cache, *extra):
 
 def test_build_is_deterministic_with_exact_high_res_ground_truth(model, anny_cache, tmp_path, monkeypatch):
     from defaust.dataset import load_handles
-    from eval.datasets.defaust import load_defaust
+    from eval.datasets.defaust_dataset import load_defaust
     from sshade.mesh.io import read_mesh
 
     _fast_highres(monkeypatch)

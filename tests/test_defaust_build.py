@@ -19,7 +19,7 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.dataset import load_handles
 from defaust.handles import snap_handles
 from defaust.store import sha256_file
-from eval.datasets.defaust import load_defaust
+from eval.datasets.defaust_dataset import load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import validate_mesh

@@ -13,7 +13,7 @@ import pytest
 
 import defaust
 from defaust.dataset import load, load_handles, read_manifest, verify
-from eval.datasets.defaust import load_defaust
+from eval.datasets.defaust_dataset import load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 

@@ -1,4 +1,4 @@
-"""``python -m sshade deform`` (sshade/cli.py, sshade/mesh/handle_files.py): every handle
+"""``python -m sshade deform`` (sshade/deform_command.py, sshade/mesh/handle_files.py): every handle
 format gives what sshade.deform gives on the same handles and targets; unreferenced
 vertices, components and --repair; every bad file gets one ``error:`` line and status 2."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 
 from examples.twisted_bar import twist_matrix, write_case
 from sshade import deform
-from sshade.cli import main
+from sshade.deform_command import main
 from sshade.mesh.handle_files import FIXED, FREE, HANDLE, apply_def, write_def, write_sel
 from sshade.mesh.io import read_mesh, write_mesh
 
@@ -119,8 +119,8 @@ def test_harness_deform_runs_other_methods_and_plugins(bar, tmp_path, capsys):
 def test_sshade_deform_and_harness_deform_build_the_same_sshade(bar, tmp_path, capsys):
     """The method package's command builds SShaDe and SShaDe+refine without the harness,
     with the parameters the harness's registry gives them (conf/method/*.yaml)."""
-    from harness.registry import named_or_plugin
-    from sshade.cli import sshade_method
+    from harness.method_registry import named_or_plugin
+    from sshade.deform_command import sshade_method
     for name in ("SShaDe", "SShaDe+refine"):
         ours, theirs = sshade_method(name, {"n_samplings": 2}), named_or_plugin(name, {"n_samplings": 2})
         assert type(ours) is type(theirs) and vars(ours).keys() == vars(theirs).keys()

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.methods import make_methods
+from eval.method_config import make_methods
 from eval.tables import ok_mask, summarize, to_latex, to_markdown, write_tables
 from sshade.errors import SShaDeError
 
@@ -150,7 +150,7 @@ def test_bad_config_raises_before_work(tmp_path, faust_root, override, message):
 
 def test_method_failure_is_recorded_and_run_continues(tmp_path, faust_root, monkeypatch):
     """A method raising SShaDeError on a case gets an `error` entry; the others go on."""
-    import eval.methods as em
+    import eval.method_config as em
     from eval.app import run
 
     class Broken:

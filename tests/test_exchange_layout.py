@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from eval.datasets.case import DeformationCase
+from eval.datasets.deformation_case import DeformationCase
 from eval.exchange.layout import CASE_FILES, INDEX, read_times, result_path, write_case
 from sshade.errors import SShaDeError
 from tests.conftest import ROOT, icosphere, subprocess_env

@@ -150,8 +150,8 @@ def test_a_malformed_times_file_is_refused_before_any_case(tmp_path, faust_root)
 
 def test_a_case_aware_method_is_told_its_case_but_not_the_truth(faust_root):
     from eval.datasets import load_cases
+    from eval.experiments.cases.case_references import CaseReferences
     from eval.experiments.cases.pair import run_pair
-    from eval.experiments.cases.references import CaseReferences
     case = load_cases("faust", faust_root, limit=1)[0]
 
     class Aware:

@@ -10,9 +10,9 @@ from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
 from eval.experiments import animation, convergence, experiments, pose_transfer, tosca
-from eval.experiments.cases import experiment as cases
-from eval.experiments.scaling import experiment as scaling
-from eval.methods import make_methods
+from eval.experiments.cases import cases_experiment as cases
+from eval.experiments.scaling import scaling_experiment as scaling
+from eval.method_config import make_methods
 
 #: experiment (conf/experiment/NAME.yaml) -> its experiment module.
 EXPERIMENTS = {"main": cases, "ci": cases, "faust": cases, "shapes": cases, "scaling": scaling, "tosca": tosca,

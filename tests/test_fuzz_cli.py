@@ -4,7 +4,7 @@ Small valid inputs (a subdivided icosahedron as OBJ, OFF, ASCII and binary PLY, 
 ``.sel`` + ``.def``, ``.json``, ``.csv``) are mutated a few hundred times (seeded:
 truncation, flipped bytes, numbers scaled by 1e+-200, permuted, dropped and duplicated
 lines, inserted garbage). All cases run in ONE child process (a driver calling
-:func:`sshade.cli.main` in-process, C-level fds 1 and 2 redirected per case) which
+:func:`sshade.deform_command.main` in-process, C-level fds 1 and 2 redirected per case) which
 logs each case before and after, so a native abort or a hang names its mutation.
 Each case must either exit 0 with an output mesh that reads back finite with the input's
 referenced vertex count, or exit 2 with exactly one ``error: `` line on stderr; never a
@@ -27,7 +27,7 @@ FAST = ["--n-low", "20", "--k", "1", "--param", "workers=1"]
 
 DRIVER = r'''
 import json, os, signal, sys, traceback
-from sshade.cli import main
+from sshade.deform_command import main
 
 cases = json.load(open(sys.argv[1]))
 log = open(sys.argv[2], "a")

@@ -1,4 +1,4 @@
-"""The result store read as untrusted input (eval/run/store.py): edited, truncated, foreign
+"""The result store read as untrusted input (eval/run/result_store.py): edited, truncated, foreign
 records are never tabulated.
 
 Seeded mutations of stored records (truncation, flipped bytes, edited cells of every
@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.run.store import ResultStore, check_row, pair_key, record_digest
+from eval.run.result_store import ResultStore, check_row, pair_key, record_digest
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env

@@ -287,7 +287,7 @@ def test_bad_method_names_are_refused(name):
 
 
 def test_good_method_names_and_case_insensitive_duplicates():
-    from eval.methods import make_methods
+    from eval.method_config import make_methods
     from harness.plugins import build_method
     for name in ("SShaDe+refine", "Mine (v2)", "ARAP-SR", "a/b 1.0", "x" * 64):
         assert build_method({"_target_": "tests.plugin_example.MyMethod", "name": name}).name == name

@@ -17,10 +17,10 @@ HELP = {
     "-m eval": ["usage: python -m eval [KEY=VALUE ...]", "Evaluate deformation methods", "out_dir=DIR",
                 "outputs/<experiment>/<date_time>", "== Configuration groups ==", "dataset: defaust, faust, shapes",
                 "ci, convergence, export, faust, main,", "== Config ==", "methods:"],
-    "-m eval.sweep": ["usage: python -m eval.sweep", "resume SWEEP_DIR", "aggregate SWEEP_DIR", "-m dataset=faust",
+    "-m eval.sweeps": ["usage: python -m eval.sweeps", "resume SWEEP_DIR", "aggregate SWEEP_DIR", "-m dataset=faust",
                       "hydra/launcher=joblib", "outputs/multirun/<date_time>"],
-    "-m eval.sweep resume": ["usage: python -m eval.sweep resume SWEEP_DIR", "killed, failed and missing"],
-    "-m eval.sweep aggregate": ["usage: python -m eval.sweep aggregate", "sweep_table"],
+    "-m eval.sweeps resume": ["usage: python -m eval.sweeps resume SWEEP_DIR", "killed, failed and missing"],
+    "-m eval.sweeps aggregate": ["usage: python -m eval.sweeps aggregate", "sweep_table"],
     "-m eval.tables": ["usage: python -m eval.tables", "RUN_DIR"],
     "-m eval.report": ["usage: python -m eval.report", "--index", "--screenshot"],
     "-m eval.reproduce": ["usage: python -m eval.reproduce", "--dry-run"],
@@ -73,7 +73,7 @@ def _entry_points() -> set[str]:
 def test_every_entry_point_is_listed():
     """A new command gets its line in HELP."""
     found = _entry_points()
-    assert "-m eval.sweep" in found and "benchmarks/remesh_speed.py" in found  # the search works
+    assert "-m eval.sweeps" in found and "benchmarks/remesh_speed.py" in found  # the search works
     assert found <= set(HELP), sorted(found - set(HELP))
 
 
@@ -90,14 +90,14 @@ def test_help_prints_usage_and_exits_0(cmd, tmp_path):
 
 
 def test_short_h_is_help_too(tmp_path):
-    r = subprocess.run([*_argv("-m eval.sweep"), "-h"], cwd=tmp_path, env=subprocess_env(), capture_output=True,
+    r = subprocess.run([*_argv("-m eval.sweeps"), "-h"], cwd=tmp_path, env=subprocess_env(), capture_output=True,
                        text=True, timeout=300)
-    assert r.returncode == 0 and r.stdout.startswith("usage: python -m eval.sweep")
+    assert r.returncode == 0 and r.stdout.startswith("usage: python -m eval.sweeps")
 
 
 def test_sweep_resume_without_folder_is_one_error_line(tmp_path):
-    r = subprocess.run([*_argv("-m eval.sweep"), "resume"], cwd=tmp_path, env=subprocess_env(),
+    r = subprocess.run([*_argv("-m eval.sweeps"), "resume"], cwd=tmp_path, env=subprocess_env(),
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 2
-    assert r.stderr.strip().splitlines() == ["error: usage: python -m eval.sweep resume SWEEP_DIR "
-                                             "(python -m eval.sweep --help)"]
+    assert r.stderr.strip().splitlines() == ["error: usage: python -m eval.sweeps resume SWEEP_DIR "
+                                             "(python -m eval.sweeps --help)"]

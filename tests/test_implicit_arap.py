@@ -177,7 +177,7 @@ def test_field_starts_at_identity():
 
 
 def test_registered_and_ordered():
-    from harness.registry import builtin_methods, file_spec, table_order
+    from harness.method_registry import builtin_methods, file_spec, table_order
     assert "Implicit-ARAP" in builtin_methods()
     assert table_order().index("Implicit-ARAP") == table_order().index("ARAP-SR") + 1
     spec = file_spec("Implicit-ARAP")

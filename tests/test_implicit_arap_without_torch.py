@@ -18,7 +18,7 @@ class _Broken:
             raise OSError("libtorch_cpu.so: cannot open shared object file: No such file or directory")
 sys.meta_path.insert(0, _Broken())
 """  # `import torch` raises OSError, as an installed PyTorch whose library does not load
-BUILD = ("import baselines; from harness.registry import build_builtin\n"
+BUILD = ("import baselines; from harness.method_registry import build_builtin\n"
          "try:\n    build_builtin('Implicit-ARAP')\nexcept Exception as e:\n"
          "    print(type(e).__name__); print(e)\n")
 

@@ -3,7 +3,7 @@ worker fails only the pair it ran (its row names the signal) and the advised com
 keeps every stored pair; a plug-in that ends its process is a failed pair; the workers
 and multiprocessing's resource tracker never outlive the main process; SIGTERM ends the
 run as interrupted; a stopped worker cannot hang a Ctrl-C; a Ctrl-C at a terminal
-prints no worker traceback (eval/experiments/cases/jobs.py, harness/jobs.py).
+prints no worker traceback (eval/experiments/cases/case_jobs.py, harness/jobs.py).
 
 Every signal is sent while the plug-in :class:`tests.worker_methods.Waits` is known to
 be mid-run (it wrote its ready file), never after a guessed delay.

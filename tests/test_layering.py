@@ -80,20 +80,23 @@ def test_imports_only_go_down():
 
 #: eval/'s floors, bottom up: subpackage (or top module) -> floor. A module of eval/ belongs
 #: to the longest name here that is it or its package (``eval``: the commands on top, i.e.
-#: app, config_check, report, leaderboard, reproduce, sweep, __main__); it may import its
-#: own part of eval/ or a lower floor, never a part on its own floor or above.
+#: app, config_check, report, leaderboard, reproduce, __main__; above them the sweep
+#: command eval.sweeps.sweep_command, run by eval.sweeps.__main__); it may import its own
+#: part of eval/ or a lower floor, never a part on its own floor or above.
 EVAL_FLOORS = {
     "eval.run": 0,  # the ground: run folder, store, names, run.json, plan, progress, subsets, code identity
-    "eval.registry": 0,  # the plug-in registries' common part
+    "eval.registry_base": 0,  # the plug-in registries' common part
     "eval.metrics": 1,  # what a result is scored by
     "eval.datasets": 1,  # the cases
-    "eval.methods": 1,  # the methods from the config
+    "eval.method_config": 1,  # the methods from the config
     "eval.present": 2,  # presentation: figures, table text, stops, rows, views
     "eval.exchange": 2,  # results computed outside the harness
     "eval.tables": 3,  # the comparison tables, written by the experiments and the sweeps
     "eval.experiments": 4,  # the experiment kinds
     "eval.sweeps": 4,  # a sweep's files, table and launcher
     "eval": 5,  # the commands
+    "eval.sweeps.sweep_command": 6,  # the sweep command, each job a run of eval.app
+    "eval.sweeps.__main__": 7,  # runs it: python -m eval.sweeps
 }
 
 
@@ -260,7 +263,7 @@ def test_no_builtin_method_name_is_a_string_literal_in_eval():
     module of eval/ is a built-in method's name (docstrings aside; prose that mentions
     one, such as a message or a column title, is not a name), so adding or renaming a
     method edits no harness code."""
-    from harness.registry import builtin_methods
+    from harness.method_registry import builtin_methods
     names = set(builtin_methods())
     found = []
     for mod, path in MODULES.items():

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from sshade.cli import main
+from sshade.deform_command import main
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_handles, validate_mesh

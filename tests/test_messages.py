@@ -86,7 +86,7 @@ def test_defaust_dropped_handles_one_summary_line(caplog, tmp_path):
     """Per case, a dropped handle is a DEBUG line; :func:`summarise_dropped` says it
     once, as what it is (the count stays per case in n_handles_dropped)."""
     from defaust.handles import snap_handles
-    from eval.datasets.defaust import summarise_dropped
+    from eval.datasets.defaust_dataset import summarise_dropped
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], float)
     P = np.array([[0, 0, 0], [0.01, 0, 0], [1, 0, 0]], float)
     with caplog.at_level(logging.DEBUG):

@@ -60,8 +60,8 @@ def test_plugin_outside_the_repository_in_its_own_git_tree(tmp_path, monkeypatch
 def test_builtin_method_is_recorded_inside_the_repository():
     from sshade import SShaDe
     (rec,) = method_sources([SShaDe(n_low=100)])
-    assert rec["class"] == "sshade.deform.SShaDe" and rec["in_repo"] is True
-    assert rec["file"].endswith("sshade/deform.py") and len(rec["sha256"]) == 64
+    assert rec["class"] == "sshade.pipeline.SShaDe" and rec["in_repo"] is True
+    assert rec["file"].endswith("sshade/pipeline.py") and len(rec["sha256"]) == 64
 
 
 def test_run_json_lists_the_plugin_source(tmp_path, monkeypatch, shared_data):

@@ -1,4 +1,4 @@
-"""The advice of SShaDe's LowResSkippedWarning (sshade/deform.py): an n_low it names is
+"""The advice of SShaDe's LowResSkippedWarning (sshade/pipeline.py): an n_low it names is
 one check_params accepts and one below the mesh's vertex count; on a mesh too small for
 any, it says so instead of asking for a smaller value."""
 from __future__ import annotations
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from sshade import deform
-from sshade.deform import LowResSkippedWarning, check_params
 from sshade.errors import SShaDeError
+from sshade.pipeline import LowResSkippedWarning, check_params
 
 TETRAHEDRON = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float),
                np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))

@@ -76,7 +76,7 @@ def test_sweep_refuses_a_users_folder(tmp_path):
     user.mkdir()
     (user / "sweep.json").write_text("{\"mine\": true}\n")
     before = _snapshot(user)
-    r = _run([sys.executable, "-m", "eval.sweep", "-m", "dataset=faust", "dataset.root=../shared/data/faust_reg",
+    r = _run([sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust", "dataset.root=../shared/data/faust_reg",
               "dataset.limit=1", "methods=[SShaDe]", "sshade.n_low=300,500", f"hydra.sweep.dir={user}"])
     msg = _one_error(r)
     assert "refusing to write into" in msg and str(user) in msg
@@ -227,7 +227,7 @@ def test_anny_figures_refuses_results(capsys):
 
 
 def test_tables_and_sweep_aggregate_refuse_results(capsys):
-    from eval.sweep import main as sweep_main
+    from eval.sweeps.sweep_command import main as sweep_main
     from eval.tables import main as tables_main
     res = ROOT / "results"
     targets = [(tables_main, [str(res / "faust")]), (sweep_main, ["aggregate", str(res / "sweeps" / "defaust")])]
@@ -255,7 +255,7 @@ def test_sweep_default_folder_taken_gets_a_suffix_and_jobs_follow(tmp_path):
         d.mkdir(parents=True)
         (d / "mine.txt").write_text("x")
         taken.append(d)
-    r = subprocess.run([sys.executable, "-m", "eval.sweep", "-m", "dataset=faust",
+    r = subprocess.run([sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust",
                         f"dataset.root={ROOT.parent / 'shared/data/faust_reg'}", "dataset.limit=1", "methods=[SShaDe]",
                         "sshade.n_low=300", "sshade.n_samplings=1"], cwd=tmp_path, env=subprocess_env(),
                        capture_output=True, text=True, timeout=240)

@@ -128,7 +128,7 @@ def test_installed_wheel_runs_outside_checkout(wheel, tmp_path):
         assert p.returncode == 0, f"{args}: {p.stdout}{p.stderr}"
         return p.stdout
 
-    out = run("-c", "import sys, harness.confdir as c, harness.registry as r; d = c.config_dir(); "
+    out = run("-c", "import sys, harness.confdir as c, harness.method_registry as r; d = c.config_dir(); "
                     "print(r.builtin_methods()); assert 'eval' not in sys.modules; import harness; "
                     "print(harness.__file__); print(d)")
     assert out.splitlines() == ["('ARAP', 'Elastic', 'ARAP-SR', 'Implicit-ARAP', 'SShaDe', 'SShaDe+refine')",

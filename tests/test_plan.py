@@ -1,5 +1,5 @@
-"""The plan printed up front (eval/run/plan.py, eval/experiments/cases/plan.py)
-and the DeFAUST build's per-subject progress (eval/datasets/defaust.py BuildProgress).
+"""The plan printed up front (eval/run/plan.py, eval/experiments/cases/case_plan.py)
+and the DeFAUST build's per-subject progress (eval/datasets/defaust_dataset.py BuildProgress).
 Structure and order are checked, never timings."""
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 from omegaconf import OmegaConf
 
-from eval.datasets.defaust import BuildProgress, build_outlook
-from eval.experiments.cases import plan as cases_plan
+from eval.datasets.defaust_dataset import BuildProgress, build_outlook
+from eval.experiments.cases import case_plan as cases_plan
 from eval.metrics.reference import sr_energy
 from eval.run import plan as P
 from eval.run.progress import CostModel, default_cost_model
@@ -96,7 +96,7 @@ def test_build_progress_lines(caplog):
     finally:
         lg.removeHandler(h)
         lg.setLevel(old)
-    lines = [r.getMessage() for r in caplog.records if r.name == "eval.datasets.defaust"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "eval.datasets.defaust_dataset"]
     assert len(lines) == 2 and h.done == 2
     assert lines[0].startswith("DeFAUST build: subject_00 done (15 s), 1 of 3 subject(s); ")
     assert lines[1].startswith("DeFAUST build: subject_01 done (17 s), 2 of 3 subject(s); ")

@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.methods import make_methods, method_spec
+from eval.method_config import make_methods, method_spec
 from harness.plugins import build_method
-from sshade.arap.cases import box_surface
+from sshade.arap.problems import box_surface
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env

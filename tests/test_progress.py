@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import pytest
 
 from eval.run.progress import CostModel, default_cost_model
-from harness.registry import method_meta
+from harness.method_registry import method_meta
 
 
 def test_cost_model_weights_by_method():

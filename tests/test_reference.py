@@ -9,7 +9,7 @@ import pytest
 
 from eval.metrics.reference import method_energy, reference_metrics, reference_solution
 from sshade.arap import arap_deform
-from sshade.arap.cases import bent_cylinder, lifted_plane
+from sshade.arap.problems import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
 
 
@@ -111,7 +111,7 @@ def test_converged_protocol_reaches_the_minimiser_where_the_paper_rule_stops_sho
 
 
 def test_methods_follow_the_protocol():
-    from eval.methods import make_methods
+    from eval.method_config import make_methods
     ms = make_methods({"methods": ["ARAP", "Elastic", "SShaDe", "SShaDe+refine"], "arap": {"protocol": "paper"}})
     assert [m.protocol for m in ms[:2]] == ["paper", "paper"] and ms[2].params["protocol"] == "paper"
     with pytest.raises(SShaDeError, match="arap.protocol"):

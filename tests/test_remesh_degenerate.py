@@ -32,7 +32,7 @@ def test_degenerate_faces_flags_flat_and_near_flat_triangles_only():
 def test_a_sampling_left_with_a_degenerate_face_is_drawn_again_with_a_derived_seed(monkeypatch):
     """The remesh of the first draw keeps a degenerate face: the second draw (seed
     derived from the seed and the attempt) is kept and the first is named in the info."""
-    from sshade.arap.cases import lifted_plane
+    from sshade.arap.problems import lifted_plane
     V, F, _, _ = lifted_plane(0.2, n_target=600)
     real, seen = remesh_module.remesh, []
 
@@ -50,7 +50,7 @@ def test_a_sampling_left_with_a_degenerate_face_is_drawn_again_with_a_derived_se
 
 
 def test_a_sampling_that_stays_degenerate_is_refused_naming_its_seeds(monkeypatch):
-    from sshade.arap.cases import lifted_plane
+    from sshade.arap.problems import lifted_plane
     V, F, _, _ = lifted_plane(0.2, n_target=600)
     real = remesh_module.remesh
 

@@ -9,7 +9,6 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from sshade._keys import unique_int
 from sshade.closed_ball import closed_ball_full as _closed_ball_full
 from sshade.closed_ball import closed_ball_holds as _closed_ball_holds
 from sshade.closed_ball import closed_ball_local
@@ -25,6 +24,7 @@ from sshade.mesh.halfedge import (
 from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import _fast_checks, validate_mesh
 from sshade.remesh import _check, mesh_topology, remesh
+from sshade.unique import unique_int
 
 from .conftest import data_file
 from .test_bad_input import BAD_MESHES, KNOWN_BAD_MESH_BUGS, _bowtie, _double_cone

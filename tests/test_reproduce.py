@@ -28,7 +28,7 @@ def test_default_runs_defaust_and_its_sweep(capsys):
                                 "resume=true jobs=1 "
                                 f"{ia}out_dir=results/defaust")  # every method on every case, resumable, one at a time
     sweep = steps["sweep"]
-    assert sweep.startswith("-m eval.sweep experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
+    assert sweep.startswith("-m eval.sweeps experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
 
 

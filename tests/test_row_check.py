@@ -7,8 +7,8 @@ import os
 import pandas as pd
 import pytest
 
+from eval.run.result_store import record_digest
 from eval.run.row_check import check_rows
-from eval.run.store import record_digest
 from eval.tables import retabulate
 
 from .test_fuzz_store import _stored

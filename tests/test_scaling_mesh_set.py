@@ -44,7 +44,7 @@ def set_run(tmp_path_factory):
     only), 642 vertices each, at SIZES; SShaDe with n_low 300, k 2; no Elastic."""
     import trimesh
 
-    from eval.experiments.scaling.experiment import run_scaling
+    from eval.experiments.scaling.scaling_experiment import run_scaling
     d = tmp_path_factory.mktemp("scaling_set")
     ico = trimesh.creation.icosphere(subdivisions=3)
     V, F = np.asarray(ico.vertices, float), np.asarray(ico.faces, np.int64)
@@ -135,7 +135,7 @@ def test_entries_checked_and_base_mesh_fallback():
 def test_first_call_median_skips_failed_probes(monkeypatch):
     """The row's first call is the median of the probes that gave a time; NaN only when
     none did."""
-    from eval.experiments.scaling import experiment as scaling
+    from eval.experiments.scaling import scaling_experiment as scaling
 
     times = iter([3.0, math.nan, 1.0, 2.0])
     monkeypatch.setattr(scaling, "probe_first_call", lambda *a, **k: {"first_call_s": next(times)})

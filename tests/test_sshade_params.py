@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from sshade import SShaDe, SShaDeError, deform
-from sshade.deform import LowResSkippedWarning, check_params
+from sshade.pipeline import LowResSkippedWarning, check_params
 
 
 @pytest.mark.parametrize("kw, message", [

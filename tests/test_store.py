@@ -1,4 +1,4 @@
-"""The evaluator's per-(case, method) result store (eval/run/store.py), resume after
+"""The evaluator's per-(case, method) result store (eval/run/result_store.py), resume after
 a kill -9, a method added later, the baseline subset rule (eval/run/subset.py) and the
 cost-weighted progress estimate (eval/run/progress.py)."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from eval.reproduce import main as reproduce_main
-from eval.run.store import ResultStore, case_identity, pair_key
+from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.subset import baseline_selection, check_baseline_cases
 from sshade.errors import SShaDeError
 

@@ -1,4 +1,4 @@
-"""Sweeps that end with an outcome for every job (eval/sweeps/launcher.py, eval/sweep.py):
+"""Sweeps that end with an outcome for every job (eval/sweeps/launcher.py, eval/sweeps/sweep_command.py):
 SLURM state queries with and without accounting, the wait loop (killed jobs, never
 hanging), the SLURM launcher's launch with fake jobs, missing and killed rows of the
 table, and resume. The real one-node SLURM run is .ci/slurm_sweep.sh."""
@@ -13,8 +13,8 @@ from types import SimpleNamespace
 import pandas as pd
 import pytest
 
-import eval.sweep as sw
 import eval.sweeps.launcher as sl
+import eval.sweeps.sweep_command as sw
 from eval.sweeps.files import (
     MANIFEST,
     RESUME_ENV,
@@ -26,7 +26,7 @@ from eval.sweeps.files import (
     write_status,
 )
 from eval.sweeps.launcher import ACTIVE_STATES, SlurmQueryError, expand_job_ids, slurm_states, wait_for_jobs
-from eval.sweeps.table import aggregate_sweep
+from eval.sweeps.sweep_table import aggregate_sweep
 
 from .conftest import subprocess_env  # noqa: E402
 
@@ -296,7 +296,7 @@ def test_resume_replays_the_command_for_the_jobs_without_result(tmp_path, monkey
     # a folder without sweep.json cannot be resumed: one clear error
     (d / MANIFEST).unlink()
     assert sw.resume_sweep(d) == 2
-    assert "only sweeps started by python -m eval.sweep" in capsys.readouterr().err
+    assert "only sweeps started by python -m eval.sweeps" in capsys.readouterr().err
 
 
 def test_resume_end_to_end_with_the_basic_launcher(faust_root, tmp_path):
@@ -304,7 +304,7 @@ def test_resume_end_to_end_with_the_basic_launcher(faust_root, tmp_path):
     folder vanished (missing); resume runs the failed and the missing ones only."""
     d = tmp_path / "sweep"
     env = subprocess_env()
-    args = [sys.executable, "-m", "eval.sweep", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
+    args = [sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
             "methods=[SShaDe]", "sshade.n_low=2,200,300", "sshade.n_samplings=1", "sshade.workers=1",
             "reference.cases=none", f"hydra.sweep.dir={d}"]
     r = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
@@ -317,7 +317,7 @@ def test_resume_end_to_end_with_the_basic_launcher(faust_root, tmp_path):
     import shutil
     shutil.rmtree(d / "2")
     assert list(aggregate_sweep(d, write=False)["status"]) == ["failed", "done", "missing"]
-    r = subprocess.run([sys.executable, "-m", "eval.sweep", "resume", str(d)], cwd=tmp_path / "..", env=env,
+    r = subprocess.run([sys.executable, "-m", "eval.sweeps", "resume", str(d)], cwd=tmp_path / "..", env=env,
                        capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "running again 2 of 3 job(s): 0 (failed), 2 (missing)" in r.stdout

@@ -209,7 +209,7 @@ def test_reference_subset_of_the_all_cases_table_is_stated(tmp_path):
 
 def test_sweep_reads_the_main_table(tmp_path):
     from eval.sweeps.files import STATUS_FILE
-    from eval.sweeps.table import aggregate_sweep
+    from eval.sweeps.sweep_table import aggregate_sweep
     job = tmp_path / "sweep" / "0"
     (job / ".hydra").mkdir(parents=True)
     (job / ".hydra" / "overrides.yaml").write_text("- sshade.n_low=500\n")

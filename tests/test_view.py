@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sshade.cli import main as sshade_main
+from sshade.deform_command import main as sshade_main
 from sshade.mesh.handle_files import write_sel
 from sshade.mesh.io import read_mesh
 from sshade.prepared import prepare

@@ -79,7 +79,7 @@ def test_after_warmup_a_deform_compiles_nothing(i, sphere):
 
 def test_deform_reports_compile_time_outside_total(monkeypatch, sphere):
     """sshade.deform: the kernel compilation it still does itself is compile_s, not total_s."""
-    sd = importlib.import_module("sshade.deform")  # the module (sshade.deform is also the function)
+    sd = importlib.import_module("sshade.pipeline")
     V, F, h, T = sphere
     sd.warm_kernels()
 
@@ -101,7 +101,7 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
     root = faust_root
     from hydra import compose, initialize_config_dir
 
-    import eval.methods as em
+    import eval.method_config as em
     from eval.app import CONF_DIR, run
 
     class Slow:
@@ -139,16 +139,16 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
 
 
 def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, monkeypatch):
-    """eval.experiments.scaling.experiment: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
+    """eval.experiments.scaling.scaling_experiment: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
     base = shared_data / "classic" / "armadillo.obj"
     if not base.is_file():
         pytest.skip(f"{base} not found")
     from hydra import compose, initialize_config_dir
 
-    import eval.experiments.scaling.experiment as sc
+    import eval.experiments.scaling.scaling_experiment as sc
     from eval.app import CONF_DIR
-    from eval.experiments.scaling.experiment import run_scaling
-    real_s, real_f = sc.warm_sshade, sc.warm_fullres  # sshade.deform's and sshade.warmup's, as scaling calls them
+    from eval.experiments.scaling.scaling_experiment import run_scaling
+    real_s, real_f = sc.warm_sshade, sc.warm_fullres  # sshade.pipeline's and sshade.warmup's, as scaling calls them
 
     def slow(real):
         def f(*a, **k):

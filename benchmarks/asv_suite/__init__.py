@@ -8,7 +8,7 @@ stand-alone programs and are never imported by it.
 - :mod:`.versus_libigl`: SShaDe against libigl's spokes-and-rims local/global on the
   hard mesh (the paper's 1000-iteration protocol, one iteration against one frame);
 - :mod:`.fullres`: the full-resolution baselines (converged Elastic, ARAP-SR) on the
-  survey-style cases of ``sshade.arap.cases``, and Elastic against libigl at equal energy.
+  survey-style cases of ``sshade.arap.problems``, and Elastic against libigl at equal energy.
 
 The meshes (a ~200k clean armadillo, the hard LS3-subdivided 252k centaur) are built
 once into a cache outside the repository (:mod:`._common`).

@@ -1,6 +1,6 @@
 """The full-resolution baselines (``baselines.Elastic``, ``baselines.ARAPSR``) under the
 converged protocol (conf/method/Elastic.yaml, ARAP-SR.yaml: the shared ``arap`` section's
-defaults) on the survey-style cases of ``sshade.arap.cases`` (``case``, the parameter):
+defaults) on the survey-style cases of ``sshade.arap.problems`` (``case``, the parameter):
 ``bent_cylinder`` (a capped cylinder bent 90 degrees, 2,504 vertices), ``twisted_bar`` (a
 square bar twisted 135 degrees, 5,136 vertices) and ``lifted_plane`` (a sheet with its
 boundary fixed and a central disc lifted 20 %, 40,500 vertices): smooth, low-frequency
@@ -18,7 +18,10 @@ _WARMED: set = set()
 
 
 def _case(name: str):
-    from sshade.arap.cases import CASES
+    try:
+        from sshade.arap.problems import CASES
+    except ImportError:  # a commit from before sshade/arap/cases.py was renamed problems.py (asv runs old commits)
+        from sshade.arap.cases import CASES
     return CASES[name]()
 
 

@@ -1,13 +1,13 @@
 """Datasets of deformation cases for the evaluator (``dataset.name`` in the config).
 
-Every case is a :class:`~eval.datasets.case.DeformationCase` (or a subclass). One
-module per dataset, each registering itself (:func:`eval.datasets.registry.register_dataset`:
+Every case is a :class:`~eval.datasets.deformation_case.DeformationCase` (or a subclass). One
+module per dataset, each registering itself (:func:`eval.datasets.dataset_registry.register_dataset`:
 its loader and the ``dataset.*`` config keys it takes):
 
 - :mod:`eval.datasets.faust`: FAUST registrations -> DeFAUST-style cases
   (:func:`~eval.datasets.faust.faust_cases`).
-- :mod:`eval.datasets.defaust`: a DeFAUST build (``python -m defaust``), read by
-  :func:`~eval.datasets.defaust.load_defaust` at high or low resolution (and built
+- :mod:`eval.datasets.defaust_dataset`: a DeFAUST build (``python -m defaust``), read by
+  :func:`~eval.datasets.defaust_dataset.load_defaust` at high or low resolution (and built
   first into the default folder, ``dataset.build.enabled``).
 - :mod:`eval.datasets.shapes`: single shapes (Stanford models) with a fixed user-defined
   edit (:func:`~eval.datasets.shapes.shape_cases`; paper §4.1, Fig. arap-examples).
@@ -23,9 +23,9 @@ import hashlib
 import itertools
 from pathlib import Path
 
-from eval.datasets.case import DeformationCase
+from eval.datasets.dataset_registry import Dataset, datasets, find_dataset, register_dataset
+from eval.datasets.deformation_case import DeformationCase
 from eval.datasets.faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
-from eval.datasets.registry import Dataset, datasets, find_dataset, register_dataset
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
 from sshade.errors import SShaDeError
@@ -130,7 +130,7 @@ def dataset_root(cfg) -> Path:
 def dataset_outlook(cfg) -> dict | None:
     """What the dataset's ``prepare`` step (:func:`dataset_root`) is about to do, found
     without doing it (its registered ``outlook``, e.g. the DeFAUST build still to run:
-    :func:`eval.datasets.defaust.build_outlook`); None when there is nothing long to do,
+    :func:`eval.datasets.defaust_dataset.build_outlook`); None when there is nothing long to do,
     no ``outlook``, or no usable ``dataset.root`` (:func:`dataset_root` then says why).
 
     Raises

@@ -38,8 +38,8 @@ import numpy as np
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust, faust_subjects
 from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUST builder's (one implementation)
-from eval.datasets.case import DeformationCase
-from eval.datasets.registry import register_dataset
+from eval.datasets.dataset_registry import register_dataset
+from eval.datasets.deformation_case import DeformationCase
 from harness.checks import check_numbers, config_int_list
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
@@ -96,7 +96,7 @@ PROTOCOLS = ("paper", "all_landmarks")
 @dataclass
 class Case(DeformationCase):
     """One FAUST deformation case: deform the rest pose with handles towards a target
-    pose (fields of :class:`eval.datasets.case.DeformationCase`, plus the ones below).
+    pose (fields of :class:`eval.datasets.deformation_case.DeformationCase`, plus the ones below).
 
     Attributes
     ----------

@@ -34,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
-from eval.datasets.case import DeformationCase
-from eval.datasets.registry import register_dataset
+from eval.datasets.dataset_registry import register_dataset
+from eval.datasets.deformation_case import DeformationCase
 from eval.run.names import safe_name
 from harness.checks import check_numbers, config_int_list, config_value
 from sshade.errors import SShaDeError
@@ -52,7 +52,7 @@ DEFAULT_SHAPES = ("armadillo.obj", "bunny.off", "dragon.obj")
 @dataclass
 class ShapeCase(DeformationCase):
     """One user-defined deformation of one shape (fields of
-    :class:`eval.datasets.case.DeformationCase`, plus the ones below).
+    :class:`eval.datasets.deformation_case.DeformationCase`, plus the ones below).
 
     Attributes
     ----------

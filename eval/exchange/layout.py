@@ -57,7 +57,7 @@ def _write_dmat(path: Path, A: np.ndarray) -> None:
 
 
 def write_case(folder, case) -> dict:
-    """Write one case (:class:`eval.datasets.case.DeformationCase`) into ``folder`` (created).
+    """Write one case (:class:`eval.datasets.deformation_case.DeformationCase`) into ``folder`` (created).
 
     Parameters
     ----------

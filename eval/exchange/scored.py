@@ -3,7 +3,7 @@ deformed mesh of each case from a results folder (:mod:`eval.exchange.layout`) a
 evaluator scores it like any row (``python -m eval experiment=score``).
 
 It is a case-aware method: the evaluator sets its ``case`` attribute
-(:class:`eval.datasets.case.CaseLabel`) before each ``deform`` call, so it knows which
+(:class:`eval.datasets.deformation_case.CaseLabel`) before each ``deform`` call, so it knows which
 file to read. Its ``info`` carries ``reported_time_s`` (the method's own seconds from the
 times file, or None), which the evaluator puts in the Time column, marked as reported,
 instead of the time it took to read the file.
@@ -46,7 +46,7 @@ class ScoredResults:
     ----------
     results : str or Path, the folder of ``<case>.obj`` (or .ply, .off, .stl) files,
         relative to the directory the command was started from.
-    name : str, the row's name (:data:`sshade.method.NAME_RULE`).
+    name : str, the row's name (:data:`sshade.method_interface.NAME_RULE`).
     times : str, Path or None, a CSV of the method's own times (``case,time_s,machine``,
         :func:`eval.exchange.layout.read_times`); None: the Time column stays empty.
 
@@ -67,7 +67,7 @@ class ScoredResults:
         self.name = name
         self.times_path = None if times in (None, "") else abs_path(times)
         self.times = {} if self.times_path is None else read_times(self.times_path)
-        self.case = None   # set by the evaluator before each deform (eval.datasets.case.CaseLabel)
+        self.case = None   # set by the evaluator before each deform (eval.datasets.deformation_case.CaseLabel)
         self.info: dict = {}
         self.key_extra = {"results": self._listing_digest(),
                           "times": None if self.times_path is None else sha256_file(self.times_path)}

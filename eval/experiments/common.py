@@ -1,8 +1,8 @@
 """Helpers shared by the experiments of :mod:`eval.experiments`."""
 from __future__ import annotations
 
-from eval.methods import method_spec
-from sshade.deform import SShaDe
+from eval.method_config import method_spec
+from sshade.pipeline import SShaDe
 
 __all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
 
@@ -26,13 +26,13 @@ def sshade_spec(cfg) -> dict:
     """SShaDe's parameters from the one place every experiment reads them: the method
     definition ``method.SShaDe`` (``conf/method/SShaDe.yaml``, whose values default to the
     ``sshade`` section and, for the low-res ARAP's stopping rule, to ``arap``), resolved
-    (:func:`eval.methods.method_spec`); ``_target_`` and ``name`` left out.
+    (:func:`eval.method_config.method_spec`); ``_target_`` and ``name`` left out.
 
     Returns
     -------
     dict with ``n_low`` (int or ``"auto"``), ``n_samplings``, ``seed``, ``workers``,
     ``gradient``, ``anchor``, ``warm_start``, ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
-    (unchecked; :func:`sshade.deform.check_params` checks them).
+    (unchecked; :func:`sshade.pipeline.check_params` checks them).
 
     Raises
     ------

@@ -1,7 +1,7 @@
 """Time to accuracy of the ARAP solvers: ``python -m eval experiment=convergence``.
 
 For each case (a subdivided plane with its boundary fixed and a central disc lifted,
-:func:`sshade.arap.cases.lifted_plane`; the first case of the configured dataset, by
+:func:`sshade.arap.problems.lifted_plane`; the first case of the configured dataset, by
 default a DeFAUST case at 150k-200k vertices), the distance to the deep-converged
 full-resolution spokes-and-rims minimiser (:func:`eval.metrics.reference.reference_solution`,
 cached) is traced against wall time for:
@@ -36,7 +36,7 @@ import numpy as np
 
 from eval import datasets
 from eval.experiments.common import as_list, sshade_spec
-from eval.experiments.registry import register_experiment
+from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.reference import reference_solution, status_words
 from eval.present.figures import safe_figure
 from eval.run.paths import abs_path
@@ -44,10 +44,10 @@ from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from harness.checks import check_numbers, config_int_list
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
-from sshade.arap.cases import lifted_plane
-from sshade.deform import check_params, effective_params
+from sshade.arap.problems import lifted_plane
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
+from sshade.pipeline import check_params, effective_params
 
 __all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to", "sshade_params"]
 

@@ -46,7 +46,7 @@ import numpy as np
 
 from eval.datasets.faust import discover_faust
 from eval.experiments.common import as_list
-from eval.experiments.registry import register_experiment
+from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import gt_stretch_pct, markdown_table, transfer_n_low
 from eval.experiments.tosca import sshade_params as _tosca_sshade_params
 from eval.metrics.measures import ground_truth_metrics
@@ -54,10 +54,10 @@ from eval.present.figures import figures_options, pose_transfer_figure, safe_fig
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from harness.checks import config_int_list
-from sshade.deform import SShaDe
 from sshade.errors import SShaDeError
 from sshade.isometric import pose_transfer, rigid_align
 from sshade.mesh.io import atomic_write, read_mesh
+from sshade.pipeline import SShaDe
 from sshade.sampling import sampling_seeds
 
 __all__ = ["run_pose_transfer", "METRICS", "sshade_params"]

@@ -41,7 +41,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from eval.experiments.common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
-from eval.experiments.registry import register_experiment
+from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.measures import chamfer, ground_truth_metrics, hausdorff
 from eval.present.figures import figures_options, safe_figure, tosca_figure
 from eval.present.meshview import view_options, write_case_view
@@ -49,10 +49,10 @@ from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.tables import ok_mask
 from harness.checks import check_numbers, config_int_list
-from sshade.deform import SShaDe, auto_n_low
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer
 from sshade.mesh.io import atomic_write, read_mesh
+from sshade.pipeline import SShaDe, auto_n_low
 from sshade.sampling import sampling_seeds
 
 __all__ = ["PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table", "markdown_table", "run_tosca",
@@ -181,7 +181,7 @@ def sshade_params(cfg) -> dict:
 
 def transfer_n_low(n_low, n_vertices: int) -> int:
     """``n_low`` for a mesh of ``n_vertices``: the int itself, or for ``"auto"``/None
-    :func:`sshade.deform.auto_n_low` (as :func:`sshade.deform` does).
+    :func:`sshade.pipeline.auto_n_low` (as :func:`sshade.deform` does).
 
     Raises
     ------

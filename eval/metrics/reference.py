@@ -39,7 +39,7 @@ from baselines.arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
 from baselines.coarse_start import SR_ENERGY, coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
 from eval.run.code_identity import numerical_versions, sources_digest
-from harness.registry import method_meta
+from harness.method_registry import method_meta
 from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
 from sshade.errors import SShaDeError
 from sshade.mesh.io import inside_folder
@@ -101,7 +101,7 @@ def _check_energy(energy: str) -> None:
 def method_energy(method) -> str:
     """The energy a method's result is scored against: its own ``energy`` attribute when
     it names one of :data:`sshade.arap.ENERGIES`, else its file's ``reference``
-    (:func:`harness.registry.method_meta`): an energy of :data:`sshade.arap.ENERGIES`, or
+    (:func:`harness.method_registry.method_meta`): an energy of :data:`sshade.arap.ENERGIES`, or
     ``arap_sr``, the method's own ARAP-SR energy with its ``alpha`` and ``alpha_scaling``
     (:func:`sr_energy`; default 0.01, ``"valence"``); a plug-in's, spokes-and-rims (the
     energy of SShaDe's low-resolution step, paper §4.1).

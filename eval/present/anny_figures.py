@@ -23,7 +23,7 @@ from defaust.anny_poses import POSES
 from defaust.anny_source import SUBJECTS, anny_subject, load_anny
 from eval.present.figures import mesh_row
 from eval.run.outdir import claim_output_dir
-from sshade.clirun import ArgumentParser
+from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
 
 __all__ = ["anny_figures"]
@@ -62,7 +62,7 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
 def main(argv=None) -> int:
     """``python -m eval.present.anny_figures [OUT_DIR]``: returns 0, or 2 after one ``error: ...``
     line; ``--help`` prints the usage and exits 0 (``SystemExit``), a bad command line
-    exits 2 (:class:`sshade.clirun.ArgumentParser`)."""
+    exits 2 (:class:`sshade.command_errors.ArgumentParser`)."""
     ap = ArgumentParser(prog="python -m eval.present.anny_figures",
                         description="PNG figures of the ANNY DeFAUST source: the 10 subjects at rest, subject 0 in "
                                     "the dataset's poses and in the whole pose library. Needs the ANNY assets.")

@@ -2,7 +2,7 @@
 and per subject, and a paired comparison of SShaDe with Elastic.
 
 Input: the per-case rows of ``cases.csv`` (columns ``case``, ``subject``, ``pose``,
-``method``, ``error`` and the metrics; :mod:`eval.experiments.cases.experiment`). Only successful
+``method``, ``error`` and the metrics; :mod:`eval.experiments.cases.cases_experiment`). Only successful
 rows (:func:`eval.tables.ok_mask`) with a finite value of a metric count for it.
 
 Outputs (:func:`write_breakdown`):
@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from baselines.arap import Elastic
+from baselines.fullres_arap import Elastic
 from eval.present.figures import distribution_figure, safe_figure
 from eval.present.rows import method_order_key, ok_mask
-from sshade.deform import SShaDe
 from sshade.mesh.io import atomic_write
+from sshade.pipeline import SShaDe
 
 __all__ = ["BREAKDOWN_METRICS", "group_breakdown", "paired_comparison", "breakdown_markdown", "write_breakdown"]
 

@@ -43,7 +43,7 @@ log = logging.getLogger("eval")
 
 #: PNG text keyword of a case figure's stamp: the store record key of each result it
 #: shows (method name -> key) and the methods not run, as JSON; a resumed run keeps a
-#: figure whose stamp equals its restored records (eval/experiments/cases/experiment.py).
+#: figure whose stamp equals its restored records (eval/experiments/cases/cases_experiment.py).
 FIGURE_RECORDS = "sshade-records"
 
 #: Handle colours of the paper's Fig. 1: static blue, dynamic yellow.

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from harness.registry import table_order
+from harness.method_registry import table_order
 
 if TYPE_CHECKING:  # pandas is imported where a table is built
     import pandas as pd
@@ -14,7 +14,7 @@ __all__ = ["method_order_key", "methods_in", "ok_mask"]
 
 
 def method_order_key(m: str) -> tuple:
-    """Sort key of a method's rows: its place in :func:`harness.registry.table_order`,
+    """Sort key of a method's rows: its place in :func:`harness.method_registry.table_order`,
     any other method after those, by name."""
     order = table_order()
     return (order.index(m), "") if m in order else (len(order), m)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from eval.present.rows import methods_in, ok_mask
-from harness.registry import builtin_methods, method_meta
+from harness.method_registry import builtin_methods, method_meta
 
 if TYPE_CHECKING:  # pandas is imported where a table is built
     import pandas as pd

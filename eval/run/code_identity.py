@@ -1,5 +1,5 @@
 """The identity of the code that produces a result: part of every result-store key
-(:mod:`eval.run.store`), so that a stored row is reused only by the code that computed it.
+(:mod:`eval.run.result_store`), so that a stored row is reused only by the code that computed it.
 
 A (case, method) row depends on the method's code, on the harness that runs and scores
 it (:mod:`eval.experiments.cases.pair` with :mod:`sshade.guard`, the metrics, the reference
@@ -18,7 +18,7 @@ them. :func:`code_identity` names all three:
   the docs or tests) does not, so a long result run survives the work that lands beside it.
 - ``versions``: the installed versions of :data:`NUMERICAL` (None when absent).
 - ``plugin``: for a method whose class lives outside the project's packages (a plug-in,
-  :func:`sshade.method.is_plugin`), the SHA-256 of the file that defines the class (its
+  :func:`sshade.method_interface.is_plugin`), the SHA-256 of the file that defines the class (its
   other modules are not followed: a plug-in spread over several files should name its
   version in a parameter); None for our own methods, which ``sources`` covers.
 
@@ -56,8 +56,8 @@ PACKAGES = ("sshade", "harness", "baselines", "defaust", "eval")
 #: The modules that make a stored row besides the method: the pair runner (the guarded
 #: call, the metrics, the info columns), the reference columns, the record format and the
 #: runner of pairs in worker processes (their threads, the ``cores`` column).
-ROW_HARNESS = ("eval.experiments.cases.pair", "eval.experiments.cases.references", "eval.run.store",
-               "eval.experiments.cases.jobs")
+ROW_HARNESS = ("eval.experiments.cases.pair", "eval.experiments.cases.case_references", "eval.run.result_store",
+               "eval.experiments.cases.case_jobs")
 
 #: Distributions whose version can change a row's numbers: the solvers and mesh
 #: processing beneath the methods, and PyTorch (Implicit-ARAP, plug-ins).
@@ -158,7 +158,7 @@ def import_closure(roots: tuple, root: str | None = None) -> tuple[str, ...]:
     level or in a function), and the parent packages of each (run on import). Names
     outside :data:`PACKAGES` are left out; ``root`` as in :func:`project_modules`.
 
-    >>> arap = import_closure(("baselines.arap",))
+    >>> arap = import_closure(("baselines.fullres_arap",))
     >>> "eval.tables" in arap, "sshade.arap.solver" in arap
     (False, True)
     """

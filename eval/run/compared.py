@@ -3,10 +3,10 @@ method's row beside the committed baselines without rerunning them.
 
 :func:`read_compared` reads another run folder's result store (``runs/<case>/<method>.json``)
 as untrusted input, never writing, resuming or recomputing it: every record must be
-valid (its digest holds, :meth:`eval.run.store.ResultStore.read`), and must have been
+valid (its digest holds, :meth:`eval.run.result_store.ResultStore.read`), and must have been
 made on the very cases of this run: each record's case identity (the digests of the rest
 vertices, faces, handles, targets and ground truth, and the dataset's name,
-:func:`eval.run.store.case_identity`) equals this run's case of the same name. Another
+:func:`eval.run.result_store.case_identity`) equals this run's case of the same name. Another
 build of a dataset (other meshes, handles or targets) is refused with one line. The
 rows come back marked with the run they came from (``run``, ``run_commit``,
 ``run_machine``) and ``time_other_run``: their Time was measured on another machine or
@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval.run.names import safe_name
+from eval.run.result_store import ResultStore, case_identity
 from eval.run.runinfo import read_runinfo
-from eval.run.store import ResultStore, case_identity
 from sshade.errors import SShaDeError
-from sshade.method import check_name
+from sshade.method_interface import check_name
 
 __all__ = ["ComparedRun", "read_compared", "compared_rows", "IDENTITY_FIELDS", "COMPARED_CSV"]
 
@@ -145,7 +145,7 @@ def _one_row(store: ResultStore, p: Path, case: str, ours: dict, out: ComparedRu
 def compared_rows(runs: list[ComparedRun], ours: list[str]) -> list[dict]:
     """The rows of ``runs``, each method named as in its run, or ``NAME (label)`` when
     that name is taken by one of ``ours`` (this run's methods) or an earlier compared
-    run (checked against :data:`sshade.method.NAME_RULE`; SShaDeError when it cannot be
+    run (checked against :data:`sshade.method_interface.NAME_RULE`; SShaDeError when it cannot be
     made a valid name)."""
     taken = {n.lower() for n in ours}
     rows = []

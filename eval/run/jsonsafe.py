@@ -2,7 +2,7 @@
 
 :func:`json_safe` turns numpy scalars and arrays, NaN and inf, non-text mapping keys and
 other objects into what :mod:`json` writes as is: the result store's records and keys
-(:mod:`eval.run.store`), a method's ``info``, the report's views, the exchange layout.
+(:mod:`eval.run.result_store`), a method's ``info``, the report's views, the exchange layout.
 On the evaluator's ground floor (:mod:`eval.run`), so that every floor above may use it.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """File names for the evaluator's case and method names.
 
 :func:`safe_name` turns a case or method name into a file name that stays inside its
-folder: the result store's ``runs/<case>/<method>.json`` (:mod:`eval.run.store`), the
+folder: the result store's ``runs/<case>/<method>.json`` (:mod:`eval.run.result_store`), the
 figures, the report's views and scope, the datasets' names compared as file names.
 On the evaluator's ground floor (:mod:`eval.run`), so that every floor above may use it.
 """

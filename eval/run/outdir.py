@@ -1,7 +1,7 @@
 """Output folders: a command writes only where it may, and never outside its folder.
 
 Every command of the harness that writes a folder of results (the evaluator
-``python -m eval``, the sweeps ``python -m eval.sweep``, ``python -m eval.reproduce``)
+``python -m eval``, the sweeps ``python -m eval.sweeps``, ``python -m eval.reproduce``)
 first *claims* it with :func:`claim_output_dir`, before any work. A folder may be
 claimed when it is
 
@@ -391,7 +391,7 @@ def _command() -> list[str]:
 
 def resume_command(out_dir) -> str:
     """The command line that continues this evaluator run in ``out_dir`` (its stored
-    pairs kept, :mod:`eval.run.store`): ``python -m eval`` with the run's own overrides
+    pairs kept, :mod:`eval.run.result_store`): ``python -m eval`` with the run's own overrides
     (Hydra's, else the command line's) and ``resume=true out_dir=<out_dir>`` in place of
     any ``resume`` or ``out_dir`` given, quoted for a POSIX shell. Running the command
     again without ``resume=true`` would clear the stored pairs."""
@@ -483,7 +483,8 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     if target and target in _claimed:
         yield None
         return
-    # resume=true (the evaluator's result store, eval/run/store.py): the earlier output is continued, not replaced
+    # resume=true (the evaluator's result store, eval/run/result_store.py): the earlier output is continued,
+    # not replaced
     claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)),
                              fresh=fresh, keep=overwrite_flag(cfg.get("resume", False)))
     with open_dict(cfg):
@@ -499,7 +500,7 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
         logging.getLogger().addHandler(handler)
         yield claim
         status = "done"
-    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (sshade.clirun.Terminated)
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (sshade.command_errors.Terminated)
         status, error = "interrupted", f"interrupted ({getattr(e, 'signal_name', 'Ctrl-C')})"
         if kind == "eval" and (claim.path / "run.json").is_file():
             logging.getLogger("eval").warning("interrupted; the finished runs are stored; to continue: %s",

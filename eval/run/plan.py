@@ -1,7 +1,7 @@
 """The evaluator's plan, up front: what a run is about to do, and about how long.
 
-Before any work the main job (:mod:`eval.experiments.cases.experiment`, through
-:mod:`eval.experiments.cases.plan`) logs one ``plan:`` line, e.g. ::
+Before any work the main job (:mod:`eval.experiments.cases.cases_experiment`, through
+:mod:`eval.experiments.cases.case_plan`) logs one ``plan:`` line, e.g. ::
 
     plan: building DeFAUST (once, into data/defaust): 10 subjects x ~160 s on 1 worker, about 27 min;
     then 46 runs: ARAP 4 x ~78 s, Elastic 4 x ~75 s, ARAP-SR 4 x ~51 s,
@@ -154,7 +154,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
         need; ``cached`` True, False or None (not known yet: the cases are not built).
     restored : int, pairs restored from the result store (resume), not run again.
     jobs : int >= 1, worker processes running whole cases side by side
-        (:mod:`eval.experiments.cases.jobs`): the runs' and references' wall time is the
+        (:mod:`eval.experiments.cases.case_jobs`): the runs' and references' wall time is the
         larger of their sum / ``jobs`` and the costliest case (each run's estimate stays
         the cost model's, measured on the whole machine).
     is_sr_energy : None (no energy is ARAP-SR's) or a callable ``energy -> bool`` telling

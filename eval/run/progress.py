@@ -6,7 +6,7 @@ promises minutes and after a baseline it says hours. :class:`CostModel` instead
 estimates the seconds of each remaining run:
 
 - before any run of a method has finished, a prior: its file's ``cost`` (a method's
-  facts, :func:`harness.registry.method_meta`): ``scale`` ``vertices`` (full resolution,
+  facts, :func:`harness.method_registry.method_meta`): ``scale`` ``vertices`` (full resolution,
   ``prior`` seconds per vertex) or ``const`` (``prior`` seconds per case); a plug-in may
   say ``cost_scale = "const"`` or ``"vertices"``; without a prior, a full-resolution
   method costs ``prior_s_per_vertex`` x n_vertices (default 1e-3 s/vertex: ~2.5 min at
@@ -18,7 +18,7 @@ estimates the seconds of each remaining run:
 The bar (:func:`weighted_bar`) counts seconds: after each run it advances by the run's
 measured wall time and its total becomes done + the estimate of what remains, so its
 remaining time is the weighted estimate. Runs restored from the result store
-(:mod:`eval.run.store`) are not counted, but their stored ``time_s`` feed the model.
+(:mod:`eval.run.result_store`) are not counted, but their stored ``time_s`` feed the model.
 
 :func:`default_cost_model` is the evaluator's model: the methods' priors plus the
 per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan
@@ -26,7 +26,7 @@ per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front p
 """
 from __future__ import annotations
 
-from harness.registry import method_meta
+from harness.method_registry import method_meta
 
 __all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VERTEX"]
 
@@ -58,7 +58,7 @@ class CostModel:
     @staticmethod
     def scale_of(method) -> str:
         """``"const"`` or ``"vertices"``: a method's ``cost_scale`` attribute when it has
-        a valid one, else its file's ``cost.scale`` (:func:`harness.registry.method_meta`;
+        a valid one, else its file's ``cost.scale`` (:func:`harness.method_registry.method_meta`;
         ``"vertices"``, full resolution, for a plug-in)."""
         s = getattr(method, "cost_scale", None)
         if s in ("const", "vertices"):
@@ -104,7 +104,7 @@ class CostModel:
 def default_cost_model(methods) -> CostModel:
     """The evaluator's :class:`CostModel` for ``methods`` (objects with ``name``): their
     scales (:meth:`CostModel.scale_of`), the ``cost.prior`` of their files
-    (:func:`harness.registry.method_meta`; left out where the method's scale is not the
+    (:func:`harness.method_registry.method_meta`; left out where the method's scale is not the
     prior's, or its ``preset`` attribute is not the prior's ``cost.preset``;
     ``cost.paper`` instead for a method whose ``protocol`` is ``"paper"``) and
     :data:`OVERHEAD_S_PER_VERTEX`.

@@ -1,5 +1,5 @@
 """Whether a table's rows are the result store's: every row of ``cases.csv`` held against
-the record of its (case, method) in ``runs/`` (:mod:`eval.run.store`).
+the record of its (case, method) in ``runs/`` (:mod:`eval.run.result_store`).
 
 :func:`check_rows` reads each row's record as untrusted input (:meth:`ResultStore.read`:
 whole, of this store version, naming that pair, its digest holding, a valid row) and
@@ -9,7 +9,7 @@ under its title: checked, not checked (no store), or which rows disagree and how
 
 What it proves and what not: a row edited in ``cases.csv``, a record edited by hand, or a
 record missing are found. The digest is an unkeyed SHA-256, so a record edited and given
-a new digest (with :func:`eval.run.store.record_digest`) passes: a local store cannot stop
+a new digest (with :func:`eval.run.result_store.record_digest`) passes: a local store cannot stop
 its owner; docs/protocols.md ("What the store checks").
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
-from eval.run.store import STORE_DIR, ResultStore
+from eval.run.result_store import STORE_DIR, ResultStore
 from sshade.errors import SShaDeError
 
 if TYPE_CHECKING:

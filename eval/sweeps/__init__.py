@@ -1,4 +1,4 @@
-"""Sweeps: the files of a sweep folder (``files``), its aggregated table (``table``) and
-the SLURM launcher behind ``hydra/launcher=slurm`` (``launcher``). The command is
-:mod:`eval.sweep`.
+"""Sweeps: the command (``sweep_command``, run as ``python -m eval.sweeps``), the files of a
+sweep folder (``files``), its aggregated table (``sweep_table``) and the SLURM launcher
+behind ``hydra/launcher=slurm`` (``launcher``).
 """

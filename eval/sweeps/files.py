@@ -1,8 +1,8 @@
-"""The files of a sweep folder (:mod:`eval.sweep`): each job's ``status.json``, the
+"""The files of a sweep folder (:mod:`eval.sweeps.sweep_command`): each job's ``status.json``, the
 sweep's ``sweep.json`` (grid, command, runs, the launcher's notes) and the job folders.
 
-Read by the summary table (:mod:`eval.sweeps.table`), written by the jobs and the Hydra
-callback (:mod:`eval.sweep`) and by the SLURM launcher (:mod:`eval.sweeps.launcher`,
+Read by the summary table (:mod:`eval.sweeps.sweep_table`), written by the jobs and the Hydra
+callback (:mod:`eval.sweeps.sweep_command`) and by the SLURM launcher (:mod:`eval.sweeps.launcher`,
 :func:`record_outcome`), which imports only this light module.
 """
 from __future__ import annotations
@@ -51,7 +51,7 @@ def read_status(job_dir) -> dict | None:
 
 # ----------------------------------------------------------------------------- sweep.json
 def read_manifest(sweep_dir) -> dict | None:
-    """``sweep_dir/sweep.json`` (the sweep's grid and command, see :func:`eval.sweep.start_manifest`),
+    """``sweep_dir/sweep.json`` (the sweep's grid and command, see :func:`eval.sweeps.sweep_command.start_manifest`),
     or None when absent or unreadable."""
     try:
         m = json.loads((Path(sweep_dir) / MANIFEST).read_text())

@@ -14,7 +14,7 @@ job without result is *killed*. Killed and failed jobs are recorded in the sweep
 ``sweep.json`` and in their ``status.json`` (:func:`eval.sweeps.files.record_outcome`), and the
 launcher returns normally, so Hydra runs the aggregation callback and exits with 0.
 
-In a resumed sweep (:func:`eval.sweep.resume_sweep`, environment
+In a resumed sweep (:func:`eval.sweeps.sweep_command.resume_sweep`, environment
 ``SSHADE_SWEEP_RESUME=1``) the jobs whose folder already holds a done or partial
 ``status.json`` are not submitted again.
 

@@ -3,7 +3,7 @@ the full-resolution baselines (Sorkine & Alexa 2007; Chao et al. 2010).
 
 One concept per module, imports only downwards: threads, kernels, solver_kernels,
 kernel_data, operators, linear, criterion, accelerate, rigid, result, solver,
-local_global; :mod:`~sshade.arap.cases` (synthetic problems) is not imported here. What
+local_global; :mod:`~sshade.arap.problems` (synthetic problems) is not imported here. What
 each module holds: docs/layout.md (``sshade/arap/``).
 """
 from .accelerate import LBFGS, Anderson

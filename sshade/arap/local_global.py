@@ -134,7 +134,7 @@ class ArapDeformer:
 
     Examples
     --------
-    >>> from sshade.arap.cases import twisted_bar
+    >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(60.0, h=0.25)
     >>> d = ArapDeformer(V, F, h, energy="spokes")
     >>> d.deform(T).converged and d.deform(T * 1.01).converged

@@ -99,7 +99,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
 
     Examples
     --------
-    >>> from sshade.arap.cases import twisted_bar
+    >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(90.0, h=0.25)
     >>> solve_arap(V, F, h, T, energy="spokes").converged
     True
@@ -137,7 +137,7 @@ class ArapSolver:
 
     Examples
     --------
-    >>> from sshade.arap.cases import twisted_bar
+    >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(90.0, h=0.25)
     >>> solver = ArapSolver(V, F, h, energy="spokes")
     >>> r1 = solver.solve(T)                  # the first frame

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .._keys import unique_int
+from ..unique import unique_int
 
 __all__ = ["edge_graph", "edge_graph_from_edges", "locality_order", "VoronoiState", "farthest_point_sampling"]
 

@@ -10,11 +10,11 @@ import time
 
 import numpy as np
 
-from eval.datasets.case import case_label
+from eval.datasets.deformation_case import case_label
 from eval.metrics.measures import deformation_metrics, ground_truth_metrics
 from eval.metrics.meshes import CaseMeshes
 from eval.run.jsonsafe import json_safe
-from eval.run.store import cell_problem
+from eval.run.result_store import cell_problem
 from sshade.errors import SShaDeError
 from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
 
@@ -73,7 +73,7 @@ def _info_columns(info, taken) -> dict:
     (letters, digits, ``_``; at most 64 characters; non-string keys by their text),
     values by :func:`_scalar`; a key clashing with ``taken`` (the row's columns), a
     summary column, a typed key with a value of another type (:data:`_TYPED_INFO`) or a
-    value its name does not allow in a stored row (:func:`eval.run.store.cell_problem`, e.g. a
+    value its name does not allow in a stored row (:func:`eval.run.result_store.cell_problem`, e.g. a
     text in ``*_pct``) becomes ``info_<key>``; ``compile_s`` (already in the row) is left out."""
     import re
     out: dict = {}
@@ -122,7 +122,7 @@ def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = 
         row["compile_s"], row["time_s"] = r.compile_s, r.seconds  # compilation: never inside time_s
         if "reported_time_s" in r.info:  # computed elsewhere: its own time, never the time to read it
             row["read_s"], row["time_s"], row["time_reported"] = r.seconds, _reported(r.info), True
-        for w in r.warnings:  # e.g. sshade.deform.LowResSkippedWarning: logged and recorded
+        for w in r.warnings:  # e.g. sshade.pipeline.LowResSkippedWarning: logged and recorded
             log.warning("%s %s: %s", case.name, name, w)
         if r.warnings:
             row["warnings"] = " | ".join(" ".join(w.split()) for w in r.warnings)
@@ -149,7 +149,7 @@ def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = 
 
 def _tell_case(m, case) -> None:
     """Set a case-aware method's ``case`` attribute (it has one) to what it may know of
-    ``case`` (:func:`eval.datasets.case.case_label`: never the true shape)."""
+    ``case`` (:func:`eval.datasets.deformation_case.case_label`: never the true shape)."""
     try:
         aware = "case" in vars(m) or hasattr(type(m), "case")
     except TypeError:  # an object without __dict__
@@ -174,7 +174,7 @@ def _reported(info) -> float | None:
 
 def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str, fields: dict, *,
                   extra: dict | None = None):
-    """:func:`run_pair`, timed, then stored at once (:meth:`eval.run.store.ResultStore.save`; a
+    """:func:`run_pair`, timed, then stored at once (:meth:`eval.run.result_store.ResultStore.save`; a
     store that cannot be written is logged and the run goes on). ``extra``: cells added to
     the row before it is stored (e.g. a worker's ``cores``).
 

@@ -2,7 +2,7 @@
 
 Each entry is ``{name: str, path: str, remesh: bool}``: ``path`` (relative to the cwd)
 is a real mesh, ``remesh`` says how the benchmark sizes are built from it
-(:func:`eval.experiments.scaling.experiment.build_mesh`: LS3 Loop subdivision, then isotropic
+(:func:`eval.experiments.scaling.scaling_experiment.build_mesh`: LS3 Loop subdivision, then isotropic
 remeshing to the target size when true: a clean mesh; subdivision alone when false: the
 base mesh's thin parts and anisotropy kept, a hard mesh). When ``scaling.meshes`` is null
 the single ``scaling.base_mesh`` (with ``scaling.remesh``) is the set, named after its
@@ -49,7 +49,7 @@ def mesh_entries(cfg) -> list[MeshEntry]:
 
     Reads ``scaling.meshes`` (a list of ``{name, path, remesh}`` mappings) or, when it is
     null or absent, ``scaling.base_mesh`` with ``scaling.remesh`` (default true). Does not
-    look at the files (:func:`eval.experiments.scaling.experiment.run_scaling` does, before building).
+    look at the files (:func:`eval.experiments.scaling.scaling_experiment.run_scaling` does, before building).
 
     Returns
     -------

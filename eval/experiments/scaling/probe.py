@@ -45,7 +45,7 @@ def first_call(mesh_path, handles_npz, params_json) -> dict:
     handles_npz : str or Path, an ``.npz`` with ``handles`` (h,) int64 and ``targets``
         (h, 3) float64.
     params_json : str or Path, a JSON object of :func:`sshade.deform`'s keyword
-        parameters (:func:`sshade.deform.check_params`'s output).
+        parameters (:func:`sshade.pipeline.check_params`'s output).
 
     Returns
     -------

@@ -7,7 +7,7 @@ Usage::
         | --handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S]
         [--param KEY=VALUE ...] [--timeout SECONDS] [--repair] [--force]
 
-Files, methods, checks and exit statuses: docs/methods.md ("Implementation notes: sshade/cli.py").
+Files, methods, checks and exit statuses: docs/methods.md ("Implementation notes: sshade/deform_command.py").
 """
 from __future__ import annotations
 
@@ -22,15 +22,15 @@ import numpy as np
 from tqdm import tqdm
 
 from .animate import main as animate_main
-from .clirun import run_command
+from .command_errors import run_command
 from .components import drop_unreferenced
-from .deform import SShaDe
 from .errors import SShaDeError
 from .guard import check_timeout, handle_error, handles_not_reached, run_method
 from .mesh.handle_files import read_def, read_dmat_selection, read_handle_file, read_sel, selection_handles
 from .mesh.io import read_mesh, write_mesh, written_by_sshade
 from .mesh.repair import repair_mesh
 from .params import check_params
+from .pipeline import SShaDe
 from .refine import SShaDeRefine
 from .view import main as view_main
 from .warmup_command import main as warmup_main
@@ -155,7 +155,7 @@ def _check_out(a) -> None:
 def sshade_method(name: str, params: dict):
     """The method of ``--method`` in ``python -m sshade deform``: ``SShaDe`` or
     ``SShaDe+refine`` (case-insensitive) with ``params`` over the defaults of
-    :func:`sshade.deform.check_params` (``n_low`` auto).
+    :func:`sshade.pipeline.check_params` (``n_low`` auto).
 
     Raises
     ------
@@ -337,7 +337,7 @@ def main(argv=None) -> int:
 def deform_main(argv, *, prog: str = "python -m sshade", resolve=sshade_method, run=run_command) -> int:
     """``<prog> deform ARGS`` (module docstring) for the arguments after ``deform``:
     ``--method`` built by ``resolve`` (:func:`sshade_method`; ``python -m harness deform``
-    passes :func:`harness.registry.named_or_plugin`), the work run by ``run``
-    (:func:`sshade.clirun.run_command`: its exit statuses)."""
+    passes :func:`harness.method_registry.named_or_plugin`), the work run by ``run``
+    (:func:`sshade.command_errors.run_command`: its exit statuses)."""
     a = build_parser(prog).parse_args(argv)
     return run(lambda: deform_file(a, resolve=resolve), where=a.out)

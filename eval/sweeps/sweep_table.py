@@ -1,9 +1,9 @@
-"""The summary table of a sweep folder (:mod:`eval.sweep`): ``sweep_table.csv`` (one row
+"""The summary table of a sweep folder (:mod:`eval.sweeps.sweep_command`): ``sweep_table.csv`` (one row
 per job: its overrides, one column per overridden key, status, error, and
 ``<method>/<column>`` for every column of the job's ``table.csv``) and ``sweep_table.md``
 (varying keys, status and the main metrics), built by :func:`aggregate_sweep` from the
 folder's files (:mod:`eval.sweeps.files`) at the end of a multirun, by
-``python -m eval.sweep aggregate DIR`` and by a resume.
+``python -m eval.sweeps aggregate DIR`` and by a resume.
 """
 from __future__ import annotations
 
@@ -88,7 +88,7 @@ def _job_row(d: Path, j: Path, keys: list, ended, seen: dict) -> dict:
         except (OSError, ValueError):
             rs = None
         row["status"] = {"done": "done", "running": "running"}.get(rs, "missing")
-        row["error"] = "" if rs == "done" else f"no {STATUS_FILE} (not run through eval.sweep?)"
+        row["error"] = "" if rs == "done" else f"no {STATUS_FILE} (not run through eval.sweeps?)"
     for k in ("wall_s", "n_cases", "n_errors"):
         row[k] = (st or {}).get(k, math.nan)
     tab = j / "table.csv"

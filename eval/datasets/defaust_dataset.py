@@ -6,7 +6,7 @@ Example
 -------
 Example::
 
-    from eval.datasets.defaust import load_defaust
+    from eval.datasets.defaust_dataset import load_defaust
     cases = load_defaust("/tmp/defaust_faust", resolution="low")
     c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape
     # -> ((6890, 3), (178,), (178, 3))
@@ -31,8 +31,8 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.dataset import Case, load, read_manifest
 from defaust.manifest import check_out_folder
-from eval.datasets.case import DeformationCase
-from eval.datasets.registry import register_dataset
+from eval.datasets.dataset_registry import register_dataset
+from eval.datasets.deformation_case import DeformationCase
 from eval.run.paths import abs_path
 from eval.run.plan import BUILD_S_PER_SUBJECT, duration_words
 from harness.checks import config_int_list

@@ -1,7 +1,7 @@
 """Build the deformation methods listed in the evaluator's Hydra config: ours by name,
 anyone's as a plug-in.
 
-Names (case-insensitive) are those of :func:`harness.registry.builtin_methods`, one per
+Names (case-insensitive) are those of :func:`harness.method_registry.builtin_methods`, one per
 file of the ``method`` config group: ``ARAP`` (spokes, Sorkine & Alexa 2007),
 ``Elastic`` (spokes and rims, Chao et al. 2010), ``ARAP-SR`` (Levi & Gotsman 2015) from
 :mod:`baselines`, ``SShaDe`` and ``SShaDe+refine`` from :mod:`sshade`. Each file
@@ -21,7 +21,7 @@ so ``sshade.n_low=500`` and ``method.SShaDe.n_low=500`` both set SShaDe's ``n_lo
 
 A plug-in is an item of ``methods`` that is a mapping built by
 :func:`hydra.utils.instantiate`, e.g. ``{_target_: mypkg.MyMethod, name: Mine,
-iterations: 20}``; the object needs what :class:`sshade.method.Deformer` documents
+iterations: 20}``; the object needs what :class:`sshade.method_interface.Deformer` documents
 (``name``, ``deform(V, F, handles, targets) -> (n, 3)``, optional ``info`` dict), checked
 when it is built (:func:`harness.plugins.build_method`, shared with ``python -m sshade
 deform``). This module is the Hydra-config part: the ``methods`` list, the composed
@@ -32,8 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from harness.plugins import as_dict, build_method, is_mapping
-from harness.registry import (
+from harness.method_registry import (
     SECTIONS,
     build_builtin,
     builtin_methods,
@@ -43,6 +42,7 @@ from harness.registry import (
     method_meta,
     strip_meta,
 )
+from harness.plugins import as_dict, build_method, is_mapping
 from sshade.arap import PROTOCOLS
 from sshade.errors import SShaDeError
 
@@ -61,7 +61,7 @@ def _get(cfg, key, default=None):
 def make_methods(cfg) -> list:
     """Instantiate the methods listed in ``cfg.methods``, in that order.
 
-    An item is one of our names (:func:`harness.registry.builtin_methods`, any case), built from its
+    An item is one of our names (:func:`harness.method_registry.builtin_methods`, any case), built from its
     definition ``cfg.method.<key>`` (:func:`method_spec`), or a plug-in: a mapping with
     ``_target_`` (``pkg.module.Class``) and keyword arguments (:func:`harness.plugins.build_method`).
 
@@ -73,14 +73,14 @@ def make_methods(cfg) -> list:
 
     Returns
     -------
-    list of objects implementing :class:`sshade.method.Deformer`.
+    list of objects implementing :class:`sshade.method_interface.Deformer`.
 
     Raises
     ------
     SShaDeError
         Empty or non-list ``methods``, unknown name, a mapping without ``_target_``, a
         target that cannot be imported or built, an object without a ``name`` (str) or
-        a callable ``deform``, a name breaking :data:`sshade.method.NAME_RULE`, a name listed twice
+        a callable ``deform``, a name breaking :data:`sshade.method_interface.NAME_RULE`, a name listed twice
         (ignoring case and repeated spaces), bad parameter values (every
         method's parameters are checked here, before any case is loaded or built), or
         ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
@@ -121,9 +121,9 @@ def method_spec(cfg, name: str) -> dict:
     ``cfg.method.<key>`` when the config has it (composed from ``conf/method/`` by
     ``conf/config.yaml``), else ``conf/method/<name>.yaml`` resolved against ``cfg``'s
     ``arap`` / ``arap_sr`` / ``sshade`` sections merged over the defaults of
-    ``conf/config.yaml`` (:func:`harness.registry.file_spec`; so a plain dict config
+    ``conf/config.yaml`` (:func:`harness.method_registry.file_spec`; so a plain dict config
     works, and so does a method file that the defaults list does not name). Without the
-    file's ``order`` (:data:`harness.registry.META_KEYS`).
+    file's ``order`` (:data:`harness.method_registry.META_KEYS`).
 
     Raises
     ------
@@ -147,7 +147,7 @@ def method_spec(cfg, name: str) -> dict:
 
 def _build_ours(cfg, name: str):
     """One of our methods from its definition in ``cfg``, its parameters checked first by
-    the checks its file names (``checks``, :func:`harness.registry.method_meta`)."""
+    the checks its file names (``checks``, :func:`harness.method_registry.method_meta`)."""
     spec = method_spec(cfg, name)
     where = f"method.{method_key(name)}"
     checks = method_meta(name)["checks"]
@@ -156,7 +156,7 @@ def _build_ours(cfg, name: str):
     elif checks == "arap_sr":
         _alpha(spec.get("alpha", 0.01), f"{where}.alpha")
         arap_params({"tol": spec.get("tol", 1e-4), "max_iter": spec.get("max_iter")}, where=where)
-    # the others check their own parameters when built (SShaDe: sshade.deform.check_params)
+    # the others check their own parameters when built (SShaDe: sshade.pipeline.check_params)
     return build_builtin(name, spec=spec)
 
 

@@ -234,7 +234,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     warm_start : bool, start samplings 1..k-1 from sampling 0's result.
     return_info : also return a dict of timings (seconds; ``total_s`` excludes
         ``compile_s``), seeds, per-sampling details, ``handle_pre_pct`` and ``frame``
-        (docs/methods.md, "Implementation notes: sshade/deform.py").
+        (docs/methods.md, "Implementation notes: sshade/pipeline.py").
 
     Returns
     -------
@@ -377,7 +377,7 @@ def warm_sshade(params: SShaDeParams) -> float:
 
 
 class SShaDe:
-    """SShaDe behind the :class:`sshade.method.Deformer` interface.
+    """SShaDe behind the :class:`sshade.method_interface.Deformer` interface.
 
     Parameters are those of :func:`deform`. After :meth:`deform`, ``info`` holds
     remesh_s / project_s / arap_s / transfer_s (summed CPU-side over samplings),

@@ -11,7 +11,7 @@ Layout, under the run's ``out_dir`` (:mod:`eval.run.outdir`)::
 
 - ``version`` (:data:`STORE_VERSION`), ``case``, ``method`` (the real names);
 - ``key``: SHA-256 (hex) of ``key_fields``, which are what determines the result: the
-  method's resolved definition (``_target_`` and parameters, :func:`eval.methods.method_spec`;
+  method's resolved definition (``_target_`` and parameters, :func:`eval.method_config.method_spec`;
   a plug-in's mapping), the case's identity (dataset name, root, seed, case name and
   seed, hashes of the vertex/face arrays and of the handles and targets: :func:`case_identity`),
   the guard options and the reference options of the row, and the identity of the code

@@ -8,7 +8,7 @@ Run through ``python -m eval`` (:mod:`eval.app`); usage (from the repository roo
 
 Config: ``conf/config.yaml`` (+ ``conf/dataset/faust.yaml``, ``conf/experiment/*.yaml``).
 For each case (:mod:`eval.datasets`, ``dataset.name`` looked up in its registry) and each method
-(:mod:`eval.methods`) the
+(:mod:`eval.method_config`) the
 ``deform`` call is timed with :func:`time.perf_counter` into ``time_s``, after the method's
 optional ``warmup()`` has compiled its numba kernels (the seconds go to the ``compile_s``
 column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
@@ -19,7 +19,7 @@ column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
 optional ``timeout_s`` of each call, its output checked
 (:func:`sshade.mesh.validate.validate_deformed`) before any metric. A method that fails on a
 case (our methods: :class:`~sshade.errors.SShaDeError`; a plug-in: any exception,
-``SystemExit`` included, :func:`sshade.method.is_plugin`; a time-out; a refused output)
+``SystemExit`` included, :func:`sshade.method_interface.is_plugin`; a time-out; a refused output)
 gets its message in the ``error`` column and the run goes on; so does a result whose
 handle error exceeds ``handle_error_max_pct`` (% of the diagonal; its metrics stay in
 the row). Ctrl-C stops the run. A case mesh with several connected components is
@@ -30,7 +30,7 @@ info values become cells through :func:`_info_columns` (safe names and values). 
 (:mod:`eval.tables`), ``breakdown.csv``, ``breakdown.md`` (per pose, per subject, the
 paired SShaDe-Elastic comparison; :mod:`eval.present.breakdown`; with figures also
 ``breakdown.png``), ``run.json`` (:mod:`eval.run.runinfo`), ``eval.log``, Hydra's
-``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.run.store`).
+``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.run.result_store`).
 All tables and ``run.json`` are written atomically.
 
 Result store and resume: each (case, method) run is stored as soon as it
@@ -43,7 +43,7 @@ run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.run.subset`; the
 stated in the table's title); the progress bar's remaining time is weighted by each
 method's expected cost (:mod:`eval.run.progress`). With ``jobs`` > 1 (``auto``: one per core
 for a run of minutes) whole cases run side by side in worker processes
-(:mod:`eval.experiments.cases.jobs`): the same rows, each run timed on its share of the cores.
+(:mod:`eval.experiments.cases.case_jobs`): the same rows, each run timed on its share of the cores.
 
 Exit status of ``python -m eval``: 0 on success (even if some method failed on some
 case), 2 on a configuration or input error (one ``error: ...`` line on stderr).
@@ -61,14 +61,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval import datasets
-from eval import methods as method_table
-from eval.experiments.cases.jobs import describe, job_count, run_case_jobs
+from eval import method_config as method_table
+from eval.experiments.cases.case_jobs import describe, job_count, run_case_jobs
+from eval.experiments.cases.case_plan import plan_runs, planned_root
+from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.pair import guard_options, run_and_store
-from eval.experiments.cases.plan import plan_runs, planned_root
-from eval.experiments.cases.references import CaseReferences
 from eval.experiments.common import as_list, sshade_spec
-from eval.experiments.registry import register_experiment
-from eval.methods import method_spec
+from eval.experiments.experiment_registry import register_experiment
+from eval.method_config import method_spec
 from eval.metrics.meshes import CaseMeshes
 from eval.present.breakdown import write_breakdown
 from eval.present.figures import FIGURE_RECORDS, case_figure_path, figures_options, write_case_figure
@@ -79,12 +79,12 @@ from eval.run.compared import compared_rows, read_compared
 from eval.run.jsonsafe import json_safe
 from eval.run.paths import abs_path
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
+from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
-from eval.run.store import ResultStore, case_identity, pair_key
 from eval.run.subset import baseline_selection, check_baseline_cases, method_selections
 from eval.tables import compare, write_cases, write_tables
 from harness.checks import config_bool
-from harness.registry import method_meta
+from harness.method_registry import method_meta
 from sshade.errors import SShaDeError
 
 __all__ = ["run", "sshade_params"]
@@ -95,7 +95,7 @@ log = logging.getLogger("eval")
 def sshade_params(cfg) -> dict:
     """The parameters the ``SShaDe`` (and ``SShaDe+refine``) rows run with: the method
     config ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`), the very
-    definition :func:`eval.methods.make_methods` builds SShaDe from."""
+    definition :func:`eval.method_config.make_methods` builds SShaDe from."""
     return sshade_spec(cfg)
 
 
@@ -132,7 +132,7 @@ class CaseSelection:
     def runs_on(self, ci: int, m) -> bool:
         """Baselines take minutes per high-res case: they run on the cases
         ``dataset.baseline_cases`` selects, a method whose file says ``cases: all``
-        (:func:`harness.registry.method_meta`) on all, except a method ``method_cases``
+        (:func:`harness.method_registry.method_meta`) on all, except a method ``method_cases``
         gives its own rule."""
         if m.name in self.own:
             sel = self.own[m.name][0]
@@ -147,7 +147,7 @@ class _Setup:
 
     methods: list                 # the built methods, in table order
     names: list[str]              # their names (row labels)
-    specs: list[dict]             # each method's resolved definition (eval/run/store.py)
+    specs: list[dict]             # each method's resolved definition (eval/run/result_store.py)
     codes: list[dict]             # each method's code identity (eval/run/code_identity.py)
     guard: dict                   # timeout_s, handle_error_max_pct
     refs: CaseReferences          # the reference columns' options and cache
@@ -180,8 +180,8 @@ class _Setup:
 
 
 def _method_specs(cfg, methods) -> list[dict]:
-    """Each method's resolved definition (what its result depends on; :mod:`eval.run.store`):
-    ours from :func:`eval.methods.method_spec`, a plug-in's ``_target_`` mapping as given,
+    """Each method's resolved definition (what its result depends on; :mod:`eval.run.result_store`):
+    ours from :func:`eval.method_config.method_spec`, a plug-in's ``_target_`` mapping as given,
     plus the method's ``key_extra`` mapping when it has one (``inputs``: what else its
     rows depend on, e.g. the files :class:`eval.exchange.scored.ScoredResults` reads)."""
     from omegaconf import OmegaConf
@@ -213,7 +213,8 @@ def _setup(cfg) -> _Setup:
     refs = CaseReferences(cfg)  # config checked here too
     resume = config_bool(cfg, "resume", default=False)
     meshes = config_bool(cfg, "store.meshes", default=False)
-    # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first (eval/experiments/cases/plan.py)
+    # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first
+    # (eval/experiments/cases/case_plan.py)
     mc = cfg.get("method_cases")
     root, build = planned_root(cfg, methods, refs, lambda cs, base: CaseSelection(
         base, method_selections(cs, mc, [x.name for x in methods])).runs_on)
@@ -277,7 +278,7 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
 
 
 def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
-    """The store keys (:func:`eval.run.store.pair_key`) of every method on case ``ci``: the
+    """The store keys (:func:`eval.run.result_store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options, and the
     identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`)."""
     ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
@@ -287,10 +288,10 @@ def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
 
 def _run_cases(cfg, s: _Setup) -> list[dict]:
     """Every (case, method) run (:func:`eval.experiments.cases.pair.run_pair`) not already in
-    the result store (``resume``; :mod:`eval.run.store`), each stored as soon as it finishes,
+    the result store (``resume``; :mod:`eval.run.result_store`), each stored as soon as it finishes,
     with a progress bar weighted by each method's expected cost (:mod:`eval.run.progress`);
     in this process, or whole cases in ``jobs`` worker processes
-    (:mod:`eval.experiments.cases.jobs`); ``cases.csv`` rewritten after each case, the
+    (:mod:`eval.experiments.cases.case_jobs`); ``cases.csv`` rewritten after each case, the
     optional figures and 3D views of the first cases. Returns the rows of every pair, in
     (case, method) order, as stored (an interrupted and resumed run, or one with other
     ``jobs``, gives the rows of an uninterrupted one)."""
@@ -304,7 +305,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
     s.jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in todo}), estimate_s=sum(est.values()))
-    s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (plan.py)
+    s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (case_plan.py)
     out = _CaseOutputs(cfg, s, plan, done)
     bar = weighted_bar(sum(est.values()), len(todo))
     with logging_redirect_tqdm(), bar:
@@ -326,7 +327,7 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
 
 
 def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
-    """The stored records a resumed run reuses (:meth:`eval.run.store.ResultStore.lookup`:
+    """The stored records a resumed run reuses (:meth:`eval.run.result_store.ResultStore.lookup`:
     same key, code included, and a valid record), observed by ``cost``; every other
     pair runs. Logs how many are restored and how many recomputed, and why (records of
     other code, of other settings, invalid ones: the first few named), and keeps that
@@ -354,7 +355,7 @@ def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
 
 def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
     """``todo`` in ``s.jobs`` worker processes, whole cases each, the costliest first
-    (:func:`eval.experiments.cases.jobs.run_case_jobs`); the cases without runs to do get
+    (:func:`eval.experiments.cases.case_jobs.run_case_jobs`); the cases without runs to do get
     their outputs (figures, views) here."""
     from omegaconf import OmegaConf
 

@@ -2,14 +2,14 @@
 
 Run a sweep (same config and overrides as ``python -m eval``; ``-m`` = multirun)::
 
-    python -m eval.sweep -m dataset.root=../shared/data/faust_reg dataset.limit=4 \\
+    python -m eval.sweeps -m dataset.root=../shared/data/faust_reg dataset.limit=4 \\
         methods=[SShaDe] sshade.n_low=500,1000,2000 sshade.n_samplings=1,5 \\
         hydra/launcher=joblib hydra.launcher.n_jobs=2
-    python -m eval.sweep experiment=sweep dataset.root=...           # grid in conf/experiment/sweep.yaml
-    python -m eval.sweep -m ... hydra/launcher=slurm hydra.launcher.partition=NAME   # SLURM (submitit)
-    python -m eval.sweep aggregate outputs/sweeps/2025-01-01_12-00-00    # rebuild the table
-    python -m eval.sweep resume outputs/sweeps/2025-01-01_12-00-00       # re-run killed/failed/missing jobs
-    python -m eval.sweep --help                                          # this command's help (HELP)
+    python -m eval.sweeps experiment=sweep dataset.root=...           # grid in conf/experiment/sweep.yaml
+    python -m eval.sweeps -m ... hydra/launcher=slurm hydra.launcher.partition=NAME   # SLURM (submitit)
+    python -m eval.sweeps aggregate outputs/sweeps/2025-01-01_12-00-00    # rebuild the table
+    python -m eval.sweeps resume outputs/sweeps/2025-01-01_12-00-00       # re-run killed/failed/missing jobs
+    python -m eval.sweeps --help                                          # this command's help (HELP)
 
 Each job is :func:`sweep_job`: it runs :func:`eval.app.run_experiment` with ``out_dir``
 set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
@@ -31,17 +31,17 @@ itself without ever waiting on a dead one, with or without ``sacct``; so the swe
 command exits with 0 once every job has an outcome (unless Hydra itself fails).
 
 Before any job starts, :class:`AggregateSweepCallback` (added automatically by
-``python -m eval.sweep -m``; also set in ``conf/experiment/sweep.yaml``) writes
+``python -m eval.sweeps -m``; also set in ``conf/experiment/sweep.yaml``) writes
 ``sweep.json`` into the sweep folder: the command, its folder and the grid (job number
 -> overrides), so that a point without folder is listed as missing and
 :func:`resume_sweep` can run the same command again for the jobs without result. At the
-end of the multirun it calls :func:`eval.sweeps.table.aggregate_sweep`, which writes
+end of the multirun it calls :func:`eval.sweeps.sweep_table.aggregate_sweep`, which writes
 ``sweep_table.csv`` (one row per job: its
 overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
 every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
 ``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.
 The folder's files (``status.json``, ``sweep.json``, the job folders) are read and
-written by :mod:`eval.sweeps.files`, the table is built by :mod:`eval.sweeps.table`.
+written by :mod:`eval.sweeps.files`, the table is built by :mod:`eval.sweeps.sweep_table`.
 
 Why not ``python -m eval -m``: the plain evaluator exits with status 2 on a
 configuration error (:func:`eval.app._main`), which stops a multirun at that job; this
@@ -71,10 +71,10 @@ from eval.sweeps.files import (
     write_manifest,
     write_status,
 )
-from eval.sweeps.table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
+from eval.sweeps.sweep_table import TABLE_CSV, TABLE_MD, aggregate_sweep, sweep_markdown, sweep_title
 from harness.command import hydra_main, run_command
 from harness.confdir import config_dir
-from sshade.clirun import ArgumentParser
+from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
 
 __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
@@ -82,11 +82,11 @@ __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start
 
 log = logging.getLogger("eval")
 
-#: ``python -m eval.sweep --help``: the command's own help (Hydra's would be the evaluator's)
+#: ``python -m eval.sweeps --help``: the command's own help (Hydra's would be the evaluator's)
 HELP = """\
-usage: python -m eval.sweep [-m] [KEY=VALUE ...]      run a parameter sweep (Hydra multirun)
-       python -m eval.sweep resume SWEEP_DIR          run again a sweep's killed, failed and missing jobs
-       python -m eval.sweep aggregate SWEEP_DIR ...   rebuild sweep_table.{csv,md} of sweep folders
+usage: python -m eval.sweeps [-m] [KEY=VALUE ...]      run a parameter sweep (Hydra multirun)
+       python -m eval.sweeps resume SWEEP_DIR          run again a sweep's killed, failed and missing jobs
+       python -m eval.sweeps aggregate SWEEP_DIR ...   rebuild sweep_table.{csv,md} of sweep folders
 
 A parameter sweep of the evaluator (python -m eval): every combination of comma-separated
 values is one job, the evaluator run into its own folder <sweep dir>/<job number>, its
@@ -94,9 +94,9 @@ outcome (done, partial, failed, killed, missing) in status.json there. A failing
 recorded and the sweep goes on; at the end sweep_table.{csv,md} summarise the jobs.
 
 How to sweep (-m = multirun):
-  python -m eval.sweep -m dataset=faust dataset.root=../shared/data/faust_reg dataset.limit=4 \\
+  python -m eval.sweeps -m dataset=faust dataset.root=../shared/data/faust_reg dataset.limit=4 \\
       methods=[SShaDe] sshade.n_low=500,1000,2000 sshade.n_samplings=1,5
-  python -m eval.sweep experiment=sweep dataset=faust dataset.root=DIR   ready grid, no -m (conf/experiment/sweep.yaml)
+  python -m eval.sweeps experiment=sweep dataset=faust dataset.root=DIR  ready grid, no -m (conf/experiment/sweep.yaml)
   add hydra/launcher=joblib hydra.launcher.n_jobs=2                      jobs side by side
   add hydra/launcher=slurm hydra.launcher.partition=NAME                 jobs on SLURM
 
@@ -106,11 +106,14 @@ outputs/sweeps/<date_time>), one folder per job below it.
 Every override of python -m eval works here (python -m eval --help lists the config
 groups and keys; --hydra-help Hydra's options). Details: docs/sweeps.md.
 """
-_RESUME_USAGE = "usage: python -m eval.sweep resume SWEEP_DIR"
+_RESUME_USAGE = "usage: python -m eval.sweeps resume SWEEP_DIR"
 _HELP_FLAGS = ("-h", "--help")
 
 _CALLBACK_KEY = "hydra.callbacks.sweep_aggregate"
-_CALLBACK_TARGET = "eval.sweep.AggregateSweepCallback"
+_CALLBACK_TARGET = "eval.sweeps.sweep_command.AggregateSweepCallback"
+#: Hydra names a job after its task function's module (here ``sweep_command``); a sweep's
+#: jobs keep the name ``sweep`` (``hydra.job.name``: the SLURM job name, ``.hydra/hydra.yaml``)
+_JOB_NAME = "hydra.job.name=sweep"
 _MAX_ERROR = 2000
 
 
@@ -296,7 +299,8 @@ except ImportError:  # pragma: no cover -- hydra-core is a dependency
 
 
 class AggregateSweepCallback(_Callback):
-    """Hydra callback (``hydra.callbacks.sweep_aggregate._target_=eval.sweep.AggregateSweepCallback``):
+    """Hydra callback
+    (``hydra.callbacks.sweep_aggregate._target_=eval.sweeps.sweep_command.AggregateSweepCallback``):
     writes ``sweep.json`` (grid and command, :func:`start_manifest`) when a multirun
     starts, and builds ``sweep_table.{csv,md}`` when it ends."""
 
@@ -324,7 +328,7 @@ class AggregateSweepCallback(_Callback):
 
 # ----------------------------------------------------------------------------- CLI
 def _aggregate_cli(args: list[str]) -> int:
-    ap = ArgumentParser(prog="python -m eval.sweep aggregate",
+    ap = ArgumentParser(prog="python -m eval.sweeps aggregate",
                                  description="Summarise sweep folders into sweep_table.{csv,md}.")
     ap.add_argument("dirs", nargs="+", help="sweep folder(s) (hydra.sweep.dir)")
     ap.add_argument("--no-write", action="store_true", help="print only, write nothing")
@@ -348,6 +352,9 @@ def _resume_argv(man: dict, sweep_dir: Path) -> list[str]:
     original may hold a ``${now:...}`` default or another spelling of the folder)."""
     argv = [str(a) for a in man.get("argv") or []]
     argv = [a for a in argv if a.lstrip("+~").split("=", 1)[0] != "hydra.sweep.dir"]
+    # the callback main adds, recorded under the module path of its day: main adds today's
+    argv = [a for a in argv if not (a.lstrip("+~").startswith(f"{_CALLBACK_KEY}._target_=")
+                                    and a.endswith(".AggregateSweepCallback"))]
     if not any(a in ("-m", "--multirun") for a in argv):
         argv.insert(0, "-m")
     return [*argv, f"hydra.sweep.dir={sweep_dir}"]
@@ -361,7 +368,7 @@ def resume_sweep(sweep_dir) -> int:
     once). ``sweep_table.{csv,md}`` are rebuilt at the end.
 
     Returns the exit status: 0 (also when nothing is left to run), 2 when the folder
-    holds no ``sweep.json`` (a sweep not started by ``python -m eval.sweep``).
+    holds no ``sweep.json`` (a sweep not started by ``python -m eval.sweeps``).
 
     Raises
     ------
@@ -372,7 +379,7 @@ def resume_sweep(sweep_dir) -> int:
         raise SShaDeError(f"sweep folder not found: {d}")
     man = read_manifest(d)
     if not man or not man.get("argv") and not man.get("points"):
-        print(f"error: {d / MANIFEST} not found or empty: only sweeps started by python -m eval.sweep "
+        print(f"error: {d / MANIFEST} not found or empty: only sweeps started by python -m eval.sweeps "
               "can be resumed", file=sys.stderr)
         return 2
     df = aggregate_sweep(d)
@@ -396,7 +403,7 @@ def resume_sweep(sweep_dir) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m eval.sweep [hydra args and overrides]``, ``... aggregate DIR...`` or
+    """``python -m eval.sweeps [hydra args and overrides]``, ``... aggregate DIR...`` or
     ``... resume DIR`` (:func:`resume_sweep`); ``--help`` prints :data:`HELP` and exits 0.
 
     Exits with 0 once every job has an outcome; 2 after one ``error: ...`` line for a bad
@@ -416,16 +423,11 @@ def main(argv: list[str] | None = None) -> None:
                   "with its recorded command,\ninto the same folders; sweep_table.{csv,md} are rebuilt at the end.")
             raise SystemExit(0)
         if len(argv) != 2 or argv[1].startswith("-"):
-            print(f"error: {_RESUME_USAGE} (python -m eval.sweep --help)", file=sys.stderr)
+            print(f"error: {_RESUME_USAGE} (python -m eval.sweeps --help)", file=sys.stderr)
             raise SystemExit(2)
         raise SystemExit(run_command(lambda: resume_sweep(argv[1]), where=argv[1]))
     if any(a in ("-m", "--multirun") for a in argv) and not any(_CALLBACK_KEY in a for a in argv):
         argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
+    if not any(a.lstrip("+~").startswith("hydra.job.name=") for a in argv):
+        argv.append(_JOB_NAME)
     hydra_main(sweep_job, config_dir(), argv=argv)
-
-
-if __name__ == "__main__":
-    # Import the module under its real name so launchers pickle eval.sweep.sweep_job by
-    # reference (a __main__ function would not resolve in their worker processes).
-    from eval.sweep import main as _main
-    _main()

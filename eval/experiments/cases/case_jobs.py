@@ -4,8 +4,8 @@
 ``cores / jobs`` threads) take the cases with runs to do, the costliest first (their
 estimated seconds, :class:`eval.run.progress.CostModel`); a worker runs a case's methods in
 table order (:func:`eval.experiments.cases.pair.run_pair`), so that a reference solution still
-continues from the method on its energy's path (:class:`~eval.experiments.cases.references.CaseReferences`),
-and stores each pair as soon as it finishes (:class:`eval.run.store.ResultStore`), as the
+continues from the method on its energy's path (:class:`~eval.experiments.cases.case_references.CaseReferences`),
+and stores each pair as soon as it finishes (:class:`eval.run.result_store.ResultStore`), as the
 one-process loop does. The main process gets every pair's seconds and row as it ends
 (the progress bar), every log record of the workers (``eval.log`` and the console) and
 the deformed meshes of the first cases (figures and 3D views). Results do not depend on
@@ -35,14 +35,14 @@ from __future__ import annotations
 
 import logging
 
-from eval import methods as method_table
+from eval import method_config as method_table
+from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.pair import guard_options, run_and_store, run_pair
-from eval.experiments.cases.references import CaseReferences
 from eval.metrics.meshes import CaseMeshes
 from eval.run.jsonsafe import json_safe
 from eval.run.outdir import resume_command
 from eval.run.paths import abs_path
-from eval.run.store import ResultStore
+from eval.run.result_store import ResultStore
 from harness.jobs import in_worker, run_jobs, send, thread_limit
 from sshade.cores import available_cores, pool_size
 from sshade.errors import SShaDeError
@@ -114,7 +114,7 @@ class _Forward(logging.Handler):
 
 def init_worker(config: dict) -> None:
     """A worker's setup (once, before its first case): the config (a resolved mapping),
-    its methods built from it (:func:`eval.methods.make_methods`, plug-ins included), the
+    its methods built from it (:func:`eval.method_config.make_methods`, plug-ins included), the
     reference options, guard, result store, and its log records forwarded."""
     from omegaconf import OmegaConf
 

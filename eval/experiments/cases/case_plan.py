@@ -17,7 +17,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from eval import datasets
-from eval.experiments.cases.jobs import job_count
+from eval.experiments.cases.case_jobs import job_count
 from eval.metrics.reference import method_energy, reference_path, sr_alpha
 from eval.run.plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
@@ -111,7 +111,7 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
     the build stage of :func:`planned_root` or None); ``todo``: the ``(ci, mi)`` pairs
     to run; ``restored``: pairs restored from the store; ``cost``: the cost model;
     ``jobs``: worker processes running whole cases side by side
-    (:mod:`eval.experiments.cases.jobs`).
+    (:mod:`eval.experiments.cases.case_jobs`).
     """
     need = []
     for ci in dict.fromkeys(ci for ci, _ in todo):

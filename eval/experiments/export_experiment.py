@@ -8,11 +8,11 @@ import logging
 
 from eval import datasets
 from eval.exchange.layout import INDEX, write_export
-from eval.experiments.registry import register_experiment
+from eval.experiments.experiment_registry import register_experiment
 from eval.run.jsonsafe import json_safe
 from eval.run.paths import abs_path
+from eval.run.result_store import case_identity
 from eval.run.runinfo import collect_runinfo, write_runinfo
-from eval.run.store import case_identity
 from sshade.errors import SShaDeError
 
 __all__ = ["run_export"]

@@ -1,5 +1,5 @@
 """One registry of named plug-ins of the evaluator, found without a list: the datasets
-(:mod:`eval.datasets.registry`) and the experiments (:mod:`eval.experiments.registry`)
+(:mod:`eval.datasets.dataset_registry`) and the experiments (:mod:`eval.experiments.experiment_registry`)
 are each a :class:`Registry` over their package, so a new dataset or experiment is one
 module that registers itself plus one config file."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Hydra multirun sweeps (eval/sweep.py): a failing job is recorded and the others
+"""Hydra multirun sweeps (eval/sweeps/sweep_command.py): a failing job is recorded and the others
 finish; the per-sweep table; the launcher configs (joblib, submitit local/SLURM)."""
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.sweep import main, sweep_job
 from eval.sweeps.files import STATUS_FILE, read_status
-from eval.sweeps.table import aggregate_sweep
+from eval.sweeps.sweep_command import main, sweep_job
+from eval.sweeps.sweep_table import aggregate_sweep
 
 from .conftest import subprocess_env  # noqa: E402
 
@@ -99,7 +99,7 @@ def test_launcher_and_experiment_configs():
     assert c.methods == ["SShaDe"] and c.sshade.workers == 8
     c = _compose(["experiment=sweep", "hydra/launcher=joblib"], hydra_cfg=True)
     assert c.hydra.launcher._target_.endswith("JoblibLauncher")
-    assert c.hydra.callbacks.sweep_aggregate._target_ == "eval.sweep.AggregateSweepCallback"
+    assert c.hydra.callbacks.sweep_aggregate._target_ == "eval.sweeps.sweep_command.AggregateSweepCallback"
     assert c.dataset.limit == 4 and c.experiment.name == "sweep"
     c = _compose(["hydra/launcher=submitit_local"], hydra_cfg=True)
     assert c.hydra.launcher._target_.endswith("LocalLauncher")
@@ -117,7 +117,7 @@ def faust_root(shared_data):
 
 def _sweep(faust_root, sweep_dir, launcher_args, timeout=240):
     env = subprocess_env()
-    args = [sys.executable, "-m", "eval.sweep", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
+    args = [sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
             "methods=[SShaDe]", "sshade.n_low=2,300", "sshade.n_samplings=1", "sshade.workers=1",
             f"hydra.sweep.dir={sweep_dir}", *launcher_args]
     return subprocess.run(args, cwd=sweep_dir.parent, env=env, capture_output=True, text=True, timeout=timeout)

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from eval.registry import Registry
+from eval.registry_base import Registry
 
 __all__ = ["register_experiment", "experiments", "find_experiment", "experiment_check"]
 
-_REGISTRY = Registry(__package__, "experiment kind", skip=("registry", "common"))
+_REGISTRY = Registry(__package__, "experiment kind", skip=("experiment_registry", "common"))
 _CHECKS: dict[str, Callable] = {}
 
 

@@ -1,12 +1,12 @@
 """Our built-in methods, by name: each a module (its class implements
-:class:`sshade.method.Deformer`) plus one file ``conf/method/<name>.yaml`` of the config
+:class:`sshade.method_interface.Deformer`) plus one file ``conf/method/<name>.yaml`` of the config
 folder of :func:`harness.confdir.config_dir` (``_target_``, table ``order``, parameters, and
 under ``harness`` what the evaluator knows of it, :func:`method_meta`). The file name is the
 method's name; its config key has ``+`` as ``_`` (:func:`method_key`). No method's module
 is imported until it is built (:func:`build_builtin`), so this floor names the baselines
 without an upward import; :func:`builtin_methods`, :func:`table_order` and ``python -m
 harness deform --method`` follow the files. A method file, and how to add one:
-docs/methods.md, "Adding a method" and "Implementation notes: harness/registry.py".
+docs/methods.md, "Adding a method" and "Implementation notes: harness/method_registry.py".
 """
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ entry (``remesh: false``) is LS3 Loop subdivided only, until it has at least the
 base mesh. Each mesh is deformed with SShaDe and, up to ``elastic_max_vertices``, with
 full-resolution Elastic (spokes and rims) under the same handles. ``table.csv`` (every
 column, one row per (mesh, size), ``mesh`` first) and ``table.md`` (one table per mesh,
-:mod:`eval.experiments.scaling.table`) in ``out_dir`` give: vertices, n_low, k, seconds
+:mod:`eval.experiments.scaling.scaling_table`) in ``out_dir`` give: vertices, n_low, k, seconds
 for remesh / low-res ARAP / transfer / total, warm (the median of ``scaling.repeat``
 timed calls, their range beside it; numba's compilation excluded: it
 runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
@@ -56,14 +56,14 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.arap import Elastic
+from baselines.fullres_arap import Elastic
 from eval.datasets.shapes import axis_handles, axis_landmarks
 from eval.experiments.common import sshade_spec
-from eval.experiments.registry import register_experiment
+from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.scaling.mesh_set import MeshEntry, cache_name, mesh_entries
 from eval.experiments.scaling.probe import probe_first_call
-from eval.experiments.scaling.table import write_csv, write_markdown
-from eval.methods import method_spec
+from eval.experiments.scaling.scaling_table import write_csv, write_markdown
+from eval.method_config import method_spec
 from eval.metrics.measures import deformation_metrics
 from eval.run.memory import PeakMemory, release_freed
 from eval.run.paths import abs_path
@@ -71,10 +71,10 @@ from eval.run.runinfo import collect_runinfo, write_runinfo
 from harness.checks import check_numbers, config_bool, config_int_list
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
-from sshade.deform import MAX_SEED, check_params, warm_sshade
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_mesh
+from sshade.pipeline import MAX_SEED, check_params, warm_sshade
 from sshade.warmup import warm_fullres
 
 log = logging.getLogger(__name__)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from eval.registry import Registry
+from eval.registry_base import Registry
 
 __all__ = ["Dataset", "register_dataset", "datasets", "find_dataset"]
 
@@ -32,7 +32,7 @@ class Dataset:
     outlook : optional ``outlook(root: Path, ds) -> dict | None``: what ``prepare`` is
         about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.run.plan`):
         None when it has nothing long to do, else a dict (e.g.
-        :func:`eval.datasets.defaust.build_outlook`).
+        :func:`eval.datasets.defaust_dataset.build_outlook`).
     check : optional ``check(cfg) -> None``: the dataset's own config values checked
         before any work (:func:`eval.config_check.check_config`); raises SShaDeError
         naming the key.
@@ -49,7 +49,7 @@ class Dataset:
     check: Callable | None = None
 
 
-_REGISTRY = Registry(__package__, "dataset", skip=("registry", "case"))
+_REGISTRY = Registry(__package__, "dataset", skip=("dataset_registry", "deformation_case"))
 
 
 def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=None, root_hint: str = "",

@@ -65,7 +65,7 @@ class CaseReferences:
 
     def settings(self, on: bool) -> dict:
         """What of this section changes a row on a case (covered or not, :meth:`covers`):
-        whether references are computed there and with which limits (:mod:`eval.run.store`)."""
+        whether references are computed there and with which limits (:mod:`eval.run.result_store`)."""
         return {"on": True, "max_iter": self.max_iter, "time_budget_s": self.time_budget_s} if on else {"on": False}
 
     def start_case(self, ci: int, case, on: bool = True) -> None:

@@ -1,0 +1,9 @@
+"""``python -m eval.sweeps [-m] [KEY=VALUE ...] | resume DIR | aggregate DIR...``: the sweep
+command, :func:`eval.sweeps.sweep_command.main` (its help: ``--help``)."""
+# The command lives in eval.sweeps.sweep_command, imported under its real name, so that
+# launchers pickle its sweep_job by reference (a __main__ function would not resolve in
+# their worker processes).
+from eval.sweeps.sweep_command import main
+
+if __name__ == "__main__":
+    main()
