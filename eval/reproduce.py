@@ -26,7 +26,9 @@ others still run):
    preset over :data:`IA_GRID` on the per_pose cases -> ``results/sweeps/implicit_arap_defaust``
    (with ``--faust``, also on FAUST -> ``results/sweeps/implicit_arap_faust``);
 3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
-   ``results/pose_transfer``;
+   ``results/pose_transfer``, and Table 1 on a DeFAUST built from those FAUST subjects
+   (:data:`FAUST_BUILD`), both protocols -> ``results/defaust_faust``,
+   ``results/defaust_faust_paper``;
 4. with ``--tosca``: the TOSCA isometric experiment -> ``results/tosca``;
 5. with ``--shapes DIR`` (a folder with armadillo.obj, bunny.off, dragon.obj): the
    user-defined deformations of Stanford models at 150k-200k vertices (paper §4.1,
@@ -73,7 +75,9 @@ SR_ALPHAS = "0.001,0.003,0.01,0.03,0.06,0.1"
 #: Implicit-ARAP's cpu-preset grid of the sweep steps: the ARAP weight (10: the preset's,
 #: the reference's weight at its HEAD; 1000: the reference's at the paper's time) and the
 #: deformation steps (a stiffer field needs more to reach its handles)
-IA_GRID = ("method.Implicit-ARAP.arap_weight=10,100,1000", "method.Implicit-ARAP.deform_steps=250,500")
+IA_GRID = ("method.Implicit-ARAP.arap_weight=10,120,1000", "method.Implicit-ARAP.deform_steps=500,1000,1500")
+#: where ``--faust`` builds its DeFAUST (git-ignored, beside the default ``data/defaust``)
+FAUST_BUILD = "data/defaust_faust"
 
 
 def _installed(name: str) -> bool:
@@ -123,6 +127,15 @@ def _steps(a) -> list[tuple[str, list[str]]]:
                                   "resume=true", "jobs=1", *ia[:1], "out_dir=results/faust"]))
         s.append(("pose_transfer", py + ["eval", "experiment=pose_transfer", f"pose_transfer.root={a.faust}",
                                            "figures.enabled=true", "out_dir=results/pose_transfer"]))
+        # Table 1 on a DeFAUST built from these FAUST subjects (the paper's source data; built
+        # into FAUST_BUILD on first use, only verified after), both protocols, every method on every case
+        build = [f"dataset.root={FAUST_BUILD}", "dataset.build.enabled=true",
+                 f'dataset.build.overrides=["source=faust","faust.root={a.faust}"]', "dataset.baseline_cases=all",
+                 "reference.cases=per_pose", "resume=true", "jobs=1"]
+        s.append(("defaust_faust", py + ["eval", *build, "figures.enabled=true", *ia,
+                                         "out_dir=results/defaust_faust"]))
+        s.append(("defaust_faust_paper", py + ["eval", *build, "arap.protocol=paper",
+                                               "out_dir=results/defaust_faust_paper"]))
     if a.tosca:
         s.append(("tosca", py + ["eval", "experiment=tosca", f"tosca.root={a.tosca}", "figures.enabled=true",
                                   "out_dir=results/tosca"]))

@@ -142,6 +142,14 @@ class RestPose(_Base):
         return np.array(V)
 
 
+class SoftRestPose(RestPose):
+    """The rest pose, from a method that says its handles are soft (a penalty)."""
+
+    def deform(self, V, F, handles, targets):
+        self.info = {"handles": "soft"}
+        return np.array(V)
+
+
 class NewlineName(_Base):
     """Its name holds a newline."""
 

@@ -230,6 +230,19 @@ def test_cli_timeout_is_checked(bar, tmp_path, capsys, value):
 
 # ------------------------------------------------------------------ 3. failed cases in the tables
 
+def test_a_soft_handle_method_above_the_bound_keeps_its_case_with_its_handle_error(tmp_path, faust_root):
+    """A penalty method's handle error is a measure of its result: the case is not failed
+    (it stays in the means, beside the others), marked handles_missed, and the table's
+    note counts it with the largest Handle; the same result from a hard-handle method
+    fails the case (test below)."""
+    res, cases, table, md = _evaluate(tmp_path, faust_root, [_bad("SoftRestPose"), MINE])
+    assert cases.loc["SoftRestPose", "error"] == "" and cases.loc["SoftRestPose", "handles_missed"] == "True"
+    err = float(cases.loc["SoftRestPose", "handle_err_pct"])
+    assert err > 1.0 and table.loc["SoftRestPose", "n_cases"] == 1 and table.loc["Mine", "n_cases"] == 1
+    assert f"1 of 1 runs above the handle bound (handle_error_max_pct), kept in the means with their " \
+           f"Handle (largest {err:.2f} %)" in md, md
+
+
 def test_rest_pose_is_a_failed_case_never_best(tmp_path, faust_root):
     mine2 = MINE.replace("name:Mine,iterations:20", "name:Mine2,iterations:5")
     res, cases, table, md = _evaluate(tmp_path, faust_root, [_bad("RestPose"), MINE, mine2])

@@ -162,9 +162,37 @@ def test_units_round_trip_and_parameters_checked():
     assert np.allclose(100 * a + 7, b, atol=1e-3)
     for bad, match in (({"preset": "gpu"}, "unknown preset"), ({"patch_points": 3}, "patch_points"),
                        ({"sdf_lr": 0}, "sdf_lr"), ({"skip": 5}, "skip"), ({"centres": "box"}, "centres"),
-                       ({"device": "tpu"}, "device")):
+                       ({"device": "tpu"}, "device"), ({"lr_milestones": [5, 3]}, "lr_milestones"),
+                       ({"lr_milestones": 7}, "lr_milestones"), ({"lr_gamma": 0}, "lr_gamma")):
         with pytest.raises(SShaDeError, match=match):
             ImplicitARAP(**bad)
+
+
+def test_the_rate_schedule_acts_only_from_its_first_milestone():
+    """The reference's MultiStepLR: milestones past the last step leave every float as
+    without a schedule (so the cpu_soft preset, 500 steps under milestones from 1000, is
+    the earlier default's run), and a milestone inside the run changes the result."""
+    X, F = _sphere_mesh()
+    h = np.flatnonzero(np.abs(X[:, 2]) > 0.45)
+    T = X[h].copy()
+    T[X[h, 2] > 0, 2] += 0.1
+    a, ha = _field(X, F, h, T, steps=20, lr_milestones=(20, 40))
+    b, hb = _field(X, F, h, T, steps=20, lr_milestones=(1000,))
+    c, hc = _field(X, F, h, T, steps=20, lr_milestones=(10,), lr_gamma=0.1)
+    assert ha == hb and hc[:11] == ha[:11] and hc[11:] != ha[11:]
+    assert np.array_equal(_apply(a, X), _apply(b, X))
+
+
+def test_the_presets_stiffness_and_schedule():
+    """cpu: ARAP weight 120 with correct weights (at least the reference's mesh default,
+    10 with its own weights, which are at most about 12x stiffer on 16-point disks),
+    cpu_soft: the earlier default (10, 500 steps); both share the reference's schedule."""
+    from baselines.implicit_arap.method import PRESETS
+    cpu, soft, paper = PRESETS["cpu"], PRESETS["cpu_soft"], PRESETS["paper"]
+    assert cpu["arap_weight"] >= 10 * 12 and not cpu["reference_weights"] and cpu["deform_steps"] > 1000
+    assert (soft["arap_weight"], soft["deform_steps"]) == (10.0, 500)
+    assert cpu["lr_milestones"] == soft["lr_milestones"] == paper["lr_milestones"] == (1000, 2000, 5000)
+    assert {k for k in cpu if cpu[k] != soft[k]} == {"arap_weight", "deform_steps"}
 
 
 def test_field_starts_at_identity():

@@ -38,11 +38,15 @@ def test_every_experiment_with_folders_and_figures(capsys):
     neural = found("torch")
     assert list(steps) == ["defaust", "defaust_paper", "convergence", "animation", "sweep", "sweep_arap_sr_alpha",
                            *(["sweep_implicit_arap", "sweep_implicit_arap_faust"] if neural else []),
-                           "faust", "pose_transfer", "tosca", "tosca_factors", "shapes", "scaling", "frames",
-                           "cold_start", "report"]
+                           "faust", "pose_transfer", "defaust_faust", "defaust_faust_paper", "tosca", "tosca_factors",
+                           "shapes", "scaling", "frames", "cold_start", "report"]
     assert steps["defaust"].endswith("sshade.n_samplings=3")  # extra overrides go to the DeFAUST run
-    for name in ("defaust", "faust", "pose_transfer", "tosca"):
+    for name in ("defaust", "faust", "pose_transfer", "defaust_faust", "tosca"):
         assert "figures.enabled=true" in steps[name], name
+    for name in ("defaust_faust", "defaust_faust_paper"):  # the FAUST subjects built into a DeFAUST of their own
+        assert ('dataset.root=data/defaust_faust dataset.build.enabled=true '
+                'dataset.build.overrides=["source=faust","faust.root=F"] dataset.baseline_cases=all') in steps[name]
+    assert "arap.protocol=paper" in steps["defaust_faust_paper"] and "Implicit-ARAP" not in steps["defaust_faust_paper"]
     assert "dataset.root=F" in steps["faust"] and "pose_transfer.root=F" in steps["pose_transfer"]
     ia = "methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP] " if found("torch") else ""
     assert steps["shapes"] == (f"-m eval experiment=shapes dataset.root=S resume=true jobs=1 {ia}"

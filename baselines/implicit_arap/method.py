@@ -1,19 +1,13 @@
-"""Implicit-ARAP (Baieri, Maggioli, Lähner, Melzi, Rodolà 2024, "Implicit-ARAP:
-efficient handle-guided deformation of high-resolution meshes and neural fields via
-local patch meshing"; reference code github.com/dbaieri/implicit-arap, MIT licence)
-behind the :class:`sshade.method.Deformer` interface. Our own code, a port of the method.
+"""Implicit-ARAP (Baieri, Maggioli, Lähner, Melzi, Rodolà 2024, "Implicit-ARAP: efficient
+handle-guided deformation of high-resolution meshes and neural fields via local patch
+meshing"; reference code github.com/dbaieri/implicit-arap, MIT licence) behind the
+:class:`sshade.method_interface.Deformer` interface. Our own code, a port of the method.
 
-1. a neural SDF of the input mesh (:func:`baselines.implicit_arap.sdf.fit_sdf`);
-2. a neural deformation field ``T(x) = R(x) x + t(x)``
-   (:class:`baselines.implicit_arap.field.DeformationField`), trained with Adam on
-   ``arap_weight * E_ARAP + handle_weight * (MSE(T(h_moving), targets)
-   + MSE(T(h_static), h_static))``, ``E_ARAP`` the patch energy of small disks meshed
-   on the SDF's level sets around the handles, zero-level points and points of space,
-   redrawn at every step (:mod:`baselines.implicit_arap.patches`);
-3. ``T`` applied to every input vertex (connectivity unchanged).
-
-Handles are vertex indices with targets: the points are the handle vertices' rest
-positions, a handle whose target equals its rest position is static, any other moving.
+:class:`ImplicitARAP` fits a neural SDF (:mod:`.sdf`), trains a deformation field
+``T(x) = R(x) x + t(x)`` (:mod:`.field`) with Adam on the patch ARAP energy plus the
+handle terms (:mod:`.patches`) and applies ``T`` to every input vertex. Handles are
+vertex indices; one whose target equals its rest position is static, any other moving.
+The steps, the loss and the presets: docs/methods.md, "Implicit-ARAP".
 """
 from __future__ import annotations
 
@@ -39,30 +33,39 @@ from .sdf import (
 
 __all__ = ["PRESETS", "ImplicitARAP", "deterministic", "fit_field", "patch_centres"]
 
-#: The two configurations. ``paper``: the reference code's as of its last commit before the
+#: The configurations. ``paper``: the reference code's as of its last commit before the
 #: paper (fa0cb78, 2024-05-02; GPU-sized): its loss weights (ARAP 1000, each handle MSE
-#: 1000) and its cotangent weights (``reference_weights``: wrong edges, overwritten
-#: repeats; the later clean-up commit d6efd08 set the ARAP weight to 10). ``cpu``: smaller
-#: networks, fewer samples, steps and patches, zero-level centres drawn on the mesh and
-#: projected (instead of rejection sampling in the box) and at most 128 handle patches
-#: per step, so one case takes under 2 minutes on 2 CPU cores; its ARAP weight and step
-#: count were chosen by the measured grid in results/sweeps/implicit_arap_* (times and
-#: errors of both presets, and what the cpu preset loses: docs/methods.md).
+#: 1000), its cotangent weights (``reference_weights``: wrong edges, overwritten repeats)
+#: and its learning-rate schedule (MultiStepLR, halved at steps 1000, 2000, 5000).
+#: ``cpu`` (the default) and ``cpu_soft`` share ``_CPU``: smaller networks, fewer samples
+#: and patches, zero-level centres drawn on the mesh and projected (instead of rejection
+#: sampling in the box), at most 128 handle patches per step. ``cpu``: correct cotangent
+#: weights with ARAP weight 120, at least as stiff as the reference's mesh default since
+#: d6efd08 (weight 10 with its own weights, which are 5.0-12.1x stiffer on the cpu
+#: preset's 16-point disks: benchmarks/implicit_arap_weights.py), run for ``STIFF_STEPS``
+#: steps. ``cpu_soft``: ARAP weight 10 with correct weights, 500 steps (about 8x softer
+#: than the reference; the default before ``cpu``). Measurements: docs/methods.md.
 #: ``handle_patches`` 0 = every handle is a patch centre at every step (the reference);
 #: n > 0 = a random n of them per step when there are more.
+_CPU = dict(layers=4, width=128, skip=2, octaves=6, sdf_steps=1000, sdf_lr=5e-4, sdf_samples=2048,
+            deform_lr=1e-3, surface_patches=256, handle_patches=128, space_patches=128, patch_points=16,
+            patch_radius=math.sqrt(1e-3), projections=2, level_threshold=0.01, centres="mesh",
+            handle_weight=1000.0, reference_weights=False, lr_milestones=(1000, 2000, 5000), lr_gamma=0.5)
+#: The cpu preset's deformation steps: the fewest that reach every FAUST and DeFAUST
+#: case's handles within 1 % of the diagonal at its ARAP weight (docs/methods.md).
+STIFF_STEPS = 1500
 PRESETS = {
     "paper": dict(layers=8, width=256, skip=4, octaves=6, sdf_steps=10000, sdf_lr=1e-4, sdf_samples=16384,
                   deform_steps=1000, deform_lr=1e-3, surface_patches=1000, handle_patches=0, space_patches=1000,
                   patch_points=30, patch_radius=math.sqrt(1e-3), projections=5, level_threshold=0.01,
-                  centres="rejection", arap_weight=1000.0, handle_weight=1000.0, reference_weights=True),
-    "cpu": dict(layers=4, width=128, skip=2, octaves=6, sdf_steps=1000, sdf_lr=5e-4, sdf_samples=2048,
-                deform_steps=500, deform_lr=1e-3, surface_patches=256, handle_patches=128, space_patches=128,
-                patch_points=16, patch_radius=math.sqrt(1e-3), projections=2, level_threshold=0.01,
-                centres="mesh", arap_weight=10.0, handle_weight=1000.0, reference_weights=False),
+                  centres="rejection", arap_weight=1000.0, handle_weight=1000.0, reference_weights=True,
+                  lr_milestones=(1000, 2000, 5000), lr_gamma=0.5),
+    "cpu": dict(_CPU, deform_steps=STIFF_STEPS, arap_weight=120.0),
+    "cpu_soft": dict(_CPU, deform_steps=500, arap_weight=10.0),
 }
 _INTS = {"layers": 2, "width": 1, "skip": 0, "octaves": 0, "sdf_steps": 0, "sdf_samples": 1, "deform_steps": 0,
          "surface_patches": 0, "handle_patches": 0, "space_patches": 0, "patch_points": 4, "projections": 0}
-_FLOATS = ("sdf_lr", "deform_lr", "patch_radius", "level_threshold", "arap_weight", "handle_weight")
+_FLOATS = ("sdf_lr", "deform_lr", "patch_radius", "level_threshold", "arap_weight", "handle_weight", "lr_gamma")
 
 
 def check_settings(preset: str, given: dict) -> dict:
@@ -96,7 +99,20 @@ def check_settings(preset: str, given: dict) -> dict:
     if not isinstance(s["reference_weights"], (bool, np.bool_)):
         raise SShaDeError(f"Implicit-ARAP: reference_weights must be true or false, got {s['reference_weights']!r}")
     s["reference_weights"] = bool(s["reference_weights"])
+    s["lr_milestones"] = _milestones(s["lr_milestones"])
     return s
+
+
+def _milestones(v) -> tuple:
+    """``lr_milestones`` as a tuple of increasing integers >= 1 (SShaDeError otherwise)."""
+    try:
+        m = tuple(v)
+    except TypeError:
+        m = None
+    if m is None or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) and x >= 1 for x in m) \
+            or any(b <= a for a, b in zip(m, m[1:])):
+        raise SShaDeError(f"Implicit-ARAP: lr_milestones must be increasing integers >= 1, got {v!r}")
+    return tuple(int(x) for x in m)
 
 
 @contextmanager
@@ -144,7 +160,7 @@ def patch_centres(sdf, H, s: dict, sampler, generator):
 
 
 def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, moving: np.ndarray, *,
-              s: dict, generator, rng: np.random.Generator, device, reference_weights: bool = False):
+              s: dict, generator, rng: np.random.Generator, device, reference_weights: bool = False, monitor=None):
     """Train the deformation field (Baieri et al. 2024 §4; reference ``deform-sdf``).
 
     Parameters
@@ -154,7 +170,8 @@ def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
     moving : (h,) bool; s : settings (:func:`check_settings`); generator : CPU
     torch.Generator; rng : numpy Generator (the disks); device : torch device;
     reference_weights : bool, the reference code's cotangent weights
-    (:mod:`baselines.implicit_arap.patches`).
+    (:mod:`baselines.implicit_arap.patches`); monitor : None or callable ``(step, field)``
+    called after each step (``step`` from 1; e.g. to record the handle error on the way).
 
     Returns
     -------
@@ -164,6 +181,8 @@ def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
     field = DeformationField(layers=s["layers"], width=s["width"], skip=s["skip"], octaves=s["octaves"],
                              generator=generator, device=device, dtype=dt)
     opt = torch.optim.Adam(field.parameters(), lr=s["deform_lr"])
+    # the reference's schedule (MultiStepLR): the rate times lr_gamma at each milestone
+    sched = torch.optim.lr_scheduler.MultiStepLR(opt, milestones=list(s["lr_milestones"]), gamma=s["lr_gamma"])
     H = torch.as_tensor(X[handles], dtype=dt, device=device)
     goal = torch.where(torch.as_tensor(moving, device=device)[:, None],
                        torch.as_tensor(targets, dtype=dt, device=device), H)
@@ -185,7 +204,10 @@ def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
+        sched.step()
         history.append(float(loss.detach()))
+        if monitor is not None:
+            monitor(len(history), field)
         n_patches += P
     return field, history, n_patches / max(s["deform_steps"], 1)
 
@@ -204,18 +226,21 @@ class ImplicitARAP:
 
     Parameters
     ----------
-    preset : ``"cpu"`` (default; minutes per FAUST case on 2 cores) or ``"paper"`` (the
-        reference configuration: 8 x 256 networks, 10,000 SDF steps, 1,000 deformation
-        steps, 2,000 patches of 30 points per step; sized for a GPU). See :data:`PRESETS`.
+    preset : ``"cpu"`` (default; minutes per case on 2 cores, at least as stiff as the
+        reference), ``"cpu_soft"`` (ARAP weight 10 with correct weights, 500 steps) or
+        ``"paper"`` (the reference configuration: 8 x 256 networks, 10,000 SDF steps,
+        1,000 deformation steps, 2,000 patches of 30 points per step; sized for a GPU).
+        See :data:`PRESETS`.
     device : ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
     seed : int, seeds every draw (torch and numpy); the same seed on the same device
         and thread count gives bit-identical output.
     reference_weights : bool or None, the reference code's cotangent weights (wrong edges,
         overwritten repeats) instead of the correct ones (docs/methods.md); None: the
-        preset's (paper: True, cpu: False).
+        preset's (paper: True, cpu and cpu_soft: False).
     layers, width, skip, octaves, sdf_steps, sdf_lr, sdf_samples, deform_steps,
     deform_lr, surface_patches, handle_patches, space_patches, patch_points,
-    patch_radius, projections, level_threshold, centres, arap_weight, handle_weight :
+    patch_radius, projections, level_threshold, centres, arap_weight, handle_weight,
+    lr_milestones (increasing steps), lr_gamma (the rate's factor at each milestone) :
         override the preset's value (None: the preset's). Lengths in the normalised box.
 
     Raises
@@ -234,7 +259,8 @@ class ImplicitARAP:
                  name: str = "Implicit-ARAP", layers=None, width=None, skip=None, octaves=None, sdf_steps=None,
                  sdf_lr=None, sdf_samples=None, deform_steps=None, deform_lr=None, surface_patches=None,
                  handle_patches=None, space_patches=None, patch_points=None, patch_radius=None, projections=None,
-                 level_threshold=None, centres=None, arap_weight=None, handle_weight=None):
+                 level_threshold=None, centres=None, arap_weight=None, handle_weight=None,
+                 lr_milestones=None, lr_gamma=None):
         require_torch()
         given = {k: v for k, v in locals().items() if k in PRESETS["paper"]}
         self.settings = check_settings(str(preset), given)
@@ -248,6 +274,9 @@ class ImplicitARAP:
         self.reference_weights = self.settings["reference_weights"]
         self.name = name
         self.info: dict = {}
+        #: None, or a callable ``(step, field)`` run after each deformation step
+        #: (:func:`fit_field`; normalised coordinates, :func:`baselines.implicit_arap.sdf.normalisation`)
+        self.monitor = None
 
     def effective_params(self) -> dict:
         """The parameters :meth:`deform` runs with: ``preset``, ``device`` (as asked;
@@ -282,12 +311,13 @@ class ImplicitARAP:
             moving = ~np.all(targets == V[handles], axis=1)
             field, hist, n_patches = fit_field(sdf, X, F, handles, (targets - centre) * scale, moving, s=s,
                                                generator=gen, rng=rng, device=dev,
-                                               reference_weights=self.reference_weights)
+                                               reference_weights=self.reference_weights, monitor=self.monitor)
             t2 = time.perf_counter()
             out = apply_field(field, X, dev) / scale + centre
         self.info = {"preset": self.preset, "device": dev, "seed": self.seed, "handles": "soft",
                      "sdf_steps": s["sdf_steps"],
-                     "deform_steps": s["deform_steps"], "sdf_fit_s": t1 - t0, "deform_s": t2 - t1,
+                     "deform_steps": s["deform_steps"], "lr_milestones": list(s["lr_milestones"]),
+                     "sdf_fit_s": t1 - t0, "deform_s": t2 - t1,
                      "map_s": time.perf_counter() - t2, "sdf_loss": _tail(sdf_hist), "loss": _tail(hist),
                      "loss_first": hist[0] if hist else None, "patches_per_step": n_patches,
                      "moving_handles": int(moving.sum()), "static_handles": int((~moving).sum()),

@@ -97,7 +97,14 @@ def _handle_words(g: pd.DataFrame) -> list[str]:
     """The method's handle kind (``handles`` column, :data:`HANDLE_TEXT`), if stated."""
     if "handles" not in g.columns or not g["handles"].notna().any():
         return []
-    return ["/".join(HANDLE_TEXT.get(str(k), str(k)) for k in sorted({str(x) for x in g["handles"].dropna()}))]
+    words = "/".join(HANDLE_TEXT.get(str(k), str(k)) for k in sorted({str(x) for x in g["handles"].dropna()}))
+    if "handles_missed" in g.columns:
+        missed = g["handles_missed"].map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
+        if missed.any():
+            worst = g.loc[missed, "handle_err_pct"].astype(float).max()
+            words += (f"; {int(missed.sum())} of {len(g)} runs above the handle bound (handle_error_max_pct), "
+                      f"kept in the means with their Handle (largest {worst:.2f} %)")
+    return [words]
 
 
 def _reference_words(g: pd.DataFrame, *, ours: bool = True) -> list[str]:
