@@ -1,4 +1,5 @@
 """The evaluator's Hydra entry point: ``python -m eval [overrides]``.
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md.
 
 Usage (from the repository root)::
 
@@ -7,17 +8,8 @@ Usage (from the repository root)::
     python -m eval dataset.root=DIR methods=[ARAP,Elastic] out_dir=outputs/run
     python -m eval experiment=tosca                           # another experiment kind
 
-Config: ``conf/config.yaml`` (+ ``conf/dataset/*.yaml``, ``conf/experiment/*.yaml``,
-``conf/method/*.yaml``). :func:`main` composes and checks the command line,
-:func:`run_experiment` checks every number of the config
-(:func:`eval.config_check.check_config`), claims ``out_dir``
-(:func:`eval.run.outdir.claimed_run`) and runs the experiment of ``experiment.kind`` from
-the registry of :mod:`eval.experiments` (default ``cases``: every method on every case
-of the dataset, :func:`eval.experiments.cases.cases_experiment.run`, re-exported here as :func:`run`).
-
 Exit status: 0 on success (even if some method failed on some case), 2 on a
-configuration or input error (one ``error: ...`` line on stderr).
-"""
+configuration or input error (one ``error: ...`` line on stderr)."""
 from __future__ import annotations
 
 import sys

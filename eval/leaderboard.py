@@ -1,17 +1,7 @@
 """One leaderboard of method x dataset over the run folders of a results tree
 (``results/leaderboard.md`` and the top of ``results/index.html``, written by
 ``python -m eval.report --index results``, the ``report`` step of ``python -m eval.reproduce``).
-
-Each entry comes from one run folder: a ``cases`` run (its ``cases.csv``, every method
-averaged over the cases on which all succeeded, :func:`eval.tables.compare`) or an
-animation run (its ``table.csv``). One column ranks, and says so: the ground-truth error
-(``gt_vertex_mean_pct``, the mean distance to the true pose in % of the diagonal; the
-animation: ``gt_mean_pct`` over its frames). A dataset without a ground truth (the
-Stanford shapes) shows volume / EL / FA and ranks nobody; nor does a run whose methods
-averaged different cases. Time is relative to SShaDe measured in the same run (the same
-machine and load), never across runs. TOSCA (a correspondence transfer, SShaDe's alone)
-is listed apart.
-"""
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import math

@@ -1,5 +1,6 @@
 """Build the deformation methods listed in the evaluator's Hydra config: ours by name,
 anyone's as a plug-in.
+Floor 1 of eval/ (beside metrics/ and datasets/, tests/test_layering.py); notes: docs/experiments.md.
 
 Names (case-insensitive) are those of :func:`harness.method_registry.builtin_methods`, one per
 file of the ``method`` config group: ``ARAP`` (spokes, Sorkine & Alexa 2007),
@@ -7,26 +8,7 @@ file of the ``method`` config group: ``ARAP`` (spokes, Sorkine & Alexa 2007),
 :mod:`baselines`, ``SShaDe`` and ``SShaDe+refine`` from :mod:`sshade`. Each file
 (``conf/method/<name>.yaml``: a ``_target_`` class, its table ``order`` and its
 parameters) is composed as ``method.<name>`` (``SShaDe+refine`` as
-``method.SShaDe_refine``), whose values default to the shared sections::
-
-    methods: [ARAP, Elastic, SShaDe]
-    arap:   {protocol: converged, tol: 1e-4, max_iter: null, etol: null, gtol: null}
-            # ARAP, Elastic, and SShaDe's low-res ARAP (ARAP-SR: tol / max_iter only)
-    arap_sr: {alpha: 0.01, alpha_scaling: valence}
-    sshade: {n_low: auto, n_samplings: 5, seed: 0, workers: null, gradient: normalized, warm_start: true}
-            # optional sshade.tol / sshade.max_iter / sshade.protocol / sshade.etol /
-            # sshade.gtol override the arap values for SShaDe
-
-so ``sshade.n_low=500`` and ``method.SShaDe.n_low=500`` both set SShaDe's ``n_low``.
-
-A plug-in is an item of ``methods`` that is a mapping built by
-:func:`hydra.utils.instantiate`, e.g. ``{_target_: mypkg.MyMethod, name: Mine,
-iterations: 20}``; the object needs what :class:`sshade.method_interface.Deformer` documents
-(``name``, ``deform(V, F, handles, targets) -> (n, 3)``, optional ``info`` dict), checked
-when it is built (:func:`harness.plugins.build_method`, shared with ``python -m sshade
-deform``). This module is the Hydra-config part: the ``methods`` list, the composed
-``method.<key>`` sections and the shared sections' checks (:func:`arap_params`).
-"""
+``method.SShaDe_refine``), whose values default to the shared sections::"""
 from __future__ import annotations
 
 import math

@@ -1,34 +1,6 @@
 """The browser report of an evaluator run: ``index.html`` in the run folder, opened from
 ``file://`` (no server, no network: every script is inline or a file next to it).
-
-The page (:func:`write_report`) shows, from the files the run wrote:
-
-- the main table (``table.csv``; for the ``cases`` experiment rebuilt from ``cases.csv``
-  with :func:`eval.tables.compare`, its note, and the second table over each method's
-  own cases when there is one); every table sorts by a click on a column header;
-- how each method stopped and its failed runs (:func:`eval.tables.stop_lines`,
-  :func:`eval.tables.failure_lines`);
-- the 3D views written during the run (``report/<case>.js``, :mod:`eval.present.meshview`): rest
-  mesh, target and every method's result of the first ``report.view_cases`` cases,
-  decimated for display, in a small WebGL viewer (``eval/report_assets/report.js``:
-  drag rotates, wheel zooms);
-- the per-pose / per-subject breakdown (``breakdown.csv``, ``breakdown.png``,
-  ``breakdown.md``), the figures (``*.png``, ``figures/*.png``);
-- which views and figures in the folder were left out, and why;
-- the provenance of ``run.json``: command, git commit and dirty flag, seeds, config.
-
-Only the cases of the run the folder holds now are shown (its ``run.json``, else
-``cases.csv``; :mod:`eval.present.report_scope`): a resumed run keeps an earlier run's files,
-so a view or case figure is shown only when it is of one of these cases and, where
-the run recorded them (``report/outputs.json``, :func:`eval.present.meshview.write_outputs`),
-when this run wrote it; every other one is listed as left out, with the run's own
-notes (e.g. a figure not redrawn). Every link and script source is a relative path
-inside the run folder, percent-encoded (:func:`eval.present.report_scope.link_target`): a file
-named ``javascript:...`` gets a plain file link, a path leaving the folder no link.
-
-Every JavaScript error is written into ``<div id="js-errors">`` (``data-count``), so a
-headless browser's ``--dump-dom`` shows it. ``index.html`` is replaced only when this
-module wrote it (its ``generator`` meta tag): a page put there by a person is kept.
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md.
 
 Command line (:func:`main`)::
 
@@ -37,8 +9,7 @@ Command line (:func:`main`)::
     python -m eval.report --screenshot OUT.png RUN_DIR   # also a PNG of the page (chromium)
 
 It writes only into an earlier evaluator output (:func:`eval.run.outdir.check_earlier_output`)
-and into ``results/`` only under ``python -m eval.reproduce``, which runs ``--index``.
-"""
+and into ``results/`` only under ``python -m eval.reproduce``, which runs ``--index``."""
 from __future__ import annotations
 
 import html

@@ -7,54 +7,9 @@
 Runs, each as its own ``python -m eval`` process (so a failure is reported and the
 others still run):
 
-1. DeFAUST (built on first use) with ARAP, Elastic, ARAP-SR, SShaDe and figures, every
-   method on all 40 cases (and, where PyTorch is installed, Implicit-ARAP's cpu preset,
-   on FAUST too) (``dataset.baseline_cases=all``), the converged ARAP protocol
-   and, on the per_pose subset, the distances to the cached references -> ``results/defaust``; the same methods
-   on all 40 cases under the paper's protocol (§4.1 move rule, libigl, 1000-iteration
-   cap; ARAP-SR's energy stop; each stop reported converged or stalled) and its
-   references on the per_pose subset -> ``results/defaust_paper``; both with ``resume=true``: a rerun after a crash
-   or a kill runs only the (case, method) pairs missing from the folder's result store
-   (:mod:`eval.run.result_store`), while a finished folder reruns nothing unless the configuration
-   changed; the
-   time-to-accuracy experiment (a DeFAUST case and a 40k lifted plane) ->
-   ``results/convergence``; the animated DeFAUST cases (``experiment=animation``: SShaDe
-   prepared once and solved per frame, Elastic warm-started) -> ``results/animation``;
-2. a sweep over SShaDe's n_low (1000, 3000, 6000) x k (1, 3, 5) on 2 DeFAUST cases ->
-   ``results/sweeps/defaust``; ARAP-SR's alpha (:data:`SR_ALPHAS`) on the per_pose cases
-   -> ``results/sweeps/arap_sr_alpha``; where PyTorch is installed, Implicit-ARAP's cpu
-   preset over :data:`IA_GRID` on the per_pose cases -> ``results/sweeps/implicit_arap_defaust``
-   (with ``--faust``, also on FAUST -> ``results/sweeps/implicit_arap_faust``);
-3. with ``--faust``: the FAUST table -> ``results/faust``, pose transfer ->
-   ``results/pose_transfer``, and Table 1 on a DeFAUST built from those FAUST subjects
-   (:data:`FAUST_BUILD`), both protocols -> ``results/defaust_faust``,
-   ``results/defaust_faust_paper``;
-4. with ``--tosca``: the TOSCA isometric experiment -> ``results/tosca``;
-5. with ``--shapes DIR`` (a folder with armadillo.obj, bunny.off, dragon.obj): the
-   user-defined deformations of Stanford models at 150k-200k vertices (paper §4.1,
-   Fig. arap-examples) -> ``results/shapes``;
-6. with ``--scaling set``: the scaling benchmark on its set of meshes (a clean one and two
-   hard TOSCA ones at 200k and 1M vertices, ``conf/experiment/scaling.yaml``; ``--scaling
-   MESH``: that one mesh instead) -> ``results/scaling``; then the frames of a handle path
-   with SShaDe prepared once (``benchmarks/frames.py``: the clean armadillo and the hard
-   centaur, or that one mesh) -> ``results/frames``; then the first call of a fresh process
-   on a cold and a filled numba cache (``benchmarks/cold_start.py``; ``--before COMMIT``:
-   that commit's code too) -> ``results/cold_start``.
-
-Steps 1, 3, 4 and 5 also render their figures into ``<folder>/figures``. Every step's
-folder gets its browser report ``<folder>/index.html`` (:mod:`eval.report`), and
-``results/index.html`` links them all (step ``report``, last: ``python -m eval.report
---index results``, with a screenshot ``results/index.png`` where Chromium is installed;
-``--only faust,report`` reruns one experiment and the index).
-
-This is the only command that writes ``results/``: it sets
-:data:`eval.run.outdir.REPRODUCE_ENV` for the commands it runs, and every other command
-refuses a folder inside ``results/`` (:func:`eval.run.outdir.claim_output_dir`). Each step
-replaces the files its previous run wrote in its folder and says which; files written
-there by something else (e.g. ``results/convergence/libigl_long.md``) are kept.
-
 Exit status 1 if any step failed (all steps are attempted).
-"""
+
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import importlib.util

@@ -1,4 +1,5 @@
 """Per-case results -> per-method tables (CSV, Markdown, LaTeX), written atomically.
+Floor 3 of eval/ (above present/, tests/test_layering.py); notes: docs/experiments.md.
 
 Input: a pandas DataFrame with one row per (case, method) as produced by
 :mod:`eval.app`: identifiers (``case``, ``subject``, ``pose``, ``method``), sizes
@@ -7,41 +8,7 @@ Input: a pandas DataFrame with one row per (case, method) as produced by
 ``angle_err_rel_pct``, ``handle_err_pct``, ``gt_vertex_mean_pct``,
 ``gt_vertex_max_pct``, ``hausdorff``, ``chamfer``), ``time_s`` (seconds of the
 ``deform`` call), method info (``iterations``, ``remesh_s``, ...) and ``error``
-(empty or missing when the method succeeded).
-
-Fair comparison. Methods need not run on the same cases (on a high-res dataset the
-full-resolution baselines run only on the first ``dataset.baseline_cases`` cases,
-SShaDe on all), and a method may fail on some. The main table therefore averages every
-method over the same cases, the *common set*: the cases on which every method of the
-frame has a successful row (:func:`common_cases`, :func:`compare`). ``Failed`` counts a
-method's failed runs over all the cases it was run on (by construction none of them is
-in the common set).
-
-Outputs (in ``out_dir``, :func:`write_tables`):
-
-- ``cases.csv``: the rows as given;
-- ``table.csv``: the main table, per-method means over the common set of every numeric
-  column, with ``n_cases`` (the common set's size, the same for every method) and
-  ``n_failed``;
-- ``table_all.csv``: only when some method succeeded on cases outside the common set:
-  per-method means over each method's own successful cases (``n_cases`` differs
-  between rows);
-- ``table.md``: the main columns as Markdown: the main table (best value per column in
-  bold) and, when ``table_all.csv`` is written, a second table "all cases each method
-  ran on" without bold (its rows average different cases);
-- ``table.tex``: the paper's Table 1 layout (Method | Volume | Area | EL | FA | Time) of
-  the main table, booktabs, best (lowest) value per column in bold, and a note row
-  naming the number of cases each row averages. Needs ``\\usepackage{booktabs}``.
-
-When no case has a successful row of every method (the common set is empty), table.md
-and table.tex say so and the main table falls back to per-method means over each
-method's own successful cases, without bold. A frame without a ``case`` column is
-summarised per method, as :func:`summarize` always did.
-
-Rows are ordered as :func:`harness.method_registry.table_order` says (ARAP, Elastic, ARAP-SR,
-Implicit-ARAP, SShaDe, SShaDe+refine: the ``order`` keys of ``conf/method/*.yaml``), then
-any other method by name.
-"""
+(empty or missing when the method succeeded)."""
 from __future__ import annotations
 
 import logging

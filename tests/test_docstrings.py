@@ -1,7 +1,8 @@
 """Module docstrings are references, not lab notes: every module of the packages in
 :data:`PACKAGES` has one, of at most :data:`MAX_LINES` lines (what the module holds, where
 it sits, the paper section it implements); rationale and measurements live in
-docs/methods.md ("Implementation notes: ..."). Read with ``ast``, nothing imported."""
+docs/methods.md, or docs/experiments.md for eval/ ("Implementation notes: ...").
+Read with ``ast``, nothing imported."""
 from __future__ import annotations
 
 import ast
@@ -10,7 +11,7 @@ from pathlib import Path
 from .conftest import ROOT
 
 #: The packages whose modules are checked (a package added here is checked the same way).
-PACKAGES = ("sshade",)
+PACKAGES = ("sshade", "eval")
 MAX_LINES = 12
 
 
@@ -24,9 +25,9 @@ def module_docstring_problem(path: Path) -> str | None:
     return f"{n_lines} lines (at most {MAX_LINES})" if n_lines > MAX_LINES else None
 
 
-def test_module_docstrings_of_sshade_are_at_most_12_lines():
+def test_module_docstrings_are_at_most_12_lines():
     paths = sorted(path for package in PACKAGES for path in (ROOT / package).rglob("*.py"))
     assert paths, f"no Python module under {PACKAGES}"
     problems = {path.relative_to(ROOT).as_posix(): module_docstring_problem(path) for path in paths}
     offending = [f"{where}: {why}" for where, why in problems.items() if why]
-    assert not offending, "module docstrings to shorten (move the rest to docs/methods.md):\n" + "\n".join(offending)
+    assert not offending, "module docstrings to shorten (move the rest to the docs):\n" + "\n".join(offending)

@@ -1,8 +1,5 @@
 """Datasets of deformation cases for the evaluator (``dataset.name`` in the config).
-
-Every case is a :class:`~eval.datasets.deformation_case.DeformationCase` (or a subclass). One
-module per dataset, each registering itself (:func:`eval.datasets.dataset_registry.register_dataset`:
-its loader and the ``dataset.*`` config keys it takes):
+Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
 
 - :mod:`eval.datasets.faust`: FAUST registrations -> DeFAUST-style cases
   (:func:`~eval.datasets.faust.faust_cases`).
@@ -10,13 +7,7 @@ its loader and the ``dataset.*`` config keys it takes):
   :func:`~eval.datasets.defaust_dataset.load_defaust` at high or low resolution (and built
   first into the default folder, ``dataset.build.enabled``).
 - :mod:`eval.datasets.shapes`: single shapes (Stanford models) with a fixed user-defined
-  edit (:func:`~eval.datasets.shapes.shape_cases`; paper §4.1, Fig. arap-examples).
-
-The registry imports every module of this package (no list to update): a new dataset is
-one module here calling ``register_dataset`` plus ``conf/dataset/NAME.yaml``.
-:func:`load_cases` dispatches on the name; :func:`dataset_root` and
-:func:`dataset_options` read the ``dataset`` config section for it.
-"""
+  edit (:func:`~eval.datasets.shapes.shape_cases`; paper §4.1, Fig. arap-examples)."""
 from __future__ import annotations
 
 import hashlib

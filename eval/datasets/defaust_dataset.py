@@ -1,23 +1,7 @@
 """The ``defaust`` dataset: a built DeFAUST folder (``python -m defaust``, :mod:`defaust`)
 read as deformation cases through the dataset's public reader :mod:`defaust.dataset`
 (which says how the stored handles become vertex handles and targets).
-
-Example
--------
-Example::
-
-    from eval.datasets.defaust_dataset import load_defaust
-    cases = load_defaust("/tmp/defaust_faust", resolution="low")
-    c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape
-    # -> ((6890, 3), (178,), (178, 3))
-
-When ``dataset.root`` is the default folder :data:`DEFAULT_DEFAUST_ROOT` (or with
-``dataset.build.enabled=true``) the evaluator first builds, finishes or verifies the
-build there (:func:`prepare_root`); any other folder is only read. What that build is
-about to do, for the evaluator's plan (:mod:`eval.run.plan`), comes from :func:`build_outlook`
-(no work); while it runs, each subject built logs one progress line with the elapsed time
-and an estimate of the time left (:class:`BuildProgress`).
-"""
+Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import logging

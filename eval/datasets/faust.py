@@ -1,32 +1,11 @@
 """FAUST registrations as handle-driven deformation cases (DeFAUST protocol).
+Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
 
 Source: SShaDe paper (Maggioli et al., Eurographics 2025), appendix "DeFAUST dataset";
 data: MPI-FAUST training registrations (Bogo et al. 2014), files ``tr_reg_XYZ.ply``
 with index ``i = XYZ = 10 * subject + pose`` (subject ``i // 10``, pose ``i % 10``),
 6890 vertices each, all sharing ONE face array and in vertex-to-vertex correspondence
-(the SMPL template topology). Units: metres.
-
-Per subject, pose 0 is the rest pose and each target pose gives one case: the rest
-mesh is deformed with handles drawn around landmarks of :data:`FAUST_LANDMARKS`
-(:func:`defaust.handles.landmark_handles`), and the target pose itself is the ground
-truth for the deformed shape.
-
-Protocols (``dataset.protocol``):
-
-- ``paper`` (default): the paper's DeFAUST protocol (appendix "DeFAUST dataset"), the
-  DeFAUST builder's rule: per subject the first ``n_targets`` (4) non-rest poses present
-  (:func:`defaust.faust_source.faust_subjects`), the first three with the 6
-  :data:`defaust.handles.BASE_LANDMARKS`, the last with all 11 landmarks
-  (:func:`defaust.handles.landmarks_for_target`). The handle seeds are the builder's
-  (:func:`case_seed` = :func:`defaust.build.handle_seed`'s formula), so these cases have
-  the low-resolution handles of a ``python -m defaust source=faust`` build.
-- ``all_landmarks``: every non-rest pose present, every pose with all 11 landmarks.
-
-Remaining differences from the paper's DeFAUST (documented in docs/differences.md): the
-original handle sets are not distributed, so they are regenerated from a fixed landmark
-list with a seeded draw; the low-resolution registrations are used as they are (no LS3
-Loop subdivision to 150k-200k vertices; ``dataset=defaust`` has those).
-"""
+(the SMPL template topology). Units: metres."""
 from __future__ import annotations
 
 import logging

@@ -1,30 +1,11 @@
 """User-defined deformations of single shapes (paper §4.1, Fig. arap-examples).
-
-The paper compares the methods on "user-defined deformations" of Stanford 3D Scanning
-Repository models taken from Implicit-ARAP (Baieri et al. 2024). Those edits are not
-available here, so each shape gets a fixed, reproducible edit instead (:func:`axis_handles`,
-the rule of the scaling benchmark): from the principal axes ``a1, a2, a3`` of the shape
-(PCA of its vertices), four handle regions around the vertices of smallest and largest
-coordinate along ``a1`` and ``a2``; the regions at the smallest ``a1`` and ``a2`` stay
-where they are, the region at the largest ``a1`` is rotated by ``rotate_deg`` about
-``a3`` through the centroid and the one at the largest ``a2`` is moved by
-``translate * bbox diagonal`` along ``a3``. Each region is ``n_per_group`` random
-vertices (seeded by ``[seed, group]``) within ``region_radius * bbox diagonal`` of its
-landmark.
-
-With ``vertex_range`` set, each shape is first brought to high resolution like the
-DeFAUST rest poses (LS3 Loop + isotropic remeshing, :func:`defaust.highres.subdivide_remesh`)
-and the result is cached as ``<cache>/<file name>_<lo>-<hi>.ply`` (e.g.
-``bunny.off_150000-200000.ply``), so later runs only read it.
-There is no ground-truth pose: cases have ``V_gt = None`` and are scored with the
-deformation metrics (volume, area, edge length, face angles, handle error) only.
+Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
 
 Example::
 
     cases = shape_cases("../shared/data/classic", files=["armadillo.obj"])
     c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape
-    # -> ((43243, 3), (120,), (120, 3))
-"""
+    # -> ((43243, 3), (120,), (120, 3))"""
 from __future__ import annotations
 
 import logging

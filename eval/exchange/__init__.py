@@ -1,7 +1,5 @@
 """Results computed outside this harness: the exchange layout and its scoring.
-
-A method written in C++, MATLAB or any other language takes part in the benchmark in
-three steps (docs/bring-your-results.md):
+Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/experiments.md.
 
 - :mod:`~eval.exchange.layout`: ``python -m eval experiment=export`` writes every case of
   a dataset in a layout any language reads (rest mesh as OBJ and PLY, handles and
@@ -10,5 +8,4 @@ three steps (docs/bring-your-results.md):
 - the user's program writes one deformed mesh per case, ``<case>.obj`` (or .ply/.off/.stl);
 - :mod:`~eval.exchange.scored`: ``python -m eval experiment=score score.results=DIR
   score.name=NAME`` scores that folder like any method's row (a plug-in that reads the
-  case's file), with the times the method reported (``score.times``), never read times.
-"""
+  case's file), with the times the method reported (``score.times``), never read times."""

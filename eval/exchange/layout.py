@@ -1,21 +1,12 @@
 """The exchange layout: every case of a dataset in files any language reads, and the
 names a folder of results computed elsewhere follows.
+Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/experiments.md.
 
-An export folder (:func:`write_export`) holds ``cases.json`` (:data:`INDEX`) and one
-folder per case, named exactly as the evaluator names the case (``s0_p1``, ``bunny``)::
-
-    <case>/rest.obj, rest.ply   the rest mesh (V (n, 3), F (m, 3), 0-based in PLY, 1-based in OBJ)
-    <case>/handles.json         handles (h,) 0-based, targets (h, 3), static (h,), group (h,) or null
-    <case>/handles.csv          one line per handle: handle,x,y,z,static,group (0-based handle)
-    <case>/handles.dmat         (h, 1) handle indices, 0-based (libigl's DMAT, igl::readDMAT)
-    <case>/targets.dmat         (h, 3) target positions (units of the rest mesh)
-    <case>/static.dmat          (h, 1) 1 where the handle's group stays at its rest position
-
-A results folder holds one deformed mesh per case, ``<case>.obj`` (or ``.ply``,
-``.off``, ``.stl``; :func:`result_path`), with the rest mesh's vertices in the same
-order, and optionally a times file (:func:`read_times`). The ground truth is never
-exported: it is what the score compares against.
-"""
+An export folder (:func:`write_export`) holds ``cases.json`` (:data:`INDEX`) and one folder
+per case (``<case>/rest.obj``, ``rest.ply``, ``handles.json``, ``handles.csv``, ``handles.dmat``,
+``targets.dmat``, ``static.dmat``), named exactly as the evaluator names the case. A results
+folder holds one deformed mesh per case, ``<case>.obj`` (or ``.ply``, ``.off``, ``.stl``;
+:func:`result_path`), and optionally a times file (:func:`read_times`)."""
 from __future__ import annotations
 
 import csv

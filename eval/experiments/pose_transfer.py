@@ -1,40 +1,11 @@
 """Pose transfer on FAUST (paper §4.3): ``python -m eval experiment=pose_transfer``.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 The paper poses hand-edited TOSCA meshes, which have no ground truth. Here the edited
 shape is another FAUST subject: the registrations (``tr_reg_XYZ.ply``, subject and pose from ``XYZ``,
 :func:`eval.datasets.faust.discover_faust`) are in 1:1 correspondence,
 share one face array and are aligned in space, and subject b in pose p is the ground
-truth of "subject b put in the pose of subject a's pose p".
-
-For every ordered pair of subjects ``a != b`` and every target pose ``p`` present for
-both: M = a pose 0, S = b pose 0, M' = a pose p; the prediction
-``S' = pose_transfer(M, F, S, M', align=True)`` (:func:`sshade.isometric.pose_transfer`:
-S first moved rigidly onto M, since FAUST subjects stand at different places; M
-remeshed to ``n_low`` vertices, ``n_samplings`` samplings averaged) is compared with b
-pose p. SShaDe's parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``,
-``workers``) come from the method config ``method.SShaDe`` (the ``sshade`` section;
-``conf/experiment/pose_transfer.yaml`` sets ``sshade.n_low: 1000``; :func:`sshade_params`).
-
-The ground truth is approximate: two subjects never hold "pose p" identically, so
-even a perfect transfer keeps the difference between a's and b's pose p; and the
-registrations of different scans are placed differently in space. Hence every shape is
-first moved rigidly onto the ground truth (:func:`sshade.isometric.rigid_align`,
-through the correspondence) and the metrics are taken after that.
-
-Metrics (``cases.csv``; :func:`eval.metrics.measures.ground_truth_metrics`): vertex error (mean
-/ max ``||v - v_gt||`` in % of the ground truth's bounding-box diagonal), Hausdorff and
-Chamfer (paper §4.2 definitions, unit-sphere normalised), ``stretch_vs_S_pct`` (mean
-relative edge-length change from S: how much of S's body is kept; the ground truth's
-own value is the natural change due to posing), wall time. References with the same
-metrics show what the transfer gains: ``identity_*`` (S itself, no transfer),
-``mprime_*`` (M' itself: the right pose on the wrong body) and ``naive_*`` (M' + (S -
-M): the rest-pose body difference added in global coordinates, without rotating it).
-
-``table.csv`` / ``table.md``: one row per method with means over the cases, the ground
-truth's own stretch, and a per-case table. ``run.json``: config, seeds, provenance.
-With ``figures.enabled``: ``figures/sA-sB_pP.png`` for the first ``figures.max_cases``
-cases (:func:`eval.present.figures.pose_transfer_figure`). All writes atomic.
-"""
+truth of "subject b put in the pose of subject a's pose p"."""
 from __future__ import annotations
 
 import logging

@@ -1,4 +1,5 @@
 """Non-rigid isometric deformations on TOSCA (paper §4.2): ``python -m eval experiment=tosca``.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 For every TOSCA class (files ``NAMEk.off`` in ``tosca.root``, vertices 1:1 within a
 class) pose 0 is the rest pose M and every other pose M' one case: M is remeshed to
@@ -7,27 +8,7 @@ correspondence and M is rebuilt in that pose with the per-triangle LRFs, average
 ``n_samplings`` samplings (:func:`sshade.isometric.isometric_transfer`). SShaDe's
 parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``anchor``, ``workers``) come from
 the method config ``method.SShaDe`` (the ``sshade`` section; ``conf/experiment/tosca.yaml``
-sets the paper's ``sshade.n_low: 6000``, ``sshade.n_samplings: 10``; :func:`sshade_params`).
-
-Per case (``cases.csv``): the paper's Hausdorff ``d_H`` and Chamfer ``d_C`` between the
-prediction and the true pose (vertex-to-surface, both shapes centred and scaled into
-the unit sphere of the true pose, :func:`eval.metrics.measures.ground_truth_metrics`), the
-vertex error (mean / max ``||v_pred - v_true||`` in % of the true pose's bounding-box
-diagonal), the wall time of the transfer and its parts, and two references: ``rest_*``
-(d_H / d_C of the rest pose itself against the true pose) and ``gt_stretch_pct`` (mean
-relative edge-length change rest -> true pose, in %: how far the data is from
-isometric; the LRF transfer is rigid per low-res triangle and cannot follow stretch).
-
-``table.csv`` / ``table.md``: per-class means, the mean over all cases, and the paper's
-figures (mean over its whole TOSCA set, d_H = 5.66e-3, d_C = 3.76e-8) as a reference
-row. ``run.json``: config, seeds, excluded classes, provenance. With ``figures.enabled``:
-``figures/<class><pose>.png`` for the first pose of each class (at most
-``figures.max_cases``; :func:`eval.present.figures.tosca_figure`). All writes atomic.
-
-Classes with fewer than ``tosca.min_vertices`` vertices are excluded (the paper drops
-``wolf``, < 5000 vertices). Each pose is read with the rest pose's face array (some
-TOSCA poses wind a few faces the other way).
-"""
+sets the paper's ``sshade.n_low: 6000``, ``sshade.n_samplings: 10``; :func:`sshade_params`)."""
 from __future__ import annotations
 
 import logging

@@ -1,10 +1,5 @@
 """Deformation-quality metrics of the paper (§4.1 ARAP errors, §4.2 Hausdorff/Chamfer).
-
-Pure numpy (and libigl for point-to-surface distances) functions over ``(V, F)``
-arrays. Percentages are returned as percentages (``12.5`` means 12.5 %), angles in
-degrees. Every function checks its inputs and raises
-:class:`~sshade.errors.SShaDeError` with a clear message on wrong shapes, mismatched
-vertex arrays, NaN/inf coordinates or out-of-range face indices.
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md.
 
 Examples
 --------
@@ -14,8 +9,7 @@ Examples
 >>> round(volume(V, F), 6)
 0.166667
 >>> round(volume_error(V, 2 * V, F), 6)
-700.0
-"""
+700.0"""
 from __future__ import annotations
 
 import numpy as np

@@ -1,12 +1,6 @@
-"""What the metrics of :mod:`eval.metrics.measures` need of a mesh that every result is compared
-with, computed once: :class:`RestMesh` (the rest side of
-:func:`eval.metrics.measures.deformation_metrics`) and :class:`TargetMesh` (the ground-truth side
-of :func:`eval.metrics.measures.ground_truth_metrics`), and the geometric kernels both use.
-
-The evaluator builds one :class:`RestMesh` per rest mesh (a DeFAUST subject's four poses
-share it) and one :class:`TargetMesh` per case, and hands them to every method's metrics:
-the numbers are those of the direct computation, bit for bit (the same kernels on the same
-arrays; ``tests/test_metric_meshes.py``), only not recomputed per (case, method) pair.
+"""What the metrics of :mod:`eval.metrics.measures` need of a mesh, computed once:
+:class:`RestMesh` (rest side) and :class:`TargetMesh` (ground-truth side), and their kernels.
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md.
 
 Examples
 --------
@@ -15,8 +9,7 @@ Examples
 >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 >>> r = RestMesh(V, F)
 >>> round(r.volume, 6), len(r.edges)
-(0.166667, 6)
-"""
+(0.166667, 6)"""
 from __future__ import annotations
 
 import numpy as np

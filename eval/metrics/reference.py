@@ -1,20 +1,6 @@
 """Reference solutions: the deep-converged full-resolution ARAP minimiser of a case,
 computed once, cached on disk, and the distance of any method's result to it.
-
-A benchmark row is only as good as its reference. For every case (rest mesh, handles,
-targets) and ARAP energy (``"spokes"``: ARAP, Sorkine & Alexa 2007; ``"spokes_and_rims"``:
-Elastic, Chao et al. 2010; ARAP-SR's own energy with its alpha, :func:`sr_energy`, Levi &
-Gotsman 2015, deep-solved by :func:`baselines.arap_sr_solver.solve_arap_sr`),
-:func:`reference_solution` runs
-:func:`sshade.arap.solve_arap` (L-BFGS-accelerated local/global, Armijo line
-search) with :data:`sshade.arap.DEEP_CRITERION` (until the energy stops
-changing in float64; on the FAUST cases L-BFGS reaches the same energy as the
-Anderson-accelerated iteration to 12 digits, or a lower one: s0_p1 spokes -0.0822362
-against -0.0822274, and on DeFAUST s00_p01 spokes -0.0273515 where a 4,836-iteration
-Anderson run had stopped at -0.027234) and stores the result in ``cache_dir`` under a key hashing the
-mesh, the handles, the targets, the energy and the solver settings, so every later run
-(any method, any experiment) reuses it. :func:`reference_metrics` scores a deformed mesh
-against it:
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md.
 
 - ``ref_mean_pct`` / ``ref_max_pct``: mean / max vertex distance to the reference, in %
   of the rest mesh's bounding-box diagonal;
@@ -22,8 +8,7 @@ against it:
   minimum, with ``E`` the reference's energy (libigl's weights, :mod:`sshade.arap.operators`);
   ``>= 0`` up to the reference's own tolerance. (libigl's cotangent weights are negative
   on obtuse triangles, so the spokes energy of a mesh with many of them, e.g. FAUST's,
-  can be negative at its minimum: hence ``|E(U*)|``.)
-"""
+  can be negative at its minimum: hence ``|E(U*)|``.)"""
 from __future__ import annotations
 
 import hashlib

@@ -1,4 +1,5 @@
 """Figures of the ANNY DeFAUST source: ``python -m eval.present.anny_figures [OUT_DIR]``.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
 
 Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.present.figures.mesh_row`:
 
@@ -6,12 +7,7 @@ Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.presen
   titled with their phenotype (:data:`defaust.anny_source.SUBJECTS`);
 - ``subject00_dataset_poses.png``: subject 0 in the rest pose with its landmarks and in the
   4 DeFAUST target poses (the last one turned 30 degrees and moved, paper appendix);
-- ``subject00_library.png``: subject 0 in every pose of :data:`defaust.anny_poses.POSES`.
-
-Default ``OUT_DIR``: ``outputs/anny_figures`` (a new, empty or earlier ``anny_figures``
-folder: :func:`eval.run.outdir.claim_output_dir`; ``results/`` only under ``python -m
-eval.reproduce``). Needs the ANNY assets (see README).
-"""
+- ``subject00_library.png``: subject 0 in every pose of :data:`defaust.anny_poses.POSES`."""
 from __future__ import annotations
 
 import sys

@@ -1,28 +1,10 @@
 """Breakdowns of an evaluator run next to its ``table.md``: per target pose
 and per subject, and a paired comparison of SShaDe with Elastic.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
 
 Input: the per-case rows of ``cases.csv`` (columns ``case``, ``subject``, ``pose``,
 ``method``, ``error`` and the metrics; :mod:`eval.experiments.cases.cases_experiment`). Only successful
-rows (:func:`eval.tables.ok_mask`) with a finite value of a metric count for it.
-
-Outputs (:func:`write_breakdown`):
-
-- ``breakdown.csv``: long format, one line per (``by`` = ``pose`` / ``subject``,
-  ``group`` value, ``method``, ``metric``) with ``n``, ``mean``, ``std`` (sample
-  standard deviation, ddof 1; empty for n = 1), ``median``, ``min``, ``max``;
-- ``breakdown.md``: the same as tables of "mean ± std" per group (rows) and method
-  (columns), one per (``by``, metric), then the paired comparison
-  (:func:`paired_comparison`): on the cases where both SShaDe and Elastic succeeded, on
-  how many SShaDe's volume error (``volume_err_pct``, % of the rest volume) is below
-  Elastic's, and the median of the differences SShaDe - Elastic with a seeded
-  percentile-bootstrap interval (default 95 %, 2000 resamples, seed 0);
-- with ``figure=True``: ``breakdown.png`` (next to ``breakdown.md``; ``figures/``
-  holds one PNG per case), the per-case distribution of each metric per method
-  (:func:`eval.present.figures.distribution_figure`).
-
-Metrics (:data:`BREAKDOWN_METRICS`, those present): volume, area, edge-length errors
-(%), face-angle error (degrees), ground-truth vertex error (% of the diagonal).
-"""
+rows (:func:`eval.tables.ok_mask`) with a finite value of a metric count for it."""
 from __future__ import annotations
 
 import math

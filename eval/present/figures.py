@@ -1,26 +1,7 @@
 """Paper-style case figures: the rest mesh with its handles, then every method's result
 coloured by the per-edge length error (paper Fig. 1 handle colours, Fig. "defaust-volume"
 error colouring), rendered headless with :mod:`eval.present.render`.
-
-- :func:`face_edge_error`: per-face edge error of paper eq. (eq:edge-error): for every
-  edge ``|l - l'| / max_e l`` (rest length ``l``, deformed ``l'``, normalised by the
-  longest rest edge), in percent, spread to the faces as the mean over each face's 3
-  edges (so the mean over edges of the face values is close to the table's
-  ``edge_err_pct``).
-- :func:`case_figure`: one PNG per case: panel 1 the rest mesh with static handles in
-  blue and dynamic handles in yellow, then one panel per method, all on one scale and
-  framing, with one shared colour bar (``0 .. clim``; default: the largest 99th
-  percentile of the methods' face errors, values above drawn in the top colour). A
-  method that failed (``None``) gets an empty panel "<name>: failed", one that was not
-  run on the case (:data:`NOT_RUN`, e.g. outside ``dataset.baseline_cases``) an empty
-  panel "<name>: not run".
-- :func:`tosca_figure` (paper §4.2): rest pose, true pose, SShaDe's reconstruction
-  coloured by the per-vertex error; :func:`pose_transfer_figure` (paper §4.3): source,
-  source in the pose, subject, SShaDe's transfer coloured by its error, ground truth.
-- :func:`mesh_row`: the shared machinery (one framing, one colour scale and bar).
-- :func:`write_case_figure` / :func:`safe_figure`: what the experiments call
-  (``figures.enabled`` in the config); they never raise, they log a warning instead.
-"""
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import logging

@@ -1,25 +1,10 @@
 """Display meshes for the HTML report (:mod:`eval.report`): one case's rest mesh, its
 target (ground truth) and every method's result, decimated and quantised for a small
 file, written next to the report as a script the page loads from ``file://``.
-
-- :func:`cluster_decimate`: vertex clustering on a grid laid over the rest mesh, the
-  cell size grown until at most ``max_faces`` faces remain. Every mesh of a case (rest,
-  target, results: the same connectivity) is shown on the *same* clusters, each
-  cluster at the mean of its vertices in that mesh, so the panels stay in
-  correspondence. For display only: thin parts closer than a cell may fuse.
-- :func:`case_view`: the JSON-able view of one case: the clusters' faces (base64
-  ``Uint16``/``Uint32``), every mesh's cluster positions quantised to ``uint16`` on the
-  case's common bounding box (base64), labels and sizes.
-- :func:`write_case_view`: ``report/<case>.js`` (:data:`VIEW_DIR`), which sets
-  ``window.SSHADE_VIEWS[<case>]``; never raises (a warning in the log instead), like
-  the figures.
-- :func:`write_outputs` / :func:`read_outputs`: ``report/outputs.json``, which of those
-  views and of the case figures the run wrote, for which cases, and why others were
-  not (re)drawn: the report shows only those (a resumed run keeps an earlier run's files).
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
 
 Size: about ``4/3 * (6 * clusters * meshes + (2 or 4) * 3 * faces)`` bytes per case
-(clusters ~ faces / 2); 30000 faces and 7 meshes: about 1.6 MB.
-"""
+(clusters ~ faces / 2); 30000 faces and 7 meshes: about 1.6 MB."""
 from __future__ import annotations
 
 import base64

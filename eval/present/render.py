@@ -1,33 +1,15 @@
 """Headless mesh rendering with matplotlib (Agg): shaded triangle meshes as RGB arrays.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
 
 No display and no ``pyplot`` state: every image is drawn on its own
 :class:`matplotlib.figure.Figure` with a :class:`~matplotlib.backends.backend_agg.FigureCanvasAgg`,
 so this works on servers, in Hydra jobs and in worker processes whatever
 ``MPLBACKEND`` says.
 
-- :func:`render_mesh`: one mesh as a ``Poly3DCollection`` (orthographic view, painter's
-  depth sort by mplot3d), flat per-face colours from scalars through a colormap (or a
-  uniform grey), Lambert shading (``ambient + (1 - ambient) * |n . l|``, two-sided, light
-  from above-left of the viewer), optional marker points (hidden when the surface covers
-  them), title and colour bar. Returns an ``(h, w, 3)`` uint8 image of exactly ``size``.
-- :func:`save_png`: an image array to a PNG file, atomically.
-- :func:`figure_row`: several images side by side with titles (and one optional shared
-  colour bar) into one PNG.
-- :func:`png_text` / :func:`set_png_text`: a PNG's ``tEXt`` chunks (what a figure was
-  drawn from), read and written with the standard library.
-
-Coordinates: ``up="y"`` (default; FAUST, most scanned meshes) shows +y upwards and looks
-at the +z side for ``view=(0, -90)``; ``up="z"`` uses the data as they are (matplotlib's
-convention). ``view=(elev, azim)`` in degrees as in :meth:`Axes3D.view_init`.
-
-Every face is drawn (no edge strokes, no anti-aliasing); the cost grows linearly with the
-face count.
-
 Example::
 
     img = render_mesh(V, F, colors=err, clim=(0, 5), colorbar_label="EL (%)")
-    save_png("out.png", img)
-"""
+    save_png("out.png", img)"""
 from __future__ import annotations
 
 import io

@@ -1,39 +1,12 @@
 """The identity of the code that produces a result: part of every result-store key
 (:mod:`eval.run.result_store`), so that a stored row is reused only by the code that computed it.
-
-A (case, method) row depends on the method's code, on the harness that runs and scores
-it (:mod:`eval.experiments.cases.pair` with :mod:`sshade.guard`, the metrics, the reference
-columns, the record format: :data:`ROW_HARNESS`) and on the numerical libraries beneath
-them. :func:`code_identity` names all three:
-
-- ``sources``: SHA-256 of the code of every project module the row's code can import
-  (:func:`import_closure`: the method's module, the modules named by ``_target_`` in its
-  definition, and :data:`ROW_HARNESS`, followed through every ``import`` statement of
-  the project's packages :data:`PACKAGES`, at module level or inside a function, and
-  through the parent packages), each file by its relative path and :func:`code_text` (its
-  syntax tree without comments and docstrings: an edit of the prose alone keeps the
-  rows), in or out of a git checkout, committed or not. ``modules`` lists them. A change to one of them (the
-  method, a metric, the guard, a solver it calls) makes the row stale; a change to a
-  module none of them imports (the tables, the report, the plan, the DeFAUST builder,
-  the docs or tests) does not, so a long result run survives the work that lands beside it.
-- ``versions``: the installed versions of :data:`NUMERICAL` (None when absent).
-- ``plugin``: for a method whose class lives outside the project's packages (a plug-in,
-  :func:`sshade.method_interface.is_plugin`), the SHA-256 of the file that defines the class (its
-  other modules are not followed: a plug-in spread over several files should name its
-  version in a parameter); None for our own methods, which ``sources`` covers.
-
-The git commit and dirty flag are recorded beside (:func:`eval.run.runinfo.git_info`, in
-``run.json`` and each record) but are not part of the key: a commit that changes only the
-docs leaves the stored rows valid, an uncommitted edit of a method does not.
-:func:`sources_digest` (every module of some packages or folders) keys the reference
-cache (:mod:`eval.metrics.reference`).
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 Example::
 
     >>> ident = code_identity(None)
     >>> sorted(ident), len(ident["sources"]), "eval.metrics.measures" in ident["modules"]
-    (['modules', 'plugin', 'sources', 'versions'], 64, True)
-"""
+    (['modules', 'plugin', 'sources', 'versions'], 64, True)"""
 from __future__ import annotations
 
 import ast

@@ -1,17 +1,6 @@
 """Rows of earlier runs beside a new one (``compare_with=[results/defaust]``): a new
 method's row beside the committed baselines without rerunning them.
-
-:func:`read_compared` reads another run folder's result store (``runs/<case>/<method>.json``)
-as untrusted input, never writing, resuming or recomputing it: every record must be
-valid (its digest holds, :meth:`eval.run.result_store.ResultStore.read`), and must have been
-made on the very cases of this run: each record's case identity (the digests of the rest
-vertices, faces, handles, targets and ground truth, and the dataset's name,
-:func:`eval.run.result_store.case_identity`) equals this run's case of the same name. Another
-build of a dataset (other meshes, handles or targets) is refused with one line. The
-rows come back marked with the run they came from (``run``, ``run_commit``,
-``run_machine``) and ``time_other_run``: their Time was measured on another machine or
-in another run, so tables never set it in bold against this run's times.
-"""
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import json

@@ -1,29 +1,10 @@
 """Output folders: a command writes only where it may, and never outside its folder.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 Every command of the harness that writes a folder of results (the evaluator
 ``python -m eval``, the sweeps ``python -m eval.sweeps``, ``python -m eval.reproduce``)
 first *claims* it with :func:`claim_output_dir`, before any work. A folder may be
-claimed when it is
-
-- new (created here, atomically: :func:`os.mkdir`),
-- empty,
-- one of this command's own earlier outputs of the same kind (it holds the marker
-  file :data:`MARKER` naming that kind): the files that earlier run wrote (listed in
-  the marker) are removed first and the command says which, files added by a person
-  stay; a folder that another live process is writing into (it holds the lock
-  :data:`LOCK`, an ``flock`` released when that process ends, even by ``kill -9``) is
-  refused;
-- anything else only with ``overwrite=true`` (the evaluator) or ``--force``.
-
-``results/`` of this checkout is written only by ``python -m eval.reproduce``, which
-sets :data:`REPRODUCE_ENV` for the commands it runs; other commands are refused there.
-A default dated folder (``outputs/<experiment>/<date_time>``) never collides with
-another run started in the same second: :func:`claim_output_dir` with ``fresh=True``
-adds ``_2``, ``_3``, ... to a name that exists.
-
-Refusals raise :class:`OutputDirError` (an :class:`~sshade.errors.SShaDeError`): the
-command prints one ``error:`` line saying how to proceed and exits with status 2.
-"""
+claimed when it is"""
 from __future__ import annotations
 
 import contextlib

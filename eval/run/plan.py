@@ -1,29 +1,12 @@
 """The evaluator's plan, up front: what a run is about to do, and about how long.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 Before any work the main job (:mod:`eval.experiments.cases.cases_experiment`, through
 :mod:`eval.experiments.cases.case_plan`) logs one ``plan:`` line, e.g. ::
 
     plan: building DeFAUST (once, into data/defaust): 10 subjects x ~160 s on 1 worker, about 27 min;
     then 46 runs: ARAP 4 x ~78 s, Elastic 4 x ~75 s, ARAP-SR 4 x ~51 s,
-    SShaDe 40 x ~9 s; references: up to 12 to compute, ~51 s each; about 50 min in all.
-
-and writes it into ``run.json`` (``plan``); at the end it logs each stage's actual
-seconds beside its estimate (:func:`render_actuals`) and records them in ``run.json``
-(each stage's ``actual_s``). The stages (:func:`make_plan`), each ``{"stage", "count",
-"seconds", ...}``:
-
-- ``build``: a dataset's one-time preparation (the DeFAUST build): subjects x the
-  measured per-subject seconds (:data:`BUILD_S_PER_SUBJECT`) in rounds of ``workers``;
-- ``runs``: the (case, method) pairs to run, each at its cost-model estimate
-  (:class:`eval.run.progress.CostModel`: measured runs, else the method's prior), per method
-  under ``methods``;
-- ``references``: the reference solutions the runs need (:mod:`eval.metrics.reference`): a cached
-  one costs nothing, one to compute :data:`REFERENCE_S_PER_VERTEX` x vertices (known
-  cached or not once the cases exist; before a build, "up to" every one).
-
-Everything here is pure (no config, no files): the numbers come in, a plan and its
-text go out.
-"""
+    SShaDe 40 x ~9 s; references: up to 12 to compute, ~51 s each; about 50 min in all."""
 from __future__ import annotations
 
 import math

@@ -1,29 +1,9 @@
 """The evaluator's progress estimate weighted by each method's expected cost.
-
-Counting (case, method) runs makes the estimate jump: on DeFAUST a full-resolution
-baseline takes minutes per case, SShaDe seconds, so after a few SShaDe runs the bar
-promises minutes and after a baseline it says hours. :class:`CostModel` instead
-estimates the seconds of each remaining run:
-
-- before any run of a method has finished, a prior: its file's ``cost`` (a method's
-  facts, :func:`harness.method_registry.method_meta`): ``scale`` ``vertices`` (full resolution,
-  ``prior`` seconds per vertex) or ``const`` (``prior`` seconds per case); a plug-in may
-  say ``cost_scale = "const"`` or ``"vertices"``; without a prior, a full-resolution
-  method costs ``prior_s_per_vertex`` x n_vertices (default 1e-3 s/vertex: ~2.5 min at
-  150k), a constant one ``prior_const_s`` (default 20 s);
-- once runs of the method have finished, their measured wall seconds (the method, its
-  metrics and references): the mean of ``seconds / n_vertices`` (full resolution) or
-  of ``seconds`` (constant) over them, times the case's scale.
-
-The bar (:func:`weighted_bar`) counts seconds: after each run it advances by the run's
-measured wall time and its total becomes done + the estimate of what remains, so its
-remaining time is the weighted estimate. Runs restored from the result store
-(:mod:`eval.run.result_store`) are not counted, but their stored ``time_s`` feed the model.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 :func:`default_cost_model` is the evaluator's model: the methods' priors plus the
 per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan
-(:mod:`eval.run.plan`) uses it too.
-"""
+(:mod:`eval.run.plan`) uses it too."""
 from __future__ import annotations
 
 from harness.method_registry import method_meta

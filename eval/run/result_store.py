@@ -1,5 +1,6 @@
 """The evaluator's per-(case, method) result store: a run that stops (crash, ``kill -9``,
 Ctrl-C, time limit) loses at most the pair it was computing.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 Layout, under the run's ``out_dir`` (:mod:`eval.run.outdir`)::
 
@@ -7,37 +8,7 @@ Layout, under the run's ``out_dir`` (:mod:`eval.run.outdir`)::
     runs/<case>/<method>.npy       its deformed vertices (n, 3) float64, with store.meshes=true
 
 ``<case>`` and ``<method>`` are the names with every character outside
-``[A-Za-z0-9._+-]`` replaced by ``_`` (:func:`eval.run.names.safe_name`). A record (JSON object) holds
-
-- ``version`` (:data:`STORE_VERSION`), ``case``, ``method`` (the real names);
-- ``key``: SHA-256 (hex) of ``key_fields``, which are what determines the result: the
-  method's resolved definition (``_target_`` and parameters, :func:`eval.method_config.method_spec`;
-  a plug-in's mapping), the case's identity (dataset name, root, seed, case name and
-  seed, hashes of the vertex/face arrays and of the handles and targets: :func:`case_identity`),
-  the guard options and the reference options of the row, and the identity of the code
-  that computed it (the project's sources, the numerical libraries' versions, a plug-in's
-  file: :func:`eval.run.code_identity.code_identity`) (:func:`pair_key`);
-- ``git``: the checkout's commit and dirty flag when it was written (information, not key);
-- ``digest``: SHA-256 of the record's key, row, info and mesh name (:func:`record_digest`):
-  a record edited by hand no longer matches it;
-- ``row``: the row of ``cases.csv`` (JSON: NaN/inf as null);
-- ``info``: the method's own ``info`` (its stopping record: iterations, converged,
-  protocol, per-sampling details ...), made JSON-safe (arrays as lists, other objects
-  by their text);
-- ``mesh``: the file name of the deformed vertices, or null;
-- ``written_utc``.
-
-Semantics: :meth:`ResultStore.lookup` returns a stored record only when its ``key`` equals
-the pair's key now (a changed parameter, dataset, handle set or code makes the earlier
-record stale: the pair is recomputed and its record replaced), and only when the record
-is valid: read like any other input, it must name that pair, match its digest, and hold
-a row of the right types (:func:`check_row`: finite numbers in numeric columns,
-non-negative times and counts). Otherwise it says why not, in words, so that a resume can
-report how many pairs it recomputes and why. The store never removes a record
-it did not replace, except :meth:`ResultStore.clear` (a run without ``resume`` starts
-from an empty store). Records are written with :func:`sshade.mesh.io.atomic_write`
-(temporary file + rename): a killed run leaves whole records only.
-"""
+``[A-Za-z0-9._+-]`` replaced by ``_`` (:func:`eval.run.names.safe_name`). A record (JSON object) holds"""
 from __future__ import annotations
 
 import datetime as _dt

@@ -1,17 +1,12 @@
 """Whether a table's rows are the result store's: every row of ``cases.csv`` held against
 the record of its (case, method) in ``runs/`` (:mod:`eval.run.result_store`).
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 :func:`check_rows` reads each row's record as untrusted input (:meth:`ResultStore.read`:
 whole, of this store version, naming that pair, its digest holding, a valid row) and
 compares the row's cells with the record's (numbers equal to float64 rounding, text
 equal, empty equal to null). :class:`RowCheck.line` is the sentence ``table.md`` carries
-under its title: checked, not checked (no store), or which rows disagree and how.
-
-What it proves and what not: a row edited in ``cases.csv``, a record edited by hand, or a
-record missing are found. The digest is an unkeyed SHA-256, so a record edited and given
-a new digest (with :func:`eval.run.result_store.record_digest`) passes: a local store cannot stop
-its owner; docs/protocols.md ("What the store checks").
-"""
+under its title: checked, not checked (no store), or which rows disagree and how."""
 from __future__ import annotations
 
 import math

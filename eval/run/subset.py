@@ -1,9 +1,5 @@
 """Which cases the full-resolution baselines run on (``dataset.baseline_cases``).
-
-The baselines (ARAP, Elastic, ARAP-SR at 150k-200k vertices) take minutes per case, so
-the DeFAUST main job may run them on a subset while SShaDe runs on every case. The
-subset is chosen by a rule that is stated in the run's table title
-(:func:`baseline_selection` returns the rule's text):
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 - ``per_pose`` (DeFAUST's default): one case per target pose, from different subjects.
   With the target poses present sorted ``p_0 < p_1 < ...`` and the subjects present
@@ -13,13 +9,7 @@ subset is chosen by a rule that is stated in the run's table title
   such case (e.g. after ``dataset.limit``), the next subject in that cyclic order that
   has it.
 - an integer ``N``: the first ``N`` cases (the dataset's order); ``0``: none.
-- ``all`` or null: every case.
-
-``method_cases`` (a mapping, method name -> one of these rules) gives a method its own
-rule instead, e.g. ``method_cases={Implicit-ARAP: per_pose}`` in ``eval.reproduce``'s
-full DeFAUST run, where the baselines run on every case but Implicit-ARAP's CPU preset
-would take hours (:func:`method_selections`).
-"""
+- ``all`` or null: every case."""
 from __future__ import annotations
 
 from sshade.errors import SShaDeError

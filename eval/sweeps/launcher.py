@@ -1,27 +1,9 @@
 """Sweeps on SLURM that end, whatever happens to their jobs.
-
-hydra-submitit-launcher collects its jobs with ``[j.results()[0] for j in jobs]``: a job
-that dies without writing its result (out of memory, time limit, node failure,
-``scancel``, ``kill -9``) raises ``submitit.core.utils.UncompletedJobError`` there, so the
-sweep command fails and no table is written; without SLURM accounting (no working
-``sacct``) submitit cannot learn the job's fate and the command waits forever.
-
-:class:`TolerantLauncherMixin` replaces that ``launch``: it submits the jobs as the plugin
-does (one job array), then waits on them itself with :func:`wait_for_jobs`: a job is over
-when its result pickle exists, or when SLURM no longer runs nor queues it
-(:func:`slurm_states`: ``sacct`` when it works, else ``squeue`` and ``scontrol``); such a
-job without result is *killed*. Killed and failed jobs are recorded in the sweep's
-``sweep.json`` and in their ``status.json`` (:func:`eval.sweeps.files.record_outcome`), and the
-launcher returns normally, so Hydra runs the aggregation callback and exits with 0.
-
-In a resumed sweep (:func:`eval.sweeps.sweep_command.resume_sweep`, environment
-``SSHADE_SWEEP_RESUME=1``) the jobs whose folder already holds a done or partial
-``status.json`` are not submitted again.
+Floor 4 of eval/ (eval/sweeps/, tests/test_layering.py); notes: docs/experiments.md.
 
 The Hydra plugin class is ``hydra_plugins.sshade_sweep_launcher.SweepSlurmLauncher``
 (Hydra only loads launchers from the ``hydra_plugins`` package), selected by
-``hydra/launcher=slurm`` (``conf/hydra/launcher/slurm.yaml``).
-"""
+``hydra/launcher=slurm`` (``conf/hydra/launcher/slurm.yaml``)."""
 from __future__ import annotations
 
 import logging

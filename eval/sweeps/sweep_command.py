@@ -1,52 +1,14 @@
 """Parameter sweeps of the evaluator (Hydra multirun) and their summary table.
+Floor 6 of eval/ (above the commands, tests/test_layering.py); notes: docs/experiments.md.
 
 Run a sweep (same config and overrides as ``python -m eval``; ``-m`` = multirun)::
 
-    python -m eval.sweeps -m dataset.root=../shared/data/faust_reg dataset.limit=4 \\
-        methods=[SShaDe] sshade.n_low=500,1000,2000 sshade.n_samplings=1,5 \\
-        hydra/launcher=joblib hydra.launcher.n_jobs=2
+    python -m eval.sweeps -m dataset.root=DIR methods=[SShaDe] sshade.n_low=500,1000,2000
     python -m eval.sweeps experiment=sweep dataset.root=...           # grid in conf/experiment/sweep.yaml
     python -m eval.sweeps -m ... hydra/launcher=slurm hydra.launcher.partition=NAME   # SLURM (submitit)
     python -m eval.sweeps aggregate outputs/sweeps/2025-01-01_12-00-00    # rebuild the table
     python -m eval.sweeps resume outputs/sweeps/2025-01-01_12-00-00       # re-run killed/failed/missing jobs
-    python -m eval.sweeps --help                                          # this command's help (HELP)
-
-Each job is :func:`sweep_job`: it runs :func:`eval.app.run_experiment` with ``out_dir``
-set to the job's own folder (``hydra.sweep.dir/hydra.sweep.subdir``, by default
-``<sweep dir>/<job number>``) and records the outcome in ``status.json`` there::
-
-    {"status": "done" | "partial" | "failed" | "killed" | "running", "error": "...", "overrides": [...],
-     "job_num": 3, "wall_s": 12.3, "n_cases": 4, "n_errors": 0, ...}
-
-Every job of a sweep ends in the table with one outcome (:data:`eval.sweeps.files.OUTCOMES`):
-``done``; ``partial``: some (case, method) rows failed; ``failed``: the job raised (bad
-parameter, crash inside a method, ...) or every row failed (e.g. ``sshade.n_low=2``:
-"n_low must be at least 4"); ``killed``: the job started but died without a result (out
-of memory, time limit, node lost, ``scancel``, ``kill -9``): its ``status.json`` still
-says ``running`` after the sweep ended, or the SLURM launcher saw it leave the queue
-without result; ``missing``: a point of the grid that never started (no folder).
-``running`` only appears while the sweep runs. The job function never raises, and the
-SLURM launcher (:mod:`eval.sweeps.launcher`, ``hydra/launcher=slurm``) waits on the jobs
-itself without ever waiting on a dead one, with or without ``sacct``; so the sweep
-command exits with 0 once every job has an outcome (unless Hydra itself fails).
-
-Before any job starts, :class:`AggregateSweepCallback` (added automatically by
-``python -m eval.sweeps -m``; also set in ``conf/experiment/sweep.yaml``) writes
-``sweep.json`` into the sweep folder: the command, its folder and the grid (job number
--> overrides), so that a point without folder is listed as missing and
-:func:`resume_sweep` can run the same command again for the jobs without result. At the
-end of the multirun it calls :func:`eval.sweeps.sweep_table.aggregate_sweep`, which writes
-``sweep_table.csv`` (one row per job: its
-overrides, one column per overridden key, status, error, and ``<method>/<column>`` for
-every column of the job's ``table.csv``: per-method means, n_cases, n_failed) and
-``sweep_table.md`` (varying keys, status and the main metrics) into the sweep folder.
-The folder's files (``status.json``, ``sweep.json``, the job folders) are read and
-written by :mod:`eval.sweeps.files`, the table is built by :mod:`eval.sweeps.sweep_table`.
-
-Why not ``python -m eval -m``: the plain evaluator exits with status 2 on a
-configuration error (:func:`eval.app._main`), which stops a multirun at that job; this
-entry point records the failure and continues.
-"""
+    python -m eval.sweeps --help                                          # this command's help (HELP)"""
 from __future__ import annotations
 
 import logging

@@ -1,36 +1,9 @@
 """The ``cases`` experiment's runs side by side: whole cases in worker processes.
-
-``jobs`` (config) worker processes (:func:`harness.jobs.run_jobs`: spawned, each with
-``cores / jobs`` threads) take the cases with runs to do, the costliest first (their
-estimated seconds, :class:`eval.run.progress.CostModel`); a worker runs a case's methods in
-table order (:func:`eval.experiments.cases.pair.run_pair`), so that a reference solution still
-continues from the method on its energy's path (:class:`~eval.experiments.cases.case_references.CaseReferences`),
-and stores each pair as soon as it finishes (:class:`eval.run.result_store.ResultStore`), as the
-one-process loop does. The main process gets every pair's seconds and row as it ends
-(the progress bar), every log record of the workers (``eval.log`` and the console) and
-the deformed meshes of the first cases (figures and 3D views). Results do not depend on
-``jobs``; timings do: each run has ``cores / jobs`` cores (the row's ``cores`` column,
-set only for runs made in a worker; the table's title says so).
-
-A worker process that dies (``kill -9``, the out-of-memory killer, a plug-in that
-crashes in compiled code, e.g. a segmentation fault) fails only the pair it was running:
-that row's ``error`` names the signal (``worker process died (SIGKILL) while running
-this pair``), the row is not stored (``resume=true`` runs the pair again), the case's
-other pairs go on in a fresh worker and the run ends normally, with a warning that lists
-the pairs lost and the command that runs them again. In one process (``jobs: 1``) such a
-crash ends the evaluation itself (only ``os._exit`` is caught there,
-:func:`sshade.guard.run_method`); the stored pairs are kept either way.
-
-``jobs: auto`` (the default) takes one worker per core when the runs to do are estimated
-at :data:`AUTO_MIN_S` seconds or more and there are at least two cases, else runs in
-this process (a worker costs a few seconds to start). ``jobs: 1`` always runs in this
-process: ``python -m eval.reproduce`` does that, so that ``results/`` times every method
-on the whole machine.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 Example::
 
-    python -m eval jobs=2            # two cases at a time, one core each (2 cores)
-"""
+    python -m eval jobs=2            # two cases at a time, one core each (2 cores)"""
 from __future__ import annotations
 
 import logging

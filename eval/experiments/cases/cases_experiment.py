@@ -1,4 +1,5 @@
 """The ``cases`` experiment (the default): every method on every case, metrics, tables.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 Run through ``python -m eval`` (:mod:`eval.app`); usage (from the repository root)::
 
@@ -6,52 +7,8 @@ Run through ``python -m eval`` (:mod:`eval.app`); usage (from the repository roo
     python -m eval experiment=ci dataset.root=DIR             # 2 cases, small settings
     python -m eval dataset.root=DIR methods=[ARAP,Elastic] out_dir=/tmp/run
 
-Config: ``conf/config.yaml`` (+ ``conf/dataset/faust.yaml``, ``conf/experiment/*.yaml``).
-For each case (:mod:`eval.datasets`, ``dataset.name`` looked up in its registry) and each method
-(:mod:`eval.method_config`) the
-``deform`` call is timed with :func:`time.perf_counter` into ``time_s``, after the method's
-optional ``warmup()`` has compiled its numba kernels (the seconds go to the ``compile_s``
-column and to ``run.json``'s ``compile_s`` per method, never into ``time_s``;
-:mod:`sshade.warmup`), the result is scored with
-:func:`eval.metrics.measures.deformation_metrics` and, when the case has a ground truth,
-:func:`eval.metrics.measures.ground_truth_metrics`. Every method runs through
-:func:`sshade.guard.run_method`: on read-only copies of the case, with the
-optional ``timeout_s`` of each call, its output checked
-(:func:`sshade.mesh.validate.validate_deformed`) before any metric. A method that fails on a
-case (our methods: :class:`~sshade.errors.SShaDeError`; a plug-in: any exception,
-``SystemExit`` included, :func:`sshade.method_interface.is_plugin`; a time-out; a refused output)
-gets its message in the ``error`` column and the run goes on; so does a result whose
-handle error exceeds ``handle_error_max_pct`` (% of the diagonal; its metrics stay in
-the row). Ctrl-C stops the run. A case mesh with several connected components is
-deformed component by component (:func:`sshade.components.deform_components`). Method
-info values become cells through :func:`_info_columns` (safe names and values). Outputs in ``out_dir``
-(default ``outputs/<experiment.name>/<date_time>``):
-``cases.csv`` (rewritten after every case), ``table.csv``, ``table.md``, ``table.tex``
-(:mod:`eval.tables`), ``breakdown.csv``, ``breakdown.md`` (per pose, per subject, the
-paired SShaDe-Elastic comparison; :mod:`eval.present.breakdown`; with figures also
-``breakdown.png``), ``run.json`` (:mod:`eval.run.runinfo`), ``eval.log``, Hydra's
-``.hydra/`` folder and the result store ``runs/<case>/<method>.json`` (:mod:`eval.run.result_store`).
-All tables and ``run.json`` are written atomically.
-
-Result store and resume: each (case, method) run is stored as soon as it
-finishes, keyed by the method's definition, the case's identity and the guard/reference
-options; the tables are built from the stored rows. ``resume=true`` with ``out_dir`` =
-an earlier run's folder continues it (the claim keeps its files, :mod:`eval.run.outdir`):
-only the pairs missing from the store, or stored under another key, run; a method added
-later runs only its own cases. Without ``resume`` the store starts empty. The baselines
-run on the cases ``dataset.baseline_cases`` selects (:mod:`eval.run.subset`; the rule is
-stated in the table's title); the progress bar's remaining time is weighted by each
-method's expected cost (:mod:`eval.run.progress`). With ``jobs`` > 1 (``auto``: one per core
-for a run of minutes) whole cases run side by side in worker processes
-(:mod:`eval.experiments.cases.case_jobs`): the same rows, each run timed on its share of the cores.
-
 Exit status of ``python -m eval``: 0 on success (even if some method failed on some
-case), 2 on a configuration or input error (one ``error: ...`` line on stderr).
-
-Phases of :func:`run`: :func:`_setup` (methods, options, dataset, cases; every check
-before any work), :func:`_start_runinfo`, :func:`_run_cases`, :func:`_finish` (tables,
-``run.json``).
-"""
+case), 2 on a configuration or input error (one ``error: ...`` line on stderr)."""
 from __future__ import annotations
 
 import json

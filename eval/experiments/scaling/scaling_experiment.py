@@ -1,51 +1,12 @@
 """Scaling benchmark (issue "Scalable SShaDe"; paper abstract, §1, Table 1):
 ``python -m eval experiment=scaling``.
-
-Runs a set of base meshes (``scaling.meshes``, :mod:`eval.experiments.scaling.mesh_set`;
-the default set: one clean mesh, the Stanford armadillo, and two hard ones, TOSCA's
-centaur and wolf) at each of ``scaling.sizes`` vertices (default 200k and 1M). A clean
-entry (``remesh: true``) is LS3 Loop subdivided, then isotropically remeshed to the
-target size (both pymeshlab; remeshing alone for sizes below the base mesh); a hard
-entry (``remesh: false``) is LS3 Loop subdivided only, until it has at least the target
-(its row gives the real vertex count), keeping the thin parts and anisotropy of the
-base mesh. Each mesh is deformed with SShaDe and, up to ``elastic_max_vertices``, with
-full-resolution Elastic (spokes and rims) under the same handles. ``table.csv`` (every
-column, one row per (mesh, size), ``mesh`` first) and ``table.md`` (one table per mesh,
-:mod:`eval.experiments.scaling.scaling_table`) in ``out_dir`` give: vertices, n_low, k, seconds
-for remesh / low-res ARAP / transfer / total, warm (the median of ``scaling.repeat``
-timed calls, their range beside it; numba's compilation excluded: it
-runs before, on a tiny mesh, and is reported as ``sshade_compile_s`` /
-``elastic_compile_s``; :mod:`sshade.warmup`), the remesh's check-and-repair rounds
-(``repair_rounds``: sum over the k samplings, ``repair_rounds_max``) and repair seeds
-(``repair_seeds``, summed), the low-res ARAP iterations (first sampling and mean of the
-warm-started ones), peak memory of the process tree (PSS, MB, of the untimed run
-below: the probe slows the call it watches; ``call_mem_mb``: what the call adds to the
-tree's PSS at its peak), SShaDe's errors, the
-spread of its sampling (``seed_spread_pct``: mean distance between the results of two
-master seeds, ``seed`` and ``seed + 1``, each a k-sampling average, in % of the bounding
-box diagonal; the second run is not timed), with
-``scaling.first_call`` the seconds of the first ``sshade.deform`` call in a fresh
-process (``first_call_s``, the median of ``scaling.repeat`` processes, their range
-beside it: what a command-line user pays, numba's on-disk cache warm; interpreter
-start and imports apart in ``first_call_import_s``, the mesh read in
-``first_call_read_s``; :mod:`eval.experiments.scaling.probe`; NaN with a warning when
-the probe fails), and Elastic's precompute time, time per iteration and time to
-convergence (when it converges within ``elastic_budget_s``), and the speed-up.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
 
 Parameters: the meshes, handles and budgets from ``scaling.*``
 (``conf/experiment/scaling.yaml``); SShaDe's from the method config ``method.SShaDe``
 (the ``sshade`` section, the experiment's yaml sets ``sshade.n_low: 6000``;
 :func:`sshade_params`); Elastic's stopping rule from ``method.Elastic`` (the ``arap``
-section; :func:`elastic_params`).
-
-Handle rule (fixed, so runs are comparable), per base mesh: its principal axes a1, a2, a3
-(PCA of the vertices); four landmark points = the base vertices of smallest and largest
-coordinate along a1 and along a2. At each size, group g takes 30 random vertices (seeded
-by ``[seed, g]``) within ``region_radius * bbox_diag`` of its landmark point. Groups at
-the smallest a1 and a2 are static; the group at the largest a1 is rotated by
-``rotate_deg`` about a3 through the centroid; the group at the largest a2 is translated
-by ``translate * bbox_diag`` along a3.
-"""
+section; :func:`elastic_params`)."""
 from __future__ import annotations
 
 import logging
