@@ -71,7 +71,7 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
             if note and not short:
                 parts[-1] += f" ({note})"
         if "converged" in g.columns and g["converged"].notna().any():
-            c = g["converged"].dropna().map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
+            c = _flags(g["converged"].dropna())
             if short:
                 parts.append(f"{int(c.sum())}/{len(c)} converged")
             else:
@@ -84,6 +84,12 @@ def stop_lines(df: pd.DataFrame, *, short: bool = False) -> list[str]:
         if parts:
             lines.append(f"{m}: " + (", " if short else "; ").join(parts))
     return lines
+
+
+def _flags(col: pd.Series) -> pd.Series:
+    """A boolean column of ``cases.csv`` as bools: True, 1 or 1.0 (as read back, text or
+    number) is True, anything else (False, empty, NaN) False."""
+    return col.map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
 
 
 #: What a method's ``handles`` column says, in words (the Handle column's meaning per row).
@@ -99,7 +105,7 @@ def _handle_words(g: pd.DataFrame) -> list[str]:
         return []
     words = "/".join(HANDLE_TEXT.get(str(k), str(k)) for k in sorted({str(x) for x in g["handles"].dropna()}))
     if "handles_missed" in g.columns:
-        missed = g["handles_missed"].map(lambda x: str(x).strip().lower() in ("true", "1", "1.0"))
+        missed = _flags(g["handles_missed"])
         if missed.any():
             worst = g.loc[missed, "handle_err_pct"].astype(float).max()
             words += (f"; {int(missed.sum())} of {len(g)} runs above the handle bound (handle_error_max_pct), "
@@ -114,8 +120,7 @@ def _reference_words(g: pd.DataFrame, *, ours: bool = True) -> list[str]:
     if "ref_energy_type" not in g.columns or not g["ref_energy_type"].notna().any():
         return []
     e = "/".join(sorted({str(x) for x in g["ref_energy_type"].dropna()}))
-    own = "ref_own_energy" in g.columns and g["ref_own_energy"].dropna().map(
-        lambda x: str(x).strip().lower() in ("true", "1", "1.0")).all()
+    own = "ref_own_energy" in g.columns and _flags(g["ref_own_energy"].dropna()).all()
     return [f"Ref/E gap against the minimiser of its own energy ({e})" if own else
             f"Ref/E gap: distance to the full-resolution {e} minimiser, an energy it "
             f"{'does not minimise' if ours else 'is not known to minimise'}"]
