@@ -1,124 +1,36 @@
 """ARAP-SR: as-rigid-as-possible with smooth rotations (Levi & Gotsman 2015, "Smooth
-rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG), behind the
-:class:`sshade.method_interface.Deformer` interface (:class:`ARAPSR`).
+rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG), at full resolution
+behind the :class:`sshade.method_interface.Deformer` interface (:class:`ARAPSR`).
 
-Two protocols: ``"converged"`` (:func:`baselines.arap_sr_solver.solve_arap_sr`; that
-module states the energy and both definitions of alpha) and ``"paper"``
-(:func:`arap_sr_deform`: Open3D's plain Smoothed-ARAP iteration, run "until convergence
-with a cutoff of 1000 iterations", paper §4.1). Why it is written on libigl and checked
-against Open3D: docs/methods.md, "Implementation notes: baselines/arap_sr.py".
+Its energy and two protocols are :mod:`sshade.arap.smooth_rotations` (which states the
+energy and both definitions of alpha): ``"converged"`` (:func:`sshade.arap.solve_arap_sr`)
+and ``"paper"`` (:func:`sshade.arap.arap_sr_deform`: Open3D's plain Smoothed-ARAP
+iteration, run "until convergence with a cutoff of 1000 iterations", paper §4.1). Why it
+is written on libigl and checked against Open3D: docs/methods.md, "Implementation notes:
+baselines/arap_sr.py".
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-from sshade.arap import DEFAULT_CRITERION, PROTOCOLS, ArapResult, bbox_diag, make_criterion, rigid_fit
+from sshade.arap import PROTOCOLS, make_criterion
+from sshade.arap.smooth_rotations import (
+    ALPHA_SCALINGS,
+    DEFAULT_ALPHA,
+    PAPER_STOPS,
+    SR_ENERGY,
+    arap_sr_deform,
+    solve_arap_sr,
+)
 from sshade.errors import SShaDeError
 from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
 
-from .arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
-from .coarse_start import SR_ENERGY, check_start, start_rotations
+from .coarse_start import check_start, start_rotations
 from .fullres_arap import check_arap_args
 
-__all__ = ["arap_sr_deform", "ARAPSR", "PAPER_STOPS"]
-
-#: stopping rules of the paper protocol (:func:`arap_sr_deform`); the first is the default
-PAPER_STOPS = ("energy", "move")
-
-
-def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
-                   alpha: float = 0.01, alpha_scaling: str = "valence", stop: str = "energy",
-                   tol: float = 1e-4, criterion=None, max_iter: int = 1000,
-                   time_budget_s: float | None = None) -> ArapResult:
-    """ARAP with smooth rotations under the paper protocol (§4.1; the converged protocol
-    is :func:`baselines.arap_sr_solver.solve_arap_sr`).
-
-    From the rigid fit of the handles, each iteration takes every rotation at once from the
-    previous ones (Jacobi local step, :meth:`baselines.arap_sr_solver.SRProblem.sweep`), then
-    the global step, until ``stop`` fires: ``"energy"`` (default; the relative change of
-    ``E`` over one iteration below ``criterion.etol``) or ``"move"`` (the largest vertex move
-    of one iteration below ``tol * bbox_diag``). ``status`` is then ``"converged"`` when the
-    gradient norm is below ``criterion.gtol`` (and, for the energy stop, the relative
-    decrease below ``criterion.etol``), else ``"stalled"``; ``"max_iter"`` /
-    ``"time_budget"`` at the caps.
-
-    Parameters
-    ----------
-    V : (n, 3) float64; F : (m, 3) int64 (validated). handles : (h,) int64;
-    targets : (h, 3) float64.
-    alpha : float >= 0, rotation-smoothness weight (times the surface area A, so it is
-        scale-free); 0 gives plain ARAP (spokes).
-    alpha_scaling : one of :data:`baselines.arap_sr_solver.ALPHA_SCALINGS` (default
-        ``"valence"``: Open3D's alpha).
-    stop : one of :data:`PAPER_STOPS`. tol : float > 0, the move rule's tolerance
-        (fraction of the bounding-box diagonal).
-    criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
-    max_iter : int >= 0, iteration cap. time_budget_s : optional cap on iteration time.
-
-    Returns
-    -------
-    :class:`sshade.arap.ArapResult`; ``info``: ``status``, ``stop``, ``energy`` (``E``,
-    mesh units^2), ``gnorm``, ``rel_decrease``, ``alpha``, ``alpha_scaling``.
-
-    Raises
-    ------
-    SShaDeError on a bad ``stop``, ``alpha`` or ``alpha_scaling``.
-
-    Examples
-    --------
-    Example::
-
-        res = arap_sr_deform(V, F, handles, targets, alpha=0.01)
-    """
-    if stop not in PAPER_STOPS:
-        raise SShaDeError(f"ARAP-SR: stop must be one of {PAPER_STOPS}, got {stop!r}")
-    crit = DEFAULT_CRITERION if criterion is None else criterion
-    V = np.ascontiguousarray(V, np.float64)
-    diag = bbox_diag(V)
-    R0, t0_ = rigid_fit(V[handles], targets)
-    info = {"alpha": alpha, "alpha_scaling": alpha_scaling, "stop": stop}
-    if float(np.abs(V[handles] @ R0.T + t0_ - targets).max()) <= 1e-12 * diag:
-        return ArapResult(V=V @ R0.T + t0_, iterations=0, converged=True, last_move=0.0, precompute_s=0.0,
-                          solve_s=0.0, info=dict(info, rigid=True, status="rigid"))
-    t0 = time.perf_counter()
-    pb = SRProblem(V, F, handles, targets, alpha, alpha_scaling=alpha_scaling)
-    t1 = time.perf_counter()
-    U = V @ R0.T + t0_
-    U[pb.h] = pb.T
-    R = pb.sweep(U, np.broadcast_to(R0, (pb.n, 3, 3)).copy(), jacobi=True)
-    U, R, it, move, rel, status = _paper_iterations(pb, U, R, stop, tol * diag, crit, max_iter, time_budget_s)
-    t2 = time.perf_counter()
-    gn = pb.gnorm(U, R)
-    if status == "rule":
-        status = "converged" if gn < crit.gtol and (stop == "move" or abs(rel) < crit.etol) else "stalled"
-    info.update(status=status, energy=pb.energy(U, R), gnorm=gn, rel_decrease=rel)
-    return ArapResult(V=U, iterations=it, converged=status == "converged", last_move=move, precompute_s=t1 - t0,
-                      solve_s=t2 - t1, info=dict(info, R=R))
-
-
-def _paper_iterations(pb: SRProblem, U, R, stop, thresh, crit, max_iter, time_budget_s):
-    """The iterations of :func:`arap_sr_deform` from ``(U, R)`` (``R`` the local step at
-    ``U``): ``(U, R, iterations, last_move, rel_decrease, status)`` with status ``"rule"``
-    (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
-    t0 = time.perf_counter()
-    E, it, move, rel = pb.energy(U, R), 0, np.inf, np.inf
-    while True:
-        if it >= max_iter:
-            return U, R, it, move, rel, "max_iter"
-        if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-            return U, R, it, move, rel, "time_budget"
-        Un = pb.global_step(U, R)
-        R = pb.sweep(Un, R.copy(), jacobi=True)
-        En = pb.energy(Un, R)
-        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
-        rel = (E - En) / abs(En) if En != 0 else 0.0
-        U, E, it = Un, En, it + 1
-        if (move < thresh) if stop == "move" else (abs(rel) < crit.etol):
-            return U, R, it, move, rel, "rule"
+__all__ = ["ARAPSR"]
 
 
 class ARAPSR:
@@ -129,17 +41,17 @@ class ARAPSR:
     alpha : float >= 0, rotation smoothness (times the surface area).
     alpha_scaling : ``"valence"`` (default: alpha as Open3D's Smoothed ARAP defines it, the
         neighbour term divided by the valence) or ``"none"`` (without the valence: about 6x
-        stiffer at the same alpha); :mod:`baselines.arap_sr_solver`.
+        stiffer at the same alpha); :mod:`sshade.arap.smooth_rotations`.
     protocol : ``"converged"`` (default, ``info["protocol"] = "converged-sr"``:
-        :func:`baselines.arap_sr_solver.solve_arap_sr`, Gauss-Seidel local step and
+        :func:`sshade.arap.solve_arap_sr`, Gauss-Seidel local step and
         Anderson acceleration, stopped by the energy-and-gradient criterion ``etol`` /
-        ``gtol``) or ``"paper"`` (:func:`arap_sr_deform`: Open3D's plain iteration run
+        ``gtol``) or ``"paper"`` (:func:`sshade.arap.arap_sr_deform`: Open3D's plain iteration run
         until the stop rule ``stop`` fires, at most 1000 iterations, then the stop
         classified converged or stalled by the gradient; ``info["protocol"] =
         "paper-sr"``, or ``"move-rule"`` with ``stop="move"``).
-    stop : ``"paper"`` protocol's stop rule, :data:`PAPER_STOPS`: ``"energy"`` (default,
-        relative energy change below ``etol``) or ``"move"`` (largest vertex move below
-        ``tol`` x diagonal).
+    stop : ``"paper"`` protocol's stop rule (:data:`sshade.arap.smooth_rotations.PAPER_STOPS`):
+        ``"energy"`` (default, relative energy change below ``etol``) or ``"move"``
+        (largest vertex move below ``tol`` x diagonal).
     tol : float > 0, ``"paper"`` with ``stop="move"``: move tolerance (fraction of the
         bounding-box diagonal).
     max_iter : int or None, iteration cap (None: 10000 converged, 1000 paper).
@@ -162,7 +74,7 @@ class ARAPSR:
 
     name = "ARAP-SR"
 
-    def __init__(self, *, alpha: float = 0.01, tol: float = 1e-4, max_iter: int | None = None,
+    def __init__(self, *, alpha: float = DEFAULT_ALPHA, tol: float = 1e-4, max_iter: int | None = None,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
                  start: str = "auto", coarse_n_low: int = 6000, alpha_scaling: str = "valence",
                  stop: str = "energy"):

@@ -3,7 +3,7 @@
 (:func:`sshade.remesh.remesh`, the handles kept as vertices), every full-resolution vertex
 given the rotation of its low-res Voronoi region, and the full-resolution solve started
 from those rotations (``R0`` of :func:`sshade.arap.solve_arap` /
-:func:`baselines.arap_sr_solver.solve_arap_sr`). :func:`check_start` checks the
+:func:`sshade.arap.solve_arap_sr`). :func:`check_start` checks the
 ``start`` / ``coarse_n_low`` options, :func:`start_rotations` applies them (``"auto"``:
 coarse on meshes of at least :data:`COARSE_MIN_RATIO` x ``coarse_n_low`` vertices, rigid
 where the coarse start fails), :func:`coarse_start` is the start itself. Why it works and
@@ -15,21 +15,16 @@ import time
 
 import numpy as np
 
-from sshade.arap import ENERGIES, Criterion, build_operators, solve_arap
+from sshade.arap import DEFORM_ENERGIES, SR_ENERGY, Criterion, build_operators, solve_arap, solve_arap_sr
 from sshade.errors import SShaDeError
 from sshade.remesh import remesh
 
-from .arap_sr_solver import solve_arap_sr
-
-__all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO",
-           "SR_ENERGY"]
+__all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO"]
 
 #: the converged protocol's starts: ``auto``, the rigid fit of the handles, the coarse start
 STARTS = ("auto", "rigid", "coarse")
 #: ``"auto"`` starts coarse only when the mesh has at least this many times ``n_low`` vertices
 COARSE_MIN_RATIO = 4
-#: ``energy`` of :func:`coarse_start` naming ARAP-SR's energy (its ``alpha`` given apart)
-SR_ENERGY = "arap_sr"
 
 
 def check_start(name: str, start, coarse_n_low) -> tuple[str, int]:
@@ -77,10 +72,10 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
     V : (n, 3) float64; F : (m, 3) int64, a validated single-component manifold mesh.
     handles : (h,) int64 unique; targets : (h, 3) float64.
     energy : ``"spokes"`` or ``"spokes_and_rims"`` (:func:`sshade.arap.solve_arap`), or
-        :data:`SR_ENERGY` (ARAP-SR, :func:`baselines.arap_sr_solver.solve_arap_sr`).
+        :data:`sshade.arap.SR_ENERGY` (ARAP-SR, :func:`sshade.arap.solve_arap_sr`).
     alpha : float >= 0, ARAP-SR's smoothness weight (the same at both resolutions).
     alpha_scaling : ARAP-SR's definition of alpha
-        (:data:`baselines.arap_sr_solver.ALPHA_SCALINGS`).
+        (:data:`sshade.arap.ALPHA_SCALINGS`).
     n_low : int >= 4, farthest-point samples of the remesh (the handles are added).
     seed : int, the remesh's first sample. criterion : the low-res solve's (default
         :data:`sshade.arap.DEFAULT_CRITERION`).
@@ -103,8 +98,8 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
         R0, info = coarse_start(V, F, handles, targets, energy="spokes", n_low=6000)
         res = solve_arap(V, F, handles, targets, energy="spokes", R0=R0)
     """
-    if energy not in ENERGIES and energy != SR_ENERGY:
-        raise SShaDeError(f"coarse start: unknown energy {energy!r}; use one of {(*ENERGIES, SR_ENERGY)}")
+    if energy not in DEFORM_ENERGIES:
+        raise SShaDeError(f"coarse start: unknown energy {energy!r}; use one of {DEFORM_ENERGIES}")
     t0 = time.perf_counter()
     rm = remesh(V, F, int(n_low), seed=seed, required=handles)
     t1 = time.perf_counter()

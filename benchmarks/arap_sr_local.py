@@ -1,5 +1,5 @@
 """ARAP-SR's local step and acceleration compared on small cases of sshade.arap.problems
-(baselines/arap_sr_solver.py): Jacobi local step (all rotations at once from the previous
+(sshade/arap/smooth_rotations.py): Jacobi local step (all rotations at once from the previous
 ones), Gauss-Seidel over a vertex colouring, Gauss-Seidel with Anderson on the joint
 (U, R) residual (the default) and with the history reset after every rejected candidate
 (an older scheme), each to the default criterion.
@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from baselines.arap_sr_solver import SRProblem, solve_arap_sr
+from sshade.arap import SRProblem, solve_arap_sr
 from sshade.arap.problems import bent_cylinder, lifted_plane, twisted_bar
 
 CASES = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),

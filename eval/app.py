@@ -14,52 +14,59 @@ from __future__ import annotations
 
 import sys
 
-from eval.config_check import check_config
-from eval.experiments import experiments, find_experiment
+from eval.config_check import check_config, check_values
+from eval.config_schema import store_schemas
+from eval.experiments import find_experiment
 from eval.experiments.cases.cases_experiment import run
 from eval.report import safe_report
 from eval.run.outdir import claimed_run
+from eval.run.spec import EvalSpec
 from harness.checks import config_bool
 from harness.command import hydra_main, run_command
 from harness.confdir import config_dir
 from sshade.errors import SShaDeError
 
-__all__ = ["CONF_DIR", "run", "run_experiment", "main"]
+__all__ = ["CONF_DIR", "run", "run_experiment", "run_spec", "main"]
 
 CONF_DIR = config_dir()  # conf/ of a source checkout, else the installed package data
+store_schemas()  # the config's types (eval/config_schema.py), before Hydra composes it
 
 
 def run_experiment(cfg, *, fresh: bool = False):
-    """Dispatch on ``experiment.kind`` (default ``cases``) through the experiment
-    registry (:func:`eval.experiments.experiments`: one module per experiment).
-
-    Every number of the config is checked first (:func:`eval.config_check.check_config`),
-    then the experiment runs in its claimed output folder ``cfg.out_dir``
-    (:func:`eval.run.outdir.claimed_run`: new, empty, or an earlier evaluator output, else
-    refused before any work; ``fresh``: ``out_dir`` is the default dated name, which gets
-    a suffix rather than being reused), which gets its browser report ``index.html`` at
-    the end (:func:`eval.report.safe_report`, unless ``report.enabled`` is false).
+    """Check the composed config ``cfg`` (:func:`eval.config_check.check_config`: every
+    value, before any work, also for sweep jobs and the Python API) and run its
+    experiment (:func:`run_spec`); ``fresh``: ``out_dir`` is the default dated name,
+    which gets a suffix rather than being reused.
 
     Raises
     ------
     SShaDeError for a bad config value or an unknown ``experiment.kind`` (before any
     work), :class:`eval.run.outdir.OutputDirError` for a folder it may not write into.
     """
-    check_config(cfg)  # every number of the config, before any work (also for sweep jobs)
-    kind = str(cfg.get("experiment", {}).get("kind", "cases"))
-    run_fn = find_experiment(kind)
-    if run_fn is None:
-        raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(experiments())}")
-    with claimed_run(cfg, fresh=fresh):
-        out = run_fn(cfg)
-        if _report_on(cfg):  # index.html, after the tables (eval/report.py; never fails the run)
-            safe_report(cfg.out_dir)
+    return run_spec(check_config(cfg), fresh=fresh)
+
+
+def run_spec(spec: EvalSpec, *, fresh: bool = False):
+    """Run the checked config ``spec``: dispatch on ``experiment.kind`` through the
+    experiment registry (:func:`eval.experiments.experiments`: one module per experiment),
+    in its claimed output folder ``output.out_dir`` (:func:`eval.run.outdir.claimed_run`:
+    new, empty, or an earlier evaluator output, else refused before any work), which
+    gets its browser report ``index.html`` at the end (:func:`eval.report.safe_report`,
+    unless ``report.enabled`` is false).
+
+    Raises
+    ------
+    :class:`eval.run.outdir.OutputDirError` for a folder it may not write into; whatever
+    the experiment raises.
+    """
+    run_fn = find_experiment(spec.experiment.kind)
+    with claimed_run(spec.output, record=spec.composed, fresh=fresh) as claim:
+        if claim is not None:
+            spec = spec.with_out_dir(claim.path)
+        out = run_fn(spec)
+        if spec.report.enabled:  # index.html, after the tables (eval/report.py; never fails the run)
+            safe_report(spec.output.out_dir)
         return out
-
-
-def _report_on(cfg) -> bool:
-    rep = cfg.get("report", None)
-    return rep is None or bool(rep.get("enabled", True))
 
 
 def _pin_out_dir(cfg) -> bool:
@@ -107,14 +114,16 @@ def _main(cfg) -> None:
 def main() -> None:
     """Console entry point (``python -m eval``): Hydra parses the overrides.
 
-    The command line is composed and every config value checked
-    (:func:`eval.config_check.check_config`) before Hydra makes the run folder; a bad
-    one gives one ``error: ...`` line and exit status 2, Ctrl-C ``interrupted`` and 130
-    (:func:`harness.command.hydra_main`).
+    The command line is composed (Hydra refuses a value of the wrong type or an unknown
+    key: eval/config_schema.py) and its values checked (:func:`eval.config_check.check_values`)
+    before Hydra starts the run, the rest of the door (:func:`eval.config_check.check_config`,
+    which resolves the whole config, ``${hydra:...}`` included) once it has, before the run
+    folder is claimed; a refusal gives one ``error: ...`` line and exit status 2, Ctrl-C
+    ``interrupted`` and 130 (:func:`harness.command.hydra_main`).
     """
     argv = sys.argv[1:]
     if any(a in ("-m", "--multirun") for a in argv) and not any("hydra.callbacks.sweep_aggregate" in a for a in argv):
         # a multirun claims its hydra.sweep.dir like python -m eval.sweeps does
         # (eval.sweeps.sweep_command.claim_sweep_dir)
         argv = [*argv, "++hydra.callbacks.sweep_aggregate._target_=eval.sweeps.sweep_command.AggregateSweepCallback"]
-    hydra_main(_main, CONF_DIR, argv=argv, check=check_config)
+    hydra_main(_main, CONF_DIR, argv=argv, check=check_values)

@@ -1,36 +1,59 @@
-"""Every number (and flag) the evaluator's config holds, checked in one place before any work.
+"""The evaluator's door: the composed config checked once, before any work, and made into
+the typed run (:class:`eval.run.spec.EvalSpec`) that everything below takes instead.
+On the evaluator's top floor beside :mod:`eval.app`: it asks the datasets, the experiment
+kinds, the case jobs and the report's views for their own checks and defaults.
 
-On the evaluator's top floor beside :mod:`eval.app`, since it asks the datasets, the
-experiment kinds, the case jobs and the report's views for their own checks and defaults.
-
-:func:`check_config` reads each value with :func:`harness.checks.config_number` /
-:func:`harness.checks.config_bool`, which raise :class:`~sshade.errors.SShaDeError` naming
-the key and the value, so that
-``arap.max_iter=inf``, ``dataset.limit=abc`` or ``reference.time_budget_s=junk`` give one
-``error: ...`` line and exit status 2 before a folder is made or a method runs
-(:func:`eval.app.main` calls it on the composed config before Hydra starts the run, and
-:func:`eval.app.run_experiment` again, for sweep jobs and the Python API).
-"""
+Hydra has refused a value of the wrong type or an unknown key (eval/config_schema.py);
+:func:`check_config` checks what a type cannot say (ranges, words, integer lists, the
+methods' names), each refusal an :class:`~sshade.errors.SShaDeError` naming the key and the
+value (``arap.tol=nan``, ``dataset.limit=0``): one ``error: ...`` line, exit status 2, before
+a folder is made or a method runs. :func:`eval.app.main` calls it on the composed config
+before Hydra starts the run, :func:`eval.app.run_experiment` again (sweep jobs, Python API)."""
 from __future__ import annotations
 
-from baselines.arap_sr_solver import ALPHA_SCALINGS
-from eval.datasets import find_dataset
-from eval.experiments import experiment_check
+import copy
+
+from eval.datasets import dataset_options, find_dataset
+from eval.experiments import experiment_options, experiments, find_experiment
 from eval.experiments.cases.case_jobs import check_jobs
+from eval.experiments.cases.pair import guard_options
+from eval.method_config import arap_params, check_alpha, method_entries
 from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
+from eval.run.outdir import overwrite_flag
+from eval.run.paths import abs_path
+from eval.run.spec import (
+    DatasetSpec,
+    EvalSpec,
+    ExperimentSpec,
+    FigureOptions,
+    OutputOptions,
+    ReferenceOptions,
+    ReportOptions,
+)
 from eval.run.subset import check_baseline_cases, check_method_cases
 from harness.checks import config_bool, config_number, config_value
+from harness.method_registry import (
+    SECTIONS,
+    builtin_methods,
+    canonical_name,
+    file_spec,
+    method_key,
+    method_meta,
+    strip_meta,
+)
+from harness.plugins import as_dict
+from sshade.arap import ALPHA_SCALINGS
 from sshade.errors import SShaDeError
 from sshade.pipeline import check_params
 
-__all__ = ["check_config"]
+__all__ = ["check_config", "check_values", "method_definition", "plain"]
 
 _ABSENT = object()   # a default that tells an absent key apart from null
 
 
 def _check_dataset(cfg) -> None:
-    """The keys every dataset shares, then the dataset's own check (its registration,
-    :class:`eval.datasets.dataset_registry.Dataset`)."""
+    """The keys every dataset shares, then the dataset's own check of its section (its
+    registration, :class:`eval.datasets.dataset_registry.Dataset`)."""
     ds = config_value(cfg, "dataset", None)
     if ds is None:
         return
@@ -39,7 +62,7 @@ def _check_dataset(cfg) -> None:
     check_method_cases(config_value(cfg, "method_cases", None))
     found = find_dataset(str(ds.get("name", "")))
     if found is not None and found.check is not None:
-        found.check(cfg)
+        found.check(plain(ds))
 
 
 def _check_sshade(cfg) -> None:
@@ -49,7 +72,8 @@ def _check_sshade(cfg) -> None:
     if sc is None:
         return
     kw = {}
-    for k in ("n_low", "n_samplings", "seed", "workers", "gradient", "anchor", "warm_start",
+    for k in ("n_low", "n_samplings", "seed", "workers", "gradient", "anchor", "warm_start", "energy",
+              "transfer", "average",
               "tol", "max_iter", "protocol", "etol", "gtol"):
         v = config_value(cfg, f"sshade.{k}", _ABSENT)
         if v is _ABSENT and k in ("tol", "max_iter", "protocol", "etol", "gtol"):
@@ -62,16 +86,14 @@ def _check_sshade(cfg) -> None:
         raise SShaDeError(str(e).replace("SShaDe: ", "sshade.", 1)) from None
 
 
-def check_config(cfg) -> None:
-    """Check every number and flag of an evaluator config before any work.
+def check_values(cfg) -> None:
+    """Check every number and flag of an evaluator config (the checks a type cannot say).
 
     Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.pipeline.check_params`),
     the dataset's ``limit``, ``baseline_cases`` and ``method_cases`` and then its own
     check (registered with it, :func:`eval.datasets.register_dataset`), ``figures.enabled``
-    / ``max_cases``, ``report.*``, ``reference.max_iter`` / ``time_budget_s``, ``jobs`` and
-    the experiment kind's own check (registered with it,
-    :func:`eval.experiments.register_experiment`). Absent keys are left to their readers'
-    defaults.
+    / ``max_cases``, ``report.*``, ``reference.max_iter`` / ``time_budget_s`` and ``jobs``.
+    Absent keys are left to their readers' defaults.
 
     Raises
     ------
@@ -106,6 +128,168 @@ def check_config(cfg) -> None:
         tb = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True, default=None)
         if tb is not None and tb <= 0:
             raise SShaDeError(f"reference.time_budget_s must be a finite number > 0 (or null), got {tb!r}")
-    check = experiment_check(str(config_value(cfg, "experiment.kind", "cases")))
-    if check is not None:
-        check(cfg)
+
+
+def check_config(cfg) -> EvalSpec:
+    """The composed config checked (:func:`check_values`, then the experiment kind's own
+    options, the methods' names, the guard, the references, the output) and made into
+    the typed run.
+
+    Parameters
+    ----------
+    cfg : the composed config (an OmegaConf DictConfig; a plain mapping works too, its
+        absent keys taking their readers' defaults).
+
+    Returns
+    -------
+    :class:`eval.run.spec.EvalSpec`.
+
+    Raises
+    ------
+    SShaDeError naming the first bad key and its value, or an unknown ``experiment.kind``
+    or method name; OmegaConf's error for a value that does not resolve.
+    """
+    check_values(cfg)
+    resolved, composed = plain(cfg), plain(cfg, resolve=False)
+    experiment = _experiment(resolved)
+    definitions = {name: method_definition(cfg, name) for name in builtin_methods()}
+    methods = method_entries(resolved["methods"], definitions) if "methods" in resolved else ()
+    _check_shared_sections(resolved, methods)
+    return EvalSpec(experiment=experiment, dataset=_dataset(resolved), methods=methods, definitions=definitions,
+                    guard=guard_options(**{k: resolved[k] for k in ("timeout_s", "handle_error_max_pct")
+                                           if k in resolved}),
+                    reference=_reference(resolved), report=_report(resolved), figures=_figures(resolved),
+                    output=_output(cfg), jobs=check_jobs(resolved.get("jobs", "auto")),
+                    method_cases=resolved.get("method_cases"), resolved=resolved, composed=composed)
+
+
+def _check_shared_sections(resolved: dict, methods) -> None:
+    """With one of our methods listed, the sections their files default to, under their
+    own names: ``arap`` (:func:`eval.method_config.arap_params`) and, for ARAP-SR's checks,
+    ``arap_sr.alpha``."""
+    ours = [m.name for m in methods if m.name is not None]
+    if not ours:
+        return
+    arap_params(resolved.get("arap") or {})
+    if any(method_meta(n)["checks"] == "arap_sr" for n in ours):
+        alpha = (resolved.get("arap_sr") or {}).get("alpha")
+        check_alpha(0.01 if alpha is None else alpha, "arap_sr.alpha")
+
+
+def plain(cfg, *, resolve: bool = True) -> dict:
+    """``cfg`` (a config or a plain mapping) as plain dicts and lists, its interpolations
+    resolved unless ``resolve`` is false (a missing value stays ``???``)."""
+    from omegaconf import OmegaConf
+    if OmegaConf.is_config(cfg):
+        return OmegaConf.to_container(cfg, resolve=resolve)
+    return copy.deepcopy(dict(cfg))
+
+
+def _experiment(resolved: dict) -> ExperimentSpec:
+    """``experiment.name`` and ``experiment.kind`` (a registered kind), with the kind's own
+    options read from its section (:func:`eval.experiments.register_experiment`)."""
+    exp = resolved.get("experiment") or {}
+    kind = str(exp.get("kind", "cases"))
+    if find_experiment(kind) is None:
+        raise SShaDeError(f"unknown experiment.kind {kind!r}; choose among {sorted(experiments())}")
+    reader = experiment_options(kind)
+    options = None if reader is None else reader.read(resolved.get(reader.section))
+    return ExperimentSpec(name=str(exp.get("name") or ""), kind=kind, options=options)
+
+
+def _dataset(resolved: dict) -> DatasetSpec | None:
+    """The ``dataset`` section (checked by :func:`check_values`), or None without one."""
+    ds = resolved.get("dataset")
+    if ds is None:
+        return None
+    return DatasetSpec(name=str(ds.get("name", "")), root=ds.get("root"), loader=dataset_options(ds), section=ds,
+                       baseline_cases=ds.get("baseline_cases"), seed=ds.get("seed"))
+
+
+def _reference(resolved: dict) -> ReferenceOptions:
+    """The ``reference`` section: its case rule checked (``baseline``, ``all``, ``none`` or
+    a rule of its own as ``dataset.baseline_cases``), its cache folder made absolute."""
+    rc = resolved.get("reference") or {}
+    cases = str(rc.get("cases", "baseline")).strip()
+    if cases not in ("baseline", "all", "none"):
+        try:
+            cases = check_baseline_cases(cases)
+        except SShaDeError:
+            raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
+                              f"got {cases!r}") from None
+    top = {"reference": rc}
+    return ReferenceOptions(cases=cases, cache=abs_path(rc.get("cache", "data/references")),
+                            max_iter=config_number(top, "reference.max_iter", min=1, default=50000),
+                            time_budget_s=config_number(top, "reference.time_budget_s", kind=float, min=0,
+                                                        allow_none=True, default=3600))
+
+
+def _report(resolved: dict) -> ReportOptions:
+    """``report``: its defaults for a config without it (:mod:`eval.present.meshview`)."""
+    rep = resolved.get("report")
+    if rep is None:
+        return ReportOptions(enabled=True, view_cases=DEFAULT_VIEW_CASES, max_faces=DEFAULT_MAX_FACES)
+    n, mf = rep.get("view_cases", DEFAULT_VIEW_CASES), rep.get("max_faces", DEFAULT_MAX_FACES)
+    return ReportOptions(enabled=bool(rep.get("enabled", True)), view_cases=int(0 if n is None else n),
+                         max_faces=int(DEFAULT_MAX_FACES if mf is None else mf))
+
+
+def _figures(resolved: dict) -> FigureOptions:
+    """``figures``: off without the section; ``max_cases`` null is 4."""
+    fig = resolved.get("figures")
+    if not fig:
+        return FigureOptions(enabled=False, max_cases=0)
+    n = fig.get("max_cases", 4)
+    return FigureOptions(enabled=bool(fig.get("enabled", False)), max_cases=int(4 if n is None else n))
+
+
+def _output(cfg) -> OutputOptions:
+    """Where the run of ``cfg`` writes: ``out_dir``, ``overwrite``, ``resume``,
+    ``store.meshes`` and ``compare_with`` (a folder or a list of folders), checked.
+
+    Raises
+    ------
+    SShaDeError on a flag that is not true or false, or a ``compare_with`` entry that is
+    not a folder name.
+    """
+    from omegaconf import OmegaConf
+    items = config_value(cfg, "compare_with", None)
+    items = OmegaConf.to_container(items, resolve=True) if OmegaConf.is_config(items) else items
+    items = [] if items is None else list(items) if isinstance(items, (list, tuple)) else [items]
+    for it in items:
+        if not isinstance(it, str) or not it.strip():
+            raise SShaDeError(f"compare_with must be a list of run folders, got {it!r}")
+    out_dir = config_value(cfg, "out_dir", "")
+    return OutputOptions(out_dir=str(out_dir or ""), overwrite=overwrite_flag(config_value(cfg, "overwrite", False)),
+                         resume=overwrite_flag(config_value(cfg, "resume", False)),
+                         store_meshes=config_bool(cfg, "store.meshes", default=False), compare_with=tuple(items))
+
+
+def method_definition(cfg, name: str) -> dict:
+    """The resolved definition (``_target_`` and parameters) of our method ``name``.
+
+    ``cfg.method.<key>`` when the config has it (composed from ``conf/method/`` by
+    ``conf/config.yaml``), else ``conf/method/<name>.yaml`` resolved against ``cfg``'s
+    ``arap`` / ``arap_sr`` / ``sshade`` sections merged over the defaults of
+    ``conf/config.yaml`` (:func:`harness.method_registry.file_spec`; so a plain dict config
+    works, and so does a method file that the defaults list does not name). Without the
+    file's ``order`` (:data:`harness.method_registry.META_KEYS`).
+
+    Raises
+    ------
+    SShaDeError on an unknown name or a definition that does not resolve.
+
+    Examples
+    --------
+    >>> method_definition({"arap": {"tol": 1e-3}}, "elastic")["tol"]
+    0.001
+    """
+    from omegaconf.errors import OmegaConfBaseException
+    name = canonical_name(name)
+    section = (cfg.get("method", None) or {}).get(method_key(name), None)
+    if section is None:
+        return file_spec(name, {k: cfg.get(k, None) for k in SECTIONS})
+    try:
+        return strip_meta(as_dict(section))
+    except OmegaConfBaseException as e:
+        raise SShaDeError(f"method.{method_key(name)}: bad definition ({e})") from None

@@ -12,46 +12,57 @@ parameters) is composed as ``method.<name>`` (``SShaDe+refine`` as
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
-from harness.method_registry import (
-    SECTIONS,
-    build_builtin,
-    builtin_methods,
-    canonical_name,
-    file_spec,
-    method_key,
-    method_meta,
-    strip_meta,
-)
+from eval.run.spec import MethodSpec
+from harness.method_registry import build_builtin, builtin_methods, canonical_name, method_key, method_meta
 from harness.plugins import as_dict, build_method, is_mapping
 from sshade.arap import PROTOCOLS
 from sshade.errors import SShaDeError
 
-__all__ = ["make_methods", "method_spec", "arap_params"]
+__all__ = ["make_methods", "method_entries", "arap_params", "check_alpha"]
 
 
-def _get(cfg, key, default=None):
-    if cfg is None:
-        return default
-    if isinstance(cfg, Mapping) or hasattr(cfg, "get"):
-        v = cfg.get(key, default)
-        return default if v is None and default is not None else v
-    return getattr(cfg, key, default)
+def method_entries(items, definitions: Mapping) -> tuple[MethodSpec, ...]:
+    """The entries of ``methods``, checked: ``items`` is a list of our names (any case) and
+    plug-in mappings (``_target_`` and keyword arguments), or one string of names;
+    ``definitions`` maps each of our names to its resolved definition.
+
+    Returns
+    -------
+    tuple of :class:`eval.run.spec.MethodSpec`, in ``items`` order (empty when ``items`` is).
+
+    Raises
+    ------
+    SShaDeError on ``items`` that is not a list or an unknown name (naming our methods).
+
+    Examples
+    --------
+    >>> [m.name for m in method_entries(["arap", {"_target_": "pkg.Mine"}], {"ARAP": {}})]
+    ['ARAP', None]
+    """
+    if isinstance(items, str):
+        items = [n for n in items.replace(",", " ").split() if n]
+    try:
+        items = list(items) if items is not None else []
+    except TypeError:
+        raise SShaDeError(f"methods must be a list of names among {list(builtin_methods())} or _target_ mappings, "
+                          f"got {items!r}") from None
+    out = []
+    for i, it in enumerate(items):
+        if is_mapping(it):
+            out.append(MethodSpec(name=None, definition=as_dict(it), where=f"methods[{i}]"))
+        else:
+            name = canonical_name(it)
+            out.append(MethodSpec(name=name, definition=dict(definitions[name]), where=f"method.{method_key(name)}"))
+    return tuple(out)
 
 
-def make_methods(cfg) -> list:
-    """Instantiate the methods listed in ``cfg.methods``, in that order.
-
-    An item is one of our names (:func:`harness.method_registry.builtin_methods`, any case), built from its
-    definition ``cfg.method.<key>`` (:func:`method_spec`), or a plug-in: a mapping with
-    ``_target_`` (``pkg.module.Class``) and keyword arguments (:func:`harness.plugins.build_method`).
-
-    Parameters
-    ----------
-    cfg : OmegaConf DictConfig or plain mapping with ``methods`` (list of names and/or
-        ``_target_`` mappings) and optional ``method`` / ``arap`` / ``arap_sr`` /
-        ``sshade`` sections (defaults: ``conf/config.yaml``).
+def make_methods(methods: Sequence[MethodSpec]) -> list:
+    """Instantiate ``methods`` (the entries of ``methods``, :func:`method_entries`), in order:
+    ours from their definitions, their parameters checked first by the checks their files
+    name (``checks``, :func:`harness.method_registry.method_meta`), plug-ins through
+    :func:`harness.plugins.build_method`.
 
     Returns
     -------
@@ -60,35 +71,23 @@ def make_methods(cfg) -> list:
     Raises
     ------
     SShaDeError
-        Empty or non-list ``methods``, unknown name, a mapping without ``_target_``, a
-        target that cannot be imported or built, an object without a ``name`` (str) or
-        a callable ``deform``, a name breaking :data:`sshade.method_interface.NAME_RULE`, a name listed twice
-        (ignoring case and repeated spaces), bad parameter values (every
-        method's parameters are checked here, before any case is loaded or built), or
-        ``SShaDe`` requested but :class:`sshade.SShaDe` cannot be imported.
+        No method, a mapping without ``_target_``, a target that cannot be imported or
+        built, an object without a ``name`` (str) or a callable ``deform``, a name breaking
+        :data:`sshade.method_interface.NAME_RULE`, a name listed twice (ignoring case and
+        repeated spaces), bad parameter values (every method's parameters are checked
+        here, before any case is loaded or built), or ``SShaDe`` requested but
+        :class:`sshade.SShaDe` cannot be imported.
 
     Examples
     --------
-    >>> [m.name for m in make_methods({"methods": ["ARAP", "elastic"]})]
+    >>> from harness.method_registry import file_spec
+    >>> entries = method_entries(["ARAP", "elastic"], {n: file_spec(n) for n in ("ARAP", "Elastic")})
+    >>> [m.name for m in make_methods(entries)]
     ['ARAP', 'Elastic']
     """
-    items = _get(cfg, "methods")
-    if isinstance(items, str):
-        items = [n for n in items.replace(",", " ").split() if n]
-    try:
-        items = list(items) if items is not None else []
-    except TypeError:
-        raise SShaDeError(f"methods must be a list of names among {list(builtin_methods())} or _target_ mappings, "
-                          f"got {items!r}") from None
-    if not items:
+    if not methods:
         raise SShaDeError(f"methods is empty; choose among {list(builtin_methods())} or give a _target_ mapping")
-    canon = [None if is_mapping(it) else canonical_name(it) for it in items]
-    if any(c is not None for c in canon):  # the shared sections, checked under their own names
-        arap_params(_get(cfg, "arap", {}) or {})
-        if any(c is not None and method_meta(c)["checks"] == "arap_sr" for c in canon):
-            _alpha(_get(_get(cfg, "arap_sr", {}) or {}, "alpha", 0.01), "arap_sr.alpha")
-    out = [build_method(it, where=f"methods[{i}]") if c is None else _build_ours(cfg, c)
-           for i, (it, c) in enumerate(zip(items, canon))]
+    out = [build_method(dict(m.definition), where=m.where) if m.name is None else _build_ours(m) for m in methods]
     keys = [" ".join(m.name.split()).lower() for m in out]  # "SShaDe" and "sshade" would be two confusing rows
     dup = {m.name for m, k in zip(out, keys) if keys.count(k) > 1}
     if dup:
@@ -97,52 +96,21 @@ def make_methods(cfg) -> list:
     return out
 
 
-def method_spec(cfg, name: str) -> dict:
-    """The resolved definition (``_target_`` and parameters) of our method ``name``.
-
-    ``cfg.method.<key>`` when the config has it (composed from ``conf/method/`` by
-    ``conf/config.yaml``), else ``conf/method/<name>.yaml`` resolved against ``cfg``'s
-    ``arap`` / ``arap_sr`` / ``sshade`` sections merged over the defaults of
-    ``conf/config.yaml`` (:func:`harness.method_registry.file_spec`; so a plain dict config
-    works, and so does a method file that the defaults list does not name). Without the
-    file's ``order`` (:data:`harness.method_registry.META_KEYS`).
-
-    Raises
-    ------
-    SShaDeError on an unknown name or a definition that does not resolve.
-
-    Examples
-    --------
-    >>> method_spec({"arap": {"tol": 1e-3}}, "elastic")["tol"]
-    0.001
-    """
-    from omegaconf.errors import OmegaConfBaseException
-    name = canonical_name(name)
-    section = _get(_get(cfg, "method", None), method_key(name), None)
-    if section is None:
-        return file_spec(name, {k: _get(cfg, k) for k in SECTIONS})
-    try:
-        return strip_meta(as_dict(section))
-    except OmegaConfBaseException as e:
-        raise SShaDeError(f"method.{method_key(name)}: bad definition ({e})") from None
-
-
-def _build_ours(cfg, name: str):
-    """One of our methods from its definition in ``cfg``, its parameters checked first by
-    the checks its file names (``checks``, :func:`harness.method_registry.method_meta`)."""
-    spec = method_spec(cfg, name)
-    where = f"method.{method_key(name)}"
-    checks = method_meta(name)["checks"]
+def _build_ours(m: MethodSpec):
+    """One of our methods from its definition, its parameters checked first by the checks
+    its file names (``checks``, :func:`harness.method_registry.method_meta`)."""
+    spec = dict(m.definition)
+    checks = method_meta(m.name)["checks"]
     if checks == "arap":
-        arap_params(spec, where=where)
+        arap_params(spec, where=m.where)
     elif checks == "arap_sr":
-        _alpha(spec.get("alpha", 0.01), f"{where}.alpha")
-        arap_params({"tol": spec.get("tol", 1e-4), "max_iter": spec.get("max_iter")}, where=where)
+        check_alpha(spec.get("alpha", 0.01), f"{m.where}.alpha")
+        arap_params({"tol": spec.get("tol", 1e-4), "max_iter": spec.get("max_iter")}, where=m.where)
     # the others check their own parameters when built (SShaDe: sshade.pipeline.check_params)
-    return build_builtin(name, spec=spec)
+    return build_builtin(m.name, spec=spec)
 
 
-def _alpha(alpha, where: str) -> float:
+def check_alpha(alpha, where: str) -> float:
     """ARAP-SR's smoothness weight, checked (finite, >= 0); SShaDeError naming ``where``."""
     try:
         a = float(alpha)
@@ -164,16 +132,20 @@ def arap_params(arap, *, where: str = "arap") -> dict:
     ------
     SShaDeError naming the bad key and value.
     """
-    protocol = str(_get(arap, "protocol", "converged"))
+    def _get(key, default=None):
+        v = arap.get(key, default) if arap is not None else default
+        return default if v is None and default is not None else v
+
+    protocol = str(_get("protocol", "converged"))
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"{where}.protocol must be one of {list(PROTOCOLS)}, got {protocol!r}")
     out = {"protocol": protocol}
     try:
-        out["tol"] = float(_get(arap, "tol", 1e-4))
-        mi = _get(arap, "max_iter", None)
+        out["tol"] = float(_get("tol", 1e-4))
+        mi = _get("max_iter", None)
         out["max_iter"] = None if mi is None else int(mi)
         for k in ("etol", "gtol"):
-            v = _get(arap, k, None)
+            v = _get(k, None)
             out[k] = None if v is None else float(v)
     except (TypeError, ValueError) as e:
         raise SShaDeError(f"bad {where} parameters: {e}") from None

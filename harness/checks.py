@@ -1,4 +1,4 @@
-"""Checked numbers, flags and integer lists read from an OmegaConf config.
+"""Checked numbers, flags and integer lists read from an OmegaConf config (or plain mappings).
 
 Each reader raises :class:`~sshade.errors.SShaDeError` naming the key and the value
 (``"<key> must be an integer >= 1 (or null), got 'abc'"``), so that a bad value on a
@@ -22,7 +22,7 @@ _MISSING = object()  # "no default": an absent key is an error
 
 def config_value(cfg, key: str, default=_MISSING):
     """``cfg``'s value at the dotted ``key`` (``default`` when absent; without a default an
-    absent key is an error).
+    absent key is an error). ``cfg``: an OmegaConf config or plain mappings and lists.
 
     Raises
     ------
@@ -31,6 +31,8 @@ def config_value(cfg, key: str, default=_MISSING):
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
     try:
+        if not OmegaConf.is_config(cfg):
+            cfg = OmegaConf.create(cfg)
         v = OmegaConf.select(cfg, key, default=_MISSING, throw_on_missing=True)
     except OmegaConfBaseException as e:
         raise SShaDeError(f"{key}: {' '.join(str(e).split())}") from None

@@ -15,14 +15,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .averaging import combine, sampling_weights
 from .errors import SShaDeError
-from .lrf import decode, encode, frame_functions
 from .mesh.validate import check_points, validate_mesh
 from .params import SShaDeParams, check_params
 from .pipeline import auto_n_low
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
-from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels
+from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels
+from .smooth_transfer import rebuild
 
 __all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "transfer_with", "TransferJob",
            "rigid_align"]
@@ -38,7 +39,9 @@ class TransferJob:
     V : (n, 3) float64 rest mesh M; F : (m, 3) int64 its faces; S : (n, 3) float64 the
     positions encoded; T : (n, 3) float64 M in the target pose (M'); n_low : int,
     farthest-point samples per low-res mesh; seeds : list of k ints; topology :
-    :func:`sshade.remesh.mesh_topology` of ``(V, F)``; gradient, anchor : LRF modes.
+    :func:`sshade.remesh.mesh_topology` of ``(V, F)``; gradient, anchor : LRF modes;
+    transfer, average : the transfer and the samplings' average
+    (:data:`sshade.smooth_transfer.TRANSFERS`, :data:`sshade.averaging.AVERAGES`).
     """
 
     V: np.ndarray
@@ -50,6 +53,8 @@ class TransferJob:
     topology: object
     gradient: str
     anchor: str
+    transfer: str = "vertex"
+    average: str = "uniform"
 
 
 def _positions(X, n: int | None, name: str, ref: str = "the rest mesh") -> np.ndarray:
@@ -102,19 +107,20 @@ def _one(job: TransferJob, i: int) -> tuple[int, np.ndarray, dict]:
     VN = V[rm.seeds]
     proj = project_to_fans(V, rm.label, VN, rm.F)
     t2 = time.perf_counter()
-    axis = frame_functions(VN, rm.F)
     bary = proj.bary if job.anchor == "projection" else None  # M's own projection, also for S
-    C = encode(job.S, proj.tri, VN, rm.F, axis, job.gradient, bary)
-    out = decode(C, proj.tri, VN, job.T[rm.seeds], rm.F, axis, job.gradient, bary)
+    TN = job.T[rm.seeds]
+    out = rebuild(job.S, proj.tri, bary, VN, TN, rm.F, transfer=job.transfer, gradient=job.gradient)
+    weights = sampling_weights(job.average, job.S, proj.tri, bary, VN, TN, rm.F)
     t3 = time.perf_counter()
-    return i, out, {"seed": int(job.seeds[i]), "first": int(rm.first), "n_low": int(len(rm.seeds)),
+    return i, out, {"weights": weights, "seed": int(job.seeds[i]), "first": int(rm.first), "n_low": int(len(rm.seeds)),
                     "n_repair": int(rm.n_repair), "n_flipped": int(rm.n_flipped), "redrawn": given_up,
                     "remesh_s": t1 - t0, "project_s": t2 - t1, "transfer_s": t3 - t2}
 
 
 def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
                             gradient: str = "normalized", workers: int | None = None,
-                            anchor: str = "projection") -> tuple[np.ndarray, dict]:
+                            anchor: str = "projection", transfer: str = "vertex",
+                            average: str = "uniform") -> tuple[np.ndarray, dict]:
     """Encode ``V_S`` in the LRFs of the remeshed ``M`` and decode them on ``M'`` (§4.2-4.3).
 
     The common core of :func:`isometric_transfer` (``V_S = V_M``) and
@@ -134,6 +140,8 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     anchor : ``"projection"`` (default) or ``"barycenter"`` (paper Alg. 1): where each
         vertex is anchored in its triangle (:mod:`sshade.lrf`); for pose transfer, S's
         vertex v is anchored at M's vertex v's projection.
+    transfer, average : as :func:`sshade.deform` (``average="proximity"`` fits here: the
+        low-res positions are exact, docs/differences.md).
     workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
         The result does not depend on it.
     n_low, n_samplings, seed, gradient, anchor and workers are checked as :func:`sshade.deform`
@@ -155,7 +163,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     t0 = time.perf_counter()
     arrays = _checked_arrays(V_M, F, V_S, V_Mprime)
     params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient,
-                          anchor=anchor)
+                          anchor=anchor, transfer=transfer, average=average)
     return _transfer(*arrays, params, t0)
 
 
@@ -183,16 +191,18 @@ def _transfer(V, F, he, S, T, params: SShaDeParams, t0: float) -> tuple[np.ndarr
     warm_kernels()
     n_low = auto_n_low(n) if params.n_low == "auto" else params.n_low
     job = TransferJob(V=V, F=F, S=S, T=T, n_low=int(min(n_low, n)), seeds=sampling_seeds(params.seed, k),
-                      topology=mesh_topology(V, F, he), gradient=params.gradient, anchor=params.anchor)
+                      topology=mesh_topology(V, F, he), gradient=params.gradient, anchor=params.anchor,
+                      transfer=params.transfer, average=params.average)
     workers = pool_size(params.workers, k)
     results: list = [None] * k
     infos: list = [None] * k
     with SamplingPool(job, workers) as pool:
         for f in [pool.submit_with_job(_one, i) for i in range(k)]:
             i, results[i], infos[i] = f.result()
-    out = average(results)  # fixed order: independent of the worker count
+    out = combine(results, [d.pop("weights") for d in infos])  # fixed order: independent of the worker count
     info = {"total_s": time.perf_counter() - t0, "seed": params.seed, "sampling_seeds": job.seeds,
             "n_samplings": k, "workers": workers, "gradient": params.gradient, "anchor": params.anchor,
+            "transfer": params.transfer, "average": params.average,
             "samplings": infos}
     for key in ("remesh_s", "project_s", "transfer_s"):
         info[key] = float(np.sum([d[key] for d in infos]))
@@ -203,7 +213,8 @@ def _transfer(V, F, he, S, T, params: SShaDeParams, t0: float) -> tuple[np.ndarr
 
 def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
                        gradient: str = "normalized", workers: int | None = None,
-                       anchor: str = "projection") -> tuple[np.ndarray, dict]:
+                       anchor: str = "projection", transfer: str = "vertex",
+                       average: str = "uniform") -> tuple[np.ndarray, dict]:
     """Rebuild a pose of a subject from its rest pose and a low-res copy of the pose (paper §4.2).
 
     Only the ~``n_low`` low-res vertices of the target are used (``V_target[seeds]``, per
@@ -219,6 +230,7 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     seed : int, master seed (per-sampling seeds in ``info["sampling_seeds"]``).
     gradient : ``"normalized"`` (default) or ``"raw"``. anchor : ``"projection"``
         (default) or ``"barycenter"`` (paper), see :func:`correspondence_transfer`.
+    transfer, average : see :func:`correspondence_transfer`.
     workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
 
     Returns
@@ -247,12 +259,14 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     n_rest = len(_positions(V_rest, None, "V_rest"))
     T = _positions(V_target, n_rest, "target pose V_target")
     return correspondence_transfer(V_rest, F, V_rest, T, n_low=n_low, n_samplings=n_samplings, seed=seed,
-                                   gradient=gradient, workers=workers, anchor=anchor)
+                                   gradient=gradient, workers=workers, anchor=anchor,
+                                   transfer=transfer, average=average)
 
 
 def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
                   gradient: str = "normalized", workers: int | None = None, align: bool = False,
-                  return_info: bool = False, anchor: str = "projection"):
+                  return_info: bool = False, anchor: str = "projection", transfer: str = "vertex",
+                  average: str = "uniform"):
     """Put shape S in the pose of M' (paper §4.3, Fig. "diagrams" b).
 
     S's vertices are encoded in the frames of M's remesh N and decoded on N' (M's
@@ -268,7 +282,8 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
     V_S : (n, 3) float, the shape to pose (1:1 with M, same connectivity, aligned with M
         in space, e.g. another subject in the same rest pose).
     V_Mprime : (n, 3) float, M in the target pose (1:1 with M).
-    n_low, n_samplings, seed, gradient, workers, anchor : as in :func:`isometric_transfer`.
+    n_low, n_samplings, seed, gradient, workers, anchor, transfer, average : as in
+        :func:`isometric_transfer`.
     align : bool, rigidly align S onto M first (for shapes not already aligned).
     return_info : bool, also return the info dict (timings, seeds).
 
@@ -292,5 +307,6 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
     if align:
         V_S = rigid_align(V_S, V_M)
     out, info = correspondence_transfer(V_M, F, V_S, V_Mprime, n_low=n_low, n_samplings=n_samplings, seed=seed,
-                                        gradient=gradient, workers=workers, anchor=anchor)
+                                        gradient=gradient, workers=workers, anchor=anchor,
+                                   transfer=transfer, average=average)
     return (out, info) if return_info else out

@@ -12,10 +12,12 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .arap import DEFAULT_MAX_ITER, PROTOCOLS, make_criterion
+from .arap import DEFAULT_MAX_ITER, DEFORM_ENERGIES, PROTOCOLS, make_criterion
+from .averaging import AVERAGES
 from .cores import pool_size
 from .errors import SShaDeError
 from .lrf import ANCHORS, GRADIENTS
+from .smooth_transfer import TRANSFERS
 
 __all__ = ["SShaDeParams", "check_params", "effective_params", "MAX_SEED", "MIN_N_LOW"]
 
@@ -35,7 +37,10 @@ class SShaDeParams(Mapping):
     workers : int >= 1 or None; max_iter : int >= 1 or None; tol : float > 0;
     gradient : one of :data:`sshade.lrf.GRADIENTS`; anchor : one of :data:`sshade.lrf.ANCHORS`;
     warm_start : bool; protocol : one of :data:`sshade.arap.PROTOCOLS`; etol, gtol : float
-    >= 0 or None. Meanings: :func:`sshade.pipeline.deform`.
+    >= 0 or None; energy : the low-res step's, one of :data:`sshade.arap.DEFORM_ENERGIES`;
+    transfer : one of :data:`sshade.smooth_transfer.TRANSFERS`; average : one of
+    :data:`sshade.averaging.AVERAGES`.
+    Meanings: :func:`sshade.pipeline.deform`.
 
     Read-only mapping of the same keys too (``p["n_low"]``, ``dict(p)``, ``**p``);
     :meth:`as_dict` is the plain dict for JSON and run records.
@@ -53,6 +58,9 @@ class SShaDeParams(Mapping):
     protocol: str
     etol: float | None
     gtol: float | None
+    energy: str
+    transfer: str
+    average: str
 
     def __getitem__(self, key: str):
         if key not in _FIELDS:
@@ -79,12 +87,13 @@ class SShaDeParams(Mapping):
 
     def arap_options(self) -> dict:
         """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step:
-        ``tol``, ``max_iter``, ``protocol`` and, when ``etol`` or ``gtol`` is given, the
-        ``criterion`` (:func:`sshade.arap.make_criterion`; else None)."""
+        ``energy``, ``tol``, ``max_iter``, ``protocol`` and, when ``etol`` or ``gtol`` is
+        given, the ``criterion`` (:func:`sshade.arap.make_criterion`; else None)."""
         crit = None
         if self.etol is not None or self.gtol is not None:  # paper protocol: gtol tells converged from stalled
             crit = make_criterion(self.etol, self.gtol)
-        return {"tol": self.tol, "max_iter": self.max_iter, "protocol": self.protocol, "criterion": crit}
+        return {"energy": self.energy, "tol": self.tol, "max_iter": self.max_iter, "protocol": self.protocol,
+                "criterion": crit}
 
 
 _FIELDS = tuple(f.name for f in fields(SShaDeParams))
@@ -125,7 +134,8 @@ def _as_tolerance(name: str, v) -> float | None:
 def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
                  max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 anchor: str = "projection") -> SShaDeParams:
+                 anchor: str = "projection", energy: str = "spokes_and_rims", transfer: str = "vertex",
+                 average: str = "uniform") -> SShaDeParams:
     """Validate SShaDe's parameters without touching a mesh, so a bad value fails before
     any work.
 
@@ -136,9 +146,11 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     [1, 2**31 - 1] or None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or
     None), gradient (one of :data:`sshade.lrf.GRADIENTS`), anchor (one of
     :data:`sshade.lrf.ANCHORS`), warm_start (bool), protocol (one of
-    :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None). An
-    integer may be given as an integral float (``1e3``) but never as a bool, NaN, inf
-    or a float beyond the range.
+    :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None), energy (one
+    of :data:`sshade.arap.DEFORM_ENERGIES`), transfer (one of
+    :data:`sshade.smooth_transfer.TRANSFERS`), average (one of
+    :data:`sshade.averaging.AVERAGES`). An integer may be given as an integral float
+    (``1e3``) but never as a bool, NaN, inf or a float beyond the range.
 
     Returns
     -------
@@ -177,8 +189,15 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
         raise SShaDeError(f"SShaDe: unknown anchor {anchor!r}; use one of {ANCHORS}")
     if protocol not in PROTOCOLS:
         raise SShaDeError(f"SShaDe: unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
+    if not isinstance(energy, str) or energy not in DEFORM_ENERGIES:
+        raise SShaDeError(f"SShaDe: unknown low-res energy {energy!r}; use one of {DEFORM_ENERGIES}")
+    if not isinstance(transfer, str) or transfer not in TRANSFERS:
+        raise SShaDeError(f"SShaDe: unknown transfer {transfer!r}; use one of {TRANSFERS}")
+    if not isinstance(average, str) or average not in AVERAGES:
+        raise SShaDeError(f"SShaDe: unknown average {average!r}; use one of {AVERAGES}")
     return SShaDeParams(**out, gradient=gradient, anchor=anchor, warm_start=bool(warm_start), protocol=protocol,
-                        etol=_as_tolerance("etol", etol), gtol=_as_tolerance("gtol", gtol))
+                        etol=_as_tolerance("etol", etol), gtol=_as_tolerance("gtol", gtol), energy=energy,
+                        transfer=transfer, average=average)
 
 
 def effective_params(params: SShaDeParams) -> dict:

@@ -1,6 +1,7 @@
-"""SShaDe: the whole pipeline (paper §3, Fig. 1): remesh -> low-res spokes-and-rims ARAP
--> LRF transfer, averaged over k samplings run in parallel processes (§3.3, the pool of
-:mod:`sshade.sampling`, every sampling working on one :class:`SamplingJob`).
+"""SShaDe: the whole pipeline (paper §3, Fig. 1): remesh -> low-res ARAP (spokes-and-rims
+by default, ``energy``) -> LRF transfer, averaged over k samplings run in parallel
+processes (§3.3, the pool of :mod:`sshade.sampling`, every sampling working on one
+:class:`SamplingJob`).
 :func:`deform` checks its keywords into a :class:`sshade.params.SShaDeParams`
 (:func:`check_params`) and runs :func:`deform_with`; :class:`SShaDe` is the method object.
 """
@@ -13,15 +14,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arap import arap_deform, bbox_diag
+from .averaging import combine, sampling_weights
 from .components import deform_components
-from .lrf import transfer
 from .mesh.halfedge import count_components
 from .mesh.unit_frame import unit_frame
 from .mesh.validate import validate_handles, validate_mesh
 from .params import MAX_SEED, MIN_N_LOW, SShaDeParams, check_params, effective_params
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
-from .sampling import SamplingPool, average, pool_size, sampling_seeds, warm_kernels
+from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels
+from .smooth_transfer import rebuild
 from .warmup import WARMED, warm_once
 
 __all__ = ["deform", "deform_with", "deform_once", "SShaDe", "SShaDeParams", "SamplingJob", "auto_n_low",
@@ -41,8 +43,11 @@ class SamplingJob:
     mesh; seeds : list of k ints (:func:`sshade.sampling.sampling_seeds`); topology :
     :func:`sshade.remesh.mesh_topology` of ``(V, F)`` or None; targets : (h, 3) float64
     or None (:func:`prepare_samplings`: not known yet); gradient, anchor : LRF modes
-    (:data:`sshade.lrf.GRADIENTS`, :data:`sshade.lrf.ANCHORS`); arap : keyword arguments
-    of :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`) or None.
+    (:data:`sshade.lrf.GRADIENTS`, :data:`sshade.lrf.ANCHORS`); transfer, average : the
+    transfer and the samplings' average (:data:`sshade.smooth_transfer.TRANSFERS`,
+    :data:`sshade.averaging.AVERAGES`); arap : keyword arguments
+    of :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`: the energy and
+    the stopping rule) or None.
     """
 
     V: np.ndarray
@@ -55,6 +60,8 @@ class SamplingJob:
     gradient: str = "normalized"
     anchor: str = "projection"
     arap: dict | None = None
+    transfer: str = "vertex"
+    average: str = "uniform"
 
 
 def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[dict, dict]:
@@ -107,15 +114,17 @@ def prepare_samplings(job: SamplingJob, workers: int) -> list[tuple[dict, dict]]
 
 
 def _finish(job: SamplingJob, prep: dict, V0=None):
-    """Low-res spokes-and-rims ARAP (§3.3, §4.1) + LRF transfer (Alg. 1) of one sampling
-    of ``job``, from ``V0`` ((k, 3) or None: the rigid fit of the handles)."""
+    """Low-res ARAP of ``job.arap``'s energy (spokes-and-rims by default, §3.3, §4.1) + LRF
+    transfer (Alg. 1) of one sampling of ``job``, from ``V0`` ((k, 3) or None: the rigid
+    fit of the handles)."""
     V, targets, handles = job.V, job.targets, job.handles
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
-    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, energy="spokes_and_rims", V0=V0, **job.arap)
+    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, V0=V0, **job.arap)
     t1 = time.perf_counter()
-    Vd = transfer(V, prep["tri"], VN, res.V, prep["F"], gradient=job.gradient,
-                  bary=prep["bary"] if job.anchor == "projection" else None)
+    bary = prep["bary"] if job.anchor == "projection" else None
+    Vd = rebuild(V, prep["tri"], bary, VN, res.V, prep["F"], transfer=job.transfer, gradient=job.gradient)
+    weights = sampling_weights(job.average, V, prep["tri"], bary, VN, res.V, prep["F"])
     # handles are low-res vertices: anchored at their projection (themselves) the transfer
     # rebuilds them exactly; at the barycenter (Alg. 1) only where P(v) moves rigidly (the
     # frame is not the triangle's affine map). Overwritten here, the residual kept for the
@@ -125,13 +134,15 @@ def _finish(job: SamplingJob, prep: dict, V0=None):
     t2 = time.perf_counter()
     return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
                 "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None,
-                "energy": res.info.get("energy"), "gnorm": res.info.get("gnorm"), "handle_resid": resid}
+                "energy": res.info.get("energy"), "gnorm": res.info.get("gnorm"), "handle_resid": resid,
+                "weights": weights}
 
 
 def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None, tol: float = 1e-4,
                 max_iter: int | None = None, gradient: str = "normalized", V_init=None, protocol: str = "converged",
                 etol: float | None = None, gtol: float | None = None,
-                anchor: str = "projection") -> tuple[np.ndarray, dict]:
+                anchor: str = "projection", energy: str = "spokes_and_rims",
+                transfer: str = "vertex") -> tuple[np.ndarray, dict]:
     """One sampling of SShaDe (no averaging): remesh, low-res ARAP, transfer.
 
     Parameters
@@ -139,8 +150,8 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64; targets : (h, 3) float64
         (all validated). n_low : farthest-point samples. seed : first-seed RNG seed.
     topology : optional :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
-    tol, max_iter, protocol, etol, gtol : the low-res ARAP's protocol and stopping rule
-        (:func:`sshade.arap.arap_deform`). gradient : LRF mode (§3.2). anchor : where a
+    tol, max_iter, protocol, etol, gtol, energy : the low-res ARAP's protocol, stopping rule
+        and energy (:func:`sshade.arap.arap_deform`). gradient : LRF mode (§3.2). anchor : where a
         vertex is anchored in its triangle (:data:`sshade.lrf.ANCHORS`, see :func:`deform`).
     V_init : (n, 3) float64 or None, a deformed high-res shape whose values at the
         low-res vertices start the ARAP iterations (default: rigid fit of the handles).
@@ -163,12 +174,13 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     SShaDeError on a bad parameter (:func:`check_params`), before any work.
     """
     p = check_params(n_low=n_low, seed=seed, tol=tol, max_iter=max_iter, gradient=gradient, protocol=protocol,
-                     etol=etol, gtol=gtol, anchor=anchor)
+                     etol=etol, gtol=gtol, anchor=anchor, energy=energy, transfer=transfer)
     job = SamplingJob(V=V, F=F, handles=handles, n_low=p.n_low, seeds=[p.seed], topology=topology, targets=targets,
-                      gradient=p.gradient, anchor=p.anchor, arap=p.arap_options())
+                      gradient=p.gradient, anchor=p.anchor, arap=p.arap_options(), transfer=p.transfer)
     _, prep, info = _task_prepare(job, 0)
     V0 = None if V_init is None else V_init[prep["seeds"]]
     Vd, info2 = _finish(job, prep, V0)
+    info2.pop("weights")  # one sampling: nothing to average
     info.update(info2, handle_pre_pct=handle_pre_pct(info2.pop("handle_resid"), V))
     return Vd, info
 
@@ -210,7 +222,8 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
            workers: int | None = None, tol: float = 1e-4, max_iter: int | None = None,
            gradient: str = "normalized", warm_start: bool = True, return_info: bool = False,
            protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-           anchor: str = "projection"):
+           anchor: str = "projection", energy: str = "spokes_and_rims", transfer: str = "vertex",
+           average: str = "uniform"):
     """Deform a high-resolution mesh with SShaDe (paper §3, Alg. 1, §3.3 averaging).
 
     Parameters
@@ -231,10 +244,22 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         below ``tol * bbox_diag``). max_iter : int or None, cap (None: the protocol's).
     gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
     anchor : ``"projection"`` (default) or ``"barycenter"`` (paper Alg. 1) (:mod:`sshade.lrf`).
+    transfer : ``"vertex"`` (default: the corners' deformation gradients blended,
+        :mod:`sshade.smooth_transfer`) or ``"triangle"`` (one frame per triangle, Alg. 1).
+    average : how the samplings are averaged (:mod:`sshade.averaging`): ``"uniform"``
+        (default, the paper's mean, §3.3), ``"proximity"`` (each sampling weighted at a
+        vertex by the inverse second moment about its low-res triangle's corners: for
+        transfers whose low-res positions are exact) or ``"distortion"``.
+    energy : the low-res ARAP's (:data:`sshade.arap.DEFORM_ENERGIES`): ``"spokes_and_rims"``
+        (default, paper §4.1), ``"spokes"`` (Sorkine & Alexa 2007) or ``"arap_sr"`` (smooth
+        rotations, Levi & Gotsman 2015: the ARAP-SR baseline's default alpha,
+        :data:`sshade.arap.DEFAULT_ALPHA` times the low-res mesh's area, as Open3D defines
+        it; under ``"paper"`` its Jacobi iteration stopped by the same move rule), solved by
+        :func:`sshade.arap.arap_deform`.
     warm_start : bool, start samplings 1..k-1 from sampling 0's result.
     return_info : also return a dict of timings (seconds; ``total_s`` excludes
-        ``compile_s``), seeds, per-sampling details, ``handle_pre_pct`` and ``frame``
-        (docs/methods.md, "Implementation notes: sshade/pipeline.py").
+        ``compile_s``), seeds, per-sampling details, ``handle_pre_pct``, ``frame`` and
+        ``low_res_energy`` (docs/methods.md, "Implementation notes: sshade/pipeline.py").
 
     Returns
     -------
@@ -259,7 +284,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
     """
     params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                           max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
-                          gtol=gtol, anchor=anchor)
+                          gtol=gtol, anchor=anchor, energy=energy, transfer=transfer, average=average)
     return deform_with(V, F, handles, targets, params, return_info=return_info)
 
 
@@ -278,22 +303,25 @@ def deform_with(V, F, handles, targets, params: SShaDeParams, *, return_info: bo
     U, T = frame.to_unit(V), frame.to_unit(targets)
     job = SamplingJob(V=U, F=F, handles=handles, n_low=n_low, seeds=sampling_seeds(p.seed, p.n_samplings),
                       topology=mesh_topology(U, F, he), targets=T, gradient=p.gradient, anchor=p.anchor,
-                      arap=p.arap_options())
+                      arap=p.arap_options(), transfer=p.transfer, average=p.average)
     workers = pool_size(p.workers, p.n_samplings)
     t1 = time.perf_counter()
     with SamplingPool(job, workers) as pool:
         results, infos = _run_samplings(pool, p.n_samplings, p.warm_start)
-    Vd = average(results)
+    weights = [d.pop("weights") for d in infos]
+    Vd = combine(results, weights)
     frame.from_unit(Vd, out=Vd)
     Vd[handles] = targets  # overwritten after averaging (the paper does not say; docs/differences.md)
-    pre = average([d.pop("handle_resid") for d in infos])  # the averaged result's residual before it
+    pre = combine([d.pop("handle_resid") for d in infos],  # the averaged result's residual before the overwrite
+                  [None if w is None else w[handles] for w in weights])  # the averaged result's residual before it
     if not return_info:
         return Vd
     info = {"total_s": time.perf_counter() - t0, "setup_s": t1 - t0, "compile_s": compile_s, "workers": workers,
             "seed": p.seed, "sampling_seeds": job.seeds, "warm_start": p.warm_start,
             "n_low_requested": int(n_low_asked), "low_res_skipped": bool(n_low_asked >= len(V)), "samplings": infos}
-    return Vd, {**info, **_summary(infos, frame), "protocol": p.protocol, "anchor": p.anchor,
-                "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, U)}
+    return Vd, {**info, **_summary(infos, frame), "protocol": p.protocol, "low_res_energy": p.energy,
+                "anchor": p.anchor, "transfer": p.transfer, "average": p.average, "handles": "overwritten",
+                "handle_pre_pct": handle_pre_pct(pre, U)}
 
 
 def handle_pre_pct(resid: np.ndarray, V: np.ndarray) -> float:
@@ -369,11 +397,12 @@ def _summary(infos: list, frame) -> dict:
 
 def warm_sshade(params: SShaDeParams) -> float:
     """Warm :func:`deform` with SShaDe's checked ``params`` (:func:`check_params`): one
-    in-process run on :func:`sshade.warmup.tiny_problem` with the same ARAP protocol and
-    gradient mode (two samplings, warm-started, so every stage runs), once per process
+    in-process run on :func:`sshade.warmup.tiny_problem` with the same ARAP protocol, energy
+    and gradient mode (two samplings, warm-started, so every stage runs), once per process
     (:func:`sshade.warmup.warm_once`). Returns the seconds spent (0.0 when warm)."""
     p = params.replace(n_low=40, n_samplings=2, workers=1, warm_start=True, seed=0)
-    return warm_once(WARMED, ("sshade", p.protocol, p.gradient), lambda V, F, h, T: deform_with(V, F, h, T, p))
+    return warm_once(WARMED, ("sshade", p.protocol, p.gradient, p.energy),
+                     lambda V, F, h, T: deform_with(V, F, h, T, p))
 
 
 class SShaDe:
@@ -396,11 +425,13 @@ class SShaDe:
     def __init__(self, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, workers: int | None = None,
                  tol: float = 1e-4, max_iter: int | None = None, gradient: str = "normalized",
                  warm_start: bool = True, protocol: str = "converged", etol: float | None = None,
-                 gtol: float | None = None, anchor: str = "projection"):
+                 gtol: float | None = None, anchor: str = "projection", energy: str = "spokes_and_rims",
+                 transfer: str = "vertex", average: str = "uniform"):
         # validated here, so a bad parameter fails when the method is built, before any work
         self.params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                                    max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol,
-                                   etol=etol, gtol=gtol, anchor=anchor)
+                                   etol=etol, gtol=gtol, anchor=anchor, energy=energy, transfer=transfer,
+                                   average=average)
         self.info: dict = {}
 
     @classmethod
@@ -420,7 +451,7 @@ class SShaDe:
 
     def warmup(self, n_vertices: int | None = None) -> float:
         """Compile (or load from numba's cache) every kernel :meth:`deform` runs, by one
-        in-process run on a tiny mesh with this method's protocol and gradient mode
+        in-process run on a tiny mesh with this method's protocol, energy and gradient mode
         (:func:`warm_sshade`), so that a timed call measures no compilation.
         ``n_vertices`` is accepted for the common interface (SShaDe's kernels run on the
         low-resolution meshes, serially). Returns the seconds spent (0.0 when warm)."""

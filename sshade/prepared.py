@@ -17,6 +17,7 @@ from concurrent.futures import Future, ThreadPoolExecutor, as_completed, wait
 import numpy as np
 
 from .arap import ArapDeformer
+from .averaging import combine, sampling_weights
 from .cores import pool_size
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
@@ -26,7 +27,8 @@ from .mesh.validate import validate_handle_indices, validate_mesh, validate_targ
 from .params import SShaDeParams, check_params
 from .pipeline import SamplingJob, handle_pre_pct, low_res_size, prepare_samplings
 from .remesh import mesh_topology
-from .sampling import average, sampling_seeds, warm_kernels
+from .sampling import sampling_seeds, warm_kernels
+from .smooth_transfer import smooth_decode, vertex_jacobians
 
 __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 
@@ -71,15 +73,15 @@ class _Sampling:
     """One sampling's prepared state: its low-res mesh and projection (``prep``), the
     frames' axis and local coordinates, its ARAP deformer, its last low-res results."""
 
-    def __init__(self, V, prep: dict, info: dict, gradient: str, anchor: str, protocol: str):
-        self.prep, self.info = prep, info
+    def __init__(self, V, prep: dict, info: dict, p: SShaDeParams):
+        self.prep, self.info, self.V = prep, info, V
         self.VN = V[prep["seeds"]]
-        self.bary = prep["bary"] if anchor == "projection" else None
+        self.bary = prep["bary"] if p.anchor == "projection" else None
         self.axis = frame_functions(self.VN, prep["F"])
-        self.gradient = gradient
-        self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, gradient, self.bary)
-        self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy="spokes_and_rims",
-                                 protocol=protocol)
+        self.gradient, self.transfer, self.average = p.gradient, p.transfer, p.average
+        if p.transfer == "triangle":
+            self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, p.gradient, self.bary)
+        self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
         self.history: list = []  # (k, 3) low-res results of the last four solves, newest first
         self.last_iterations = 0  # of the last solve
 
@@ -109,13 +111,42 @@ class _Sampling:
                 "status": res.info.get("status"), "warm_start": V0 is not None}
 
     def decode(self, rows=None, out: np.ndarray | None = None, add: bool = False) -> np.ndarray:
-        """The last solve's high-res positions at ``rows`` (Alg. 1;
+        """The last solve's high-res positions at ``rows`` (Alg. 1, or
+        :func:`sshade.smooth_transfer.smooth_decode` for ``transfer="vertex"``;
         :func:`sshade.lrf.decode_with_frames`: rows, out and add as there)."""
+        if self.transfer == "vertex":
+            return self._decode_smooth(rows, out, add)
         frames = self.frames
         if frames is None:  # threads racing here compute the same frames
             frames = self.frames = deformed_frames(self.VN, self.low, self.prep["F"], self.axis, self.gradient)
         return decode_with_frames(frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
                                   rows=rows, out=out, add=add)
+
+
+    def _decode_smooth(self, rows, out, add: bool) -> np.ndarray:
+        """:meth:`decode` for ``transfer="vertex"``: the corners' deformation gradients of
+        the last solve (made once, by the first decoding after it) blended at ``rows``."""
+        Jv = self.frames
+        if Jv is None:  # threads racing here compute the same gradients
+            Jv = self.frames = vertex_jacobians(self.VN, self.low, self.prep["F"])
+        idx = slice(0, len(self.V)) if rows is None else rows
+        bary = None if self.bary is None else self.bary[idx]
+        X = smooth_decode(self.V[idx], self.prep["tri"][idx], bary, self.VN, self.low, self.prep["F"], Jv=Jv)
+        if out is None:
+            return X
+        if add:
+            out += X
+        else:
+            out[:] = X
+        return out
+
+    def weights(self, rows=None) -> np.ndarray | None:
+        """The last solve's averaging weights at ``rows`` ((r,) float64), or None for the
+        uniform mean (:func:`sshade.averaging.sampling_weights`)."""
+        idx = slice(0, len(self.V)) if rows is None else rows
+        bary = None if self.bary is None else self.bary[idx]
+        return sampling_weights(self.average, self.V[idx], self.prep["tri"][idx], bary, self.VN, self.low,
+                                self.prep["F"])
 
 
 class Prepared:
@@ -143,7 +174,8 @@ class Prepared:
         self._samplings, self.prepare_s = samplings, prepare_s
         self._pool, self.workers, self._pending = pool, workers, []
         self._arap = params.arap_options()
-        self._arap.pop("protocol")  # the deformers were made for it
+        for made_for in ("protocol", "energy"):  # the deformers were made for them
+            self._arap.pop(made_for)
         self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
         self.n_solves = 0
         self._corners = np.array([V.min(0), V.max(0)])  # V's bounding box, for the per-solve checks
@@ -240,7 +272,7 @@ class Prepared:
         else:  # from the rigid fit of the handles
             futs = self._submit(lambda i: run(i, None), range(len(S)))
         Vd, infos, transfer_s = self._decode_average(futs)
-        pre = average([s.decode(self.handles) - T for s in S])
+        pre = combine([s.decode(self.handles) - T for s in S], [s.weights(self.handles) for s in S])
         self.frame.from_unit(Vd, out=Vd)
         Vd[self.handles] = T_mesh
         self.n_solves += 1
@@ -260,16 +292,18 @@ class Prepared:
         sampling order, else into an (n, 3) array of its own, added when its turn comes;
         so the additions are those of :func:`sshade.sampling.average` (sampling order),
         whatever order the ARAPs end in (at most ``k - 1`` such arrays held during a
-        solve). The ARAP infos and the decoding's seconds. Waits for every ARAP even when
-        one fails."""
+        solve). A weighted average (``average`` not ``"uniform"``) keeps every decoding and
+        combines them at the end (:func:`sshade.averaging.combine`, as :func:`sshade.deform`).
+        The ARAP infos and the decoding's seconds. Waits for every ARAP even when one fails."""
         out, infos, secs = np.empty((len(self.V), 3)), [None] * len(futs), 0.0
         early, nxt, index = {}, 0, {f: i for i, f in enumerate(futs)}
+        weighted = self.params.average != "uniform"
         try:
             for f in as_completed(futs):
                 i = index[f]
                 infos[i] = f.result()
                 t = time.perf_counter()
-                if i != nxt:  # ended before an earlier sampling: decoded aside
+                if i != nxt or weighted:  # ended before an earlier sampling: decoded aside
                     early[i] = self._samplings[i].decode(slice(0, len(out)))
                 else:
                     self._samplings[i].decode(slice(0, len(out)), out, add=i > 0)
@@ -281,6 +315,9 @@ class Prepared:
         except BaseException:
             wait(futs)
             raise
+        if weighted:
+            S = self._samplings
+            return combine([early[i] for i in range(len(S))], [s.weights() for s in S]), infos, secs
         out /= len(futs)
         return out, infos, secs
 
@@ -288,7 +325,8 @@ class Prepared:
 def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,
             max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
             protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-            anchor: str = "projection", workers: int | None = None) -> Prepared:
+            anchor: str = "projection", workers: int | None = None, energy: str = "spokes_and_rims",
+            transfer: str = "vertex", average: str = "uniform") -> Prepared:
     """Everything of SShaDe that does not depend on the handles' targets (module docstring).
 
     Parameters
@@ -325,7 +363,7 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     """
     params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
                           max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
-                          gtol=gtol, anchor=anchor)
+                          gtol=gtol, anchor=anchor, energy=energy, transfer=transfer, average=average)
     return prepare_with(V, F, handles, params)
 
 
@@ -349,7 +387,7 @@ def prepare_with(V, F, handles, params: SShaDeParams) -> Prepared:
     preps = prepare_samplings(job, n_workers)
     pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-sampling")
     try:
-        samplings = list(pool.map(lambda pi: _Sampling(U, *pi, p.gradient, p.anchor, p.protocol), preps))
+        samplings = list(pool.map(lambda pi: _Sampling(U, *pi, p), preps))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
     arap_pool = ThreadPoolExecutor(n_workers, thread_name_prefix="sshade-arap")

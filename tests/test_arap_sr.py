@@ -1,6 +1,6 @@
 """ARAP-SR baseline (Levi & Gotsman 2015): reduces to ARAP at alpha = 0, reproduces
 rigid motions, smooths rotations for alpha > 0; the converged protocol
-(baselines/arap_sr_solver.py) never increases the energy and matches a deep solve of its
+(sshade/arap/smooth_rotations.py) never increases the energy and matches a deep solve of its
 own energy; the paper protocol stops by its energy (or move) rule and says whether it
 converged or stalled."""
 from __future__ import annotations
@@ -10,8 +10,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from baselines import ARAPSR
-from baselines.arap_sr import arap_sr_deform
-from baselines.arap_sr_solver import SRProblem, solve_arap_sr
 from eval.metrics.reference import (
     energy_operators,
     method_energy,
@@ -20,7 +18,17 @@ from eval.metrics.reference import (
     sr_alpha,
     sr_energy,
 )
-from sshade.arap import DEEP_CRITERION, DEFAULT_CRITERION, Criterion, arap_deform, solve_arap
+from sshade.arap import (
+    DEEP_CRITERION,
+    DEFAULT_CRITERION,
+    SR_ENERGY,
+    Criterion,
+    SRProblem,
+    arap_deform,
+    arap_sr_deform,
+    solve_arap,
+    solve_arap_sr,
+)
 from sshade.arap.problems import bent_cylinder, lifted_plane, twisted_bar
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
@@ -192,7 +200,7 @@ def test_anderson_on_joint_residual_needs_fewer_iterations():
 def test_coarse_start_same_minimiser():
     """The coarse start (the rotations of a low-res solve of the same energy)
     ends at the same minimiser as the rigid start, certified by the same criterion."""
-    from baselines.coarse_start import SR_ENERGY, coarse_start
+    from baselines.coarse_start import coarse_start
 
     V, F, h, T = SMALL["lifted_plane"]()
     pb = SRProblem(V, F, h, T, 0.01)

@@ -85,42 +85,69 @@ def _no_tmp_or_empty(d: Path):
 
 # ----------------------------------------------------------------------------- 1. numbers
 CI = ["experiment=ci", "dataset.root=/nonexistent/faust_reg"]
-BAD_EVAL = [
-    ("arap.max_iter=inf", "arap.max_iter"), ("arap.max_iter=1e300", "arap.max_iter"), ("arap.tol=nan", "arap.tol"),
-    ("arap.etol=-1", "arap.etol"), ("arap_sr.alpha=abc", "arap_sr.alpha"),
-    ("dataset.limit=abc", "dataset.limit"), ("dataset.limit=0", "dataset.limit"),
-    ("dataset.limit=true", "dataset.limit"), ("dataset.baseline_cases=abc", "dataset.baseline_cases"),
-    ("dataset.baseline_cases=-1", "dataset.baseline_cases"), ("dataset.seed=abc", "dataset.seed"),
-    ("dataset.n_per_landmark=inf", "dataset.n_per_landmark"),
-    ("dataset.static_threshold=nan", "dataset.static_threshold"),
-    ("dataset.subjects=[0,abc]", "dataset.subjects"),
-    ("figures.max_cases=abc", "figures.max_cases"), ("figures.enabled=maybe", "figures.enabled"),
-    ("reference.max_iter=junk", "reference.max_iter"), ("reference.max_iter=inf", "reference.max_iter"),
+#: refused by Hydra as it composes the config: a value of the wrong type (eval/config_schema.py)
+BAD_TYPES = [
+    ("arap.max_iter=inf", "arap.max_iter"), ("arap.max_iter=1e300", "arap.max_iter"),
+    ("arap_sr.alpha=abc", "arap_sr.alpha"), ("dataset.limit=abc", "dataset.limit"),
+    ("dataset.limit=true", "dataset.limit"), ("dataset.seed=abc", "dataset.seed"),
+    ("dataset.n_per_landmark=inf", "dataset.n_per_landmark"), ("figures.max_cases=abc", "figures.max_cases"),
+    ("figures.enabled=maybe", "figures.enabled"), ("reference.max_iter=junk", "reference.max_iter"),
+    ("reference.max_iter=inf", "reference.max_iter"), ("sshade.n_samplings=abc", "n_samplings"),
+    ("sshade.warm_start=abc", "warm_start"),
+]
+#: refused by the config check: what a type cannot say (ranges, words, lists of integers)
+BAD_VALUES = [
+    ("arap.tol=nan", "arap.tol"), ("arap.etol=-1", "arap.etol"), ("dataset.limit=0", "dataset.limit"),
+    ("dataset.baseline_cases=abc", "dataset.baseline_cases"), ("dataset.baseline_cases=-1", "dataset.baseline_cases"),
+    ("dataset.static_threshold=nan", "dataset.static_threshold"), ("dataset.subjects=[0,abc]", "dataset.subjects"),
     ("reference.time_budget_s=junk", "reference.time_budget_s"),
     ("reference.time_budget_s=-5", "reference.time_budget_s"),
-    ("sshade.n_low=inf", "n_low"), ("sshade.n_low=1e300", "n_low"), ("sshade.n_samplings=abc", "n_samplings"),
-    ("sshade.seed=-1", "seed"), ("sshade.workers=0", "workers"), ("sshade.warm_start=abc", "warm_start"),
-    ("+sshade.max_iter=nan", "max_iter"),
+    ("sshade.n_low=inf", "n_low"), ("sshade.n_low=1e300", "n_low"), ("sshade.seed=-1", "seed"),
+    ("sshade.workers=0", "workers"), ("+sshade.max_iter=nan", "max_iter"),
 ]
 
 
-@pytest.mark.parametrize("override,key", BAD_EVAL)
-def test_check_config_rejects_junk_numbers(override, key):
+def _refusal(overrides) -> tuple[str, str]:
+    """Where a config is refused and the one-line message: ``("compose", Hydra's)`` or
+    ``("check", eval.config_check's)``; ``("", "")`` when it is accepted."""
     from eval.config_check import check_config
-    check_config(_compose_eval(CI))  # the same config without the bad value is fine
-    with pytest.raises(SShaDeError, match=key.replace(".", r"\.")):
-        check_config(_compose_eval([*CI, override]))
+    from harness.command import config_error_types, hydra_message
+    try:
+        cfg = _compose_eval(overrides)
+    except config_error_types() as e:
+        return "compose", hydra_message(e)
+    try:
+        check_config(cfg)
+    except SShaDeError as e:
+        return "check", str(e)
+    return "", ""
+
+
+@pytest.mark.parametrize("override,key", BAD_TYPES)
+def test_composition_rejects_wrong_types(override, key):
+    assert _refusal(CI) == ("", "")  # the same config without the bad value is fine
+    where, msg = _refusal([*CI, override])
+    assert where == "compose" and key in msg, (where, msg)
+
+
+@pytest.mark.parametrize("override,key", BAD_VALUES)
+def test_check_config_rejects_junk_numbers(override, key):
+    where, msg = _refusal([*CI, override])
+    assert where == "check" and key in msg, (where, msg)
 
 
 def test_check_config_experiment_sections():
-    from eval.config_check import check_config
-    for exp, bad in [("scaling", "scaling.elastic_budget_s=inf"), ("tosca", "tosca.min_vertices=abc"),
-                     ("tosca", "sshade.n_samplings=abc"), ("pose_transfer", "sshade.seed=nan"),
-                     ("convergence", "convergence.time_budget_s=abc"),
-                     ("shapes", "dataset.vertex_range=[10,abc]")]:
-        check_config(_compose_eval([f"experiment={exp}"]))
-        with pytest.raises(SShaDeError, match=bad.split("=")[0].replace(".", r"\.")):
-            check_config(_compose_eval([f"experiment={exp}", bad]))
+    for exp, bad, where in [("scaling", "scaling.elastic_budget_s=inf", "check"),
+                            ("tosca", "tosca.min_vertices=abc", "compose"),
+                            ("tosca", "tosca.min_vertices=-1", "check"),
+                            ("tosca", "sshade.n_samplings=abc", "compose"),
+                            ("pose_transfer", "sshade.seed=nan", "compose"),
+                            ("convergence", "convergence.time_budget_s=abc", "check"),
+                            ("shapes", "dataset.vertex_range=[10,abc]", "compose"),
+                            ("shapes", "dataset.vertex_range=[10,2]", "check")]:
+        assert _refusal([f"experiment={exp}"]) == ("", "")
+        got, msg = _refusal([f"experiment={exp}", bad])
+        assert got == where and bad.split("=")[0] in msg, (bad, got, msg)
 
 
 def test_config_number_helper():

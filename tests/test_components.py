@@ -11,6 +11,7 @@ import trimesh
 from scipy.spatial.distance import pdist
 
 from baselines import Elastic
+from eval.config_check import check_config
 from sshade import deform
 from sshade.arap import rigid_fit
 from sshade.arap.problems import bent_cylinder
@@ -138,7 +139,7 @@ def test_evaluator_deforms_a_case_with_two_components(tmp_path, two, monkeypatch
         cfg = compose(config_name="config", overrides=["dataset=faust", f"dataset.root={tmp_path}", "methods=[Elastic]",
                                                        "arap.tol=1e-3", "reference.cases=none",
                                                        f"out_dir={tmp_path / 'out'}"])
-    res = run(cfg)
+    res = run(check_config(cfg))
     assert res["n_errors"] == 0
     row = pd.read_csv(tmp_path / "out" / "cases.csv", keep_default_na=False).iloc[0]
     assert row["error"] == "" and int(row["n_components"]) == 2 and int(row["n_rigid_components"]) == 1

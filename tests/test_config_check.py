@@ -9,7 +9,7 @@ from omegaconf import OmegaConf
 
 from eval.config_check import check_config
 from eval.datasets import dataset_names
-from eval.experiments import experiment_check, experiments
+from eval.experiments import experiment_options, experiments
 from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
 from sshade.errors import SShaDeError
 
@@ -24,20 +24,36 @@ def test_config_check_names_no_dataset_and_no_experiment():
     assert not strings & (set(dataset_names()) | set(experiments()) - {"cases"})
 
 
-def test_every_experiment_but_the_cases_one_registers_a_check():
-    assert {k for k in experiments() if experiment_check(k) is None} <= {"cases", "animation"}
+def test_every_experiment_but_the_cases_one_reads_options_of_its_own():
+    assert {k for k in experiments() if experiment_options(k) is None} <= {"cases"}
 
 
-def test_a_registered_check_is_what_check_config_runs(monkeypatch):
-    """check_config calls the experiment kind's registered check, whatever it is."""
-    seen = []
+def test_the_registered_reader_is_what_check_config_runs(monkeypatch):
+    """check_config reads the experiment kind's options with its registered reader,
+    whatever it is, and hands them to the run in ``experiment.options``."""
     import eval.experiments.experiment_registry as reg
-    monkeypatch.setitem(reg._CHECKS, "tosca", lambda cfg: seen.append(cfg.tosca.min_vertices))
-    check_config(OmegaConf.create({"experiment": {"kind": "tosca"}, "tosca": {"min_vertices": "abc"}}))
-    assert seen == ["abc"]  # the stand-in accepted what the real check refuses
+    cfg = OmegaConf.create({"experiment": {"kind": "tosca"}, "tosca": {"min_vertices": "abc"}})
+    monkeypatch.setitem(reg._OPTIONS, "tosca", reg.OptionsReader("tosca", lambda v: ("read", v["min_vertices"])))
+    assert check_config(cfg).experiment.options == ("read", "abc")  # the stand-in accepted what the real one refuses
     monkeypatch.undo()
     with pytest.raises(SShaDeError, match=r"tosca\.min_vertices"):
-        check_config(OmegaConf.create({"experiment": {"kind": "tosca"}, "tosca": {"min_vertices": "abc"}}))
+        check_config(cfg)
+
+
+def test_check_config_makes_the_typed_run():
+    """The door's output: frozen objects, each section typed (eval/run/spec.py)."""
+    import dataclasses
+
+    from eval.run.spec import EvalSpec
+    spec = check_config(OmegaConf.create({"methods": ["ARAP", {"_target_": "tests.plugin_example.MyMethod"}],
+                                          "timeout_s": 5, "jobs": "auto", "reference": {"cases": "2"},
+                                          "report": {"enabled": False}, "compare_with": "results/x"}))
+    assert isinstance(spec, EvalSpec) and spec.experiment.kind == "cases" and spec.dataset is None
+    assert [m.name for m in spec.methods] == ["ARAP", None] and spec.methods[0].definition["_target_"]
+    assert spec.guard.timeout_s == 5.0 and spec.jobs is None and spec.reference.cases == 2
+    assert spec.report.views == 0 and spec.output.compare_with == ("results/x",)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.jobs = 2
 
 
 def test_report_defaults_are_the_config_files():

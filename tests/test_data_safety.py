@@ -14,6 +14,7 @@ import pytest
 
 from defaust.build import BuildConfig, build_defaust, check_out_folder
 from defaust.cli import compose_config, config_from_omegaconf
+from eval.config_check import check_config
 from sshade.errors import SShaDeError
 
 from .conftest import SHARED_DATA
@@ -52,7 +53,7 @@ def test_evaluator_reads_a_users_faust_build_and_writes_nothing_there(faust_buil
     out = tmp_path / "out"
     cfg = _eval_cfg([f"dataset.root={faust_build}", "methods=[SShaDe]", "sshade.n_low=300", "sshade.n_samplings=1",
                      "sshade.workers=1", f"out_dir={out}"])
-    res = run(cfg)  # default dataset=defaust, dataset.build.enabled=auto: no build here
+    res = run(check_config(cfg))  # default dataset=defaust, dataset.build.enabled=auto: no build here
     assert res["n_cases"] == 1 and res["n_errors"] == 0
     assert _snapshot(faust_build) == before  # same files, same bytes, not even rewritten
     assert not any(p.name.startswith("subject_01") for p in faust_build.iterdir())
@@ -64,7 +65,7 @@ def test_explicit_build_into_a_users_faust_build_is_refused(faust_build, tmp_pat
     cfg = _eval_cfg([f"dataset.root={faust_build}", "dataset.build.enabled=true", "methods=[SShaDe]",
                      f"out_dir={tmp_path / 'out'}"])
     with pytest.raises(SShaDeError, match=r"refusing to build into .*source: 'faust' there, 'anny' asked"):
-        run(cfg)
+        run(check_config(cfg))
     # the builder itself refuses too, whatever calls it
     with pytest.raises(SShaDeError, match="python -m eval dataset.root="):
         build_defaust(BuildConfig(out=faust_build, n_subjects=1, vertex_range=(8000, 12000), progress=False))
@@ -112,7 +113,7 @@ def test_a_typo_in_dataset_root_builds_nothing(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     cfg = _eval_cfg(["dataset.root=data/defuast", "methods=[SShaDe]", f"out_dir={tmp_path / 'out'}"])
     with pytest.raises(SShaDeError, match="does not exist.*only into the default folder data/defaust"):
-        run(cfg)
+        run(check_config(cfg))
     assert not (tmp_path / "data").exists() and not (tmp_path / "out").exists()
 
 
@@ -137,5 +138,5 @@ def test_bad_method_parameter_fails_before_any_build(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     cfg = _eval_cfg(["sshade.n_low=2", f"out_dir={tmp_path / 'out'}"])
     with pytest.raises(SShaDeError, match=r"n_low must be at least 4"):
-        run(cfg)
+        run(check_config(cfg))
     assert not (tmp_path / "data").exists() and not (tmp_path / "out").exists()

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
+from eval.config_check import check_config
 from eval.method_config import make_methods
 from eval.tables import ok_mask, summarize, to_latex, to_markdown, write_tables
 from sshade.errors import SShaDeError
@@ -144,7 +145,7 @@ def test_bad_config_raises_before_work(tmp_path, faust_root, override, message):
     base = [] if over.startswith("dataset.root") else [f"dataset.root={faust_root}"]
     cfg = _compose([*base, over, f"out_dir={tmp_path / 'out'}"])
     with pytest.raises(SShaDeError, match=message):
-        run(cfg)
+        run(check_config(cfg))
     assert not (tmp_path / "out").exists()
 
 
@@ -172,7 +173,7 @@ def test_method_failure_is_recorded_and_run_continues(tmp_path, faust_root, monk
 
     monkeypatch.setattr(em, "make_methods", lambda cfg: [Broken(), Identity()])
     cfg = _compose([f"dataset.root={faust_root}", "dataset.limit=1", f"out_dir={tmp_path}"])
-    res = run(cfg)
+    res = run(check_config(cfg))
     assert res["n_errors"] == 1
     cases = pd.read_csv(tmp_path / "cases.csv", keep_default_na=False)
     assert cases.set_index("method").loc["Broken", "error"] == "boom: refused on purpose"
@@ -192,7 +193,8 @@ def test_config_defaults_and_ci_experiment():
     assert cfg.arap.tol == pytest.approx(1e-4) and isinstance(cfg.arap.tol, float) and cfg.arap.max_iter is None
     assert cfg.arap.protocol == "converged"
     assert dict(cfg.sshade) == {"n_low": "auto", "n_samplings": 5, "seed": 0, "workers": None, "gradient": "normalized",
-                                 "anchor": "projection", "warm_start": True}
+                                 "anchor": "projection", "energy": "spokes_and_rims", "transfer": "vertex",
+                                 "average": "uniform", "warm_start": True}
     d = cfg.dataset
     assert (d.name, d.subjects, d.poses, d.n_per_landmark, d.neighbourhood, d.static_threshold, d.seed, d.limit) == \
         ("faust", None, None, 30, 90, 0.02, 0, None)
@@ -206,30 +208,31 @@ def test_config_defaults_and_ci_experiment():
 
 
 def test_make_methods():
-    ms = make_methods({"methods": ["arap", "Elastic"], "arap": {"tol": 1e-3, "max_iter": 7}})
+    ms = make_methods(check_config({"methods": ["arap", "Elastic"], "arap": {"tol": 1e-3, "max_iter": 7}}).methods)
     assert [m.name for m in ms] == ["ARAP", "Elastic"]
     assert all(m.tol == 1e-3 and m.max_iter == 7 for m in ms)
     with pytest.raises(SShaDeError, match="unknown method"):
-        make_methods({"methods": ["ARAP", "Foo"]})
+        make_methods(check_config({"methods": ["ARAP", "Foo"]}).methods)
     with pytest.raises(SShaDeError, match="twice"):
-        make_methods({"methods": ["ARAP", "arap"]})
+        make_methods(check_config({"methods": ["ARAP", "arap"]}).methods)
     with pytest.raises(SShaDeError, match="empty"):
-        make_methods({"methods": []})
+        make_methods(check_config({"methods": []}).methods)
     with pytest.raises(SShaDeError, match="max_iter"):
-        make_methods({"methods": ["ARAP"], "arap": {"max_iter": 0}})
+        make_methods(check_config({"methods": ["ARAP"], "arap": {"max_iter": 0}}).methods)
 
 
 @pytest.mark.skipif(not _has_sshade(), reason="sshade.SShaDe not available yet")
 def test_make_methods_sshade_from_config():
     cfg = _compose(["dataset.root=x", "sshade.n_low=321", "sshade.workers=1"])
-    m = make_methods(cfg)[-1]
+    m = make_methods(check_config(cfg).methods)[-1]
     assert m.name == "SShaDe"
     params = getattr(m, "params", None)
     if params is not None:
         assert params["n_low"] == 321 and params["workers"] == 1 and params["n_samplings"] == 5
         assert params["tol"] == pytest.approx(1e-4) and params["max_iter"] is None  # the protocol's cap
         assert params["protocol"] == "converged" and params["etol"] is None and params["gtol"] is None
-    m = make_methods(_compose(["dataset.root=x", "arap.protocol=paper", "arap.max_iter=1000"]))[-1]
+    paper = _compose(["dataset.root=x", "arap.protocol=paper", "arap.max_iter=1000"])
+    m = make_methods(check_config(paper).methods)[-1]
     assert m.params["protocol"] == "paper" and m.params["max_iter"] == 1000
 
 

@@ -165,8 +165,8 @@ def test_a_case_aware_method_is_told_its_case_but_not_the_truth(faust_root):
             return U
 
     m = Aware()
-    from omegaconf import OmegaConf
-    refs = CaseReferences(OmegaConf.create({"reference": {"cases": "none"}}))
+    from eval.run.spec import ReferenceOptions
+    refs = CaseReferences(ReferenceOptions(cases="none"))
     row, U, _ = run_pair(m, "Aware", case, refs, {"timeout_s": None, "handle_error_max_pct": 1.0})
     told = m.seen[0]
     assert row["error"] == "" and told.name == case.name and np.array_equal(told.static, case.static)

@@ -1,7 +1,8 @@
 """Every experiment reads SShaDe's parameters from one place, the method config
 ``method.SShaDe`` (default: the ``sshade`` section), so ``sshade.*`` overrides reach each
 of them; no experiment keeps a private copy (``tosca.n_low``, ...). Cheap: the configs are
-composed and each experiment's ``sshade_params(cfg)`` is read, nothing runs."""
+composed, checked at the door and each experiment's ``sshade_params(spec)`` is read, nothing
+runs."""
 from __future__ import annotations
 
 import pytest
@@ -9,6 +10,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
+from eval.config_check import check_config
 from eval.experiments import animation, convergence, experiments, pose_transfer, tosca
 from eval.experiments.cases import cases_experiment as cases
 from eval.experiments.scaling import scaling_experiment as scaling
@@ -31,6 +33,11 @@ def _compose(overrides):
         return compose(config_name="config", overrides=list(overrides))
 
 
+def _spec(overrides):
+    """The checked config of ``overrides`` (:func:`eval.config_check.check_config`)."""
+    return check_config(_compose(overrides))
+
+
 def test_every_experiment_kind_is_covered():
     kinds = {str(OmegaConf.select(_compose([f"experiment={e}"]), "experiment.kind", default="cases"))
              for e in EXPERIMENTS}
@@ -39,7 +46,7 @@ def test_every_experiment_kind_is_covered():
 
 @pytest.mark.parametrize("exp", sorted(EXPERIMENTS))
 def test_defaults_unchanged(exp):
-    p = EXPERIMENTS[exp].sshade_params(_compose([f"experiment={exp}"]))
+    p = EXPERIMENTS[exp].sshade_params(_spec([f"experiment={exp}"]))
     assert p["n_low"] == DEFAULT_N_LOW[exp]
     assert p["n_samplings"] == DEFAULT_N_SAMPLINGS.get(exp, 5) and p["seed"] == 0
 
@@ -50,12 +57,11 @@ OVERRIDES = {"sshade.n_low": 123, "sshade.n_samplings": 3, "sshade.seed": 7, "ss
 
 @pytest.mark.parametrize("exp", sorted(EXPERIMENTS))
 def test_sshade_overrides_reach_every_experiment(exp):
-    cfg = _compose([f"experiment={exp}", *(f"{k}={v}" for k, v in OVERRIDES.items())])
-    p = EXPERIMENTS[exp].sshade_params(cfg)
+    p = EXPERIMENTS[exp].sshade_params(_spec([f"experiment={exp}", *(f"{k}={v}" for k, v in OVERRIDES.items())]))
     for k, v in OVERRIDES.items():
         assert p[k.split(".", 1)[1]] == v, (exp, k, p)
     # method.SShaDe.* (the method's own key) is the same place
-    p = EXPERIMENTS[exp].sshade_params(_compose([f"experiment={exp}", "method.SShaDe.n_low=321"]))
+    p = EXPERIMENTS[exp].sshade_params(_spec([f"experiment={exp}", "method.SShaDe.n_low=321"]))
     assert p["n_low"] == 321
 
 
@@ -63,27 +69,27 @@ def test_sshade_overrides_reach_every_experiment(exp):
 def test_cases_experiment_builds_sshade_with_the_overrides(exp):
     """The cases experiment's SShaDe row is the method make_methods builds."""
     cfg = _compose([f"experiment={exp}", "methods=[SShaDe]", "sshade.n_low=123", "sshade.n_samplings=3"])
-    (m,) = make_methods(cfg)
+    (m,) = make_methods(check_config(cfg).methods)
     assert m.params["n_low"] == 123 and m.params["n_samplings"] == 3
 
 
 def test_arap_stopping_rule_reaches_scaling_and_convergence():
     """SShaDe's low-res ARAP stopping rule: sshade.tol, else arap.tol (conf/method/SShaDe.yaml)."""
     for exp, mod in (("scaling", scaling), ("convergence", convergence)):
-        assert mod.sshade_params(_compose([f"experiment={exp}", "arap.tol=1e-3"]))["tol"] == 1e-3
-        assert mod.sshade_params(_compose([f"experiment={exp}", "+sshade.tol=2e-3"]))["tol"] == 2e-3
-    ep = scaling.elastic_params(_compose(["experiment=scaling", "arap.protocol=paper", "arap.max_iter=50"]))
+        assert mod.sshade_params(_spec([f"experiment={exp}", "arap.tol=1e-3"]))["tol"] == 1e-3
+        assert mod.sshade_params(_spec([f"experiment={exp}", "+sshade.tol=2e-3"]))["tol"] == 2e-3
+    ep = scaling.elastic_params(_spec(["experiment=scaling", "arap.protocol=paper", "arap.max_iter=50"]))
     assert ep["protocol"] == "paper" and ep["max_iter"] == 50
 
 
 def test_convergence_sampling_counts_follow_n_samplings():
-    cfg = _compose(["experiment=convergence", "sshade.n_samplings=7"])
-    sp = convergence.sshade_params(cfg)
-    assert convergence.sampling_counts(cfg, sp) == [1, 7] and cfg.convergence.sshade.refine_k == 7
-    cfg = _compose(["experiment=convergence"])
-    assert convergence.sampling_counts(cfg, convergence.sshade_params(cfg)) == [1, 5]  # as before
-    cfg = _compose(["experiment=convergence", "convergence.sshade.k=[2,3]"])
-    assert convergence.sampling_counts(cfg, convergence.sshade_params(cfg)) == [2, 3]
+    spec = _spec(["experiment=convergence", "sshade.n_samplings=7"])
+    opts = spec.experiment.options
+    assert convergence.sampling_counts(opts, convergence.sshade_params(spec)) == [1, 7] and opts.refine_k == 7
+    spec = _spec(["experiment=convergence"])
+    assert convergence.sampling_counts(spec.experiment.options, convergence.sshade_params(spec)) == [1, 5]
+    spec = _spec(["experiment=convergence", "convergence.sshade.k=[2,3]"])
+    assert convergence.sampling_counts(spec.experiment.options, convergence.sshade_params(spec)) == [2, 3]
 
 
 @pytest.mark.parametrize("exp,key", [("scaling", "scaling.n_low"), ("tosca", "tosca.n_low"),

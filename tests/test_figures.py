@@ -8,11 +8,11 @@ import pytest
 pytest.importorskip("matplotlib")
 import matplotlib.image as mimage  # noqa: E402
 
+from eval.config_check import check_config
 from eval.metrics.measures import edge_length_error  # noqa: E402
 from eval.present.figures import (  # noqa: E402
     case_figure,
     face_edge_error,
-    figures_options,
     mesh_row,
     pose_transfer_figure,
     safe_figure,
@@ -164,11 +164,12 @@ def test_safe_figure_logs_instead_of_raising(sphere, tmp_path, caplog):
 
 
 def test_figures_options():
-    from omegaconf import OmegaConf
-    assert figures_options(OmegaConf.create({"methods": ["ARAP"]})) == (False, 0)
-    assert figures_options(OmegaConf.create({"figures": {"enabled": False}}))[0] is False
-    assert figures_options(OmegaConf.create({"figures": {"enabled": True}})) == (True, 4)
-    assert figures_options({"figures": {"enabled": True, "max_cases": 2}}) == (True, 2)
+    """The door's ``figures`` (eval/config_check.py): off without the section, 4 cases by default."""
+    from eval.run.spec import FigureOptions
+    assert check_config({"methods": ["ARAP"]}).figures == FigureOptions(enabled=False, max_cases=0)
+    assert check_config({"figures": {"enabled": False}}).figures.enabled is False
+    assert check_config({"figures": {"enabled": True}}).figures == FigureOptions(enabled=True, max_cases=4)
+    assert check_config({"figures": {"enabled": True, "max_cases": 2}}).figures == FigureOptions(True, 2)
 
 
 def test_app_writes_case_figures(shared_data, tmp_path):
@@ -184,7 +185,7 @@ def test_app_writes_case_figures(shared_data, tmp_path):
             "dataset=faust", f"dataset.root={root}", "dataset.limit=2", "methods=[SShaDe]", "sshade.n_low=300",
             "sshade.n_samplings=1", f"out_dir={tmp_path / 'run'}", "++figures.enabled=true",
             "++figures.max_cases=1"])
-    res = run(cfg)
+    res = run(check_config(cfg))
     figs = sorted((res["out_dir"] / "figures").glob("*.png"))
     assert [f.name for f in figs] == ["s0_p1.png"]
     assert figs[0].read_bytes()[:8] == PNG_SIGNATURE

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from eval.config_check import check_config
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer, rigid_align
 from sshade.sampling import sampling_seeds
@@ -131,7 +132,7 @@ def test_run_tosca_writes_tables(tmp_path):
     out = tmp_path / "out"
     cfg = _cfg(SHARED_DATA / "tosca", out)
     cfg.figures = {"enabled": True, "max_cases": 4}
-    res = run_tosca(cfg)
+    res = run_tosca(check_config(cfg))
     for f in ("cases.csv", "table.csv", "table.md", "run.json"):
         assert (out / f).is_file(), f
     # one figure per class that ran: rest, true pose, SShaDe + colour bar (eval.present.figures.tosca_figure)
@@ -167,15 +168,15 @@ def test_run_tosca_writes_tables(tmp_path):
 def test_run_tosca_bad_config(tmp_path):
     from eval.experiments.tosca import run_tosca
     with pytest.raises(SShaDeError, match="tosca.root"):
-        run_tosca(_cfg(tmp_path / "nowhere", tmp_path / "out"))
+        run_tosca(check_config(_cfg(tmp_path / "nowhere", tmp_path / "out")))
     (tmp_path / "empty").mkdir()
     with pytest.raises(SShaDeError, match="no TOSCA"):
-        run_tosca(_cfg(tmp_path / "empty", tmp_path / "out"))
+        run_tosca(check_config(_cfg(tmp_path / "empty", tmp_path / "out")))
     data_file("tosca/centaur0.off")
     with pytest.raises(SShaDeError, match="horse"):
-        run_tosca(_cfg(SHARED_DATA / "tosca", tmp_path / "out", classes=["horse"]))
+        run_tosca(check_config(_cfg(SHARED_DATA / "tosca", tmp_path / "out", classes=["horse"])))
     with pytest.raises(SShaDeError, match="no TOSCA case"):  # wolf alone is excluded
-        run_tosca(_cfg(SHARED_DATA / "tosca", tmp_path / "out", classes=["wolf"]))
+        run_tosca(check_config(_cfg(SHARED_DATA / "tosca", tmp_path / "out", classes=["wolf"])))
 
 
 def test_cli_experiment_tosca(tmp_path):

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 import harness.method_registry as reg
+from eval.config_check import check_config
 from sshade.errors import SShaDeError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,7 +46,7 @@ def test_a_new_method_is_one_file(tmp_path, monkeypatch):
     m = reg.named_or_plugin("mine", {"tol": 1e-3})
     assert m.name == "Mine" and m.tol == 1e-3
     from eval.method_config import make_methods
-    assert [x.name for x in make_methods({"methods": ["ARAP", "Mine"]})] == ["ARAP", "Mine"]
+    assert [x.name for x in make_methods(check_config({"methods": ["ARAP", "Mine"]}).methods)] == ["ARAP", "Mine"]
 
 
 _BOTTOM = "sys, sshade, sshade.deform_command, harness.method_registry, sshade.guard, sshade.mesh, sshade.isometric"

@@ -10,6 +10,7 @@ import subprocess
 
 import pytest
 
+from eval.config_check import check_config
 from eval.run.runinfo import method_sources
 
 _PLUGIN = '''
@@ -80,7 +81,7 @@ def test_run_json_lists_the_plugin_source(tmp_path, monkeypatch, shared_data):
         cfg = compose(config_name="config", overrides=[
             "dataset=faust", f"dataset.root={root}", "dataset.limit=1", "reference.cases=none",
             f"out_dir={out}", "methods=[{_target_:pinned_run.Pinned}]"])
-    run(cfg)
+    run(check_config(cfg))
     info = json.loads((out / "run.json").read_text())
     (rec,) = info["method_sources"]
     f = (plug / "pinned_run.py").resolve()

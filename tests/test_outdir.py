@@ -191,17 +191,15 @@ def test_reproduce_marks_its_commands(monkeypatch):
 
 
 def test_failed_run_never_stays_running(tmp_path):
-    from omegaconf import OmegaConf
-    cfg = OmegaConf.create({"out_dir": str(tmp_path / "run"), "overwrite": False})
+    from eval.run.spec import OutputOptions
     with pytest.raises(RuntimeError):
-        with claimed_run(cfg):
+        with claimed_run(OutputOptions(out_dir=str(tmp_path / "run"))):
             (tmp_path / "run" / "run.json").write_text(json.dumps({"status": "running"}))
             raise RuntimeError("a bug in a method")
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["status"] == "failed" and "a bug in a method" in info["error"]
-    cfg = OmegaConf.create({"out_dir": str(tmp_path / "run2"), "overwrite": False})
     with pytest.raises(KeyboardInterrupt):
-        with claimed_run(cfg):
+        with claimed_run(OutputOptions(out_dir=str(tmp_path / "run2"))):
             (tmp_path / "run2" / "run.json").write_text(json.dumps({"status": "running"}))
             raise KeyboardInterrupt
     assert json.loads((tmp_path / "run2" / "run.json").read_text())["status"] == "interrupted"

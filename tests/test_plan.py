@@ -129,12 +129,12 @@ def test_plan_logged_before_the_build(monkeypatch, caplog, tmp_path):
     monkeypatch.setattr(cases_plan.datasets, "dataset_outlook", lambda cfg: outlook)
     monkeypatch.setattr(cases_plan.datasets, "dataset_root",
                         lambda cfg: logging.getLogger("eval").info("building now") or tmp_path)
-    cfg = OmegaConf.create({"dataset": {"baseline_cases": "per_pose"}})
+    ds = C(baseline_cases="per_pose")
     refs = C(covers=lambda ci, cases, base: base is None or ci in base)
     methods = [C(name="ARAP"), C(name="SShaDe")]
     with caplog.at_level(logging.INFO, logger="eval"):
         root, build = cases_plan.planned_root(
-            cfg, methods, refs, lambda cs, base: lambda ci, m: base is None or ci in base or m.name == "SShaDe")
+            ds, None, methods, refs, lambda cs, base: lambda ci, m: base is None or ci in base or m.name == "SShaDe")
     msgs = [r.getMessage() for r in caplog.records if r.name == "eval"]
     assert root == tmp_path and build["count"] == 2 and build["actual_s"] >= 0
     assert msgs[0].startswith("plan: building DeFAUST (once, into ") and msgs[1] == "building now"

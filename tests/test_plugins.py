@@ -13,7 +13,8 @@ import pandas as pd
 import pytest
 
 from eval.app import CONF_DIR
-from eval.method_config import make_methods, method_spec
+from eval.config_check import check_config, method_definition
+from eval.method_config import make_methods
 from harness.plugins import build_method
 from sshade.arap.problems import box_surface
 from sshade.errors import SShaDeError
@@ -105,7 +106,7 @@ def test_plugin_exception_is_recorded_and_run_goes_on(tmp_path, shared_data, mon
     from eval.app import run
     cfg = _compose([f"dataset.root={root}", "dataset.limit=1", "reference.cases=none", f"out_dir={tmp_path}",
                     "methods=[{_target_:tests.test_plugins.Raising},{_target_:tests.plugin_example.MyMethod}]"])
-    res = run(cfg)
+    res = run(check_config(cfg))
     assert res["n_errors"] == 1
     cases = pd.read_csv(tmp_path / "cases.csv", keep_default_na=False).set_index("method")
     assert cases.loc["Raising", "error"] == "RuntimeError: plug-in bug on purpose"
@@ -118,9 +119,9 @@ def test_method_group_is_composed_and_follows_the_shared_sections():
     cfg = _compose(["sshade.n_low=321", "arap.tol=1e-3", "method.Elastic.max_iter=7"])
     assert set(cfg.method) == {"ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe", "SShaDe_refine"}
     assert cfg.method.SShaDe._target_ == "sshade.SShaDe" and cfg.method.SShaDe.n_low == 321
-    ms = {m.name: m for m in make_methods(_compose(["sshade.n_low=321", "arap.tol=1e-3", "method.Elastic.max_iter=7",
-                                                    "method.SShaDe.n_samplings=2",
-                                                    "methods=[ARAP,Elastic,ARAP-SR,SShaDe,SShaDe+refine]"]))}
+    cfg = _compose(["sshade.n_low=321", "arap.tol=1e-3", "method.Elastic.max_iter=7", "method.SShaDe.n_samplings=2",
+                    "methods=[ARAP,Elastic,ARAP-SR,SShaDe,SShaDe+refine]"])
+    ms = {m.name: m for m in make_methods(check_config(cfg).methods)}
     assert ms["ARAP"].tol == 1e-3 and ms["ARAP"].max_iter is None
     assert ms["Elastic"].max_iter == 7  # set on the method only
     assert ms["ARAP-SR"].max_iter == 10000  # arap.max_iter null -> the converged protocol's cap
@@ -130,14 +131,15 @@ def test_method_group_is_composed_and_follows_the_shared_sections():
 
 
 def test_plain_dict_config_reads_the_method_files():
-    spec = method_spec({"arap": {"tol": 2e-3}, "sshade": {"n_low": 50, "tol": 5e-4}}, "sshade")
+    spec = method_definition({"arap": {"tol": 2e-3}, "sshade": {"n_low": 50, "tol": 5e-4}}, "sshade")
     assert spec["_target_"] == "sshade.SShaDe" and spec["n_low"] == 50 and spec["tol"] == 5e-4
     assert spec["protocol"] == "converged" and spec["n_samplings"] == 5  # defaults of conf/config.yaml
-    assert method_spec({}, "ARAP-SR")["alpha"] == 0.01
+    assert method_definition({}, "ARAP-SR")["alpha"] == 0.01
 
 
 def test_plugin_mapping_with_a_name_for_one_of_our_classes():
-    ms = make_methods({"methods": ["SShaDe", {"_target_": "sshade.SShaDe", "name": "SShaDe-500", "n_low": 500}]})
+    mine = {"_target_": "sshade.SShaDe", "name": "SShaDe-500", "n_low": 500}
+    ms = make_methods(check_config({"methods": ["SShaDe", mine]}).methods)
     assert [m.name for m in ms] == ["SShaDe", "SShaDe-500"] and ms[1].params["n_low"] == 500
     m = build_method({"_target_": "tests.plugin_example.MyMethod", "name": "Mine", "iterations": 3})
     assert isinstance(m, MyMethod) and m.name == "Mine" and m.iterations == 3
@@ -155,14 +157,14 @@ def test_plugin_mapping_with_a_name_for_one_of_our_classes():
 ])
 def test_bad_plugin_is_one_clear_error_at_build_time(item, message):
     with pytest.raises(SShaDeError, match=re.escape(message)) as e:
-        make_methods({"methods": ["ARAP", item]})
+        make_methods(check_config({"methods": ["ARAP", item]}).methods)
     assert "\n" not in str(e.value)
 
 
 def test_repeated_plugin_name_is_refused():
     with pytest.raises(SShaDeError, match="listed twice"):
-        make_methods({"methods": [{"_target_": "tests.plugin_example.MyMethod"},
-                                  {"_target_": "tests.plugin_example.MyMethod", "iterations": 5}]})
+        make_methods(check_config({"methods": [{"_target_": "tests.plugin_example.MyMethod"},
+                                  {"_target_": "tests.plugin_example.MyMethod", "iterations": 5}]}).methods)
 
 
 def test_bad_plugin_on_the_command_line_exits_2_with_one_line(tmp_path):

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from eval.config_check import check_config
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer, pose_transfer, rigid_align
 
@@ -88,7 +89,7 @@ def test_run_pose_transfer_writes_tables(tmp_path, faust):
     out = tmp_path / "out"
     cfg = _cfg(SHARED_DATA / "faust_reg", out)
     cfg.figures = {"enabled": True, "max_cases": 1}
-    res = run_pose_transfer(cfg)
+    res = run_pose_transfer(check_config(cfg))
     for f in ("cases.csv", "table.csv", "table.md", "run.json"):
         assert (out / f).is_file(), f
     # the first figures.max_cases cases: M, M', S, SShaDe, truth + colour bar (pose_transfer_figure)
@@ -114,9 +115,9 @@ def test_run_pose_transfer_writes_tables(tmp_path, faust):
 def test_run_pose_transfer_bad_config(tmp_path):
     from eval.experiments.pose_transfer import run_pose_transfer
     with pytest.raises(SShaDeError, match="pose_transfer.root"):
-        run_pose_transfer(_cfg(tmp_path / "nowhere", tmp_path / "out"))
+        run_pose_transfer(check_config(_cfg(tmp_path / "nowhere", tmp_path / "out")))
     data_file("faust_reg/tr_reg_000.ply")
     with pytest.raises(SShaDeError, match="subject"):
-        run_pose_transfer(_cfg(SHARED_DATA / "faust_reg", tmp_path / "out", subjects=[0, 7]))
+        run_pose_transfer(check_config(_cfg(SHARED_DATA / "faust_reg", tmp_path / "out", subjects=[0, 7])))
     with pytest.raises(SShaDeError, match="no pose-transfer case"):
-        run_pose_transfer(_cfg(SHARED_DATA / "faust_reg", tmp_path / "out", poses=[9]))
+        run_pose_transfer(check_config(_cfg(SHARED_DATA / "faust_reg", tmp_path / "out", poses=[9])))

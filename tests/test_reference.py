@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from eval.config_check import check_config
 from eval.metrics.reference import method_energy, reference_metrics, reference_solution
 from sshade.arap import arap_deform
 from sshade.arap.problems import bent_cylinder, lifted_plane
@@ -112,12 +113,13 @@ def test_converged_protocol_reaches_the_minimiser_where_the_paper_rule_stops_sho
 
 def test_methods_follow_the_protocol():
     from eval.method_config import make_methods
-    ms = make_methods({"methods": ["ARAP", "Elastic", "SShaDe", "SShaDe+refine"], "arap": {"protocol": "paper"}})
+    cfg = {"methods": ["ARAP", "Elastic", "SShaDe", "SShaDe+refine"], "arap": {"protocol": "paper"}}
+    ms = make_methods(check_config(cfg).methods)
     assert [m.protocol for m in ms[:2]] == ["paper", "paper"] and ms[2].params["protocol"] == "paper"
     with pytest.raises(SShaDeError, match="arap.protocol"):
-        make_methods({"methods": ["ARAP"], "arap": {"protocol": "fast"}})
+        make_methods(check_config({"methods": ["ARAP"], "arap": {"protocol": "fast"}}).methods)
     with pytest.raises(SShaDeError, match="arap.gtol"):
-        make_methods({"methods": ["ARAP"], "arap": {"gtol": -1}})
+        make_methods(check_config({"methods": ["ARAP"], "arap": {"gtol": -1}}).methods)
 
 
 def test_sshade_refine_saves_iterations(plane):

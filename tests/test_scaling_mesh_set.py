@@ -12,7 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.experiments.scaling.mesh_set import MeshEntry, cache_name, mesh_entries
+from eval.config_check import check_config
+from eval.experiments.scaling.mesh_set import MeshEntry, cache_name
 from eval.experiments.scaling.probe import probe_first_call
 from sshade.errors import SShaDeError
 from sshade.mesh.io import write_mesh
@@ -55,7 +56,7 @@ def set_run(tmp_path_factory):
                     "sshade.workers=1", "scaling.elastic=false", "scaling.first_call=true",
                     "scaling.repeat=2",
                     f"scaling.cache={d}/cache", f"out_dir={d}/out"])
-    res = run_scaling(cfg)
+    res = run_scaling(check_config(cfg))
     return d, len(V), res
 
 
@@ -118,17 +119,22 @@ def test_bad_entry_is_refused_before_any_mesh(tmp_path, bad, what):
     assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
 
 
+def _entries(cfg) -> list:
+    """The scaling meshes of a composed config, as the door reads them (eval.config_check)."""
+    return list(check_config(cfg).experiment.options.meshes)
+
+
 def test_entries_checked_and_base_mesh_fallback():
-    es = mesh_entries(_compose([]))  # the default set: one clean mesh, two hard ones
+    es = _entries(_compose([]))  # the default set: one clean mesh, two hard ones
     assert [(e.name, e.remesh) for e in es] == [("armadillo", True), ("centaur", False), ("wolf", False)]
-    old = mesh_entries(_compose(["scaling.meshes=null", "scaling.base_mesh=some/dir/bunny.off",
+    old = _entries(_compose(["scaling.meshes=null", "scaling.base_mesh=some/dir/bunny.off",
                                  "scaling.remesh=false"]))
     assert old == [MeshEntry("bunny", "some/dir/bunny.off", False)]
     for bad, what in [("[{name:a,path:x,remesh:1}]", r"meshes\[0\]\.remesh must be true or false"),
                       ("[{name:a,path:x,remesh:true},{name:a,path:y,remesh:true}]", "repeats"),
                       ("[{name:'a b',path:x,remesh:true}]", "file-name token"), ("[]", "non-empty list")]:
         with pytest.raises(SShaDeError, match=what):
-            mesh_entries(_compose([f"scaling.meshes={bad}"]))
+            _entries(_compose([f"scaling.meshes={bad}"]))
     assert cache_name(MeshEntry("m", "p", True), 200000) != cache_name(MeshEntry("m", "p", False), 200000)
 
 

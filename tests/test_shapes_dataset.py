@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from eval.config_check import check_config
 from eval.datasets import load_cases
 from eval.datasets.shapes import axis_handles, axis_landmarks, shape_cases
 from sshade.errors import SShaDeError
@@ -91,7 +92,7 @@ def test_app_runs_experiment_shapes(classic, tmp_path):
         cfg = compose(config_name="config", overrides=[
             "experiment=shapes", f"dataset.root={classic}", "dataset.files=[bunny.off]", "dataset.vertex_range=null",
             "methods=[Elastic,SShaDe]", "sshade.n_low=500", "sshade.n_samplings=2", f"out_dir={tmp_path / 'run'}"])
-    res = run(cfg)
+    res = run(check_config(cfg))
     cases = pd.read_csv(res["out_dir"] / "cases.csv", keep_default_na=False)
     assert cases["method"].tolist() == ["Elastic", "SShaDe"] and (cases["error"] == "").all()
     assert (cases["n_vertices"] == 3485).all() and "gt_vertex_mean_pct" not in cases.columns

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from eval.config_check import check_config
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import tiny_problem, uses_parallel_kernels
 
@@ -129,7 +130,7 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name="config", overrides=["dataset=faust", f"dataset.root={root}", "dataset.limit=2",
                                                        "reference.cases=none", f"out_dir={tmp_path}"])
-    run(cfg)
+    run(check_config(cfg))
     assert m.warm_calls == [6890, 6890]
     rows = pd.read_csv(tmp_path / "cases.csv")
     assert list(rows["compile_s"].round(1)) == [0.6, 0.2]
@@ -163,7 +164,7 @@ def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, mon
             "experiment=scaling", "scaling.meshes=null", f"scaling.base_mesh={base}", "scaling.sizes=[3000]",
             "sshade.n_low=300", "sshade.n_samplings=2", "sshade.workers=1", "scaling.elastic_budget_s=30",
             "scaling.first_call=false", f"scaling.cache={tmp_path}/c", f"out_dir={tmp_path}/out"])
-    res = run_scaling(cfg)
+    res = run_scaling(check_config(cfg))
     row = res["table"].iloc[0]
     assert row["sshade_compile_s"] == pytest.approx(0.5) and row["elastic_compile_s"] == pytest.approx(0.5)
     assert row["sshade_total_s"] < 0.5 and row["elastic_precompute_s"] + row["elastic_s_per_iter"] < 0.5

@@ -19,6 +19,7 @@ from eval.datasets.deformation_case import DeformationCase
 from eval.datasets.faust import FAUST_LANDMARKS, Case, discover_faust, faust_cases
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
+from eval.run.spec import DatasetSpec
 from sshade.errors import SShaDeError
 
 __all__ = ["Case", "DeformationCase", "FAUST_LANDMARKS", "discover_faust", "faust_cases", "load_cases",
@@ -93,32 +94,30 @@ def unique_case_names(cases: list) -> list:
     return cases
 
 
-def dataset_root(cfg) -> Path:
-    """``dataset.root`` of ``cfg`` resolved against the launch directory, after the
-    dataset's ``prepare`` step (the DeFAUST build into its default folder).
+def dataset_root(ds: DatasetSpec | None) -> Path:
+    """``ds.root`` resolved against the launch directory, after the dataset's ``prepare``
+    step (the DeFAUST build into its default folder).
 
     Raises
     ------
     SShaDeError when no dataset is configured, ``dataset.root`` is unset or is not a folder.
     """
-    from omegaconf import OmegaConf
-    ds = cfg.get("dataset")
     if ds is None:
         raise SShaDeError("no dataset configured; pass dataset=faust dataset.root=DIR")
-    if OmegaConf.is_missing(ds, "root") or ds.get("root") in (None, ""):
+    if ds.root in (None, "", "???"):
         raise SShaDeError("dataset.root is not set: pass dataset.root=DIR, a folder with FAUST "
                           "registrations tr_reg_XYZ.ply (e.g. dataset.root=../shared/data/faust_reg)")
     root = abs_path(ds.root)
-    d = find_dataset(ds.get("name", ""))
+    d = find_dataset(ds.name)
     if d is not None and d.prepare is not None:
-        d.prepare(root, ds)
+        d.prepare(root, ds.section)
     if not root.is_dir():
         hint = d.root_hint if d is not None else ""
         raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}{hint}")
     return root
 
 
-def dataset_outlook(cfg) -> dict | None:
+def dataset_outlook(ds: DatasetSpec | None) -> dict | None:
     """What the dataset's ``prepare`` step (:func:`dataset_root`) is about to do, found
     without doing it (its registered ``outlook``, e.g. the DeFAUST build still to run:
     :func:`eval.datasets.defaust_dataset.build_outlook`); None when there is nothing long to do,
@@ -128,29 +127,23 @@ def dataset_outlook(cfg) -> dict | None:
     ------
     SShaDeError from the ``outlook`` (e.g. a bad ``dataset.build`` setting).
     """
-    from omegaconf import OmegaConf
-    ds = cfg.get("dataset")
-    if ds is None or OmegaConf.is_missing(ds, "root") or ds.get("root") in (None, ""):
+    if ds is None or ds.root in (None, "", "???"):
         return None
-    d = find_dataset(ds.get("name", ""))
+    d = find_dataset(ds.name)
     if d is None or d.outlook is None:
         return None
-    return d.outlook(abs_path(ds.root), ds)
+    return d.outlook(abs_path(ds.root), ds.section)
 
 
-def dataset_options(ds, *, skip=()) -> dict:
-    """The keyword options of the loader of dataset section ``ds`` (its registered
-    ``keys`` present in ``ds``, except ``skip``): list/mapping values as plain Python,
-    path keys resolved against the launch directory. An unknown name gives ``{}``
-    (:func:`load_cases` then names the known datasets)."""
-    from omegaconf import OmegaConf
-    d = find_dataset(ds.get("name", ""))
+def dataset_options(section, *, skip=()) -> dict:
+    """The keyword options of the loader of the dataset section ``section`` (a mapping:
+    its registered ``keys`` present in it, except ``skip``; path keys resolved against the
+    launch directory). An unknown name gives ``{}`` (:func:`load_cases` then names the
+    known datasets)."""
+    d = find_dataset(section.get("name", ""))
     if d is None:
         return {}
-    opts = {k: ds.get(k) for k in d.keys if k in ds and k not in skip}
-    for k, v in opts.items():
-        if OmegaConf.is_config(v):
-            opts[k] = OmegaConf.to_container(v)
+    opts = {k: section.get(k) for k in d.keys if k in section and k not in skip}
     for k in d.path_keys:
         if opts.get(k) is not None:
             opts[k] = abs_path(opts[k])

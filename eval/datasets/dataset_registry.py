@@ -25,17 +25,18 @@ class Dataset:
     keys : the ``dataset.<key>`` config keys passed to ``load`` (when present), as lists /
         mappings for list-valued keys.
     path_keys : those of ``keys`` that are paths, resolved against the launch directory.
-    prepare : optional ``prepare(root: Path, ds) -> None`` run on the resolved root before
-        it is checked (e.g. the DeFAUST build), ``ds`` the ``dataset`` config section.
+    prepare : optional ``prepare(root: Path, section) -> None`` run on the resolved root
+        before it is checked (e.g. the DeFAUST build), ``section`` the ``dataset`` section
+        (plain values, :attr:`eval.run.spec.DatasetSpec.section`).
     root_hint : text added to the "does not exist" error of ``dataset.root``.
     seeds : optional ``seeds(root: Path) -> dict``, extra seeds recorded in ``run.json``.
-    outlook : optional ``outlook(root: Path, ds) -> dict | None``: what ``prepare`` is
+    outlook : optional ``outlook(root: Path, section) -> dict | None``: what ``prepare`` is
         about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.run.plan`):
         None when it has nothing long to do, else a dict (e.g.
         :func:`eval.datasets.defaust_dataset.build_outlook`).
-    check : optional ``check(cfg) -> None``: the dataset's own config values checked
-        before any work (:func:`eval.config_check.check_config`); raises SShaDeError
-        naming the key.
+    check : optional ``check(section) -> None``: the dataset's own values of its section
+        (plain values) checked before any work (:func:`eval.config_check.check_config`);
+        raises SShaDeError naming the key (``dataset.<key>``).
     """
 
     name: str

@@ -242,11 +242,11 @@ def _seeds(root: Path) -> dict:
     return {"defaust_manifest_seed": read_manifest(root).get("parameters", {}).get("seed")}
 
 
-def check_defaust(cfg) -> None:
+def check_defaust(section) -> None:
     """``dataset.subjects`` and ``dataset.poses`` (integers or null) checked; SShaDeError
     naming the key."""
-    config_int_list(cfg, "dataset.subjects")
-    config_int_list(cfg, "dataset.poses")
+    config_int_list({"dataset": section}, "dataset.subjects")
+    config_int_list({"dataset": section}, "dataset.poses")
 
 
 register_dataset("defaust", load_defaust, keys=("subjects", "resolution", "limit"), prepare=prepare_root,

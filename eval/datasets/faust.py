@@ -249,13 +249,14 @@ def _fmt(sel) -> str:
     return "all" if sel is None else str(sorted(sel))
 
 
-def check_faust(cfg) -> None:
+def check_faust(section) -> None:
     """The ``dataset`` section's numbers and subject / pose lists of FAUST checked;
     SShaDeError naming the key."""
-    check_numbers(cfg, "dataset", [("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
+    top = {"dataset": section}
+    check_numbers(top, "dataset", [("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
                                    ("static_threshold", float, 0, False), ("seed", int, 0, False)])
-    config_int_list(cfg, "dataset.subjects")
-    config_int_list(cfg, "dataset.poses")
+    config_int_list(top, "dataset.subjects")
+    config_int_list(top, "dataset.poses")
 
 
 register_dataset("faust", faust_cases, keys=("subjects", "poses", "n_per_landmark", "neighbourhood",

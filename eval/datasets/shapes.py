@@ -191,14 +191,15 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
     return cases
 
 
-def check_shapes(cfg) -> None:
+def check_shapes(section) -> None:
     """The ``dataset`` section's numbers and ``vertex_range`` ([lo, hi], 4 <= lo <= hi)
     of the shapes checked; SShaDeError naming the key."""
-    check_numbers(cfg, "dataset", [("n_per_group", int, 1, False), ("region_radius", float, 0, False),
+    top = {"dataset": section}
+    check_numbers(top, "dataset", [("n_per_group", int, 1, False), ("region_radius", float, 0, False),
                                    ("rotate_deg", float, None, False), ("translate", float, None, False),
                                    ("seed", int, 0, False)])
-    if config_value(cfg, "dataset.vertex_range", None) is not None:
-        vr = config_int_list(cfg, "dataset.vertex_range", min=4)
+    if config_value(top, "dataset.vertex_range", None) is not None:
+        vr = config_int_list(top, "dataset.vertex_range", min=4)
         if len(vr) != 2 or vr[0] > vr[1]:
             raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
 

@@ -6,6 +6,12 @@ by kind (:mod:`eval.experiments.experiment_registry`; :func:`eval.app.run_experi
 Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
-from eval.experiments.experiment_registry import experiment_check, experiments, find_experiment, register_experiment
+from eval.experiments.experiment_registry import (
+    OptionsReader,
+    experiment_options,
+    experiments,
+    find_experiment,
+    register_experiment,
+)
 
-__all__ = ["experiments", "find_experiment", "register_experiment", "experiment_check"]
+__all__ = ["experiments", "find_experiment", "register_experiment", "experiment_options", "OptionsReader"]

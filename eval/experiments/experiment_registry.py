@@ -7,24 +7,39 @@ of the package, :func:`experiments`), so a new experiment is one module calling
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from eval.registry_base import Registry
 
-__all__ = ["register_experiment", "experiments", "find_experiment", "experiment_check"]
+__all__ = ["OptionsReader", "register_experiment", "experiments", "find_experiment", "experiment_options"]
 
 _REGISTRY = Registry(__package__, "experiment kind", skip=("experiment_registry", "common"))
-_CHECKS: dict[str, Callable] = {}
 
 
-def register_experiment(kind: str, run: Callable, *, check: Callable | None = None) -> Callable:
-    """Register ``run(cfg) -> dict`` as experiment ``kind``, with ``check(cfg) -> None``,
-    its own config values checked before any work (raises SShaDeError naming the key;
-    :func:`eval.config_check.check_config`); called at the bottom of an experiment module.
-    Returns ``run``. Registering a kind twice with another function raises ValueError (a
-    programming error, not a user's)."""
+@dataclass(frozen=True)
+class OptionsReader:
+    """How an experiment kind reads its own options: ``read(values)`` makes its typed
+    options (raising SShaDeError naming the key) of ``values``, the plain values of the
+    config's top-level section ``section`` (None when the config has none)."""
+
+    section: str
+    read: Callable
+
+
+_OPTIONS: dict[str, OptionsReader] = {}
+
+
+def register_experiment(kind: str, run: Callable, *, section: str | None = None,
+                        options: Callable | None = None) -> Callable:
+    """Register ``run(spec) -> dict`` as experiment ``kind`` (``spec``: the checked run,
+    :class:`eval.run.spec.EvalSpec`, its ``experiment.options`` what ``options`` made),
+    with ``options(values)``, its own options read from the config's section ``section``
+    before any work (:class:`OptionsReader`; :func:`eval.config_check.check_config`);
+    called at the bottom of an experiment module. Returns ``run``. Registering a kind
+    twice with another function raises ValueError (a programming error, not a user's)."""
     out = _REGISTRY.add(kind, run, same=lambda old, new: old is new)
-    if check is not None:
-        _CHECKS[kind] = check
+    if options is not None:
+        _OPTIONS[kind] = OptionsReader(section=str(section or kind), read=options)
     return out
 
 
@@ -38,6 +53,6 @@ def find_experiment(kind) -> Callable | None:
     return _REGISTRY.find(kind)
 
 
-def experiment_check(kind) -> Callable | None:
-    """The config check registered with experiment ``kind``, or None (none, or no such kind)."""
-    return _CHECKS.get(kind) if find_experiment(kind) is not None else None
+def experiment_options(kind) -> OptionsReader | None:
+    """How experiment ``kind`` reads its options, or None (none, or no such kind)."""
+    return _OPTIONS.get(kind) if find_experiment(kind) is not None else None

@@ -12,18 +12,19 @@ import logging
 import math
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from eval.datasets.faust import discover_faust
-from eval.experiments.common import as_list
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import gt_stretch_pct, markdown_table, transfer_n_low
 from eval.experiments.tosca import sshade_params as _tosca_sshade_params
 from eval.metrics.measures import ground_truth_metrics
-from eval.present.figures import figures_options, pose_transfer_figure, safe_figure
+from eval.present.figures import pose_transfer_figure, safe_figure
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
+from eval.run.spec import EvalSpec, FigureOptions
 from harness.checks import config_int_list
 from sshade.errors import SShaDeError
 from sshade.isometric import pose_transfer, rigid_align
@@ -31,7 +32,7 @@ from sshade.mesh.io import atomic_write, read_mesh
 from sshade.pipeline import SShaDe
 from sshade.sampling import sampling_seeds
 
-__all__ = ["run_pose_transfer", "METRICS", "sshade_params"]
+__all__ = ["PoseTransferOptions", "pose_transfer_options", "run_pose_transfer", "METRICS", "sshade_params"]
 
 log = logging.getLogger(__name__)
 
@@ -55,22 +56,51 @@ _COLUMNS = (
 )
 
 
-def sshade_params(cfg) -> dict:
+def sshade_params(spec: EvalSpec) -> dict:
     """Keyword parameters of :func:`sshade.isometric.pose_transfer` from the method config
     ``method.SShaDe``: ``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``workers``
     (the same keys as TOSCA's, :func:`eval.experiments.tosca.sshade_params`)."""
-    return _tosca_sshade_params(cfg)
+    return _tosca_sshade_params(spec)
 
 
-def run_pose_transfer(cfg) -> dict:
-    """Run the FAUST pose-transfer experiment of ``cfg.pose_transfer``.
+@dataclass(frozen=True)
+class PoseTransferOptions:
+    """The ``pose_transfer`` section, checked: ``root`` (FAUST registrations, as given),
+    ``subjects`` (None: all with a pose 0), ``poses`` (target poses; None: all but 0),
+    ``align`` (move S rigidly onto M first)."""
 
-    Config keys (``cfg.pose_transfer``, see conf/experiment/pose_transfer.yaml):
-    ``root`` (FAUST registrations; relative to the launch directory), ``subjects``
-    (list or null = all with a pose 0), ``poses`` (target poses or null = all but 0),
-    ``align`` (rigidly align S onto M first; default true). SShaDe's ``n_low``,
+    root: str
+    subjects: tuple[int, ...] | None = None
+    poses: tuple[int, ...] | None = None
+    align: bool = True
+
+
+def pose_transfer_options(values) -> PoseTransferOptions:
+    """The ``pose_transfer`` section (plain values) read and checked.
+
+    Raises
+    ------
+    SShaDeError naming the key: no section, no ``root``, ``subjects`` or ``poses`` not
+    integers (or null).
+    """
+    if values is None:
+        raise SShaDeError("no `pose_transfer` section in the config; use experiment=pose_transfer")
+    top = {"pose_transfer": values}
+    poses = config_int_list(top, "pose_transfer.poses")
+    if values.get("root") in (None, "", "???"):
+        raise SShaDeError("pose_transfer.root is not set: pass pose_transfer.root=DIR "
+                          "(a folder of FAUST registrations tr_reg_XYZ.ply)")
+    subjects = config_int_list(top, "pose_transfer.subjects")
+    return PoseTransferOptions(root=str(values["root"]), subjects=None if subjects is None else tuple(subjects),
+                               poses=None if poses is None else tuple(poses), align=bool(values.get("align", True)))
+
+
+def run_pose_transfer(spec: EvalSpec) -> dict:
+    """Run the FAUST pose-transfer experiment of ``spec.experiment.options``
+    (:class:`PoseTransferOptions`, see conf/experiment/pose_transfer.yaml): every ordered
+    pair of the selected subjects, every selected target pose. SShaDe's ``n_low``,
     ``n_samplings``, ``seed``, ``gradient``, ``workers``: :func:`sshade_params`. Outputs
-    go to ``cfg.out_dir``. ``cfg.dataset`` is not used.
+    go to ``spec.output.out_dir``. The dataset is not used.
 
     Returns
     -------
@@ -83,50 +113,40 @@ def run_pose_transfer(cfg) -> dict:
     subject without its files, or no (pair, pose) case, before any transfer.
     """
     t_start = time.perf_counter()
-    from omegaconf import OmegaConf
-
-
-    pc, root, files = _pose_transfer_root(cfg)
-    out_dir = abs_path(cfg.out_dir)
-    jobs = _pose_transfer_jobs(pc, root, files)
-    sp = sshade_params(cfg)
+    opts = spec.experiment.options
+    root, files = _pose_transfer_root(opts)
+    out_dir = abs_path(spec.output.out_dir)
+    jobs = _pose_transfer_jobs(opts, root, files)
+    sp = sshade_params(spec)
     k, seed = int(sp["n_samplings"]), int(sp["seed"])
-    align = bool(pc.get("align", True))
     log.info("%d pose-transfer case(s) from %s; n_low=%s k=%d; output %s", len(jobs), root, sp["n_low"], k,
              out_dir)
     F, V = _read_meshes(files, jobs)
 
-    config = OmegaConf.to_container(cfg, resolve=True)
+    config = spec.record()
     config["pose_transfer"]["root"] = str(root)
     info = collect_runinfo(config, seeds={"pose_transfer": seed, "sampling_seeds": sampling_seeds(seed, k)},
                            extra={"status": "running", "out_dir": str(out_dir)})
     write_runinfo(out_dir / "run.json", info)
-    rows = _run_pose_transfer_cases(cfg, jobs, F, V, sp, align, out_dir)
-    return _pose_transfer_tables(rows, sp, align, info, out_dir, t_start)
+    rows = _run_pose_transfer_cases(spec.figures, jobs, F, V, sp, opts.align, out_dir)
+    return _pose_transfer_tables(rows, sp, opts.align, info, out_dir, t_start)
 
 
-def _pose_transfer_root(cfg):
-    """``(section, root, files)``: ``pose_transfer.root`` resolved and its registrations
+def _pose_transfer_root(opts: PoseTransferOptions):
+    """``(root, files)``: ``pose_transfer.root`` resolved and its registrations
     (:func:`eval.datasets.faust.discover_faust`)."""
-    from omegaconf import OmegaConf
-    pc = cfg.get("pose_transfer")
-    if pc is None:
-        raise SShaDeError("no `pose_transfer` section in the config; use experiment=pose_transfer")
-    if OmegaConf.is_missing(pc, "root") or pc.get("root") in (None, ""):
-        raise SShaDeError("pose_transfer.root is not set: pass pose_transfer.root=DIR "
-                          "(a folder of FAUST registrations tr_reg_XYZ.ply)")
-    root = abs_path(pc.root)
+    root = abs_path(opts.root)
     if not root.is_dir():
         raise SShaDeError(f"pose_transfer.root does not exist or is not a folder: {root} "
                           "(pass pose_transfer.root=DIR, e.g. ../shared/data/faust_reg)")
-    return pc, root, discover_faust(root)
+    return root, discover_faust(root)
 
 
-def _pose_transfer_jobs(pc, root, files) -> list[tuple[int, int, int]]:
+def _pose_transfer_jobs(opts: PoseTransferOptions, root, files) -> list[tuple[int, int, int]]:
     """The cases ``(a, b, p)``: ordered pairs of selected subjects with a pose 0 and
     the target poses present for both."""
     present = sorted({s for s, p in files if p == 0})
-    subjects = as_list(pc.get("subjects"))
+    subjects = None if opts.subjects is None else list(opts.subjects)
     if subjects is None:
         subjects = present
     else:
@@ -135,8 +155,7 @@ def _pose_transfer_jobs(pc, root, files) -> list[tuple[int, int, int]]:
         if miss:
             raise SShaDeError(f"pose_transfer.subjects: no rest pose (pose 0) for subject(s) {miss} in {root} "
                               f"(subjects with pose 0: {present})")
-    poses = as_list(pc.get("poses"))
-    poses = None if poses is None else [int(p) for p in poses]
+    poses = None if opts.poses is None else list(opts.poses)
     jobs = [(a, b, p) for a in subjects for b in subjects if a != b
             for p in sorted({q for s, q in files if s == a and q != 0})
             if (b, p) in files and (poses is None or p in poses)]
@@ -162,7 +181,7 @@ def _read_meshes(files, jobs):
     return F, V
 
 
-def _run_pose_transfer_cases(cfg, jobs, F, V, sp: dict, align: bool, out_dir) -> list[dict]:
+def _run_pose_transfer_cases(figures: FigureOptions, jobs, F, V, sp: dict, align: bool, out_dir) -> list[dict]:
     """Every case (:func:`_pose_transfer_case`), ``cases.csv`` rewritten after each,
     the figures of the first ``figures.max_cases``; returns the rows."""
     import pandas as pd
@@ -170,7 +189,7 @@ def _run_pose_transfer_cases(cfg, jobs, F, V, sp: dict, align: bool, out_dir) ->
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     rows: list[dict] = []
-    fig_on, fig_left = figures_options(cfg)  # the first figures.max_cases cases
+    fig_on, fig_left = figures.enabled, figures.max_cases  # the first figures.max_cases cases
     with logging_redirect_tqdm():
         for a, b, p in tqdm(jobs, desc="pose transfer", unit="case", file=sys.stderr, dynamic_ncols=True):
             row, Vs = _pose_transfer_case(a, b, p, F, V, sp, align)
@@ -200,7 +219,7 @@ def _pose_transfer_case(a: int, b: int, p: int, F, V: dict, sp: dict, align: boo
         t0 = time.perf_counter()
         Vs, ti = pose_transfer(M, F, S, Mp, n_low=transfer_n_low(sp["n_low"], len(M)), n_samplings=k, seed=seed,
                                gradient=str(sp.get("gradient") or "normalized"), workers=sp.get("workers"),
-                               **{k: sp[k] for k in ("anchor",) if sp.get(k)},
+                               **{k: sp[k] for k in ("anchor", "transfer", "average") if sp.get(k)},
                                align=align, return_info=True)
         row["time_s"] = time.perf_counter() - t0
         row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s", "workers")})
@@ -250,7 +269,7 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
     wall = time.perf_counter() - t_start
     md = "\n".join([
         f"### FAUST pose transfer (paper §4.3): n_low={n_low}, k={k}, seed={seed}, gradient={gradient}, "
-        f"anchor={sp.get('anchor')}", "",
+        f"anchor={sp.get('anchor')}, transfer={sp.get('transfer')}, average={sp.get('average')}", "",
         markdown_table(table, ("method", "Method"), _COLUMNS),
         "Mean over the cases. Every shape is first moved rigidly onto the ground truth (b pose p). Vertex "
         "errors in % of the ground truth's bounding-box diagonal; d_H, d_C: vertex-to-surface Hausdorff / "
@@ -271,9 +290,4 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
     return {"out_dir": out_dir, "paths": paths, "cases": df, "table": table, "n_cases": len(df), "n_errors": n_err}
 
 
-def check_pose_transfer(cfg) -> None:
-    """``pose_transfer.poses`` (integers or null) checked; SShaDeError naming the key."""
-    config_int_list(cfg, "pose_transfer.poses")
-
-
-register_experiment("pose_transfer", run_pose_transfer, check=check_pose_transfer)
+register_experiment("pose_transfer", run_pose_transfer, options=pose_transfer_options)

@@ -6,9 +6,10 @@ class) pose 0 is the rest pose M and every other pose M' one case: M is remeshed
 ``n_low`` vertices, the low-res mesh is taken into the pose through the
 correspondence and M is rebuilt in that pose with the per-triangle LRFs, averaged over
 ``n_samplings`` samplings (:func:`sshade.isometric.isometric_transfer`). SShaDe's
-parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``anchor``, ``workers``) come from
-the method config ``method.SShaDe`` (the ``sshade`` section; ``conf/experiment/tosca.yaml``
-sets the paper's ``sshade.n_low: 6000``, ``sshade.n_samplings: 10``; :func:`sshade_params`)."""
+parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``anchor``, ``transfer``,
+``average``, ``workers``) come from the method config ``method.SShaDe`` (the ``sshade``
+section; ``conf/experiment/tosca.yaml`` sets the paper's ``sshade.n_low: 6000``,
+``sshade.n_samplings: 10`` and ``sshade.average: proximity``; :func:`sshade_params`)."""
 from __future__ import annotations
 
 import logging
@@ -16,6 +17,7 @@ import math
 import re
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -24,20 +26,21 @@ import numpy as np
 from eval.experiments.common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.measures import chamfer, ground_truth_metrics, hausdorff
-from eval.present.figures import figures_options, safe_figure, tosca_figure
-from eval.present.meshview import view_options, write_case_view
+from eval.present.figures import safe_figure, tosca_figure
+from eval.present.meshview import write_case_view
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
+from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
 from eval.tables import ok_mask
-from harness.checks import check_numbers, config_int_list
+from harness.checks import config_int_list, config_number
 from sshade.errors import SShaDeError
 from sshade.isometric import isometric_transfer
 from sshade.mesh.io import atomic_write, read_mesh
 from sshade.pipeline import SShaDe, auto_n_low
 from sshade.sampling import sampling_seeds
 
-__all__ = ["PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table", "markdown_table", "run_tosca",
-           "sshade_params", "transfer_n_low"]
+__all__ = ["ToscaOptions", "tosca_options", "PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table",
+           "markdown_table", "run_tosca", "sshade_params", "transfer_n_low"]
 
 log = logging.getLogger(__name__)
 
@@ -150,14 +153,14 @@ def markdown_table(table, first: tuple[str, str], columns) -> str:
     return "\n".join(lines) + "\n"
 
 
-def sshade_params(cfg) -> dict:
+def sshade_params(spec: EvalSpec) -> dict:
     """Keyword parameters of SShaDe's correspondence transfers
     (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
     ``n_low`` (int or ``"auto"``, see :func:`transfer_n_low`), ``n_samplings``, ``seed``,
     ``gradient``, ``workers`` of the method config ``method.SShaDe``
     (:func:`eval.experiments.common.sshade_spec`)."""
-    spec = sshade_spec(cfg)
-    return {k: spec[k] for k in SSHADE_TRANSFER_KEYS if k in spec}
+    sp = sshade_spec(spec)
+    return {k: sp[k] for k in SSHADE_TRANSFER_KEYS if k in sp}
 
 
 def transfer_n_low(n_low, n_vertices: int) -> int:
@@ -176,15 +179,47 @@ def transfer_n_low(n_low, n_vertices: int) -> int:
         raise SShaDeError(f"sshade.n_low must be an integer or auto, got {n_low!r}") from None
 
 
-def run_tosca(cfg) -> dict:
-    """Run the TOSCA experiment of ``cfg.tosca`` (see conf/experiment/tosca.yaml).
+@dataclass(frozen=True)
+class ToscaOptions:
+    """The ``tosca`` section, checked: ``root`` (folder of NAMEk.off files, as given),
+    ``min_vertices`` (classes below are excluded; 0: none), ``classes`` (names; None: all
+    present), ``poses`` (target pose indices; None: all but 0)."""
 
-    Config keys (``cfg.tosca``): ``root`` (folder of NAMEk.off files; relative to the
-    launch directory), ``min_vertices`` (classes below are excluded; paper: wolf),
-    ``classes`` (list or null = all), ``poses`` (target pose indices or null = all but
-    0). SShaDe's ``n_low`` (paper: 6000), ``n_samplings`` (paper: 10), ``seed``,
-    ``gradient``, ``workers``: :func:`sshade_params`. Outputs go to ``cfg.out_dir``.
-    ``cfg.dataset`` is not used.
+    root: str
+    min_vertices: int = 0
+    classes: tuple | None = None
+    poses: tuple[int, ...] | None = None
+
+
+def tosca_options(values) -> ToscaOptions:
+    """The ``tosca`` section (plain values) read and checked.
+
+    Raises
+    ------
+    SShaDeError naming the key: no section, no ``root``, ``min_vertices`` not an integer
+    >= 0 (or null), ``poses`` not integers (or null).
+    """
+    if values is None:
+        raise SShaDeError("no `tosca` section in the config; use experiment=tosca")
+    top = {"tosca": values}
+    min_v = config_number(top, "tosca.min_vertices", min=0, allow_none=True, default=None)
+    poses = config_int_list(top, "tosca.poses")
+    if values.get("root") in (None, "", "???"):
+        raise SShaDeError("tosca.root is not set: pass tosca.root=DIR (a folder of TOSCA NAMEk.off files)")
+    classes = as_list(values.get("classes"))
+    return ToscaOptions(root=str(values["root"]), min_vertices=int(min_v or 0),
+                        classes=None if classes is None else tuple(classes),
+                        poses=None if poses is None else tuple(poses))
+
+
+def run_tosca(spec: EvalSpec) -> dict:
+    """Run the TOSCA experiment of ``spec.experiment.options`` (:class:`ToscaOptions`, see
+    conf/experiment/tosca.yaml).
+
+    Every class of ``root`` with at least ``min_vertices`` vertices (paper: wolf is
+    excluded), the ``classes`` and ``poses`` selected. SShaDe's ``n_low`` (paper: 6000),
+    ``n_samplings`` (paper: 10), ``seed``, ``gradient``, ``workers``: :func:`sshade_params`.
+    Outputs go to ``spec.output.out_dir``. The dataset is not used.
 
     Returns
     -------
@@ -197,51 +232,38 @@ def run_tosca(cfg) -> dict:
     without pose 0, or no case left to run, before any transfer.
     """
     t_start = time.perf_counter()
-    from omegaconf import OmegaConf
-
-
-    root, found = _tosca_root(cfg)
-    out_dir = abs_path(cfg.out_dir)
-    sp = sshade_params(cfg)
+    opts = spec.experiment.options
+    root = abs_path(opts.root)
+    found = discover_tosca(root)
+    out_dir = abs_path(spec.output.out_dir)
+    sp = sshade_params(spec)
     k, seed = int(sp["n_samplings"]), int(sp["seed"])
-    rests, excluded, jobs = _tosca_jobs(cfg.tosca, root, found)
+    rests, excluded, jobs = _tosca_jobs(opts, root, found)
     log.info("%d TOSCA case(s) from %s (classes %s; excluded %s); n_low=%s k=%d; output %s",
              len(jobs), root, sorted(rests), sorted(excluded), sp["n_low"], k, out_dir)
 
-    config = OmegaConf.to_container(cfg, resolve=True)
+    config = spec.record()
     config["tosca"]["root"] = str(root)
     info = collect_runinfo(config, seeds={"tosca": seed, "sampling_seeds": sampling_seeds(seed, k)},
                            extra={"status": "running", "out_dir": str(out_dir), "excluded": excluded,
                                   "paper": PAPER_TOSCA})
     write_runinfo(out_dir / "run.json", info)
-    df = _run_tosca_cases(cfg, jobs, rests, found, sp, out_dir)
+    df = _run_tosca_cases(spec.figures, spec.report, jobs, rests, found, sp, out_dir)
     return _tosca_tables(df, sp, excluded, info, out_dir, t_start)
 
 
-def _tosca_root(cfg):
-    """``tosca.root`` resolved and its classes (:func:`discover_tosca`)."""
-    from omegaconf import OmegaConf
-    tc = cfg.get("tosca")
-    if tc is None:
-        raise SShaDeError("no `tosca` section in the config; use experiment=tosca")
-    if OmegaConf.is_missing(tc, "root") or tc.get("root") in (None, ""):
-        raise SShaDeError("tosca.root is not set: pass tosca.root=DIR (a folder of TOSCA NAMEk.off files)")
-    root = abs_path(tc.root)
-    return root, discover_tosca(root)
-
-
-def _tosca_jobs(tc, root, found):
+def _tosca_jobs(opts: ToscaOptions, root, found):
     """The selected classes' rest poses (read and validated; classes below
     ``tosca.min_vertices`` excluded) and the (class, pose) cases; returns
     ``(rests, excluded, jobs)``."""
-    classes = as_list(tc.get("classes"))
+    classes = None if opts.classes is None else list(opts.classes)
     if classes is not None:
         unknown = [c for c in classes if c not in found]
         if unknown:
             raise SShaDeError(f"tosca.classes: {unknown} not found in {root} (present: {sorted(found)})")
         found = {c: found[c] for c in classes}
-    poses = as_list(tc.get("poses"))
-    min_v = int(tc.get("min_vertices") or 0)
+    poses = None if opts.poses is None else list(opts.poses)
+    min_v = opts.min_vertices
     rests, excluded, jobs = {}, {}, []
     for c, files in found.items():
         if 0 not in files:
@@ -261,7 +283,7 @@ def _tosca_jobs(tc, root, found):
     return rests, excluded, jobs
 
 
-def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
+def _run_tosca_cases(figures: FigureOptions, report: ReportOptions, jobs, rests, found, sp: dict, out_dir):
     """Every case (:func:`_tosca_case`), ``cases.csv`` rewritten after each, the
     optional figures and 3D views (:func:`eval.present.meshview.write_case_view`; one per class,
     its first pose); returns the cases' DataFrame."""
@@ -270,8 +292,8 @@ def _run_tosca_cases(cfg, jobs, rests, found, sp: dict, out_dir):
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     rows: list[dict] = []
-    fig_on, fig_left = figures_options(cfg)  # one figure per class (first pose), at most max_cases
-    n_view, max_faces = view_options(cfg)  # one 3D view per class (first pose), at most report.view_cases
+    fig_on, fig_left = figures.enabled, figures.max_cases  # one figure per class (first pose), at most max_cases
+    n_view, max_faces = report.views, report.max_faces  # one 3D view per class (first pose), at most view_cases
     drawn: set[str] = set()
     viewed: set[str] = set()
     with logging_redirect_tqdm():
@@ -314,7 +336,7 @@ def _tosca_case(c: str, p: int, V0, F0, path, sp: dict):
         t0 = time.perf_counter()
         Vp, ti = isometric_transfer(V0, F0, V1, n_low=transfer_n_low(sp["n_low"], len(V0)), n_samplings=k,
                                     seed=seed, gradient=str(sp.get("gradient") or "normalized"),
-                                    **{k: sp[k] for k in ("anchor",) if sp.get(k)},
+                                    **{k: sp[k] for k in ("anchor", "transfer", "average") if sp.get(k)},
                                     workers=sp.get("workers"))
         row["time_s"] = time.perf_counter() - t0
         row.update({key: ti[key] for key in ("n_low", "remesh_s", "project_s", "transfer_s",
@@ -351,7 +373,8 @@ def _tosca_tables(df, sp: dict, excluded: dict, info: dict, out_dir, t_start: fl
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     wall = time.perf_counter() - t_start
     title = (f"### TOSCA non-rigid isometric deformations (paper §4.2): n_low={n_low}, k={k}, seed={seed}, "
-             f"gradient={gradient}, anchor={sp.get('anchor')}")
+             f"gradient={gradient}, anchor={sp.get('anchor')}, transfer={sp.get('transfer')}, "
+             f"average={sp.get('average')}")
     md = "\n".join([
         title, "",
         markdown_table(table, ("class", "Class"), TOSCA_COLUMNS),
@@ -376,11 +399,4 @@ def table_workers(df) -> str:
     return ",".join(map(str, w)) or "-"
 
 
-def check_tosca(cfg) -> None:
-    """``tosca.min_vertices`` (an integer >= 0 or null) and ``tosca.poses`` (integers or
-    null) checked; SShaDeError naming the key."""
-    check_numbers(cfg, "tosca", [("min_vertices", int, 0, True)])
-    config_int_list(cfg, "tosca.poses")
-
-
-register_experiment("tosca", run_tosca, check=check_tosca)
+register_experiment("tosca", run_tosca, options=tosca_options)

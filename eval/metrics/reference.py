@@ -20,12 +20,20 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.arap_sr_solver import ALPHA_SCALINGS, SRProblem, solve_arap_sr
-from baselines.coarse_start import SR_ENERGY, coarse_start, uses_coarse
+from baselines.coarse_start import coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
 from eval.run.code_identity import numerical_versions, sources_digest
 from harness.method_registry import method_meta
-from sshade.arap import DEEP_CRITERION, ENERGIES, build_operators, solve_arap
+from sshade.arap import (
+    ALPHA_SCALINGS,
+    DEEP_CRITERION,
+    ENERGIES,
+    SR_ENERGY,
+    SRProblem,
+    build_operators,
+    solve_arap,
+    solve_arap_sr,
+)
 from sshade.errors import SShaDeError
 from sshade.mesh.io import inside_folder
 
@@ -48,7 +56,7 @@ _SR = "arap_sr_"
 
 def sr_energy(alpha: float, alpha_scaling: str = "valence") -> str:
     """The name of ARAP-SR's energy with smoothness weight ``alpha`` under the definition
-    ``alpha_scaling`` (Levi & Gotsman 2015; :mod:`baselines.arap_sr_solver`), e.g.
+    ``alpha_scaling`` (Levi & Gotsman 2015; :mod:`sshade.arap.smooth_rotations`), e.g.
     ``"arap_sr_valence_0.01"``: both are part of the name, hence of the cache key and file
     name. Raises SShaDeError on an unknown ``alpha_scaling``."""
     if alpha_scaling not in ALPHA_SCALINGS:
@@ -109,7 +117,7 @@ def method_energy(method) -> str:
 def energy_operators(V, F, energy: str):
     """What :func:`reference_metrics` evaluates ``energy`` with: the
     :class:`sshade.arap.ArapOperators` of ``(V, F)`` for an ARAP energy, an energy-only
-    :class:`baselines.arap_sr_solver.SRProblem` for an ARAP-SR one. Raises SShaDeError on
+    :class:`sshade.arap.SRProblem` for an ARAP-SR one. Raises SShaDeError on
     an unknown energy."""
     _check_energy(energy)
     p = sr_params(energy)
@@ -231,7 +239,7 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
     V : (n, 3) float64 rest positions. F : (m, 3) int64 faces (validated by the caller).
     handles : (h,) int64 vertex indices. targets : (h, 3) float64 target positions.
     energy : ``"spokes"``, ``"spokes_and_rims"`` (:func:`sshade.arap.solve_arap`) or an
-        ARAP-SR energy :func:`sr_energy` (``alpha``; :func:`baselines.arap_sr_solver.solve_arap_sr`,
+        ARAP-SR energy :func:`sr_energy` (``alpha``; :func:`sshade.arap.solve_arap_sr`,
         Anderson-accelerated block descent; ``energy`` = ``E(U, R)`` at the final state).
     cache_dir : folder of the cache files (created; one ``<energy>_<key>.npz`` each).
     max_iter, time_budget_s : caps of the deep solve (recorded in the key and ``info``).
@@ -334,7 +342,7 @@ def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None, R0=None) ->
     ref : :class:`Reference` of the same case.
     operators : :func:`energy_operators` of ``(V_rest, F, ref.energy_type)`` or None
         (built here). For ARAP-SR ``E(Vd) = min_R E(Vd, R)`` by Gauss-Seidel sweeps
-        (:meth:`baselines.arap_sr_solver.SRProblem.reduced_energy`) from ARAP's optimal
+        (:meth:`sshade.arap.SRProblem.reduced_energy`) from ARAP's optimal
         rotations (at most 2,000 sweeps: at 169k vertices they stop short of the
         minimum and overstate the gap, by ~0.3% on DeFAUST s00_p01), or, with ``R0``,
         ``E(Vd, R)`` after at most :data:`SR_GAP_SWEEPS` sweeps from ``R0`` (an upper

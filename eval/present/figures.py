@@ -16,7 +16,7 @@ from sshade.errors import SShaDeError
 from sshade.isometric import rigid_align
 
 __all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
-           "pose_transfer_figure", "safe_figure", "write_case_figure", "case_figure_path", "figures_options",
+           "pose_transfer_figure", "safe_figure", "write_case_figure", "case_figure_path",
            "ERROR_CMAP", "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure",
            "FIGURE_RECORDS"]
 
@@ -278,16 +278,6 @@ def safe_figure(name: str, draw, *args, **kwargs) -> Path | None:
         return None
     log.info("figure %s", path)
     return path
-
-
-def figures_options(cfg) -> tuple[bool, int]:
-    """``(enabled, max_cases)`` from ``cfg.figures``; a missing key means disabled."""
-    fig = cfg.get("figures", None) if cfg is not None else None
-    if not fig:
-        return False, 0
-    enabled = bool(fig.get("enabled", False))
-    max_cases = fig.get("max_cases", 4)
-    return enabled, int(4 if max_cases is None else max_cases)
 
 
 def case_figure_path(fig_dir, name) -> Path:

@@ -24,7 +24,7 @@ from sshade.mesh.io import atomic_write
 
 __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
            "cluster_positions", "cluster_means", "vertex_edge_error", "case_view",
-           "case_view_path", "write_case_view", "read_view", "view_options", "write_outputs", "read_outputs"]
+           "case_view_path", "write_case_view", "read_view", "write_outputs", "read_outputs"]
 
 log = logging.getLogger("eval")
 
@@ -259,18 +259,6 @@ def read_view(path) -> dict:
     if not isinstance(view, dict) or "meshes" not in view:
         raise ValueError(f"{path} is not a view file")
     return view
-
-
-def view_options(cfg) -> tuple[int, int]:
-    """``(view_cases, max_faces)`` from ``cfg.report`` (defaults :data:`DEFAULT_VIEW_CASES`
-    and :data:`DEFAULT_MAX_FACES`; ``report.enabled`` false: no view)."""
-    rep = cfg.get("report", None) if cfg is not None else None
-    if rep is None:
-        return DEFAULT_VIEW_CASES, DEFAULT_MAX_FACES
-    if not bool(rep.get("enabled", True)):
-        return 0, DEFAULT_MAX_FACES
-    n, mf = rep.get("view_cases", DEFAULT_VIEW_CASES), rep.get("max_faces", DEFAULT_MAX_FACES)
-    return int(0 if n is None else n), int(DEFAULT_MAX_FACES if mf is None else mf)
 
 
 def case_view_path(run_dir, name) -> Path:

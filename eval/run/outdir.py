@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval.run.runinfo import read_runinfo, write_runinfo
+from eval.run.spec import OutputOptions
 from sshade.errors import SShaDeError
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
@@ -408,9 +409,10 @@ _claimed: dict[str, OutputClaim] = {}  # folders this process claimed and still 
 _LOG_FORMAT = "[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"
 
 
-def _hydra_record(out: Path, cfg) -> None:
+def _hydra_record(out: Path, record) -> None:
     """``out/.hydra/{config,hydra,overrides}.yaml``, as Hydra writes them (Hydra itself
-    writes nothing: ``hydra.output_subdir`` is null, so nothing lands before the claim)."""
+    writes nothing: ``hydra.output_subdir`` is null, so nothing lands before the claim);
+    ``record`` is the run's config, unresolved (``config.yaml``; None: not written)."""
     from omegaconf import OmegaConf
     try:
         from hydra.core.hydra_config import HydraConfig
@@ -419,7 +421,8 @@ def _hydra_record(out: Path, cfg) -> None:
         hc = None
     d = out / ".hydra"
     d.mkdir(exist_ok=True)
-    OmegaConf.save(cfg, d / "config.yaml", resolve=False)
+    if record is not None:
+        OmegaConf.save(OmegaConf.create(dict(record)), d / "config.yaml", resolve=False)
     if hc is not None:
         OmegaConf.save(OmegaConf.create({"hydra": hc}), d / "hydra.yaml", resolve=False)
         OmegaConf.save(OmegaConf.create(list(hc.overrides.task)), d / "overrides.yaml")
@@ -436,18 +439,19 @@ def _end_runinfo(out: Path, status: str, error: str) -> None:
 
 
 @contextlib.contextmanager
-def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str = "eval.log"):
-    """Run one experiment in its claimed output folder ``cfg.out_dir``.
+def claimed_run(output: OutputOptions, *, record=None, kind: str = "eval", fresh: bool = False,
+                log_name: str = "eval.log"):
+    """Run one experiment in its claimed output folder ``output.out_dir``.
 
-    Claims the folder (:func:`claim_output_dir`, ``cfg.overwrite``; ``cfg.resume``
-    true: ``keep``, the earlier output of the same kind is continued), pins ``cfg.out_dir``
-    to the folder claimed (a fresh name may have gained a suffix), records Hydra's
-    config in ``.hydra/``, logs into ``out/eval.log``; at the end marks the folder done,
-    failed or interrupted (``run.json`` too) and releases it. A run that ends before writing
-    ``run.json`` (refused before any work: a bad config value, an unknown method, a
-    missing dataset) leaves nothing: what it wrote is removed, with the folder and its
-    parents when this run created them (:meth:`OutputClaim.finish`).
-    Nested use on a folder this process already claimed does nothing.
+    Claims the folder (:func:`claim_output_dir`, ``output.overwrite``; ``output.resume``
+    true: ``keep``, the earlier output of the same kind is continued), records the run's
+    config ``record`` (unresolved, its ``out_dir`` the folder claimed: a fresh name may have
+    gained a suffix) and Hydra's in ``.hydra/``, logs into ``out/eval.log``; at the end marks
+    the folder done, failed or interrupted (``run.json`` too) and releases it. A run that
+    ends before writing ``run.json`` (refused before any work: an unknown method, a missing
+    dataset) leaves nothing: what it wrote is removed, with the folder and its parents when
+    this run created them (:meth:`OutputClaim.finish`). Nested use on a folder this process
+    already claimed does nothing.
 
     Yields
     ------
@@ -459,23 +463,21 @@ def claimed_run(cfg, *, kind: str = "eval", fresh: bool = False, log_name: str =
     """
     import logging
 
-    from omegaconf import open_dict
-    target = os.path.abspath(Path(str(cfg.get("out_dir", "") or "")).expanduser()) if cfg.get("out_dir") else ""
+    out_dir = output.out_dir
+    target = os.path.abspath(Path(str(out_dir)).expanduser()) if out_dir else ""
     if target and target in _claimed:
         yield None
         return
     # resume=true (the evaluator's result store, eval/run/result_store.py): the earlier output is continued,
     # not replaced
-    claim = claim_output_dir(cfg.get("out_dir", ""), kind, overwrite=overwrite_flag(cfg.get("overwrite", False)),
-                             fresh=fresh, keep=overwrite_flag(cfg.get("resume", False)))
-    with open_dict(cfg):
-        cfg.out_dir = str(claim.path)
+    claim = claim_output_dir(out_dir, kind, overwrite=overwrite_flag(output.overwrite), fresh=fresh,
+                             keep=overwrite_flag(output.resume))
     _claimed[str(claim.path)] = claim
     handler = None
     status, error = "failed", ""
     try:
         logging.getLogger("eval").info(claim.message)
-        _hydra_record(claim.path, cfg)
+        _hydra_record(claim.path, None if record is None else {**record, "out_dir": str(claim.path)})
         handler = logging.FileHandler(claim.path / log_name)
         handler.setFormatter(logging.Formatter(_LOG_FORMAT))
         logging.getLogger().addHandler(handler)

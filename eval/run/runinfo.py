@@ -162,18 +162,22 @@ _PAPER_METHOD_OPTIONS = {
                              "of Alg. 1"),
     "warm_start": (False, "samplings 1..k-1 start from sampling 0's result (§3.3: independent)"),
     "protocol": ("paper", "ARAP run to the converged criterion, not the 1000-iteration move rule of §4.1"),
+    "energy": ("spokes_and_rims", "another low-resolution ARAP energy than the spokes and rims of §4.1"),
+    "transfer": ("triangle", "the corners' deformation gradients blended across each low-res triangle, not one "
+                             "frame per triangle (Alg. 1)"),
+    "average": ("uniform", "the samplings weighted per vertex, not the plain mean of §3.3"),
 }
 
 
-def departures(config: dict) -> list[str]:
+def departures(resolved: dict) -> list[str]:
     """Departures from the paper selected by a resolved config (docs/differences.md).
 
     Parameters
     ----------
-    config : the resolved config as plain containers. Read: ``methods`` and their
-        ``method.<name>`` sections (``gradient``, ``anchor``, ``warm_start``, ``protocol``), else the
-        ``sshade`` / ``arap`` sections; ``dataset.name`` with ``dataset.protocol`` and
-        ``dataset.n_targets`` (FAUST).
+    resolved : the resolved config as plain containers. Read: ``methods`` and their
+        ``method.<name>`` sections (``gradient``, ``anchor``, ``warm_start``, ``protocol``,
+        ``energy``), else the ``sshade`` / ``arap`` sections; ``dataset.name`` with
+        ``dataset.protocol`` and ``dataset.n_targets`` (FAUST).
 
     Returns
     -------
@@ -189,15 +193,15 @@ def departures(config: dict) -> list[str]:
     'arap.protocol=converged (paper'
     """
     out: list[str] = []
-    sections = config.get("method") or {}
-    names = [n for n in (config.get("methods") or []) if isinstance(n, str) and isinstance(sections.get(n), dict)]
+    sections = resolved.get("method") or {}
+    names = [n for n in (resolved.get("methods") or []) if isinstance(n, str) and isinstance(sections.get(n), dict)]
     where = {f"method.{n}": sections[n] for n in names} or {
-        "sshade": config.get("sshade") or {}, "arap": config.get("arap") or {}}
+        "sshade": resolved.get("sshade") or {}, "arap": resolved.get("arap") or {}}
     for prefix, sec in where.items():
         for key, (paper, why) in _PAPER_METHOD_OPTIONS.items():
             if key in sec and sec[key] is not None and sec[key] != paper:
                 out.append(f"{prefix}.{key}={_fmt(sec[key])} (paper: {_fmt(paper)}): {why}")
-    ds = config.get("dataset") or {}
+    ds = resolved.get("dataset") or {}
     if ds.get("name") == "faust":
         if ds.get("protocol", "paper") != "paper":
             out.append(f"dataset.protocol={ds['protocol']} (paper: paper): every pose with all 11 landmarks, "
@@ -212,13 +216,13 @@ def _fmt(v) -> str:
     return str(v).lower() if isinstance(v, bool) else str(v)
 
 
-def collect_runinfo(config: dict, *, seeds: dict | None = None, extra: dict | None = None) -> dict:
+def collect_runinfo(resolved: dict, *, seeds: dict | None = None, extra: dict | None = None) -> dict:
     """Provenance dict (JSON-serialisable).
 
     Parameters
     ----------
-    config : the resolved config as plain containers
-        (``OmegaConf.to_container(cfg, resolve=True)``).
+    resolved : the resolved config as plain containers (:meth:`eval.run.spec.EvalSpec.record`),
+        recorded as ``config``.
     seeds : seeds used, e.g. ``{"dataset": 0, "sshade": 0, "cases": {"s0_p1": 123}}``.
     extra : anything else to record (status, timings, output paths).
     """
@@ -226,8 +230,8 @@ def collect_runinfo(config: dict, *, seeds: dict | None = None, extra: dict | No
         "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "command": _command(),
         "cwd": os.getcwd(),
-        "config": config,
-        "departures": departures(config),
+        "config": resolved,
+        "departures": departures(resolved),
         "seeds": seeds or {},
         "git": git_info(),
         "python": sys.version.split()[0],

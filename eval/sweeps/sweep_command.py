@@ -20,8 +20,10 @@ import traceback
 from pathlib import Path
 
 from eval import app
+from eval.config_check import plain
 from eval.run.outdir import OutputDirError, claim_output_dir, claimed_run, overwrite_flag
 from eval.run.paths import abs_path
+from eval.run.spec import OutputOptions
 from eval.sweeps.files import (
     KEEP,
     MANIFEST,
@@ -189,7 +191,11 @@ def sweep_job(cfg) -> dict:
     t0 = time.perf_counter()
     claimed = False
     try:
-        with claimed_run(cfg):  # the job's folder (eval.run.outdir): new, or this job's earlier attempt
+        # the job's folder (eval.run.outdir): new, or this job's earlier attempt; the job's
+        # values are checked in it (app.run_experiment), a refusal recorded in its status.json
+        output = OutputOptions(out_dir=str(job_dir), overwrite=cfg.get("overwrite", False),
+                               resume=cfg.get("resume", False))
+        with claimed_run(output, record=plain(cfg, resolve=False)):
             claimed = True
             write_status(job_dir, status)
             res = app.run_experiment(cfg)

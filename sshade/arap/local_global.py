@@ -1,6 +1,8 @@
 """Handle-driven ARAP under one of two protocols (:func:`arap_deform`, :data:`PROTOCOLS`):
 SShaDe's low-res step (paper §3.3, §4.1: spokes-and-rims) and the full-resolution
-baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes and rims").
+baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes and rims"); with
+``energy="arap_sr"`` (:data:`DEFORM_ENERGIES`) ARAP with smooth rotations
+(:mod:`sshade.arap.smooth_rotations`) under the same two protocols.
 
 - ``"converged"`` (default): :func:`sshade.arap.solver.solve_arap`, stopped by
   :class:`sshade.arap.criterion.Criterion`;
@@ -21,13 +23,16 @@ from .criterion import DEFAULT_CRITERION, gradient_norm
 from .operators import ENERGIES, bbox_diag, build_operators
 from .result import ArapResult
 from .rigid import rigid_fit
+from .smooth_rotations import DEFAULT_ALPHA, SR_ENERGY, SRProblem, arap_sr_deform, solve_arap_sr
 from .solver import ArapSolver
 
-__all__ = ["arap_deform", "ArapDeformer", "iterate", "PROTOCOLS", "DEFAULT_MAX_ITER"]
+__all__ = ["arap_deform", "ArapDeformer", "iterate", "PROTOCOLS", "DEFAULT_MAX_ITER", "DEFORM_ENERGIES"]
 
 PROTOCOLS = ("converged", "paper")
 #: Iteration cap of each protocol when none is given (paper §4.1: 1000).
 DEFAULT_MAX_ITER = {"converged": 10000, "paper": 1000}
+#: The energies :func:`arap_deform` solves: :data:`sshade.arap.ENERGIES` and ARAP-SR's.
+DEFORM_ENERGIES = (*ENERGIES, SR_ENERGY)
 
 
 def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
@@ -64,15 +69,19 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
                 energy: str = "spokes_and_rims", tol: float = 1e-4, max_iter: int | None = None,
                 V0: np.ndarray | None = None, time_budget_s: float | None = None,
                 protocol: str = "converged", criterion=None, accelerate: str = "lbfgs",
-                anderson_m: int | None = None, R0: np.ndarray | None = None) -> ArapResult:
+                anderson_m: int | None = None, R0: np.ndarray | None = None,
+                alpha: float = DEFAULT_ALPHA) -> ArapResult:
     """Handle-driven ARAP deformation under one of the two protocols (:data:`PROTOCOLS`).
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions. F : (m, 3) int64 faces.
     handles : (h,) int64 constrained vertex indices. targets : (h, 3) float64 positions.
-    energy : ``"spokes"`` (ARAP, Sorkine & Alexa 2007) or ``"spokes_and_rims"``
-        (Elastic, Chao et al. 2010).
+    energy : ``"spokes"`` (ARAP, Sorkine & Alexa 2007), ``"spokes_and_rims"``
+        (Elastic, Chao et al. 2010) or ``"arap_sr"`` (ARAP with smooth rotations, Levi &
+        Gotsman 2015, Open3D's alpha: :func:`sshade.arap.smooth_rotations.solve_arap_sr`
+        under ``"converged"``, :func:`sshade.arap.smooth_rotations.arap_sr_deform` with the
+        move rule under ``"paper"``); :data:`DEFORM_ENERGIES`.
     tol : float, ``"paper"`` protocol: stop when the largest per-vertex move in one
         iteration is below ``tol * bbox_diag(V)``.
     max_iter : int or None, iteration cap (None: :data:`DEFAULT_MAX_ITER` of the
@@ -87,21 +96,26 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         ``"converged"`` protocol's stopping thresholds; under ``"paper"`` its ``gtol``
         tells a converged stop from a stalled one (``info["status"]``).
     accelerate : ``"lbfgs"`` (default), ``"anderson"`` or ``"none"``, the ``"converged"``
-        protocol's iteration (:func:`sshade.arap.solver.solve_arap`).
+        protocol's iteration (:func:`sshade.arap.solver.solve_arap`; ``"arap_sr"`` has no
+        L-BFGS: ``"lbfgs"`` runs its Anderson acceleration).
     anderson_m : int or None, its history window (None: 10 for L-BFGS, 5 for Anderson).
     R0 : (n, 3, 3) float64 or None, ``"converged"`` protocol only: start from the global
         step of these rotations (:func:`sshade.arap.solver.solve_arap`), not with ``V0``.
+    alpha : float >= 0, ``"arap_sr"`` only: the smoothness weight, times the surface area
+        of ``(V, F)`` (default :data:`sshade.arap.smooth_rotations.DEFAULT_ALPHA`, with
+        Open3D's valence scaling).
 
     Returns
     -------
     ArapResult (``info["protocol"]`` names the protocol, ``info["status"]`` how it stopped,
     ``info["gnorm"]`` the gradient norm at the result; the ``"converged"`` protocol adds
-    the final energy and histories, see :func:`sshade.arap.solver.solve_arap`).
+    the final energy and histories, see :func:`sshade.arap.solver.solve_arap`;
+    ``"arap_sr"`` adds ``energy`` and the rotations ``R``).
 
     Raises
     ------
     SShaDeError on an unknown energy or protocol, ``R0`` under the ``"paper"`` protocol
-    (inputs are assumed validated by the caller).
+    (inputs are assumed validated by the caller), a bad ``alpha`` (``"arap_sr"``).
 
     Examples
     --------
@@ -110,7 +124,7 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
         import igl
         res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1)
     """
-    return ArapDeformer(V, F, handles, energy=energy, protocol=protocol).deform(
+    return ArapDeformer(V, F, handles, energy=energy, protocol=protocol, alpha=alpha).deform(
         targets, tol=tol, max_iter=max_iter, V0=V0, time_budget_s=time_budget_s, criterion=criterion,
         accelerate=accelerate, anderson_m=anderson_m, R0=R0)
 
@@ -119,14 +133,16 @@ class ArapDeformer:
     """:func:`arap_deform` prepared once for a mesh and a handle set, then run for any
     targets (an animation's frames): the ``"converged"`` protocol keeps its
     :class:`sshade.arap.solver.ArapSolver` (operators, numbering, Cholesky factor), the
-    ``"paper"`` protocol libigl's ``ARAPData`` after ``arap_precomputation``. Each is made
-    on the first call whose handles do not move rigidly (a rigid motion needs neither).
+    ``"paper"`` protocol libigl's ``ARAPData`` after ``arap_precomputation``, ``"arap_sr"``
+    its :class:`sshade.arap.smooth_rotations.SRProblem`. Each is made on the first call
+    whose handles do not move rigidly (a rigid motion needs none).
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions. F : (m, 3) int64 faces. handles : (h,) int64
         constrained vertex indices (validated by the caller, as for :func:`arap_deform`).
-    energy : ``"spokes"`` or ``"spokes_and_rims"``. protocol : one of :data:`PROTOCOLS`.
+    energy : one of :data:`DEFORM_ENERGIES`. protocol : one of :data:`PROTOCOLS`.
+    alpha : float >= 0, ``"arap_sr"``'s smoothness weight (:func:`arap_deform`).
 
     Raises
     ------
@@ -141,22 +157,26 @@ class ArapDeformer:
     True
     """
 
-    def __init__(self, V, F, handles, *, energy: str = "spokes_and_rims", protocol: str = "converged"):
-        if energy not in ENERGIES:
-            raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
+    def __init__(self, V, F, handles, *, energy: str = "spokes_and_rims", protocol: str = "converged",
+                 alpha: float = DEFAULT_ALPHA):
+        if energy not in DEFORM_ENERGIES:
+            raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {DEFORM_ENERGIES}")
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
         self.V = np.ascontiguousarray(V, np.float64)
         self.F = np.ascontiguousarray(F, np.int64)
         self.handles = handles
-        self.energy, self.protocol = energy, protocol
+        self.energy, self.protocol, self.alpha = energy, protocol, alpha
         self.diag = bbox_diag(self.V)
-        self._solver = self._data = self._ops = None
+        self._solver = self._data = self._ops = self._sr = None
 
     @property
     def factorisation(self):
         """The converged protocol's factorised ``L_ff``
-        (:attr:`sshade.arap.solver.ArapSolver.factorisation`), None until a solve made it."""
+        (:attr:`sshade.arap.solver.ArapSolver.factorisation`; ``"arap_sr"``: its
+        :class:`SRProblem`'s, under either protocol), None until a solve made it."""
+        if self._sr is not None:
+            return self._sr.solver
         return None if self._solver is None else self._solver.factorisation
 
     def deform(self, targets, *, tol: float = 1e-4, max_iter: int | None = None, V0: np.ndarray | None = None,
@@ -166,8 +186,8 @@ class ArapDeformer:
         """The deformation for ``targets`` ((h, 3) float64); parameters and result as
         :func:`arap_deform`, and ``carry_history`` (``"converged"`` protocol: start the
         accelerator with the last solve's history, as
-        :meth:`sshade.arap.solver.ArapSolver.solve`). Raises SShaDeError for ``R0`` under the
-        ``"paper"`` protocol."""
+        :meth:`sshade.arap.solver.ArapSolver.solve`; not ``"arap_sr"``'s, which starts each
+        solve without history). Raises SShaDeError for ``R0`` under the ``"paper"`` protocol."""
         protocol, V, handles = self.protocol, self.V, self.handles
         if R0 is not None and protocol != "converged":
             raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
@@ -185,6 +205,9 @@ class ArapDeformer:
             return ArapResult(V=V @ R.T + t, iterations=0, converged=True, last_move=0.0,
                               precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol,
                                                                    "status": "rigid"})
+        if self.energy == SR_ENERGY:
+            return self._smooth_rotations(bc, tol=tol, max_iter=max_iter, V0=V0, R0=R0, time_budget_s=time_budget_s,
+                                          criterion=criterion, accelerate=accelerate, anderson_m=anderson_m)
         if protocol == "converged":
             if self._solver is None:
                 self._solver = ArapSolver(V, self.F, handles, energy=self.energy)
@@ -196,6 +219,32 @@ class ArapDeformer:
         U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()
         res = self._paper(bc, U, thresh=tol * self.diag, max_iter=max_iter, time_budget_s=time_budget_s)
         return self._classify(res, DEFAULT_CRITERION if criterion is None else criterion)
+
+    def _smooth_rotations(self, bc: np.ndarray, *, tol, max_iter, V0, R0, time_budget_s, criterion, accelerate,
+                          anderson_m) -> ArapResult:
+        """ARAP-SR for the targets ``bc`` (h, 3) under this deformer's protocol, options as
+        :meth:`deform`: :func:`solve_arap_sr` (``"lbfgs"`` runs its Anderson acceleration;
+        ``anderson_m`` None: its window) or :func:`arap_sr_deform` with the move rule
+        (``tol``). Its :class:`SRProblem` is made by the first call (its seconds in that
+        result's ``precompute_s``) and given each later call's targets."""
+        t0 = time.perf_counter()
+        if self._sr is None:
+            self._sr = SRProblem(self.V, self.F, self.handles, bc, self.alpha)
+        else:
+            self._sr.set_targets(bc)
+        setup_s = time.perf_counter() - t0
+        if self.protocol == "paper":
+            res = arap_sr_deform(self.V, self.F, self.handles, bc, alpha=self.alpha, stop="move", tol=tol,
+                                 criterion=criterion, max_iter=max_iter, time_budget_s=time_budget_s, V0=V0,
+                                 problem=self._sr)
+        else:
+            window = {} if anderson_m is None else {"anderson_m": anderson_m}
+            res = solve_arap_sr(self.V, self.F, self.handles, bc, alpha=self.alpha, criterion=criterion,
+                                max_iter=max_iter, accelerate="anderson" if accelerate == "lbfgs" else accelerate,
+                                U0=V0, R0=R0, time_budget_s=time_budget_s, problem=self._sr, **window)
+        res.precompute_s += setup_s
+        res.info["protocol"] = self.protocol
+        return res
 
     def _paper(self, bc: np.ndarray, U: np.ndarray, *, thresh: float, max_iter: int,
                time_budget_s: float | None) -> ArapResult:

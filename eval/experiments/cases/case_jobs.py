@@ -7,20 +7,23 @@ Example::
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 from eval import method_config as method_table
 from eval.experiments.cases.case_references import CaseReferences
-from eval.experiments.cases.pair import guard_options, run_and_store, run_pair
+from eval.experiments.cases.pair import run_and_store, run_pair
 from eval.metrics.meshes import CaseMeshes
 from eval.run.jsonsafe import json_safe
 from eval.run.outdir import resume_command
 from eval.run.paths import abs_path
 from eval.run.result_store import ResultStore
+from eval.run.spec import MethodSpec, ReferenceOptions
 from harness.jobs import in_worker, run_jobs, send, thread_limit
 from sshade.cores import available_cores, pool_size
 from sshade.errors import SShaDeError
 
-__all__ = ["AUTO_MIN_S", "check_jobs", "job_count", "describe", "run_case_jobs", "init_worker", "case_job",
+__all__ = ["AUTO_MIN_S", "WorkerSetup", "check_jobs", "job_count", "describe", "run_case_jobs", "init_worker",
+           "case_job",
            "lost_record"]
 
 log = logging.getLogger("eval")
@@ -85,19 +88,30 @@ class _Forward(logging.Handler):
             pass
 
 
-def init_worker(config: dict) -> None:
-    """A worker's setup (once, before its first case): the config (a resolved mapping),
-    its methods built from it (:func:`eval.method_config.make_methods`, plug-ins included), the
-    reference options, guard, result store, and its log records forwarded."""
-    from omegaconf import OmegaConf
+@dataclass(frozen=True)
+class WorkerSetup:
+    """What each worker of :func:`run_case_jobs` builds its state from (sent to it once):
+    the methods' entries (built again in the worker, plug-ins included), the reference
+    options, the guard (:meth:`eval.run.spec.GuardOptions.as_dict`), the run's folder and
+    ``store.meshes``."""
 
+    methods: tuple[MethodSpec, ...]
+    reference: ReferenceOptions
+    guard: dict
+    out_dir: str
+    store_meshes: bool = False
+
+
+def init_worker(setup: WorkerSetup) -> None:
+    """A worker's setup (once, before its first case): its methods built from ``setup``
+    (:func:`eval.method_config.make_methods`, plug-ins included), the reference options,
+    guard, result store, and its log records forwarded."""
     lg = logging.getLogger("eval")
     lg.handlers[:] = [_Forward()]
     lg.setLevel(logging.INFO)
     lg.propagate = False
-    cfg = OmegaConf.create(config)
-    _W.update(methods=method_table.make_methods(cfg), refs=CaseReferences(cfg), guard=guard_options(cfg),
-              store=ResultStore(abs_path(cfg.out_dir), meshes=bool((cfg.get("store") or {}).get("meshes", False))),
+    _W.update(methods=method_table.make_methods(setup.methods), refs=CaseReferences(setup.reference),
+              guard=dict(setup.guard), store=ResultStore(abs_path(setup.out_dir), meshes=setup.store_meshes),
               meshes=CaseMeshes())
 
 
@@ -190,7 +204,7 @@ class _Cases:
         return None
 
 
-def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case, names=None) -> float:
+def run_case_jobs(setup: WorkerSetup, tasks, *, jobs: int, on_pair, on_case, names=None) -> float:
     """Run ``tasks`` in ``jobs`` worker processes (:func:`harness.jobs.run_jobs`).
 
     A worker that dies (killed, out of memory, a plug-in's crash in compiled code) fails
@@ -201,13 +215,13 @@ def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case, names=Non
 
     Parameters
     ----------
-    config : the run's config as a resolved mapping (each worker builds its methods from it).
+    setup : what each worker builds its methods, references, guard and store from.
     tasks : list of ``(ci, case, pairs, ref_on, want_meshes)`` (:func:`case_job`'s
         arguments), in the order they are handed out (costliest first).
     on_pair : called ``on_pair(ci, mi, seconds, cost_s)`` as each pair ends (``cost_s``:
         the seconds less the method's one-off compilation; None for a pair lost with its worker).
     on_case : called ``on_case(ci, [(mi, record, U or None), ...])`` as each case ends.
-    names : the methods' names, by index (for a lost pair's row); default: built from ``config``.
+    names : the methods' names, by index (for a lost pair's row); default: built from ``setup``.
 
     Returns
     -------
@@ -222,11 +236,10 @@ def run_case_jobs(config: dict, tasks, *, jobs: int, on_pair, on_case, names=Non
     if in_worker():  # pragma: no cover - never nested
         raise SShaDeError("eval: jobs > 1 inside a worker")
     if names is None:
-        from omegaconf import OmegaConf
-        names = [m.name for m in method_table.make_methods(OmegaConf.create(config))]
-    again = resume_command(config.get("out_dir", ""))
+        names = [m.name for m in method_table.make_methods(setup.methods)]
+    again = resume_command(setup.out_dir)
     c = _Cases(tasks, list(names), jobs, on_pair, on_case)
-    run_jobs(case_job, c.tasks, workers=jobs, init=init_worker, init_args=(config,), on_message=c.message,
+    run_jobs(case_job, c.tasks, workers=jobs, init=init_worker, init_args=(setup,), on_message=c.message,
              on_result=c.result, on_lost=c.lost_job, what="evaluation",
              advice=f"the finished runs are stored; to continue: {again}")
     if c.lost:

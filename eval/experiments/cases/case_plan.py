@@ -21,6 +21,7 @@ from eval.experiments.cases.case_jobs import job_count
 from eval.metrics.reference import method_energy, reference_path, sr_alpha
 from eval.run.plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
+from eval.run.spec import DatasetSpec
 from eval.run.subset import baseline_selection
 from sshade.errors import SShaDeError
 
@@ -35,27 +36,28 @@ def _is_sr_energy(energy: str) -> bool:
     return sr_alpha(energy) is not None
 
 
-def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
-    """``(root, build)``: :func:`eval.datasets.dataset_root` of ``cfg``, with the plan
+def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_on) -> tuple[Path, dict | None]:
+    """``(root, build)``: :func:`eval.datasets.dataset_root` of dataset ``ds``, with the plan
     logged first when the dataset has a build ahead; ``build`` is that build's stage
     (:func:`eval.run.plan.build_stage`, with ``actual_s``) or None when nothing was built.
 
-    ``methods``: the built methods; ``refs``: the experiment's reference options (an
-    object with ``settings(in_base) -> {"on": bool, ...}``); ``runs_on(cases, base)``:
-    a predicate ``(ci, m) -> bool``, whether method ``m`` runs on case ``ci`` of ``cases``
-    given the baseline subset ``base`` (built once, so per-method rules are computed once).
+    ``jobs``: the run's ``jobs`` (None: ``auto``); ``methods``: the built methods;
+    ``refs``: the experiment's reference options (an object with ``settings(in_base) ->
+    {"on": bool, ...}``); ``runs_on(cases, base)``: a predicate ``(ci, m) -> bool``,
+    whether method ``m`` runs on case ``ci`` of ``cases`` given the baseline subset
+    ``base`` (built once, so per-method rules are computed once).
 
     Raises
     ------
     SShaDeError from the outlook or the preparation (before any run).
     """
-    out = datasets.dataset_outlook(cfg)
+    out = datasets.dataset_outlook(ds)
     if out is None:
-        return datasets.dataset_root(cfg), None
+        return datasets.dataset_root(ds), None
     build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"],
                         what="DeFAUST", root=_short(out["root"]))
     cases = [SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]]
-    base, _ = baseline_selection(cases, (cfg.get("dataset") or {}).get("baseline_cases", None)) if cases else (None, "")
+    base, _ = baseline_selection(cases, ds.baseline_cases) if cases else (None, "")
     names = [m.name for m in methods]
     runs = runs_on(cases, base)
     pairs = [(ci, mi) for ci in range(len(cases)) for mi, m in enumerate(methods) if runs(ci, m)]
@@ -67,13 +69,13 @@ def planned_root(cfg, methods, refs, runs_on) -> tuple[Path, dict | None]:
     cost = default_cost_model(methods)
     est = sum(cost.estimate(names[mi], cases[ci].n_vertices) for ci, mi in pairs)
     try:
-        jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in pairs}), estimate_s=est)
+        jobs = job_count(jobs, cases=len({ci for ci, _ in pairs}), estimate_s=est)
     except SShaDeError:
-        jobs = 1  # an invalid value is refused in the experiment's setup, before any work
+        jobs = 1  # an invalid value is refused at the door (eval.config_check), before any work
     plan = make_plan(cases, names, pairs, cost, build=build, references=need, jobs=jobs, is_sr_energy=_is_sr_energy)
     log.info(render_plan(plan))
     t0 = time.perf_counter()
-    root = datasets.dataset_root(cfg)
+    root = datasets.dataset_root(ds)
     build["actual_s"] = round(time.perf_counter() - t0, 3)
     return root, build
 

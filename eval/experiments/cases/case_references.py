@@ -13,10 +13,8 @@ from eval.metrics.reference import (
     sr_alpha,
     status_words,
 )
-from eval.run.paths import abs_path
-from eval.run.subset import baseline_selection, check_baseline_cases
-from harness.checks import config_number
-from sshade.errors import SShaDeError
+from eval.run.spec import ReferenceOptions
+from eval.run.subset import baseline_selection
 
 __all__ = ["CaseReferences"]
 
@@ -24,7 +22,7 @@ log = logging.getLogger("eval")
 
 
 class CaseReferences:
-    """The ``reference`` config section at work: for the cases it selects
+    """The ``reference`` section (``options``, checked) at work: for the cases it selects
     (``reference.cases``: ``baseline`` = the cases the full-resolution baselines run on,
     ``dataset.baseline_cases``; ``all``; ``none``; or a rule of its own, ``per_pose`` or
     an integer, as for ``dataset.baseline_cases``), the deep-converged full-resolution
@@ -34,20 +32,13 @@ class CaseReferences:
     ``ref_mean_pct``, ``ref_max_pct``, ``energy_gap`` columns (none outside the selection).
     The reference's own solve is not part of any method's ``time_s``."""
 
-    def __init__(self, cfg):
-        rc = cfg.get("reference", None) or {}
-        self.mode = str(rc.get("cases", "baseline")).strip()
-        if self.mode not in ("baseline", "all", "none"):
-            try:  # a case rule of its own, as dataset.baseline_cases (eval/run/subset.py)
-                self.rule = check_baseline_cases(self.mode)
-            except SShaDeError:
-                raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
-                                  f"got {self.mode!r}") from None
+    def __init__(self, options: ReferenceOptions):
+        self.mode = options.cases if options.cases in ("baseline", "all", "none") else "rule"
+        self.rule = options.cases  # a case rule of its own, as dataset.baseline_cases (eval/run/subset.py)
         self._sel = None  # (cases, indices) of the own rule, computed once per case list
-        self.cache = abs_path(rc.get("cache", "data/references"))
-        self.max_iter = config_number(cfg, "reference.max_iter", min=1, default=50000)
-        self.time_budget_s = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True,
-                                           default=3600)
+        self.cache = options.cache
+        self.max_iter = options.max_iter
+        self.time_budget_s = options.time_budget_s
         self.case = None
         self.refs: dict = {}
         self.ops: dict = {}

@@ -19,17 +19,16 @@ from pathlib import Path
 
 from eval import datasets
 from eval import method_config as method_table
-from eval.experiments.cases.case_jobs import describe, job_count, run_case_jobs
+from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, run_case_jobs
 from eval.experiments.cases.case_plan import plan_runs, planned_root
 from eval.experiments.cases.case_references import CaseReferences
-from eval.experiments.cases.pair import guard_options, run_and_store
-from eval.experiments.common import as_list, sshade_spec
+from eval.experiments.cases.pair import run_and_store
+from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
-from eval.method_config import method_spec
 from eval.metrics.meshes import CaseMeshes
 from eval.present.breakdown import write_breakdown
-from eval.present.figures import FIGURE_RECORDS, case_figure_path, figures_options, write_case_figure
-from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, view_options, write_case_view, write_outputs
+from eval.present.figures import FIGURE_RECORDS, case_figure_path, write_case_figure
+from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, write_case_view, write_outputs
 from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
 from eval.run.compared import compared_rows, read_compared
@@ -38,9 +37,9 @@ from eval.run.paths import abs_path
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
-from eval.run.subset import baseline_selection, check_baseline_cases, method_selections
+from eval.run.spec import EvalSpec, FigureOptions, OutputOptions, ReportOptions
+from eval.run.subset import baseline_selection, method_selections
 from eval.tables import compare, write_cases, write_tables
-from harness.checks import config_bool
 from harness.method_registry import method_meta
 from sshade.errors import SShaDeError
 
@@ -49,15 +48,15 @@ __all__ = ["run", "sshade_params"]
 log = logging.getLogger("eval")
 
 
-def sshade_params(cfg) -> dict:
+def sshade_params(spec: EvalSpec) -> dict:
     """The parameters the ``SShaDe`` (and ``SShaDe+refine``) rows run with: the method
     config ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`), the very
     definition :func:`eval.method_config.make_methods` builds SShaDe from."""
-    return sshade_spec(cfg)
+    return sshade_spec(spec)
 
 
-def run(cfg) -> dict:
-    """Run the evaluation described by ``cfg`` (an OmegaConf DictConfig).
+def run(spec: EvalSpec) -> dict:
+    """Run the evaluation described by ``spec`` (the checked config, :func:`eval.config_check.check_config`).
 
     Returns
     -------
@@ -70,10 +69,10 @@ def run(cfg) -> dict:
     unknown method, ...), before any method runs.
     """
     t_start = time.perf_counter()
-    s = _setup(cfg)
-    info = _start_runinfo(cfg, s)
-    rows = _run_cases(cfg, s)
-    return _finish(cfg, s, rows, info, t_start)
+    s = _setup(spec)
+    info = _start_runinfo(spec, s)
+    rows = _run_cases(spec, s)
+    return _finish(spec, s, rows, info, t_start)
 
 
 @dataclass
@@ -106,7 +105,7 @@ class _Setup:
     names: list[str]              # their names (row labels)
     specs: list[dict]             # each method's resolved definition (eval/run/result_store.py)
     codes: list[dict]             # each method's code identity (eval/run/code_identity.py)
-    guard: dict                   # timeout_s, handle_error_max_pct
+    guard: dict                   # timeout_s, handle_error_max_pct (eval.run.spec.GuardOptions)
     refs: CaseReferences          # the reference columns' options and cache
     root: Path                    # the dataset's root
     out_dir: Path
@@ -117,6 +116,7 @@ class _Setup:
     store: ResultStore
     resume: bool
     build: dict | None            # the dataset's build stage when one ran (plan.planned_root)
+    seed: object = None           # dataset.seed (the cases' identity in the store)
     compared: list = field(default_factory=list)  # rows of earlier runs (compare_with; eval/run/compared.py)
     meshes: CaseMeshes = field(default_factory=CaseMeshes)  # the metrics' kept rest / ground-truth meshes
     jobs: int = 1
@@ -136,93 +136,78 @@ class _Setup:
         return self.selection.runs_on(ci, m)
 
 
-def _method_specs(cfg, methods) -> list[dict]:
+def _method_specs(entries, methods) -> list[dict]:
     """Each method's resolved definition (what its result depends on; :mod:`eval.run.result_store`):
-    ours from :func:`eval.method_config.method_spec`, a plug-in's ``_target_`` mapping as given,
-    plus the method's ``key_extra`` mapping when it has one (``inputs``: what else its
-    rows depend on, e.g. the files :class:`eval.exchange.scored.ScoredResults` reads)."""
-    from omegaconf import OmegaConf
-    items = cfg.get("methods")
-    items = [n for n in items.replace(",", " ").split() if n] if isinstance(items, str) else as_list(items)
+    its entry's (:class:`eval.run.spec.MethodSpec`: ours as :func:`eval.config_check.method_definition`
+    resolves it, a plug-in's ``_target_`` mapping as given), plus the method's ``key_extra``
+    mapping when it has one (``inputs``: what else its rows depend on, e.g. the files
+    :class:`eval.exchange.scored.ScoredResults` reads)."""
     out = []
-    for it, m in zip(items, methods):
-        if OmegaConf.is_config(it) or isinstance(it, dict):
-            spec = OmegaConf.to_container(it, resolve=True) if OmegaConf.is_config(it) else dict(it)
-        else:
-            spec = method_spec(cfg, str(it))
-        out.append({"class": f"{type(m).__module__}.{type(m).__qualname__}", "name": m.name, **json_safe(spec)})
+    for e, m in zip(entries, methods):
+        out.append({"class": f"{type(m).__module__}.{type(m).__qualname__}", "name": m.name,
+                    **json_safe(dict(e.definition))})
         inputs = getattr(m, "key_extra", None)  # e.g. the digest of a scored results folder
         if isinstance(inputs, dict):
             out[-1]["inputs"] = json_safe(inputs)
     return out
 
 
-def _setup(cfg) -> _Setup:
+def _setup(spec: EvalSpec) -> _Setup:
     """Every method built and checked, the guard and reference options, the dataset's
     root (may build DeFAUST) and cases, the baseline subset, the result store (emptied
     unless ``resume``), before any method runs."""
-    methods = method_table.make_methods(cfg)  # every method's parameters are checked before any work
-    specs = _method_specs(cfg, methods)
+    methods = method_table.make_methods(spec.methods)  # every method's parameters are checked before any work
+    specs = _method_specs(spec.methods, methods)
     codes = [code_identity(m, sp) for m, sp in zip(methods, specs)]  # once each (eval/run/code_identity.py)
-    guard = guard_options(cfg)  # timeout_s, handle_error_max_pct
-    base_spec = (cfg.get("dataset") or {}).get("baseline_cases", None)
-    check_baseline_cases(base_spec)
-    refs = CaseReferences(cfg)  # config checked here too
-    resume = config_bool(cfg, "resume", default=False)
-    meshes = config_bool(cfg, "store.meshes", default=False)
+    ds = spec.dataset
+    refs = CaseReferences(spec.reference)
     # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first
     # (eval/experiments/cases/case_plan.py)
-    mc = cfg.get("method_cases")
-    root, build = planned_root(cfg, methods, refs, lambda cs, base: CaseSelection(
+    mc = spec.method_cases
+    root, build = planned_root(ds, spec.jobs, methods, refs, lambda cs, base: CaseSelection(
         base, method_selections(cs, mc, [x.name for x in methods])).runs_on)
-    out_dir = abs_path(cfg.out_dir)
-    ds = cfg.dataset
-    name = str(ds.get("name", "faust"))
-    cases = datasets.load_cases(name, root, **datasets.dataset_options(ds))
-    base, base_rule = baseline_selection(cases, base_spec)
+    out_dir = abs_path(spec.output.out_dir)
+    cases = datasets.load_cases(ds.name, root, **ds.loader)
+    base, base_rule = baseline_selection(cases, ds.baseline_cases)
     names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
-    own = method_selections(cases, cfg.get("method_cases"), names)
+    own = method_selections(cases, mc, names)
     log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
-    compared = _compared(cfg, cases, name, root, out_dir)  # read and checked before any method runs
-    store = ResultStore(out_dir, meshes=meshes)
+    compared = _compared(spec.output, cases, ds, root, out_dir)  # read and checked before any method runs
+    store = ResultStore(out_dir, meshes=spec.output.store_meshes)
     store.check_links()  # a link in runs/ would take a resume's records outside out_dir
-    if not resume:
+    if not spec.output.resume:
         n = store.clear()
         if n:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
-    return _Setup(methods=methods, names=names, specs=specs, codes=codes, guard=guard, refs=refs, root=root,
-                  out_dir=out_dir, name=name, cases=cases, selection=CaseSelection(base, own), base_rule=base_rule,
-                  store=store, resume=resume, build=build, compared=compared)
+    return _Setup(methods=methods, names=names, specs=specs, codes=codes, guard=spec.guard.as_dict(), refs=refs,
+                  root=root, out_dir=out_dir, name=ds.name, cases=cases, selection=CaseSelection(base, own),
+                  base_rule=base_rule, store=store, resume=spec.output.resume, build=build, seed=ds.seed,
+                  compared=compared)
 
 
-def _compared(cfg, cases, name: str, root: Path, out_dir: Path) -> list:
-    """The runs named by ``compare_with`` (a folder or a list of folders, relative to the
-    launch directory), read and checked against ``cases`` (:func:`eval.run.compared.read_compared`);
+def _compared(output: OutputOptions, cases, ds, root: Path, out_dir: Path) -> list:
+    """The runs named by ``compare_with`` (folders relative to the launch directory), read
+    and checked against ``cases`` of dataset ``ds`` (:func:`eval.run.compared.read_compared`);
     SShaDeError naming the folder when one is this run's own folder or cannot be compared."""
-    items = as_list(cfg.get("compare_with", None)) or []
     out = []
-    for it in items:
-        if not isinstance(it, str) or not it.strip():
-            raise SShaDeError(f"compare_with must be a list of run folders, got {it!r}")
+    for it in output.compare_with:
         folder = abs_path(it)
         if folder == out_dir:
             raise SShaDeError(f"compare_with: {folder} is this run's own folder; name earlier runs")
-        out.append(read_compared(folder, it, cases, dataset=name, root=root, seed=cfg.dataset.get("seed")))
+        out.append(read_compared(folder, it, cases, dataset=ds.name, root=root, seed=ds.seed))
         log.info("compare_with %s: %d record(s) of %s%s", it, len(out[-1].rows), ", ".join(out[-1].methods),
                  f"; no record of {len(out[-1].missing)} case(s)" if out[-1].missing else "")
     return out
 
 
-def _start_runinfo(cfg, s: _Setup) -> dict:
+def _start_runinfo(spec: EvalSpec, s: _Setup) -> dict:
     """``run.json`` with status ``running``: the resolved config, the seeds (dataset,
     SShaDe, each case's, the dataset's own, e.g. a DeFAUST build's), each method's source
     file with its sha256 and git state (:func:`eval.run.runinfo.method_sources`)."""
-    from omegaconf import OmegaConf
-
-    config = OmegaConf.to_container(cfg, resolve=True)
+    config = spec.record()
     config["dataset"]["root"] = str(s.root)
-    seeds = {"dataset": cfg.dataset.get("seed"), "sshade": cfg.get("sshade", {}).get("seed"),
+    seeds = {"dataset": s.seed, "sshade": (config.get("sshade") or {}).get("seed"),
              "cases": {c.name: getattr(c, "seed", None) for c in s.cases}}
     d = datasets.find_dataset(s.name)
     if d is not None and d.seeds is not None:
@@ -234,16 +219,16 @@ def _start_runinfo(cfg, s: _Setup) -> dict:
     return info
 
 
-def _pair_keys(cfg, s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
+def _pair_keys(s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     """The store keys (:func:`eval.run.result_store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options, and the
     identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`)."""
-    ident = case_identity(case, dataset=s.name, root=s.root, seed=cfg.dataset.get("seed"))
+    ident = case_identity(case, dataset=s.name, root=s.root, seed=s.seed)
     extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
     return [pair_key(spec, ident, extra, code) for spec, code in zip(s.specs, s.codes)]
 
 
-def _run_cases(cfg, s: _Setup) -> list[dict]:
+def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     """Every (case, method) run (:func:`eval.experiments.cases.pair.run_pair`) not already in
     the result store (``resume``; :mod:`eval.run.result_store`), each stored as soon as it finishes,
     with a progress bar weighted by each method's expected cost (:mod:`eval.run.progress`);
@@ -256,18 +241,18 @@ def _run_cases(cfg, s: _Setup) -> list[dict]:
 
     methods, names, cases = s.methods, s.names, s.cases
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
-    keys = {ci: _pair_keys(cfg, s, ci, c) for ci, c in enumerate(cases)}
+    keys = {ci: _pair_keys(s, ci, c) for ci, c in enumerate(cases)}
     cost = default_cost_model(methods)  # measured per-method priors (eval/run/progress.py)
     done = _restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
-    s.jobs = job_count(cfg.get("jobs", "auto"), cases=len({ci for ci, _ in todo}), estimate_s=sum(est.values()))
+    s.jobs = job_count(spec.jobs, cases=len({ci for ci, _ in todo}), estimate_s=sum(est.values()))
     s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (case_plan.py)
-    out = _CaseOutputs(cfg, s, plan, done)
+    out = _CaseOutputs(spec.figures, spec.report, s, plan, done)
     bar = weighted_bar(sum(est.values()), len(todo))
     with logging_redirect_tqdm(), bar:
         if s.jobs > 1:
-            _run_in_jobs(cfg, s, todo, keys, est, cost, bar, done, out)
+            _run_in_jobs(spec, s, todo, keys, est, cost, bar, done, out)
         else:
             for ci in range(len(cases)):
                 s.refs.start_case(ci, cases[ci], s.refs.covers(ci, cases, s.base))
@@ -310,12 +295,10 @@ def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
     return done
 
 
-def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
+def _run_in_jobs(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
     """``todo`` in ``s.jobs`` worker processes, whole cases each, the costliest first
     (:func:`eval.experiments.cases.case_jobs.run_case_jobs`); the cases without runs to do get
     their outputs (figures, views) here."""
-    from omegaconf import OmegaConf
-
     by_case: dict = {}
     for ci, mi in todo:
         by_case.setdefault(ci, []).append(mi)
@@ -337,9 +320,9 @@ def _run_in_jobs(cfg, s: _Setup, todo, keys, est, cost: CostModel, bar, done: di
         out.case_done(ci, {mi: U for mi, _, U in pairs})
 
     log.info("%d case(s) with runs to do in %d worker processes (%s)", len(tasks), s.jobs, describe(s.jobs))
-    config = OmegaConf.to_container(cfg, resolve=True)
-    s.refs.computed_s += run_case_jobs(config, tasks, jobs=s.jobs, on_pair=on_pair, on_case=on_case,
-                                       names=s.names)
+    setup = WorkerSetup(methods=spec.methods, reference=spec.reference, guard=s.guard, out_dir=str(s.out_dir),
+                        store_meshes=spec.output.store_meshes)
+    s.refs.computed_s += run_case_jobs(setup, tasks, jobs=s.jobs, on_pair=on_pair, on_case=on_case, names=s.names)
     for ci in range(len(s.cases)):
         if ci not in by_case:
             out.case_done(ci, {})
@@ -355,11 +338,10 @@ class _CaseOutputs:
     file removed (a resumed run keeps an earlier run's files), except a figure stamped
     with exactly the records this run restored (:meth:`_figure`)."""
 
-    def __init__(self, cfg, s: _Setup, plan: dict, done: dict):
+    def __init__(self, figures: FigureOptions, report: ReportOptions, s: _Setup, plan: dict, done: dict):
         self.s, self.plan, self.done = s, plan, done
-        fig_on, n_fig = figures_options(cfg)  # figures.enabled / max_cases; missing key = off
-        self.n_fig = n_fig if fig_on else 0
-        self.n_view, self.max_faces = view_options(cfg)  # report.view_cases (eval/present/meshview.py)
+        self.n_fig = figures.max_cases if figures.enabled else 0  # figures.enabled / max_cases
+        self.n_view, self.max_faces = report.views, report.max_faces  # report.view_cases, max_faces
         self.views, self.figures, self.notes = {}, {}, {}  # case index -> relative path; -> texts
         self._record()  # at once: an earlier run's record never speaks for this run
 
@@ -470,7 +452,7 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
     return rec, U
 
 
-def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
+def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
     """Tables (:func:`eval.tables.write_tables`; the title states the baseline rule) and
     breakdowns (:func:`eval.present.breakdown.write_breakdown`, with its figure when figures
     are enabled) from the stored rows, ``run.json`` with status ``done``, the Markdown
@@ -482,7 +464,7 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
     for r in rows:
         if isinstance(r.get("compile_s"), (int, float)):
             compile_s[r["method"]] = compile_s.get(r["method"], 0.0) + r["compile_s"]
-    exp = cfg.get("experiment", {}).get("name", s.name)
+    exp = spec.experiment.name or s.name
     title = f"{exp}: {len(s.cases)} {s.name} case(s)"
     if s.base is not None and any(not s.runs_on(ci, m) for ci in range(len(s.cases)) for m in s.methods
                                   if m.name not in s.own):
@@ -491,7 +473,7 @@ def _finish(cfg, s: _Setup, rows, info, t_start) -> dict:
     title += _side_by_side(rows) + _presets(rows)
     comp_rows = compared_rows(s.compared, s.names)
     paths = write_tables(df, s.out_dir, title=title, compared=pd.DataFrame(comp_rows) if comp_rows else None)
-    paths.update(write_breakdown(df, s.out_dir, figure=figures_options(cfg)[0]))
+    paths.update(write_breakdown(df, s.out_dir, figure=spec.figures.enabled))
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
     info.update(status="done", n_cases=len(s.cases), n_rows=len(df), n_errors=n_err,

@@ -15,6 +15,7 @@ from eval.metrics.measures import deformation_metrics, ground_truth_metrics
 from eval.metrics.meshes import CaseMeshes
 from eval.run.jsonsafe import json_safe
 from eval.run.result_store import cell_problem
+from eval.run.spec import GuardOptions
 from sshade.errors import SShaDeError
 from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
 
@@ -90,19 +91,19 @@ def _info_columns(info, taken) -> dict:
     return out
 
 
-def guard_options(cfg) -> dict:
+def guard_options(timeout_s=None, handle_error_max_pct=HANDLE_ERROR_MAX_PCT) -> GuardOptions:
     """``timeout_s`` (positive seconds or null: the limit of each method call,
     :func:`sshade.guard.run_method`) and ``handle_error_max_pct`` (positive, % of the
-    bounding-box diagonal, or null: the largest handle error of a successful run) of
-    the config, checked; SShaDeError naming the key."""
-    hmax = cfg.get("handle_error_max_pct", HANDLE_ERROR_MAX_PCT)
+    bounding-box diagonal, or null: the largest handle error of a successful run),
+    checked; SShaDeError naming the key."""
+    hmax = handle_error_max_pct
     if hmax is not None:
         try:
             hmax = check_timeout(hmax, "handle_error_max_pct")
         except SShaDeError:
             raise SShaDeError(f"handle_error_max_pct must be a positive number (% of the bounding-box diagonal) "
                               f"or null for no limit, got {hmax!r}") from None
-    return {"timeout_s": check_timeout(cfg.get("timeout_s", None), "timeout_s"), "handle_error_max_pct": hmax}
+    return GuardOptions(timeout_s=check_timeout(timeout_s, "timeout_s"), handle_error_max_pct=hmax)
 
 
 def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = None):

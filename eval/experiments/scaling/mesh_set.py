@@ -14,7 +14,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness.checks import config_value
 from sshade.errors import SShaDeError
 
 __all__ = ["MeshEntry", "mesh_entries", "cache_name"]
@@ -44,8 +43,8 @@ class MeshEntry:
         return "clean" if self.remesh else "hard"
 
 
-def mesh_entries(cfg) -> list[MeshEntry]:
-    """The benchmark's meshes from the config ``cfg`` (its ``scaling`` section), checked.
+def mesh_entries(values) -> list[MeshEntry]:
+    """The benchmark's meshes from the ``scaling`` section ``values`` (plain values), checked.
 
     Reads ``scaling.meshes`` (a list of ``{name, path, remesh}`` mappings) or, when it is
     null or absent, ``scaling.base_mesh`` with ``scaling.remesh`` (default true). Does not
@@ -62,11 +61,9 @@ def mesh_entries(cfg) -> list[MeshEntry]:
     ``_ . -``) or that repeats, a path that is not a non-empty string, a ``remesh`` that
     is not true/false; an empty list; neither ``meshes`` nor ``base_mesh`` set.
     """
-    from omegaconf import OmegaConf
-    raw = config_value(cfg, "scaling.meshes", None)
+    raw = values.get("meshes", None)
     if raw is None:
-        return [_base_entry(cfg)]
-    raw = OmegaConf.to_container(raw, resolve=True) if OmegaConf.is_config(raw) else raw
+        return [_base_entry(values)]
     if not isinstance(raw, list) or not raw:
         raise SShaDeError(f"scaling.meshes must be a non-empty list of {{name, path, remesh}} entries (or null), "
                           f"got {raw!r}")
@@ -79,13 +76,13 @@ def mesh_entries(cfg) -> list[MeshEntry]:
     return out
 
 
-def _base_entry(cfg) -> MeshEntry:
+def _base_entry(values) -> MeshEntry:
     """The one-mesh set of the older configs: ``scaling.base_mesh`` / ``scaling.remesh``."""
-    path = config_value(cfg, "scaling.base_mesh", None)
+    path = values.get("base_mesh", None)
     if not isinstance(path, str) or not path.strip():
         raise SShaDeError("scaling.meshes is null and scaling.base_mesh is not set (set scaling.base_mesh=PATH "
                           "or a list scaling.meshes)")
-    remesh = config_value(cfg, "scaling.remesh", True)
+    remesh = values.get("remesh", True)
     if not isinstance(remesh, bool):
         raise SShaDeError(f"scaling.remesh must be true or false, got {remesh!r}")
     return MeshEntry(Path(path).stem, path, remesh)

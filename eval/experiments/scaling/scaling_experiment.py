@@ -13,6 +13,7 @@ import logging
 import math
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,12 +25,12 @@ from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.scaling.mesh_set import MeshEntry, cache_name, mesh_entries
 from eval.experiments.scaling.probe import probe_first_call
 from eval.experiments.scaling.scaling_table import write_csv, write_markdown
-from eval.method_config import method_spec
 from eval.metrics.measures import deformation_metrics
 from eval.run.memory import PeakMemory, release_freed
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, write_runinfo
-from harness.checks import check_numbers, config_bool, config_int_list
+from eval.run.spec import EvalSpec
+from harness.checks import check_numbers, config_bool, config_int_list, config_value
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
 from sshade.errors import SShaDeError
@@ -40,7 +41,8 @@ from sshade.warmup import warm_fullres
 
 log = logging.getLogger(__name__)
 
-__all__ = ["build_mesh", "size_mesh", "run_scaling", "sshade_params", "elastic_params"]
+__all__ = ["ScalingOptions", "scaling_options", "build_mesh", "size_mesh", "run_scaling", "sshade_params",
+           "elastic_params"]
 
 
 def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = True,
@@ -76,57 +78,113 @@ def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = Tr
     return np.ascontiguousarray(m.vertex_matrix(), np.float64), np.ascontiguousarray(m.face_matrix(), np.int64)
 
 
-def sshade_params(cfg) -> dict:
+def sshade_params(spec: EvalSpec) -> dict:
     """Keyword parameters of :func:`sshade.deform` in this experiment: the method config
     ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`)."""
-    return sshade_spec(cfg)
+    return sshade_spec(spec)
 
 
-def elastic_params(cfg) -> dict:
+def elastic_params(spec: EvalSpec) -> dict:
     """Full-resolution Elastic's protocol and stopping rule in this experiment:
     ``protocol``, ``tol``, ``max_iter``, ``etol``, ``gtol`` of the method config
     ``method.Elastic`` (the ``arap`` section)."""
-    spec = method_spec(cfg, Elastic.name)
-    return {k: spec.get(k) for k in ("protocol", "tol", "max_iter", "etol", "gtol")}
+    d = spec.definition(Elastic.name)
+    return {k: d.get(k) for k in ("protocol", "tol", "max_iter", "etol", "gtol")}
 
 
-def run_scaling(cfg) -> dict:
-    """Run the scaling experiment described by ``cfg.scaling`` (see conf/experiment/scaling.yaml).
+@dataclass(frozen=True)
+class ScalingOptions:
+    """The ``scaling`` section, checked (conf/experiment/scaling.yaml): the meshes and
+    ``sizes``, the handle draw (``seed``, ``n_per_group``, ``region_radius``,
+    ``rotate_deg``, ``translate``), SShaDe's timed calls (``repeat``, ``first_call``,
+    ``first_call_timeout_s``), Elastic's (``elastic``, ``elastic_budget_s``,
+    ``elastic_max_vertices``: None for every size) and the mesh ``cache``."""
+
+    meshes: tuple[MeshEntry, ...]
+    sizes: tuple[int, ...]
+    seed: int = 0
+    n_per_group: int = 30
+    region_radius: float = 0.06
+    rotate_deg: float = 20.0
+    translate: float = 0.05
+    repeat: int = 1
+    first_call: bool = True
+    first_call_timeout_s: float = 600.0
+    elastic: bool = True
+    elastic_budget_s: float = 600.0
+    elastic_max_vertices: int | None = None
+    cache: str = "data/scaling"
+
+
+#: the numbers of the ``scaling`` section: (key, kind, min, allow_none)
+_NUMBERS = [("seed", int, 0, False), ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
+            ("rotate_deg", float, None, False), ("translate", float, None, False),
+            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
+            ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]
+
+
+def scaling_options(values) -> ScalingOptions:
+    """The ``scaling`` section (plain values) read and checked: its numbers, flags,
+    ``sizes`` and every ``meshes`` entry's keys
+    (:func:`eval.experiments.scaling.mesh_set.mesh_entries`), before any mesh is built;
+    SShaDeError naming the key."""
+    if values is None:
+        raise SShaDeError("no `scaling` section in the config; use experiment=scaling")
+    top = {"scaling": values}
+    check_numbers(top, "scaling", _NUMBERS)
+    sizes = config_int_list(top, "scaling.sizes", min=4)
+    first_call = config_bool(top, "scaling.first_call", default=True)
+    elastic = config_bool(top, "scaling.elastic", default=True)
+    meshes = mesh_entries(values)
+
+    def get(key, default):
+        return config_value(top, f"scaling.{key}", default)
+    emax = get("elastic_max_vertices", None)
+    return ScalingOptions(meshes=tuple(meshes), sizes=tuple(sizes or ()), seed=int(get("seed", 0)),
+                          n_per_group=int(get("n_per_group", 30)), region_radius=float(get("region_radius", 0.06)),
+                          rotate_deg=float(get("rotate_deg", 20.0)), translate=float(get("translate", 0.05)),
+                          repeat=int(get("repeat", 1)), first_call=first_call,
+                          first_call_timeout_s=float(get("first_call_timeout_s", 600)), elastic=elastic,
+                          elastic_budget_s=float(get("elastic_budget_s", 600)),
+                          elastic_max_vertices=None if emax is None else int(emax),
+                          cache=str(get("cache", None) or "data/scaling"))
+
+
+def run_scaling(spec: EvalSpec) -> dict:
+    """Run the scaling experiment of ``spec.experiment.options`` (:class:`ScalingOptions`,
+    see conf/experiment/scaling.yaml).
 
     Returns dict ``out_dir``, ``table`` (DataFrame, one row per (mesh, size)).
 
     Raises
     ------
-    SShaDeError on a bad ``scaling.meshes`` entry (:func:`mesh_entries`), a base mesh file
-    that is not there or a bad SShaDe parameter, before any mesh is built.
+    SShaDeError on a base mesh file that is not there or a bad SShaDe parameter, before
+    any mesh is built.
     """
     import pandas as pd
-    from omegaconf import OmegaConf
 
-    sc = cfg.scaling
-    out_dir = abs_path(cfg.out_dir)
-    entries = mesh_entries(cfg)
-    for e in entries:
+    sc = spec.experiment.options
+    out_dir = abs_path(spec.output.out_dir)
+    for e in sc.meshes:
         if not abs_path(e.path).is_file():
             raise SShaDeError(f"scaling: base mesh of {e.name!r} not found: {abs_path(e.path)} "
                               "(scaling.meshes[].path, or scaling.base_mesh=PATH with scaling.meshes=null)")
-    sp = check_params(**sshade_params(cfg))
-    ep = elastic_params(cfg)
-    cache = abs_path(sc.get("cache", None) or "data/scaling")  # built meshes, reused by later runs
-    config = OmegaConf.to_container(cfg, resolve=True)
-    info = collect_runinfo(config, seeds={"scaling": int(sc.seed), "sshade": int(sp["seed"])},
+    sp = check_params(**sshade_params(spec))
+    ep = elastic_params(spec)
+    cache = abs_path(sc.cache)  # built meshes, reused by later runs
+    info = collect_runinfo(spec.record(), seeds={"scaling": sc.seed, "sshade": int(sp["seed"])},
                            extra={"status": "running"})
     write_runinfo(out_dir / "run.json", info)
     rows = []
-    for e in entries:
+    for e in sc.meshes:
         base = _read_base(e)
-        for size in list(sc.sizes):
+        for size in sc.sizes:
             rows.append(_size_row(sc, e, base, int(size), cache, sp, ep))
             print(f"[scaling] {rows[-1]}", file=sys.stderr, flush=True)
             write_csv(out_dir / "table.csv", pd.DataFrame(rows))
     df = pd.DataFrame(rows)
     md = write_markdown(out_dir / "table.md", df)
-    info.update(status="done", n_rows=len(rows), meshes=[e.name for e in entries])
+    info.update(status="done", n_rows=len(rows), meshes=[e.name for e in sc.meshes])
     write_runinfo(out_dir / "run.json", info)
     print(md)
     return {"out_dir": out_dir, "table": df}
@@ -139,7 +197,7 @@ def _read_base(entry: MeshEntry):
     return path, V0, F0, axis_landmarks(V0)
 
 
-def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) -> dict:
+def _size_row(sc: ScalingOptions, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) -> dict:
     """One row of the table: the mesh of ``entry`` at ``size``, SShaDe warm (compilation
     apart), its first call in a fresh process (``scaling.first_call``) and full-res
     Elastic (``scaling.elastic``, up to ``scaling.elastic_max_vertices``)."""
@@ -149,17 +207,17 @@ def _size_row(sc, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) 
            "handles": len(h), "build_s": build_s}
     print(f"[scaling] {entry.name}, {len(V)} vertices: SShaDe ...", file=sys.stderr, flush=True)
     row["sshade_compile_s"] = warm_sshade(sp)  # outside the timings and the memory peak
-    repeat = int(sc.get("repeat", 1))
+    repeat = sc.repeat
     late_compile_s, srow = _sshade_row(V, F, h, T, sp, repeat)
     row["sshade_compile_s"] += late_compile_s
     row.update(srow)
-    if bool(sc.get("first_call", True)):
+    if sc.first_call:
         print(f"[scaling] {entry.name}, {len(V)} vertices: first call in a fresh process ...",
               file=sys.stderr, flush=True)
-        row.update(_first_call_row(mp, h, T, sp.as_dict(), repeat, float(sc.get("first_call_timeout_s", 600))))
-    emax = sc.get("elastic_max_vertices", None)
-    if bool(sc.elastic) and (emax is None or len(V) <= int(emax)):
-        row.update(_elastic_row(V, F, h, T, ep, float(sc.elastic_budget_s), row["sshade_total_s"]))
+        row.update(_first_call_row(mp, h, T, sp.as_dict(), repeat, sc.first_call_timeout_s))
+    emax = sc.elastic_max_vertices
+    if sc.elastic and (emax is None or len(V) <= emax):
+        row.update(_elastic_row(V, F, h, T, ep, sc.elastic_budget_s, row["sshade_total_s"]))
     return row
 
 
@@ -208,12 +266,11 @@ def size_mesh(entry: MeshEntry, V0: np.ndarray, F0: np.ndarray, size: int, cache
     return mp, V, F, time.perf_counter() - t0
 
 
-def _size_handles(sc, base, V):
+def _size_handles(sc: ScalingOptions, base, V):
     """The handles and targets at one size (module docstring's rule, ``scaling.seed``)."""
     lm, center, axes = base[3]
-    h, T, _, _ = axis_handles(V, lm, center, axes, n_per_group=int(sc.n_per_group),
-                              region_radius=float(sc.region_radius), rotate_deg=float(sc.rotate_deg),
-                              translate=float(sc.translate), seed=int(sc.seed))
+    h, T, _, _ = axis_handles(V, lm, center, axes, n_per_group=sc.n_per_group, region_radius=sc.region_radius,
+                              rotate_deg=sc.rotate_deg, translate=sc.translate, seed=sc.seed)
     return h, T
 
 
@@ -283,22 +340,4 @@ def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -
     return row
 
 
-#: the numbers of the ``scaling`` section: (key, kind, min, allow_none)
-_NUMBERS = [("seed", int, 0, False), ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
-            ("rotate_deg", float, None, False), ("translate", float, None, False),
-            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
-            ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]
-
-
-def check_scaling(cfg) -> None:
-    """The ``scaling`` section's numbers, flags, ``sizes`` and every ``meshes`` entry's
-    keys (:func:`eval.experiments.scaling.mesh_set.mesh_entries`), before any mesh is built;
-    SShaDeError naming the key."""
-    check_numbers(cfg, "scaling", _NUMBERS)
-    config_int_list(cfg, "scaling.sizes", min=4)
-    config_bool(cfg, "scaling.first_call", default=True)
-    config_bool(cfg, "scaling.elastic", default=True)
-    mesh_entries(cfg)
-
-
-register_experiment("scaling", run_scaling, check=check_scaling)
+register_experiment("scaling", run_scaling, options=scaling_options)

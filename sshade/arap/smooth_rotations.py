@@ -1,14 +1,14 @@
-"""Converged ARAP-SR (Levi & Gotsman 2015, "Smooth rotation enhanced as-rigid-as-possible
-mesh animation", IEEE TVCG): block-coordinate descent with an energy-verified stop.
+"""ARAP with smooth rotations, ARAP-SR (Levi & Gotsman 2015, "Smooth rotation enhanced
+as-rigid-as-possible mesh animation", IEEE TVCG): its energy and its two protocols.
 
     E(U, R) = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
               + alpha * A * sum_i c_i sum_{j in N(i)} || R_i - R_j ||_F^2
 
 ``w_ij`` libigl's cotangent weights, ``A`` the surface area, ``c_i = 1 / valence``
 (``alpha_scaling="valence"``, Open3D's alpha) or 1 (``"none"``; :data:`ALPHA_SCALINGS`).
-:func:`solve_arap_sr`: Gauss-Seidel local step over a vertex colouring (:class:`SRProblem`),
-global step, Anderson acceleration. Derivation, sources and what "converged" certifies:
-docs/methods.md, "Implementation notes: baselines/arap_sr_solver.py".
+:func:`solve_arap_sr` (converged: Gauss-Seidel local step over a vertex colouring,
+:class:`SRProblem`; Anderson), :func:`arap_sr_deform` (the paper protocol, §4.1). Derivation
+and sources: docs/methods.md, "Implementation notes: sshade/arap/smooth_rotations.py".
 """
 from __future__ import annotations
 
@@ -18,23 +18,24 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-from sshade.arap import (
-    DEFAULT_CRITERION,
-    Anderson,
-    ArapResult,
-    Criterion,
-    LaplacianSolver,
-    build_operators,
-    fit_rotations,
-    gradient_norm,
-    rigid_fit,
-)
-from sshade.errors import SShaDeError
-from sshade.mesh.validate import validate_handles
+from ..errors import SShaDeError
+from ..mesh.validate import validate_handles
+from .accelerate import Anderson
+from .criterion import DEFAULT_CRITERION, Criterion, gradient_norm
+from .linear import LaplacianSolver
+from .operators import bbox_diag, build_operators, fit_rotations
+from .result import ArapResult
+from .rigid import rigid_fit
 
-__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "SR_ACCELERATIONS", "ALPHA_SCALINGS",
-           "smoothness_weights"]
+__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "arap_sr_deform", "smoothness_weights", "SR_ENERGY",
+           "SR_ACCELERATIONS", "ALPHA_SCALINGS", "DEFAULT_ALPHA", "PAPER_STOPS"]
 
+#: the name of ARAP-SR's energy beside :data:`sshade.arap.ENERGIES` (its ``alpha`` given apart)
+SR_ENERGY = "arap_sr"
+#: ``alpha`` when none is given: Open3D's Smoothed ARAP default (with ``alpha_scaling="valence"``)
+DEFAULT_ALPHA = 0.01
+#: stopping rules of the paper protocol (:func:`arap_sr_deform`); the first is the default
+PAPER_STOPS = ("energy", "move")
 #: the iterations of :func:`solve_arap_sr`
 SR_ACCELERATIONS = ("anderson", "none")
 #: definitions of alpha (module docstring): the first is the default
@@ -184,7 +185,15 @@ class SRProblem:
         t0 = clock()
         self.solver = LaplacianSolver(ops.L[self.free][:, self.free], linear_solver) if len(self.h) else None
         self.factor_s = clock() - t0
-        self.Lfb_T = ops.L[self.free][:, self.h] @ self.T
+        self._L_fb = ops.L[self.free][:, self.h]
+        self.Lfb_T = self._L_fb @ self.T
+
+    def set_targets(self, targets) -> None:
+        """New ``targets`` ((h, 3) float64, one per handle) for the same handles: the
+        global step's right-hand side follows them; the operators and the factorised
+        ``L_ff`` are kept. Raises SShaDeError on targets of the wrong shape or not finite."""
+        self.h, self.T = validate_handles(self.ops.V, self.h, targets)
+        self.Lfb_T = self._L_fb @ self.T
 
     def smoothness(self, R: np.ndarray) -> float:
         """``sum_i c_i sum_{j in N(i)} ||R_i - R_j||_F^2`` (module docstring),
@@ -267,14 +276,14 @@ class SRProblem:
         return E, R
 
 
-def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling: str = "valence",
+def solve_arap_sr(V, F, handles, targets, *, alpha: float = DEFAULT_ALPHA, alpha_scaling: str = "valence",
                   criterion: Criterion | None = None,
                   max_iter: int = 10000, accelerate: str = "anderson", anderson_m: int = 5,
                   U0: np.ndarray | None = None, time_budget_s: float | None = None, jacobi: bool = False,
                   problem: SRProblem | None = None, linear_solver: str = "auto",
                   reset_on_reject: bool = False, R0: np.ndarray | None = None) -> ArapResult:
     """ARAP-SR run to a certified convergence (docs/methods.md, "Implementation notes:
-    baselines/arap_sr_solver.py").
+    sshade/arap/smooth_rotations.py").
 
     Parameters
     ----------
@@ -291,7 +300,7 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = 0.01, alpha_scaling:
         that fit's rotation; with ``R0``: the global step of ``R0``); handle rows are set
         to ``targets``.
     R0 : (n, 3, 3) float64 or None, start rotations (default: the rigid fit's), e.g.
-        :func:`baselines.coarse_start.coarse_start`'s; one sweep at ``U0`` follows.
+        those of a solve on a low-resolution remesh; one sweep at ``U0`` follows.
     time_budget_s : float or None, stop (status ``"time_budget"``) after this many seconds.
     jacobi : bool, Jacobi local step instead of Gauss-Seidel (measurements only: the
         energy may then increase; steps are not safeguarded).
@@ -390,3 +399,100 @@ def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opt
         hist.append(E)
     info.update(energy=E, gnorm=gn, rel_decrease=rel, energy_history=hist, move=move)
     return U, R, it, status
+
+
+def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
+                   alpha: float = DEFAULT_ALPHA, alpha_scaling: str = "valence", stop: str = "energy",
+                   tol: float = 1e-4, criterion=None, max_iter: int = 1000,
+                   time_budget_s: float | None = None, V0: np.ndarray | None = None,
+                   problem: SRProblem | None = None) -> ArapResult:
+    """ARAP with smooth rotations under the paper protocol (§4.1; the converged protocol
+    is :func:`solve_arap_sr`).
+
+    From ``V0`` (default the rigid fit of the handles), each iteration takes every rotation
+    at once from the previous ones (Jacobi local step, :meth:`SRProblem.sweep`), then
+    the global step, until ``stop`` fires: ``"energy"`` (default; the relative change of
+    ``E`` over one iteration below ``criterion.etol``) or ``"move"`` (the largest vertex move
+    of one iteration below ``tol * bbox_diag``). ``status`` is then ``"converged"`` when the
+    gradient norm is below ``criterion.gtol`` (and, for the energy stop, the relative
+    decrease below ``criterion.etol``), else ``"stalled"``; ``"max_iter"`` /
+    ``"time_budget"`` at the caps.
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64 (validated). handles : (h,) int64;
+    targets : (h, 3) float64.
+    alpha : float >= 0, rotation-smoothness weight (times the surface area A, so it is
+        scale-free); 0 gives plain ARAP (spokes).
+    alpha_scaling : one of :data:`ALPHA_SCALINGS` (default ``"valence"``: Open3D's alpha).
+    stop : one of :data:`PAPER_STOPS`. tol : float > 0, the move rule's tolerance
+        (fraction of the bounding-box diagonal).
+    criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
+    max_iter : int >= 0, iteration cap. time_budget_s : optional cap on iteration time.
+    V0 : (n, 3) float64 or None, start (handle rows set to ``targets``); the first local
+        step takes the rigid fit's rotation as every vertex's previous one.
+    problem : :class:`SRProblem` or None, prebuilt for the same inputs and ``alpha``.
+
+    Returns
+    -------
+    :class:`sshade.arap.ArapResult`; ``info``: ``status``, ``stop``, ``energy`` (``E``,
+    mesh units^2), ``gnorm``, ``rel_decrease``, ``alpha``, ``alpha_scaling``, ``R``
+    ((n, 3, 3) the final rotations).
+
+    Raises
+    ------
+    SShaDeError on a bad ``stop``, ``alpha``, ``alpha_scaling`` or ``V0``.
+
+    Examples
+    --------
+    Example::
+
+        res = arap_sr_deform(V, F, handles, targets, alpha=0.01)
+    """
+    if stop not in PAPER_STOPS:
+        raise SShaDeError(f"ARAP-SR: stop must be one of {PAPER_STOPS}, got {stop!r}")
+    crit = DEFAULT_CRITERION if criterion is None else criterion
+    V = np.ascontiguousarray(V, np.float64)
+    diag = bbox_diag(V)
+    R0, t0_ = rigid_fit(V[handles], targets)
+    info = {"alpha": alpha, "alpha_scaling": alpha_scaling, "stop": stop}
+    if float(np.abs(V[handles] @ R0.T + t0_ - targets).max()) <= 1e-12 * diag:
+        return ArapResult(V=V @ R0.T + t0_, iterations=0, converged=True, last_move=0.0, precompute_s=0.0,
+                          solve_s=0.0, info=dict(info, rigid=True, status="rigid"))
+    t0 = time.perf_counter()
+    pb = SRProblem(V, F, handles, targets, alpha, alpha_scaling=alpha_scaling) if problem is None else problem
+    t1 = time.perf_counter()
+    U = V @ R0.T + t0_ if V0 is None else np.array(V0, np.float64)
+    if U.shape != (pb.n, 3) or not np.isfinite(U).all():
+        raise SShaDeError(f"V0 must be a finite ({pb.n}, 3) array")
+    U[pb.h] = pb.T
+    R = pb.sweep(U, np.broadcast_to(R0, (pb.n, 3, 3)).copy(), jacobi=True)
+    U, R, it, move, rel, status = _paper_iterations(pb, U, R, stop, tol * diag, crit, max_iter, time_budget_s)
+    t2 = time.perf_counter()
+    gn = pb.gnorm(U, R)
+    if status == "rule":
+        status = "converged" if gn < crit.gtol and (stop == "move" or abs(rel) < crit.etol) else "stalled"
+    info.update(status=status, energy=pb.energy(U, R), gnorm=gn, rel_decrease=rel)
+    return ArapResult(V=U, iterations=it, converged=status == "converged", last_move=move, precompute_s=t1 - t0,
+                      solve_s=t2 - t1, info=dict(info, R=R))
+
+
+def _paper_iterations(pb: SRProblem, U, R, stop, thresh, crit, max_iter, time_budget_s):
+    """The iterations of :func:`arap_sr_deform` from ``(U, R)`` (``R`` the local step at
+    ``U``): ``(U, R, iterations, last_move, rel_decrease, status)`` with status ``"rule"``
+    (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
+    t0 = time.perf_counter()
+    E, it, move, rel = pb.energy(U, R), 0, np.inf, np.inf
+    while True:
+        if it >= max_iter:
+            return U, R, it, move, rel, "max_iter"
+        if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
+            return U, R, it, move, rel, "time_budget"
+        Un = pb.global_step(U, R)
+        R = pb.sweep(Un, R.copy(), jacobi=True)
+        En = pb.energy(Un, R)
+        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
+        rel = (E - En) / abs(En) if En != 0 else 0.0
+        U, E, it = Un, En, it + 1
+        if (move < thresh) if stop == "move" else (abs(rel) < crit.etol):
+            return U, R, it, move, rel, "rule"

@@ -1,0 +1,350 @@
+"""The types of the evaluator's Hydra config, registered with Hydra's ConfigStore.
+Floor 0 of eval/ (tests/test_layering.py); the checks a type cannot say: eval/config_check.py.
+
+``conf/config.yaml`` starts its defaults list with ``config_schema`` (:func:`top_schema`);
+each file of ``conf/dataset/`` and each experiment with a section of its own extends its
+schema (``schema/dataset/<name>``, ``schema/experiment/<kind>``), and each method file is
+typed by ``schema/method/<name>`` (:func:`method_schemas`). Composition then refuses a value
+of the wrong type or an unknown key with Hydra's own message (one ``error:`` line). A key
+that holds one of several types (``sshade.n_low``: ``auto`` or an integer) is ``Any`` here
+(OmegaConf has no unions) and is typed by :func:`eval.config_check.eval_spec`."""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, make_dataclass
+from typing import Any, Dict, List, Optional  # OmegaConf 2.3 reads typing's generics
+
+from omegaconf import MISSING, OmegaConf
+
+from harness.method_registry import builtin_methods, method_file, method_key
+
+__all__ = ["FiguresSchema", "ReportSchema", "ArapSchema", "ReferenceSchema", "ArapSRSchema", "SShaDeSchema",
+           "StoreSchema", "ExperimentSchema", "TopSchema", "DefaustBuildSchema", "DefaustSchema", "FaustSchema",
+           "ShapesSchema", "AnimationSchema", "PlaneSchema", "ConvergenceSShaDeSchema", "ConvergenceSchema",
+           "PoseTransferSchema", "ScalingSchema", "ScoreSchema", "ToscaSchema", "DATASET_SCHEMAS",
+           "SECTION_SCHEMAS", "method_schemas", "top_schema", "store_schemas"]
+
+
+# ----------------------------------------------------------------------------- conf/config.yaml
+@dataclass
+class FiguresSchema:
+    """``figures``: paper-style PNG renders of the first cases."""
+
+    enabled: bool = False
+    max_cases: Optional[int] = 4
+
+
+@dataclass
+class ReportSchema:
+    """``report``: the browser report and its 3D views."""
+
+    enabled: bool = True
+    view_cases: Optional[int] = 2
+    max_faces: int = 30000
+
+
+@dataclass
+class ArapSchema:
+    """``arap``: the full-resolution baselines' protocol and stopping rule."""
+
+    protocol: str = "converged"
+    tol: float = 1.0e-4
+    max_iter: Optional[int] = None
+    etol: Optional[float] = None
+    gtol: Optional[float] = None
+
+
+@dataclass
+class ReferenceSchema:
+    """``reference``: the deep-converged reference solutions. ``cases`` is a word or an
+    integer, ``time_budget_s`` seconds as written (an int stays an int in ``run.json``)."""
+
+    cases: Any = "baseline"
+    cache: str = "data/references"
+    max_iter: int = 50000
+    time_budget_s: Any = 3600
+
+
+@dataclass
+class ArapSRSchema:
+    """``arap_sr``: ARAP-SR's smoothness weight."""
+
+    alpha: float = 0.01
+    alpha_scaling: str = "valence"
+
+
+@dataclass
+class SShaDeSchema:
+    """``sshade``: SShaDe's parameters (``n_low``: ``auto`` or an integer). The optional
+    ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol`` are added with ``+sshade.KEY=``."""
+
+    n_low: Any = "auto"
+    n_samplings: int = 5
+    seed: int = 0
+    workers: Optional[int] = None
+    gradient: str = "normalized"
+    anchor: str = "projection"
+    energy: str = "spokes_and_rims"
+    transfer: str = "vertex"
+    average: str = "uniform"
+    warm_start: bool = True
+
+
+@dataclass
+class StoreSchema:
+    """``store``: what the result store keeps beside each row."""
+
+    meshes: bool = False
+
+
+@dataclass
+class ExperimentSchema:
+    """``experiment``: its name; ``kind`` (default ``cases``) is added by the experiments
+    that have one and checked against the registered kinds."""
+
+    name: str = MISSING
+
+
+@dataclass
+class TopSchema:
+    """The top level of ``conf/config.yaml``, in its order. ``methods`` (a list, or one
+    name), ``jobs`` (``auto`` or an integer) and ``compare_with`` (a folder or a list) hold
+    several types; ``method_cases`` is null or a mapping (a null typed mapping takes no
+    override in OmegaConf 2.3); ``dataset`` is typed by its own file's schema."""
+
+    methods: Any = MISSING
+    timeout_s: Optional[float] = None
+    handle_error_max_pct: Optional[float] = 1.0
+    figures: FiguresSchema = field(default_factory=FiguresSchema)
+    report: ReportSchema = field(default_factory=ReportSchema)
+    arap: ArapSchema = field(default_factory=ArapSchema)
+    method_cases: Any = None
+    jobs: Any = "auto"
+    reference: ReferenceSchema = field(default_factory=ReferenceSchema)
+    arap_sr: ArapSRSchema = field(default_factory=ArapSRSchema)
+    sshade: SShaDeSchema = field(default_factory=SShaDeSchema)
+    out_dir: str = MISSING
+    overwrite: bool = False
+    compare_with: Any = None
+    resume: bool = False
+    store: StoreSchema = field(default_factory=StoreSchema)
+    dataset: Any = None
+    experiment: ExperimentSchema = field(default_factory=ExperimentSchema)
+
+
+# ----------------------------------------------------------------------------- conf/dataset/
+@dataclass
+class DefaustBuildSchema:
+    """``dataset.build`` of DeFAUST: ``enabled`` is ``auto``, true or false."""
+
+    enabled: Any = "auto"
+    overrides: List[str] = field(default_factory=list)
+
+
+@dataclass
+class DefaustSchema:
+    """``conf/dataset/defaust.yaml`` (``subjects``: an integer or a list)."""
+
+    name: str = "defaust"
+    root: str = "data/defaust"
+    resolution: str = "high"
+    subjects: Any = None
+    limit: Optional[int] = None
+    baseline_cases: Any = "per_pose"
+    reference_cases: Any = "none"
+    build: DefaustBuildSchema = field(default_factory=DefaustBuildSchema)
+
+
+@dataclass
+class FaustSchema:
+    """``conf/dataset/faust.yaml`` (``subjects``, ``poses``: an integer or a list)."""
+
+    name: str = "faust"
+    root: Optional[str] = MISSING
+    protocol: str = "paper"
+    n_targets: int = 4
+    subjects: Any = None
+    poses: Any = None
+    n_per_landmark: int = 30
+    neighbourhood: int = 90
+    static_threshold: float = 0.02
+    seed: int = 0
+    limit: Optional[int] = None
+    baseline_cases: Any = None
+
+
+@dataclass
+class ShapesSchema:
+    """``conf/dataset/shapes.yaml``."""
+
+    name: str = "shapes"
+    root: str = "../shared/data/classic"
+    files: Optional[List[str]] = None
+    vertex_range: Optional[List[int]] = None
+    cache: Optional[str] = "data/shapes"
+    n_per_group: int = 30
+    region_radius: float = 0.06
+    rotate_deg: float = 20.0
+    translate: float = 0.05
+    seed: int = 0
+    limit: Optional[int] = None
+    baseline_cases: Any = None
+
+
+#: ``schema/dataset/<name>``: the schema each file of ``conf/dataset/`` extends.
+DATASET_SCHEMAS = {"defaust": DefaustSchema, "faust": FaustSchema, "shapes": ShapesSchema}
+
+
+# ----------------------------------------------------------------------------- conf/experiment/
+@dataclass
+class AnimationSchema:
+    """``animation`` (``subjects``, ``poses``: an integer or a list)."""
+
+    frames: int = 30
+    subjects: Any = None
+    poses: Any = None
+    baseline_cases: int = 1
+    anny_cache: Optional[str] = None
+
+
+@dataclass
+class PlaneSchema:
+    """``convergence.plane``: the lifted plane."""
+
+    lift: float = 0.2
+    n_target: int = 40000
+
+
+@dataclass
+class ConvergenceSShaDeSchema:
+    """``convergence.sshade``: the sampling counts (``k``: an integer or a list)."""
+
+    k: Any = None
+    refine_k: int = MISSING
+
+
+@dataclass
+class ConvergenceSchema:
+    """``convergence`` (``time_budget_s``: seconds as written)."""
+
+    cases: List[str] = field(default_factory=list)
+    plane: PlaneSchema = field(default_factory=PlaneSchema)
+    dataset_case: int = 0
+    energy: str = "spokes_and_rims"
+    time_budget_s: Any = 300
+    stop_pct: float = 0.001
+    target_pct: float = 0.05
+    sshade: ConvergenceSShaDeSchema = field(default_factory=ConvergenceSShaDeSchema)
+
+
+@dataclass
+class PoseTransferSchema:
+    """``pose_transfer`` (``subjects``, ``poses``: an integer or a list)."""
+
+    root: Optional[str] = MISSING
+    subjects: Any = None
+    poses: Any = None
+    align: bool = True
+
+
+@dataclass
+class ScalingSchema:
+    """``scaling`` (``meshes``: a list of ``{name, path, remesh}`` checked entry by entry;
+    the times in seconds as written)."""
+
+    meshes: Any = None
+    base_mesh: Optional[str] = None
+    remesh: bool = True
+    sizes: List[int] = field(default_factory=list)
+    seed: int = 0
+    n_per_group: int = 30
+    region_radius: float = 0.06
+    rotate_deg: float = 20.0
+    translate: float = 0.05
+    repeat: int = 3
+    first_call: bool = True
+    first_call_timeout_s: Any = 600
+    elastic: bool = True
+    elastic_budget_s: Any = 600
+    elastic_max_vertices: Optional[int] = None
+    cache: Optional[str] = "data/scaling"
+
+
+@dataclass
+class ScoreSchema:
+    """``score``: results computed elsewhere."""
+
+    results: Optional[str] = None
+    name: Optional[str] = None
+    times: Optional[str] = None
+
+
+@dataclass
+class ToscaSchema:
+    """``tosca`` (``classes``: a name or a list; ``poses``: an integer or a list)."""
+
+    root: Optional[str] = MISSING
+    min_vertices: Optional[int] = None
+    classes: Any = None
+    poses: Any = None
+
+
+#: ``schema/experiment/<section>``: the schema of the top-level section an experiment adds.
+SECTION_SCHEMAS = {"animation": AnimationSchema, "convergence": ConvergenceSchema,
+                   "pose_transfer": PoseTransferSchema, "scaling": ScalingSchema, "score": ScoreSchema,
+                   "tosca": ToscaSchema}
+
+
+# ----------------------------------------------------------------------------- conf/method/
+#: The keys of a method file the evaluator reads, typed; its parameters are the class's
+#: own (``Any``: any type, checked when it is built).
+_METHOD_TYPES = {"_target_": str, "order": int, "harness": Dict[str, Any]}
+
+
+def _method_schema(name: str) -> type:
+    """The schema of ``conf/method/<name>.yaml``: its keys and no other, those of
+    :data:`_METHOD_TYPES` typed, every parameter ``Any``."""
+    cls_name = "MethodSchema_" + re.sub(r"\W", "_", method_key(name))
+    spec = [(str(k), _METHOD_TYPES.get(str(k), Any), field(default=MISSING))
+            for k in OmegaConf.load(method_file(name)).keys()]
+    cls = make_dataclass(cls_name, spec, namespace={"__module__": __name__})
+    globals()[cls_name] = cls  # pickled by reference (a sweep's jobs get their config pickled)
+    return cls
+
+
+def method_schemas() -> dict[str, type]:
+    """``{name: schema}`` of every built-in method file (``schema/method/<name>``)."""
+    return {name: _method_schema(name) for name in builtin_methods()}
+
+
+_METHOD_SCHEMAS = method_schemas()
+
+
+# ----------------------------------------------------------------------------- the store
+def _open(node, opened=()):
+    """``node`` (a structured config) as an open mapping of its typed nodes: each key keeps
+    its type, and keys may be added; so do the sections named in ``opened``."""
+    return OmegaConf.create({k: _open(node[k]) if k in opened else node._get_node(k) for k in node})
+
+
+def top_schema():
+    """``config_schema``: :class:`TopSchema` as an open mapping of typed nodes
+    (:func:`_open`, its ``experiment`` too), so that an experiment may add a top-level
+    section of its own (typed by its own schema) while every key of ``conf/config.yaml``
+    keeps its type."""
+    return _open(OmegaConf.structured(TopSchema), opened=("experiment",))
+
+
+def store_schemas() -> None:
+    """Register every schema with Hydra's ConfigStore (again is harmless)."""
+    from hydra.core.config_store import ConfigStore
+    cs = ConfigStore.instance()
+    cs.store(name="config_schema", node=top_schema())
+    for name, cls in DATASET_SCHEMAS.items():
+        cs.store(group="schema/dataset", name=name, node=cls)
+    for name, cls in SECTION_SCHEMAS.items():
+        cs.store(group="schema/experiment", name=name, node=cls)
+    for name, cls in _METHOD_SCHEMAS.items():
+        cs.store(group="schema/method", name=name, node=cls)
+
+

@@ -1,0 +1,89 @@
+"""sshade/smooth_transfer.py: the transfer with the corners' deformation gradients
+blended (``transfer="vertex"``): exact for rigid motions and at the low-res vertices,
+the module's formula, and third-order accuracy on a smooth bending where Alg. 1's one
+frame per triangle is second order."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sshade.errors import SShaDeError
+from sshade.lrf import transfer
+from sshade.smooth_transfer import smooth_decode, triangle_jacobians, vertex_jacobians
+from tests.test_lrf import _grid, _on_coarse, _rotation
+
+
+def _bend(P, R=0.5):
+    """Roll the plane z = 0 onto a cylinder of radius R (an isometry), z along the normal."""
+    x, y, z = P.T
+    return np.c_[(R - z) * np.sin(x / R), y, R - (R - z) * np.cos(x / R)]
+
+
+def _bumpy(n, rng):
+    VN, FN = _grid(n)
+    VN[:, 2] = 0.1 * rng.normal(size=len(VN))
+    return VN, FN
+
+
+@pytest.mark.parametrize("projection", [True, False])
+def test_a_rigid_motion_is_reproduced_exactly(projection):
+    rng = np.random.default_rng(1)
+    VN, FN = _bumpy(4, rng)
+    V = rng.uniform(0, 1, size=(60, 3)) * [1, 1, 0.1]
+    tri, bary = _on_coarse(V, VN, FN)
+    R, t = _rotation(rng), rng.normal(size=3)
+    Vd = smooth_decode(V, tri, bary if projection else None, VN, VN @ R.T + t, FN)
+    np.testing.assert_allclose(Vd, V @ R.T + t, atol=1e-12)
+
+
+def test_a_vertex_at_a_low_res_vertex_goes_exactly_to_its_deformed_position():
+    rng = np.random.default_rng(2)
+    VN, FN = _bumpy(5, rng)
+    VD = VN + 0.2 * rng.normal(size=VN.shape)
+    tri, bary = _on_coarse(VN, VN, FN)
+    np.testing.assert_allclose(smooth_decode(VN, tri, bary, VN, VD, FN), VD, atol=1e-12)
+
+
+def test_the_kernel_computes_the_module_formula():
+    rng = np.random.default_rng(3)
+    VN, FN = _bumpy(5, rng)
+    VD = VN + 0.1 * rng.normal(size=VN.shape)
+    V = rng.uniform(0, 1, size=(80, 3)) * [1, 1, 0.2]
+    tri, bary = _on_coarse(V, VN, FN)
+    J, A = triangle_jacobians(VN, VD, FN)
+    Jv = np.zeros((len(VN), 3, 3))
+    for t, f in enumerate(FN):  # area-weighted mean at the corners, written out
+        for c in f:
+            Jv[c] += A[t] * J[t]
+    Jv /= np.bincount(FN.ravel(), weights=np.repeat(A, 3), minlength=len(VN))[:, None, None]
+    np.testing.assert_allclose(vertex_jacobians(VN, VD, FN), Jv, atol=1e-13)
+    C = FN[tri]
+    a, ad = np.einsum("ni,nij->nj", bary, VN[C]), np.einsum("ni,nij->nj", bary, VD[C])
+    Jbar = np.einsum("ni,nijk->njk", bary, Jv[C])
+    want = ad + np.einsum("njk,nk->nj", Jbar, V - a) + 0.5 * np.einsum("ni,nijk,nik->nj", bary, Jv[C],
+                                                                         a[:, None, :] - VN[C])
+    np.testing.assert_allclose(smooth_decode(V, tri, bary, VN, VD, FN), want, atol=1e-13)
+
+
+def test_on_a_smooth_bending_the_error_falls_faster_than_with_one_frame_per_triangle():
+    rng = np.random.default_rng(0)
+    V = rng.uniform(0.1, 0.9, size=(300, 3))
+    V[:, 2] = 0.0
+    err = {}
+    for n in (9, 17, 33):
+        VN, FN = _grid(n)
+        tri, bary = _on_coarse(V, VN, FN)
+        err[n] = (np.abs(transfer(V, tri, VN, _bend(VN), FN, bary=bary) - _bend(V)).max(),
+                  np.abs(smooth_decode(V, tri, bary, VN, _bend(VN), FN) - _bend(V)).max())
+    for coarse, fine in ((9, 17), (17, 33)):
+        assert err[coarse][0] / err[fine][0] < 4.5             # one frame per triangle: second order
+        assert err[coarse][1] / err[fine][1] > 7.0             # corners blended: third order
+    assert err[17][1] < err[17][0] / 50
+
+
+def test_a_degenerate_low_res_triangle_is_refused():
+    VN, FN = _grid(3)
+    VD = VN.copy()
+    VD[FN[0]] = VD[FN[0][0]]
+    with pytest.raises(SShaDeError, match="degenerate"):
+        vertex_jacobians(VN, VD, FN)

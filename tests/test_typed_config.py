@@ -1,0 +1,177 @@
+"""The evaluator's config typed at the door (eval/config_schema.py, eval/config_check.py):
+Hydra's composition refuses a wrong type and an unknown key with its own message (one
+``error:`` line, exit 2, no folder made), the schemas hold exactly the keys of the files
+they type (so the composed config, and ``run.json``, are those of the files), and below the
+commands no function of eval/ takes the raw config."""
+from __future__ import annotations
+
+import ast
+import dataclasses
+import subprocess
+import sys
+import typing
+
+import pytest
+from omegaconf import OmegaConf
+
+from eval.app import CONF_DIR
+from eval.config_schema import DATASET_SCHEMAS, SECTION_SCHEMAS, TopSchema, method_schemas
+from harness.command import config_error_types, hydra_message
+
+from .conftest import ROOT, subprocess_env
+
+CI = ["experiment=ci", "dataset.root=/nonexistent/faust_reg"]
+
+
+def _compose(overrides):
+    from hydra import compose, initialize_config_dir
+    with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+def _keys(cls) -> list[str]:
+    return [f.name for f in dataclasses.fields(cls)]
+
+
+def _sections(cls) -> dict:
+    """The fields of schema ``cls`` that are schemas themselves: name -> class."""
+    return {k: t for k, t in typing.get_type_hints(cls).items() if dataclasses.is_dataclass(t)}
+
+
+def _yaml(path) -> dict:
+    """A config file's own keys (its defaults list left out), unresolved."""
+    d = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+    d.pop("defaults", None)
+    return d
+
+
+# ----------------------------------------------------------------------------- refused by Hydra
+@pytest.mark.parametrize("overrides, words", [
+    (["sshade.n_samplings=abc"], ["sshade.n_samplings=abc", "could not be converted to Integer"]),
+    (["dataset.limit=abc"], ["dataset.limit=abc", "Integer"]),
+    (["timeout_s=soon"], ["timeout_s=soon", "Float"]),
+    (["resume=maybe"], ["resume=maybe", "not a valid bool"]),
+    (["method.ARAP.order=abc"], ["method.ARAP.order=abc", "Integer"]),
+    (["experiment=tosca", "tosca.min_vertices=abc"], ["tosca.min_vertices", "Integer"]),
+    (["experiment=scaling", "scaling.sizes=[1,x]"], ["scaling.sizes", "Integer"]),
+    (["dataset.nonsense=1"], ["dataset.nonsense", "not in 'FaustSchema'"]),
+    (["method.Elastic.nonsense=1"], ["method.Elastic.nonsense", "not in"]),
+    (["experiment=tosca", "tosca.nope=1"], ["tosca.nope", "not in 'ToscaSchema'"]),
+    (["report.nope=1"], ["report.nope", "not in 'ReportSchema'"]),
+])
+def test_composition_refuses_a_wrong_type_or_an_unknown_key(overrides, words):
+    with pytest.raises(config_error_types()) as e:
+        _compose([*CI, *overrides])
+    msg = hydra_message(e.value)
+    assert "\n" not in msg
+    for w in words:
+        assert w in msg, (w, msg)
+
+
+def test_the_command_line_refuses_them_in_one_line_before_any_work(tmp_path):
+    cases = [("sshade.n_samplings=abc", "could not be converted to Integer"),
+             ("dataset.nonsense=1", "Key 'nonsense' not in 'FaustSchema'")]
+    procs = [subprocess.Popen([sys.executable, "-m", "eval", *CI, f"out_dir={tmp_path / f'run{i}'}", ov],
+                              cwd=tmp_path, env=subprocess_env(), text=True, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE) for i, (ov, _) in enumerate(cases)]
+    for (ov, words), p in zip(cases, procs):
+        _, err = p.communicate(timeout=180)
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        assert p.returncode == 2, err[-2000:]
+        assert len(lines) == 1 and lines[0].startswith("error: ") and ov.split("=")[0] in lines[0], err[-2000:]
+        assert words in lines[0] and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []  # no run folder, no outputs/
+
+
+def test_every_kind_of_value_still_composes():
+    """The values the files and the docs use compose: one name for ``methods``, a plug-in
+    mapping, an integer ``jobs``, ``sshade.n_low`` as a number or ``auto``, the optional
+    ``sshade`` stopping keys, a ``compare_with`` folder."""
+    cfg = _compose([*CI, "methods=[SShaDe,{_target_:tests.plugin_example.MyMethod,name:Mine}]", "jobs=2",
+                    "sshade.n_low=500", "+sshade.tol=1e-3", "compare_with=results/defaust", "dataset.subjects=3",
+                    "method_cases={SShaDe: per_pose}"])
+    assert (cfg.jobs, cfg.sshade.n_low, cfg.sshade.tol, cfg.dataset.subjects) == (2, 500, 1e-3, 3)
+    assert _compose([*CI, "methods=ARAP"]).methods == "ARAP"
+
+
+# ----------------------------------------------------------------------------- the schemas and the files
+def test_the_top_schema_holds_the_keys_of_config_yaml_in_their_order():
+    top = _yaml(ROOT / "conf" / "config.yaml")
+    for k in ("hydra", "method"):  # Hydra's own; the method files, typed each by its own schema
+        top.pop(k, None)
+    assert _keys(TopSchema) == [*top, "dataset", "experiment"]
+    for k, cls in _sections(TopSchema).items():
+        if k in top:
+            assert _keys(cls) == list(top[k]), k
+
+
+def test_each_dataset_and_experiment_section_schema_holds_its_files_keys():
+    for name, cls in DATASET_SCHEMAS.items():
+        d = _yaml(ROOT / "conf" / "dataset" / f"{name}.yaml")
+        assert _keys(cls) == list(d), name
+        assert (ROOT / "conf" / "dataset" / f"{name}.yaml").read_text().count(f"/schema/dataset/{name}@_here_") == 1
+    for name, cls in SECTION_SCHEMAS.items():
+        d = _yaml(ROOT / "conf" / "experiment" / f"{name}.yaml")[name]
+        assert _keys(cls) == list(d), name
+        for k, sub in _sections(cls).items():
+            assert _keys(sub) == list(d[k]), f"{name}.{k}"
+
+
+def test_every_method_file_is_typed_by_its_schema():
+    schemas = method_schemas()
+    text = (ROOT / "conf" / "config.yaml").read_text()
+    for name, cls in schemas.items():
+        assert _keys(cls) == list(_yaml(ROOT / "conf" / "method" / f"{name}.yaml")), name
+        key = name.replace("+", "_")
+        assert f"- schema/method@method.{key}: {name}\n  - method@method.{key}: {name}\n" in text, name
+
+
+# ----------------------------------------------------------------------------- below the door
+#: The functions of eval/ that take the composed config: the commands and the door. Every
+#: other function takes the typed objects it reads (eval/run/spec.py).
+ENTRIES = {
+    "eval/app.py": {"run_experiment", "_pin_out_dir", "_refuse_fresh_resume", "_main"},
+    "eval/config_check.py": {"check_config", "check_values", "_check_dataset", "_check_sshade", "_output",
+                             "method_definition", "plain"},
+    # python -m eval.sweeps: a sweep job (Hydra's task function), the sweep folder, Hydra's callbacks
+    "eval/sweeps/sweep_command.py": {"sweep_job", "sweep_points", "start_manifest", "claim_sweep_dir",
+                                     "on_multirun_start", "on_multirun_end"},
+}
+CONFIG_NAMES = {"cfg", "config"}
+
+
+def _takes_the_config(fn) -> bool:
+    """Whether function ``fn`` (an AST node) has a parameter named ``cfg`` / ``config`` or
+    annotated with OmegaConf's ``DictConfig``."""
+    a = fn.args
+    params = [*a.posonlyargs, *a.args, *a.kwonlyargs, *(p for p in (a.vararg, a.kwarg) if p is not None)]
+    return any(p.arg in CONFIG_NAMES or (p.annotation is not None and "DictConfig" in ast.unparse(p.annotation))
+               for p in params)
+
+
+def _config_takers() -> dict[str, set[str]]:
+    """``{module path: names of its functions that take the config}`` over eval/."""
+    out: dict[str, set[str]] = {}
+    for path in sorted((ROOT / "eval").rglob("*.py")):
+        tree = ast.parse(path.read_text(), str(path))
+        names = {n.name for n in ast.walk(tree)
+                 if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and _takes_the_config(n)}
+        if names:
+            out[path.relative_to(ROOT).as_posix()] = names
+    return out
+
+
+def test_no_function_below_the_entries_takes_the_config():
+    found = _config_takers()
+    below = {m: sorted(names - ENTRIES.get(m, set())) for m, names in found.items() if names - ENTRIES.get(m, set())}
+    assert not below, f"functions below the entries that take the config (take its typed objects): {below}"
+    assert found == ENTRIES, "the entries changed: update ENTRIES (and keep the rest typed)"
+
+
+def test_the_walk_finds_a_config_parameter():
+    """The check itself: each way of taking the config is seen."""
+    for src in ("def f(cfg): pass", "def f(x, *, config=None): pass", "def f(c: DictConfig): pass",
+                "def f(c: 'omegaconf.DictConfig | None'): pass", "class A:\n    def m(self, cfg): pass"):
+        fn = next(n for n in ast.walk(ast.parse(src)) if isinstance(n, ast.FunctionDef))
+        assert _takes_the_config(fn), src
+    assert not _takes_the_config(ast.parse("def f(spec, section): pass").body[0])
