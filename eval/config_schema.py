@@ -7,7 +7,7 @@ schema (``schema/dataset/<name>``, ``schema/experiment/<kind>``), and each metho
 typed by ``schema/method/<name>`` (:func:`method_schemas`). Composition then refuses a value
 of the wrong type or an unknown key with Hydra's own message (one ``error:`` line). A key
 that holds one of several types (``sshade.n_low``: ``auto`` or an integer) is ``Any`` here
-(OmegaConf has no unions) and is typed by :func:`eval.config_check.eval_spec`."""
+(OmegaConf has no unions) and is typed at the door (:func:`eval.config_check.check_config`)."""
 from __future__ import annotations
 
 import re
@@ -312,12 +312,12 @@ def _method_schema(name: str) -> type:
     return cls
 
 
+_METHOD_SCHEMAS = {name: _method_schema(name) for name in builtin_methods()}
+
+
 def method_schemas() -> dict[str, type]:
     """``{name: schema}`` of every built-in method file (``schema/method/<name>``)."""
-    return {name: _method_schema(name) for name in builtin_methods()}
-
-
-_METHOD_SCHEMAS = method_schemas()
+    return dict(_METHOD_SCHEMAS)
 
 
 # ----------------------------------------------------------------------------- the store
