@@ -32,14 +32,6 @@ def _has_sshade() -> bool:
     return True
 
 
-@pytest.fixture(scope="module")
-def faust_root(shared_data):
-    root = shared_data / "faust_reg"
-    if not (root / "tr_reg_000.ply").is_file() or not list(root.glob("tr_reg_00[1-9].ply")):
-        pytest.skip(f"FAUST subject 0 rest + one pose not found in {root}")
-    return root
-
-
 def _run(args, cwd, timeout=300):
     env = subprocess_env()
     return subprocess.run([sys.executable, "-m", "eval", *_faust_first(args)], cwd=cwd, env=env, capture_output=True,

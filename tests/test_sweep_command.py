@@ -107,14 +107,6 @@ def test_launcher_and_experiment_configs():
 
 # ---------------------------------------------------------------- real sweeps (FAUST)
 
-@pytest.fixture(scope="module")
-def faust_root(shared_data):
-    root = shared_data / "faust_reg"
-    if not (root / "tr_reg_000.ply").is_file() or not list(root.glob("tr_reg_00[1-9].ply")):
-        pytest.skip(f"FAUST subject 0 rest + one pose not found in {root}")
-    return root
-
-
 def _sweep(faust_root, sweep_dir, launcher_args, timeout=240):
     env = subprocess_env()
     args = [sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1",
