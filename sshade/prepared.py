@@ -17,7 +17,7 @@ from concurrent.futures import Future, ThreadPoolExecutor, as_completed, wait
 import numpy as np
 
 from .arap import ArapDeformer
-from .averaging import combine, sampling_weights
+from .averaging import combine, proximity_weights, sampling_weights
 from .cores import pool_size
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
@@ -79,6 +79,8 @@ class _Sampling:
         self.bary = prep["bary"] if p.anchor == "projection" else None
         self.axis = frame_functions(self.VN, prep["F"])
         self.gradient, self.transfer, self.average = p.gradient, p.transfer, p.average
+        self.proximity = (proximity_weights(V, prep["tri"], self.bary, self.VN, prep["F"])
+                          if p.average == "proximity" else None)
         if p.transfer == "triangle":
             self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, p.gradient, self.bary)
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
@@ -143,6 +145,8 @@ class _Sampling:
     def weights(self, rows=None) -> np.ndarray | None:
         """The last solve's averaging weights at ``rows`` ((r,) float64), or None for the
         uniform mean (:func:`sshade.averaging.sampling_weights`)."""
+        if self.proximity is not None:  # known before the targets: made once, in __init__
+            return self.proximity if rows is None else self.proximity[rows]
         idx = slice(0, len(self.V)) if rows is None else rows
         bary = None if self.bary is None else self.bary[idx]
         return sampling_weights(self.average, self.V[idx], self.prep["tri"][idx], bary, self.VN, self.low,
