@@ -308,5 +308,5 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
         V_S = rigid_align(V_S, V_M)
     out, info = correspondence_transfer(V_M, F, V_S, V_Mprime, n_low=n_low, n_samplings=n_samplings, seed=seed,
                                         gradient=gradient, workers=workers, anchor=anchor,
-                                   transfer=transfer, average=average)
+                                        transfer=transfer, average=average)
     return (out, info) if return_info else out

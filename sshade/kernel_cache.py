@@ -31,13 +31,15 @@ from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
 from .mesh.halfedge import boundary_loops, halfedges, vertex_fan_count, vertex_normals
 from .mesh.validate import validate_mesh
 from .projection import project_to_fans
+from .smooth_transfer import smooth_decode
 
 __all__ = ["KERNEL_MODULES", "GROUPS", "COLD_COMPILE_S", "kernel_dispatchers", "cache_folder", "cold_kernels",
            "notice", "compile_kernels"]
 
 #: The modules whose numba kernels one SShaDe call compiles.
 KERNEL_MODULES = ("sshade.mesh.halfedge", "sshade.mesh.geodesic", "sshade.mesh.validate", "sshade.closed_ball",
-                  "sshade.projection", "sshade.lrf", "sshade.arap.kernels", "sshade.arap.solver_kernels")
+                  "sshade.projection", "sshade.lrf", "sshade.smooth_transfer", "sshade.arap.kernels",
+                  "sshade.arap.solver_kernels")
 #: Seconds a cold first call of SShaDe spends compiling on 2 cores, kernels filled on two
 #: processes (measured by benchmarks/cold_start.py; results/cold_start/table.md); the notice's estimate.
 COLD_COMPILE_S = 15
@@ -144,6 +146,7 @@ def _warm_topology() -> None:
     for bary in (None, np.full((4, 3), 1 / 3)):
         decode_with_frames(L, np.zeros((4, 3)), np.arange(4), V, F, bary=bary)
         encode(V, np.arange(4), V, F, frame_functions(V, F), "normalized", bary)
+        smooth_decode(V, np.arange(4), bary, V, V, F)
 
 
 #: The kernels in two halves of about equal compile time: name -> (warm function, kernels
@@ -157,7 +160,7 @@ GROUPS = {
     "topology and transfer": (_warm_topology, (
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
         "sshade.closed_ball.closed_ball", "sshade.closed_ball.closed_ball_local", "sshade.closed_ball.vertex_faces",
-        "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel")),
+        "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel")),
 }
 
 
