@@ -43,6 +43,7 @@ HELP = {
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
     "benchmarks/tosca_transfer_factors.py": ["usage:", "--classes"],
     "benchmarks/sshade_variants.py": ["usage:", "--energy", "--protocol"],
+    "benchmarks/config_flow.py": ["usage:", "--methods"],
     "benchmarks/frames.py": ["usage:", "--frames"],
     "benchmarks/cold_start.py": ["usage:", "--before"],
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
