@@ -8,7 +8,7 @@ ones), Gauss-Seidel over a vertex colouring, Gauss-Seidel with Anderson on the j
 
 Columns: iterations (global solves), local sweeps, status, final energy, the largest
 energy increase between accepted states (> 0: the energy went up), rejected Anderson
-candidates, seconds. Measured rows: results/arap_sr/local_step.md.
+candidates, seconds. Measured rows: benchmarks/records/arap_sr_local_step.md.
 """
 import argparse
 import time

@@ -1,5 +1,6 @@
 """Every percentage that docs/reproduction.md, docs/methods.md and docs/protocols.md attach
-to a committed results folder is in that folder's tables: a sentence (or table row) that
+to a committed results folder (or a benchmark's record under benchmarks/records/) is in
+that folder's tables: a sentence (or table row) that
 names ``results/...`` may quote a percentage only when one of the named folder's tables (its
 ``*.md``, ``table*.csv``, ``sweep_table*.csv``; a named file: that file) holds a number
 that rounds to it. The paper's own figures (``paper`` within the 40 characters before
@@ -15,7 +16,7 @@ from tests.conftest import ROOT
 
 DOCS = ("reproduction.md", "methods.md", "protocols.md")
 PERCENT = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s?%")
-RESULTS = re.compile(r"(results/[\w./-]*[\w/])")
+RESULTS = re.compile(r"((?:results|benchmarks/records)/[\w./-]*[\w/])")
 SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`(*])|\n(?=\|)")  #: a sentence, or a table row
 OWN_SOURCE = re.compile(r"\btests/\w+\.py|\bbenchmarks/\w+\.py|not kept in a results file")
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?(?:[eE]-?\d+)?")
@@ -70,6 +71,6 @@ def test_every_percentage_attached_to_a_results_folder_is_in_it(doc):
 
 def test_an_edited_number_is_caught():
     text = (ROOT / "docs" / "reproduction.md").read_text()
-    quote = "1.2% of the diagonal from the minimiser"  # results/arap_sr/faust_s0_p1.md: Ref mean 1.208
+    quote = "1.2% of the diagonal from the minimiser"  # benchmarks/records/arap_sr_faust_s0_p1.md: Ref mean 1.208
     assert quote in text, "reproduction.md no longer quotes the move rule's distance beside its results file"
     assert unbacked(text) == [] and unbacked(text.replace(quote, "9.7% of the diagonal from the minimiser"))
