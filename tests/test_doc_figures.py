@@ -1,12 +1,22 @@
 """Every percentage that docs/reproduction.md, docs/methods.md and docs/protocols.md attach
 to a committed results folder (or a benchmark's record under benchmarks/records/) is in
-that folder's tables: a sentence (or table row) that
-names ``results/...`` may quote a percentage only when one of the named folder's tables (its
-``*.md``, ``table*.csv``, ``sweep_table*.csv``; a named file: that file) holds a number
-that rounds to it. The paper's own figures (``paper`` within the 40 characters before
-the number) are exempt. An edited number fails (tested)."""
+that folder's tables, in the row and column it names.
+
+A paragraph attaches its percentages to the folders it names (``results/...``), or, naming
+none and not opening with the script it quotes, to the folders named earlier in its
+section (a ``#`` heading starts a section). A percentage must round-match a cell of
+those folders' tables (their ``*.md``, ``table*.csv``, ``sweep_table*.csv``; a named file:
+that file); where its sentence names a method before it (ARAP, Elastic, ARAP-SR,
+Implicit-ARAP, SShaDe), a cell of that method's rows; where it names a measure (volume,
+area, EL, GT mean, handle) just before the number, a cell of that measure's column. A doc
+table's row that starts with a method is checked cell by cell the same way (columns
+without ``%`` and those headed ``Paper`` aside). The paper's own
+figures (``paper`` within the 40 characters before the number) are exempt, and so is a
+sentence that gives its own source. An edited number fails (tested)."""
 from __future__ import annotations
 
+import csv
+import io
 import re
 from pathlib import Path
 
@@ -18,59 +28,150 @@ DOCS = ("reproduction.md", "methods.md", "protocols.md")
 PERCENT = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s?%")
 RESULTS = re.compile(r"((?:results|benchmarks/records)/[\w./-]*[\w/])")
 SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`(*])|\n(?=\|)")  #: a sentence, or a table row
-OWN_SOURCE = re.compile(r"\btests/\w+\.py|\bbenchmarks/\w+\.py|not kept in a results file")
+SCRIPT = re.compile(r"\btests/\w+\.py|\bbenchmarks/\w+\.py")
+OWN_SOURCE = re.compile(SCRIPT.pattern + "|not kept in a results file")
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?(?:[eE]-?\d+)?")
+METHOD = re.compile(r"(?<![\w-])(Implicit-ARAP|ARAP-SR|ARAP|Elastic|SShaDe)(?![\w-])")
+#: a measure as the docs name it -> the column names that hold it in the results' tables
+MEASURES = {"volume": ("Volume (%)", "volume_err_pct"), "area": ("Area (%)", "area_err_pct"),
+            "EL": ("EL (%)", "edge_err_pct"), "GT mean": ("GT mean (%)", "gt_vertex_mean_pct"),
+            "handle": ("Handle (%)", "handle_err_pct")}
+MEASURE = re.compile(r"\b(?:(?i:volume|area|handle)|EL|GT mean)\b")
+NEAR = 25  #: a measure names the number's column when named at most this many characters before it
 
 
-def _tables(target: Path) -> list[Path]:
+def _files(target: Path) -> list[Path]:
     if target.is_file():
         return [target]
     return sorted(p for p in target.rglob("*") if p.is_file() and "runs" not in p.relative_to(target).parts
                   and (p.suffix == ".md" or p.name.startswith(("table", "sweep_table")) and p.suffix == ".csv"))
 
 
-def _numbers(targets) -> list[float]:
+def _rows(p: Path):
+    """``(header, row)`` pairs of the tables in ``p`` (markdown pipe tables or a CSV file);
+    a line of a markdown file outside any table is one row of one cell, with no header."""
+    text = p.read_text(errors="replace")
+    if p.suffix == ".csv":
+        rows = list(csv.reader(io.StringIO(text)))
+        return [(rows[0], r) for r in rows[1:]] if rows else []
+    out, header = [], None
+    for line in text.splitlines():
+        if not line.startswith("|"):
+            header = None
+            out.append(([""], [line]))
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if header is None:
+            header = cells
+        elif not all(set(c) <= set("-: ") for c in cells):
+            out.append((header, cells))
+    return out
+
+
+def _cells(targets, method: str | None, measure: str | None) -> list[float]:
+    """The numbers of the targets' table cells in ``method``'s rows (a row with a cell
+    equal to it, or a column headed with it) and ``measure``'s column; ``None``: any."""
+    cols = MEASURES.get(measure.lower() if measure and measure.lower() in MEASURES else measure, ())
     out = []
     for t in targets:
-        for p in _tables(t):
-            out += [float(m.group(0)) for m in NUMBER.finditer(p.read_text(errors="replace"))]
+        for p in _files(t):
+            for header, row in _rows(p):
+                in_row = method is None or method in row
+                for h, cell in zip(header, row):
+                    if method is not None and not (in_row or method in METHOD.findall(h)):
+                        continue
+                    if measure is not None and not any(h == c or h.endswith(" " + c) for c in cols):
+                        continue
+                    out += [float(m.group(0)) for m in NUMBER.finditer(cell)]
     return out
+
+
+def _backed(s: str, targets, method, measure) -> bool:
+    """``s`` (a number as written) rounds from a cell of the targets, in the named row and
+    column where the tables have them (each restriction dropped where it leaves no cell)."""
+    dec = len(s.split(".")[1]) if "." in s else 0
+    for key in ((method, measure), (method, None), (None, measure), (None, None)):
+        values = _cells(targets, *key)
+        if values:
+            return any(abs(v - float(s)) <= 0.5 * 10 ** -dec + 1e-12 for v in values)
+    return False
+
+
+def _last(pattern: re.Pattern, text: str) -> str | None:
+    found = pattern.findall(text)
+    return found[-1] if found else None
+
+
+def _table_row(sentence: str, header: list[str] | None, targets) -> list[str]:
+    """The unbacked cells of one doc table row that starts with a method."""
+    cells = [c.strip() for c in sentence.strip().strip("|").split("|")]
+    if header is None or not cells or METHOD.fullmatch(cells[0]) is None:
+        return []
+    bad = []
+    for h, cell in zip(header[1:], cells[1:]):
+        if "%" in h and not h.lower().startswith("paper") and NUMBER.fullmatch(cell):
+            if not _backed(cell, targets, cells[0], _last(MEASURE, h)):
+                bad.append(f"{cell}% in: {sentence.strip()[:90]!r}")
+    return bad
+
+
+def _sentences(sentence: str, targets) -> list[str]:
+    bad = []
+    for m in PERCENT.finditer(sentence):
+        before = sentence[:m.start()]
+        if "paper" in before[-40:]:
+            continue
+        if not _backed(m.group(1), targets, _last(METHOD, before), _last(MEASURE, before[-NEAR:])):
+            bad.append(f"{m.group(1)}% in: {sentence[:90]!r}")
+    return bad
 
 
 def unbacked(text: str) -> list[str]:
     """The percentages of ``text`` (a document) attached to a results folder and not in
-    its tables: a paragraph naming ``results/...`` attaches its percentages to the named
-    folders, except in a sentence that gives its own source (a test or benchmark file, a
-    measurement "not kept in a results file") and the paper's figures."""
-    bad = []
+    the named row and column of its tables."""
+    bad, section = [], set()
     for para in re.split(r"\n\s*\n", text):
-        targets = {ROOT / m.group(1).rstrip("/.") for m in RESULTS.finditer(para)}
-        targets = {t for t in targets if t.exists()}
+        if para.lstrip().startswith("#"):
+            section = set()
+        named = {ROOT / m.group(1).rstrip("/.") for m in RESULTS.finditer(para)}
+        section |= {t for t in named if t.exists()}
+        own = SCRIPT.search(SENTENCE.split(para)[0]) is not None  # opens naming the script it quotes
+        targets = {t for t in named if t.exists()} or (set() if own else set(section))
         if not targets:
             continue
-        values = _numbers(targets)
+        header = None
         for sentence in SENTENCE.split(para):
             if OWN_SOURCE.search(sentence):
                 continue
-            for m in PERCENT.finditer(sentence):
-                if "paper" in sentence[max(0, m.start() - 40):m.start()]:
+            if sentence.lstrip().startswith("|"):
+                cells = [c.strip() for c in sentence.strip().strip("|").split("|")]
+                if header is None or set("".join(cells)) <= set("-: "):
+                    header = header or cells
                     continue
-                s = m.group(1)
-                dec = len(s.split(".")[1]) if "." in s else 0
-                if not any(abs(v - float(s)) <= 0.5 * 10 ** -dec + 1e-12 for v in values):
-                    bad.append(f"{s}% in: {sentence[:90]!r}")
+                bad += _table_row(sentence, header, targets)
+            else:
+                header = None
+            bad += _sentences(sentence, targets)
     return bad
 
 
 @pytest.mark.parametrize("doc", DOCS)
-def test_every_percentage_attached_to_a_results_folder_is_in_it(doc):
+def test_every_percentage_attached_to_a_results_folder_is_in_its_row_and_column(doc):
     if not (ROOT / "results").is_dir():
         pytest.skip("no committed results/")
     assert unbacked((ROOT / "docs" / doc).read_text()) == []
 
 
-def test_an_edited_number_is_caught():
+@pytest.mark.parametrize("quote, edited", [
+    # benchmarks/records/arap_sr_faust_s0_p1.md: Ref mean 1.208
+    ("1.2% of the diagonal from the minimiser", "9.7% of the diagonal from the minimiser"),
+    # a paragraph that names no folder, under the section naming results/defaust_faust: 1.47
+    # is a number of that folder's tables, but not SShaDe's GT mean
+    ("(GT mean 1.46 % converged", "(GT mean 1.47 % converged"),
+    # a doc table's cell: Elastic's volume in results/defaust_faust/table.md
+    ("| Elastic | 12.25 | 5.75 |", "| Elastic | 12.25 | 5.61 |"),
+])
+def test_an_edited_number_is_caught(quote, edited):
     text = (ROOT / "docs" / "reproduction.md").read_text()
-    quote = "1.2% of the diagonal from the minimiser"  # benchmarks/records/arap_sr_faust_s0_p1.md: Ref mean 1.208
-    assert quote in text, "reproduction.md no longer quotes the move rule's distance beside its results file"
-    assert unbacked(text) == [] and unbacked(text.replace(quote, "9.7% of the diagonal from the minimiser"))
+    assert quote in text, f"reproduction.md no longer quotes {quote!r}"
+    assert unbacked(text) == [] and unbacked(text.replace(quote, edited))
