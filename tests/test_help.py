@@ -48,6 +48,7 @@ HELP = {
     "benchmarks/cold_start.py": ["usage:", "--before"],
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
+    "benchmarks/table_change.py": ["usage:", "--before", "--after"],
 }
 
 
