@@ -9,8 +9,8 @@ those folders' tables (their ``*.md``, ``table*.csv``, ``sweep_table*.csv``; a n
 that file); where its sentence names a method before it (ARAP, Elastic, ARAP-SR,
 Implicit-ARAP, SShaDe), a cell of that method's rows; where it names a measure (volume,
 area, EL, GT mean, handle) just before the number, a cell of that measure's column. A doc
-table's row that starts with a method is checked cell by cell the same way (columns
-without ``%`` and those headed ``Paper`` aside). The paper's own
+table's row is checked cell by cell the same way, in its method's rows where it starts
+with one (columns without ``%`` and those headed ``Paper`` aside). The paper's own
 figures (``paper`` within the 40 characters before the number) are exempt, and so is a
 sentence that gives its own source. An edited number fails (tested)."""
 from __future__ import annotations
@@ -103,14 +103,16 @@ def _last(pattern: re.Pattern, text: str) -> str | None:
 
 
 def _table_row(sentence: str, header: list[str] | None, targets) -> list[str]:
-    """The unbacked cells of one doc table row that starts with a method."""
+    """The unbacked cells of one doc table row (held to the row's method where it starts
+    with one)."""
     cells = [c.strip() for c in sentence.strip().strip("|").split("|")]
-    if header is None or not cells or METHOD.fullmatch(cells[0]) is None:
+    if header is None or not cells:
         return []
+    method = cells[0] if METHOD.fullmatch(cells[0]) else None
     bad = []
     for h, cell in zip(header[1:], cells[1:]):
         if "%" in h and not h.lower().startswith("paper") and NUMBER.fullmatch(cell):
-            if not _backed(cell, targets, cells[0], _last(MEASURE, h)):
+            if not _backed(cell, targets, method, _last(MEASURE, h)):
                 bad.append(f"{cell}% in: {sentence.strip()[:90]!r}")
     return bad
 
