@@ -16,6 +16,7 @@ sentence that gives its own source. An edited number fails (tested)."""
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import re
 from pathlib import Path
@@ -47,13 +48,14 @@ def _files(target: Path) -> list[Path]:
                   and (p.suffix == ".md" or p.name.startswith(("table", "sweep_table")) and p.suffix == ".csv"))
 
 
-def _rows(p: Path):
+@functools.lru_cache(maxsize=None)
+def _rows(p: Path) -> tuple:
     """``(header, row)`` pairs of the tables in ``p`` (markdown pipe tables or a CSV file);
     a line of a markdown file outside any table is one row of one cell, with no header."""
     text = p.read_text(errors="replace")
     if p.suffix == ".csv":
         rows = list(csv.reader(io.StringIO(text)))
-        return [(rows[0], r) for r in rows[1:]] if rows else []
+        return tuple((rows[0], r) for r in rows[1:]) if rows else ()
     out, header = [], None
     for line in text.splitlines():
         if not line.startswith("|"):
@@ -65,13 +67,13 @@ def _rows(p: Path):
             header = cells
         elif not all(set(c) <= set("-: ") for c in cells):
             out.append((header, cells))
-    return out
+    return tuple(out)
 
 
 def _cells(targets, method: str | None, measure: str | None) -> list[float]:
     """The numbers of the targets' table cells in ``method``'s rows (a row with a cell
     equal to it, or a column headed with it) and ``measure``'s column; ``None``: any."""
-    cols = MEASURES.get(measure.lower() if measure and measure.lower() in MEASURES else measure, ())
+    cols = MEASURES.get(measure, MEASURES.get(measure.lower(), ())) if measure else ()
     out = []
     for t in targets:
         for p in _files(t):
