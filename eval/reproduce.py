@@ -27,9 +27,11 @@ from sshade.command_errors import ArgumentParser
 #: ARAP-SR's alpha values of the sweep step (Open3D's definition; 0.06 is about the
 #: stiffness of 0.01 without the valence, this package's earlier definition)
 SR_ALPHAS = "0.001,0.003,0.01,0.03,0.06,0.1"
-#: Implicit-ARAP's cpu-preset grid of the sweep steps: the ARAP weight (10: the preset's,
-#: the reference's weight at its HEAD; 1000: the reference's at the paper's time) and the
-#: deformation steps (a stiffer field needs more to reach its handles)
+#: Implicit-ARAP's cpu-preset grid of the sweep steps: the ARAP weight with correct
+#: cotangent weights (10: the cpu_soft preset's; 120: the cpu preset's, the reference's
+#: mesh default since June 2024; 1000: the reference's number at the paper's time, there
+#: with its own weights) and the deformation steps (a stiffer field needs more to reach
+#: its handles); docs/methods.md, "Selection rule", reads both sweeps
 IA_GRID = ("method.Implicit-ARAP.arap_weight=10,120,1000", "method.Implicit-ARAP.deform_steps=500,1000,1500")
 #: where ``--faust`` builds its DeFAUST (git-ignored, beside the default ``data/defaust``)
 FAUST_BUILD = "data/defaust_faust"

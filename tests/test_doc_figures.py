@@ -5,7 +5,8 @@ that folder's tables, in the row and column it names.
 A paragraph attaches its percentages to the folders it names (``results/...``), or, naming
 none and not opening with the script it quotes, to the folders named earlier in its
 section (a ``#`` heading starts a section). A percentage must round-match a cell of
-those folders' tables (their ``*.md``, ``table*.csv``, ``sweep_table*.csv``; a named file:
+those folders' tables (their ``*.md``, ``table*.csv``, ``sweep_table*.csv``, the per-case
+``cases*.csv``; a named file:
 that file); where its sentence names a method before it (ARAP, Elastic, ARAP-SR,
 Implicit-ARAP, SShaDe), a cell of that method's rows; where it names a measure (volume,
 area, EL, GT mean, handle) just before the number, a cell of that measure's column. A doc
@@ -44,8 +45,9 @@ NEAR = 25  #: a measure names the number's column when named at most this many c
 def _files(target: Path) -> list[Path]:
     if target.is_file():
         return [target]
+    tables = ("table", "sweep_table", "cases")
     return sorted(p for p in target.rglob("*") if p.is_file() and "runs" not in p.relative_to(target).parts
-                  and (p.suffix == ".md" or p.name.startswith(("table", "sweep_table")) and p.suffix == ".csv"))
+                  and (p.suffix == ".md" or p.name.startswith(tables) and p.suffix == ".csv"))
 
 
 @functools.lru_cache(maxsize=None)
@@ -166,16 +168,18 @@ def test_every_percentage_attached_to_a_results_folder_is_in_its_row_and_column(
     assert unbacked((ROOT / "docs" / doc).read_text()) == []
 
 
-@pytest.mark.parametrize("quote, edited", [
+@pytest.mark.parametrize("quote, edited, doc", [
     # benchmarks/records/arap_sr_faust_s0_p1.md: Ref mean 1.208
-    ("1.2% of the diagonal from the minimiser", "9.7% of the diagonal from the minimiser"),
+    ("1.2% of the diagonal from the minimiser", "9.7% of the diagonal from the minimiser", "reproduction.md"),
     # a paragraph that names no folder, under the section naming results/defaust_faust: 1.47
     # is a number of that folder's tables, but not SShaDe's GT mean
-    ("(GT mean 1.46 % converged", "(GT mean 1.47 % converged"),
+    ("(GT mean 1.46 % converged", "(GT mean 1.47 % converged", "reproduction.md"),
     # a doc table's cell: Elastic's volume in results/defaust_faust/table.md
-    ("| Elastic | 12.25 | 5.75 |", "| Elastic | 12.25 | 5.61 |"),
+    ("| Elastic | 12.25 | 5.75 |", "| Elastic | 12.25 | 5.61 |", "reproduction.md"),
+    # a per-case figure, in the handle column of the named sweep's cases.csv (2.078)
+    ("s03_p04 at a handle error of 2.08 %", "s03_p04 at a handle error of 2.09 %", "methods.md"),
 ])
-def test_an_edited_number_is_caught(quote, edited):
-    text = (ROOT / "docs" / "reproduction.md").read_text()
-    assert quote in text, f"reproduction.md no longer quotes {quote!r}"
+def test_an_edited_number_is_caught(quote, edited, doc):
+    text = (ROOT / "docs" / doc).read_text()
+    assert quote in text, f"{doc} no longer quotes {quote!r}"
     assert unbacked(text) == [] and unbacked(text.replace(quote, edited))
