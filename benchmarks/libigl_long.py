@@ -4,7 +4,7 @@ mean distance to the deep-converged reference is below 0.05% of the diagonal, or
     python benchmarks/libigl_long.py 1500      # seconds; prints ~30 rows of the curve as JSON
 
 Needs the DeFAUST build in data/defaust and computes (or reads) the reference in
-data/references. Measured on the 2-core VM (results/convergence/libigl_long.md): 5,736
+data/references. Measured on the 2-core VM (benchmarks/records/libigl_long.md): 5,736
 iterations in 1,500 s reach 0.442% (mean), never 0.05%; our L-BFGS solver reaches 0.442% after
 31 s and 0.05% after 75 s (results/convergence/table.md).
 """
