@@ -66,7 +66,7 @@ def _steps(a) -> list[tuple[str, list[str]]]:
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          # SShaDe prepared once and solved per frame on animated DeFAUST cases (ANNY's frames), beside Elastic
          ("animation", py + ["eval", "experiment=animation", "out_dir=results/animation"]),
-         ("sweep", py + ["eval.sweeps", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
+         ("sweep", py + ["eval.sweeps", "-m", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
                          "hydra.sweep.dir=results/sweeps/defaust"]),
          # ARAP-SR's alpha (Open3D's definition) on the per_pose cases (the dataset's baseline_cases)
          ("sweep_arap_sr_alpha", py + ["eval.sweeps", "-m", "methods=[ARAP-SR]", "reference.cases=none", "jobs=1",

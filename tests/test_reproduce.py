@@ -28,7 +28,7 @@ def test_default_runs_defaust_and_its_sweep(capsys):
                                 "resume=true jobs=1 "
                                 f"{ia}out_dir=results/defaust")  # every method on every case, resumable, one at a time
     sweep = steps["sweep"]
-    assert sweep.startswith("-m eval.sweeps experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
+    assert sweep.startswith("-m eval.sweeps -m experiment=sweep") and "hydra.sweep.dir=results/sweeps/defaust" in sweep
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
 
 
@@ -75,3 +75,23 @@ def test_only_runs_the_named_steps(capsys):
     assert list(steps) == ["faust", "pose_transfer"]
     assert main(["--dry-run", "--only", "nope"]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(capsys):
+    """Hydra refuses a sweep override (``key=a,b``) without ``-m`` ("Ambiguous value for
+    argument"), even where the experiment's config sets ``hydra.mode: MULTIRUN``: each step
+    whose overrides hold a sweep passes ``-m``, as Hydra's own parser reads them."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create()
+    steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "set")
+    checked = 0
+    for name, cmd in steps.items():
+        words = cmd.split()
+        if words[:2] != ["-m", "eval.sweeps"] and words[:2] != ["-m", "eval"]:
+            continue
+        overrides = parser.parse_overrides([w for w in words[2:] if "=" in w])
+        if any(o.is_sweep_override() for o in overrides):
+            assert "-m" in words[2:], name
+            checked += 1
+    assert checked == 2 + 2 * found("torch")  # sweep, sweep_arap_sr_alpha (+ the two Implicit-ARAP sweeps)
