@@ -41,10 +41,25 @@ def _error(r) -> str:
     return lines[-1]
 
 
-def test_a_plugin_row_beside_results_faust_reads_the_committed_records_without_torch(tmp_path, faust_root):
-    res = ROOT / "results" / "faust"
+def _data(name: str, faust_root) -> list[str] | None:
+    """The evaluator's dataset arguments for the committed folder ``results/<name>``:
+    FAUST from the shared data; DeFAUST from this checkout's git-ignored ANNY build
+    (``python -m defaust out=data/defaust``, about 5 min), None where it is not built."""
+    if name == "faust":
+        return ["dataset=faust", f"dataset.root={faust_root}"]
+    if not (ROOT / "data" / "defaust" / "manifest.json").is_file():
+        return None
+    return ["dataset=defaust", "dataset.root=data/defaust", "dataset.build.enabled=false", "dataset.baseline_cases=all"]
+
+
+@pytest.mark.parametrize("name, cases", [("faust", ("s0_p1", "s0_p2")), ("defaust", ("s00_p01", "s00_p02"))])
+def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(tmp_path, faust_root, name, cases):
+    res = ROOT / "results" / name
     if not (res / "runs").is_dir():
-        pytest.skip("no committed results/faust")
+        pytest.skip(f"no committed results/{name}")
+    data = _data(name, faust_root)
+    if data is None:
+        pytest.skip("no DeFAUST build in data/defaust (python -m defaust out=data/defaust)")
     before = _snapshot(res)
     site = tmp_path / "site"
     site.mkdir()
@@ -52,22 +67,22 @@ def test_a_plugin_row_beside_results_faust_reads_the_committed_records_without_t
     env = subprocess_env()
     env["PYTHONPATH"] = f"{site}:{env['PYTHONPATH']}"
     out = tmp_path / "run"
-    r = _eval(["dataset=faust", f"dataset.root={faust_root}", "dataset.limit=2", f"methods=[{PLUGIN}]",
-               "compare_with=[results/faust]", "reference.cases=none", "report.enabled=false", f"out_dir={out}"], env)
+    r = _eval([*data, "dataset.limit=2", f"methods=[{PLUGIN}]", f"compare_with=[results/{name}]",
+               "reference.cases=none", "report.enabled=false", f"out_dir={out}"], env)
     assert r.returncode == 0, r.stderr[-3000:]
     assert _snapshot(res) == before  # read, never written
     stored = sorted(p.name for p in (out / "runs").rglob("*.json"))
     assert stored == ["Mine.json", "Mine.json"]  # only the new method ran
     with open(out / "compared.csv") as f:
         rows = list(csv.DictReader(f))
-    assert {(r_["case"], r_["method"]) for r_ in rows} == {(c, m) for c in ("s0_p1", "s0_p2") for m in
+    assert {(r_["case"], r_["method"]) for r_ in rows} == {(c, m) for c in cases for m in
                                                           ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe")}
     for r_ in rows:  # each row is its committed record's, naming its run
         rec = json.loads((res / "runs" / r_["case"] / f"{r_['method']}.json").read_text())
         assert float(r_["volume_err_pct"]) == pytest.approx(rec["row"]["volume_err_pct"], rel=1e-12)
-        assert r_["run"] == "results/faust" and r_["run_commit"].startswith(rec["git"]["commit"][:12])
+        assert r_["run"] == f"results/{name}" and r_["run_commit"].startswith(rec["git"]["commit"][:12])
     table = (out / "table.md").read_text()
-    assert "Implicit-ARAP" in table and "(other run)" in table and "read from results/faust" in table
+    assert "Implicit-ARAP" in table and "(other run)" in table and f"read from results/{name}" in table
     line = next(ln for ln in table.splitlines() if ln.startswith("| ARAP |"))
     assert not next(x for x in line.split("|") if "(other run)" in x).strip().startswith("**")
 
