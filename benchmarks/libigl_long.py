@@ -5,8 +5,9 @@ mean distance to the deep-converged reference is below 0.05% of the diagonal, or
 
 Needs the DeFAUST build in data/defaust and computes (or reads) the reference in
 data/references. Measured on the 2-core VM (benchmarks/records/libigl_long.md): 5,736
-iterations in 1,500 s reach 0.442% (mean), never 0.05%; our L-BFGS solver reaches 0.442% after
-31 s and 0.05% after 75 s (results/convergence/table.md).
+iterations in 1,500 s reach 0.442% (mean), never 0.05%; our L-BFGS solver of that commit reached
+0.442% after 31 s and 0.05% after 75 s (the results/convergence/table.md of that commit; the
+present one is of later code).
 """
 import json
 import sys

@@ -88,7 +88,7 @@ def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(caps
     checked = 0
     for name, cmd in steps.items():
         words = cmd.split()
-        if words[:2] != ["-m", "eval.sweeps"] and words[:2] != ["-m", "eval"]:
+        if words[:2] not in (["-m", "eval.sweeps"], ["-m", "eval"]):
             continue
         overrides = parser.parse_overrides([w for w in words[2:] if "=" in w])
         if any(o.is_sweep_override() for o in overrides):
