@@ -39,6 +39,7 @@ HELP = {
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
     "benchmarks/implicit_arap_weights.py": ["usage:", "trials"],
     "benchmarks/implicit_arap_steps.py": ["usage:", "--steps", "--set"],
+    "benchmarks/implicit_arap_step_time.py": ["usage:", "--deform-steps", "--both"],
     "benchmarks/remesh_speed.py": ["usage:", "--mesh"],
     "benchmarks/remesh_hard.py": ["usage:", "--meshes"],
     "benchmarks/tosca_transfer_factors.py": ["usage:", "--classes"],
