@@ -4,6 +4,7 @@ cost-weighted progress estimate (eval/run/progress.py)."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from types import SimpleNamespace
@@ -173,3 +174,25 @@ def test_resume_after_kill_runs_only_missing_pairs(tmp_path, faust_root):
     assert _counts(counter) == {"A": 2, "B": 2}
     assert sorted(str(p.relative_to(out)) for p in (out / "runs").rglob("*.json")) == \
         ["runs/s0_p1/A.json", "runs/s0_p1/B.json", "runs/s0_p2/A.json", "runs/s0_p2/B.json"]
+
+
+def test_the_same_data_read_from_another_folder_restores_and_other_data_recomputes(tmp_path, faust_root):
+    (tmp_path / "faust").symlink_to(faust_root)
+    out, counter = tmp_path / "out", tmp_path / "calls.txt"
+    _eval(out, ["A"], env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"A": 2}
+    # a clean checkout elsewhere: the run folder and a copy of the data under another root
+    there = tmp_path / "elsewhere"
+    shutil.copytree(out, there / "out")
+    (there / "faust").mkdir()
+    for f in faust_root.glob("*.ply"):
+        shutil.copyfile(f, there / "faust" / f.name)
+    before = _snapshot(there / "out")
+    counter.unlink()
+    r = _eval(there / "out", ["A"], "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {} and "2 run(s) restored" in r.stdout + r.stderr
+    assert _snapshot(there / "out") == before  # the records as they were: restored, not rewritten
+    # other data under that root (another rest mesh): recomputed, whatever the folder
+    shutil.copyfile(faust_root / "tr_reg_010.ply", there / "faust" / "tr_reg_000.ply")
+    _eval(there / "out", ["A"], "resume=true", env={"SSHADE_TEST_COUNTER": str(counter)})
+    assert _counts(counter) == {"A": 2}

@@ -223,9 +223,27 @@ def _pair_keys(s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     """The store keys (:func:`eval.run.result_store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options, and the
     identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`)."""
-    ident = case_identity(case, dataset=s.name, root=s.root, seed=s.seed)
+    ident = _stored_root(s, case, case_identity(case, dataset=s.name, root=s.root, seed=s.seed))
     extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
     return [pair_key(spec, ident, extra, code) for spec, code in zip(s.specs, s.codes)]
+
+
+def _stored_root(s: _Setup, case, ident: dict) -> dict:
+    """``ident`` (:func:`eval.run.result_store.case_identity`) with the ``root`` of this
+    case's stored records where one agrees with it in every other field (the same data,
+    read from another folder: a clean checkout elsewhere, a build copied to another
+    machine), so that those records are restored rather than recomputed; ``ident``
+    unchanged otherwise (no record, or other data: the data digests differ)."""
+    if not s.resume:
+        return ident
+    for name in s.names:
+        rec = s.store.read(case.name, name).record
+        old = (rec or {}).get("key_fields")
+        old = old.get("case") if isinstance(old, dict) else None
+        if (isinstance(old, dict) and isinstance(old.get("root"), str) and old.keys() == ident.keys()
+                and all(old[k] == ident[k] for k in ident if k != "root")):
+            return {**ident, "root": old["root"]}
+    return ident
 
 
 def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
