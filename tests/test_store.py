@@ -1,5 +1,6 @@
 """The evaluator's per-(case, method) result store (eval/run/result_store.py), resume after
-a kill -9, a method added later, the baseline subset rule (eval/run/subset.py) and the
+a kill -9, a method added later, a record restored where the same data is read from
+another folder, the baseline subset rule (eval/run/subset.py) and the
 cost-weighted progress estimate (eval/run/progress.py)."""
 from __future__ import annotations
 
