@@ -9,7 +9,11 @@ default: :func:`sshade.arap.solve_arap` until the energy-verified criterion hold
 ``paper`` (the paper's §4.1 rule: rigid-fit start, libigl's local/global until the
 largest move is below ``tol * bbox_diag``, at most 1000 iterations); docs/protocols.md.
 """
-from .arap_sr import ARAPSR
-from .fullres_arap import ARAP, Elastic, FullResArap
+import lazy_loader
 
-__all__ = ["ARAP", "Elastic", "ARAPSR", "FullResArap"]
+# bound on first use (SPEC 1): importing one submodule does not import the others, so a
+# row's code identity holds only what its code reaches (docs/experiments.md)
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "arap_sr": ["ARAPSR"],
+    "fullres_arap": ["ARAP", "Elastic", "FullResArap"],
+})

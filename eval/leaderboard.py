@@ -11,11 +11,12 @@ from pathlib import Path
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
 from eval.run.runinfo import read_runinfo
+from eval.run.stale_rows import CommitTrees, check_folders, run_folders
 from eval.tables import compare
 from sshade.pipeline import SShaDe
 
-__all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "LABELS",
-           "RANK_COLUMN"]
+__all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "stale_words",
+           "LABELS", "RANK_COLUMN"]
 
 LEADERBOARD = "leaderboard.md"  #: the file written beside ``index.html``
 #: Folder name -> the dataset's name on the board (other folders: their own name).
@@ -39,6 +40,7 @@ class Board:
     rank_column: str = RANK_COLUMN[0]
     time_words: str = ""
     rows: list = field(default_factory=list)
+    stale: dict = field(default_factory=dict)  # method -> (stale rows, stored rows) at this checkout
 
 
 def _num(v):
@@ -114,6 +116,23 @@ def _animation_board(d: Path, info: dict) -> Board | None:
     return b
 
 
+def _stale(d: Path, trees: CommitTrees) -> dict:
+    """``{method: (stale, rows)}`` of the stored rows of run folder ``d`` (and of the
+    folders below it) whose code identity differs from this checkout's
+    (:func:`eval.run.stale_rows.check_folders`); methods without a stale row left out."""
+    out: dict = {}
+    for ms in check_folders(run_folders(d), trees).values():
+        for m, v in ms.items():
+            k, n = out.get(m, (0, 0))
+            out[m] = (k + v["stale"], n + v["rows"])
+    return {m: kn for m, kn in out.items() if kn[0]}
+
+
+def stale_words(stale: tuple | None) -> str:
+    """A cell's mark for a method with stale rows: ``" [stale: 8 of 40 rows]"``; ``""`` for none."""
+    return f" [stale: {stale[0]} of {stale[1]} rows]" if stale else ""
+
+
 def _commit(info: dict) -> str:
     c = (info.get("git") or {}).get("commit") if isinstance(info.get("git"), dict) else None
     return c[:12] if isinstance(c, str) else ""
@@ -126,15 +145,18 @@ def collect(root) -> tuple[list[Board], list[str]]:
     root = Path(root)
     order = list(LABELS)
     boards, apart = [], []
-    for d in sorted((p.parent for p in root.glob("*/run.json")),
-                    key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name)):
-        info = read_runinfo(d)
-        kind = str(((info.get("config") or {}).get("experiment") or {}).get("kind", "cases"))
-        b = _cases_board(d, info) if kind == "cases" else _animation_board(d, info) if kind == "animation" else None
-        if b is not None and b.rows:
-            boards.append(b)
-        elif kind == "tosca":
-            apart += _tosca_line(d)
+    with CommitTrees() as trees:
+        for d in sorted((p.parent for p in root.glob("*/run.json")),
+                        key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name)):
+            info = read_runinfo(d)
+            kind = str(((info.get("config") or {}).get("experiment") or {}).get("kind", "cases"))
+            b = (_cases_board(d, info) if kind == "cases" else _animation_board(d, info) if kind == "animation"
+                 else None)
+            if b is not None and b.rows:
+                b.stale = _stale(d, trees)
+                boards.append(b)
+            elif kind == "tosca":
+                apart += _tosca_line(d)
     return boards, apart
 
 
@@ -168,9 +190,11 @@ def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
             if r is None:
                 cells.append("--")
             elif r["gt"] is not None:
-                cells.append(_f(r["gt"], 2) + (f" ({r['rank']})" if r["rank"] is not None else ""))
+                cells.append(_f(r["gt"], 2) + (f" ({r['rank']})" if r["rank"] is not None else "")
+                             + stale_words(b.stale.get(m)))
             else:
-                cells.append(f"{_f(r['volume'], 2)} / {_f(r['el'], 2)} / {_f(r['fa'], 2)}")
+                cells.append(f"{_f(r['volume'], 2)} / {_f(r['el'], 2)} / {_f(r['fa'], 2)}"
+                             + stale_words(b.stale.get(m)))
         rows.append(cells)
     return head, rows
 
@@ -189,7 +213,10 @@ def leaderboard_markdown(root) -> str:
            "",
            f"**The ranking column is {RANK_COLUMN[1]}**, the rank in parentheses (1 = nearest); no other column "
            "ranks: a method best on volume may be far from the true pose. Where the data has no ground truth the "
-           "cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked.", "",
+           "cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
+           + (" A cell marked [stale: k of n rows] holds rows whose code changed since they were computed "
+              "(`python -m eval.reproduce --check`): not this checkout's numbers." if any(b.stale for b in boards)
+              else ""), "",
            "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     for b in boards:
@@ -201,7 +228,8 @@ def leaderboard_markdown(root) -> str:
                 f"| Rank | Method | GT mean (%) | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) | Stopped |",
                 "|---:|---|---:|---:|---:|---:|---:|---|"]
         for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0)):
-            out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']} | {_f(r['gt'], 2)} | "
+            out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
+                       f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | "
                        f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
                        f"{r['stopped'].replace('|', '/')} |")
     if apart:

@@ -3,16 +3,22 @@
     python -m eval.reproduce                                   # embedded synthetic DeFAUST only
     python -m eval.reproduce --faust DIR --tosca DIR           # + FAUST and TOSCA experiments
     python -m eval.reproduce --faust DIR --tosca DIR --shapes DIR --scaling MESH
+    python -m eval.reproduce --check [--json]     # which committed rows are stale; no computation
+    python -m eval.reproduce --rekey              # re-key records of the earlier key layout (no computation)
 
 Runs, each as its own ``python -m eval`` process (so a failure is reported and the
-others still run):
+others still run); before any work it prints, per step and method, the stored rows it
+reuses and those stale (and why), and the stale rows' stored time as the estimate. The
+table steps resume (``resume=true``): only their stale and missing rows are computed.
 
-Exit status 1 if any step failed (all steps are attempted).
+Exit status 1 if any step failed (all steps are attempted); with ``--check``, 1 if any
+committed row is stale (:mod:`eval.run.stale_rows`).
 
 Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -21,6 +27,7 @@ from pathlib import Path
 
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
+from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 
@@ -35,6 +42,8 @@ SR_ALPHAS = "0.001,0.003,0.01,0.03,0.06,0.1"
 IA_GRID = ("method.Implicit-ARAP.arap_weight=10,120,1000", "method.Implicit-ARAP.deform_steps=500,1000,1500")
 #: where ``--faust`` builds its DeFAUST (git-ignored, beside the default ``data/defaust``)
 FAUST_BUILD = "data/defaust_faust"
+#: the folder every step writes under (the one command that writes it)
+RESULTS = "results"
 
 
 def _installed(name: str) -> bool:
@@ -142,9 +151,53 @@ def main(argv=None) -> int:
     p.add_argument("--before", help="with --scaling: the cold-start step also probes this commit's code")
     p.add_argument("--dry-run", action="store_true", help="print the commands only")
     p.add_argument("--only", help="comma-separated step names to run (e.g. faust,tosca); default every step")
+    p.add_argument("--check", action="store_true", help="no computation: list every committed row of results/ whose "
+                                                         "code identity differs from this checkout's; exit 1 if any")
+    p.add_argument("--json", action="store_true", help="with --check: print {folder: {method: {rows, stale}}}")
+    p.add_argument("--rekey", action="store_true", help="no computation: re-key the records of results/ written "
+                                                         "under the earlier key layout, from the commit that made "
+                                                         "each (git must have it)")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")
     a = p.parse_args(argv)
+    if a.json and not a.check:
+        p.error("--json goes with --check")
+    if a.check or a.rekey:
+        return run_command(lambda: _rekey(a) if a.rekey else _check(a), where="results/")
     return run_command(lambda: _run_steps(a), where="results/")
+
+
+def _check(a) -> int:
+    """``--check``: every committed row of :data:`RESULTS` held to this checkout's code."""
+    with CommitTrees() as trees:
+        states = check_folders(run_folders(RESULTS), trees)
+    if a.json:
+        print(json.dumps({f: {m: {"rows": v["rows"], "stale": v["stale"]} for m, v in ms.items()}
+                          for f, ms in states.items()}, indent=1, sort_keys=True))
+    else:
+        for f, ms in states.items():
+            for m, v in ms.items():
+                if v["stale"]:
+                    whys = "; ".join(f"{w} ({n})" for w, n in sorted(v["why"].items(), key=lambda kv: -kv[1]))
+                    print(f"{f}: {m}: {v['stale']} of {v['rows']} rows stale: {whys}")
+    n = sum(v["stale"] for ms in states.values() for v in ms.values())
+    rows = sum(v["rows"] for ms in states.values() for v in ms.values())
+    print(f"{'stale' if n else 'current'}: {n} of {rows} committed rows in {len(states)} folders are stale",
+          file=sys.stderr if a.json else sys.stdout)
+    return 1 if n else 0
+
+
+def _rekey(a) -> int:
+    """``--rekey``: re-key every record of :data:`RESULTS` of the earlier layout (:func:`rekey_record`)."""
+    counts: dict[str, int] = {}
+    with CommitTrees() as trees:
+        for f in run_folders(RESULTS):
+            for _, path in record_paths(f):
+                r = rekey_record(f, path, trees)
+                counts[r] = counts.get(r, 0) + 1
+                if r.startswith("refused"):
+                    print(f"{path}: {r}", file=sys.stderr)
+    print("rekey: " + ", ".join(f"{n} {w}" for w, n in sorted(counts.items())) if counts else "rekey: no record")
+    return 1 if any(w.startswith("refused") for w in counts) else 0
 
 
 def _run_steps(a) -> int:
@@ -157,9 +210,9 @@ def _run_steps(a) -> int:
         print(f"error: --only names no step of this command: {', '.join(unknown)} "
               f"(steps: {', '.join(name for name, _ in steps)})", file=sys.stderr)
         return 2
-    for name, cmd in steps:
-        if only and name not in only:
-            continue
+    selected = [(name, cmd) for name, cmd in steps if not only or name in only]
+    _print_plan(selected)
+    for name, cmd in selected:
         print(f"== {name}: {' '.join(cmd[1:])}", flush=True)
         if a.dry_run:
             continue
@@ -172,6 +225,44 @@ def _run_steps(a) -> int:
         print(f"error: step(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
     return 0
+
+
+def step_folder(cmd: list[str]) -> Path | None:
+    """The folder a step writes: its ``out_dir=``, ``hydra.sweep.dir=`` or ``--out``."""
+    for i, x in enumerate(cmd):
+        for pre in ("out_dir=", "hydra.sweep.dir="):
+            if x.startswith(pre):
+                return Path(x[len(pre):])
+        if x == "--out" and i + 1 < len(cmd):
+            return Path(cmd[i + 1])
+    return None
+
+
+def _print_plan(selected) -> None:
+    """Before any work: per step and method, the stored rows reused and those stale (why,
+    and their stored seconds as the estimate); a step without stored rows runs whole."""
+    print("plan: stored rows reused and stale, per step and method (before any work)", flush=True)
+    with CommitTrees() as trees:
+        for name, cmd in selected:
+            folder = step_folder(cmd)
+            states = check_folders(run_folders(folder), trees) if folder and folder.is_dir() else {}
+            if not states:
+                print(f"   {name}: no stored rows; the step runs whole", flush=True)
+                continue
+            per: dict[str, list] = {}
+            for ms in states.values():
+                for m, v in ms.items():
+                    agg = per.setdefault(m, [0, 0, 0.0, {}])
+                    agg[0] += v["rows"] - v["stale"]
+                    agg[1] += v["stale"]
+                    agg[2] += v["stale_s"]
+                    for w, n in v["why"].items():
+                        agg[3][w] = agg[3].get(w, 0) + n
+            whole = " (a sweep step runs all its jobs again)" if "hydra.sweep.dir" in " ".join(cmd) else ""
+            for m, (ok, stale, secs, why) in per.items():
+                words = "; ".join(f"{w} ({n})" for w, n in why.items())
+                print(f"   {name}: {m}: {ok} reused, {stale} stale" + (f" ({words}), about {secs:.0f} s" if stale
+                                                                          else "") + whole, flush=True)
 
 
 if __name__ == "__main__":

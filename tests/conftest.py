@@ -182,3 +182,13 @@ def write_lift_selection(d, V):
     M[2, 3] = 0.3
     write_def(d / "m.def", M)
     return status
+
+
+def edit_syntax_tree(path) -> None:
+    """An edit of ``path``'s syntax tree (a statement added at the top of its first
+    function), as a commit that changes the code makes; comments and layout are rewritten too."""
+    import ast
+    tree = ast.parse(Path(path).read_text())
+    fn = next(n for n in tree.body if isinstance(n, ast.FunctionDef))
+    fn.body.insert(0, ast.parse("_edited = 1").body[0])
+    Path(path).write_text(ast.unparse(tree))

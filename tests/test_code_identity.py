@@ -15,9 +15,17 @@ import sys
 
 import pandas as pd
 
-from eval.run.code_identity import PACKAGES, ROW_HARNESS, code_identity, describe_change, import_closure, sources_digest
+from eval.run.code_identity import (
+    PACKAGES,
+    ROW_HARNESS,
+    code_identity,
+    describe_change,
+    identity_roots,
+    import_closure,
+    sources_digest,
+)
 
-from .conftest import ROOT, subprocess_env
+from .conftest import ROOT, edit_syntax_tree, subprocess_env
 from .store_methods import kill_at_call
 
 PLUGIN_SRC = '''
@@ -87,12 +95,15 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     from baselines import ARAP
     from baselines.implicit_arap import ImplicitARAP
     arap = import_closure(("baselines.fullres_arap",))
-    assert {"sshade.arap.solver", "sshade.mesh.validate", "baselines"} <= set(arap)
+    assert {"sshade.arap.solver", "sshade.mesh.validate"} <= set(arap)
+    # lazy package inits (SPEC 1): importing sshade.arap.solver does not import the pipeline
+    assert not {"baselines", "sshade", "sshade.pipeline", "sshade.smooth_transfer", "baselines.arap_sr"} & set(arap)
     harness = import_closure(ROW_HARNESS)
-    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard", "eval.run.result_store",
-            "harness.jobs", "harness.method_registry"} <= set(harness)
+    assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard",
+            "harness.method_registry"} <= set(harness)
     presentation = {"eval.tables", "eval.report", "eval.present.meshview", "eval.run.plan", "defaust.build",
-                    "defaust.export", "eval.reproduce", "eval.app"}
+                    "defaust.export", "eval.reproduce", "eval.app", "eval.run.result_store", "harness.jobs",
+                    "eval.experiments.cases.case_jobs"}  # presentation, commands, the store and the runner
     assert not presentation & (set(arap) | set(harness))
     src = _tree_copy(tmp_path / "src")
     root = str(src)
@@ -100,19 +111,51 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     a0, i0 = code_identity(ARAP(), root=root), code_identity(ia, root=root)
     assert a0["sources"] == code_identity(ARAP())["sources"]  # the same bytes under another folder
     assert "baselines.implicit_arap.field" in i0["modules"] and "baselines.implicit_arap.field" not in a0["modules"]
-    _touch(src / "eval" / "tables.py")  # presentation: no row changes
-    _touch(src / "defaust" / "export.py")
-    import_closure.cache_clear()
+    for f in (("eval", "tables.py"), ("defaust", "export.py"), ("eval", "run", "result_store.py"),
+              ("harness", "jobs.py")):  # presentation, the builder, the record format, the runner: no row
+        _touch(src.joinpath(*f))
     assert code_identity(ARAP(), root=root) == a0 and code_identity(ia, root=root) == i0
     _touch(src / "baselines" / "implicit_arap" / "field.py")  # one method's own module: its rows only
     assert code_identity(ARAP(), root=root) == a0 and code_identity(ia, root=root) != i0
     _touch(src / "eval" / "metrics" / "measures.py")  # a metric: every row
     assert code_identity(ARAP(), root=root)["sources"] != a0["sources"]
-    a1 = code_identity(ARAP(), root=root)
-    _touch(src / "harness" / "jobs.py")  # the shared floor's job runner (a row's worker): every row
-    assert code_identity(ARAP(), root=root)["sources"] != a1["sources"]
 
 
+#: the class and definition of each built-in method's rows, as its records store them
+BUILTIN = {"ARAP": {"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP"},
+           "Elastic": {"class": "baselines.fullres_arap.Elastic", "_target_": "baselines.Elastic"},
+           "ARAP-SR": {"class": "baselines.arap_sr.ARAPSR", "_target_": "baselines.ARAPSR"},
+           "Implicit-ARAP": {"class": "baselines.implicit_arap.method.ImplicitARAP",
+                             "_target_": "baselines.implicit_arap.ImplicitARAP"},
+           "SShaDe": {"class": "sshade.pipeline.SShaDe", "_target_": "sshade.SShaDe"}}
+
+
+def _identities(root):
+    return {m: code_identity(None, spec, root=root)["sources"] for m, spec in BUILTIN.items()}
+
+
+def test_each_builtin_method_has_its_own_modules_and_an_edit_changes_exactly_its_rows(tmp_path):
+    """For each built-in method, the modules its identity is made of (beside the harness's
+    own: the pair runner, metrics, references, data loading); edits of (a) SShaDe's
+    transfer, (b) the full-resolution ARAP file, (c) a metric, (d) a presentation module,
+    each in a temporary copy, change exactly the expected rows' identities."""
+    harness = set(import_closure(identity_roots(None)))
+    own = {m: set(import_closure(identity_roots(spec))) - harness for m, spec in BUILTIN.items()}
+    assert own["ARAP"] == own["Elastic"] >= {"baselines.fullres_arap"}
+    assert own["ARAP-SR"] >= {"baselines.arap_sr", "baselines.fullres_arap"}  # it imports the ARAP file's checks
+    assert own["Implicit-ARAP"] >= {"baselines.implicit_arap.method", "baselines.implicit_arap.field"}
+    assert own["SShaDe"] >= {"sshade.pipeline", "sshade.smooth_transfer", "sshade.lrf", "sshade.projection"}
+    assert "sshade.smooth_transfer" not in harness | own["ARAP"] | own["ARAP-SR"] | own["Implicit-ARAP"]
+    src = _tree_copy(tmp_path / "src")
+    before = _identities(str(src))
+    for path, changed in ((("sshade", "smooth_transfer.py"), {"SShaDe"}),
+                          (("baselines", "fullres_arap.py"), {"ARAP", "Elastic", "ARAP-SR"}),
+                          (("eval", "metrics", "measures.py"), set(BUILTIN)),
+                          (("eval", "present", "breakdown.py"), set())):
+        edit_syntax_tree(src.joinpath(*path))
+        after = _identities(str(src))
+        assert {m for m in BUILTIN if after[m] != before[m]} == changed, path
+        before = after
 def test_comments_docstrings_and_layout_do_not_change_the_identity(tmp_path):
     from baselines import ARAP
     src = _tree_copy(tmp_path / "src")

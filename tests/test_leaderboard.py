@@ -66,3 +66,22 @@ def test_the_committed_leaderboard_is_the_committed_runs_board():
     committed = ROOT / "results" / LEADERBOARD
     assert committed.is_file(), "results/leaderboard.md: python -m eval.reproduce --only report writes it"
     assert committed.read_text() == leaderboard_markdown(ROOT / "results")
+
+
+def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
+    """results/faust copied with SShaDe's records replaced by those of the earlier key layout
+    (git's history): the board marks SShaDe's cell and row stale, 8 of 8, and says what
+    the mark means; the other methods are unmarked."""
+    import shutil
+    import subprocess
+    shutil.copytree(ROOT / "results" / "faust", tmp_path / "faust")
+    for case in sorted(p.name for p in (tmp_path / "faust" / "runs").iterdir()):
+        r = subprocess.run(["git", "-C", str(ROOT), "show", f"8d866e5:results/faust/runs/{case}/SShaDe.json"],
+                           capture_output=True, text=True, timeout=60, check=False)
+        if r.returncode != 0:
+            import pytest
+            pytest.skip("git history without 8d866e5 (a shallow clone?)")
+        (tmp_path / "faust" / "runs" / case / "SShaDe.json").write_text(r.stdout)
+    text = leaderboard_markdown(tmp_path)
+    assert "| SShaDe [stale: 8 of 8 rows] |" in text and "[stale: k of n rows]" in text
+    assert text.count("[stale:") == 3  # the matrix cell, the dataset's row, the explanation

@@ -35,13 +35,13 @@ def _case(name="c", seed=0):
 # ----------------------------------------------------------------------------- store, unit
 def test_store_keys_round_trip_and_clear(tmp_path):
     c = _case()
-    ident = case_identity(c, dataset="faust", root="/d", seed=0)
+    ident = case_identity(c, dataset="faust", seed=0)
     k1, f1 = pair_key({"_target_": "x.A", "tol": 1e-4}, ident, {"guard": {"timeout_s": None}})
     assert k1 == pair_key({"tol": 1e-4, "_target_": "x.A"}, dict(ident), {"guard": {"timeout_s": None}})[0]
     assert k1 != pair_key({"_target_": "x.A", "tol": 1e-3}, ident)[0]  # another parameter: another key
     c2 = _case()
     c2.targets = c2.targets + 1e-9  # another handle target: another case
-    assert k1 != pair_key({"_target_": "x.A", "tol": 1e-4}, case_identity(c2, dataset="faust", root="/d", seed=0),
+    assert k1 != pair_key({"_target_": "x.A", "tol": 1e-4}, case_identity(c2, dataset="faust", seed=0),
                           {"guard": {"timeout_s": None}})[0]
     st = ResultStore(tmp_path, meshes=True)
     row = {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": float("nan"), "n": np.int64(3), "error": "",
@@ -91,6 +91,9 @@ def test_defaust_default_is_per_pose(capsys):
     # the main job's references: none on DeFAUST (its deep solves would add ~30 min; the
     # reproduce run computes them on the per_pose cases), the baseline cases elsewhere
     from hydra import compose, initialize_config_dir
+
+    from eval.config_schema import store_schemas
+    store_schemas()  # the typed schemas the config names (as python -m eval registers them)
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base=None):
         assert compose("config").reference.cases == "none"
         assert compose("config", overrides=["dataset=faust"]).reference.cases == "baseline"

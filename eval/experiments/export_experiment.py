@@ -40,7 +40,7 @@ def run_export(spec: EvalSpec) -> dict:
         raise SShaDeError(f"dataset {ds.name} at {root}: no case to export")
     out = abs_path(spec.output.out_dir)
     meta = {"name": ds.name, "root": str(root), "seed": json_safe(ds.seed), "options": json_safe(dict(ds.loader)),
-            "identities": {c.name: case_identity(c, dataset=ds.name, root=root, seed=ds.seed) for c in cases}}
+            "identities": {c.name: case_identity(c, dataset=ds.name, seed=ds.seed) for c in cases}}
     index = write_export(out, cases, dataset=meta)
     log.info("exported %d case(s) of %s to %s (%s)", len(cases), ds.name, out, INDEX)
     info = collect_runinfo(spec.record(), seeds={"dataset": json_safe(ds.seed)},

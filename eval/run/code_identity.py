@@ -1,12 +1,17 @@
 """The identity of the code that produces a result: part of every result-store key
 (:mod:`eval.run.result_store`), so that a stored row is reused only by the code that computed it.
+A row's identity is the code its numbers come from: the method's modules and what they
+import (solvers, metrics, references, data loading), found in the syntax trees; a package
+``__init__`` that binds its names lazily (SPEC 1, ``lazy_loader.attach``) counts only
+through the names used, and the modules that only store, run or present records
+(:data:`RECORD_ONLY`) count through the store's version instead of their source.
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 Example::
 
     >>> ident = code_identity(None)
-    >>> sorted(ident), len(ident["sources"]), "eval.metrics.measures" in ident["modules"]
-    (['modules', 'plugin', 'sources', 'versions'], 64, True)"""
+    >>> sorted(ident), "eval.metrics.measures" in ident["modules"], "sshade.pipeline" in ident["modules"]
+    (['constants', 'modules', 'plugin', 'sources', 'versions'], True, False)"""
 from __future__ import annotations
 
 import ast
@@ -19,18 +24,25 @@ from pathlib import Path
 
 from eval.run.runinfo import REPO_ROOT
 
-__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "code_text", "sources_digest", "project_modules", "import_closure",
-           "modules_digest", "numerical_versions", "code_identity", "describe_change"]
+__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "RECORD_ONLY", "code_text", "sources_digest", "project_modules",
+           "import_closure", "closure_constants", "modules_digest", "numerical_versions", "identity_roots",
+           "code_identity", "describe_change"]
 
 #: The project's packages whose source makes a row (every floor of the house: the method,
 #: the harness's shared tools, the baselines and the builder, the evaluator).
 PACKAGES = ("sshade", "harness", "baselines", "defaust", "eval")
 
 #: The modules that make a stored row besides the method: the pair runner (the guarded
-#: call, the metrics, the info columns), the reference columns, the record format and the
-#: runner of pairs in worker processes (their threads, the ``cores`` column).
-ROW_HARNESS = ("eval.experiments.cases.pair", "eval.experiments.cases.case_references", "eval.run.result_store",
-               "eval.experiments.cases.case_jobs")
+#: call, the metrics, the info columns) and the reference columns.
+ROW_HARNESS = ("eval.experiments.cases.pair", "eval.experiments.cases.case_references")
+
+#: The modules (and packages, with everything under them) that only store, run or present
+#: records: the ground floor (record format, options, paths, progress, run records), the
+#: presentation and the runner of pairs in worker processes. Their source is no part of a
+#: row's identity and the closure does not enter them: what they decide reaches a row's
+#: key as values (its options, the case's data) or as the store's record version
+#: (:data:`eval.run.result_store.STORE_VERSION`, bumped when the record changes).
+RECORD_ONLY = ("eval.run", "eval.present", "eval.experiments.cases.case_jobs")
 
 #: Distributions whose version can change a row's numbers: the solvers and mesh
 #: processing beneath the methods, and PyTorch (Implicit-ARAP, plug-ins).
@@ -99,64 +111,263 @@ def project_modules(root: str | None = None) -> dict[str, Path]:
     return mods
 
 
+def _record_only(name: str) -> bool:
+    """Whether the module ``name`` is (under) one of :data:`RECORD_ONLY`."""
+    return any(name == r or name.startswith(r + ".") for r in RECORD_ONLY)
+
+
+@functools.lru_cache(maxsize=512)
+def _parse(path: str, mtime_ns: int, size: int) -> ast.Module:
+    return ast.parse(Path(path).read_bytes(), path)
+
+
+def _tree(path: Path) -> ast.Module:
+    st = path.stat()
+    return _parse(str(path), st.st_mtime_ns, st.st_size)
+
+
+def _lazy_exports(path: Path) -> dict[str, str]:
+    """``{name: submodule}`` that a package ``__init__`` binds lazily through a module-level
+    ``lazy_loader.attach(__name__, submodules, submod_attrs)`` (literal arguments); ``{}``
+    for any other ``__init__``."""
+    out: dict[str, str] = {}
+    for node in _tree(path).body:
+        call = node.value if isinstance(node, (ast.Assign, ast.Expr)) else None
+        f = getattr(call, "func", None)
+        if not isinstance(call, ast.Call) or getattr(f, "attr", getattr(f, "id", None)) != "attach":
+            continue
+        args = {**dict(zip(("package_name", "submodules", "submod_attrs"), call.args)),
+                **{k.arg: k.value for k in call.keywords}}
+        try:
+            subs = ast.literal_eval(args["submodules"]) if "submodules" in args else ()
+            attrs = ast.literal_eval(args["submod_attrs"]) if "submod_attrs" in args else {}
+        except ValueError:
+            continue
+        out.update({str(m): str(m) for m in subs or ()})
+        out.update({str(a): str(m) for m, names in (attrs or {}).items() for a in names})
+    return out
+
+
+def _locate(name: str, mods: Mapping) -> tuple[str, list[str]] | None:
+    """``(module, rest)``: the project module the dotted ``name`` refers to and the names
+    left after it. Follows a lazy package's names (``sshade.deform`` -> ``sshade.pipeline``)
+    and a name a module only re-exports (``from .params import MAX_SEED`` in
+    ``sshade.pipeline`` -> ``sshade.params``); None outside the project."""
+    parts = name.split(".")
+    cur = next((".".join(parts[:i]) for i in range(len(parts), 0, -1) if ".".join(parts[:i]) in mods), None)
+    if cur is None:
+        return None
+    rest = parts[cur.count(".") + 1:]
+    for _ in range(32):  # a chain of re-exports, bounded (an import cycle of names stops here)
+        if not rest:
+            break
+        nxt = _lazy_exports(mods[cur]).get(rest[0]) if mods[cur].name == "__init__.py" else None
+        if nxt is not None and f"{cur}.{nxt}" in mods:
+            cur, rest = f"{cur}.{nxt}", rest[1:]
+            continue
+        source = _reexport(cur, rest[0], mods)
+        if source is None:
+            break
+        return _locate(".".join([source, *rest[1:]]), mods) or (cur, rest)
+    return cur, rest
+
+
 def _resolve(name: str, mods: Mapping) -> str | None:
-    """The project module ``name`` refers to: itself, or the nearest enclosing one
-    (``pkg.mod.attr`` -> ``pkg.mod``); None outside the project."""
-    while name and name not in mods:
-        name = name.rpartition(".")[0]
-    return name or None
+    """The project module the dotted ``name`` refers to (:func:`_locate`), None outside the project."""
+    found = _locate(name, mods)
+    return found[0] if found else None
 
 
-def _imports(name: str, path: Path, mods: Mapping) -> set[str]:
-    """The project modules that module ``name`` (file ``path``) imports, anywhere in it."""
-    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+_LITERAL_NODES = (ast.Constant, ast.Tuple, ast.List, ast.Set, ast.Dict, ast.UnaryOp, ast.BinOp, ast.operator,
+                  ast.unaryop, ast.expr_context)
+
+
+def _literal(module: str, attr: str, mods: Mapping) -> str | None:
+    """``ast.dump`` of the value of ``attr`` when module ``module`` binds it once, at module
+    level, to a literal (numbers, strings, and tuples, lists, sets, dicts and arithmetic of
+    them: ``MAX_SEED = 2**63 - 1``); None otherwise. Such a name counts by its value, not
+    by its module's whole source."""
+    value, n = None, 0
+    for node in _tree(mods[module]).body:
+        if isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            if any(attr in {x.id for x in ast.walk(t) if isinstance(x, ast.Name)} for t in targets):
+                n += 1
+                ok = (len(targets) == 1 and isinstance(targets[0], ast.Name) and node.value is not None
+                      and not isinstance(node, ast.AugAssign))
+                value = node.value if ok else None
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Import, ast.ImportFrom)):
+            if attr in {getattr(node, "name", None)} | {a.asname or a.name for a in getattr(node, "names", [])}:
+                n += 2
+    if n != 1 or value is None or not all(isinstance(x, _LITERAL_NODES) for x in ast.walk(value)):
+        return None
+    return ast.dump(value, include_attributes=False)
+
+
+def _reexport(name: str, attr: str, mods: Mapping) -> str | None:
+    """Where module ``name`` takes ``attr`` from when it only re-exports it (a module-level
+    ``from X import attr``, and no definition or assignment of its own): the dotted name
+    ``X.attr``, absolute; None when the module defines it (or does not bind it)."""
+    pkg = name if mods[name].name == "__init__.py" else name.rpartition(".")[0]
+    source = None
+    for node in _tree(mods[name]).body:
+        if isinstance(node, ast.ImportFrom):
+            for a in node.names:
+                if (a.asname or a.name) == attr:
+                    base = pkg
+                    for _ in range(max(node.level - 1, 0)):
+                        base = base.rpartition(".")[0]
+                    mod = (f"{base}.{node.module}" if node.module else base) if node.level else (node.module or "")
+                    source = f"{mod}.{a.name}"
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == attr:
+            return None
+        elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            if any(attr in {n.id for n in ast.walk(t) if isinstance(n, ast.Name)} for t in targets):
+                return None
+    return source
+
+
+def _attribute_names(tree: ast.AST, bound: Mapping[str, str]) -> set[str]:
+    """Dotted names used as attribute chains on the names ``bound`` (local name -> module
+    name bound by ``import``): ``sshade.deform(...)`` after ``import sshade`` gives ``sshade.deform``."""
     out = set()
-    for node in ast.walk(ast.parse(path.read_bytes(), str(path))):
+    for node in ast.walk(tree):
+        chain = []
+        while isinstance(node, ast.Attribute):
+            chain.append(node.attr)
+            node = node.value
+        if chain and isinstance(node, ast.Name) and node.id in bound:
+            out.add(".".join([bound[node.id], *reversed(chain)]))
+    return out
+
+
+def _imports(name: str, path: Path, mods: Mapping) -> tuple[set[str], set[str]]:
+    """``(modules, constants)``: the project modules that module ``name`` (file ``path``)
+    imports, anywhere in it, each resolved through lazy packages and re-exports
+    (:func:`_locate`), and the literal constants it imports (``"module.NAME"``,
+    :func:`_literal`), which count by their value instead of their module."""
+    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    tree = _tree(path)
+    found, bound = set(), {}
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            out.update(r for a in node.names if (r := _resolve(a.name, mods)))
+            for a in node.names:
+                found.add(a.name)  # the module itself runs (a lazy package: only the names used, below)
+                bound[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
         elif isinstance(node, ast.ImportFrom):
             base = pkg
             for _ in range(max(node.level - 1, 0)):
                 base = base.rpartition(".")[0]
             mod = (f"{base}.{node.module}" if node.module else base) if node.level else (node.module or "")
-            out.update(r for r in [_resolve(mod, mods)] + [_resolve(f"{mod}.{a.name}", mods) for a in node.names]
-                       if r)
-    return out
+            found.update(f"{mod}.{a.name}" for a in node.names)
+    found |= _attribute_names(tree, bound)
+    modules, constants = set(), set()
+    for x in found:
+        loc = _locate(x, mods)
+        if loc is None:
+            continue
+        m, rest = loc
+        if rest and _literal(m, rest[0], mods) is not None:
+            constants.add(f"{m}.{rest[0]}")
+        elif not (x == m and _binds_lazily(m, mods)):
+            modules.add(m)
+    return modules, constants
 
 
-@functools.lru_cache(maxsize=64)
-def import_closure(roots: tuple, root: str | None = None) -> tuple[str, ...]:
-    """The project modules (sorted dotted names) that the modules ``roots`` can import:
-    each root, every module an ``import`` statement of a reached module names (module
-    level or in a function), and the parent packages of each (run on import). Names
-    outside :data:`PACKAGES` are left out; ``root`` as in :func:`project_modules`.
+def _binds_lazily(name: str, mods: Mapping) -> bool:
+    """Whether ``name`` is a package whose ``__init__`` only binds names lazily: importing
+    it runs no project code; the names used from it are followed instead."""
+    return mods[name].name == "__init__.py" and bool(_lazy_exports(mods[name])) and not _eager(name, mods)
 
-    >>> arap = import_closure(("baselines.fullres_arap",))
-    >>> "eval.tables" in arap, "sshade.arap.solver" in arap
-    (False, True)
-    """
+
+def _eager(name: str, mods: Mapping) -> bool:
+    """Whether the package ``__init__`` of ``name`` imports a project module when it runs
+    (a module-level import, not one inside a function): only then does importing one of
+    its submodules run project code of its own."""
+    body = [n for n in _tree(mods[name]).body if not isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                                      ast.ClassDef))]
+    for node in body:
+        for sub in ast.walk(node):
+            if isinstance(sub, ast.Import) and any(_resolve(a.name, mods) for a in sub.names):
+                return True
+            if isinstance(sub, ast.ImportFrom) and (sub.level or _resolve(sub.module or "", mods)):
+                return True
+    return False
+
+
+def _snapshot(root: str | None) -> tuple:
+    """Each project file under ``root`` with its modification time and size: a closure
+    computed for one snapshot is reused until a file changes."""
+    return tuple((str(p), (st := p.stat()).st_mtime_ns, st.st_size) for p in project_modules(root).values())
+
+
+def _closure(roots: tuple, root: str | None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """``(modules, constants)`` of :func:`import_closure` and :func:`closure_constants`."""
+    return _closure_of(tuple(roots), root, _snapshot(root))
+
+
+@functools.lru_cache(maxsize=256)
+def _closure_of(roots: tuple, root: str | None, snapshot: tuple) -> tuple[tuple[str, ...], tuple[str, ...]]:
     mods = project_modules(root)
     seen: set[str] = set()
+    consts: set[str] = set()
     todo = [r for r in (_resolve(str(x), mods) for x in roots) if r]
     while todo:
         m = todo.pop()
-        if m in seen:
+        if m in seen or _record_only(m):
             continue
         seen.add(m)
         parts = m.split(".")
-        todo += [p for p in (".".join(parts[:i]) for i in range(1, len(parts))) if p in mods]
-        todo += _imports(m, mods[m], mods)
-    return tuple(sorted(seen))
+        todo += [p for p in (".".join(parts[:i]) for i in range(1, len(parts))) if p in mods and _eager(p, mods)]
+        found, c = _imports(m, mods[m], mods)
+        todo += found
+        consts |= {x for x in c if not _record_only(x.rpartition(".")[0])}
+    return tuple(sorted(seen)), tuple(sorted(consts))
 
 
-def modules_digest(modules, root: str | None = None) -> str:
+def import_closure(roots: tuple, root: str | None = None) -> tuple[str, ...]:
+    """The project modules (sorted dotted names) whose code the modules ``roots`` can run:
+    each root, every module an ``import`` statement of a reached module names (module
+    level or in a function; through a lazy package or a re-export, the module that
+    defines the name used; a literal constant counts by its value instead,
+    :func:`closure_constants`), and the parent packages whose ``__init__`` imports
+    project code when it runs. Names outside :data:`PACKAGES` and the modules under
+    :data:`RECORD_ONLY` are left out; ``root`` as in :func:`project_modules`.
+
+    >>> arap = import_closure(("baselines.fullres_arap",))
+    >>> "eval.tables" in arap, "sshade.arap.solver" in arap, "sshade.pipeline" in arap
+    (False, True, False)
+    """
+    return _closure(tuple(roots), root)[0]
+
+
+def closure_constants(roots: tuple, root: str | None = None) -> tuple[str, ...]:
+    """The literal constants (sorted ``"module.NAME"``, :func:`_literal`) that the modules
+    of :func:`import_closure` import from modules outside it: part of the identity by value.
+
+    >>> "sshade.params.MAX_SEED" in closure_constants(("harness.checks",))
+    True
+    """
+    mods = set(_closure(tuple(roots), root)[0])
+    return tuple(c for c in _closure(tuple(roots), root)[1] if c.rpartition(".")[0] not in mods)
+
+
+def modules_digest(modules, root: str | None = None, constants=()) -> str:
     """SHA-256 (hex) of the files of the project ``modules`` (dotted names), each as its
-    path relative to ``root`` and its :func:`code_text`, in sorted order."""
+    path relative to ``root`` and its :func:`code_text`, in sorted order, then of each
+    literal constant of ``constants`` (``"module.NAME"``) as its name and value
+    (:func:`_literal`; a module or name missing under ``root`` counts as such).
+    Raises KeyError when a module is missing under ``root``."""
     base = Path(root) if root is not None else REPO_ROOT
     mods, h = project_modules(root), hashlib.sha256()
     for m in sorted(modules):
         h.update(str(mods[m].relative_to(base)).encode() + b"\0")
         h.update(code_text(mods[m]) + b"\0")
+    for c in sorted(constants):
+        m, _, attr = c.rpartition(".")
+        value = _literal(m, attr, mods) if m in mods else None
+        h.update(f"{c}={value}".encode() + b"\0")
     return h.hexdigest()
 
 
@@ -196,19 +407,36 @@ def _plugin_digest(method) -> str | None:
         return "unknown"
 
 
+def identity_roots(spec: Mapping | None) -> tuple[str, ...]:
+    """The modules a row's identity starts from (sorted): :data:`ROW_HARNESS`, and for a
+    method's resolved definition ``spec`` (as stored in a record's key, :mod:`eval.run.result_store`)
+    the dotted names of its ``class`` and of every ``_target_`` in it (nested ones too),
+    which :func:`import_closure` resolves to the modules defining them.
+
+    >>> identity_roots({"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP"})[:2]
+    ('baselines.ARAP', 'baselines.fullres_arap.ARAP')
+    """
+    roots = list(ROW_HARNESS)
+    if isinstance(spec, Mapping):
+        roots += [spec["class"]] if isinstance(spec.get("class"), str) else []
+        roots += _targets(spec)  # resolved through lazy packages: "baselines.ARAPSR" -> baselines.arap_sr
+    return tuple(sorted({r for r in roots if r}))
+
+
 def code_identity(method, spec=None, *, root: str | None = None) -> dict:
     """The code identity of ``method``'s rows (module docstring): ``{"sources": hex,
-    "modules": [dotted names], "versions": {dist: version}, "plugin": hex or None}``.
+    "modules": [dotted names], "constants": ["module.NAME"], "versions": {dist: version},
+    "plugin": hex or None}`` (``sources``: :func:`modules_digest` of the modules and constants).
     ``method``: the built method object, or None for the harness alone (``plugin``
-    None); ``spec``: its resolved definition, whose ``_target_`` strings (nested ones
-    too) add their modules; ``root`` as in :func:`project_modules`."""
-    roots = list(ROW_HARNESS)
-    if method is not None:
-        roots.append(type(method).__module__)
-    roots += [t.rpartition(".")[0] for t in _targets(spec)]
-    mods = import_closure(tuple(sorted(set(roots))), root)
-    return {"sources": modules_digest(mods, root), "modules": list(mods), "versions": dict(numerical_versions()),
-            "plugin": None if method is None else _plugin_digest(method)}
+    None); ``spec``: its resolved definition (:func:`identity_roots`; without a ``class``
+    the method's own module is taken); ``root`` as in :func:`project_modules`."""
+    spec = dict(spec or {})
+    if method is not None and "class" not in spec:
+        spec["class"] = f"{type(method).__module__}.{type(method).__qualname__}"
+    roots = identity_roots(spec)
+    mods, consts = import_closure(roots, root), closure_constants(roots, root)
+    return {"sources": modules_digest(mods, root, consts), "modules": list(mods), "constants": list(consts),
+            "versions": dict(numerical_versions()), "plugin": None if method is None else _plugin_digest(method)}
 
 
 def describe_change(old, new: dict) -> str:

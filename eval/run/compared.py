@@ -16,8 +16,8 @@ from sshade.method_interface import check_name
 
 __all__ = ["ComparedRun", "read_compared", "compared_rows", "IDENTITY_FIELDS", "COMPARED_CSV"]
 
-#: The fields of a case identity that must agree (not ``root``: the folder differs
-#: between machines; the data digests say whether it is the same data).
+#: The fields of a case identity that must agree (the data digests say whether it is the
+#: same data; the dataset's seed may differ where the data agree).
 IDENTITY_FIELDS = ("dataset", "case", "V", "F", "handles", "targets", "V_gt")
 #: The file of an evaluator run folder that keeps the compared rows (beside ``cases.csv``).
 COMPARED_CSV = "compared.csv"
@@ -61,7 +61,7 @@ def _identity_problem(stored, ours: dict) -> str:
     return f"its {', '.join(bad)} differ" if bad else ""
 
 
-def read_compared(folder, label: str, cases, *, dataset: str, root, seed) -> ComparedRun:
+def read_compared(folder, label: str, cases, *, dataset: str, seed) -> ComparedRun:
     """The rows of run folder ``folder`` on ``cases`` (this run's), checked (module docstring).
 
     Parameters
@@ -69,7 +69,7 @@ def read_compared(folder, label: str, cases, *, dataset: str, root, seed) -> Com
     folder : str or Path, an earlier ``python -m eval`` run folder (``run.json``, ``runs/``).
     label : str, the name its rows carry (e.g. ``results/defaust``).
     cases : this run's cases (``name``, ``V``, ``F``, ``handles``, ``targets``, ``V_gt``).
-    dataset, root, seed : this run's dataset name, root and seed (:func:`case_identity`).
+    dataset, seed : this run's dataset name and seed (:func:`case_identity`).
 
     Returns
     -------
@@ -101,7 +101,7 @@ def read_compared(folder, label: str, cases, *, dataset: str, root, seed) -> Com
         if not names:
             out.missing.append(c.name)
             continue
-        ours = case_identity(c, dataset=dataset, root=root, seed=seed)
+        ours = case_identity(c, dataset=dataset, seed=seed)
         for n in names:
             out.rows.append(_one_row(store, d / n, c.name, ours, out))
     if not out.rows:

@@ -34,7 +34,11 @@ __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "case_identity
 
 log = logging.getLogger("eval")
 
-STORE_VERSION = 3  #: bumped when the record layout changes (an older record is then stale)
+#: The record format's version, bumped when what the modules that only store, run or present
+#: records (:data:`eval.run.code_identity.RECORD_ONLY`) write or key changes: their source is
+#: not part of a row's code identity, this number is (an older record is then stale, or re-keyed
+#: by ``python -m eval.reproduce --rekey`` where git still has the code that made it)
+STORE_VERSION = 4
 STORE_DIR = "runs"  #: the store's folder inside out_dir
 
 
@@ -43,15 +47,16 @@ def _digest(a) -> str:
     return hashlib.sha256(f"{a.dtype.str}{a.shape}".encode() + a.tobytes()).hexdigest()[:16]
 
 
-def case_identity(case, *, dataset: str, root, seed) -> dict:
-    """What identifies a case: ``dataset`` (name), ``root`` (its folder, as text),
-    ``seed`` (the dataset's seed), the case's ``name``, ``seed``, ``subject``, ``pose`` and
-    ``n_dropped`` (the row's columns taken from the case), and short SHA-256 digests of
+def case_identity(case, *, dataset: str, seed) -> dict:
+    """What identifies a case: ``dataset`` (name), ``seed`` (the dataset's seed), the
+    case's ``name``, ``seed``, ``subject``, ``pose`` and ``n_dropped`` (the row's columns
+    taken from the case), and short SHA-256 digests of
     its vertices ``V`` (n, 3), faces ``F`` (m, 3), ``handles`` (h,), ``targets`` (h, 3)
     (so a changed handle set is another case) and ground truth ``V_gt`` (n, 3) when it
-    has one. The dataset's reader is not part of the code identity: what it gives is."""
+    has one. Not the folder it was read from: the same data read from another folder (a
+    clean checkout elsewhere, a build copied to another machine) is the same case."""
     gt = getattr(case, "V_gt", None)
-    return {"V_gt": None if gt is None else _digest(gt), "dataset": str(dataset), "root": str(root),
+    return {"V_gt": None if gt is None else _digest(gt), "dataset": str(dataset),
             "dataset_seed": json_safe(seed), "case": str(case.name),
             "case_seed": json_safe(getattr(case, "seed", None)), "V": _digest(case.V), "F": _digest(case.F),
             "handles": _digest(case.handles), "targets": _digest(case.targets),
@@ -279,6 +284,18 @@ class ResultStore:
                "row": json_safe(row), "info": json_safe(info or {}), "mesh": mesh, "git": json_safe(git),
                "written_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
         rec["digest"] = record_digest(rec)
+        with atomic_write(p, "w") as fh:
+            fh.write(json.dumps(rec, indent=1) + "\n")
+        return p
+
+    def rewrite(self, path, rec: dict) -> Path:
+        """Write the record ``rec`` back over its file ``path`` (atomically), e.g. re-keyed
+        (:func:`eval.run.stale_rows.rekey_record`). Raises SShaDeError when ``path`` is not
+        this store's record of ``rec``'s case and method (:meth:`path`). Returns the path."""
+        p = self.path(str(rec.get("case")), str(rec.get("method")))
+        if Path(path).resolve() != p.resolve():
+            raise SShaDeError(f"result store: {path} is not the record of ({rec.get('case')!r}, "
+                              f"{rec.get('method')!r}) in {self.root}")
         with atomic_write(p, "w") as fh:
             fh.write(json.dumps(rec, indent=1) + "\n")
         return p

@@ -38,6 +38,7 @@ from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions, OutputOptions, ReportOptions
+from eval.run.stale_rows import CommitTrees, row_state
 from eval.run.subset import baseline_selection, method_selections
 from eval.tables import compare, write_cases, write_tables
 from harness.method_registry import method_meta
@@ -173,7 +174,7 @@ def _setup(spec: EvalSpec) -> _Setup:
     own = method_selections(cases, mc, names)
     log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
-    compared = _compared(spec.output, cases, ds, root, out_dir)  # read and checked before any method runs
+    compared = _compared(spec.output, cases, ds, out_dir)  # read and checked before any method runs
     store = ResultStore(out_dir, meshes=spec.output.store_meshes)
     store.check_links()  # a link in runs/ would take a resume's records outside out_dir
     if not spec.output.resume:
@@ -186,7 +187,7 @@ def _setup(spec: EvalSpec) -> _Setup:
                   compared=compared)
 
 
-def _compared(output: OutputOptions, cases, ds, root: Path, out_dir: Path) -> list:
+def _compared(output: OutputOptions, cases, ds, out_dir: Path) -> list:
     """The runs named by ``compare_with`` (folders relative to the launch directory), read
     and checked against ``cases`` of dataset ``ds`` (:func:`eval.run.compared.read_compared`);
     SShaDeError naming the folder when one is this run's own folder or cannot be compared."""
@@ -195,7 +196,7 @@ def _compared(output: OutputOptions, cases, ds, root: Path, out_dir: Path) -> li
         folder = abs_path(it)
         if folder == out_dir:
             raise SShaDeError(f"compare_with: {folder} is this run's own folder; name earlier runs")
-        out.append(read_compared(folder, it, cases, dataset=ds.name, root=root, seed=ds.seed))
+        out.append(read_compared(folder, it, cases, dataset=ds.name, seed=ds.seed))
         log.info("compare_with %s: %d record(s) of %s%s", it, len(out[-1].rows), ", ".join(out[-1].methods),
                  f"; no record of {len(out[-1].missing)} case(s)" if out[-1].missing else "")
     return out
@@ -223,27 +224,9 @@ def _pair_keys(s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     """The store keys (:func:`eval.run.result_store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options, and the
     identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`)."""
-    ident = _stored_root(s, case, case_identity(case, dataset=s.name, root=s.root, seed=s.seed))
+    ident = case_identity(case, dataset=s.name, seed=s.seed)
     extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
     return [pair_key(spec, ident, extra, code) for spec, code in zip(s.specs, s.codes)]
-
-
-def _stored_root(s: _Setup, case, ident: dict) -> dict:
-    """``ident`` (:func:`eval.run.result_store.case_identity`) with the ``root`` of this
-    case's stored records where one agrees with it in every other field (the same data,
-    read from another folder: a clean checkout elsewhere, a build copied to another
-    machine), so that those records are restored rather than recomputed; ``ident``
-    unchanged otherwise (no record, or other data: the data digests differ)."""
-    if not s.resume:
-        return ident
-    for name in s.names:
-        rec = s.store.read(case.name, name).record
-        old = (rec or {}).get("key_fields")
-        old = old.get("case") if isinstance(old, dict) else None
-        if (isinstance(old, dict) and isinstance(old.get("root"), str) and old.keys() == ident.keys()
-                and all(old[k] == ident[k] for k in ident if k != "root")):
-            return {**ident, "root": old["root"]}
-    return ident
 
 
 def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
@@ -289,28 +272,55 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
 def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
     """The stored records a resumed run reuses (:meth:`eval.run.result_store.ResultStore.lookup`:
     same key, code included, and a valid record), observed by ``cost``; every other
-    pair runs. Logs how many are restored and how many recomputed, and why (records of
-    other code, of other settings, invalid ones: the first few named), and keeps that
-    count in ``s.resumed`` for ``run.json``. Returns ``{(ci, mi): record}``."""
-    done, why = {}, {}
-    for ci, mis in plan.items():
-        for mi in mis:
-            found = s.store.lookup(s.cases[ci].name, s.names[mi], *keys[ci][mi])
-            if found.record is not None:
-                done[ci, mi] = found.record
-                cost.observe(s.names[mi], len(s.cases[ci].V), found.record["row"].get("time_s"))
-            elif found.why != "absent":
-                why.setdefault(found.why, []).append(f"{s.cases[ci].name} {s.names[mi]}")
+    pair runs. Logs, before any work, how many are restored and how many recomputed, and
+    per method the rows reused, stale and why (a record of other code names the modules
+    changed since its commit, :func:`eval.run.stale_rows.row_state`), and keeps the counts
+    and the commits of the restored rows in ``s.resumed`` for ``run.json``. Returns
+    ``{(ci, mi): record}``."""
+    done, why, per = {}, {}, {n: [0, {}, 0] for n in s.names}  # method -> [reused, {why: n}, not stored]
+    with CommitTrees() as trees:
+        for ci, mis in plan.items():
+            for mi in mis:
+                name = s.names[mi]
+                found = s.store.lookup(s.cases[ci].name, name, *keys[ci][mi])
+                if found.record is not None:
+                    done[ci, mi] = found.record
+                    per[name][0] += 1
+                    cost.observe(name, len(s.cases[ci].V), found.record["row"].get("time_s"))
+                elif found.why == "absent":
+                    per[name][2] += 1
+                else:
+                    w = _named_change(s, s.cases[ci].name, name, found.why, trees)
+                    why.setdefault(w, []).append(f"{s.cases[ci].name} {name}")
+                    per[name][1][w] = per[name][1].get(w, 0) + 1
     n_todo = sum(len(mis) for mis in plan.values()) - len(done)
     n_stale = sum(len(v) for v in why.values())
     log.info("resume: %d run(s) restored from %s, %d to run (%d not stored, %d recomputed)", len(done),
              s.store.root, n_todo, n_todo - n_stale, n_stale)
+    for name, (ok, stale, absent) in per.items():
+        words = "; ".join(f"{w} ({n})" for w, n in stale.items())
+        log.info("resume: %s: %d reused, %d stale%s, %d not stored", name, ok, sum(stale.values()),
+                 f" ({words})" if words else "", absent)
     for w, pairs in sorted(why.items(), key=lambda kv: -len(kv[1])):
         more = f" and {len(pairs) - 3} more" if len(pairs) > 3 else ""
         log.warning("resume: %d stored run(s) recomputed, %s: %s%s", len(pairs), w, ", ".join(pairs[:3]), more)
+    commits: dict = {}
+    for rec in done.values():
+        c = str((rec.get("git") or {}).get("commit")) + ("+dirty" if (rec.get("git") or {}).get("dirty") else "")
+        commits[c] = commits.get(c, 0) + 1
     s.resumed = {"restored": len(done), "recomputed": {w: len(p) for w, p in why.items()},
-                 "not_stored": n_todo - n_stale}
+                 "not_stored": n_todo - n_stale, "restored_commits": commits}
     return done
+
+
+def _named_change(s: _Setup, case: str, method: str, why: str, trees: CommitTrees) -> str:
+    """``why`` a stored record is stale, with the modules changed since its commit named
+    when its code changed (:func:`eval.run.stale_rows.row_state`)."""
+    if not why.startswith("other code: the project's sources changed"):
+        return why
+    rec = s.store.read(case, method).record
+    st = row_state(s.out_dir, rec, trees) if rec is not None else None
+    return f"other code: {st.why}" if st is not None and st.stale and st.why else why
 
 
 def _run_in_jobs(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
@@ -498,11 +508,23 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
                 wall_s=round(time.perf_counter() - t_start, 3), jobs=s.jobs,
                 compile_s={k: round(v, 3) for k, v in compile_s.items()},
                 outputs={k: Path(v).name for k, v in paths.items()}, plan=s.plan.finish(s.refs.computed_s),
-                resumed=s.resumed)
+                resumed=s.resumed, row_commits=_row_commits(s, info, len(df)))
     paths["run_json"] = write_runinfo(s.out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {s.out_dir}")
     return {"out_dir": s.out_dir, "paths": paths, "n_cases": len(s.cases), "n_errors": n_err, "summary": summ}
+
+
+def _row_commits(s: _Setup, info: dict, n_rows: int) -> dict:
+    """``{commit: rows}``: the commits the table's rows came from (restored records keep
+    the commit that computed them; the others are this run's, ``+dirty`` when it was)."""
+    out = dict((s.resumed or {}).get("restored_commits") or {})
+    git = info.get("git") if isinstance(info.get("git"), dict) else {}
+    head = str(git.get("commit")) + ("+dirty" if git.get("dirty") else "")
+    fresh = n_rows - sum(out.values())
+    if fresh > 0:
+        out[head] = out.get(head, 0) + fresh
+    return out
 
 
 def _presets(rows) -> str:

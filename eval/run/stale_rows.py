@@ -1,0 +1,259 @@
+"""Which stored rows are stale, and why; re-keying records whose code git still has.
+
+A stored row (:mod:`eval.run.result_store`) is current when its record is of this store
+version and its code identity's ``sources`` equal what
+:func:`eval.run.code_identity.code_identity` gives for its method at this checkout (the
+numerical libraries' versions are this machine's, not the code's: they are reported, not
+judged here). A record written under an earlier key layout (store version 3) is re-keyed,
+never recomputed, when git has the commit its ``git`` names and that commit's sources give
+its old identity: its new identity is computed from that commit's sources, for the
+modules its method's identity is made of now.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import subprocess
+import tarfile
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from eval.run.code_identity import (
+    PACKAGES,
+    closure_constants,
+    code_text,
+    identity_roots,
+    import_closure,
+    modules_digest,
+    project_modules,
+)
+from eval.run.result_store import STORE_DIR, STORE_VERSION, ResultStore, check_row, pair_key, record_digest
+from eval.run.runinfo import REPO_ROOT
+from sshade.errors import SShaDeError
+
+__all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "row_state", "check_folders",
+           "rekey_record"]
+
+#: The store version whose records :func:`rekey_record` converts (the layout before the
+#: case identity left out the data folder and the identity followed only the code a row runs).
+REKEY_FROM = 3
+
+
+class CommitTrees:
+    """The project's sources (:data:`eval.run.code_identity.PACKAGES`) at git commits,
+    extracted once each into a temporary folder (``git archive``; removed on
+    :meth:`close` or at the end of a ``with`` block)."""
+
+    def __init__(self, repo=REPO_ROOT):
+        self.repo = Path(repo)
+        self._tmp = tempfile.TemporaryDirectory(prefix="sshade-commits-")
+        self._trees: dict[str, Path | None] = {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        """Remove the extracted trees."""
+        self._tmp.cleanup()
+
+    def tree(self, commit) -> Path | None:
+        """The folder holding the sources of ``commit`` (40 hex digits), None when it is
+        no commit of this repository (or git is missing)."""
+        if not isinstance(commit, str) or len(commit) != 40 or any(c not in "0123456789abcdef" for c in commit):
+            return None
+        if commit not in self._trees:
+            self._trees[commit] = self._extract(commit)
+        return self._trees[commit]
+
+    def _extract(self, commit: str) -> Path | None:
+        paths = [p for p in PACKAGES if (self.repo / p).is_dir()]
+        try:
+            r = subprocess.run(["git", "-C", str(self.repo), "archive", "--format=tar", commit, "--", *paths],
+                               capture_output=True, timeout=120, check=False)
+        except (OSError, subprocess.TimeoutExpired):
+            return None
+        if r.returncode != 0:
+            return None
+        dest = Path(self._tmp.name) / commit
+        with tarfile.open(fileobj=io.BytesIO(r.stdout)) as tf:
+            tf.extractall(dest, filter="data")  # refuses links out and absolute names
+        return dest
+
+
+@dataclass
+class RowState:
+    """One stored record: its folder (the run's ``out_dir``), case, method, whether it is
+    stale and why (``""`` when current), the commit that computed it and its ``time_s``."""
+    folder: Path
+    case: str
+    method: str
+    stale: bool
+    why: str = ""
+    commit: str | None = None
+    time_s: float | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def run_folders(top) -> list[Path]:
+    """Every run folder under ``top`` (``top`` itself included) that holds a result store
+    (``runs/``), sorted; symbolic links are not followed."""
+    top = Path(top)
+    found = [p.parent for p in top.rglob(STORE_DIR) if p.is_dir() and not p.is_symlink()]  # rglob enters no link
+    return sorted(p for p in found if STORE_DIR not in p.relative_to(top).parts)
+
+
+def record_paths(folder) -> Iterator[tuple[str, Path]]:
+    """``(case folder name, record path)`` of every ``runs/<case>/<method>.json`` of ``folder``, sorted."""
+    root = Path(folder) / STORE_DIR
+    for d in sorted(root.iterdir()) if root.is_dir() else []:
+        if d.is_dir() and not d.is_symlink():
+            for p in sorted(d.glob("*.json")):
+                if not p.is_symlink():
+                    yield d.name, p
+
+
+def _read_json(p: Path):
+    try:
+        return json.loads(p.read_text())
+    except (OSError, ValueError, RecursionError):
+        return None
+
+
+def _now(spec, root: str | None = None) -> tuple[tuple, tuple]:
+    roots = identity_roots(spec)
+    return import_closure(roots, root), closure_constants(roots, root)
+
+
+def _changed(mods, consts, tree: Path, root: str | None) -> list[str]:
+    """The modules (and constants) of ``mods``/``consts`` whose code differs between the
+    sources under ``tree`` and the checkout ``root``."""
+    then, now = project_modules(str(tree)), project_modules(root)
+    out = [m for m in mods if m not in then or code_text(then[m]) != code_text(now[m])]
+    out += [c for c in consts if modules_digest((), str(tree), (c,)) != modules_digest((), root, (c,))]
+    return out
+
+
+def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) -> RowState:
+    """The :class:`RowState` of a record ``rec`` (read from ``folder``'s store and found
+    valid there): stale when of another store version or when its code identity's
+    sources differ from those of the checkout ``root`` (default: this one) for its
+    method; ``why`` names the modules that changed since its commit where git has that commit."""
+    row = rec.get("row") if isinstance(rec.get("row"), dict) else {}
+    git = rec.get("git") if isinstance(rec.get("git"), dict) else {}
+    st = RowState(Path(folder), str(rec.get("case")), str(rec.get("method")), False, commit=git.get("commit"),
+                  time_s=row.get("time_s") if isinstance(row.get("time_s"), (int, float)) else None)
+    if rec.get("version") != STORE_VERSION:
+        st.stale, st.why = True, (f"store version {rec.get('version')!r}, now {STORE_VERSION}"
+                                  + (" (python -m eval.reproduce --rekey)" if rec.get("version") == REKEY_FROM else ""))
+        return st
+    fields = rec.get("key_fields") if isinstance(rec.get("key_fields"), dict) else {}
+    code = fields.get("code") if isinstance(fields.get("code"), dict) else {}
+    if code.get("plugin") is not None:
+        st.why = "a plug-in's row: its source lies outside this repository (not checked)"
+        return st
+    mods, consts = _now(fields.get("method"), root)
+    if code.get("sources") == modules_digest(mods, root, consts):
+        return st
+    st.stale = True
+    tree = trees.tree(st.commit) if not git.get("dirty") else None
+    if list(mods) != code.get("modules") or list(consts) != code.get("constants"):
+        st.why = "the modules its method's code is made of changed"
+    elif tree is None:
+        st.why = "its code changed (its commit is not in this clone)"
+    else:
+        names = _changed(mods, consts, tree, root)
+        st.why = f"{', '.join(names) or 'its code'} changed since {str(st.commit)[:7]}"
+    return st
+
+
+def _valid(folder, case_dir: str, p: Path) -> tuple[dict | None, str]:
+    """A record file read as untrusted input: ``(record, "")`` when it is whole and valid
+    for its store version, else ``(None, why)``."""
+    rec = _read_json(p)
+    if not isinstance(rec, dict) or not isinstance(rec.get("method"), str) or not isinstance(rec.get("case"), str):
+        return None, "invalid: not a record"
+    try:
+        if ResultStore(folder).path(rec["case"], rec["method"]).resolve() != p.resolve():
+            return None, "invalid: it names another pair than its file"
+    except SShaDeError as e:
+        return None, f"invalid: {e}"
+    if rec.get("version") == STORE_VERSION:
+        found = ResultStore(folder).read(rec["case"], rec["method"])
+        return (found.record, "") if found.record is not None else (None, found.why or "invalid")
+    if rec.get("digest") != record_digest(rec):
+        return None, "invalid: edited (its digest does not match)"
+    bad = check_row(rec.get("row"), rec["case"], rec["method"])
+    return (None, f"invalid: {bad}") if bad else (rec, "")
+
+
+def check_folders(folders, trees: CommitTrees, root: str | None = None) -> dict[str, dict[str, dict]]:
+    """``{folder: {method: {"rows": n, "stale": k, "why": {why: count}, "stale_s": s}}}``
+    for every record of every folder in ``folders`` (:func:`row_state`; an invalid
+    record counts as stale, with why; ``stale_s``: the stored seconds of the stale rows,
+    the time their recomputation is estimated at); ``root``: the checkout whose code
+    the rows are held to (default: this one)."""
+    out: dict[str, dict[str, dict]] = {}
+    for folder in folders:
+        per = out.setdefault(str(folder), {})
+        for case_dir, p in record_paths(folder):
+            rec, bad = _valid(folder, case_dir, p)
+            st = row_state(folder, rec, trees, root) if rec else RowState(Path(folder), case_dir, p.stem, True, bad)
+            m = per.setdefault(st.method, {"rows": 0, "stale": 0, "why": {}, "stale_s": 0.0})
+            m["rows"] += 1
+            if st.stale:
+                m["stale"] += 1
+                m["why"][st.why] = m["why"].get(st.why, 0) + 1
+                m["stale_s"] += st.time_s or 0.0
+    return out
+
+
+def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
+    """Re-key one record file ``p`` of ``folder``'s store written under store version
+    :data:`REKEY_FROM`, in place (atomically): ``"rekeyed"``, ``"current"`` (already of
+    this version) or ``"refused: <why>"`` (left as it is: not valid, made by a dirty
+    checkout, its commit not in git, its old identity not that commit's, a module of its
+    identity missing there). The new identity: :func:`eval.run.code_identity.code_identity`'s
+    modules and constants for its method at this checkout, their code as at its commit;
+    the numerical versions and plug-in digest as recorded; the case identity without its folder."""
+    rec, bad = _valid(folder, p.parent.name, p)
+    if rec is None:
+        return f"refused: {bad}"
+    if rec.get("version") == STORE_VERSION:
+        return "current"
+    if rec.get("version") != REKEY_FROM:
+        return f"refused: store version {rec.get('version')!r}"
+    fields, git = rec.get("key_fields"), rec.get("git")
+    if not isinstance(fields, dict) or not isinstance(git, dict) or not isinstance(fields.get("code"), dict):
+        return "refused: no key fields or git state"
+    text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
+    if hashlib.sha256(text.encode()).hexdigest() != rec.get("key"):
+        return "refused: its key is not its key fields' digest"
+    if git.get("dirty") is not False:
+        return "refused: made by a checkout with uncommitted changes"
+    tree = trees.tree(git.get("commit"))
+    if tree is None:
+        return f"refused: commit {git.get('commit')!r} is not in this repository"
+    old = fields["code"]
+    try:
+        if modules_digest(old.get("modules") or [], str(tree)) != old.get("sources"):
+            return f"refused: its code identity is not that of {git['commit'][:7]}'s sources"
+        mods, consts = _now(fields.get("method"))
+        sources = modules_digest(mods, str(tree), consts)
+    except KeyError as e:
+        return f"refused: module {e} is not at {git['commit'][:7]}"
+    case = {k: v for k, v in (fields.get("case") or {}).items() if k != "root"}
+    code = {"sources": sources, "modules": list(mods), "constants": list(consts), "versions": old.get("versions"),
+            "plugin": old.get("plugin")}
+    key, new_fields = pair_key(fields.get("method"), case, fields.get("extra"), code)
+    rec.update(version=STORE_VERSION, key=key, key_fields=new_fields,
+               rekeyed={"from_version": REKEY_FROM, "from_key": rec.get("key"), "commit": git["commit"]})
+    rec["digest"] = record_digest(rec)
+    ResultStore(folder).rewrite(p, rec)
+    return "rekeyed"
