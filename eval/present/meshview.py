@@ -149,12 +149,13 @@ def _b64(a: np.ndarray) -> str:
     return base64.b64encode(np.ascontiguousarray(a).astype(a.dtype.newbyteorder("<")).tobytes()).decode("ascii")
 
 
-def _carried(earlier, meshes: Mapping, keys: Mapping, faces: str, c: int) -> dict:
+def _carried(earlier, meshes: Mapping, keys: Mapping, faces: str, c: int, aliases: Mapping) -> dict:
     """Panels of an ``earlier`` view of the same case (:func:`read_view`) for the meshes
     restored without their vertices (kind ``not stored``): ``{label: (P (c, 3) cluster
     positions, {quantity: (c,) values})}`` for each whose earlier panel shows the same
-    stored record (its ``key`` equals ``keys[label]``) on the same clusters (the same
-    ``faces``, ``c`` clusters); nothing else is taken from it."""
+    stored record (its ``key`` equals ``keys[label]``, or ``aliases[label]``: the key that
+    record had before it was re-keyed) on the same clusters (the same ``faces``, ``c``
+    clusters); nothing else is taken from it."""
     if not isinstance(earlier, Mapping) or earlier.get("faces") != faces or earlier.get("clusters") != c:
         return {}
     try:
@@ -164,7 +165,8 @@ def _carried(earlier, meshes: Mapping, keys: Mapping, faces: str, c: int) -> dic
         out = {}
         for label, (kind, X) in meshes.items():
             m = old.get(label)
-            if X is not None or kind != "not stored" or m is None or not keys.get(label) or m.get("key") != keys[label]:
+            if (X is not None or kind != "not stored" or m is None or not keys.get(label)
+                    or m.get("key") not in (keys[label], aliases.get(label))):
                 continue
             q = np.frombuffer(base64.b64decode(m["pos"]), "<u2").reshape(-1, 3)
             vals = {k: np.frombuffer(base64.b64decode(m[k]), np.uint8) / 255.0 * float(scales[k]["max"])
@@ -177,7 +179,7 @@ def _carried(earlier, meshes: Mapping, keys: Mapping, faces: str, c: int) -> dic
 
 
 def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_FACES, keys=None,
-              earlier=None) -> dict:
+              earlier=None, aliases=None) -> dict:
     """The view of one case (module docstring).
 
     Parameters
@@ -192,6 +194,8 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     earlier : the case's earlier view (:func:`read_view`) or None: a ``not stored``
         mesh whose record key it shows on the same clusters is taken from it (its
         panel's ``carried`` is true) instead of being left out (:func:`_carried`).
+    aliases : mapping label -> the key that result's record had before it was re-keyed
+        (shown by an earlier view under that key), or None.
 
     Returns a JSON-able dict: ``case``, ``n_vertices``, ``n_faces`` (the mesh's),
     ``shown_faces``, ``clusters``, ``idx32``, ``faces`` (base64), ``lo`` / ``step`` (the
@@ -207,7 +211,7 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     idx32 = c > 65535
     faces = _b64(G.astype(np.uint32 if idx32 else np.uint16))
     keys = dict(keys or {})
-    carried = _carried(earlier, meshes, keys, faces, c)
+    carried = _carried(earlier, meshes, keys, faces, c, dict(aliases or {}))
     pos = {label: P for label, (P, _) in carried.items()}
     for label, (_kind, X) in meshes.items():
         if X is None:
@@ -268,14 +272,14 @@ def case_view_path(run_dir, name) -> Path:
 
 
 def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: int = DEFAULT_MAX_FACES,
-                    stored=(), keys=None) -> Path | None:
+                    stored=(), keys=None, aliases=None) -> Path | None:
     """``run_dir/report/<case>.js`` for one evaluated case (attributes ``name``, ``V``,
     ``F``, optional ``V_gt``): panels rest, target (when the case has a ground truth),
     then every method of ``results`` (name -> deformed vertices (n, 3), or None: failed;
     names in ``not_run``: not run; in ``stored``: restored without a mesh, shown from the
     earlier view file when it shows the same record, ``keys``: name -> store record key,
-    :func:`case_view`). Returns the path, or None after a logged warning (a view never
-    stops an evaluation)."""
+    ``aliases``: name -> the key its record had before it was re-keyed, :func:`case_view`).
+    Returns the path, or None after a logged warning (a view never stops an evaluation)."""
     meshes = {"rest": ("rest", case.V)}
     if getattr(case, "V_gt", None) is not None:
         meshes["target (ground truth)"] = ("target", case.V_gt)
@@ -292,7 +296,8 @@ def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: i
         except (OSError, ValueError):
             earlier = None
     try:
-        view = case_view(case.name, case.V, case.F, meshes, max_faces=max_faces, keys=keys, earlier=earlier)
+        view = case_view(case.name, case.V, case.F, meshes, max_faces=max_faces, keys=keys, earlier=earlier,
+                         aliases=aliases)
         p.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(view, separators=(",", ":"))
         with atomic_write(p, "w") as fh:

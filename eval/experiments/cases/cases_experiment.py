@@ -401,21 +401,26 @@ class _CaseOutputs:
         not_run = [n for m, n in zip(s.methods, s.names) if not s.runs_on(ci, m)]  # "not run", not "failed"
         results = {n: deformed.get(n) for n in s.names}
         keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
+        earlier = {s.names[mi]: (self.done[ci, mi].get("rekeyed") or {}).get("from_key") or keys[s.names[mi]]
+                   for mi in self.plan[ci] if (ci, mi) in self.done}  # a re-keyed record: the same run
         if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/present/figures.py)
-            self._figure(ci, results, not_run, unknown, keys)
+            self._figure(ci, results, not_run, unknown, keys, earlier)
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
             p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown,
-                                keys=keys)
+                                keys=keys, aliases=earlier)
             self._kept(ci, "3D view", p, case_view_path(s.out_dir, case.name))
         self._record()
 
-    def _figure(self, ci: int, results: dict, not_run: list, unknown: list, keys: dict) -> None:
+    def _figure(self, ci: int, results: dict, not_run: list, unknown: list, keys: dict, earlier: dict) -> None:
         """Case ``ci``'s figure, stamped with the records it shows (:data:`FIGURE_RECORDS`,
         a PNG text chunk). When some restored run has no stored mesh, an earlier run's
-        figure stamped with exactly these records is kept (noted as such); else removed."""
+        figure stamped with exactly these records (``keys``; or ``earlier``: the keys they
+        had before they were re-keyed, :func:`eval.run.stale_rows.rekey_record`) is kept,
+        stamped anew, and noted as such; else removed."""
         s, case = self.s, self.s.cases[ci]
         path = case_figure_path(s.out_dir / "figures", case.name)
         stamp = json.dumps({"records": keys, "not_run": sorted(not_run)}, sort_keys=True)
+        before = json.dumps({"records": earlier, "not_run": sorted(not_run)}, sort_keys=True)
         if not unknown:
             p = write_case_figure(case, results, s.out_dir / "figures", not_run=not_run)
             try:
@@ -424,7 +429,9 @@ class _CaseOutputs:
                 log.warning("figure %s not stamped with its records: %s", p, e)
             return self._kept(ci, "figure", p, path)
         try:
-            same = all(keys.values()) and png_text(path).get(FIGURE_RECORDS) == stamp
+            same = all(keys.values()) and png_text(path).get(FIGURE_RECORDS) in (stamp, before)
+            if same and png_text(path).get(FIGURE_RECORDS) != stamp:
+                set_png_text(path, {FIGURE_RECORDS: stamp})  # the same records under their new keys
         except (OSError, SShaDeError):
             same = False
         if same:
