@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
 import sys
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
@@ -109,6 +111,9 @@ def cluster_options(values) -> ClusterOptions | None:
     extra = values["additional_parameters"] or {}
     if not isinstance(setup, (list, tuple)) or not all(isinstance(x, str) for x in setup):
         raise SShaDeError(f"cluster.setup must be a list of shell lines or null, got {setup!r}")
+    if setup and values["executor"] == "local":  # a shell between this process and the task: Ctrl-C would miss it
+        raise SShaDeError("cluster.setup is for SLURM tasks; the local executor's tasks take this process's "
+                          "environment (set it before the command)")
     if not isinstance(extra, Mapping) or not all(isinstance(k, str) for k in extra):
         raise SShaDeError(f"cluster.additional_parameters must be a mapping of sbatch options, got {extra!r}")
     return ClusterOptions(
@@ -223,12 +228,48 @@ def missing_record(case, name: str, message: str, cores: int | None = None) -> d
     return {"row": json_safe(row), "info": {}, "case": case.name, "method": name}
 
 
+def _thread_caps(options: ClusterOptions) -> dict:
+    """The environment that caps a task's threads at ``cpus_per_task``
+    (:data:`harness.jobs.THREAD_VARIABLES`, :data:`sshade.cores.CORES_VARIABLE`)."""
+    return {v: str(options.cpus_per_task) for v in (*THREAD_VARIABLES, CORES_VARIABLE)}
+
+
+@contextlib.contextmanager
+def _local_launch(options: ClusterOptions, log_path: Path):
+    """Meanwhile, what a local task's process inherits: the thread caps
+    (:func:`_thread_caps`) in the environment, and stdout / stderr to ``log_path`` (its
+    controller's messages, e.g. when cancelled, go there, not to this command's output)."""
+    values = _thread_caps(options)
+    old = {k: os.environ.get(k) for k in values}
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        os.environ.update(values)
+        with open(log_path, "ab") as fh:
+            os.dup2(fh.fileno(), 1)
+            os.dup2(fh.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved:
+            os.close(fd)
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def _executor(options: ClusterOptions, folder: Path):
-    """submitit's executor for ``options`` writing its scripts and logs in ``folder``; each
-    task's threads capped at ``cpus_per_task`` (:data:`harness.jobs.THREAD_VARIABLES`)."""
+    """submitit's executor for ``options`` writing its scripts and logs in ``folder``; a
+    SLURM task's threads capped by its script (:func:`_thread_caps`), a local task's by
+    the environment it inherits (no shell in between: a cancel reaches it)."""
     import submitit
 
-    cap = [f"export {v}={options.cpus_per_task}" for v in (*THREAD_VARIABLES, CORES_VARIABLE)]
+    cap = [f"export {k}={v}" for k, v in _thread_caps(options).items()]
     ex = submitit.AutoExecutor(folder=str(folder / "%j"), cluster=options.executor)
     params: dict = {"timeout_min": options.timeout_min, "cpus_per_task": options.cpus_per_task,
                     "name": "sshade-table"}
@@ -239,8 +280,6 @@ def _executor(options: ClusterOptions, folder: Path):
                       slurm_additional_parameters=dict(options.additional_parameters))
         params.update({f"slurm_{k}": getattr(options, k) for k in ("partition", "account", "qos")
                        if getattr(options, k) is not None})
-    else:
-        params["local_setup"] = [*cap, *options.setup]
     ex.update_parameters(**params)
     return ex
 
@@ -271,7 +310,7 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, old)
 
 
-def _cancel(jobs: list, ended: set) -> None:
+def _cancel(jobs: list, ended: set, options: ClusterOptions) -> None:
     """Cancel every job not in ``ended`` (``scancel`` through submitit; a local task gets
     SIGINT), logging one line; a failure to cancel is logged, never raised."""
     left = [j for i, j in enumerate(jobs) if i not in ended]
@@ -280,6 +319,9 @@ def _cancel(jobs: list, ended: set) -> None:
             j.cancel(check=False)
         except Exception as e:  # noqa: BLE001 -- cancelling goes on for the others
             log.warning("could not cancel array task %s: %s", j.job_id, e)
+    t_end = time.monotonic() + 10.0  # a local task's controller ends it (SIGINT, then SIGKILL after 1 s)
+    while options.executor == "local" and any(j.state == "RUNNING" for j in left) and time.monotonic() < t_end:
+        time.sleep(0.1)
     if left:
         log.warning("interrupted: cancelled %d array task(s) without result: %s", len(left),
                     " ".join(str(j.job_id) for j in left))
@@ -338,7 +380,8 @@ def run_case_array(setup: WorkerSetup, tasks: list, options: ClusterOptions, *, 
     """
     folder = abs_path(setup.out_dir) / options.folder
     try:
-        jobs = _executor(options, folder).map_array(run_case_task, [setup] * len(tasks), tasks)
+        with _local_launch(options, folder / "local.log") if options.executor == "local" else contextlib.nullcontext():
+            jobs = _executor(options, folder).map_array(run_case_task, [setup] * len(tasks), tasks)
     except Exception as e:  # noqa: BLE001 -- sbatch missing, refused, a bad sbatch option
         raise SShaDeError(f"cluster: submitting the array failed: {' '.join(str(e).split())[-600:]}") from None
     log.info("submitted %d array task(s) (%s, one per case): %s; logs in %s", len(jobs), options.executor,
@@ -365,7 +408,7 @@ def run_case_array(setup: WorkerSetup, tasks: list, options: ClusterOptions, *, 
             wait_for_jobs(jobs, states=_states(options, jobs), poll_s=options.poll_s, grace_polls=options.grace_polls,
                           unreachable_s=options.unreachable_s, report=report)
     except KeyboardInterrupt:
-        _cancel(jobs, ends)
+        _cancel(jobs, ends, options)
         raise
     if lost:
         log.warning("%d pair(s) have no record (their array task did not store them): %s; their rows are errors, "
