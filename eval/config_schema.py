@@ -22,7 +22,7 @@ __all__ = ["FiguresSchema", "ReportSchema", "ArapSchema", "ReferenceSchema", "Ar
            "StoreSchema", "ExperimentSchema", "TopSchema", "DefaustBuildSchema", "DefaustSchema", "FaustSchema",
            "ShapesSchema", "AnimationSchema", "PlaneSchema", "ConvergenceSShaDeSchema", "ConvergenceSchema",
            "PoseTransferSchema", "ScalingSchema", "ScoreSchema", "ToscaSchema", "DATASET_SCHEMAS",
-           "SECTION_SCHEMAS", "method_schemas", "top_schema", "store_schemas"]
+           "SECTION_SCHEMAS", "ClusterSchema", "method_schemas", "top_schema", "store_schemas"]
 
 
 # ----------------------------------------------------------------------------- conf/config.yaml
@@ -295,6 +295,28 @@ SECTION_SCHEMAS = {"animation": AnimationSchema, "convergence": ConvergenceSchem
                    "tosca": ToscaSchema}
 
 
+# ----------------------------------------------------------------------------- conf/cluster/
+@dataclass
+class ClusterSchema:
+    """``cluster`` (``cluster=slurm``, ``conf/cluster/slurm.yaml``, which holds every value):
+    the ``cases`` experiment's pairs as a job array (eval/experiments/cases/case_array.py)."""
+
+    executor: str = MISSING
+    partition: Optional[str] = MISSING
+    account: Optional[str] = MISSING
+    qos: Optional[str] = MISSING
+    timeout_min: int = MISSING
+    cpus_per_task: int = MISSING
+    mem_gb: Optional[float] = MISSING
+    array_parallelism: int = MISSING
+    setup: Optional[List[str]] = MISSING
+    additional_parameters: Dict[str, Any] = MISSING
+    folder: str = MISSING
+    poll_s: float = MISSING
+    grace_polls: int = MISSING
+    unreachable_s: float = MISSING
+
+
 # ----------------------------------------------------------------------------- conf/method/
 #: The keys of a method file the evaluator reads, typed; its parameters are the class's
 #: own (``Any``: any type, checked when it is built).
@@ -344,6 +366,7 @@ def store_schemas() -> None:
         cs.store(group="schema/dataset", name=name, node=cls)
     for name, cls in SECTION_SCHEMAS.items():
         cs.store(group="schema/experiment", name=name, node=cls)
+    cs.store(group="schema/cluster", name="slurm", node=ClusterSchema)
     for name, cls in _METHOD_SCHEMAS.items():
         cs.store(group="schema/method", name=name, node=cls)
 

@@ -43,3 +43,16 @@ def kill_at_call(proc, counter, n: int, timeout_s: float = 300.0) -> None:
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)
         proc.communicate()
+
+
+class DiesOnCase(Counted):
+    """:class:`Counted`, case-aware: on the case named by ``$SSHADE_TEST_DIE_CASE`` it
+    kills its own process (SIGKILL), as OOM or ``kill -9`` would (tests/test_case_array.py)."""
+
+    case = None  # set by the evaluator before each deform (eval.datasets.deformation_case.case_label)
+
+    def deform(self, V, F, handles, targets):
+        import signal
+        if self.case is not None and os.environ.get("SSHADE_TEST_DIE_CASE") == self.case.name:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return super().deform(V, F, handles, targets)

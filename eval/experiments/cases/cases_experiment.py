@@ -19,6 +19,7 @@ from pathlib import Path
 
 from eval import datasets
 from eval import method_config as method_table
+from eval.experiments.cases.case_array import CaseTask, TaskEnd, cluster_options, run_case_array
 from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, run_case_jobs
 from eval.experiments.cases.case_plan import plan_runs, planned_root
 from eval.experiments.cases.case_references import CaseReferences
@@ -234,7 +235,8 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     the result store (``resume``; :mod:`eval.run.result_store`), each stored as soon as it finishes,
     with a progress bar weighted by each method's expected cost (:mod:`eval.run.progress`);
     in this process, or whole cases in ``jobs`` worker processes
-    (:mod:`eval.experiments.cases.case_jobs`); ``cases.csv`` rewritten after each case, the
+    (:mod:`eval.experiments.cases.case_jobs`), or one task per case of a SLURM job array
+    (``cluster``, :mod:`eval.experiments.cases.case_array`); ``cases.csv`` rewritten after each case, the
     optional figures and 3D views of the first cases. Returns the rows of every pair, in
     (case, method) order, as stored (an interrupted and resumed run, or one with other
     ``jobs``, gives the rows of an uninterrupted one)."""
@@ -247,12 +249,17 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     done = _restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
-    s.jobs = job_count(spec.jobs, cases=len({ci for ci, _ in todo}), estimate_s=sum(est.values()))
+    array = spec.experiment.options  # the cluster section (case_array.py); None: the pairs run here
+    n_cases = len({ci for ci, _ in todo})
+    s.jobs = (job_count(spec.jobs, cases=n_cases, estimate_s=sum(est.values())) if array is None
+              else max(1, min(array.array_parallelism, n_cases)))
     s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (case_plan.py)
     out = _CaseOutputs(spec.figures, spec.report, s, plan, done)
     bar = weighted_bar(sum(est.values()), len(todo))
     with logging_redirect_tqdm(), bar:
-        if s.jobs > 1:
+        if array is not None:
+            _run_in_array(spec, s, todo, keys, est, cost, bar, done, out)
+        elif s.jobs > 1:
             _run_in_jobs(spec, s, todo, keys, est, cost, bar, done, out)
         else:
             for ci in range(len(cases)):
@@ -327,9 +334,7 @@ def _run_in_jobs(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, ba
     """``todo`` in ``s.jobs`` worker processes, whole cases each, the costliest first
     (:func:`eval.experiments.cases.case_jobs.run_case_jobs`); the cases without runs to do get
     their outputs (figures, views) here."""
-    by_case: dict = {}
-    for ci, mi in todo:
-        by_case.setdefault(ci, []).append(mi)
+    by_case = _by_case(todo)
     order = sorted(by_case, key=lambda ci: (-sum(est[ci, mi] for mi in by_case[ci]), ci))
     tasks = [(ci, s.cases[ci], [(mi, *keys[ci][mi]) for mi in by_case[ci]],
               s.refs.covers(ci, s.cases, s.base), out.wants_meshes(ci)) for ci in order]
@@ -348,9 +353,47 @@ def _run_in_jobs(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, ba
         out.case_done(ci, {mi: U for mi, _, U in pairs})
 
     log.info("%d case(s) with runs to do in %d worker processes (%s)", len(tasks), s.jobs, describe(s.jobs))
-    setup = WorkerSetup(methods=spec.methods, reference=spec.reference, guard=s.guard, out_dir=str(s.out_dir),
-                        store_meshes=spec.output.store_meshes)
-    s.refs.computed_s += run_case_jobs(setup, tasks, jobs=s.jobs, on_pair=on_pair, on_case=on_case, names=s.names)
+    s.refs.computed_s += run_case_jobs(_worker_setup(spec, s), tasks, jobs=s.jobs, on_pair=on_pair, on_case=on_case,
+                                       names=s.names)
+    for ci in range(len(s.cases)):
+        if ci not in by_case:
+            out.case_done(ci, {})
+
+
+def _by_case(todo) -> dict:
+    """``{ci: [mi, ...]}`` of the ``(ci, mi)`` pairs ``todo``, in their order."""
+    by_case: dict = {}
+    for ci, mi in todo:
+        by_case.setdefault(ci, []).append(mi)
+    return by_case
+
+
+def _worker_setup(spec: EvalSpec, s: _Setup) -> WorkerSetup:
+    """What a worker process or an array task builds its methods, references, guard and store from."""
+    return WorkerSetup(methods=spec.methods, reference=spec.reference, guard=s.guard, out_dir=str(s.out_dir),
+                       store_meshes=spec.output.store_meshes)
+
+
+def _run_in_array(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
+    """``todo`` as one job array, a task per case (:func:`eval.experiments.cases.case_array.run_case_array`):
+    each task's records (or failed rows for the pairs it did not store) into ``done`` as it
+    ends, then its case's outputs; the cases without runs to do get theirs at the end."""
+    by_case = _by_case(todo)
+    tasks = [CaseTask(ci, s.cases[ci], tuple((mi, *keys[ci][mi]) for mi in mis), s.refs.covers(ci, s.cases, s.base),
+                      out.wants_meshes(ci)) for ci, mis in by_case.items()]
+
+    def on_end(end: TaskEnd) -> None:
+        for mi, rec in end.records.items():
+            done[end.ci, mi] = rec
+            if "key" in rec:  # stored: a measured run
+                cost.observe(s.names[mi], len(s.cases[end.ci].V), rec["row"].get("time_s"))
+        bar.update(sum(est[end.ci, mi] for mi in by_case[end.ci]))
+        out.case_done(end.ci, end.fresh)
+
+    if spec.jobs != 1:
+        log.info("cluster: %d task(s), each running its case's pairs in turn (jobs is not used)", len(tasks))
+    s.refs.computed_s += run_case_array(_worker_setup(spec, s), tasks, spec.experiment.options, store=s.store,
+                                        names=s.names, on_end=on_end)
     for ci in range(len(s.cases)):
         if ci not in by_case:
             out.case_done(ci, {})
@@ -556,4 +599,4 @@ def _side_by_side(rows) -> str:
     return f"; {len(side)} of {len(rows)} runs side by side, {cores} core{'s' if hi != 1 else ''} each"
 
 
-register_experiment("cases", run)
+register_experiment("cases", run, section="cluster", options=cluster_options)
