@@ -36,6 +36,7 @@ from eval.run.outdir import (
     results_dir,
 )
 from eval.run.runinfo import read_runinfo
+from eval.run.stale_rows import CommitTrees, check_folders
 from eval.tables import (
     ALL_CASES_HEADING,
     EXTRA_COLUMNS,
@@ -385,18 +386,26 @@ def safe_report(run_dir) -> Path | None:
 def write_index(root) -> Path:
     """``root/index.html``: a link to the page (or the folder) of every run folder
     below ``root`` (a folder with ``run.json``, up to three levels down), with its
-    experiment and status. Raises OutputDirError when ``root/index.html`` is not ours."""
+    experiment and status (with how many of its stored rows are stale at this checkout,
+    :func:`eval.run.stale_rows.check_folders`). Raises OutputDirError when
+    ``root/index.html`` is not ours."""
     root = Path(root)
     runs = sorted({p.parent for p in root.glob("*/run.json")} | {p.parent for p in root.glob("*/*/run.json")}
                   | {p.parent for p in root.glob("*/*/*/run.json")})
     rows = []
+    with CommitTrees() as trees:
+        stale = {Path(f): ms for f, ms in check_folders(runs, trees).items()}
     for d in runs:
         info = read_runinfo(d)
         rel = d.relative_to(root).as_posix()
         target = f"{rel}/{PAGE}" if (d / PAGE).is_file() else f"{rel}/"
         exp = ((info.get("config") or {}).get("experiment") or {}).get("name", "")
+        k = sum(v["stale"] for v in stale.get(d, {}).values())
+        n = sum(v["rows"] for v in stale.get(d, {}).values())
+        status = str(info.get("status", "")) + (f"; {k} of {n} rows stale (python -m eval.reproduce --check)"
+                                                if k else "")
         rows.append([f"<td>{_link(root, target, _e(rel))}</td>", f"<td>{_e(exp)}</td>",
-                     f"<td>{_e(info.get('status', ''))}</td>", _cell(info.get("n_cases")),
+                     f"<td>{_e(status)}</td>", _cell(info.get("n_cases")),
                      f"<td>{_e((info.get('git') or {}).get('commit', ''))[:12]}</td>"])
     if not rows:
         raise OutputDirError(f"no run folder (with run.json) below {root}: no index written")

@@ -1,19 +1,14 @@
 """Regenerate every table and figure under ``results/`` with one command (paper §4).
 
     python -m eval.reproduce                                   # embedded synthetic DeFAUST only
-    python -m eval.reproduce --faust DIR --tosca DIR           # + FAUST and TOSCA experiments
     python -m eval.reproduce --faust DIR --tosca DIR --shapes DIR --scaling MESH
     python -m eval.reproduce --check [--json]     # which committed rows are stale; no computation
-    python -m eval.reproduce --rekey              # re-key records of the earlier key layout (no computation)
+    python -m eval.reproduce --rekey              # re-key records of the earlier key layout
 
-Runs, each as its own ``python -m eval`` process (so a failure is reported and the
-others still run); before any work it prints, per step and method, the stored rows it
-reuses and those stale (and why), and the stale rows' stored time as the estimate. The
-table steps resume (``resume=true``): only their stale and missing rows are computed.
-
-Exit status 1 if any step failed (all steps are attempted); with ``--check``, 1 if any
-committed row is stale (:mod:`eval.run.stale_rows`).
-
+Each step runs as its own process (a failure is reported, the others still run), after a
+plan of the stored rows reused and stale per step and method; the table steps resume, so
+they compute only stale and missing rows. Exit 1 if a step failed (or, with ``--check``,
+a committed row is stale: :mod:`eval.run.stale_rows`).
 Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 

@@ -71,7 +71,7 @@ def test_the_committed_leaderboard_is_the_committed_runs_board():
 def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
     """results/faust copied with SShaDe's records replaced by those of the earlier key layout
     (git's history): the board marks SShaDe's cell and row stale, 8 of 8, and says what
-    the mark means; the other methods are unmarked."""
+    the mark means; the other methods are unmarked; the index's status says 8 of 40."""
     import shutil
     import subprocess
     shutil.copytree(ROOT / "results" / "faust", tmp_path / "faust")
@@ -85,3 +85,4 @@ def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
     text = leaderboard_markdown(tmp_path)
     assert "| SShaDe [stale: 8 of 8 rows] |" in text and "[stale: k of n rows]" in text
     assert text.count("[stale:") == 3  # the matrix cell, the dataset's row, the explanation
+    assert "done; 8 of 40 rows stale" in write_index(tmp_path).read_text()  # the index's status column

@@ -1,10 +1,8 @@
 """The identity of the code that produces a result: part of every result-store key
-(:mod:`eval.run.result_store`), so that a stored row is reused only by the code that computed it.
-A row's identity is the code its numbers come from: the method's modules and what they
-import (solvers, metrics, references, data loading), found in the syntax trees; a package
-``__init__`` that binds its names lazily (SPEC 1, ``lazy_loader.attach``) counts only
-through the names used, and the modules that only store, run or present records
-(:data:`RECORD_ONLY`) count through the store's version instead of their source.
+(:mod:`eval.run.result_store`), so that a stored row is reused only by the code that computed it:
+the method's modules and what they import (solvers, metrics, references, data loading),
+through lazy packages (SPEC 1) and re-exports; literal constants by value; not the
+modules that only store, run or present records (:data:`RECORD_ONLY`).
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 
 Example::
