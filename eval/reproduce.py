@@ -253,11 +253,12 @@ def _print_plan(selected) -> None:
                     agg[2] += v["stale_s"]
                     for w, n in v["why"].items():
                         agg[3][w] = agg[3].get(w, 0) + n
-            whole = " (a sweep step runs all its jobs again)" if "hydra.sweep.dir" in " ".join(cmd) else ""
+            whole = "hydra.sweep.dir" in " ".join(cmd)  # a sweep step runs all its jobs again
             for m, (ok, stale, secs, why) in per.items():
                 words = "; ".join(f"{w} ({n})" for w, n in why.items())
-                print(f"   {name}: {m}: {ok} reused, {stale} stale" + (f" ({words}), about {secs:.0f} s" if stale
-                                                                          else "") + whole, flush=True)
+                head = f"{ok + stale} stored, {stale} stale" if whole else f"{ok} reused, {stale} stale"
+                print(f"   {name}: {m}: {head}" + (f" ({words}), about {secs:.0f} s" if stale else "")
+                      + ("; a sweep step computes every row again" if whole else ""), flush=True)
 
 
 if __name__ == "__main__":

@@ -95,3 +95,30 @@ def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(caps
             assert "-m" in words[2:], name
             checked += 1
     assert checked == 2 + 2 * found("torch")  # sweep, sweep_arap_sr_alpha (+ the two Implicit-ARAP sweeps)
+
+
+def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_method(capsys):
+    """Before the first step: per step and method, the committed rows it reuses and those
+    stale (none at this checkout: ``--check`` passes); a sweep step says it computes
+    every row again; a step without stored rows runs whole."""
+    assert main(["--dry-run", "--faust", "F", "--only", "faust,sweep,convergence"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    first_step = next(i for i, ln in enumerate(out) if ln.startswith("== "))
+    plan = [ln.strip() for ln in out[:first_step]]
+    assert plan[0].startswith("plan: stored rows reused and stale")
+    for m in ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe"):
+        assert f"faust: {m}: 8 reused, 0 stale" in plan
+    assert "sweep: SShaDe: 18 stored, 0 stale; a sweep step computes every row again" in plan
+    assert "convergence: no stored rows; the step runs whole" in plan
+
+
+def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(capsys):
+    import json
+    assert main(["--check", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["results/faust"]["SShaDe"] == {"rows": 8, "stale": 0}
+    assert sum(v["rows"] for ms in got.values() for v in ms.values()) >= 600
+    import pytest
+    with pytest.raises(SystemExit) as e:
+        main(["--json"])  # --json goes with --check
+    assert e.value.code == 2 and "--json goes with --check" in capsys.readouterr().err
