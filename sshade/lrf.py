@@ -17,7 +17,8 @@ from numba import njit
 from .errors import SShaDeError
 
 __all__ = ["frame_functions", "triangle_gradients", "local_frames", "anchor_points", "encode", "decode",
-           "deformed_frames", "decode_with_frames", "transfer", "GRADIENTS", "ANCHORS"]
+           "deformed_frames", "decode_with_frames", "decode_rows", "anchor_weights",
+           "transfer", "GRADIENTS", "ANCHORS"]
 
 GRADIENTS = ("normalized", "raw")
 #: Where a high-res vertex is anchored in its triangle: its projection (default) or the
@@ -146,14 +147,23 @@ def encode(V: np.ndarray, tri: np.ndarray, VN: np.ndarray, FN: np.ndarray, axis:
     Linv = np.linalg.inv(L) if gradient == "raw" else np.transpose(L, (0, 2, 1))
     out = np.empty((len(tri), 3))
     _encode_kernel(np.ascontiguousarray(Linv, np.float64), np.ascontiguousarray(V, np.float64),
-                   np.ascontiguousarray(tri, np.int32), *_anchor_weights(bary),
+                   np.ascontiguousarray(tri, np.int32), *anchor_weights(bary),
                    np.ascontiguousarray(VN, np.float64), np.ascontiguousarray(FN, np.int64), out)
     return out
 
 
-def _anchor_weights(bary: np.ndarray | None) -> tuple[np.ndarray, bool]:
-    """The kernels' anchor weights: ``(bary (n, 3) C-contiguous float64, True)``, or the
-    barycenter's thirds ``((1, 3), False)`` when ``bary`` is None."""
+def anchor_weights(bary: np.ndarray | None) -> tuple[np.ndarray, bool]:
+    """The decoding kernels' anchor weights (§3.2, the anchor a(v) of :func:`anchor_points`).
+
+    Parameters
+    ----------
+    bary : (n, 3) float64 barycentric coordinates, or None for the barycenter (Alg. 1).
+
+    Returns
+    -------
+    ``(bary (n, 3) C-contiguous float64, True)``, or the barycenter's thirds ``((1, 3),
+    False)`` when ``bary`` is None (the flag: one row per vertex).
+    """
     if bary is None:
         return np.full((1, 3), 1.0 / 3.0), False
     return np.ascontiguousarray(bary, np.float64), True
@@ -228,28 +238,53 @@ def decode_with_frames(L: np.ndarray, C: np.ndarray, tri: np.ndarray, VN_def: np
     ------
     SShaDeError when ``out`` has the wrong shape or layout, or ``add`` without ``out``.
     """
-    n = len(tri)
-    if rows is None or isinstance(rows, slice):
-        lo, hi, step = (0, n, 1) if rows is None else rows.indices(n)
-        if step != 1:
-            raise SShaDeError("decode_with_frames: a slice of rows must have step 1")
-        C_, tri_, bary_ = C, tri, bary
-    else:
-        idx = np.asarray(rows, np.int64)
-        C_, tri_, bary_ = C[idx], tri[idx], None if bary is None else bary[idx]
-        lo, hi = 0, len(idx)
-    r = max(hi - lo, 0)
-    if out is None:
-        if add:
-            raise SShaDeError("decode_with_frames: add=True needs an out array")
-        out = np.empty((r, 3))
-    elif out.shape != (r, 3) or out.dtype != np.float64 or not out.flags.c_contiguous:
-        raise SShaDeError(f"decode_with_frames: out must be a C-contiguous ({r}, 3) float64 array")
-    w, per_vertex = _anchor_weights(bary_)
+    idx, lo, hi, out = decode_rows(rows, len(tri), out, add, "decode_with_frames")
+    C_, tri_, bary_ = (C, tri, bary) if idx is None else (C[idx], tri[idx], None if bary is None else bary[idx])
+    w, per_vertex = anchor_weights(bary_)
     _decode_kernel(L, np.ascontiguousarray(C_, np.float64), np.ascontiguousarray(tri_, np.int32), w,
                    np.ascontiguousarray(VN_def, np.float64), np.ascontiguousarray(FN, np.int64), per_vertex,
                    lo, hi, add, out)
     return out
+
+
+def decode_rows(rows, n: int, out: np.ndarray | None, add: bool, who: str) -> tuple:
+    """The rows a decoding kernel runs over and the array it writes: the ``rows``, ``out``
+    and ``add`` arguments of :func:`decode_with_frames` checked (also those of
+    :func:`sshade.smooth_transfer.smooth_decode_with`).
+
+    Parameters
+    ----------
+    rows : None (all ``n``), a ``slice`` with step 1, or (r,) int indices. n : int, the
+    vertices. out : (r, 3) float64 C-contiguous or None. add : bool. who : str, the
+    caller's name in the messages.
+
+    Returns
+    -------
+    ``(idx, lo, hi, out)``: ``idx`` (r,) int64 indices to gather the per-vertex arrays at
+    (then ``lo, hi = 0, r``), or None with ``lo:hi`` the slice; ``out`` as given, or a new
+    (r, 3) array.
+
+    Raises
+    ------
+    SShaDeError on a slice with another step, ``out`` of the wrong shape, dtype or
+    layout, ``add`` without ``out``.
+    """
+    idx = None
+    if rows is None or isinstance(rows, slice):
+        lo, hi, step = (0, n, 1) if rows is None else rows.indices(n)
+        if step != 1:
+            raise SShaDeError(f"{who}: a slice of rows must have step 1")
+    else:
+        idx = np.asarray(rows, np.int64)
+        lo, hi = 0, len(idx)
+    r = max(hi - lo, 0)
+    if out is None:
+        if add:
+            raise SShaDeError(f"{who}: add=True needs an out array")
+        out = np.empty((r, 3))
+    elif out.shape != (r, 3) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise SShaDeError(f"{who}: out must be a C-contiguous ({r}, 3) float64 array")
+    return idx, lo, hi, out
 
 
 @njit(cache=True, nogil=True)

@@ -28,7 +28,7 @@ from .params import SShaDeParams, check_params
 from .pipeline import SamplingJob, handle_pre_pct, low_res_size, prepare_samplings
 from .remesh import mesh_topology
 from .sampling import sampling_seeds, warm_kernels
-from .smooth_transfer import smooth_decode, vertex_jacobians
+from .smooth_transfer import jacobian_rest, smooth_decode_with, smooth_offsets, vertex_jacobians
 
 __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 
@@ -83,6 +83,9 @@ class _Sampling:
                           if p.average == "proximity" else None)
         if p.transfer == "triangle":
             self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, p.gradient, self.bary)
+        else:  # the blended transfer's rest parts, known before the targets
+            self.G = smooth_offsets(V, prep["tri"], self.bary, self.VN, prep["F"])
+            self.jac_rest = jacobian_rest(self.VN, prep["F"])
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
         self.history: list = []  # (k, 3) low-res results of the last four solves, newest first
         self.last_iterations = 0  # of the last solve
@@ -114,7 +117,7 @@ class _Sampling:
 
     def decode(self, rows=None, out: np.ndarray | None = None, add: bool = False) -> np.ndarray:
         """The last solve's high-res positions at ``rows`` (Alg. 1, or
-        :func:`sshade.smooth_transfer.smooth_decode` for ``transfer="vertex"``;
+        :func:`sshade.smooth_transfer.smooth_decode_with` for ``transfer="vertex"``;
         :func:`sshade.lrf.decode_with_frames`: rows, out and add as there)."""
         if self.transfer == "vertex":
             return self._decode_smooth(rows, out, add)
@@ -124,23 +127,14 @@ class _Sampling:
         return decode_with_frames(frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
                                   rows=rows, out=out, add=add)
 
-
     def _decode_smooth(self, rows, out, add: bool) -> np.ndarray:
         """:meth:`decode` for ``transfer="vertex"``: the corners' deformation gradients of
         the last solve (made once, by the first decoding after it) blended at ``rows``."""
         Jv = self.frames
         if Jv is None:  # threads racing here compute the same gradients
-            Jv = self.frames = vertex_jacobians(self.VN, self.low, self.prep["F"])
-        idx = slice(0, len(self.V)) if rows is None else rows
-        bary = None if self.bary is None else self.bary[idx]
-        X = smooth_decode(self.V[idx], self.prep["tri"][idx], bary, self.VN, self.low, self.prep["F"], Jv=Jv)
-        if out is None:
-            return X
-        if add:
-            out += X
-        else:
-            out[:] = X
-        return out
+            Jv = self.frames = vertex_jacobians(self.VN, self.low, self.prep["F"], rest=self.jac_rest)
+        return smooth_decode_with(Jv, self.G, self.prep["tri"], self.bary, self.low, self.prep["F"], rows=rows,
+                                  out=out, add=add)
 
     def weights(self, rows=None) -> np.ndarray | None:
         """The last solve's averaging weights at ``rows`` ((r,) float64), or None for the

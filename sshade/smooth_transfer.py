@@ -10,14 +10,18 @@ interpolants' errors are opposite). Measured: docs/differences.md M10.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
 from .errors import SShaDeError
+from .lrf import anchor_weights, decode_rows
 from .lrf import transfer as frame_transfer
 
-__all__ = ["triangle_jacobians", "vertex_jacobians", "smooth_decode", "rebuild", "TRANSFERS"]
+__all__ = ["triangle_jacobians", "JacobianRest", "jacobian_rest", "vertex_jacobians", "smooth_offsets", "smooth_decode",
+           "smooth_decode_with", "rebuild", "TRANSFERS"]
 
 #: How a high-res vertex follows the low-res mesh: one frame per triangle (Alg. 1,
 #: :mod:`sshade.lrf`) or the corners' deformation gradients blended (this module).
@@ -41,37 +45,127 @@ def triangle_jacobians(VN: np.ndarray, VN_def: np.ndarray, FN: np.ndarray) -> tu
     ------
     SShaDeError on a degenerate (zero-area) triangle, rest or deformed.
     """
-    def frame(P):
-        e1, e2 = P[FN[:, 1]] - P[FN[:, 0]], P[FN[:, 2]] - P[FN[:, 0]]
-        n = np.cross(e1, e2)
-        dbl = np.linalg.norm(n, axis=1)
-        if not (np.isfinite(dbl).all() and (dbl > 0).all()):
-            raise SShaDeError(f"smooth transfer: {int((~(dbl > 0)).sum())} degenerate low-res triangles")
-        return np.stack([e1, e2, n / dbl[:, None]], axis=2), dbl / 2
-    M, A = frame(VN)
-    Md, _ = frame(VN_def)
+    M, A = _edge_frames(VN, FN)
+    Md, _ = _edge_frames(VN_def, FN)
     return Md @ np.linalg.inv(M), A
 
 
-def vertex_jacobians(VN: np.ndarray, VN_def: np.ndarray, FN: np.ndarray) -> np.ndarray:
+def _edge_frames(P: np.ndarray, FN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[e1 e2 n]`` (t, 3, 3) (columns: the edges from corner 0 and the unit normal) and
+    the areas (t,) of the triangles ``FN`` on ``P``; SShaDeError on a degenerate one."""
+    e1, e2 = P[FN[:, 1]] - P[FN[:, 0]], P[FN[:, 2]] - P[FN[:, 0]]
+    n = np.cross(e1, e2)
+    dbl = np.linalg.norm(n, axis=1)
+    if not (np.isfinite(dbl).all() and (dbl > 0).all()):
+        raise SShaDeError(f"smooth transfer: {int((~(dbl > 0)).sum())} degenerate low-res triangles")
+    return np.stack([e1, e2, n / dbl[:, None]], axis=2), dbl / 2
+
+
+class JacobianRest(NamedTuple):
+    """What :func:`vertex_jacobians` needs of the rest low-res mesh (:func:`jacobian_rest`):
+    ``Minv`` (t, 3, 3) the inverse rest frames ``[e1 e2 n]^-1``, ``S`` (k, t) sparse
+    corner-by-triangle rest areas, ``w`` (k,) their sums, ``has`` (k,) bool ``w > 0``."""
+
+    Minv: np.ndarray
+    S: sp.csr_matrix
+    w: np.ndarray
+    has: np.ndarray
+
+
+def jacobian_rest(VN: np.ndarray, FN: np.ndarray) -> JacobianRest:
+    """The rest-pose part of :func:`vertex_jacobians`, made once for many deformed meshes.
+
+    Parameters
+    ----------
+    VN : (k, 3) float64 rest low-res positions. FN : (t, 3) int64.
+
+    Returns
+    -------
+    :class:`JacobianRest`.
+
+    Raises
+    ------
+    SShaDeError on a degenerate (zero-area) rest triangle.
+    """
+    M, A = _edge_frames(VN, FN)
+    k, t = len(VN), len(FN)
+    S = sp.csr_matrix((np.repeat(A, 3), (FN.ravel(), np.repeat(np.arange(t), 3))), shape=(k, t))  # corner x triangle
+    w = np.asarray(S.sum(axis=1)).ravel()
+    return JacobianRest(np.linalg.inv(M), S, w, w > 0)
+
+
+def vertex_jacobians(VN: np.ndarray, VN_def: np.ndarray, FN: np.ndarray, *,
+                     rest: JacobianRest | None = None) -> np.ndarray:
     """J_k: the area-weighted mean of :func:`triangle_jacobians` over the triangles at
-    each low-res vertex.
+    each low-res vertex (§3.2's transfer, ``transfer="vertex"``).
 
     Parameters
     ----------
     VN, VN_def : (k, 3) float64 rest / deformed low-res positions. FN : (t, 3) int64.
+    rest : :func:`jacobian_rest` of ``(VN, FN)`` when made already (the same numbers).
 
     Returns
     -------
     (k, 3, 3) float64, C-contiguous (a vertex in no triangle: zeros).
+
+    Raises
+    ------
+    SShaDeError on a degenerate (zero-area) triangle, rest or deformed.
     """
-    J, A = triangle_jacobians(VN, VN_def, FN)
+    if rest is None:
+        rest = jacobian_rest(VN, FN)
+    Md, _ = _edge_frames(VN_def, FN)
     k, t = len(VN), len(FN)
-    S = sp.csr_matrix((np.repeat(A, 3), (FN.ravel(), np.repeat(np.arange(t), 3))), shape=(k, t))  # corner x triangle
-    w = np.asarray(S.sum(axis=1)).ravel()
-    out = S @ J.reshape(t, 9)
-    out[w > 0] /= w[w > 0, None]
+    out = rest.S @ (Md @ rest.Minv).reshape(t, 9)
+    out[rest.has] /= rest.w[rest.has, None]
     return np.ascontiguousarray(out.reshape(k, 3, 3))
+
+
+def smooth_offsets(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: np.ndarray,
+                   FN: np.ndarray) -> np.ndarray:
+    """The rest-pose part of :func:`smooth_decode` at each high-res vertex: the vectors
+    its three corners' gradients are applied to, ``G[i, k] = (v - a) + 1/2 (a - N_k)``
+    (module docstring; a the anchor, N_k the k-th corner of P(v), all at rest).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 high-res rest positions. tri : (n,) int triangle P(v).
+    bary : (n, 3) float64 the anchor's barycentric coordinates, or None for the
+        barycenter. VN : (k, 3) float64 rest low-res positions. FN : (t, 3) int64.
+
+    Returns
+    -------
+    (n, 3, 3) float64, C-contiguous: known before the targets, made once by
+    :func:`sshade.prepare` and given to :func:`smooth_decode_with` every frame.
+    """
+    w, per_vertex = anchor_weights(bary)
+    G = np.empty((len(tri), 3, 3))
+    _offsets_kernel(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(tri, np.int32), w, per_vertex,
+                    np.ascontiguousarray(VN, np.float64), np.ascontiguousarray(FN, np.int64), G)
+    return G
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _corners(i, tri, bary, per_vertex, FN):
+    """The corners of vertex ``i``'s triangle ``tri[i]`` and its anchor weights (``bary[i]``
+    when ``per_vertex``, else ``bary[0]``): ``(c0, c1, c2, w0, w1, w2)``."""
+    t = tri[i]
+    r = i if per_vertex else 0
+    return FN[t, 0], FN[t, 1], FN[t, 2], bary[r, 0], bary[r, 1], bary[r, 2]
+
+
+@njit(cache=True, nogil=True)
+def _offsets_kernel(V, tri, bary, per_vertex, P, FN, G):
+    """``G[i, k] = (V[i] - a) + 0.5 (a - P[FN[tri[i], k]])``, ``a = sum_k w_k P[FN[tri[i],
+    k]]`` with ``w = bary[i]`` (``per_vertex``) or ``bary[0]``: :func:`smooth_offsets`."""
+    for i in range(len(tri)):
+        c0, c1, c2, w0, w1, w2 = _corners(i, tri, bary, per_vertex, FN)
+        for e in range(3):
+            a = ((0.0 + w0 * P[c0, e]) + w1 * P[c1, e]) + w2 * P[c2, e]
+            u = V[i, e] - a
+            G[i, 0, e] = u + 0.5 * (a - P[c0, e])
+            G[i, 1, e] = u + 0.5 * (a - P[c1, e])
+            G[i, 2, e] = u + 0.5 * (a - P[c2, e])
 
 
 def smooth_decode(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: np.ndarray, VN_def: np.ndarray,
@@ -90,42 +184,65 @@ def smooth_decode(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: n
 
     Returns
     -------
-    (n, 3) float64 deformed positions. A rigid motion of the low-res mesh is reproduced
-    exactly; a vertex at a low-res vertex goes exactly to its deformed position.
+    (n, 3) float64 deformed positions: :func:`smooth_decode_with` of
+    :func:`smooth_offsets`. A rigid motion of the low-res mesh is reproduced exactly; a
+    vertex at a low-res vertex goes exactly to its deformed position.
     """
     if Jv is None:
         Jv = vertex_jacobians(VN, VN_def, FN)
-    w = np.full((1, 3), 1.0 / 3.0) if bary is None else np.ascontiguousarray(bary, np.float64)
-    out = np.empty((len(tri), 3))
-    _smooth_kernel(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(tri, np.int64), w, bary is not None,
-                   np.ascontiguousarray(VN, np.float64), np.ascontiguousarray(VN_def, np.float64),
-                   np.ascontiguousarray(FN, np.int64), np.ascontiguousarray(Jv, np.float64), out)
+    return smooth_decode_with(Jv, smooth_offsets(V, tri, bary, VN, FN), tri, bary, VN_def, FN)
+
+
+def smooth_decode_with(Jv: np.ndarray, G: np.ndarray, tri: np.ndarray, bary: np.ndarray | None,
+                       VN_def: np.ndarray, FN: np.ndarray, *, rows=None, out: np.ndarray | None = None,
+                       add: bool = False) -> np.ndarray:
+    """:func:`smooth_decode` with the corners' gradients and the rest offsets given, for
+    some rows, into or onto ``out`` (as :func:`sshade.lrf.decode_with_frames`).
+
+    Parameters
+    ----------
+    Jv : (k, 3, 3) float64 :func:`vertex_jacobians`. G : (n, 3, 3) float64
+        :func:`smooth_offsets`. tri : (n,) int triangle P(v). bary : (n, 3) float64 or
+        None, as given to :func:`smooth_offsets`. VN_def : (k, 3) float64 deformed
+        low-res positions. FN : (t, 3) int64.
+    rows, out, add : as :func:`sshade.lrf.decode_with_frames` (None, a slice with step 1
+        or (r,) int indices; None or an (r, 3) C-contiguous float64 array; add onto it).
+
+    Returns
+    -------
+    ``out`` (r, 3), r the number of rows. The kernel releases the GIL.
+
+    Raises
+    ------
+    SShaDeError when ``out`` has the wrong shape or layout, ``add`` without ``out``, or a
+    slice of rows with a step (:func:`sshade.lrf.decode_rows`).
+    """
+    idx, lo, hi, out = decode_rows(rows, len(tri), out, add, "smooth_decode_with")
+    G_, tri_, bary_ = (G, tri, bary) if idx is None else (G[idx], tri[idx], None if bary is None else bary[idx])
+    w, per_vertex = anchor_weights(bary_)
+    _smooth_kernel(np.ascontiguousarray(Jv, np.float64), np.ascontiguousarray(G_, np.float64),
+                   np.ascontiguousarray(tri_, np.int32), w, per_vertex, np.ascontiguousarray(VN_def, np.float64),
+                   np.ascontiguousarray(FN, np.int64), lo, hi, add, out)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _smooth_kernel(V, tri, bary, per_vertex, P, Q, FN, Jv, out):
-    """``out[i] = a' + sum_k b_k J_k (V[i] - a) + 1/2 sum_k b_k J_k (a - P_k)``, a and a'
-    the anchor on P and Q: :func:`smooth_decode` in one pass."""
-    for i in range(len(tri)):
-        t = tri[i]
-        r = i if per_vertex else 0
-        a = np.zeros(3)
-        ad = np.zeros(3)
-        for k in range(3):
-            for d in range(3):
-                a[d] += bary[r, k] * P[FN[t, k], d]
-                ad[d] += bary[r, k] * Q[FN[t, k], d]
+def _smooth_kernel(Jv, G, tri, bary, per_vertex, Q, FN, lo, hi, add, out):
+    """``out[i - lo] (+)= a' + sum_k w_k Jv[c_k] G[i, k]`` for ``lo <= i < hi`` (c_k the
+    corners of ``tri[i]``, a' the deformed anchor, ``w = bary[i]`` or ``bary[0]``):
+    :func:`smooth_decode_with` in one pass, in scalars, each sum added in the order of
+    the module formula (the anchor, then corner 0, 1, 2)."""
+    for i in range(lo, hi):
+        c0, c1, c2, w0, w1, w2 = _corners(i, tri, bary, per_vertex, FN)
         for d in range(3):
-            out[i, d] = ad[d]
-        for k in range(3):
-            c = FN[t, k]
-            b = bary[r, k]
-            for d in range(3):
-                s = 0.0
-                for e in range(3):
-                    s += Jv[c, d, e] * ((V[i, e] - a[e]) + 0.5 * (a[e] - P[c, e]))
-                out[i, d] += b * s
+            v = ((0.0 + w0 * Q[c0, d]) + w1 * Q[c1, d]) + w2 * Q[c2, d]
+            v += w0 * (((0.0 + Jv[c0, d, 0] * G[i, 0, 0]) + Jv[c0, d, 1] * G[i, 0, 1]) + Jv[c0, d, 2] * G[i, 0, 2])
+            v += w1 * (((0.0 + Jv[c1, d, 0] * G[i, 1, 0]) + Jv[c1, d, 1] * G[i, 1, 1]) + Jv[c1, d, 2] * G[i, 1, 2])
+            v += w2 * (((0.0 + Jv[c2, d, 0] * G[i, 2, 0]) + Jv[c2, d, 1] * G[i, 2, 1]) + Jv[c2, d, 2] * G[i, 2, 2])
+            if add:
+                out[i - lo, d] += v
+            else:
+                out[i - lo, d] = v
 
 
 def rebuild(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: np.ndarray, VN_def: np.ndarray,

@@ -1,7 +1,9 @@
 """sshade/smooth_transfer.py: the transfer with the corners' deformation gradients
 blended (``transfer="vertex"``): exact for rigid motions and at the low-res vertices,
 the module's formula, and third-order accuracy on a smooth bending where Alg. 1's one
-frame per triangle is second order."""
+frame per triangle is second order; the decoding with its rest parts made once (rows,
+into or onto an array) gives the same numbers, bit for bit, as the one-pass decoding
+with small arrays per vertex it replaced."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +11,14 @@ import pytest
 
 from sshade.errors import SShaDeError
 from sshade.lrf import transfer
-from sshade.smooth_transfer import smooth_decode, triangle_jacobians, vertex_jacobians
+from sshade.smooth_transfer import (
+    jacobian_rest,
+    smooth_decode,
+    smooth_decode_with,
+    smooth_offsets,
+    triangle_jacobians,
+    vertex_jacobians,
+)
 from tests.test_lrf import _grid, _on_coarse, _rotation
 
 
@@ -87,3 +96,83 @@ def test_a_degenerate_low_res_triangle_is_refused():
     VD[FN[0]] = VD[FN[0][0]]
     with pytest.raises(SShaDeError, match="degenerate"):
         vertex_jacobians(VN, VD, FN)
+
+
+def _previous_decode(V, tri, bary, P, Q, FN, Jv):
+    """The decoding kernel this module had before its rest parts were made once, written
+    out in Python floats (the same IEEE operations in the same order as its numba code)."""
+    out = np.empty((len(tri), 3))
+    for i in range(len(tri)):
+        t, w = tri[i], (bary[i] if bary is not None else np.full(3, 1.0 / 3.0))
+        a, ad = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        for k in range(3):
+            for d in range(3):
+                a[d] += float(w[k]) * float(P[FN[t, k], d])
+                ad[d] += float(w[k]) * float(Q[FN[t, k], d])
+        o = list(ad)
+        for k in range(3):
+            c = FN[t, k]
+            for d in range(3):
+                s = 0.0
+                for e in range(3):
+                    s += float(Jv[c, d, e]) * ((float(V[i, e]) - a[e]) + 0.5 * (a[e] - float(P[c, e])))
+                o[d] += float(w[k]) * s
+        out[i] = o
+    return out
+
+
+def _case(seed=4):
+    rng = np.random.default_rng(seed)
+    VN, FN = _bumpy(5, rng)
+    VD = VN + 0.1 * rng.normal(size=VN.shape)
+    V = rng.uniform(0, 1, size=(70, 3)) * [1, 1, 0.2]
+    tri, bary = _on_coarse(V, VN, FN)
+    return VN, FN, VD, V, tri, bary
+
+
+@pytest.mark.parametrize("projection", [True, False])
+def test_the_decoding_is_the_previous_kernel_bit_for_bit(projection):
+    VN, FN, VD, V, tri, bary = _case()
+    bary = bary if projection else None
+    Jv = vertex_jacobians(VN, VD, FN)
+    assert np.array_equal(vertex_jacobians(VN, VD, FN, rest=jacobian_rest(VN, FN)), Jv)
+    assert np.array_equal(smooth_decode(V, tri, bary, VN, VD, FN), _previous_decode(V, tri, bary, VN, VD, FN, Jv))
+
+
+@pytest.mark.parametrize("projection", [True, False])
+def test_decoding_some_rows_into_or_onto_an_array_is_the_whole_decode_bit_for_bit(projection):
+    """smooth_decode_with on a block of rows, on chosen rows, added onto an array: the
+    numbers of the whole decode (a prepared SShaDe's sum over the samplings)."""
+    VN, FN, VD, V, tri, bary = _case(5)
+    bary = bary if projection else None
+    whole = smooth_decode(V, tri, bary, VN, VD, FN)
+    Jv, G = vertex_jacobians(VN, VD, FN), smooth_offsets(V, tri, bary, VN, FN)
+    assert G.shape == (len(V), 3, 3) and G.flags.c_contiguous
+    assert np.array_equal(smooth_decode_with(Jv, G, tri, bary, VD, FN), whole)
+    assert np.array_equal(smooth_decode_with(Jv, G, tri, bary, VD, FN, rows=slice(10, 30)), whole[10:30])
+    rows = np.array([69, 0, 7])
+    assert np.array_equal(smooth_decode_with(Jv, G, tri, bary, VD, FN, rows=rows), whole[rows])
+    acc = np.ones((20, 3))
+    assert smooth_decode_with(Jv, G, tri, bary, VD, FN, rows=slice(10, 30), out=acc, add=True) is acc
+    assert np.array_equal(acc, 1.0 + whole[10:30])
+    smooth_decode_with(Jv, G, tri, bary, VD, FN, rows=slice(10, 30), out=acc)
+    assert np.array_equal(acc, whole[10:30])
+
+
+@pytest.mark.parametrize("out", [np.empty((4, 3)), np.empty((5, 3), np.float32), np.empty((3, 5)).T])
+def test_a_bad_out_array_is_refused(out):
+    VN, FN, VD, V, tri, bary = _case()
+    Jv, G = vertex_jacobians(VN, VD, FN), smooth_offsets(V, tri, bary, VN, FN)
+    with pytest.raises(SShaDeError, match="out must be"):
+        smooth_decode_with(Jv, G, tri, bary, VD, FN, rows=slice(0, 5), out=out)
+    with pytest.raises(SShaDeError, match="add=True"):
+        smooth_decode_with(Jv, G, tri, bary, VD, FN, add=True)
+    with pytest.raises(SShaDeError, match="step 1"):
+        smooth_decode_with(Jv, G, tri, bary, VD, FN, rows=slice(0, 10, 2))
+
+
+def test_a_degenerate_rest_triangle_is_refused_by_the_rest_part():
+    VN, FN = _grid(3)
+    VN[FN[0]] = VN[FN[0][0]]
+    with pytest.raises(SShaDeError, match="degenerate"):
+        jacobian_rest(VN, FN)
