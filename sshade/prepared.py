@@ -14,9 +14,10 @@ import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor, as_completed, wait
 
+import igl
 import numpy as np
 
-from .arap import ArapDeformer
+from .arap import ArapDeformer, LaplacianSolver
 from .averaging import combine, proximity_weights, sampling_weights
 from .cores import pool_size
 from .errors import SShaDeError
@@ -38,8 +39,9 @@ __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 #: :func:`sshade.pipeline.deform`'s L-BFGS, so that it is ``deform`` bit for bit. From a start
 #: as near as the extrapolated one, Anderson acceleration met the same stopping rule in
 #: fewer iterations than L-BFGS on both meshes of ``benchmarks/frames.py``, and a window of
-#: 16 in fewer than one of 8 (a longer one costs more per iteration than it saves).
-FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 16}
+#: 32 in fewer than one of 16 or 8 (a longer one saved almost no more iterations;
+#: benchmarks/records/frames_scalar_decode.md).
+FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 32}
 
 
 def _extrapolate(h: list, degree: int) -> np.ndarray:
@@ -69,6 +71,35 @@ def _done(fn, x) -> Future:
     return f
 
 
+class _HandleMoves:
+    """The harmonic extension of the handles' moves on a low-res mesh: a start whose handle
+    rows move to the targets takes its free vertices along, ``d_f = -L_ff^-1 L_fb d_h``
+    (``L = -igl.cotmatrix``, the Laplacian of the ARAP global step, factored once), so that
+    it has no kink at the handles for the iterations to smooth out.
+
+    Parameters
+    ----------
+    VN : (k, 3) float64 low-res vertices. F : (t, 3) int64 low-res faces.
+    handles : (h,) int64 low-res handle vertices, in the targets' order.
+    """
+
+    def __init__(self, VN: np.ndarray, F: np.ndarray, handles: np.ndarray):
+        L = (-igl.cotmatrix(VN, F)).tocsr()
+        self.h = np.asarray(handles, np.int64)
+        self.free = np.setdiff1d(np.arange(len(VN)), self.h)
+        self.Lfb = L[self.free][:, self.h].tocsr()
+        self.lin = LaplacianSolver(L[self.free][:, self.free]) if len(self.free) else None
+
+    def extend(self, U0: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """``U0`` ((k, 3) float64) with its handle rows at ``targets`` ((h, 3) float64) and
+        its free rows moved by the harmonic extension of those moves: a new array."""
+        U = np.array(U0, dtype=np.float64)
+        if self.lin is not None:
+            U[self.free] += self.lin.solve(np.ascontiguousarray(-(self.Lfb @ (targets - U[self.h]))))
+        U[self.h] = targets
+        return U
+
+
 class _Sampling:
     """One sampling's prepared state: its low-res mesh and projection (``prep``), the
     frames' axis and local coordinates, its ARAP deformer, its last low-res results."""
@@ -87,6 +118,7 @@ class _Sampling:
             self.G = smooth_offsets(V, prep["tri"], self.bary, self.VN, prep["F"])
             self.jac_rest = jacobian_rest(self.VN, prep["F"])
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
+        self.moves = _HandleMoves(self.VN, prep["F"], prep["low_handles"])
         self.history: list = []  # (k, 3) low-res results of the last four solves, newest first
         self.last_iterations = 0  # of the last solve
 
@@ -104,10 +136,14 @@ class _Sampling:
         return _extrapolate(h, d), d
 
     def solve(self, targets, V0, arap: dict, carry: bool = False) -> dict:
-        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit), with the last
-        solve's accelerator history when ``carry``: the info of the ARAP run. Its result's
-        frames are made by the first :meth:`decode` after it (on the decoding thread)."""
+        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit); when ``carry`` (a
+        later frame) with the last solve's accelerator history and ``V0``'s free vertices
+        moved with its handle rows to the targets (:class:`_HandleMoves`): the info of the
+        ARAP run. Its result's frames are made by the first :meth:`decode` after it (on
+        the decoding thread)."""
         t0 = time.perf_counter()
+        if carry and V0 is not None:
+            V0 = self.moves.extend(V0, targets)
         res = self.arap.deform(targets, V0=V0, carry_history=carry, **arap)
         self.low, self.frames = res.V, None
         self.history = [res.V] + self.history[:3]

@@ -1,6 +1,7 @@
 """sshade/prepared.py: prepare once, solve per frame. The first solve is deform bit for
-bit; a sequence of frames lands on the one-shot deform of each frame; the set-up is
-made once; bad targets and meshes are refused."""
+bit; a sequence of frames lands on the one-shot deform of each frame, and within a bound
+of the frames of the earlier start (handle rows alone moved); the set-up is made once;
+bad targets and meshes are refused."""
 from __future__ import annotations
 
 import numpy as np
@@ -130,6 +131,44 @@ def test_the_start_follows_the_path_and_stops_with_the_handles(faust_pair):
             _, info = p.solve(V[h] + t * (V2[h] - V[h]), return_info=True)
             degrees.append(info["samplings"][0].get("start_degree"))
     assert degrees[:2] == [None, 0] and degrees[4] == 2 and degrees[6] == 0, degrees
+
+
+def test_the_handles_moves_extend_a_translation_exactly(faust_pair):
+    """The harmonic extension of the handles' moves (the later frames' start) carries the
+    free vertices along a common translation of every handle exactly (the Laplacian's rows
+    sum to zero), and puts the handle rows at their targets."""
+    from sshade.prepared import _HandleMoves
+    V, F, h, _ = faust_pair
+    moves = _HandleMoves(V, F, h)
+    t = np.array([0.3, -0.2, 0.1])
+    U = moves.extend(V, V[h] + t)
+    assert np.allclose(U, V + t, rtol=0, atol=1e-12) and np.array_equal(U[h], V[h] + t)
+
+
+def test_the_extended_start_keeps_the_frames_of_the_handle_rows_start_within_a_bound(faust_pair, monkeypatch):
+    """Later frames start with the free vertices moved with the handles and a window of 32:
+    not the numbers of the start whose handle rows alone jump (window 16, the earlier
+    default), but each frame within 2e-6 of the diagonal (mean) of that one, both
+    converged, in no more low-res iterations over the path."""
+    import sshade.prepared as prepared_module
+    V, F, h, V2 = faust_pair
+    kw = dict(n_low=500, n_samplings=2, seed=1, workers=1)
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    path = [V[h] + t * (V2[h] - V[h]) for t in np.linspace(0.05, 1.0, 20)]
+
+    def frames():
+        with prepare(V, F, h, **kw) as p:
+            return [p.solve(T, return_info=True) for T in path]
+
+    new = frames()
+    monkeypatch.setattr(prepared_module._HandleMoves, "extend", lambda self, U0, targets: U0)
+    monkeypatch.setitem(prepared_module.FRAME_ACCELERATION, "anderson_m", 16)
+    old = frames()
+    assert np.array_equal(new[0][0], old[0][0])  # the first solve: deform's, bit for bit
+    assert all(a[1]["converged"] and b[1]["converged"] for a, b in zip(new, old))
+    gap = [np.linalg.norm(a[0] - b[0], axis=1).mean() / diag for a, b in zip(new, old)]
+    assert max(gap) < 2e-6 and max(gap[1:]) > 0, gap
+    assert sum(a[1]["iterations"] for a in new) <= sum(b[1]["iterations"] for b in old)
 
 
 def test_a_closed_prepared_refuses_to_solve(faust_pair):
