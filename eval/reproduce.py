@@ -22,6 +22,7 @@ from pathlib import Path
 
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
+from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
@@ -212,7 +213,7 @@ def _run_steps(a) -> int:
         if a.dry_run:
             continue
         t = time.perf_counter()
-        rc = subprocess.call(cmd, env=dict(os.environ, **{REPRODUCE_ENV: "1"}))
+        rc = subprocess.call(cmd, env=step_env())
         print(f"== {name}: exit {rc} after {time.perf_counter() - t:.0f} s", flush=True)
         if rc != 0:
             failed.append(name)
@@ -220,6 +221,15 @@ def _run_steps(a) -> int:
         print(f"error: step(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
     return 0
+
+
+def step_env() -> dict:
+    """The environment of every step: this one, marked as the reproduce run's
+    (:data:`eval.run.outdir.REPRODUCE_ENV`), with this checkout first on ``PYTHONPATH``, so
+    that each step and each process it starts (a benchmark's fresh-process probes) runs this
+    checkout's code, not another installed copy's."""
+    path = os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    return dict(os.environ, **{REPRODUCE_ENV: "1", "PYTHONPATH": path})
 
 
 def step_folder(cmd: list[str]) -> Path | None:

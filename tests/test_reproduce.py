@@ -122,3 +122,16 @@ def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(caps
     with pytest.raises(SystemExit) as e:
         main(["--json"])  # --json goes with --check
     assert e.value.code == 2 and "--json goes with --check" in capsys.readouterr().err
+
+
+def test_every_step_runs_this_checkout_first_on_the_python_path(monkeypatch):
+    """A step (and a benchmark's fresh-process probes) imports this checkout's packages even
+    where another copy is installed (an editable install of another clone)."""
+    import os
+
+    from eval.reproduce import step_env
+    from eval.run.outdir import REPRODUCE_ENV
+    from eval.run.runinfo import REPO_ROOT
+    monkeypatch.setenv("PYTHONPATH", "/elsewhere")
+    env = step_env()
+    assert env["PYTHONPATH"].split(os.pathsep) == [str(REPO_ROOT), "/elsewhere"] and env[REPRODUCE_ENV] == "1"
