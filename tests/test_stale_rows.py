@@ -46,6 +46,10 @@ def _old_store(tmp_path, *methods):
 
 
 def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
+    """ARAP's and SShaDe's s0_p1 records of 3e79476 re-keyed: rows kept bit for bit, keys
+    their new key fields' digests, the data folder out of the case identity; ARAP's is
+    current (its code is the same at this checkout); SShaDe's new identity is computed from
+    its own commit's sources, so it is stale since SShaDe's transfer changed after it."""
     out = _old_store(tmp_path, "ARAP", "SShaDe")
     before = {m: json.loads((out / "runs" / "s0_p1" / f"{m}.json").read_text()) for m in ("ARAP", "SShaDe")}
     assert {r["version"] for r in before.values()} == {REKEY_FROM}
@@ -62,7 +66,9 @@ def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
                             rec["key_fields"]["code"])[0] == rec["key"]
             assert rec["rekeyed"] == {"from_version": REKEY_FROM, "from_key": old["key"],
                                       "commit": old["git"]["commit"]}
-            assert not row_state(out, rec, trees).stale
+        assert not row_state(out, ResultStore(out).read("s0_p1", "ARAP").record, trees).stale
+        sshade = row_state(out, ResultStore(out).read("s0_p1", "SShaDe").record, trees)
+        assert sshade.stale and "sshade.smooth_transfer changed since 3e79476" in sshade.why
         assert rekey_record(out, out / "runs" / "s0_p1" / "ARAP.json", trees) == "current"  # idempotent
 
 
