@@ -329,9 +329,11 @@ def compared_lines(compared: pd.DataFrame | None) -> list[str]:
     out = []
     for run, g in compared.groupby("run", sort=False):
         first = g.iloc[0]
-        commit = first.get("run_commit")
-        out.append(f"{', '.join(methods_in(g))}: {len(g)} record(s) read from {run} (commit "
-                   f"{commit if isinstance(commit, str) else 'unknown'}; {first.get('run_machine', '?')}), "
+        commits = g["run_commit"].map(lambda c: c if isinstance(c, str) else "unknown").value_counts(sort=False)
+        words = (f"commit {commits.index[0]}" if len(commits) == 1 else
+                 "commits " + ", ".join(f"{c} ({n} records)" for c, n in commits.items()))
+        out.append(f"{', '.join(methods_in(g))}: {len(g)} record(s) read from {run} ({words}; "
+                   f"{first.get('run_machine', '?')}), "
                    "not recomputed: each record's digest and case identity checked against this run's cases")
     return out
 

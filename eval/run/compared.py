@@ -127,7 +127,10 @@ def _one_row(store: ResultStore, p: Path, case: str, ours: dict, out: ComparedRu
                           "another build of the dataset? Compare runs on the same cases")
     if method not in out.methods:
         out.methods.append(method)
-    return {**rec["row"], "method": method, "run": out.label, "run_commit": out.commit, "run_machine": out.machine,
+    git = rec.get("git") if isinstance(rec.get("git"), dict) else {}
+    commit = (git["commit"][:12] + ("+dirty" if git.get("dirty") else "")) if isinstance(git.get("commit"), str) \
+        else out.commit  # the record's own commit: a table's rows may come from several
+    return {**rec["row"], "method": method, "run": out.label, "run_commit": commit, "run_machine": out.machine,
             "time_other_run": True}
 
 
