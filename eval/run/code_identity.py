@@ -202,6 +202,17 @@ def _literal(module: str, attr: str, mods: Mapping) -> str | None:
     return ast.dump(value, include_attributes=False)
 
 
+def _from_module(pkg: str, node: ast.ImportFrom) -> str:
+    """The absolute dotted module a ``from ... import`` statement ``node`` of a module in
+    package ``pkg`` imports from (its relative level resolved)."""
+    if not node.level:
+        return node.module or ""
+    base = pkg
+    for _ in range(node.level - 1):
+        base = base.rpartition(".")[0]
+    return f"{base}.{node.module}" if node.module else base
+
+
 def _reexport(name: str, attr: str, mods: Mapping) -> str | None:
     """Where module ``name`` takes ``attr`` from when it only re-exports it (a module-level
     ``from X import attr``, and no definition or assignment of its own): the dotted name
@@ -212,11 +223,7 @@ def _reexport(name: str, attr: str, mods: Mapping) -> str | None:
         if isinstance(node, ast.ImportFrom):
             for a in node.names:
                 if (a.asname or a.name) == attr:
-                    base = pkg
-                    for _ in range(max(node.level - 1, 0)):
-                        base = base.rpartition(".")[0]
-                    mod = (f"{base}.{node.module}" if node.module else base) if node.level else (node.module or "")
-                    source = f"{mod}.{a.name}"
+                    source = f"{_from_module(pkg, node)}.{a.name}"
         elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == attr:
             return None
         elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
@@ -254,10 +261,7 @@ def _imports(name: str, path: Path, mods: Mapping) -> tuple[set[str], set[str]]:
                 found.add(a.name)  # the module itself runs (a lazy package: only the names used, below)
                 bound[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
         elif isinstance(node, ast.ImportFrom):
-            base = pkg
-            for _ in range(max(node.level - 1, 0)):
-                base = base.rpartition(".")[0]
-            mod = (f"{base}.{node.module}" if node.module else base) if node.level else (node.module or "")
+            mod = _from_module(pkg, node)
             found.update(f"{mod}.{a.name}" for a in node.names)
     found |= _attribute_names(tree, bound)
     modules, constants = set(), set()
@@ -347,8 +351,8 @@ def closure_constants(roots: tuple, root: str | None = None) -> tuple[str, ...]:
     >>> "sshade.params.MAX_SEED" in closure_constants(("harness.checks",))
     True
     """
-    mods = set(_closure(tuple(roots), root)[0])
-    return tuple(c for c in _closure(tuple(roots), root)[1] if c.rpartition(".")[0] not in mods)
+    mods, consts = _closure(tuple(roots), root)
+    return tuple(c for c in consts if c.rpartition(".")[0] not in set(mods))
 
 
 def modules_digest(modules, root: str | None = None, constants=()) -> str:

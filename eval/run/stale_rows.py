@@ -173,7 +173,7 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
     return st
 
 
-def _valid(folder, case_dir: str, p: Path) -> tuple[dict | None, str]:
+def _valid(folder, p: Path) -> tuple[dict | None, str]:
     """A record file read as untrusted input: ``(record, "")`` when it is whole and valid
     for its store version, else ``(None, why)``."""
     rec = _read_json(p)
@@ -203,7 +203,7 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None) -> dict[
     for folder in folders:
         per = out.setdefault(str(folder), {})
         for case_dir, p in record_paths(folder):
-            rec, bad = _valid(folder, case_dir, p)
+            rec, bad = _valid(folder, p)
             st = row_state(folder, rec, trees, root) if rec else RowState(Path(folder), case_dir, p.stem, True, bad)
             m = per.setdefault(st.method, {"rows": 0, "stale": 0, "why": {}, "stale_s": 0.0})
             m["rows"] += 1
@@ -222,7 +222,7 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
     identity missing there). The new identity: :func:`eval.run.code_identity.code_identity`'s
     modules and constants for its method at this checkout, their code as at its commit;
     the numerical versions and plug-in digest as recorded; the case identity without its folder."""
-    rec, bad = _valid(folder, p.parent.name, p)
+    rec, bad = _valid(folder, p)
     if rec is None:
         return f"refused: {bad}"
     if rec.get("version") == STORE_VERSION:
