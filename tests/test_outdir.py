@@ -116,8 +116,11 @@ def test_own_earlier_output_is_replaced_and_named(tmp_path):
     (c.path / "my_notes.txt").write_text("added by a person")  # not the run's: kept
     c2 = claim_output_dir(tmp_path / "run", "eval")
     assert sorted(c2.replaced) == ["cases.csv", "figures"] and "replacing" in c2.message
-    assert "cases.csv" in c2.message and sorted(os.listdir(c2.path)) == sorted([MARKER, outdir.LOCK, "my_notes.txt"])
-    c2.finish("done")
+    assert "cases.csv" in c2.message and sorted(os.listdir(c2.path)) == sorted([MARKER, outdir.LOCK, "my_notes.txt",
+                                                                                  outdir.ASIDE])
+    (c2.path / "cases.csv").write_text("new")
+    c2.finish("done")  # the new run has its result: the earlier one's files are gone
+    assert sorted(os.listdir(c2.path)) == sorted([MARKER, outdir.LOCK, "my_notes.txt", "cases.csv"])
     with pytest.raises(OutputDirError, match="another kind of output"):  # an eval folder is no sweep folder
         claim_output_dir(tmp_path / "run", "sweep")
 

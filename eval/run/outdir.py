@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.run.earlier_output import ASIDE, clean, files_under, ours, restore, set_aside
 from eval.run.runinfo import read_runinfo, write_runinfo
 from eval.run.spec import OutputOptions
 from sshade.errors import SShaDeError
@@ -29,7 +30,7 @@ __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "
 MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and its files
 LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
 REPRODUCE_ENV = "SSHADE_REPRODUCE"  #: "1" in the commands eval.reproduce runs: results/ allowed
-_OWN = {MARKER, LOCK}
+_OWN = {MARKER, LOCK, ASIDE}
 _REPO = Path(__file__).resolve().parents[2]
 
 class OutputDirError(SShaDeError):
@@ -92,6 +93,8 @@ def record_output_files(path, names) -> None:
     if m is None:
         return
     m["files"] = sorted(set(m.get("files") or []) | {str(n) for n in names})
+    if isinstance(m.get("paths"), list):
+        m["paths"] = sorted(set(m["paths"]) | set(files_under(Path(path), [str(n) for n in names])))
     _write_marker(Path(path), m)
 
 
@@ -104,8 +107,14 @@ class OutputClaim:
     ----------
     path : the folder (absolute).
     kind : the kind of output (``eval``, ``sweep``).
-    replaced : names of the earlier run's files removed before this run.
+    replaced : names of the earlier run's entries set aside for this run (removed once
+        it has its first result, put back if it fails before: :mod:`eval.run.earlier_output`).
     foreign : names that were in the folder before and are not ours (kept).
+    first_result : the file whose existence says this run has its first result (e.g.
+        ``run.json``), or None: any entry written, or the run done.
+    aside : the marker's record of the earlier output set aside, or None.
+    user_paths : files under our entries that no run of ours wrote (kept, never recorded).
+    kept : the files added to the earlier output, put back once this run had a result.
     message : one line saying what was claimed (new folder, replaced files, ...).
     created : the folder was created by this claim.
     parents : the folders above it that this claim created (outermost first).
@@ -118,27 +127,47 @@ class OutputClaim:
     created: bool = False
     fd: int | None = None
     parents: list = field(default_factory=list)
+    first_result: str | None = None
+    aside: dict | None = None
+    user_paths: list = field(default_factory=list)
+    kept: list = field(default_factory=list)
 
     def finish(self, status: str, *, drop_if_unused: str | None = None, **extra) -> None:
         """Record the run's end in the marker (``status`` done / failed / interrupted) with
-        the names this run wrote (every entry of the folder but the foreign ones), and
-        release the lock. With ``drop_if_unused`` (a file name, e.g. ``run.json``): when
-        that file was never written (a run refused before any work, e.g. a bad config
-        value), what this run wrote is removed (``.hydra/``, the log; the folder itself
-        and the parents this claim created, when nothing else is left in them), so such a
-        run leaves nothing behind. Never raises."""
+        the entries and files this run wrote (every entry of the folder but the foreign
+        ones, every file under them but the ones someone else added), and release the
+        lock. A run without its first result (``drop_if_unused`` or :attr:`first_result`
+        never written, e.g. a run refused for a bad config value; without either: nothing
+        written and not done) has what it wrote removed and an earlier output it replaced
+        put back as it was (byte for byte, marker and lock included); without an earlier
+        output, the folder and the parents this claim created go too, when nothing else is
+        left in them. Never raises."""
+        lock_bytes = None
         try:
-            if drop_if_unused and self.path.is_dir() and not (self.path / drop_if_unused).exists():
-                self._drop_own()
-            elif self.path.is_dir():
+            if self.path.is_dir():
+                mark = drop_if_unused or self.first_result
+                written = set(os.listdir(self.path)) - set(self.foreign) - _OWN
+                has_result = status == "done" or ((self.path / mark).exists() if mark else bool(written))
+                if not has_result and (self.aside is not None or drop_if_unused):
+                    lock_bytes = self._undo()
+                    return
+                if self.aside is not None:
+                    self.kept = clean(self.path, self.aside)
+                    self.aside = None
+                    if self.kept:
+                        _log_kept(self.path, self.kept)
                 names = sorted(set(os.listdir(self.path)) - set(self.foreign) - _OWN)
+                theirs = set(self.kept) | set(self.user_paths)
                 m = read_marker(self.path) or {}
-                m.update(kind=self.kind, status=status, files=names, finished=_now(), **extra)
+                m.pop("aside", None)
+                m.update(kind=self.kind, status=status, files=names, finished=_now(),
+                         paths=[r for r in files_under(self.path, names) if r not in theirs],
+                         user_paths=sorted(theirs), **extra)
                 _write_marker(self.path, m)
         except OSError:
             pass
         finally:
-            self.release()
+            self.release(lock_bytes)
 
     def __enter__(self) -> OutputClaim:
         return self
@@ -149,32 +178,48 @@ class OutputClaim:
         self.finish("done" if exc_type is None else "failed")
         return False
 
-    def _drop_own(self) -> None:
-        """Remove what this claim wrote (every entry but the foreign ones); then the
-        marker and lock when nothing else is left, the folder if this claim created it,
-        and the created parents that are empty."""
+    def _undo(self) -> bytes | None:
+        """Remove what this claim wrote (every entry but the foreign ones); then put back
+        the earlier output it set aside (returns that output's lock bytes), or, without
+        one, remove the marker and lock when nothing else is left, the folder if this claim
+        created it, and the created parents that are empty."""
         for n in sorted(set(os.listdir(self.path)) - set(self.foreign) - _OWN):
             q = self.path / n
             with contextlib.suppress(OSError):
                 shutil.rmtree(q) if q.is_dir() and not q.is_symlink() else q.unlink()
+        if self.aside is not None:
+            lock = restore(self.path, self.aside, MARKER)
+            self.aside = None
+            return lock
         if set(os.listdir(self.path)) - _OWN:
             m = read_marker(self.path) or {}
             m.update(kind=self.kind, status="failed", files=[], finished=_now())
             _write_marker(self.path, m)
-            return
+            return None
         for n in _OWN:
             with contextlib.suppress(OSError):
                 (self.path / n).unlink()
         for d in ([self.path] if self.created else []) + list(reversed(self.parents)):
             with contextlib.suppress(OSError):
                 d.rmdir()  # only when empty
+        return None
 
-    def release(self) -> None:
-        """Release the folder's lock (also released when the process ends)."""
+    def release(self, content: bytes | None = None) -> None:
+        """Release the folder's lock (also released when the process ends), its file left
+        holding ``content`` when given (an earlier output's, put back)."""
         if self.fd is not None:
             with contextlib.suppress(OSError):
+                if content is not None:
+                    os.ftruncate(self.fd, 0)
+                    os.pwrite(self.fd, content, 0)
                 os.close(self.fd)
             self.fd = None
+
+
+def _log_kept(path: Path, kept: list) -> None:
+    import logging
+    logging.getLogger("eval").info("kept %d file(s) you added to the earlier output in %s: %s%s", len(kept), path,
+                                   ", ".join(kept[:8]), " ..." if len(kept) > 8 else "")
 
 
 def _now() -> str:
@@ -233,26 +278,35 @@ def _lock(path: Path) -> int:
     return fd
 
 
-def _remove_earlier(path: Path, names) -> list[str]:
-    """Remove the entries ``names`` (an earlier run's own files) from ``path``."""
-    gone = []
-    for n in names or []:
-        n = str(n)
-        if not n or "/" in n or n in (".", "..") or n in _OWN:
-            continue  # never anything outside the folder, never the marker/lock
-        p = path / n
-        if p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p)
-        elif p.exists() or p.is_symlink():
-            p.unlink()
-        else:
-            continue
-        gone.append(n)
-    return gone
+def _recover(p: Path, m: dict | None) -> dict | None:
+    """The marker of ``p`` (locked by this process) once a run that died there without
+    finishing (its marker still ``running``) is accounted for: an earlier output it had
+    set aside is put back when that run had no first result yet, else cleaned
+    (:mod:`eval.run.earlier_output`); the dead run's entries (all but the foreign ones it
+    recorded) become its ``files``, so the next replacement removes them."""
+    if m is None or m.get("status") != "running":
+        return m
+    foreign = set(m.get("foreign") or [])
+    rec = m.get("aside")
+    if isinstance(rec, dict) and (p / ASIDE).is_dir():
+        mark = rec.get("first_result")
+        if mark and not (p / str(mark)).exists():  # died before its first result: the earlier output back
+            for n in sorted(set(os.listdir(p)) - foreign - _OWN):
+                with contextlib.suppress(OSError):
+                    shutil.rmtree(p / n) if (p / n).is_dir() and not (p / n).is_symlink() else (p / n).unlink()
+            restore(p, rec, MARKER)
+            return read_marker(p)
+        kept = clean(p, rec)
+        m["user_paths"] = sorted(set(m.get("user_paths") or []) | set(kept))
+    m.pop("aside", None)
+    m.update(status="killed", files=sorted(set(os.listdir(p)) - foreign - _OWN))
+    _write_marker(p, m)
+    return m
 
 
 def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = False,
-                     keep: bool = False, option: str | None = None, name: str = "out_dir") -> OutputClaim:
+                     keep: bool = False, option: str | None = None, name: str = "out_dir",
+                     first_result: str | None = None) -> OutputClaim:
     """Claim folder ``path`` for an output of ``kind`` (module docstring), before any work.
 
     Parameters
@@ -265,6 +319,9 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     option : str, how the user says ``overwrite`` on this command (for the message; ""
         when the command has no such option).
     name : str, how the user names the folder on this command (for the message).
+    first_result : str or None, the file (e.g. ``run.json``) whose existence says the run
+        has its first result: an earlier output replaced is set aside until then and put
+        back if the run ends before (:meth:`OutputClaim.finish`); None: any entry written.
 
     Returns
     -------
@@ -290,18 +347,19 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
         raise OutputDirError(f"output folder {p} is a file; choose a folder")
     made = [a for a in reversed(p.parents) if not a.exists()]  # created below; removed by a run refused early
     try:
-        claim = _claim(p, kind, overwrite, fresh, keep, how)
+        claim = _claim(p, kind, overwrite, fresh, keep, how, first_result)
     except OSError as e:
         raise OutputDirError(f"cannot create or use output folder {p}: {e.strerror or e}") from None
     claim.parents = made
     return claim
 
 
-def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: str) -> OutputClaim:
+def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: str,
+           first_result: str | None) -> OutputClaim:
     """:func:`claim_output_dir` once ``p`` is checked: create or take the folder."""
     if fresh:
         p = _mkdir_fresh(p)
-        return _take(p, kind, [], [], f"writing into the new folder {p}", created=True)
+        return _take(p, kind, [], [], f"writing into the new folder {p}", created=True, first_result=first_result)
     created = False
     if not p.exists():
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -312,7 +370,7 @@ def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: st
             pass
     if not os.access(p, os.W_OK | os.X_OK):
         raise OutputDirError(f"output folder {p} is not writable; choose another folder")
-    return _claim_existing(p, kind, created, overwrite, keep, how)
+    return _claim_existing(p, kind, created, overwrite, keep, how, first_result)
 
 
 def _links_inside(p: Path) -> list[str]:
@@ -330,10 +388,12 @@ def _links_inside(p: Path) -> list[str]:
     return sorted(out)
 
 
-def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bool, how: str) -> OutputClaim:
+def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bool, how: str,
+                    first_result: str | None) -> OutputClaim:
     names = sorted(set(os.listdir(p)) - _OWN)
-    if created or not names:
-        return _take(p, kind, [], [], f"writing into the {'new' if created else 'empty'} folder {p}", created=created)
+    if created or not names and not (p / ASIDE).exists():
+        return _take(p, kind, [], [], f"writing into the {'new' if created else 'empty'} folder {p}", created=created,
+                     first_result=first_result)
     links = _links_inside(p)
     if links:  # a write or a removal through one would reach outside the folder
         raise OutputDirError(f"refusing to write into {p}: {links[0]} is a symbolic link out of it (to "
@@ -342,15 +402,28 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bo
     m = read_marker(p)
     reproducing = os.environ.get(REPRODUCE_ENV) == "1" and _inside(p, results_dir())
     if m is not None and m.get("kind") == kind or reproducing and m is None:
-        fd = _lock(p)  # refuse while another run writes here, before removing anything
+        lock_before = (p / LOCK).read_bytes() if (p / LOCK).is_file() and not (p / LOCK).is_symlink() else None
+        fd = _lock(p)  # refuse while another run writes here, before moving anything
+        m = _recover(p, m)
+        wrote = ours(m)
         if keep:
-            return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}", fd=fd)
-        earlier = (m or {}).get("files") or []
-        gone = _remove_earlier(p, earlier)
+            user = [r for r in files_under(p, (m or {}).get("files") or []) if not wrote(r)]
+            return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}", fd=fd,
+                         first_result=first_result, user_paths=user)
+        if lock_before is not None:  # the earlier lock's bytes, kept with the aside
+            (p / f".{LOCK}.earlier").write_bytes(lock_before)
+        try:
+            rec = set_aside(p, [n for n in (m or {}).get("files") or [] if str(n) not in _OWN], p / MARKER,
+                            p / f".{LOCK}.earlier", m)
+        finally:
+            with contextlib.suppress(OSError):
+                (p / f".{LOCK}.earlier").unlink()
+        gone = rec["names"]
         rest = sorted(set(os.listdir(p)) - _OWN)
         msg = (f"replacing the earlier {kind} output in {p}" +
-               (f" (removed {len(gone)}: {', '.join(gone[:8])}{' ...' if len(gone) > 8 else ''})" if gone else ""))
-        return _take(p, kind, gone, rest, msg, fd=fd)
+               (f" (set aside {len(gone)}: {', '.join(gone[:8])}{' ...' if len(gone) > 8 else ''}; removed once this "
+                "run has its first result, put back if it ends before)" if gone else ""))
+        return _take(p, kind, gone, rest, msg, fd=fd, first_result=first_result, aside=rec)
     if not overwrite:
         what = (f"another kind of output ({m.get('kind')})" if m else
                 f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote "
@@ -394,14 +467,21 @@ def resume_command(out_dir) -> str:
 
 
 def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: int | None = None,
-          created: bool = False) -> OutputClaim:
+          created: bool = False, first_result: str | None = None, aside: dict | None = None,
+          user_paths: list | None = None) -> OutputClaim:
     fd = _lock(p) if fd is None else fd
     old = read_marker(p) or {}
     m = {"kind": kind, "status": "running", "pid": os.getpid(), "host": socket.gethostname(), "started": _now(),
          "command": _command(),
-         "files": [f for f in old.get("files", []) if f not in gone and (p / f).exists()]}
+         "files": [f for f in old.get("files", []) if f not in gone and (p / f).exists()],
+         "foreign": list(foreign), "user_paths": list(user_paths or [])}
+    if isinstance(old.get("paths"), list) and aside is None:  # continued: its record of files stands
+        m["paths"] = old["paths"]
+    if aside is not None:
+        m["aside"] = {**aside, "first_result": first_result}
     _write_marker(p, m)
-    return OutputClaim(path=p, kind=kind, replaced=gone, foreign=foreign, message=message, created=created, fd=fd)
+    return OutputClaim(path=p, kind=kind, replaced=gone, foreign=foreign, message=message, created=created, fd=fd,
+                       first_result=first_result, aside=aside, user_paths=list(user_paths or []))
 
 
 # ----------------------------------------------------------------------------- one run's folder
@@ -471,7 +551,7 @@ def claimed_run(output: OutputOptions, *, record=None, kind: str = "eval", fresh
     # resume=true (the evaluator's result store, eval/run/result_store.py): the earlier output is continued,
     # not replaced
     claim = claim_output_dir(out_dir, kind, overwrite=overwrite_flag(output.overwrite), fresh=fresh,
-                             keep=overwrite_flag(output.resume))
+                             keep=overwrite_flag(output.resume), first_result="run.json")
     _claimed[str(claim.path)] = claim
     handler = None
     status, error = "failed", ""

@@ -1,0 +1,153 @@
+"""An earlier output replaced without loss (eval/run/earlier_output.py through
+eval.run.outdir's claims): a run that fails before its first result leaves the earlier output
+byte for byte; files someone added inside it survive a rerun and are named; a run killed
+with the earlier output set aside is recovered by the next claim."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from eval.run import outdir
+from eval.run.earlier_output import ASIDE, files_under, ours
+from eval.run.outdir import LOCK, MARKER, claim_output_dir
+from tests.conftest import ROOT, subprocess_env
+
+
+def _bytes(folder: Path) -> dict:
+    """relative path -> sha256 of every file below ``folder`` (marker and lock included)."""
+    return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _earlier(tmp_path: Path) -> Path:
+    """An earlier eval output with files added by a person: at the top, in ``runs/s0``, in ``report``."""
+    c = claim_output_dir(tmp_path / "run", "eval", first_result="run.json")
+    p = c.path
+    (p / "run.json").write_text('{"status": "done"}')
+    (p / "runs" / "s0").mkdir(parents=True)
+    (p / "runs" / "s0" / "A.json").write_text("old record")
+    (p / "report").mkdir()
+    (p / "report" / "index.html").write_text("<p>old</p>")
+    c.finish("done")
+    (p / "my_top.txt").write_text("mine, top")
+    (p / "runs" / "s0" / "notes.txt").write_text("mine, in runs")
+    (p / "report" / "my.txt").write_text("mine, in report")
+    return p
+
+
+def test_a_claim_that_fails_before_its_first_result_leaves_the_earlier_output_byte_identical(tmp_path):
+    p = _earlier(tmp_path)
+    before = _bytes(p)
+    c = claim_output_dir(p, "eval", first_result="run.json")
+    assert sorted(c.replaced) == ["report", "run.json", "runs"] and (p / ASIDE).is_dir()
+    (p / ".hydra").mkdir()
+    (p / ".hydra" / "config.yaml").write_text("new run")
+    (p / "eval.log").write_text("new log")
+    c.finish("failed", drop_if_unused="run.json")
+    assert _bytes(p) == before and not (p / ASIDE).exists()
+
+
+def test_files_added_inside_an_earlier_output_survive_a_rerun_and_are_not_recorded_as_its_own(tmp_path, caplog):
+    p = _earlier(tmp_path)
+    c = claim_output_dir(p, "eval", first_result="run.json")
+    (p / "run.json").write_text('{"status": "done", "new": 1}')
+    (p / "runs" / "s0").mkdir(parents=True)
+    (p / "runs" / "s0" / "A.json").write_text("new record")
+    with caplog.at_level("INFO", logger="eval"):
+        c.finish("done")
+    assert (p / "runs" / "s0" / "notes.txt").read_text() == "mine, in runs"
+    assert (p / "report" / "my.txt").read_text() == "mine, in report"
+    assert (p / "my_top.txt").read_text() == "mine, top"
+    assert not (p / "report" / "index.html").exists()  # the earlier run's own file, not written again
+    assert (p / "runs" / "s0" / "A.json").read_text() == "new record" and not (p / ASIDE).exists()
+    assert "kept 2 file(s) you added" in caplog.text and "runs/s0/notes.txt" in caplog.text
+    m = json.loads((p / MARKER).read_text())
+    assert sorted(m["paths"]) == ["run.json", "runs/s0/A.json"]
+    assert sorted(m["user_paths"]) == ["report/my.txt", "runs/s0/notes.txt"]
+    c = claim_output_dir(p, "eval", first_result="run.json")  # a third run: still theirs
+    (p / "run.json").write_text("{}")
+    c.finish("done")
+    assert (p / "runs" / "s0" / "notes.txt").is_file() and (p / "report" / "my.txt").is_file()
+    assert not (p / "runs" / "s0" / "A.json").exists()
+
+
+def test_a_file_added_where_the_new_run_writes_is_kept_beside_it(tmp_path):
+    p = _earlier(tmp_path)
+    c = claim_output_dir(p, "eval", first_result="run.json")
+    (p / "run.json").write_text("{}")
+    (p / "report").mkdir()
+    (p / "report" / "my.txt").write_text("the new run's file of that name")
+    c.finish("done")
+    assert (p / "report" / "my.txt").read_text() == "the new run's file of that name"
+    assert (p / "report" / "my.txt.kept").read_text() == "mine, in report"
+
+
+@pytest.mark.parametrize("had_result", [False, True])
+def test_a_run_killed_with_the_earlier_output_aside_is_recovered_by_the_next_claim(tmp_path, had_result):
+    p = _earlier(tmp_path)
+    before = _bytes(p)
+    c = claim_output_dir(p, "eval", first_result="run.json")
+    (p / "partial.csv").write_text("half")
+    if had_result:
+        (p / "run.json").write_text('{"status": "running"}')
+    c.release()  # the process dies here: no finish
+    c2 = claim_output_dir(p, "eval", first_result="run.json", keep=True)
+    assert not (p / ASIDE).exists()
+    if had_result:  # the killed run had results: its files stay, the earlier one's go, the person's come back
+        assert (p / "partial.csv").is_file() and not (p / "report" / "index.html").exists()
+        assert (p / "runs" / "s0" / "notes.txt").is_file() and (p / "report" / "my.txt").is_file()
+        c2.finish("done")
+        m = json.loads((p / MARKER).read_text())
+        assert "partial.csv" in m["paths"] and "runs/s0/notes.txt" not in m["paths"]
+    else:  # died before its first result: the earlier output as it was
+        c2.release()
+        now = _bytes(p)
+        now.pop(MARKER), before.pop(MARKER)
+        now.pop(LOCK), before.pop(LOCK)
+        assert now == before
+
+
+def test_files_under_lists_files_and_links_and_ours_reads_both_records(tmp_path):
+    (tmp_path / "d" / "e").mkdir(parents=True)
+    (tmp_path / "d" / "e" / "f.txt").write_text("x")
+    (tmp_path / "g").write_text("y")
+    os.symlink("e", tmp_path / "d" / "link")
+    assert files_under(tmp_path, ["d", "g", "absent"]) == ["d/e/f.txt", "d/link", "g"]
+    assert ours({"paths": ["g"]})("g") and not ours({"paths": ["g"]})("d/e/f.txt")
+    assert ours({"user_paths": ["g"]})("d/e/f.txt") and not ours({"user_paths": ["g"]})("g")
+    assert ours(None)("anything")
+
+
+# ----------------------------------------------------------------------------- end to end
+EVAL = [sys.executable, "-m", "eval", "experiment=ci", "dataset.root=../shared/data/faust_reg", "dataset.limit=1",
+        "methods=[SShaDe]"]
+
+
+def _run(args):
+    return subprocess.run(args, cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=300)
+
+
+def test_a_bad_input_into_an_earlier_eval_output_is_refused_and_leaves_it_byte_identical(tmp_path):
+    if not (ROOT.parent / "shared" / "data" / "faust_reg").is_dir():
+        pytest.skip("needs ../shared/data/faust_reg")
+    p = tmp_path / "P"
+    r = _run([*EVAL, f"out_dir={p}"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    (p / "runs").mkdir(exist_ok=True)
+    (p / "my_notes.txt").write_text("mine")
+    before = _bytes(p)
+    notrun = tmp_path / "not_a_run"
+    notrun.mkdir()
+    for bad in ("dataset.root=/nonexistent", f"compare_with=[{notrun}]", f"compare_with=[{p}]",
+                "sshade.n_low=2"):
+        r = _run([*EVAL, f"out_dir={p}", bad])
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert r.returncode == 2 and lines[-1].startswith("error: ") and "Traceback" not in r.stderr, (bad, r.stderr)
+        assert _bytes(p) == before, bad
+        assert not (p / outdir.ASIDE).exists()
