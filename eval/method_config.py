@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+from eval.run.names import safe_name
 from eval.run.spec import MethodSpec
 from harness.method_registry import build_builtin, builtin_methods, canonical_name, method_key, method_meta
 from harness.plugins import as_dict, build_method, is_mapping
@@ -74,7 +75,8 @@ def make_methods(methods: Sequence[MethodSpec]) -> list:
         No method, a mapping without ``_target_``, a target that cannot be imported or
         built, an object without a ``name`` (str) or a callable ``deform``, a name breaking
         :data:`sshade.method_interface.NAME_RULE`, a name listed twice (ignoring case and
-        repeated spaces), bad parameter values (every method's parameters are checked
+        repeated spaces), two names of one file name (:func:`eval.run.names.safe_name`,
+        ignoring case: their records would overwrite each other), bad parameter values (every method's parameters are checked
         here, before any case is loaded or built), or ``SShaDe`` requested but
         :class:`sshade.SShaDe` cannot be imported.
 
@@ -93,6 +95,12 @@ def make_methods(methods: Sequence[MethodSpec]) -> list:
     if dup:
         raise SShaDeError(f"method(s) listed twice: {sorted(dup)} (names are compared ignoring case; give a "
                           "plug-in another `name`)")
+    files = [safe_name(m.name).lower() for m in out]  # "M a" and "M_a" would share runs/<case>/M_a.json
+    clash = sorted({m.name for m, f in zip(out, files) if files.count(f) > 1})
+    if clash:
+        raise SShaDeError(f"methods {clash} would share the file name {safe_name(clash[0])!r} (runs/<case>/"
+                          f"{safe_name(clash[0])}.json; file names are compared ignoring case): give a plug-in "
+                          "another `name`")
     return out
 
 

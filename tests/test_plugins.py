@@ -167,6 +167,13 @@ def test_repeated_plugin_name_is_refused():
                                   {"_target_": "tests.plugin_example.MyMethod", "iterations": 5}]}).methods)
 
 
+def test_two_method_names_of_one_file_name_are_refused_before_any_work():
+    # "M a" and "M_a" would both store runs/<case>/M_a.json, one overwriting the other's records
+    with pytest.raises(SShaDeError, match=r"would share the file name 'M_a'"):
+        make_methods(check_config({"methods": [{"_target_": "tests.plugin_example.MyMethod", "name": "M a"},
+                                               {"_target_": "tests.plugin_example.MyMethod", "name": "m_A"}]}).methods)
+
+
 def test_bad_plugin_on_the_command_line_exits_2_with_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={tmp_path}",
                         "methods=[{_target_:tests.test_plugins.NoDeform}]", f"out_dir={tmp_path / 'out'}"],
