@@ -76,8 +76,8 @@ def make_methods(methods: Sequence[MethodSpec]) -> list:
         built, an object without a ``name`` (str) or a callable ``deform``, a name breaking
         :data:`sshade.method_interface.NAME_RULE`, a name listed twice (ignoring case and
         repeated spaces), two names of one file name (:func:`eval.run.names.safe_name`,
-        ignoring case: their records would overwrite each other), bad parameter values (every method's parameters are checked
-        here, before any case is loaded or built), or ``SShaDe`` requested but
+        ignoring case: their records would overwrite each other), bad parameter values
+        (every method's parameters are checked here, before any case is loaded or built), or ``SShaDe`` requested but
         :class:`sshade.SShaDe` cannot be imported.
 
     Examples

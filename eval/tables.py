@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from eval.present.rows import method_order_key, methods_in, ok_mask
 from eval.present.stops import PROTOCOL_TEXT, stop_lines
 from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
-from eval.run.compared import COMPARED_CSV
+from eval.run.compared import COMPARED_CSV, SETTINGS
 from eval.run.outdir import refuse_results
 from eval.run.row_check import check_rows
 from harness.command import run_command
@@ -334,7 +334,8 @@ def compared_lines(compared: pd.DataFrame | None) -> list[str]:
                  "commits " + ", ".join(f"{c} ({n} records)" for c, n in commits.items()))
         out.append(f"{', '.join(methods_in(g))}: {len(g)} record(s) read from {run} ({words}; "
                    f"{first.get('run_machine', '?')}), "
-                   "not recomputed: each record's digest and case identity checked against this run's cases")
+                   "not recomputed: each record's digest and case identity checked against this run's cases, "
+                   f"and its run's {', '.join(SETTINGS)} against this run's")
     return out
 
 

@@ -118,3 +118,22 @@ def test_an_edited_record_or_another_dataset_is_refused(tmp_path, faust_root):
     assert "dataset 'faust'" in msg and "'shapes'" in msg
     msg = _error(_eval(["dataset=faust", *common[:-1], f"compare_with=[{tmp_path}]", f"out_dir={tmp_path / 'c'}"]))
     assert "not a python -m eval run folder" in msg
+
+
+def test_a_run_made_under_another_handle_bound_or_reference_setting_is_refused_naming_it(tmp_path, faust_root):
+    first = tmp_path / "first"
+    base = ["dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1", f"methods=[{PLUGIN}]",
+            "reference.cases=none", "report.enabled=false", "figures.enabled=false"]
+    r = _eval([*base, "handle_error_max_pct=null", f"out_dir={first}"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    common = [*base[:3], "methods=[SShaDe]", *base[4:], f"compare_with=[{first}]"]
+    msg = _error(_eval([*common, f"out_dir={tmp_path / 'a'}"]))
+    assert "handle_error_max_pct=None" in msg and "handle_error_max_pct=1.0" in msg and str(first) in msg
+    msg = _error(_eval([*common, "handle_error_max_pct=null", "reference.max_iter=3", f"out_dir={tmp_path / 'b'}"]))
+    assert "reference.max_iter=50000" in msg and "reference.max_iter=3" in msg
+    r = _eval([*common[:-1], "handle_error_max_pct=null", f"compare_with=[{first},{first}]",
+               f"out_dir={tmp_path / 'c'}"])  # named twice: its rows once
+    assert r.returncode == 0, r.stderr[-2000:]
+    rows = (tmp_path / "c" / "compared.csv").read_text().splitlines()
+    assert len(rows) == 2 and "named twice, read once" in r.stderr + r.stdout
+    assert "handle_error_max_pct" in (tmp_path / "c" / "table.md").read_text()

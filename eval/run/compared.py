@@ -14,11 +14,18 @@ from eval.run.runinfo import read_runinfo
 from sshade.errors import SShaDeError
 from sshade.method_interface import check_name
 
-__all__ = ["ComparedRun", "read_compared", "compared_rows", "IDENTITY_FIELDS", "COMPARED_CSV"]
+__all__ = ["ComparedRun", "read_compared", "compared_rows", "run_settings", "IDENTITY_FIELDS", "SETTINGS",
+           "COMPARED_CSV"]
 
 #: The fields of a case identity that must agree (the data digests say whether it is the
 #: same data; the dataset's seed may differ where the data agree).
 IDENTITY_FIELDS = ("dataset", "case", "V", "F", "handles", "targets", "V_gt")
+#: The settings of a run's ``config`` (``run.json``) that make the numbers of its rows
+#: besides the methods and the data: the handle bound that fails a row, the reference's
+#: stopping (the Ref and E-gap columns), the dataset's protocol. A compared run must agree
+#: on each (dotted paths into the config).
+SETTINGS = ("handle_error_max_pct", "reference.max_iter", "reference.time_budget_s", "dataset.protocol")
+_ABSENT = "(absent)"
 #: The file of an evaluator run folder that keeps the compared rows (beside ``cases.csv``).
 COMPARED_CSV = "compared.csv"
 
@@ -52,6 +59,18 @@ def _run_json(folder: Path) -> dict:
     return d
 
 
+def run_settings(config) -> dict:
+    """The :data:`SETTINGS` of a run's resolved ``config`` (mapping), each dotted path to its
+    value (``"(absent)"`` where the config has none)."""
+    out = {}
+    for path in SETTINGS:
+        v = config
+        for k in path.split("."):
+            v = v.get(k, _ABSENT) if isinstance(v, dict) else _ABSENT
+        out[path] = v
+    return out
+
+
 def _identity_problem(stored, ours: dict) -> str:
     """``""`` when a record's case identity ``stored`` agrees with ``ours`` on
     :data:`IDENTITY_FIELDS`, else the fields that differ, in words."""
@@ -61,7 +80,7 @@ def _identity_problem(stored, ours: dict) -> str:
     return f"its {', '.join(bad)} differ" if bad else ""
 
 
-def read_compared(folder, label: str, cases, *, dataset: str, seed) -> ComparedRun:
+def read_compared(folder, label: str, cases, *, dataset: str, seed, settings: dict | None = None) -> ComparedRun:
     """The rows of run folder ``folder`` on ``cases`` (this run's), checked (module docstring).
 
     Parameters
@@ -70,6 +89,7 @@ def read_compared(folder, label: str, cases, *, dataset: str, seed) -> ComparedR
     label : str, the name its rows carry (e.g. ``results/defaust``).
     cases : this run's cases (``name``, ``V``, ``F``, ``handles``, ``targets``, ``V_gt``).
     dataset, seed : this run's dataset name and seed (:func:`case_identity`).
+    settings : this run's :func:`run_settings` (None: not checked).
 
     Returns
     -------
@@ -78,8 +98,9 @@ def read_compared(folder, label: str, cases, *, dataset: str, seed) -> ComparedR
     Raises
     ------
     SShaDeError naming the folder and the file: not a run folder, a link out of it,
-    another dataset, an invalid or edited record, a record made on other data (another
-    build), or no record of any case of this run.
+    another dataset, another value of a setting of :data:`SETTINGS` (naming it), an
+    invalid or edited record, a record made on other data (another build), or no record
+    of any case of this run.
     """
     folder = Path(folder)
     if not (folder / "runs").is_dir():
@@ -90,6 +111,12 @@ def read_compared(folder, label: str, cases, *, dataset: str, seed) -> ComparedR
     theirs = str(((info.get("config") or {}).get("dataset") or {}).get("name", ""))
     if theirs != str(dataset):
         raise SShaDeError(f"compare_with: {folder} is a run on dataset {theirs!r}, this one on {dataset!r}")
+    if settings is not None:
+        other = run_settings(info.get("config") if isinstance(info.get("config"), dict) else {})
+        for k, v in settings.items():
+            if other.get(k) != v:
+                raise SShaDeError(f"compare_with: {folder} was made with {k}={other.get(k)!r}, this run with "
+                                  f"{k}={v!r}: its rows are not comparable (run both with the same {k})")
     git = info.get("git") if isinstance(info.get("git"), dict) else {}
     commit = git.get("commit")
     out = ComparedRun(folder=folder, label=label, commit=(commit[:12] + ("+dirty" if git.get("dirty") else ""))

@@ -32,13 +32,13 @@ from eval.present.figures import FIGURE_RECORDS, case_figure_path, write_case_fi
 from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, write_case_view, write_outputs
 from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
-from eval.run.compared import compared_rows, read_compared
+from eval.run.compared import compared_rows, read_compared, run_settings
 from eval.run.jsonsafe import json_safe
 from eval.run.paths import abs_path
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
-from eval.run.spec import EvalSpec, FigureOptions, OutputOptions, ReportOptions
+from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
 from eval.run.stale_rows import CommitTrees, row_state
 from eval.run.subset import baseline_selection, method_selections
 from eval.tables import compare, write_cases, write_tables
@@ -175,7 +175,7 @@ def _setup(spec: EvalSpec) -> _Setup:
     own = method_selections(cases, mc, names)
     log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
-    compared = _compared(spec.output, cases, ds, out_dir)  # read and checked before any method runs
+    compared = _compared(spec, cases, ds, out_dir)  # read and checked before any method runs
     store = ResultStore(out_dir, meshes=spec.output.store_meshes)
     store.check_links()  # a link in runs/ would take a resume's records outside out_dir
     if not spec.output.resume:
@@ -188,16 +188,22 @@ def _setup(spec: EvalSpec) -> _Setup:
                   compared=compared)
 
 
-def _compared(output: OutputOptions, cases, ds, out_dir: Path) -> list:
-    """The runs named by ``compare_with`` (folders relative to the launch directory), read
-    and checked against ``cases`` of dataset ``ds`` (:func:`eval.run.compared.read_compared`);
-    SShaDeError naming the folder when one is this run's own folder or cannot be compared."""
-    out = []
-    for it in output.compare_with:
+def _compared(spec: EvalSpec, cases, ds, out_dir: Path) -> list:
+    """The runs named by ``compare_with`` (folders relative to the launch directory; one
+    named twice is read once), read and checked against ``cases`` of dataset ``ds`` and
+    this run's settings (:func:`eval.run.compared.read_compared`); SShaDeError naming the
+    folder when one is this run's own folder or cannot be compared."""
+    out, seen = [], set()
+    settings = run_settings(spec.record())
+    for it in spec.output.compare_with:
         folder = abs_path(it)
         if folder == out_dir:
             raise SShaDeError(f"compare_with: {folder} is this run's own folder; name earlier runs")
-        out.append(read_compared(folder, it, cases, dataset=ds.name, seed=ds.seed))
+        if folder.resolve() in seen:
+            log.info("compare_with %s: named twice, read once", it)
+            continue
+        seen.add(folder.resolve())
+        out.append(read_compared(folder, it, cases, dataset=ds.name, seed=ds.seed, settings=settings))
         log.info("compare_with %s: %d record(s) of %s%s", it, len(out[-1].rows), ", ".join(out[-1].methods),
                  f"; no record of {len(out[-1].missing)} case(s)" if out[-1].missing else "")
     return out
