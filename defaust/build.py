@@ -11,7 +11,6 @@ any count. The folder: docs/defaust.md §2; items, keys and resumes: docs/defaus
 """
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -24,6 +23,7 @@ from tqdm import tqdm
 from harness.jobs import run_jobs, send
 from sshade.cores import pool_size
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.mesh.io import read_mesh
 
 from . import highres
@@ -215,7 +215,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
                  "(their files are kept): %s", len(stale), ", ".join(stale[:5]) + (" ..." if len(stale) > 5 else ""))
     write_manifest(out, manifest)
     write_croissant(out)
-    report.manifest = json.loads((out / MANIFEST).read_text())
+    report.manifest = read_json(out / MANIFEST)
     return report
 
 

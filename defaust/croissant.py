@@ -16,6 +16,7 @@ import json
 import re
 from pathlib import Path
 
+from sshade.json_file import loads, read_json
 from sshade.mesh.io import atomic_write
 
 from .manifest import MANIFEST
@@ -231,7 +232,7 @@ def write_croissant(out) -> Path:
     """Write ``out/croissant.json`` for the manifest now in ``out`` (atomically; a no-op
     when the file already holds exactly that content). Returns its path."""
     out = Path(out)
-    m = json.loads((out / MANIFEST).read_text())
+    m = read_json(out / MANIFEST)
     text = croissant_text(m, manifest_sha256=sha256_file(out / MANIFEST))
     p = out / CROISSANT
     if not (p.is_file() and p.read_text() == text):
@@ -258,7 +259,7 @@ def croissant_sha256_of(data: bytes) -> str | None:
     'ab'
     """
     try:
-        meta = json.loads(data)
+        meta = loads(data)
         return next(d.get("sha256") for d in meta["distribution"] if d.get("@id") == MANIFEST)
     except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
         return None

@@ -10,7 +10,6 @@ errors: docs/defaust.md §6.
 """
 from __future__ import annotations
 
-import json
 import os
 import re
 from collections.abc import Iterable
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.json_file import loads
 from sshade.mesh.io import inside_folder, read_mesh
 
 from .archive import MAX_TEXT_BYTES, ArchiveBuild, is_archive
@@ -179,7 +179,7 @@ def _manifest(src: FolderBuild | ArchiveBuild) -> dict:
     text = src.manifest_text() if isinstance(src, FolderBuild) else _archive_manifest_text(src)
     p = src.where(MANIFEST)
     try:
-        m = json.loads(text)
+        m = loads(text)
     except ValueError as e:
         hint = (f"; rebuild with `python -m defaust out={src.path}`" if isinstance(src, FolderBuild) else "")
         raise SShaDeError(f"{p}: unreadable manifest ({e}){hint}") from None

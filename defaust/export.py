@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write, write_mesh
 
 from .dataset import RESOLUTIONS, Case, FolderBuild, load, open_build
@@ -54,7 +55,7 @@ def check_export_folder(root: Path, to: Path) -> None:
         return
     marker = to / MARKER
     try:
-        kind = json.loads(marker.read_text()).get("kind") if marker.is_file() else None
+        kind = read_json(marker).get("kind") if marker.is_file() else None
     except (ValueError, OSError, AttributeError):
         kind = None
     if kind != KIND:

@@ -17,6 +17,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 from .store import sha256_file
@@ -72,7 +73,7 @@ def read_manifest_file(path) -> dict:
         # -> 'defaust-1'
     """
     try:
-        m = json.loads(Path(path).read_text())
+        m = read_json(path)
     except (ValueError, OSError) as e:
         raise ManifestError(path, "unreadable", e) from None
     if not isinstance(m, dict) or m.get("format") != FORMAT:

@@ -24,6 +24,7 @@ from eval.run.outdir import refuse_results
 from eval.run.row_check import check_rows
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
@@ -415,7 +416,6 @@ def retabulate(run_dir) -> dict[str, Path]:
     ------
     FileNotFoundError if ``run_dir/cases.csv`` is missing.
     """
-    import json
 
     import pandas as pd
 
@@ -425,7 +425,7 @@ def retabulate(run_dir) -> dict[str, Path]:
     compared = pd.read_csv(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
     title = None
     try:
-        cfg = json.loads((run_dir / "run.json").read_text()).get("config", {})
+        cfg = read_json(run_dir / "run.json").get("config", {})
         exp, ds = cfg.get("experiment", {}).get("name"), cfg.get("dataset", {}).get("name")
         if exp:
             title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")

@@ -20,6 +20,7 @@ import numpy as np
 
 from defaust.store import sha256_file
 from sshade.errors import SShaDeError
+from sshade.json_file import read_bounded
 from sshade.mesh.io import atomic_write, write_mesh
 
 __all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "write_case",
@@ -164,15 +165,13 @@ def read_times(path) -> dict[str, tuple[float, str]]:
 
     Raises
     ------
-    SShaDeError naming the file and line: unreadable, larger than
-    :data:`MAX_TIMES_BYTES`, no ``case``/``time_s`` column, a time that is not a finite
+    SShaDeError naming the file and line: unreadable, not a regular file, larger than
+    :data:`MAX_TIMES_BYTES` (counted as read), no ``case``/``time_s`` column, a time that is not a finite
     number >= 0, a case listed twice.
     """
     p = Path(path)
     try:
-        if p.stat().st_size > MAX_TIMES_BYTES:
-            raise SShaDeError(f"{p}: a times file of {p.stat().st_size} bytes is refused (at most {MAX_TIMES_BYTES})")
-        text = p.read_bytes().decode("utf-8-sig")
+        text = read_bounded(p, MAX_TIMES_BYTES).decode("utf-8-sig")  # a FIFO or a device refused, not read
     except OSError as e:
         raise SShaDeError(f"{p}: unreadable times file ({e.strerror or type(e).__name__})") from None
     except UnicodeDecodeError as e:

@@ -20,6 +20,7 @@ from eval.metrics.meshes import unique_edges
 from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
@@ -334,7 +335,7 @@ def read_outputs(run_dir) -> dict | None:
     and ``figures`` dicts, ``notes`` list), or None when the file is absent, unreadable
     or not such a record (a run folder written before it existed)."""
     try:
-        rec = json.loads((Path(run_dir) / VIEW_DIR / OUTPUTS).read_text())
+        rec = read_json(Path(run_dir) / VIEW_DIR / OUTPUTS)
     except (OSError, ValueError):
         return None
     ok = (isinstance(rec, dict) and isinstance(rec.get("cases"), list) and isinstance(rec.get("views"), dict)

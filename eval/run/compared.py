@@ -3,7 +3,6 @@ method's row beside the committed baselines without rerunning them.
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,6 +11,7 @@ from eval.run.names import safe_name
 from eval.run.result_store import ResultStore, case_identity
 from eval.run.runinfo import read_runinfo
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.method_interface import check_name
 
 __all__ = ["ComparedRun", "read_compared", "compared_rows", "run_settings", "IDENTITY_FIELDS", "SETTINGS",
@@ -140,7 +140,7 @@ def read_compared(folder, label: str, cases, *, dataset: str, seed, settings: di
 def _one_row(store: ResultStore, p: Path, case: str, ours: dict, out: ComparedRun) -> dict:
     """The row of record file ``p`` of ``case``, checked, marked with its run."""
     try:
-        method = json.loads(p.read_text()).get("method")
+        method = read_json(p).get("method")
     except (OSError, ValueError, AttributeError):
         method = None
     found = store.read(case, str(method)) if isinstance(method, str) else None

@@ -22,6 +22,7 @@ from eval.run.earlier_output import ASIDE, clean, files_under, ours, restore, se
 from eval.run.runinfo import read_runinfo, write_runinfo
 from eval.run.spec import OutputOptions
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
            "claimed_run", "results_dir", "refuse_results", "read_marker", "check_earlier_output",
@@ -56,7 +57,7 @@ def refuse_results(path, what: str) -> None:
 def read_marker(path) -> dict | None:
     """The marker of folder ``path`` (:data:`MARKER`), or None when absent/unreadable."""
     try:
-        m = json.loads((Path(path) / MARKER).read_text())
+        m = read_json(Path(path) / MARKER)
     except (OSError, ValueError):
         return None
     return m if isinstance(m, dict) else None

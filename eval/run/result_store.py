@@ -27,6 +27,7 @@ from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.runinfo import git_info
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write, inside_folder
 
 __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "case_identity", "pair_key",
@@ -227,7 +228,7 @@ class ResultStore:
         if not p.is_file():
             return Lookup(None, "absent")
         try:
-            rec = json.loads(p.read_text())
+            rec = read_json(p)
         except (OSError, ValueError) as e:
             return Lookup(None, f"invalid: unreadable ({type(e).__name__})")
         if not isinstance(rec, dict):
@@ -309,7 +310,7 @@ class ResultStore:
             return 0
         for p in sorted(self.root.glob("*/*.json")):
             try:
-                rec = json.loads(p.read_text())
+                rec = read_json(p)
             except (OSError, ValueError):
                 continue
             if not isinstance(rec, dict) or "version" not in rec or "key" not in rec:

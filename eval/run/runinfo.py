@@ -21,6 +21,7 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 __all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "read_runinfo", "effective_params",
@@ -135,7 +136,7 @@ def read_runinfo(folder) -> dict:
     """The ``run.json`` of run folder ``folder`` as a dict; ``{}`` when it is missing,
     unreadable, not JSON or not a mapping (a folder's record read as untrusted input)."""
     try:
-        info = json.loads((Path(folder) / "run.json").read_text())
+        info = read_json(Path(folder) / "run.json")
     except (OSError, ValueError):
         return {}
     return info if isinstance(info, dict) else {}

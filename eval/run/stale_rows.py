@@ -34,6 +34,7 @@ from eval.run.code_identity import (
 from eval.run.result_store import STORE_DIR, STORE_VERSION, ResultStore, check_row, pair_key, record_digest
 from eval.run.runinfo import REPO_ROOT
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 
 __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "row_state", "check_folders",
            "rekey_record"]
@@ -121,7 +122,7 @@ def record_paths(folder) -> Iterator[tuple[str, Path]]:
 
 def _read_json(p: Path):
     try:
-        return json.loads(p.read_text())
+        return read_json(p)
     except (OSError, ValueError, RecursionError):
         return None
 

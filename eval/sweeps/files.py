@@ -12,6 +12,7 @@ import json
 import os
 from pathlib import Path
 
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 __all__ = ["STATUS_FILE", "MANIFEST", "RESUME_ENV", "OUTCOMES", "KEEP", "now_iso", "write_status", "read_status",
@@ -44,7 +45,7 @@ def read_status(job_dir) -> dict | None:
     """``status.json`` of a job folder, or None when absent or unreadable."""
     p = Path(job_dir) / STATUS_FILE
     try:
-        return json.loads(p.read_text())
+        return read_json(p)
     except (OSError, ValueError):
         return None
 
@@ -54,7 +55,7 @@ def read_manifest(sweep_dir) -> dict | None:
     """``sweep_dir/sweep.json`` (the sweep's grid and command, see :func:`eval.sweeps.sweep_command.start_manifest`),
     or None when absent or unreadable."""
     try:
-        m = json.loads((Path(sweep_dir) / MANIFEST).read_text())
+        m = read_json(Path(sweep_dir) / MANIFEST)
     except (OSError, ValueError):
         return None
     return m if isinstance(m, dict) else None

@@ -8,7 +8,6 @@ folder's files (:mod:`eval.sweeps.files`) at the end of a multirun, by
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import math
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from eval.run.outdir import refuse_results
 from eval.sweeps.files import MANIFEST, OUTCOMES, STATUS_FILE, job_dirs, read_manifest, read_status
 from eval.tables import TABLE_COLUMNS, method_order_key
 from sshade.errors import SShaDeError
+from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 __all__ = ["aggregate_sweep", "sweep_markdown", "sweep_title", "TABLE_CSV", "TABLE_MD"]
@@ -84,7 +84,7 @@ def _job_row(d: Path, j: Path, keys: list, ended, seen: dict) -> dict:
     else:
         run_json = j / "run.json"
         try:
-            rs = json.loads(run_json.read_text()).get("status") if run_json.is_file() else None
+            rs = read_json(run_json).get("status") if run_json.is_file() else None
         except (OSError, ValueError):
             rs = None
         row["status"] = {"done": "done", "running": "running"}.get(rs, "missing")

@@ -9,7 +9,6 @@ binary chunk is streamed and mapped here, so neither side holds the animation in
 """
 from __future__ import annotations
 
-import json
 import mmap
 import os
 import shutil
@@ -22,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SShaDeError
+from ..json_file import loads
 from .io import atomic_write
 from .validate import check_faces
 
@@ -227,7 +227,7 @@ def glb_extras(path) -> dict | None:
     """The ``asset.extras`` dict of the ``.glb`` at ``path`` (only its JSON chunk is
     read), or None: no such file, not a glTF binary, no such dict."""
     try:
-        doc = json.loads(_chunks(path, map_bin=False)[0])
+        doc = loads(_chunks(path, map_bin=False)[0])
         extras = doc.get("asset", {}).get("extras")
     except (SShaDeError, ValueError, AttributeError, RecursionError):
         return None

@@ -1,0 +1,74 @@
+"""Files read as untrusted input: a regular file only (a FIFO, a device or a folder is
+refused without blocking), its size bounded by the bytes read rather than by what ``stat``
+says, JSON nesting bounded.
+
+* :func:`read_bounded`: the bytes of a regular file of at most ``max_bytes``;
+* :func:`loads`: :func:`json.loads` whose too-deep nesting is a ``ValueError``;
+* :func:`read_json`: both, for a JSON file (``MAX_JSON_BYTES`` by default).
+Callers catch ``OSError`` (unreadable, not a regular file, too large) and ``ValueError``
+(not UTF-8, not JSON, nested too deeply) as they did for ``Path.read_text`` and ``json.loads``.
+"""
+from __future__ import annotations
+
+import errno
+import json
+import os
+import stat
+
+__all__ = ["MAX_JSON_BYTES", "read_bounded", "loads", "read_json"]
+
+MAX_JSON_BYTES = 256 * 2**20  #: a JSON file larger than this is refused (bytes)
+
+
+def read_bounded(path, max_bytes: int) -> bytes:
+    """The bytes of the regular file ``path`` (links followed).
+
+    Parameters
+    ----------
+    path : str or Path. max_bytes : int >= 0, the most bytes accepted.
+
+    Returns
+    -------
+    bytes, at most ``max_bytes`` of them.
+
+    Raises
+    ------
+    OSError: unreadable; not a regular file (``EINVAL``: a FIFO, a device, a folder;
+        opened without blocking); more than ``max_bytes`` bytes read (``EFBIG``), whatever
+        its size on disk says.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        chunks, n = [], 0
+        while True:
+            b = os.read(fd, min(1 << 20, max_bytes + 1 - n))
+            if not b:
+                return b"".join(chunks)
+            chunks.append(b)
+            n += len(b)
+            if n > max_bytes:
+                raise OSError(errno.EFBIG, f"larger than {max_bytes} bytes", str(path))
+    finally:
+        os.close(fd)
+
+
+def loads(text):
+    """:func:`json.loads` of ``text`` (str or bytes); ValueError (``json.JSONDecodeError``
+    or nesting deeper than the interpreter's recursion allows) when it is no JSON.
+
+    >>> loads("[1, {}]"), loads("[" * 100_000) if False else None
+    ([1, {}], None)
+    """
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("JSON nested too deeply") from None
+
+
+def read_json(path, max_bytes: int = MAX_JSON_BYTES):
+    """The JSON value in the file ``path`` (UTF-8, a BOM allowed): :func:`read_bounded`
+    then :func:`loads`. Raises OSError or ValueError as they do (``UnicodeDecodeError``
+    is a ValueError)."""
+    return loads(read_bounded(path, max_bytes).decode("utf-8-sig"))
