@@ -3,6 +3,10 @@
 (:mod:`defaust.dataset_cli`)."""
 import sys
 
+from sshade.numba_cache import ensure_cache
+
+ensure_cache()  # before the first kernel module: a command runs where numba cannot cache
+
 if __name__ == "__main__":
     from .dataset_cli import COMMANDS
     from .dataset_cli import main as dataset_main

@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import sys
 
-from .deform_command import main as cli_main
+from .numba_cache import ensure_cache
+
+ensure_cache()  # before the first kernel module: a command runs where numba cannot cache
+
+from .deform_command import main as cli_main  # noqa: E402
 
 
 def main() -> int:

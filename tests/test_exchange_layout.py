@@ -90,3 +90,29 @@ def test_result_path_wants_exactly_one_mesh_per_case(tmp_path):
     (tmp_path / "a.ply").write_text("")
     with pytest.raises(SShaDeError, match="two results for case a"):
         result_path(tmp_path, "a")
+
+
+def test_a_result_that_is_a_link_a_folder_or_a_fifo_is_refused_in_one_line_and_never_followed(tmp_path):
+    import os
+    (tmp_path / "secret").write_text("root:x:0:0\n")
+    os.symlink(tmp_path / "secret", tmp_path / "s0_p1.obj")
+    os.symlink(tmp_path / "gone", tmp_path / "s0_p2.obj")  # dangling
+    (tmp_path / "s0_p3.obj").mkdir()
+    os.mkfifo(tmp_path / "s0_p4.obj")
+    for case, words in (("s0_p1", "is a link"), ("s0_p2", "is a link"), ("s0_p3", "not a regular file"),
+                        ("s0_p4", "not a regular file")):
+        with pytest.raises(SShaDeError, match=words) as e:
+            result_path(tmp_path, case)
+        assert "\n" not in str(e.value) and "root:x" not in str(e.value)
+
+
+def test_times_past_the_bound_are_refused_and_a_machine_field_is_plain_text(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text("case,time_s\ns0_p1,1e308\n")
+    with pytest.raises(SShaDeError, match=r"line 2: time_s '1e308' must be a number of seconds in \[0, 1e\+07\]"):
+        read_times(p)
+    p.write_text("case,time_s,machine\ns0_p1,1,=cmd|' /C calc'!A0\ns0_p2,2,<script>alert(1)</script>\n"
+                 "s0_p3,3,-2+3\n")
+    got = {k: m for k, (_, m) in read_times(p).items()}
+    assert got["s0_p1"][0] not in "=+-@" and not any(c in got["s0_p2"] for c in "<>|'!")
+    assert got["s0_p3"] == "2+3" and all("|" not in m for m in got.values())

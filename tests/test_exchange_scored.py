@@ -187,3 +187,21 @@ def test_same_faces_ignores_face_order_and_rotation_but_not_orientation():
     assert not same_faces(F, np.array([[0, 2, 1], [2, 1, 3]]))  # flipped
     assert not same_faces(F, F[:1])
     assert json.dumps(same_faces(F, F)) == "true"
+
+
+def test_a_result_with_reordered_vertices_is_named_as_such_not_as_a_face_count(tmp_path):
+    from types import SimpleNamespace
+
+    from eval.exchange.scored import ScoredResults
+    from sshade.errors import SShaDeError
+    from sshade.mesh.io import write_mesh
+    from tests.conftest import icosphere
+    V, F = icosphere()
+    perm = np.roll(np.arange(len(V)), 1)  # what a reader that reorders vertices writes back
+    inv = np.argsort(perm)
+    write_mesh(tmp_path / "c.ply", V[perm], inv[F])
+    s = ScoredResults(tmp_path, "Theirs")
+    s.case = SimpleNamespace(name="c")
+    with pytest.raises(SShaDeError, match=r"join other vertices than the rest mesh's \(same count\): the vertices "
+                                          r"were reordered"):
+        s.deform(V, F, np.array([0]), V[:1])

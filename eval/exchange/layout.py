@@ -14,6 +14,8 @@ import io
 import json
 import math
 import os
+import re
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +25,8 @@ from sshade.errors import SShaDeError
 from sshade.json_file import read_bounded
 from sshade.mesh.io import atomic_write, write_mesh
 
-__all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "write_case",
+__all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "MAX_TIME_S",
+           "machine_text", "write_case",
            "write_export", "result_path", "read_times"]
 
 FORMAT = "sshade-exchange/1"   #: ``format`` of :data:`INDEX`
@@ -36,7 +39,8 @@ CASE_FILES = {"rest_obj": "rest.obj", "rest_ply": "rest.ply", "handles_json": "h
 RESULT_EXTS = (".obj", ".ply", ".off", ".stl")
 #: Columns of a times file: the case, the method's own seconds for it, the machine.
 TIMES_COLUMNS = ("case", "time_s", "machine")
-MAX_TIMES_BYTES = 16 << 20     #: a times file larger than this is refused unread
+MAX_TIMES_BYTES = 16 << 20     #: a times file larger than this is refused (counted as read)
+MAX_TIME_S = 1e7               #: a reported time above this (115 days) is refused: their mean would overflow
 
 
 def _write_dmat(path: Path, A: np.ndarray) -> None:
@@ -130,7 +134,8 @@ def result_path(results, name: str) -> Path:
 
     Raises
     ------
-    SShaDeError when there is none (naming the names looked for) or more than one.
+    SShaDeError when there is none (naming the names looked for), more than one, or it is
+    a link (never followed), a folder, a FIFO or a device.
     """
     results = Path(results)
     want = {f"{name}{e}".lower() for e in RESULT_EXTS}
@@ -142,7 +147,17 @@ def result_path(results, name: str) -> Path:
         raise SShaDeError(f"no result for case {name}: {results} has no {name}.obj (nor .ply, .off, .stl)")
     if len(found) > 1:
         raise SShaDeError(f"two results for case {name} in {results}: {', '.join(found)}; keep one")
-    return results / found[0]
+    p = results / found[0]
+    try:
+        st = os.lstat(p)
+    except OSError as e:
+        raise SShaDeError(f"{p}: cannot read it ({e.strerror or type(e).__name__})") from None
+    if stat.S_ISLNK(st.st_mode):  # never followed: a link to /etc/passwd would land in the tables
+        raise SShaDeError(f"{p} is a link (to {os.readlink(p)}); a result must be a regular file in {results}: "
+                          "copy it there")
+    if not stat.S_ISREG(st.st_mode):
+        raise SShaDeError(f"{p} is not a regular file (a folder, a FIFO or a device); a result must be a mesh file")
+    return p
 
 
 def _time(v: str, where: str) -> float:
@@ -150,9 +165,21 @@ def _time(v: str, where: str) -> float:
         t = float(v)
     except ValueError:
         raise SShaDeError(f"{where}: time_s {v!r} is not a number") from None
-    if not (math.isfinite(t) and t >= 0):
-        raise SShaDeError(f"{where}: time_s {v!r} must be a finite number of seconds >= 0")
+    if not (math.isfinite(t) and 0 <= t <= MAX_TIME_S):
+        raise SShaDeError(f"{where}: time_s {v!r} must be a number of seconds in [0, {MAX_TIME_S:g}]")
     return t
+
+
+def machine_text(v: str) -> str:
+    """A reported machine name as plain text for CSV, Markdown and HTML: spaces collapsed,
+    characters outside letters, digits and ``space . _ , : ( ) / # + -`` replaced by ``_``,
+    no leading ``+`` or ``-`` (a spreadsheet formula), at most 200 characters.
+
+    >>> machine_text("=cmd|' /C calc'!A0"), machine_text("<script>x</script>")
+    ('_cmd__ /C calc__A0', '_script_x_/script_')
+    """
+    s = re.sub(r"[^A-Za-z0-9 ._,:()/#+-]", "_", " ".join(str(v).split()))[:200]
+    return s.lstrip("+-")
 
 
 def read_times(path) -> dict[str, tuple[float, str]]:
@@ -191,5 +218,5 @@ def read_times(path) -> dict[str, tuple[float, str]]:
         name = r[ic].strip()
         if name in out:
             raise SShaDeError(f"{p}, line {i}: case {name!r} listed twice")
-        out[name] = (_time(r[it].strip(), f"{p}, line {i}"), " ".join(r[im].split())[:200] if im is not None else "")
+        out[name] = (_time(r[it].strip(), f"{p}, line {i}"), machine_text(r[im]) if im is not None else "")
     return out

@@ -115,8 +115,12 @@ class ScoredResults:
             raise SShaDeError(f"{path.name}: {int(bad.sum())} vertices are not finite (the first: vertex "
                               f"{int(np.flatnonzero(bad)[0])})")
         if not same_faces(np.asarray(F), G):
-            raise SShaDeError(f"{path.name}: its {len(G)} faces are not the rest mesh's {len(F)} (vertex order "
-                              "changed or the mesh was remeshed)")
+            if len(G) == len(F):
+                raise SShaDeError(f"{path.name}: its {len(G)} faces join other vertices than the rest mesh's (same "
+                                  "count): the vertices were reordered (Open3D's OBJ reader does; keep the rest "
+                                  "mesh's order, e.g. read rest.ply) or the mesh was remeshed")
+            raise SShaDeError(f"{path.name}: {len(G)} faces, the rest mesh of {name} has {len(F)} (the result must "
+                              "keep the rest mesh's faces: it was remeshed?)")
         t = self.times.get(name)
         self.info = {"result_file": path.name, "result_sha256": sha256_file(path),
                      "reported_time_s": None if t is None else t[0], "time_machine": None if t is None else t[1]}
