@@ -84,7 +84,7 @@ def test_every_json_reader_ends_a_crafted_input_in_its_documented_outcome(tmp_pa
         assert read_runinfo(p.parent) == {}, kind
     for kind, p in _crafted(tmp_path / "status", "status.json").items():
         assert read_status(p.parent) is None, kind
-    for kind, p in _crafted(tmp_path / "manifest", "manifest.json").items():
+    for _kind, p in _crafted(tmp_path / "manifest", "manifest.json").items():
         with pytest.raises(ManifestError):
             read_manifest_file(p)
     for kind, p in _crafted(tmp_path / "store", "ARAP.json").items():
