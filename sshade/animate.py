@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 import shutil
 import sys
-import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -24,7 +23,7 @@ from tqdm import tqdm
 
 from .command_errors import ArgumentParser, run_command
 from .errors import SShaDeError
-from .mesh.gltf import GlbAnimationWriter, check_glb_output, glb_extras
+from .mesh.gltf import GlbAnimationWriter, check_glb_output, frames_tempfile, glb_extras
 from .mesh.handle_files import apply_def, check_affine, read_moving_handles
 from .mesh.io import atomic_write, read_mesh, write_mesh, written_by_sshade
 from .mesh.validate import check_faces
@@ -39,6 +38,9 @@ FORMATS = ("obj", "off", "ply")
 #: Frames per second of an animation's playback when ``--fps`` is not given (and of an
 #: ``.npz`` written before it stored ``fps``).
 DEFAULT_FPS = 24.0
+#: The playback rates accepted (frames per second): keyframe times ``i / fps`` stay distinct
+#: and finite in a ``.glb``'s float32 for a million frames.
+FPS_RANGE = (1e-3, 1e4)
 
 
 def build_parser() -> ArgumentParser:
@@ -67,8 +69,8 @@ def build_parser() -> ArgumentParser:
 def _check_out(a) -> None:
     """The output checks (docs/methods.md, "Implementation notes: sshade/animate.py"), before any work."""
     out = Path(a.out)
-    if not (np.isfinite(a.fps) and a.fps > 0):
-        raise SShaDeError(f"--fps must be a positive number, got {a.fps}")
+    if not FPS_RANGE[0] <= a.fps <= FPS_RANGE[1]:  # NaN fails too
+        raise SShaDeError(f"--fps must be a number in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {a.fps}")
     if out.suffix.lower() in (".npz", ".glb"):
         if out.is_dir():
             raise SShaDeError(f"output {out} is a folder; an {out.suffix.lower()} output is a file")
@@ -128,13 +130,21 @@ def read_animation_npz(path) -> tuple[np.ndarray, np.ndarray, float]:
     bad = np.flatnonzero(~np.isfinite(V).all(axis=(1, 2)))
     if len(bad):
         raise SShaDeError(f"{path}: V: frame {bad[0]} holds NaN or inf ({len(bad)} such frame(s))")
-    if not (np.isfinite(fps) and fps > 0):
-        raise SShaDeError(f"{path}: fps: expected a positive number, got {fps}")
+    if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        raise SShaDeError(f"{path}: fps: expected a number in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {fps}")
     return V, F, fps
 
 
 def _frames(a, V) -> tuple[np.ndarray, np.ndarray]:
     """(handles (h,), targets (f, h, 3)) from the handle file and ``--frames``."""
+    try:
+        with open(a.frames, "rb") as fh:
+            head = fh.read(6)
+    except OSError as e:
+        raise SShaDeError(f"{a.frames}: cannot read it ({e.strerror or type(e).__name__})") from None
+    if head != b"\x93NUMPY" and not head.startswith(b"PK\x03\x04"):  # a .npy, or an .npz refused below
+        raise SShaDeError(f"{a.frames}: not a .npy file (it starts with {head!r}); --frames takes one array of "
+                          "(f, h, 3) targets or (f, 4, 4) matrices written by numpy.save")
     try:
         X = np.load(a.frames, allow_pickle=False, mmap_mode="r")
     except (OSError, ValueError, EOFError) as e:
@@ -239,7 +249,7 @@ class _FrameSink:
             self.glb = GlbAnimationWriter(self.path, rest, F, fps=self.fps)
             return
         if self.kind == ".npz":
-            fd, self.tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".frames", dir=self.path.parent)
+            fd, self.tmp = frames_tempfile(self.path)
             self.fh = os.fdopen(fd, "wb")
             return
         old = [q for q in self.path.glob("frame_*") if q.is_file()] if self.path.is_dir() else []

@@ -122,6 +122,17 @@ def test_an_npz_given_as_frames_is_named_as_an_archive_with_its_arrays(body, tmp
     assert len(err) == 1 and "an .npz archive (arrays targets, extra); --frames takes one .npy" in err[0]
 
 
+def test_a_text_file_as_frames_is_named_as_not_a_npy_file(body, tmp_path, capsys):
+    V, F, h, _ = body
+    args = _args(tmp_path, V, h, np.repeat(V[h][None], 2, axis=0))
+    (tmp_path / "frames.txt").write_text("0 0 0\n1 1 1\n")
+    args[4] = str(tmp_path / "frames.txt")
+    assert main(["animate", *args, "-o", str(tmp_path / "x.npz")]) == 2
+    err = _lines(capsys)
+    assert len(err) == 1 and "frames.txt: not a .npy file (it starts with b'0 0 0\\n')" in err[0], err
+    assert "pickled" not in err[0]
+
+
 @pytest.mark.parametrize("out", ["a.npz", "a.glb", "folder"])
 def test_an_interrupted_animation_keeps_its_solved_frames_whole_and_says_so(body, tmp_path, capsys, monkeypatch, out):
     from sshade.prepared import Prepared
@@ -223,7 +234,7 @@ def test_a_glb_holds_the_npz_frames_to_float32_precision_and_is_replaced_only_wh
     assert read_glb_animation(tmp_path / "other.glb").n_frames == 3
 
 
-@pytest.mark.parametrize("case", ["no pygltflib", "fps 0", "too many frames"])
+@pytest.mark.parametrize("case", ["no pygltflib", "fps 0", "fps 1e308", "fps 1e-300", "too many frames"])
 def test_a_glb_that_cannot_be_written_is_one_error_line_before_any_solve(body, tmp_path, capsys, monkeypatch, case):
     V, F, h, _ = body
     n, h = (65536 if case == "too many frames" else 2), h[:2]  # two handles: a 3 MB frames file
@@ -231,11 +242,13 @@ def test_a_glb_that_cannot_be_written_is_one_error_line_before_any_solve(body, t
     if case == "no pygltflib":
         monkeypatch.setattr("sshade.mesh.gltf.pygltflib", None)
     monkeypatch.setattr("sshade.animate.prepare", lambda *a, **k: pytest.fail("prepared before the output checked"))
-    extra = ["--fps", "0"] if case == "fps 0" else []
+    extra = ["--fps", case.split()[1]] if case.startswith("fps") else []
     assert main(["animate", *args, "-o", str(tmp_path / "x.glb"), *extra]) == 2
     err = _lines(capsys)
     says = {"no pygltflib": "needs pygltflib, a dependency of sshade: pip install -e .",
-            "fps 0": "--fps must be a positive number, got 0.0",
+            "fps 0": "--fps must be a number in [0.001, 10000], got 0.0",
+            "fps 1e308": "--fps must be a number in [0.001, 10000], got 1e+308",
+            "fps 1e-300": "--fps must be a number in [0.001, 10000], got 1e-300",
             "too many frames": "x.glb: a .glb holds at most 65535 frames, the frames file has 65536"}[case]
     assert len(err) == 1 and err[0].startswith("error:") and says in err[0], err
     assert sorted(q.name for q in tmp_path.iterdir()) == ["frames.npy", "h.json"]

@@ -6,6 +6,7 @@ the place. (The Khronos glTF validator is not run: it is not installed here.)"""
 from __future__ import annotations
 
 import json
+import os
 import struct
 
 import numpy as np
@@ -143,6 +144,11 @@ def _damage(kind, path):
     elif kind == "times":  # the weights (mostly 0) as keyframe times
         doc["animations"][0]["samplers"][0]["input"] = doc["animations"][0]["samplers"][0]["output"]
         _rewrite(path, doc, tail)
+    elif kind == "zeros":  # a 2.4 GB position accessor claimed by a small file (no bufferView: all zeros)
+        doc["accessors"][1].pop("bufferView")
+        doc["accessors"][1].pop("byteOffset", None)
+        doc["accessors"][1]["count"] = 200_000_000
+        _rewrite(path, doc, tail)
     elif kind == "weights":  # the keyframe times as weights
         doc["animations"][0]["samplers"][0]["output"] = doc["animations"][0]["samplers"][0]["input"]
         _rewrite(path, doc, tail)
@@ -151,7 +157,9 @@ def _damage(kind, path):
 @pytest.mark.parametrize("kind, says", [
     ("cut", "its header gives"), ("not glTF", "not a glTF binary"),
     ("accessor", "accessor 3 (morph target 1 POSITION): 3 elements of 12 bytes every 12 from byte 1000000000"),
-    ("faces", "mesh 0 faces"), ("nan", "mesh 0 morph target 1: NaN or inf"),
+    ("faces", "mesh 0 faces"),
+    ("zeros", "accessor 1 (POSITION): 200000000 elements without a bufferView (2400000000 bytes of zeros)"),
+    ("nan", "mesh 0 morph target 1: NaN or inf"),
     ("times", "animation 0 channel 0: keyframe times not finite and increasing"),
     ("weights", "animation 0 channel 0: 3 weights for 1 x 3 keyframes x 3 targets")])
 def test_a_damaged_glb_is_one_error_naming_the_file_and_the_place(tmp_path, kind, says):
@@ -184,3 +192,13 @@ def test_any_byte_of_the_json_changed_is_read_or_refused_with_an_sshade_error(tm
         except SShaDeError:
             refused += 1
     assert refused > 50
+
+
+def test_a_killed_writers_frames_file_is_removed_by_the_next_writer_and_a_live_ones_kept(tmp_path):
+    V, F = np.eye(3), np.array([[0, 1, 2]])
+    dead = tmp_path / ".a.glb.99999999.x1.frames"  # above any pid_max: no such process
+    live = tmp_path / f".a.glb.{os.getppid()}.x2.frames"
+    dead.write_bytes(b"\0" * 1000)
+    live.write_bytes(b"\0" * 10)
+    _write(tmp_path / "a.glb", V, F, [V, V * 2])
+    assert not dead.exists() and live.exists() and (tmp_path / "a.glb").is_file()

@@ -48,7 +48,11 @@ def test_a_record_edited_by_hand_or_missing_or_linked_makes_its_row_unchecked(tm
     st.path("s0_p2", "B").unlink()
     c = check_rows(df, tmp_path)
     assert c.n_checked == 0
-    assert c.problems == ["s0_p1 / A: record invalid: edited (its digest does not match)", "s0_p2 / B: record absent"]
+    assert c.problems == ["s0_p1 / A: record invalid: edited (its digest does not match)"]
+    assert c.absent == ["s0_p2 / B"] and not c.ok  # no record (a killed worker): said apart, not as a disagreement
+    line = c.line()
+    assert "1 of 2 rows of cases.csv do not match" in line and "**Rows without a record:** 1 of 2" in line
+    assert "resume=true" in line
     outside = tmp_path.parent / (tmp_path.name + "_outside")
     outside.mkdir()
     os.rename(p.parent, outside / "s0_p1")

@@ -26,30 +26,44 @@ MAX_LISTED = 3  #: rows named in the line when more disagree
 
 class RowCheck(NamedTuple):
     """The outcome of :func:`check_rows`: ``n_rows`` rows, ``n_checked`` of them matching
-    a valid record, ``problems`` one text per row that does not ("<case> / <method>: why"),
-    ``has_store`` whether the folder has a ``runs/`` store at all."""
+    a valid record, ``problems`` one text per row whose record is invalid or says other
+    numbers ("<case> / <method>: why"), ``has_store`` whether the folder has a ``runs/``
+    store at all, ``absent`` the rows ("<case> / <method>") that have no record (their run
+    ended before storing it: a killed worker, an interrupted run)."""
     n_rows: int
     n_checked: int
     problems: list
     has_store: bool
+    absent: list = []
 
     @property
     def ok(self) -> bool:
         """Every row matches its record."""
-        return self.has_store and not self.problems
+        return self.has_store and not self.problems and not self.absent
 
     def line(self) -> str:
         """One sentence for ``table.md`` (Markdown)."""
         if not self.has_store:
             return (f"Rows not checked: this folder has no result store ({STORE_DIR}/), so nothing says that "
                     "cases.csv holds what the methods computed.")
-        if not self.problems:
+        if not self.problems and not self.absent:
             return (f"Rows checked: all {self.n_rows} rows of cases.csv match their records in {STORE_DIR}/ "
                     "(digests hold; a digest catches a record edited by hand, not one re-signed).")
-        listed = "; ".join(self.problems[:MAX_LISTED]) + (" ..." if len(self.problems) > MAX_LISTED else "")
-        n_bad = self.n_rows - self.n_checked
-        return (f"**Rows disagree with the result store:** {n_bad} of {self.n_rows} rows of cases.csv "
-                f"do not match a valid record in {STORE_DIR}/ ({listed}); the table is not what the store holds.")
+        out = []
+        if self.problems:
+            n_bad = self.n_rows - self.n_checked - len(self.absent)
+            out.append(f"**Rows disagree with the result store:** {n_bad} of {self.n_rows} rows of "
+                       f"cases.csv do not match a valid record in {STORE_DIR}/ ({_listed(self.problems)}); the table "
+                       "is not what the store holds.")
+        if self.absent:
+            out.append(f"**Rows without a record:** {len(self.absent)} of {self.n_rows} rows of cases.csv have no "
+                       f"record in {STORE_DIR}/ ({_listed(self.absent)}): their run ended before storing it (a "
+                       "killed worker, an interrupted run); python -m eval with resume=true computes them again.")
+        return " ".join(out)
+
+
+def _listed(items: list) -> str:
+    return "; ".join(items[:MAX_LISTED]) + (" ..." if len(items) > MAX_LISTED else "")
 
 
 def _missing(v) -> bool:
@@ -78,7 +92,7 @@ def _row_problem(store: ResultStore, row: dict) -> str | None:
     except SShaDeError as e:
         return f"{case} / {method}: {e}"
     if found.record is None:
-        return f"{case} / {method}: record {found.why}"
+        return f"{case} / {method}: record {found.why}" if found.why != "absent" else None
     stored = found.record["row"]
     diff = [k for k in sorted(set(stored) | set(row)) if _cell_differs(row.get(k), stored.get(k))]
     if diff:
@@ -106,5 +120,16 @@ def check_rows(df: pd.DataFrame, out_dir) -> RowCheck:
         return RowCheck(len(df), 0, [], False)
     if "case" not in df.columns or "method" not in df.columns:
         return RowCheck(len(df), 0, ["cases.csv has no case and method columns to find records by"], True)
-    problems = [p for p in (_row_problem(store, r) for r in df.to_dict("records")) if p]
-    return RowCheck(len(df), len(df) - len(problems), problems, True)
+    rows = df.to_dict("records")
+    problems = [p for p in (_row_problem(store, r) for r in rows) if p]
+    absent = [f"{r.get('case')} / {r.get('method')}" for r in rows
+              if _absent(store, str(r.get("case")), str(r.get("method")))]
+    return RowCheck(len(df), len(df) - len(problems) - len(absent), problems, True, absent)
+
+
+def _absent(store: ResultStore, case: str, method: str) -> bool:
+    try:
+        found = store.read(case, method)
+    except SShaDeError:
+        return False
+    return found.record is None and found.why == "absent"

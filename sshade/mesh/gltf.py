@@ -9,6 +9,8 @@ binary chunk is streamed and mapped here, so neither side holds the animation in
 """
 from __future__ import annotations
 
+import contextlib
+import glob
 import mmap
 import os
 import shutil
@@ -30,8 +32,8 @@ try:  # a dependency; an environment installed before it became one may lack it
 except ImportError:
     pygltflib = None
 
-__all__ = ["GlbAnimationWriter", "GlbAnimation", "read_glb_animation", "glb_extras", "check_glb_output",
-           "MAX_FRAMES"]
+__all__ = ["GlbAnimationWriter", "frames_tempfile", "GlbAnimation", "read_glb_animation", "glb_extras",
+           "check_glb_output", "MAX_FRAMES"]
 
 #: The most frames a .glb holds: the one-hot keyframe weights are a sparse accessor of
 #: f * f scalars whose indices are 32-bit.
@@ -106,7 +108,7 @@ class GlbAnimationWriter:
         self.F = np.ascontiguousarray(F, "<u4")
         self.base64 = self.base.astype(np.float64)  # what a reader adds the targets to
         self.bounds: list = []  # (min, max) of each target
-        fd, self.tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".frames", dir=self.path.parent)
+        fd, self.tmp = frames_tempfile(self.path)
         self.fh = os.fdopen(fd, "wb")
         self.F.tofile(self.fh)
         self.base.tofile(self.fh)
@@ -268,6 +270,32 @@ class GlbAnimation:
         return U
 
 
+def frames_tempfile(path: Path) -> tuple[int, str]:
+    """A temporary file beside ``path`` for the frames written before it (``.NAME.PID.*.frames``):
+    ``(fd, name)`` as :func:`tempfile.mkstemp`. Those left by processes that no longer run
+    (killed before they could remove theirs) are removed first; a live process's are kept."""
+    path = Path(path)
+    for q in path.parent.glob(f".{glob.escape(path.name)}.*.frames"):
+        pid = q.name[len(path.name) + 2:].split(".")[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            with contextlib.suppress(OSError):
+                q.unlink()
+    return tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".frames", dir=path.parent)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+_MIN_ZEROS = 64 << 20  #: bytes of zeros an accessor without a bufferView may stand for, at least
+
+
 class _Reader:
     """The checks and accessors of :func:`read_glb_animation` for one file."""
 
@@ -313,6 +341,10 @@ class _Reader:
         is dense (sparse values applied to a copy). ``what`` names it in errors."""
         a, w, width, dt, count = self.head(i, what, types, components)
         if a.bufferView is None:
+            need, most = count * width * dt.itemsize, max(_MIN_ZEROS, 8 * (self.start + self.length))
+            if need > most:  # zeros the file does not hold: bounded by its size, not by its claim
+                raise self.fail(w, f"{count} elements without a bufferView ({need} bytes of zeros), more than "
+                                   f"{most} for a file of its size")
             out = np.zeros((count, width), dt)
         else:
             at, ln, stride = self.view(a.bufferView, w)
