@@ -116,3 +116,11 @@ def test_times_past_the_bound_are_refused_and_a_machine_field_is_plain_text(tmp_
     got = {k: m for k, (_, m) in read_times(p).items()}
     assert got["s0_p1"][0] not in "=+-@" and not any(c in got["s0_p2"] for c in "<>|'!")
     assert got["s0_p3"] == "2+3" and all("|" not in m for m in got.values())
+
+
+def test_an_stl_result_is_refused_naming_why_and_no_other_format_is_taken_for_it(tmp_path):
+    (tmp_path / "s0_p1.stl").write_bytes(b"solid x\nendsolid x\n")
+    with pytest.raises(SShaDeError, match="an STL result cannot be scored .* write OBJ, PLY or OFF"):
+        result_path(tmp_path, "s0_p1")
+    with pytest.raises(SShaDeError, match=r"has no s0_p2.obj \(nor .ply, .off\)"):
+        result_path(tmp_path, "s0_p2")

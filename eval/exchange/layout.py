@@ -5,7 +5,7 @@ Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/experimen
 An export folder (:func:`write_export`) holds ``cases.json`` (:data:`INDEX`) and one folder
 per case (``<case>/rest.obj``, ``rest.ply``, ``handles.json``, ``handles.csv``, ``handles.dmat``,
 ``targets.dmat``, ``static.dmat``), named exactly as the evaluator names the case. A results
-folder holds one deformed mesh per case, ``<case>.obj`` (or ``.ply``, ``.off``, ``.stl``;
+folder holds one deformed mesh per case, ``<case>.obj`` (or ``.ply``, ``.off``;
 :func:`result_path`), and optionally a times file (:func:`read_times`)."""
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ CASE_FILES = {"rest_obj": "rest.obj", "rest_ply": "rest.ply", "handles_json": "h
               "handles_csv": "handles.csv", "handles_dmat": "handles.dmat", "targets_dmat": "targets.dmat",
               "static_dmat": "static.dmat"}
 #: Extensions of a result mesh, in the order they are looked for (exactly one per case).
-RESULT_EXTS = (".obj", ".ply", ".off", ".stl")
+RESULT_EXTS = (".obj", ".ply", ".off")  #: STL is refused: it keeps no shared vertices, so no vertex order
 #: Columns of a times file: the case, the method's own seconds for it, the machine.
 TIMES_COLUMNS = ("case", "time_s", "machine")
 MAX_TIMES_BYTES = 16 << 20     #: a times file larger than this is refused (counted as read)
@@ -120,8 +120,9 @@ def write_export(out_dir, cases, *, dataset: dict) -> Path:
     out = Path(out_dir)
     entries = [write_case(out / c.name, c) for c in cases]
     index = {"format": FORMAT, "dataset": dataset, "cases": entries,
-             "results": {"file": "<results>/<name>.obj (or .ply, .off, .stl): the deformed rest mesh, its vertices "
-                                 "in the rest mesh's order; faces, when written, those of the rest mesh",
+             "results": {"file": "<results>/<name>.obj (or .ply, .off; not .stl, which keeps no vertex order): the "
+                                 "deformed rest mesh, its vertices in the rest mesh's order and its faces those of "
+                                 "the rest mesh (a file of vertices only is refused)",
                          "times": "optional CSV with columns case,time_s,machine: the method's own seconds per case"}}
     with atomic_write(out / INDEX) as f:
         json.dump(index, f, indent=1)
@@ -144,7 +145,11 @@ def result_path(results, name: str) -> Path:
     except OSError as e:
         raise SShaDeError(f"{results}: cannot list the results folder ({e.strerror or type(e).__name__})") from None
     if not found:
-        raise SShaDeError(f"no result for case {name}: {results} has no {name}.obj (nor .ply, .off, .stl)")
+        stl = [p for p in os.listdir(results) if p.lower() == f"{name}.stl".lower()]
+        if stl:
+            raise SShaDeError(f"{results / stl[0]}: an STL result cannot be scored (it stores each triangle's corners "
+                              "apart, in float32: the rest mesh's vertex order is lost); write OBJ, PLY or OFF")
+        raise SShaDeError(f"no result for case {name}: {results} has no {name}.obj (nor .ply, .off)")
     if len(found) > 1:
         raise SShaDeError(f"two results for case {name} in {results}: {', '.join(found)}; keep one")
     p = results / found[0]

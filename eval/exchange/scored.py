@@ -44,7 +44,7 @@ class ScoredResults:
 
     Parameters
     ----------
-    results : str or Path, the folder of ``<case>.obj`` (or .ply, .off, .stl) files,
+    results : str or Path, the folder of ``<case>.obj`` (or .ply, .off) files,
         relative to the directory the command was started from.
     name : str, the row's name (:data:`sshade.method_interface.NAME_RULE`).
     times : str, Path or None, a CSV of the method's own times (``case,time_s,machine``,
