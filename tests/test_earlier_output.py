@@ -144,9 +144,11 @@ def test_a_bad_input_into_an_earlier_eval_output_is_refused_and_leaves_it_byte_i
     before = _bytes(p)
     notrun = tmp_path / "not_a_run"
     notrun.mkdir()
-    for bad in ("dataset.root=/nonexistent", f"compare_with=[{notrun}]", f"compare_with=[{p}]",
-                "sshade.n_low=2"):
-        r = _run([*EVAL, f"out_dir={p}", bad])
+    score = ["experiment=score", "score.name=Theirs"]
+    for bad in (["dataset.root=/nonexistent"], [f"compare_with=[{notrun}]"], [f"compare_with=[{p}]"],
+                ["sshade.n_low=2"], [*score, "score.results=/nonexistent"], [*score, f"score.results={notrun}",
+                                                                              "score.times=/dev/zero"]):
+        r = _run([*EVAL, f"out_dir={p}", *bad])
         lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
         assert r.returncode == 2 and lines[-1].startswith("error: ") and "Traceback" not in r.stderr, (bad, r.stderr)
         assert _bytes(p) == before, bad
