@@ -54,8 +54,8 @@ def _numeric_columns(df: pd.DataFrame) -> list[str]:
         if c in _ID_COLUMNS:
             continue
         s = df[c]
-        if pd.api.types.is_bool_dtype(s) or pd.api.types.is_numeric_dtype(s):
-            num_cols.append(c)
+        if c == "time_s" or pd.api.types.is_bool_dtype(s) or pd.api.types.is_numeric_dtype(s):
+            num_cols.append(c)  # a Time column of no time (results scored without times) stays, empty
         elif s.dtype == object and len(s.dropna()):
             try:
                 s.dropna().astype(float)

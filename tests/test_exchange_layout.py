@@ -7,6 +7,7 @@ import csv
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -70,7 +71,7 @@ def test_export_names_cases_as_the_evaluator_and_leaves_out_the_truth(tmp_path, 
 def test_times_file_is_read_and_bad_lines_are_named(tmp_path):
     p = tmp_path / "t.csv"
     p.write_text("case,time_s,machine\ns0_p1,1.5,laptop i7\ns0_p2,0,\n")
-    assert read_times(p) == {"s0_p1": (1.5, "laptop i7"), "s0_p2": (0.0, "")}
+    assert read_times(p) == {"s0_p1": (1.5, "laptop i7", None, None), "s0_p2": (0.0, "", None, None)}
     for body, where in (("case,seconds\na,1\n", "line 1"), ("case,time_s\na,-1\n", "line 2"),
                         ("case,time_s\na,nan\n", "line 2"), ("case,time_s\na,1\na,2\n", "line 3"),
                         ("case,time_s\na,1,extra\n", "line 2"), ("case,time_s\na,fast\n", "line 2")):
@@ -113,7 +114,7 @@ def test_times_past_the_bound_are_refused_and_a_machine_field_is_plain_text(tmp_
         read_times(p)
     p.write_text("case,time_s,machine\ns0_p1,1,=cmd|' /C calc'!A0\ns0_p2,2,<script>alert(1)</script>\n"
                  "s0_p3,3,-2+3\n")
-    got = {k: m for k, (_, m) in read_times(p).items()}
+    got = {k: t.machine for k, t in read_times(p).items()}
     assert got["s0_p1"][0] not in "=+-@" and not any(c in got["s0_p2"] for c in "<>|'!")
     assert got["s0_p3"] == "2+3" and all("|" not in m for m in got.values())
 
@@ -124,3 +125,19 @@ def test_an_stl_result_is_refused_naming_why_and_no_other_format_is_taken_for_it
         result_path(tmp_path, "s0_p1")
     with pytest.raises(SShaDeError, match=r"has no s0_p2.obj \(nor .ply, .off\)"):
         result_path(tmp_path, "s0_p2")
+
+
+def test_a_times_file_says_how_the_method_stopped_and_a_bad_cell_is_named():
+    import tempfile
+    p = Path(tempfile.mkdtemp()) / "t.csv"
+    p.write_text("case,time_s,iterations,converged\ns0_p1,2.5,1000,false\ns0_p2,1,57,TRUE\ns0_p3,1,,\n")
+    t = read_times(p)
+    assert (t["s0_p1"].iterations, t["s0_p1"].converged) == (1000, False)
+    assert (t["s0_p2"].iterations, t["s0_p2"].converged) == (57, True)
+    assert (t["s0_p3"].iterations, t["s0_p3"].converged) == (None, None)
+    p.write_text("case,time_s,iterations\ns0_p1,2.5,-3\n")
+    with pytest.raises(SShaDeError, match="line 2: iterations '-3' is not an integer >= 0"):
+        read_times(p)
+    p.write_text("case,time_s,converged\ns0_p1,2.5,maybe\n")
+    with pytest.raises(SShaDeError, match="line 2: converged 'maybe' is not true or false"):
+        read_times(p)

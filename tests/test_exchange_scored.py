@@ -37,10 +37,10 @@ OUTSIDE = textwrap.dedent('''
         t0 = time.perf_counter()
         U = sshade.SShaDe(n_low=300, n_samplings=2, seed=0).deform(V, F, np.array(h["handles"]),
                                                                    np.array(h["targets"]))
-        rows.append((c["name"], round(time.perf_counter() - t0, 4) + 100.0, "outside box"))
+        rows.append((c["name"], round(time.perf_counter() - t0, 4) + 100.0, "outside box", 1000, "false"))
         write_mesh(dst / (c["name"] + ".obj"), U, F)
     with open(dst / "times.csv", "w", newline="") as f:
-        w = csv.writer(f); w.writerow(["case", "time_s", "machine"]); w.writerows(rows)
+        w = csv.writer(f); w.writerow(["case", "time_s", "machine", "iterations", "converged"]); w.writerows(rows)
 ''')
 
 
@@ -83,6 +83,9 @@ def _round_trip(tmp_path, data: list[str]):
     line = next(ln for ln in table.splitlines() if ln.startswith("| Outside"))
     time_cell = next(x.strip() for x in line.split("|") if "(reported)" in x)
     assert not time_cell.startswith("**")  # a reported time is never compared in bold
+    stop = next(ln for ln in table.splitlines() if ln.startswith("- Outside: "))  # how it stopped, as reported
+    assert "1000 iterations" in stop and f"converged on 0/{len(names)} runs" in stop
+    assert "as the method reported" in stop and "reported as stopped before its criterion on" in stop
     return both
 
 

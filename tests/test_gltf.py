@@ -16,7 +16,7 @@ from sshade.errors import SShaDeError
 from sshade.mesh.gltf import GlbAnimationWriter, glb_extras, read_glb_animation
 from sshade.mesh.io import read_mesh
 
-from .conftest import SHARED_DATA
+from .conftest import SHARED_DATA, icosphere
 from .optional import optional_import
 
 BUNNY = SHARED_DATA / "classic" / "bunny.off"
@@ -202,3 +202,47 @@ def test_a_killed_writers_frames_file_is_removed_by_the_next_writer_and_a_live_o
     live.write_bytes(b"\0" * 10)
     _write(tmp_path / "a.glb", V, F, [V, V * 2])
     assert not dead.exists() and live.exists() and (tmp_path / "a.glb").is_file()
+
+
+VALIDATE_JS = """
+const fs = require('fs'); const v = require('gltf-validator');
+v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[1]))).then(r => {
+  console.log(JSON.stringify({errors: r.issues.numErrors, warnings: r.issues.numWarnings,
+                              messages: r.issues.messages.slice(0, 5)}));
+}).catch(e => { console.error(String(e)); process.exit(3); });
+"""
+
+
+def _gltf_validator_env() -> dict:
+    """The environment in which ``node`` finds the Khronos glTF-Validator (npm package
+    ``gltf-validator``: ``$GLTF_VALIDATOR_NODE_PATH``, else npm's global root), or skip
+    with one line when node or the package is absent."""
+    import shutil
+    import subprocess
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is not on PATH: the Khronos glTF-Validator runs on it (Debian: apt-get install nodejs npm; "
+                    "npm install -g gltf-validator); .ci/run installs both and reruns the tests marked 'gltf'")
+    paths = [os.environ.get("GLTF_VALIDATOR_NODE_PATH", "")]
+    if shutil.which("npm"):
+        r = subprocess.run(["npm", "root", "-g"], capture_output=True, text=True, timeout=60)
+        paths.append(r.stdout.strip())
+    env = dict(os.environ, NODE_PATH=os.pathsep.join(p for p in paths if p))
+    r = subprocess.run([node, "-e", "require.resolve('gltf-validator')"], env=env, capture_output=True, timeout=60)
+    if r.returncode != 0:
+        pytest.skip("the npm package gltf-validator is not installed (npm install -g gltf-validator); .ci/run "
+                    "installs it and reruns the tests marked 'gltf'")
+    return env
+
+
+@pytest.mark.gltf
+def test_the_khronos_validator_reports_no_error_and_no_warning_on_an_animation(tmp_path):
+    import subprocess
+    env = _gltf_validator_env()
+    V, F = icosphere()
+    _write(tmp_path / "a.glb", V, F, [V * (1 + 0.01 * i) for i in range(24)])
+    r = subprocess.run(["node", "-e", VALIDATE_JS, str(tmp_path / "a.glb")], env=env, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    report = json.loads(r.stdout)
+    assert report["errors"] == 0 and report["warnings"] == 0, report

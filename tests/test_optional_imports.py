@@ -18,8 +18,8 @@ from .conftest import ROOT
 #: module -> the exception its import raises in the child run
 BROKEN = {"open3d": "ImportError", "polyscope": "ImportError", "mlcroissant": "ImportError",
           "body_models": "ImportError", "anny": "ImportError", "torch": "OSError"}
-#: programs taken off PATH (eval.report.find_chromium's names, and xvfb-run)
-PROGRAMS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "xvfb-run")
+#: programs taken off PATH (eval.report.find_chromium's names, xvfb-run, node)
+PROGRAMS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "xvfb-run", "node")
 #: test file -> what its skip lines say (each skip line names one of these, each is named)
 EXPECTED = {
     "test_arap_sr_open3d": ["open3d cannot be imported (ImportError: open3d: libdemo.so.0"],
@@ -29,8 +29,9 @@ EXPECTED = {
     "test_defaust_croissant": ["mlcroissant cannot be imported (ImportError: mlcroissant: libdemo.so.0"],
     "test_defaust_anny": ["ANNY body model assets not found"],
     "test_defaust_anny_path": ["ANNY body model assets not found"],
+    "test_gltf": ["node is not on PATH"],
 }
-MARKS = "anny or neural or view or open3d or browser or xvfb or mlcroissant"
+MARKS = "anny or neural or view or open3d or browser or xvfb or mlcroissant or gltf"
 PACKAGES = ("sshade", "harness", "baselines", "defaust", "eval")  # pyproject's testpaths besides tests/
 
 SITECUSTOMIZE = f'''import sys

@@ -281,3 +281,12 @@ def test_stop_lines_count_stalled_runs_and_say_what_handle_and_ref_columns_mean(
     assert "handles are hard constraints" in arap and "against the minimiser of its own energy (spokes)" in arap
     assert "converged on 1/1 runs" in ours and "overwritten with their targets" in ours
     assert "distance to the full-resolution spokes_and_rims minimiser, an energy it does not minimise" in ours
+
+
+def test_a_method_scored_without_times_keeps_an_empty_time_column():
+    df = pd.DataFrame([_row("c0", "Theirs", 1.0, time_s=None), _row("c1", "Theirs", 2.0, time_s=None)])
+    assert df["time_s"].dtype == object  # as the evaluator's rows hold it: no time at all
+    s = summarize(df)
+    assert "time_s" in s.columns and np.isnan(s["time_s"].iloc[0])
+    md = to_markdown(s)
+    assert "Time (s)" in md and _md_row(md, "Theirs")[-1] == "--"

@@ -17,6 +17,7 @@ import os
 import re
 import stat
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from sshade.json_file import read_bounded
 from sshade.mesh.io import atomic_write, write_mesh
 
 __all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "MAX_TIME_S",
-           "machine_text", "write_case",
+           "ReportedRun", "machine_text", "write_case",
            "write_export", "result_path", "read_times"]
 
 FORMAT = "sshade-exchange/1"   #: ``format`` of :data:`INDEX`
@@ -38,7 +39,7 @@ CASE_FILES = {"rest_obj": "rest.obj", "rest_ply": "rest.ply", "handles_json": "h
 #: Extensions of a result mesh, in the order they are looked for (exactly one per case).
 RESULT_EXTS = (".obj", ".ply", ".off")  #: STL is refused: it keeps no shared vertices, so no vertex order
 #: Columns of a times file: the case, the method's own seconds for it, the machine.
-TIMES_COLUMNS = ("case", "time_s", "machine")
+TIMES_COLUMNS = ("case", "time_s", "machine", "iterations", "converged")
 MAX_TIMES_BYTES = 16 << 20     #: a times file larger than this is refused (counted as read)
 MAX_TIME_S = 1e7               #: a reported time above this (115 days) is refused: their mean would overflow
 
@@ -187,19 +188,33 @@ def machine_text(v: str) -> str:
     return s.lstrip("+-")
 
 
-def read_times(path) -> dict[str, tuple[float, str]]:
+class ReportedRun(NamedTuple):
+    """What a method reported of one case's run (a line of its times file): ``time_s``
+    (seconds), ``machine`` (:func:`machine_text`, ``""`` when not given), how it stopped:
+    ``iterations`` (int >= 0) and ``converged`` (bool: its stopping criterion met, False:
+    a cap or a budget stopped it), None where not given."""
+    time_s: float
+    machine: str
+    iterations: int | None = None
+    converged: bool | None = None
+
+
+def read_times(path) -> dict[str, ReportedRun]:
     """The times a method reported for its cases: a CSV with a header line naming the
-    columns ``case`` and ``time_s`` (seconds, >= 0) and optionally ``machine`` (text).
+    columns ``case`` and ``time_s`` (seconds, >= 0) and optionally ``machine`` (text),
+    ``iterations`` (an integer >= 0) and ``converged`` (true/false, 1/0, yes/no), these
+    two cells may be empty.
 
     Returns
     -------
-    dict: case name -> ``(time_s, machine)`` (machine ``""`` when not given).
+    dict: case name -> :class:`ReportedRun`.
 
     Raises
     ------
     SShaDeError naming the file and line: unreadable, not a regular file, larger than
-    :data:`MAX_TIMES_BYTES` (counted as read), no ``case``/``time_s`` column, a time that is not a finite
-    number >= 0, a case listed twice.
+    :data:`MAX_TIMES_BYTES` (counted as read), no ``case``/``time_s`` column, a time that
+    is not a number of seconds in [0, :data:`MAX_TIME_S`], an iteration count or a
+    converged flag that is not one, a case listed twice.
     """
     p = Path(path)
     try:
@@ -213,7 +228,7 @@ def read_times(path) -> dict[str, tuple[float, str]]:
     if "case" not in head or "time_s" not in head:
         raise SShaDeError(f"{p}, line 1: the header must name the columns case,time_s[,machine], got {head}")
     ic, it = head.index("case"), head.index("time_s")
-    im = head.index("machine") if "machine" in head else None
+    col = {c: head.index(c) if c in head else None for c in ("machine", "iterations", "converged")}
     out: dict = {}
     for i, r in enumerate(rows[1:], start=2):
         if not any(c.strip() for c in r):
@@ -223,5 +238,25 @@ def read_times(path) -> dict[str, tuple[float, str]]:
         name = r[ic].strip()
         if name in out:
             raise SShaDeError(f"{p}, line {i}: case {name!r} listed twice")
-        out[name] = (_time(r[it].strip(), f"{p}, line {i}"), machine_text(r[im]) if im is not None else "")
+        cell = {c: (r[j].strip() if j is not None else "") for c, j in col.items()}
+        where = f"{p}, line {i}"
+        out[name] = ReportedRun(_time(r[it].strip(), where), machine_text(cell["machine"]),
+                                _count(cell["iterations"], where), _flag(cell["converged"], where))
     return out
+
+
+def _count(v: str, where: str) -> int | None:
+    if not v:
+        return None
+    if not v.isdigit() or len(v) > 12:
+        raise SShaDeError(f"{where}: iterations {v!r} is not an integer >= 0")
+    return int(v)
+
+
+def _flag(v: str, where: str) -> bool | None:
+    if not v:
+        return None
+    f = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}.get(v.lower())
+    if f is None:
+        raise SShaDeError(f"{where}: converged {v!r} is not true or false")
+    return f

@@ -123,5 +123,11 @@ class ScoredResults:
                               "keep the rest mesh's faces: it was remeshed?)")
         t = self.times.get(name)
         self.info = {"result_file": path.name, "result_sha256": sha256_file(path),
-                     "reported_time_s": None if t is None else t[0], "time_machine": None if t is None else t[1]}
+                     "reported_time_s": None if t is None else t.time_s,
+                     "time_machine": None if t is None else t.machine}
+        if t is not None and t.iterations is not None:  # how it stopped, as the method reported it
+            self.info["iterations"] = t.iterations
+        if t is not None and t.converged is not None:
+            self.info["converged"] = t.converged
+            self.info["status"] = "converged" if t.converged else "reported as stopped before its criterion"
         return U

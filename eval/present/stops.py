@@ -36,8 +36,11 @@ def _elsewhere_words(g) -> str:
     """How a scored method (results computed elsewhere) stopped, as far as the harness knows."""
     machines = sorted({str(x) for x in g.get("time_machine", []) if isinstance(x, str) and x})
     timed = int(g["time_s"].notna().sum()) if "time_s" in g.columns else 0
-    return ("computed elsewhere: results read from files (eval.exchange.scored), how the method stopped is not "
-            f"known here; Time as the method reported it on {len(g)} run(s): {timed} with a time"
+    told = any(c in g.columns and g[c].notna().any() for c in ("iterations", "converged"))
+    return ("computed elsewhere: results read from files (eval.exchange.scored), "
+            + ("how it stopped as the method reported it (its times file)" if told else
+               "how the method stopped is not known here (a times file can say: iterations, converged)")
+            + f"; Time as the method reported it on {len(g)} run(s): {timed} with a time"
             + (f" (machine: {', '.join(machines)})" if machines else ""))
 
 

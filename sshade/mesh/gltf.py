@@ -158,6 +158,7 @@ class GlbAnimationWriter:
         assert starts[-1] == size
         views = [g.BufferView(buffer=0, byteOffset=s, byteLength=ln, target=t) for s, ln, t in
                  zip(starts, lengths, [_ELEMENT_ARRAY_BUFFER, _ARRAY_BUFFER, _ARRAY_BUFFER, None, None, None])]
+        views[2].byteStride = 12  # the targets' accessors share this view: glTF wants its stride said
         acc = [g.Accessor(bufferView=0, componentType=g.UNSIGNED_INT, count=self.F.size, type=g.SCALAR),
                g.Accessor(bufferView=1, componentType=g.FLOAT, count=n, type=g.VEC3,
                           min=self.base.min(axis=0).tolist(), max=self.base.max(axis=0).tolist())]
@@ -165,7 +166,7 @@ class GlbAnimationWriter:
                            min=lo, max=hi) for i, (lo, hi) in enumerate(self.bounds)]
         acc += [g.Accessor(bufferView=3, componentType=g.FLOAT, count=k, type=g.SCALAR,
                            min=[float(times[0])], max=[float(times[-1])]),
-                g.Accessor(componentType=g.FLOAT, count=k * k, type=g.SCALAR, sparse=g.Sparse(
+                g.Accessor(byteOffset=None, componentType=g.FLOAT, count=k * k, type=g.SCALAR, sparse=g.Sparse(
                     count=k, indices=g.AccessorSparseIndices(bufferView=4, componentType=g.UNSIGNED_INT),
                     values=g.AccessorSparseValues(bufferView=5)))]
         prim = g.Primitive(attributes=g.Attributes(POSITION=1), indices=0, mode=g.TRIANGLES,
