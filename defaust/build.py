@@ -164,6 +164,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
     n_items = sum(1 + len(p) for p in plan.values())
     bar = tqdm(total=n_items, desc=f"DeFAUST {cfg.source}", unit="item", disable=not cfg.progress)
     manifest, report = _new_manifest(cfg, src, params), BuildReport(out=out)
+    manifest["planned_subjects"] = sorted(int(s) for s in plan)  # a partial manifest names what it lacks
     common = _key_common(cfg, src, params)
     seen: set = set()  # items notified (a worker's message and its job's result both carry them)
     results: dict[int, dict] = {}
@@ -213,6 +214,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
     if stale:
         log.info("%d item(s) of an earlier build are not part of this one and are left out of the manifest "
                  "(their files are kept): %s", len(stale), ", ".join(stale[:5]) + (" ..." if len(stale) > 5 else ""))
+    manifest["complete"] = True  # written last: every planned subject is in it
     write_manifest(out, manifest)
     write_croissant(out)
     report.manifest = read_json(out / MANIFEST)

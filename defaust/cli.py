@@ -13,6 +13,7 @@ Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 
 from harness.checks import config_int_list, config_number
@@ -156,6 +157,9 @@ def _main(cfg) -> None:
     through :func:`harness.command.run_command`."""
     logging.getLogger("defaust").setLevel(logging.INFO)
     rc = run_command(lambda: run(cfg), where=cfg.get("out"))
+    if rc in (130, 143):  # Ctrl-C or SIGTERM: the partial manifest keeps every finished item
+        print("the build is partial (defaust.load and verify say so); run the same command again to finish it: "
+              "finished items are kept", file=sys.stderr)
     if rc:
         raise SystemExit(rc)
 

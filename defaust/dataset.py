@@ -34,7 +34,7 @@ from .handles import (
     handles_from_arrays,
     snap_handles,
 )
-from .manifest import FORMAT, MANIFEST
+from .manifest import FORMAT, MANIFEST, partial_problem
 from .store import read_npz, sha256_file
 
 __all__ = ["Case", "CaseSequence", "CaseReader", "FolderBuild", "open_build", "read_manifest", "load_handles", "load",
@@ -425,7 +425,7 @@ class CaseReader:
 
 
 def load(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
-         verify: bool = True, tol: float | None = None, eager: bool = False) -> CaseSequence:
+         verify: bool = True, tol: float | None = None, eager: bool = False, partial: bool = False) -> CaseSequence:
     """The deformation cases of a DeFAUST build (a folder, or an archive that
     ``python -m defaust pack`` wrote, read in place), each read when first asked for.
 
@@ -447,6 +447,8 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
         :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal).
     eager : bool, read every case (and with ``verify`` check every file) before
         returning, so that a bad file raises here rather than at its case's first access.
+    partial : bool, accept a partial build (interrupted or still running: its manifest
+        says ``complete: false``) and load its complete subjects only; False: refuse it.
 
     Returns
     -------
@@ -458,7 +460,8 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     ------
     SShaDeError, one line
         Here: a bad parameter (the message names it and its value), missing folder or
-        manifest, a subject not in the build, a missing file, a link in the build folder
+        manifest, a partial build without ``partial=True`` (naming the subjects it lacks
+        and how to finish it), a subject not in the build, a missing file, a link in the build folder
         (an archive member with ``..``, an absolute path or a link). At a case's first
         access (here with ``eager``): a corrupted file (checksum mismatch), a handles file
         refused by :func:`load_handles` (unexpected, missing or oversized array, NaN/inf
@@ -473,6 +476,9 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     want = _load_params(root, resolution, subjects, limit, verify, tol, eager)
     src = open_build(root)
     m = _manifest(src)
+    problem = partial_problem(m, src.path)
+    if problem and not partial:
+        raise SShaDeError(problem)
     plan = _plan(m, str(src.path), want, limit)
     if not plan:
         raise SShaDeError(f"no DeFAUST case in {src.path}")
@@ -526,7 +532,8 @@ def verify(root) -> list[str]:
         return [str(e)]
     src = FolderBuild(root)
     files = m.get("files", {})
-    problems = [line for rel in sorted(files) for line in _verify_file(src, m, rel)]
+    problems = [p for p in [partial_problem(m, root)] if p]
+    problems += [line for rel in sorted(files) for line in _verify_file(src, m, rel)]
     for name in (CROISSANT, DATASHEET):
         if not (root / name).is_symlink() and (root / name).is_file():  # a link is reported below, never read
             problems += _names_manifest(src, name, (root / name).read_bytes(), sha256_file(root / MANIFEST))
@@ -552,7 +559,7 @@ def _verify_archive(path: Path) -> list[str]:
         m = _manifest(a)
     except SShaDeError as e:
         return [str(e)]
-    problems = list(a.problems)
+    problems = list(a.problems) + [p for p in [partial_problem(m, path)] if p]
     files = m.get("files", {})
     problems += [line for rel in sorted(files) for line in _verify_file(a, m, rel)]
     for name in (CROISSANT, DATASHEET):

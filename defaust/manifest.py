@@ -194,8 +194,25 @@ def write_manifest(out: Path, m: dict) -> None:
 def write_partial(out: Path, manifest: dict, old: dict) -> None:
     """Manifest of a build in progress: finished items so far plus the earlier build's
     entries (so an interruption loses nothing that was valid)."""
-    write_manifest(out, {**manifest, "items": {**old.get("items", {}), **manifest["items"]},
+    write_manifest(out, {**manifest, "complete": False, "items": {**old.get("items", {}), **manifest["items"]},
                          "subjects": {**old.get("subjects", {}), **manifest["subjects"]}})
+
+
+def partial_problem(m: dict, where) -> str | None:
+    """The one line saying that manifest ``m`` (of the build at ``where``) is a build in
+    progress or interrupted (``complete`` false: :func:`write_partial` wrote it), naming
+    the subjects it lacks and how to finish it; None for a complete build (or one written
+    before builds said so)."""
+    if m.get("complete", True) is not False:
+        return None
+    done = {v.get("subject") for v in (m.get("subjects") or {}).values() if isinstance(v, dict)}
+    planned = m.get("planned_subjects") if isinstance(m.get("planned_subjects"), list) else []
+    missing = sorted(set(planned) - done, key=str)
+    lacks = (f"subject(s) {', '.join(map(str, missing[:8]))}{' ...' if len(missing) > 8 else ''} of {len(planned)} "
+             "not finished" if missing else "not finished")
+    return (f"{where}: a partial DeFAUST build ({lacks}; {len(done)} complete): the build was interrupted or "
+            "is still running. Run the command that built it again (it resumes: finished items are kept), or "
+            "load the complete subjects only with defaust.load(..., partial=True)")
 
 
 def item_valid(out: Path, entry: dict | None, key: str) -> bool:

@@ -203,3 +203,40 @@ def test_bad_input_messages(tmp_path):
     r = subprocess.run([sys.executable, "-m", "defaust"], cwd=ROOT, env=subprocess_env(), capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2 and "out=DIR" in r.stderr
+
+
+@pytest.mark.parametrize("point", ["first pose", "third pose", "before the manifest"])
+def test_a_build_killed_at_three_points_is_partial_to_load_and_verify_and_the_same_command_finishes_it(
+        built, tmp_path, monkeypatch, point):
+    from defaust.dataset import load, verify
+    src, _ = built
+    real_pose, real_merge = build_mod._build_pose, build_mod._merge
+    calls = {"n": 0}
+
+    def pose(*a, **k):
+        calls["n"] += 1
+        if point != "before the manifest" and calls["n"] == {"first pose": 1, "third pose": 3}[point]:
+            raise KeyboardInterrupt("simulated kill")
+        return real_pose(*a, **k)
+
+    def merge(*a, **k):
+        raise KeyboardInterrupt("simulated kill")
+
+    monkeypatch.setattr(build_mod, "_build_pose", pose)
+    if point == "before the manifest":
+        monkeypatch.setattr(build_mod, "_merge", merge)
+    with pytest.raises(KeyboardInterrupt):
+        _build(tmp_path)
+    with pytest.raises(SShaDeError, match=r"a partial DeFAUST build \(subject\(s\) 0 of 1 not finished; 0 complete\)"
+                                          r".* Run the command that built it again") as e:
+        load(tmp_path)
+    assert "\n" not in str(e.value)
+    problems = verify(tmp_path)
+    assert problems and "a partial DeFAUST build" in problems[0]
+    with pytest.raises(SShaDeError, match="no DeFAUST case"):  # partial=True: only complete subjects, none here
+        load(tmp_path, partial=True)
+    monkeypatch.setattr(build_mod, "_build_pose", real_pose)
+    monkeypatch.setattr(build_mod, "_merge", real_merge)
+    _build(tmp_path)  # the same command
+    assert verify(tmp_path) == [] and len(load(tmp_path)) == len(POSES)
+    assert (tmp_path / "manifest.json").read_bytes() == (src / "manifest.json").read_bytes()
