@@ -21,7 +21,10 @@ __all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown",
 LEADERBOARD = "leaderboard.md"  #: the file written beside ``index.html``
 #: Folder name -> the dataset's name on the board (other folders: their own name).
 LABELS = {"faust": "FAUST", "defaust": "DeFAUST", "defaust_paper": "DeFAUST (paper protocol)",
+          "defaust_faust": "DeFAUST of FAUST bodies", "defaust_faust_paper": "DeFAUST of FAUST bodies (paper protocol)",
           "shapes": "Stanford shapes", "animation": "Animated DeFAUST", "tosca": "TOSCA"}
+#: The decimals the board shows GT mean with: values equal at them share a rank.
+RANK_DECIMALS = 2
 #: The column that ranks, and its words.
 RANK_COLUMN = ("gt_vertex_mean_pct", "GT mean (%): mean distance to the true pose, % of the bounding-box diagonal")
 REFERENCE = SShaDe.name  #: times are relative to this method in the same run
@@ -51,10 +54,41 @@ def _num(v):
     return f if math.isfinite(f) else None
 
 
-def _ranks(values: list) -> list:
-    """Competition ranks (1, 2, 2, 4) of the finite values, lowest first; None elsewhere."""
-    fin = sorted(v for v in values if v is not None)
-    return [None if v is None else 1 + sum(1 for x in fin if x < v) for v in values]
+def _ranks(values: list, decimals: int = RANK_DECIMALS) -> list:
+    """Competition ranks (1, 2, 2, 4) of the finite values, lowest first, values equal at
+    the ``decimals`` the board shows sharing a rank; None elsewhere.
+
+    >>> _ranks([1.814, 1.806, None, 1.5])
+    [2, 2, None, 1]
+    """
+    r = [None if v is None else round(v, decimals) for v in values]
+    fin = sorted(v for v in r if v is not None)
+    return [None if v is None else 1 + sum(1 for x in fin if x < v) for v in r]
+
+
+def _label(d: Path, info: dict) -> str:
+    """The board's column heading: :data:`LABELS`, else the run's dataset name, with
+    "(paper protocol)" when its methods ran under it (never a bare folder name)."""
+    if d.name in LABELS:
+        return LABELS[d.name]
+    cfg = info.get("config") if isinstance(info.get("config"), dict) else {}
+    name = str((cfg.get("dataset") or {}).get("name") or d.name)
+    paper = (cfg.get("arap") or {}).get("protocol") == "paper"
+    return LABELS.get(name, name) + (" (paper protocol)" if paper else "") + f" ({d.name}/)"
+
+
+def _rank_words(info: dict, n_cases: int, column: str) -> str:
+    """How a board ranks: by ``column``, under the paper protocol's stopping rule when its
+    methods ran under it (the ranks are then of that rule, converged or not), and saying
+    so when they rest on one case."""
+    cfg = info.get("config") if isinstance(info.get("config"), dict) else {}
+    words = f"ranked by {column}"
+    if (cfg.get("arap") or {}).get("protocol") == "paper":
+        words += (" at the paper protocol's stopping rule (its iteration cap or tolerance, §4.1; the Stopped column "
+                  "says how many runs converged): the ranks are of that rule, not of converged methods")
+    if n_cases == 1:
+        words += "; on one case only: the ranks are of that case"
+    return words
 
 
 def _cases_board(d: Path, info: dict) -> Board | None:
@@ -77,8 +111,9 @@ def _cases_board(d: Path, info: dict) -> Board | None:
     ref = main.loc[main["method"] == REFERENCE, "time_s"] if "time_s" in main.columns else []
     ref_t = _num(ref.iloc[0]) if len(ref) else None
     ranks = _ranks(gt) if ranked else [None] * len(main)
-    b = Board(folder=d.name, label=LABELS.get(d.name, d.name), commit=_commit(info),
-              n_cases=int(main["n_cases"].max()) if len(main) else 0, ranked=ranked, why_not=why)
+    n = int(main["n_cases"].max()) if len(main) else 0
+    b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=ranked, why_not=why,
+              rank_column=_rank_words(info, n, RANK_COLUMN[0]).removeprefix("ranked by "))
     for i, (_, r) in enumerate(main.iterrows()):
         t = _num(r.get("time_s"))
         b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": _num(r.get("volume_err_pct")),
@@ -102,10 +137,11 @@ def _animation_board(d: Path, info: dict) -> Board | None:
     ref_t = _num(ref.iloc[0]) if len(ref) else None
     same = t["n_cases"].nunique() == 1 if "n_cases" in t.columns else False
     ranks = _ranks(gt) if same else [None] * len(t)
-    b = Board(folder=d.name, label=LABELS.get(d.name, d.name), commit=_commit(info),
-              n_cases=int(t["n_cases"].max()) if "n_cases" in t.columns else 0, ranked=same,
+    n = int(t["n_cases"].max()) if "n_cases" in t.columns else 0
+    b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=same,
               why_not="" if same else "methods ran on different cases: not ranked",
-              rank_column="gt_mean_pct (the ground-truth error over every frame)",
+              rank_column=_rank_words(info, n, "gt_mean_pct (the ground-truth error over every frame)")
+              .removeprefix("ranked by "),
               time_words=" (median seconds per frame)")
     for i, (_, r) in enumerate(t.iterrows()):
         tm = _num(r.get("frame_median_s"))

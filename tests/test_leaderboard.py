@@ -43,6 +43,21 @@ def test_the_ground_truth_ranks_not_the_best_volume(tmp_path):
     assert "The ranking column is GT mean" in md and "no other column ranks" in md
 
 
+def test_values_equal_at_the_shown_decimals_share_a_rank_and_no_column_is_a_folder_name(tmp_path):
+    rows = [_row("a", "ARAP", 1.0, 1.8141, 1.0), _row("a", "Elastic", 1.0, 1.8062, 1.0),
+            _row("a", "SShaDe", 1.0, 1.64, 1.0)]
+    _run(tmp_path / "my_defaust_run", rows)
+    info = json.loads((tmp_path / "my_defaust_run" / "run.json").read_text())
+    info["config"].update(dataset={"name": "defaust"}, arap={"protocol": "paper"})
+    (tmp_path / "my_defaust_run" / "run.json").write_text(json.dumps(info))
+    (b,) = collect(tmp_path)[0]
+    assert {r["method"]: r["rank"] for r in b.rows} == {"SShaDe": 1, "ARAP": 2, "Elastic": 2}  # 1.81 and 1.81
+    assert b.label == "DeFAUST (paper protocol) (my_defaust_run/)"
+    assert "paper protocol's stopping rule" in b.rank_column and "on one case only" in b.rank_column
+    md = leaderboard_markdown(tmp_path)
+    assert "| ARAP | 1.81 (2) |" in md and "| Elastic | 1.81 (2) |" in md
+
+
 def test_a_dataset_without_ground_truth_ranks_nobody(tmp_path):
     rows = [_row("bunny", m, v, "", 1.0) for m, v in (("SShaDe", 0.3), ("ARAP", 3.1))]
     _run(tmp_path / "shapes", rows)
