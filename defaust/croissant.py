@@ -178,6 +178,11 @@ def _record_sets(manifest: dict) -> list[dict]:
             for rs in RECORD_SETS if data[rs]]
 
 
+#: Builder version -> the date it was released (the dataset's ``datePublished``: a build of
+#: that version is that dataset version, whenever it is built).
+RELEASED = {2: "2026-11-22"}
+
+
 def dataset_version(manifest: dict) -> str:
     """``MAJOR.MINOR.0``: the manifest format's number (``defaust-1``: 1) and the builder
     version."""
@@ -195,6 +200,7 @@ def croissant_metadata(manifest: dict, *, manifest_sha256: str) -> dict:
     -------
     dict: ``@context``, ``@type`` ``sc:Dataset``, ``name``, ``description``, ``license``
     (:data:`LICENCES` of the build's source), ``citeAs``, ``version`` (:func:`dataset_version`),
+    ``datePublished`` (:data:`RELEASED` of its builder version),
     ``distribution`` (the manifest as a FileObject with its sha256, the meshes and handle
     files as FileSets), ``recordSet`` (``cases`` and ``files``, :data:`RECORD_SETS`,
     inline data derived from the manifest).
@@ -214,6 +220,8 @@ def croissant_metadata(manifest: dict, *, manifest_sha256: str) -> dict:
         "license": LICENCES.get(src, "unknown"),
         "citeAs": CITATION,
         "version": dataset_version(manifest),
+        **({"datePublished": RELEASED[manifest.get("builder_version")]}
+           if manifest.get("builder_version") in RELEASED else {}),
         "distribution": [{"@type": "cr:FileObject", "@id": MANIFEST, "name": MANIFEST, "contentUrl": MANIFEST,
                           "encodingFormat": "application/json", "sha256": manifest_sha256,
                           "description": "every file's sha256, the build's parameters, seeds and packages"},

@@ -30,7 +30,8 @@ except (ImportError, OSError) as e:  # installed, but does not load: the test sk
     print(json.dumps({"import_error": f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]}"}))
     sys.exit(0)
 ds = mlc.Dataset(jsonld=sys.argv[1])  # raises ValidationError on any error
-print(json.dumps({"name": ds.metadata.name, "errors": sorted(map(str, ds.metadata.ctx.issues.errors))}))
+print(json.dumps({"name": ds.metadata.name, "errors": sorted(map(str, ds.metadata.ctx.issues.errors)),
+                  "warnings": sorted(map(str, ds.metadata.ctx.issues.warnings))}))
 """
 
 
@@ -95,7 +96,7 @@ def test_builder_writes_croissant_that_mlcroissant_validates(request):
     defaust_ci = request.getfixturevalue("defaust_ci")
     p = defaust_ci / CROISSANT
     assert p.is_file()
-    assert _in_mlcroissant(_VALIDATE, p) == {"name": "DeFAUST-synthetic", "errors": []}
+    assert _in_mlcroissant(_VALIDATE, p) == {"name": "DeFAUST-synthetic", "errors": [], "warnings": []}
     meta = json.loads(p.read_text())
     assert meta["license"] == LICENCES["synthetic"] and meta["version"] == "1.2.0"
     assert meta["distribution"][0]["sha256"] == sha256_file(defaust_ci / "manifest.json")
