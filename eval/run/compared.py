@@ -59,12 +59,13 @@ def _run_json(folder: Path) -> dict:
     return d
 
 
-def run_settings(config) -> dict:
-    """The :data:`SETTINGS` of a run's resolved ``config`` (mapping), each dotted path to its
-    value (``"(absent)"`` where the config has none)."""
+def run_settings(record) -> dict:
+    """The :data:`SETTINGS` of a run's resolved config as recorded (a mapping: ``run.json``'s
+    ``config``, or :meth:`eval.run.spec.EvalSpec.record` of this run), each dotted path to
+    its value (``"(absent)"`` where the record has none)."""
     out = {}
     for path in SETTINGS:
-        v = config
+        v = record
         for k in path.split("."):
             v = v.get(k, _ABSENT) if isinstance(v, dict) else _ABSENT
         out[path] = v

@@ -7,8 +7,7 @@ back as it was. Floor 0 of eval/ (eval/run/); used by :mod:`eval.run.outdir`.
 * :func:`restore`: the aside put back (the new run failed before its first result);
 * :func:`clean`: the aside removed, the files someone added to the earlier output moved
   back to their place (the new run has its first result);
-* :func:`files_under`, :func:`ours`: the files of a folder, and which an output wrote
-  (its marker's ``paths``, or all but its ``user_paths``).
+* :func:`files_under`, :func:`ours`: the files of a folder, and which an output wrote.
 The marker's ``aside`` entry records what was set aside, so that a run killed with the
 earlier output aside is recovered by the next claim (:func:`eval.run.outdir.claim_output_dir`).
 """
