@@ -57,6 +57,7 @@ def small_defaust(tmp_path_factory, anny_assets, anny_cache):
     return root
 
 
+@pytest.mark.slow
 def test_frames_go_from_the_rest_pose_to_the_target_for_every_method(small_defaust, tmp_path, anny_cache):
     out = tmp_path / "out"
     r = _eval([f"dataset.root={small_defaust}", "animation.frames=4", "animation.subjects=[0]",

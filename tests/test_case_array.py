@@ -53,6 +53,7 @@ def _same_table(a_dir, b_dir) -> None:
     pd.testing.assert_frame_equal(ta[cols], tb[cols])
 
 
+@pytest.mark.slow
 def test_array_table_equals_local_and_a_killed_task_is_missing_then_resumed(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     local, arr, calls = tmp_path / "local", tmp_path / "arr", tmp_path / "calls.txt"

@@ -33,6 +33,7 @@ def _eval(tmp_path, out, *extra, counter=None):
     return r
 
 
+@pytest.mark.slow
 def test_two_jobs_give_the_rows_of_one_process(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     one, two, counter = tmp_path / "one", tmp_path / "two", tmp_path / "calls.txt"
@@ -91,6 +92,7 @@ def test_plan_wall_time_on_workers():
     assert make_plan(cases, ["A", "S"], [(0, 0), (0, 1)], cost, jobs=4)["total_s"] == 20.0
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_the_workers(tmp_path, faust_root):
     """Ctrl-C while two workers run (each sleeping in a plug-in's deform): one line
     ``interrupted``, exit 130, no worker process left behind."""

@@ -14,6 +14,7 @@ import subprocess
 import sys
 
 import pandas as pd
+import pytest
 
 from eval.run.code_identity import (
     PACKAGES,
@@ -199,6 +200,7 @@ def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
         f"numpy {ident['versions']['numpy']} -> 0.0"
 
 
+@pytest.mark.slow
 def test_changed_plugin_file_is_recomputed_on_resume(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     plug = tmp_path / "scaledplug.py"
@@ -222,6 +224,7 @@ def test_changed_plugin_file_is_recomputed_on_resume(tmp_path, faust_root):
     assert info["resumed"]["restored"] == 0 and sum(info["resumed"]["recomputed"].values()) == 2
 
 
+@pytest.mark.slow
 def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, faust_root):
     """A run killed after its first case, the project's sources changed (a metric file
     edited, as a commit would), then resumed: the first case's pairs run again, so the

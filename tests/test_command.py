@@ -248,6 +248,7 @@ def test_defaust_cli_bad_values_and_hydra_errors(tmp_path):
 
 
 # ----------------------------------------------------------------------------- 3. Hydra's errors
+@pytest.mark.slow
 def test_hydra_errors_are_one_line(tmp_path):
     cases = [(["eval", "foo=1"], "foo"), (["eval", "dataset=nope"], "dataset/nope"),
              (["eval", "hydra/launcher=nope"], "launcher/nope"), (["eval", "methods=[A"], "[A"),

@@ -87,6 +87,7 @@ def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(
     assert not next(x for x in line.split("|") if "(other run)" in x).strip().startswith("**")
 
 
+@pytest.mark.slow
 def test_another_build_of_the_data_is_refused_in_one_line(tmp_path, faust_root):
     first = tmp_path / "first"
     r = _eval(["dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1", f"methods=[{PLUGIN}]",
@@ -101,6 +102,7 @@ def test_another_build_of_the_data_is_refused_in_one_line(tmp_path, faust_root):
     assert _snapshot(first) == before and not (out / "cases.csv").exists()
 
 
+@pytest.mark.slow
 def test_an_edited_record_or_another_dataset_is_refused(tmp_path, faust_root):
     first = tmp_path / "first"
     r = _eval(["dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1", f"methods=[{PLUGIN}]",
@@ -120,6 +122,7 @@ def test_an_edited_record_or_another_dataset_is_refused(tmp_path, faust_root):
     assert "not a python -m eval run folder" in msg
 
 
+@pytest.mark.slow
 def test_a_run_made_under_another_handle_bound_or_reference_setting_is_refused_naming_it(tmp_path, faust_root):
     first = tmp_path / "first"
     base = ["dataset=faust", f"dataset.root={faust_root}", "dataset.limit=1", f"methods=[{PLUGIN}]",

@@ -133,6 +133,7 @@ def _run(args):
     return subprocess.run(args, cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_a_bad_input_into_an_earlier_eval_output_is_refused_and_leaves_it_byte_identical(tmp_path):
     if not (ROOT.parent / "shared" / "data" / "faust_reg").is_dir():
         pytest.skip("needs ../shared/data/faust_reg")

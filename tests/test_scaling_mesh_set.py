@@ -60,6 +60,7 @@ def set_run(tmp_path_factory):
     return d, len(V), res
 
 
+@pytest.mark.slow
 def test_one_row_per_mesh_and_size(set_run):
     d, n0, res = set_run
     df = pd.read_csv(d / "out" / "table.csv")

@@ -74,6 +74,7 @@ def test_the_kernel_computes_the_module_formula():
     np.testing.assert_allclose(smooth_decode(V, tri, bary, VN, VD, FN), want, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_on_a_smooth_bending_the_error_falls_faster_than_with_one_frame_per_triangle():
     rng = np.random.default_rng(0)
     V = rng.uniform(0.1, 0.9, size=(300, 3))

@@ -139,6 +139,7 @@ def _counts(path):
         if path.exists() else {}
 
 
+@pytest.mark.slow
 def test_resume_after_kill_runs_only_missing_pairs(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     out, full = tmp_path / "out", tmp_path / "full"
@@ -180,6 +181,7 @@ def test_resume_after_kill_runs_only_missing_pairs(tmp_path, faust_root):
         ["runs/s0_p1/A.json", "runs/s0_p1/B.json", "runs/s0_p2/A.json", "runs/s0_p2/B.json"]
 
 
+@pytest.mark.slow
 def test_the_same_data_read_from_another_folder_restores_and_other_data_recomputes(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)
     out, counter = tmp_path / "out", tmp_path / "calls.txt"

@@ -138,6 +138,7 @@ def _check_failed_and_done(r, sweep_dir: Path):
     assert "failed" in (sweep_dir / "sweep_table.md").read_text()
 
 
+@pytest.mark.slow
 def test_joblib_sweep_records_failure(faust_root, tmp_path):
     pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
     sw = tmp_path / "sweep_joblib"

@@ -299,6 +299,7 @@ def test_resume_replays_the_command_for_the_jobs_without_result(tmp_path, monkey
     assert "only sweeps started by python -m eval.sweeps" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_resume_end_to_end_with_the_basic_launcher(faust_root, tmp_path):
     """A real sweep (Hydra's in-process launcher): a failed job, a done job, a job whose
     folder vanished (missing); resume runs the failed and the missing ones only."""
