@@ -156,10 +156,15 @@ def _main(cfg) -> None:
     ``error: ...`` line, status 2) or Ctrl-C (``interrupted``, 130) ends the process
     through :func:`harness.command.run_command`."""
     logging.getLogger("defaust").setLevel(logging.INFO)
-    rc = run_command(lambda: run(cfg), where=cfg.get("out"))
-    if rc in (130, 143):  # Ctrl-C or SIGTERM: the partial manifest keeps every finished item
-        print("the build is partial (defaust.load and verify say so); run the same command again to finish it: "
-              "finished items are kept", file=sys.stderr)
+    def work():
+        try:
+            return run(cfg)
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the partial manifest keeps every finished item
+            print("the build is partial (defaust.load and verify say so); run the same command again to finish "
+                  "it: finished items are kept", file=sys.stderr)
+            raise
+
+    rc = run_command(work, where=cfg.get("out"))
     if rc:
         raise SystemExit(rc)
 

@@ -45,7 +45,8 @@ def _write(path, V, F, frames, fps=12.0):
 
 
 def _decode(doc, blob, i):
-    """Accessor ``i`` through pygltflib's document (no byteStride in these files)."""
+    """Accessor ``i`` through pygltflib's document (tightly packed: a byteStride, where
+    given, is the element's own size)."""
     a = doc.accessors[i]
     dt = {5125: np.uint32, 5126: np.float32}[a.componentType]
     width = {"SCALAR": 1, "VEC3": 3}[a.type]
@@ -53,7 +54,7 @@ def _decode(doc, blob, i):
         out = np.zeros(a.count * width, dt)
     else:
         v = doc.bufferViews[a.bufferView]
-        assert v.byteStride is None
+        assert v.byteStride in (None, width * np.dtype(dt).itemsize)
         out = np.frombuffer(blob, dt, a.count * width, v.byteOffset + (a.byteOffset or 0)).copy()
     if a.sparse is not None:
         s = a.sparse
