@@ -234,6 +234,7 @@ class ConvergenceSchema:
     time_budget_s: Any = 300
     stop_pct: float = 0.001
     target_pct: float = 0.05
+    libigl: bool = True
     sshade: ConvergenceSShaDeSchema = field(default_factory=ConvergenceSShaDeSchema)
 
 

@@ -10,6 +10,7 @@ import dataclasses
 import subprocess
 import sys
 import typing
+from pathlib import Path
 
 import pytest
 from omegaconf import OmegaConf
@@ -175,3 +176,21 @@ def test_the_walk_finds_a_config_parameter():
         fn = next(n for n in ast.walk(ast.parse(src)) if isinstance(n, ast.FunctionDef))
         assert _takes_the_config(fn), src
     assert not _takes_the_config(ast.parse("def f(spec, section): pass").body[0])
+
+
+def test_the_three_defaults_that_disagreed_are_the_schemas():
+    """scaling.repeat (3 in the schema and the YAML, 1 in the reader), report.view_cases (2,
+    0 in ReportOptions) and convergence.libigl (read, in neither the schema nor the YAML)."""
+    from eval.config_schema import ConvergenceSchema, ReportSchema, ScalingSchema
+    from eval.experiments.convergence import ConvergenceOptions
+    from eval.experiments.scaling.scaling_experiment import ScalingOptions, scaling_options
+    from eval.run.spec import ReportOptions
+    opts = scaling_options({"base_mesh": "m.obj", "sizes": [1000]})  # every other key left to its default
+    assert opts.repeat == ScalingSchema.repeat == 3
+    shared = {f.name for f in dataclasses.fields(ScalingOptions)} & {f.name for f in dataclasses.fields(ScalingSchema)}
+    for name in shared - {"meshes", "sizes"}:
+        assert getattr(opts, name) == getattr(ScalingSchema(), name), name
+    assert ReportOptions().view_cases == ReportSchema.view_cases == 2
+    assert ConvergenceOptions.__dataclass_fields__["libigl"].default is ConvergenceSchema.libigl is True
+    yaml = OmegaConf.load(Path(CONF_DIR) / "experiment" / "convergence.yaml")
+    assert yaml.convergence.libigl is True

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from eval import datasets
+from eval.config_schema import ConvergenceSchema
 from eval.experiments.common import as_list, sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.reference import reference_solution, status_words
@@ -182,7 +183,7 @@ def convergence_options(values) -> ConvergenceOptions:
                               time_budget_s=float(num("time_budget_s")), stop_pct=float(num("stop_pct")),
                               target_pct=float(num("target_pct")), k=None if ks is None else tuple(ks),
                               refine_k=int(num("sshade.refine_k")),
-                              libigl=config_bool(top, "convergence.libigl", default=True))
+                              libigl=config_bool(top, "convergence.libigl", default=ConvergenceSchema.libigl))
 
 
 def _cases(opts: ConvergenceOptions, ds: DatasetSpec | None) -> list[tuple[str, tuple]]:

@@ -91,7 +91,7 @@ class ReportOptions:
     first ``view_cases`` cases with at most ``max_faces`` faces per mesh."""
 
     enabled: bool = True
-    view_cases: int = 0
+    view_cases: int = 2  # as eval.config_schema.ReportSchema (tests/test_typed_config.py holds them equal)
     max_faces: int = 30000
 
     @property

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from baselines.fullres_arap import Elastic
+from eval.config_schema import ScalingSchema
 from eval.datasets.shapes import axis_handles, axis_landmarks
 from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
@@ -92,6 +93,9 @@ def elastic_params(spec: EvalSpec) -> dict:
     return {k: d.get(k) for k in ("protocol", "tol", "max_iter", "etol", "gtol")}
 
 
+_D = ScalingSchema()  # the section's defaults
+
+
 @dataclass(frozen=True)
 class ScalingOptions:
     """The ``scaling`` section, checked (conf/experiment/scaling.yaml): the meshes and
@@ -102,18 +106,18 @@ class ScalingOptions:
 
     meshes: tuple[MeshEntry, ...]
     sizes: tuple[int, ...]
-    seed: int = 0
-    n_per_group: int = 30
-    region_radius: float = 0.06
-    rotate_deg: float = 20.0
-    translate: float = 0.05
-    repeat: int = 1
-    first_call: bool = True
-    first_call_timeout_s: float = 600.0
-    elastic: bool = True
-    elastic_budget_s: float = 600.0
-    elastic_max_vertices: int | None = None
-    cache: str = "data/scaling"
+    seed: int = _D.seed  # every default is the schema's (eval.config_schema.ScalingSchema), written once there
+    n_per_group: int = _D.n_per_group
+    region_radius: float = _D.region_radius
+    rotate_deg: float = _D.rotate_deg
+    translate: float = _D.translate
+    repeat: int = _D.repeat
+    first_call: bool = _D.first_call
+    first_call_timeout_s: float = float(_D.first_call_timeout_s)
+    elastic: bool = _D.elastic
+    elastic_budget_s: float = float(_D.elastic_budget_s)
+    elastic_max_vertices: int | None = _D.elastic_max_vertices
+    cache: str = _D.cache
 
 
 #: the numbers of the ``scaling`` section: (key, kind, min, allow_none)
@@ -133,21 +137,23 @@ def scaling_options(values) -> ScalingOptions:
     top = {"scaling": values}
     check_numbers(top, "scaling", _NUMBERS)
     sizes = config_int_list(top, "scaling.sizes", min=4)
-    first_call = config_bool(top, "scaling.first_call", default=True)
-    elastic = config_bool(top, "scaling.elastic", default=True)
+    first_call = config_bool(top, "scaling.first_call", default=_D.first_call)
+    elastic = config_bool(top, "scaling.elastic", default=_D.elastic)
     meshes = mesh_entries(values)
 
     def get(key, default):
         return config_value(top, f"scaling.{key}", default)
-    emax = get("elastic_max_vertices", None)
-    return ScalingOptions(meshes=tuple(meshes), sizes=tuple(sizes or ()), seed=int(get("seed", 0)),
-                          n_per_group=int(get("n_per_group", 30)), region_radius=float(get("region_radius", 0.06)),
-                          rotate_deg=float(get("rotate_deg", 20.0)), translate=float(get("translate", 0.05)),
-                          repeat=int(get("repeat", 1)), first_call=first_call,
-                          first_call_timeout_s=float(get("first_call_timeout_s", 600)), elastic=elastic,
-                          elastic_budget_s=float(get("elastic_budget_s", 600)),
+    emax = get("elastic_max_vertices", _D.elastic_max_vertices)
+    return ScalingOptions(meshes=tuple(meshes), sizes=tuple(sizes or ()), seed=int(get("seed", _D.seed)),
+                          n_per_group=int(get("n_per_group", _D.n_per_group)),
+                          region_radius=float(get("region_radius", _D.region_radius)),
+                          rotate_deg=float(get("rotate_deg", _D.rotate_deg)),
+                          translate=float(get("translate", _D.translate)), repeat=int(get("repeat", _D.repeat)),
+                          first_call=first_call,
+                          first_call_timeout_s=float(get("first_call_timeout_s", _D.first_call_timeout_s)),
+                          elastic=elastic, elastic_budget_s=float(get("elastic_budget_s", _D.elastic_budget_s)),
                           elastic_max_vertices=None if emax is None else int(emax),
-                          cache=str(get("cache", None) or "data/scaling"))
+                          cache=str(get("cache", None) or _D.cache))
 
 
 def run_scaling(spec: EvalSpec) -> dict:
