@@ -45,3 +45,26 @@ def test_implicit_arap_cpu_preset_prior_is_constant():
     assert cpu.estimate("Implicit-ARAP", 6_890) == pytest.approx(method_meta("Implicit-ARAP")["cost"]["prior"], abs=1.0)
     paper = default_cost_model([SimpleNamespace(name="Implicit-ARAP", preset="paper", )])
     assert paper.basis("Implicit-ARAP") == "guess"
+
+
+def test_the_weighted_bar_never_goes_back_whatever_the_estimates_do():
+    """Runs longer than estimated, estimates raised and lowered in any order: the fraction
+    shown never decreases, never passes 1, and ends at 1 when the last run is counted."""
+    import random
+
+    from eval.run.progress import weighted_bar
+    rng = random.Random(3)
+    for _ in range(50):
+        bar = weighted_bar(10.0, 5, disable=True)
+        shown = [0.0]
+        for _step in range(rng.randint(1, 12)):
+            if rng.random() < 0.5:
+                bar.advance(rng.uniform(0.0, 8.0))
+            else:
+                bar.retotal(bar.n + rng.uniform(0.0, 30.0))
+            f = bar.n / bar.total
+            assert shown[-1] - 1e-12 <= f <= 1.0 + 1e-12, (shown[-1], f)
+            shown.append(f)
+        bar.retotal(bar.n)  # nothing left
+        assert bar.n / bar.total == 1.0 or bar.n == 0
+        bar.close()

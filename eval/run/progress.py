@@ -109,9 +109,27 @@ def default_cost_model(methods) -> CostModel:
 
 def weighted_bar(total_s: float, n_runs: int, **kw):
     """A tqdm bar counting estimated seconds (stderr; its count of runs goes in the
-    postfix, set by the caller). ``total_s``: the first estimate of all runs."""
+    postfix, set by the caller). ``total_s``: the first estimate of all runs. Its
+    :meth:`retotal` takes a new estimate without the fraction shown ever going back."""
     import sys
 
     from tqdm import tqdm
-    return tqdm(total=max(total_s, 1e-9), desc=f"{n_runs} runs", file=sys.stderr, dynamic_ncols=True,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}] {postfix}", **kw)
+
+    class MonotoneBar(tqdm):
+        def retotal(self, total: float) -> None:
+            """Set the estimated total (seconds): a longer estimate than the bar can take
+            without its fraction going back holds the fraction instead (the runs left
+            then fill it more slowly); never below what is counted."""
+            f = self.n / self.total if self.total else 0.0
+            total = max(float(total), float(self.n), 1e-9)
+            if 0.0 < f <= 1.0 and self.n / total < f:
+                total = self.n / f
+            self.total = total
+
+        def advance(self, seconds: float) -> None:
+            """Count ``seconds`` more, the total raised first where they overfill it."""
+            self.retotal(max(self.total, self.n + seconds))
+            self.update(seconds)
+
+    return MonotoneBar(total=max(total_s, 1e-9), desc=f"{n_runs} runs", file=sys.stderr, dynamic_ncols=True,
+                       bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}] {postfix}", **kw)

@@ -276,7 +276,7 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
                         bar.set_postfix_str(f"{todo.index((ci, mi)) + 1}/{len(todo)} runs: {cases[ci].name} "
                                             f"{names[mi]}")
                         done[ci, mi], fresh[mi] = _run_stored(s, ci, mi, keys[ci][mi], cost, bar)
-                        bar.total = bar.n + sum(est[p] for p in todo[todo.index((ci, mi)) + 1:]) + 1e-9
+                        bar.retotal(bar.n + sum(est[p] for p in todo[todo.index((ci, mi)) + 1:]))
                         bar.refresh()
                 out.case_done(ci, fresh)
     return out.rows(len(cases))
@@ -349,9 +349,8 @@ def _run_in_jobs(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, ba
     def on_pair(ci, mi, wall, cost_s):
         cost.observe(s.names[mi], len(s.cases[ci].V), cost_s)
         n_done[0] += 1
-        bar.total = max(bar.total, bar.n + wall)
         bar.set_postfix_str(f"{n_done[0]}/{len(todo)} runs: {s.cases[ci].name} {s.names[mi]}")
-        bar.update(wall)
+        bar.advance(wall)
 
     def on_case(ci, pairs):
         for mi, rec, _ in pairs:
@@ -393,7 +392,7 @@ def _run_in_array(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, b
             done[end.ci, mi] = rec
             if "key" in rec:  # stored: a measured run
                 cost.observe(s.names[mi], len(s.cases[end.ci].V), rec["row"].get("time_s"))
-        bar.update(sum(est[end.ci, mi] for mi in by_case[end.ci]))
+        bar.advance(sum(est[end.ci, mi] for mi in by_case[end.ci]))
         out.case_done(end.ci, end.fresh)
 
     if spec.jobs != 1:
@@ -531,8 +530,7 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
     case, name = s.cases[ci], s.names[mi]
     rec, U, wall, cost_s = run_and_store(s.methods[mi], name, case, s.refs, s.guard, s.meshes, s.store, *key)
     cost.observe(name, len(case.V), cost_s)
-    bar.total = max(bar.total, bar.n + wall)  # a run longer than estimated never overfills the bar
-    bar.update(wall)
+    bar.advance(wall)  # a run longer than estimated never overfills the bar, nor sends it back
     return rec, U
 
 
