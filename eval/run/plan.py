@@ -10,9 +10,12 @@ Before any work the main job (:mod:`eval.experiments.cases.cases_experiment`, th
 from __future__ import annotations
 
 import math
+import os
+
+from sshade.cores import available_cores
 
 __all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "make_plan",
-           "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words"]
+           "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words", "busy_words"]
 
 #: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
 #: poses) on a 2-core machine, two subjects at once: 59-90 s (builder version 2; 10
@@ -26,6 +29,26 @@ REFERENCE_S_PER_VERTEX = 3e-4
 #: method's converged result): 474 s, 1,269 iterations at DeFAUST s00_p01's 168,897
 #: vertices (2 cores, one busy with another job): 2.8e-3 s/vertex (FAUST: 3-7e-3).
 SR_REFERENCE_S_PER_VERTEX = 2.8e-3
+
+
+def busy_words(load: float | None = None, cores: int | None = None) -> str:
+    """``""`` on an idle machine, else the sentence that says the plan's times assume one:
+    busy when the 1-minute load average, less this process, is above half the cores this
+    process may use (``load``, ``cores``: as measured now when None).
+
+    >>> busy_words(0.9, 2), busy_words(3.2, 2)[:40]
+    ('', 'the machine is busy (load average 3.2 on')
+    """
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except (AttributeError, OSError):  # pragma: no cover - no load average on this OS
+            return ""
+    cores = cores or available_cores()
+    if load - 1.0 <= 0.5 * cores:
+        return ""
+    return (f"the machine is busy (load average {load:.1f} on {cores} cores before this run): the times above "
+            "are an idle machine's and will be longer")
 
 
 def duration_words(seconds: float, *, about: bool = False) -> str:

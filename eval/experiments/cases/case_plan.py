@@ -19,7 +19,7 @@ from types import SimpleNamespace
 from eval import datasets
 from eval.experiments.cases.case_jobs import job_count
 from eval.metrics.reference import method_energy, reference_path, sr_alpha
-from eval.run.plan import add_actuals, build_stage, make_plan, render_actuals, render_plan
+from eval.run.plan import add_actuals, build_stage, busy_words, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
 from eval.run.spec import DatasetSpec
 from eval.run.subset import baseline_selection
@@ -128,4 +128,8 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
     plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs,
                      is_sr_energy=_is_sr_energy)
     log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
+    busy = busy_words()
+    if busy:
+        plan["busy"] = busy
+        log.warning("plan: %s", busy)
     return PlanRecord(plan)
