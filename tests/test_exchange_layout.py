@@ -16,6 +16,7 @@ from eval.datasets.deformation_case import DeformationCase
 from eval.exchange.layout import CASE_FILES, INDEX, read_times, result_path, write_case
 from sshade.errors import SShaDeError
 from tests.conftest import ROOT, icosphere, subprocess_env
+from tests.optional import optional_import
 
 
 def _case(name="c", group=True) -> DeformationCase:
@@ -66,6 +67,10 @@ def test_export_names_cases_as_the_evaluator_and_leaves_out_the_truth(tmp_path, 
         assert e["n_vertices"] == len(c.V) == 6890
     written = [p for p in out.rglob("*") if p.is_file()]
     assert not any("gt" in p.name or p.suffix == ".npz" for p in written)
+    jsonschema = optional_import("jsonschema")  # cases.json and run.json against their schemas
+    for doc, schema in ((index, ROOT / "eval" / "exchange" / "cases.schema.json"),
+                        (json.loads((out / "run.json").read_text()), ROOT / "eval" / "run" / "run.schema.json")):
+        jsonschema.Draft202012Validator(json.loads(schema.read_text())).validate(doc)
 
 
 def test_times_file_is_read_and_bad_lines_are_named(tmp_path):

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import json
 import subprocess
+from pathlib import Path
 
 from eval.run.runinfo import git_info
+from tests.conftest import ROOT
 
 
 def _git(repo, *args):
@@ -68,3 +70,19 @@ def test_the_page_shows_the_effective_parameters_of_run_json(tmp_path):
         {"name": "ARAP", "params": {"max_iter": 10000, "gtol": 0.001}}, {"name": "Mine", "params": None}]}))
     page = render_page(tmp_path)
     assert "effective parameters" in page and "&quot;max_iter&quot;: 10000" in page and "Mine" not in page
+
+
+def test_every_committed_run_json_and_a_fresh_one_validate_against_the_schema():
+    import glob
+
+    from eval.run.runinfo import collect_runinfo
+    from tests.optional import optional_import
+    jsonschema = optional_import("jsonschema")
+    v = jsonschema.Draft202012Validator(json.loads((ROOT / "eval" / "run" / "run.schema.json").read_text()))
+    files = glob.glob(str(ROOT / "results" / "**" / "run.json"), recursive=True)
+    assert files, "no committed run.json"
+    bad = [(f, e.message) for f in files for e in v.iter_errors(json.loads(Path(f).read_text()))]
+    assert not bad, bad[:3]
+    fresh = json.loads(json.dumps(collect_runinfo({"dataset": {"name": "x"}}, extra={"status": "done"}), default=str))
+    assert not list(v.iter_errors(fresh))
+    assert list(v.iter_errors({**fresh, "status": "finished"}))  # the schema holds something

@@ -124,7 +124,8 @@ def write_export(out_dir, cases, *, dataset: dict) -> Path:
              "results": {"file": "<results>/<name>.obj (or .ply, .off; not .stl, which keeps no vertex order): the "
                                  "deformed rest mesh, its vertices in the rest mesh's order and its faces those of "
                                  "the rest mesh (a file of vertices only is refused)",
-                         "times": "optional CSV with columns case,time_s,machine: the method's own seconds per case"}}
+                         "times": "optional CSV with columns case,time_s[,machine,iterations,converged]: the "
+                                  "method's own seconds per case, and how it stopped"}}
     with atomic_write(out / INDEX) as f:
         json.dump(index, f, indent=1)
     return out / INDEX
