@@ -10,13 +10,14 @@ from pathlib import Path
 
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
+from eval.run.compared import COMPARED_CSV
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders, run_folders
 from eval.tables import compare
 from sshade.pipeline import SShaDe
 
 __all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "stale_words",
-           "LABELS", "RANK_COLUMN"]
+           "LABELS", "RANK_COLUMN", "run_board_markdown"]
 
 LEADERBOARD = "leaderboard.md"  #: the file written beside ``index.html``
 #: Folder name -> the dataset's name on the board (other folders: their own name).
@@ -91,13 +92,24 @@ def _rank_words(info: dict, n_cases: int, column: str) -> str:
     return words
 
 
-def _cases_board(d: Path, info: dict) -> Board | None:
-    """The board of a ``cases`` run folder (its ``cases.csv``), or None without one."""
+def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None:
+    """The board of a ``cases`` run folder (its ``cases.csv``; with ``compared`` also the
+    rows its ``compare_with`` read, ``compared.csv``, already checked like with like:
+    ranked beside this run's, their times left out as another run's), or None without one."""
     import pandas as pd
     try:
         df = pd.read_csv(d / "cases.csv")
     except (OSError, ValueError):
         return None
+    other: set = set()
+    if compared and (d / COMPARED_CSV).is_file():
+        try:
+            extra = pd.read_csv(d / COMPARED_CSV)
+        except (OSError, ValueError):
+            extra = None
+        if extra is not None and "method" in extra.columns:
+            other = set(map(str, extra["method"]))
+            df = pd.concat([df, extra], ignore_index=True)
     if "method" not in df.columns or not len(df):
         return None
     comp = compare(df)
@@ -108,14 +120,14 @@ def _cases_board(d: Path, info: dict) -> Board | None:
     ranked = has_gt and comp.same_cases
     why = ("" if ranked else "no ground truth: not ranked" if not has_gt
            else "methods averaged different cases: not ranked")
-    ref = main.loc[main["method"] == REFERENCE, "time_s"] if "time_s" in main.columns else []
+    ref = main.loc[main["method"] == REFERENCE, "time_s"] if "time_s" in main.columns and REFERENCE not in other else []
     ref_t = _num(ref.iloc[0]) if len(ref) else None
     ranks = _ranks(gt) if ranked else [None] * len(main)
     n = int(main["n_cases"].max()) if len(main) else 0
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=ranked, why_not=why,
               rank_column=_rank_words(info, n, RANK_COLUMN[0]).removeprefix("ranked by "))
     for i, (_, r) in enumerate(main.iterrows()):
-        t = _num(r.get("time_s"))
+        t = None if str(r["method"]) in other else _num(r.get("time_s"))  # never a time across runs
         b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": _num(r.get("volume_err_pct")),
                        "el": _num(r.get("edge_err_pct")), "fa": _num(r.get("angle_err_deg")),
                        "time_rel": t / ref_t if t is not None and ref_t else None, "rank": ranks[i],
@@ -235,6 +247,40 @@ def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
     return head, rows
 
 
+def _board_section(b: Board, link: str) -> list[str]:
+    """One board's heading, words and ranked table (Markdown lines)."""
+    out = ["", f"## {b.label}", "",
+           f"{link}, commit {b.commit or 'unknown'}; mean over {b.n_cases} case(s) every method ran on; "
+           + (f"ranked by {b.rank_column}" if b.ranked else b.why_not)
+           + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
+           f"| Rank | Method | GT mean (%) | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) | Stopped |",
+           "|---:|---|---:|---:|---:|---:|---:|---|"]
+    for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0)):
+        out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
+                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | "
+                   f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
+                   f"{r['stopped'].replace('|', '/')} |")
+    return out
+
+
+def run_board_markdown(run_dir) -> str | None:
+    """The board of one run folder that read earlier runs' rows (``compare_with``): its
+    methods ranked beside theirs, as the leaderboard ranks (``leaderboard.md`` of the run,
+    written by :func:`eval.report.write_report`); None without compared rows."""
+    d = Path(run_dir)
+    if not (d / COMPARED_CSV).is_file():
+        return None
+    info = read_runinfo(d)
+    b = _cases_board(d, info, compared=True)
+    if b is None or not b.rows:
+        return None
+    return "\n".join([HEADING, "",
+                      f"Written by `python -m eval.report {d.name}` at the end of the run: this run's methods ranked "
+                      "beside the rows its compare_with read (their records checked like with like: "
+                      "compared.csv); their times are another run's and are left out.", *_board_section(b, "this run")]
+                     ) + "\n"
+
+
 #: The first line of a leaderboard this module wrote (a file that does not start so is not replaced).
 HEADING = "# Leaderboard"
 
@@ -256,18 +302,7 @@ def leaderboard_markdown(root) -> str:
            "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     for b in boards:
-        link = f"[{b.folder}/]({b.folder}/index.html)"
-        out += ["", f"## {b.label}", "",
-                f"{link}, commit {b.commit or 'unknown'}; mean over {b.n_cases} case(s) every method ran on; "
-                + (f"ranked by {b.rank_column}" if b.ranked else b.why_not)
-                + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
-                f"| Rank | Method | GT mean (%) | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) | Stopped |",
-                "|---:|---|---:|---:|---:|---:|---:|---|"]
-        for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0)):
-            out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
-                       f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | "
-                       f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
-                       f"{r['stopped'].replace('|', '/')} |")
+        out += _board_section(b, f"[{b.folder}/]({b.folder}/index.html)")
     if apart:
         out += ["", "## Listed apart", ""] + [f"- {x}" for x in apart]
     return "\n".join(out) + "\n"

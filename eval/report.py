@@ -21,7 +21,15 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from eval.leaderboard import HEADING, LEADERBOARD, RANK_COLUMN, collect, leaderboard_markdown, leaderboard_rows
+from eval.leaderboard import (
+    HEADING,
+    LEADERBOARD,
+    RANK_COLUMN,
+    collect,
+    leaderboard_markdown,
+    leaderboard_rows,
+    run_board_markdown,
+)
 from eval.present.breakdown import BREAKDOWN_METRICS
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
@@ -368,7 +376,28 @@ def write_report(run_dir) -> Path:
         raise OutputDirError(f"{page} was not written by python -m eval.report: left as it is")
     with atomic_write(page, "w") as fh:
         fh.write(render_page(run_dir))
+    _write_run_board(run_dir)
     return page
+
+
+def _write_run_board(run_dir: Path) -> None:
+    """``run_dir/leaderboard.md`` when the run read earlier runs' rows (``compare_with``):
+    its methods ranked beside theirs (:func:`eval.leaderboard.run_board_markdown`); a
+    file of that name this module did not write is left as it is."""
+    text = run_board_markdown(run_dir)
+    md = run_dir / LEADERBOARD
+    if text is None:
+        return
+    try:
+        ours = not md.exists() or md.read_text(errors="replace").startswith(HEADING + "\n")
+    except OSError:
+        ours = False
+    if not ours:
+        log.warning("%s was not written by python -m eval.report: left as it is", md)
+        return
+    with atomic_write(md, "w") as fh:
+        fh.write(text)
+    record_output_files(run_dir, [LEADERBOARD])
 
 
 def safe_report(run_dir) -> Path | None:

@@ -101,3 +101,20 @@ def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
     assert "| SShaDe [stale: 8 of 8 rows] |" in text and "[stale: k of n rows]" in text
     assert text.count("[stale:") == 3  # the matrix cell, the dataset's row, the explanation
     assert "done; 8 of 40 rows stale" in write_index(tmp_path).read_text()  # the index's status column
+
+
+def test_a_users_run_with_compare_with_is_ranked_beside_the_rows_it_read(tmp_path):
+    from eval.leaderboard import run_board_markdown
+    run = tmp_path / "mine"
+    _run(run, [_row(c, "Mine", 1.0, 1.70, 3.0) for c in "ab"])
+    assert run_board_markdown(run) is None  # no compare_with: no board of its own
+    theirs = [_row(c, m, 1.0, gt, t) | {"time_other_run": True} for c in "ab"
+              for m, gt, t in (("SShaDe", 1.64, 2.0), ("ARAP", 1.81, 60.0))]
+    with open(run / "compared.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(theirs[0]))
+        w.writeheader()
+        w.writerows(theirs)
+    md = run_board_markdown(run)
+    assert "| 1 | SShaDe | 1.64 |" in md and "| 2 | Mine | 1.70 |" in md and "| 3 | ARAP | 1.81 |" in md
+    assert "| 2 | Mine | 1.70 | 1.00 | 1.00 | 1.000 | -- |" in md  # no SShaDe time in this run: no ratio
+    assert "| 3 | ARAP | 1.81 | 1.00 | 1.00 | 1.000 | -- |" in md  # another run's time: never a ratio here
