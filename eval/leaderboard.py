@@ -24,8 +24,13 @@ LEADERBOARD = "leaderboard.md"  #: the file written beside ``index.html``
 LABELS = {"faust": "FAUST", "defaust": "DeFAUST", "defaust_paper": "DeFAUST (paper protocol)",
           "defaust_faust": "DeFAUST of FAUST bodies", "defaust_faust_paper": "DeFAUST of FAUST bodies (paper protocol)",
           "shapes": "Stanford shapes", "animation": "Animated DeFAUST", "tosca": "TOSCA"}
-#: The decimals the board shows GT mean with: values equal at them share a rank.
-RANK_DECIMALS = 2
+#: The paired test that separates ranks, and its level. In order of GT mean, a method shares
+#: the rank of the group above unless this test over the same cases says it is farther from
+#: the truth than that group's first method; then it starts a group whose rank is its place.
+RANK_TEST = ("two-sided Wilcoxon signed-rank test over the same cases", 0.05)
+#: How a rank is read, in words.
+RANK_WORDS = (f"in order of GT mean, a method shares the rank of the group above unless a {RANK_TEST[0]} "
+              f"at p < {RANK_TEST[1]} says it is farther from the truth than that group's first method")
 #: The column that ranks, and its words.
 RANK_COLUMN = ("gt_vertex_mean_pct", "GT mean (%): mean distance to the true pose, % of the bounding-box diagonal")
 REFERENCE = SShaDe.name  #: times are relative to this method in the same run
@@ -55,16 +60,48 @@ def _num(v):
     return f if math.isfinite(f) else None
 
 
-def _ranks(values: list, decimals: int = RANK_DECIMALS) -> list:
-    """Competition ranks (1, 2, 2, 4) of the finite values, lowest first, values equal at
-    the ``decimals`` the board shows sharing a rank; None elsewhere.
+def _paired_ranks(per_case: dict, means: dict) -> dict:
+    """``{method: rank}`` by :data:`RANK_TEST`: in order of ``means`` (lowest first), each
+    method joins the rank of the group above unless its per-case values (``per_case[m]``:
+    the same cases in the same order for every method) differ from those of the group's
+    first method by the test at its level (then its rank is its place, 1-based).
 
-    >>> _ranks([1.814, 1.806, None, 1.5])
-    [2, 2, None, 1]
+    >>> a, b = [1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6], [2.0, 2.2, 2.1, 2.4, 2.3, 2.5, 2.6]
+    >>> _paired_ranks({"A": a, "B": b, "C": b[::-1]}, {"A": 1.3, "B": 2.3, "C": 2.3})
+    {'A': 1, 'B': 2, 'C': 2}
     """
-    r = [None if v is None else round(v, decimals) for v in values]
-    fin = sorted(v for v in r if v is not None)
-    return [None if v is None else 1 + sum(1 for x in fin if x < v) for v in r]
+    from scipy.stats import wilcoxon
+    order = sorted(per_case, key=lambda m: (means[m], m))
+    out, lead = {}, None
+    for place, m in enumerate(order, start=1):
+        if lead is not None:
+            d = [x - y for x, y in zip(per_case[m], per_case[lead])]
+            try:
+                p = float(wilcoxon(d, alternative="two-sided").pvalue) if any(d) else 1.0
+            except ValueError:  # too few non-zero differences
+                p = 1.0
+            if not p < RANK_TEST[1]:
+                out[m] = out[lead]
+                continue
+        lead, out[m] = m, place
+    return out
+
+
+def _case_ranks(df, comp, gt: list, methods: list) -> list:
+    """The ranks of ``methods`` (the main table's rows, GT means ``gt``) by
+    :func:`_paired_ranks` over the common cases' successful rows of ``df``."""
+    from eval.present.rows import ok_mask
+    col = RANK_COLUMN[0]
+    rows = df[ok_mask(df) & df["case"].isin(list(comp.cases or []))]
+    per = {}
+    for m in methods:
+        g = rows[rows["method"] == m].drop_duplicates("case").set_index("case")[col]
+        if len(g) != len(comp.cases or []) or g.isna().any():
+            return [None] * len(methods)
+        per[m] = [float(g[c]) for c in comp.cases]
+    means = {m: (v if v is not None else float("inf")) for m, v in zip(methods, gt)}
+    r = _paired_ranks(per, means)
+    return [r.get(m) for m in methods]
 
 
 def _label(d: Path, info: dict) -> str:
@@ -122,7 +159,7 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
            else "methods averaged different cases: not ranked")
     ref = main.loc[main["method"] == REFERENCE, "time_s"] if "time_s" in main.columns and REFERENCE not in other else []
     ref_t = _num(ref.iloc[0]) if len(ref) else None
-    ranks = _ranks(gt) if ranked else [None] * len(main)
+    ranks = _case_ranks(df, comp, gt, [str(m) for m in main["method"]]) if ranked else [None] * len(main)
     n = int(main["n_cases"].max()) if len(main) else 0
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=ranked, why_not=why,
               rank_column=_rank_words(info, n, RANK_COLUMN[0]).removeprefix("ranked by "))
@@ -147,11 +184,11 @@ def _animation_board(d: Path, info: dict) -> Board | None:
     gt = [_num(v) for v in t["gt_mean_pct"]]
     ref = t.loc[t["method"] == REFERENCE, "frame_median_s"] if "frame_median_s" in t.columns else []
     ref_t = _num(ref.iloc[0]) if len(ref) else None
-    same = t["n_cases"].nunique() == 1 if "n_cases" in t.columns else False
-    ranks = _ranks(gt) if same else [None] * len(t)
+    same = False  # one row per method, no per-case rows: no paired test can separate them
+    ranks = [None] * len(t)
     n = int(t["n_cases"].max()) if "n_cases" in t.columns else 0
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=same,
-              why_not="" if same else "methods ran on different cases: not ranked",
+              why_not=f"not ranked: its table has no per-case rows for the paired test ({RANK_TEST[0]})",
               rank_column=_rank_words(info, n, "gt_mean_pct (the ground-truth error over every frame)")
               .removeprefix("ranked by "),
               time_words=" (median seconds per frame)")
@@ -255,7 +292,8 @@ def _board_section(b: Board, link: str) -> list[str]:
            + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
            f"| Rank | Method | GT mean (%) | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) | Stopped |",
            "|---:|---|---:|---:|---:|---:|---:|---|"]
-    for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0)):
+    for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0,
+                                           x["gt"] if x["gt"] is not None else math.inf)):
         out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
                    f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | "
                    f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
@@ -293,9 +331,9 @@ def leaderboard_markdown(root) -> str:
            f"Written by `python -m eval.report --index {Path(root).name}` (the `report` step of "
            "`python -m eval.reproduce`) from the run folders below; each cell comes from the run linked under it.",
            "",
-           f"**The ranking column is {RANK_COLUMN[1]}**, the rank in parentheses (1 = nearest); no other column "
-           "ranks: a method best on volume may be far from the true pose. Where the data has no ground truth the "
-           "cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
+           f"**The ranking column is {RANK_COLUMN[1]}**, the rank in parentheses (1 = nearest; {RANK_WORDS}); "
+           "no other column ranks: a method best on volume may be far from the true pose. Where the data has no "
+           "ground truth the cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
            + (" A cell marked [stale: k of n rows] holds rows whose code changed since they were computed "
               "(`python -m eval.reproduce --check`): not this checkout's numbers." if any(b.stale for b in boards)
               else ""), "",

@@ -25,6 +25,7 @@ from eval.leaderboard import (
     HEADING,
     LEADERBOARD,
     RANK_COLUMN,
+    RANK_WORDS,
     collect,
     leaderboard_markdown,
     leaderboard_rows,
@@ -474,8 +475,9 @@ def _leaderboard(root: Path) -> str:
     head, rows = leaderboard_rows(boards)
     links = " ".join(_link(root, f"{b.folder}/{PAGE}", _e(b.label)) for b in boards)
     cells = [[f"<td>{_e(c)}</td>" for c in r] for r in rows]
-    return (f'<h1>Leaderboard</h1>\n<p class="note">Ranked by {_e(RANK_COLUMN[1])} (rank in parentheses; '
-            "no other column ranks); where the data has no ground truth: Volume / EL / FA errors, not ranked. "
+    return (f'<h1>Leaderboard</h1>\n<p class="note">Ranked by {_e(RANK_COLUMN[1])} (rank in parentheses: '
+            f"{_e(RANK_WORDS)}; no other column ranks); where the data has no ground truth: Volume / EL / FA errors, "
+            "not ranked. "
             f"Per dataset, with times and how each method stopped: {_link(root, LEADERBOARD, LEADERBOARD)}; "
             f"runs: {links}.</p>\n{_table(head, cells, 'leaderboard')}\n")
 
