@@ -87,9 +87,32 @@ def _paired_ranks(per_case: dict, means: dict) -> dict:
     return out
 
 
-def _case_ranks(df, comp, gt: list, methods: list) -> list:
+#: The GT mean's interval on the board: a percentile bootstrap over cases (level,
+#: resamples, seed).
+CI = (0.95, 2000, 0)
+
+
+def bootstrap_ci(values) -> tuple[float, float] | None:
+    """The :data:`CI` percentile-bootstrap interval of the mean of ``values`` ((c,) float,
+    one per case; cases resampled with replacement, seeded), or None for fewer than 2.
+
+    >>> bootstrap_ci([1.0, 1.0, 1.0])
+    (1.0, 1.0)
+    """
+    import numpy as np
+    v = np.asarray(values, float)
+    if len(v) < 2:
+        return None
+    level, n, seed = CI
+    means = v[np.random.default_rng(seed).integers(0, len(v), (n, len(v)))].mean(axis=1)
+    lo, hi = np.quantile(means, [(1 - level) / 2, (1 + level) / 2])
+    return float(lo), float(hi)
+
+
+def _case_ranks(df, comp, gt: list, methods: list) -> tuple[list, list]:
     """The ranks of ``methods`` (the main table's rows, GT means ``gt``) by
-    :func:`_paired_ranks` over the common cases' successful rows of ``df``."""
+    :func:`_paired_ranks` over the common cases' successful rows of ``df``, and each
+    one's :func:`bootstrap_ci` over those cases (None lists where a method lacks one)."""
     from eval.present.rows import ok_mask
     col = RANK_COLUMN[0]
     rows = df[ok_mask(df) & df["case"].isin(list(comp.cases or []))]
@@ -97,11 +120,11 @@ def _case_ranks(df, comp, gt: list, methods: list) -> list:
     for m in methods:
         g = rows[rows["method"] == m].drop_duplicates("case").set_index("case")[col]
         if len(g) != len(comp.cases or []) or g.isna().any():
-            return [None] * len(methods)
+            return [None] * len(methods), [None] * len(methods)
         per[m] = [float(g[c]) for c in comp.cases]
     means = {m: (v if v is not None else float("inf")) for m, v in zip(methods, gt)}
     r = _paired_ranks(per, means)
-    return [r.get(m) for m in methods]
+    return [r.get(m) for m in methods], [bootstrap_ci(per[m]) for m in methods]
 
 
 def _label(d: Path, info: dict) -> str:
@@ -159,7 +182,8 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
            else "methods averaged different cases: not ranked")
     ref = main.loc[main["method"] == REFERENCE, "time_s"] if "time_s" in main.columns and REFERENCE not in other else []
     ref_t = _num(ref.iloc[0]) if len(ref) else None
-    ranks = _case_ranks(df, comp, gt, [str(m) for m in main["method"]]) if ranked else [None] * len(main)
+    ranks, cis = (_case_ranks(df, comp, gt, [str(m) for m in main["method"]]) if ranked
+                  else ([None] * len(main), [None] * len(main)))
     n = int(main["n_cases"].max()) if len(main) else 0
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=ranked, why_not=why,
               rank_column=_rank_words(info, n, RANK_COLUMN[0]).removeprefix("ranked by "))
@@ -168,7 +192,7 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
         b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": _num(r.get("volume_err_pct")),
                        "el": _num(r.get("edge_err_pct")), "fa": _num(r.get("angle_err_deg")),
                        "time_rel": t / ref_t if t is not None and ref_t else None, "rank": ranks[i],
-                       "stopped": stops.get(str(r["method"]), "")})
+                       "ci": cis[i], "stopped": stops.get(str(r["method"]), "")})
     return b
 
 
@@ -261,6 +285,10 @@ def _f(v, dec: int, suffix: str = "") -> str:
     return "--" if v is None else f"{v:.{dec}f}{suffix}"
 
 
+def _ci(ci) -> str:
+    return "--" if ci is None else f"{ci[0]:.2f}-{ci[1]:.2f}"
+
+
 def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
     """The method x dataset matrix: header and one row per method (each cell ``GT (rank)``,
     or ``Vol/EL/FA`` where the dataset has no ground truth, ``--`` where it did not run)."""
@@ -290,12 +318,13 @@ def _board_section(b: Board, link: str) -> list[str]:
            f"{link}, commit {b.commit or 'unknown'}; mean over {b.n_cases} case(s) every method ran on; "
            + (f"ranked by {b.rank_column}" if b.ranked else b.why_not)
            + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
-           f"| Rank | Method | GT mean (%) | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) | Stopped |",
-           "|---:|---|---:|---:|---:|---:|---:|---|"]
+           f"| Rank | Method | GT mean (%) | {CI[0]:.0%} CI | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) "
+           "| Stopped |",
+           "|---:|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0,
                                            x["gt"] if x["gt"] is not None else math.inf)):
         out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
-                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | "
+                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | {_ci(r.get('ci'))} | "
                    f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
                    f"{r['stopped'].replace('|', '/')} |")
     return out
@@ -332,8 +361,9 @@ def leaderboard_markdown(root) -> str:
            "`python -m eval.reproduce`) from the run folders below; each cell comes from the run linked under it.",
            "",
            f"**The ranking column is {RANK_COLUMN[1]}**, the rank in parentheses (1 = nearest; {RANK_WORDS}); "
-           "no other column ranks: a method best on volume may be far from the true pose. Where the data has no "
-           "ground truth the cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
+           "no other column ranks: a method best on volume may be far from the true pose. Per dataset, the GT "
+           f"mean's {CI[0]:.0%} interval is a percentile bootstrap over its cases ({CI[1]} resamples, seed {CI[2]}). "
+           "Where the data has no ground truth the cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
            + (" A cell marked [stale: k of n rows] holds rows whose code changed since they were computed "
               "(`python -m eval.reproduce --check`): not this checkout's numbers." if any(b.stale for b in boards)
               else ""), "",
