@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.present.rows import methods_in
+from eval.present.rows import methods_in, ok_mask
 from eval.present.stops import stop_lines
 from eval.run.compared import COMPARED_CSV
 from eval.run.runinfo import read_runinfo
@@ -113,7 +113,6 @@ def _case_ranks(df, comp, gt: list, methods: list) -> tuple[list, list]:
     """The ranks of ``methods`` (the main table's rows, GT means ``gt``) by
     :func:`_paired_ranks` over the common cases' successful rows of ``df``, and each
     one's :func:`bootstrap_ci` over those cases (None lists where a method lacks one)."""
-    from eval.present.rows import ok_mask
     col = RANK_COLUMN[0]
     rows = df[ok_mask(df) & df["case"].isin(list(comp.cases or []))]
     per = {}

@@ -52,6 +52,7 @@ def _data(name: str, faust_root) -> list[str] | None:
     return ["dataset=defaust", "dataset.root=data/defaust", "dataset.build.enabled=false", "dataset.baseline_cases=all"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, cases", [("faust", ("s0_p1", "s0_p2")), ("defaust", ("s00_p01", "s00_p02"))])
 def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(tmp_path, faust_root, name, cases):
     res = ROOT / "results" / name

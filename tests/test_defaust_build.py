@@ -205,6 +205,7 @@ def test_bad_input_messages(tmp_path):
     assert r.returncode == 2 and "out=DIR" in r.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("point", ["first pose", "third pose", "before the manifest"])
 def test_a_build_killed_at_three_points_is_partial_to_load_and_verify_and_the_same_command_finishes_it(
         built, tmp_path, monkeypatch, point):

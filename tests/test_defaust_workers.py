@@ -47,6 +47,7 @@ def test_two_workers_build_the_same_files_as_one(serial, tmp_path):
     assert rep2.manifest == rep1.manifest
 
 
+@pytest.mark.slow
 def test_parallel_build_resumes_and_repairs(serial, tmp_path):
     out1, _ = serial
     _build(tmp_path, 2)

@@ -57,6 +57,7 @@ KERNEL = textwrap.dedent('''
 RUN = "from sshade.numba_cache import ensure_cache; ensure_cache(); import kern; print(kern.twice(21))"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("part", ["nbi", "nbc"])
 def test_a_damaged_cache_entry_is_dropped_and_compiled_again_with_one_notice(tmp_path, part):
     (tmp_path / "kern.py").write_text(KERNEL)

@@ -33,6 +33,7 @@ def test_default_dated_folder_is_not_left(tmp_path, bad, what):
     assert not (tmp_path / "outputs").exists(), sorted(p.name for p in (tmp_path / "outputs").rglob("*"))
 
 
+@pytest.mark.slow
 def test_given_folders_are_left_as_they_were(tmp_path):
     """out_dir=a/b (new, with a new parent): neither remains; an existing empty folder
     stays empty; a folder with a user's file (overwrite=true) keeps only that file."""
