@@ -78,6 +78,7 @@ def test_array_table_equals_local_and_a_killed_task_is_missing_then_resumed(tmp_
     assert (arr / "report" / f"{cases[0]}.js").is_file()  # the first case's view, from the task's meshes
 
 
+@pytest.mark.slow
 def test_sigterm_cancels_the_array(tmp_path, faust_root):
     """SIGTERM while a task runs: one line ``interrupted``, exit 130, the task process gone."""
     (tmp_path / "faust").symlink_to(faust_root)

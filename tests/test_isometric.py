@@ -179,6 +179,7 @@ def test_run_tosca_bad_config(tmp_path):
         run_tosca(check_config(_cfg(SHARED_DATA / "tosca", tmp_path / "out", classes=["wolf"])))
 
 
+@pytest.mark.slow
 def test_cli_experiment_tosca(tmp_path):
     """`python -m eval experiment=tosca` with the default (relative) root from the repo root;
     conf/config.yaml's dataset.root=??? is never touched."""

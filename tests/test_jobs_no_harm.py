@@ -157,6 +157,7 @@ def test_os_exit_in_a_plugin_is_a_failed_pair_in_one_process(tmp_path, faust_roo
     assert json.loads((out / "run.json").read_text())["status"] == "done" and (out / "table.md").is_file()
 
 
+@pytest.mark.slow
 def test_os_exit_and_segfault_in_workers_are_failed_pairs(tmp_path, faust_root):
     out = tmp_path / "out"
     methods = [A, "{_target_:tests.worker_methods.ExitsProcess,name:X}",
@@ -172,6 +173,7 @@ def test_os_exit_and_segfault_in_workers_are_failed_pairs(tmp_path, faust_root):
     assert len(list((out / "runs").rglob("S.json"))) == 0 and len(list((out / "runs").rglob("X.json"))) == 2
 
 
+@pytest.mark.slow
 def test_killing_the_main_process_leaves_no_process(tmp_path, faust_root):
     with _two_workers_mid_run(faust_root, tmp_path / "out", tmp_path / "ready") as (p, _, kids):
         assert len(kids) >= 3, kids  # the workers and the resource tracker
@@ -181,6 +183,7 @@ def test_killing_the_main_process_leaves_no_process(tmp_path, faust_root):
     assert not left, left
 
 
+@pytest.mark.slow
 def test_sigterm_ends_the_run_as_interrupted(tmp_path, faust_root):
     out = tmp_path / "out"
     with _two_workers_mid_run(faust_root, out, tmp_path / "ready") as (p, _, kids):
@@ -196,6 +199,7 @@ def test_sigterm_ends_the_run_as_interrupted(tmp_path, faust_root):
     assert advised and "resume=true" in shlex.split(advised[-1]), o[-3000:]
 
 
+@pytest.mark.slow
 def test_ctrl_c_with_a_stopped_worker_ends_within_seconds(tmp_path, faust_root):
     with _two_workers_mid_run(faust_root, tmp_path / "out", tmp_path / "ready") as (p, workers, kids):
         os.kill(workers[0], signal.SIGSTOP)

@@ -244,6 +244,7 @@ def test_tables_and_sweep_aggregate_refuse_results(capsys):
         assert _snapshot(Path(argv[-1])) == before
 
 
+@pytest.mark.slow
 def test_sweep_default_folder_taken_gets_a_suffix_and_jobs_follow(tmp_path):
     """Two sweeps started in the same second: the second's default dated folder exists
     (here: every name of the next minute holds a user's file); the sweep goes to

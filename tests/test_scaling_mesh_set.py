@@ -74,6 +74,7 @@ def test_one_row_per_mesh_and_size(set_run):
         cache_name(MeshEntry(m, "", r), s) for m, r in (("ball", True), ("egg", False)) for s in SIZES)
 
 
+@pytest.mark.slow
 def test_repair_rounds_iterations_and_first_call(set_run):
     _, _, res = set_run
     df = res["table"]
