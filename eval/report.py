@@ -386,19 +386,24 @@ def _write_run_board(run_dir: Path) -> None:
     its methods ranked beside theirs (:func:`eval.leaderboard.run_board_markdown`); a
     file of that name this module did not write is left as it is."""
     text = run_board_markdown(run_dir)
-    md = run_dir / LEADERBOARD
-    if text is None:
-        return
+    if text is not None and _write_board(run_dir / LEADERBOARD, text):
+        record_output_files(run_dir, [LEADERBOARD])
+
+
+def _write_board(md: Path, text: str) -> bool:
+    """Write ``text`` to the leaderboard file ``md`` unless a file there was not written
+    by this module (it starts otherwise than :data:`eval.leaderboard.HEADING`: left as it
+    is, with a warning). Whether it was written."""
     try:
         ours = not md.exists() or md.read_text(errors="replace").startswith(HEADING + "\n")
     except OSError:
         ours = False
     if not ours:
         log.warning("%s was not written by python -m eval.report: left as it is", md)
-        return
+        return False
     with atomic_write(md, "w") as fh:
         fh.write(text)
-    record_output_files(run_dir, [LEADERBOARD])
+    return True
 
 
 def safe_report(run_dir) -> Path | None:
@@ -462,16 +467,7 @@ def _leaderboard(root: Path) -> str:
     boards, _ = collect(root)
     if not boards:
         return ""
-    md = root / LEADERBOARD
-    try:
-        ours = not md.exists() or md.read_text(errors="replace").startswith(HEADING + "\n")
-    except OSError:
-        ours = False
-    if ours:
-        with atomic_write(md, "w") as fh:
-            fh.write(leaderboard_markdown(root))
-    else:
-        log.warning("%s was not written by python -m eval.report: left as it is", md)
+    _write_board(root / LEADERBOARD, leaderboard_markdown(root))
     head, rows = leaderboard_rows(boards)
     links = " ".join(_link(root, f"{b.folder}/{PAGE}", _e(b.label)) for b in boards)
     cells = [[f"<td>{_e(c)}</td>" for c in r] for r in rows]

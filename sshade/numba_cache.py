@@ -63,7 +63,8 @@ def ensure_cache() -> str | None:
         return None
     _done = True
     _guard_loads()
-    if any(all(_writable(d) for d in loc) for loc in cache_locations()):
+    locations = cache_locations()
+    if any(all(_writable(d) for d in loc) for loc in locations):
         return None
     from numba.core import config
     try:
@@ -71,7 +72,7 @@ def ensure_cache() -> str | None:
     except OSError:
         return None
     atexit.register(shutil.rmtree, tmp, True)
-    tried = ", ".join(str(loc[0]) for loc in cache_locations())
+    tried = ", ".join(str(loc[0]) for loc in locations)
     config.CACHE_DIR = tmp
     print(f"notice: no writable numba cache folder ({tried}); the kernels are compiled and cached for this "
           f"process only, in {tmp} (about a minute more per command). Set NUMBA_CACHE_DIR to a writable folder "

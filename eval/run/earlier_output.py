@@ -17,7 +17,7 @@ import os
 import shutil
 from pathlib import Path
 
-__all__ = ["ASIDE", "files_under", "ours", "set_aside", "restore", "clean"]
+__all__ = ["ASIDE", "files_under", "ours", "set_aside", "restore", "clean", "remove_entry"]
 
 ASIDE = ".sshade-earlier"  #: the folder an earlier output waits in while a new run replaces it
 _MARKER_COPY, _LOCK_COPY = ".marker", ".lock"  # the earlier marker's and lock's bytes, inside ASIDE
@@ -53,9 +53,10 @@ def ours(marker: dict | None):
     return lambda rel: rel not in user
 
 
-def set_aside(path: Path, names, marker_file: Path, lock_file: Path, earlier: dict | None) -> dict:
+def set_aside(path: Path, names, marker_file: Path, lock_bytes: bytes | None, earlier: dict | None) -> dict:
     """Move the entries ``names`` of folder ``path`` (an earlier output's own, top level)
-    into ``path/ASIDE``, with copies of the bytes of ``marker_file`` and ``lock_file``.
+    into ``path/ASIDE``, with a copy of the bytes of ``marker_file`` and the earlier lock's
+    ``lock_bytes`` (None: it had no lock file).
 
     Returns
     -------
@@ -64,9 +65,10 @@ def set_aside(path: Path, names, marker_file: Path, lock_file: Path, earlier: di
     """
     a = path / ASIDE
     a.mkdir()
-    for src, copy in ((marker_file, _MARKER_COPY), (lock_file, _LOCK_COPY)):
-        if src.is_file() and not src.is_symlink():
-            shutil.copyfile(src, a / copy)
+    if marker_file.is_file() and not marker_file.is_symlink():
+        shutil.copyfile(marker_file, a / _MARKER_COPY)
+    if lock_bytes is not None:
+        (a / _LOCK_COPY).write_bytes(lock_bytes)
     moved = []
     for n in names:
         n = str(n)
@@ -87,7 +89,7 @@ def restore(path: Path, record: dict, marker_name: str) -> bytes | None:
         src, dst = a / n, path / n
         if not os.path.lexists(src):
             continue
-        _remove(dst)
+        remove_entry(dst)
         os.rename(src, dst)
     if (a / _MARKER_COPY).is_file():
         os.replace(a / _MARKER_COPY, path / marker_name)
@@ -131,7 +133,9 @@ def _free(path: Path, rel: str) -> Path:
     return dst
 
 
-def _remove(p: Path) -> None:
+def remove_entry(p: Path) -> None:
+    """Remove ``p``: a folder with what it holds, a file or a link (never what it points
+    to); nothing when it does not exist."""
     if p.is_dir() and not p.is_symlink():
         shutil.rmtree(p)
     elif os.path.lexists(p):

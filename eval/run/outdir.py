@@ -12,13 +12,12 @@ import datetime as _dt
 import errno
 import json
 import os
-import shutil
 import socket
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.run.earlier_output import ASIDE, clean, files_under, ours, restore, set_aside
+from eval.run.earlier_output import ASIDE, clean, files_under, ours, remove_entry, restore, set_aside
 from eval.run.runinfo import read_runinfo, write_runinfo
 from eval.run.spec import OutputOptions
 from sshade.errors import SShaDeError
@@ -184,10 +183,7 @@ class OutputClaim:
         the earlier output it set aside (returns that output's lock bytes), or, without
         one, remove the marker and lock when nothing else is left, the folder if this claim
         created it, and the created parents that are empty."""
-        for n in sorted(set(os.listdir(self.path)) - set(self.foreign) - _OWN):
-            q = self.path / n
-            with contextlib.suppress(OSError):
-                shutil.rmtree(q) if q.is_dir() and not q.is_symlink() else q.unlink()
+        _drop_entries(self.path, set(self.foreign))
         if self.aside is not None:
             lock = restore(self.path, self.aside, MARKER)
             self.aside = None
@@ -279,6 +275,13 @@ def _lock(path: Path) -> int:
     return fd
 
 
+def _drop_entries(p: Path, foreign: set) -> None:
+    """Remove every entry of folder ``p`` but the ``foreign`` ones and the bookkeeping."""
+    for n in sorted(set(os.listdir(p)) - foreign - _OWN):
+        with contextlib.suppress(OSError):
+            remove_entry(p / n)
+
+
 def _recover(p: Path, m: dict | None) -> dict | None:
     """The marker of ``p`` (locked by this process) once a run that died there without
     finishing (its marker still ``running``) is accounted for: an earlier output it had
@@ -292,9 +295,7 @@ def _recover(p: Path, m: dict | None) -> dict | None:
     if isinstance(rec, dict) and (p / ASIDE).is_dir():
         mark = rec.get("first_result")
         if mark and not (p / str(mark)).exists():  # died before its first result: the earlier output back
-            for n in sorted(set(os.listdir(p)) - foreign - _OWN):
-                with contextlib.suppress(OSError):
-                    shutil.rmtree(p / n) if (p / n).is_dir() and not (p / n).is_symlink() else (p / n).unlink()
+            _drop_entries(p, foreign)
             restore(p, rec, MARKER)
             return read_marker(p)
         kept = clean(p, rec)
@@ -411,14 +412,7 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bo
             user = [r for r in files_under(p, (m or {}).get("files") or []) if not wrote(r)]
             return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}", fd=fd,
                          first_result=first_result, user_paths=user)
-        if lock_before is not None:  # the earlier lock's bytes, kept with the aside
-            (p / f".{LOCK}.earlier").write_bytes(lock_before)
-        try:
-            rec = set_aside(p, [n for n in (m or {}).get("files") or [] if str(n) not in _OWN], p / MARKER,
-                            p / f".{LOCK}.earlier", m)
-        finally:
-            with contextlib.suppress(OSError):
-                (p / f".{LOCK}.earlier").unlink()
+        rec = set_aside(p, [n for n in (m or {}).get("files") or [] if str(n) not in _OWN], p / MARKER, lock_before, m)
         gone = rec["names"]
         rest = sorted(set(os.listdir(p)) - _OWN)
         msg = (f"replacing the earlier {kind} output in {p}" +

@@ -85,21 +85,25 @@ def _cell_differs(a, b) -> bool:
     return str(a) != str(b)
 
 
-def _row_problem(store: ResultStore, row: dict) -> str | None:
+def _row_problem(store: ResultStore, row: dict) -> tuple[bool, str | None]:
+    """``(absent, problem)`` of one row: whether its record is absent, else the text of
+    what is wrong with it or its cells (None when it matches)."""
     case, method = str(row.get("case")), str(row.get("method"))
     try:
         found = store.read(case, method)
     except SShaDeError as e:
-        return f"{case} / {method}: {e}"
+        return False, f"{case} / {method}: {e}"
     if found.record is None:
-        return f"{case} / {method}: record {found.why}" if found.why != "absent" else None
+        if found.why == "absent":
+            return True, None
+        return False, f"{case} / {method}: record {found.why}"
     stored = found.record["row"]
     diff = [k for k in sorted(set(stored) | set(row)) if _cell_differs(row.get(k), stored.get(k))]
     if diff:
         k = diff[0]
-        return (f"{case} / {method}: {k} {row.get(k)!r} in cases.csv, {stored.get(k)!r} in the record"
-                + (f" (+{len(diff) - 1} more cells)" if len(diff) > 1 else ""))
-    return None
+        return False, (f"{case} / {method}: {k} {row.get(k)!r} in cases.csv, {stored.get(k)!r} in the record"
+                       + (f" (+{len(diff) - 1} more cells)" if len(diff) > 1 else ""))
+    return False, None
 
 
 def check_rows(df: pd.DataFrame, out_dir) -> RowCheck:
@@ -120,16 +124,11 @@ def check_rows(df: pd.DataFrame, out_dir) -> RowCheck:
         return RowCheck(len(df), 0, [], False)
     if "case" not in df.columns or "method" not in df.columns:
         return RowCheck(len(df), 0, ["cases.csv has no case and method columns to find records by"], True)
-    rows = df.to_dict("records")
-    problems = [p for p in (_row_problem(store, r) for r in rows) if p]
-    absent = [f"{r.get('case')} / {r.get('method')}" for r in rows
-              if _absent(store, str(r.get("case")), str(r.get("method")))]
+    problems, absent = [], []
+    for r in df.to_dict("records"):
+        gone, problem = _row_problem(store, r)
+        if gone:
+            absent.append(f"{r.get('case')} / {r.get('method')}")
+        elif problem:
+            problems.append(problem)
     return RowCheck(len(df), len(df) - len(problems) - len(absent), problems, True, absent)
-
-
-def _absent(store: ResultStore, case: str, method: str) -> bool:
-    try:
-        found = store.read(case, method)
-    except SShaDeError:
-        return False
-    return found.record is None and found.why == "absent"
