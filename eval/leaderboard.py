@@ -126,24 +126,30 @@ def _case_ranks(df, comp, gt: list, methods: list) -> tuple[list, list]:
     return [r.get(m) for m in methods], [bootstrap_ci(per[m]) for m in methods]
 
 
+def _config(info: dict) -> dict:
+    return info.get("config") if isinstance(info.get("config"), dict) else {}
+
+
+def _paper(info: dict) -> bool:
+    """Whether the run's methods ran under the paper protocol (``arap.protocol``)."""
+    return (_config(info).get("arap") or {}).get("protocol") == "paper"
+
+
 def _label(d: Path, info: dict) -> str:
     """The board's column heading: :data:`LABELS`, else the run's dataset name, with
     "(paper protocol)" when its methods ran under it (never a bare folder name)."""
     if d.name in LABELS:
         return LABELS[d.name]
-    cfg = info.get("config") if isinstance(info.get("config"), dict) else {}
-    name = str((cfg.get("dataset") or {}).get("name") or d.name)
-    paper = (cfg.get("arap") or {}).get("protocol") == "paper"
-    return LABELS.get(name, name) + (" (paper protocol)" if paper else "") + f" ({d.name}/)"
+    name = str((_config(info).get("dataset") or {}).get("name") or d.name)
+    return LABELS.get(name, name) + (" (paper protocol)" if _paper(info) else "") + f" ({d.name}/)"
 
 
 def _rank_words(info: dict, n_cases: int, column: str) -> str:
-    """How a board ranks: by ``column``, under the paper protocol's stopping rule when its
-    methods ran under it (the ranks are then of that rule, converged or not), and saying
-    so when they rest on one case."""
-    cfg = info.get("config") if isinstance(info.get("config"), dict) else {}
-    words = f"ranked by {column}"
-    if (cfg.get("arap") or {}).get("protocol") == "paper":
+    """What a board ranks by: ``column``, at the paper protocol's stopping rule when its
+    methods ran under it (the ranks are then of that rule, converged or not), saying so
+    when they rest on one case."""
+    words = column
+    if _paper(info):
         words += (" at the paper protocol's stopping rule (its iteration cap or tolerance, §4.1; the Stopped column "
                   "says how many runs converged): the ranks are of that rule, not of converged methods")
     if n_cases == 1:
@@ -185,7 +191,7 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
                   else ([None] * len(main), [None] * len(main)))
     n = int(main["n_cases"].max()) if len(main) else 0
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=ranked, why_not=why,
-              rank_column=_rank_words(info, n, RANK_COLUMN[0]).removeprefix("ranked by "))
+              rank_column=_rank_words(info, n, RANK_COLUMN[0]))
     for i, (_, r) in enumerate(main.iterrows()):
         t = None if str(r["method"]) in other else _num(r.get("time_s"))  # never a time across runs
         b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": _num(r.get("volume_err_pct")),
@@ -207,18 +213,16 @@ def _animation_board(d: Path, info: dict) -> Board | None:
     gt = [_num(v) for v in t["gt_mean_pct"]]
     ref = t.loc[t["method"] == REFERENCE, "frame_median_s"] if "frame_median_s" in t.columns else []
     ref_t = _num(ref.iloc[0]) if len(ref) else None
-    same = False  # one row per method, no per-case rows: no paired test can separate them
-    ranks = [None] * len(t)
     n = int(t["n_cases"].max()) if "n_cases" in t.columns else 0
-    b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=same,
+    # one row per method, no per-case rows: no paired test can separate them
+    b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=False,
               why_not=f"not ranked: its table has no per-case rows for the paired test ({RANK_TEST[0]})",
-              rank_column=_rank_words(info, n, "gt_mean_pct (the ground-truth error over every frame)")
-              .removeprefix("ranked by "),
+              rank_column="gt_mean_pct (the ground-truth error over every frame)",
               time_words=" (median seconds per frame)")
     for i, (_, r) in enumerate(t.iterrows()):
         tm = _num(r.get("frame_median_s"))
         b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": None, "el": None, "fa": None,
-                       "time_rel": tm / ref_t if tm is not None and ref_t else None, "rank": ranks[i],
+                       "time_rel": tm / ref_t if tm is not None and ref_t else None, "rank": None,
                        "stopped": str(r.get("how", "")) + (f"; {int(r['n_converged'])} frames converged"
                                                            if _num(r.get("n_converged")) is not None else "")})
     return b
