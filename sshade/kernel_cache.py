@@ -161,7 +161,7 @@ GROUPS = {
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
         "sshade.closed_ball.closed_ball", "sshade.closed_ball.closed_ball_local", "sshade.closed_ball.vertex_faces",
         "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel",
-        "sshade.smooth_transfer._offsets_kernel")),
+        "sshade.smooth_transfer._offsets_kernel", "sshade.smooth_transfer._vertex_jacobians_kernel")),
 }
 
 

@@ -10,9 +10,10 @@ Starts, threads and timings: docs/methods.md ("Implementation notes: sshade/prep
 """
 from __future__ import annotations
 
+import functools
 import threading
 import time
-from concurrent.futures import Future, ThreadPoolExecutor, as_completed, wait
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 
 import igl
 import numpy as np
@@ -44,14 +45,26 @@ __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 32}
 
 
-def _extrapolate(h: list, degree: int) -> np.ndarray:
-    """One step on from the results ``h`` ((k, 3) each, newest first) along the polynomial
-    of ``degree`` (0, 1 or 2) through the newest ``degree + 1`` of them."""
-    if degree == 0:
-        return h[0]
-    if degree == 1:
-        return 2.0 * h[0] - h[1]
-    return 3.0 * (h[0] - h[1]) + h[2]
+#: Results the later solves' start is fitted through (:meth:`_Sampling.start`).
+START_RESULTS = 5
+
+
+@functools.lru_cache(maxsize=None)
+def _fit_weights(n: int, degree: int) -> np.ndarray:
+    """The weights of :func:`_fit_ahead` for ``n`` results: (n,) float64."""
+    t = -np.arange(n, dtype=np.float64)
+    return np.ones(degree + 1) @ np.linalg.pinv(np.vander(t, degree + 1, increasing=True))
+
+
+def _fit_ahead(h: list, degree: int) -> np.ndarray:
+    """One step on from the results ``h`` ((k, 3) each, newest first, taken at steps 0,
+    -1, -2, ...) along the least-squares polynomial of ``degree`` (< ``len(h)``) through
+    them: a new array."""
+    c = _fit_weights(len(h), degree)
+    out = c[0] * h[0]
+    for cj, hj in zip(c[1:], h[1:]):
+        out += cj * hj
+    return out
 
 
 def _norm(a: np.ndarray) -> float:
@@ -119,21 +132,30 @@ class _Sampling:
             self.jac_rest = jacobian_rest(self.VN, prep["F"])
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
         self.moves = _HandleMoves(self.VN, prep["F"], prep["low_handles"])
-        self.history: list = []  # (k, 3) low-res results of the last four solves, newest first
+        self.history: list = []  # (k, 3) low-res results of the last START_RESULTS solves, newest first
         self.last_iterations = 0  # of the last solve
 
     def start(self) -> tuple[np.ndarray, int]:
-        """The next solve's start, (k, 3), and its order: the polynomial of degree 0, 1 or 2
-        through the newest results, evaluated one step on (frames taken as equally
-        spaced), of the degree that, from the results before it, best predicted the
-        newest one (least Euclidean distance; a smooth path picks 2, a handle that stops
-        picks 0 after one solve, a jittery one the degree that copes)."""
+        """The next solve's start, (k, 3), and its degree: the last result (degree 0) or
+        the least-squares polynomial of degree ``min(2, r - 1)`` through the newest ``r``
+        results (at most :data:`START_RESULTS`; frames taken as equally spaced) evaluated
+        one step on, whichever, fitted to the results before it, predicted the newest
+        one better (least Euclidean distance; a tie keeps the last result). A smooth path
+        takes the fit, a handle that stops the last result. Fitting a quadratic through
+        five results rather than interpolating three damps each result's convergence
+        error, which the interpolation amplifies (benchmarks/records/frames_scalar_decode.md)."""
         h = self.history
         if len(h) == 1:
             return h[0], 0
-        errs = [_norm(_extrapolate(h[1:], d) - h[0]) for d in range(min(3, len(h) - 1))]
-        d = int(np.argmin(errs))
-        return _extrapolate(h, d), d
+
+        def fit(hs: list) -> tuple[np.ndarray, int]:
+            r = min(START_RESULTS, len(hs))
+            return _fit_ahead(hs[:r], min(2, r - 1)), min(2, r - 1)
+
+        past, _ = fit(h[1:])
+        if _norm(past - h[0]) < _norm(h[1] - h[0]):
+            return fit(h)
+        return h[0], 0
 
     def solve(self, targets, V0, arap: dict, carry: bool = False) -> dict:
         """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit); when ``carry`` (a
@@ -146,31 +168,32 @@ class _Sampling:
             V0 = self.moves.extend(V0, targets)
         res = self.arap.deform(targets, V0=V0, carry_history=carry, **arap)
         self.low, self.frames = res.V, None
-        self.history = [res.V] + self.history[:3]
+        self.history = [res.V] + self.history[:START_RESULTS - 1]
         self.last_iterations = res.iterations
         return {"arap_s": time.perf_counter() - t0, "iterations": res.iterations, "converged": res.converged,
                 "status": res.info.get("status"), "warm_start": V0 is not None}
+
+    def make_frames(self):
+        """The last solve's frames (Alg. 1) or corners' deformation gradients
+        (``transfer="vertex"``), made by the first call after the solve (threads racing
+        here compute the same ones): what :meth:`decode` applies."""
+        if self.frames is None:
+            if self.transfer == "vertex":
+                self.frames = vertex_jacobians(self.VN, self.low, self.prep["F"], rest=self.jac_rest)
+            else:
+                self.frames = deformed_frames(self.VN, self.low, self.prep["F"], self.axis, self.gradient)
+        return self.frames
 
     def decode(self, rows=None, out: np.ndarray | None = None, add: bool = False) -> np.ndarray:
         """The last solve's high-res positions at ``rows`` (Alg. 1, or
         :func:`sshade.smooth_transfer.smooth_decode_with` for ``transfer="vertex"``;
         :func:`sshade.lrf.decode_with_frames`: rows, out and add as there)."""
+        frames = self.make_frames()
         if self.transfer == "vertex":
-            return self._decode_smooth(rows, out, add)
-        frames = self.frames
-        if frames is None:  # threads racing here compute the same frames
-            frames = self.frames = deformed_frames(self.VN, self.low, self.prep["F"], self.axis, self.gradient)
+            return smooth_decode_with(frames, self.G, self.prep["tri"], self.bary, self.low, self.prep["F"],
+                                      rows=rows, out=out, add=add)
         return decode_with_frames(frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
                                   rows=rows, out=out, add=add)
-
-    def _decode_smooth(self, rows, out, add: bool) -> np.ndarray:
-        """:meth:`decode` for ``transfer="vertex"``: the corners' deformation gradients of
-        the last solve (made once, by the first decoding after it) blended at ``rows``."""
-        Jv = self.frames
-        if Jv is None:  # threads racing here compute the same gradients
-            Jv = self.frames = vertex_jacobians(self.VN, self.low, self.prep["F"], rest=self.jac_rest)
-        return smooth_decode_with(Jv, self.G, self.prep["tri"], self.bary, self.low, self.prep["F"], rows=rows,
-                                  out=out, add=add)
 
     def weights(self, rows=None) -> np.ndarray | None:
         """The last solve's averaging weights at ``rows`` ((r,) float64), or None for the
@@ -181,6 +204,79 @@ class _Sampling:
         bary = None if self.bary is None else self.bary[idx]
         return sampling_weights(self.average, self.V[idx], self.prep["tri"][idx], bary, self.VN, self.low,
                                 self.prep["F"])
+
+
+class _Average:
+    """One solve's decodings averaged chunk by chunk of rows, on the ARAP threads.
+
+    Sampling ``i``'s decoding of chunk ``c`` (:meth:`decode`, queued when its ARAP ends,
+    so behind the ARAPs still waiting: a thread left without an ARAP decodes for the
+    others) goes onto ``out[c]`` when it is the chunk's next in sampling order, else aside
+    until the chunk's earlier ones are added: so every row gets the additions of
+    :func:`sshade.sampling.average` (sampling order), whatever order the threads run in.
+    The thread adding a chunk's last decoding divides it by ``k`` and maps it out of the
+    unit frame. A weighted average (``average`` not ``"uniform"``) keeps every decoding
+    whole in ``parts`` ((k, n, 3)) for :func:`sshade.averaging.combine`.
+    """
+
+    def __init__(self, n: int, k: int, chunks: int, weighted: bool, frame: UnitFrame):
+        self.k, self.frame, self.weighted = k, frame, weighted
+        self.out = np.empty((n, 3))
+        self.parts = np.empty((k, n, 3)) if weighted else None
+        self.bounds = np.linspace(0, n, chunks + 1).astype(np.int64)
+        self.lock = threading.Lock()
+        self.nxt = [0] * chunks  # the next sampling to add onto each chunk
+        self.busy = [False] * chunks  # a thread is adding onto the chunk
+        self.aside: list[dict] = [{} for _ in range(chunks)]
+
+    def decode(self, sampling: _Sampling, i: int, c: int) -> float:
+        """Sampling ``i``'s decoding of chunk ``c``, added in order (class docstring): its seconds."""
+        t = time.perf_counter()
+        rows = slice(int(self.bounds[c]), int(self.bounds[c + 1]))
+        if self.weighted:
+            sampling.decode(rows, self.parts[i, rows])
+            return time.perf_counter() - t
+        with self.lock:
+            mine = not self.busy[c] and self.nxt[c] == i
+            self.busy[c] |= mine
+        if mine:
+            sampling.decode(rows, self.out[rows], add=i > 0)
+        else:
+            a = sampling.decode(rows)
+            with self.lock:
+                mine = not self.busy[c] and self.nxt[c] == i
+                self.busy[c] |= mine
+                if not mine:
+                    self.aside[c][i] = a
+            if mine:
+                self._add(rows, i, a)
+        if mine:
+            self._drain(c, rows)
+        return time.perf_counter() - t
+
+    def _add(self, rows: slice, i: int, a: np.ndarray) -> None:
+        if i == 0:
+            self.out[rows] = a
+        else:
+            self.out[rows] += a
+
+    def _drain(self, c: int, rows: slice) -> None:
+        """After an addition onto chunk ``c`` (its thread holds ``busy``): the decodings
+        set aside for it in order, then, with all ``k`` added, the chunk's average in mesh
+        units; ``busy`` released when the next one is not there yet."""
+        while True:
+            with self.lock:
+                self.nxt[c] += 1
+                i = self.nxt[c]
+                a = self.aside[c].pop(i, None)
+                if a is None:
+                    self.busy[c] = False
+                    break
+            self._add(rows, i, a)
+        if i == self.k:
+            chunk = self.out[rows]
+            chunk /= self.k
+            self.frame.from_unit(chunk, out=chunk)
 
 
 class Prepared:
@@ -284,17 +380,35 @@ class Prepared:
         wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
         self._pending = []
         first, S = self.n_solves == 0, self._samplings
-        arap = self._arap
+        arap, first_arap = self._arap, Future()
+        avg = _Average(len(self.V), len(S), 2 * self.workers if self.workers > 1 else 1,
+                       self.params.average != "uniform", self.frame)
 
-        def run(i: int, V0) -> dict:
-            return S[i].solve(T, V0, arap)
+        def decoded(i: int, info: dict) -> tuple[dict, list]:
+            """Sampling i's ARAP info and the futures of its decoding's chunks (queued),
+            its frames made here first (once, not by each chunk's thread)."""
+            t = time.perf_counter()
+            S[i].make_frames()
+            info["frames_s"] = time.perf_counter() - t
+            return info, self._submit(lambda c: avg.decode(S[i], i, c), range(len(avg.nxt)))
 
-        def later(i: int) -> dict:  # the earlier frames extrapolated, the accelerator's history kept
+        def run(i: int, V0) -> tuple:
+            try:
+                info = S[i].solve(T, V0, arap)
+            except BaseException as e:
+                if i == 0:
+                    first_arap.set_exception(e)
+                raise
+            if i == 0:
+                first_arap.set_result(None)
+            return decoded(i, info)
+
+        def later(i: int) -> tuple:  # the earlier frames extrapolated, the accelerator's history kept
             V0, degree = S[i].start()
-            return {**S[i].solve(T, V0, self._frame_arap, carry=True), "start_degree": degree}
+            return decoded(i, {**S[i].solve(T, V0, self._frame_arap, carry=True), "start_degree": degree})
 
-        def from_first(i: int) -> dict:  # as deform: from sampling 0's result
-            futs[0].result()
+        def from_first(i: int) -> tuple:  # as deform: from sampling 0's result
+            first_arap.result()
             return run(i, S[0].decode(S[i].prep["seeds"]))
 
         if not first:  # the samplings that took longest last time start first
@@ -305,9 +419,12 @@ class Prepared:
             futs += self._submit(from_first, range(1, len(S)))
         else:  # from the rigid fit of the handles
             futs = self._submit(lambda i: run(i, None), range(len(S)))
-        Vd, infos, transfer_s = self._decode_average(futs)
+        infos, transfer_s = self._wait(futs)
+        Vd = avg.out
+        if avg.parts is not None:
+            Vd = combine(list(avg.parts), [s.weights() for s in S])
+            self.frame.from_unit(Vd, out=Vd)
         pre = combine([s.decode(self.handles) - T for s in S], [s.weights(self.handles) for s in S])
-        self.frame.from_unit(Vd, out=Vd)
         Vd[self.handles] = T_mesh
         self.n_solves += 1
         if not return_info:
@@ -320,40 +437,22 @@ class Prepared:
                 "handles": "overwritten", "handle_pre_pct": handle_pre_pct(pre, self._unit_corners)}
         return Vd, info
 
-    def _decode_average(self, futs: list) -> tuple[np.ndarray, list, float]:
-        """The samplings' decodings averaged, (n, 3), each sampling decoded here as soon as
-        its ARAP (future in ``futs``) is done: onto the running sum when it is the next in
-        sampling order, else into an (n, 3) array of its own, added when its turn comes;
-        so the additions are those of :func:`sshade.sampling.average` (sampling order),
-        whatever order the ARAPs end in (at most ``k - 1`` such arrays held during a
-        solve). A weighted average (``average`` not ``"uniform"``) keeps every decoding and
-        combines them at the end (:func:`sshade.averaging.combine`, as :func:`sshade.deform`).
-        The ARAP infos and the decoding's seconds. Waits for every ARAP even when one fails."""
-        out, infos, secs = np.empty((len(self.V), 3)), [None] * len(futs), 0.0
-        early, nxt, index = {}, 0, {f: i for i, f in enumerate(futs)}
-        weighted = self.params.average != "uniform"
+    @staticmethod
+    def _wait(futs: list) -> tuple[list, float]:
+        """Every sampling's ARAP (``futs``, in sampling order) and the decoding chunks each
+        queued, waited for: the ARAP infos and the decodings' seconds, summed. Raises the
+        first failure after every task ended."""
+        infos, chunks = [], []
         try:
-            for f in as_completed(futs):
-                i = index[f]
-                infos[i] = f.result()
-                t = time.perf_counter()
-                if i != nxt or weighted:  # ended before an earlier sampling: decoded aside
-                    early[i] = self._samplings[i].decode(slice(0, len(out)))
-                else:
-                    self._samplings[i].decode(slice(0, len(out)), out, add=i > 0)
-                    nxt += 1
-                    while nxt in early:  # the same additions as decoding onto the sum
-                        out += early.pop(nxt)
-                        nxt += 1
-                secs += time.perf_counter() - t
+            for f in futs:
+                info, fc = f.result()
+                infos.append(info)
+                chunks += fc
+            return infos, float(sum(f.result() for f in chunks) + sum(d.pop("frames_s") for d in infos))
         except BaseException:
             wait(futs)
+            wait([c for f in futs if not f.cancelled() and f.exception() is None for c in f.result()[1]])
             raise
-        if weighted:
-            S = self._samplings
-            return combine([early[i] for i in range(len(S))], [s.weights() for s in S]), infos, secs
-        out /= len(futs)
-        return out, infos, secs
 
 
 def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,

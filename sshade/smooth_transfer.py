@@ -114,11 +114,54 @@ def vertex_jacobians(VN: np.ndarray, VN_def: np.ndarray, FN: np.ndarray, *,
     """
     if rest is None:
         rest = jacobian_rest(VN, FN)
-    Md, _ = _edge_frames(VN_def, FN)
-    k, t = len(VN), len(FN)
-    out = rest.S @ (Md @ rest.Minv).reshape(t, 9)
-    out[rest.has] /= rest.w[rest.has, None]
-    return np.ascontiguousarray(out.reshape(k, 3, 3))
+    out = np.empty((len(VN), 3, 3))
+    bad = _vertex_jacobians_kernel(np.ascontiguousarray(VN_def, np.float64), np.ascontiguousarray(FN, np.int64),
+                                   rest.Minv, rest.S.indptr, rest.S.indices, rest.S.data, rest.w, out)
+    if bad:
+        raise SShaDeError(f"smooth transfer: {bad} degenerate low-res triangles")
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _vertex_jacobians_kernel(Q, FN, Minv, ptr, idx, val, w, out):
+    """:func:`vertex_jacobians` in one pass over the triangles (each one's ``[e1' e2' n']
+    Minv``, ``Minv`` (t, 3, 3)) and one over the corners (their area-weighted sum, the
+    CSR matrix ``(ptr, idx, val)`` (k, t) in its stored order, over ``w`` where positive):
+    into ``out`` (k, 3, 3); returns the number of degenerate deformed triangles."""
+    J = np.empty((len(FN), 3, 3))
+    M = np.empty((3, 3))
+    bad = 0
+    for f in range(len(FN)):
+        c0, c1, c2 = FN[f, 0], FN[f, 1], FN[f, 2]
+        for d in range(3):
+            M[d, 0] = Q[c1, d] - Q[c0, d]
+            M[d, 1] = Q[c2, d] - Q[c0, d]
+        n0 = M[1, 0] * M[2, 1] - M[2, 0] * M[1, 1]
+        n1 = M[2, 0] * M[0, 1] - M[0, 0] * M[2, 1]
+        n2 = M[0, 0] * M[1, 1] - M[1, 0] * M[0, 1]
+        dbl = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if not (dbl > 0 and np.isfinite(dbl)):
+            bad += 1
+            continue
+        M[0, 2], M[1, 2], M[2, 2] = n0 / dbl, n1 / dbl, n2 / dbl
+        for a in range(3):
+            for b in range(3):
+                J[f, a, b] = (M[a, 0] * Minv[f, 0, b] + M[a, 1] * Minv[f, 1, b]) + M[a, 2] * Minv[f, 2, b]
+    if bad:
+        return bad
+    acc = np.empty(9)
+    for k in range(len(out)):
+        acc[:] = 0.0
+        for j in range(ptr[k], ptr[k + 1]):
+            f, v = idx[j], val[j]
+            for a in range(3):
+                for b in range(3):
+                    acc[3 * a + b] += v * J[f, a, b]
+        s = w[k] if w[k] > 0 else 1.0
+        for a in range(3):
+            for b in range(3):
+                out[k, a, b] = acc[3 * a + b] / s
+    return 0
 
 
 def smooth_offsets(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: np.ndarray,
