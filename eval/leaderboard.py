@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.present.intervals import CI, bootstrap_ci
 from eval.present.rows import methods_in, ok_mask
 from eval.present.stops import stop_lines
 from eval.run.compared import COMPARED_CSV
@@ -85,28 +86,6 @@ def _paired_ranks(per_case: dict, means: dict) -> dict:
                 continue
         lead, out[m] = m, place
     return out
-
-
-#: The GT mean's interval on the board: a percentile bootstrap over cases (level,
-#: resamples, seed).
-CI = (0.95, 2000, 0)
-
-
-def bootstrap_ci(values) -> tuple[float, float] | None:
-    """The :data:`CI` percentile-bootstrap interval of the mean of ``values`` ((c,) float,
-    one per case; cases resampled with replacement, seeded), or None for fewer than 2.
-
-    >>> bootstrap_ci([1.0, 1.0, 1.0])
-    (1.0, 1.0)
-    """
-    import numpy as np
-    v = np.asarray(values, float)
-    if len(v) < 2:
-        return None
-    level, n, seed = CI
-    means = v[np.random.default_rng(seed).integers(0, len(v), (n, len(v)))].mean(axis=1)
-    lo, hi = np.quantile(means, [(1 - level) / 2, (1 + level) / 2])
-    return float(lo), float(hi)
 
 
 def _case_ranks(df, comp, gt: list, methods: list) -> tuple[list, list]:

@@ -3,7 +3,7 @@
     python -m eval.reproduce                                   # embedded synthetic DeFAUST only
     python -m eval.reproduce --faust DIR --tosca DIR --shapes DIR --scaling MESH
     python -m eval.reproduce --check [--json]     # which committed rows are stale; no computation
-    python -m eval.reproduce --rekey              # re-key records of the earlier key layout
+    python -m eval.reproduce --rekey | --retabulate   # re-key old records | rebuild tables from rows
 
 Each step runs as its own process (a failure is reported, the others still run), after a
 plan of the stored rows reused and stale per step and method; the table steps resume, so
@@ -153,12 +153,17 @@ def main(argv=None) -> int:
     p.add_argument("--rekey", action="store_true", help="no computation: re-key the records of results/ written "
                                                          "under the earlier key layout, from the commit that made "
                                                          "each (git must have it)")
+    p.add_argument("--retabulate", action="store_true", help="no computation: rebuild table.{csv,md,tex} of every "
+                                                              "committed run folder from its cases.csv (after a "
+                                                              "change of the tables' layout: python -m eval.tables)")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")
     a = p.parse_args(argv)
     if a.json and not a.check:
         p.error("--json goes with --check")
     if a.check or a.rekey:
         return run_command(lambda: _rekey(a) if a.rekey else _check(a), where="results/")
+    if a.retabulate:
+        return run_command(_retabulate, where="results/")
     return run_command(lambda: _run_steps(a), where="results/")
 
 
@@ -194,6 +199,17 @@ def _rekey(a) -> int:
                     print(f"{path}: {r}", file=sys.stderr)
     print("rekey: " + ", ".join(f"{n} {w}" for w, n in sorted(counts.items())) if counts else "rekey: no record")
     return 1 if any(w.startswith("refused") for w in counts) else 0
+
+
+def _retabulate() -> int:
+    """``--retabulate``: ``python -m eval.tables`` on every run folder of :data:`RESULTS`
+    with a ``cases.csv`` (the folders whose tables :func:`eval.tables.write_tables` made:
+    those with a result store), as a step of this command (:func:`step_env`); its exit code."""
+    dirs = [str(f) for f in run_folders(RESULTS) if (f / "cases.csv").is_file()]
+    if not dirs:
+        print("retabulate: no run folder with cases.csv under results/")
+        return 0
+    return subprocess.call([sys.executable, "-m", "eval.tables", *dirs], env=step_env())
 
 
 def _run_steps(a) -> int:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from eval.present.intervals import interval_table
 from eval.present.rows import method_order_key, methods_in, ok_mask
 from eval.present.stops import PROTOCOL_TEXT, stop_lines
 from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
@@ -32,7 +33,7 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "all_note", "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
-           "COMMON_CASES_HEADING", "compared_lines", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines",
+           "COMMON_CASES_HEADING", "INTERVAL_COLUMNS", "case_intervals", "compared_lines", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines",
            "PROTOCOL_TEXT"]
 
 #: Columns never averaged (identifiers, seeds).
@@ -42,6 +43,11 @@ _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds
 ALL_CASES_HEADING = "All cases each method ran on"
 #: Heading of table.md's main table when a second table follows and no title is given.
 COMMON_CASES_HEADING = "Cases every method succeeded on"
+#: (column, header, decimals) of the main table's columns given intervals
+#: (:func:`case_intervals`): its error measures (the time is a cost, not an error) and
+#: the distance to the ground truth, with the headers and decimals of the table.
+INTERVAL_COLUMNS = (*((c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c != "time_s"),
+                    *(x for x in EXTRA_COLUMNS if x[0] == "gt_vertex_mean_pct"))
 
 
 def _numeric_columns(df: pd.DataFrame) -> list[str]:
@@ -267,8 +273,27 @@ def failure_lines(df: pd.DataFrame) -> list[str]:
     return lines
 
 
+def case_intervals(df: pd.DataFrame, comp: Comparison) -> str:
+    """The main table's intervals: per method (table order) and error column
+    (:data:`INTERVAL_COLUMNS` present in ``df``) the bootstrap interval of its mean over
+    the common cases (:func:`eval.present.intervals.interval_table`), each over the cases
+    whose value the mean averages; empty with fewer than 2 common cases."""
+    import pandas as pd
+    if not comp.cases or len(comp.cases) < 2:
+        return ""
+    columns = [x for x in INTERVAL_COLUMNS if x[0] in df.columns]
+    rows = df[ok_mask(df) & df["case"].isin(list(comp.cases))]
+    per = {}
+    for m in comp.main["method"]:
+        g = rows[rows["method"] == m].drop_duplicates("case").sort_values("case", kind="stable")
+        if len(g):  # in case order, so the interval does not depend on the rows' order
+            per[m] = {c: pd.to_numeric(g[c], errors="coerce").dropna().to_numpy(float) for c, _, _ in columns}
+    return interval_table(per, columns, len(comp.cases))
+
+
 def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: list[str] | None = None,
-                        failures: list[str] | None = None, checked: str | None = None) -> str:
+                        failures: list[str] | None = None, checked: str | None = None,
+                        intervals: str | None = None) -> str:
     """``table.md``'s text for a :class:`Comparison`.
 
     The main table (bold: best per column, all rows on the same cases) under ``title``
@@ -282,6 +307,8 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
     ``failures`` (:func:`failure_lines`): a "Failed runs" list under the main table.
     ``checked``: the sentence saying whether the rows were checked against the result
     store (:meth:`eval.run.row_check.RowCheck.line`), under the main table.
+    ``intervals``: the main table's confidence intervals (:func:`case_intervals`), right
+    under it.
     """
     if title is None and comp.all is not None:
         title = COMMON_CASES_HEADING
@@ -289,6 +316,8 @@ def comparison_markdown(comp: Comparison, *, title: str | None = None, stops: li
     if note and comp.cases and (comp.main["n_failed"] > 0).any():
         note += " Failed: failed runs over all the cases the method was run on."
     text = to_markdown(comp.main, title=title, note=note, bold=comp.same_cases)
+    if intervals:
+        text += "\n" + intervals
     if checked:
         text += f"\n{checked}\n"
     if stops:
@@ -391,16 +420,29 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     if others:
         line += "\n\nRows from other runs:\n\n" + "".join(f"- {x}\n" for x in others)
     paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df),
-                                                        checked=line), out_dir / "table.md")
+                                                        checked=line, intervals=case_intervals(df, comp)),
+                                    out_dir / "table.md")
     note = " ".join(x for x in [main_note(comp), "; ".join(stop_lines(df, short=True))] if x) or None
     paths["table_tex"] = _write_text(to_latex(comp.main, note=note, bold=comp.same_cases), out_dir / "table.tex")
     return paths
 
 
+def _written_title(run_dir: Path) -> str | None:
+    """The main table's title the run wrote: the first line of its ``table.md`` when it
+    is a ``### `` heading (at most 4096 characters read), else None."""
+    try:
+        with open(run_dir / "table.md", encoding="utf-8", errors="replace") as fh:
+            first = fh.readline(4096).rstrip("\n")
+    except OSError:
+        return None
+    return first[4:] if first.startswith("### ") and len(first) > 4 else None
+
+
 def retabulate(run_dir) -> dict[str, Path]:
     """Rebuild the tables of a finished evaluator run from its ``cases.csv`` (e.g. after
     a change of the table layout), without rerunning any method; ``cases.csv`` itself
-    is left as it is. The title is taken from the run's ``run.json`` when present.
+    is left as it is. The title is the one the run wrote (the first heading of its
+    ``table.md``), else made from its ``run.json`` when present.
 
     ``python -m eval.tables RUN_DIR [RUN_DIR ...]`` does the same from the shell.
 
@@ -423,14 +465,15 @@ def retabulate(run_dir) -> dict[str, Path]:
     refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
     df = pd.read_csv(run_dir / "cases.csv")
     compared = pd.read_csv(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
-    title = None
-    try:
-        cfg = read_json(run_dir / "run.json").get("config", {})
-        exp, ds = cfg.get("experiment", {}).get("name"), cfg.get("dataset", {}).get("name")
-        if exp:
-            title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
-    except (OSError, ValueError, AttributeError):
-        pass
+    title = _written_title(run_dir)
+    if title is None:
+        try:
+            cfg = read_json(run_dir / "run.json").get("config", {})
+            exp, ds = cfg.get("experiment", {}).get("name"), cfg.get("dataset", {}).get("name")
+            if exp:
+                title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
+        except (OSError, ValueError, AttributeError):
+            pass
     return write_tables(df, run_dir, title=title, cases=False, compared=compared)
 
 

@@ -56,7 +56,6 @@ def test_paired_comparison_counts_and_bootstrap():
     assert r["median_diff"] == pytest.approx(-0.5)
     assert r["ci_lo"] <= r["median_diff"] <= r["ci_hi"]
     assert r == paired_comparison(df)  # seeded: reproducible
-    assert paired_comparison(df, seed=1)["median_diff"] == r["median_diff"]
     assert paired_comparison(df, b="ARAP") is None
     assert paired_comparison(df.drop(columns="volume_err_pct")) is None
     # rows in another order: same answer

@@ -135,3 +135,27 @@ def test_every_step_runs_this_checkout_first_on_the_python_path(monkeypatch):
     monkeypatch.setenv("PYTHONPATH", "/elsewhere")
     env = step_env()
     assert env["PYTHONPATH"].split(os.pathsep) == [str(REPO_ROOT), "/elsewhere"] and env[REPRODUCE_ENV] == "1"
+
+
+def test_retabulate_rebuilds_each_run_folders_tables_keeping_the_title_the_run_wrote(monkeypatch, tmp_path):
+    """``--retabulate`` rewrites table.md of every folder with a result store and a
+    cases.csv from its rows alone (here: adding the intervals), keeping the run's title;
+    a folder without a store (an experiment's own table) is left as it is."""
+    import pandas as pd
+
+    import eval.reproduce as reproduce
+    run = tmp_path / "results" / "demo"
+    (run / "runs").mkdir(parents=True)
+    pd.DataFrame([dict(case=f"c{i}", method=m, volume_err_pct=1.0 + i + (m == "B"), error="")
+                  for i in range(3) for m in "AB"]).to_csv(run / "cases.csv", index=False)
+    (run / "table.md").write_text("### demo: 3 cases; B: cpu preset\n\nold\n")
+    other = tmp_path / "results" / "own_table"
+    other.mkdir()
+    (other / "cases.csv").write_text("case,method\nc0,A\n")
+    (other / "table.md").write_text("an experiment's own table\n")
+    monkeypatch.setattr(reproduce, "RESULTS", str(tmp_path / "results"))
+    assert reproduce.main(["--retabulate"]) == 0
+    md = (run / "table.md").read_text()
+    assert md.startswith("### demo: 3 cases; B: cpu preset\n") and "old" not in md
+    assert "interval of the mean over the 3 cases" in md
+    assert (other / "table.md").read_text() == "an experiment's own table\n"

@@ -290,3 +290,24 @@ def test_a_method_scored_without_times_keeps_an_empty_time_column():
     assert "time_s" in s.columns and np.isnan(s["time_s"].iloc[0])
     md = to_markdown(s)
     assert "Time (s)" in md and _md_row(md, "Theirs")[-1] == "--"
+
+
+def test_table_md_states_each_means_interval_over_the_common_cases_whatever_the_row_order(tmp_path):
+    """Under the main table, each method's 95 % bootstrap interval of its mean over the
+    common cases only (ARAP's c0, c1: not SShaDe's c2, c3), the same for the rows shuffled."""
+    from eval.present.intervals import bootstrap_ci
+    df = _frame()
+    df.loc[(df["method"] == "SShaDe") & (df["case"] == "c1"), "volume_err_pct"] = 5.0
+    write_tables(df, tmp_path)
+    md = (tmp_path / "table.md").read_text()
+    assert "interval of the mean over the 2 cases" in md
+    lo, hi = bootstrap_ci([3.0, 5.0])
+    intervals = md.split("interval of the mean over the 2 cases")[1]
+    assert _md_row(intervals, "SShaDe")[1] == f"{lo:.2f} .. {hi:.2f}"
+    assert _md_row(intervals, "ARAP")[1] == "2.00 .. 2.00"
+    out2 = tmp_path / "shuffled"
+    out2.mkdir()
+    write_tables(df.sample(frac=1, random_state=5).reset_index(drop=True), out2)
+    assert md.split("### ")[0] == (out2 / "table.md").read_text().split("### ")[0]
+    assert intervals.split("\n\n")[1] == (out2 / "table.md").read_text().split(
+        "interval of the mean over the 2 cases")[1].split("\n\n")[1]

@@ -15,6 +15,7 @@ import pandas as pd
 
 from baselines.fullres_arap import Elastic
 from eval.present.figures import distribution_figure, safe_figure
+from eval.present.intervals import CI, bootstrap_ci
 from eval.present.rows import method_order_key, ok_mask
 from sshade.mesh.io import atomic_write
 from sshade.pipeline import SShaDe
@@ -71,8 +72,7 @@ def group_breakdown(df: pd.DataFrame, by=("pose", "subject")) -> pd.DataFrame:
     return res.reset_index(drop=True)
 
 
-def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.name, metric: str = "volume_err_pct", *,
-                      n_boot: int = 2000, seed: int = 0, level: float = 0.95) -> dict | None:
+def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.name, metric: str = "volume_err_pct") -> dict | None:
     """Method ``a`` against ``b`` on their common successful cases (finite ``metric``).
 
     Returns
@@ -80,9 +80,9 @@ def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.n
     None when either method or the metric is absent or they share no case; else a dict
     with ``a``, ``b``, ``metric``, ``n`` (common cases), ``n_a_lower`` (cases where a's
     value is below b's), ``n_ties``, ``median_diff`` (median of a - b, the metric's
-    unit), ``ci_lo``, ``ci_hi`` (percentile bootstrap of that median: ``n_boot``
-    resamples of the cases with :func:`numpy.random.default_rng` (``seed``), interval
-    ``level``), ``n_boot``, ``seed``, ``level``.
+    unit), ``ci_lo``, ``ci_hi`` (the percentile bootstrap of that median over the cases,
+    :func:`eval.present.intervals.bootstrap_ci`), ``n_boot``, ``seed``, ``level`` (its
+    :data:`eval.present.intervals.CI`; ``ci_lo = ci_hi = median_diff`` for one case).
 
     >>> d = pd.DataFrame({"case": ["c1", "c2", "c1", "c2"], "method": ["SShaDe"] * 2 + ["Elastic"] * 2,
     ...                   "error": "", "volume_err_pct": [1.0, 3.0, 2.0, 2.0]})
@@ -101,9 +101,8 @@ def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.n
     if not len(j):
         return None
     d = (j["a"] - j["b"]).to_numpy(float)
-    rng = np.random.default_rng(seed)
-    boots = np.median(d[rng.integers(0, len(d), size=(int(n_boot), len(d)))], axis=1)
-    lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
+    lo, hi = bootstrap_ci(d, np.median) or (float(np.median(d)),) * 2
+    level, n_boot, seed = CI
     return {"a": a, "b": b, "metric": metric, "n": len(d), "n_a_lower": int((d < 0).sum()),
             "n_ties": int((d == 0).sum()), "median_diff": float(np.median(d)), "ci_lo": float(lo),
             "ci_hi": float(hi), "n_boot": int(n_boot), "seed": int(seed), "level": float(level)}
@@ -126,7 +125,7 @@ def _paired_text(p: dict | None, a: str, b: str, metric: str) -> list[str]:
 
 
 def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: str = SShaDe.name, b: str = Elastic.name,
-                       metric: str = "volume_err_pct", seed: int = 0) -> str:
+                       metric: str = "volume_err_pct") -> str:
     """``breakdown.md``'s text: per (``by``, metric) a table of "mean ± std (n)" with the
     groups as rows and the methods (table order) as columns, then the paired comparison."""
     br = group_breakdown(df) if br is None else br
@@ -142,7 +141,7 @@ def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: s
             lines.append("| " + " | ".join([str(g), *[_cell(by_m.get(m)) for m in methods]]) + " |")
         lines.append("")
     lines += [f"## Paired comparison: {a} vs {b} ({metric})", ""]
-    lines += _paired_text(paired_comparison(df, a, b, metric, seed=seed), a, b, metric)
+    lines += _paired_text(paired_comparison(df, a, b, metric), a, b, metric)
     return "\n".join(lines) + "\n"
 
 
