@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval.present.intervals import CI, bootstrap_ci
+from eval.present.measures import MEASURES, label
 from eval.present.rows import methods_in, ok_mask
 from eval.present.stops import stop_lines
 from eval.run.compared import COMPARED_CSV
@@ -33,14 +34,18 @@ RANK_TEST = ("two-sided Wilcoxon signed-rank test over the same cases", 0.05)
 RANK_WORDS = (f"in order of GT mean, a method shares the rank of the group above unless a {RANK_TEST[0]} "
               f"at p < {RANK_TEST[1]} says it is farther from the truth than that group's first method")
 #: The column that ranks, and its words.
-RANK_COLUMN = ("gt_vertex_mean_pct", "GT mean (%): mean distance to the true pose, % of the bounding-box diagonal")
+RANK_COLUMN = ("gt_vertex_mean_pct", f"{label('gt_vertex_mean_pct')}: mean distance to the true pose, % of the "
+                                     "bounding-box diagonal")
 REFERENCE = SShaDe.name  #: times are relative to this method in the same run
+#: The measures a board shows after its rank column, in order.
+BOARD_MEASURES = ("volume_err_pct", "edge_err_pct", "angle_err_deg")
 
 
 @dataclass
 class Board:
-    """One dataset's entries. ``rows``: per method ``method``, ``gt`` (or None), ``volume``,
-    ``el``, ``fa``, ``time_rel`` (x SShaDe, or None), ``rank`` (or None), ``stopped``."""
+    """One dataset's entries. ``rows``: per method ``method``, ``gt`` (or None), the
+    :data:`BOARD_MEASURES` (by key), ``time_rel`` (x SShaDe, or None), ``rank`` (or None),
+    ``stopped``."""
     folder: str
     label: str
     commit: str
@@ -173,8 +178,7 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
               rank_column=_rank_words(info, n, RANK_COLUMN[0]))
     for i, (_, r) in enumerate(main.iterrows()):
         t = None if str(r["method"]) in other else _num(r.get("time_s"))  # never a time across runs
-        b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": _num(r.get("volume_err_pct")),
-                       "el": _num(r.get("edge_err_pct")), "fa": _num(r.get("angle_err_deg")),
+        b.rows.append({"method": str(r["method"]), "gt": gt[i], **{k: _num(r.get(k)) for k in BOARD_MEASURES},
                        "time_rel": t / ref_t if t is not None and ref_t else None, "rank": ranks[i],
                        "ci": cis[i], "stopped": stops.get(str(r["method"]), "")})
     return b
@@ -200,7 +204,7 @@ def _animation_board(d: Path, info: dict) -> Board | None:
               time_words=" (median seconds per frame)")
     for i, (_, r) in enumerate(t.iterrows()):
         tm = _num(r.get("frame_median_s"))
-        b.rows.append({"method": str(r["method"]), "gt": gt[i], "volume": None, "el": None, "fa": None,
+        b.rows.append({"method": str(r["method"]), "gt": gt[i], **dict.fromkeys(BOARD_MEASURES),
                        "time_rel": tm / ref_t if tm is not None and ref_t else None, "rank": None,
                        "stopped": str(r.get("how", "")) + (f"; {int(r['n_converged'])} frames converged"
                                                            if _num(r.get("n_converged")) is not None else "")})
@@ -288,8 +292,7 @@ def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
                 cells.append(_f(r["gt"], 2) + (f" ({r['rank']})" if r["rank"] is not None else "")
                              + stale_words(b.stale.get(m)))
             else:
-                cells.append(f"{_f(r['volume'], 2)} / {_f(r['el'], 2)} / {_f(r['fa'], 2)}"
-                             + stale_words(b.stale.get(m)))
+                cells.append(" / ".join(_f(r[k], 2) for k in BOARD_MEASURES) + stale_words(b.stale.get(m)))
         rows.append(cells)
     return head, rows
 
@@ -300,14 +303,15 @@ def _board_section(b: Board, link: str) -> list[str]:
            f"{link}, commit {b.commit or 'unknown'}; mean over {b.n_cases} case(s) every method ran on; "
            + (f"ranked by {b.rank_column}" if b.ranked else b.why_not)
            + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
-           f"| Rank | Method | GT mean (%) | {CI[0]:.0%} CI | Volume (%) | EL (%) | FA (deg) | Time (x {REFERENCE}) "
-           "| Stopped |",
+           f"| Rank | Method | {label(RANK_COLUMN[0])} | {CI[0]:.0%} CI | {' | '.join(map(label, BOARD_MEASURES))} "
+           f"| Time (x {REFERENCE}) | Stopped |",
            "|---:|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0,
                                            x["gt"] if x["gt"] is not None else math.inf)):
         out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
-                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], 2)} | {_ci(r.get('ci'))} | "
-                   f"{_f(r['volume'], 2)} | {_f(r['el'], 2)} | {_f(r['fa'], 3)} | {_f(r['time_rel'], 2, 'x')} | "
+                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], MEASURES[RANK_COLUMN[0]].decimals)} | {_ci(r.get('ci'))} | "
+                   + "".join(f"{_f(r[k], MEASURES[k].decimals)} | " for k in BOARD_MEASURES)
+                   + f"{_f(r['time_rel'], 2, 'x')} | "
                    f"{r['stopped'].replace('|', '/')} |")
     return out
 

@@ -32,6 +32,7 @@ from eval.leaderboard import (
     run_board_markdown,
 )
 from eval.present.breakdown import BREAKDOWN_METRICS
+from eval.present.measures import MEASURES
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
 from eval.present.table_markup import time_marks, time_notes
@@ -115,7 +116,7 @@ def _summary_table(summary, table_id: str) -> str:
     """The main columns (:data:`eval.tables.TABLE_COLUMNS` and ``EXTRA_COLUMNS``) of a
     per-method summary (:func:`eval.tables.summarize` layout)."""
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
-    cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns and c != "converged"]
+    cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns and not MEASURES[c].fraction]
     head = ["Method", "Cases", "Failed", *[h for _, h, _ in cols]]
     rows, marks = [], time_marks(summary)
     for i, (_, r) in enumerate(summary.iterrows()):

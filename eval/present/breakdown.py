@@ -16,20 +16,16 @@ import pandas as pd
 from baselines.fullres_arap import Elastic
 from eval.present.figures import distribution_figure, safe_figure
 from eval.present.intervals import CI, bootstrap_ci
+from eval.present.measures import BROKEN_DOWN, label
 from eval.present.rows import method_order_key, ok_mask
 from sshade.mesh.io import atomic_write
 from sshade.pipeline import SShaDe
 
 __all__ = ["BREAKDOWN_METRICS", "group_breakdown", "paired_comparison", "breakdown_markdown", "write_breakdown"]
 
-#: (column, label) of the metrics broken down, in this order (when present).
-BREAKDOWN_METRICS = (
-    ("volume_err_pct", "Volume (%)"),
-    ("area_err_pct", "Area (%)"),
-    ("edge_err_pct", "EL (%)"),
-    ("angle_err_deg", "FA (deg)"),
-    ("gt_vertex_mean_pct", "GT mean (%)"),
-)
+#: (column, label) of the metrics broken down, in this order (when present):
+#: :data:`eval.present.measures.BROKEN_DOWN`.
+BREAKDOWN_METRICS = tuple((k, label(k)) for k in BROKEN_DOWN)
 
 
 def _metrics(df: pd.DataFrame) -> list[tuple[str, str]]:

@@ -7,33 +7,21 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from eval.present.measures import EXTRA, MAIN, MEASURES
+
 if TYPE_CHECKING:  # pandas is imported where a table is built
     import pandas as pd
 
 __all__ = ["TABLE_COLUMNS", "EXTRA_COLUMNS", "NO_BOLD", "REPORTED_NOTE", "OTHER_RUN_NOTE", "time_marks", "time_notes",
            "to_markdown", "to_latex", "tex_escape"]
 
-#: (column, Markdown header, LaTeX header, decimals, LaTeX unit suffix) of the main table.
-TABLE_COLUMNS = (
-    ("volume_err_pct", "Volume (%)", "Volume", 2, r"\%"),
-    ("area_err_pct", "Area (%)", "Area", 2, r"\%"),
-    ("edge_err_pct", "EL (%)", "EL", 2, r"\%"),
-    ("angle_err_deg", "FA (deg)", "FA", 3, r"\textdegree"),
-    ("time_s", "Time (s)", "Time", 2, "s"),
-)
-#: Extra columns shown in Markdown only (when present).
-EXTRA_COLUMNS = (
-    ("angle_err_rel_pct", "FA rel (%)", 2),
-    ("handle_err_pct", "Handle (%)", 3),
-    ("handle_pre_pct", "Handle pre (%)", 3),
-    ("gt_vertex_mean_pct", "GT mean (%)", 2),
-    ("chamfer", "Chamfer", 5),
-    ("ref_mean_pct", "Ref mean (%)", 3),
-    ("ref_max_pct", "Ref max (%)", 2),
-    ("energy_gap", "E gap", 4),
-    ("iterations", "Iters", 0),
-    ("converged", "Converged", 0),
-)
+#: (column, Markdown header, LaTeX header, decimals, LaTeX unit suffix) of the main table
+#: (:data:`eval.present.measures.MAIN`).
+TABLE_COLUMNS = tuple((k, MEASURES[k].label, MEASURES[k].latex, MEASURES[k].decimals, MEASURES[k].tex_unit)
+                      for k in MAIN)
+#: (column, Markdown header, decimals) shown in Markdown only, when present
+#: (:data:`eval.present.measures.EXTRA`).
+EXTRA_COLUMNS = tuple((k, MEASURES[k].label, MEASURES[k].decimals) for k in EXTRA)
 #: The line under a table with a reported Time.
 REPORTED_NOTE = ("(reported): the time the method reported for itself, on its own machine (the times file of "
                  "its scored results); not measured in this run, so never compared in bold with one that was.")
@@ -41,7 +29,7 @@ REPORTED_NOTE = ("(reported): the time the method reported for itself, on its ow
 OTHER_RUN_NOTE = ("(other run): measured by the run the row was read from, on its machine (see \"Rows from other "
                   "runs\"); never compared in bold with this run's times.")
 #: Columns where the lowest value is not "best": never bold.
-NO_BOLD = ("iterations", "converged")
+NO_BOLD = tuple(k for k, m in MEASURES.items() if not m.best_lowest)
 
 
 def _fmt(v, dec: int) -> str:
@@ -90,7 +78,7 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
         if "Failed" in head:
             cells.append(str(int(r["n_failed"])))
         for c, _, d in cols:
-            if c == "converged":  # mean of a boolean: show as k/n
+            if MEASURES.get(c) is not None and MEASURES[c].fraction:  # mean of a boolean: show as k/n
                 v = r[c]
                 s = "--" if v is None or not math.isfinite(float(v)) else \
                     f"{int(round(float(v) * int(r['n_cases'])))}/{int(r['n_cases'])}"
