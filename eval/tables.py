@@ -51,17 +51,22 @@ INTERVAL_COLUMNS = (*((c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c != "time
 
 
 def _numeric_columns(df: pd.DataFrame) -> list[str]:
-    """Columns averaged by :func:`summarize`: numeric or boolean ones, and object ones
-    that convert to float (e.g. booleans mixed with NaN where a method failed), except
-    identifiers (:data:`_ID_COLUMNS`)."""
+    """Columns averaged by :func:`summarize`: numeric or boolean ones holding a value, and
+    object ones that convert to float (e.g. booleans mixed with NaN where a method
+    failed), except identifiers (:data:`_ID_COLUMNS`); ``time_s`` always (empty without
+    times). A column of no value is left out whether it comes as None (a run's rows) or as
+    NaN (``cases.csv`` read back), so :func:`retabulate` gives the run's table."""
     import pandas as pd
     num_cols = []
     for c in df.columns:
         if c in _ID_COLUMNS:
             continue
         s = df[c]
-        if c == "time_s" or pd.api.types.is_bool_dtype(s) or pd.api.types.is_numeric_dtype(s):
+        if c == "time_s":
             num_cols.append(c)  # a Time column of no time (results scored without times) stays, empty
+        elif pd.api.types.is_bool_dtype(s) or pd.api.types.is_numeric_dtype(s):
+            if s.notna().any():  # a column of no value read back from cases.csv is no mean, as in the run
+                num_cols.append(c)
         elif s.dtype == object and len(s.dropna()):
             try:
                 s.dropna().astype(float)
