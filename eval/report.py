@@ -32,6 +32,7 @@ from eval.leaderboard import (
     run_board_markdown,
 )
 from eval.present.breakdown import BREAKDOWN_METRICS
+from eval.present.intervals import CI
 from eval.present.measures import MEASURES
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
@@ -195,10 +196,13 @@ def _breakdown_section(run_dir: Path) -> str:
                     continue
                 r = r.iloc[0]
                 sd = "" if pd.isna(r["std"]) else f" &plusmn; {float(r['std']):.3g}"
-                cells.append(f'<td data-v="{float(r["mean"])!r}">{float(r["mean"]):.3g}{sd} ({int(r["n"])})</td>')
+                ci = "" if pd.isna(r.get("ci_lo")) or pd.isna(r.get("ci_hi")) else \
+                    f" [{float(r['ci_lo']):.3g} .. {float(r['ci_hi']):.3g}]"
+                cells.append(f'<td data-v="{float(r["mean"])!r}">{float(r["mean"]):.3g}{sd} ({int(r["n"])}){ci}</td>')
             rows.append(cells)
         out.append(f"<details{' open' if len(out) == 1 else ''}><summary>{_e(labels.get(metric, metric))} per {_e(by)} "
-                   f"(mean &plusmn; std (n))</summary>{_table([str(by), *map(str, methods)], rows)}</details>")
+                   f"(mean &plusmn; std (n) [{CI[0]:.0%} interval of the mean])</summary>"
+                   f"{_table([str(by), *map(str, methods)], rows)}</details>")
     if (run_dir / "breakdown.png").is_file():
         out.append('<p><img src="breakdown.png" alt="breakdown"></p>')
     if (run_dir / "breakdown.md").is_file():

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from eval.present.breakdown import write_breakdown
 from eval.present.intervals import interval_table
 from eval.present.rows import method_order_key, methods_in, ok_mask
 from eval.present.stops import PROTOCOL_TEXT, stop_lines
@@ -447,7 +448,8 @@ def retabulate(run_dir) -> dict[str, Path]:
     """Rebuild the tables of a finished evaluator run from its ``cases.csv`` (e.g. after
     a change of the table layout), without rerunning any method; ``cases.csv`` itself
     is left as it is. The title is the one the run wrote (the first heading of its
-    ``table.md``), else made from its ``run.json`` when present.
+    ``table.md``), else made from its ``run.json`` when present. A breakdown the run wrote
+    (``breakdown.csv``, ``breakdown.md``) is made again too; its figure is kept.
 
     ``python -m eval.tables RUN_DIR [RUN_DIR ...]`` does the same from the shell.
 
@@ -479,7 +481,10 @@ def retabulate(run_dir) -> dict[str, Path]:
                 title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
         except (OSError, ValueError, AttributeError):
             pass
-    return write_tables(df, run_dir, title=title, cases=False, compared=compared)
+    paths = write_tables(df, run_dir, title=title, cases=False, compared=compared)
+    if (run_dir / "breakdown.csv").is_file():  # the run wrote its breakdown: made again from the same rows
+        paths.update(write_breakdown(df, run_dir, figure=False))
+    return paths
 
 
 def main(argv=None) -> int:

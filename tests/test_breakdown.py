@@ -33,13 +33,18 @@ def test_group_breakdown_per_pose_and_subject():
     df = _rows()
     br = group_breakdown(df)
     assert set(br["by"]) == {"pose", "subject"}
-    assert list(br.columns) == ["by", "group", "method", "metric", "n", "mean", "std", "median", "min", "max"]
+    assert list(br.columns) == ["by", "group", "method", "metric", "n", "mean", "std", "median", "min", "max",
+                                "ci_lo", "ci_hi"]
     v = br[(br["by"] == "pose") & (br["metric"] == "volume_err_pct")]
     s1 = v[(v["group"] == 1) & (v["method"] == "SShaDe")].iloc[0]
     x = df[(df.method == "SShaDe") & (df.pose == 1)]["volume_err_pct"]
     assert s1["n"] == 10 and s1["mean"] == pytest.approx(x.mean()) and s1["std"] == pytest.approx(x.std(ddof=1))
     e3 = v[(v["group"] == 3) & (v["method"] == "Elastic")].iloc[0]
-    assert e3["n"] == 1 and np.isnan(e3["std"])  # the failed case (s01_p03) is left out
+    assert e3["n"] == 1 and np.isnan(e3["std"]) and np.isnan(e3["ci_lo"])  # the failed case (s01_p03) is left out
+    from eval.present.intervals import bootstrap_ci
+    xs = df[(df.method == "SShaDe") & (df.pose == 1)].sort_values("case")["volume_err_pct"]
+    assert (s1["ci_lo"], s1["ci_hi"]) == bootstrap_ci(xs.to_numpy(float))  # over the group's cases, in case order
+    assert s1["ci_lo"] <= s1["mean"] <= s1["ci_hi"]
     assert list(v["method"][v["group"] == 1]) == ["Elastic", "SShaDe"]  # table order
     subj = br[(br["by"] == "subject") & (br["metric"] == "edge_err_pct") & (br["method"] == "Elastic")]
     assert list(subj["group"]) == [0, 1] and list(subj["n"]) == [4, 3]

@@ -138,16 +138,18 @@ def test_every_step_runs_this_checkout_first_on_the_python_path(monkeypatch):
 
 
 def test_retabulate_rebuilds_each_run_folders_tables_keeping_the_title_the_run_wrote(monkeypatch, tmp_path):
-    """``--retabulate`` rewrites table.md of every folder with a result store and a
-    cases.csv from its rows alone (here: adding the intervals), keeping the run's title;
-    a folder without a store (an experiment's own table) is left as it is."""
+    """``--retabulate`` rewrites table.md (and the breakdown the run wrote) of every folder
+    with a result store and a cases.csv from its rows alone (here: adding the intervals),
+    keeping the run's title; a folder without a store (an experiment's own table) is left
+    as it is."""
     import pandas as pd
 
     import eval.reproduce as reproduce
     run = tmp_path / "results" / "demo"
     (run / "runs").mkdir(parents=True)
-    pd.DataFrame([dict(case=f"c{i}", method=m, volume_err_pct=1.0 + i + (m == "B"), error="")
+    pd.DataFrame([dict(case=f"c{i}", subject=0, pose=1, method=m, volume_err_pct=1.0 + i + (m == "B"), error="")
                   for i in range(3) for m in "AB"]).to_csv(run / "cases.csv", index=False)
+    (run / "breakdown.csv").write_text("old\n")
     (run / "table.md").write_text("### demo: 3 cases; B: cpu preset\n\nold\n")
     other = tmp_path / "results" / "own_table"
     other.mkdir()
@@ -158,4 +160,5 @@ def test_retabulate_rebuilds_each_run_folders_tables_keeping_the_title_the_run_w
     md = (run / "table.md").read_text()
     assert md.startswith("### demo: 3 cases; B: cpu preset\n") and "old" not in md
     assert "interval of the mean over the 3 cases" in md
+    assert "| 1 | 2 ± 1 (n=3) [" in (run / "breakdown.md").read_text()  # the run's breakdown made again
     assert (other / "table.md").read_text() == "an experiment's own table\n"

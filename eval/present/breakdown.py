@@ -15,7 +15,7 @@ import pandas as pd
 
 from baselines.fullres_arap import Elastic
 from eval.present.figures import distribution_figure, safe_figure
-from eval.present.intervals import CI, bootstrap_ci
+from eval.present.intervals import CI, bootstrap_ci, interval_words
 from eval.present.measures import BROKEN_DOWN, label
 from eval.present.rows import method_order_key, ok_mask
 from sshade.mesh.io import atomic_write
@@ -42,22 +42,27 @@ def group_breakdown(df: pd.DataFrame, by=("pose", "subject")) -> pd.DataFrame:
     Returns
     -------
     DataFrame with columns ``by``, ``group``, ``method``, ``metric``, ``n``, ``mean``,
-    ``std`` (ddof 1, NaN for n = 1), ``median``, ``min``, ``max``; methods in table
-    order; groups sorted. Empty (those columns) when nothing qualifies.
+    ``std`` (ddof 1, NaN for n = 1), ``median``, ``min``, ``max``, ``ci_lo``, ``ci_hi``
+    (the mean's interval over the group's cases, :func:`eval.present.intervals.bootstrap_ci`
+    of the values in case order; NaN for n = 1); methods in table order; groups sorted.
+    Empty (those columns) when nothing qualifies.
     """
-    cols = ["by", "group", "method", "metric", "n", "mean", "std", "median", "min", "max"]
+    cols = ["by", "group", "method", "metric", "n", "mean", "std", "median", "min", "max", "ci_lo", "ci_hi"]
     ok = df[ok_mask(df)] if len(df) else df
     out = []
     for b in by:
         if b not in ok.columns or ok[b].isna().all():
             continue
         for col, _ in _metrics(ok):
-            v = ok[[b, "method", col]].copy()
+            v = ok[[b, "method", col, *(["case"] if "case" in ok.columns else [])]].copy()
             v[col] = pd.to_numeric(v[col], errors="coerce")
             v = v[np.isfinite(v[col])]
+            if "case" in v.columns:
+                v = v.sort_values("case", kind="stable")
             for (g, m), x in v.groupby([b, "method"], sort=True)[col]:
+                ci = bootstrap_ci(x.to_numpy(float)) or (math.nan, math.nan)
                 out.append([b, g, m, col, len(x), x.mean(), x.std(ddof=1) if len(x) > 1 else math.nan,
-                            x.median(), x.min(), x.max()])
+                            x.median(), x.min(), x.max(), *ci])
     res = pd.DataFrame(out, columns=cols)
     if len(res):
         order = [c for c, _ in BREAKDOWN_METRICS]
@@ -108,7 +113,9 @@ def _cell(r) -> str:
     if r is None:
         return "-"
     s = f"{r['mean']:.3g}"
-    return s + (f" ± {r['std']:.2g}" if r["std"] == r["std"] else "") + (f" (n={r['n']})" if r["n"] != 1 else "")
+    lo, hi = r.get("ci_lo", math.nan), r.get("ci_hi", math.nan)
+    return (s + (f" ± {r['std']:.2g}" if r["std"] == r["std"] else "") + (f" (n={r['n']})" if r["n"] != 1 else "")
+            + (f" [{lo:.3g} .. {hi:.3g}]" if lo == lo and hi == hi else ""))
 
 
 def _paired_text(p: dict | None, a: str, b: str, metric: str) -> list[str]:
@@ -126,7 +133,7 @@ def breakdown_markdown(df: pd.DataFrame, br: pd.DataFrame | None = None, *, a: s
     groups as rows and the methods (table order) as columns, then the paired comparison."""
     br = group_breakdown(df) if br is None else br
     lines = ["# Breakdowns", "", "Mean ± sample standard deviation (n cases when not 1) over the successful cases "
-             "of each group.", ""]
+             f"of each group, and in brackets its {interval_words()}.", ""]
     labels = dict(BREAKDOWN_METRICS)
     for (by, col), t in br.groupby(["by", "metric"], sort=False):
         methods = sorted(t["method"].unique(), key=method_order_key)
