@@ -309,7 +309,8 @@ def _board_section(b: Board, link: str) -> list[str]:
     for r in sorted(b.rows, key=lambda x: (x["rank"] is None, x["rank"] or 0,
                                            x["gt"] if x["gt"] is not None else math.inf)):
         out.append(f"| {r['rank'] if r['rank'] is not None else '--'} | {r['method']}"
-                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], MEASURES[RANK_COLUMN[0]].decimals)} | {_ci(r.get('ci'))} | "
+                   f"{stale_words(b.stale.get(r['method']))} | {_f(r['gt'], MEASURES[RANK_COLUMN[0]].decimals)} | "
+                   f"{_ci(r.get('ci'))} | "
                    + "".join(f"{_f(r[k], MEASURES[k].decimals)} | " for k in BOARD_MEASURES)
                    + f"{_f(r['time_rel'], 2, 'x')} | "
                    f"{r['stopped'].replace('|', '/')} |")

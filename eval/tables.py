@@ -34,8 +34,8 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "all_note", "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
-           "COMMON_CASES_HEADING", "INTERVAL_COLUMNS", "case_intervals", "compared_lines", "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines",
-           "PROTOCOL_TEXT"]
+           "COMMON_CASES_HEADING", "INTERVAL_COLUMNS", "case_intervals", "compared_lines", "TABLE_COLUMNS",
+           "EXTRA_COLUMNS", "method_order_key", "stop_lines", "PROTOCOL_TEXT"]
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")

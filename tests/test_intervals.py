@@ -1,6 +1,5 @@
 """eval.present.intervals: the bootstrap interval of a mean over cases, and the table of them."""
 import numpy as np
-import pytest
 
 from eval.present.intervals import CI, bootstrap_ci, interval_table
 

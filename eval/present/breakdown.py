@@ -73,7 +73,8 @@ def group_breakdown(df: pd.DataFrame, by=("pose", "subject")) -> pd.DataFrame:
     return res.reset_index(drop=True)
 
 
-def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.name, metric: str = "volume_err_pct") -> dict | None:
+def paired_comparison(df: pd.DataFrame, a: str = SShaDe.name, b: str = Elastic.name,
+                      metric: str = "volume_err_pct") -> dict | None:
     """Method ``a`` against ``b`` on their common successful cases (finite ``metric``).
 
     Returns
