@@ -77,13 +77,15 @@ def test_refused_inputs(faust_pair):
         prepare(V, F, h, anchor="corner")
 
 
-@pytest.mark.parametrize("average", ["uniform", "proximity"])
-def test_threads_do_not_change_the_results(faust_pair, average):
+@pytest.mark.parametrize("average, transfer", [("uniform", "vertex"), ("proximity", "vertex"),
+                                               ("uniform", "triangle")])
+def test_threads_do_not_change_the_results(faust_pair, average, transfer):
     """The samplings on one thread or on three (their decodings then added chunk by chunk
     in whatever order the threads end): the same numbers, first solve and later ones
-    (their starts extrapolated from the earlier results), uniform or weighted average."""
+    (their starts extrapolated from the earlier results), uniform or weighted average,
+    blended or per-triangle (Alg. 1) transfer."""
     V, F, h, V2 = faust_pair
-    kw = dict(n_low=500, n_samplings=3, seed=3, average=average)
+    kw = dict(n_low=500, n_samplings=3, seed=3, average=average, transfer=transfer)
     with prepare(V, F, h, workers=1, **kw) as one, prepare(V, F, h, workers=3, **kw) as three:
         assert (one.workers, three.workers) == (1, 3)
         for t in (0.25, 0.5, 0.75, 1.0):
