@@ -349,6 +349,17 @@ class Prepared:
         self._pending += futs
         return futs
 
+    def _settle(self) -> None:
+        """Wait for every task of the solves before, the decoding chunks their ARAP tasks
+        queued while this waited included (a task adds its chunks before it ends, so none
+        is left once every listed task is done), then forget them."""
+        while True:
+            running = [f for f in self._pending if not f.done()]
+            if not running:
+                break
+            wait(running)
+        self._pending = []
+
     def solve(self, targets, *, return_info: bool = False):
         """Deform for ``targets`` ((h, 3) float, one per handle, in :attr:`handles`' order).
 
@@ -377,8 +388,7 @@ class Prepared:
     def _solve(self, T_mesh: np.ndarray, return_info: bool):
         T = self.frame.to_unit(T_mesh)
         t0 = time.perf_counter()
-        wait(self._pending)  # an interrupted solve's tasks end before their samplings are reused
-        self._pending = []
+        self._settle()  # an interrupted solve's tasks end before their samplings are reused
         first, S = self.n_solves == 0, self._samplings
         arap, first_arap = self._arap, Future()
         avg = _Average(len(self.V), len(S), 2 * self.workers if self.workers > 1 else 1,

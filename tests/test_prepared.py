@@ -239,3 +239,28 @@ def test_solves_leave_native_worker_threads_idle():
     assert out.returncode == 0, out.stderr[-2000:]
     busy, wall = map(float, out.stdout.split()[-2:])
     assert busy <= 0.1 * wall + 2, f"threads not started by Python ran {busy:.0f} of {wall:.0f} ticks"
+
+
+def test_a_solve_after_an_interrupted_one_waits_for_its_decodings_and_lands_as_without(faust_pair, monkeypatch):
+    """Ctrl-C in the calling thread while a solve's tasks run (here: right after they are
+    queued): the tasks go on, and the next solve waits for all of them, the decoding chunks
+    their ARAPs queued meanwhile included, before it touches the samplings: its result is
+    the one of the same solves uninterrupted."""
+    import sshade.prepared as prepared_module
+    V, F, h, V2 = faust_pair
+    kw = dict(n_low=500, n_samplings=3, seed=3, workers=2)
+    path = [V[h] + t * (V2[h] - V[h]) for t in (0.3, 0.6, 0.9)]
+    with prepare(V, F, h, **kw) as p:
+        want = [p.solve(T) for T in path]
+    real_wait = prepared_module.Prepared._wait
+
+    def interrupted(futs):
+        raise KeyboardInterrupt
+
+    with prepare(V, F, h, **kw) as p:
+        assert np.array_equal(p.solve(path[0]), want[0])
+        monkeypatch.setattr(prepared_module.Prepared, "_wait", staticmethod(interrupted))
+        with pytest.raises(KeyboardInterrupt):
+            p.solve(path[1])
+        monkeypatch.setattr(prepared_module.Prepared, "_wait", staticmethod(real_wait))
+        assert np.array_equal(p.solve(path[2]), want[2])
