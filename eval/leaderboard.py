@@ -10,12 +10,12 @@ from pathlib import Path
 
 from eval.present.intervals import CI, bootstrap_ci
 from eval.present.measures import MEASURES, label
-from eval.present.rows import methods_in, ok_mask
+from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
 from eval.run.compared import COMPARED_CSV
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders, run_folders
-from eval.tables import compare
+from eval.tables import common_case_values, compare
 from sshade.pipeline import SShaDe
 
 __all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "stale_words",
@@ -97,14 +97,13 @@ def _case_ranks(df, comp, gt: list, methods: list) -> tuple[list, list]:
     """The ranks of ``methods`` (the main table's rows, GT means ``gt``) by
     :func:`_paired_ranks` over the common cases' successful rows of ``df``, and each
     one's :func:`bootstrap_ci` over those cases (None lists where a method lacks one)."""
-    col = RANK_COLUMN[0]
-    rows = df[ok_mask(df) & df["case"].isin(list(comp.cases or []))]
+    values = common_case_values(df, comp, RANK_COLUMN[0])
     per = {}
     for m in methods:
-        g = rows[rows["method"] == m].drop_duplicates("case").set_index("case")[col]
-        if len(g) != len(comp.cases or []) or g.isna().any():
+        g = values.get(m)
+        if g is None or len(g) != len(comp.cases or []) or g.isna().any():
             return [None] * len(methods), [None] * len(methods)
-        per[m] = [float(g[c]) for c in comp.cases]
+        per[m] = g.tolist()
     means = {m: (v if v is not None else float("inf")) for m, v in zip(methods, gt)}
     r = _paired_ranks(per, means)
     return [r.get(m) for m in methods], [bootstrap_ci(per[m]) for m in methods]

@@ -32,7 +32,7 @@ from eval.leaderboard import (
     run_board_markdown,
 )
 from eval.present.breakdown import BREAKDOWN_METRICS
-from eval.present.intervals import CI
+from eval.present.intervals import CI, interval_text
 from eval.present.measures import MEASURES
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
@@ -196,8 +196,8 @@ def _breakdown_section(run_dir: Path) -> str:
                     continue
                 r = r.iloc[0]
                 sd = "" if pd.isna(r["std"]) else f" &plusmn; {float(r['std']):.3g}"
-                ci = "" if pd.isna(r.get("ci_lo")) or pd.isna(r.get("ci_hi")) else \
-                    f" [{float(r['ci_lo']):.3g} .. {float(r['ci_hi']):.3g}]"
+                ci = interval_text((r.get("ci_lo", math.nan), r.get("ci_hi", math.nan)), ".3g")
+                ci = f" [{ci}]" if ci else ""
                 cells.append(f'<td data-v="{float(r["mean"])!r}">{float(r["mean"]):.3g}{sd} ({int(r["n"])}){ci}</td>')
             rows.append(cells)
         out.append(f"<details{' open' if len(out) == 1 else ''}><summary>{_e(labels.get(metric, metric))} per {_e(by)} "

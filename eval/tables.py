@@ -34,8 +34,8 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
 
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "all_note", "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
-           "COMMON_CASES_HEADING", "INTERVAL_COLUMNS", "case_intervals", "compared_lines", "TABLE_COLUMNS",
-           "EXTRA_COLUMNS", "method_order_key", "stop_lines", "PROTOCOL_TEXT"]
+           "COMMON_CASES_HEADING", "INTERVAL_COLUMNS", "case_intervals", "common_case_values", "compared_lines",
+           "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines", "PROTOCOL_TEXT"]
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
@@ -279,21 +279,34 @@ def failure_lines(df: pd.DataFrame) -> list[str]:
     return lines
 
 
+def common_case_values(df: pd.DataFrame, comp: Comparison, column: str) -> dict:
+    """Each method's (the main table's, in its order) ``column`` over the common cases'
+    successful rows: ``{method: Series}`` indexed by case in case-name order, so what is
+    computed from them (an interval's resamples) does not depend on the rows' order;
+    values as numbers (NaN where missing); methods without such a row left out."""
+    import pandas as pd
+    rows = df[ok_mask(df) & df["case"].isin(list(comp.cases or []))]
+    out = {}
+    for m in comp.main["method"]:
+        g = rows[rows["method"] == m].drop_duplicates("case").sort_values("case", kind="stable").set_index("case")
+        if len(g):
+            out[m] = pd.to_numeric(g[column], errors="coerce")
+    return out
+
+
 def case_intervals(df: pd.DataFrame, comp: Comparison) -> str:
     """The main table's intervals: per method (table order) and error column
     (:data:`INTERVAL_COLUMNS` present in ``df``) the bootstrap interval of its mean over
     the common cases (:func:`eval.present.intervals.interval_table`), each over the cases
-    whose value the mean averages; empty with fewer than 2 common cases."""
-    import pandas as pd
+    whose value the mean averages (:func:`common_case_values`, missing values left out);
+    empty with fewer than 2 common cases."""
     if not comp.cases or len(comp.cases) < 2:
         return ""
     columns = [x for x in INTERVAL_COLUMNS if x[0] in df.columns]
-    rows = df[ok_mask(df) & df["case"].isin(list(comp.cases))]
-    per = {}
-    for m in comp.main["method"]:
-        g = rows[rows["method"] == m].drop_duplicates("case").sort_values("case", kind="stable")
-        if len(g):  # in case order, so the interval does not depend on the rows' order
-            per[m] = {c: pd.to_numeric(g[c], errors="coerce").dropna().to_numpy(float) for c, _, _ in columns}
+    per: dict = {}
+    for c, _, _ in columns:
+        for m, v in common_case_values(df, comp, c).items():
+            per.setdefault(m, {})[c] = v.dropna().to_numpy(float)
     return interval_table(per, columns, len(comp.cases))
 
 

@@ -15,7 +15,7 @@ import pandas as pd
 
 from baselines.fullres_arap import Elastic
 from eval.present.figures import distribution_figure, safe_figure
-from eval.present.intervals import CI, bootstrap_ci, interval_words
+from eval.present.intervals import CI, bootstrap_ci, interval_text, interval_words
 from eval.present.measures import BROKEN_DOWN, label
 from eval.present.rows import method_order_key, ok_mask
 from sshade.mesh.io import atomic_write
@@ -114,9 +114,9 @@ def _cell(r) -> str:
     if r is None:
         return "-"
     s = f"{r['mean']:.3g}"
-    lo, hi = r.get("ci_lo", math.nan), r.get("ci_hi", math.nan)
+    ci = interval_text((r.get("ci_lo", math.nan), r.get("ci_hi", math.nan)), ".3g")
     return (s + (f" ± {r['std']:.2g}" if r["std"] == r["std"] else "") + (f" (n={r['n']})" if r["n"] != 1 else "")
-            + (f" [{lo:.3g} .. {hi:.3g}]" if lo == lo and hi == hi else ""))
+            + (f" [{ci}]" if ci else ""))
 
 
 def _paired_text(p: dict | None, a: str, b: str, metric: str) -> list[str]:

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-__all__ = ["CI", "bootstrap_ci", "interval_words", "interval_table"]
+__all__ = ["CI", "bootstrap_ci", "interval_text", "interval_words", "interval_table"]
 
 #: (level, resamples, seed) of every interval the evaluator states.
 CI = (0.95, 2000, 0)
@@ -37,6 +37,18 @@ def bootstrap_ci(values, stat=np.mean) -> tuple[float, float] | None:
     boots = stat(v[np.random.default_rng(seed).integers(0, len(v), (n, len(v)))], axis=1)
     lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
     return float(lo), float(hi)
+
+
+def interval_text(ci, spec: str) -> str | None:
+    """An interval ``(lo, hi)`` as ``"lo .. hi"``, each bound in the format ``spec``
+    (e.g. ``".2f"``); None for None or a bound that is not finite.
+
+    >>> interval_text((1.234, 2.5), ".2f"), interval_text(None, ".2f")
+    ('1.23 .. 2.50', None)
+    """
+    if ci is None or not all(math.isfinite(float(x)) for x in ci):
+        return None
+    return f"{ci[0]:{spec}} .. {ci[1]:{spec}}"
 
 
 def interval_words(what: str = "mean", cases: int | None = None) -> str:
@@ -70,10 +82,7 @@ def interval_table(per_case: dict, columns, cases: int) -> str:
              "| Method | " + " | ".join(h for _, h, _ in columns) + " |",
              "|---|" + "---:|" * len(columns)]
     for m, cols in per_case.items():
-        cells = []
-        for c, _, dec in columns:
-            ci = bootstrap_ci(cols[c]) if c in cols else None
-            ok = ci is not None and all(math.isfinite(x) for x in ci)
-            cells.append(f"{ci[0]:.{dec}f} .. {ci[1]:.{dec}f}" if ok else "--")
+        cells = [interval_text(bootstrap_ci(cols[c]) if c in cols else None, f".{dec}f") or "--"
+                 for c, _, dec in columns]
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
