@@ -223,6 +223,7 @@ class _Average:
         self.k, self.frame, self.weighted = k, frame, weighted
         self.out = np.empty((n, 3))
         self.parts = np.empty((k, n, 3)) if weighted else None
+        self.chunks = chunks
         self.bounds = np.linspace(0, n, chunks + 1).astype(np.int64)
         self.lock = threading.Lock()
         self.nxt = [0] * chunks  # the next sampling to add onto each chunk
@@ -394,13 +395,13 @@ class Prepared:
         avg = _Average(len(self.V), len(S), 2 * self.workers if self.workers > 1 else 1,
                        self.params.average != "uniform", self.frame)
 
-        def decoded(i: int, info: dict) -> tuple[dict, list]:
-            """Sampling i's ARAP info and the futures of its decoding's chunks (queued),
-            its frames made here first (once, not by each chunk's thread)."""
+        def decoded(i: int, info: dict) -> tuple[dict, list, float]:
+            """Sampling i's ARAP info, the futures of its decoding's chunks (queued) and the
+            seconds of its frames, made here first (once, not by each chunk's thread)."""
             t = time.perf_counter()
             S[i].make_frames()
-            info["frames_s"] = time.perf_counter() - t
-            return info, self._submit(lambda c: avg.decode(S[i], i, c), range(len(avg.nxt)))
+            frames_s = time.perf_counter() - t
+            return info, self._submit(lambda c: avg.decode(S[i], i, c), range(avg.chunks)), frames_s
 
         def run(i: int, V0) -> tuple:
             try:
@@ -450,15 +451,16 @@ class Prepared:
     @staticmethod
     def _wait(futs: list) -> tuple[list, float]:
         """Every sampling's ARAP (``futs``, in sampling order) and the decoding chunks each
-        queued, waited for: the ARAP infos and the decodings' seconds, summed. Raises the
-        first failure after every task ended."""
-        infos, chunks = [], []
+        queued, waited for: the ARAP infos and the seconds of the frames and decodings,
+        summed. Raises the first failure after every task ended."""
+        infos, chunks, secs = [], [], 0.0
         try:
             for f in futs:
-                info, fc = f.result()
+                info, fc, frames_s = f.result()
                 infos.append(info)
                 chunks += fc
-            return infos, float(sum(f.result() for f in chunks) + sum(d.pop("frames_s") for d in infos))
+                secs += frames_s
+            return infos, float(secs + sum(f.result() for f in chunks))
         except BaseException:
             wait(futs)
             wait([c for f in futs if not f.cancelled() and f.exception() is None for c in f.result()[1]])
