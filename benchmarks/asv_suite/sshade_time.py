@@ -50,11 +50,11 @@ class Deform:
 class PreparedFrame:
     """A frame of a prepared SShaDe: ``p = sshade.prepare(V, F, handles)`` (n_low=6000,
     n_samplings=5, seed=0), one untimed first solve, then the median seconds of
-    ``p.solve(targets_t)`` over the next 30 frames of benchmarks/frames.py's smooth
+    ``p.solve(targets_t)`` over frames 2-60 of benchmarks/frames.py's smooth
     (smoothstep) 60-frame path from the rest positions to the scaling edit's targets, so
     that each frame moves the handles as much as in results/frames (``prepared_frames``
-    in ``_common``). Target: <= 0.100 s at 200k on both meshes (results/frames: 59 ms
-    clean, 93 ms hard, quiet 2-core machine). n/a where ``sshade.prepare`` does not exist."""
+    in ``_common``). Target: <= 0.100 s at 200k on both meshes (results/frames: 85 ms
+    clean, 134 ms hard, 2-core machine). n/a where ``sshade.prepare`` does not exist."""
 
     params = MESH_PARAMS
     param_names = ["mesh"]
@@ -72,7 +72,7 @@ class PreparedFrame:
         self.V, self.F, self.h, self.T = load_mesh(files, mesh)
 
     def track_frame_median(self, files, mesh):
-        """Median seconds of a prepared frame (30 frames after the first solve)."""
+        """Median seconds of a prepared frame (frames 2-60, after the first solve)."""
         return statistics.median(prepared_frames(self.V, self.F, self.h, self.T))
 
     track_frame_median.unit = "seconds"
