@@ -30,7 +30,7 @@ from eval.run.spec import (
     ReferenceOptions,
     ReportOptions,
 )
-from eval.run.subset import check_baseline_cases, check_method_cases
+from eval.run.subset import check_baseline_cases, check_method_cases, check_sample
 from harness.checks import config_bool, config_number, config_value
 from harness.method_registry import (
     SECTIONS,
@@ -59,6 +59,7 @@ def _check_dataset(cfg) -> None:
         return
     config_number(cfg, "dataset.limit", min=1, allow_none=True, default=None)
     check_baseline_cases(config_value(cfg, "dataset.baseline_cases", None))
+    check_sample(config_value(cfg, "dataset.sample", None), config_value(cfg, "dataset.sample_seed", 0))
     check_method_cases(config_value(cfg, "method_cases", None))
     found = find_dataset(str(ds.get("name", "")))
     if found is not None and found.check is not None:
@@ -202,8 +203,10 @@ def _dataset(resolved: dict) -> DatasetSpec | None:
     ds = resolved.get("dataset")
     if ds is None:
         return None
+    sample, sample_seed = check_sample(ds.get("sample"), ds.get("sample_seed"))
     return DatasetSpec(name=str(ds.get("name", "")), root=ds.get("root"), loader=dataset_options(ds), section=ds,
-                       baseline_cases=ds.get("baseline_cases"), seed=ds.get("seed"))
+                       baseline_cases=ds.get("baseline_cases"), seed=ds.get("seed"), sample=sample,
+                       sample_seed=sample_seed)
 
 
 def _reference(resolved: dict) -> ReferenceOptions:

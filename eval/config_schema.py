@@ -150,6 +150,8 @@ class DefaustSchema:
     resolution: str = "high"
     subjects: Any = None
     limit: Optional[int] = None
+    sample: Optional[int] = None
+    sample_seed: int = 0
     baseline_cases: Any = "per_pose"
     reference_cases: Any = "none"
     build: DefaustBuildSchema = field(default_factory=DefaustBuildSchema)
@@ -170,6 +172,8 @@ class FaustSchema:
     static_threshold: float = 0.02
     seed: int = 0
     limit: Optional[int] = None
+    sample: Optional[int] = None
+    sample_seed: int = 0
     baseline_cases: Any = None
 
 
@@ -188,6 +192,8 @@ class ShapesSchema:
     translate: float = 0.05
     seed: int = 0
     limit: Optional[int] = None
+    sample: Optional[int] = None
+    sample_seed: int = 0
     baseline_cases: Any = None
 
 

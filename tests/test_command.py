@@ -90,6 +90,7 @@ BAD_TYPES = [
     ("arap.max_iter=inf", "arap.max_iter"), ("arap.max_iter=1e300", "arap.max_iter"),
     ("arap_sr.alpha=abc", "arap_sr.alpha"), ("dataset.limit=abc", "dataset.limit"),
     ("dataset.limit=true", "dataset.limit"), ("dataset.seed=abc", "dataset.seed"),
+    ("dataset.sample=abc", "dataset.sample"), ("dataset.sample_seed=abc", "dataset.sample_seed"),
     ("dataset.n_per_landmark=inf", "dataset.n_per_landmark"), ("figures.max_cases=abc", "figures.max_cases"),
     ("figures.enabled=maybe", "figures.enabled"), ("reference.max_iter=junk", "reference.max_iter"),
     ("reference.max_iter=inf", "reference.max_iter"), ("sshade.n_samplings=abc", "n_samplings"),
@@ -99,6 +100,7 @@ BAD_TYPES = [
 BAD_VALUES = [
     ("arap.tol=nan", "arap.tol"), ("arap.etol=-1", "arap.etol"), ("dataset.limit=0", "dataset.limit"),
     ("dataset.baseline_cases=abc", "dataset.baseline_cases"), ("dataset.baseline_cases=-1", "dataset.baseline_cases"),
+    ("dataset.sample=0", "dataset.sample"), ("dataset.sample_seed=-1", "dataset.sample_seed"),
     ("dataset.static_threshold=nan", "dataset.static_threshold"), ("dataset.subjects=[0,abc]", "dataset.subjects"),
     ("reference.time_budget_s=junk", "reference.time_budget_s"),
     ("reference.time_budget_s=-5", "reference.time_budget_s"),

@@ -129,7 +129,7 @@ def test_plan_logged_before_the_build(monkeypatch, caplog, tmp_path):
     monkeypatch.setattr(cases_plan.datasets, "dataset_outlook", lambda cfg: outlook)
     monkeypatch.setattr(cases_plan.datasets, "dataset_root",
                         lambda cfg: logging.getLogger("eval").info("building now") or tmp_path)
-    ds = C(baseline_cases="per_pose")
+    ds = C(baseline_cases="per_pose", sample=None, sample_seed=0)
     refs = C(covers=lambda ci, cases, base: base is None or ci in base)
     methods = [C(name="ARAP"), C(name="SShaDe")]
     with caplog.at_level(logging.INFO, logger="eval"):
@@ -140,6 +140,11 @@ def test_plan_logged_before_the_build(monkeypatch, caplog, tmp_path):
     assert msgs[0].startswith("plan: building DeFAUST (once, into ") and msgs[1] == "building now"
     assert "then 6 run(s): ARAP 2 x ~" in msgs[0] and "SShaDe 4 x ~" in msgs[0]  # per_pose: 2 baseline cases
     assert "references: up to 4 to compute" in msgs[0]  # spokes and spokes-and-rims on the 2 baseline cases
+    caplog.clear()
+    sampled = C(baseline_cases="all", sample=3, sample_seed=1)  # the plan counts the sample's cases only
+    with caplog.at_level(logging.INFO, logger="eval"):
+        cases_plan.planned_root(sampled, None, methods, refs, lambda cs, base: lambda ci, m: True)
+    assert "then 6 run(s): ARAP 3 x ~" in caplog.records[0].getMessage()
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from eval.run.paths import abs_path
 from eval.run.result_store import case_identity
 from eval.run.runinfo import collect_runinfo, write_runinfo
 from eval.run.spec import EvalSpec
+from eval.run.subset import take_sample
 from sshade.errors import SShaDeError
 
 __all__ = ["run_export"]
@@ -35,14 +36,16 @@ def run_export(spec: EvalSpec) -> dict:
     """
     ds = spec.dataset
     root = datasets.dataset_root(ds)   # a DeFAUST is built first when it must be
-    cases = datasets.load_cases(ds.name, root, **ds.loader)
+    cases, rule = take_sample(datasets.load_cases(ds.name, root, **ds.loader), ds.sample, ds.sample_seed)
     if not cases:
         raise SShaDeError(f"dataset {ds.name} at {root}: no case to export")
     out = abs_path(spec.output.out_dir)
     meta = {"name": ds.name, "root": str(root), "seed": json_safe(ds.seed), "options": json_safe(dict(ds.loader)),
             "identities": {c.name: case_identity(c, dataset=ds.name, seed=ds.seed) for c in cases}}
+    if ds.sample is not None:
+        meta["sample"] = {"k": ds.sample, "seed": ds.sample_seed, "rule": rule}
     index = write_export(out, cases, dataset=meta)
-    log.info("exported %d case(s) of %s to %s (%s)", len(cases), ds.name, out, INDEX)
+    log.info("exported %d case(s) of %s to %s (%s; %s)", len(cases), ds.name, out, INDEX, rule)
     info = collect_runinfo(spec.record(), seeds={"dataset": json_safe(ds.seed)},
                            extra={"status": "done", "out_dir": str(out), "n_cases": len(cases)})
     write_runinfo(out / "run.json", info)

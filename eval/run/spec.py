@@ -50,6 +50,8 @@ class DatasetSpec:
         ``prepare`` and ``outlook``, e.g. DeFAUST's ``build``).
     baseline_cases : the baselines' case rule (checked: ``all``, ``per_pose``, an int, None).
     seed : ``dataset.seed`` (None when it has none).
+    sample, sample_seed : the run's seeded sample of cases (None: every case) and its seed
+        (checked, :func:`eval.run.subset.sample_cases`).
     """
 
     name: str
@@ -58,6 +60,8 @@ class DatasetSpec:
     section: Mapping
     baseline_cases: Any = None
     seed: Any = None
+    sample: int | None = None
+    sample_seed: int = 0
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from eval.metrics.reference import method_energy, reference_path, sr_alpha
 from eval.run.plan import add_actuals, build_stage, busy_words, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
 from eval.run.spec import DatasetSpec
-from eval.run.subset import baseline_selection
+from eval.run.subset import baseline_selection, take_sample
 from sshade.errors import SShaDeError
 
 __all__ = ["planned_root", "plan_runs", "PlanRecord"]
@@ -56,7 +56,8 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
         return datasets.dataset_root(ds), None
     build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"],
                         what="DeFAUST", root=_short(out["root"]))
-    cases = [SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]]
+    cases, _ = take_sample([SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]],
+                           ds.sample, ds.sample_seed)
     base, _ = baseline_selection(cases, ds.baseline_cases) if cases else (None, "")
     names = [m.name for m in methods]
     runs = runs_on(cases, base)

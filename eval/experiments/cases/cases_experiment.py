@@ -40,7 +40,7 @@ from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
 from eval.run.stale_rows import CommitTrees, row_state
-from eval.run.subset import baseline_selection, method_selections
+from eval.run.subset import baseline_selection, method_selections, take_sample
 from eval.tables import compare, write_cases, write_tables
 from harness.method_registry import method_meta
 from sshade.errors import SShaDeError
@@ -115,6 +115,7 @@ class _Setup:
     cases: list                   # its cases
     selection: CaseSelection      # which cases each method runs on
     base_rule: str                # dataset.baseline_cases in words
+    sample_rule: str              # dataset.sample in words ("" without one)
     store: ResultStore
     resume: bool
     build: dict | None            # the dataset's build stage when one ran (plan.planned_root)
@@ -169,11 +170,12 @@ def _setup(spec: EvalSpec) -> _Setup:
     root, build = planned_root(ds, spec.jobs, methods, refs, lambda cs, base: CaseSelection(
         base, method_selections(cs, mc, [x.name for x in methods])).runs_on)
     out_dir = abs_path(spec.output.out_dir)
-    cases = datasets.load_cases(ds.name, root, **ds.loader)
+    cases, sample_rule = take_sample(datasets.load_cases(ds.name, root, **ds.loader), ds.sample, ds.sample_seed)
     base, base_rule = baseline_selection(cases, ds.baseline_cases)
     names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
     own = method_selections(cases, mc, names)
-    log.info("%d case(s) from %s; methods %s; baselines on %s%s; output %s", len(cases), root, names, base_rule,
+    log.info("%d case(s) from %s; %s; methods %s; baselines on %s%s; output %s", len(cases), root, sample_rule,
+             names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
     compared = _compared(spec, cases, ds, out_dir)  # read and checked before any method runs
     store = ResultStore(out_dir, meshes=spec.output.store_meshes)
@@ -184,8 +186,8 @@ def _setup(spec: EvalSpec) -> _Setup:
             log.info("resume=false: removed %d stored run(s) of an earlier run in %s", n, store.root)
     return _Setup(methods=methods, names=names, specs=specs, codes=codes, guard=spec.guard.as_dict(), refs=refs,
                   root=root, out_dir=out_dir, name=ds.name, cases=cases, selection=CaseSelection(base, own),
-                  base_rule=base_rule, store=store, resume=spec.output.resume, build=build, seed=ds.seed,
-                  compared=compared)
+                  base_rule=base_rule, sample_rule=sample_rule if ds.sample is not None else "", store=store,
+                  resume=spec.output.resume, build=build, seed=ds.seed, compared=compared)
 
 
 def _compared(spec: EvalSpec, cases, ds, out_dir: Path) -> list:
@@ -547,7 +549,7 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
         if isinstance(r.get("compile_s"), (int, float)):
             compile_s[r["method"]] = compile_s.get(r["method"], 0.0) + r["compile_s"]
     exp = spec.experiment.name or s.name
-    title = f"{exp}: {len(s.cases)} {s.name} case(s)"
+    title = f"{exp}: {len(s.cases)} {s.name} case(s)" + (f"; {s.sample_rule}" if s.sample_rule else "")
     if s.base is not None and any(not s.runs_on(ci, m) for ci in range(len(s.cases)) for m in s.methods
                                   if m.name not in s.own):
         title += f"; full-resolution baselines on {s.base_rule}"
