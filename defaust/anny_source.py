@@ -328,20 +328,26 @@ def _pose_arrays(model, local_world: dict, B: np.ndarray, names: list) -> dict:
 
 
 def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_intersections: bool = True,
-                 model=None) -> AnnySubject:
-    """Build ANNY subject ``subject`` (phenotype ``SUBJECTS[subject]``) in its poses.
+                 model=None, phenotype: Phenotype | None = None, move_last: bool = True) -> AnnySubject:
+    """Build ANNY subject ``subject`` (phenotype ``SUBJECTS[subject]``, or ``phenotype``)
+    in its poses.
 
     Deterministic (no randomness): the same assets, versions and arguments give the same
     arrays.
 
     Parameters
     ----------
-    subject : int, index into :data:`SUBJECTS`.
+    subject : int, index into :data:`SUBJECTS` (any int >= 0 when ``phenotype`` is given:
+        then only its id).
     poses : target pose specs or None (see :func:`defaust.anny_poses.resolve_poses`;
         default :data:`defaust.anny_poses.DEFAULT_TARGETS`). The last target is turned and
-        moved (not aligned with the rest pose).
+        moved (not aligned with the rest pose) when ``move_last``.
     root, cache : see :func:`defaust.anny_model.load_anny`. model : an already loaded model (overrides them).
     check_intersections : bool, raise if a pose self-intersects (:func:`self_intersections`).
+    phenotype : :class:`Phenotype` or None (``SUBJECTS[subject]``), e.g. a sampled one
+        (:func:`defaust.anny_sampling.draw_phenotype`).
+    move_last : bool, turn and move the last target (:data:`LAST_TARGET_TURN_DEG`,
+        :data:`LAST_TARGET_SHIFT`); False keeps every target where its planted joints are.
 
     Returns
     -------
@@ -361,12 +367,12 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
         # -> (['rest', 'squat', 'step'], (13348, 3))
     """
     subject = int(subject)
-    if not 0 <= subject < len(SUBJECTS):
+    if phenotype is None and not 0 <= subject < len(SUBJECTS):
         raise SShaDeError(f"ANNY subject {subject} does not exist: the phenotype table has subjects "
                           f"0..{len(SUBJECTS) - 1}")
     plist = resolve_poses(poses)
     model = load_anny(root, cache) if model is None else model
-    phen = SUBJECTS[subject]
+    phen = SUBJECTS[subject] if phenotype is None else phenotype
     names = list(model.joint_names)
     keep, F = body_topology(model)
     ident = model.prepare_identity(phen.shape)
@@ -384,7 +390,7 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     Ts, placements = [], []
     for i, p in enumerate(plist):
         X = A @ S[i][used] @ Ainv  # unposed -> pose, body frame
-        G, where = placement(i, p, len(plist) - 1, K[i], A, names, joints_rest, off)
+        G, where = placement(i, p, len(plist) - 1 if move_last else -1, K[i], A, names, joints_rest, off)
         Ts.append((X if G is None else G @ X)[:, :3, :])
         placements.append(where)
     jn = tuple(names[j] for j in used)
@@ -445,7 +451,7 @@ def placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, j
 
     Parameters
     ----------
-    i : int, the pose's index (0: the rest pose); p : its AnnyPose; last : the last
+    i : int, the pose's index (0: the rest pose); p : its AnnyPose; last : the last (-1: none)
     target's index. K : (163, 4, 4) body-models' skeleton transforms of the posed body
     (ANNY's frame). A : (4, 4) :func:`body_transform`. names : ANNY's joint names;
     joints_rest : name -> (3,) rest position (body frame); off : (3,) the body frame's

