@@ -27,6 +27,7 @@ from sshade.json_file import read_json
 from sshade.mesh.io import read_mesh
 
 from . import highres
+from .anny_source import self_intersections
 from .config import BuildConfig
 from .croissant import write_croissant
 from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
@@ -350,7 +351,8 @@ def _build_subject(run: _Run, s: int, poses: list[int]) -> float:
     rid = f"{sdir}/rest"
     lo, hi = (int(x) for x in cfg.vertex_range)
     high = {"vertex_range": [lo, hi], "remesh_iterations": int(cfg.remesh_iterations)}
-    rkey = item_key({**run.common, "item": "rest", "subject": s, "high_res": high, **src.rest_inputs(s)})
+    res = _resolution_key(cfg)  # {} for the default [high]: the keys are what they were before
+    rkey = item_key({**run.common, "item": "rest", "subject": s, "high_res": high, **res, **src.rest_inputs(s)})
     t_subject = _item(run, rid, rkey, lambda: _build_rest(run.out, sdir, s, src, cfg, rkey))
     rest_files = items[rid]["files"]
     src.remember(("rest_info", s), items[rid].get("info", {}))
@@ -362,7 +364,7 @@ def _build_subject(run: _Run, s: int, poses: list[int]) -> float:
         hseed = handle_seed(cfg.seed, s, p)
         pkey = item_key({**run.common, "item": "pose", "subject": s, "pose": p, "handles": hparams,
                          "landmarks": [[k, v] for k, v in lm.items()], "handle_seed": hseed,
-                         "rest_files": rest_files, **src.pose_inputs(s, p)})
+                         "rest_files": rest_files, **res, **src.pose_inputs(s, p)})
         t_subject += _item(run, f"{sdir}/pose_{p:02d}", pkey,  # _item calls make() at once, in this iteration
                            lambda p=p, pkey=pkey, lm=lm, hseed=hseed:
                            _build_pose(run.out, sdir, s, p, src, cfg, pkey, lm, hseed))
@@ -401,20 +403,45 @@ def _landmarks(manifest, rid, src, s) -> dict[str, int]:
     return {str(k): int(v) for k, v in lm}  # a list of [name, index]: JSON keeps its order
 
 
+def _resolution_key(cfg: BuildConfig) -> dict:
+    """What the items' keys hold of ``resolutions``: nothing for the default ``[high]``."""
+    r = [x if x == "high" else int(x) for x in cfg.resolutions]
+    return {} if r == ["high"] else {"resolutions": r}
+
+
+def _extra_resolutions(cfg: BuildConfig) -> list[int]:
+    """The vertex counts of ``resolutions`` (``rN`` meshes), in the order given."""
+    return [int(x) for x in cfg.resolutions if x != "high"]
+
+
 def _build_rest(out: Path, sdir: str, s: int, src: Source, cfg: BuildConfig, key: str) -> dict:
     V, F = src.rest_low(s)
     lm = src.landmarks(s)
-    hr = highres.subdivide_remesh(V, F, vertex_range=cfg.vertex_range, remesh_iterations=cfg.remesh_iterations,
-                                  check_distance=cfg.remesh_check_distance)
     files = {}
     files[f"{sdir}/rest_low.ply"] = write_ply(out / sdir / "rest_low.ply", V, F)
-    files[f"{sdir}/rest_high.ply"] = write_ply(out / sdir / "rest_high.ply", hr.V, hr.F)
-    src.remember(("rest_high", s), (hr.V, hr.F))
-    info = {"n_vertices_low": int(len(V)), "n_faces_low": int(len(F)), "n_vertices_high": int(len(hr.V)),
-            "n_faces_high": int(len(hr.F)), "ls3_iterations": int(hr.iterations),
-            "n_vertices_subdivided": int(hr.n_subdivided), "remesh_target_edge": float(hr.target_edge),
-            "remesh_attempts": int(hr.attempts)}
-    info.update(src.rest_info(s, hr.V, hr.F))
+    info = {"n_vertices_low": int(len(V)), "n_faces_low": int(len(F))}
+    Vh = Fh = None
+    if "high" in cfg.resolutions:
+        hr = highres.subdivide_remesh(V, F, vertex_range=cfg.vertex_range, remesh_iterations=cfg.remesh_iterations,
+                                      check_distance=cfg.remesh_check_distance)
+        Vh, Fh = hr.V, hr.F
+        files[f"{sdir}/rest_high.ply"] = write_ply(out / sdir / "rest_high.ply", hr.V, hr.F)
+        src.remember(("rest_high", s), (hr.V, hr.F))
+        info.update({"n_vertices_high": int(len(hr.V)), "n_faces_high": int(len(hr.F)),
+                     "ls3_iterations": int(hr.iterations), "n_vertices_subdivided": int(hr.n_subdivided),
+                     "remesh_target_edge": float(hr.target_edge), "remesh_attempts": int(hr.attempts)})
+    extra = {}
+    for n in _extra_resolutions(cfg):  # a remesh of the same surface with n vertices (within 5 %)
+        rr = highres.subdivide_remesh(V, F, vertex_range=(int(0.95 * n), int(np.ceil(1.05 * n))),
+                                      remesh_iterations=cfg.remesh_iterations, check_distance=True)
+        files[f"{sdir}/rest_r{n}.ply"] = write_ply(out / sdir / f"rest_r{n}.ply", rr.V, rr.F)
+        src.remember((f"rest_r{n}", s), (rr.V, rr.F))
+        extra[f"r{n}"] = {"n_vertices": int(len(rr.V)), "n_faces": int(len(rr.F)), "ls3_iterations": int(rr.iterations),
+                          "remesh_target_edge": float(rr.target_edge), "remesh_attempts": int(rr.attempts),
+                          "n_self_intersecting_faces": int(self_intersections(rr.V, rr.F).size)}
+    info.update(src.rest_info(s, Vh, Fh))
+    if extra:
+        info["resolutions"] = extra
     return {"key": key, "files": files, "landmarks": [[k, int(v)] for k, v in lm.items()],  # ordered
             "info": info}
 
@@ -438,9 +465,17 @@ def _build_pose(out: Path, sdir: str, s: int, p: int, src: Source, cfg: BuildCon
     info = {"landmarks": list(H.landmark_names), "n_handles": int(len(H)),
             "n_static": int(H.static.sum()), "n_dynamic": int((~H.static).sum()),
             "delta": [float(x) for x in H.delta], "group_static": [bool(x) for x in H.group_static]}
-    if src.has_high_gt:
+    if src.has_high_gt and "high" in cfg.resolutions:
         Vh, Fh = _rest_high(out, sdir, s, src)
         Vg = src.target_high(s, p, Vh)
         files[f"{sdir}/pose_{p:02d}_high.ply"] = write_ply(out / sdir / f"pose_{p:02d}_high.ply", Vg, Fh)
         info.update(src.pose_info(s, p, Vg, Fh))
+    for n in _extra_resolutions(cfg):
+        Vr, Fr = src.cached((f"rest_r{n}", s), lambda n=n: read_mesh(out / sdir / f"rest_r{n}.ply", validate=False))
+        k = src.recalled(("rest_info", s), {}).get("resolutions", {}).get(f"r{n}", {}).get("ls3_iterations")
+        if k is None:
+            raise SShaDeError(f"subject {s}: its rest item records no r{n} mesh; rebuild it (delete its "
+                              "rest_low.ply and rerun)")
+        Vg = src.target_at(s, p, Vr, f"r{n}", int(k))
+        files[f"{sdir}/pose_{p:02d}_r{n}.ply"] = write_ply(out / sdir / f"pose_{p:02d}_r{n}.ply", Vg, Fr)
     return {"key": key, "files": files, "pose_name": src.pose_name(s, p), "handle_seed": int(hseed), "info": info}

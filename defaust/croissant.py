@@ -65,8 +65,8 @@ def _file_sets() -> list[dict]:
         return {"@type": "cr:FileSet", "@id": i, "name": i, "description": what, "encodingFormat": fmt,
                 "includes": inc}
     return [fs("rest-meshes", "application/x-ply", "subject_*/rest_*.ply",
-               "each subject's rest mesh, rest_high.ply (the paper's high resolution) and rest_low.ply; "
-               "binary PLY, vertices in metres"),
+               "each subject's rest mesh, rest_high.ply (the paper's high resolution), rest_low.ply and "
+               "rest_rN.ply (N vertices) where the build has it; binary PLY, vertices in metres"),
             fs("pose-meshes", "application/x-ply", "subject_*/pose_*_*.ply",
                "the true target poses on the rest meshes' faces: pose_YY_low.ply, and pose_YY_high.ply where "
                "the build has a high-resolution ground truth (every source; not a FAUST build made before it)"),
@@ -88,7 +88,7 @@ RECORD_SETS = {
         "n_handles": ("sc:Integer", "handles stored (before the snap to a mesh)"),
         "handles_file": ("sc:Text", "the handles .npz, relative to the build"),
         "rest_low": ("sc:Text", "the subject's low-resolution rest mesh"),
-        "rest_high": ("sc:Text", "the subject's high-resolution rest mesh"),
+        "rest_high": ("sc:Text", "the subject's high-resolution rest mesh (null: a build without one)"),
         "target_low": ("sc:Text", "the true target pose at low resolution (null: none)"),
         "target_high": ("sc:Text", "the true target pose at high resolution (null: none)"),
     },
@@ -136,7 +136,7 @@ def case_records(manifest: dict) -> list[dict]:
                     "cases/handle_seed": seed if isinstance(seed, int) and not isinstance(seed, bool) else None,
                     "cases/n_handles": n if isinstance(n, int) and not isinstance(n, bool) else None,
                     "cases/handles_file": f"{sd}/pose_{p:02d}_handles.npz",
-                    "cases/rest_low": f"{sd}/rest_low.ply", "cases/rest_high": f"{sd}/rest_high.ply",
+                    "cases/rest_low": f"{sd}/rest_low.ply", "cases/rest_high": listed(f"{sd}/rest_high.ply"),
                     "cases/target_low": listed(f"{sd}/pose_{p:02d}_low.ply"),
                     "cases/target_high": listed(f"{sd}/pose_{p:02d}_high.ply")})
     return out

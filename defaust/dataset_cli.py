@@ -13,7 +13,7 @@ from __future__ import annotations
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 
-from .dataset import RESOLUTIONS, verify
+from .dataset import verify
 from .describe import describe, markdown
 from .export import FORMATS, export
 from .packing import pack
@@ -31,12 +31,12 @@ def _parser() -> ArgumentParser:
     v.add_argument("root", help="the build folder (out= of the build) or an archive that pack wrote")
     d = sub.add_parser("describe", help="each case's handles and its ground truth's volume and area change")
     d.add_argument("root", help="the build folder or archive")
-    d.add_argument("--resolution", default="high", choices=RESOLUTIONS)
+    d.add_argument("--resolution", default="high", help="high, low or rN (an extra resolution the build has)")
     e = sub.add_parser("export", help="write the cases for other tools (npz, or meshes + handle JSON)")
     e.add_argument("root", help="the build folder or archive")
     e.add_argument("--to", required=True, help="export folder: new, empty, or an earlier export")
     e.add_argument("--format", default="npz", choices=FORMATS)
-    e.add_argument("--resolution", default="high", choices=RESOLUTIONS)
+    e.add_argument("--resolution", default="high", help="high, low or rN (an extra resolution the build has)")
     e.add_argument("--subjects", type=int, nargs="+", default=None)
     k = sub.add_parser("pack", help="one zip archive of a build, with its manifest, Croissant file and datasheet")
     k.add_argument("root", help="the build folder")

@@ -22,15 +22,17 @@ from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write, write_mesh
 
-from .dataset import RESOLUTIONS, Case, FolderBuild, load, open_build
+from .dataset import Case, FolderBuild, check_resolution, load, open_build, read_manifest
+from .hf_export import arrow_schema, write_shards
 from .manifest import MANIFEST
 from .store import sha256_bytes, sha256_file
 
 __all__ = ["FORMATS", "MARKER", "KIND", "export", "check_export_folder", "case_arrays"]
 
 #: The export formats: one ``<case>.npz`` per case, or ``<case>.obj|ply`` (rest mesh),
-#: ``<case>_gt.obj|ply`` (true pose, when the case has one) and ``<case>_handles.json``.
-FORMATS = ("npz", "obj", "ply")
+#: ``<case>_gt.obj|ply`` (true pose, when the case has one) and ``<case>_handles.json``;
+#: or ``hf``: Parquet shards of every case for HuggingFace ``datasets`` (:mod:`defaust.hf_export`).
+FORMATS = ("npz", "obj", "ply", "hf")
 #: The file that marks a folder as this exporter's output.
 MARKER = "export.json"
 #: ``kind`` of :data:`MARKER`.
@@ -120,7 +122,7 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
         manifest, every case read before any file is written).
     to : str or Path, the export folder: new, empty, or an earlier export (replaced file
         by file; files of cases no longer exported are left and not listed).
-    fmt : one of :data:`FORMATS`. resolution : ``"high"`` or ``"low"``.
+    fmt : one of :data:`FORMATS`. resolution : ``"high"``, ``"low"`` or ``"rN"`` (as :func:`load`).
     subjects : int, list of int or None (every subject).
 
     Returns
@@ -135,8 +137,9 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
     """
     if fmt not in FORMATS:
         raise SShaDeError(f"format must be one of {list(FORMATS)}, got {fmt!r}")
-    if resolution not in RESOLUTIONS:
-        raise SShaDeError(f"resolution must be 'high' or 'low', got {resolution!r}")
+    check_resolution(resolution)
+    if fmt == "hf":
+        arrow_schema()  # pyarrow is there (the [hf] extra), before any case is read or folder made
     root, to = Path(root).expanduser(), Path(to).expanduser()
     check_export_folder(root, to)
     cases = load(root, resolution=resolution, subjects=subjects, eager=True)  # a bad file: before any is written
@@ -144,7 +147,9 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
     manifest_sha256 = sha256_file(root / MANIFEST) if isinstance(src, FolderBuild) else src.sha256(MANIFEST)
     to.mkdir(parents=True, exist_ok=True)
     files: dict[str, str] = {}
-    for c in cases:
+    if fmt == "hf":
+        files.update(write_shards(cases, to, read_manifest(root).get("subjects") or {}))
+    for c in cases if fmt != "hf" else ():
         files.update(_write_case(c, to, fmt))
     marker = {"kind": KIND, "format": fmt, "resolution": resolution, "source": cases[0].source,
               "cases": [c.name for c in cases], "build": str(root.resolve()),

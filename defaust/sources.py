@@ -78,7 +78,8 @@ class Source:
         raise NotImplementedError
 
     def rest_info(self, s: int, Vh, Fh) -> dict:
-        """Extra entries of the rest item's ``info`` (none by default)."""
+        """Extra entries of the rest item's ``info`` (none by default); ``Vh``, ``Fh`` the
+        high-res rest mesh, None when the build has none."""
         return {}
 
     def pose_info(self, s: int, p: int, Vg, Fh) -> dict:
@@ -197,8 +198,9 @@ class ModelSource(Source):
     def make_model(self, s):
         raise NotImplementedError
 
-    def high_weights(self, s, m, Vh) -> np.ndarray:
-        """Skinning weights of the high-res rest vertices ``Vh`` of model ``m``."""
+    def high_weights(self, s, m, Vh, ls3_iterations: int | None = None) -> np.ndarray:
+        """Skinning weights of the rest vertices ``Vh`` of a remesh of model ``m`` (made
+        after ``ls3_iterations`` LS3 Loop iterations; None: the high-res one's)."""
         raise NotImplementedError
 
     def check_subjects(self, want: list[int]) -> None:
@@ -227,9 +229,15 @@ class ModelSource(Source):
 
     def target_high(self, s, p, Vh):
         """Target pose ``p`` of the high-res rest mesh ``Vh`` by the same skinning."""
+        return self.target_at(s, p, Vh, "high")
+
+    def target_at(self, s, p, V, tag: str, ls3_iterations: int | None = None):
+        """Target pose ``p`` of rest mesh ``V`` of resolution ``tag`` (``high`` or ``rN``,
+        a remesh after ``ls3_iterations`` LS3 Loop iterations; None: the high one's) by
+        the same skinning, its weights made once per subject and resolution."""
         m = self.model(s)
-        W = self.cached(("W_high", s), lambda: self.high_weights(s, m, Vh))
-        return m.posed(p, V=Vh, W=W)
+        W = self.cached((f"W_{tag}", s), lambda: self.high_weights(s, m, V, ls3_iterations))
+        return m.posed(p, V=V, W=W)
 
     def pose_name(self, s, p):
         return self.names[p]
@@ -255,7 +263,7 @@ class SyntheticSource(ModelSource):
                                  n_vertices=c.synthetic_vertices, blend=c.synthetic_blend,
                                  remesh_iterations=c.synthetic_remesh_iterations)
 
-    def high_weights(self, s, m, Vh):
+    def high_weights(self, s, m, Vh, ls3_iterations=None):
         return transfer_weights(m.V, m.F, m.W, Vh)
 
     def rest_inputs(self, s):
@@ -314,14 +322,16 @@ class AnnySource(ModelSource):
         self.remember(("sampled", s), got.record)
         return got.subject
 
-    def high_weights(self, s, m, Vh):
-        return high_res_weights(m.V, m.F, m.W, Vh, self.ls3_iterations(s))
+    def high_weights(self, s, m, Vh, ls3_iterations=None):
+        k = self.ls3_iterations(s) if ls3_iterations is None else ls3_iterations
+        return high_res_weights(m.V, m.F, m.W, Vh, k)
 
     def rest_info(self, s, Vh, Fh):
         m = self.model(s)
         out = {"stature_m": round(float(m.stature), 4),
-               "n_self_intersecting_faces_low": int(self_intersections(m.V, m.F).size),
-               "n_self_intersecting_faces_high": int(self_intersections(Vh, Fh).size)}
+               "n_self_intersecting_faces_low": int(self_intersections(m.V, m.F).size)}
+        if Vh is not None:  # no high-res mesh: resolutions without high
+            out["n_self_intersecting_faces_high"] = int(self_intersections(Vh, Fh).size)
         if self.sampling:
             out["sampled"] = {**self.recalled(("sampled", s)), "poses_drawn": [pose_to_spec(p) for p in m.poses]}
         return out

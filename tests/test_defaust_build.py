@@ -241,3 +241,57 @@ def test_a_build_killed_at_three_points_is_partial_to_load_and_verify_and_the_sa
     _build(tmp_path)  # the same command
     assert verify(tmp_path) == [] and len(load(tmp_path)) == len(POSES)
     assert (tmp_path / "manifest.json").read_bytes() == (src / "manifest.json").read_bytes()
+
+
+# ----------------------------------------------------------------------------- resolutions
+
+
+def test_an_extra_resolution_is_a_remesh_with_its_own_ground_truth(built, tmp_path):
+    """``resolutions=[high, 2000]``: ``rest_r2000.ply`` has 2000 vertices within 5 % and
+    its ground truth shares its faces; the skinning at r2000 agrees with the high-res one
+    (each r2000 vertex moves as the nearest high-res rest vertex does, within a few mm);
+    ``load`` reads it as ``r2000`` and its rest/pose files are the only new ones."""
+    from scipy.spatial import cKDTree
+
+    import defaust
+    out = tmp_path / "r"
+    rep = _build(out, "resolutions=[high,2000]")
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["parameters"]["resolutions"] == ["high", 2000]
+    base = json.loads((built[0] / "manifest.json").read_text())
+    extra = {f for f in m["files"] if "_r2000" in f}
+    assert set(m["files"]) - extra == set(base["files"])
+    assert extra == {"subject_00/rest_r2000.ply"} | {f"subject_00/pose_{p:02d}_r2000.ply" for p in POSES}
+    info = m["items"]["subject_00/rest"]["info"]["resolutions"]["r2000"]
+    assert 1900 <= info["n_vertices"] <= 2100 and rep.built[0] == "subject_00/rest"
+    hi, r = defaust.load(out, resolution="high"), defaust.load(out, resolution="r2000")
+    assert len(r) == len(hi) == 4
+    for ch, cr in zip(hi, r):
+        assert len(cr.V) == info["n_vertices"] and cr.V_gt.shape == cr.V.shape
+        d, j = cKDTree(ch.V).query(cr.V)
+        move_r, move_h = cr.V_gt - cr.V, ch.V_gt[j] - ch.V[j]
+        assert np.median(np.linalg.norm(move_r - move_h, axis=1)) < 0.003  # metres
+        assert len(cr.handles) > 0
+    with pytest.raises(SShaDeError, match="no resolution 'r7000'; it has low, high, r2000"):
+        defaust.load(out, resolution="r7000")
+
+
+def test_resolutions_without_high_build_no_high_res_mesh(tmp_path):
+    import defaust
+    out = tmp_path / "nohigh"
+    _build(out, "resolutions=[1500]")
+    m = json.loads((out / "manifest.json").read_text())
+    assert not [f for f in m["files"] if "_high" in f]
+    assert "n_vertices_high" not in m["items"]["subject_00/rest"]["info"]
+    assert len(defaust.load(out, resolution="r1500")) == 4
+    with pytest.raises(SShaDeError, match="no resolution 'high'; it has low, r1500"):
+        defaust.load(out)
+
+
+@pytest.mark.parametrize("value,word", [("[]", "non-empty"), ("[high,high]", "repeats"), ("[100]", "resolutions"),
+                                        ("[2000,2000]", "repeats"), ("[abc]", "resolutions")])
+def test_bad_resolutions_are_refused_before_any_work(tmp_path, value, word):
+    cfg = compose_config(["preset=ci", f"out={tmp_path / 'x'}", f"resolutions={value}"])
+    with pytest.raises(SShaDeError, match=word):
+        config_from_omegaconf(cfg).validate()
+    assert not (tmp_path / "x").exists()

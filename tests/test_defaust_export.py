@@ -98,3 +98,40 @@ def test_cli_export_writes_and_reports_the_size(defaust_ci, tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith("exported 12 file(s)")  # 4 cases x (mesh, ground truth, handles)
     assert len(list((tmp_path / "o").glob("*_handles.json"))) == 4
+
+
+@pytest.mark.hf
+def test_hf_export_loads_with_datasets_equal_to_defaust_load(defaust_ci, tmp_path):
+    """``--format hf``: Parquet shards that HuggingFace ``datasets`` loads (whole and
+    streamed) row for row equal to ``defaust.load``'s cases; small shards split in case
+    order; the same build gives the same bytes."""
+    from .conftest import optional_import
+    datasets = optional_import("datasets")
+    from defaust.hf_export import write_shards
+    cases = load(defaust_ci, resolution="high")
+    files = export(defaust_ci, tmp_path / "hf", fmt="hf", resolution="high")
+    assert [f.relative_to(tmp_path / "hf").as_posix() for f in files] == \
+        ["data/train-00000-of-00001.parquet", MARKER]
+    ds = datasets.load_dataset("parquet", data_dir=str(tmp_path / "hf"), split="train",
+                               cache_dir=str(tmp_path / "cache"))
+    assert ds.num_rows == len(cases)
+    for row, c in zip(ds, cases):
+        assert (row["name"], row["subject"], row["pose"], row["resolution"]) == (c.name, c.subject, c.pose, "high")
+        for k in ("V", "F", "V_gt", "targets", "handles", "static", "group", "snap_distance"):
+            a = np.asarray(row[k])
+            np.testing.assert_array_equal(a, getattr(c, k))
+        assert row["landmark_names"] == list(c.landmark_names) and row["phenotype"] is None  # synthetic bodies
+    streamed = datasets.load_dataset("parquet", data_dir=str(tmp_path / "hf"), split="train", streaming=True)
+    assert [r["name"] for r in streamed] == [c.name for c in cases]
+    again = export(defaust_ci, tmp_path / "hf2", fmt="hf", resolution="high")
+    assert again[0].read_bytes() == files[0].read_bytes()
+    small = write_shards(cases, tmp_path / "small", {}, shard_mb=1e-6)  # one case per shard
+    assert list(small) == [f"data/train-{i:05d}-of-{len(cases):05d}.parquet" for i in range(len(cases))]
+
+
+def test_hf_export_without_pyarrow_names_the_extra_before_writing(defaust_ci, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # import pyarrow raises ImportError
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
+    with pytest.raises(SShaDeError, match=r"pip install -e \.\[hf\]"):
+        export(defaust_ci, tmp_path / "hf", fmt="hf")
+    assert not (tmp_path / "hf").exists()

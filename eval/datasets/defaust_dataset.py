@@ -187,7 +187,7 @@ def build_outlook(root: Path, ds) -> dict | None:
     ``s_per_subject`` (:data:`eval.run.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
     ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and
     ``dataset.limit``) and ``n_vertices`` (estimated per case: the middle of the
-    high-res vertex range, or a rough low-res count).
+    high-res vertex range, N at resolution ``rN``, or a rough low-res count).
 
     Raises
     ------
@@ -202,7 +202,7 @@ def build_outlook(root: Path, ds) -> dict | None:
     else:
         subjects = list(range(10 if bc.source == "faust" else int(bc.n_subjects)))  # FAUST: its 10 subjects
     if bc.source == "anny":
-        n_poses = len(bc.anny_poses or DEFAULT_TARGETS)
+        n_poses = int(bc.anny_n_targets) if bc.anny_poses == "sampled" else len(bc.anny_poses or DEFAULT_TARGETS)
     else:
         n_poses = len(bc.faust_target_poses) if bc.source == "faust" and bc.faust_target_poses else bc.n_poses - 1
     complete = _complete_subjects(root, bc.source, bc.parameters())
@@ -220,11 +220,11 @@ def build_outlook(root: Path, ds) -> dict | None:
         cases = [c for c in cases if c[0] in want]
     if ds.get("limit", None) is not None:
         cases = cases[:max(int(ds.get("limit")), 0)]
-    high = str(ds.get("resolution", "high")) != "low"
+    res = str(ds.get("resolution", "high"))
     n_low = bc.synthetic_vertices if bc.source == "synthetic" else _LOW_RES_VERTICES.get(bc.source, 7000)
+    n = int(sum(bc.vertex_range) / 2) if res == "high" else int(res[1:]) if res[1:].isdigit() else int(n_low)
     return {"root": str(root), "source": bc.source, "subjects": len(todo), "complete": len(subjects) - len(todo),
-            "workers": workers, "s_per_subject": BUILD_S_PER_SUBJECT, "cases": cases,
-            "n_vertices": int(sum(bc.vertex_range) / 2) if high else int(n_low)}
+            "workers": workers, "s_per_subject": BUILD_S_PER_SUBJECT, "cases": cases, "n_vertices": n}
 
 
 def _complete_subjects(root: Path, source: str, parameters: dict) -> set[int]:
