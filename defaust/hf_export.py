@@ -4,10 +4,12 @@ train-XXXXX-of-YYYYY.parquet``, one row per case (:data:`COLUMNS`: the arrays of
 :func:`defaust.export.case_arrays` as nested lists, and the subject's phenotype), shards of
 about ``shard_mb`` MiB in case order, written with pyarrow (the ``[hf]`` extra); the same
 build and pyarrow give the same bytes. ``datasets.load_dataset("parquet", data_dir=OUT)``
-reads them, ``streaming=True`` one row at a time. docs/defaust.md §6, "Export".
+reads them, ``streaming=True`` one row at a time; ``croissant.json`` (Croissant 1.1)
+describes them for mlcroissant. docs/defaust.md §6, "Export".
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +17,11 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
+from .croissant import CROISSANT, shards_metadata
 from .dataset import Case
 from .store import sha256_bytes
 
-__all__ = ["COLUMNS", "PHENOTYPE_FIELDS", "arrow_schema", "write_shards"]
+__all__ = ["COLUMNS", "PHENOTYPE_FIELDS", "arrow_schema", "write_shards", "croissant_fields", "write_shards_croissant"]
 
 #: The phenotype's fields (null for a source without one: FAUST, synthetic).
 PHENOTYPE_FIELDS = ("gender", "age", "muscle", "weight", "height", "proportions")
@@ -147,3 +150,28 @@ def write_shards(cases, to: Path, subjects: dict, *, shard_mb: float = 256.0) ->
             fh.write(data)
         out[rel] = sha256_bytes(data)
     return out
+
+
+#: Column kind -> Croissant (dataType, arrayShape); the phenotype struct is in the shards only.
+_CROISSANT_TYPES = {"str": ("sc:Text", None), "int": ("sc:Integer", None), "int?": ("sc:Integer", None),
+                    "xyz": ("sc:Float", "-1,3"), "xyz?": ("sc:Float", "-1,3"), "tri": ("sc:Integer", "-1,3"),
+                    "[int]": ("sc:Integer", "-1"), "[float]": ("sc:Float", "-1"), "[bool]": ("sc:Boolean", "-1"),
+                    "[str]": ("sc:Text", "-1")}
+
+
+def croissant_fields() -> list[tuple]:
+    """``(column, dataType, description, arrayShape)`` of every column Croissant describes
+    (:data:`COLUMNS` but ``phenotype``, a struct)."""
+    return [(k, *_CROISSANT_TYPES[kind][:1], what, _CROISSANT_TYPES[kind][1])
+            for k, (kind, what) in COLUMNS.items() if kind in _CROISSANT_TYPES]
+
+
+def write_shards_croissant(to: Path, manifest: dict, *, manifest_sha256: str, resolution: str) -> str:
+    """Write ``to/croissant.json`` (:func:`defaust.croissant.shards_metadata`) beside the
+    shards; returns its sha256."""
+    meta = shards_metadata(manifest, manifest_sha256=manifest_sha256, resolution=resolution,
+                           fields=croissant_fields())
+    text = json.dumps(meta, indent=1, sort_keys=True) + "\n"
+    with atomic_write(to / CROISSANT, "w") as fh:
+        fh.write(text)
+    return sha256_bytes(text.encode())

@@ -111,7 +111,7 @@ def test_hf_export_loads_with_datasets_equal_to_defaust_load(defaust_ci, tmp_pat
     cases = load(defaust_ci, resolution="high")
     files = export(defaust_ci, tmp_path / "hf", fmt="hf", resolution="high")
     assert [f.relative_to(tmp_path / "hf").as_posix() for f in files] == \
-        ["data/train-00000-of-00001.parquet", MARKER]
+        ["data/train-00000-of-00001.parquet", "croissant.json", MARKER]
     ds = datasets.load_dataset("parquet", data_dir=str(tmp_path / "hf"), split="train",
                                cache_dir=str(tmp_path / "cache"))
     assert ds.num_rows == len(cases)
