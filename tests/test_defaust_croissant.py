@@ -22,26 +22,22 @@ from .optional import locate_or_skip, skip_reason
 # mlcroissant runs in its own process: importing it sets up absl's logging, whose handler
 # keeps the stderr of the moment (here a test's capture, closed after the test), and a
 # later test's log line then wrote into a closed file and killed the test process
-_VALIDATE = """
+_PRELUDE = """
 import json, sys
 try:
     import mlcroissant as mlc
 except (ImportError, OSError) as e:  # installed, but does not load: the test skips
     print(json.dumps({"import_error": f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]}"}))
     sys.exit(0)
+"""
+_VALIDATE = _PRELUDE + """
 ds = mlc.Dataset(jsonld=sys.argv[1])  # raises ValidationError on any error
 print(json.dumps({"name": ds.metadata.name, "errors": sorted(map(str, ds.metadata.ctx.issues.errors)),
                   "warnings": sorted(map(str, ds.metadata.ctx.issues.warnings))}))
 """
 
 
-_RECORDS = """
-import json, sys
-try:
-    import mlcroissant as mlc
-except (ImportError, OSError) as e:
-    print(json.dumps({"import_error": f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]}"}))
-    sys.exit(0)
+_RECORDS = _PRELUDE + """
 ds = mlc.Dataset(jsonld=sys.argv[1])
 def plain(v):
     return v.item() if hasattr(v, "item") else v.decode() if isinstance(v, bytes) else v
@@ -125,13 +121,7 @@ def test_faust_builds_name_faust_terms_not_a_free_licence():
     assert "no redistribution" in meta["license"] and meta["name"] == "DeFAUST-faust"
 
 
-_SHARD_RECORDS = """
-import json, sys
-try:
-    import mlcroissant as mlc
-except (ImportError, OSError) as e:
-    print(json.dumps({"import_error": f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]}"}))
-    sys.exit(0)
+_SHARD_RECORDS = _PRELUDE + """
 ds = mlc.Dataset(jsonld=sys.argv[1])
 def plain(v):
     v = v.tolist() if hasattr(v, "tolist") else v
