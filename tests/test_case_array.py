@@ -21,7 +21,7 @@ from .conftest import ROOT, subprocess_env
 
 submitit = pytest.importorskip("submitit", reason="submitit (hydra-submitit-launcher's dependency) is not installed")
 
-from eval.experiments.cases.case_array import cluster_options  # noqa: E402
+from harness.slurm_array import cluster_options  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402
 
 _spec = importlib.util.spec_from_file_location("table_change", ROOT / "benchmarks" / "table_change.py")
@@ -117,7 +117,7 @@ def test_cluster_section_checked():
     assert cluster_options(None) is None
     got = cluster_options(GOOD)
     assert got.setup == () and got.mem_gb == 4.0 and got.folder == "slurm" and got.executor == "slurm"
-    for key, bad, words in [("folder", "../up", "inside out_dir"), ("folder", "/abs", "inside out_dir"),
+    for key, bad, words in [("folder", "../up", "inside the output folder"), ("folder", "/abs", "inside the output folder"),
                             ("executor", "pbs", "cluster.executor"), ("cpus_per_task", 0, "cluster.cpus_per_task"),
                             ("poll_s", float("nan"), "cluster.poll_s"), ("setup", "echo hi", "cluster.setup"),
                             ("partition", "", "cluster.partition")]:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from eval import datasets
 from eval import method_config as method_table
-from eval.experiments.cases.case_array import CaseTask, TaskEnd, cluster_options, run_case_array
+from eval.experiments.cases.case_array import CaseTask, TaskEnd, run_case_array
 from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, run_case_jobs
 from eval.experiments.cases.case_plan import plan_runs, planned_root
 from eval.experiments.cases.case_references import CaseReferences
@@ -43,6 +43,7 @@ from eval.run.stale_rows import CommitTrees, row_state
 from eval.run.subset import baseline_selection, method_selections, take_sample
 from eval.tables import compare, write_cases, write_tables
 from harness.method_registry import method_meta
+from harness.slurm_array import cluster_options
 from sshade.errors import SShaDeError
 
 __all__ = ["run", "sshade_params"]
