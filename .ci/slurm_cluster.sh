@@ -10,7 +10,11 @@
 #    task/none, select/cons_tres, no accounting: sacct does not work, as on clusters
 #    without slurmdbd) and ports of their own, so an existing SLURM is not touched;
 #    exports SLURM_CONF;
-# 3. on exit (trap): cancels the jobs left, stops the daemons it started, by PID, prints
+# 3. defines array_task_pid FOLDER TASK: the PID of the Python process of array task TASK
+#    (SLURM_ARRAY_TASK_ID) whose submitit folder lies under FOLDER, empty when none runs; and
+#    array_task_when FOLDER TASK RUN CMD...: that PID once the command CMD succeeds and the
+#    task runs (polled every 0.1 s, up to 300 s, while process RUN lives; empty: never);
+# 4. on exit (trap): cancels the jobs left, stops the daemons it started, by PID, prints
 #    the logs' tails on failure and removes $T.
 
 # ---- 1. packages
@@ -127,3 +131,26 @@ done
 say "one-node cluster up: node $NODE, $CPUS CPUs, partition debug (daemons ${PIDS[*]})"
 if sacct -n >/dev/null 2>&1; then say "note: sacct works here"; else say "sacct does not work (no accounting), as intended"; fi
 
+
+array_task_pid() {
+  local pid
+  for pid in $(pgrep -f "^[^ ]*python[^ ]* -u -m submitit.core._submit $1/" || true); do
+    if tr '\0' '\n' < "/proc/$pid/environ" 2>/dev/null | grep -qx "SLURM_ARRAY_TASK_ID=$2"; then
+      echo "$pid"
+      return
+    fi
+  done
+}
+
+array_task_when() {
+  local folder=$1 task=$2 run=$3 pid
+  shift 3
+  for _ in $(seq 3000); do
+    if "$@"; then
+      pid=$(array_task_pid "$folder" "$task")
+      [ -n "$pid" ] && { echo "$pid"; return; }
+    fi
+    kill -0 "$run" 2>/dev/null || return 0
+    sleep 0.1
+  done
+}

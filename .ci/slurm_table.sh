@@ -47,22 +47,14 @@ say "array: python -m eval ${CONFIG[*]} ${ARRAY[*]} out_dir=$ARR"
 t_array=$(date +%s.%N)
 python -m eval "${CONFIG[@]}" "${ARRAY[@]}" "reference.cache=$T/refs_array" "out_dir=$ARR" > "$T/array.log" 2>&1 &
 RUN=$!
-KILLED=""
-for _ in $(seq 3000); do   # up to 300 s for task 2 to store its first pair
-  # task 2's log (submitit's, in out_dir/slurm/) names its case in its first pair's line
-  case2=$(sed -nE 's/^[0-9-]+ [0-9:,]+ INFO ([^ ]+) +[^ ]+ +[0-9.]+s +vol .*/\1/p' "$ARR"/slurm/*_1/*_log.err \
-          2>/dev/null | head -1 || true)
-  if [ -n "$case2" ] && ls "$ARR/runs/$case2/"*.json >/dev/null 2>&1; then
-    for pid in $(pgrep -f "^[^ ]*python[^ ]* -u -m submitit.core._submit $ARR/" || true); do
-      if tr '\0' '\n' < "/proc/$pid/environ" 2>/dev/null | grep -qx "SLURM_ARRAY_TASK_ID=1"; then
-        KILLED=$pid
-      fi
-    done
-  fi
-  [ -n "$KILLED" ] && break
-  kill -0 "$RUN" 2>/dev/null || break
-  sleep 0.1
-done
+# task 2's log (submitit's, in out_dir/slurm/) names its case in its first pair's line
+task2_case() {
+  sed -nE 's/^[0-9-]+ [0-9:,]+ INFO ([^ ]+) +[^ ]+ +[0-9.]+s +vol .*/\1/p' "$ARR"/slurm/*_1/*_log.err 2>/dev/null \
+    | head -1 || true
+}
+stored_first_pair() { local c; c=$(task2_case); [ -n "$c" ] && ls "$ARR/runs/$c/"*.json >/dev/null 2>&1; }
+KILLED=$(array_task_when "$ARR" 1 "$RUN" stored_first_pair)   # up to 300 s for task 2 to store its first pair
+case2=$(task2_case)
 [ -n "$KILLED" ] || { say "task 2 never stored a pair while running"; exit 1; }
 kill -9 "$KILLED"
 say "task 2 (case $case2, python pid $KILLED) stored $(ls "$ARR/runs/$case2" | tr '\n' ' ')and was killed with kill -9"

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -21,6 +21,8 @@ import numpy as np
 from tqdm import tqdm
 
 from harness.jobs import run_jobs, send
+from harness.slurm_array import run_array
+from harness.slurm_jobs import killed_message
 from sshade.cores import pool_size
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
@@ -191,9 +193,10 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
         return _Run(out=out, cfg=cfg, src=src, old=old, manifest=manifest_, common=common,
                     report=BuildReport(out=out), notify=notify_, verify_only=verify_only)
 
+    missing: dict = {}  # subject -> why its array task gave no result
     try:
         todo = dict(plan)
-        if pool_size(cfg.workers, len(plan)) > 1:  # complete subjects are verified here, without a worker
+        if cfg.cluster is not None or pool_size(cfg.workers, len(plan)) > 1:  # complete subjects: verified here
             todo = {}
             for s, poses in plan.items():
                 try:
@@ -201,7 +204,9 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
                 except _Unfinished:
                     todo[s] = poses
         n = pool_size(cfg.workers, len(todo))
-        if n == 1:
+        if cfg.cluster is not None and todo:
+            missing = _build_on_array(out, cfg, old, common, todo, done)
+        elif n == 1:
             for s, poses in todo.items():
                 done(_subject_result(run_for({"items": {}, "subjects": {}}, notify), s, poses))
         else:
@@ -215,6 +220,11 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
     if stale:
         log.info("%d item(s) of an earlier build are not part of this one and are left out of the manifest "
                  "(their files are kept): %s", len(stale), ", ".join(stale[:5]) + (" ..." if len(stale) > 5 else ""))
+    if missing:  # the subjects built are kept; the manifest says partial and which are missing
+        write_partial(out, manifest, old)
+        raise SShaDeError(f"{len(missing)} subject(s) not built: " + "; ".join(f"subject {s}: {why}" for s, why in
+                                                                               sorted(missing.items())[:4])
+                          + " (the others are kept); run the same command again to build them")
     manifest["complete"] = True  # written last: every planned subject is in it
     write_manifest(out, manifest)
     write_croissant(out)
@@ -290,6 +300,56 @@ def subject_job(s: int, poses: list[int]) -> dict:
         return _subject_result(run, s, poses)
     except SShaDeError as e:
         raise SShaDeError(str(e)) from None
+
+
+def subject_task(arg: tuple) -> dict:
+    """One array task of the build (:func:`_build_on_array`): ``arg`` is ``(out, cfg, old,
+    common, s, poses)``; returns :func:`_subject_result` of subject ``s``, built in this
+    process (the manifest is the submitting process's to write).
+
+    Raises
+    ------
+    SShaDeError as the build raises it (a plain SShaDeError with its message).
+    """
+    out, cfg, old, common, s, poses = arg
+    run = _Run(out=out, cfg=cfg, src=SOURCES[cfg.source](cfg), old=old, manifest={"items": {}, "subjects": {}},
+               common=common, report=BuildReport(out=out), notify=lambda iid, entry, built: None)
+    try:
+        return _subject_result(run, s, poses)
+    except SShaDeError as e:
+        raise SShaDeError(str(e)) from None
+
+
+def array_folder(out: Path, cfg: BuildConfig) -> Path:
+    """Where an array build's submitit scripts and logs go: ``<out>_slurm/<cluster.folder>``,
+    beside the build (whose folder holds only what its manifest lists)."""
+    return out.with_name(out.name + "_slurm") / cfg.cluster.folder
+
+
+def _build_on_array(out: Path, cfg: BuildConfig, old: dict, common: dict, todo: dict, done: Callable) -> dict:
+    """The subjects of ``todo`` as one job array (:func:`harness.slurm_array.run_array`), a
+    task per subject; ``done(result)`` for each that returns. Returns ``{subject: why}``
+    for those whose task failed or was killed (how, and its log)."""
+    folder = array_folder(out, cfg)
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise SShaDeError(f"refusing to write the array's logs into {folder}: not a folder")
+    subjects = list(todo)
+    work = [(out, replace(cfg, cluster=None, progress=False), old, common, s, list(todo[s])) for s in subjects]
+    missing: dict = {}
+
+    def report(i: int, outcome, job) -> None:
+        s = subjects[i]
+        if outcome.kind == "result" and isinstance(outcome.value, dict):
+            done(outcome.value)
+            return
+        how = (f"failed: {(str(outcome.value).strip().splitlines() or ['error'])[-1]}" if outcome.kind == "error"
+               else killed_message(outcome.state, str(job.job_id)))
+        missing[s] = f"array task {job.job_id} {how} (log: {job.paths.stderr})"
+        log.warning("subject %d: array task %s %s", s, job.job_id, how)
+
+    run_array(subject_task, work, cfg.cluster, folder, name="defaust-build", what="one per subject",
+              report=report, variables=_WORKER_THREAD_VARIABLES)  # BLAS as a local build's (the bytes)
+    return missing
 
 
 def _new_manifest(cfg: BuildConfig, src: Source, params: dict) -> dict:

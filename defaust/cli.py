@@ -20,6 +20,7 @@ from pathlib import Path
 from harness.checks import config_int_list, config_number
 from harness.command import hydra_main, run_command
 from harness.confdir import config_dir
+from harness.slurm_array import cluster_options
 from sshade.errors import SShaDeError
 from sshade.pipeline import MAX_SEED
 
@@ -111,6 +112,7 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         anny_root=None if an.get("root") in (None, "") else _abs(an["root"]),
         anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
         resolutions=_resolutions(c.get("resolutions", list(d.resolutions))),
+        cluster=cluster_options(c.get("cluster")),
         progress=progress, workers=config_number(cfg, "workers", min=1, max=4096, allow_none=True, default=None),
     )
 

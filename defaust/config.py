@@ -71,6 +71,9 @@ class BuildConfig:
     workers : int or None, subjects built at once, each in its own process (None: every
         core this process may use, :func:`sshade.cores.available_cores`; 1: one after
         the other in this process). Not a dataset parameter: any count gives the same files.
+    cluster : :class:`harness.slurm_array.ClusterOptions` or None: the subjects to build as
+        one job array (submitit), one task per subject; None: here (``workers``). Not a
+        dataset parameter: the same files.
     """
 
     out: str | Path
@@ -100,6 +103,7 @@ class BuildConfig:
     anny_cache: str | Path | None = None
     progress: bool = True
     workers: int | None = None
+    cluster: object = None
 
     def parameters(self) -> dict:
         """JSON-able parameters (everything but ``out``, ``progress``, ``workers`` and the
@@ -111,7 +115,7 @@ class BuildConfig:
         SShaDeError on a malformed anny pose (source ``"anny"`` only).
         """
         d = asdict(self)
-        for k in ("out", "progress", "workers", "anny_root", "anny_cache"):
+        for k in ("out", "progress", "workers", "cluster", "anny_root", "anny_cache"):
             d.pop(k)
         d["vertex_range"] = [int(x) for x in self.vertex_range]
         d["resolutions"] = [r if r == "high" else int(r) for r in self.resolutions]

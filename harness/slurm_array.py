@@ -115,18 +115,18 @@ def cluster_options(values) -> ClusterOptions | None:
         unreachable_s=config_number(cfg, "cluster.unreachable_s", kind=float, min=0))
 
 
-def thread_caps(options: ClusterOptions) -> dict:
-    """The environment that caps a task's threads at ``cpus_per_task``
-    (:data:`harness.jobs.THREAD_VARIABLES`, :data:`sshade.cores.CORES_VARIABLE`)."""
-    return {v: str(options.cpus_per_task) for v in (*THREAD_VARIABLES, CORES_VARIABLE)}
+def thread_caps(options: ClusterOptions, variables: Sequence[str] = THREAD_VARIABLES) -> dict:
+    """The environment that caps a task's threads at ``cpus_per_task``: ``variables``
+    (default :data:`harness.jobs.THREAD_VARIABLES`) and :data:`sshade.cores.CORES_VARIABLE`."""
+    return {v: str(options.cpus_per_task) for v in (*variables, CORES_VARIABLE)}
 
 
 @contextlib.contextmanager
-def _local_launch(options: ClusterOptions, log_path: Path):
+def _local_launch(options: ClusterOptions, log_path: Path, variables: Sequence[str] = THREAD_VARIABLES):
     """Meanwhile, what a local task's process inherits: the thread caps
     (:func:`thread_caps`) in the environment, and stdout / stderr to ``log_path`` (its
     controller's messages, e.g. when cancelled, go there, not to this command's output)."""
-    values = thread_caps(options)
+    values = thread_caps(options, variables)
     old = {k: os.environ.get(k) for k in values}
     log_path.parent.mkdir(parents=True, exist_ok=True)
     sys.stdout.flush()
@@ -150,14 +150,14 @@ def _local_launch(options: ClusterOptions, log_path: Path):
                 os.environ[k] = v
 
 
-def array_executor(options: ClusterOptions, folder: Path, name: str):
+def array_executor(options: ClusterOptions, folder: Path, name: str, variables: Sequence[str] = THREAD_VARIABLES):
     """submitit's executor for ``options`` writing its scripts and logs in ``folder``, its
     jobs named ``name``; a
     SLURM task's threads capped by its script (:func:`thread_caps`), a local task's by
     the environment it inherits (no shell in between: a cancel reaches it)."""
     import submitit
 
-    cap = [f"export {k}={v}" for k, v in thread_caps(options).items()]
+    cap = [f"export {k}={v}" for k, v in thread_caps(options, variables).items()]
     ex = submitit.AutoExecutor(folder=str(folder / "%j"), cluster=options.executor)
     params: dict = {"timeout_min": options.timeout_min, "cpus_per_task": options.cpus_per_task,
                     "name": name}
@@ -216,7 +216,8 @@ def _cancel(jobs: list, ended: set, options: ClusterOptions) -> None:
 
 
 def run_array(fn: Callable, args: Sequence, options: ClusterOptions, folder: Path, *, name: str, what: str,
-              report: Callable[[int, JobOutcome, object], None]) -> list:
+              report: Callable[[int, JobOutcome, object], None],
+              variables: Sequence[str] = THREAD_VARIABLES) -> list:
     """Submit ``fn(arg)`` for each of ``args`` as one job array and wait for every task.
 
     Parameters
@@ -226,7 +227,8 @@ def run_array(fn: Callable, args: Sequence, options: ClusterOptions, folder: Pat
     (``folder/<job id>/``; a local run's controller output in ``folder/local.log``).
     name : the jobs' name. what : one task in words, for the log (e.g. "one per case").
     report : called ``report(i, outcome, job)`` as task ``i`` ends
-    (:class:`harness.slurm_jobs.JobOutcome`).
+    (:class:`harness.slurm_jobs.JobOutcome`). variables : the thread variables capped at
+    ``cpus_per_task`` in each task (:func:`thread_caps`).
 
     Returns
     -------
@@ -238,8 +240,9 @@ def run_array(fn: Callable, args: Sequence, options: ClusterOptions, folder: Pat
     KeyboardInterrupt (Ctrl-C or SIGTERM) after cancelling the tasks without outcome.
     """
     try:
-        with _local_launch(options, folder / "local.log") if options.executor == "local" else contextlib.nullcontext():
-            jobs = array_executor(options, folder, name).map_array(fn, list(args))
+        local = options.executor == "local"
+        with _local_launch(options, folder / "local.log", variables) if local else contextlib.nullcontext():
+            jobs = array_executor(options, folder, name, variables).map_array(fn, list(args))
     except Exception as e:  # noqa: BLE001 -- sbatch missing, refused, a bad sbatch option
         raise SShaDeError(f"cluster: submitting the array failed: {' '.join(str(e).split())[-600:]}") from None
     log.info("submitted %d array task(s) (%s, %s): %s; logs in %s", len(jobs), options.executor, what,

@@ -117,7 +117,8 @@ def test_cluster_section_checked():
     assert cluster_options(None) is None
     got = cluster_options(GOOD)
     assert got.setup == () and got.mem_gb == 4.0 and got.folder == "slurm" and got.executor == "slurm"
-    for key, bad, words in [("folder", "../up", "inside the output folder"), ("folder", "/abs", "inside the output folder"),
+    inside = "inside the output folder"
+    for key, bad, words in [("folder", "../up", inside), ("folder", "/abs", inside),
                             ("executor", "pbs", "cluster.executor"), ("cpus_per_task", 0, "cluster.cpus_per_task"),
                             ("poll_s", float("nan"), "cluster.poll_s"), ("setup", "echo hi", "cluster.setup"),
                             ("partition", "", "cluster.partition")]:

@@ -3,6 +3,7 @@ remeshing, and the loader (synthetic source, `preset=ci` settings, one subject).
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -295,3 +296,58 @@ def test_bad_resolutions_are_refused_before_any_work(tmp_path, value, word):
     with pytest.raises(SShaDeError, match=word):
         config_from_omegaconf(cfg).validate()
     assert not (tmp_path / "x").exists()
+
+
+# ----------------------------------------------------------------------------- a job array
+
+
+def _task_pids(folder: Path) -> list[int]:
+    """PIDs of the submitit task processes whose job folder lies under ``folder``."""
+    out = []
+    for proc in Path("/proc").iterdir():
+        try:
+            cmd = (proc / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"submitit.core._submit" in cmd and any(str(folder).encode() in c for c in cmd):
+            out.append(int(proc.name))
+    return out
+
+
+@pytest.mark.slow
+def test_an_array_build_with_a_task_killed_resumes_to_the_local_builds_bytes(tmp_path):
+    """``cluster=slurm cluster.executor=local`` (submitit's local executor: the array path
+    without SLURM; .ci/slurm_build.sh runs it on SLURM): one task killed (SIGKILL) while
+    it builds: the command exits 2 naming the subject, the manifest is partial and loads
+    refuse it; the same command builds only that subject, and the build's manifest (every
+    checksum) equals a local build's byte for byte."""
+    import signal
+    import time
+
+    import defaust
+    local, arr = tmp_path / "local", tmp_path / "arr"
+    _build(local, "n_subjects=3", "workers=1")
+    cmd = [sys.executable, "-m", "defaust", "source=synthetic", "preset=ci", f"out={arr}", "n_subjects=3",
+           "progress=false", "cluster=slurm", "cluster.executor=local", "cluster.poll_s=0.2"]
+    p = subprocess.Popen(cmd, cwd=ROOT, env=subprocess_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                         text=True)
+    killed, t_end = None, time.monotonic() + 120
+    while killed is None and p.poll() is None and time.monotonic() < t_end:
+        pids = _task_pids(tmp_path / "arr_slurm")
+        if pids:
+            time.sleep(0.5)  # inside its subject's work
+            os.kill(pids[0], signal.SIGKILL)
+            killed = pids[0]
+        time.sleep(0.05)
+    out, _ = p.communicate(timeout=300)
+    assert killed is not None and p.returncode == 2, out
+    assert "1 subject(s) not built" in out and "run the same command again" in out
+    m = json.loads((arr / "manifest.json").read_text())
+    assert m["complete"] is False and len(m["subjects"]) == 2
+    with pytest.raises(SShaDeError, match="partial"):
+        defaust.load(arr)
+    again = subprocess.run(cmd, cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert "5 item(s) built, 10 skipped" in again.stdout + again.stderr
+    assert (arr / "manifest.json").read_bytes() == (local / "manifest.json").read_bytes()
+    assert defaust.verify(arr) == []
