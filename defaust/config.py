@@ -153,7 +153,8 @@ class BuildConfig:
     def validate(self) -> "BuildConfig":
         """Check every parameter before anything is built or any folder made.
 
-        Integers: ``seed`` in [0, :data:`sshade.pipeline.MAX_SEED`]; ``n_subjects`` >= 1; ``n_poses`` >= 2;
+        Integers: ``seed`` in [0, :data:`sshade.pipeline.MAX_SEED`]; ``n_subjects`` in [1,
+        :data:`MAX_SUBJECTS`]; ``n_poses`` >= 2;
         ``vertex_range`` two integers ``4 <= lo <= hi``; ``remesh_iterations`` >= 1;
         ``1 <= n_per_landmark <= neighbourhood`` (FAUST: neighbourhood <= 6890, its vertex
         count); ``synthetic_vertices`` >= 100; ``synthetic_remesh_iterations`` >= 0;
@@ -171,7 +172,7 @@ class BuildConfig:
         SShaDeError naming the first bad parameter and its value (never a late failure
         after minutes of building, nor a partial build).
         """
-        for name, lo, hi in (("seed", 0, MAX_SEED), ("n_subjects", 1, _MAX_INT), ("n_poses", 2, 10_000),
+        for name, lo, hi in (("seed", 0, MAX_SEED), ("n_subjects", 1, MAX_SUBJECTS), ("n_poses", 2, 10_000),
                              ("remesh_iterations", 1, 10_000), ("n_per_landmark", 1, _MAX_INT),
                              ("neighbourhood", 1, _MAX_INT), ("synthetic_vertices", 100, _MAX_INT),
                              ("synthetic_remesh_iterations", 0, 10_000)):
@@ -230,6 +231,8 @@ class BuildConfig:
 
 
 _MAX_INT = 2**31 - 1
+#: The most subjects one build plans (its manifest lists every item of every subject).
+MAX_SUBJECTS = 100_000
 
 
 def _check_int(name: str, v, lo: int, hi: int) -> int:

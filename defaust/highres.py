@@ -120,8 +120,9 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
 
     Raises
     ------
-    SShaDeError on a bad range, or if no attempt lands in the range or the remesh is not
-    a manifold single-component mesh.
+    SShaDeError on a bad range, or if no attempt gives a valid mesh (a manifold single
+    component without degenerate faces) in the range; an attempt whose mesh is refused
+    is followed by one with a 0.5 % shorter target edge.
 
     Examples
     --------
@@ -152,7 +153,7 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
     area = float(base.get_geometric_measures()["surface_area"])
     del base
     edge = float(np.sqrt(2.0 * area / (np.sqrt(3.0) * target_n)))
-    tried = []
+    tried, invalid = [], []
     for attempt in range(1, int(max_attempts) + 1):
         ms = _meshset(Vs, Fs)
         isotropic_remesh(ms, edge, remesh_iterations, check_distance=check_distance)
@@ -162,9 +163,15 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
         if lo <= n <= hi:
             Vh = np.asarray(m.vertex_matrix(), np.float64)
             Fh = np.asarray(m.face_matrix(), np.int64)
-            Vh, Fh = validate_mesh(Vh, Fh, name="high-res remesh")
+            try:
+                Vh, Fh = validate_mesh(Vh, Fh, name="high-res remesh")
+            except SShaDeError as e:  # e.g. a degenerate face: the next attempt, a 0.5 % shorter edge
+                invalid.append(str(e))
+                edge *= 0.995
+                continue
             return HighResResult(V=Vh, F=Fh, iterations=k, n_subdivided=int(n_sub), target_edge=edge,
                                  attempts=attempt)
         edge *= float(np.sqrt(n / target_n))
-    raise SShaDeError(f"isotropic remesh did not reach [{lo}, {hi}] vertices in {max_attempts} attempts "
-                      f"(target edge length -> vertex count: {[(round(e, 6), n) for e, n in tried]})")
+    why = f"; meshes refused: {'; '.join(invalid)}" if invalid else ""
+    raise SShaDeError(f"isotropic remesh did not reach a valid mesh of [{lo}, {hi}] vertices in {max_attempts} "
+                      f"attempts (target edge length -> vertex count: {[(round(e, 6), n) for e, n in tried]}{why})")

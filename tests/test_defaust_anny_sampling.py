@@ -96,7 +96,8 @@ def test_the_fixed_builds_parameters_are_those_before_sampling():
                                      ({"anny_poses": "random"}, "anny.poses"),
                                      ({"anny_difficulty": 0.0}, "anny.difficulty"),
                                      ({"anny_difficulty": 60.0}, "anny.difficulty"),
-                                     ({"anny_n_targets": 0}, "anny.n_targets")])
+                                     ({"anny_n_targets": 0}, "anny.n_targets"),
+                                     ({"n_subjects": 10**9, "anny_phenotypes": "sampled"}, "n_subjects")])
 def test_a_bad_sampling_parameter_is_refused_naming_it(kw, word):
     with pytest.raises(SShaDeError, match=word):
         BuildConfig(out="x", **kw).validate()

@@ -191,7 +191,7 @@ def test_describe_and_export_of_a_nan_target_are_one_error_line_and_exit_2(defau
     ({"tol": -1}, "tol must be None or a finite number >= 0 (metres), got -1"),
     ({"tol": "0.1"}, "got '0.1'"),
     ({"verify": "no"}, "verify must be True or False, got 'no'"),
-    ({"resolution": "mid"}, "resolution must be 'high' or 'low', got 'mid'"),
+    ({"resolution": "mid"}, "resolution must be 'high', 'low' or 'rN' (an extra resolution of N vertices), got 'mid'"),
 ])
 def test_load_refuses_a_bad_parameter_naming_it_before_reading_anything(tmp_path, kw, words):
     msg = _one_line_error(load, tmp_path / "no_such_build", **kw)  # the parameter, not the folder
