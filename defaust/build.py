@@ -216,6 +216,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
     finally:
         bar.close()
     _merge(manifest, report, [results[s] for s in sorted(results)])
+    _keep_earlier_subjects(manifest, old, plan)
     stale = sorted(set(old.get("items", {})) - set(manifest["items"]))
     if stale:
         log.info("%d item(s) of an earlier build are not part of this one and are left out of the manifest "
@@ -246,6 +247,31 @@ def _merge(manifest: dict, report: BuildReport, results: list[dict]) -> None:
         report.skipped += r["skipped"]
         report.seconds.update(r["seconds_per_item"])
         report.subject_seconds[r["subject"]] = r["seconds"]
+
+
+def _keep_earlier_subjects(manifest: dict, old: dict, plan: dict) -> None:
+    """Keep in ``manifest`` the subjects of the earlier build in the folder that this one
+    did not plan (``subjects=[...]`` builds a subset: the folder's other complete subjects,
+    built with the same parameters, stay listed), subjects and items in subject order; the
+    ``subjects`` parameter becomes what the folder holds (null: all of ``n_subjects``)."""
+    planned = {f"subject_{int(s):02d}" for s in plan}
+    earlier = {k: v for k, v in (old.get("subjects") or {}).items()
+               if k not in planned and k not in manifest["subjects"] and isinstance(v, dict)}
+    if not earlier:
+        return
+    items = {iid: e for iid, e in (old.get("items") or {}).items() if iid.split("/")[0] in earlier}
+    order = sorted({**manifest["subjects"], **earlier}, key=lambda k: int(k.split("_")[1]))
+    by_subject: dict = {}
+    for iid, e in {**manifest["items"], **items}.items():
+        by_subject.setdefault(iid.split("/")[0], {})[iid] = e
+    manifest["subjects"] = {k: {**manifest["subjects"], **earlier}[k] for k in order}
+    manifest["items"] = {iid: e for k in order for iid, e in by_subject.get(k, {}).items()}
+    manifest["planned_subjects"] = sorted({int(k.split("_")[1]) for k in order} | set(manifest["planned_subjects"]))
+    was, now = (old.get("parameters") or {}).get("subjects"), manifest["parameters"].get("subjects")
+    manifest["parameters"] = {**manifest["parameters"], "subjects": None if was is None or now is None
+                              else sorted({int(x) for x in [*was, *now]})}  # what the folder holds
+    log.info("%d subject(s) of the earlier build in this folder kept as they were (not planned by this one)",
+             len(earlier))
 
 
 class _Unfinished(Exception):

@@ -351,3 +351,16 @@ def test_an_array_build_with_a_task_killed_resumes_to_the_local_builds_bytes(tmp
     assert "5 item(s) built, 10 skipped" in again.stdout + again.stderr
     assert (arr / "manifest.json").read_bytes() == (local / "manifest.json").read_bytes()
     assert defaust.verify(arr) == []
+
+
+def test_a_subset_build_keeps_the_folders_other_subjects(tmp_path):
+    """``subjects=[1]`` on a complete 2-subject build: subject 0 stays listed (it was being
+    dropped from the manifest, its files left unlisted), and the manifest is the full
+    build's byte for byte."""
+    import defaust
+    out = tmp_path / "b"
+    _build(out, "n_subjects=2", "workers=1")
+    before = (out / "manifest.json").read_bytes()
+    rep = _build(out, "n_subjects=2", "subjects=[1]", "workers=1")
+    assert rep.built == [] and (out / "manifest.json").read_bytes() == before
+    assert defaust.verify(out) == [] and len(defaust.load(out)) == 8
