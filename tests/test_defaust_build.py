@@ -247,7 +247,7 @@ def test_a_build_killed_at_three_points_is_partial_to_load_and_verify_and_the_sa
 # ----------------------------------------------------------------------------- resolutions
 
 
-def test_an_extra_resolution_is_a_remesh_with_its_own_ground_truth(built, tmp_path):
+def test_an_extra_resolution_is_a_remesh_with_its_own_ground_truth(built, tmp_path, monkeypatch):
     """``resolutions=[high, 2000]``: ``rest_r2000.ply`` has 2000 vertices within 5 % and
     its ground truth shares its faces; the skinning at r2000 agrees with the high-res one
     (each r2000 vertex moves as the nearest high-res rest vertex does, within a few mm);
@@ -275,6 +275,21 @@ def test_an_extra_resolution_is_a_remesh_with_its_own_ground_truth(built, tmp_pa
         assert len(cr.handles) > 0
     with pytest.raises(SShaDeError, match="no resolution 'r7000'; it has low, high, r2000"):
         defaust.load(out, resolution="r7000")
+
+    # a handle farther from the coarse mesh than the tolerance is dropped and counted at rN,
+    # refused when the caller gives the tolerance (as at high and low)
+    import defaust.dataset as ds_mod
+    with pytest.raises(SShaDeError, match="off the surface"):
+        defaust.load(out, resolution="r2000", tol=1e-4, eager=True)
+    base = [c.n_dropped for c in defaust.load(out, resolution="r2000")]
+    orig, tight = ds_mod.CaseReader._tol, {}
+
+    def tol(self, V, F):
+        tight["tol"] = 0.3 * orig(self, V, F)
+        return tight["tol"]
+    monkeypatch.setattr(ds_mod.CaseReader, "_tol", tol)
+    for c, b in zip(defaust.load(out, resolution="r2000"), base):
+        assert c.n_dropped > b and np.all(c.snap_distance <= tight["tol"])
 
 
 def test_resolutions_without_high_build_no_high_res_mesh(tmp_path):

@@ -66,7 +66,7 @@ def summarise_dropped(n_dropped, n_handles, *, resolution: str = "high") -> str 
     n_dropped : sequence of int, per case, handles dropped because a nearer handle took
         their nearest vertex (:func:`defaust.handles.snap_handles`).
     n_handles : sequence of int, per case, handles stored (before dropping).
-    resolution : ``"high"`` or ``"low"``, the meshes the handles were snapped to.
+    resolution : ``"high"``, ``"low"`` or ``"rN"``, the meshes the handles were snapped to.
 
     Examples
     --------
@@ -81,6 +81,10 @@ def summarise_dropped(n_dropped, n_handles, *, resolution: str = "high") -> str 
     tot = sorted({int(x) for x in n_handles})
     count = f"{lo}-{hi}" if lo != hi else f"{lo}"
     of = f"{tot[0]}" if len(tot) == 1 else f"{tot[0]}-{tot[-1]}"
+    if resolution not in ("high", "low"):  # an extra resolution rN: a coarse remesh
+        return (f"DeFAUST: {count} of {of} handles per case ({len(hit)} of {len(d)} cases) are dropped at "
+                f"{resolution}: a nearer handle took their vertex, or the remesh lost the place they were drawn "
+                "(a finger tip) beyond the snap tolerance (per case in cases.csv n_handles_dropped)")
     return (f"DeFAUST: {count} of {of} handles per case ({len(hit)} of {len(d)} cases) share a {resolution}-res "
             "vertex with a nearer handle and are dropped (dataset design: their low-res vertices are closer than "
             "the mesh's spacing; per case in cases.csv n_handles_dropped, see README Troubleshooting)")
