@@ -44,6 +44,7 @@ from .manifest import (
     write_manifest,
     write_partial,
 )
+from .resolutions import extra_counts, resolution_key
 from .sources import SOURCES, Source
 from .store import write_npz, write_ply
 
@@ -437,7 +438,7 @@ def _build_subject(run: _Run, s: int, poses: list[int]) -> float:
     rid = f"{sdir}/rest"
     lo, hi = (int(x) for x in cfg.vertex_range)
     high = {"vertex_range": [lo, hi], "remesh_iterations": int(cfg.remesh_iterations)}
-    res = _resolution_key(cfg)  # {} for the default [high]: the keys are what they were before
+    res = resolution_key(cfg.resolutions)  # {} for the default [high]: the keys are what they were before
     rkey = item_key({**run.common, "item": "rest", "subject": s, "high_res": high, **res, **src.rest_inputs(s)})
     t_subject = _item(run, rid, rkey, lambda: _build_rest(run.out, sdir, s, src, cfg, rkey))
     rest_files = items[rid]["files"]
@@ -489,17 +490,6 @@ def _landmarks(manifest, rid, src, s) -> dict[str, int]:
     return {str(k): int(v) for k, v in lm}  # a list of [name, index]: JSON keeps its order
 
 
-def _resolution_key(cfg: BuildConfig) -> dict:
-    """What the items' keys hold of ``resolutions``: nothing for the default ``[high]``."""
-    r = [x if x == "high" else int(x) for x in cfg.resolutions]
-    return {} if r == ["high"] else {"resolutions": r}
-
-
-def _extra_resolutions(cfg: BuildConfig) -> list[int]:
-    """The vertex counts of ``resolutions`` (``rN`` meshes), in the order given."""
-    return [int(x) for x in cfg.resolutions if x != "high"]
-
-
 def _build_rest(out: Path, sdir: str, s: int, src: Source, cfg: BuildConfig, key: str) -> dict:
     V, F = src.rest_low(s)
     lm = src.landmarks(s)
@@ -517,7 +507,7 @@ def _build_rest(out: Path, sdir: str, s: int, src: Source, cfg: BuildConfig, key
                      "ls3_iterations": int(hr.iterations), "n_vertices_subdivided": int(hr.n_subdivided),
                      "remesh_target_edge": float(hr.target_edge), "remesh_attempts": int(hr.attempts)})
     extra = {}
-    for n in _extra_resolutions(cfg):  # a remesh of the same surface with n vertices (within 5 %)
+    for n in extra_counts(cfg.resolutions):  # a remesh of the same surface with n vertices (within 5 %)
         rr = highres.subdivide_remesh(V, F, vertex_range=(int(0.95 * n), int(np.ceil(1.05 * n))),
                                       remesh_iterations=cfg.remesh_iterations, check_distance=True)
         files[f"{sdir}/rest_r{n}.ply"] = write_ply(out / sdir / f"rest_r{n}.ply", rr.V, rr.F)
@@ -556,7 +546,7 @@ def _build_pose(out: Path, sdir: str, s: int, p: int, src: Source, cfg: BuildCon
         Vg = src.target_high(s, p, Vh)
         files[f"{sdir}/pose_{p:02d}_high.ply"] = write_ply(out / sdir / f"pose_{p:02d}_high.ply", Vg, Fh)
         info.update(src.pose_info(s, p, Vg, Fh))
-    for n in _extra_resolutions(cfg):
+    for n in extra_counts(cfg.resolutions):
         Vr, Fr = src.cached((f"rest_r{n}", s), lambda n=n: read_mesh(out / sdir / f"rest_r{n}.ply", validate=False))
         k = src.recalled(("rest_info", s), {}).get("resolutions", {}).get(f"r{n}", {}).get("ls3_iterations")
         if k is None:

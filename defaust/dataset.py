@@ -35,16 +35,12 @@ from .handles import (
     snap_handles,
 )
 from .manifest import FORMAT, MANIFEST, partial_problem
+from .resolutions import RESOLUTIONS, build_resolutions, check_resolution
 from .store import read_npz, sha256_file
 
 __all__ = ["Case", "CaseSequence", "CaseReader", "FolderBuild", "open_build", "read_manifest", "load_handles", "load",
            "verify", "RESOLUTIONS", "UNLISTED", "check_resolution", "build_resolutions"]
 
-#: The two meshes of a default build's subjects: ``high`` (LS3 Loop + isotropic remesh, the
-#: paper's setting) and ``low`` (the ANNY / FAUST / synthetic base mesh); a build with
-#: ``resolutions=[..., N]`` also has ``rN``, a remesh with N vertices (:func:`build_resolutions`).
-RESOLUTIONS = ("high", "low")
-_EXTRA_RESOLUTION = re.compile(r"r[1-9][0-9]*")
 #: A handles file of the build: ``subject_XX/pose_YY_handles.npz``.
 _HANDLES_FILE = re.compile(r"subject_(\d+)/pose_(\d+)_handles\.npz")
 
@@ -275,24 +271,6 @@ def _inside(root: Path, rel: str) -> Path:
 def _is_int(x) -> bool:
     """``x`` is a Python or numpy integer, not a bool."""
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
-
-
-def check_resolution(resolution) -> str:
-    """``resolution`` checked: ``"high"``, ``"low"`` or ``"rN"`` (N >= 1, a build's extra
-    remesh); SShaDeError naming the parameter otherwise."""
-    if isinstance(resolution, str) and (resolution in RESOLUTIONS or _EXTRA_RESOLUTION.fullmatch(resolution)):
-        return resolution
-    raise SShaDeError(f"resolution must be 'high', 'low' or 'rN' (an extra resolution of N vertices), "
-                      f"got {resolution!r}")
-
-
-def build_resolutions(manifest: dict) -> list[str]:
-    """The resolutions a build's manifest says it has: ``low``, then its ``resolutions``
-    parameter (``high`` and ``rN``; a default build: ``high``)."""
-    params = manifest.get("parameters") if isinstance(manifest.get("parameters"), dict) else {}
-    res = params.get("resolutions", ["high"])
-    res = res if isinstance(res, list) else ["high"]
-    return ["low"] + [r if r == "high" else f"r{r}" for r in res if r == "high" or isinstance(r, int)]
 
 
 def _load_params(root, resolution, subjects, limit, verify, tol, eager=False) -> set[int] | None:

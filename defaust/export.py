@@ -23,9 +23,10 @@ from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write, write_mesh
 
 from .croissant import CROISSANT
-from .dataset import Case, FolderBuild, check_resolution, load, open_build, read_manifest
+from .dataset import Case, FolderBuild, load, open_build, read_manifest
 from .hf_export import arrow_schema, write_shards, write_shards_croissant
 from .manifest import MANIFEST
+from .resolutions import check_resolution
 from .store import sha256_bytes, sha256_file
 
 __all__ = ["FORMATS", "MARKER", "KIND", "export", "check_export_folder", "case_arrays"]
