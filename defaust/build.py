@@ -358,8 +358,12 @@ def _build_on_array(out: Path, cfg: BuildConfig, old: dict, common: dict, todo: 
     task per subject; ``done(result)`` for each that returns. Returns ``{subject: why}``
     for those whose task failed or was killed (how, and its log)."""
     folder = array_folder(out, cfg)
-    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
-        raise SShaDeError(f"refusing to write the array's logs into {folder}: not a folder")
+    base = out.with_name(out.name + "_slurm")
+    others = sorted(p.name for p in base.iterdir() if p.name != folder.relative_to(base).parts[0]) \
+        if base.is_dir() and not base.is_symlink() else []
+    if any(p.is_symlink() or (p.exists() and not p.is_dir()) for p in (base, folder)) or others:
+        raise SShaDeError(f"refusing to write the array's logs into {base}: it is not a folder of this build's logs "
+                          f"({'it holds ' + ', '.join(others[:3]) if others else 'a link or a file'}); move it away")
     subjects = list(todo)
     work = [(out, replace(cfg, cluster=None, progress=False), old, common, s, list(todo[s])) for s in subjects]
     missing: dict = {}

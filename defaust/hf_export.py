@@ -139,6 +139,8 @@ def write_shards(cases, to: Path, subjects: dict, *, shard_mb: float = 256.0) ->
         size += nbytes
     if cur:
         shards.append(cur)
+    if (to / "data").is_symlink() or ((to / "data").exists() and not (to / "data").is_dir()):
+        raise SShaDeError(f"refusing to write the shards into {to / 'data'}: a link or a file, not a folder")
     (to / "data").mkdir(parents=True, exist_ok=True)
     out = {}
     for i, part in enumerate(shards):

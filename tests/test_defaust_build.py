@@ -379,3 +379,14 @@ def test_a_subset_build_keeps_the_folders_other_subjects(tmp_path):
     rep = _build(out, "n_subjects=2", "subjects=[1]", "workers=1")
     assert rep.built == [] and (out / "manifest.json").read_bytes() == before
     assert defaust.verify(out) == [] and len(defaust.load(out)) == 8
+
+
+def test_an_array_build_refuses_a_logs_folder_that_is_not_its_own(tmp_path):
+    """``OUT_slurm`` beside the build holding other files, or being a link, is refused
+    before anything is submitted or built."""
+    out = tmp_path / "b"
+    (tmp_path / "b_slurm").mkdir()
+    (tmp_path / "b_slurm" / "notes.txt").write_text("mine")
+    with pytest.raises(SShaDeError, match="holds notes.txt"):
+        _build(out, "cluster=slurm", "cluster.executor=local")
+    assert (tmp_path / "b_slurm" / "notes.txt").read_text() == "mine" and not (out / "subject_00").exists()

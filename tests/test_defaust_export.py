@@ -4,6 +4,7 @@ lies inside the build, is refused before anything is written."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -135,3 +136,19 @@ def test_hf_export_without_pyarrow_names_the_extra_before_writing(defaust_ci, tm
     with pytest.raises(SShaDeError, match=r"pip install -e \.\[hf\]"):
         export(defaust_ci, tmp_path / "hf", fmt="hf")
     assert not (tmp_path / "hf").exists()
+
+
+def test_hf_export_never_writes_through_a_linked_data_folder(defaust_ci, tmp_path):
+    from defaust.hf_export import arrow_schema
+    try:
+        arrow_schema()
+    except SShaDeError:
+        pytest.skip("pyarrow is not importable here (the [hf] extra)")
+    export(defaust_ci, tmp_path / "hf", fmt="hf", resolution="low")
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shutil.rmtree(tmp_path / "hf" / "data")
+    (tmp_path / "hf" / "data").symlink_to(outside)
+    with pytest.raises(SShaDeError, match="a link or a file"):
+        export(defaust_ci, tmp_path / "hf", fmt="hf", resolution="low")
+    assert list(outside.iterdir()) == []
