@@ -261,11 +261,12 @@ def _keep_earlier_subjects(manifest: dict, old: dict, plan: dict) -> None:
     if not earlier:
         return
     items = {iid: e for iid, e in (old.get("items") or {}).items() if iid.split("/")[0] in earlier}
-    order = sorted({**manifest["subjects"], **earlier}, key=lambda k: int(k.split("_")[1]))
+    subjects = {**manifest["subjects"], **earlier}
+    order = sorted(subjects, key=lambda k: int(k.split("_")[1]))
     by_subject: dict = {}
     for iid, e in {**manifest["items"], **items}.items():
         by_subject.setdefault(iid.split("/")[0], {})[iid] = e
-    manifest["subjects"] = {k: {**manifest["subjects"], **earlier}[k] for k in order}
+    manifest["subjects"] = {k: subjects[k] for k in order}
     manifest["items"] = {iid: e for k in order for iid, e in by_subject.get(k, {}).items()}
     manifest["planned_subjects"] = sorted({int(k.split("_")[1]) for k in order} | set(manifest["planned_subjects"]))
     was, now = (old.get("parameters") or {}).get("subjects"), manifest["parameters"].get("subjects")
@@ -319,10 +320,16 @@ def subject_job(s: int, poses: list[int]) -> dict:
     SShaDeError as the build raises it (as a plain SShaDeError with its message, which
     crosses the process boundary whatever its subclass).
     """
+    return _worker_result(s, poses, lambda iid, entry, built: send((iid, entry, built)))
+
+
+def _worker_result(s: int, poses: list[int], notify: Callable) -> dict:
+    """:func:`_subject_result` of subject ``s`` with the worker's set-up
+    (:func:`init_subject_worker`), ``notify`` told of each item; a SShaDeError re-raised
+    as a plain one (its subclass may not unpickle in the process that waits)."""
     w = _WORKER
     run = _Run(out=w["out"], cfg=w["cfg"], src=w["src"], old=w["old"], manifest={"items": {}, "subjects": {}},
-               common=w["common"], report=BuildReport(out=w["out"]),
-               notify=lambda iid, entry, built: send((iid, entry, built)))
+               common=w["common"], report=BuildReport(out=w["out"]), notify=notify)
     try:
         return _subject_result(run, s, poses)
     except SShaDeError as e:
@@ -339,26 +346,22 @@ def subject_task(arg: tuple) -> dict:
     SShaDeError as the build raises it (a plain SShaDeError with its message).
     """
     out, cfg, old, common, s, poses = arg
-    run = _Run(out=out, cfg=cfg, src=SOURCES[cfg.source](cfg), old=old, manifest={"items": {}, "subjects": {}},
-               common=common, report=BuildReport(out=out), notify=lambda iid, entry, built: None)
-    try:
-        return _subject_result(run, s, poses)
-    except SShaDeError as e:
-        raise SShaDeError(str(e)) from None
+    init_subject_worker(out, cfg, old, common)
+    return _worker_result(s, poses, lambda iid, entry, built: None)
 
 
-def array_folder(out: Path, cfg: BuildConfig) -> Path:
-    """Where an array build's submitit scripts and logs go: ``<out>_slurm/<cluster.folder>``,
-    beside the build (whose folder holds only what its manifest lists)."""
-    return out.with_name(out.name + "_slurm") / cfg.cluster.folder
+def _logs_folder(out: Path) -> Path:
+    """Where an array build's submitit scripts and logs go: ``<out>_slurm``, beside the
+    build (whose folder holds only what its manifest lists)."""
+    return out.with_name(out.name + "_slurm")
 
 
 def _build_on_array(out: Path, cfg: BuildConfig, old: dict, common: dict, todo: dict, done: Callable) -> dict:
     """The subjects of ``todo`` as one job array (:func:`harness.slurm_array.run_array`), a
     task per subject; ``done(result)`` for each that returns. Returns ``{subject: why}``
     for those whose task failed or was killed (how, and its log)."""
-    folder = array_folder(out, cfg)
-    base = out.with_name(out.name + "_slurm")
+    base = _logs_folder(out)
+    folder = base / cfg.cluster.folder
     others = sorted(p.name for p in base.iterdir() if p.name != folder.relative_to(base).parts[0]) \
         if base.is_dir() and not base.is_symlink() else []
     if any(p.is_symlink() or (p.exists() and not p.is_dir()) for p in (base, folder)) or others:

@@ -17,6 +17,7 @@ from sshade.pipeline import MAX_SEED
 
 from .anny_poses import POSES, pose_to_spec, resolve_poses
 from .anny_sampling import SAMPLER_VERSION
+from .resolutions import resolution_key
 
 __all__ = ["BuildConfig"]
 
@@ -118,9 +119,8 @@ class BuildConfig:
         for k in ("out", "progress", "workers", "cluster", "anny_root", "anny_cache"):
             d.pop(k)
         d["vertex_range"] = [int(x) for x in self.vertex_range]
-        d["resolutions"] = [r if r == "high" else int(r) for r in self.resolutions]
-        if d["resolutions"] == ["high"]:
-            d.pop("resolutions")  # the default build's parameters are what they were before
+        d.pop("resolutions")
+        d.update(resolution_key(self.resolutions))  # none for the default: its parameters are as before
         if d["faust_root"] is not None:
             d["faust_root"] = str(Path(d["faust_root"]).expanduser().resolve())
         synthetic = ("synthetic_vertices", "synthetic_voxel", "synthetic_blend", "synthetic_remesh_iterations")

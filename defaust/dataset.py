@@ -388,12 +388,17 @@ class CaseReader:
             return V, F, (self.src.path / rel if isinstance(self.src, FolderBuild) else Path(self.src.where(rel)))
         return self._rest.get(s, read)
 
+    @property
+    def _coarse(self) -> bool:
+        """An extra resolution ``rN`` read with the default tolerance (a coarse remesh)."""
+        return self.tol is None and self.resolution not in RESOLUTIONS
+
     def _tol(self, V, F) -> float | None:
         """The snap tolerance: the caller's, else at an extra resolution ``rN`` the larger
         of 1 % of the diagonal (:func:`defaust.handles.snap_handles`' default) and two mean
         edge lengths (a coarse remesh moves off the surface the handles were drawn on by
         about an edge), else None (that default)."""
-        if self.tol is not None or self.resolution in RESOLUTIONS:
+        if not self._coarse:
             return self.tol
         E = V[F[:, [1, 2, 0]]] - V[F]
         return max(0.01 * float(np.linalg.norm(V.max(0) - V.min(0))), 2.0 * float(np.linalg.norm(E, axis=2).mean()))
@@ -403,7 +408,7 @@ class CaseReader:
         handles farther than ``tol`` from every vertex (a coarse remesh loses finger tips,
         where some handles are drawn) and how many those are; elsewhere ``(H, 0)`` (the
         snap refuses a far handle). SShaDeError when no handle is left."""
-        if self.tol is not None or self.resolution in RESOLUTIONS:
+        if not self._coarse:
             return H, 0
         from scipy.spatial import cKDTree
         near = cKDTree(V).query(H.rest)[0] <= tol

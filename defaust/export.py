@@ -154,8 +154,9 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
         files.update(write_shards(cases, to, manifest.get("subjects") or {}))
         files[CROISSANT] = write_shards_croissant(to, manifest, manifest_sha256=manifest_sha256,
                                                   resolution=resolution)
-    for c in cases if fmt != "hf" else ():
-        files.update(_write_case(c, to, fmt))
+    else:
+        for c in cases:
+            files.update(_write_case(c, to, fmt))
     marker = {"kind": KIND, "format": fmt, "resolution": resolution, "source": cases[0].source,
               "cases": [c.name for c in cases], "build": str(root.resolve()),
               "build_manifest_sha256": manifest_sha256, "files": files}
