@@ -47,8 +47,8 @@ POSE_ACTIONS: tuple[tuple, ...] = (
     ("leg", "bend", ("upperleg01.L",), FORWARD, -15.0, 60.0),           # thigh forwards (+) or back
     ("leg", "bend", ("lowerleg01.L",), BACK, 0.0, 70.0),                # knee bent
 )
-#: The default difficulty, % of the diagonal (:func:`mean_displacement_pct`; the library's
-#: poses measure 8-15 % on the fixed subjects).
+#: The default difficulty, % of the diagonal (:func:`mean_displacement_pct`), amid the
+#: library poses' (benchmarks/records/defaust_scale.md).
 DEFAULT_DIFFICULTY = 10.0
 #: Draws tried per body or pose before the build stops with an error.
 MAX_ATTEMPTS = 20
