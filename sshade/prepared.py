@@ -5,12 +5,12 @@
 §3.1, local coordinates §3.2, the low-res ARAP's deformer) and returns a :class:`Prepared`;
 :meth:`Prepared.solve` runs per sampling the low-res ARAP and the decoding (Alg. 1) and
 averages them (§3.3). The first solve is :func:`sshade.deform` of the same parameters, bit
-for bit; later ones start from the earlier results extrapolated (:data:`FRAME_ACCELERATION`).
+for bit; later ones start from the earlier results extrapolated along the targets' path
+(:data:`FRAME_ACCELERATION`).
 Starts, threads and timings: docs/methods.md ("Implementation notes: sshade/prepared.py").
 """
 from __future__ import annotations
 
-import functools
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor, wait
@@ -45,26 +45,31 @@ __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 32}
 
 
-#: Results the later solves' start is fitted through (:meth:`_Sampling.start`).
-START_RESULTS = 5
+#: How many results a later solve's start may be fitted through: the count whose fit
+#: best predicted the newest result from those before it (:meth:`_Sampling.start`).
+START_FITS = (3, 5, 8, 12)
+#: Results kept per sampling: the longest fit's and the newest one it is checked against.
+START_RESULTS = START_FITS[-1] + 1
+#: Path positions closer than this share of the fitted span count as one point when the
+#: fit's degree is capped at the distinct points less one (:func:`_fit_ahead`).
+DISTINCT_POSITIONS = 1e-3
 
 
-@functools.lru_cache(maxsize=None)
-def _fit_weights(n: int, degree: int) -> np.ndarray:
-    """The weights of :func:`_fit_ahead` for ``n`` results: (n,) float64."""
-    t = -np.arange(n, dtype=np.float64)
-    return np.ones(degree + 1) @ np.linalg.pinv(np.vander(t, degree + 1, increasing=True))
-
-
-def _fit_ahead(h: list, degree: int) -> np.ndarray:
-    """One step on from the results ``h`` ((k, 3) each, newest first, taken at steps 0,
-    -1, -2, ...) along the least-squares polynomial of ``degree`` (< ``len(h)``) through
-    them: a new array."""
-    c = _fit_weights(len(h), degree)
+def _fit_ahead(h: list, x: np.ndarray, most: int = 2) -> tuple[np.ndarray, int]:
+    """The least-squares polynomial of degree at most ``most`` through the results ``h``
+    ((k, 3) each) at path positions ``x`` ((r,) float64, r = len(h), relative to the
+    position predicted) evaluated there, and its degree: at most the distinct positions
+    less one (:data:`DISTINCT_POSITIONS`); positions all equal give their mean."""
+    span = float(np.abs(x).max())
+    degree = 0
+    if span > 0:
+        x = x / span
+        degree = min(most, int(np.count_nonzero(np.diff(np.sort(x)) > DISTINCT_POSITIONS)))
+    c = np.linalg.pinv(np.vander(x, degree + 1, increasing=True))[0] if degree else np.full(len(h), 1 / len(h))
     out = c[0] * h[0]
     for cj, hj in zip(c[1:], h[1:]):
         out += cj * hj
-    return out
+    return out, degree
 
 
 def _norm(a: np.ndarray) -> float:
@@ -133,32 +138,40 @@ class _Sampling:
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
         self.moves = _HandleMoves(self.VN, prep["F"], prep["low_handles"])
         self.history: list = []  # (k, 3) low-res results of the last START_RESULTS solves, newest first
+        self.at: list = []  # their path positions (Prepared.solve)
         self.last_iterations = 0  # of the last solve
 
-    def start(self) -> tuple[np.ndarray, int]:
-        """The next solve's start, (k, 3), and its degree: the last result (degree 0) or
-        the least-squares polynomial of degree ``min(2, r - 1)`` through the newest ``r``
-        results (at most :data:`START_RESULTS`; frames taken as equally spaced) evaluated
-        one step on, whichever, fitted to the results before it, predicted the newest
-        one better (least Euclidean distance; a tie keeps the last result). A smooth path
-        takes the fit, a handle that stops the last result. Fitting a quadratic through
-        five results rather than interpolating three damps each result's convergence
-        error, which the interpolation amplifies (benchmarks/records/frames_scalar_decode.md)."""
-        h = self.history
-        if len(h) == 1:
+    def start(self, at: float) -> tuple[np.ndarray, int]:
+        """The start of the solve at path position ``at`` (:meth:`Prepared.solve`: the arc
+        length of the targets' path), (k, 3), and its degree: the last result (degree 0),
+        or the least-squares polynomial of degree at most 2 through the newest ``r``
+        results at their path positions evaluated at ``at`` (:func:`_fit_ahead`), ``r`` of
+        :data:`START_FITS`: whichever predicted the newest result best from the results
+        before it (least Euclidean distance; a tie keeps the fewer results, the last result
+        first). A smooth path takes a fit, a handle that stops the last result; targets
+        where the last solve's were keep its result. Fitting over the arc length rather than
+        the frame number follows a path that slows down or speeds up (a smoothstep); a long
+        fit damps the results' convergence errors on a path that bends slowly, a short one
+        follows one that bends faster (benchmarks/records/frames_arc_length_start.md)."""
+        h, pos = self.history, np.asarray(self.at)
+        if len(h) == 1 or pos[0] == at:
             return h[0], 0
+        best, err = 0, _norm(h[1] - h[0])
+        for r in START_FITS:
+            r = min(r, len(h) - 1)
+            past, _ = _fit_ahead(h[1:r + 1], pos[1:r + 1] - pos[0])
+            e = _norm(past - h[0])
+            if e < err:
+                best, err = r, e
+            if r == len(h) - 1:
+                break
+        if best == 0:
+            return h[0], 0
+        return _fit_ahead(h[:best], pos[:best] - at)
 
-        def fit(hs: list) -> tuple[np.ndarray, int]:
-            r = min(START_RESULTS, len(hs))
-            return _fit_ahead(hs[:r], min(2, r - 1)), min(2, r - 1)
-
-        past, _ = fit(h[1:])
-        if _norm(past - h[0]) < _norm(h[1] - h[0]):
-            return fit(h)
-        return h[0], 0
-
-    def solve(self, targets, V0, arap: dict, carry: bool = False) -> dict:
-        """The low-res ARAP from ``V0`` ((k, 3) or None: the rigid fit); when ``carry`` (a
+    def solve(self, targets, at: float, V0, arap: dict, carry: bool = False) -> dict:
+        """The low-res ARAP at path position ``at`` (:meth:`start`) from ``V0`` ((k, 3) or
+        None: the rigid fit); when ``carry`` (a
         later frame) with the last solve's accelerator history and ``V0``'s free vertices
         moved with its handle rows to the targets (:class:`_HandleMoves`): the info of the
         ARAP run. Its result's frames are made by the first :meth:`decode` after it (on
@@ -169,6 +182,7 @@ class _Sampling:
         res = self.arap.deform(targets, V0=V0, carry_history=carry, **arap)
         self.low, self.frames = res.V, None
         self.history = [res.V] + self.history[:START_RESULTS - 1]
+        self.at = [at] + self.at[:START_RESULTS - 1]
         self.last_iterations = res.iterations
         return {"arap_s": time.perf_counter() - t0, "iterations": res.iterations, "converged": res.converged,
                 "status": res.info.get("status"), "warm_start": V0 is not None}
@@ -309,6 +323,7 @@ class Prepared:
             self._arap.pop(made_for)
         self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
         self.n_solves = 0
+        self._path, self._last_T = 0.0, None  # the targets' path so far (arc length, unit frame), its last point
         self._corners = np.array([V.min(0), V.max(0)])  # V's bounding box, for the per-solve checks
         self._unit_corners = frame.to_unit(self._corners)
         self._lock = threading.Lock()  # one solve at a time: the samplings' state is the previous solve's
@@ -363,6 +378,10 @@ class Prepared:
 
     def solve(self, targets, *, return_info: bool = False):
         """Deform for ``targets`` ((h, 3) float, one per handle, in :attr:`handles`' order).
+        From the second solve on each sampling starts from its earlier results fitted over
+        the targets' path: the arc length of the solves' targets so far (the sum of the
+        Euclidean distances between successive targets, all handles together;
+        :meth:`_Sampling.start`); the result is that of the stopping rule whatever the start.
 
         Returns
         -------
@@ -389,6 +408,9 @@ class Prepared:
     def _solve(self, T_mesh: np.ndarray, return_info: bool):
         T = self.frame.to_unit(T_mesh)
         t0 = time.perf_counter()
+        if self._last_T is not None:
+            self._path += _norm(T - self._last_T)
+        self._last_T, at = T, self._path
         self._settle()  # an interrupted solve's tasks end before their samplings are reused
         first, S = self.n_solves == 0, self._samplings
         arap, first_arap = self._arap, Future()
@@ -405,7 +427,7 @@ class Prepared:
 
         def run(i: int, V0) -> tuple:
             try:
-                info = S[i].solve(T, V0, arap)
+                info = S[i].solve(T, at, V0, arap)
             except BaseException as e:
                 if i == 0:
                     first_arap.set_exception(e)
@@ -415,8 +437,8 @@ class Prepared:
             return decoded(i, info)
 
         def later(i: int) -> tuple:  # the earlier frames extrapolated, the accelerator's history kept
-            V0, degree = S[i].start()
-            return decoded(i, {**S[i].solve(T, V0, self._frame_arap, carry=True), "start_degree": degree})
+            V0, degree = S[i].start(at)
+            return decoded(i, {**S[i].solve(T, at, V0, self._frame_arap, carry=True), "start_degree": degree})
 
         def from_first(i: int) -> tuple:  # as deform: from sampling 0's result
             first_arap.result()

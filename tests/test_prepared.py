@@ -126,30 +126,63 @@ def test_solves_from_several_threads_each_land_on_their_own_targets(faust_pair):
 
 
 def test_the_start_follows_the_path_and_stops_with_the_handles(faust_pair):
-    """A steady path is extrapolated (degree 2 once three results exist); handles that stop
-    moving are followed by the previous result (degree 0) from the solve after the stop."""
+    """A steady path is extrapolated (degree 2 once three results exist); targets where the
+    last solve's were keep its result (degree 0), and so do handles that stop moving."""
     V, F, h, V2 = faust_pair
     with prepare(V, F, h, n_low=500, n_samplings=1) as p:
         degrees = []
         for t in [0.1, 0.2, 0.3, 0.4, 0.5, 0.5, 0.5]:
             _, info = p.solve(V[h] + t * (V2[h] - V[h]), return_info=True)
             degrees.append(info["samplings"][0].get("start_degree"))
-    assert degrees[:2] == [None, 0] and degrees[4] == 2 and degrees[6] == 0, degrees
+    assert degrees[:2] == [None, 0] and degrees[4] == 2 and degrees[5:] == [0, 0], degrees
 
 
-def test_the_fitted_start_continues_a_quadratic_path_exactly():
-    """The least-squares polynomial through five results of a path quadratic in the frame
-    number (and the interpolating ones through fewer) gives the next frame's positions
-    to rounding; through two results it continues a straight line."""
+def test_the_fitted_start_continues_a_quadratic_path_exactly_at_uneven_positions():
+    """The least-squares polynomial through twelve results of a path quadratic in its
+    position, taken at uneven positions (a smoothstep's), gives the positions at the next
+    one to rounding, and so do the interpolating ones through three; through two results
+    it continues a straight line; positions that do not move give their results' mean."""
     from sshade.prepared import _fit_ahead
     rng = np.random.default_rng(0)
     a, b, c = rng.normal(size=(3, 40, 3))
-    path = [a + b * t + c * t * t for t in range(8)]
-    for r, degree in ((5, 2), (4, 2), (3, 2)):
-        h = path[7 - r:7][::-1]  # newest first
-        assert np.allclose(_fit_ahead(h, degree), path[7], rtol=0, atol=1e-10)
-    line = [a + b * t for t in range(3)]
-    assert np.allclose(_fit_ahead([line[1], line[0]], 1), line[2], rtol=0, atol=1e-12)
+    s = np.linspace(0, 1, 14) ** 2 * (3 - 2 * np.linspace(0, 1, 14))
+    path = [a + b * t + c * t * t for t in s]
+    for r in (12, 3):
+        h = path[13 - r:13][::-1]  # newest first
+        out, degree = _fit_ahead(h, s[13 - r:13][::-1] - s[13])
+        assert degree == 2 and np.allclose(out, path[13], rtol=0, atol=1e-10)
+    out, degree = _fit_ahead([a + b * s[1], a + b * s[0]], s[1::-1] - s[2])
+    assert degree == 1 and np.allclose(out, a + b * s[2], rtol=0, atol=1e-12)
+    out, degree = _fit_ahead([path[3], path[2]], np.zeros(2))
+    assert degree == 0 and np.allclose(out, (path[3] + path[2]) / 2, rtol=0, atol=1e-15)
+
+
+def test_the_fitted_start_caps_its_degree_at_the_distinct_positions():
+    """Results at two positions (one repeated: handles stopped, then moved on) are fitted by
+    a line, not by a quadratic that the repeated position leaves undetermined."""
+    from sshade.prepared import _fit_ahead
+    a, b = np.ones((5, 3)), np.arange(15.0).reshape(5, 3)
+    h = [a + b, a + b, a + b, a]  # newest first, at positions 1, 1, 1, 0
+    out, degree = _fit_ahead(h, np.array([1.0, 1.0, 1.0, 0.0]) - 2.0)
+    assert degree == 1 and np.allclose(out, a + 2 * b, rtol=0, atol=1e-12)
+
+
+def test_the_start_fits_through_the_count_of_results_that_predicted_best():
+    """Results on a straight path, each off by a convergence error, are fitted through the
+    most results (12: the errors averaged out); exact results on a path that bends fast
+    through the fewest (3: a long quadratic cannot follow it)."""
+    from types import SimpleNamespace
+
+    from sshade.prepared import START_FITS, START_RESULTS, _fit_ahead, _Sampling
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(2, 30, 3))
+    pos = np.linspace(1.0, 0.0, START_RESULTS) ** 1.5  # newest first, uneven
+    at = 1.08
+    noisy = [a + b * t + 1e-3 * rng.normal(size=a.shape) for t in pos]
+    bent = [a * np.cos(6 * t) + b * np.sin(6 * t) for t in pos]
+    for h, r in ((noisy, START_FITS[-1]), (bent, START_FITS[0])):
+        start, degree = _Sampling.start(SimpleNamespace(history=h, at=list(pos)), at)
+        assert degree == 2 and np.array_equal(start, _fit_ahead(h[:r], pos[:r] - at)[0]), r
 
 
 def test_the_handles_moves_extend_a_translation_exactly(faust_pair):
