@@ -53,8 +53,8 @@ class PreparedFrame:
     ``p.solve(targets_t)`` over frames 2-60 of benchmarks/frames.py's smooth
     (smoothstep) 60-frame path from the rest positions to the scaling edit's targets, so
     that each frame moves the handles as much as in results/frames (``prepared_frames``
-    in ``_common``). Target: <= 0.100 s at 200k on both meshes (results/frames at 6a83b77:
-    57 ms clean, 70 ms hard, 2-core machine). n/a where ``sshade.prepare`` does not exist."""
+    in ``_common``). Target: <= 0.100 s at 200k on both meshes (results/frames at e0b4e30:
+    57 ms clean, 80 ms hard, 2-core machine). n/a where ``sshade.prepare`` does not exist."""
 
     params = MESH_PARAMS
     param_names = ["mesh"]

@@ -57,7 +57,7 @@ class FrameVersusLibigl:
     (``sshade.prepare``, frames 2-60 of benchmarks/frames.py's smooth path, as
     ``PreparedFrame``) divided by the median seconds of one libigl ``arap_solve``
     iteration (spokes and rims, after its precomputation; 15 timed) on the hard 252k
-    centaur, same process run. Target: <= 0.40 (results/frames at 6a83b77: 70 ms / 299 ms = 0.23
+    centaur, same process run. Target: <= 0.40 (results/frames at e0b4e30: 80 ms / 286 ms = 0.28
     on a 2-core machine). n/a where ``sshade.prepare`` does not exist."""
 
     timeout = 600
