@@ -27,7 +27,8 @@ META_KEYS = ("order", "harness")
 #: The keys of a method file's ``harness`` and what a file that leaves one out (and a
 #: plug-in) gets: ``cost`` (the plan's prior: ``scale`` ``vertices`` or ``const``,
 #: ``prior`` in seconds per vertex or per case, optional ``preset``: the only preset the
-#: prior holds for, optional ``paper``: the prior under ``arap.protocol=paper``),
+#: prior holds for, optional ``paper``: the prior under ``arap.protocol=paper``, optional
+#: ``exponent``: how the prior grows with the vertices, :mod:`eval.run.progress`),
 #: ``reference`` (an energy of :data:`sshade.arap.ENERGIES`, or ``arap_sr``: ARAP-SR's
 #: own with the method's ``alpha``), ``cases`` (``baseline`` or ``all``), ``checks``
 #: (``arap``, ``arap_sr`` or ``none``), ``iterations`` (what its iteration count counts,

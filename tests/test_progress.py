@@ -47,6 +47,44 @@ def test_implicit_arap_cpu_preset_prior_is_constant():
     assert paper.basis("Implicit-ARAP") == "guess"
 
 
+#: Mean time_s of each method, one core per run, on 7029-vertex DeFAUST cases (the 100-case
+#: table of benchmarks/records/defaust_scale.md, outputs/defaust200_sample100/cases.csv).
+SMALL_VERTICES, SMALL_MEAN_S = 7029, {"ARAP": 0.450, "Elastic": 0.351, "ARAP-SR": 1.160, "SShaDe": 0.258}
+
+
+def test_the_priors_hold_at_their_size_and_their_exponent_carries_them_to_small_meshes():
+    """At PRIOR_VERTICES each estimate is its file's prior (plus the overhead); at 7029
+    vertices, where the linear prior planned ARAP 6.6x and SShaDe 7.8x what they took, the
+    exponent brings each method's estimate within 25 % of its measured mean; a run that
+    is measured replaces the prior at any size, scaled by the same exponent."""
+    from eval.run.progress import OVERHEAD_S_PER_VERTEX, PRIOR_VERTICES
+    cm = default_cost_model([SimpleNamespace(name=n) for n in SMALL_MEAN_S])
+    for name, measured in SMALL_MEAN_S.items():
+        cost = method_meta(name)["cost"]
+        at_prior = cost["prior"] * (PRIOR_VERTICES if cost["scale"] == "vertices" else 1)
+        assert cm.estimate(name, PRIOR_VERTICES) == pytest.approx(at_prior + OVERHEAD_S_PER_VERTEX * PRIOR_VERTICES)
+        small = cm.estimate(name, SMALL_VERTICES) - OVERHEAD_S_PER_VERTEX * SMALL_VERTICES
+        assert abs(small / measured - 1) < 0.25, (name, small, measured)
+    cm.observe("ARAP", SMALL_VERTICES, 0.5)
+    p = cm.exponents["ARAP"]
+    assert cm.estimate("ARAP", 2 * SMALL_VERTICES) == pytest.approx(0.5 * 2 ** p)
+
+
+def test_a_cost_exponent_out_of_range_is_refused_naming_the_file(tmp_path, monkeypatch):
+    import shutil
+    from pathlib import Path
+
+    import harness.method_registry as reg
+    from sshade.errors import SShaDeError
+    conf = tmp_path / "conf"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "conf", conf)
+    f = conf / "method" / "ARAP.yaml"
+    f.write_text(f.read_text().replace("exponent: 1.59", "exponent: 7"))
+    monkeypatch.setattr(reg, "config_dir", lambda sub="": str(conf / sub) if sub else str(conf))
+    with pytest.raises(SShaDeError, match=r"conf/method/ARAP.yaml: cost.exponent must be a number in \[0, 3\], got 7"):
+        default_cost_model([SimpleNamespace(name="ARAP")])
+
+
 def test_the_weighted_bar_never_goes_back_whatever_the_estimates_do():
     """Runs longer than estimated, estimates raised and lowered in any order: the fraction
     shown never decreases, never passes 1, and ends at 1 when the last run is counted."""

@@ -7,8 +7,9 @@ per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front p
 from __future__ import annotations
 
 from harness.method_registry import method_meta
+from sshade.errors import SShaDeError
 
-__all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VERTEX"]
+__all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VERTEX", "PRIOR_VERTICES"]
 
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
 #: reading a cached reference, the store, cases.csv, the report's 3D views), in seconds per
@@ -16,6 +17,9 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VE
 #: against a tree built once per case); measured as the spacing of a run's pairs in its
 #: eval.log minus their ``time_s`` (about 2.5 s per pair at 169k vertices).
 OVERHEAD_S_PER_VERTEX = 1.5e-5
+#: The mesh size the methods' priors hold at (DeFAUST's high resolution: results/defaust's
+#: mean, 150k-200k vertices); a prior's ``exponent`` carries it to other sizes.
+PRIOR_VERTICES = 168_864
 
 
 class CostModel:
@@ -23,16 +27,19 @@ class CostModel:
 
     def __init__(self, scales: dict[str, str] | None = None, *, prior_s_per_vertex: float = 1e-3,
                  prior_const_s: float = 20.0, priors: dict[str, float] | None = None,
-                 overhead_s_per_vertex: float = 0.0):
+                 overhead_s_per_vertex: float = 0.0, exponents: dict[str, float] | None = None):
         """``scales``: method -> ``"const"`` / ``"vertices"`` (:meth:`scale_of`);
         ``priors``: method -> its own prior in its unit, before ``prior_s_per_vertex`` /
         ``prior_const_s``; ``overhead_s_per_vertex``: added to a prior (not to a
-        measured cost, which includes it)."""
+        measured cost, which includes it); ``exponents``: method -> ``p``, its cost taken
+        as growing as ``n ** p`` with the vertices ``n`` about :data:`PRIOR_VERTICES`,
+        where its prior holds (none: ``p`` = 1 for ``"vertices"``, 0 for ``"const"``)."""
         self.scales = dict(scales or {})
         self.prior_s_per_vertex = float(prior_s_per_vertex)
         self.prior_const_s = float(prior_const_s)
         self.priors = {str(k): float(v) for k, v in (priors or {}).items()}
         self.overhead_s_per_vertex = float(overhead_s_per_vertex)
+        self.exponents = {str(k): float(v) for k, v in (exponents or {}).items()}
         self.seen: dict[str, list[float]] = {}
 
     @staticmethod
@@ -46,7 +53,13 @@ class CostModel:
         return method_meta(getattr(method, "name", ""))["cost"]["scale"]
 
     def _unit(self, method: str, n_vertices: int) -> float:
-        return 1.0 if self.scales.get(method, "vertices") == "const" else max(int(n_vertices), 1)
+        """What ``method``'s cost is per: 1 (``"const"``) or the vertices, scaled by
+        ``(n / PRIOR_VERTICES) ** (p - default p)`` where it has an exponent ``p``."""
+        n, const = max(int(n_vertices), 1), self.scales.get(method, "vertices") == "const"
+        p = self.exponents.get(method)
+        if p is None:
+            return 1.0 if const else float(n)
+        return (1.0 if const else PRIOR_VERTICES) * (n / PRIOR_VERTICES) ** p
 
     def observe(self, method: str, n_vertices: int, seconds: float) -> None:
         """Record a finished run of ``method`` on a mesh of ``n_vertices`` that took ``seconds``."""
@@ -86,16 +99,23 @@ def default_cost_model(methods) -> CostModel:
     scales (:meth:`CostModel.scale_of`), the ``cost.prior`` of their files
     (:func:`harness.method_registry.method_meta`; left out where the method's scale is not the
     prior's, or its ``preset`` attribute is not the prior's ``cost.preset``;
-    ``cost.paper`` instead for a method whose ``protocol`` is ``"paper"``) and
-    :data:`OVERHEAD_S_PER_VERTEX`.
+    ``cost.paper`` instead for a method whose ``protocol`` is ``"paper"``) with the
+    prior's ``cost.exponent`` (how its cost grows with the vertices from
+    :data:`PRIOR_VERTICES`; not for ``cost.paper``, a fixed count of iterations, linear in
+    the vertices) and :data:`OVERHEAD_S_PER_VERTEX`.
+
+    Raises
+    ------
+    SShaDeError naming the method's file for a ``cost.exponent`` that is not a number in
+    [0, 3].
 
     >>> from types import SimpleNamespace as M
     >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
     >>> round(cm.estimate("ARAP", 100_000)), round(cm.estimate("SShaDe", 100_000))
-    (44, 4)
+    (32, 3)
     """
     scales = {m.name: CostModel.scale_of(m) for m in methods}
-    priors = {}
+    priors, exponents = {}, {}
     for m in methods:
         cost = method_meta(m.name)["cost"]
         if cost.get("prior") is None or scales[m.name] != cost["scale"]:
@@ -104,7 +124,12 @@ def default_cost_model(methods) -> CostModel:
             continue  # a prior measured on one preset says nothing of another
         paper = getattr(m, "protocol", None) == "paper" and cost.get("paper") is not None
         priors[m.name] = float(cost["paper"] if paper else cost["prior"])
-    return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX)
+        p = cost.get("exponent")
+        if p is not None and not paper:
+            if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p <= 3:
+                raise SShaDeError(f"conf/method/{m.name}.yaml: cost.exponent must be a number in [0, 3], got {p!r}")
+            exponents[m.name] = float(p)
+    return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX, exponents=exponents)
 
 
 def weighted_bar(total_s: float, n_runs: int, **kw):
