@@ -14,14 +14,17 @@ import os
 
 from sshade.cores import available_cores
 
-__all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "make_plan",
+from .progress import PRIOR_VERTICES
+
+__all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "REFERENCE_EXPONENT",
+           "SR_REFERENCE_EXPONENT", "reference_s", "make_plan",
            "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words", "busy_words"]
 
 #: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
-#: poses) on a 2-core machine, two subjects at once: 59-90 s (builder version 2; 10
-#: subjects in 344 s with 2 workers). A parallel build takes rounds of
-#: ``workers`` subjects.
-BUILD_S_PER_SUBJECT = 69.0
+#: poses) on a 2-core machine, two subjects at once: a fresh clone's main job built its 10
+#: subjects in 278.6 s with 2 workers, 5 rounds of about 56 s (benchmarks/records/command_times.md).
+#: A parallel build takes rounds of ``workers`` subjects.
+BUILD_S_PER_SUBJECT = 56.0
 #: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
 #: rigid fit: 24-63 s (mean 42 s) at 168,897 vertices in ``results/defaust/eval.log``.
 REFERENCE_S_PER_VERTEX = 3e-4
@@ -29,6 +32,12 @@ REFERENCE_S_PER_VERTEX = 3e-4
 #: method's converged result): 474 s, 1,269 iterations at DeFAUST s00_p01's 168,897
 #: vertices (2 cores, one busy with another job): 2.8e-3 s/vertex (FAUST: 3-7e-3).
 SR_REFERENCE_S_PER_VERTEX = 2.8e-3
+#: How those seconds grow with the vertices ``n`` about :data:`eval.run.progress.PRIOR_VERTICES`,
+#: as ``n ** p`` (linear per vertex below that overestimated small meshes ninefold): fitted to
+#: the rates above and FAUST's 6890-vertex references computed from an empty cache (mean
+#: 0.48 s ARAP, 1.82 s ARAP-SR; benchmarks/records/command_times.md).
+REFERENCE_EXPONENT = 1.46
+SR_REFERENCE_EXPONENT = 1.74
 
 
 def busy_words(load: float | None = None, cores: int | None = None) -> str:
@@ -85,7 +94,7 @@ def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD
     count as 1), ``s_per_subject`` each.
 
     >>> build_stage(10, workers=4)["seconds"]
-    207.0
+    168.0
     """
     w = int(workers) if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
     n = max(int(subjects), 0)
@@ -122,6 +131,19 @@ def _basis(cost, name: str) -> str:
     return f(name) if callable(f) else "prior"
 
 
+def reference_s(n_vertices: int, sr: bool = False) -> float:
+    """Expected seconds of one deep reference solve on ``n_vertices`` vertices (ARAP-SR's
+    energy when ``sr``): :data:`REFERENCE_S_PER_VERTEX` (:data:`SR_REFERENCE_S_PER_VERTEX`)
+    at :data:`eval.run.progress.PRIOR_VERTICES`, grown as ``n ** p`` with
+    :data:`REFERENCE_EXPONENT` (:data:`SR_REFERENCE_EXPONENT`).
+
+    >>> round(reference_s(168_864)), round(reference_s(6_890), 2), round(reference_s(6_890, sr=True), 2)
+    (51, 0.47, 1.81)
+    """
+    rate, p = (SR_REFERENCE_S_PER_VERTEX, SR_REFERENCE_EXPONENT) if sr else (REFERENCE_S_PER_VERTEX, REFERENCE_EXPONENT)
+    return rate * PRIOR_VERTICES * (max(int(n_vertices), 1) / PRIOR_VERTICES) ** p
+
+
 def _references_stage(references, jobs: int = 1, is_sr_energy=None) -> dict:
     cached = to_compute = unknown = guessed = 0
     seconds = 0.0
@@ -131,8 +153,7 @@ def _references_stage(references, jobs: int = 1, is_sr_energy=None) -> dict:
             continue
         sr = is_sr_energy is not None and bool(is_sr_energy(energy))
         guessed += sr
-        rate = SR_REFERENCE_S_PER_VERTEX if sr else REFERENCE_S_PER_VERTEX
-        seconds += rate * max(int(n_vertices), 1)
+        seconds += reference_s(n_vertices, sr)
         if is_cached is None:
             unknown += 1
         else:
