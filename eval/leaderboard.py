@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.present.intervals import CI, bootstrap_ci
+from eval.present.intervals import CI, bootstrap_ci, interval_text
 from eval.present.measures import MEASURES, label
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
@@ -271,7 +271,9 @@ def _f(v, dec: int, suffix: str = "") -> str:
 
 
 def _ci(ci) -> str:
-    return "--" if ci is None else f"{ci[0]:.2f}-{ci[1]:.2f}"
+    """The ranked measure's interval as the tables write one (:func:`interval_text`, its
+    decimals), ``--`` without one."""
+    return interval_text(ci, f".{MEASURES[RANK_COLUMN[0]].decimals}f") or "--"
 
 
 def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
