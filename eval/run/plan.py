@@ -14,7 +14,7 @@ import os
 
 from sshade.cores import available_cores
 
-from .progress import PRIOR_VERTICES
+from .progress import PRIOR_VERTICES, size_factor
 
 __all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "REFERENCE_EXPONENT",
            "SR_REFERENCE_EXPONENT", "reference_s", "make_plan",
@@ -141,7 +141,7 @@ def reference_s(n_vertices: int, sr: bool = False) -> float:
     (51, 0.47, 1.81)
     """
     rate, p = (SR_REFERENCE_S_PER_VERTEX, SR_REFERENCE_EXPONENT) if sr else (REFERENCE_S_PER_VERTEX, REFERENCE_EXPONENT)
-    return rate * PRIOR_VERTICES * (max(int(n_vertices), 1) / PRIOR_VERTICES) ** p
+    return rate * PRIOR_VERTICES * size_factor(n_vertices, p)
 
 
 def _references_stage(references, jobs: int = 1, is_sr_energy=None) -> dict:

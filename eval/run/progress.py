@@ -9,7 +9,8 @@ from __future__ import annotations
 from harness.method_registry import method_meta
 from sshade.errors import SShaDeError
 
-__all__ = ["CostModel", "weighted_bar", "default_cost_model", "OVERHEAD_S_PER_VERTEX", "PRIOR_VERTICES"]
+__all__ = ["CostModel", "weighted_bar", "default_cost_model", "size_factor", "OVERHEAD_S_PER_VERTEX",
+           "PRIOR_VERTICES"]
 
 #: What a pair costs beyond the method's ``time_s`` (its metrics, the ground-truth metrics,
 #: reading a cached reference, the store, cases.csv, the report's 3D views), in seconds per
@@ -20,6 +21,16 @@ OVERHEAD_S_PER_VERTEX = 1.5e-5
 #: The mesh size the methods' priors hold at (DeFAUST's high resolution: results/defaust's
 #: mean, 150k-200k vertices); a prior's ``exponent`` carries it to other sizes.
 PRIOR_VERTICES = 168_864
+
+
+def size_factor(n_vertices: int, exponent: float) -> float:
+    """How much a cost measured at :data:`PRIOR_VERTICES` grows at ``n_vertices`` (at least
+    1) when it grows as ``n ** exponent``: ``(n / PRIOR_VERTICES) ** exponent``.
+
+    >>> size_factor(PRIOR_VERTICES, 1.5), round(size_factor(PRIOR_VERTICES // 4, 2.0), 4)
+    (1.0, 0.0625)
+    """
+    return (max(int(n_vertices), 1) / PRIOR_VERTICES) ** exponent
 
 
 class CostModel:
@@ -59,7 +70,7 @@ class CostModel:
         p = self.exponents.get(method)
         if p is None:
             return 1.0 if const else float(n)
-        return (1.0 if const else PRIOR_VERTICES) * (n / PRIOR_VERTICES) ** p
+        return (1.0 if const else PRIOR_VERTICES) * size_factor(n, p)
 
     def observe(self, method: str, n_vertices: int, seconds: float) -> None:
         """Record a finished run of ``method`` on a mesh of ``n_vertices`` that took ``seconds``."""
