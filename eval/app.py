@@ -16,7 +16,8 @@ import sys
 
 from eval.config_check import check_config, check_values
 from eval.config_schema import store_schemas
-from eval.experiments import find_experiment
+from eval.exchange.scored import ScoreConfig
+from eval.experiments import experiments, find_experiment
 from eval.experiments.cases.cases_experiment import run
 from eval.report import safe_report
 from eval.run.outdir import claimed_run
@@ -29,6 +30,9 @@ from sshade.errors import SShaDeError
 __all__ = ["CONF_DIR", "run", "run_experiment", "run_spec", "main"]
 
 CONF_DIR = config_dir()  # conf/ of a source checkout, else the installed package data
+#: the modules that type a section of their own, imported before the config's types are
+#: stored: every experiment kind's (:func:`eval.experiments.experiments`) and ``score``'s
+_SECTION_OWNERS = (*experiments().values(), ScoreConfig)
 store_schemas()  # the config's types (eval/config_schema.py), before Hydra composes it
 
 

@@ -2,14 +2,17 @@
 Floor 0 of eval/ (tests/test_layering.py); the checks a type cannot say: eval/config_check.py.
 
 ``conf/config.yaml`` starts its defaults list with ``config_schema`` (:func:`top_schema`);
-each file of ``conf/dataset/`` and each experiment with a section of its own extends its
-schema (``schema/dataset/<name>``, ``schema/experiment/<kind>``), and each method file is
-typed by ``schema/method/<name>`` (:func:`method_schemas`). Composition then refuses a value
+each file of ``conf/dataset/`` extends its schema (``schema/dataset/<name>``), each
+experiment with a section of its own the schema its module registers
+(``schema/experiment/<section>``, :func:`register_section`; the section's options are that
+schema's instance, :func:`typed_section`), and each method file is typed by
+``schema/method/<name>`` (:func:`method_schemas`). Composition then refuses a value
 of the wrong type or an unknown key with Hydra's own message (one ``error:`` line). A key
 that holds one of several types (``sshade.n_low``: ``auto`` or an integer) is ``Any`` here
 (OmegaConf has no unions) and is typed at the door (:func:`eval.config_check.check_config`)."""
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field, make_dataclass
 from typing import Any, Dict, List, Optional  # OmegaConf 2.3 reads typing's generics
@@ -17,12 +20,12 @@ from typing import Any, Dict, List, Optional  # OmegaConf 2.3 reads typing's gen
 from omegaconf import MISSING, OmegaConf
 
 from harness.method_registry import builtin_methods, method_file, method_key
+from sshade.errors import SShaDeError
 
 __all__ = ["FiguresSchema", "ReportSchema", "ArapSchema", "ReferenceSchema", "ArapSRSchema", "SShaDeSchema",
            "StoreSchema", "ExperimentSchema", "TopSchema", "DefaustBuildSchema", "DefaustSchema", "FaustSchema",
-           "ShapesSchema", "AnimationSchema", "PlaneSchema", "ConvergenceSShaDeSchema", "ConvergenceSchema",
-           "PoseTransferSchema", "ScalingSchema", "ScoreSchema", "ToscaSchema", "DATASET_SCHEMAS",
-           "SECTION_SCHEMAS", "ClusterSchema", "method_schemas", "top_schema", "store_schemas"]
+           "ShapesSchema", "DATASET_SCHEMAS", "register_section", "section_reader", "section_schemas", "typed_section",
+           "ClusterSchema", "method_schemas", "top_schema", "store_schemas"]
 
 
 # ----------------------------------------------------------------------------- conf/config.yaml
@@ -202,104 +205,60 @@ DATASET_SCHEMAS = {"defaust": DefaustSchema, "faust": FaustSchema, "shapes": Sha
 
 
 # ----------------------------------------------------------------------------- conf/experiment/
-@dataclass
-class AnimationSchema:
-    """``animation`` (``subjects``, ``poses``: an integer or a list)."""
-
-    frames: int = 30
-    subjects: Any = None
-    poses: Any = None
-    baseline_cases: int = 1
-    anny_cache: Optional[str] = None
+#: ``schema/experiment/<section>``: the type of each top-level section an experiment adds,
+#: registered by the module that reads it (:func:`register_section`).
+_SECTIONS: dict[str, type] = {}
 
 
-@dataclass
-class PlaneSchema:
-    """``convergence.plane``: the lifted plane."""
-
-    lift: float = 0.2
-    n_target: int = 40000
-
-
-@dataclass
-class ConvergenceSShaDeSchema:
-    """``convergence.sshade``: the sampling counts (``k``: an integer or a list)."""
-
-    k: Any = None
-    refine_k: int = MISSING
+def register_section(name: str, schema: type) -> type:
+    """Register dataclass ``schema`` as the type of the top-level section ``name`` (stored as
+    ``schema/experiment/<name>`` by :func:`store_schemas`); called by the module that owns
+    the section, whose options are then the schema's own instance (:func:`typed_section`).
+    Returns ``schema``. ValueError for a second class under one name (a programming error)."""
+    old = _SECTIONS.setdefault(str(name), schema)
+    if old is not schema:
+        raise ValueError(f"config section {name!r} already typed by {old.__qualname__}")
+    return schema
 
 
-@dataclass
-class ConvergenceSchema:
-    """``convergence`` (``time_budget_s``: seconds as written)."""
-
-    cases: List[str] = field(default_factory=list)
-    plane: PlaneSchema = field(default_factory=PlaneSchema)
-    dataset_case: int = 0
-    energy: str = "spokes_and_rims"
-    time_budget_s: Any = 300
-    stop_pct: float = 0.001
-    target_pct: float = 0.05
-    libigl: bool = True
-    sshade: ConvergenceSShaDeSchema = field(default_factory=ConvergenceSShaDeSchema)
+def section_reader(name: str, schema: type, *, absent: str = ""):
+    """Register ``schema`` as section ``name``'s type (:func:`register_section`) and return
+    its reader for :func:`eval.experiments.register_experiment`: ``read(values)`` is
+    :func:`typed_section` of the section (``absent``: what to do without one)."""
+    register_section(name, schema)
+    return functools.partial(typed_section, name, absent=absent)
 
 
-@dataclass
-class PoseTransferSchema:
-    """``pose_transfer`` (``subjects``, ``poses``: an integer or a list)."""
-
-    root: Optional[str] = MISSING
-    subjects: Any = None
-    poses: Any = None
-    align: bool = True
+def section_schemas() -> dict[str, type]:
+    """``{section: schema}`` of every registered section (the modules that register them
+    imported first: :func:`eval.experiments.experiments` and :mod:`eval.exchange.scored`)."""
+    return dict(sorted(_SECTIONS.items()))
 
 
-@dataclass
-class ScalingSchema:
-    """``scaling`` (``meshes``: a list of ``{name, path, remesh}`` checked entry by entry;
-    the times in seconds as written)."""
+def typed_section(name: str, values, *, absent: str = ""):
+    """Section ``name``'s options: ``values`` (its plain values) merged into its registered
+    schema and made by ``OmegaConf.to_object``, which runs the schema's own checks (its
+    ``__post_init__``: ranges, words, lists) and normalises (tuples).
 
-    meshes: Any = None
-    base_mesh: Optional[str] = None
-    remesh: bool = True
-    sizes: List[int] = field(default_factory=list)
-    seed: int = 0
-    n_per_group: int = 30
-    region_radius: float = 0.06
-    rotate_deg: float = 20.0
-    translate: float = 0.05
-    repeat: int = 3
-    first_call: bool = True
-    first_call_timeout_s: Any = 600
-    elastic: bool = True
-    elastic_budget_s: Any = 600
-    elastic_max_vertices: Optional[int] = None
-    cache: Optional[str] = "data/scaling"
+    Raises
+    ------
+    SShaDeError, one line naming the key: no section (``absent`` says what to do), a value
+    of the wrong type, a required key not set (the schema's ``REQUIRED`` says what to pass),
+    or the schema's own refusal.
+    """
+    from omegaconf.errors import MissingMandatoryValue, ValidationError
 
-
-@dataclass
-class ScoreSchema:
-    """``score``: results computed elsewhere."""
-
-    results: Optional[str] = None
-    name: Optional[str] = None
-    times: Optional[str] = None
-
-
-@dataclass
-class ToscaSchema:
-    """``tosca`` (``classes``: a name or a list; ``poses``: an integer or a list)."""
-
-    root: Optional[str] = MISSING
-    min_vertices: Optional[int] = None
-    classes: Any = None
-    poses: Any = None
-
-
-#: ``schema/experiment/<section>``: the schema of the top-level section an experiment adds.
-SECTION_SCHEMAS = {"animation": AnimationSchema, "convergence": ConvergenceSchema,
-                   "pose_transfer": PoseTransferSchema, "scaling": ScalingSchema, "score": ScoreSchema,
-                   "tosca": ToscaSchema}
+    schema = _SECTIONS[name]
+    if values is None:
+        raise SShaDeError(f"no `{name}` section in the config; {absent}".rstrip("; "))
+    try:
+        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), values))
+    except MissingMandatoryValue as e:
+        key = f"{name}.{e.full_key}"
+        what = getattr(schema, "REQUIRED", {}).get(str(e.full_key), "VALUE")
+        raise SShaDeError(f"{key} is not set: pass {key}={what}") from None
+    except ValidationError as e:
+        raise SShaDeError(f"{name}.{e.full_key}: {str(e).splitlines()[0]}") from None
 
 
 # ----------------------------------------------------------------------------- conf/cluster/
@@ -365,13 +324,14 @@ def top_schema():
 
 
 def store_schemas() -> None:
-    """Register every schema with Hydra's ConfigStore (again is harmless)."""
+    """Register every schema with Hydra's ConfigStore (again is harmless); the experiment
+    sections' (:func:`section_schemas`) once their modules are imported."""
     from hydra.core.config_store import ConfigStore
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=top_schema())
     for name, cls in DATASET_SCHEMAS.items():
         cs.store(group="schema/dataset", name=name, node=cls)
-    for name, cls in SECTION_SCHEMAS.items():
+    for name, cls in _SECTIONS.items():
         cs.store(group="schema/experiment", name=name, node=cls)
     cs.store(group="schema/cluster", name="slurm", node=ClusterSchema)
     for name, cls in _METHOD_SCHEMAS.items():

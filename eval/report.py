@@ -33,7 +33,7 @@ from eval.leaderboard import (
 )
 from eval.present.breakdown import BREAKDOWN_METRICS
 from eval.present.intervals import CI, interval_text
-from eval.present.measures import MEASURES
+from eval.present.measures import MEASURES, label
 from eval.present.meshview import VIEW_DIR, read_outputs, read_view
 from eval.present.report_scope import link_target, not_current, run_cases
 from eval.present.table_markup import time_marks, time_notes
@@ -118,7 +118,7 @@ def _summary_table(summary, table_id: str) -> str:
     per-method summary (:func:`eval.tables.summarize` layout)."""
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
     cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns and not MEASURES[c].fraction]
-    head = ["Method", "Cases", "Failed", *[h for _, h, _ in cols]]
+    head = ["Method", label("n_cases"), label("n_failed"), *[h for _, h, _ in cols]]
     rows, marks = [], time_marks(summary)
     for i, (_, r) in enumerate(summary.iterrows()):
         cells = [f"<td>{_e(r['method'])}</td>", _cell(int(r["n_cases"])), _cell(int(r.get("n_failed", 0) or 0))]
@@ -458,7 +458,7 @@ def write_index(root) -> Path:
             f"<script>{_asset('errors.js')}</script></head><body>\n"
             '<div id="js-errors" data-count="0" hidden><b>JavaScript errors on this page:</b></div>\n'
             f"{board}<h1>{_e(root.name)}: {len(rows)} run folder(s)</h1>\n"
-            f"{_table(['Folder', 'Experiment', 'Status', 'Cases', 'Commit'], rows, 'runs-table')}\n"
+            f"{_table(['Folder', 'Experiment', 'Status', label('n_cases'), 'Commit'], rows, 'runs-table')}\n"
             f"<script>{_asset('report.js')}</script>\n</body></html>\n")
     with atomic_write(page, "w") as fh:
         fh.write(text)

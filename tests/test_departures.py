@@ -1,7 +1,12 @@
 """run.json's `departures` (eval/run/runinfo.py): the switches at non-paper values."""
 from __future__ import annotations
 
+from pathlib import Path
+
+from eval.datasets import datasets
 from eval.run.runinfo import collect_runinfo, departures
+
+datasets()  # every dataset module imported: FAUST registers its section's departures
 
 PAPER = {"sshade": {"gradient": "raw", "warm_start": False}, "arap": {"protocol": "paper"},
          "dataset": {"name": "faust", "protocol": "paper", "n_targets": 4}}
@@ -24,6 +29,12 @@ def test_defaults_list_each_switch():
     assert "(paper: raw)" in departures(cfg)[0] and "(paper: false)" in departures(cfg)[1]
     # the defaust dataset has no protocol switch here
     assert _keys({"dataset": {"name": "defaust", "protocol": "x"}}) == []
+
+
+def test_no_dataset_is_named_below_its_own_modules():
+    """FAUST's rule lives in eval/datasets/ (registered), not in the ground floor's runinfo."""
+    text = (Path(__file__).resolve().parents[1] / "eval" / "run" / "runinfo.py").read_text()
+    assert '"faust"' not in text and "'faust'" not in text
 
 
 def test_method_sections_win_over_the_shared_ones():

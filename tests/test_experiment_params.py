@@ -85,7 +85,7 @@ def test_arap_stopping_rule_reaches_scaling_and_convergence():
 def test_convergence_sampling_counts_follow_n_samplings():
     spec = _spec(["experiment=convergence", "sshade.n_samplings=7"])
     opts = spec.experiment.options
-    assert convergence.sampling_counts(opts, convergence.sshade_params(spec)) == [1, 7] and opts.refine_k == 7
+    assert convergence.sampling_counts(opts, convergence.sshade_params(spec)) == [1, 7] and opts.sshade.refine_k == 7
     spec = _spec(["experiment=convergence"])
     assert convergence.sampling_counts(spec.experiment.options, convergence.sshade_params(spec)) == [1, 5]
     spec = _spec(["experiment=convergence", "convergence.sshade.k=[2,3]"])

@@ -16,8 +16,9 @@ import pytest
 from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
-from eval.config_schema import DATASET_SCHEMAS, SECTION_SCHEMAS, TopSchema, method_schemas
+from eval.config_schema import DATASET_SCHEMAS, TopSchema, method_schemas, section_schemas
 from harness.command import config_error_types, hydra_message
+from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env
 
@@ -57,7 +58,7 @@ def _yaml(path) -> dict:
     (["experiment=scaling", "scaling.sizes=[1,x]"], ["scaling.sizes", "Integer"]),
     (["dataset.nonsense=1"], ["dataset.nonsense", "not in 'FaustSchema'"]),
     (["method.Elastic.nonsense=1"], ["method.Elastic.nonsense", "not in"]),
-    (["experiment=tosca", "tosca.nope=1"], ["tosca.nope", "not in 'ToscaSchema'"]),
+    (["experiment=tosca", "tosca.nope=1"], ["tosca.nope", "not in 'ToscaConfig'"]),
     (["report.nope=1"], ["report.nope", "not in 'ReportSchema'"]),
 ])
 def test_composition_refuses_a_wrong_type_or_an_unknown_key(overrides, words):
@@ -111,7 +112,7 @@ def test_each_dataset_and_experiment_section_schema_holds_its_files_keys():
         d = _yaml(ROOT / "conf" / "dataset" / f"{name}.yaml")
         assert _keys(cls) == list(d), name
         assert (ROOT / "conf" / "dataset" / f"{name}.yaml").read_text().count(f"/schema/dataset/{name}@_here_") == 1
-    for name, cls in SECTION_SCHEMAS.items():
+    for name, cls in section_schemas().items():
         d = _yaml(ROOT / "conf" / "experiment" / f"{name}.yaml")[name]
         assert _keys(cls) == list(d), name
         for k, sub in _sections(cls).items():
@@ -180,17 +181,58 @@ def test_the_walk_finds_a_config_parameter():
 
 def test_the_three_defaults_that_disagreed_are_the_schemas():
     """scaling.repeat (3 in the schema and the YAML, 1 in the reader), report.view_cases (2,
-    0 in ReportOptions) and convergence.libigl (read, in neither the schema nor the YAML)."""
-    from eval.config_schema import ConvergenceSchema, ReportSchema, ScalingSchema
-    from eval.experiments.convergence import ConvergenceOptions
-    from eval.experiments.scaling.scaling_experiment import ScalingOptions, scaling_options
+    0 in ReportOptions) and convergence.libigl (read, in neither the schema nor the YAML):
+    the sections' options are now their schemas' own instances, so a key left out takes the
+    schema's default and no other."""
+    from eval.config_schema import ReportSchema, typed_section
+    from eval.experiments.convergence import ConvergenceConfig
+    from eval.experiments.scaling.scaling_experiment import ScalingConfig
     from eval.run.spec import ReportOptions
-    opts = scaling_options({"base_mesh": "m.obj", "sizes": [1000]})  # every other key left to its default
-    assert opts.repeat == ScalingSchema.repeat == 3
-    shared = {f.name for f in dataclasses.fields(ScalingOptions)} & {f.name for f in dataclasses.fields(ScalingSchema)}
-    for name in shared - {"meshes", "sizes"}:
-        assert getattr(opts, name) == getattr(ScalingSchema(), name), name
+    opts = typed_section("scaling", {"base_mesh": "m.obj", "sizes": [1000]})  # every other key left to its default
+    assert type(opts) is ScalingConfig and opts.repeat == 3
+    for f in dataclasses.fields(ScalingConfig):
+        if f.name not in ("meshes", "sizes", "base_mesh", "first_call_timeout_s", "elastic_budget_s"):
+            assert getattr(opts, f.name) == f.default, f.name
     assert ReportOptions().view_cases == ReportSchema.view_cases == 2
-    assert ConvergenceOptions.__dataclass_fields__["libigl"].default is ConvergenceSchema.libigl is True
+    assert ConvergenceConfig.libigl is True
     yaml = OmegaConf.load(Path(CONF_DIR) / "experiment" / "convergence.yaml")
     assert yaml.convergence.libigl is True
+
+
+#: the experiment sections' schemas and the modules that own and register them
+SECTION_OWNERS = {"animation": "eval/experiments/animation.py", "convergence": "eval/experiments/convergence.py",
+                  "pose_transfer": "eval/experiments/pose_transfer.py", "score": "eval/exchange/scored.py",
+                  "scaling": "eval/experiments/scaling/scaling_experiment.py", "tosca": "eval/experiments/tosca.py"}
+
+
+def test_each_section_is_typed_once_by_the_module_that_reads_it():
+    """One dataclass per experiment section, in its owner module (registered there), and no
+    second dataclass or reader of the section anywhere in eval/ (no ``*Options`` class or
+    ``*_options`` function of an experiment kind)."""
+    schemas = section_schemas()
+    assert sorted(schemas) == sorted(SECTION_OWNERS)
+    for name, cls in schemas.items():
+        assert Path(sys.modules[cls.__module__].__file__).resolve() == (ROOT / SECTION_OWNERS[name]).resolve(), name
+    text = "\n".join(p.read_text() for p in sorted((ROOT / "eval").rglob("*.py")))
+    for name in schemas:
+        camel = "".join(w.title() for w in name.split("_"))
+        assert f"class {camel}Options" not in text and f"def {name}_options(" not in text, name
+
+
+def test_a_section_made_at_the_door_is_its_schemas_instance_checked_and_normalised():
+    from eval.config_check import check_config
+    from eval.experiments.convergence import ConvergenceConfig
+    from eval.experiments.tosca import ToscaConfig
+    spec = check_config(_compose(["experiment=tosca", "tosca.poses=[1,2]", "tosca.classes=cat"]))
+    opts = spec.experiment.options
+    assert type(opts) is ToscaConfig and opts.poses == (1, 2) and opts.classes == ("cat",) and opts.min_vertices == 5000
+    spec = check_config(_compose(["experiment=convergence", "sshade.n_samplings=7"]))
+    opts = spec.experiment.options
+    assert type(opts) is ConvergenceConfig and opts.sshade.refine_k == 7 and opts.cases == ("plane", "dataset")
+    for overrides, words in ((["experiment=tosca", "tosca.min_vertices=-1"], "tosca.min_vertices"),
+                             (["experiment=convergence", "convergence.cases=[plane,cube]"], "unknown case 'cube'"),
+                             (["experiment=tosca", "tosca.root=null"], "tosca.root is not set: pass tosca.root=DIR"),
+                             (["experiment=scaling", "scaling.sizes=[2]"], "scaling.sizes")):
+        with pytest.raises(SShaDeError) as e:
+            check_config(_compose(overrides))
+        assert words in str(e.value) and "\n" not in str(e.value), (overrides, str(e.value))

@@ -13,17 +13,34 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
 
 from defaust.store import sha256_file
+from eval.config_schema import register_section
 from eval.exchange.layout import RESULT_EXTS, read_times, result_path
 from eval.run.paths import abs_path
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
-__all__ = ["ScoredResults", "same_faces"]
+__all__ = ["ScoreConfig", "ScoredResults", "same_faces"]
+
+
+@dataclass
+class ScoreConfig:
+    """The ``score`` section (conf/experiment/score.yaml), typed: ``results``, ``name`` and
+    ``times``, the arguments of :class:`ScoredResults`, which its method entry passes on
+    (``${score.results}``, ...) and which checks them."""
+
+    results: Optional[str] = None
+    name: Optional[str] = None
+    times: Optional[str] = None
+
+
+register_section("score", ScoreConfig)
 
 
 def same_faces(F: np.ndarray, G: np.ndarray) -> bool:

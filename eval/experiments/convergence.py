@@ -8,24 +8,27 @@ full-resolution spokes-and-rims minimiser (:func:`eval.metrics.reference.referen
 cached) is traced against wall time for:"""
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, List  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
+from omegaconf import MISSING
 
 from eval import datasets
-from eval.config_schema import ConvergenceSchema
-from eval.experiments.common import as_list, sshade_spec
+from eval.config_schema import section_reader
+from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.reference import reference_solution, status_words
 from eval.present.figures import safe_figure
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import DatasetSpec, EvalSpec, ReferenceOptions
-from harness.checks import check_numbers, config_bool, config_int_list, config_value
+from harness.checks import check_numbers, config_int_list
 from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.problems import lifted_plane
@@ -33,7 +36,7 @@ from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 from sshade.pipeline import check_params, effective_params
 
-__all__ = ["ConvergenceOptions", "convergence_options", "run_convergence", "libigl_curve", "solver_curve", "time_to",
+__all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to",
            "sshade_params"]
 
 log = logging.getLogger("eval")
@@ -136,25 +139,55 @@ def time_to(rows: list[dict], pct: float) -> float:
     return float("nan")
 
 
-@dataclass(frozen=True)
-class ConvergenceOptions:
-    """The ``convergence`` section, checked (conf/experiment/convergence.yaml): the
-    ``cases`` (``plane``, ``dataset``), the plane's ``lift`` and ``n_target``, the
-    ``dataset_case``, the ``energy``, each iterative solver's ``time_budget_s``, libigl's
-    ``stop_pct``, the table's ``target_pct``, SShaDe's sampling counts ``k`` (None: 1 and
-    ``n_samplings``) and ``refine_k``, and whether libigl runs (``libigl``)."""
+@dataclass
+class PlaneConfig:
+    """``convergence.plane``: the lifted plane's ``lift`` (a fraction of its side) and
+    ``n_target`` (vertices)."""
 
-    cases: tuple[str, ...]
-    lift: float
-    n_target: int
-    dataset_case: int
-    energy: str
-    time_budget_s: float
-    stop_pct: float
-    target_pct: float
-    k: tuple[int, ...] | None
-    refine_k: int
+    lift: float = 0.2
+    n_target: int = 40000
+
+
+@dataclass
+class ConvergenceSShaDeConfig:
+    """``convergence.sshade``: the sampling counts ``k`` to run (an integer or a list; None:
+    1 and ``sshade.n_samplings``) and ``refine_k`` (SShaDe + refine starts from that run)."""
+
+    k: Any = None
+    refine_k: int = MISSING
+
+
+@dataclass
+class ConvergenceConfig:
+    """The ``convergence`` section (conf/experiment/convergence.yaml), typed and checked: the
+    ``cases`` (``plane``, ``dataset``), the ``plane``, the ``dataset_case``, the ``energy``,
+    each iterative solver's ``time_budget_s`` (seconds as written), libigl's ``stop_pct``,
+    the table's ``target_pct``, whether libigl runs (``libigl``) and SShaDe's counts
+    (``sshade``). Made by :func:`eval.config_schema.typed_section` at the door, whose
+    ``OmegaConf.to_object`` runs :meth:`__post_init__`: SShaDeError naming the key for a
+    number out of range, ``sshade.k`` not integers in [1, 10000] or an unknown case;
+    ``cases`` and ``sshade.k`` become tuples."""
+
+    cases: List[str] = field(default_factory=list)
+    plane: PlaneConfig = field(default_factory=PlaneConfig)
+    dataset_case: int = 0
+    energy: str = "spokes_and_rims"
+    time_budget_s: Any = 300
+    stop_pct: float = 0.001
+    target_pct: float = 0.05
     libigl: bool = True
+    sshade: ConvergenceSShaDeConfig = field(default_factory=ConvergenceSShaDeConfig)
+
+    def __post_init__(self):
+        top = {"convergence": dataclasses.asdict(self)}
+        check_numbers(top, "convergence", _NUMBERS)
+        ks = config_int_list(top, "convergence.sshade.k", min=1, max=10_000)
+        for name in self.cases:
+            if name not in ("plane", "dataset"):
+                raise SShaDeError(f"convergence.cases: unknown case {name!r}; use plane and/or dataset")
+        self.cases = tuple(self.cases)
+        self.time_budget_s = float(self.time_budget_s)
+        self.sshade.k = None if ks is None else tuple(ks)
 
 
 #: the numbers of the ``convergence`` section: (key, kind, min, allow_none)
@@ -163,35 +196,13 @@ _NUMBERS = [("plane.lift", float, None, False), ("plane.n_target", int, 4, False
             ("sshade.refine_k", int, 1, False)]
 
 
-def convergence_options(values) -> ConvergenceOptions:
-    """The ``convergence`` section (plain values) read and checked; SShaDeError naming the
-    key (its numbers, ``sshade.k``, an unknown case)."""
-    if values is None:
-        raise SShaDeError("no `convergence` section in the config; use experiment=convergence")
-    top = {"convergence": values}
-    check_numbers(top, "convergence", _NUMBERS)
-    ks = config_int_list(top, "convergence.sshade.k", min=1, max=10_000)
-    cases = tuple(as_list(values.get("cases")) or ())
-    for name in cases:
-        if name not in ("plane", "dataset"):
-            raise SShaDeError(f"convergence.cases: unknown case {name!r}; use plane and/or dataset")
-
-    def num(key, default=None):
-        return config_value(top, f"convergence.{key}", default)
-    return ConvergenceOptions(cases=cases, lift=float(num("plane.lift")), n_target=int(num("plane.n_target")),
-                              dataset_case=int(num("dataset_case", 0)), energy=str(num("energy", "spokes_and_rims")),
-                              time_budget_s=float(num("time_budget_s")), stop_pct=float(num("stop_pct")),
-                              target_pct=float(num("target_pct")), k=None if ks is None else tuple(ks),
-                              refine_k=int(num("sshade.refine_k")),
-                              libigl=config_bool(top, "convergence.libigl", default=ConvergenceSchema.libigl))
-
-
-def _cases(opts: ConvergenceOptions, ds: DatasetSpec | None) -> list[tuple[str, tuple]]:
+def _cases(opts: ConvergenceConfig, ds: DatasetSpec | None) -> list[tuple[str, tuple]]:
     """(name, (V, F, handles, targets)) of the configured cases."""
     out = []
     for name in opts.cases:
         if name == "plane":
-            out.append((f"plane_{int(opts.n_target // 1000)}k", lifted_plane(opts.lift, n_target=opts.n_target)))
+            plane = opts.plane
+            out.append((f"plane_{int(plane.n_target // 1000)}k", lifted_plane(plane.lift, n_target=plane.n_target)))
         else:
             root = datasets.dataset_root(ds)
             opts_ds = {k: v for k, v in ds.loader.items() if k != "limit"}
@@ -208,15 +219,16 @@ def sshade_params(spec: EvalSpec) -> dict:
     return sshade_spec(spec)
 
 
-def sampling_counts(opts: ConvergenceOptions, sp: dict) -> list[int]:
+def sampling_counts(opts: ConvergenceConfig, sp: dict) -> list[int]:
     """The sampling counts SShaDe runs with: ``convergence.sshade.k``, or when it is null
     ``[1, n_samplings]`` (``n_samplings`` of ``sp``, :func:`sshade_params`)."""
-    return [int(k) for k in (opts.k if opts.k is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
+    ks = opts.sshade.k
+    return [int(k) for k in (ks if ks is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
 
 
 def run_convergence(spec: EvalSpec) -> dict:
     """The experiment (module docstring) of ``spec.experiment.options``
-    (:class:`ConvergenceOptions`, ``conf/experiment/convergence.yaml``).
+    (:class:`ConvergenceConfig`, ``conf/experiment/convergence.yaml``).
 
     Returns dict ``out_dir``, ``table`` (DataFrame), ``curves`` (DataFrame), ``paths``.
 
@@ -256,7 +268,7 @@ def run_convergence(spec: EvalSpec) -> dict:
     return {"out_dir": out_dir, "table": tdf, "curves": cdf, "paths": paths}
 
 
-def _case_curves(opts: ConvergenceOptions, reference: ReferenceOptions, cname: str, V, F, h, T,
+def _case_curves(opts: ConvergenceConfig, reference: ReferenceOptions, cname: str, V, F, h, T,
                  sp: dict) -> tuple[list[dict], list[dict]]:
     """One case: its reference (``reference``: its cache and limits), then every solver's
     curve; returns the curve rows and the table rows (one per solver)."""
@@ -296,7 +308,7 @@ def _case_curves(opts: ConvergenceOptions, reference: ReferenceOptions, cname: s
         add(f"SShaDe k={int(k)}", [{"iteration": int(si["iterations"]), "time_s": dt, "ref_mean_pct": m,
                                     "ref_max_pct": x}],
             iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
-        if int(k) == opts.refine_k:
+        if int(k) == opts.sshade.refine_k:
             rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
                                      t_offset=dt)
             add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
@@ -358,4 +370,5 @@ def convergence_figure(curves, table, path, *, target_pct: float = 0.05) -> Path
     return path
 
 
-register_experiment("convergence", run_convergence, options=convergence_options)
+register_experiment("convergence", run_convergence,
+                    options=section_reader("convergence", ConvergenceConfig, absent="use experiment=convergence"))

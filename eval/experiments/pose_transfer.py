@@ -13,15 +13,19 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from typing import Any, ClassVar, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
+from omegaconf import MISSING
 
+from eval.config_schema import section_reader
 from eval.datasets.faust import discover_faust
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import gt_stretch_pct, markdown_table, transfer_n_low
 from eval.experiments.tosca import sshade_params as _tosca_sshade_params
 from eval.metrics.measures import ground_truth_metrics
 from eval.present.figures import pose_transfer_figure, safe_figure
+from eval.present.measures import columns, measure_column
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions
@@ -32,7 +36,7 @@ from sshade.mesh.io import atomic_write, read_mesh
 from sshade.pipeline import SShaDe
 from sshade.sampling import sampling_seeds
 
-__all__ = ["PoseTransferOptions", "pose_transfer_options", "run_pose_transfer", "METRICS", "sshade_params"]
+__all__ = ["PoseTransferConfig", "run_pose_transfer", "METRICS", "sshade_params"]
 
 log = logging.getLogger(__name__)
 
@@ -44,16 +48,7 @@ METHODS = (("", "SShaDe pose transfer"), ("naive_", "naive: M' + (S - M)"),
            ("identity_", "identity: S, no transfer"), ("mprime_", "M': source subject in the target pose"),
            ("truth_", "ground truth (b pose p)"))
 
-_COLUMNS = (
-    ("n_cases", "Cases", "{:.0f}"),
-    ("n_failed", "Failed", "{:.0f}"),
-    ("gt_vertex_mean_pct", "Vertex mean (% diag)", "{:.3f}"),
-    ("gt_vertex_max_pct", "Vertex max (% diag)", "{:.3f}"),
-    ("hausdorff", "d_H", "{:.3e}"),
-    ("chamfer", "d_C", "{:.3e}"),
-    ("stretch_vs_S_pct", "Stretch vs S (%)", "{:.2f}"),
-    ("time_s", "Time (s)", "{:.2f}"),
-)
+_COLUMNS = columns("pose_transfer")
 
 
 def sshade_params(spec: EvalSpec) -> dict:
@@ -63,41 +58,34 @@ def sshade_params(spec: EvalSpec) -> dict:
     return _tosca_sshade_params(spec)
 
 
-@dataclass(frozen=True)
-class PoseTransferOptions:
-    """The ``pose_transfer`` section, checked: ``root`` (FAUST registrations, as given),
-    ``subjects`` (None: all with a pose 0), ``poses`` (target poses; None: all but 0),
-    ``align`` (move S rigidly onto M first)."""
+@dataclass
+class PoseTransferConfig:
+    """The ``pose_transfer`` section (conf/experiment/pose_transfer.yaml), typed and checked:
+    ``root`` (FAUST registrations, as given), ``subjects`` (None: all with a pose 0),
+    ``poses`` (target poses; None: all but 0), each an integer or a list, ``align`` (move S
+    rigidly onto M first). Made by :func:`eval.config_schema.typed_section` at the door,
+    whose ``OmegaConf.to_object`` runs :meth:`__post_init__`: SShaDeError naming the key for
+    ``subjects`` or ``poses`` not integers; both become tuples."""
 
-    root: str
-    subjects: tuple[int, ...] | None = None
-    poses: tuple[int, ...] | None = None
+    root: Optional[str] = MISSING
+    subjects: Any = None
+    poses: Any = None
     align: bool = True
 
+    REQUIRED: ClassVar[dict] = {"root": "DIR (a folder of FAUST registrations tr_reg_XYZ.ply)"}
 
-def pose_transfer_options(values) -> PoseTransferOptions:
-    """The ``pose_transfer`` section (plain values) read and checked.
-
-    Raises
-    ------
-    SShaDeError naming the key: no section, no ``root``, ``subjects`` or ``poses`` not
-    integers (or null).
-    """
-    if values is None:
-        raise SShaDeError("no `pose_transfer` section in the config; use experiment=pose_transfer")
-    top = {"pose_transfer": values}
-    poses = config_int_list(top, "pose_transfer.poses")
-    if values.get("root") in (None, "", "???"):
-        raise SShaDeError("pose_transfer.root is not set: pass pose_transfer.root=DIR "
-                          "(a folder of FAUST registrations tr_reg_XYZ.ply)")
-    subjects = config_int_list(top, "pose_transfer.subjects")
-    return PoseTransferOptions(root=str(values["root"]), subjects=None if subjects is None else tuple(subjects),
-                               poses=None if poses is None else tuple(poses), align=bool(values.get("align", True)))
+    def __post_init__(self):
+        if self.root in (None, ""):
+            raise SShaDeError(f"pose_transfer.root is not set: pass pose_transfer.root={self.REQUIRED['root']}")
+        top = {"pose_transfer": {"subjects": self.subjects, "poses": self.poses}}
+        poses, subjects = config_int_list(top, "pose_transfer.poses"), config_int_list(top, "pose_transfer.subjects")
+        self.subjects = None if subjects is None else tuple(subjects)
+        self.poses = None if poses is None else tuple(poses)
 
 
 def run_pose_transfer(spec: EvalSpec) -> dict:
     """Run the FAUST pose-transfer experiment of ``spec.experiment.options``
-    (:class:`PoseTransferOptions`, see conf/experiment/pose_transfer.yaml): every ordered
+    (:class:`PoseTransferConfig`, see conf/experiment/pose_transfer.yaml): every ordered
     pair of the selected subjects, every selected target pose. SShaDe's ``n_low``,
     ``n_samplings``, ``seed``, ``gradient``, ``workers``: :func:`sshade_params`. Outputs
     go to ``spec.output.out_dir``. The dataset is not used.
@@ -132,7 +120,7 @@ def run_pose_transfer(spec: EvalSpec) -> dict:
     return _pose_transfer_tables(rows, sp, opts.align, info, out_dir, t_start)
 
 
-def _pose_transfer_root(opts: PoseTransferOptions):
+def _pose_transfer_root(opts: PoseTransferConfig):
     """``(root, files)``: ``pose_transfer.root`` resolved and its registrations
     (:func:`eval.datasets.faust.discover_faust`)."""
     root = abs_path(opts.root)
@@ -142,7 +130,7 @@ def _pose_transfer_root(opts: PoseTransferOptions):
     return root, discover_faust(root)
 
 
-def _pose_transfer_jobs(opts: PoseTransferOptions, root, files) -> list[tuple[int, int, int]]:
+def _pose_transfer_jobs(opts: PoseTransferConfig, root, files) -> list[tuple[int, int, int]]:
     """The cases ``(a, b, p)``: ordered pairs of selected subjects with a pose 0 and
     the target poses present for both."""
     present = sorted({s for s, p in files if p == 0})
@@ -284,10 +272,11 @@ def _pose_transfer_tables(rows: list[dict], sp: dict, align: bool, info: dict, o
         markdown_table(per_case, ("case", "Case (a->b, pose)"),
                        ((SShaDe.name, SShaDe.name, "{:.3f}"), ("naive", "Naive", "{:.3f}"),
                         ("identity", "Identity", "{:.3f}"), ("M'", "M'", "{:.3f}"),
-                        ("time_s", "Time (s)", "{:.2f}"))),
+                        measure_column("time_s"))),
         f"{len(df)} case(s), {n_err} failed, {wall:.1f} s in all.", ""])
     finish_run(out_dir, md, paths, info, n_cases=len(df), n_errors=n_err, wall_s=wall)
     return {"out_dir": out_dir, "paths": paths, "cases": df, "table": table, "n_cases": len(df), "n_errors": n_err}
 
 
-register_experiment("pose_transfer", run_pose_transfer, options=pose_transfer_options)
+register_experiment("pose_transfer", run_pose_transfer,
+                    options=section_reader("pose_transfer", PoseTransferConfig, absent="use experiment=pose_transfer"))

@@ -20,13 +20,17 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any, ClassVar, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
+from omegaconf import MISSING
 
+from eval.config_schema import section_reader
 from eval.experiments.common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.measures import chamfer, ground_truth_metrics, hausdorff
 from eval.present.figures import safe_figure, tosca_figure
+from eval.present.measures import columns
 from eval.present.meshview import write_case_view
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
@@ -39,7 +43,7 @@ from sshade.mesh.io import atomic_write, read_mesh
 from sshade.pipeline import SShaDe, auto_n_low
 from sshade.sampling import sampling_seeds
 
-__all__ = ["ToscaOptions", "tosca_options", "PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table",
+__all__ = ["ToscaConfig", "PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table",
            "markdown_table", "run_tosca", "sshade_params", "transfer_n_low"]
 
 log = logging.getLogger(__name__)
@@ -50,19 +54,7 @@ PAPER_TOSCA = {"hausdorff": 5.66e-3, "chamfer": 3.76e-8}
 _NAME = re.compile(r"^([A-Za-z_]+?)(\d+)\.off$", re.IGNORECASE)
 
 #: (column, Markdown header, format) of the summary tables.
-TOSCA_COLUMNS = (
-    ("n_vertices", "Vertices", "{:.0f}"),
-    ("n_cases", "Cases", "{:.0f}"),
-    ("n_failed", "Failed", "{:.0f}"),
-    ("n_low", "n_low", "{:.0f}"),
-    ("hausdorff", "d_H", "{:.3e}"),
-    ("chamfer", "d_C", "{:.3e}"),
-    ("gt_vertex_mean_pct", "Vertex mean (% diag)", "{:.4f}"),
-    ("gt_vertex_max_pct", "Vertex max (% diag)", "{:.3f}"),
-    ("rest_hausdorff", "d_H rest vs pose", "{:.3e}"),
-    ("gt_stretch_pct", "GT stretch (%)", "{:.2f}"),
-    ("time_s", "Time (s)", "{:.2f}"),
-)
+TOSCA_COLUMNS = columns("tosca")
 
 
 def discover_tosca(root) -> dict[str, dict[int, Path]]:
@@ -179,41 +171,35 @@ def transfer_n_low(n_low, n_vertices: int) -> int:
         raise SShaDeError(f"sshade.n_low must be an integer or auto, got {n_low!r}") from None
 
 
-@dataclass(frozen=True)
-class ToscaOptions:
-    """The ``tosca`` section, checked: ``root`` (folder of NAMEk.off files, as given),
-    ``min_vertices`` (classes below are excluded; 0: none), ``classes`` (names; None: all
-    present), ``poses`` (target pose indices; None: all but 0)."""
+@dataclass
+class ToscaConfig:
+    """The ``tosca`` section (conf/experiment/tosca.yaml), typed and checked: ``root`` (a
+    folder of NAMEk.off files, as given), ``min_vertices`` (classes below are excluded; 0:
+    none), ``classes`` (a name or a list; None: all present), ``poses`` (target pose
+    indices, an integer or a list; None: all but 0). Made by
+    :func:`eval.config_schema.typed_section` at the door, whose ``OmegaConf.to_object``
+    runs :meth:`__post_init__`: SShaDeError naming the key for ``min_vertices`` below 0 or
+    ``poses`` not integers; ``classes`` and ``poses`` become tuples."""
 
-    root: str
-    min_vertices: int = 0
-    classes: tuple | None = None
-    poses: tuple[int, ...] | None = None
+    root: Optional[str] = MISSING
+    min_vertices: Optional[int] = None
+    classes: Any = None
+    poses: Any = None
 
+    REQUIRED: ClassVar[dict] = {"root": "DIR (a folder of TOSCA NAMEk.off files)"}
 
-def tosca_options(values) -> ToscaOptions:
-    """The ``tosca`` section (plain values) read and checked.
-
-    Raises
-    ------
-    SShaDeError naming the key: no section, no ``root``, ``min_vertices`` not an integer
-    >= 0 (or null), ``poses`` not integers (or null).
-    """
-    if values is None:
-        raise SShaDeError("no `tosca` section in the config; use experiment=tosca")
-    top = {"tosca": values}
-    min_v = config_number(top, "tosca.min_vertices", min=0, allow_none=True, default=None)
-    poses = config_int_list(top, "tosca.poses")
-    if values.get("root") in (None, "", "???"):
-        raise SShaDeError("tosca.root is not set: pass tosca.root=DIR (a folder of TOSCA NAMEk.off files)")
-    classes = as_list(values.get("classes"))
-    return ToscaOptions(root=str(values["root"]), min_vertices=int(min_v or 0),
-                        classes=None if classes is None else tuple(classes),
-                        poses=None if poses is None else tuple(poses))
+    def __post_init__(self):
+        if self.root in (None, ""):
+            raise SShaDeError(f"tosca.root is not set: pass tosca.root={self.REQUIRED['root']}")
+        top = {"tosca": {"min_vertices": self.min_vertices, "poses": self.poses}}
+        self.min_vertices = int(config_number(top, "tosca.min_vertices", min=0, allow_none=True, default=None) or 0)
+        poses, classes = config_int_list(top, "tosca.poses"), as_list(self.classes)
+        self.classes = None if classes is None else tuple(classes)
+        self.poses = None if poses is None else tuple(poses)
 
 
 def run_tosca(spec: EvalSpec) -> dict:
-    """Run the TOSCA experiment of ``spec.experiment.options`` (:class:`ToscaOptions`, see
+    """Run the TOSCA experiment of ``spec.experiment.options`` (:class:`ToscaConfig`, see
     conf/experiment/tosca.yaml).
 
     Every class of ``root`` with at least ``min_vertices`` vertices (paper: wolf is
@@ -252,7 +238,7 @@ def run_tosca(spec: EvalSpec) -> dict:
     return _tosca_tables(df, sp, excluded, info, out_dir, t_start)
 
 
-def _tosca_jobs(opts: ToscaOptions, root, found):
+def _tosca_jobs(opts: ToscaConfig, root, found):
     """The selected classes' rest poses (read and validated; classes below
     ``tosca.min_vertices`` excluded) and the (class, pose) cases; returns
     ``(rests, excluded, jobs)``."""
@@ -399,4 +385,5 @@ def table_workers(df) -> str:
     return ",".join(map(str, w)) or "-"
 
 
-register_experiment("tosca", run_tosca, options=tosca_options)
+register_experiment("tosca", run_tosca,
+                    options=section_reader("tosca", ToscaConfig, absent="use experiment=tosca"))

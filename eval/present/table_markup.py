@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from eval.present.measures import EXTRA, MAIN, MEASURES
+from eval.present.measures import EXTRA, MAIN, MEASURES, label
 
 if TYPE_CHECKING:  # pandas is imported where a table is built
     import pandas as pd
@@ -62,9 +62,8 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
     import pandas as pd
     cols = [(c, h, d) for c, h, _, d, _ in TABLE_COLUMNS if c in summary.columns]
     cols += [(c, h, d) for c, h, d in EXTRA_COLUMNS if c in summary.columns]
-    head = ["Method", "Cases", *[h for _, h, _ in cols]]
-    if (summary.get("n_failed", pd.Series(dtype=int)) > 0).any():
-        head.insert(2, "Failed")
+    failed = (summary.get("n_failed", pd.Series(dtype=int)) > 0).any()
+    head = ["Method", label("n_cases"), *([label("n_failed")] if failed else []), *[h for _, h, _ in cols]]
     lines = []
     if title:
         lines += [f"### {title}", ""]
@@ -75,7 +74,7 @@ def to_markdown(summary: pd.DataFrame, *, title: str | None = None, bold: bool =
     best = {c: _best(_compared(summary, c, reported), d) if bold and c not in NO_BOLD else set() for c, _, d in cols}
     for i, (_, r) in enumerate(summary.iterrows()):
         cells = [str(r["method"]), str(int(r["n_cases"]))]
-        if "Failed" in head:
+        if failed:
             cells.append(str(int(r["n_failed"])))
         for c, _, d in cols:
             if MEASURES.get(c) is not None and MEASURES[c].fraction:  # mean of a boolean: show as k/n

@@ -18,6 +18,7 @@ import os
 import platform
 import subprocess
 import sys
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
 
 __all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "read_runinfo", "effective_params",
-           "source_record", "departures", "collect_runinfo", "write_runinfo"]
+           "source_record", "departures", "register_departures", "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
@@ -177,8 +178,8 @@ def departures(resolved: dict) -> list[str]:
     ----------
     resolved : the resolved config as plain containers. Read: ``methods`` and their
         ``method.<name>`` sections (``gradient``, ``anchor``, ``warm_start``, ``protocol``,
-        ``energy``), else the ``sshade`` / ``arap`` sections; ``dataset.name`` with
-        ``dataset.protocol`` and ``dataset.n_targets`` (FAUST).
+        ``energy``), else the ``sshade`` / ``arap`` sections; the ``dataset`` section by
+        its dataset's own rule (:func:`register_departures`, e.g. FAUST's protocol).
 
     Returns
     -------
@@ -203,13 +204,21 @@ def departures(resolved: dict) -> list[str]:
             if key in sec and sec[key] is not None and sec[key] != paper:
                 out.append(f"{prefix}.{key}={_fmt(sec[key])} (paper: {_fmt(paper)}): {why}")
     ds = resolved.get("dataset") or {}
-    if ds.get("name") == "faust":
-        if ds.get("protocol", "paper") != "paper":
-            out.append(f"dataset.protocol={ds['protocol']} (paper: paper): every pose with all 11 landmarks, "
-                       "not 6 for targets 1-3 (appendix A)")
-        if ds.get("n_targets", 4) != 4:
-            out.append(f"dataset.n_targets={ds['n_targets']} (paper: 4): targets per subject (appendix A)")
-    return out
+    rule = _DATASET_DEPARTURES.get(str(ds.get("name", "")))
+    return out + (list(rule(ds)) if rule is not None else [])
+
+
+#: dataset name -> ``rule(section) -> [line]``: the departures its section selects, each
+#: registered by the dataset's own module (:func:`register_departures`).
+_DATASET_DEPARTURES: dict[str, Callable] = {}
+
+
+def register_departures(dataset: str, rule: Callable) -> Callable:
+    """Register ``rule(section) -> list[str]``, the departures from the paper that dataset
+    ``dataset``'s config section (plain values) selects, in :func:`departures`' form;
+    called by the dataset's own module. Returns ``rule``."""
+    _DATASET_DEPARTURES[str(dataset)] = rule
+    return rule
 
 
 def _fmt(v) -> str:

@@ -9,17 +9,19 @@ Parameters: the meshes, handles and budgets from ``scaling.*``
 section; :func:`elastic_params`)."""
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, List, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
 
 from baselines.fullres_arap import Elastic
-from eval.config_schema import ScalingSchema
+from eval.config_schema import section_reader
 from eval.datasets.shapes import axis_handles, axis_landmarks
 from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
@@ -31,7 +33,7 @@ from eval.run.memory import PeakMemory, release_freed
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, write_runinfo
 from eval.run.spec import EvalSpec
-from harness.checks import check_numbers, config_bool, config_int_list, config_value
+from harness.checks import check_numbers, config_int_list
 from sshade import deform
 from sshade.arap import arap_deform, make_criterion
 from sshade.errors import SShaDeError
@@ -42,7 +44,7 @@ from sshade.warmup import warm_fullres
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ScalingOptions", "scaling_options", "build_mesh", "size_mesh", "run_scaling", "sshade_params",
+__all__ = ["ScalingConfig", "build_mesh", "size_mesh", "run_scaling", "sshade_params",
            "elastic_params"]
 
 
@@ -93,31 +95,46 @@ def elastic_params(spec: EvalSpec) -> dict:
     return {k: d.get(k) for k in ("protocol", "tol", "max_iter", "etol", "gtol")}
 
 
-_D = ScalingSchema()  # the section's defaults
+@dataclass
+class ScalingConfig:
+    """The ``scaling`` section (conf/experiment/scaling.yaml), typed and checked: the
+    ``meshes`` (a list of ``{name, path, remesh}``, or null for ``base_mesh`` with
+    ``remesh``) and ``sizes``, the handle draw (``seed``, ``n_per_group``,
+    ``region_radius``, ``rotate_deg``, ``translate``), SShaDe's timed calls (``repeat``,
+    ``first_call``, ``first_call_timeout_s``), Elastic's (``elastic``, ``elastic_budget_s``,
+    ``elastic_max_vertices``: None for every size) and the mesh ``cache`` (null: the
+    default). Made by :func:`eval.config_schema.typed_section` at the door, whose
+    ``OmegaConf.to_object`` runs :meth:`__post_init__`: SShaDeError naming the key for a
+    number out of range, a size below 4 or a bad mesh entry
+    (:func:`eval.experiments.scaling.mesh_set.mesh_entries`), before any mesh is built;
+    ``meshes`` become :class:`MeshEntry` objects, ``sizes`` a tuple, the times floats."""
 
+    meshes: Any = None
+    base_mesh: Optional[str] = None
+    remesh: bool = True
+    sizes: List[int] = field(default_factory=list)
+    seed: int = 0
+    n_per_group: int = 30
+    region_radius: float = 0.06
+    rotate_deg: float = 20.0
+    translate: float = 0.05
+    repeat: int = 3
+    first_call: bool = True
+    first_call_timeout_s: Any = 600
+    elastic: bool = True
+    elastic_budget_s: Any = 600
+    elastic_max_vertices: Optional[int] = None
+    cache: Optional[str] = "data/scaling"
 
-@dataclass(frozen=True)
-class ScalingOptions:
-    """The ``scaling`` section, checked (conf/experiment/scaling.yaml): the meshes and
-    ``sizes``, the handle draw (``seed``, ``n_per_group``, ``region_radius``,
-    ``rotate_deg``, ``translate``), SShaDe's timed calls (``repeat``, ``first_call``,
-    ``first_call_timeout_s``), Elastic's (``elastic``, ``elastic_budget_s``,
-    ``elastic_max_vertices``: None for every size) and the mesh ``cache``."""
-
-    meshes: tuple[MeshEntry, ...]
-    sizes: tuple[int, ...]
-    seed: int = _D.seed  # every default is the schema's (eval.config_schema.ScalingSchema), written once there
-    n_per_group: int = _D.n_per_group
-    region_radius: float = _D.region_radius
-    rotate_deg: float = _D.rotate_deg
-    translate: float = _D.translate
-    repeat: int = _D.repeat
-    first_call: bool = _D.first_call
-    first_call_timeout_s: float = float(_D.first_call_timeout_s)
-    elastic: bool = _D.elastic
-    elastic_budget_s: float = float(_D.elastic_budget_s)
-    elastic_max_vertices: int | None = _D.elastic_max_vertices
-    cache: str = _D.cache
+    def __post_init__(self):
+        top = {"scaling": {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
+        check_numbers(top, "scaling", _NUMBERS)
+        sizes = config_int_list(top, "scaling.sizes", min=4)
+        self.meshes = tuple(mesh_entries(top["scaling"]))
+        self.sizes = tuple(sizes or ())
+        self.first_call_timeout_s = float(self.first_call_timeout_s)
+        self.elastic_budget_s = float(self.elastic_budget_s)
+        self.cache = str(self.cache or ScalingConfig.cache)
 
 
 #: the numbers of the ``scaling`` section: (key, kind, min, allow_none)
@@ -127,37 +144,8 @@ _NUMBERS = [("seed", int, 0, False), ("n_per_group", int, 1, False), ("region_ra
             ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]
 
 
-def scaling_options(values) -> ScalingOptions:
-    """The ``scaling`` section (plain values) read and checked: its numbers, flags,
-    ``sizes`` and every ``meshes`` entry's keys
-    (:func:`eval.experiments.scaling.mesh_set.mesh_entries`), before any mesh is built;
-    SShaDeError naming the key."""
-    if values is None:
-        raise SShaDeError("no `scaling` section in the config; use experiment=scaling")
-    top = {"scaling": values}
-    check_numbers(top, "scaling", _NUMBERS)
-    sizes = config_int_list(top, "scaling.sizes", min=4)
-    first_call = config_bool(top, "scaling.first_call", default=_D.first_call)
-    elastic = config_bool(top, "scaling.elastic", default=_D.elastic)
-    meshes = mesh_entries(values)
-
-    def get(key, default):
-        return config_value(top, f"scaling.{key}", default)
-    emax = get("elastic_max_vertices", _D.elastic_max_vertices)
-    return ScalingOptions(meshes=tuple(meshes), sizes=tuple(sizes or ()), seed=int(get("seed", _D.seed)),
-                          n_per_group=int(get("n_per_group", _D.n_per_group)),
-                          region_radius=float(get("region_radius", _D.region_radius)),
-                          rotate_deg=float(get("rotate_deg", _D.rotate_deg)),
-                          translate=float(get("translate", _D.translate)), repeat=int(get("repeat", _D.repeat)),
-                          first_call=first_call,
-                          first_call_timeout_s=float(get("first_call_timeout_s", _D.first_call_timeout_s)),
-                          elastic=elastic, elastic_budget_s=float(get("elastic_budget_s", _D.elastic_budget_s)),
-                          elastic_max_vertices=None if emax is None else int(emax),
-                          cache=str(get("cache", None) or _D.cache))
-
-
 def run_scaling(spec: EvalSpec) -> dict:
-    """Run the scaling experiment of ``spec.experiment.options`` (:class:`ScalingOptions`,
+    """Run the scaling experiment of ``spec.experiment.options`` (:class:`ScalingConfig`,
     see conf/experiment/scaling.yaml).
 
     Returns dict ``out_dir``, ``table`` (DataFrame, one row per (mesh, size)).
@@ -203,7 +191,7 @@ def _read_base(entry: MeshEntry):
     return path, V0, F0, axis_landmarks(V0)
 
 
-def _size_row(sc: ScalingOptions, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) -> dict:
+def _size_row(sc: ScalingConfig, entry: MeshEntry, base, size: int, cache, sp: dict, ep: dict) -> dict:
     """One row of the table: the mesh of ``entry`` at ``size``, SShaDe warm (compilation
     apart), its first call in a fresh process (``scaling.first_call``) and full-res
     Elastic (``scaling.elastic``, up to ``scaling.elastic_max_vertices``)."""
@@ -272,7 +260,7 @@ def size_mesh(entry: MeshEntry, V0: np.ndarray, F0: np.ndarray, size: int, cache
     return mp, V, F, time.perf_counter() - t0
 
 
-def _size_handles(sc: ScalingOptions, base, V):
+def _size_handles(sc: ScalingConfig, base, V):
     """The handles and targets at one size (module docstring's rule, ``scaling.seed``)."""
     lm, center, axes = base[3]
     h, T, _, _ = axis_handles(V, lm, center, axes, n_per_group=sc.n_per_group, region_radius=sc.region_radius,
@@ -346,4 +334,5 @@ def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -
     return row
 
 
-register_experiment("scaling", run_scaling, options=scaling_options)
+register_experiment("scaling", run_scaling,
+                    options=section_reader("scaling", ScalingConfig, absent="use experiment=scaling"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from eval.present.measures import columns
 from sshade.mesh.io import atomic_write
 
 __all__ = ["scaling_markdown", "write_csv", "write_markdown", "MESH_KINDS"]
@@ -12,20 +13,7 @@ __all__ = ["scaling_markdown", "write_csv", "write_markdown", "MESH_KINDS"]
 MESH_KINDS = {True: "clean: LS3 Loop + isotropic remesh", False: "hard: LS3 Loop only"}
 
 #: (column, header, format) of table.md, in order; absent columns are left out
-_COLS = [("vertices", "Vertices", "{:.0f}"), ("n_low", "n_low", "{:.0f}"), ("k", "k", "{:.0f}"),
-         ("remesh_s", "Remesh (s)", "{:.2f}"), ("repair_rounds_max", "Repair rounds (max)", "{:.0f}"),
-         ("repair_seeds", "Repair seeds", "{:.0f}"), ("lowres_arap_s", "Low-res ARAP (s)", "{:.2f}"),
-         ("lowres_iters_first", "Iters (first / warm mean)", None),
-         ("transfer_s", "Transfer (s)", "{:.2f}"), ("sshade_total_s", "SShaDe total (s, median)", "{:.2f}"),
-         ("sshade_total_min_s", "Range (s)", None),
-         ("first_call_s", "First call (s, median)", "{:.2f}"), ("first_call_min_s", "First call range (s)", None),
-         ("sshade_compile_s", "Compile (s)", "{:.2f}"),
-         ("peak_mem_mb", "Peak mem (MB)", "{:.0f}"), ("call_mem_mb", "Call mem (MB)", "{:.0f}"),
-         ("sshade_volume_err_pct", "Vol (%)", "{:.2f}"), ("sshade_edge_err_pct", "EL (%)", "{:.2f}"),
-         ("sshade_angle_err_deg", "FA (deg)", "{:.3f}"), ("seed_spread_pct", "Seed spread (% diag)", "{:.3f}"),
-         ("elastic_precompute_s", "Elastic precompute (s)", "{:.2f}"),
-         ("elastic_s_per_iter", "Elastic s/iter", "{:.3f}"), ("elastic_iters", "Elastic iters", "{:.0f}"),
-         ("elastic_total_s", "Elastic total (s)", "{:.1f}"), ("speedup", "Speed-up", "{:.1f}x")]
+_COLS = columns("scaling")
 
 
 def _missing(v) -> bool:
