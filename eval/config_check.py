@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import copy
 
+from eval.config_schema import typed_object
 from eval.datasets import dataset_options, find_dataset
 from eval.experiments import experiment_options, experiments, find_experiment
 from eval.experiments.cases.case_jobs import check_jobs
 from eval.experiments.cases.pair import guard_options
 from eval.method_config import arap_params, check_alpha, method_entries
-from eval.present.meshview import DEFAULT_MAX_FACES, DEFAULT_VIEW_CASES
 from eval.run.outdir import overwrite_flag
-from eval.run.paths import abs_path
 from eval.run.spec import (
     DatasetSpec,
     EvalSpec,
@@ -113,22 +112,13 @@ def check_values(cfg) -> None:
         raise SShaDeError(f"arap_sr.alpha_scaling must be one of {list(ALPHA_SCALINGS)}, got {scaling!r}")
     _check_sshade(cfg)
     _check_dataset(cfg)
-    if config_value(cfg, "figures", None) is not None:
-        config_bool(cfg, "figures.enabled", default=False)
     config_bool(cfg, "resume", default=False)
     check_jobs(config_value(cfg, "jobs", "auto"))
-    if config_value(cfg, "report", None) is not None:
-        config_bool(cfg, "report.enabled", default=True)
-        config_number(cfg, "report.view_cases", min=0, allow_none=True, default=DEFAULT_VIEW_CASES)
-        config_number(cfg, "report.max_faces", min=100, max=2_000_000, default=DEFAULT_MAX_FACES)
     if config_value(cfg, "store", None) is not None:
         config_bool(cfg, "store.meshes", default=False)
-        config_number(cfg, "figures.max_cases", min=0, allow_none=True, default=None)
-    if config_value(cfg, "reference", None) is not None:
-        config_number(cfg, "reference.max_iter", min=1, default=50000)
-        tb = config_number(cfg, "reference.time_budget_s", kind=float, min=0, allow_none=True, default=None)
-        if tb is not None and tb <= 0:
-            raise SShaDeError(f"reference.time_budget_s must be a finite number > 0 (or null), got {tb!r}")
+    plain_cfg = plain(cfg)
+    for name, schema in _RUN_SECTIONS.items():
+        _run_section(schema, plain_cfg, name)
 
 
 def check_config(cfg) -> EvalSpec:
@@ -159,7 +149,9 @@ def check_config(cfg) -> EvalSpec:
     return EvalSpec(experiment=experiment, dataset=_dataset(resolved), methods=methods, definitions=definitions,
                     guard=guard_options(**{k: resolved[k] for k in ("timeout_s", "handle_error_max_pct")
                                            if k in resolved}),
-                    reference=_reference(resolved), report=_report(resolved), figures=_figures(resolved),
+                    reference=_run_section(ReferenceOptions, resolved, "reference"),
+                    report=_run_section(ReportOptions, resolved, "report"),
+                    figures=_run_section(FigureOptions, resolved, "figures"),
                     output=_output(cfg), jobs=check_jobs(resolved.get("jobs", "auto")),
                     method_cases=resolved.get("method_cases"), resolved=resolved, composed=composed)
 
@@ -209,41 +201,14 @@ def _dataset(resolved: dict) -> DatasetSpec | None:
                        sample_seed=sample_seed)
 
 
-def _reference(resolved: dict) -> ReferenceOptions:
-    """The ``reference`` section: its case rule checked (``baseline``, ``all``, ``none`` or
-    a rule of its own as ``dataset.baseline_cases``), its cache folder made absolute."""
-    rc = resolved.get("reference") or {}
-    cases = str(rc.get("cases", "baseline")).strip()
-    if cases not in ("baseline", "all", "none"):
-        try:
-            cases = check_baseline_cases(cases)
-        except SShaDeError:
-            raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
-                              f"got {cases!r}") from None
-    top = {"reference": rc}
-    return ReferenceOptions(cases=cases, cache=abs_path(rc.get("cache", "data/references")),
-                            max_iter=config_number(top, "reference.max_iter", min=1, default=50000),
-                            time_budget_s=config_number(top, "reference.time_budget_s", kind=float, min=0,
-                                                        allow_none=True, default=3600))
+#: The sections typed by the run's own objects (:mod:`eval.run.spec`), checked when made.
+_RUN_SECTIONS = {"reference": ReferenceOptions, "report": ReportOptions, "figures": FigureOptions}
 
 
-def _report(resolved: dict) -> ReportOptions:
-    """``report``: its defaults for a config without it (:mod:`eval.present.meshview`)."""
-    rep = resolved.get("report")
-    if rep is None:
-        return ReportOptions(enabled=True, view_cases=DEFAULT_VIEW_CASES, max_faces=DEFAULT_MAX_FACES)
-    n, mf = rep.get("view_cases", DEFAULT_VIEW_CASES), rep.get("max_faces", DEFAULT_MAX_FACES)
-    return ReportOptions(enabled=bool(rep.get("enabled", True)), view_cases=int(0 if n is None else n),
-                         max_faces=int(DEFAULT_MAX_FACES if mf is None else mf))
-
-
-def _figures(resolved: dict) -> FigureOptions:
-    """``figures``: off without the section; ``max_cases`` null is 4."""
-    fig = resolved.get("figures")
-    if not fig:
-        return FigureOptions(enabled=False, max_cases=0)
-    n = fig.get("max_cases", 4)
-    return FigureOptions(enabled=bool(fig.get("enabled", False)), max_cases=int(4 if n is None else n))
+def _run_section(schema: type, resolved: dict, name: str):
+    """Section ``name`` of ``resolved`` as ``schema``'s instance
+    (:func:`eval.config_schema.typed_object`), every default without the section."""
+    return typed_object(schema, resolved.get(name), name)
 
 
 def _output(cfg) -> OutputOptions:

@@ -1,7 +1,9 @@
 """The types of the evaluator's Hydra config, registered with Hydra's ConfigStore.
-Floor 0 of eval/ (tests/test_layering.py); the checks a type cannot say: eval/config_check.py.
+Floor 1 of eval/ (tests/test_layering.py); the checks a type cannot say: eval/config_check.py.
 
-``conf/config.yaml`` starts its defaults list with ``config_schema`` (:func:`top_schema`);
+``conf/config.yaml`` starts its defaults list with ``config_schema`` (:func:`top_schema`;
+its ``reference``, ``report`` and ``figures`` typed by the run's own objects,
+:mod:`eval.run.spec`, which check their values when made: :func:`typed_object`);
 each file of ``conf/dataset/`` extends its schema (``schema/dataset/<name>``), each
 experiment with a section of its own the schema its module registers
 (``schema/experiment/<section>``, :func:`register_section`; the section's options are that
@@ -19,33 +21,17 @@ from typing import Any, Dict, List, Optional  # OmegaConf 2.3 reads typing's gen
 
 from omegaconf import MISSING, OmegaConf
 
+from eval.run.spec import FigureOptions, ReferenceOptions, ReportOptions
 from harness.method_registry import builtin_methods, method_file, method_key
 from sshade.errors import SShaDeError
 
-__all__ = ["FiguresSchema", "ReportSchema", "ArapSchema", "ReferenceSchema", "ArapSRSchema", "SShaDeSchema",
-           "StoreSchema", "ExperimentSchema", "TopSchema", "DefaustBuildSchema", "DefaustSchema", "FaustSchema",
-           "ShapesSchema", "DATASET_SCHEMAS", "register_section", "section_reader", "section_schemas", "typed_section",
-           "ClusterSchema", "method_schemas", "top_schema", "store_schemas"]
+__all__ = ["ArapSchema", "ArapSRSchema", "SShaDeSchema", "StoreSchema", "ExperimentSchema", "TopSchema",
+           "DefaustBuildSchema", "DefaustSchema", "FaustSchema", "ShapesSchema", "DATASET_SCHEMAS", "register_section",
+           "section_reader", "section_schemas", "typed_object", "typed_section", "ClusterSchema", "method_schemas",
+           "top_schema", "store_schemas"]
 
 
 # ----------------------------------------------------------------------------- conf/config.yaml
-@dataclass
-class FiguresSchema:
-    """``figures``: paper-style PNG renders of the first cases."""
-
-    enabled: bool = False
-    max_cases: Optional[int] = 4
-
-
-@dataclass
-class ReportSchema:
-    """``report``: the browser report and its 3D views."""
-
-    enabled: bool = True
-    view_cases: Optional[int] = 2
-    max_faces: int = 30000
-
-
 @dataclass
 class ArapSchema:
     """``arap``: the full-resolution baselines' protocol and stopping rule."""
@@ -55,17 +41,6 @@ class ArapSchema:
     max_iter: Optional[int] = None
     etol: Optional[float] = None
     gtol: Optional[float] = None
-
-
-@dataclass
-class ReferenceSchema:
-    """``reference``: the deep-converged reference solutions. ``cases`` is a word or an
-    integer, ``time_budget_s`` seconds as written (an int stays an int in ``run.json``)."""
-
-    cases: Any = "baseline"
-    cache: str = "data/references"
-    max_iter: int = 50000
-    time_budget_s: Any = 3600
 
 
 @dataclass
@@ -113,17 +88,19 @@ class TopSchema:
     """The top level of ``conf/config.yaml``, in its order. ``methods`` (a list, or one
     name), ``jobs`` (``auto`` or an integer) and ``compare_with`` (a folder or a list) hold
     several types; ``method_cases`` is null or a mapping (a null typed mapping takes no
-    override in OmegaConf 2.3); ``dataset`` is typed by its own file's schema."""
+    override in OmegaConf 2.3); ``dataset`` is typed by its own file's schema. The sections
+    typed by :mod:`eval.run.spec`'s objects have no default here (``???``: conf/config.yaml
+    sets them), so that building this schema does not make (and check) one."""
 
     methods: Any = MISSING
     timeout_s: Optional[float] = None
     handle_error_max_pct: Optional[float] = 1.0
-    figures: FiguresSchema = field(default_factory=FiguresSchema)
-    report: ReportSchema = field(default_factory=ReportSchema)
+    figures: FigureOptions = MISSING
+    report: ReportOptions = MISSING
     arap: ArapSchema = field(default_factory=ArapSchema)
     method_cases: Any = None
     jobs: Any = "auto"
-    reference: ReferenceSchema = field(default_factory=ReferenceSchema)
+    reference: ReferenceOptions = MISSING
     arap_sr: ArapSRSchema = field(default_factory=ArapSRSchema)
     sshade: SShaDeSchema = field(default_factory=SShaDeSchema)
     out_dir: str = MISSING
@@ -235,30 +212,34 @@ def section_schemas() -> dict[str, type]:
     return dict(sorted(_SECTIONS.items()))
 
 
-def typed_section(name: str, values, *, absent: str = ""):
-    """Section ``name``'s options: ``values`` (its plain values) merged into its registered
-    schema and made by ``OmegaConf.to_object``, which runs the schema's own checks (its
-    ``__post_init__``: ranges, words, lists) and normalises (tuples).
+def typed_object(schema: type, values, where: str):
+    """``schema``'s instance from ``values`` (plain values of the section ``where``; None:
+    every default): merged into the schema and made by ``OmegaConf.to_object``, which runs
+    the schema's own checks (its ``__post_init__``: ranges, words, lists) and normalises.
 
     Raises
     ------
-    SShaDeError, one line naming the key: no section (``absent`` says what to do), a value
-    of the wrong type, a required key not set (the schema's ``REQUIRED`` says what to pass),
-    or the schema's own refusal.
+    SShaDeError, one line naming the key: a value of the wrong type, a required key not set
+    (the schema's ``REQUIRED`` says what to pass), or the schema's own refusal.
     """
     from omegaconf.errors import MissingMandatoryValue, ValidationError
 
-    schema = _SECTIONS[name]
-    if values is None:
-        raise SShaDeError(f"no `{name}` section in the config; {absent}".rstrip("; "))
     try:
-        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), values))
+        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), values or {}))
     except MissingMandatoryValue as e:
-        key = f"{name}.{e.full_key}"
+        key = f"{where}.{e.full_key}"
         what = getattr(schema, "REQUIRED", {}).get(str(e.full_key), "VALUE")
         raise SShaDeError(f"{key} is not set: pass {key}={what}") from None
     except ValidationError as e:
-        raise SShaDeError(f"{name}.{e.full_key}: {str(e).splitlines()[0]}") from None
+        raise SShaDeError(f"{where}.{e.full_key}: {str(e).splitlines()[0]}") from None
+
+
+def typed_section(name: str, values, *, absent: str = ""):
+    """Registered section ``name``'s options (:func:`typed_object` of its schema);
+    SShaDeError when the config has no such section (``absent`` says what to do)."""
+    if values is None:
+        raise SShaDeError(f"no `{name}` section in the config; {absent}".rstrip("; "))
+    return typed_object(_SECTIONS[name], values, name)
 
 
 # ----------------------------------------------------------------------------- conf/cluster/

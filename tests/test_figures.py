@@ -166,7 +166,7 @@ def test_safe_figure_logs_instead_of_raising(sphere, tmp_path, caplog):
 def test_figures_options():
     """The door's ``figures`` (eval/config_check.py): off without the section, 4 cases by default."""
     from eval.run.spec import FigureOptions
-    assert check_config({"methods": ["ARAP"]}).figures == FigureOptions(enabled=False, max_cases=0)
+    assert check_config({"methods": ["ARAP"]}).figures == FigureOptions(enabled=False, max_cases=4)
     assert check_config({"figures": {"enabled": False}}).figures.enabled is False
     assert check_config({"figures": {"enabled": True}}).figures == FigureOptions(enabled=True, max_cases=4)
     assert check_config({"figures": {"enabled": True, "max_cases": 2}}).figures == FigureOptions(True, 2)

@@ -86,7 +86,7 @@ def test_imports_only_go_down():
 EVAL_FLOORS = {
     "eval.run": 0,  # the ground: run folder, store, names, run.json, plan, progress, subsets, code identity
     "eval.registry_base": 0,  # the plug-in registries' common part
-    "eval.config_schema": 0,  # the config's types, registered with Hydra's ConfigStore
+    "eval.config_schema": 1,  # the config's types, registered with Hydra's ConfigStore (some are eval.run.spec's)
     "eval.metrics": 1,  # what a result is scored by
     "eval.datasets": 1,  # the cases
     "eval.method_config": 1,  # the methods from the config

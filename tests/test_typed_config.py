@@ -59,7 +59,7 @@ def _yaml(path) -> dict:
     (["dataset.nonsense=1"], ["dataset.nonsense", "not in 'FaustSchema'"]),
     (["method.Elastic.nonsense=1"], ["method.Elastic.nonsense", "not in"]),
     (["experiment=tosca", "tosca.nope=1"], ["tosca.nope", "not in 'ToscaConfig'"]),
-    (["report.nope=1"], ["report.nope", "not in 'ReportSchema'"]),
+    (["report.nope=1"], ["report.nope", "not in 'ReportOptions'"]),
 ])
 def test_composition_refuses_a_wrong_type_or_an_unknown_key(overrides, words):
     with pytest.raises(config_error_types()) as e:
@@ -184,7 +184,7 @@ def test_the_three_defaults_that_disagreed_are_the_schemas():
     0 in ReportOptions) and convergence.libigl (read, in neither the schema nor the YAML):
     the sections' options are now their schemas' own instances, so a key left out takes the
     schema's default and no other."""
-    from eval.config_schema import ReportSchema, typed_section
+    from eval.config_schema import typed_section
     from eval.experiments.convergence import ConvergenceConfig
     from eval.experiments.scaling.scaling_experiment import ScalingConfig
     from eval.run.spec import ReportOptions
@@ -193,7 +193,7 @@ def test_the_three_defaults_that_disagreed_are_the_schemas():
     for f in dataclasses.fields(ScalingConfig):
         if f.name not in ("meshes", "sizes", "base_mesh", "first_call_timeout_s", "elastic_budget_s"):
             assert getattr(opts, f.name) == f.default, f.name
-    assert ReportOptions().view_cases == ReportSchema.view_cases == 2
+    assert ReportOptions().view_cases == 2 and ReportOptions.view_cases == 2
     assert ConvergenceConfig.libigl is True
     yaml = OmegaConf.load(Path(CONF_DIR) / "experiment" / "convergence.yaml")
     assert yaml.convergence.libigl is True
@@ -236,3 +236,18 @@ def test_a_section_made_at_the_door_is_its_schemas_instance_checked_and_normalis
         with pytest.raises(SShaDeError) as e:
             check_config(_compose(overrides))
         assert words in str(e.value) and "\n" not in str(e.value), (overrides, str(e.value))
+
+
+def test_conf_config_yaml_restates_no_default_differently():
+    """conf/config.yaml's sections hold every key (for its comments and ``--cfg job``): each
+    value there is its type's default, so the two cannot disagree (the type's is what a
+    config without the key, e.g. the Python API's, gets); an interpolation is the YAML's alone."""
+    top = _yaml(ROOT / "conf" / "config.yaml")
+    for name, cls in _sections(TopSchema).items():
+        if name not in top or name == "experiment":
+            continue
+        for f in dataclasses.fields(cls):
+            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            value = top[name][f.name]
+            if not (isinstance(value, str) and value.startswith("${")):
+                assert value == default, f"{name}.{f.name}: {value!r} vs {default!r}"

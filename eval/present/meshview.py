@@ -19,6 +19,7 @@ import numpy as np
 from eval.metrics.meshes import unique_edges
 from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
+from eval.run.spec import ReportOptions
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 from sshade.mesh.io import atomic_write
@@ -30,8 +31,8 @@ __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "CO
 log = logging.getLogger("eval")
 
 VIEW_DIR = "report"  #: the views' folder inside a run folder (next to index.html)
-DEFAULT_MAX_FACES = 30000  #: faces shown per mesh unless ``report.max_faces`` says otherwise
-DEFAULT_VIEW_CASES = 2     #: cases with a 3D view unless ``report.view_cases`` says otherwise
+DEFAULT_MAX_FACES = ReportOptions.max_faces    #: faces shown per mesh unless ``report.max_faces`` says otherwise
+DEFAULT_VIEW_CASES = ReportOptions.view_cases  #: cases with a 3D view unless ``report.view_cases`` says otherwise
 #: The per-vertex quantities a view colours its meshes by (:func:`case_view`): key -> legend.
 COLOUR_MODES = {"edge": "edge-length error, % of the longest rest edge (paper Fig. 4)",
                 "gt": "distance to the ground truth, % of the bounding-box diagonal"}

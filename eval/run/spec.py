@@ -1,6 +1,8 @@
-"""What one evaluator run is asked to do, checked and typed: frozen objects made once at the
-door (:func:`eval.config_check.check_config`) from the composed config, then handed down.
-Floor 0 of eval/ (eval/run/, tests/test_layering.py); the config's types: eval/config_schema.py.
+"""What one evaluator run is asked to do, checked and typed: objects made once at the door
+(:func:`eval.config_check.check_config`) from the composed config, then handed down; the
+``reference``, ``report`` and ``figures`` sections are their own Hydra schemas (typed by
+OmegaConf, checked when made). Floor 0 of eval/ (eval/run/, tests/test_layering.py); the
+config's other types: eval/config_schema.py.
 
 Below the commands no function takes the config itself: each takes the object it reads
 (:class:`DatasetSpec`, :class:`MethodSpec`, :class:`ReferenceOptions`, ...), an experiment
@@ -11,8 +13,12 @@ import copy
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
+
+from eval.run.paths import abs_path
+from eval.run.subset import check_baseline_cases
+from harness.checks import config_number
+from sshade.errors import SShaDeError
 
 __all__ = ["MethodSpec", "DatasetSpec", "GuardOptions", "ReferenceOptions", "ReportOptions", "FigureOptions",
            "OutputOptions", "ExperimentSpec", "EvalSpec"]
@@ -77,26 +83,50 @@ class GuardOptions:
         return {"timeout_s": self.timeout_s, "handle_error_max_pct": self.handle_error_max_pct}
 
 
-@dataclass(frozen=True)
+@dataclass
 class ReferenceOptions:
-    """The ``reference`` section: ``cases`` (``baseline``, ``all``, ``none``, ``per_pose`` or
-    an int >= 0), the ``cache`` folder (absolute), the deep solve's ``max_iter`` and
-    ``time_budget_s`` (None: no budget)."""
+    """The ``reference`` section, typed (the Hydra schema of ``conf/config.yaml``'s
+    ``reference``, eval/config_schema.py) and checked when made (:meth:`__post_init__`):
+    ``cases`` (``baseline``, ``all``, ``none``, ``per_pose`` or an int >= 0), the ``cache``
+    folder (made absolute), the deep solve's ``max_iter`` (>= 1) and ``time_budget_s``
+    (seconds > 0, None: no budget; a float once made). SShaDeError naming the key."""
 
-    cases: str | int = "baseline"
-    cache: Path = Path("data/references")
+    cases: Any = "baseline"
+    cache: str = "data/references"
     max_iter: int = 50000
-    time_budget_s: float | None = 3600.0
+    time_budget_s: Any = 3600
+
+    def __post_init__(self):
+        cases = str(self.cases).strip()
+        if cases not in ("baseline", "all", "none"):
+            try:
+                cases = check_baseline_cases(cases)
+            except SShaDeError:
+                raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
+                                  f"got {self.cases!r}") from None
+        top = {"reference": {"max_iter": self.max_iter, "time_budget_s": self.time_budget_s}}
+        self.max_iter = config_number(top, "reference.max_iter", min=1)
+        tb = config_number(top, "reference.time_budget_s", kind=float, min=0, allow_none=True)
+        if tb is not None and tb <= 0:
+            raise SShaDeError(f"reference.time_budget_s must be a finite number > 0 (or null), got {tb!r}")
+        self.cases, self.time_budget_s, self.cache = cases, tb, abs_path(self.cache)
 
 
-@dataclass(frozen=True)
+@dataclass
 class ReportOptions:
-    """The ``report`` section: ``enabled`` (``index.html`` at the end), the 3D views of the
-    first ``view_cases`` cases with at most ``max_faces`` faces per mesh."""
+    """The ``report`` section, typed (the Hydra schema of ``conf/config.yaml``'s ``report``)
+    and checked when made: ``enabled`` (``index.html`` at the end), the 3D views of the
+    first ``view_cases`` cases (>= 0; None: none) with at most ``max_faces`` faces per mesh
+    (in [100, 2,000,000]). SShaDeError naming the key."""
 
     enabled: bool = True
-    view_cases: int = 2  # as eval.config_schema.ReportSchema (tests/test_typed_config.py holds them equal)
+    view_cases: Optional[int] = 2
     max_faces: int = 30000
+
+    def __post_init__(self):
+        top = {"report": {"view_cases": self.view_cases, "max_faces": self.max_faces}}
+        self.view_cases = config_number(top, "report.view_cases", min=0, allow_none=True) or 0
+        self.max_faces = config_number(top, "report.max_faces", min=100, max=2_000_000)
 
     @property
     def views(self) -> int:
@@ -104,12 +134,18 @@ class ReportOptions:
         return self.view_cases if self.enabled else 0
 
 
-@dataclass(frozen=True)
+@dataclass
 class FigureOptions:
-    """The ``figures`` section: ``enabled``, the figures of the first ``max_cases`` cases."""
+    """The ``figures`` section, typed (the Hydra schema of ``conf/config.yaml``'s
+    ``figures``) and checked when made: ``enabled``, the figures of the first
+    ``max_cases`` cases (>= 0; None: 4). SShaDeError naming the key."""
 
     enabled: bool = False
-    max_cases: int = 0
+    max_cases: Optional[int] = 4
+
+    def __post_init__(self):
+        n = config_number({"figures": {"max_cases": self.max_cases}}, "figures.max_cases", min=0, allow_none=True)
+        self.max_cases = FigureOptions.max_cases if n is None else n
 
 
 @dataclass(frozen=True)
