@@ -43,7 +43,8 @@ from harness.method_registry import (
 from harness.plugins import as_dict
 from sshade.arap import ALPHA_SCALINGS
 from sshade.errors import SShaDeError
-from sshade.pipeline import check_params
+from sshade.params import SShaDeParams
+from sshade.pipeline import SShaDe, check_params
 
 __all__ = ["check_config", "check_values", "method_definition", "plain"]
 
@@ -147,6 +148,7 @@ def check_config(cfg) -> EvalSpec:
     methods = method_entries(resolved["methods"], definitions) if "methods" in resolved else ()
     _check_shared_sections(resolved, methods)
     return EvalSpec(experiment=experiment, dataset=_dataset(resolved), methods=methods, definitions=definitions,
+                    sshade=_sshade_params(definitions[SShaDe.name]),
                     guard=guard_options(**{k: resolved[k] for k in ("timeout_s", "handle_error_max_pct")
                                            if k in resolved}),
                     reference=_run_section(ReferenceOptions, resolved, "reference"),
@@ -154,6 +156,15 @@ def check_config(cfg) -> EvalSpec:
                     figures=_run_section(FigureOptions, resolved, "figures"),
                     output=_output(cfg), jobs=check_jobs(resolved.get("jobs", "auto")),
                     method_cases=resolved.get("method_cases"), resolved=resolved, composed=composed)
+
+
+def _sshade_params(definition) -> SShaDeParams:
+    """SShaDe's parameters of its resolved definition ``method.SShaDe`` (``_target_`` and
+    ``name`` left out), checked; SShaDeError naming the key ``method.SShaDe.<key>``."""
+    try:
+        return check_params(**{k: v for k, v in definition.items() if k not in ("_target_", "name")})
+    except SShaDeError as e:
+        raise SShaDeError(str(e).replace("SShaDe: ", "method.SShaDe.", 1)) from None
 
 
 def _check_shared_sections(resolved: dict, methods) -> None:

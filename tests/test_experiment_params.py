@@ -1,8 +1,8 @@
 """Every experiment reads SShaDe's parameters from one place, the method config
-``method.SShaDe`` (default: the ``sshade`` section), so ``sshade.*`` overrides reach each
-of them; no experiment keeps a private copy (``tosca.n_low``, ...). Cheap: the configs are
-composed, checked at the door and each experiment's ``sshade_params(spec)`` is read, nothing
-runs."""
+``method.SShaDe`` (default: the ``sshade`` section), checked at the door into
+``EvalSpec.sshade`` (an ``SShaDeParams``), so ``sshade.*`` overrides reach each of them; no
+experiment keeps a private copy (``tosca.n_low``, ...) or a wrapper of its own. Cheap: the
+configs are composed and checked at the door, nothing runs."""
 from __future__ import annotations
 
 import pytest
@@ -46,7 +46,7 @@ def test_every_experiment_kind_is_covered():
 
 @pytest.mark.parametrize("exp", sorted(EXPERIMENTS))
 def test_defaults_unchanged(exp):
-    p = EXPERIMENTS[exp].sshade_params(_spec([f"experiment={exp}"]))
+    p = _spec([f"experiment={exp}"]).sshade
     assert p["n_low"] == DEFAULT_N_LOW[exp]
     assert p["n_samplings"] == DEFAULT_N_SAMPLINGS.get(exp, 5) and p["seed"] == 0
 
@@ -57,11 +57,11 @@ OVERRIDES = {"sshade.n_low": 123, "sshade.n_samplings": 3, "sshade.seed": 7, "ss
 
 @pytest.mark.parametrize("exp", sorted(EXPERIMENTS))
 def test_sshade_overrides_reach_every_experiment(exp):
-    p = EXPERIMENTS[exp].sshade_params(_spec([f"experiment={exp}", *(f"{k}={v}" for k, v in OVERRIDES.items())]))
+    p = _spec([f"experiment={exp}", *(f"{k}={v}" for k, v in OVERRIDES.items())]).sshade
     for k, v in OVERRIDES.items():
         assert p[k.split(".", 1)[1]] == v, (exp, k, p)
     # method.SShaDe.* (the method's own key) is the same place
-    p = EXPERIMENTS[exp].sshade_params(_spec([f"experiment={exp}", "method.SShaDe.n_low=321"]))
+    p = _spec([f"experiment={exp}", "method.SShaDe.n_low=321"]).sshade
     assert p["n_low"] == 321
 
 
@@ -75,9 +75,9 @@ def test_cases_experiment_builds_sshade_with_the_overrides(exp):
 
 def test_arap_stopping_rule_reaches_scaling_and_convergence():
     """SShaDe's low-res ARAP stopping rule: sshade.tol, else arap.tol (conf/method/SShaDe.yaml)."""
-    for exp, mod in (("scaling", scaling), ("convergence", convergence)):
-        assert mod.sshade_params(_spec([f"experiment={exp}", "arap.tol=1e-3"]))["tol"] == 1e-3
-        assert mod.sshade_params(_spec([f"experiment={exp}", "+sshade.tol=2e-3"]))["tol"] == 2e-3
+    for exp in ("scaling", "convergence"):
+        assert _spec([f"experiment={exp}", "arap.tol=1e-3"]).sshade["tol"] == 1e-3
+        assert _spec([f"experiment={exp}", "+sshade.tol=2e-3"]).sshade["tol"] == 2e-3
     ep = scaling.elastic_params(_spec(["experiment=scaling", "arap.protocol=paper", "arap.max_iter=50"]))
     assert ep["protocol"] == "paper" and ep["max_iter"] == 50
 
@@ -85,11 +85,11 @@ def test_arap_stopping_rule_reaches_scaling_and_convergence():
 def test_convergence_sampling_counts_follow_n_samplings():
     spec = _spec(["experiment=convergence", "sshade.n_samplings=7"])
     opts = spec.experiment.options
-    assert convergence.sampling_counts(opts, convergence.sshade_params(spec)) == [1, 7] and opts.sshade.refine_k == 7
+    assert convergence.sampling_counts(opts, spec.sshade) == [1, 7] and opts.sshade.refine_k == 7
     spec = _spec(["experiment=convergence"])
-    assert convergence.sampling_counts(spec.experiment.options, convergence.sshade_params(spec)) == [1, 5]
+    assert convergence.sampling_counts(spec.experiment.options, spec.sshade) == [1, 5]
     spec = _spec(["experiment=convergence", "convergence.sshade.k=[2,3]"])
-    assert convergence.sampling_counts(spec.experiment.options, convergence.sshade_params(spec)) == [2, 3]
+    assert convergence.sampling_counts(spec.experiment.options, spec.sshade) == [2, 3]
 
 
 @pytest.mark.parametrize("exp,key", [("scaling", "scaling.n_low"), ("tosca", "tosca.n_low"),
@@ -101,3 +101,16 @@ def test_no_private_copy_left(exp, key):
     assert OmegaConf.select(cfg, key, default="absent") == "absent"
     with pytest.raises(Exception, match="n_low"):
         _compose([f"experiment={exp}", f"{key}=500"])
+
+
+def test_the_door_checks_sshades_parameters_once_into_one_object():
+    """EvalSpec.sshade is SShaDe's checked parameters (SShaDeParams), made once at the door;
+    no experiment module keeps a one-line wrapper returning them as a dict; a bad value of
+    the method's own key is one error naming it."""
+    from sshade.errors import SShaDeError
+    from sshade.params import SShaDeParams
+    assert type(_spec(["experiment=tosca"]).sshade) is SShaDeParams
+    for mod in (cases, scaling, tosca, pose_transfer, convergence, animation):
+        assert not hasattr(mod, "sshade_params"), mod.__name__
+    with pytest.raises(SShaDeError, match=r"^method\.SShaDe\.n_samplings"):
+        _spec(["method.SShaDe.n_samplings=0"])

@@ -28,7 +28,7 @@ from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
 from defaust.skinning import high_res_weights
 from eval.config_schema import section_reader
-from eval.experiments.common import as_list, sshade_spec
+from eval.experiments.common import as_list
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import markdown_table
 from eval.method_config import make_methods
@@ -44,7 +44,7 @@ from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
 
-__all__ = ["AnimationConfig", "run_animation", "jitter_pct", "sshade_params", "TRUTH_TOL_M"]
+__all__ = ["AnimationConfig", "run_animation", "jitter_pct", "TRUTH_TOL_M"]
 
 log = logging.getLogger(__name__)
 
@@ -71,12 +71,6 @@ def jitter_pct(X: np.ndarray, G: np.ndarray, diag: float) -> float:
         return math.nan
     a = (X[2:] - 2.0 * X[1:-1] + X[:-2]) - (G[2:] - 2.0 * G[1:-1] + G[:-2])
     return float(100.0 * np.linalg.norm(a, axis=2).mean() / diag)
-
-
-def sshade_params(spec: EvalSpec) -> dict:
-    """The parameters SShaDe's frames run with: the method config ``method.SShaDe``
-    (:func:`eval.experiments.common.sshade_spec`, as every experiment)."""
-    return sshade_spec(spec)
 
 
 @dataclass
@@ -125,7 +119,7 @@ def run_animation(spec: EvalSpec) -> dict:
     methods = make_methods(spec.methods)
     cases, manifest = _cases(spec.dataset, opts)
     out_dir = abs_path(spec.output.out_dir)
-    sp = sshade_params(spec)
+    sp = spec.sshade
     info = collect_runinfo(spec.record(), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running", "out_dir": str(out_dir),
                                   "method_sources": method_sources(methods)})

@@ -1,10 +1,10 @@
-"""Helpers shared by the experiments of :mod:`eval.experiments`."""
+"""Helpers shared by the experiments of :mod:`eval.experiments`. SShaDe's parameters, the
+same for every experiment, are the run's :attr:`eval.run.spec.EvalSpec.sshade`."""
 from __future__ import annotations
 
-from eval.run.spec import EvalSpec
-from sshade.pipeline import SShaDe
+from collections.abc import Mapping
 
-__all__ = ["as_list", "sshade_spec", "SSHADE_TRANSFER_KEYS"]
+__all__ = ["as_list", "transfer_params", "SSHADE_TRANSFER_KEYS"]
 
 #: SShaDe's parameters that its correspondence transfers take
 #: (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
@@ -22,17 +22,7 @@ def as_list(x):
     return list(x) if isinstance(x, (list, tuple)) else [x]
 
 
-def sshade_spec(spec: EvalSpec) -> dict:
-    """SShaDe's parameters from the one place every experiment reads them: the method
-    definition ``method.SShaDe`` (``conf/method/SShaDe.yaml``, whose values default to the
-    ``sshade`` section and, for the low-res ARAP's stopping rule, to ``arap``), resolved
-    (:func:`eval.config_check.method_definition`); ``_target_`` and ``name`` left out.
-
-    Returns
-    -------
-    dict with ``n_low`` (int or ``"auto"``), ``n_samplings``, ``seed``, ``workers``,
-    ``gradient``, ``anchor``, ``warm_start``, ``energy``, ``transfer``, ``average``,
-    ``tol``, ``max_iter``, ``protocol``, ``etol``, ``gtol``
-    (unchecked; :func:`sshade.pipeline.check_params` checks them).
-    """
-    return {k: v for k, v in spec.definition(SShaDe.name).items() if k not in ("_target_", "name")}
+def transfer_params(params: Mapping) -> dict:
+    """The parameters of SShaDe's correspondence transfers (:data:`SSHADE_TRANSFER_KEYS`) of
+    its checked parameters ``params`` (:attr:`eval.run.spec.EvalSpec.sshade`)."""
+    return {k: params[k] for k in SSHADE_TRANSFER_KEYS if k in params}

@@ -21,7 +21,6 @@ from omegaconf import MISSING
 
 from eval import datasets
 from eval.config_schema import section_reader
-from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.reference import reference_solution, status_words
 from eval.present.figures import safe_figure
@@ -34,10 +33,9 @@ from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.problems import lifted_plane
 from sshade.errors import SShaDeError
 from sshade.mesh.io import atomic_write
-from sshade.pipeline import check_params, effective_params
+from sshade.pipeline import effective_params
 
-__all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to",
-           "sshade_params"]
+__all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to"]
 
 log = logging.getLogger("eval")
 
@@ -212,16 +210,9 @@ def _cases(opts: ConvergenceConfig, ds: DatasetSpec | None) -> list[tuple[str, t
     return out
 
 
-def sshade_params(spec: EvalSpec) -> dict:
-    """Keyword parameters of :func:`sshade.deform` in this experiment: the method config
-    ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`); its ``n_samplings``
-    is replaced by each of :func:`sampling_counts` in turn."""
-    return sshade_spec(spec)
-
-
 def sampling_counts(opts: ConvergenceConfig, sp: dict) -> list[int]:
     """The sampling counts SShaDe runs with: ``convergence.sshade.k``, or when it is null
-    ``[1, n_samplings]`` (``n_samplings`` of ``sp``, :func:`sshade_params`)."""
+    ``[1, n_samplings]`` (``n_samplings`` of ``sp``, the run's SShaDe parameters)."""
     ks = opts.sshade.k
     return [int(k) for k in (ks if ks is not None else dict.fromkeys([1, int(sp["n_samplings"])]))]
 
@@ -240,7 +231,7 @@ def run_convergence(spec: EvalSpec) -> dict:
 
     opts = spec.experiment.options
     out_dir = abs_path(spec.output.out_dir)
-    sp = check_params(**sshade_params(spec))
+    sp = spec.sshade
     cases = _cases(opts, spec.dataset)
     info = collect_runinfo(spec.record(), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running", "sshade_params": effective_params(sp)})

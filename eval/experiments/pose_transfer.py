@@ -20,9 +20,9 @@ from omegaconf import MISSING
 
 from eval.config_schema import section_reader
 from eval.datasets.faust import discover_faust
+from eval.experiments.common import transfer_params
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import gt_stretch_pct, markdown_table, transfer_n_low
-from eval.experiments.tosca import sshade_params as _tosca_sshade_params
 from eval.metrics.measures import ground_truth_metrics
 from eval.present.figures import pose_transfer_figure, safe_figure
 from eval.present.measures import columns, measure_column
@@ -36,7 +36,7 @@ from sshade.mesh.io import atomic_write, read_mesh
 from sshade.pipeline import SShaDe
 from sshade.sampling import sampling_seeds
 
-__all__ = ["PoseTransferConfig", "run_pose_transfer", "METRICS", "sshade_params"]
+__all__ = ["PoseTransferConfig", "run_pose_transfer", "METRICS"]
 
 log = logging.getLogger(__name__)
 
@@ -49,13 +49,6 @@ METHODS = (("", "SShaDe pose transfer"), ("naive_", "naive: M' + (S - M)"),
            ("truth_", "ground truth (b pose p)"))
 
 _COLUMNS = columns("pose_transfer")
-
-
-def sshade_params(spec: EvalSpec) -> dict:
-    """Keyword parameters of :func:`sshade.isometric.pose_transfer` from the method config
-    ``method.SShaDe``: ``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``workers``
-    (the same keys as TOSCA's, :func:`eval.experiments.tosca.sshade_params`)."""
-    return _tosca_sshade_params(spec)
 
 
 @dataclass
@@ -87,7 +80,7 @@ def run_pose_transfer(spec: EvalSpec) -> dict:
     """Run the FAUST pose-transfer experiment of ``spec.experiment.options``
     (:class:`PoseTransferConfig`, see conf/experiment/pose_transfer.yaml): every ordered
     pair of the selected subjects, every selected target pose. SShaDe's ``n_low``,
-    ``n_samplings``, ``seed``, ``gradient``, ``workers``: :func:`sshade_params`. Outputs
+    ``n_samplings``, ``seed``, ``gradient``, ``workers``: :attr:`eval.run.spec.EvalSpec.sshade`. Outputs
     go to ``spec.output.out_dir``. The dataset is not used.
 
     Returns
@@ -105,7 +98,7 @@ def run_pose_transfer(spec: EvalSpec) -> dict:
     root, files = _pose_transfer_root(opts)
     out_dir = abs_path(spec.output.out_dir)
     jobs = _pose_transfer_jobs(opts, root, files)
-    sp = sshade_params(spec)
+    sp = transfer_params(spec.sshade)
     k, seed = int(sp["n_samplings"]), int(sp["seed"])
     log.info("%d pose-transfer case(s) from %s; n_low=%s k=%d; output %s", len(jobs), root, sp["n_low"], k,
              out_dir)

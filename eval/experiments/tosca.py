@@ -9,7 +9,7 @@ correspondence and M is rebuilt in that pose with the per-triangle LRFs, average
 parameters (``n_low``, ``n_samplings``, ``seed``, ``gradient``, ``anchor``, ``transfer``,
 ``average``, ``workers``) come from the method config ``method.SShaDe`` (the ``sshade``
 section; ``conf/experiment/tosca.yaml`` sets the paper's ``sshade.n_low: 6000``,
-``sshade.n_samplings: 10`` and ``sshade.average: proximity``; :func:`sshade_params`)."""
+``sshade.n_samplings: 10`` and ``sshade.average: proximity``; :attr:`eval.run.spec.EvalSpec.sshade`)."""
 from __future__ import annotations
 
 import logging
@@ -26,7 +26,7 @@ import numpy as np
 from omegaconf import MISSING
 
 from eval.config_schema import section_reader
-from eval.experiments.common import SSHADE_TRANSFER_KEYS, as_list, sshade_spec
+from eval.experiments.common import as_list, transfer_params
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.measures import chamfer, ground_truth_metrics, hausdorff
 from eval.present.figures import safe_figure, tosca_figure
@@ -44,7 +44,7 @@ from sshade.pipeline import SShaDe, auto_n_low
 from sshade.sampling import sampling_seeds
 
 __all__ = ["ToscaConfig", "PAPER_TOSCA", "discover_tosca", "gt_stretch_pct", "group_table",
-           "markdown_table", "run_tosca", "sshade_params", "transfer_n_low"]
+           "markdown_table", "run_tosca", "transfer_n_low"]
 
 log = logging.getLogger(__name__)
 
@@ -145,16 +145,6 @@ def markdown_table(table, first: tuple[str, str], columns) -> str:
     return "\n".join(lines) + "\n"
 
 
-def sshade_params(spec: EvalSpec) -> dict:
-    """Keyword parameters of SShaDe's correspondence transfers
-    (:func:`sshade.isometric.isometric_transfer`, :func:`sshade.isometric.pose_transfer`):
-    ``n_low`` (int or ``"auto"``, see :func:`transfer_n_low`), ``n_samplings``, ``seed``,
-    ``gradient``, ``workers`` of the method config ``method.SShaDe``
-    (:func:`eval.experiments.common.sshade_spec`)."""
-    sp = sshade_spec(spec)
-    return {k: sp[k] for k in SSHADE_TRANSFER_KEYS if k in sp}
-
-
 def transfer_n_low(n_low, n_vertices: int) -> int:
     """``n_low`` for a mesh of ``n_vertices``: the int itself, or for ``"auto"``/None
     :func:`sshade.pipeline.auto_n_low` (as :func:`sshade.deform` does).
@@ -204,7 +194,7 @@ def run_tosca(spec: EvalSpec) -> dict:
 
     Every class of ``root`` with at least ``min_vertices`` vertices (paper: wolf is
     excluded), the ``classes`` and ``poses`` selected. SShaDe's ``n_low`` (paper: 6000),
-    ``n_samplings`` (paper: 10), ``seed``, ``gradient``, ``workers``: :func:`sshade_params`.
+    ``n_samplings`` (paper: 10), ``seed``, ``gradient``, ``workers``: :attr:`eval.run.spec.EvalSpec.sshade`.
     Outputs go to ``spec.output.out_dir``. The dataset is not used.
 
     Returns
@@ -222,7 +212,7 @@ def run_tosca(spec: EvalSpec) -> dict:
     root = abs_path(opts.root)
     found = discover_tosca(root)
     out_dir = abs_path(spec.output.out_dir)
-    sp = sshade_params(spec)
+    sp = transfer_params(spec.sshade)
     k, seed = int(sp["n_samplings"]), int(sp["seed"])
     rests, excluded, jobs = _tosca_jobs(opts, root, found)
     log.info("%d TOSCA case(s) from %s (classes %s; excluded %s); n_low=%s k=%d; output %s",

@@ -19,6 +19,7 @@ from eval.run.paths import abs_path
 from eval.run.subset import check_baseline_cases
 from harness.checks import config_number
 from sshade.errors import SShaDeError
+from sshade.params import SShaDeParams
 
 __all__ = ["MethodSpec", "DatasetSpec", "GuardOptions", "ReferenceOptions", "ReportOptions", "FigureOptions",
            "OutputOptions", "ExperimentSpec", "EvalSpec"]
@@ -179,8 +180,11 @@ class EvalSpec:
     ----------
     experiment, dataset (None without a ``dataset`` section), methods (``methods``, in
     table order), guard, reference, report, figures, output : see each class.
-    definitions : every built-in method's resolved definition, by name (SShaDe's
-        parameters for every experiment, Elastic's for the scaling one).
+    definitions : every built-in method's resolved definition, by name (Elastic's for the
+        scaling experiment; what :func:`eval.method_config.make_methods` builds from).
+    sshade : SShaDe's parameters, checked (:func:`sshade.params.check_params`), from its
+        definition ``method.SShaDe`` (default: the ``sshade`` section): every experiment
+        reads them here.
     jobs : worker processes, None for ``auto``.
     method_cases : a method's own case rule (``method_cases``), checked, or None.
     resolved : the whole config as plain values, resolved (``run.json``'s ``config``).
@@ -191,6 +195,7 @@ class EvalSpec:
     dataset: DatasetSpec | None = None
     methods: tuple[MethodSpec, ...] = ()
     definitions: Mapping = field(default_factory=dict)
+    sshade: Optional[SShaDeParams] = None
     guard: GuardOptions = field(default_factory=GuardOptions)
     reference: ReferenceOptions = field(default_factory=ReferenceOptions)
     report: ReportOptions = field(default_factory=ReportOptions)

@@ -24,7 +24,6 @@ from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, r
 from eval.experiments.cases.case_plan import plan_runs, planned_root
 from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.pair import run_and_store
-from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.meshes import CaseMeshes
 from eval.present.breakdown import write_breakdown
@@ -46,16 +45,9 @@ from harness.method_registry import method_meta
 from harness.slurm_array import cluster_options
 from sshade.errors import SShaDeError
 
-__all__ = ["run", "sshade_params"]
+__all__ = ["run"]
 
 log = logging.getLogger("eval")
-
-
-def sshade_params(spec: EvalSpec) -> dict:
-    """The parameters the ``SShaDe`` (and ``SShaDe+refine``) rows run with: the method
-    config ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`), the very
-    definition :func:`eval.method_config.make_methods` builds SShaDe from."""
-    return sshade_spec(spec)
 
 
 def run(spec: EvalSpec) -> dict:

@@ -5,7 +5,7 @@ Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experi
 Parameters: the meshes, handles and budgets from ``scaling.*``
 (``conf/experiment/scaling.yaml``); SShaDe's from the method config ``method.SShaDe``
 (the ``sshade`` section, the experiment's yaml sets ``sshade.n_low: 6000``;
-:func:`sshade_params`); Elastic's stopping rule from ``method.Elastic`` (the ``arap``
+:attr:`eval.run.spec.EvalSpec.sshade`); Elastic's stopping rule from ``method.Elastic`` (the ``arap``
 section; :func:`elastic_params`)."""
 from __future__ import annotations
 
@@ -23,7 +23,6 @@ import numpy as np
 from baselines.fullres_arap import Elastic
 from eval.config_schema import section_reader
 from eval.datasets.shapes import axis_handles, axis_landmarks
-from eval.experiments.common import sshade_spec
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.scaling.mesh_set import MeshEntry, cache_name, mesh_entries
 from eval.experiments.scaling.probe import probe_first_call
@@ -39,13 +38,12 @@ from sshade.arap import arap_deform, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_mesh
-from sshade.pipeline import MAX_SEED, check_params, warm_sshade
+from sshade.pipeline import MAX_SEED, warm_sshade
 from sshade.warmup import warm_fullres
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ScalingConfig", "build_mesh", "size_mesh", "run_scaling", "sshade_params",
-           "elastic_params"]
+__all__ = ["ScalingConfig", "build_mesh", "size_mesh", "run_scaling", "elastic_params"]
 
 
 def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = True,
@@ -79,12 +77,6 @@ def build_mesh(V: np.ndarray, F: np.ndarray, n_target: int, *, remesh: bool = Tr
         ms.meshing_isotropic_explicit_remeshing(iterations=iterations, targetlen=ml.PureValue(L))
     m = ms.current_mesh()
     return np.ascontiguousarray(m.vertex_matrix(), np.float64), np.ascontiguousarray(m.face_matrix(), np.int64)
-
-
-def sshade_params(spec: EvalSpec) -> dict:
-    """Keyword parameters of :func:`sshade.deform` in this experiment: the method config
-    ``method.SShaDe`` (:func:`eval.experiments.common.sshade_spec`)."""
-    return sshade_spec(spec)
 
 
 def elastic_params(spec: EvalSpec) -> dict:
@@ -163,7 +155,7 @@ def run_scaling(spec: EvalSpec) -> dict:
         if not abs_path(e.path).is_file():
             raise SShaDeError(f"scaling: base mesh of {e.name!r} not found: {abs_path(e.path)} "
                               "(scaling.meshes[].path, or scaling.base_mesh=PATH with scaling.meshes=null)")
-    sp = check_params(**sshade_params(spec))
+    sp = spec.sshade
     ep = elastic_params(spec)
     cache = abs_path(sc.cache)  # built meshes, reused by later runs
     info = collect_runinfo(spec.record(), seeds={"scaling": sc.seed, "sshade": int(sp["seed"])},
