@@ -219,17 +219,25 @@ def typed_object(schema: type, values, where: str):
 
     Raises
     ------
-    SShaDeError, one line naming the key: a value of the wrong type, a required key not set
-    (the schema's ``REQUIRED`` says what to pass), or the schema's own refusal.
+    SShaDeError, one line naming the key: a section that is not a mapping, an unknown key, a
+    value of the wrong type, a required key not set (the schema's ``REQUIRED`` says what to
+    pass), or the schema's own refusal.
     """
-    from omegaconf.errors import MissingMandatoryValue, ValidationError
+    from collections.abc import Mapping
 
+    from omegaconf.errors import ConfigKeyError, MissingMandatoryValue, ValidationError
+
+    if values is not None and not (isinstance(values, Mapping) or OmegaConf.is_dict(values)):
+        raise SShaDeError(f"{where} must be a section of keys, got {values!r}")
     try:
         return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), values or {}))
     except MissingMandatoryValue as e:
         key = f"{where}.{e.full_key}"
         what = getattr(schema, "REQUIRED", {}).get(str(e.full_key), "VALUE")
         raise SShaDeError(f"{key} is not set: pass {key}={what}") from None
+    except ConfigKeyError as e:
+        raise SShaDeError(f"{where}.{e.full_key}: unknown key (the keys: {', '.join(schema.__dataclass_fields__)})") \
+            from None
     except ValidationError as e:
         raise SShaDeError(f"{where}.{e.full_key}: {str(e).splitlines()[0]}") from None
 

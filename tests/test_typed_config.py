@@ -251,3 +251,25 @@ def test_conf_config_yaml_restates_no_default_differently():
             value = top[name][f.name]
             if not (isinstance(value, str) and value.startswith("${")):
                 assert value == default, f"{name}.{f.name}: {value!r} vs {default!r}"
+
+
+@pytest.mark.parametrize("cfg, words", [
+    ({"report": {"nope": 1}}, "report.nope: unknown key"),
+    ({"report": 5}, "report must be a section of keys, got 5"),
+    ({"reference": {"max_iter": 0}}, "reference.max_iter"),
+    ({"figures": {"max_cases": -1}}, "figures.max_cases"),
+    ({"report": {"max_faces": "many"}}, "report.max_faces"),
+])
+def test_a_plain_mapping_config_is_refused_in_one_line_naming_the_key(cfg, words):
+    """The Python API's plain mapping meets the same typed sections as a composed config:
+    an unknown key, a section that is not a mapping or a bad value is one SShaDeError."""
+    from eval.config_check import check_config
+    with pytest.raises(SShaDeError) as e:
+        check_config({"methods": ["ARAP"], **cfg})
+    assert words in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_tosca_classes_must_be_names():
+    from eval.config_check import check_config
+    with pytest.raises(SShaDeError, match="tosca.classes must be a class name or a list of names"):
+        check_config(_compose(["experiment=tosca", "tosca.classes=[1,2]"]))

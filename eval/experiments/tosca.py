@@ -168,8 +168,8 @@ class ToscaConfig:
     none), ``classes`` (a name or a list; None: all present), ``poses`` (target pose
     indices, an integer or a list; None: all but 0). Made by
     :func:`eval.config_schema.typed_section` at the door, whose ``OmegaConf.to_object``
-    runs :meth:`__post_init__`: SShaDeError naming the key for ``min_vertices`` below 0 or
-    ``poses`` not integers; ``classes`` and ``poses`` become tuples."""
+    runs :meth:`__post_init__`: SShaDeError naming the key for ``min_vertices`` below 0,
+    ``poses`` not integers or ``classes`` not names; both become tuples."""
 
     root: Optional[str] = MISSING
     min_vertices: Optional[int] = None
@@ -184,6 +184,8 @@ class ToscaConfig:
         top = {"tosca": {"min_vertices": self.min_vertices, "poses": self.poses}}
         self.min_vertices = int(config_number(top, "tosca.min_vertices", min=0, allow_none=True, default=None) or 0)
         poses, classes = config_int_list(top, "tosca.poses"), as_list(self.classes)
+        if classes is not None and not all(isinstance(c, str) and c for c in classes):
+            raise SShaDeError(f"tosca.classes must be a class name or a list of names, got {self.classes!r}")
         self.classes = None if classes is None else tuple(classes)
         self.poses = None if poses is None else tuple(poses)
 
