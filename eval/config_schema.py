@@ -2,16 +2,13 @@
 Floor 1 of eval/ (tests/test_layering.py); the checks a type cannot say: eval/config_check.py.
 
 ``conf/config.yaml`` starts its defaults list with ``config_schema`` (:func:`top_schema`;
-its ``reference``, ``report`` and ``figures`` typed by the run's own objects,
-:mod:`eval.run.spec`, which check their values when made: :func:`typed_object`);
-each file of ``conf/dataset/`` extends its schema (``schema/dataset/<name>``), each
-experiment with a section of its own the schema its module registers
-(``schema/experiment/<section>``, :func:`register_section`; the section's options are that
-schema's instance, :func:`typed_section`), and each method file is typed by
-``schema/method/<name>`` (:func:`method_schemas`). Composition then refuses a value
-of the wrong type or an unknown key with Hydra's own message (one ``error:`` line). A key
-that holds one of several types (``sshade.n_low``: ``auto`` or an integer) is ``Any`` here
-(OmegaConf has no unions) and is typed at the door (:func:`eval.config_check.check_config`)."""
+``reference``, ``report``, ``figures`` typed by :mod:`eval.run.spec`'s objects); each file
+of ``conf/dataset/`` extends its schema (``schema/dataset/<name>``), each experiment with a
+section of its own the dataclass its module registers (:func:`section_reader`), each method
+file ``schema/method/<name>``. Composition refuses a wrong type or an unknown key with
+Hydra's own message; the door makes each section's object with ``OmegaConf.to_object``
+(:func:`typed_object`), which runs its checks. A key of several types (``sshade.n_low``:
+``auto`` or an integer) is ``Any`` (OmegaConf has no unions), typed at the door."""
 from __future__ import annotations
 
 import functools
