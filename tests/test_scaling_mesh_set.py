@@ -94,6 +94,7 @@ def test_repair_rounds_iterations_and_first_call(set_run):
     assert "elastic_total_s" not in df.columns
 
 
+@pytest.mark.slow
 def test_markdown_has_one_table_per_mesh(set_run):
     d, _, _ = set_run
     md = (d / "out" / "table.md").read_text()
@@ -106,6 +107,26 @@ def test_markdown_has_one_table_per_mesh(set_run):
     for col in ("Repair rounds (max)", "Iters (first / warm mean)", "First call (s, median)", "Compile (s)",
                 "Peak mem (MB)", "Seed spread (% diag)", "Range (s)", "First call range (s)"):
         assert col in header
+
+
+def test_markdown_of_rows_is_one_table_per_mesh_with_the_registrys_headers():
+    """The table writer alone (the run's table.md: the slow test above): a heading per mesh
+    naming how its sizes were built, one row per size, the headers of eval/present/measures.py,
+    a range of two columns in one cell."""
+    from eval.experiments.scaling.scaling_table import scaling_markdown
+    from eval.present.measures import columns
+    df = pd.DataFrame({"mesh": ["ball", "ball", "egg"], "remesh": [True, True, False], "vertices": [1000, 4000, 2562],
+                       "sshade_total_s": [0.5, 1.5, 1.0], "sshade_total_min_s": [0.4, 1.2, 0.9],
+                       "sshade_total_max_s": [0.6, 1.8, 1.1], "peak_mem_mb": [50.0, 80.0, 60.0]})
+    md = scaling_markdown(df)
+    heads = [line for line in md.splitlines() if line.startswith("### ")]
+    assert heads == ["### ball (clean: LS3 Loop + isotropic remesh)", "### egg (hard: LS3 Loop only)"]
+    assert [len([ln for ln in b.splitlines() if ln.startswith("| ") and "Vertices" not in ln])
+            for b in md.split("### ")[1:]] == [2, 1]
+    labels = dict((k, h) for k, h, _ in columns("scaling"))
+    header = next(line for line in md.splitlines() if line.startswith("| Vertices"))
+    assert all(labels[k] in header for k in ("vertices", "sshade_total_s", "sshade_total_min_s", "peak_mem_mb"))
+    assert "| 0.40-0.60 |" in md  # the range of the timed calls in one cell
 
 
 @pytest.mark.parametrize("bad, what", [("[{name:a,remesh:true}]", "scaling.meshes[0] lacks path"),
