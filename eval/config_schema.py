@@ -236,7 +236,8 @@ def typed_object(schema: type, values, where: str):
         raise SShaDeError(f"{where}.{e.full_key}: unknown key (the keys: {', '.join(schema.__dataclass_fields__)})") \
             from None
     except ValidationError as e:
-        raise SShaDeError(f"{where}.{e.full_key}: {str(e).splitlines()[0]}") from None
+        key = f"{where}.{e.full_key}" if e.full_key else where
+        raise SShaDeError(f"{key}: {str(e).splitlines()[0]}") from None
 
 
 def typed_section(name: str, values, *, absent: str = ""):
