@@ -117,9 +117,7 @@ def check_values(cfg) -> None:
     check_jobs(config_value(cfg, "jobs", "auto"))
     if config_value(cfg, "store", None) is not None:
         config_bool(cfg, "store.meshes", default=False)
-    plain_cfg = plain(cfg)
-    for name, schema in _RUN_SECTIONS.items():
-        _run_section(schema, plain_cfg, name)
+    _run_sections(plain(cfg))
 
 
 def check_config(cfg) -> EvalSpec:
@@ -151,9 +149,7 @@ def check_config(cfg) -> EvalSpec:
                     sshade=_sshade_params(definitions[SShaDe.name]),
                     guard=guard_options(**{k: resolved[k] for k in ("timeout_s", "handle_error_max_pct")
                                            if k in resolved}),
-                    reference=_run_section(ReferenceOptions, resolved, "reference"),
-                    report=_run_section(ReportOptions, resolved, "report"),
-                    figures=_run_section(FigureOptions, resolved, "figures"),
+                    **_run_sections(resolved),
                     output=_output(cfg), jobs=check_jobs(resolved.get("jobs", "auto")),
                     method_cases=resolved.get("method_cases"), resolved=resolved, composed=composed)
 
@@ -216,10 +212,10 @@ def _dataset(resolved: dict) -> DatasetSpec | None:
 _RUN_SECTIONS = {"reference": ReferenceOptions, "report": ReportOptions, "figures": FigureOptions}
 
 
-def _run_section(schema: type, resolved: dict, name: str):
-    """Section ``name`` of ``resolved`` as ``schema``'s instance
-    (:func:`eval.config_schema.typed_object`), every default without the section."""
-    return typed_object(schema, resolved.get(name), name)
+def _run_sections(resolved: dict) -> dict:
+    """``{name: object}`` of each section of :data:`_RUN_SECTIONS` in ``resolved``, its
+    schema's instance (:func:`eval.config_schema.typed_object`), every default without it."""
+    return {name: typed_object(schema, resolved.get(name), name) for name, schema in _RUN_SECTIONS.items()}
 
 
 def _output(cfg) -> OutputOptions:
