@@ -115,12 +115,63 @@ def build_wanted(root: Path, ds) -> bool:
 
 
 def _build_config(root: Path, ds):
-    """The builder's config (OmegaConf) for ``root`` with ``dataset.build.overrides``."""
-    from omegaconf import OmegaConf
+    """``(cfg, all_subjects)``: the builder's config (OmegaConf) for ``root`` with
+    ``dataset.build.overrides``, and the subjects it would plan unlimited; when
+    those name no ``subjects``, the build is limited to the subjects whose cases the run
+    takes (:func:`_run_subjects`: ``dataset.subjects``, ``dataset.limit``), so that a run on
+    a few subjects builds only those (a later run, or ``python -m defaust out=ROOT``, adds
+    the others to the same folder)."""
+    from omegaconf import OmegaConf, open_dict
 
     extra = ds.get("build", {}).get("overrides") or []
-    extra = OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra)
-    return compose_config([f"out={root}", *[str(x) for x in extra]])
+    extra = [str(x) for x in (OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra))]
+    cfg = compose_config([f"out={root}", *extra])
+    bc = config_from_omegaconf(cfg)
+    planned = _planned_subjects(bc)
+    if any(x.split("=")[0].lstrip("+~") == "subjects" for x in extra):
+        return cfg, planned
+    take = _run_subjects(planned, _n_poses(bc), ds)
+    if take and take != planned:
+        with open_dict(cfg):
+            cfg.subjects = take
+    return cfg, planned
+
+
+def _planned_subjects(bc) -> list[int]:
+    """The subjects a build of config ``bc`` plans, sorted (FAUST: its 10 subjects)."""
+    if bc.subjects is not None:
+        return sorted(int(x) for x in bc.subjects)
+    return list(range(10 if bc.source == "faust" else int(bc.n_subjects)))
+
+
+def _n_poses(bc) -> int:
+    """Target poses per subject of a build of config ``bc``."""
+    if bc.source == "anny":
+        return int(bc.anny_n_targets) if bc.anny_poses == "sampled" else len(bc.anny_poses or DEFAULT_TARGETS)
+    return len(bc.faust_target_poses) if bc.source == "faust" and bc.faust_target_poses else bc.n_poses - 1
+
+
+def _run_cases(planned: list[int], n_poses: int, ds) -> list[tuple[int, int]]:
+    """The ``(subject, pose)`` pairs a run takes from a build of the subjects ``planned``
+    with ``n_poses`` targets each: after ``dataset.subjects``, then ``dataset.limit`` (the
+    first N in subject, then pose order, as :func:`defaust.dataset.load` reads them)."""
+    cases = [(x, p) for x in planned for p in range(1, n_poses + 1)]
+    want = ds.get("subjects", None)
+    if want is not None:
+        want = {int(want)} if isinstance(want, int) else {int(x) for x in want}
+        cases = [c for c in cases if c[0] in want]
+    if ds.get("limit", None) is not None:
+        cases = cases[:max(int(ds.get("limit")), 0)]
+    return cases
+
+
+def _run_subjects(planned: list[int], n_poses: int, ds) -> list[int]:
+    """The subjects of ``planned`` with a case the run takes (:func:`_run_cases`), sorted;
+    every planned subject when the run draws a sample (``dataset.sample``: its cases are
+    known only once read)."""
+    if ds.get("sample", None) is not None:
+        return list(planned)
+    return sorted({s for s, _ in _run_cases(planned, n_poses, ds)})
 
 
 def _build(root: Path, ds) -> None:
@@ -128,7 +179,12 @@ def _build(root: Path, ds) -> None:
     (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped.
     Each subject built logs a progress line (:class:`BuildProgress`)."""
     logging.getLogger("defaust").setLevel(logging.INFO)
-    bcfg = _build_config(root, ds)
+    bcfg, planned = _build_config(root, ds)
+    take = list(bcfg.get("subjects") or planned)
+    if take != planned:
+        log.info("DeFAUST: building into %s the %d subject(s) this run takes (%s) of the %d; a run on the others, "
+                 "or python -m defaust out=%s, adds them to the same folder", root, len(take),
+                 ", ".join(map(str, take)), len(planned), root)
     out = build_outlook(root, ds)
     progress = BuildProgress(out["subjects"] if out else 0)
     logging.getLogger("defaust").addHandler(progress)
@@ -199,16 +255,9 @@ def build_outlook(root: Path, ds) -> dict | None:
     """
     if not build_wanted(root, ds):
         return None
-    bcfg = _build_config(root, ds)
+    bcfg = _build_config(root, ds)[0]
     bc = config_from_omegaconf(bcfg)
-    if bc.subjects is not None:
-        subjects = [int(x) for x in bc.subjects]
-    else:
-        subjects = list(range(10 if bc.source == "faust" else int(bc.n_subjects)))  # FAUST: its 10 subjects
-    if bc.source == "anny":
-        n_poses = int(bc.anny_n_targets) if bc.anny_poses == "sampled" else len(bc.anny_poses or DEFAULT_TARGETS)
-    else:
-        n_poses = len(bc.faust_target_poses) if bc.source == "faust" and bc.faust_target_poses else bc.n_poses - 1
+    subjects, n_poses = _planned_subjects(bc), _n_poses(bc)
     complete = _complete_subjects(root, bc.source, bc.parameters())
     todo = [x for x in subjects if x not in complete]
     if not todo:
@@ -217,13 +266,7 @@ def build_outlook(root: Path, ds) -> dict | None:
     ok = workers is None or (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1)
     # the builder's own worker count (None: every core, capped at the subjects to build)
     workers = pool_size(workers, len(todo)) if "workers" in bcfg and ok else 1
-    cases = [(x, p) for x in subjects for p in range(1, n_poses + 1)]
-    want = (ds.get("subjects", None))
-    if want is not None:
-        want = {int(want)} if isinstance(want, int) else {int(x) for x in want}
-        cases = [c for c in cases if c[0] in want]
-    if ds.get("limit", None) is not None:
-        cases = cases[:max(int(ds.get("limit")), 0)]
+    cases = _run_cases(subjects, n_poses, ds)
     res = str(ds.get("resolution", "high"))
     n_low = bc.synthetic_vertices if bc.source == "synthetic" else _LOW_RES_VERTICES.get(bc.source, 7000)
     n = int(sum(bc.vertex_range) / 2) if res == "high" else int(res[1:]) if res[1:].isdigit() else int(n_low)

@@ -1,0 +1,65 @@
+"""eval.datasets.defaust_dataset's build before a run: a run on some subjects
+(``dataset.subjects``, ``dataset.limit``) builds only those, a later run adds the others
+to the same folder and leaves the first ones' files as they were; builder overrides that
+name ``subjects`` and a sampled run keep the builder's own plan."""
+from __future__ import annotations
+
+import hashlib
+import json
+
+import pytest
+from omegaconf import OmegaConf
+
+from eval.datasets.defaust_dataset import build_outlook, prepare_root
+
+CI = ["preset=ci", "source=synthetic", "n_subjects=3", "progress=false", "workers=1"]
+
+
+def _ds(**kw):
+    return OmegaConf.create({"name": "defaust", "build": {"enabled": True, "overrides": list(CI)}, **kw})
+
+
+def _hashes(root):
+    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("kw,subjects,cases", [
+    ({"subjects": [1]}, 1, [(1, 1), (1, 2), (1, 3), (1, 4)]),
+    ({"limit": 5}, 2, [(0, 1), (0, 2), (0, 3), (0, 4), (1, 1)]),
+    ({"subjects": [0, 2], "limit": 2}, 1, [(0, 1), (0, 2)]),
+    ({}, 3, None),
+    ({"subjects": [1], "sample": 2}, 3, None),  # a sample is drawn once the cases are read: all are built
+])
+def test_the_plan_builds_only_the_subjects_whose_cases_the_run_takes(tmp_path, kw, subjects, cases):
+    out = build_outlook(tmp_path / "new", _ds(**kw))
+    assert out["subjects"] == subjects and out["complete"] == 0
+    if cases is not None:
+        assert out["cases"] == cases
+
+
+def test_builder_overrides_naming_subjects_are_kept(tmp_path):
+    ds = _ds(subjects=[1])
+    ds.build.overrides.append("subjects=[0,1,2]")
+    assert build_outlook(tmp_path / "new", ds)["subjects"] == 3
+
+
+def test_a_run_on_one_subject_builds_it_and_a_later_run_adds_the_others(tmp_path, caplog):
+    root = tmp_path / "defaust"
+    with caplog.at_level("INFO", logger="eval"):
+        prepare_root(root, _ds(subjects=[1]))
+    m = json.loads((root / "manifest.json").read_text())
+    assert sorted(m["subjects"]) == ["subject_01"] and m["complete"] is True
+    assert m["parameters"]["subjects"] == [1]  # the folder says what it holds
+    assert any("the 1 subject(s) this run takes (1) of the 3" in r.getMessage() for r in caplog.records)
+    first = _hashes(root)
+    assert build_outlook(root, _ds(subjects=[1])) is None  # nothing left to build for that run
+    prepare_root(root, _ds())
+    m = json.loads((root / "manifest.json").read_text())
+    assert sorted(m["subjects"]) == ["subject_00", "subject_01", "subject_02"] and m["parameters"]["subjects"] is None
+    after = _hashes(root)
+    kept = {f: h for f, h in first.items() if f.startswith("subject_01/")}
+    assert kept and all(after[f] == h for f, h in kept.items())  # subject 1's files untouched
+    whole = _hashes(root)
+    prepare_root(root, _ds(subjects=[1]))  # a run on one subject of a whole build only verifies it
+    assert _hashes(root) == whole
