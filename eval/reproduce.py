@@ -54,16 +54,16 @@ def _installed(name: str) -> bool:
 def _steps(a) -> list[tuple[str, list[str]]]:
     py = [sys.executable, "-m"]
     # the one command that writes results/: every other run goes to outputs/ by default
-    # every method on all 40 DeFAUST cases (the main job's default runs the baselines on a
+    # every method on all 40 DeFAUST cases (`python -m eval`'s default runs the baselines on a
     # per_pose subset, eval/run/subset.py); resume=true: a rerun after a crash continues (eval/run/result_store.py)
     # Implicit-ARAP (the [neural] extra, its cpu preset) where PyTorch is installed, on every case too
     neural = _installed("torch")
     ia = ["methods=[ARAP,Elastic,ARAP-SR,SShaDe,Implicit-ARAP]"] if neural else []
     # the deep references (a minute or more each at 169k vertices, three energies) on the
-    # per_pose subset, the main job's baseline cases: the check that each converged
+    # per_pose subset, `python -m eval`'s baseline cases: the check that each converged
     # method lands on its minimiser, not a column over all 40 cases (eval/metrics/reference.py)
     # jobs=1: one run at a time on the whole machine, so that the time columns of results/
-    # are each method's own (the main job's jobs=auto runs cases side by side)
+    # are each method's own (`python -m eval`'s jobs=auto runs cases side by side)
     s = [("defaust", py + ["eval", "figures.enabled=true", "dataset.baseline_cases=all", "reference.cases=per_pose",
                            "resume=true", "jobs=1", *ia, "out_dir=results/defaust", *a.extra]),
          ("defaust_paper", py + ["eval", "arap.protocol=paper", "dataset.baseline_cases=all",

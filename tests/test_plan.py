@@ -209,3 +209,13 @@ def test_a_reference_is_planned_at_its_prior_at_full_size_and_within_25_percent_
     assert P.reference_s(PRIOR_VERTICES, sr=True) == pytest.approx(P.SR_REFERENCE_S_PER_VERTEX * PRIOR_VERTICES)
     for sr, measured in ((False, 0.48), (True, 1.82)):
         assert abs(P.reference_s(6890, sr) / measured - 1) < 0.25
+
+
+def test_build_estimate_counts_each_workers_start_up_once():
+    """The ANNY build's start-up (the model's preprocessing, once per worker) is counted
+    once, not per subject: 2 subjects on 2 workers are one round after it."""
+    b = P.build_stage(2, workers=2, start_s=P.BUILD_START_S)
+    assert b["seconds"] == pytest.approx(P.BUILD_START_S + P.BUILD_S_PER_SUBJECT)
+    assert P.build_stage(0, workers=2, start_s=P.BUILD_START_S)["seconds"] == 0.0
+    words = P.render_plan(P.make_plan([], [], [], lambda *a: 0.0, build=b))
+    assert "2 subject(s) x ~50 s on 2 workers after ~30 s of start-up, about 80 s" in words

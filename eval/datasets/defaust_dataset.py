@@ -18,7 +18,7 @@ from defaust.manifest import check_out_folder
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
 from eval.run.paths import abs_path
-from eval.run.plan import BUILD_S_PER_SUBJECT, duration_words
+from eval.run.plan import BUILD_S_PER_SUBJECT, BUILD_START_S, duration_words
 from harness.checks import config_int_list
 from sshade.cores import pool_size
 from sshade.errors import SShaDeError
@@ -244,7 +244,8 @@ def build_outlook(root: Path, ds) -> dict | None:
     ``subjects`` (int, to build), ``complete`` (int, already built), ``workers`` (the
     processes the builder will use: :func:`sshade.cores.pool_size` of its ``workers``
     setting, null = every core, capped at the subjects to build; 1 without the setting),
-    ``s_per_subject`` (:data:`eval.run.plan.BUILD_S_PER_SUBJECT`), ``cases`` (the
+    ``s_per_subject`` and ``start_s`` (:data:`eval.run.plan.BUILD_S_PER_SUBJECT`,
+    :data:`~eval.run.plan.BUILD_START_S`: ANNY's start-up, none for other sources), ``cases`` (the
     ``(subject, pose)`` pairs the evaluator will load, after ``dataset.subjects`` and
     ``dataset.limit``) and ``n_vertices`` (estimated per case: the middle of the
     high-res vertex range, N at resolution ``rN``, or a rough low-res count).
@@ -271,7 +272,8 @@ def build_outlook(root: Path, ds) -> dict | None:
     n_low = bc.synthetic_vertices if bc.source == "synthetic" else _LOW_RES_VERTICES.get(bc.source, 7000)
     n = int(sum(bc.vertex_range) / 2) if res == "high" else int(res[1:]) if res[1:].isdigit() else int(n_low)
     return {"root": str(root), "source": bc.source, "subjects": len(todo), "complete": len(subjects) - len(todo),
-            "workers": workers, "s_per_subject": BUILD_S_PER_SUBJECT, "cases": cases, "n_vertices": n}
+            "workers": workers, "s_per_subject": BUILD_S_PER_SUBJECT,
+            "start_s": BUILD_START_S if bc.source == "anny" else 0.0, "cases": cases, "n_vertices": n}
 
 
 def _complete_subjects(root: Path, source: str, parameters: dict) -> set[int]:

@@ -16,15 +16,17 @@ from sshade.cores import available_cores
 
 from .progress import PRIOR_VERTICES, size_factor
 
-__all__ = ["BUILD_S_PER_SUBJECT", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX", "REFERENCE_EXPONENT",
-           "SR_REFERENCE_EXPONENT", "reference_s", "make_plan",
+__all__ = ["BUILD_S_PER_SUBJECT", "BUILD_START_S", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX",
+           "REFERENCE_EXPONENT", "SR_REFERENCE_EXPONENT", "reference_s", "make_plan",
            "build_stage", "render_plan", "render_actuals", "add_actuals", "duration_words", "busy_words"]
 
 #: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
-#: poses) on a 2-core machine, two subjects at once: a fresh clone's main job built its 10
-#: subjects in 278.6 s with 2 workers, 5 rounds of about 56 s (benchmarks/records/command_times.md).
-#: A parallel build takes rounds of ``workers`` subjects.
-BUILD_S_PER_SUBJECT = 56.0
+#: poses) on a 2-core machine, two subjects at once, and the seconds each worker spends once
+#: before its first subject (the ANNY model's preprocessing): fitted to two fresh clones'
+#: builds with 2 workers, 10 subjects in 278.6 s (873274a) and 4 in 129.6 s (0e39b31)
+#: (benchmarks/records/command_times.md). A parallel build takes rounds of ``workers`` subjects.
+BUILD_S_PER_SUBJECT = 49.7
+BUILD_START_S = 30.2
 #: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
 #: rigid fit: 24-63 s (mean 42 s) at 168,897 vertices in ``results/defaust/eval.log``.
 REFERENCE_S_PER_VERTEX = 3e-4
@@ -89,17 +91,21 @@ def _n_vertices(case) -> int:
 
 
 def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD_S_PER_SUBJECT,
-                what: str = "DeFAUST", root: str = "") -> dict:
+                start_s: float = 0.0, what: str = "DeFAUST", root: str = "") -> dict:
     """The ``build`` stage: ``subjects`` to build, in rounds of ``workers`` (>= 1; others
-    count as 1), ``s_per_subject`` each.
+    count as 1), ``s_per_subject`` each, after ``start_s`` seconds of each worker's start-up
+    (nothing when there is no subject to build).
 
-    >>> build_stage(10, workers=4)["seconds"]
+    >>> build_stage(10, workers=4, s_per_subject=56.0)["seconds"]
     168.0
+    >>> build_stage(4, workers=2, start_s=BUILD_START_S)["seconds"]
+    129.6
     """
     w = int(workers) if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
     n = max(int(subjects), 0)
+    seconds = (float(start_s) + math.ceil(n / w) * float(s_per_subject)) if n else 0.0
     return {"stage": "build", "what": str(what), "root": str(root), "count": n, "workers": w,
-            "s_per_subject": float(s_per_subject), "seconds": float(math.ceil(n / w) * s_per_subject)}
+            "s_per_subject": float(s_per_subject), "start_s": float(start_s), "seconds": round(seconds, 6)}
 
 
 def _runs_stage(cases, names, pairs, cost, restored: int, jobs: int) -> dict:
@@ -221,8 +227,9 @@ def _build_words(b: dict) -> str:
     if not b["count"]:
         return f"{b['what']}{where} complete"
     workers = f"{b['workers']} worker" + ("s" if b["workers"] != 1 else "")
+    start = f" after {duration_words(b['start_s'], about=True)} of start-up" if b.get("start_s") else ""
     return (f"building {b['what']} (once{',' + where if where else ''}): {b['count']} subject(s) x "
-            f"{duration_words(b['s_per_subject'], about=True)} on {workers}, "
+            f"{duration_words(b['s_per_subject'], about=True)} on {workers}{start}, "
             f"about {duration_words(b['seconds'])}")
 
 

@@ -55,7 +55,7 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
     if out is None:
         return datasets.dataset_root(ds), None
     build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"],
-                        what="DeFAUST", root=_short(out["root"]))
+                        start_s=out.get("start_s", 0.0), what="DeFAUST", root=_short(out["root"]))
     cases, _ = take_sample([SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]],
                            ds.sample, ds.sample_seed)
     base, _ = baseline_selection(cases, ds.baseline_cases) if cases else (None, "")
