@@ -308,6 +308,7 @@ def test_a_click_on_a_header_sorts_the_table(chromium_on_path, tmp_path):
     assert re.search(r'id="js-errors" data-count="0"', dom)
 
 
+@pytest.mark.slow  # about 50 s: every committed page opened; CI runs it with the slow tests or the browser ones
 def test_committed_results_pages_open_in_headless_chromium(chromium_on_path):
     """The committed ``results/index.html`` and every page it links to (each folder's
     ``index.html``, written by ``python -m eval.reproduce``) load in headless Chromium
