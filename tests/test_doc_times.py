@@ -82,3 +82,16 @@ def test_a_documented_time_is_that_of_the_run_it_names(command, cell):
 def test_an_edited_time_fails():
     assert _matches(FIGURE.search("10 min"), 618.0) and not _matches(FIGURE.search("11 min"), 618.0)
     assert _matches(FIGURE.search("2.4 min"), 144.0) and not _matches(FIGURE.search("2.5 min"), 144.0)
+
+
+def test_the_readmes_main_job_is_the_documented_and_measured_one_within_10_minutes():
+    """The evaluator command ending the README's set-up line is the docs' main-job row and a
+    record of command_times.md, whose measured wall time (the whole set-up line from a fresh
+    clone on 2 cores) is at most 10 minutes."""
+    line = next(ln for ln in (ROOT / "README.md").read_text().splitlines() if ln.startswith("pip install -e . &&"))
+    main_job = line.split("&&")[-1].strip()
+    assert main_job.startswith("python -m eval")
+    rows = {c: cell for c, cell in _checks()}
+    assert f"`{main_job}`" in rows, f"docs/experiments.md has no row for the README's {main_job!r}"
+    assert "the main job" in next(ln for ln in DOC.read_text().splitlines() if ln.startswith(f"| `{main_job}` |"))
+    assert _recorded()[f"`{main_job}`"] <= 600.0
