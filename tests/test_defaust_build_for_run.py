@@ -1,7 +1,7 @@
 """eval.datasets.defaust_dataset's build before a run: a run on some subjects
 (``dataset.subjects``, ``dataset.limit``) builds only those, a later run adds the others
 to the same folder and leaves the first ones' files as they were; builder overrides that
-name ``subjects`` and a sampled run keep the builder's own plan."""
+name ``subjects`` keep the builder's own plan."""
 from __future__ import annotations
 
 import hashlib
@@ -29,7 +29,7 @@ def _hashes(root):
     ({"limit": 5}, 2, [(0, 1), (0, 2), (0, 3), (0, 4), (1, 1)]),
     ({"subjects": [0, 2], "limit": 2}, 1, [(0, 1), (0, 2)]),
     ({}, 3, None),
-    ({"subjects": [1], "sample": 2}, 3, None),  # a sample is drawn once the cases are read: all are built
+    ({"subjects": [1], "sample": 2}, 1, None),  # a sample is drawn from the cases after subjects and limit
 ])
 def test_the_plan_builds_only_the_subjects_whose_cases_the_run_takes(tmp_path, kw, subjects, cases):
     out = build_outlook(tmp_path / "new", _ds(**kw))

@@ -166,11 +166,8 @@ def _run_cases(planned: list[int], n_poses: int, ds) -> list[tuple[int, int]]:
 
 
 def _run_subjects(planned: list[int], n_poses: int, ds) -> list[int]:
-    """The subjects of ``planned`` with a case the run takes (:func:`_run_cases`), sorted;
-    every planned subject when the run draws a sample (``dataset.sample``: its cases are
-    known only once read)."""
-    if ds.get("sample", None) is not None:
-        return list(planned)
+    """The subjects of ``planned`` with a case the run may take (:func:`_run_cases`; a
+    ``dataset.sample`` is drawn from those cases), sorted."""
     return sorted({s for s, _ in _run_cases(planned, n_poses, ds)})
 
 
