@@ -34,7 +34,7 @@ from .handles import (
     handles_from_arrays,
     snap_handles,
 )
-from .manifest import FORMAT, MANIFEST, partial_problem
+from .manifest import FORMAT, MANIFEST, partial_problem, subset_problem
 from .resolutions import RESOLUTIONS, build_resolutions, check_resolution
 from .store import read_npz, sha256_file
 
@@ -481,7 +481,9 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     eager : bool, read every case (and with ``verify`` check every file) before
         returning, so that a bad file raises here rather than at its case's first access.
     partial : bool, accept a partial build (interrupted or still running: its manifest
-        says ``complete: false``) and load its complete subjects only; False: refuse it.
+        says ``complete: false``) and load its complete subjects only, or, with
+        ``subjects`` None, a build of some subjects only (``subjects=[...]`` at build time:
+        :func:`defaust.manifest.subset_words`); False: refuse both.
 
     Returns
     -------
@@ -494,7 +496,9 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     SShaDeError, one line
         Here: a bad parameter (the message names it and its value), missing folder or
         manifest, a partial build without ``partial=True`` (naming the subjects it lacks
-        and how to finish it), a subject not in the build, a missing file, a link in the build folder
+        and how to finish it), a build of some subjects only with neither ``subjects`` nor
+        ``partial=True`` (naming them and how to build the others), a subject not in the
+        build, a missing file, a link in the build folder
         (an archive member with ``..``, an absolute path or a link). At a case's first
         access (here with ``eager``): a corrupted file (checksum mismatch), a handles file
         refused by :func:`load_handles` (unexpected, missing or oversized array, NaN/inf
@@ -509,7 +513,7 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     want = _load_params(root, resolution, subjects, limit, verify, tol, eager)
     src = open_build(root)
     m = _manifest(src)
-    problem = partial_problem(m, src.path)
+    problem = partial_problem(m, src.path) or (subset_problem(m, src.path) if subjects is None else None)
     if problem and not partial:
         raise SShaDeError(problem)
     have = build_resolutions(m)

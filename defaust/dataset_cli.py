@@ -13,9 +13,10 @@ from __future__ import annotations
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 
-from .dataset import verify
+from .dataset import read_manifest, verify
 from .describe import describe, markdown
 from .export import FORMATS, export
+from .manifest import subset_words
 from .packing import pack
 
 __all__ = ["COMMANDS", "main"]
@@ -52,7 +53,8 @@ def _verify(root) -> int:
     if problems:
         print(f"{len(problems)} problem(s) in {root}")
         return 2
-    print(f"{root}: every file matches its manifest")
+    words = subset_words(read_manifest(root))
+    print(f"{root}: every file matches its manifest" + (f"; a build of {words}" if words else ""))
     return 0
 
 

@@ -58,9 +58,11 @@ def describe(root, resolution: str = "high") -> list[dict]:
     ------
     SShaDeError as :func:`defaust.load` (missing folder, manifest or file).
     """
-    items = read_manifest(root).get("items", {})
+    m = read_manifest(root)
+    items = m.get("items", {})
     rows, rest = [], {}
-    for c in load(root, resolution=resolution):
+    held = (m.get("parameters") or {}).get("subjects")  # a build of some subjects: those it holds
+    for c in load(root, resolution=resolution, subjects=held if isinstance(held, list) else None):
         if c.subject not in rest:
             rest[c.subject] = _volume_area(c.V, c.F)
         vol0, area0 = rest[c.subject]

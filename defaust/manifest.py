@@ -215,6 +215,46 @@ def partial_problem(m: dict, where) -> str | None:
             "load the complete subjects only with defaust.load(..., partial=True)")
 
 
+#: Subjects of a FAUST source (MPI-FAUST's registrations: 10 people).
+FAUST_SUBJECTS = 10
+
+
+def subset_words(m: dict) -> str | None:
+    """What a build of some subjects only holds, in words, from manifest ``m``: its
+    ``parameters.subjects`` (the builder's ``subjects=[...]``, extended by later builds into
+    the folder) when they leave out some of the subjects a build without them makes (0 ..
+    ``n_subjects`` - 1, or FAUST's 10); None for a build of every subject.
+
+    >>> subset_words({"parameters": {"subjects": [0, 1], "n_subjects": 10}})
+    'subject(s) 0, 1, 8 of its 10 not built'
+    >>> subset_words({"parameters": {"subjects": None, "n_subjects": 10}}) is None
+    True
+    """
+    par = m.get("parameters") or {}
+    held = par.get("subjects")
+    if not isinstance(held, list):
+        return None
+    total = par.get("n_subjects") if isinstance(par.get("n_subjects"), int) else FAUST_SUBJECTS
+    missing = set(range(total)) - {x for x in held if isinstance(x, int)}
+    if not missing:
+        return None
+    shown = ", ".join(map(str, held[:8])) + (" ..." if len(held) > 8 else "")
+    return f"subject(s) {shown}, {len(missing)} of its {total} not built"
+
+
+def subset_problem(m: dict, where) -> str | None:
+    """The one line saying that manifest ``m`` (of the build at ``where``) holds some
+    subjects only (:func:`subset_words`), how to load them and how to build the others;
+    None for a build of every subject."""
+    words = subset_words(m)
+    if words is None:
+        return None
+    held = ",".join(map(str, m["parameters"]["subjects"]))
+    return (f"{where}: a DeFAUST build of {words} (built with subjects=[{held}]): load those with "
+            f"defaust.load(..., subjects=[{held}]) (the evaluator: dataset.subjects=[{held}]) or partial=True, or "
+            "add the others by running its build command again without subjects (python -m defaust out=FOLDER)")
+
+
 def item_valid(out: Path, entry: dict | None, key: str) -> bool:
     """Whether a manifest ``entry`` of an earlier build is this item, complete: the same
     ``key`` and every recorded file present with its recorded sha256."""

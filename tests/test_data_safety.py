@@ -51,8 +51,8 @@ def test_evaluator_reads_a_users_faust_build_and_writes_nothing_there(faust_buil
     from eval.app import run
     before = _snapshot(faust_build)
     out = tmp_path / "out"
-    cfg = _eval_cfg([f"dataset.root={faust_build}", "methods=[SShaDe]", "sshade.n_low=300", "sshade.n_samplings=1",
-                     "sshade.workers=1", f"out_dir={out}"])
+    cfg = _eval_cfg([f"dataset.root={faust_build}", "dataset.subjects=[0]", "methods=[SShaDe]", "sshade.n_low=300",
+                     "sshade.n_samplings=1", "sshade.workers=1", f"out_dir={out}"])
     res = run(check_config(cfg))  # default dataset=defaust, dataset.build.enabled=auto: no build here
     assert res["n_cases"] == 1 and res["n_errors"] == 0
     assert _snapshot(faust_build) == before  # same files, same bytes, not even rewritten

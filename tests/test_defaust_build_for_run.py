@@ -10,7 +10,8 @@ import json
 import pytest
 from omegaconf import OmegaConf
 
-from eval.datasets.defaust_dataset import build_outlook, prepare_root
+from eval.datasets.defaust_dataset import build_outlook, load_defaust, prepare_root
+from sshade.errors import SShaDeError
 
 CI = ["preset=ci", "source=synthetic", "n_subjects=3", "progress=false", "workers=1"]
 
@@ -52,11 +53,14 @@ def test_a_run_on_one_subject_builds_it_and_a_later_run_adds_the_others(tmp_path
     assert sorted(m["subjects"]) == ["subject_01"] and m["complete"] is True
     assert m["parameters"]["subjects"] == [1]  # the folder says what it holds
     assert any("the 1 subject(s) this run takes (1) of the 3" in r.getMessage() for r in caplog.records)
+    with pytest.raises(SShaDeError, match=r"subject\(s\) 1, 2 of its 3 not built"):  # not taken for the whole
+        load_defaust(root)
     first = _hashes(root)
     assert build_outlook(root, _ds(subjects=[1])) is None  # nothing left to build for that run
     prepare_root(root, _ds())
     m = json.loads((root / "manifest.json").read_text())
     assert sorted(m["subjects"]) == ["subject_00", "subject_01", "subject_02"] and m["parameters"]["subjects"] is None
+    assert len(load_defaust(root)) == 12  # the whole build now, loaded as such
     after = _hashes(root)
     kept = {f: h for f, h in first.items() if f.startswith("subject_01/")}
     assert kept and all(after[f] == h for f, h in kept.items())  # subject 1's files untouched

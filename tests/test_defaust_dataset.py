@@ -96,3 +96,25 @@ def test_verify_names_a_missing_and_an_unlisted_file(defaust_ci, tmp_path):
     assert sorted(verify(c)) == sorted([f"{c / 'subject_00' / 'pose_01_low.ply'}: missing",
                                         f"{c / 'subject_00' / 'notes.txt'}: not in manifest.json"])
     assert _cli_verify(c).returncode == 2
+
+
+def test_a_build_of_some_subjects_is_not_loaded_as_the_whole_dataset(tmp_path):
+    """A build of subject 1 of 2 (``subjects=[1]``): ``load`` without ``subjects`` refuses in
+    one line naming the subjects built and how to load or finish them; ``subjects=[1]`` and
+    ``partial=True`` load its 4 cases; ``verify`` says what it holds and exits 0."""
+    from defaust.build import build_defaust
+    from defaust.cli import compose_config, config_from_omegaconf
+
+    out = tmp_path / "some"
+    build_defaust(config_from_omegaconf(compose_config(
+        ["preset=ci", "source=synthetic", "n_subjects=2", "subjects=[1]", f"out={out}", "progress=false"])))
+    with pytest.raises(SShaDeError, match=r"a DeFAUST build of subject\(s\) 1, 1 of its 2 not built \(built with "
+                                          r"subjects=\[1\]\): load those with defaust.load\(\.\.\., subjects=\[1\]\)"):
+        load(out)
+    assert [c.name for c in load(out, subjects=[1])] == [c.name for c in load(out, partial=True)] == \
+        ["s01_p01", "s01_p02", "s01_p03", "s01_p04"]
+    assert verify(out) == []
+    r = subprocess.run([sys.executable, "-m", "defaust", "verify", str(out)], capture_output=True, text=True,
+                       cwd=ROOT, env=subprocess_env(), timeout=300)
+    assert r.returncode == 0
+    assert r.stdout.strip() == f"{out}: every file matches its manifest; a build of subject(s) 1, 1 of its 2 not built"
