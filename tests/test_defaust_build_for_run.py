@@ -1,5 +1,5 @@
 """eval.datasets.defaust_dataset's build before a run: a run on some subjects
-(``dataset.subjects``, ``dataset.limit``) builds only those, a later run adds the others
+(``dataset.subjects``) builds only those, a later run adds the others
 to the same folder and leaves the first ones' files as they were; builder overrides that
 name ``subjects`` keep the builder's own plan."""
 from __future__ import annotations
@@ -27,12 +27,12 @@ def _hashes(root):
 
 @pytest.mark.parametrize("kw,subjects,cases", [
     ({"subjects": [1]}, 1, [(1, 1), (1, 2), (1, 3), (1, 4)]),
-    ({"limit": 5}, 2, [(0, 1), (0, 2), (0, 3), (0, 4), (1, 1)]),
-    ({"subjects": [0, 2], "limit": 2}, 1, [(0, 1), (0, 2)]),
+    ({"limit": 5}, 3, [(0, 1), (0, 2), (0, 3), (0, 4), (1, 1)]),  # limit alone: every subject (the loader's rule)
+    ({"subjects": [0, 2], "limit": 2}, 2, [(0, 1), (0, 2)]),
     ({}, 3, None),
-    ({"subjects": [1], "sample": 2}, 1, None),  # a sample is drawn from the cases after subjects and limit
+    ({"subjects": [1], "sample": 2}, 1, None),  # a sample is drawn from the cases of those subjects
 ])
-def test_the_plan_builds_only_the_subjects_whose_cases_the_run_takes(tmp_path, kw, subjects, cases):
+def test_the_plan_builds_only_the_runs_subjects(tmp_path, kw, subjects, cases):
     out = build_outlook(tmp_path / "new", _ds(**kw))
     assert out["subjects"] == subjects and out["complete"] == 0
     if cases is not None:
@@ -67,3 +67,11 @@ def test_a_run_on_one_subject_builds_it_and_a_later_run_adds_the_others(tmp_path
     whole = _hashes(root)
     prepare_root(root, _ds(subjects=[1]))  # a run on one subject of a whole build only verifies it
     assert _hashes(root) == whole
+
+
+def test_a_run_with_a_limit_alone_builds_every_subject_and_reads_its_first_cases(tmp_path):
+    root = tmp_path / "defaust"
+    prepare_root(root, _ds(limit=2))
+    m = json.loads((root / "manifest.json").read_text())
+    assert sorted(m["subjects"]) == ["subject_00", "subject_01", "subject_02"] and m["parameters"]["subjects"] is None
+    assert [c.name for c in load_defaust(root, limit=2)] == ["s00_p01", "s00_p02"]

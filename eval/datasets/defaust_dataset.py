@@ -117,10 +117,11 @@ def build_wanted(root: Path, ds) -> bool:
 def _build_config(root: Path, ds):
     """``(cfg, all_subjects)``: the builder's config (OmegaConf) for ``root`` with
     ``dataset.build.overrides``, and the subjects it would plan unlimited; when
-    those name no ``subjects``, the build is limited to the subjects whose cases the run
-    takes (:func:`_run_subjects`: ``dataset.subjects``, ``dataset.limit``), so that a run on
-    a few subjects builds only those (a later run, or ``python -m defaust out=ROOT``, adds
-    the others to the same folder)."""
+    those name no ``subjects``, the build is limited to ``dataset.subjects`` (those the
+    build plans), so that a run on a few subjects builds only those (a later run, or
+    ``python -m defaust out=ROOT``, adds the others to the same folder; ``dataset.limit``
+    alone builds every subject: the loader takes a build of some subjects for the whole
+    dataset only when told which, :func:`defaust.dataset.load`)."""
     from omegaconf import OmegaConf, open_dict
 
     extra = ds.get("build", {}).get("overrides") or []
@@ -130,7 +131,9 @@ def _build_config(root: Path, ds):
     planned = _planned_subjects(bc)
     if any(x.split("=")[0].lstrip("+~") == "subjects" for x in extra):
         return cfg, planned
-    take = _run_subjects(planned, _n_poses(bc), ds)
+    want = ds.get("subjects", None)
+    want = None if want is None else {int(want)} if isinstance(want, int) else {int(x) for x in want}
+    take = [x for x in planned if want is None or x in want]
     if take and take != planned:
         with open_dict(cfg):
             cfg.subjects = take
@@ -163,12 +166,6 @@ def _run_cases(planned: list[int], n_poses: int, ds) -> list[tuple[int, int]]:
     if ds.get("limit", None) is not None:
         cases = cases[:max(int(ds.get("limit")), 0)]
     return cases
-
-
-def _run_subjects(planned: list[int], n_poses: int, ds) -> list[int]:
-    """The subjects of ``planned`` with a case the run may take (:func:`_run_cases`; a
-    ``dataset.sample`` is drawn from those cases), sorted."""
-    return sorted({s for s, _ in _run_cases(planned, n_poses, ds)})
 
 
 def _build(root: Path, ds) -> None:
