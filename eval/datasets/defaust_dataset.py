@@ -131,13 +131,18 @@ def _build_config(root: Path, ds):
     planned = _planned_subjects(bc)
     if any(x.split("=")[0].lstrip("+~") == "subjects" for x in extra):
         return cfg, planned
-    want = ds.get("subjects", None)
-    want = None if want is None else {int(want)} if isinstance(want, int) else {int(x) for x in want}
+    want = _wanted_subjects(ds)
     take = [x for x in planned if want is None or x in want]
     if take and take != planned:
         with open_dict(cfg):
             cfg.subjects = take
     return cfg, planned
+
+
+def _wanted_subjects(ds) -> set[int] | None:
+    """``dataset.subjects`` as a set (an int is one subject); None: every subject."""
+    want = ds.get("subjects", None)
+    return None if want is None else {int(want)} if isinstance(want, int) else {int(x) for x in want}
 
 
 def _planned_subjects(bc) -> list[int]:
@@ -159,9 +164,8 @@ def _run_cases(planned: list[int], n_poses: int, ds) -> list[tuple[int, int]]:
     with ``n_poses`` targets each: after ``dataset.subjects``, then ``dataset.limit`` (the
     first N in subject, then pose order, as :func:`defaust.dataset.load` reads them)."""
     cases = [(x, p) for x in planned for p in range(1, n_poses + 1)]
-    want = ds.get("subjects", None)
+    want = _wanted_subjects(ds)
     if want is not None:
-        want = {int(want)} if isinstance(want, int) else {int(x) for x in want}
         cases = [c for c in cases if c[0] in want]
     if ds.get("limit", None) is not None:
         cases = cases[:max(int(ds.get("limit")), 0)]
