@@ -140,9 +140,10 @@ def _build_config(root: Path, ds):
 
 
 def _wanted_subjects(ds) -> set[int] | None:
-    """``dataset.subjects`` as a set (an int is one subject); None: every subject."""
-    want = ds.get("subjects", None)
-    return None if want is None else {int(want)} if isinstance(want, int) else {int(x) for x in want}
+    """``dataset.subjects`` as a set (:func:`harness.checks.config_int_list`: an int is one
+    subject); None: every subject."""
+    want = config_int_list({"dataset": ds}, "dataset.subjects")
+    return None if want is None else set(want)
 
 
 def _planned_subjects(bc) -> list[int]:
@@ -183,7 +184,7 @@ def _build(root: Path, ds) -> None:
         log.info("DeFAUST: building into %s the %d subject(s) this run takes (%s) of the %d; a run on the others, "
                  "or python -m defaust out=%s, adds them to the same folder", root, len(take),
                  ", ".join(map(str, take)), len(planned), root)
-    out = build_outlook(root, ds)
+    out = _outlook(root, ds, bcfg)
     progress = BuildProgress(out["subjects"] if out else 0)
     logging.getLogger("defaust").addHandler(progress)
     try:
@@ -254,7 +255,11 @@ def build_outlook(root: Path, ds) -> dict | None:
     """
     if not build_wanted(root, ds):
         return None
-    bcfg = _build_config(root, ds)[0]
+    return _outlook(root, ds, _build_config(root, ds)[0])
+
+
+def _outlook(root: Path, ds, bcfg) -> dict | None:
+    """:func:`build_outlook` for the builder's config ``bcfg`` (:func:`_build_config`)."""
     bc = config_from_omegaconf(bcfg)
     subjects, n_poses = _planned_subjects(bc), _n_poses(bc)
     complete = _complete_subjects(root, bc.source, bc.parameters())
