@@ -48,6 +48,10 @@ from sshade.mesh.io import read_mesh  # noqa: E402
 BUNNY = ROOT.parent / "shared" / "data" / "classic" / "bunny.off"
 CENTAUR = ROOT.parent / "shared" / "data" / "tosca" / "centaur0.off"
 
+#: The code the probes run in their own processes (PROBE and ``python -m sshade``), which
+#: no import of this file names: held with its imports by eval.run.stale_runs
+CODE_ROOTS = ("sshade.deform", "sshade.__main__", "baselines.ARAP", "baselines.Elastic", "baselines.ARAPSR")
+
 # One probe: python -c PROBE CASE NPZ -> one JSON line (import_s, first_s, second_s, module)
 PROBE = r"""
 import json, sys, time

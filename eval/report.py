@@ -21,6 +21,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+from eval.experiments import find_experiment
 from eval.leaderboard import (
     HEADING,
     LEADERBOARD,
@@ -48,6 +49,7 @@ from eval.run.outdir import (
 )
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders
+from eval.run.stale_runs import whole_run_folders, whole_run_state
 from eval.tables import (
     ALL_CASES_HEADING,
     EXTRA_COLUMNS,
@@ -427,7 +429,8 @@ def write_index(root) -> Path:
     """``root/index.html``: a link to the page (or the folder) of every run folder
     below ``root`` (a folder with ``run.json``, up to three levels down), with its
     experiment and status (with how many of its stored rows are stale at this checkout,
-    :func:`eval.run.stale_rows.check_folders`). Raises OutputDirError when
+    :func:`eval.run.stale_rows.check_folders`, or, for a folder run whole, whether it is,
+    :func:`eval.run.stale_runs.whole_run_state`). Raises OutputDirError when
     ``root/index.html`` is not ours."""
     root = Path(root)
     runs = sorted({p.parent for p in root.glob("*/run.json")} | {p.parent for p in root.glob("*/*/run.json")}
@@ -435,6 +438,7 @@ def write_index(root) -> Path:
     rows = []
     with CommitTrees() as trees:
         stale = {Path(f): ms for f, ms in check_folders(runs, trees).items()}
+        whole = {f: whole_run_state(f, trees, find_experiment) for f in whole_run_folders(root) if f in runs}
     for d in runs:
         info = read_runinfo(d)
         rel = d.relative_to(root).as_posix()
@@ -444,6 +448,8 @@ def write_index(root) -> Path:
         n = sum(v["rows"] for v in stale.get(d, {}).values())
         status = str(info.get("status", "")) + (f"; {k} of {n} rows stale (python -m eval.reproduce --check)"
                                                 if k else "")
+        if d in whole and whole[d].stale:
+            status += f"; stale: {whole[d].why} (python -m eval.reproduce --check)"
         rows.append([f"<td>{_link(root, target, _e(rel))}</td>", f"<td>{_e(exp)}</td>",
                      f"<td>{_e(status)}</td>", _cell(info.get("n_cases")),
                      f"<td>{_e((info.get('git') or {}).get('commit', ''))[:12]}</td>"])

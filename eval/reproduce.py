@@ -8,7 +8,7 @@
 Each step runs as its own process (a failure is reported, the others still run), after a
 plan of the stored rows reused and stale per step and method; the table steps resume, so
 they compute only stale and missing rows. Exit 1 if a step failed (or, with ``--check``,
-a committed row is stale: :mod:`eval.run.stale_rows`).
+a committed row or a folder run whole is stale: :mod:`eval.run.stale_rows`, :mod:`eval.run.stale_runs`).
 Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
@@ -20,10 +20,12 @@ import sys
 import time
 from pathlib import Path
 
+from eval.experiments import find_experiment
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
 from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
+from eval.run.stale_runs import whole_run_folders, whole_run_state
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 
@@ -40,6 +42,8 @@ IA_GRID = ("method.Implicit-ARAP.arap_weight=10,120,1000", "method.Implicit-ARAP
 FAUST_BUILD = "data/defaust_faust"
 #: the folder every step writes under (the one command that writes it)
 RESULTS = "results"
+#: how ``--check`` names a folder run whole (no stored rows: held as one unit)
+WHOLE_RUN = "whole run"
 
 
 def _installed(name: str) -> bool:
@@ -168,23 +172,30 @@ def main(argv=None) -> int:
 
 
 def _check(a) -> int:
-    """``--check``: every committed row of :data:`RESULTS` held to this checkout's code."""
+    """``--check``: every committed row of :data:`RESULTS`, and every folder run whole,
+    held to this checkout's code."""
     with CommitTrees() as trees:
         states = check_folders(run_folders(RESULTS), trees)
+        runs = [whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)]
     if a.json:
-        print(json.dumps({f: {m: {"rows": v["rows"], "stale": v["stale"]} for m, v in ms.items()}
-                          for f, ms in states.items()}, indent=1, sort_keys=True))
+        out = {f: {m: {"rows": v["rows"], "stale": v["stale"]} for m, v in ms.items()} for f, ms in states.items()}
+        out.update({str(r.folder): {WHOLE_RUN: {"rows": 1, "stale": int(r.stale)}} for r in runs})
+        print(json.dumps(out, indent=1, sort_keys=True))
     else:
         for f, ms in states.items():
             for m, v in ms.items():
                 if v["stale"]:
                     whys = "; ".join(f"{w} ({n})" for w, n in sorted(v["why"].items(), key=lambda kv: -kv[1]))
                     print(f"{f}: {m}: {v['stale']} of {v['rows']} rows stale: {whys}")
+        for r in runs:
+            if r.stale:
+                print(f"{r.folder}: {WHOLE_RUN} stale: {r.why}")
     n = sum(v["stale"] for ms in states.values() for v in ms.values())
     rows = sum(v["rows"] for ms in states.values() for v in ms.values())
-    print(f"{'stale' if n else 'current'}: {n} of {rows} committed rows in {len(states)} folders are stale",
-          file=sys.stderr if a.json else sys.stdout)
-    return 1 if n else 0
+    k = sum(r.stale for r in runs)
+    print(f"{'stale' if n or k else 'current'}: {n} of {rows} committed rows in {len(states)} folders are stale; "
+          f"{k} of {len(runs)} folders run whole", file=sys.stderr if a.json else sys.stdout)
+    return 1 if n or k else 0
 
 
 def _rekey(a) -> int:
@@ -259,6 +270,16 @@ def step_folder(cmd: list[str]) -> Path | None:
     return None
 
 
+def _whole_now(folder: Path | None, trees: CommitTrees) -> str:
+    """How the committed output of a step run whole stands: ``" (its output: current at
+    abc1234)"``, ``" (its output: stale: why)"``, or ``""`` without one."""
+    if folder is None or not folder.is_dir() or folder not in whole_run_folders(folder.parent):
+        return ""
+    st = whole_run_state(folder, trees, find_experiment)
+    made = f"current at {str(st.origin.commit)[:7]}" if not st.stale and st.origin else f"stale: {st.why}"
+    return f" (its output: {made})"
+
+
 def _print_plan(selected) -> None:
     """Before any work: per step and method, the stored rows reused and those stale (why,
     and their stored seconds as the estimate); a step without stored rows runs whole."""
@@ -268,7 +289,7 @@ def _print_plan(selected) -> None:
             folder = step_folder(cmd)
             states = check_folders(run_folders(folder), trees) if folder and folder.is_dir() else {}
             if not states:
-                print(f"   {name}: no stored rows; the step runs whole", flush=True)
+                print(f"   {name}: no stored rows; the step runs whole{_whole_now(folder, trees)}", flush=True)
                 continue
             per: dict[str, list] = {}
             for ms in states.values():

@@ -1,8 +1,11 @@
 """The one command that regenerates results/ (eval/reproduce.py): which runs it makes."""
 from __future__ import annotations
 
+import json
+
 from eval.reproduce import main
 
+from .conftest import ROOT
 from .optional import found
 
 
@@ -100,7 +103,8 @@ def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(caps
 def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_method(capsys):
     """Before the first step: per step and method, the committed rows it reuses and those
     stale (none at this checkout: ``--check`` passes); a sweep step says it computes
-    every row again; a step without stored rows runs whole."""
+    every row again; a step without stored rows runs whole, and its committed output is
+    current at the commit that made it (:mod:`eval.run.stale_runs`)."""
     assert main(["--dry-run", "--faust", "F", "--only", "faust,sweep,convergence"]) == 0
     out = capsys.readouterr().out.splitlines()
     first_step = next(i for i, ln in enumerate(out) if ln.startswith("== "))
@@ -109,14 +113,15 @@ def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_metho
     for m in ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe"):
         assert f"faust: {m}: 8 reused, 0 stale" in plan
     assert "sweep: SShaDe: 18 stored, 0 stale; a sweep step computes every row again" in plan
-    assert "convergence: no stored rows; the step runs whole" in plan
+    made = json.loads((ROOT / "results" / "convergence" / "run.json").read_text())["git"]["commit"]
+    assert f"convergence: no stored rows; the step runs whole (its output: current at {made[:7]})" in plan
 
 
 def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(capsys):
-    import json
     assert main(["--check", "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
     assert got["results/faust"]["SShaDe"] == {"rows": 8, "stale": 0}
+    assert got["results/convergence"] == got["results/frames"] == {"whole run": {"rows": 1, "stale": 0}}
     assert sum(v["rows"] for ms in got.values() for v in ms.values()) >= 600
     import pytest
     with pytest.raises(SystemExit) as e:

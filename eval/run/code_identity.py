@@ -23,8 +23,8 @@ from pathlib import Path
 from eval.run.runinfo import REPO_ROOT
 
 __all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "RECORD_ONLY", "code_text", "sources_digest", "project_modules",
-           "import_closure", "closure_constants", "modules_digest", "numerical_versions", "identity_roots",
-           "code_identity", "describe_change"]
+           "import_closure", "closure_constants", "file_imports", "modules_digest", "numerical_versions",
+           "identity_roots", "code_identity", "describe_change"]
 
 #: The project's packages whose source makes a row (every floor of the house: the method,
 #: the harness's shared tools, the baselines and the builder, the evaluator).
@@ -342,6 +342,15 @@ def import_closure(roots: tuple, root: str | None = None) -> tuple[str, ...]:
     (False, True, False)
     """
     return _closure(tuple(roots), root)[0]
+
+
+def file_imports(path, root: str | None = None) -> tuple[str, ...]:
+    """The project modules (sorted dotted names) a Python file outside the packages (a
+    script such as ``benchmarks/frames.py``) imports, anywhere in it, resolved as
+    :func:`import_closure` resolves a module's imports: roots for :func:`import_closure`.
+    Raises OSError when ``path`` cannot be read, SyntaxError when it does not parse."""
+    mods = project_modules(root)
+    return tuple(sorted(m for m in _imports("__main__", Path(path), mods)[0] if not _record_only(m)))
 
 
 def closure_constants(roots: tuple, root: str | None = None) -> tuple[str, ...]:

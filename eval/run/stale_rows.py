@@ -36,8 +36,12 @@ from eval.run.runinfo import REPO_ROOT
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 
-__all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "row_state", "check_folders",
-           "rekey_record"]
+__all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "changed_since", "row_state",
+           "check_folders", "rekey_record"]
+
+#: The folders of scripts whose runs are held to their code besides the packages
+#: (:mod:`eval.run.stale_runs`): extracted with them.
+SCRIPTS = ("benchmarks",)
 
 #: The store version whose records :func:`rekey_record` converts (the layout before the
 #: case identity left out the data folder and the identity followed only the code a row runs).
@@ -45,7 +49,7 @@ REKEY_FROM = 3
 
 
 class CommitTrees:
-    """The project's sources (:data:`eval.run.code_identity.PACKAGES`) at git commits,
+    """The project's sources (:data:`eval.run.code_identity.PACKAGES`, :data:`SCRIPTS`) at git commits,
     extracted once each into a temporary folder (``git archive``; removed on
     :meth:`close` or at the end of a ``with`` block)."""
 
@@ -74,18 +78,21 @@ class CommitTrees:
         return self._trees[commit]
 
     def _extract(self, commit: str) -> Path | None:
-        paths = [p for p in PACKAGES if (self.repo / p).is_dir()]
-        try:
-            r = subprocess.run(["git", "-C", str(self.repo), "archive", "--format=tar", commit, "--", *paths],
-                               capture_output=True, timeout=120, check=False)
-        except (OSError, subprocess.TimeoutExpired):
-            return None
-        if r.returncode != 0:
-            return None
-        dest = Path(self._tmp.name) / commit
-        with tarfile.open(fileobj=io.BytesIO(r.stdout)) as tf:
-            tf.extractall(dest, filter="data")  # refuses links out and absolute names
-        return dest
+        """``git archive`` of the packages and scripts at ``commit`` (only the packages
+        where that commit had no scripts' folder), extracted; None when git cannot."""
+        here = [p for p in (*PACKAGES, *SCRIPTS) if (self.repo / p).is_dir()]
+        for paths in (here, [p for p in here if p not in SCRIPTS]):
+            try:
+                r = subprocess.run(["git", "-C", str(self.repo), "archive", "--format=tar", commit, "--", *paths],
+                                   capture_output=True, timeout=120, check=False)
+            except (OSError, subprocess.TimeoutExpired):
+                return None
+            if r.returncode == 0:
+                dest = Path(self._tmp.name) / commit
+                with tarfile.open(fileobj=io.BytesIO(r.stdout)) as tf:
+                    tf.extractall(dest, filter="data")  # refuses links out and absolute names
+                return dest
+        return None
 
 
 @dataclass
@@ -132,7 +139,7 @@ def _now(spec, root: str | None = None) -> tuple[tuple, tuple]:
     return import_closure(roots, root), closure_constants(roots, root)
 
 
-def _changed(mods, consts, tree: Path, root: str | None) -> list[str]:
+def changed_since(mods, consts, tree: Path, root: str | None = None) -> list[str]:
     """The modules (and constants) of ``mods``/``consts`` whose code differs between the
     sources under ``tree`` and the checkout ``root``."""
     then, now = project_modules(str(tree)), project_modules(root)
@@ -169,7 +176,7 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
     elif tree is None:
         st.why = "its code changed (its commit is not in this clone)"
     else:
-        names = _changed(mods, consts, tree, root)
+        names = changed_since(mods, consts, tree, root)
         st.why = f"{', '.join(names) or 'its code'} changed since {str(st.commit)[:7]}"
     return st
 
