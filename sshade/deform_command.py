@@ -155,7 +155,7 @@ def _check_out(a) -> None:
 def sshade_method(name: str, params: dict):
     """The method of ``--method`` in ``python -m sshade deform``: ``SShaDe`` or
     ``SShaDe+refine`` (case-insensitive) with ``params`` over the defaults of
-    :func:`sshade.pipeline.check_params` (``n_low`` auto).
+    :class:`sshade.params.SShaDeParams`, but ``n_low`` auto.
 
     Raises
     ------
@@ -171,9 +171,9 @@ def sshade_method(name: str, params: dict):
         raise SShaDeError(f"SShaDe has no parameter {sorted(refine)[0]!r} (SShaDe+refine has)")
     label = "SShaDe" if key == "sshade" else "SShaDe+refine"
     try:
-        p = check_params(**params)
-    except TypeError as e:  # an unexpected keyword
-        raise SShaDeError(f"{label}: {str(e).replace('check_params() ', '')}") from None
+        p = check_params({"n_low": "auto"}, **params)  # the commands' n_low, as conf/config.yaml's sshade.n_low
+    except SShaDeError as e:
+        raise SShaDeError(str(e).replace("SShaDe: ", f"{label}: ", 1)) from None
     return SShaDe.from_params(p) if key == "sshade" else SShaDeRefine.from_params(p, **refine)
 
 

@@ -11,6 +11,7 @@ sshade/isometric.py").
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,15 +19,15 @@ import numpy as np
 from .averaging import combine, sampling_weights
 from .errors import SShaDeError
 from .mesh.validate import check_points, validate_mesh
-from .params import SShaDeParams, check_params
+from .params import SShaDeParams, check_params, only_params
 from .pipeline import auto_n_low
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
 from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels
 from .smooth_transfer import rebuild
 
-__all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "transfer_with", "TransferJob",
-           "rigid_align"]
+__all__ = ["isometric_transfer", "pose_transfer", "correspondence_transfer", "transfer_with", "transfer_params",
+           "TransferJob", "rigid_align", "TRANSFER_KEYS", "TRANSFER_DEFAULTS"]
 
 
 @dataclass(frozen=True)
@@ -117,10 +118,22 @@ def _one(job: TransferJob, i: int) -> tuple[int, np.ndarray, dict]:
                     "remesh_s": t1 - t0, "project_s": t2 - t1, "transfer_s": t3 - t2}
 
 
-def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
-                            gradient: str = "normalized", workers: int | None = None,
-                            anchor: str = "projection", transfer: str = "vertex",
-                            average: str = "uniform") -> tuple[np.ndarray, dict]:
+#: The parameters the transfers use (:class:`sshade.params.SShaDeParams`; no low-res ARAP)
+TRANSFER_KEYS = ("n_low", "n_samplings", "seed", "gradient", "workers", "anchor", "transfer", "average")
+#: The transfers' own defaults over :class:`sshade.params.SShaDeParams`' (the paper's k for §4.2-4.3)
+TRANSFER_DEFAULTS = {"n_samplings": 10}
+
+
+def transfer_params(where: str, params: SShaDeParams | Mapping | None, overrides: Mapping) -> SShaDeParams:
+    """The checked parameters of the transfer ``where``: ``params`` (None:
+    :data:`TRANSFER_DEFAULTS`) with ``overrides``, which must be of :data:`TRANSFER_KEYS`.
+    Raises SShaDeError on a bad value or another parameter."""
+    return check_params(TRANSFER_DEFAULTS if params is None else params,
+                        **only_params(where, overrides, TRANSFER_KEYS))
+
+
+def correspondence_transfer(V_M, F, V_S, V_Mprime, params: SShaDeParams | Mapping | None = None,
+                            **overrides) -> tuple[np.ndarray, dict]:
     """Encode ``V_S`` in the LRFs of the remeshed ``M`` and decode them on ``M'`` (§4.2-4.3).
 
     The common core of :func:`isometric_transfer` (``V_S = V_M``) and
@@ -132,20 +145,14 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
         a single-component 2-manifold (boundary allowed).
     V_S : (n, 3) float, positions encoded (1:1 with M, aligned with M in space).
     V_Mprime : (n, 3) float, M in the target pose (1:1 with M).
-    n_low : int >= 4, farthest-point samples per low-res mesh (capped at n), or
-        ``"auto"`` (:func:`sshade.pipeline.auto_n_low`).
-    n_samplings : int >= 1, samplings averaged (paper: 5-10).
-    seed : int, master seed; sampling i uses ``sampling_seeds(seed, n_samplings)[i]``.
-    gradient : ``"normalized"`` (orthonormal frames) or ``"raw"`` (paper's g_t).
-    anchor : ``"projection"`` (default) or ``"barycenter"`` (paper Alg. 1): where each
-        vertex is anchored in its triangle (:mod:`sshade.lrf`); for pose transfer, S's
-        vertex v is anchored at M's vertex v's projection.
-    transfer, average : as :func:`sshade.deform` (``average="proximity"`` fits here: the
-        low-res positions are exact, docs/differences.md).
-    workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
-        The result does not depend on it.
-    n_low, n_samplings, seed, gradient, anchor and workers are checked as :func:`sshade.deform`
-    checks them (:func:`sshade.pipeline.check_params`).
+    params : :class:`sshade.params.SShaDeParams` or a mapping of some of its keys, or None
+        (:data:`TRANSFER_DEFAULTS`: 10 samplings, the paper's); ``**overrides`` over it,
+        those of :data:`TRANSFER_KEYS` only (meanings and defaults:
+        :class:`sshade.params.SShaDeParams`): ``n_low`` (capped at n), ``n_samplings``,
+        ``seed``, ``gradient``, ``workers`` (the result does not depend on it), ``anchor``
+        (for pose transfer, S's vertex v is anchored at M's vertex v's projection),
+        ``transfer``, ``average`` (``"proximity"`` fits here: the low-res positions are
+        exact, docs/differences.md).
 
     Returns
     -------
@@ -157,14 +164,12 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_sampl
     Raises
     ------
     SShaDeError on an invalid mesh (:func:`sshade.mesh.validate.validate_mesh`), position
-    arrays of the wrong shape / vertex count / with NaN, n_samplings < 1, n_low < 4,
-    unknown gradient mode.
+    arrays of the wrong shape / vertex count / with NaN, a bad parameter or one it does
+    not use (:func:`transfer_params`).
     """
     t0 = time.perf_counter()
     arrays = _checked_arrays(V_M, F, V_S, V_Mprime)
-    params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, gradient=gradient,
-                          anchor=anchor, transfer=transfer, average=average)
-    return _transfer(*arrays, params, t0)
+    return _transfer(*arrays, transfer_params("correspondence_transfer", params, overrides), t0)
 
 
 def transfer_with(V_M, F, V_S, V_Mprime, params: SShaDeParams) -> tuple[np.ndarray, dict]:
@@ -211,10 +216,8 @@ def _transfer(V, F, he, S, T, params: SShaDeParams, t0: float) -> tuple[np.ndarr
     return out, info
 
 
-def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
-                       gradient: str = "normalized", workers: int | None = None,
-                       anchor: str = "projection", transfer: str = "vertex",
-                       average: str = "uniform") -> tuple[np.ndarray, dict]:
+def isometric_transfer(V_rest, F, V_target, params: SShaDeParams | Mapping | None = None,
+                       **overrides) -> tuple[np.ndarray, dict]:
     """Rebuild a pose of a subject from its rest pose and a low-res copy of the pose (paper §4.2).
 
     Only the ~``n_low`` low-res vertices of the target are used (``V_target[seeds]``, per
@@ -225,13 +228,8 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     V_rest : (n, 3) float, rest pose M (any length unit). F : (m, 3) int, its faces
         (single-component 2-manifold, boundary allowed).
     V_target : (n, 3) float, the target pose M' (1:1 with ``V_rest``).
-    n_low : int, farthest-point samples per low-res mesh (paper: ~6000); capped at n.
-    n_samplings : int, samplings averaged (paper: 10).
-    seed : int, master seed (per-sampling seeds in ``info["sampling_seeds"]``).
-    gradient : ``"normalized"`` (default) or ``"raw"``. anchor : ``"projection"``
-        (default) or ``"barycenter"`` (paper), see :func:`correspondence_transfer`.
-    transfer, average : see :func:`correspondence_transfer`.
-    workers : int or None, processes (None: min(k, CPU count)); 1 runs in-process.
+    params, **overrides : as :func:`correspondence_transfer` (10 samplings by default, the
+        paper's; the per-sampling seeds in ``info["sampling_seeds"]``).
 
     Returns
     -------
@@ -242,7 +240,7 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     Raises
     ------
     SShaDeError on an invalid mesh, ``V_target`` of another vertex count or shape or
-    with NaN/inf, n_samplings < 1, n_low < 4, unknown gradient mode.
+    with NaN/inf, a bad parameter or one it does not use.
 
     Notes
     -----
@@ -258,15 +256,13 @@ def isometric_transfer(V_rest, F, V_target, *, n_low: int = 6000, n_samplings: i
     """
     n_rest = len(_positions(V_rest, None, "V_rest"))
     T = _positions(V_target, n_rest, "target pose V_target")
-    return correspondence_transfer(V_rest, F, V_rest, T, n_low=n_low, n_samplings=n_samplings, seed=seed,
-                                   gradient=gradient, workers=workers, anchor=anchor,
-                                   transfer=transfer, average=average)
+    t0 = time.perf_counter()
+    p = transfer_params("isometric_transfer", params, overrides)
+    return _transfer(*_checked_arrays(V_rest, F, V_rest, T), p, t0)
 
 
-def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int = 10, seed: int = 0,
-                  gradient: str = "normalized", workers: int | None = None, align: bool = False,
-                  return_info: bool = False, anchor: str = "projection", transfer: str = "vertex",
-                  average: str = "uniform"):
+def pose_transfer(V_M, F, V_S, V_Mprime, params: SShaDeParams | Mapping | None = None, *, align: bool = False,
+                  return_info: bool = False, **overrides):
     """Put shape S in the pose of M' (paper §4.3, Fig. "diagrams" b).
 
     S's vertices are encoded in the frames of M's remesh N and decoded on N' (M's
@@ -282,8 +278,7 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
     V_S : (n, 3) float, the shape to pose (1:1 with M, same connectivity, aligned with M
         in space, e.g. another subject in the same rest pose).
     V_Mprime : (n, 3) float, M in the target pose (1:1 with M).
-    n_low, n_samplings, seed, gradient, workers, anchor, transfer, average : as in
-        :func:`isometric_transfer`.
+    params, **overrides : as :func:`correspondence_transfer` (10 samplings by default).
     align : bool, rigidly align S onto M first (for shapes not already aligned).
     return_info : bool, also return the info dict (timings, seeds).
 
@@ -295,7 +290,7 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
     Raises
     ------
     SShaDeError on an invalid mesh M, ``V_S`` / ``V_Mprime`` of another vertex count
-    or shape or with NaN/inf, n_samplings < 1, n_low < 4, unknown gradient mode.
+    or shape or with NaN/inf, a bad parameter or one it does not use.
 
     Examples
     --------
@@ -304,9 +299,8 @@ def pose_transfer(V_M, F, V_S, V_Mprime, *, n_low: int = 6000, n_samplings: int 
         from sshade.isometric import pose_transfer
         V_Sp = pose_transfer(V_M, F, V_S, V_Mp, n_low=1000, n_samplings=5)
     """
+    p = transfer_params("pose_transfer", params, overrides)  # before any work
     if align:
         V_S = rigid_align(V_S, V_M)
-    out, info = correspondence_transfer(V_M, F, V_S, V_Mprime, n_low=n_low, n_samplings=n_samplings, seed=seed,
-                                        gradient=gradient, workers=workers, anchor=anchor,
-                                        transfer=transfer, average=average)
+    out, info = correspondence_transfer(V_M, F, V_S, V_Mprime, p)
     return (out, info) if return_info else out

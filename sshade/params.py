@@ -1,13 +1,16 @@
 """SShaDe's parameters as one checked, frozen object (paper §3, §4.1 settings).
 
-:func:`check_params` checks and normalises the keyword parameters of
-:func:`sshade.pipeline.deform` into a :class:`SShaDeParams`, which :mod:`sshade.pipeline`,
-:mod:`sshade.prepared`, :mod:`sshade.isometric` and :mod:`sshade.refine` pass around;
-:func:`effective_params` resolves its defaults for run records.
+:class:`SShaDeParams` states each parameter once: its meaning, its range and its default
+(its fields'); :func:`check_params` checks and normalises a mapping and keyword overrides
+into one, which :mod:`sshade.pipeline`, :mod:`sshade.prepared`, :mod:`sshade.isometric`
+and :mod:`sshade.refine` pass around; their functions take ``params=None, **overrides``
+and list the parameters in their help (:func:`document_params`). :func:`effective_params`
+resolves its defaults for run records.
 """
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+import inspect
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -19,7 +22,8 @@ from .errors import SShaDeError
 from .lrf import ANCHORS, GRADIENTS
 from .smooth_transfer import TRANSFERS
 
-__all__ = ["SShaDeParams", "check_params", "effective_params", "MAX_SEED", "MIN_N_LOW"]
+__all__ = ["SShaDeParams", "check_params", "effective_params", "document_params", "only_params", "params_signature",
+           "MAX_SEED", "MIN_N_LOW"]
 
 _MAX_COUNT = 2**31 - 1    # n_low, workers, max_iter: int32 range (numba kernels, libigl)
 MIN_N_LOW = 4             #: the smallest n_low check_params accepts
@@ -29,38 +33,72 @@ MAX_SEED = 2**63 - 1      #: seeds: int64, recorded in JSON/CSV and passed to nu
 
 @dataclass(frozen=True, eq=False)
 class SShaDeParams(Mapping):
-    """SShaDe's checked parameters; made by :func:`check_params`, never by hand.
+    """SShaDe's checked parameters; made by :func:`check_params`, never by hand. The
+    reference for each parameter (its meaning, range and default, the field's).
 
-    Attributes
+    Parameters
     ----------
-    n_low : int >= 4 or ``"auto"``; n_samplings : int >= 1; seed : int in [0, 2**63 - 1];
-    workers : int >= 1 or None; max_iter : int >= 1 or None; tol : float > 0;
-    gradient : one of :data:`sshade.lrf.GRADIENTS`; anchor : one of :data:`sshade.lrf.ANCHORS`;
-    warm_start : bool; protocol : one of :data:`sshade.arap.PROTOCOLS`; etol, gtol : float
-    >= 0 or None; energy : the low-res step's, one of :data:`sshade.arap.DEFORM_ENERGIES`;
-    transfer : one of :data:`sshade.smooth_transfer.TRANSFERS`; average : one of
-    :data:`sshade.averaging.AVERAGES`.
-    Meanings: :func:`sshade.pipeline.deform`.
+    n_low : int in [4, 2**31 - 1] or ``"auto"`` (None too), default 6000
+        Farthest-point samples per low-res mesh (paper: ~6000 for 150k-200k vertices),
+        capped at the vertex count; the handles are added to them. ``"auto"``:
+        :func:`sshade.pipeline.auto_n_low`.
+    n_samplings : int in [1, 10000], default 5
+        k samplings with different first seeds, averaged (paper: 5-10).
+    seed : int in [0, 2**63 - 1], default 0
+        Master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
+    workers : int >= 1 or None, default None
+        Processes (threads for :func:`sshade.prepared.prepare`; None: min(k, the cores
+        this process may use)); 1 runs in-process. The result does not depend on it.
+    max_iter : int >= 1 or None, default None
+        Cap on the low-res ARAP's iterations (None: the protocol's).
+    tol : float > 0, default 1e-4
+        Under ``protocol="paper"``: stop when the largest move of one iteration is
+        below ``tol * bbox_diag`` (libigl's rule).
+    gradient : one of :data:`sshade.lrf.GRADIENTS`, default ``"normalized"``
+        ``"normalized"`` (orthonormal LRF) or ``"raw"`` (the paper's g_t, §3.2).
+    anchor : one of :data:`sshade.lrf.ANCHORS`, default ``"projection"``
+        Where a vertex is anchored in its triangle: ``"projection"`` or ``"barycenter"``
+        (paper Alg. 1) (:mod:`sshade.lrf`).
+    warm_start : bool, default True
+        Start samplings 1..k-1 from sampling 0's result.
+    protocol : one of :data:`sshade.arap.PROTOCOLS`, default ``"converged"``
+        The low-res ARAP's (:func:`sshade.arap.arap_deform`): ``"converged"`` (stopped by
+        the criterion of thresholds ``etol``/``gtol``) or ``"paper"`` (libigl's move rule, ``tol``).
+    etol, gtol : float >= 0 or None, default None
+        The converged protocol's energy and gradient thresholds (None: its defaults,
+        :func:`sshade.arap.make_criterion`).
+    energy : one of :data:`sshade.arap.DEFORM_ENERGIES`, default ``"spokes_and_rims"``
+        The low-res ARAP's: ``"spokes_and_rims"`` (paper §4.1), ``"spokes"`` (Sorkine &
+        Alexa 2007) or ``"arap_sr"`` (smooth rotations, Levi & Gotsman 2015, at the
+        ARAP-SR baseline's default alpha, :data:`sshade.arap.DEFAULT_ALPHA` times the
+        low-res mesh's area, as Open3D defines it).
+    transfer : one of :data:`sshade.smooth_transfer.TRANSFERS`, default ``"vertex"``
+        ``"vertex"`` (the corners' deformation gradients blended,
+        :mod:`sshade.smooth_transfer`) or ``"triangle"`` (one frame per triangle, Alg. 1).
+    average : one of :data:`sshade.averaging.AVERAGES`, default ``"uniform"``
+        How the samplings are averaged: ``"uniform"`` (the paper's mean, §3.3),
+        ``"proximity"`` (each sampling weighted at a vertex by the inverse second moment
+        about its low-res triangle's corners: for exact low-res positions) or ``"distortion"``.
 
-    Read-only mapping of the same keys too (``p["n_low"]``, ``dict(p)``, ``**p``);
+    A read-only mapping of the same keys too (``p["n_low"]``, ``dict(p)``, ``**p``);
     :meth:`as_dict` is the plain dict for JSON and run records.
     """
 
-    n_low: int | str
-    n_samplings: int
-    seed: int
-    workers: int | None
-    max_iter: int | None
-    tol: float
-    gradient: str
-    anchor: str
-    warm_start: bool
-    protocol: str
-    etol: float | None
-    gtol: float | None
-    energy: str
-    transfer: str
-    average: str
+    n_low: int | str = 6000
+    n_samplings: int = 5
+    seed: int = 0
+    workers: int | None = None
+    max_iter: int | None = None
+    tol: float = 1e-4
+    gradient: str = "normalized"
+    anchor: str = "projection"
+    warm_start: bool = True
+    protocol: str = "converged"
+    etol: float | None = None
+    gtol: float | None = None
+    energy: str = "spokes_and_rims"
+    transfer: str = "vertex"
+    average: str = "uniform"
 
     def __getitem__(self, key: str):
         if key not in _FIELDS:
@@ -83,7 +121,7 @@ class SShaDeParams(Mapping):
     def replace(self, **changes) -> SShaDeParams:
         """A copy with ``changes`` (keyword parameters of :func:`check_params`), checked
         again. Raises SShaDeError as :func:`check_params`."""
-        return check_params(**{**self.as_dict(), **changes})
+        return check_params(self, **changes)
 
     def arap_options(self) -> dict:
         """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step:
@@ -97,6 +135,7 @@ class SShaDeParams(Mapping):
 
 
 _FIELDS = tuple(f.name for f in fields(SShaDeParams))
+_DEFAULTS = {f.name: f.default for f in fields(SShaDeParams)}
 
 
 def _as_int(name: str, v, lo: int, hi: int = _MAX_COUNT) -> int:
@@ -131,26 +170,17 @@ def _as_tolerance(name: str, v) -> float | None:
     return fv
 
 
-def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=None, tol: float = 1e-4,
-                 max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
-                 protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 anchor: str = "projection", energy: str = "spokes_and_rims", transfer: str = "vertex",
-                 average: str = "uniform") -> SShaDeParams:
+def check_params(params: Mapping | None = None, /, **overrides) -> SShaDeParams:
     """Validate SShaDe's parameters without touching a mesh, so a bad value fails before
     any work.
 
     Parameters
     ----------
-    As :func:`sshade.pipeline.deform`: n_low (int in [4, 2**31 - 1] or ``"auto"``/None),
-    n_samplings (int in [1, 10000]), seed (int in [0, 2**63 - 1]), workers (int in
-    [1, 2**31 - 1] or None), tol (finite float > 0), max_iter (int in [1, 2**31 - 1] or
-    None), gradient (one of :data:`sshade.lrf.GRADIENTS`), anchor (one of
-    :data:`sshade.lrf.ANCHORS`), warm_start (bool), protocol (one of
-    :data:`sshade.arap.PROTOCOLS`), etol / gtol (finite floats >= 0 or None), energy (one
-    of :data:`sshade.arap.DEFORM_ENERGIES`), transfer (one of
-    :data:`sshade.smooth_transfer.TRANSFERS`), average (one of
-    :data:`sshade.averaging.AVERAGES`). An integer may be given as an integral float
-    (``1e3``) but never as a bool, NaN, inf or a float beyond the range.
+    params : :class:`SShaDeParams` or a mapping of some of its keys, or None
+        The values to start from; the rest are :class:`SShaDeParams`' defaults.
+    **overrides : any of :class:`SShaDeParams`' parameters (ranges there), over ``params``.
+        An integer may be given as an integral float (``1e3``) or a numeric string but
+        never as a bool, NaN, inf or a float beyond the range.
 
     Returns
     -------
@@ -158,18 +188,32 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
 
     Raises
     ------
-    SShaDeError naming the first bad parameter and its value (never OverflowError or
-    TypeError).
+    SShaDeError naming the first bad parameter and its value, or a name that is none of
+    SShaDe's (never OverflowError or TypeError).
 
     Examples
     --------
     >>> check_params(n_low=6000).n_low
     6000
+    >>> check_params(check_params(seed=3), n_samplings=2).seed
+    3
     >>> check_params(n_low=2)
     Traceback (most recent call last):
     ...
     sshade.errors.SShaDeError: SShaDe: n_low must be at least 4 (or 'auto'), got 2
     """
+    if params is not None and not isinstance(params, Mapping):
+        raise SShaDeError(f"SShaDe: params must be SShaDeParams or a mapping of its keys, got {type(params).__name__}")
+    raw = {**_DEFAULTS, **(params or {}), **overrides}
+    unknown = [k for k in raw if k not in _DEFAULTS]
+    if unknown:
+        raise SShaDeError(f"SShaDe: no parameter {unknown[0]!r} (its parameters: {', '.join(_FIELDS)})")
+    return _checked(**raw)
+
+
+def _checked(*, n_low, n_samplings, seed, workers, tol, max_iter, gradient, warm_start, protocol, etol, gtol,
+             anchor, energy, transfer, average) -> SShaDeParams:
+    """:func:`check_params` on every value given."""
     out = {"n_low": "auto" if n_low in (None, "auto") else _as_int("n_low", n_low, MIN_N_LOW),
            "n_samplings": _as_int("n_samplings", n_samplings, 1, _MAX_SAMPLINGS),
            "seed": _as_int("seed", seed, 0, MAX_SEED),
@@ -198,6 +242,38 @@ def check_params(*, n_low="auto", n_samplings: int = 5, seed: int = 0, workers=N
     return SShaDeParams(**out, gradient=gradient, anchor=anchor, warm_start=bool(warm_start), protocol=protocol,
                         etol=_as_tolerance("etol", etol), gtol=_as_tolerance("gtol", gtol), energy=energy,
                         transfer=transfer, average=average)
+
+
+def only_params(where: str, overrides: Mapping, keys) -> dict:
+    """``overrides`` when every key is one of ``keys`` (the parameters the function
+    ``where`` uses); SShaDeError naming the first other one."""
+    other = [k for k in overrides if k not in keys]
+    if other:
+        raise SShaDeError(f"{where}: no parameter {other[0]!r} (its parameters: {', '.join(keys)})")
+    return dict(overrides)
+
+
+def params_signature(fn: Callable) -> inspect.Signature:
+    """The signature of ``fn`` (which takes ``**overrides`` for :class:`SShaDeParams`) with
+    the overrides spelled out as keyword-only parameters, their defaults the fields', so
+    that introspection (a plug-in builder asking whether ``name`` is a parameter, an
+    editor) sees the keywords ``fn`` accepts; set as a class's ``__signature__``."""
+    sig = inspect.signature(fn)
+    head = [p for p in sig.parameters.values() if p.kind is not p.VAR_KEYWORD and p.name != "self"]
+    tail = [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default) for f in fields(SShaDeParams)
+            if f.name not in {p.name for p in head}]
+    return sig.replace(parameters=[*head, *tail])
+
+
+def document_params(fn: Callable) -> Callable:
+    """``fn`` with the line ``{sshade_params}`` of its docstring replaced by
+    :class:`SShaDeParams`' parameter list, so that ``help(fn)`` lists each parameter
+    while its text lives once, there. Returns ``fn``."""
+    doc = SShaDeParams.__doc__ or ""
+    block = doc[doc.index("    n_low :"):doc.index("\n\n    A read-only mapping")]
+    if fn.__doc__ and "{sshade_params}" in fn.__doc__:
+        fn.__doc__ = fn.__doc__.replace("    {sshade_params}", block)
+    return fn
 
 
 def effective_params(params: SShaDeParams) -> dict:

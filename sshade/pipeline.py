@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,7 +20,16 @@ from .components import deform_components
 from .mesh.halfedge import count_components
 from .mesh.unit_frame import unit_frame
 from .mesh.validate import validate_handles, validate_mesh
-from .params import MAX_SEED, MIN_N_LOW, SShaDeParams, check_params, effective_params
+from .params import (
+    MAX_SEED,
+    MIN_N_LOW,
+    SShaDeParams,
+    check_params,
+    document_params,
+    effective_params,
+    only_params,
+    params_signature,
+)
 from .projection import project_to_fans
 from .remesh import mesh_topology, remesh_drawn
 from .sampling import SamplingPool, pool_size, sampling_seeds, warm_kernels
@@ -138,23 +148,20 @@ def _finish(job: SamplingJob, prep: dict, V0=None):
                 "weights": weights}
 
 
-def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None, tol: float = 1e-4,
-                max_iter: int | None = None, gradient: str = "normalized", V_init=None, protocol: str = "converged",
-                etol: float | None = None, gtol: float | None = None,
-                anchor: str = "projection", energy: str = "spokes_and_rims",
-                transfer: str = "vertex") -> tuple[np.ndarray, dict]:
+def deform_once(V, F, handles, targets, params: SShaDeParams | Mapping | None = None, *, topology=None,
+                V_init=None, **overrides) -> tuple[np.ndarray, dict]:
     """One sampling of SShaDe (no averaging): remesh, low-res ARAP, transfer.
 
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64; targets : (h, 3) float64
-        (all validated). n_low : farthest-point samples. seed : first-seed RNG seed.
+        (all validated).
+    params : :class:`sshade.params.SShaDeParams` or a mapping of some of its keys, or None.
     topology : optional :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
-    tol, max_iter, protocol, etol, gtol, energy : the low-res ARAP's protocol, stopping rule
-        and energy (:func:`sshade.arap.arap_deform`). gradient : LRF mode (§3.2). anchor : where a
-        vertex is anchored in its triangle (:data:`sshade.lrf.ANCHORS`, see :func:`deform`).
     V_init : (n, 3) float64 or None, a deformed high-res shape whose values at the
         low-res vertices start the ARAP iterations (default: rigid fit of the handles).
+    **overrides : those of :data:`ONCE_KEYS` (:class:`sshade.params.SShaDeParams`: ``n_low``
+        an int here; ``seed`` the sampling's own seed), over ``params``.
 
     Runs in the caller's coordinates (:func:`deform` and :func:`sshade.prepared.prepare`
     move the mesh to its unit frame first, :mod:`sshade.mesh.unit_frame`).
@@ -171,10 +178,9 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
 
     Raises
     ------
-    SShaDeError on a bad parameter (:func:`check_params`), before any work.
+    SShaDeError on a bad parameter or one it does not use (:func:`check_params`), before any work.
     """
-    p = check_params(n_low=n_low, seed=seed, tol=tol, max_iter=max_iter, gradient=gradient, protocol=protocol,
-                     etol=etol, gtol=gtol, anchor=anchor, energy=energy, transfer=transfer)
+    p = check_params(params, **only_params("deform_once", overrides, ONCE_KEYS))
     job = SamplingJob(V=V, F=F, handles=handles, n_low=p.n_low, seeds=[p.seed], topology=topology, targets=targets,
                       gradient=p.gradient, anchor=p.anchor, arap=p.arap_options(), transfer=p.transfer)
     _, prep, info = _task_prepare(job, 0)
@@ -183,6 +189,11 @@ def deform_once(V, F, handles, targets, *, n_low: int, seed: int, topology=None,
     info2.pop("weights")  # one sampling: nothing to average
     info.update(info2, handle_pre_pct=handle_pre_pct(info2.pop("handle_resid"), V))
     return Vd, info
+
+
+#: The parameters :func:`deform_once` uses (one sampling: no average, no workers)
+ONCE_KEYS = ("n_low", "seed", "tol", "max_iter", "gradient", "protocol", "etol", "gtol", "anchor", "energy",
+             "transfer")
 
 
 def _task_full(job: SamplingJob, i: int):
@@ -218,12 +229,9 @@ def auto_n_low(n: int) -> int:
     return int(max(100, min(6000, n // 7)))
 
 
-def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0,
-           workers: int | None = None, tol: float = 1e-4, max_iter: int | None = None,
-           gradient: str = "normalized", warm_start: bool = True, return_info: bool = False,
-           protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-           anchor: str = "projection", energy: str = "spokes_and_rims", transfer: str = "vertex",
-           average: str = "uniform"):
+@document_params
+def deform(V, F, handles, targets, params: SShaDeParams | Mapping | None = None, *, return_info: bool = False,
+           **overrides):
     """Deform a high-resolution mesh with SShaDe (paper §3, Alg. 1, §3.3 averaging).
 
     Parameters
@@ -233,30 +241,9 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
         components are deformed apart (:func:`sshade.components.deform_components`; info
         gains ``n_components``).
     handles : (h,) int vertex indices. targets : (h, 3) float target positions.
-    n_low : int or ``"auto"`` (:func:`auto_n_low`), farthest-point samples per low-res mesh
-        (paper: ~6000 for 150k-200k vertices), capped at n; the handles are added to them.
-    n_samplings : int, k samplings with different first seeds, averaged (paper: 5-10).
-    seed : int, master seed; sampling i uses ``sampling_seeds(seed, k)[i]``.
-    workers : int or None, processes (default: min(k, CPU count)); 1 runs in-process.
-    protocol : the low-res ARAP's (:func:`sshade.arap.arap_deform`): ``"converged"``
-        (default; stopped by the criterion of thresholds ``etol``/``gtol``, None =
-        defaults) or ``"paper"`` (libigl; stops when the largest move of one iteration is
-        below ``tol * bbox_diag``). max_iter : int or None, cap (None: the protocol's).
-    gradient : ``"normalized"`` (default, orthonormal LRF) or ``"raw"`` (paper's g_t).
-    anchor : ``"projection"`` (default) or ``"barycenter"`` (paper Alg. 1) (:mod:`sshade.lrf`).
-    transfer : ``"vertex"`` (default: the corners' deformation gradients blended,
-        :mod:`sshade.smooth_transfer`) or ``"triangle"`` (one frame per triangle, Alg. 1).
-    average : how the samplings are averaged (:mod:`sshade.averaging`): ``"uniform"``
-        (default, the paper's mean, §3.3), ``"proximity"`` (each sampling weighted at a
-        vertex by the inverse second moment about its low-res triangle's corners: for
-        transfers whose low-res positions are exact) or ``"distortion"``.
-    energy : the low-res ARAP's (:data:`sshade.arap.DEFORM_ENERGIES`): ``"spokes_and_rims"``
-        (default, paper §4.1), ``"spokes"`` (Sorkine & Alexa 2007) or ``"arap_sr"`` (smooth
-        rotations, Levi & Gotsman 2015: the ARAP-SR baseline's default alpha,
-        :data:`sshade.arap.DEFAULT_ALPHA` times the low-res mesh's area, as Open3D defines
-        it; under ``"paper"`` its Jacobi iteration stopped by the same move rule), solved by
-        :func:`sshade.arap.arap_deform`.
-    warm_start : bool, start samplings 1..k-1 from sampling 0's result.
+    params : :class:`sshade.params.SShaDeParams` (:func:`check_params`) or a mapping of
+        some of its keys, or None; ``**overrides`` (its keys) over it, the rest its defaults:
+    {sshade_params}
     return_info : also return a dict of timings (seconds; ``total_s`` excludes
         ``compile_s``), seeds, per-sampling details, ``handle_pre_pct``, ``frame`` and
         ``low_res_energy`` (docs/methods.md, "Implementation notes: sshade/pipeline.py").
@@ -282,10 +269,7 @@ def deform(V, F, handles, targets, *, n_low: int = 6000, n_samplings: int = 5, s
 
         Vd = deform(V, F, handles, targets, n_low=6000, n_samplings=5, seed=0)
     """
-    params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                          max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
-                          gtol=gtol, anchor=anchor, energy=energy, transfer=transfer, average=average)
-    return deform_with(V, F, handles, targets, params, return_info=return_info)
+    return deform_with(V, F, handles, targets, check_params(params, **overrides), return_info=return_info)
 
 
 def deform_with(V, F, handles, targets, params: SShaDeParams, *, return_info: bool = False):
@@ -408,9 +392,9 @@ def warm_sshade(params: SShaDeParams) -> float:
 class SShaDe:
     """SShaDe behind the :class:`sshade.method_interface.Deformer` interface.
 
-    Parameters are those of :func:`deform`. After :meth:`deform`, ``info`` holds
-    remesh_s / project_s / arap_s / transfer_s (summed CPU-side over samplings),
-    total_s (wall time), the sampling seeds and per-sampling details.
+    ``params`` and ``**overrides`` as :func:`deform` (:class:`sshade.params.SShaDeParams`).
+    After :meth:`deform`, ``info`` holds remesh_s / project_s / arap_s / transfer_s (summed
+    CPU-side over samplings), total_s (wall time), the sampling seeds and per-sampling details.
 
     Examples
     --------
@@ -422,22 +406,17 @@ class SShaDe:
 
     name = "SShaDe"
 
-    def __init__(self, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, workers: int | None = None,
-                 tol: float = 1e-4, max_iter: int | None = None, gradient: str = "normalized",
-                 warm_start: bool = True, protocol: str = "converged", etol: float | None = None,
-                 gtol: float | None = None, anchor: str = "projection", energy: str = "spokes_and_rims",
-                 transfer: str = "vertex", average: str = "uniform"):
+    def __init__(self, params: SShaDeParams | Mapping | None = None, **overrides):
         # validated here, so a bad parameter fails when the method is built, before any work
-        self.params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                                   max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol,
-                                   etol=etol, gtol=gtol, anchor=anchor, energy=energy, transfer=transfer,
-                                   average=average)
+        self.params = check_params(params, **overrides)
         self.info: dict = {}
+
+    __signature__ = params_signature(__init__)  # the keywords it takes: SShaDeParams' fields
 
     @classmethod
     def from_params(cls, params: SShaDeParams) -> SShaDe:
         """The method with the checked ``params`` (:func:`check_params`)."""
-        return cls(**params)
+        return cls(params)
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """See :func:`deform`; returns (n, 3) float64."""

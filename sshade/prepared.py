@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 
 import igl
@@ -489,21 +490,18 @@ class Prepared:
             raise
 
 
-def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int = 0, tol: float = 1e-4,
-            max_iter: int | None = None, gradient: str = "normalized", warm_start: bool = True,
-            protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-            anchor: str = "projection", workers: int | None = None, energy: str = "spokes_and_rims",
-            transfer: str = "vertex", average: str = "uniform") -> Prepared:
+def prepare(V, F, handles, params: SShaDeParams | Mapping | None = None, **overrides) -> Prepared:
     """Everything of SShaDe that does not depend on the handles' targets (module docstring).
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions; F : (m, 3) int faces of a connected manifold
         triangle mesh; handles : (h,) int vertex indices (a new selection needs a new
-        :func:`prepare`). workers : int >= 1 or None, threads the samplings run on
-        (:func:`sshade.cores.pool_size`: None = the cores this process may use, at most
-        ``n_samplings``); the results do not depend on it. The other parameters as
-        :func:`sshade.pipeline.deform`.
+        :func:`prepare`).
+    params, **overrides : as :func:`sshade.pipeline.deform` (:class:`sshade.params.SShaDeParams`);
+        ``workers`` is the threads the samplings run on (:func:`sshade.cores.pool_size`:
+        None = the cores this process may use, at most ``n_samplings``); the results do
+        not depend on it.
 
     Returns
     -------
@@ -528,10 +526,7 @@ def prepare(V, F, handles, *, n_low: int = 6000, n_samplings: int = 5, seed: int
     ...     bool(np.allclose(p.solve(T)[h], T))
     True
     """
-    params = check_params(n_low=n_low, n_samplings=n_samplings, seed=seed, workers=workers, tol=tol,
-                          max_iter=max_iter, gradient=gradient, warm_start=warm_start, protocol=protocol, etol=etol,
-                          gtol=gtol, anchor=anchor, energy=energy, transfer=transfer, average=average)
-    return prepare_with(V, F, handles, params)
+    return prepare_with(V, F, handles, check_params(params, **overrides))
 
 
 def prepare_with(V, F, handles, params: SShaDeParams) -> Prepared:

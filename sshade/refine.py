@@ -11,6 +11,7 @@ full-resolution answer when SShaDe's approximation is not enough.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -31,8 +32,9 @@ class SShaDeRefine:
     refine_etol, refine_gtol : float or None, the refinement's criterion
         (:class:`sshade.arap.criterion.Criterion`; None: its defaults).
     refine_max_iter : int, cap on the refinement's iterations.
-    **sshade : the parameters of :func:`sshade.deform` (n_low, n_samplings, seed,
-        workers, protocol, ...), checked at construction (:func:`sshade.pipeline.check_params`).
+    params, **sshade : SShaDe's, as :func:`sshade.deform` (:class:`sshade.params.SShaDeParams`:
+        n_low, n_samplings, seed, workers, protocol, ...), checked at construction
+        (:func:`sshade.params.check_params`).
 
     After :meth:`deform`, ``info`` holds SShaDe's info plus ``sshade_s`` (its wall time),
     ``refine_s``, ``refine_iterations``, ``iterations`` (= refine_iterations),
@@ -53,9 +55,9 @@ class SShaDeRefine:
     name = "SShaDe+refine"
     energy = "spokes_and_rims"
 
-    def __init__(self, *, refine_etol: float | None = None, refine_gtol: float | None = None,
-                 refine_max_iter: int = 10000, **sshade):
-        self.params = check_params(**sshade)
+    def __init__(self, params: SShaDeParams | Mapping | None = None, *, refine_etol: float | None = None,
+                 refine_gtol: float | None = None, refine_max_iter: int = 10000, **sshade):
+        self.params = check_params(params, **sshade)
         self.criterion = make_criterion(refine_etol, refine_gtol)
         self.refine_max_iter = int(refine_max_iter)
         self.info: dict = {}
@@ -64,7 +66,7 @@ class SShaDeRefine:
     def from_params(cls, params: SShaDeParams, **refine) -> SShaDeRefine:
         """The method with SShaDe's checked ``params`` (:func:`sshade.params.check_params`)
         and the refinement's keyword parameters ``refine`` (as the constructor's)."""
-        return cls(**refine, **params)
+        return cls(params, **refine)
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` (n, 3) / (m, 3) so ``V[handles]`` reach ``targets`` (h, 3);
