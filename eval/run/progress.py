@@ -163,8 +163,10 @@ def weighted_bar(total_s: float, n_runs: int, **kw):
             self.total = total
 
         def advance(self, seconds: float) -> None:
-            """Count ``seconds`` more, the total raised first where they overfill it."""
-            self.retotal(max(self.total, self.n + seconds))
+            """Count ``seconds`` more, the total raised first where they overfill it (the
+            fraction then rises to 1, never past it: not :meth:`retotal`, which would hold
+            the fraction before the count and leave the count above the total)."""
+            self.total = max(float(self.total), self.n + seconds)
             self.update(seconds)
 
     return MonotoneBar(total=max(total_s, 1e-9), desc=f"{n_runs} runs", file=sys.stderr, dynamic_ncols=True,
