@@ -25,7 +25,7 @@ from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
 from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
-from eval.run.stale_runs import whole_run_folders, whole_run_state
+from eval.run.stale_runs import is_whole_run, whole_run_folders, whole_run_state
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 
@@ -273,7 +273,7 @@ def step_folder(cmd: list[str]) -> Path | None:
 def _whole_now(folder: Path | None, trees: CommitTrees) -> str:
     """How the committed output of a step run whole stands: ``" (its output: current at
     abc1234)"``, ``" (its output: stale: why)"``, or ``""`` without one."""
-    if folder is None or not folder.is_dir() or folder not in whole_run_folders(folder.parent):
+    if folder is None or not is_whole_run(folder):
         return ""
     st = whole_run_state(folder, trees, find_experiment)
     made = f"current at {str(st.origin.commit)[:7]}" if not st.stale and st.origin else f"stale: {st.why}"

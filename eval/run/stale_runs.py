@@ -24,7 +24,7 @@ from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, changed_since
 from sshade.json_file import read_json
 
-__all__ = ["MADE_BY", "RunOrigin", "RunState", "whole_run_folders", "run_origin", "whole_run_state"]
+__all__ = ["MADE_BY", "RunOrigin", "RunState", "is_whole_run", "whole_run_folders", "run_origin", "whole_run_state"]
 
 #: A benchmark script's provenance line in the ``table.md`` it writes: its path, commit, dirty flag.
 MADE_BY = re.compile(r"Made by `python (benchmarks/[\w]+\.py)[^`]*` at git commit ([0-9a-f]{40}) \(dirty: (\w+)\)")
@@ -81,16 +81,19 @@ def run_origin(folder) -> RunOrigin | None:
     return None
 
 
+def is_whole_run(folder) -> bool:
+    """Whether ``folder`` is a folder run whole: a directory (not a link) with a
+    ``run.json`` or a benchmark's ``table.md`` and no result store (``runs/``: those are
+    held row by row)."""
+    d = Path(folder)
+    return (d.is_dir() and not d.is_symlink() and not (d / STORE_DIR).exists()
+            and ((d / "run.json").is_file() or (d / "table.md").is_file()))
+
+
 def whole_run_folders(top) -> list[Path]:
-    """The folders directly under ``top`` run whole: with a ``run.json`` or a benchmark's
-    ``table.md`` and no result store (``runs/``, those are held row by row), sorted; no link followed."""
+    """The folders directly under ``top`` run whole (:func:`is_whole_run`), sorted."""
     top = Path(top)
-    found = []
-    for d in sorted(top.iterdir()) if top.is_dir() else []:
-        if d.is_dir() and not d.is_symlink() and not (d / STORE_DIR).exists():
-            if (d / "run.json").is_file() or (d / "table.md").is_file():
-                found.append(d)
-    return found
+    return [d for d in sorted(top.iterdir()) if is_whole_run(d)] if top.is_dir() else []
 
 
 def _script_roots(path: Path, root: str | None) -> tuple[str, ...]:
