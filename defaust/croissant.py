@@ -16,8 +16,8 @@ import json
 import re
 from pathlib import Path
 
+from sshade.files import atomic_write
 from sshade.json_file import loads, read_json
-from sshade.mesh.io import atomic_write
 
 from .manifest import MANIFEST
 from .store import sha256_file

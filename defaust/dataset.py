@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.files import inside_folder
 from sshade.json_file import loads
-from sshade.mesh.io import inside_folder, read_mesh
+from sshade.mesh.io import read_mesh
 
 from .archive import MAX_TEXT_BYTES, ArchiveBuild, is_archive
 from .case_sequence import CaseSequence, Once, case_name, item_key

@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write, write_mesh
+from sshade.mesh.io import write_mesh
 
 from .croissant import CROISSANT
 from .dataset import Case, FolderBuild, load, open_build, read_manifest

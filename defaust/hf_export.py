@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 
 from .croissant import CROISSANT, shards_metadata
 from .dataset import Case

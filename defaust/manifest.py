@@ -17,8 +17,8 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write
 
 from .store import sha256_file
 

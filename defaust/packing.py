@@ -15,7 +15,7 @@ import zipfile
 from pathlib import Path
 
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write, inside_folder
+from sshade.files import atomic_write, inside_folder
 
 from .archive import PACK_COMMENT
 from .croissant import CROISSANT, croissant_text

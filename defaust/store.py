@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 
 __all__ = ["write_ply", "ply_bytes", "read_ply_bytes", "write_npz", "read_npz", "sha256_file", "sha256_bytes",
            "sha256_stream", "MAX_MEMBER_BYTES"]

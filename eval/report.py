@@ -62,7 +62,7 @@ from eval.tables import (
 )
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 
 __all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
            "find_chromium", "chromium", "screenshot", "main"]

@@ -23,6 +23,7 @@ from pathlib import Path
 from eval.experiments import find_experiment
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
+from eval.run.pending_rows import marked_pending
 from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
 from eval.run.stale_runs import is_whole_run, whole_run_folders, whole_run_state
@@ -75,19 +76,24 @@ def _steps(a) -> list[tuple[str, list[str]]]:
          ("convergence", py + ["eval", "experiment=convergence", "out_dir=results/convergence"]),
          # SShaDe prepared once and solved per frame on animated DeFAUST cases (ANNY's frames), beside Elastic
          ("animation", py + ["eval", "experiment=animation", "out_dir=results/animation"]),
+         # the sweep steps resume as the table steps do: resume=true keeps each job's folder of
+         # the grid and its current rows, each job computes only its stale and missing pairs
+         # (eval.sweeps.sweep_command.claim_sweep_dir)
          ("sweep", py + ["eval.sweeps", "-m", "experiment=sweep", "dataset.limit=2", "sshade.n_low=1000,3000,6000",
-                         "hydra.sweep.dir=results/sweeps/defaust"]),
+                         "resume=true", "hydra.sweep.dir=results/sweeps/defaust"]),
          # ARAP-SR's alpha (Open3D's definition) on the per_pose cases (the dataset's baseline_cases)
          ("sweep_arap_sr_alpha", py + ["eval.sweeps", "-m", "methods=[ARAP-SR]", "reference.cases=none", "jobs=1",
-                                       f"arap_sr.alpha={SR_ALPHAS}", "hydra.sweep.dir=results/sweeps/arap_sr_alpha"])]
+                                       f"arap_sr.alpha={SR_ALPHAS}", "resume=true",
+                                       "hydra.sweep.dir=results/sweeps/arap_sr_alpha"])]
     if neural:  # Implicit-ARAP's cpu preset, its ARAP weight and step count, on DeFAUST's per_pose cases
         s.append(("sweep_implicit_arap", py + ["eval.sweeps", "-m", "methods=[Implicit-ARAP]", "reference.cases=none",
-                                               "jobs=1", *IA_GRID,
+                                               "jobs=1", *IA_GRID, "resume=true",
                                                "hydra.sweep.dir=results/sweeps/implicit_arap_defaust"]))
     if a.faust and neural:  # the same grid on the 8 FAUST cases
         s.append(("sweep_implicit_arap_faust", py + ["eval.sweeps", "-m", "dataset=faust", f"dataset.root={a.faust}",
                                                      "methods=[Implicit-ARAP]", "reference.cases=none", "jobs=1",
-                                                     *IA_GRID, "hydra.sweep.dir=results/sweeps/implicit_arap_faust"]))
+                                                     *IA_GRID, "resume=true",
+                                                     "hydra.sweep.dir=results/sweeps/implicit_arap_faust"]))
     if a.faust:
         s.append(("faust", py + ["eval", "dataset=faust", f"dataset.root={a.faust}", "figures.enabled=true",
                                   "resume=true", "jobs=1", *ia[:1], "out_dir=results/faust"]))
@@ -153,7 +159,9 @@ def main(argv=None) -> int:
     p.add_argument("--only", help="comma-separated step names to run (e.g. faust,tosca); default every step")
     p.add_argument("--check", action="store_true", help="no computation: list every committed row of results/ whose "
                                                          "code identity differs from this checkout's; exit 1 if any")
-    p.add_argument("--json", action="store_true", help="with --check: print {folder: {method: {rows, stale}}}")
+    p.add_argument("--json", action="store_true", help="with --check: print {folder: {method: {rows, stale, "
+                                                        "pending}}}")
+    p.add_argument("--strict", action="store_true", help="with --check: exit 1 on a row marked pending too")
     p.add_argument("--rekey", action="store_true", help="no computation: re-key the records of results/ written "
                                                          "under the earlier key layout, from the commit that made "
                                                          "each (git must have it)")
@@ -162,8 +170,8 @@ def main(argv=None) -> int:
                                                               "change of the tables' layout: python -m eval.tables)")
     p.add_argument("extra", nargs="*", help="extra overrides for the DeFAUST run")
     a = p.parse_args(argv)
-    if a.json and not a.check:
-        p.error("--json goes with --check")
+    if (a.json or a.strict) and not a.check:
+        p.error("--json and --strict go with --check")
     if a.check or a.rekey:
         return run_command(lambda: _rekey(a) if a.rekey else _check(a), where="results/")
     if a.retabulate:
@@ -173,29 +181,40 @@ def main(argv=None) -> int:
 
 def _check(a) -> int:
     """``--check``: every committed row of :data:`RESULTS`, and every folder run whole,
-    held to this checkout's code."""
+    held to this checkout's code. A stale row its tables mark pending (with the commit
+    that made it, :mod:`eval.run.pending_rows`) is counted apart: exit 0 when every row is
+    current or so marked, 1 on an unmarked stale row or a stale folder run whole (and,
+    with ``--strict``, on a row marked pending too)."""
     with CommitTrees() as trees:
-        states = check_folders(run_folders(RESULTS), trees)
+        states = check_folders(run_folders(RESULTS), trees, marked=marked_pending)
         runs = [whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)]
     if a.json:
-        out = {f: {m: {"rows": v["rows"], "stale": v["stale"]} for m, v in ms.items()} for f, ms in states.items()}
-        out.update({str(r.folder): {WHOLE_RUN: {"rows": 1, "stale": int(r.stale)}} for r in runs})
+        out = {f: {m: {"rows": v["rows"], "stale": v["stale"] - v["marked"], "pending": v["marked"]}
+                   for m, v in ms.items()} for f, ms in states.items()}
+        out.update({str(r.folder): {WHOLE_RUN: {"rows": 1, "stale": int(r.stale), "pending": 0}} for r in runs})
         print(json.dumps(out, indent=1, sort_keys=True))
     else:
         for f, ms in states.items():
             for m, v in ms.items():
                 if v["stale"]:
                     whys = "; ".join(f"{w} ({n})" for w, n in sorted(v["why"].items(), key=lambda kv: -kv[1]))
-                    print(f"{f}: {m}: {v['stale']} of {v['rows']} rows stale: {whys}")
+                    kind = "pending (marked in its tables)" if v["marked"] == v["stale"] else \
+                        f"stale ({v['marked']} of them marked pending)"
+                    print(f"{f}: {m}: {v['stale']} of {v['rows']} rows {kind}: {whys}")
         for r in runs:
             if r.stale:
                 print(f"{r.folder}: {WHOLE_RUN} stale: {r.why}")
-    n = sum(v["stale"] for ms in states.values() for v in ms.values())
     rows = sum(v["rows"] for ms in states.values() for v in ms.values())
+    pending = sum(v["marked"] for ms in states.values() for v in ms.values())
+    n = sum(v["stale"] for ms in states.values() for v in ms.values()) - pending
     k = sum(r.stale for r in runs)
-    print(f"{'stale' if n or k else 'current'}: {n} of {rows} committed rows in {len(states)} folders are stale; "
-          f"{k} of {len(runs)} folders run whole", file=sys.stderr if a.json else sys.stdout)
-    return 1 if n or k else 0
+    bad = n or k or (a.strict and pending)
+    word = "stale" if n or k else "pending" if pending else "current"
+    print(f"{word}: {rows - n - pending} of {rows} committed rows in {len(states)} folders are current, "
+          f"{pending} pending (marked in their tables), {n} stale; {k} of {len(runs)} folders run whole stale"
+          + ("; --strict: a pending row fails" if a.strict and pending else ""),
+          file=sys.stderr if a.json else sys.stdout)
+    return 1 if bad else 0
 
 
 def _rekey(a) -> int:
@@ -300,7 +319,9 @@ def _print_plan(selected) -> None:
                     agg[2] += v["stale_s"]
                     for w, n in v["why"].items():
                         agg[3][w] = agg[3].get(w, 0) + n
-            whole = "hydra.sweep.dir" in " ".join(cmd)  # a sweep step runs all its jobs again
+            # a sweep step without resume=true runs all its jobs again; with it, its jobs
+            # reuse their current rows as a table step does (eval.sweeps.sweep_command.claim_sweep_dir)
+            whole = "hydra.sweep.dir" in " ".join(cmd) and "resume=true" not in cmd
             for m, (ok, stale, secs, why) in per.items():
                 words = "; ".join(f"{w} ({n})" for w, n in why.items())
                 head = f"{ok + stale} stored, {stale} stale" if whole else f"{ok} reused, {stale} stale"

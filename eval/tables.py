@@ -23,11 +23,13 @@ from eval.present.stops import PROTOCOL_TEXT, stop_lines
 from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 from eval.run.compared import COMPARED_CSV, SETTINGS
 from eval.run.outdir import refuse_results
+from eval.run.pending_rows import pending_markdown, pending_title, strip_pending
 from eval.run.row_check import check_rows
+from eval.run.stale_rows import CommitTrees, folder_states
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
     import pandas as pd
@@ -389,7 +391,7 @@ def compared_lines(compared: pd.DataFrame | None) -> list[str]:
 
 
 def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: bool = True,
-                 compared: pd.DataFrame | None = None) -> dict[str, Path]:
+                 compared: pd.DataFrame | None = None, pending=()) -> dict[str, Path]:
     """Write ``cases.csv``, ``table.csv``, ``table.md``, ``table.tex`` and, when some
     method has successful cases outside the common set, ``table_all.csv`` into ``out_dir``
     (see the module docstring and :func:`compare`).
@@ -405,6 +407,9 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     :func:`retabulate`). ``compared``: rows read from earlier runs (``compare_with``,
     :mod:`eval.run.compared`), tabulated beside ``df``'s, kept in ``compared.csv`` (not
     in ``cases.csv``, which holds this run's rows only) and listed under the table.
+    ``pending``: the states of the folder's stored rows (:func:`eval.run.stale_rows.folder_states`)
+    when some may be made by older code: the title gives their count and ``table.md`` lists
+    them (:mod:`eval.run.pending_rows`).
 
     Returns
     -------
@@ -438,6 +443,9 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     others = compared_lines(compared)
     if others:
         line += "\n\nRows from other runs:\n\n" + "".join(f"- {x}\n" for x in others)
+    if pending_markdown(pending):
+        line += "\n\n" + pending_markdown(pending)
+    title = pending_title(title, pending)
     paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df),
                                                         checked=line, intervals=case_intervals(df, comp)),
                                     out_dir / "table.md")
@@ -454,14 +462,16 @@ def _written_title(run_dir: Path) -> str | None:
             first = fh.readline(4096).rstrip("\n")
     except OSError:
         return None
-    return first[4:] if first.startswith("### ") and len(first) > 4 else None
+    return strip_pending(first[4:]) if first.startswith("### ") and len(first) > 4 else None
 
 
 def retabulate(run_dir) -> dict[str, Path]:
     """Rebuild the tables of a finished evaluator run from its ``cases.csv`` (e.g. after
     a change of the table layout), without rerunning any method; ``cases.csv`` itself
     is left as it is. The title is the one the run wrote (the first heading of its
-    ``table.md``), else made from its ``run.json`` when present. A breakdown the run wrote
+    ``table.md``), else made from its ``run.json`` when present. Stored rows made by older
+    code (:mod:`eval.run.stale_rows`) are marked pending: counted in the title, listed
+    under the table with their commit (:mod:`eval.run.pending_rows`). A breakdown the run wrote
     (``breakdown.csv``, ``breakdown.md``) is made again too; its figure is kept.
 
     ``python -m eval.tables RUN_DIR [RUN_DIR ...]`` does the same from the shell.
@@ -494,7 +504,9 @@ def retabulate(run_dir) -> dict[str, Path]:
                 title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
         except (OSError, ValueError, AttributeError):
             pass
-    paths = write_tables(df, run_dir, title=title, cases=False, compared=compared)
+    with CommitTrees() as trees:  # the stored rows made by older code are marked pending
+        states = folder_states(run_dir, trees)
+    paths = write_tables(df, run_dir, title=title, cases=False, compared=compared, pending=states)
     if (run_dir / "breakdown.csv").is_file():  # the run wrote its breakdown: made again from the same rows
         paths.update(write_breakdown(df, run_dir, figure=False))
     return paths

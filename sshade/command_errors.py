@@ -24,7 +24,7 @@ __all__ = ["INTERRUPTED", "TERMINATED", "Terminated", "run_command", "os_error_l
 
 INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
-_TMP = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")  # sshade.mesh.io.atomic_write's temporary files
+_TMP = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")  # sshade.files.atomic_write's temporary files
 
 
 def one_line(text) -> str:

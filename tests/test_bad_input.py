@@ -20,7 +20,8 @@ import pytest
 import baselines.fullres_arap
 from baselines import Elastic
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write, read_mesh, write_mesh
+from sshade.files import atomic_write
+from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_handles, validate_mesh
 from tests.conftest import data_file
 

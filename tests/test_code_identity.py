@@ -19,6 +19,7 @@ import pytest
 from eval.run.code_identity import (
     PACKAGES,
     ROW_HARNESS,
+    ROW_REFERENCES,
     code_identity,
     describe_change,
     identity_roots,
@@ -99,9 +100,14 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     assert {"sshade.arap.solver", "sshade.mesh.validate"} <= set(arap)
     # lazy package inits (SPEC 1): importing sshade.arap.solver does not import the pipeline
     assert not {"baselines", "sshade", "sshade.pipeline", "sshade.smooth_transfer", "baselines.arap_sr"} & set(arap)
-    harness = import_closure(ROW_HARNESS)
+    bare = import_closure(ROW_HARNESS)  # a row without reference columns: no reference code, no loader
+    assert {"eval.metrics.measures", "sshade.guard", "eval.datasets.deformation_case"} <= set(bare)
+    assert not {"eval.metrics.reference", "eval.datasets", "eval.datasets.faust", "sshade.mesh.io",
+                "sshade.arap.solver", "eval.experiments"} & set(bare)
+    harness = import_closure(ROW_HARNESS + ROW_REFERENCES)
     assert {"eval.metrics.measures", "eval.metrics.reference", "sshade.guard",
-            "harness.method_registry"} <= set(harness)
+            "harness.method_registry", "sshade.files"} <= set(harness)
+    assert "sshade.mesh.io" not in harness  # writing a file imports no mesh reader
     presentation = {"eval.tables", "eval.report", "eval.present.meshview", "eval.run.plan", "defaust.build",
                     "defaust.export", "eval.reproduce", "eval.app", "eval.run.result_store", "harness.jobs",
                     "eval.experiments.cases.case_jobs"}  # presentation, commands, the store and the runner
@@ -246,3 +252,44 @@ def test_commit_between_two_halves_of_a_run_recomputes_the_first_half(tmp_path, 
     assert "2 stored run(s) recomputed, other code: the project's sources changed" in r.stdout + r.stderr
     keys = {json.loads(p.read_text())["key_fields"]["code"]["sources"] for p in (out / "runs").rglob("*.json")}
     assert len(keys) == 1
+
+
+def _moved_tree(tmp_path, edit_moved=False, drop_used_import=False):
+    """A copy of the checkout where ``sshade.files.atomic_write`` moved (back) into a new
+    module ``sshade.files_moved`` and ``defaust/store.py`` imports it from there."""
+    tree = _tree_copy(tmp_path / "tree")
+    files = (tree / "sshade" / "files.py").read_text()
+    head, _, rest = files.partition("@contextlib.contextmanager")
+    body, _, tail = rest.partition("def inside_folder(")
+    (tree / "sshade" / "files.py").write_text(head + "from .files_moved import atomic_write\n\n\ndef inside_folder("
+                                              + tail)
+    moved = "import contextlib\nimport os\nimport tempfile\nfrom pathlib import Path\n\n\n@contextlib.contextmanager" \
+        + body
+    if edit_moved:
+        moved = moved.replace("os.replace(tmp, path)", "os.replace(tmp, str(path))")
+    (tree / "sshade" / "files_moved.py").write_text(moved)
+    store = tree / "defaust" / "store.py"
+    store.write_text(store.read_text().replace("from sshade.files import atomic_write",
+                                               "from sshade.files_moved import atomic_write"))
+    if drop_used_import:
+        ref = tree / "eval" / "metrics" / "reference.py"
+        ref.write_text(ref.read_text().replace("import hashlib\n", ""))
+    return tree
+
+
+def test_a_definition_moved_to_a_new_module_is_the_same_code(tmp_path):
+    """same_code: a function moved into a new module, its old module importing it back and
+    another module importing it from its new home, is no change; an edit of the moved
+    function, or a removed import its module still uses, is one."""
+    from eval.run.code_identity import modules_digest, modules_digest_at, same_code
+    here = str(ROOT)
+    tree = _moved_tree(tmp_path)
+    for m in ("sshade.files", "sshade.files_moved"):
+        assert same_code(m, ROOT, str(tree))  # the checkout is the "commit", the copy its future
+    mods = ("sshade.files", "sshade.errors")
+    assert modules_digest_at(mods, ROOT, here) == modules_digest(mods, here)
+    edited = _moved_tree(tmp_path / "e", edit_moved=True)
+    assert not same_code("sshade.files_moved", ROOT, str(edited))
+    dropped = _moved_tree(tmp_path / "d", drop_used_import=True)
+    assert not same_code("eval.metrics.reference", ROOT, str(dropped))
+    assert same_code("defaust.store", ROOT, str(tree))  # an import from elsewhere, the same definition

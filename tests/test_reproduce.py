@@ -64,6 +64,8 @@ def test_every_experiment_with_folders_and_figures(capsys):
                 "--mesh M=M.obj --out results/frames" if name == "frames" else
                 "cold_start.py --out results/cold_start" if name == "cold_start" else f"out_dir=results/{name}")
         assert want in cmd, name
+        if name in sweeps:  # a sweep step resumes: each job reuses its current rows (eval/sweeps/sweep_command.py)
+            assert f"resume=true {want}" in cmd, name
     assert "tosca.root=T" in steps["tosca"] and "scaling.base_mesh=M.obj" in steps["scaling"]
     assert "scaling.meshes=null" in steps["scaling"]  # one mesh instead of the set
     every = _steps(capsys, "--scaling", "set")
@@ -102,8 +104,8 @@ def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(caps
 
 def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_method(capsys):
     """Before the first step: per step and method, the committed rows it reuses and those
-    stale (none at this checkout: ``--check`` passes); a sweep step says it computes
-    every row again; a step without stored rows runs whole, and its committed output is
+    stale (none at this checkout: ``--check`` passes); a sweep step resumes as a table
+    step does (``resume=true``); a step without stored rows runs whole, and its committed output is
     current at the commit that made it (:mod:`eval.run.stale_runs`)."""
     assert main(["--dry-run", "--faust", "F", "--only", "faust,sweep,convergence"]) == 0
     out = capsys.readouterr().out.splitlines()
@@ -112,7 +114,7 @@ def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_metho
     assert plan[0].startswith("plan: stored rows reused and stale")
     for m in ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe"):
         assert f"faust: {m}: 8 reused, 0 stale" in plan
-    assert "sweep: SShaDe: 18 stored, 0 stale; a sweep step computes every row again" in plan
+    assert "sweep: SShaDe: 18 reused, 0 stale" in plan
     made = json.loads((ROOT / "results" / "convergence" / "run.json").read_text())["git"]["commit"]
     assert f"convergence: no stored rows; the step runs whole (its output: current at {made[:7]})" in plan
 
@@ -120,8 +122,8 @@ def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_metho
 def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(capsys):
     assert main(["--check", "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
-    assert got["results/faust"]["SShaDe"] == {"rows": 8, "stale": 0}
-    assert got["results/convergence"] == got["results/frames"] == {"whole run": {"rows": 1, "stale": 0}}
+    assert got["results/faust"]["SShaDe"] == {"rows": 8, "stale": 0, "pending": 0}
+    assert got["results/convergence"] == got["results/frames"] == {"whole run": {"rows": 1, "stale": 0, "pending": 0}}
     assert sum(v["rows"] for ms in got.values() for v in ms.values()) >= 600
     import pytest
     with pytest.raises(SystemExit) as e:

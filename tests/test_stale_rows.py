@@ -19,12 +19,22 @@ import pytest
 
 from eval.run.code_identity import PACKAGES
 from eval.run.result_store import STORE_VERSION, ResultStore, pair_key, record_digest
-from eval.run.stale_rows import REKEY_FROM, CommitTrees, check_folders, rekey_record, row_state, run_folders
+from eval.run.stale_rows import (
+    REKEY_FROM,
+    CommitTrees,
+    check_folders,
+    record_paths,
+    references_on,
+    rekey_record,
+    row_state,
+    run_folders,
+)
 
 from .conftest import ROOT, edit_syntax_tree, subprocess_env
 
-#: a commit whose results/faust records are of store version 3, made by 3e79476's code
-OLD = "8d866e5"
+#: a commit whose results/faust records are of store version 4 (the identity with every
+#: loader and the reference code in every row), made by 3e79476's code (ARAP) and c449109's (SShaDe)
+OLD = "79d1940"
 OLD_RECORD = "results/faust/runs/s0_p1/{}.json"
 
 
@@ -46,13 +56,14 @@ def _old_store(tmp_path, *methods):
 
 
 def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
-    """ARAP's and SShaDe's s0_p1 records of 3e79476 re-keyed: rows kept bit for bit, keys
-    their new key fields' digests, the data folder out of the case identity; ARAP's is
-    current (its code is the same at this checkout); SShaDe's new identity is computed from
-    its own commit's sources, so it is stale since SShaDe's transfer changed after it."""
+    """ARAP's and SShaDe's s0_p1 records of store version 4 re-keyed: rows kept bit for
+    bit, keys their new key fields' digests, the loaders (eval.datasets' package) out of
+    the identity; both current at this checkout; an edit of SShaDe's transfer in a copy
+    of the checkout then stales SShaDe's and not ARAP's, naming the module and commit."""
     out = _old_store(tmp_path, "ARAP", "SShaDe")
     before = {m: json.loads((out / "runs" / "s0_p1" / f"{m}.json").read_text()) for m in ("ARAP", "SShaDe")}
     assert {r["version"] for r in before.values()} == {REKEY_FROM}
+    assert all("eval.datasets.faust" in r["key_fields"]["code"]["modules"] for r in before.values())
     with CommitTrees() as trees:
         assert {m: rekey_record(out, out / "runs" / "s0_p1" / f"{m}.json", trees) for m in before} == \
             {"ARAP": "rekeyed", "SShaDe": "rekeyed"}
@@ -61,15 +72,22 @@ def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
             rec = found.record
             assert found.why is None and rec["version"] == STORE_VERSION
             assert rec["row"] == old["row"] and rec["info"] == old["info"] and rec["git"] == old["git"]
-            assert "root" not in rec["key_fields"]["case"]  # the data folder is no part of the key any more
+            loaders = {"eval.datasets", "eval.datasets.faust", "sshade.mesh.io"}
+            assert not loaders & set(rec["key_fields"]["code"]["modules"])
             assert pair_key(rec["key_fields"]["method"], rec["key_fields"]["case"], rec["key_fields"]["extra"],
                             rec["key_fields"]["code"])[0] == rec["key"]
             assert rec["rekeyed"] == {"from_version": REKEY_FROM, "from_key": old["key"],
                                       "commit": old["git"]["commit"]}
-        assert not row_state(out, ResultStore(out).read("s0_p1", "ARAP").record, trees).stale
-        sshade = row_state(out, ResultStore(out).read("s0_p1", "SShaDe").record, trees)
-        assert sshade.stale and "sshade.smooth_transfer changed since 3e79476" in sshade.why
+            assert not row_state(out, rec, trees).stale
         assert rekey_record(out, out / "runs" / "s0_p1" / "ARAP.json", trees) == "current"  # idempotent
+        tree = tmp_path / "tree"
+        for d in PACKAGES:
+            shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
+        edit_syntax_tree(tree / "sshade" / "smooth_transfer.py")
+        arap, sshade = (row_state(out, ResultStore(out).read("s0_p1", m).record, trees, str(tree))
+                        for m in ("ARAP", "SShaDe"))
+        assert not arap.stale
+        assert sshade.stale and sshade.why == "sshade.smooth_transfer changed since c449109"
 
 
 def _resign(rec: dict) -> dict:
@@ -99,6 +117,12 @@ def test_rekey_refuses_what_it_cannot_verify_and_leaves_the_file(tmp_path, edit,
     assert path.read_text() == text
 
 
+def _reproduce(tree, *args):
+    env = dict(subprocess_env(), PYTHONPATH=str(tree))
+    return subprocess.run([sys.executable, "-m", "eval.reproduce", *args], cwd=tree, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
 def _check_json(tree):
     env = dict(subprocess_env(), PYTHONPATH=str(tree))
     r = subprocess.run([sys.executable, "-m", "eval.reproduce", "--check", "--json"], cwd=tree, env=env,
@@ -109,20 +133,39 @@ def _check_json(tree):
 def test_an_edit_of_sshade_transfer_makes_only_sshade_rows_stale(tmp_path):
     """``--check --json`` in a copy of the checkout with results/faust: current (exit 0);
     after an edit of sshade/smooth_transfer.py's syntax tree, SShaDe's 8 rows are stale
-    and no ARAP, Elastic, ARAP-SR or Implicit-ARAP row is (exit 1)."""
+    and no ARAP, Elastic, ARAP-SR or Implicit-ARAP row is (exit 1); ``--retabulate`` marks
+    them pending in the table (title count, one line each with its commit): ``--check``
+    exits 0, ``--check --strict`` 1; with the code back, the marks go."""
     tree = tmp_path / "tree"
     for d in (*PACKAGES, "conf"):
         shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copytree(ROOT / "results" / "faust", tree / "results" / "faust")
+    shutil.copy(ROOT / "pyproject.toml", tree)  # a checkout: its conf/ is the configs' (harness.confdir)
     rc, got, err = _check_json(tree)
     assert rc == 0, err
     assert {m: v["stale"] for m, v in got["results/faust"].items()} == \
         {"ARAP": 0, "Elastic": 0, "ARAP-SR": 0, "Implicit-ARAP": 0, "SShaDe": 0}
     edit_syntax_tree(tree / "sshade" / "smooth_transfer.py")
     rc, got, err = _check_json(tree)
-    assert rc == 1 and "stale: 8 of 40" in err
+    assert rc == 1 and "0 pending (marked in their tables), 8 stale" in err
     assert {m: v["stale"] for m, v in got["results/faust"].items()} == \
         {"ARAP": 0, "Elastic": 0, "ARAP-SR": 0, "Implicit-ARAP": 0, "SShaDe": 8}
+    # the tables rebuilt mark the 8 rows pending: --check passes, --check --strict does not
+    table = tree / "results" / "faust" / "table.md"
+    before = table.read_text().splitlines()
+    r = _reproduce(tree, "--retabulate")
+    assert r.returncode == 0, r.stderr
+    text = table.read_text()
+    assert text.splitlines()[0] == before[0] + " (32 of 40 rows made by this commit's code; 8 pending from c449109)"
+    assert text.count("`SShaDe`: made at c449109; ") == 8  # the copy is no git clone: why says so
+    rc, got, err = _check_json(tree)
+    assert rc == 0 and "32 of 40 committed rows in 1 folders are current, 8 pending" in err, err
+    assert got["results/faust"]["SShaDe"] == {"rows": 8, "stale": 0, "pending": 8}
+    assert _reproduce(tree, "--check", "--strict").returncode == 1
+    (tree / "sshade" / "smooth_transfer.py").write_text((ROOT / "sshade" / "smooth_transfer.py").read_text())
+    assert _reproduce(tree, "--retabulate").returncode == 0  # current again: the marks are gone
+    assert table.read_text().splitlines()[0] == before[0] and "made at" not in table.read_text()
+    assert _reproduce(tree, "--check", "--strict").returncode == 0
 
 
 def test_committed_results_are_current_at_this_checkout():
@@ -142,3 +185,55 @@ def test_run_folders_finds_stores_and_enters_no_link(tmp_path):
     os.symlink(tmp_path / "outside", tmp_path / "a" / "link")
     assert run_folders(tmp_path) == [tmp_path / "a", tmp_path / "outside", tmp_path / "sweeps" / "0"]
     assert run_folders(tmp_path / "a") == [tmp_path / "a"]
+
+
+@pytest.fixture(scope="module")
+def committed_records(tmp_path_factory):
+    """The committed records of results/ (their ``runs/`` folders only), copied once."""
+    dst = tmp_path_factory.mktemp("records") / "results"
+    for folder in run_folders(ROOT / "results"):
+        rel = folder.relative_to(ROOT / "results")
+        shutil.copytree(folder / "runs", dst / rel / "runs")
+    return dst
+
+
+def _stale_after_edit(tmp_path, records, path: str) -> dict[str, int]:
+    """``{method: stale rows}`` of the committed records held to a copy of the checkout
+    whose file ``path`` has one module-level statement more (as benchmarks/identity_cost.py)."""
+    tree = tmp_path / "tree"
+    for d in PACKAGES:
+        shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
+    with open(tree / path, "a") as fh:
+        fh.write("\n_PROBE_EDIT = object()\n")
+    out: dict[str, int] = {}
+    with CommitTrees() as trees:
+        for ms in check_folders(run_folders(records), trees, str(tree)).values():
+            for m, v in ms.items():
+                out[m] = out.get(m, 0) + v["stale"]
+    return out
+
+
+def _with_references(records, method: str) -> int:
+    return sum(1 for f in run_folders(records) for _, p in record_paths(f)
+               if p.stem == method and references_on(json.loads(p.read_text())["key_fields"]))
+
+
+@pytest.mark.parametrize("path, allowed", [
+    ("eval/datasets/__init__.py", {}),  # a loader's package: no row runs it
+    ("sshade/mesh/io.py", {"SShaDe": None}),  # the mesh reader: no baseline row runs it
+    ("sshade/arap/solver.py", {"ARAP": None, "Elastic": None, "ARAP-SR": None, "SShaDe": None,
+                               "Implicit-ARAP": "references"}),
+    ("baselines/implicit_arap/method.py", {"Implicit-ARAP": None}),
+])
+def test_an_edit_stales_only_the_rows_whose_code_it_is(tmp_path, committed_records, path, allowed):
+    """A module-level edit stales only the committed rows that run the module: none for the
+    dataset package, no baseline's for the mesh reader, of Implicit-ARAP only the rows with
+    reference columns for the shared solver, no other method's for Implicit-ARAP's own module."""
+    got = _stale_after_edit(tmp_path, committed_records, path)
+    for m, n in got.items():
+        bound = allowed.get(m, 0)
+        if bound == "references":
+            bound = _with_references(committed_records, m)
+        assert bound is None or n <= bound, (m, n, bound)
+    if path.startswith("baselines/implicit_arap"):
+        assert got["Implicit-ARAP"] > 0  # the edit is seen where it belongs

@@ -23,8 +23,9 @@ import numpy as np
 
 from defaust.store import sha256_file
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_bounded
-from sshade.mesh.io import atomic_write, write_mesh
+from sshade.mesh.io import write_mesh
 
 __all__ = ["FORMAT", "INDEX", "CASE_FILES", "RESULT_EXTS", "TIMES_COLUMNS", "MAX_TIMES_BYTES", "MAX_TIME_S",
            "ReportedRun", "machine_text", "write_case",

@@ -42,7 +42,7 @@ from harness.method_registry import method_meta
 from sshade import SShaDe, prepare
 from sshade.arap import ArapDeformer
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 
 __all__ = ["AnimationConfig", "run_animation", "jitter_pct", "TRUTH_TOL_M"]
 

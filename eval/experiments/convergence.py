@@ -32,7 +32,7 @@ from sshade import deform
 from sshade.arap import rigid_fit, solve_arap
 from sshade.arap.problems import lifted_plane
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 from sshade.pipeline import effective_params
 
 __all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to"]

@@ -31,8 +31,9 @@ from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions
 from harness.checks import config_int_list
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.isometric import pose_transfer, rigid_align
-from sshade.mesh.io import atomic_write, read_mesh
+from sshade.mesh.io import read_mesh
 from sshade.pipeline import SShaDe
 from sshade.sampling import sampling_seeds
 

@@ -38,8 +38,9 @@ from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
 from eval.tables import ok_mask
 from harness.checks import config_int_list, config_number
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.isometric import isometric_transfer
-from sshade.mesh.io import atomic_write, read_mesh
+from sshade.mesh.io import read_mesh
 from sshade.pipeline import SShaDe, auto_n_low
 from sshade.sampling import sampling_seeds
 

@@ -35,7 +35,7 @@ from sshade.arap import (
     solve_arap_sr,
 )
 from sshade.errors import SShaDeError
-from sshade.mesh.io import inside_folder
+from sshade.files import inside_folder
 
 __all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
            "reference_solution", "reference_metrics",

@@ -18,7 +18,7 @@ from eval.present.figures import distribution_figure, safe_figure
 from eval.present.intervals import CI, bootstrap_ci, interval_text, interval_words
 from eval.present.measures import BROKEN_DOWN, label
 from eval.present.rows import method_order_key, ok_mask
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 from sshade.pipeline import SShaDe
 
 __all__ = ["BREAKDOWN_METRICS", "group_breakdown", "paired_comparison", "breakdown_markdown", "write_breakdown"]

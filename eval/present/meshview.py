@@ -21,8 +21,8 @@ from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.spec import ReportOptions
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write
 
 __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
            "cluster_positions", "cluster_means", "vertex_edge_error", "case_view",

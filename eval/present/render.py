@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 from sshade.mesh.validate import check_arrays
 
 __all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "png_text", "set_png_text",

@@ -13,6 +13,7 @@ Example::
 from __future__ import annotations
 
 import ast
+import copy
 import functools
 import hashlib
 import inspect
@@ -22,17 +23,22 @@ from pathlib import Path
 
 from eval.run.runinfo import REPO_ROOT
 
-__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "RECORD_ONLY", "code_text", "sources_digest", "project_modules",
-           "import_closure", "closure_constants", "file_imports", "modules_digest", "numerical_versions",
+__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "ROW_REFERENCES", "RECORD_ONLY", "code_text", "sources_digest",
+           "project_modules", "import_closure", "closure_constants", "file_imports", "modules_digest", "same_code",
+           "modules_digest_at", "numerical_versions",
            "identity_roots", "code_identity", "describe_change"]
 
 #: The project's packages whose source makes a row (every floor of the house: the method,
 #: the harness's shared tools, the baselines and the builder, the evaluator).
 PACKAGES = ("sshade", "harness", "baselines", "defaust", "eval")
 
-#: The modules that make a stored row besides the method: the pair runner (the guarded
-#: call, the metrics, the info columns) and the reference columns.
-ROW_HARNESS = ("eval.experiments.cases.pair", "eval.experiments.cases.case_references")
+#: The modules that make every stored row besides the method: the pair runner (the
+#: guarded call, the metrics, the info columns).
+ROW_HARNESS = ("eval.experiments.cases.pair",)
+
+#: The modules that make a row's reference columns, part of the identity of the rows
+#: that have them only (``key_fields.extra.reference.on``).
+ROW_REFERENCES = ("eval.experiments.cases.case_references",)
 
 #: The modules (and packages, with everything under them) that only store, run or present
 #: records: the ground floor (record format, options, paths, progress, run records), the
@@ -263,6 +269,8 @@ def _imports(name: str, path: Path, mods: Mapping) -> tuple[set[str], set[str]]:
         elif isinstance(node, ast.ImportFrom):
             mod = _from_module(pkg, node)
             found.update(f"{mod}.{a.name}" for a in node.names)
+            # a module bound by name (``from eval import datasets``): its attributes are followed too
+            bound.update({a.asname or a.name: f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in mods})
     found |= _attribute_names(tree, bound)
     modules, constants = set(), set()
     for x in found:
@@ -382,6 +390,141 @@ def modules_digest(modules, root: str | None = None, constants=()) -> str:
     return h.hexdigest()
 
 
+def _bound_names(node: ast.stmt) -> tuple[str, ...]:
+    """The names a top-level statement binds when it is a definition (a function, a class,
+    an assignment to plain names), else ``()``."""
+    if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+        return (node.name,)
+    if isinstance(node, (ast.Assign, ast.AnnAssign)) and getattr(node, "value", None) is not None:
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        if all(isinstance(t, ast.Name) for t in targets):
+            return tuple(t.id for t in targets)
+    return ()
+
+
+@functools.lru_cache(maxsize=1024)
+def _parts(path: str, mtime_ns: int, size: int, pkg: str) -> tuple[tuple, tuple, frozenset]:
+    """``(statements, bindings, used)`` of the module file ``path`` in package ``pkg``:
+    each top-level statement but its imports and ``__all__`` as ``(names it defines,
+    ast.dump)`` (docstrings left out, as :func:`code_text`), in order; ``(name, absolute
+    dotted source)`` of each name its top-level imports bind; every name it reads or
+    writes. Cached by file, modification time and size."""
+    tree = _strip_docstrings(copy.deepcopy(_parse(path, mtime_ns, size)))
+    stmts, binds = [], []
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            binds += [(a.asname or a.name.split(".")[0], a.name if a.asname else a.name.split(".")[0])
+                      for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            binds += [(a.asname or a.name, f"{_from_module(pkg, node)}.{a.name}") for a in node.names]
+        elif _bound_names(node) != ("__all__",):  # __all__ lists names, it runs nothing
+            stmts.append((_bound_names(node), ast.dump(node, include_attributes=False)))
+    used = frozenset(n.id for n in ast.walk(tree) if isinstance(n, ast.Name))
+    return tuple(stmts), tuple(binds), used
+
+
+def _module_parts(name: str, mods: Mapping) -> tuple[list, dict[str, str], frozenset]:
+    """:func:`_parts` of project module ``name`` of ``mods``, its bindings as a dict."""
+    path = mods[name]
+    st = path.stat()
+    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    stmts, binds, used = _parts(str(path), st.st_mtime_ns, st.st_size, pkg)
+    return list(stmts), dict(binds), used
+
+
+def _definition(dotted: str, mods: Mapping) -> tuple[str, str]:
+    """What an imported dotted name means in the project ``mods``: ``("module", name)``
+    for a project module, ``("def", ast.dump)`` of the top-level statement of the
+    defining module that binds it (:func:`_locate`; docstrings left out), or
+    ``("name", dotted)`` outside the project (or where no such statement is found)."""
+    found = _locate(dotted, mods)
+    if found is None:
+        return "name", dotted
+    module, rest = found
+    if not rest and module.rpartition(".")[2] != dotted.rpartition(".")[2]:
+        rest = [dotted.rpartition(".")[2]]  # a name a lazy package binds (_locate gives its module)
+    if not rest:
+        return "module", module
+    for names, dump in _module_parts(module, mods)[0]:
+        if rest[0] in names:
+            return "def", dump
+    return "name", f"{module}.{'.'.join(rest)}"
+
+
+def _moved(stmts, binds: dict, mods: Mapping) -> list:
+    """The definitions of ``stmts`` that the other side binds by import instead
+    (``binds``, resolved in ``mods``) to the very same statement: moved to another module."""
+    return [s for s in stmts if s[0] and all(n in binds and _definition(binds[n], mods) == ("def", s[1])
+                                             for n in s[0])]
+
+
+def same_code(name: str, tree, root: str | None = None) -> bool:
+    """Whether project module ``name`` of the checkout ``root`` runs the same code as the
+    sources under ``tree`` (a commit's, :mod:`eval.run.stale_rows`): its :func:`code_text`
+    is the same there; or its statements are those there, in order, but for
+    definitions that moved between it and another module (one side defines a name, the
+    other imports the very same definition: :func:`_definition`), each name its imports
+    bind means the same there, and an import it no longer has binds a name it does not
+    use; or, a new module, each of its definitions is word for word one of the code
+    there, and each name it imports is bound to the same definition there. A move is not
+    a change; anything else is."""
+    now, then = project_modules(root), project_modules(str(tree))
+    if name not in now:
+        return False
+    if name in then and code_text(then[name]) == code_text(now[name]):
+        return True
+    stmts, binds, used = _module_parts(name, now)
+    if name not in then:
+        return _new_module_moved(stmts, binds, now, then)
+    old, old_binds, _ = _module_parts(name, then)
+    out_, in_ = _moved(old, binds, now), _moved(stmts, old_binds, then)
+    if [s for s in old if s not in out_] != [s for s in stmts if s not in in_]:
+        return False
+    moved_names = {n for s in out_ + in_ for n in s[0]}
+    if any(n not in moved_names and (n not in old_binds or _definition(b, now) != _definition(old_binds[n], then))
+           for n, b in binds.items()):
+        return False
+    return all(n in binds or n in moved_names or n not in used for n in old_binds)
+
+
+def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
+    """Whether a module new since the sources ``then`` only holds definitions moved there
+    from them (:func:`same_code`): each statement a definition found word for word in
+    one of ``then``'s modules, each import binding what such a module binds by that name."""
+    if not stmts or any(not s[0] for s in stmts):
+        return False
+    sources = {m for m in then if set(stmts) & set(_module_parts(m, then)[0])}
+    if not set(stmts) <= {s for m in sources for s in _module_parts(m, then)[0]}:
+        return False
+    meanings = {}
+    for m in sources:
+        old, old_binds, _ = _module_parts(m, then)
+        meanings.update({n: _definition(b, then) for n, b in old_binds.items()})
+        meanings.update({n: ("def", d) for names, d in old for n in names})
+    return all(meanings.get(n) == _definition(b, now) for n, b in binds.items())
+
+
+def modules_digest_at(modules, tree, root: str | None = None, constants=()) -> str:
+    """:func:`modules_digest` of the ``modules`` and ``constants`` of the checkout ``root``
+    with their code as under ``tree`` (a commit's sources): each module that runs the
+    same code there (:func:`same_code`, a move included) counts as it is in ``root``,
+    any other as it is under ``tree``; equal to ``modules_digest(modules, root,
+    constants)`` exactly when no module and no constant differs. Raises KeyError naming
+    a module missing under ``tree`` (and not moved there)."""
+    base, old_base = (Path(root) if root is not None else REPO_ROOT), Path(tree)
+    now, then, h = project_modules(root), project_modules(str(tree)), hashlib.sha256()
+    for m in sorted(modules):
+        path, rel = (now[m], now[m].relative_to(base)) if same_code(m, tree, root) else \
+            (then[m], then[m].relative_to(old_base))
+        h.update(str(rel).encode() + b"\0")
+        h.update(code_text(path) + b"\0")
+    for c in sorted(constants):
+        m, _, attr = c.rpartition(".")
+        value = _literal(m, attr, then) if m in then else None
+        h.update(f"{c}={value}".encode() + b"\0")
+    return h.hexdigest()
+
+
 def _targets(spec) -> list[str]:
     """Every ``_target_`` string in a method definition (nested mappings and lists too)."""
     if isinstance(spec, Mapping):
@@ -418,33 +561,35 @@ def _plugin_digest(method) -> str | None:
         return "unknown"
 
 
-def identity_roots(spec: Mapping | None) -> tuple[str, ...]:
-    """The modules a row's identity starts from (sorted): :data:`ROW_HARNESS`, and for a
+def identity_roots(spec: Mapping | None, references: bool = True) -> tuple[str, ...]:
+    """The modules a row's identity starts from (sorted): :data:`ROW_HARNESS`, with
+    ``references`` (the row has reference columns) :data:`ROW_REFERENCES`, and for a
     method's resolved definition ``spec`` (as stored in a record's key, :mod:`eval.run.result_store`)
     the dotted names of its ``class`` and of every ``_target_`` in it (nested ones too),
     which :func:`import_closure` resolves to the modules defining them.
 
-    >>> identity_roots({"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP"})[:2]
-    ('baselines.ARAP', 'baselines.fullres_arap.ARAP')
+    >>> identity_roots({"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP"}, False)
+    ('baselines.ARAP', 'baselines.fullres_arap.ARAP', 'eval.experiments.cases.pair')
     """
-    roots = list(ROW_HARNESS)
+    roots = list(ROW_HARNESS) + (list(ROW_REFERENCES) if references else [])
     if isinstance(spec, Mapping):
         roots += [spec["class"]] if isinstance(spec.get("class"), str) else []
         roots += _targets(spec)  # resolved through lazy packages: "baselines.ARAPSR" -> baselines.arap_sr
     return tuple(sorted({r for r in roots if r}))
 
 
-def code_identity(method, spec=None, *, root: str | None = None) -> dict:
+def code_identity(method, spec=None, *, references: bool = True, root: str | None = None) -> dict:
     """The code identity of ``method``'s rows (module docstring): ``{"sources": hex,
     "modules": [dotted names], "constants": ["module.NAME"], "versions": {dist: version},
     "plugin": hex or None}`` (``sources``: :func:`modules_digest` of the modules and constants).
     ``method``: the built method object, or None for the harness alone (``plugin``
     None); ``spec``: its resolved definition (:func:`identity_roots`; without a ``class``
-    the method's own module is taken); ``root`` as in :func:`project_modules`."""
+    the method's own module is taken); ``references``: of the rows with reference
+    columns (:data:`ROW_REFERENCES`); ``root`` as in :func:`project_modules`."""
     spec = dict(spec or {})
     if method is not None and "class" not in spec:
         spec["class"] = f"{type(method).__module__}.{type(method).__qualname__}"
-    roots = identity_roots(spec)
+    roots = identity_roots(spec, references)
     mods, consts = import_closure(roots, root), closure_constants(roots, root)
     return {"sources": modules_digest(mods, root, consts), "modules": list(mods), "constants": list(consts),
             "versions": dict(numerical_versions()), "plugin": None if method is None else _plugin_digest(method)}

@@ -27,8 +27,8 @@ from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.runinfo import git_info
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write, inside_folder
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write, inside_folder
 
 __all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "case_identity", "pair_key",
            "check_row", "cell_problem", "record_digest", "numeric_column"]
@@ -39,7 +39,7 @@ log = logging.getLogger("eval")
 #: records (:data:`eval.run.code_identity.RECORD_ONLY`) write or key changes: their source is
 #: not part of a row's code identity, this number is (an older record is then stale, or re-keyed
 #: by ``python -m eval.reproduce --rekey`` where git still has the code that made it)
-STORE_VERSION = 4
+STORE_VERSION = 5
 STORE_DIR = "runs"  #: the store's folder inside out_dir
 
 

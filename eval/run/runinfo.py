@@ -22,8 +22,8 @@ from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write
 
 __all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "read_runinfo", "effective_params",
            "source_record", "departures", "register_departures", "collect_runinfo", "write_runinfo"]

@@ -4,10 +4,10 @@ A stored row (:mod:`eval.run.result_store`) is current when its record is of thi
 version and its code identity's ``sources`` equal what
 :func:`eval.run.code_identity.code_identity` gives for its method at this checkout (the
 numerical libraries' versions are this machine's, not the code's: they are reported, not
-judged here). A record written under an earlier key layout (store version 3) is re-keyed,
-never recomputed, when git has the commit its ``git`` names and that commit's sources give
-its old identity: its new identity is computed from that commit's sources, for the
-modules its method's identity is made of now.
+judged here). A record keyed under earlier identity rules (store version 4, or this one)
+is re-keyed, never recomputed, when git has the commit its ``git`` names and that commit's
+sources give its recorded identity: its new identity is computed from that commit's
+sources, for the modules its method's identity is made of now.
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 """
 from __future__ import annotations
@@ -25,11 +25,11 @@ from pathlib import Path
 from eval.run.code_identity import (
     PACKAGES,
     closure_constants,
-    code_text,
     identity_roots,
     import_closure,
     modules_digest,
-    project_modules,
+    modules_digest_at,
+    same_code,
 )
 from eval.run.result_store import STORE_DIR, STORE_VERSION, ResultStore, check_row, pair_key, record_digest
 from eval.run.runinfo import REPO_ROOT
@@ -37,15 +37,17 @@ from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 
 __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "changed_since", "row_state",
-           "check_folders", "rekey_record"]
+           "check_folders", "rekey_record", "references_on",
+           "folder_states"]
 
 #: The folders of scripts whose runs are held to their code besides the packages
 #: (:mod:`eval.run.stale_runs`): extracted with them.
 SCRIPTS = ("benchmarks",)
 
-#: The store version whose records :func:`rekey_record` converts (the layout before the
-#: case identity left out the data folder and the identity followed only the code a row runs).
-REKEY_FROM = 3
+#: The store version whose records :func:`rekey_record` converts besides this one's (the
+#: layout before a row's identity left out the reference columns' code where it has none,
+#: and the loaders, through the lazy dataset and experiment packages).
+REKEY_FROM = 4
 
 
 class CommitTrees:
@@ -134,16 +136,26 @@ def _read_json(p: Path):
         return None
 
 
-def _now(spec, root: str | None = None) -> tuple[tuple, tuple]:
-    roots = identity_roots(spec)
+def references_on(fields) -> bool:
+    """Whether a record's key fields ``fields`` say its row has reference columns
+    (``extra.reference.on``; a record of unknown shape counts as having them)."""
+    extra = fields.get("extra") if isinstance(fields, dict) else None
+    ref = extra.get("reference") if isinstance(extra, dict) else None
+    return not isinstance(ref, dict) or ref.get("on") is not False
+
+
+def _now(fields, root: str | None = None) -> tuple[tuple, tuple]:
+    """``(modules, constants)`` of the identity of a record with key fields ``fields`` at the checkout ``root``."""
+    spec = fields.get("method") if isinstance(fields, dict) else None
+    roots = identity_roots(spec, references_on(fields))
     return import_closure(roots, root), closure_constants(roots, root)
 
 
 def changed_since(mods, consts, tree: Path, root: str | None = None) -> list[str]:
     """The modules (and constants) of ``mods``/``consts`` whose code differs between the
-    sources under ``tree`` and the checkout ``root``."""
-    then, now = project_modules(str(tree)), project_modules(root)
-    out = [m for m in mods if m not in then or code_text(then[m]) != code_text(now[m])]
+    sources under ``tree`` and the checkout ``root`` (a definition moved is no change:
+    :func:`eval.run.code_identity.same_code`)."""
+    out = [m for m in mods if not same_code(m, tree, root)]
     out += [c for c in consts if modules_digest((), str(tree), (c,)) != modules_digest((), root, (c,))]
     return out
 
@@ -166,7 +178,7 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
     if code.get("plugin") is not None:
         st.why = "a plug-in's row: its source lies outside this repository (not checked)"
         return st
-    mods, consts = _now(fields.get("method"), root)
+    mods, consts = _now(fields, root)
     if code.get("sources") == modules_digest(mods, root, consts):
         return st
     st.stale = True
@@ -201,41 +213,71 @@ def _valid(folder, p: Path) -> tuple[dict | None, str]:
     return (None, f"invalid: {bad}") if bad else (rec, "")
 
 
-def check_folders(folders, trees: CommitTrees, root: str | None = None) -> dict[str, dict[str, dict]]:
-    """``{folder: {method: {"rows": n, "stale": k, "why": {why: count}, "stale_s": s}}}``
-    for every record of every folder in ``folders`` (:func:`row_state`; an invalid
-    record counts as stale, with why; ``stale_s``: the stored seconds of the stale rows,
-    the time their recomputation is estimated at); ``root``: the checkout whose code
-    the rows are held to (default: this one)."""
+def folder_states(folder, trees: CommitTrees, root: str | None = None) -> list[RowState]:
+    """The :class:`RowState` of every record of ``folder``'s store (:func:`row_state`; an
+    invalid record is stale, with why), in :func:`record_paths` order; ``root``: the
+    checkout whose code the rows are held to (default: this one)."""
+    out = []
+    for case_dir, p in record_paths(folder):
+        rec, bad = _valid(folder, p)
+        out.append(row_state(folder, rec, trees, root) if rec else RowState(Path(folder), case_dir, p.stem, True, bad))
+    return out
+
+
+def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=None) -> dict[str, dict[str, dict]]:
+    """``{folder: {method: {"rows": n, "stale": k, "marked": j, "why": {why: count},
+    "stale_s": s}}}`` for every record of every folder in ``folders`` (:func:`folder_states`;
+    ``stale_s``: the stored seconds of the stale rows, the time their recomputation is
+    estimated at; ``marked``: of the stale rows, those its tables mark pending, as
+    ``marked(folder)`` says, a set of ``(case, method, commit[:7])``; none without it);
+    ``root``: the checkout whose code the rows are held to (default: this one)."""
     out: dict[str, dict[str, dict]] = {}
     for folder in folders:
         per = out.setdefault(str(folder), {})
-        for case_dir, p in record_paths(folder):
-            rec, bad = _valid(folder, p)
-            st = row_state(folder, rec, trees, root) if rec else RowState(Path(folder), case_dir, p.stem, True, bad)
-            m = per.setdefault(st.method, {"rows": 0, "stale": 0, "why": {}, "stale_s": 0.0})
+        marks = marked(folder) if marked is not None else set()
+        for st in folder_states(folder, trees, root):
+            m = per.setdefault(st.method, {"rows": 0, "stale": 0, "marked": 0, "why": {}, "stale_s": 0.0})
             m["rows"] += 1
             if st.stale:
                 m["stale"] += 1
+                m["marked"] += (st.case, st.method, str(st.commit)[:7]) in marks
                 m["why"][st.why] = m["why"].get(st.why, 0) + 1
                 m["stale_s"] += st.time_s or 0.0
     return out
 
 
+def _verified(code: dict, tree: Path) -> bool:
+    """Whether a record's code identity ``code`` is that of the sources under ``tree``
+    (its commit's): its modules' and constants' digest there, or, for a record re-keyed
+    after a definition moved (:func:`eval.run.code_identity.modules_digest_at`), there
+    with the moved modules as in this checkout."""
+    mods, consts = code.get("modules") or [], code.get("constants") or ()
+    for digest in (lambda: modules_digest(mods, str(tree), consts),
+                   lambda: modules_digest_at(mods, tree, None, consts)):
+        try:
+            if digest() == code.get("sources"):
+                return True
+        except KeyError:
+            continue
+    return False
+
+
 def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
-    """Re-key one record file ``p`` of ``folder``'s store written under store version
-    :data:`REKEY_FROM`, in place (atomically): ``"rekeyed"``, ``"current"`` (already of
-    this version) or ``"refused: <why>"`` (left as it is: not valid, made by a dirty
-    checkout, its commit not in git, its old identity not that commit's, a module of its
-    identity missing there). The new identity: :func:`eval.run.code_identity.code_identity`'s
-    modules and constants for its method at this checkout, their code as at its commit;
-    the numerical versions and plug-in digest as recorded; the case identity without its folder."""
+    """Re-key one record file ``p`` of ``folder``'s store (store version :data:`REKEY_FROM`
+    or this one) under the identity rules of this checkout, in place (atomically):
+    ``"rekeyed"``, ``"current"`` (its key is already what the rules give) or
+    ``"refused: <why>"`` (left as it is: not valid, made by a dirty checkout, its commit
+    not in git, its recorded identity not that commit's sources, a module of its identity
+    missing there). The new identity: :func:`eval.run.code_identity.code_identity`'s
+    modules and constants for its method (and its reference columns where it has them)
+    at this checkout, their code as at its commit (:func:`eval.run.code_identity.modules_digest_at`:
+    a definition moved since counts as the same code); the numerical
+    versions and plug-in digest as recorded. A record whose code changed since its
+    commit is re-keyed and stays stale."""
     rec, bad = _valid(folder, p)
     if rec is None:
         return f"refused: {bad}"
-    if rec.get("version") == STORE_VERSION:
-        return "current"
-    if rec.get("version") != REKEY_FROM:
+    if rec.get("version") not in (REKEY_FROM, STORE_VERSION):
         return f"refused: store version {rec.get('version')!r}"
     fields, git = rec.get("key_fields"), rec.get("git")
     if not isinstance(fields, dict) or not isinstance(git, dict) or not isinstance(fields.get("code"), dict):
@@ -243,25 +285,30 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
     text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
     if hashlib.sha256(text.encode()).hexdigest() != rec.get("key"):
         return "refused: its key is not its key fields' digest"
+    old = fields["code"]
+    if old.get("plugin") is not None:
+        return "refused: a plug-in's row (its source lies outside this repository)"
     if git.get("dirty") is not False:
         return "refused: made by a checkout with uncommitted changes"
     tree = trees.tree(git.get("commit"))
     if tree is None:
         return f"refused: commit {git.get('commit')!r} is not in this repository"
-    old = fields["code"]
     try:
-        if modules_digest(old.get("modules") or [], str(tree)) != old.get("sources"):
+        if not _verified(old, tree):
             return f"refused: its code identity is not that of {git['commit'][:7]}'s sources"
-        mods, consts = _now(fields.get("method"))
-        sources = modules_digest(mods, str(tree), consts)
+        mods, consts = _now(fields)
+        sources = modules_digest_at(mods, tree, None, consts)
     except KeyError as e:
         return f"refused: module {e} is not at {git['commit'][:7]}"
-    case = {k: v for k, v in (fields.get("case") or {}).items() if k != "root"}
     code = {"sources": sources, "modules": list(mods), "constants": list(consts), "versions": old.get("versions"),
             "plugin": old.get("plugin")}
-    key, new_fields = pair_key(fields.get("method"), case, fields.get("extra"), code)
+    key, new_fields = pair_key(fields.get("method"), fields.get("case"), fields.get("extra"), code)
+    if rec.get("version") == STORE_VERSION and key == rec.get("key"):
+        return "current"
     rec.update(version=STORE_VERSION, key=key, key_fields=new_fields,
-               rekeyed={"from_version": REKEY_FROM, "from_key": rec.get("key"), "commit": git["commit"]})
+               rekeyed={"from_version": rec.get("version"), "from_key": rec.get("key"), "commit": git["commit"]})
     rec["digest"] = record_digest(rec)
     ResultStore(folder).rewrite(p, rec)
     return "rekeyed"
+
+

@@ -12,8 +12,8 @@ import json
 import os
 from pathlib import Path
 
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write
 
 __all__ = ["STATUS_FILE", "MANIFEST", "RESUME_ENV", "OUTCOMES", "KEEP", "now_iso", "write_status", "read_status",
            "read_manifest", "write_manifest", "job_dirs", "record_outcome"]

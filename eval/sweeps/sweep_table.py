@@ -15,8 +15,8 @@ from eval.run.outdir import refuse_results
 from eval.sweeps.files import MANIFEST, OUTCOMES, STATUS_FILE, job_dirs, read_manifest, read_status
 from eval.tables import TABLE_COLUMNS, method_order_key
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_json
-from sshade.mesh.io import atomic_write
 
 __all__ = ["aggregate_sweep", "sweep_markdown", "sweep_title", "TABLE_CSV", "TABLE_MD"]
 

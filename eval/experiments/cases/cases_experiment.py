@@ -99,7 +99,7 @@ class _Setup:
     methods: list                 # the built methods, in table order
     names: list[str]              # their names (row labels)
     specs: list[dict]             # each method's resolved definition (eval/run/result_store.py)
-    codes: list[dict]             # each method's code identity (eval/run/code_identity.py)
+    codes: list[dict]             # each method's code identity, {with reference columns: identity} (code_identity.py)
     guard: dict                   # timeout_s, handle_error_max_pct (eval.run.spec.GuardOptions)
     refs: CaseReferences          # the reference columns' options and cache
     root: Path                    # the dataset's root
@@ -154,7 +154,8 @@ def _setup(spec: EvalSpec) -> _Setup:
     unless ``resume``), before any method runs."""
     methods = method_table.make_methods(spec.methods)  # every method's parameters are checked before any work
     specs = _method_specs(spec.methods, methods)
-    codes = [code_identity(m, sp) for m, sp in zip(methods, specs)]  # once each (eval/run/code_identity.py)
+    # once each, for its rows with and without reference columns (eval/run/code_identity.py)
+    codes = [{on: code_identity(m, sp, references=on) for on in (True, False)} for m, sp in zip(methods, specs)]
     ds = spec.dataset
     refs = CaseReferences(spec.reference)
     # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first
@@ -225,10 +226,12 @@ def _start_runinfo(spec: EvalSpec, s: _Setup) -> dict:
 def _pair_keys(s: _Setup, ci: int, case) -> list[tuple[str, dict]]:
     """The store keys (:func:`eval.run.result_store.pair_key`) of every method on case ``ci``: the
     method's definition, the case's identity, the guard and reference options, and the
-    identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`)."""
+    identity of the code that computes the row (:func:`eval.run.code_identity.code_identity`; the
+    reference columns' code only where the case has them)."""
     ident = case_identity(case, dataset=s.name, seed=s.seed)
-    extra = {"guard": s.guard, "reference": s.refs.settings(s.refs.covers(ci, s.cases, s.base))}
-    return [pair_key(spec, ident, extra, code) for spec, code in zip(s.specs, s.codes)]
+    on = s.refs.covers(ci, s.cases, s.base)
+    extra = {"guard": s.guard, "reference": s.refs.settings(on)}
+    return [pair_key(spec, ident, extra, code[on]) for spec, code in zip(s.specs, s.codes)]
 
 
 def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:

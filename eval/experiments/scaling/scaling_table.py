@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from eval.present.measures import columns
-from sshade.mesh.io import atomic_write
+from sshade.files import atomic_write
 
 __all__ = ["scaling_markdown", "write_csv", "write_markdown", "MESH_KINDS"]
 

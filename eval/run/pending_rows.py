@@ -1,0 +1,77 @@
+"""A table's rows made by older code, marked pending: what ``table.md`` says of them and
+how ``python -m eval.reproduce --check`` reads it back.
+
+A stored row whose code changed since it was computed (:mod:`eval.run.stale_rows`) stays
+in its tables until it is regenerated, marked: the title gives the count (``38 of 40
+rows made by this commit's code; 2 pending from 3e79476``) and a list under the table
+names each pending row with the commit that made it and the modules changed since
+(:func:`pending_markdown`). ``--check`` counts a stale row as marked when its folder's
+``table.md`` lists it with that commit (:func:`marked_pending`).
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from sshade.json_file import read_bounded
+
+__all__ = ["PENDING_HEADING", "pending_title", "strip_pending", "pending_markdown", "marked_pending"]
+
+#: The heading of the list of a table's pending rows in ``table.md``.
+PENDING_HEADING = "Rows pending regeneration (made by older code)"
+#: A listed pending row: ``- `case` `method`: made at abc1234; why``.
+_ROW = re.compile(r"^- `(?P<case>[^`]+)` `(?P<method>[^`]+)`: made at (?P<commit>[0-9a-f]{7}|unknown)\b")
+#: The count a title ends with when some rows are pending.
+_TITLE = re.compile(r" \(\d+ of \d+ rows made by this commit's code; \d+ pending from [^()]*\)$")
+#: The most of a ``table.md`` read back (bytes): a table is a few kB.
+MAX_TABLE_BYTES = 8 * 2**20
+
+
+def _short(commit) -> str:
+    return str(commit)[:7] if isinstance(commit, str) and commit else "unknown"
+
+
+def pending_title(title: str | None, states) -> str | None:
+    """``title`` with the count of pending rows among ``states`` (the
+    :class:`eval.run.stale_rows.RowState` of every stored row of the table) appended, or
+    as it is when none is pending (any count appended before is taken off first)."""
+    stale = [s for s in states if s.stale]
+    if title is None or not stale:
+        return strip_pending(title)
+    commits = ", ".join(sorted({_short(s.commit) for s in stale}))
+    n = len(list(states))
+    return (f"{strip_pending(title)} ({n - len(stale)} of {n} rows made by this commit's code; "
+            f"{len(stale)} pending from {commits})")
+
+
+def strip_pending(title: str | None) -> str | None:
+    """``title`` without the count :func:`pending_title` appended."""
+    return None if title is None else _TITLE.sub("", title)
+
+
+def pending_markdown(states) -> str:
+    """The list of the pending rows among ``states`` (``""`` when none is), for ``table.md``:
+    each row's case, method, the commit that made it and why it is stale."""
+    stale = [s for s in states if s.stale]
+    if not stale:
+        return ""
+    rows = "\n".join(f"- `{s.case}` `{s.method}`: made at {_short(s.commit)}; {' '.join(str(s.why).split())}"
+                     for s in stale)
+    return (f"#### {PENDING_HEADING}\n\nTheir numbers are in the table as that code made them; "
+            f"`python -m eval.reproduce` regenerates them (`--check` lists them).\n\n{rows}\n")
+
+
+def marked_pending(folder) -> set[tuple[str, str, str]]:
+    """``{(case, method, commit[:7])}`` of the rows ``folder``'s ``table.md`` lists as
+    pending (:func:`pending_markdown`); empty when it has none, or no readable ``table.md``
+    (a link, a FIFO or a file above :data:`MAX_TABLE_BYTES` is not read)."""
+    path = Path(folder) / "table.md"
+    try:
+        if path.is_symlink():
+            return set()
+        text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8", "replace")
+    except OSError:
+        return set()
+    _, found, rest = text.partition(f"#### {PENDING_HEADING}\n")
+    return {(m["case"], m["method"], m["commit"]) for m in map(_ROW.match, rest.splitlines()) if m} if found else set()
