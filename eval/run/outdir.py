@@ -115,6 +115,8 @@ class OutputClaim:
     aside : the marker's record of the earlier output set aside, or None.
     user_paths : files under our entries that no run of ours wrote (kept, never recorded).
     kept : the files added to the earlier output, put back once this run had a result.
+    continued : names of the earlier output's entries this run continues (``keep`` names
+        them): never removed by this claim, not even when the run ends without a result.
     message : one line saying what was claimed (new folder, replaced files, ...).
     created : the folder was created by this claim.
     parents : the folders above it that this claim created (outermost first).
@@ -131,6 +133,7 @@ class OutputClaim:
     aside: dict | None = None
     user_paths: list = field(default_factory=list)
     kept: list = field(default_factory=list)
+    continued: list = field(default_factory=list)
 
     def finish(self, status: str, *, drop_if_unused: str | None = None, **extra) -> None:
         """Record the run's end in the marker (``status`` done / failed / interrupted) with
@@ -183,7 +186,7 @@ class OutputClaim:
         the earlier output it set aside (returns that output's lock bytes), or, without
         one, remove the marker and lock when nothing else is left, the folder if this claim
         created it, and the created parents that are empty."""
-        _drop_entries(self.path, set(self.foreign))
+        _drop_entries(self.path, set(self.foreign) | set(self.continued))
         if self.aside is not None:
             lock = restore(self.path, self.aside, MARKER)
             self.aside = None
@@ -307,7 +310,7 @@ def _recover(p: Path, m: dict | None) -> dict | None:
 
 
 def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = False,
-                     keep: bool = False, option: str | None = None, name: str = "out_dir",
+                     keep=False, option: str | None = None, name: str = "out_dir",
                      first_result: str | None = None) -> OutputClaim:
     """Claim folder ``path`` for an output of ``kind`` (module docstring), before any work.
 
@@ -317,7 +320,10 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     kind : str, the kind of output (``eval``: one evaluator run; ``sweep``: a sweep folder).
     overwrite : bool, write into a non-empty folder that is not ours (the user asked).
     fresh : bool, ``path`` is a default name: never reuse it, add ``_2``, ``_3``, ... instead.
-    keep : bool, an own earlier output is continued, not replaced (a sweep's resume).
+    keep : bool, or a collection of top-level entry names: true, an own earlier output is
+        continued, not replaced (a sweep's resume); names, those entries of an own earlier
+        output are continued and its other entries replaced (set aside as without
+        ``keep``: a sweep run again with ``resume=true`` keeps the folders of its jobs).
     option : str, how the user says ``overwrite`` on this command (for the message; ""
         when the command has no such option).
     name : str, how the user names the folder on this command (for the message).
@@ -356,7 +362,7 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     return claim
 
 
-def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep: bool, how: str,
+def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep, how: str,
            first_result: str | None) -> OutputClaim:
     """:func:`claim_output_dir` once ``p`` is checked: create or take the folder."""
     if fresh:
@@ -390,7 +396,7 @@ def _links_inside(p: Path) -> list[str]:
     return sorted(out)
 
 
-def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bool, how: str,
+def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, how: str,
                     first_result: str | None) -> OutputClaim:
     names = sorted(set(os.listdir(p)) - _OWN)
     if created or not names and not (p / ASIDE).exists():
@@ -408,17 +414,22 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep: bo
         fd = _lock(p)  # refuse while another run writes here, before moving anything
         m = _recover(p, m)
         wrote = ours(m)
-        if keep:
+        if keep is True:
             user = [r for r in files_under(p, (m or {}).get("files") or []) if not wrote(r)]
             return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}", fd=fd,
                          first_result=first_result, user_paths=user)
-        rec = set_aside(p, [n for n in (m or {}).get("files") or [] if str(n) not in _OWN], p / MARKER, lock_before, m)
+        earlier = [str(n) for n in (m or {}).get("files") or [] if str(n) not in _OWN]
+        kept = sorted({str(n) for n in keep or ()} & set(earlier))  # only entries the earlier output wrote
+        rec = set_aside(p, [n for n in earlier if n not in kept], p / MARKER, lock_before, m)
         gone = rec["names"]
-        rest = sorted(set(os.listdir(p)) - _OWN)
-        msg = (f"replacing the earlier {kind} output in {p}" +
+        rest = sorted(set(os.listdir(p)) - _OWN - set(kept))
+        msg = (f"{'continuing' if kept else 'replacing'} the earlier {kind} output in {p}" +
+               (f" (kept {len(kept)}: {', '.join(kept[:8])}{' ...' if len(kept) > 8 else ''})" if kept else "") +
                (f" (set aside {len(gone)}: {', '.join(gone[:8])}{' ...' if len(gone) > 8 else ''}; removed once this "
                 "run has its first result, put back if it ends before)" if gone else ""))
-        return _take(p, kind, gone, rest, msg, fd=fd, first_result=first_result, aside=rec)
+        user = [r for r in files_under(p, kept) if not wrote(r)]
+        return _take(p, kind, gone, rest, msg, fd=fd, first_result=first_result, aside=rec, user_paths=user,
+                     continued=kept)
     if not overwrite:
         what = (f"another kind of output ({m.get('kind')})" if m else
                 f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote "
@@ -463,7 +474,7 @@ def resume_command(out_dir) -> str:
 
 def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: int | None = None,
           created: bool = False, first_result: str | None = None, aside: dict | None = None,
-          user_paths: list | None = None) -> OutputClaim:
+          user_paths: list | None = None, continued: list | None = None) -> OutputClaim:
     fd = _lock(p) if fd is None else fd
     old = read_marker(p) or {}
     m = {"kind": kind, "status": "running", "pid": os.getpid(), "host": socket.gethostname(), "started": _now(),
@@ -476,7 +487,8 @@ def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: in
         m["aside"] = {**aside, "first_result": first_result}
     _write_marker(p, m)
     return OutputClaim(path=p, kind=kind, replaced=gone, foreign=foreign, message=message, created=created, fd=fd,
-                       first_result=first_result, aside=aside, user_paths=list(user_paths or []))
+                       first_result=first_result, aside=aside, user_paths=list(user_paths or []),
+                       continued=list(continued or []))
 
 
 # ----------------------------------------------------------------------------- one run's folder

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from eval import app
 from eval.config_check import plain
-from eval.run.outdir import OutputDirError, claim_output_dir, claimed_run, overwrite_flag
+from eval.run.outdir import OutputDirError, check_earlier_output, claim_output_dir, claimed_run, overwrite_flag
 from eval.run.paths import abs_path
 from eval.run.spec import OutputOptions
 from eval.sweeps.files import (
@@ -29,6 +29,7 @@ from eval.sweeps.files import (
     MANIFEST,
     RESUME_ENV,
     STATUS_FILE,
+    job_dirs,
     now_iso,
     read_manifest,
     read_status,
@@ -42,7 +43,7 @@ from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
 
 __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
-           "claim_sweep_dir", "release_sweep_dir", "resume_sweep", "main"]
+           "grid_job_entries", "claim_sweep_dir", "release_sweep_dir", "resume_sweep", "main"]
 
 log = logging.getLogger("eval")
 
@@ -65,7 +66,9 @@ How to sweep (-m = multirun):
   add hydra/launcher=slurm hydra.launcher.partition=NAME                 jobs on SLURM
 
 Output: hydra.sweep.dir=DIR (default outputs/multirun/<date_time>; experiment=sweep:
-outputs/sweeps/<date_time>), one folder per job below it.
+outputs/sweeps/<date_time>), one folder per job below it. Run again into DIR, a sweep
+replaces the earlier one; with resume=true each job keeps its folder and its current
+rows and computes only its stale and missing (case, method) pairs.
 
 Every override of python -m eval works here (python -m eval --help lists the config
 groups and keys; --hydra-help Hydra's options). Details: docs/sweeps.md.
@@ -225,21 +228,82 @@ def sweep_job(cfg) -> dict:
 _sweep_claim: list = []  # the claim of this process's sweep folder (released when the sweep ends)
 
 
+def _job_number(job_dir: Path) -> int | None:
+    """The job number of a job folder: its ``status.json``'s, else its name's (Hydra's default subdir)."""
+    n = (read_status(job_dir) or {}).get("job_num")
+    if isinstance(n, int) and not isinstance(n, bool):
+        return n
+    return int(job_dir.name) if job_dir.name.isdigit() else None
+
+
+def _continuable(job_dir: Path) -> bool:
+    """The job folder holds an evaluator output its job may continue
+    (:func:`eval.run.outdir.check_earlier_output`); a job that failed before its first
+    result left only its ``status.json``, which its job's claim would refuse."""
+    try:
+        check_earlier_output(job_dir, "eval", "")
+    except OutputDirError:
+        return False
+    return True
+
+
+def grid_job_entries(sweep_dir, n_jobs: int) -> list[str]:
+    """The top-level entries of the sweep folder ``sweep_dir`` that a sweep of ``n_jobs``
+    jobs (numbered 0 to n_jobs - 1) run again with ``resume=true`` continues: folders
+    holding job folders (:func:`eval.sweeps.files.job_dirs`), every one of them numbered
+    below ``n_jobs`` (:func:`_job_number`) and holding an evaluator output to continue
+    (:func:`_continuable`). A job folder of another number, or of none, is no job of this
+    sweep, and one without output has nothing to reuse: its entry is not continued (it is
+    replaced, and its job, if any, starts in a new folder)."""
+    d = Path(sweep_dir)
+    out = []
+    for e in sorted(os.listdir(d)) if d.is_dir() else []:
+        q = d / e
+        if e.startswith(".") or q.is_symlink() or not q.is_dir():
+            continue
+        jobs = job_dirs(q)
+        if jobs and all((n := _job_number(j)) is not None and 0 <= n < n_jobs and _continuable(j) for j in jobs):
+            out.append(e)
+    return out
+
+
+def _resumed_entries(pts: list | None, d: str) -> list[str]:
+    """What a sweep with ``resume=true`` (run again into its folder, not
+    :func:`resume_sweep`) continues of the earlier sweep in ``d``: the folders of the
+    jobs of this sweep's grid ``pts`` (:func:`grid_job_entries`); every other entry of the
+    earlier sweep (job folders beyond the grid, ``sweep.json``, ``sweep_table.*``) is
+    replaced. A grid that cannot be expanded (``pts`` None, :func:`sweep_points`)
+    continues nothing."""
+    if pts is None:
+        log.warning("resume=true: the sweep's grid cannot be expanded; the earlier job folders in %s are "
+                    "replaced and every row computed again", d)
+        return []
+    return grid_job_entries(d, len(pts))
+
+
 def claim_sweep_dir(config) -> None:
     """Claim ``hydra.sweep.dir`` for this sweep before any job starts
     (:func:`eval.run.outdir.claim_output_dir`, kind ``sweep``): a new or empty folder, or an
     earlier sweep's folder (its files are removed first; a resume, :data:`RESUME_ENV`,
-    keeps them); any other folder is refused unless ``overwrite=true``; the default dated
-    folder gets a suffix when the name exists. On refusal: one ``error:`` line, exit 2.
-    The sweep's jobs write into folders of their own below it."""
+    keeps them; ``resume=true`` keeps the folders of the jobs of this sweep's grid,
+    :func:`_resumed_entries`, and replaces the rest); any other folder is refused unless
+    ``overwrite=true``; the default dated folder gets a suffix when the name exists
+    (``resume=true`` there is refused: no sweep to continue). On refusal: one ``error:``
+    line, exit 2. The sweep's jobs write into folders of their own below it."""
     from omegaconf import open_dict
 
     d = str(config.hydra.sweep.dir)
     given = {str(o).lstrip("+~").split("=", 1)[0] for o in config.hydra.overrides.hydra}
+    replay = os.environ.get(RESUME_ENV) == "1"
+    fresh = "hydra.sweep.dir" not in given and not replay
     try:
+        resume = overwrite_flag(config.get("resume", False))
+        if resume and fresh:
+            raise OutputDirError("resume=true continues a sweep in its folder: pass hydra.sweep.dir=DIR, the "
+                                 "folder of the sweep to continue (the default is a new folder)")
+        keep = True if replay else _resumed_entries(sweep_points(config), d) if resume else False
         c = claim_output_dir(d, "sweep", overwrite=overwrite_flag(config.get("overwrite", False)),
-                             fresh="hydra.sweep.dir" not in given and os.environ.get(RESUME_ENV) != "1",
-                             keep=os.environ.get(RESUME_ENV) == "1")
+                             fresh=fresh, keep=keep)
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
