@@ -50,6 +50,7 @@ HELP = {
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
     "benchmarks/table_change.py": ["usage:", "--before", "--after"],
+    "benchmarks/identity_cost.py": ["usage:", "probes"],
 }
 
 

@@ -128,7 +128,7 @@ def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(caps
     import pytest
     with pytest.raises(SystemExit) as e:
         main(["--json"])  # --json goes with --check
-    assert e.value.code == 2 and "--json goes with --check" in capsys.readouterr().err
+    assert e.value.code == 2 and "--json and --strict go with --check" in capsys.readouterr().err
 
 
 def test_every_step_runs_this_checkout_first_on_the_python_path(monkeypatch):
