@@ -240,7 +240,8 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=N
             m["rows"] += 1
             if st.stale:
                 m["stale"] += 1
-                m["marked"] += (st.case, st.method, str(st.commit)[:7]) in marks
+                made = st.commit[:7] if isinstance(st.commit, str) and st.commit else "unknown"
+                m["marked"] += (st.case, st.method, made) in marks
                 m["why"][st.why] = m["why"].get(st.why, 0) + 1
                 m["stale_s"] += st.time_s or 0.0
     return out
