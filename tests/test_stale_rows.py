@@ -218,6 +218,7 @@ def _with_references(records, method: str) -> int:
                if p.stem == method and references_on(json.loads(p.read_text())["key_fields"]))
 
 
+@pytest.mark.slow  # about 30 s: four copies of the checkout held against the 637 committed records
 @pytest.mark.parametrize("path, allowed", [
     ("eval/datasets/__init__.py", {}),  # a loader's package: no row runs it
     ("sshade/mesh/io.py", {"SShaDe": None}),  # the mesh reader: no baseline row runs it
