@@ -443,8 +443,10 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     others = compared_lines(compared)
     if others:
         line += "\n\nRows from other runs:\n\n" + "".join(f"- {x}\n" for x in others)
-    if pending_markdown(pending):
-        line += "\n\n" + pending_markdown(pending)
+    pending = list(pending)
+    marks = pending_markdown(pending)
+    if marks:
+        line += "\n\n" + marks
     title = pending_title(title, pending)
     paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df),
                                                         checked=line, intervals=case_intervals(df, comp)),

@@ -379,10 +379,19 @@ def modules_digest(modules, root: str | None = None, constants=()) -> str:
     (:func:`_literal`; a module or name missing under ``root`` counts as such).
     Raises KeyError when a module is missing under ``root``."""
     base = Path(root) if root is not None else REPO_ROOT
-    mods, h = project_modules(root), hashlib.sha256()
-    for m in sorted(modules):
-        h.update(str(mods[m].relative_to(base)).encode() + b"\0")
-        h.update(code_text(mods[m]) + b"\0")
+    mods = project_modules(root)
+    return _digest(((mods[m], base) for m in sorted(modules)), constants, mods)
+
+
+def _digest(files, constants, mods: Mapping) -> str:
+    """SHA-256 (hex) of ``files`` (``(path, base)`` pairs, in order: each as its path
+    relative to ``base`` and its :func:`code_text`), then of each of ``constants``
+    (``"module.NAME"``, sorted) as its name and value in the project ``mods``
+    (:func:`_literal`; a module or name missing there counts as such)."""
+    h = hashlib.sha256()
+    for path, base in files:
+        h.update(str(path.relative_to(base)).encode() + b"\0")
+        h.update(code_text(path) + b"\0")
     for c in sorted(constants):
         m, _, attr = c.rpartition(".")
         value = _literal(m, attr, mods) if m in mods else None
@@ -417,8 +426,8 @@ def _parts(path: str, mtime_ns: int, size: int, pkg: str) -> tuple[tuple, tuple,
                       for a in node.names]
         elif isinstance(node, ast.ImportFrom):
             binds += [(a.asname or a.name, f"{_from_module(pkg, node)}.{a.name}") for a in node.names]
-        elif _bound_names(node) != ("__all__",):  # __all__ lists names, it runs nothing
-            stmts.append((_bound_names(node), ast.dump(node, include_attributes=False)))
+        elif (names := _bound_names(node)) != ("__all__",):  # __all__ lists names, it runs nothing
+            stmts.append((names, ast.dump(node, include_attributes=False)))
     used = frozenset(n.id for n in ast.walk(tree) if isinstance(n, ast.Name))
     return tuple(stmts), tuple(binds), used
 
@@ -511,18 +520,10 @@ def modules_digest_at(modules, tree, root: str | None = None, constants=()) -> s
     any other as it is under ``tree``; equal to ``modules_digest(modules, root,
     constants)`` exactly when no module and no constant differs. Raises KeyError naming
     a module missing under ``tree`` (and not moved there)."""
-    base, old_base = (Path(root) if root is not None else REPO_ROOT), Path(tree)
-    now, then, h = project_modules(root), project_modules(str(tree)), hashlib.sha256()
-    for m in sorted(modules):
-        path, rel = (now[m], now[m].relative_to(base)) if same_code(m, tree, root) else \
-            (then[m], then[m].relative_to(old_base))
-        h.update(str(rel).encode() + b"\0")
-        h.update(code_text(path) + b"\0")
-    for c in sorted(constants):
-        m, _, attr = c.rpartition(".")
-        value = _literal(m, attr, then) if m in then else None
-        h.update(f"{c}={value}".encode() + b"\0")
-    return h.hexdigest()
+    base = Path(root) if root is not None else REPO_ROOT
+    now, then = project_modules(root), project_modules(str(tree))
+    return _digest(((now[m], base) if same_code(m, tree, root) else (then[m], Path(tree)) for m in sorted(modules)),
+                   constants, then)
 
 
 def _targets(spec) -> list[str]:

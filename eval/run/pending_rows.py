@@ -16,7 +16,7 @@ from pathlib import Path
 
 from sshade.json_file import read_bounded
 
-__all__ = ["PENDING_HEADING", "pending_title", "strip_pending", "pending_markdown", "marked_pending"]
+__all__ = ["PENDING_HEADING", "short_commit", "pending_title", "strip_pending", "pending_markdown", "marked_pending"]
 
 #: The heading of the list of a table's pending rows in ``table.md``.
 PENDING_HEADING = "Rows pending regeneration (made by older code)"
@@ -28,19 +28,22 @@ _TITLE = re.compile(r" \(\d+ of \d+ rows made by this commit's code; \d+ pending
 MAX_TABLE_BYTES = 8 * 2**20
 
 
-def _short(commit) -> str:
-    return str(commit)[:7] if isinstance(commit, str) and commit else "unknown"
+def short_commit(commit) -> str:
+    """How a table names the commit that made a row: its first 7 hex digits, ``"unknown"``
+    when the record names none (or not as a text)."""
+    return commit[:7] if isinstance(commit, str) and commit else "unknown"
 
 
 def pending_title(title: str | None, states) -> str | None:
     """``title`` with the count of pending rows among ``states`` (the
     :class:`eval.run.stale_rows.RowState` of every stored row of the table) appended, or
     as it is when none is pending (any count appended before is taken off first)."""
+    states = list(states)
     stale = [s for s in states if s.stale]
     if title is None or not stale:
         return strip_pending(title)
-    commits = ", ".join(sorted({_short(s.commit) for s in stale}))
-    n = len(list(states))
+    commits = ", ".join(sorted({short_commit(s.commit) for s in stale}))
+    n = len(states)
     return (f"{strip_pending(title)} ({n - len(stale)} of {n} rows made by this commit's code; "
             f"{len(stale)} pending from {commits})")
 
@@ -56,7 +59,7 @@ def pending_markdown(states) -> str:
     stale = [s for s in states if s.stale]
     if not stale:
         return ""
-    rows = "\n".join(f"- `{s.case}` `{s.method}`: made at {_short(s.commit)}; {' '.join(str(s.why).split())}"
+    rows = "\n".join(f"- `{s.case}` `{s.method}`: made at {short_commit(s.commit)}; {' '.join(str(s.why).split())}"
                      for s in stale)
     return (f"#### {PENDING_HEADING}\n\nTheir numbers are in the table as that code made them; "
             f"`python -m eval.reproduce` regenerates them (`--check` lists them).\n\n{rows}\n")

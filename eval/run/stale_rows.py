@@ -31,6 +31,7 @@ from eval.run.code_identity import (
     modules_digest_at,
     same_code,
 )
+from eval.run.pending_rows import short_commit
 from eval.run.result_store import STORE_DIR, STORE_VERSION, ResultStore, check_row, pair_key, record_digest
 from eval.run.runinfo import REPO_ROOT
 from sshade.errors import SShaDeError
@@ -240,8 +241,7 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=N
             m["rows"] += 1
             if st.stale:
                 m["stale"] += 1
-                made = st.commit[:7] if isinstance(st.commit, str) and st.commit else "unknown"
-                m["marked"] += (st.case, st.method, made) in marks
+                m["marked"] += (st.case, st.method, short_commit(st.commit)) in marks
                 m["why"][st.why] = m["why"].get(st.why, 0) + 1
                 m["stale_s"] += st.time_s or 0.0
     return out
