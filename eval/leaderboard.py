@@ -211,20 +211,22 @@ def _animation_board(d: Path, info: dict) -> Board | None:
 
 
 def _stale(d: Path, trees: CommitTrees) -> dict:
-    """``{method: (stale, rows)}`` of the stored rows of run folder ``d`` (and of the
-    folders below it) whose code identity differs from this checkout's
-    (:func:`eval.run.stale_rows.check_folders`); methods without a stale row left out."""
+    """``{method: (stale, rows, commits)}`` of the stored rows of run folder ``d`` (and of
+    the folders below it) whose code identity differs from this checkout's, with the
+    commits that made them (:func:`eval.run.stale_rows.check_folders`); methods without a
+    stale row left out."""
     out: dict = {}
     for ms in check_folders(run_folders(d), trees).values():
         for m, v in ms.items():
-            k, n = out.get(m, (0, 0))
-            out[m] = (k + v["stale"], n + v["rows"])
-    return {m: kn for m, kn in out.items() if kn[0]}
+            k, n, c = out.get(m, (0, 0, set()))
+            out[m] = (k + v["stale"], n + v["rows"], c | v["commits"])
+    return {m: knc for m, knc in out.items() if knc[0]}
 
 
 def stale_words(stale: tuple | None) -> str:
-    """A cell's mark for a method with stale rows: ``" [stale: 8 of 40 rows]"``; ``""`` for none."""
-    return f" [stale: {stale[0]} of {stale[1]} rows]" if stale else ""
+    """A cell's mark for a method with stale rows, with the commits that made them:
+    ``" [stale: 8 of 40 rows, made at 3e79476]"``; ``""`` for none."""
+    return f" [stale: {stale[0]} of {stale[1]} rows, made at {', '.join(sorted(stale[2]))}]" if stale else ""
 
 
 def _commit(info: dict) -> str:
@@ -352,8 +354,9 @@ def leaderboard_markdown(root) -> str:
            "no other column ranks: a method best on volume may be far from the true pose. Per dataset, the GT "
            f"mean's {CI[0]:.0%} interval is a percentile bootstrap over its cases ({CI[1]} resamples, seed {CI[2]}). "
            "Where the data has no ground truth the cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
-           + (" A cell marked [stale: k of n rows] holds rows whose code changed since they were computed "
-              "(`python -m eval.reproduce --check`): not this checkout's numbers." if any(b.stale for b in boards)
+           + (" A cell marked [stale: k of n rows, made at C] holds rows made by the code of commit C, which "
+              "changed since (`python -m eval.reproduce --check` names the modules): not this checkout's numbers."
+              if any(b.stale for b in boards)
               else ""), "",
            "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]

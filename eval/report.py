@@ -446,8 +446,9 @@ def write_index(root) -> Path:
         exp = ((info.get("config") or {}).get("experiment") or {}).get("name", "")
         k = sum(v["stale"] for v in stale.get(d, {}).values())
         n = sum(v["rows"] for v in stale.get(d, {}).values())
-        status = str(info.get("status", "")) + (f"; {k} of {n} rows stale (python -m eval.reproduce --check)"
-                                                if k else "")
+        made = ", ".join(sorted(set().union(*(v["commits"] for v in stale.get(d, {}).values()))))
+        status = str(info.get("status", "")) + (f"; {k} of {n} rows stale, made at {made} "
+                                                "(python -m eval.reproduce --check)" if k else "")
         if d in whole and whole[d].stale:
             status += f"; stale: {whole[d].why} (python -m eval.reproduce --check)"
         rows.append([f"<td>{_link(root, target, _e(rel))}</td>", f"<td>{_e(exp)}</td>",

@@ -126,9 +126,9 @@ def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
             pytest.skip("git history without 8d866e5 (a shallow clone?)")
         (tmp_path / "faust" / "runs" / case / "SShaDe.json").write_text(r.stdout)
     text = leaderboard_markdown(tmp_path)
-    assert "| SShaDe [stale: 8 of 8 rows] |" in text and "[stale: k of n rows]" in text
+    assert "| SShaDe [stale: 8 of 8 rows, made at 3e79476] |" in text and "[stale: k of n rows, made at C]" in text
     assert text.count("[stale:") == 3  # the matrix cell, the dataset's row, the explanation
-    assert "done; 8 of 40 rows stale" in write_index(tmp_path).read_text()  # the index's status column
+    assert "done; 8 of 40 rows stale, made at 3e79476" in write_index(tmp_path).read_text()  # the index's status
 
 
 def test_a_users_run_with_compare_with_is_ranked_beside_the_rows_it_read(tmp_path):

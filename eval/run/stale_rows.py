@@ -227,7 +227,9 @@ def folder_states(folder, trees: CommitTrees, root: str | None = None) -> list[R
 
 def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=None) -> dict[str, dict[str, dict]]:
     """``{folder: {method: {"rows": n, "stale": k, "marked": j, "why": {why: count},
-    "stale_s": s}}}`` for every record of every folder in ``folders`` (:func:`folder_states`;
+    "stale_s": s, "commits": {commit[:7]}}}}`` for every record of every folder in
+    ``folders`` (:func:`folder_states`; ``commits``: those that made the stale rows, as
+    :func:`eval.run.pending_rows.short_commit` names them;
     ``stale_s``: the stored seconds of the stale rows, the time their recomputation is
     estimated at; ``marked``: of the stale rows, those its tables mark pending, as
     ``marked(folder)`` says, a set of ``(case, method, commit[:7])``; none without it);
@@ -237,11 +239,13 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=N
         per = out.setdefault(str(folder), {})
         marks = marked(folder) if marked is not None else set()
         for st in folder_states(folder, trees, root):
-            m = per.setdefault(st.method, {"rows": 0, "stale": 0, "marked": 0, "why": {}, "stale_s": 0.0})
+            m = per.setdefault(st.method, {"rows": 0, "stale": 0, "marked": 0, "why": {}, "stale_s": 0.0,
+                                           "commits": set()})
             m["rows"] += 1
             if st.stale:
                 m["stale"] += 1
                 m["marked"] += (st.case, st.method, short_commit(st.commit)) in marks
+                m["commits"].add(short_commit(st.commit))
                 m["why"][st.why] = m["why"].get(st.why, 0) + 1
                 m["stale_s"] += st.time_s or 0.0
     return out
