@@ -4,17 +4,18 @@
     python -m eval.reproduce --faust DIR --tosca DIR --shapes DIR --scaling MESH
     python -m eval.reproduce --check [--json]     # which committed rows are stale; no computation
     python -m eval.reproduce --rekey | --retabulate   # re-key old records | rebuild tables from rows
+    python -m eval.reproduce --budget 2h [--only STEPS]   # the stale rows that fit; the rest marked pending
 
-Each step runs as its own process (a failure is reported, the others still run), after a
-plan of the stored rows reused and stale per step and method; the table steps resume, so
-they compute only stale and missing rows. Exit 1 if a step failed (or, with ``--check``,
-a committed row or a folder run whole is stale: :mod:`eval.run.stale_rows`, :mod:`eval.run.stale_runs`).
+Each step runs as its own process (a failure is reported, the others still run) after a plan
+of the stored rows reused and stale; table and sweep steps compute only stale and missing rows.
+Exit 1 if a step failed (``--check``: a row stale and not marked pending, or a folder run whole stale).
 Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import importlib.util
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -23,7 +24,7 @@ from pathlib import Path
 from eval.experiments import find_experiment
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
-from eval.run.pending_rows import marked_pending
+from eval.run.pending_rows import STOP_AFTER_ENV, marked_pending
 from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
 from eval.run.stale_runs import is_whole_run, whole_run_folders, whole_run_state
@@ -162,6 +163,9 @@ def main(argv=None) -> int:
     p.add_argument("--json", action="store_true", help="with --check: print {folder: {method: {rows, stale, "
                                                         "pending}}}")
     p.add_argument("--strict", action="store_true", help="with --check: exit 1 on a row marked pending too")
+    p.add_argument("--budget", help="regenerate the stale rows of the table steps that fit in DURATION (600s, 90m, "
+                                    "2h), oldest code first, then the most-cited tables; the rows left stay in "
+                                    "their tables marked pending")
     p.add_argument("--rekey", action="store_true", help="no computation: re-key the records of results/ written "
                                                          "under the earlier key layout, from the commit that made "
                                                          "each (git must have it)")
@@ -176,6 +180,11 @@ def main(argv=None) -> int:
         return run_command(lambda: _rekey(a) if a.rekey else _check(a), where="results/")
     if a.retabulate:
         return run_command(_retabulate, where="results/")
+    if a.budget is not None:
+        budget = parse_duration(a.budget)
+        if budget is None:
+            p.error(f"--budget takes a duration such as 600s, 90m or 2h, got {a.budget!r}")
+        return run_command(lambda: _run_budget(a, budget), where="results/")
     return run_command(lambda: _run_steps(a), where="results/")
 
 
@@ -242,17 +251,114 @@ def _retabulate() -> int:
     return subprocess.call([sys.executable, "-m", "eval.tables", *dirs], env=step_env())
 
 
-def _run_steps(a) -> int:
-    """Run every step as its own process; 1 (after one ``error:`` line) if any failed."""
-    failed = []
+def parse_duration(text) -> float | None:
+    """Seconds of a duration ``"600"``, ``"600s"``, ``"90m"``, ``"2h"`` (> 0), None when it is none.
+
+    >>> parse_duration("90m"), parse_duration("2h"), parse_duration("0s"), parse_duration("soon")
+    (5400.0, 7200.0, None, None)
+    """
+    m = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([smh]?)\s*", str(text))
+    if not m:
+        return None
+    secs = float(m[1]) * {"": 1, "s": 1, "m": 60, "h": 3600}[m[2]]
+    return secs if 0 < secs < float("inf") else None
+
+
+def _selected(a) -> list[tuple[str, list[str]]] | None:
+    """The steps ``--only`` selects (every step without it); None after one ``error:`` line
+    when it names no step."""
     steps = _steps(a)
     only = [x.strip() for x in (a.only or "").split(",") if x.strip()]
     unknown = sorted(set(only) - {name for name, _ in steps})
     if unknown:
         print(f"error: --only names no step of this command: {', '.join(unknown)} "
               f"(steps: {', '.join(name for name, _ in steps)})", file=sys.stderr)
+        return None
+    return [(name, cmd) for name, cmd in steps if not only or name in only]
+
+
+def _commit_time(commit: str, cache: dict) -> int:
+    """The commit time (Unix seconds) of ``commit`` (a short or full hash), 0 when git does
+    not know it (an unknown commit counts as the oldest code)."""
+    if commit not in cache:
+        try:
+            r = subprocess.run(["git", "-C", str(REPO_ROOT), "show", "-s", "--format=%ct", commit],
+                               capture_output=True, text=True, timeout=30, check=False)
+            cache[commit] = int(r.stdout.strip()) if r.returncode == 0 and r.stdout.strip().isdigit() else 0
+        except (OSError, subprocess.TimeoutExpired):
+            cache[commit] = 0
+    return cache[commit]
+
+
+def _citations(folder: Path) -> int:
+    """How often the README and docs/ name ``folder`` (``results/<name>``, not a longer name)."""
+    pat = re.compile(re.escape(folder.as_posix()) + r"(?![\w-])")
+    texts = [REPO_ROOT / "README.md", *sorted((REPO_ROOT / "docs").glob("*.md"))]
+    return sum(len(pat.findall(t.read_text(errors="replace"))) for t in texts if t.is_file())
+
+
+def _budget_order(selected) -> tuple[list, list]:
+    """``(table steps with stale rows, in the order --budget runs them, other steps not run)``:
+    the table steps (a result store, one folder: ``out_dir=``) ordered by the oldest commit
+    among their stale rows, then by how often the docs cite their folder (most first)."""
+    runs, skipped, times = [], [], {}
+    with CommitTrees() as trees:
+        for name, cmd in selected:
+            folder = step_folder(cmd)
+            table = folder is not None and "resume=true" in cmd and "jobs=1" in cmd and \
+                not any(x.startswith("hydra.sweep.dir=") for x in cmd) and (folder / "runs").is_dir()
+            states = check_folders([folder], trees) if table else {}
+            commits = {c for ms in states.values() for v in ms.values() for c in v["commits"]}
+            if commits:
+                runs.append((min(_commit_time(c, times) for c in commits), -_citations(folder), name, cmd, folder))
+            else:
+                skipped.append((name, "no stale row" if table else "not a table step (whole run or sweep)"))
+    return [r[2:] for r in sorted(runs, key=lambda r: r[:2])], skipped
+
+
+def _run_budget(a, budget: float) -> int:
+    """``--budget``: the plan, then the table steps with stale rows (:func:`_budget_order`),
+    each given what is left of ``budget`` in :data:`eval.run.pending_rows.STOP_AFTER_ENV`
+    (the evaluator starts no pair after it; the pairs left keep their stored rows, marked pending in the tables); a step
+    with no time left is not started and its tables are rebuilt to mark its stale rows
+    (``python -m eval.tables``). A pair already running finishes: a step may overrun its
+    share by one pair. Exit 1 if a step failed."""
+    selected = _selected(a)
+    if selected is None:
         return 2
-    selected = [(name, cmd) for name, cmd in steps if not only or name in only]
+    _print_plan(selected)
+    order, skipped = _budget_order(selected)
+    for name, why in skipped:
+        print(f"== {name}: not run under --budget ({why})", flush=True)
+    t0, failed = time.monotonic(), []
+    for name, cmd, folder in order:
+        left = budget - (time.monotonic() - t0)
+        if a.dry_run:
+            print(f"== {name}: {' '.join(cmd[1:])} ({STOP_AFTER_ENV}=what is left of {budget:.0f} s)", flush=True)
+            continue
+        if left < 1:
+            print(f"== {name}: no time left in the budget; its stale rows are marked pending", flush=True)
+            rc = subprocess.call([sys.executable, "-m", "eval.tables", str(folder)], env=step_env())
+        else:
+            print(f"== {name}: {' '.join(cmd[1:])} ({STOP_AFTER_ENV}={left:.0f})", flush=True)
+            rc = subprocess.call(cmd, env={**step_env(), STOP_AFTER_ENV: f"{left:.0f}"})
+        print(f"== {name}: exit {rc}", flush=True)
+        if rc != 0:
+            failed.append(name)
+    print(f"budget: {time.monotonic() - t0:.0f} of {budget:.0f} s used; python -m eval.reproduce --check "
+          "counts the rows still pending", flush=True)
+    if failed:
+        print(f"error: step(s) failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _run_steps(a) -> int:
+    """Run every step as its own process; 1 (after one ``error:`` line) if any failed."""
+    failed = []
+    selected = _selected(a)
+    if selected is None:
+        return 2
     _print_plan(selected)
     for name, cmd in selected:
         print(f"== {name}: {' '.join(cmd[1:])}", flush=True)

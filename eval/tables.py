@@ -408,8 +408,8 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     :mod:`eval.run.compared`), tabulated beside ``df``'s, kept in ``compared.csv`` (not
     in ``cases.csv``, which holds this run's rows only) and listed under the table.
     ``pending``: the states of the folder's stored rows (:func:`eval.run.stale_rows.folder_states`)
-    when some may be made by older code: the title gives their count and ``table.md`` lists
-    them (:mod:`eval.run.pending_rows`).
+    when some may be made by older code: for the rows of ``df``, the title gives their count
+    and ``table.md`` lists them (:mod:`eval.run.pending_rows`).
 
     Returns
     -------
@@ -443,7 +443,8 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     others = compared_lines(compared)
     if others:
         line += "\n\nRows from other runs:\n\n" + "".join(f"- {x}\n" for x in others)
-    pending = list(pending)
+    tabled = set(zip(ours["case"].astype(str), ours["method"].astype(str))) if len(ours) else set()
+    pending = [st for st in pending if (st.case, st.method) in tabled]  # the states of this table's rows
     marks = pending_markdown(pending)
     if marks:
         line += "\n\n" + marks

@@ -238,3 +238,36 @@ def test_an_edit_stales_only_the_rows_whose_code_it_is(tmp_path, committed_recor
         assert bound is None or n <= bound, (m, n, bound)
     if path.startswith("baselines/implicit_arap"):
         assert got["Implicit-ARAP"] > 0  # the edit is seen where it belongs
+
+
+@pytest.mark.slow  # about a minute: the evaluator on the 8 FAUST cases for 20 s, then the tables
+def test_budget_after_a_guard_edit_leaves_its_rows_marked_pending(tmp_path):
+    """A probe edit of sshade/guard.py stales every row of a copy of results/faust (its
+    Implicit-ARAP rows left out: that method may not be installed); ``--budget 20s --only
+    faust`` regenerates what fits and stops: the table's title counts the rows made by this
+    code and the pending ones, lists each pending row with its commit; ``--check`` exits 0,
+    ``--check --strict`` 1, and no row of the table is lost."""
+    faust = ROOT.parent / "shared" / "data" / "faust_reg"
+    if not (faust / "tr_reg_000.ply").is_file():
+        pytest.skip("no FAUST registrations in ../shared/data/faust_reg")
+    tree = tmp_path / "tree"
+    for d in (*PACKAGES, "conf"):
+        shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tree)
+    shutil.copytree(ROOT / "results" / "faust", tree / "results" / "faust")
+    for p in (tree / "results" / "faust" / "runs").glob("*/Implicit-ARAP.json"):
+        p.unlink()
+    with open(tree / "sshade" / "guard.py", "a") as fh:
+        fh.write("\n_PROBE_EDIT = object()\n")
+    rc, got, err = _check_json(tree)
+    assert rc == 1 and sum(v["stale"] for v in got["results/faust"].values()) == 32
+    r = _reproduce(tree, "--faust", str(faust), "--only", "faust", "--budget", "20s")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "SSHADE_STOP_AFTER_S=20" in r.stdout
+    rc, got, err = _check_json(tree)
+    pending = sum(v["pending"] for v in got["results/faust"].values())
+    assert rc == 0 and pending > 0 and sum(v["stale"] for v in got["results/faust"].values()) == 0, err
+    title = (tree / "results" / "faust" / "table.md").read_text().splitlines()[0]
+    assert f"({32 - pending} of 32 rows made by this commit's code; {pending} pending from " in title
+    assert (tree / "results" / "faust" / "table.md").read_text().count(": made at ") == pending
+    assert _reproduce(tree, "--check", "--strict").returncode == 1

@@ -6,17 +6,28 @@ in its tables until it is regenerated, marked: the title gives the count (``38 o
 rows made by this commit's code; 2 pending from 3e79476``) and a list under the table
 names each pending row with the commit that made it and the modules changed since
 (:func:`pending_markdown`). ``--check`` counts a stale row as marked when its folder's
-``table.md`` lists it with that commit (:func:`marked_pending`).
+``table.md`` lists it with that commit (:func:`marked_pending`). :data:`STOP_AFTER_ENV` stops
+an evaluator run early, its pairs left marked so (``python -m eval.reproduce --budget``).
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
 """
 from __future__ import annotations
 
+import math
+import os
 import re
 from pathlib import Path
 
+from sshade.errors import SShaDeError
 from sshade.json_file import read_bounded
 
-__all__ = ["PENDING_HEADING", "short_commit", "pending_title", "strip_pending", "pending_markdown", "marked_pending"]
+__all__ = ["STOP_AFTER_ENV", "PENDING_HEADING", "stop_after_s", "short_commit", "pending_title", "strip_pending",
+           "pending_markdown", "marked_pending"]
+
+#: The environment variable that stops an evaluator run early (``python -m eval.reproduce
+#: --budget`` sets it for each table step): seconds after the run's start when no (case,
+#: method) run starts any more; each pair left keeps its stored row, marked pending. An
+#: operating limit of the command, not a setting of any row: no part of the config or a key.
+STOP_AFTER_ENV = "SSHADE_STOP_AFTER_S"
 
 #: The heading of the list of a table's pending rows in ``table.md``.
 PENDING_HEADING = "Rows pending regeneration (made by older code)"
@@ -78,3 +89,18 @@ def marked_pending(folder) -> set[tuple[str, str, str]]:
         return set()
     _, found, rest = text.partition(f"#### {PENDING_HEADING}\n")
     return {(m["case"], m["method"], m["commit"]) for m in map(_ROW.match, rest.splitlines()) if m} if found else set()
+
+
+def stop_after_s(environ=None) -> float | None:
+    """The seconds :data:`STOP_AFTER_ENV` gives in ``environ`` (default ``os.environ``),
+    None when it is unset or empty. Raises SShaDeError naming it when it is no number > 0."""
+    text = (os.environ if environ is None else environ).get(STOP_AFTER_ENV, "")
+    if not text.strip():
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise SShaDeError(f"{STOP_AFTER_ENV} must be a number of seconds > 0, got {text!r}")
+    return v

@@ -34,11 +34,12 @@ from eval.run.code_identity import code_identity
 from eval.run.compared import compared_rows, read_compared, run_settings
 from eval.run.jsonsafe import json_safe
 from eval.run.paths import abs_path
+from eval.run.pending_rows import STOP_AFTER_ENV, stop_after_s
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
-from eval.run.stale_rows import CommitTrees, row_state
+from eval.run.stale_rows import CommitTrees, RowState, row_state
 from eval.run.subset import baseline_selection, method_selections, take_sample
 from eval.tables import compare, write_cases, write_tables
 from harness.method_registry import method_meta
@@ -64,7 +65,12 @@ def run(spec: EvalSpec) -> dict:
     unknown method, ...), before any method runs.
     """
     t_start = time.perf_counter()
+    stop = stop_after_s()  # python -m eval.reproduce --budget: checked before any work
+    if stop is not None and not (spec.output.resume and spec.jobs == 1):
+        raise SShaDeError(f"{STOP_AFTER_ENV} needs resume=true (the pairs it leaves keep their stored rows) and "
+                          "jobs=1 (the pairs start one by one in this process)")
     s = _setup(spec)
+    s.deadline = None if stop is None else t_start + stop
     info = _start_runinfo(spec, s)
     rows = _run_cases(spec, s)
     return _finish(spec, s, rows, info, t_start)
@@ -118,6 +124,8 @@ class _Setup:
     jobs: int = 1
     plan: object = None           # plan.PlanRecord once logged
     resumed: dict | None = None   # restored / recomputed counts for run.json
+    deadline: float | None = None  # perf_counter time after which no pair starts (pending_rows.STOP_AFTER_ENV)
+    left: dict = field(default_factory=dict)  # (case, method) left at the deadline -> (why, commit) of its stored row
 
     @property
     def base(self) -> set | None:
@@ -260,6 +268,8 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (case_plan.py)
     out = _CaseOutputs(spec.figures, spec.report, s, plan, done)
     bar = weighted_bar(sum(est.values()), len(todo))
+    if array is not None and s.deadline is not None:
+        raise SShaDeError(f"{STOP_AFTER_ENV} starts the pairs one by one in this process: not with a cluster section")
     with logging_redirect_tqdm(), bar:
         if array is not None:
             _run_in_array(spec, s, todo, keys, est, cost, bar, done, out)
@@ -270,7 +280,9 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
                 s.refs.start_case(ci, cases[ci], s.refs.covers(ci, cases, s.base))
                 fresh = {}
                 for mi in plan[ci]:
-                    if (ci, mi) not in done:
+                    if (ci, mi) not in done and s.deadline is not None and time.perf_counter() >= s.deadline:
+                        _leave_pending(s, ci, mi, keys[ci][mi], done)
+                    elif (ci, mi) not in done:
                         bar.set_postfix_str(f"{todo.index((ci, mi)) + 1}/{len(todo)} runs: {cases[ci].name} "
                                             f"{names[mi]}")
                         done[ci, mi], fresh[mi] = _run_stored(s, ci, mi, keys[ci][mi], cost, bar)
@@ -278,6 +290,25 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
                         bar.refresh()
                 out.case_done(ci, fresh)
     return out.rows(len(cases))
+
+
+def _leave_pending(s: _Setup, ci: int, mi: int, key: tuple, done: dict) -> None:
+    """Past the run's stop (:data:`eval.run.pending_rows.STOP_AFTER_ENV`): pair ``(ci, mi)``
+    (store key and key fields ``key``) does not run; its stored record (of older code or
+    other settings, read whole and valid, :meth:`eval.run.result_store.ResultStore.read`)
+    stands in the tables marked pending, with the commit that made it and why; a pair
+    never stored has no row."""
+    name, case = s.names[mi], s.cases[ci].name
+    rec = s.store.read(case, name).record
+    if rec is None:
+        log.warning("%s: %s %s not run and never stored: no row", STOP_AFTER_ENV, case, name)
+        return
+    done[ci, mi] = rec
+    git = rec.get("git") if isinstance(rec.get("git"), dict) else {}
+    s.left[case, name] = (s.store.lookup(case, name, *key).why or "stale", git.get("commit"))
+    c = str(git.get("commit")) + ("+dirty" if git.get("dirty") else "")
+    commits = s.resumed.setdefault("restored_commits", {})  # its row is not this run's (run.json row_commits)
+    commits[c] = commits.get(c, 0) + 1
 
 
 def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
@@ -552,7 +583,16 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
     title += "".join(f"; {n} on {rule}" for n, (sel, rule) in s.own.items() if sel is not None)
     title += _side_by_side(rows) + _presets(rows)
     comp_rows = compared_rows(s.compared, s.names)
-    paths = write_tables(df, s.out_dir, title=title, compared=pd.DataFrame(comp_rows) if comp_rows else None)
+    pending = []
+    if s.left:  # stopped early: the rows of the pairs left are marked pending
+        log.warning("%s: %d stored row(s) left, marked pending in the tables (python -m eval.reproduce --check)",
+                    STOP_AFTER_ENV, len(s.left))
+        with CommitTrees() as trees:  # why each is stale: the modules changed since its commit
+            left = {k: (_named_change(s, *k, why, trees), commit) for k, (why, commit) in s.left.items()}
+        pending = [RowState(s.out_dir, r["case"], r["method"], (r["case"], r["method"]) in left,
+                            *left.get((r["case"], r["method"]), ("", None))) for r in rows]
+    paths = write_tables(df, s.out_dir, title=title, compared=pd.DataFrame(comp_rows) if comp_rows else None,
+                         pending=pending)
     paths.update(write_breakdown(df, s.out_dir, figure=spec.figures.enabled))
     summ = compare(df).main  # every method on the same cases (eval.tables.compare)
     n_err = int((df["error"].astype(str).str.len() > 0).sum())
@@ -560,7 +600,9 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
                 wall_s=round(time.perf_counter() - t_start, 3), jobs=s.jobs,
                 compile_s={k: round(v, 3) for k, v in compile_s.items()},
                 outputs={k: Path(v).name for k, v in paths.items()}, plan=s.plan.finish(s.refs.computed_s),
-                resumed=s.resumed, row_commits=_row_commits(s, info, len(df)))
+                resumed=s.resumed, row_commits=_row_commits(s, info, len(df)),
+                stopped=None if s.deadline is None else {"after_s": round(s.deadline - t_start, 3),
+                                                         "left": len(s.left)})
     paths["run_json"] = write_runinfo(s.out_dir / "run.json", info)
     print(Path(paths["table_md"]).read_text())
     print(f"wrote {', '.join(Path(p).name for p in paths.values())} to {s.out_dir}")
