@@ -176,6 +176,8 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if (a.json or a.strict) and not a.check:
         p.error("--json and --strict go with --check")
+    if sum(map(bool, (a.check, a.rekey, a.retabulate, a.budget is not None))) > 1:
+        p.error("--check, --rekey, --retabulate and --budget are separate commands: give one")
     if a.check or a.rekey:
         return run_command(lambda: _rekey(a) if a.rekey else _check(a), where="results/")
     if a.retabulate:
