@@ -20,7 +20,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 
 from baselines import ARAP, Elastic  # noqa: E402
 from eval import datasets  # noqa: E402
-from eval.metrics.reference import reference_metrics, reference_solution  # noqa: E402
+from eval.metrics.reference import reference_solution  # noqa: E402
+from eval.metrics.reference_scores import reference_metrics  # noqa: E402
 from sshade.arap import bbox_diag  # noqa: E402
 
 METHODS = {"ARAP": (ARAP, "spokes"), "Elastic": (Elastic, "spokes_and_rims")}

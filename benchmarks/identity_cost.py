@@ -6,7 +6,9 @@ it counts by the module's code, eval/run/code_identity.py) is appended to that f
 the copy's committed rows are held to the copy's code (``eval.run.stale_rows.check_folders``,
 as ``python -m eval.reproduce --check``). Prints, per probe, the stale rows per method and
 their stored ``time_s`` in hours (what a regeneration of those rows costs on the machine
-that made them; the references they need are not counted), as a Markdown table.
+that made them; the references they need are not counted), and of them those stale only
+because the code that solves their reference changed (a resumed run keeps such a row when
+its reference, solved again, comes out bit for bit the one it records), as a Markdown table.
 
     python benchmarks/identity_cost.py                       # the default probes
     python benchmarks/identity_cost.py sshade/guard.py eval/metrics/reference.py
@@ -30,12 +32,14 @@ METHODS = ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe")
 #: reader, the mesh checks, the guard, the dataset package, the metrics, the references
 #: and one baseline's own module
 PROBES = ("sshade/arap/solver.py", "sshade/mesh/io.py", "sshade/mesh/validate.py", "sshade/guard.py",
-          "eval/datasets/__init__.py", "eval/metrics/reference.py", "eval/metrics/measures.py",
+          "eval/datasets/__init__.py", "eval/metrics/reference.py", "eval/metrics/reference_scores.py",
+          "eval/metrics/measures.py",
           "baselines/implicit_arap/method.py")
 
 
 def probe(path: str, trees: CommitTrees) -> dict:
-    """``{method: [stale rows, rows, stale hours]}`` after the probe edit of ``path``."""
+    """``{method: [stale rows, rows, stale hours, of them stale for the reference only]}``
+    after the probe edit of ``path``."""
     with tempfile.TemporaryDirectory(prefix="sshade-probe-") as tmp:
         tree = Path(tmp)
         for d in PACKAGES:
@@ -47,10 +51,11 @@ def probe(path: str, trees: CommitTrees) -> dict:
         out: dict = {}
         for ms in check_folders(run_folders(tree / "results"), trees, str(tree)).values():
             for m, v in ms.items():
-                agg = out.setdefault(m, [0, 0, 0.0])
+                agg = out.setdefault(m, [0, 0, 0.0, 0])
                 agg[0] += v["stale"] + v.get("pending", 0)
                 agg[1] += v["rows"]
                 agg[2] += v["stale_s"] / 3600
+                agg[3] += sum(k for why, k in v["why"].items() if why.startswith("its reference solver"))
         return out
 
 
@@ -61,14 +66,15 @@ def main(argv=None) -> int:
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                           text=True, check=False).stdout.strip()
     print(f"Rows of results/ a probe edit stales at {head} (stale / rows, stored hours)\n")
-    print("| edit of | " + " | ".join(METHODS) + " | all | hours |")
-    print("|---|" + "---:|" * (len(METHODS) + 2))
+    print("| edit of | " + " | ".join(METHODS) + " | all | hours | reference only |")
+    print("|---|" + "---:|" * (len(METHODS) + 3))
     with CommitTrees() as trees:
         for path in ["", *a.probes]:
             got = probe(path, trees)
             cells = [f"{got.get(m, [0, 0])[0]} / {got.get(m, [0, 0])[1]}" for m in METHODS]
-            n, rows, hours = (sum(v[i] for v in got.values()) for i in range(3))
-            print(f"| {path or '(nothing)'} | " + " | ".join(cells) + f" | {n} / {rows} | {hours:.2f} |", flush=True)
+            n, rows, hours, ref = (sum(v[i] for v in got.values()) for i in range(4))
+            print(f"| {path or '(nothing)'} | " + " | ".join(cells) + f" | {n} / {rows} | {hours:.2f} | {ref} |",
+                  flush=True)
     return 0
 
 

@@ -56,3 +56,10 @@ class DiesOnCase(Counted):
         if self.case is not None and os.environ.get("SSHADE_TEST_DIE_CASE") == self.case.name:
             os.kill(os.getpid(), signal.SIGKILL)
         return super().deform(V, F, handles, targets)
+
+
+class CountedSpokes(Counted):
+    """:class:`Counted` scored against the spokes energy (its ``energy`` attribute,
+    :func:`eval.metrics.reference_scores.method_energy`), not spokes-and-rims."""
+
+    energy = "spokes"

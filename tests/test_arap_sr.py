@@ -10,11 +10,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from baselines import ARAPSR
-from eval.metrics.reference import (
+from eval.metrics.reference import reference_solution
+from eval.metrics.reference_scores import (
     energy_operators,
     method_energy,
     reference_metrics,
-    reference_solution,
     sr_alpha,
     sr_energy,
 )

@@ -21,11 +21,11 @@ from eval.run.code_identity import (
     ROW_HARNESS,
     ROW_REFERENCES,
     code_identity,
-    describe_change,
     identity_roots,
     import_closure,
     sources_digest,
 )
+from eval.run.result_store import describe_change
 
 from .conftest import ROOT, edit_syntax_tree, subprocess_env
 from .store_methods import kill_at_call

@@ -82,7 +82,7 @@ def test_a_toy_method_is_its_module_and_its_file(tmp_path, monkeypatch, faust_ro
     from hydra import compose, initialize_config_dir
 
     from eval.app import run_experiment
-    from eval.metrics.reference import method_energy
+    from eval.metrics.reference_scores import method_energy
     conf = tmp_path / "conf"
     shutil.copytree(ROOT / "conf", conf)
     (conf / "method" / "Toy.yaml").write_text(_TOY)

@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 
 from eval.datasets.defaust_dataset import BuildProgress, build_outlook
 from eval.experiments.cases import case_plan as cases_plan
-from eval.metrics.reference import sr_energy
+from eval.metrics.reference_scores import sr_energy
 from eval.run import plan as P
 from eval.run.progress import CostModel, default_cost_model
 from sshade.cores import available_cores

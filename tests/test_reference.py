@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from eval.config_check import check_config
-from eval.metrics.reference import method_energy, reference_metrics, reference_solution
+from eval.metrics.reference import reference_solution
+from eval.metrics.reference_scores import method_energy, reference_metrics
 from sshade.arap import arap_deform
 from sshade.arap.problems import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
@@ -163,7 +164,7 @@ def test_arap_sr_reference_continues_the_methods_path(plane, tmp_path):
     0.05% of the diagonal of it, and its energy gap read at the method's own rotations
     is tiny, an upper bound of the gap at the optimal rotations."""
     from baselines.arap_sr import ARAPSR
-    from eval.metrics.reference import sr_energy
+    from eval.metrics.reference_scores import sr_energy
 
     V, F, h, T = plane
     m = ARAPSR(alpha=0.01)
@@ -185,16 +186,21 @@ def test_arap_sr_reference_continues_the_methods_path(plane, tmp_path):
 
 
 def test_reference_key_changes_with_the_solver_code(monkeypatch):
-    """A cached reference computed by other solver code (sshade/arap, baselines) or other
-    numerical libraries is not reused: both are part of its key."""
-    import eval.metrics.reference as reference
+    """A cached reference computed by other solver code (the import closure of
+    eval.metrics.reference: its solvers, energies and operators) or other numerical
+    libraries is not reused: both are part of its key."""
+    import eval.run.reference_cache as cache
+    from eval.run.code_identity import artifact_identity
 
     V = np.eye(3)
     F = np.array([[0, 1, 2]])
     args = (V, F, np.array([0]), V[:1], "spokes_and_rims", {"etol": 1e-12})
-    k0 = reference.reference_key(*args)
-    assert reference.REFERENCE_CODE == ("sshade/arap", "baselines")
-    monkeypatch.setattr(reference, "sources_digest", lambda packages: "edited")
-    k1 = reference.reference_key(*args)
-    monkeypatch.setattr(reference, "numerical_versions", lambda: {"numpy": "0"})
-    assert len({k0, k1, reference.reference_key(*args)}) == 3
+    k0 = cache.reference_key(*args)
+    solvers = artifact_identity()["modules"]
+    assert {"eval.metrics.reference", "sshade.arap.solver", "sshade.arap.smooth_rotations",
+            "baselines.coarse_start"} <= set(solvers)
+    assert not {"baselines.implicit_arap.method", "sshade.pipeline"} & set(solvers)  # not another method's code
+    monkeypatch.setattr(cache, "artifact_identity", lambda: {"sources": "edited"})
+    k1 = cache.reference_key(*args)
+    monkeypatch.setattr(cache, "numerical_versions", lambda: {"numpy": "0"})
+    assert len({k0, k1, cache.reference_key(*args)}) == 3

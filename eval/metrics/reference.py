@@ -1,14 +1,10 @@
 """Reference solutions: the deep-converged full-resolution ARAP minimiser of a case,
-computed once, cached on disk, and the distance of any method's result to it.
-Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md.
-
-- ``ref_mean_pct`` / ``ref_max_pct``: mean / max vertex distance to the reference, in %
-  of the rest mesh's bounding-box diagonal;
-- ``energy_gap``: ``(E(U) - E(U*)) / |E(U*)|``, i.e. ``E(U) / E(U*) - 1`` for a positive
-  minimum, with ``E`` the reference's energy (libigl's weights, :mod:`sshade.arap.operators`);
-  ``>= 0`` up to the reference's own tolerance. (libigl's cotangent weights are negative
-  on obtuse triangles, so the spokes energy of a mesh with many of them, e.g. FAUST's,
-  can be negative at its minimum: hence ``|E(U*)|``.)"""
+computed once and cached on disk (:func:`reference_solution`), an artifact of its own:
+the code of this module's import closure solves it, and a row scored against it records
+its content digest, not that code (:mod:`eval.run.code_identity`, docs/reproduction.md).
+What a result is scored against and how far it lies from the reference:
+:mod:`eval.metrics.reference_scores`.
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import hashlib
@@ -22,106 +18,25 @@ import numpy as np
 
 from baselines.coarse_start import coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
-from eval.run.code_identity import numerical_versions, sources_digest
-from harness.method_registry import method_meta
+from eval.metrics.reference_scores import sr_alpha, sr_params
+from eval.run.reference_cache import reference_key
 from sshade.arap import (
-    ALPHA_SCALINGS,
     DEEP_CRITERION,
     ENERGIES,
     SR_ENERGY,
-    SRProblem,
-    build_operators,
     solve_arap,
     solve_arap_sr,
 )
 from sshade.errors import SShaDeError
 from sshade.files import inside_folder
 
-__all__ = ["REFERENCE_VERSION", "Reference", "status_words", "reference_key", "reference_path",
-           "reference_solution", "reference_metrics",
-           "method_energy", "sr_energy", "sr_alpha", "sr_params", "energy_operators"]
+__all__ = ["Reference", "status_words", "reference_path", "reference_solution"]
 
 log = logging.getLogger("eval")
-
-#: Bumped whenever the reference solver's output for the same inputs changes.
-REFERENCE_VERSION = 1
-
-#: Gauss-Seidel sweeps of the rotations at a method's ARAP-SR result, from its own
-#: rotations, before its energy gap is read (:func:`reference_metrics`).
-SR_GAP_SWEEPS = 20
-
-#: prefix of the ARAP-SR energies (:func:`sr_energy`)
-_SR = "arap_sr_"
-
-
-def sr_energy(alpha: float, alpha_scaling: str = "valence") -> str:
-    """The name of ARAP-SR's energy with smoothness weight ``alpha`` under the definition
-    ``alpha_scaling`` (Levi & Gotsman 2015; :mod:`sshade.arap.smooth_rotations`), e.g.
-    ``"arap_sr_valence_0.01"``: both are part of the name, hence of the cache key and file
-    name. Raises SShaDeError on an unknown ``alpha_scaling``."""
-    if alpha_scaling not in ALPHA_SCALINGS:
-        raise SShaDeError(f"ARAP-SR: alpha_scaling must be one of {ALPHA_SCALINGS}, got {alpha_scaling!r}")
-    return f"{_SR}{alpha_scaling}_{float(alpha)!r}"
-
-
-def sr_params(energy: str) -> tuple[float, str] | None:
-    """``(alpha, alpha_scaling)`` of an ARAP-SR energy name (:func:`sr_energy`), None for
-    another energy. Raises SShaDeError on a malformed ARAP-SR name."""
-    if not str(energy).startswith(_SR):
-        return None
-    scaling, _, a = str(energy)[len(_SR):].rpartition("_")
-    try:
-        a = float(a)
-    except ValueError:
-        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}") from None
-    if not (np.isfinite(a) and a >= 0) or scaling not in ALPHA_SCALINGS:
-        raise SShaDeError(f"bad ARAP-SR energy name {energy!r}")
-    return a, scaling
-
-
-def sr_alpha(energy: str) -> float | None:
-    """``alpha`` of an ARAP-SR energy name (:func:`sr_energy`), None for another energy.
-    Raises SShaDeError on a malformed ARAP-SR name."""
-    p = sr_params(energy)
-    return None if p is None else p[0]
-
 
 def _check_energy(energy: str) -> None:
     if energy not in ENERGIES and sr_alpha(energy) is None:
         raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES} or sr_energy(alpha)")
-
-
-def method_energy(method) -> str:
-    """The energy a method's result is scored against: its own ``energy`` attribute when
-    it names one of :data:`sshade.arap.ENERGIES`, else its file's ``reference``
-    (:func:`harness.method_registry.method_meta`): an energy of :data:`sshade.arap.ENERGIES`, or
-    ``arap_sr``, the method's own ARAP-SR energy with its ``alpha`` and ``alpha_scaling``
-    (:func:`sr_energy`; default 0.01, ``"valence"``); a plug-in's, spokes-and-rims (the
-    energy of SShaDe's low-resolution step, paper §4.1).
-
-    Raises
-    ------
-    SShaDeError on a ``reference`` that names no energy."""
-    e = getattr(method, "energy", None)
-    if e in ENERGIES:
-        return str(e)
-    ref = method_meta(str(getattr(method, "name", method)))["reference"]
-    if ref == "arap_sr":
-        return sr_energy(getattr(method, "alpha", 0.01), getattr(method, "alpha_scaling", "valence"))
-    if ref not in ENERGIES:
-        raise SShaDeError(f"method {getattr(method, 'name', method)}: reference must be one of "
-                          f"{[*ENERGIES, 'arap_sr']}, got {ref!r}")
-    return str(ref)
-
-
-def energy_operators(V, F, energy: str):
-    """What :func:`reference_metrics` evaluates ``energy`` with: the
-    :class:`sshade.arap.ArapOperators` of ``(V, F)`` for an ARAP energy, an energy-only
-    :class:`sshade.arap.SRProblem` for an ARAP-SR one. Raises SShaDeError on
-    an unknown energy."""
-    _check_energy(energy)
-    p = sr_params(energy)
-    return build_operators(V, F, energy) if p is None else SRProblem(V, F, None, None, p[0], alpha_scaling=p[1])
 
 
 def _deep_solve(V, F, handles, targets, energy, solver, U0, R0=None):
@@ -186,28 +101,6 @@ def status_words(status) -> str:
     ``stalled`` (the energy stopped decreasing in float64 round-off, a success) reads
     ``reached float64 precision``; ``converged`` and unknown values are kept."""
     return _STATUS_WORDS.get(str(status), str(status))
-
-
-#: The source folders whose code decides a reference: the energies, their operators and
-#: solvers (ARAP's and Elastic's in ``sshade/arap``, ARAP-SR's in ``baselines``).
-REFERENCE_CODE = ("sshade/arap", "baselines")
-
-
-def reference_key(V, F, handles, targets, energy: str, solver: dict) -> str:
-    """SHA-256 (hex) of everything a reference depends on: the bytes of ``V`` (n, 3)
-    float64, ``F`` (m, 3) int64, ``handles`` (h,) int64, ``targets`` (h, 3) float64, the
-    energy, the solver settings, :data:`REFERENCE_VERSION` and the code that defines the
-    energies and solves them (:data:`REFERENCE_CODE`: the sources of ``sshade/arap`` and
-    ``baselines``, and the numerical libraries' versions, :mod:`eval.run.code_identity`): a
-    reference cached by other code is computed again, never reused."""
-    h = hashlib.sha256()
-    for a, dt in ((V, np.float64), (F, np.int64), (handles, np.int64), (targets, np.float64)):
-        h.update(np.ascontiguousarray(a, dt).tobytes())
-        h.update(str(np.shape(a)).encode())
-    code = {"sources": sources_digest(REFERENCE_CODE), "versions": numerical_versions()}
-    h.update(json.dumps({"energy": energy, "solver": solver, "version": REFERENCE_VERSION, "code": code},
-                        sort_keys=True).encode())
-    return h.hexdigest()
 
 
 def _solver_settings(max_iter: int, time_budget_s: float | None, energy: str) -> dict:
@@ -332,46 +225,3 @@ def _read_entry(path: Path, cache_dir, key: str, shape: tuple):
     return (U, float(E), info), None
 
 
-def reference_metrics(V_rest, Vd, F, ref: Reference, operators=None, R0=None) -> dict:
-    """Distance of a deformed mesh to a reference solution.
-
-    Parameters
-    ----------
-    V_rest : (n, 3) float64 rest positions (for the bounding-box diagonal and the energy).
-    Vd : (n, 3) float64 the method's result. F : (m, 3) int64 faces.
-    ref : :class:`Reference` of the same case.
-    operators : :func:`energy_operators` of ``(V_rest, F, ref.energy_type)`` or None
-        (built here). For ARAP-SR ``E(Vd) = min_R E(Vd, R)`` by Gauss-Seidel sweeps
-        (:meth:`sshade.arap.SRProblem.reduced_energy`) from ARAP's optimal
-        rotations (at most 2,000 sweeps: at 169k vertices they stop short of the
-        minimum and overstate the gap, by ~0.3% on DeFAUST s00_p01), or, with ``R0``,
-        ``E(Vd, R)`` after at most :data:`SR_GAP_SWEEPS` sweeps from ``R0`` (an upper
-        bound of ``min_R E(Vd, R)``, since no sweep raises the energy).
-    R0 : (n, 3, 3) float64 or None, the method's own ARAP-SR rotations
-        (:attr:`baselines.arap_sr.ARAPSR.rotations`).
-
-    Returns
-    -------
-    dict ``ref_mean_pct``, ``ref_max_pct`` (% of the diagonal), ``energy_gap``
-    (``(E(Vd) - E(U*)) / |E(U*)|``; NaN when the reference energy is 0), ``ref_energy``.
-
-    Raises
-    ------
-    SShaDeError when ``Vd`` and the reference have different shapes.
-    """
-    V_rest = np.asarray(V_rest, np.float64)
-    Vd = np.asarray(Vd, np.float64)
-    if Vd.shape != ref.U.shape:
-        raise SShaDeError(f"result has shape {Vd.shape}, the reference {ref.U.shape}")
-    diag = float(np.linalg.norm(V_rest.max(0) - V_rest.min(0)))
-    d = np.linalg.norm(Vd - ref.U, axis=1) / diag * 100.0
-    ops = operators if operators is not None else energy_operators(V_rest, F, ref.energy_type)
-    if R0 is not None and np.shape(R0) != (len(Vd), 3, 3):
-        R0 = None  # not this mesh's rotations
-    if sr_alpha(ref.energy_type) is None:
-        E = float(ops.energy(Vd))
-    else:
-        E = float(ops.reduced_energy(Vd, R0, max_sweeps=SR_GAP_SWEEPS if R0 is not None else 2000)[0])
-    gap = (E - ref.energy) / abs(ref.energy) if ref.energy != 0 else float("nan")
-    return {"ref_mean_pct": float(d.mean()), "ref_max_pct": float(d.max()), "energy_gap": float(gap),
-            "ref_energy": float(ref.energy)}

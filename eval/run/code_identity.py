@@ -9,7 +9,7 @@ Example::
 
     >>> ident = code_identity(None)
     >>> sorted(ident), "eval.metrics.measures" in ident["modules"], "sshade.pipeline" in ident["modules"]
-    (['constants', 'modules', 'plugin', 'sources', 'versions'], True, False)"""
+    (['constants', 'modules', 'plugin', 'reference', 'sources', 'versions'], True, False)"""
 from __future__ import annotations
 
 import ast
@@ -23,10 +23,11 @@ from pathlib import Path
 
 from eval.run.runinfo import REPO_ROOT
 
-__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "ROW_REFERENCES", "RECORD_ONLY", "code_text", "sources_digest",
+__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text",
+           "sources_digest",
            "project_modules", "import_closure", "closure_constants", "file_imports", "modules_digest", "same_code",
            "modules_digest_at", "numerical_versions",
-           "identity_roots", "code_identity", "describe_change"]
+           "identity_roots", "code_identity", "artifact_identity"]
 
 #: The project's packages whose source makes a row (every floor of the house: the method,
 #: the harness's shared tools, the baselines and the builder, the evaluator).
@@ -39,6 +40,14 @@ ROW_HARNESS = ("eval.experiments.cases.pair",)
 #: The modules that make a row's reference columns, part of the identity of the rows
 #: that have them only (``key_fields.extra.reference.on``).
 ROW_REFERENCES = ("eval.experiments.cases.case_references",)
+
+#: The modules that make an artifact a row reads by its content: the reference solutions
+#: (:mod:`eval.metrics.reference`, keyed by their own code and case). A row's closure stops
+#: there; a row with reference columns holds the artifact's own identity beside its code
+#: (:func:`artifact_identity`, ``code["reference"]``) and its record the digest of the
+#: reference it was scored against, so that a reference solved again by other code, bit
+#: for bit the same, leaves the row current (early cutoff; docs/reproduction.md).
+ARTIFACTS = ("eval.metrics.reference",)
 
 #: The modules (and packages, with everything under them) that only store, run or present
 #: records: the ground floor (record format, options, paths, progress, run records), the
@@ -312,20 +321,22 @@ def _snapshot(root: str | None) -> tuple:
     return tuple((str(p), (st := p.stat()).st_mtime_ns, st.st_size) for p in project_modules(root).values())
 
 
-def _closure(roots: tuple, root: str | None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+def _closure(roots: tuple, root: str | None, stop: tuple = ()) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """``(modules, constants)`` of :func:`import_closure` and :func:`closure_constants`."""
-    return _closure_of(tuple(roots), root, _snapshot(root))
+    return _closure_of(tuple(roots), root, _snapshot(root), tuple(stop))
 
 
 @functools.lru_cache(maxsize=256)
-def _closure_of(roots: tuple, root: str | None, snapshot: tuple) -> tuple[tuple[str, ...], tuple[str, ...]]:
+def _closure_of(roots: tuple, root: str | None, snapshot: tuple, stop: tuple = ()
+                ) -> tuple[tuple[str, ...], tuple[str, ...]]:
     mods = project_modules(root)
     seen: set[str] = set()
     consts: set[str] = set()
     todo = [r for r in (_resolve(str(x), mods) for x in roots) if r]
+    stop = tuple(m for m in stop if m not in todo)  # a root is entered
     while todo:
         m = todo.pop()
-        if m in seen or _record_only(m):
+        if m in seen or _record_only(m) or m in stop:
             continue
         seen.add(m)
         parts = m.split(".")
@@ -336,20 +347,21 @@ def _closure_of(roots: tuple, root: str | None, snapshot: tuple) -> tuple[tuple[
     return tuple(sorted(seen)), tuple(sorted(consts))
 
 
-def import_closure(roots: tuple, root: str | None = None) -> tuple[str, ...]:
+def import_closure(roots: tuple, root: str | None = None, stop: tuple = ()) -> tuple[str, ...]:
     """The project modules (sorted dotted names) whose code the modules ``roots`` can run:
     each root, every module an ``import`` statement of a reached module names (module
     level or in a function; through a lazy package or a re-export, the module that
     defines the name used; a literal constant counts by its value instead,
     :func:`closure_constants`), and the parent packages whose ``__init__`` imports
     project code when it runs. Names outside :data:`PACKAGES` and the modules under
-    :data:`RECORD_ONLY` are left out; ``root`` as in :func:`project_modules`.
+    :data:`RECORD_ONLY` are left out, and the modules ``stop`` (unless a root; e.g.
+    :data:`ARTIFACTS` for a row) with all they alone import; ``root`` as in :func:`project_modules`.
 
     >>> arap = import_closure(("baselines.fullres_arap",))
     >>> "eval.tables" in arap, "sshade.arap.solver" in arap, "sshade.pipeline" in arap
     (False, True, False)
     """
-    return _closure(tuple(roots), root)[0]
+    return _closure(tuple(roots), root, stop)[0]
 
 
 def file_imports(path, root: str | None = None) -> tuple[str, ...]:
@@ -361,14 +373,15 @@ def file_imports(path, root: str | None = None) -> tuple[str, ...]:
     return tuple(sorted(m for m in _imports("__main__", Path(path), mods)[0] if not _record_only(m)))
 
 
-def closure_constants(roots: tuple, root: str | None = None) -> tuple[str, ...]:
+def closure_constants(roots: tuple, root: str | None = None, stop: tuple = ()) -> tuple[str, ...]:
     """The literal constants (sorted ``"module.NAME"``, :func:`_literal`) that the modules
-    of :func:`import_closure` import from modules outside it: part of the identity by value.
+    of :func:`import_closure` (``stop`` as there) import from modules outside it: part of
+    the identity by value.
 
     >>> "sshade.params.MAX_SEED" in closure_constants(("harness.checks",))
     True
     """
-    mods, consts = _closure(tuple(roots), root)
+    mods, consts = _closure(tuple(roots), root, stop)
     return tuple(c for c in consts if c.rpartition(".")[0] not in set(mods))
 
 
@@ -472,7 +485,9 @@ def same_code(name: str, tree, root: str | None = None) -> bool:
     sources under ``tree`` (a commit's, :mod:`eval.run.stale_rows`): its :func:`code_text`
     is the same there; or its statements are those there, in order, but for
     definitions that moved between it and another module (one side defines a name, the
-    other imports the very same definition: :func:`_definition`), each name its imports
+    other imports the very same definition: :func:`_definition`), definitions it now
+    imports from a record-only module (:data:`RECORD_ONLY`: no part of any identity) and
+    definitions it dropped and no longer uses (:func:`_dropped`), each name its imports
     bind means the same there, and an import it no longer has binds a name it does not
     use; or, a new module, each of its definitions is word for word one of the code
     there, and each name it imports is bound to the same definition there. A move is not
@@ -487,13 +502,30 @@ def same_code(name: str, tree, root: str | None = None) -> bool:
         return _new_module_moved(stmts, binds, now, then)
     old, old_binds, _ = _module_parts(name, then)
     out_, in_ = _moved(old, binds, now), _moved(stmts, old_binds, then)
+    out_ += [s for s in old if s not in out_ and s[0] and all(n in binds and _record_only(binds[n]) for n in s[0])]
+    out_ += _dropped([s for s in old if s not in out_ and s not in stmts], used, then[name])
     if [s for s in old if s not in out_] != [s for s in stmts if s not in in_]:
         return False
     moved_names = {n for s in out_ + in_ for n in s[0]}
-    if any(n not in moved_names and (n not in old_binds or _definition(b, now) != _definition(old_binds[n], then))
+    if any(n not in moved_names and not _record_only(b)  # a record-only module's names are no part of a row
+           and (n not in old_binds or _definition(b, now) != _definition(old_binds[n], then))
            for n, b in binds.items()):
         return False
     return all(n in binds or n in moved_names or n not in used for n in old_binds)
+
+
+def _dropped(stmts, used: frozenset, path: Path) -> list:
+    """The statements of ``stmts``, gone from the module whose earlier file is ``path``,
+    that defined what the module no longer uses (none of their names in ``used``) and ran
+    nothing when defined: a function without decorators, or a name bound to a literal. A
+    module that imported one from it now binds something else: a change found there."""
+    inert = set()
+    for node in _strip_docstrings(copy.deepcopy(_tree(path))).body:
+        if (isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not node.decorator_list) or (
+                isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None
+                and all(isinstance(x, _LITERAL_NODES) for x in ast.walk(node.value))):
+            inert.add(ast.dump(node, include_attributes=False))
+    return [s for s in stmts if s[0] and not set(s[0]) & used and s[1] in inert]
 
 
 def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
@@ -510,7 +542,7 @@ def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
         old, old_binds, _ = _module_parts(m, then)
         meanings.update({n: _definition(b, then) for n, b in old_binds.items()})
         meanings.update({n: ("def", d) for names, d in old for n in names})
-    return all(meanings.get(n) == _definition(b, now) for n, b in binds.items())
+    return all(_record_only(b) or meanings.get(n) == _definition(b, now) for n, b in binds.items())
 
 
 def modules_digest_at(modules, tree, root: str | None = None, constants=()) -> str:
@@ -586,33 +618,25 @@ def code_identity(method, spec=None, *, references: bool = True, root: str | Non
     ``method``: the built method object, or None for the harness alone (``plugin``
     None); ``spec``: its resolved definition (:func:`identity_roots`; without a ``class``
     the method's own module is taken); ``references``: of the rows with reference
-    columns (:data:`ROW_REFERENCES`); ``root`` as in :func:`project_modules`."""
+    columns (:data:`ROW_REFERENCES`; their closure stops at :data:`ARTIFACTS`, whose own
+    identity is then ``"reference"``, :func:`artifact_identity`); ``root`` as in
+    :func:`project_modules`."""
     spec = dict(spec or {})
     if method is not None and "class" not in spec:
         spec["class"] = f"{type(method).__module__}.{type(method).__qualname__}"
     roots = identity_roots(spec, references)
-    mods, consts = import_closure(roots, root), closure_constants(roots, root)
-    return {"sources": modules_digest(mods, root, consts), "modules": list(mods), "constants": list(consts),
-            "versions": dict(numerical_versions()), "plugin": None if method is None else _plugin_digest(method)}
+    mods, consts = import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
+    out = {"sources": modules_digest(mods, root, consts), "modules": list(mods), "constants": list(consts),
+           "versions": dict(numerical_versions()), "plugin": None if method is None else _plugin_digest(method)}
+    if references:
+        out["reference"] = artifact_identity(root)
+    return out
 
 
-def describe_change(old, new: dict) -> str:
-    """In words, what differs between a stored record's code identity ``old`` (any JSON
-    value: records written before code identities were keyed have none) and ``new``:
-    e.g. ``"the project's sources changed"``, ``"numpy 1.26.4 -> 2.1.0"``, ``"the
-    plug-in's source changed"``; ``""`` when they agree.
+def artifact_identity(root: str | None = None) -> dict:
+    """The identity of the code that solves the references (:data:`ARTIFACTS` and their
+    closure): ``{"sources": hex, "modules": [...], "constants": [...]}`` as in
+    :func:`code_identity`, at the checkout ``root`` (default: this one)."""
+    mods, consts = import_closure(ARTIFACTS, root), closure_constants(ARTIFACTS, root)
+    return {"sources": modules_digest(mods, root, consts), "modules": list(mods), "constants": list(consts)}
 
-    >>> describe_change({"sources": "a", "versions": {"numpy": "1"}, "plugin": None},
-    ...                 {"sources": "b", "versions": {"numpy": "2"}, "plugin": None})
-    "the project's sources changed; numpy 1 -> 2"
-    """
-    if not isinstance(old, dict):
-        return "a record without the identity of its code (written by an older version)"
-    parts = []
-    if old.get("sources") != new.get("sources"):
-        parts.append("the project's sources changed")  # of the modules the row's code imports
-    ov, nv = old.get("versions") if isinstance(old.get("versions"), dict) else {}, new.get("versions") or {}
-    parts += [f"{d} {ov.get(d)} -> {nv.get(d)}" for d in sorted(set(ov) | set(nv)) if ov.get(d) != nv.get(d)]
-    if old.get("plugin") != new.get("plugin"):
-        parts.append("the plug-in's source changed")
-    return "; ".join(parts)

@@ -192,7 +192,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
         the cost model's, measured on the whole machine).
     is_sr_energy : None (no energy is ARAP-SR's) or a callable ``energy -> bool`` telling
         ARAP-SR's energies, whose references cost :data:`SR_REFERENCE_S_PER_VERTEX` per
-        vertex and count as a guess (the caller's, from :func:`eval.metrics.reference.sr_alpha`:
+        vertex and count as a guess (the caller's, from :func:`eval.metrics.reference_scores.sr_alpha`:
         the plan knows no energy names).
 
     Returns

@@ -22,7 +22,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from eval.run.code_identity import describe_change
 from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.runinfo import git_info
@@ -30,8 +29,9 @@ from sshade.errors import SShaDeError
 from sshade.files import atomic_write, inside_folder
 from sshade.json_file import read_json
 
-__all__ = ["STORE_VERSION", "STORE_DIR", "ResultStore", "Lookup", "case_identity", "pair_key",
-           "check_row", "cell_problem", "record_digest", "numeric_column"]
+__all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "ResultStore", "Lookup", "case_identity", "pair_key",
+           "check_row", "cell_problem", "record_digest", "output_digest", "numeric_column",
+           "describe_change"]
 
 log = logging.getLogger("eval")
 
@@ -39,8 +39,15 @@ log = logging.getLogger("eval")
 #: records (:data:`eval.run.code_identity.RECORD_ONLY`) write or key changes: their source is
 #: not part of a row's code identity, this number is (an older record is then stale, or re-keyed
 #: by ``python -m eval.reproduce --rekey`` where git still has the code that made it)
-STORE_VERSION = 5
+STORE_VERSION = 6
 STORE_DIR = "runs"  #: the store's folder inside out_dir
+
+#: The fields a record may hold besides its row, covered by its digest where present:
+#: ``output`` (:func:`output_digest` of the deformed vertices), ``reference`` (the
+#: reference the row was scored against: energy, cache key, content digest) and
+#: ``reproduced`` (the row kept by a later commit whose reference came out bit for bit the
+#: same: :mod:`eval.experiments.cases.reference_cutoff`).
+RECORD_EXTRAS = ("output", "reference", "reproduced")
 
 
 def _digest(a) -> str:
@@ -141,9 +148,18 @@ def check_row(row, case: str, method: str) -> str:
 
 def record_digest(rec: dict) -> str:
     """SHA-256 (hex) of a record's ``key``, ``case``, ``method``, ``row``, ``info`` and
-    ``mesh`` (canonical JSON): what :meth:`ResultStore.save` writes as ``digest``."""
+    ``mesh``, and of those of :data:`RECORD_EXTRAS` it holds (canonical JSON): what
+    :meth:`ResultStore.save` writes as ``digest``."""
     body = {k: rec.get(k) for k in ("key", "case", "method", "row", "info", "mesh")}
+    body.update({k: rec[k] for k in RECORD_EXTRAS if k in rec})
     return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def output_digest(U) -> str:
+    """SHA-256 (hex) of a result's deformed vertices ``U`` (n, 3) as float64 in C order,
+    with their shape: two runs gave the same output exactly when their digests agree."""
+    a = np.ascontiguousarray(U, dtype=np.float64)
+    return hashlib.sha256(f"{a.shape}".encode() + a.tobytes()).hexdigest()
 
 
 class Lookup(NamedTuple):
@@ -154,9 +170,34 @@ class Lookup(NamedTuple):
     why: str | None
 
 
+def describe_change(old, new: dict) -> str:
+    """In words, what differs between a stored record's code identity ``old`` (any JSON
+    value: records written before code identities were keyed have none) and ``new``:
+    e.g. ``"the project's sources changed"``, ``"numpy 1.26.4 -> 2.1.0"``, ``"the
+    plug-in's source changed"``; ``""`` when they agree.
+
+    >>> describe_change({"sources": "a", "versions": {"numpy": "1"}, "plugin": None},
+    ...                 {"sources": "b", "versions": {"numpy": "2"}, "plugin": None})
+    "the project's sources changed; numpy 1 -> 2"
+    """
+    if not isinstance(old, dict):
+        return "a record without the identity of its code (written by an older version)"
+    parts = []
+    if old.get("sources") != new.get("sources"):
+        parts.append("the project's sources changed")  # of the modules the row's code imports
+    ref_old, ref_new = old.get("reference"), new.get("reference")
+    if (ref_old or ref_new) and (ref_old or {}).get("sources") != (ref_new or {}).get("sources"):
+        parts.append("the reference solver's code changed")
+    ov, nv = old.get("versions") if isinstance(old.get("versions"), dict) else {}, new.get("versions") or {}
+    parts += [f"{d} {ov.get(d)} -> {nv.get(d)}" for d in sorted(set(ov) | set(nv)) if ov.get(d) != nv.get(d)]
+    if old.get("plugin") != new.get("plugin"):
+        parts.append("the plug-in's source changed")
+    return "; ".join(parts)
+
+
 def _stale_why(old, new: dict | None) -> str:
     """Why a record under another key is stale: ``"other code: ..."`` when its code
-    identity differs (:func:`eval.run.code_identity.describe_change`), else ``"other
+    identity differs (:func:`describe_change`), else ``"other
     settings: <the differing sections>"``."""
     if new is None:
         return "other settings"
@@ -176,12 +217,16 @@ class ResultStore:
     ----------
     out_dir : the run's claimed output folder; the store is ``out_dir/runs``.
     meshes : bool, also store each successful run's deformed vertices (``.npy``).
+    annotate : None or ``f(case, method, row) -> dict``, the :data:`RECORD_EXTRAS` a
+        record gets besides its ``output`` digest (e.g. the reference it was scored
+        against); other keys are left out.
     """
 
-    def __init__(self, out_dir, *, meshes: bool = False):
+    def __init__(self, out_dir, *, meshes: bool = False, annotate=None):
         self.out_dir = Path(out_dir)
         self.root = self.out_dir / STORE_DIR
         self.meshes = bool(meshes)
+        self.annotate = annotate
         self._git = None  # the checkout's state, read once at the first save
 
     def path(self, case: str, method: str) -> Path:
@@ -266,7 +311,8 @@ class ResultStore:
     def save(self, case: str, method: str, key: str, fields: dict, row: dict, info=None, U=None,
              git: dict | None = None) -> Path:
         """Store one finished run atomically (the mesh first, then the record naming it,
-        with its :func:`record_digest`); ``git``: the checkout's state, recorded beside
+        with the :func:`output_digest` of ``U`` (n, 3) when the run gave one, the fields
+        ``annotate`` adds, and its :func:`record_digest`); ``git``: the checkout's state, recorded beside
         (default: :func:`eval.run.runinfo.git_info`, read once per store).
         Returns the record's path. OSError propagates (the caller decides)."""
         if git is None:
@@ -284,6 +330,10 @@ class ResultStore:
         rec = {"version": STORE_VERSION, "case": str(case), "method": str(method), "key": key, "key_fields": fields,
                "row": json_safe(row), "info": json_safe(info or {}), "mesh": mesh, "git": json_safe(git),
                "written_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+        if U is not None:
+            rec["output"] = output_digest(U)
+        extra = self.annotate(str(case), str(method), rec["row"]) if self.annotate is not None else None
+        rec.update({k: json_safe(v) for k, v in (extra or {}).items() if k in RECORD_EXTRAS and k != "output"})
         rec["digest"] = record_digest(rec)
         with atomic_write(p, "w") as fh:
             fh.write(json.dumps(rec, indent=1) + "\n")

@@ -23,7 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval.run.code_identity import (
+    ARTIFACTS,
     PACKAGES,
+    artifact_identity,
     closure_constants,
     identity_roots,
     import_closure,
@@ -45,10 +47,11 @@ __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders
 #: (:mod:`eval.run.stale_runs`): extracted with them.
 SCRIPTS = ("benchmarks",)
 
-#: The store version whose records :func:`rekey_record` converts besides this one's (the
-#: layout before a row's identity left out the reference columns' code where it has none,
-#: and the loaders, through the lazy dataset and experiment packages).
-REKEY_FROM = 4
+#: The store versions whose records :func:`rekey_record` converts besides this one's: 4 (a
+#: row's identity held the reference columns' code where it has none, and the loaders,
+#: through the lazy dataset and experiment packages) and 5 (it held the reference solver's
+#: code, now an artifact of its own: ``code["reference"]``).
+REKEY_FROM = (4, 5)
 
 
 class CommitTrees:
@@ -149,7 +152,7 @@ def _now(fields, root: str | None = None) -> tuple[tuple, tuple]:
     """``(modules, constants)`` of the identity of a record with key fields ``fields`` at the checkout ``root``."""
     spec = fields.get("method") if isinstance(fields, dict) else None
     roots = identity_roots(spec, references_on(fields))
-    return import_closure(roots, root), closure_constants(roots, root)
+    return import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
 
 
 def changed_since(mods, consts, tree: Path, root: str | None = None) -> list[str]:
@@ -172,7 +175,7 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
                   time_s=row.get("time_s") if isinstance(row.get("time_s"), (int, float)) else None)
     if rec.get("version") != STORE_VERSION:
         st.stale, st.why = True, (f"store version {rec.get('version')!r}, now {STORE_VERSION}"
-                                  + (" (python -m eval.reproduce --rekey)" if rec.get("version") == REKEY_FROM else ""))
+                                  + (" (python -m eval.reproduce --rekey)" if rec.get("version") in REKEY_FROM else ""))
         return st
     fields = rec.get("key_fields") if isinstance(rec.get("key_fields"), dict) else {}
     code = fields.get("code") if isinstance(fields.get("code"), dict) else {}
@@ -180,10 +183,10 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
         st.why = "a plug-in's row: its source lies outside this repository (not checked)"
         return st
     mods, consts = _now(fields, root)
-    if code.get("sources") == modules_digest(mods, root, consts):
-        return st
-    st.stale = True
     tree = trees.tree(st.commit) if not git.get("dirty") else None
+    if code.get("sources") == modules_digest(mods, root, consts):
+        return _reference_state(st, code, tree, root) if references_on(fields) else st
+    st.stale = True
     if list(mods) != code.get("modules") or list(consts) != code.get("constants"):
         st.why = "the modules its method's code is made of changed"
     elif tree is None:
@@ -191,6 +194,22 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
     else:
         names = changed_since(mods, consts, tree, root)
         st.why = f"{', '.join(names) or 'its code'} changed since {str(st.commit)[:7]}"
+    return st
+
+
+def _reference_state(st: RowState, code: dict, tree: Path | None, root: str | None) -> RowState:
+    """``st`` of a row with reference columns whose own code is current: stale when the
+    code that solves its reference (:func:`eval.run.code_identity.artifact_identity`)
+    changed since, with the modules named where git has its commit; a resumed run then
+    solves the reference again and keeps the row when it comes out bit for bit the same
+    as the one the row records (:mod:`eval.experiments.cases.reference_cutoff`)."""
+    ref, now = code.get("reference") if isinstance(code.get("reference"), dict) else {}, artifact_identity(root)
+    if ref.get("sources") == now["sources"]:
+        return st
+    st.stale = True
+    names = changed_since(now["modules"], now["constants"], tree, root) if tree is not None else []
+    st.why = (f"its reference solver ({', '.join(names) or 'its code'}) changed since {str(st.commit)[:7]}: "
+              "a resumed run keeps it if the reference comes out bit for bit the same")
     return st
 
 
@@ -251,20 +270,64 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=N
     return out
 
 
-def _verified(code: dict, tree: Path) -> bool:
+def _verified(code: dict, tree: Path, by: Path | None = None) -> bool:
     """Whether a record's code identity ``code`` is that of the sources under ``tree``
     (its commit's): its modules' and constants' digest there, or, for a record re-keyed
     after a definition moved (:func:`eval.run.code_identity.modules_digest_at`), there
-    with the moved modules as in this checkout."""
+    with the moved modules as in this checkout or as in ``by``, the sources of the commit
+    that re-keyed it."""
     mods, consts = code.get("modules") or [], code.get("constants") or ()
     for digest in (lambda: modules_digest(mods, str(tree), consts),
-                   lambda: modules_digest_at(mods, tree, None, consts)):
+                   lambda: modules_digest_at(mods, tree, None, consts),
+                   lambda: modules_digest_at(mods, tree, str(by), consts) if by is not None else None):
         try:
             if digest() == code.get("sources"):
                 return True
         except KeyError:
             continue
     return False
+
+
+def _head() -> str | None:
+    """This checkout's commit (40 hex digits) when its packages' sources are that
+    commit's, None when they have uncommitted changes (the records re-keyed then name
+    their code by the commit that stores them, :func:`_rekeyed_by`) or git cannot say."""
+    try:
+        r = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
+                           timeout=60, check=False)
+        d = subprocess.run(["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--", *PACKAGES],
+                           capture_output=True, text=True, timeout=60, check=False)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return r.stdout.strip() if r.returncode == 0 and d.returncode == 0 and not d.stdout.strip() else None
+
+
+def _rekeyed_by(rec: dict, p: Path) -> str | None:
+    """The commit whose code re-keyed record ``rec`` (file ``p``): its ``rekeyed.by``, or,
+    for a record re-keyed before that was written, the last commit that changed its file."""
+    by = rec["rekeyed"].get("by")
+    if isinstance(by, str):
+        return by
+    try:
+        r = subprocess.run(["git", "-C", str(REPO_ROOT), "log", "-1", "--format=%H", "--", str(Path(p).resolve())],
+                           capture_output=True, text=True, timeout=60, check=False)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return r.stdout.strip() or None if r.returncode == 0 else None
+
+
+def _reference_tree(rec: dict, tree: Path, trees: CommitTrees) -> tuple[Path | None, str]:
+    """The sources whose code solved the reference a record was scored against: its
+    commit's (``tree``), or, for a row kept since because its reference came out the same
+    (``reproduced``), those of the commit that kept it; ``(None, why)`` when git cannot
+    give them."""
+    rep = rec.get("reproduced")
+    if not isinstance(rep, dict):
+        return tree, ""
+    if rep.get("dirty") is not False:
+        return None, "its reference was solved again by a checkout with uncommitted changes"
+    t = trees.tree(rep.get("commit"))
+    return (t, "") if t is not None else (None, f"commit {rep.get('commit')!r} is not in this repository")
 
 
 def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
@@ -282,7 +345,7 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
     rec, bad = _valid(folder, p)
     if rec is None:
         return f"refused: {bad}"
-    if rec.get("version") not in (REKEY_FROM, STORE_VERSION):
+    if rec.get("version") not in (*REKEY_FROM, STORE_VERSION):
         return f"refused: store version {rec.get('version')!r}"
     fields, git = rec.get("key_fields"), rec.get("git")
     if not isinstance(fields, dict) or not isinstance(git, dict) or not isinstance(fields.get("code"), dict):
@@ -299,19 +362,26 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
     if tree is None:
         return f"refused: commit {git.get('commit')!r} is not in this repository"
     try:
-        if not _verified(old, tree):
+        by = trees.tree(_rekeyed_by(rec, p)) if isinstance(rec.get("rekeyed"), dict) else None
+        if not _verified(old, tree, by):
             return f"refused: its code identity is not that of {git['commit'][:7]}'s sources"
         mods, consts = _now(fields)
-        sources = modules_digest_at(mods, tree, None, consts)
+        code = {"sources": modules_digest_at(mods, tree, None, consts), "modules": list(mods),
+                "constants": list(consts), "versions": old.get("versions"), "plugin": old.get("plugin")}
+        if references_on(fields):
+            rtree, why = _reference_tree(rec, tree, trees)
+            if rtree is None or (isinstance(old.get("reference"), dict) and not _verified(old["reference"], rtree, by)):
+                return f"refused: {why or 'its reference solver identity is not that of its commit'}"
+            ref = artifact_identity()
+            code["reference"] = {**ref, "sources": modules_digest_at(ref["modules"], rtree, None, ref["constants"])}
     except KeyError as e:
         return f"refused: module {e} is not at {git['commit'][:7]}"
-    code = {"sources": sources, "modules": list(mods), "constants": list(consts), "versions": old.get("versions"),
-            "plugin": old.get("plugin")}
     key, new_fields = pair_key(fields.get("method"), fields.get("case"), fields.get("extra"), code)
     if rec.get("version") == STORE_VERSION and key == rec.get("key"):
         return "current"
     rec.update(version=STORE_VERSION, key=key, key_fields=new_fields,
-               rekeyed={"from_version": rec.get("version"), "from_key": rec.get("key"), "commit": git["commit"]})
+               rekeyed={"from_version": rec.get("version"), "from_key": rec.get("key"), "commit": git["commit"],
+                        "by": _head()})
     rec["digest"] = record_digest(rec)
     ResultStore(folder).rewrite(p, rec)
     return "rekeyed"

@@ -22,6 +22,7 @@ from eval import method_config as method_table
 from eval.experiments.cases.case_jobs import WorkerSetup
 from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.pair import run_and_store, run_pair
+from eval.experiments.cases.reference_cutoff import scored_against
 from eval.metrics.meshes import CaseMeshes
 from eval.run.jsonsafe import json_safe
 from eval.run.outdir import resume_command
@@ -92,7 +93,7 @@ def run_case_task(setup: WorkerSetup, task: CaseTask) -> dict:
         lg.setLevel(logging.INFO)
     methods = method_table.make_methods(setup.methods)
     refs = CaseReferences(setup.reference)
-    store = ResultStore(abs_path(setup.out_dir), meshes=setup.store_meshes)
+    store = ResultStore(abs_path(setup.out_dir), meshes=setup.store_meshes, annotate=scored_against(refs, methods))
     refs.start_case(task.ci, task.case, task.ref_on)
     meshes, stored, out = CaseMeshes(), [], {}
     for mi, key, fields in task.pairs:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from eval import method_config as method_table
 from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.pair import run_and_store, run_pair
+from eval.experiments.cases.reference_cutoff import scored_against
 from eval.metrics.meshes import CaseMeshes
 from eval.run.jsonsafe import json_safe
 from eval.run.outdir import resume_command
@@ -110,9 +111,9 @@ def init_worker(setup: WorkerSetup) -> None:
     lg.handlers[:] = [_Forward()]
     lg.setLevel(logging.INFO)
     lg.propagate = False
-    _W.update(methods=method_table.make_methods(setup.methods), refs=CaseReferences(setup.reference),
-              guard=dict(setup.guard), store=ResultStore(abs_path(setup.out_dir), meshes=setup.store_meshes),
-              meshes=CaseMeshes())
+    methods, refs = method_table.make_methods(setup.methods), CaseReferences(setup.reference)
+    store = ResultStore(abs_path(setup.out_dir), meshes=setup.store_meshes, annotate=scored_against(refs, methods))
+    _W.update(methods=methods, refs=refs, guard=dict(setup.guard), store=store, meshes=CaseMeshes())
 
 
 def case_job(ci: int, case, pairs, ref_on: bool, want_meshes: bool) -> dict:

@@ -18,7 +18,8 @@ from types import SimpleNamespace
 
 from eval import datasets
 from eval.experiments.cases.case_jobs import job_count
-from eval.metrics.reference import method_energy, reference_path, sr_alpha
+from eval.metrics.reference import reference_path
+from eval.metrics.reference_scores import method_energy, sr_alpha
 from eval.run.plan import add_actuals, build_stage, busy_words, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
 from eval.run.spec import DatasetSpec
@@ -31,7 +32,7 @@ log = logging.getLogger("eval")
 
 
 def _is_sr_energy(energy: str) -> bool:
-    """Whether ``energy`` is ARAP-SR's (:func:`eval.metrics.reference.sr_alpha`): the plan's
+    """Whether ``energy`` is ARAP-SR's (:func:`eval.metrics.reference_scores.sr_alpha`): the plan's
     rate for its references (:func:`eval.run.plan.make_plan`)."""
     return sr_alpha(energy) is not None
 

@@ -5,14 +5,8 @@ from __future__ import annotations
 
 import logging
 
-from eval.metrics.reference import (
-    energy_operators,
-    method_energy,
-    reference_metrics,
-    reference_solution,
-    sr_alpha,
-    status_words,
-)
+from eval.metrics.reference import reference_solution, status_words
+from eval.metrics.reference_scores import energy_operators, method_energy, reference_metrics, sr_alpha
 from eval.run.spec import ReferenceOptions
 from eval.run.subset import baseline_selection
 
@@ -27,7 +21,7 @@ class CaseReferences:
     ``dataset.baseline_cases``; ``all``; ``none``; or a rule of its own, ``per_pose`` or
     an integer, as for ``dataset.baseline_cases``), the deep-converged full-resolution
     minimiser of the energy each method is compared with
-    (:func:`eval.metrics.reference.method_energy`), computed once per (case, energy), cached in
+    (:func:`eval.metrics.reference_scores.method_energy`), computed once per (case, energy), cached in
     ``reference.cache`` and reused by later runs; :meth:`metrics` gives a row's
     ``ref_mean_pct``, ``ref_max_pct``, ``energy_gap`` columns (none outside the selection).
     The reference's own solve is not part of any method's ``time_s``."""

@@ -23,7 +23,9 @@ from eval.experiments.cases.case_array import CaseTask, TaskEnd, run_case_array
 from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, run_case_jobs
 from eval.experiments.cases.case_plan import plan_runs, planned_root
 from eval.experiments.cases.case_references import CaseReferences
+from eval.experiments.cases.case_restore import keep_reproduced, leave_pending, named_change, restore
 from eval.experiments.cases.pair import run_and_store
+from eval.experiments.cases.reference_cutoff import scored_against
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.meshes import CaseMeshes
 from eval.present.breakdown import write_breakdown
@@ -39,7 +41,7 @@ from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
-from eval.run.stale_rows import CommitTrees, RowState, row_state
+from eval.run.stale_rows import CommitTrees, RowState
 from eval.run.subset import baseline_selection, method_selections, take_sample
 from eval.tables import compare, write_cases, write_tables
 from harness.method_registry import method_meta
@@ -126,6 +128,7 @@ class _Setup:
     resumed: dict | None = None   # restored / recomputed counts for run.json
     deadline: float | None = None  # perf_counter time after which no pair starts (pending_rows.STOP_AFTER_ENV)
     left: dict = field(default_factory=dict)  # (case, method) left at the deadline -> (why, commit) of its stored row
+    cutoff: dict = field(default_factory=dict)  # (ci, mi) -> stored record kept if its reference is reproduced
 
     @property
     def base(self) -> set | None:
@@ -180,7 +183,7 @@ def _setup(spec: EvalSpec) -> _Setup:
              names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
     compared = _compared(spec, cases, ds, out_dir)  # read and checked before any method runs
-    store = ResultStore(out_dir, meshes=spec.output.store_meshes)
+    store = ResultStore(out_dir, meshes=spec.output.store_meshes, annotate=scored_against(refs, methods))
     store.check_links()  # a link in runs/ would take a resume's records outside out_dir
     if not spec.output.resume:
         n = store.clear()
@@ -258,7 +261,7 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(s, ci, c) for ci, c in enumerate(cases)}
     cost = default_cost_model(methods)  # measured per-method priors (eval/run/progress.py)
-    done = _restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
+    done = restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
     array = spec.experiment.options  # the cluster section (case_array.py); None: the pairs run here
@@ -281,7 +284,9 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
                 fresh = {}
                 for mi in plan[ci]:
                     if (ci, mi) not in done and s.deadline is not None and time.perf_counter() >= s.deadline:
-                        _leave_pending(s, ci, mi, keys[ci][mi], done)
+                        leave_pending(s, ci, mi, keys[ci][mi], done)
+                    elif (ci, mi) in s.cutoff and keep_reproduced(s, ci, mi, keys[ci][mi], done):
+                        bar.retotal(bar.total - est[ci, mi])
                     elif (ci, mi) not in done:
                         bar.set_postfix_str(f"{todo.index((ci, mi)) + 1}/{len(todo)} runs: {cases[ci].name} "
                                             f"{names[mi]}")
@@ -290,79 +295,6 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
                         bar.refresh()
                 out.case_done(ci, fresh)
     return out.rows(len(cases))
-
-
-def _leave_pending(s: _Setup, ci: int, mi: int, key: tuple, done: dict) -> None:
-    """Past the run's stop (:data:`eval.run.pending_rows.STOP_AFTER_ENV`): pair ``(ci, mi)``
-    (store key and key fields ``key``) does not run; its stored record (of older code or
-    other settings, read whole and valid, :meth:`eval.run.result_store.ResultStore.read`)
-    stands in the tables marked pending, with the commit that made it and why; a pair
-    never stored has no row."""
-    name, case = s.names[mi], s.cases[ci].name
-    rec = s.store.read(case, name).record
-    if rec is None:
-        log.warning("%s: %s %s not run and never stored: no row", STOP_AFTER_ENV, case, name)
-        return
-    done[ci, mi] = rec
-    git = rec.get("git") if isinstance(rec.get("git"), dict) else {}
-    s.left[case, name] = (s.store.lookup(case, name, *key).why or "stale", git.get("commit"))
-    c = str(git.get("commit")) + ("+dirty" if git.get("dirty") else "")
-    commits = s.resumed.setdefault("restored_commits", {})  # its row is not this run's (run.json row_commits)
-    commits[c] = commits.get(c, 0) + 1
-
-
-def _restore(s: _Setup, plan: dict, keys: dict, cost: CostModel) -> dict:
-    """The stored records a resumed run reuses (:meth:`eval.run.result_store.ResultStore.lookup`:
-    same key, code included, and a valid record), observed by ``cost``; every other
-    pair runs. Logs, before any work, how many are restored and how many recomputed, and
-    per method the rows reused, stale and why (a record of other code names the modules
-    changed since its commit, :func:`eval.run.stale_rows.row_state`), and keeps the counts
-    and the commits of the restored rows in ``s.resumed`` for ``run.json``. Returns
-    ``{(ci, mi): record}``."""
-    done, why, per = {}, {}, {n: [0, {}, 0] for n in s.names}  # method -> [reused, {why: n}, not stored]
-    with CommitTrees() as trees:
-        for ci, mis in plan.items():
-            for mi in mis:
-                name = s.names[mi]
-                found = s.store.lookup(s.cases[ci].name, name, *keys[ci][mi])
-                if found.record is not None:
-                    done[ci, mi] = found.record
-                    per[name][0] += 1
-                    cost.observe(name, len(s.cases[ci].V), found.record["row"].get("time_s"))
-                elif found.why == "absent":
-                    per[name][2] += 1
-                else:
-                    w = _named_change(s, s.cases[ci].name, name, found.why, trees)
-                    why.setdefault(w, []).append(f"{s.cases[ci].name} {name}")
-                    per[name][1][w] = per[name][1].get(w, 0) + 1
-    n_todo = sum(len(mis) for mis in plan.values()) - len(done)
-    n_stale = sum(len(v) for v in why.values())
-    log.info("resume: %d run(s) restored from %s, %d to run (%d not stored, %d recomputed)", len(done),
-             s.store.root, n_todo, n_todo - n_stale, n_stale)
-    for name, (ok, stale, absent) in per.items():
-        words = "; ".join(f"{w} ({n})" for w, n in stale.items())
-        log.info("resume: %s: %d reused, %d stale%s, %d not stored", name, ok, sum(stale.values()),
-                 f" ({words})" if words else "", absent)
-    for w, pairs in sorted(why.items(), key=lambda kv: -len(kv[1])):
-        more = f" and {len(pairs) - 3} more" if len(pairs) > 3 else ""
-        log.warning("resume: %d stored run(s) recomputed, %s: %s%s", len(pairs), w, ", ".join(pairs[:3]), more)
-    commits: dict = {}
-    for rec in done.values():
-        c = str((rec.get("git") or {}).get("commit")) + ("+dirty" if (rec.get("git") or {}).get("dirty") else "")
-        commits[c] = commits.get(c, 0) + 1
-    s.resumed = {"restored": len(done), "recomputed": {w: len(p) for w, p in why.items()},
-                 "not_stored": n_todo - n_stale, "restored_commits": commits}
-    return done
-
-
-def _named_change(s: _Setup, case: str, method: str, why: str, trees: CommitTrees) -> str:
-    """``why`` a stored record is stale, with the modules changed since its commit named
-    when its code changed (:func:`eval.run.stale_rows.row_state`)."""
-    if not why.startswith("other code: the project's sources changed"):
-        return why
-    rec = s.store.read(case, method).record
-    st = row_state(s.out_dir, rec, trees) if rec is not None else None
-    return f"other code: {st.why}" if st is not None and st.stale and st.why else why
 
 
 def _run_in_jobs(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, bar, done: dict, out) -> None:
@@ -588,7 +520,7 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
         log.warning("%s: %d stored row(s) left, marked pending in the tables (python -m eval.reproduce --check)",
                     STOP_AFTER_ENV, len(s.left))
         with CommitTrees() as trees:  # why each is stale: the modules changed since its commit
-            left = {k: (_named_change(s, *k, why, trees), commit) for k, (why, commit) in s.left.items()}
+            left = {k: (named_change(s, *k, why, trees), commit) for k, (why, commit) in s.left.items()}
         pending = [RowState(s.out_dir, r["case"], r["method"], (r["case"], r["method"]) in left,
                             *left.get((r["case"], r["method"]), ("", None))) for r in rows]
     paths = write_tables(df, s.out_dir, title=title, compared=pd.DataFrame(comp_rows) if comp_rows else None,
