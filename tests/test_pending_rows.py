@@ -52,3 +52,34 @@ def test_the_early_stop_is_a_number_of_seconds_or_nothing(text, want):
 def test_a_bad_early_stop_is_refused_naming_the_variable(text):
     with pytest.raises(SShaDeError, match=STOP_AFTER_ENV):
         stop_after_s({STOP_AFTER_ENV: text})
+
+
+def test_a_pair_left_at_the_stop_and_never_stored_has_no_row_and_the_run_ends_cleanly(tmp_path, faust_root):
+    """The evaluator's early stop past its first pair: a stored current row (A) stands, a
+    pair never stored (B) has no row and no mesh in the first case's figure, and the run
+    exits 0 (it once failed on the missing mesh of the pair left)."""
+    import subprocess
+    import sys
+
+    import pandas as pd
+
+    from .conftest import ROOT, subprocess_env
+
+    (tmp_path / "faust").symlink_to(faust_root)
+    out, counter = tmp_path / "out", tmp_path / "calls.txt"
+    A, B = ("{_target_:tests.store_methods.Counted,name:%s}" % n for n in "AB")
+
+    def run(methods, environ=None):
+        cmd = [sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={tmp_path / 'faust'}",
+               "dataset.limit=1", "reference.cases=none", f"methods=[{methods}]", f"out_dir={out}", "resume=true",
+               "jobs=1"]
+        env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(counter), **(environ or {}))
+        return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+
+    assert run(A).returncode == 0
+    calls = counter.read_text()
+    r = run(f"{A},{B}", {STOP_AFTER_ENV: "0.001"})
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert counter.read_text() == calls  # nothing ran after the stop
+    assert list(pd.read_csv(out / "cases.csv")["method"]) == ["A"]
+    assert "not run and never stored: no row" in (out / "eval.log").read_text()

@@ -403,6 +403,8 @@ class _CaseOutputs:
             if mi in fresh:
                 deformed[name] = fresh[mi]
                 continue
+            if (ci, mi) not in self.done:  # left at the run's stop, never stored: no row, no mesh
+                continue
             deformed[name] = s.store.load_mesh(self.done[ci, mi])
             if deformed[name] is None and not self.done[ci, mi]["row"].get("error"):
                 unknown.append(name)  # restored without its mesh (store.meshes=false)
