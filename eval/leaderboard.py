@@ -211,22 +211,28 @@ def _animation_board(d: Path, info: dict) -> Board | None:
 
 
 def _stale(d: Path, trees: CommitTrees) -> dict:
-    """``{method: (stale, rows, commits)}`` of the stored rows of run folder ``d`` (and of
-    the folders below it) whose code identity differs from this checkout's, with the
-    commits that made them (:func:`eval.run.stale_rows.check_folders`); methods without a
-    stale row left out."""
+    """``{method: (stale, rows, commits, modules)}`` of the stored rows of run folder ``d``
+    (and of the folders below it) whose code identity differs from this checkout's, with
+    the commits that made them and the modules changed since
+    (:func:`eval.run.stale_rows.check_folders`); methods without a stale row left out."""
     out: dict = {}
     for ms in check_folders(run_folders(d), trees).values():
         for m, v in ms.items():
-            k, n, c = out.get(m, (0, 0, set()))
-            out[m] = (k + v["stale"], n + v["rows"], c | v["commits"])
+            k, n, c, ch = out.get(m, (0, 0, set(), set()))
+            out[m] = (k + v["stale"], n + v["rows"], c | v["commits"], ch | v["changed"])
     return {m: knc for m, knc in out.items() if knc[0]}
 
 
 def stale_words(stale: tuple | None) -> str:
-    """A cell's mark for a method with stale rows, with the commits that made them:
-    ``" [stale: 8 of 40 rows, made at 3e79476]"``; ``""`` for none."""
-    return f" [stale: {stale[0]} of {stale[1]} rows, made at {', '.join(sorted(stale[2]))}]" if stale else ""
+    """A cell's mark for a method with stale rows, with the commits that made them and the
+    modules changed since (at most three named):
+    ``" [stale: 8 of 40 rows, made at 3e79476; sshade.guard changed]"``; ``""`` for none."""
+    if not stale or not stale[0]:
+        return ""
+    changed = sorted(stale[3]) if len(stale) > 3 else []
+    more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
+    what = f"; {', '.join(changed[:3])}{more} changed" if changed else ""
+    return f" [stale: {stale[0]} of {stale[1]} rows, made at {', '.join(sorted(stale[2]))}{what}]"
 
 
 def _commit(info: dict) -> str:

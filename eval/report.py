@@ -447,7 +447,9 @@ def write_index(root) -> Path:
         k = sum(v["stale"] for v in stale.get(d, {}).values())
         n = sum(v["rows"] for v in stale.get(d, {}).values())
         made = ", ".join(sorted(set().union(*(v["commits"] for v in stale.get(d, {}).values()))))
-        status = str(info.get("status", "")) + (f"; {k} of {n} rows stale, made at {made} "
+        changed = sorted(set().union(*(v.get("changed", ()) for v in stale.get(d, {}).values())))
+        what = f"; {', '.join(changed[:3])}{' and more' if len(changed) > 3 else ''} changed since" if changed else ""
+        status = str(info.get("status", "")) + (f"; {k} of {n} rows stale, made at {made}{what} "
                                                 "(python -m eval.reproduce --check)" if k else "")
         if d in whole and whole[d].stale:
             status += f"; stale: {whole[d].why} (python -m eval.reproduce --check)"

@@ -146,3 +146,13 @@ def test_a_users_run_with_compare_with_is_ranked_beside_the_rows_it_read(tmp_pat
     assert "| 1 | SShaDe | 1.64 |" in md and "| 2 | Mine | 1.74 |" in md and "| 3 | ARAP | 1.84 |" in md
     assert re.search(r"\| 2 \| Mine \| 1.74 \| 1.7\d \.\. 1.7\d \| 1.00 \| 1.00 \| 1.000 \| -- \|", md)  # no SShaDe
     assert re.search(r"\| 3 \| ARAP \| 1.84 \| 1.8\d \.\. 1.8\d \| 1.00 \| 1.00 \| 1.000 \| -- \|", md)  # another run's
+
+
+def test_a_stale_mark_names_the_commits_and_at_most_three_modules_changed_since():
+    from eval.leaderboard import stale_words
+    assert stale_words(None) == "" and stale_words((0, 8, set(), set())) == ""
+    assert stale_words((8, 40, {"3e79476"}, set())) == " [stale: 8 of 40 rows, made at 3e79476]"
+    assert stale_words((8, 40, {"3e79476", "c449109"}, {"sshade.guard"})) == \
+        " [stale: 8 of 40 rows, made at 3e79476, c449109; sshade.guard changed]"
+    many = {"a", "b", "c", "d", "e"}
+    assert stale_words((1, 2, {"3e79476"}, many)).endswith("; a, b, c and 2 more changed]")

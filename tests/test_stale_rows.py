@@ -88,6 +88,9 @@ def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
                         for m in ("ARAP", "SShaDe"))
         assert not arap.stale
         assert sshade.stale and sshade.why == "sshade.smooth_transfer changed since c449109"
+        assert sshade.extra["changed"] == ["sshade.smooth_transfer"]  # what the leaderboard and index name
+        got = check_folders([out], trees, str(tree))[str(out)]
+        assert got["SShaDe"]["changed"] == {"sshade.smooth_transfer"} and got["ARAP"]["changed"] == set()
 
 
 def _resign(rec: dict) -> dict:

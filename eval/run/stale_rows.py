@@ -193,7 +193,7 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
         st.why = "its code changed (its commit is not in this clone)"
     else:
         names = changed_since(mods, consts, tree, root)
-        st.why = f"{', '.join(names) or 'its code'} changed since {str(st.commit)[:7]}"
+        st.why, st.extra["changed"] = f"{', '.join(names) or 'its code'} changed since {str(st.commit)[:7]}", names
     return st
 
 
@@ -208,6 +208,7 @@ def _reference_state(st: RowState, code: dict, tree: Path | None, root: str | No
         return st
     st.stale = True
     names = changed_since(now["modules"], now["constants"], tree, root) if tree is not None else []
+    st.extra["changed"] = names
     st.why = (f"its reference solver ({', '.join(names) or 'its code'}) changed since {str(st.commit)[:7]}: "
               "a resumed run keeps it if the reference comes out bit for bit the same")
     return st
@@ -246,9 +247,10 @@ def folder_states(folder, trees: CommitTrees, root: str | None = None) -> list[R
 
 def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=None) -> dict[str, dict[str, dict]]:
     """``{folder: {method: {"rows": n, "stale": k, "marked": j, "why": {why: count},
-    "stale_s": s, "commits": {commit[:7]}}}}`` for every record of every folder in
-    ``folders`` (:func:`folder_states`; ``commits``: those that made the stale rows, as
-    :func:`eval.run.pending_rows.short_commit` names them;
+    "stale_s": s, "commits": {commit[:7]}, "changed": {module}}}}`` for every record of
+    every folder in ``folders`` (:func:`folder_states`; ``commits``: those that made the
+    stale rows, as :func:`eval.run.pending_rows.short_commit` names them; ``changed``: the
+    modules changed since, where git has those commits;
     ``stale_s``: the stored seconds of the stale rows, the time their recomputation is
     estimated at; ``marked``: of the stale rows, those its tables mark pending, as
     ``marked(folder)`` says, a set of ``(case, method, commit[:7])``; none without it);
@@ -259,12 +261,13 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=N
         marks = marked(folder) if marked is not None else set()
         for st in folder_states(folder, trees, root):
             m = per.setdefault(st.method, {"rows": 0, "stale": 0, "marked": 0, "why": {}, "stale_s": 0.0,
-                                           "commits": set()})
+                                           "commits": set(), "changed": set()})
             m["rows"] += 1
             if st.stale:
                 m["stale"] += 1
                 m["marked"] += (st.case, st.method, short_commit(st.commit)) in marks
                 m["commits"].add(short_commit(st.commit))
+                m["changed"].update(st.extra.get("changed") or ())
                 m["why"][st.why] = m["why"].get(st.why, 0) + 1
                 m["stale_s"] += st.time_s or 0.0
     return out
