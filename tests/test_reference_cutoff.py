@@ -72,6 +72,7 @@ def test_a_reference_solved_again_bit_for_bit_keeps_its_rows_and_one_that_differ
     assert last["A"]["row"] == first["A"]["row"] and "reproduced" in last["A"]
     assert last["B"]["reference"]["digest"] != first["B"]["reference"]["digest"] and "reproduced" not in last["B"]
     assert last["B"]["output"] == first["B"]["output"]  # the method gave the same bytes; its reference moved
+    assert last["B"]["same_output_as"]["key"] == kept["B"]["key"]  # and its record says so
 
 
 def _record(fields, ref_code="r1", digest="d" * 64):

@@ -60,6 +60,33 @@ def test_store_keys_round_trip_and_clear(tmp_path):
     assert not list(tmp_path.glob("*.tmp")) and not list((tmp_path / "runs").rglob("*.tmp"))
 
 
+def test_a_record_holds_its_output_digest_and_names_a_replaced_record_with_the_same_bytes(tmp_path):
+    """Each record holds the sha256 of its output vertices; one that replaces a record of
+    another key with the very same bytes says so (its commit and key), any other does not;
+    the extra fields are covered by the record's digest (an edit makes it invalid)."""
+    from eval.run.result_store import output_digest
+    st = ResultStore(tmp_path)
+    row = {"case": "c", "method": "A", "error": "", "time_s": 1.0}
+    U = np.arange(15, dtype=np.float64).reshape(5, 3)
+    st.save("c", "A", "k1", {}, row, {}, U, git={"commit": "a" * 40, "dirty": False})
+    first = st.load("c", "A", "k1")
+    assert first["output"] == output_digest(U) == output_digest(np.asfortranarray(U)) and "same_output_as" not in first
+    st.save("c", "A", "k2", {}, row, {}, U.copy())
+    second = st.load("c", "A", "k2")
+    assert second["same_output_as"] == {"commit": "a" * 40, "key": "k1"}
+    st.save("c", "A", "k2", {}, row, {}, U)  # the same key again: not a reproduction of other code
+    assert "same_output_as" not in st.load("c", "A", "k2")
+    U2 = U.copy()
+    U2[0, 0] = np.nextafter(U2[0, 0], 1.0)
+    st.save("c", "A", "k3", {}, row, {}, U2)
+    assert "same_output_as" not in st.load("c", "A", "k3") and output_digest(U2) != output_digest(U)
+    p = st.path("c", "A")
+    rec = json.loads(p.read_text())
+    rec["output"] = output_digest(U)
+    p.write_text(json.dumps(rec))
+    assert st.read("c", "A").why.startswith("invalid: edited")
+
+
 # ----------------------------------------------------------------------------- subset rule
 def test_baseline_subset_rules():
     cases = [SimpleNamespace(subject=s, pose=p) for s in range(10) for p in (1, 2, 3, 4)]  # DeFAUST: 40

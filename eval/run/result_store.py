@@ -46,8 +46,10 @@ STORE_DIR = "runs"  #: the store's folder inside out_dir
 #: ``output`` (:func:`output_digest` of the deformed vertices), ``reference`` (the
 #: reference the row was scored against: energy, cache key, content digest) and
 #: ``reproduced`` (the row kept by a later commit whose reference came out bit for bit the
-#: same: :mod:`eval.experiments.cases.reference_cutoff`).
-RECORD_EXTRAS = ("output", "reference", "reproduced")
+#: same: :mod:`eval.experiments.cases.reference_cutoff`) and ``same_output_as`` (the record
+#: it replaced, of other code or settings, whose output had the very same bytes: its
+#: ``commit`` and ``key``).
+RECORD_EXTRAS = ("output", "reference", "reproduced", "same_output_as")
 
 
 def _digest(a) -> str:
@@ -332,12 +334,28 @@ class ResultStore:
                "written_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
         if U is not None:
             rec["output"] = output_digest(U)
+            rec.update(self._same_output(p, rec))
         extra = self.annotate(str(case), str(method), rec["row"]) if self.annotate is not None else None
         rec.update({k: json_safe(v) for k, v in (extra or {}).items() if k in RECORD_EXTRAS and k != "output"})
         rec["digest"] = record_digest(rec)
         with atomic_write(p, "w") as fh:
             fh.write(json.dumps(rec, indent=1) + "\n")
         return p
+
+    def _same_output(self, p: Path, rec: dict) -> dict:
+        """``{"same_output_as": {"commit", "key"}}`` when the record file ``p`` that ``rec``
+        replaces (read as untrusted input: any unreadable or other content counts as none)
+        is of another key and recorded the same ``output`` digest; else ``{}``."""
+        try:
+            old = read_json(p) if p.is_file() and not p.is_symlink() else None
+        except (OSError, ValueError, RecursionError):
+            old = None
+        if not isinstance(old, dict) or old.get("output") != rec["output"] or old.get("key") == rec["key"]:
+            return {}
+        git = old.get("git") if isinstance(old.get("git"), dict) else {}
+        log.info("%s %s: the same output bytes as its stored row of %s", rec["case"], rec["method"],
+                 str(git.get("commit"))[:7])
+        return {"same_output_as": {"commit": json_safe(git.get("commit")), "key": json_safe(old.get("key"))}}
 
     def rewrite(self, path, rec: dict) -> Path:
         """Write the record ``rec`` back over its file ``path`` (atomically), e.g. re-keyed
