@@ -87,6 +87,35 @@ def test_a_record_holds_its_output_digest_and_names_a_replaced_record_with_the_s
     assert st.read("c", "A").why.startswith("invalid: edited")
 
 
+def test_the_static_handles_and_groups_are_part_of_a_case_and_an_earlier_record_is_matched_without_them(tmp_path):
+    """What a case-aware method is told besides the arrays (which handles are static, their
+    groups) is part of the case's key, so a loader that changes them makes other rows; a
+    record stored before they were keyed (its case identity lacks them) is found when it
+    agrees on all it holds, and stale when it does not."""
+    from eval.run.result_store import LATER_CASE_FIELDS
+    c = _case()
+    c.static, c.group = np.array([True, False]), np.array([0, 1])
+    ident = case_identity(c, dataset="faust", seed=0)
+    method, extra, code = {"_target_": "x.A"}, {"guard": {"timeout_s": None}}, {"sources": "s", "plugin": None}
+    key, fields = pair_key(method, ident, extra, code)
+    for change in ({"static": np.array([False, False])}, {"group": np.array([0, 0])}, {"group": None}):
+        other = SimpleNamespace(**{**vars(c), **change})
+        assert pair_key(method, case_identity(other, dataset="faust", seed=0), extra, code)[0] != key
+    st = ResultStore(tmp_path)
+    row = {"case": "c", "method": "A", "error": "", "time_s": 1.0}
+    earlier = {k: v for k, v in ident.items() if k not in LATER_CASE_FIELDS}
+    st.save("c", "A", *pair_key(method, earlier, extra, code), row, {})
+    found = st.lookup("c", "A", key, fields)
+    assert found.why is None and found.record["key_fields"]["case"] == earlier  # kept as stored
+    moved = SimpleNamespace(**{**vars(c), "targets": c.targets + 1.0})
+    key2, fields2 = pair_key(method, case_identity(moved, dataset="faust", seed=0), extra, code)
+    assert st.lookup("c", "A", key2, fields2).why == "other settings: case data"
+    st.save("c", "A", key, fields, row, {})  # stored now: keyed with them
+    other = SimpleNamespace(**{**vars(c), "static": np.array([False, False])})
+    key3, fields3 = pair_key(method, case_identity(other, dataset="faust", seed=0), extra, code)
+    assert st.lookup("c", "A", key3, fields3).why == "other settings: case data"
+
+
 # ----------------------------------------------------------------------------- subset rule
 def test_baseline_subset_rules():
     cases = [SimpleNamespace(subject=s, pose=p) for s in range(10) for p in (1, 2, 3, 4)]  # DeFAUST: 40

@@ -29,7 +29,8 @@ from sshade.errors import SShaDeError
 from sshade.files import atomic_write, inside_folder
 from sshade.json_file import read_json
 
-__all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "ResultStore", "Lookup", "case_identity", "pair_key",
+__all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "LATER_CASE_FIELDS", "ResultStore", "Lookup",
+           "case_identity", "pair_key",
            "check_row", "cell_problem", "record_digest", "output_digest", "numeric_column",
            "describe_change"]
 
@@ -57,21 +58,31 @@ def _digest(a) -> str:
     return hashlib.sha256(f"{a.dtype.str}{a.shape}".encode() + a.tobytes()).hexdigest()[:16]
 
 
+#: The case fields a record's key holds since they were added (:func:`case_identity`); a
+#: record stored before lacks them and is matched without them (:meth:`ResultStore.lookup`).
+LATER_CASE_FIELDS = ("static", "group")
+
+
 def case_identity(case, *, dataset: str, seed) -> dict:
     """What identifies a case: ``dataset`` (name), ``seed`` (the dataset's seed), the
     case's ``name``, ``seed``, ``subject``, ``pose`` and ``n_dropped`` (the row's columns
     taken from the case), and short SHA-256 digests of
     its vertices ``V`` (n, 3), faces ``F`` (m, 3), ``handles`` (h,), ``targets`` (h, 3)
-    (so a changed handle set is another case) and ground truth ``V_gt`` (n, 3) when it
-    has one. Not the folder it was read from: the same data read from another folder (a
-    clean checkout elsewhere, a build copied to another machine) is the same case."""
-    gt = getattr(case, "V_gt", None)
+    (so a changed handle set is another case), ground truth ``V_gt`` (n, 3) when it
+    has one, and what a case-aware method is told besides (``static`` (h,) bool, ``group``
+    (h,) int64 or None; :func:`eval.datasets.deformation_case.case_label`), so no loader
+    need be part of a row's identity. Not the folder it was read from: the same data read
+    from another folder (a clean checkout elsewhere, a build copied to another machine) is
+    the same case."""
+    gt, group, static = getattr(case, "V_gt", None), getattr(case, "group", None), getattr(case, "static", None)
+    later = {"static": None if static is None else _digest(np.asarray(static, bool)),
+             "group": None if group is None else _digest(np.asarray(group, np.int64))}
     return {"V_gt": None if gt is None else _digest(gt), "dataset": str(dataset),
             "dataset_seed": json_safe(seed), "case": str(case.name),
             "case_seed": json_safe(getattr(case, "seed", None)), "V": _digest(case.V), "F": _digest(case.F),
             "handles": _digest(case.handles), "targets": _digest(case.targets),
             "subject": json_safe(getattr(case, "subject", None)), "pose": json_safe(getattr(case, "pose", None)),
-            "n_dropped": json_safe(getattr(case, "n_dropped", None))}
+            "n_dropped": json_safe(getattr(case, "n_dropped", None)), **later}
 
 
 def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None, code: dict | None = None
@@ -197,6 +208,19 @@ def describe_change(old, new: dict) -> str:
     return "; ".join(parts)
 
 
+def _earlier_key(rec: dict, fields: dict | None) -> str | None:
+    """The key of a record stored before :data:`LATER_CASE_FIELDS` were part of a case's
+    identity, when ``rec`` is one (its case identity lacks them) and its key is that of
+    ``fields`` (the pair's key fields now) without them: a record that agrees on all it
+    holds; else None."""
+    old = (rec.get("key_fields") or {}).get("case") if isinstance(rec.get("key_fields"), dict) else None
+    if fields is None or not isinstance(old, dict) or any(k in old for k in LATER_CASE_FIELDS):
+        return None
+    case = {k: v for k, v in (fields.get("case") or {}).items() if k not in LATER_CASE_FIELDS}
+    key = pair_key(fields.get("method"), case, fields.get("extra"), fields.get("code"))[0]
+    return key if key == rec.get("key") else None
+
+
 def _stale_why(old, new: dict | None) -> str:
     """Why a record under another key is stale: ``"other code: ..."`` when its code
     identity differs (:func:`describe_change`), else ``"other
@@ -265,6 +289,9 @@ class ResultStore:
         found = self.read(case, method, key=key)
         if found.record is None or found.why != "stale":
             return found
+        earlier = _earlier_key(found.record, fields)
+        if earlier is not None:
+            return self.read(case, method, key=earlier)
         return Lookup(None, _stale_why(found.record.get("key_fields"), fields))
 
     def read(self, case: str, method: str, key: str | None = None) -> Lookup:
