@@ -206,6 +206,27 @@ def test_identity_names_sources_versions_and_plugin_file(tmp_path, monkeypatch):
         f"numpy {ident['versions']['numpy']} -> 0.0"
 
 
+def test_a_row_holds_the_versions_of_the_libraries_its_code_uses_and_a_plugin_of_all(tmp_path, monkeypatch):
+    """PyTorch is Implicit-ARAP's: an upgrade changes its rows' identity, not ARAP's or
+    SShaDe's; numpy and scipy are everyone's; a plug-in (whose imports go unseen) holds
+    every numerical library's version."""
+    import eval.run.code_identity as ci
+    from baselines import ARAP
+    from eval.run.library_versions import NUMERICAL
+    ids = {m: code_identity(None, spec, references=False) for m, spec in BUILTIN.items()}
+    assert "torch" in ids["Implicit-ARAP"]["versions"]
+    assert all("torch" not in ids[m]["versions"] for m in ("ARAP", "Elastic", "ARAP-SR", "SShaDe"))
+    assert all({"numpy", "scipy"} <= set(v["versions"]) for v in ids.values())
+    monkeypatch.setattr(ci, "numerical_versions", lambda: {d: "0" for d in NUMERICAL})
+    after = {m: code_identity(None, spec, references=False) for m, spec in BUILTIN.items()}
+    assert after["ARAP"]["versions"] == dict.fromkeys(ids["ARAP"]["versions"], "0")
+    (tmp_path / "myplug.py").write_text(PLUGIN_SRC.format(factor=1.0))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import myplug
+    assert set(code_identity(myplug.Scaled())["versions"]) == set(NUMERICAL)
+    assert set(code_identity(ARAP())["versions"]) < set(NUMERICAL)
+
+
 @pytest.mark.slow
 def test_changed_plugin_file_is_recomputed_on_resume(tmp_path, faust_root):
     (tmp_path / "faust").symlink_to(faust_root)

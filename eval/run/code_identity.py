@@ -18,16 +18,16 @@ import functools
 import hashlib
 import inspect
 from collections.abc import Mapping
-from importlib import metadata
 from pathlib import Path
 
+from eval.run.library_versions import NUMERICAL, numerical_versions, used_libraries
 from eval.run.runinfo import REPO_ROOT
 
-__all__ = ["PACKAGES", "NUMERICAL", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text",
+__all__ = ["PACKAGES", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text",
            "sources_digest",
            "project_modules", "import_closure", "closure_constants", "file_imports", "modules_digest", "same_code",
-           "modules_digest_at", "numerical_versions",
-           "identity_roots", "code_identity", "artifact_identity"]
+           "modules_digest_at",
+           "identity_roots", "code_identity", "row_libraries", "artifact_identity"]
 
 #: The project's packages whose source makes a row (every floor of the house: the method,
 #: the harness's shared tools, the baselines and the builder, the evaluator).
@@ -56,11 +56,6 @@ ARTIFACTS = ("eval.metrics.reference",)
 #: key as values (its options, the case's data) or as the store's record version
 #: (:data:`eval.run.result_store.STORE_VERSION`, bumped when the record changes).
 RECORD_ONLY = ("eval.run", "eval.present", "eval.experiments.cases.case_jobs")
-
-#: Distributions whose version can change a row's numbers: the solvers and mesh
-#: processing beneath the methods, and PyTorch (Implicit-ARAP, plug-ins).
-NUMERICAL = ("numpy", "scipy", "libigl", "pymeshlab", "numba", "cholespy", "trimesh", "torch")
-
 
 def _strip_docstrings(tree: ast.AST) -> ast.AST:
     """``tree`` with the docstring of every module, class and function removed."""
@@ -568,18 +563,6 @@ def _targets(spec) -> list[str]:
     return []
 
 
-@functools.lru_cache(maxsize=1)
-def numerical_versions() -> dict:
-    """``{distribution: version or None}`` for :data:`NUMERICAL` (installed metadata)."""
-    out = {}
-    for dist in NUMERICAL:
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[dist] = None
-    return out
-
-
 def _plugin_digest(method) -> str | None:
     """SHA-256 of the file defining ``type(method)`` when it lies outside :data:`PACKAGES`
     (a plug-in), None for the project's own methods; ``"unknown"`` when the file cannot
@@ -626,11 +609,21 @@ def code_identity(method, spec=None, *, references: bool = True, root: str | Non
         spec["class"] = f"{type(method).__module__}.{type(method).__qualname__}"
     roots = identity_roots(spec, references)
     mods, consts = import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
+    plugin = None if method is None else _plugin_digest(method)
+    used = set(row_libraries(mods, root)) if plugin is None else set(NUMERICAL)  # a plug-in's imports are unseen
     out = {"sources": modules_digest(mods, root, consts), "modules": list(mods), "constants": list(consts),
-           "versions": dict(numerical_versions()), "plugin": None if method is None else _plugin_digest(method)}
+           "versions": {d: v for d, v in numerical_versions().items() if d in used}, "plugin": plugin}
     if references:
         out["reference"] = artifact_identity(root)
     return out
+
+
+def row_libraries(modules, root: str | None = None) -> tuple[str, ...]:
+    """The numerical libraries whose version is part of the identity of a row made of the
+    project ``modules`` (:func:`eval.run.library_versions.used_libraries` of their files
+    under ``root``)."""
+    mods = project_modules(root)
+    return used_libraries(mods[m] for m in modules if m in mods)
 
 
 def artifact_identity(root: str | None = None) -> dict:

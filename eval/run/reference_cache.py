@@ -10,7 +10,8 @@ import json
 
 import numpy as np
 
-from eval.run.code_identity import artifact_identity, numerical_versions
+from eval.run.code_identity import artifact_identity
+from eval.run.library_versions import numerical_versions
 
 __all__ = ["REFERENCE_VERSION", "reference_key"]
 

@@ -31,6 +31,7 @@ from eval.run.code_identity import (
     import_closure,
     modules_digest,
     modules_digest_at,
+    row_libraries,
     same_code,
 )
 from eval.run.pending_rows import short_commit
@@ -319,6 +320,17 @@ def _rekeyed_by(rec: dict, p: Path) -> str | None:
     return r.stdout.strip() or None if r.returncode == 0 else None
 
 
+def _versions(old: dict, mods) -> dict | None:
+    """The numerical libraries' versions a record re-keyed for the modules ``mods`` keeps:
+    those of its recorded ``versions`` that its code uses
+    (:func:`eval.run.code_identity.row_libraries`), as recorded."""
+    v = old.get("versions")
+    if not isinstance(v, dict):
+        return v
+    used = row_libraries(mods)
+    return {d: v.get(d) for d in used}
+
+
 def _reference_tree(rec: dict, tree: Path, trees: CommitTrees) -> tuple[Path | None, str]:
     """The sources whose code solved the reference a record was scored against: its
     commit's (``tree``), or, for a row kept since because its reference came out the same
@@ -370,7 +382,7 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
             return f"refused: its code identity is not that of {git['commit'][:7]}'s sources"
         mods, consts = _now(fields)
         code = {"sources": modules_digest_at(mods, tree, None, consts), "modules": list(mods),
-                "constants": list(consts), "versions": old.get("versions"), "plugin": old.get("plugin")}
+                "constants": list(consts), "versions": _versions(old, mods), "plugin": old.get("plugin")}
         if references_on(fields):
             rtree, why = _reference_tree(rec, tree, trees)
             if rtree is None or (isinstance(old.get("reference"), dict) and not _verified(old["reference"], rtree, by)):

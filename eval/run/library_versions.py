@@ -1,0 +1,66 @@
+"""The numerical libraries beneath the project's code and their installed versions: part
+of a row's identity only for the libraries its code imports and those they compute with
+(:func:`used_libraries`), so an upgrade of PyTorch stales Implicit-ARAP's rows and not
+ARAP's. Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes:
+docs/experiments.md ("eval/run/code_identity.py")."""
+from __future__ import annotations
+
+import ast
+import functools
+from importlib import metadata
+from pathlib import Path
+
+__all__ = ["NUMERICAL", "IMPORT_NAMES", "BUILDS_ON", "numerical_versions", "used_libraries"]
+
+#: Distributions whose version can change a row's numbers: the solvers and mesh
+#: processing beneath the methods, and PyTorch (Implicit-ARAP, plug-ins).
+NUMERICAL = ("numpy", "scipy", "libigl", "pymeshlab", "numba", "cholespy", "trimesh", "torch")
+
+#: The module a distribution of :data:`NUMERICAL` is imported as, where the names differ.
+IMPORT_NAMES = {"libigl": "igl"}
+
+#: The distributions of :data:`NUMERICAL` each one computes with: its results can change
+#: with theirs.
+BUILDS_ON = {"scipy": ("numpy",), "libigl": ("numpy", "scipy"), "trimesh": ("numpy", "scipy"),
+             "pymeshlab": ("numpy",), "numba": ("numpy",), "cholespy": ("numpy",), "torch": ("numpy",)}
+
+
+@functools.lru_cache(maxsize=1)
+def numerical_versions() -> dict:
+    """``{distribution: version or None}`` for :data:`NUMERICAL` (installed metadata)."""
+    out = {}
+    for dist in NUMERICAL:
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+@functools.lru_cache(maxsize=2048)
+def _imported(path: str, mtime_ns: int, size: int) -> frozenset:
+    """The top-level names of the absolute imports anywhere in the file ``path``."""
+    try:
+        tree = ast.parse(Path(path).read_bytes(), path)
+    except (SyntaxError, ValueError):
+        return frozenset(NUMERICAL)  # unreadable: every library counts
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            out.add(node.module.split(".")[0])
+    return frozenset(out)
+
+
+def used_libraries(files) -> tuple[str, ...]:
+    """The distributions of :data:`NUMERICAL` (in that order) that the Python ``files``
+    import (module level or in a function; by :data:`IMPORT_NAMES`), with those they
+    compute with (:data:`BUILDS_ON`). Raises OSError when a file cannot be read."""
+    names = set()
+    for f in files:
+        st = Path(f).stat()
+        names |= _imported(str(f), st.st_mtime_ns, st.st_size)
+    used = {d for d in NUMERICAL if IMPORT_NAMES.get(d, d) in names}
+    used |= {b for d in list(used) for b in BUILDS_ON.get(d, ())}
+    return tuple(d for d in NUMERICAL if d in used)
