@@ -13,6 +13,7 @@ from eval.present.measures import MEASURES, label
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
 from eval.run.compared import COMPARED_CSV
+from eval.run.pending_rows import marked_pending
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders, run_folders
 from eval.tables import common_case_values, compare
@@ -216,7 +217,7 @@ def _stale(d: Path, trees: CommitTrees) -> dict:
     the commits that made them and the modules changed since
     (:func:`eval.run.stale_rows.check_folders`); methods without a stale row left out."""
     out: dict = {}
-    for ms in check_folders(run_folders(d), trees).values():
+    for ms in check_folders(run_folders(d), trees, marked=marked_pending).values():
         for m, v in ms.items():
             k, n, c, ch = out.get(m, (0, 0, set(), set()))
             out[m] = (k + v["stale"], n + v["rows"], c | v["commits"], ch | v["changed"])

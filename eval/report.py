@@ -47,6 +47,7 @@ from eval.run.outdir import (
     refuse_results,
     results_dir,
 )
+from eval.run.pending_rows import marked_pending
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders
 from eval.run.stale_runs import whole_run_folders, whole_run_state
@@ -437,7 +438,7 @@ def write_index(root) -> Path:
                   | {p.parent for p in root.glob("*/*/*/run.json")})
     rows = []
     with CommitTrees() as trees:
-        stale = {Path(f): ms for f, ms in check_folders(runs, trees).items()}
+        stale = {Path(f): ms for f, ms in check_folders(runs, trees, marked=marked_pending).items()}
         whole = {f: whole_run_state(f, trees, find_experiment) for f in whole_run_folders(root) if f in runs}
     for d in runs:
         info = read_runinfo(d)

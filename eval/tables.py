@@ -23,9 +23,9 @@ from eval.present.stops import PROTOCOL_TEXT, stop_lines
 from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
 from eval.run.compared import COMPARED_CSV, SETTINGS
 from eval.run.outdir import refuse_results
-from eval.run.pending_rows import pending_markdown, pending_title, strip_pending
+from eval.run.pending_rows import marked_pending, pending_markdown, pending_title, strip_pending
 from eval.run.row_check import check_rows
-from eval.run.stale_rows import CommitTrees, folder_states
+from eval.run.stale_rows import CommitTrees, folder_states, settings_marks
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 from sshade.files import atomic_write
@@ -507,8 +507,8 @@ def retabulate(run_dir) -> dict[str, Path]:
                 title = f"{exp}: {df['case'].nunique()} {ds or ''} case(s)".replace("  ", " ")
         except (OSError, ValueError, AttributeError):
             pass
-    with CommitTrees() as trees:  # the stored rows made by older code are marked pending
-        states = folder_states(run_dir, trees)
+    with CommitTrees() as trees:  # the stored rows made by older code (or settings) are marked pending
+        states = settings_marks(folder_states(run_dir, trees), marked_pending(run_dir))
     paths = write_tables(df, run_dir, title=title, cases=False, compared=compared, pending=states)
     if (run_dir / "breakdown.csv").is_file():  # the run wrote its breakdown: made again from the same rows
         paths.update(write_breakdown(df, run_dir, figure=False))

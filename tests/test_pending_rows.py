@@ -32,15 +32,16 @@ def test_what_a_table_writes_of_its_pending_rows_is_read_back_exactly(tmp_path):
     assert title == "faust: 2 cases (1 of 3 rows made by this commit's code; 2 pending from 3e79476, unknown)"
     assert strip_pending(title) == "faust: 2 cases" and pending_title(title, states[:1]) == "faust: 2 cases"
     (tmp_path / "table.md").write_text(f"### {title}\n\n| table |\n\n{pending_markdown(states)}")
-    assert marked_pending(tmp_path) == {("s0_p2", "ARAP", "3e79476"), ("s0_p2", "Implicit-ARAP", "unknown")}
+    assert marked_pending(tmp_path) == {("s0_p2", "ARAP", "3e79476"): "sshade.guard changed since 3e79476",
+                                        ("s0_p2", "Implicit-ARAP", "unknown"): "invalid: not a record"}
     assert pending_markdown(states[:1]) == "" and short_commit(12) == "unknown"
 
 
 def test_a_linked_or_missing_table_marks_nothing(tmp_path):
     (tmp_path / "elsewhere.md").write_text(pending_markdown(_states(tmp_path)))
-    assert marked_pending(tmp_path) == set()
+    assert marked_pending(tmp_path) == {}
     os.symlink(tmp_path / "elsewhere.md", tmp_path / "table.md")
-    assert marked_pending(tmp_path) == set()  # a link is not read: no mark comes from outside the folder
+    assert marked_pending(tmp_path) == {}  # a link is not read: no mark comes from outside the folder
 
 
 @pytest.mark.parametrize("text, want", [("", None), ("  ", None), ("20", 20.0), ("0.5", 0.5)])
@@ -83,3 +84,36 @@ def test_a_pair_left_at_the_stop_and_never_stored_has_no_row_and_the_run_ends_cl
     assert counter.read_text() == calls  # nothing ran after the stop
     assert list(pd.read_csv(out / "cases.csv")["method"]) == ["A"]
     assert "not run and never stored: no row" in (out / "eval.log").read_text()
+
+
+def test_a_row_left_pending_for_other_settings_stays_marked_until_made_again(tmp_path):
+    """A row whose code is current but that its run left pending for other settings (the
+    run's stop, :data:`STOP_AFTER_ENV`) stays marked when its tables are rebuilt, and counts
+    as pending for ``--check``, the leaderboard and the index, until a run makes it again."""
+    import shutil
+
+    from eval.run.stale_rows import CommitTrees, check_folders
+    from eval.tables import retabulate
+
+    from .conftest import ROOT
+
+    run = tmp_path / "faust"
+    shutil.copytree(ROOT / "results" / "faust", run)
+    with CommitTrees() as trees:
+        assert check_folders([run], trees, marked=marked_pending)[str(run)]["ARAP"]["stale"] == 0
+    rec = __import__("json").loads((run / "runs" / "s0_p1" / "ARAP.json").read_text())
+    c7 = short_commit(rec["git"]["commit"])
+    table = run / "table.md"
+    why = "other settings: guard or reference options"
+    table.write_text(table.read_text() + f"\n#### Rows pending regeneration (made by older code)\n\n"
+                                         f"- `s0_p1` `ARAP`: made at {c7}; {why}\n")
+    code_only = table.read_text().replace(why, "sshade.guard changed since " + c7)
+    retabulate(run)
+    assert marked_pending(run) == {("s0_p1", "ARAP", c7): why}
+    assert "(39 of 40 rows made by this commit's code; 1 pending from " in table.read_text().splitlines()[0]
+    with CommitTrees() as trees:
+        arap = check_folders([run], trees, marked=marked_pending)[str(run)]["ARAP"]
+    assert (arap["stale"], arap["marked"], list(arap["why"])) == (1, 1, [why])
+    table.write_text(code_only)  # a mark for code that is current again goes
+    retabulate(run)
+    assert marked_pending(run) == {}

@@ -32,7 +32,8 @@ STOP_AFTER_ENV = "SSHADE_STOP_AFTER_S"
 #: The heading of the list of a table's pending rows in ``table.md``.
 PENDING_HEADING = "Rows pending regeneration (made by older code)"
 #: A listed pending row: ``- `case` `method`: made at abc1234; why``.
-_ROW = re.compile(r"^- `(?P<case>[^`]+)` `(?P<method>[^`]+)`: made at (?P<commit>[0-9a-f]{7}|unknown)\b")
+_ROW = re.compile(r"^- `(?P<case>[^`]+)` `(?P<method>[^`]+)`: made at (?P<commit>[0-9a-f]{7}|unknown)\b"
+                  r"(?:; (?P<why>.*))?$")
 #: The count a title ends with when some rows are pending.
 _TITLE = re.compile(r" \(\d+ of \d+ rows made by this commit's code; \d+ pending from [^()]*\)$")
 #: The most of a ``table.md`` read back (bytes): a table is a few kB.
@@ -76,19 +77,21 @@ def pending_markdown(states) -> str:
             f"`python -m eval.reproduce` regenerates them (`--check` lists them).\n\n{rows}\n")
 
 
-def marked_pending(folder) -> set[tuple[str, str, str]]:
-    """``{(case, method, commit[:7])}`` of the rows ``folder``'s ``table.md`` lists as
+def marked_pending(folder) -> dict[tuple[str, str, str], str]:
+    """``{(case, method, commit[:7]): why}`` of the rows ``folder``'s ``table.md`` lists as
     pending (:func:`pending_markdown`); empty when it has none, or no readable ``table.md``
     (a link, a FIFO or a file above :data:`MAX_TABLE_BYTES` is not read)."""
     path = Path(folder) / "table.md"
     try:
         if path.is_symlink():
-            return set()
+            return {}
         text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8", "replace")
     except OSError:
-        return set()
+        return {}
     _, found, rest = text.partition(f"#### {PENDING_HEADING}\n")
-    return {(m["case"], m["method"], m["commit"]) for m in map(_ROW.match, rest.splitlines()) if m} if found else set()
+    if not found:
+        return {}
+    return {(m["case"], m["method"], m["commit"]): m["why"] or "" for m in map(_ROW.match, rest.splitlines()) if m}
 
 
 def stop_after_s(environ=None) -> float | None:

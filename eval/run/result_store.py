@@ -29,7 +29,8 @@ from sshade.errors import SShaDeError
 from sshade.files import atomic_write, inside_folder
 from sshade.json_file import read_json
 
-__all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "LATER_CASE_FIELDS", "ResultStore", "Lookup",
+__all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "LATER_CASE_FIELDS", "OTHER_SETTINGS", "ResultStore",
+           "Lookup",
            "case_identity", "pair_key",
            "check_row", "cell_problem", "record_digest", "output_digest", "numeric_column",
            "describe_change"]
@@ -221,19 +222,24 @@ def _earlier_key(rec: dict, fields: dict | None) -> str | None:
     return key if key == rec.get("key") else None
 
 
+#: How a stale record's why begins when its code is current and its settings (method
+#: definition, case data, guard or reference options) differ from the run's.
+OTHER_SETTINGS = "other settings"
+
+
 def _stale_why(old, new: dict | None) -> str:
     """Why a record under another key is stale: ``"other code: ..."`` when its code
     identity differs (:func:`describe_change`), else ``"other
     settings: <the differing sections>"``."""
     if new is None:
-        return "other settings"
+        return OTHER_SETTINGS
     old = old if isinstance(old, dict) else {}
     change = describe_change(old.get("code"), new.get("code") or {})
     if change:
         return f"other code: {change}"
     names = {"method": "method definition", "case": "case data", "extra": "guard or reference options"}
     diff = [w for k, w in names.items() if json_safe(old.get(k)) != new.get(k)]
-    return f"other settings: {', '.join(diff) or 'key'}"
+    return f"{OTHER_SETTINGS}: {', '.join(diff) or 'key'}"
 
 
 class ResultStore:

@@ -35,13 +35,21 @@ from eval.run.code_identity import (
     same_code,
 )
 from eval.run.pending_rows import short_commit
-from eval.run.result_store import STORE_DIR, STORE_VERSION, ResultStore, check_row, pair_key, record_digest
+from eval.run.result_store import (
+    OTHER_SETTINGS,
+    STORE_DIR,
+    STORE_VERSION,
+    ResultStore,
+    check_row,
+    pair_key,
+    record_digest,
+)
 from eval.run.runinfo import REPO_ROOT
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 
 __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "changed_since", "row_state",
-           "check_folders", "rekey_record", "references_on",
+           "check_folders", "settings_marks", "rekey_record", "references_on",
            "folder_states"]
 
 #: The folders of scripts whose runs are held to their code besides the packages
@@ -246,6 +254,19 @@ def folder_states(folder, trees: CommitTrees, root: str | None = None) -> list[R
     return out
 
 
+def settings_marks(states: list[RowState], marks) -> list[RowState]:
+    """``states`` with each row that its code leaves current but that its table marks
+    pending for other settings than its run's (``marks``: :func:`eval.run.pending_rows.marked_pending`,
+    a why beginning with :data:`eval.run.result_store.OTHER_SETTINGS`; only the code is
+    judged here, the settings by the run) stale again, with that why: the mark stays until
+    the row is made again (by another commit)."""
+    for st in states:
+        why = marks.get((st.case, st.method, short_commit(st.commit))) if isinstance(marks, dict) else None
+        if not st.stale and isinstance(why, str) and why.startswith(OTHER_SETTINGS):
+            st.stale, st.why = True, why
+    return states
+
+
 def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=None) -> dict[str, dict[str, dict]]:
     """``{folder: {method: {"rows": n, "stale": k, "marked": j, "why": {why: count},
     "stale_s": s, "commits": {commit[:7]}, "changed": {module}}}}`` for every record of
@@ -259,8 +280,8 @@ def check_folders(folders, trees: CommitTrees, root: str | None = None, marked=N
     out: dict[str, dict[str, dict]] = {}
     for folder in folders:
         per = out.setdefault(str(folder), {})
-        marks = marked(folder) if marked is not None else set()
-        for st in folder_states(folder, trees, root):
+        marks = marked(folder) if marked is not None else {}
+        for st in settings_marks(folder_states(folder, trees, root), marks):
             m = per.setdefault(st.method, {"rows": 0, "stale": 0, "marked": 0, "why": {}, "stale_s": 0.0,
                                            "commits": set(), "changed": set()})
             m["rows"] += 1
