@@ -105,12 +105,58 @@ def test_a_run_killed_with_the_earlier_output_aside_is_recovered_by_the_next_cla
         c2.finish("done")
         m = json.loads((p / MARKER).read_text())
         assert "partial.csv" in m["paths"] and "runs/s0/notes.txt" not in m["paths"]
-    else:  # died before its first result: the earlier output as it was
+    else:  # died before its first result: the earlier output as it was; what the dead run
+        # (or someone after it) added beside stays, named in the claim's message
+        assert "kept 1 that a killed run left or someone added: partial.csv" in c2.message
         c2.release()
         now = _bytes(p)
         now.pop(MARKER), before.pop(MARKER)
         now.pop(LOCK), before.pop(LOCK)
-        assert now == before
+        assert now.pop("partial.csv") and now == before
+
+
+def test_files_added_after_a_run_was_killed_before_its_first_result_survive_the_next_commands(tmp_path):
+    """Killed with the earlier output aside; a person then adds a file and a folder: the
+    next command into the folder, even one refused (failed before its first result), puts
+    the earlier output back and keeps both, naming them; so does the run after it."""
+    p = _earlier(tmp_path)
+    c = claim_output_dir(p, "eval", first_result="run.json")
+    c.release()  # killed
+    (p / "analysis.txt").write_text("mine, after the kill")
+    (p / "myplots").mkdir()
+    (p / "myplots" / "a.png").write_bytes(b"png")
+    refused = claim_output_dir(p, "eval", first_result="run.json")
+    assert "analysis.txt, myplots" in refused.message
+    refused.finish("failed", drop_if_unused="run.json")
+    assert (p / "analysis.txt").read_text() == "mine, after the kill" and (p / "myplots" / "a.png").is_file()
+    assert (p / "run.json").is_file() and (p / "runs" / "s0" / "A.json").read_text() == "old record"
+    c = claim_output_dir(p, "eval", first_result="run.json")
+    (p / "run.json").write_text("{}")
+    c.finish("done")
+    assert (p / "analysis.txt").is_file() and (p / "myplots" / "a.png").is_file()
+
+
+@pytest.mark.parametrize("field, value", [
+    ("aside.names", ["../../victim"]), ("aside.names", ["/abs"]), ("foreign", ["../sibling.txt"]),
+    ("files", ["a/b"]), ("aside.user_paths", ["x/../../victim/f"]), ("user_paths", ["/etc/passwd"]),
+    ("aside.first_result", "../run.json"), ("files", "run.json"), ("aside.names", [None])])
+def test_a_marker_naming_anything_but_a_plain_path_inside_its_folder_is_refused_and_nothing_is_touched(
+        tmp_path, field, value):
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "f").write_text("not yours")
+    (tmp_path / "sibling.txt").write_text("not yours either")
+    p = _earlier(tmp_path / "deep")
+    m = json.loads((p / MARKER).read_text())
+    m["status"] = "running"
+    top, _, key = field.rpartition(".")
+    (m.setdefault(top, {"names": [], "user_paths": [], "first_result": "run.json"}) if top else m)[key] = value
+    (p / MARKER).write_text(json.dumps(m))
+    (p / ASIDE).mkdir()
+    before = _bytes(tmp_path)
+    with pytest.raises(outdir.OutputDirError, match=f"{MARKER}: {field} names"):
+        claim_output_dir(p, "eval", first_result="run.json")
+    assert _bytes(tmp_path) == before and (victim / "f").read_text() == "not yours"
 
 
 def test_files_under_lists_files_and_links_and_ours_reads_both_records(tmp_path):

@@ -54,12 +54,46 @@ def refuse_results(path, what: str) -> None:
 
 
 def read_marker(path) -> dict | None:
-    """The marker of folder ``path`` (:data:`MARKER`), or None when absent/unreadable."""
+    """The marker of folder ``path`` (:data:`MARKER`), or None when absent/unreadable.
+    Raises OutputDirError when it names an entry or file that is not a plain path inside
+    its folder (:func:`_marker_problem`): a marker is input, whoever wrote the folder."""
     try:
         m = read_json(Path(path) / MARKER)
     except (OSError, ValueError):
         return None
-    return m if isinstance(m, dict) else None
+    if not isinstance(m, dict):
+        return None
+    bad = _marker_problem(m)
+    if bad:
+        raise OutputDirError(f"{Path(path) / MARKER}: {bad}, not a plain entry inside its folder; this marker is "
+                             "not one our runs write: remove it (and the folder's .sshade-earlier) to use the folder")
+    return m
+
+
+def _plain(name) -> bool:
+    """Whether ``name`` is a plain entry name: a non-empty string, not ``.`` or ``..``,
+    without a path separator or NUL."""
+    return isinstance(name, str) and name not in ("", ".", "..") and not any(c in name for c in "/\\\0")
+
+
+def _marker_problem(m: dict) -> str:
+    """What a marker ``m`` names that no run of ours writes there, in words (``""`` when
+    nothing): its entry lists (``files``, ``foreign``, ``aside.names``) hold plain names,
+    its file lists (``paths``, ``user_paths``, ``aside.user_paths``) relative paths of
+    plain names, its ``first_result`` a plain name."""
+    aside = m.get("aside") if isinstance(m.get("aside"), dict) else {}
+    names = {"files": m.get("files"), "foreign": m.get("foreign"), "aside.names": aside.get("names")}
+    paths = {"paths": m.get("paths"), "user_paths": m.get("user_paths"), "aside.user_paths": aside.get("user_paths")}
+    ok_path = lambda x: isinstance(x, str) and all(map(_plain, x.split("/")))  # noqa: E731
+    for key, (v, ok) in {**{k: (v, _plain) for k, v in names.items()}, **{k: (v, ok_path) for k, v in paths.items()}
+                         }.items():
+        if v is not None and not isinstance(v, list):
+            return f"{key} names {v!r}"
+        bad = [x for x in v or [] if not ok(x)]
+        if bad:
+            return f"{key} names {bad[0]!r}"
+    first = aside.get("first_result")
+    return f"aside.first_result names {first!r}" if first is not None and not _plain(first) else ""
 
 
 def check_earlier_output(path, kind: str, what: str) -> Path:
@@ -285,28 +319,30 @@ def _drop_entries(p: Path, foreign: set) -> None:
             remove_entry(p / n)
 
 
-def _recover(p: Path, m: dict | None) -> dict | None:
-    """The marker of ``p`` (locked by this process) once a run that died there without
-    finishing (its marker still ``running``) is accounted for: an earlier output it had
-    set aside is put back when that run had no first result yet, else cleaned
+def _recover(p: Path, m: dict | None) -> tuple[dict | None, list[str]]:
+    """``(marker, left)``: the marker of ``p`` (locked by this process) once a run that
+    died there without finishing (its marker still ``running``) is accounted for: an
+    earlier output it had set aside is put back when that run had no first result yet
+    (over the entries of the same names; any other entry, which the dead run or someone
+    after it made, stays and is ``left``, to be named as kept), else cleaned
     (:mod:`eval.run.earlier_output`); the dead run's entries (all but the foreign ones it
     recorded) become its ``files``, so the next replacement removes them."""
     if m is None or m.get("status") != "running":
-        return m
+        return m, []
     foreign = set(m.get("foreign") or [])
     rec = m.get("aside")
     if isinstance(rec, dict) and (p / ASIDE).is_dir():
         mark = rec.get("first_result")
         if mark and not (p / str(mark)).exists():  # died before its first result: the earlier output back
-            _drop_entries(p, foreign)
+            left = sorted(set(os.listdir(p)) - foreign - _OWN - {ASIDE} - set(rec.get("names") or []))
             restore(p, rec, MARKER)
-            return read_marker(p)
+            return read_marker(p), left
         kept = clean(p, rec)
         m["user_paths"] = sorted(set(m.get("user_paths") or []) | set(kept))
     m.pop("aside", None)
     m.update(status="killed", files=sorted(set(os.listdir(p)) - foreign - _OWN))
     _write_marker(p, m)
-    return m
+    return m, []
 
 
 def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = False,
@@ -412,11 +448,13 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, ho
     if m is not None and m.get("kind") == kind or reproducing and m is None:
         lock_before = (p / LOCK).read_bytes() if (p / LOCK).is_file() and not (p / LOCK).is_symlink() else None
         fd = _lock(p)  # refuse while another run writes here, before moving anything
-        m = _recover(p, m)
+        m, left = _recover(p, m)
+        left = (f" (kept {len(left)} that a killed run left or someone added: {', '.join(left[:8])}"
+                f"{' ...' if len(left) > 8 else ''})" if left else "")
         wrote = ours(m)
         if keep is True:
             user = [r for r in files_under(p, (m or {}).get("files") or []) if not wrote(r)]
-            return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}", fd=fd,
+            return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}{left}", fd=fd,
                          first_result=first_result, user_paths=user)
         earlier = [str(n) for n in (m or {}).get("files") or [] if str(n) not in _OWN]
         kept = sorted({str(n) for n in keep or ()} & set(earlier))  # only entries the earlier output wrote
@@ -426,7 +464,8 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, ho
         msg = (f"{'continuing' if kept else 'replacing'} the earlier {kind} output in {p}" +
                (f" (kept {len(kept)}: {', '.join(kept[:8])}{' ...' if len(kept) > 8 else ''})" if kept else "") +
                (f" (set aside {len(gone)}: {', '.join(gone[:8])}{' ...' if len(gone) > 8 else ''}; removed once this "
-                "run has its first result, put back if it ends before)" if gone else ""))
+                "run has its first result, put back if it ends before)" if gone else "") +
+               left)
         user = [r for r in files_under(p, kept) if not wrote(r)]
         return _take(p, kind, gone, rest, msg, fd=fd, first_result=first_result, aside=rec, user_paths=user,
                      continued=kept)
