@@ -26,7 +26,7 @@ from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
 from eval.run.pending_rows import STOP_AFTER_ENV, marked_pending
 from eval.run.runinfo import REPO_ROOT
-from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders
+from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders, table_problems
 from eval.run.stale_runs import is_whole_run, whole_run_folders, whole_run_state
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
@@ -197,8 +197,10 @@ def _check(a) -> int:
     current or so marked, 1 on an unmarked stale row or a stale folder run whole (and,
     with ``--strict``, on a row marked pending too)."""
     with CommitTrees() as trees:
-        states = check_folders(run_folders(RESULTS), trees, marked=marked_pending)
+        folders = run_folders(RESULTS)
+        states = check_folders(folders, trees, marked=marked_pending)
         runs = [whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)]
+    unread = _unread(folders)
     if a.json:
         out = {f: {m: {"rows": v["rows"], "stale": v["stale"] - v["marked"], "pending": v["marked"]}
                    for m, v in ms.items()} for f, ms in states.items()}
@@ -219,13 +221,27 @@ def _check(a) -> int:
     pending = sum(v["marked"] for ms in states.values() for v in ms.values())
     n = sum(v["stale"] for ms in states.values() for v in ms.values()) - pending
     k = sum(r.stale for r in runs)
-    bad = n or k or (a.strict and pending)
-    word = "stale" if n or k else "pending" if pending else "current"
+    for line in unread:
+        print(line, file=sys.stderr if a.json else sys.stdout)
+    bad = n or k or unread or (a.strict and pending)
+    word = "stale" if n or k else "unread" if unread else "pending" if pending else "current"
     print(f"{word}: {rows - n - pending} of {rows} committed rows in {len(states)} folders are current, "
           f"{pending} pending (marked in their tables), {n} stale; {k} of {len(runs)} folders run whole stale"
+          + (f"; {len(unread)} thing(s) a reader would see that the records do not say" if unread else "")
           + ("; --strict: a pending row fails" if a.strict and pending else ""),
           file=sys.stderr if a.json else sys.stdout)
     return 1 if bad else 0
+
+
+def _unread(folders) -> list[str]:
+    """What ``--check`` reads beyond the records: each folder's ``cases.csv`` against its
+    records (:func:`eval.run.stale_rows.table_problems`), and every link under
+    :data:`RESULTS` (a folder, case folder or record replaced by a link is not committed
+    content: the check would not see what it points to)."""
+    out = [x for f in folders for x in table_problems(f)]
+    out += [f"{p}: a link (to {os.readlink(p)}), not committed content" for p in sorted(Path(RESULTS).rglob("*"))
+            if p.is_symlink()]
+    return out
 
 
 def _rekey(a) -> int:

@@ -28,6 +28,7 @@ from eval.run.row_check import check_rows
 from eval.run.stale_rows import CommitTrees, folder_states, settings_marks
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
+from sshade.errors import SShaDeError
 from sshade.files import atomic_write
 from sshade.json_file import read_json
 
@@ -489,7 +490,8 @@ def retabulate(run_dir) -> dict[str, Path]:
 
     Raises
     ------
-    FileNotFoundError if ``run_dir/cases.csv`` is missing.
+    FileNotFoundError if ``run_dir/cases.csv`` is missing; SShaDeError when a row of it
+    disagrees with its record (:func:`eval.run.row_check.check_rows`).
     """
 
     import pandas as pd
@@ -497,6 +499,10 @@ def retabulate(run_dir) -> dict[str, Path]:
     run_dir = Path(run_dir)
     refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
     df = pd.read_csv(run_dir / "cases.csv")
+    bad = check_rows(df, run_dir).problems
+    if bad:  # a table is made from the store's rows, never from rows that disagree with it
+        raise SShaDeError(f"{run_dir / 'cases.csv'}: {bad[0]}" + (f" (and {len(bad) - 1} more rows)" if len(bad) > 1
+                          else "") + "; its rows disagree with their records: no table is made from them")
     compared = pd.read_csv(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
     title = _written_title(run_dir)
     if title is None:

@@ -32,7 +32,7 @@ from sshade.json_file import read_json
 __all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "LATER_CASE_FIELDS", "OTHER_SETTINGS", "ResultStore",
            "Lookup",
            "case_identity", "pair_key",
-           "check_row", "cell_problem", "record_digest", "output_digest", "numeric_column",
+           "check_row", "cell_problem", "record_digest", "output_digest", "fields_digest", "numeric_column",
            "describe_change"]
 
 log = logging.getLogger("eval")
@@ -86,6 +86,12 @@ def case_identity(case, *, dataset: str, seed) -> dict:
             "n_dropped": json_safe(getattr(case, "n_dropped", None)), **later}
 
 
+def fields_digest(fields) -> str:
+    """SHA-256 (hex) of the canonical JSON of a record's key fields: its ``key``
+    (:func:`pair_key`)."""
+    return hashlib.sha256(json.dumps(fields, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
 def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None, code: dict | None = None
              ) -> tuple[str, dict]:
     """``(key, fields)``: the SHA-256 (hex) of the canonical JSON of ``fields`` =
@@ -94,8 +100,7 @@ def pair_key(method_spec: dict, case_id: dict, extra: dict | None = None, code: 
     settings; ``code``: :func:`eval.run.code_identity.code_identity` of the method)."""
     fields = {"version": STORE_VERSION, "method": json_safe(method_spec), "case": json_safe(case_id),
               "extra": json_safe(extra or {}), "code": json_safe(code)}
-    text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest(), fields
+    return fields_digest(fields), fields
 
 
 _NUMERIC = re.compile(r"^(n_\w+|\w+_(pct|s|deg|mb|err))$")
@@ -321,6 +326,8 @@ class ResultStore:
             return Lookup(rec, "stale")
         if rec.get("digest") != record_digest(rec):
             return Lookup(None, "invalid: edited (its digest does not match)")
+        if rec.get("key") != fields_digest(rec.get("key_fields")):
+            return Lookup(None, "invalid: its key is not its key fields' digest (edited)")
         bad = check_row(rec.get("row"), case, method)
         if bad or not isinstance(rec.get("info"), dict):
             return Lookup(None, f"invalid: {bad or 'info is not a mapping'}")

@@ -12,9 +12,7 @@ Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: d
 """
 from __future__ import annotations
 
-import hashlib
 import io
-import json
 import subprocess
 import tarfile
 import tempfile
@@ -41,15 +39,17 @@ from eval.run.result_store import (
     STORE_VERSION,
     ResultStore,
     check_row,
+    fields_digest,
     pair_key,
     record_digest,
 )
+from eval.run.row_check import check_rows
 from eval.run.runinfo import REPO_ROOT
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 
 __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "changed_since", "row_state",
-           "check_folders", "settings_marks", "rekey_record", "references_on",
+           "check_folders", "settings_marks", "table_problems", "rekey_record", "references_on",
            "folder_states"]
 
 #: The folders of scripts whose runs are held to their code besides the packages
@@ -133,13 +133,16 @@ def run_folders(top) -> list[Path]:
 
 
 def record_paths(folder) -> Iterator[tuple[str, Path]]:
-    """``(case folder name, record path)`` of every ``runs/<case>/<method>.json`` of ``folder``, sorted."""
+    """``(case folder name, record path)`` of every ``runs/<case>/<method>.json`` of
+    ``folder``, sorted; an entry of ``runs/`` that is no folder (a file, a link) comes as
+    its own path, and a record that is a link as its path, for the caller to refuse."""
     root = Path(folder) / STORE_DIR
     for d in sorted(root.iterdir()) if root.is_dir() else []:
-        if d.is_dir() and not d.is_symlink():
-            for p in sorted(d.glob("*.json")):
-                if not p.is_symlink():
-                    yield d.name, p
+        if d.is_symlink() or not d.is_dir():
+            yield d.name, d
+            continue
+        for p in sorted(d.glob("*.json")):
+            yield d.name, p
 
 
 def _read_json(p: Path):
@@ -188,8 +191,8 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
         return st
     fields = rec.get("key_fields") if isinstance(rec.get("key_fields"), dict) else {}
     code = fields.get("code") if isinstance(fields.get("code"), dict) else {}
-    if code.get("plugin") is not None:
-        st.why = "a plug-in's row: its source lies outside this repository (not checked)"
+    if code.get("plugin") is not None:  # results/ holds the project's methods' rows only
+        st.stale, st.why = True, "a plug-in's row: its source lies outside this repository, so its code cannot be held"
         return st
     mods, consts = _now(fields, root)
     tree = trees.tree(st.commit) if not git.get("dirty") else None
@@ -226,6 +229,8 @@ def _reference_state(st: RowState, code: dict, tree: Path | None, root: str | No
 def _valid(folder, p: Path) -> tuple[dict | None, str]:
     """A record file read as untrusted input: ``(record, "")`` when it is whole and valid
     for its store version, else ``(None, why)``."""
+    if p.is_symlink() or not p.is_file():
+        return None, f"invalid: {'a link' if p.is_symlink() else 'not a file'} where a record belongs"
     rec = _read_json(p)
     if not isinstance(rec, dict) or not isinstance(rec.get("method"), str) or not isinstance(rec.get("case"), str):
         return None, "invalid: not a record"
@@ -239,6 +244,8 @@ def _valid(folder, p: Path) -> tuple[dict | None, str]:
         return (found.record, "") if found.record is not None else (None, found.why or "invalid")
     if rec.get("digest") != record_digest(rec):
         return None, "invalid: edited (its digest does not match)"
+    if rec.get("key") != fields_digest(rec.get("key_fields")):
+        return None, "invalid: its key is not its key fields' digest (edited)"
     bad = check_row(rec.get("row"), rec["case"], rec["method"])
     return (None, f"invalid: {bad}") if bad else (rec, "")
 
@@ -251,6 +258,31 @@ def folder_states(folder, trees: CommitTrees, root: str | None = None) -> list[R
     for case_dir, p in record_paths(folder):
         rec, bad = _valid(folder, p)
         out.append(row_state(folder, rec, trees, root) if rec else RowState(Path(folder), case_dir, p.stem, True, bad))
+    return out
+
+
+def table_problems(folder) -> list[str]:
+    """What a reader of ``folder``'s ``cases.csv`` would take that its records do not say,
+    one line each (``[]`` when nothing): the file missing, a link or unreadable; a row
+    whose record is absent, invalid or holds other numbers
+    (:func:`eval.run.row_check.check_rows`); a valid record whose row the file does not list."""
+    import pandas as pd
+
+    p = Path(folder) / "cases.csv"
+    if p.is_symlink() or not p.is_file():
+        return [f"{p}: {'a link' if p.is_symlink() else 'missing'}, where the rows of {STORE_DIR}/ belong"]
+    try:
+        df = pd.read_csv(p)
+    except (OSError, ValueError) as e:
+        return [f"{p}: unreadable ({type(e).__name__})"]
+    chk = check_rows(df, folder)
+    out = [f"{p}: {x}" for x in chk.problems] + [f"{p}: {x}: no record in {STORE_DIR}/" for x in chk.absent]
+    if "case" in df.columns and "method" in df.columns:
+        listed = set(zip(df["case"].astype(str), df["method"].astype(str)))
+        for _, rp in record_paths(folder):
+            rec, _ = _valid(folder, rp)
+            if rec is not None and (str(rec["case"]), str(rec["method"])) not in listed:
+                out.append(f"{rp}: a record whose row cases.csv does not list")
     return out
 
 
@@ -386,8 +418,7 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
     fields, git = rec.get("key_fields"), rec.get("git")
     if not isinstance(fields, dict) or not isinstance(git, dict) or not isinstance(fields.get("code"), dict):
         return "refused: no key fields or git state"
-    text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
-    if hashlib.sha256(text.encode()).hexdigest() != rec.get("key"):
+    if fields_digest(fields) != rec.get("key"):
         return "refused: its key is not its key fields' digest"
     old = fields["code"]
     if old.get("plugin") is not None:
