@@ -23,6 +23,7 @@ from tqdm import tqdm
 
 from .command_errors import ArgumentParser, run_command
 from .errors import SShaDeError
+from .json_file import regular_file
 from .mesh.gltf import GlbAnimationWriter, check_glb_output, frames_tempfile, glb_extras
 from .mesh.handle_files import apply_def, check_affine, read_moving_handles
 from .mesh.io import atomic_write, read_mesh, write_mesh, written_by_sshade
@@ -115,6 +116,7 @@ def read_animation_npz(path) -> tuple[np.ndarray, np.ndarray, float]:
     (no ``sshade_animation`` mark), shapes, face indices out of range, a frame with NaN or
     inf (the first one named), a bad ``fps``.
     """
+    regular_file(path, "animation")
     try:
         with np.load(path, allow_pickle=False) as z:
             if NPZ_KEY not in z.files:
@@ -137,6 +139,7 @@ def read_animation_npz(path) -> tuple[np.ndarray, np.ndarray, float]:
 
 def _frames(a, V) -> tuple[np.ndarray, np.ndarray]:
     """(handles (h,), targets (f, h, 3)) from the handle file and ``--frames``."""
+    regular_file(a.frames, "--frames file")
     try:
         with open(a.frames, "rb") as fh:
             head = fh.read(6)

@@ -4,7 +4,8 @@ says, JSON nesting bounded.
 
 * :func:`read_bounded`: the bytes of a regular file of at most ``max_bytes``;
 * :func:`loads`: :func:`json.loads` whose too-deep nesting is a ``ValueError``;
-* :func:`read_json`: both, for a JSON file (``MAX_JSON_BYTES`` by default).
+* :func:`read_json`: both, for a JSON file (``MAX_JSON_BYTES`` by default);
+* :func:`regular_file`: a path checked to name a regular file before a reader opens it.
 Callers catch ``OSError`` (unreadable, not a regular file, too large) and ``ValueError``
 (not UTF-8, not JSON, nested too deeply) as they did for ``Path.read_text`` and ``json.loads``.
 """
@@ -15,7 +16,7 @@ import json
 import os
 import stat
 
-__all__ = ["MAX_JSON_BYTES", "read_bounded", "loads", "read_json"]
+__all__ = ["MAX_JSON_BYTES", "read_bounded", "loads", "read_json", "regular_file"]
 
 MAX_JSON_BYTES = 256 * 2**20  #: a JSON file larger than this is refused (bytes)
 
@@ -52,6 +53,38 @@ def read_bounded(path, max_bytes: int) -> bytes:
                 raise OSError(errno.EFBIG, f"larger than {max_bytes} bytes", str(path))
     finally:
         os.close(fd)
+
+
+def _kind(mode: int) -> str:
+    """What a file of ``st_mode`` ``mode`` is, in words, when it is no regular file."""
+    for test, word in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return word
+    return "not a regular file"
+
+
+def regular_file(path, what: str = "file"):
+    """``path`` (a :class:`pathlib.Path`) when it names a regular file (a link to one
+    included), checked before a reader opens it: a FIFO would block the reader, a folder
+    or a device (``/dev/zero``) has no end it could trust. ``what``: the kind of file, for
+    the message. Raises :class:`sshade.errors.SShaDeError` naming ``path``: not found,
+    unreadable, or what it is instead."""
+    from pathlib import Path
+
+    from .errors import SShaDeError
+
+    p = Path(path)
+    try:
+        mode = os.stat(p).st_mode
+    except FileNotFoundError:
+        raise SShaDeError(f"{what} not found: {p}") from None
+    except OSError as e:
+        raise SShaDeError(f"{p}: cannot read it ({e.strerror or type(e).__name__})") from None
+    if not stat.S_ISREG(mode):
+        raise SShaDeError(f"{p}: {_kind(mode)}, not a {what} (a regular file)")
+    return p
 
 
 def loads(text):

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SShaDeError
-from ..json_file import loads
+from ..json_file import loads, regular_file
 from .io import atomic_write
 from .validate import check_faces
 
@@ -199,7 +199,7 @@ def _chunks(path, map_bin: bool = True) -> tuple[bytes, int, int, mmap.mmap | No
     """(JSON text, BIN offset, BIN length, the file mapped or None) of a ``.glb``, its
     header and chunk lengths checked against the file's size (``map_bin=False``: the
     JSON chunk only)."""
-    p = Path(path)
+    p = regular_file(path, "glTF binary")
     try:
         with open(p, "rb") as fh:
             size = os.fstat(fh.fileno()).st_size

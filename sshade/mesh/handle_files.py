@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SShaDeError
+from ..json_file import regular_file
 from .io import atomic_write
 from .validate import validate_handles
 
@@ -41,9 +42,7 @@ def _check_size(p: Path, what: str, limit: int) -> None:
 def _text_lines(path, what: str, limit: int = MAX_BYTES) -> list[tuple[int, str]]:
     """(line number, stripped text) of the non-empty, non-comment lines of a text file
     of at most ``limit`` bytes."""
-    p = Path(path)
-    if not p.is_file():
-        raise SShaDeError(f"{what} file not found: {p}")
+    p = regular_file(path, f"{what} file")
     _check_size(p, what, limit)
     try:
         text = p.read_text(encoding="utf-8-sig")  # a byte-order mark is not text
@@ -102,9 +101,7 @@ def read_dmat_selection(path, n: int) -> np.ndarray:
     (n, 1) or (1, n) matrix), values that are not integers >= -1 or not finite, or no
     fixed and no handle vertex.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise SShaDeError(f".dmat file not found: {p}")
+    p = regular_file(path, ".dmat file")
     _check_size(p, ".dmat", MAX_BYTES + PER_VERTEX_BYTES * n)
     S = _read_dmat(p)
     if S.ndim != 2 or 1 not in S.shape or S.size != n:
@@ -290,8 +287,7 @@ def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
     ext = p.suffix.lower()
     if ext not in (".json", ".csv"):
         raise SShaDeError(f"{p}: handle file must be .json or .csv, got {ext or 'no extension'!r}")
-    if not p.is_file():
-        raise SShaDeError(f"handle file not found: {p}")
+    regular_file(p, "handle file")
     try:
         if ext == ".json":
             h, T = _json_handles(p, n)

@@ -7,6 +7,7 @@ deform``); the geometry core (remesh, ARAP, transfer) never reads or writes file
 """
 from __future__ import annotations
 
+import os
 import re
 import warnings
 from pathlib import Path
@@ -15,6 +16,7 @@ import numpy as np
 
 from ..errors import SShaDeError
 from ..files import atomic_write, inside_folder
+from ..json_file import regular_file
 from .validate import validate_mesh
 
 __all__ = ["read_mesh", "write_mesh", "atomic_write", "inside_folder", "written_by_sshade", "SIGNATURE"]
@@ -50,14 +52,16 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
 
         V, F = read_mesh("../shared/data/classic/bunny.off")
     """
-    p = Path(path)
-    if not p.is_file():
-        raise SShaDeError(f"mesh file not found: {p}")
+    p = regular_file(path, "mesh file")
     ext = p.suffix.lower()
     if ext not in _EXTS:
         raise SShaDeError(f"{p}: unsupported mesh format {ext!r} (use one of {sorted(_EXTS)})")
     try:
-        data = p.read_bytes()
+        with open(p, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            _check_prefix(fh.read(PREFIX_BYTES), size, ext, p)  # before the rest is read: bounded by the header
+            fh.seek(0)
+            data = fh.read()
     except OSError as e:
         raise SShaDeError(f"{p}: unreadable mesh file ({e.strerror or type(e).__name__})") from None
     if ext != ".stl" and data.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (editors on Windows)
@@ -78,6 +82,43 @@ def read_mesh(path, *, validate: bool = True, allow_components: bool = False) ->
     if validate:
         V, F = validate_mesh(V, F, name=str(p), allow_components=allow_components)
     return V, F
+
+
+#: The bytes of a mesh file read and checked before the rest (:func:`_check_prefix`).
+PREFIX_BYTES = 1 << 16
+#: The most entries a PLY face list is taken to hold when a binary file's size is bounded
+#: by its header (a triangle has 3; polygons are refused later, by name).
+PLY_LIST_MAX = 16
+
+
+def _check_prefix(head: bytes, size: int, ext: str, p: Path) -> None:
+    """Refuse, before reading the rest, a mesh file whose first bytes ``head`` show it is no
+    such file, or whose size exceeds what its header promises: a NUL byte in the text of
+    an OBJ, OFF, ASCII PLY or ASCII STL (a sparse or binary file named so); a binary PLY
+    larger than its elements can fill (at most :data:`PLY_LIST_MAX` entries per list).
+    ``size``: the file's size in bytes."""
+    text = head[:_ply_body(head)] if ext == ".ply" else head
+    binary_stl = ext == ".stl" and len(head) >= 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little")
+    if ext == ".ply" and head.startswith(b"ply") and b"\0" not in text:
+        fmt, elems, body = _ply_header(head, p)
+        if fmt == b"ascii":
+            text = head
+        else:
+            most = body + sum(n * sum(np.dtype(t).itemsize + (0 if c is None else np.dtype(c).itemsize
+                                                              + (PLY_LIST_MAX - 1) * np.dtype(t).itemsize)
+                                      for _, t, c in props) for _, n, props in elems)
+            if size > most:
+                raise _bad(p, f"{size} bytes, more than its header's elements can hold ({most})")
+    i = -1 if binary_stl else text.find(b"\0")
+    if i >= 0:
+        raise _bad(p, f"byte {i}: a NUL byte, so no {ext[1:].upper()} text (a binary or empty file named so?)")
+
+
+def _ply_body(head: bytes) -> int:
+    """The offset of a PLY's body in ``head`` (the end of its ``end_header`` line), or its length."""
+    end = head.find(b"end_header")
+    nl = head.find(b"\n", end) if end >= 0 else -1
+    return nl + 1 if nl >= 0 else len(head)
 
 
 def _short(e: BaseException) -> str:
