@@ -24,7 +24,7 @@ from pathlib import Path
 from eval.experiments import find_experiment
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
-from eval.run.pending_rows import STOP_AFTER_ENV, marked_pending
+from eval.run.pending_rows import STOP_AFTER_ENV, mark_run_pending, marked_pending, marked_run, short_commit
 from eval.run.runinfo import REPO_ROOT
 from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders, table_problems
 from eval.run.stale_runs import is_whole_run, whole_run_folders, whole_run_state
@@ -201,10 +201,13 @@ def _check(a) -> int:
         states = check_folders(folders, trees, marked=marked_pending)
         runs = [whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)]
     unread = _unread(folders)
+    marked = {str(r.folder) for r in runs if r.stale and r.origin is not None and r.origin.commit
+              and r.origin.dirty is False and marked_run(r.folder) == short_commit(r.origin.commit)}
     if a.json:
         out = {f: {m: {"rows": v["rows"], "stale": v["stale"] - v["marked"], "pending": v["marked"]}
                    for m, v in ms.items()} for f, ms in states.items()}
-        out.update({str(r.folder): {WHOLE_RUN: {"rows": 1, "stale": int(r.stale), "pending": 0}} for r in runs})
+        out.update({str(r.folder): {WHOLE_RUN: {"rows": 1, "stale": int(r.stale and str(r.folder) not in marked),
+                                                "pending": int(str(r.folder) in marked)}} for r in runs})
         print(json.dumps(out, indent=1, sort_keys=True))
     else:
         for f, ms in states.items():
@@ -216,17 +219,20 @@ def _check(a) -> int:
                     print(f"{f}: {m}: {v['stale']} of {v['rows']} rows {kind}: {whys}")
         for r in runs:
             if r.stale:
-                print(f"{r.folder}: {WHOLE_RUN} stale: {r.why}")
+                word = "pending (marked in its table.md)" if str(r.folder) in marked else "stale"
+                print(f"{r.folder}: {WHOLE_RUN} {word}: {r.why}")
     rows = sum(v["rows"] for ms in states.values() for v in ms.values())
     pending = sum(v["marked"] for ms in states.values() for v in ms.values())
     n = sum(v["stale"] for ms in states.values() for v in ms.values()) - pending
-    k = sum(r.stale for r in runs)
+    k = sum(r.stale for r in runs) - len(marked)
+    pending_runs = len(marked)
     for line in unread:
         print(line, file=sys.stderr if a.json else sys.stdout)
-    bad = n or k or unread or (a.strict and pending)
-    word = "stale" if n or k else "unread" if unread else "pending" if pending else "current"
+    bad = n or k or unread or (a.strict and (pending or pending_runs))
+    word = "stale" if n or k else "unread" if unread else "pending" if pending or pending_runs else "current"
     print(f"{word}: {rows - n - pending} of {rows} committed rows in {len(states)} folders are current, "
-          f"{pending} pending (marked in their tables), {n} stale; {k} of {len(runs)} folders run whole stale"
+          f"{pending} pending (marked in their tables), {n} stale; {k} of {len(runs)} folders run whole stale, "
+          f"{pending_runs} pending (marked in their table.md)"
           + (f"; {len(unread)} thing(s) a reader would see that the records do not say" if unread else "")
           + ("; --strict: a pending row fails" if a.strict and pending else ""),
           file=sys.stderr if a.json else sys.stdout)
@@ -261,12 +267,21 @@ def _rekey(a) -> int:
 def _retabulate() -> int:
     """``--retabulate``: ``python -m eval.tables`` on every run folder of :data:`RESULTS`
     with a ``cases.csv`` (the folders whose tables :func:`eval.tables.write_tables` made:
-    those with a result store), as a step of this command (:func:`step_env`); its exit code."""
+    those with a result store), as a step of this command (:func:`step_env`); then each
+    folder run whole marked pending in its ``table.md`` while stale, unmarked once current
+    (:func:`eval.run.pending_rows.mark_run_pending`). Its exit code: that of the tables."""
     dirs = [str(f) for f in run_folders(RESULTS) if (f / "cases.csv").is_file()]
+    rc = subprocess.call([sys.executable, "-m", "eval.tables", *dirs], env=step_env()) if dirs else 0
     if not dirs:
         print("retabulate: no run folder with cases.csv under results/")
-        return 0
-    return subprocess.call([sys.executable, "-m", "eval.tables", *dirs], env=step_env())
+    with CommitTrees() as trees:
+        for r in (whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)):
+            commit = r.origin.commit if r.origin else None
+            older = r.stale and commit is not None and r.origin.dirty is False  # made by a commit's older code
+            if mark_run_pending(r.folder, commit, r.why if older else None):
+                print(f"{r.folder}: {'marked pending (made at ' + short_commit(commit) + ')' if r.stale else 'current'}"
+                      " in its table.md")
+    return rc
 
 
 def parse_duration(text) -> float | None:

@@ -117,3 +117,19 @@ def test_a_row_left_pending_for_other_settings_stays_marked_until_made_again(tmp
     table.write_text(code_only)  # a mark for code that is current again goes
     retabulate(run)
     assert marked_pending(run) == {}
+
+
+def test_a_folder_run_whole_is_marked_pending_in_its_table_and_unmarked_byte_for_byte(tmp_path):
+    from eval.run.pending_rows import RUN_PENDING_HEADING, mark_run_pending, marked_run
+    table = tmp_path / "table.md"
+    text = "### convergence\n\n| a | b |\n"
+    table.write_text(text)
+    assert marked_run(tmp_path) is None and not mark_run_pending(tmp_path, "c" * 40, None)
+    assert mark_run_pending(tmp_path, "c449109" + "0" * 33, "sshade.mesh.io changed since c449109")
+    assert marked_run(tmp_path) == "c449109" and RUN_PENDING_HEADING in table.read_text()
+    assert not mark_run_pending(tmp_path, "c449109" + "0" * 33, "sshade.mesh.io changed since c449109")  # idempotent
+    assert mark_run_pending(tmp_path, "c449109" + "0" * 33, None) and table.read_text() == text
+    os.symlink(table, tmp_path / "other")
+    (tmp_path / "linked").mkdir()
+    os.symlink(table, tmp_path / "linked" / "table.md")
+    assert not mark_run_pending(tmp_path / "linked", "c" * 40, "why") and table.read_text() == text  # no link written

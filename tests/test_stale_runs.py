@@ -113,15 +113,18 @@ def test_whole_run_folders_are_those_without_stored_rows_and_no_link(tmp_path):
     assert whole_run_folders(tmp_path) == [tmp_path / "a", tmp_path / "b"]
 
 
-def test_committed_whole_runs_are_current_at_this_checkout():
+def test_committed_whole_runs_are_current_or_marked_pending_at_this_checkout():
     """Every folder of results/ run whole was made by this checkout's code for what it
-    runs (``python -m eval.reproduce --check``: the rule for results/ covers them too)."""
+    runs, or is marked pending in its table.md with the commit that made it
+    (``python -m eval.reproduce --check``: the rule for results/ covers them too)."""
+    from eval.run.pending_rows import marked_run, short_commit
     shallow = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--is-shallow-repository"], capture_output=True,
                              text=True, check=False).stdout.strip()
     if shallow != "false":
         pytest.skip("a shallow clone (or no git): the commits that made results/ are not here to compare")
     folders = whole_run_folders(ROOT / "results")
     with CommitTrees() as trees:
-        stale = {f.name: st.why for f in folders if (st := whole_run_state(f, trees, find_experiment)).stale}
+        stale = {f.name: st.why for f in folders if (st := whole_run_state(f, trees, find_experiment)).stale
+                 and marked_run(f) != short_commit(st.origin.commit if st.origin else None)}
     assert not stale
     assert {"convergence", "scaling", "frames", "cold_start"} <= {f.name for f in folders}

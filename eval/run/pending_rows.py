@@ -18,10 +18,12 @@ import re
 from pathlib import Path
 
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_bounded
 
-__all__ = ["STOP_AFTER_ENV", "PENDING_HEADING", "stop_after_s", "short_commit", "pending_title", "strip_pending",
-           "pending_markdown", "marked_pending"]
+__all__ = ["STOP_AFTER_ENV", "PENDING_HEADING", "RUN_PENDING_HEADING", "stop_after_s", "short_commit",
+           "pending_title", "strip_pending", "pending_markdown", "marked_pending", "mark_run_pending",
+           "marked_run"]
 
 #: The environment variable that stops an evaluator run early (``python -m eval.reproduce
 #: --budget`` sets it for each table step): seconds after the run's start when no (case,
@@ -34,6 +36,9 @@ PENDING_HEADING = "Rows pending regeneration (made by older code)"
 #: A listed pending row: ``- `case` `method`: made at abc1234; why``.
 _ROW = re.compile(r"^- `(?P<case>[^`]+)` `(?P<method>[^`]+)`: made at (?P<commit>[0-9a-f]{7}|unknown)\b"
                   r"(?:; (?P<why>.*))?$")
+#: The heading a folder run whole gets at the end of its ``table.md`` while it is pending,
+#: over one line ``made at abc1234; why`` (:func:`mark_run_pending`).
+RUN_PENDING_HEADING = "This run is pending regeneration (made by older code)"
 #: The count a title ends with when some rows are pending.
 _TITLE = re.compile(r" \(\d+ of \d+ rows made by this commit's code; \d+ pending from [^()]*\)$")
 #: The most of a ``table.md`` read back (bytes): a table is a few kB.
@@ -92,6 +97,49 @@ def marked_pending(folder) -> dict[tuple[str, str, str], str]:
     if not found:
         return {}
     return {(m["case"], m["method"], m["commit"]): m["why"] or "" for m in map(_ROW.match, rest.splitlines()) if m}
+
+
+def _unmarked(text: str) -> str:
+    """``text`` of a ``table.md`` without the section :func:`mark_run_pending` adds."""
+    return text.partition(f"\n#### {RUN_PENDING_HEADING}\n")[0].rstrip("\n") + "\n"
+
+
+def mark_run_pending(folder, commit, why: str | None) -> bool:
+    """Mark the folder run whole ``folder`` pending in its ``table.md`` (a section at its
+    end: the commit that made it and ``why`` it is stale), or, with ``why`` None, remove
+    that mark; the rest of the file kept byte for byte. Returns whether the file changed;
+    a ``table.md`` that is missing, a link or no regular file is left alone (False)."""
+    path = Path(folder) / "table.md"
+    try:
+        if path.is_symlink():
+            return False
+        text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8")
+    except (OSError, UnicodeDecodeError):
+        return False
+    new = _unmarked(text)
+    if why is not None:
+        new += f"\n#### {RUN_PENDING_HEADING}\n\nmade at {short_commit(commit)}; {' '.join(str(why).split())}\n"
+    if new == text:
+        return False
+    with atomic_write(path, "w") as fh:
+        fh.write(new)
+    return True
+
+
+def marked_run(folder) -> str | None:
+    """The commit (7 hex digits, or ``"unknown"``) with which :func:`mark_run_pending`
+    marked the folder run whole ``folder`` pending, None when it is not marked (or its
+    ``table.md`` cannot be read as a regular file)."""
+    path = Path(folder) / "table.md"
+    try:
+        if path.is_symlink():
+            return None
+        text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8", "replace")
+    except OSError:
+        return None
+    _, found, rest = text.partition(f"\n#### {RUN_PENDING_HEADING}\n")
+    m = re.search(r"^made at ([0-9a-f]{7}|unknown)\b", rest, re.M) if found else None
+    return m[1] if m else None
 
 
 def stop_after_s(environ=None) -> float | None:
