@@ -512,6 +512,8 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
         # -> (['s00_p01', 's00_p02'], True)
     """
     want = _load_params(root, resolution, subjects, limit, verify, tol, eager)
+    if not isinstance(partial, (bool, np.bool_)):
+        raise SShaDeError(f"partial must be True or False, got {partial!r}")
     src = open_build(root)
     m = _manifest(src)
     problem = partial_problem(m, src.path) or (subset_problem(m, src.path) if subjects is None else None)

@@ -118,3 +118,10 @@ def test_a_build_of_some_subjects_is_not_loaded_as_the_whole_dataset(tmp_path):
                        cwd=ROOT, env=subprocess_env(), timeout=300)
     assert r.returncode == 0
     assert r.stdout.strip() == f"{out}: every file matches its manifest; a build of subject(s) 1, 1 of its 2 not built"
+
+
+@pytest.mark.parametrize("partial", ["yes", 1, None])
+def test_load_refuses_a_partial_that_is_no_boolean(tmp_path, partial):
+    from defaust.dataset import load
+    with pytest.raises(SShaDeError, match="partial must be True or False"):
+        load(tmp_path, partial=partial)

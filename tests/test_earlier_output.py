@@ -200,3 +200,18 @@ def test_a_bad_input_into_an_earlier_eval_output_is_refused_and_leaves_it_byte_i
         assert r.returncode == 2 and lines[-1].startswith("error: ") and "Traceback" not in r.stderr, (bad, r.stderr)
         assert _bytes(p) == before, bad
         assert not (p / outdir.ASIDE).exists()
+
+
+def test_an_unrecorded_set_aside_folder_is_refused_naming_it_and_what_to_do(tmp_path):
+    """A .sshade-earlier that no run recorded (made by hand, or copied with the folder):
+    the claim names it and what to do, moves nothing and leaves the lock free."""
+    p = _earlier(tmp_path)
+    (p / ASIDE).mkdir()
+    (p / ASIDE / "x.txt").write_text("someone's")
+    before = _bytes(p)
+    with pytest.raises(outdir.OutputDirError, match=f"holds {ASIDE}, which no run recorded.*move it out"):
+        claim_output_dir(p, "eval", first_result="run.json")
+    assert _bytes(p) == before
+    (p / ASIDE / "x.txt").unlink()
+    (p / ASIDE).rmdir()
+    claim_output_dir(p, "eval", first_result="run.json").release()  # the lock was released

@@ -456,6 +456,10 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, ho
             user = [r for r in files_under(p, (m or {}).get("files") or []) if not wrote(r)]
             return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}{left}", fd=fd,
                          first_result=first_result, user_paths=user)
+        if os.path.lexists(p / ASIDE):  # no run of ours left it there without a record
+            OutputClaim(path=p, kind=kind, replaced=[], foreign=[], message="", fd=fd).release(lock_before)
+            raise OutputDirError(f"refusing to write into {p}: it holds {ASIDE}, which no run recorded setting aside "
+                                 f"(made by hand, or by a copy of the folder); move it out of {p} or remove it")
         earlier = [str(n) for n in (m or {}).get("files") or [] if str(n) not in _OWN]
         kept = sorted({str(n) for n in keep or ()} & set(earlier))  # only entries the earlier output wrote
         rec = set_aside(p, [n for n in earlier if n not in kept], p / MARKER, lock_before, m)
