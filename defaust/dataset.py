@@ -521,8 +521,9 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
         raise SShaDeError(problem)
     have = build_resolutions(m)
     if resolution not in have:
-        raise SShaDeError(f"{src.path} has no resolution {resolution!r}; it has {', '.join(have)} "
-                          "(python -m defaust resolutions=[...] builds others)")
+        raise SShaDeError(f"{src.path} has no resolution {resolution!r}; it has {', '.join(have)}: choose one "
+                          "(resolution=... in Python, --resolution on python -m defaust's commands), or build "
+                          "others (python -m defaust resolutions=[...])")
     plan = _plan(m, str(src.path), want, limit)
     if not plan:
         raise SShaDeError(f"no DeFAUST case in {src.path}")

@@ -300,7 +300,7 @@ def test_resolutions_without_high_build_no_high_res_mesh(tmp_path):
     assert not [f for f in m["files"] if "_high" in f]
     assert "n_vertices_high" not in m["items"]["subject_00/rest"]["info"]
     assert len(defaust.load(out, resolution="r1500")) == 4
-    with pytest.raises(SShaDeError, match="no resolution 'high'; it has low, r1500"):
+    with pytest.raises(SShaDeError, match="no resolution 'high'; it has low, r1500: choose one .*--resolution"):
         defaust.load(out)
 
 
