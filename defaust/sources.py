@@ -210,7 +210,13 @@ class ModelSource(Source):
     def plan(self):
         subs = list(range(int(self.cfg.n_subjects)))
         if self.cfg.subjects is not None:
-            subs = sorted({int(s) for s in self.cfg.subjects})
+            given = [int(s) for s in self.cfg.subjects]
+            twice = sorted({s for s in given if given.count(s) > 1})
+            if not given or twice:
+                raise SShaDeError("subjects must name each subject to build once (or be null for the first "
+                                  f"n_subjects), got {list(self.cfg.subjects)}"
+                                  + (f": {', '.join(map(str, twice))} more than once" if twice else ": none"))
+            subs = sorted(set(given))
             self.check_subjects(subs)
         return {s: list(range(1, len(self.names))) for s in subs}
 

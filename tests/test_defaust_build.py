@@ -390,3 +390,11 @@ def test_an_array_build_refuses_a_logs_folder_that_is_not_its_own(tmp_path):
     with pytest.raises(SShaDeError, match="holds notes.txt"):
         _build(out, "cluster=slurm", "cluster.executor=local")
     assert (tmp_path / "b_slurm" / "notes.txt").read_text() == "mine" and not (out / "subject_00").exists()
+
+
+@pytest.mark.parametrize("subjects, why", [("[]", ": none"), ("[0,0]", ": 0 more than once")])
+def test_subjects_naming_no_subject_or_one_twice_are_refused_before_any_file(tmp_path, subjects, why):
+    out = tmp_path / "b"
+    with pytest.raises(SShaDeError, match=f"subjects must name each subject to build once.*{why}"):
+        _build(out, f"subjects={subjects}")
+    assert not out.exists() or not any(out.iterdir())
