@@ -522,8 +522,7 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
     have = build_resolutions(m)
     if resolution not in have:
         raise SShaDeError(f"{src.path} has no resolution {resolution!r}; it has {', '.join(have)}: choose one "
-                          "(resolution=... in Python, --resolution on python -m defaust's commands), or build "
-                          "others (python -m defaust resolutions=[...])")
+                          "(resolution= / --resolution), or build others (python -m defaust resolutions=[...])")
     plan = _plan(m, str(src.path), want, limit)
     if not plan:
         raise SShaDeError(f"no DeFAUST case in {src.path}")
