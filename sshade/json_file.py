@@ -15,6 +15,9 @@ import errno
 import json
 import os
 import stat
+from pathlib import Path
+
+from .errors import SShaDeError
 
 __all__ = ["MAX_JSON_BYTES", "read_bounded", "loads", "read_json", "regular_file"]
 
@@ -71,10 +74,6 @@ def regular_file(path, what: str = "file"):
     or a device (``/dev/zero``) has no end it could trust. ``what``: the kind of file, for
     the message. Raises :class:`sshade.errors.SShaDeError` naming ``path``: not found,
     unreadable, or what it is instead."""
-    from pathlib import Path
-
-    from .errors import SShaDeError
-
     p = Path(path)
     try:
         mode = os.stat(p).st_mode
