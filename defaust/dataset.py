@@ -35,7 +35,7 @@ from .handles import (
     handles_from_arrays,
     snap_handles,
 )
-from .manifest import FORMAT, MANIFEST, partial_problem, subset_problem
+from .manifest import FORMAT, MANIFEST, checked_manifest, partial_problem, subset_problem
 from .resolutions import RESOLUTIONS, build_resolutions, check_resolution
 from .store import read_npz, sha256_file
 
@@ -188,7 +188,7 @@ def _manifest(src: FolderBuild | ArchiveBuild) -> dict:
                           f" expected {FORMAT!r})")
     if not all(isinstance(m.get(k, {}), dict) for k in ("files", "subjects", "items")):
         raise SShaDeError(f"{p}: 'files', 'subjects' and 'items' must be objects")
-    return m
+    return checked_manifest(m, p)
 
 
 def read_manifest(root) -> dict:

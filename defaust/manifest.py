@@ -261,3 +261,49 @@ def item_valid(out: Path, entry: dict | None, key: str) -> bool:
     if not entry or entry.get("key") != key or not entry.get("files"):
         return False
     return all(sha256_file(out / f) == h for f, h in entry["files"].items())
+
+
+def _held(m: dict) -> set:
+    """The subject ids manifest ``m`` holds (its ``subjects`` entries)."""
+    return {v.get("subject") for v in (m.get("subjects") or {}).values()
+            if isinstance(v, dict) and isinstance(v.get("subject"), int)}
+
+
+def self_problems(m: dict, where) -> list[str]:
+    """What manifest ``m`` (of the build at ``where``) says against itself, one line each:
+    a complete build holding other subjects than its ``parameters.subjects`` (or, without
+    them, the ``n_subjects`` a build makes) or its ``planned_subjects``; an item lacking a
+    file that the other items of its kind (rest, pose) hold (a ground truth deleted with
+    its entries, say)."""
+    out, par = [], m.get("parameters") if isinstance(m.get("parameters"), dict) else {}
+    held = _held(m)
+    if m.get("complete", True) is not False:
+        claimed = par.get("subjects")
+        total = par.get("n_subjects") if isinstance(par.get("n_subjects"), int) else FAUST_SUBJECTS
+        want = {x for x in claimed if isinstance(x, int)} if isinstance(claimed, list) else set(range(total))
+        planned = m.get("planned_subjects")
+        for what, ids in (("its parameters", want), ("its planned_subjects", set(planned) if isinstance(planned, list)
+                                                      else held)):
+            if held != ids:
+                out.append(f"{where}: a complete build holding subject(s) {sorted(held)}, but {what} name "
+                           f"{sorted(ids, key=str)}: an edited or cut manifest; rebuild it")
+                break
+    kinds: dict = {}
+    for key, it in (m.get("items") or {}).items():
+        if isinstance(it, dict) and isinstance(it.get("files"), dict):
+            kind = "rest" if str(key).endswith("/rest") else "pose"
+            kinds.setdefault(kind, []).append((key, {f[len(key):] for f in it["files"] if f.startswith(key)}))
+    for kind, items in kinds.items():
+        every = set().union(*(s for _, s in items))
+        out += [f"{where}: item {key} lacks {', '.join(sorted(every - s))}, which every other {kind} item holds: a "
+                "file removed with its entries? verify against the build's archive or rebuild it"
+                for key, s in items if s != every]
+    return out
+
+
+def checked_manifest(m: dict, where) -> dict:
+    """``m`` when it agrees with itself (:func:`self_problems`); SShaDeError naming its first problem."""
+    bad = self_problems(m, where)
+    if bad:
+        raise SShaDeError(bad[0] + (f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""))
+    return m

@@ -398,3 +398,42 @@ def test_subjects_naming_no_subject_or_one_twice_are_refused_before_any_file(tmp
     with pytest.raises(SShaDeError, match=f"subjects must name each subject to build once.*{why}"):
         _build(out, f"subjects={subjects}")
     assert not out.exists() or not any(out.iterdir())
+
+
+def _edit_manifest(out: Path, edit) -> None:
+    m = json.loads((out / "manifest.json").read_text())
+    edit(m)
+    (out / "manifest.json").write_text(json.dumps(m))
+    for name in ("croissant.json", "datasheet.md"):  # they hold the manifest's digest: gone with it
+        (out / name).unlink(missing_ok=True)
+
+
+def test_a_manifest_that_contradicts_itself_is_refused_by_verify_and_load(tmp_path):
+    """A 1-subject build whose manifest loses parameters.subjects and claims
+    planned_subjects=[0, 1] of n_subjects=2; a pose's ground truth deleted with its
+    entries: ``verify`` names each, ``load`` refuses (it loaded them as whole)."""
+    from defaust.dataset import load, verify
+    out = tmp_path / "one"
+    _build(out, "n_subjects=2", "subjects=[0]")
+    assert verify(out) == []
+
+    def widen(m):
+        m["parameters"].pop("subjects", None)
+        m["planned_subjects"] = [0, 1]
+    _edit_manifest(out, widen)
+    problems = verify(out)
+    assert any("holding subject(s) [0], but its parameters name [0, 1]" in p for p in problems), problems
+    with pytest.raises(SShaDeError, match="an edited or cut manifest"):
+        load(out)
+    out2 = tmp_path / "gt"
+    _build(out2)
+    gt = "subject_00/pose_01_high.ply"
+    (out2 / gt).unlink()
+
+    def cut(m):
+        m["files"].pop(gt)
+        m["items"]["subject_00/pose_01"]["files"].pop(gt)
+    _edit_manifest(out2, cut)
+    assert any("item subject_00/pose_01 lacks _high.ply" in p for p in verify(out2))
+    with pytest.raises(SShaDeError, match="lacks _high.ply, which every other pose item holds"):
+        load(out2)
