@@ -12,6 +12,7 @@ Example::
 """
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 from pathlib import Path
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from sshade.errors import SShaDeError
-from sshade.files import atomic_write
+from sshade.files import atomic_write, inside_folder
 from sshade.json_file import read_json
 from sshade.mesh.io import write_mesh
 
@@ -161,6 +162,23 @@ def export(root, to, *, fmt: str = "npz", resolution: str = "high", subjects=Non
     marker = {"kind": KIND, "format": fmt, "resolution": resolution, "source": cases[0].source,
               "cases": [c.name for c in cases], "build": str(root.resolve()),
               "build_manifest_sha256": manifest_sha256, "files": files}
+    earlier = _earlier_files(to)
     with atomic_write(to / MARKER) as fh:
         fh.write(json.dumps(marker, indent=1) + "\n")
+    for rel in sorted(set(earlier) - set(files)):  # the earlier export's own files this one did not write
+        with contextlib.suppress(OSError, SShaDeError):
+            inside_folder(to, rel, "earlier export").unlink()
     return [to / n for n in files] + [to / MARKER]
+
+
+def _earlier_files(to: Path) -> list[str]:
+    """The files an earlier export in ``to`` lists in its :data:`MARKER` (read as untrusted
+    input: only plain relative paths of regular files inside ``to`` count; none when it
+    has no such marker)."""
+    try:
+        old = read_json(to / MARKER) if (to / MARKER).is_file() and not (to / MARKER).is_symlink() else {}
+    except (OSError, ValueError):
+        return []
+    files = old.get("files") if isinstance(old, dict) and old.get("kind") == KIND else None
+    return [f for f in files if isinstance(f, str) and not Path(f).is_absolute() and ".." not in Path(f).parts
+            and (to / f).is_file() and not (to / f).is_symlink()] if isinstance(files, dict) else []

@@ -152,3 +152,18 @@ def test_hf_export_never_writes_through_a_linked_data_folder(defaust_ci, tmp_pat
     with pytest.raises(SShaDeError, match="a link or a file"):
         export(defaust_ci, tmp_path / "hf", fmt="hf", resolution="low")
     assert list(outside.iterdir()) == []
+
+
+def test_an_export_of_another_format_into_an_earlier_export_leaves_none_of_its_files(defaust_ci, tmp_path):
+    """An npz export into an earlier mesh export: every file the earlier one listed and
+    this one does not write is gone, a file someone added stays, and the folder holds
+    exactly this export's files besides (it left the old files beside it, unlisted)."""
+    out = tmp_path / "x"
+    old = export(defaust_ci, out, fmt="obj", resolution="low", subjects=[0])
+    assert any(f.suffix == ".obj" for f in old)
+    (out / "notes.txt").write_text("mine")
+    new = export(defaust_ci, out, fmt="npz", resolution="low", subjects=[0])
+    listed = set(json.loads((out / MARKER).read_text())["files"])
+    held = {f.relative_to(out).as_posix() for f in out.rglob("*") if f.is_file()}
+    assert held == listed | {MARKER, "notes.txt"} and {f.relative_to(out).as_posix() for f in new} == listed | {MARKER}
+    assert (out / "notes.txt").read_text() == "mine"
