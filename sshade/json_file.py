@@ -43,8 +43,11 @@ def read_bounded(path, max_bytes: int) -> bytes:
     """
     fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
             raise OSError(errno.EINVAL, "not a regular file", str(path))
+        if st.st_size > max_bytes:  # refused before a byte is read (a sparse file included)
+            raise OSError(errno.EFBIG, f"larger than {max_bytes} bytes", str(path))
         chunks, n = [], 0
         while True:
             b = os.read(fd, min(1 << 20, max_bytes + 1 - n))

@@ -89,3 +89,25 @@ def test_a_sparse_2gb_mesh_is_refused_from_its_first_bytes_in_bounded_memory(tmp
     msg, rss_kib = r.stdout.strip().splitlines()
     assert str(p) in msg and ("NUL" in msg or "more than its header" in msg), msg
     assert int(rss_kib) < 64 * 1024, f"{int(rss_kib) / 1024:.0f} MiB more than the import's"
+
+
+@pytest.mark.parametrize("ext", [".npz", ".glb", ".sel", ".dmat", ".def", ".json", ".csv", "manifest"])
+def test_every_other_reader_refuses_a_sparse_2gb_file_in_bounded_memory(tmp_path, ext):
+    """Animations, handle files and a DeFAUST manifest (sshade.json_file.read_json) given a
+    sparse 2 GB file: one line, and less than 64 MiB above the readers' import."""
+    p = tmp_path / ("manifest.json" if ext == "manifest" else f"sparse{ext}")
+    with open(p, "wb") as fh:
+        fh.truncate(2 ** 31)
+    call = {"manifest": f"read_json({str(p)!r})"}.get(ext, f"_readers()[{ext!r}]({str(p)!r})")
+    code = ("import resource\nfrom tests.test_regular_files import _readers\nfrom sshade.json_file import read_json\n"
+            "from sshade.errors import SShaDeError\nr = _readers()\n"
+            "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+            f"try:\n    {call}\nexcept (SShaDeError, OSError, ValueError) as e:\n"
+            "    print(str(e).replace(chr(10), ' '))\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base)")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=subprocess_env(), capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    msg, rss_kib = r.stdout.strip().splitlines()
+    assert str(p.name) in msg or "larger than" in msg, msg
+    assert int(rss_kib) < 64 * 1024, f"{int(rss_kib) / 1024:.0f} MiB more than the import's"
