@@ -246,7 +246,7 @@ def test_read_mesh_rejects(name, tmp_path):
 def test_read_mesh_missing_path(tmp_path):
     with pytest.raises(SShaDeError, match="not found"):
         read_mesh(tmp_path / "nothere.off")
-    with pytest.raises(SShaDeError, match="not found"):
+    with pytest.raises(SShaDeError, match="a folder, not a mesh file"):
         read_mesh(tmp_path)  # a directory is not a mesh file
 
 

@@ -10,6 +10,7 @@ import pytest
 from eval.run.result_store import record_digest
 from eval.run.row_check import check_rows
 from eval.tables import retabulate
+from sshade.errors import SShaDeError
 
 from .test_fuzz_store import _stored
 
@@ -81,8 +82,12 @@ def test_retabulated_table_says_checked_or_disagreeing_or_unchecked(tmp_path):
     df = pd.read_csv(tmp_path / "cases.csv")
     df.loc[0, "time_s"] = 0.01
     df.to_csv(tmp_path / "cases.csv", index=False)
-    retabulate(tmp_path)
-    assert "Rows disagree with the result store" in (tmp_path / "table.md").read_text()
+    table = (tmp_path / "table.md").read_text()
+    with pytest.raises(SShaDeError, match="cases.csv: s0_p1 / A: time_s 0.01 in cases.csv, 0.25 in the record; its "
+                                          "rows disagree with their records: no table is made from them"):
+        retabulate(tmp_path)  # no table from rows the store does not hold
+    assert (tmp_path / "table.md").read_text() == table
+    assert "Rows disagree with the result store" in check_rows(df, tmp_path).line()
     bare = tmp_path / "bare"
     bare.mkdir()
     df.to_csv(bare / "cases.csv", index=False)

@@ -68,18 +68,19 @@ def test_a_record_holds_its_output_digest_and_names_a_replaced_record_with_the_s
     st = ResultStore(tmp_path)
     row = {"case": "c", "method": "A", "error": "", "time_s": 1.0}
     U = np.arange(15, dtype=np.float64).reshape(5, 3)
-    st.save("c", "A", "k1", {}, row, {}, U, git={"commit": "a" * 40, "dirty": False})
-    first = st.load("c", "A", "k1")
+    (k1, f1), (k2, f2), (k3, f3) = (pair_key({"_target_": "x.A", "tol": t}, {"case": "c"}) for t in (1, 2, 3))
+    st.save("c", "A", k1, f1, row, {}, U, git={"commit": "a" * 40, "dirty": False})
+    first = st.load("c", "A", k1)
     assert first["output"] == output_digest(U) == output_digest(np.asfortranarray(U)) and "same_output_as" not in first
-    st.save("c", "A", "k2", {}, row, {}, U.copy())
-    second = st.load("c", "A", "k2")
-    assert second["same_output_as"] == {"commit": "a" * 40, "key": "k1"}
-    st.save("c", "A", "k2", {}, row, {}, U)  # the same key again: not a reproduction of other code
-    assert "same_output_as" not in st.load("c", "A", "k2")
+    st.save("c", "A", k2, f2, row, {}, U.copy())
+    second = st.load("c", "A", k2)
+    assert second["same_output_as"] == {"commit": "a" * 40, "key": k1}
+    st.save("c", "A", k2, f2, row, {}, U)  # the same key again: not a reproduction of other code
+    assert "same_output_as" not in st.load("c", "A", k2)
     U2 = U.copy()
     U2[0, 0] = np.nextafter(U2[0, 0], 1.0)
-    st.save("c", "A", "k3", {}, row, {}, U2)
-    assert "same_output_as" not in st.load("c", "A", "k3") and output_digest(U2) != output_digest(U)
+    st.save("c", "A", k3, f3, row, {}, U2)
+    assert "same_output_as" not in st.load("c", "A", k3) and output_digest(U2) != output_digest(U)
     p = st.path("c", "A")
     rec = json.loads(p.read_text())
     rec["output"] = output_digest(U)
