@@ -24,7 +24,7 @@ from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to
 from eval.run.compared import COMPARED_CSV, SETTINGS
 from eval.run.outdir import refuse_results
 from eval.run.pending_rows import marked_pending, pending_markdown, pending_title, strip_pending
-from eval.run.row_check import check_rows
+from eval.run.row_check import check_rows, read_cases
 from eval.run.stale_rows import CommitTrees, folder_states, settings_marks
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
@@ -494,16 +494,15 @@ def retabulate(run_dir) -> dict[str, Path]:
     disagrees with its record (:func:`eval.run.row_check.check_rows`).
     """
 
-    import pandas as pd
 
     run_dir = Path(run_dir)
     refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
-    df = pd.read_csv(run_dir / "cases.csv")
+    df = read_cases(run_dir / "cases.csv")
     bad = check_rows(df, run_dir).problems
     if bad:  # a table is made from the store's rows, never from rows that disagree with it
         raise SShaDeError(f"{run_dir / 'cases.csv'}: {bad[0]}" + (f" (and {len(bad) - 1} more rows)" if len(bad) > 1
                           else "") + "; its rows disagree with their records: no table is made from them")
-    compared = pd.read_csv(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
+    compared = read_cases(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
     title = _written_title(run_dir)
     if title is None:
         try:

@@ -341,3 +341,24 @@ def test_check_fails_on_a_committed_folder_replaced_by_a_link(tmp_path):
     (tree / "results" / "faust").symlink_to(tmp_path / "faust")
     rc, got, err = _check_json(tree)
     assert rc == 1 and "results/faust: a link" in err, err
+
+
+@pytest.mark.parametrize("kind", ["sparse", "fifo"])
+def test_a_giant_or_pipe_cases_csv_is_reported_not_read(tmp_path, kind):
+    """``--check`` (table_problems) and ``python -m eval.tables`` given a cases.csv that is a
+    sparse 2 GB file or a FIFO: one problem or one error, without reading it or blocking."""
+    from eval.run.stale_rows import table_problems
+    from eval.tables import retabulate
+    run = tmp_path / "faust"
+    shutil.copytree(ROOT / "results" / "faust", run)
+    csv = run / "cases.csv"
+    csv.unlink()
+    if kind == "fifo":
+        os.mkfifo(csv)
+    else:
+        with open(csv, "wb") as fh:
+            fh.truncate(2 ** 31)
+    problems = table_problems(run)
+    assert len(problems) == 1 and "cases.csv: unreadable" in problems[0], problems
+    with pytest.raises(OSError):
+        retabulate(run)

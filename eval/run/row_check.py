@@ -15,13 +15,28 @@ from typing import TYPE_CHECKING, NamedTuple
 
 from eval.run.result_store import STORE_DIR, ResultStore
 from sshade.errors import SShaDeError
+from sshade.json_file import read_bounded
 
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["RowCheck", "check_rows", "MAX_LISTED"]
+__all__ = ["RowCheck", "check_rows", "read_cases", "MAX_LISTED", "MAX_CASES_BYTES"]
 
 MAX_LISTED = 3  #: rows named in the line when more disagree
+#: The largest ``cases.csv`` read (bytes): a row is well under 2 KiB, a run a few thousand rows.
+MAX_CASES_BYTES = 256 * 2**20
+
+
+def read_cases(path) -> pd.DataFrame:
+    """A run's ``cases.csv`` (or another table of rows) read as untrusted input: a regular
+    file of at most :data:`MAX_CASES_BYTES` (:func:`sshade.json_file.read_bounded`: a FIFO,
+    a device or a sparse giant is refused before it is read). Raises OSError (missing, not
+    a regular file, too large) or ValueError (no CSV)."""
+    import io
+
+    import pandas as pd
+
+    return pd.read_csv(io.BytesIO(read_bounded(path, MAX_CASES_BYTES)))
 
 
 class RowCheck(NamedTuple):

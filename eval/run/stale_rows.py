@@ -13,6 +13,7 @@ Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: d
 from __future__ import annotations
 
 import io
+import os
 import subprocess
 import tarfile
 import tempfile
@@ -43,7 +44,7 @@ from eval.run.result_store import (
     pair_key,
     record_digest,
 )
-from eval.run.row_check import check_rows
+from eval.run.row_check import check_rows, read_cases
 from eval.run.runinfo import REPO_ROOT
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
@@ -266,15 +267,13 @@ def table_problems(folder) -> list[str]:
     one line each (``[]`` when nothing): the file missing, a link or unreadable; a row
     whose record is absent, invalid or holds other numbers
     (:func:`eval.run.row_check.check_rows`); a valid record whose row the file does not list."""
-    import pandas as pd
-
     p = Path(folder) / "cases.csv"
-    if p.is_symlink() or not p.is_file():
+    if p.is_symlink() or not os.path.lexists(p):
         return [f"{p}: {'a link' if p.is_symlink() else 'missing'}, where the rows of {STORE_DIR}/ belong"]
     try:
-        df = pd.read_csv(p)
+        df = read_cases(p)
     except (OSError, ValueError) as e:
-        return [f"{p}: unreadable ({type(e).__name__})"]
+        return [f"{p}: unreadable ({getattr(e, 'strerror', None) or type(e).__name__})"]
     chk = check_rows(df, folder)
     out = [f"{p}: {x}" for x in chk.problems] + [f"{p}: {x}: no record in {STORE_DIR}/" for x in chk.absent]
     if "case" in df.columns and "method" in df.columns:
