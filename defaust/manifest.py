@@ -272,12 +272,13 @@ def _held(m: dict) -> set:
 def self_problems(m: dict, where) -> list[str]:
     """What manifest ``m`` (of the build at ``where``) says against itself, one line each:
     a complete build holding other subjects than its ``parameters.subjects`` (or, without
-    them, the ``n_subjects`` a build makes) or its ``planned_subjects``; an item lacking a
+    them, the ``n_subjects`` a build makes) or its ``planned_subjects`` (a manifest with no
+    ``parameters`` at all is not held to them: a source's own check names it); an item lacking a
     file that the other items of its kind (rest, pose) hold (a ground truth deleted with
     its entries, say)."""
-    out, par = [], m.get("parameters") if isinstance(m.get("parameters"), dict) else {}
+    out, par = [], m.get("parameters") if isinstance(m.get("parameters"), dict) else None
     held = _held(m)
-    if m.get("complete", True) is not False:
+    if par is not None and m.get("complete", True) is not False:  # without parameters: nothing to hold it to
         claimed = par.get("subjects")
         total = par.get("n_subjects") if isinstance(par.get("n_subjects"), int) else FAUST_SUBJECTS
         want = {x for x in claimed if isinstance(x, int)} if isinstance(claimed, list) else set(range(total))
