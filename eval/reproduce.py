@@ -201,8 +201,7 @@ def _check(a) -> int:
         states = check_folders(folders, trees, marked=marked_pending)
         runs = [whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)]
     unread = _unread(folders)
-    marked = {str(r.folder) for r in runs if r.stale and r.origin is not None and r.origin.commit
-              and r.origin.dirty is False and marked_run(r.folder) == short_commit(r.origin.commit)}
+    marked = {str(r.folder) for r in runs if _older_code(r) and marked_run(r.folder) == short_commit(r.origin.commit)}
     if a.json:
         out = {f: {m: {"rows": v["rows"], "stale": v["stale"] - v["marked"], "pending": v["marked"]}
                    for m, v in ms.items()} for f, ms in states.items()}
@@ -237,6 +236,13 @@ def _check(a) -> int:
           + ("; --strict: a pending row fails" if a.strict and pending else ""),
           file=sys.stderr if a.json else sys.stdout)
     return 1 if bad else 0
+
+
+def _older_code(r) -> bool:
+    """Whether the folder run whole of state ``r`` (:func:`eval.run.stale_runs.whole_run_state`)
+    is stale and was made by a commit's code (clean checkout): what a pending mark may stand
+    for; a folder of unknown or dirty origin is stale, never pending."""
+    return bool(r.stale and r.origin is not None and r.origin.commit and r.origin.dirty is False)
 
 
 def _unread(folders) -> list[str]:
@@ -277,8 +283,7 @@ def _retabulate() -> int:
     with CommitTrees() as trees:
         for r in (whole_run_state(f, trees, find_experiment) for f in whole_run_folders(RESULTS)):
             commit = r.origin.commit if r.origin else None
-            older = r.stale and commit is not None and r.origin.dirty is False  # made by a commit's older code
-            if mark_run_pending(r.folder, commit, r.why if older else None):
+            if mark_run_pending(r.folder, commit, r.why if _older_code(r) else None):
                 print(f"{r.folder}: {'marked pending (made at ' + short_commit(commit) + ')' if r.stale else 'current'}"
                       " in its table.md")
     return rc

@@ -82,18 +82,22 @@ def pending_markdown(states) -> str:
             f"`python -m eval.reproduce` regenerates them (`--check` lists them).\n\n{rows}\n")
 
 
+def _table_text(folder, errors: str = "replace") -> str | None:
+    """The text of ``folder``'s ``table.md`` read as untrusted input, None when it is
+    missing, a link, no regular file, above :data:`MAX_TABLE_BYTES` or (``errors="strict"``)
+    no UTF-8."""
+    path = Path(folder) / "table.md"
+    try:
+        return None if path.is_symlink() else read_bounded(path, MAX_TABLE_BYTES).decode("utf-8", errors)
+    except (OSError, UnicodeDecodeError):
+        return None
+
+
 def marked_pending(folder) -> dict[tuple[str, str, str], str]:
     """``{(case, method, commit[:7]): why}`` of the rows ``folder``'s ``table.md`` lists as
     pending (:func:`pending_markdown`); empty when it has none, or no readable ``table.md``
     (a link, a FIFO or a file above :data:`MAX_TABLE_BYTES` is not read)."""
-    path = Path(folder) / "table.md"
-    try:
-        if path.is_symlink():
-            return {}
-        text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8", "replace")
-    except OSError:
-        return {}
-    _, found, rest = text.partition(f"#### {PENDING_HEADING}\n")
+    _, found, rest = (_table_text(folder) or "").partition(f"#### {PENDING_HEADING}\n")
     if not found:
         return {}
     return {(m["case"], m["method"], m["commit"]): m["why"] or "" for m in map(_ROW.match, rest.splitlines()) if m}
@@ -109,19 +113,15 @@ def mark_run_pending(folder, commit, why: str | None) -> bool:
     end: the commit that made it and ``why`` it is stale), or, with ``why`` None, remove
     that mark; the rest of the file kept byte for byte. Returns whether the file changed;
     a ``table.md`` that is missing, a link or no regular file is left alone (False)."""
-    path = Path(folder) / "table.md"
-    try:
-        if path.is_symlink():
-            return False
-        text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8")
-    except (OSError, UnicodeDecodeError):
+    text = _table_text(folder, "strict")  # rewritten whole: never from replaced characters
+    if text is None:
         return False
     new = _unmarked(text)
     if why is not None:
         new += f"\n#### {RUN_PENDING_HEADING}\n\nmade at {short_commit(commit)}; {' '.join(str(why).split())}\n"
     if new == text:
         return False
-    with atomic_write(path, "w") as fh:
+    with atomic_write(Path(folder) / "table.md", "w") as fh:
         fh.write(new)
     return True
 
@@ -130,14 +130,7 @@ def marked_run(folder) -> str | None:
     """The commit (7 hex digits, or ``"unknown"``) with which :func:`mark_run_pending`
     marked the folder run whole ``folder`` pending, None when it is not marked (or its
     ``table.md`` cannot be read as a regular file)."""
-    path = Path(folder) / "table.md"
-    try:
-        if path.is_symlink():
-            return None
-        text = read_bounded(path, MAX_TABLE_BYTES).decode("utf-8", "replace")
-    except OSError:
-        return None
-    _, found, rest = text.partition(f"\n#### {RUN_PENDING_HEADING}\n")
+    _, found, rest = (_table_text(folder) or "").partition(f"\n#### {RUN_PENDING_HEADING}\n")
     m = re.search(r"^made at ([0-9a-f]{7}|unknown)\b", rest, re.M) if found else None
     return m[1] if m else None
 

@@ -12,6 +12,7 @@ Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: d
 """
 from __future__ import annotations
 
+import functools
 import io
 import os
 import subprocess
@@ -196,10 +197,10 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
         st.stale, st.why = True, "a plug-in's row: its source lies outside this repository, so its code cannot be held"
         return st
     mods, consts = _now(fields, root)
-    tree = trees.tree(st.commit) if not git.get("dirty") else None
     if code.get("sources") == modules_digest(mods, root, consts):
-        return _reference_state(st, code, tree, root) if references_on(fields) else st
+        return _reference_state(st, code, trees, git, root) if references_on(fields) else st
     st.stale = True
+    tree = trees.tree(st.commit) if not git.get("dirty") else None  # extracted only for a stale row
     if list(mods) != code.get("modules") or list(consts) != code.get("constants"):
         st.why = "the modules its method's code is made of changed"
     elif tree is None:
@@ -210,7 +211,7 @@ def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) ->
     return st
 
 
-def _reference_state(st: RowState, code: dict, tree: Path | None, root: str | None) -> RowState:
+def _reference_state(st: RowState, code: dict, trees: CommitTrees, git: dict, root: str | None) -> RowState:
     """``st`` of a row with reference columns whose own code is current: stale when the
     code that solves its reference (:func:`eval.run.code_identity.artifact_identity`)
     changed since, with the modules named where git has its commit; a resumed run then
@@ -220,6 +221,7 @@ def _reference_state(st: RowState, code: dict, tree: Path | None, root: str | No
     if ref.get("sources") == now["sources"]:
         return st
     st.stale = True
+    tree = trees.tree(st.commit) if not git.get("dirty") else None
     names = changed_since(now["modules"], now["constants"], tree, root) if tree is not None else []
     st.extra["changed"] = names
     st.why = (f"its reference solver ({', '.join(names) or 'its code'}) changed since {str(st.commit)[:7]}: "
@@ -344,6 +346,7 @@ def _verified(code: dict, tree: Path, by: Path | None = None) -> bool:
     return False
 
 
+@functools.lru_cache(maxsize=1)
 def _head() -> str | None:
     """This checkout's commit (40 hex digits) when its packages' sources are that
     commit's, None when they have uncommitted changes (the records re-keyed then name
