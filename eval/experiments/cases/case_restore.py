@@ -96,9 +96,13 @@ def restore(s, plan: dict, keys: dict, cost: CostModel) -> dict:
 
 def named_change(s, case: str, method: str, why: str, trees: CommitTrees) -> str:
     """``why`` a stored record is stale, with the modules changed since its commit named
-    when its code changed (:func:`eval.run.stale_rows.row_state`)."""
+    when its code changed (:func:`eval.run.stale_rows.row_state`); a plug-in's row keeps
+    ``why`` as the store said it."""
     if not why.startswith("other code: the project's sources changed"):
         return why
     rec = s.store.read(case, method).record
+    code = ((rec or {}).get("key_fields") or {}).get("code") or {}
+    if code.get("plugin") is not None:  # row_state holds results/'s rows, which never come from a plug-in
+        return why
     st = row_state(s.out_dir, rec, trees) if rec is not None else None
     return f"other code: {st.why}" if st is not None and st.stale and st.why else why
