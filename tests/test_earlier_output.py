@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -96,6 +97,7 @@ def test_a_run_killed_with_the_earlier_output_aside_is_recovered_by_the_next_cla
     (p / "partial.csv").write_text("half")
     if had_result:
         (p / "run.json").write_text('{"status": "running"}')
+    outdir.alive(p)  # as after a stored record
     c.release()  # the process dies here: no finish
     c2 = claim_output_dir(p, "eval", first_result="run.json", keep=True)
     assert not (p / ASIDE).exists()
@@ -134,6 +136,39 @@ def test_files_added_after_a_run_was_killed_before_its_first_result_survive_the_
     (p / "run.json").write_text("{}")
     c.finish("done")
     assert (p / "analysis.txt").is_file() and (p / "myplots" / "a.png").is_file()
+
+
+def test_files_added_after_a_run_was_killed_past_its_first_result_survive_the_next_run_and_are_named(
+        tmp_path, caplog):
+    """Killed after its first result and a stored record (its last sign of life); a person
+    then adds a file and a folder, one inside the run's store: the next run replaces the
+    killed one, keeps both and names them, and its marker does not count them as its own.
+    What the killed run wrote before its last sign of life goes."""
+    p = _earlier(tmp_path)
+    c = claim_output_dir(p, "eval", first_result="run.json", own=("eval.log", ".hydra"))
+    (p / "run.json").write_text('{"status": "running"}')
+    (p / "runs" / "s0").mkdir(parents=True)
+    (p / "runs" / "s0" / "A.json").write_text("killed run's record")
+    (p / "eval.log").write_text("its log")
+    outdir.alive(p)
+    (p / "eval.log").write_text("its log, a line after its last record")  # its own, changed later
+    c.release()  # SIGKILL
+    time.sleep(0.05)  # a person, after the kill (file times are coarse: a clock tick at least)
+    (p / "analysis.txt").write_text("mine")
+    (p / "myplots").mkdir()
+    (p / "myplots" / "a.png").write_bytes(b"png")
+    (p / "runs" / "s0" / "mine.txt").write_text("mine too")
+    c2 = claim_output_dir(p, "eval", first_result="run.json")
+    assert "analysis.txt, myplots/a.png, runs/s0/mine.txt" in c2.message
+    (p / "run.json").write_text("{}")
+    with caplog.at_level("INFO", logger="eval"):
+        c2.finish("done")
+    assert (p / "analysis.txt").read_text() == "mine" and (p / "myplots" / "a.png").read_bytes() == b"png"
+    assert (p / "runs" / "s0" / "mine.txt").read_text() == "mine too"
+    assert not (p / "eval.log").exists() and not (p / "runs" / "s0" / "A.json").exists()  # the killed run's
+    assert "kept 5 file(s)" in caplog.text and "analysis.txt" in caplog.text  # with the earlier output's two
+    m = json.loads((p / MARKER).read_text())
+    assert m["paths"] == ["run.json"] and {"analysis.txt", "myplots/a.png"} <= set(m["user_paths"])
 
 
 @pytest.mark.parametrize("field, value", [

@@ -25,7 +25,7 @@ from sshade.json_file import read_json
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
            "claimed_run", "results_dir", "refuse_results", "read_marker", "check_earlier_output",
-           "record_output_files", "resume_command"]
+           "record_output_files", "resume_command", "alive"]
 
 MARKER = ".sshade-output.json"   #: names the kind of output a folder holds, and its files
 LOCK = ".sshade-output.lock"     #: flock-ed by the process writing into the folder
@@ -79,13 +79,13 @@ def _plain(name) -> bool:
 def _marker_problem(m: dict) -> str:
     """What a marker ``m`` names that no run of ours writes there, in words (``""`` when
     nothing): its entry lists (``files``, ``foreign``, ``aside.names``) hold plain names,
-    its file lists (``paths``, ``user_paths``, ``aside.user_paths``) relative paths of
-    plain names, its ``first_result`` a plain name."""
+    its file lists (``paths``, ``user_paths``, ``aside.user_paths``, ``own``) relative
+    paths of plain names, its ``first_result`` a plain name."""
     aside = m.get("aside") if isinstance(m.get("aside"), dict) else {}
     names = {"files": m.get("files"), "foreign": m.get("foreign"), "aside.names": aside.get("names")}
-    paths = {"paths": m.get("paths"), "user_paths": m.get("user_paths"), "aside.user_paths": aside.get("user_paths")}
-    ok_path = lambda x: isinstance(x, str) and all(map(_plain, x.split("/")))  # noqa: E731
-    for key, (v, ok) in {**{k: (v, _plain) for k, v in names.items()}, **{k: (v, ok_path) for k, v in paths.items()}
+    paths = {"paths": m.get("paths"), "user_paths": m.get("user_paths"), "aside.user_paths": aside.get("user_paths"),
+             "own": m.get("own")}
+    for key, (v, ok) in {**{k: (v, _plain) for k, v in names.items()}, **{k: (v, _plain_path) for k, v in paths.items()}
                          }.items():
         if v is not None and not isinstance(v, list):
             return f"{key} names {v!r}"
@@ -151,6 +151,9 @@ class OutputClaim:
     kept : the files added to the earlier output, put back once this run had a result.
     continued : names of the earlier output's entries this run continues (``keep`` names
         them): never removed by this claim, not even when the run ends without a result.
+    own : paths (files, or folders and all under them) that the run writes all along for
+        itself (its log, its config record, ``first_result``): a killed run's even when
+        changed after its last sign of life (:func:`alive`).
     message : one line saying what was claimed (new folder, replaced files, ...).
     created : the folder was created by this claim.
     parents : the folders above it that this claim created (outermost first).
@@ -168,6 +171,7 @@ class OutputClaim:
     user_paths: list = field(default_factory=list)
     kept: list = field(default_factory=list)
     continued: list = field(default_factory=list)
+    own: list = field(default_factory=list)
 
     def finish(self, status: str, *, drop_if_unused: str | None = None, **extra) -> None:
         """Record the run's end in the marker (``status`` done / failed / interrupted) with
@@ -319,18 +323,22 @@ def _drop_entries(p: Path, foreign: set) -> None:
             remove_entry(p / n)
 
 
-def _recover(p: Path, m: dict | None) -> tuple[dict | None, list[str]]:
+def _recover(p: Path, m: dict | None, alive_ns: int | None) -> tuple[dict | None, list[str]]:
     """``(marker, left)``: the marker of ``p`` (locked by this process) once a run that
     died there without finishing (its marker still ``running``) is accounted for: an
     earlier output it had set aside is put back when that run had no first result yet
     (over the entries of the same names; any other entry, which the dead run or someone
     after it made, stays and is ``left``, to be named as kept), else cleaned
     (:mod:`eval.run.earlier_output`); the dead run's entries (all but the foreign ones it
-    recorded) become its ``files``, so the next replacement removes them."""
+    recorded) become its ``files``, so the next replacement removes them, all but the
+    files changed after its last sign of life ``alive_ns`` (the lock's mtime, ns;
+    :func:`alive`) and not its :attr:`OutputClaim.own`: someone added those after it
+    died (or it wrote them after its last record): they are ``left``, its ``user_paths``."""
     if m is None or m.get("status") != "running":
         return m, []
     foreign = set(m.get("foreign") or [])
     rec = m.get("aside")
+    kept: list = []
     if isinstance(rec, dict) and (p / ASIDE).is_dir():
         mark = rec.get("first_result")
         if mark and not (p / str(mark)).exists():  # died before its first result: the earlier output back
@@ -338,16 +346,50 @@ def _recover(p: Path, m: dict | None) -> tuple[dict | None, list[str]]:
             restore(p, rec, MARKER)
             return read_marker(p), left
         kept = clean(p, rec)
-        m["user_paths"] = sorted(set(m.get("user_paths") or []) | set(kept))
+    names = sorted(set(os.listdir(p)) - foreign - _OWN)
+    late = _changed_after(p, names, alive_ns, m.get("own") or [])
     m.pop("aside", None)
-    m.update(status="killed", files=sorted(set(os.listdir(p)) - foreign - _OWN))
+    m.pop("paths", None)  # a record of a run it continued: the dead run's own files are not in it
+    m.update(status="killed", files=names, user_paths=sorted(set(m.get("user_paths") or []) | set(kept) | set(late)))
     _write_marker(p, m)
-    return m, []
+    return m, sorted(set(late) - set(kept))
+
+
+def _changed_after(p: Path, names: list, alive_ns: int | None, own: list) -> list[str]:
+    """The files under the entries ``names`` of ``p`` (:func:`eval.run.earlier_output.files_under`)
+    whose status changed after ``alive_ns`` (ctime, which no copy or touch sets back),
+    but those under ``own``; none when ``alive_ns`` is None (no sign of life known)."""
+    if alive_ns is None:
+        return []
+    out = []
+    for rel in files_under(p, names):
+        if any(rel == o or rel.startswith(o.rstrip("/") + "/") for o in own):
+            continue
+        with contextlib.suppress(OSError):
+            if os.lstat(p / rel).st_ctime_ns > alive_ns:
+                out.append(rel)
+    return out
+
+
+def _plain_path(rel) -> bool:
+    """``rel`` a relative path of plain names, inside its folder."""
+    return isinstance(rel, str) and bool(rel) and not rel.startswith("/") and all(_plain(n) for n in rel.split("/"))
+
+
+def alive(folder) -> None:
+    """Sign of life of the run writing ``folder`` (its lock's mtime set to now): a file
+    changed there later, should the run be killed, was not its own (:func:`_recover`).
+    Called once a file the run wrote is in place (a stored record); nothing when the
+    folder holds no lock file of its own. Never raises."""
+    q = Path(folder) / LOCK
+    with contextlib.suppress(OSError):
+        if q.is_file() and not q.is_symlink():
+            os.utime(q)
 
 
 def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = False,
                      keep=False, option: str | None = None, name: str = "out_dir",
-                     first_result: str | None = None) -> OutputClaim:
+                     first_result: str | None = None, own=()) -> OutputClaim:
     """Claim folder ``path`` for an output of ``kind`` (module docstring), before any work.
 
     Parameters
@@ -366,6 +408,8 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     first_result : str or None, the file (e.g. ``run.json``) whose existence says the run
         has its first result: an earlier output replaced is set aside until then and put
         back if the run ends before (:meth:`OutputClaim.finish`); None: any entry written.
+    own : relative paths the run writes all along for itself (:attr:`OutputClaim.own`;
+        ``first_result`` is one).
 
     Returns
     -------
@@ -391,7 +435,8 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
         raise OutputDirError(f"output folder {p} is a file; choose a folder")
     made = [a for a in reversed(p.parents) if not a.exists()]  # created below; removed by a run refused early
     try:
-        claim = _claim(p, kind, overwrite, fresh, keep, how, first_result)
+        claim = _claim(p, kind, overwrite, fresh, keep, how, first_result,
+                       sorted({*map(str, own), *([first_result] if first_result else [])}))
     except OSError as e:
         raise OutputDirError(f"cannot create or use output folder {p}: {e.strerror or e}") from None
     claim.parents = made
@@ -399,11 +444,12 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
 
 
 def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep, how: str,
-           first_result: str | None) -> OutputClaim:
+           first_result: str | None, own: list) -> OutputClaim:
     """:func:`claim_output_dir` once ``p`` is checked: create or take the folder."""
     if fresh:
         p = _mkdir_fresh(p)
-        return _take(p, kind, [], [], f"writing into the new folder {p}", created=True, first_result=first_result)
+        return _take(p, kind, [], [], f"writing into the new folder {p}", created=True, first_result=first_result,
+                     own=own)
     created = False
     if not p.exists():
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -414,7 +460,7 @@ def _claim(p: Path, kind: str, overwrite: bool, fresh: bool, keep, how: str,
             pass
     if not os.access(p, os.W_OK | os.X_OK):
         raise OutputDirError(f"output folder {p} is not writable; choose another folder")
-    return _claim_existing(p, kind, created, overwrite, keep, how, first_result)
+    return _claim_existing(p, kind, created, overwrite, keep, how, first_result, own)
 
 
 def _links_inside(p: Path) -> list[str]:
@@ -433,11 +479,11 @@ def _links_inside(p: Path) -> list[str]:
 
 
 def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, how: str,
-                    first_result: str | None) -> OutputClaim:
+                    first_result: str | None, own: list) -> OutputClaim:
     names = sorted(set(os.listdir(p)) - _OWN)
     if created or not names and not (p / ASIDE).exists():
         return _take(p, kind, [], [], f"writing into the {'new' if created else 'empty'} folder {p}", created=created,
-                     first_result=first_result)
+                     first_result=first_result, own=own)
     links = _links_inside(p)
     if links:  # a write or a removal through one would reach outside the folder
         raise OutputDirError(f"refusing to write into {p}: {links[0]} is a symbolic link out of it (to "
@@ -446,16 +492,18 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, ho
     m = read_marker(p)
     reproducing = os.environ.get(REPRODUCE_ENV) == "1" and _inside(p, results_dir())
     if m is not None and m.get("kind") == kind or reproducing and m is None:
-        lock_before = (p / LOCK).read_bytes() if (p / LOCK).is_file() and not (p / LOCK).is_symlink() else None
+        plain_lock = (p / LOCK).is_file() and not (p / LOCK).is_symlink()
+        lock_before = (p / LOCK).read_bytes() if plain_lock else None
+        alive_ns = os.lstat(p / LOCK).st_mtime_ns if plain_lock else None  # before _lock writes it
         fd = _lock(p)  # refuse while another run writes here, before moving anything
-        m, left = _recover(p, m)
+        m, left = _recover(p, m, alive_ns)
         left = (f" (kept {len(left)} that a killed run left or someone added: {', '.join(left[:8])}"
                 f"{' ...' if len(left) > 8 else ''})" if left else "")
         wrote = ours(m)
         if keep is True:
             user = [r for r in files_under(p, (m or {}).get("files") or []) if not wrote(r)]
             return _take(p, kind, [], [], f"continuing the earlier {kind} output in {p}{left}", fd=fd,
-                         first_result=first_result, user_paths=user)
+                         first_result=first_result, user_paths=user, own=own)
         if os.path.lexists(p / ASIDE):  # no run of ours left it there without a record
             OutputClaim(path=p, kind=kind, replaced=[], foreign=[], message="", fd=fd).release(lock_before)
             raise OutputDirError(f"refusing to write into {p}: it holds {ASIDE}, which no run recorded setting aside "
@@ -472,7 +520,7 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, ho
                left)
         user = [r for r in files_under(p, kept) if not wrote(r)]
         return _take(p, kind, gone, rest, msg, fd=fd, first_result=first_result, aside=rec, user_paths=user,
-                     continued=kept)
+                     continued=kept, own=own)
     if not overwrite:
         what = (f"another kind of output ({m.get('kind')})" if m else
                 f"{len(names)} {'entry' if len(names) == 1 else 'entries'} that no earlier {kind} run wrote "
@@ -481,7 +529,7 @@ def _claim_existing(p: Path, kind: str, created: bool, overwrite: bool, keep, ho
         alt = f", or pass {how} to write into it anyway (files of the same name are replaced)" if how else ""
         raise OutputDirError(f"refusing to write into {p}: it holds {what}. Choose a new or empty folder{alt}")
     return _take(p, kind, [], names, f"writing into {p} ({how}: {len(names)} entries there kept unless "
-                                      "replaced by files of the same name)")
+                                      "replaced by files of the same name)", own=own)
 
 
 def _command() -> list[str]:
@@ -517,13 +565,13 @@ def resume_command(out_dir) -> str:
 
 def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: int | None = None,
           created: bool = False, first_result: str | None = None, aside: dict | None = None,
-          user_paths: list | None = None, continued: list | None = None) -> OutputClaim:
+          user_paths: list | None = None, continued: list | None = None, own: list | None = None) -> OutputClaim:
     fd = _lock(p) if fd is None else fd
     old = read_marker(p) or {}
     m = {"kind": kind, "status": "running", "pid": os.getpid(), "host": socket.gethostname(), "started": _now(),
          "command": _command(),
          "files": [f for f in old.get("files", []) if f not in gone and (p / f).exists()],
-         "foreign": list(foreign), "user_paths": list(user_paths or [])}
+         "foreign": list(foreign), "user_paths": list(user_paths or []), "own": list(own or [])}
     if isinstance(old.get("paths"), list) and aside is None:  # continued: its record of files stands
         m["paths"] = old["paths"]
     if aside is not None:
@@ -531,7 +579,7 @@ def _take(p: Path, kind: str, gone: list, foreign: list, message: str, *, fd: in
     _write_marker(p, m)
     return OutputClaim(path=p, kind=kind, replaced=gone, foreign=foreign, message=message, created=created, fd=fd,
                        first_result=first_result, aside=aside, user_paths=list(user_paths or []),
-                       continued=list(continued or []))
+                       continued=list(continued or []), own=list(own or []))
 
 
 # ----------------------------------------------------------------------------- one run's folder
@@ -601,7 +649,7 @@ def claimed_run(output: OutputOptions, *, record=None, kind: str = "eval", fresh
     # resume=true (the evaluator's result store, eval/run/result_store.py): the earlier output is continued,
     # not replaced
     claim = claim_output_dir(out_dir, kind, overwrite=overwrite_flag(output.overwrite), fresh=fresh,
-                             keep=overwrite_flag(output.resume), first_result="run.json")
+                             keep=overwrite_flag(output.resume), first_result="run.json", own=(log_name, ".hydra"))
     _claimed[str(claim.path)] = claim
     handler = None
     status, error = "failed", ""

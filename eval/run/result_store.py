@@ -24,6 +24,7 @@ import numpy as np
 
 from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
+from eval.run.outdir import alive
 from eval.run.runinfo import git_info
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write, inside_folder
@@ -380,6 +381,7 @@ class ResultStore:
         rec["digest"] = record_digest(rec)
         with atomic_write(p, "w") as fh:
             fh.write(json.dumps(rec, indent=1) + "\n")
+        alive(self.out_dir)  # the record is in place: the run's own, should it be killed
         return p
 
     def _same_output(self, p: Path, rec: dict) -> dict:
