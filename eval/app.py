@@ -20,7 +20,7 @@ from eval.exchange.scored import ScoreConfig
 from eval.experiments import experiments, find_experiment
 from eval.experiments.cases.cases_experiment import run
 from eval.report import safe_report
-from eval.run.outdir import claimed_run
+from eval.run.run_folder import claimed_run
 from eval.run.spec import EvalSpec
 from harness.checks import config_bool
 from harness.command import hydra_main, run_command
@@ -53,7 +53,7 @@ def run_experiment(cfg, *, fresh: bool = False):
 def run_spec(spec: EvalSpec, *, fresh: bool = False):
     """Run the checked config ``spec``: dispatch on ``experiment.kind`` through the
     experiment registry (:func:`eval.experiments.experiments`: one module per experiment),
-    in its claimed output folder ``output.out_dir`` (:func:`eval.run.outdir.claimed_run`:
+    in its claimed output folder ``output.out_dir`` (:func:`eval.run.run_folder.claimed_run`:
     new, empty, or an earlier evaluator output, else refused before any work), which
     gets its browser report ``index.html`` at the end (:func:`eval.report.safe_report`,
     unless ``report.enabled`` is false).

@@ -19,7 +19,7 @@ from eval.experiments import experiment_options, experiments, find_experiment
 from eval.experiments.cases.case_jobs import check_jobs
 from eval.experiments.cases.pair import guard_options
 from eval.method_config import arap_params, check_alpha, method_entries
-from eval.run.outdir import overwrite_flag
+from eval.run.run_folder import overwrite_flag
 from eval.run.spec import (
     DatasetSpec,
     EvalSpec,

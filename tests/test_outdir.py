@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 from eval.run import outdir
-from eval.run.outdir import MARKER, OutputDirError, claim_output_dir, claimed_run
+from eval.run.outdir import MARKER, OutputDirError, claim_output_dir
+from eval.run.run_folder import claimed_run
 from tests.conftest import ROOT, subprocess_env
 
 EVAL = [sys.executable, "-m", "eval", "experiment=ci", "dataset.root=../shared/data/faust_reg",

@@ -21,8 +21,9 @@ from pathlib import Path
 
 from eval import app
 from eval.config_check import plain
-from eval.run.outdir import OutputDirError, check_earlier_output, claim_output_dir, claimed_run, overwrite_flag
+from eval.run.outdir import OutputDirError, check_earlier_output, claim_output_dir
 from eval.run.paths import abs_path
+from eval.run.run_folder import claimed_run, overwrite_flag
 from eval.run.spec import OutputOptions
 from eval.sweeps.files import (
     KEEP,
