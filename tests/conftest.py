@@ -123,17 +123,25 @@ def chromium_on_path() -> str:
 
 #: fixture -> the mark of every test that uses it (directly or through another fixture)
 _FIXTURE_MARKS = {"anny_assets": "anny", "chromium_on_path": "browser"}
+#: session fixtures that cost seconds to make: the tests that use one run on one
+#: pytest-xdist worker (``--dist loadgroup``, pyproject.toml), which makes it once
+_COSTLY_FIXTURES = ("anny_model", "defaust_ci")
 
 
 def pytest_collection_modifyitems(config, items):
     """Every test that uses :func:`anny_assets` carries the ``anny`` mark and every test
     that uses :func:`chromium_on_path` the ``browser`` mark, so ``pytest -m anny`` (or
-    ``-m browser``) reruns exactly those."""
+    ``-m browser``) reruns exactly those; the tests of one costly session fixture share
+    an ``xdist_group``."""
     for item in items:
         names = getattr(item, "fixturenames", ())
         for fixture, mark in _FIXTURE_MARKS.items():
             if fixture in names:
                 item.add_marker(getattr(pytest.mark, mark))
+        for fixture in _COSTLY_FIXTURES:
+            if fixture in names:
+                item.add_marker(pytest.mark.xdist_group(fixture))
+                break
 
 
 def data_file(rel: str) -> Path:
