@@ -5,6 +5,7 @@ Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,8 +13,9 @@ from eval.present.intervals import CI, bootstrap_ci, interval_text
 from eval.present.measures import MEASURES, label
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
-from eval.run.compared import COMPARED_CSV
+from eval.run.compared import COMPARED_CSV, checked_compared
 from eval.run.pending_rows import marked_pending
+from eval.run.row_check import checked_cases, read_cases
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders, run_folders
 from eval.tables import common_case_values, compare
@@ -144,18 +146,16 @@ def _rank_words(info: dict, n_cases: int, column: str) -> str:
 def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None:
     """The board of a ``cases`` run folder (its ``cases.csv``; with ``compared`` also the
     rows its ``compare_with`` read, ``compared.csv``, already checked like with like:
-    ranked beside this run's, their times left out as another run's), or None without one."""
+    ranked beside this run's, their times left out as another run's), or None without one.
+    SShaDeError naming the file when a row disagrees with its record
+    (:func:`eval.run.row_check.checked_cases`, :func:`eval.run.compared.checked_compared`)."""
     import pandas as pd
-    try:
-        df = pd.read_csv(d / "cases.csv")
-    except (OSError, ValueError):
+    if not os.path.lexists(d / "cases.csv"):
         return None
+    df = checked_cases(d)  # ranked only when every row is its record's (SShaDeError otherwise)
     other: set = set()
-    if compared and (d / COMPARED_CSV).is_file():
-        try:
-            extra = pd.read_csv(d / COMPARED_CSV)
-        except (OSError, ValueError):
-            extra = None
+    if compared:
+        extra = checked_compared(d)
         if extra is not None and "method" in extra.columns:
             other = set(map(str, extra["method"]))
             df = pd.concat([df, extra], ignore_index=True)
@@ -186,9 +186,8 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
 
 def _animation_board(d: Path, info: dict) -> Board | None:
     """The board of an ``animation`` run folder (its ``table.csv``: one row per method)."""
-    import pandas as pd
     try:
-        t = pd.read_csv(d / "table.csv")
+        t = read_cases(d / "table.csv")
     except (OSError, ValueError):
         return None
     if not {"method", "gt_mean_pct"} <= set(t.columns):
@@ -264,9 +263,8 @@ def collect(root) -> tuple[list[Board], list[str]]:
 
 
 def _tosca_line(d: Path) -> list[str]:
-    import pandas as pd
     try:
-        t = pd.read_csv(d / "table.csv")
+        t = read_cases(d / "table.csv")
         r = t[t["class"].astype(str).str.startswith("all")].iloc[0]
     except (OSError, ValueError, KeyError, IndexError):
         return []

@@ -48,6 +48,7 @@ from eval.run.outdir import (
     results_dir,
 )
 from eval.run.pending_rows import marked_pending
+from eval.run.row_check import checked_cases, read_cases
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders
 from eval.run.stale_runs import whole_run_folders, whole_run_state
@@ -64,6 +65,7 @@ from eval.tables import (
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 from sshade.files import atomic_write
+from sshade.json_file import read_bounded
 
 __all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
            "find_chromium", "chromium", "screenshot", "main"]
@@ -72,6 +74,7 @@ log = logging.getLogger("eval")
 
 PAGE = "index.html"  #: the report's file name in a run folder
 GENERATOR = "sshade eval.report"  #: the generator meta tag: a page with another one is never replaced
+MAX_SHOWN = 16 * 2**20  #: the largest text file of a run (table.md, breakdown.md) shown in its page (bytes)
 _ASSETS = Path(__file__).resolve().parent / "report_assets"
 _CSS = """body{font:14px/1.45 system-ui,sans-serif;margin:1.5em auto;max-width:1250px;padding:0 1em;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1em}th,td{border:1px solid #ccc;padding:.2em .5em;text-align:left}
@@ -136,11 +139,16 @@ def _summary_table(summary, table_id: str) -> str:
 
 def _csv_table(path: Path, table_id: str = "") -> str:
     """Every column of a CSV file as a sortable table (other experiments' ``table.csv``)."""
-    import pandas as pd
-    df = pd.read_csv(path)
+    df = read_cases(path)
     rows = [[_cell(_num(v)) if not isinstance(v, str) else f"<td>{_e(v)}</td>" for v in r]
             for r in df.itertuples(index=False)]
     return _table([str(c) for c in df.columns], rows, table_id)
+
+
+def _text(path: Path) -> str:
+    """A text file of the run shown in the page (at most :data:`MAX_SHOWN` bytes, a regular
+    file: :func:`sshade.json_file.read_bounded`; OSError otherwise)."""
+    return read_bounded(path, MAX_SHOWN).decode("utf-8", errors="replace")
 
 
 def _items(lines: list[str]) -> str:
@@ -150,11 +158,10 @@ def _items(lines: list[str]) -> str:
 def _main_section(run_dir: Path, kind: str) -> str:
     """The main table(s), stopping record and failures (``cases`` experiment), else
     ``table.csv`` as it is."""
-    import pandas as pd
     out = ['<h2 id="main">Main table</h2>']
     cases = run_dir / "cases.csv"
-    if kind == "cases" and cases.is_file():
-        df = pd.read_csv(cases)
+    if kind == "cases" and os.path.lexists(cases):
+        df = checked_cases(run_dir)  # shown only when every row is its record's
         if "method" in df.columns and len(df):
             comp = compare(df)
             note = main_note(comp)
@@ -173,7 +180,7 @@ def _main_section(run_dir: Path, kind: str) -> str:
     else:
         out.append("<p>No table.csv in this folder.</p>")
     if (run_dir / "table.md").is_file():
-        out.append(f"<details><summary>table.md</summary><pre>{_e((run_dir / 'table.md').read_text())}</pre></details>")
+        out.append(f"<details><summary>table.md</summary><pre>{_e(_text(run_dir / 'table.md'))}</pre></details>")
     return "\n".join(out)
 
 
@@ -184,7 +191,7 @@ def _breakdown_section(run_dir: Path) -> str:
     p = run_dir / "breakdown.csv"
     if not p.is_file():
         return ""
-    df = pd.read_csv(p)
+    df = read_cases(p)
     out = ['<h2 id="breakdown">Breakdown per pose and subject</h2>']
     labels = dict(BREAKDOWN_METRICS)
     for (by, metric), g in df.groupby(["by", "metric"], sort=False):
@@ -210,7 +217,7 @@ def _breakdown_section(run_dir: Path) -> str:
         out.append('<p><img src="breakdown.png" alt="breakdown"></p>')
     if (run_dir / "breakdown.md").is_file():
         out.append("<details><summary>breakdown.md (with the paired SShaDe-Elastic comparison)</summary>"
-                   f"<pre>{_e((run_dir / 'breakdown.md').read_text())}</pre></details>")
+                   f"<pre>{_e(_text(run_dir / 'breakdown.md'))}</pre></details>")
     return "\n".join(out)
 
 
@@ -363,12 +370,25 @@ def render_page(run_dir) -> str:
 def _ours(page: Path) -> bool:
     """Whether ``page`` is absent or was written by this module (generator tag)."""
     try:
-        head = page.read_text(errors="replace")[:2000]
+        head = _head(page, 2000)
     except FileNotFoundError:
         return True
     except OSError:
         return False
     return f'content="{GENERATOR}"' in head
+
+
+def _head(path: Path, n: int) -> str:
+    """The first ``n`` bytes of the regular file ``path`` as text (a FIFO or a device is
+    an OSError, opened without blocking; FileNotFoundError when absent)."""
+    import stat
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path}: not a regular file")
+        return os.read(fd, n).decode("utf-8", errors="replace")
+    finally:
+        os.close(fd)
 
 
 def write_report(run_dir) -> Path:
@@ -403,7 +423,7 @@ def _write_board(md: Path, text: str) -> bool:
     by this module (it starts otherwise than :data:`eval.leaderboard.HEADING`: left as it
     is, with a warning). Whether it was written."""
     try:
-        ours = not md.exists() or md.read_text(errors="replace").startswith(HEADING + "\n")
+        ours = not os.path.lexists(md) or _head(md, len(HEADING.encode()) + 1).startswith(HEADING + "\n")
     except OSError:
         ours = False
     if not ours:

@@ -21,16 +21,16 @@ from eval.present.intervals import interval_table
 from eval.present.rows import method_order_key, methods_in, ok_mask
 from eval.present.stops import PROTOCOL_TEXT, stop_lines
 from eval.present.table_markup import EXTRA_COLUMNS, TABLE_COLUMNS, to_latex, to_markdown
-from eval.run.compared import COMPARED_CSV, SETTINGS
+from eval.run.compared import COMPARED_CSV, COMPARED_RECORD, SETTINGS, checked_compared, write_compared
 from eval.run.outdir import refuse_results
 from eval.run.pending_rows import marked_pending, pending_markdown, pending_title, strip_pending
-from eval.run.row_check import check_rows, read_cases
+from eval.run.row_check import check_rows, checked_cases
 from eval.run.stale_rows import CommitTrees, folder_states, settings_marks
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
-from sshade.json_file import read_json
+from sshade.json_file import read_json, regular_file
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
     import pandas as pd
@@ -423,13 +423,11 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     ours = df
     if compared is not None and len(compared):
         if cases:
-            p_comp = out_dir / COMPARED_CSV
-            with atomic_write(p_comp, "w", newline="") as fh:
-                compared.to_csv(fh, index=False)
-            paths["compared"] = p_comp
+            paths["compared"] = write_compared(out_dir, compared)
         df = pd.concat([df, compared], ignore_index=True)
     elif cases:
-        (out_dir / COMPARED_CSV).unlink(missing_ok=True)  # never rows of an earlier run's comparison
+        for name in (COMPARED_CSV, COMPARED_RECORD):  # never rows of an earlier run's comparison
+            (out_dir / name).unlink(missing_ok=True)
     comp = compare(df)
     paths["table_csv"] = _write_csv(comp.main, out_dir / "table.csv")
     p_all = out_dir / "table_all.csv"
@@ -462,9 +460,10 @@ def _written_title(run_dir: Path) -> str | None:
     """The main table's title the run wrote: the first line of its ``table.md`` when it
     is a ``### `` heading (at most 4096 characters read), else None."""
     try:
+        regular_file(run_dir / "table.md", "table")  # a FIFO would block the read
         with open(run_dir / "table.md", encoding="utf-8", errors="replace") as fh:
             first = fh.readline(4096).rstrip("\n")
-    except OSError:
+    except (OSError, SShaDeError):
         return None
     return strip_pending(first[4:]) if first.startswith("### ") and len(first) > 4 else None
 
@@ -490,19 +489,16 @@ def retabulate(run_dir) -> dict[str, Path]:
 
     Raises
     ------
-    FileNotFoundError if ``run_dir/cases.csv`` is missing; SShaDeError when a row of it
-    disagrees with its record (:func:`eval.run.row_check.check_rows`).
+    SShaDeError when ``run_dir/cases.csv`` cannot be read or a row of it disagrees with
+    its record (:func:`eval.run.row_check.checked_cases`), or a row of ``compared.csv``
+    with the record of the compared rows (:func:`eval.run.compared.checked_compared`).
     """
 
 
     run_dir = Path(run_dir)
     refuse_results(run_dir, "python -m eval.tables rebuilds the tables of runs outside it")
-    df = read_cases(run_dir / "cases.csv")
-    bad = check_rows(df, run_dir).problems
-    if bad:  # a table is made from the store's rows, never from rows that disagree with it
-        raise SShaDeError(f"{run_dir / 'cases.csv'}: {bad[0]}" + (f" (and {len(bad) - 1} more rows)" if len(bad) > 1
-                          else "") + "; its rows disagree with their records: no table is made from them")
-    compared = read_cases(run_dir / COMPARED_CSV) if (run_dir / COMPARED_CSV).is_file() else None
+    df = checked_cases(run_dir)  # a table is made from the store's rows, never from rows that disagree with it
+    compared = checked_compared(run_dir)
     title = _written_title(run_dir)
     if title is None:
         try:

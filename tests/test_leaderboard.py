@@ -8,10 +8,13 @@ import csv
 import json
 import re
 
+import pandas as pd
 import pytest
 
 from eval.leaderboard import LEADERBOARD, collect, leaderboard_markdown, leaderboard_rows
 from eval.report import write_index
+from eval.run.compared import write_compared
+from sshade.errors import SShaDeError
 from tests.conftest import ROOT
 
 
@@ -138,14 +141,19 @@ def test_a_users_run_with_compare_with_is_ranked_beside_the_rows_it_read(tmp_pat
     assert run_board_markdown(run) is None  # no compare_with: no board of its own
     theirs = [_row(c, m, 1.0, gt + i / 100 * k, t) | {"time_other_run": True} for i, c in enumerate(CASES)
               for m, gt, t, k in (("SShaDe", 1.605, 2.0, 1.0), ("ARAP", 1.775, 60.0, 2.0))]
-    with open(run / "compared.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(theirs[0]))
-        w.writeheader()
-        w.writerows(theirs)
+    write_compared(run, pd.DataFrame(theirs))
     md = run_board_markdown(run)
     assert "| 1 | SShaDe | 1.64 |" in md and "| 2 | Mine | 1.74 |" in md and "| 3 | ARAP | 1.84 |" in md
     assert re.search(r"\| 2 \| Mine \| 1.74 \| 1.7\d \.\. 1.7\d \| 1.00 \| 1.00 \| 1.000 \| -- \|", md)  # no SShaDe
     assert re.search(r"\| 3 \| ARAP \| 1.84 \| 1.8\d \.\. 1.8\d \| 1.00 \| 1.00 \| 1.000 \| -- \|", md)  # another run's
+    text = (run / "compared.csv").read_text()
+    (run / "compared.csv").write_text(text.replace("1.775", "0.775", 1))  # an edited number
+    with pytest.raises(SShaDeError, match=r"compared.csv: .*gt_vertex_mean_pct '?0.775'? in compared.csv, 1.775 rec"):
+        run_board_markdown(run)
+    (run / "compared.csv").write_text(text)
+    (run / "compared.json").unlink()  # no record of the rows: nothing says they are the ones read
+    with pytest.raises(SShaDeError, match="cannot be checked against compared.json"):
+        run_board_markdown(run)
 
 
 def test_a_stale_mark_names_the_commits_and_at_most_three_modules_changed_since():

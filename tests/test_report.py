@@ -138,6 +138,35 @@ def test_cli_rewrites_a_run_and_refuses_other_folders(run_dir, tmp_path, monkeyp
     assert main([]) == 2
 
 
+def test_a_report_refuses_an_edited_cases_csv_and_leaves_out_a_fifo_or_a_deeply_nested_view(run_dir, tmp_path,
+                                                                                             capsys):
+    """``python -m eval.report`` on a copy of a run: a FIFO or a view nested 100,000 deep
+    in place of a view file is left out, without blocking; a number edited in
+    ``cases.csv`` is one error line naming the file and the row, and no page is made."""
+    import os
+    import shutil
+    run = tmp_path / "run"
+    shutil.copytree(run_dir, run)
+    views = sorted((run / "report").glob("*.js"))
+    views[0].unlink()
+    os.mkfifo(views[0])
+    views[1].write_text("(window.SSHADE_VIEWS = window.SSHADE_VIEWS || {})[" + "[" * 100_000)
+    assert main([str(run)]) == 0
+    cases = run / "cases.csv"
+    rows = list(csv.DictReader(cases.open()))
+    col = next(c for c in ("volume_err_pct", "edge_err_pct") if rows[0].get(c))
+    rows[0][col] = "0.000123"
+    with cases.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    (run / PAGE).unlink()
+    capsys.readouterr()
+    assert main([str(run)]) == 2 and not (run / PAGE).exists()
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and str(cases) in err and f"{col} 0.000123 in cases.csv" in err
+
+
 def test_a_page_written_by_someone_else_is_kept(tmp_path):
     (tmp_path / "run.json").write_text("{}")
     (tmp_path / PAGE).write_text("<html>my notes</html>")

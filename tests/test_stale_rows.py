@@ -29,6 +29,7 @@ from eval.run.stale_rows import (
     row_state,
     run_folders,
 )
+from sshade.errors import SShaDeError
 
 from .conftest import ROOT, edit_syntax_tree, subprocess_env
 
@@ -285,7 +286,6 @@ def test_check_holds_a_table_to_its_records_and_refuses_a_record_it_cannot_trust
     reported, and ``python -m eval.tables`` makes no table from rows that disagree."""
     from eval.run.stale_rows import table_problems
     from eval.tables import retabulate
-    from sshade.errors import SShaDeError
     run = tmp_path / "faust"
     shutil.copytree(ROOT / "results" / "faust", run)
     assert table_problems(run) == []
@@ -360,5 +360,5 @@ def test_a_giant_or_pipe_cases_csv_is_reported_not_read(tmp_path, kind):
             fh.truncate(2 ** 31)
     problems = table_problems(run)
     assert len(problems) == 1 and "cases.csv: unreadable" in problems[0], problems
-    with pytest.raises(OSError):
+    with pytest.raises(SShaDeError, match="cases.csv: cannot be read"):
         retabulate(run)

@@ -88,6 +88,29 @@ def test_a_record_holds_its_output_digest_and_names_a_replaced_record_with_the_s
     assert st.read("c", "A").why.startswith("invalid: edited")
 
 
+def test_a_stored_mesh_is_read_only_when_it_is_the_records_output_and_never_from_a_fifo(tmp_path):
+    """``load_mesh`` reads a mesh as untrusted input: an edited mesh (scaled), a header
+    of another vertex count, a sparse giant that its header calls (89478485, 3), and a
+    FIFO put in its place give None, without blocking and without reading the giant."""
+    import os
+    st = ResultStore(tmp_path, meshes=True)
+    U = np.arange(15, dtype=np.float64).reshape(5, 3)
+    k, f = pair_key({"_target_": "x.A"}, {"case": "c"})
+    st.save("c", "A", k, f, {"case": "c", "method": "A", "error": "", "time_s": 1.0}, {}, U)
+    rec = st.load("c", "A", k)
+    mesh = st.path("c", "A").with_suffix(".npy")
+    assert np.array_equal(st.load_mesh(rec, 5), U) and st.load_mesh(rec, 6) is None
+    np.save(mesh, 3 * U)  # edited: a valid array, not the output the record names
+    assert st.load_mesh(rec, 5) is None
+    giant = np.lib.format.open_memmap(tmp_path / "g.npy", mode="w+", dtype="<f8", shape=(89478485, 3))
+    del giant  # a sparse file of 2 GB
+    os.replace(tmp_path / "g.npy", mesh)
+    assert st.load_mesh(rec) is None and st.load_mesh(rec, 5) is None
+    mesh.unlink()
+    os.mkfifo(mesh)
+    assert st.load_mesh(rec, 5) is None  # returns at once: the FIFO is never read
+
+
 def test_the_static_handles_and_groups_are_part_of_a_case_and_an_earlier_record_is_matched_without_them(tmp_path):
     """What a case-aware method is told besides the arrays (which handles are static, their
     groups) is part of the case's key, so a loader that changes them makes other rows; a

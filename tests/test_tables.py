@@ -249,6 +249,34 @@ def test_retabulate_rebuilds_tables_from_cases_csv_only(tmp_path):
     assert _md_row(_tables(md)[0], "SShaDe")[1] == "2"  # the common set, as write_tables
 
 
+def test_retabulate_refuses_an_edited_compared_csv_and_a_fifo_table_md_does_not_block_it(tmp_path, capsys):
+    """The compared rows are tabulated only as their run recorded them (``compared.json``):
+    a number edited in ``compared.csv`` is one error line naming it; a FIFO where
+    ``table.md`` was is not read (the title comes from ``run.json``)."""
+    import os
+
+    from eval.run.compared import write_compared
+    from eval.tables import main as tables_main
+    from eval.tables import write_cases
+    write_cases(_frame(), tmp_path)
+    (tmp_path / "run.json").write_text('{"config": {"experiment": {"name": "demo"}, "dataset": {"name": "x"}}}')
+    theirs = _frame().query("method == 'SShaDe'").assign(method="Theirs", run="elsewhere", run_commit="abc",
+                                                         run_machine="Linux, 2 cores", time_other_run=True)
+    write_compared(tmp_path, theirs)
+    os.mkfifo(tmp_path / "table.md")  # replaced through a rename, never opened
+    assert tables_main([str(tmp_path)]) == 0
+    assert "| Theirs |" in (tmp_path / "table.md").read_text()
+    text = (tmp_path / "compared.csv").read_text()
+    v = str(theirs["volume_err_pct"].iloc[0])
+    (tmp_path / "compared.csv").write_text(text.replace(v, "9" + v, 1))
+    before = (tmp_path / "table.md").read_bytes()
+    capsys.readouterr()
+    assert tables_main([str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "compared.csv: " in err and f"volume_err_pct 9{v}" in err
+    assert (tmp_path / "table.md").read_bytes() == before
+
+
 def test_a_preset_method_says_its_preset_and_steps():
     """Implicit-ARAP-like rows (a preset, fixed step counts, an SDF fit inside the time):
     the table's stop line says so (every row says which preset made it)."""

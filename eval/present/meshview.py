@@ -22,7 +22,7 @@ from eval.run.names import safe_name
 from eval.run.spec import ReportOptions
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
-from sshade.json_file import read_json
+from sshade.json_file import read_bounded, read_json
 
 __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
            "cluster_positions", "cluster_means", "vertex_edge_error", "case_view",
@@ -40,6 +40,9 @@ COLOUR_MODES = {"edge": "edge-length error, % of the longest rest edge (paper Fi
 #: quantity, shared by its meshes); larger values show saturated.
 SCALE_PERCENTILE = 99.0
 OUTPUTS = "outputs.json"  #: in VIEW_DIR: the per-case views and figures the run wrote (write_outputs)
+#: The largest view file read back (bytes): a view of 8 meshes of ``max_faces`` faces is
+#: a few MiB at the default, about 100 MiB at 2 million faces each.
+MAX_VIEW_BYTES = 512 * 2**20
 
 
 def cluster_decimate(V, F, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
@@ -252,17 +255,22 @@ _PREFIX = "(window.SSHADE_VIEWS = window.SSHADE_VIEWS || {})["
 
 
 def read_view(path) -> dict:
-    """The view (:func:`case_view`'s dict) in a file :func:`write_case_view` wrote.
-    Raises ValueError when the file is not such a view, OSError when unreadable."""
-    text = Path(path).read_text()
+    """The view (:func:`case_view`'s dict) in a file :func:`write_case_view` wrote, read
+    as untrusted input (a regular file of at most :data:`MAX_VIEW_BYTES`). Raises
+    ValueError when the file is not such a view (nested too deeply included), OSError
+    when unreadable, not a regular file or too large."""
+    text = read_bounded(path, MAX_VIEW_BYTES).decode("utf-8")
     if not text.startswith(_PREFIX):
         raise ValueError(f"{path} is not a view file")
     dec = json.JSONDecoder()
-    _, i = dec.raw_decode(text, len(_PREFIX))
-    if not text.startswith("] = ", i):
-        raise ValueError(f"{path} is not a view file")
-    view, _ = dec.raw_decode(text, i + 4)
-    if not isinstance(view, dict) or "meshes" not in view:
+    try:
+        _, i = dec.raw_decode(text, len(_PREFIX))
+        if not text.startswith("] = ", i):
+            raise ValueError(f"{path} is not a view file")
+        view, _ = dec.raw_decode(text, i + 4)
+    except RecursionError:
+        raise ValueError(f"{path} is not a view file (nested too deeply)") from None
+    if not isinstance(view, dict) or "meshes" not in view or "case" not in view:
         raise ValueError(f"{path} is not a view file")
     return view
 

@@ -3,19 +3,24 @@ method's row beside the committed baselines without rerunning them.
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.result_store import ResultStore, case_identity
+from eval.run.row_check import MAX_LISTED, cell_differs, read_cases
 from eval.run.runinfo import read_runinfo
 from sshade.errors import SShaDeError
+from sshade.files import atomic_write
 from sshade.json_file import read_json
 from sshade.method_interface import check_name
 
-__all__ = ["ComparedRun", "read_compared", "compared_rows", "run_settings", "IDENTITY_FIELDS", "SETTINGS",
-           "COMPARED_CSV"]
+__all__ = ["ComparedRun", "read_compared", "compared_rows", "run_settings", "write_compared", "checked_compared",
+           "IDENTITY_FIELDS", "SETTINGS", "COMPARED_CSV", "COMPARED_RECORD"]
 
 #: The fields of a case identity that must agree (the data digests say whether it is the
 #: same data; the dataset's seed may differ where the data agree).
@@ -28,6 +33,9 @@ SETTINGS = ("handle_error_max_pct", "reference.max_iter", "reference.time_budget
 _ABSENT = "(absent)"
 #: The file of an evaluator run folder that keeps the compared rows (beside ``cases.csv``).
 COMPARED_CSV = "compared.csv"
+#: Their record, as read and checked from their runs' stores (``rows`` and their sha256,
+#: ``digest``): what ``compared.csv`` is held against, as ``cases.csv`` is against ``runs/``.
+COMPARED_RECORD = "compared.json"
 
 
 @dataclass
@@ -177,3 +185,60 @@ def compared_rows(runs: list[ComparedRun], ours: list[str]) -> list[dict]:
             taken.add(rename[m].lower())
         rows += [{**row, "method": rename[row["method"]]} for row in r.rows]
     return rows
+
+
+def _rows_digest(rows: list) -> str:
+    return hashlib.sha256(json.dumps(rows, sort_keys=True, allow_nan=True).encode()).hexdigest()
+
+
+def write_compared(out_dir, df) -> Path:
+    """Write the compared rows ``df`` (pandas DataFrame, one row per (case, method) of an
+    earlier run, :func:`compared_rows`) as ``compared.csv`` and their record
+    ``compared.json`` (:data:`COMPARED_RECORD`) in ``out_dir``. Returns the CSV's path;
+    OSError propagates."""
+    out_dir = Path(out_dir)
+    rows = json_safe(df.to_dict("records"))
+    with atomic_write(out_dir / COMPARED_RECORD, "w") as fh:
+        fh.write(json.dumps({"version": 1, "rows": rows, "digest": _rows_digest(rows)}, indent=1) + "\n")
+    with atomic_write(out_dir / COMPARED_CSV, "w", newline="") as fh:
+        df.to_csv(fh, index=False)
+    return out_dir / COMPARED_CSV
+
+
+def checked_compared(run_dir):
+    """The rows of ``run_dir``'s ``compared.csv`` (a pandas DataFrame) when they are those
+    its run read and checked (:data:`COMPARED_RECORD`, its digest holding); None when the
+    run compared no rows. Raises SShaDeError naming the file: unreadable, not a regular
+    file, without its record (written by a version before it had one), or a row that
+    disagrees with it (an edit)."""
+    p, rec_p = Path(run_dir) / COMPARED_CSV, Path(run_dir) / COMPARED_RECORD
+    if not os.path.lexists(p):
+        return None
+    try:
+        df, rec = read_cases(p), read_json(rec_p)
+    except (OSError, ValueError) as e:
+        raise SShaDeError(f"{p}: cannot be checked against {COMPARED_RECORD} ({getattr(e, 'strerror', None) or e}); "
+                          "run the comparison again (python -m eval ... compare_with=[...])") from None
+    rows = rec.get("rows") if isinstance(rec, dict) else None
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows) \
+            or rec.get("digest") != _rows_digest(rows):
+        raise SShaDeError(f"{rec_p}: not the record of the compared rows (edited, or another file)")
+    problems = _compared_problems(df.to_dict("records"), rows)
+    if problems:
+        raise SShaDeError(f"{p}: {'; '.join(problems[:MAX_LISTED])}"
+                          f"{f' (and {len(problems) - MAX_LISTED} more)' if len(problems) > MAX_LISTED else ''}: "
+                          f"its rows disagree with {COMPARED_RECORD}; nothing is made from them")
+    return df
+
+
+def _compared_problems(got: list, rows: list) -> list[str]:
+    """What differs between the rows read back from ``compared.csv`` and the recorded ones."""
+    if len(got) != len(rows):
+        return [f"{len(got)} rows, {len(rows)} recorded"]
+    out = []
+    for a, b in zip(got, rows):
+        diff = [k for k in sorted(set(a) | set(b)) if cell_differs(a.get(k), b.get(k))]
+        if diff:
+            out.append(f"{b.get('case')} / {b.get('method')}: {diff[0]} {a.get(diff[0])!r} in {COMPARED_CSV}, "
+                       f"{b.get(diff[0])!r} recorded")
+    return out

@@ -16,6 +16,7 @@ import hashlib
 import json
 import logging
 import math
+import os
 import re
 from pathlib import Path
 from typing import NamedTuple
@@ -182,6 +183,28 @@ def output_digest(U) -> str:
     return hashlib.sha256(f"{a.shape}".encode() + a.tobytes()).hexdigest()
 
 
+def _read_npy(p: Path, n: int | None) -> np.ndarray | None:
+    """The (m, 3) float64 array of the regular ``.npy`` file ``p`` (opened without
+    blocking), None when its header says another dtype or shape (``m`` = ``n`` when
+    given) or the file holds other than the bytes it promises. OSError, ValueError."""
+    import stat
+    fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
+    with os.fdopen(fd, "rb") as fh:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            return None
+        fmt = np.lib.format
+        major = fmt.read_magic(fh)[0]
+        if major not in (1, 2):
+            return None
+        shape, fortran, dtype = (fmt.read_array_header_1_0 if major == 1 else fmt.read_array_header_2_0)(fh)
+        if dtype != np.dtype("<f8") or fortran or len(shape) != 2 or shape[1] != 3 or (n is not None and shape[0] != n):
+            return None
+        if st.st_size != fh.tell() + shape[0] * 24:
+            return None
+        return np.fromfile(fh, dtype="<f8", count=shape[0] * 3).reshape(shape)
+
+
 class Lookup(NamedTuple):
     """What :meth:`ResultStore.lookup` found: ``record`` (the valid record, or None) and
     ``why`` (None when found; else ``"absent"``, or ``"other code: <what changed>"``,
@@ -338,17 +361,20 @@ class ResultStore:
 
     def load_mesh(self, rec: dict, n: int | None = None) -> np.ndarray | None:
         """The deformed vertices (n, 3) float64 a record names, or None (not stored,
-        unreadable, not a finite (n, 3) float64 array; ``n``: the case's vertex count)."""
+        unreadable, not a regular file, not a finite (n, 3) float64 ``.npy`` of the size
+        its header gives, or not the output the record's ``output`` digest names: an
+        edited mesh; ``n``: the case's vertex count). Reads no more than the header
+        promises, and nothing of a FIFO or a device."""
         name = rec.get("mesh")
         if not name:
             return None
         try:
-            p = self.path(rec["case"], rec["method"]).with_name(str(name))
-            U = np.load(inside_folder(self.out_dir, p, "result store"), allow_pickle=False)
+            p = inside_folder(self.out_dir, self.path(rec["case"], rec["method"]).with_name(str(name)), "result store")
+            U = _read_npy(p, n)
         except (OSError, ValueError, EOFError, SShaDeError):
             return None
-        ok = (isinstance(U, np.ndarray) and U.dtype == np.float64 and U.ndim == 2 and U.shape[1] == 3
-              and (n is None or len(U) == n) and bool(np.isfinite(U).all()))
+        ok = (U is not None and (n is None or len(U) == n) and bool(np.isfinite(U).all())
+              and rec.get("output") in (None, output_digest(U)))
         return U if ok else None
 
     def save(self, case: str, method: str, key: str, fields: dict, row: dict, info=None, U=None,

@@ -20,9 +20,10 @@ from sshade.json_file import read_bounded
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["RowCheck", "check_rows", "read_cases", "MAX_LISTED", "MAX_CASES_BYTES"]
+__all__ = ["RowCheck", "check_rows", "checked_cases", "read_cases", "cell_differs", "MAX_LISTED", "MAX_CASES_BYTES"]
 
 MAX_LISTED = 3  #: rows named in the line when more disagree
+OLDER = "older"  # _row_problem: a record of another store version
 #: The largest ``cases.csv`` read (bytes): a row is well under 2 KiB, a run a few thousand rows.
 MAX_CASES_BYTES = 256 * 2**20
 
@@ -44,29 +45,35 @@ class RowCheck(NamedTuple):
     a valid record, ``problems`` one text per row whose record is invalid or says other
     numbers ("<case> / <method>: why"), ``has_store`` whether the folder has a ``runs/``
     store at all, ``absent`` the rows ("<case> / <method>") that have no record (their run
-    ended before storing it: a killed worker, an interrupted run)."""
+    ended before storing it: a killed worker, an interrupted run), ``older`` those whose
+    record is of another store version (not comparable here; the tables mark them as made
+    by older code, :mod:`eval.run.stale_rows`)."""
     n_rows: int
     n_checked: int
     problems: list
     has_store: bool
     absent: list = []
+    older: list = []
 
     @property
     def ok(self) -> bool:
         """Every row matches its record."""
-        return self.has_store and not self.problems and not self.absent
+        return self.has_store and not self.problems and not self.absent and not self.older
 
     def line(self) -> str:
         """One sentence for ``table.md`` (Markdown)."""
         if not self.has_store:
             return (f"Rows not checked: this folder has no result store ({STORE_DIR}/), so nothing says that "
                     "cases.csv holds what the methods computed.")
-        if not self.problems and not self.absent:
+        if not self.problems and not self.absent and not self.older:
             return (f"Rows checked: all {self.n_rows} rows of cases.csv match their records in {STORE_DIR}/ "
                     "(digests hold; a digest catches a record edited by hand, not one re-signed).")
         out = []
+        if self.older:
+            out.append(f"{len(self.older)} of {self.n_rows} rows have a record of an older store version "
+                       f"({_listed(self.older)}): not checked here.")
         if self.problems:
-            n_bad = self.n_rows - self.n_checked - len(self.absent)
+            n_bad = self.n_rows - self.n_checked - len(self.absent) - len(self.older)
             out.append(f"**Rows disagree with the result store:** {n_bad} of {self.n_rows} rows of "
                        f"cases.csv do not match a valid record in {STORE_DIR}/ ({_listed(self.problems)}); the table "
                        "is not what the store holds.")
@@ -85,8 +92,9 @@ def _missing(v) -> bool:
     return v is None or (isinstance(v, float) and math.isnan(v)) or (isinstance(v, str) and v == "")
 
 
-def _cell_differs(a, b) -> bool:
-    """Whether a cell read back from ``cases.csv`` (``a``) differs from the record's (``b``)."""
+def cell_differs(a, b) -> bool:
+    """Whether a cell read back from ``cases.csv`` (``a``) differs from the record's (``b``):
+    numbers unequal beyond float64 rounding, text unequal, one empty and not the other."""
     if _missing(a) or _missing(b):
         return not (_missing(a) and _missing(b))
     if isinstance(b, bool) or isinstance(a, bool):
@@ -111,9 +119,11 @@ def _row_problem(store: ResultStore, row: dict) -> tuple[bool, str | None]:
     if found.record is None:
         if found.why == "absent":
             return True, None
+        if str(found.why).startswith("other code: store version"):
+            return False, OLDER
         return False, f"{case} / {method}: record {found.why}"
     stored = found.record["row"]
-    diff = [k for k in sorted(set(stored) | set(row)) if _cell_differs(row.get(k), stored.get(k))]
+    diff = [k for k in sorted(set(stored) | set(row)) if cell_differs(row.get(k), stored.get(k))]
     if diff:
         k = diff[0]
         return False, (f"{case} / {method}: {k} {row.get(k)!r} in cases.csv, {stored.get(k)!r} in the record"
@@ -139,11 +149,31 @@ def check_rows(df: pd.DataFrame, out_dir) -> RowCheck:
         return RowCheck(len(df), 0, [], False)
     if "case" not in df.columns or "method" not in df.columns:
         return RowCheck(len(df), 0, ["cases.csv has no case and method columns to find records by"], True)
-    problems, absent = [], []
+    problems, absent, older = [], [], []
     for r in df.to_dict("records"):
         gone, problem = _row_problem(store, r)
         if gone:
             absent.append(f"{r.get('case')} / {r.get('method')}")
+        elif problem is OLDER:
+            older.append(f"{r.get('case')} / {r.get('method')}")
         elif problem:
             problems.append(problem)
-    return RowCheck(len(df), len(df) - len(problems) - len(absent), problems, True, absent)
+    return RowCheck(len(df), len(df) - len(problems) - len(absent) - len(older), problems, True, absent, older)
+
+
+def checked_cases(run_dir) -> pd.DataFrame:
+    """A run's ``cases.csv`` (:func:`read_cases`) when every row of it is its record's
+    (:func:`check_rows`; a folder without a store is taken as it is): what a reader of the
+    folder (a table, a report, a board) may show. Raises SShaDeError naming the file and
+    the first row that disagrees, or that it cannot be read (missing, not a regular file,
+    too large, no CSV)."""
+    p = Path(run_dir) / "cases.csv"
+    try:
+        df = read_cases(p)
+    except (OSError, ValueError) as e:
+        raise SShaDeError(f"{p}: cannot be read ({getattr(e, 'strerror', None) or e})") from None
+    bad = check_rows(df, run_dir).problems
+    if bad:  # a table is made from the store's rows, never from rows that disagree with it
+        raise SShaDeError(f"{p}: {bad[0]}" + (f" (and {len(bad) - 1} more rows)" if len(bad) > 1 else "")
+                          + "; its rows disagree with their records: nothing is made from them")
+    return df

@@ -405,7 +405,7 @@ class _CaseOutputs:
                 continue
             if (ci, mi) not in self.done:  # left at the run's stop, never stored: no row, no mesh
                 continue
-            deformed[name] = s.store.load_mesh(self.done[ci, mi])
+            deformed[name] = s.store.load_mesh(self.done[ci, mi], len(s.cases[ci].V))
             if deformed[name] is None and not self.done[ci, mi]["row"].get("error"):
                 unknown.append(name)  # restored without its mesh (store.meshes=false)
         case = s.cases[ci]
