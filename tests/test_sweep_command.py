@@ -76,6 +76,34 @@ def test_aggregate_sweep_table(tmp_path, capsys):
     assert e.value.code == 2
 
 
+def test_a_sweeps_records_with_nested_aliases_a_fifo_or_a_giant_are_refused_in_bounded_memory(tmp_path):
+    """``multirun.yaml`` as a 600-byte "billion laughs" (nested aliases that print as
+    gigabytes), a job's ``overrides.yaml`` that is a FIFO, and a sparse 2 GB ``table.csv``:
+    the table is made at once (the multirun's overrides left out of its title, that job's
+    table an error of its row), nothing blocks and nothing is expanded."""
+    import os
+    sw = tmp_path / "sweep"
+    _job(sw / "0", 0, ["sshade.n_low=500"], {"status": "done", "wall_s": 3.0}, {"method": ["SShaDe"], "n_cases": [1]})
+    _job(sw / "1", 1, ["sshade.n_low=600"], {"status": "done", "wall_s": 3.0})
+    laughs = ["a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
+    laughs += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)]
+    (sw / "multirun.yaml").write_text("\n".join(laughs) + "\nhydra:\n  overrides:\n    task: *a8\n")
+    (sw / "0" / ".hydra" / "overrides.yaml").unlink()
+    os.mkfifo(sw / "0" / ".hydra" / "overrides.yaml")
+    with open(sw / "1" / "table.csv", "wb") as fh:
+        fh.truncate(2 * 2**30)
+    import tracemalloc
+    tracemalloc.start()
+    try:
+        df = aggregate_sweep(sw)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 * 2**20, peak  # the aliases print as 300 MB, the table.csv reads as 2 GB
+    assert list(df["status"]) == ["done", "done"] and "unreadable table.csv" in df.loc[1, "error"]
+    assert (sw / "sweep_table.md").read_text().startswith("### Sweep sweep: 2 job(s), 2 done\n")
+
+
 def test_sweep_job_records_an_exception(tmp_path):
     """A job whose experiment raises writes status failed and returns normally."""
     cfg = _compose([f"out_dir={tmp_path / 'job'}"])          # dataset.root missing -> SShaDeError

@@ -12,30 +12,47 @@ import math
 from pathlib import Path
 
 from eval.run.outdir import refuse_results
+from eval.run.row_check import read_cases
 from eval.sweeps.files import MANIFEST, OUTCOMES, STATUS_FILE, job_dirs, read_manifest, read_status
 from eval.tables import TABLE_COLUMNS, method_order_key
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
-from sshade.json_file import read_json
+from sshade.json_file import read_bounded, read_json
 
 __all__ = ["aggregate_sweep", "sweep_markdown", "sweep_title", "TABLE_CSV", "TABLE_MD"]
 
 TABLE_CSV = "sweep_table.csv"
 TABLE_MD = "sweep_table.md"
+MAX_YAML_BYTES = 16 * 2**20  #: the largest Hydra record (multirun.yaml, overrides.yaml) read
+MAX_OVERRIDES = 1000  #: overrides read from one record
+MAX_TITLE_SPEC = 2000  #: characters of the multirun's overrides in the table's title
 
 
 def _overrides(job_dir: Path, status: dict | None) -> list[str]:
     if status and isinstance(status.get("overrides"), list):
         return [str(o) for o in status["overrides"]]
-    p = job_dir / ".hydra" / "overrides.yaml"
-    if p.is_file():
-        import yaml
-        try:
-            v = yaml.safe_load(p.read_text())
-            return [str(o) for o in v] if isinstance(v, list) else []
-        except Exception:  # noqa: BLE001
-            return []
-    return []
+    v = _read_yaml(job_dir / ".hydra" / "overrides.yaml")
+    return [str(o) for o in v][:MAX_OVERRIDES] if isinstance(v, list) else []
+
+
+def _read_yaml(p: Path):
+    """The YAML file ``p`` that Hydra wrote, read as untrusted input: a regular file of at
+    most :data:`MAX_YAML_BYTES`, without aliases (a few hundred bytes of nested aliases
+    expand to gigabytes when printed); None when absent, unreadable or refused."""
+    import yaml
+
+    class _NoAliases(yaml.SafeLoader):
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.events.AliasEvent):
+                raise yaml.YAMLError(f"{p}: an alias (Hydra writes none)")
+            return super().compose_node(parent, index)
+
+    if not p.is_file():
+        return None
+    try:
+        return yaml.load(read_bounded(p, MAX_YAML_BYTES), Loader=_NoAliases)  # noqa: S506 -- a SafeLoader
+    except (OSError, ValueError, RecursionError, yaml.YAMLError):
+        return None
 
 
 def _split(override: str) -> tuple[str, str]:
@@ -60,7 +77,6 @@ def _job_row(d: Path, j: Path, keys: list, ended, seen: dict) -> dict:
     """The table row of the job folder ``j`` of the sweep ``d`` (its overridden keys are
     appended to ``keys``; ``ended``: the end of the sweep's last run, ``seen``: the
     launcher's notes)."""
-    import pandas as pd
     st = read_status(j)
     ov = _overrides(j, st)
     row = {"job": None, "dir": str(j.relative_to(d)) or ".", "overrides": " ".join(ov)}
@@ -94,7 +110,7 @@ def _job_row(d: Path, j: Path, keys: list, ended, seen: dict) -> dict:
     tab = j / "table.csv"
     if tab.is_file():
         try:
-            t = pd.read_csv(tab)
+            t = read_cases(tab)  # a regular file of bounded size
         except Exception as e:  # noqa: BLE001
             row["error"] = (row["error"] + f"; unreadable table.csv ({e})").lstrip("; ")
             t = None
@@ -215,15 +231,13 @@ def sweep_title(d: Path, df) -> str:
     counts = df["status"].value_counts()
     parts = ", ".join(f"{int(counts[s])} {s}" for s in (*OUTCOMES, "running") if s in counts)
     spec = ""
-    p = d / "multirun.yaml"
-    if p.is_file():
-        try:
-            import yaml
-            task = (yaml.safe_load(p.read_text()) or {}).get("hydra", {}).get("overrides", {}).get("task")
-            if task:
-                spec = f" ({' '.join(str(t) for t in task)})"
-        except Exception:  # noqa: BLE001
-            pass
+    v = _read_yaml(d / "multirun.yaml")
+    try:
+        task = v.get("hydra", {}).get("overrides", {}).get("task") if isinstance(v, dict) else None
+    except AttributeError:  # a section that is no mapping
+        task = None
+    if isinstance(task, list) and task:
+        spec = f" ({' '.join(str(t) for t in task[:MAX_OVERRIDES])})"[:MAX_TITLE_SPEC]
     return f"Sweep {d.name}: {len(df)} job(s), {parts}{spec}"
 
 
