@@ -1,7 +1,9 @@
 """numba's on-disk kernel cache made safe for every command: where no location can be
 written (a read-only ``NUMBA_CACHE_DIR``, an unwritable home and package folder: a shared
 cluster install) the kernels are cached for this process only, in a temporary folder; a
-damaged cache entry is dropped and its kernel compiled again. One notice each, on stderr.
+damaged cache entry is dropped and its kernel compiled again; so is an entry that is no
+regular file (a FIFO would block the load, a link may point anywhere) or larger than
+:data:`MAX_ENTRY_BYTES`. One notice each, on stderr.
 
 * :func:`ensure_cache`: both, before the first kernel module is imported (the commands'
   ``__main__`` call it first; a library user may too, or set ``NUMBA_CACHE_DIR``);
@@ -12,7 +14,10 @@ first call").
 from __future__ import annotations
 
 import atexit
+import glob
+import os
 import shutil
+import stat
 import sys
 import tempfile
 from pathlib import Path
@@ -22,6 +27,7 @@ __all__ = ["ensure_cache", "cache_locations"]
 _PKG = Path(__file__).resolve().parent
 _KERNEL_DIRS = (_PKG, _PKG / "arap", _PKG / "mesh")  # the package folders that hold numba kernels
 _done = False
+MAX_ENTRY_BYTES = 256 * 2**20  #: the largest cache file (index or compiled code) loaded, bytes
 
 
 def cache_locations() -> list[list[Path]]:
@@ -89,18 +95,41 @@ def _guard_loads() -> None:
         return
 
     def load_overload(self, sig, target_context):
+        index = getattr(getattr(self, "_cache_file", None), "_index_path", None)
+        bad = _unfit_files(Path(index)) if index else []
         try:
+            if bad:
+                raise OSError(f"{bad[0][0]} is {bad[0][1]}")
             return load(self, sig, target_context)
         except Exception as e:  # noqa: BLE001 -- any damage: a cache miss
-            index = getattr(getattr(self, "_cache_file", None), "_index_path", None)
-            if index:
+            for f in [Path(index)] * bool(index) + [f for f, _ in bad]:
                 try:
-                    Path(index).unlink()
+                    f.unlink()
                 except OSError:
                     pass
-            print(f"notice: numba cache entry {index or self} is damaged ({type(e).__name__}); dropped, the "
+            why = f"{bad[0][0].name} is {bad[0][1]}" if bad else type(e).__name__
+            print(f"notice: numba cache entry {index or self} is damaged ({why}); dropped, the "
                   "kernel is compiled again", file=sys.stderr)
             return None
 
     load_overload.sshade_guarded = True
     caching.Cache.load_overload = load_overload
+
+
+def _unfit_files(index: Path) -> list[tuple[Path, str]]:
+    """The files of the cache entry of index ``index`` (the index and its ``.nbc`` data
+    files) that are no regular file or larger than :data:`MAX_ENTRY_BYTES`, each with what
+    it is; checked by ``lstat``, nothing opened."""
+    stem = index.name[:-4] if index.name.endswith(".nbi") else index.stem
+    out = []
+    data = glob.glob(os.path.join(glob.escape(str(index.parent)), glob.escape(stem) + ".*.nbc"))
+    for p in [index, *map(Path, data)]:
+        try:
+            st = os.lstat(p)
+        except OSError:
+            continue
+        if not stat.S_ISREG(st.st_mode):
+            out.append((p, "a link" if stat.S_ISLNK(st.st_mode) else "no regular file"))
+        elif st.st_size > MAX_ENTRY_BYTES:
+            out.append((p, f"{st.st_size} bytes, more than {MAX_ENTRY_BYTES}"))
+    return out

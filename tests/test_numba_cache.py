@@ -4,6 +4,7 @@ notice, its temporary cache removed at exit; a damaged cache entry is dropped an
 again with one notice instead of a pickle traceback."""
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -58,8 +59,12 @@ RUN = "from sshade.numba_cache import ensure_cache; ensure_cache(); import kern;
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("damage", ["torn", "fifo", "sparse"])
 @pytest.mark.parametrize("part", ["nbi", "nbc"])
-def test_a_damaged_cache_entry_is_dropped_and_compiled_again_with_one_notice(tmp_path, part):
+def test_a_damaged_cache_entry_is_dropped_and_compiled_again_with_one_notice(tmp_path, part, damage):
+    """A torn write, a FIFO (which would block the load) or a sparse 2 GB file in place of
+    the index or the compiled code: one notice, the kernel compiled again, no traceback,
+    no hang; the next run loads the new entry."""
     (tmp_path / "kern.py").write_text(KERNEL)
     cache = tmp_path / "cache"
     env = _env(PYTHONPATH=f"{tmp_path}:{ROOT}", NUMBA_CACHE_DIR=str(cache))
@@ -71,8 +76,15 @@ def test_a_damaged_cache_entry_is_dropped_and_compiled_again_with_one_notice(tmp
     r = run()
     assert r.returncode == 0 and r.stdout.strip() == "42", r.stderr
     (f,) = [p for p in cache.rglob(f"*.{part}")]
-    data = f.read_bytes()
-    f.write_bytes(data[: len(data) // 2] + b"\x00garbage" * 8)  # a torn write
+    if damage == "torn":
+        data = f.read_bytes()
+        f.write_bytes(data[: len(data) // 2] + b"\x00garbage" * 8)
+    elif damage == "fifo":
+        f.unlink()
+        os.mkfifo(f)
+    else:
+        with open(f, "r+b") as fh:
+            fh.truncate(2 * 2**30)
     r = run()
     assert r.returncode == 0 and r.stdout.strip() == "42", r.stderr
     notices = [ln for ln in r.stderr.splitlines() if ln.startswith("notice: numba cache entry")]
