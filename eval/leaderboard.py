@@ -14,7 +14,7 @@ from eval.present.measures import MEASURES, label
 from eval.present.rows import methods_in
 from eval.present.stops import stop_lines
 from eval.run.compared import COMPARED_CSV, checked_compared
-from eval.run.pending_rows import marked_pending
+from eval.run.pending_rows import marked_pending, marked_run
 from eval.run.row_check import checked_cases, read_cases
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders, run_folders
@@ -256,6 +256,9 @@ def collect(root) -> tuple[list[Board], list[str]]:
                  else None)
             if b is not None and b.rows:
                 b.stale = _stale(d, trees)
+                made = marked_run(d) if kind == "animation" else None  # a folder run whole, marked by --retabulate
+                if made is not None:  # one row per method in its table
+                    b.stale = {r["method"]: (1, 1, {made}, set()) for r in b.rows}
                 boards.append(b)
             elif kind == "tosca":
                 apart += _tosca_line(d)

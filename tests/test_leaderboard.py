@@ -134,6 +134,25 @@ def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
     assert "done; 8 of 40 rows stale, made at 3e79476" in write_index(tmp_path).read_text()  # the index's status
 
 
+def test_a_folder_run_whole_marked_pending_has_its_cells_marked_stale(tmp_path):
+    """An animation folder (run whole: one row per method in its table.csv) whose table.md
+    ``--retabulate`` marked pending: each of its cells and rows carries the mark with the
+    commit that made it; unmarked, none does."""
+    from eval.run.pending_rows import mark_run_pending
+    d = tmp_path / "animation"
+    d.mkdir()
+    (d / "run.json").write_text(json.dumps({"config": {"experiment": {"name": "animation", "kind": "animation"}},
+                                            "git": {"commit": "c449109aaaa"}, "status": "done"}))
+    (d / "table.csv").write_text("method,how,n_cases,frame_median_s,gt_mean_pct\nSShaDe,x,1,0.1,1.26\n"
+                                 "Elastic,y,1,12.0,1.66\n")
+    (d / "table.md").write_text("### animation\n\n| Method |\n|---|\n| SShaDe |\n")
+    assert "[stale:" not in leaderboard_markdown(tmp_path)
+    assert mark_run_pending(d, "c449109", "sshade.guard changed since c449109")
+    text = leaderboard_markdown(tmp_path)
+    mark = "[stale: 1 of 1 rows, made at c449109]"
+    assert f"| 1.26 {mark} |" in text and f"| 1.66 {mark} |" in text
+
+
 def test_a_users_run_with_compare_with_is_ranked_beside_the_rows_it_read(tmp_path):
     from eval.leaderboard import run_board_markdown
     run = tmp_path / "mine"
