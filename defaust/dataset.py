@@ -20,7 +20,7 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 from sshade.files import inside_folder
-from sshade.json_file import loads
+from sshade.json_file import loads, regular_file
 from sshade.mesh.io import read_mesh
 
 from .archive import MAX_TEXT_BYTES, ArchiveBuild, is_archive
@@ -117,6 +117,8 @@ class FolderBuild:
         way or the missing file."""
         p = _inside(self.path, rel)
         if not p.is_file():
+            if os.path.lexists(p):  # a FIFO, a folder, a device: named as what it is
+                regular_file(p, "DeFAUST file")
             raise SShaDeError(f"{p} is missing; resume the build with `python -m defaust ... out={self.path}`")
         return p
 

@@ -183,11 +183,22 @@ def open_player(a, ps, backend: str | None = None, clock=time.monotonic) -> Play
     if a.sel or a.dmat or a.handles:
         raise SShaDeError(f"{a.mesh} is an animation, played as it is; --sel, --dmat and --handles are for a mesh")
     frame, F, times = read_animation(a.mesh, a.fps)
-    ps.set_use_prefs_file(False)  # no .polyscope.ini / imgui.ini in the user's folder
-    ps.init(backend) if backend else ps.init()
+    _init(ps, backend)
     player = Player(ps, frame, F, times, clock)
     ps.set_user_callback(player.callback)
     return player
+
+
+def _init(ps, backend: str | None) -> None:
+    """Initialise polyscope ``ps`` (``backend``, or its default) without a preferences file
+    in the user's folder; SShaDeError in one line where no window can be opened (no
+    display, no OpenGL: polyscope's RuntimeError)."""
+    ps.set_use_prefs_file(False)  # no .polyscope.ini / imgui.ini in the user's folder
+    try:
+        ps.init(backend) if backend else ps.init()
+    except RuntimeError as e:
+        raise SShaDeError(f"the viewer cannot open a window here ({' '.join(str(e).split())[:300]}); it needs a "
+                          "display with OpenGL (over SSH: ssh -X, or xvfb-run for a screenshot)") from None
 
 
 def build_parser() -> ArgumentParser:
@@ -218,8 +229,7 @@ def open_viewer(a, ps, backend: str | None = None) -> Viewer:
     if not moved.any():
         raise SShaDeError("the selection has no handle vertex (status 2) for the gizmo to move")
     prepared = prepare(V, F, handles, n_low=a.n_low, n_samplings=a.k, seed=a.seed)  # n_low checked there
-    ps.set_use_prefs_file(False)  # no .polyscope.ini / imgui.ini in the user's folder
-    ps.init(backend) if backend else ps.init()
+    _init(ps, backend)
     viewer = Viewer(ps, prepared.V, prepared.F, prepared.handles, moved, prepared)
     ps.set_user_callback(viewer.callback)
     return viewer

@@ -172,6 +172,20 @@ def test_describe_and_export_of_a_nan_target_are_one_error_line_and_exit_2(defau
     assert not (tmp_path / "x").exists() or not any((tmp_path / "x").iterdir())
 
 
+def test_describe_and_export_name_a_fifo_case_file_as_a_fifo_without_blocking(defaust_ci, tmp_path):
+    """A FIFO where a case's handle file belongs: ``describe`` and ``export`` end with one
+    error line that names it as a FIFO (not as missing), without blocking on it."""
+    import os
+    c = _copy(defaust_ci, tmp_path)
+    (c / H01).unlink()
+    os.mkfifo(c / H01)
+    for argv in (("describe", c, "--resolution", "low"), ("export", c, "--to", tmp_path / "x", "--format", "obj")):
+        r = _cli(*argv)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert lines[0].startswith("error: ") and str(c / H01) in lines[0] and "FIFO" in lines[0], lines[0]
+
+
 # --- 3. parameters of load ----------------------------------------------------------
 
 

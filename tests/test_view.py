@@ -86,6 +86,31 @@ def test_without_polyscope_the_command_is_one_error_line(tmp_path, monkeypatch, 
                                                "'sshade[view]' (ImportError: ")
 
 
+def test_where_no_window_can_open_the_command_is_one_error_line(tmp_path, monkeypatch, capsys):
+    """polyscope installed but no display (its init raises RuntimeError): one ``error:``
+    line saying what the viewer needs, exit 2, no traceback."""
+    import sys
+    import types
+
+    from sshade.mesh.io import write_mesh
+    from sshade.view import main
+    fake = types.ModuleType("polyscope")
+    fake.set_use_prefs_file = lambda flag: None
+
+    def init(*args):
+        raise RuntimeError("[polyscope] [EXCEPTION] GLFW initialization failed")
+    fake.init = init
+    fake.__path__ = []  # a package, with its imgui module
+    monkeypatch.setitem(sys.modules, "polyscope", fake)
+    monkeypatch.setitem(sys.modules, "polyscope.imgui", types.ModuleType("polyscope.imgui"))
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    write_mesh(tmp_path / "m.obj", V, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    (tmp_path / "h.json").write_text('{"handles": [0, 1, 2], "targets": [[0, 0, 0], [1, 0, 0], [0, 1.5, 0]]}')
+    assert main([str(tmp_path / "m.obj"), "--handles", str(tmp_path / "h.json"), "--n-low", "4"]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("error: the viewer cannot open a window here") and "GLFW" in err[0]
+
+
 _SCREENSHOTS = """
 import sys
 import numpy as np
