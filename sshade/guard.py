@@ -27,12 +27,15 @@ from .errors import SShaDeError
 from .mesh.validate import check_points, validate_deformed, validate_handles, validate_mesh
 from .method_interface import is_plugin
 
-__all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "handle_error", "handles_not_reached",
-           "HANDLE_ERROR_MAX_PCT"]
+__all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "check_positive", "handle_error",
+           "handles_not_reached", "HANDLE_ERROR_MAX_PCT", "MAX_TIMEOUT_S"]
 
 #: Default largest handle error (% of the rest bounding-box diagonal, the
 #: ``handle_err_pct`` of :func:`eval.metrics.measures.deformation_metrics`) of a successful run.
 HANDLE_ERROR_MAX_PCT = 1.0
+#: The longest time-out accepted (s, about 116 days): ``setitimer`` refuses 1e10 s with an
+#: OverflowError on a 64-bit Linux.
+MAX_TIMEOUT_S = 1e7
 
 
 class MethodFailure(SShaDeError):
@@ -116,22 +119,38 @@ class MethodRun:
         return iter((self.U, self.seconds))
 
 
-def check_timeout(value, where: str = "timeout_s"):
-    """``value`` as a positive finite float, or None for None (no limit).
+def check_positive(value, where: str, most: float = math.inf) -> float:
+    """``value`` as a positive finite float of at most ``most``.
 
-    Raises SShaDeError naming ``where``: a bool, a non-number, zero, negative, NaN, inf.
+    Raises SShaDeError naming ``where``: a bool, a non-number, zero, negative, NaN, inf,
+    more than ``most``.
     """
-    if value is None:
-        return None
     try:
         if isinstance(value, bool):
             raise TypeError
         v = float(value)
     except (TypeError, ValueError):
         v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise SShaDeError(f"{where} must be a positive number of seconds (or null for no limit), got {value!r}")
+    if not (math.isfinite(v) and 0 < v <= most):
+        bound = f", at most {most:g}" if math.isfinite(most) else ""
+        raise SShaDeError(f"{where} must be a positive number{bound}, got {value!r}")
     return v
+
+
+def check_timeout(value, where: str = "timeout_s"):
+    """``value`` as a positive finite float of at most :data:`MAX_TIMEOUT_S`, or None for
+    None (no limit).
+
+    Raises SShaDeError naming ``where``: a bool, a non-number, zero, negative, NaN, inf,
+    more than :data:`MAX_TIMEOUT_S` (the system's interval timer takes no more).
+    """
+    if value is None:
+        return None
+    try:
+        return check_positive(value, where, MAX_TIMEOUT_S)
+    except SShaDeError:
+        raise SShaDeError(f"{where} must be a positive number of seconds, at most {MAX_TIMEOUT_S:g} (or null for no "
+                          f"limit), got {value!r}") from None
 
 
 def handle_error(Vd, handles, targets, diag: float) -> float:
@@ -330,9 +349,9 @@ def _alarm(timeout_s):
         raise _Timeout()
 
     old = signal.signal(signal.SIGALRM, handler)
-    old_delay, _ = signal.setitimer(signal.ITIMER_REAL, timeout_s, 0.5)
-    t0 = time.monotonic()
-    try:
+    t0, old_delay = time.monotonic(), 0.0
+    try:  # armed inside: an alarm that fires at once is cleaned up too
+        old_delay = signal.setitimer(signal.ITIMER_REAL, timeout_s, 0.5)[0]
         yield fired
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)

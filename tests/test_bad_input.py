@@ -173,6 +173,8 @@ def test_unreferenced_vertices_in_a_real_file():
 BAD_HANDLES = {
     "index out of range": ([0, 4], np.zeros((2, 3)), "out of range"),
     "negative index": ([-1], np.zeros((1, 3)), "out of range"),
+    "uint64 index of 2**63": (np.array([2**63], np.uint64), np.zeros((1, 3)),
+                              r"handle index 9223372036854775808 is out of range"),  # not wrapped negative
     "duplicate handles": ([1, 1], np.zeros((2, 3)), "duplicate"),
     "length mismatch": ([0, 1, 2], np.zeros((2, 3)), "differ in length"),
     "NaN targets": ([0, 1], [[0, 0, 0], [np.nan, 0, 0]], "NaN"),

@@ -170,6 +170,30 @@ def test_run_method_timeout():
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)  # no alarm left behind
 
 
+def test_a_timeout_that_fires_at_once_leaves_no_alarm_and_the_handler_restored():
+    """A time-out of 1 microsecond fires before the method is called: each run is a
+    failure that says so, and no alarm is left armed (one left behind killed the process
+    with SIGALRM, "Alarm clock", after the run had finished)."""
+    code = ("import signal, time, numpy as np\n"
+            "from sshade.guard import MethodFailure, run_method\n"
+            "import tests.bad_methods as bm\n"
+            "V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]); F = np.array([[0, 2, 1], [0, 1, 3], "
+            "[0, 3, 2], [1, 2, 3]]); h = np.array([0, 1, 2]); t = V[h] + 0.1\n"
+            "before = signal.getsignal(signal.SIGALRM)\n"
+            "for _ in range(50):\n"
+            "    try:\n"
+            "        run_method(bm.RestPose(), V, F, h, t, timeout_s=1e-6)\n"
+            "    except MethodFailure as e:\n"
+            "        assert str(e) == 'timed out after 1e-06 s', e\n"
+            "    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)\n"
+            "    assert signal.getsignal(signal.SIGALRM) is before\n"
+            "time.sleep(1.2)\n"
+            "print('ok')\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=subprocess_env(), capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", (r.returncode, r.stderr[-2000:])
+
+
 def test_input_modifying_plugin_does_not_harm_later_methods(tmp_path, faust_root):
     _, alone, _, _ = _evaluate(tmp_path / "alone", faust_root, [MINE])
     _, after, _, _ = _evaluate(tmp_path / "after", faust_root, [_bad("ScalesInput"), MINE])
@@ -193,7 +217,7 @@ def test_timeout_in_the_evaluator(tmp_path, faust_root):
     assert cases.loc["Mine", "error"] == ""
 
 
-@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf", "abc", "true"])
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf", "abc", "true", "1e308"])
 def test_timeout_config_is_checked(tmp_path, faust_root, value):
     from eval.app import run
     from harness.command import config_error_types
@@ -227,7 +251,7 @@ def test_cli_sys_exit_subprocess(bar, tmp_path):
     _one_error_line(r.returncode, r.stderr, out, "SystemExit: 0")
 
 
-@pytest.mark.parametrize("value", ["0", "-2", "nan", "x"])
+@pytest.mark.parametrize("value", ["0", "-2", "nan", "x", "1e10"])
 def test_cli_timeout_is_checked(bar, tmp_path, capsys, value):
     out = tmp_path / "out.off"
     rc, _, err = _cli(bar, out, "tests.plugin_example.MyMethod", "--timeout", value, capsys=capsys)

@@ -16,6 +16,7 @@ from eval.report import write_index
 from eval.run.compared import write_compared
 from sshade.errors import SShaDeError
 from tests.conftest import ROOT
+from tests.current_rows import current_copy
 
 
 def _run(folder, rows, kind="cases", commit="abc123"):
@@ -118,9 +119,8 @@ def test_a_method_whose_rows_are_stale_is_marked_stale(tmp_path):
     """results/faust copied with SShaDe's records replaced by those of the earlier key layout
     (git's history): the board marks SShaDe's cell and row stale, 8 of 8, and says what
     the mark means; the other methods are unmarked; the index's status says 8 of 40."""
-    import shutil
     import subprocess
-    shutil.copytree(ROOT / "results" / "faust", tmp_path / "faust")
+    current_copy(ROOT / "results" / "faust", tmp_path / "faust")  # every row current, whatever the committed state
     for case in sorted(p.name for p in (tmp_path / "faust" / "runs").iterdir()):
         r = subprocess.run(["git", "-C", str(ROOT), "show", f"8d866e5:results/faust/runs/{case}/SShaDe.json"],
                            capture_output=True, text=True, timeout=60, check=False)

@@ -90,15 +90,13 @@ def test_a_row_left_pending_for_other_settings_stays_marked_until_made_again(tmp
     """A row whose code is current but that its run left pending for other settings (the
     run's stop, :data:`STOP_AFTER_ENV`) stays marked when its tables are rebuilt, and counts
     as pending for ``--check``, the leaderboard and the index, until a run makes it again."""
-    import shutil
 
     from eval.run.stale_rows import CommitTrees, check_folders
     from eval.tables import retabulate
 
     from .conftest import ROOT
-
-    run = tmp_path / "faust"
-    shutil.copytree(ROOT / "results" / "faust", run)
+    from .current_rows import current_copy
+    run = current_copy(ROOT / "results" / "faust", tmp_path / "faust")  # current, whatever the committed state
     with CommitTrees() as trees:
         assert check_folders([run], trees, marked=marked_pending)[str(run)]["ARAP"]["stale"] == 0
     rec = __import__("json").loads((run / "runs" / "s0_p1" / "ARAP.json").read_text())

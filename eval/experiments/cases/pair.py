@@ -17,7 +17,7 @@ from eval.run.jsonsafe import json_safe
 from eval.run.result_store import cell_problem
 from eval.run.spec import GuardOptions
 from sshade.errors import SShaDeError
-from sshade.guard import HANDLE_ERROR_MAX_PCT, check_timeout, handles_not_reached, run_method
+from sshade.guard import HANDLE_ERROR_MAX_PCT, check_positive, check_timeout, handles_not_reached, run_method
 
 __all__ = ["run_pair", "run_and_store", "guard_options"]
 
@@ -99,7 +99,7 @@ def guard_options(timeout_s=None, handle_error_max_pct=HANDLE_ERROR_MAX_PCT) -> 
     hmax = handle_error_max_pct
     if hmax is not None:
         try:
-            hmax = check_timeout(hmax, "handle_error_max_pct")
+            hmax = check_positive(hmax, "handle_error_max_pct")
         except SShaDeError:
             raise SShaDeError(f"handle_error_max_pct must be a positive number (% of the bounding-box diagonal) "
                               f"or null for no limit, got {hmax!r}") from None
