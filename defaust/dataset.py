@@ -6,8 +6,7 @@ manifest (:func:`verify`). NumPy only, no Hydra, OmegaConf or evaluator import o
 path; :mod:`eval.datasets.defaust_dataset` reads through it. The stored handle positions are
 snapped to the mesh read (:func:`defaust.handles.snap_handles`) and their targets moved
 with them; every file is read as untrusted input (:func:`load_handles`). Usage, checks and
-errors: docs/defaust.md §6.
-"""
+errors: docs/defaust.md §6."""
 from __future__ import annotations
 
 import os
@@ -98,8 +97,7 @@ class FolderBuild:
 
     Attributes
     ----------
-    path : Path of the folder.
-    """
+    path : Path of the folder."""
 
     def __init__(self, root: Path):
         self.path = Path(root)
@@ -113,8 +111,8 @@ class FolderBuild:
         return (self.path / rel).is_file()
 
     def check(self, rel: str) -> Path:
-        """``root / rel``, a real file inside the folder; SShaDeError naming a link on the
-        way or the missing file."""
+        """``root / rel``, a regular file inside the folder; SShaDeError naming a link on
+        the way, the missing file, or what stands there instead (a FIFO, a folder)."""
         p = _inside(self.path, rel)
         if not p.is_file():
             if os.path.lexists(p):  # a FIFO, a folder, a device: named as what it is

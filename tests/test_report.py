@@ -151,20 +151,21 @@ def test_a_report_refuses_an_edited_cases_csv_and_leaves_out_a_fifo_or_a_deeply_
     views[0].unlink()
     os.mkfifo(views[0])
     views[1].write_text("(window.SSHADE_VIEWS = window.SSHADE_VIEWS || {})[" + "[" * 100_000)
-    assert main([str(run)]) == 0
+    rc = main([str(run)])
+    assert rc == 0, capsys.readouterr().err
     cases = run / "cases.csv"
     rows = list(csv.DictReader(cases.open()))
-    col = next(c for c in ("volume_err_pct", "edge_err_pct") if rows[0].get(c))
-    rows[0][col] = "0.000123"
+    i, col = next((i, c) for i, r in enumerate(rows) for c in ("volume_err_pct", "edge_err_pct") if r.get(c))
+    rows[i][col] = "0.000123"
     with cases.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     (run / PAGE).unlink()
     capsys.readouterr()
-    assert main([str(run)]) == 2 and not (run / PAGE).exists()
-    err = capsys.readouterr().err
-    assert err.startswith("error: ") and str(cases) in err and f"{col} 0.000123 in cases.csv" in err
+    rc, err = main([str(run)]), capsys.readouterr().err
+    assert rc == 2 and not (run / PAGE).exists(), err
+    assert err.startswith("error: ") and str(cases) in err and f"{col} 0.000123 in cases.csv" in err, err
 
 
 def test_a_page_written_by_someone_else_is_kept(tmp_path):

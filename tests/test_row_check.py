@@ -84,7 +84,7 @@ def test_retabulated_table_says_checked_or_disagreeing_or_unchecked(tmp_path):
     df.to_csv(tmp_path / "cases.csv", index=False)
     table = (tmp_path / "table.md").read_text()
     with pytest.raises(SShaDeError, match="cases.csv: s0_p1 / A: time_s 0.01 in cases.csv, 0.25 in the record; its "
-                                          "rows disagree with their records: no table is made from them"):
+                                          "rows disagree with their records: nothing is made from them"):
         retabulate(tmp_path)  # no table from rows the store does not hold
     assert (tmp_path / "table.md").read_text() == table
     assert "Rows disagree with the result store" in check_rows(df, tmp_path).line()

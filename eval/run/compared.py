@@ -12,7 +12,7 @@ from pathlib import Path
 from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.result_store import ResultStore, case_identity
-from eval.run.row_check import MAX_LISTED, cell_differs, read_cases
+from eval.run.row_check import MAX_LISTED, cell_differs, read_cases, shown_cell
 from eval.run.runinfo import read_runinfo
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
@@ -239,6 +239,7 @@ def _compared_problems(got: list, rows: list) -> list[str]:
     for a, b in zip(got, rows):
         diff = [k for k in sorted(set(a) | set(b)) if cell_differs(a.get(k), b.get(k))]
         if diff:
-            out.append(f"{b.get('case')} / {b.get('method')}: {diff[0]} {a.get(diff[0])!r} in {COMPARED_CSV}, "
-                       f"{b.get(diff[0])!r} recorded")
+            k = diff[0]
+            out.append(f"{b.get('case')} / {b.get('method')}: {k} {shown_cell(a.get(k))} in {COMPARED_CSV}, "
+                       f"{shown_cell(b.get(k))} recorded")
     return out

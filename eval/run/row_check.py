@@ -20,7 +20,8 @@ from sshade.json_file import read_bounded
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["RowCheck", "check_rows", "checked_cases", "read_cases", "cell_differs", "MAX_LISTED", "MAX_CASES_BYTES"]
+__all__ = ["RowCheck", "check_rows", "checked_cases", "read_cases", "cell_differs", "shown_cell", "MAX_LISTED",
+           "MAX_CASES_BYTES"]
 
 MAX_LISTED = 3  #: rows named in the line when more disagree
 OLDER = "older"  # _row_problem: a record of another store version
@@ -108,6 +109,13 @@ def cell_differs(a, b) -> bool:
     return str(a) != str(b)
 
 
+def shown_cell(v) -> str:
+    """A cell as a message shows it: a number as Python writes it (a NumPy scalar too),
+    text quoted."""
+    v = v.item() if hasattr(v, "item") and not isinstance(v, (str, bytes)) else v
+    return repr(v)
+
+
 def _row_problem(store: ResultStore, row: dict) -> tuple[bool, str | None]:
     """``(absent, problem)`` of one row: whether its record is absent, else the text of
     what is wrong with it or its cells (None when it matches)."""
@@ -126,7 +134,8 @@ def _row_problem(store: ResultStore, row: dict) -> tuple[bool, str | None]:
     diff = [k for k in sorted(set(stored) | set(row)) if cell_differs(row.get(k), stored.get(k))]
     if diff:
         k = diff[0]
-        return False, (f"{case} / {method}: {k} {row.get(k)!r} in cases.csv, {stored.get(k)!r} in the record"
+        return False, (f"{case} / {method}: {k} {shown_cell(row.get(k))} in cases.csv, {shown_cell(stored.get(k))} "
+                       "in the record"
                        + (f" (+{len(diff) - 1} more cells)" if len(diff) > 1 else ""))
     return False, None
 
