@@ -65,7 +65,7 @@ from eval.tables import (
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 from sshade.files import atomic_write
-from sshade.json_file import read_bounded
+from sshade.json_file import read_bounded, read_prefix
 
 __all__ = ["PAGE", "GENERATOR", "CHROMIUM_FLAGS", "render_page", "write_report", "safe_report", "write_index",
            "find_chromium", "chromium", "screenshot", "main"]
@@ -381,14 +381,7 @@ def _ours(page: Path) -> bool:
 def _head(path: Path, n: int) -> str:
     """The first ``n`` bytes of the regular file ``path`` as text (a FIFO or a device is
     an OSError, opened without blocking; FileNotFoundError when absent)."""
-    import stat
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise OSError(f"{path}: not a regular file")
-        return os.read(fd, n).decode("utf-8", errors="replace")
-    finally:
-        os.close(fd)
+    return read_prefix(path, n).decode("utf-8", errors="replace")
 
 
 def write_report(run_dir) -> Path:

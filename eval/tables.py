@@ -28,9 +28,8 @@ from eval.run.row_check import check_rows, checked_cases
 from eval.run.stale_rows import CommitTrees, folder_states, settings_marks
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
-from sshade.errors import SShaDeError
 from sshade.files import atomic_write
-from sshade.json_file import read_json, regular_file
+from sshade.json_file import read_json, read_prefix
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python -m eval` only refuses a config
     import pandas as pd
@@ -460,10 +459,8 @@ def _written_title(run_dir: Path) -> str | None:
     """The main table's title the run wrote: the first line of its ``table.md`` when it
     is a ``### `` heading (at most 4096 characters read), else None."""
     try:
-        regular_file(run_dir / "table.md", "table")  # a FIFO would block the read
-        with open(run_dir / "table.md", encoding="utf-8", errors="replace") as fh:
-            first = fh.readline(4096).rstrip("\n")
-    except (OSError, SShaDeError):
+        first = read_prefix(run_dir / "table.md", 4096).decode("utf-8", errors="replace").split("\n", 1)[0]
+    except OSError:
         return None
     return strip_pending(first[4:]) if first.startswith("### ") and len(first) > 4 else None
 

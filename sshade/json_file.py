@@ -3,6 +3,8 @@ refused without blocking), its size bounded by the bytes read rather than by wha
 says, JSON nesting bounded.
 
 * :func:`read_bounded`: the bytes of a regular file of at most ``max_bytes``;
+* :func:`open_regular`, :func:`read_prefix`: a regular file opened without blocking, and
+  its first ``n`` bytes (a header, a generator tag);
 * :func:`loads`: :func:`json.loads` whose too-deep nesting is a ``ValueError``;
 * :func:`read_json`: both, for a JSON file (``MAX_JSON_BYTES`` by default);
 * :func:`regular_file`: a path checked to name a regular file before a reader opens it.
@@ -11,6 +13,7 @@ Callers catch ``OSError`` (unreadable, not a regular file, too large) and ``Valu
 """
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -19,7 +22,7 @@ from pathlib import Path
 
 from .errors import SShaDeError
 
-__all__ = ["MAX_JSON_BYTES", "read_bounded", "loads", "read_json", "regular_file"]
+__all__ = ["MAX_JSON_BYTES", "read_bounded", "open_regular", "read_prefix", "loads", "read_json", "regular_file"]
 
 MAX_JSON_BYTES = 256 * 2**20  #: a JSON file larger than this is refused (bytes)
 
@@ -59,6 +62,35 @@ def read_bounded(path, max_bytes: int) -> bytes:
                 raise OSError(errno.EFBIG, f"larger than {max_bytes} bytes", str(path))
     finally:
         os.close(fd)
+
+
+@contextlib.contextmanager
+def open_regular(path):
+    """The regular file ``path`` (links followed) opened for binary reading, without
+    blocking: a context manager giving the file object, closed on exit.
+
+    Raises
+    ------
+    OSError: unreadable, absent (``FileNotFoundError``), or not a regular file
+        (``EINVAL``: a FIFO, a device, a folder), before a byte is read.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        fh = os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+    with fh:
+        yield fh
+
+
+def read_prefix(path, n: int) -> bytes:
+    """The first ``n`` (>= 0) bytes of the regular file ``path`` (fewer when it is
+    shorter), read through :func:`open_regular`; OSError as it raises."""
+    with open_regular(path) as fh:
+        return fh.read(n)
 
 
 def _kind(mode: int) -> str:

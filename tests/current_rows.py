@@ -9,34 +9,21 @@ import json
 import shutil
 from pathlib import Path
 
-from eval.run.code_identity import (
-    ARTIFACTS,
-    artifact_identity,
-    closure_constants,
-    identity_roots,
-    import_closure,
-    modules_digest,
-)
 from eval.run.result_store import fields_digest, record_digest
-from eval.run.stale_rows import record_paths, references_on, run_folders
+from eval.run.stale_rows import current_code, record_paths, run_folders
 
 
 def resign_current(top, root: str | None = None) -> int:
     """Re-sign every record of the run folders under ``top`` with the code identity of the
     checkout ``root`` (default: this one): their ``code`` sources, modules, constants and
-    reference identity, then their key and digest. Returns the records re-signed."""
+    reference identity (:func:`eval.run.stale_rows.current_code`), then their key and
+    digest. Returns the records re-signed."""
     n = 0
-    ref = artifact_identity(root)
     for folder in run_folders(Path(top)):
         for _, p in record_paths(folder):
             rec = json.loads(p.read_text())
             fields = rec["key_fields"]
-            roots = identity_roots(fields.get("method"), references_on(fields))
-            mods, consts = import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
-            code = fields["code"]
-            code.update(sources=modules_digest(mods, root, consts), modules=list(mods), constants=list(consts))
-            if "reference" in code:
-                code["reference"] = ref
+            fields["code"] = current_code(fields, root)
             rec["key"] = fields_digest(fields)
             rec["digest"] = record_digest(rec)
             p.write_text(json.dumps(rec, indent=1) + "\n")

@@ -1,5 +1,5 @@
 """sshade/json_file.py and the readers built on it: a FIFO, a device or a folder where a
-file is expected is refused at once (never read, never waited on), a size is counted on the
+file is expected is refused at once (the bounded reader and the prefix reader) (never read, never waited on), a size is counted on the
 bytes read, a JSON file nested 200,000 deep is an unreadable file, not a RecursionError; a
 crafted-input sweep over the evaluator's, the sweeps' and DeFAUST's JSON readers and the
 times reader ends every case in their documented outcome."""
@@ -18,7 +18,7 @@ from eval.run.result_store import ResultStore
 from eval.run.runinfo import read_runinfo
 from eval.sweeps.files import read_status
 from sshade.errors import SShaDeError
-from sshade.json_file import loads, read_bounded, read_json
+from sshade.json_file import loads, read_bounded, read_json, read_prefix
 
 
 @pytest.fixture(autouse=True)
@@ -56,18 +56,27 @@ def _crafted(tmp_path, name: str) -> dict:
     return out
 
 
-def test_read_bounded_refuses_a_fifo_a_device_and_a_folder_without_reading_and_counts_what_it_reads(tmp_path):
+@pytest.mark.parametrize("reader", [read_bounded, read_prefix])
+def test_the_bounded_and_the_prefix_reader_refuse_a_fifo_a_device_and_a_folder_without_reading(tmp_path, reader):
     fifo = tmp_path / "f"
     os.mkfifo(fifo)
     for p in (fifo, "/dev/zero", tmp_path):
         with pytest.raises(OSError) as e:
-            read_bounded(p, 10)
+            reader(p, 10)
         assert e.value.errno in (errno.EINVAL, errno.EISDIR)
+    with pytest.raises(FileNotFoundError):
+        reader(tmp_path / "absent", 10)
+
+
+def test_read_bounded_counts_what_it_reads_and_read_prefix_reads_at_most_n_bytes(tmp_path):
     (tmp_path / "a").write_bytes(b"x" * 11)
     with pytest.raises(OSError) as e:
         read_bounded(tmp_path / "a", 10)
     assert e.value.errno == errno.EFBIG
     assert read_bounded(tmp_path / "a", 11) == b"x" * 11
+    (tmp_path / "b").write_bytes(b"0123456789" * 1000)
+    assert read_prefix(tmp_path / "b", 4) == b"0123"
+    assert read_prefix(tmp_path / "b", 10**6) == b"0123456789" * 1000
 
 
 def test_json_nested_200000_deep_is_a_value_error_not_a_recursion_error(tmp_path):

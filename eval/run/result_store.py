@@ -29,7 +29,7 @@ from eval.run.outdir import alive
 from eval.run.runinfo import git_info
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write, inside_folder
-from sshade.json_file import read_json
+from sshade.json_file import open_regular, read_json
 
 __all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "LATER_CASE_FIELDS", "OTHER_SETTINGS", "ResultStore",
            "Lookup",
@@ -185,14 +185,11 @@ def output_digest(U) -> str:
 
 def _read_npy(p: Path, n: int | None) -> np.ndarray | None:
     """The (m, 3) float64 array of the regular ``.npy`` file ``p`` (opened without
-    blocking), None when its header says another dtype or shape (``m`` = ``n`` when
-    given) or the file holds other than the bytes it promises. OSError, ValueError."""
-    import stat
-    fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
-    with os.fdopen(fd, "rb") as fh:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            return None
+    blocking, :func:`sshade.json_file.open_regular`), None when its header says another
+    dtype or shape (``m`` = ``n`` when given) or the file holds other than the bytes it
+    promises. OSError (a FIFO or a device included), ValueError."""
+    with open_regular(p) as fh:
+        st = os.fstat(fh.fileno())
         fmt = np.lib.format
         major = fmt.read_magic(fh)[0]
         if major not in (1, 2):

@@ -52,7 +52,7 @@ from sshade.json_file import read_json
 
 __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "changed_since", "row_state",
            "check_folders", "settings_marks", "table_problems", "rekey_record", "references_on",
-           "folder_states"]
+           "folder_states", "current_code"]
 
 #: The folders of scripts whose runs are held to their code besides the packages
 #: (:mod:`eval.run.stale_runs`): extracted with them.
@@ -167,6 +167,19 @@ def _now(fields, root: str | None = None) -> tuple[tuple, tuple]:
     spec = fields.get("method") if isinstance(fields, dict) else None
     roots = identity_roots(spec, references_on(fields))
     return import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
+
+
+def current_code(fields, root: str | None = None) -> dict:
+    """What a record with key fields ``fields`` would hold as ``code`` had the checkout
+    ``root`` (default: this one) made it: its ``sources`` digest, ``modules`` and
+    ``constants`` (:func:`_now`), and ``reference`` (the identity of the code that solves
+    references) where ``fields["code"]`` has one; the other entries kept. A dict."""
+    code = dict(fields.get("code") or {}) if isinstance(fields, dict) else {}
+    mods, consts = _now(fields, root)
+    code.update(sources=modules_digest(mods, root, consts), modules=list(mods), constants=list(consts))
+    if "reference" in code:
+        code["reference"] = artifact_identity(root)
+    return code
 
 
 def changed_since(mods, consts, tree: Path, root: str | None = None) -> list[str]:
