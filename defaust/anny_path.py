@@ -7,15 +7,17 @@ corrections included) along the geodesic ``R_j(a) = R_j^0 exp(a log(R_j^0^T R_j^
 planted joints (the feet) at their rest positions and grows the last target's turn and
 shift in proportion to ``a``: frame 0 is the rest pose, frame 1 the target (to rounding).
 Any mesh of the rest surface follows through
-:meth:`defaust.anny_source.AnnySubject.posed_by`.
+:meth:`defaust.anny_source.AnnySubject.posed_by`. The arithmetic is in a fixed order
+(:mod:`defaust.fixed_order`, :mod:`defaust.anny_fixed`): the same bytes on every machine.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from sshade.errors import SShaDeError
 
+from . import anny_fixed
+from . import fixed_order as fo
 from .anny_source import AnnySubject, body_transform, placement
 
 __all__ = ["interpolate_pose_arrays", "path_transforms"]
@@ -23,7 +25,9 @@ __all__ = ["interpolate_pose_arrays", "path_transforms"]
 
 def interpolate_pose_arrays(rest: dict, target: dict, a: float) -> dict:
     """ANNY's pose arrays a fraction ``a`` of the way from ``rest`` to ``target``: per
-    joint the geodesic between the two rotations (module docstring).
+    joint the geodesic between the two rotations (module docstring), by rotation matrices
+    (:func:`defaust.fixed_order.rotvec_to_matrix`, :func:`~defaust.fixed_order.matmul`,
+    :func:`~defaust.fixed_order.matrix_to_rotvec`).
 
     Parameters
     ----------
@@ -45,10 +49,11 @@ def interpolate_pose_arrays(rest: dict, target: dict, a: float) -> dict:
         raise SShaDeError("interpolate_pose_arrays: the two poses' arrays differ in groups or shapes")
     out = {}
     for g in rest:
-        r0 = Rotation.from_rotvec(np.asarray(rest[g], np.float64).reshape(-1, 3))
-        r1 = Rotation.from_rotvec(np.asarray(target[g], np.float64).reshape(-1, 3))
-        step = (r0.inv() * r1).as_rotvec()
-        out[g] = (r0 * Rotation.from_rotvec(float(a) * step)).as_rotvec().reshape(np.shape(rest[g]))
+        R0 = fo.rotvec_to_matrix(np.asarray(rest[g], np.float64).reshape(-1, 3))
+        R1 = fo.rotvec_to_matrix(np.asarray(target[g], np.float64).reshape(-1, 3))
+        step = fo.matrix_to_rotvec(fo.matmul(np.swapaxes(R0, -1, -2), R1))  # log(R0^T R1)
+        Ra = fo.matmul(R0, fo.rotvec_to_matrix(float(a) * step))
+        out[g] = fo.matrix_to_rotvec(Ra).reshape(np.shape(rest[g]))
     return out
 
 
@@ -59,8 +64,8 @@ def path_transforms(sub: AnnySubject, model, pose: int, alphas) -> np.ndarray:
     Parameters
     ----------
     sub : :class:`defaust.anny_source.AnnySubject` (built by
-        :func:`defaust.anny_source.anny_subject` with ``model``). model : the loaded ANNY
-        model (:func:`defaust.anny_model.load_anny`). pose : int target index, 1 .. P-1.
+        :func:`defaust.anny_source.anny_subject` with ``model``). model : ANNY's assets
+        (:func:`defaust.anny_fixed.load_anny_fixed`). pose : int target index, 1 .. P-1.
         alphas : (f,) floats in [0, 1].
 
     Returns
@@ -74,7 +79,7 @@ def path_transforms(sub: AnnySubject, model, pose: int, alphas) -> np.ndarray:
 
     Example::
 
-        model = load_anny(cache=...)
+        model = load_anny_fixed()
         sub = anny_subject(0, model=model)
         T = path_transforms(sub, model, 2, np.linspace(0, 1, 31))   # (31, k, 3, 4)
         frames = [sub.posed_by(Ta, V=Vh, W=Wh) for Ta in T]         # high-res ground truth
@@ -83,17 +88,17 @@ def path_transforms(sub: AnnySubject, model, pose: int, alphas) -> np.ndarray:
         raise SShaDeError(f"path_transforms: target pose {pose} out of range [1, {len(sub.T)})")
     names = list(model.joint_names)
     used = [names.index(n) for n in sub.joint_names]
-    ident = model.prepare_identity(sub.phenotype.shape)
+    ident = anny_fixed.prepare_identity(model, np.asarray(sub.phenotype.shape, np.float64))
     A = body_transform(sub.offset)
-    Ainv = np.linalg.inv(A)
+    Ainv = fo.rigid_inverse(A)
     last = len(sub.T) - 1
     out = []
     for a in np.asarray(alphas, np.float64).ravel():
         arr = interpolate_pose_arrays(sub.pose_params[0], sub.pose_params[int(pose)], float(a))
-        res = model.prepare_pose(arr["body_pose"], arr["head_pose"], arr["hand_pose"], identity=ident)
-        S = np.asarray(res["skinning_transforms"], np.float64)
-        K = np.asarray(res["skeleton_transforms"], np.float64)
-        X = A @ S[used] @ Ainv  # unposed -> frame, body frame
+        R = anny_fixed.pack_rotations(arr["body_pose"], arr["head_pose"], arr["hand_pose"])
+        res = anny_fixed.prepare_pose(model, ident, R)
+        S, K = res["skinning_transforms"], res["skeleton_transforms"]
+        X = fo.matmul(fo.matmul(A, S[used]), Ainv)  # unposed -> frame, body frame
         G, _ = placement(int(pose), sub.poses[int(pose)], last, K, A, names, sub.joints, sub.offset, fraction=float(a))
-        out.append((X if G is None else G @ X)[:, :3, :])
+        out.append((X if G is None else fo.matmul(G, X))[:, :3, :])
     return np.stack(out) if out else np.empty((0, len(used), 3, 4))

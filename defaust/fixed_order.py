@@ -7,7 +7,8 @@ reduction of more than one term, no CPU-dispatched SIMD math. The transcendental
 :mod:`decimal`, 40 significant digits) and rounded once to float64, so they do not
 depend on the C library either. Products of small matrices (:func:`matmul`,
 :func:`apply_affine`, :func:`rigid_inverse`, :func:`solve3`), per-row weighted sums
-(:func:`blend`), norms and dots of 3-vectors, Rodrigues' rotation
+(:func:`blend`), sums in ascending order (:func:`sum_ascending`), norms and dots of
+3-vectors, Rodrigues' rotation
 (:func:`rotvec_to_matrix`) and back (:func:`matrix_to_rotvec`). Why: docs/defaust.md, "The same bytes on every machine".
 """
 from __future__ import annotations
@@ -17,9 +18,8 @@ from decimal import Decimal
 
 import numpy as np
 
-__all__ = ["matmul", "apply_affine", "rigid_inverse", "norm3", "dot3", "blend", "solve3", "sin", "cos", "atan2",
-           "rotvec_to_matrix",
-           "matrix_to_rotvec"]
+__all__ = ["matmul", "apply_affine", "rigid_inverse", "norm3", "dot3", "blend", "sum_ascending", "solve3", "sin",
+           "cos", "atan2", "rotvec_to_matrix", "matrix_to_rotvec"]
 
 _CTX = decimal.Context(prec=40, rounding=decimal.ROUND_HALF_EVEN, Emin=-999999, Emax=999999)
 _PI = Decimal("3.141592653589793238462643383279502884197169399375105820974944592")
@@ -152,6 +152,40 @@ def blend(W, T) -> np.ndarray:
     for j in np.flatnonzero(np.any(W != 0.0, axis=0)):
         out += W[:, j, None] * flat[j]
     return out.reshape((W.shape[0],) + tail)
+
+
+def sum_ascending(X, axis: int = 0) -> np.ndarray:
+    """The sum of ``X`` along ``axis``, its terms added in ascending index order
+    (``((x0 + x1) + x2) + ...``), where numpy's ``sum`` adds pairwise in blocks.
+
+    Parameters
+    ----------
+    X : (..., n, ...) float, ``n >= 1`` terms along ``axis``.
+
+    Returns
+    -------
+    X's shape without ``axis``, float64 (a 0-d array for a 1-d ``X``).
+
+    Raises
+    ------
+    ValueError if ``X`` has no term along ``axis``.
+
+    >>> float(sum_ascending([1e16, 1.0, -1e16, 1.0]))
+    1.0
+    """
+    X = np.moveaxis(np.asarray(X, np.float64), axis, 0)
+    if not len(X):
+        raise ValueError("sum_ascending: no term to add")
+    if X.ndim == 1:  # one Python float addition per term: no array per term
+        terms = X.tolist()
+        acc = terms[0]
+        for t in terms[1:]:
+            acc = acc + t
+        return np.asarray(acc, np.float64)
+    acc = X[0].copy()
+    for k in range(1, len(X)):
+        acc = acc + X[k]
+    return acc
 
 
 def solve3(M, y) -> np.ndarray:

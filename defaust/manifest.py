@@ -34,7 +34,9 @@ FORMAT = "defaust-1"
 #: A change to one source's items only changes those items' keys instead, so the other
 #: sources' builds stay valid: the faust pose items' ``high_ground_truth`` entry
 #: (:data:`defaust.sources.FAUST_HIGH_GT`, the high-res ground truth of a FAUST build).
-BUILDER_VERSION = 2
+#: 3: every float of the ANNY and FAUST paths in a fixed order, machine-independent
+#: (:mod:`defaust.fixed_order`, :mod:`defaust.anny_fixed`): the same bytes on every machine.
+BUILDER_VERSION = 3
 
 
 class ManifestError(SShaDeError):

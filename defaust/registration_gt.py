@@ -6,7 +6,8 @@ high-res vertex is its closest point on the subdivided rest (:class:`SurfaceMap`
 barycentric coordinates, and the vertex's rounding-sized offset from that point), read on
 the subdivided target (:func:`map_target`). Definition, what it is exact for, measured
 sizes: docs/defaust.md §2, "Ground truth of a FAUST build at high resolution". Pure
-functions over arrays; no file I/O.
+functions over arrays; no file I/O; the sums in a fixed order (:mod:`defaust.fixed_order`:
+the same bytes on every machine).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 
+from . import fixed_order as fo
 from .highres import ls3_loop
 from .skinning import closest_barycentric
 
@@ -47,12 +49,14 @@ class SurfaceMap:
     @property
     def offset_max(self) -> float:
         """The largest offset's length (metres)."""
-        return float(np.sqrt((self.offset ** 2).sum(axis=1).max())) if len(self.offset) else 0.0
+        return float(fo.norm3(self.offset).max()) if len(self.offset) else 0.0
 
 
 def _at(V: np.ndarray, F: np.ndarray, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """The (p, 3) points with barycentric coordinates ``bary`` (p, 3) in triangles ``F[face]`` of ``V``."""
-    return np.einsum("pk,pkj->pj", bary, V[F[face]])
+    """The (p, 3) points with barycentric coordinates ``bary`` (p, 3) in triangles ``F[face]`` of ``V``
+    (``(b0 v0 + b1 v1) + b2 v2``)."""
+    T = V[F[face]]
+    return (bary[:, 0:1] * T[:, 0] + bary[:, 1:2] * T[:, 1]) + bary[:, 2:3] * T[:, 2]
 
 
 def surface_map(V0, F0, Vh, iterations: int) -> SurfaceMap:
@@ -87,7 +91,7 @@ def surface_map(V0, F0, Vh, iterations: int) -> SurfaceMap:
     Vh = np.asarray(Vh, np.float64)
     Vs, Fs = ls3_loop(V0, F0, iterations)
     face, bary = closest_barycentric(Vs, Fs, Vh)
-    bary = bary / bary.sum(axis=1, keepdims=True)  # clipped coordinates: sum back to 1
+    bary = bary / ((bary[:, 0] + bary[:, 1]) + bary[:, 2])[:, None]  # clipped coordinates: sum back to 1
     return SurfaceMap(iterations=iterations, F_sub=Fs, n_sub=int(len(Vs)), face=face, bary=bary,
                       offset=Vh - _at(Vs, Fs, face, bary))
 
@@ -127,7 +131,8 @@ def map_target(m: SurfaceMap, V1, F0) -> np.ndarray:
 
 def volume_area(V, F) -> tuple[float, float]:
     """Signed enclosed volume (divergence theorem over the faces, outward orientation
-    positive; m^3) and surface area (m^2) of a closed triangle mesh.
+    positive; m^3) and surface area (m^2) of a closed triangle mesh, the faces' terms added
+    in face order (:func:`defaust.fixed_order.sum_ascending`).
 
     Parameters
     ----------
@@ -142,9 +147,11 @@ def volume_area(V, F) -> tuple[float, float]:
     """
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
+    if not len(F):
+        return 0.0, 0.0
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    vol = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-    area = float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    vol = float(fo.sum_ascending(fo.dot3(a, np.cross(b, c))) / 6.0)
+    area = float(0.5 * fo.sum_ascending(fo.norm3(np.cross(b - a, c - a))))
     return vol, area
 
 

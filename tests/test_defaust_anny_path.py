@@ -14,8 +14,8 @@ from sshade.errors import SShaDeError
 
 
 @pytest.fixture(scope="module")
-def model(anny_model):
-    return anny_model
+def model(anny_fixed_assets):
+    return anny_fixed_assets
 
 
 @pytest.fixture(scope="module")

@@ -106,22 +106,22 @@ def test_a_bad_sampling_parameter_is_refused_naming_it(kw, word):
 # ----------------------------------------------------------------------------- with ANNY
 
 
-def test_a_sampled_subject_meets_its_difficulty_without_self_intersection(anny_model):
-    got = sampled_subject(4, seed=0, model=anny_model, n_targets=2, difficulty=8.0)
+def test_a_sampled_subject_meets_its_difficulty_without_self_intersection(anny_fixed_assets):
+    got = sampled_subject(4, seed=0, model=anny_fixed_assets, n_targets=2, difficulty=8.0)
     sub, rec = got.subject, got.record
     assert sub.phenotype == draw_phenotype(0, 4, rec["body_attempts"] - 1)
     assert [p.name for p in sub.poses] == ["rest", "sampled_1", "sampled_2"] and len(rec["poses"]) == 2
     for i, (p, r) in enumerate(zip(sub.poses[1:], rec["poses"]), 1):
-        d = mean_displacement_pct(anny_model, sub.phenotype, p)
+        d = mean_displacement_pct(anny_fixed_assets, sub.phenotype, p)
         assert abs(d - 8.0) <= 0.02 * 8.0 and d == pytest.approx(r["difficulty_pct"], abs=1e-4)
         assert 0 < r["scale"] <= 1 and r["attempts"] >= 1
         assert self_intersections(sub.posed(i), sub.F).size == 0
-    again = sampled_subject(4, seed=0, model=anny_model, n_targets=2, difficulty=8.0)
+    again = sampled_subject(4, seed=0, model=anny_fixed_assets, n_targets=2, difficulty=8.0)
     np.testing.assert_array_equal(again.subject.posed(2), sub.posed(2))
     assert json.dumps(again.record) == json.dumps(rec)
 
 
-def test_a_failed_draw_is_redrawn_with_the_next_attempt_and_counted(anny_model, monkeypatch):
+def test_a_failed_draw_is_redrawn_with_the_next_attempt_and_counted(anny_fixed_assets, monkeypatch):
     real = samp.self_intersections
     calls = []
 
@@ -130,21 +130,21 @@ def test_a_failed_draw_is_redrawn_with_the_next_attempt_and_counted(anny_model, 
         return np.array([0]) if len(calls) == 1 else real(V, F)
 
     monkeypatch.setattr(samp, "self_intersections", fails_first)
-    got = sampled_subject(2, seed=0, model=anny_model, phenotypes="fixed", n_targets=1, difficulty=8.0)
+    got = sampled_subject(2, seed=0, model=anny_fixed_assets, phenotypes="fixed", n_targets=1, difficulty=8.0)
     assert got.subject.phenotype == SUBJECTS[2] and got.record["poses"][0]["attempts"] == 2
     assert got.subject.poses[1].description.endswith("attempt 1)")
     monkeypatch.setattr(samp, "self_intersections", lambda V, F: np.array([0]))
     monkeypatch.setattr(samp, "MAX_ATTEMPTS", 2)
     with pytest.raises(SShaDeError, match="smaller anny.difficulty"):
-        sampled_subject(2, seed=0, model=anny_model, phenotypes="fixed", n_targets=1, difficulty=8.0)
+        sampled_subject(2, seed=0, model=anny_fixed_assets, phenotypes="fixed", n_targets=1, difficulty=8.0)
 
 
-def test_library_poses_on_a_sampled_body(anny_model):
-    got = sampled_subject(11, seed=5, model=anny_model, poses=[POSES["squat"]])
+def test_library_poses_on_a_sampled_body(anny_fixed_assets):
+    got = sampled_subject(11, seed=5, model=anny_fixed_assets, poses=[POSES["squat"]])
     assert got.subject.subject == 11 and got.subject.pose_names == ["rest", "squat"] and got.record["poses"] == []
 
 
-def test_a_sampled_build_is_reproducible_and_verifies(anny_model, anny_cache, tmp_path, monkeypatch):
+def test_a_sampled_build_is_reproducible_and_verifies(anny_fixed_assets, anny_cache, tmp_path, monkeypatch):
     """Two builds with one seed: the same manifest (every checksum); another seed draws
     other bodies; the build verifies and loads; beyond the table's 10 subjects."""
     from defaust.dataset import load, verify

@@ -58,6 +58,25 @@ def test_rigid_inverse_and_apply_affine_undo_a_rigid_map_to_rounding():
     assert np.allclose(fo.rigid_inverse(T), np.linalg.inv(T), rtol=0, atol=1e-14)
 
 
+def test_sum_ascending_equals_the_left_to_right_python_sum_bit_for_bit():
+    X = _rng().normal(size=(40, 7)) * 10.0 ** _rng().integers(-8, 9, size=(40, 7))
+    for axis in (0, 1):
+        got = fo.sum_ascending(X, axis=axis)
+        for i, row in enumerate(np.moveaxis(X, axis, -1)):
+            s = row[0]
+            for v in row[1:]:
+                s = s + v
+            assert got[i] == s
+    col = X[:, 3]
+    s = float(col[0])
+    for v in col[1:].tolist():
+        s = s + v
+    assert float(fo.sum_ascending(col)) == s and fo.sum_ascending(col).shape == ()
+    assert float(fo.sum_ascending([1.0, 1e16, -1e16])) == 0.0  # (1 + 1e16) rounds to 1e16 first
+    with pytest.raises(ValueError):
+        fo.sum_ascending(np.zeros((0, 3)))
+
+
 def test_solve3_agrees_with_lapack_on_near_rotations():
     M = Rotation.random(20, random_state=2).as_matrix() * (1 + 0.1 * _rng().random((20, 1, 1)))
     y = _rng().normal(size=(20, 3))
@@ -118,7 +137,7 @@ A, B = rng.normal(size=(200, 4, 4)), rng.normal(size=(200, 4, 4))
 W, T = rng.random((2000, 64)), rng.normal(size=(64, 3, 4))
 parts = [fo.matmul(A, B), fo.blend(W, T), fo.rigid_inverse(A), fo.solve3(A[:, :3, :3], A[:, 3, :3]),
          fo.rotvec_to_matrix(A[:, 0, :3]), fo.atan2(A[:, 1, 1], A[:, 2, 2]),
-         fo.matrix_to_rotvec(fo.rotvec_to_matrix(A[:, 1, :3]))]
+         fo.matrix_to_rotvec(fo.rotvec_to_matrix(A[:, 1, :3])), fo.sum_ascending(W, axis=1)]
 print(hashlib.sha256(b"".join(np.ascontiguousarray(p).tobytes() for p in parts)).hexdigest())
 """
 

@@ -1,8 +1,8 @@
 """sshade/json_file.py and the readers built on it: a FIFO, a device or a folder where a
-file is expected is refused at once (the bounded reader and the prefix reader) (never read, never waited on), a size is counted on the
-bytes read, a JSON file nested 200,000 deep is an unreadable file, not a RecursionError; a
-crafted-input sweep over the evaluator's, the sweeps' and DeFAUST's JSON readers and the
-times reader ends every case in their documented outcome."""
+file is expected is refused at once by the bounded and the prefix reader (never read, never
+waited on), a size is counted on the bytes read, a JSON file nested 200,000 deep is an
+unreadable file, not a RecursionError; a crafted-input sweep over the evaluator's, the
+sweeps' and DeFAUST's JSON readers and the times reader ends every case in their documented outcome."""
 from __future__ import annotations
 
 import errno

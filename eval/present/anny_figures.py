@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from defaust.anny_fixed import load_anny_fixed
 from defaust.anny_poses import POSES
-from defaust.anny_source import SUBJECTS, anny_subject, load_anny
+from defaust.anny_source import SUBJECTS, anny_subject
 from eval.present.figures import mesh_row
 from eval.run.outdir import claim_output_dir
 from sshade.command_errors import ArgumentParser
@@ -25,7 +26,7 @@ from sshade.errors import SShaDeError
 __all__ = ["anny_figures"]
 
 
-def anny_figures(out_dir, *, cache=None) -> list[Path]:
+def anny_figures(out_dir) -> list[Path]:
     """Render the figures of the module docstring into ``out_dir``; returns their paths.
 
     Raises
@@ -34,7 +35,7 @@ def anny_figures(out_dir, *, cache=None) -> list[Path]:
     """
 
     out = Path(out_dir)
-    m = load_anny(cache=cache)
+    m = load_anny_fixed()
     subs = [anny_subject(i, model=m) for i in range(len(SUBJECTS))]
     panels = [{"title": f"{i}: {p.description.rsplit(',', 1)[0]}", "V": s.V, "F": s.F}
               for i, (s, p) in enumerate(zip(subs, SUBJECTS))]
