@@ -2,8 +2,9 @@
 dataset (the builder's own is :mod:`defaust.cli`). DIR is a build folder or, for
 ``verify``, ``describe`` and ``export``, an archive that ``pack`` wrote (read in place).
 ``verify`` (:func:`defaust.dataset.verify`: one line per problem, exit 0 for a good copy,
-2 on any problem), ``describe`` (:func:`defaust.describe.describe`: one Markdown row per
-case, writes nothing), ``export`` (:func:`defaust.export.export`) and ``pack``
+2 on any problem; then whether it is the canonical DeFAUST, :mod:`defaust.canonical`: exit 1
+when not and ``--canonical`` is given), ``describe`` (:func:`defaust.describe.describe`:
+one Markdown row per case, writes nothing), ``export`` (:func:`defaust.export.export`) and ``pack``
 (:func:`defaust.packing.pack`); a refused folder, output or build is one ``error:`` line
 and exit 2, before any file is written. Options: ``python -m defaust --help``; usage:
 docs/defaust.md §6 and §7.
@@ -13,6 +14,7 @@ from __future__ import annotations
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 
+from .canonical import canonical_status
 from .dataset import read_manifest, verify
 from .describe import describe, markdown
 from .export import FORMATS, export
@@ -30,6 +32,8 @@ def _parser() -> ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     v = sub.add_parser("verify", help="check every file of a build against its manifest")
     v.add_argument("root", help="the build folder (out= of the build) or an archive that pack wrote")
+    v.add_argument("--canonical", action="store_true",
+                   help="exit 1 when the build is not (a part of) the canonical DeFAUST (it says so either way)")
     d = sub.add_parser("describe", help="each case's handles and its ground truth's volume and area change")
     d.add_argument("root", help="the build folder or archive")
     d.add_argument("--resolution", default="high", help="high, low or rN (an extra resolution the build has)")
@@ -46,16 +50,19 @@ def _parser() -> ArgumentParser:
     return p
 
 
-def _verify(root) -> int:
+def _verify(root, canonical: bool = False) -> int:
     problems = verify(root)
     for line in problems:
         print(line)
     if problems:
         print(f"{len(problems)} problem(s) in {root}")
         return 2
-    words = subset_words(read_manifest(root))
+    m = read_manifest(root)
+    words = subset_words(m)
     print(f"{root}: every file matches its manifest" + (f"; a build of {words}" if words else ""))
-    return 0
+    status = canonical_status(m)
+    print(f"{root}: {status.words()}")
+    return 1 if canonical and not status.canonical else 0
 
 
 def _export(a) -> int:
@@ -78,7 +85,7 @@ def main(argv: list[str]) -> int:
     line, exit 2)."""
     a = _parser().parse_args(argv)
     if a.command == "verify":
-        return run_command(lambda: _verify(a.root), where=a.root)
+        return run_command(lambda: _verify(a.root, a.canonical), where=a.root)
     if a.command == "describe":
         return run_command(lambda: print(markdown(describe(a.root, resolution=a.resolution)), end=""), where=a.root)
     if a.command == "pack":

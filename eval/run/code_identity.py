@@ -514,13 +514,23 @@ def _dropped(stmts, used: frozenset, path: Path) -> list:
     that defined what the module no longer uses (none of their names in ``used``) and ran
     nothing when defined: a function without decorators, or a name bound to a literal. A
     module that imported one from it now binds something else: a change found there."""
+    st = path.stat()
+    inert = _inert(str(path), st.st_mtime_ns, st.st_size)
+    return [s for s in stmts if s[0] and not set(s[0]) & used and s[1] in inert]
+
+
+@functools.lru_cache(maxsize=512)
+def _inert(path: str, mtime_ns: int, size: int) -> frozenset:
+    """The top-level statements of the module file ``path`` that run nothing when
+    defined (:func:`_dropped`), each as its ``ast.dump``; cached by file, modification
+    time and size."""
     inert = set()
-    for node in _strip_docstrings(copy.deepcopy(_tree(path))).body:
+    for node in _strip_docstrings(copy.deepcopy(_tree(Path(path)))).body:
         if (isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not node.decorator_list) or (
                 isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None
                 and all(isinstance(x, _LITERAL_NODES) for x in ast.walk(node.value))):
             inert.add(ast.dump(node, include_attributes=False))
-    return [s for s in stmts if s[0] and not set(s[0]) & used and s[1] in inert]
+    return frozenset(inert)
 
 
 def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
