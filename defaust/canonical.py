@@ -15,9 +15,13 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from harness.command import run_command
+from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
 from sshade.json_file import read_json
+
+from .dataset import read_manifest, verify
 
 __all__ = ["CANONICAL_DIR", "CanonicalStatus", "canonical_records", "canonical_record", "canonical_status", "main"]
 
@@ -123,27 +127,31 @@ def canonical_status(manifest: dict, records: dict | None = None) -> CanonicalSt
     return CanonicalStatus(bool(items), name, len(items), of, None if items else "it holds no item")
 
 
+def _write(root: str, name: str) -> int:
+    """Write ``CANONICAL_DIR / f"{name}.json"`` from the build ``root`` (:func:`main`)."""
+    problems = verify(root)
+    if problems:
+        raise SShaDeError(f"{root} does not verify ({problems[0]})")
+    rec = canonical_record(read_manifest(root))
+    CANONICAL_DIR.mkdir(exist_ok=True)
+    with atomic_write(CANONICAL_DIR / f"{name}.json", "w") as fh:
+        fh.write(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+    print(f"wrote {CANONICAL_DIR / (name + '.json')}: {len(rec['items'])} items")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m defaust.canonical DIR NAME``: write ``defaust/canonical/NAME.json`` from
-    the complete, verified build DIR; exit 2 with one ``error:`` line otherwise."""
-    from .dataset import read_manifest, verify
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 2 or not argv[1].replace("-", "").replace("_", "").isalnum():
-        print("error: usage: python -m defaust.canonical DIR NAME (NAME: letters, digits, - and _)", file=sys.stderr)
-        return 2
-    problems = verify(argv[0])
-    try:
-        if problems:
-            raise SShaDeError(f"{argv[0]} does not verify ({problems[0]})")
-        rec = canonical_record(read_manifest(argv[0]))
-    except SShaDeError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    CANONICAL_DIR.mkdir(exist_ok=True)
-    with atomic_write(CANONICAL_DIR / f"{argv[1]}.json", "w") as fh:
-        fh.write(json.dumps(rec, indent=1, sort_keys=True) + "\n")
-    print(f"wrote {CANONICAL_DIR / (argv[1] + '.json')}: {len(rec['items'])} items")
-    return 0
+    the complete, verified build DIR; a refused build or name is one ``error:`` line and
+    exit 2."""
+    p = ArgumentParser(prog="python -m defaust.canonical",
+                       description="Write the canonical record of a complete, verified DeFAUST build.")
+    p.add_argument("root", help="the build folder (complete; python -m defaust verify passes)")
+    p.add_argument("name", help="the record's name (letters, digits, - and _), e.g. anny-default")
+    a = p.parse_args(sys.argv[1:] if argv is None else argv)
+    if not a.name.replace("-", "").replace("_", "").isalnum():
+        p.error(f"the name {a.name!r} must be letters, digits, - and _")
+    return run_command(lambda: _write(a.root, a.name), where=a.root)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ HELP = {
     "-m eval.present.anny_figures": ["usage: python -m eval.present.anny_figures", "OUT_DIR", "outputs/anny_figures"],
     "-m defaust": ["usage: python -m defaust out=DIR", "Build the DeFAUST dataset", "== Configuration groups ==",
                    "preset: ci, full", "source: anny"],
+    "-m defaust.canonical": ["usage: python -m defaust.canonical", "root name"],
     "-m sshade": ["usage: python -m sshade deform MESH -o OUT"],
     "-m sshade deform": ["usage: python -m sshade deform", "--sel", "--force"],
     "-m sshade animate": ["usage: python -m sshade animate", "--frames", "--handles"],
