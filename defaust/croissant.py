@@ -203,7 +203,7 @@ def _record_sets(manifest: dict) -> list[dict]:
 
 #: Builder version -> the date it was released (the dataset's ``datePublished``: a build of
 #: that version is that dataset version, whenever it is built).
-RELEASED = {2: "2026-11-22"}
+RELEASED = {2: "2026-11-22", 3: "2026-11-27"}
 
 
 def dataset_version(manifest: dict) -> str:

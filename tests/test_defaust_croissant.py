@@ -14,6 +14,7 @@ import pytest
 
 from defaust.croissant import CROISSANT, LICENCES, croissant_metadata, write_croissant
 from defaust.dataset import load, verify
+from defaust.manifest import BUILDER_VERSION
 from defaust.store import sha256_file
 
 from .conftest import ROOT, subprocess_env
@@ -94,7 +95,7 @@ def test_builder_writes_croissant_that_mlcroissant_validates(request):
     assert p.is_file()
     assert _in_mlcroissant(_VALIDATE, p) == {"name": "DeFAUST-synthetic", "errors": [], "warnings": []}
     meta = json.loads(p.read_text())
-    assert meta["license"] == LICENCES["synthetic"] and meta["version"] == "1.2.0"
+    assert meta["license"] == LICENCES["synthetic"] and meta["version"] == f"1.{BUILDER_VERSION}.0"
     assert meta["distribution"][0]["sha256"] == sha256_file(defaust_ci / "manifest.json")
     assert {d["includes"] for d in meta["distribution"][1:]} == {
         "subject_*/rest_*.ply", "subject_*/pose_*_*.ply", "subject_*/pose_*_handles.npz"}
@@ -114,6 +115,16 @@ def test_verify_tells_a_croissant_of_another_manifest(defaust_ci, tmp_path):
     assert verify(c) == [f"{c / CROISSANT}: does not describe this manifest.json (its sha256 differs)"]
     write_croissant(c)
     assert verify(c) == []
+
+
+def test_every_builder_version_up_to_this_one_has_a_release_date():
+    """mlcroissant warns on a dataset without ``datePublished``: each builder version, the
+    current one included, names the date it was released (a constant, never the build's)."""
+    from defaust.croissant import RELEASED
+    assert set(RELEASED) >= set(range(2, BUILDER_VERSION + 1))
+    meta = croissant_metadata({"format": "defaust-1", "builder_version": BUILDER_VERSION, "source": "anny"},
+                              manifest_sha256="0")
+    assert meta["datePublished"] == RELEASED[BUILDER_VERSION]
 
 
 def test_faust_builds_name_faust_terms_not_a_free_licence():
