@@ -13,7 +13,6 @@ Example::
 from __future__ import annotations
 
 import ast
-import copy
 import functools
 import hashlib
 import inspect
@@ -24,7 +23,7 @@ from eval.run.library_versions import NUMERICAL, numerical_versions, used_librar
 from eval.run.runinfo import REPO_ROOT
 
 __all__ = ["PACKAGES", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text",
-           "sources_digest",
+           "sources_digest", "sources_snapshot",
            "project_modules", "import_closure", "closure_constants", "file_imports", "modules_digest", "same_code",
            "modules_digest_at",
            "identity_roots", "code_identity", "row_libraries", "artifact_identity"]
@@ -104,7 +103,7 @@ def sources_digest(packages: tuple = PACKAGES, root: str | None = None) -> str:
     return h.hexdigest()
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=32)
 def project_modules(root: str | None = None) -> dict[str, Path]:
     """``{dotted name: file}`` of every module of :data:`PACKAGES` under ``root``
     (default: this checkout or installed tree); a package by its ``__init__.py``."""
@@ -310,21 +309,24 @@ def _eager(name: str, mods: Mapping) -> bool:
     return False
 
 
-def _snapshot(root: str | None) -> tuple:
-    """Each project file under ``root`` with its modification time and size: a closure
-    computed for one snapshot is reused until a file changes."""
+def sources_snapshot(root: str | None = None) -> tuple:
+    """Each project file under ``root`` (default: this checkout) as ``(path, modification
+    time in ns, size in bytes)``: what a result computed from the sources is cached by,
+    reused until a file changes (a closure here, a row's changed modules in
+    :mod:`eval.run.stale_rows`)."""
     return tuple((str(p), (st := p.stat()).st_mtime_ns, st.st_size) for p in project_modules(root).values())
 
 
 def _closure(roots: tuple, root: str | None, stop: tuple = ()) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """``(modules, constants)`` of :func:`import_closure` and :func:`closure_constants`."""
-    return _closure_of(tuple(roots), root, _snapshot(root), tuple(stop))
+    return _closure_of(tuple(roots), root, sources_snapshot(root), tuple(stop))
 
 
 @functools.lru_cache(maxsize=256)
 def _closure_of(roots: tuple, root: str | None, snapshot: tuple, stop: tuple = ()
                 ) -> tuple[tuple[str, ...], tuple[str, ...]]:
     mods = project_modules(root)
+    known = _imports_of(root, snapshot)  # one snapshot's modules' imports, shared by every closure of it
     seen: set[str] = set()
     consts: set[str] = set()
     todo = [r for r in (_resolve(str(x), mods) for x in roots) if r]
@@ -336,10 +338,19 @@ def _closure_of(roots: tuple, root: str | None, snapshot: tuple, stop: tuple = (
         seen.add(m)
         parts = m.split(".")
         todo += [p for p in (".".join(parts[:i]) for i in range(1, len(parts))) if p in mods and _eager(p, mods)]
-        found, c = _imports(m, mods[m], mods)
+        if m not in known:
+            known[m] = _imports(m, mods[m], mods)
+        found, c = known[m]
         todo += found
         consts |= {x for x in c if not _record_only(x.rpartition(".")[0])}
     return tuple(sorted(seen)), tuple(sorted(consts))
+
+
+@functools.lru_cache(maxsize=8)
+def _imports_of(root: str | None, snapshot: tuple) -> dict[str, tuple[set[str], set[str]]]:
+    """An empty memo of :func:`_imports` per module for the sources of ``root`` as
+    ``snapshot`` stamps them (filled by :func:`_closure_of`)."""
+    return {}
 
 
 def import_closure(roots: tuple, root: str | None = None, stop: tuple = ()) -> tuple[str, ...]:
@@ -426,7 +437,7 @@ def _parts(path: str, mtime_ns: int, size: int, pkg: str) -> tuple[tuple, tuple,
     ast.dump)`` (docstrings left out, as :func:`code_text`), in order; ``(name, absolute
     dotted source)`` of each name its top-level imports bind; every name it reads or
     writes. Cached by file, modification time and size."""
-    tree = _strip_docstrings(copy.deepcopy(_parse(path, mtime_ns, size)))
+    tree = _strip_docstrings(ast.parse(Path(path).read_bytes(), path))  # a fresh tree: parsing beats a deep copy
     stmts, binds = [], []
     for node in tree.body:
         if isinstance(node, ast.Import):
@@ -525,12 +536,22 @@ def _inert(path: str, mtime_ns: int, size: int) -> frozenset:
     defined (:func:`_dropped`), each as its ``ast.dump``; cached by file, modification
     time and size."""
     inert = set()
-    for node in _strip_docstrings(copy.deepcopy(_tree(Path(path)))).body:
+    for node in _strip_docstrings(ast.parse(Path(path).read_bytes(), path)).body:
         if (isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not node.decorator_list) or (
                 isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None
                 and all(isinstance(x, _LITERAL_NODES) for x in ast.walk(node.value))):
             inert.add(ast.dump(node, include_attributes=False))
     return frozenset(inert)
+
+
+def _may_define(path: Path, names: set[str]) -> bool:
+    """Whether the module file ``path`` may define one of ``names``: its text spells one
+    (an identifier outside ASCII may be spelled otherwise, NFKC: then it may). Spares
+    parsing the modules that cannot."""
+    if not all(n.isascii() for n in names):
+        return True
+    text = path.read_bytes()
+    return any(n.encode() in text for n in names)
 
 
 def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
@@ -539,7 +560,8 @@ def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
     one of ``then``'s modules, each import binding what such a module binds by that name."""
     if not stmts or any(not s[0] for s in stmts):
         return False
-    sources = {m for m in then if set(stmts) & set(_module_parts(m, then)[0])}
+    names = {n for s in stmts for n in s[0]}
+    sources = {m for m in then if _may_define(then[m], names) and set(stmts) & set(_module_parts(m, then)[0])}
     if not set(stmts) <= {s for m in sources for s in _module_parts(m, then)[0]}:
         return False
     meanings = {}

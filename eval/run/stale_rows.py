@@ -18,6 +18,7 @@ import os
 import subprocess
 import tarfile
 import tempfile
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +34,7 @@ from eval.run.code_identity import (
     modules_digest_at,
     row_libraries,
     same_code,
+    sources_snapshot,
 )
 from eval.run.pending_rows import short_commit
 from eval.run.result_store import (
@@ -67,13 +69,13 @@ REKEY_FROM = (4, 5)
 
 class CommitTrees:
     """The project's sources (:data:`eval.run.code_identity.PACKAGES`, :data:`SCRIPTS`) at git commits,
-    extracted once each into a temporary folder (``git archive``; removed on
-    :meth:`close` or at the end of a ``with`` block)."""
+    extracted once each per process (``git archive``) into a temporary folder removed when
+    the process exits: a commit's sources never change, so every check of a process reads
+    the same files, and what was computed from them stays cached (:func:`changed_since`).
+    A context manager, as it was when each instance held its own folder."""
 
     def __init__(self, repo=REPO_ROOT):
         self.repo = Path(repo)
-        self._tmp = tempfile.TemporaryDirectory(prefix="sshade-commits-")
-        self._trees: dict[str, Path | None] = {}
 
     def __enter__(self):
         return self
@@ -82,21 +84,22 @@ class CommitTrees:
         self.close()
 
     def close(self) -> None:
-        """Remove the extracted trees."""
-        self._tmp.cleanup()
+        """Nothing: the extracted trees are the process's (removed at its exit)."""
 
     def tree(self, commit) -> Path | None:
         """The folder holding the sources of ``commit`` (40 hex digits), None when it is
         no commit of this repository (or git is missing)."""
         if not isinstance(commit, str) or len(commit) != 40 or any(c not in "0123456789abcdef" for c in commit):
             return None
-        if commit not in self._trees:
-            self._trees[commit] = self._extract(commit)
-        return self._trees[commit]
+        key = (str(self.repo.resolve()), commit)
+        with _EXTRACTING:
+            if key not in _EXTRACTED:
+                _EXTRACTED[key] = self._extract(commit, Path(_extracted_dir().name) / str(len(_EXTRACTED)))
+            return _EXTRACTED[key]
 
-    def _extract(self, commit: str) -> Path | None:
+    def _extract(self, commit: str, dest: Path) -> Path | None:
         """``git archive`` of the packages and scripts at ``commit`` (only the packages
-        where that commit had no scripts' folder), extracted; None when git cannot."""
+        where that commit had no scripts' folder), extracted into ``dest``; None when git cannot."""
         here = [p for p in (*PACKAGES, *SCRIPTS) if (self.repo / p).is_dir()]
         for paths in (here, [p for p in here if p not in SCRIPTS]):
             try:
@@ -105,11 +108,21 @@ class CommitTrees:
             except (OSError, subprocess.TimeoutExpired):
                 return None
             if r.returncode == 0:
-                dest = Path(self._tmp.name) / commit
                 with tarfile.open(fileobj=io.BytesIO(r.stdout)) as tf:
                     tf.extractall(dest, filter="data")  # refuses links out and absolute names
                 return dest
         return None
+
+
+#: ``(repository, commit) -> its extracted sources`` (None: git could not), per process.
+_EXTRACTED: dict[tuple[str, str], Path | None] = {}
+_EXTRACTING = threading.Lock()
+
+
+@functools.lru_cache(maxsize=1)
+def _extracted_dir() -> tempfile.TemporaryDirectory:
+    """The process's folder of extracted commits (removed when the process exits)."""
+    return tempfile.TemporaryDirectory(prefix="sshade-commits-")
 
 
 @dataclass
@@ -184,11 +197,19 @@ def current_code(fields, root: str | None = None) -> dict:
 
 def changed_since(mods, consts, tree: Path, root: str | None = None) -> list[str]:
     """The modules (and constants) of ``mods``/``consts`` whose code differs between the
-    sources under ``tree`` and the checkout ``root`` (a definition moved is no change:
-    :func:`eval.run.code_identity.same_code`)."""
+    sources under ``tree`` (a commit's, as :class:`CommitTrees` extracts them: never
+    changed while it exists) and the checkout ``root`` (a definition moved is no change:
+    :func:`eval.run.code_identity.same_code`). Cached per process by the checkout's file
+    stamps (:func:`eval.run.code_identity.sources_snapshot`): the rows one commit made for
+    one method ask once."""
+    return list(_changed(tuple(mods), tuple(consts), str(tree), root, sources_snapshot(root)))
+
+
+@functools.lru_cache(maxsize=1024)
+def _changed(mods: tuple, consts: tuple, tree: str, root: str | None, snapshot: tuple) -> tuple[str, ...]:
     out = [m for m in mods if not same_code(m, tree, root)]
-    out += [c for c in consts if modules_digest((), str(tree), (c,)) != modules_digest((), root, (c,))]
-    return out
+    out += [c for c in consts if modules_digest((), tree, (c,)) != modules_digest((), root, (c,))]
+    return tuple(out)
 
 
 def row_state(folder, rec: dict, trees: CommitTrees, root: str | None = None) -> RowState:
