@@ -22,11 +22,10 @@ from pathlib import Path
 from eval.run.library_versions import NUMERICAL, numerical_versions, used_libraries
 from eval.run.runinfo import REPO_ROOT
 
-__all__ = ["PACKAGES", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text",
-           "sources_digest", "sources_snapshot",
-           "project_modules", "import_closure", "closure_constants", "file_imports", "modules_digest", "same_code",
-           "modules_digest_at",
-           "identity_roots", "code_identity", "row_libraries", "artifact_identity"]
+__all__ = ["PACKAGES", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text", "sources_digest",
+           "sources_snapshot", "project_modules", "import_closure", "closure_constants", "file_imports",
+           "modules_digest", "same_code", "modules_digest_at", "identity_roots", "code_identity", "row_libraries",
+           "artifact_identity"]
 
 #: The project's packages whose source makes a row (every floor of the house: the method,
 #: the harness's shared tools, the baselines and the builder, the evaluator).
@@ -310,10 +309,8 @@ def _eager(name: str, mods: Mapping) -> bool:
 
 
 def sources_snapshot(root: str | None = None) -> tuple:
-    """Each project file under ``root`` (default: this checkout) as ``(path, modification
-    time in ns, size in bytes)``: what a result computed from the sources is cached by,
-    reused until a file changes (a closure here, a row's changed modules in
-    :mod:`eval.run.stale_rows`)."""
+    """Each project file under ``root`` (default: this checkout) as ``(path, mtime in ns,
+    size in bytes)``: what results computed from the sources are cached by until a file changes."""
     return tuple((str(p), (st := p.stat()).st_mtime_ns, st.st_size) for p in project_modules(root).values())
 
 
@@ -327,8 +324,7 @@ def _closure_of(roots: tuple, root: str | None, snapshot: tuple, stop: tuple = (
                 ) -> tuple[tuple[str, ...], tuple[str, ...]]:
     mods = project_modules(root)
     known = _imports_of(root, snapshot)  # one snapshot's modules' imports, shared by every closure of it
-    seen: set[str] = set()
-    consts: set[str] = set()
+    seen, consts = set(), set()
     todo = [r for r in (_resolve(str(x), mods) for x in roots) if r]
     stop = tuple(m for m in stop if m not in todo)  # a root is entered
     while todo:
@@ -338,18 +334,14 @@ def _closure_of(roots: tuple, root: str | None, snapshot: tuple, stop: tuple = (
         seen.add(m)
         parts = m.split(".")
         todo += [p for p in (".".join(parts[:i]) for i in range(1, len(parts))) if p in mods and _eager(p, mods)]
-        if m not in known:
-            known[m] = _imports(m, mods[m], mods)
-        found, c = known[m]
+        found, c = known[m] if m in known else known.setdefault(m, _imports(m, mods[m], mods))
         todo += found
         consts |= {x for x in c if not _record_only(x.rpartition(".")[0])}
     return tuple(sorted(seen)), tuple(sorted(consts))
 
 
 @functools.lru_cache(maxsize=8)
-def _imports_of(root: str | None, snapshot: tuple) -> dict[str, tuple[set[str], set[str]]]:
-    """An empty memo of :func:`_imports` per module for the sources of ``root`` as
-    ``snapshot`` stamps them (filled by :func:`_closure_of`)."""
+def _imports_of(root: str | None, snapshot: tuple) -> dict:  # {module: _imports(...)} of one snapshot
     return {}
 
 
@@ -544,24 +536,15 @@ def _inert(path: str, mtime_ns: int, size: int) -> frozenset:
     return frozenset(inert)
 
 
-def _may_define(path: Path, names: set[str]) -> bool:
-    """Whether the module file ``path`` may define one of ``names``: its text spells one
-    (an identifier outside ASCII may be spelled otherwise, NFKC: then it may). Spares
-    parsing the modules that cannot."""
-    if not all(n.isascii() for n in names):
-        return True
-    text = path.read_bytes()
-    return any(n.encode() in text for n in names)
-
-
 def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
     """Whether a module new since the sources ``then`` only holds definitions moved there
     from them (:func:`same_code`): each statement a definition found word for word in
     one of ``then``'s modules, each import binding what such a module binds by that name."""
     if not stmts or any(not s[0] for s in stmts):
         return False
-    names = {n for s in stmts for n in s[0]}
-    sources = {m for m in then if _may_define(then[m], names) and set(stmts) & set(_module_parts(m, then)[0])}
+    names = [n.encode() for s in stmts for n in s[0]]  # a module can define only what its text spells (NFKC aside)
+    sources = {m for m in then if (not all(n.isascii() for n in names) or any(n in then[m].read_bytes() for n in names))
+               and set(stmts) & set(_module_parts(m, then)[0])}
     if not set(stmts) <= {s for m in sources for s in _module_parts(m, then)[0]}:
         return False
     meanings = {}
