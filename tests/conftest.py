@@ -137,6 +137,20 @@ _FIXTURE_MARKS = {"anny_assets": "anny", "chromium_on_path": "browser"}
 _COSTLY_FIXTURES = ("anny_model", "anny_fixed_assets", "defaust_ci")
 
 
+#: The thread pools capped at one thread in each pytest-xdist worker (the workers already
+#: use every core: one pool per core more would oversubscribe them). numba's is left as it
+#: is: the methods and tests set its count per call.
+_WORKER_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def pytest_configure(config):
+    """In pytest-xdist's controller, before its workers start (they inherit the
+    environment): :data:`_WORKER_THREADS` at one thread each, unless already set."""
+    if getattr(config.option, "numprocesses", None) and "PYTEST_XDIST_WORKER" not in os.environ:
+        for k in _WORKER_THREADS:
+            os.environ.setdefault(k, "1")
+
+
 def pytest_collection_modifyitems(config, items):
     """Every test that uses :func:`anny_assets` carries the ``anny`` mark and every test
     that uses :func:`chromium_on_path` the ``browser`` mark, so ``pytest -m anny`` (or
