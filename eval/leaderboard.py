@@ -9,6 +9,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from eval.datasets import find_dataset
 from eval.present.intervals import CI, bootstrap_ci, interval_text
 from eval.present.measures import MEASURES, label
 from eval.present.rows import methods_in
@@ -59,6 +60,7 @@ class Board:
     time_words: str = ""
     rows: list = field(default_factory=list)
     stale: dict = field(default_factory=dict)  # method -> (stale rows, stored rows) at this checkout
+    data: tuple = ("", "")  # (heading tag, sentence) on data other than its canonical build (_data_mark)
 
 
 def _num(v):
@@ -235,6 +237,24 @@ def stale_words(stale: tuple | None) -> str:
     return f" [stale: {stale[0]} of {stale[1]} rows, made at {', '.join(sorted(stale[2]))}{what}]"
 
 
+def _data_mark(info: dict) -> tuple[str, str]:
+    """``(tag, sentence)`` for a board whose run read data other than its dataset's
+    canonical build (``run.json``'s ``dataset_build``, :func:`eval.datasets.defaust_dataset.build_provenance`),
+    or whose run, of a dataset that has a canonical build, recorded no such check; ``("", "")`` otherwise."""
+    build = info.get("dataset_build")
+    if isinstance(build, dict):
+        if build.get("canonical") is True:
+            return "", ""
+        mark = build.get("mark")
+        return " (not the canonical build)", mark if isinstance(mark, str) and mark else "not on the canonical build"
+    name = (_config(info).get("dataset") or {}).get("name")
+    d = find_dataset(name) if isinstance(name, str) else None
+    if d is None or d.provenance is None:
+        return "", ""
+    return (" (build unchecked)", "its run recorded no check of its data against the canonical build (a run made "
+            "before runs did): its rows may stand on other meshes than the canonical build's")
+
+
 def _commit(info: dict) -> str:
     c = (info.get("git") or {}).get("commit") if isinstance(info.get("git"), dict) else None
     return c[:12] if isinstance(c, str) else ""
@@ -255,7 +275,7 @@ def collect(root) -> tuple[list[Board], list[str]]:
             b = (_cases_board(d, info) if kind == "cases" else _animation_board(d, info) if kind == "animation"
                  else None)
             if b is not None and b.rows:
-                b.stale = _stale(d, trees)
+                b.stale, b.data = _stale(d, trees), _data_mark(info)
                 made = marked_run(d) if kind == "animation" else None  # a folder run whole, marked by --retabulate
                 if made is not None:  # one row per method in its table
                     b.stale = {r["method"]: (1, 1, {made}, set()) for r in b.rows}
@@ -291,7 +311,7 @@ def leaderboard_rows(boards: list[Board]) -> tuple[list[str], list[list[str]]]:
     or ``Vol/EL/FA`` where the dataset has no ground truth, ``--`` where it did not run)."""
     import pandas as pd
     methods = methods_in(pd.DataFrame({"method": [r["method"] for b in boards for r in b.rows]}))
-    head = ["Method", *[b.label for b in boards]]
+    head = ["Method", *[b.label + b.data[0] for b in boards]]
     rows = []
     for m in methods:
         cells = [m]
@@ -313,7 +333,8 @@ def _board_section(b: Board, link: str) -> list[str]:
     out = ["", f"## {b.label}", "",
            f"{link}, commit {b.commit or 'unknown'}; mean over {b.n_cases} case(s) every method ran on; "
            + (f"ranked by {b.rank_column}" if b.ranked else b.why_not)
-           + f"; Time relative to {REFERENCE} in the same run{b.time_words}.", "",
+           + f"; Time relative to {REFERENCE} in the same run{b.time_words}."
+           + (f" Data: {b.data[1]}." if b.data[1] else ""), "",
            f"| Rank | Method | {label(RANK_COLUMN[0])} | {CI[0]:.0%} CI | {' | '.join(map(label, BOARD_MEASURES))} "
            f"| Time (x {REFERENCE}) | Stopped |",
            "|---:|---|---:|---:|---:|---:|---:|---:|---|"]

@@ -110,8 +110,11 @@ def _watch_parent(sentinel) -> None:
 def _forked_from_worker() -> None:
     """In a process a worker forks (a sampling pool): dies with the worker, and holds no
     copy of the worker's pipe (so the main process sees the pipe close when the worker
-    dies)."""
-    _set_death_signal()
+    dies). A worker killed before the death signal was set (this process not yet run
+    since the fork) is seen by the parent's pid: this process then ends at once."""
+    worker = _CHANNEL[1]
+    if _set_death_signal() and worker and os.getppid() != worker:
+        _hard_exit(1)
     conn = _CHANNEL[0]
     _CHANNEL[:] = [None, 0, None]
     if conn is not None:

@@ -77,7 +77,8 @@ def test_frames_go_from_the_rest_pose_to_the_target_for_every_method(small_defau
     both = s[s["case"] == rows.loc[rows["method"] == "Elastic", "case"].iloc[0]]
     np.testing.assert_allclose(table.loc["SShaDe", "gt_mean_pct"], both["gt_mean_pct"].mean(), rtol=1e-5)
     assert "Over all the cases each method ran on" in (out / "table.md").read_text()
-    assert json.loads((out / "run.json").read_text())["status"] == "done"
+    info = json.loads((out / "run.json").read_text())
+    assert info["status"] == "done" and info["dataset_build"]["canonical"] is False  # a small build: not canonical
     from eval.present.render import png_size
     for m in ("SShaDe", "Elastic"):  # the first case's frames, on the page
         assert png_size(out / f"frames_{m}.png")[0] >= 4 * 320

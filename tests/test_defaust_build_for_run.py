@@ -75,3 +75,29 @@ def test_a_run_with_a_limit_alone_builds_every_subject_and_reads_its_first_cases
     m = json.loads((root / "manifest.json").read_text())
     assert sorted(m["subjects"]) == ["subject_00", "subject_01", "subject_02"] and m["parameters"]["subjects"] is None
     assert [c.name for c in load_defaust(root, limit=2)] == ["s00_p01", "s00_p02"]
+
+
+def test_a_run_on_a_build_other_than_the_canonical_one_records_and_says_so(defaust_ci, tmp_path):
+    """A DeFAUST run records its build held against the canonical records in run.json
+    (``dataset_build``); on a build that is not the canonical one (the synthetic ci build)
+    its table's title and its leaderboard board say so, naming the first item that differs."""
+    import subprocess
+    import sys
+
+    from eval.datasets.defaust_dataset import build_provenance
+    from eval.leaderboard import collect, leaderboard_rows
+
+    from .conftest import ROOT, subprocess_env
+    prov = build_provenance(defaust_ci)
+    assert prov["canonical"] is False and "is no item of a canonical build" in prov["difference"]
+    out = tmp_path / "runs" / "defaust"
+    r = subprocess.run([sys.executable, "-m", "eval", "dataset=defaust", f"dataset.root={defaust_ci}",
+                        "dataset.build.enabled=false", "dataset.resolution=low", "dataset.limit=2",
+                        "methods=[SShaDe]", "sshade.n_low=300", "sshade.n_samplings=1", f"out_dir={out}"],
+                       cwd=ROOT, env=subprocess_env(), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads((out / "run.json").read_text())["dataset_build"] == prov
+    assert prov["mark"] in (out / "table.md").read_text().splitlines()[0]
+    boards, _ = collect(tmp_path / "runs")
+    assert leaderboard_rows(boards)[0] == ["Method", "DeFAUST (not the canonical build)"]
+    assert boards[0].data[1] == prov["mark"]

@@ -19,10 +19,10 @@ from tests.conftest import ROOT
 from tests.current_rows import current_copy
 
 
-def _run(folder, rows, kind="cases", commit="abc123"):
+def _run(folder, rows, kind="cases", commit="abc123", **info):
     folder.mkdir(parents=True)
     (folder / "run.json").write_text(json.dumps({"config": {"experiment": {"name": folder.name, "kind": kind}},
-                                                 "git": {"commit": commit}, "status": "done"}))
+                                                 "git": {"commit": commit}, "status": "done", **info}))
     with open(folder / "cases.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -56,6 +56,24 @@ def test_the_ground_truth_ranks_not_the_best_volume(tmp_path):
     ci = {r["method"]: r["ci"] for r in b.rows}
     assert ci["SShaDe"][0] < 1.5 + 3.5 / 100 < ci["SShaDe"][1]  # the mean inside its interval
     assert ci == {r["method"]: r["ci"] for r in collect(tmp_path)[0][0].rows}  # seeded: the same again
+
+
+@pytest.mark.parametrize("build,tag", [
+    ({"canonical": True, "name": "anny-default", "mark": ""}, ""),
+    ({"canonical": False, "mark": "not on the canonical DeFAUST (x differs)"}, " (not the canonical build)"),
+    (None, " (build unchecked)"),  # a DeFAUST run that recorded no check of its build
+])
+def test_a_board_on_data_other_than_the_canonical_build_says_so(tmp_path, build, tag):
+    rows = [_row(c, m, 1.0, g + i / 10, 1.0) for i, c in enumerate(CASES) for m, g in (("SShaDe", 1), ("ARAP", 2))]
+    config = {"experiment": {"name": "defaust", "kind": "cases"}, "dataset": {"name": "defaust"}}
+    _run(tmp_path / "defaust", rows, config=config, **({"dataset_build": build} if build else {}))
+    _run(tmp_path / "faust", rows)  # FAUST registrations: no canonical build, no mark
+    boards, _ = collect(tmp_path)
+    assert leaderboard_rows(boards)[0] == ["Method", "FAUST", "DeFAUST" + tag]
+    md = leaderboard_markdown(tmp_path)
+    assert ("Data: " in md) == bool(tag) and md.count("Data: ") <= 1
+    if build and tag:
+        assert "not on the canonical DeFAUST (x differs)" in md
 
 
 def test_ranks_follow_the_paired_test_and_no_column_is_a_folder_name(tmp_path):

@@ -30,6 +30,9 @@ class Dataset:
         (plain values, :attr:`eval.run.spec.DatasetSpec.section`).
     root_hint : text added to the "does not exist" error of ``dataset.root``.
     seeds : optional ``seeds(root: Path) -> dict``, extra seeds recorded in ``run.json``.
+    provenance : optional ``provenance(root: Path) -> dict``: what the data read is,
+        recorded in ``run.json`` as ``dataset_build`` (a DeFAUST build: whether it is the
+        canonical one, :func:`eval.datasets.defaust_dataset.build_provenance`).
     outlook : optional ``outlook(root: Path, section) -> dict | None``: what ``prepare`` is
         about to do, found cheaply (no work), for the evaluator's plan (:mod:`eval.run.plan`):
         None when it has nothing long to do, else a dict (e.g.
@@ -48,18 +51,19 @@ class Dataset:
     seeds: Callable | None = None
     outlook: Callable | None = None
     check: Callable | None = None
+    provenance: Callable | None = None
 
 
 _REGISTRY = Registry(__package__, "dataset", skip=("dataset_registry", "deformation_case"))
 
 
 def register_dataset(name: str, load: Callable, *, keys, path_keys=(), prepare=None, root_hint: str = "",
-                     seeds=None, outlook=None, check=None) -> Dataset:
+                     seeds=None, outlook=None, check=None, provenance=None) -> Dataset:
     """Register dataset ``name`` (fields of :class:`Dataset`); called at the bottom of a
     dataset module. Registering a name twice with another loader raises ValueError (a
     programming error, not a user's)."""
     d = Dataset(name=str(name), load=load, keys=tuple(keys), path_keys=tuple(path_keys), prepare=prepare,
-                root_hint=root_hint, seeds=seeds, outlook=outlook, check=check)
+                root_hint=root_hint, seeds=seeds, outlook=outlook, check=check, provenance=provenance)
     return _REGISTRY.add(d.name, d, same=lambda old, new: old.load is new.load)
 
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from defaust.anny_poses import DEFAULT_TARGETS
+from defaust.canonical import CanonicalStatus, canonical_status
 from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.dataset import Case, load, read_manifest
@@ -294,6 +295,25 @@ def _seeds(root: Path) -> dict:
     return {"defaust_manifest_seed": read_manifest(root).get("parameters", {}).get("seed")}
 
 
+def build_provenance(root: Path) -> dict:
+    """What ``run.json`` records of the DeFAUST build at ``root`` (``dataset_build``): its
+    manifest held against the canonical records (:func:`defaust.canonical.canonical_status`):
+    ``canonical`` (bool), ``name`` (the canonical build, or None), ``items`` and ``of``
+    (items held, of the canonical build's), ``difference`` (the first file or item that
+    differs, or None), ``words`` (one line for a reader) and ``mark`` (what a table's
+    title and the leaderboard add: ``""`` on the canonical build). ``canonical`` is None,
+    with why, when the records cannot be read."""
+    try:
+        st = canonical_status(read_manifest(root))
+    except SShaDeError as e:
+        st = CanonicalStatus(None, None, 0, 0, f"its build could not be held against the canonical records: {e}")
+    mark = "" if st.canonical else (f"not on the canonical DeFAUST ({st.difference}): its rows compare only with "
+                                    "rows made on that same build")
+    return {"canonical": st.canonical, "name": st.name, "items": st.items, "of": st.of,
+            "difference": st.difference, "words": st.words() if st.canonical is not None else st.difference,
+            "mark": mark}
+
+
 def check_defaust(section) -> None:
     """``dataset.subjects`` and ``dataset.poses`` (integers or null) checked; SShaDeError
     naming the key."""
@@ -304,4 +324,4 @@ def check_defaust(section) -> None:
 register_dataset("defaust", load_defaust, keys=("subjects", "resolution", "limit"), prepare=prepare_root,
                  root_hint=(f"; the evaluator builds a DeFAUST only into the default folder {DEFAULT_DEFAUST_ROOT} "
                             f"or with dataset.build.enabled=true (python -m defaust out=DIR builds one)"),
-                 seeds=_seeds, outlook=build_outlook, check=check_defaust)
+                 seeds=_seeds, outlook=build_outlook, check=check_defaust, provenance=build_provenance)

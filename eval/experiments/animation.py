@@ -17,6 +17,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
@@ -29,6 +30,7 @@ from defaust.anny_source import anny_subject
 from defaust.dataset import load, read_manifest
 from defaust.skinning import high_res_weights
 from eval.config_schema import section_reader
+from eval.datasets.defaust_dataset import build_provenance
 from eval.experiments.common import as_list
 from eval.experiments.experiment_registry import register_experiment
 from eval.experiments.tosca import markdown_table
@@ -119,21 +121,21 @@ def run_animation(spec: EvalSpec) -> dict:
     t_start = time.perf_counter()
     opts = spec.experiment.options
     methods = make_methods(spec.methods)
-    cases, manifest = _cases(spec.dataset, opts)
+    cases, manifest, root = _cases(spec.dataset, opts)
     out_dir = abs_path(spec.output.out_dir)
     sp = spec.sshade
     info = collect_runinfo(spec.record(), seeds={"sshade": int(sp["seed"])},
                            extra={"status": "running", "out_dir": str(out_dir),
-                                  "method_sources": method_sources(methods)})
+                                  "method_sources": method_sources(methods), "dataset_build": build_provenance(root)})
     write_runinfo(out_dir / "run.json", info)
     truth = _Truth(manifest, opts)
     rows = _run_cases(cases, methods, truth, opts, sp, out_dir)
     return _tables(rows, opts, sp, info, out_dir, t_start)
 
 
-def _cases(ds: DatasetSpec | None, opts: AnimationConfig) -> tuple[list, dict]:
-    """The selected cases of ``dataset.root`` (high resolution) and its manifest;
-    refuses a DeFAUST that is not ANNY-built."""
+def _cases(ds: DatasetSpec | None, opts: AnimationConfig) -> tuple[list, dict, Path]:
+    """The selected cases of ``dataset.root`` (high resolution), its manifest and the
+    folder; refuses a DeFAUST that is not ANNY-built."""
     root = abs_path((ds.root if ds is not None else None) or "data/defaust")
     m = read_manifest(root)
     if m.get("source") != "anny":
@@ -145,7 +147,7 @@ def _cases(ds: DatasetSpec | None, opts: AnimationConfig) -> tuple[list, dict]:
              if poses is None or c.pose in {int(p) for p in poses}]
     if not cases:
         raise SShaDeError(f"no case of {root} for animation.subjects={subjects} animation.poses={poses}")
-    return cases, m
+    return cases, m, root
 
 
 class _Truth:

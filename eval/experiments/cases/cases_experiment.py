@@ -227,9 +227,11 @@ def _start_runinfo(spec: EvalSpec, s: _Setup) -> dict:
     d = datasets.find_dataset(s.name)
     if d is not None and d.seeds is not None:
         seeds.update(d.seeds(s.root))
-    info = collect_runinfo(config, seeds=seeds, extra={"status": "running", "out_dir": str(s.out_dir),
-                                                       "method_sources": method_sources(s.methods),
-                                                       "code": code_identity(None)})
+    extra = {"status": "running", "out_dir": str(s.out_dir), "method_sources": method_sources(s.methods),
+             "code": code_identity(None)}
+    if d is not None and d.provenance is not None:
+        extra["dataset_build"] = d.provenance(s.root)
+    info = collect_runinfo(config, seeds=seeds, extra=extra)
     write_runinfo(s.out_dir / "run.json", info)
     return info
 
@@ -516,6 +518,8 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
         title += f"; full-resolution baselines on {s.base_rule}"
     title += "".join(f"; {n} on {rule}" for n, (sel, rule) in s.own.items() if sel is not None)
     title += _side_by_side(rows) + _presets(rows)
+    mark = (info.get("dataset_build") or {}).get("mark")  # data other than its canonical build says so
+    title += f"; {mark}" if mark else ""
     comp_rows = compared_rows(s.compared, s.names)
     pending = []
     if s.left:  # stopped early: the rows of the pairs left are marked pending
