@@ -385,8 +385,10 @@ def leaderboard_markdown(root) -> str:
            "Where the data has no ground truth the cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
            + (" A cell marked [stale: k of n rows, made at C] holds rows made by the code of commit C, which "
               "changed since (`python -m eval.reproduce --check` names the modules): not this checkout's numbers."
-              if any(b.stale for b in boards)
-              else ""), "",
+              if any(b.stale for b in boards) else "")
+           + (" A column headed (not the canonical build) holds rows made on other data than the dataset's "
+              "canonical build (`python -m defaust verify`), one headed (build unchecked) rows whose run did not "
+              "check: comparable with rows of the same build only." if any(b.data[0] for b in boards) else ""), "",
            "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     for b in boards:
