@@ -52,6 +52,14 @@ def _data(name: str, faust_root) -> list[str] | None:
     return ["dataset=defaust", "dataset.root=data/defaust", "dataset.build.enabled=false", "dataset.baseline_cases=all"]
 
 
+def _both_canonical(folder, root) -> bool:
+    """Whether the run ``folder`` recorded the canonical DeFAUST (``dataset_build``) and the
+    build at ``root`` is canonical too: only then are its records made on that build's cases."""
+    from eval.datasets.defaust_dataset import build_provenance
+    made = json.loads((folder / "run.json").read_text()).get("dataset_build") or {}
+    return made.get("canonical") is True and build_provenance(root)["canonical"] is True
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name, cases", [("faust", ("s0_p1", "s0_p2")), ("defaust", ("s00_p01", "s00_p02"))])
 def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(tmp_path, faust_root, name, cases):
@@ -61,6 +69,9 @@ def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(
     data = _data(name, faust_root)
     if data is None:
         pytest.skip("no DeFAUST build in data/defaust (python -m defaust out=data/defaust)")
+    if name == "defaust" and not _both_canonical(res, ROOT / "data" / "defaust"):
+        pytest.skip("results/defaust and data/defaust are not both the canonical DeFAUST: the committed rows stand on "
+                    "other meshes (compare_with refuses them) until made again on the canonical build")
     before = _snapshot(res)
     site = tmp_path / "site"
     site.mkdir()
