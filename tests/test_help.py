@@ -38,6 +38,7 @@ HELP = {
     "-m examples.twisted_bar": ["usage: python -m examples.twisted_bar", "outputs/twisted_bar"],
     "benchmarks/arap_iteration.py": ["usage:", "--mesh"],
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
+    "benchmarks/defaust_blend.py": ["usage:", "repeats"],
     "benchmarks/implicit_arap_weights.py": ["usage:", "trials"],
     "benchmarks/implicit_arap_steps.py": ["usage:", "--steps", "--set"],
     "benchmarks/implicit_arap_step_time.py": ["usage:", "--deform-steps", "--both"],
