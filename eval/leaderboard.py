@@ -177,7 +177,7 @@ def _cases_board(d: Path, info: dict, *, compared: bool = False) -> Board | None
                   else ([None] * len(main), [None] * len(main)))
     n = int(main["n_cases"].max()) if len(main) else 0
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=ranked, why_not=why,
-              rank_column=_rank_words(info, n, RANK_COLUMN[0]))
+              rank_column=_rank_words(info, n, RANK_COLUMN[0]), data=_data_mark(info))
     for i, (_, r) in enumerate(main.iterrows()):
         t = None if str(r["method"]) in other else _num(r.get("time_s"))  # never a time across runs
         b.rows.append({"method": str(r["method"]), "gt": gt[i], **{k: _num(r.get(k)) for k in BOARD_MEASURES},
@@ -202,7 +202,7 @@ def _animation_board(d: Path, info: dict) -> Board | None:
     b = Board(folder=d.name, label=_label(d, info), commit=_commit(info), n_cases=n, ranked=False,
               why_not=f"not ranked: its table has no per-case rows for the paired test ({RANK_TEST[0]})",
               rank_column="gt_mean_pct (the ground-truth error over every frame)",
-              time_words=" (median seconds per frame)")
+              time_words=" (median seconds per frame)", data=_data_mark(info))
     for i, (_, r) in enumerate(t.iterrows()):
         tm = _num(r.get("frame_median_s"))
         b.rows.append({"method": str(r["method"]), "gt": gt[i], **dict.fromkeys(BOARD_MEASURES),
@@ -275,7 +275,7 @@ def collect(root) -> tuple[list[Board], list[str]]:
             b = (_cases_board(d, info) if kind == "cases" else _animation_board(d, info) if kind == "animation"
                  else None)
             if b is not None and b.rows:
-                b.stale, b.data = _stale(d, trees), _data_mark(info)
+                b.stale = _stale(d, trees)
                 made = marked_run(d) if kind == "animation" else None  # a folder run whole, marked by --retabulate
                 if made is not None:  # one row per method in its table
                     b.stale = {r["method"]: (1, 1, {made}, set()) for r in b.rows}
