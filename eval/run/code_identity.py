@@ -542,9 +542,9 @@ def _new_module_moved(stmts, binds: dict, now: Mapping, then: Mapping) -> bool:
     one of ``then``'s modules, each import binding what such a module binds by that name."""
     if not stmts or any(not s[0] for s in stmts):
         return False
-    names = [n.encode() for s in stmts for n in s[0]]  # a module can define only what its text spells (NFKC aside)
-    sources = {m for m in then if (not all(n.isascii() for n in names) or any(n in then[m].read_bytes() for n in names))
-               and set(stmts) & set(_module_parts(m, then)[0])}
+    names, plain = [n.encode() for s in stmts for n in s[0]], all(n.isascii() for s in stmts for n in s[0])
+    sources = {m for m in then if (not plain or any(map(then[m].read_bytes().__contains__, names)))  # spells one?
+               and set(stmts) & set(_module_parts(m, then)[0])}  # (a text read once per module; NFKC: parse all)
     if not set(stmts) <= {s for m in sources for s in _module_parts(m, then)[0]}:
         return False
     meanings = {}
