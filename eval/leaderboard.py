@@ -240,9 +240,13 @@ def stale_words(stale: tuple | None) -> str:
 def _data_mark(info: dict) -> tuple[str, str]:
     """``(tag, sentence)`` for a board whose run read data other than its dataset's
     canonical build (``run.json``'s ``dataset_build``, :func:`eval.datasets.defaust_dataset.build_provenance`),
-    or whose run, of a dataset that has a canonical build, recorded no such check; ``("", "")`` otherwise."""
+    or whose run, of a dataset that has a canonical build, recorded no such check, or that
+    left rows pending from a run on other case data (``rows_on_other_data``); ``("", "")`` otherwise."""
     build = info.get("dataset_build")
     if isinstance(build, dict):
+        other = build.get("rows_on_other_data")
+        if build.get("canonical") is True and isinstance(other, int) and other > 0:
+            return f" ({other} rows on another build)", str(build.get("mark") or "")
         if build.get("canonical") is True:
             return "", ""
         mark = build.get("mark")
@@ -253,6 +257,16 @@ def _data_mark(info: dict) -> tuple[str, str]:
         return "", ""
     return (" (build unchecked)", "its run recorded no check of its data against the canonical build (a run made "
             "before runs did): its rows may stand on other meshes than the canonical build's")
+
+
+def _data_legend(tags: set) -> str:
+    """The leaderboard's sentence on the data tags its columns carry (:func:`_data_mark`)."""
+    said = [w for k, w in (("(not the canonical build)", "one headed (not the canonical build) holds rows made on "
+                            "other data than the dataset's canonical build (`python -m defaust verify`)"),
+                           ("(build unchecked)", "one headed (build unchecked) rows whose run did not check"),
+                           ("rows on another build)", "one headed (k rows on another build) a run on the canonical "
+                            "build that left k rows of an earlier build pending")) if any(k in t for t in tags)]
+    return f" A column {'; '.join(said)[4:]}: comparable with rows of the same build only." if said else ""
 
 
 def _commit(info: dict) -> str:
@@ -386,9 +400,7 @@ def leaderboard_markdown(root) -> str:
            + (" A cell marked [stale: k of n rows, made at C] holds rows made by the code of commit C, which "
               "changed since (`python -m eval.reproduce --check` names the modules): not this checkout's numbers."
               if any(b.stale for b in boards) else "")
-           + (" A column headed (not the canonical build) holds rows made on other data than the dataset's "
-              "canonical build (`python -m defaust verify`), one headed (build unchecked) rows whose run did not "
-              "check: comparable with rows of the same build only." if any(b.data[0] for b in boards) else ""), "",
+           + _data_legend({b.data[0] for b in boards}), "",
            "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     for b in boards:

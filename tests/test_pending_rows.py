@@ -86,6 +86,37 @@ def test_a_pair_left_at_the_stop_and_never_stored_has_no_row_and_the_run_ends_cl
     assert "not run and never stored: no row" in (out / "eval.log").read_text()
 
 
+def test_a_row_left_pending_from_other_case_data_is_counted_in_the_title_and_run_json(faust_root, tmp_path):
+    """A resumed run stopped at once (:data:`STOP_AFTER_ENV`) whose case now has other
+    targets (another dataset seed) leaves its stored row, made on the earlier data,
+    pending: the row says it stands on other case data, the table's title counts it, so
+    a run does not vouch for data it did not read; a row of the same data says nothing."""
+    import json
+    import subprocess
+    import sys
+
+    from .conftest import ROOT, subprocess_env
+
+    (tmp_path / "faust").symlink_to(faust_root)
+    out = tmp_path / "out"
+    A = "{_target_:tests.store_methods.Counted,name:A}"
+
+    def run(seed, environ=None):
+        cmd = [sys.executable, "-m", "eval", "dataset=faust", f"dataset.root={tmp_path / 'faust'}",
+               "dataset.limit=1", f"dataset.seed={seed}", "reference.cases=none", f"methods=[{A}]",
+               f"out_dir={out}", "resume=true", "jobs=1"]
+        env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(tmp_path / "calls.txt"), **(environ or {}))
+        return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+
+    assert run(0).returncode == 0
+    r = run(1, {STOP_AFTER_ENV: "0.001"})
+    assert r.returncode == 0, r.stderr[-3000:]
+    table = (out / "table.md").read_text()
+    assert "1 pending row(s) made on other case data than this run's" in table.splitlines()[0]
+    assert "on other case data than this run's" in table.split("#### ")[-1]
+    assert json.loads((out / "run.json").read_text()).get("dataset_build") is None  # FAUST: no canonical build
+
+
 def test_a_row_left_pending_for_other_settings_stays_marked_until_made_again(tmp_path):
     """A row whose code is current but that its run left pending for other settings (the
     run's stop, :data:`STOP_AFTER_ENV`) stays marked when its tables are rebuilt, and counts

@@ -35,7 +35,7 @@ __all__ = ["STORE_VERSION", "STORE_DIR", "RECORD_EXTRAS", "LATER_CASE_FIELDS", "
            "Lookup",
            "case_identity", "pair_key",
            "check_row", "cell_problem", "record_digest", "output_digest", "fields_digest", "numeric_column",
-           "describe_change"]
+           "describe_change", "other_case_data"]
 
 log = logging.getLogger("eval")
 
@@ -86,6 +86,24 @@ def case_identity(case, *, dataset: str, seed) -> dict:
             "handles": _digest(case.handles), "targets": _digest(case.targets),
             "subject": json_safe(getattr(case, "subject", None)), "pose": json_safe(getattr(case, "pose", None)),
             "n_dropped": json_safe(getattr(case, "n_dropped", None)), **later}
+
+
+#: The fields of a case's identity that are its data (:func:`case_identity`): a record whose
+#: digests of these differ from a run's ran on other meshes, handles or targets.
+CASE_DATA_FIELDS = ("V", "F", "handles", "targets", "V_gt", *LATER_CASE_FIELDS)
+
+
+def other_case_data(rec, fields: dict | None) -> bool:
+    """Whether stored record ``rec`` ran on other data than the case of ``fields`` (a
+    pair's key fields now, :func:`pair_key`): any of :data:`CASE_DATA_FIELDS` its case
+    identity holds differs (a field it lacks, stored before it was keyed, is not compared).
+    A record without a case identity counts as other data."""
+    old = (rec.get("key_fields") or {}).get("case") if isinstance(rec, dict) and isinstance(
+        rec.get("key_fields"), dict) else None
+    new = (fields or {}).get("case") if isinstance(fields, dict) else None
+    if not isinstance(old, dict) or not isinstance(new, dict):
+        return True
+    return any(old[k] != new.get(k) for k in CASE_DATA_FIELDS if k in old)
 
 
 def fields_digest(fields) -> str:

@@ -10,6 +10,7 @@ import logging
 from eval.experiments.cases.reference_cutoff import cutoff_candidate, keep_if_reproduced
 from eval.run.pending_rows import STOP_AFTER_ENV
 from eval.run.progress import CostModel
+from eval.run.result_store import other_case_data
 from eval.run.stale_rows import CommitTrees, row_state
 
 __all__ = ["restore", "keep_reproduced", "leave_pending", "named_change"]
@@ -21,8 +22,9 @@ def leave_pending(s, ci: int, mi: int, key: tuple, done: dict) -> None:
     """Past the run's stop (:data:`eval.run.pending_rows.STOP_AFTER_ENV`): pair ``(ci, mi)``
     (store key and key fields ``key``) does not run; its stored record (of older code or
     other settings, read whole and valid, :meth:`eval.run.result_store.ResultStore.read`)
-    stands in the tables marked pending, with the commit that made it and why; a pair
-    never stored has no row."""
+    stands in the tables marked pending, with the commit that made it and why, and
+    whether it ran on other case data than this run reads (another build of the dataset:
+    :func:`eval.run.result_store.other_case_data`); a pair never stored has no row."""
     name, case = s.names[mi], s.cases[ci].name
     rec = s.store.read(case, name).record
     if rec is None:
@@ -30,7 +32,8 @@ def leave_pending(s, ci: int, mi: int, key: tuple, done: dict) -> None:
         return
     done[ci, mi] = rec
     git = rec.get("git") if isinstance(rec.get("git"), dict) else {}
-    s.left[case, name] = (s.store.lookup(case, name, *key).why or "stale", git.get("commit"))
+    s.left[case, name] = (s.store.lookup(case, name, *key).why or "stale", git.get("commit"),
+                          other_case_data(rec, key[1]))
     c = str(git.get("commit")) + ("+dirty" if git.get("dirty") else "")
     commits = s.resumed.setdefault("restored_commits", {})  # its row is not this run's (run.json row_commits)
     commits[c] = commits.get(c, 0) + 1

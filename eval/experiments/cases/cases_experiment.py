@@ -127,7 +127,7 @@ class _Setup:
     plan: object = None           # plan.PlanRecord once logged
     resumed: dict | None = None   # restored / recomputed counts for run.json
     deadline: float | None = None  # perf_counter time after which no pair starts (pending_rows.STOP_AFTER_ENV)
-    left: dict = field(default_factory=dict)  # (case, method) left at the deadline -> (why, commit) of its stored row
+    left: dict = field(default_factory=dict)  # (case, method) left at the deadline -> (why, commit, other data)
     cutoff: dict = field(default_factory=dict)  # (ci, mi) -> stored record kept if its reference is reproduced
 
     @property
@@ -499,6 +499,21 @@ def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostMo
     return rec, U
 
 
+def _data_mark(info: dict, left: dict) -> str:
+    """The title's mark of a run's data (``run.json``'s ``dataset_build``, updated in
+    place): its build's own mark, and the count of rows left pending from a run on other
+    case data (``left``: :attr:`_Setup.left`), recorded as ``rows_on_other_data``, so a
+    run on the canonical build does not vouch for the rows it did not make."""
+    build = info.get("dataset_build")
+    n = sum(1 for v in left.values() if v[2])
+    if not isinstance(build, dict):
+        return f"{n} pending row(s) made on other case data than this run's" if n else ""
+    if n:
+        words = f"{n} pending row(s) made on other case data than this build's"
+        build.update(rows_on_other_data=n, mark=f"{build['mark']}; {words}" if build.get("mark") else words)
+    return build.get("mark") or ""
+
+
 def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
     """Tables (:func:`eval.tables.write_tables`; the title states the baseline rule) and
     breakdowns (:func:`eval.present.breakdown.write_breakdown`, with its figure when figures
@@ -518,7 +533,7 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
         title += f"; full-resolution baselines on {s.base_rule}"
     title += "".join(f"; {n} on {rule}" for n, (sel, rule) in s.own.items() if sel is not None)
     title += _side_by_side(rows) + _presets(rows)
-    mark = (info.get("dataset_build") or {}).get("mark")  # data other than its canonical build says so
+    mark = _data_mark(info, s.left)  # data other than its canonical build says so
     title += f"; {mark}" if mark else ""
     comp_rows = compared_rows(s.compared, s.names)
     pending = []
@@ -526,7 +541,8 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
         log.warning("%s: %d stored row(s) left, marked pending in the tables (python -m eval.reproduce --check)",
                     STOP_AFTER_ENV, len(s.left))
         with CommitTrees() as trees:  # why each is stale: the modules changed since its commit
-            left = {k: (named_change(s, *k, why, trees), commit) for k, (why, commit) in s.left.items()}
+            left = {k: (named_change(s, *k, why, trees) + ("; on other case data than this run's" if other else ""),
+                        commit) for k, (why, commit, other) in s.left.items()}
         pending = [RowState(s.out_dir, r["case"], r["method"], (r["case"], r["method"]) in left,
                             *left.get((r["case"], r["method"]), ("", None))) for r in rows]
     paths = write_tables(df, s.out_dir, title=title, compared=pd.DataFrame(comp_rows) if comp_rows else None,
