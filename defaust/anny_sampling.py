@@ -19,14 +19,15 @@ from sshade.errors import SShaDeError
 
 from . import fixed_order as fo
 from .anny_poses import BACK, FORWARD, LEFT, UP, AnnyPose, JointRotation, bend, sym, turn
-from .anny_source import SUBJECTS, AnnySubject, Phenotype, anny_subject, self_intersections
+from .anny_source import SUBJECTS, AnnySubject, Phenotype, anny_subject
+from .self_intersections import self_intersections
 
 __all__ = ["SAMPLER_VERSION", "PHENOTYPE_RANGES", "POSE_ACTIONS", "DEFAULT_DIFFICULTY", "MAX_ATTEMPTS",
            "draw_phenotype", "draw_pose", "scale_pose", "mean_displacement_pct", "SampledSubject",
            "sampled_subject"]
 
 #: Changes whenever a draw would change: part of every sampled item's key.
-SAMPLER_VERSION = 1
+SAMPLER_VERSION = 2
 #: ``(lo, hi)`` of each control, uniform; the fixed table's span (:data:`SUBJECTS`: adults of
 #: 26-74 years, slim to heavy, 1.56-1.93 m). ``gender`` is 0 or 1, each with probability 1/2.
 PHENOTYPE_RANGES: dict[str, tuple[float, float]] = {

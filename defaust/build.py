@@ -29,7 +29,6 @@ from sshade.json_file import read_json
 from sshade.mesh.io import read_mesh
 
 from . import highres
-from .anny_source import self_intersections
 from .config import BuildConfig
 from .croissant import write_croissant
 from .handles import handles_to_arrays, landmark_handles, landmarks_for_target
@@ -45,6 +44,7 @@ from .manifest import (
     write_partial,
 )
 from .resolutions import extra_counts, resolution_key
+from .self_intersections import self_intersections
 from .sources import SOURCES, Source
 from .store import write_npz, write_ply
 

