@@ -39,15 +39,22 @@ class CanonicalStatus:
     name : str or None, that canonical build's name (the one holding the first item).
     items : int, items of the build checked. of : int, items of that canonical build.
     difference : str or None, the first item or file that differs, in words.
+    unrecorded : int, items of a build of a canonical record's kind (builder version, source,
+        ANNY versions and parameters but the subjects and the FAUST folder) whose item the
+        record does not hold (a FAUST subject it lacks): nobody's bytes to hold them to.
     """
     canonical: bool
     name: str | None
     items: int
     of: int
     difference: str | None
+    unrecorded: int = 0
 
     def words(self) -> str:
         """One line for a person: what the build is, and what follows for comparisons."""
+        if self.unrecorded and self.difference and self.difference.startswith(_UNRECORDED):
+            return (f"{self.difference}. Its other {self.items - self.unrecorded} items are the canonical "
+                    f"'{self.name}' build's; rows on the unrecorded ones compare only with rows made on this build")
         if self.canonical:
             part = "" if self.items == self.of else f" ({self.items} of its {self.of} items)"
             return f"the canonical DeFAUST '{self.name}'{part}: rows made on it compare with anyone's rows on it"
@@ -81,14 +88,18 @@ def _item_ok(v) -> bool:
 def canonical_record(manifest: dict) -> dict:
     """The canonical record of a build from its manifest (read by
     :func:`defaust.dataset.read_manifest`, the build verified): its format, builder
-    version, source and parameters (what it was built with, for a reader), and per item
-    its key and its files' sha256. Raises SShaDeError on a partial build."""
+    version, source and parameters (what it was built with, for a reader; not the FAUST
+    folder, a machine's path), and per item its key and its files' sha256. Raises
+    SShaDeError on a partial build."""
     if not manifest.get("complete"):
         raise SShaDeError("a canonical record is made from a complete build (this one is partial)")
     items = {i: {"key": v["key"], "files": dict(sorted(v["files"].items()))}
              for i, v in sorted(manifest.get("items", {}).items())}
     keep = ("format", "builder_version", "source", "parameters", "anny")
-    return {**{k: manifest[k] for k in keep if k in manifest}, "items": items}
+    rec = {k: manifest[k] for k in keep if k in manifest}
+    if isinstance(rec.get("parameters"), dict):  # a machine's folder is no part of what the build is
+        rec["parameters"] = {k: v for k, v in rec["parameters"].items() if k != "faust_root"}
+    return {**rec, "items": items}
 
 
 def canonical_status(manifest: dict, records: dict | None = None) -> CanonicalStatus:
@@ -109,9 +120,13 @@ def canonical_status(manifest: dict, records: dict | None = None) -> CanonicalSt
     records = canonical_records() if records is None else records
     by_key = {v["key"]: (name, i, v) for name, rec in records.items() for i, v in rec["items"].items()}
     items = manifest.get("items") if isinstance(manifest.get("items"), dict) else {}
-    name = None
+    kind = next((n for n, rec in records.items() if _kind(rec) == _kind(manifest)), None)
+    name, unrecorded = None, []
     for i, v in sorted(items.items()):
         hit = by_key.get(v.get("key")) if isinstance(v, dict) else None
+        if hit is None and kind is not None and i not in records[kind]["items"]:
+            unrecorded.append(i)  # of the record's kind, an item it does not hold
+            continue
         if hit is None:
             return CanonicalStatus(False, None, len(items), 0, f"its item {i} is no item of a canonical build "
                                    "(other builder version, source, seed, parameters, assets or ANNY versions)")
@@ -123,8 +138,28 @@ def canonical_status(manifest: dict, records: dict | None = None) -> CanonicalSt
                 return CanonicalStatus(False, hit[0], len(items), len(records[hit[0]]["items"]),
                                        f"{rel} differs from the canonical '{hit[0]}' build's (sha256 "
                                        f"{str(mine)[:12]}... here, {str(theirs)[:12]}... there)")
+    if unrecorded:
+        name = name or kind
+        return CanonicalStatus(False, name, len(items), len(records[name]["items"]),
+                               f"{_UNRECORDED} {len(unrecorded)} of its items ({unrecorded[0]} first): the "
+                               f"canonical '{name}' record holds {len(records[name]['items'])} items of this kind",
+                               len(unrecorded))
     of = len(records[name]["items"]) if name else 0
     return CanonicalStatus(bool(items), name, len(items), of, None if items else "it holds no item")
+
+
+#: How the difference of a build with items no canonical record holds begins.
+_UNRECORDED = "no canonical record holds"
+#: The parameters that say where or which part of a build, not what its items are.
+_LOCAL_PARAMETERS = ("subjects", "n_subjects", "faust_root")
+
+
+def _kind(d: dict) -> str:
+    """What a build or record is a build of, as JSON: builder version, source, ANNY versions
+    and parameters but :data:`_LOCAL_PARAMETERS` (the items a record could hold)."""
+    params = d.get("parameters") if isinstance(d.get("parameters"), dict) else {}
+    return json.dumps([d.get("builder_version"), d.get("source"), d.get("anny"),
+                       {k: v for k, v in params.items() if k not in _LOCAL_PARAMETERS}], sort_keys=True)
 
 
 def _write(root: str, name: str) -> int:

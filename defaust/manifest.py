@@ -274,7 +274,8 @@ def _held(m: dict) -> set:
 def self_problems(m: dict, where) -> list[str]:
     """What manifest ``m`` (of the build at ``where``) says against itself, one line each:
     a complete build holding other subjects than its ``parameters.subjects`` (or, without
-    them, the ``n_subjects`` a build makes) or its ``planned_subjects`` (a manifest with no
+    them, the ``n_subjects`` a build makes; a FAUST build without them makes the subjects its
+    folder holds, which only ``planned_subjects`` names) or its ``planned_subjects`` (a manifest with no
     ``parameters`` at all is not held to them: a source's own check names it); an item lacking a
     file that the other items of its kind (rest, pose) hold (a ground truth deleted with
     its entries, say)."""
@@ -284,10 +285,12 @@ def self_problems(m: dict, where) -> list[str]:
         claimed = par.get("subjects")
         total = par.get("n_subjects") if isinstance(par.get("n_subjects"), int) else FAUST_SUBJECTS
         want = {x for x in claimed if isinstance(x, int)} if isinstance(claimed, list) else set(range(total))
+        if not isinstance(claimed, list) and par.get("source") == "faust":
+            want = None  # the subjects its FAUST folder holds: only planned_subjects names them
         planned = m.get("planned_subjects")
         for what, ids in (("its parameters", want), ("its planned_subjects", set(planned) if isinstance(planned, list)
                                                       else held)):
-            if held != ids:
+            if ids is not None and held != ids:
                 out.append(f"{where}: a complete build holding subject(s) {sorted(held)}, but {what} name "
                            f"{sorted(ids, key=str)}: an edited or cut manifest; rebuild it")
                 break
