@@ -24,6 +24,7 @@ import numpy as np
 
 from .components import deform_components, n_components
 from .errors import SShaDeError
+from .mesh.checked import checked_mesh
 from .mesh.validate import check_points, validate_deformed, validate_handles, validate_mesh
 from .method_interface import is_plugin
 
@@ -225,7 +226,10 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     Raises
     ------
     SShaDeError (not a MethodFailure) on an invalid mesh or handles, before the method
-    runs (:func:`sshade.mesh.validate.validate_mesh`, ``validate_handles``).
+    runs (:func:`sshade.mesh.validate.validate_mesh`, ``validate_handles``). The mesh is
+    checked there once: the method's own ``validate_mesh`` of the read-only arrays it is
+    handed returns at once (:func:`sshade.mesh.checked.checked_mesh`; a mesh of several
+    components is deformed per component, each checked by the method).
     MethodFailure on anything the method raises or does: our methods' SShaDeError
     (its message), a plug-in's exception (``Type: message``), SystemExit and other
     BaseException (``SystemExit: 0 (...)``), a plug-in's ``os._exit`` (``os._exit(0)
@@ -236,7 +240,7 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     """
     name = str(getattr(method, "name", type(method).__name__))
     timeout_s = check_timeout(timeout_s)
-    V, F = validate_mesh(V, F, allow_components=True)
+    V, F, he = validate_mesh(V, F, allow_components=True, return_halfedges=True)
     handles, targets = validate_handles(V, handles, targets)
     n = len(V)
     Vr, Fr, hr, tr = (_read_only(a) for a in (V, F, handles, targets))
@@ -251,7 +255,8 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
             raw, info = _guarded(lambda: deform_components(checked, Vr, Fr, hr, tr, return_info=True),
                                  timeout_s, plugin)
         else:
-            raw = _guarded(lambda: method.deform(Vr, Fr, hr, tr), timeout_s, plugin)
+            with checked_mesh(Vr, Fr, he, single_component=True):  # checked above: not again inside
+                raw = _guarded(lambda: method.deform(Vr, Fr, hr, tr), timeout_s, plugin)
             info = getattr(method, "info", None)
         elapsed = time.perf_counter() - t0
     info = dict(info) if isinstance(info, Mapping) else {}

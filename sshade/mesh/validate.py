@@ -15,6 +15,7 @@ from numba import njit
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import SShaDeError
+from .checked import trusted_mesh
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
 __all__ = ["validate_mesh", "validate_handles", "validate_targets", "validate_handle_indices", "validate_deformed",
@@ -217,7 +218,14 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     >>> V2, F2 = validate_mesh(V, F)
+
+    Arrays a caller already checked (:func:`sshade.mesh.checked.checked_mesh`: the guard's,
+    inside a method's call) are not checked again: copies of them come back at once.
     """
+    hit = trusted_mesh(V, F, allow_components=allow_components,
+                       default_checks=allow_boundary is True and area_tol == AREA_TOL)
+    if hit is not None:
+        return hit if return_halfedges else hit[:2]
     V = np.ascontiguousarray(_real_array(V, f"{name}: vertex array"), dtype=np.float64)
     if not V.flags.writeable:  # a read-only array (sshade.guard) would make numba compile a second signature
         V = V.copy()
