@@ -396,7 +396,8 @@ def leaderboard_markdown(root) -> str:
            f"**The ranking column is {RANK_COLUMN[1]}**, the rank in parentheses (1 = nearest; {RANK_WORDS}); "
            "no other column ranks: a method best on volume may be far from the true pose. Per dataset, the GT "
            f"mean's {CI[0]:.0%} interval is a percentile bootstrap over its cases ({CI[1]} resamples, seed {CI[2]}). "
-           "Where the data has no ground truth the cell shows Volume / EL (%) / FA (deg) errors and nobody is ranked."
+           f"Where the data has no ground truth the cell shows {' / '.join(label(k) for k in BOARD_MEASURES)} "
+           "errors and nobody is ranked."
            + (" A cell marked [stale: k of n rows, made at C] holds rows made by the code of commit C, which "
               "changed since (`python -m eval.reproduce --check` names the modules): not this checkout's numbers."
               if any(b.stale for b in boards) else "")

@@ -58,6 +58,16 @@ def test_no_module_of_eval_restates_a_column_label_of_the_registry():
     assert not found, f"column labels restated outside eval/present/measures.py: {found}"
 
 
+def test_no_module_of_eval_spells_a_measure_label_inside_any_text():
+    """Substring level, docstrings and f-strings included: a measure's label with its unit
+    ("EL (%)", "Time (s)") appears in eval/present/measures.py only, so renaming one
+    renames every header, sentence and example."""
+    labels = {m.label for m in MEASURES.values() if "(" in m.label}
+    found = {p.relative_to(ROOT).as_posix(): sorted(lb for lb in labels if lb in p.read_text())
+             for p in sorted((ROOT / "eval").rglob("*.py")) if p.name != "measures.py" or p.parent.name != "present"}
+    assert not {k: v for k, v in found.items() if v}, found
+
+
 def test_each_experiment_table_takes_its_columns_from_the_registry():
     from eval.experiments import animation, pose_transfer, tosca
     from eval.experiments.scaling import scaling_table

@@ -24,6 +24,7 @@ from eval.config_schema import section_reader
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.reference import reference_solution, status_words
 from eval.present.figures import safe_figure
+from eval.present.measures import label as measure_label
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import DatasetSpec, EvalSpec, ReferenceOptions
@@ -311,7 +312,7 @@ def _markdown(tdf, target: float, budget: float) -> str:
              f"Distances in % of the bounding-box diagonal; 'to {target:g}%': first time the mean distance is "
              f"below {target:g}% (-- never within the {budget:g} s budget). Times include precomputation, "
              "exclude the distance evaluations.", "",
-             f"| Case | Vertices | Solver | Iterations | Time (s) | To {target:g}% (s) "
+             f"| Case | Vertices | Solver | Iterations | {measure_label('time_s')} | To {target:g}% (s) "
              "| Mean (%) | Max (%) | Stopped |",
              "|---|---:|---|---:|---:|---:|---:|---:|---|"]
     for _, r in tdf.iterrows():

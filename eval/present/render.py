@@ -8,7 +8,7 @@ so this works on servers, in Hydra jobs and in worker processes whatever
 
 Example::
 
-    img = render_mesh(V, F, colors=err, clim=(0, 5), colorbar_label="EL (%)")
+    img = render_mesh(V, F, colors=err, clim=(0, 5), colorbar_label=label("edge_err_pct"))  # eval.present.measures
     save_png("out.png", img)"""
 from __future__ import annotations
 
