@@ -27,7 +27,7 @@ from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_once
 
-from .coarse_start import check_start, start_rotations
+from .coarse_start import COARSE_N_LOW, check_start, start_rotations
 from .fullres_arap import check_arap_args
 
 __all__ = ["ARAPSR"]
@@ -76,7 +76,7 @@ class ARAPSR:
 
     def __init__(self, *, alpha: float = DEFAULT_ALPHA, tol: float = 1e-4, max_iter: int | None = None,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 start: str = "auto", coarse_n_low: int = 6000, alpha_scaling: str = "valence",
+                 start: str = "auto", coarse_n_low: int = COARSE_N_LOW, alpha_scaling: str = "valence",
                  stop: str = "energy"):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{self.name}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")

@@ -19,12 +19,16 @@ from sshade.arap import DEFORM_ENERGIES, SR_ENERGY, Criterion, build_operators, 
 from sshade.errors import SShaDeError
 from sshade.remesh import remesh
 
-__all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO"]
+__all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO",
+           "COARSE_N_LOW"]
 
 #: the converged protocol's starts: ``auto``, the rigid fit of the handles, the coarse start
 STARTS = ("auto", "rigid", "coarse")
 #: ``"auto"`` starts coarse only when the mesh has at least this many times ``n_low`` vertices
 COARSE_MIN_RATIO = 4
+#: the low-resolution size of the coarse start (``coarse_n_low``) by default: SShaDe's
+#: paper size (§4.1), the one home of this default (method YAMLs held to it by a test)
+COARSE_N_LOW = 6000
 
 
 def check_start(name: str, start, coarse_n_low) -> tuple[str, int]:
@@ -62,7 +66,7 @@ def start_rotations(start: str, V, F, handles, targets, *, energy: str, coarse_n
         return None, {}
 
 
-def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_low: int = 6000, seed: int = 0,
+def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_low: int = COARSE_N_LOW, seed: int = 0,
                  criterion: Criterion | None = None, alpha_scaling: str = "valence") -> tuple[np.ndarray, dict]:
     """Start rotations for a full-resolution solve from a low-resolution solve of the same
     energy.
@@ -95,7 +99,7 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
     --------
     Example::
 
-        R0, info = coarse_start(V, F, handles, targets, energy="spokes", n_low=6000)
+        R0, info = coarse_start(V, F, handles, targets, energy="spokes", n_low=COARSE_N_LOW)
         res = solve_arap(V, F, handles, targets, energy="spokes", R0=R0)
     """
     if energy not in DEFORM_ENERGIES:

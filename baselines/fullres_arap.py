@@ -11,7 +11,7 @@ from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import WARMED, warm_fullres, warm_once
 
-from .coarse_start import check_start, coarse_start, start_rotations, uses_coarse
+from .coarse_start import COARSE_N_LOW, check_start, coarse_start, start_rotations, uses_coarse
 
 __all__ = ["FullResArap", "ARAP", "Elastic", "check_arap_args"]
 
@@ -91,7 +91,7 @@ class FullResArap:
 
     def __init__(self, energy: str, *, tol: float = 1e-4, max_iter: int | None = None, name: str | None = None,
                  protocol: str = "converged", etol: float | None = None, gtol: float | None = None,
-                 start: str = "rigid", coarse_n_low: int = 6000):
+                 start: str = "rigid", coarse_n_low: int = COARSE_N_LOW):
         if protocol not in PROTOCOLS:
             raise SShaDeError(f"{name or energy}: unknown protocol {protocol!r}; use one of {PROTOCOLS}")
         self.start, self.coarse_n_low = check_start(name or energy, start, coarse_n_low)
@@ -166,7 +166,8 @@ class ARAP(FullResArap):
     """ARAP, spokes energy (Sorkine & Alexa 2007), full resolution."""
 
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
-                 etol: float | None = None, gtol: float | None = None, start: str = "rigid", coarse_n_low: int = 6000):
+                 etol: float | None = None, gtol: float | None = None, start: str = "rigid",
+                 coarse_n_low: int = COARSE_N_LOW):
         super().__init__("spokes", tol=tol, max_iter=max_iter, name="ARAP", protocol=protocol, etol=etol, gtol=gtol,
                          start=start, coarse_n_low=coarse_n_low)
 
@@ -177,6 +178,7 @@ class Elastic(FullResArap):
     name = "Elastic"
 
     def __init__(self, *, tol: float = 1e-4, max_iter: int | None = None, protocol: str = "converged",
-                 etol: float | None = None, gtol: float | None = None, start: str = "rigid", coarse_n_low: int = 6000):
+                 etol: float | None = None, gtol: float | None = None, start: str = "rigid",
+                 coarse_n_low: int = COARSE_N_LOW):
         super().__init__("spokes_and_rims", tol=tol, max_iter=max_iter, name=Elastic.name, protocol=protocol,
                          etol=etol, gtol=gtol, start=start, coarse_n_low=coarse_n_low)

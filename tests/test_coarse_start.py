@@ -98,3 +98,23 @@ def test_auto_rule():
     assert start_rotations("auto", V, F, h, T, energy="spokes", coarse_n_low=6000) == (None, {})
     with pytest.raises(SShaDeError, match="energy"):
         coarse_start(V, F, h, T, energy="elements", n_low=100)
+
+
+def test_the_coarse_start_size_is_written_once_and_the_method_configs_follow_it():
+    """COARSE_N_LOW is the default of every signature that takes a coarse size, and the
+    ARAP, Elastic and ARAP-SR configs state the same number (a YAML cannot import it)."""
+    import inspect
+    from pathlib import Path
+
+    import yaml
+
+    from baselines.coarse_start import COARSE_N_LOW
+    from baselines.fullres_arap import FullResArap
+
+    conf = Path(__file__).resolve().parents[1] / "conf" / "method"
+    for name in ("ARAP", "Elastic", "ARAP-SR"):
+        assert yaml.safe_load((conf / f"{name}.yaml").read_text())["coarse_n_low"] == COARSE_N_LOW, name
+    classes = (ARAPSR, ARAP, Elastic, FullResArap)
+    signatures = [(coarse_start, "n_low"), *((c.__init__, "coarse_n_low") for c in classes)]
+    for f, p in signatures:
+        assert inspect.signature(f).parameters[p].default == COARSE_N_LOW, f

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.coarse_start import coarse_start, uses_coarse
+from baselines.coarse_start import COARSE_N_LOW, coarse_start, uses_coarse
 from defaust.store import read_npz, write_npz
 from eval.metrics.reference_scores import sr_alpha, sr_params
 from eval.run.reference_cache import reference_key
@@ -58,14 +58,14 @@ def _sr_start(V, F, handles, targets, params, U0, R0):
     """``(U0, R0)`` for ARAP-SR's deep solve: a converged ARAP-SR result ``U0`` with its
     rotations ``R0``, so the deep solve continues that path; else (no ``R0``: sweeps for
     the rotations of a given ``U0`` crawl at 169k vertices), on a mesh of at least
-    ``COARSE_MIN_RATIO`` x 6,000 vertices, the method's own coarse start
+    ``COARSE_MIN_RATIO`` x ``COARSE_N_LOW`` vertices, the method's own coarse start
     (:func:`baselines.coarse_start.coarse_start`; from the rigid fit the solve takes
     hours at 169k vertices); else the rigid fit (``(None, None)``). ``params``:
     ``(alpha, alpha_scaling)``."""
     if U0 is not None and R0 is not None:
         return U0, R0
-    if uses_coarse("auto", len(V), 6000):  # the method's own rule (baselines/coarse_start.py)
-        return None, coarse_start(V, F, handles, targets, energy=SR_ENERGY, alpha=params[0], n_low=6000,
+    if uses_coarse("auto", len(V), COARSE_N_LOW):  # the method's own rule (baselines/coarse_start.py)
+        return None, coarse_start(V, F, handles, targets, energy=SR_ENERGY, alpha=params[0], n_low=COARSE_N_LOW,
                                   alpha_scaling=params[1])[0]
     return None, None
 
