@@ -367,10 +367,10 @@ def _verified(code: dict, tree: Path, by: Path | None = None) -> bool:
     (its commit's): its modules' and constants' digest there, or, for a record re-keyed
     after a definition moved (:func:`eval.run.code_identity.modules_digest_at`), there
     with the moved modules as in this checkout or as in ``by``, the sources of the commit
-    that re-keyed it."""
+    that re-keyed it (a module new since its commit: :func:`_sources_at`'s digest)."""
     mods, consts = code.get("modules") or [], code.get("constants") or ()
     for digest in (lambda: modules_digest(mods, str(tree), consts),
-                   lambda: modules_digest_at(mods, tree, None, consts),
+                   lambda: _sources_at(mods, tree, consts),
                    lambda: modules_digest_at(mods, tree, str(by), consts) if by is not None else None):
         try:
             if digest() == code.get("sources"):
@@ -434,18 +434,29 @@ def _reference_tree(rec: dict, tree: Path, trees: CommitTrees) -> tuple[Path | N
     return (t, "") if t is not None else (None, f"commit {rep.get('commit')!r} is not in this repository")
 
 
+def _sources_at(mods, tree, consts) -> str:
+    """:func:`eval.run.code_identity.modules_digest_at` of ``mods`` under ``tree`` (a
+    commit's sources), or, when one of them is new since (missing there), a digest no
+    checkout has: the code changed since, so a record keyed by it stays stale."""
+    try:
+        return modules_digest_at(mods, tree, None, consts)
+    except KeyError as e:
+        return f"a module new since its commit: {e}"
+
+
 def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
     """Re-key one record file ``p`` of ``folder``'s store (store version :data:`REKEY_FROM`
     or this one) under the identity rules of this checkout, in place (atomically):
     ``"rekeyed"``, ``"current"`` (its key is already what the rules give) or
     ``"refused: <why>"`` (left as it is: not valid, made by a dirty checkout, its commit
-    not in git, its recorded identity not that commit's sources, a module of its identity
-    missing there). The new identity: :func:`eval.run.code_identity.code_identity`'s
+    not in git, its recorded identity not that commit's sources, a module of its reference
+    solver's identity missing there). The new identity: :func:`eval.run.code_identity.code_identity`'s
     modules and constants for its method (and its reference columns where it has them)
     at this checkout, their code as at its commit (:func:`eval.run.code_identity.modules_digest_at`:
     a definition moved since counts as the same code); the numerical
     versions and plug-in digest as recorded. A record whose code changed since its
-    commit is re-keyed and stays stale."""
+    commit (a module of this checkout's identity new since then included) is re-keyed and
+    stays stale."""
     rec, bad = _valid(folder, p)
     if rec is None:
         return f"refused: {bad}"
@@ -469,14 +480,14 @@ def rekey_record(folder, p: Path, trees: CommitTrees) -> str:
         if not _verified(old, tree, by):
             return f"refused: its code identity is not that of {git['commit'][:7]}'s sources"
         mods, consts = _now(fields)
-        code = {"sources": modules_digest_at(mods, tree, None, consts), "modules": list(mods),
+        code = {"sources": _sources_at(mods, tree, consts), "modules": list(mods),
                 "constants": list(consts), "versions": _versions(old, mods), "plugin": old.get("plugin")}
         if references_on(fields):
             rtree, why = _reference_tree(rec, tree, trees)
             if rtree is None or (isinstance(old.get("reference"), dict) and not _verified(old["reference"], rtree, by)):
                 return f"refused: {why or 'its reference solver identity is not that of its commit'}"
             ref = artifact_identity()
-            code["reference"] = {**ref, "sources": modules_digest_at(ref["modules"], rtree, None, ref["constants"])}
+            code["reference"] = {**ref, "sources": _sources_at(ref["modules"], rtree, ref["constants"])}
     except KeyError as e:
         return f"refused: module {e} is not at {git['commit'][:7]}"
     key, new_fields = pair_key(fields.get("method"), fields.get("case"), fields.get("extra"), code)
