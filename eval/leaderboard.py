@@ -261,12 +261,12 @@ def _data_mark(info: dict) -> tuple[str, str]:
 
 def _data_legend(tags: set) -> str:
     """The leaderboard's sentence on the data tags its columns carry (:func:`_data_mark`)."""
-    said = [w for k, w in (("(not the canonical build)", "one headed (not the canonical build) holds rows made on "
+    said = [w for k, w in (("(not the canonical build)", "headed (not the canonical build) holds rows made on "
                             "other data than the dataset's canonical build (`python -m defaust verify`)"),
-                           ("(build unchecked)", "one headed (build unchecked) rows whose run did not check"),
-                           ("rows on another build)", "one headed (k rows on another build) a run on the canonical "
+                           ("(build unchecked)", "headed (build unchecked) rows whose run did not check"),
+                           ("rows on another build)", "headed (k rows on another build) a run on the canonical "
                             "build that left k rows of an earlier build pending")) if any(k in t for t in tags)]
-    return f" A column {'; '.join(said)[4:]}: comparable with rows of the same build only." if said else ""
+    return f" A column {'; one '.join(said)}: comparable with rows of the same build only." if said else ""
 
 
 def _commit(info: dict) -> str:
