@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mesh.bounds import bounding_box
 from .sampling import average
 from .smooth_transfer import triangle_jacobians
 
@@ -41,7 +42,8 @@ def proximity_weights(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, V
     C = VN[FN[tri]]                                     # (n, 3 corners, 3)
     d2 = ((V[:, None, :] - C) ** 2).sum(axis=2)         # (n, 3)
     q = d2.mean(axis=1) if bary is None else np.einsum("nk,nk->n", bary, d2)
-    eps = _EPS_Q * float(np.sum((VN.max(axis=0) - VN.min(axis=0)) ** 2))
+    lo, hi = bounding_box(VN)
+    eps = _EPS_Q * float(np.sum((hi - lo) ** 2))
     return 1.0 / (eps + np.maximum(q, 0.0))
 
 

@@ -24,6 +24,7 @@ from .averaging import combine, proximity_weights, sampling_weights
 from .cores import pool_size
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
+from .mesh.bounds import bounding_box
 from .mesh.halfedge import count_components
 from .mesh.unit_frame import UnitFrame, unit_frame
 from .mesh.validate import validate_handle_indices, validate_mesh, validate_targets
@@ -325,7 +326,7 @@ class Prepared:
         self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
         self.n_solves = 0
         self._path, self._last_T = 0.0, None  # the targets' path so far (arc length, unit frame), its last point
-        self._corners = np.array([V.min(0), V.max(0)])  # V's bounding box, for the per-solve checks
+        self._corners = np.array(bounding_box(V))  # V's bounding box, for the per-solve checks
         self._unit_corners = frame.to_unit(self._corners)
         self._lock = threading.Lock()  # one solve at a time: the samplings' state is the previous solve's
 

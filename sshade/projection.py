@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from .errors import SShaDeError
+from .mesh.bounds import bbox_diagonal
 
 __all__ = ["Projection", "project_to_fans", "vertex_fans", "closest_point_triangle", "TIE"]
 
@@ -180,7 +181,7 @@ def project_to_fans(V: np.ndarray, label: np.ndarray, VN: np.ndarray, FN: np.nda
     VN = np.asarray(VN, np.float64)
     FN = np.asarray(FN, np.int64)
     G = VN[FN[faces]].reshape(-1, 9)  # corners of each fan triangle, in fan order
-    tie = TIE * float(np.linalg.norm(VN.max(0) - VN.min(0)))
+    tie = TIE * bbox_diagonal(VN)
     _project(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(label, np.int64), G, ptr, faces,
              tri, bary, dist, tie)
     return Projection(tri=tri, bary=bary, dist=dist)

@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SShaDeError
+from ..mesh.bounds import bbox_diagonal
 from ..mesh.validate import check_arrays
 from .kernel_data import KernelData, as_u32, rcm_order
 from .kernels import energy_kernel, fused, polar_kernel
@@ -30,8 +31,7 @@ ENERGIES = ("spokes", "spokes_and_rims")
 
 def bbox_diag(V: np.ndarray) -> float:
     """Length of the bounding-box diagonal of ``V`` ((n, 3) float64), mesh units."""
-    V = np.asarray(V, np.float64)
-    return float(np.linalg.norm(V.max(0) - V.min(0)))
+    return bbox_diagonal(np.asarray(V, np.float64))
 
 
 def _polar_numpy(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -24,6 +24,7 @@ import scipy.sparse as sp
 
 from ..errors import SShaDeError
 from ..json_file import loads, regular_file
+from .bounds import bounding_box
 from .io import atomic_write
 from .validate import check_faces
 
@@ -123,7 +124,7 @@ class GlbAnimationWriter:
         from the base."""
         d = (np.asarray(U, np.float64) - self.base64).astype("<f4")
         d.tofile(self.fh)
-        self.bounds.append((d.min(axis=0).tolist(), d.max(axis=0).tolist()))
+        self.bounds.append(tuple(c.tolist() for c in bounding_box(d)))
 
     def finish(self, extras: dict | None = None) -> None:
         """Write the ``.glb`` with the frames added so far (at least one), ``extras`` (a
@@ -161,7 +162,7 @@ class GlbAnimationWriter:
         views[2].byteStride = 12  # the targets' accessors share this view: glTF wants its stride said
         acc = [g.Accessor(bufferView=0, componentType=g.UNSIGNED_INT, count=self.F.size, type=g.SCALAR),
                g.Accessor(bufferView=1, componentType=g.FLOAT, count=n, type=g.VEC3,
-                          min=self.base.min(axis=0).tolist(), max=self.base.max(axis=0).tolist())]
+                          min=bounding_box(self.base)[0].tolist(), max=bounding_box(self.base)[1].tolist())]
         acc += [g.Accessor(bufferView=2, byteOffset=12 * n * i, componentType=g.FLOAT, count=n, type=g.VEC3,
                            min=lo, max=hi) for i, (lo, hi) in enumerate(self.bounds)]
         acc += [g.Accessor(bufferView=3, componentType=g.FLOAT, count=k, type=g.SCALAR,

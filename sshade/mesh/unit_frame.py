@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bounds import bounding_box
+
 __all__ = ["UnitFrame", "unit_frame"]
 
 
@@ -74,7 +76,7 @@ def unit_frame(V: np.ndarray) -> UnitFrame:
     V = np.asarray(V, np.float64)
     if V.ndim != 2 or V.shape[1] != 3 or not len(V):
         raise ValueError(f"unit_frame: V must be (n, 3) with n >= 1, got shape {V.shape}")
-    lo, hi = V.min(0), V.max(0)
+    lo, hi = bounding_box(V)
     diag = float(np.linalg.norm(hi - lo))
     if not (math.isfinite(diag) and diag > 0):
         raise ValueError(f"unit_frame: the bounding box's diagonal is {diag}")

@@ -15,6 +15,7 @@ from numba import njit
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import SShaDeError
+from .bounds import bbox_diagonal, bounding_box
 from .checked import trusted_mesh
 from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
 
@@ -175,7 +176,7 @@ def zero_area_faces(V: np.ndarray, F: np.ndarray, area_tol: float = AREA_TOL) ->
     """
     if not len(F):
         return np.zeros(0, bool)
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    diag = bbox_diagonal(V)
     dbl = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     return dbl <= 2 * area_tol * diag * diag
 
@@ -411,7 +412,7 @@ def _check_scale(V, F, name) -> None:
     if big > COORD_MAX:
         raise SShaDeError(f"{name}: coordinates overflow in float64 (largest |x| = {big:.3g}, above {COORD_MAX:g}: "
                           "products of lengths in the methods would overflow; rescale the mesh)")
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    diag = bbox_diagonal(V)
     if diag == 0:
         raise SShaDeError(f"{name}: all vertices coincide")
     if diag < DIAG_MIN:
@@ -574,8 +575,8 @@ def validate_deformed(U, n_vertices: int, *, V=None, name: str = "method") -> np
                           f"expected ({int(n_vertices)}, 3)")
     with np.errstate(over="ignore", invalid="ignore"):
         out = np.array(A, dtype=np.float64, order="C", copy=True)
-    bad = ~np.isfinite(out).all(axis=1)
-    if bad.any():
+    bad = None if np.isfinite(out).all() else ~np.isfinite(out).all(axis=1)  # a row-wise pass only to name one
+    if bad is not None:
         raise SShaDeError(f"{name} returned {int(bad.sum())} vertices with NaN/inf coordinates "
                           f"(first: vertex {int(np.flatnonzero(bad)[0])})")
     if V is not None:
@@ -587,9 +588,13 @@ def _check_magnitude(U: np.ndarray, V, name: str) -> None:
     """SShaDeError if a row of ``U`` is farther than :data:`MAX_DIAGONALS` bounding-box
     diagonals of ``V`` from ``V``'s bounding-box centre."""
     V = np.asarray(V, dtype=np.float64)
-    lo, hi = V.min(axis=0), V.max(axis=0)
+    lo, hi = bounding_box(V)
     diag = float(np.linalg.norm(hi - lo))
     if not np.isfinite(diag) or diag <= 0:
+        return
+    ulo, uhi = bounding_box(U)  # every row within this box: none is far when its corners are not
+    if np.linalg.norm(np.maximum(np.abs(ulo - (lo + hi) / 2), np.abs(uhi - (lo + hi) / 2))) * (1 + 1e-12) \
+            <= MAX_DIAGONALS * diag:
         return
     dist = np.linalg.norm(U - (lo + hi) / 2, axis=1)
     far = dist > MAX_DIAGONALS * diag
@@ -605,7 +610,7 @@ def _check_target_scale(V, T) -> None:
     V = np.asarray(V, np.float64)
     if V.ndim != 2 or V.shape[1] != 3 or not len(V) or not np.isfinite(V).all():
         return
-    lo, hi = V.min(0), V.max(0)
+    lo, hi = bounding_box(V)
     ext = float((hi - lo).max())
     if not ext > 0 or not np.isfinite(ext):
         return
