@@ -160,9 +160,10 @@ class GlbAnimationWriter:
         views = [g.BufferView(buffer=0, byteOffset=s, byteLength=ln, target=t) for s, ln, t in
                  zip(starts, lengths, [_ELEMENT_ARRAY_BUFFER, _ARRAY_BUFFER, _ARRAY_BUFFER, None, None, None])]
         views[2].byteStride = 12  # the targets' accessors share this view: glTF wants its stride said
+        base_lo, base_hi = bounding_box(self.base)
         acc = [g.Accessor(bufferView=0, componentType=g.UNSIGNED_INT, count=self.F.size, type=g.SCALAR),
                g.Accessor(bufferView=1, componentType=g.FLOAT, count=n, type=g.VEC3,
-                          min=bounding_box(self.base)[0].tolist(), max=bounding_box(self.base)[1].tolist())]
+                          min=base_lo.tolist(), max=base_hi.tolist())]
         acc += [g.Accessor(bufferView=2, byteOffset=12 * n * i, componentType=g.FLOAT, count=n, type=g.VEC3,
                            min=lo, max=hi) for i, (lo, hi) in enumerate(self.bounds)]
         acc += [g.Accessor(bufferView=3, componentType=g.FLOAT, count=k, type=g.SCALAR,
