@@ -105,9 +105,15 @@ class LBFGS:
     (Liu, Bouaziz, Kavan, "Quasi-Newton Methods for Real-time Simulation of Hyperelastic
     Materials", ACM TOG 36(3), 2017; Nocedal & Wright, Algorithm 7.4): ``H0 = (2 L_ff)^-1``,
     so ``H0 grad(x) = z = x - G(x)`` and ``H0 y_i`` is the difference of two ``z``: no solve
-    beyond the global step's own. History in (m, N) ring buffers, ``N = 3 n_free``; the
-    recursion runs in serial numba kernels (BLAS calls were much slower on a loaded
-    machine: their threads spin), about ``4 m + 4`` passes over ``N`` numbers.
+    beyond the global step's own. ``H0`` is scaled by ``gamma = s.y / (y . H0 y)`` of the
+    newest pair (Nocedal & Wright, eq. 7.20, with ``H0`` in place of the identity), which
+    Liu et al. do not scale: the rotations make the energy softer than ``2 L_ff`` along
+    the slow modes, and the scaled steps take about a quarter fewer iterations there
+    (docs/methods.md, "Implementation notes: sshade/arap/accelerate.py"). Without
+    history the direction is the plain step ``-z``. History in (m, N) ring buffers,
+    ``N = 3 n_free``; the recursion runs in serial numba kernels (BLAS calls were much
+    slower on a loaded machine: their threads spin), about ``2 m + 2`` passes over the
+    two work vectors and ``5 m`` over the history.
     """
 
     def __init__(self, m: int, Lff):
@@ -121,7 +127,7 @@ class LBFGS:
 
     def reset(self):
         """Forget the curvature pairs (the next direction is the plain step's)."""
-        self.n_hist, self.pos, self.have_prev = 0, 0, False
+        self.n_hist, self.pos, self.have_prev, self.gamma = 0, 0, False, 1.0
 
     def restart(self):
         """A new problem on the same free vertices and ``L_ff`` (other targets): keep the
@@ -130,21 +136,27 @@ class LBFGS:
         iterate (a pair across two problems would mix their targets)."""
         self.have_prev = False
 
-    def direction(self, x: np.ndarray, g: np.ndarray):
+    def direction(self, x: np.ndarray, g: np.ndarray, grad: np.ndarray | None = None):
         """Descent direction ``d`` ((nf, 3), new array) at the accepted iterate ``x`` whose
-        plain step is ``g = G(x)``, and the slope ``grad(x) . d < 0``."""
+        plain step is ``g = G(x)``, and the slope ``grad(x) . d < 0``. ``grad``: (nf, 3)
+        C-contiguous ``2 L_ff (x - g)`` when the caller has it (the same floats as this
+        method's own product; read, not kept)."""
         m = self.m
         z = np.subtract(x, g)
-        grad = (self.L @ z).reshape(-1)
-        grad *= 2.0
+        if grad is None:
+            grad = (self.L @ z).reshape(-1)
+            grad *= 2.0
+        else:
+            grad = grad.reshape(-1)
         z = z.reshape(-1)
         xv = np.ascontiguousarray(x).reshape(-1)
         k = self.pos
         if self.have_prev:  # new curvature pair (s, y, H0 y) into the ring
-            sy, ss, yy = lbfgs_pair(xv, grad, z, self.x_prev, self.grad_prev, self.z_prev,
-                                     self.S[k], self.Y[k], self.Z[k])
-            if sy > 1e-12 * np.sqrt(ss * yy):  # curvature condition
+            sy, ss, yy, yz = lbfgs_pair(xv, grad, z, self.x_prev, self.grad_prev, self.z_prev,
+                                         self.S[k], self.Y[k], self.Z[k])
+            if sy > 1e-12 * np.sqrt(ss * yy) and yz > 0:  # curvature condition
                 self.rho[k] = 1.0 / sy
+                self.gamma = sy / yz
                 self.pos = (k + 1) % m
                 self.n_hist = min(self.n_hist + 1, m)
             elif self.n_hist == m:  # the rejected pair overwrote the oldest one
@@ -156,9 +168,10 @@ class LBFGS:
             self.have_prev = True
         order = np.array([(self.pos - 1 - i) % m for i in range(self.n_hist)], np.int64)
         r = np.empty_like(z)
-        slope = -lbfgs_two_loop(self.S, self.Y, self.Z, self.rho, order, grad, z, self.q, r, self.alpha)
+        slope = -lbfgs_two_loop(self.S, self.Y, self.Z, self.rho, order, grad, z, self.gamma, self.q, r,
+                                self.alpha)
         if not slope < 0:  # not a descent direction: plain step, fresh history
-            self.n_hist, self.pos = 0, 0
+            self.n_hist, self.pos, self.gamma = 0, 0, 1.0
             r = z
             slope = -float(grad @ z)
         return (-r).reshape(x.shape), slope

@@ -22,9 +22,10 @@ class Criterion:
     """Convergence criterion of :func:`sshade.arap.solver.solve_arap`: stop when BOTH hold
     at an accepted iterate ``U_k``.
 
-    * energy: ``(E_{k-1} - E_k) / E_k < etol`` (relative decrease over the last accepted
-      iteration; an energy below ``1e-12 * sum_e w_e ||e_e||^2``, i.e. a rigid motion up to
-      rounding, satisfies it);
+    * energy: ``(E_{k-1} - E_k) / |E_k| < etol`` (relative decrease over the last accepted
+      iteration; an energy within ``1e-12 * sum_e w_e ||e_e||^2`` of 0, i.e. a rigid motion
+      up to rounding, satisfies it). ``|E_k|``: with libigl's cotangent weights, negative
+      on obtuse triangles, the spokes energy can be negative;
     * gradient: ``gnorm(U_k) < gtol`` with the scale-free norm of :func:`gradient_norm`.
 
     Attributes

@@ -369,6 +369,7 @@ class _Stepper:
         self.Ek = np.empty(n)
         self.B = np.empty((nf, 3))
         self.q = np.empty(nf)
+        self.grad = np.empty((nf, 3))  # the last gnorm's gradient (kernels only)
 
     def run(self, name: str, *args):
         """Loop kernel ``name`` with ``cur`` threads."""
@@ -406,10 +407,10 @@ class _Stepper:
 
     def gnorm(self, x: np.ndarray, g: np.ndarray) -> float:
         """Scale-free gradient norm at ``x``, whose plain step is ``g`` (``grad = 2 L_ff
-        (x - g)``; :func:`sshade.arap.criterion.gradient_norm`)."""
+        (x - g)``, kept in ``grad`` with the kernels; :func:`sshade.arap.criterion.gradient_norm`)."""
         t0 = clock()
         if self.kern:
-            self.run("grad", *self.L_csr, x, g, self.mass_f, self.q)
+            self.run("grad", *self.L_csr, x, g, self.mass_f, self.q, self.grad)
             gn = float(self.diag * np.sqrt(self.q.sum() / self.mass_sum))
         else:
             gn = gradient_norm(2.0 * (self.Lff @ (x - g)), self.mass_f, self.diag)
@@ -476,12 +477,12 @@ class _Loop:
         st, crit, E = self.st, self.crit, self.E
         gn = st.gnorm(self.x, self.g)
         self.G_hist.append(gn)
-        if E <= st.zero_E:
+        if abs(E) <= st.zero_E:
             self.rel = 0.0
-        else:
-            self.rel = (self.E_prev - E) / E if np.isfinite(self.E_prev) else np.inf
+        else:  # |E|: libigl's cotangent weights turn negative on obtuse triangles, and so can E
+            self.rel = (self.E_prev - E) / abs(E) if np.isfinite(self.E_prev) else np.inf
         if self.rel < crit.etol and gn < crit.gtol:
-            return "converged" if self.it > 0 or E > st.zero_E else "rigid"
+            return "converged" if self.it > 0 or abs(E) > st.zero_E else "rigid"
         if self.callback is not None and self.it > 0:
             st.U[st.free] = self.x
             if self.callback(self.it, st.to_mesh(st.U), E, gn):
@@ -498,7 +499,7 @@ class _Loop:
         status ``"stalled"`` (no decrease even along the plain direction)."""
         st, x, E = self.st, self.x, self.E
         t0 = clock()
-        d, slope = self.lbfgs.direction(x, self.g)
+        d, slope = self.lbfgs.direction(x, self.g, st.grad if st.kern else None)
         st.tm["anderson"] += clock() - t0
         alpha, E_new = 1.0, None
         while True:

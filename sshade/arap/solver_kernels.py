@@ -1,7 +1,8 @@
 """Numba kernels of the solver's loop (:mod:`sshade.arap.solver`) and of its accelerators
 (:mod:`sshade.arap.accelerate`), with their lazy compilation.
 
-``set_rows``, ``max_move``, ``grad`` (the stopping test's gradient in CSR), ``push`` /
+``set_rows``, ``max_move``, ``grad`` (the stopping test's gradient in CSR, kept for the
+L-BFGS direction), ``push`` /
 ``mix`` (Anderson's history and mixing; sums over fixed chunks of :data:`CHUNK`, so the
 same floats whatever the thread count), :func:`lbfgs_two_loop`, :func:`lbfgs_pair`.
 :func:`loop_kernels` compiles (or loads from numba's cache) the serial or parallel
@@ -50,9 +51,9 @@ if nb is not None:
         return m
 
     @_njit
-    def _grad_rows(r0, r1, ptr, idx, val, x, g, mass, q):
+    def _grad_rows(r0, r1, ptr, idx, val, x, g, mass, q, out):
         """Rows ``r0:r1`` of the gradient ``2 A (x - g)`` (``A`` in CSR, scipy's order of
-        summation): ``q[i] = ||grad_i||^2 / (4 mass[i])``."""
+        summation) into ``out`` (r, 3): ``q[i] = ||grad_i||^2 / (4 mass[i])``."""
         for i in range(r0, r1):
             a0 = 0.0; a1 = 0.0; a2 = 0.0
             for jj in range(ptr[i], ptr[i + 1]):
@@ -60,17 +61,18 @@ if nb is not None:
                 v = val[jj]
                 a0 += v * (x[j, 0] - g[j, 0]); a1 += v * (x[j, 1] - g[j, 1]); a2 += v * (x[j, 2] - g[j, 2])
             a0 = 2.0 * a0; a1 = 2.0 * a1; a2 = 2.0 * a2
+            out[i, 0] = a0; out[i, 1] = a1; out[i, 2] = a2
             q[i] = (a0 * a0 + a1 * a1 + a2 * a2) / (4.0 * mass[i])
 
     @_njit
-    def _grad_serial(ptr, idx, val, x, g, mass, q):
-        _grad_rows(0, q.shape[0], ptr, idx, val, x, g, mass, q)
+    def _grad_serial(ptr, idx, val, x, g, mass, q, out):
+        _grad_rows(0, q.shape[0], ptr, idx, val, x, g, mass, q, out)
 
     @_njit_par
-    def _grad_parallel(ptr, idx, val, x, g, mass, q):
+    def _grad_parallel(ptr, idx, val, x, g, mass, q, out):
         n = q.shape[0]
         for c in _prange((n + 2047) // 2048):
-            _grad_rows(c * 2048, min(n, (c + 1) * 2048), ptr, idx, val, x, g, mass, q)
+            _grad_rows(c * 2048, min(n, (c + 1) * 2048), ptr, idx, val, x, g, mass, q, out)
 
     @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
     def _dot(a, b, n):
@@ -142,67 +144,98 @@ if nb is not None:
 
 if nb is not None:
     @_njit
-    def lbfgs_two_loop(S, Y, Z, rho, order, grad, z, q, r, alpha):
-        """L-BFGS two-loop recursion (Nocedal & Wright, Alg. 7.4) with ``H0 y_i = Z_i``
-        and ``H0 grad = z``: writes the quasi-Newton step ``r = H grad`` (N,) and returns
-        ``grad . r``. ``order``: ring slots, newest first. Serial and deterministic."""
+    def lbfgs_two_loop(S, Y, Z, rho, order, grad, z, gamma, q, r, alpha):
+        """L-BFGS two-loop recursion (Nocedal & Wright, Alg. 7.4) with the initial Hessian
+        ``gamma H0``, ``H0 y_i = Z_i`` and ``H0 grad = z``: writes the quasi-Newton step
+        ``r = H grad`` (N,) and returns ``grad . r``. ``order``: ring slots, newest first.
+        Each pass updates the vectors with one pair and sums the next pair's dot product
+        (the same sums, in the same order, as one pass each). Serial and deterministic."""
         N = grad.shape[0]
+        k = order.shape[0]
+        if k == 0:
+            sl = 0.0
+            for j in range(N):
+                r[j] = z[j]
+                sl += grad[j] * z[j]
+            return sl
+        i = order[0]
+        a = 0.0
         for j in range(N):
             q[j] = grad[j]
-            r[j] = z[j]
-        for t in range(order.shape[0]):
+            r[j] = gamma * z[j]
+            a += S[i, j] * grad[j]
+        for t in range(k):
             i = order[t]
-            a = 0.0
-            for j in range(N):
-                a += S[i, j] * q[j]
             a *= rho[i]
             alpha[t] = a
-            for j in range(N):
-                q[j] -= a * Y[i, j]
-                r[j] -= a * Z[i, j]
-        for t in range(order.shape[0] - 1, -1, -1):
-            i = order[t]
-            b = 0.0
-            for j in range(N):
-                b += Y[i, j] * r[j]
-            c = alpha[t] - rho[i] * b
-            for j in range(N):
-                r[j] += c * S[i, j]
-        sl = 0.0
+            ga = gamma * a
+            if t + 1 < k:
+                nxt = order[t + 1]
+                a2 = 0.0
+                for j in range(N):
+                    qj = q[j] - a * Y[i, j]
+                    q[j] = qj
+                    r[j] -= ga * Z[i, j]
+                    a2 += S[nxt, j] * qj
+                a = a2
+            else:
+                for j in range(N):
+                    r[j] -= ga * Z[i, j]
+        i = order[k - 1]
+        b = 0.0
         for j in range(N):
-            sl += grad[j] * r[j]
+            b += Y[i, j] * r[j]
+        sl = 0.0
+        for t in range(k - 1, -1, -1):
+            i = order[t]
+            c = alpha[t] - rho[i] * b
+            if t > 0:
+                nxt = order[t - 1]
+                b = 0.0
+                for j in range(N):
+                    rj = r[j] + c * S[i, j]
+                    r[j] = rj
+                    b += Y[nxt, j] * rj
+            else:
+                for j in range(N):
+                    rj = r[j] + c * S[i, j]
+                    r[j] = rj
+                    sl += grad[j] * rj
         return sl
 
     @_njit
     def lbfgs_pair(x, grad, z, x_prev, grad_prev, z_prev, s, y, zz):
         """New curvature pair into (s, y, zz) and the previous point updated to
-        (x, grad, z); returns (s.y, s.s, y.y)."""
+        (x, grad, z); returns (s.y, s.s, y.y, y.zz)."""
         sy = 0.0
         ss = 0.0
         yy = 0.0
+        yz = 0.0
         for j in range(x.shape[0]):
             a = x[j] - x_prev[j]
             b = grad[j] - grad_prev[j]
+            c = z[j] - z_prev[j]
             s[j] = a
             y[j] = b
-            zz[j] = z[j] - z_prev[j]
+            zz[j] = c
             sy += a * b
             ss += a * a
             yy += b * b
+            yz += b * c
             x_prev[j] = x[j]
             grad_prev[j] = grad[j]
             z_prev[j] = z[j]
-        return sy, ss, yy
+        return sy, ss, yy, yz
 
 
 else:  # pragma: no cover - numpy versions of the two L-BFGS kernels
-    def lbfgs_two_loop(S, Y, Z, rho, order, grad, z, q, r, alpha):
+    def lbfgs_two_loop(S, Y, Z, rho, order, grad, z, gamma, q, r, alpha):
         q[:] = grad
-        r[:] = z
+        r[:] = z if len(order) == 0 else gamma * z
         for t, i in enumerate(order):
             alpha[t] = rho[i] * np.einsum("j,j->", S[i], q)
             q -= alpha[t] * Y[i]
-            r -= alpha[t] * Z[i]
+            r -= (gamma * alpha[t]) * Z[i]
         for t in range(len(order) - 1, -1, -1):
             i = order[t]
             r += (alpha[t] - rho[i] * np.einsum("j,j->", Y[i], r)) * S[i]
@@ -216,7 +249,7 @@ else:  # pragma: no cover - numpy versions of the two L-BFGS kernels
         grad_prev[:] = grad
         z_prev[:] = z
         return (float(np.einsum("j,j->", s, y)), float(np.einsum("j,j->", s, s)),
-                float(np.einsum("j,j->", y, y)))
+                float(np.einsum("j,j->", y, y)), float(np.einsum("j,j->", y, zz)))
 
 
 _LOOP = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
@@ -240,7 +273,7 @@ def loop_kernels(parallel: bool):
             k["set_rows"](np.zeros((2, 3)), np.arange(2, dtype=np.uint32), x)
             k["max_move"](x, x)
             k["grad"](np.array([0, 1, 2], np.uint64), np.array([0, 1], np.uint32), np.ones(2), x, x, np.ones(2),
-                      np.empty(2))
+                      np.empty(2), np.empty((2, 3)))
             DF = np.zeros((2, 6))
             part = np.empty((1, 4))
             k["push"](xf, xf, xf, xf, DF, DF.copy(), 0, 1, part)
@@ -260,5 +293,5 @@ def warmup_kernels() -> bool:
         N, z = 3, np.zeros(3)
         lbfgs_pair(z, z, z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
         lbfgs_two_loop(np.zeros((1, N)), np.zeros((1, N)), np.zeros((1, N)), np.zeros(1), np.zeros(1, np.int64),
-                       z, z, np.empty(N), np.empty(N), np.empty(1))
+                       z, z, 1.0, np.empty(N), np.empty(N), np.empty(1))
     return ok
