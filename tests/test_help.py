@@ -41,6 +41,7 @@ HELP = {
     "benchmarks/defaust_blend.py": ["usage:", "repeats"],
     "benchmarks/checked_once.py": ["usage:", "--repeats"],
     "benchmarks/bounds.py": ["usage:", "--repeats"],
+    "benchmarks/fullres_defaust.py": ["usage:", "--code"],
     "benchmarks/implicit_arap_weights.py": ["usage:", "trials"],
     "benchmarks/implicit_arap_steps.py": ["usage:", "--steps", "--set"],
     "benchmarks/implicit_arap_step_time.py": ["usage:", "--deform-steps", "--both"],
