@@ -13,13 +13,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from sshade.arap import PROTOCOLS, make_criterion
-from sshade.arap.smooth_rotations import (
+from sshade.arap import (
     ALPHA_SCALINGS,
     DEFAULT_ALPHA,
+    DEFAULT_MAX_ITER,
     PAPER_STOPS,
+    PROTOCOLS,
     SR_ENERGY,
+    ArapOptions,
     arap_sr_deform,
+    make_criterion,
     solve_arap_sr,
 )
 from sshade.errors import SShaDeError
@@ -49,7 +52,7 @@ class ARAPSR:
         until the stop rule ``stop`` fires, at most 1000 iterations, then the stop
         classified converged or stalled by the gradient; ``info["protocol"] =
         "paper-sr"``, or ``"move-rule"`` with ``stop="move"``).
-    stop : ``"paper"`` protocol's stop rule (:data:`sshade.arap.smooth_rotations.PAPER_STOPS`):
+    stop : ``"paper"`` protocol's stop rule (:data:`sshade.arap.PAPER_STOPS`):
         ``"energy"`` (default, relative energy change below ``etol``) or ``"move"``
         (largest vertex move below ``tol`` x diagonal).
     tol : float > 0, ``"paper"`` with ``stop="move"``: move tolerance (fraction of the
@@ -89,8 +92,7 @@ class ARAPSR:
         if alpha_scaling not in ALPHA_SCALINGS:
             raise SShaDeError(f"{self.name}: alpha_scaling must be one of {ALPHA_SCALINGS}, got {alpha_scaling!r}")
         self.alpha_scaling = alpha_scaling
-        self.max_iter = ({"converged": 10000, "paper": 1000}[protocol] if args["max_iter"] is None
-                         else args["max_iter"])
+        self.max_iter = DEFAULT_MAX_ITER[protocol] if args["max_iter"] is None else args["max_iter"]
         self.criterion = make_criterion(etol, gtol)
         self.info: dict = {}
         #: (n, 3, 3) float64 or None: the rotations of the last converged-protocol result
@@ -118,8 +120,9 @@ class ARAPSR:
         frame = unit_frame(V)  # solved centred and scaled (sshade.mesh.unit_frame), mapped back
         U, T = frame.to_unit(V), frame.to_unit(targets)
         if self.protocol == "paper":
-            res = arap_sr_deform(U, F, handles, T, alpha=self.alpha, alpha_scaling=self.alpha_scaling,
-                                 stop=self.stop, tol=self.tol, criterion=self.criterion, max_iter=self.max_iter)
+            options = ArapOptions(alpha=self.alpha, alpha_scaling=self.alpha_scaling, stop=self.stop, tol=self.tol,
+                                  criterion=self.criterion, max_iter=self.max_iter)
+            res = arap_sr_deform(U, F, handles, T, options)
         else:
             res = self._converged(U, F, handles, T)
         self.rotations = res.info.get("R") if self.protocol == "converged" else None
@@ -146,9 +149,9 @@ class ARAPSR:
         R0, cinfo = start_rotations(self.start, V, F, handles, targets, energy=SR_ENERGY, alpha=self.alpha,
                                     alpha_scaling=self.alpha_scaling,
                                     coarse_n_low=self.coarse_n_low, criterion=self.criterion)
-        res = solve_arap_sr(V, F, handles, targets, alpha=self.alpha, alpha_scaling=self.alpha_scaling,
-                            criterion=self.criterion,
-                            max_iter=self.max_iter, R0=R0)
+        options = ArapOptions(alpha=self.alpha, alpha_scaling=self.alpha_scaling, criterion=self.criterion,
+                              max_iter=self.max_iter)
+        res = solve_arap_sr(V, F, handles, targets, options, R0=R0)
         if cinfo:
             res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
             res.info.update(cinfo)

@@ -15,12 +15,12 @@ import time
 
 import numpy as np
 
-from sshade.arap import DEFORM_ENERGIES, SR_ENERGY, Criterion, build_operators, solve_arap, solve_arap_sr
+from sshade.arap import DEFORM_ENERGIES, SR_ENERGY, ArapOptions, Criterion, build_operators, solve_arap, solve_arap_sr
 from sshade.errors import SShaDeError
 from sshade.remesh import remesh
 
 __all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO",
-           "COARSE_N_LOW"]
+           "COARSE_N_LOW", "COARSE_MAX_ITER"]
 
 #: the converged protocol's starts: ``auto``, the rigid fit of the handles, the coarse start
 STARTS = ("auto", "rigid", "coarse")
@@ -29,6 +29,9 @@ COARSE_MIN_RATIO = 4
 #: the low-resolution size of the coarse start (``coarse_n_low``) by default: SShaDe's
 #: paper size (§4.1), the one home of this default (method YAMLs held to it by a test)
 COARSE_N_LOW = 6000
+#: the iteration cap of the coarse start's low-res ARAP and Elastic solve (ARAP-SR's: the
+#: converged protocol's, :data:`sshade.arap.DEFAULT_MAX_ITER`)
+COARSE_MAX_ITER = 5000
 
 
 def check_start(name: str, start, coarse_n_low) -> tuple[str, int]:
@@ -82,7 +85,8 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
         (:data:`sshade.arap.ALPHA_SCALINGS`).
     n_low : int >= 4, farthest-point samples of the remesh (the handles are added).
     seed : int, the remesh's first sample. criterion : the low-res solve's (default
-        :data:`sshade.arap.DEFAULT_CRITERION`).
+        :data:`sshade.arap.DEFAULT_CRITERION`; ARAP and Elastic capped at
+        :data:`COARSE_MAX_ITER` iterations, ARAP-SR at the converged protocol's).
 
     Returns
     -------
@@ -100,7 +104,7 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
     Example::
 
         R0, info = coarse_start(V, F, handles, targets, energy="spokes", n_low=COARSE_N_LOW)
-        res = solve_arap(V, F, handles, targets, energy="spokes", R0=R0)
+        res = solve_arap(V, F, handles, targets, ArapOptions(energy="spokes"), R0=R0)
     """
     if energy not in DEFORM_ENERGIES:
         raise SShaDeError(f"coarse start: unknown energy {energy!r}; use one of {DEFORM_ENERGIES}")
@@ -109,11 +113,13 @@ def coarse_start(V, F, handles, targets, *, energy: str, alpha: float = 0.0, n_l
     t1 = time.perf_counter()
     Vl, hl = V[rm.seeds], rm.label[handles]
     if energy == SR_ENERGY:
-        res = solve_arap_sr(Vl, rm.F, hl, targets, alpha=alpha, alpha_scaling=alpha_scaling, criterion=criterion)
+        res = solve_arap_sr(Vl, rm.F, hl, targets, ArapOptions(alpha=alpha, alpha_scaling=alpha_scaling,
+                                                               criterion=criterion))
         R = res.info["R"]
     else:
         ops = build_operators(Vl, rm.F, energy)
-        res = solve_arap(Vl, rm.F, hl, targets, energy=energy, criterion=criterion, operators=ops)
+        options = ArapOptions(energy=energy, criterion=criterion, max_iter=COARSE_MAX_ITER)
+        res = solve_arap(Vl, rm.F, hl, targets, options, operators=ops)
         R = ops.rotations(res.V)
     R0 = np.ascontiguousarray(R[rm.label])
     info = {"coarse_n": int(len(rm.seeds)), "coarse_iterations": int(res.iterations),

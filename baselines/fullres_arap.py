@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from sshade.arap import DEFAULT_MAX_ITER, PROTOCOLS, arap_deform, make_criterion
+from sshade.arap import DEFAULT_MAX_ITER, PROTOCOLS, ArapOptions, arap_deform, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
@@ -114,6 +114,14 @@ class FullResArap:
                 "etol": self.criterion.etol, "gtol": self.criterion.gtol, "start": self.start,
                 "coarse_n_low": self.coarse_n_low}
 
+    def arap_options(self) -> ArapOptions:
+        """The options of :func:`sshade.arap.arap_deform` :meth:`deform` runs with:
+        ``energy``, ``protocol``, ``max_iter``, the criterion and, under the paper
+        protocol, the move rule's ``tol``."""
+        paper = {"tol": self.tol} if self.protocol == "paper" else {}
+        return ArapOptions(energy=self.energy, protocol=self.protocol, max_iter=self.max_iter,
+                           criterion=self.criterion, **paper)
+
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` reach ``targets``; returns (n, 3) float64.
         Solved in the mesh's unit frame (:mod:`sshade.mesh.unit_frame`) and mapped back,
@@ -130,8 +138,7 @@ class FullResArap:
         if self.protocol == "converged":
             R0, cinfo = start_rotations(self.start, V, F, handles, T, energy=self.energy,
                                         coarse_n_low=self.coarse_n_low, criterion=self.criterion)
-        res = arap_deform(V, F, handles, T, energy=self.energy, tol=self.tol, max_iter=self.max_iter,
-                          protocol=self.protocol, criterion=self.criterion, R0=R0)
+        res = arap_deform(V, F, handles, T, self.arap_options(), R0=R0)
         if cinfo:  # the coarse start's seconds count as set-up
             res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
         self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": self.protocol,

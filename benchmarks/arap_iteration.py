@@ -59,11 +59,12 @@ def load_case(path: Path):
 
 def bench_ours(V, F, h, T, ops, *, iters: int, repeat: int, threads: int, accelerate: str) -> dict:
     """Best-of-``repeat`` seconds per iteration of each stage, other and total."""
-    from sshade.arap import Criterion, solve_arap
+    from sshade.arap import ArapOptions, Criterion, solve_arap
     best = {}
+    options = ArapOptions(energy=ops.energy_type, max_iter=iters, criterion=Criterion(0.0, 0.0), accelerate=accelerate,
+                          threads=threads)
     for _ in range(repeat):
-        r = solve_arap(V, F, h, T, energy=ops.energy_type, operators=ops, max_iter=iters,
-                       criterion=Criterion(0.0, 0.0), accelerate=accelerate, threads=threads)
+        r = solve_arap(V, F, h, T, options, operators=ops)
         it = max(r.iterations, 1)
         row = {k: r.info["stage_s"][k] / it for k in STAGES}
         row["total"] = r.solve_s / it
@@ -113,7 +114,7 @@ def main(argv=None) -> None:
     ap.add_argument("--no-igl", action="store_true", help="skip libigl")
     args = ap.parse_args(argv)
 
-    from sshade.arap import build_operators, max_threads, solve_arap
+    from sshade.arap import ArapOptions, build_operators, max_threads, solve_arap
     V, F, h, T = load_case(args.mesh)
     print(f"mesh {args.mesh.name}: {len(V)} vertices, {len(F)} faces, {len(h)} handles; energy {args.energy}; "
           f"{args.iters} iterations, best of {args.repeat}; load average {os.getloadavg()[0]:.2f}")
@@ -122,7 +123,7 @@ def main(argv=None) -> None:
     print(f"build_operators {time.perf_counter() - t0:.2f} s")
     threads = [None if t == "auto" else int(t) for t in (args.threads or sorted({1, max_threads()}) + ["auto"])]
     for t in threads:  # warm-up: numba cache, kernel data, parallel pool
-        solve_arap(V, F, h, T, energy=args.energy, operators=ops, max_iter=2, threads=t)
+        solve_arap(V, F, h, T, ArapOptions(energy=args.energy, max_iter=2, threads=t), operators=ops)
 
     cols = STAGES + ("other", "total")
     print("\nours, milliseconds per iteration (stage_s / iterations; total = solve_s / iterations)")

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from sshade.arap import SRProblem, solve_arap_sr
+from sshade.arap import ArapOptions, SRProblem, solve_arap_sr
 from sshade.arap.problems import bent_cylinder, lifted_plane, twisted_bar
 
 CASES = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),
@@ -32,8 +32,8 @@ def main(alpha: float = 0.01) -> None:
         pb = SRProblem(V, F, h, T, alpha)
         for scheme, (acc, jac, reset) in SCHEMES.items():
             t = time.perf_counter()
-            r = solve_arap_sr(V, F, h, T, alpha=alpha, accelerate=acc, jacobi=jac, problem=pb, max_iter=5000,
-                              reset_on_reject=reset)
+            options = ArapOptions(alpha=alpha, accelerate=acc, jacobi=jac, max_iter=5000, reset_on_reject=reset)
+            r = solve_arap_sr(V, F, h, T, options, problem=pb)
             dt = time.perf_counter() - t
             inc = float(np.diff(r.info["energy_history"]).max())
             print(f"| {name} | {len(V)} | {scheme} | {r.iterations} | {r.info['n_sweeps']} | {r.info['status']} | "

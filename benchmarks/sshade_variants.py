@@ -24,7 +24,7 @@ from eval.datasets.defaust_dataset import load_defaust  # noqa: E402
 from eval.datasets.faust import faust_cases  # noqa: E402
 from eval.metrics.measures import area_error, edge_length_error, ground_truth_metrics, volume_error  # noqa: E402
 from harness.command import run_command  # noqa: E402
-from sshade.arap import arap_deform  # noqa: E402
+from sshade.arap import ArapOptions, arap_deform  # noqa: E402
 from sshade.averaging import (  # noqa: E402
     AVERAGES,  # noqa: E402,I001
     combine,
@@ -50,8 +50,8 @@ def case_rows(c, n_low: int, k: int, energy: str, protocol: str) -> dict:
     for s in sampling_seeds(0, k):
         prep, _ = prepare_sampling(U, F, c.handles, n_low, s, topo)
         VN, tri, FN, bary = U[prep["seeds"]], prep["tri"], prep["F"], prep["bary"]
-        res = arap_deform(VN, FN, prep["low_handles"], T, energy=energy, protocol=protocol,
-                          V0=None if first is None else first[prep["seeds"]])
+        res = arap_deform(VN, FN, prep["low_handles"], T, ArapOptions(energy=energy, protocol=protocol),
+                          U0=None if first is None else first[prep["seeds"]])
         X = {t: rebuild(U, tri, bary, VN, res.V, FN, transfer=t) for t in TRANSFERS}
         W = {a: sampling_weights(a, U, tri, bary, VN, res.V, FN) for a in AVERAGES}
         first = X["vertex"] if first is None else first

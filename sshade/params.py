@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .arap import DEFAULT_MAX_ITER, DEFORM_ENERGIES, PROTOCOLS, make_criterion
+from .arap import DEFAULT_MAX_ITER, DEFORM_ENERGIES, PROTOCOLS, ArapOptions, make_criterion
 from .averaging import AVERAGES
 from .cores import pool_size
 from .errors import SShaDeError
@@ -123,15 +123,15 @@ class SShaDeParams(Mapping):
         again. Raises SShaDeError as :func:`check_params`."""
         return check_params(self, **changes)
 
-    def arap_options(self) -> dict:
-        """Keyword arguments of :func:`sshade.arap.arap_deform` for the low-res step:
-        ``energy``, ``tol``, ``max_iter``, ``protocol`` and, when ``etol`` or ``gtol`` is
-        given, the ``criterion`` (:func:`sshade.arap.make_criterion`; else None)."""
-        crit = None
-        if self.etol is not None or self.gtol is not None:  # paper protocol: gtol tells converged from stalled
-            crit = make_criterion(self.etol, self.gtol)
-        return {"energy": self.energy, "tol": self.tol, "max_iter": self.max_iter, "protocol": self.protocol,
-                "criterion": crit}
+    def arap_options(self) -> ArapOptions:
+        """The low-res step's options for :func:`sshade.arap.arap_deform`
+        (:class:`sshade.arap.ArapOptions`): ``energy``, ``protocol``, ``max_iter``, the
+        criterion of ``etol`` / ``gtol`` (:func:`sshade.arap.make_criterion`; under the
+        paper protocol its ``gtol`` tells converged from stalled) and, under the paper
+        protocol, the move rule's ``tol``."""
+        paper = {"tol": self.tol} if self.protocol == "paper" else {}
+        return ArapOptions(energy=self.energy, protocol=self.protocol, max_iter=self.max_iter,
+                           criterion=make_criterion(self.etol, self.gtol), **paper)
 
 
 _FIELDS = tuple(f.name for f in fields(SShaDeParams))

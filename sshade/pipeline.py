@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arap import arap_deform, bbox_diag
+from .arap import ArapOptions, arap_deform, bbox_diag
 from .averaging import combine, sampling_weights
 from .components import deform_components
 from .mesh.halfedge import count_components
@@ -55,9 +55,9 @@ class SamplingJob:
     or None (:func:`prepare_samplings`: not known yet); gradient, anchor : LRF modes
     (:data:`sshade.lrf.GRADIENTS`, :data:`sshade.lrf.ANCHORS`); transfer, average : the
     transfer and the samplings' average (:data:`sshade.smooth_transfer.TRANSFERS`,
-    :data:`sshade.averaging.AVERAGES`); arap : keyword arguments
-    of :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`: the energy and
-    the stopping rule) or None.
+    :data:`sshade.averaging.AVERAGES`); arap : the options of
+    :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`: the energy and
+    the stopping rule) or None (its defaults).
     """
 
     V: np.ndarray
@@ -69,7 +69,7 @@ class SamplingJob:
     targets: np.ndarray | None = None
     gradient: str = "normalized"
     anchor: str = "projection"
-    arap: dict | None = None
+    arap: ArapOptions | None = None
     transfer: str = "vertex"
     average: str = "uniform"
 
@@ -123,14 +123,14 @@ def prepare_samplings(job: SamplingJob, workers: int) -> list[tuple[dict, dict]]
         return [f.result()[1:] for f in futures]
 
 
-def _finish(job: SamplingJob, prep: dict, V0=None):
+def _finish(job: SamplingJob, prep: dict, U0=None):
     """Low-res ARAP of ``job.arap``'s energy (spokes-and-rims by default, §3.3, §4.1) + LRF
-    transfer (Alg. 1) of one sampling of ``job``, from ``V0`` ((k, 3) or None: the rigid
+    transfer (Alg. 1) of one sampling of ``job``, from ``U0`` ((k, 3) or None: the rigid
     fit of the handles)."""
     V, targets, handles = job.V, job.targets, job.handles
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
-    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, V0=V0, **job.arap)
+    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, job.arap, U0=U0)
     t1 = time.perf_counter()
     bary = prep["bary"] if job.anchor == "projection" else None
     Vd = rebuild(V, prep["tri"], bary, VN, res.V, prep["F"], transfer=job.transfer, gradient=job.gradient)
@@ -143,7 +143,7 @@ def _finish(job: SamplingJob, prep: dict, V0=None):
     Vd[handles] = targets
     t2 = time.perf_counter()
     return Vd, {"arap_s": t1 - t0, "transfer_s": t2 - t1, "iterations": res.iterations,
-                "converged": res.converged, "status": res.info.get("status"), "warm_start": V0 is not None,
+                "converged": res.converged, "status": res.info.get("status"), "warm_start": U0 is not None,
                 "energy": res.info.get("energy"), "gnorm": res.info.get("gnorm"), "handle_resid": resid,
                 "weights": weights}
 

@@ -15,11 +15,12 @@ import threading
 import time
 from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor, wait
+from dataclasses import replace
 
 import igl
 import numpy as np
 
-from .arap import ArapDeformer, LaplacianSolver
+from .arap import ArapDeformer, ArapOptions, LaplacianSolver
 from .averaging import combine, proximity_weights, sampling_weights
 from .cores import pool_size
 from .errors import SShaDeError
@@ -36,15 +37,15 @@ from .smooth_transfer import jacobian_rest, smooth_decode_with, smooth_offsets, 
 
 __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 
-#: The low-res ARAP's acceleration from the second solve on (``accelerate``,
-#: ``anderson_m`` of :meth:`sshade.arap.solver.ArapSolver.solve`), with the history kept
+#: The low-res ARAP's acceleration from the second solve on under the converged protocol
+#: (fields ``accelerate`` and ``history`` of :class:`sshade.arap.ArapOptions`), with the history kept
 #: from solve to solve (``carry_history``); the first solve keeps
 #: :func:`sshade.pipeline.deform`'s L-BFGS, so that it is ``deform`` bit for bit. From a start
 #: as near as the extrapolated one, Anderson acceleration met the same stopping rule in
 #: fewer iterations than L-BFGS on both meshes of ``benchmarks/frames.py``, and a window of
 #: 32 in fewer than one of 16 or 8 (a longer one saved almost no more iterations;
 #: benchmarks/records/frames_scalar_decode.md).
-FRAME_ACCELERATION = {"accelerate": "anderson", "anderson_m": 32}
+FRAME_ACCELERATION = {"accelerate": "anderson", "history": 32}
 
 
 #: How many results a later solve's start may be fitted through: the count whose fit
@@ -137,7 +138,7 @@ class _Sampling:
         else:  # the blended transfer's rest parts, known before the targets
             self.G = smooth_offsets(V, prep["tri"], self.bary, self.VN, prep["F"])
             self.jac_rest = jacobian_rest(self.VN, prep["F"])
-        self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], energy=p.energy, protocol=p.protocol)
+        self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], p.arap_options())
         self.moves = _HandleMoves(self.VN, prep["F"], prep["low_handles"])
         self.history: list = []  # (k, 3) low-res results of the last START_RESULTS solves, newest first
         self.at: list = []  # their path positions (Prepared.solve)
@@ -171,7 +172,7 @@ class _Sampling:
             return h[0], 0
         return _fit_ahead(h[:best], pos[:best] - at)
 
-    def solve(self, targets, at: float, V0, arap: dict, carry: bool = False) -> dict:
+    def solve(self, targets, at: float, V0, arap: ArapOptions, carry: bool = False) -> dict:
         """The low-res ARAP at path position ``at`` (:meth:`start`) from ``V0`` ((k, 3) or
         None: the rigid fit); when ``carry`` (a
         later frame) with the last solve's accelerator history and ``V0``'s free vertices
@@ -181,7 +182,7 @@ class _Sampling:
         t0 = time.perf_counter()
         if carry and V0 is not None:
             V0 = self.moves.extend(V0, targets)
-        res = self.arap.deform(targets, V0=V0, carry_history=carry, **arap)
+        res = self.arap.deform(targets, options=arap, U0=V0, carry_history=carry)
         self.low, self.frames = res.V, None
         self.history = [res.V] + self.history[:START_RESULTS - 1]
         self.at = [at] + self.at[:START_RESULTS - 1]
@@ -321,9 +322,8 @@ class Prepared:
         self._samplings, self.prepare_s = samplings, prepare_s
         self._pool, self.workers, self._pending = pool, workers, []
         self._arap = params.arap_options()
-        for made_for in ("protocol", "energy"):  # the deformers were made for them
-            self._arap.pop(made_for)
-        self._frame_arap = {**self._arap, **FRAME_ACCELERATION}
+        self._frame_arap = (replace(self._arap, **FRAME_ACCELERATION) if self._arap.protocol == "converged"
+                            else self._arap)
         self.n_solves = 0
         self._path, self._last_T = 0.0, None  # the targets' path so far (arc length, unit frame), its last point
         self._corners = np.array(bounding_box(V))  # V's bounding box, for the per-solve checks

@@ -15,7 +15,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .arap import make_criterion, solve_arap
+from .arap import ArapOptions, make_criterion, solve_arap
 from .mesh.validate import validate_handles, validate_mesh
 from .params import SShaDeParams, check_params, effective_params
 from .pipeline import deform_with, warm_sshade
@@ -76,8 +76,8 @@ class SShaDeRefine:
         t0 = time.perf_counter()
         Vs, info = deform_with(V, F, handles, targets, self.params, return_info=True)
         t1 = time.perf_counter()
-        res = solve_arap(V, F, handles, targets, energy=self.energy, U0=Vs, criterion=self.criterion,
-                         max_iter=self.refine_max_iter)
+        res = solve_arap(V, F, handles, targets, ArapOptions(energy=self.energy, criterion=self.criterion,
+                                                             max_iter=self.refine_max_iter), U0=Vs)
         t2 = time.perf_counter()
         info = {k: v for k, v in info.items() if k not in ("samplings",)}
         info.update(sshade_s=t1 - t0, refine_s=t2 - t1, refine_iterations=res.iterations,

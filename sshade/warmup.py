@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .arap import arap_deform, kernels, solver_kernels
+from .arap import ArapOptions, arap_deform, kernels, solver_kernels
 from .arap.threads import PARALLEL_MIN_CELLS, resolve_threads
 from .mesh.validate import validate_handles, validate_mesh
 
@@ -100,6 +100,6 @@ def warm_fullres(energy: str, protocol: str, n_vertices: int | None = None) -> f
     def run(V, F, h, T):  # as the baselines' deform: validation, then the solve
         V, F = validate_mesh(V, F)
         h, T = validate_handles(V, h, T)
-        return arap_deform(V, F, h, T, energy=energy, protocol=protocol)
+        return arap_deform(V, F, h, T, ArapOptions(energy=energy, protocol=protocol))
     return warm_once(WARMED, ("fullres", energy, protocol), run,
                      parallel=protocol == "converged" and uses_parallel_kernels(n_vertices))

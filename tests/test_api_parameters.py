@@ -1,10 +1,7 @@
 """SShaDe's API states each parameter once: at most 10 parameters per public function of
 sshade/ (a dataclass's generated ``__init__``, a record of named fields, aside), SShaDe's
-own as one :class:`sshade.params.SShaDeParams` plus keyword overrides, listed in help().
-
-The low-level ARAP solvers of sshade/arap/ still take their options one by one (every
-stored row's code runs them: changing them regenerates every row); they are held here at
-their present counts, which may only fall.
+own as one :class:`sshade.params.SShaDeParams` plus keyword overrides, listed in help(),
+the ARAP solvers' as one :class:`sshade.arap.ArapOptions` (tests/test_arap_options.py).
 """
 from __future__ import annotations
 
@@ -23,10 +20,6 @@ from sshade.arap.problems import twisted_bar
 from sshade.isometric import isometric_transfer, pose_transfer
 from sshade.params import SShaDeParams
 from sshade.pipeline import deform_once
-
-#: public functions above 10 parameters, at their present counts (may only fall)
-STILL_WIDE = {"sshade.arap.local_global.arap_deform": 15, "sshade.arap.smooth_rotations.arap_sr_deform": 13,
-              "sshade.arap.smooth_rotations.solve_arap_sr": 17, "sshade.arap.solver.solve_arap": 17}
 
 
 def _public_callables():
@@ -53,8 +46,7 @@ def test_no_public_function_of_sshade_takes_more_than_10_parameters():
         n = len([p for p in inspect.signature(fn).parameters if p not in ("self", "cls")])
         if n > 10:
             wide[name] = n
-    assert {k: v for k, v in wide.items() if k not in STILL_WIDE} == {}
-    assert all(wide.get(k, 0) <= v for k, v in STILL_WIDE.items()), wide
+    assert wide == {}
 
 
 @pytest.mark.parametrize("fn", [deform, prepare, isometric_transfer, pose_transfer, deform_once, SShaDe])

@@ -7,6 +7,7 @@ import pytest
 from sshade.arap import (
     DEEP_CRITERION,
     DEFAULT_CRITERION,
+    ArapOptions,
     ArapResult,
     Criterion,
     LaplacianSolver,
@@ -42,8 +43,8 @@ def _dist(U, Uref, diag):
 @pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
 def test_safeguard_never_increases_energy(bar, energy):
     V, F, h, T = bar
-    res = solve_arap(V, F, h, T, energy=energy, criterion=Criterion(1e-10, 1e-6), accelerate="anderson",
-                     anderson_m=5)
+    res = solve_arap(V, F, h, T, ArapOptions(energy=energy, criterion=Criterion(1e-10, 1e-6), accelerate="anderson",
+                                             history=5))
     assert isinstance(res, ArapResult)
     E = np.array(res.info["energy_history"])
     assert len(E) == res.iterations + 1
@@ -55,7 +56,7 @@ def test_safeguard_never_increases_energy(bar, energy):
 
 def test_safeguard_fallback_path_is_exercised(bent):
     V, F, h, T = bent
-    res = solve_arap(V, F, h, T, criterion=DEFAULT_CRITERION, accelerate="anderson")
+    res = solve_arap(V, F, h, T, ArapOptions(criterion=DEFAULT_CRITERION, accelerate="anderson"))
     assert res.info["n_fallback"] > 0  # Anderson steps were rejected on this case
     E = np.array(res.info["energy_history"])
     assert (np.diff(E) <= 0).all()
@@ -64,7 +65,7 @@ def test_safeguard_fallback_path_is_exercised(bent):
 @pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
 def test_lbfgs_line_search_never_increases_energy(bent, energy):
     V, F, h, T = bent
-    res = solve_arap(V, F, h, T, energy=energy, criterion=Criterion(1e-10, 1e-6))
+    res = solve_arap(V, F, h, T, ArapOptions(energy=energy, criterion=Criterion(1e-10, 1e-6)))
     assert res.info["accelerate"] == "lbfgs" and res.converged
     E = np.array(res.info["energy_history"])
     assert len(E) == res.iterations + 1
@@ -80,7 +81,7 @@ def test_rigid_handle_motion_is_reproduced_exactly(bar, energy):
     Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     Q *= np.sign(np.linalg.det(Q))
     t = rng.normal(size=3)
-    res = solve_arap(V, F, h, V[h] @ Q.T + t, energy=energy)
+    res = solve_arap(V, F, h, V[h] @ Q.T + t, ArapOptions(energy=energy))
     assert res.converged
     assert np.abs(res.V - (V @ Q.T + t)).max() <= 1e-9 * bbox_diag(V)
     assert res.iterations == 0 and res.info["status"] == "rigid"
@@ -91,10 +92,10 @@ def test_criterion_guarantee_on_bent_bar(bent, energy):
     V, F, h, T = bent
     ops = build_operators(V, F, energy)
     diag = ops.diag
-    ref = solve_arap(V, F, h, T, energy=energy, criterion=DEEP_CRITERION, max_iter=20000, operators=ops)
+    ref = solve_arap(V, F, h, T, ArapOptions(energy=energy, criterion=DEEP_CRITERION, max_iter=20000), operators=ops)
     assert ref.info["gnorm"] < 1e-6
     for accelerate in ("lbfgs", "anderson", False):
-        res = solve_arap(V, F, h, T, energy=energy, accelerate=accelerate, max_iter=20000, operators=ops)
+        res = solve_arap(V, F, h, T, ArapOptions(energy=energy, accelerate=accelerate, max_iter=20000), operators=ops)
         assert res.converged, res.info["status"]
         assert res.info["gnorm"] < DEFAULT_CRITERION.gtol
         mean, mx = _dist(res.V, ref.V, diag)
@@ -107,8 +108,8 @@ def test_accelerated_and_plain_reach_the_same_minimum():
     # saddle: Anderson converges to it, plain local/global leaves it after ~4000
     # iterations through rounding noise and reaches a 2.5 % lower energy.)
     V, F, h, T = twisted_bar(90.0, h=0.12)
-    a = solve_arap(V, F, h, T, criterion=Criterion(1e-12, 1e-7))
-    p = solve_arap(V, F, h, T, criterion=Criterion(1e-12, 1e-7), accelerate=False, max_iter=20000)
+    a = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(1e-12, 1e-7)))
+    p = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(1e-12, 1e-7), accelerate=False, max_iter=20000))
     assert a.converged and p.converged
     assert a.iterations * 3 < p.iterations
     mean, mx = _dist(a.V, p.V, bbox_diag(V))
@@ -120,13 +121,13 @@ def test_cholesky_and_scipy_fallback_agree(bar):
     V, F, h, T = bar
     plain = {}
     for backend in ("cholespy", "scipy", "igl"):
-        plain[backend] = solve_arap(V, F, h, T, accelerate=False, criterion=Criterion(0.0, 0.0), max_iter=15,
-                                    linear_solver=backend)
+        options = ArapOptions(accelerate=False, criterion=Criterion(0.0, 0.0), max_iter=15, linear_solver=backend)
+        plain[backend] = solve_arap(V, F, h, T, options)
         assert plain[backend].info["linear_solver"] == backend
     diag = bbox_diag(V)
     assert np.abs(plain["cholespy"].V - plain["scipy"].V).max() <= 1e-10 * diag
     assert np.abs(plain["igl"].V - plain["scipy"].V).max() <= 1e-10 * diag
-    acc = {b: solve_arap(V, F, h, T, linear_solver=b) for b in ("cholespy", "scipy")}
+    acc = {b: solve_arap(V, F, h, T, ArapOptions(linear_solver=b)) for b in ("cholespy", "scipy")}
     assert acc["cholespy"].converged and acc["scipy"].converged
     assert np.abs(acc["cholespy"].V - acc["scipy"].V).max() <= 1e-4 * diag
 
@@ -135,10 +136,10 @@ def test_auto_backend_falls_back_to_scipy(monkeypatch, bar):
     from sshade.arap import linear
     monkeypatch.setattr(linear, "CholeskySolverD", None)  # as when cholespy cannot be imported
     V, F, h, T = bar
-    res = solve_arap(V, F, h, T, max_iter=3, criterion=Criterion(0.0, 0.0))
+    res = solve_arap(V, F, h, T, ArapOptions(max_iter=3, criterion=Criterion(0.0, 0.0)))
     assert res.info["linear_solver"] == "scipy"
     with pytest.raises(SShaDeError):
-        solve_arap(V, F, h, T, linear_solver="cholespy")
+        solve_arap(V, F, h, T, ArapOptions(linear_solver="cholespy"))
 
 
 def test_free_region_without_handle_raises():
@@ -148,7 +149,7 @@ def test_free_region_without_handle_raises():
     F2 = np.concatenate([F, F + len(V)])
     for backend in ("scipy",) + (("cholespy",) if HAVE_CHOLESPY else ()):
         with pytest.raises(SShaDeError, match="no handle"):
-            solve_arap(V2, F2, h, T, linear_solver=backend)
+            solve_arap(V2, F2, h, T, ArapOptions(linear_solver=backend))
     if HAVE_CHOLESPY:  # an indefinite matrix is refused by the Cholesky backend
         with pytest.raises(SShaDeError, match="positive definite"):
             LaplacianSolver(np.array([[1.0, -2.0], [-2.0, 1.0]]), backend="cholespy")
@@ -175,31 +176,27 @@ def test_time_budget_and_callback(bar):
         seen.append((k, E, g))
         return k >= 4
 
-    res = solve_arap(V, F, h, T, callback=cb, criterion=Criterion(0.0, 0.0))
+    res = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(0.0, 0.0)), callback=cb)
     assert res.info["status"] == "callback" and res.iterations == 4 and not res.converged
     assert [s[0] for s in seen] == [1, 2, 3, 4]
-    res = solve_arap(V, F, h, T, time_budget_s=0.0, criterion=Criterion(0.0, 0.0))
+    res = solve_arap(V, F, h, T, ArapOptions(time_budget_s=0.0, criterion=Criterion(0.0, 0.0)))
     assert res.info["status"] == "time_budget" and not res.converged
 
 
 def test_bad_input_raises(bar):
     V, F, h, T = bar
-    with pytest.raises(SShaDeError):
-        solve_arap(V, F, h, T, energy="elements")
+    with pytest.raises(SShaDeError, match="unknown ARAP energy 'arap_sr'"):
+        solve_arap(V, F, h, T, ArapOptions(energy="arap_sr"))
     with pytest.raises(SShaDeError):
         solve_arap(V, F, h, T[:-1])
     with pytest.raises(SShaDeError):
         solve_arap(V, F, h, T, U0=V[:-1])
-    with pytest.raises(SShaDeError):
-        solve_arap(V, F, h, T, linear_solver="mumps")
-    with pytest.raises(SShaDeError):
-        solve_arap(V, F, h, T, anderson_m=0)
-    with pytest.raises(SShaDeError):
-        solve_arap(V, F, h, T, accelerate="newton")
+    with pytest.raises(SShaDeError, match="options must be an ArapOptions"):
+        solve_arap(V, F, h, T, {"energy": "spokes"})
     with pytest.raises(SShaDeError):
         Criterion(etol=-1.0)
     with pytest.raises(SShaDeError):
-        solve_arap(V, F, h, T, energy="spokes", operators=build_operators(V, F, "spokes_and_rims"))
+        solve_arap(V, F, h, T, ArapOptions(energy="spokes"), operators=build_operators(V, F, "spokes_and_rims"))
     with pytest.raises(SShaDeError):
         LaplacianSolver(np.eye(3), backend="nope")
 
@@ -211,8 +208,9 @@ def test_threads_and_numbering_do_not_change_the_iterates(bar, accelerate):
     runs = {}
     for threads in (1, 2):
         for reorder in (False, True):
-            runs[threads, reorder] = solve_arap(V, F, h, T, operators=ops, criterion=Criterion(0.0, 0.0), max_iter=30,
-                                                threads=threads, reorder=reorder, accelerate=accelerate)
+            options = ArapOptions(criterion=Criterion(0.0, 0.0), max_iter=30, threads=threads, reorder=reorder,
+                                  accelerate=accelerate)
+            runs[threads, reorder] = solve_arap(V, F, h, T, options, operators=ops)
     a = runs[1, False]
     assert a.info["threads"] == 1 and not a.info["reordered"] and runs[2, True].info["reordered"]
     assert set(a.info["stage_s"]) == {"local", "rhs", "solve", "gradient", "anderson"}
@@ -227,10 +225,10 @@ def test_threads_and_numbering_do_not_change_the_iterates(bar, accelerate):
 def test_numpy_fallback_solver_agrees(monkeypatch, bar):
     from sshade.arap import kernels
     V, F, h, T = bar
-    ref = solve_arap(V, F, h, T, criterion=Criterion(1e-10, 1e-6))
+    ref = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(1e-10, 1e-6)))
     monkeypatch.setattr(kernels, "_POLAR", False)
     monkeypatch.setattr(kernels, "_ENERGY", False)
-    res = solve_arap(V, F, h, T, criterion=Criterion(1e-10, 1e-6), reorder=True)
+    res = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(1e-10, 1e-6), reorder=True))
     assert not res.info["reordered"]  # numpy path: mesh numbering
     assert res.converged
     assert np.abs(res.V - ref.V).max() <= 1e-6 * bbox_diag(V)
@@ -255,8 +253,8 @@ def test_thread_picker_follows_the_faster_mode():
 
 def test_automatic_threads_same_iterates():
     V, F, h, T = lifted_plane(0.2, n_target=22000)  # above the parallel threshold
-    a = solve_arap(V, F, h, T, criterion=Criterion(0.0, 0.0), max_iter=20)
-    b = solve_arap(V, F, h, T, criterion=Criterion(0.0, 0.0), max_iter=20, threads=1)
+    a = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(0.0, 0.0), max_iter=20))
+    b = solve_arap(V, F, h, T, ArapOptions(criterion=Criterion(0.0, 0.0), max_iter=20, threads=1))
     assert a.info["reordered"]
     if a.info["threads"] > 1:  # NUMBA_NUM_THREADS > 1: the automatic mode timed both
         assert 0.0 < a.info["parallel_fraction"] < 1.0
@@ -269,8 +267,8 @@ def test_a_prepared_solver_gives_solve_arap_bit_for_bit():
     from sshade.arap.solver import ArapSolver
     V, F, h, T = twisted_bar(90.0, h=0.25)
     for energy in ("spokes", "spokes_and_rims"):
-        one = solve_arap(V, F, h, T, energy=energy)
-        two = ArapSolver(V, F, h, energy=energy).solve(T)
+        one = solve_arap(V, F, h, T, ArapOptions(energy=energy))
+        two = ArapSolver(V, F, h, ArapOptions(energy=energy)).solve(T)
         assert np.array_equal(one.V, two.V) and one.iterations == two.iterations
         assert one.info["energy"] == two.info["energy"]
 
@@ -281,14 +279,14 @@ def test_frames_share_one_factorisation_and_each_lands_on_the_one_shot_solution(
     1e-4 of the diagonal (mean)."""
     from sshade.arap.solver import ArapSolver
     V, F, h, _ = twisted_bar(0.0, h=0.25)
-    solver = ArapSolver(V, F, h, energy="spokes_and_rims")
+    solver = ArapSolver(V, F, h, ArapOptions(energy="spokes_and_rims"))
     lin = solver.factorisation
     diag = np.linalg.norm(V.max(0) - V.min(0))
     prev = None
     for k, angle in enumerate(np.linspace(15.0, 90.0, 6)):
         _, _, _, T = twisted_bar(angle, h=0.25)
         r = solver.solve(T, U0=prev)
-        ref = solve_arap(V, F, h, T, energy="spokes_and_rims")
+        ref = solve_arap(V, F, h, T, ArapOptions(energy="spokes_and_rims"))
         assert r.converged and ref.converged
         assert np.linalg.norm(r.V - ref.V, axis=1).mean() < 1e-4 * diag
         if k == 0:
@@ -325,8 +323,9 @@ def test_carried_history_converges_to_each_frames_one_shot_solution(accelerate, 
     its_c = its_f = 0
     for k, angle in enumerate(np.linspace(10.0, 90.0, 9)):
         _, _, _, T = twisted_bar(angle, h=0.25)
-        rc = carried.solve(T, U0=prev_c, accelerate=accelerate, anderson_m=m, carry_history=True)
-        rf = fresh.solve(T, U0=prev_f, accelerate=accelerate, anderson_m=m)
+        options = ArapOptions(accelerate=accelerate, history=m)
+        rc = carried.solve(T, options=options, U0=prev_c, carry_history=True)
+        rf = fresh.solve(T, options=options, U0=prev_f)
         ref = solve_arap(V, F, h, T)
         assert rc.converged and rf.converged
         assert np.linalg.norm(rc.V - ref.V, axis=1).mean() < 1e-4 * diag
@@ -345,9 +344,9 @@ def test_carried_history_needs_the_same_accelerator_and_window():
     from sshade.arap.solver import ArapSolver
     V, F, h, T = twisted_bar(60.0, h=0.25)
     _, _, _, T2 = twisted_bar(70.0, h=0.25)
-    for options in ({"anderson_m": 5}, {"accelerate": "anderson"}):
+    for options in (ArapOptions(history=5), ArapOptions(accelerate="anderson")):
         a, b = ArapSolver(V, F, h), ArapSolver(V, F, h)
-        r1 = a.solve(T, anderson_m=6)
-        ra = a.solve(T2, U0=r1.V, carry_history=True, **options)
-        rb = b.solve(T2, U0=r1.V, **options)
+        r1 = a.solve(T, options=ArapOptions(history=6))
+        ra = a.solve(T2, options=options, U0=r1.V, carry_history=True)
+        rb = b.solve(T2, options=options, U0=r1.V)
         assert np.array_equal(ra.V, rb.V) and ra.iterations == rb.iterations

@@ -22,6 +22,7 @@ from sshade.arap import (
     DEEP_CRITERION,
     DEFAULT_CRITERION,
     SR_ENERGY,
+    ArapOptions,
     Criterion,
     SRProblem,
     arap_deform,
@@ -52,8 +53,8 @@ def test_alpha_zero_paper_iteration_is_arap():
     """At alpha = 0 the paper protocol's iteration, run to a tight energy stop, lands on
     converged ARAP's (spokes) result."""
     V, F, h, T = _case()
-    a = arap_deform(V, F, h, T, energy="spokes")
-    b = arap_sr_deform(V, F, h, T, alpha=0.0, criterion=Criterion(etol=1e-11, gtol=1e-4), max_iter=5000)
+    a = arap_deform(V, F, h, T, ArapOptions(energy="spokes"))
+    b = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.0, criterion=Criterion(etol=1e-11, gtol=1e-4), max_iter=5000))
     diag = np.linalg.norm(V.max(0) - V.min(0))
     assert a.converged and b.converged and b.info["status"] == "converged"
     assert np.abs(a.V - b.V).max() < 1e-3 * diag
@@ -71,8 +72,8 @@ def test_smoothing_makes_rotations_vary_less():
     directions vary more smoothly, so the result differs from ARAP and the handles are
     still met exactly."""
     V, F, h, T = _case()
-    a = arap_sr_deform(V, F, h, T, alpha=0.0)
-    b = arap_sr_deform(V, F, h, T, alpha=0.05)
+    a = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.0))
+    b = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.05))
     assert np.allclose(b.V[h], T)
     assert np.abs(a.V - b.V).max() > 1e-3 * np.linalg.norm(V.max(0) - V.min(0))
 
@@ -91,10 +92,10 @@ def _mean_dist(A, B, V):
 def test_converged_energy_monotone_and_matches_deep_solve(name):
     V, F, h, T = SMALL[name]()
     pb = SRProblem(V, F, h, T, 0.01)
-    deep = solve_arap_sr(V, F, h, T, alpha=0.01, criterion=DEEP_CRITERION, max_iter=20000, problem=pb)
+    deep = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01, criterion=DEEP_CRITERION, max_iter=20000), problem=pb)
     assert deep.info["status"] in ("converged", "stalled")
     for acc, reset in (("anderson", False), ("anderson", True), ("none", False)):
-        res = solve_arap_sr(V, F, h, T, alpha=0.01, accelerate=acc, problem=pb, reset_on_reject=reset)
+        res = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01, accelerate=acc, reset_on_reject=reset), problem=pb)
         assert res.converged and res.info["status"] == "converged"
         E = np.array(res.info["energy_history"])
         assert (np.diff(E) <= 1e-12 * np.abs(E[1:])).all(), "the energy increased"
@@ -124,8 +125,8 @@ def test_gauss_seidel_sweep_never_increases_energy():
 
 def test_alpha_zero_reproduces_converged_arap():
     V, F, h, T = SMALL["twisted_bar"]()
-    a = solve_arap(V, F, h, T, energy="spokes")
-    b = solve_arap_sr(V, F, h, T, alpha=0.0)
+    a = solve_arap(V, F, h, T, ArapOptions(energy="spokes"))
+    b = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.0))
     assert a.converged and b.converged
     assert _mean_dist(a.V, b.V, V) < 5e-4
     assert abs(b.info["energy"] - 2 * a.info["energy"]) < 1e-6 * abs(a.info["energy"])  # E_SR = 2 E_spokes
@@ -190,8 +191,8 @@ def test_anderson_on_joint_residual_needs_fewer_iterations():
     same minimiser (0.05 % of the diagonal); measured 21 against 48 iterations."""
     V, F, h, T = SMALL["bent_cylinder"]()
     pb = SRProblem(V, F, h, T, 0.01)
-    new = solve_arap_sr(V, F, h, T, alpha=0.01, problem=pb)
-    old = solve_arap_sr(V, F, h, T, alpha=0.01, problem=pb, reset_on_reject=True)
+    new = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01), problem=pb)
+    old = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01, reset_on_reject=True), problem=pb)
     assert new.converged and old.converged
     assert new.iterations < old.iterations
     assert _mean_dist(new.V, old.V, V) < 5e-4
@@ -204,12 +205,12 @@ def test_coarse_start_same_minimiser():
 
     V, F, h, T = SMALL["lifted_plane"]()
     pb = SRProblem(V, F, h, T, 0.01)
-    deep = solve_arap_sr(V, F, h, T, alpha=0.01, criterion=DEEP_CRITERION, max_iter=20000, problem=pb)
+    deep = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01, criterion=DEEP_CRITERION, max_iter=20000), problem=pb)
     R0, info = coarse_start(V, F, h, T, energy=SR_ENERGY, alpha=0.01, n_low=300)
     assert R0.shape == (len(V), 3, 3) and info["coarse_status"] == "converged" and info["coarse_n"] >= 300
     assert np.allclose(np.einsum("kab,kcb->kac", R0, R0), np.eye(3), atol=1e-9)
-    res = solve_arap_sr(V, F, h, T, alpha=0.01, R0=R0, problem=pb)
-    plain = solve_arap_sr(V, F, h, T, alpha=0.01, problem=pb)
+    res = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01), R0=R0, problem=pb)
+    plain = solve_arap_sr(V, F, h, T, ArapOptions(alpha=0.01), problem=pb)
     assert res.info["status"] == "converged" and np.allclose(res.V[h], T)
     E = np.array(res.info["energy_history"])
     assert (np.diff(E) <= 1e-12 * np.abs(E[1:])).all(), "the energy increased"

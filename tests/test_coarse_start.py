@@ -8,7 +8,7 @@ import pytest
 
 from baselines import ARAP, ARAPSR, Elastic
 from baselines.coarse_start import COARSE_MIN_RATIO, check_start, coarse_start, start_rotations, uses_coarse
-from sshade.arap import DEEP_CRITERION, arap_deform, build_operators, solve_arap
+from sshade.arap import DEEP_CRITERION, ArapOptions, arap_deform, build_operators, solve_arap
 from sshade.arap.problems import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
 
@@ -25,18 +25,18 @@ def test_r0_start_is_the_global_step_of_r0():
     V, F, h, T = lifted_plane(n_target=600)
     ops = build_operators(V, F, "spokes")
     R0 = np.broadcast_to(np.eye(3), (len(V), 3, 3)).copy()
-    res = solve_arap(V, F, h, T, energy="spokes", R0=R0, max_iter=0, operators=ops)
+    res = solve_arap(V, F, h, T, ArapOptions(energy="spokes", max_iter=0), R0=R0, operators=ops)
     U = res.V
     free = np.setdiff1d(np.arange(len(V)), h)
     g = ops.gradient(U, R0)[free]
     assert np.abs(g).max() < 1e-9 * np.abs(ops.rhs(R0)).max()
     assert np.allclose(U[h], T) and res.info["energy"] == pytest.approx(ops.energy(U), rel=1e-9)
     with pytest.raises(SShaDeError, match="not both"):
-        solve_arap(V, F, h, T, energy="spokes", R0=R0, U0=V)
+        solve_arap(V, F, h, T, ArapOptions(energy="spokes"), R0=R0, U0=V)
     with pytest.raises(SShaDeError, match="R0"):
-        solve_arap(V, F, h, T, energy="spokes", R0=R0[:-1])
+        solve_arap(V, F, h, T, ArapOptions(energy="spokes"), R0=R0[:-1])
     with pytest.raises(SShaDeError, match="converged"):
-        arap_deform(V, F, h, T, energy="spokes", protocol="paper", R0=R0)
+        arap_deform(V, F, h, T, ArapOptions(energy="spokes", protocol="paper"), R0=R0)
 
 
 @pytest.mark.parametrize("energy", ENERGIES)
@@ -46,12 +46,12 @@ def test_coarse_start_same_minimiser(energy):
     the lifted plane (a case with one minimum in reach)."""
     V, F, h, T = lifted_plane(n_target=2500)
     ops = build_operators(V, F, energy)
-    deep = solve_arap(V, F, h, T, energy=energy, criterion=DEEP_CRITERION, max_iter=20000, operators=ops)
+    deep = solve_arap(V, F, h, T, ArapOptions(energy=energy, criterion=DEEP_CRITERION, max_iter=20000), operators=ops)
     R0, info = coarse_start(V, F, h, T, energy=energy, n_low=300)
     assert R0.shape == (len(V), 3, 3) and info["coarse_status"] == "converged" and info["coarse_n"] >= 300
     assert np.allclose(np.einsum("kab,kcb->kac", R0, R0), np.eye(3), atol=1e-9)
-    res = solve_arap(V, F, h, T, energy=energy, R0=R0, operators=ops)
-    rigid = solve_arap(V, F, h, T, energy=energy, operators=ops)
+    res = solve_arap(V, F, h, T, ArapOptions(energy=energy), R0=R0, operators=ops)
+    rigid = solve_arap(V, F, h, T, ArapOptions(energy=energy), operators=ops)
     assert res.info["status"] == "converged" and np.allclose(res.V[h], T)
     E = np.array(res.info["energy_history"])
     assert (np.diff(E) <= 1e-12 * np.abs(E[1:])).all(), "the energy increased"

@@ -10,7 +10,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from sshade import SShaDe, SShaDeError, check_params, deform, prepare
-from sshade.arap import DEFAULT_ALPHA, DEFORM_ENERGIES, arap_deform, arap_sr_deform, bbox_diag, solve_arap_sr
+from sshade.arap import (
+    DEFAULT_ALPHA,
+    DEFORM_ENERGIES,
+    ArapOptions,
+    arap_deform,
+    arap_sr_deform,
+    bbox_diag,
+    solve_arap_sr,
+)
 from sshade.arap.problems import bent_cylinder, twisted_bar
 from sshade.pipeline import deform_once, prepare_sampling
 
@@ -54,7 +62,7 @@ def test_spokes_solves_the_low_res_mesh_as_arap_deform(bar, protocol):
     V, F, h, T = bar
     Vd, info, prep = _low_res(V, F, h, T, "spokes", protocol)
     seeds = prep["seeds"]
-    res = arap_deform(V[seeds], prep["F"], prep["low_handles"], T, energy="spokes", protocol=protocol)
+    res = arap_deform(V[seeds], prep["F"], prep["low_handles"], T, ArapOptions(energy="spokes", protocol=protocol))
     assert info["iterations"] == res.iterations > 0 and info["status"] == res.info["status"]
     assert info["gnorm"] == res.info["gnorm"]
     # the projection anchor rebuilds every low-res vertex at its deformed position
@@ -65,14 +73,14 @@ def test_arap_sr_solves_the_low_res_mesh_as_the_arap_sr_solver(bar):
     V, F, h, T = bar
     Vd, info, prep = _low_res(V, F, h, T, "arap_sr", "converged")
     seeds = prep["seeds"]
-    res = solve_arap_sr(V[seeds], prep["F"], prep["low_handles"], T, alpha=DEFAULT_ALPHA)
+    res = solve_arap_sr(V[seeds], prep["F"], prep["low_handles"], T, ArapOptions(alpha=DEFAULT_ALPHA))
     assert res.info["alpha"] == 0.01 and res.info["alpha_scaling"] == "valence"  # the baseline's default
     assert info["iterations"] == res.iterations > 0 and info["status"] == res.info["status"] == "converged"
     assert info["energy"] == res.info["energy"] and info["gnorm"] == res.info["gnorm"]
     np.testing.assert_allclose(Vd[seeds], res.V, rtol=0, atol=1e-12 * bbox_diag(V))
     # the paper protocol: ARAP-SR's Jacobi iteration stopped by SShaDe's move rule (tol)
     Vp, info_p, _ = _low_res(V, F, h, T, "arap_sr", "paper")
-    rp = arap_sr_deform(V[seeds], prep["F"], prep["low_handles"], T, stop="move", tol=1e-4, max_iter=1000)
+    rp = arap_sr_deform(V[seeds], prep["F"], prep["low_handles"], T, ArapOptions(stop="move", tol=1e-4, max_iter=1000))
     assert info_p["iterations"] == rp.iterations and info_p["energy"] == rp.info["energy"]
     np.testing.assert_allclose(Vp[seeds], rp.V, rtol=0, atol=1e-12 * bbox_diag(V))
 

@@ -215,7 +215,7 @@ def test_the_extended_start_keeps_the_frames_of_the_handle_rows_start_within_a_b
 
     new = frames()
     monkeypatch.setattr(prepared_module._HandleMoves, "extend", lambda self, U0, targets: U0)
-    monkeypatch.setitem(prepared_module.FRAME_ACCELERATION, "anderson_m", 16)
+    monkeypatch.setitem(prepared_module.FRAME_ACCELERATION, "history", 16)
     old = frames()
     assert np.array_equal(new[0][0], old[0][0])  # the first solve: deform's, bit for bit
     assert all(a[1]["converged"] and b[1]["converged"] for a, b in zip(new, old))

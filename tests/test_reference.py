@@ -10,7 +10,7 @@ import pytest
 from eval.config_check import check_config
 from eval.metrics.reference import reference_solution
 from eval.metrics.reference_scores import method_energy, reference_metrics
-from sshade.arap import arap_deform
+from sshade.arap import ArapOptions, arap_deform
 from sshade.arap.problems import bent_cylinder, lifted_plane
 from sshade.errors import SShaDeError
 
@@ -119,7 +119,7 @@ def test_reference_metrics(plane, tmp_path):
     ref = reference_solution(V, F, h, T, cache_dir=tmp_path)
     m = reference_metrics(V, ref.U, F, ref)
     assert m["ref_mean_pct"] == 0 and m["ref_max_pct"] == 0 and abs(m["energy_gap"]) < 1e-12
-    paper = arap_deform(V, F, h, T, protocol="paper", max_iter=20)  # far from the minimiser
+    paper = arap_deform(V, F, h, T, ArapOptions(protocol="paper", max_iter=20))  # far from the minimiser
     mp = reference_metrics(V, paper.V, F, ref)
     assert mp["ref_mean_pct"] > 0.01 and mp["energy_gap"] > 1e-3
     assert method_energy(type("M", (), {"name": "ARAP"})) == "spokes"
@@ -131,15 +131,15 @@ def test_converged_protocol_reaches_the_minimiser_where_the_paper_rule_stops_sho
     converged protocol's result is within its guarantee (0.05 % mean, 0.5 % max)."""
     V, F, h, T = bent_cylinder(90.0, h=0.12)
     ref = reference_solution(V, F, h, T, cache_dir=tmp_path)
-    conv = arap_deform(V, F, h, T, protocol="converged")
-    paper = arap_deform(V, F, h, T, protocol="paper")
+    conv = arap_deform(V, F, h, T, ArapOptions(protocol="converged"))
+    paper = arap_deform(V, F, h, T, ArapOptions(protocol="paper"))
     assert conv.converged and conv.info["status"] == "converged" and conv.info["protocol"] == "converged"
     mc, mp = reference_metrics(V, conv.V, F, ref), reference_metrics(V, paper.V, F, ref)
     assert mc["ref_mean_pct"] < 0.05 and mc["ref_max_pct"] < 0.5
     assert mp["ref_mean_pct"] > 5 * mc["ref_mean_pct"]
     assert paper.info["protocol"] == "paper"
     with pytest.raises(SShaDeError, match="unknown ARAP protocol"):
-        arap_deform(V, F, h, T, protocol="fast")
+        arap_deform(V, F, h, T, ArapOptions(protocol="fast"))
 
 
 def test_methods_follow_the_protocol():

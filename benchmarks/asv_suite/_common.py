@@ -221,6 +221,16 @@ def warm_deform(V, F, handles, targets, key) -> None:
     _WARMED.add(key)
 
 
+def arap_deform(V, F, handles, targets, energy: str):
+    """``sshade.arap.arap_deform`` of ``energy`` with its other options' defaults, called
+    as the commit under test takes them: one ``ArapOptions`` where ``sshade.arap`` has it,
+    else the keyword ``energy`` (asv runs older commits too)."""
+    import sshade.arap as arap
+    if hasattr(arap, "ArapOptions"):
+        return arap.arap_deform(V, F, handles, targets, arap.ArapOptions(energy=energy))
+    return arap.arap_deform(V, F, handles, targets, energy=energy)
+
+
 def prepared_frames(V, F, handles, targets, n_frames: int = FRAMES) -> list[float]:
     """Seconds of each of ``n_frames`` solves of ``sshade.prepare(V, F, handles)`` after one
     untimed first solve: frames 2 to ``n_frames + 1`` of benchmarks/frames.py's path, the

@@ -12,7 +12,7 @@ import statistics
 
 import numpy as np
 
-from ._common import SSHADE, defaust_root, load_mesh, mesh_files, prepared_frames, skip, warm_deform
+from ._common import SSHADE, arap_deform, defaust_root, load_mesh, mesh_files, prepared_frames, skip, warm_deform
 
 MESH_PARAMS = ["clean", "hard"]
 
@@ -86,13 +86,12 @@ def _stage_state(files, mesh, V, F, h, T):
     per process and mesh: the input of the timed transfer."""
     key = files[mesh]
     if key not in _STAGE_STATE:
-        from sshade.arap import arap_deform
         from sshade.projection import project_to_fans
         from sshade.remesh import remesh
         rm = remesh(V, F, SSHADE["n_low"], seed=SSHADE["seed"], required=h)
         proj = project_to_fans(V, rm.label, V[rm.seeds], rm.F)
         VN = V[rm.seeds]
-        res = arap_deform(VN, rm.F, rm.label[h], T, energy="spokes_and_rims")
+        res = arap_deform(VN, rm.F, rm.label[h], T, "spokes_and_rims")
         _STAGE_STATE[key] = {"tri": proj.tri, "bary": proj.bary, "VN": VN, "VNd": res.V, "FN": rm.F}
     return _STAGE_STATE[key]
 

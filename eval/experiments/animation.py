@@ -241,10 +241,10 @@ def _method_frames(m, case, G: np.ndarray, sp: dict) -> tuple[np.ndarray, list, 
                 X.append(Vd), secs.append(info["total_s"]), conv.append(bool(info["converged"]))
         return np.stack(X), secs, conv, "prepare once, solve per frame"
     if isinstance(m, FullResArap):
-        d = ArapDeformer(case.V, case.F, h, energy=m.energy, protocol=m.protocol)
+        d = ArapDeformer(case.V, case.F, h, m.arap_options())
         for Gi in G[1:]:
             t0 = time.perf_counter()
-            res = d.deform(Gi[h], tol=m.tol, max_iter=m.max_iter, V0=X[-1], criterion=m.criterion)
+            res = d.deform(Gi[h], U0=X[-1])
             secs.append(time.perf_counter() - t0)
             X.append(res.V), conv.append(bool(res.converged))
         return np.stack(X), secs, conv, "warm-started from the previous frame"

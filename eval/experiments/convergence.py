@@ -30,7 +30,7 @@ from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import DatasetSpec, EvalSpec, ReferenceOptions
 from harness.checks import check_numbers, config_int_list
 from sshade import deform
-from sshade.arap import rigid_fit, solve_arap
+from sshade.arap import ArapOptions, rigid_fit, solve_arap
 from sshade.arap.problems import lifted_plane
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
@@ -39,6 +39,8 @@ from sshade.pipeline import effective_params
 __all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to"]
 
 log = logging.getLogger("eval")
+#: the iteration cap of :func:`solver_curve`'s solves (the time budget usually stops them first)
+CURVE_MAX_ITER = 5000
 
 
 def _dist(U, ref_U, diag) -> tuple[float, float]:
@@ -98,7 +100,8 @@ def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
                  accelerate: str = "lbfgs", time_budget_s: float = 300.0, t_offset: float = 0.0,
                  criterion=None) -> tuple[list[dict], object]:
     """:func:`sshade.arap.solve_arap` traced against a reference (arguments as
-    :func:`libigl_curve`; ``accelerate`` as in ``solve_arap``; ``U0`` a start,
+    :func:`libigl_curve`; ``accelerate`` and ``criterion`` as the fields of
+    :class:`sshade.arap.ArapOptions`, at most :data:`CURVE_MAX_ITER` iterations; ``U0`` a start,
     ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
     ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
@@ -121,8 +124,9 @@ def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
         spent["cb"] += time.perf_counter() - t1
         return False
 
-    res = solve_arap(V, F, handles, targets, energy=energy, U0=U0, accelerate=accelerate, criterion=criterion,
-                     time_budget_s=time_budget_s, callback=cb)
+    options = ArapOptions(energy=energy, accelerate=accelerate, criterion=criterion, time_budget_s=time_budget_s,
+                          max_iter=CURVE_MAX_ITER)
+    res = solve_arap(V, F, handles, targets, options, U0=U0, callback=cb)
     total = t_offset + (time.perf_counter() - t0) - spent["cb"]
     m, x = _dist(res.V, ref_U, diag)
     rows.append({"iteration": int(res.iterations), "time_s": total, "ref_mean_pct": m, "ref_max_pct": x,

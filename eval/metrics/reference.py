@@ -24,6 +24,7 @@ from sshade.arap import (
     DEEP_CRITERION,
     ENERGIES,
     SR_ENERGY,
+    ArapOptions,
     solve_arap,
     solve_arap_sr,
 )
@@ -43,14 +44,14 @@ def _deep_solve(V, F, handles, targets, energy, solver, U0, R0=None):
     """The deep solve of ``energy``: ``(U, E, result)``."""
     p = sr_params(energy)
     if p is None:
-        res = solve_arap(V, F, handles, targets, energy=energy, U0=U0, criterion=DEEP_CRITERION,
-                         max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"],
-                         accelerate=solver["accelerate"])
+        options = ArapOptions(energy=energy, criterion=DEEP_CRITERION, max_iter=solver["max_iter"],
+                              time_budget_s=solver["time_budget_s"], accelerate=solver["accelerate"])
+        res = solve_arap(V, F, handles, targets, options, U0=U0)
     else:
         U0, R0 = _sr_start(V, F, handles, targets, p, U0, R0)
-        res = solve_arap_sr(V, F, handles, targets, alpha=p[0], alpha_scaling=p[1], U0=U0, R0=R0,
-                            criterion=DEEP_CRITERION,
-                            max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"])
+        options = ArapOptions(alpha=p[0], alpha_scaling=p[1], criterion=DEEP_CRITERION, max_iter=solver["max_iter"],
+                              time_budget_s=solver["time_budget_s"])
+        res = solve_arap_sr(V, F, handles, targets, options, U0=U0, R0=R0)
     return np.asarray(res.V, np.float64), float(res.info.get("energy", np.nan)), res
 
 

@@ -2,7 +2,7 @@
 the full-resolution baselines (Sorkine & Alexa 2007; Chao et al. 2010; Levi & Gotsman 2015).
 
 One concept per module, imports only downwards: threads, kernels, solver_kernels,
-kernel_data, operators, linear, criterion, accelerate, rigid, result, solver,
+kernel_data, operators, linear, criterion, options, accelerate, rigid, result, solver,
 smooth_rotations, local_global; :mod:`~sshade.arap.problems` (synthetic problems) is not
 imported here. What each module holds: docs/layout.md (``sshade/arap/``).
 """
@@ -15,13 +15,14 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "criterion": ["DEEP_CRITERION", "DEFAULT_CRITERION", "Criterion", "gradient_norm", "make_criterion"],
     "kernel_data": ["KernelData", "rcm_order"],
     "linear": ["LINEAR_SOLVERS", "LaplacianSolver"],
-    "local_global": ["DEFAULT_MAX_ITER", "DEFORM_ENERGIES", "PROTOCOLS", "ArapDeformer", "arap_deform", "iterate"],
+    "local_global": ["ArapDeformer", "arap_deform", "deformer_reads", "iterate"],
     "operators": ["ENERGIES", "ArapOperators", "bbox_diag", "build_operators", "fit_rotations"],
+    "options": ["ACCELERATIONS", "ALPHA_SCALINGS", "DEFAULT_ALPHA", "DEFAULT_MAX_ITER", "DEFORM_ENERGIES",
+                "PAPER_STOPS", "PROTOCOLS", "READS", "SR_ENERGY", "ArapOptions"],
     "result": ["ArapResult"],
     "rigid": ["rigid_fit"],
-    "smooth_rotations": ["ALPHA_SCALINGS", "DEFAULT_ALPHA", "SR_ENERGY", "SRProblem", "arap_sr_deform",
-                         "solve_arap_sr"],
-    "solver": ["ACCELERATIONS", "REORDER_MIN_VERTICES", "ArapSolver", "solve_arap"],
+    "smooth_rotations": ["SRProblem", "arap_sr_deform", "solve_arap_sr"],
+    "solver": ["REORDER_MIN_VERTICES", "ArapSolver", "solve_arap"],
     "solver_kernels": ["warmup_kernels"],
     "threads": ["PARALLEL_MIN_CELLS", "max_threads", "resolve_threads"],
 })

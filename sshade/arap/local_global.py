@@ -1,7 +1,7 @@
-"""Handle-driven ARAP under one of two protocols (:func:`arap_deform`, :data:`PROTOCOLS`):
-SShaDe's low-res step (paper §3.3, §4.1: spokes-and-rims) and the full-resolution
-baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes and rims"); with
-``energy="arap_sr"`` (:data:`DEFORM_ENERGIES`) ARAP with smooth rotations
+"""Handle-driven ARAP under one of two protocols (:func:`arap_deform`; its options
+:class:`sshade.arap.options.ArapOptions`): SShaDe's low-res step (paper §3.3, §4.1:
+spokes-and-rims) and the full-resolution baselines (Sorkine & Alexa 2007 "spokes"; Chao et
+al. 2010 "spokes and rims"); with ``energy="arap_sr"`` ARAP with smooth rotations
 (:mod:`sshade.arap.smooth_rotations`) under the same two protocols.
 
 - ``"converged"`` (default): :func:`sshade.arap.solver.solve_arap`, stopped by
@@ -14,25 +14,24 @@ baselines (Sorkine & Alexa 2007 "spokes"; Chao et al. 2010 "spokes and rims"); w
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import igl
 import numpy as np
 
 from ..errors import SShaDeError
-from .criterion import DEFAULT_CRITERION, gradient_norm
-from .operators import ENERGIES, bbox_diag, build_operators
+from .criterion import gradient_norm
+from .operators import bbox_diag, build_operators
+from .options import READS, SR_ENERGY, ArapOptions
 from .result import ArapResult
 from .rigid import rigid_fit
-from .smooth_rotations import DEFAULT_ALPHA, SR_ENERGY, SRProblem, arap_sr_deform, solve_arap_sr
+from .smooth_rotations import SRProblem, arap_sr_deform, solve_arap_sr
 from .solver import ArapSolver
 
-__all__ = ["arap_deform", "ArapDeformer", "iterate", "PROTOCOLS", "DEFAULT_MAX_ITER", "DEFORM_ENERGIES"]
+__all__ = ["arap_deform", "ArapDeformer", "iterate", "deformer_reads", "DEFORMER_SETUP"]
 
-PROTOCOLS = ("converged", "paper")
-#: Iteration cap of each protocol when none is given (paper §4.1: 1000).
-DEFAULT_MAX_ITER = {"converged": 10000, "paper": 1000}
-#: The energies :func:`arap_deform` solves: :data:`sshade.arap.ENERGIES` and ARAP-SR's.
-DEFORM_ENERGIES = (*ENERGIES, SR_ENERGY)
+#: the options an :class:`ArapDeformer` is set up with: each deform's must be the same
+DEFORMER_SETUP = ("energy", "protocol", "alpha", "alpha_scaling", "linear_solver", "threads", "reorder")
 
 
 def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
@@ -65,45 +64,45 @@ def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
     return U, it, converged, move
 
 
-def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
-                energy: str = "spokes_and_rims", tol: float = 1e-4, max_iter: int | None = None,
-                V0: np.ndarray | None = None, time_budget_s: float | None = None,
-                protocol: str = "converged", criterion=None, accelerate: str = "lbfgs",
-                anderson_m: int | None = None, R0: np.ndarray | None = None,
-                alpha: float = DEFAULT_ALPHA) -> ArapResult:
-    """Handle-driven ARAP deformation under one of the two protocols (:data:`PROTOCOLS`).
+def deformer_reads(energy: str, protocol: str) -> frozenset[str]:
+    """The fields of :class:`sshade.arap.options.ArapOptions` that :func:`arap_deform` reads
+    for ``energy`` under ``protocol``: ``energy``, ``protocol`` and those of the solver it
+    runs (:data:`sshade.arap.options.READS`): ``solve_arap`` or ``solve_arap_sr`` under
+    ``"converged"``; libigl's ``arap_solve`` or ``arap_sr_deform`` (always the move rule:
+    no ``stop``) under ``"paper"``."""
+    if protocol == "converged":
+        used = READS["solve_arap_sr" if energy == SR_ENERGY else "solve_arap"]
+    else:
+        used = READS["arap_sr_deform"] - {"stop"} if energy == SR_ENERGY else READS["arap_deform (paper)"]
+    return used | {"energy", "protocol"}
+
+
+def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray,
+                options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
+                R0: np.ndarray | None = None) -> ArapResult:
+    """Handle-driven ARAP deformation under one of the two protocols
+    (:data:`sshade.arap.options.PROTOCOLS`).
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions. F : (m, 3) int64 faces.
     handles : (h,) int64 constrained vertex indices. targets : (h, 3) float64 positions.
-    energy : ``"spokes"`` (ARAP, Sorkine & Alexa 2007), ``"spokes_and_rims"``
-        (Elastic, Chao et al. 2010) or ``"arap_sr"`` (ARAP with smooth rotations, Levi &
-        Gotsman 2015, Open3D's alpha: :func:`sshade.arap.smooth_rotations.solve_arap_sr`
+    options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). ``energy``:
+        ``"spokes"`` (ARAP, Sorkine & Alexa 2007), ``"spokes_and_rims"`` (Elastic, Chao et
+        al. 2010) or ``"arap_sr"`` (ARAP with smooth rotations, Levi & Gotsman 2015, of
+        ``alpha`` and ``alpha_scaling``: :func:`sshade.arap.smooth_rotations.solve_arap_sr`
         under ``"converged"``, :func:`sshade.arap.smooth_rotations.arap_sr_deform` with the
-        move rule under ``"paper"``); :data:`DEFORM_ENERGIES`.
-    tol : float, ``"paper"`` protocol: stop when the largest per-vertex move in one
-        iteration is below ``tol * bbox_diag(V)``.
-    max_iter : int or None, iteration cap (None: :data:`DEFAULT_MAX_ITER` of the
-        protocol; paper: 1000).
-    V0 : (n, 3) float64 or None, initial guess; default the best rigid fit of the
+        move rule under ``"paper"``). ``protocol``: ``"converged"`` (default:
+        :func:`sshade.arap.solver.solve_arap`'s options; ``accelerate="lbfgs"`` runs
+        ARAP-SR's Anderson acceleration) or ``"paper"`` (libigl's iteration, stopped when
+        the largest per-vertex move in one iteration is below ``tol * bbox_diag(V)`` or at
+        ``max_iter``, None: 1000; ``criterion.gtol`` tells a converged stop from a stalled
+        one). What each reads: :func:`deformer_reads`; the others must keep their defaults.
+    U0 : (n, 3) float64 or None, initial guess; default the best rigid fit of the
         handles (:func:`sshade.arap.rigid.rigid_fit`; for two or collinear handles the
         fit turning the mesh least) applied to ``V``.
-    time_budget_s : float or None, stop (unconverged) once the iterations have taken
-        this many seconds (for benchmarks of slow full-resolution runs).
-    protocol : ``"converged"`` or ``"paper"`` (:data:`PROTOCOLS`).
-    criterion : :class:`sshade.arap.criterion.Criterion` or None (its default), the
-        ``"converged"`` protocol's stopping thresholds; under ``"paper"`` its ``gtol``
-        tells a converged stop from a stalled one (``info["status"]``).
-    accelerate : ``"lbfgs"`` (default), ``"anderson"`` or ``"none"``, the ``"converged"``
-        protocol's iteration (:func:`sshade.arap.solver.solve_arap`; ``"arap_sr"`` has no
-        L-BFGS: ``"lbfgs"`` runs its Anderson acceleration).
-    anderson_m : int or None, its history window (None: 10 for L-BFGS, 5 for Anderson).
     R0 : (n, 3, 3) float64 or None, ``"converged"`` protocol only: start from the global
-        step of these rotations (:func:`sshade.arap.solver.solve_arap`), not with ``V0``.
-    alpha : float >= 0, ``"arap_sr"`` only: the smoothness weight, times the surface area
-        of ``(V, F)`` (default :data:`sshade.arap.smooth_rotations.DEFAULT_ALPHA`, with
-        Open3D's valence scaling).
+        step of these rotations (:func:`sshade.arap.solver.solve_arap`), not with ``U0``.
 
     Returns
     -------
@@ -114,19 +113,17 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
 
     Raises
     ------
-    SShaDeError on an unknown energy or protocol, ``R0`` under the ``"paper"`` protocol
-    (inputs are assumed validated by the caller), a bad ``alpha`` (``"arap_sr"``).
+    SShaDeError on options not an ArapOptions or setting a field the energy and protocol
+    do not read, ``R0`` under the ``"paper"`` protocol (inputs are assumed validated by the
+    caller).
 
     Examples
     --------
     Example::
 
-        import igl
-        res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1)
+        res = arap_deform(V, F, np.array([0, 5]), V[[0, 5]] + 0.1, ArapOptions(protocol="paper"))
     """
-    return ArapDeformer(V, F, handles, energy=energy, protocol=protocol, alpha=alpha).deform(
-        targets, tol=tol, max_iter=max_iter, V0=V0, time_budget_s=time_budget_s, criterion=criterion,
-        accelerate=accelerate, anderson_m=anderson_m, R0=R0)
+    return ArapDeformer(V, F, handles, options).deform(targets, U0=U0, R0=R0)
 
 
 class ArapDeformer:
@@ -141,32 +138,35 @@ class ArapDeformer:
     ----------
     V : (n, 3) float64 rest positions. F : (m, 3) int64 faces. handles : (h,) int64
         constrained vertex indices (validated by the caller, as for :func:`arap_deform`).
-    energy : one of :data:`DEFORM_ENERGIES`. protocol : one of :data:`PROTOCOLS`.
-    alpha : float >= 0, ``"arap_sr"``'s smoothness weight (:func:`arap_deform`).
+    options : :class:`sshade.arap.options.ArapOptions` or None, as :func:`arap_deform`;
+        its set-up fields (:data:`DEFORMER_SETUP`: energy, protocol, ARAP-SR's alpha, the linear
+        solver, threads, numbering) hold for every deform.
+
+    Attributes
+    ----------
+    options : ArapOptions (each deform's unless it gives its own). energy, protocol : str.
 
     Raises
     ------
-    SShaDeError on an unknown energy or protocol.
+    SShaDeError on options not an ArapOptions or setting a field the energy and protocol
+    do not read (:func:`deformer_reads`).
 
     Examples
     --------
+    >>> from sshade.arap.options import ArapOptions
     >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(60.0, h=0.25)
-    >>> d = ArapDeformer(V, F, h, energy="spokes")
+    >>> d = ArapDeformer(V, F, h, ArapOptions(energy="spokes"))
     >>> d.deform(T).converged and d.deform(T * 1.01).converged
     True
     """
 
-    def __init__(self, V, F, handles, *, energy: str = "spokes_and_rims", protocol: str = "converged",
-                 alpha: float = DEFAULT_ALPHA):
-        if energy not in DEFORM_ENERGIES:
-            raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {DEFORM_ENERGIES}")
-        if protocol not in PROTOCOLS:
-            raise SShaDeError(f"unknown ARAP protocol {protocol!r}; use one of {PROTOCOLS}")
+    def __init__(self, V, F, handles, options: ArapOptions | None = None):
+        self.options = _checked(options, "ArapDeformer")
         self.V = np.ascontiguousarray(V, np.float64)
         self.F = np.ascontiguousarray(F, np.int64)
         self.handles = handles
-        self.energy, self.protocol, self.alpha = energy, protocol, alpha
+        self.energy, self.protocol = self.options.energy, self.options.protocol
         self.diag = bbox_diag(self.V)
         self._solver = self._data = self._ops = self._sr = None
 
@@ -179,20 +179,23 @@ class ArapDeformer:
             return self._sr.solver
         return None if self._solver is None else self._solver.factorisation
 
-    def deform(self, targets, *, tol: float = 1e-4, max_iter: int | None = None, V0: np.ndarray | None = None,
-               time_budget_s: float | None = None, criterion=None, accelerate: str = "lbfgs",
-               anderson_m: int | None = None, R0: np.ndarray | None = None,
-               carry_history: bool = False) -> ArapResult:
-        """The deformation for ``targets`` ((h, 3) float64); parameters and result as
-        :func:`arap_deform`, and ``carry_history`` (``"converged"`` protocol: start the
-        accelerator with the last solve's history, as
-        :meth:`sshade.arap.solver.ArapSolver.solve`; not ``"arap_sr"``'s, which starts each
-        solve without history). Raises SShaDeError for ``R0`` under the ``"paper"`` protocol."""
+    def deform(self, targets, *, options: ArapOptions | None = None, U0: np.ndarray | None = None,
+               R0: np.ndarray | None = None, carry_history: bool = False) -> ArapResult:
+        """The deformation for ``targets`` ((h, 3) float64); ``U0``, ``R0`` and the result
+        as :func:`arap_deform`. ``options``: None (the deformer's) or another
+        :class:`~sshade.arap.options.ArapOptions` with the same set-up fields
+        (:data:`DEFORMER_SETUP`). ``carry_history`` (``"converged"`` protocol: start the accelerator
+        with the last solve's history, as :meth:`sshade.arap.solver.ArapSolver.solve`; not
+        ``"arap_sr"``'s, which starts each solve without history). Raises SShaDeError for
+        ``R0`` under the ``"paper"`` protocol, bad options or another set-up."""
         protocol, V, handles = self.protocol, self.V, self.handles
+        if options is None:
+            o = self.options
+        else:
+            o = _checked(options, "ArapDeformer.deform")
+            o.refuse_other_setup(self.options, DEFORMER_SETUP, "ArapDeformer.deform")
         if R0 is not None and protocol != "converged":
             raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
-        if max_iter is None:
-            max_iter = DEFAULT_MAX_ITER[protocol]
         bc = np.ascontiguousarray(targets, np.float64)
         R, t = rigid_fit(V[handles], bc)
         rigid_resid = float(np.abs(V[handles] @ R.T + t - bc).max())
@@ -206,42 +209,35 @@ class ArapDeformer:
                               precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol,
                                                                    "status": "rigid"})
         if self.energy == SR_ENERGY:
-            return self._smooth_rotations(bc, tol=tol, max_iter=max_iter, V0=V0, R0=R0, time_budget_s=time_budget_s,
-                                          criterion=criterion, accelerate=accelerate, anderson_m=anderson_m)
+            return self._smooth_rotations(bc, o, U0, R0)
         if protocol == "converged":
             if self._solver is None:
-                self._solver = ArapSolver(V, self.F, handles, energy=self.energy)
-            res = self._solver.solve(targets, U0=V0, R0=R0, criterion=criterion, max_iter=max_iter,
-                                     accelerate=accelerate, anderson_m=anderson_m, time_budget_s=time_budget_s,
-                                     carry_history=carry_history)
+                self._solver = ArapSolver(V, self.F, handles, o)
+            res = self._solver.solve(targets, options=o, U0=U0, R0=R0, carry_history=carry_history)
             res.info["protocol"] = "converged"
             return res
-        U = V @ R.T + t if V0 is None else np.ascontiguousarray(V0, np.float64).copy()
-        res = self._paper(bc, U, thresh=tol * self.diag, max_iter=max_iter, time_budget_s=time_budget_s)
-        return self._classify(res, DEFAULT_CRITERION if criterion is None else criterion)
+        U = V @ R.T + t if U0 is None else np.ascontiguousarray(U0, np.float64).copy()
+        res = self._paper(bc, U, thresh=o.tol * self.diag, max_iter=o.iteration_cap(),
+                          time_budget_s=o.time_budget_s)
+        return self._classify(res, o.criterion)
 
-    def _smooth_rotations(self, bc: np.ndarray, *, tol, max_iter, V0, R0, time_budget_s, criterion, accelerate,
-                          anderson_m) -> ArapResult:
-        """ARAP-SR for the targets ``bc`` (h, 3) under this deformer's protocol, options as
-        :meth:`deform`: :func:`solve_arap_sr` (``"lbfgs"`` runs its Anderson acceleration;
-        ``anderson_m`` None: its window) or :func:`arap_sr_deform` with the move rule
-        (``tol``). Its :class:`SRProblem` is made by the first call (its seconds in that
-        result's ``precompute_s``) and given each later call's targets."""
+    def _smooth_rotations(self, bc: np.ndarray, o: ArapOptions, U0, R0) -> ArapResult:
+        """ARAP-SR for the targets ``bc`` (h, 3) under this deformer's protocol, options
+        ``o`` and starts as :meth:`deform`: :func:`solve_arap_sr` (``"lbfgs"`` runs its
+        Anderson acceleration) or :func:`arap_sr_deform` with the move rule. Its
+        :class:`SRProblem` is made by the first call (its seconds in that result's
+        ``precompute_s``) and given each later call's targets."""
         t0 = time.perf_counter()
         if self._sr is None:
-            self._sr = SRProblem(self.V, self.F, self.handles, bc, self.alpha)
+            self._sr = SRProblem(self.V, self.F, self.handles, bc, o.alpha, o.linear_solver, o.alpha_scaling)
         else:
             self._sr.set_targets(bc)
         setup_s = time.perf_counter() - t0
         if self.protocol == "paper":
-            res = arap_sr_deform(self.V, self.F, self.handles, bc, alpha=self.alpha, stop="move", tol=tol,
-                                 criterion=criterion, max_iter=max_iter, time_budget_s=time_budget_s, V0=V0,
-                                 problem=self._sr)
+            res = arap_sr_deform(self.V, self.F, self.handles, bc, replace(o, stop="move"), U0=U0, problem=self._sr)
         else:
-            window = {} if anderson_m is None else {"anderson_m": anderson_m}
-            res = solve_arap_sr(self.V, self.F, self.handles, bc, alpha=self.alpha, criterion=criterion,
-                                max_iter=max_iter, accelerate="anderson" if accelerate == "lbfgs" else accelerate,
-                                U0=V0, R0=R0, time_budget_s=time_budget_s, problem=self._sr, **window)
+            sr = replace(o, accelerate="anderson") if o.accelerate == "lbfgs" else o
+            res = solve_arap_sr(self.V, self.F, self.handles, bc, sr, U0=U0, R0=R0, problem=self._sr)
         res.precompute_s += setup_s
         res.info["protocol"] = self.protocol
         return res
@@ -289,3 +285,12 @@ class ArapDeformer:
         return res
 
 
+
+
+def _checked(options, who: str) -> ArapOptions:
+    """``options`` (None: the defaults) for :func:`arap_deform`: an :class:`ArapOptions`
+    setting no field its energy and protocol do not read. Raises SShaDeError naming ``who``."""
+    options = ArapOptions.of(options, who)
+    options.refuse_unused(deformer_reads(options.energy, options.protocol),
+                          f"{who} ({options.protocol} protocol, energy {options.energy!r})")
+    return options

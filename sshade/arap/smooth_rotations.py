@@ -21,25 +21,18 @@ from numba import njit
 from ..errors import SShaDeError
 from ..mesh.validate import validate_handles
 from .accelerate import Anderson
-from .criterion import DEFAULT_CRITERION, Criterion, gradient_norm
+from .criterion import gradient_norm
 from .linear import LaplacianSolver
 from .operators import bbox_diag, build_operators, fit_rotations
+from .options import ALPHA_SCALINGS, READS, SR_ENERGY, ArapOptions
 from .result import ArapResult
 from .rigid import rigid_fit
 
-__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "arap_sr_deform", "smoothness_weights", "SR_ENERGY",
-           "SR_ACCELERATIONS", "ALPHA_SCALINGS", "DEFAULT_ALPHA", "PAPER_STOPS"]
+__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "arap_sr_deform", "smoothness_weights",
+           "SR_ACCELERATIONS"]
 
-#: the name of ARAP-SR's energy beside :data:`sshade.arap.ENERGIES` (its ``alpha`` given apart)
-SR_ENERGY = "arap_sr"
-#: ``alpha`` when none is given: Open3D's Smoothed ARAP default (with ``alpha_scaling="valence"``)
-DEFAULT_ALPHA = 0.01
-#: stopping rules of the paper protocol (:func:`arap_sr_deform`); the first is the default
-PAPER_STOPS = ("energy", "move")
-#: the iterations of :func:`solve_arap_sr`
+#: the iterations of :func:`solve_arap_sr` (``accelerate``, ``"auto"`` resolved)
 SR_ACCELERATIONS = ("anderson", "none")
-#: definitions of alpha (module docstring): the first is the default
-ALPHA_SCALINGS = ("valence", "none")
 
 clock = time.perf_counter
 
@@ -276,39 +269,31 @@ class SRProblem:
         return E, R
 
 
-def solve_arap_sr(V, F, handles, targets, *, alpha: float = DEFAULT_ALPHA, alpha_scaling: str = "valence",
-                  criterion: Criterion | None = None,
-                  max_iter: int = 10000, accelerate: str = "anderson", anderson_m: int = 5,
-                  U0: np.ndarray | None = None, time_budget_s: float | None = None, jacobi: bool = False,
-                  problem: SRProblem | None = None, linear_solver: str = "auto",
-                  reset_on_reject: bool = False, R0: np.ndarray | None = None) -> ArapResult:
-    """ARAP-SR run to a certified convergence (docs/methods.md, "Implementation notes:
-    sshade/arap/smooth_rotations.py").
+def solve_arap_sr(V, F, handles, targets, options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
+                  R0: np.ndarray | None = None, problem: SRProblem | None = None) -> ArapResult:
+    """ARAP-SR run to a certified convergence, the converged protocol (docs/methods.md,
+    "Implementation notes: sshade/arap/smooth_rotations.py").
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions (mesh units); F : (m, 3) int faces.
     handles : (h,) int unique vertex indices; targets : (h, 3) float64.
-    alpha : float >= 0, smoothness weight (times the surface area; 0: ARAP spokes).
-    alpha_scaling : one of :data:`ALPHA_SCALINGS` (module docstring; default ``"valence"``,
-        Open3D's definition of ``alpha``).
-    criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
-    max_iter : int >= 0, cap on accepted iterations (global solves).
-    accelerate : ``"anderson"`` (default) or ``"none"`` (plain block descent).
-    anderson_m : int >= 1, Anderson's window.
+    options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). Read:
+        ``alpha`` (smoothness weight times the surface area; 0: ARAP spokes),
+        ``alpha_scaling`` (module docstring), ``criterion``, ``max_iter`` (None: 10000),
+        ``accelerate`` (``"auto"`` or ``"anderson"``: Anderson; ``"none"``: plain block
+        descent), ``history`` (Anderson's window, None: 5), ``time_budget_s``,
+        ``linear_solver``, ``jacobi`` (Jacobi local step instead of Gauss-Seidel,
+        measurements only: the energy may then increase; steps are not safeguarded),
+        ``reset_on_reject`` (forget Anderson's history after a rejected candidate),
+        ``energy`` (the default or ``"arap_sr"``). The others must keep their defaults.
     U0 : (n, 3) float64 or None, start (default: the rigid fit of the handles, rotations
         that fit's rotation; with ``R0``: the global step of ``R0``); handle rows are set
         to ``targets``.
     R0 : (n, 3, 3) float64 or None, start rotations (default: the rigid fit's), e.g.
         those of a solve on a low-resolution remesh; one sweep at ``U0`` follows.
-    time_budget_s : float or None, stop (status ``"time_budget"``) after this many seconds.
-    jacobi : bool, Jacobi local step instead of Gauss-Seidel (measurements only: the
-        energy may then increase; steps are not safeguarded).
-    problem : :class:`SRProblem` or None, prebuilt for the same inputs (its ``alpha`` and
-        ``alpha_scaling`` are used).
-    linear_solver : :class:`sshade.arap.LaplacianSolver` backend.
-    reset_on_reject : bool, forget Anderson's history after a rejected candidate (default
-        False: keep it).
+    problem : :class:`SRProblem` or None, prebuilt for the same inputs, ``alpha``,
+        ``alpha_scaling`` and linear solver.
 
     Returns
     -------
@@ -321,14 +306,18 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = DEFAULT_ALPHA, alpha
 
     Raises
     ------
-    SShaDeError on bad inputs or options (:class:`SRProblem`).
+    SShaDeError on bad inputs (:class:`SRProblem`), ``U0`` / ``R0``, options (``accelerate``
+    ``"lbfgs"``, an option not read set, another energy) or a ``problem`` of another alpha.
     """
     t0 = clock()
-    crit = DEFAULT_CRITERION if criterion is None else criterion
+    o = _sr_options(options, "solve_arap_sr", problem)
+    accelerate = o.acceleration(SR_ENERGY)
     if accelerate not in SR_ACCELERATIONS:
-        raise SShaDeError(f"accelerate must be one of {SR_ACCELERATIONS}, got {accelerate!r}")
-    pb = problem if problem is not None else SRProblem(V, F, handles, targets, alpha, linear_solver,
-                                                                alpha_scaling)
+        raise SShaDeError(f"solve_arap_sr: accelerate must be 'auto' or one of {SR_ACCELERATIONS}, got "
+                          f"{o.accelerate!r} (ARAP-SR has no L-BFGS)")
+    crit = o.criterion
+    pb = problem if problem is not None else SRProblem(V, F, handles, targets, o.alpha, o.linear_solver,
+                                                       o.alpha_scaling)
     Rr, tr_ = rigid_fit(pb.ops.V[pb.h], pb.T)
     if R0 is None:
         R = np.broadcast_to(Rr, (pb.n, 3, 3)).copy()
@@ -345,12 +334,34 @@ def solve_arap_sr(V, F, handles, targets, *, alpha: float = DEFAULT_ALPHA, alpha
     info = {"alpha": pb.alpha, "alpha_scaling": pb.alpha_scaling, "etol": crit.etol, "gtol": crit.gtol,
             "accelerate": accelerate,
             "n_colours": len(pb.classes), "n_fallback": 0, "n_sweeps": 1, "linear_solver": pb.solver.backend}
-    opts = {"m": anderson_m, "jacobi": jacobi, "reset": reset_on_reject}
-    U, R, it, status = _iterate(pb, U, pb.sweep(U, R, jacobi), crit, max_iter, accelerate, time_budget_s, opts,
-                                info)
+    opts = {"m": o.window(accelerate), "jacobi": o.jacobi, "reset": o.reset_on_reject}
+    U, R, it, status = _iterate(pb, U, pb.sweep(U, R, o.jacobi), crit, o.iteration_cap("converged"), accelerate,
+                                o.time_budget_s, opts, info)
     t2 = clock()
     return ArapResult(V=U, iterations=it, converged=status in ("converged", "rigid"), last_move=info.pop("move"),
                       precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status, R=R))
+
+
+def _sr_options(options, who: str, problem: SRProblem | None) -> ArapOptions:
+    """``options`` (None: the defaults) for the ARAP-SR solver ``who``: an
+    :class:`ArapOptions` setting no field it does not read (:data:`READS`), of ARAP-SR's
+    energy (or the default), agreeing with ``problem``'s alpha, alpha_scaling and linear
+    solver. Raises SShaDeError naming ``who``."""
+    o = ArapOptions.of(options, who)
+    o.refuse_unused(READS[who], who)
+    if o.energy not in (SR_ENERGY, ArapOptions.energy):
+        raise SShaDeError(f"{who} solves ARAP-SR's energy ({SR_ENERGY!r}), not {o.energy!r} "
+                          "(solve_arap or arap_deform)")
+    if problem is not None:
+        backend = None if problem.solver is None else problem.solver.backend
+        for name, mine, its in (("alpha", o.alpha, problem.alpha), ("alpha_scaling", o.alpha_scaling,
+                                                                      problem.alpha_scaling)):
+            if mine != its:
+                raise SShaDeError(f"{who}: {name}={mine!r}, but the problem given was built with {its!r}")
+        if o.linear_solver not in ("auto", backend):
+            raise SShaDeError(f"{who}: linear_solver={o.linear_solver!r}, but the problem given factorised with "
+                              f"{backend!r}")
+    return o
 
 
 def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opts, info):
@@ -401,37 +412,36 @@ def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opt
     return U, R, it, status
 
 
-def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, *,
-                   alpha: float = DEFAULT_ALPHA, alpha_scaling: str = "valence", stop: str = "energy",
-                   tol: float = 1e-4, criterion=None, max_iter: int = 1000,
-                   time_budget_s: float | None = None, V0: np.ndarray | None = None,
+def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray,
+                   options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
                    problem: SRProblem | None = None) -> ArapResult:
     """ARAP with smooth rotations under the paper protocol (§4.1; the converged protocol
     is :func:`solve_arap_sr`).
 
-    From ``V0`` (default the rigid fit of the handles), each iteration takes every rotation
+    From ``U0`` (default the rigid fit of the handles), each iteration takes every rotation
     at once from the previous ones (Jacobi local step, :meth:`SRProblem.sweep`), then
-    the global step, until ``stop`` fires: ``"energy"`` (default; the relative change of
-    ``E`` over one iteration below ``criterion.etol``) or ``"move"`` (the largest vertex move
-    of one iteration below ``tol * bbox_diag``). ``status`` is then ``"converged"`` when the
-    gradient norm is below ``criterion.gtol`` (and, for the energy stop, the relative
-    decrease below ``criterion.etol``), else ``"stalled"``; ``"max_iter"`` /
-    ``"time_budget"`` at the caps.
+    the global step, until ``options.stop`` fires: ``"energy"`` (default; the relative
+    change of ``E`` over one iteration below ``criterion.etol``) or ``"move"`` (the largest
+    vertex move of one iteration below ``tol * bbox_diag``). ``status`` is then
+    ``"converged"`` when the gradient norm is below ``criterion.gtol`` (and, for the energy
+    stop, the relative decrease below ``criterion.etol``), else ``"stalled"``;
+    ``"max_iter"`` / ``"time_budget"`` at the caps.
 
     Parameters
     ----------
     V : (n, 3) float64; F : (m, 3) int64 (validated). handles : (h,) int64;
     targets : (h, 3) float64.
-    alpha : float >= 0, rotation-smoothness weight (times the surface area A, so it is
-        scale-free); 0 gives plain ARAP (spokes).
-    alpha_scaling : one of :data:`ALPHA_SCALINGS` (default ``"valence"``: Open3D's alpha).
-    stop : one of :data:`PAPER_STOPS`. tol : float > 0, the move rule's tolerance
-        (fraction of the bounding-box diagonal).
-    criterion : :class:`sshade.arap.Criterion` or None (``DEFAULT_CRITERION``).
-    max_iter : int >= 0, iteration cap. time_budget_s : optional cap on iteration time.
-    V0 : (n, 3) float64 or None, start (handle rows set to ``targets``); the first local
+    options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). Read:
+        ``alpha`` (rotation-smoothness weight times the surface area A, so it is
+        scale-free; 0 gives plain ARAP, spokes), ``alpha_scaling``, ``stop``, ``tol``
+        (the move rule's, a fraction of the bounding-box diagonal), ``criterion``,
+        ``max_iter`` (None: the paper protocol's 1000), ``time_budget_s``,
+        ``linear_solver``, ``energy`` (the default or ``"arap_sr"``), ``protocol`` (either:
+        this is the paper protocol). The others must keep their defaults.
+    U0 : (n, 3) float64 or None, start (handle rows set to ``targets``); the first local
         step takes the rigid fit's rotation as every vertex's previous one.
-    problem : :class:`SRProblem` or None, prebuilt for the same inputs and ``alpha``.
+    problem : :class:`SRProblem` or None, prebuilt for the same inputs, ``alpha`` and
+        ``alpha_scaling``.
 
     Returns
     -------
@@ -441,33 +451,35 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
 
     Raises
     ------
-    SShaDeError on a bad ``stop``, ``alpha``, ``alpha_scaling`` or ``V0``.
+    SShaDeError on bad options (an option not read set, another energy), a ``problem`` of
+    another alpha, a bad ``U0``.
 
     Examples
     --------
     Example::
 
-        res = arap_sr_deform(V, F, handles, targets, alpha=0.01)
+        res = arap_sr_deform(V, F, handles, targets, ArapOptions(alpha=0.01, stop="move"))
     """
-    if stop not in PAPER_STOPS:
-        raise SShaDeError(f"ARAP-SR: stop must be one of {PAPER_STOPS}, got {stop!r}")
-    crit = DEFAULT_CRITERION if criterion is None else criterion
+    o = _sr_options(options, "arap_sr_deform", problem)
+    stop, crit = o.stop, o.criterion
     V = np.ascontiguousarray(V, np.float64)
     diag = bbox_diag(V)
     R0, t0_ = rigid_fit(V[handles], targets)
-    info = {"alpha": alpha, "alpha_scaling": alpha_scaling, "stop": stop}
+    info = {"alpha": o.alpha, "alpha_scaling": o.alpha_scaling, "stop": stop}
     if float(np.abs(V[handles] @ R0.T + t0_ - targets).max()) <= 1e-12 * diag:
         return ArapResult(V=V @ R0.T + t0_, iterations=0, converged=True, last_move=0.0, precompute_s=0.0,
                           solve_s=0.0, info=dict(info, rigid=True, status="rigid"))
     t0 = time.perf_counter()
-    pb = SRProblem(V, F, handles, targets, alpha, alpha_scaling=alpha_scaling) if problem is None else problem
+    pb = SRProblem(V, F, handles, targets, o.alpha, o.linear_solver, o.alpha_scaling) if problem is None \
+        else problem
     t1 = time.perf_counter()
-    U = V @ R0.T + t0_ if V0 is None else np.array(V0, np.float64)
+    U = V @ R0.T + t0_ if U0 is None else np.array(U0, np.float64)
     if U.shape != (pb.n, 3) or not np.isfinite(U).all():
-        raise SShaDeError(f"V0 must be a finite ({pb.n}, 3) array")
+        raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
     U[pb.h] = pb.T
     R = pb.sweep(U, np.broadcast_to(R0, (pb.n, 3, 3)).copy(), jacobi=True)
-    U, R, it, move, rel, status = _paper_iterations(pb, U, R, stop, tol * diag, crit, max_iter, time_budget_s)
+    U, R, it, move, rel, status = _paper_iterations(pb, U, R, stop, o.tol * diag, crit, o.iteration_cap("paper"),
+                                                    o.time_budget_s)
     t2 = time.perf_counter()
     gn = pb.gnorm(U, R)
     if status == "rule":

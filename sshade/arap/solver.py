@@ -2,8 +2,9 @@
 Anderson), stopped by an energy-and-gradient criterion (:func:`solve_arap`;
 :class:`ArapSolver` keeps the set-up for one handle set across solves).
 
-Energy and operators: :mod:`sshade.arap.operators`; accelerators:
-:mod:`sshade.arap.accelerate`; stopping rule: :class:`sshade.arap.criterion.Criterion`.
+Options: :class:`sshade.arap.options.ArapOptions`; energy and operators:
+:mod:`sshade.arap.operators`; accelerators: :mod:`sshade.arap.accelerate`; stopping rule:
+:class:`sshade.arap.criterion.Criterion`.
 The algorithm, its phases, the cost of one iteration and the result's ``info`` keys:
 docs/methods.md ("Implementation notes: sshade/arap/solver.py").
 """
@@ -17,42 +18,47 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import SShaDeError
 from ..mesh.validate import validate_handle_indices, validate_handles
 from .accelerate import LBFGS, Anderson
-from .criterion import DEFAULT_CRITERION, Criterion, gradient_norm
+from .criterion import Criterion, gradient_norm
 from .kernels import fused
 from .linear import LaplacianSolver
 from .operators import ENERGIES, ArapOperators, build_operators
+from .options import READS, SR_ENERGY, ArapOptions
 from .result import ArapResult
 from .rigid import rigid_fit
 from .solver_kernels import loop_kernels
 from .threads import ThreadPicker, numba_threads, resolve_threads
 
-__all__ = ["solve_arap", "ArapSolver", "ACCELERATIONS", "REORDER_MIN_VERTICES"]
+__all__ = ["solve_arap", "ArapSolver", "REORDER_MIN_VERTICES", "SOLVER_SETUP"]
 
-#: the iterations of :func:`solve_arap` (``accelerate``)
-ACCELERATIONS = ("lbfgs", "anderson", "none")
 #: vertices from which :func:`solve_arap` renumbers the mesh for locality by default
 #: (:func:`sshade.arap.kernel_data.rcm_order`; below, everything fits in the L2 cache).
 REORDER_MIN_VERTICES = 20_000
+#: the options an :class:`ArapSolver` is set up with: each solve's must be the same
+SOLVER_SETUP = ("energy", "linear_solver", "threads", "reorder")
 
 clock = time.perf_counter
 
 
-def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = "spokes_and_rims",
-               U0: np.ndarray | None = None, R0: np.ndarray | None = None,
-               criterion: Criterion | None = None, max_iter: int = 5000,
-               accelerate: bool | str = "lbfgs", anderson_m: int | None = None, time_budget_s: float | None = None,
-               callback=None, linear_solver: str = "auto",
-               operators: ArapOperators | None = None, threads: int | None = None,
-               reorder: bool | None = None) -> ArapResult:
-    """Handle-driven ARAP deformation run to a certified convergence (the algorithm:
-    docs/methods.md, "Implementation notes: sshade/arap/solver.py").
+def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, options: ArapOptions | None = None, *,
+               U0: np.ndarray | None = None, R0: np.ndarray | None = None, callback=None,
+               operators: ArapOperators | None = None) -> ArapResult:
+    """Handle-driven ARAP deformation run to a certified convergence (the converged
+    protocol; the algorithm: docs/methods.md, "Implementation notes: sshade/arap/solver.py").
 
     Parameters
     ----------
     V : (n, 3) float64 rest positions (mesh units). F : (m, 3) int faces.
     handles : (h,) int unique vertex indices; targets : (h, 3) float64 their positions.
-    energy : ``"spokes"`` (Sorkine & Alexa 2007) or ``"spokes_and_rims"`` (Chao et al.
-        2010), libigl's definitions (:mod:`sshade.arap.operators`).
+    options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). Read:
+        ``energy`` (``"spokes"`` or ``"spokes_and_rims"``, libigl's definitions,
+        :mod:`sshade.arap.operators`), ``criterion``, ``max_iter`` (None: 10000),
+        ``accelerate`` (``"auto"``/``"lbfgs"``: L-BFGS, Armijo backtracking, memory pairs
+        with non-positive curvature skipped; ``"anderson"``: energy safeguard;
+        ``"none"``: plain local/global, libigl's iteration in float64), ``history``,
+        ``time_budget_s``, ``linear_solver`` (:class:`sshade.arap.linear.LaplacianSolver`),
+        ``threads`` (the iterates do not depend on it), ``reorder`` (same iterates up to
+        rounding: the renumbered Cholesky factor rounds differently). The others must keep
+        their defaults.
     U0 : (n, 3) float64 or None, start; default the best rigid fit of the handles
         (:func:`sshade.arap.rigid.rigid_fit`) applied to ``V``. The handle rows are
         overwritten by ``targets``.
@@ -60,27 +66,11 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
         e.g. those of a solve on a low-resolution remesh (the baselines' coarse start): the
         first iterate is their global step, the minimiser of ``E(U, R0)`` with the handles
         at ``targets``. Not together with ``U0``.
-    criterion : :class:`Criterion` or None (:data:`DEFAULT_CRITERION`).
-    max_iter : int >= 0, cap on accepted iterations (global solves).
-    accelerate : ``"lbfgs"`` (default; Armijo backtracking, memory pairs with non-positive
-        curvature skipped), ``"anderson"`` (``True``; energy safeguard) or ``False`` /
-        ``"none"``: plain local/global, libigl's iteration in float64.
-    anderson_m : int >= 1 or None, history window: Anderson's (Peng et al. use 5-6;
-        default 5) or L-BFGS's memory (default 10).
-    time_budget_s : float or None, stop (unconverged, status ``"time_budget"``) once the
-        iterations have taken this many seconds.
     callback : callable or None, ``callback(k, U, E, gnorm) -> bool`` after every accepted
         iterate ``k`` (``U`` (n, 3) must not be modified); a true return value stops
         (status ``"callback"``).
-    linear_solver : ``"auto"``, ``"cholespy"``, ``"scipy"`` or ``"igl"``
-        (:class:`sshade.arap.linear.LaplacianSolver`).
     operators : :class:`sshade.arap.operators.ArapOperators` or None, precomputed for
         ``(V, F, energy)`` to reuse across calls (then ``V``/``F`` are not re-read).
-    threads : int >= 1 or None, threads of the numba kernels (None: automatic,
-        :class:`sshade.arap.threads.ThreadPicker`). The iterates do not depend on it.
-    reorder : bool or None, iterate in a cache-friendly vertex numbering (result in the
-        mesh's). None: from :data:`REORDER_MIN_VERTICES` vertices when numba is usable.
-        Same iterates up to rounding (the renumbered Cholesky factor rounds differently).
 
     Returns
     -------
@@ -93,23 +83,22 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, *, energy: str = 
     Raises
     ------
     SShaDeError
-        Unknown energy or linear solver, bad mesh / handles / targets / ``U0`` / ``R0``
-        shapes or values, both ``U0`` and ``R0`` given, ``operators`` built for another
-        energy, a connected component without a handle.
+        ``options`` not an ArapOptions, an energy other than :data:`sshade.arap.ENERGIES`,
+        an option this solver does not read set, bad mesh / handles / targets / ``U0`` /
+        ``R0`` shapes or values, both ``U0`` and ``R0`` given, ``operators`` built for
+        another energy, a connected component without a handle.
 
     Examples
     --------
+    >>> from sshade.arap.options import ArapOptions
     >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(90.0, h=0.25)
-    >>> solve_arap(V, F, h, T, energy="spokes").converged
+    >>> solve_arap(V, F, h, T, ArapOptions(energy="spokes")).converged
     True
     """
     t_start = clock()
-    _check_options(energy, criterion, accelerate, anderson_m, max_iter)
-    solver = ArapSolver(V, F, handles, energy=energy, linear_solver=linear_solver, operators=operators,
-                        threads=threads, reorder=reorder)
-    return solver._solve(targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
-                         t_start)
+    solver = ArapSolver(V, F, handles, options, operators=operators)
+    return solver._solve(targets, U0, R0, solver.options, callback, t_start)
 
 
 class ArapSolver:
@@ -123,44 +112,48 @@ class ArapSolver:
     ----------
     V : (n, 3) float64 rest positions. F : (m, 3) int faces. handles : (h,) int unique
         vertex indices (their targets are given to :meth:`solve`).
-    energy, linear_solver, operators, threads, reorder : as :func:`solve_arap`.
+    options : :class:`sshade.arap.options.ArapOptions` or None, as :func:`solve_arap`; its
+        set-up fields (:data:`SOLVER_SETUP`: energy, linear solver, threads, numbering) hold for
+        every solve. operators : as :func:`solve_arap`.
 
     Attributes
     ----------
-    n : int, vertices. handles : (h,) int64. energy : str. precompute_s : float, seconds of
-    the set-up (reported in the first solve's ``precompute_s``).
+    n : int, vertices. handles : (h,) int64. energy : str. options : ArapOptions (each
+    solve's unless it gives its own). precompute_s : float, seconds of the set-up (reported
+    in the first solve's ``precompute_s``).
 
     Raises
     ------
-    SShaDeError as :func:`solve_arap` for the mesh, the handle indices, the energy, the
+    SShaDeError as :func:`solve_arap` for the options, the mesh, the handle indices, the
     linear solver and a component without a handle.
 
     Examples
     --------
+    >>> from sshade.arap.options import ArapOptions
     >>> from sshade.arap.problems import twisted_bar
     >>> V, F, h, T = twisted_bar(90.0, h=0.25)
-    >>> solver = ArapSolver(V, F, h, energy="spokes")
+    >>> solver = ArapSolver(V, F, h, ArapOptions(energy="spokes"))
     >>> r1 = solver.solve(T)                  # the first frame
     >>> r2 = solver.solve(T * 1.01, U0=r1.V)  # the next one, warm-started from the first
     >>> r1.converged and r2.converged
     True
     """
 
-    def __init__(self, V, F, handles, *, energy: str = "spokes_and_rims", linear_solver: str = "auto",
-                 operators: ArapOperators | None = None, threads: int | None = None, reorder: bool | None = None):
+    def __init__(self, V, F, handles, options: ArapOptions | None = None, *,
+                 operators: ArapOperators | None = None):
         t0 = clock()
-        if energy not in ENERGIES:
-            raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
+        options = _checked(options, "solve_arap")
+        energy = options.energy
         self.ops = operators if operators is not None else build_operators(V, F, energy)
         if self.ops.energy_type != energy:
             raise SShaDeError(f"operators were built for {self.ops.energy_type!r}, not {energy!r}")
-        self.energy, self.n = energy, self.ops.n
+        self.energy, self.n, self.options = energy, self.ops.n, options
         self.handles = validate_handle_indices(self.ops.V, handles)
         self._st = None
         if len(np.setdiff1d(np.arange(self.n), self.handles)):  # not every vertex a handle
             _check_components(self.ops.L, self.handles)
-            self._st = _Stepper(self.ops, self.handles, threads=threads, reorder=reorder,
-                                linear_solver=linear_solver)
+            self._st = _Stepper(self.ops, self.handles, threads=options.threads, reorder=options.reorder,
+                                linear_solver=options.linear_solver)
         self.precompute_s = clock() - t0
         self._first = True
         self._acc = None  # the last solve's accelerator and its history (carry_history)
@@ -170,41 +163,46 @@ class ArapSolver:
         """The factorised ``L_ff`` every solve uses (None when every vertex is a handle)."""
         return None if self._st is None else self._st.lin
 
-    def solve(self, targets, *, U0: np.ndarray | None = None, R0: np.ndarray | None = None,
-              criterion: Criterion | None = None, max_iter: int = 5000, accelerate: bool | str = "lbfgs",
-              anderson_m: int | None = None, time_budget_s: float | None = None, callback=None,
-              carry_history: bool = False) -> ArapResult:
+    def solve(self, targets, *, options: ArapOptions | None = None, U0: np.ndarray | None = None,
+              R0: np.ndarray | None = None, callback=None, carry_history: bool = False) -> ArapResult:
         """The converged deformation for ``targets`` ((h, 3) float64, one per handle, in
-        :attr:`handles`' order); the other parameters and the result as :func:`solve_arap`
-        (``U0``: e.g. the previous frame's result). The result's ``precompute_s`` holds
-        the set-up's seconds in the first solve only. ``carry_history``: the accelerator
-        starts with the history the last solve of this solver ended with (when it ran the
-        same accelerator with the same ``anderson_m``), not with none: L-BFGS's curvature
-        pairs, Anderson's differences of iterates and of their plain steps. The free
-        vertices and ``L_ff`` are the same, and each entry (a difference of positions,
-        gradients or plain steps within one solve) does not depend on the targets, whose
-        term cancels in the differences. The stopping rule is the same; only the path to
-        it changes.
+        :attr:`handles`' order); ``U0``, ``R0``, ``callback`` and the result as
+        :func:`solve_arap` (``U0``: e.g. the previous frame's result). ``options``: None
+        (the solver's) or another :class:`~sshade.arap.options.ArapOptions` with the same
+        set-up fields (:data:`SOLVER_SETUP`). The result's ``precompute_s`` holds the set-up's
+        seconds in the first solve only. ``carry_history``: the accelerator starts with the
+        history the last solve of this solver ended with (when it ran the same accelerator
+        with the same window), not with none: L-BFGS's curvature pairs, Anderson's
+        differences of iterates and of their plain steps. The free vertices and ``L_ff``
+        are the same, and each entry (a difference of positions, gradients or plain steps
+        within one solve) does not depend on the targets, whose term cancels in the
+        differences. The stopping rule is the same; only the path to it changes.
 
         Raises
         ------
-        SShaDeError on bad targets, ``U0`` / ``R0`` or options (:func:`solve_arap`).
+        SShaDeError on bad targets, ``U0`` / ``R0`` or options (:func:`solve_arap`), a
+        set-up field other than the solver's.
         """
-        return self._solve(targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
-                           clock(), carry_history)
+        if options is None:
+            options = self.options
+        else:
+            options = _checked(options, "ArapSolver.solve")
+            options.refuse_other_setup(self.options, SOLVER_SETUP, "ArapSolver.solve")
+        return self._solve(targets, U0, R0, options, callback, clock(), carry_history)
 
-    def _solve(self, targets, U0, R0, criterion, max_iter, accelerate, anderson_m, time_budget_s, callback,
-               t_start: float, carry_history: bool = False) -> ArapResult:
-        """:meth:`solve`, its set-up time counted from ``t_start`` (plus the
-        preparation's on the first solve)."""
-        crit, acc, m = _check_options(self.energy, criterion, accelerate, anderson_m, max_iter)
+    def _solve(self, targets, U0, R0, options: ArapOptions, callback, t_start: float,
+               carry_history: bool = False) -> ArapResult:
+        """:meth:`solve` with checked ``options``, its set-up time counted from
+        ``t_start`` (plus the preparation's on the first solve)."""
+        crit, acc = options.criterion, options.acceleration()
+        m, max_iter = options.window(acc), options.iteration_cap("converged")
         h, T = validate_handles(self.ops.V, self.handles, targets)
         U = _start_point(self.ops, h, T, U0)
         R0 = _start_rotations(self.n, U0, R0)
         extra = self.precompute_s if self._first else 0.0
         self._first = False
         info = {"energy_type": self.energy, "etol": crit.etol, "gtol": crit.gtol, "accelerate": acc,
-                "anderson_m": m, "n_local": 0, "n_fallback": 0}
+                "history": m, "n_local": 0, "n_fallback": 0}
         if self._st is None:  # every vertex is a handle
             res = _all_handles(self.ops, U, info, t_start)
             res.precompute_s += extra
@@ -213,32 +211,22 @@ class ArapSolver:
         kind = {"lbfgs": LBFGS, "anderson": Anderson}.get(acc)
         kept = self._acc if carry_history and kind is not None and isinstance(self._acc, kind) \
             and self._acc.m == m else None
-        loop = _Loop(self._st, crit, acc, m, max_iter=max_iter, time_budget_s=time_budget_s, callback=callback,
-                     R0=R0, kept=kept)
+        loop = _Loop(self._st, crit, acc, m, max_iter=max_iter, time_budget_s=options.time_budget_s,
+                     callback=callback, R0=R0, kept=kept)
         loop.run()
         self._acc = loop.lbfgs if loop.lbfgs is not None else loop.anderson
         return loop.result(precompute_s=loop.t_iter - t_start + extra)
 
 
-def _check_options(energy, criterion, accelerate, anderson_m, max_iter) -> tuple[Criterion, str, int]:
-    """``(criterion, accelerate, anderson_m)`` of :func:`solve_arap` checked and resolved
-    (defaults filled in, ``accelerate`` one of :data:`ACCELERATIONS`)."""
-    if energy not in ENERGIES:
-        raise SShaDeError(f"unknown ARAP energy {energy!r}; use one of {ENERGIES}")
-    crit = DEFAULT_CRITERION if criterion is None else criterion
-    if not isinstance(crit, Criterion):
-        raise SShaDeError(f"criterion must be a Criterion, got {type(crit).__name__}")
-    acc = {True: "anderson", False: "none", None: "none"}.get(accelerate, accelerate) \
-        if isinstance(accelerate, (bool, type(None))) else str(accelerate)
-    if acc not in ACCELERATIONS:
-        raise SShaDeError(f"accelerate must be one of {ACCELERATIONS} (or True/False), got {accelerate!r}")
-    if anderson_m is None:
-        anderson_m = 10 if acc == "lbfgs" else 5
-    if int(anderson_m) < 1:
-        raise SShaDeError(f"anderson_m must be >= 1, got {anderson_m}")
-    if int(max_iter) < 0:
-        raise SShaDeError(f"max_iter must be >= 0, got {max_iter}")
-    return crit, acc, int(anderson_m)
+def _checked(options, who: str) -> ArapOptions:
+    """``options`` (None: the defaults) for this solver: an :class:`ArapOptions` of an ARAP
+    energy that sets no field the solver does not read. Raises SShaDeError naming ``who``."""
+    options = ArapOptions.of(options, who)
+    options.refuse_unused(READS["solve_arap"], who)
+    if options.energy not in ENERGIES:
+        raise SShaDeError(f"unknown ARAP energy {options.energy!r}; use one of {ENERGIES} "
+                          f"({SR_ENERGY!r}: solve_arap_sr or arap_deform)")
+    return options
 
 
 def _start_point(ops: ArapOperators, h: np.ndarray, T: np.ndarray, U0) -> np.ndarray:

@@ -34,7 +34,7 @@ from eval.run.runinfo import collect_runinfo, write_runinfo
 from eval.run.spec import EvalSpec
 from harness.checks import check_numbers, config_int_list
 from sshade import deform
-from sshade.arap import arap_deform, make_criterion
+from sshade.arap import ArapOptions, arap_deform, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 from sshade.mesh.validate import validate_mesh
@@ -309,9 +309,11 @@ def _elastic_row(V, F, h, T, ep: dict, budget_s: float, sshade_total_s: float) -
     print(f"[scaling] {len(V)} vertices: full-res Elastic (budget {budget_s:g}s) ...", file=sys.stderr, flush=True)
     protocol = str(ep["protocol"])
     row = {"elastic_compile_s": warm_fullres("spokes_and_rims", protocol, len(V))}
-    res = arap_deform(V, F, h, T, energy="spokes_and_rims", tol=float(ep["tol"]),
-                      max_iter=None if ep["max_iter"] is None else int(ep["max_iter"]), time_budget_s=budget_s,
-                      protocol=protocol, criterion=make_criterion(ep["etol"], ep["gtol"]))
+    paper = {"tol": float(ep["tol"])} if protocol == "paper" else {}
+    options = ArapOptions(energy="spokes_and_rims", protocol=protocol, time_budget_s=budget_s,
+                          max_iter=None if ep["max_iter"] is None else int(ep["max_iter"]),
+                          criterion=make_criterion(ep["etol"], ep["gtol"]), **paper)
+    res = arap_deform(V, F, h, T, options)
     per_it = res.solve_s / max(res.iterations, 1)
     row.update({"elastic_precompute_s": res.precompute_s, "elastic_s_per_iter": per_it,
                 "elastic_iters": res.iterations, "elastic_converged": res.converged,
