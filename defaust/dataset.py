@@ -92,7 +92,7 @@ class Case:
 class FolderBuild:
     """A build folder's files, for :class:`CaseReader` and :func:`verify` (the same
     methods as :class:`defaust.archive.ArchiveBuild`): every file is checked to lie
-    inside ``root`` with no link on the way (:func:`sshade.mesh.io.inside_folder`)
+    inside ``root`` with no link on the way (:func:`sshade.files.inside_folder`)
     before it is read.
 
     Attributes
@@ -199,7 +199,7 @@ def read_manifest(root) -> dict:
     ------
     SShaDeError if ``root`` is neither a folder nor a DeFAUST archive
     (:func:`open_build`) or has no readable DeFAUST manifest (a link in its place is
-    refused, :func:`sshade.mesh.io.inside_folder`).
+    refused, :func:`sshade.files.inside_folder`).
 
     Example::
 
@@ -264,7 +264,7 @@ def _handle_counts(m: dict, s: int, p: int) -> dict:
 
 def _inside(root: Path, rel: str) -> Path:
     """``root / rel`` after checking that no link lies on the way and that it stays inside
-    ``root`` (:func:`sshade.mesh.io.inside_folder`; SShaDeError naming the link)."""
+    ``root`` (:func:`sshade.files.inside_folder`; SShaDeError naming the link)."""
     inside_folder(root, rel, "DeFAUST build")
     return root / rel
 
@@ -463,7 +463,7 @@ def load(root, *, resolution: str = "high", subjects=None, limit: int | None = N
 
     Checks every parameter, reads the manifest and checks that every file the selected
     cases need is there, inside ``root`` with no symbolic link on the way
-    (:func:`sshade.mesh.io.inside_folder`; :class:`defaust.archive.ArchiveBuild`); no
+    (:func:`sshade.files.inside_folder`; :class:`defaust.archive.ArchiveBuild`); no
     array is read until a case is asked for (``eager`` aside). docs/defaust.md §6.
 
     Parameters

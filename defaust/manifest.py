@@ -4,7 +4,7 @@ validity, and its atomic writing.
 ``manifest.json`` records the build's parameters, seeds and package versions, and per
 *item* (``subject_XX/rest``, ``subject_XX/pose_YY``) its key (:func:`item_key`, a hash of
 everything the item depends on) and its files' sha256. It is written with sorted keys
-(deterministic bytes) and atomically (:func:`sshade.mesh.io.atomic_write`), after every
+(deterministic bytes) and atomically (:func:`sshade.files.atomic_write`), after every
 item of a build in progress (:func:`write_partial`). :func:`read_manifest_file` is the one
 reader of the file's JSON and format (the builder's out-folder check and the loader).
 """

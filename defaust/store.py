@@ -1,6 +1,6 @@
 """Byte-deterministic files for the DeFAUST builder: binary PLY (:func:`ply_bytes`,
 ``double`` coordinates), NPZ with fixed member timestamps (:func:`write_npz`), SHA-256,
-written atomically (:func:`sshade.mesh.io.atomic_write`). Meshes are read back with
+written atomically (:func:`sshade.files.atomic_write`). Meshes are read back with
 :func:`sshade.mesh.io.read_mesh` or, from bytes (an archive's member), with
 :func:`read_ply_bytes`; :func:`read_npz` reads an ``.npz`` as untrusted input (expected
 members only, each bounded in size before it is decompressed). Why not trimesh's PLY or

@@ -397,7 +397,7 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     (see the module docstring and :func:`compare`).
 
     Every file is written to a temporary file and renamed into place
-    (:func:`sshade.mesh.io.atomic_write`), so a crash never leaves a half-written table.
+    (:func:`sshade.files.atomic_write`), so a crash never leaves a half-written table.
     A ``table_all.csv`` left by an earlier run into the same folder is removed when this
     run has no second table, so it never describes other results. ``table.md`` says
     whether every row matches its record in the folder's result store

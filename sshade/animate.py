@@ -23,10 +23,11 @@ from tqdm import tqdm
 
 from .command_errors import ArgumentParser, run_command
 from .errors import SShaDeError
+from .files import atomic_write
 from .json_file import regular_file
 from .mesh.gltf import GlbAnimationWriter, check_glb_output, frames_tempfile, glb_extras
 from .mesh.handle_files import apply_def, check_affine, read_moving_handles
-from .mesh.io import atomic_write, read_mesh, write_mesh, written_by_sshade
+from .mesh.io import read_mesh, write_mesh, written_by_sshade
 from .mesh.validate import check_faces
 from .prepared import prepare
 

@@ -307,7 +307,7 @@ class ResultStore:
 
     def path(self, case: str, method: str) -> Path:
         """``runs/<case>/<method>.json`` (names through :func:`safe_name`), checked to lie
-        inside the output folder with no link on the way (:func:`sshade.mesh.io.inside_folder`;
+        inside the output folder with no link on the way (:func:`sshade.files.inside_folder`;
         SShaDeError otherwise)."""
         rel = Path(STORE_DIR) / safe_name(case) / f"{safe_name(method)}.json"
         return inside_folder(self.out_dir, rel, "result store")

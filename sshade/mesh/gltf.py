@@ -23,9 +23,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SShaDeError
+from ..files import atomic_write
 from ..json_file import loads, regular_file
 from .bounds import bounding_box
-from .io import atomic_write
 from .validate import check_faces
 
 try:  # a dependency; an environment installed before it became one may lack it

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SShaDeError
+from ..files import atomic_write
 from ..json_file import regular_file
-from .io import atomic_write
 from .validate import validate_handles
 
 __all__ = ["read_sel", "read_dmat_selection", "read_def", "apply_def", "selection_handles", "read_handle_file",
