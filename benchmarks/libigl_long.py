@@ -14,11 +14,11 @@ import sys
 
 import numpy as np
 
-from eval.datasets.defaust_dataset import load_defaust
+from eval.datasets.defaust_dataset import DefaustOptions, load_defaust
 from eval.experiments.convergence import libigl_curve
 from eval.metrics.reference import reference_solution
 
-c = load_defaust('data/defaust', limit=1)[0]
+c = load_defaust('data/defaust', DefaustOptions(limit=1))[0]
 V, F, h, T = np.asarray(c.V, np.float64), np.asarray(c.F, np.int64), c.handles, c.targets
 ref = reference_solution(V, F, h, T, energy="spokes_and_rims", cache_dir="data/references")
 print("reference", ref.info.get("cached"), ref.energy, flush=True)

@@ -16,6 +16,7 @@ import sys
 
 from eval.config_check import check_config, check_values
 from eval.config_schema import store_schemas
+from eval.datasets import datasets
 from eval.exchange.scored import ScoreConfig
 from eval.experiments import experiments, find_experiment
 from eval.experiments.cases.cases_experiment import run
@@ -31,8 +32,9 @@ __all__ = ["CONF_DIR", "run", "run_experiment", "run_spec", "main"]
 
 CONF_DIR = config_dir()  # conf/ of a source checkout, else the installed package data
 #: the modules that type a section of their own, imported before the config's types are
-#: stored: every experiment kind's (:func:`eval.experiments.experiments`) and ``score``'s
-_SECTION_OWNERS = (*experiments().values(), ScoreConfig)
+#: stored: every dataset's (:func:`eval.datasets.datasets`), every experiment kind's
+#: (:func:`eval.experiments.experiments`) and ``score``'s
+_SECTION_OWNERS = (*datasets().values(), *experiments().values(), ScoreConfig)
 store_schemas()  # the config's types (eval/config_schema.py), before Hydra composes it
 
 

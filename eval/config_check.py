@@ -12,9 +12,10 @@ before Hydra starts the run, :func:`eval.app.run_experiment` again (sweep jobs, 
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping
 
 from eval.config_schema import typed_object
-from eval.datasets import dataset_options, find_dataset
+from eval.datasets import dataset_named
 from eval.experiments import experiment_options, experiments, find_experiment
 from eval.experiments.cases.case_jobs import check_jobs
 from eval.experiments.cases.pair import guard_options
@@ -29,7 +30,7 @@ from eval.run.spec import (
     ReferenceOptions,
     ReportOptions,
 )
-from eval.run.subset import check_baseline_cases, check_method_cases, check_sample
+from eval.run.subset import check_method_cases
 from harness.checks import config_bool, config_number, config_value
 from harness.method_registry import (
     SECTIONS,
@@ -49,21 +50,6 @@ from sshade.pipeline import SShaDe, check_params
 __all__ = ["check_config", "check_values", "method_definition", "plain"]
 
 _ABSENT = object()   # a default that tells an absent key apart from null
-
-
-def _check_dataset(cfg) -> None:
-    """The keys every dataset shares, then the dataset's own check of its section (its
-    registration, :class:`eval.datasets.dataset_registry.Dataset`)."""
-    ds = config_value(cfg, "dataset", None)
-    if ds is None:
-        return
-    config_number(cfg, "dataset.limit", min=1, allow_none=True, default=None)
-    check_baseline_cases(config_value(cfg, "dataset.baseline_cases", None))
-    check_sample(config_value(cfg, "dataset.sample", None), config_value(cfg, "dataset.sample_seed", 0))
-    check_method_cases(config_value(cfg, "method_cases", None))
-    found = find_dataset(str(ds.get("name", "")))
-    if found is not None and found.check is not None:
-        found.check(plain(ds))
 
 
 def _check_sshade(cfg) -> None:
@@ -91,10 +77,10 @@ def check_values(cfg) -> None:
     """Check every number and flag of an evaluator config (the checks a type cannot say).
 
     Covers ``arap.*``, ``arap_sr.alpha``, ``sshade.*`` (:func:`sshade.pipeline.check_params`),
-    the dataset's ``limit``, ``baseline_cases`` and ``method_cases`` and then its own
-    check (registered with it, :func:`eval.datasets.register_dataset`), ``figures.enabled``
-    / ``max_cases``, ``report.*``, ``reference.max_iter`` / ``time_budget_s`` and ``jobs``.
-    Absent keys are left to their readers' defaults.
+    ``method_cases``, the ``dataset`` section (its dataset's options object, registered with
+    it: :func:`eval.datasets.register_dataset`), ``figures.enabled`` / ``max_cases``,
+    ``report.*``, ``reference.max_iter`` / ``time_budget_s`` and ``jobs``. Absent keys are
+    left to their readers' defaults.
 
     Raises
     ------
@@ -112,12 +98,14 @@ def check_values(cfg) -> None:
     if scaling not in ALPHA_SCALINGS:
         raise SShaDeError(f"arap_sr.alpha_scaling must be one of {list(ALPHA_SCALINGS)}, got {scaling!r}")
     _check_sshade(cfg)
-    _check_dataset(cfg)
+    check_method_cases(config_value(cfg, "method_cases", None))
+    resolved = plain(cfg)
+    _dataset(resolved)
     config_bool(cfg, "resume", default=False)
     check_jobs(config_value(cfg, "jobs", "auto"))
     if config_value(cfg, "store", None) is not None:
         config_bool(cfg, "store.meshes", default=False)
-    _run_sections(plain(cfg))
+    _run_sections(resolved)
 
 
 def check_config(cfg) -> EvalSpec:
@@ -198,14 +186,19 @@ def _experiment(resolved: dict) -> ExperimentSpec:
 
 
 def _dataset(resolved: dict) -> DatasetSpec | None:
-    """The ``dataset`` section (checked by :func:`check_values`), or None without one."""
+    """The ``dataset`` section as its dataset's options object (the dataclass registered
+    with ``dataset.name``, :func:`eval.datasets.register_dataset`), made and checked by
+    :func:`eval.config_schema.typed_object`; a ``root`` not set (``???``, FAUST's default)
+    is None there, refused only where it is read (:func:`eval.datasets.dataset_root`). None without a
+    section; SShaDeError naming the key for a bad value, or an unknown dataset."""
     ds = resolved.get("dataset")
     if ds is None:
         return None
-    sample, sample_seed = check_sample(ds.get("sample"), ds.get("sample_seed"))
-    return DatasetSpec(name=str(ds.get("name", "")), root=ds.get("root"), loader=dataset_options(ds), section=ds,
-                       baseline_cases=ds.get("baseline_cases"), seed=ds.get("seed"), sample=sample,
-                       sample_seed=sample_seed)
+    if not isinstance(ds, Mapping):
+        raise SShaDeError(f"dataset must be a section of keys, got {ds!r}")
+    options = dataset_named(str(ds.get("name", ""))).options
+    values = {**ds, "root": None} if ds.get("root", options.root) == "???" else ds  # absent: its default
+    return DatasetSpec(options=typed_object(options, values, "dataset"))
 
 
 #: The sections typed by the run's own objects (:mod:`eval.run.spec`), checked when made.

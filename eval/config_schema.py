@@ -3,9 +3,10 @@ Floor 1 of eval/ (tests/test_layering.py); the checks a type cannot say: eval/co
 
 ``conf/config.yaml`` starts its defaults list with ``config_schema`` (:func:`top_schema`;
 ``reference``, ``report``, ``figures`` typed by :mod:`eval.run.spec`'s objects); each file
-of ``conf/dataset/`` extends its schema (``schema/dataset/<name>``), each experiment with a
-section of its own the dataclass its module registers (:func:`section_reader`), each method
-file ``schema/method/<name>``. Composition refuses a wrong type or an unknown key with
+of ``conf/dataset/`` extends the options dataclass its dataset module registers
+(``schema/dataset/<name>``, :func:`register_dataset_schema`), each experiment with a section
+of its own the dataclass its module registers (:func:`section_reader`), each method file
+``schema/method/<name>``. Composition refuses a wrong type or an unknown key with
 Hydra's own message; the door makes each section's object with ``OmegaConf.to_object``
 (:func:`typed_object`), which runs its checks. A key of several types (``sshade.n_low``:
 ``auto`` or an integer) is ``Any`` (OmegaConf has no unions), typed at the door."""
@@ -23,9 +24,8 @@ from harness.method_registry import builtin_methods, method_file, method_key
 from sshade.errors import SShaDeError
 
 __all__ = ["ArapSchema", "ArapSRSchema", "SShaDeSchema", "StoreSchema", "ExperimentSchema", "TopSchema",
-           "DefaustBuildSchema", "DefaustSchema", "FaustSchema", "ShapesSchema", "DATASET_SCHEMAS", "register_section",
-           "section_reader", "section_schemas", "typed_object", "typed_section", "ClusterSchema", "method_schemas",
-           "top_schema", "store_schemas"]
+           "register_dataset_schema", "dataset_schemas", "register_section", "section_reader", "section_schemas",
+           "typed_object", "typed_section", "ClusterSchema", "method_schemas", "top_schema", "store_schemas"]
 
 
 # ----------------------------------------------------------------------------- conf/config.yaml
@@ -85,7 +85,7 @@ class TopSchema:
     """The top level of ``conf/config.yaml``, in its order. ``methods`` (a list, or one
     name), ``jobs`` (``auto`` or an integer) and ``compare_with`` (a folder or a list) hold
     several types; ``method_cases`` is null or a mapping (a null typed mapping takes no
-    override in OmegaConf 2.3); ``dataset`` is typed by its own file's schema. The sections
+    override in OmegaConf 2.3); ``dataset`` is typed by its own dataset's options. The sections
     typed by :mod:`eval.run.spec`'s objects have no default here (``???``: conf/config.yaml
     sets them), so that building this schema does not make (and check) one."""
 
@@ -110,72 +110,26 @@ class TopSchema:
 
 
 # ----------------------------------------------------------------------------- conf/dataset/
-@dataclass
-class DefaustBuildSchema:
-    """``dataset.build`` of DeFAUST: ``enabled`` is ``auto``, true or false."""
-
-    enabled: Any = "auto"
-    overrides: List[str] = field(default_factory=list)
+#: ``schema/dataset/<name>``: the type each file of ``conf/dataset/`` extends, the options
+#: dataclass its dataset module registers (:func:`eval.datasets.register_dataset`).
+_DATASETS: dict[str, type] = {}
 
 
-@dataclass
-class DefaustSchema:
-    """``conf/dataset/defaust.yaml`` (``subjects``: an integer or a list)."""
-
-    name: str = "defaust"
-    root: str = "data/defaust"
-    resolution: str = "high"
-    subjects: Any = None
-    limit: Optional[int] = None
-    sample: Optional[int] = None
-    sample_seed: int = 0
-    baseline_cases: Any = "per_pose"
-    reference_cases: Any = "none"
-    build: DefaustBuildSchema = field(default_factory=DefaustBuildSchema)
+def register_dataset_schema(name: str, schema: type) -> type:
+    """Register dataclass ``schema`` as the type of dataset ``name``'s section (stored as
+    ``schema/dataset/<name>`` by :func:`store_schemas`); called by
+    :func:`eval.datasets.register_dataset`. Returns ``schema``. ValueError for a second
+    class under one name (a programming error)."""
+    old = _DATASETS.setdefault(str(name), schema)
+    if old is not schema:
+        raise ValueError(f"dataset {name!r} already typed by {old.__qualname__}")
+    return schema
 
 
-@dataclass
-class FaustSchema:
-    """``conf/dataset/faust.yaml`` (``subjects``, ``poses``: an integer or a list)."""
-
-    name: str = "faust"
-    root: Optional[str] = MISSING
-    protocol: str = "paper"
-    n_targets: int = 4
-    subjects: Any = None
-    poses: Any = None
-    n_per_landmark: int = 30
-    neighbourhood: int = 90
-    static_threshold: float = 0.02
-    seed: int = 0
-    limit: Optional[int] = None
-    sample: Optional[int] = None
-    sample_seed: int = 0
-    baseline_cases: Any = None
-
-
-@dataclass
-class ShapesSchema:
-    """``conf/dataset/shapes.yaml``."""
-
-    name: str = "shapes"
-    root: str = "../shared/data/classic"
-    files: Optional[List[str]] = None
-    vertex_range: Optional[List[int]] = None
-    cache: Optional[str] = "data/shapes"
-    n_per_group: int = 30
-    region_radius: float = 0.06
-    rotate_deg: float = 20.0
-    translate: float = 0.05
-    seed: int = 0
-    limit: Optional[int] = None
-    sample: Optional[int] = None
-    sample_seed: int = 0
-    baseline_cases: Any = None
-
-
-#: ``schema/dataset/<name>``: the schema each file of ``conf/dataset/`` extends.
-DATASET_SCHEMAS = {"defaust": DefaustSchema, "faust": FaustSchema, "shapes": ShapesSchema}
+def dataset_schemas() -> dict[str, type]:
+    """``{name: schema}`` of every registered dataset (the dataset modules imported first:
+    :func:`eval.datasets.datasets`)."""
+    return dict(sorted(_DATASETS.items()))
 
 
 # ----------------------------------------------------------------------------- conf/experiment/
@@ -311,12 +265,13 @@ def top_schema():
 
 
 def store_schemas() -> None:
-    """Register every schema with Hydra's ConfigStore (again is harmless); the experiment
-    sections' (:func:`section_schemas`) once their modules are imported."""
+    """Register every schema with Hydra's ConfigStore (again is harmless); the datasets'
+    (:func:`dataset_schemas`) and the experiment sections' (:func:`section_schemas`) once
+    their modules are imported."""
     from hydra.core.config_store import ConfigStore
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=top_schema())
-    for name, cls in DATASET_SCHEMAS.items():
+    for name, cls in _DATASETS.items():
         cs.store(group="schema/dataset", name=name, node=cls)
     for name, cls in _SECTIONS.items():
         cs.store(group="schema/experiment", name=name, node=cls)

@@ -118,18 +118,20 @@ def test_a_typo_in_dataset_root_builds_nothing(tmp_path, monkeypatch):
 
 
 def test_build_policy(tmp_path, monkeypatch):
-    from omegaconf import OmegaConf
-
+    from eval.datasets.defaust_dataset import DefaustBuildOptions, DefaustOptions
     from eval.datasets.defaust_dataset import build_wanted as _build_wanted
     from eval.run.paths import abs_path
     monkeypatch.chdir(tmp_path)
     default, other = abs_path("data/defaust"), abs_path("elsewhere")
-    ds = OmegaConf.create({"build": {"enabled": "auto"}})
-    assert _build_wanted(default, ds) and not _build_wanted(other, ds)
-    assert _build_wanted(other, OmegaConf.create({"build": {"enabled": True}}))
-    assert not _build_wanted(default, OmegaConf.create({"build": {"enabled": False}}))
-    with pytest.raises(SShaDeError, match="auto, true or false"):
-        _build_wanted(default, OmegaConf.create({"build": {"enabled": "yes"}}))
+
+    def ds(enabled):
+        return DefaustOptions(build=DefaustBuildOptions(enabled=enabled))
+
+    assert _build_wanted(default, ds(" Auto")) and not _build_wanted(other, ds("auto"))
+    assert _build_wanted(other, ds(True))
+    assert not _build_wanted(default, ds(False))
+    with pytest.raises(SShaDeError, match="dataset.build.enabled must be auto, true or false"):
+        ds("yes")
 
 
 def test_bad_method_parameter_fails_before_any_build(tmp_path, monkeypatch):

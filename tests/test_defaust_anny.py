@@ -200,7 +200,7 @@ def _build(out, cache, *extra):
 
 def test_build_is_deterministic_with_exact_high_res_ground_truth(model, anny_cache, tmp_path, monkeypatch):
     from defaust.dataset import load_handles
-    from eval.datasets.defaust_dataset import load_defaust
+    from eval.datasets.defaust_dataset import DefaustOptions, load_defaust
     from sshade.mesh.io import read_mesh
 
     _fast_highres(monkeypatch)
@@ -257,7 +257,7 @@ def test_build_is_deterministic_with_exact_high_res_ground_truth(model, anny_cac
     assert grp["right_hand"][:, 0].max() < grp["right_elbow"][:, 0].min() < 0
     assert grp["left_foot"][:, 1].max() < 0.1 and grp["left_knee"][:, 1].min() > 0.3
     assert not H.static.all() and (~H.static).sum() > 30  # the last target moved the whole body
-    cases = load_defaust(a, subjects=[1])  # a build of subject 1 only
+    cases = load_defaust(a, DefaustOptions(subjects=[1]))  # a build of subject 1 only
     assert cases[0].V_gt is not None and cases[0].pose_name == "squat"
     c = cases[-1]
     dyn = ~c.static  # dynamic handles: the ground truth, up to the snap to the high-res mesh (LS3 moved it)

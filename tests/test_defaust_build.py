@@ -20,7 +20,7 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.dataset import load_handles
 from defaust.handles import snap_handles
 from defaust.store import sha256_file
-from eval.datasets.defaust_dataset import load_defaust
+from eval.datasets.defaust_dataset import DefaustOptions, load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 from sshade.mesh.validate import validate_mesh
@@ -168,13 +168,13 @@ def test_loader(built):
     assert c.handles.dtype == np.int64 and len(np.unique(c.handles)) == len(c.handles)
     assert c.targets.shape == (len(c.handles), 3) and c.static.shape == (len(c.handles),)
     np.testing.assert_array_equal(c.targets[c.static], c.V[c.handles[c.static]])  # static = in place
-    lo = load_defaust(out, resolution="low", limit=2)
+    lo = load_defaust(out, DefaustOptions(resolution="low", limit=2))
     assert len(lo) == 2 and lo[0].n_dropped == 0
     H = load_handles(out / "subject_00/pose_01_handles.npz")
     np.testing.assert_array_equal(lo[0].targets, H.target)
     np.testing.assert_array_equal(lo[0].handles, H.index)
     with pytest.raises(SShaDeError, match="not in"):
-        load_defaust(out, subjects=[7])
+        load_defaust(out, DefaustOptions(subjects=[7]))
 
 
 def test_loader_detects_corruption(built, tmp_path):

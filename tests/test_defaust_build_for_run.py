@@ -8,16 +8,21 @@ import hashlib
 import json
 
 import pytest
-from omegaconf import OmegaConf
 
-from eval.datasets.defaust_dataset import build_outlook, load_defaust, prepare_root
+from eval.datasets.defaust_dataset import (
+    DefaustBuildOptions,
+    DefaustOptions,
+    build_outlook,
+    load_defaust,
+    prepare_root,
+)
 from sshade.errors import SShaDeError
 
 CI = ["preset=ci", "source=synthetic", "n_subjects=3", "progress=false", "workers=1"]
 
 
 def _ds(**kw):
-    return OmegaConf.create({"name": "defaust", "build": {"enabled": True, "overrides": list(CI)}, **kw})
+    return DefaustOptions(build=DefaustBuildOptions(enabled=True, overrides=list(CI)), **kw)
 
 
 def _hashes(root):
@@ -74,7 +79,7 @@ def test_a_run_with_a_limit_alone_builds_every_subject_and_reads_its_first_cases
     prepare_root(root, _ds(limit=2))
     m = json.loads((root / "manifest.json").read_text())
     assert sorted(m["subjects"]) == ["subject_00", "subject_01", "subject_02"] and m["parameters"]["subjects"] is None
-    assert [c.name for c in load_defaust(root, limit=2)] == ["s00_p01", "s00_p02"]
+    assert [c.name for c in load_defaust(root, DefaustOptions(limit=2))] == ["s00_p01", "s00_p02"]
 
 
 def test_a_run_on_a_build_other_than_the_canonical_one_records_and_says_so(defaust_ci, tmp_path):

@@ -13,7 +13,7 @@ from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
 from defaust.dataset import load_handles
 from defaust.faust_source import FAUST_LANDMARKS, discover_faust, faust_subjects
-from eval.datasets.defaust_dataset import load_defaust
+from eval.datasets.defaust_dataset import DefaustOptions, load_defaust
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
@@ -77,11 +77,11 @@ def test_small_faust_build(faust_root, tmp_path):
     assert len(load_handles(tmp_path / "subject_00/pose_01_handles.npz").landmark_names) == 6
     dyn = ~H.static
     np.testing.assert_array_equal(H.target[dyn], V4[H.index[dyn]])
-    cases = load_defaust(tmp_path, resolution="low", subjects=[0])  # a build of subject 0 only
+    cases = load_defaust(tmp_path, DefaustOptions(resolution="low", subjects=[0]))  # a build of subject 0 only
     np.testing.assert_array_equal(cases[1].V_gt, V4)
     # the high-res ground truth (defaust.registration_gt): on rest_high's faces, written per pose
     Vh, Fh = read_mesh(tmp_path / "subject_00/rest_high.ply")
-    hi = load_defaust(tmp_path, subjects=[0])
+    hi = load_defaust(tmp_path, DefaustOptions(subjects=[0]))
     assert 8000 <= len(hi[0].V) <= 12000
     for c in hi:
         Vg, Fg = read_mesh(tmp_path / f"subject_00/pose_{c.pose:02d}_high.ply", validate=False)

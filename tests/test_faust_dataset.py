@@ -17,7 +17,7 @@ from defaust.handles import (
     landmarks_for_target,
 )
 from eval.datasets import FAUST_LANDMARKS, discover_faust, faust_cases, load_cases
-from eval.datasets.faust import case_seed, faust_plan
+from eval.datasets.faust import FaustOptions, case_seed, faust_plan
 from sshade.errors import SShaDeError
 
 L = len(FAUST_LANDMARKS)
@@ -51,7 +51,7 @@ def present(faust_root):
 @pytest.fixture(scope="module")
 def cases(faust_root):
     """Every non-rest pose with all 11 landmarks (most checks below need every group)."""
-    return faust_cases(faust_root, protocol="all_landmarks")
+    return faust_cases(faust_root, FaustOptions(protocol="all_landmarks"))
 
 
 @pytest.fixture(scope="module")
@@ -97,13 +97,13 @@ def test_one_case_per_non_rest_pose(cases, present):
 
 
 def test_subject_pose_filters_and_limit(faust_root, cases):
-    sub = faust_cases(faust_root, subjects=[cases[0].subject], poses=[cases[0].pose])
+    sub = faust_cases(faust_root, FaustOptions(subjects=[cases[0].subject], poses=[cases[0].pose]))
     assert [c.name for c in sub] == [cases[0].name]
-    assert [c.name for c in faust_cases(faust_root, limit=2)] == [c.name for c in cases[:2]]
+    assert [c.name for c in faust_cases(faust_root, FaustOptions(limit=2))] == [c.name for c in cases[:2]]
     with pytest.raises(SShaDeError, match="no FAUST case"):
-        faust_cases(faust_root, subjects=[9999])
+        faust_cases(faust_root, FaustOptions(subjects=[9999]))
     with pytest.raises(SShaDeError, match="limit"):
-        faust_cases(faust_root, limit=0)
+        faust_cases(faust_root, FaustOptions(limit=0))
 
 
 # ---------------------------------------------------------------- protocols
@@ -272,17 +272,17 @@ def test_threshold_extremes(cases):
 
 
 def test_determinism(faust_root, cases):
-    again = faust_cases(faust_root, protocol="all_landmarks")
+    again = faust_cases(faust_root, FaustOptions(protocol="all_landmarks"))
     for a, b in zip(cases, again):
         np.testing.assert_array_equal(a.handles, b.handles)
         np.testing.assert_array_equal(a.targets, b.targets)
         assert a.seed == b.seed == case_seed(0, a.subject, a.pose)
-    other = faust_cases(faust_root, seed=1, limit=1)[0]
+    other = faust_cases(faust_root, FaustOptions(seed=1, limit=1))[0]
     assert other.seed != cases[0].seed
     assert not np.array_equal(other.handles, cases[0].handles)
     # a case's handles do not depend on which other cases are built
     last = cases[-1]
-    solo = faust_cases(faust_root, subjects=[last.subject], poses=[last.pose])[0]
+    solo = faust_cases(faust_root, FaustOptions(subjects=[last.subject], poses=[last.pose]))[0]
     np.testing.assert_array_equal(solo.handles, last.handles)
     assert len({c.seed for c in cases}) == len(cases)
 

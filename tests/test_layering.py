@@ -88,8 +88,8 @@ EVAL_FLOORS = {
     "eval.registry_base": 0,  # the plug-in registries' common part
     "eval.config_schema": 1,  # the config's types, registered with Hydra's ConfigStore (some are eval.run.spec's)
     "eval.metrics": 1,  # what a result is scored by
-    "eval.datasets": 1,  # the cases
     "eval.method_config": 1,  # the methods from the config
+    "eval.datasets": 2,  # the cases, each dataset with its options (registered as its section's config type)
     "eval.present": 2,  # presentation: figures, table text, stops, rows, views
     "eval.exchange": 2,  # results computed outside the harness
     "eval.tables": 3,  # the comparison tables, written by the experiments and the sweeps

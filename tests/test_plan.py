@@ -10,9 +10,8 @@ from types import SimpleNamespace as C
 
 import pandas as pd
 import pytest
-from omegaconf import OmegaConf
 
-from eval.datasets.defaust_dataset import BuildProgress, build_outlook
+from eval.datasets.defaust_dataset import BuildProgress, DefaustBuildOptions, DefaustOptions, build_outlook
 from eval.experiments.cases import case_plan as cases_plan
 from eval.metrics.reference_scores import sr_energy
 from eval.run import plan as P
@@ -104,8 +103,7 @@ def test_build_progress_lines(caplog):
 
 
 def test_build_outlook(tmp_path):
-    ds = OmegaConf.create({"name": "defaust", "build": {"enabled": True, "overrides": ["preset=ci", "subjects=[0,2]"]},
-                           "limit": 5})
+    ds = DefaustOptions(build=DefaustBuildOptions(enabled=True, overrides=["preset=ci", "subjects=[0,2]"]), limit=5)
     out = build_outlook(tmp_path / "new", ds)
     assert out["subjects"] == 2 and out["complete"] == 0
     assert out["workers"] == min(available_cores(), 2)  # the builder's default: every core, at most 1 per subject
@@ -113,7 +111,7 @@ def test_build_outlook(tmp_path):
     assert build_outlook(tmp_path / "new", ds)["workers"] == 1
     assert out["cases"] == [(0, 1), (0, 2), (0, 3), (0, 4), (2, 1)]  # 4 anny poses each, dataset.limit=5
     assert 8000 <= out["n_vertices"] <= 12000  # the ci preset's vertex range
-    assert build_outlook(tmp_path / "new", OmegaConf.create({"build": {"enabled": False}})) is None
+    assert build_outlook(tmp_path / "new", DefaustOptions(build=DefaustBuildOptions(enabled=False))) is None
     other = tmp_path / "other"
     other.mkdir()
     (other / "notes.txt").write_text("mine")

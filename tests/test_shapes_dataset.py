@@ -7,10 +7,15 @@ from scipy.spatial.transform import Rotation
 
 from eval.config_check import check_config
 from eval.datasets import load_cases
-from eval.datasets.shapes import axis_handles, axis_landmarks, shape_cases
+from eval.datasets.shapes import ShapesOptions, axis_handles, axis_landmarks, shape_cases
 from sshade.errors import SShaDeError
 
 from .conftest import data_file
+
+
+def _options(**kw) -> ShapesOptions:
+    """The shapes' options with ``kw``, at the files' native resolution unless ``kw`` says."""
+    return ShapesOptions(**{"vertex_range": None, **kw})
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +24,7 @@ def classic():
 
 
 def test_the_edit_is_what_the_docstring_says(classic):
-    (c,) = shape_cases(classic, files=["bunny.off"], seed=3)
+    (c,) = shape_cases(classic, _options(files=["bunny.off"], seed=3))
     assert c.V_gt is None and c.n_source == len(c.V) == 3485
     g = c.group
     assert len(c.handles) == len(np.unique(c.handles)) == len(g)
@@ -43,23 +48,23 @@ def test_the_edit_is_what_the_docstring_says(classic):
 
 
 def test_seeded_and_dispatched(classic):
-    a = load_cases("shapes", classic, files=["bunny.off"], seed=0)[0]
-    b = shape_cases(classic, files=["bunny.off"], seed=0)[0]
-    c = shape_cases(classic, files=["bunny.off"], seed=1)[0]
+    a = load_cases("shapes", classic, files=["bunny.off"], seed=0, vertex_range=None)[0]
+    b = shape_cases(classic, _options(files=["bunny.off"], seed=0))[0]
+    c = shape_cases(classic, _options(files=["bunny.off"], seed=1))[0]
     np.testing.assert_array_equal(a.handles, b.handles)
     assert not np.array_equal(a.handles, c.handles)
 
 
 def test_high_resolution_version_is_cached(classic, tmp_path):
-    (c,) = shape_cases(classic, files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path)
+    (c,) = shape_cases(classic, _options(files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path))
     assert 8000 <= len(c.V) <= 12000 and c.n_source == 3485
     cached = tmp_path / "bunny.off_8000-12000.ply"  # the whole file name: bunny.obj would have its own
     assert cached.is_file()
-    (again,) = shape_cases(classic, files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path)
+    (again,) = shape_cases(classic, _options(files=["bunny.off"], vertex_range=(8000, 12000), cache=tmp_path))
     np.testing.assert_array_equal(again.F, c.F)
     np.testing.assert_allclose(again.V, c.V)
     # the edit is defined on the source shape: the same regions at every resolution
-    lm, _, _ = axis_landmarks(shape_cases(classic, files=["bunny.off"])[0].V)
+    lm, _, _ = axis_landmarks(shape_cases(classic, _options(files=["bunny.off"]))[0].V)
     diag = np.linalg.norm(c.V.max(0) - c.V.min(0))
     assert np.bincount(c.group).tolist() == [30] * 4
     assert (np.linalg.norm(c.V[c.handles] - lm[c.group], axis=1) <= 0.06 * diag + 1e-12).all()
@@ -69,12 +74,12 @@ def test_bad_input(classic, tmp_path):
     with pytest.raises(SShaDeError, match="not a folder"):
         shape_cases(tmp_path / "nowhere")
     with pytest.raises(SShaDeError, match="not found"):
-        shape_cases(classic, files=["teapot.obj"])
+        shape_cases(classic, _options(files=["teapot.obj"]))
     with pytest.raises(SShaDeError, match="limit"):
-        shape_cases(classic, files=["bunny.off"], limit=0)
+        shape_cases(classic, _options(files=["bunny.off"], limit=0))
     with pytest.raises(SShaDeError, match="no file"):
-        shape_cases(classic, files=[])
-    (c,) = shape_cases(classic, files=["bunny.off"])
+        shape_cases(classic, _options(files=[]))
+    (c,) = shape_cases(classic, _options(files=["bunny.off"]))
     lm, center, axes = axis_landmarks(c.V)
     with pytest.raises(SShaDeError, match="no free vertex"):
         axis_handles(c.V, lm + 1e3, center, axes)
@@ -120,15 +125,15 @@ COLLIDING = ["a b.off", "a_b.off", "bunny.off", "bunny.obj", "solo.off"]
 
 def test_colliding_case_names_become_distinct_file_names(tmp_path):
     from eval.run.names import safe_name
-    cases = load_cases("shapes", _write_shapes(tmp_path, COLLIDING), files=COLLIDING, n_per_group=3,
-                       region_radius=0.3)
+    cases = load_cases("shapes", _write_shapes(tmp_path, COLLIDING), files=COLLIDING, vertex_range=None,
+                       n_per_group=3, region_radius=0.3)
     names = [c.name for c in cases]
     assert len({safe_name(n).casefold() for n in names}) == len(COLLIDING), names
     assert names[-1] == "solo" and cases[-1].subject == "solo"  # a name without a twin is kept
     assert [n.rsplit("-", 1)[0] for n in names[:4]] == ["a b", "a_b", "bunny", "bunny"]
     assert all(len(n.rsplit("-", 1)[1]) == 8 for n in names[:4])
     assert [c.subject for c in cases[:4]] == names[:4]  # the stem was the subject: it follows the name
-    again = load_cases("shapes", tmp_path, files=COLLIDING, n_per_group=3, region_radius=0.3)
+    again = load_cases("shapes", tmp_path, files=COLLIDING, vertex_range=None, n_per_group=3, region_radius=0.3)
     assert [c.name for c in again] == names  # from the source paths: the same names every time
 
 
@@ -136,7 +141,7 @@ def test_a_file_listed_twice_is_refused(tmp_path):
     _write_shapes(tmp_path, ["x.off", "y.off"])
     for files in (["x.off", "y.off", "x.off"], ["x.off", "./x.off"]):
         with pytest.raises(SShaDeError, match="listed once"):
-            shape_cases(tmp_path, files=files, limit=1)  # the whole list is checked, not the first file
+            shape_cases(tmp_path, _options(files=files, limit=1))  # the whole list is checked, not the first file
 
 
 def test_the_app_refuses_a_file_listed_twice_before_any_work(tmp_path):

@@ -16,7 +16,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from eval.app import CONF_DIR
-from eval.config_schema import DATASET_SCHEMAS, TopSchema, method_schemas, section_schemas
+from eval.config_schema import TopSchema, dataset_schemas, method_schemas, section_schemas
 from harness.command import config_error_types, hydra_message
 from sshade.errors import SShaDeError
 
@@ -56,7 +56,7 @@ def _yaml(path) -> dict:
     (["method.ARAP.order=abc"], ["method.ARAP.order=abc", "Integer"]),
     (["experiment=tosca", "tosca.min_vertices=abc"], ["tosca.min_vertices", "Integer"]),
     (["experiment=scaling", "scaling.sizes=[1,x]"], ["scaling.sizes", "Integer"]),
-    (["dataset.nonsense=1"], ["dataset.nonsense", "not in 'FaustSchema'"]),
+    (["dataset.nonsense=1"], ["dataset.nonsense", "not in 'FaustOptions'"]),
     (["method.Elastic.nonsense=1"], ["method.Elastic.nonsense", "not in"]),
     (["experiment=tosca", "tosca.nope=1"], ["tosca.nope", "not in 'ToscaConfig'"]),
     (["report.nope=1"], ["report.nope", "not in 'ReportOptions'"]),
@@ -72,7 +72,7 @@ def test_composition_refuses_a_wrong_type_or_an_unknown_key(overrides, words):
 
 def test_the_command_line_refuses_them_in_one_line_before_any_work(tmp_path):
     cases = [("sshade.n_samplings=abc", "could not be converted to Integer"),
-             ("dataset.nonsense=1", "Key 'nonsense' not in 'FaustSchema'")]
+             ("dataset.nonsense=1", "Key 'nonsense' not in 'FaustOptions'")]
     procs = [subprocess.Popen([sys.executable, "-m", "eval", *CI, f"out_dir={tmp_path / f'run{i}'}", ov],
                               cwd=tmp_path, env=subprocess_env(), text=True, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE) for i, (ov, _) in enumerate(cases)]
@@ -108,7 +108,8 @@ def test_the_top_schema_holds_the_keys_of_config_yaml_in_their_order():
 
 
 def test_each_dataset_and_experiment_section_schema_holds_its_files_keys():
-    for name, cls in DATASET_SCHEMAS.items():
+    assert sorted(dataset_schemas()) == ["defaust", "faust", "shapes"]
+    for name, cls in dataset_schemas().items():
         d = _yaml(ROOT / "conf" / "dataset" / f"{name}.yaml")
         assert _keys(cls) == list(d), name
         assert (ROOT / "conf" / "dataset" / f"{name}.yaml").read_text().count(f"/schema/dataset/{name}@_here_") == 1
@@ -133,7 +134,7 @@ def test_every_method_file_is_typed_by_its_schema():
 #: other function takes the typed objects it reads (eval/run/spec.py).
 ENTRIES = {
     "eval/app.py": {"run_experiment", "_pin_out_dir", "_refuse_fresh_resume", "_main"},
-    "eval/config_check.py": {"check_config", "check_values", "_check_dataset", "_check_sshade", "_output",
+    "eval/config_check.py": {"check_config", "check_values", "_check_sshade", "_output",
                              "method_definition", "plain"},
     # python -m eval.sweeps: a sweep job (Hydra's task function), the sweep folder, Hydra's callbacks
     "eval/sweeps/sweep_command.py": {"sweep_job", "sweep_points", "start_manifest", "claim_sweep_dir",

@@ -1,14 +1,15 @@
 """The ``defaust`` dataset: a built DeFAUST folder (``python -m defaust``, :mod:`defaust`)
 read as deformation cases through the dataset's public reader :mod:`defaust.dataset`
 (which says how the stored handles become vertex handles and targets).
-Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
 import logging
 import re
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any, List, Optional  # OmegaConf 2.3 reads typing's generics
 
 from defaust.anny_poses import DEFAULT_TARGETS
 from defaust.canonical import CanonicalStatus, canonical_status
@@ -16,6 +17,7 @@ from defaust.cli import compose_config, config_from_omegaconf
 from defaust.cli import run as build_run
 from defaust.dataset import Case, load, read_manifest
 from defaust.manifest import check_out_folder
+from eval.datasets.dataset_options import DatasetOptions
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
 from eval.run.paths import abs_path
@@ -24,10 +26,58 @@ from harness.checks import config_int_list
 from sshade.cores import pool_size
 from sshade.errors import SShaDeError
 
-__all__ = ["DefaustCase", "load_defaust", "summarise_dropped",
+__all__ = ["DefaustBuildOptions", "DefaustOptions", "DefaustCase", "load_defaust", "summarise_dropped",
            "DEFAULT_DEFAUST_ROOT", "build_wanted", "prepare_root", "build_outlook", "BuildProgress"]
 
 log = logging.getLogger(__name__)
+
+#: The only folder the evaluator builds the embedded DeFAUST into on its own
+#: (``dataset.build.enabled: auto``), relative to where the command runs.
+DEFAULT_DEFAUST_ROOT = "data/defaust"
+
+
+@dataclass
+class DefaustBuildOptions:
+    """``dataset.build``: ``enabled`` (``auto``, true or false, :func:`build_wanted`;
+    SShaDeError naming ``dataset.build.enabled`` otherwise) and ``overrides``, extra
+    ``python -m defaust`` overrides of the build."""
+
+    enabled: Any = "auto"
+    overrides: List[str] = field(default_factory=list)
+
+    def __post_init__(self):
+        if isinstance(self.enabled, str) and self.enabled.strip().lower() == "auto":
+            self.enabled = "auto"
+        elif not isinstance(self.enabled, bool):
+            raise SShaDeError(f"dataset.build.enabled must be auto, true or false, got {self.enabled!r}")
+        self.overrides = [str(x) for x in self.overrides or []]
+
+
+@dataclass
+class DefaustOptions(DatasetOptions):
+    """``conf/dataset/defaust.yaml``: the keys of :class:`DatasetOptions` and DeFAUST's own,
+    checked when made (SShaDeError naming ``dataset.<key>``).
+
+    Attributes
+    ----------
+    resolution : ``high``, ``low`` or ``rN``, the meshes read (:func:`defaust.dataset.load`).
+    subjects : None (every subject of the build) or integers >= 0 (a list once made).
+    reference_cases : the deep references' cases when ``reference.cases`` is not given
+        (conf/config.yaml reads it; checked there as ``reference.cases``).
+    build : :class:`DefaustBuildOptions`, the build before the run (:func:`prepare_root`).
+    """
+
+    name: str = "defaust"
+    root: Optional[str] = DEFAULT_DEFAUST_ROOT
+    baseline_cases: Any = "per_pose"
+    resolution: str = "high"
+    subjects: Any = None
+    reference_cases: Any = "none"
+    build: DefaustBuildOptions = field(default_factory=DefaustBuildOptions)
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.subjects = config_int_list({"dataset": vars(self)}, "dataset.subjects")
 
 
 @dataclass
@@ -37,23 +87,24 @@ class DefaustCase(DeformationCase, Case):
     DeFAUST-only ones after them), as the evaluator's :class:`DeformationCase`."""
 
 
-def load_defaust(root, *, resolution: str = "high", subjects=None, limit: int | None = None,
-                 verify: bool = True, tol: float | None = None) -> list[DefaustCase]:
+def load_defaust(root, options: DefaustOptions | None = None) -> list[DefaustCase]:
     """The cases of a DeFAUST build as the evaluator's :class:`DefaustCase`: read by the
-    dataset's public reader :func:`defaust.dataset.load` (parameters, order, errors:
+    dataset's public reader :func:`defaust.dataset.load` with ``options``' ``resolution``,
+    ``subjects`` and ``limit`` (:class:`DefaustOptions`, None: its defaults; order, errors:
     there), plus one log line counting the handles dropped by the snap
     (:func:`summarise_dropped`).
 
     Example::
 
-        cases = load_defaust("/tmp/defaust_syn", resolution="high", limit=2)
+        cases = load_defaust("/tmp/defaust_syn", DefaustOptions(limit=2))
         [c.name for c in cases]
         # -> ['s00_p01', 's00_p02']
     """
-    read = load(root, resolution=resolution, subjects=subjects, limit=limit, verify=verify, tol=tol)
+    o = DefaustOptions() if options is None else options
+    read = load(root, resolution=o.resolution, subjects=o.subjects, limit=o.limit)
     cases = [DefaustCase(**{f.name: getattr(c, f.name) for f in fields(c)}) for c in read]
     line = summarise_dropped([c.n_dropped for c in cases], [len(c.handles) + c.n_dropped for c in cases],
-                             resolution=resolution)
+                             resolution=o.resolution)
     if line:
         log.info(line)
     return cases
@@ -91,31 +142,17 @@ def summarise_dropped(n_dropped, n_handles, *, resolution: str = "high") -> str 
             "the mesh's spacing; per case in cases.csv n_handles_dropped, see README Troubleshooting)")
 
 
-#: The only folder the evaluator builds the embedded DeFAUST into on its own
-#: (``dataset.build.enabled: auto``), relative to where the command runs.
-DEFAULT_DEFAUST_ROOT = "data/defaust"
-
-
-def build_wanted(root: Path, ds) -> bool:
-    """``dataset.build.enabled``: ``auto`` (default) builds only when ``root`` is
-    :data:`DEFAULT_DEFAUST_ROOT`; ``true`` builds into any folder (the builder still
+def build_wanted(root: Path, options: DefaustOptions) -> bool:
+    """``dataset.build.enabled`` of ``options``: ``auto`` (default) builds only when ``root``
+    is :data:`DEFAULT_DEFAUST_ROOT`; ``true`` builds into any folder (the builder still
     refuses a folder holding another build or other files); ``false`` never builds.
     A user's own folder (e.g. a DeFAUST built from their FAUST scans, or a typo) is
-    therefore read, never written, unless they ask for a build.
-
-    Raises
-    ------
-    SShaDeError on a value other than auto, true or false.
-    """
-    enabled = (ds.get("build", {}) or {}).get("enabled", "auto")
-    if isinstance(enabled, str) and enabled.strip().lower() == "auto":
-        return root == abs_path(DEFAULT_DEFAUST_ROOT)
-    if not isinstance(enabled, bool):
-        raise SShaDeError(f"dataset.build.enabled must be auto, true or false, got {enabled!r}")
-    return enabled
+    therefore read, never written, unless they ask for a build."""
+    enabled = options.build.enabled
+    return root == abs_path(DEFAULT_DEFAUST_ROOT) if enabled == "auto" else enabled
 
 
-def _build_config(root: Path, ds):
+def _build_config(root: Path, options: DefaustOptions):
     """``(cfg, all_subjects)``: the builder's config (OmegaConf) for ``root`` with
     ``dataset.build.overrides``, and the subjects it would plan unlimited; when
     those name no ``subjects``, the build is limited to ``dataset.subjects`` (those the
@@ -123,28 +160,20 @@ def _build_config(root: Path, ds):
     ``python -m defaust out=ROOT``, adds the others to the same folder; ``dataset.limit``
     alone builds every subject: the loader takes a build of some subjects for the whole
     dataset only when told which, :func:`defaust.dataset.load`)."""
-    from omegaconf import OmegaConf, open_dict
+    from omegaconf import open_dict
 
-    extra = ds.get("build", {}).get("overrides") or []
-    extra = [str(x) for x in (OmegaConf.to_container(extra) if OmegaConf.is_config(extra) else list(extra))]
+    extra = list(options.build.overrides)
     cfg = compose_config([f"out={root}", *extra])
     bc = config_from_omegaconf(cfg)
     planned = _planned_subjects(bc)
     if any(x.split("=")[0].lstrip("+~") == "subjects" for x in extra):
         return cfg, planned
-    want = _wanted_subjects(ds)
+    want = options.subjects
     take = [x for x in planned if want is None or x in want]
     if take and take != planned:
         with open_dict(cfg):
             cfg.subjects = take
     return cfg, planned
-
-
-def _wanted_subjects(ds) -> set[int] | None:
-    """``dataset.subjects`` as a set (:func:`harness.checks.config_int_list`: an int is one
-    subject); None: every subject."""
-    want = config_int_list({"dataset": ds}, "dataset.subjects")
-    return None if want is None else set(want)
 
 
 def _planned_subjects(bc) -> list[int]:
@@ -161,31 +190,30 @@ def _n_poses(bc) -> int:
     return len(bc.faust_target_poses) if bc.source == "faust" and bc.faust_target_poses else bc.n_poses - 1
 
 
-def _run_cases(planned: list[int], n_poses: int, ds) -> list[tuple[int, int]]:
+def _run_cases(planned: list[int], n_poses: int, options: DefaustOptions) -> list[tuple[int, int]]:
     """The ``(subject, pose)`` pairs a run takes from a build of the subjects ``planned``
     with ``n_poses`` targets each: after ``dataset.subjects``, then ``dataset.limit`` (the
     first N in subject, then pose order, as :func:`defaust.dataset.load` reads them)."""
     cases = [(x, p) for x in planned for p in range(1, n_poses + 1)]
-    want = _wanted_subjects(ds)
-    if want is not None:
-        cases = [c for c in cases if c[0] in want]
-    if ds.get("limit", None) is not None:
-        cases = cases[:max(int(ds.get("limit")), 0)]
+    if options.subjects is not None:
+        cases = [c for c in cases if c[0] in options.subjects]
+    if options.limit is not None:
+        cases = cases[:options.limit]
     return cases
 
 
-def _build(root: Path, ds) -> None:
+def _build(root: Path, options: DefaustOptions) -> None:
     """Build (or finish, or verify) the DeFAUST dataset at ``root`` before evaluating
     (``dataset.build.enabled``). Resumable: complete, checksum-valid items are skipped.
     Each subject built logs a progress line (:class:`BuildProgress`)."""
     logging.getLogger("defaust").setLevel(logging.INFO)
-    bcfg, planned = _build_config(root, ds)
+    bcfg, planned = _build_config(root, options)
     take = list(bcfg.get("subjects") or planned)
     if take != planned:
         log.info("DeFAUST: building into %s the %d subject(s) this run takes (%s) of the %d; a run on the others, "
                  "or python -m defaust out=%s, adds them to the same folder", root, len(take),
                  ", ".join(map(str, take)), len(planned), root)
-    out = _outlook(root, ds, bcfg)
+    out = _outlook(root, options, bcfg)
     progress = BuildProgress(out["subjects"] if out else 0)
     logging.getLogger("defaust").addHandler(progress)
     try:
@@ -222,18 +250,18 @@ class BuildProgress(logging.Handler):
                  duration_words(float(m.group(2))), self.done, total, duration_words(elapsed), duration_words(left))
 
 
-def prepare_root(root: Path, ds) -> None:
+def prepare_root(root: Path, options: DefaustOptions) -> None:
     """The dataset's ``prepare`` step (:func:`eval.datasets.dataset_root`): build into
     ``root`` when :func:`build_wanted` says so."""
-    if build_wanted(root, ds):
-        _build(root, ds)
+    if build_wanted(root, options):
+        _build(root, options)
 
 
 #: Vertices per case at low resolution, by source (rough: for the plan only).
 _LOW_RES_VERTICES = {"faust": 6890, "anny": 14000}
 
 
-def build_outlook(root: Path, ds) -> dict | None:
+def build_outlook(root: Path, options: DefaustOptions) -> dict | None:
     """What :func:`prepare_root` is about to build, found without building (the builder's
     config and ``root/manifest.json``; no mesh read, no ANNY model loaded).
 
@@ -252,14 +280,14 @@ def build_outlook(root: Path, ds) -> dict | None:
 
     Raises
     ------
-    SShaDeError on a bad ``dataset.build.enabled`` or builder setting (as the build would).
+    SShaDeError on a bad builder setting (as the build would).
     """
-    if not build_wanted(root, ds):
+    if not build_wanted(root, options):
         return None
-    return _outlook(root, ds, _build_config(root, ds)[0])
+    return _outlook(root, options, _build_config(root, options)[0])
 
 
-def _outlook(root: Path, ds, bcfg) -> dict | None:
+def _outlook(root: Path, options: DefaustOptions, bcfg) -> dict | None:
     """:func:`build_outlook` for the builder's config ``bcfg`` (:func:`_build_config`)."""
     bc = config_from_omegaconf(bcfg)
     subjects, n_poses = _planned_subjects(bc), _n_poses(bc)
@@ -271,8 +299,8 @@ def _outlook(root: Path, ds, bcfg) -> dict | None:
     ok = workers is None or (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1)
     # the builder's own worker count (None: every core, capped at the subjects to build)
     workers = pool_size(workers, len(todo)) if "workers" in bcfg and ok else 1
-    cases = _run_cases(subjects, n_poses, ds)
-    res = str(ds.get("resolution", "high"))
+    cases = _run_cases(subjects, n_poses, options)
+    res = str(options.resolution)
     n_low = bc.synthetic_vertices if bc.source == "synthetic" else _LOW_RES_VERTICES.get(bc.source, 7000)
     n = int(sum(bc.vertex_range) / 2) if res == "high" else int(res[1:]) if res[1:].isdigit() else int(n_low)
     return {"root": str(root), "source": bc.source, "subjects": len(todo), "complete": len(subjects) - len(todo),
@@ -314,14 +342,7 @@ def build_provenance(root: Path) -> dict:
             "mark": mark}
 
 
-def check_defaust(section) -> None:
-    """``dataset.subjects`` and ``dataset.poses`` (integers or null) checked; SShaDeError
-    naming the key."""
-    config_int_list({"dataset": section}, "dataset.subjects")
-    config_int_list({"dataset": section}, "dataset.poses")
-
-
-register_dataset("defaust", load_defaust, keys=("subjects", "resolution", "limit"), prepare=prepare_root,
+register_dataset("defaust", load_defaust, options=DefaustOptions, prepare=prepare_root,
                  root_hint=(f"; the evaluator builds a DeFAUST only into the default folder {DEFAULT_DEFAUST_ROOT} "
                             f"or with dataset.build.enabled=true (python -m defaust out=DIR builds one)"),
-                 seeds=_seeds, outlook=build_outlook, check=check_defaust, provenance=build_provenance)
+                 seeds=_seeds, outlook=build_outlook, provenance=build_provenance)

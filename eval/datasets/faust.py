@@ -1,5 +1,5 @@
 """FAUST registrations as handle-driven deformation cases (DeFAUST protocol).
-Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
 
 Source: SShaDe paper (Maggioli et al., Eurographics 2025), appendix "DeFAUST dataset";
 data: MPI-FAUST training registrations (Bogo et al. 2014), files ``tr_reg_XYZ.ply``
@@ -11,19 +11,23 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
+from omegaconf import MISSING
 
 from defaust.faust_source import FAUST_LANDMARKS as _FAUST_LANDMARKS
 from defaust.faust_source import discover_faust, faust_subjects
 from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUST builder's (one implementation)
+from eval.datasets.dataset_options import DatasetOptions
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
 from harness.checks import check_numbers, config_int_list
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
-__all__ = ["FAUST_LANDMARKS", "PROTOCOLS", "Case", "discover_faust", "faust_cases", "case_seed", "faust_plan"]
+__all__ = ["FAUST_LANDMARKS", "PROTOCOLS", "FaustOptions", "Case", "discover_faust", "faust_cases", "case_seed",
+           "faust_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +74,43 @@ FAUST_N_VERTICES = 6890
 
 #: ``dataset.protocol`` values, see the module docstring.
 PROTOCOLS = ("paper", "all_landmarks")
+
+
+@dataclass
+class FaustOptions(DatasetOptions):
+    """``conf/dataset/faust.yaml``: the keys of :class:`DatasetOptions` and FAUST's own,
+    checked when made (SShaDeError naming ``dataset.<key>``).
+
+    Attributes
+    ----------
+    protocol : ``"paper"`` or ``"all_landmarks"``, n_targets : int >= 1, targets per subject
+        of ``paper``; subjects, poses : None or integers >= 0 (one integer or a list; a
+        list once made): which cases, see :func:`faust_plan`.
+    n_per_landmark, neighbourhood : int >= 1, static_threshold : metres >= 0, see
+        :func:`defaust.handles.landmark_handles`.
+    seed : int >= 0, the dataset seed; each case draws with :func:`case_seed`.
+    """
+
+    name: str = "faust"
+    root: Optional[str] = MISSING  # the user's to set: composed, the section shows it missing (???)
+    protocol: str = "paper"
+    n_targets: int = 4
+    subjects: Any = None
+    poses: Any = None
+    n_per_landmark: int = 30
+    neighbourhood: int = 90
+    static_threshold: float = 0.02
+    seed: int = 0
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.protocol not in PROTOCOLS:
+            raise SShaDeError(f"dataset.protocol must be one of {list(PROTOCOLS)}, got {self.protocol!r}")
+        check_numbers({"dataset": vars(self)}, "dataset", [
+            ("n_targets", int, 1, False), ("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
+            ("static_threshold", float, 0, False), ("seed", int, 0, False)])
+        self.subjects = config_int_list({"dataset": vars(self)}, "dataset.subjects")
+        self.poses = config_int_list({"dataset": vars(self)}, "dataset.poses")
 
 
 @dataclass
@@ -164,22 +205,19 @@ def faust_plan(files: dict, *, protocol: str = "paper", subjects=None, poses=Non
     return out
 
 
-def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
-                neighbourhood: int = 90, static_threshold: float = 0.02, seed: int = 0,
-                limit: int | None = None, landmarks: dict[str, int] | None = None,
-                protocol: str = "paper", n_targets: int = 4) -> list[Case]:
+def faust_cases(root, options: FaustOptions | None = None) -> list[Case]:
     """Build the deformation cases from a folder of FAUST registrations.
 
     Parameters
     ----------
     root : str or Path, see :func:`discover_faust`.
-    subjects, poses, protocol, n_targets, landmarks : which cases and which landmarks,
-        see :func:`faust_plan` (``protocol`` ``"paper"`` by default: 4 targets per subject,
-        6 landmarks for the first three, 11 for the last).
-    n_per_landmark, neighbourhood, static_threshold : see
-        :func:`defaust.handles.landmark_handles` (threshold in metres).
-    seed : int, dataset seed; each case uses :func:`case_seed` ``(seed, subject, pose)``.
-    limit : int or None, keep only the first ``limit`` cases in (subject, pose) order.
+    options : :class:`FaustOptions` (None: its defaults): ``subjects``, ``poses``,
+        ``protocol``, ``n_targets`` say which cases and which landmarks, see
+        :func:`faust_plan` (``protocol`` ``"paper"`` by default: 4 targets per subject, 6
+        landmarks for the first three, 11 for the last); ``n_per_landmark``,
+        ``neighbourhood``, ``static_threshold``: see :func:`defaust.handles.landmark_handles`
+        (threshold in metres); ``seed``: each case uses :func:`case_seed` ``(seed, subject,
+        pose)``; ``limit``: only the first ``limit`` cases in (subject, pose) order.
 
     Returns
     -------
@@ -189,21 +227,16 @@ def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
     ------
     SShaDeError
         No registrations found, unreadable/invalid mesh, a mesh whose faces differ from
-        its rest pose's (not a FAUST registration), a bad ``limit`` or ``protocol``, or
-        no case left after filtering.
+        its rest pose's (not a FAUST registration), or no case left after filtering.
     """
+    o = FaustOptions() if options is None else options
     files = discover_faust(root)
-    if limit is not None:
-        limit = int(limit)
-        if limit < 1:
-            raise SShaDeError(f"limit must be a positive integer or null, got {limit}")
     try:
-        plan = faust_plan(files, protocol=protocol, subjects=subjects, poses=poses, n_targets=n_targets,
-                          landmarks=landmarks)
+        plan = faust_plan(files, protocol=o.protocol, subjects=o.subjects, poses=o.poses, n_targets=o.n_targets)
     except SShaDeError as e:
         raise SShaDeError(f"{Path(root)}: {e}") from None
-    if limit is not None:
-        plan = plan[:limit]
+    if o.limit is not None:
+        plan = plan[:o.limit]
     rest: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     cases: list[Case] = []
     for s, p, lm in plan:
@@ -217,9 +250,9 @@ def faust_cases(root, *, subjects=None, poses=None, n_per_landmark: int = 30,
         bad = [k for k, v in lm.items() if not 0 <= v < len(V0)]
         if bad:
             raise SShaDeError(f"{files[(s, 0)]}: landmark(s) {bad} out of range for {len(V0)} vertices")
-        cs = case_seed(seed, s, p)
-        H = landmark_handles(V0, F0, V1, lm, n_per_landmark=n_per_landmark,
-                             neighbourhood=neighbourhood, static_threshold=static_threshold, seed=cs)
+        cs = case_seed(o.seed, s, p)
+        H = landmark_handles(V0, F0, V1, lm, n_per_landmark=o.n_per_landmark,
+                             neighbourhood=o.neighbourhood, static_threshold=o.static_threshold, seed=cs)
         cases.append(Case(name=f"s{s}_p{p}", subject=s, pose=p, V=V0, F=F0, handles=H.index,
                           targets=H.target, static=H.static, V_gt=V1, group=H.group, delta=H.delta,
                           landmark_names=H.landmark_names, seed=cs, rest_path=files[(s, 0)],
@@ -249,16 +282,4 @@ def _fmt(sel) -> str:
     return "all" if sel is None else str(sorted(sel))
 
 
-def check_faust(section) -> None:
-    """The ``dataset`` section's numbers and subject / pose lists of FAUST checked;
-    SShaDeError naming the key."""
-    top = {"dataset": section}
-    check_numbers(top, "dataset", [("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
-                                   ("static_threshold", float, 0, False), ("seed", int, 0, False)])
-    config_int_list(top, "dataset.subjects")
-    config_int_list(top, "dataset.poses")
-
-
-register_dataset("faust", faust_cases, keys=("subjects", "poses", "n_per_landmark", "neighbourhood",
-                                             "static_threshold", "seed", "limit", "protocol", "n_targets"),
-                 check=check_faust)
+register_dataset("faust", faust_cases, options=FaustOptions)

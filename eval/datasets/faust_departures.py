@@ -1,7 +1,7 @@
 """What a FAUST run's ``dataset`` section departs from in the paper's protocol (appendix A),
 registered with :func:`eval.run.runinfo.register_departures` for ``run.json``'s
 ``departures``: ``dataset.protocol`` (the paper: 6 landmarks for targets 1-3) and
-``dataset.n_targets`` (the paper: 4 targets per subject). Floor 1 of eval/ (eval/datasets/,
+``dataset.n_targets`` (the paper: 4 targets per subject). Floor 2 of eval/ (eval/datasets/,
 tests/test_layering.py); the registry finds this module on its own."""
 from __future__ import annotations
 

@@ -1,22 +1,22 @@
 """The ``dataset`` section at work: a dataset's cases loaded by name with collision-free
 names (:func:`load_cases`), its root resolved after its ``prepare`` step
-(:func:`dataset_root`), what that step is about to do (:func:`dataset_outlook`) and its
-loader's keyword options (:func:`dataset_options`).
-Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
+(:func:`dataset_root`) and what that step is about to do (:func:`dataset_outlook`).
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 from pathlib import Path
 
-from eval.datasets.dataset_registry import datasets, find_dataset
+from eval.datasets.dataset_registry import Dataset, datasets, find_dataset
 from eval.datasets.deformation_case import DeformationCase
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
 from eval.run.spec import DatasetSpec
 from sshade.errors import SShaDeError
 
-__all__ = ["load_cases", "dataset_names", "unique_case_names", "dataset_root", "dataset_outlook", "dataset_options"]
+__all__ = ["load_cases", "dataset_names", "dataset_named", "unique_case_names", "dataset_root", "dataset_outlook"]
 
 
 def dataset_names() -> list[str]:
@@ -24,21 +24,31 @@ def dataset_names() -> list[str]:
     return list(datasets())
 
 
-def load_cases(name: str, root, **kw) -> list[DeformationCase]:
-    """Cases of dataset ``name`` (one of :func:`dataset_names`) found under ``root``.
-
-    Keyword arguments go to the dataset's loader (e.g. :func:`eval.datasets.faust.faust_cases`). The names
-    are made collision-free (:func:`unique_case_names`), so every case has files of its
-    own (``runs/<case>/``, ``report/<case>.js``, ``figures/<case>.png``).
-
-    Raises
-    ------
-    SShaDeError on an unknown dataset name or whatever the loader raises.
-    """
+def dataset_named(name: str) -> Dataset:
+    """The registered dataset ``name``; SShaDeError naming the known ones when there is none."""
     d = find_dataset(name)
     if d is None:
         raise SShaDeError(f"unknown dataset {name!r}; available: {dataset_names()}")
-    return unique_case_names(d.load(root, **kw))
+    return d
+
+
+def load_cases(name: str, root, options=None, **changes) -> list[DeformationCase]:
+    """Cases of dataset ``name`` (one of :func:`dataset_names`) found under ``root``.
+
+    ``options`` is the dataset's options object (its registered dataclass, e.g.
+    :class:`eval.datasets.faust.FaustOptions`; None: its defaults), with ``changes``
+    (``limit=2``) made by :func:`dataclasses.replace` (checked again); the loader gets it
+    (e.g. :func:`eval.datasets.faust.faust_cases`). The names are made collision-free
+    (:func:`unique_case_names`), so every case has files of its own (``runs/<case>/``,
+    ``report/<case>.js``, ``figures/<case>.png``).
+
+    Raises
+    ------
+    SShaDeError on an unknown dataset name, a bad option or whatever the loader raises.
+    """
+    d = dataset_named(name)
+    opts = d.options() if options is None else options
+    return unique_case_names(d.load(root, dataclasses.replace(opts, **changes) if changes else opts))
 
 
 def _source_of(case, index: int) -> str:
@@ -102,7 +112,7 @@ def dataset_root(ds: DatasetSpec | None) -> Path:
     root = abs_path(ds.root)
     d = find_dataset(ds.name)
     if d is not None and d.prepare is not None:
-        d.prepare(root, ds.section)
+        d.prepare(root, ds.options)
     if not root.is_dir():
         hint = d.root_hint if d is not None else ""
         raise SShaDeError(f"dataset.root does not exist or is not a folder: {root}{hint}")
@@ -124,19 +134,4 @@ def dataset_outlook(ds: DatasetSpec | None) -> dict | None:
     d = find_dataset(ds.name)
     if d is None or d.outlook is None:
         return None
-    return d.outlook(abs_path(ds.root), ds.section)
-
-
-def dataset_options(section, *, skip=()) -> dict:
-    """The keyword options of the loader of the dataset section ``section`` (a mapping:
-    its registered ``keys`` present in it, except ``skip``; path keys resolved against the
-    launch directory). An unknown name gives ``{}`` (:func:`load_cases` then names the
-    known datasets)."""
-    d = find_dataset(section.get("name", ""))
-    if d is None:
-        return {}
-    opts = {k: section.get(k) for k in d.keys if k in section and k not in skip}
-    for k in d.path_keys:
-        if opts.get(k) is not None:
-            opts[k] = abs_path(opts[k])
-    return opts
+    return d.outlook(abs_path(ds.root), ds.options)

@@ -1,33 +1,76 @@
 """User-defined deformations of single shapes (paper §4.1, Fig. arap-examples).
-Floor 1 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
 
 Example::
 
-    cases = shape_cases("../shared/data/classic", files=["armadillo.obj"])
+    cases = shape_cases("../shared/data/classic", ShapesOptions(files=["armadillo.obj"], vertex_range=None))
     c = cases[0]; c.V.shape, c.handles.shape, c.targets.shape
     # -> ((43243, 3), (120,), (120, 3))"""
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import List, Optional  # OmegaConf 2.3 reads typing's generics
 
 import numpy as np
 
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
+from eval.datasets.dataset_options import DatasetOptions
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
 from eval.run.names import safe_name
-from harness.checks import check_numbers, config_int_list, config_value
+from eval.run.paths import abs_path
+from harness.checks import check_numbers, config_int_list
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 
-__all__ = ["ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
+__all__ = ["ShapesOptions", "ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
 
 log = logging.getLogger(__name__)
 
 #: Stanford models of ../shared/data/classic (libigl tutorial data), the paper's S3D set.
 DEFAULT_SHAPES = ("armadillo.obj", "bunny.off", "dragon.obj")
+
+
+@dataclass
+class ShapesOptions(DatasetOptions):
+    """``conf/dataset/shapes.yaml``: the keys of :class:`DatasetOptions` and the shapes'
+    own, checked when made (SShaDeError naming ``dataset.<key>``).
+
+    Attributes
+    ----------
+    files : file names in ``root`` (None: :data:`DEFAULT_SHAPES`).
+    vertex_range : None (native resolution) or ``[lo, hi]`` (4 <= lo <= hi): a high-res
+        version first (LS3 Loop + isotropic remesh, :func:`defaust.highres.subdivide_remesh`).
+    cache : folder of the high-res meshes (None: rebuilt every time), made absolute.
+    n_per_group : int >= 1, region_radius : >= 0, rotate_deg, translate, seed : int >= 0:
+        the edit, see :func:`axis_handles`.
+    """
+
+    name: str = "shapes"
+    root: Optional[str] = "../shared/data/classic"
+    files: Optional[List[str]] = field(default_factory=lambda: list(DEFAULT_SHAPES))
+    vertex_range: Optional[List[int]] = field(default_factory=lambda: [150000, 200000])
+    cache: Optional[str] = "data/shapes"
+    n_per_group: int = 30
+    region_radius: float = 0.06
+    rotate_deg: float = 20.0
+    translate: float = 0.05
+    seed: int = 0
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_numbers({"dataset": vars(self)}, "dataset", [
+            ("n_per_group", int, 1, False), ("region_radius", float, 0, False), ("rotate_deg", float, None, False),
+            ("translate", float, None, False), ("seed", int, 0, False)])
+        if self.vertex_range is not None:
+            vr = config_int_list({"dataset": vars(self)}, "dataset.vertex_range", min=4)
+            if len(vr) != 2 or vr[0] > vr[1]:
+                raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
+            self.vertex_range = vr
+        if self.cache is not None:
+            self.cache = abs_path(self.cache)
 
 
 @dataclass
@@ -138,19 +181,16 @@ def _refuse_repeats(root: Path, names: list) -> None:
         seen[p] = n
 
 
-def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group: int = 30,
-                region_radius: float = 0.06, rotate_deg: float = 20.0, translate: float = 0.05, seed: int = 0,
-                limit: int | None = None) -> list[ShapeCase]:
+def shape_cases(root, options: ShapesOptions | None = None) -> list[ShapeCase]:
     """One deformation case per shape file in ``root``.
 
     Parameters
     ----------
     root : str or Path, a folder of meshes (any format :func:`sshade.mesh.io.read_mesh` reads).
-    files : list of file names in ``root`` (default :data:`DEFAULT_SHAPES`).
-    vertex_range : None (native resolution) or (lo, hi): high-res version first.
-    cache : folder for the high-res meshes (None: rebuilt every time).
-    n_per_group, region_radius, rotate_deg, translate, seed : the edit, see :func:`axis_handles`.
-    limit : keep the first ``limit`` files.
+    options : :class:`ShapesOptions` (None: its defaults): ``files`` (names in ``root``),
+        ``vertex_range`` and ``cache`` (the high-res version), the edit (``n_per_group``,
+        ``region_radius``, ``rotate_deg``, ``translate``, ``seed``: see
+        :func:`axis_handles`), ``limit`` (keep the first ``limit`` files).
 
     Returns
     -------
@@ -161,17 +201,16 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
     Raises
     ------
     SShaDeError on a missing folder or file, a file listed twice, an unreadable or
-    invalid mesh (the message names it), a bad ``limit`` or an empty selection.
+    invalid mesh (the message names it) or an empty selection.
     """
+    o = ShapesOptions() if options is None else options
     root = Path(root)
     if not root.is_dir():
         raise SShaDeError(f"shapes: dataset.root is not a folder: {root}")
-    names = list(DEFAULT_SHAPES if files is None else files)
+    names = list(DEFAULT_SHAPES if o.files is None else o.files)
     _refuse_repeats(root, names)  # the whole list, before limit
-    if limit is not None:
-        if int(limit) < 1:
-            raise SShaDeError(f"limit must be a positive integer or null, got {limit}")
-        names = names[:int(limit)]
+    if o.limit is not None:
+        names = names[:o.limit]
     if not names:
         raise SShaDeError("shapes: no file selected (dataset.files is empty)")
     missing = [n for n in names if not (root / n).is_file()]
@@ -182,28 +221,13 @@ def shape_cases(root, *, files=None, vertex_range=None, cache=None, n_per_group:
         path = root / n
         V0, F0 = read_mesh(path, allow_components=True)  # the evaluator deforms each component
         lm, center, axes = axis_landmarks(V0)  # from the source shape: same edit at every resolution
-        V, F = (V0, F0) if vertex_range is None else _highres(path, V0, F0, vertex_range, cache)
-        h, T, st, group = axis_handles(V, lm, center, axes, n_per_group=n_per_group, region_radius=region_radius,
-                                rotate_deg=rotate_deg, translate=translate, seed=seed)
+        V, F = (V0, F0) if o.vertex_range is None else _highres(path, V0, F0, o.vertex_range, o.cache)
+        h, T, st, group = axis_handles(V, lm, center, axes, n_per_group=o.n_per_group, region_radius=o.region_radius,
+                                       rotate_deg=o.rotate_deg, translate=o.translate, seed=o.seed)
         cases.append(ShapeCase(name=path.stem, subject=path.stem, pose=1, V=V, F=F, handles=h, targets=T,
-                               static=st, V_gt=None, group=group, seed=int(seed), path=path,
+                               static=st, V_gt=None, group=group, seed=int(o.seed), path=path,
                                n_source=len(V0)))
     return cases
 
 
-def check_shapes(section) -> None:
-    """The ``dataset`` section's numbers and ``vertex_range`` ([lo, hi], 4 <= lo <= hi)
-    of the shapes checked; SShaDeError naming the key."""
-    top = {"dataset": section}
-    check_numbers(top, "dataset", [("n_per_group", int, 1, False), ("region_radius", float, 0, False),
-                                   ("rotate_deg", float, None, False), ("translate", float, None, False),
-                                   ("seed", int, 0, False)])
-    if config_value(top, "dataset.vertex_range", None) is not None:
-        vr = config_int_list(top, "dataset.vertex_range", min=4)
-        if len(vr) != 2 or vr[0] > vr[1]:
-            raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
-
-
-register_dataset("shapes", shape_cases, keys=("files", "vertex_range", "cache", "n_per_group", "region_radius",
-                                              "rotate_deg", "translate", "seed", "limit"), path_keys=("cache",),
-                 check=check_shapes)
+register_dataset("shapes", shape_cases, options=ShapesOptions)

@@ -208,9 +208,8 @@ def _cases(opts: ConvergenceConfig, ds: DatasetSpec | None) -> list[tuple[str, t
             out.append((f"plane_{int(plane.n_target // 1000)}k", lifted_plane(plane.lift, n_target=plane.n_target)))
         else:
             root = datasets.dataset_root(ds)
-            opts_ds = {k: v for k, v in ds.loader.items() if k != "limit"}
             i = opts.dataset_case
-            c = datasets.load_cases(ds.name, root, limit=i + 1, **opts_ds)[i]
+            c = datasets.load_cases(ds.name, root, ds.options, limit=i + 1)[i]
             out.append((f"{ds.name}_{c.name}", (c.V, c.F, c.handles, c.targets)))
     return out
 

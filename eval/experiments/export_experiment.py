@@ -4,6 +4,7 @@ every case of the configured dataset written in the exchange layout
 come back through ``experiment=score`` (:mod:`eval.exchange.scored`). No method runs."""
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 from eval import datasets
@@ -36,11 +37,11 @@ def run_export(spec: EvalSpec) -> dict:
     """
     ds = spec.dataset
     root = datasets.dataset_root(ds)   # a DeFAUST is built first when it must be
-    cases, rule = take_sample(datasets.load_cases(ds.name, root, **ds.loader), ds.sample, ds.sample_seed)
+    cases, rule = take_sample(datasets.load_cases(ds.name, root, ds.options), ds.sample, ds.sample_seed)
     if not cases:
         raise SShaDeError(f"dataset {ds.name} at {root}: no case to export")
     out = abs_path(spec.output.out_dir)
-    meta = {"name": ds.name, "root": str(root), "seed": json_safe(ds.seed), "options": json_safe(dict(ds.loader)),
+    meta = {"name": ds.name, "root": str(root), "seed": json_safe(ds.seed), "options": json_safe(_options(ds.options)),
             "identities": {c.name: case_identity(c, dataset=ds.name, seed=ds.seed) for c in cases}}
     if ds.sample is not None:
         meta["sample"] = {"k": ds.sample, "seed": ds.sample_seed, "rule": rule}
@@ -52,9 +53,15 @@ def run_export(spec: EvalSpec) -> dict:
     return {"out_dir": out, "paths": {"index": index, "run.json": out / "run.json"}, "n_cases": len(cases)}
 
 
+def _options(options) -> dict:
+    """What the index records of the dataset's options: every key but ``name`` and ``root``
+    (recorded beside them), as plain values."""
+    return {k: v for k, v in dataclasses.asdict(options).items() if k not in ("name", "root")}
+
+
 def export_options(values) -> None:
     """The export's own check, of the ``dataset`` section (plain values): a dataset with a
-    name (its own keys are checked by the dataset's check); SShaDeError otherwise. The
+    name (its own keys are checked by its options object at the door); SShaDeError otherwise. The
     export has no options of its own (None)."""
     if values is None or not str(values.get("name", "") or ""):
         raise SShaDeError("experiment=export needs a dataset: pass dataset=faust|defaust|shapes and dataset.root=DIR")

@@ -46,29 +46,49 @@ class MethodSpec:
 
 @dataclass(frozen=True)
 class DatasetSpec:
-    """The ``dataset`` section.
+    """The ``dataset`` section: its dataset's options object, read through the keys every
+    dataset shares.
 
     Attributes
     ----------
-    name : ``dataset.name``.
-    root : ``dataset.root`` as given (None when not set).
-    loader : the keyword options of its loader (:func:`eval.datasets.dataset_options`).
-    section : the whole section as plain values, for the dataset's own steps (its
-        ``prepare`` and ``outlook``, e.g. DeFAUST's ``build``).
-    baseline_cases : the baselines' case rule (checked: ``all``, ``per_pose``, an int, None).
-    seed : ``dataset.seed`` (None when it has none).
-    sample, sample_seed : the run's seeded sample of cases (None: every case) and its seed
-        (checked, :func:`eval.run.subset.sample_cases`).
+    options : the section as its dataset's options dataclass (registered with the dataset,
+        a subclass of :class:`eval.datasets.dataset_options.DatasetOptions`, e.g.
+        :class:`eval.datasets.faust.FaustOptions`), made and checked at the door
+        (:func:`eval.config_check.check_config`); what the dataset's loader, ``prepare`` and
+        ``outlook`` take.
     """
 
-    name: str
-    root: str | None
-    loader: Mapping
-    section: Mapping
-    baseline_cases: Any = None
-    seed: Any = None
-    sample: int | None = None
-    sample_seed: int = 0
+    options: Any
+
+    @property
+    def name(self) -> str:
+        """``dataset.name``."""
+        return self.options.name
+
+    @property
+    def root(self) -> str | None:
+        """``dataset.root`` as given (None when not set)."""
+        return self.options.root
+
+    @property
+    def baseline_cases(self):
+        """The baselines' case rule (checked: None for every case, ``per_pose`` or an int)."""
+        return self.options.baseline_cases
+
+    @property
+    def seed(self):
+        """``dataset.seed`` (None when the dataset has none)."""
+        return getattr(self.options, "seed", None)
+
+    @property
+    def sample(self) -> int | None:
+        """The run's seeded sample of cases (None: every case), :func:`eval.run.subset.sample_cases`."""
+        return self.options.sample
+
+    @property
+    def sample_seed(self) -> int:
+        """The sample's seed."""
+        return self.options.sample_seed
 
 
 @dataclass(frozen=True)

@@ -175,7 +175,7 @@ def _setup(spec: EvalSpec) -> _Setup:
     root, build = planned_root(ds, spec.jobs, methods, refs, lambda cs, base: CaseSelection(
         base, method_selections(cs, mc, [x.name for x in methods])).runs_on)
     out_dir = abs_path(spec.output.out_dir)
-    cases, sample_rule = take_sample(datasets.load_cases(ds.name, root, **ds.loader), ds.sample, ds.sample_seed)
+    cases, sample_rule = take_sample(datasets.load_cases(ds.name, root, ds.options), ds.sample, ds.sample_seed)
     base, base_rule = baseline_selection(cases, ds.baseline_cases)
     names = [m.name for m in methods]  # checked when built; a plug-in cannot rename its row later
     own = method_selections(cases, mc, names)
