@@ -42,7 +42,7 @@ from harness.method_registry import (
     strip_meta,
 )
 from harness.plugins import as_dict
-from sshade.arap import ALPHA_SCALINGS
+from sshade.arap import ALPHA_SCALINGS, DEFAULT_ALPHA
 from sshade.errors import SShaDeError
 from sshade.params import SShaDeParams
 from sshade.pipeline import SShaDe, check_params
@@ -93,7 +93,7 @@ def check_values(cfg) -> None:
         config_number(cfg, "arap.max_iter", min=1, allow_none=True, default=None)
         for k in ("etol", "gtol"):
             config_number(cfg, f"arap.{k}", kind=float, min=0, allow_none=True, default=None)
-    config_number(cfg, "arap_sr.alpha", kind=float, min=0, default=0.01)
+    config_number(cfg, "arap_sr.alpha", kind=float, min=0, default=DEFAULT_ALPHA)
     scaling = config_value(cfg, "arap_sr.alpha_scaling", "valence")
     if scaling not in ALPHA_SCALINGS:
         raise SShaDeError(f"arap_sr.alpha_scaling must be one of {list(ALPHA_SCALINGS)}, got {scaling!r}")
@@ -161,7 +161,7 @@ def _check_shared_sections(resolved: dict, methods) -> None:
     arap_params(resolved.get("arap") or {})
     if any(method_meta(n)["checks"] == "arap_sr" for n in ours):
         alpha = (resolved.get("arap_sr") or {}).get("alpha")
-        check_alpha(0.01 if alpha is None else alpha, "arap_sr.alpha")
+        check_alpha(DEFAULT_ALPHA if alpha is None else alpha, "arap_sr.alpha")
 
 
 def plain(cfg, *, resolve: bool = True) -> dict:

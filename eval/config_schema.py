@@ -21,6 +21,8 @@ from omegaconf import MISSING, OmegaConf
 
 from eval.run.spec import FigureOptions, ReferenceOptions, ReportOptions
 from harness.method_registry import builtin_methods, method_file, method_key
+from baselines.coarse_start import COARSE_N_LOW
+from sshade.arap import DEFAULT_ALPHA
 from sshade.errors import SShaDeError
 
 __all__ = ["ArapSchema", "ArapSRSchema", "SShaDeSchema", "StoreSchema", "ExperimentSchema", "TopSchema",
@@ -38,13 +40,14 @@ class ArapSchema:
     max_iter: Optional[int] = None
     etol: Optional[float] = None
     gtol: Optional[float] = None
+    coarse_n_low: int = COARSE_N_LOW
 
 
 @dataclass
 class ArapSRSchema:
     """``arap_sr``: ARAP-SR's smoothness weight."""
 
-    alpha: float = 0.01
+    alpha: float = DEFAULT_ALPHA
     alpha_scaling: str = "valence"
 
 

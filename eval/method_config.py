@@ -18,7 +18,7 @@ from eval.run.names import safe_name
 from eval.run.spec import MethodSpec
 from harness.method_registry import build_builtin, builtin_methods, canonical_name, method_key, method_meta
 from harness.plugins import as_dict, build_method, is_mapping
-from sshade.arap import PROTOCOLS
+from sshade.arap import DEFAULT_ALPHA, PROTOCOLS
 from sshade.errors import SShaDeError
 
 __all__ = ["make_methods", "method_entries", "arap_params", "check_alpha"]
@@ -112,7 +112,7 @@ def _build_ours(m: MethodSpec):
     if checks == "arap":
         arap_params(spec, where=m.where)
     elif checks == "arap_sr":
-        check_alpha(spec.get("alpha", 0.01), f"{m.where}.alpha")
+        check_alpha(spec.get("alpha", DEFAULT_ALPHA), f"{m.where}.alpha")
         arap_params({"tol": spec.get("tol", 1e-4), "max_iter": spec.get("max_iter")}, where=m.where)
     # the others check their own parameters when built (SShaDe: sshade.pipeline.check_params)
     return build_builtin(m.name, spec=spec)

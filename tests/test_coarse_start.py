@@ -101,8 +101,9 @@ def test_auto_rule():
 
 
 def test_the_coarse_start_size_is_written_once_and_the_method_configs_follow_it():
-    """COARSE_N_LOW is the default of every signature that takes a coarse size, and the
-    ARAP, Elastic and ARAP-SR configs state the same number (a YAML cannot import it)."""
+    """COARSE_N_LOW is the default of every signature that takes a coarse size, the config
+    states the same number once (``arap.coarse_n_low``: a YAML cannot import it), and the
+    ARAP, Elastic and ARAP-SR files take theirs from it."""
     import inspect
     from pathlib import Path
 
@@ -111,9 +112,14 @@ def test_the_coarse_start_size_is_written_once_and_the_method_configs_follow_it(
     from baselines.coarse_start import COARSE_N_LOW
     from baselines.fullres_arap import FullResArap
 
-    conf = Path(__file__).resolve().parents[1] / "conf" / "method"
+    conf = Path(__file__).resolve().parents[1] / "conf"
+    assert yaml.safe_load((conf / "config.yaml").read_text())["arap"]["coarse_n_low"] == COARSE_N_LOW
     for name in ("ARAP", "Elastic", "ARAP-SR"):
-        assert yaml.safe_load((conf / f"{name}.yaml").read_text())["coarse_n_low"] == COARSE_N_LOW, name
+        text = (conf / "method" / f"{name}.yaml").read_text()
+        assert yaml.safe_load(text)["coarse_n_low"] == "${arap.coarse_n_low}", name
+    numbers = [line for p in conf.rglob("*.yaml") for line in p.read_text().splitlines()
+               if line.split("#")[0].strip().startswith("coarse_n_low:") and "${" not in line]
+    assert len(numbers) == 1, numbers
     classes = (ARAPSR, ARAP, Elastic, FullResArap)
     signatures = [(coarse_start, "n_low"), *((c.__init__, "coarse_n_low") for c in classes)]
     for f, p in signatures:

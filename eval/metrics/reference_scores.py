@@ -16,6 +16,7 @@ import numpy as np
 from harness.method_registry import method_meta
 from sshade.arap import (
     ALPHA_SCALINGS,
+    DEFAULT_ALPHA,
     ENERGIES,
     SRProblem,
     build_operators,
@@ -88,7 +89,7 @@ def method_energy(method) -> str:
         return str(e)
     ref = method_meta(str(getattr(method, "name", method)))["reference"]
     if ref == "arap_sr":
-        return sr_energy(getattr(method, "alpha", 0.01), getattr(method, "alpha_scaling", "valence"))
+        return sr_energy(getattr(method, "alpha", DEFAULT_ALPHA), getattr(method, "alpha_scaling", "valence"))
     if ref not in ENERGIES:
         raise SShaDeError(f"method {getattr(method, 'name', method)}: reference must be one of "
                           f"{[*ENERGIES, 'arap_sr']}, got {ref!r}")

@@ -458,7 +458,7 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
     --------
     Example::
 
-        res = arap_sr_deform(V, F, handles, targets, ArapOptions(alpha=0.01, stop="move"))
+        res = arap_sr_deform(V, F, handles, targets, ArapOptions(stop="move"))
     """
     o = _sr_options(options, "arap_sr_deform", problem)
     stop, crit = o.stop, o.criterion
