@@ -19,9 +19,9 @@ from typing import Any, Dict, List, Optional  # OmegaConf 2.3 reads typing's gen
 
 from omegaconf import MISSING, OmegaConf
 
+from baselines.coarse_start import COARSE_N_LOW
 from eval.run.spec import FigureOptions, ReferenceOptions, ReportOptions
 from harness.method_registry import builtin_methods, method_file, method_key
-from baselines.coarse_start import COARSE_N_LOW
 from sshade.arap import DEFAULT_ALPHA
 from sshade.errors import SShaDeError
 
