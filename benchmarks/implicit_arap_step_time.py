@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 
 import baselines.implicit_arap.method as ia  # noqa: E402
 from baselines.implicit_arap.backend import torch  # noqa: E402
+from baselines.implicit_arap.params import ImplicitARAPParams  # noqa: E402
 from sshade.mesh import read_mesh  # noqa: E402
 
 
@@ -38,9 +39,9 @@ def step_times(V, F, h, t, args) -> dict:
     m.deform(V, F, h, t)
     sdf = m.info["sdf_fit_s"] / args.sdf_steps
     dfm = m.info["deform_s"] / args.deform_steps
-    full = ia.check_settings(args.preset, {})
+    full = ImplicitARAPParams(preset=args.preset)  # the preset's step counts
     return {"sdf_ms_per_step": 1e3 * sdf, "deform_ms_per_step": 1e3 * dfm, "device": m.info["device"],
-            "case_estimate_s": full["sdf_steps"] * sdf + full["deform_steps"] * dfm, "threads": m.info["threads"]}
+            "case_estimate_s": full.sdf_steps * sdf + full.deform_steps * dfm, "threads": m.info["threads"]}
 
 
 def main() -> int:

@@ -1,5 +1,7 @@
 """SShaDe's API states each parameter once: at most 10 parameters per public function of
-sshade/ (a dataclass's generated ``__init__``, a record of named fields, aside), SShaDe's
+sshade/ and of baselines/ (a dataclass's generated ``__init__``, a record of named fields,
+aside; Implicit-ARAP's as one :class:`baselines.implicit_arap.ImplicitARAPParams`,
+tests/test_implicit_arap_params.py), SShaDe's
 own as one :class:`sshade.params.SShaDeParams` plus keyword overrides, listed in help(),
 the ARAP solvers' as one :class:`sshade.arap.ArapOptions` (tests/test_arap_options.py).
 """
@@ -14,6 +16,7 @@ import re
 import numpy as np
 import pytest
 
+import baselines
 import sshade
 from sshade import SShaDe, SShaDeError, check_params, deform, prepare
 from sshade.arap.problems import twisted_bar
@@ -22,8 +25,10 @@ from sshade.params import SShaDeParams
 from sshade.pipeline import deform_once
 
 
-def _public_callables():
-    for info in pkgutil.walk_packages(sshade.__path__, "sshade."):
+def _public_callables(package):
+    """``(dotted name, function)`` of each public function, method and constructor of
+    ``package``'s modules (a dataclass's generated ``__init__`` aside)."""
+    for info in pkgutil.walk_packages(package.__path__, f"{package.__name__}."):
         if info.name.endswith("__main__"):
             continue
         mod = importlib.import_module(info.name)
@@ -40,9 +45,10 @@ def _public_callables():
                         yield f"{mod.__name__}.{name}.{k}", v
 
 
-def test_no_public_function_of_sshade_takes_more_than_10_parameters():
+@pytest.mark.parametrize("package", [sshade, baselines], ids=["sshade", "baselines"])
+def test_no_public_function_takes_more_than_10_parameters(package):
     wide = {}
-    for name, fn in _public_callables():
+    for name, fn in _public_callables(package):
         n = len([p for p in inspect.signature(fn).parameters if p not in ("self", "cls")])
         if n > 10:
             wide[name] = n

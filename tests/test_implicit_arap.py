@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.implicit_arap import ImplicitARAP
+from baselines.implicit_arap import ImplicitARAP, ImplicitARAPParams
 from baselines.implicit_arap.field import DeformationField, rodrigues
 from baselines.implicit_arap.method import fit_field
 from baselines.implicit_arap.patches import disk, edge_structure, mesh_patches, patch_energy
@@ -43,16 +43,16 @@ def _sphere_mesh():
 
 
 def _settings(**kw):
-    from baselines.implicit_arap.method import check_settings
-    return check_settings("cpu", {**SMALL, **kw})
+    """The cpu preset with :data:`SMALL` and ``kw`` over it, on the CPU."""
+    return ImplicitARAPParams(**{**SMALL, "device": "cpu", **kw})
 
 
 def _field(X, F, handles, targets, steps=60, seed=0, **kw):
     """fit_field on the analytic sphere SDF; (field, loss history)."""
     moving = ~np.all(targets == X[handles], axis=1)
     gen = torch.Generator().manual_seed(seed)
-    field, hist, _ = fit_field(sphere_sdf(0.5), X, F, handles, targets, moving, s=_settings(deform_steps=steps, **kw),
-                               generator=gen, rng=np.random.default_rng(seed), device="cpu")
+    field, hist, _ = fit_field(sphere_sdf(0.5), X, F, handles, targets, moving, _settings(deform_steps=steps, **kw),
+                               generator=gen, rng=np.random.default_rng(seed))
     return field, hist
 
 
@@ -168,6 +168,26 @@ def test_units_round_trip_and_parameters_checked():
             ImplicitARAP(**bad)
 
 
+def test_params_object_mapping_and_keywords_build_the_same_method_and_bits():
+    """ImplicitARAP(params), ImplicitARAP(mapping) and ImplicitARAP(**keywords) hold equal
+    parameters and give the same bits; an override over a params object replaces its field."""
+    X, F = _sphere_mesh()
+    h = np.flatnonzero(X[:, 2] > 0.45)
+    kw = {**SMALL, "sdf_steps": 5, "sdf_samples": 128, "deform_steps": 3, "device": "cpu", "arap_weight": 50}
+    p = ImplicitARAPParams(**kw)
+    ms = [ImplicitARAP(p), ImplicitARAP(dict(kw)), ImplicitARAP(**kw),
+          ImplicitARAP(p.replace(arap_weight=7), arap_weight=50)]
+    assert all(m.params == p for m in ms) and ms[0].params is p
+    outs = [m.deform(X, F, h, X[h] + 0.01) for m in ms]
+    assert all(np.array_equal(outs[0], o) for o in outs[1:])
+    m = ImplicitARAP(p, seed=4, name="IA-4")
+    assert (m.params.seed, m.params.arap_weight, m.seed, m.name) == (4, 50.0, 4, "IA-4")
+    assert (m.preset, m.device, m.reference_weights, m.torch_device()) == ("cpu", "cpu", False, "cpu")
+    assert m.effective_params() == p.replace(seed=4).as_dict()
+    with pytest.raises(SShaDeError, match="no parameter 'arap_wieght'"):
+        ImplicitARAP(arap_wieght=1.0)
+
+
 def test_the_rate_schedule_acts_only_from_its_first_milestone():
     """The reference's MultiStepLR: milestones past the last step leave every float as
     without a schedule (so the cpu_soft preset, 500 steps under milestones from 1000, is
@@ -187,7 +207,7 @@ def test_the_presets_stiffness_and_schedule():
     """cpu: ARAP weight 120 with correct weights (at least the reference's mesh default,
     10 with its own weights, which are at most about 12x stiffer on 16-point disks),
     cpu_soft: the earlier default (10, 500 steps); both share the reference's schedule."""
-    from baselines.implicit_arap.method import PRESETS
+    from baselines.implicit_arap.params import PRESETS
     cpu, soft, paper = PRESETS["cpu"], PRESETS["cpu_soft"], PRESETS["paper"]
     assert cpu["arap_weight"] >= 10 * 12 and not cpu["reference_weights"] and cpu["deform_steps"] > 1000
     assert (soft["arap_weight"], soft["deform_steps"]) == (10.0, 500)

@@ -18,7 +18,7 @@ except (ImportError, OSError) as e:
     torch = None
     _IMPORT_ERROR = e
 
-__all__ = ["NO_TORCH", "require_torch", "torch"]
+__all__ = ["NO_TORCH", "require_torch", "resolve_device", "torch"]
 
 #: The one line a build without PyTorch fails with (a PyTorch that is installed but does
 #: not load adds the first line of its error).
@@ -39,3 +39,12 @@ def require_torch():
         first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), "")
         raise SShaDeError(f"{NO_TORCH} (import torch failed: {type(e).__name__}: {first})")
     return torch
+
+
+def resolve_device(device: str) -> str:
+    """The torch device ``device`` (one of
+    :data:`baselines.implicit_arap.params.DEVICES`) names: ``auto`` is ``cuda`` when
+    PyTorch sees a CUDA device, else ``cpu``; ``cpu`` and ``cuda`` are themselves."""
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return device

@@ -11,17 +11,20 @@ The steps, the loss and the presets: docs/methods.md, "Implicit-ARAP".
 """
 from __future__ import annotations
 
-import math
+import inspect
 import time
+from collections.abc import Mapping
 from contextlib import contextmanager
+from dataclasses import fields
 
 import numpy as np
 
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_handles, validate_mesh
 
-from .backend import require_torch, torch
+from .backend import require_torch, resolve_device, torch
 from .field import DeformationField
+from .params import PRESETS, ImplicitARAPParams, implicit_arap_params
 from .patches import disk, edge_structure, mesh_patches, patch_energy
 from .sdf import (
     SurfaceSampler,
@@ -31,89 +34,8 @@ from .sdf import (
     sample_zero_level,
 )
 
-__all__ = ["PRESETS", "ImplicitARAP", "deterministic", "fit_field", "patch_centres"]
-
-#: The configurations. ``paper``: the reference code's as of its last commit before the
-#: paper (fa0cb78, 2024-05-02; GPU-sized): its loss weights (ARAP 1000, each handle MSE
-#: 1000), its cotangent weights (``reference_weights``: wrong edges, overwritten repeats)
-#: and its learning-rate schedule (MultiStepLR, halved at steps 1000, 2000, 5000).
-#: ``cpu`` (the default) and ``cpu_soft`` share ``_CPU``: smaller networks, fewer samples
-#: and patches, zero-level centres drawn on the mesh and projected (instead of rejection
-#: sampling in the box), at most 128 handle patches per step. ``cpu``: correct cotangent
-#: weights with ARAP weight 120, at least as stiff as the reference's mesh default since
-#: d6efd08 (weight 10 with its own weights, which are 5.0-12.1x stiffer on the cpu
-#: preset's 16-point disks: benchmarks/implicit_arap_weights.py), run for ``STIFF_STEPS``
-#: steps. ``cpu_soft``: ARAP weight 10 with correct weights, 500 steps (about 8x softer
-#: than the reference; the default before ``cpu``). Measurements: docs/methods.md.
-#: ``handle_patches`` 0 = every handle is a patch centre at every step (the reference);
-#: n > 0 = a random n of them per step when there are more.
-_CPU = dict(layers=4, width=128, skip=2, octaves=6, sdf_steps=1000, sdf_lr=5e-4, sdf_samples=2048,
-            deform_lr=1e-3, surface_patches=256, handle_patches=128, space_patches=128, patch_points=16,
-            patch_radius=math.sqrt(1e-3), projections=2, level_threshold=0.01, centres="mesh",
-            handle_weight=1000.0, reference_weights=False, lr_milestones=(1000, 2000, 5000), lr_gamma=0.5)
-#: The cpu preset's deformation steps: the fewest after which the largest handle error
-#: stops falling on most FAUST and DeFAUST cases at its ARAP weight (three FAUST cases
-#: stay above 1 % of the diagonal, kept with their handle error: docs/methods.md).
-STIFF_STEPS = 1500
-PRESETS = {
-    "paper": dict(layers=8, width=256, skip=4, octaves=6, sdf_steps=10000, sdf_lr=1e-4, sdf_samples=16384,
-                  deform_steps=1000, deform_lr=1e-3, surface_patches=1000, handle_patches=0, space_patches=1000,
-                  patch_points=30, patch_radius=math.sqrt(1e-3), projections=5, level_threshold=0.01,
-                  centres="rejection", arap_weight=1000.0, handle_weight=1000.0, reference_weights=True,
-                  lr_milestones=(1000, 2000, 5000), lr_gamma=0.5),
-    "cpu": dict(_CPU, deform_steps=STIFF_STEPS, arap_weight=120.0),
-    "cpu_soft": dict(_CPU, deform_steps=500, arap_weight=10.0),
-}
-_INTS = {"layers": 2, "width": 1, "skip": 0, "octaves": 0, "sdf_steps": 0, "sdf_samples": 1, "deform_steps": 0,
-         "surface_patches": 0, "handle_patches": 0, "space_patches": 0, "patch_points": 4, "projections": 0}
-_FLOATS = ("sdf_lr", "deform_lr", "patch_radius", "level_threshold", "arap_weight", "handle_weight", "lr_gamma")
-
-
-def check_settings(preset: str, given: dict) -> dict:
-    """The preset's settings with the ``given`` non-None values over them, checked.
-
-    Raises
-    ------
-    SShaDeError naming the parameter and its value: an unknown preset, an integer below
-    its minimum (``layers`` 2, ``patch_points`` 4, ``skip`` a hidden layer or 0, ...), a
-    float that is not finite and > 0 (``arap_weight`` may be 0), ``centres`` not
-    ``mesh`` / ``rejection``, ``reference_weights`` not a bool.
-    """
-    if preset not in PRESETS:
-        raise SShaDeError(f"Implicit-ARAP: unknown preset {preset!r}; use one of {sorted(PRESETS)}")
-    s = {**PRESETS[preset], **{k: v for k, v in given.items() if v is not None}}
-    for k, lo in _INTS.items():
-        v = s[k]
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise SShaDeError(f"Implicit-ARAP: {k} must be an integer >= {lo}, got {v!r}")
-        s[k] = int(v)
-    for k in _FLOATS:
-        v = s[k]
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        if not ok or v < 0 or (v == 0 and k != "arap_weight"):
-            raise SShaDeError(f"Implicit-ARAP: {k} must be a finite number > 0, got {v!r}")
-        s[k] = float(v)
-    if s["skip"] and not 1 <= s["skip"] <= s["layers"] - 2:
-        raise SShaDeError(f"Implicit-ARAP: skip must be 0 or in [1, layers - 2 = {s['layers'] - 2}], got {s['skip']}")
-    if s["centres"] not in ("mesh", "rejection"):
-        raise SShaDeError(f"Implicit-ARAP: centres must be 'mesh' or 'rejection', got {s['centres']!r}")
-    if not isinstance(s["reference_weights"], (bool, np.bool_)):
-        raise SShaDeError(f"Implicit-ARAP: reference_weights must be true or false, got {s['reference_weights']!r}")
-    s["reference_weights"] = bool(s["reference_weights"])
-    s["lr_milestones"] = _milestones(s["lr_milestones"])
-    return s
-
-
-def _milestones(v) -> tuple:
-    """``lr_milestones`` as a tuple of increasing integers >= 1 (SShaDeError otherwise)."""
-    try:
-        m = tuple(v)
-    except TypeError:
-        m = None
-    if m is None or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) and x >= 1 for x in m) \
-            or any(b <= a for a, b in zip(m, m[1:])):
-        raise SShaDeError(f"Implicit-ARAP: lr_milestones must be increasing integers >= 1, got {v!r}")
-    return tuple(int(x) for x in m)
+__all__ = ["PRESETS", "ImplicitARAP", "ImplicitARAPParams", "deterministic", "fit_field", "patch_centres",
+           "apply_field"]
 
 
 @contextmanager
@@ -128,7 +50,7 @@ def deterministic():
         torch.use_deterministic_algorithms(was, warn_only=warn)
 
 
-def patch_centres(sdf, H, s: dict, sampler, generator):
+def patch_centres(sdf, H, params: ImplicitARAPParams, sampler, generator):
     """One step's patch centres: handles (all, or a random ``handle_patches`` of them),
     zero-level points up to ``surface_patches`` centres in all (``centres="mesh"``: drawn
     on the mesh and projected ``projections`` times onto the zero level set;
@@ -137,71 +59,75 @@ def patch_centres(sdf, H, s: dict, sampler, generator):
 
     Parameters
     ----------
-    sdf : callable; H : (h, 3) tensor of handle rest positions (normalised); s : the
-    settings (:func:`check_settings`); sampler : :class:`SurfaceSampler` of the mesh;
-    generator : CPU torch.Generator.
+    sdf : callable; H : (h, 3) tensor of handle rest positions (normalised); params :
+    :class:`ImplicitARAPParams` (the fields named above); sampler : :class:`SurfaceSampler`
+    of the mesh; generator : CPU torch.Generator.
 
     Returns
     -------
     (P, 3) tensor.
     """
+    p = params
     dev, dt = H.device, H.dtype
     hc = H
-    if s["handle_patches"] and len(H) > s["handle_patches"]:
-        hc = H[torch.randperm(len(H), generator=generator)[:s["handle_patches"]].to(dev)]
-    n_surf = max(0, s["surface_patches"] - len(hc))
-    if s["centres"] == "mesh":
+    if p.handle_patches and len(H) > p.handle_patches:
+        hc = H[torch.randperm(len(H), generator=generator)[:p.handle_patches].to(dev)]
+    n_surf = max(0, p.surface_patches - len(hc))
+    if p.centres == "mesh":
         xs, _ = sampler.sample(n_surf, generator)
-        xs = project_to_level(sdf, xs, torch.zeros(n_surf, device=dev, dtype=dt), s["projections"])
+        xs = project_to_level(sdf, xs, torch.zeros(n_surf, device=dev, dtype=dt), p.projections)
     else:
-        xs = sample_zero_level(sdf, n_surf, threshold=s["level_threshold"], iters=s["projections"],
+        xs = sample_zero_level(sdf, n_surf, threshold=p.level_threshold, iters=p.projections,
                                generator=generator, device=dev, dtype=dt)
-    xu = (2 * torch.rand(s["space_patches"], 3, generator=generator, dtype=torch.float64) - 1).to(dev, dt)
+    xu = (2 * torch.rand(p.space_patches, 3, generator=generator, dtype=torch.float64) - 1).to(dev, dt)
     return torch.cat([hc, xs, xu])
 
 
-def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, moving: np.ndarray, *,
-              s: dict, generator, rng: np.random.Generator, device, reference_weights: bool = False, monitor=None):
+def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray, moving: np.ndarray,
+              params: ImplicitARAPParams, *, generator, rng: np.random.Generator, monitor=None):
     """Train the deformation field (Baieri et al. 2024 §4; reference ``deform-sdf``).
 
     Parameters
     ----------
     sdf : callable (N, 3) -> (N,), the shape; X : (n, 3) float64 normalised vertices;
     F : (m, 3) int64; handles : (h,) int64; targets : (h, 3) float64 normalised targets;
-    moving : (h,) bool; s : settings (:func:`check_settings`); generator : CPU
-    torch.Generator; rng : numpy Generator (the disks); device : torch device;
-    reference_weights : bool, the reference code's cotangent weights
-    (:mod:`baselines.implicit_arap.patches`); monitor : None or callable ``(step, field)``
-    called after each step (``step`` from 1; e.g. to record the handle error on the way).
+    moving : (h,) bool; params : :class:`ImplicitARAPParams`: the network (``layers``,
+    ``width``, ``skip``, ``octaves``), the steps and their rate schedule, the patches
+    (:func:`patch_centres`, ``patch_points``, ``patch_radius``), the loss weights, the
+    cotangent weights (``reference_weights``, :mod:`baselines.implicit_arap.patches`) and
+    the device (``auto`` resolved: :func:`baselines.implicit_arap.backend.resolve_device`);
+    generator : CPU torch.Generator; rng : numpy Generator (the disks); monitor : None or
+    callable ``(step, field)`` called after each step (``step`` from 1; e.g. to record the
+    handle error on the way).
 
     Returns
     -------
     (DeformationField, list of the loss per step, mean number of patches per step).
     """
-    dt = torch.float32
-    field = DeformationField(layers=s["layers"], width=s["width"], skip=s["skip"], octaves=s["octaves"],
+    p, device, dt = params, resolve_device(params.device), torch.float32
+    field = DeformationField(layers=p.layers, width=p.width, skip=p.skip, octaves=p.octaves,
                              generator=generator, device=device, dtype=dt)
-    opt = torch.optim.Adam(field.parameters(), lr=s["deform_lr"])
+    opt = torch.optim.Adam(field.parameters(), lr=p.deform_lr)
     # the reference's schedule (MultiStepLR): the rate times lr_gamma at each milestone
-    sched = torch.optim.lr_scheduler.MultiStepLR(opt, milestones=list(s["lr_milestones"]), gamma=s["lr_gamma"])
+    sched = torch.optim.lr_scheduler.MultiStepLR(opt, milestones=list(p.lr_milestones), gamma=p.lr_gamma)
     H = torch.as_tensor(X[handles], dtype=dt, device=device)
     goal = torch.where(torch.as_tensor(moving, device=device)[:, None],
                        torch.as_tensor(targets, dtype=dt, device=device), H)
     sampler = SurfaceSampler(X, F, device, dt)
     groups = [g for g in (torch.as_tensor(moving, device=device), torch.as_tensor(~moving, device=device)) if g.any()]
     history, n_patches = [], 0
-    for _ in range(s["deform_steps"]):
-        pts, tris = disk(s["patch_points"], s["patch_radius"], rng)
-        Xp = mesh_patches(sdf, patch_centres(sdf, H, s, sampler, generator), pts, s["projections"])
+    for _ in range(p.deform_steps):
+        pts, tris = disk(p.patch_points, p.patch_radius, rng)
+        Xp = mesh_patches(sdf, patch_centres(sdf, H, p, sampler, generator), pts, p.projections)
         P, k = Xp.shape[:2]
         x = torch.cat([Xp.reshape(-1, 3), H])
         R, t = field.rotation_translation(x)
         Tx = (R @ x[:, :, None])[:, :, 0] + t
         arap = patch_energy(Xp, R[:P * k].view(P, k, 3, 3), Tx[:P * k].view(P, k, 3), tris,
-                            edge_structure(tris, reference_weights))
+                            edge_structure(tris, p.reference_weights))
         err = ((Tx[P * k:] - goal) ** 2).sum(-1)
         fit = sum(err[g].mean() / 3 for g in groups)  # the MSE of each group (per coordinate)
-        loss = s["arap_weight"] * arap + s["handle_weight"] * fit
+        loss = p.arap_weight * arap + p.handle_weight * fit
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -210,7 +136,7 @@ def fit_field(sdf, X: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
         if monitor is not None:
             monitor(len(history), field)
         n_patches += P
-    return field, history, n_patches / max(s["deform_steps"], 1)
+    return field, history, n_patches / max(p.deform_steps, 1)
 
 
 def apply_field(field, X: np.ndarray, device, chunk: int = 32768) -> np.ndarray:
@@ -222,32 +148,40 @@ def apply_field(field, X: np.ndarray, device, chunk: int = 32768) -> np.ndarray:
     return torch.cat(out).numpy()
 
 
+def _spelled_out(init) -> inspect.Signature:
+    """The signature of ``init`` (a constructor taking ``**overrides`` of
+    :class:`ImplicitARAPParams`) without ``self``, the overrides spelled out as
+    keyword-only parameters with the fields' defaults: what introspection (help, a plug-in
+    builder asking whether ``name`` is a parameter, an editor) sees."""
+    sig = inspect.signature(init)
+    head = [q for q in sig.parameters.values() if q.kind is not q.VAR_KEYWORD and q.name != "self"]
+    return sig.replace(parameters=[*head, *(inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default)
+                                            for f in fields(ImplicitARAPParams))])
+
+
 class ImplicitARAP:
     """Implicit-ARAP (Baieri et al. 2024) as one of our methods.
 
     Parameters
     ----------
-    preset : ``"cpu"`` (default; minutes per case on 2 cores, at least as stiff as the
-        reference), ``"cpu_soft"`` (ARAP weight 10 with correct weights, 500 steps) or
-        ``"paper"`` (the reference configuration: 8 x 256 networks, 10,000 SDF steps,
-        1,000 deformation steps, 2,000 patches of 30 points per step; sized for a GPU).
-        See :data:`PRESETS`.
-    device : ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
-    seed : int, seeds every draw (torch and numpy); the same seed on the same device
-        and thread count gives bit-identical output.
-    reference_weights : bool or None, the reference code's cotangent weights (wrong edges,
-        overwritten repeats) instead of the correct ones (docs/methods.md); None: the
-        preset's (paper: True, cpu and cpu_soft: False).
-    layers, width, skip, octaves, sdf_steps, sdf_lr, sdf_samples, deform_steps,
-    deform_lr, surface_patches, handle_patches, space_patches, patch_points,
-    patch_radius, projections, level_threshold, centres, arap_weight, handle_weight,
-    lr_milestones (increasing steps), lr_gamma (the rate's factor at each milestone) :
-        override the preset's value (None: the preset's). Lengths in the normalised box.
+    params : :class:`ImplicitARAPParams`, a mapping of some of its fields, or None (the
+        defaults: the ``cpu`` preset).
+    name : str, default ``"Implicit-ARAP"``, the method's row name.
+    **overrides : fields of :class:`ImplicitARAPParams` over ``params`` (None: the
+        preset's value), e.g. ``preset="paper"``, ``arap_weight=1000.0``: the reference for
+        each (meaning, range, the presets' values and their source) is there.
+
+    Attributes
+    ----------
+    params : the checked :class:`ImplicitARAPParams`; ``preset``, ``device``, ``seed``,
+    ``reference_weights`` are its fields'. info : dict, the last :meth:`deform`'s. monitor :
+    None, or a callable ``(step, field)`` run after each deformation step (:func:`fit_field`).
 
     Raises
     ------
     SShaDeError at construction: PyTorch missing (one line: ``Implicit-ARAP needs
-    PyTorch: pip install -e .[neural]``), a bad parameter, ``device="cuda"`` without CUDA.
+    PyTorch: pip install -e .[neural]``), a bad parameter (:class:`ImplicitARAPParams`),
+    ``device="cuda"`` without CUDA.
 
     Example::
 
@@ -256,41 +190,50 @@ class ImplicitARAP:
         m.info["sdf_fit_s"], m.info["deform_s"]
     """
 
-    def __init__(self, *, preset: str = "cpu", device: str = "auto", seed: int = 0, reference_weights=None,
-                 name: str = "Implicit-ARAP", layers=None, width=None, skip=None, octaves=None, sdf_steps=None,
-                 sdf_lr=None, sdf_samples=None, deform_steps=None, deform_lr=None, surface_patches=None,
-                 handle_patches=None, space_patches=None, patch_points=None, patch_radius=None, projections=None,
-                 level_threshold=None, centres=None, arap_weight=None, handle_weight=None,
-                 lr_milestones=None, lr_gamma=None):
+    def __init__(self, params: ImplicitARAPParams | Mapping | None = None, *, name: str = "Implicit-ARAP",
+                 **overrides):
         require_torch()
-        given = {k: v for k, v in locals().items() if k in PRESETS["paper"]}
-        self.settings = check_settings(str(preset), given)
-        if device not in ("auto", "cpu", "cuda"):
-            raise SShaDeError(f"Implicit-ARAP: device must be auto, cpu or cuda, got {device!r}")
-        if device == "cuda" and not torch.cuda.is_available():
+        self.params = implicit_arap_params(params, **overrides)
+        if self.params.device == "cuda" and not torch.cuda.is_available():
             raise SShaDeError("Implicit-ARAP: device=cuda but PyTorch sees no CUDA device (use auto or cpu)")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise SShaDeError(f"Implicit-ARAP: seed must be an integer >= 0, got {seed!r}")
-        self.preset, self.device, self.seed = str(preset), device, int(seed)
-        self.reference_weights = self.settings["reference_weights"]
         self.name = name
         self.info: dict = {}
         #: None, or a callable ``(step, field)`` run after each deformation step
         #: (:func:`fit_field`; normalised coordinates, :func:`baselines.implicit_arap.sdf.normalisation`)
         self.monitor = None
 
+    __signature__ = _spelled_out(__init__)  # the keywords it takes: ImplicitARAPParams' fields
+
+    @property
+    def preset(self) -> str:
+        """The preset (:attr:`ImplicitARAPParams.preset`)."""
+        return self.params.preset
+
+    @property
+    def device(self) -> str:
+        """The device as asked (``auto``, ``cpu`` or ``cuda``; :meth:`torch_device` resolves it)."""
+        return self.params.device
+
+    @property
+    def seed(self) -> int:
+        """The seed (:attr:`ImplicitARAPParams.seed`)."""
+        return self.params.seed
+
+    @property
+    def reference_weights(self) -> bool:
+        """Whether the reference code's cotangent weights are used (:attr:`ImplicitARAPParams.reference_weights`)."""
+        return self.params.reference_weights
+
     def effective_params(self) -> dict:
-        """The parameters :meth:`deform` runs with: ``preset``, ``device`` (as asked;
-        ``auto``: CUDA when PyTorch sees one, the case's ``device`` info says which),
-        ``seed`` and every setting of :data:`PRESETS` with the given ones over the
-        preset's (:func:`check_settings`): no None stands for a preset's value."""
-        return {"preset": self.preset, "device": self.device, "seed": self.seed, **self.settings}
+        """The parameters :meth:`deform` runs with (:meth:`ImplicitARAPParams.as_dict`):
+        ``preset``, ``device`` (as asked; ``auto``: CUDA when PyTorch sees one, the case's
+        ``device`` info says which), ``seed`` and every setting of :data:`PRESETS` with the
+        given ones over the preset's: no None stands for a preset's value."""
+        return self.params.as_dict()
 
     def torch_device(self) -> str:
         """The device the next :meth:`deform` runs on (``auto`` resolved)."""
-        if self.device == "auto":
-            return "cuda" if torch.cuda.is_available() else "cpu"
-        return self.device
+        return resolve_device(self.params.device)
 
     def deform(self, V, F, handles, targets) -> np.ndarray:
         """Deform ``(V, F)`` so ``V[handles]`` move to ``targets`` (soft constraints, as
@@ -298,31 +241,29 @@ class ImplicitARAP:
         the SDF fit. Raises ``SShaDeError`` on invalid mesh or handles."""
         V, F = validate_mesh(V, F)
         handles, targets = validate_handles(V, handles, targets)
-        s, dev = self.settings, self.torch_device()
+        p, dev = self.params, self.torch_device()
         centre, scale = normalisation(V, F)
         X = (V - centre) * scale
         with deterministic():
-            gen = torch.Generator().manual_seed(self.seed)
-            rng = np.random.default_rng(self.seed)
+            gen = torch.Generator().manual_seed(p.seed)
+            rng = np.random.default_rng(p.seed)
             t0 = time.perf_counter()
-            net = {k: s[k] for k in ("layers", "width", "skip", "octaves")}
-            sdf, sdf_hist = fit_sdf(X, F, steps=s["sdf_steps"], lr=s["sdf_lr"], samples=s["sdf_samples"],
-                                    generator=gen, device=dev, **net)
+            sdf, sdf_hist = fit_sdf(X, F, steps=p.sdf_steps, lr=p.sdf_lr, samples=p.sdf_samples, generator=gen,
+                                    device=dev, layers=p.layers, width=p.width, skip=p.skip, octaves=p.octaves)
             t1 = time.perf_counter()
             moving = ~np.all(targets == V[handles], axis=1)
-            field, hist, n_patches = fit_field(sdf, X, F, handles, (targets - centre) * scale, moving, s=s,
-                                               generator=gen, rng=rng, device=dev,
-                                               reference_weights=self.reference_weights, monitor=self.monitor)
+            field, hist, n_patches = fit_field(sdf, X, F, handles, (targets - centre) * scale, moving, p,
+                                               generator=gen, rng=rng, monitor=self.monitor)
             t2 = time.perf_counter()
             out = apply_field(field, X, dev) / scale + centre
-        self.info = {"preset": self.preset, "device": dev, "seed": self.seed, "handles": "soft",
-                     "sdf_steps": s["sdf_steps"],
-                     "deform_steps": s["deform_steps"], "lr_milestones": list(s["lr_milestones"]),
+        self.info = {"preset": p.preset, "device": dev, "seed": p.seed, "handles": "soft",
+                     "sdf_steps": p.sdf_steps,
+                     "deform_steps": p.deform_steps, "lr_milestones": list(p.lr_milestones),
                      "sdf_fit_s": t1 - t0, "deform_s": t2 - t1,
                      "map_s": time.perf_counter() - t2, "sdf_loss": _tail(sdf_hist), "loss": _tail(hist),
                      "loss_first": hist[0] if hist else None, "patches_per_step": n_patches,
                      "moving_handles": int(moving.sum()), "static_handles": int((~moving).sum()),
-                     "reference_weights": self.reference_weights, "threads": torch.get_num_threads()}
+                     "reference_weights": p.reference_weights, "threads": torch.get_num_threads()}
         return out
 
     def warmup(self, n_vertices: int | None = None) -> float:
