@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from tqdm import tqdm
 
-from harness.jobs import run_jobs, send
+from harness.jobs import JobOptions, run_jobs, send
 from harness.slurm_array import run_array
 from harness.slurm_jobs import killed_message
 from sshade.cores import pool_size
@@ -213,7 +213,7 @@ def _build_into(out: Path, cfg: BuildConfig, src: Source, params: dict, old: dic
         else:
             run_jobs(subject_job, [(s, list(p)) for s, p in todo.items()], workers=n, init=init_subject_worker,
                      init_args=(out, cfg, old, common), on_message=lambda msg: notify(*msg),
-                     on_result=lambda i, r: done(r), thread_variables=_WORKER_THREAD_VARIABLES)
+                     on_result=lambda i, r: done(r), options=JobOptions(thread_variables=_WORKER_THREAD_VARIABLES))
     finally:
         bar.close()
     _merge(manifest, report, [results[s] for s in sorted(results)])

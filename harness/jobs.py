@@ -23,11 +23,13 @@ import threading
 import time
 import traceback
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 from sshade.cores import CORES_VARIABLE, available_cores, pool_size
 from sshade.errors import SShaDeError
 
-__all__ = ["THREAD_VARIABLES", "GRACE_S", "thread_limit", "run_jobs", "send", "in_worker", "death_reason"]
+__all__ = ["THREAD_VARIABLES", "GRACE_S", "JobOptions", "thread_limit", "run_jobs", "send", "in_worker",
+           "death_reason"]
 
 #: Environment variables that cap the threads of OpenBLAS, MKL, OpenMP, Accelerate, numexpr and numba.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
@@ -35,6 +37,38 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 
 #: Seconds a terminated worker is given to end before it is killed (SIGKILL).
 GRACE_S = 3.0
+
+
+@dataclass(frozen=True)
+class JobOptions:
+    """How :func:`run_jobs` sets up its workers and words a worker's death, checked when
+    made (SShaDeError naming the field).
+
+    thread_variables : tuple of str, default :data:`THREAD_VARIABLES`: those of its
+        variables set to the workers' thread limit (the others keep this process's values);
+        :data:`sshade.cores.CORES_VARIABLE` is always set to it. A list is taken as a tuple.
+    what : str, default ``"build"``: the workers' purpose, in the message when a worker
+        dies without ``on_lost`` or while starting (``"a build worker process died ..."``).
+    advice : str, default ``"run the same command again to resume (finished items are
+        kept)"``: what to do next, in that message.
+
+    >>> JobOptions(what="evaluation").what
+    'evaluation'
+    """
+
+    thread_variables: tuple[str, ...] = THREAD_VARIABLES
+    what: str = "build"
+    advice: str = "run the same command again to resume (finished items are kept)"
+
+    def __post_init__(self):
+        names = self.thread_variables
+        if not isinstance(names, (tuple, list)) or not set(names) <= set(THREAD_VARIABLES):
+            raise SShaDeError(f"JobOptions: thread_variables must be some of {THREAD_VARIABLES}, got {names!r}")
+        object.__setattr__(self, "thread_variables", tuple(names))
+        for name in ("what", "advice"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise SShaDeError(f"JobOptions: {name} must be a non-empty string, got {getattr(self, name)!r}")
+
 
 _CHANNEL: list = [None, 0, None]  # in a worker: its connection to the main process, its pid, a send lock
 _hard_exit = os._exit  # bound once: a guarded plug-in may replace os._exit meanwhile (sshade.guard)
@@ -335,8 +369,7 @@ def _deliver(hit: list) -> None:
 
 
 def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_message=None, on_result=None,
-             on_lost=None, thread_variables=THREAD_VARIABLES, what: str = "build",
-             advice: str = "run the same command again to resume (finished items are kept)") -> None:
+             on_lost=None, options: JobOptions | None = None) -> None:
     """Run ``job(*args)`` for every ``args`` in ``args_list`` in ``workers`` spawned processes.
 
     A job is handed out only when a worker is free, so that after a failure or Ctrl-C
@@ -355,11 +388,9 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
         job ``index`` dies (``reason``: :func:`death_reason`, e.g. ``"worker process died
         (SIGKILL)"``); returns the arguments of a job to run in its place under the same
         index (e.g. the items it had not reached), or None. None: a dying worker is an error.
-    thread_variables : the variables of :data:`THREAD_VARIABLES` set to the workers'
-        thread limit (the others keep this process's values); :data:`CORES_VARIABLE` is
-        always set to it.
-    what, advice : the workers' purpose (``"build"``) and what to do next, in the message
-        when a worker dies without ``on_lost`` or while starting.
+    options : :class:`JobOptions` or None (its defaults): the thread variables set in the
+        workers, and the words of the message when a worker dies without ``on_lost`` or
+        while starting.
 
     Raises
     ------
@@ -375,11 +406,12 @@ def run_jobs(job, args_list, *, workers: int, init=None, init_args=(), on_messag
     """
     if not len(args_list):
         return
+    options = JobOptions() if options is None else options
     n = pool_size(workers, len(args_list))
-    pool = _Pool(job, n, init, tuple(init_args), on_message, on_result, on_lost, what, advice)
+    pool = _Pool(job, n, init, tuple(init_args), on_message, on_result, on_lost, options.what, options.advice)
     pool.todo = [(i, tuple(a)) for i, a in enumerate(args_list)][::-1]
     finished = False
-    with _thread_env(thread_limit(n), (*thread_variables, CORES_VARIABLE)), _deferred_signals() as hit:
+    with _thread_env(thread_limit(n), (*options.thread_variables, CORES_VARIABLE)), _deferred_signals() as hit:
         try:
             pool.run(hit)
             finished = True

@@ -1,9 +1,11 @@
 """SShaDe's API states each parameter once: at most 10 parameters per public function of
-sshade/ and of baselines/ (a dataclass's generated ``__init__``, a record of named fields,
-aside; Implicit-ARAP's as one :class:`baselines.implicit_arap.ImplicitARAPParams`,
-tests/test_implicit_arap_params.py), SShaDe's
-own as one :class:`sshade.params.SShaDeParams` plus keyword overrides, listed in help(),
-the ARAP solvers' as one :class:`sshade.arap.ArapOptions` (tests/test_arap_options.py).
+sshade/, harness/, baselines/, defaust/ and eval/ (a dataclass's generated ``__init__``, a
+record of named fields, aside), SShaDe's own as one :class:`sshade.params.SShaDeParams`
+plus keyword overrides, listed in help(), the ARAP solvers' as one
+:class:`sshade.arap.ArapOptions` (tests/test_arap_options.py), Implicit-ARAP's as one
+:class:`baselines.implicit_arap.ImplicitARAPParams` (tests/test_implicit_arap_params.py),
+a mesh image's look as one :class:`eval.present.render_style.RenderStyle`
+(tests/test_render_style.py).
 """
 from __future__ import annotations
 
@@ -16,8 +18,6 @@ import re
 import numpy as np
 import pytest
 
-import baselines
-import sshade
 from sshade import SShaDe, SShaDeError, check_params, deform, prepare
 from sshade.arap.problems import twisted_bar
 from sshade.isometric import isometric_transfer, pose_transfer
@@ -25,10 +25,8 @@ from sshade.params import SShaDeParams
 from sshade.pipeline import deform_once
 
 
-def _public_callables(package):
-    """``(dotted name, function)`` of each public function, method and constructor of
-    ``package``'s modules (a dataclass's generated ``__init__`` aside)."""
-    for info in pkgutil.walk_packages(package.__path__, f"{package.__name__}."):
+def _public_callables(package: str):
+    for info in pkgutil.walk_packages(importlib.import_module(package).__path__, f"{package}."):
         if info.name.endswith("__main__"):
             continue
         mod = importlib.import_module(info.name)
@@ -45,7 +43,7 @@ def _public_callables(package):
                         yield f"{mod.__name__}.{name}.{k}", v
 
 
-@pytest.mark.parametrize("package", [sshade, baselines], ids=["sshade", "baselines"])
+@pytest.mark.parametrize("package", ["sshade", "harness", "baselines", "defaust", "eval"])
 def test_no_public_function_takes_more_than_10_parameters(package):
     wide = {}
     for name, fn in _public_callables(package):

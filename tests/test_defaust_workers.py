@@ -16,7 +16,7 @@ from defaust.build import build_defaust
 from defaust.cli import compose_config, config_from_omegaconf
 from defaust.config import BuildConfig
 from defaust.store import sha256_file
-from harness.jobs import THREAD_VARIABLES, run_jobs, send, thread_limit
+from harness.jobs import THREAD_VARIABLES, JobOptions, run_jobs, send, thread_limit
 from sshade.cores import pool_size
 from sshade.errors import SShaDeError
 
@@ -95,7 +95,7 @@ def test_run_jobs_results_messages_and_thread_limit():
     assert all(env == {k: want for k in THREAD_VARIABLES} for _, env in results.values())
     results.clear()  # only the variables named are set; the others keep this process's values
     run_jobs(_square, [(1,), (2,)], workers=2, on_result=lambda i, r: results.__setitem__(i, r),
-             thread_variables=("NUMBA_NUM_THREADS",))
+             options=JobOptions(thread_variables=("NUMBA_NUM_THREADS",)))
     here = os.environ.get("OPENBLAS_NUM_THREADS")
     assert all(env["NUMBA_NUM_THREADS"] == want and env["OPENBLAS_NUM_THREADS"] == here for _, env in results.values())
 

@@ -2,6 +2,8 @@
 evaluator's optional figure hook (``figures.enabled``)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,9 @@ import matplotlib.image as mimage  # noqa: E402
 from eval.config_check import check_config
 from eval.metrics.measures import edge_length_error  # noqa: E402
 from eval.present.figures import (  # noqa: E402
+    POSE_TRANSFER_STYLE,
+    ROW_STYLE,
+    TOSCA_STYLE,
     case_figure,
     face_edge_error,
     mesh_row,
@@ -20,6 +25,7 @@ from eval.present.figures import (  # noqa: E402
     vertex_error_pct,
 )
 from eval.present.render import figure_row, png_size, render_mesh, save_png  # noqa: E402
+from eval.present.render_style import RenderStyle  # noqa: E402
 from sshade.errors import SShaDeError  # noqa: E402
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -38,7 +44,7 @@ def _n_colours(img) -> int:
 
 def test_render_mesh_size_and_content(sphere, tmp_path):
     V, F = sphere
-    img = render_mesh(V, F, size=(200, 150))
+    img = render_mesh(V, F, style=RenderStyle(size=(200, 150)))
     assert img.shape == (150, 200, 3) and img.dtype == np.uint8
     assert _n_colours(img) > 20                       # shaded, not one flat colour
     assert (img == 255).all(axis=2).any()             # white background around the mesh
@@ -53,26 +59,25 @@ def test_render_mesh_size_and_content(sphere, tmp_path):
 
 def test_render_scalars_points_title_colorbar(sphere):
     V, F = sphere
-    img = render_mesh(V, F, colors=V[:, 1], cmap="hot", clim=(-1, 1), title="height",
-                      colorbar_label="y", points=V[:5], point_colors="blue", size=(240, 200),
-                      view=(20, -60))
+    img = render_mesh(V, F, colors=V[:, 1], clim=(-1, 1), title="height", colorbar_label="y", points=V[:5],
+                      point_colors="blue", style=RenderStyle(cmap="hot", size=(240, 200), view=(20, -60)))
     assert img.shape == (200, 240, 3)
     r, g, b = (img[..., i].astype(int) for i in range(3))
     assert ((r > 150) & (g < 80) & (b < 80)).any()    # red part of "hot"
-    per_face = render_mesh(V, F, colors=V[F].mean(axis=1)[:, 0], size=(64, 64))
+    per_face = render_mesh(V, F, colors=V[F].mean(axis=1)[:, 0], style=RenderStyle(size=(64, 64)))
     assert per_face.shape == (64, 64, 3) and _n_colours(per_face) > 10
 
 
 def test_render_hides_points_behind_the_surface(sphere):
     V, F = sphere
-    kw = dict(size=(120, 120), view=(0, -90), up="z")
-    plain = render_mesh(V, F, **kw)
+    style = RenderStyle(size=(120, 120), view=(0, -90), up="z", point_size=40)
+    plain = render_mesh(V, F, style=style)
     # up="z", azim=-90: the viewer is on the -y side; +y points are on the far side
     back = V[V[:, 1] > 0.8]
     front = V[V[:, 1] < -0.8]
-    assert np.array_equal(render_mesh(V, F, points=back, point_colors="red", point_size=40, **kw), plain)
-    assert not np.array_equal(render_mesh(V, F, points=front, point_colors="red", point_size=40, **kw), plain)
-    shown = render_mesh(V, F, points=back, point_colors="red", point_size=40, hide_occluded_points=False, **kw)
+    assert np.array_equal(render_mesh(V, F, points=back, point_colors="red", style=style), plain)
+    assert not np.array_equal(render_mesh(V, F, points=front, point_colors="red", style=style), plain)
+    shown = render_mesh(V, F, points=back, point_colors="red", style=replace(style, hide_occluded_points=False))
     assert not np.array_equal(shown, plain)
 
 
@@ -84,14 +89,14 @@ def test_render_rejects_bad_input(sphere):
         render_mesh(V, F + len(V))
     with pytest.raises(SShaDeError, match="colors"):
         render_mesh(V, F, colors=np.ones(7))
-    with pytest.raises(SShaDeError, match="size"):
-        render_mesh(V, F, size=(4, 4))
+    with pytest.raises(SShaDeError, match="points"):
+        render_mesh(V, F, points=np.ones((2, 2)))
 
 
 def test_figure_row_layout(sphere, tmp_path):
     V, F = sphere
-    a = render_mesh(V, F, size=(100, 80))
-    b = render_mesh(V, F, colors=V[:, 2], size=(120, 90))
+    a = render_mesh(V, F, style=RenderStyle(size=(100, 80)))
+    b = render_mesh(V, F, colors=V[:, 2], style=RenderStyle(size=(120, 90)))
     p = figure_row([("a", a), {"image": b, "title": "b"}], tmp_path / "row.png",
                    colorbar={"cmap": "hot", "clim": (0, 1), "label": "err"})
     assert p.read_bytes()[:8] == PNG_SIGNATURE
@@ -116,7 +121,7 @@ def test_case_figure_png(sphere, tmp_path):
     static = np.array([True, True, True, False, False, False])
     results = {"ARAP": V * [1.2, 1.0, 1.0], "SShaDe": V + 0.05 * np.sin(5 * V), "Broken": None}
     p = case_figure(V, F, results, handles, static, tmp_path / "figs" / "case.png", title="case",
-                    panel_size=(160, 200))
+                    style=replace(ROW_STYLE, size=(160, 200)))
     data = p.read_bytes()
     assert data[:8] == PNG_SIGNATURE
     assert png_size(p) == (4 * 160 + 90, 200 + 28 + 28)
@@ -138,10 +143,11 @@ def test_tosca_and_pose_transfer_figures(sphere, tmp_path):
     V, F = sphere
     pose = V * [1.0, 1.4, 0.8]
     pred = pose + 0.02 * np.sin(7 * V)
-    p = tosca_figure(V, pose, pred, F, tmp_path / "tosca.png", title="t", panel_size=(120, 150))
+    p = tosca_figure(V, pose, pred, F, tmp_path / "tosca.png", title="t", style=replace(TOSCA_STYLE, size=(120, 150)))
     assert p.read_bytes()[:8] == PNG_SIGNATURE and png_size(p) == (3 * 120 + 90, 150 + 56)
     S = V * 1.1
-    p = pose_transfer_figure(V, S, pose, pred * 1.1, pose * 1.1, F, tmp_path / "pt.png", panel_size=(100, 150))
+    p = pose_transfer_figure(V, S, pose, pred * 1.1, pose * 1.1, F, tmp_path / "pt.png",
+                             style=replace(POSE_TRANSFER_STYLE, size=(100, 150)))
     assert png_size(p) == (5 * 100 + 90, 150 + 28)
     img = mimage.imread(p)
     assert _n_colours(img) > 50
@@ -150,7 +156,7 @@ def test_tosca_and_pose_transfer_figures(sphere, tmp_path):
 def test_mesh_row_without_values_has_no_colour_bar(sphere, tmp_path):
     V, F = sphere
     p = mesh_row([{"title": "a", "V": V, "F": F}, {"title": "failed", "V": None}], tmp_path / "r.png",
-                 panel_size=(100, 120))
+                 style=replace(ROW_STYLE, size=(100, 120)))
     assert png_size(p) == (2 * 100, 120 + 28)
     with pytest.raises(SShaDeError, match="no panel"):
         mesh_row([{"title": "x", "V": None}], tmp_path / "none.png")
@@ -222,7 +228,7 @@ def test_case_figure_with_a_not_run_method_writes_a_png(sphere, tmp_path, monkey
     real = figs.mesh_row
     monkeypatch.setattr(figs, "mesh_row", lambda panels, path, **kw: seen.append(panels) or real(panels, path, **kw))
     p = figs.case_figure(V, F, _results(V), [0, 1], [True, False], tmp_path / "c.png", title="c",
-                         panel_size=(120, 160))
+                         style=replace(figs.ROW_STYLE, size=(120, 160)))
     assert p.is_file() and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert png_size(p) == (4 * 120 + 90, 160 + 28 + 28)
     assert [q["title"] for q in seen[0]][1:3] == ["ARAP: failed", "Elastic: not run"]

@@ -1,7 +1,7 @@
 """harness/jobs.py's worker processes, in this process: a worker that dies loses only its
 job (``on_lost``, or one error naming the signal), workers ignore Ctrl-C, a stopped
-worker cannot hang the end of a run, a process a worker forks dies with it; and
-sshade/guard.py turns a plug-in's ``os._exit`` into a failed run.
+worker cannot hang the end of a run, a process a worker forks dies with it, the options
+word a worker's death; and sshade/guard.py turns a plug-in's ``os._exit`` into a failed run.
 
 Every signal is sent once the job said (through :func:`harness.jobs.send`) that it is
 running, never after a guessed delay.
@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from harness.jobs import run_jobs, send
+from harness.jobs import THREAD_VARIABLES, JobOptions, run_jobs, send
 from sshade.errors import SShaDeError
 
 from .conftest import ROOT, subprocess_env
@@ -42,7 +42,10 @@ def _gone(pids, within: float) -> bool:
 # module-level jobs: the spawned workers import them from this module
 def _job(kind: str, x: int = 0, flag: str = ""):
     """``wait``: say the worker's pid, then sleep; ``fork``: fork a child that sleeps, say
-    both pids, then sleep; ``flag``: say the pid, return once ``flag`` exists; else x * x."""
+    both pids, then sleep; ``flag``: say the pid, return once ``flag`` exists; ``exit``:
+    end the worker with status x; else x * x."""
+    if kind == "exit":
+        os._exit(x)
     if kind == "wait":
         send(("pid", os.getpid()))
         time.sleep(120)
@@ -96,6 +99,16 @@ def test_a_dead_worker_without_on_lost_is_one_error_naming_the_signal(tmp_path):
         run_jobs(_job, [("wait",), ("flag", 0, str(flag))], workers=2, on_message=message,
                  on_result=lambda i, r: results.__setitem__(i, r))
     assert results == {1: "finished"}  # the job running beside it finished
+
+
+def test_job_options_word_the_death_of_a_worker_and_are_checked():
+    with pytest.raises(SShaDeError, match=r"^an evaluation worker process exited with status 3; try again$"):
+        run_jobs(_job, [("exit", 3)], workers=1, options=JobOptions(what="evaluation", advice="try again"))
+    assert JobOptions(thread_variables=list(THREAD_VARIABLES[:2])).thread_variables == THREAD_VARIABLES[:2]
+    for bad in ({"thread_variables": "OMP_NUM_THREADS"}, {"thread_variables": ("PATH",)}, {"what": ""},
+                {"advice": None}):
+        with pytest.raises(SShaDeError, match=f"^JobOptions: {next(iter(bad))}"):
+            JobOptions(**bad)
 
 
 def test_workers_ignore_ctrl_c(tmp_path):

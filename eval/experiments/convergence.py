@@ -36,11 +36,15 @@ from sshade.errors import SShaDeError
 from sshade.files import atomic_write
 from sshade.pipeline import effective_params
 
-__all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to"]
+__all__ = ["ConvergenceConfig", "run_convergence", "libigl_curve", "solver_curve", "time_to", "CURVE_OPTIONS"]
 
 log = logging.getLogger("eval")
 #: the iteration cap of :func:`solver_curve`'s solves (the time budget usually stops them first)
 CURVE_MAX_ITER = 5000
+#: :func:`solver_curve`'s solver options when none are given: L-BFGS on the spokes-and-rims
+#: energy, 300 s, at most :data:`CURVE_MAX_ITER` iterations (change a field with
+#: :func:`dataclasses.replace`)
+CURVE_OPTIONS = ArapOptions(accelerate="lbfgs", time_budget_s=300.0, max_iter=CURVE_MAX_ITER)
 
 
 def _dist(U, ref_U, diag) -> tuple[float, float]:
@@ -96,14 +100,13 @@ def libigl_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
     return rows
 
 
-def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rims", U0=None,
-                 accelerate: str = "lbfgs", time_budget_s: float = 300.0, t_offset: float = 0.0,
-                 criterion=None) -> tuple[list[dict], object]:
+def solver_curve(V, F, handles, targets, ref_U, options: ArapOptions | None = None, *, U0=None,
+                 t_offset: float = 0.0) -> tuple[list[dict], object]:
     """:func:`sshade.arap.solve_arap` traced against a reference (arguments as
-    :func:`libigl_curve`; ``accelerate`` and ``criterion`` as the fields of
-    :class:`sshade.arap.ArapOptions`, at most :data:`CURVE_MAX_ITER` iterations; ``U0`` a start,
-    ``t_offset`` seconds added to every time, e.g. the time SShaDe took to produce
-    ``U0``). Returns ``(rows, result)``; the last row is the returned result."""
+    :func:`libigl_curve`; ``options`` :func:`~sshade.arap.solve_arap`'s, None:
+    :data:`CURVE_OPTIONS`; ``U0`` a start, ``t_offset`` seconds added to every time, e.g.
+    the time SShaDe took to produce ``U0``). Returns ``(rows, result)``; the last row is
+    the returned result."""
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     if U0 is None:
         R, t = rigid_fit(V[handles], targets)
@@ -124,9 +127,7 @@ def solver_curve(V, F, handles, targets, ref_U, *, energy: str = "spokes_and_rim
         spent["cb"] += time.perf_counter() - t1
         return False
 
-    options = ArapOptions(energy=energy, accelerate=accelerate, criterion=criterion, time_budget_s=time_budget_s,
-                          max_iter=CURVE_MAX_ITER)
-    res = solve_arap(V, F, handles, targets, options, U0=U0, callback=cb)
+    res = solve_arap(V, F, handles, targets, CURVE_OPTIONS if options is None else options, U0=U0, callback=cb)
     total = t_offset + (time.perf_counter() - t0) - spent["cb"]
     m, x = _dist(res.V, ref_U, diag)
     rows.append({"iteration": int(res.iterations), "time_s": total, "ref_mean_pct": m, "ref_max_pct": x,
@@ -292,8 +293,9 @@ def _case_curves(opts: ConvergenceConfig, reference: ReferenceOptions, cname: st
         add("libigl local/global", rows, iterations=last["iteration"],
             stopped=("reached stop_pct" if last["ref_mean_pct"] < opts.stop_pct else
                      f"time budget {budget:g} s"))
+    options = dataclasses.replace(CURVE_OPTIONS, energy=energy, time_budget_s=budget)
     for acc, label in (("lbfgs", "L-BFGS (ours)"), ("anderson", "Anderson (ours)")):
-        rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, time_budget_s=budget, accelerate=acc)
+        rows, res = solver_curve(V, F, h, T, ref.U, dataclasses.replace(options, accelerate=acc))
         add(label, rows, iterations=res.iterations, stopped=str(res.info.get("status")))
     for k in sampling_counts(opts, sp):
         t0 = time.perf_counter()
@@ -304,8 +306,7 @@ def _case_curves(opts: ConvergenceConfig, reference: ReferenceOptions, cname: st
                                     "ref_max_pct": x}],
             iterations=int(si["iterations"]), stopped="low-res " + ("converged" if si["converged"] else "capped"))
         if int(k) == opts.sshade.refine_k:
-            rows, res = solver_curve(V, F, h, T, ref.U, energy=energy, U0=Vs, time_budget_s=budget,
-                                     t_offset=dt)
+            rows, res = solver_curve(V, F, h, T, ref.U, options, U0=Vs, t_offset=dt)
             add("SShaDe + refine", rows, iterations=res.iterations, stopped=str(res.info.get("status")))
     return curves, table
 

@@ -11,6 +11,7 @@ Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.presen
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ import numpy as np
 from defaust.anny_fixed import load_anny_fixed
 from defaust.anny_poses import POSES
 from defaust.anny_source import SUBJECTS, anny_subject
-from eval.present.figures import mesh_row
+from eval.present.figures import ROW_STYLE, mesh_row
 from eval.run.outdir import claim_output_dir
 from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
@@ -39,19 +40,22 @@ def anny_figures(out_dir) -> list[Path]:
     subs = [anny_subject(i, model=m) for i in range(len(SUBJECTS))]
     panels = [{"title": f"{i}: {p.description.rsplit(',', 1)[0]}", "V": s.V, "F": s.F}
               for i, (s, p) in enumerate(zip(subs, SUBJECTS))]
-    paths = [mesh_row(panels[:5], out / "subjects_rest_0-4.png", view=(5., -90.), panel_size=(300, 520),
+    front = replace(ROW_STYLE, view=(5., -90.), size=(300, 520))
+    paths = [mesh_row(panels[:5], out / "subjects_rest_0-4.png", style=front,
                       title=f"ANNY DeFAUST subjects 0-4, rest pose (low resolution, {len(subs[0].V):,} vertices)"),
-             mesh_row(panels[5:], out / "subjects_rest_5-9.png", view=(5., -90.), panel_size=(300, 520),
+             mesh_row(panels[5:], out / "subjects_rest_5-9.png", style=front,
                       title="ANNY DeFAUST subjects 5-9, rest pose")]
     s = subs[0]
     lm = np.array(list(s.landmarks.values()))
     pan = [{"title": "rest + landmarks", "V": s.V, "F": s.F, "points": s.V[lm], "point_colors": "red"}]
     pan += [{"title": f"{p}: {n}", "V": s.posed(p), "F": s.F} for p, n in enumerate(s.pose_names) if p]
-    paths.append(mesh_row(pan, out / "subject00_dataset_poses.png", view=(20., -60.), panel_size=(300, 480),
+    paths.append(mesh_row(pan, out / "subject00_dataset_poses.png",
+                          style=replace(ROW_STYLE, view=(20., -60.), size=(300, 480)),
                           title="subject 0 in the DeFAUST poses (pose 4 turned 30 deg and moved)"))
     lib = anny_subject(0, model=m, poses=list(POSES))
     pan = [{"title": n, "V": lib.posed(p), "F": lib.F} for p, n in enumerate(lib.pose_names)]
-    paths.append(mesh_row(pan, out / "subject00_library.png", view=(8., -70.), panel_size=(260, 480),
+    paths.append(mesh_row(pan, out / "subject00_library.png",
+                          style=replace(ROW_STYLE, view=(8., -70.), size=(260, 480)),
                           title=f"subject 0 ({SUBJECTS[0].description}): the pose library"))
     return paths
 

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from eval.present.render import DEFAULT_VIEW, figure_row, render_mesh
+from eval.present.render import figure_row, render_mesh
+from eval.present.render_style import ERROR_CMAP, RenderStyle
 from eval.run.names import safe_name
 from sshade.errors import SShaDeError
 from sshade.isometric import rigid_align
@@ -18,7 +20,7 @@ from sshade.isometric import rigid_align
 __all__ = ["face_edge_error", "vertex_error_pct", "mesh_row", "case_figure", "case_panels", "tosca_figure",
            "pose_transfer_figure", "safe_figure", "write_case_figure", "case_figure_path",
            "ERROR_CMAP", "STATIC_COLOR", "DYNAMIC_COLOR", "TOSCA_VIEW", "NOT_RUN", "distribution_figure",
-           "FIGURE_RECORDS"]
+           "FIGURE_RECORDS", "ROW_STYLE", "POSE_TRANSFER_STYLE", "TOSCA_STYLE"]
 
 log = logging.getLogger("eval")
 
@@ -30,9 +32,18 @@ FIGURE_RECORDS = "sshade-records"
 #: Handle colours of the paper's Fig. 1: static blue, dynamic yellow.
 STATIC_COLOR = "#1f3fff"
 DYNAMIC_COLOR = "#ffd000"
-#: Error colours: matplotlib's "hot", reversed (low error light, high error dark red to
-#: black) and cut before pure white so the shading of error-free regions stays readable.
-ERROR_CMAP = "sshade_hot"
+#: Camera for TOSCA (z-up data): a three-quarter view from the front-left, a little above.
+TOSCA_VIEW = (15.0, -60.0)
+#: The panels of :func:`mesh_row` and :func:`case_figure` when no style is given: 320 x 480
+#: px, coloured with :data:`ERROR_CMAP`, the other fields
+#: :class:`~eval.present.render_style.RenderStyle`'s defaults. Change a field with
+#: :func:`dataclasses.replace`: ``replace(ROW_STYLE, view=(0, -90))``.
+ROW_STYLE = RenderStyle(size=(320, 480), cmap=ERROR_CMAP)
+#: The panels of :func:`pose_transfer_figure` when no style is given: :data:`ROW_STYLE` at 240 x 400 px.
+POSE_TRANSFER_STYLE = replace(ROW_STYLE, size=(240, 400))
+#: The panels of :func:`tosca_figure` when no style is given: :data:`ROW_STYLE` at 320 x 400
+#: px, seen from :data:`TOSCA_VIEW` with z up.
+TOSCA_STYLE = replace(ROW_STYLE, view=TOSCA_VIEW, up="z", size=(320, 400))
 
 
 class _NotRun:
@@ -55,15 +66,6 @@ class _NotRun:
 #: Value of a method in :func:`case_figure`'s ``results`` that was not run on the case
 #: (drawn "<name>: not run"), as opposed to ``None``, a method that ran and failed.
 NOT_RUN = _NotRun()
-
-
-def _error_cmap():
-    import matplotlib
-    from matplotlib.colors import ListedColormap
-    if ERROR_CMAP not in matplotlib.colormaps:
-        cm = matplotlib.colormaps["hot_r"]
-        matplotlib.colormaps.register(ListedColormap(cm(np.linspace(0.12, 1.0, 256)), name=ERROR_CMAP))
-    return matplotlib.colormaps[ERROR_CMAP]
 
 
 def face_edge_error(V, Vd, F) -> np.ndarray:
@@ -108,8 +110,7 @@ def vertex_error_pct(Vd, Vgt) -> np.ndarray:
 
 
 def mesh_row(panels: Sequence[Mapping], path, *, title: str | None = None, clim: float | None = None,
-             cmap=None, colorbar_label: str = "error", view=DEFAULT_VIEW, up: str = "y",
-             panel_size=(320, 480)) -> Path:
+             colorbar_label: str = "error", style: RenderStyle | None = None) -> Path:
     """Render several meshes side by side on one framing and one colour scale, into a PNG.
 
     Parameters
@@ -122,17 +123,20 @@ def mesh_row(panels: Sequence[Mapping], path, *, title: str | None = None, clim:
     path : output PNG (written atomically).
     title : line above the row. clim : upper end of the shared scale ``0 .. clim``
         (default: the largest 99th percentile of the panels' values; larger values are
-        drawn in the top colour and the bar gets an arrow). cmap : default
-        :data:`ERROR_CMAP`. colorbar_label : label of the shared bar (drawn only when a
-        panel has values).
-    view, up : camera, see :func:`eval.present.render.render_mesh`. panel_size : (w, h) px per panel.
+        drawn in the top colour and the bar gets an arrow). colorbar_label : label of the
+        shared bar (drawn only when a panel has values).
+    style : :class:`eval.present.render_style.RenderStyle` of every panel (its ``size``:
+        (w, h) px per panel; its ``cmap``: the shared scale's, bar included; its
+        ``background``: the row's too), or None: :data:`ROW_STYLE`.
 
     Returns the path. The PNG is ``len(panels) * w (+ 90 with a colour bar)`` wide and
     ``h + 28 (+ 28 with title)`` high.
 
     Raises SShaDeError on malformed meshes or values (before anything is written).
     """
-    cm = cmap if cmap is not None else _error_cmap()
+    style = ROW_STYLE if style is None else style
+    cm = style.colormap()
+    panel_w, panel_h = style.size
     vals = [None if p.get("V") is None or p.get("values") is None else np.asarray(p["values"], np.float64)
             for p in panels]
     finite = [v[np.isfinite(v)] for v in vals if v is not None]
@@ -144,23 +148,22 @@ def mesh_row(panels: Sequence[Mapping], path, *, title: str | None = None, clim:
     if not meshes:
         raise SShaDeError("mesh_row: no panel has a mesh")
     frame = np.concatenate([X[::max(1, len(X) // 5000)] for X in meshes])  # one framing for all panels
-    kw = dict(view=view, up=up, size=panel_size, frame=frame)
+    kw = dict(style=style, frame=frame)
     images = []
     for p, v in zip(panels, vals):
         if p.get("V") is None:
-            images.append((p.get("title", ""), np.full((panel_size[1], panel_size[0], 3), 255, np.uint8)))
+            images.append((p.get("title", ""), np.full((panel_h, panel_w, 3), 255, np.uint8)))
             continue
-        extra = {} if v is None else {"colors": v, "cmap": cm, "clim": (0.0, clim)}
+        extra = {} if v is None else {"colors": v, "clim": (0.0, clim)}
         if p.get("points") is not None and len(p["points"]):
             extra.update(points=p["points"], point_colors=p.get("point_colors"))
         images.append((p.get("title", ""), render_mesh(np.asarray(p["V"], np.float64), p["F"], **extra, **kw)))
     bar = {"cmap": cm, "clim": (0.0, clim), "label": colorbar_label, "extend": extend} if finite else None
-    return figure_row(images, path, title=title, colorbar=bar)
+    return figure_row(images, path, title=title, colorbar=bar, background=style.background)
 
 
 def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, title: str | None = None,
-                view=DEFAULT_VIEW, up: str = "y", panel_size=(320, 480), clim: float | None = None,
-                cmap=None) -> Path:
+                clim: float | None = None, style: RenderStyle | None = None) -> Path:
     """Render one deformation case into a PNG row: rest + handles, then each method's
     deformed mesh coloured by its per-face edge error (:func:`face_edge_error`).
 
@@ -175,20 +178,20 @@ def case_figure(V_rest, F, results: Mapping, handles, static_mask, path, *, titl
         (drawn blue; dynamic ones yellow, paper Fig. 1).
     path : output PNG (written atomically).
     title : line above the row (e.g. the case name).
-    view, up : camera, see :func:`eval.present.render.render_mesh`.
-    panel_size : (w, h) pixels per mesh panel.
     clim : upper end of the shared colour scale in percent (default: the largest 99th
         percentile over the methods' face errors).
-    cmap : colormap (default :data:`ERROR_CMAP`, a light-to-dark "hot").
+    style : :class:`eval.present.render_style.RenderStyle` of the panels (camera, (w, h)
+        px per panel as ``size``, colormap, ...), or None: :data:`ROW_STYLE` (320 x 480 px,
+        :data:`ERROR_CMAP`, a light-to-dark "hot").
 
-    Returns the path. The PNG is ``(1 + len(results)) * panel_w + 90`` px wide and
-    ``panel_h + 28`` (+ 28 with ``title``) px high.
+    Returns the path. The PNG is ``(1 + len(results)) * w + 90`` px wide and
+    ``h + 28`` (+ 28 with ``title``) px high.
 
     Raises SShaDeError on mismatched handles/flags or bad meshes.
     """
     panels = case_panels(V_rest, F, results, handles, static_mask)
-    return mesh_row(panels, path, title=title, clim=clim, cmap=cmap, view=view, up=up, panel_size=panel_size,
-                    colorbar_label="edge error (% of max rest edge)")
+    return mesh_row(panels, path, title=title, clim=clim, colorbar_label="edge error (% of max rest edge)",
+                    style=style)
 
 
 def case_panels(V_rest, F, results: Mapping, handles, static_mask) -> list[dict]:
@@ -225,37 +228,34 @@ def case_panels(V_rest, F, results: Mapping, handles, static_mask) -> list[dict]
     return panels
 
 
-#: Camera for TOSCA (z-up data): a three-quarter view from the front-left, a little above.
-TOSCA_VIEW = (15.0, -60.0)
-
-
-def tosca_figure(V_rest, V_true, V_pred, F, path, *, title: str | None = None, view=TOSCA_VIEW, up: str = "z",
-                 panel_size=(320, 400), clim: float | None = None) -> Path:
+def tosca_figure(V_rest, V_true, V_pred, F, path, *, title: str | None = None, clim: float | None = None,
+                 style: RenderStyle | None = None) -> Path:
     """TOSCA isometric case (paper §4.2, Fig. fig:tosca-isometric): rest pose M, true pose M', and
     SShaDe's reconstruction of M' coloured by the per-vertex error against M'
     (:func:`vertex_error_pct`, % of M''s bounding-box diagonal), one shared colour bar.
 
     V_rest, V_true, V_pred : (n, 3) in 1:1 correspondence; F : (m, 3) (the rest pose's).
-    Other parameters as :func:`mesh_row`. Returns the path; PNG ``3 * w + 90`` by
-    ``h + 28 (+ 28)`` px. Raises SShaDeError on mismatched shapes.
+    Other parameters as :func:`mesh_row`; ``style`` None: :data:`TOSCA_STYLE`. Returns
+    the path; PNG ``3 * w + 90`` by ``h + 28 (+ 28)`` px. Raises SShaDeError on mismatched shapes.
     """
     e = vertex_error_pct(V_pred, V_true)
     panels = [{"title": "rest pose M", "V": V_rest, "F": F},
               {"title": "true pose M'", "V": V_true, "F": F},
               {"title": f"SShaDe (mean {float(e.mean()):.3f}%)", "V": V_pred, "F": F, "values": e}]
-    return mesh_row(panels, path, title=title, clim=clim, view=view, up=up, panel_size=panel_size,
-                    colorbar_label="vertex error (% of diagonal)")
+    return mesh_row(panels, path, title=title, clim=clim, colorbar_label="vertex error (% of diagonal)",
+                    style=TOSCA_STYLE if style is None else style)
 
 
 def pose_transfer_figure(M, S, M_pose, S_pred, S_true, F, path, *, title: str | None = None,
-                         view=DEFAULT_VIEW, up: str = "y", panel_size=(240, 400), clim: float | None = None) -> Path:
+                         clim: float | None = None, style: RenderStyle | None = None) -> Path:
     """Pose transfer case (paper §4.3, Fig. fig:pose-transfer): the source M, M in the target
     pose M', the subject S, SShaDe's S in the target pose coloured by the per-vertex
     error against the ground truth, and the ground truth.
 
     M, S, M_pose, S_pred, S_true : (n, 3) in 1:1 correspondence, sharing F (m, 3).
     ``S_pred`` is drawn as given; its error is taken after moving it rigidly onto
-    ``S_true`` (:func:`sshade.isometric.rigid_align`, as in the table). Returns the path;
+    ``S_true`` (:func:`sshade.isometric.rigid_align`, as in the table). Other parameters
+    as :func:`mesh_row`; ``style`` None: :data:`POSE_TRANSFER_STYLE`. Returns the path;
     PNG ``5 * w + 90`` by ``h + 28 (+ 28)`` px. Raises SShaDeError on mismatched shapes.
     """
     e = vertex_error_pct(rigid_align(np.asarray(S_pred, np.float64), np.asarray(S_true, np.float64)), S_true)
@@ -264,8 +264,8 @@ def pose_transfer_figure(M, S, M_pose, S_pred, S_true, F, path, *, title: str | 
               {"title": "subject S", "V": S, "F": F},
               {"title": f"SShaDe (mean {float(e.mean()):.2f}%)", "V": S_pred, "F": F, "values": e},
               {"title": "ground truth", "V": S_true, "F": F}]
-    return mesh_row(panels, path, title=title, clim=clim, view=view, up=up, panel_size=panel_size,
-                    colorbar_label="vertex error (% of diagonal)")
+    return mesh_row(panels, path, title=title, clim=clim, colorbar_label="vertex error (% of diagonal)",
+                    style=POSE_TRANSFER_STYLE if style is None else style)
 
 
 def safe_figure(name: str, draw, *args, **kwargs) -> Path | None:

@@ -8,7 +8,7 @@ so this works on servers, in Hydra jobs and in worker processes whatever
 
 Example::
 
-    img = render_mesh(V, F, colors=err, clim=(0, 5), colorbar_label=label("edge_err_pct"))  # eval.present.measures
+    img = render_mesh(V, F, colors=err, clim=(0, 5), style=RenderStyle(view=(20.0, -60.0), size=(320, 480)))
     save_png("out.png", img)"""
 from __future__ import annotations
 
@@ -18,15 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
+from eval.present.render_style import RenderStyle
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
 from sshade.mesh.validate import check_arrays
 
-__all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "png_text", "set_png_text",
-           "DEFAULT_VIEW"]
+__all__ = ["render_mesh", "save_png", "figure_row", "face_scalars", "png_size", "png_text", "set_png_text"]
 
-#: Default camera: slightly from above, turned a little to the side of a y-up mesh's front.
-DEFAULT_VIEW = (10.0, -75.0)
 _DPI = 100
 _GREY = (0.80, 0.80, 0.82)
 _BAD = (0.55, 0.55, 0.55)        # NaN scalars
@@ -69,16 +67,6 @@ def _camera(view) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     right = np.array([-np.sin(az), np.cos(az), 0.0])
     upv = np.cross(eye, right)
     return eye, right, upv
-
-
-def _size(size) -> tuple[int, int]:
-    try:
-        w, h = (int(size[0]), int(size[1]))
-    except (TypeError, ValueError, IndexError):
-        raise SShaDeError(f"render: size must be (width, height) in pixels, got {size!r}") from None
-    if w < 16 or h < 16:
-        raise SShaDeError(f"render: size must be at least 16x16 px, got {w}x{h}")
-    return w, h
 
 
 def _canvas_rgb(fig, canvas, w: int, h: int) -> np.ndarray:
@@ -194,41 +182,39 @@ def _visible_points(pts: np.ndarray, P: np.ndarray, F: np.ndarray, eye, right, u
 
 
 # ----------------------------------------------------------------------------- public API
-def render_mesh(V, F, *, colors=None, cmap="hot", clim=None, view=DEFAULT_VIEW, up: str = "y",
-                points=None, point_colors=None, point_size: float | None = None,
-                hide_occluded_points: bool = True, title: str | None = None,
-                colorbar_label: str | None = None, size=(480, 640), ambient: float = 0.35,
-                fill: float = 0.94, frame=None, background="white") -> np.ndarray:
+def render_mesh(V, F, *, colors=None, clim=None, points=None, point_colors=None, title: str | None = None,
+                colorbar_label: str | None = None, frame=None, style: RenderStyle | None = None) -> np.ndarray:
     """Render a triangle mesh off-screen; returns an ``(h, w, 3)`` uint8 RGB image.
 
     Parameters
     ----------
     V : (n, 3) float vertices; F : (m, 3) int triangles.
     colors : None (uniform grey), ``(m,)`` per-face or ``(n,)`` per-vertex scalars
-        (vertex values averaged per face) mapped through ``cmap`` over ``clim``
-        (default: data min..max; NaN drawn grey), or ``(m|n, 3|4)`` RGB(A) in [0, 1].
-    cmap : matplotlib colormap name or object. clim : (lo, hi) or None.
-    view : (elev, azim) degrees. up : "y" (data's +y is up) or "z".
+        (vertex values averaged per face) mapped through the style's ``cmap`` over
+        ``clim`` (default: data min..max; NaN drawn grey), or ``(m|n, 3|4)`` RGB(A) in [0, 1].
+    clim : (lo, hi) or None.
     points : (k, 3) marker positions (e.g. handles), drawn on top of the surface;
-        those the surface hides are left out unless ``hide_occluded_points=False``.
-    point_colors : one colour or k colours (names, RGB rows). point_size : marker area
-        in pt^2 (default scales with the image).
+        those the surface hides are left out unless the style's ``hide_occluded_points``
+        is False.
+    point_colors : one colour or k colours (names, RGB rows).
     title : text above the mesh. colorbar_label : when given (and colors are scalars),
         a colour bar with this label is drawn on the right.
-    size : (width, height) in pixels of the returned image.
-    ambient : share of light that does not depend on the surface orientation.
-    fill : fraction of the free frame (image minus title band and colour bar) that the
-        mesh's projection fills along its tighter direction; the mesh is centred in it.
     frame : optional (k, 3) points to frame instead of the mesh (pass the same points to
         several renders, e.g. all meshes of a figure row, to give them one common scale
         and position).
+    style : :class:`eval.present.render_style.RenderStyle` or None (its defaults): the
+        camera (``view``, ``up``), the image's ``size`` (width, height) in pixels,
+        ``cmap``, ``point_size``, ``hide_occluded_points``, ``ambient``, ``fill`` and
+        ``background``.
 
     Raises
     ------
-    SShaDeError on malformed V/F/colors/size.
+    SShaDeError on malformed V/F/colors/points.
     """
     V, F = check_arrays(V, F, name="render")
-    w, h = _size(size)
+    st = RenderStyle() if style is None else style
+    w, h = st.size
+    view, up, background = st.view, st.up, st.background
     _, Figure, FigureCanvasAgg = _mpl()
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: F401  (registers projection)
 
@@ -236,8 +222,8 @@ def render_mesh(V, F, *, colors=None, cmap="hot", clim=None, view=DEFAULT_VIEW, 
     eye, right, upv = _camera(view)
     light = eye + 0.45 * upv - 0.35 * right
     light /= np.linalg.norm(light)
-    base, mapped = _base_colors(colors, F, len(V), cmap, clim)
-    rgb = np.clip(base * _lambert(P, F, light, float(ambient))[:, None], 0.0, 1.0)
+    base, mapped = _base_colors(colors, F, len(V), st.colormap(), clim)
+    rgb = np.clip(base * _lambert(P, F, light, st.ambient)[:, None], 0.0, 1.0)
 
     fig = Figure(figsize=(w / _DPI, h / _DPI), dpi=_DPI, facecolor=background)
     canvas = FigureCanvasAgg(fig)
@@ -259,7 +245,7 @@ def render_mesh(V, F, *, colors=None, cmap="hot", clim=None, view=DEFAULT_VIEW, 
     ax.set_zlim(mid[2] - pad[2] / 2, mid[2] + pad[2] / 2)
     ax.set_proj_type("ortho")
     ax.view_init(elev=float(view[0]), azim=float(view[1]))
-    _fit(ax, canvas, Q, pad, rect, w, h, float(fill))
+    _fit(ax, canvas, Q, pad, rect, w, h, st.fill)
     coll = Poly3DCollection(P[F], facecolors=rgb, edgecolors="none", linewidths=0.0, antialiased=False)
     coll.set_clip_on(False)  # the fitted mesh may extend past mplot3d's square axes box
     ax.add_collection3d(coll)
@@ -267,10 +253,10 @@ def render_mesh(V, F, *, colors=None, cmap="hot", clim=None, view=DEFAULT_VIEW, 
     if points is not None:
         pts = _to_plot(_points(points, "points"), up)
         pc = _point_rgba(point_colors, len(pts))
-        keep = (_visible_points(pts, P, F, eye, right, upv) if hide_occluded_points and len(pts)
+        keep = (_visible_points(pts, P, F, eye, right, upv) if st.hide_occluded_points and len(pts)
                 else np.ones(len(pts), bool))
         pc = pc[keep]
-        s = point_size if point_size is not None else max(4.0, (min(w, h) / 120.0) ** 2)
+        s = st.point_size if st.point_size is not None else max(4.0, (min(w, h) / 120.0) ** 2)
         if keep.any():
             ax.computed_zorder = False
             coll.set_zorder(1)

@@ -19,7 +19,7 @@ from eval.run.outdir import resume_command
 from eval.run.paths import abs_path
 from eval.run.result_store import ResultStore
 from eval.run.spec import MethodSpec, ReferenceOptions
-from harness.jobs import in_worker, run_jobs, send, thread_limit
+from harness.jobs import JobOptions, in_worker, run_jobs, send, thread_limit
 from sshade.cores import available_cores, pool_size
 from sshade.errors import SShaDeError
 
@@ -241,8 +241,8 @@ def run_case_jobs(setup: WorkerSetup, tasks, *, jobs: int, on_pair, on_case, nam
     again = resume_command(setup.out_dir)
     c = _Cases(tasks, list(names), jobs, on_pair, on_case)
     run_jobs(case_job, c.tasks, workers=jobs, init=init_worker, init_args=(setup,), on_message=c.message,
-             on_result=c.result, on_lost=c.lost_job, what="evaluation",
-             advice=f"the finished runs are stored; to continue: {again}")
+             on_result=c.result, on_lost=c.lost_job,
+             options=JobOptions(what="evaluation", advice=f"the finished runs are stored; to continue: {again}"))
     if c.lost:
         log.warning("%d run(s) failed with their worker process: %s; their rows are not stored, to run them "
                     "again: %s", len(c.lost), "; ".join(f"{a} {b}: {r}" for a, b, r in c.lost), again)
