@@ -108,8 +108,9 @@ class LBFGS:
     beyond the global step's own. ``H0`` is scaled by ``gamma = s.y / (y . H0 y)`` of the
     newest pair (Nocedal & Wright, eq. 7.20, with ``H0`` in place of the identity), which
     Liu et al. do not scale: the rotations make the energy softer than ``2 L_ff`` along
-    the slow modes, and the scaled steps take about a quarter fewer iterations there
-    (docs/methods.md, "Implementation notes: sshade/arap/accelerate.py"). Without
+    the slow modes, where the scaled steps take fewer iterations (measured:
+    benchmarks/records/lbfgs_scaling.md; docs/methods.md, "Implementation notes:
+    sshade/arap/accelerate.py"). Without
     history the direction is the plain step ``-z``. History in (m, N) ring buffers,
     ``N = 3 n_free``; the recursion runs in serial numba kernels (BLAS calls were much
     slower on a loaded machine: their threads spin), about ``2 m + 2`` passes over the
