@@ -1,5 +1,6 @@
 """The closed-ball property of a Voronoi decomposition, checked (paper §3.1; Edelsbrunner
-& Shah 1997): compiled kernels of :func:`sshade.remesh.remesh`'s check-and-repair rounds.
+& Shah 1997): compiled kernels of :func:`sshade.remesh.remesh`'s check-and-repair rounds, called one after another
+from Python (a kernel calling kernels recompiles their code into its own).
 
 On the high-res mesh with every boundary loop coned to a virtual vertex: every region a
 disk, every two adjacent regions meeting along one arc, every three at one point; a
@@ -13,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["closed_ball", "closed_ball_full", "closed_ball_holds", "closed_ball_local", "vertex_faces"]
+__all__ = ["closed_ball", "closed_ball_full", "closed_ball_holds", "closed_ball_local", "vertex_faces",
+           "warm_kernels"]
 
 # Pairs and triples of region labels are numbered through open-addressing hash tables
 # (int64 keys, -1 = empty slot, linear probing, Fibonacci hashing).
@@ -106,7 +108,6 @@ def _face_kind(lab, Fc, f, chi):
     return 2
 
 
-@njit(cache=True)
 def closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
     """One round of closed-ball checks with the repair candidates (the rules:
     docs/methods.md, "Implementation notes: sshade/closed_ball.py").
@@ -118,16 +119,8 @@ def closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
     pair, parent, arc, np_ = _cross_pairs(Ec, lab, nlab, ncross)
     cyc = np.zeros(np_, np.bool_)
     f3, tri, nt = _link_faces(Fc, FEc, lab, nlab, kind, n3, pair, parent, arc, cyc)
-    tcnt = np.zeros(nt, np.int64)
-    for j in range(n3):
-        tcnt[tri[j]] += 1
-    bad = False
-    for r in range(nlab):
-        bad |= chi[r] != 1
-    for p in range(np_):
-        bad |= arc[p] != 1 or cyc[p]
-    for t in range(nt):
-        bad |= tcnt[t] != 1
+    tcnt = np.bincount(tri, minlength=nt).astype(np.int64)
+    bad = bool((chi != 1).any() or (arc != 1).any() or cyc.any() or (tcnt != 1).any())
     if not bad:
         return False, np.empty(0, np.int64), f3
     pick = _repair_candidates(Fc, Ec, lab, dist, n, nlab, chi, pair, arc, cyc, np_, f3, tri, tcnt, nt)
@@ -157,7 +150,6 @@ def _region_euler(Fc, Ec, lab, nlab):
     return chi, kind, ncross, n3
 
 
-@njit(cache=True)
 def _cross_pairs(Ec, lab, nlab, ncross):
     """2. two regions meet along one arc: the cross edges of a pair, linked through the
     faces with two labels, form paths and cycles; one arc <=> (edges - links) == 1 and
@@ -172,10 +164,7 @@ def _cross_pairs(Ec, lab, nlab, ncross):
     np_ = _pair_ids(Ec, lab, nlab, min(ncross, 4 * nlab), pair, parent)
     if np_ < 0:  # more pairs than that
         np_ = _pair_ids(Ec, lab, nlab, ncross, pair, parent)
-    arc = np.zeros(np_, np.int64)  # cross edges - links: 1 for a single path
-    for e in range(ne):
-        if pair[e] >= 0:
-            arc[pair[e]] += 1
+    arc = np.bincount(pair[pair >= 0], minlength=np_).astype(np.int64)  # cross edges - links: 1 for a single path
     return pair, parent, arc, np_
 
 
@@ -319,7 +308,6 @@ def closed_ball_holds(Fc, FEc, lab, nlab, ne):
     return True, f3[:n3].copy()
 
 
-@njit(cache=True)
 def closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
     """One round of closed-ball checks (the rules: docs/methods.md, "Implementation notes:
     sshade/closed_ball.py"): the one-pass test, and the full check with repair candidates
@@ -480,7 +468,6 @@ def _any_bad_region(chi, in_a):
     return False
 
 
-@njit(cache=True)
 def closed_ball_local(Fc, Ec, FEc, vf_ptr, vf_idx, lab, dist, n, nlab, in_a):
     """The closed-ball check restricted to the regions ``in_a`` (A) and the pairs and
     triples involving one of them (docs/methods.md, "Implementation notes: sshade/closed_ball.py").
@@ -503,13 +490,20 @@ def closed_ball_local(Fc, Ec, FEc, vf_ptr, vf_idx, lab, dist, n, nlab, in_a):
         order (the low-res faces to check for flips).
     """
     in_a = in_a.copy()
-    for c in range(n, lab.shape[0]):  # a cone vertex's region: a disk, judged through its pairs
-        in_a[lab[c]] = False
+    in_a[lab[n:]] = False  # a cone vertex's region: a disk, judged through its pairs
     vs, fs, es = _touched(Fc, FEc, vf_ptr, vf_idx, lab, n, Ec.shape[0], in_a)
     chi, kind, ncross, n3 = _local_euler(Fc, Ec, lab, nlab, in_a, vs, fs, es)
     pair, arc, cyc, np_ = _local_pairs(Fc, Ec, FEc, lab, nlab, in_a, fs, es, kind, ncross)
     f3, tri, tcnt = _local_triples(Fc, lab, nlab, in_a, fs, kind, n3)
-    nt = tcnt.shape[0]
+    bad, pick = _local_candidates(Fc, Ec, lab, dist, n, nlab, in_a, vs, es, chi, pair, arc, cyc, f3, tri, tcnt)
+    return bad, np.flatnonzero(pick), f3[tcnt[tri] == 1]
+
+
+@njit(cache=True)
+def _local_candidates(Fc, Ec, lab, dist, n, nlab, in_a, vs, es, chi, pair, arc, cyc, f3, tri, tcnt):
+    """The verdict of :func:`closed_ball_local` and its repair candidates: ``(bad, pick)``,
+    ``pick`` a (n,) bool mask (the rules of :func:`_repair_candidates`, over A)."""
+    np_, nt = arc.shape[0], tcnt.shape[0]
     best = np.full(max(nlab, np_, nt), -1, np.int64)
     pick = np.zeros(n, np.bool_)
     bad = _any_bad_region(chi, in_a)
@@ -533,8 +527,20 @@ def closed_ball_local(Fc, Ec, FEc, vf_ptr, vf_idx, lab, dist, n, nlab, in_a):
                 if Fc[f3[j], k] < n:
                     _better(best, t, Fc[f3[j], k], dist)
     _take(best, nt, dist, pick)
-    cand = np.flatnonzero(pick)
-    keep = np.empty(f3.shape[0], np.bool_)
-    for j in range(f3.shape[0]):
-        keep[j] = tcnt[tri[j]] == 1
-    return bad, cand, f3[keep]
+    return bad, pick
+
+
+def warm_kernels() -> None:
+    """Compile (or load from numba's cache) every kernel of this module with the argument
+    types :func:`sshade.remesh.remesh` passes, on a closed tetrahedron labelled twice: two
+    regions (the property fails: the repair path) and four (it holds)."""
+    Fc = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    ends = np.sort(np.stack([Fc, np.roll(Fc, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    E, FE = np.unique(ends, axis=0, return_inverse=True)
+    Ec, FEc = np.ascontiguousarray(E, np.int64), np.ascontiguousarray(FE.reshape(4, 3), np.int64)
+    ptr, idx = vertex_faces(Fc, 4)
+    for lab in (np.array([0, 0, 1, 1], np.int32), np.arange(4, dtype=np.int32)):
+        nlab = int(lab.max()) + 1
+        closed_ball(Fc, Ec, FEc, lab, np.zeros(4), 4, nlab)
+        closed_ball_full(Fc, Ec, FEc, lab, np.zeros(4), 4, nlab)
+        closed_ball_local(Fc, Ec, FEc, ptr, idx, lab, np.zeros(4), 4, nlab, np.ones(nlab, np.bool_))

@@ -24,7 +24,7 @@ import numpy as np
 from numba.core.registry import CPUDispatcher
 
 from .arap import warmup_kernels
-from .closed_ball import closed_ball, closed_ball_local, vertex_faces
+from .closed_ball import warm_kernels as warm_closed_ball
 from .cores import available_cores
 from .lrf import decode_with_frames, encode, frame_functions
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
@@ -134,10 +134,7 @@ def _warm_topology() -> None:
     and local) and the transfer's encoding and decoding."""
     V, F, E, FE = _tetrahedron()
     validate_mesh(V, F)
-    lab = np.arange(4, dtype=np.int32)
-    closed_ball(F, E, FE, lab, np.zeros(4), 4, 4)
-    ptr, idx = vertex_faces(F, 4)
-    closed_ball_local(F, E, FE, ptr, idx, lab, np.zeros(4), 4, 4, np.ones(4, np.bool_))
+    warm_closed_ball()
     he = halfedges(F, 4)
     vertex_fan_count(F, he, 4)
     boundary_loops(F, he)
@@ -154,12 +151,15 @@ def _warm_topology() -> None:
 GROUPS = {
     "sampling and ARAP": (_warm_sampling, (
         "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._morton_sort", "sshade.mesh.geodesic._fps",
-        "sshade.mesh.geodesic._add_seeds", "sshade.mesh.geodesic._propagate", "sshade.projection._project",
+        "sshade.mesh.geodesic._grow", "sshade.mesh.geodesic._propagate", "sshade.projection._project",
         "sshade.arap.kernels._polar_batch_nb", "sshade.arap.kernels._local_serial", "sshade.arap.kernels._rhs_serial",
         "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_two_loop")),
     "topology and transfer": (_warm_topology, (
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
-        "sshade.closed_ball.closed_ball", "sshade.closed_ball.closed_ball_local", "sshade.closed_ball.vertex_faces",
+        "sshade.closed_ball.closed_ball_holds", "sshade.closed_ball._region_euler", "sshade.closed_ball._pair_ids",
+        "sshade.closed_ball._link_faces", "sshade.closed_ball._repair_candidates", "sshade.closed_ball._touched",
+        "sshade.closed_ball._local_euler", "sshade.closed_ball._local_pairs", "sshade.closed_ball._local_triples",
+        "sshade.closed_ball._local_candidates", "sshade.closed_ball.vertex_faces",
         "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel",
         "sshade.smooth_transfer._offsets_kernel", "sshade.smooth_transfer._vertex_jacobians_kernel")),
 }

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .closed_ball import closed_ball, closed_ball_local, vertex_faces
+from .closed_ball import warm_kernels as warm_closed_ball
 from .cores import available_cores
 from .errors import SShaDeError
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
@@ -244,12 +245,7 @@ def _warm_check() -> None:
     global _WARM
     if _WARM:
         return
-    Fc = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
-    he = halfedges(Fc, 4)
-    lab = np.arange(4, dtype=np.int32)
-    closed_ball(Fc, he.E, he.FE, lab, np.zeros(4), 4, 4)
-    ptr, idx = vertex_faces(Fc, 4)
-    closed_ball_local(Fc, he.E, he.FE, ptr, idx, lab, np.zeros(4), 4, 4, np.ones(4, np.bool_))
+    warm_closed_ball()
     _WARM = True
 
 
