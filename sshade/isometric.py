@@ -37,12 +37,25 @@ class TransferJob:
 
     Attributes
     ----------
-    V : (n, 3) float64 rest mesh M; F : (m, 3) int64 its faces; S : (n, 3) float64 the
-    positions encoded; T : (n, 3) float64 M in the target pose (M'); n_low : int,
-    farthest-point samples per low-res mesh; seeds : list of k ints; topology :
-    :func:`sshade.remesh.mesh_topology` of ``(V, F)``; gradient, anchor : LRF modes;
-    transfer, average : the transfer and the samplings' average
-    (:data:`sshade.smooth_transfer.TRANSFERS`, :data:`sshade.averaging.AVERAGES`).
+    V : (n, 3) float64
+        The rest mesh M.
+    F : (m, 3) int64
+        Its faces.
+    S : (n, 3) float64
+        The positions encoded.
+    T : (n, 3) float64
+        M in the target pose (M').
+    n_low : int
+        Farthest-point samples per low-res mesh.
+    seeds : list of k ints
+        The samplings' seeds.
+    topology : MeshTopology
+        :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
+    gradient, anchor : str
+        LRF modes.
+    transfer, average : str
+        The transfer and the samplings' average (:data:`sshade.smooth_transfer.TRANSFERS`,
+        :data:`sshade.averaging.AVERAGES`).
     """
 
     V: np.ndarray

@@ -80,6 +80,8 @@ class SShaDeParams(Mapping):
         ``"proximity"`` (each sampling weighted at a vertex by the inverse second moment
         about its low-res triangle's corners: for exact low-res positions) or ``"distortion"``.
 
+    Notes
+    -----
     A read-only mapping of the same keys too (``p["n_low"]``, ``dict(p)``, ``**p``);
     :meth:`as_dict` is the plain dict for JSON and run records.
     """
@@ -270,7 +272,7 @@ def document_params(fn: Callable) -> Callable:
     :class:`SShaDeParams`' parameter list, so that ``help(fn)`` lists each parameter
     while its text lives once, there. Returns ``fn``."""
     doc = SShaDeParams.__doc__ or ""
-    block = doc[doc.index("    n_low :"):doc.index("\n\n    A read-only mapping")]
+    block = doc[doc.index("    n_low :"):doc.index("\n\n    Notes\n")]
     if fn.__doc__ and "{sshade_params}" in fn.__doc__:
         fn.__doc__ = fn.__doc__.replace("    {sshade_params}", block)
     return fn

@@ -48,16 +48,28 @@ class SamplingJob:
 
     Attributes
     ----------
-    V : (n, 3) float64 rest positions (in the unit frame); F : (m, 3) int64 faces;
-    handles : (h,) int64 vertex indices; n_low : int, farthest-point samples per low-res
-    mesh; seeds : list of k ints (:func:`sshade.sampling.sampling_seeds`); topology :
-    :func:`sshade.remesh.mesh_topology` of ``(V, F)`` or None; targets : (h, 3) float64
-    or None (:func:`prepare_samplings`: not known yet); gradient, anchor : LRF modes
-    (:data:`sshade.lrf.GRADIENTS`, :data:`sshade.lrf.ANCHORS`); transfer, average : the
-    transfer and the samplings' average (:data:`sshade.smooth_transfer.TRANSFERS`,
-    :data:`sshade.averaging.AVERAGES`); arap : the options of
-    :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`: the energy and
-    the stopping rule) or None (its defaults).
+    V : (n, 3) float64
+        Rest positions (in the unit frame).
+    F : (m, 3) int64
+        Faces.
+    handles : (h,) int64
+        Vertex indices.
+    n_low : int
+        Farthest-point samples per low-res mesh.
+    seeds : list of k ints
+        :func:`sshade.sampling.sampling_seeds`.
+    topology : MeshTopology or None
+        :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
+    targets : (h, 3) float64 or None
+        None from :func:`prepare_samplings` (not known yet).
+    gradient, anchor : str
+        LRF modes (:data:`sshade.lrf.GRADIENTS`, :data:`sshade.lrf.ANCHORS`).
+    transfer, average : str
+        The transfer and the samplings' average (:data:`sshade.smooth_transfer.TRANSFERS`,
+        :data:`sshade.averaging.AVERAGES`).
+    arap : ArapOptions or None
+        The options of :func:`sshade.arap.arap_deform` (:meth:`SShaDeParams.arap_options`:
+        the energy and the stopping rule); None: its defaults.
     """
 
     V: np.ndarray
@@ -79,9 +91,16 @@ def prepare_sampling(V, F, handles, n_low: int, seed: int, topology) -> tuple[di
 
     Parameters
     ----------
-    V : (n, 3) float64, F : (m, 3) int64 (validated); handles : (h,) int64 (added to the
-    low-res vertices); n_low : int farthest-point samples; seed : int; topology : the
-    :func:`sshade.remesh.mesh_topology` of ``(V, F)`` or None.
+    V, F : (n, 3) float64, (m, 3) int64
+        The validated mesh.
+    handles : (h,) int64
+        Added to the low-res vertices.
+    n_low : int
+        Farthest-point samples.
+    seed : int
+        The sampling's seed.
+    topology : MeshTopology or None
+        The :func:`sshade.remesh.mesh_topology` of ``(V, F)``.
 
     Returns
     -------
@@ -163,9 +182,6 @@ def deform_once(V, F, handles, targets, params: SShaDeParams | Mapping | None = 
     **overrides : those of :data:`ONCE_KEYS` (:class:`sshade.params.SShaDeParams`: ``n_low``
         an int here; ``seed`` the sampling's own seed), over ``params``.
 
-    Runs in the caller's coordinates (:func:`deform` and :func:`sshade.prepared.prepare`
-    move the mesh to its unit frame first, :mod:`sshade.mesh.unit_frame`).
-
     Returns
     -------
     Vd : (n, 3) float64 deformed positions; info : dict with per-stage seconds
@@ -179,6 +195,11 @@ def deform_once(V, F, handles, targets, params: SShaDeParams | Mapping | None = 
     Raises
     ------
     SShaDeError on a bad parameter or one it does not use (:func:`check_params`), before any work.
+
+    Notes
+    -----
+    Runs in the caller's coordinates (:func:`deform` and :func:`sshade.prepared.prepare`
+    move the mesh to its unit frame first, :mod:`sshade.mesh.unit_frame`).
     """
     p = check_params(params, **only_params("deform_once", overrides, ONCE_KEYS))
     job = SamplingJob(V=V, F=F, handles=handles, n_low=p.n_low, seeds=[p.seed], topology=topology, targets=targets,

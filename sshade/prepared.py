@@ -303,12 +303,19 @@ class Prepared:
 
     Attributes
     ----------
-    V : (n, 3) float64; F : (m, 3) int64; handles : (h,) int64 (the validated inputs).
-    params : :class:`sshade.params.SShaDeParams`, the checked parameters.
-    workers : int, threads the samplings run on. prepare_s : float, seconds
-    :func:`prepare` took. n_solves : int, solves so far. frame : the
-    :class:`sshade.mesh.unit_frame.UnitFrame` the samplings are held in (targets are
-    mapped into it, results out of it).
+    V, F, handles : (n, 3) float64, (m, 3) int64, (h,) int64
+        The validated inputs.
+    params : SShaDeParams
+        The checked parameters (:class:`sshade.params.SShaDeParams`).
+    workers : int
+        Threads the samplings run on.
+    prepare_s : float
+        Seconds :func:`prepare` took.
+    n_solves : int
+        Solves so far.
+    frame : UnitFrame
+        The :class:`sshade.mesh.unit_frame.UnitFrame` the samplings are held in (targets
+        are mapped into it, results out of it).
 
     Solves from several threads at once are run one after the other (a lock per object):
     each starts from the samplings' state the one before left, as in one thread, so each

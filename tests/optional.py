@@ -22,6 +22,7 @@ HOW = {
     "polyscope": "the [view] extra: pip install -e .[view]; .ci/run installs it and reruns the tests marked 'view'",
     "mlcroissant": "the test extra: pip install -e .[test]",
     "body_models": "a dependency: pip install -e . (body-models 0.26)",
+    "mkdocs": "the [docs] extra: pip install -e .[docs]; .ci/run installs it and reruns the tests marked 'docs'",
 }
 
 

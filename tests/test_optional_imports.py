@@ -1,5 +1,5 @@
 """A machine where the optional modules and programs are missing or broken: a child pytest run
-in which open3d, polyscope, mlcroissant, body_models and anny raise an ImportError that is
+in which open3d, polyscope, mlcroissant, body_models, anny and mkdocs raise an ImportError that is
 not a ModuleNotFoundError (as open3d does without the system's libusb), torch raises an
 OSError (a shared library that does not load), and PATH has no Chromium and no xvfb-run.
 There the tests that need one of them skip, each with one line naming what is missing, none
@@ -17,7 +17,8 @@ from .conftest import ROOT
 
 #: module -> the exception its import raises in the child run
 BROKEN = {"open3d": "ImportError", "polyscope": "ImportError", "mlcroissant": "ImportError",
-          "body_models": "ImportError", "anny": "ImportError", "torch": "OSError"}
+          "body_models": "ImportError", "anny": "ImportError", "torch": "OSError",
+          "mkdocs": "ImportError"}
 #: programs taken off PATH (eval.report.find_chromium's names, xvfb-run, node)
 PROGRAMS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "xvfb-run", "node")
 #: test file -> what its skip lines say (each skip line names one of these, each is named)
@@ -30,8 +31,9 @@ EXPECTED = {
     "test_defaust_anny": ["ANNY body model assets not found"],
     "test_defaust_anny_path": ["ANNY body model assets not found"],
     "test_gltf": ["node is not on PATH"],
+    "test_site_hooks": ["mkdocs cannot be imported (ImportError: mkdocs: libdemo.so.0"],
 }
-MARKS = "anny or neural or view or open3d or browser or xvfb or mlcroissant or gltf"
+MARKS = "anny or neural or view or open3d or browser or xvfb or mlcroissant or gltf or docs"
 PACKAGES = ("sshade", "harness", "baselines", "defaust", "eval")  # pyproject's testpaths besides tests/
 
 SITECUSTOMIZE = f'''import sys
