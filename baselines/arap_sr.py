@@ -6,7 +6,7 @@ Its energy and two protocols are :mod:`sshade.arap.smooth_rotations` (which stat
 energy and both definitions of alpha): ``"converged"`` (:func:`sshade.arap.solve_arap_sr`)
 and ``"paper"`` (:func:`sshade.arap.arap_sr_deform`: Open3D's plain Smoothed-ARAP
 iteration, run "until convergence with a cutoff of 1000 iterations", paper §4.1). Why it
-is written on libigl and checked against Open3D: docs/methods.md, "Implementation notes:
+is written on libigl and checked against Open3D: docs/implementation.md, "Implementation notes:
 baselines/arap_sr.py".
 """
 from __future__ import annotations

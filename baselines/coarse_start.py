@@ -7,7 +7,7 @@ from those rotations (``R0`` of :func:`sshade.arap.solve_arap` /
 ``start`` / ``coarse_n_low`` options, :func:`start_rotations` applies them (``"auto"``:
 coarse on meshes of at least :data:`COARSE_MIN_RATIO` x ``coarse_n_low`` vertices, rigid
 where the coarse start fails), :func:`coarse_start` is the start itself. Why it works and
-what it saves: docs/methods.md, "Implementation notes: baselines/coarse_start.py".
+what it saves: docs/implementation.md, "Implementation notes: baselines/coarse_start.py".
 """
 from __future__ import annotations
 

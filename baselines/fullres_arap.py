@@ -72,7 +72,7 @@ class FullResArap:
         remesh), ``"auto"`` (coarse when the mesh has at least ``COARSE_MIN_RATIO *
         coarse_n_low`` vertices, falling back to rigid if the coarse start raises
         SShaDeError). Either start is stopped by the same full-resolution criterion; why
-        rigid is the default here: docs/methods.md, "Implementation notes:
+        rigid is the default here: docs/implementation.md, "Implementation notes:
         baselines/coarse_start.py".
     coarse_n_low : int >= 4, the remesh's sample count for the coarse start.
 

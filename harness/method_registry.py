@@ -5,8 +5,8 @@ under ``harness`` what the evaluator knows of it, :func:`method_meta`). The file
 method's name; its config key has ``+`` as ``_`` (:func:`method_key`). No method's module
 is imported until it is built (:func:`build_builtin`), so this floor names the baselines
 without an upward import; :func:`builtin_methods`, :func:`table_order` and ``python -m
-harness deform --method`` follow the files. A method file, and how to add one:
-docs/methods.md, "Adding a method" and "Implementation notes: harness/method_registry.py".
+harness deform --method`` follow the files. A method file, and how to add one: docs/methods.md,
+"Adding a method"; why: docs/implementation.md, "Implementation notes: harness/method_registry.py".
 """
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ Usage::
         --frames FRAMES.npy -o OUT.npz|OUT.glb|FOLDER [--format obj|off|ply] [--fps FPS]
         [--n-low N] [--k K] [--seed S] [--force]
 
-Frames, outputs and their rules: docs/methods.md ("Implementation notes: sshade/animate.py").
+Frames, outputs and their rules: docs/implementation.md ("Implementation notes: sshade/animate.py").
 """
 from __future__ import annotations
 
@@ -69,7 +69,7 @@ def build_parser() -> ArgumentParser:
 
 
 def _check_out(a) -> None:
-    """The output checks (docs/methods.md, "Implementation notes: sshade/animate.py"), before any work."""
+    """The output checks (docs/implementation.md, "Implementation notes: sshade/animate.py"), before any work."""
     out = Path(a.out)
     if not FPS_RANGE[0] <= a.fps <= FPS_RANGE[1]:  # NaN fails too
         raise SShaDeError(f"--fps must be a number in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {a.fps}")
@@ -224,7 +224,7 @@ def animate_file(a, log=print) -> dict:
 
 
 class _FrameSink:
-    """The frames into ``out`` as they are solved (the outputs: docs/methods.md,
+    """The frames into ``out`` as they are solved (the outputs: docs/implementation.md,
     "Implementation notes: sshade/animate.py"); a context manager that finishes the output
     on leaving, marked incomplete when left by an exception after at least one frame (and
     says so on stderr), removed when no frame was done.

@@ -6,7 +6,7 @@ On the high-res mesh with every boundary loop coned to a virtual vertex: every r
 disk, every two adjacent regions meeting along one arc, every three at one point; a
 failing region, pair or triple gets one repair candidate (its vertex farthest from its
 seed). :func:`closed_ball` is one full round, :func:`closed_ball_local` a round limited
-to the regions that changed. Details: docs/methods.md ("Implementation notes:
+to the regions that changed. Details: docs/implementation.md ("Implementation notes:
 sshade/closed_ball.py").
 """
 from __future__ import annotations
@@ -110,7 +110,7 @@ def _face_kind(lab, Fc, f, chi):
 
 def closed_ball_full(Fc, Ec, FEc, lab, dist, n, nlab):
     """One round of closed-ball checks with the repair candidates (the rules:
-    docs/methods.md, "Implementation notes: sshade/closed_ball.py").
+    docs/implementation.md, "Implementation notes: sshade/closed_ball.py").
 
     lab : (n + loops,) labels with the cone vertices as their own regions.
     Returns (bad, cand, f3): whether the property fails, the sorted unique seed
@@ -309,7 +309,7 @@ def closed_ball_holds(Fc, FEc, lab, nlab, ne):
 
 
 def closed_ball(Fc, Ec, FEc, lab, dist, n, nlab):
-    """One round of closed-ball checks (the rules: docs/methods.md, "Implementation notes:
+    """One round of closed-ball checks (the rules: docs/implementation.md, "Implementation notes:
     sshade/closed_ball.py"): the one-pass test, and the full check with repair candidates
     when it fails. Returns (bad, cand, f3)."""
     ok, f3 = closed_ball_holds(Fc, FEc, lab, nlab, Ec.shape[0])
@@ -470,7 +470,7 @@ def _any_bad_region(chi, in_a):
 
 def closed_ball_local(Fc, Ec, FEc, vf_ptr, vf_idx, lab, dist, n, nlab, in_a):
     """The closed-ball check restricted to the regions ``in_a`` (A) and the pairs and
-    triples involving one of them (docs/methods.md, "Implementation notes: sshade/closed_ball.py").
+    triples involving one of them (docs/implementation.md, "Implementation notes: sshade/closed_ball.py").
 
     Parameters
     ----------

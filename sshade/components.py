@@ -4,7 +4,7 @@ its nearest deformed component rigidly (:func:`deform_components`, :func:`rigid_
 :class:`ComponentWise` wraps any :class:`sshade.method_interface.Deformer`).
 
 Used by :func:`sshade.deform`, the evaluator and ``python -m sshade deform``. The rule of
-the rigid following: docs/methods.md ("Implementation notes: sshade/components.py").
+the rigid following: docs/implementation.md ("Implementation notes: sshade/components.py").
 """
 from __future__ import annotations
 
@@ -112,7 +112,7 @@ def _submesh(F: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
 
 def rigid_follow(V, Vd, F, labels, comp: int, near: int, *, min_faces: int = MIN_PATCH_FACES):
     """Rigid motion of the handle-less component ``comp`` from the deformation of
-    component ``near`` (the patch rule: docs/methods.md, "Implementation notes: sshade/components.py").
+    component ``near`` (the patch rule: docs/implementation.md, "Implementation notes: sshade/components.py").
 
     Parameters
     ----------

@@ -7,7 +7,7 @@ Usage::
         | --handles F.json|F.csv) [--method NAME] [--n-low N] [--k K] [--seed S]
         [--param KEY=VALUE ...] [--timeout SECONDS] [--repair] [--force]
 
-Files, methods, checks and exit statuses: docs/methods.md ("Implementation notes: sshade/deform_command.py").
+Files, methods, checks and exit statuses: docs/implementation.md ("Implementation notes: sshade/deform_command.py").
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ The method gets read-only copies of its inputs, each connected component apart
 ``sys.exit``, ``os._exit`` from its thread, a time-out) becomes a :class:`MethodFailure`
 (``KeyboardInterrupt`` stops the run), and its result is checked
 (:func:`sshade.mesh.validate.validate_deformed`). What cannot be caught (crashes,
-time-outs off the main thread): docs/methods.md ("Implementation notes: sshade/guard.py").
+time-outs off the main thread): docs/implementation.md ("Implementation notes: sshade/guard.py").
 """
 from __future__ import annotations
 
@@ -217,7 +217,8 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
         connected components allowed: each is deformed apart); handles : (h,) int
         vertex indices; targets : (h, 3) float positions. Never modified.
     timeout_s : positive float or None, the wall-clock limit of each of the
-        ``warmup`` and ``deform`` calls (main thread only: docs/methods.md, "Implementation notes: sshade/guard.py").
+        ``warmup`` and ``deform`` calls (main thread only: docs/implementation.md,
+        "Implementation notes: sshade/guard.py").
 
     Returns
     -------

@@ -5,7 +5,7 @@ Per sampling: remesh the rest mesh M to N, read the deformed low-res mesh N' off
 (``V_M'[seeds]`` with N's faces) instead of running a low-res ARAP, encode M (or a third
 shape S, 1:1 with M and aligned with it) in N's triangle frames and decode on N' (Alg. 1);
 the k samplings (one :class:`TransferJob`) are averaged (§3.3) in the pool of
-:mod:`sshade.sampling`. Steps and formulas: docs/methods.md ("Implementation notes:
+:mod:`sshade.sampling`. Steps and formulas: docs/implementation.md ("Implementation notes:
 sshade/isometric.py").
 """
 from __future__ import annotations
@@ -150,7 +150,7 @@ def correspondence_transfer(V_M, F, V_S, V_Mprime, params: SShaDeParams | Mappin
     """Encode ``V_S`` in the LRFs of the remeshed ``M`` and decode them on ``M'`` (§4.2-4.3).
 
     The common core of :func:`isometric_transfer` (``V_S = V_M``) and
-    :func:`pose_transfer` (docs/methods.md, "Implementation notes: sshade/isometric.py").
+    :func:`pose_transfer` (docs/implementation.md, "Implementation notes: sshade/isometric.py").
 
     Parameters
     ----------
@@ -281,7 +281,7 @@ def pose_transfer(V_M, F, V_S, V_Mprime, params: SShaDeParams | Mapping | None =
     S's vertices are encoded in the frames of M's remesh N and decoded on N' (M's
     low-res vertices in the pose of M'), averaged over ``n_samplings`` samplings (§3.3);
     with ``V_S = V_M`` the result is :func:`isometric_transfer`'s. S must be aligned with
-    M in space (``align=True`` moves it rigidly onto M first). Formulas: docs/methods.md
+    M in space (``align=True`` moves it rigidly onto M first). Formulas: docs/implementation.md
     ("Implementation notes: sshade/isometric.py").
 
     Parameters

@@ -3,7 +3,7 @@ filling a cold one on two processes at once.
 
 numba keys each cached kernel on its source file's modification time and size and on the
 CPU, so a fresh install, an upgrade, a new machine or an empty ``NUMBA_CACHE_DIR`` leaves
-it cold and the next call compiles every kernel (docs/methods.md, "The first call").
+it cold and the next call compiles every kernel (docs/deform.md, "The first call").
 :func:`compile_kernels` fills it: with two cores or more and ``fork``, a forked child
 compiles one half of the kernels (:data:`GROUPS`) while this process compiles the other,
 then this process loads the child's half from the cache. :func:`notice` prints one line

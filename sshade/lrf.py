@@ -6,7 +6,7 @@ coordinate (as in the paper with ``gradient="raw"``, of unit length with
 ``"normalized"``), n_t the unit normal, w_t = g_t x n_t. A high-res vertex v with
 P(v) = t is stored as v_t = L_t^-1 (v - a(v)) and rebuilt as v' = L'_t v_t + a'(v), the
 anchor a(v) the barycenter b_t (``anchor="barycenter"``, paper) or v's projection onto t
-(``"projection"``, the default; docs/differences.md). Details: docs/methods.md
+(``"projection"``, the default; docs/differences.md). Details: docs/implementation.md
 ("Implementation notes: sshade/lrf.py").
 """
 from __future__ import annotations

@@ -8,7 +8,7 @@ regular file (a FIFO would block the load, a link may point anywhere) or larger 
 * :func:`ensure_cache`: both, before the first kernel module is imported (the commands'
   ``__main__`` call it first; a library user may too, or set ``NUMBA_CACHE_DIR``);
 * :func:`cache_locations`: the folders numba would try, in its order.
-Neither changes a result: the cache only saves compilation time (docs/methods.md, "The
+Neither changes a result: the cache only saves compilation time (docs/deform.md, "The
 first call").
 """
 from __future__ import annotations

@@ -267,7 +267,7 @@ def deform(V, F, handles, targets, params: SShaDeParams | Mapping | None = None,
     {sshade_params}
     return_info : also return a dict of timings (seconds; ``total_s`` excludes
         ``compile_s``), seeds, per-sampling details, ``handle_pre_pct``, ``frame`` and
-        ``low_res_energy`` (docs/methods.md, "Implementation notes: sshade/pipeline.py").
+        ``low_res_energy`` (docs/implementation.md, "Implementation notes: sshade/pipeline.py").
 
     Returns
     -------

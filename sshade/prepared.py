@@ -7,7 +7,7 @@
 averages them (§3.3). The first solve is :func:`sshade.deform` of the same parameters, bit
 for bit; later ones start from the earlier results extrapolated along the targets' path
 (:data:`FRAME_ACCELERATION`).
-Starts, threads and timings: docs/methods.md ("Implementation notes: sshade/prepared.py").
+Starts, threads and timings: docs/implementation.md ("Implementation notes: sshade/prepared.py").
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ added until the Voronoi decomposition has the closed-ball property (Edelsbrunner
 1997; :mod:`sshade.closed_ball`) and no low-res face is flipped or degenerate
 (:mod:`sshade.remesh_repair`, a departure); its nerve is then a manifold low-res mesh
 homeomorphic to the input. :func:`mesh_topology` is built once per mesh; :func:`remesh_drawn`
-draws again when a degenerate face is left. Details: docs/methods.md ("Implementation
+draws again when a degenerate face is left. Details: docs/implementation.md ("Implementation
 notes: sshade/remesh.py").
 """
 from __future__ import annotations

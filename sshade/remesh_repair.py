@@ -4,7 +4,7 @@
 :func:`flipped_faces` (normal opposing the surface they stand for),
 :func:`degenerate_faces` (almost no area for their size) and :func:`voronoi_vertex_seeds`
 (a seed at each bad face's Voronoi vertex, after Delaunay refinement: Chew 1989; Ruppert
-1995). Repairing flipped faces is a departure from the paper; why and how: docs/methods.md
+1995). Repairing flipped faces is a departure from the paper; why and how: docs/implementation.md
 ("Implementation notes: sshade/remesh_repair.py").
 """
 from __future__ import annotations

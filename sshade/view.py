@@ -1,6 +1,6 @@
 """``python -m sshade view``: drag a mesh's handle region with a gizmo in polyscope (the
 ``[view]`` extra) and see SShaDe's result on every change, or play an animation that
-``python -m sshade animate`` wrote (:class:`Player`). Behaviour: docs/methods.md
+``python -m sshade animate`` wrote (:class:`Player`). Behaviour: docs/implementation.md
 ("Implementation notes: sshade/view.py").
 
 Usage::

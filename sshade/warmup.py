@@ -5,7 +5,7 @@ Every method of the evaluator has a ``warmup(n_vertices=None) -> float`` built o
 :func:`warm_once` (SShaDe's: :func:`sshade.pipeline.warm_sshade`); the evaluator records its
 seconds as ``compile_s``. Also :func:`tiny_problem`, :func:`warm_fullres`,
 :func:`warm_parallel_kernels`. This module imports nothing above the ARAP solver; cold
-caches: docs/methods.md ("Implementation notes: sshade/warmup.py").
+caches: docs/implementation.md ("Implementation notes: sshade/warmup.py").
 """
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
-"""Every percentage that docs/reproduction.md, docs/methods.md and docs/protocols.md attach
-to a committed results folder (or a benchmark's record under benchmarks/records/) is in
-that folder's tables, in the row and column it names.
+"""Every percentage that docs/reproduction.md, docs/methods.md, docs/deform.md,
+docs/implementation.md and docs/protocols.md attach to a committed results folder (or a
+benchmark's record under benchmarks/records/) is in that folder's tables, in the row and
+column it names.
 
 A paragraph attaches its percentages to the folders it names (``results/...``), or, naming
 none and not opening with the script it quotes, to the folders named earlier in its
@@ -26,7 +27,7 @@ import pytest
 
 from tests.conftest import ROOT
 
-DOCS = ("reproduction.md", "methods.md", "protocols.md")
+DOCS = ("reproduction.md", "methods.md", "deform.md", "implementation.md", "protocols.md")
 PERCENT = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s?%")
 RESULTS = re.compile(r"((?:results|benchmarks/records)/[\w./-]*[\w/])")
 SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`(*])|\n(?=\|)")  #: a sentence, or a table row

@@ -7,7 +7,7 @@ Delaunay-triangulated once in the plane and projected onto the centre's level se
 SDF; all patches of one step share the disk and its triangles. The energy is the ARAP
 energy of Sorkine & Alexa 2007 on each patch, the rotation given by the deformation field.
 Cotangent weights: correct by default, the reference code's with ``reference=True``
-(docs/methods.md, "Implementation notes: baselines/implicit_arap/patches.py").
+(docs/implementation.md, "Implementation notes: baselines/implicit_arap/patches.py").
 """
 from __future__ import annotations
 
@@ -143,7 +143,7 @@ def cot_weights(X, tris: np.ndarray, edges: dict):
     -------
     (P, e) tensor: default ``(cot a + cot b) / 2`` (one cotangent on a boundary edge),
     the same value in both directions; ``reference`` mode: the reference code's weights
-    (docs/methods.md, "Implementation notes: baselines/implicit_arap/patches.py").
+    (docs/implementation.md, "Implementation notes: baselines/implicit_arap/patches.py").
     """
     cot = corner_cotangents(X, tris)
     P = X.shape[0]

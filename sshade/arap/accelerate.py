@@ -6,7 +6,7 @@
   ACM TOG 37(4), SIGGRAPH 2018, Algorithm 2); the solver applies the energy safeguard.
 
 Histories in preallocated ring buffers; their passes over the ``N = 3 n_free`` numbers run
-in :mod:`sshade.arap.solver_kernels`. Formulas: docs/methods.md ("Implementation notes:
+in :mod:`sshade.arap.solver_kernels`. Formulas: docs/implementation.md ("Implementation notes:
 sshade/arap/accelerate.py").
 """
 from __future__ import annotations
@@ -109,7 +109,7 @@ class LBFGS:
     newest pair (Nocedal & Wright, eq. 7.20, with ``H0`` in place of the identity), which
     Liu et al. do not scale: the rotations make the energy softer than ``2 L_ff`` along
     the slow modes, where the scaled steps take fewer iterations (measured:
-    benchmarks/records/lbfgs_scaling.md; docs/methods.md, "Implementation notes:
+    benchmarks/records/lbfgs_scaling.md; docs/implementation.md, "Implementation notes:
     sshade/arap/accelerate.py"). Without
     history the direction is the plain step ``-z``. History in (m, N) ring buffers,
     ``N = 3 n_free``; the recursion runs in serial numba kernels (BLAS calls were much

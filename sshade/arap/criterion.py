@@ -34,7 +34,7 @@ class Criterion:
     gtol : float >= 0, scale-free gradient threshold (dimensionless).
 
     The defaults (:data:`DEFAULT_CRITERION`: ``etol = 1e-7``, ``gtol = 1e-3``), their
-    calibration and what a stop certifies: docs/methods.md ("Implementation notes:
+    calibration and what a stop certifies: docs/implementation.md ("Implementation notes:
     sshade/arap/criterion.py").
     """
 

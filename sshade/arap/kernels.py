@@ -5,7 +5,7 @@ and their lazy compilation, for :mod:`sshade.arap.operators` on the arrays of
 :func:`polar_kernel`, :func:`energy_kernel`, :func:`fused_kernels` (serial and parallel
 apart) and :func:`fused` compile (or load from numba's cache) on first use and return
 False when numba is unusable (the callers then take their numpy / scipy paths). No
-result depends on the thread count. Design: docs/methods.md ("Implementation notes:
+result depends on the thread count. Design: docs/implementation.md ("Implementation notes:
 sshade/arap/kernels.py").
 """
 from __future__ import annotations

@@ -8,7 +8,7 @@ al. 2010 "spokes and rims"); with ``energy="arap_sr"`` ARAP with smooth rotation
   :class:`sshade.arap.criterion.Criterion`;
 - ``"paper"`` (paper §4.1, Table 1): libigl's ``arap_solve`` one iteration at a time
   (:func:`iterate`), stopped by the largest vertex move; ``"stalled"`` where the gradient
-  test fails. Both start from the rigid fit of the handles. Details: docs/methods.md
+  test fails. Both start from the rigid fit of the handles. Details: docs/implementation.md
   ("Implementation notes: sshade/arap/local_global.py").
 """
 from __future__ import annotations

@@ -5,7 +5,7 @@ Two energies (:data:`ENERGIES`), one rotation per vertex: ``"spokes"`` (Sorkine 
 libigl's ``ARAP_ENERGY_TYPE_SPOKES`` / ``_SPOKES_AND_RIMS``. ``E(U, R) = tr(U^T L U) -
 2 tr(U^T K(R)) + const``, ``L = -igl.cotmatrix``, so the global step is libigl's.
 :class:`ArapOperators`, :func:`build_operators`, :func:`fit_rotations`, :func:`bbox_diag`;
-kernels in :mod:`sshade.arap.kernels`. Conventions and derivation: docs/methods.md
+kernels in :mod:`sshade.arap.kernels`. Conventions and derivation: docs/implementation.md
 ("Implementation notes: sshade/arap/operators.py").
 """
 from __future__ import annotations
@@ -474,7 +474,7 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
 
 
 def _cell_pairs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str) -> tuple:
-    """Edges and (cell, edge) incidences of ``energy`` (the cells: docs/methods.md,
+    """Edges and (cell, edge) incidences of ``energy`` (the cells: docs/implementation.md,
     "Implementation notes: sshade/arap/operators.py") from the cotangent entries ``C``
     (m, 3). Returns ``(edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr)``
     as the attributes of :class:`ArapOperators`."""

@@ -8,7 +8,7 @@ as-rigid-as-possible mesh animation", IEEE TVCG): its energy and its two protoco
 (``alpha_scaling="valence"``, Open3D's alpha) or 1 (``"none"``; :data:`ALPHA_SCALINGS`).
 :func:`solve_arap_sr` (converged: Gauss-Seidel local step over a vertex colouring,
 :class:`SRProblem`; Anderson), :func:`arap_sr_deform` (the paper protocol, §4.1). Derivation
-and sources: docs/methods.md, "Implementation notes: sshade/arap/smooth_rotations.py".
+and sources: docs/implementation.md, "Implementation notes: sshade/arap/smooth_rotations.py".
 """
 from __future__ import annotations
 
@@ -271,7 +271,7 @@ class SRProblem:
 
 def solve_arap_sr(V, F, handles, targets, options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
                   R0: np.ndarray | None = None, problem: SRProblem | None = None) -> ArapResult:
-    """ARAP-SR run to a certified convergence, the converged protocol (docs/methods.md,
+    """ARAP-SR run to a certified convergence, the converged protocol (docs/implementation.md,
     "Implementation notes: sshade/arap/smooth_rotations.py").
 
     Parameters

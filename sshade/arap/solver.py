@@ -6,7 +6,7 @@ Options: :class:`sshade.arap.options.ArapOptions`; energy and operators:
 :mod:`sshade.arap.operators`; accelerators: :mod:`sshade.arap.accelerate`; stopping rule:
 :class:`sshade.arap.criterion.Criterion`.
 The algorithm, its phases, the cost of one iteration and the result's ``info`` keys:
-docs/methods.md ("Implementation notes: sshade/arap/solver.py").
+docs/implementation.md ("Implementation notes: sshade/arap/solver.py").
 """
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, options: ArapOpti
                U0: np.ndarray | None = None, R0: np.ndarray | None = None, callback=None,
                operators: ArapOperators | None = None) -> ArapResult:
     """Handle-driven ARAP deformation run to a certified convergence (the converged
-    protocol; the algorithm: docs/methods.md, "Implementation notes: sshade/arap/solver.py").
+    protocol; the algorithm: docs/implementation.md, "Implementation notes: sshade/arap/solver.py").
 
     Parameters
     ----------
@@ -78,7 +78,7 @@ def solve_arap(V: np.ndarray, F: np.ndarray, handles, targets, options: ArapOpti
     one the reported energy and gradient belong to), ``iterations`` (accepted iterations
     = global solves), ``converged`` (the criterion was met), ``last_move`` (mesh units),
     ``precompute_s`` (operators + factorisation), ``solve_s``, ``info`` (its keys:
-    docs/methods.md, "Implementation notes: sshade/arap/solver.py").
+    docs/implementation.md, "Implementation notes: sshade/arap/solver.py").
 
     Raises
     ------

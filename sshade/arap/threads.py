@@ -5,7 +5,7 @@ cells, in worker processes, and in a forked child of an OpenMP pool's owner:
 :func:`fork_unsafe`), :func:`numba_threads` (context manager), :class:`ThreadPicker`
 (the automatic mode of :func:`sshade.arap.solver.solve_arap`) and :func:`avoid_old_tbb`
 (run at import). No kernel's result depends on the thread count. Threading layers:
-docs/methods.md ("Implementation notes: sshade/arap/threads.py").
+docs/implementation.md ("Implementation notes: sshade/arap/threads.py").
 """
 from __future__ import annotations
 

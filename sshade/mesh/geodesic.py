@@ -5,7 +5,7 @@ Distances are shortest paths on the edge graph (Euclidean edge lengths); each ne
 runs an incremental Dijkstra over the vertices it takes over (:class:`VoronoiState`,
 numba), in a cache-friendly vertex order (:func:`locality_order`). Labels, distances and
 the farthest point (the smallest index among exact ties) depend neither on the vertex
-order nor on the queue. Speed: docs/methods.md ("Implementation notes:
+order nor on the queue. Speed: docs/implementation.md ("Implementation notes:
 sshade/mesh/geodesic.py").
 """
 from __future__ import annotations

@@ -75,7 +75,7 @@ class GlbAnimationWriter:
     (float32 displacements from the base) and one animation whose ``weights`` channel
     shows frame i at ``i / fps`` seconds. Frames go to a temporary file beside ``path``
     as they come; :meth:`finish` writes the ``.glb`` atomically (nothing is written at
-    ``path`` without it). The layout and memory: docs/methods.md ("Implementation notes:
+    ``path`` without it). The layout and memory: docs/implementation.md ("Implementation notes:
     sshade/mesh/gltf.py").
 
     Parameters

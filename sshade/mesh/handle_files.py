@@ -4,7 +4,7 @@ Botsch & Sorkine's deformation benchmark (IEEE TVCG 2008: ``.sel`` per-vertex st
 ``.json`` / ``.csv`` of vertex indices and target positions (mesh units).
 
 Every reader raises :class:`SShaDeError` with one line naming the file and the problem.
-The formats in detail: docs/methods.md ("Implementation notes: sshade/mesh/handle_files.py").
+The formats in detail: docs/implementation.md ("Implementation notes: sshade/mesh/handle_files.py").
 """
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def _text_lines(path, what: str, limit: int = MAX_BYTES) -> list[tuple[int, str]
 
 def read_sel(path, n: int) -> np.ndarray:
     """Per-vertex status of a ``.sel`` file (deformation benchmark; the format:
-    docs/methods.md, "Implementation notes: sshade/mesh/handle_files.py").
+    docs/implementation.md, "Implementation notes: sshade/mesh/handle_files.py").
 
     Parameters
     ----------
@@ -82,7 +82,7 @@ def read_sel(path, n: int) -> np.ndarray:
 
 
 def read_dmat_selection(path, n: int) -> np.ndarray:
-    """Per-vertex status from a libigl ``.dmat`` selection (the format: docs/methods.md,
+    """Per-vertex status from a libigl ``.dmat`` selection (the format: docs/implementation.md,
     "Implementation notes: sshade/mesh/handle_files.py"), in the ``.sel`` codes: ``-1`` ->
     :data:`FREE`, ``0`` -> :data:`FIXED`, ``>= 1`` -> :data:`HANDLE`.
 
@@ -162,7 +162,7 @@ def _is_float(t: bytes) -> bool:
 
 def read_def(path) -> np.ndarray:
     """The 4x4 handle transformation of a ``.def`` file (the format:
-    docs/methods.md, "Implementation notes: sshade/mesh/handle_files.py").
+    docs/implementation.md, "Implementation notes: sshade/mesh/handle_files.py").
 
     Returns
     -------
@@ -267,7 +267,7 @@ def read_moving_handles(n: int, *, sel=None, dmat=None, handles=None) -> tuple[n
 
 def read_handle_file(path, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Handles and targets of a ``.json`` or ``.csv`` file (the formats:
-    docs/methods.md, "Implementation notes: sshade/mesh/handle_files.py").
+    docs/implementation.md, "Implementation notes: sshade/mesh/handle_files.py").
 
     Parameters
     ----------

@@ -4,7 +4,7 @@ sshade deform --repair``; :func:`repair_mesh`): duplicate vertices and faces, nu
 re-wound and no hole is filled. Every output vertex is an input vertex (``origin``), so
 per-vertex data carries over. Reference: P. Cignoni et al., "MeshLab: an open-source mesh
 processing tool" (2008); pymeshlab (Muntoni & Cignoni). The filters in detail:
-docs/methods.md ("Implementation notes: sshade/mesh/repair.py").
+docs/implementation.md ("Implementation notes: sshade/mesh/repair.py").
 """
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ bounding-box diagonal, where every solve of SShaDe and the baselines runs
 
 A power-of-two scale is exact: a mesh scaled by ``2**k`` gives the same result scaled,
 bit for bit; a translation is undone up to the precision of the moved input. Why:
-docs/methods.md ("Implementation notes: sshade/mesh/unit_frame.py").
+docs/implementation.md ("Implementation notes: sshade/mesh/unit_frame.py").
 """
 from __future__ import annotations
 
