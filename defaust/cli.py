@@ -17,7 +17,7 @@ import logging
 import sys
 from pathlib import Path
 
-from harness.checks import config_int_list, config_number
+from harness.checks import check_int_list, check_number, config_value
 from harness.command import hydra_main, run_command
 from harness.confdir import config_dir
 from harness.slurm_array import cluster_options
@@ -80,19 +80,20 @@ def config_from_omegaconf(cfg) -> BuildConfig:
 
     def num(key, default, kind=int):  # a number of the config, or SShaDeError naming its key
         seed = key == "seed"
-        return config_number(cfg, key, kind=kind, default=default, min=0 if seed else None,
-                             max=MAX_SEED if seed else None)
+        return check_number(config_value(cfg, key, default), key, kind=kind, min=0 if seed else None,
+                            max=MAX_SEED if seed else None)
 
     def ints(key):
-        return config_int_list(cfg, key, min=-2**31, allow_none=True)
+        return check_int_list(config_value(cfg, key, None), key, min=-2**31, allow_none=True)
+    vertex_range = config_value(cfg, "high_res.vertex_range", None)
     progress = c.get("progress", True)
     if not isinstance(progress, bool):
         raise SShaDeError(f"progress must be true or false, got {progress!r}")
     return BuildConfig(
         out=_abs(c["out"]), source=src, seed=num("seed", 0),
         subjects=ints("subjects"), n_subjects=num("n_subjects", d.n_subjects), n_poses=num("n_poses", d.n_poses),
-        vertex_range=tuple(config_int_list(cfg, "high_res.vertex_range", min=-2**31, allow_none=False)
-                           if OmegaConf.select(cfg, "high_res.vertex_range") is not None else d.vertex_range),
+        vertex_range=d.vertex_range if vertex_range is None else tuple(
+            check_int_list(vertex_range, "high_res.vertex_range", min=-2**31, allow_none=False)),
         remesh_iterations=num("high_res.remesh_iterations", d.remesh_iterations),
         remesh_check_distance=(c.get("high_res") or {}).get("check_distance", d.remesh_check_distance),
         n_per_landmark=num("handles.n_per_landmark", d.n_per_landmark),
@@ -113,7 +114,8 @@ def config_from_omegaconf(cfg) -> BuildConfig:
         anny_cache=None if an.get("cache") in (None, "") else _abs(an["cache"]),
         resolutions=_resolutions(c.get("resolutions", list(d.resolutions))),
         cluster=cluster_options(c.get("cluster")),
-        progress=progress, workers=config_number(cfg, "workers", min=1, max=4096, allow_none=True, default=None),
+        progress=progress, workers=check_number(config_value(cfg, "workers", None), "workers", min=1, max=4096,
+                                                allow_none=True),
     )
 
 

@@ -23,7 +23,7 @@ from eval.experiments.cases.cases_experiment import run
 from eval.report import safe_report
 from eval.run.run_folder import claimed_run
 from eval.run.spec import EvalSpec
-from harness.checks import config_bool
+from harness.checks import check_bool, config_value
 from harness.command import hydra_main, run_command
 from harness.confdir import config_dir
 from sshade.errors import SShaDeError
@@ -98,7 +98,7 @@ def _pin_out_dir(cfg) -> bool:
 def _refuse_fresh_resume(cfg, fresh: bool) -> None:
     """``resume=true`` continues the run of a folder named by ``out_dir=``; with the
     default dated ``out_dir`` (``fresh``) there is none to continue: SShaDeError."""
-    if fresh and config_bool(cfg, "resume", default=False):
+    if fresh and check_bool(config_value(cfg, "resume", False), "resume"):
         raise SShaDeError("resume=true needs the folder of the run to continue: pass out_dir=DIR, the folder "
                           "to resume (the default out_dir is a new folder)")
 

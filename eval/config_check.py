@@ -31,7 +31,7 @@ from eval.run.spec import (
     ReportOptions,
 )
 from eval.run.subset import check_method_cases
-from harness.checks import config_bool, config_number, config_value
+from harness.checks import check_bool, check_number, config_value
 from harness.method_registry import (
     SECTIONS,
     builtin_methods,
@@ -87,13 +87,13 @@ def check_values(cfg) -> None:
     SShaDeError naming the first bad key and its value.
     """
     if config_value(cfg, "arap", None) is not None:
-        config_number(cfg, "arap.tol", kind=float, min=0, default=1e-4)
-        if config_number(cfg, "arap.tol", kind=float, default=1e-4) <= 0:
-            raise SShaDeError(f"arap.tol must be a finite number > 0, got {config_value(cfg, 'arap.tol')!r}")
-        config_number(cfg, "arap.max_iter", min=1, allow_none=True, default=None)
+        tol = config_value(cfg, "arap.tol", 1e-4)
+        if check_number(tol, "arap.tol", kind=float, min=0) <= 0:
+            raise SShaDeError(f"arap.tol must be a finite number > 0, got {tol!r}")
+        check_number(config_value(cfg, "arap.max_iter", None), "arap.max_iter", min=1, allow_none=True)
         for k in ("etol", "gtol"):
-            config_number(cfg, f"arap.{k}", kind=float, min=0, allow_none=True, default=None)
-    config_number(cfg, "arap_sr.alpha", kind=float, min=0, default=DEFAULT_ALPHA)
+            check_number(config_value(cfg, f"arap.{k}", None), f"arap.{k}", kind=float, min=0, allow_none=True)
+    check_number(config_value(cfg, "arap_sr.alpha", DEFAULT_ALPHA), "arap_sr.alpha", kind=float, min=0)
     scaling = config_value(cfg, "arap_sr.alpha_scaling", "valence")
     if scaling not in ALPHA_SCALINGS:
         raise SShaDeError(f"arap_sr.alpha_scaling must be one of {list(ALPHA_SCALINGS)}, got {scaling!r}")
@@ -101,10 +101,10 @@ def check_values(cfg) -> None:
     check_method_cases(config_value(cfg, "method_cases", None))
     resolved = plain(cfg)
     _dataset(resolved)
-    config_bool(cfg, "resume", default=False)
+    check_bool(config_value(cfg, "resume", False), "resume")
     check_jobs(config_value(cfg, "jobs", "auto"))
     if config_value(cfg, "store", None) is not None:
-        config_bool(cfg, "store.meshes", default=False)
+        check_bool(config_value(cfg, "store.meshes", False), "store.meshes")
     _run_sections(resolved)
 
 
@@ -230,7 +230,8 @@ def _output(cfg) -> OutputOptions:
     out_dir = config_value(cfg, "out_dir", "")
     return OutputOptions(out_dir=str(out_dir or ""), overwrite=overwrite_flag(config_value(cfg, "overwrite", False)),
                          resume=overwrite_flag(config_value(cfg, "resume", False)),
-                         store_meshes=config_bool(cfg, "store.meshes", default=False), compare_with=tuple(items))
+                         store_meshes=check_bool(config_value(cfg, "store.meshes", False), "store.meshes"),
+                         compare_with=tuple(items))
 
 
 def method_definition(cfg, name: str) -> dict:

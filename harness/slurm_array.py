@@ -16,7 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from harness.checks import config_number
+from harness.checks import check_fields, checked_field
 from harness.jobs import THREAD_VARIABLES
 from harness.slurm_jobs import JobOutcome, slurm_states, wait_for_jobs
 from sshade.cores import CORES_VARIABLE
@@ -33,22 +33,27 @@ EXECUTORS = ("slurm", "local")
 
 @dataclass(frozen=True)
 class ClusterOptions:
-    """The ``cluster`` section (``conf/cluster/slurm.yaml`` says what each key does), checked."""
+    """The ``cluster`` section (``conf/cluster/slurm.yaml`` says what each key does), its
+    numbers checked and coerced when made (:func:`harness.checks.check_fields`; SShaDeError
+    naming ``cluster.<key>``), the other keys by :func:`cluster_options`."""
 
     executor: str
     partition: str | None
     account: str | None
     qos: str | None
-    timeout_min: int
-    cpus_per_task: int
-    mem_gb: float | None
-    array_parallelism: int
+    timeout_min: int = checked_field(int, min=1)
+    cpus_per_task: int = checked_field(int, min=1, max=4096)
+    mem_gb: float | None = checked_field(float, min=0.001, allow_none=True)
+    array_parallelism: int = checked_field(int, min=1)
     setup: tuple[str, ...]
     additional_parameters: Mapping
     folder: str
-    poll_s: float
-    grace_polls: int
-    unreachable_s: float
+    poll_s: float = checked_field(float, min=0.01)
+    grace_polls: int = checked_field(int, min=1, max=1000)
+    unreachable_s: float = checked_field(float, min=0)
+
+    def __post_init__(self):
+        check_fields(self, "cluster")
 
 
 def _text(values: Mapping, key: str, *, allow_none: bool = True) -> str | None:
@@ -89,7 +94,6 @@ def cluster_options(values) -> ClusterOptions | None:
         raise SShaDeError(f"cluster.{missing[0]} is not set (cluster=slurm sets every key)")
     if values["executor"] not in EXECUTORS:
         raise SShaDeError(f"cluster.executor must be one of {list(EXECUTORS)}, got {values['executor']!r}")
-    cfg = {"cluster": dict(values)}
     folder = PurePosixPath(str(_text(values, "folder", allow_none=False)))
     if folder.is_absolute() or ".." in folder.parts or str(folder) in ("", "."):
         raise SShaDeError(f"cluster.folder must be a folder inside the output folder (a relative path), "
@@ -103,16 +107,12 @@ def cluster_options(values) -> ClusterOptions | None:
                           "environment (set it before the command)")
     if not isinstance(extra, Mapping) or not all(isinstance(k, str) for k in extra):
         raise SShaDeError(f"cluster.additional_parameters must be a mapping of sbatch options, got {extra!r}")
-    return ClusterOptions(
+    return ClusterOptions(  # the numbers as given: ClusterOptions checks them
         executor=values["executor"], partition=_text(values, "partition"), account=_text(values, "account"),
-        qos=_text(values, "qos"), timeout_min=config_number(cfg, "cluster.timeout_min", min=1),
-        cpus_per_task=config_number(cfg, "cluster.cpus_per_task", min=1, max=4096),
-        mem_gb=config_number(cfg, "cluster.mem_gb", kind=float, min=0.001, allow_none=True),
-        array_parallelism=config_number(cfg, "cluster.array_parallelism", min=1),
-        setup=tuple(setup), additional_parameters=dict(extra), folder=folder.as_posix(),
-        poll_s=config_number(cfg, "cluster.poll_s", kind=float, min=0.01),
-        grace_polls=config_number(cfg, "cluster.grace_polls", min=1, max=1000),
-        unreachable_s=config_number(cfg, "cluster.unreachable_s", kind=float, min=0))
+        qos=_text(values, "qos"), timeout_min=values["timeout_min"], cpus_per_task=values["cpus_per_task"],
+        mem_gb=values["mem_gb"], array_parallelism=values["array_parallelism"], setup=tuple(setup),
+        additional_parameters=dict(extra), folder=folder.as_posix(), poll_s=values["poll_s"],
+        grace_polls=values["grace_polls"], unreachable_s=values["unreachable_s"])
 
 
 def thread_caps(options: ClusterOptions, variables: Sequence[str] = THREAD_VARIABLES) -> dict:

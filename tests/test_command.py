@@ -155,17 +155,20 @@ def test_check_config_experiment_sections():
 def test_config_number_helper():
     from omegaconf import OmegaConf
 
-    from harness.checks import config_number
+    from harness.checks import check_number, config_value
     cfg = OmegaConf.create({"a": {"n": 5, "x": 2.5, "s": "7", "none": None, "big": 1e300, "b": True}})
-    assert config_number(cfg, "a.n", kind=int, min=1) == 5
-    assert config_number(cfg, "a.x", kind=float, min=0) == 2.5
-    assert config_number(cfg, "a.none", kind=int, allow_none=True) is None
-    assert config_number(cfg, "a.missing", kind=int, default=3) == 3
+
+    def number(key, default=None, **kw):  # a key read once from the config, then checked
+        return check_number(config_value(cfg, key, default), key, **kw)
+    assert number("a.n", kind=int, min=1) == 5
+    assert number("a.x", kind=float, min=0) == 2.5
+    assert number("a.none", kind=int, allow_none=True) is None
+    assert number("a.missing", 3, kind=int) == 3
     for key, kw in [("a.x", {"kind": int}), ("a.s", {"kind": int}), ("a.big", {"kind": int}),
                     ("a.b", {"kind": int}), ("a.none", {"kind": int}), ("a.n", {"kind": int, "min": 6}),
                     ("a.n", {"kind": int, "max": 4}), ("a.big", {"kind": float, "max": 1e6})]:
         with pytest.raises(SShaDeError, match=key.replace(".", r"\.")):
-            config_number(cfg, key, **kw)
+            number(key, **kw)
 
 
 def test_eval_bad_numbers_cli_before_any_work(tmp_path, faust_root):

@@ -12,7 +12,7 @@ from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
 from omegaconf import MISSING
 
 from eval.run.subset import check_baseline_cases, check_sample
-from harness.checks import config_number
+from harness.checks import check_fields, checked_field
 
 __all__ = ["DatasetOptions"]
 
@@ -21,7 +21,9 @@ __all__ = ["DatasetOptions"]
 class DatasetOptions:
     """The keys of every ``conf/dataset/NAME.yaml``, checked when made (SShaDeError naming
     ``dataset.<key>``); a dataset's own dataclass extends it with its keys (and its own
-    defaults of these), in the order of its file.
+    defaults of these), in the order of its file, each number's or integer list's kind and
+    bounds declared on its field (:func:`harness.checks.checked_field`): the one walk of
+    :meth:`__post_init__` (:func:`harness.checks.check_fields`) checks them all.
 
     Attributes
     ----------
@@ -36,12 +38,12 @@ class DatasetOptions:
 
     name: str = MISSING
     root: Optional[str] = None
-    limit: Optional[int] = None
+    limit: Optional[int] = checked_field(int, min=1, allow_none=True, default=None)
     sample: Optional[int] = None
     sample_seed: int = 0
     baseline_cases: Any = None
 
     def __post_init__(self):
-        self.limit = config_number({"dataset": {"limit": self.limit}}, "dataset.limit", min=1, allow_none=True)
+        check_fields(self, "dataset")  # every declared field, the subclass's own too
         self.baseline_cases = check_baseline_cases(self.baseline_cases)
         self.sample, self.sample_seed = check_sample(self.sample, self.sample_seed)

@@ -22,7 +22,7 @@ from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
 from eval.run.paths import abs_path
 from eval.run.plan import BUILD_S_PER_SUBJECT, BUILD_START_S, duration_words
-from harness.checks import config_int_list
+from harness.checks import checked_field
 from sshade.cores import pool_size
 from sshade.errors import SShaDeError
 
@@ -71,13 +71,9 @@ class DefaustOptions(DatasetOptions):
     root: Optional[str] = DEFAULT_DEFAUST_ROOT
     baseline_cases: Any = "per_pose"
     resolution: str = "high"
-    subjects: Any = None
+    subjects: Any = checked_field(list[int], allow_none=True, default=None)
     reference_cases: Any = "none"
     build: DefaustBuildOptions = field(default_factory=DefaustBuildOptions)
-
-    def __post_init__(self):
-        super().__post_init__()
-        self.subjects = config_int_list({"dataset": vars(self)}, "dataset.subjects")
 
 
 @dataclass

@@ -22,7 +22,7 @@ from defaust.handles import landmark_handles, landmarks_for_target  # the DeFAUS
 from eval.datasets.dataset_options import DatasetOptions
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
-from harness.checks import check_numbers, config_int_list
+from harness.checks import checked_field
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh
 
@@ -94,23 +94,18 @@ class FaustOptions(DatasetOptions):
     name: str = "faust"
     root: Optional[str] = MISSING  # the user's to set: composed, the section shows it missing (???)
     protocol: str = "paper"
-    n_targets: int = 4
-    subjects: Any = None
-    poses: Any = None
-    n_per_landmark: int = 30
-    neighbourhood: int = 90
-    static_threshold: float = 0.02
-    seed: int = 0
+    n_targets: int = checked_field(int, min=1, default=4)
+    subjects: Any = checked_field(list[int], allow_none=True, default=None)
+    poses: Any = checked_field(list[int], allow_none=True, default=None)
+    n_per_landmark: int = checked_field(int, min=1, default=30)
+    neighbourhood: int = checked_field(int, min=1, default=90)
+    static_threshold: float = checked_field(float, min=0, default=0.02)
+    seed: int = checked_field(int, min=0, default=0)
 
     def __post_init__(self):
-        super().__post_init__()
+        super().__post_init__()  # the declared fields (harness.checks.check_fields)
         if self.protocol not in PROTOCOLS:
             raise SShaDeError(f"dataset.protocol must be one of {list(PROTOCOLS)}, got {self.protocol!r}")
-        check_numbers({"dataset": vars(self)}, "dataset", [
-            ("n_targets", int, 1, False), ("n_per_landmark", int, 1, False), ("neighbourhood", int, 1, False),
-            ("static_threshold", float, 0, False), ("seed", int, 0, False)])
-        self.subjects = config_int_list({"dataset": vars(self)}, "dataset.subjects")
-        self.poses = config_int_list({"dataset": vars(self)}, "dataset.poses")
 
 
 @dataclass

@@ -21,7 +21,7 @@ from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
 from eval.run.names import safe_name
 from eval.run.paths import abs_path
-from harness.checks import check_numbers, config_int_list
+from harness.checks import checked_field
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 
@@ -51,24 +51,20 @@ class ShapesOptions(DatasetOptions):
     name: str = "shapes"
     root: Optional[str] = "../shared/data/classic"
     files: Optional[List[str]] = field(default_factory=lambda: list(DEFAULT_SHAPES))
-    vertex_range: Optional[List[int]] = field(default_factory=lambda: [150000, 200000])
+    vertex_range: Optional[List[int]] = checked_field(list[int], min=4, allow_none=True,
+                                                      default_factory=lambda: [150000, 200000])
     cache: Optional[str] = "data/shapes"
-    n_per_group: int = 30
-    region_radius: float = 0.06
-    rotate_deg: float = 20.0
-    translate: float = 0.05
-    seed: int = 0
+    n_per_group: int = checked_field(int, min=1, default=30)
+    region_radius: float = checked_field(float, min=0, default=0.06)
+    rotate_deg: float = checked_field(float, default=20.0)
+    translate: float = checked_field(float, default=0.05)
+    seed: int = checked_field(int, min=0, default=0)
 
     def __post_init__(self):
-        super().__post_init__()
-        check_numbers({"dataset": vars(self)}, "dataset", [
-            ("n_per_group", int, 1, False), ("region_radius", float, 0, False), ("rotate_deg", float, None, False),
-            ("translate", float, None, False), ("seed", int, 0, False)])
-        if self.vertex_range is not None:
-            vr = config_int_list({"dataset": vars(self)}, "dataset.vertex_range", min=4)
-            if len(vr) != 2 or vr[0] > vr[1]:
-                raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
-            self.vertex_range = vr
+        super().__post_init__()  # the declared fields (harness.checks.check_fields)
+        vr = self.vertex_range
+        if vr is not None and (len(vr) != 2 or vr[0] > vr[1]):
+            raise SShaDeError(f"dataset.vertex_range must be [lo, hi] with 4 <= lo <= hi, got {vr}")
         if self.cache is not None:
             self.cache = abs_path(self.cache)
 

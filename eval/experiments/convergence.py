@@ -28,7 +28,7 @@ from eval.present.measures import label as measure_label
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import DatasetSpec, EvalSpec, ReferenceOptions
-from harness.checks import check_numbers, config_int_list
+from harness.checks import check_fields, checked_field
 from sshade import deform
 from sshade.arap import ArapOptions, rigid_fit, solve_arap
 from sshade.arap.problems import lifted_plane
@@ -148,8 +148,8 @@ class PlaneConfig:
     """``convergence.plane``: the lifted plane's ``lift`` (a fraction of its side) and
     ``n_target`` (vertices)."""
 
-    lift: float = 0.2
-    n_target: int = 40000
+    lift: float = checked_field(float, default=0.2)
+    n_target: int = checked_field(int, min=4, default=40000)
 
 
 @dataclass
@@ -157,8 +157,8 @@ class ConvergenceSShaDeConfig:
     """``convergence.sshade``: the sampling counts ``k`` to run (an integer or a list; None:
     1 and ``sshade.n_samplings``) and ``refine_k`` (SShaDe + refine starts from that run)."""
 
-    k: Any = None
-    refine_k: int = MISSING
+    k: Any = checked_field(list[int], min=1, max=10_000, allow_none=True, default=None)
+    refine_k: int = checked_field(int, min=1, default=MISSING)
 
 
 @dataclass
@@ -174,30 +174,22 @@ class ConvergenceConfig:
 
     cases: List[str] = field(default_factory=list)
     plane: PlaneConfig = field(default_factory=PlaneConfig)
-    dataset_case: int = 0
+    dataset_case: int = checked_field(int, min=0, default=0)
     energy: str = "spokes_and_rims"
-    time_budget_s: Any = 300
-    stop_pct: float = 0.001
-    target_pct: float = 0.05
+    time_budget_s: Any = checked_field(float, min=0, default=300)
+    stop_pct: float = checked_field(float, min=0, default=0.001)
+    target_pct: float = checked_field(float, min=0, default=0.05)
     libigl: bool = True
     sshade: ConvergenceSShaDeConfig = field(default_factory=ConvergenceSShaDeConfig)
 
     def __post_init__(self):
-        top = {"convergence": dataclasses.asdict(self)}
-        check_numbers(top, "convergence", _NUMBERS)
-        ks = config_int_list(top, "convergence.sshade.k", min=1, max=10_000)
+        check_fields(self, "convergence")  # plane and sshade too
         for name in self.cases:
             if name not in ("plane", "dataset"):
                 raise SShaDeError(f"convergence.cases: unknown case {name!r}; use plane and/or dataset")
         self.cases = tuple(self.cases)
-        self.time_budget_s = float(self.time_budget_s)
+        ks = self.sshade.k
         self.sshade.k = None if ks is None else tuple(ks)
-
-
-#: the numbers of the ``convergence`` section: (key, kind, min, allow_none)
-_NUMBERS = [("plane.lift", float, None, False), ("plane.n_target", int, 4, False), ("dataset_case", int, 0, False),
-            ("time_budget_s", float, 0, False), ("stop_pct", float, 0, False), ("target_pct", float, 0, False),
-            ("sshade.refine_k", int, 1, False)]
 
 
 def _cases(opts: ConvergenceConfig, ds: DatasetSpec | None) -> list[tuple[str, tuple]]:

@@ -29,7 +29,7 @@ from eval.present.measures import columns, measure_column
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions
-from harness.checks import config_int_list
+from harness.checks import check_fields, checked_field
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
 from sshade.isometric import pose_transfer, rigid_align
@@ -62,8 +62,8 @@ class PoseTransferConfig:
     ``subjects`` or ``poses`` not integers; both become tuples."""
 
     root: Optional[str] = MISSING
-    subjects: Any = None
-    poses: Any = None
+    subjects: Any = checked_field(list[int], allow_none=True, default=None)
+    poses: Any = checked_field(list[int], allow_none=True, default=None)
     align: bool = True
 
     REQUIRED: ClassVar[dict] = {"root": "DIR (a folder of FAUST registrations tr_reg_XYZ.ply)"}
@@ -71,10 +71,9 @@ class PoseTransferConfig:
     def __post_init__(self):
         if self.root in (None, ""):
             raise SShaDeError(f"pose_transfer.root is not set: pass pose_transfer.root={self.REQUIRED['root']}")
-        top = {"pose_transfer": {"subjects": self.subjects, "poses": self.poses}}
-        poses, subjects = config_int_list(top, "pose_transfer.poses"), config_int_list(top, "pose_transfer.subjects")
-        self.subjects = None if subjects is None else tuple(subjects)
-        self.poses = None if poses is None else tuple(poses)
+        check_fields(self, "pose_transfer")
+        self.subjects = None if self.subjects is None else tuple(self.subjects)
+        self.poses = None if self.poses is None else tuple(self.poses)
 
 
 def run_pose_transfer(spec: EvalSpec) -> dict:

@@ -36,7 +36,7 @@ from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, finish_run, write_runinfo
 from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
 from eval.tables import ok_mask
-from harness.checks import config_int_list, config_number
+from harness.checks import check_fields, checked_field
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
 from sshade.isometric import isometric_transfer
@@ -173,18 +173,18 @@ class ToscaConfig:
     ``poses`` not integers or ``classes`` not names; both become tuples."""
 
     root: Optional[str] = MISSING
-    min_vertices: Optional[int] = None
+    min_vertices: Optional[int] = checked_field(int, min=0, allow_none=True, default=None)
     classes: Any = None
-    poses: Any = None
+    poses: Any = checked_field(list[int], allow_none=True, default=None)
 
     REQUIRED: ClassVar[dict] = {"root": "DIR (a folder of TOSCA NAMEk.off files)"}
 
     def __post_init__(self):
         if self.root in (None, ""):
             raise SShaDeError(f"tosca.root is not set: pass tosca.root={self.REQUIRED['root']}")
-        top = {"tosca": {"min_vertices": self.min_vertices, "poses": self.poses}}
-        self.min_vertices = int(config_number(top, "tosca.min_vertices", min=0, allow_none=True, default=None) or 0)
-        poses, classes = config_int_list(top, "tosca.poses"), as_list(self.classes)
+        check_fields(self, "tosca")
+        self.min_vertices = self.min_vertices or 0
+        poses, classes = self.poses, as_list(self.classes)
         if classes is not None and not all(isinstance(c, str) and c for c in classes):
             raise SShaDeError(f"tosca.classes must be a class name or a list of names, got {self.classes!r}")
         self.classes = None if classes is None else tuple(classes)

@@ -17,7 +17,7 @@ from typing import Any, Optional  # OmegaConf 2.3 reads typing's generics
 
 from eval.run.paths import abs_path
 from eval.run.subset import check_baseline_cases
-from harness.checks import config_number
+from harness.checks import check_fields, checked_field
 from sshade.errors import SShaDeError
 from sshade.params import SShaDeParams
 
@@ -114,8 +114,8 @@ class ReferenceOptions:
 
     cases: Any = "baseline"
     cache: str = "data/references"
-    max_iter: int = 50000
-    time_budget_s: Any = 3600
+    max_iter: int = checked_field(int, min=1, default=50000)
+    time_budget_s: Any = checked_field(float, min=0, allow_none=True, default=3600)
 
     def __post_init__(self):
         cases = str(self.cases).strip()
@@ -125,12 +125,11 @@ class ReferenceOptions:
             except SShaDeError:
                 raise SShaDeError(f"reference.cases must be baseline, all, none, per_pose or an integer >= 0, "
                                   f"got {self.cases!r}") from None
-        top = {"reference": {"max_iter": self.max_iter, "time_budget_s": self.time_budget_s}}
-        self.max_iter = config_number(top, "reference.max_iter", min=1)
-        tb = config_number(top, "reference.time_budget_s", kind=float, min=0, allow_none=True)
+        check_fields(self, "reference")
+        tb = self.time_budget_s
         if tb is not None and tb <= 0:
             raise SShaDeError(f"reference.time_budget_s must be a finite number > 0 (or null), got {tb!r}")
-        self.cases, self.time_budget_s, self.cache = cases, tb, abs_path(self.cache)
+        self.cases, self.cache = cases, abs_path(self.cache)
 
 
 @dataclass
@@ -141,13 +140,12 @@ class ReportOptions:
     (in [100, 2,000,000]). SShaDeError naming the key."""
 
     enabled: bool = True
-    view_cases: Optional[int] = 2
-    max_faces: int = 30000
+    view_cases: Optional[int] = checked_field(int, min=0, allow_none=True, default=2)
+    max_faces: int = checked_field(int, min=100, max=2_000_000, default=30000)
 
     def __post_init__(self):
-        top = {"report": {"view_cases": self.view_cases, "max_faces": self.max_faces}}
-        self.view_cases = config_number(top, "report.view_cases", min=0, allow_none=True) or 0
-        self.max_faces = config_number(top, "report.max_faces", min=100, max=2_000_000)
+        check_fields(self, "report")
+        self.view_cases = self.view_cases or 0
 
     @property
     def views(self) -> int:
@@ -162,11 +160,12 @@ class FigureOptions:
     ``max_cases`` cases (>= 0; None: 4). SShaDeError naming the key."""
 
     enabled: bool = False
-    max_cases: Optional[int] = 4
+    max_cases: Optional[int] = checked_field(int, min=0, allow_none=True, default=4)
 
     def __post_init__(self):
-        n = config_number({"figures": {"max_cases": self.max_cases}}, "figures.max_cases", min=0, allow_none=True)
-        self.max_cases = FigureOptions.max_cases if n is None else n
+        check_fields(self, "figures")
+        if self.max_cases is None:
+            self.max_cases = FigureOptions.max_cases  # the field's default
 
 
 @dataclass(frozen=True)

@@ -9,12 +9,11 @@ Parameters: the meshes, handles and budgets from ``scaling.*``
 section; :func:`elastic_params`)."""
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, List, Optional  # OmegaConf 2.3 reads typing's generics
 
@@ -32,7 +31,7 @@ from eval.run.memory import PeakMemory, release_freed
 from eval.run.paths import abs_path
 from eval.run.runinfo import collect_runinfo, write_runinfo
 from eval.run.spec import EvalSpec
-from harness.checks import check_numbers, config_int_list
+from harness.checks import check_fields, checked_field
 from sshade import deform
 from sshade.arap import ArapOptions, arap_deform, make_criterion
 from sshade.errors import SShaDeError
@@ -104,36 +103,25 @@ class ScalingConfig:
     meshes: Any = None
     base_mesh: Optional[str] = None
     remesh: bool = True
-    sizes: List[int] = field(default_factory=list)
-    seed: int = 0
-    n_per_group: int = 30
-    region_radius: float = 0.06
-    rotate_deg: float = 20.0
-    translate: float = 0.05
-    repeat: int = 3
+    sizes: List[int] = checked_field(list[int], min=4, allow_none=True, default_factory=list)
+    seed: int = checked_field(int, min=0, default=0)
+    n_per_group: int = checked_field(int, min=1, default=30)
+    region_radius: float = checked_field(float, min=0, default=0.06)
+    rotate_deg: float = checked_field(float, default=20.0)
+    translate: float = checked_field(float, default=0.05)
+    repeat: int = checked_field(int, min=1, default=3)
     first_call: bool = True
-    first_call_timeout_s: Any = 600
+    first_call_timeout_s: Any = checked_field(float, min=0, default=600)
     elastic: bool = True
-    elastic_budget_s: Any = 600
-    elastic_max_vertices: Optional[int] = None
+    elastic_budget_s: Any = checked_field(float, min=0, default=600)
+    elastic_max_vertices: Optional[int] = checked_field(int, min=1, allow_none=True, default=None)
     cache: Optional[str] = "data/scaling"
 
     def __post_init__(self):
-        top = {"scaling": {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
-        check_numbers(top, "scaling", _NUMBERS)
-        sizes = config_int_list(top, "scaling.sizes", min=4)
-        self.meshes = tuple(mesh_entries(top["scaling"]))
-        self.sizes = tuple(sizes or ())
-        self.first_call_timeout_s = float(self.first_call_timeout_s)
-        self.elastic_budget_s = float(self.elastic_budget_s)
+        check_fields(self, "scaling")
+        self.meshes = tuple(mesh_entries(vars(self)))
+        self.sizes = tuple(self.sizes or ())
         self.cache = str(self.cache or ScalingConfig.cache)
-
-
-#: the numbers of the ``scaling`` section: (key, kind, min, allow_none)
-_NUMBERS = [("seed", int, 0, False), ("n_per_group", int, 1, False), ("region_radius", float, 0, False),
-            ("rotate_deg", float, None, False), ("translate", float, None, False),
-            ("elastic_budget_s", float, 0, False), ("elastic_max_vertices", int, 1, True),
-            ("first_call_timeout_s", float, 0, False), ("repeat", int, 1, False)]
 
 
 def run_scaling(spec: EvalSpec) -> dict:
