@@ -4,6 +4,9 @@ and the leaderboard and the committed tables as generated pages.
 * :func:`on_files`: adds ``generated/leaderboard.md`` (``results/leaderboard.md``) and
   ``generated/tables.md`` (every ``results/<run>/table.md``), read at build time, never
   copied into docs/; their links into ``results/`` become the files' repository paths.
+* :func:`on_page_markdown`: opens each API page with the table of its packages' public
+  names as users import them (``sshade.deform``), each linked to its entry
+  (``sshade.pipeline.deform``).
 * :func:`on_post_build`: fails the build (``PluginError``) when a name of a package's
   ``__all__`` (:data:`API_PAGES`) has no ``::: module.name`` entry on its API page.
 """
@@ -36,6 +39,27 @@ def missing_api_names(docs_dir: Path) -> list[str]:
             names = getattr(importlib.import_module(pkg), "__all__", ())
             out += [f"{pkg}.{n} ({page})" for n in names if n not in documented]
     return sorted(out)
+
+
+def public_names_table(text: str, packages) -> str:
+    """A Markdown table of the public names of ``packages`` (``__all__``) as imported,
+    each linked to the ``::: module.name`` entry of ``text`` (an API page) that documents it."""
+    home = {path.rsplit(".", 1)[-1]: path for path in _DIRECTIVE.findall(text)}
+    rows = ["| Import as | Documented as |", "|---|---|"]
+    for pkg in packages:
+        for n in getattr(importlib.import_module(pkg), "__all__", ()):
+            if n in home:
+                rows.append(f"| `{pkg}.{n}` | [`{home[n]}`](#{home[n]}) |")
+    return "\n".join(rows)
+
+
+def on_page_markdown(markdown, page, config, files):
+    """Put the table of public names before an API page's first section."""
+    packages = API_PAGES.get(page.file.src_uri)
+    if not packages:
+        return markdown
+    head, sep, rest = markdown.partition("\n## ")
+    return f"{head}\n{public_names_table(markdown, packages)}\n{sep}{rest}" if sep else markdown
 
 
 def _repository_links(text: str, folder: str) -> str:

@@ -34,6 +34,14 @@ def test_a_public_name_left_out_of_the_api_reference_is_named(tmp_path):
     assert hooks.missing_api_names(tmp_path) == ["sshade.prepare (api/sshade.md)"]
 
 
+def test_each_public_name_is_listed_as_imported_and_linked_to_its_entry():
+    text = (ROOT / "docs" / "api" / "sshade.md").read_text(encoding="utf-8")
+    table = _hooks().public_names_table(text, ("sshade",))
+    assert "| `sshade.deform` | [`sshade.pipeline.deform`](#sshade.pipeline.deform) |" in table
+    import sshade
+    assert len(table.splitlines()) == 2 + len(sshade.__all__)
+
+
 def test_links_into_results_become_repository_paths():
     text = "[faust/](faust/index.html) and [the paper](https://example.org) and [top](#rank)"
     out = _hooks()._repository_links(text, "results")
