@@ -1,6 +1,6 @@
 """The closed-ball property of a Voronoi decomposition, checked (paper §3.1; Edelsbrunner
-& Shah 1997): compiled kernels of :func:`sshade.remesh.remesh`'s check-and-repair rounds, called one after another
-from Python (a kernel calling kernels recompiles their code into its own).
+& Shah 1997): compiled kernels of :func:`sshade.remesh.remesh`'s check-and-repair rounds,
+called one after another from Python (a kernel calling kernels recompiles their code).
 
 On the high-res mesh with every boundary loop coned to a virtual vertex: every region a
 disk, every two adjacent regions meeting along one arc, every three at one point; a
@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from .mesh.halfedge import halfedges
 
 __all__ = ["closed_ball", "closed_ball_full", "closed_ball_holds", "closed_ball_local", "vertex_faces",
            "warm_kernels"]
@@ -535,9 +537,8 @@ def warm_kernels() -> None:
     types :func:`sshade.remesh.remesh` passes, on a closed tetrahedron labelled twice: two
     regions (the property fails: the repair path) and four (it holds)."""
     Fc = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
-    ends = np.sort(np.stack([Fc, np.roll(Fc, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-    E, FE = np.unique(ends, axis=0, return_inverse=True)
-    Ec, FEc = np.ascontiguousarray(E, np.int64), np.ascontiguousarray(FE.reshape(4, 3), np.int64)
+    he = halfedges(Fc, 4)
+    Ec, FEc = he.E, he.FE
     ptr, idx = vertex_faces(Fc, 4)
     for lab in (np.array([0, 0, 1, 1], np.int32), np.arange(4, dtype=np.int32)):
         nlab = int(lab.max()) + 1

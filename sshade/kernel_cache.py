@@ -132,7 +132,7 @@ def _warm_sampling() -> None:
 def _warm_topology() -> None:
     """Mesh checks, half-edges, fans, normals, boundary loops, the closed-ball checks (full
     and local) and the transfer's encoding and decoding."""
-    V, F, E, FE = _tetrahedron()
+    V, F, _, _ = _tetrahedron()
     validate_mesh(V, F)
     warm_closed_ball()
     he = halfedges(F, 4)
