@@ -12,7 +12,7 @@ largest move is below ``tol * bbox_diag``, at most 1000 iterations); docs/protoc
 import lazy_loader
 
 # bound on first use (SPEC 1): importing one submodule does not import the others, so a
-# row's code identity holds only what its code reaches (docs/experiments.md)
+# row's code identity holds only what its code reaches (docs/implementation.md)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "arap_sr": ["ARAPSR"],
     "fullres_arap": ["ARAP", "Elastic", "FullResArap"],

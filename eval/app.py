@@ -1,5 +1,5 @@
 """The evaluator's Hydra entry point: ``python -m eval [overrides]``.
-Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md.
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/implementation.md.
 
 Usage (from the repository root)::
 

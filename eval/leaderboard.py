@@ -1,7 +1,7 @@
 """One leaderboard of method x dataset over the run folders of a results tree
 (``results/leaderboard.md`` and the top of ``results/index.html``, written by
 ``python -m eval.report --index results``, the ``report`` step of ``python -m eval.reproduce``).
-Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import math

@@ -1,6 +1,6 @@
 """Build the deformation methods listed in the evaluator's Hydra config: ours by name,
 anyone's as a plug-in.
-Floor 1 of eval/ (beside metrics/ and datasets/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 1 of eval/ (beside metrics/ and datasets/, tests/test_layering.py); notes: docs/implementation.md.
 
 Names (case-insensitive) are those of :func:`harness.method_registry.builtin_methods`, one per
 file of the ``method`` config group: ``ARAP`` (spokes, Sorkine & Alexa 2007),

@@ -1,6 +1,6 @@
 """The browser report of an evaluator run: ``index.html`` in the run folder, opened from
 ``file://`` (no server, no network: every script is inline or a file next to it).
-Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md.
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/implementation.md.
 
 Command line (:func:`main`)::
 

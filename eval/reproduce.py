@@ -9,7 +9,7 @@
 Each step runs as its own process (a failure is reported, the others still run) after a plan
 of the stored rows reused and stale; table and sweep steps compute only stale and missing rows.
 Exit 1 if a step failed (``--check``: a row stale and not marked pending, or a folder run whole stale).
-Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 5 of eval/ (the commands, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import importlib.util

@@ -1,5 +1,5 @@
 """Per-case results -> per-method tables (CSV, Markdown, LaTeX), written atomically.
-Floor 3 of eval/ (above present/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 3 of eval/ (above present/, tests/test_layering.py); notes: docs/implementation.md.
 
 Input: a pandas DataFrame with one row per (case, method) as produced by
 :mod:`eval.app`: identifiers (``case``, ``subject``, ``pose``, ``method``), sizes

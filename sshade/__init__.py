@@ -13,7 +13,7 @@ import lazy_loader
 
 # bound on first use (SPEC 1): importing one submodule (sshade.arap.solver, sshade.mesh.io)
 # does not import the pipeline, so a row's code identity holds only what its code reaches
-# (docs/experiments.md); ``sshade.remesh`` stays the function after ``import sshade.remesh``
+# (docs/implementation.md); ``sshade.remesh`` stays the function after ``import sshade.remesh``
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "errors": ["SShaDeError"],
     "method_interface": ["Deformer"],

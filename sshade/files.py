@@ -4,7 +4,7 @@
 
 Writing a file imports no mesh reader: the record writers, the caches, the DeFAUST store
 and the commands take these from here (a row's code identity then holds no reader,
-docs/experiments.md); the bounded JSON reader is :mod:`sshade.json_file`.
+docs/implementation.md); the bounded JSON reader is :mod:`sshade.json_file`.
 """
 from __future__ import annotations
 

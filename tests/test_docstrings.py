@@ -1,7 +1,7 @@
 """Module docstrings are references, not lab notes: every module of the packages in
 :data:`PACKAGES` has one, of at most :data:`MAX_LINES` lines (what the module holds, where
 it sits, the paper section it implements); rationale and measurements live in
-docs/implementation.md, or docs/experiments.md for eval/ ("Implementation notes: ...").
+docs/implementation.md ("Implementation notes: ...", eval/ included).
 Read with ``ast``, nothing imported."""
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ Needs PyTorch (extra ``[neural]``); importing this package does not (:mod:`.back
 import lazy_loader
 
 # bound on first use (SPEC 1): importing one submodule does not import the others, so a
-# row's code identity holds only what its code reaches (docs/experiments.md)
+# row's code identity holds only what its code reaches (docs/implementation.md)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "method": ["ImplicitARAP"],
     "params": ["PRESETS", "ImplicitARAPParams", "implicit_arap_params"],

@@ -1,5 +1,5 @@
 """Datasets of deformation cases for the evaluator (``dataset.name`` in the config).
-Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/implementation.md.
 
 - :mod:`eval.datasets.faust`: FAUST registrations -> DeFAUST-style cases
   (:func:`~eval.datasets.faust.faust_cases`).
@@ -13,7 +13,7 @@ Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experimen
 import lazy_loader
 
 # bound on first use (SPEC 1): a module that needs one name (the pair runner's case label)
-# runs no loader, so a row's code identity holds no loader (docs/experiments.md)
+# runs no loader, so a row's code identity holds no loader (docs/implementation.md)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "dataset_options": ["DatasetOptions"],
     "dataset_registry": ["Dataset", "datasets", "find_dataset", "register_dataset"],

@@ -3,7 +3,7 @@
 options dataclass extends (e.g. :class:`eval.datasets.faust.FaustOptions`) and registers
 with its loader (:func:`eval.datasets.register_dataset`): the type of ``conf/dataset/NAME.yaml``,
 made at the door by :func:`eval.config_schema.typed_object`, its checks in ``__post_init__``.
-Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 from dataclasses import dataclass

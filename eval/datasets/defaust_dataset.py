@@ -1,7 +1,7 @@
 """The ``defaust`` dataset: a built DeFAUST folder (``python -m defaust``, :mod:`defaust`)
 read as deformation cases through the dataset's public reader :mod:`defaust.dataset`
 (which says how the stored handles become vertex handles and targets).
-Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import logging

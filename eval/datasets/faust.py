@@ -1,5 +1,5 @@
 """FAUST registrations as handle-driven deformation cases (DeFAUST protocol).
-Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/implementation.md.
 
 Source: SShaDe paper (Maggioli et al., Eurographics 2025), appendix "DeFAUST dataset";
 data: MPI-FAUST training registrations (Bogo et al. 2014), files ``tr_reg_XYZ.ply``

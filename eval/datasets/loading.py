@@ -1,7 +1,7 @@
 """The ``dataset`` section at work: a dataset's cases loaded by name with collision-free
 names (:func:`load_cases`), its root resolved after its ``prepare`` step
 (:func:`dataset_root`) and what that step is about to do (:func:`dataset_outlook`).
-Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import dataclasses

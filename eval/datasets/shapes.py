@@ -1,5 +1,5 @@
 """User-defined deformations of single shapes (paper §4.1, Fig. arap-examples).
-Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/datasets/, tests/test_layering.py); notes: docs/implementation.md.
 
 Example::
 

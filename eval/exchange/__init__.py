@@ -1,5 +1,5 @@
 """Results computed outside this harness: the exchange layout and its scoring.
-Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/implementation.md.
 
 - :mod:`~eval.exchange.layout`: ``python -m eval experiment=export`` writes every case of
   a dataset in a layout any language reads (rest mesh as OBJ and PLY, handles and

@@ -1,6 +1,6 @@
 """The exchange layout: every case of a dataset in files any language reads, and the
 names a folder of results computed elsewhere follows.
-Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/exchange/, tests/test_layering.py); notes: docs/implementation.md.
 
 An export folder (:func:`write_export`) holds ``cases.json`` (:data:`INDEX`) and one folder
 per case (``<case>/rest.obj``, ``rest.ply``, ``handles.json``, ``handles.csv``, ``handles.dmat``,

@@ -1,5 +1,5 @@
 """Animated DeFAUST: ``python -m eval experiment=animation``.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 For each DeFAUST case (subject s, target pose p) of the selected subjects, ``frames``
 frames take the body from the rest pose to the target pose with the joint rotations

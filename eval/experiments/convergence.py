@@ -1,5 +1,5 @@
 """Time to accuracy of the ARAP solvers: ``python -m eval experiment=convergence``.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 For each case (a subdivided plane with its boundary fixed and a central disc lifted,
 :func:`sshade.arap.problems.lifted_plane`; the first case of the configured dataset, by

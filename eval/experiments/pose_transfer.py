@@ -1,5 +1,5 @@
 """Pose transfer on FAUST (paper §4.3): ``python -m eval experiment=pose_transfer``.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 The paper poses hand-edited TOSCA meshes, which have no ground truth. Here the edited
 shape is another FAUST subject: the registrations (``tr_reg_XYZ.ply``, subject and pose from ``XYZ``,

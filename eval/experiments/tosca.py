@@ -1,5 +1,5 @@
 """Non-rigid isometric deformations on TOSCA (paper §4.2): ``python -m eval experiment=tosca``.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 For every TOSCA class (files ``NAMEk.off`` in ``tosca.root``, vertices 1:1 within a
 class) pose 0 is the rest pose M and every other pose M' one case: M is remeshed to

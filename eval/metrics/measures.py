@@ -1,5 +1,5 @@
 """Deformation-quality metrics of the paper (§4.1 ARAP errors, §4.2 Hausdorff/Chamfer).
-Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/implementation.md.
 
 Examples
 --------

@@ -1,6 +1,6 @@
 """What the metrics of :mod:`eval.metrics.measures` need of a mesh, computed once:
 :class:`RestMesh` (rest side) and :class:`TargetMesh` (ground-truth side), and their kernels.
-Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/implementation.md.
 
 Examples
 --------

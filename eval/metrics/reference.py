@@ -4,7 +4,7 @@ the code of this module's import closure solves it, and a row scored against it 
 its content digest, not that code (:mod:`eval.run.code_identity`, docs/reproduction.md).
 What a result is scored against and how far it lies from the reference:
 :mod:`eval.metrics.reference_scores`.
-Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 1 of eval/ (eval/metrics/, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import hashlib

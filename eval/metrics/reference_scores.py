@@ -2,7 +2,7 @@
 method is compared with (:func:`method_energy`; ARAP-SR's named by :func:`sr_energy`), its
 operators, and the distance of a result to a reference solution (:func:`reference_metrics`),
 part of every row with reference columns; the reference itself is an artifact of
-:mod:`eval.metrics.reference`. Floor 1 of eval/ (tests/test_layering.py); notes: docs/experiments.md.
+:mod:`eval.metrics.reference`. Floor 1 of eval/ (tests/test_layering.py); notes: docs/implementation.md.
 
 - ``ref_mean_pct`` / ``ref_max_pct``: mean / max vertex distance to the reference, in % of
   the rest mesh's bounding-box diagonal;

@@ -1,5 +1,5 @@
 """Figures of the ANNY DeFAUST source: ``python -m eval.present.anny_figures [OUT_DIR]``.
-Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/implementation.md.
 
 Writes, at the bodies' low resolution (13,348 vertices), with :func:`eval.present.figures.mesh_row`:
 

@@ -1,6 +1,6 @@
 """Breakdowns of an evaluator run next to its ``table.md``: per target pose
 and per subject, and a paired comparison of SShaDe with Elastic.
-Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/implementation.md.
 
 Input: the per-case rows of ``cases.csv`` (columns ``case``, ``subject``, ``pose``,
 ``method``, ``error`` and the metrics; :mod:`eval.experiments.cases.cases_experiment`). Only successful

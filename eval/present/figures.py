@@ -1,7 +1,7 @@
 """Paper-style case figures: the rest mesh with its handles, then every method's result
 coloured by the per-edge length error (paper Fig. 1 handle colours, Fig. "defaust-volume"
 error colouring), rendered headless with :mod:`eval.present.render`.
-Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import logging

@@ -5,7 +5,7 @@ the experiments' own tables' included (:class:`Column`, :data:`COUNTS`, :data:`T
 The tables (:mod:`eval.tables`, :mod:`eval.present.table_markup`), the breakdown, the
 browser report, the leaderboard and the experiments take their headers from here
 (:func:`label`, :func:`columns`), so a column is added or renamed in one place. What each
-metric measures: :mod:`eval.metrics.measures`; notes: docs/experiments.md and docs/layout.md.
+metric measures: :mod:`eval.metrics.measures`; notes: docs/implementation.md and docs/layout.md.
 """
 from __future__ import annotations
 

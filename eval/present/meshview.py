@@ -1,7 +1,7 @@
 """Display meshes for the HTML report (:mod:`eval.report`): one case's rest mesh, its
 target (ground truth) and every method's result, decimated and quantised for a small
 file, written next to the report as a script the page loads from ``file://``.
-Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/implementation.md.
 
 Size: about ``4/3 * (6 * clusters * meshes + (2 or 4) * 3 * faces)`` bytes per case
 (clusters ~ faces / 2); 30000 faces and 7 meshes: about 1.6 MB."""

@@ -1,5 +1,5 @@
 """Headless mesh rendering with matplotlib (Agg): shaded triangle meshes as RGB arrays.
-Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/implementation.md.
 
 No display and no ``pyplot`` state: every image is drawn on its own
 :class:`matplotlib.figure.Figure` with a :class:`~matplotlib.backends.backend_agg.FigureCanvasAgg`,

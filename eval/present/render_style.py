@@ -3,7 +3,7 @@ matplotlib's rcParams hold a figure's look: camera, image size, colormap, marker
 shading, background. :func:`eval.present.render.render_mesh` takes one, and so do the
 figures of :mod:`eval.present.figures` for each of their panels; the data drawn (meshes,
 values, points, colour range, titles) stay those functions' parameters.
-Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 2 of eval/ (eval/present/, tests/test_layering.py); notes: docs/implementation.md.
 
 Example::
 

@@ -3,7 +3,7 @@
 the method's modules and what they import (solvers, metrics, references, data loading),
 through lazy packages (SPEC 1) and re-exports; literal constants by value; not the
 modules that only store, run or present records (:data:`RECORD_ONLY`).
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
 Example::
 

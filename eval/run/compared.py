@@ -1,6 +1,6 @@
 """Rows of earlier runs beside a new one (``compare_with=[results/defaust]``): a new
 method's row beside the committed baselines without rerunning them.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md."""
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md."""
 from __future__ import annotations
 
 import hashlib

@@ -2,7 +2,7 @@
 of a row's identity only for the libraries its code imports and those they compute with
 (:func:`used_libraries`), so an upgrade of PyTorch stales Implicit-ARAP's rows and not
 ARAP's. Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes:
-docs/experiments.md ("eval/run/code_identity.py")."""
+docs/implementation.md ("eval/run/code_identity.py")."""
 from __future__ import annotations
 
 import ast

@@ -1,5 +1,5 @@
 """Output folders: a command writes only where it may, and never outside its folder.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
 Every command of the harness that writes a folder of results (the evaluator
 ``python -m eval``, the sweeps ``python -m eval.sweeps``, ``python -m eval.reproduce``)

@@ -8,7 +8,7 @@ names each pending row with the commit that made it and the modules changed sinc
 (:func:`pending_markdown`). ``--check`` counts a stale row as marked when its folder's
 ``table.md`` lists it with that commit (:func:`marked_pending`). :data:`STOP_AFTER_ENV` stops
 an evaluator run early, its pairs left marked so (``python -m eval.reproduce --budget``).
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The evaluator's plan, up front: what a run is about to do, and about how long.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
 Before any work the main job (:mod:`eval.experiments.cases.cases_experiment`, through
 :mod:`eval.experiments.cases.case_plan`) logs one ``plan:`` line, e.g. ::

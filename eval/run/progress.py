@@ -1,5 +1,5 @@
 """The evaluator's progress estimate weighted by each method's expected cost.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
 :func:`default_cost_model` is the evaluator's model: the methods' priors plus the
 per-pair overhead of the metrics (:data:`OVERHEAD_S_PER_VERTEX`); the up-front plan

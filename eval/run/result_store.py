@@ -1,6 +1,6 @@
 """The evaluator's per-(case, method) result store: a run that stops (crash, ``kill -9``,
 Ctrl-C, time limit) loses at most the pair it was computing.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
 Layout, under the run's ``out_dir`` (:mod:`eval.run.outdir`)::
 

@@ -1,6 +1,6 @@
 """Whether a table's rows are the result store's: every row of ``cases.csv`` held against
 the record of its (case, method) in ``runs/`` (:mod:`eval.run.result_store`).
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
 :func:`check_rows` reads each row's record as untrusted input (:meth:`ResultStore.read`:
 whole, of this store version, naming that pair, its digest holding, a valid row) and

@@ -8,7 +8,7 @@ judged here). A record keyed under earlier identity rules (store version 4, or t
 is re-keyed, never recomputed, when git has the commit its ``git`` names and that commit's
 sources give its recorded identity: its new identity is computed from that commit's
 sources, for the modules its method's identity is made of now.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ of its experiment's module, or of the script's imports and its ``CODE_ROOTS``) a
 script itself have the same code (:func:`eval.run.code_identity.code_text`) at that
 commit as in this checkout; git must hold the commit (:class:`eval.run.stale_rows.CommitTrees`).
 Only code is held, not the config: a run's effective settings are in its ``run.json``.
-Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/experiments.md.
+Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 """
 from __future__ import annotations
 

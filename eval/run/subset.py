@@ -1,6 +1,6 @@
 """Which cases a run takes (``dataset.sample=K``, :func:`sample_cases`: a seeded uniform
 sample, in the dataset's order) and which of them the full-resolution baselines run on
-(``dataset.baseline_cases``). Floor 0 of eval/ (tests/test_layering.py); docs/experiments.md.
+(``dataset.baseline_cases``). Floor 0 of eval/ (tests/test_layering.py); docs/implementation.md.
 
 - ``per_pose`` (DeFAUST's default): one case per target pose, from different subjects.
   With the target poses present sorted ``p_0 < p_1 < ...`` and the subjects present

@@ -1,5 +1,5 @@
 """Sweeps on SLURM that end, whatever happens to their jobs.
-Floor 4 of eval/ (eval/sweeps/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/sweeps/, tests/test_layering.py); notes: docs/implementation.md.
 
 The Hydra plugin class is ``hydra_plugins.sshade_sweep_launcher.SweepSlurmLauncher``
 (Hydra only loads launchers from the ``hydra_plugins`` package), selected by

@@ -1,5 +1,5 @@
 """Parameter sweeps of the evaluator (Hydra multirun) and their summary table.
-Floor 6 of eval/ (above the commands, tests/test_layering.py); notes: docs/experiments.md.
+Floor 6 of eval/ (above the commands, tests/test_layering.py); notes: docs/implementation.md.
 
 Run a sweep (same config and overrides as ``python -m eval``; ``-m`` = multirun)::
 

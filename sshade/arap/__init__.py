@@ -9,7 +9,7 @@ imported here. What each module holds: docs/layout.md (``sshade/arap/``).
 import lazy_loader
 
 # bound on first use (SPEC 1): importing one submodule does not import the others, so a
-# row's code identity holds only what its code reaches (docs/experiments.md)
+# row's code identity holds only what its code reaches (docs/implementation.md)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "accelerate": ["LBFGS", "Anderson"],
     "criterion": ["DEEP_CRITERION", "DEFAULT_CRITERION", "Criterion", "gradient_norm", "make_criterion"],

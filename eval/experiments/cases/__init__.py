@@ -1,6 +1,6 @@
 """The ``cases`` experiment (``experiment.kind: cases``, the default): every method on
 every case of the configured dataset (FAUST, DeFAUST, shapes), metrics and tables.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 - :mod:`~eval.experiments.cases.cases_experiment`: the run, registered as ``cases``;
 - :mod:`~eval.experiments.cases.case_plan`: the plan logged before any run;

@@ -1,5 +1,5 @@
 """The ``cases`` experiment's pairs as one SLURM job array (``cluster=slurm``), through submitit.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 One array task per case with runs to do (its methods in table order, its reference
 computed once), each pair stored in the run's result store as it finishes

@@ -1,5 +1,5 @@
 """The ``cases`` experiment's runs side by side: whole cases in worker processes.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 Example::
 

@@ -1,5 +1,5 @@
 """The ``cases`` experiment (the default): every method on every case, metrics, tables.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 Run through ``python -m eval`` (:mod:`eval.app`); usage (from the repository root)::
 

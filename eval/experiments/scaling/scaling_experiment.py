@@ -1,6 +1,6 @@
 """Scaling benchmark (issue "Scalable SShaDe"; paper abstract, §1, Table 1):
 ``python -m eval experiment=scaling``.
-Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/experiments.md.
+Floor 4 of eval/ (eval/experiments/, tests/test_layering.py); notes: docs/implementation.md.
 
 Parameters: the meshes, handles and budgets from ``scaling.*``
 (``conf/experiment/scaling.yaml``); SShaDe's from the method config ``method.SShaDe``
