@@ -20,7 +20,7 @@ from sshade.errors import SShaDeError
 from sshade.pipeline import MAX_SEED
 
 __all__ = ["config_value", "check_number", "check_bool", "check_int_list", "checked_field", "check_fields",
-           "MAX_INT"]
+           "env_positive", "MAX_INT"]
 
 MAX_INT = 2**31 - 1   # counts and iteration caps: int32 (numba kernels, libigl)
 _MISSING = object()  # "no default": an absent key is an error
@@ -107,6 +107,40 @@ def check_number(value, key: str, *, kind=int, min=None, max=None, allow_none: b
     if (min is not None and value < min) or (hi is not None and value > hi):
         raise bad
     return value
+
+
+def env_positive(name: str, what: str, environ=None) -> float | None:
+    """The finite number > 0 that environment variable ``name`` holds in ``environ``
+    (default ``os.environ``), None when it is unset or blank.
+
+    Parameters
+    ----------
+    name : the variable. what : what the number is, for the message (``"a number of
+        seconds > 0"``). environ : mapping or None.
+
+    Returns
+    -------
+    float or None.
+
+    Raises
+    ------
+    SShaDeError ``"<name> must be <what>, got '<text>'"`` on anything else.
+
+    >>> env_positive("X", "a number > 0", {"X": " 2.5 "}), env_positive("X", "a number > 0", {})
+    (2.5, None)
+    """
+    import os
+
+    text = (os.environ if environ is None else environ).get(name, "")
+    if not text.strip():
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise SShaDeError(f"{name} must be {what}, got {text!r}")
+    return v
 
 
 def check_bool(value, key: str) -> bool:

@@ -30,6 +30,21 @@ def _reference_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session", autouse=True)
+def _plan_speed_fixed():
+    """The evaluator's plan takes the priors as measured (factor 1) instead of timing this
+    machine with its probe (about 1 s per process, eval/run/machine_speed.py), unless the
+    caller already fixed it; child processes inherit it. tests/test_machine_speed.py
+    runs the probe itself."""
+    from eval.run.machine_speed import SPEED_ENV
+
+    old = os.environ.get(SPEED_ENV)
+    os.environ.setdefault(SPEED_ENV, "1")
+    yield
+    if old is None:
+        os.environ.pop(SPEED_ENV, None)
+
+
+@pytest.fixture(scope="session", autouse=True)
 def _ctrl_c_as_at_a_terminal():
     """Ctrl-C reaches the tests' commands as at a terminal, also where the suite starts
     with SIGINT ignored (a CI runner's background job): Python then installs no

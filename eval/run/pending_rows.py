@@ -12,12 +12,10 @@ Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: d
 """
 from __future__ import annotations
 
-import math
-import os
 import re
 from pathlib import Path
 
-from sshade.errors import SShaDeError
+from harness.checks import env_positive
 from sshade.files import atomic_write
 from sshade.json_file import read_bounded
 
@@ -138,13 +136,4 @@ def marked_run(folder) -> str | None:
 def stop_after_s(environ=None) -> float | None:
     """The seconds :data:`STOP_AFTER_ENV` gives in ``environ`` (default ``os.environ``),
     None when it is unset or empty. Raises SShaDeError naming it when it is no number > 0."""
-    text = (os.environ if environ is None else environ).get(STOP_AFTER_ENV, "")
-    if not text.strip():
-        return None
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise SShaDeError(f"{STOP_AFTER_ENV} must be a number of seconds > 0, got {text!r}")
-    return v
+    return env_positive(STOP_AFTER_ENV, "a number of seconds > 0", environ)

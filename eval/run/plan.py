@@ -14,6 +14,7 @@ import os
 
 from sshade.cores import available_cores
 
+from .machine_speed import speed_words
 from .progress import PRIOR_VERTICES, size_factor
 
 __all__ = ["BUILD_S_PER_SUBJECT", "BUILD_START_S", "REFERENCE_S_PER_VERTEX", "SR_REFERENCE_S_PER_VERTEX",
@@ -137,20 +138,21 @@ def _basis(cost, name: str) -> str:
     return f(name) if callable(f) else "prior"
 
 
-def reference_s(n_vertices: int, sr: bool = False) -> float:
+def reference_s(n_vertices: int, sr: bool = False, speed: float = 1.0) -> float:
     """Expected seconds of one deep reference solve on ``n_vertices`` vertices (ARAP-SR's
     energy when ``sr``): :data:`REFERENCE_S_PER_VERTEX` (:data:`SR_REFERENCE_S_PER_VERTEX`)
     at :data:`eval.run.progress.PRIOR_VERTICES`, grown as ``n ** p`` with
-    :data:`REFERENCE_EXPONENT` (:data:`SR_REFERENCE_EXPONENT`).
+    :data:`REFERENCE_EXPONENT` (:data:`SR_REFERENCE_EXPONENT`), times ``speed`` (this
+    machine's factor, :func:`eval.run.machine_speed.machine_speed`).
 
     >>> round(reference_s(168_864)), round(reference_s(6_890), 2), round(reference_s(6_890, sr=True), 2)
     (51, 0.47, 1.81)
     """
     rate, p = (SR_REFERENCE_S_PER_VERTEX, SR_REFERENCE_EXPONENT) if sr else (REFERENCE_S_PER_VERTEX, REFERENCE_EXPONENT)
-    return rate * PRIOR_VERTICES * size_factor(n_vertices, p)
+    return rate * PRIOR_VERTICES * size_factor(n_vertices, p) * float(speed)
 
 
-def _references_stage(references, jobs: int = 1, is_sr_energy=None) -> dict:
+def _references_stage(references, jobs: int = 1, is_sr_energy=None, speed: float = 1.0) -> dict:
     cached = to_compute = unknown = guessed = 0
     seconds = 0.0
     for n_vertices, energy, is_cached in references:
@@ -159,7 +161,7 @@ def _references_stage(references, jobs: int = 1, is_sr_energy=None) -> dict:
             continue
         sr = is_sr_energy is not None and bool(is_sr_energy(energy))
         guessed += sr
-        seconds += reference_s(n_vertices, sr)
+        seconds += reference_s(n_vertices, sr, speed)
         if is_cached is None:
             unknown += 1
         else:
@@ -180,7 +182,8 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     names : sequence of str, the method names; ``pairs`` index it.
     pairs : sequence of ``(ci, mi)``, the (case, method) pairs about to run.
     cost : an :class:`eval.run.progress.CostModel` (``estimate(name, n_vertices)`` seconds;
-        ``basis(name)`` if it has one).
+        ``basis(name)`` if it has one; its ``speed``, if it has one, scales the references'
+        seconds as it does the priors').
     build : None (nothing to build) or a :func:`build_stage` dict (an ``actual_s`` in it:
         already done).
     references : sequence of ``(n_vertices, energy, cached)``, one per reference the runs
@@ -216,7 +219,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
     stages = [dict(build)] if build is not None else []
     jobs = max(int(jobs), 1)
     stages.append(_runs_stage(cases, names, pairs, cost, restored, jobs))
-    stages.append(_references_stage(references, jobs, is_sr_energy))
+    stages.append(_references_stage(references, jobs, is_sr_energy, float(getattr(cost, "speed", 1.0))))
     return {"stages": stages, "total_s": sum(s["seconds"] for s in stages if "actual_s" not in s)}
 
 
@@ -258,7 +261,8 @@ def _refs_words(f: dict) -> str:
 
 def render_plan(plan: dict, *, head: str = "plan") -> str:
     """The plan on one line, ``head: stage; stage; ...; about T in all.`` (module
-    docstring); a finished build stage reads as done and is not in the total."""
+    docstring); a finished build stage reads as done and is not in the total; a plan with
+    a ``speed`` entry (:func:`eval.run.machine_speed.machine_speed`) says what calibrated it."""
     parts = []
     by = {s["stage"]: s for s in plan["stages"]}
     b = by.get("build")
@@ -266,7 +270,8 @@ def render_plan(plan: dict, *, head: str = "plan") -> str:
         parts.append(_build_words(b))
     parts.append(_runs_words(by["runs"], then=b is not None and "actual_s" not in b and b["count"] > 0))
     parts.append(_refs_words(by["references"]))
-    return f"{head}: {'; '.join(parts)}; about {duration_words(plan['total_s'])} in all."
+    speed = f" ({speed_words(plan['speed'])})" if plan.get("speed") else ""
+    return f"{head}: {'; '.join(parts)}; about {duration_words(plan['total_s'])} in all{speed}."
 
 
 def add_actuals(plan: dict, actual: dict) -> dict:

@@ -38,19 +38,24 @@ class CostModel:
 
     def __init__(self, scales: dict[str, str] | None = None, *, prior_s_per_vertex: float = 1e-3,
                  prior_const_s: float = 20.0, priors: dict[str, float] | None = None,
-                 overhead_s_per_vertex: float = 0.0, exponents: dict[str, float] | None = None):
+                 overhead_s_per_vertex: float = 0.0, exponents: dict[str, float] | None = None,
+                 speed: float = 1.0):
         """``scales``: method -> ``"const"`` / ``"vertices"`` (:meth:`scale_of`);
         ``priors``: method -> its own prior in its unit, before ``prior_s_per_vertex`` /
         ``prior_const_s``; ``overhead_s_per_vertex``: added to a prior (not to a
         measured cost, which includes it); ``exponents``: method -> ``p``, its cost taken
         as growing as ``n ** p`` with the vertices ``n`` about :data:`PRIOR_VERTICES`,
-        where its prior holds (none: ``p`` = 1 for ``"vertices"``, 0 for ``"const"``)."""
+        where its prior holds (none: ``p`` = 1 for ``"vertices"``, 0 for ``"const"``);
+        ``speed``: this machine's time factor against the priors' machine
+        (:func:`eval.run.machine_speed.machine_speed`), multiplying every prior and guess
+        (not a measured cost, which is this machine's already)."""
         self.scales = dict(scales or {})
         self.prior_s_per_vertex = float(prior_s_per_vertex)
         self.prior_const_s = float(prior_const_s)
         self.priors = {str(k): float(v) for k, v in (priors or {}).items()}
         self.overhead_s_per_vertex = float(overhead_s_per_vertex)
         self.exponents = {str(k): float(v) for k, v in (exponents or {}).items()}
+        self.speed = float(speed)
         self.seen: dict[str, list[float]] = {}
 
     @staticmethod
@@ -92,10 +97,12 @@ class CostModel:
             return sum(seen) / len(seen) * unit
         overhead = self.overhead_s_per_vertex * max(int(n_vertices), 1)
         if method in self.priors:
-            return self.priors[method] * unit + overhead
-        if self.scales.get(method, "vertices") == "const":
-            return self.prior_const_s + overhead
-        return self.prior_s_per_vertex * unit + overhead
+            prior = self.priors[method] * unit
+        elif self.scales.get(method, "vertices") == "const":
+            prior = self.prior_const_s
+        else:
+            prior = self.prior_s_per_vertex * unit
+        return (prior + overhead) * self.speed
 
     def basis(self, method: str) -> str:
         """What ``method``'s estimate rests on: ``"measured"`` (runs it has observed),
@@ -105,7 +112,7 @@ class CostModel:
         return "prior" if method in self.priors else "guess"
 
 
-def default_cost_model(methods) -> CostModel:
+def default_cost_model(methods, speed: float = 1.0) -> CostModel:
     """The evaluator's :class:`CostModel` for ``methods`` (objects with ``name``): their
     scales (:meth:`CostModel.scale_of`), the ``cost.prior`` of their files
     (:func:`harness.method_registry.method_meta`; left out where the method's scale is not the
@@ -113,7 +120,8 @@ def default_cost_model(methods) -> CostModel:
     ``cost.paper`` instead for a method whose ``protocol`` is ``"paper"``) with the
     prior's ``cost.exponent`` (how its cost grows with the vertices from
     :data:`PRIOR_VERTICES`; not for ``cost.paper``, a fixed count of iterations, linear in
-    the vertices) and :data:`OVERHEAD_S_PER_VERTEX`.
+    the vertices) and :data:`OVERHEAD_S_PER_VERTEX`, all times ``speed`` (this machine's
+    factor, :func:`eval.run.machine_speed.machine_speed`; 1: the priors' machine).
 
     Raises
     ------
@@ -140,7 +148,8 @@ def default_cost_model(methods) -> CostModel:
             if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p <= 3:
                 raise SShaDeError(f"conf/method/{m.name}.yaml: cost.exponent must be a number in [0, 3], got {p!r}")
             exponents[m.name] = float(p)
-    return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX, exponents=exponents)
+    return CostModel(scales, priors=priors, overhead_s_per_vertex=OVERHEAD_S_PER_VERTEX, exponents=exponents,
+                     speed=speed)
 
 
 def weighted_bar(total_s: float, n_runs: int, **kw):

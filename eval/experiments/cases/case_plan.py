@@ -20,6 +20,7 @@ from eval import datasets
 from eval.experiments.cases.case_jobs import job_count
 from eval.metrics.reference import reference_path
 from eval.metrics.reference_scores import method_energy, sr_alpha
+from eval.run.machine_speed import machine_speed
 from eval.run.plan import add_actuals, build_stage, busy_words, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
 from eval.run.spec import DatasetSpec
@@ -55,8 +56,10 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
     out = datasets.dataset_outlook(ds)
     if out is None:
         return datasets.dataset_root(ds), None
-    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"],
-                        start_s=out.get("start_s", 0.0), what="DeFAUST", root=_short(out["root"]))
+    speed = machine_speed()
+    f = speed["factor"]
+    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"] * f,
+                        start_s=out.get("start_s", 0.0) * f, what="DeFAUST", root=_short(out["root"]))
     cases, _ = take_sample([SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]],
                            ds.sample, ds.sample_seed)
     base, _ = baseline_selection(cases, ds.baseline_cases) if cases else (None, "")
@@ -68,13 +71,14 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
         if refs.covers(ci, cases, base):
             energies = dict.fromkeys(method_energy(m) for mi, m in enumerate(methods) if (ci, mi) in on)
             need += [(c.n_vertices, e, None) for e in energies]
-    cost = default_cost_model(methods)
+    cost = default_cost_model(methods, speed=f)
     est = sum(cost.estimate(names[mi], cases[ci].n_vertices) for ci, mi in pairs)
     try:
         jobs = job_count(jobs, cases=len({ci for ci, _ in pairs}), estimate_s=est)
     except SShaDeError:
         jobs = 1  # an invalid value is refused at the door (eval.config_check), before any work
     plan = make_plan(cases, names, pairs, cost, build=build, references=need, jobs=jobs, is_sr_energy=_is_sr_energy)
+    plan["speed"] = speed
     log.info(render_plan(plan))
     t0 = time.perf_counter()
     root = datasets.dataset_root(ds)
@@ -129,6 +133,7 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
     build = getattr(s, "build", None)
     plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs,
                      is_sr_energy=_is_sr_energy)
+    plan["speed"] = machine_speed()  # what calibrated ``cost`` (cases_experiment)
     log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
     busy = busy_words()
     if busy:

@@ -35,6 +35,7 @@ from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
 from eval.run.compared import compared_rows, read_compared, run_settings
 from eval.run.jsonsafe import json_safe
+from eval.run.machine_speed import machine_speed
 from eval.run.paths import abs_path
 from eval.run.pending_rows import STOP_AFTER_ENV, stop_after_s
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
@@ -262,7 +263,8 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     methods, names, cases = s.methods, s.names, s.cases
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(s, ci, c) for ci, c in enumerate(cases)}
-    cost = default_cost_model(methods)  # measured per-method priors (eval/run/progress.py)
+    # measured per-method priors (eval/run/progress.py), scaled to this machine (machine_speed.py)
+    cost = default_cost_model(methods, speed=machine_speed()["factor"])
     done = restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}

@@ -1,0 +1,82 @@
+"""The plan's calibration to the machine (eval/run/machine_speed.py): the probe, the factor
+it gives or the environment fixes, and the plan's times scaled by it."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from eval.run import machine_speed as ms
+from eval.run.plan import make_plan, reference_s, render_plan
+from eval.run.progress import CostModel, default_cost_model
+from sshade.errors import SShaDeError
+
+
+@pytest.fixture
+def no_env(monkeypatch):
+    monkeypatch.delenv(ms.SPEED_ENV, raising=False)
+    ms._probed.cache_clear()
+    yield
+    ms._probed.cache_clear()
+
+
+def test_probe_is_positive_and_refuses_a_bad_repeat_count():
+    assert ms.probe_seconds(1) > 0
+    for bad in (0, -1, 1.5, True, "3"):
+        with pytest.raises(SShaDeError, match="repeats"):
+            ms.probe_seconds(bad)
+
+
+def test_probe_factor_is_its_seconds_over_the_reference_and_is_run_once_per_process(no_env, monkeypatch):
+    calls = []
+    monkeypatch.setattr(ms, "probe_seconds", lambda: calls.append(1) or 2.0 * ms.PROBE_REFERENCE_S)
+    a, b = ms.machine_speed(), ms.machine_speed()
+    assert a == b and len(calls) == 1
+    assert a["factor"] == 2.0 and a["source"] == "probe" and not a["clipped"]
+    assert a["probe_s"] == pytest.approx(2.0 * ms.PROBE_REFERENCE_S)
+
+
+@pytest.mark.parametrize("seconds, factor", [(1e-6, ms.SPEED_RANGE[0]), (1e6, ms.SPEED_RANGE[1])])
+def test_a_probe_outside_the_range_is_clipped_and_says_so(no_env, monkeypatch, seconds, factor):
+    monkeypatch.setattr(ms, "probe_seconds", lambda: seconds)
+    s = ms.machine_speed()
+    assert s["factor"] == factor and s["clipped"]
+    assert "clipped" in ms.speed_words(s)
+
+
+def test_the_environment_fixes_the_factor_without_a_probe(no_env, monkeypatch):
+    monkeypatch.setattr(ms, "probe_seconds", lambda: pytest.fail("the probe ran"))
+    monkeypatch.setenv(ms.SPEED_ENV, "1.5")
+    assert ms.machine_speed() == {"factor": 1.5, "source": "env", "probe_s": None,
+                                  "reference_s": ms.PROBE_REFERENCE_S, "clipped": False}
+
+
+@pytest.mark.parametrize("raw", ["0", "-1", "nan", "inf", "fast"])
+def test_a_bad_environment_value_is_refused_by_name(no_env, monkeypatch, raw):
+    monkeypatch.setenv(ms.SPEED_ENV, raw)
+    with pytest.raises(SShaDeError, match=ms.SPEED_ENV):
+        ms.machine_speed()
+
+
+def test_speed_scales_every_prior_and_guess_but_no_measured_cost():
+    names = [SimpleNamespace(name=n) for n in ("ARAP", "SShaDe", "NoSuchPlugin")]
+    one, two = default_cost_model(names), default_cost_model(names, speed=2.0)
+    for n in ("ARAP", "SShaDe", "NoSuchPlugin"):
+        for nv in (7_000, 170_000):
+            assert two.estimate(n, nv) == pytest.approx(2.0 * one.estimate(n, nv))
+    for m in (one, two):
+        m.observe("ARAP", 100_000, 30.0)
+    assert two.estimate("ARAP", 150_000) == one.estimate("ARAP", 150_000)
+
+
+def test_the_plan_scales_its_references_with_the_cost_model_and_names_its_calibration():
+    assert reference_s(50_000, speed=3.0) == pytest.approx(3.0 * reference_s(50_000))
+    cases = [SimpleNamespace(n_vertices=50_000)]
+    refs = [(50_000, "spokes", False)]
+    p1 = make_plan(cases, ["ARAP"], [(0, 0)], CostModel({}, priors={"ARAP": 1e-4}), references=refs)
+    p3 = make_plan(cases, ["ARAP"], [(0, 0)], CostModel({}, priors={"ARAP": 1e-4}, speed=3.0), references=refs)
+    assert p3["total_s"] == pytest.approx(3.0 * p1["total_s"])
+    p3["speed"] = {"factor": 3.0, "source": "env", "probe_s": None, "reference_s": 0.25, "clipped": False}
+    line = render_plan(p3)
+    assert line.endswith(f"in all ({ms.speed_words(p3['speed'])}).")
+    assert "x3" in line
