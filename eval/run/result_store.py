@@ -374,12 +374,13 @@ class ResultStore:
             return Lookup(None, "invalid: it names another mesh file")
         return Lookup(rec, None)
 
-    def load_mesh(self, rec: dict, n: int | None = None) -> np.ndarray | None:
+    def load_mesh(self, rec: dict, n: int) -> np.ndarray | None:
         """The deformed vertices (n, 3) float64 a record names, or None (not stored,
         unreadable, not a regular file, not a finite (n, 3) float64 ``.npy`` of the size
         its header gives, or not the output the record's ``output`` digest names: an
-        edited mesh; ``n``: the case's vertex count). Reads no more than the header
-        promises, and nothing of a FIFO or a device."""
+        edited mesh; ``n``: the case's vertex count, required so that a header promising
+        another size is refused before any of it is read). Reads no more than ``n`` rows,
+        and nothing of a FIFO or a device."""
         name = rec.get("mesh")
         if not name:
             return None
@@ -388,7 +389,7 @@ class ResultStore:
             U = _read_npy(p, n)
         except (OSError, ValueError, EOFError, SShaDeError):
             return None
-        ok = (U is not None and (n is None or len(U) == n) and bool(np.isfinite(U).all())
+        ok = (U is not None and len(U) == n and bool(np.isfinite(U).all())
               and rec.get("output") in (None, output_digest(U)))
         return U if ok else None
 
