@@ -55,6 +55,7 @@ def test_a_bad_early_stop_is_refused_naming_the_variable(text):
         stop_after_s({STOP_AFTER_ENV: text})
 
 
+@pytest.mark.slow  # about 8 s: an evaluator run on FAUST stopped after its first pairs
 def test_a_pair_left_at_the_stop_and_never_stored_has_no_row_and_the_run_ends_cleanly(tmp_path, faust_root):
     """The evaluator's early stop past its first pair: a stored current row (A) stands, a
     pair never stored (B) has no row and no mesh in the first case's figure, and the run
@@ -86,6 +87,7 @@ def test_a_pair_left_at_the_stop_and_never_stored_has_no_row_and_the_run_ends_cl
     assert "not run and never stored: no row" in (out / "eval.log").read_text()
 
 
+@pytest.mark.slow  # about 10 s: evaluator runs on FAUST, stopped and resumed
 def test_a_row_left_pending_from_other_case_data_is_counted_in_the_title_and_run_json(faust_root, tmp_path):
     """A resumed run stopped at once (:data:`STOP_AFTER_ENV`) whose case now has other
     targets (another dataset seed) leaves its stored row, made on the earlier data,

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from eval.reproduce import main
 
 from .conftest import ROOT
@@ -35,6 +37,7 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
 
 
+@pytest.mark.slow  # about 9 s: the dry-run plan of every step, its rows held to the commits that made them
 def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
                    "sshade.n_samplings=3")

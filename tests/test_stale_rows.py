@@ -150,6 +150,7 @@ def _check_json(tree):
     return r.returncode, json.loads(r.stdout), r.stderr
 
 
+@pytest.mark.slow  # about 25 s: six --check / --retabulate processes on a copy of the checkout
 def test_an_edit_of_sshade_transfer_makes_only_sshade_rows_stale(tmp_path):
     """``--check --json`` in a copy of the checkout with results/faust: current (exit 0);
     after an edit of sshade/smooth_transfer.py's syntax tree, SShaDe's 8 rows are stale

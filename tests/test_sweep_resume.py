@@ -43,6 +43,7 @@ def _sweep(faust_root: Path, d: Path) -> subprocess.CompletedProcess:
     return r
 
 
+@pytest.mark.slow  # about 15 s: two evaluator sweeps on FAUST
 def test_a_rerun_with_resume_recomputes_only_the_stale_row(faust_root, tmp_path):
     d = tmp_path / "sweep"
     _sweep(faust_root, d)
