@@ -95,8 +95,8 @@ def test_without_optional_modules_and_programs_their_tests_skip_in_one_line_and_
     for p in PROGRAMS:
         assert subprocess.run(["sh", "-c", f"command -v {p}"], env=env, capture_output=True).returncode != 0, p
     files = [f"tests/{name}.py" for name in EXPECTED]
-    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "sshade_test_reports",
-                        f"--basetemp={tmp_path / 't'}", "-m", MARKS, *files, *PACKAGES],
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider",  # no workers
+                        "-p", "sshade_test_reports", f"--basetemp={tmp_path / 't'}", "-m", MARKS, *files, *PACKAGES],
                        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     tail = r.stdout[-4000:] + r.stderr[-2000:]
     assert r.returncode == 0, tail  # no failure, no error, no collection error (every package module imported)

@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import json
+from unittest import mock
 
 import pytest
 
+from eval import reproduce
 from eval.reproduce import main
 
 from .conftest import ROOT
@@ -12,7 +14,11 @@ from .optional import found
 
 
 def _steps(capsys, *argv) -> dict[str, str]:
-    assert main(["--dry-run", *argv]) == 0
+    """The steps ``--dry-run`` lists, each as ``name -> its arguments``; without the plan
+    of stored rows before them (each step's rows held to the commits that made them,
+    seconds per step; test_the_plan_before_any_step... tests it)."""
+    with mock.patch.object(reproduce, "_print_plan", lambda selected: None):
+        assert main(["--dry-run", *argv]) == 0
     out = capsys.readouterr().out.splitlines()
     return {line.split(":")[0][3:]: line.split(": ", 1)[1] for line in out if line.startswith("== ")}
 
@@ -37,7 +43,6 @@ def test_default_runs_defaust_and_its_sweep(capsys):
     assert "sshade.n_low=1000,3000,6000" in sweep  # x k = 1,3,5 from conf/experiment/sweep.yaml
 
 
-@pytest.mark.slow  # about 9 s: the dry-run plan of every step, its rows held to the commits that made them
 def test_every_experiment_with_folders_and_figures(capsys):
     steps = _steps(capsys, "--faust", "F", "--tosca", "T", "--shapes", "S", "--scaling", "M.obj",
                    "sshade.n_samplings=3")
@@ -137,7 +142,6 @@ def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(caps
     assert got["results/convergence"]["whole run"]["rows"] == 1  # current or marked pending, never stale
     assert all(v["whole run"]["stale"] == 0 for v in got.values() if "whole run" in v)  # current or marked pending
     assert sum(v["rows"] for ms in got.values() for v in ms.values()) >= 600
-    import pytest
     with pytest.raises(SystemExit) as e:
         main(["--json"])  # --json goes with --check
     assert e.value.code == 2 and "--json and --strict go with --check" in capsys.readouterr().err
