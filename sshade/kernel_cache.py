@@ -6,14 +6,18 @@ CPU, so a fresh install, an upgrade, a new machine or an empty ``NUMBA_CACHE_DIR
 it cold and the next call compiles every kernel (docs/deform.md, "The first call").
 :func:`compile_kernels` fills it: with two cores or more and ``fork``, a forked child
 compiles one half of the kernels (:data:`GROUPS`) while this process compiles the other,
-then this process loads the child's half from the cache. :func:`notice` prints one line
-the first time a process finds the cache cold. ``python -m sshade warmup`` does it ahead.
+then this process loads the child's half from the cache; processes that find it cold at
+once take turns (a lock file beside the cache), so the later ones load what the first
+compiled. :func:`notice` prints one line the first time a process finds the cache cold.
+``python -m sshade warmup`` does it ahead.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import importlib
 import multiprocessing as mp
+import os
 import signal
 import sys
 import threading
@@ -33,8 +37,8 @@ from .mesh.validate import validate_mesh
 from .projection import project_to_fans
 from .smooth_transfer import smooth_decode
 
-__all__ = ["KERNEL_MODULES", "GROUPS", "COLD_COMPILE_S", "kernel_dispatchers", "cache_folder", "cold_kernels",
-           "notice", "compile_kernels"]
+__all__ = ["KERNEL_MODULES", "GROUPS", "COLD_COMPILE_S", "TURN_WAIT_S", "LOCK_NAME", "kernel_dispatchers",
+           "cache_folder", "cold_kernels", "notice", "compile_kernels"]
 
 #: The modules whose numba kernels one SShaDe call compiles.
 KERNEL_MODULES = ("sshade.mesh.halfedge", "sshade.mesh.geodesic", "sshade.mesh.validate", "sshade.closed_ball",
@@ -46,6 +50,10 @@ COLD_COMPILE_S = 15
 #: Seconds the caller waits for the child at least (then three times its own group's time)
 #: before it ends the child and compiles the child's group itself.
 CHILD_MIN_WAIT_S = 60.0
+#: Seconds a process waits at most for another one filling the same cold cache (then it
+#: compiles alongside); the lock file's name in :func:`cache_folder`.
+TURN_WAIT_S = 120.0
+LOCK_NAME = "sshade-compile.lock"
 _NOTICED = [False]
 _FILLED = [False]
 _LOCK = threading.Lock()
@@ -196,11 +204,50 @@ def compile_kernels(*, show_notice: bool = True, split: bool | None = None, prog
         return 0.0 if _FILLED[0] else _compile(show_notice, split, progress)
 
 
+@contextlib.contextmanager
+def _turn(cold: list[str]):
+    """Hold the cache folder's lock file (:data:`LOCK_NAME`, ``flock``: released when the
+    holder exits, however it exits) while this process fills a cold cache; another
+    process filling it makes this one wait, at most :data:`TURN_WAIT_S`. Yields whether
+    the cache is still cold. Without a cold cache, ``fcntl`` or a writable cache folder
+    there is no turn to take."""
+    folder = cache_folder() if cold else None
+    try:
+        import fcntl
+        fd = (os.open(folder / LOCK_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o644)
+              if folder is not None else None)  # a link in its place is not followed: no turn
+    except (ImportError, OSError):
+        fd = None
+    if fd is None:
+        yield bool(cold)
+        return
+    with os.fdopen(fd, "a") as fh:
+        deadline, held = time.monotonic() + TURN_WAIT_S, False
+        while not held:
+            try:
+                fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+                held = True
+            except OSError:
+                if time.monotonic() > deadline:
+                    break
+                time.sleep(0.1)
+        try:
+            yield bool(cold_kernels()) if held else True  # the other process may have filled it
+        finally:
+            if held:
+                fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
 def _compile(show_notice: bool, split: bool | None, progress) -> float:
     t0 = time.perf_counter()
     cold = cold_kernels()
     if show_notice:
         notice(cold)
+    with _turn(cold) as still_cold:
+        return _fill(t0, still_cold, split, progress)
+
+
+def _fill(t0: float, cold: bool, split: bool | None, progress) -> float:
     if split is None:
         split = bool(cold) and available_cores() >= 2 and "fork" in mp.get_all_start_methods()
     names = list(GROUPS)

@@ -130,3 +130,83 @@ def test_every_group_kernel_is_a_cached_kernel_of_the_package():
     named = [n for _, names in kernel_cache.GROUPS.values() for n in names]
     assert len(named) == len(set(named)) and set(named) <= set(ds)
     assert kernel_cache.cache_folder() is not None
+
+
+def _hold(path):
+    """Hold ``path``'s flock from another open file (as another process would)."""
+    import fcntl
+    fh = open(path, "a")  # noqa: SIM115
+    fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+    return fh
+
+
+def test_a_process_at_a_cold_cache_waits_its_turn_and_finds_it_filled(tmp_path, monkeypatch):
+    """While another process fills the cache (its lock file held) this one waits; once the
+    lock is free it checks again and finds the cache warm; past TURN_WAIT_S it stops
+    waiting and fills it alongside."""
+    pytest.importorskip("fcntl")
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: tmp_path)
+    monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: [])  # filled by the other process
+    monkeypatch.setattr(kernel_cache, "TURN_WAIT_S", 0.4)
+    other = _hold(tmp_path / kernel_cache.LOCK_NAME)
+    t = time.perf_counter()
+    with kernel_cache._turn(["m.k"]) as cold:
+        waited = time.perf_counter() - t
+    assert cold and waited >= 0.4  # given up: compiles alongside, as without the lock
+    other.close()  # the other process done (or dead: flock goes with it)
+    with kernel_cache._turn(["m.k"]) as cold:
+        assert not cold
+        assert _hold_fails(tmp_path / kernel_cache.LOCK_NAME)  # this process holds it while filling
+    with kernel_cache._turn([]) as cold:  # a warm cache: no turn taken
+        assert not cold
+
+
+def _hold_fails(path) -> bool:
+    import fcntl
+    with open(path, "a") as fh:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return True
+        fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+        return False
+
+
+def test_a_link_in_place_of_the_lock_file_is_not_followed(tmp_path, monkeypatch):
+    """A symbolic link named like the lock file: not followed (nothing created where it
+    points), no turn taken, the cache filled as without the lock."""
+    pytest.importorskip("fcntl")
+    cache, outside = tmp_path / "cache", tmp_path / "elsewhere" / "target"
+    cache.mkdir()
+    (cache / kernel_cache.LOCK_NAME).symlink_to(outside)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: cache)
+    monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: pytest.fail("no turn was to be taken"))
+    with kernel_cache._turn(["m.k"]) as cold:
+        assert cold
+    assert not outside.exists() and not outside.parent.exists()
+
+
+_TURN = r"""
+import json, time
+from sshade import kernel_cache as kc
+t = time.perf_counter()
+kc.compile_kernels(split=False, show_notice=False)
+ds = kc.kernel_dispatchers()
+print(json.dumps({"compiled": sum(sum(d.stats.cache_misses.values()) for d in ds.values()),
+                  "s": time.perf_counter() - t}))
+"""
+
+
+@pytest.mark.slow
+def test_two_processes_at_a_cold_cache_compile_it_once(tmp_path):
+    """Two processes started together on one empty cache: one compiles the kernels, the
+    other waits for it and loads them all (no cache miss)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    procs = [subprocess.Popen([sys.executable, "-c", _TURN], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = []
+    for p in procs:
+        out, err = p.communicate(timeout=600)
+        assert p.returncode == 0, err[-2000:]
+        outs.append(json.loads(out.strip().splitlines()[-1]))
+    assert sorted(o["compiled"] == 0 for o in outs) == [False, True], outs
