@@ -15,9 +15,9 @@ from sshade.errors import SShaDeError
 @pytest.fixture
 def no_env(monkeypatch):
     monkeypatch.delenv(ms.SPEED_ENV, raising=False)
-    ms._probed.cache_clear()
+    ms._probe_once.cache_clear()
     yield
-    ms._probed.cache_clear()
+    ms._probe_once.cache_clear()
 
 
 def test_probe_is_positive_and_refuses_a_bad_repeat_count():
@@ -28,10 +28,23 @@ def test_probe_is_positive_and_refuses_a_bad_repeat_count():
 
 
 def test_probe_factor_is_its_seconds_over_the_reference_and_is_run_once_per_process(no_env, monkeypatch):
+    import threading
+    import time
     calls = []
-    monkeypatch.setattr(ms, "probe_seconds", lambda: calls.append(1) or 2.0 * ms.PROBE_REFERENCE_S)
-    a, b = ms.machine_speed(), ms.machine_speed()
-    assert a == b and len(calls) == 1
+
+    def slow_probe():
+        calls.append(1)
+        time.sleep(0.2)  # a second thread asks meanwhile
+        return 2.0 * ms.PROBE_REFERENCE_S
+    monkeypatch.setattr(ms, "probe_seconds", slow_probe)
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(ms.machine_speed())) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    a, b = got
+    assert a == b == ms.machine_speed() and len(calls) == 1
     assert a["factor"] == 2.0 and a["source"] == "probe" and not a["clipped"]
     assert a["probe_s"] == pytest.approx(2.0 * ms.PROBE_REFERENCE_S)
 

@@ -27,7 +27,7 @@ from sshade.mesh.io import read_mesh
 SHARED = Path(sshade.__file__).resolve().parents[2] / "shared" / "data" / "classic" / "bunny.off"
 if SHARED.is_file():
     V, F = read_mesh(SHARED)
-else:  # no shared data: the package's own bent cylinder
+else:  # no shared data: the package's own capped cylinder
     from sshade.arap.problems import capped_cylinder
     V, F = capped_cylinder()
 order = np.argsort(V[:, 1])

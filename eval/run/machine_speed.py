@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -120,10 +121,20 @@ def probe_seconds(repeats: int = 2, threads: int | None = None) -> float:
     return max(best, 1e-9)
 
 
+_PROBE_LOCK = threading.Lock()
+
+
 @functools.lru_cache(maxsize=1)
-def _probed() -> tuple[float, float]:
+def _probe_once() -> tuple[float, float]:
     s = probe_seconds()
     return s, s / PROBE_REFERENCE_S
+
+
+def _probed() -> tuple[float, float]:
+    """The probe's seconds and factor, measured once per process (two threads asking at
+    once get the same one: the second waits for the first's)."""
+    with _PROBE_LOCK:
+        return _probe_once()
 
 
 def machine_speed() -> dict:
