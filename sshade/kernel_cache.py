@@ -214,8 +214,9 @@ def _turn(cold: list[str]):
     folder = cache_folder() if cold else None
     try:
         import fcntl
-        fd = (os.open(folder / LOCK_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o644)
-              if folder is not None else None)  # a link in its place is not followed: no turn
+        flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK
+        # a link in its place is not followed, a FIFO not waited on (ENXIO), a folder refused: no turn
+        fd = os.open(folder / LOCK_NAME, flags, 0o644) if folder is not None else None
     except (ImportError, OSError):
         fd = None
     if fd is None:

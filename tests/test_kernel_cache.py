@@ -172,18 +172,22 @@ def _hold_fails(path) -> bool:
         return False
 
 
-def test_a_link_in_place_of_the_lock_file_is_not_followed(tmp_path, monkeypatch):
-    """A symbolic link named like the lock file: not followed (nothing created where it
-    points), no turn taken, the cache filled as without the lock."""
+@pytest.mark.parametrize("kind", ["link", "fifo", "folder"])
+def test_a_link_fifo_or_folder_in_place_of_the_lock_file_takes_no_turn(tmp_path, monkeypatch, kind):
+    """A symbolic link, a FIFO or a folder named like the lock file: the link not followed
+    (nothing created where it points), the FIFO not waited on, no turn taken; the cache
+    filled as without the lock."""
     pytest.importorskip("fcntl")
     cache, outside = tmp_path / "cache", tmp_path / "elsewhere" / "target"
     cache.mkdir()
-    (cache / kernel_cache.LOCK_NAME).symlink_to(outside)
+    lock = cache / kernel_cache.LOCK_NAME
+    {"link": lambda: lock.symlink_to(outside), "fifo": lambda: os.mkfifo(lock), "folder": lock.mkdir}[kind]()
     monkeypatch.setattr(kernel_cache, "cache_folder", lambda: cache)
     monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: pytest.fail("no turn was to be taken"))
+    t = time.perf_counter()
     with kernel_cache._turn(["m.k"]) as cold:
         assert cold
-    assert not outside.exists() and not outside.parent.exists()
+    assert time.perf_counter() - t < 5 and not outside.exists() and not outside.parent.exists()
 
 
 _TURN = r"""
