@@ -448,7 +448,7 @@ def fused_kernels(parallel: bool):
     key = 2 if parallel else 1
     if _FUSED[key] is None:
         try:
-            if not polar_kernel() or not energy_kernel():
+            if not energy_kernel():  # not the polar kernel: the fused ones hold their own copy
                 raise RuntimeError("numba unusable")
             local, rhs = (_local_parallel, _rhs_parallel) if parallel else (_local_serial, _rhs_serial)
             if parallel:
@@ -466,8 +466,9 @@ def fused_kernels(parallel: bool):
 
 def fused(threads: int):
     """The fused kernels for ``threads`` (serial for 1) or False (numpy paths; also when
-    the polar or energy kernel is unusable, e.g. monkeypatched off in a test)."""
-    if not polar_kernel() or not energy_kernel():
+    the energy kernel is unusable, e.g. monkeypatched off in a test). The standalone polar
+    kernel (:func:`polar_kernel`) is not compiled for them: SShaDe's path never calls it."""
+    if not energy_kernel():
         return False
     return fused_kernels(threads > 1)
 

@@ -247,8 +247,9 @@ def _grow(hk, hv, size, need):
     cap = max(2 * hk.shape[0], size + need)
     nk = np.empty(cap, hk.dtype)
     nv = np.empty(cap, hv.dtype)
-    nk[:size] = hk[:size]
-    nv[:size] = hv[:size]
+    for i in range(size):  # a loop: a slice assignment compiles numba's shape checks and messages (2-3 s)
+        nk[i] = hk[i]
+        nv[i] = hv[i]
     return nk, nv
 
 
