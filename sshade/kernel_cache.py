@@ -7,7 +7,7 @@ it cold and the next call compiles every kernel (docs/deform.md, "The first call
 :func:`compile_kernels` fills it: with two cores or more and ``fork``, a forked child
 compiles one half of the kernels (:data:`GROUPS`) while this process compiles the other,
 then this process loads the child's half from the cache; processes that find it cold at
-once take turns (a lock file beside the cache), so the later ones load what the first
+once take turns (a lock file in numba's cache folder), so the later ones load what the first
 compiled. :func:`notice` prints one line the first time a process finds the cache cold.
 ``python -m sshade warmup`` does it ahead.
 """
@@ -38,7 +38,7 @@ from .projection import project_to_fans
 from .smooth_transfer import smooth_decode
 
 __all__ = ["KERNEL_MODULES", "GROUPS", "COLD_COMPILE_S", "TURN_WAIT_S", "LOCK_NAME", "kernel_dispatchers",
-           "cache_folder", "cold_kernels", "notice", "compile_kernels"]
+           "cache_folder", "lock_folder", "cold_kernels", "notice", "compile_kernels"]
 
 #: The modules whose numba kernels one SShaDe call compiles.
 KERNEL_MODULES = ("sshade.mesh.halfedge", "sshade.mesh.geodesic", "sshade.mesh.validate", "sshade.closed_ball",
@@ -51,7 +51,7 @@ COLD_COMPILE_S = 15
 #: before it ends the child and compiles the child's group itself.
 CHILD_MIN_WAIT_S = 60.0
 #: Seconds a process waits at most for another one filling the same cold cache (then it
-#: compiles alongside); the lock file's name in :func:`cache_folder`.
+#: compiles alongside); the lock file's name in :func:`lock_folder`.
 TURN_WAIT_S = 120.0
 LOCK_NAME = "sshade-compile.lock"
 _NOTICED = [False]
@@ -84,6 +84,22 @@ def cache_folder() -> Path | None:
         path = getattr(d._cache, "_cache_path", None)
         if path:
             return Path(path).parent
+    return None
+
+
+def lock_folder() -> Path | None:
+    """numba's own cache folder of this package's first kernel (``__pycache__`` beside its
+    source, or its folder in ``NUMBA_CACHE_DIR``), made when missing as numba would: where
+    :data:`LOCK_NAME` lives, never in a source folder. None when numba keeps no cache or
+    the folder cannot be made."""
+    for d in kernel_dispatchers().values():
+        path = getattr(d._cache, "_cache_path", None)
+        if path:
+            try:
+                os.makedirs(path, exist_ok=True)
+            except OSError:
+                return None
+            return Path(path)
     return None
 
 
@@ -208,12 +224,12 @@ def compile_kernels(*, show_notice: bool = True, split: bool | None = None, prog
 
 @contextlib.contextmanager
 def _turn(cold: list[str]):
-    """Hold the cache folder's lock file (:data:`LOCK_NAME`, ``flock``: released when the
+    """Hold the lock file in :func:`lock_folder` (:data:`LOCK_NAME`, ``flock``: released when the
     holder exits, however it exits) while this process fills a cold cache; another
     process filling it makes this one wait, at most :data:`TURN_WAIT_S`. Yields whether
     the cache is still cold. Without a cold cache, ``fcntl`` or a writable cache folder
     there is no turn to take."""
-    folder = cache_folder() if cold else None
+    folder = lock_folder() if cold else None
     try:
         import fcntl
         flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK

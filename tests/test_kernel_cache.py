@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -132,6 +133,23 @@ def test_every_group_kernel_is_a_cached_kernel_of_the_package():
     assert kernel_cache.cache_folder() is not None
 
 
+def test_the_lock_file_lives_in_numbas_cache_folder_never_beside_the_sources(tmp_path, monkeypatch):
+    """Without NUMBA_CACHE_DIR the lock is in a ``__pycache__`` folder; with it, inside
+    NUMBA_CACHE_DIR (a fresh process each: numba reads the variable at import)."""
+    probe = "import sshade.kernel_cache as k; print(k.lock_folder())"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    beside = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env=env, capture_output=True, text=True,
+                            timeout=120)
+    assert beside.returncode == 0, beside.stderr[-2000:]
+    assert Path(beside.stdout.strip()).name == "__pycache__"
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "nb")
+    inside = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env=env, capture_output=True, text=True,
+                            timeout=120)
+    assert inside.returncode == 0, inside.stderr[-2000:]
+    folder = Path(inside.stdout.strip())
+    assert folder.is_dir() and folder.resolve().is_relative_to((tmp_path / "nb").resolve())
+
+
 def _hold(path):
     """Hold ``path``'s flock from another open file (as another process would)."""
     import fcntl
@@ -145,7 +163,7 @@ def test_a_process_at_a_cold_cache_waits_its_turn_and_finds_it_filled(tmp_path, 
     lock is free it checks again and finds the cache warm; past TURN_WAIT_S it stops
     waiting and fills it alongside."""
     pytest.importorskip("fcntl")
-    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: tmp_path)
+    monkeypatch.setattr(kernel_cache, "lock_folder", lambda: tmp_path)
     monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: [])  # filled by the other process
     monkeypatch.setattr(kernel_cache, "TURN_WAIT_S", 0.4)
     other = _hold(tmp_path / kernel_cache.LOCK_NAME)
@@ -182,7 +200,7 @@ def test_a_link_fifo_or_folder_in_place_of_the_lock_file_takes_no_turn(tmp_path,
     cache.mkdir()
     lock = cache / kernel_cache.LOCK_NAME
     {"link": lambda: lock.symlink_to(outside), "fifo": lambda: os.mkfifo(lock), "folder": lock.mkdir}[kind]()
-    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: cache)
+    monkeypatch.setattr(kernel_cache, "lock_folder", lambda: cache)
     monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: pytest.fail("no turn was to be taken"))
     t = time.perf_counter()
     with kernel_cache._turn(["m.k"]) as cold:
