@@ -141,7 +141,7 @@ def _tetrahedron():
 
 def _warm_sampling() -> None:
     """Geodesic sampling (both queues, mesh and locality order), the low-res ARAP's serial
-    kernels, L-BFGS and the smooth transfer."""
+    kernels and L-BFGS."""
     V, F, E, _ = _tetrahedron()
     order = locality_order(V)
     for queue in ("auto", "heap"):
@@ -150,13 +150,11 @@ def _warm_sampling() -> None:
             st.sample(2, 0)
             st.add([3])
     warmup_kernels()
-    for bary in (None, np.full((4, 3), 1 / 3)):
-        smooth_decode(V, np.arange(4), bary, V, V, F)
 
 
 def _warm_topology() -> None:
     """Mesh checks, half-edges, fans, normals, boundary loops, the closed-ball checks (full
-    and local), projection and the triangle transfer's encoding and decoding."""
+    and local), projection and both transfers' encoding and decoding."""
     V, F, _, _ = _tetrahedron()
     validate_mesh(V, F)
     warm_closed_ball()
@@ -169,25 +167,25 @@ def _warm_topology() -> None:
     for bary in (None, np.full((4, 3), 1 / 3)):
         decode_with_frames(L, np.zeros((4, 3)), np.arange(4), V, F, bary=bary)
         encode(V, np.arange(4), V, F, frame_functions(V, F), "normalized", bary)
+        smooth_decode(V, np.arange(4), bary, V, V, F)
 
 
 #: The kernels in two halves of about equal compile time: name -> (warm function, kernels
 #: it compiles). A cold :func:`compile_kernels` runs the first half in a forked child.
 GROUPS = {
-    "sampling, ARAP and smooth transfer": (_warm_sampling, (
+    "sampling and ARAP": (_warm_sampling, (
         "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._morton_sort", "sshade.mesh.geodesic._fps",
         "sshade.mesh.geodesic._grow", "sshade.mesh.geodesic._propagate",
         "sshade.arap.kernels._local_serial", "sshade.arap.kernels._rhs_serial",
-        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_two_loop",
-        "sshade.smooth_transfer._smooth_kernel", "sshade.smooth_transfer._offsets_kernel",
-        "sshade.smooth_transfer._vertex_jacobians_kernel")),
-    "topology, projection and triangle transfer": (_warm_topology, (
+        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_two_loop")),
+    "topology, projection and transfer": (_warm_topology, (
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
         "sshade.closed_ball.closed_ball_holds", "sshade.closed_ball._region_euler", "sshade.closed_ball._pair_ids",
         "sshade.closed_ball._link_faces", "sshade.closed_ball._repair_candidates", "sshade.closed_ball._touched",
         "sshade.closed_ball._local_euler", "sshade.closed_ball._local_pairs", "sshade.closed_ball._local_triples",
         "sshade.closed_ball._local_candidates", "sshade.closed_ball.vertex_faces", "sshade.projection._project",
-        "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel")),
+        "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel",
+        "sshade.smooth_transfer._offsets_kernel", "sshade.smooth_transfer._vertex_jacobians_kernel")),
 }
 
 
