@@ -26,13 +26,16 @@ another stationary point); ``--save-dir`` / ``--snapshots`` keep results and ite
     python benchmarks/arap_hierarchy.py --root /work/main/data/defaust
     python benchmarks/arap_hierarchy.py --cases twisted_bar,bent_cylinder,lifted_plane
 
-Prints one JSON line per run and per coarse level (``--out FILE`` also appends them).
+Prints one JSON line per run and per coarse level (``--out DIR`` also appends them to
+DIR/runs.jsonl). ``--out``, ``--save-dir`` and ``--trace-dir`` are folders that are new,
+empty or this benchmark's earlier output (continued, not replaced).
 The iterations are patched only to be counted (``sshade.arap.solver.LBFGS`` and
 ``_Stepper.local`` wrapped): no arithmetic changes.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -43,6 +46,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
 import sshade.arap.solver as arap_solver  # noqa: E402
+from eval.run.outdir import claim_output_dir  # noqa: E402
 from sshade.arap import DEEP_CRITERION, DEFAULT_CRITERION, ArapOptions, build_operators, solve_arap  # noqa: E402
 from sshade.arap.accelerate import LBFGS  # noqa: E402
 from sshade.arap.problems import CASES  # noqa: E402
@@ -334,7 +338,7 @@ def main():
     ap.add_argument("--no-rigid", action="store_true", help="skip the rigid start")
     ap.add_argument("--deep", default="", help="START=N,...: continue those DeFAUST results under "
                                                "DEEP_CRITERION for at most N iterations")
-    ap.add_argument("--out", default=None, help="also append the JSON lines to this file")
+    ap.add_argument("--out", default=None, help="also append the JSON lines to DIR/runs.jsonl")
     ap.add_argument("--kinds", default="RU", help="carried to the fine level: R (rotations), U (positions)")
     ap.add_argument("--save-dir", default=None, help="save each fine result (mesh units, .npy) here")
     ap.add_argument("--snapshots", default="", help="comma-separated iterations whose iterates --save-dir "
@@ -347,11 +351,21 @@ def main():
     SNAPSHOTS.update(dict.fromkeys(int(k) for k in a.snapshots.split(",") if k))
     deep = {k: int(v) for k, v in (kv.rsplit("=", 1) for kv in a.deep.split(",") if kv)}
 
+    with contextlib.ExitStack() as stack:
+        for opt in ("out", "trace_dir") + (() if a.cells else ("save_dir",)):  # --cells reads --save-dir
+            if getattr(a, opt):
+                claim = stack.enter_context(claim_output_dir(getattr(a, opt), "arap_hierarchy", keep=True, option="",
+                                                             name="--" + opt.replace("_", "-")))
+                setattr(a, opt, str(claim.path))
+        _run(a, chains, deep)
+
+
+def _run(a, chains, deep) -> None:
     def emit(row):
         line = json.dumps(row)
         print(line, flush=True)
         if a.out:
-            with open(a.out, "a") as f:
+            with open(Path(a.out) / "runs.jsonl", "a") as f:
                 f.write(line + "\n")
 
     if a.cells:

@@ -54,6 +54,7 @@ HELP = {
     "benchmarks/cold_start.py": ["usage:", "--before"],
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
+    "benchmarks/arap_hierarchy.py": ["usage:", "--chains"],
     "benchmarks/table_change.py": ["usage:", "--before", "--after"],
     "benchmarks/identity_cost.py": ["usage:", "probes"],
 }
