@@ -131,7 +131,7 @@ def default_cost_model(methods, speed: float = 1.0) -> CostModel:
     >>> from types import SimpleNamespace as M
     >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
     >>> round(cm.estimate("ARAP", 100_000)), round(cm.estimate("SShaDe", 100_000))
-    (32, 3)
+    (18, 3)
     """
     scales = {m.name: CostModel.scale_of(m) for m in methods}
     priors, exponents = {}, {}
