@@ -77,14 +77,20 @@ def kernel_dispatchers() -> dict:
     return out
 
 
-def cache_folder() -> Path | None:
-    """The folder holding the kernels' cache files (``NUMBA_CACHE_DIR`` when set, else
-    beside the sources or numba's user-wide fallback), or None when numba keeps none."""
+def _first_cache_path() -> str | None:
+    """numba's cache folder of this package's first kernel, or None when it keeps none."""
     for d in kernel_dispatchers().values():
         path = getattr(d._cache, "_cache_path", None)
         if path:
-            return Path(path).parent
+            return path
     return None
+
+
+def cache_folder() -> Path | None:
+    """The folder holding the kernels' cache files (``NUMBA_CACHE_DIR`` when set, else
+    beside the sources or numba's user-wide fallback), or None when numba keeps none."""
+    path = _first_cache_path()
+    return Path(path).parent if path else None
 
 
 def lock_folder() -> Path | None:
@@ -92,15 +98,14 @@ def lock_folder() -> Path | None:
     source, or its folder in ``NUMBA_CACHE_DIR``), made when missing as numba would: where
     :data:`LOCK_NAME` lives, never in a source folder. None when numba keeps no cache or
     the folder cannot be made."""
-    for d in kernel_dispatchers().values():
-        path = getattr(d._cache, "_cache_path", None)
-        if path:
-            try:
-                os.makedirs(path, exist_ok=True)
-            except OSError:
-                return None
-            return Path(path)
-    return None
+    path = _first_cache_path()
+    if path is None:
+        return None
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:
+        return None
+    return Path(path)
 
 
 def _is_cached(d) -> bool:
