@@ -55,6 +55,7 @@ HELP = {
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
     "benchmarks/arap_hierarchy.py": ["usage:", "--chains"],
+    "benchmarks/arap_alternatives.py": ["usage:", "--max-cg", "--methods"],
     "benchmarks/table_change.py": ["usage:", "--before", "--after"],
     "benchmarks/identity_cost.py": ["usage:", "probes"],
 }
