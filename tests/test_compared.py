@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import re
 import subprocess
 import sys
 
@@ -72,6 +73,11 @@ def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(
     if name == "defaust" and not _both_canonical(res, ROOT / "data" / "defaust"):
         pytest.skip("results/defaust and data/defaust are not both the canonical DeFAUST: the committed rows stand on "
                     "other meshes (compare_with refuses them) until made again on the canonical build")
+    table = (res / "table.md").read_text() if (res / "table.md").is_file() else ""
+    other = [c for c in cases if re.search(rf"^- `{c}` `[\w.-]+`: made at [^\n]*on other case data", table, re.M)]
+    if other:
+        pytest.skip(f"results/{name} holds rows of {other[0]} made on an earlier build's meshes (pending in its "
+                    "table.md; compare_with refuses them) until made again on this build")
     before = _snapshot(res)
     site = tmp_path / "site"
     site.mkdir()
