@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-import re
 import subprocess
 import sys
 
@@ -73,8 +72,8 @@ def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(
     if name == "defaust" and not _both_canonical(res, ROOT / "data" / "defaust"):
         pytest.skip("results/defaust and data/defaust are not both the canonical DeFAUST: the committed rows stand on "
                     "other meshes (compare_with refuses them) until made again on the canonical build")
-    table = (res / "table.md").read_text() if (res / "table.md").is_file() else ""
-    other = [c for c in cases if re.search(rf"^- `{c}` `[\w.-]+`: made at [^\n]*on other case data", table, re.M)]
+    from eval.run.pending_rows import marked_pending
+    other = sorted({c for (c, _, _), why in marked_pending(res).items() if c in cases and "on other case data" in why})
     if other:
         pytest.skip(f"results/{name} holds rows of {other[0]} made on an earlier build's meshes (pending in its "
                     "table.md; compare_with refuses them) until made again on this build")

@@ -385,9 +385,8 @@ def _pending_on_other_data(folder: Path) -> set:
     """``(case, method)`` pairs that a run's table.md lists as pending rows made on other
     case data than the run's (an earlier build's mesh: their result has no vertices on
     this one, so no view can show it)."""
-    table = folder / "table.md"
-    text = table.read_text() if table.is_file() else ""
-    return set(re.findall(r"^- `([\w.-]+)` `([\w.-]+)`: made at [^\n]*on other case data", text, re.M))
+    from eval.run.pending_rows import marked_pending
+    return {(case, method) for (case, method, _), why in marked_pending(folder).items() if "on other case data" in why}
 
 
 def test_committed_results_pages_show_every_method_in_3d_coloured_by_edge_error():
