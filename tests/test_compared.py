@@ -72,8 +72,8 @@ def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(
     if name == "defaust" and not _both_canonical(res, ROOT / "data" / "defaust"):
         pytest.skip("results/defaust and data/defaust are not both the canonical DeFAUST: the committed rows stand on "
                     "other meshes (compare_with refuses them) until made again on the canonical build")
-    from eval.run.pending_rows import marked_pending
-    other = sorted({c for (c, _, _), why in marked_pending(res).items() if c in cases and "on other case data" in why})
+    from eval.run.pending_rows import pending_on_other_data
+    other = sorted({c for c, _ in pending_on_other_data(res) if c in cases})
     if other:
         pytest.skip(f"results/{name} holds rows of {other[0]} made on an earlier build's meshes (pending in its "
                     "table.md; compare_with refuses them) until made again on this build")

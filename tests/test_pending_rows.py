@@ -6,10 +6,12 @@ import os
 
 import pytest
 
+from eval.present.meshview import OTHER_DATA_KIND, case_view_path, read_view
 from eval.run.pending_rows import (
     STOP_AFTER_ENV,
     marked_pending,
     pending_markdown,
+    pending_on_other_data,
     pending_title,
     short_commit,
     stop_after_s,
@@ -117,6 +119,10 @@ def test_a_row_left_pending_from_other_case_data_is_counted_in_the_title_and_run
     assert "1 pending row(s) made on other case data than this run's" in table.splitlines()[0]
     assert "on other case data than this run's" in table.split("#### ")[-1]
     assert json.loads((out / "run.json").read_text()).get("dataset_build") is None  # FAUST: no canonical build
+    (case,) = {c for c, _ in pending_on_other_data(out)}
+    assert pending_on_other_data(out) == {(case, "A")}
+    panels = {m["label"]: m for m in read_view(case_view_path(out, case))["meshes"]}
+    assert panels["A"]["kind"] == OTHER_DATA_KIND and not panels["A"]["pos"]  # said, not drawn on this mesh
 
 
 def test_a_row_left_pending_for_other_settings_stays_marked_until_made_again(tmp_path):

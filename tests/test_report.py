@@ -26,6 +26,7 @@ from eval.present.meshview import (
 )
 from eval.report import PAGE, chromium, main, screenshot, write_index, write_report
 from eval.run.outdir import REPRODUCE_ENV, read_marker, results_dir
+from eval.run.pending_rows import pending_on_other_data
 
 METHODS = ["Mine", "NaNOutput"]
 
@@ -381,30 +382,20 @@ def _committed_run_pages() -> list:
     return out
 
 
-def _pending_on_other_data(folder: Path) -> set:
-    """``(case, method)`` pairs that a run's table.md lists as pending rows made on other
-    case data than the run's (an earlier build's mesh: their result has no vertices on
-    this one, so no view can show it)."""
-    from eval.run.pending_rows import marked_pending
-    return {(case, method) for (case, method, _), why in marked_pending(folder).items() if "on other case data" in why}
-
-
 def test_committed_results_pages_show_every_method_in_3d_coloured_by_edge_error():
     """Every committed run page's 3D views (the view cases of ``python -m eval.reproduce``)
     show every method of its run as a result mesh with its vertices, each carrying its
     per-vertex edge error (the colour; paper Fig. 4), and the ground-truth distance where
     the case has a ground truth (a method that failed or was not run would have no result
-    panel); the page names no view "not stored", except a row the table lists as pending
-    and made on other case data (an earlier build's mesh), whose vertices do not fit the
-    case shown."""
+    panel); the page names no view "not stored"; a row the table lists as pending and made
+    on other case data (an earlier build's mesh), whose vertices do not fit the case shown,
+    has no result panel."""
     pages = _committed_run_pages()
     if not pages:
         pytest.skip("no committed run page with 3D views in this checkout")
     for folder, methods, views in pages:
-        other = _pending_on_other_data(folder)
+        other = pending_on_other_data(folder)
         text = (folder / PAGE).read_text()
-        for case, method in other:
-            text = text.replace(f"<div>{method}: not stored</div>", "", 1) if f'data-case="{case}"' in text else text
         assert "not stored" not in text, f"{folder.name}: a panel says not stored"
         for src in views:
             view = read_view(folder / src)

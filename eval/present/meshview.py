@@ -26,13 +26,16 @@ from sshade.json_file import read_bounded, read_json
 
 __all__ = ["VIEW_DIR", "OUTPUTS", "DEFAULT_MAX_FACES", "DEFAULT_VIEW_CASES", "COLOUR_MODES", "cluster_decimate",
            "cluster_positions", "cluster_means", "vertex_edge_error", "case_view",
-           "case_view_path", "write_case_view", "read_view", "write_outputs", "read_outputs"]
+           "OTHER_DATA_KIND", "case_view_path", "write_case_view", "read_view", "write_outputs", "read_outputs"]
 
 log = logging.getLogger("eval")
 
 VIEW_DIR = "report"  #: the views' folder inside a run folder (next to index.html)
 DEFAULT_MAX_FACES = ReportOptions.max_faces    #: faces shown per mesh unless ``report.max_faces`` says otherwise
 DEFAULT_VIEW_CASES = ReportOptions.view_cases  #: cases with a 3D view unless ``report.view_cases`` says otherwise
+#: What a panel says of a restored row made on an earlier build's mesh (a pending row on
+#: other case data: its vertices, if stored, do not fit the case shown).
+OTHER_DATA_KIND = "pending: made on an earlier build's mesh"
 #: The per-vertex quantities a view colours its meshes by (:func:`case_view`): key -> legend.
 COLOUR_MODES = {"edge": "edge-length error, % of the longest rest edge (paper Fig. 4)",
                 "gt": "distance to the ground truth, % of the bounding-box diagonal"}
@@ -192,7 +195,8 @@ def case_view(name: str, V, F, meshes: Mapping, *, max_faces: int = DEFAULT_MAX_
     name : the case's name. V : (n, 3) rest vertices. F : (m, 3) faces.
     meshes : label -> ``(kind, X)`` in panel order, ``kind`` one of ``rest``, ``target``,
         ``result`` (colours), ``X`` (n, 3) vertices, or None with ``kind`` the text
-        shown instead (``failed``, ``not run``, ``not stored``).
+        shown instead (``failed``, ``not run``, ``not stored``,
+        :data:`OTHER_DATA_KIND`).
     max_faces : faces shown (:func:`cluster_decimate`).
     keys : mapping label -> the store record key of that result (each panel keeps its
         ``key``), or None.
@@ -282,19 +286,21 @@ def case_view_path(run_dir, name) -> Path:
 
 
 def write_case_view(case, results: Mapping, run_dir, *, not_run=(), max_faces: int = DEFAULT_MAX_FACES,
-                    stored=(), keys=None, aliases=None) -> Path | None:
+                    stored=(), other_data=(), keys=None, aliases=None) -> Path | None:
     """``run_dir/report/<case>.js`` for one evaluated case (attributes ``name``, ``V``,
     ``F``, optional ``V_gt``): panels rest, target (when the case has a ground truth),
     then every method of ``results`` (name -> deformed vertices (n, 3), or None: failed;
     names in ``not_run``: not run; in ``stored``: restored without a mesh, shown from the
-    earlier view file when it shows the same record, ``keys``: name -> store record key,
+    earlier view file when it shows the same record; in ``other_data``: a pending row made
+    on an earlier build's mesh, :data:`OTHER_DATA_KIND`; ``keys``: name -> store record key,
     ``aliases``: name -> the key its record had before it was re-keyed, :func:`case_view`).
     Returns the path, or None after a logged warning (a view never stops an evaluation)."""
     meshes = {"rest": ("rest", case.V)}
     if getattr(case, "V_gt", None) is not None:
         meshes["target (ground truth)"] = ("target", case.V_gt)
     for n, U in results.items():
-        kind = "not run" if n in not_run else "not stored" if n in stored else "failed"
+        kind = ("not run" if n in not_run else OTHER_DATA_KIND if n in other_data else "not stored" if n in stored
+                else "failed")
         meshes[str(n)] = ("result", U) if U is not None else (kind, None)
     for n in not_run:
         meshes.setdefault(str(n), ("not run", None))

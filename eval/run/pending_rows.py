@@ -21,7 +21,7 @@ from sshade.json_file import read_bounded
 
 __all__ = ["STOP_AFTER_ENV", "PENDING_HEADING", "RUN_PENDING_HEADING", "stop_after_s", "short_commit",
            "pending_title", "strip_pending", "pending_markdown", "marked_pending", "mark_run_pending",
-           "marked_run"]
+           "marked_run", "OTHER_CASE_DATA", "pending_on_other_data"]
 
 #: The environment variable that stops an evaluator run early (``python -m eval.reproduce
 #: --budget`` sets it for each table step): seconds after the run's start when no (case,
@@ -37,6 +37,10 @@ _ROW = re.compile(r"^- `(?P<case>[^`]+)` `(?P<method>[^`]+)`: made at (?P<commit
 #: The heading a folder run whole gets at the end of its ``table.md`` while it is pending,
 #: over one line ``made at abc1234; why`` (:func:`mark_run_pending`).
 RUN_PENDING_HEADING = "This run is pending regeneration (made by older code)"
+#: The words a pending row's reason carries when its stored record ran on other case data
+#: than the run that left it (another build of the dataset: its vertices do not fit this
+#: one's meshes), as the tables and a run's title write them.
+OTHER_CASE_DATA = "on other case data"
 #: The count a title ends with when some rows are pending.
 _TITLE = re.compile(r" \(\d+ of \d+ rows made by this commit's code; \d+ pending from [^()]*\)$")
 #: The most of a ``table.md`` read back (bytes): a table is a few kB.
@@ -99,6 +103,12 @@ def marked_pending(folder) -> dict[tuple[str, str, str], str]:
     if not found:
         return {}
     return {(m["case"], m["method"], m["commit"]): m["why"] or "" for m in map(_ROW.match, rest.splitlines()) if m}
+
+
+def pending_on_other_data(folder) -> set[tuple[str, str]]:
+    """``{(case, method)}`` of the rows ``folder``'s ``table.md`` lists as pending and made
+    on other case data than the run's (:data:`OTHER_CASE_DATA`; :func:`marked_pending`)."""
+    return {(case, method) for (case, method, _), why in marked_pending(folder).items() if OTHER_CASE_DATA in why}
 
 
 def _unmarked(text: str) -> str:

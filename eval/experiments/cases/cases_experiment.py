@@ -37,7 +37,7 @@ from eval.run.compared import compared_rows, read_compared, run_settings
 from eval.run.jsonsafe import json_safe
 from eval.run.machine_speed import machine_speed
 from eval.run.paths import abs_path
-from eval.run.pending_rows import STOP_AFTER_ENV, stop_after_s
+from eval.run.pending_rows import OTHER_CASE_DATA, STOP_AFTER_ENV, stop_after_s
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
@@ -421,8 +421,10 @@ class _CaseOutputs:
         if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/present/figures.py)
             self._figure(ci, results, not_run, unknown, keys, earlier)
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
-            p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run, stored=unknown,
-                                keys=keys, aliases=earlier)
+            other = [n for n in unknown if s.left.get((case.name, n), ("", None, False))[2]]  # an earlier build's
+            p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run,
+                                stored=[n for n in unknown if n not in other], other_data=other, keys=keys,
+                                aliases=earlier)
             self._kept(ci, "3D view", p, case_view_path(s.out_dir, case.name))
         self._record()
 
@@ -509,9 +511,9 @@ def _data_mark(info: dict, left: dict) -> str:
     build = info.get("dataset_build")
     n = sum(1 for v in left.values() if v[2])
     if not isinstance(build, dict):
-        return f"{n} pending row(s) made on other case data than this run's" if n else ""
+        return f"{n} pending row(s) made {OTHER_CASE_DATA} than this run's" if n else ""
     if n:
-        words = f"{n} pending row(s) made on other case data than this build's"
+        words = f"{n} pending row(s) made {OTHER_CASE_DATA} than this build's"
         build.update(rows_on_other_data=n, mark=f"{build['mark']}; {words}" if build.get("mark") else words)
     return build.get("mark") or ""
 
@@ -543,7 +545,7 @@ def _finish(spec: EvalSpec, s: _Setup, rows, info, t_start) -> dict:
         log.warning("%s: %d stored row(s) left, marked pending in the tables (python -m eval.reproduce --check)",
                     STOP_AFTER_ENV, len(s.left))
         with CommitTrees() as trees:  # why each is stale: the modules changed since its commit
-            left = {k: (named_change(s, *k, why, trees) + ("; on other case data than this run's" if other else ""),
+            left = {k: (named_change(s, *k, why, trees) + (f"; {OTHER_CASE_DATA} than this run's" if other else ""),
                         commit) for k, (why, commit, other) in s.left.items()}
         pending = [RowState(s.out_dir, r["case"], r["method"], (r["case"], r["method"]) in left,
                             *left.get((r["case"], r["method"]), ("", None))) for r in rows]
