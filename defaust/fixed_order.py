@@ -8,18 +8,19 @@ reduction of more than one term, no CPU-dispatched SIMD math. The transcendental
 depend on the C library either. Products of small matrices (:func:`matmul`,
 :func:`apply_affine`, :func:`rigid_inverse`, :func:`solve3`), per-row weighted sums
 (:func:`blend`), sums in ascending order (:func:`sum_ascending`), norms and dots of
-3-vectors, Rodrigues' rotation
+3-vectors, a symmetric 3 x 3 eigensolver (:func:`eigh3`), Rodrigues' rotation
 (:func:`rotvec_to_matrix`) and back (:func:`matrix_to_rotvec`). Why: docs/defaust.md, "The same bytes on every machine".
 """
 from __future__ import annotations
 
 import decimal
+import math
 from decimal import Decimal
 
 import numpy as np
 
-__all__ = ["matmul", "apply_affine", "rigid_inverse", "norm3", "dot3", "blend", "sum_ascending", "solve3", "sin",
-           "cos", "atan2", "rotvec_to_matrix", "matrix_to_rotvec"]
+__all__ = ["matmul", "apply_affine", "rigid_inverse", "norm3", "dot3", "blend", "sum_ascending", "solve3", "eigh3",
+           "sin", "cos", "atan2", "rotvec_to_matrix", "matrix_to_rotvec"]
 
 _CTX = decimal.Context(prec=40, rounding=decimal.ROUND_HALF_EVEN, Emin=-999999, Emax=999999)
 _PI = Decimal("3.141592653589793238462643383279502884197169399375105820974944592")
@@ -208,6 +209,54 @@ def solve3(M, y) -> np.ndarray:
     c2 = _cross(M[..., :, 0], M[..., :, 1])
     det = dot3(M[..., :, 0], c0)
     return np.stack([dot3(c0, y) / det, dot3(c1, y) / det, dot3(c2, y) / det], axis=-1)
+
+
+def eigh3(C) -> tuple[list, list]:
+    """Eigenpairs of a symmetric 3 x 3 matrix by cyclic Jacobi rotations (Golub & Van
+    Loan, Matrix Computations, §8.5), in Python floats: ``+ - * /`` and ``sqrt`` in a
+    fixed order, the same bits on every machine (LAPACK's depend on its kernels).
+
+    Parameters
+    ----------
+    C : (3, 3) finite float, symmetric (its upper triangle is not read separately).
+
+    Returns
+    -------
+    values : list of 3 floats, descending (ties in index order); vectors : list of 3
+    lists of 3 floats, the unit eigenvectors in the same order (their signs as the
+    rotations leave them).
+
+    >>> eigh3([[2.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 1.0]])[0]
+    [3.0, 2.0, 1.0]
+    """
+    a = [[float(C[i][j]) for j in range(3)] for i in range(3)]
+    v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    for _ in range(64):  # quadratic convergence: a handful of sweeps reach exact zeros
+        if a[0][1] == 0.0 and a[0][2] == 0.0 and a[1][2] == 0.0:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p][q]
+            if apq == 0.0:
+                continue
+            g = 100.0 * abs(apq)
+            if abs(a[p][p]) + g == abs(a[p][p]) and abs(a[q][q]) + g == abs(a[q][q]):
+                a[p][q] = a[q][p] = 0.0  # below the diagonal's rounding: annihilated
+                continue
+            theta = (a[q][q] - a[p][p]) / (2.0 * apq)
+            t = 0.5 / theta if abs(theta) > 1e150 else \
+                math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            for m in (a, v):  # columns p, q: M J
+                for k in range(3):
+                    mp, mq = m[k][p], m[k][q]
+                    m[k][p], m[k][q] = c * mp - s * mq, s * mp + c * mq
+            for k in range(3):  # rows p, q: J^T A
+                ap, aq = a[p][k], a[q][k]
+                a[p][k], a[q][k] = c * ap - s * aq, s * ap + c * aq
+            a[p][q] = a[q][p] = 0.0  # zero by construction, exactly
+    order = sorted(range(3), key=lambda i: -a[i][i])  # stable: ties keep index order
+    return [a[i][i] for i in order], [[v[k][i] for k in range(3)] for i in order]
 
 
 def _cross(a, b) -> np.ndarray:

@@ -129,6 +129,20 @@ def test_matrix_to_rotvec_inverts_rodrigues_and_agrees_with_scipy():
     assert np.allclose(np.abs(fo.dot3(half, axis[:5])), np.pi, rtol=0, atol=1e-12)
 
 
+def test_eigh3_agrees_with_lapack_on_random_repeated_and_nearly_repeated_eigenvalues():
+    rng = np.random.default_rng(0)
+    mats = [A @ A.T for A in rng.normal(size=(50, 3, 3))]
+    mats += [np.diag([1.0, 1.0, 2.0]), np.diag([3.0, 2.0, 1.0]), np.zeros((3, 3)), np.diag([2.0, 2.0, 2.0])]
+    mats += [np.diag([1.0, 1.0, 2.0]) + 1e-17 * mats[0]]  # nearly repeated values, tiny off-diagonals
+    for C in mats:
+        w, vecs = fo.eigh3(C)
+        E = np.array(vecs)
+        scale = max(1.0, float(np.abs(C).max()))
+        np.testing.assert_allclose(w, np.linalg.eigvalsh(C)[::-1], atol=1e-13 * scale)
+        np.testing.assert_allclose(E @ E.T, np.eye(3), atol=1e-14)
+        np.testing.assert_allclose(E @ C @ E.T, np.diag(w), atol=1e-13 * scale)
+
+
 _PROBE = """
 import hashlib, numpy as np
 from defaust import fixed_order as fo
@@ -137,7 +151,8 @@ A, B = rng.normal(size=(200, 4, 4)), rng.normal(size=(200, 4, 4))
 W, T = rng.random((2000, 64)), rng.normal(size=(64, 3, 4))
 parts = [fo.matmul(A, B), fo.blend(W, T), fo.rigid_inverse(A), fo.solve3(A[:, :3, :3], A[:, 3, :3]),
          fo.rotvec_to_matrix(A[:, 0, :3]), fo.atan2(A[:, 1, 1], A[:, 2, 2]),
-         fo.matrix_to_rotvec(fo.rotvec_to_matrix(A[:, 1, :3])), fo.sum_ascending(W, axis=1)]
+         fo.matrix_to_rotvec(fo.rotvec_to_matrix(A[:, 1, :3])), fo.sum_ascending(W, axis=1),
+         np.array([fo.eigh3(C)[1] for C in fo.matmul(A[:20], np.swapaxes(A[:20], 1, 2))])]
 print(hashlib.sha256(b"".join(np.ascontiguousarray(p).tobytes() for p in parts)).hexdigest())
 """
 

@@ -1,13 +1,15 @@
 """Stanford shapes with the fixed user-defined edit (eval/datasets/shapes.py)."""
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from eval.config_check import check_config
 from eval.datasets import load_cases
-from eval.datasets.shapes import ShapesOptions, axis_handles, axis_landmarks, shape_cases
+from eval.datasets.shapes import ShapesOptions, axis_handles, axis_landmarks, principal_axes, shape_cases
 from sshade.errors import SShaDeError
 
 from .conftest import data_file
@@ -45,6 +47,33 @@ def test_the_edit_is_what_the_docstring_says(classic):
     # principal axes are orthonormal
     A = np.stack(axes)
     np.testing.assert_allclose(A @ A.T, np.eye(3), atol=1e-12)
+
+
+#: sha256 of the bunny's edit at its own resolution (handles, targets, static, group bytes),
+#: as made on a 2-core AMD EPYC with numpy's OpenBLAS; any machine must make these bytes.
+BUNNY_EDIT_SHA256 = "b7446468006875c87dbad36dcd68050970daaed8b7ccc98b9334e8202ee8fc5f"
+
+
+def test_the_edit_is_the_same_bytes_on_every_machine(classic):
+    """No BLAS or LAPACK in the edit: the bytes recorded on one machine are made here,
+    whatever this machine's library, kernels or threads (rows keyed by them compare)."""
+    (c,) = shape_cases(classic, _options(files=["bunny.off"]))
+    h = hashlib.sha256()
+    for a in (c.handles, c.targets, c.static, c.group):
+        h.update(np.ascontiguousarray(a).tobytes())
+    assert h.hexdigest() == BUNNY_EDIT_SHA256
+
+
+def test_principal_axes_are_lapacks_with_a_fixed_sign(classic):
+    (c,) = shape_cases(classic, _options(files=["bunny.off"]))
+    center, axes = principal_axes(c.V)
+    np.testing.assert_allclose(center, c.V.mean(0), rtol=0, atol=1e-15)
+    _, _, Wt = np.linalg.svd(c.V - c.V.mean(0), full_matrices=False)
+    A = np.stack(axes)
+    np.testing.assert_allclose(np.abs(np.sum(A * Wt, axis=1)), 1.0, atol=1e-12)  # the same axes, up to sign
+    assert np.linalg.det(A) > 0  # right-handed: a3 = a1 x a2
+    for a in axes[:2]:  # the sign: the largest-magnitude component positive
+        assert a[np.abs(a).argmax()] > 0
 
 
 def test_seeded_and_dispatched(classic):

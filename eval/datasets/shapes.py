@@ -9,6 +9,7 @@ Example::
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional  # OmegaConf 2.3 reads typing's generics
@@ -16,6 +17,7 @@ from typing import List, Optional  # OmegaConf 2.3 reads typing's generics
 import numpy as np
 
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
+from defaust.fixed_order import dot3, eigh3, matmul, norm3, rotvec_to_matrix, sum_ascending
 from eval.datasets.dataset_options import DatasetOptions
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
@@ -25,7 +27,8 @@ from harness.checks import checked_field
 from sshade.errors import SShaDeError
 from sshade.mesh.io import read_mesh, write_mesh
 
-__all__ = ["ShapesOptions", "ShapeCase", "shape_cases", "axis_landmarks", "axis_handles", "DEFAULT_SHAPES"]
+__all__ = ["ShapesOptions", "ShapeCase", "shape_cases", "principal_axes", "axis_landmarks", "axis_handles",
+           "DEFAULT_SHAPES"]
 
 log = logging.getLogger(__name__)
 
@@ -86,17 +89,43 @@ class ShapeCase(DeformationCase):
     n_source: int = 0
 
 
+def _canonical_sign(u: list) -> np.ndarray:
+    """``u`` (3,) with the sign that makes its largest-magnitude component (the first of
+    equals) positive: an eigenvector's sign, fixed by the vector, not by the solver."""
+    k = max(range(3), key=lambda i: abs(u[i]))
+    return np.array(u if u[k] > 0 else [-x for x in u], np.float64)
+
+
+def principal_axes(V: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """The centroid and principal axes of the points ``V``, the same bits on every machine
+    (:mod:`defaust.fixed_order`: sums in ascending order, a Jacobi eigensolver).
+
+    V : (n, 3) float64, n >= 1. Returns ``center`` (3,) and ``axes`` (a1, a2, a3): unit
+    (3,) vectors along the covariance's eigenvectors by descending variance, a1 and a2
+    with their largest-magnitude component positive, ``a3 = a1 x a2`` (right-handed).
+    """
+    n = len(V)
+    center = np.array([float(sum_ascending(V[:, k])) / n for k in range(3)])
+    D = V - center
+    C = [[0.0] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i, 3):
+            C[i][j] = C[j][i] = float(sum_ascending(D[:, i] * D[:, j]))
+    _, vecs = eigh3(C)
+    a1, a2 = _canonical_sign(vecs[0]), _canonical_sign(vecs[1])
+    a3 = np.array([a1[1] * a2[2] - a1[2] * a2[1], a1[2] * a2[0] - a1[0] * a2[2], a1[0] * a2[1] - a1[1] * a2[0]])
+    return center, (a1, a2, a3 / norm3(a3))
+
+
 def axis_landmarks(V: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
     """Landmarks of the fixed edit: the vertices of smallest and largest coordinate along
-    the first two principal axes.
+    the first two principal axes (:func:`principal_axes`: the same on every machine).
 
     V : (n, 3) float64. Returns ``points`` (4, 3) in the order (min a1, max a1, min a2,
     max a2), ``center`` (3,) the centroid, ``axes`` (a1, a2, a3) unit (3,) vectors.
     """
-    c = V.mean(0)
-    _, _, Wt = np.linalg.svd(V - c, full_matrices=False)
-    a1, a2, a3 = Wt
-    p1, p2 = (V - c) @ a1, (V - c) @ a2
+    c, (a1, a2, a3) = principal_axes(V)
+    p1, p2 = dot3(V - c, a1), dot3(V - c, a2)
     pts = np.stack([V[p1.argmin()], V[p1.argmax()], V[p2.argmin()], V[p2.argmax()]])
     return pts, c, (a1, a2, a3)
 
@@ -104,7 +133,8 @@ def axis_landmarks(V: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
 def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes, *, n_per_group: int = 30,
                  region_radius: float = 0.06, rotate_deg: float = 20.0, translate: float = 0.05,
                  seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Handles and targets of the fixed edit (module docstring) on the mesh ``V``.
+    """Handles and targets of the fixed edit (module docstring) on the mesh ``V``, the
+    same bits on every machine (:mod:`defaust.fixed_order`'s arithmetic: no BLAS).
 
     Parameters
     ----------
@@ -125,10 +155,9 @@ def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes,
     SShaDeError if a region holds no vertex (not already taken by an earlier region).
     """
     from scipy.spatial import cKDTree
-    from scipy.spatial.transform import Rotation
-    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    diag = float(norm3(V.max(0) - V.min(0)))
     tree = cKDTree(V)
-    R = Rotation.from_rotvec(np.deg2rad(rotate_deg) * axes[2]).as_matrix()
+    R = rotvec_to_matrix((float(rotate_deg) * math.pi / 180.0) * np.asarray(axes[2], np.float64))
     hs, ts, st = [], [], []
     taken: set = set()
     for g, p in enumerate(landmarks):
@@ -140,9 +169,9 @@ def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes,
         taken.update(pick.tolist())
         P = V[pick]
         if g == 1:
-            T = (P - center) @ R.T + center
+            T = matmul(P - center, R.T) + center
         elif g == 3:
-            T = P + translate * diag * axes[2]
+            T = P + (translate * diag) * np.asarray(axes[2], np.float64)
         else:
             T = P.copy()
         hs.append(pick)
