@@ -218,7 +218,7 @@ def eigh3(C) -> tuple[list, list]:
 
     Parameters
     ----------
-    C : (3, 3) finite float, symmetric (its upper triangle is not read separately).
+    C : (3, 3) finite float, symmetric (both triangles are read: they must agree).
 
     Returns
     -------
