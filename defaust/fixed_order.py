@@ -7,7 +7,7 @@ reduction of more than one term, no CPU-dispatched SIMD math. The transcendental
 :mod:`decimal`, 40 significant digits) and rounded once to float64, so they do not
 depend on the C library either. Products of small matrices (:func:`matmul`,
 :func:`apply_affine`, :func:`rigid_inverse`, :func:`solve3`), per-row weighted sums
-(:func:`blend`), sums in ascending order (:func:`sum_ascending`), norms and dots of
+(:func:`blend`), sums in ascending order (:func:`sum_ascending`), norms, dots and cross products of
 3-vectors, a symmetric 3 x 3 eigensolver (:func:`eigh3`), Rodrigues' rotation
 (:func:`rotvec_to_matrix`) and back (:func:`matrix_to_rotvec`). Why: docs/defaust.md, "The same bytes on every machine".
 """
@@ -19,8 +19,8 @@ from decimal import Decimal
 
 import numpy as np
 
-__all__ = ["matmul", "apply_affine", "rigid_inverse", "norm3", "dot3", "blend", "sum_ascending", "solve3", "eigh3",
-           "sin", "cos", "atan2", "rotvec_to_matrix", "matrix_to_rotvec"]
+__all__ = ["matmul", "apply_affine", "rigid_inverse", "norm3", "dot3", "cross3", "blend", "sum_ascending", "solve3",
+           "eigh3", "sin", "cos", "atan2", "rotvec_to_matrix", "matrix_to_rotvec"]
 
 _CTX = decimal.Context(prec=40, rounding=decimal.ROUND_HALF_EVEN, Emin=-999999, Emax=999999)
 _PI = Decimal("3.141592653589793238462643383279502884197169399375105820974944592")
@@ -204,9 +204,9 @@ def solve3(M, y) -> np.ndarray:
     """
     M = np.asarray(M, np.float64)
     y = np.asarray(y, np.float64)
-    c0 = _cross(M[..., :, 1], M[..., :, 2])  # cofactor rows of the adjugate
-    c1 = _cross(M[..., :, 2], M[..., :, 0])
-    c2 = _cross(M[..., :, 0], M[..., :, 1])
+    c0 = cross3(M[..., :, 1], M[..., :, 2])  # cofactor rows of the adjugate
+    c1 = cross3(M[..., :, 2], M[..., :, 0])
+    c2 = cross3(M[..., :, 0], M[..., :, 1])
     det = dot3(M[..., :, 0], c0)
     return np.stack([dot3(c0, y) / det, dot3(c1, y) / det, dot3(c2, y) / det], axis=-1)
 
@@ -259,8 +259,20 @@ def eigh3(C) -> tuple[list, list]:
     return [a[i][i] for i in order], [[v[k][i] for k in range(3)] for i in order]
 
 
-def _cross(a, b) -> np.ndarray:
-    """Cross products of (..., 3) arrays, each component one difference of two products."""
+def cross3(a, b) -> np.ndarray:
+    """Cross products of 3-vectors, each component one difference of two products
+    (``a1 b2 - a2 b1``, ``a2 b0 - a0 b2``, ``a0 b1 - a1 b0``).
+
+    Parameters
+    ----------
+    a, b : (..., 3) float (broadcast).
+
+    Returns
+    -------
+    (..., 3) float64.
+    """
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
     return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 

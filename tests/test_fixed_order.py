@@ -94,6 +94,15 @@ def _ulps(a, b) -> np.ndarray:
     return np.abs(np.asarray(a) - np.asarray(b)) / np.spacing(np.abs(np.asarray(b)))
 
 
+def test_cross3_is_the_stated_differences_and_agrees_with_numpy():
+    a, b = _rng().normal(size=(50, 3)), _rng().normal(size=(50, 3))[::-1]
+    got = fo.cross3(a, b)
+    for i in range(50):
+        x, y = a[i].tolist(), b[i].tolist()
+        assert got[i].tolist() == [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
+    np.testing.assert_allclose(got, np.cross(a, b), rtol=0, atol=1e-15)
+
+
 def test_decimal_transcendentals_are_within_one_ulp_of_libm_and_exact_on_known_values():
     x = np.concatenate([_rng().uniform(-7, 7, 300), [0.0, -0.0, 1e-300, math.pi, -math.pi / 2, 100.0]])
     assert (_ulps(fo.sin(x), np.array([math.sin(v) for v in x])) <= 1).all()

@@ -17,7 +17,7 @@ from typing import List, Optional  # OmegaConf 2.3 reads typing's generics
 import numpy as np
 
 from defaust import highres  # the module: tests replace highres.subdivide_remesh by a fast one
-from defaust.fixed_order import dot3, eigh3, matmul, norm3, rotvec_to_matrix, sum_ascending
+from defaust.fixed_order import cross3, dot3, eigh3, matmul, norm3, rotvec_to_matrix, sum_ascending
 from eval.datasets.dataset_options import DatasetOptions
 from eval.datasets.dataset_registry import register_dataset
 from eval.datasets.deformation_case import DeformationCase
@@ -113,7 +113,7 @@ def principal_axes(V: np.ndarray) -> tuple[np.ndarray, tuple]:
             C[i][j] = C[j][i] = float(sum_ascending(D[:, i] * D[:, j]))
     _, vecs = eigh3(C)
     a1, a2 = _canonical_sign(vecs[0]), _canonical_sign(vecs[1])
-    a3 = np.array([a1[1] * a2[2] - a1[2] * a2[1], a1[2] * a2[0] - a1[0] * a2[2], a1[0] * a2[1] - a1[1] * a2[0]])
+    a3 = cross3(a1, a2)
     return center, (a1, a2, a3 / norm3(a3))
 
 
