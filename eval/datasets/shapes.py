@@ -125,7 +125,8 @@ def axis_landmarks(V: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
     max a2), ``center`` (3,) the centroid, ``axes`` (a1, a2, a3) unit (3,) vectors.
     """
     c, (a1, a2, a3) = principal_axes(V)
-    p1, p2 = dot3(V - c, a1), dot3(V - c, a2)
+    D = V - c
+    p1, p2 = dot3(D, a1), dot3(D, a2)
     pts = np.stack([V[p1.argmin()], V[p1.argmax()], V[p2.argmin()], V[p2.argmax()]])
     return pts, c, (a1, a2, a3)
 
