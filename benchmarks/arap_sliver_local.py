@@ -38,6 +38,8 @@ import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
+from arap_hierarchy import defaust_case  # noqa: E402  (this script's folder, as run)
+
 from sshade.arap import DEFAULT_CRITERION, ArapOptions, ArapSolver, build_operators  # noqa: E402
 from sshade.arap.criterion import Criterion  # noqa: E402
 from sshade.mesh.unit_frame import unit_frame  # noqa: E402
@@ -46,20 +48,19 @@ ENERGY = "spokes"
 BASELINE_ENERGY = -0.02981296188  # s00_p01, rigid start, threads=1 (arap_hierarchy.md), mesh units
 
 
-def defaust_case(root: str, subject: int, pose: int):
-    from defaust.dataset import load
-    case = next(c for c in load(root, subjects=[subject], partial=True) if c.pose == pose)
-    return f"s{subject:02d}_p{pose:02d}", case.V, case.F, case.handles, case.targets
-
-
 def sliver_set(ops, F: np.ndarray, h: np.ndarray, rings: int) -> np.ndarray:
     """Free vertices at an edge of negative weight in ``ops.L`` grown by ``rings`` rings
     (sorted int64)."""
-    n = ops.n
     C = sp.triu(ops.L, 1).tocoo()  # L's off-diagonal is -w: a positive entry is a negative weight
     neg = C.data > 0
-    mark = np.zeros(n, bool)
+    mark = np.zeros(ops.n, bool)
     mark[C.row[neg]] = mark[C.col[neg]] = True
+    return grown(ops, mark, h, rings)
+
+
+def grown(ops, mark: np.ndarray, h: np.ndarray, rings: int) -> np.ndarray:
+    """The vertices marked in ``mark`` ((n,) bool) grown by ``rings`` rings of ``ops.L``'s
+    pattern, the handles ``h`` left out (sorted int64)."""
     A = (ops.L != 0).astype(np.int8).tocsr()
     for _ in range(rings):
         mark = (A @ mark.astype(np.int8)) > 0
@@ -107,11 +108,7 @@ def top_set(ops, U, free, h, k: int, rings: int) -> np.ndarray:
     c = (g * g).sum(1) / ops.mass[free]
     mark = np.zeros(ops.n, bool)
     mark[free[np.argsort(c)[::-1][:k]]] = True
-    A = (ops.L != 0).astype(np.int8).tocsr()
-    for _ in range(rings):
-        mark = (A @ mark.astype(np.int8)) > 0
-    mark[h] = False
-    return np.flatnonzero(mark)
+    return grown(ops, mark, h, rings)
 
 
 def gnorm_split(ops, U, free, S, mass):
