@@ -56,6 +56,7 @@ HELP = {
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
     "benchmarks/arap_hierarchy.py": ["usage:", "--chains"],
     "benchmarks/arap_alternatives.py": ["usage:", "--max-cg", "--methods"],
+    "benchmarks/arap_sliver_local.py": ["usage:", "--diagnose", "--every"],
     "benchmarks/table_change.py": ["usage:", "--before", "--after"],
     "benchmarks/identity_cost.py": ["usage:", "probes"],
 }
