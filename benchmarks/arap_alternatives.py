@@ -126,13 +126,7 @@ def newton_cg(P: Problem, *, eta: float, max_cg: int, max_evals: int, trace: boo
             break
         d, hit_neg = _inner(P, x, g, eta=min(eta, np.sqrt(gn)), max_cg=max_cg)
         neg += hit_neg
-        slope, alpha = float((g * d).sum()), 1.0
-        while True:
-            E_try = P.energy(x + alpha * d)
-            if E_try <= E + 1e-4 * alpha * slope or alpha < 1e-10:
-                break
-            alpha *= 0.5
-        x = x + alpha * d
+        x = x + backtrack(P, x, E, d, float((g * d).sum())) * d
         E_prev = E
         E, g = P.at(x)
         outer += 1
@@ -201,18 +195,47 @@ def _h0(A, block: bool):
     return lambda v: np.einsum("kab,kb->ka", Hinv, v)
 
 
-def _two_loop(S, Y, g, h0):
-    """L-BFGS direction ``-H g`` (Nocedal & Wright, Algorithm 7.4, ``gamma h0``)."""
+def backtrack(P: Problem, x, E: float, d, slope: float) -> float:
+    """Armijo backtracking from the unit step along ``d`` (slope ``g . d``): the step taken."""
+    alpha = 1.0
+    while True:
+        if P.energy(x + alpha * d) <= E + 1e-4 * alpha * slope or alpha < 1e-10:
+            return alpha
+        alpha *= 0.5
+
+
+def two_loop(S, Y, g, h0, scale: bool = True):
+    """L-BFGS direction ``-H g`` (Nocedal & Wright, Algorithm 7.4, ``gamma h0``; ``gamma``
+    from the newest pair, eq. 7.20, or 1 without ``scale``)."""
     q, al = g.copy(), []
     for s, y in reversed(list(zip(S, Y))):
         a = float((s * q).sum()) / float((s * y).sum())
         al.append(a)
         q -= a * y
-    gamma = float((S[-1] * Y[-1]).sum()) / float((Y[-1] * h0(Y[-1])).sum()) if S else 1.0
+    gamma = float((S[-1] * Y[-1]).sum()) / float((Y[-1] * h0(Y[-1])).sum()) if S and scale else 1.0
     r = gamma * h0(q)
     for (s, y), a in zip(zip(S, Y), reversed(al)):
         r += (a - float((y * r).sum()) / float((s * y).sum())) * s
     return -r
+
+
+def descent(S, Y, g, h0, scale: bool = True):
+    """``(d, g . d, S, Y)``: the L-BFGS direction, or ``-h0(g)`` with the history dropped
+    when that is no descent direction."""
+    d = two_loop(S, Y, g, h0, scale)
+    slope = float((g * d).sum())
+    if not slope < 0:
+        S, Y = [], []
+        d = -h0(g)
+        slope = float((g * d).sum())
+    return d, slope, S, Y
+
+
+def push_pair(S, Y, s, y, m: int):
+    """The history with the pair ``(s, y)`` added (kept ``m`` newest) when its curvature is positive."""
+    if float((s * y).sum()) > 1e-12 * np.sqrt(float((s * s).sum()) * float((y * y).sum())):
+        return (S + [s])[-m:], (Y + [y])[-m:]
+    return S, Y
 
 
 def rotations(P: Problem, *, m: int, block: bool, max_evals: int, trace: bool) -> dict:
@@ -227,12 +250,7 @@ def rotations(P: Problem, *, m: int, block: bool, max_evals: int, trace: bool) -
             status = "converged"
             break
         E_prev, h0 = E, _h0(A, block)
-        d = _two_loop(S, Y, g, h0)
-        slope = float((g * d).sum())
-        if not slope < 0:
-            S, Y = [], []
-            d = -h0(g)
-            slope = float((g * d).sum())
+        d, slope, S, Y = descent(S, Y, g, h0)
         alpha = 1.0
         while True:
             R_new = _expmap(alpha * d) @ R
@@ -240,9 +258,7 @@ def rotations(P: Problem, *, m: int, block: bool, max_evals: int, trace: bool) -
             if f_new <= f + 1e-4 * alpha * slope or alpha < 1e-10:
                 break
             alpha *= 0.5
-        s, y = alpha * d, g_new - g
-        if float((s * y).sum()) > 1e-12 * np.sqrt(float((s * s).sum()) * float((y * y).sum())):
-            S, Y = (S + [s])[-m:], (Y + [y])[-m:]
+        S, Y = push_pair(S, Y, alpha * d, g_new - g, m)
         R, f, g, U, A = R_new, f_new, g_new, U_new, A_new
         it += 1
     return {"status": status, "iterations": it, "evals": P.evals, "energy": E, "gnorm": gn}

@@ -57,6 +57,7 @@ HELP = {
     "benchmarks/arap_hierarchy.py": ["usage:", "--chains"],
     "benchmarks/arap_alternatives.py": ["usage:", "--max-cg", "--methods"],
     "benchmarks/arap_sliver_local.py": ["usage:", "--diagnose", "--every"],
+    "benchmarks/arap_projected_newton.py": ["usage:", "--refresh", "--nc"],
     "benchmarks/table_change.py": ["usage:", "--before", "--after"],
     "benchmarks/identity_cost.py": ["usage:", "probes"],
 }
