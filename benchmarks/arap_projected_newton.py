@@ -158,7 +158,7 @@ def newton(P: Problem, *, reg: float, max_iter: int, trace: bool) -> dict:
     CH = CellHessian(P)
     x = P.U[P.free].copy()
     E, g = P.at(x)
-    E_prev, it, status, tb, tf = np.inf, 0, "max_iter", 0.0, 0.0
+    E_prev, it, status, tb, tf, nnz = np.inf, 0, "max_iter", 0.0, 0.0, 0
     while it < max_iter:
         gn, met = P.converged(E, E_prev, g, {"iteration": it} if trace else None)
         if met:
