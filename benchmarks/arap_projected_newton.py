@@ -63,6 +63,15 @@ def rotation_terms(ops, U):
     return W, ops.pair_w[:, None, None] * (X @ R[ops.pair_cell].transpose(0, 2, 1))
 
 
+def free_dofs(P: Problem) -> np.ndarray:
+    """(3 n,) int64: each coordinate ``3 v + c``'s index among the free coordinates, -1 at
+    the handles' (vertex-major, as ``x.ravel()`` of the free positions)."""
+    out = np.full(3 * P.ops.n, -1, np.int64)
+    fd = (3 * P.free[:, None] + np.arange(3)).ravel()
+    out[fd] = np.arange(len(fd))
+    return out
+
+
 class CellHessian:
     """The cells' vertex lists and the pairs' local indices of one :class:`Problem`."""
 
@@ -77,9 +86,7 @@ class CellHessian:
         self.start = np.concatenate([[0], np.cumsum(self.m)[:-1]])
         self.ls = np.searchsorted(keys, cell * n + e[:, 0]) - self.start[cell]
         self.ld = np.searchsorted(keys, cell * n + e[:, 1]) - self.start[cell]
-        self.free_dof = np.full(3 * n, -1, np.int64)
-        fd = (3 * P.free[:, None] + np.arange(3)).ravel()
-        self.free_dof[fd] = np.arange(len(fd))
+        self.free_dof = free_dofs(P)
         self.n_neg = 0
         self.project = True  # False: the exact (unprojected) Hessian, for checks
 
@@ -186,7 +193,7 @@ class TwoLevel:
         import igl
 
         from sshade.remesh import remesh
-        self.P, self.CH = P, CellHessian(P)
+        self.P, self.free_dof = P, free_dofs(P)
         rm = remesh(V, F, nc, seed=seed, required=np.asarray(handles, np.int64))
         Vc, Fc = V[rm.seeds], np.asarray(rm.F, np.int64)
         _, fi, C = igl.point_mesh_squared_distance(V[P.free], Vc, Fc)
@@ -205,7 +212,7 @@ class TwoLevel:
     def refresh(self, x) -> float:
         """Rebuild ``H`` and the coarse factor at free positions ``x``; seconds taken."""
         t = time.perf_counter()
-        P, ops, CH = self.P, self.P.ops, self.CH
+        P, ops = self.P, self.P.ops
         U = P.U.copy()
         U[P.free] = x
         W, Qp = rotation_terms(ops, U)
@@ -213,7 +220,7 @@ class TwoLevel:
         rows = (3 * ops.pair_cell[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 3), np.int64)
         parts = []
         for end, sgn in ((e[:, 0], 1.0), (e[:, 1], -1.0)):
-            cols = CH.free_dof[3 * end[:, None, None] + np.arange(3)[None, None, :]] * np.ones((1, 3, 1), np.int64)
+            cols = self.free_dof[3 * end[:, None, None] + np.arange(3)[None, None, :]] * np.ones((1, 3, 1), np.int64)
             parts.append((rows.ravel(), cols.ravel(), sgn * Qp.ravel()))
         r, c, v = (np.concatenate(z) for z in zip(*parts))
         keep = c >= 0
