@@ -47,14 +47,15 @@ from sshade.arap.linear import LaplacianSolver  # noqa: E402
 from sshade.mesh.unit_frame import unit_frame  # noqa: E402
 
 
-def rotation_terms(ops, U):
+def rotation_terms(ops, U, floor: float = 1e-12):
     """``W_k = (tr(S_k) I - S_k)^-1`` (n, 3, 3) and each pair's ``a_ke [e_e]x R_k^T``
-    (p, 3, 3) at positions ``U`` (n, 3); eigenvalues of ``tr(S) I - S`` clamped positive."""
+    (p, 3, 3) at positions ``U`` (n, 3); eigenvalues of ``tr(S) I - S`` clamped to at
+    least ``floor`` times the cell's largest."""
     R = ops.rotations(U, threads=1)
     S = R.transpose(0, 2, 1) @ ops.covariances(U)
     S = 0.5 * (S + S.transpose(0, 2, 1))
     lam, Q = np.linalg.eigh(np.trace(S, axis1=1, axis2=2)[:, None, None] * np.eye(3) - S)
-    lam = np.maximum(lam, 1e-12 * np.maximum(np.abs(lam).max(1, keepdims=True), 1e-30))
+    lam = np.maximum(lam, floor * np.maximum(np.abs(lam).max(1, keepdims=True), 1e-30))
     W = (Q / lam[:, None, :]) @ Q.transpose(0, 2, 1)
     ev = ops.edge_vec[ops.pair_edge]
     X = np.zeros((len(ev), 3, 3))  # [e]x
@@ -182,6 +183,40 @@ def newton(P: Problem, *, reg: float, max_iter: int, trace: bool) -> dict:
             "build_s": round(tb, 2), "factor_s": round(tf, 2), "nnz": nnz, "neg_eigs_last": CH.n_neg}
 
 
+class ExactHessian:
+    """The reduced energy's exact (unprojected) Hessian ``2 L_ff (x) I3 - 2 G^T W G`` over
+    the free coordinates as an operator, ``W`` and ``G`` taken at the last :meth:`refresh`."""
+
+    def __init__(self, P: Problem, floor: float = 1e-12):
+        self.P, self.free_dof, self.floor = P, free_dofs(P), floor
+        self.L2k = sp.kron(P.L2, sp.eye(3), format="csr")
+
+    def refresh(self, x) -> float:
+        """Rebuild ``G`` (3 n, 3 n_f) and ``W`` (3 n, 3 n) at free positions ``x`` (n_f, 3)."""
+        t = time.perf_counter()
+        P, ops = self.P, self.P.ops
+        U = P.U.copy()
+        U[P.free] = x
+        W, Qp = rotation_terms(ops, U, self.floor)
+        e = ops.edges[ops.pair_edge]
+        rows = (3 * ops.pair_cell[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 3), np.int64)
+        parts = []
+        for end, sgn in ((e[:, 0], 1.0), (e[:, 1], -1.0)):
+            cols = self.free_dof[3 * end[:, None, None] + np.arange(3)[None, None, :]] * np.ones((1, 3, 1), np.int64)
+            parts.append((rows.ravel(), cols.ravel(), sgn * Qp.ravel()))
+        r, c, v = (np.concatenate(z) for z in zip(*parts))
+        keep = c >= 0
+        self.G = sp.csr_matrix((v[keep], (r[keep], c[keep])), shape=(3 * ops.n, 3 * len(P.free)))
+        self.GT = self.G.T.tocsr()
+        self.W = _block_diag(W)
+        return time.perf_counter() - t
+
+    def apply(self, v):
+        """``H v`` for ``v`` (n_f, 3)."""
+        f = v.ravel()
+        return (self.L2k @ f - 2.0 * (self.GT @ (self.W @ (self.G @ f)))).reshape(v.shape)
+
+
 class TwoLevel:
     """A two-level preconditioner of the reduced energy's exact Hessian: the fine level
     ``(2 L_ff)^-1`` (the global step's factor), the coarse level the Galerkin product
@@ -193,7 +228,7 @@ class TwoLevel:
         import igl
 
         from sshade.remesh import remesh
-        self.P, self.free_dof = P, free_dofs(P)
+        self.P = P
         rm = remesh(V, F, nc, seed=seed, required=np.asarray(handles, np.int64))
         Vc, Fc = V[rm.seeds], np.asarray(rm.F, np.int64)
         _, fi, C = igl.point_mesh_squared_distance(V[P.free], Vc, Fc)
@@ -205,29 +240,16 @@ class TwoLevel:
         Pm = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(nf), 3), T.ravel())), shape=(nf, len(Vc)))
         self.nc = len(Vc)
         self.Pk = sp.kron(Pm, sp.eye(3), format="csr")
-        self.L2k = sp.kron(P.L2, sp.eye(3), format="csr")
-        self.PtL2P = (self.Pk.T @ self.L2k @ self.Pk).tocsc()
+        self.H = ExactHessian(P)
+        self.PtL2P = (self.Pk.T @ self.H.L2k @ self.Pk).tocsc()
         self.shift = 0.0
 
     def refresh(self, x) -> float:
         """Rebuild ``H`` and the coarse factor at free positions ``x``; seconds taken."""
         t = time.perf_counter()
-        P, ops = self.P, self.P.ops
-        U = P.U.copy()
-        U[P.free] = x
-        W, Qp = rotation_terms(ops, U)
-        e = ops.edges[ops.pair_edge]
-        rows = (3 * ops.pair_cell[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 3), np.int64)
-        parts = []
-        for end, sgn in ((e[:, 0], 1.0), (e[:, 1], -1.0)):
-            cols = self.free_dof[3 * end[:, None, None] + np.arange(3)[None, None, :]] * np.ones((1, 3, 1), np.int64)
-            parts.append((rows.ravel(), cols.ravel(), sgn * Qp.ravel()))
-        r, c, v = (np.concatenate(z) for z in zip(*parts))
-        keep = c >= 0
-        self.G = sp.csr_matrix((v[keep], (r[keep], c[keep])), shape=(3 * ops.n, 3 * len(P.free)))
-        self.W = _block_diag(W)
-        GP = (self.G @ self.Pk).tocsr()
-        Hc = (self.PtL2P - 2.0 * (GP.T @ self.W @ GP)).tocsc()
+        self.H.refresh(x)
+        GP = (self.H.G @ self.Pk).tocsr()
+        Hc = (self.PtL2P - 2.0 * (GP.T @ self.H.W @ GP)).tocsc()
         Hc = 0.5 * (Hc + Hc.T)
         for mu in (0.0, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, np.inf):
             A = self.PtL2P if mu == np.inf else Hc + mu * self.PtL2P
@@ -241,9 +263,7 @@ class TwoLevel:
 
     def hess(self, v):
         """``H v`` for ``v`` (n_f, 3)."""
-        f = v.ravel()
-        Gv = self.G @ f
-        return (self.L2k @ f - 2.0 * (self.G.T @ (self.W @ Gv))).reshape(v.shape)
+        return self.H.apply(v)
 
     def coarse(self, r):
         rc = self.Pk.T @ r.ravel()
