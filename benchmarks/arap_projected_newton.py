@@ -321,6 +321,21 @@ def faust_case(root: str, name: str):
     return c.V, c.F, c.handles, c.targets
 
 
+def unit_case(name: str, faust: str | None, root: str | None):
+    """``(V, F, handles, targets)`` of a FAUST (``faust``), DeFAUST (``root``) or
+    synthetic case, in the mesh's unit frame."""
+    V0, F, h, T0 = faust_case(faust, name) if faust else load_case(name, root)
+    frame = unit_frame(V0)
+    return frame.to_unit(V0), F, h, frame.to_unit(T0)
+
+
+def solver_row(V, F, h, T) -> dict:
+    """The solver's L-BFGS (``solve_arap``, spokes, one thread) on the case: its row's fields."""
+    r = solve_arap(V, F, h, T, ArapOptions(energy="spokes", threads=1))
+    return {"status": r.info["status"], "iterations": r.iterations, "evals": r.info["n_local"],
+            "energy": r.info["energy"], "gnorm": r.info["gnorm"]}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cases", default="twisted_bar,bent_cylinder,lifted_plane",
@@ -339,9 +354,7 @@ def main(argv=None) -> int:
     ap.add_argument("--trace", action="store_true", help="one JSON line per iteration")
     a = ap.parse_args(argv)
     for name in a.cases.split(","):
-        V0, F, h, T0 = faust_case(a.faust, name) if a.faust else load_case(name, a.root)
-        frame = unit_frame(V0)
-        V, T = frame.to_unit(V0), frame.to_unit(T0)
+        V, F, h, T = unit_case(name, a.faust, a.root)
         for meth in a.methods.split(","):
             t = time.perf_counter()
             row = {"case": name, "n": len(V), "method": meth}
@@ -369,9 +382,7 @@ def main(argv=None) -> int:
                                     max_iter=a.max_iter, m=10, trace=a.trace, scale=not a.no_scale))
                 row["shift_last"] = TL.shift
             else:
-                r = solve_arap(V, F, h, T, ArapOptions(energy="spokes", threads=1))
-                row.update(status=r.info["status"], iterations=r.iterations, evals=r.info["n_local"],
-                           energy=r.info["energy"], gnorm=r.info["gnorm"])
+                row.update(solver_row(V, F, h, T))
             row["s"] = round(time.perf_counter() - t, 2)
             print(json.dumps(row), flush=True)
     return 0

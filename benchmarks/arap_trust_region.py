@@ -38,11 +38,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from arap_alternatives import Problem, load_case  # noqa: E402  (this script's folder, as run)
-from arap_projected_newton import ExactHessian, faust_case  # noqa: E402
-
-from sshade.arap import ArapOptions, solve_arap  # noqa: E402
-from sshade.mesh.unit_frame import unit_frame  # noqa: E402
+from arap_alternatives import Problem  # noqa: E402  (this script's folder, as run)
+from arap_projected_newton import ExactHessian, solver_row, unit_case  # noqa: E402
 
 
 def _to_boundary(sMs: float, sMp: float, pMp: float, radius: float) -> float:
@@ -138,9 +135,7 @@ def main(argv=None) -> int:
     ap.add_argument("--trace", action="store_true", help="one JSON line per outer iteration")
     a = ap.parse_args(argv)
     for name in a.cases.split(","):
-        V0, F, h, T0 = faust_case(a.faust, name) if a.faust else load_case(name, a.root)
-        frame = unit_frame(V0)
-        V, T = frame.to_unit(V0), frame.to_unit(T0)
+        V, F, h, T = unit_case(name, a.faust, a.root)
         for meth in a.methods.split(","):
             t = time.perf_counter()
             row = {"case": name, "n": len(V), "method": meth}
@@ -149,9 +144,7 @@ def main(argv=None) -> int:
                 row.update(trust_region(Problem(V, F, h, T), eta=a.eta, max_cg=a.max_cg, max_outer=a.max_outer,
                                         trace=a.trace, floor=a.floor, grow=a.grow))
             else:
-                r = solve_arap(V, F, h, T, ArapOptions(energy="spokes", threads=1))
-                row.update(status=r.info["status"], iterations=r.iterations, evals=r.info["n_local"],
-                           energy=r.info["energy"], gnorm=r.info["gnorm"])
+                row.update(solver_row(V, F, h, T))
             row["s"] = round(time.perf_counter() - t, 2)
             print(json.dumps(row), flush=True)
     return 0
