@@ -336,12 +336,30 @@ def solver_row(V, F, h, T) -> dict:
             "energy": r.info["energy"], "gnorm": r.info["gnorm"]}
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def case_arguments(ap: argparse.ArgumentParser) -> None:
+    """Add ``--cases``, ``--root`` and ``--faust`` (what :func:`run_cases` reads) to ``ap``."""
     ap.add_argument("--cases", default="twisted_bar,bent_cylinder,lifted_plane",
                     help="comma-separated synthetic cases, DeFAUST sXX_pYY (--root) or FAUST sN_pM (--faust)")
     ap.add_argument("--root", help="a DeFAUST build, for sXX_pYY cases")
     ap.add_argument("--faust", help="a folder of FAUST registrations, for sN_pM cases")
+
+
+def run_cases(a, run_one) -> None:
+    """Each of ``a.cases`` (``a.faust``, ``a.root``) and ``a.methods``: ``run_one(meth, V, F,
+    h, T, row)`` fills the row, or the solver's L-BFGS for ``lbfgs``; one JSON line each."""
+    for name in a.cases.split(","):
+        V, F, h, T = unit_case(name, a.faust, a.root)
+        for meth in a.methods.split(","):
+            t = time.perf_counter()
+            row = {"case": name, "n": len(V), "method": meth}
+            row.update(solver_row(V, F, h, T) if meth == "lbfgs" else run_one(meth, V, F, h, T, row))
+            row["s"] = round(time.perf_counter() - t, 2)
+            print(json.dumps(row), flush=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    case_arguments(ap)
     ap.add_argument("--methods", default="newton,lbfgs_h,lbfgs",
                     help="comma-separated: newton, lbfgs_h, lbfgs_2l, lbfgs_l (this script's L-BFGS), "
                          "lbfgs (the solver)")
@@ -353,38 +371,35 @@ def main(argv=None) -> int:
     ap.add_argument("--no-scale", action="store_true", help="lbfgs_2l / lbfgs_l: no gamma scaling of H0")
     ap.add_argument("--trace", action="store_true", help="one JSON line per iteration")
     a = ap.parse_args(argv)
-    for name in a.cases.split(","):
-        V, F, h, T = unit_case(name, a.faust, a.root)
-        for meth in a.methods.split(","):
-            t = time.perf_counter()
-            row = {"case": name, "n": len(V), "method": meth}
-            if meth == "newton":
-                row.update(reg=a.reg, **newton(Problem(V, F, h, T), reg=a.reg, max_iter=a.max_iter, trace=a.trace))
-            elif meth == "lbfgs_h":
-                P = Problem(V, F, h, T)
-                H0 = HessianFactor(CellHessian(P), a.reg)
-                row.update(reg=a.reg, refresh=a.refresh,
-                           **lbfgs_pc(P, H0.apply, refresh_fn=H0.refresh, refresh=a.refresh,
-                                      max_iter=a.max_iter, m=10, trace=a.trace))
-                row.update(build_s=round(H0.build_s, 2), factor_s=round(H0.factor_s, 2), nnz=H0.nnz,
-                           neg_eigs_last=H0.CH.n_neg)
-            elif meth == "lbfgs_l":
-                P = Problem(V, F, h, T)
-                row.update(scale=not a.no_scale, **lbfgs_pc(P, P.precondition, max_iter=a.max_iter, m=10,
-                                                            trace=a.trace, scale=not a.no_scale))
-            elif meth == "lbfgs_2l":
-                P = Problem(V, F, h, T)
-                t0 = time.perf_counter()
-                TL = TwoLevel(P, V, F, h, a.nc)
-                row.update(nc=TL.nc, mode=a.mode, refresh=a.refresh, scale=not a.no_scale,
-                           setup_s=round(time.perf_counter() - t0, 2))
-                row.update(lbfgs_pc(P, partial(TL.apply, mode=a.mode), refresh_fn=TL.refresh, refresh=a.refresh,
-                                    max_iter=a.max_iter, m=10, trace=a.trace, scale=not a.no_scale))
-                row["shift_last"] = TL.shift
-            else:
-                row.update(solver_row(V, F, h, T))
-            row["s"] = round(time.perf_counter() - t, 2)
-            print(json.dumps(row), flush=True)
+    def run_one(meth, V, F, h, T, row):
+        if meth == "newton":
+            row.update(reg=a.reg, **newton(Problem(V, F, h, T), reg=a.reg, max_iter=a.max_iter, trace=a.trace))
+        elif meth == "lbfgs_h":
+            P = Problem(V, F, h, T)
+            H0 = HessianFactor(CellHessian(P), a.reg)
+            row.update(reg=a.reg, refresh=a.refresh,
+                       **lbfgs_pc(P, H0.apply, refresh_fn=H0.refresh, refresh=a.refresh,
+                                  max_iter=a.max_iter, m=10, trace=a.trace))
+            row.update(build_s=round(H0.build_s, 2), factor_s=round(H0.factor_s, 2), nnz=H0.nnz,
+                       neg_eigs_last=H0.CH.n_neg)
+        elif meth == "lbfgs_l":
+            P = Problem(V, F, h, T)
+            row.update(scale=not a.no_scale, **lbfgs_pc(P, P.precondition, max_iter=a.max_iter, m=10,
+                                                        trace=a.trace, scale=not a.no_scale))
+        elif meth == "lbfgs_2l":
+            P = Problem(V, F, h, T)
+            t0 = time.perf_counter()
+            TL = TwoLevel(P, V, F, h, a.nc)
+            row.update(nc=TL.nc, mode=a.mode, refresh=a.refresh, scale=not a.no_scale,
+                       setup_s=round(time.perf_counter() - t0, 2))
+            row.update(lbfgs_pc(P, partial(TL.apply, mode=a.mode), refresh_fn=TL.refresh, refresh=a.refresh,
+                                max_iter=a.max_iter, m=10, trace=a.trace, scale=not a.no_scale))
+            row["shift_last"] = TL.shift
+        else:
+            raise SystemExit(f"error: --methods: unknown method {meth!r}")
+        return row
+
+    run_cases(a, run_one)
     return 0
 
 

@@ -30,16 +30,14 @@ Prints one JSON line per run (``--trace``: also one per outer iteration). Writes
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from arap_alternatives import Problem  # noqa: E402  (this script's folder, as run)
-from arap_projected_newton import ExactHessian, solver_row, unit_case  # noqa: E402
+from arap_projected_newton import ExactHessian, case_arguments, run_cases  # noqa: E402
 
 
 def _to_boundary(sMs: float, sMp: float, pMp: float, radius: float) -> float:
@@ -121,10 +119,7 @@ def trust_region(P: Problem, *, eta: float, max_cg: int, max_outer: int, trace: 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", default="twisted_bar,bent_cylinder,lifted_plane",
-                    help="comma-separated synthetic cases, DeFAUST sXX_pYY (--root) or FAUST sN_pM (--faust)")
-    ap.add_argument("--root", help="a DeFAUST build, for sXX_pYY cases")
-    ap.add_argument("--faust", help="a folder of FAUST registrations, for sN_pM cases")
+    case_arguments(ap)
     ap.add_argument("--methods", default="trust_region,lbfgs", help="comma-separated: trust_region, lbfgs (the solver)")
     ap.add_argument("--eta", type=float, default=0.5, help="largest relative residual of the inner solve")
     ap.add_argument("--max-cg", type=int, default=200, help="inner iterations per outer one at most")
@@ -134,19 +129,14 @@ def main(argv=None) -> int:
     ap.add_argument("--grow", type=float, default=2.0, help="the radius's factor after a good boundary step")
     ap.add_argument("--trace", action="store_true", help="one JSON line per outer iteration")
     a = ap.parse_args(argv)
-    for name in a.cases.split(","):
-        V, F, h, T = unit_case(name, a.faust, a.root)
-        for meth in a.methods.split(","):
-            t = time.perf_counter()
-            row = {"case": name, "n": len(V), "method": meth}
-            if meth == "trust_region":
-                row.update(eta=a.eta, max_cg=a.max_cg, floor=a.floor, grow=a.grow)
-                row.update(trust_region(Problem(V, F, h, T), eta=a.eta, max_cg=a.max_cg, max_outer=a.max_outer,
-                                        trace=a.trace, floor=a.floor, grow=a.grow))
-            else:
-                row.update(solver_row(V, F, h, T))
-            row["s"] = round(time.perf_counter() - t, 2)
-            print(json.dumps(row), flush=True)
+    def run_one(meth, V, F, h, T, row):
+        if meth != "trust_region":
+            raise SystemExit(f"error: --methods: unknown method {meth!r}")
+        row.update(eta=a.eta, max_cg=a.max_cg, floor=a.floor, grow=a.grow)
+        return trust_region(Problem(V, F, h, T), eta=a.eta, max_cg=a.max_cg, max_outer=a.max_outer,
+                            trace=a.trace, floor=a.floor, grow=a.grow)
+
+    run_cases(a, run_one)
     return 0
 
 
