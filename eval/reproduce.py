@@ -163,9 +163,9 @@ def main(argv=None) -> int:
     p.add_argument("--json", action="store_true", help="with --check: print {folder: {method: {rows, stale, "
                                                         "pending}}}")
     p.add_argument("--strict", action="store_true", help="with --check: exit 1 on a row marked pending too")
-    p.add_argument("--budget", help="regenerate the stale rows of the table steps that fit in DURATION (600s, 90m, "
-                                    "2h), oldest code first, then the most-cited tables; the rows left stay in "
-                                    "their tables marked pending")
+    p.add_argument("--budget", help="regenerate the stale rows of the table and sweep steps that fit in DURATION "
+                                    "(600s, 90m, 2h), oldest code first, then the most-cited tables; the rows left "
+                                    "stay in their tables marked pending")
     p.add_argument("--rekey", action="store_true", help="no computation: re-key the records of results/ written "
                                                          "under the earlier key layout, from the commit that made "
                                                          "each (git must have it)")
@@ -336,31 +336,38 @@ def _citations(folder: Path) -> int:
 
 
 def _budget_order(selected) -> tuple[list, list]:
-    """``(table steps with stale rows, in the order --budget runs them, other steps not run)``:
-    the table steps (a result store, one folder: ``out_dir=``) ordered by the oldest commit
-    among their stale rows, then by how often the docs cite their folder (most first)."""
+    """``(steps with stale rows, in the order --budget runs them, other steps not run)``:
+    the table steps (a result store, one folder: ``out_dir=``) and the sweep steps (one
+    store per job folder under ``hydra.sweep.dir=``), each resumed with ``jobs=1``, ordered
+    by the oldest commit among their stale rows, then by how often the docs cite their
+    folder (most first). Each comes as ``(name, command, its run folders)``."""
     runs, skipped, times = [], [], {}
     with CommitTrees() as trees:
         for name, cmd in selected:
             folder = step_folder(cmd)
-            table = folder is not None and "resume=true" in cmd and "jobs=1" in cmd and \
-                not any(x.startswith("hydra.sweep.dir=") for x in cmd) and (folder / "runs").is_dir()
-            states = check_folders([folder], trees) if table else {}
+            sweep = any(x.startswith("hydra.sweep.dir=") for x in cmd)
+            rows = folder is not None and (sweep or (folder / "runs").is_dir())
+            stored = rows and "resume=true" in cmd and "jobs=1" in cmd  # what a stop needs
+            folders = [] if not stored else run_folders(folder) if sweep else [folder]
+            states = check_folders(folders, trees)
             commits = {c for ms in states.values() for v in ms.values() for c in v["commits"]}
             if commits:
-                runs.append((min(_commit_time(c, times) for c in commits), -_citations(folder), name, cmd, folder))
+                runs.append((min(_commit_time(c, times) for c in commits), -_citations(folder), name, cmd, folders))
             else:
-                skipped.append((name, "no stale row" if table else "not a table step (whole run or sweep)"))
+                skipped.append((name, "no stale row" if stored else "not run with resume=true jobs=1, which a stop "
+                                "needs" if rows else "not a table or sweep step (a whole run)"))
     return [r[2:] for r in sorted(runs, key=lambda r: r[:2])], skipped
 
 
 def _run_budget(a, budget: float) -> int:
-    """``--budget``: the plan, then the table steps with stale rows (:func:`_budget_order`),
-    each given what is left of ``budget`` in :data:`eval.run.pending_rows.STOP_AFTER_ENV`
-    (the evaluator starts no pair after it; the pairs left keep their stored rows, marked pending in the tables); a step
-    with no time left is not started and its tables are rebuilt to mark its stale rows
-    (``python -m eval.tables``). A pair already running finishes: a step may overrun its
-    share by one pair. Exit 1 if a step failed."""
+    """``--budget``: the plan, then the table and sweep steps with stale rows
+    (:func:`_budget_order`), each given what is left of ``budget`` in
+    :data:`eval.run.pending_rows.STOP_AFTER_ENV` (the evaluator starts no pair after it, and
+    no job of a sweep after that moment, :func:`eval.run.pending_rows.share_stop`; the pairs
+    left keep their stored rows, marked pending in the tables); a step with no time left is
+    not started and its tables are rebuilt to mark its stale rows (``python -m
+    eval.tables``). A pair already running finishes: a step may overrun its share by one
+    pair. Exit 1 if a step failed."""
     selected = _selected(a)
     if selected is None:
         return 2
@@ -369,14 +376,14 @@ def _run_budget(a, budget: float) -> int:
     for name, why in skipped:
         print(f"== {name}: not run under --budget ({why})", flush=True)
     t0, failed = time.monotonic(), []
-    for name, cmd, folder in order:
+    for name, cmd, folders in order:
         left = budget - (time.monotonic() - t0)
         if a.dry_run:
             print(f"== {name}: {' '.join(cmd[1:])} ({STOP_AFTER_ENV}=what is left of {budget:.0f} s)", flush=True)
             continue
         if left < 1:
             print(f"== {name}: no time left in the budget; its stale rows are marked pending", flush=True)
-            rc = subprocess.call([sys.executable, "-m", "eval.tables", str(folder)], env=step_env())
+            rc = subprocess.call([sys.executable, "-m", "eval.tables", *map(str, folders)], env=step_env())
         else:
             print(f"== {name}: {' '.join(cmd[1:])} ({STOP_AFTER_ENV}={left:.0f})", flush=True)
             rc = subprocess.call(cmd, env={**step_env(), STOP_AFTER_ENV: f"{left:.0f}"})

@@ -1,7 +1,8 @@
 """Test plug-ins for the result store (tests/test_store.py): the README's toy method,
 each ``deform`` call appended to the file named by ``$SSHADE_TEST_COUNTER`` (one line
 ``<n_vertices> <name>``); with ``$SSHADE_TEST_HANG_AFTER=k`` the call after the k-th
-one recorded sleeps (so a test can kill the run there)."""
+one recorded sleeps (so a test can kill the run there); ``$SSHADE_TEST_SLEEP_S=s``: each
+call recorded takes ``s`` seconds more."""
 from __future__ import annotations
 
 import os
@@ -20,6 +21,7 @@ class Counted(MyMethod):
                 fh.write(f"{len(V)} {self.name}\n")
             with open(path) as fh:
                 n = sum(1 for _ in fh)
+            time.sleep(float(os.environ.get("SSHADE_TEST_SLEEP_S") or 0))
             hang = os.environ.get("SSHADE_TEST_HANG_AFTER")
             if hang and n > int(hang):
                 time.sleep(600)

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import os
+import time
 
 import pytest
 
 from eval.present.meshview import OTHER_DATA_KIND, case_view_path, read_view
 from eval.run.pending_rows import (
     STOP_AFTER_ENV,
+    STOP_BY_ENV,
     marked_pending,
     pending_markdown,
     pending_on_other_data,
     pending_title,
+    share_stop,
     short_commit,
     stop_after_s,
     strip_pending,
@@ -55,6 +58,49 @@ def test_the_early_stop_is_a_number_of_seconds_or_nothing(text, want):
 def test_a_bad_early_stop_is_refused_naming_the_variable(text):
     with pytest.raises(SShaDeError, match=STOP_AFTER_ENV):
         stop_after_s({STOP_AFTER_ENV: text})
+
+
+def test_a_shared_stop_is_fixed_once_and_counts_down_to_one_moment():
+    env = {STOP_AFTER_ENV: "100"}
+    assert share_stop(env) == 100.0 and abs(float(env[STOP_BY_ENV]) - (time.time() + 100)) < 5
+    by = env[STOP_BY_ENV]
+    env[STOP_AFTER_ENV] = "5000"  # a later command of the same sweep: the moment stays
+    assert share_stop(env) < 101 and env[STOP_BY_ENV] == by
+    assert 0 < stop_after_s(env) <= 100  # a job started later gets what is left, not the whole stop
+    assert share_stop({}) is None
+
+
+def test_a_run_started_past_the_shared_moment_starts_no_pair():
+    assert stop_after_s({STOP_AFTER_ENV: "100", STOP_BY_ENV: repr(time.time() - 10)}) == pytest.approx(1e-3)
+
+
+@pytest.mark.parametrize("text", ["0", "-3", "abc", "nan", "inf"])
+def test_a_bad_shared_moment_is_refused_naming_the_variable(text):
+    with pytest.raises(SShaDeError, match=STOP_BY_ENV):
+        stop_after_s({STOP_AFTER_ENV: "100", STOP_BY_ENV: text})
+
+
+@pytest.mark.slow  # about 35 s: a sweep of two evaluator runs on FAUST, the first taking 25 s
+def test_the_jobs_of_a_sweep_share_one_stop(tmp_path, faust_root):
+    """``python -m eval.sweeps`` under :data:`STOP_AFTER_ENV` (as ``--budget`` runs a sweep
+    step): job 0's one pair starts before the 20 s stop and takes 25 s; job 1 starts past the
+    sweep's stop, so it starts no pair (given the whole stop again, it would have run its
+    two), and the sweep ends cleanly."""
+    import subprocess
+    import sys
+
+    from .conftest import ROOT, subprocess_env
+
+    counter, d = tmp_path / "calls.txt", tmp_path / "sweep"
+    cmd = [sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust", f"dataset.root={faust_root}",
+           "dataset.limit=1,2", "methods=[{_target_:tests.store_methods.Counted,name:A}]", "reference.cases=none",
+           "figures.enabled=false", "report.enabled=false", "jobs=1", "resume=true", f"hydra.sweep.dir={d}"]
+    env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(counter), SSHADE_TEST_SLEEP_S="25", **{STOP_AFTER_ENV: "20"})
+    env.pop(STOP_BY_ENV, None)
+    r = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert counter.read_text().count(" A\n") == 1
+    assert "not run and never stored: no row" in (d / "1" / "eval.log").read_text()
 
 
 @pytest.mark.slow  # about 8 s: an evaluator run on FAUST stopped after its first pairs

@@ -265,6 +265,32 @@ def test_an_edit_stales_only_the_rows_whose_code_it_is(tmp_path, committed_recor
         assert got["Implicit-ARAP"] > 0  # the edit is seen where it belongs
 
 
+@pytest.mark.slow  # about 20 s: --check and a --budget plan on a copy of the checkout
+def test_budget_takes_a_sweep_step_with_stale_rows(tmp_path):
+    """A probe edit of sshade/guard.py stales the rows of a copy of results/sweeps/arap_sr_alpha
+    (ARAP-SR's alpha sweep, one store per job folder): ``--budget 1h --only
+    sweep_arap_sr_alpha --dry-run`` plans that sweep step with the budget's stop, where it
+    once skipped sweeps."""
+    tree = tmp_path / "tree"
+    for d in (*PACKAGES, "conf"):
+        shutil.copytree(ROOT / d, tree / d, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tree)
+    src = ROOT / "results" / "sweeps" / "arap_sr_alpha"
+    for job in sorted(p for p in src.iterdir() if (p / "runs").is_dir()):
+        current_copy(job, tree / "results" / "sweeps" / "arap_sr_alpha" / job.name, str(tree))
+    with open(tree / "sshade" / "guard.py", "a") as fh:
+        fh.write("\n_PROBE_EDIT = object()\n")
+    rc, got, err = _check_json(tree)
+    stale = sum(v["stale"] for f, ms in got.items() if f.startswith("results/sweeps/arap_sr_alpha/")
+                for v in ms.values())
+    assert rc == 1 and stale == 24, err
+    r = _reproduce(tree, "--only", "sweep_arap_sr_alpha", "--budget", "1h", "--dry-run")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "== sweep_arap_sr_alpha: -m eval.sweeps " in r.stdout
+    assert "(SSHADE_STOP_AFTER_S=what is left of 3600 s)" in r.stdout
+    assert "not run under --budget" not in r.stdout
+
+
 @pytest.mark.slow  # about a minute: the evaluator on the 8 FAUST cases for 20 s, then the tables
 def test_budget_after_a_guard_edit_leaves_its_rows_marked_pending(tmp_path):
     """A probe edit of sshade/guard.py stales every row of a copy of results/faust (its

@@ -220,6 +220,27 @@ def test_sweep_reads_the_main_table(tmp_path):
     assert not any(c.startswith("table_all") for c in agg.columns)
 
 
+def test_a_sweep_table_shows_the_rows_its_jobs_mark_pending(tmp_path):
+    """Job 1's table marks two rows made at an older commit pending: the sweep table counts
+    them per job (with the commit) and in its title; job 0, all current, shows none."""
+    from eval.run.stale_rows import RowState
+    from eval.sweeps.files import STATUS_FILE
+    from eval.sweeps.sweep_table import aggregate_sweep
+    for n in (0, 1):
+        job = tmp_path / "sweep" / str(n)
+        job.mkdir(parents=True)
+        ov = [f"sshade.n_low={500 * (n + 1)}"]
+        (job / STATUS_FILE).write_text(json.dumps({"job_num": n, "overrides": ov, "status": "done"}))
+        old = [RowState(job, c, "SShaDe", n == 1 and c in ("c0", "c1"), "sshade.guard changed since 3e79476",
+                        commit="3e79476" + "0" * 33) for c in ("c0", "c1", "c2", "c3")]
+        write_tables(_frame(), job, pending=old)
+    agg = aggregate_sweep(tmp_path / "sweep")
+    assert list(agg["pending"]) == [0, 2] and list(agg["pending_from"].fillna("")) == ["", "3e79476"]
+    md = (tmp_path / "sweep" / "sweep_table.md").read_text()
+    assert "2 done; 2 row(s) pending from 3e79476" in md.splitlines()[0]
+    assert "| Pending rows |" in md and "| done | 2 from 3e79476 |" in md and "| done |  |" in md
+
+
 # ---------------------------------------------------------------- read-back CSV, pandas warnings
 
 def test_ok_mask_on_an_error_column_read_back_from_csv():

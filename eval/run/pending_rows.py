@@ -7,20 +7,23 @@ rows made by this commit's code; 2 pending from 3e79476``) and a list under the 
 names each pending row with the commit that made it and the modules changed since
 (:func:`pending_markdown`). ``--check`` counts a stale row as marked when its folder's
 ``table.md`` lists it with that commit (:func:`marked_pending`). :data:`STOP_AFTER_ENV` stops
-an evaluator run early, its pairs left marked so (``python -m eval.reproduce --budget``).
+an evaluator run early, its pairs left marked so (``python -m eval.reproduce --budget``);
+a sweep's jobs share one stop (:func:`share_stop`).
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 """
 from __future__ import annotations
 
+import os
 import re
+import time
 from pathlib import Path
 
 from harness.checks import env_positive
 from sshade.files import atomic_write
 from sshade.json_file import read_bounded
 
-__all__ = ["STOP_AFTER_ENV", "PENDING_HEADING", "RUN_PENDING_HEADING", "stop_after_s", "short_commit",
-           "pending_title", "strip_pending", "pending_markdown", "marked_pending", "mark_run_pending",
+__all__ = ["STOP_AFTER_ENV", "STOP_BY_ENV", "PENDING_HEADING", "RUN_PENDING_HEADING", "stop_after_s", "share_stop",
+           "short_commit", "pending_title", "strip_pending", "pending_markdown", "marked_pending", "mark_run_pending",
            "marked_run", "OTHER_CASE_DATA", "pending_on_other_data"]
 
 #: The environment variable that stops an evaluator run early (``python -m eval.reproduce
@@ -28,6 +31,12 @@ __all__ = ["STOP_AFTER_ENV", "PENDING_HEADING", "RUN_PENDING_HEADING", "stop_aft
 #: method) run starts any more; each pair left keeps its stored row, marked pending. An
 #: operating limit of the command, not a setting of any row: no part of the config or a key.
 STOP_AFTER_ENV = "SSHADE_STOP_AFTER_S"
+#: Set by :func:`share_stop` in a command that runs several evaluator runs one after the
+#: other (a sweep): the moment, in seconds since the epoch, after which none of them starts
+#: a pair, so that :data:`STOP_AFTER_ENV` bounds the whole command, not each run.
+STOP_BY_ENV = "SSHADE_STOP_BY"
+#: The stop of a run that starts past the shared moment: no pair starts.
+_PAST = 1e-3
 
 #: The heading of the list of a table's pending rows in ``table.md``.
 PENDING_HEADING = "Rows pending regeneration (made by older code)"
@@ -144,6 +153,25 @@ def marked_run(folder) -> str | None:
 
 
 def stop_after_s(environ=None) -> float | None:
-    """The seconds :data:`STOP_AFTER_ENV` gives in ``environ`` (default ``os.environ``),
-    None when it is unset or empty. Raises SShaDeError naming it when it is no number > 0."""
-    return env_positive(STOP_AFTER_ENV, "a number of seconds > 0", environ)
+    """The seconds from now after which an evaluator run starts no pair: what
+    :data:`STOP_AFTER_ENV` gives in ``environ`` (default ``os.environ``), or, where
+    :func:`share_stop` set :data:`STOP_BY_ENV`, the seconds left until that moment (at
+    least 1 ms: a run started past it starts no pair); None when neither is set.
+    Raises SShaDeError naming the variable when it holds no number > 0."""
+    after = env_positive(STOP_AFTER_ENV, "a number of seconds > 0", environ)
+    by = env_positive(STOP_BY_ENV, "a number of seconds since the epoch > 0", environ)
+    return after if by is None else max(by - time.time(), _PAST)
+
+
+def share_stop(environ=None) -> float | None:
+    """In a command that runs several evaluator runs one after the other (a sweep, whose
+    jobs may run in other processes): fix the moment :data:`STOP_AFTER_ENV` points to, once,
+    in ``environ`` (default ``os.environ``) as :data:`STOP_BY_ENV`, so that every run it
+    starts later stops at that one moment. Returns the seconds left (None without a stop);
+    a moment already set (an outer command's) is kept. Raises SShaDeError as
+    :func:`stop_after_s`."""
+    environ = os.environ if environ is None else environ
+    left = stop_after_s(environ)
+    if left is not None and not environ.get(STOP_BY_ENV, "").strip():
+        environ[STOP_BY_ENV] = repr(time.time() + left)
+    return left

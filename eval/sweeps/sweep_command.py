@@ -23,6 +23,7 @@ from eval import app
 from eval.config_check import plain
 from eval.run.outdir import OutputDirError, check_earlier_output, claim_output_dir
 from eval.run.paths import abs_path
+from eval.run.pending_rows import share_stop
 from eval.run.run_folder import claimed_run, overwrite_flag
 from eval.run.spec import OutputOptions
 from eval.sweeps.files import (
@@ -450,6 +451,11 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(0)
     if argv and argv[0] == "aggregate":
         raise SystemExit(run_command(lambda: _aggregate_cli(argv[1:]), where=argv[1] if len(argv) > 1 else None))
+    try:
+        share_stop()  # python -m eval.reproduce --budget: one stop for every job of the sweep
+    except SShaDeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
     if argv and argv[0] == "resume":
         if len(argv) == 2 and argv[1] in _HELP_FLAGS:
             print(f"{_RESUME_USAGE}\n\nRun again the killed, failed and missing jobs of the sweep in SWEEP_DIR "

@@ -1,7 +1,7 @@
 """The summary table of a sweep folder (:mod:`eval.sweeps.sweep_command`): ``sweep_table.csv`` (one row
-per job: its overrides, one column per overridden key, status, error, and
-``<method>/<column>`` for every column of the job's ``table.csv``) and ``sweep_table.md``
-(varying keys, status and the main metrics), built by :func:`aggregate_sweep` from the
+per job: its overrides, one column per overridden key, status, error, the rows its tables
+mark pending, and ``<method>/<column>`` for every column of the job's ``table.csv``) and
+``sweep_table.md`` (varying keys, status, pending rows and the main metrics), built by :func:`aggregate_sweep` from the
 folder's files (:mod:`eval.sweeps.files`) at the end of a multirun, by
 ``python -m eval.sweeps aggregate DIR`` and by a resume.
 """
@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 from eval.run.outdir import refuse_results
+from eval.run.pending_rows import marked_pending
 from eval.run.row_check import read_cases
 from eval.sweeps.files import MANIFEST, OUTCOMES, STATUS_FILE, job_dirs, read_manifest, read_status
 from eval.tables import TABLE_COLUMNS, method_order_key
@@ -107,6 +108,9 @@ def _job_row(d: Path, j: Path, keys: list, ended, seen: dict) -> dict:
         row["error"] = "" if rs == "done" else f"no {STATUS_FILE} (not run through eval.sweeps?)"
     for k in ("wall_s", "n_cases", "n_errors"):
         row[k] = (st or {}).get(k, math.nan)
+    marks = marked_pending(j)  # rows made by older code, as the job's table.md lists them
+    row["pending"] = len(marks)
+    row["pending_from"] = " ".join(sorted({c for _, _, c in marks}))
     tab = j / "table.csv"
     if tab.is_file():
         try:
@@ -157,7 +161,9 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     a missing job), ``overrides`` (space-separated), one column per overridden key,
     ``status`` (:data:`eval.sweeps.files.OUTCOMES`, or running while the sweep runs; a point of
     ``sweep.json``'s grid without folder is missing), ``error``, ``wall_s``, ``n_cases``,
-    ``n_errors``, then ``<method>/<column>`` for every column of the job's
+    ``n_errors``, ``pending`` and ``pending_from`` (the rows the job's ``table.md`` marks
+    pending, made by older code, and the commits that made them, space-separated:
+    :func:`eval.run.pending_rows.marked_pending`), then ``<method>/<column>`` for every column of the job's
     ``table.csv`` (per-method means over successful cases; NaN where none).
 
     Raises
@@ -183,7 +189,7 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
         rows.append(_job_row(d, j, keys, ended, seen))
     rows += _missing_rows(rows, points, keys, ended, seen)
     rows.sort(key=_job_sort_key)
-    head = ["job", "dir", "overrides", *keys, "status", "error", "wall_s", "n_cases", "n_errors"]
+    head = ["job", "dir", "overrides", *keys, "status", "error", "wall_s", "n_cases", "n_errors", *_PENDING]
     metric_cols = [c for r in rows for c in r if c not in head]
     metric_cols = list(dict.fromkeys(metric_cols))
     df = pd.DataFrame(rows, columns=head + metric_cols)
@@ -196,6 +202,7 @@ def aggregate_sweep(sweep_dir, *, write: bool = True):
     return df
 
 
+_PENDING = ("pending", "pending_from")  #: the columns of the rows made by older code
 _KILLED = "died without a result (killed: out of memory, time limit, node failure or cancelled)"
 
 
@@ -227,9 +234,14 @@ def _launcher_note(seen: dict, num) -> str:
 
 
 def sweep_title(d: Path, df) -> str:
-    """Title of the sweep table of folder ``d``: its job counts per outcome and the multirun's overrides."""
+    """Title of the sweep table of folder ``d``: its job counts per outcome, the rows its
+    jobs' tables mark pending (with the commits that made them) and the multirun's overrides."""
     counts = df["status"].value_counts()
     parts = ", ".join(f"{int(counts[s])} {s}" for s in (*OUTCOMES, "running") if s in counts)
+    n = int(df["pending"].fillna(0).sum()) if "pending" in df.columns else 0
+    if n:
+        made = sorted({c for v in df["pending_from"].fillna("").astype(str) for c in v.split()})
+        parts += f"; {n} row(s) pending from {', '.join(made)} (made by older code: python -m eval.reproduce)"
     spec = ""
     v = _read_yaml(d / "multirun.yaml")
     try:
@@ -260,9 +272,10 @@ def _md_cell(v, dec: int | None = None) -> str:
 
 def sweep_markdown(df, *, title: str | None = None) -> str:
     """Markdown view of :func:`aggregate_sweep`'s table: job, the overridden keys that
-    vary across jobs (all of them if none varies), status, per method the main metrics
+    vary across jobs (all of them if none varies), status, the rows made by older code
+    (where a job has any: how many and from which commits), per method the main metrics
     of ``eval.tables.TABLE_COLUMNS`` and the number of cases, and the error (shortened)."""
-    fixed = {"job", "dir", "overrides", "status", "error", "wall_s", "n_cases", "n_errors"}
+    fixed = {"job", "dir", "overrides", "status", "error", "wall_s", "n_cases", "n_errors", *_PENDING}
     keys = [c for c in df.columns if c not in fixed and "/" not in c]
     vary = [k for k in keys if df[k].astype(str).nunique(dropna=False) > 1] or keys
     methods = list(dict.fromkeys(c.split("/", 1)[0] for c in df.columns if "/" in c))
@@ -274,14 +287,27 @@ def sweep_markdown(df, *, title: str | None = None) -> str:
         for c, h, _, dec, _ in TABLE_COLUMNS:
             if f"{m}/{c}" in df.columns:
                 cols.append((f"{m}/{c}", f"{m} {h}", dec))
-    head = ["Job", *vary, "Status", *[h for _, h, _ in cols], "Error"]
+    pend = "pending" in df.columns and bool(df["pending"].fillna(0).astype(float).gt(0).any())
+    head = ["Job", *vary, "Status", *(["Pending rows"] if pend else []), *[h for _, h, _ in cols], "Error"]
     lines = [f"### {title}", ""] if title else []
     lines += ["| " + " | ".join(head) + " |",
-              "|" + "|".join(["---:"] + ["---"] * (len(vary) + 1) + ["---:"] * len(cols) + ["---"]) + "|"]
+              "|" + "|".join(["---:"] + ["---"] * (len(vary) + 1 + pend) + ["---:"] * len(cols) + ["---"]) + "|"]
     for _, r in df.iterrows():
         err = str(r.get("error") or "")
         err = err if len(err) <= 100 else err[:97] + "..."
         cells = [_md_cell(r["job"]), *[_md_cell(r[k]) for k in vary], _md_cell(r["status"]),
-                 *[_md_cell(r[c], d) for c, _, d in cols], _md_cell(err) if err else ""]
+                 *([_pending_cell(r)] if pend else []), *[_md_cell(r[c], d) for c, _, d in cols],
+                 _md_cell(err) if err else ""]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _pending_cell(r) -> str:
+    """``"4 from 3e79476"``: the rows of a job made by older code, ``""`` when none."""
+    try:
+        n = float(r.get("pending"))
+    except (TypeError, ValueError):
+        return ""
+    if not math.isfinite(n) or n <= 0:
+        return ""
+    return f"{int(n)} from {', '.join(str(r.get('pending_from') or 'unknown').split())}"
