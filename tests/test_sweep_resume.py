@@ -151,3 +151,68 @@ def test_resume_without_a_grid_or_a_named_folder(tmp_path, capsys):
         sw.claim_sweep_dir(_config(fresh, ["100"], named=False))
     assert e.value.code == 2 and not fresh.parent.exists()
     assert "resume=true continues a sweep in its folder: pass hydra.sweep.dir=DIR" in capsys.readouterr().err
+
+
+def _counted_sweep(faust_root: Path, d: Path, limits: str, counter: Path, *extra, hang_after=None):
+    """``python -m eval.sweeps`` over ``dataset.limit=<limits>`` with the counted test method
+    A into ``d``, started (a Popen) with ``$SSHADE_TEST_HANG_AFTER`` when given."""
+    args = [sys.executable, "-m", "eval.sweeps", "-m", "dataset=faust", f"dataset.root={faust_root}",
+            f"dataset.limit={limits}", "methods=[{_target_:tests.store_methods.Counted,name:A}]",
+            "reference.cases=none", "figures.enabled=false", "report.enabled=false", "jobs=1",
+            f"hydra.sweep.dir={d}", *extra]
+    env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(counter))
+    if hang_after is not None:
+        env["SSHADE_TEST_HANG_AFTER"] = str(hang_after)
+    from .conftest import ROOT
+    return subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _term_at_call(proc, counter: Path, n: int) -> None:
+    """SIGTERM the run ``proc`` once its ``n``-th counted call (which hangs) has started."""
+    import os
+    import signal
+    import time
+    t0 = time.time()
+    while not (counter.exists() and len(counter.read_text().splitlines()) >= n):
+        assert proc.poll() is None, proc.communicate()[1][-3000:]
+        assert time.time() - t0 < 300
+        time.sleep(0.2)
+    os.kill(proc.pid, signal.SIGTERM)
+    proc.communicate(timeout=120)
+
+
+def _tree(d: Path) -> dict:
+    return {p.relative_to(d).as_posix(): p.read_bytes() for p in sorted(d.rglob("*"))
+            if p.is_file() and not p.name.startswith(".sshade-output")}
+
+
+@pytest.mark.slow  # about 30 s: two sweeps on FAUST, the second stopped by SIGTERM in its first pair
+def test_a_sweep_stopped_before_its_first_result_puts_the_earlier_sweep_back(faust_root, tmp_path):
+    """A sweep replacing an earlier one in its folder, stopped (SIGTERM) while its first
+    pair runs: the earlier sweep's files (job folders, sweep.json, sweep_table.*) are back
+    byte for byte, and its table is there to read (once lost with the set-aside files)."""
+    d, counter = tmp_path / "sweep", tmp_path / "calls.txt"
+    p = _counted_sweep(faust_root, d, "1", counter)
+    assert p.wait(timeout=300) == 0, p.communicate()[1][-3000:]
+    before = _tree(d)
+    assert "sweep_table.md" in before and "0/runs/s0_p1/A.json" in before
+    p = _counted_sweep(faust_root, d, "1", counter, hang_after=1)
+    _term_at_call(p, counter, 2)
+    assert p.returncode != 0
+    assert _tree(d) == before
+
+
+@pytest.mark.slow  # about 40 s: two sweeps on FAUST, the second stopped by SIGTERM in its last job
+def test_a_resumed_sweep_stopped_after_a_result_has_its_table_made_again(faust_root, tmp_path):
+    """A sweep run again with ``resume=true`` and a grid one job larger, stopped (SIGTERM)
+    in the new job's first pair: the jobs it finished keep their results, and the sweep's
+    table is made again from its folders (jobs 0 and 1 done, job 2 killed), not lost."""
+    d, counter = tmp_path / "sweep", tmp_path / "calls.txt"
+    p = _counted_sweep(faust_root, d, "1,2", counter, "resume=true")
+    assert p.wait(timeout=300) == 0, p.communicate()[1][-3000:]
+    n = len(counter.read_text().splitlines())
+    p = _counted_sweep(faust_root, d, "1,2,3", counter, "resume=true", hang_after=n)
+    _term_at_call(p, counter, n + 1)
+    df = pd.read_csv(d / "sweep_table.csv", keep_default_na=False)
+    assert list(df["status"]) == ["done", "done", "killed"]
+    assert "3 job(s)" in (d / "sweep_table.md").read_text().splitlines()[0]

@@ -45,7 +45,8 @@ from sshade.command_errors import ArgumentParser
 from sshade.errors import SShaDeError
 
 __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
-           "grid_job_entries", "claim_sweep_dir", "release_sweep_dir", "resume_sweep", "main"]
+           "grid_job_entries", "claim_sweep_dir", "release_sweep_dir", "end_unfinished_sweep", "resume_sweep",
+           "main"]
 
 log = logging.getLogger("eval")
 
@@ -227,7 +228,7 @@ def sweep_job(cfg) -> dict:
 
 
 # ----------------------------------------------------------------------------- the sweep folder
-_sweep_claim: list = []  # the claim of this process's sweep folder (released when the sweep ends)
+_sweep_claim: list = []  # (claim, time.time() at the claim) of this process's sweep folder, until the sweep ends
 
 
 def _job_number(job_dir: Path) -> int | None:
@@ -316,13 +317,54 @@ def claim_sweep_dir(config) -> None:
             # load_sweep_config), so the new folder must be among them
             config.hydra.overrides.hydra.append(f"hydra.sweep.dir='{c.path}'")
     log.info(c.message)
-    _sweep_claim.append(c)
+    _sweep_claim.append((c, time.time()))
 
 
 def release_sweep_dir(status: str = "done") -> None:
     """Mark this process's sweep folder ended and release it (:func:`claim_sweep_dir`)."""
     while _sweep_claim:
-        _sweep_claim.pop().finish(status)
+        _sweep_claim.pop()[0].finish(status)
+
+
+def _results_since(d: Path, t0: float) -> bool:
+    """Whether a job of the sweep folder ``d`` has a result written at or after ``t0``
+    (seconds since the epoch): a stored (case, method) record, or a final ``status.json``
+    (a job that failed before its first pair has only that)."""
+    for j in job_dirs(d):
+        st = read_status(j)
+        try:
+            if st and st.get("status") != "running" and (j / STATUS_FILE).stat().st_mtime >= t0:
+                return True
+            if any(r.stat().st_mtime >= t0 for r in (j / "runs").glob("*/*.json")):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def end_unfinished_sweep() -> None:
+    """A sweep of this process stopped before its end (Ctrl-C, SIGTERM, an error after its
+    folder was claimed): where its jobs wrote a result, the run is closed in ``sweep.json``
+    (its job still ``running`` is then reported killed) and ``sweep_table.{csv,md}`` made
+    again from the folders; where none did, the claim ends without a result, so the earlier
+    sweep output it set aside is put back as it was and what it wrote goes (the job folders
+    it continues stay: :meth:`eval.run.outdir.OutputClaim.finish`). Never raises."""
+    while _sweep_claim:
+        c, t0 = _sweep_claim.pop()
+        try:
+            if _results_since(c.path, t0):
+                finish_manifest(c.path)
+                aggregate_sweep(c.path)
+                c.finish("interrupted")
+            else:
+                c.finish("interrupted", drop_if_unused=_NO_RESULT)
+        except Exception as e:  # noqa: BLE001 -- the command is already ending on its own error
+            log.warning("could not close the stopped sweep in %s: %s", c.path, e)
+            c.release()
+
+
+#: A name no sweep writes: the claim of a sweep stopped without a result ends as unused.
+_NO_RESULT = ".sshade-no-result"
 
 
 # ----------------------------------------------------------------------------- Hydra callback
@@ -469,4 +511,7 @@ def main(argv: list[str] | None = None) -> None:
         argv.append(f"++{_CALLBACK_KEY}._target_={_CALLBACK_TARGET}")
     if not any(a.lstrip("+~").startswith("hydra.job.name=") for a in argv):
         argv.append(_JOB_NAME)
-    hydra_main(sweep_job, config_dir(), argv=argv)
+    try:
+        hydra_main(sweep_job, config_dir(), argv=argv)
+    finally:
+        end_unfinished_sweep()  # a sweep that ended normally released its folder already
