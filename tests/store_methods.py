@@ -28,12 +28,14 @@ class Counted(MyMethod):
         return super().deform(V, F, handles, targets)
 
 
-def kill_at_call(proc, counter, n: int, timeout_s: float = 300.0) -> None:
+def kill_at_call(proc, counter, n: int, timeout_s: float = 300.0, sig: int | None = None) -> None:
     """Wait until the run ``proc`` (a Popen of ``python -m eval`` with
     ``$SSHADE_TEST_COUNTER`` = ``counter`` and ``$SSHADE_TEST_HANG_AFTER`` = ``n - 1``) has
-    made its ``n``-th call, which sleeps, then kill it (SIGKILL). AssertionError if it
-    ends first or takes longer than ``timeout_s``."""
+    made its ``n``-th call, which sleeps, then send it ``sig`` (default SIGKILL) and wait
+    for its end (SIGKILL after ``timeout_s`` more). AssertionError if it ends first or
+    takes longer than ``timeout_s``."""
     import signal
+    import subprocess
 
     try:
         t0 = time.time()
@@ -43,8 +45,13 @@ def kill_at_call(proc, counter, n: int, timeout_s: float = 300.0) -> None:
             time.sleep(0.2)
     finally:
         if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGKILL)
-        proc.communicate()
+            os.kill(proc.pid, signal.SIGKILL if sig is None else sig)
+        try:
+            proc.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise
 
 
 class DiesOnCase(Counted):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -23,7 +24,8 @@ from eval.run.outdir import claim_output_dir, read_marker
 from eval.run.result_store import record_digest
 from eval.sweeps.files import MANIFEST, read_status, write_manifest, write_status
 
-from .conftest import subprocess_env  # noqa: E402
+from .conftest import ROOT, subprocess_env  # noqa: E402
+from .store_methods import kill_at_call
 
 
 def _records(d: Path) -> dict:
@@ -163,22 +165,7 @@ def _counted_sweep(faust_root: Path, d: Path, limits: str, counter: Path, *extra
     env = dict(subprocess_env(), SSHADE_TEST_COUNTER=str(counter))
     if hang_after is not None:
         env["SSHADE_TEST_HANG_AFTER"] = str(hang_after)
-    from .conftest import ROOT
     return subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def _term_at_call(proc, counter: Path, n: int) -> None:
-    """SIGTERM the run ``proc`` once its ``n``-th counted call (which hangs) has started."""
-    import os
-    import signal
-    import time
-    t0 = time.time()
-    while not (counter.exists() and len(counter.read_text().splitlines()) >= n):
-        assert proc.poll() is None, proc.communicate()[1][-3000:]
-        assert time.time() - t0 < 300
-        time.sleep(0.2)
-    os.kill(proc.pid, signal.SIGTERM)
-    proc.communicate(timeout=120)
 
 
 def _tree(d: Path) -> dict:
@@ -197,7 +184,7 @@ def test_a_sweep_stopped_before_its_first_result_puts_the_earlier_sweep_back(fau
     before = _tree(d)
     assert "sweep_table.md" in before and "0/runs/s0_p1/A.json" in before
     p = _counted_sweep(faust_root, d, "1", counter, hang_after=1)
-    _term_at_call(p, counter, 2)
+    kill_at_call(p, counter, 2, sig=signal.SIGTERM)
     assert p.returncode != 0
     assert _tree(d) == before
 
@@ -212,7 +199,7 @@ def test_a_resumed_sweep_stopped_after_a_result_has_its_table_made_again(faust_r
     assert p.wait(timeout=300) == 0, p.communicate()[1][-3000:]
     n = len(counter.read_text().splitlines())
     p = _counted_sweep(faust_root, d, "1,2,3", counter, "resume=true", hang_after=n)
-    _term_at_call(p, counter, n + 1)
+    kill_at_call(p, counter, n + 1, sig=signal.SIGTERM)
     df = pd.read_csv(d / "sweep_table.csv", keep_default_na=False)
     assert list(df["status"]) == ["done", "done", "killed"]
     assert "3 job(s)" in (d / "sweep_table.md").read_text().splitlines()[0]
