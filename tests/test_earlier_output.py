@@ -117,6 +117,38 @@ def test_a_run_killed_with_the_earlier_output_aside_is_recovered_by_the_next_cla
         assert now.pop("partial.csv") and now == before
 
 
+def test_a_killed_claim_whose_continued_entries_hold_old_results_gets_the_earlier_output_back(tmp_path):
+    """A sweep-like claim continuing job ``0`` (an old record on disk) and replacing the
+    rest, killed before any job stored a new record: the old record is not its result, so
+    the next claim puts the earlier output back byte for byte; killed after a job stored
+    one, its own files stand as the earlier output of the claim after it."""
+    first = "**/runs/*/*.json"
+    c = claim_output_dir(tmp_path / "sweep", "sweep", first_result=first)
+    p = c.path
+    (p / "0" / "runs" / "s0").mkdir(parents=True)
+    (p / "0" / "runs" / "s0" / "A.json").write_text("old row")
+    (p / "sweep_table.md").write_text("old table")
+    c.finish("done")
+    before = _bytes(p)
+    time.sleep(0.05)  # file times are coarse: the next claim a clock tick later at least
+    c = claim_output_dir(p, "sweep", keep={"0"}, first_result=first)
+    assert c.replaced == ["sweep_table.md"] and c.continued == ["0"]
+    (p / "sweep_table.md").write_text("half a table")
+    c.release()  # SIGKILL in the first job, before its first record
+    claim_output_dir(p, "sweep", keep={"0"}, first_result=first).finish("failed")
+    now = _bytes(p)
+    assert now.pop(LOCK) and before.pop(LOCK)  # the lock names the last process that held it
+    assert now == before
+    c = claim_output_dir(p, "sweep", keep={"0"}, first_result=first)
+    (p / "1" / "runs" / "s0").mkdir(parents=True)
+    (p / "1" / "runs" / "s0" / "A.json").write_text("new row")
+    (p / "sweep_table.md").write_text("half a table")
+    c.release()  # SIGKILL after the first record of job 1
+    claim_output_dir(p, "sweep", keep={"0"}, first_result=first).finish("failed")
+    assert (p / "1" / "runs" / "s0" / "A.json").read_text() == "new row"
+    assert (p / "sweep_table.md").read_text() == "half a table" and not (p / ASIDE).exists()
+
+
 def test_files_added_after_a_run_was_killed_before_its_first_result_survive_the_next_commands(tmp_path):
     """Killed with the earlier output aside; a person then adds a file and a folder: the
     next command into the folder, even one refused (failed before its first result), puts

@@ -173,20 +173,40 @@ def _tree(d: Path) -> dict:
             if p.is_file() and not p.name.startswith(".sshade-output")}
 
 
-@pytest.mark.slow  # about 30 s: two sweeps on FAUST, the second stopped by SIGTERM in its first pair
-def test_a_sweep_stopped_before_its_first_result_puts_the_earlier_sweep_back(faust_root, tmp_path):
-    """A sweep replacing an earlier one in its folder, stopped (SIGTERM) while its first
-    pair runs: the earlier sweep's files (job folders, sweep.json, sweep_table.*) are back
-    byte for byte, and its table is there to read (once lost with the set-aside files)."""
+@pytest.mark.slow  # about 30 s each: two sweeps on FAUST, the second stopped in its first pair
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
+def test_a_sweep_stopped_before_its_first_result_puts_the_earlier_sweep_back(faust_root, tmp_path, sig):
+    """A sweep replacing an earlier one in its folder, stopped while its first pair runs:
+    the earlier sweep's files (job folders, sweep.json, sweep_table.*) are back byte for
+    byte, and its table is there to read (once lost with the set-aside files): at once
+    after SIGTERM, at the next claim of the folder after SIGKILL (here one that fails)."""
     d, counter = tmp_path / "sweep", tmp_path / "calls.txt"
     p = _counted_sweep(faust_root, d, "1", counter)
     assert p.wait(timeout=300) == 0, p.communicate()[1][-3000:]
     before = _tree(d)
     assert "sweep_table.md" in before and "0/runs/s0_p1/A.json" in before
     p = _counted_sweep(faust_root, d, "1", counter, hang_after=1)
-    kill_at_call(p, counter, 2, sig=signal.SIGTERM)
+    kill_at_call(p, counter, 2, sig=sig)
     assert p.returncode != 0
+    if sig == signal.SIGKILL:
+        assert (d / ASIDE).is_dir()
+        claim_output_dir(d, "sweep", first_result=sw.FIRST_RESULT).finish("failed")
     assert _tree(d) == before
+
+
+@pytest.mark.slow  # about 20 s: a sweep on FAUST killed (SIGKILL) in its second job
+def test_a_sweep_killed_in_its_second_job_leaves_the_first_jobs_files_as_its_own(faust_root, tmp_path):
+    """A sweep killed outright in job 1: the next claim of its folder takes job 0's files
+    (written before job 0 ended, the sweep's last sign of life) as the killed sweep's own,
+    replaced as its output, not as files a person added after it died (kept and named)."""
+    d, counter = tmp_path / "sweep", tmp_path / "calls.txt"
+    p = _counted_sweep(faust_root, d, "1,2", counter, hang_after=1)
+    kill_at_call(p, counter, 2)
+    assert (d / "0" / "runs" / "s0_p1" / "A.json").is_file()
+    c = claim_output_dir(d, "sweep", first_result=sw.FIRST_RESULT)
+    assert "0" in c.replaced
+    assert not [r for r in c.aside["user_paths"] if r.startswith("0/")], c.aside["user_paths"]
+    c.finish("failed")
 
 
 @pytest.mark.slow  # about 40 s: two sweeps on FAUST, the second stopped by SIGTERM in its last job

@@ -61,7 +61,9 @@ def set_aside(path: Path, names, marker_file: Path, lock_bytes: bytes | None, ea
     Returns
     -------
     dict, the marker's ``aside`` record: ``names`` (moved), ``user_paths`` (the files
-    under them that the earlier output did not write, :func:`ours` of ``earlier``).
+    under them that the earlier output did not write, :func:`ours` of ``earlier``),
+    ``since_ns`` (``ASIDE``'s modification time once filled, ns, by the file system's own
+    clock: a file the new run writes afterwards is at least as new).
     """
     a = path / ASIDE
     a.mkdir()
@@ -77,7 +79,8 @@ def set_aside(path: Path, names, marker_file: Path, lock_bytes: bytes | None, ea
         os.rename(path / n, a / n)
         moved.append(n)
     wrote = ours(earlier)
-    return {"names": moved, "user_paths": [r for r in files_under(a, moved) if not wrote(r)]}
+    return {"names": moved, "user_paths": [r for r in files_under(a, moved) if not wrote(r)],
+            "since_ns": os.stat(a).st_mtime_ns}
 
 
 def restore(path: Path, record: dict, marker_name: str) -> bytes | None:

@@ -81,7 +81,8 @@ def _marker_problem(m: dict) -> str:
     """What a marker ``m`` names that no run of ours writes there, in words (``""`` when
     nothing): its entry lists (``files``, ``foreign``, ``aside.names``) hold plain names,
     its file lists (``paths``, ``user_paths``, ``aside.user_paths``, ``own``) relative
-    paths of plain names, its ``first_result`` a plain name."""
+    paths of plain names, its ``first_result`` a relative pattern of plain names, its
+    ``since_ns`` an integer."""
     aside = m.get("aside") if isinstance(m.get("aside"), dict) else {}
     names = {"files": m.get("files"), "foreign": m.get("foreign"), "aside.names": aside.get("names")}
     paths = {"paths": m.get("paths"), "user_paths": m.get("user_paths"), "aside.user_paths": aside.get("user_paths"),
@@ -93,8 +94,10 @@ def _marker_problem(m: dict) -> str:
         bad = [x for x in v or [] if not ok(x)]
         if bad:
             return f"{key} names {bad[0]!r}"
-    first = aside.get("first_result")
-    return f"aside.first_result names {first!r}" if first is not None and not _plain(first) else ""
+    first, since = aside.get("first_result"), aside.get("since_ns")
+    if since is not None and (not isinstance(since, int) or isinstance(since, bool)):
+        return f"aside.since_ns is {since!r}"
+    return f"aside.first_result names {first!r}" if first is not None and not _plain_path(first) else ""
 
 
 def check_earlier_output(path, kind: str, what: str) -> Path:
@@ -145,8 +148,9 @@ class OutputClaim:
     replaced : names of the earlier run's entries set aside for this run (removed once
         it has its first result, put back if it fails before: :mod:`eval.run.earlier_output`).
     foreign : names that were in the folder before and are not ours (kept).
-    first_result : the file whose existence says this run has its first result (e.g.
-        ``run.json``), or None: any entry written, or the run done.
+    first_result : the file, or a pattern of files (``**/runs/*/*.json``), whose writing
+        says this run has its first result (:func:`_first_result_written`), or None: any
+        entry written, or the run done.
     aside : the marker's record of the earlier output set aside, or None.
     user_paths : files under our entries that no run of ours wrote (kept, never recorded).
     kept : the files added to the earlier output, put back once this run had a result.
@@ -174,7 +178,8 @@ class OutputClaim:
     continued: list = field(default_factory=list)
     own: list = field(default_factory=list)
 
-    def finish(self, status: str, *, drop_if_unused: str | None = None, **extra) -> None:
+    def finish(self, status: str, *, drop_if_unused: str | None = None, result: bool | None = None,
+               **extra) -> None:
         """Record the run's end in the marker (``status`` done / failed / interrupted) with
         the entries and files this run wrote (every entry of the folder but the foreign
         ones, every file under them but the ones someone else added), and release the
@@ -183,13 +188,18 @@ class OutputClaim:
         written and not done) has what it wrote removed and an earlier output it replaced
         put back as it was (byte for byte, marker and lock included); without an earlier
         output, the folder and the parents this claim created go too, when nothing else is
-        left in them. Never raises."""
+        left in them. ``result`` (True / False) says whether the run has its first result
+        where the caller knows better (a sweep whose jobs all failed: their ends are its
+        result). Never raises."""
         lock_bytes = None
         try:
             if self.path.is_dir():
                 mark = drop_if_unused or self.first_result
                 written = set(os.listdir(self.path)) - set(self.foreign) - _OWN
-                has_result = status == "done" or ((self.path / mark).exists() if mark else bool(written))
+                if result is None:
+                    since = self.aside.get("since_ns") if self.aside is not None else None
+                    result = _first_result_written(self.path, mark, since) if mark else bool(written)
+                has_result = status == "done" or result
                 if not has_result and (self.aside is not None or drop_if_unused):
                     lock_bytes = self._undo()
                     return
@@ -342,7 +352,7 @@ def _recover(p: Path, m: dict | None, alive_ns: int | None) -> tuple[dict | None
     kept: list = []
     if isinstance(rec, dict) and (p / ASIDE).is_dir():
         mark = rec.get("first_result")
-        if mark and not (p / str(mark)).exists():  # died before its first result: the earlier output back
+        if mark and not _first_result_written(p, str(mark), rec.get("since_ns")):  # died before its first result
             left = sorted(set(os.listdir(p)) - foreign - _OWN - {ASIDE} - set(rec.get("names") or []))
             restore(p, rec, MARKER)
             return read_marker(p), left
@@ -354,6 +364,28 @@ def _recover(p: Path, m: dict | None, alive_ns: int | None) -> tuple[dict | None
     m.update(status="killed", files=names, user_paths=sorted(set(m.get("user_paths") or []) | set(kept) | set(late)))
     _write_marker(p, m)
     return m, sorted(set(late) - set(kept))
+
+
+def _first_result_written(p: Path, pattern: str, since_ns: int | None) -> bool:
+    """Whether a run writing folder ``p`` has its first result: a file below ``p`` (not a
+    link, resolved inside ``p``, under no hidden folder such as the aside) matching the
+    relative glob ``pattern`` (a name such as ``run.json``, or ``**/runs/*/*.json``) and,
+    with ``since_ns`` (ns; the time the earlier output was set aside,
+    :func:`eval.run.earlier_output.set_aside`), modified since then, so that the files of
+    the entries a run continues (a resumed sweep's jobs) count only once it rewrote them.
+    Never raises."""
+    try:
+        root = p.resolve()
+        for f in p.glob(pattern):
+            with contextlib.suppress(OSError):
+                rel = f.relative_to(p).parts
+                if (not any(n.startswith(".") for n in rel[:-1]) and not f.is_symlink() and f.is_file()
+                        and f.resolve().is_relative_to(root)
+                        and (since_ns is None or f.stat().st_mtime_ns >= since_ns)):
+                    return True
+    except (OSError, ValueError):  # an unreadable folder, an empty or absolute pattern
+        pass
+    return False
 
 
 def _changed_after(p: Path, names: list, alive_ns: int | None, own: list) -> list[str]:
@@ -406,9 +438,12 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     option : str, how the user says ``overwrite`` on this command (for the message; ""
         when the command has no such option).
     name : str, how the user names the folder on this command (for the message).
-    first_result : str or None, the file (e.g. ``run.json``) whose existence says the run
-        has its first result: an earlier output replaced is set aside until then and put
-        back if the run ends before (:meth:`OutputClaim.finish`); None: any entry written.
+    first_result : str or None, the file (e.g. ``run.json``) or the relative glob of files
+        (a sweep's ``**/runs/*/*.json``) whose writing says the run has its first result
+        (a match modified since the claim set the earlier output aside): an earlier output
+        replaced is set aside until then and put back if the run ends before
+        (:meth:`OutputClaim.finish`), or is killed before (the next claim); None: any entry
+        written.
     own : relative paths the run writes all along for itself (:attr:`OutputClaim.own`;
         ``first_result`` is one).
 
@@ -437,7 +472,7 @@ def claim_output_dir(path, kind: str, *, overwrite: bool = False, fresh: bool = 
     made = [a for a in reversed(p.parents) if not a.exists()]  # created below; removed by a run refused early
     try:
         claim = _claim(p, kind, overwrite, fresh, keep, how, first_result,
-                       sorted({*map(str, own), *([first_result] if first_result else [])}))
+                       sorted({*map(str, own), *([first_result] if first_result and _plain(first_result) else [])}))
     except OSError as e:
         raise OutputDirError(f"cannot create or use output folder {p}: {e.strerror or e}") from None
     claim.parents = made

@@ -21,9 +21,10 @@ from pathlib import Path
 
 from eval import app
 from eval.config_check import plain
-from eval.run.outdir import OutputDirError, check_earlier_output, claim_output_dir
+from eval.run.outdir import OutputDirError, alive, check_earlier_output, claim_output_dir
 from eval.run.paths import abs_path
 from eval.run.pending_rows import share_stop
+from eval.run.result_store import STORE_DIR
 from eval.run.run_folder import claimed_run, overwrite_flag
 from eval.run.spec import OutputOptions
 from eval.sweeps.files import (
@@ -46,7 +47,7 @@ from sshade.errors import SShaDeError
 
 __all__ = ["HELP", "sweep_job", "AggregateSweepCallback", "sweep_points", "start_manifest", "finish_manifest",
            "grid_job_entries", "claim_sweep_dir", "release_sweep_dir", "end_unfinished_sweep", "resume_sweep",
-           "main"]
+           "main", "FIRST_RESULT"]
 
 log = logging.getLogger("eval")
 
@@ -284,6 +285,13 @@ def _resumed_entries(pts: list | None, d: str) -> list[str]:
     return grid_job_entries(d, len(pts))
 
 
+#: A sweep's first result: a (case, method) record one of its jobs stored, in a job folder
+#: at any depth (``hydra.sweep.subdir``). Until one is written, the earlier sweep output it
+#: replaces waits aside, put back if the sweep ends or is killed (``kill -9`` included: the
+#: next claim of the folder recovers it) before.
+FIRST_RESULT = f"**/{STORE_DIR}/*/*.json"
+
+
 def claim_sweep_dir(config) -> None:
     """Claim ``hydra.sweep.dir`` for this sweep before any job starts
     (:func:`eval.run.outdir.claim_output_dir`, kind ``sweep``): a new or empty folder, or an
@@ -306,7 +314,7 @@ def claim_sweep_dir(config) -> None:
                                  "folder of the sweep to continue (the default is a new folder)")
         keep = True if replay else _resumed_entries(sweep_points(config), d) if resume else False
         c = claim_output_dir(d, "sweep", overwrite=overwrite_flag(config.get("overwrite", False)),
-                             fresh=fresh, keep=keep)
+                             fresh=fresh, keep=keep, first_result=FIRST_RESULT)
     except SShaDeError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
@@ -335,7 +343,7 @@ def _results_since(d: Path, t0: float) -> bool:
         try:
             if st and st.get("status") != "running" and (j / STATUS_FILE).stat().st_mtime >= t0:
                 return True
-            if any(r.stat().st_mtime >= t0 for r in (j / "runs").glob("*/*.json")):
+            if any(r.stat().st_mtime >= t0 for r in (j / STORE_DIR).glob("*/*.json")):
                 return True
         except OSError:
             continue
@@ -355,7 +363,7 @@ def end_unfinished_sweep() -> None:
             if _results_since(c.path, t0):
                 finish_manifest(c.path)
                 aggregate_sweep(c.path)
-                c.finish("interrupted")
+                c.finish("interrupted", result=True)
             else:
                 c.finish("interrupted", drop_if_unused=_NO_RESULT)
         except Exception as e:  # noqa: BLE001 -- the command is already ending on its own error
@@ -386,6 +394,18 @@ class AggregateSweepCallback(_Callback):
             start_manifest(config)
         except Exception as e:  # noqa: BLE001 -- a sweep without manifest still runs
             log.warning("cannot write %s: %s", MANIFEST, e)
+
+    def on_job_end(self, config, job_return=None, **kwargs) -> None:
+        """In a sweep, a sign of life of its folder once a job ended
+        (:func:`eval.run.outdir.alive`): should the sweep be killed, the files its jobs
+        wrote until then are its own, not files a person added after it died."""
+        try:
+            from hydra.core.hydra_config import HydraConfig
+            from hydra.types import RunMode
+            if HydraConfig.get().mode == RunMode.MULTIRUN:
+                alive(abs_path(str(config.hydra.sweep.dir)))
+        except Exception as e:  # noqa: BLE001 -- a sign of life never fails a job
+            log.debug("no sign of life for the sweep folder: %s", e)
 
     def on_multirun_end(self, config, **kwargs) -> None:
         try:
