@@ -138,7 +138,7 @@ ENTRIES = {
                              "method_definition", "plain"},
     # python -m eval.sweeps: a sweep job (Hydra's task function), the sweep folder, Hydra's callbacks
     "eval/sweeps/sweep_command.py": {"sweep_job", "sweep_points", "start_manifest", "claim_sweep_dir",
-                                     "on_multirun_start", "on_multirun_end"},
+                                     "on_multirun_start", "on_job_end", "on_multirun_end"},
 }
 CONFIG_NAMES = {"cfg", "config"}
 
