@@ -181,3 +181,30 @@ def test_submitit_local_sweep_records_failure(faust_root, tmp_path):
     r = _sweep(faust_root, sw, ["hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5"])
     _check_failed_and_done(r, sw)
     assert (sw / ".submitit").is_dir()
+
+
+def test_a_stopped_sweep_keeps_a_record_stored_in_the_file_system_tick_of_its_claim(tmp_path):
+    """A record whose modification time is the claim marker's own (a job writing in the
+    same tick of a coarse file-system clock) is the stopped sweep's result: it stays, and
+    the sweep is closed as interrupted, not undone."""
+    import os
+
+    from omegaconf import OmegaConf
+
+    from eval.run.outdir import MARKER, read_marker
+    from eval.run.result_store import STORE_DIR
+    from eval.sweeps.sweep_command import claim_sweep_dir, end_unfinished_sweep
+
+    d = tmp_path / "sweep"
+    config = OmegaConf.create({"hydra": {"sweep": {"dir": str(d)}, "overrides": {"hydra": [f"hydra.sweep.dir={d}"]}}})
+    claim_sweep_dir(config)
+    job = d / "0"
+    (job / STORE_DIR / "s0").mkdir(parents=True)
+    (job / STATUS_FILE).write_text(json.dumps({"job_num": 0, "status": "running"}))
+    record = job / STORE_DIR / "s0" / "ARAP.json"
+    record.write_text("{}")
+    tick = (d / MARKER).stat().st_mtime_ns
+    os.utime(record, ns=(tick, tick))
+    end_unfinished_sweep()
+    assert record.read_text() == "{}"
+    assert read_marker(d)["status"] == "interrupted"

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from eval import app
 from eval.config_check import plain
-from eval.run.outdir import OutputDirError, alive, check_earlier_output, claim_output_dir
+from eval.run.outdir import MARKER, OutputDirError, alive, check_earlier_output, claim_output_dir
 from eval.run.paths import abs_path
 from eval.run.pending_rows import share_stop
 from eval.run.result_store import STORE_DIR
@@ -229,7 +229,7 @@ def sweep_job(cfg) -> dict:
 
 
 # ----------------------------------------------------------------------------- the sweep folder
-_sweep_claim: list = []  # (claim, time.time() at the claim) of this process's sweep folder, until the sweep ends
+_sweep_claim: list = []  # (claim, its time in ns) of this process's sweep folder, until the sweep ends
 
 
 def _job_number(job_dir: Path) -> int | None:
@@ -325,7 +325,22 @@ def claim_sweep_dir(config) -> None:
             # load_sweep_config), so the new folder must be among them
             config.hydra.overrides.hydra.append(f"hydra.sweep.dir='{c.path}'")
     log.info(c.message)
-    _sweep_claim.append((c, time.time()))
+    _sweep_claim.append((c, _claim_time_ns(c)))
+
+
+def _claim_time_ns(c) -> int:
+    """When the claim ``c`` took its folder, by the file system's own clock (ns): the
+    earlier output's aside time where one was set aside, else the claim marker's
+    modification time, so that a job's file written after the claim is never older, on a
+    file system whose clock is coarser than ``time.time()``; 0 (everything counts) when
+    neither can be read."""
+    since = (c.aside or {}).get("since_ns")
+    if isinstance(since, int) and not isinstance(since, bool):
+        return since
+    try:
+        return (c.path / MARKER).stat().st_mtime_ns
+    except OSError:
+        return 0
 
 
 def release_sweep_dir(status: str = "done") -> None:
@@ -334,16 +349,16 @@ def release_sweep_dir(status: str = "done") -> None:
         _sweep_claim.pop()[0].finish(status)
 
 
-def _results_since(d: Path, t0: float) -> bool:
-    """Whether a job of the sweep folder ``d`` has a result written at or after ``t0``
-    (seconds since the epoch): a stored (case, method) record, or a final ``status.json``
-    (a job that failed before its first pair has only that)."""
+def _results_since(d: Path, t0_ns: int) -> bool:
+    """Whether a job of the sweep folder ``d`` has a result modified at or after ``t0_ns``
+    (ns, the file system's clock: :func:`_claim_time_ns`): a stored (case, method) record,
+    or a final ``status.json`` (a job that failed before its first pair has only that)."""
     for j in job_dirs(d):
         st = read_status(j)
         try:
-            if st and st.get("status") != "running" and (j / STATUS_FILE).stat().st_mtime >= t0:
+            if st and st.get("status") != "running" and (j / STATUS_FILE).stat().st_mtime_ns >= t0_ns:
                 return True
-            if any(r.stat().st_mtime >= t0 for r in (j / STORE_DIR).glob("*/*.json")):
+            if any(r.stat().st_mtime_ns >= t0_ns for r in (j / STORE_DIR).glob("*/*.json")):
                 return True
         except OSError:
             continue
@@ -358,9 +373,9 @@ def end_unfinished_sweep() -> None:
     sweep output it set aside is put back as it was and what it wrote goes (the job folders
     it continues stay: :meth:`eval.run.outdir.OutputClaim.finish`). Never raises."""
     while _sweep_claim:
-        c, t0 = _sweep_claim.pop()
+        c, t0_ns = _sweep_claim.pop()
         try:
-            if _results_since(c.path, t0):
+            if _results_since(c.path, t0_ns):
                 finish_manifest(c.path)
                 aggregate_sweep(c.path)
                 c.finish("interrupted", result=True)
