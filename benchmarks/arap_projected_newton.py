@@ -19,11 +19,14 @@ projected Hessian's factor as ``H0`` (scaled by the newest pair as Nocedal & Wri
 7.20), refactored every ``--refresh`` iterations (0: only at the start). ``lbfgs_2l``:
 the same L-BFGS with the two-level ``H0`` of :class:`TwoLevel` (a Galerkin coarse level
 of the exact Hessian over a remesh's P1 space, refreshed every ``--refresh``
-iterations). ``lbfgs_l``: the same L-BFGS with ``(2 L_ff)^-1`` (the solver's ``H0``).
+iterations). ``lbfgs_mg``: the same L-BFGS with one symmetric two-level cycle on ``2 L_ff``
+(:class:`LaplacianVCycle`: Jacobi sweeps and that P1 space's Galerkin coarse level) in place
+of its factor. ``lbfgs_l``: the same L-BFGS with ``(2 L_ff)^-1`` (the solver's ``H0``).
 
     python benchmarks/arap_projected_newton.py --cases twisted_bar,bent_cylinder,lifted_plane
     python benchmarks/arap_projected_newton.py --faust /work/shared/data/faust_reg --cases s0_p3
     python benchmarks/arap_projected_newton.py --root /work/main/data/defaust --cases s00_p01
+    python benchmarks/arap_projected_newton.py --root data/defaust --cases s00_p01 --methods lbfgs_mg --nc 6000 --nu 2
 
 Prints one JSON line per run (``--trace``: one per iteration). Writes no file.
 """
@@ -278,6 +281,44 @@ class TwoLevel:
         return z + self.coarse(r - self.hess(z))
 
 
+class LaplacianVCycle:
+    """An approximate ``(2 L_ff)^-1``: one symmetric two-level cycle on ``A = 2 L_ff`` (``nu``
+    damped-Jacobi sweeps, the Galerkin coarse correction ``P (P^T A P)^-1 P^T`` over the
+    P1 space of a remesh with ``nc`` samples, ``nu`` sweeps back), the global step's matrix
+    without its factor (Xian, Tong & Liu 2019 solve it by a Galerkin multigrid). Damping
+    ``omega = 1 / lambda_max(D^-1 A)`` (power iteration), so the cycle is SPD and a valid
+    L-BFGS ``H0``; ``cycles`` cycles per application."""
+
+    def __init__(self, P: Problem, V, F, handles, nc: int, nu: int = 2, cycles: int = 1, seed: int = 0):
+        TL = TwoLevel.__new__(TwoLevel)
+        TwoLevel.__init__(TL, P, V, F, handles, nc, seed)  # its P1 interpolation (scalar rows)
+        self.A = P.L2
+        Pm = TL.Pk[0::3, 0::3].tocsc()  # the scalar interpolation (kron with I3)
+        used = np.flatnonzero(np.asarray(abs(Pm).sum(0)).ravel() > 1e-12)  # a coarse handle may reach no free vertex
+        self.Pm = Pm[:, used].tocsr()
+        self.nc, self.nu, self.cycles = len(used), nu, cycles
+        Ac = (self.Pm.T @ self.A @ self.Pm).tocsc()
+        self.fc = LaplacianSolver(Ac + 1e-10 * Ac.diagonal().mean() * sp.eye(Ac.shape[0]))
+        dinv = 1.0 / self.A.diagonal()
+        v = np.random.default_rng(seed).standard_normal(self.A.shape[0])
+        for _ in range(50):
+            v = dinv * (self.A @ v)
+            lam = np.linalg.norm(v)
+            v /= lam
+        self.omega_dinv = (1.0 / (1.05 * lam)) * dinv[:, None]
+
+    def apply(self, r):
+        """The cycle(s) on a residual ``r`` (n_f, 3); zero start."""
+        A, z = self.A, np.zeros_like(r)
+        for _ in range(self.cycles):
+            for _ in range(self.nu):
+                z = z + self.omega_dinv * (r - A @ z)
+            z = z + self.Pm @ self.fc.solve(self.Pm.T @ (r - A @ z))
+            for _ in range(self.nu):
+                z = z + self.omega_dinv * (r - A @ z)
+        return z
+
+
 def _block_diag(W):
     """Block-diagonal CSR of the (k, 3, 3) blocks ``W``."""
     k = len(W)
@@ -361,12 +402,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     case_arguments(ap)
     ap.add_argument("--methods", default="newton,lbfgs_h,lbfgs",
-                    help="comma-separated: newton, lbfgs_h, lbfgs_2l, lbfgs_l (this script's L-BFGS), "
+                    help="comma-separated: newton, lbfgs_h, lbfgs_2l, lbfgs_mg, lbfgs_l (this script's L-BFGS), "
                          "lbfgs (the solver)")
     ap.add_argument("--refresh", type=int, default=0, help="lbfgs_h: refactor every N iterations (0: never)")
     ap.add_argument("--reg", type=float, default=0.0, help="add reg * 2 L_ff to the projected Hessian")
     ap.add_argument("--max-iter", type=int, default=3000, help="iterations per run at most")
     ap.add_argument("--nc", type=int, default=1000, help="lbfgs_2l: coarse samples")
+    ap.add_argument("--nu", type=int, default=2, help="lbfgs_mg: Jacobi sweeps before and after the coarse level")
+    ap.add_argument("--cycles", type=int, default=1, help="lbfgs_mg: two-level cycles per H0 application")
     ap.add_argument("--mode", default="mult", help="lbfgs_2l: mult (coarse-fine-coarse) or add")
     ap.add_argument("--no-scale", action="store_true", help="lbfgs_2l / lbfgs_l: no gamma scaling of H0")
     ap.add_argument("--trace", action="store_true", help="one JSON line per iteration")
@@ -386,6 +429,13 @@ def main(argv=None) -> int:
             P = Problem(V, F, h, T)
             row.update(scale=not a.no_scale, **lbfgs_pc(P, P.precondition, max_iter=a.max_iter, m=10,
                                                         trace=a.trace, scale=not a.no_scale))
+        elif meth == "lbfgs_mg":
+            P = Problem(V, F, h, T)
+            t0 = time.perf_counter()
+            MG = LaplacianVCycle(P, V, F, h, a.nc, nu=a.nu, cycles=a.cycles)
+            row.update(nc=MG.nc, nu=a.nu, cycles=a.cycles, scale=not a.no_scale,
+                       setup_s=round(time.perf_counter() - t0, 2))
+            row.update(lbfgs_pc(P, MG.apply, max_iter=a.max_iter, m=10, trace=a.trace, scale=not a.no_scale))
         elif meth == "lbfgs_2l":
             P = Problem(V, F, h, T)
             t0 = time.perf_counter()
