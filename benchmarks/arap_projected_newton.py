@@ -220,6 +220,24 @@ class ExactHessian:
         return (self.L2k @ f - 2.0 * (self.GT @ (self.W @ (self.G @ f)))).reshape(v.shape)
 
 
+def p1_interpolation(P: Problem, V, F, handles, nc: int, seed: int = 0):
+    """The P1 interpolation (n_f, n_c) CSR from a remesh of ``(V, F)`` with ``nc`` samples
+    (:func:`sshade.remesh.remesh`, the handles required) to the free vertices of ``P``:
+    each free vertex's closest point on the remesh, its clipped barycentric weights."""
+    import igl
+
+    from sshade.remesh import remesh
+    rm = remesh(V, F, nc, seed=seed, required=np.asarray(handles, np.int64))
+    Vc, Fc = V[rm.seeds], np.asarray(rm.F, np.int64)
+    _, fi, C = igl.point_mesh_squared_distance(V[P.free], Vc, Fc)
+    T = Fc[fi]
+    B = igl.barycentric_coordinates(C, Vc[T[:, 0]], Vc[T[:, 1]], Vc[T[:, 2]])
+    B = np.clip(B, 0.0, None)
+    B /= B.sum(1, keepdims=True)
+    nf = len(P.free)
+    return sp.csr_matrix((B.ravel(), (np.repeat(np.arange(nf), 3), T.ravel())), shape=(nf, len(Vc)))
+
+
 class TwoLevel:
     """A two-level preconditioner of the reduced energy's exact Hessian: the fine level
     ``(2 L_ff)^-1`` (the global step's factor), the coarse level the Galerkin product
@@ -228,20 +246,9 @@ class TwoLevel:
     barycentric). Applied symmetric-multiplicatively: coarse, fine, coarse."""
 
     def __init__(self, P: Problem, V, F, handles, nc: int, seed: int = 0):
-        import igl
-
-        from sshade.remesh import remesh
         self.P = P
-        rm = remesh(V, F, nc, seed=seed, required=np.asarray(handles, np.int64))
-        Vc, Fc = V[rm.seeds], np.asarray(rm.F, np.int64)
-        _, fi, C = igl.point_mesh_squared_distance(V[P.free], Vc, Fc)
-        T = Fc[fi]
-        B = igl.barycentric_coordinates(C, Vc[T[:, 0]], Vc[T[:, 1]], Vc[T[:, 2]])
-        B = np.clip(B, 0.0, None)
-        B /= B.sum(1, keepdims=True)
-        nf = len(P.free)
-        Pm = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(nf), 3), T.ravel())), shape=(nf, len(Vc)))
-        self.nc = len(Vc)
+        Pm = p1_interpolation(P, V, F, handles, nc, seed)
+        self.nc = Pm.shape[1]
         self.Pk = sp.kron(Pm, sp.eye(3), format="csr")
         self.H = ExactHessian(P)
         self.PtL2P = (self.Pk.T @ self.H.L2k @ self.Pk).tocsc()
@@ -290,10 +297,8 @@ class LaplacianVCycle:
     L-BFGS ``H0``; ``cycles`` cycles per application."""
 
     def __init__(self, P: Problem, V, F, handles, nc: int, nu: int = 2, cycles: int = 1, seed: int = 0):
-        TL = TwoLevel.__new__(TwoLevel)
-        TwoLevel.__init__(TL, P, V, F, handles, nc, seed)  # its P1 interpolation (scalar rows)
         self.A = P.L2
-        Pm = TL.Pk[0::3, 0::3].tocsc()  # the scalar interpolation (kron with I3)
+        Pm = p1_interpolation(P, V, F, handles, nc, seed).tocsc()
         used = np.flatnonzero(np.asarray(abs(Pm).sum(0)).ravel() > 1e-12)  # a coarse handle may reach no free vertex
         self.Pm = Pm[:, used].tocsr()
         self.nc, self.nu, self.cycles = len(used), nu, cycles
