@@ -25,6 +25,7 @@ from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 
 __all__ = ["MARKER", "LOCK", "REPRODUCE_ENV", "OutputDirError", "OutputClaim", "claim_output_dir",
+           "first_result_written",
            "results_dir", "refuse_results", "read_marker", "check_earlier_output",
            "record_output_files", "resume_command", "alive"]
 
@@ -149,7 +150,7 @@ class OutputClaim:
         it has its first result, put back if it fails before: :mod:`eval.run.earlier_output`).
     foreign : names that were in the folder before and are not ours (kept).
     first_result : the file, or a pattern of files (``**/runs/*/*.json``), whose writing
-        says this run has its first result (:func:`_first_result_written`), or None: any
+        says this run has its first result (:func:`first_result_written`), or None: any
         entry written, or the run done.
     aside : the marker's record of the earlier output set aside, or None.
     user_paths : files under our entries that no run of ours wrote (kept, never recorded).
@@ -198,7 +199,7 @@ class OutputClaim:
                 written = set(os.listdir(self.path)) - set(self.foreign) - _OWN
                 if result is None:
                     since = self.aside.get("since_ns") if self.aside is not None else None
-                    result = _first_result_written(self.path, mark, since) if mark else bool(written)
+                    result = first_result_written(self.path, mark, since) if mark else bool(written)
                 has_result = status == "done" or result
                 if not has_result and (self.aside is not None or drop_if_unused):
                     lock_bytes = self._undo()
@@ -352,7 +353,7 @@ def _recover(p: Path, m: dict | None, alive_ns: int | None) -> tuple[dict | None
     kept: list = []
     if isinstance(rec, dict) and (p / ASIDE).is_dir():
         mark = rec.get("first_result")
-        if mark and not _first_result_written(p, str(mark), rec.get("since_ns")):  # died before its first result
+        if mark and not first_result_written(p, str(mark), rec.get("since_ns")):  # died before its first result
             left = sorted(set(os.listdir(p)) - foreign - _OWN - {ASIDE} - set(rec.get("names") or []))
             restore(p, rec, MARKER)
             return read_marker(p), left
@@ -366,14 +367,14 @@ def _recover(p: Path, m: dict | None, alive_ns: int | None) -> tuple[dict | None
     return m, sorted(set(late) - set(kept))
 
 
-def _first_result_written(p: Path, pattern: str, since_ns: int | None) -> bool:
+def first_result_written(p: Path, pattern: str, since_ns: int | None) -> bool:
     """Whether a run writing folder ``p`` has its first result: a file below ``p`` (not a
     link, resolved inside ``p``, under no hidden folder such as the aside) matching the
     relative glob ``pattern`` (a name such as ``run.json``, or ``**/runs/*/*.json``) and,
-    with ``since_ns`` (ns; the time the earlier output was set aside,
-    :func:`eval.run.earlier_output.set_aside`), modified since then, so that the files of
-    the entries a run continues (a resumed sweep's jobs) count only once it rewrote them.
-    Never raises."""
+    with ``since_ns`` (ns, the file system's clock: the time the earlier output was set
+    aside, :func:`eval.run.earlier_output.set_aside`, or a claim's), modified since then,
+    so that the files of the entries a run continues (a resumed sweep's jobs) count only
+    once it rewrote them. Never raises."""
     try:
         root = p.resolve()
         for f in p.glob(pattern):

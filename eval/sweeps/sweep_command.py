@@ -21,7 +21,14 @@ from pathlib import Path
 
 from eval import app
 from eval.config_check import plain
-from eval.run.outdir import MARKER, OutputDirError, alive, check_earlier_output, claim_output_dir
+from eval.run.outdir import (
+    MARKER,
+    OutputDirError,
+    alive,
+    check_earlier_output,
+    claim_output_dir,
+    first_result_written,
+)
 from eval.run.paths import abs_path
 from eval.run.pending_rows import share_stop
 from eval.run.result_store import STORE_DIR
@@ -351,14 +358,15 @@ def release_sweep_dir(status: str = "done") -> None:
 
 def _results_since(d: Path, t0_ns: int) -> bool:
     """Whether a job of the sweep folder ``d`` has a result modified at or after ``t0_ns``
-    (ns, the file system's clock: :func:`_claim_time_ns`): a stored (case, method) record,
-    or a final ``status.json`` (a job that failed before its first pair has only that)."""
+    (ns, the file system's clock: :func:`_claim_time_ns`): a stored (case, method) record
+    (the claim's own test, :data:`FIRST_RESULT`), or a final ``status.json`` (a job that
+    failed before its first pair has only that)."""
+    if first_result_written(d, FIRST_RESULT, t0_ns):
+        return True
     for j in job_dirs(d):
         st = read_status(j)
         try:
             if st and st.get("status") != "running" and (j / STATUS_FILE).stat().st_mtime_ns >= t0_ns:
-                return True
-            if any(r.stat().st_mtime_ns >= t0_ns for r in (j / STORE_DIR).glob("*/*.json")):
                 return True
         except OSError:
             continue
