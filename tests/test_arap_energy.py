@@ -6,6 +6,7 @@ import pytest
 from scipy.sparse.linalg import splu
 
 from sshade.arap import ENERGIES, build_operators, fit_rotations, rigid_fit
+from sshade.arap.operators import TRACE_MIN_ENERGY
 from sshade.arap.problems import bent_cylinder, twisted_bar
 from sshade.errors import SShaDeError
 
@@ -209,8 +210,9 @@ def test_fused_local_step_matches_separate_steps(bar, energy):
     np.testing.assert_allclose(B, ops.K @ Rs, rtol=0, atol=1e-13 * np.abs(B).max())
 
 
+@pytest.mark.parametrize("trace", [False, True], ids=["pairs", "trace form"])
 @pytest.mark.parametrize("energy", ENERGIES)
-def test_kernels_independent_of_threads_and_numbering(bar, energy):
+def test_kernels_independent_of_threads_and_numbering(bar, energy, trace):
     V, F, _, _ = bar
     ops = build_operators(V, F, energy)
     n = ops.n
@@ -222,17 +224,42 @@ def test_kernels_independent_of_threads_and_numbering(bar, energy):
         for t in (1, 2):
             W = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
             R, Ek = np.empty((n, 3, 3)), np.empty(n)
-            E = ops.local_step(np.ascontiguousarray(U[perm]), R, Ek, W, t, kd)
+            Et = np.empty(len(ops.edges)) if trace else None
+            E = ops.local_step(np.ascontiguousarray(U[perm]), R, Ek, W, t, kd, Et)
             rows = np.arange(n, dtype=np.uint32)
             B = ops.rhs_rows(R, rows, np.zeros((n, 3)), np.empty((n, 3)), t, kd)
             inv = np.argsort(perm)
             out[reorder, t] = (R[inv], Ek[inv], E, W[inv], B[inv])
     ref = out[False, 1]
     for val in out.values():
-        for a, b in zip(ref[:4], val[:4]):  # rotations, cell energies, energy, warm start: bit-identical
+        for a, b in zip(ref[:4], val[:4]):  # rotations, cell energies or traces, energy, warm start: bit-identical
             np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(val[4], ref[4], rtol=0, atol=1e-13 * np.abs(ref[4]).max())
     np.testing.assert_array_equal(out[True, 1][4], out[True, 2][4])  # same numbering: same floats
+
+
+@pytest.mark.parametrize("energy", ENERGIES)
+def test_trace_form_is_the_term_by_term_energy_and_gives_way_to_it_near_rigid_states(bar, energy):
+    V, F, _, _ = bar
+    ops = build_operators(V, F, energy)
+    n, ne = ops.n, len(ops.edges)
+    rng = np.random.default_rng(11)
+    Q = _random_rotation(rng)
+    states = {"deformed": V + 0.05 * rng.normal(size=V.shape),
+              "nearly rigid": V @ Q.T + 0.3 + 1e-7 * rng.normal(size=V.shape)}
+    for name, U in states.items():
+        runs = {}
+        for Et in (None, np.empty(ne)):
+            W = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+            R, Ek = np.empty((n, 3, 3)), np.empty(n)
+            runs[Et is None] = (ops.local_step(np.ascontiguousarray(U), R, Ek, W, 1, None, Et), R, W)
+        (E_pairs, R_pairs, W_pairs), (E_trace, R_trace, W_trace) = runs[True], runs[False]
+        np.testing.assert_array_equal(R_trace, R_pairs)  # the same rotations and warm starts either way
+        np.testing.assert_array_equal(W_trace, W_pairs)
+        if abs(E_pairs) >= TRACE_MIN_ENERGY * ops.rest_term:
+            assert name == "deformed" and E_trace == pytest.approx(E_pairs, rel=1e-10, abs=0)
+        else:  # below the threshold the trace form's terms cancel: the pair sum, bit for bit
+            assert name == "nearly rigid" and E_trace == E_pairs
 
 
 def test_numpy_fallbacks_when_numba_is_off(monkeypatch, bar):

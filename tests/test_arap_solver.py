@@ -350,3 +350,21 @@ def test_carried_history_needs_the_same_accelerator_and_window():
         ra = a.solve(T2, options=options, U0=r1.V, carry_history=True)
         rb = b.solve(T2, options=options, U0=r1.V)
         assert np.array_equal(ra.V, rb.V) and ra.iterations == rb.iterations
+
+
+@pytest.mark.parametrize("criterion", [DEFAULT_CRITERION, Criterion(1e-10, 1e-6), DEEP_CRITERION],
+                         ids=["default", "etol 1e-10", "deep"])
+def test_the_energy_takes_the_trace_form_only_under_a_criterion_its_noise_cannot_reach(bar, criterion, monkeypatch):
+    from sshade.arap.criterion import TRACE_ETOL
+    from sshade.arap.operators import ArapOperators
+    V, F, h, T = bar
+    seen, step = [], ArapOperators.local_step
+
+    def spy(self, *args):
+        seen.append(args[6] is not None)  # Et: the trace form's edge terms
+        return step(self, *args)
+
+    monkeypatch.setattr(ArapOperators, "local_step", spy)
+    res = solve_arap(V, F, h, T, ArapOptions(criterion=criterion, max_iter=30))
+    assert seen and len(seen) == res.info["n_local"]
+    assert set(seen) == {criterion.etol >= TRACE_ETOL}

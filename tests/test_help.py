@@ -58,6 +58,7 @@ HELP = {
     "benchmarks/arap_alternatives.py": ["usage:", "--max-cg", "--methods"],
     "benchmarks/arap_sliver_local.py": ["usage:", "--diagnose", "--every"],
     "benchmarks/arap_projected_newton.py": ["usage:", "--refresh", "--nc"],
+    "benchmarks/arap_trace_energy.py": ["usage:", "--cases", "--root"],
     "benchmarks/arap_trust_region.py": ["usage:", "--eta", "--max-outer"],
     "benchmarks/table_change.py": ["usage:", "--before", "--after"],
     "benchmarks/identity_cost.py": ["usage:", "probes"],

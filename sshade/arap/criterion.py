@@ -14,7 +14,13 @@ import numpy as np
 
 from ..errors import SShaDeError
 
-__all__ = ["Criterion", "DEFAULT_CRITERION", "DEEP_CRITERION", "make_criterion", "gradient_norm"]
+__all__ = ["TRACE_ETOL", "Criterion", "DEFAULT_CRITERION", "DEEP_CRITERION", "make_criterion", "gradient_norm"]
+
+
+#: The least ``etol`` under which the solver's local step sums the energy in the trace form
+#: (:data:`sshade.arap.operators.TRACE_MIN_ENERGY`); below it, e.g. :data:`DEEP_CRITERION`,
+#: the cells' energies are summed term by term.
+TRACE_ETOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -44,6 +50,12 @@ class Criterion:
     def __post_init__(self):
         if not (self.etol >= 0 and self.gtol >= 0):
             raise SShaDeError(f"criterion thresholds must be >= 0, got etol={self.etol}, gtol={self.gtol}")
+
+    @property
+    def trace_energy(self) -> bool:
+        """Whether the solver may take the energy's trace form (``etol >= TRACE_ETOL``):
+        its noise, at most ~4e-11 relative where it is kept, stays far below ``etol``."""
+        return self.etol >= TRACE_ETOL
 
 
 DEFAULT_CRITERION = Criterion()

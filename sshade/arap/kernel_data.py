@@ -60,6 +60,9 @@ class KernelData:
         (edges sorted by their smaller new end point; every edge keeps its orientation and
         every cell the order of its pairs, so the cell energies are summed term by term in
         the same order in every numbering).
+    edge_w : (ne,) float64, the operators' edge weights in this numbering's edge order;
+        ``einv`` (ne,) int64 or None maps the mesh's edges to it (``x[einv]``: an edge
+        array of this numbering in the mesh's edge order; None: the same order).
 
     Index arrays (``idx``, ``edges``, ``pair_edge``) are uint32 and pointer arrays
     (``ptr``, ``cell_ptr``) uint64: unsigned indices spare numba's negative-index
@@ -75,6 +78,8 @@ class KernelData:
     cell_ptr: np.ndarray
     pair_edge: np.ndarray
     pair_w: np.ndarray
+    edge_w: np.ndarray
+    einv: np.ndarray | None
 
     @classmethod
     def build(cls, ops, perm: np.ndarray | None = None) -> KernelData:
@@ -85,7 +90,8 @@ class KernelData:
         kv = _csr3([ops.K[:, d * n:(d + 1) * n] for d in range(3)])
         if perm is None:
             return cls(None, None, _u32csr(kt), _u32csr(kv), as_u32(ops.edges), ops.edge_vec,
-                       np.ascontiguousarray(ops.cell_ptr, np.uint64), as_u32(ops.pair_edge), ops.pair_w)
+                       np.ascontiguousarray(ops.cell_ptr, np.uint64), as_u32(ops.pair_edge), ops.pair_w,
+                       np.ascontiguousarray(ops.edge_w, np.float64), None)
         perm = np.ascontiguousarray(perm, np.int64)
         inv = np.empty(n, np.int64)
         inv[perm] = np.arange(n, dtype=np.int64)
@@ -98,7 +104,8 @@ class KernelData:
         edges = np.ascontiguousarray(np.stack([es, ed], 1)[eperm])
         cell_ptr, pair_edge, _, src = _permute_csr(ops.cell_ptr, ops.pair_edge, None, perm, einv)
         return cls(perm, inv, _u32csr(kt), _u32csr(kv), as_u32(edges), np.ascontiguousarray(ops.edge_vec[eperm]),
-                   np.ascontiguousarray(cell_ptr, np.uint64), as_u32(pair_edge), np.ascontiguousarray(ops.pair_w[src]))
+                   np.ascontiguousarray(cell_ptr, np.uint64), as_u32(pair_edge), np.ascontiguousarray(ops.pair_w[src]),
+                   np.ascontiguousarray(ops.edge_w[eperm], np.float64), einv)
 
     def local_arrays(self) -> tuple:
         """Arguments of the local kernel after ``U``."""

@@ -309,52 +309,72 @@ if nb is not None:
             out[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
 
     @_njit
+    def _block_edge_terms(b, nb, U, edges, edge_w, Et):
+        """The trace form's edge terms ``Et[e] = w_e ||U_s - U_d||^2`` of block ``b``'s
+        share of the edges (``b ne / nb`` to ``(b + 1) ne / nb``, ``nb`` blocks)."""
+        ne = edges.shape[0]
+        for e in range(b * ne // nb, (b + 1) * ne // nb):
+            s = edges[e, 0]; d = edges[e, 1]
+            a0 = U[s, 0] - U[d, 0]; a1 = U[s, 1] - U[d, 1]; a2 = U[s, 2] - U[d, 2]
+            Et[e] = edge_w[e] * (a0 * a0 + a1 * a1 + a2 * a2)
+
+    @_njit
     def _local_block(b, U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w,
-                     W, warm, R, Ek):
+                     W, warm, R, Ek, mode, edge_w, Et):
         """Local step of the cells ``b LANES ... (b + 1) LANES - 1``: covariances (rows of
         the CSR with 3-vector values ``kt_*``, ``M[c, d] = sum_j kt_val[j, d] U[j, c]``,
         summed in ``scipy``'s order, so equal to ``KT @ U`` to the bit), polar
-        decompositions into ``R`` (warm start ``W``) and cell energies into ``Ek``."""
+        decompositions into ``R`` (warm start ``W``), then by ``mode``: 0, the cell
+        energies into ``Ek``; 1 (the trace form), ``tr(R_k^T M_k)`` into ``Ek`` and the
+        block's share of the edge terms into ``Et`` (:func:`_block_edge_terms`); 2, only
+        the cell energies at the given ``R`` (no covariance, no polar decomposition)."""
         n = R.shape[0]
         k0 = b * LANES
         nl = min(LANES, n - k0)
-        S = np.empty(_SCRATCH)
-        for l in range(nl):
-            k = k0 + l
-            m00 = 0.0; m01 = 0.0; m02 = 0.0
-            m10 = 0.0; m11 = 0.0; m12 = 0.0
-            m20 = 0.0; m21 = 0.0; m22 = 0.0
-            for jj in range(kt_ptr[k], kt_ptr[k + 1]):
-                j = kt_idx[jj]
-                a0 = kt_val[jj, 0]; a1 = kt_val[jj, 1]; a2 = kt_val[jj, 2]
-                u0 = U[j, 0]; u1 = U[j, 1]; u2 = U[j, 2]
-                m00 += a0 * u0; m01 += a1 * u0; m02 += a2 * u0
-                m10 += a0 * u1; m11 += a1 * u1; m12 += a2 * u1
-                m20 += a0 * u2; m21 += a1 * u2; m22 += a2 * u2
-            S[_SM + 0 * LANES + l] = m00; S[_SM + 1 * LANES + l] = m01; S[_SM + 2 * LANES + l] = m02
-            S[_SM + 3 * LANES + l] = m10; S[_SM + 4 * LANES + l] = m11; S[_SM + 5 * LANES + l] = m12
-            S[_SM + 6 * LANES + l] = m20; S[_SM + 7 * LANES + l] = m21; S[_SM + 8 * LANES + l] = m22
-        _polar_init(S, nl, W, k0, warm)
-        _polar_jacobi(S)
-        _polar_finish(S)
-        _polar_store(S, nl, k0, W, warm, R, Ek[:0])
-        for k in range(k0, k0 + nl):
-            Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
+        if mode != 2:
+            S = np.empty(_SCRATCH)
+            for l in range(nl):
+                k = k0 + l
+                m00 = 0.0; m01 = 0.0; m02 = 0.0
+                m10 = 0.0; m11 = 0.0; m12 = 0.0
+                m20 = 0.0; m21 = 0.0; m22 = 0.0
+                for jj in range(kt_ptr[k], kt_ptr[k + 1]):
+                    j = kt_idx[jj]
+                    a0 = kt_val[jj, 0]; a1 = kt_val[jj, 1]; a2 = kt_val[jj, 2]
+                    u0 = U[j, 0]; u1 = U[j, 1]; u2 = U[j, 2]
+                    m00 += a0 * u0; m01 += a1 * u0; m02 += a2 * u0
+                    m10 += a0 * u1; m11 += a1 * u1; m12 += a2 * u1
+                    m20 += a0 * u2; m21 += a1 * u2; m22 += a2 * u2
+                S[_SM + 0 * LANES + l] = m00; S[_SM + 1 * LANES + l] = m01; S[_SM + 2 * LANES + l] = m02
+                S[_SM + 3 * LANES + l] = m10; S[_SM + 4 * LANES + l] = m11; S[_SM + 5 * LANES + l] = m12
+                S[_SM + 6 * LANES + l] = m20; S[_SM + 7 * LANES + l] = m21; S[_SM + 8 * LANES + l] = m22
+            _polar_init(S, nl, W, k0, warm)
+            _polar_jacobi(S)
+            _polar_finish(S)
+            _polar_store(S, nl, k0, W, warm, R, Ek[:] if mode == 1 else Ek[:0])
+        if mode == 1:
+            _block_edge_terms(b, (n + LANES - 1) // LANES, U, edges, edge_w, Et)
+        else:
+            for k in range(k0, k0 + nl):
+                Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
 
     @_njit
-    def _local_serial(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek):
+    def _local_serial(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek,
+                      mode, edge_w, Et):
         """Fused local step over all cells (:func:`_local_block`), one thread."""
         for b in range((R.shape[0] + LANES - 1) // LANES):
-            _local_block(b, U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek)
+            _local_block(b, U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek,
+                         mode, edge_w, Et)
 
     @_njit_par
-    def _local_parallel(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek):
+    def _local_parallel(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W, warm, R, Ek,
+                        mode, edge_w, Et):
         """Fused local step over all cells (:func:`_local_block`), blocks of cells split
         over threads (every block writes only its own outputs: the results are those of
         :func:`_local_serial`, whatever the number of threads)."""
         for b in _prange((R.shape[0] + LANES - 1) // LANES):  # prange counts in uint64: one callee signature
             _local_block(np.int64(b), U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, W,
-                         warm, R, Ek)
+                         warm, R, Ek, mode, edge_w, Et)
 
     @_njit
     def _rhs_row(i, v, kv_ptr, kv_idx, kv_val, R, sub, out):
@@ -441,8 +461,10 @@ def _tiny_fused_args():
 def fused_kernels(parallel: bool):
     """``(local, rhs)`` compiled fused kernels (serial or parallel), or False.
 
-    ``local(U, *KernelData.local_arrays(), W, warm, R, Ek)`` is the local step (rotations
-    into ``R``, cell energies into ``Ek``); ``rhs(rows, *KernelData.kv, R, sub, out)``
+    ``local(U, *KernelData.local_arrays(), W, warm, R, Ek, mode, edge_w, Et)`` is the
+    local step (rotations into ``R``; by ``mode`` (int): 0, cell energies into ``Ek``; 1,
+    the trace form's ``tr(R_k^T M_k)`` into ``Ek`` and edge terms into ``Et`` (ne,) with
+    the weights ``edge_w`` (ne,); 2, cell energies at the given ``R`` only); ``rhs(rows, *KernelData.kv, R, sub, out)``
     writes ``K(R)[rows] - sub``. Compiling the parallel pair starts numba's thread pool.
     """
     key = 2 if parallel else 1
@@ -456,7 +478,7 @@ def fused_kernels(parallel: bool):
             U, kt, pairs, W = _tiny_fused_args()
             R = np.empty((2, 3, 3)); Ek = np.empty(2)
             for warm in (True, False):
-                local(U, *kt, *pairs, W, warm, R, Ek)
+                local(U, *kt, *pairs, W, warm, R, Ek, 0, np.ones(1), np.empty(1))
             rhs(np.arange(2, dtype=np.uint32), *kt, R, np.zeros((2, 3)), np.empty((2, 3)))
             _FUSED[key] = (local, rhs)
         except Exception:  # pragma: no cover - numba missing or broken

@@ -10,6 +10,7 @@ kernels in :mod:`sshade.arap.kernels`. Conventions and derivation: docs/implemen
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 
 import igl
@@ -23,10 +24,18 @@ from .kernel_data import KernelData, as_u32, rcm_order
 from .kernels import energy_kernel, fused, polar_kernel
 from .threads import numba_threads, resolve_threads
 
-__all__ = ["ENERGIES", "ArapOperators", "build_operators", "fit_rotations", "bbox_diag"]
+__all__ = ["ENERGIES", "TRACE_MIN_ENERGY", "ArapOperators", "build_operators", "fit_rotations", "bbox_diag"]
 
 #: the ARAP energies (libigl's ``ARAP_ENERGY_TYPE_SPOKES`` / ``..._SPOKES_AND_RIMS``)
 ENERGIES = ("spokes", "spokes_and_rims")
+#: The least ``|E| / sum_e w_e ||e_e||^2`` at which :meth:`ArapOperators.local_step` keeps
+#: the energy's trace form; below it (nearly rigid states, where the form's terms cancel)
+#: it sums the cells' energies pair by pair. The form's relative noise is about
+#: ``1e-14 rest / |E|`` (benchmarks/records/arap_trace_energy.md), so at most ~4e-11 here.
+TRACE_MIN_ENERGY = 1e-3
+
+
+_NO_EDGES = np.empty(0)  # the edge-term scratch of a term-by-term local step (unread)
 
 
 def bbox_diag(V: np.ndarray) -> float:
@@ -177,60 +186,75 @@ class ArapOperators:
         return out.reshape(self.n, 3, 3).transpose(0, 2, 1)
 
     def local_step(self, U: np.ndarray, R: np.ndarray, Ek: np.ndarray, warm: np.ndarray | None = None,
-                   threads: int = 1, data: KernelData | None = None) -> float:
+                   threads: int = 1, data: KernelData | None = None, Et: np.ndarray | None = None) -> float:
         """The local step into preallocated arrays: optimal rotations ``R*(U)`` and ``E(U)``.
 
         With numba, ONE kernel over the cells does the covariance, the polar decomposition
-        and the cell's energy summed term by term (parallel over blocks of cells for
-        ``threads > 1``; the results do not depend on ``threads``); without, the numpy
-        path of :meth:`rotations`.
+        and the energy (parallel over blocks of cells for ``threads > 1``; the results do
+        not depend on ``threads``); without, the numpy path of :meth:`rotations`. The
+        energy: the cells' energies summed term by term, or with ``Et`` the trace form
+        ``sum_e w_e ||e'_e||^2 + sum_e w_e ||e_e||^2 - 2 sum_k tr(R_k^T M_k)`` (one pass
+        over the edges instead of the cells' pairs), which falls back to the term-by-term
+        sum below :data:`TRACE_MIN_ENERGY`; either is summed in the mesh's order, the same
+        float in every numbering.
 
         Parameters
         ----------
         U : (n, 3) float64 deformed positions.
         R : (n, 3, 3) float64 C-contiguous, overwritten with the rotations.
-        Ek : (n,) float64 C-contiguous scratch, overwritten with the cell energies (numba)
-            or left untouched (numpy).
+        Ek : (n,) float64 C-contiguous scratch, overwritten with the cell energies or the
+            traces (numba) or left untouched (numpy).
         warm : (n, 3, 3) float64 C-contiguous or None, polar warm start, updated in place
             (:func:`fit_rotations`).
         threads : int >= 1, threads of the kernel (:func:`resolve_threads`).
         data : :class:`KernelData` or None (:meth:`kernel_data`, mesh numbering); all the
             arrays above are in its numbering.
+        Et : (ne,) float64 C-contiguous scratch or None: with numba, the trace form's edge
+            terms (ne = the number of edges); None: the term-by-term sum.
 
         Returns
         -------
-        E : float, ``E(U, R*(U))`` (mesh units^2; the sum of ``Ek``).
+        E : float, ``E(U, R*(U))`` (mesh units^2).
         """
         kern = fused(threads)
         if not kern:
-            if data is None or data.perm is None:
-                Rn, E = self._rotations_numpy(U, True, warm)
-                R[...] = Rn
-                return E
-            inv, perm = data.inv, data.perm  # numpy path in the mesh's numbering
-            Wo = None if warm is None else warm[inv]
-            Rn, E = self._rotations_numpy(np.asarray(U)[inv], True, Wo)
-            R[...] = Rn[perm]
-            if warm is not None:
-                warm[...] = Wo[perm]
-            return E
+            return self._local_step_numpy(U, R, warm, data)
         if data is None:
             data = self.kernel_data(False)
         U = np.ascontiguousarray(U, np.float64)
-        n = self.n
+        n, ne = self.n, len(self.edges)
         for name, a, shape in (("U", U, (n, 3)), ("R", R, (n, 3, 3)), ("Ek", Ek, (n,)),
-                               ("warm", R if warm is None else warm, (n, 3, 3))):
+                               ("warm", R if warm is None else warm, (n, 3, 3)),
+                               ("Et", _NO_EDGES if Et is None else Et, (0,) if Et is None else (ne,))):
             if not (isinstance(a, np.ndarray) and a.shape == shape and a.dtype == np.float64
                     and a.flags.c_contiguous):
                 raise SShaDeError(f"{name} must be a C-contiguous float64 array of shape {shape}")
         args = (U, *data.local_arrays(), R if warm is None else warm, warm is not None, R, Ek)
-        if threads > 1:
-            with numba_threads(threads):
-                kern[0](*args)
-        else:
-            kern[0](*args)
-        # summed in the mesh's cell order: the same float in every numbering
+        with numba_threads(threads) if threads > 1 else contextlib.nullcontext():
+            if Et is None:
+                kern[0](*args, 0, data.edge_w, _NO_EDGES)
+                return float((Ek if data.perm is None else Ek[data.inv]).sum())
+            kern[0](*args, 1, data.edge_w, Et)
+            tr = (Ek if data.perm is None else Ek[data.inv]).sum()
+            E = float((Et if data.einv is None else Et[data.einv]).sum() + self.rest_term - 2.0 * tr)
+            if abs(E) >= TRACE_MIN_ENERGY * self.rest_term:
+                return E
+            kern[0](*args, 2, data.edge_w, Et)  # nearly rigid: the cells' energies at these R
         return float((Ek if data.perm is None else Ek[data.inv]).sum())
+
+    def _local_step_numpy(self, U, R, warm, data) -> float:
+        """:meth:`local_step` without numba: :meth:`_rotations_numpy` in the mesh's numbering."""
+        if data is None or data.perm is None:
+            Rn, E = self._rotations_numpy(U, True, warm)
+            R[...] = Rn
+            return E
+        inv, perm = data.inv, data.perm  # numpy path in the mesh's numbering
+        Wo = None if warm is None else warm[inv]
+        Rn, E = self._rotations_numpy(np.asarray(U)[inv], True, Wo)
+        R[...] = Rn[perm]
+        if warm is not None:
+            warm[...] = Wo[perm]
+        return E
 
     def rotations(self, U: np.ndarray, *, return_energy: bool = False, warm: np.ndarray | None = None,
                   threads: int | None = None):

@@ -207,7 +207,7 @@ class ArapSolver:
             res = _all_handles(self.ops, U, info, t_start)
             res.precompute_s += extra
             return res
-        self._st.start(U, T, info)
+        self._st.start(U, T, info, crit.trace_energy)
         kind = {"lbfgs": LBFGS, "anderson": Anderson}.get(acc)
         kept = self._acc if carry_history and kind is not None and isinstance(self._acc, kind) \
             and self._acc.m == m else None
@@ -304,10 +304,12 @@ class _Stepper:
             self.free_u = self.free.astype(np.uint32)
         self.rows = self.free_u if self.kern else self.free
 
-    def start(self, U: np.ndarray, T: np.ndarray, info: dict) -> None:
+    def start(self, U: np.ndarray, T: np.ndarray, info: dict, trace: bool = False) -> None:
         """A solve's problem: start positions ``U`` (n, 3) (mesh numbering, handle rows at
-        their targets), targets ``T`` (h, 3), its ``info`` (the set-up's facts added)."""
-        self.info = info
+        their targets), targets ``T`` (h, 3), its ``info`` (the set-up's facts added);
+        ``trace``: the local steps take the energy's trace form
+        (:meth:`sshade.arap.operators.ArapOperators.local_step`, with the kernels)."""
+        self.info, self.trace = info, trace
         self.U = U if self.perm is None else np.ascontiguousarray(U[self.perm])
         self.c_f = np.ascontiguousarray(self.Lfb @ T)  # (n_f, 3)
         info.update(linear_solver=self.lin.backend, factor_s=self.lin.factor_s, threads=self.nthreads,
@@ -350,7 +352,7 @@ class _Stepper:
 
     def allocate(self) -> None:
         """The buffers of the iterations: polar warm start, rotations ``R`` of the last
-        local step, cell energies, right-hand side, gradient scratch."""
+        local step, cell energies, right-hand side, gradient scratch, edge terms."""
         n, nf = self.ops.n, len(self.free)
         self.warm = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         self.R = np.empty((n, 3, 3))
@@ -358,6 +360,7 @@ class _Stepper:
         self.B = np.empty((nf, 3))
         self.q = np.empty(nf)
         self.grad = np.empty((nf, 3))  # the last gnorm's gradient (kernels only)
+        self.Et = np.empty(len(self.ops.edges)) if self.trace and self.kern else None  # the trace form's
 
     def run(self, name: str, *args):
         """Loop kernel ``name`` with ``cur`` threads."""
@@ -379,7 +382,7 @@ class _Stepper:
         else:
             self.U[self.free] = x
         self.info["n_local"] += 1
-        E = self.ops.local_step(self.U, self.R, self.Ek, self.warm, self.cur, self.kdata)
+        E = self.ops.local_step(self.U, self.R, self.Ek, self.warm, self.cur, self.kdata, self.Et)
         self.tm["local"] += clock() - t0
         return E
 
