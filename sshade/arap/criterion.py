@@ -54,7 +54,7 @@ class Criterion:
     @property
     def trace_energy(self) -> bool:
         """Whether the solver may take the energy's trace form (``etol >= TRACE_ETOL``):
-        its noise, at most ~4e-11 relative where it is kept, stays far below ``etol``."""
+        its noise, about 1e-12 relative at most where it is kept, stays far below ``etol``."""
         return self.etol >= TRACE_ETOL
 
 

@@ -30,8 +30,9 @@ __all__ = ["ENERGIES", "TRACE_MIN_ENERGY", "ArapOperators", "build_operators", "
 ENERGIES = ("spokes", "spokes_and_rims")
 #: The least ``|E| / sum_e w_e ||e_e||^2`` at which :meth:`ArapOperators.local_step` keeps
 #: the energy's trace form; below it (nearly rigid states, where the form's terms cancel)
-#: it sums the cells' energies pair by pair. The form's relative noise is about
-#: ``1e-14 rest / |E|`` (benchmarks/records/arap_trace_energy.md), so at most ~4e-11 here.
+#: it sums the cells' energies pair by pair. The form's relative noise, its sums taken
+#: pairwise as here, was at most ``1e-15 rest / |E|`` on four meshes
+#: (benchmarks/records/arap_trace_energy.md), so about 1e-12 at most here.
 TRACE_MIN_ENERGY = 1e-3
 
 
