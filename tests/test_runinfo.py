@@ -86,3 +86,25 @@ def test_every_committed_run_json_and_a_fresh_one_validate_against_the_schema():
     fresh = json.loads(json.dumps(collect_runinfo({"dataset": {"name": "x"}}, extra={"status": "done"}), default=str))
     assert not list(v.iter_errors(fresh))
     assert list(v.iter_errors({**fresh, "status": "finished"}))  # the schema holds something
+
+
+def test_machine_info_reads_the_first_processor_and_its_widest_simd_set(tmp_path):
+    from eval.run.runinfo import machine_info
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("processor\t: 0\nmodel name\t: Test CPU 9000\nflags\t\t: fpu sse4_2 avx avx2 avx512f\n\n"
+                       "processor\t: 1\nmodel name\t: Other CPU\nflags\t\t: fpu sse4_2\n")
+    m = machine_info(cpuinfo)
+    assert (m["cpu"], m["simd"]) == ("Test CPU 9000", "avx512f")  # the first block, the widest set
+    cpuinfo.write_text("processor\t: 0\nmodel name\t: Test CPU\nflags\t\t: fpu sse4_2 avx avx2\n")
+    assert machine_info(cpuinfo)["simd"] == "avx2"
+    cpuinfo.write_text("processor\t: 0\nFeatures\t: fp asimd evtstrm\nCPU part\t: 0xd0c\n")
+    assert machine_info(cpuinfo)["simd"] == "asimd"  # Arm spells its flags Features
+
+
+def test_machine_info_never_raises_on_an_unreadable_or_binary_cpuinfo(tmp_path):
+    from eval.run.runinfo import machine_info
+    junk = tmp_path / "junk"
+    junk.write_bytes(b"\xff\xfe\x00model name: \x80\n" * 10)
+    for path in (tmp_path / "absent", tmp_path, junk):
+        m = machine_info(path)
+        assert set(m) == {"cpu", "simd", "cores"} and m["simd"] is None

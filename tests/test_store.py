@@ -16,6 +16,7 @@ import pytest
 
 from eval.reproduce import main as reproduce_main
 from eval.run.result_store import ResultStore, case_identity, pair_key
+from eval.run.runinfo import machine_info
 from eval.run.subset import baseline_selection, check_baseline_cases
 from sshade.errors import SShaDeError
 
@@ -52,6 +53,7 @@ def test_store_keys_round_trip_and_clear(tmp_path):
     assert rec["row"] == {"case": "c/1", "method": "SShaDe+refine", "volume_err_pct": None, "n": 3, "error": "",
                           "time_s": 1.5}
     assert rec["info"] == {"per": [{"a": 1.5}]} and np.array_equal(st.load_mesh(rec, 5), np.ones((5, 3)))
+    assert rec["machine"] == machine_info()  # which machine made the row, beside the commit
     assert st.load("c/1", "SShaDe+refine", "other") is None  # stale key
     assert st.load("c/1", "ARAP", k1) is None
     (tmp_path / "runs" / "c_1" / "notes.txt").write_text("mine")

@@ -26,7 +26,7 @@ import numpy as np
 from eval.run.jsonsafe import json_safe
 from eval.run.names import safe_name
 from eval.run.outdir import alive
-from eval.run.runinfo import git_info
+from eval.run.runinfo import git_info, machine_info
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write, inside_folder
 from sshade.json_file import open_regular, read_json
@@ -304,6 +304,7 @@ class ResultStore:
         self.meshes = bool(meshes)
         self.annotate = annotate
         self._git = None  # the checkout's state, read once at the first save
+        self._machine = None  # the machine's, likewise
 
     def path(self, case: str, method: str) -> Path:
         """``runs/<case>/<method>.json`` (names through :func:`safe_name`), checked to lie
@@ -398,13 +399,16 @@ class ResultStore:
         """Store one finished run atomically (the mesh first, then the record naming it,
         with the :func:`output_digest` of ``U`` (n, 3) when the run gave one, the fields
         ``annotate`` adds, and its :func:`record_digest`); ``git``: the checkout's state, recorded beside
-        (default: :func:`eval.run.runinfo.git_info`, read once per store).
+        (default: :func:`eval.run.runinfo.git_info`, read once per store), as is the machine
+        (:func:`eval.run.runinfo.machine_info`).
         Returns the record's path. OSError propagates (the caller decides)."""
         if git is None:
             if self._git is None:
                 g = git_info()
                 self._git = {"commit": g.get("commit"), "dirty": g.get("dirty")}
             git = self._git
+        if self._machine is None:
+            self._machine = machine_info()
         p = self.path(case, method)
         p.parent.mkdir(parents=True, exist_ok=True)
         mesh = None
@@ -414,6 +418,7 @@ class ResultStore:
                 np.save(fh, np.asarray(U, dtype=np.float64), allow_pickle=False)
         rec = {"version": STORE_VERSION, "case": str(case), "method": str(method), "key": key, "key_fields": fields,
                "row": json_safe(row), "info": json_safe(info or {}), "mesh": mesh, "git": json_safe(git),
+               "machine": self._machine,
                "written_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
         if U is not None:
             rec["output"] = output_digest(U)

@@ -3,7 +3,8 @@
 Records: the resolved config, the departures from the paper that the config selects
 (:func:`departures`, docs/differences.md), the seeds used (dataset seed, per-case handle seeds,
 method seeds), the git commit of the project (and which tracked files had local
-changes), the Python version, the platform, the versions of the packages in
+changes), the Python version, the platform and the machine (:func:`machine_info`: CPU model,
+its widest SIMD set, cores), the versions of the packages in
 :data:`PACKAGES` (numerical libraries, Hydra and its launchers, matplotlib) and, per
 method, the source file of its class with its sha256 and git state
 (:func:`method_sources`: a plug-in's code is identified even outside this repository).
@@ -25,8 +26,9 @@ from pathlib import Path
 from sshade.files import atomic_write
 from sshade.json_file import read_json
 
-__all__ = ["PACKAGES", "package_versions", "git_info", "method_sources", "read_runinfo", "effective_params",
-           "source_record", "departures", "register_departures", "collect_runinfo", "write_runinfo"]
+__all__ = ["PACKAGES", "SIMD_LEVELS", "package_versions", "machine_info", "git_info", "method_sources",
+           "read_runinfo", "effective_params", "source_record", "departures", "register_departures",
+           "collect_runinfo", "write_runinfo"]
 
 #: distribution name -> import name (for a fallback ``__version__``).
 PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "pymeshlab",
@@ -35,6 +37,48 @@ PACKAGES = {"numpy": "numpy", "scipy": "scipy", "libigl": "igl", "pymeshlab": "p
             "hydra-submitit-launcher": "hydra_plugins", "submitit": "submitit"}
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
+
+#: CPU flags naming the SIMD sets vectorised kernels choose their code by, widest first
+#: (x86's, then Arm's as /proc/cpuinfo spells them).
+SIMD_LEVELS = ("avx512f", "avx2", "avx", "sse4_2", "sve", "asimd")
+_CPUINFO = Path("/proc/cpuinfo")
+_CPUINFO_MAX = 1 << 16
+
+
+def machine_info(cpuinfo: Path = _CPUINFO) -> dict:
+    """The machine a run computes on, recorded beside its results.
+
+    Why: vectorised kernels (PyTorch's, a BLAS's) pick their code by the CPU's widest SIMD
+    set, so one seeded computation can give other floats on another machine
+    (docs/methods.md, Implicit-ARAP); the record says which machine made a row.
+
+    Parameters
+    ----------
+    cpuinfo : the Linux CPU description to read (its first processor's block, at most
+        64 kB); elsewhere, or unreadable, the CPU is ``platform.processor()``.
+
+    Returns
+    -------
+    dict ``{"cpu": model name or None, "simd": the first of SIMD_LEVELS its flags name
+    or None, "cores": os.cpu_count()}``. Never raises.
+    """
+    fields: dict[str, str] = {}
+    try:
+        with open(cpuinfo, "rb") as fh:
+            text = fh.read(_CPUINFO_MAX).decode("utf-8", "replace")
+    except OSError:
+        text = ""
+    for line in text.splitlines():
+        if not line.strip():
+            if fields:
+                break
+            continue
+        key, _, value = line.partition(":")
+        fields.setdefault(key.strip().lower(), value.strip())
+    flags = set((fields.get("flags") or fields.get("features") or "").split())
+    cpu = fields.get("model name") or fields.get("cpu model") or platform.processor() or None
+    simd = next((s for s in SIMD_LEVELS if s in flags), None)
+    return {"cpu": cpu, "simd": simd, "cores": os.cpu_count()}
 
 
 def package_versions() -> dict[str, str | None]:
@@ -247,6 +291,7 @@ def collect_runinfo(resolved: dict, *, seeds: dict | None = None, extra: dict | 
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
+        "machine": machine_info(),
         "packages": package_versions(),
     }
     if extra:
