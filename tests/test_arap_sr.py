@@ -251,3 +251,4 @@ def test_compiled_sweep_matches_sparse_formula():
     assert np.abs(pb.sweep(U, R0.copy()) - want).max() < 1e-12
     Rs = np.asfortranarray(R0)
     assert np.abs(pb.sweep(U, Rs) - want).max() < 1e-12 and np.abs(Rs - want).max() < 1e-12
+

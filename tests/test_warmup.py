@@ -16,7 +16,8 @@ from sshade.mesh.validate import validate_handles, validate_mesh
 from sshade.warmup import tiny_problem, uses_parallel_kernels
 
 _KERNEL_MODULES = ["sshade.mesh.geodesic", "sshade.remesh", "sshade.mesh.halfedge", "sshade.mesh.validate",
-                   "sshade.projection", "sshade.arap.kernels", "sshade.arap.solver_kernels", "sshade.lrf"]
+                   "sshade.projection", "sshade.arap.kernels", "sshade.arap.solver_kernels", "sshade.arap.sr_local",
+                   "sshade.arap.smooth_rotations", "sshade.lrf"]
 
 
 def _specialisations() -> dict[str, int]:

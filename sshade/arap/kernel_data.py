@@ -13,7 +13,7 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import SShaDeError
 
-__all__ = ["KernelData", "rcm_order", "as_u32"]
+__all__ = ["KernelData", "rcm_order", "permute_csr", "as_u32"]
 
 
 def rcm_order(L) -> np.ndarray:
@@ -30,11 +30,22 @@ def rcm_order(L) -> np.ndarray:
     return np.asarray(reverse_cuthill_mckee(sp.csr_matrix(L), symmetric_mode=True), np.int64)
 
 
-def _permute_csr(ptr, idx, val, perm, inv):
+def permute_csr(ptr, idx, val, perm, inv):
     """Rows of a CSR taken in the order ``perm`` (row ``i`` of the result is row
-    ``perm[i]``), column indices mapped by ``inv``; the entries of a row keep their order.
-    ``val`` (nnz, ...) may be None. Returns ``(ptr, idx, val, src)`` with ``src`` the old
-    position of every entry."""
+    ``perm[i]``), column indices mapped by ``inv``; the entries of a row keep their order
+    (so a row's sum is rounded as before).
+
+    Parameters
+    ----------
+    ptr : (r + 1,) int row pointers; idx : (nnz,) int column indices or None; val :
+    (nnz, ...) values or None. perm : (r,) int64, ``perm[new] = old``; inv : (c,) int64
+    or None, new column numbers (None: kept).
+
+    Returns
+    -------
+    ``(ptr (r + 1,) int64, idx (nnz,) or None, val (nnz, ...) or None, src (nnz,) int64)``,
+    ``src`` the old position of every entry.
+    """
     lens = np.diff(ptr)[perm]
     nptr = np.zeros(len(perm) + 1, np.int64)
     np.cumsum(lens, out=nptr[1:])
@@ -95,14 +106,14 @@ class KernelData:
         perm = np.ascontiguousarray(perm, np.int64)
         inv = np.empty(n, np.int64)
         inv[perm] = np.arange(n, dtype=np.int64)
-        kt = _permute_csr(*kt, perm, inv)[:3]
-        kv = _permute_csr(*kv, perm, inv)[:3]
+        kt = permute_csr(*kt, perm, inv)[:3]
+        kv = permute_csr(*kv, perm, inv)[:3]
         es, ed = inv[ops.edges[:, 0]], inv[ops.edges[:, 1]]
         eperm = np.argsort(np.minimum(es, ed) * n + np.maximum(es, ed), kind="stable")
         einv = np.empty(len(eperm), np.int64)
         einv[eperm] = np.arange(len(eperm), dtype=np.int64)
         edges = np.ascontiguousarray(np.stack([es, ed], 1)[eperm])
-        cell_ptr, pair_edge, _, src = _permute_csr(ops.cell_ptr, ops.pair_edge, None, perm, einv)
+        cell_ptr, pair_edge, _, src = permute_csr(ops.cell_ptr, ops.pair_edge, None, perm, einv)
         return cls(perm, inv, _u32csr(kt), _u32csr(kv), as_u32(edges), np.ascontiguousarray(ops.edge_vec[eperm]),
                    np.ascontiguousarray(cell_ptr, np.uint64), as_u32(pair_edge), np.ascontiguousarray(ops.pair_w[src]),
                    np.ascontiguousarray(ops.edge_w[eperm], np.float64), einv)

@@ -19,7 +19,8 @@ try:  # numba is a dependency of the package; without it the numpy paths are use
 except ImportError:  # pragma: no cover
     nb = None
 
-__all__ = ["LANES", "polar_kernel", "energy_kernel", "fused_kernels", "fused", "warmup_energy_kernels"]
+__all__ = ["LANES", "polar_kernel", "energy_kernel", "fused_kernels", "fused", "sr_local_kernel",
+           "warmup_energy_kernels"]
 
 # Lanes of the polar kernel: LANES cells are decomposed together, every 3x3 quantity
 # stored as a row of LANES values of a scratch vector, so that the Jacobi sweeps are
@@ -377,6 +378,77 @@ if nb is not None:
                          warm, R, Ek, mode, edge_w, Et)
 
     @_njit
+    def _sr_lanes(k0, nl, cells, U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, a_ptr,
+                  a_idx, a_val, wR, Rold, R, Ek, S, W, Rl, no_tr):
+        """:func:`_sr_local_nb` on the cells ``cells[k0:k0 + nl]`` (``nl <= LANES``), in the
+        scratch ``S``, ``W``, ``Rl`` (LANES, 3, 3)."""
+        for l in range(nl):
+            k = cells[k0 + l]
+            m00 = 0.0; m01 = 0.0; m02 = 0.0
+            m10 = 0.0; m11 = 0.0; m12 = 0.0
+            m20 = 0.0; m21 = 0.0; m22 = 0.0
+            for jj in range(kt_ptr[k], kt_ptr[k + 1]):
+                j = kt_idx[jj]
+                a0 = kt_val[jj, 0]; a1 = kt_val[jj, 1]; a2 = kt_val[jj, 2]
+                u0 = U[j, 0]; u1 = U[j, 1]; u2 = U[j, 2]
+                m00 += a0 * u0; m01 += a1 * u0; m02 += a2 * u0
+                m10 += a0 * u1; m11 += a1 * u1; m12 += a2 * u1
+                m20 += a0 * u2; m21 += a1 * u2; m22 += a2 * u2
+            n00 = 0.0; n01 = 0.0; n02 = 0.0  # the neighbours' sum
+            n10 = 0.0; n11 = 0.0; n12 = 0.0
+            n20 = 0.0; n21 = 0.0; n22 = 0.0
+            for p in range(a_ptr[k], a_ptr[k + 1]):
+                j = a_idx[p]
+                c = a_val[p]
+                n00 += c * Rold[j, 0, 0]; n01 += c * Rold[j, 0, 1]; n02 += c * Rold[j, 0, 2]
+                n10 += c * Rold[j, 1, 0]; n11 += c * Rold[j, 1, 1]; n12 += c * Rold[j, 1, 2]
+                n20 += c * Rold[j, 2, 0]; n21 += c * Rold[j, 2, 1]; n22 += c * Rold[j, 2, 2]
+            S[_SM + 0 * LANES + l] = m00 + wR * n00
+            S[_SM + 1 * LANES + l] = m01 + wR * n01
+            S[_SM + 2 * LANES + l] = m02 + wR * n02
+            S[_SM + 3 * LANES + l] = m10 + wR * n10
+            S[_SM + 4 * LANES + l] = m11 + wR * n11
+            S[_SM + 5 * LANES + l] = m12 + wR * n12
+            S[_SM + 6 * LANES + l] = m20 + wR * n20
+            S[_SM + 7 * LANES + l] = m21 + wR * n21
+            S[_SM + 8 * LANES + l] = m22 + wR * n22
+        _polar_init(S, nl, W, 0, False)
+        _polar_jacobi(S)
+        _polar_finish(S)
+        _polar_store(S, nl, 0, W, False, Rl, no_tr)
+        for l in range(nl):
+            k = cells[k0 + l]
+            for a in range(3):
+                for c in range(3):
+                    R[k, a, c] = Rl[l, a, c]
+            if Ek.shape[0] > 0:
+                Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
+
+    @_njit
+    def _sr_local_nb(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, cells, bptr, a_ptr,
+                     a_idx, a_val, wR, Rold, R, Ek):
+        """ARAP-SR's local step on the cells ``cells`` (c,) int64 in the batches
+        ``cells[bptr[b]:bptr[b + 1]]`` one after the other, ``LANES`` cells at a time:
+        ``R[k] = polar(M_k + wR sum_j a_kj Rold[j])`` (``M_k`` the covariance as in
+        :func:`_local_block`, the weighted graph as the CSR ``a_*``, summed in its order),
+        then ``Ek[k]``, the cell's ARAP energy at ``R[k]`` (:func:`_cell_energy`). ``Rold``
+        may be ``R`` when no two cells of a batch are neighbours (Gauss-Seidel: a batch
+        reads the rotations the batches before it set)."""
+        S = np.empty(_SCRATCH)
+        W = np.empty((LANES, 3, 3))
+        Rl = np.empty((LANES, 3, 3))
+        no_tr = np.empty(0)
+        after = bptr.shape[0] > 2  # batches in turn: the energies in one pass in the cells' order after them
+        Eb = Ek[:0] if after else Ek
+        for b in range(bptr.shape[0] - 1):
+            for k0 in range(bptr[b], bptr[b + 1], LANES):
+                _sr_lanes(k0, min(LANES, bptr[b + 1] - k0), cells, U, kt_ptr, kt_idx, kt_val, edges, edge_vec,
+                          cell_ptr, pair_edge, pair_w, a_ptr, a_idx, a_val, wR, Rold, R, Eb, S, W, Rl, no_tr)
+        if after:
+            for k in range(R.shape[0]):
+                Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
+
+    @_njit
     def _rhs_row(i, v, kv_ptr, kv_idx, kv_val, R, sub, out):
         """``out[i] = K(R)[v] - sub[i]`` from row ``v`` of the CSR with 3-vector values
         ``kv_*`` (``kv_val[jj, d] = K_d[v, kv_idx[jj]]``): ``sum_k R[k] kv_val[jj]``, one
@@ -410,6 +482,7 @@ _ENERGY = None
 # and parallel apart (the OpenMP layer is not fork-safe with GNU libgomp: the worker
 # pools fork).
 _FUSED = {1: None, 2: None}
+_SR_LOCAL = None
 
 
 def polar_kernel():
@@ -445,6 +518,27 @@ def energy_kernel():
         except Exception:  # pragma: no cover - numba missing or broken
             _ENERGY = False
     return _ENERGY
+
+
+def sr_local_kernel():
+    """The compiled numba local step of ARAP-SR
+    ``(U, *KernelData.local_arrays(), cells, bptr, a_ptr, a_idx, a_val, wR, Rold, R, Ek)``
+    (every index array int64 but the kernel data's; :mod:`sshade.arap.smooth_rotations`),
+    or False when numba is unusable (then its numpy path)."""
+    global _SR_LOCAL
+    if _SR_LOCAL is None:
+        try:
+            if not energy_kernel():
+                raise RuntimeError("numba unusable")
+            U, kt, pairs, W = _tiny_fused_args()
+            one = np.array([0, 1, 2], np.int64)
+            graph = (one, np.array([1, 0], np.int64), np.ones(2))
+            _sr_local_nb(U, *kt, *pairs, np.arange(2, dtype=np.int64), np.array([0, 2], np.int64), *graph, 1.0, W,
+                         np.empty((2, 3, 3)), np.empty(2))
+            _SR_LOCAL = _sr_local_nb
+        except Exception:  # pragma: no cover - numba missing or broken
+            _SR_LOCAL = False
+    return _SR_LOCAL
 
 
 def _tiny_fused_args():

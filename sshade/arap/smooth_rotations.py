@@ -7,8 +7,9 @@ as-rigid-as-possible mesh animation", IEEE TVCG): its energy and its two protoco
 ``w_ij`` libigl's cotangent weights, ``A`` the surface area, ``c_i = 1 / valence``
 (``alpha_scaling="valence"``, Open3D's alpha) or 1 (``"none"``; :data:`ALPHA_SCALINGS`).
 :func:`solve_arap_sr` (converged: Gauss-Seidel local step over a vertex colouring,
-:class:`SRProblem`; Anderson), :func:`arap_sr_deform` (the paper protocol, §4.1). Derivation
-and sources: docs/implementation.md, "Implementation notes: sshade/arap/smooth_rotations.py".
+:class:`SRProblem`; Anderson), :func:`arap_sr_deform` (the paper protocol, §4.1); their
+iterations keep the rotations in :mod:`sshade.arap.sr_local`'s numbering. Derivation and
+sources: docs/implementation.md, "Implementation notes: sshade/arap/smooth_rotations.py".
 """
 from __future__ import annotations
 
@@ -22,11 +23,14 @@ from ..errors import SShaDeError
 from ..mesh.validate import validate_handles
 from .accelerate import Anderson
 from .criterion import gradient_norm
+from .kernels import sr_local_kernel
 from .linear import LaplacianSolver
 from .operators import bbox_diag, build_operators, fit_rotations
 from .options import ALPHA_SCALINGS, READS, SR_ENERGY, ArapOptions
 from .result import ArapResult
 from .rigid import rigid_fit
+from .solver import REORDER_MIN_VERTICES
+from .sr_local import SRLocal, edge_sq_sum
 
 __all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "arap_sr_deform", "smoothness_weights",
            "SR_ACCELERATIONS"]
@@ -35,20 +39,6 @@ __all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "arap_sr_deform", "sm
 SR_ACCELERATIONS = ("anderson", "none")
 
 clock = time.perf_counter
-
-
-@njit(cache=True, nogil=True)
-def _edge_sq_sum(Rf, s, d, we):  # pragma: no cover - compiled
-    """``sum_e we_e ||Rf[s_e] - Rf[d_e]||^2`` for (n, 9) ``Rf``, term by term."""
-    tot = 0.0
-    for e in range(len(s)):
-        a, b = s[e], d[e]
-        sq = 0.0
-        for k in range(9):
-            x = Rf[a, k] - Rf[b, k]
-            sq += x * x
-        tot += we[e] * sq
-    return tot
 
 
 @njit(cache=True, nogil=True)
@@ -172,6 +162,7 @@ class SRProblem:
                                  shape=(self.n, self.n))
         self.classes = colour_classes(self.n, ops.edges)
         self.adj.sort_indices()
+        self._kernel_setup()
         free = np.ones(self.n, bool)
         free[self.h] = False
         self.free = np.flatnonzero(free)
@@ -180,6 +171,13 @@ class SRProblem:
         self.factor_s = clock() - t0
         self._L_fb = ops.L[self.free][:, self.h]
         self.Lfb_T = self._L_fb @ self.T
+
+    def _kernel_setup(self) -> None:
+        """The fused local step (:class:`sshade.arap.sr_local.SRLocal`, in the reverse
+        Cuthill-McKee numbering from :data:`REORDER_MIN_VERTICES` vertices), or None when
+        numba is unusable (then the scipy / numpy path)."""
+        self.fused = SRLocal(self.ops, self.adj, self.classes, self.edge_w, self.wR,
+                             self.n >= REORDER_MIN_VERTICES) if sr_local_kernel() else None
 
     def set_targets(self, targets) -> None:
         """New ``targets`` ((h, 3) float64, one per handle) for the same handles: the
@@ -192,7 +190,9 @@ class SRProblem:
         """``sum_i c_i sum_{j in N(i)} ||R_i - R_j||_F^2`` (module docstring),
         dimensionless."""
         Rf = np.ascontiguousarray(R, np.float64).reshape(self.n, 9)
-        return 2.0 * float(_edge_sq_sum(Rf, self.ops.edges[:, 0], self.ops.edges[:, 1], self.edge_w))
+        ne = len(self.edge_w)
+        s, d = (np.ascontiguousarray(self.ops.edges[:, k], np.int64) for k in (0, 1))
+        return 2.0 * float(edge_sq_sum(Rf, s, d, self.edge_w, np.arange(ne, dtype=np.int64), np.empty(ne)))
 
     def energy(self, U: np.ndarray, R: np.ndarray) -> float:
         """``E(U, R)`` of the module docstring, mesh units^2."""
@@ -203,6 +203,52 @@ class SRProblem:
         every rotation at once from the previous ones, which may increase the energy; for
         measurements). ``R`` (n, 3, 3) float64 is updated in place and returned; ``U``
         (n, 3)."""
+        return self.local_step(U, R, jacobi)[0]
+
+    def local_step(self, U: np.ndarray, R: np.ndarray, jacobi: bool = False) -> tuple[np.ndarray, float]:
+        """:meth:`sweep` and the energy ``E(U, R)`` at its rotations (:meth:`energy`, the
+        same float): with numba one pass over the cells, each cell's ARAP term summed when
+        its rotation is set (:class:`sshade.arap.sr_local.SRLocal`), else the scipy /
+        numpy path then :meth:`energy`.
+
+        Parameters
+        ----------
+        U : (n, 3) float64. R : (n, 3, 3) float64, updated in place. jacobi : bool.
+
+        Returns
+        -------
+        ``(R, E)``: ``R`` itself; ``E`` float, mesh units^2.
+        """
+        Rk = self.to_work(R)
+        Rk, E = self.work_step(U, Rk, jacobi)
+        R[...] = self.from_work(Rk)
+        return R, E
+
+    # ----------------------------------------- the iterations' state: rotations "Rw"
+    def to_work(self, R: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) rotations as a new C-contiguous array in the numbering the iterations
+        keep them in (:class:`sshade.arap.sr_local.SRLocal`; the mesh's without numba)."""
+        return self.fused.to_kernel(R) if self.fused is not None else np.array(R, np.float64, order="C")
+
+    def from_work(self, Rw: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`to_work`: a new (n, 3, 3) array in the mesh's numbering."""
+        return self.fused.from_kernel(Rw) if self.fused is not None else np.array(Rw, np.float64)
+
+    def work_step(self, U: np.ndarray, Rw: np.ndarray, jacobi: bool = False) -> tuple[np.ndarray, float]:
+        """:meth:`local_step` on ``Rw`` ((n, 3, 3) of :meth:`to_work`, updated in place):
+        ``(Rw, E)``."""
+        if self.fused is not None:
+            return Rw, self.fused.step(U, Rw, jacobi)
+        Rw = self._sweep_numpy(U, Rw, jacobi)
+        return Rw, self.energy(U, Rw)
+
+    def work_rhs(self, Rw: np.ndarray) -> np.ndarray:
+        """``K(R)`` ((n, 3) float64, the mesh's numbering) of ``Rw`` (:meth:`to_work`), as
+        :meth:`sshade.arap.operators.ArapOperators.rhs` gives it."""
+        return self.fused.rhs(Rw) if self.fused is not None else self.ops.rhs(Rw)
+
+    def _sweep_numpy(self, U: np.ndarray, R: np.ndarray, jacobi: bool) -> np.ndarray:
+        """:meth:`sweep` without the fused kernel (scipy products, :func:`fit_rotations`)."""
         M = self.ops.covariances(U)
         if self.wR == 0:
             R[...] = fit_rotations(M)
@@ -258,15 +304,14 @@ class SRProblem:
         optimal rotations) until the relative decrease of a sweep is below ``rtol``.
         Returns ``(E, R)``."""
         R = self.ops.rotations(U) if R is None else np.array(R, np.float64)
-        E = self.energy(U, R)
+        E, Rw = self.energy(U, R), self.to_work(R)
         for _ in range(max_sweeps):
-            self.sweep(U, R)
-            En = self.energy(U, R)
+            En = self.work_step(U, Rw)[1]
             done = E - En <= rtol * abs(En)
             E = En
             if done:
                 break
-        return E, R
+        return E, self.from_work(Rw)
 
 
 def solve_arap_sr(V, F, handles, targets, options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
@@ -335,11 +380,12 @@ def solve_arap_sr(V, F, handles, targets, options: ArapOptions | None = None, *,
             "accelerate": accelerate,
             "n_colours": len(pb.classes), "n_fallback": 0, "n_sweeps": 1, "linear_solver": pb.solver.backend}
     opts = {"m": o.window(accelerate), "jacobi": o.jacobi, "reset": o.reset_on_reject}
-    U, R, it, status = _iterate(pb, U, pb.sweep(U, R, o.jacobi), crit, o.iteration_cap("converged"), accelerate,
-                                o.time_budget_s, opts, info)
+    Rw, E = pb.work_step(U, pb.to_work(R), o.jacobi)
+    U, Rw, it, status = _iterate(pb, (U, Rw, E), crit, o.iteration_cap("converged"), accelerate, o.time_budget_s,
+                                 opts, info)
     t2 = clock()
     return ArapResult(V=U, iterations=it, converged=status in ("converged", "rigid"), last_move=info.pop("move"),
-                      precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status, R=R))
+                      precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status, R=pb.from_work(Rw)))
 
 
 def _sr_options(options, who: str, problem: SRProblem | None) -> ArapOptions:
@@ -364,9 +410,10 @@ def _sr_options(options, who: str, problem: SRProblem | None) -> ArapOptions:
     return o
 
 
-def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opts, info):
-    """The iterations of :func:`solve_arap_sr` from the state ``(U, R)`` (``R`` the local
-    step at ``U``; ``opts``: ``m``, ``jacobi``, ``reset``): returns ``(U, R, iterations,
+def _iterate(pb: SRProblem, state, crit, max_iter, accelerate, time_budget_s, opts, info):
+    """The iterations of :func:`solve_arap_sr` from ``state = (U, R, E)`` (``R`` the local
+    step at ``U`` in the iterations' numbering, :meth:`SRProblem.to_work`; ``E`` its
+    energy; ``opts``: ``m``, ``jacobi``, ``reset``): returns ``(U, R, iterations,
     status)``, fills ``info``. ``K(R)`` of the accepted state is computed once, for the
     gradient test and the next global step."""
     t0 = clock()
@@ -374,11 +421,11 @@ def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opt
     zero_E = 1e-12 * 2.0 * pb.ops.rest_term
     # numpy passes: the serial loop kernels of sshade.arap were measured slower on this 12 n-long state
     acc = Anderson(opts["m"], 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
-    E, E_prev, it, move = pb.energy(U, R), np.inf, 0, 0.0
+    (U, R, E), E_prev, it, move = state, np.inf, 0, 0.0
     hist = [E]
     while True:
-        B = pb.ops.rhs(R)
-        gn = pb.gnorm(U, R, B)
+        B = pb.work_rhs(R)
+        gn = pb.gnorm(U, None, B)
         rel = 0.0 if abs(E) <= zero_E else ((E_prev - E) / abs(E) if np.isfinite(E_prev) else np.inf)
         status = ("converged" if it > 0 or abs(E) > zero_E else "rigid") if rel < crit.etol and gn < crit.gtol \
             else "max_iter" if it >= max_iter \
@@ -387,17 +434,15 @@ def _iterate(pb: SRProblem, U, R, crit, max_iter, accelerate, time_budget_s, opt
             status = "stalled"
         if status is not None:
             break
-        Ug = pb.global_step(U, R, B)
-        Rg = pb.sweep(Ug, R.copy(), jacobi)
-        Eg = pb.energy(Ug, Rg)
+        Ug = pb.global_step(U, None, B)
+        Rg, Eg = pb.work_step(Ug, R.copy(), jacobi)
         info["n_sweeps"] += 1
         Un, Rn, En = Ug, Rg, Eg
         if acc is not None:  # residual of the joint map (U, R) -> (Ug, Rg); alpha = 0: R = R*(U), U's only
             cand = acc.step(pb.pack(U, R if pb.wR > 0 else Rg), pb.pack(Ug, Rg))
             if cand is not None:
                 Ua, Ra = pb.unpack(cand, Ug)
-                Ra = pb.sweep(Ua, Ra, jacobi)
-                Ea = pb.energy(Ua, Ra)
+                Ra, Ea = pb.work_step(Ua, Ra, jacobi)
                 info["n_sweeps"] += 1
                 if Ea < Eg:
                     Un, Rn, En = Ua, Ra, Ea
@@ -477,34 +522,34 @@ def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: n
     if U.shape != (pb.n, 3) or not np.isfinite(U).all():
         raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
     U[pb.h] = pb.T
-    R = pb.sweep(U, np.broadcast_to(R0, (pb.n, 3, 3)).copy(), jacobi=True)
-    U, R, it, move, rel, status = _paper_iterations(pb, U, R, stop, o.tol * diag, crit, o.iteration_cap("paper"),
-                                                    o.time_budget_s)
+    state = (U, *pb.work_step(U, pb.to_work(np.broadcast_to(R0, (pb.n, 3, 3))), jacobi=True))
+    (U, Rw, E), it, move, rel, status = _paper_iterations(pb, state, stop, o.tol * diag, crit,
+                                                          o.iteration_cap("paper"), o.time_budget_s)
     t2 = time.perf_counter()
-    gn = pb.gnorm(U, R)
+    gn = pb.gnorm(U, None, pb.work_rhs(Rw))
     if status == "rule":
         status = "converged" if gn < crit.gtol and (stop == "move" or abs(rel) < crit.etol) else "stalled"
-    info.update(status=status, energy=pb.energy(U, R), gnorm=gn, rel_decrease=rel)
+    info.update(status=status, energy=E, gnorm=gn, rel_decrease=rel)
     return ArapResult(V=U, iterations=it, converged=status == "converged", last_move=move, precompute_s=t1 - t0,
-                      solve_s=t2 - t1, info=dict(info, R=R))
+                      solve_s=t2 - t1, info=dict(info, R=pb.from_work(Rw)))
 
 
-def _paper_iterations(pb: SRProblem, U, R, stop, thresh, crit, max_iter, time_budget_s):
-    """The iterations of :func:`arap_sr_deform` from ``(U, R)`` (``R`` the local step at
-    ``U``): ``(U, R, iterations, last_move, rel_decrease, status)`` with status ``"rule"``
-    (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
+def _paper_iterations(pb: SRProblem, state, stop, thresh, crit, max_iter, time_budget_s):
+    """The iterations of :func:`arap_sr_deform` from ``state = (U, R, E)`` (``R`` the
+    local step at ``U`` in the iterations' numbering, :meth:`SRProblem.to_work`; ``E`` its
+    energy): ``((U, R, E), iterations, last_move, rel_decrease, status)`` with status
+    ``"rule"`` (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
     t0 = time.perf_counter()
-    E, it, move, rel = pb.energy(U, R), 0, np.inf, np.inf
+    (U, R, E), it, move, rel = state, 0, np.inf, np.inf
     while True:
         if it >= max_iter:
-            return U, R, it, move, rel, "max_iter"
+            return (U, R, E), it, move, rel, "max_iter"
         if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-            return U, R, it, move, rel, "time_budget"
-        Un = pb.global_step(U, R)
-        R = pb.sweep(Un, R.copy(), jacobi=True)
-        En = pb.energy(Un, R)
+            return (U, R, E), it, move, rel, "time_budget"
+        Un = pb.global_step(U, None, pb.work_rhs(R))
+        R, En = pb.work_step(Un, R.copy(), jacobi=True)
         move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
         rel = (E - En) / abs(En) if En != 0 else 0.0
         U, E, it = Un, En, it + 1
         if (move < thresh) if stop == "move" else (abs(rel) < crit.etol):
-            return U, R, it, move, rel, "rule"
+            return (U, R, E), it, move, rel, "rule"
