@@ -378,22 +378,32 @@ if nb is not None:
                          warm, R, Ek, mode, edge_w, Et)
 
     @_njit
-    def _sr_lanes(k0, nl, cells, U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, a_ptr,
-                  a_idx, a_val, wR, Rold, R, Ek, S, W, Rl, no_tr):
-        """:func:`_sr_local_nb` on the cells ``cells[k0:k0 + nl]`` (``nl <= LANES``), in the
-        scratch ``S``, ``W``, ``Rl`` (LANES, 3, 3)."""
+    def _covariance(k, U, kt_ptr, kt_idx, kt_val, M):
+        """Cell ``k``'s covariance into ``M[k]`` (3, 3), as :func:`_local_block` sums it."""
+        m00 = 0.0; m01 = 0.0; m02 = 0.0
+        m10 = 0.0; m11 = 0.0; m12 = 0.0
+        m20 = 0.0; m21 = 0.0; m22 = 0.0
+        for jj in range(kt_ptr[k], kt_ptr[k + 1]):
+            j = kt_idx[jj]
+            a0 = kt_val[jj, 0]; a1 = kt_val[jj, 1]; a2 = kt_val[jj, 2]
+            u0 = U[j, 0]; u1 = U[j, 1]; u2 = U[j, 2]
+            m00 += a0 * u0; m01 += a1 * u0; m02 += a2 * u0
+            m10 += a0 * u1; m11 += a1 * u1; m12 += a2 * u1
+            m20 += a0 * u2; m21 += a1 * u2; m22 += a2 * u2
+        M[k, 0, 0] = m00; M[k, 0, 1] = m01; M[k, 0, 2] = m02
+        M[k, 1, 0] = m10; M[k, 1, 1] = m11; M[k, 1, 2] = m12
+        M[k, 2, 0] = m20; M[k, 2, 1] = m21; M[k, 2, 2] = m22
+
+    @_njit
+    def _sr_lanes(k0, nl, cells, M, a_ptr, a_idx, a_val, wR, Rold, R, S, W, Rl, no_tr):
+        """:func:`_sr_local_nb`'s rotations of the cells ``cells[k0:k0 + nl]`` (``nl <=
+        LANES``) from their covariances ``M`` (n, 3, 3), in the scratch ``S``, ``W``, ``Rl``
+        (LANES, 3, 3)."""
         for l in range(nl):
             k = cells[k0 + l]
-            m00 = 0.0; m01 = 0.0; m02 = 0.0
-            m10 = 0.0; m11 = 0.0; m12 = 0.0
-            m20 = 0.0; m21 = 0.0; m22 = 0.0
-            for jj in range(kt_ptr[k], kt_ptr[k + 1]):
-                j = kt_idx[jj]
-                a0 = kt_val[jj, 0]; a1 = kt_val[jj, 1]; a2 = kt_val[jj, 2]
-                u0 = U[j, 0]; u1 = U[j, 1]; u2 = U[j, 2]
-                m00 += a0 * u0; m01 += a1 * u0; m02 += a2 * u0
-                m10 += a0 * u1; m11 += a1 * u1; m12 += a2 * u1
-                m20 += a0 * u2; m21 += a1 * u2; m22 += a2 * u2
+            m00 = M[k, 0, 0]; m01 = M[k, 0, 1]; m02 = M[k, 0, 2]
+            m10 = M[k, 1, 0]; m11 = M[k, 1, 1]; m12 = M[k, 1, 2]
+            m20 = M[k, 2, 0]; m21 = M[k, 2, 1]; m22 = M[k, 2, 2]
             n00 = 0.0; n01 = 0.0; n02 = 0.0  # the neighbours' sum
             n10 = 0.0; n11 = 0.0; n12 = 0.0
             n20 = 0.0; n21 = 0.0; n22 = 0.0
@@ -421,32 +431,32 @@ if nb is not None:
             for a in range(3):
                 for c in range(3):
                     R[k, a, c] = Rl[l, a, c]
-            if Ek.shape[0] > 0:
-                Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
 
     @_njit
     def _sr_local_nb(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, cells, bptr, a_ptr,
-                     a_idx, a_val, wR, Rold, R, Ek):
+                     a_idx, a_val, wR, Rold, R, M, Ek):
         """ARAP-SR's local step on the cells ``cells`` (c,) int64 in the batches
         ``cells[bptr[b]:bptr[b + 1]]`` one after the other, ``LANES`` cells at a time:
-        ``R[k] = polar(M_k + wR sum_j a_kj Rold[j])`` (``M_k`` the covariance as in
-        :func:`_local_block`, the weighted graph as the CSR ``a_*``, summed in its order),
-        then ``Ek[k]``, the cell's ARAP energy at ``R[k]`` (:func:`_cell_energy`). ``Rold``
-        may be ``R`` when no two cells of a batch are neighbours (Gauss-Seidel: a batch
-        reads the rotations the batches before it set)."""
+        ``R[k] = polar(M_k + wR sum_j a_kj Rold[j])`` with ``M_k`` the covariance (as
+        :func:`_local_block` sums it; all of them first, in the cells' order, into the
+        scratch ``M`` (n, 3, 3)) and the weighted graph as the CSR ``a_*`` (summed in its
+        order); then ``Ek[k]`` (n,), every cell's ARAP energy at ``R[k]``
+        (:func:`_cell_energy`), in the cells' order. ``Rold`` may be ``R`` when no two
+        cells of a batch are neighbours (Gauss-Seidel: a batch reads the rotations the
+        batches before it set)."""
+        n = R.shape[0]
+        for k in range(n):
+            _covariance(k, U, kt_ptr, kt_idx, kt_val, M)
         S = np.empty(_SCRATCH)
         W = np.empty((LANES, 3, 3))
         Rl = np.empty((LANES, 3, 3))
         no_tr = np.empty(0)
-        after = bptr.shape[0] > 2  # batches in turn: the energies in one pass in the cells' order after them
-        Eb = Ek[:0] if after else Ek
         for b in range(bptr.shape[0] - 1):
             for k0 in range(bptr[b], bptr[b + 1], LANES):
-                _sr_lanes(k0, min(LANES, bptr[b + 1] - k0), cells, U, kt_ptr, kt_idx, kt_val, edges, edge_vec,
-                          cell_ptr, pair_edge, pair_w, a_ptr, a_idx, a_val, wR, Rold, R, Eb, S, W, Rl, no_tr)
-        if after:
-            for k in range(R.shape[0]):
-                Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
+                _sr_lanes(k0, min(LANES, bptr[b + 1] - k0), cells, M, a_ptr, a_idx, a_val, wR, Rold, R, S, W, Rl,
+                          no_tr)
+        for k in range(n):
+            Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
 
     @_njit
     def _rhs_row(i, v, kv_ptr, kv_idx, kv_val, R, sub, out):
@@ -522,7 +532,7 @@ def energy_kernel():
 
 def sr_local_kernel():
     """The compiled numba local step of ARAP-SR
-    ``(U, *KernelData.local_arrays(), cells, bptr, a_ptr, a_idx, a_val, wR, Rold, R, Ek)``
+    ``(U, *KernelData.local_arrays(), cells, bptr, a_ptr, a_idx, a_val, wR, Rold, R, M, Ek)``
     (every index array int64 but the kernel data's; :mod:`sshade.arap.smooth_rotations`),
     or False when numba is unusable (then its numpy path)."""
     global _SR_LOCAL
@@ -534,7 +544,7 @@ def sr_local_kernel():
             one = np.array([0, 1, 2], np.int64)
             graph = (one, np.array([1, 0], np.int64), np.ones(2))
             _sr_local_nb(U, *kt, *pairs, np.arange(2, dtype=np.int64), np.array([0, 2], np.int64), *graph, 1.0, W,
-                         np.empty((2, 3, 3)), np.empty(2))
+                         np.empty((2, 3, 3)), np.empty((2, 3, 3)), np.empty(2))
             _SR_LOCAL = _sr_local_nb
         except Exception:  # pragma: no cover - numba missing or broken
             _SR_LOCAL = False

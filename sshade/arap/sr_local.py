@@ -85,6 +85,7 @@ class SRLocal:
         self.jacobi_order = (every, np.array([0, n], np.int64))
         self.gs = gs_order([np.sort(kd.inv[c]) for c in classes])
         self.rows = as_u32(every)
+        self._M = np.empty((n, 3, 3))  # the kernel's covariances (scratch)
         self.threads = resolve_threads(None, n)
 
     def to_kernel(self, R: np.ndarray) -> np.ndarray:
@@ -109,7 +110,7 @@ class SRLocal:
             order = self.jacobi_order
         else:
             Rold, order = Rk, self.gs
-        sr_local_kernel()(Uk, *self.kd.local_arrays(), *order, *self.graph, self.wR, Rold, Rk, Ek)
+        sr_local_kernel()(Uk, *self.kd.local_arrays(), *order, *self.graph, self.wR, Rold, Rk, self._M, Ek)
         E = float(Ek[self.inv].sum())  # in the mesh's order
         return 2.0 * E + self.wR * (self.smoothness(Rk) if self.wR > 0 else 0.0)
 
