@@ -38,6 +38,7 @@ HELP = {
     "-m examples.twisted_bar": ["usage: python -m examples.twisted_bar", "outputs/twisted_bar"],
     "benchmarks/arap_iteration.py": ["usage:", "--mesh"],
     "benchmarks/arap_sr_local.py": ["usage:", "alpha"],
+    "benchmarks/arap_sr_iteration.py": ["usage:", "--iters"],
     "benchmarks/defaust_blend.py": ["usage:", "repeats"],
     "benchmarks/checked_once.py": ["usage:", "--repeats"],
     "benchmarks/bounds.py": ["usage:", "--repeats"],
