@@ -67,3 +67,24 @@ def test_gauss_seidel_order_is_the_colour_classes_and_the_solve_reaches_the_same
     assert got.info["status"] in ("converged", "stalled") and got.info["gnorm"] < 1e-6  # stalled: float64's floor
     assert abs(got.info["energy"] - want.info["energy"]) <= 1e-12 * want.info["energy"]
     assert np.abs(got.V - want.V).max() < 1e-8 * np.ptp(V, 0).max()
+
+
+def test_two_threads_sharing_a_problem_get_each_their_own_local_step(monkeypatch):
+    """The fused local step keeps no state between calls (its scratch is the call's): two
+    threads sweeping different states of one problem at once get what each gets alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from sshade.arap import smooth_rotations
+
+    monkeypatch.setattr(smooth_rotations, "REORDER_MIN_VERTICES", 0)
+    V, F, h, T = twisted_bar(**TWISTED)
+    pb = SRProblem(V, F, h, T, 0.05)
+    rng = np.random.default_rng(5)
+    states = [(V + 0.05 * rng.standard_normal(V.shape), pb.ops.rotations(V + 0.02 * rng.standard_normal(V.shape)))
+              for _ in range(2)]
+    alone = [pb.local_step(U, R.copy()) for U, R in states]
+    for _ in range(3):
+        with ThreadPoolExecutor(2) as ex:
+            both = list(ex.map(lambda st: pb.local_step(st[0], st[1].copy()), states))
+        for (Ra, Ea), (Rb, Eb) in zip(alone, both):
+            assert np.array_equal(Ra, Rb) and Ea == Eb

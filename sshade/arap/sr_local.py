@@ -1,7 +1,8 @@
-"""ARAP-SR's per-iteration products in one numbering: the local step as one numba pass over
-the cells (:func:`sshade.arap.kernels.sr_local_kernel`: covariance, the neighbours'
-rotations, polar decomposition and the cell's energy together), the right-hand side
-``K(R)`` and the smoothness sum, on rotations kept in the reverse Cuthill-McKee numbering
+"""ARAP-SR's per-iteration products in one numbering: the local step as one numba call
+(:func:`sshade.arap.kernels.sr_local_kernel`: every cell's covariance, then the
+neighbours' rotations and the polar decompositions batch by batch, then every cell's
+energy), the right-hand side ``K(R)`` and the smoothness sum, on rotations kept in the
+reverse Cuthill-McKee numbering
 of large meshes (:func:`sshade.arap.kernel_data.rcm_order`), where the kernels' gathers hit
 the cache; the mesh's numbering below :data:`sshade.arap.solver.REORDER_MIN_VERTICES`.
 Every sum keeps the mesh's order, so each number is the one the scipy formulas give in the
@@ -19,6 +20,7 @@ from .kernels import sr_local_kernel
 from .threads import resolve_threads
 
 __all__ = ["SRLocal", "edge_sq_sum", "gs_order"]
+
 
 @njit(cache=True, nogil=True)
 def edge_sq_sum(Rf, s, d, we, order, buf):  # pragma: no cover - compiled
@@ -85,7 +87,6 @@ class SRLocal:
         self.jacobi_order = (every, np.array([0, n], np.int64))
         self.gs = gs_order([np.sort(kd.inv[c]) for c in classes])
         self.rows = as_u32(every)
-        self._M = np.empty((n, 3, 3))  # the kernel's covariances (scratch)
         self.threads = resolve_threads(None, n)
 
     def to_kernel(self, R: np.ndarray) -> np.ndarray:
@@ -110,7 +111,8 @@ class SRLocal:
             order = self.jacobi_order
         else:
             Rold, order = Rk, self.gs
-        sr_local_kernel()(Uk, *self.kd.local_arrays(), *order, *self.graph, self.wR, Rold, Rk, self._M, Ek)
+        M = np.empty((self.n, 3, 3))  # the covariances (scratch of this call: two threads may share a problem)
+        sr_local_kernel()(Uk, *self.kd.local_arrays(), *order, *self.graph, self.wR, Rold, Rk, M, Ek)
         E = float(Ek[self.inv].sum())  # in the mesh's order
         return 2.0 * E + self.wR * (self.smoothness(Rk) if self.wR > 0 else 0.0)
 
