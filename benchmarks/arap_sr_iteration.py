@@ -39,17 +39,13 @@ def _defaust_cases(a):
 
 def _hard_case(a):
     """(name, V, F, handles, targets) of ``--mesh`` at ``--size``, the scaling experiment's edit."""
+    from frames import mesh_entry, sized_mesh  # this script's folder, as run
+
     from eval.datasets.shapes import axis_handles, axis_landmarks
-    from eval.experiments.scaling.mesh_set import MeshEntry
-    from eval.experiments.scaling.scaling_experiment import size_mesh
-    from sshade.mesh.io import read_mesh
-    name, _, path = a.mesh.partition("=")
-    hard = path.endswith(":hard")
-    entry = MeshEntry(name, path[:-5] if hard else path, not hard)
-    V0, F0 = read_mesh(entry.path)
-    _, V, F, _ = size_mesh(entry, V0, F0, a.size, Path(a.cache))
+    entry = mesh_entry(a.mesh)
+    V, F, V0 = sized_mesh(entry, a.size, Path(a.cache))
     h, T, _, _ = axis_handles(V, *axis_landmarks(V0))
-    yield f"{name} ({entry.kind})", V, F, h, T
+    yield f"{entry.name} ({entry.kind})", V, F, h, T
 
 
 def main(argv=None) -> int:

@@ -52,7 +52,7 @@ DEFAULT_MESHES = ["armadillo=../shared/data/classic/armadillo.obj", "centaur=../
 TARGETS = {200_000: 0.100, 1_000_000: 0.300}  # the frame targets (s) at about these sizes
 
 
-def _entry(spec: str) -> MeshEntry:
+def mesh_entry(spec: str) -> MeshEntry:
     """``NAME=PATH[:hard]`` as a scaling-set entry."""
     name, sep, path = spec.partition("=")
     if not sep or not name or not path:
@@ -61,7 +61,7 @@ def _entry(spec: str) -> MeshEntry:
     return MeshEntry(name, path[:-5] if hard else path, not hard)
 
 
-def _mesh(entry: MeshEntry, size: int, cache: Path):
+def sized_mesh(entry: MeshEntry, size: int, cache: Path):
     """The entry's mesh at ``size`` (built and cached on first use) and its base mesh."""
     V0, F0 = read_mesh(entry.path)
     _, V, F, _ = size_mesh(entry, V0, F0, size, cache)
@@ -101,7 +101,7 @@ def _frames(a, p, h, rest, T_end, rows: list, label: str) -> tuple[np.ndarray, n
 
 def _one(a, entry: MeshEntry, size: int, frames: list) -> dict:
     """The row of one mesh at one size (module docstring)."""
-    V, F, V0 = _mesh(entry, size, Path(a.cache))
+    V, F, V0 = sized_mesh(entry, size, Path(a.cache))
     lm, center, axes = axis_landmarks(V0)
     h, T_end, _, _ = axis_handles(V, lm, center, axes)
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
@@ -158,7 +158,7 @@ def _table(rows: list) -> str:
 
 
 def main(a) -> int:
-    entries = [_entry(s) for s in (a.mesh or DEFAULT_MESHES)]
+    entries = [mesh_entry(s) for s in (a.mesh or DEFAULT_MESHES)]
     for e in entries:
         if not Path(e.path).is_file():
             raise SShaDeError(f"mesh {e.name!r}: {e.path} not found")
