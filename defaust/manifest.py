@@ -228,7 +228,7 @@ def subset_words(m: dict) -> str | None:
     ``n_subjects`` - 1, or FAUST's 10); None for a build of every subject.
 
     >>> subset_words({"parameters": {"subjects": [0, 1], "n_subjects": 10}})
-    'subject(s) 0, 1, 8 of its 10 not built'
+    'subject(s) 0, 1 (8 of its 10 not built)'
     >>> subset_words({"parameters": {"subjects": None, "n_subjects": 10}}) is None
     True
     """
@@ -241,7 +241,7 @@ def subset_words(m: dict) -> str | None:
     if not missing:
         return None
     shown = ", ".join(map(str, held[:8])) + (" ..." if len(held) > 8 else "")
-    return f"subject(s) {shown}, {len(missing)} of its {total} not built"
+    return f"subject(s) {shown} ({len(missing)} of its {total} not built)"
 
 
 def subset_problem(m: dict, where) -> str | None:
@@ -252,7 +252,7 @@ def subset_problem(m: dict, where) -> str | None:
     if words is None:
         return None
     held = ",".join(map(str, m["parameters"]["subjects"]))
-    return (f"{where}: a DeFAUST build of {words} (built with subjects=[{held}]): load those with "
+    return (f"{where}: a DeFAUST build of {words}, built with subjects=[{held}]: load those with "
             f"defaust.load(..., subjects=[{held}]) (the evaluator: dataset.subjects=[{held}]) or partial=True, or "
             "add the others by running its build command again without subjects (python -m defaust out=FOLDER)")
 

@@ -109,8 +109,8 @@ def test_a_build_of_some_subjects_is_not_loaded_as_the_whole_dataset(tmp_path):
     out = tmp_path / "some"
     build_defaust(config_from_omegaconf(compose_config(
         ["preset=ci", "source=synthetic", "n_subjects=2", "subjects=[1]", f"out={out}", "progress=false"])))
-    with pytest.raises(SShaDeError, match=r"a DeFAUST build of subject\(s\) 1, 1 of its 2 not built \(built with "
-                                          r"subjects=\[1\]\): load those with defaust.load\(\.\.\., subjects=\[1\]\)"):
+    with pytest.raises(SShaDeError, match=r"a DeFAUST build of subject\(s\) 1 \(1 of its 2 not built\), built with "
+                                          r"subjects=\[1\]: load those with defaust.load\(\.\.\., subjects=\[1\]\)"):
         load(out)
     assert [c.name for c in load(out, subjects=[1])] == [c.name for c in load(out, partial=True)] == \
         ["s01_p01", "s01_p02", "s01_p03", "s01_p04"]
@@ -119,7 +119,7 @@ def test_a_build_of_some_subjects_is_not_loaded_as_the_whole_dataset(tmp_path):
                        cwd=ROOT, env=subprocess_env(), timeout=300)
     assert r.returncode == 0
     first, canon = r.stdout.strip().splitlines()
-    assert first == f"{out}: every file matches its manifest; a build of subject(s) 1, 1 of its 2 not built"
+    assert first == f"{out}: every file matches its manifest; a build of subject(s) 1 (1 of its 2 not built)"
     assert canon.startswith(f"{out}: not the canonical DeFAUST")  # a ci build of the synthetic source
 
 
