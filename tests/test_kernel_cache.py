@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -88,6 +89,22 @@ def test_a_failing_child_leaves_its_group_to_the_caller(tmp_path, monkeypatch):
     assert ("b", me) in runs and ("a", me) in runs  # the caller ran both groups itself
     assert any(g == "a" and pid != me for g, pid in runs)  # the child tried its group
     assert kernel_cache.compile_kernels(split=True) == 0.0  # once per process
+
+
+def test_the_childs_group_is_reported_with_the_childs_own_seconds_not_the_load_here(tmp_path, monkeypatch):
+    log = tmp_path / "runs.jsonl"
+    me = os.getpid()
+    _fake_groups(monkeypatch, log, lambda: time.sleep(0.6) if os.getpid() != me else None)
+    lines: list[str] = []
+    kernel_cache.compile_kernels(split=True, show_notice=False, progress=lines.append)
+    assert [ln.split(":")[0] for ln in lines] == ["b", "a"]  # this process's group first, then the child's
+    assert re.fullmatch(r"b: \d+\.\d s", lines[0])
+    m = re.fullmatch(r"a: (\d+\.\d) s in a second process, beside the first \((\d+\.\d) s to load here\)", lines[1])
+    assert m and float(m[1]) >= 0.6 > float(m[2])  # the child's sleep, not the caller's quick run
+    monkeypatch.setattr(kernel_cache, "_FILLED", [False])
+    lines.clear()
+    kernel_cache.compile_kernels(split=False, show_notice=False, progress=lines.append)
+    assert [re.fullmatch(r"[ab]: \d+\.\d s", ln) is not None for ln in lines] == [True, True]
 
 
 def test_an_interrupted_caller_leaves_no_child_behind(tmp_path, monkeypatch):
