@@ -41,6 +41,7 @@ HELP = {
     "benchmarks/arap_sr_iteration.py": ["usage:", "--iters"],
     "benchmarks/defaust_blend.py": ["usage:", "repeats"],
     "benchmarks/checked_once.py": ["usage:", "--repeats"],
+    "benchmarks/plan_probe.py": ["usage:", "--copies"],
     "benchmarks/bounds.py": ["usage:", "--repeats"],
     "benchmarks/fullres_defaust.py": ["usage:", "--code"],
     "benchmarks/implicit_arap_weights.py": ["usage:", "trials"],

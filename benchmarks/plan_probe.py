@@ -1,0 +1,125 @@
+"""What the plan's probe says against what the solvers do, on this machine: the numbers
+that calibrate ``eval/run/machine_speed.py`` across machines, measured in one run.
+
+    python benchmarks/plan_probe.py [--rounds 5] [--copies 2]
+
+Each line is one kind of work, timed as its wall seconds, the least of ``--rounds`` rounds
+after an untimed one (numba's cache loaded, or compiled once there):
+
+- ``probe, threads``: ``probe_seconds()`` as the plan runs it (``--copies`` threads in this
+  process; the plan's factor is it over ``PROBE_REFERENCE_S``);
+- ``probe, 1 copy``: the same work alone;
+- ``probe, processes``: the same work in ``--copies`` spawned worker processes at once
+  (``harness.jobs.run_jobs``, one core each, as the evaluator runs its pairs);
+- ``ARAP-SR paper, twisted bar``: ``baselines.ARAPSR(alpha=0.01, alpha_scaling="valence",
+  protocol="paper", max_iter=30)`` on ``sshade.arap.problems`` ``twisted_bar`` (5,136
+  vertices), in this process at the default threads (as the asv benchmark
+  ``fullres.ArapSrPaper`` times it), then in ``--copies`` spawned processes at once;
+- ``Elastic, twisted bar``: ``baselines.Elastic()`` (converged) on the same case, the same two
+  ways (its iterations are printed: they may differ by a few across machines).
+
+A process line's round is the slowest copy's, among the rounds every copy ran while all
+the others were running too. Run it quiet; record: benchmarks/records/machine_speed.md.
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import subprocess
+import time
+
+from harness.jobs import run_jobs
+
+_STATE: dict = {}
+
+
+def _probe_inputs():
+    from eval.run import machine_speed as ms
+    return ms._work, ms._inputs()
+
+
+def _solver(kind: str):
+    from baselines import ARAPSR, Elastic
+    from sshade.arap.problems import CASES
+    V, F, h, T = CASES["twisted_bar"]()
+    if kind == "srpaper":
+        method = ARAPSR(alpha=0.01, alpha_scaling="valence", protocol="paper", max_iter=30)
+    else:
+        method = Elastic()
+
+    def run():
+        method.deform(V, F, h, T)
+        return method.info.get("iterations")
+    return run
+
+
+def _setup(kind: str) -> None:
+    """A worker's ``init``: its work made ready and run once, untimed."""
+    if kind == "probe":
+        work, inputs = _probe_inputs()
+        _STATE["run"] = lambda: work(inputs)
+    else:
+        _STATE["run"] = _solver(kind)
+    _STATE["run"]()
+
+
+def _rounds(rounds: int) -> list[tuple[float, float]]:
+    """A worker's job: ``rounds`` timed rounds, each as (start, end) on the shared monotonic clock."""
+    out = []
+    for _ in range(rounds):
+        t = time.perf_counter()
+        _STATE["run"]()
+        out.append((t, time.perf_counter()))
+    return out
+
+
+def in_processes(kind: str, copies: int, rounds: int) -> float:
+    """The least round of ``copies`` spawned workers running ``kind`` at once (module docstring)."""
+    got: list = []
+    run_jobs(_rounds, [(rounds,)] * copies, workers=copies, init=_setup, init_args=(kind,),
+             on_result=lambda i, r: got.append(r))
+    lo = max(r[0][0] for r in got)   # every copy has started
+    hi = min(r[-1][1] for r in got)  # no copy has ended
+    inside = [[e - s for s, e in r if s >= lo and e <= hi] for r in got]
+    if all(inside) and len(inside) == copies:
+        return max(min(x) for x in inside)
+    return max(min(e - s for s, e in r) for r in got)
+
+
+def here(kind: str, rounds: int) -> tuple[float, object]:
+    """The least round of ``kind`` in this process (default threads), after an untimed one,
+    and the iterations its run reported (None for the probe)."""
+    _setup(kind)
+    return min(e - s for s, e in _rounds(rounds)), _STATE["run"]()
+
+
+def _cpu() -> str:
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        return next(ln.split(":", 1)[1].strip() for ln in out.splitlines() if ln.startswith("Model name"))
+    except (OSError, StopIteration, subprocess.SubprocessError):
+        return platform.processor() or "unknown"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--copies", type=int, default=2)
+    a = ap.parse_args()
+    from eval.run import machine_speed as ms
+    commit = subprocess.run(["git", "rev-parse", "--short=8", "HEAD"], capture_output=True, text=True).stdout.strip()
+    print(f"machine: {_cpu()}; commit {commit}; PROBE_REFERENCE_S {ms.PROBE_REFERENCE_S}")
+    rows = [("probe, threads", min(ms.probe_seconds(threads=a.copies) for _ in range(a.rounds))),
+            ("probe, 1 copy", min(ms.probe_seconds(threads=1) for _ in range(a.rounds))),
+            ("probe, processes", in_processes("probe", a.copies, a.rounds))]
+    for kind, label in (("srpaper", "ARAP-SR paper, twisted bar"), ("elastic", "Elastic, twisted bar")):
+        seconds, iterations = here(kind, a.rounds)
+        rows.append((f"{label}, this process ({iterations} iterations)", seconds))
+        rows.append((f"{label}, processes", in_processes(kind, a.copies, a.rounds)))
+    print("| work | seconds |\n|---|---:|")
+    for label, s in rows:
+        print(f"| {label} | {s:.4f} |")
+
+
+if __name__ == "__main__":
+    main()
