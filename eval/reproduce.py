@@ -25,8 +25,16 @@ from eval.experiments import find_experiment
 from eval.report import find_chromium
 from eval.run.outdir import REPRODUCE_ENV
 from eval.run.pending_rows import STOP_AFTER_ENV, mark_run_pending, marked_pending, marked_run, short_commit
-from eval.run.runinfo import REPO_ROOT
-from eval.run.stale_rows import CommitTrees, check_folders, record_paths, rekey_record, run_folders, table_problems
+from eval.run.runinfo import REPO_ROOT, machine_info, machine_words
+from eval.run.stale_rows import (
+    CommitTrees,
+    check_folders,
+    record_paths,
+    rekey_record,
+    row_machines,
+    run_folders,
+    table_problems,
+)
 from eval.run.stale_runs import is_whole_run, whole_run_folders, whole_run_state
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
@@ -166,6 +174,8 @@ def main(argv=None) -> int:
     p.add_argument("--budget", help="regenerate the stale rows of the table and sweep steps that fit in DURATION "
                                     "(600s, 90m, 2h), oldest code first, then the most-cited tables; the rows left "
                                     "stay in their tables marked pending")
+    p.add_argument("--any-machine", action="store_true", help="compute a table's or sweep's rows here even where its "
+                                                               "rows were timed on another machine only")
     p.add_argument("--rekey", action="store_true", help="no computation: re-key the records of results/ written "
                                                          "under the earlier key layout, from the commit that made "
                                                          "each (git must have it)")
@@ -176,6 +186,8 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if (a.json or a.strict) and not a.check:
         p.error("--json and --strict go with --check")
+    if a.any_machine and (a.check or a.rekey or a.retabulate):
+        p.error("--any-machine goes with a run or --budget, not with --check, --rekey or --retabulate")
     if sum(map(bool, (a.check, a.rekey, a.retabulate, a.budget is not None))) > 1:
         p.error("--check, --rekey, --retabulate and --budget are separate commands: give one")
     if a.check or a.rekey:
@@ -335,26 +347,49 @@ def _citations(folder: Path) -> int:
     return sum(len(pat.findall(t.read_text(errors="replace"))) for t in texts if t.is_file())
 
 
-def _budget_order(selected) -> tuple[list, list]:
+def _stored_folders(cmd: list[str]) -> tuple[list[Path], bool]:
+    """``(run folders, has rows)`` of a step: the table steps' folder (a result store,
+    ``out_dir=``) or the sweep steps' job folders (``hydra.sweep.dir=``) when the step
+    resumes them with ``jobs=1`` (what a stop needs), else none; ``has rows``: the step
+    keeps a result store at all."""
+    folder = step_folder(cmd)
+    sweep = any(x.startswith("hydra.sweep.dir=") for x in cmd)
+    rows = folder is not None and (sweep or (folder / "runs").is_dir())
+    stored = rows and "resume=true" in cmd and "jobs=1" in cmd
+    return ([] if not stored else run_folders(folder) if sweep else [folder]), rows
+
+
+def other_machine(folders, here: str | None) -> str | None:
+    """Why rows of ``folders`` should not be computed on machine ``here``
+    (:func:`eval.run.runinfo.machine_words`): their records were all timed on other machines,
+    and a table cannot tell two machines' times apart. None when one of them is ``here``,
+    none says its machine, or ``here`` is unknown."""
+    machines = row_machines(folders)
+    if here is None or not machines or here in machines:
+        return None
+    made = "; ".join(f"{n} on {w}" for w, n in sorted(machines.items(), key=lambda kv: (-kv[1], kv[0])))
+    return (f"its rows were timed on another machine ({made}) and this one is {here}: one table cannot tell "
+            "their times apart (--any-machine computes them here anyway)")
+
+
+def _budget_order(selected, any_machine: bool = False) -> tuple[list, list]:
     """``(steps with stale rows, in the order --budget runs them, other steps not run)``:
-    the table steps (a result store, one folder: ``out_dir=``) and the sweep steps (one
-    store per job folder under ``hydra.sweep.dir=``), each resumed with ``jobs=1``, ordered
-    by the oldest commit among their stale rows, then by how often the docs cite their
-    folder (most first). Each comes as ``(name, command, its run folders)``."""
+    the table and sweep steps (:func:`_stored_folders`), each resumed with ``jobs=1``,
+    ordered by the oldest commit among their stale rows, then by how often the docs cite
+    their folder (most first). Each comes as ``(name, command, its run folders, why not
+    here)``: why not here is :func:`other_machine`'s reason (None with ``any_machine``)."""
     runs, skipped, times = [], [], {}
+    here = None if any_machine else machine_words(machine_info())
     with CommitTrees() as trees:
         for name, cmd in selected:
-            folder = step_folder(cmd)
-            sweep = any(x.startswith("hydra.sweep.dir=") for x in cmd)
-            rows = folder is not None and (sweep or (folder / "runs").is_dir())
-            stored = rows and "resume=true" in cmd and "jobs=1" in cmd  # what a stop needs
-            folders = [] if not stored else run_folders(folder) if sweep else [folder]
+            folders, rows = _stored_folders(cmd)
             states = check_folders(folders, trees)
             commits = {c for ms in states.values() for v in ms.values() for c in v["commits"]}
             if commits:
-                runs.append((min(_commit_time(c, times) for c in commits), -_citations(folder), name, cmd, folders))
+                runs.append((min(_commit_time(c, times) for c in commits), -_citations(step_folder(cmd)), name, cmd,
+                             folders, other_machine(folders, here)))
             else:
-                skipped.append((name, "no stale row" if stored else "not run with resume=true jobs=1, which a stop "
+                skipped.append((name, "no stale row" if folders else "not run with resume=true jobs=1, which a stop "
                                 "needs" if rows else "not a table or sweep step (a whole run)"))
     return [r[2:] for r in sorted(runs, key=lambda r: r[:2])], skipped
 
@@ -366,23 +401,27 @@ def _run_budget(a, budget: float) -> int:
     no job of a sweep after that moment, :func:`eval.run.pending_rows.share_stop`; the pairs
     left keep their stored rows, marked pending in the tables); a step with no time left is
     not started and its tables are rebuilt to mark its stale rows (``python -m
-    eval.tables``). A pair already running finishes: a step may overrun its share by one
-    pair. Exit 1 if a step failed."""
+    eval.tables``), and so is a step whose rows were all timed on other machines
+    (:func:`other_machine`; ``--any-machine`` runs it). A pair already running finishes: a
+    step may overrun its share by one pair. Exit 1 if a step failed."""
     selected = _selected(a)
     if selected is None:
         return 2
     _print_plan(selected)
-    order, skipped = _budget_order(selected)
+    order, skipped = _budget_order(selected, a.any_machine)
     for name, why in skipped:
         print(f"== {name}: not run under --budget ({why})", flush=True)
     t0, failed = time.monotonic(), []
-    for name, cmd, folders in order:
+    for name, cmd, folders, elsewhere in order:
         left = budget - (time.monotonic() - t0)
         if a.dry_run:
-            print(f"== {name}: {' '.join(cmd[1:])} ({STOP_AFTER_ENV}=what is left of {budget:.0f} s)", flush=True)
+            print(f"== {name}: " + (f"not run ({elsewhere})" if elsewhere else
+                                    f"{' '.join(cmd[1:])} ({STOP_AFTER_ENV}=what is left of {budget:.0f} s)"),
+                  flush=True)
             continue
-        if left < 1:
-            print(f"== {name}: no time left in the budget; its stale rows are marked pending", flush=True)
+        if left < 1 or elsewhere:
+            print(f"== {name}: {f'not run ({elsewhere})' if elsewhere else 'no time left in the budget'}; its stale "
+                  "rows are marked pending", flush=True)
             rc = subprocess.call([sys.executable, "-m", "eval.tables", *map(str, folders)], env=step_env())
         else:
             print(f"== {name}: {' '.join(cmd[1:])} ({STOP_AFTER_ENV}={left:.0f})", flush=True)
@@ -399,18 +438,25 @@ def _run_budget(a, budget: float) -> int:
 
 
 def _run_steps(a) -> int:
-    """Run every step as its own process; 1 (after one ``error:`` line) if any failed."""
+    """Run every step as its own process, but a table or sweep step whose rows were all timed
+    on other machines (:func:`other_machine`; its tables rebuilt to mark its stale rows
+    instead, unless ``--any-machine``); 1 (after one ``error:`` line) if any failed."""
     failed = []
     selected = _selected(a)
     if selected is None:
         return 2
     _print_plan(selected)
+    here = None if a.any_machine else machine_words(machine_info())
     for name, cmd in selected:
-        print(f"== {name}: {' '.join(cmd[1:])}", flush=True)
+        folders, _ = _stored_folders(cmd)
+        elsewhere = other_machine(folders, here)
+        print(f"== {name}: " + (f"not run ({elsewhere}); its stale rows are marked pending" if elsewhere
+                                else " ".join(cmd[1:])), flush=True)
         if a.dry_run:
             continue
         t = time.perf_counter()
-        rc = subprocess.call(cmd, env=step_env())
+        rc = subprocess.call([sys.executable, "-m", "eval.tables", *map(str, folders)] if elsewhere else cmd,
+                             env=step_env())
         print(f"== {name}: exit {rc} after {time.perf_counter() - t:.0f} s", flush=True)
         if rc != 0:
             failed.append(name)

@@ -291,6 +291,41 @@ def test_budget_takes_a_sweep_step_with_stale_rows(tmp_path):
     assert "== sweep_arap_sr_alpha: -m eval.sweeps " in r.stdout
     assert "(SSHADE_STOP_AFTER_S=what is left of 3600 s)" in r.stdout
     assert "not run under --budget" not in r.stdout
+    # the same rows timed on another machine: not computed here, unless asked
+    other = {"cpu": "Elsewhere CPU", "simd": "avx2", "cores": 2}
+    resign_current(tree / "results" / "sweeps" / "arap_sr_alpha", str(ROOT), other)  # stale in the edited tree
+    r = _reproduce(tree, "--only", "sweep_arap_sr_alpha", "--budget", "1h", "--dry-run")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert ("== sweep_arap_sr_alpha: not run (its rows were timed on another machine (24 on Elsewhere CPU, avx2, "
+            "2 cores) and this one is ") in r.stdout
+    r = _reproduce(tree, "--only", "sweep_arap_sr_alpha", "--budget", "1h", "--dry-run", "--any-machine")
+    assert "== sweep_arap_sr_alpha: -m eval.sweeps " in r.stdout
+
+
+def test_rows_timed_on_other_machines_only_are_not_computed_here_and_say_where_they_were(tmp_path):
+    """:func:`eval.reproduce.other_machine` reads the machines of a folder's records: None
+    when one of them is this machine, when none says its machine (older records, a link, an
+    unreadable file) or when this machine is unknown; else the reason, with the count per
+    machine, most first."""
+    from eval.reproduce import other_machine
+    from eval.run.runinfo import machine_words
+    a = {"cpu": "AMD EPYC", "simd": "avx2", "cores": 2}
+    b = {"cpu": "Intel Xeon", "simd": "avx512f", "cores": 2}
+    folder = tmp_path / "run"
+    for i, m in enumerate([a, a, b, None]):
+        d = folder / "runs" / f"s00_p0{i}"
+        d.mkdir(parents=True)
+        (d / "ARAP.json").write_text(json.dumps({"machine": m}))
+    (folder / "runs" / "s00_p00" / "Elastic.json").write_text("{not json")
+    (folder / "runs" / "s00_p01" / "Elastic.json").symlink_to(folder / "runs" / "s00_p02" / "ARAP.json")
+    here = machine_words({"cpu": "Arm Neoverse", "simd": "asimd", "cores": 8})
+    why = other_machine([folder], here)
+    assert why.startswith("its rows were timed on another machine (2 on AMD EPYC, avx2, 2 cores; 1 on Intel Xeon, "
+                          "avx512f, 2 cores) and this one is Arm Neoverse, asimd, 8 cores")
+    assert "--any-machine" in why
+    assert other_machine([folder], machine_words(b)) is None  # one of them is this machine
+    assert other_machine([folder], None) is None
+    assert other_machine([tmp_path / "empty"], here) is None
 
 
 @pytest.mark.slow  # about a minute: the evaluator on the 8 FAUST cases for 20 s, then the tables

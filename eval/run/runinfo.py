@@ -26,7 +26,7 @@ from pathlib import Path
 from sshade.files import atomic_write
 from sshade.json_file import read_json
 
-__all__ = ["PACKAGES", "SIMD_LEVELS", "package_versions", "machine_info", "git_info", "method_sources",
+__all__ = ["PACKAGES", "SIMD_LEVELS", "package_versions", "machine_info", "machine_words", "git_info", "method_sources",
            "read_runinfo", "effective_params", "source_record", "departures", "register_departures",
            "collect_runinfo", "write_runinfo"]
 
@@ -79,6 +79,18 @@ def machine_info(cpuinfo: Path = _CPUINFO) -> dict:
     cpu = fields.get("model name") or fields.get("cpu model") or platform.processor() or None
     simd = next((s for s in SIMD_LEVELS if s in flags), None)
     return {"cpu": cpu, "simd": simd, "cores": os.cpu_count()}
+
+
+def machine_words(m) -> str | None:
+    """A machine of :func:`machine_info` in words, the same for two records of one machine:
+    ``"AMD EPYC, avx2, 2 cores"``; None for anything without a CPU name (an older record).
+
+    >>> machine_words({"cpu": "AMD EPYC", "simd": "avx2", "cores": 2}), machine_words(None)
+    ('AMD EPYC, avx2, 2 cores', None)
+    """
+    if not isinstance(m, dict) or not isinstance(m.get("cpu"), str) or not m["cpu"].strip():
+        return None
+    return f"{m['cpu'].strip()}, {m.get('simd') or 'simd unknown'}, {m.get('cores')} cores"
 
 
 def package_versions() -> dict[str, str | None]:

@@ -48,13 +48,13 @@ from eval.run.result_store import (
     record_digest,
 )
 from eval.run.row_check import check_rows, read_cases
-from eval.run.runinfo import REPO_ROOT
+from eval.run.runinfo import REPO_ROOT, machine_words
 from sshade.errors import SShaDeError
 from sshade.json_file import read_json
 
 __all__ = ["REKEY_FROM", "CommitTrees", "RowState", "record_paths", "run_folders", "changed_since", "row_state",
            "check_folders", "settings_marks", "table_problems", "rekey_record", "references_on",
-           "folder_states", "current_code"]
+           "folder_states", "current_code", "row_machines"]
 
 #: The folders of scripts whose runs are held to their code besides the packages
 #: (:mod:`eval.run.stale_runs`): extracted with them.
@@ -158,6 +158,20 @@ def record_paths(folder) -> Iterator[tuple[str, Path]]:
             continue
         for p in sorted(d.glob("*.json")):
             yield d.name, p
+
+
+def row_machines(folders) -> dict[str, int]:
+    """How many records under ``folders`` (run folders) each machine made, by
+    :func:`eval.run.runinfo.machine_words`; records without a machine (older ones), links
+    and unreadable ones are not counted."""
+    counts: dict[str, int] = {}
+    for folder in folders:
+        for _, p in record_paths(folder):
+            rec = None if p.is_symlink() or not p.is_file() else _read_json(p)
+            words = machine_words(rec.get("machine")) if isinstance(rec, dict) else None
+            if words is not None:
+                counts[words] = counts.get(words, 0) + 1
+    return counts
 
 
 def _read_json(p: Path):
