@@ -25,7 +25,7 @@ from eval.run.compared import COMPARED_CSV, COMPARED_RECORD, SETTINGS, checked_c
 from eval.run.outdir import refuse_results
 from eval.run.pending_rows import marked_pending, pending_markdown, pending_title, strip_pending
 from eval.run.row_check import check_rows, checked_cases
-from eval.run.stale_rows import CommitTrees, folder_states, settings_marks
+from eval.run.stale_rows import CommitTrees, folder_states, row_machines, settings_marks
 from harness.command import run_command
 from sshade.command_errors import ArgumentParser
 from sshade.files import atomic_write
@@ -37,7 +37,7 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: not when `python
 __all__ = ["summarize", "write_tables", "retabulate", "to_markdown", "to_latex", "ok_mask", "common_cases", "compare",
            "all_note", "Comparison", "comparison_markdown", "main_note", "failure_lines", "ALL_CASES_HEADING",
            "COMMON_CASES_HEADING", "INTERVAL_COLUMNS", "case_intervals", "common_case_values", "compared_lines",
-           "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines", "PROTOCOL_TEXT"]
+           "TABLE_COLUMNS", "EXTRA_COLUMNS", "method_order_key", "stop_lines", "PROTOCOL_TEXT", "machines_line"]
 
 #: Columns never averaged (identifiers, seeds).
 _ID_COLUMNS = ("case", "subject", "pose", "method", "error", "case_seed", "seeds", "seed")
@@ -446,6 +446,9 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     marks = pending_markdown(pending)
     if marks:
         line += "\n\n" + marks
+    machines = machines_line(row_machines([out_dir], pairs=tabled))
+    if machines:
+        line += "\n\n" + machines
     title = pending_title(title, pending)
     paths["table_md"] = _write_text(comparison_markdown(comp, title=title, stops=stops, failures=failure_lines(df),
                                                         checked=line, intervals=case_intervals(df, comp)),
@@ -453,6 +456,24 @@ def write_tables(df: pd.DataFrame, out_dir, *, title: str | None = None, cases: 
     note = " ".join(x for x in [main_note(comp), "; ".join(stop_lines(df, short=True))] if x) or None
     paths["table_tex"] = _write_text(to_latex(comp.main, note=note, bold=comp.same_cases), out_dir / "table.tex")
     return paths
+
+
+def machines_line(machines: dict[str, int]) -> str | None:
+    """The line ``table.md`` gets when its rows' records were timed on more than one machine
+    (``machines``: :func:`eval.run.stale_rows.row_machines` of its rows), else None: their
+    Time columns are not one machine's.
+
+    >>> machines_line({"AMD EPYC, avx2, 2 cores": 3})
+    >>> two = machines_line({"AMD EPYC, avx2, 2 cores": 3, "Intel Xeon, avx512f, 2 cores": 1})
+    >>> two[:93]
+    '**Timed on 2 machines**: 3 rows on AMD EPYC, avx2, 2 cores; 1 on Intel Xeon, avx512f, 2 cores'
+    """
+    if len(machines) < 2:
+        return None
+    ranked = sorted(machines.items(), key=lambda kv: (-kv[1], kv[0]))
+    made = "; ".join(f"{n} rows on {w}" if i == 0 else f"{n} on {w}" for i, (w, n) in enumerate(ranked))
+    return (f"**Timed on {len(machines)} machines**: {made} (each row's record names its machine): their times "
+            "are not one machine's, so a Time compares only within one.")
 
 
 def _written_title(run_dir: Path) -> str | None:

@@ -361,3 +361,28 @@ def test_table_md_states_each_means_interval_over_the_common_cases_whatever_the_
     assert md.split("### ")[0] == (out2 / "table.md").read_text().split("### ")[0]
     assert intervals.split("\n\n")[1] == (out2 / "table.md").read_text().split(
         "interval of the mean over the 2 cases")[1].split("\n\n")[1]
+
+
+def test_a_table_whose_rows_were_timed_on_two_machines_says_so_with_the_counts(tmp_path):
+    """``table.md`` of a folder whose records name one machine says nothing of machines; with
+    two of its records re-signed as another machine's, rebuilt, it names both with their
+    counts (most first), and only the rows it tabulates count."""
+    from eval.run.result_store import record_digest
+    from eval.tables import retabulate
+
+    from .conftest import ROOT
+    from .current_rows import current_copy
+    run = current_copy(ROOT / "results" / "faust", tmp_path / "faust")  # every record this machine's
+    retabulate(run)
+    assert "Timed on" not in (run / "table.md").read_text()
+    other = {"cpu": "Elsewhere CPU", "simd": "avx2", "cores": 2}
+    for p in (run / "runs" / "s0_p1" / "ARAP.json", run / "runs" / "s0_p1" / "Elastic.json"):
+        rec = json.loads(p.read_text())
+        rec["machine"] = other
+        rec["digest"] = record_digest(rec)
+        p.write_text(json.dumps(rec, indent=1) + "\n")
+    retabulate(run)
+    text = (run / "table.md").read_text()
+    n = sum(1 for _ in (run / "runs").glob("*/*.json"))
+    assert f"**Timed on 2 machines**: {n - 2} rows on " in text
+    assert "; 2 on Elsewhere CPU, avx2, 2 cores (each row's record names its machine)" in text

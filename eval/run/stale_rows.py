@@ -160,13 +160,16 @@ def record_paths(folder) -> Iterator[tuple[str, Path]]:
             yield d.name, p
 
 
-def row_machines(folders) -> dict[str, int]:
+def row_machines(folders, pairs=None) -> dict[str, int]:
     """How many records under ``folders`` (run folders) each machine made, by
     :func:`eval.run.runinfo.machine_words`; records without a machine (older ones), links
-    and unreadable ones are not counted."""
+    and unreadable ones are not counted. ``pairs``: a set of ``(case, method)`` to count
+    alone (None: every record)."""
     counts: dict[str, int] = {}
     for folder in folders:
-        for _, p in record_paths(folder):
+        for case, p in record_paths(folder):
+            if pairs is not None and (case, p.stem) not in pairs:
+                continue
             rec = None if p.is_symlink() or not p.is_file() else _read_json(p)
             words = machine_words(rec.get("machine")) if isinstance(rec, dict) else None
             if words is not None:
