@@ -29,6 +29,7 @@ from eval.run.runinfo import REPO_ROOT, machine_info, machine_words
 from eval.run.stale_rows import (
     CommitTrees,
     check_folders,
+    folder_states,
     record_paths,
     rekey_record,
     row_machines,
@@ -359,13 +360,28 @@ def _stored_folders(cmd: list[str]) -> tuple[list[Path], bool]:
     return ([] if not stored else run_folders(folder) if sweep else [folder]), rows
 
 
-def other_machine(folders, here: str | None) -> str | None:
+def other_machine(folders, here: str | None, trees: CommitTrees | None = None) -> str | None:
     """Why rows of ``folders`` should not be computed on machine ``here``
-    (:func:`eval.run.runinfo.machine_words`): their records were all timed on other machines,
-    and a table cannot tell two machines' times apart. None when one of them is ``here``,
-    none says its machine, or ``here`` is unknown."""
-    machines = row_machines(folders)
-    if here is None or not machines or here in machines:
+    (:func:`eval.run.runinfo.machine_words`): the records a resumed run keeps were all timed
+    on other machines, and a table cannot tell two machines' times apart. With ``trees``
+    only a folder with both stale rows (computed again) and current ones counts, and only
+    its current records (where none of them names its machine, every record of the folder);
+    without, every record. None when one of them is ``here``, none says its machine, no
+    folder mixes, or ``here`` is unknown."""
+    if here is None:
+        return None
+    machines: dict[str, int] = {}
+    for f in folders:
+        kept = None
+        if trees is not None:
+            states = folder_states(f, trees)
+            kept = {(s.case, s.method) for s in states if not s.stale}
+            if not kept or len(kept) == len(states):
+                continue  # every row computed again, or none: no two machines' rows in one table
+        counts = row_machines([f], pairs=kept) or row_machines([f])  # kept rows of unknown machine: the folder's
+        for w, n in counts.items():
+            machines[w] = machines.get(w, 0) + n
+    if not machines or here in machines:
         return None
     made = "; ".join(f"{n} on {w}" for w, n in sorted(machines.items(), key=lambda kv: (-kv[1], kv[0])))
     return (f"its rows were timed on another machine ({made}) and this one is {here}: one table cannot tell "
@@ -387,7 +403,7 @@ def _budget_order(selected, any_machine: bool = False) -> tuple[list, list]:
             commits = {c for ms in states.values() for v in ms.values() for c in v["commits"]}
             if commits:
                 runs.append((min(_commit_time(c, times) for c in commits), -_citations(step_folder(cmd)), name, cmd,
-                             folders, other_machine(folders, here)))
+                             folders, other_machine(folders, here, trees)))
             else:
                 skipped.append((name, "no stale row" if folders else "not run with resume=true jobs=1, which a stop "
                                 "needs" if rows else "not a table or sweep step (a whole run)"))
@@ -449,7 +465,8 @@ def _run_steps(a) -> int:
     here = None if a.any_machine else machine_words(machine_info())
     for name, cmd in selected:
         folders, _ = _stored_folders(cmd)
-        elsewhere = other_machine(folders, here)
+        with CommitTrees() as trees:
+            elsewhere = other_machine(folders, here, trees)
         print(f"== {name}: " + (f"not run ({elsewhere}); its stale rows are marked pending" if elsewhere
                                 else " ".join(cmd[1:])), flush=True)
         if a.dry_run:

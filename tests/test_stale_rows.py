@@ -20,12 +20,13 @@ import pytest
 
 from eval.run.code_identity import PACKAGES
 from eval.run.pending_rows import marked_pending
-from eval.run.result_store import STORE_VERSION, ResultStore, pair_key, record_digest
+from eval.run.result_store import STORE_VERSION, ResultStore, fields_digest, pair_key, record_digest
 from eval.run.stale_rows import (
     REKEY_FROM,
     CommitTrees,
     changed_since,
     check_folders,
+    current_code,
     record_paths,
     references_on,
     rekey_record,
@@ -291,12 +292,23 @@ def test_budget_takes_a_sweep_step_with_stale_rows(tmp_path):
     assert "== sweep_arap_sr_alpha: -m eval.sweeps " in r.stdout
     assert "(SSHADE_STOP_AFTER_S=what is left of 3600 s)" in r.stdout
     assert "not run under --budget" not in r.stdout
-    # the same rows timed on another machine: not computed here, unless asked
+    # every row stale and timed on another machine: all computed here again, no table mixes
     other = {"cpu": "Elsewhere CPU", "simd": "avx2", "cores": 2}
-    resign_current(tree / "results" / "sweeps" / "arap_sr_alpha", str(ROOT), other)  # stale in the edited tree
+    sweep = tree / "results" / "sweeps" / "arap_sr_alpha"
+    resign_current(sweep, str(ROOT), other)  # current at the unedited checkout: stale in the edited tree
+    r = _reproduce(tree, "--only", "sweep_arap_sr_alpha", "--budget", "1h", "--dry-run")
+    assert "== sweep_arap_sr_alpha: -m eval.sweeps " in r.stdout, r.stderr[-3000:]
+    # one job's row current, its others stale, all of another machine: not computed here, unless asked
+    job = sorted(p for p in sweep.iterdir() if (p / "runs").is_dir())[0]
+    rec_path = sorted((job / "runs").glob("*/*.json"))[0]
+    rec = json.loads(rec_path.read_text())
+    rec["key_fields"]["code"] = current_code(rec["key_fields"], str(tree))
+    rec["key"] = fields_digest(rec["key_fields"])
+    rec["digest"] = record_digest(rec)
+    rec_path.write_text(json.dumps(rec, indent=1) + "\n")
     r = _reproduce(tree, "--only", "sweep_arap_sr_alpha", "--budget", "1h", "--dry-run")
     assert r.returncode == 0, r.stderr[-3000:]
-    assert ("== sweep_arap_sr_alpha: not run (its rows were timed on another machine (24 on Elsewhere CPU, avx2, "
+    assert ("== sweep_arap_sr_alpha: not run (its rows were timed on another machine (1 on Elsewhere CPU, avx2, "
             "2 cores) and this one is ") in r.stdout
     r = _reproduce(tree, "--only", "sweep_arap_sr_alpha", "--budget", "1h", "--dry-run", "--any-machine")
     assert "== sweep_arap_sr_alpha: -m eval.sweeps " in r.stdout
