@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 from unittest import mock
 
 import pytest
@@ -14,11 +15,12 @@ from .optional import found
 
 
 def _steps(capsys, *argv) -> dict[str, str]:
-    """The steps ``--dry-run`` lists, each as ``name -> its arguments``; without the plan
-    of stored rows before them (each step's rows held to the commits that made them,
-    seconds per step; test_the_plan_before_any_step... tests it)."""
+    """The steps ``--dry-run --any-machine`` lists (every command, on any machine), each as
+    ``name -> its arguments``; without the plan of stored rows before them (each step's rows
+    held to the commits that made them, seconds per step; test_the_plan_before_any_step...
+    tests it)."""
     with mock.patch.object(reproduce, "_print_plan", lambda selected: None):
-        assert main(["--dry-run", *argv]) == 0
+        assert main(["--dry-run", "--any-machine", *argv]) == 0
     out = capsys.readouterr().out.splitlines()
     return {line.split(":")[0][3:]: line.split(": ", 1)[1] for line in out if line.startswith("== ")}
 
@@ -88,6 +90,27 @@ def test_only_runs_the_named_steps(capsys):
     assert list(steps) == ["faust", "pose_transfer"]
     assert main(["--dry-run", "--only", "nope"]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_a_step_adding_rows_beside_another_machines_is_not_run_and_says_whose(capsys):
+    """Without ``--any-machine``, on a machine none of defaust_paper's current rows was timed on
+    (the EPYC's; its first record taken as stale, whatever the committed state), the dry run
+    lists the step as not run, naming the machine and the count, and the rows it leaves
+    marked pending."""
+    from dataclasses import replace
+    real = reproduce.folder_states
+
+    def one_stale(folder, trees):
+        return [replace(s, stale=True) if i == 0 else s for i, s in enumerate(real(folder, trees))]
+    elsewhere = {"cpu": "Elsewhere CPU", "simd": "sve", "cores": 64}
+    with mock.patch.object(reproduce, "_print_plan", lambda selected: None), \
+            mock.patch.object(reproduce, "machine_info", lambda: elsewhere), \
+            mock.patch.object(reproduce, "folder_states", one_stale):
+        assert main(["--dry-run", "--only", "defaust_paper"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("== defaust_paper: "))
+    assert line.startswith("== defaust_paper: not run (its rows were timed on another machine (")
+    assert "and this one is Elsewhere CPU, sve, 64 cores" in line and line.endswith("its stale rows are marked pending")
+    assert re.search(r"\((\d+) on AMD EPYC, avx2, 2 cores\)", line)
 
 
 def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(capsys):
