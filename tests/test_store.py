@@ -166,7 +166,7 @@ def test_baseline_subset_rules():
 def test_defaust_default_is_per_pose(capsys):
     from omegaconf import OmegaConf
     assert OmegaConf.load(ROOT / "conf" / "dataset" / "defaust.yaml").baseline_cases == "per_pose"
-    assert reproduce_main(["--dry-run", "--only", "defaust,defaust_paper"]) == 0
+    assert reproduce_main(["--dry-run", "--any-machine", "--only", "defaust,defaust_paper"]) == 0
     lines = {ln.split(":")[0]: ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("== ")}
     for step in ("== defaust", "== defaust_paper"):  # every method on all 40 DeFAUST cases
         assert "dataset.baseline_cases=all" in lines[step] and "dataset.limit" not in lines[step]
