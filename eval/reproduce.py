@@ -463,10 +463,10 @@ def _run_steps(a) -> int:
         return 2
     _print_plan(selected)
     here = None if a.any_machine else machine_words(machine_info())
+    with CommitTrees() as trees:  # before any step: each step writes its own folders only
+        why = {name: other_machine(_stored_folders(cmd)[0], here, trees) for name, cmd in selected}
     for name, cmd in selected:
-        folders, _ = _stored_folders(cmd)
-        with CommitTrees() as trees:
-            elsewhere = other_machine(folders, here, trees)
+        folders, elsewhere = _stored_folders(cmd)[0], why[name]
         print(f"== {name}: " + (f"not run ({elsewhere}); its stale rows are marked pending" if elsewhere
                                 else " ".join(cmd[1:])), flush=True)
         if a.dry_run:
