@@ -6,11 +6,11 @@ that calibrate ``eval/run/machine_speed.py`` across machines, measured in one ru
 Each line is one kind of work, timed as its wall seconds, the least of ``--rounds`` rounds
 after an untimed one (numba's cache loaded, or compiled once there):
 
-- ``probe, threads``: ``probe_seconds()`` as the plan runs it (``--copies`` threads in this
-  process; the plan's factor is it over ``PROBE_REFERENCE_S``);
-- ``probe, 1 copy``: the same work alone;
-- ``probe, processes``: the same work in ``--copies`` spawned worker processes at once
-  (``harness.jobs.run_jobs``, one core each, as the evaluator runs its pairs);
+- ``probe, runs`` and ``probe, build``: ``probe_seconds()`` as the plan runs it (``--copies``
+  spawned processes at once, ``harness.jobs.run_jobs``, one core each, as the evaluator runs
+  its pairs; the plan's factors are these over ``PROBE_REFERENCE_S``), the least of
+  ``--rounds`` calls;
+- the same with 1 copy: the work alone;
 - ``ARAP-SR paper, twisted bar``: ``baselines.ARAPSR(alpha=0.01, alpha_scaling="valence",
   protocol="paper", max_iter=30)`` on ``sshade.arap.problems`` ``twisted_bar`` (5,136
   vertices), in this process at the default threads (as the asv benchmark
@@ -33,11 +33,6 @@ from harness.jobs import run_jobs
 _STATE: dict = {}
 
 
-def _probe_inputs():
-    from eval.run import machine_speed as ms
-    return ms._work, ms._inputs()
-
-
 def _solver(kind: str):
     from baselines import ARAPSR, Elastic
     from sshade.arap.problems import CASES
@@ -55,11 +50,7 @@ def _solver(kind: str):
 
 def _setup(kind: str) -> None:
     """A worker's ``init``: its work made ready and run once, untimed."""
-    if kind == "probe":
-        work, inputs = _probe_inputs()
-        _STATE["run"] = lambda: work(inputs)
-    else:
-        _STATE["run"] = _solver(kind)
+    _STATE["run"] = _solver(kind)
     _STATE["run"]()
 
 
@@ -88,7 +79,7 @@ def in_processes(kind: str, copies: int, rounds: int) -> float:
 
 def here(kind: str, rounds: int) -> tuple[float, object]:
     """The least round of ``kind`` in this process (default threads), after an untimed one,
-    and the iterations its run reported (None for the probe)."""
+    and the iterations its run reported."""
     _setup(kind)
     return min(e - s for s, e in _rounds(rounds)), _STATE["run"]()
 
@@ -109,9 +100,11 @@ def main() -> None:
     from eval.run import machine_speed as ms
     commit = subprocess.run(["git", "rev-parse", "--short=8", "HEAD"], capture_output=True, text=True).stdout.strip()
     print(f"machine: {_cpu()}; commit {commit}; PROBE_REFERENCE_S {ms.PROBE_REFERENCE_S}")
-    rows = [("probe, threads", min(ms.probe_seconds(threads=a.copies) for _ in range(a.rounds))),
-            ("probe, 1 copy", min(ms.probe_seconds(threads=1) for _ in range(a.rounds))),
-            ("probe, processes", in_processes("probe", a.copies, a.rounds))]
+    rows = []
+    for copies in (a.copies, 1):
+        got = [ms.probe_seconds(copies=copies) for _ in range(a.rounds)]
+        rows += [(f"probe, {k}, {copies} cop{'ies' if copies > 1 else 'y'}", min(g[k] for g in got))
+                 for k in ms.PROBE_KINDS]
     for kind, label in (("srpaper", "ARAP-SR paper, twisted bar"), ("elastic", "Elastic, twisted bar")):
         seconds, iterations = here(kind, a.rounds)
         rows.append((f"{label}, this process ({iterations} iterations)", seconds))

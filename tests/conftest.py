@@ -32,7 +32,7 @@ def _reference_cache(tmp_path_factory):
 @pytest.fixture(scope="session", autouse=True)
 def _plan_speed_fixed():
     """The evaluator's plan takes the priors as measured (factor 1) instead of timing this
-    machine with its probe (about 1 s per process, eval/run/machine_speed.py), unless the
+    machine with its probe (3-6 s per process, eval/run/machine_speed.py), unless the
     caller already fixed it; child processes inherit it. tests/test_machine_speed.py
     runs the probe itself."""
     from eval.run.machine_speed import SPEED_ENV

@@ -15,28 +15,38 @@ from sshade.errors import SShaDeError
 @pytest.fixture
 def no_env(monkeypatch):
     monkeypatch.delenv(ms.SPEED_ENV, raising=False)
-    ms._probe_once.cache_clear()
+    ms._PROBED.clear()
     yield
-    ms._probe_once.cache_clear()
+    ms._PROBED.clear()
 
 
-def test_probe_is_positive_and_refuses_a_bad_repeat_count():
-    assert ms.probe_seconds(1) > 0
+def test_probe_times_each_kind_asked_in_spawned_copies_and_refuses_bad_arguments():
+    got = ms.probe_seconds(("runs",), repeats=1, copies=1)
+    assert list(got) == ["runs"] and got["runs"] > 0
     for bad in (0, -1, 1.5, True, "3"):
         with pytest.raises(SShaDeError, match="repeats"):
-            ms.probe_seconds(bad)
+            ms.probe_seconds(repeats=bad)
+        with pytest.raises(SShaDeError, match="copies"):
+            ms.probe_seconds(copies=bad)
+    for kinds in ((), ("nope",), ("runs", "walk")):
+        with pytest.raises(SShaDeError, match="kinds"):
+            ms.probe_seconds(kinds)
+
+
+def _fake_probe(calls, times=2.0, sleep=0.0):
+    import time
+
+    def probe(kinds):
+        calls.append(tuple(kinds))
+        time.sleep(sleep)  # a second thread asks meanwhile
+        return {k: times * ms.PROBE_REFERENCE_S[k] for k in kinds}
+    return probe
 
 
 def test_probe_factor_is_its_seconds_over_the_reference_and_is_run_once_per_process(no_env, monkeypatch):
     import threading
-    import time
     calls = []
-
-    def slow_probe():
-        calls.append(1)
-        time.sleep(0.2)  # a second thread asks meanwhile
-        return 2.0 * ms.PROBE_REFERENCE_S
-    monkeypatch.setattr(ms, "probe_seconds", slow_probe)
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls, sleep=0.2))
     got = []
     threads = [threading.Thread(target=lambda: got.append(ms.machine_speed())) for _ in range(2)]
     for t in threads:
@@ -44,24 +54,44 @@ def test_probe_factor_is_its_seconds_over_the_reference_and_is_run_once_per_proc
     for t in threads:
         t.join()
     a, b = got
-    assert a == b == ms.machine_speed() and len(calls) == 1
-    assert a["factor"] == 2.0 and a["source"] == "probe" and not a["clipped"]
-    assert a["probe_s"] == pytest.approx(2.0 * ms.PROBE_REFERENCE_S)
+    assert a == b == ms.machine_speed() and calls == [("runs",)]
+    assert a["factor"] == a["build_factor"] == 2.0 and a["source"] == "probe" and not a["clipped"]
+    assert a["probe_s"] == {"runs": pytest.approx(2.0 * ms.PROBE_REFERENCE_S["runs"])}
 
 
-@pytest.mark.parametrize("seconds, factor", [(1e-6, ms.SPEED_RANGE[0]), (1e6, ms.SPEED_RANGE[1])])
-def test_a_probe_outside_the_range_is_clipped_and_says_so(no_env, monkeypatch, seconds, factor):
-    monkeypatch.setattr(ms, "probe_seconds", lambda: seconds)
+def test_the_build_is_probed_once_when_asked_and_has_its_own_factor(no_env, monkeypatch):
+    calls = []
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls))
+    assert ms.machine_speed()["build_factor"] == 2.0 and calls == [("runs",)]
+    ms._PROBED["runs"] = 3.0 * ms.PROBE_REFERENCE_S["runs"]
+    s = ms.machine_speed(build=True)
+    assert calls == [("runs",), ("build",)] and (s["factor"], s["build_factor"]) == (3.0, 2.0)
+    assert ms.machine_speed() == s and len(calls) == 2  # a later call without build keeps its factor
+    assert "the runs x3 the priors, the build x2" in ms.speed_words(s)
+
+
+@pytest.mark.parametrize("times, factor", [(1e-9, ms.SPEED_RANGE[0]), (1e9, ms.SPEED_RANGE[1])])
+def test_a_probe_outside_the_range_is_clipped_and_says_so(no_env, monkeypatch, times, factor):
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe([], times=times))
     s = ms.machine_speed()
     assert s["factor"] == factor and s["clipped"]
     assert "clipped" in ms.speed_words(s)
 
 
+def test_a_failed_probe_leaves_the_priors_as_they_are_and_says_why(no_env, monkeypatch):
+    def broken(kinds):
+        raise SShaDeError("a plan probe worker process died (SIGKILL)")
+    monkeypatch.setattr(ms, "probe_seconds", broken)
+    s = ms.machine_speed(build=True)
+    assert (s["factor"], s["build_factor"], s["source"]) == (1.0, 1.0, "none")
+    assert ms.speed_words(s).endswith("(the probe failed: a plan probe worker process died (SIGKILL))")
+
+
 def test_the_environment_fixes_the_factor_without_a_probe(no_env, monkeypatch):
-    monkeypatch.setattr(ms, "probe_seconds", lambda: pytest.fail("the probe ran"))
+    monkeypatch.setattr(ms, "probe_seconds", lambda kinds: pytest.fail("the probe ran"))
     monkeypatch.setenv(ms.SPEED_ENV, "1.5")
-    assert ms.machine_speed() == {"factor": 1.5, "source": "env", "probe_s": None,
-                                  "reference_s": ms.PROBE_REFERENCE_S, "clipped": False}
+    assert ms.machine_speed(build=True) == {"factor": 1.5, "build_factor": 1.5, "source": "env", "probe_s": None,
+                                            "reference_s": ms.PROBE_REFERENCE_S, "clipped": False}
 
 
 @pytest.mark.parametrize("raw", ["0", "-1", "nan", "inf", "fast"])
@@ -89,7 +119,8 @@ def test_the_plan_scales_its_references_with_the_cost_model_and_names_its_calibr
     p1 = make_plan(cases, ["ARAP"], [(0, 0)], CostModel({}, priors={"ARAP": 1e-4}), references=refs)
     p3 = make_plan(cases, ["ARAP"], [(0, 0)], CostModel({}, priors={"ARAP": 1e-4}, speed=3.0), references=refs)
     assert p3["total_s"] == pytest.approx(3.0 * p1["total_s"])
-    p3["speed"] = {"factor": 3.0, "source": "env", "probe_s": None, "reference_s": 0.25, "clipped": False}
+    p3["speed"] = {"factor": 3.0, "build_factor": 3.0, "source": "env", "probe_s": None, "reference_s": {},
+                   "clipped": False}
     line = render_plan(p3)
     assert line.endswith(f"in all ({ms.speed_words(p3['speed'])}).")
     assert "x3" in line

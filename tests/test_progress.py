@@ -47,15 +47,15 @@ def test_implicit_arap_cpu_preset_prior_is_constant():
     assert paper.basis("Implicit-ARAP") == "guess"
 
 
-#: Mean time_s of each method, one core per run, on 48 sampled DeFAUST cases of 7043 vertices
-#: on average, in the probe's reference seconds (measured / the run's factor x1.84;
-#: benchmarks/records/machine_speed.md, "The priors refitted").
-SMALL_VERTICES, SMALL_MEAN_S = 7043, {"ARAP": 0.301, "Elastic": 0.243, "ARAP-SR": 1.210, "SShaDe": 0.236}
+#: Mean time_s of each method, one run at a time, on FAUST's 8 cases of 6890 vertices, in the
+#: probe's reference seconds (measured / the run's factor x1.079;
+#: benchmarks/records/machine_speed.md, "The solvers' probe").
+SMALL_VERTICES, SMALL_MEAN_S = 6890, {"ARAP": 0.406, "Elastic": 0.368, "ARAP-SR": 2.307, "SShaDe": 0.245}
 
 
 def test_the_priors_hold_at_their_size_and_their_exponent_carries_them_to_small_meshes():
-    """At PRIOR_VERTICES each estimate is its file's prior (plus the overhead); at 7043
-    vertices, where the prior without its exponent would plan ARAP 4.9x and SShaDe 11x what they took, the
+    """At PRIOR_VERTICES each estimate is its file's prior (plus the overhead); at FAUST's 6890
+    vertices, where the prior without its exponent would plan ARAP 5x and SShaDe 13x what they took, the
     exponent brings each method's estimate within 25 % of its measured mean; a run that
     is measured replaces the prior at any size, scaled by the same exponent."""
     from eval.run.progress import OVERHEAD_S_PER_VERTEX, PRIOR_VERTICES

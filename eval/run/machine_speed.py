@@ -2,182 +2,235 @@
 measured on: a short probe, once per process, that calibrates the plan.
 Floor 0 of eval/ (eval/run/, the ground floor, tests/test_layering.py); notes: docs/implementation.md.
 
-:func:`probe_seconds` times a fixed piece of the solvers' work (a sparse Cholesky
-factorisation and its 3-column solves, sparse products, batched 3x3 SVDs, streaming
-vector updates), one copy per core at once; :func:`machine_speed` divides it by
+:func:`probe_seconds` times two kinds of work, each as the evaluator runs it (one spawned
+process per core, all at once, :func:`harness.jobs.run_jobs`): ``runs``, the solver of the
+full-resolution baselines and references (:class:`sshade.arap.ArapSolver`, prepared once)
+for a fixed number of iterations on a synthetic bar past the caches' size, and ``build``, the
+DeFAUST builder's own kernels (pymeshlab's isotropic remesh, the fixed-order skinning blend).
+:func:`machine_speed` divides each by
 :data:`PROBE_REFERENCE_S`, what it took where the priors of conf/method/*.yaml and
-:mod:`eval.run.plan` were measured. The plan's priors are multiplied by that factor;
-:data:`SPEED_ENV` fixes it instead (a cluster whose nodes differ from the submitting one).
+:mod:`eval.run.plan` were measured: the runs' priors and references are multiplied by the
+``runs`` factor, the build's by the ``build`` factor. :data:`SPEED_ENV` fixes both instead.
 """
 from __future__ import annotations
 
-import functools
-import math
+import multiprocessing as mp
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-import scipy.sparse as sp
 
+from defaust.fixed_order import blend
+from defaust.highres import isotropic_remesh
 from harness.checks import env_positive
-from sshade.arap.linear import LaplacianSolver
+from harness.jobs import JobOptions, run_jobs
+from sshade.arap import ArapOptions, ArapSolver
+from sshade.arap.problems import box_surface, twisted_bar
 from sshade.cores import available_cores
 from sshade.errors import SShaDeError
 
-__all__ = ["PROBE_REFERENCE_S", "MAX_PROBE_THREADS", "SPEED_ENV", "SPEED_RANGE", "probe_threads", "probe_seconds",
-           "machine_speed", "speed_words"]
+__all__ = ["PROBE_KINDS", "PROBE_REFERENCE_S", "MAX_PROBE_COPIES", "SPEED_ENV", "SPEED_RANGE", "probe_copies",
+           "probe_seconds", "machine_speed", "speed_words"]
 
-#: Seconds :func:`probe_seconds` took (the least of its rounds, 2 threads) on the 2-core
-#: machine the priors were measured on, quiet (benchmarks/records/machine_speed.md).
-PROBE_REFERENCE_S = 0.37
-#: The most copies of the probe's work run at once (:func:`probe_threads`).
-MAX_PROBE_THREADS = 8
-#: Environment variable that fixes the factor (a positive number; 1: the priors as they are)
-#: instead of running the probe.
+#: The kinds of work the probe times: the solvers' (the runs and references) and the builder's.
+PROBE_KINDS = ("runs", "build")
+#: Seconds :func:`probe_seconds` took for each kind (the slowest copy's least round, 2
+#: copies) on the 2-core machine the priors were measured on (an Intel Xeon VM), in the plan
+#: of the run they were fitted to (benchmarks/records/machine_speed.md, "The solvers' probe").
+PROBE_REFERENCE_S = {"runs": 0.407, "build": 0.611}
+#: The most copies of the probe's work run at once (:func:`probe_copies`).
+MAX_PROBE_COPIES = 8
+#: Environment variable that fixes both factors (a positive number; 1: the priors as they
+#: are) instead of running the probe.
 SPEED_ENV = "SSHADE_PLAN_SPEED"
 #: The factors the plan takes: a probe outside them is clipped (and says so).
 SPEED_RANGE = (0.125, 8.0)
 
-_GRID = 150  # the probe's grid: 150 x 150 vertices (22,500 unknowns)
-_SOLVES = 20
-_SVDS = 30_000
-_STREAM = 1_000_000  # 8 MB per vector: past the caches, 16 MB of inputs per copy
+_BAR_H = 0.014      # the runs' bar: 91,308 vertices (a factor of about 100 MB, as at 169k: past the caches)
+_ITERATIONS = 8     # fixed iterations of the solve (it does not converge in them)
+_BOX_H = 0.03       # the build's mesh: a 19,736-vertex box, remeshed at about the same size
+_REMESH = (0.025, 1)  # target edge, iterations
+_BLEND = (170_000, 24, 0.3)  # vertices, bones, fraction of non-zero weights (a DeFAUST body's size)
+_WAIT_S = 120.0     # the longest a copy waits for the others at a round's start
+_STATE: dict = {}
 
 
-def _grid_laplacian(k: int) -> sp.csc_matrix:
-    """The ``k*k`` grid's 5-point Laplacian plus a small shift: symmetric positive definite."""
-    d = sp.diags([-np.ones(k - 1), 2.0 * np.ones(k), -np.ones(k - 1)], [-1, 0, 1])
-    eye = sp.identity(k)
-    return (sp.kron(d, eye) + sp.kron(eye, d) + 1e-3 * sp.identity(k * k)).tocsc()
+def _runs_work():
+    V, F, handles, targets = twisted_bar(h=_BAR_H)
+    solver = ArapSolver(V, F, handles, ArapOptions(energy="spokes_and_rims", max_iter=_ITERATIONS))
+
+    def work():
+        return float(solver.solve(targets).V[0, 0])
+    return work
 
 
-def _inputs() -> tuple:
-    """The probe's fixed inputs (seeded): the matrix, right-hand sides, 3x3 matrices, vectors."""
+def _build_work():
+    import pymeshlab
+
+    V, F = box_surface((4.0, 1.0, 1.0), _BOX_H)
+    n, k, p = _BLEND
     rng = np.random.default_rng(0)
-    A = _grid_laplacian(_GRID)
-    return (A, rng.standard_normal((A.shape[0], 3)), rng.standard_normal((_SVDS, 3, 3)),
-            rng.standard_normal(_STREAM), rng.standard_normal(_STREAM))
+    W = rng.random((n, k))
+    W[W > p] = 0.0
+    T = rng.standard_normal((k, 3, 4))
+
+    def work():
+        ms = pymeshlab.MeshSet()
+        ms.add_mesh(pymeshlab.Mesh(V, F.astype(np.int32)))
+        isotropic_remesh(ms, _REMESH[0], _REMESH[1], check_distance=False)
+        return ms.current_mesh().vertex_number() + float(blend(W, T)[0, 0, 0])
+    return work
 
 
-def _work(inputs: tuple) -> float:
-    """One pass of the probe's work on :func:`_inputs`; returns a number that depends on
-    all of it (so none of it can be skipped). No BLAS call: its threads would make the
-    probe depend on the machine's load in another way than the solvers' kernels do."""
-    A, B, M, x, y = inputs
-    lin = LaplacianSolver(A)
-    Ac = A.tocsr()
-    acc = 0.0
-    for _ in range(_SOLVES):
-        X = lin.solve(B)
-        B = Ac @ X + 0.5 * B
-        acc += float(X[0, 0])
-    u, s, vt = np.linalg.svd(M)
-    acc += float(s[:, 0].sum()) + float(np.einsum("nij,njk->nik", u, vt)[:, 0, 0].sum())
-    y = y.copy()
-    for _ in range(16):
-        y += 0.25 * x
-        acc += float(np.einsum("i,i->", x, y)) * 1e-9
-    return acc
+_WORK = {"runs": _runs_work, "build": _build_work}
 
 
-def probe_threads() -> int:
-    """How many copies of the probe's work run at once: every core this process may use,
-    at least 2 (the priors' machine's count) and at most :data:`MAX_PROBE_THREADS`."""
-    return max(2, min(available_cores(), MAX_PROBE_THREADS))
+def _setup(kinds: tuple, barrier) -> None:
+    """A worker's ``init``: each kind's work made ready and run once, untimed (numba's
+    cache loaded, pymeshlab's plugins)."""
+    _STATE["barrier"] = barrier
+    _STATE["work"] = {k: _WORK[k]() for k in kinds}
+    for w in _STATE["work"].values():
+        w()
 
 
-def probe_seconds(repeats: int = 2, threads: int | None = None) -> float:
-    """The least wall seconds of ``repeats`` rounds of the probe, after one untimed round;
-    a round runs ``threads`` copies of its work at once, one per thread (the evaluator's
-    runs share the machine the same way, so its load counts too). About ``0.37 *
-    (repeats + 1)`` s on the priors' machine at 2 threads.
+def _rounds(repeats: int) -> dict:
+    """A worker's job: ``repeats`` rounds of each kind, every one started with the other
+    copies (a broken barrier: alone); kind -> list of seconds."""
+    out: dict = {}
+    for _ in range(repeats):
+        for kind, work in _STATE["work"].items():
+            try:
+                _STATE["barrier"].wait(_WAIT_S)
+            except threading.BrokenBarrierError:
+                pass
+            t = time.perf_counter()
+            work()
+            out.setdefault(kind, []).append(time.perf_counter() - t)
+    return out
+
+
+def probe_copies() -> int:
+    """How many copies of the probe's work run at once: every core this process may use
+    (as many as the evaluator's ``jobs=auto`` runs side by side), at most :data:`MAX_PROBE_COPIES`."""
+    return max(1, min(available_cores(), MAX_PROBE_COPIES))
+
+
+def probe_seconds(kinds=PROBE_KINDS, repeats: int = 2, copies: int | None = None) -> dict:
+    """Each kind's seconds: the slowest copy's least of ``repeats`` rounds, after one
+    untimed round, with ``copies`` spawned processes running the same work at once (module
+    docstring). About 3 s for ``runs`` and 3 s for ``build`` on the priors' machine, the
+    processes' start-up included.
 
     Parameters
     ----------
+    kinds : sequence of :data:`PROBE_KINDS` names, at least one.
     repeats : int >= 1.
-    threads : int >= 1 or None (:func:`probe_threads`).
+    copies : int >= 1 or None (:func:`probe_copies`).
 
     Returns
     -------
-    float, seconds (> 0).
+    dict kind -> float, seconds (> 0).
 
     Raises
     ------
-    SShaDeError when ``repeats`` or ``threads`` is not an int >= 1.
+    SShaDeError when ``repeats`` or ``copies`` is not an int >= 1, a kind is unknown, or a
+    worker could not start or died.
     """
-    threads = probe_threads() if threads is None else threads
-    for name, v in (("repeats", repeats), ("threads", threads)):
+    copies = probe_copies() if copies is None else copies
+    for name, v in (("repeats", repeats), ("copies", copies)):
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise SShaDeError(f"probe {name} must be an int >= 1, got {v!r}")
-    inputs = [_inputs() for _ in range(threads)]
-    best = math.inf
-    with ThreadPoolExecutor(threads, thread_name_prefix="sshade-probe") as pool:
-        list(pool.map(_work, inputs))
-        for _ in range(repeats):
-            t = time.perf_counter()
-            list(pool.map(_work, inputs))
-            best = min(best, time.perf_counter() - t)
-    return max(best, 1e-9)
+    kinds = tuple(dict.fromkeys(kinds))
+    if not kinds or any(k not in PROBE_KINDS for k in kinds):
+        raise SShaDeError(f"probe kinds must be some of {PROBE_KINDS}, got {kinds!r}")
+    got: list = []
+    run_jobs(_rounds, [(repeats,)] * copies, workers=copies, init=_setup,
+             init_args=(kinds, mp.get_context("spawn").Barrier(copies)), on_result=lambda i, r: got.append(r),
+             options=JobOptions(what="plan probe", advice=f"set {SPEED_ENV}=1 to plan without the probe"))
+    return {k: max(max(min(r[k]) for r in got), 1e-9) for k in kinds}
 
 
 _PROBE_LOCK = threading.Lock()
+_PROBED: dict = {}
 
 
-@functools.lru_cache(maxsize=1)
-def _probe_once() -> tuple[float, float]:
-    s = probe_seconds()
-    return s, s / PROBE_REFERENCE_S
-
-
-def _probed() -> tuple[float, float]:
-    """The probe's seconds and factor, measured once per process (two threads asking at
-    once get the same one: the second waits for the first's)."""
+def _probed(kinds: tuple) -> dict:
+    """Each kind's seconds, measured once per process (two threads asking at once get the
+    same ones: the second waits for the first's); None for each when the probe failed."""
     with _PROBE_LOCK:
-        return _probe_once()
+        todo = tuple(k for k in kinds if k not in _PROBED)
+        if todo:
+            try:
+                _PROBED.update(probe_seconds(todo))
+            except Exception as e:  # noqa: BLE001 - a failed probe leaves the priors as they are, said in the plan
+                _PROBED.update({k: None for k in todo})
+                _PROBED.setdefault("error", str(e).splitlines()[0] if str(e) else type(e).__name__)
+        return {k: _PROBED[k] for k in kinds}
 
 
-def machine_speed() -> dict:
-    """This machine's time factor against the priors' machine, once per process.
+def machine_speed(build: bool = False) -> dict:
+    """This machine's time factors against the priors' machine, once per process.
+
+    Parameters
+    ----------
+    build : bool, probe the builder's work too (a build is ahead); else ``build_factor``
+        is the ``runs`` one unless it was probed before in this process.
 
     Returns
     -------
-    dict: ``factor`` (float, what the priors' seconds are multiplied by: > 1 on a slower
-    machine, within :data:`SPEED_RANGE`), ``source`` (``"probe"`` or ``"env"``),
-    ``probe_s`` (the probe's seconds, None from the environment), ``reference_s``
-    (:data:`PROBE_REFERENCE_S`), ``clipped`` (bool: the probe's factor was outside
-    :data:`SPEED_RANGE`).
+    dict: ``factor`` (float, what the runs' and references' priors are multiplied by: > 1
+    on a slower machine, within :data:`SPEED_RANGE`), ``build_factor`` (the same for the
+    build), ``source`` (``"probe"``, ``"env"`` or ``"none"``: the probe failed, the
+    priors as they are), ``probe_s`` (kind -> the probe's seconds; None from the
+    environment), ``reference_s`` (:data:`PROBE_REFERENCE_S`), ``clipped`` (bool: a
+    probe's factor was outside :data:`SPEED_RANGE`), and ``error`` when the probe failed.
 
     Raises
     ------
     SShaDeError when :data:`SPEED_ENV` is set to anything but a positive number.
     """
     env = env_positive(SPEED_ENV, "a number > 0 (1: the priors as measured)")
+    out = {"source": "env", "probe_s": None, "reference_s": dict(PROBE_REFERENCE_S)}
     if env is not None:
-        raw, probe_s, source = env, None, "env"
+        raw = {"runs": env, "build": env}
     else:
-        probe_s, raw = _probed()
-        source = "probe"
+        with _PROBE_LOCK:
+            had_build = _PROBED.get("build") is not None
+        probe = _probed(PROBE_KINDS if build or had_build else ("runs",))
+        if any(v is None for v in probe.values()):
+            out.update(source="none", error=_PROBED.get("error", ""))
+            raw = {"runs": 1.0, "build": 1.0}
+        else:
+            out.update(source="probe", probe_s={k: round(v, 4) for k, v in probe.items()})
+            raw = {k: v / PROBE_REFERENCE_S[k] for k, v in probe.items()}
+            raw.setdefault("build", raw["runs"])
     lo, hi = SPEED_RANGE
-    factor = min(max(raw, lo), hi)
-    return {"factor": round(factor, 4), "source": source,
-            "probe_s": None if probe_s is None else round(probe_s, 4),
-            "reference_s": PROBE_REFERENCE_S, "clipped": factor != raw}
+    f = {k: min(max(v, lo), hi) for k, v in raw.items()}
+    return {"factor": round(f["runs"], 4), "build_factor": round(f["build"], 4), **out,
+            "clipped": any(f[k] != raw[k] for k in f)}
 
 
 def speed_words(speed: dict) -> str:
-    """The factor in words for the plan line.
+    """The factors in words for the plan line.
 
-    >>> speed_words({"factor": 1.3, "source": "probe", "probe_s": 0.325, "reference_s": 0.25, "clipped": False})
-    'times for this machine: x1.3 the priors (probe 0.33 s against 0.25 s)'
-    >>> speed_words({"factor": 2.0, "source": "env", "probe_s": None, "reference_s": 0.25, "clipped": False})
+    >>> speed_words({"factor": 1.3, "build_factor": 1.6, "source": "probe", "probe_s": {"runs": 0.8, "build": 1.0},
+    ...              "reference_s": {"runs": 0.62, "build": 0.62}, "clipped": False})
+    'times for this machine: the runs x1.3 the priors, the build x1.6 (probe 0.8 s and 1 s against 0.62 s and 0.62 s)'
+    >>> speed_words({"factor": 2.0, "build_factor": 2.0, "source": "env", "probe_s": None, "reference_s": {},
+    ...              "clipped": False})
     'times for this machine: x2 the priors (SSHADE_PLAN_SPEED)'
     """
-    f = f"x{speed['factor']:.2g}"
+    f, b = speed["factor"], speed.get("build_factor", speed["factor"])
     if speed["source"] == "env":
-        why = SPEED_ENV
-    else:
-        why = f"probe {speed['probe_s']:.2g} s against {speed['reference_s']:.2g} s"
-        if speed.get("clipped"):
-            why += f", clipped to {SPEED_RANGE[0]:g}-{SPEED_RANGE[1]:g}"
-    return f"times for this machine: {f} the priors ({why})"
+        return f"times for this machine: x{f:.2g} the priors ({SPEED_ENV})"
+    if speed["source"] == "none":
+        return f"times for this machine: the priors as measured (the probe failed: {speed.get('error', '')})"
+    probe, ref = speed["probe_s"], speed["reference_s"]
+    kinds = [k for k in PROBE_KINDS if k in probe]
+    why = (f"probe {' and '.join(f'{probe[k]:.2g} s' for k in kinds)} against "
+           f"{' and '.join(f'{ref[k]:.2g} s' for k in kinds)}")
+    if speed.get("clipped"):
+        why += f", clipped to {SPEED_RANGE[0]:g}-{SPEED_RANGE[1]:g}"
+    words = f"the runs x{f:.2g} the priors" + (f", the build x{b:.2g}" if "build" in probe else "")
+    return f"times for this machine: {words} ({why})"

@@ -23,24 +23,29 @@ __all__ = ["BUILD_S_PER_SUBJECT", "BUILD_START_S", "REFERENCE_S_PER_VERTEX", "SR
 
 #: Seconds to build one DeFAUST subject (ANNY rest mesh at 150k-200k vertices and its 4
 #: poses) on a 2-core machine, two subjects at once, and the seconds each worker spends once
-#: before its first subject (the ANNY model's preprocessing): fitted to two fresh clones'
-#: builds with 2 workers, 10 subjects in 278.6 s (873274a) and 4 in 129.6 s (0e39b31)
-#: (benchmarks/records/command_times.md). A parallel build takes rounds of ``workers`` subjects.
-BUILD_S_PER_SUBJECT = 49.7
-BUILD_START_S = 30.2
+#: before its first subject (the ANNY model's preprocessing; the builder's numba kernels
+#: compiled on a fresh machine), in the build probe's reference seconds
+#: (:data:`eval.run.machine_speed.PROBE_REFERENCE_S`): fitted to builds with 2 workers of 2
+#: subjects in 87.3 s and of 8 in about 352 s (numba's cache warm), and a fresh clone's 2 in
+#: 117.7 s (benchmarks/records/machine_speed.md, "The solvers' probe"). A parallel build
+#: takes rounds of ``workers`` subjects.
+BUILD_S_PER_SUBJECT = 85.0
+BUILD_START_S = 10.0
 #: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
-#: rigid fit: 24-63 s (mean 42 s) at 168,897 vertices in ``results/defaust/eval.log``.
-REFERENCE_S_PER_VERTEX = 3e-4
+#: rigid fit, in the probe's reference seconds: 35-118 s (mean 47 s) at 169k vertices, 8 of
+#: DeFAUST's references two at a time (benchmarks/records/machine_speed.md, "The solvers' probe").
+REFERENCE_S_PER_VERTEX = 2.8e-4
 #: The same for ARAP-SR's energy (Anderson-accelerated block descent, continued from the
 #: method's converged result): 474 s, 1,269 iterations at DeFAUST s00_p01's 168,897
-#: vertices (2 cores, one busy with another job): 2.8e-3 s/vertex (FAUST: 3-7e-3).
-SR_REFERENCE_S_PER_VERTEX = 2.8e-3
+#: vertices (2 cores, one busy with another job; an earlier probe's seconds, carried by the
+#: ARAP-SR prior's ratio, not measured again).
+SR_REFERENCE_S_PER_VERTEX = 3.0e-3
 #: How those seconds grow with the vertices ``n`` about :data:`eval.run.progress.PRIOR_VERTICES`,
 #: as ``n ** p`` (linear per vertex below that overestimated small meshes ninefold): fitted to
 #: the rates above and FAUST's 6890-vertex references computed from an empty cache (mean
-#: 0.48 s ARAP, 1.82 s ARAP-SR; benchmarks/records/command_times.md).
-REFERENCE_EXPONENT = 1.46
-SR_REFERENCE_EXPONENT = 1.74
+#: 0.53 s ARAP, 2.32 s ARAP-SR in the probe's reference seconds; machine_speed.md).
+REFERENCE_EXPONENT = 1.40
+SR_REFERENCE_EXPONENT = 1.68
 
 
 def busy_words(load: float | None = None, cores: int | None = None) -> str:
@@ -100,7 +105,7 @@ def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD
     >>> build_stage(10, workers=4, s_per_subject=56.0)["seconds"]
     168.0
     >>> build_stage(4, workers=2, start_s=BUILD_START_S)["seconds"]
-    129.6
+    180.0
     """
     w = int(workers) if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
     n = max(int(subjects), 0)
@@ -146,7 +151,7 @@ def reference_s(n_vertices: int, sr: bool = False, speed: float = 1.0) -> float:
     machine's factor, :func:`eval.run.machine_speed.machine_speed`).
 
     >>> round(reference_s(168_864)), round(reference_s(6_890), 2), round(reference_s(6_890, sr=True), 2)
-    (51, 0.47, 1.81)
+    (47, 0.54, 2.35)
     """
     rate, p = (SR_REFERENCE_S_PER_VERTEX, SR_REFERENCE_EXPONENT) if sr else (REFERENCE_S_PER_VERTEX, REFERENCE_EXPONENT)
     return rate * PRIOR_VERTICES * size_factor(n_vertices, p) * float(speed)

@@ -16,8 +16,10 @@ __all__ = ["CostModel", "weighted_bar", "default_cost_model", "size_factor", "OV
 #: reading a cached reference, the store, cases.csv, the report's 3D views), in seconds per
 #: vertex: mostly the ground-truth Hausdorff and Chamfer (two point-to-surface queries
 #: against a tree built once per case); measured as the spacing of a run's pairs in its
-#: eval.log minus their ``time_s`` (about 2.5 s per pair at 169k vertices).
-OVERHEAD_S_PER_VERTEX = 1.5e-5
+#: eval.log minus their ``time_s`` (about 3.7 s per pair at 169k vertices in the README's main
+#: job, 4.2 s with the end's imbalance of two workers, at the probe's reference speed;
+#: benchmarks/records/machine_speed.md, "The solvers' probe").
+OVERHEAD_S_PER_VERTEX = 2.5e-5
 #: The mesh size the methods' priors hold at (DeFAUST's high resolution: results/defaust's
 #: mean, 150k-200k vertices); a prior's ``exponent`` carries it to other sizes.
 PRIOR_VERTICES = 168_864
@@ -131,7 +133,7 @@ def default_cost_model(methods, speed: float = 1.0) -> CostModel:
     >>> from types import SimpleNamespace as M
     >>> cm = default_cost_model([M(name="ARAP"), M(name="SShaDe")])
     >>> round(cm.estimate("ARAP", 100_000)), round(cm.estimate("SShaDe", 100_000))
-    (18, 3)
+    (25, 5)
     """
     scales = {m.name: CostModel.scale_of(m) for m in methods}
     priors, exponents = {}, {}

@@ -56,10 +56,10 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
     out = datasets.dataset_outlook(ds)
     if out is None:
         return datasets.dataset_root(ds), None
-    speed = machine_speed()
-    f = speed["factor"]
-    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"] * f,
-                        start_s=out.get("start_s", 0.0) * f, what="DeFAUST", root=_short(out["root"]))
+    speed = machine_speed(build=out["subjects"] > 0)
+    f, fb = speed["factor"], speed["build_factor"]
+    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"] * fb,
+                        start_s=out.get("start_s", 0.0) * fb, what="DeFAUST", root=_short(out["root"]))
     cases, _ = take_sample([SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]],
                            ds.sample, ds.sample_seed)
     base, _ = baseline_selection(cases, ds.baseline_cases) if cases else (None, "")
@@ -102,11 +102,14 @@ class PlanRecord:
         self.plan, self.t0 = plan, time.perf_counter()
 
     def finish(self, references_s: float = 0.0) -> dict:
-        """The plan with each stage's actual seconds (:func:`eval.run.plan.add_actuals`: the
-        runs = the wall time since :attr:`t0` less ``references_s``, the seconds spent
-        computing references), logged beside the estimates; for ``run.json``."""
-        runs = time.perf_counter() - self.t0
-        out = add_actuals(self.plan, {"runs": max(runs - references_s, 0.0), "references": references_s})
+        """The plan with each stage's actual seconds (:func:`eval.run.plan.add_actuals`),
+        logged beside the estimates; for ``run.json``. ``references_s``: the seconds spent
+        computing references, summed over the worker processes; with ``jobs`` of them side
+        by side the references stage is that sum over ``jobs`` (as the plan counts it), the
+        runs the wall time since :attr:`t0` less it."""
+        jobs = max(int(next((s.get("jobs", 1) for s in self.plan["stages"] if s["stage"] == "runs"), 1)), 1)
+        runs, refs = time.perf_counter() - self.t0, float(references_s) / jobs
+        out = add_actuals(self.plan, {"runs": max(runs - refs, 0.0), "references": refs})
         log.info(render_actuals(out))
         return out
 
