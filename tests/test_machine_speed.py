@@ -124,3 +124,16 @@ def test_the_plan_scales_its_references_with_the_cost_model_and_names_its_calibr
     line = render_plan(p3)
     assert line.endswith(f"in all ({ms.speed_words(p3['speed'])}).")
     assert "x3" in line
+
+
+def test_probe_copies_follow_the_cores_but_no_more_than_the_free_memory_holds(monkeypatch):
+    monkeypatch.setattr(ms, "available_cores", lambda: 16)
+    monkeypatch.setattr(ms, "_free_bytes", lambda: None)
+    assert ms.probe_copies() == ms.MAX_PROBE_COPIES
+    monkeypatch.setattr(ms, "_free_bytes", lambda: 3 * ms.PROBE_COPY_BYTES + 1)
+    assert ms.probe_copies() == 3
+    monkeypatch.setattr(ms, "_free_bytes", lambda: 0)
+    assert ms.probe_copies() == 1
+    monkeypatch.setattr(ms, "available_cores", lambda: 2)
+    monkeypatch.setattr(ms, "_free_bytes", lambda: 64 * ms.PROBE_COPY_BYTES)
+    assert ms.probe_copies() == 2

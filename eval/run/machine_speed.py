@@ -7,14 +7,14 @@ process per core, all at once, :func:`harness.jobs.run_jobs`): ``runs``, the sol
 full-resolution baselines and references (:class:`sshade.arap.ArapSolver`, prepared once)
 for a fixed number of iterations on a synthetic bar past the caches' size, and ``build``, the
 DeFAUST builder's own kernels (pymeshlab's isotropic remesh, the fixed-order skinning blend).
-:func:`machine_speed` divides each by
-:data:`PROBE_REFERENCE_S`, what it took where the priors of conf/method/*.yaml and
-:mod:`eval.run.plan` were measured: the runs' priors and references are multiplied by the
-``runs`` factor, the build's by the ``build`` factor. :data:`SPEED_ENV` fixes both instead.
+:func:`machine_speed` divides each by :data:`PROBE_REFERENCE_S`, what it took where the priors
+of conf/method/*.yaml and :mod:`eval.run.plan` were measured: the runs' priors and references
+are multiplied by the ``runs`` factor, the build's by the ``build`` one; :data:`SPEED_ENV` fixes both.
 """
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import threading
 import time
 
@@ -29,8 +29,8 @@ from sshade.arap.problems import box_surface, twisted_bar
 from sshade.cores import available_cores
 from sshade.errors import SShaDeError
 
-__all__ = ["PROBE_KINDS", "PROBE_REFERENCE_S", "MAX_PROBE_COPIES", "SPEED_ENV", "SPEED_RANGE", "probe_copies",
-           "probe_seconds", "machine_speed", "speed_words"]
+__all__ = ["PROBE_KINDS", "PROBE_REFERENCE_S", "MAX_PROBE_COPIES", "PROBE_COPY_BYTES", "SPEED_ENV", "SPEED_RANGE",
+           "probe_copies", "probe_seconds", "machine_speed", "speed_words"]
 
 #: The kinds of work the probe times: the solvers' (the runs and references) and the builder's.
 PROBE_KINDS = ("runs", "build")
@@ -40,6 +40,9 @@ PROBE_KINDS = ("runs", "build")
 PROBE_REFERENCE_S = {"runs": 0.407, "build": 0.611}
 #: The most copies of the probe's work run at once (:func:`probe_copies`).
 MAX_PROBE_COPIES = 8
+#: Memory set aside for each copy (its process peaks at about 0.65 GB: the 91k-vertex solver's
+#: factor, pymeshlab): no more copies run than the free memory holds.
+PROBE_COPY_BYTES = 1 << 30
 #: Environment variable that fixes both factors (a positive number; 1: the priors as they
 #: are) instead of running the probe.
 SPEED_ENV = "SSHADE_PLAN_SPEED"
@@ -110,10 +113,22 @@ def _rounds(repeats: int) -> dict:
     return out
 
 
+def _free_bytes() -> int | None:
+    """The machine's free physical memory in bytes, None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
 def probe_copies() -> int:
     """How many copies of the probe's work run at once: every core this process may use
-    (as many as the evaluator's ``jobs=auto`` runs side by side), at most :data:`MAX_PROBE_COPIES`."""
-    return max(1, min(available_cores(), MAX_PROBE_COPIES))
+    (as many as the evaluator's ``jobs=auto`` runs side by side), at most
+    :data:`MAX_PROBE_COPIES` and no more than the free memory holds at
+    :data:`PROBE_COPY_BYTES` each (at least 1)."""
+    free = _free_bytes()
+    by_memory = MAX_PROBE_COPIES if free is None else free // PROBE_COPY_BYTES
+    return max(1, min(available_cores(), MAX_PROBE_COPIES, by_memory))
 
 
 def probe_seconds(kinds=PROBE_KINDS, repeats: int = 2, copies: int | None = None) -> dict:
