@@ -16,8 +16,10 @@ from sshade.errors import SShaDeError
 def no_env(monkeypatch):
     monkeypatch.delenv(ms.SPEED_ENV, raising=False)
     ms._PROBED.clear()
+    ms._READINGS.clear()
     yield
     ms._PROBED.clear()
+    ms._READINGS.clear()
 
 
 def test_probe_times_each_kind_asked_in_spawned_copies_and_refuses_bad_arguments():
@@ -56,7 +58,7 @@ def test_probe_factor_is_its_seconds_over_the_reference_and_is_run_once_per_proc
     a, b = got
     assert a == b == ms.machine_speed() and calls == [("runs",)]
     assert a["factor"] == a["build_factor"] == 2.0 and a["source"] == "probe" and not a["clipped"]
-    assert a["probe_s"] == {"runs": pytest.approx(2.0 * ms.PROBE_REFERENCE_S["runs"])}
+    assert a["probe_s"] == {"runs": pytest.approx(2.0 * ms.PROBE_REFERENCE_S["runs"])} and a["readings"] == {"runs": 1}
 
 
 def test_the_build_is_probed_once_when_asked_and_has_its_own_factor(no_env, monkeypatch):
@@ -137,3 +139,17 @@ def test_probe_copies_follow_the_cores_but_no_more_than_the_free_memory_holds(mo
     monkeypatch.setattr(ms, "available_cores", lambda: 2)
     monkeypatch.setattr(ms, "_free_bytes", lambda: 64 * ms.PROBE_COPY_BYTES)
     assert ms.probe_copies() == 2
+
+
+def test_probing_again_takes_the_mean_of_this_process_readings_of_the_runs(no_env, monkeypatch):
+    calls = []
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls))
+    first = ms.machine_speed(build=True)
+    assert first["factor"] == 2.0 and first["readings"] == {"runs": 1, "build": 1}
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls, times=4.0))
+    s = ms.machine_speed(again=True)
+    assert calls == [("runs", "build"), ("runs",)]  # the build's reading is not taken again
+    assert (s["factor"], s["build_factor"]) == (3.0, 2.0) and s["readings"] == {"runs": 2, "build": 1}
+    assert ms.machine_speed() == s and len(calls) == 2
+    monkeypatch.setattr(ms, "probe_seconds", lambda kinds: (_ for _ in ()).throw(SShaDeError("died")))
+    assert ms.machine_speed(again=True)["factor"] == 3.0  # a failed probe again keeps the readings

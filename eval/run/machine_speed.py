@@ -169,39 +169,46 @@ def probe_seconds(kinds=PROBE_KINDS, repeats: int = 2, copies: int | None = None
 
 
 _PROBE_LOCK = threading.Lock()
-_PROBED: dict = {}
+_PROBED: dict = {}    # kind -> the mean of its readings in this process (None: the probe failed)
+_READINGS: dict = {}  # kind -> every reading in this process
 
 
-def _probed(kinds: tuple) -> dict:
-    """Each kind's seconds, measured once per process (two threads asking at once get the
-    same ones: the second waits for the first's); None for each when the probe failed."""
+def _probed(kinds: tuple, again: bool = False) -> dict:
+    """Each kind's seconds: the mean of its readings in this process, probed when it has
+    none or ``again`` (two threads asking at once get the same ones: the second waits for
+    the first's); None for a kind whose probe failed without an earlier reading."""
     with _PROBE_LOCK:
-        todo = tuple(k for k in kinds if k not in _PROBED)
+        todo = tuple(k for k in kinds if again or k not in _PROBED)
         if todo:
             try:
-                _PROBED.update(probe_seconds(todo))
+                for k, v in probe_seconds(todo).items():
+                    _READINGS.setdefault(k, []).append(v)
+                    _PROBED[k] = sum(_READINGS[k]) / len(_READINGS[k])
             except Exception as e:  # noqa: BLE001 - a failed probe leaves the priors as they are, said in the plan
-                _PROBED.update({k: None for k in todo})
+                _PROBED.update({k: None for k in todo if k not in _READINGS})
                 _PROBED.setdefault("error", str(e).splitlines()[0] if str(e) else type(e).__name__)
         return {k: _PROBED[k] for k in kinds}
 
 
-def machine_speed(build: bool = False) -> dict:
+def machine_speed(build: bool = False, again: bool = False) -> dict:
     """This machine's time factors against the priors' machine, once per process.
 
     Parameters
     ----------
     build : bool, probe the builder's work too (a build is ahead); else ``build_factor``
         is the ``runs`` one unless it was probed before in this process.
+    again : bool, probe the runs' work again (e.g. after minutes of a build: a VM's speed
+        moves over tens of seconds) and take the mean of this process's readings.
 
     Returns
     -------
     dict: ``factor`` (float, what the runs' and references' priors are multiplied by: > 1
     on a slower machine, within :data:`SPEED_RANGE`), ``build_factor`` (the same for the
     build), ``source`` (``"probe"``, ``"env"`` or ``"none"``: the probe failed, the
-    priors as they are), ``probe_s`` (kind -> the probe's seconds; None from the
-    environment), ``reference_s`` (:data:`PROBE_REFERENCE_S`), ``clipped`` (bool: a
-    probe's factor was outside :data:`SPEED_RANGE`), and ``error`` when the probe failed.
+    priors as they are), ``probe_s`` (kind -> the probe's seconds, the mean of its
+    ``readings``, kind -> how many; None from the environment), ``reference_s``
+    (:data:`PROBE_REFERENCE_S`), ``clipped`` (bool: a probe's factor was outside
+    :data:`SPEED_RANGE`), and ``error`` when the probe failed.
 
     Raises
     ------
@@ -214,12 +221,13 @@ def machine_speed(build: bool = False) -> dict:
     else:
         with _PROBE_LOCK:
             had_build = _PROBED.get("build") is not None
-        probe = _probed(PROBE_KINDS if build or had_build else ("runs",))
+        probe = {**_probed(PROBE_KINDS if build or had_build else ("runs",)), **_probed(("runs",), again)}
         if any(v is None for v in probe.values()):
             out.update(source="none", error=_PROBED.get("error", ""))
             raw = {"runs": 1.0, "build": 1.0}
         else:
-            out.update(source="probe", probe_s={k: round(v, 4) for k, v in probe.items()})
+            out.update(source="probe", probe_s={k: round(v, 4) for k, v in probe.items()},
+                       readings={k: len(_READINGS[k]) for k in probe})
             raw = {k: v / PROBE_REFERENCE_S[k] for k, v in probe.items()}
             raw.setdefault("build", raw["runs"])
     lo, hi = SPEED_RANGE

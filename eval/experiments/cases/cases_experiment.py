@@ -263,8 +263,10 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     methods, names, cases = s.methods, s.names, s.cases
     plan = {ci: [mi for mi, m in enumerate(methods) if s.runs_on(ci, m)] for ci in range(len(cases))}
     keys = {ci: _pair_keys(s, ci, c) for ci, c in enumerate(cases)}
-    # measured per-method priors (eval/run/progress.py), scaled to this machine (machine_speed.py)
-    cost = default_cost_model(methods, speed=machine_speed()["factor"])
+    # measured per-method priors (eval/run/progress.py), scaled to this machine (machine_speed.py),
+    # probed again after a build of minutes (a VM's speed moves over tens of seconds)
+    built = s.build is not None and s.build.get("count", 0) > 0
+    cost = default_cost_model(methods, speed=machine_speed(again=built)["factor"])
     done = restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
