@@ -36,10 +36,9 @@ __all__ = ["PROBE_KINDS", "PROBE_REFERENCE_S", "MAX_PROBE_COPIES", "PROBE_COPY_B
 PROBE_KINDS = ("runs", "build")
 #: Seconds :func:`probe_seconds` takes for each kind (the slowest copy's least round, 2
 #: copies) on the 2-core machine the priors were measured on (an Intel Xeon VM) at the priors'
-#: speed: runs, the mean of its readings over that speed in four runs' plans; build, its
-#: reading in the plan of the build the priors came from (benchmarks/records/machine_speed.md,
-#: "The solvers' probe").
-PROBE_REFERENCE_S = {"runs": 0.39, "build": 0.611}
+#: speed: the mean of its readings over that speed in five runs' plans (four for the build;
+#: benchmarks/records/machine_speed.md, "The solvers' probe").
+PROBE_REFERENCE_S = {"runs": 0.40, "build": 0.71}
 #: The most copies of the probe's work run at once (:func:`probe_copies`).
 MAX_PROBE_COPIES = 8
 #: Memory set aside for each copy (its process peaks at about 0.65 GB: the 91k-vertex solver's
