@@ -15,11 +15,11 @@ from sshade.errors import SShaDeError
 @pytest.fixture
 def no_env(monkeypatch):
     monkeypatch.delenv(ms.SPEED_ENV, raising=False)
-    ms._PROBED.clear()
     ms._READINGS.clear()
+    ms._ERRORS.clear()
     yield
-    ms._PROBED.clear()
     ms._READINGS.clear()
+    ms._ERRORS.clear()
 
 
 def test_probe_times_each_kind_asked_in_spawned_copies_and_refuses_bad_arguments():
@@ -65,7 +65,7 @@ def test_the_build_is_probed_once_when_asked_and_has_its_own_factor(no_env, monk
     calls = []
     monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls))
     assert ms.machine_speed()["build_factor"] == 2.0 and calls == [("runs",)]
-    ms._PROBED["runs"] = 3.0 * ms.PROBE_REFERENCE_S["runs"]
+    ms._READINGS["runs"] = [3.0 * ms.PROBE_REFERENCE_S["runs"]]
     s = ms.machine_speed(build=True)
     assert calls == [("runs",), ("build",)] and (s["factor"], s["build_factor"]) == (3.0, 2.0)
     assert ms.machine_speed() == s and len(calls) == 2  # a later call without build keeps its factor

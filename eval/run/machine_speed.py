@@ -135,8 +135,8 @@ def probe_copies() -> int:
 def probe_seconds(kinds=PROBE_KINDS, repeats: int = 2, copies: int | None = None) -> dict:
     """Each kind's seconds: the slowest copy's least of ``repeats`` rounds, after one
     untimed round, with ``copies`` spawned processes running the same work at once (module
-    docstring). About 3 s for ``runs`` and 3 s for ``build`` on the priors' machine, the
-    processes' start-up included.
+    docstring). About 6-8 s for both kinds on the priors' machine, the processes' start-up
+    and the solver's set-up included (docs/implementation.md).
 
     Parameters
     ----------
@@ -168,25 +168,27 @@ def probe_seconds(kinds=PROBE_KINDS, repeats: int = 2, copies: int | None = None
 
 
 _PROBE_LOCK = threading.Lock()
-_PROBED: dict = {}    # kind -> the mean of its readings in this process (None: the probe failed)
-_READINGS: dict = {}  # kind -> every reading in this process
+_READINGS: dict = {}  # kind -> every reading in this process (empty: its probe failed)
+_ERRORS: list = []    # what each failed probe said
 
 
-def _probed(kinds: tuple, again: bool = False) -> dict:
-    """Each kind's seconds: the mean of its readings in this process, probed when it has
-    none or ``again`` (two threads asking at once get the same ones: the second waits for
-    the first's); None for a kind whose probe failed without an earlier reading."""
+def _probed(kinds: tuple, again: tuple = ()) -> tuple[dict, dict]:
+    """``(seconds, readings)`` of each kind: the mean of its readings in this process
+    (None when it has none: its probe failed) and how many; a kind is probed when it was
+    not yet, or is in ``again``. Two threads asking at once get the same ones (the second
+    waits for the first's)."""
     with _PROBE_LOCK:
-        todo = tuple(k for k in kinds if again or k not in _PROBED)
+        todo = tuple(k for k in kinds if k in again or k not in _READINGS)
         if todo:
             try:
                 for k, v in probe_seconds(todo).items():
                     _READINGS.setdefault(k, []).append(v)
-                    _PROBED[k] = sum(_READINGS[k]) / len(_READINGS[k])
             except Exception as e:  # noqa: BLE001 - a failed probe leaves the priors as they are, said in the plan
-                _PROBED.update({k: None for k in todo if k not in _READINGS})
-                _PROBED.setdefault("error", str(e).splitlines()[0] if str(e) else type(e).__name__)
-        return {k: _PROBED[k] for k in kinds}
+                for k in todo:
+                    _READINGS.setdefault(k, [])
+                _ERRORS.append(str(e).splitlines()[0] if str(e) else type(e).__name__)
+        got = {k: _READINGS[k] for k in kinds}
+        return {k: sum(r) / len(r) if r else None for k, r in got.items()}, {k: len(r) for k, r in got.items()}
 
 
 def machine_speed(build: bool = False, again: bool = False) -> dict:
@@ -219,14 +221,13 @@ def machine_speed(build: bool = False, again: bool = False) -> dict:
         raw = {"runs": env, "build": env}
     else:
         with _PROBE_LOCK:
-            had_build = _PROBED.get("build") is not None
-        probe = {**_probed(PROBE_KINDS if build or had_build else ("runs",)), **_probed(("runs",), again)}
+            had_build = bool(_READINGS.get("build"))
+        probe, readings = _probed(PROBE_KINDS if build or had_build else ("runs",), ("runs",) if again else ())
         if any(v is None for v in probe.values()):
-            out.update(source="none", error=_PROBED.get("error", ""))
+            out.update(source="none", error=_ERRORS[0] if _ERRORS else "")
             raw = {"runs": 1.0, "build": 1.0}
         else:
-            out.update(source="probe", probe_s={k: round(v, 4) for k, v in probe.items()},
-                       readings={k: len(_READINGS[k]) for k in probe})
+            out.update(source="probe", probe_s={k: round(v, 4) for k, v in probe.items()}, readings=readings)
             raw = {k: v / PROBE_REFERENCE_S[k] for k, v in probe.items()}
             raw.setdefault("build", raw["runs"])
     lo, hi = SPEED_RANGE
