@@ -18,14 +18,16 @@ after an untimed one (numba's cache loaded, or compiled once there):
 - ``Elastic, twisted bar``: ``baselines.Elastic()`` (converged) on the same case, the same two
   ways (its iterations are printed: they may differ by a few across machines).
 
-A process line's round is the slowest copy's, among the rounds every copy ran while all
-the others were running too. Run it quiet; record: benchmarks/records/machine_speed.md.
+A process line is the slowest copy's least round, every round started by all copies
+together at a barrier (as the probe starts its rounds). Run it quiet; record: benchmarks/records/machine_speed.md.
 """
 from __future__ import annotations
 
 import argparse
+import multiprocessing as mp
 import platform
 import subprocess
+import threading
 import time
 
 from harness.jobs import run_jobs
@@ -48,40 +50,43 @@ def _solver(kind: str):
     return run
 
 
-def _setup(kind: str) -> None:
+def _setup(kind: str, barrier=None) -> None:
     """A worker's ``init``: its work made ready and run once, untimed."""
     _STATE["run"] = _solver(kind)
+    _STATE["barrier"] = barrier
     _STATE["run"]()
 
 
-def _rounds(rounds: int) -> list[tuple[float, float]]:
-    """A worker's job: ``rounds`` timed rounds, each as (start, end) on the shared monotonic clock."""
+def _rounds(rounds: int) -> list[float]:
+    """A worker's job: ``rounds`` timed rounds, each started with the other copies at the
+    barrier (a broken or absent barrier: alone), as the probe starts its rounds."""
     out = []
     for _ in range(rounds):
+        if _STATE["barrier"] is not None:
+            try:
+                _STATE["barrier"].wait(120.0)
+            except threading.BrokenBarrierError:
+                pass
         t = time.perf_counter()
         _STATE["run"]()
-        out.append((t, time.perf_counter()))
+        out.append(time.perf_counter() - t)
     return out
 
 
 def in_processes(kind: str, copies: int, rounds: int) -> float:
-    """The least round of ``copies`` spawned workers running ``kind`` at once (module docstring)."""
+    """The slowest copy's least round of ``copies`` spawned workers running ``kind``, every
+    round started together (module docstring)."""
     got: list = []
-    run_jobs(_rounds, [(rounds,)] * copies, workers=copies, init=_setup, init_args=(kind,),
-             on_result=lambda i, r: got.append(r))
-    lo = max(r[0][0] for r in got)   # every copy has started
-    hi = min(r[-1][1] for r in got)  # no copy has ended
-    inside = [[e - s for s, e in r if s >= lo and e <= hi] for r in got]
-    if all(inside) and len(inside) == copies:
-        return max(min(x) for x in inside)
-    return max(min(e - s for s, e in r) for r in got)
+    run_jobs(_rounds, [(rounds,)] * copies, workers=copies, init=_setup,
+             init_args=(kind, mp.get_context("spawn").Barrier(copies)), on_result=lambda i, r: got.append(r))
+    return max(min(r) for r in got)
 
 
 def here(kind: str, rounds: int) -> tuple[float, object]:
     """The least round of ``kind`` in this process (default threads), after an untimed one,
     and the iterations its run reported."""
     _setup(kind)
-    return min(e - s for s, e in _rounds(rounds)), _STATE["run"]()
+    return min(_rounds(rounds)), _STATE["run"]()
 
 
 def _cpu() -> str:

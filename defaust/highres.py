@@ -13,7 +13,7 @@ import numpy as np
 from sshade.errors import SShaDeError
 from sshade.mesh.validate import validate_mesh
 
-__all__ = ["HighResResult", "subdivide_remesh", "ls3_loop"]
+__all__ = ["HighResResult", "subdivide_remesh", "ls3_loop", "isotropic_remesh", "meshset"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ def ls3_loop(V, F, iterations: int = 1) -> tuple[np.ndarray, np.ndarray]:
         len(F2) == 4 * len(F)
         # -> True
     """
-    ms = _meshset(V, F)
+    ms = meshset(V, F)
     _ls3(ms, iterations)
     m = ms.current_mesh()
     return np.asarray(m.vertex_matrix(), np.float64), np.asarray(m.face_matrix(), np.int64)
@@ -80,7 +80,10 @@ def isotropic_remesh(ms, edge: float, iterations: int, *, check_distance: bool =
         splitflag=True, collapseflag=True, swapflag=True, smoothflag=True, reprojectflag=True)
 
 
-def _meshset(V, F):
+def meshset(V, F):
+    """A pymeshlab ``MeshSet`` holding one mesh: ``V`` (n, 3) float64 and ``F`` (m, 3)
+    taken as int32, pymeshlab's face type (contiguous copies where needed). Unchecked: the
+    caller passes a checked mesh. Raises ImportError without pymeshlab."""
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
@@ -145,7 +148,7 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
     k, n_est = 1, 4 * len(V)
     while n_est < 0.5 * target_n and k < 8:
         k, n_est = k + 1, 4 * n_est
-    base = _meshset(V, F)
+    base = meshset(V, F)
     _ls3(base, k)
     Vs = np.asarray(base.current_mesh().vertex_matrix(), np.float64)
     Fs = np.asarray(base.current_mesh().face_matrix(), np.int64)
@@ -155,7 +158,7 @@ def subdivide_remesh(V, F, *, vertex_range=(150_000, 200_000), remesh_iterations
     edge = float(np.sqrt(2.0 * area / (np.sqrt(3.0) * target_n)))
     tried, invalid = [], []
     for attempt in range(1, int(max_attempts) + 1):
-        ms = _meshset(Vs, Fs)
+        ms = meshset(Vs, Fs)
         isotropic_remesh(ms, edge, remesh_iterations, check_distance=check_distance)
         m = ms.current_mesh()
         n = m.vertex_number()

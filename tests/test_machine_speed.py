@@ -153,3 +153,28 @@ def test_probing_again_takes_the_mean_of_this_process_readings_of_the_runs(no_en
     assert ms.machine_speed() == s and len(calls) == 2
     monkeypatch.setattr(ms, "probe_seconds", lambda kinds: (_ for _ in ()).throw(SShaDeError("died")))
     assert ms.machine_speed(again=True)["factor"] == 3.0  # a failed probe again keeps the readings
+
+
+def test_a_plan_under_the_floor_runs_no_probe_and_says_it_uses_the_priors(no_env, monkeypatch):
+    calls = []
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls))
+    s = ms.machine_speed(build=True, again=True, probe=False)
+    assert calls == [] and (s["factor"], s["build_factor"], s["source"]) == (1.0, 1.0, "short")
+    assert f"not probed: the plan is under {ms.PROBE_MIN_PLAN_S:g} s" in ms.speed_words(s)
+    ms.machine_speed()  # a later long plan probes; a short one then takes its reading, no build probed
+    s = ms.machine_speed(build=True, again=True, probe=False)
+    assert calls == [("runs",)] and s["source"] == "probe" and s["factor"] == 2.0 and "build" not in s["probe_s"]
+
+
+def test_plan_speed_probes_a_long_plan_or_a_build_and_not_a_short_plan(no_env, monkeypatch):
+    from eval.experiments.cases.case_plan import plan_speed
+    calls = []
+    monkeypatch.setattr(ms, "probe_seconds", _fake_probe(calls))
+    methods = [SimpleNamespace(name="ARAP")]
+    cost = default_cost_model(methods)
+    short = [("ARAP", 6890)] * max(1, int(0.5 * ms.PROBE_MIN_PLAN_S / cost.estimate("ARAP", 6890)))
+    assert sum(cost.estimate(n, v) for n, v in short) < ms.PROBE_MIN_PLAN_S
+    assert plan_speed(methods, short)["source"] == "short" and calls == []
+    assert plan_speed(methods, short * 3)["source"] == "probe" and calls == [("runs",)]
+    ms._READINGS.clear()
+    assert plan_speed(methods, short, build=True)["source"] == "probe" and calls[-1] == ("runs", "build")

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from defaust.fixed_order import blend
-from defaust.highres import isotropic_remesh
+from defaust.highres import isotropic_remesh, meshset
 from harness.checks import env_positive
 from harness.jobs import JobOptions, run_jobs
 from sshade.arap import ArapOptions, ArapSolver
@@ -30,6 +30,7 @@ from sshade.cores import available_cores
 from sshade.errors import SShaDeError
 
 __all__ = ["PROBE_KINDS", "PROBE_REFERENCE_S", "MAX_PROBE_COPIES", "PROBE_COPY_BYTES", "SPEED_ENV", "SPEED_RANGE",
+           "PROBE_MIN_PLAN_S",
            "probe_copies", "probe_seconds", "machine_speed", "speed_words"]
 
 #: The kinds of work the probe times: the solvers' (the runs and references) and the builder's.
@@ -47,6 +48,9 @@ PROBE_COPY_BYTES = 1 << 30
 #: Environment variable that fixes both factors (a positive number; 1: the priors as they
 #: are) instead of running the probe.
 SPEED_ENV = "SSHADE_PLAN_SPEED"
+#: A plan shorter than this at the priors (seconds, the runs and the build) runs no probe: it
+#: costs 6-8 s per process, and a 30 % error on such a plan is under 20 s.
+PROBE_MIN_PLAN_S = 60.0
 #: The factors the plan takes: a probe outside them is clipped (and says so).
 SPEED_RANGE = (0.125, 8.0)
 
@@ -69,8 +73,6 @@ def _runs_work():
 
 
 def _build_work():
-    import pymeshlab
-
     V, F = box_surface((4.0, 1.0, 1.0), _BOX_H)
     n, k, p = _BLEND
     rng = np.random.default_rng(0)
@@ -79,8 +81,7 @@ def _build_work():
     T = rng.standard_normal((k, 3, 4))
 
     def work():
-        ms = pymeshlab.MeshSet()
-        ms.add_mesh(pymeshlab.Mesh(V, F.astype(np.int32)))
+        ms = meshset(V, F)
         isotropic_remesh(ms, _REMESH[0], _REMESH[1], check_distance=False)
         return ms.current_mesh().vertex_number() + float(blend(W, T)[0, 0, 0])
     return work
@@ -191,7 +192,7 @@ def _probed(kinds: tuple, again: tuple = ()) -> tuple[dict, dict]:
         return {k: sum(r) / len(r) if r else None for k, r in got.items()}, {k: len(r) for k, r in got.items()}
 
 
-def machine_speed(build: bool = False, again: bool = False) -> dict:
+def machine_speed(build: bool = False, again: bool = False, probe: bool = True) -> dict:
     """This machine's time factors against the priors' machine, once per process.
 
     Parameters
@@ -200,13 +201,17 @@ def machine_speed(build: bool = False, again: bool = False) -> dict:
         is the ``runs`` one unless it was probed before in this process.
     again : bool, probe the runs' work again (e.g. after minutes of a build: a VM's speed
         moves over tens of seconds) and take the mean of this process's readings.
+    probe : bool, run the probe where this process has no reading yet; False (a plan
+        under :data:`PROBE_MIN_PLAN_S` at the priors: the probe would cost more than the
+        error it corrects) takes the readings there are, else the priors as they are
+        (``source`` ``"short"``).
 
     Returns
     -------
     dict: ``factor`` (float, what the runs' and references' priors are multiplied by: > 1
     on a slower machine, within :data:`SPEED_RANGE`), ``build_factor`` (the same for the
-    build), ``source`` (``"probe"``, ``"env"`` or ``"none"``: the probe failed, the
-    priors as they are), ``probe_s`` (kind -> the probe's seconds, the mean of its
+    build), ``source`` (``"probe"``, ``"env"``, ``"short"``: not probed, or ``"none"``: the
+    probe failed; the priors as they are for the last two), ``probe_s`` (kind -> the probe's seconds, the mean of its
     ``readings``, kind -> how many; None from the environment), ``reference_s``
     (:data:`PROBE_REFERENCE_S`), ``clipped`` (bool: a probe's factor was outside
     :data:`SPEED_RANGE`), and ``error`` when the probe failed.
@@ -221,14 +226,17 @@ def machine_speed(build: bool = False, again: bool = False) -> dict:
         raw = {"runs": env, "build": env}
     else:
         with _PROBE_LOCK:
-            had_build = bool(_READINGS.get("build"))
-        probe, readings = _probed(PROBE_KINDS if build or had_build else ("runs",), ("runs",) if again else ())
-        if any(v is None for v in probe.values()):
+            had_build, had_runs = bool(_READINGS.get("build")), "runs" in _READINGS
+        if not (probe or had_runs):
+            return {"factor": 1.0, "build_factor": 1.0, **out, "source": "short", "clipped": False}
+        seconds, readings = _probed(PROBE_KINDS if (build and probe) or had_build else ("runs",),
+                                    ("runs",) if again and probe else ())
+        if any(v is None for v in seconds.values()):
             out.update(source="none", error=_ERRORS[0] if _ERRORS else "")
             raw = {"runs": 1.0, "build": 1.0}
         else:
-            out.update(source="probe", probe_s={k: round(v, 4) for k, v in probe.items()}, readings=readings)
-            raw = {k: v / PROBE_REFERENCE_S[k] for k, v in probe.items()}
+            out.update(source="probe", probe_s={k: round(v, 4) for k, v in seconds.items()}, readings=readings)
+            raw = {k: v / PROBE_REFERENCE_S[k] for k, v in seconds.items()}
             raw.setdefault("build", raw["runs"])
     lo, hi = SPEED_RANGE
     f = {k: min(max(v, lo), hi) for k, v in raw.items()}
@@ -249,6 +257,9 @@ def speed_words(speed: dict) -> str:
     f, b = speed["factor"], speed.get("build_factor", speed["factor"])
     if speed["source"] == "env":
         return f"times for this machine: x{f:.2g} the priors ({SPEED_ENV})"
+    if speed["source"] == "short":
+        return (f"times for this machine: the priors as measured (not probed: the plan is under "
+                f"{PROBE_MIN_PLAN_S:g} s at them)")
     if speed["source"] == "none":
         return f"times for this machine: the priors as measured (the probe failed: {speed.get('error', '')})"
     probe, ref = speed["probe_s"], speed["reference_s"]

@@ -20,14 +20,14 @@ from eval import datasets
 from eval.experiments.cases.case_jobs import job_count
 from eval.metrics.reference import reference_path
 from eval.metrics.reference_scores import method_energy, sr_alpha
-from eval.run.machine_speed import machine_speed
+from eval.run.machine_speed import PROBE_MIN_PLAN_S, machine_speed
 from eval.run.plan import add_actuals, build_stage, busy_words, make_plan, render_actuals, render_plan
 from eval.run.progress import default_cost_model
 from eval.run.spec import DatasetSpec
 from eval.run.subset import baseline_selection, take_sample
 from sshade.errors import SShaDeError
 
-__all__ = ["planned_root", "plan_runs", "PlanRecord"]
+__all__ = ["planned_root", "plan_speed", "plan_runs", "PlanRecord"]
 
 log = logging.getLogger("eval")
 
@@ -56,10 +56,6 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
     out = datasets.dataset_outlook(ds)
     if out is None:
         return datasets.dataset_root(ds), None
-    speed = machine_speed(build=out["subjects"] > 0)
-    f, fb = speed["factor"], speed["build_factor"]
-    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"] * fb,
-                        start_s=out.get("start_s", 0.0) * fb, what="DeFAUST", root=_short(out["root"]))
     cases, _ = take_sample([SimpleNamespace(subject=s, pose=p, n_vertices=out["n_vertices"]) for s, p in out["cases"]],
                            ds.sample, ds.sample_seed)
     base, _ = baseline_selection(cases, ds.baseline_cases) if cases else (None, "")
@@ -71,6 +67,10 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
         if refs.covers(ci, cases, base):
             energies = dict.fromkeys(method_energy(m) for mi, m in enumerate(methods) if (ci, mi) in on)
             need += [(c.n_vertices, e, None) for e in energies]
+    speed = plan_speed(methods, [(names[mi], cases[ci].n_vertices) for ci, mi in pairs], build=out["subjects"] > 0)
+    f, fb = speed["factor"], speed["build_factor"]
+    build = build_stage(out["subjects"], workers=out["workers"], s_per_subject=out["s_per_subject"] * fb,
+                        start_s=out.get("start_s", 0.0) * fb, what="DeFAUST", root=_short(out["root"]))
     cost = default_cost_model(methods, speed=f)
     est = sum(cost.estimate(names[mi], cases[ci].n_vertices) for ci, mi in pairs)
     try:
@@ -84,6 +84,17 @@ def planned_root(ds: DatasetSpec | None, jobs: int | None, methods, refs, runs_o
     root = datasets.dataset_root(ds)
     build["actual_s"] = round(time.perf_counter() - t0, 3)
     return root, build
+
+
+def plan_speed(methods, runs, *, build: bool = False, again: bool = False) -> dict:
+    """:func:`eval.run.machine_speed.machine_speed` for a plan: probed when a build is
+    ahead or behind (``build``, ``again``: the runs probed again after it) or when the
+    ``runs`` (a list of ``(method name, vertex count)``) of ``methods`` take
+    :data:`~eval.run.machine_speed.PROBE_MIN_PLAN_S` or more at the priors; otherwise the
+    readings this process has, else the priors as they are."""
+    prior = default_cost_model(methods)
+    long = build or again or sum(prior.estimate(name, n) for name, n in runs) >= PROBE_MIN_PLAN_S
+    return machine_speed(build=build, again=again, probe=long)
 
 
 def _short(path) -> str:
@@ -114,7 +125,7 @@ class PlanRecord:
         return out
 
 
-def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
+def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1, speed: dict | None = None) -> PlanRecord:
     """Log the plan of the runs about to start (before the first) and return its record.
 
     ``s``: the experiment's setup (``cases``, ``methods``, ``names``, ``base``, ``refs``
@@ -122,7 +133,8 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
     the build stage of :func:`planned_root` or None); ``todo``: the ``(ci, mi)`` pairs
     to run; ``restored``: pairs restored from the store; ``cost``: the cost model;
     ``jobs``: worker processes running whole cases side by side
-    (:mod:`eval.experiments.cases.case_jobs`).
+    (:mod:`eval.experiments.cases.case_jobs`); ``speed``: what calibrated ``cost``
+    (:func:`eval.run.machine_speed.machine_speed`; None: this process's).
     """
     need = []
     for ci in dict.fromkeys(ci for ci, _ in todo):
@@ -136,7 +148,7 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1) -> PlanRecord:
     build = getattr(s, "build", None)
     plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs,
                      is_sr_energy=_is_sr_energy)
-    plan["speed"] = machine_speed()  # what calibrated ``cost`` (cases_experiment)
+    plan["speed"] = machine_speed(probe=False) if speed is None else speed
     log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
     busy = busy_words()
     if busy:

@@ -21,7 +21,7 @@ from eval import datasets
 from eval import method_config as method_table
 from eval.experiments.cases.case_array import CaseTask, TaskEnd, run_case_array
 from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, run_case_jobs
-from eval.experiments.cases.case_plan import plan_runs, planned_root
+from eval.experiments.cases.case_plan import plan_runs, plan_speed, planned_root
 from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.case_restore import keep_reproduced, leave_pending, named_change, restore
 from eval.experiments.cases.pair import run_and_store
@@ -35,7 +35,6 @@ from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
 from eval.run.compared import compared_rows, read_compared, run_settings
 from eval.run.jsonsafe import json_safe
-from eval.run.machine_speed import machine_speed
 from eval.run.paths import abs_path
 from eval.run.pending_rows import OTHER_CASE_DATA, STOP_AFTER_ENV, stop_after_s
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
@@ -265,8 +264,10 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     keys = {ci: _pair_keys(s, ci, c) for ci, c in enumerate(cases)}
     # measured per-method priors (eval/run/progress.py), scaled to this machine (machine_speed.py),
     # probed again after a build of minutes (a VM's speed moves over tens of seconds)
+    # (not probed for a plan of seconds: case_plan.plan_speed)
     built = s.build is not None and s.build.get("count", 0) > 0
-    cost = default_cost_model(methods, speed=machine_speed(again=built)["factor"])
+    speed = plan_speed(methods, [(names[mi], len(cases[ci].V)) for ci, mis in plan.items() for mi in mis], again=built)
+    cost = default_cost_model(methods, speed=speed["factor"])
     done = restore(s, plan, keys, cost) if s.resume else {}  # (ci, mi) -> stored record
     todo = [(ci, mi) for ci, mis in plan.items() for mi in mis if (ci, mi) not in done]
     est = {p: cost.estimate(names[p[1]], len(cases[p[0]].V)) for p in todo}
@@ -274,7 +275,7 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     n_cases = len({ci for ci, _ in todo})
     s.jobs = (job_count(spec.jobs, cases=n_cases, estimate_s=sum(est.values())) if array is None
               else max(1, min(array.array_parallelism, n_cases)))
-    s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs)  # the plan, before any run (case_plan.py)
+    s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs, speed=speed)  # the plan, before any run (case_plan.py)
     out = _CaseOutputs(spec.figures, spec.report, s, plan, done)
     bar = weighted_bar(sum(est.values()), len(todo))
     if array is not None and s.deadline is not None:
