@@ -24,7 +24,8 @@ from sshade.arap.problems import bent_cylinder, twisted_bar
 
 from .optional import optional_import
 
-pytestmark = [pytest.mark.open3d, pytest.mark.xdist_group("open3d_oracle")]  # one worker: oracles shared
+# one worker: oracles shared; slow: Open3D to 6000 iterations per oracle, about 70 s on one worker
+pytestmark = [pytest.mark.open3d, pytest.mark.slow, pytest.mark.xdist_group("open3d_oracle")]
 o3d = None  # the open3d module, set by _import_open3d
 
 

@@ -159,6 +159,7 @@ def test_a_subject_has_the_same_bytes_under_other_blas_thread_counts_and_kernels
     assert len(outs) == 1 and len(outs.pop()) == 64, outs
 
 
+@pytest.mark.slow  # every pose on every subject (about 33 s): the slow suite, which .ci/run runs next
 def test_library_poses_do_not_self_intersect(model, sub0):
     """Every library pose on every subject (anny_subject raises on an intersection)."""
     assert set(DEFAULT_TARGETS) <= set(POSES)
@@ -198,6 +199,7 @@ def _build(out, cache, *extra):
     return build_defaust(config_from_omegaconf(cfg))
 
 
+@pytest.mark.slow  # a whole build (30-50 s): the slow suite, which .ci/run runs next
 def test_build_is_deterministic_with_exact_high_res_ground_truth(model, anny_cache, tmp_path, monkeypatch):
     from defaust.dataset import load_handles
     from eval.datasets.defaust_dataset import DefaustOptions, load_defaust

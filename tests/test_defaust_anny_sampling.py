@@ -145,6 +145,7 @@ def test_library_poses_on_a_sampled_body(anny_fixed_assets):
     assert got.subject.subject == 11 and got.subject.pose_names == ["rest", "squat"] and got.record["poses"] == []
 
 
+@pytest.mark.slow  # a whole build (30-50 s): the slow suite, which .ci/run runs next
 def test_a_sampled_build_is_reproducible_and_verifies(anny_fixed_assets, anny_cache, tmp_path, monkeypatch):
     """Two builds with one seed: the same manifest (every checksum); another seed draws
     other bodies; the build verifies and loads; beyond the table's 10 subjects."""
