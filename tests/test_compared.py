@@ -44,12 +44,18 @@ def _error(r) -> str:
 def _data(name: str, faust_root) -> list[str] | None:
     """The evaluator's dataset arguments for the committed folder ``results/<name>``:
     FAUST from the shared data; DeFAUST from this checkout's git-ignored ANNY build
-    (``python -m defaust out=data/defaust``, about 5 min), None where it is not built."""
+    (``python -m defaust out=data/defaust``, about 5 min; of the subjects it was built with,
+    when it holds some), None where it is not built or lacks subject 0."""
     if name == "faust":
         return ["dataset=faust", f"dataset.root={faust_root}"]
-    if not (ROOT / "data" / "defaust" / "manifest.json").is_file():
+    manifest = ROOT / "data" / "defaust" / "manifest.json"
+    if not manifest.is_file():
         return None
-    return ["dataset=defaust", "dataset.root=data/defaust", "dataset.build.enabled=false", "dataset.baseline_cases=all"]
+    args = ["dataset=defaust", "dataset.root=data/defaust", "dataset.build.enabled=false", "dataset.baseline_cases=all"]
+    some = (json.loads(manifest.read_text()).get("parameters") or {}).get("subjects")
+    if isinstance(some, list):  # built with subjects=[...] (the README's main job): the cases' subject 0 among them
+        return args + [f"dataset.subjects=[{','.join(map(str, some))}]"] if 0 in some else None
+    return args
 
 
 def _both_canonical(folder, root) -> bool:
