@@ -125,7 +125,7 @@ class PlanRecord:
         return out
 
 
-def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1, speed: dict | None = None) -> PlanRecord:
+def plan_runs(s, todo, restored: int, cost, *, speed: dict, jobs: int = 1) -> PlanRecord:
     """Log the plan of the runs about to start (before the first) and return its record.
 
     ``s``: the experiment's setup (``cases``, ``methods``, ``names``, ``base``, ``refs``
@@ -134,7 +134,7 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1, speed: dict | None
     to run; ``restored``: pairs restored from the store; ``cost``: the cost model;
     ``jobs``: worker processes running whole cases side by side
     (:mod:`eval.experiments.cases.case_jobs`); ``speed``: what calibrated ``cost``
-    (:func:`eval.run.machine_speed.machine_speed`; None: this process's).
+    (:func:`plan_speed`).
     """
     need = []
     for ci in dict.fromkeys(ci for ci, _ in todo):
@@ -148,7 +148,7 @@ def plan_runs(s, todo, restored: int, cost, *, jobs: int = 1, speed: dict | None
     build = getattr(s, "build", None)
     plan = make_plan(s.cases, s.names, todo, cost, build=build, references=need, restored=restored, jobs=jobs,
                      is_sr_energy=_is_sr_energy)
-    plan["speed"] = machine_speed(probe=False) if speed is None else speed
+    plan["speed"] = speed
     log.info(render_plan(plan, head="plan, the cases built" if build is not None else "plan"))
     busy = busy_words()
     if busy:
