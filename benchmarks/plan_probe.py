@@ -1,7 +1,7 @@
 """What the plan's probe says against what the solvers do, on this machine: the numbers
 that calibrate ``eval/run/machine_speed.py`` across machines, measured in one run.
 
-    python benchmarks/plan_probe.py [--rounds 5] [--copies 2]
+    python benchmarks/plan_probe.py [--rounds 5] [--copies 2] [--build]
 
 Each line is one kind of work, timed as its wall seconds, the least of ``--rounds`` rounds
 after an untimed one (numba's cache loaded, or compiled once there):
@@ -16,7 +16,14 @@ after an untimed one (numba's cache loaded, or compiled once there):
   vertices), in this process at the default threads (as the asv benchmark
   ``fullres.ArapSrPaper`` times it), then in ``--copies`` spawned processes at once;
 - ``Elastic, twisted bar``: ``baselines.Elastic()`` (converged) on the same case, the same two
-  ways (its iterations are printed: they may differ by a few across machines).
+  ways (its iterations are printed: they may differ by a few across machines);
+- with ``--build``, the work the build probe stands for: ``python -m defaust`` of subjects 0
+  and 1 into a temporary folder (every core, as the README's main job builds them; about
+  90-110 s on 2 cores), timed whole, beside the plan's prior for it (``BUILD_START_S`` plus
+  one round of ``BUILD_S_PER_SUBJECT``): their ratio is the build's speed, and the build
+  probe's least reading over it is what ``PROBE_REFERENCE_S["build"]`` would be on this
+  machine (the runs' counterpart needs a DeFAUST pair: the README's main job, its
+  ``run.json``).
 
 A process line is the slowest copy's least round, every round started by all copies
 together at a barrier (as the probe starts its rounds). Run it quiet; record: benchmarks/records/machine_speed.md.
@@ -89,6 +96,19 @@ def here(kind: str, rounds: int) -> tuple[float, object]:
     return min(_rounds(rounds)), _STATE["run"]()
 
 
+def build_seconds(subjects=(0, 1)) -> float:
+    """Wall seconds of ``python -m defaust`` building ``subjects`` into a temporary folder
+    (removed after), every core; raises CalledProcessError with the builder's words."""
+    import sys
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        t = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "defaust", f"out={d}/defaust",
+                        f"subjects=[{','.join(map(str, subjects))}]", "progress=false"],
+                       check=True, capture_output=True, text=True)
+        return time.perf_counter() - t
+
+
 def _cpu() -> str:
     try:
         out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
@@ -101,6 +121,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--copies", type=int, default=2)
+    ap.add_argument("--build", action="store_true", help="also time a 2-subject DeFAUST build (about 100 s)")
     a = ap.parse_args()
     from eval.run import machine_speed as ms
     commit = subprocess.run(["git", "rev-parse", "--short=8", "HEAD"], capture_output=True, text=True).stdout.strip()
@@ -114,6 +135,15 @@ def main() -> None:
         seconds, iterations = here(kind, a.rounds)
         rows.append((f"{label}, this process ({iterations} iterations)", seconds))
         rows.append((f"{label}, processes", in_processes(kind, a.copies, a.rounds)))
+    if a.build:
+        from eval.run.plan import BUILD_S_PER_SUBJECT, BUILD_START_S
+        prior = BUILD_START_S + BUILD_S_PER_SUBJECT * -(-2 // max(ms.probe_copies(), 1))
+        took = build_seconds()
+        rows.append(("DeFAUST build, subjects 0 and 1 (python -m defaust)", took))
+        rows.append(("the plan's prior for it at factor 1", prior))
+        build_probe = min(s for label, s in rows if label.startswith(f"probe, build, {a.copies} cop"))
+        rows.append(("the build probe over the build's speed (PROBE_REFERENCE_S on this machine)",
+                     build_probe / (took / prior)))
     print("| work | seconds |\n|---|---:|")
     for label, s in rows:
         print(f"| {label} | {s:.4f} |")
