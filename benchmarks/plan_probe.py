@@ -98,15 +98,19 @@ def here(kind: str, rounds: int) -> tuple[float, object]:
 
 def build_seconds(subjects=(0, 1)) -> float:
     """Wall seconds of ``python -m defaust`` building ``subjects`` into a temporary folder
-    (removed after), every core; raises CalledProcessError with the builder's words."""
+    (removed after), every core; exits with the builder's last line when it fails."""
     import sys
     import tempfile
     with tempfile.TemporaryDirectory() as d:
         t = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "defaust", f"out={d}/defaust",
-                        f"subjects=[{','.join(map(str, subjects))}]", "progress=false"],
-                       check=True, capture_output=True, text=True)
-        return time.perf_counter() - t
+        r = subprocess.run([sys.executable, "-m", "defaust", f"out={d}/defaust",
+                            f"subjects=[{','.join(map(str, subjects))}]", "progress=false"],
+                           capture_output=True, text=True)
+        took = time.perf_counter() - t
+    if r.returncode:
+        last = (r.stderr.strip().splitlines() or [f"exit {r.returncode}"])[-1]
+        raise SystemExit(f"error: python -m defaust failed: {last.removeprefix('error: ')}")
+    return took
 
 
 def _cpu() -> str:
@@ -126,24 +130,24 @@ def main() -> None:
     from eval.run import machine_speed as ms
     commit = subprocess.run(["git", "rev-parse", "--short=8", "HEAD"], capture_output=True, text=True).stdout.strip()
     print(f"machine: {_cpu()}; commit {commit}; PROBE_REFERENCE_S {ms.PROBE_REFERENCE_S}")
-    rows = []
+    rows, probe = [], {}  # probe: copies -> kind -> the least reading
     for copies in (a.copies, 1):
         got = [ms.probe_seconds(copies=copies) for _ in range(a.rounds)]
-        rows += [(f"probe, {k}, {copies} cop{'ies' if copies > 1 else 'y'}", min(g[k] for g in got))
-                 for k in ms.PROBE_KINDS]
+        probe[copies] = {k: min(g[k] for g in got) for k in ms.PROBE_KINDS}
+        rows += [(f"probe, {k}, {copies} cop{'ies' if copies > 1 else 'y'}", v) for k, v in probe[copies].items()]
     for kind, label in (("srpaper", "ARAP-SR paper, twisted bar"), ("elastic", "Elastic, twisted bar")):
         seconds, iterations = here(kind, a.rounds)
         rows.append((f"{label}, this process ({iterations} iterations)", seconds))
         rows.append((f"{label}, processes", in_processes(kind, a.copies, a.rounds)))
     if a.build:
-        from eval.run.plan import BUILD_S_PER_SUBJECT, BUILD_START_S
-        prior = BUILD_START_S + BUILD_S_PER_SUBJECT * -(-2 // max(ms.probe_copies(), 1))
+        from eval.run.plan import BUILD_START_S, build_stage
+        from sshade.cores import available_cores
+        prior = build_stage(2, workers=available_cores(), start_s=BUILD_START_S)["seconds"]  # as the builder runs
         took = build_seconds()
         rows.append(("DeFAUST build, subjects 0 and 1 (python -m defaust)", took))
         rows.append(("the plan's prior for it at factor 1", prior))
-        build_probe = min(s for label, s in rows if label.startswith(f"probe, build, {a.copies} cop"))
         rows.append(("the build probe over the build's speed (PROBE_REFERENCE_S on this machine)",
-                     build_probe / (took / prior)))
+                     probe[a.copies]["build"] / (took / prior)))
     print("| work | seconds |\n|---|---:|")
     for label, s in rows:
         print(f"| {label} | {s:.4f} |")
