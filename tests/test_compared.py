@@ -74,7 +74,7 @@ def test_a_plugin_row_beside_a_committed_folder_reads_its_records_without_torch(
         pytest.skip(f"no committed results/{name}")
     data = _data(name, faust_root)
     if data is None:
-        pytest.skip("no DeFAUST build in data/defaust (python -m defaust out=data/defaust)")
+        pytest.skip("no DeFAUST build holding subject 0 in data/defaust (python -m defaust out=data/defaust)")
     if name == "defaust" and not _both_canonical(res, ROOT / "data" / "defaust"):
         pytest.skip("results/defaust and data/defaust are not both the canonical DeFAUST: the committed rows stand on "
                     "other meshes (compare_with refuses them) until made again on the canonical build")

@@ -48,8 +48,9 @@ PROBE_COPY_BYTES = 1 << 30
 #: Environment variable that fixes both factors (a positive number; 1: the priors as they
 #: are) instead of running the probe.
 SPEED_ENV = "SSHADE_PLAN_SPEED"
-#: A plan shorter than this at the priors (seconds, the runs and the build) runs no probe: it
-#: costs 6-8 s per process, and a 30 % error on such a plan is under 20 s.
+#: A plan with no build whose runs take less than this at the priors (seconds) runs no probe
+#: (``eval.experiments.cases.case_plan.plan_speed``): it costs 6-8 s per process, and a 30 %
+#: error on such a plan is under 20 s.
 PROBE_MIN_PLAN_S = 60.0
 #: The factors the plan takes: a probe outside them is clipped (and says so).
 SPEED_RANGE = (0.125, 8.0)
