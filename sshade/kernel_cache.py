@@ -182,7 +182,7 @@ GROUPS = {
         "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._morton_sort", "sshade.mesh.geodesic._fps",
         "sshade.mesh.geodesic._grow", "sshade.mesh.geodesic._propagate",
         "sshade.arap.kernels._local_serial", "sshade.arap.kernels._rhs_serial",
-        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_two_loop")),
+        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_direction")),
     "topology, projection and transfer": (_warm_topology, (
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
         "sshade.closed_ball.closed_ball_holds", "sshade.closed_ball._region_euler", "sshade.closed_ball._pair_ids",

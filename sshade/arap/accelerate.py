@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .solver_kernels import CHUNK, lbfgs_pair, lbfgs_two_loop
+from .solver_kernels import CHUNK, lbfgs_direction, lbfgs_update
 from .threads import numba_threads
 
 __all__ = ["Anderson", "LBFGS"]
@@ -101,29 +101,32 @@ class Anderson:
 
 
 class LBFGS:
-    """L-BFGS two-loop recursion with the global step's matrix as initial Hessian
-    (Liu, Bouaziz, Kavan, "Quasi-Newton Methods for Real-time Simulation of Hyperelastic
-    Materials", ACM TOG 36(3), 2017; Nocedal & Wright, Algorithm 7.4): ``H0 = (2 L_ff)^-1``,
-    so ``H0 grad(x) = z = x - G(x)`` and ``H0 y_i`` is the difference of two ``z``: no solve
-    beyond the global step's own. ``H0`` is scaled by ``gamma = s.y / (y . H0 y)`` of the
-    newest pair (Nocedal & Wright, eq. 7.20, with ``H0`` in place of the identity), which
-    Liu et al. do not scale: the rotations make the energy softer than ``2 L_ff`` along
-    the slow modes, where the scaled steps take fewer iterations (measured:
+    """L-BFGS with the global step's matrix as initial Hessian (Liu, Bouaziz, Kavan,
+    "Quasi-Newton Methods for Real-time Simulation of Hyperelastic Materials", ACM TOG
+    36(3), 2017), in the compact form of Byrd, Nocedal & Schnabel ("Representations of
+    quasi-Newton matrices and their use in limited memory methods", Math. Programming 63,
+    1994, eq. 2.6), which gives Nocedal & Wright's two-loop recursion (Algorithm 7.4) in
+    two passes over the history instead of four: ``H0 = (2 L_ff)^-1``, so ``H0 grad(x) =
+    z = x - G(x)`` and ``H0 y_i`` is the difference of two ``z``: no solve beyond the
+    global step's own. ``H0`` is scaled by ``gamma = s.y / (y . H0 y)`` of the newest pair
+    (Nocedal & Wright, eq. 7.20, with ``H0`` in place of the identity), which Liu et al. do
+    not scale: the rotations make the energy softer than ``2 L_ff`` along the slow modes,
+    where the scaled steps take fewer iterations (measured:
     benchmarks/records/lbfgs_scaling.md; docs/implementation.md, "Implementation notes:
-    sshade/arap/accelerate.py"). Without
-    history the direction is the plain step ``-z``. History in (m, N) ring buffers,
-    ``N = 3 n_free``; the recursion runs in serial numba kernels (BLAS calls were much
-    slower on a loaded machine: their threads spin), about ``2 m + 2`` passes over the
-    two work vectors and ``5 m`` over the history.
+    sshade/arap/accelerate.py"). Without history the direction is the plain step ``-z``.
+    History: ``S`` and ``Z = H0 Y`` in (m, N) ring buffers, ``N = 3 n_free`` (``Y`` is
+    needed only through its products, kept in ``SY`` (m, m), ``s_i . y_j``, and ``YZ``
+    (m, m), ``y_i . H0 y_j``); the passes run in the serial numba kernels
+    :func:`sshade.arap.solver_kernels.lbfgs_update` and ``lbfgs_direction``.
     """
 
     def __init__(self, m: int, Lff):
         self.m, self.L = m, Lff.tocsr()
         N = 3 * Lff.shape[0]
-        self.S, self.Y, self.Z = np.zeros((m, N)), np.zeros((m, N)), np.zeros((m, N))
-        self.rho = np.zeros(m)
+        self.S, self.Z = np.zeros((m, N)), np.zeros((m, N))
+        self.SY, self.YZ = np.ones((m, m)), np.zeros((m, m))
+        self.dots = np.zeros((4, m))
         self.x_prev, self.grad_prev, self.z_prev = np.zeros(N), np.zeros(N), np.zeros(N)
-        self.q, self.alpha = np.empty(N), np.empty(m)
         self.reset()
 
     def reset(self):
@@ -137,43 +140,48 @@ class LBFGS:
         iterate (a pair across two problems would mix their targets)."""
         self.have_prev = False
 
+    def _slots(self) -> np.ndarray:
+        """The kept pairs' ring slots, oldest first."""
+        return np.array([(self.pos - self.n_hist + i) % self.m for i in range(self.n_hist)], np.int64)
+
     def direction(self, x: np.ndarray, g: np.ndarray, grad: np.ndarray | None = None):
         """Descent direction ``d`` ((nf, 3), new array) at the accepted iterate ``x`` whose
         plain step is ``g = G(x)``, and the slope ``grad(x) . d < 0``. ``grad``: (nf, 3)
         C-contiguous ``2 L_ff (x - g)`` when the caller has it (the same floats as this
         method's own product; read, not kept)."""
-        m = self.m
-        z = np.subtract(x, g)
+        m, k = self.m, self.pos
+        xv, gv = np.ascontiguousarray(x).reshape(-1), np.ascontiguousarray(g).reshape(-1)
         if grad is None:
-            grad = (self.L @ z).reshape(-1)
+            grad = (self.L @ (x - g)).reshape(-1)
             grad *= 2.0
         else:
             grad = grad.reshape(-1)
-        z = z.reshape(-1)
-        xv = np.ascontiguousarray(x).reshape(-1)
-        k = self.pos
-        if self.have_prev:  # new curvature pair (s, y, H0 y) into the ring
-            sy, ss, yy, yz = lbfgs_pair(xv, grad, z, self.x_prev, self.grad_prev, self.z_prev,
-                                         self.S[k], self.Y[k], self.Z[k])
-            if sy > 1e-12 * np.sqrt(ss * yy) and yz > 0:  # curvature condition
-                self.rho[k] = 1.0 / sy
+        old = self._slots()
+        new = self.have_prev
+        if new and self.n_hist == m:  # the new pair takes the oldest one's slot
+            old = old[1:]
+        ss, yy = lbfgs_update(xv, gv, grad, self.x_prev, self.grad_prev, self.z_prev, self.S, self.Z, k, new,
+                              old, self.dots)
+        self.have_prev = True
+        dots = self.dots
+        if new:
+            sy, yz = dots[2, k], dots[3, k]
+            if sy > 1e-12 * np.sqrt(ss * yy) and yz > 0:  # curvature condition: keep the pair
+                self.SY[old, k] = dots[2, old]
+                self.SY[k, k] = sy
+                self.YZ[old, k] = self.YZ[k, old] = dots[3, old]
+                self.YZ[k, k] = yz
                 self.gamma = sy / yz
                 self.pos = (k + 1) % m
                 self.n_hist = min(self.n_hist + 1, m)
             elif self.n_hist == m:  # the rejected pair overwrote the oldest one
                 self.n_hist -= 1
-        else:
-            self.x_prev[:] = xv
-            self.grad_prev[:] = grad
-            self.z_prev[:] = z
-            self.have_prev = True
-        order = np.array([(self.pos - 1 - i) % m for i in range(self.n_hist)], np.int64)
-        r = np.empty_like(z)
-        slope = -lbfgs_two_loop(self.S, self.Y, self.Z, self.rho, order, grad, z, self.gamma, self.q, r,
-                                self.alpha)
+        z = self.z_prev  # now this iterate's z
+        d = np.empty_like(z)
+        slope = lbfgs_direction(self.S, self.Z, self.SY, self.YZ, dots[0], dots[1], self._slots(), self.gamma, z,
+                                grad, d)
         if not slope < 0:  # not a descent direction: plain step, fresh history
             self.n_hist, self.pos, self.gamma = 0, 0, 1.0
-            r = z
-            slope = -float(grad @ z)
-        return (-r).reshape(x.shape), slope
-
+            np.negative(z, out=d)
+            slope = float(grad @ d)
+        return d.reshape(x.shape), slope

@@ -97,8 +97,7 @@ class KernelData:
         """From ``ops`` (:class:`sshade.arap.operators.ArapOperators`) in the numbering
         ``perm`` (``perm[new] = old``; None: identity)."""
         n = ops.n
-        kt = _csr3([ops.KT[d::3] for d in range(3)])
-        kv = _csr3([ops.K[:, d * n:(d + 1) * n] for d in range(3)])
+        kt, kv = ops.kt, ops.kv
         if perm is None:
             return cls(None, None, _u32csr(kt), _u32csr(kv), as_u32(ops.edges), ops.edge_vec,
                        np.ascontiguousarray(ops.cell_ptr, np.uint64), as_u32(ops.pair_edge), ops.pair_w,
@@ -134,28 +133,3 @@ def as_u32(a) -> np.ndarray:
 def _u32csr(c) -> tuple:
     """``(ptr uint64, idx uint32, val)``."""
     return np.ascontiguousarray(c[0], np.uint64), as_u32(c[1]), np.ascontiguousarray(c[2], np.float64)
-
-
-def _csr3(blocks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Three (r, c) CSR matrices as one CSR with 3-vector values (union of the patterns,
-    entries in row-major order, missing ones 0): ``(ptr, idx, val)``."""
-    blocks = [sp.csr_matrix(b) for b in blocks]
-    for b in blocks:
-        if not b.has_canonical_format:
-            b.sum_duplicates()
-    b0 = blocks[0]
-    if all(np.array_equal(b.indptr, b0.indptr) and np.array_equal(b.indices, b0.indices) for b in blocks[1:]):
-        val = np.stack([b.data for b in blocks], 1)
-        return b0.indptr.astype(np.int64), b0.indices.astype(np.int64), np.ascontiguousarray(val, np.float64)
-    r, c = b0.shape  # patterns differ (explicit zeros dropped somewhere): merge
-    coo = [b.tocoo() for b in blocks]
-    key = np.concatenate([x.row.astype(np.int64) * c + x.col for x in coo])
-    ukey, inv = np.unique(key, return_inverse=True)
-    val = np.zeros((len(ukey), 3))
-    o = 0
-    for d, x in enumerate(coo):
-        val[inv[o:o + x.nnz], d] = x.data
-        o += x.nnz
-    ptr = np.zeros(r + 1, np.int64)
-    np.cumsum(np.bincount(ukey // c, minlength=r), out=ptr[1:])
-    return ptr, (ukey % c).astype(np.int64), val

@@ -31,6 +31,13 @@ __all__ = ["LANES", "polar_kernel", "energy_kernel", "fused_kernels", "fused", "
 LANES = 64
 _SM, _SA, _SQ, _SACT, _SR, _STR = 0, 9 * LANES, 18 * LANES, 27 * LANES, 28 * LANES, 37 * LANES
 _SCRATCH = 38 * LANES
+# Each row's offset named (``_M01``: row 1 of M): one integer add per access, which halves
+# numba's typing and lowering of the polar code against ``_SM + 1 * LANES + l``
+# (benchmarks/records/cold_compile.md); the arithmetic is the same.
+(_M00, _M01, _M02, _M10, _M11, _M12, _M20, _M21, _M22) = (_SM + k * LANES for k in range(9))
+(_A00, _A01, _A02, _A10, _A11, _A12, _A20, _A21, _A22) = (_SA + k * LANES for k in range(9))
+(_Q00, _Q01, _Q02, _Q10, _Q11, _Q12, _Q20, _Q21, _Q22) = (_SQ + k * LANES for k in range(9))
+(_R00, _R01, _R02, _R10, _R11, _R12, _R20, _R21, _R22) = (_SR + k * LANES for k in range(9))
 
 if nb is not None:
     _prange = nb.prange
@@ -44,9 +51,9 @@ if nb is not None:
         """Lanes ``l < nl``: ``A = Q^T M^T M Q`` with ``Q = W[k0 + l]`` (warm) or ``Q = I``,
         from ``M`` in the scratch ``S``; lanes ``l >= nl``: ``M = A = Q = I`` (inert)."""
         for l in range(LANES):
-            m00 = S[_SM + 0 * LANES + l]; m01 = S[_SM + 1 * LANES + l]; m02 = S[_SM + 2 * LANES + l]
-            m10 = S[_SM + 3 * LANES + l]; m11 = S[_SM + 4 * LANES + l]; m12 = S[_SM + 5 * LANES + l]
-            m20 = S[_SM + 6 * LANES + l]; m21 = S[_SM + 7 * LANES + l]; m22 = S[_SM + 8 * LANES + l]
+            m00 = S[_M00 + l]; m01 = S[_M01 + l]; m02 = S[_M02 + l]
+            m10 = S[_M10 + l]; m11 = S[_M11 + l]; m12 = S[_M12 + l]
+            m20 = S[_M20 + l]; m21 = S[_M21 + l]; m22 = S[_M22 + l]
             q00 = 1.0; q01 = 0.0; q02 = 0.0
             q10 = 0.0; q11 = 1.0; q12 = 0.0
             q20 = 0.0; q21 = 0.0; q22 = 1.0
@@ -54,9 +61,9 @@ if nb is not None:
                 m00 = 1.0; m01 = 0.0; m02 = 0.0
                 m10 = 0.0; m11 = 1.0; m12 = 0.0
                 m20 = 0.0; m21 = 0.0; m22 = 1.0
-                S[_SM + 0 * LANES + l] = m00; S[_SM + 1 * LANES + l] = m01; S[_SM + 2 * LANES + l] = m02
-                S[_SM + 3 * LANES + l] = m10; S[_SM + 4 * LANES + l] = m11; S[_SM + 5 * LANES + l] = m12
-                S[_SM + 6 * LANES + l] = m20; S[_SM + 7 * LANES + l] = m21; S[_SM + 8 * LANES + l] = m22
+                S[_M00 + l] = m00; S[_M01 + l] = m01; S[_M02 + l] = m02
+                S[_M10 + l] = m10; S[_M11 + l] = m11; S[_M12 + l] = m12
+                S[_M20 + l] = m20; S[_M21 + l] = m21; S[_M22 + l] = m22
             elif warm:
                 k = k0 + l
                 q00 = W[k, 0, 0]; q01 = W[k, 0, 1]; q02 = W[k, 0, 2]
@@ -76,18 +83,18 @@ if nb is not None:
                 b00 = m00; b01 = m01; b02 = m02
                 b10 = m10; b11 = m11; b12 = m12
                 b20 = m20; b21 = m21; b22 = m22
-            S[_SA + 0 * LANES + l] = b00 * b00 + b10 * b10 + b20 * b20
-            S[_SA + 1 * LANES + l] = b00 * b01 + b10 * b11 + b20 * b21
-            S[_SA + 2 * LANES + l] = b00 * b02 + b10 * b12 + b20 * b22
-            S[_SA + 3 * LANES + l] = b01 * b00 + b11 * b10 + b21 * b20
-            S[_SA + 4 * LANES + l] = b01 * b01 + b11 * b11 + b21 * b21
-            S[_SA + 5 * LANES + l] = b01 * b02 + b11 * b12 + b21 * b22
-            S[_SA + 6 * LANES + l] = b02 * b00 + b12 * b10 + b22 * b20
-            S[_SA + 7 * LANES + l] = b02 * b01 + b12 * b11 + b22 * b21
-            S[_SA + 8 * LANES + l] = b02 * b02 + b12 * b12 + b22 * b22
-            S[_SQ + 0 * LANES + l] = q00; S[_SQ + 1 * LANES + l] = q01; S[_SQ + 2 * LANES + l] = q02
-            S[_SQ + 3 * LANES + l] = q10; S[_SQ + 4 * LANES + l] = q11; S[_SQ + 5 * LANES + l] = q12
-            S[_SQ + 6 * LANES + l] = q20; S[_SQ + 7 * LANES + l] = q21; S[_SQ + 8 * LANES + l] = q22
+            S[_A00 + l] = b00 * b00 + b10 * b10 + b20 * b20
+            S[_A01 + l] = b00 * b01 + b10 * b11 + b20 * b21
+            S[_A02 + l] = b00 * b02 + b10 * b12 + b20 * b22
+            S[_A10 + l] = b01 * b00 + b11 * b10 + b21 * b20
+            S[_A11 + l] = b01 * b01 + b11 * b11 + b21 * b21
+            S[_A12 + l] = b01 * b02 + b11 * b12 + b21 * b22
+            S[_A20 + l] = b02 * b00 + b12 * b10 + b22 * b20
+            S[_A21 + l] = b02 * b01 + b12 * b11 + b22 * b21
+            S[_A22 + l] = b02 * b02 + b12 * b12 + b22 * b22
+            S[_Q00 + l] = q00; S[_Q01 + l] = q01; S[_Q02 + l] = q02
+            S[_Q10 + l] = q10; S[_Q11 + l] = q11; S[_Q12 + l] = q12
+            S[_Q20 + l] = q20; S[_Q21 + l] = q21; S[_Q22 + l] = q22
             S[_SACT + l] = 1.0
 
     @_njit
@@ -111,8 +118,8 @@ if nb is not None:
         for _sweep in range(30):
             nact = 0
             for l in range(LANES):
-                a00 = S[_SA + 0 * LANES + l]; a01 = S[_SA + 1 * LANES + l]; a02 = S[_SA + 2 * LANES + l]
-                a11 = S[_SA + 4 * LANES + l]; a12 = S[_SA + 5 * LANES + l]; a22 = S[_SA + 8 * LANES + l]
+                a00 = S[_A00 + l]; a01 = S[_A01 + l]; a02 = S[_A02 + l]
+                a11 = S[_A11 + l]; a12 = S[_A12 + l]; a22 = S[_A22 + l]
                 off = a01 * a01 + a02 * a02 + a12 * a12
                 dg = a00 * a00 + a11 * a11 + a22 * a22
                 act = S[_SACT + l] != 0.0 and off > 1e-34 * dg
@@ -121,46 +128,46 @@ if nb is not None:
             if nact == 0:
                 break
             for l in range(LANES):  # plane (0, 1)
-                a00 = S[_SA + 0 * LANES + l]; a01 = S[_SA + 1 * LANES + l]; a02 = S[_SA + 2 * LANES + l]
-                a10 = S[_SA + 3 * LANES + l]; a11 = S[_SA + 4 * LANES + l]; a12 = S[_SA + 5 * LANES + l]
-                a20 = S[_SA + 6 * LANES + l]; a21 = S[_SA + 7 * LANES + l]
+                a00 = S[_A00 + l]; a01 = S[_A01 + l]; a02 = S[_A02 + l]
+                a10 = S[_A10 + l]; a11 = S[_A11 + l]; a12 = S[_A12 + l]
+                a20 = S[_A20 + l]; a21 = S[_A21 + l]
                 c, s = _rot_coef(S[_SACT + l] != 0.0 and a01 != 0.0, a00, a11, a01)
                 n00 = c * a00 - s * a01; n01 = s * a00 + c * a01
                 n10 = c * a10 - s * a11; n11 = s * a10 + c * a11
-                S[_SA + 6 * LANES + l] = c * a20 - s * a21; S[_SA + 7 * LANES + l] = s * a20 + c * a21
-                S[_SA + 0 * LANES + l] = c * n00 - s * n10; S[_SA + 3 * LANES + l] = s * n00 + c * n10
-                S[_SA + 1 * LANES + l] = c * n01 - s * n11; S[_SA + 4 * LANES + l] = s * n01 + c * n11
-                S[_SA + 2 * LANES + l] = c * a02 - s * a12; S[_SA + 5 * LANES + l] = s * a02 + c * a12
+                S[_A20 + l] = c * a20 - s * a21; S[_A21 + l] = s * a20 + c * a21
+                S[_A00 + l] = c * n00 - s * n10; S[_A10 + l] = s * n00 + c * n10
+                S[_A01 + l] = c * n01 - s * n11; S[_A11 + l] = s * n01 + c * n11
+                S[_A02 + l] = c * a02 - s * a12; S[_A12 + l] = s * a02 + c * a12
                 for r in range(3):
                     qp = S[_SQ + (3 * r + 0) * LANES + l]; qq = S[_SQ + (3 * r + 1) * LANES + l]
                     S[_SQ + (3 * r + 0) * LANES + l] = c * qp - s * qq
                     S[_SQ + (3 * r + 1) * LANES + l] = s * qp + c * qq
             for l in range(LANES):  # plane (0, 2)
-                a00 = S[_SA + 0 * LANES + l]; a01 = S[_SA + 1 * LANES + l]; a02 = S[_SA + 2 * LANES + l]
-                a10 = S[_SA + 3 * LANES + l]; a12 = S[_SA + 5 * LANES + l]
-                a20 = S[_SA + 6 * LANES + l]; a21 = S[_SA + 7 * LANES + l]; a22 = S[_SA + 8 * LANES + l]
+                a00 = S[_A00 + l]; a01 = S[_A01 + l]; a02 = S[_A02 + l]
+                a10 = S[_A10 + l]; a12 = S[_A12 + l]
+                a20 = S[_A20 + l]; a21 = S[_A21 + l]; a22 = S[_A22 + l]
                 c, s = _rot_coef(S[_SACT + l] != 0.0 and a02 != 0.0, a00, a22, a02)
                 n00 = c * a00 - s * a02; n02 = s * a00 + c * a02
                 n20 = c * a20 - s * a22; n22 = s * a20 + c * a22
-                S[_SA + 3 * LANES + l] = c * a10 - s * a12; S[_SA + 5 * LANES + l] = s * a10 + c * a12
-                S[_SA + 0 * LANES + l] = c * n00 - s * n20; S[_SA + 6 * LANES + l] = s * n00 + c * n20
-                S[_SA + 1 * LANES + l] = c * a01 - s * a21; S[_SA + 7 * LANES + l] = s * a01 + c * a21
-                S[_SA + 2 * LANES + l] = c * n02 - s * n22; S[_SA + 8 * LANES + l] = s * n02 + c * n22
+                S[_A10 + l] = c * a10 - s * a12; S[_A12 + l] = s * a10 + c * a12
+                S[_A00 + l] = c * n00 - s * n20; S[_A20 + l] = s * n00 + c * n20
+                S[_A01 + l] = c * a01 - s * a21; S[_A21 + l] = s * a01 + c * a21
+                S[_A02 + l] = c * n02 - s * n22; S[_A22 + l] = s * n02 + c * n22
                 for r in range(3):
                     qp = S[_SQ + (3 * r + 0) * LANES + l]; qq = S[_SQ + (3 * r + 2) * LANES + l]
                     S[_SQ + (3 * r + 0) * LANES + l] = c * qp - s * qq
                     S[_SQ + (3 * r + 2) * LANES + l] = s * qp + c * qq
             for l in range(LANES):  # plane (1, 2)
-                a01 = S[_SA + 1 * LANES + l]; a02 = S[_SA + 2 * LANES + l]
-                a10 = S[_SA + 3 * LANES + l]; a11 = S[_SA + 4 * LANES + l]; a12 = S[_SA + 5 * LANES + l]
-                a20 = S[_SA + 6 * LANES + l]; a21 = S[_SA + 7 * LANES + l]; a22 = S[_SA + 8 * LANES + l]
+                a01 = S[_A01 + l]; a02 = S[_A02 + l]
+                a10 = S[_A10 + l]; a11 = S[_A11 + l]; a12 = S[_A12 + l]
+                a20 = S[_A20 + l]; a21 = S[_A21 + l]; a22 = S[_A22 + l]
                 c, s = _rot_coef(S[_SACT + l] != 0.0 and a12 != 0.0, a11, a22, a12)
                 n11 = c * a11 - s * a12; n12 = s * a11 + c * a12
                 n21 = c * a21 - s * a22; n22 = s * a21 + c * a22
-                S[_SA + 1 * LANES + l] = c * a01 - s * a02; S[_SA + 2 * LANES + l] = s * a01 + c * a02
-                S[_SA + 3 * LANES + l] = c * a10 - s * a20; S[_SA + 6 * LANES + l] = s * a10 + c * a20
-                S[_SA + 4 * LANES + l] = c * n11 - s * n21; S[_SA + 7 * LANES + l] = s * n11 + c * n21
-                S[_SA + 5 * LANES + l] = c * n12 - s * n22; S[_SA + 8 * LANES + l] = s * n12 + c * n22
+                S[_A01 + l] = c * a01 - s * a02; S[_A02 + l] = s * a01 + c * a02
+                S[_A10 + l] = c * a10 - s * a20; S[_A20 + l] = s * a10 + c * a20
+                S[_A11 + l] = c * n11 - s * n21; S[_A21 + l] = s * n11 + c * n21
+                S[_A12 + l] = c * n12 - s * n22; S[_A22 + l] = s * n12 + c * n22
                 for r in range(3):
                     qp = S[_SQ + (3 * r + 1) * LANES + l]; qq = S[_SQ + (3 * r + 2) * LANES + l]
                     S[_SQ + (3 * r + 1) * LANES + l] = c * qp - s * qq
@@ -179,14 +186,14 @@ if nb is not None:
         that it vectorises over the lanes; the arithmetic is that of the scalar code.
         """
         for l in range(LANES):
-            m00 = S[_SM + 0 * LANES + l]; m01 = S[_SM + 1 * LANES + l]; m02 = S[_SM + 2 * LANES + l]
-            m10 = S[_SM + 3 * LANES + l]; m11 = S[_SM + 4 * LANES + l]; m12 = S[_SM + 5 * LANES + l]
-            m20 = S[_SM + 6 * LANES + l]; m21 = S[_SM + 7 * LANES + l]; m22 = S[_SM + 8 * LANES + l]
-            q00 = S[_SQ + 0 * LANES + l]; q01 = S[_SQ + 1 * LANES + l]; q02 = S[_SQ + 2 * LANES + l]
-            q10 = S[_SQ + 3 * LANES + l]; q11 = S[_SQ + 4 * LANES + l]; q12 = S[_SQ + 5 * LANES + l]
-            q20 = S[_SQ + 6 * LANES + l]; q21 = S[_SQ + 7 * LANES + l]; q22 = S[_SQ + 8 * LANES + l]
+            m00 = S[_M00 + l]; m01 = S[_M01 + l]; m02 = S[_M02 + l]
+            m10 = S[_M10 + l]; m11 = S[_M11 + l]; m12 = S[_M12 + l]
+            m20 = S[_M20 + l]; m21 = S[_M21 + l]; m22 = S[_M22 + l]
+            q00 = S[_Q00 + l]; q01 = S[_Q01 + l]; q02 = S[_Q02 + l]
+            q10 = S[_Q10 + l]; q11 = S[_Q11 + l]; q12 = S[_Q12 + l]
+            q20 = S[_Q20 + l]; q21 = S[_Q21 + l]; q22 = S[_Q22 + l]
             # order of the eigenvalues (descending): columns i0, i1 of Q
-            e0 = S[_SA + 0 * LANES + l]; e1 = S[_SA + 4 * LANES + l]; e2 = S[_SA + 8 * LANES + l]
+            e0 = S[_A00 + l]; e1 = S[_A11 + l]; e2 = S[_A22 + l]
             i0 = 0; i1 = 1; i2 = 2
             sw = e0 < e1
             t = i0; i0 = i1 if sw else i0; i1 = t if sw else i1
@@ -204,9 +211,9 @@ if nb is not None:
             v21 = q20 if i1 == 0 else (q21 if i1 == 1 else q22)
             # proper third column: v2 = v0 x v1
             v02 = v10 * v21 - v20 * v11; v12 = v20 * v01 - v00 * v21; v22 = v00 * v11 - v10 * v01
-            S[_SQ + 0 * LANES + l] = v00; S[_SQ + 1 * LANES + l] = v01; S[_SQ + 2 * LANES + l] = v02
-            S[_SQ + 3 * LANES + l] = v10; S[_SQ + 4 * LANES + l] = v11; S[_SQ + 5 * LANES + l] = v12
-            S[_SQ + 6 * LANES + l] = v20; S[_SQ + 7 * LANES + l] = v21; S[_SQ + 8 * LANES + l] = v22
+            S[_Q00 + l] = v00; S[_Q01 + l] = v01; S[_Q02 + l] = v02
+            S[_Q10 + l] = v10; S[_Q11 + l] = v11; S[_Q12 + l] = v12
+            S[_Q20 + l] = v20; S[_Q21 + l] = v21; S[_Q22 + l] = v22
             # B = M @ [v0 v1 v2]
             b00 = m00 * v00 + m01 * v10 + m02 * v20
             b10 = m10 * v00 + m11 * v10 + m12 * v20
@@ -236,15 +243,15 @@ if nb is not None:
             s3 = u02 * b02 + u12 * b12 + u22 * b22
             z = n1 == 0.0  # M = 0: identity, trace 0
             S[_STR + l] = 0.0 if z else n1 + (u01 * b01 + u11 * b11 + u21 * b21) + s3
-            S[_SR + 0 * LANES + l] = 1.0 if z else u00 * v00 + u01 * v01 + u02 * v02
-            S[_SR + 1 * LANES + l] = 0.0 if z else u00 * v10 + u01 * v11 + u02 * v12
-            S[_SR + 2 * LANES + l] = 0.0 if z else u00 * v20 + u01 * v21 + u02 * v22
-            S[_SR + 3 * LANES + l] = 0.0 if z else u10 * v00 + u11 * v01 + u12 * v02
-            S[_SR + 4 * LANES + l] = 1.0 if z else u10 * v10 + u11 * v11 + u12 * v12
-            S[_SR + 5 * LANES + l] = 0.0 if z else u10 * v20 + u11 * v21 + u12 * v22
-            S[_SR + 6 * LANES + l] = 0.0 if z else u20 * v00 + u21 * v01 + u22 * v02
-            S[_SR + 7 * LANES + l] = 0.0 if z else u20 * v10 + u21 * v11 + u22 * v12
-            S[_SR + 8 * LANES + l] = 1.0 if z else u20 * v20 + u21 * v21 + u22 * v22
+            S[_R00 + l] = 1.0 if z else u00 * v00 + u01 * v01 + u02 * v02
+            S[_R01 + l] = 0.0 if z else u00 * v10 + u01 * v11 + u02 * v12
+            S[_R02 + l] = 0.0 if z else u00 * v20 + u01 * v21 + u02 * v22
+            S[_R10 + l] = 0.0 if z else u10 * v00 + u11 * v01 + u12 * v02
+            S[_R11 + l] = 1.0 if z else u10 * v10 + u11 * v11 + u12 * v12
+            S[_R12 + l] = 0.0 if z else u10 * v20 + u11 * v21 + u12 * v22
+            S[_R20 + l] = 0.0 if z else u20 * v00 + u21 * v01 + u22 * v02
+            S[_R21 + l] = 0.0 if z else u20 * v10 + u21 * v11 + u22 * v12
+            S[_R22 + l] = 1.0 if z else u20 * v20 + u21 * v21 + u22 * v22
 
     @_njit
     def _polar_store(S, nl, k0, W, warm, R, tr):
@@ -346,9 +353,9 @@ if nb is not None:
                     m00 += a0 * u0; m01 += a1 * u0; m02 += a2 * u0
                     m10 += a0 * u1; m11 += a1 * u1; m12 += a2 * u1
                     m20 += a0 * u2; m21 += a1 * u2; m22 += a2 * u2
-                S[_SM + 0 * LANES + l] = m00; S[_SM + 1 * LANES + l] = m01; S[_SM + 2 * LANES + l] = m02
-                S[_SM + 3 * LANES + l] = m10; S[_SM + 4 * LANES + l] = m11; S[_SM + 5 * LANES + l] = m12
-                S[_SM + 6 * LANES + l] = m20; S[_SM + 7 * LANES + l] = m21; S[_SM + 8 * LANES + l] = m22
+                S[_M00 + l] = m00; S[_M01 + l] = m01; S[_M02 + l] = m02
+                S[_M10 + l] = m10; S[_M11 + l] = m11; S[_M12 + l] = m12
+                S[_M20 + l] = m20; S[_M21 + l] = m21; S[_M22 + l] = m22
             _polar_init(S, nl, W, k0, warm)
             _polar_jacobi(S)
             _polar_finish(S)
@@ -413,15 +420,15 @@ if nb is not None:
                 n00 += c * Rold[j, 0, 0]; n01 += c * Rold[j, 0, 1]; n02 += c * Rold[j, 0, 2]
                 n10 += c * Rold[j, 1, 0]; n11 += c * Rold[j, 1, 1]; n12 += c * Rold[j, 1, 2]
                 n20 += c * Rold[j, 2, 0]; n21 += c * Rold[j, 2, 1]; n22 += c * Rold[j, 2, 2]
-            S[_SM + 0 * LANES + l] = m00 + wR * n00
-            S[_SM + 1 * LANES + l] = m01 + wR * n01
-            S[_SM + 2 * LANES + l] = m02 + wR * n02
-            S[_SM + 3 * LANES + l] = m10 + wR * n10
-            S[_SM + 4 * LANES + l] = m11 + wR * n11
-            S[_SM + 5 * LANES + l] = m12 + wR * n12
-            S[_SM + 6 * LANES + l] = m20 + wR * n20
-            S[_SM + 7 * LANES + l] = m21 + wR * n21
-            S[_SM + 8 * LANES + l] = m22 + wR * n22
+            S[_M00 + l] = m00 + wR * n00
+            S[_M01 + l] = m01 + wR * n01
+            S[_M02 + l] = m02 + wR * n02
+            S[_M10 + l] = m10 + wR * n10
+            S[_M11 + l] = m11 + wR * n11
+            S[_M12 + l] = m12 + wR * n12
+            S[_M20 + l] = m20 + wR * n20
+            S[_M21 + l] = m21 + wR * n21
+            S[_M22 + l] = m22 + wR * n22
         _polar_init(S, nl, W, 0, False)
         _polar_jacobi(S)
         _polar_finish(S)

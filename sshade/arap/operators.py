@@ -121,12 +121,18 @@ class ArapOperators:
     cell_ptr : (n + 1,) int64, the pairs of cell ``k`` are ``cell_ptr[k]:cell_ptr[k+1]``
         (pairs are sorted by cell).
     L : (n, n) scipy.sparse.csr_matrix, ``-igl.cotmatrix(V, F)`` (PSD, rows sum to 0).
-    K : (n, 3n) scipy.sparse.csr_matrix, ``[K_0 K_1 K_2]``: the right-hand side is
-        ``K(R)[:, c] = sum_d K_d @ R[:, c, d]`` (libigl's ``arap_rhs`` up to sign and
-        layout).
-    KT : (3n, n) scipy.sparse.csr_matrix, row ``3k + d`` is row ``k`` of ``K_d^T``: the
-        covariances are ``M[k, c, d] = (K_d^T U)[k, c]`` (libigl's
-        ``covariance_scatter_matrix``).
+    kt : ``(ptr (n + 1,), idx (nnz,), val (nnz, 3))`` int64, int64, float64: the three
+        blocks of ``K^T`` as one CSR with 3-vector values on the pattern of ``L`` (the
+        diagonal and both directions of every edge, columns sorted):
+        ``M[k, c, d] = sum_jj val[jj, d] U[idx[jj], c]`` over row ``k``.
+    kv : the same for ``K`` (the transposed values on the same pattern): ``K(R)[v] =
+        sum_d sum_jj val[jj, d] R[idx[jj], :, d]``.
+    K : (n, 3n) scipy.sparse.csr_matrix (a property, built on first use from ``kv``),
+        ``[K_0 K_1 K_2]``: the right-hand side is ``K(R)[:, c] = sum_d K_d @ R[:, c, d]``
+        (libigl's ``arap_rhs`` up to sign and layout).
+    KT : (3n, n) scipy.sparse.csr_matrix (a property, from ``kt``), row ``3k + d`` is
+        row ``k`` of ``K_d^T``: the covariances are ``M[k, c, d] = (K_d^T U)[k, c]``
+        (libigl's ``covariance_scatter_matrix``), summed as ``kt`` sums them.
     rest_term : float, ``sum_e w_e ||e_e||^2`` (mesh units^2).
     mass : (n,) float64 Voronoi-hybrid vertex areas (``igl.massmatrix``), mesh units^2.
     diag : float, bounding-box diagonal of ``V``.
@@ -146,12 +152,34 @@ class ArapOperators:
     pair_w: np.ndarray
     cell_ptr: np.ndarray
     L: sp.csr_matrix
-    K: sp.csr_matrix
-    KT: sp.csr_matrix
+    kt: tuple
+    kv: tuple
     rest_term: float
     mass: np.ndarray
     diag: float
     _kdata: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def KT(self) -> sp.csr_matrix:
+        """(3n, n) scipy.sparse.csr_matrix, row ``3k + d`` = row ``k`` of ``K_d^T``
+        (built once from :attr:`kt`)."""
+        if "KT" not in self._kdata:
+            ptr, idx, val = self.kt
+            row = np.repeat(np.arange(self.n), np.diff(ptr))
+            rows = (3 * row[:, None] + np.arange(3)).ravel()
+            self._kdata["KT"] = sp.csr_matrix((val.ravel(), (rows, np.repeat(idx, 3))), shape=(3 * self.n, self.n))
+        return self._kdata["KT"]
+
+    @property
+    def K(self) -> sp.csr_matrix:
+        """(n, 3n) scipy.sparse.csr_matrix ``[K_0 K_1 K_2]`` (built once from :attr:`kv`)."""
+        if "K" not in self._kdata:
+            ptr, idx, val = self.kv
+            row = np.repeat(np.arange(self.n), np.diff(ptr))
+            self._kdata["K"] = sp.csr_matrix(
+                (val.T.ravel(), (np.tile(row, 3), (idx + self.n * np.arange(3)[:, None]).ravel())),
+                shape=(self.n, 3 * self.n))
+        return self._kdata["K"]
 
     def kernel_data(self, reorder: bool = False) -> KernelData:
         """The arrays of the numba kernels (:class:`KernelData`), built once per numbering.
@@ -489,12 +517,12 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
         bad = int(np.flatnonzero(~np.isfinite(C).all(1))[0])
         raise SShaDeError(f"face {bad} is degenerate (non-finite cotangent weight)")
     L = (-igl.cotmatrix(V, F)).tocsr()
-    edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr = _cell_pairs(V, F, C, energy)
-    K, KT = _rhs_operators(n, edges, edge_vec, pair_cell, pair_edge, pair_w)
+    edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr, fe2e = _cell_pairs(V, F, C, energy)
+    kt, kv = _rhs_csr(V, F, C, energy, edges, fe2e.reshape(-1, 3))
     rest_term = float((edge_w * (edge_vec ** 2).sum(1)).sum())
     mass = np.asarray(igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_VORONOI).diagonal(), np.float64)
     return ArapOperators(energy_type=energy, n=n, V=V, F=F, edges=edges, edge_vec=edge_vec, edge_w=edge_w,
-                         pair_cell=pair_cell, pair_edge=pair_edge, pair_w=pair_w, cell_ptr=cell_ptr, L=L, K=K, KT=KT,
+                         pair_cell=pair_cell, pair_edge=pair_edge, pair_w=pair_w, cell_ptr=cell_ptr, L=L, kt=kt, kv=kv,
                          rest_term=rest_term, mass=mass, diag=bbox_diag(V))
 
 
@@ -502,7 +530,8 @@ def _cell_pairs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str) -> tup
     """Edges and (cell, edge) incidences of ``energy`` (the cells: docs/implementation.md,
     "Implementation notes: sshade/arap/operators.py") from the cotangent entries ``C``
     (m, 3). Returns ``(edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr)``
-    as the attributes of :class:`ArapOperators`."""
+    as the attributes of :class:`ArapOperators`, and ``fe2e`` (3m,), the edge of each face-edge
+    (edge ``k`` of face ``f``, opposite its corner ``k``, at ``3 f + k``)."""
     n = len(V)
     # face-edges: edge e of face f goes from S to D, opposite corner X
     S = F[:, [1, 2, 0]].ravel()
@@ -529,20 +558,49 @@ def _cell_pairs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str) -> tup
     cell_ptr = P.indptr.astype(np.int64)
     P = P.tocoo()
     pair_cell, pair_edge, pair_w = P.row.astype(np.int64), P.col.astype(np.int64), P.data
-    return edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr
+    return edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr, fe2e
 
 
-def _rhs_operators(n, edges, edge_vec, pair_cell, pair_edge, pair_w) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """``(K, KT)`` of :class:`ArapOperators` from the (cell, edge) incidences."""
-    # K_d[s, k] += a e_d ; K_d[d, k] -= a e_d   for every pair (k, e = (s, d))
-    s_, d_ = edges[pair_edge, 0], edges[pair_edge, 1]
-    rows = np.concatenate([s_, d_])
-    blocks = []
-    for dd in range(3):
-        val = pair_w * edge_vec[pair_edge, dd]
-        blocks.append(sp.coo_matrix((np.concatenate([val, -val]),
-                                     (rows, np.concatenate([pair_cell, pair_cell]))), shape=(n, n)).tocsr())
-    K = sp.hstack(blocks, format="csr")
-    KT = sp.vstack([b.T for b in blocks], format="csr")
-    perm = (np.arange(3)[None, :] * n + np.arange(n)[:, None]).ravel()  # row 3k + d <- d n + k
-    return K, KT[perm]
+def _rhs_csr(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str, edges: np.ndarray,
+             fe: np.ndarray) -> tuple[tuple, tuple]:
+    """``(kt, kv)`` of :class:`ArapOperators`, assembled face by face on the pattern of
+    ``L`` (the diagonal and both directions of every edge). A pair (cell ``q``, edge ``e =
+    v_s - v_d``) of weight ``w`` adds ``w e`` at (q, s) and ``-w e`` at (q, d); the cells of
+    a face's edge are its end points (``w = c / 2``) and, for spokes-and-rims, the opposite
+    corner too (``w = c / 3``). Summed within each face into its 3x3 block of positions
+    (corners ``q``, ``r``), then over the faces in their order. ``fe`` (m, 3): the edge of
+    each face-edge (opposite corner ``k``)."""
+    n, ne = len(V), len(edges)
+    ar = np.arange(n)
+    ids = np.arange(n + 2 * ne)
+    P = sp.coo_matrix((ids, (np.concatenate([ar, edges[:, 0], edges[:, 1]]),
+                             np.concatenate([ar, edges[:, 1], edges[:, 0]]))), shape=(n, n)).tocsr()
+    P.sort_indices()
+    pos = np.empty(len(ids), np.int64)
+    pos[P.data] = np.arange(P.nnz)
+    diag, fwd, bwd = pos[:n], pos[n:n + ne], pos[n + ne:]  # (v, v), (s, d), (d, s)
+    rims = energy != "spokes"
+    # u[k]: edge k (corner k + 1 to k + 2) times its weight; at corner r the edges through
+    # it sum to u[r + 2] - u[r + 1] (the spokes' diagonal, every cell of a rims face)
+    u = [(C[:, k] / (3.0 if rims else 2.0))[:, None] * (V[F[:, (k + 1) % 3]] - V[F[:, (k + 2) % 3]])
+         for k in range(3)]
+    T = np.empty((len(F), 3, 3), np.int64)  # T[f, q, r]: position of (F[f, q], F[f, r])
+    B = np.empty((3, len(F), 3, 3))  # B[c, f, q, r]: component c of the face's sum there
+    for q in range(3):
+        for r in range(3):
+            if q == r:
+                T[:, q, r] = diag[F[:, q]]
+            else:
+                e = fe[:, 3 - q - r]
+                T[:, q, r] = np.where(F[:, q] < F[:, r], fwd[e], bwd[e])
+            if rims or q == r:
+                B[:, :, q, r] = (u[(r + 2) % 3] - u[(r + 1) % 3]).T
+            else:  # spokes: only the edge (q, r), + where r is its first corner
+                k = 3 - q - r
+                B[:, :, q, r] = (u[k] if r == (k + 1) % 3 else -u[k]).T
+    at = T.ravel()
+    kval = np.stack([np.bincount(at, weights=B[c].ravel(), minlength=P.nnz) for c in range(3)], 1)
+    tperm = np.empty(P.nnz, np.int64)  # position of (j, i) for (i, j)
+    tperm[diag], tperm[fwd], tperm[bwd] = diag, bwd, fwd
+    ptr, idx = P.indptr.astype(np.int64), P.indices.astype(np.int64)
+    return (ptr, idx, kval), (ptr, idx, np.ascontiguousarray(kval[tperm]))

@@ -4,7 +4,8 @@
 ``set_rows``, ``max_move``, ``grad`` (the stopping test's gradient in CSR, kept for the
 L-BFGS direction), ``push`` /
 ``mix`` (Anderson's history and mixing; sums over fixed chunks of :data:`CHUNK`, so the
-same floats whatever the thread count), :func:`lbfgs_two_loop`, :func:`lbfgs_pair`.
+same floats whatever the thread count), :func:`lbfgs_update` and
+:func:`lbfgs_direction` (L-BFGS's compact form).
 :func:`loop_kernels` compiles (or loads from numba's cache) the serial or parallel
 variants on first use; :func:`warmup_kernels` every serial kernel of the solver,
 :mod:`sshade.arap.kernels` included.
@@ -21,7 +22,7 @@ try:  # numba is a dependency of the package; without it the numpy paths are use
 except ImportError:  # pragma: no cover
     nb = None
 
-__all__ = ["CHUNK", "loop_kernels", "lbfgs_two_loop", "lbfgs_pair", "warmup_kernels"]
+__all__ = ["CHUNK", "LBFGS_BLOCK", "loop_kernels", "lbfgs_update", "lbfgs_direction", "warmup_kernels"]
 
 #: Anderson's dot products are summed over fixed chunks of CHUNK entries, then over the
 #: chunks: the same floats whatever the number of threads.
@@ -142,114 +143,168 @@ if nb is not None:
             _mix_range(c * CHUNK, min(N, (c + 1) * CHUNK), g, DG, theta, nh, out)
 
 
-if nb is not None:
-    @_njit
-    def lbfgs_two_loop(S, Y, Z, rho, order, grad, z, gamma, q, r, alpha):
-        """L-BFGS two-loop recursion (Nocedal & Wright, Alg. 7.4) with the initial Hessian
-        ``gamma H0``, ``H0 y_i = Z_i`` and ``H0 grad = z``: writes the quasi-Newton step
-        ``r = H grad`` (N,) and returns ``grad . r``. ``order``: ring slots, newest first.
-        Each pass updates the vectors with one pair and sums the next pair's dot product
-        (the same sums, in the same order, as one pass each). Serial and deterministic."""
-        N = grad.shape[0]
-        k = order.shape[0]
-        if k == 0:
-            sl = 0.0
-            for j in range(N):
-                r[j] = z[j]
-                sl += grad[j] * z[j]
-            return sl
-        i = order[0]
-        a = 0.0
-        for j in range(N):
-            q[j] = grad[j]
-            r[j] = gamma * z[j]
-            a += S[i, j] * grad[j]
-        for t in range(k):
-            i = order[t]
-            a *= rho[i]
-            alpha[t] = a
-            ga = gamma * a
-            if t + 1 < k:
-                nxt = order[t + 1]
-                a2 = 0.0
-                for j in range(N):
-                    qj = q[j] - a * Y[i, j]
-                    q[j] = qj
-                    r[j] -= ga * Z[i, j]
-                    a2 += S[nxt, j] * qj
-                a = a2
-            else:
-                for j in range(N):
-                    r[j] -= ga * Z[i, j]
-        i = order[k - 1]
-        b = 0.0
-        for j in range(N):
-            b += Y[i, j] * r[j]
-        sl = 0.0
-        for t in range(k - 1, -1, -1):
-            i = order[t]
-            c = alpha[t] - rho[i] * b
-            if t > 0:
-                nxt = order[t - 1]
-                b = 0.0
-                for j in range(N):
-                    rj = r[j] + c * S[i, j]
-                    r[j] = rj
-                    b += Y[nxt, j] * rj
-            else:
-                for j in range(N):
-                    rj = r[j] + c * S[i, j]
-                    r[j] = rj
-                    sl += grad[j] * rj
-        return sl
+#: L-BFGS's passes run over blocks of LBFGS_BLOCK entries (their dot products summed per
+#: block, then over the blocks: the same floats whatever the caller, for one machine's
+#: vector width).
+LBFGS_BLOCK = 2048
 
-    @_njit
-    def lbfgs_pair(x, grad, z, x_prev, grad_prev, z_prev, s, y, zz):
-        """New curvature pair into (s, y, zz) and the previous point updated to
-        (x, grad, z); returns (s.y, s.s, y.y, y.zz)."""
-        sy = 0.0
+if nb is not None:
+    # reassociated sums (vectorised): the order is fixed by the block and the vector width
+    _njit_fm = nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+
+    @_njit_fm
+    def lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
+        """One pass of L-BFGS's compact form (Byrd, Nocedal & Schnabel 1994): the plain
+        step's ``z = x - g``, the new pair (if ``new``) ``s = x - x_prev``, ``y = grad -
+        grad_prev``, ``H0 y = z - z_prev`` into ``S[slot]``, ``Z[slot]``, the previous
+        point set to ``(x, grad, z)``, and the inner products with the kept pairs ``old``
+        (k,) (slots) into ``dots`` (4, m) by slot: ``S_i . grad``, ``Z_i . grad``,
+        ``S_i . y``, ``Z_i . y`` (the last two only if ``new``; the new pair's own at
+        ``slot``). Flat (N,) vectors, (m, N) histories. Returns ``(s.s, y.y)``."""
+        N = x.shape[0]
+        k = old.shape[0]
+        for a in range(4):
+            for i in range(dots.shape[1]):
+                dots[a, i] = 0.0
         ss = 0.0
         yy = 0.0
-        yz = 0.0
-        for j in range(x.shape[0]):
-            a = x[j] - x_prev[j]
-            b = grad[j] - grad_prev[j]
-            c = z[j] - z_prev[j]
-            s[j] = a
-            y[j] = b
-            zz[j] = c
-            sy += a * b
-            ss += a * a
-            yy += b * b
-            yz += b * c
-            x_prev[j] = x[j]
-            grad_prev[j] = grad[j]
-            z_prev[j] = z[j]
-        return sy, ss, yy, yz
+        yb = np.empty(LBFGS_BLOCK)
+        for c0 in range(0, N, LBFGS_BLOCK):  # block views: contiguous loops that vectorise
+            c1 = min(N, c0 + LBFGS_BLOCK)
+            n = c1 - c0
+            xc = x[c0:c1]; gc = g[c0:c1]; grc = grad[c0:c1]
+            xp = x_prev[c0:c1]; gp = grad_prev[c0:c1]; zp = z_prev[c0:c1]
+            if new:
+                sc = S[slot, c0:c1]; hc = Z[slot, c0:c1]
+                p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0; p4 = 0.0; p5 = 0.0
+                for i in range(n):
+                    zj = xc[i] - gc[i]
+                    sj = xc[i] - xp[i]
+                    yj = grc[i] - gp[i]
+                    hj = zj - zp[i]
+                    sc[i] = sj; hc[i] = hj; yb[i] = yj
+                    xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = zj
+                    p0 += sj * grc[i]; p1 += hj * grc[i]; p2 += sj * yj; p3 += hj * yj
+                    p4 += sj * sj; p5 += yj * yj
+                dots[0, slot] += p0; dots[1, slot] += p1; dots[2, slot] += p2; dots[3, slot] += p3
+                ss += p4
+                yy += p5
+            else:
+                for i in range(n):
+                    xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = xc[i] - gc[i]
+            for t in range(k):
+                r = old[t]
+                sr = S[r, c0:c1]; zr = Z[r, c0:c1]
+                p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0
+                if new:
+                    for i in range(n):
+                        sv = sr[i]; zv = zr[i]; gj = grc[i]; yj = yb[i]
+                        p0 += sv * gj; p1 += zv * gj; p2 += sv * yj; p3 += zv * yj
+                else:
+                    for i in range(n):
+                        p0 += sr[i] * grc[i]; p1 += zr[i] * grc[i]
+                dots[0, r] += p0; dots[1, r] += p1; dots[2, r] += p2; dots[3, r] += p3
+        return ss, yy
+
+    @_njit
+    def _compact_coefficients(SY, YZ, Sg, Zg, idx, gamma, cs, cz):
+        """The compact form's coefficients (Byrd, Nocedal & Schnabel 1994, eq. 2.6; pairs
+        ``idx`` oldest first): ``H grad = gamma z + S^T cs + Z^T cz`` with ``R`` the upper
+        triangle of ``S^T Y``, ``D`` its diagonal, ``u = S^T grad``, ``v = gamma Z^T grad``:
+        ``p = R^-1 u``, ``cs = R^-T ((D + gamma Y^T Z) p - v)``, ``cz = -gamma p``."""
+        k = idx.shape[0]
+        p = np.empty(k)
+        for a in range(k - 1, -1, -1):  # back substitution: R p = u
+            acc = Sg[idx[a]]
+            for b in range(a + 1, k):
+                acc -= SY[idx[a], idx[b]] * p[b]
+            p[a] = acc / SY[idx[a], idx[a]]
+        w = np.empty(k)
+        for a in range(k):
+            acc = SY[idx[a], idx[a]] * p[a] - gamma * Zg[idx[a]]
+            for b in range(k):
+                acc += gamma * YZ[idx[a], idx[b]] * p[b]
+            w[a] = acc
+        for a in range(k):  # forward substitution: R^T cs = w
+            acc = w[a]
+            for b in range(a):
+                acc -= SY[idx[b], idx[a]] * cs[b]
+            cs[a] = acc / SY[idx[a], idx[a]]
+            cz[a] = -gamma * p[a]
+
+    @_njit_fm
+    def lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
+        """The L-BFGS direction ``d = -H grad`` (N,) from the compact form (pairs ``idx``
+        (k,), slots oldest first; :func:`_compact_coefficients`) with the initial Hessian
+        ``gamma H0``, ``H0 grad = z``, ``H0 y_i = Z_i`` (``H0`` unscaled without pairs);
+        returns the slope ``grad . d``. One pass over the kept pairs, block by block."""
+        N = z.shape[0]
+        k = idx.shape[0]
+        if k == 0:
+            gamma = 1.0
+        cs = np.empty(k)
+        cz = np.empty(k)
+        _compact_coefficients(SY, YZ, Sg, Zg, idx, gamma, cs, cz)
+        acc = np.empty(LBFGS_BLOCK)
+        slope = 0.0
+        for c0 in range(0, N, LBFGS_BLOCK):  # block views: contiguous loops that vectorise
+            c1 = min(N, c0 + LBFGS_BLOCK)
+            n = c1 - c0
+            zc = z[c0:c1]
+            for i in range(n):
+                acc[i] = gamma * zc[i]
+            for t in range(k):
+                a = cs[t]
+                b = cz[t]
+                sr = S[idx[t], c0:c1]; zr = Z[idx[t], c0:c1]
+                for i in range(n):
+                    acc[i] += a * sr[i] + b * zr[i]
+            dc = d[c0:c1]; gc = grad[c0:c1]
+            part = 0.0
+            for i in range(n):
+                v = -acc[i]
+                dc[i] = v
+                part += gc[i] * v
+            slope += part
+        return slope
 
 
-else:  # pragma: no cover - numpy versions of the two L-BFGS kernels
-    def lbfgs_two_loop(S, Y, Z, rho, order, grad, z, gamma, q, r, alpha):
-        q[:] = grad
-        r[:] = z if len(order) == 0 else gamma * z
-        for t, i in enumerate(order):
-            alpha[t] = rho[i] * np.einsum("j,j->", S[i], q)
-            q -= alpha[t] * Y[i]
-            r -= (gamma * alpha[t]) * Z[i]
-        for t in range(len(order) - 1, -1, -1):
-            i = order[t]
-            r += (alpha[t] - rho[i] * np.einsum("j,j->", Y[i], r)) * S[i]
-        return float(np.einsum("j,j->", grad, r))
+def _numpy_lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
+    """:func:`lbfgs_update` in numpy (numba unusable)."""
+    z = x - g
+    dots[:] = 0.0
+    ss = yy = 0.0
+    if new:
+        y = grad - grad_prev
+        np.subtract(x, x_prev, out=S[slot])
+        np.subtract(z, z_prev, out=Z[slot])
+        dots[:, slot] = (S[slot] @ grad, Z[slot] @ grad, S[slot] @ y, Z[slot] @ y)
+        ss, yy = float(S[slot] @ S[slot]), float(y @ y)
+    x_prev[:] = x
+    grad_prev[:] = grad
+    z_prev[:] = z
+    for r in old:
+        dots[0, r], dots[1, r] = S[r] @ grad, Z[r] @ grad
+        if new:
+            dots[2, r], dots[3, r] = S[r] @ y, Z[r] @ y
+    return ss, yy
 
-    def lbfgs_pair(x, grad, z, x_prev, grad_prev, z_prev, s, y, zz):
-        np.subtract(x, x_prev, out=s)
-        np.subtract(grad, grad_prev, out=y)
-        np.subtract(z, z_prev, out=zz)
-        x_prev[:] = x
-        grad_prev[:] = grad
-        z_prev[:] = z
-        return (float(np.einsum("j,j->", s, y)), float(np.einsum("j,j->", s, s)),
-                float(np.einsum("j,j->", y, y)), float(np.einsum("j,j->", y, zz)))
+
+def _numpy_lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
+    """:func:`lbfgs_direction` in numpy (numba unusable)."""
+    if len(idx) == 0:
+        np.negative(z, out=d)
+        return float(grad @ d)
+    R = np.triu(SY[np.ix_(idx, idx)])
+    p = np.linalg.solve(R, Sg[idx])
+    w = (np.diag(np.diag(R)) + gamma * YZ[np.ix_(idx, idx)]) @ p - gamma * Zg[idx]
+    cs = np.linalg.solve(R.T, w)
+    d[:] = -(gamma * z + cs @ S[idx] - gamma * (p @ Z[idx]))
+    return float(grad @ d)
+
+
+if nb is None:  # pragma: no cover - numba unusable
+    lbfgs_update, lbfgs_direction = _numpy_lbfgs_update, _numpy_lbfgs_direction
 
 
 _LOOP = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
@@ -291,7 +346,9 @@ def warmup_kernels() -> bool:
     ok = bool(warmup_energy_kernels() and loop_kernels(False))
     if ok:  # the L-BFGS kernels
         N, z = 3, np.zeros(3)
-        lbfgs_pair(z, z, z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
-        lbfgs_two_loop(np.zeros((1, N)), np.zeros((1, N)), np.zeros((1, N)), np.zeros(1), np.zeros(1, np.int64),
-                       z, z, 1.0, np.empty(N), np.empty(N), np.empty(1))
+        S, Z, dots = np.zeros((1, N)), np.zeros((1, N)), np.zeros((4, 1))
+        one = np.zeros(1, np.int64)
+        lbfgs_update(z, z, z, z.copy(), z.copy(), z.copy(), S, Z, 0, True, one[:0], dots)
+        lbfgs_direction(S, Z, np.ones((1, 1)), np.ones((1, 1)), np.zeros(1), np.zeros(1), one, 1.0, z, z,
+                        np.empty(N))
     return ok
