@@ -94,14 +94,14 @@ def test_only_runs_the_named_steps(capsys):
 
 def test_a_step_adding_rows_beside_another_machines_is_not_run_and_says_whose(capsys):
     """Without ``--any-machine``, on a machine none of defaust_paper's current rows was timed on
-    (the EPYC's; its first record taken as stale, whatever the committed state), the dry run
-    lists the step as not run, naming the machine and the count, and the rows it leaves
-    marked pending."""
+    (the EPYC's; its first record taken as stale and the others as current, whatever the
+    committed state), the dry run lists the step as not run, naming the machine and the
+    count, and the rows it leaves marked pending."""
     from dataclasses import replace
     real = reproduce.folder_states
 
     def one_stale(folder, trees):
-        return [replace(s, stale=True) if i == 0 else s for i, s in enumerate(real(folder, trees))]
+        return [replace(s, stale=i == 0, why=s.why if i == 0 else "") for i, s in enumerate(real(folder, trees))]
     elsewhere = {"cpu": "Elsewhere CPU", "simd": "sve", "cores": 64}
     with mock.patch.object(reproduce, "_print_plan", lambda selected: None), \
             mock.patch.object(reproduce, "machine_info", lambda: elsewhere), \
