@@ -15,7 +15,7 @@ then plain local/global) run for ``--iters`` iterations with the criterion switc
 after a warm-up solve (numba cache load, operators). Printed per iteration: the stages
 from ``info["stage_s"]`` (local = covariances + rotations + energy, fused; rhs = ``K(R)``;
 solve = CHOLMOD; gradient = the stopping test's gradient norm; anderson = Anderson's history
-update and mixing, or L-BFGS's direction: gradient, two-loop recursion), the rest of the loop ("other")
+update and mixing, or L-BFGS's direction: gradient, the compact form's two passes), the rest of the loop ("other")
 and the total (``solve_s / iterations``);
 ``locals/it`` is the number of local steps per iteration (the accelerated loop evaluates a
 second candidate after a rejected Anderson step) and ``parallel`` the fraction of
