@@ -105,8 +105,9 @@ class LBFGS:
     "Quasi-Newton Methods for Real-time Simulation of Hyperelastic Materials", ACM TOG
     36(3), 2017), in the compact form of Byrd, Nocedal & Schnabel ("Representations of
     quasi-Newton matrices and their use in limited memory methods", Math. Programming 63,
-    1994, eq. 2.6), which gives Nocedal & Wright's two-loop recursion (Algorithm 7.4) in
-    two passes over the history instead of four: ``H0 = (2 L_ff)^-1``, so ``H0 grad(x) =
+    1994, eq. 2.6): the matrix of Nocedal & Wright's two-loop recursion (Algorithm 7.4)
+    applied in two passes that read about ``4 m`` vectors of the history, where the
+    recursion reads and writes about ``11 m``. ``H0 = (2 L_ff)^-1``, so ``H0 grad(x) =
     z = x - G(x)`` and ``H0 y_i`` is the difference of two ``z``: no solve beyond the
     global step's own. ``H0`` is scaled by ``gamma = s.y / (y . H0 y)`` of the newest pair
     (Nocedal & Wright, eq. 7.20, with ``H0`` in place of the identity), which Liu et al. do

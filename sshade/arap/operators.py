@@ -137,7 +137,8 @@ class ArapOperators:
     mass : (n,) float64 Voronoi-hybrid vertex areas (``igl.massmatrix``), mesh units^2.
     diag : float, bounding-box diagonal of ``V``.
 
-    The numba kernels use :class:`KernelData` (:meth:`kernel_data`), built on first use.
+    The numba kernels use :class:`KernelData` (:meth:`kernel_data`), built on first use and
+    kept, like scipy's :attr:`K` and :attr:`KT`, in ``_kdata``.
     """
 
     energy_type: str
