@@ -31,9 +31,9 @@ __all__ = ["LANES", "polar_kernel", "energy_kernel", "fused_kernels", "fused", "
 LANES = 64
 _SM, _SA, _SQ, _SACT, _SR, _STR = 0, 9 * LANES, 18 * LANES, 27 * LANES, 28 * LANES, 37 * LANES
 _SCRATCH = 38 * LANES
-# Each row's offset named (``_M01``: row 1 of M): one integer add per access, which halves
-# numba's typing and lowering of the polar code against ``_SM + 1 * LANES + l``
-# (benchmarks/records/cold_compile.md); the arithmetic is the same.
+# Each row's offset named (``_M01``: row 1 of M): one integer add per access instead of
+# ``_SM + 1 * LANES + l``'s three, less IR for numba to type and lower (measured:
+# benchmarks/records/lbfgs_compact.md); the arithmetic is the same.
 (_M00, _M01, _M02, _M10, _M11, _M12, _M20, _M21, _M22) = (_SM + k * LANES for k in range(9))
 (_A00, _A01, _A02, _A10, _A11, _A12, _A20, _A21, _A22) = (_SA + k * LANES for k in range(9))
 (_Q00, _Q01, _Q02, _Q10, _Q11, _Q12, _Q20, _Q21, _Q22) = (_SQ + k * LANES for k in range(9))
