@@ -3,6 +3,7 @@ global steps against libigl and finite differences."""
 import igl
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from sshade.arap import ENERGIES, build_operators, fit_rotations, rigid_fit
@@ -94,6 +95,43 @@ def test_rotation_backends_agree():
     np.testing.assert_allclose(Rw[full], Rc[full], atol=1e-9)
     with pytest.raises(SShaDeError):
         fit_rotations(M, warm=np.zeros((3, 3, 3)))
+
+
+def _bumpy_bar():
+    """The bar with its vertices moved at random (obtuse faces, negative weights) and its
+    faces shuffled, so that no face order or orientation is special."""
+    V, F, _, _ = twisted_bar(90.0, h=0.25)
+    rng = np.random.default_rng(3)
+    V = V + rng.normal(scale=0.02, size=V.shape)
+    return V, np.ascontiguousarray(F[rng.permutation(len(F))])
+
+
+@pytest.mark.parametrize("mesh", ["bar", "bumpy", "cylinder"])
+@pytest.mark.parametrize("energy", ENERGIES)
+def test_laplacian_and_pairs_are_libigls_and_a_sparse_assembly_to_the_bit(bar, mesh, energy):
+    V, F = {"bar": bar[:2], "bumpy": _bumpy_bar(), "cylinder": bent_cylinder()[:2]}[mesh]
+    ops = build_operators(V, F, energy)
+    L = (-igl.cotmatrix(V, F)).tocsr()
+    L.sort_indices()
+    assert np.array_equal(ops.L.indptr, L.indptr) and np.array_equal(ops.L.indices, L.indices)
+    assert np.array_equal(ops.L.data, L.data)  # libigl's sums, in its order
+    # the (cell, edge) pairs: scipy's sum of every face's contributions
+    C = igl.cotmatrix_entries(V, F)
+    key = {tuple(e): i for i, e in enumerate(ops.edges)}
+    cells, pe, pw = [], [], []
+    for f in range(len(F)):
+        for k in range(3):
+            s, d, x = F[f, (k + 1) % 3], F[f, (k + 2) % 3], F[f, k]
+            e = key[(min(s, d), max(s, d))]
+            for cell in ((s, d) if energy == "spokes" else (s, d, x)):
+                cells.append(cell)
+                pe.append(e)
+                pw.append(C[f, k] / (2.0 if energy == "spokes" else 3.0))
+    P = sp.coo_matrix((pw, (cells, pe)), shape=(len(V), len(ops.edges))).tocsr()
+    P.sort_indices()
+    assert np.array_equal(ops.cell_ptr, P.indptr) and np.array_equal(ops.pair_edge, P.indices)
+    assert np.array_equal(ops.pair_cell, np.repeat(np.arange(len(V)), np.diff(P.indptr)))
+    assert np.array_equal(ops.pair_w, P.data)
 
 
 @pytest.mark.parametrize("energy", ENERGIES)

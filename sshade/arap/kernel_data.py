@@ -105,8 +105,8 @@ class KernelData:
         perm = np.ascontiguousarray(perm, np.int64)
         inv = np.empty(n, np.int64)
         inv[perm] = np.arange(n, dtype=np.int64)
-        kt = permute_csr(*kt, perm, inv)[:3]
-        kv = permute_csr(*kv, perm, inv)[:3]
+        ptr, idx, val, src = permute_csr(*kt, perm, inv)
+        kt, kv = (ptr, idx, val), (ptr, idx, np.ascontiguousarray(kv[2][src]))  # kv: kt's pattern
         es, ed = inv[ops.edges[:, 0]], inv[ops.edges[:, 1]]
         eperm = np.argsort(np.minimum(es, ed) * n + np.maximum(es, ed), kind="stable")
         einv = np.empty(len(eperm), np.int64)

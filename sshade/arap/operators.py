@@ -37,6 +37,10 @@ TRACE_MIN_ENERGY = 1e-3
 
 
 _NO_EDGES = np.empty(0)  # the edge-term scratch of a term-by-term local step (unread)
+# Spokes' K^T within a face, off the diagonal: position (q, r) holds edge k = 3 - q - r
+# (corner k + 1 to k + 2), + where r is its first corner
+_SPOKE_EDGE = np.array([[0, 2, 1], [2, 1, 0], [1, 0, 2]])
+_SPOKE_SIGN = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]])
 
 
 def bbox_diag(V: np.ndarray) -> float:
@@ -517,9 +521,10 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
     if not np.isfinite(C).all():
         bad = int(np.flatnonzero(~np.isfinite(C).all(1))[0])
         raise SShaDeError(f"face {bad} is degenerate (non-finite cotangent weight)")
-    L = (-igl.cotmatrix(V, F)).tocsr()
-    edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr, fe2e = _cell_pairs(V, F, C, energy)
-    kt, kv = _rhs_csr(V, F, C, energy, edges, fe2e.reshape(-1, 3))
+    edges, edge_vec, edge_w, fe2e = _edges(V, F, C)
+    pattern = _pattern(n, edges)
+    pair_cell, pair_edge, pair_w, cell_ptr = _cell_pairs(F, C, energy, len(edges), fe2e, pattern)
+    L, kt, kv = _laplacian_and_rhs(V, F, C, energy, pattern, fe2e.reshape(-1, 3))
     rest_term = float((edge_w * (edge_vec ** 2).sum(1)).sum())
     mass = np.asarray(igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_VORONOI).diagonal(), np.float64)
     return ArapOperators(energy_type=energy, n=n, V=V, F=F, edges=edges, edge_vec=edge_vec, edge_w=edge_w,
@@ -527,51 +532,90 @@ def build_operators(V: np.ndarray, F: np.ndarray, energy: str = "spokes_and_rims
                          rest_term=rest_term, mass=mass, diag=bbox_diag(V))
 
 
-def _cell_pairs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str) -> tuple:
-    """Edges and (cell, edge) incidences of ``energy`` (the cells: docs/implementation.md,
-    "Implementation notes: sshade/arap/operators.py") from the cotangent entries ``C``
-    (m, 3). Returns ``(edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr)``
-    as the attributes of :class:`ArapOperators`, and ``fe2e`` (3m,), the edge of each face-edge
-    (edge ``k`` of face ``f``, opposite its corner ``k``, at ``3 f + k``)."""
+def _edges(V: np.ndarray, F: np.ndarray, C: np.ndarray) -> tuple:
+    """The undirected edges of ``F`` from its face-edges (edge ``k`` of face ``f``, from
+    corner ``k + 1`` to ``k + 2``, opposite corner ``k``, at ``3 f + k``): ``(edges (ne, 2)
+    int64 (s < d, sorted), edge_vec (ne, 3), edge_w (ne,) (the sum of the face-edges'
+    cotangent entries ``C`` (m, 3) in face order), fe2e (3m,) int64 the edge of each
+    face-edge)``."""
     n = len(V)
-    # face-edges: edge e of face f goes from S to D, opposite corner X
-    S = F[:, [1, 2, 0]].ravel()
-    D = F[:, [2, 0, 1]].ravel()
-    X = F[:, [0, 1, 2]].ravel()
-    c = C.ravel()
-    lo, hi = np.minimum(S, D), np.maximum(S, D)
-    key = lo * n + hi
-    ukey, fe2e = np.unique(key, return_inverse=True)
+    S, D = F[:, [1, 2, 0]].ravel(), F[:, [2, 0, 1]].ravel()
+    ukey, fe2e = np.unique(np.minimum(S, D) * n + np.maximum(S, D), return_inverse=True)
     edges = np.stack([ukey // n, ukey % n], 1)
-    ne = len(edges)
     edge_vec = V[edges[:, 0]] - V[edges[:, 1]]
-    edge_w = np.bincount(fe2e, weights=c, minlength=ne)
+    return edges, edge_vec, np.bincount(fe2e, weights=C.ravel(), minlength=len(edges)), fe2e
+
+
+def _cell_pairs(F: np.ndarray, C: np.ndarray, energy: str, ne: int, fe2e: np.ndarray, pattern: tuple) -> tuple:
+    """The (cell, edge) incidences of ``energy`` (the cells: docs/implementation.md,
+    "Implementation notes: sshade/arap/operators.py"): ``(pair_cell, pair_edge, pair_w,
+    cell_ptr)`` as the attributes of :class:`ArapOperators`, sorted by cell, then edge.
+
+    Spokes: the cells of an edge are its end points, ``w = c / 2`` per face: the pairs of
+    cell ``v`` are the off-diagonal entries of row ``v`` of ``L``'s ``pattern``
+    (:func:`_pattern`), whose column order is the edges' order. Spokes-and-rims: the
+    opposite corner too, ``w = c / 3``, a (cell, edge) met twice summed."""
+    ptr, idx, diag, fwd, bwd = pattern
+    n = len(ptr) - 1
+    c = C.ravel()
     if energy == "spokes":
-        cells = np.concatenate([S, D])
-        pe = np.concatenate([fe2e, fe2e])
-        pw = np.concatenate([c, c]) / 2.0
-    else:
-        cells = np.concatenate([S, D, X])
-        pe = np.concatenate([fe2e, fe2e, fe2e])
-        pw = np.concatenate([c, c, c]) / 3.0
-    P = sp.coo_matrix((pw, (cells, pe)), shape=(n, ne)).tocsr()  # sums duplicates
+        offd = np.ones(len(idx), bool)
+        offd[diag] = False
+        pos_edge = np.empty(len(idx), np.int64)
+        pos_edge[fwd] = pos_edge[bwd] = np.arange(ne)
+        pair_edge = pos_edge[offd]
+        cell_ptr = ptr - np.arange(n + 1)
+        pair_cell = np.repeat(np.arange(n), np.diff(cell_ptr))
+        return pair_cell, pair_edge, np.bincount(fe2e, weights=c / 2.0, minlength=ne)[pair_edge], cell_ptr
+    cells = np.concatenate([F[:, [1, 2, 0]].ravel(), F[:, [2, 0, 1]].ravel(), F.ravel()])
+    P = sp.coo_matrix((np.tile(c / 3.0, 3), (cells, np.tile(fe2e, 3))), shape=(n, ne)).tocsr()  # sums duplicates
     P.sort_indices()
     cell_ptr = P.indptr.astype(np.int64)
-    P = P.tocoo()
-    pair_cell, pair_edge, pair_w = P.row.astype(np.int64), P.col.astype(np.int64), P.data
-    return edges, edge_vec, edge_w, pair_cell, pair_edge, pair_w, cell_ptr, fe2e
+    return np.repeat(np.arange(n), np.diff(cell_ptr)), P.indices.astype(np.int64), P.data, cell_ptr
 
 
-def _rhs_csr(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str, edges: np.ndarray,
-             fe: np.ndarray) -> tuple[tuple, tuple]:
-    """``(kt, kv)`` of :class:`ArapOperators`, assembled face by face on the pattern of
-    ``L`` (the diagonal and both directions of every edge). A pair (cell ``q``, edge ``e =
-    v_s - v_d``) of weight ``w`` adds ``w e`` at (q, s) and ``-w e`` at (q, d); the cells of
-    a face's edge are its end points (``w = c / 2``) and, for spokes-and-rims, the opposite
-    corner too (``w = c / 3``). Summed within each face into its 3x3 block of positions
-    (corners ``q``, ``r``), then over the faces in their order. ``fe`` (m, 3): the edge of
-    each face-edge (opposite corner ``k``)."""
-    n, ne = len(V), len(edges)
+def _laplacian_and_rhs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str, pattern: tuple,
+                       fe: np.ndarray) -> tuple[sp.csr_matrix, tuple, tuple]:
+    """``(L, kt, kv)`` of :class:`ArapOperators`, assembled face by face on ``pattern``
+    (:func:`_pattern`: the diagonal and both directions of every edge, columns sorted).
+    ``fe`` (m, 3): the edge of each face-edge (opposite corner ``k``).
+
+    ``L = -igl.cotmatrix(V, F)`` to the bit: the entries libigl's ``cotmatrix`` makes, four
+    per face-edge in its order, summed in that order (Eigen's ``setFromTriplets``). For
+    ``K``, a pair (cell ``q``, edge ``e = v_s - v_d``) of weight ``w`` adds ``w e`` at
+    (q, s) and ``-w e`` at (q, d); the cells of a face's edge are its end points (``w = c /
+    2``) and, for spokes-and-rims, the opposite corner too (``w = c / 3``). Summed within
+    each face into its 3x3 block of positions (corners ``q``, ``r``), then over the faces
+    in their order."""
+    n, m = len(V), len(F)
+    ptr, idx, diag, fwd, bwd = pattern
+    nnz = len(idx)
+    T = np.empty((m, 3, 3), np.int64)  # T[f, q, r]: position of (F[f, q], F[f, r])
+    T[:, (0, 1, 2), (0, 1, 2)] = diag[F]
+    for k in range(3):  # face-edge k joins corners a and b
+        a, b = (k + 1) % 3, (k + 2) % 3
+        e = fe[:, k]
+        pf, pb = fwd[e], bwd[e]
+        lt = F[:, a] < F[:, b]
+        T[:, a, b] = np.where(lt, pf, pb)
+        T[:, b, a] = np.where(lt, pb, pf)
+    # libigl's triplets per face-edge k (s, d its corners): (s, d), (d, s), (s, s), (d, d)
+    ab = [((k + 1) % 3, (k + 2) % 3) for k in range(3)]
+    at = [3 * a + b for a, b in ab for (a, b) in ((a, b), (b, a), (a, a), (b, b))]
+    Ct = np.repeat(C, 4, axis=1) * np.tile([-1.0, -1.0, 1.0, 1.0], 3)  # -C off the diagonal
+    L = sp.csr_matrix((np.bincount(T.reshape(m, 9)[:, at].ravel(), weights=Ct.ravel(), minlength=nnz), idx, ptr),
+                      shape=(n, n))
+    kval = _rhs_values(V, F, C, energy != "spokes", T, nnz)
+    tperm = np.empty(nnz, np.int64)  # position of (j, i) for (i, j)
+    tperm[diag], tperm[fwd], tperm[bwd] = diag, bwd, fwd
+    return L, (ptr, idx, np.ascontiguousarray(kval.T)), (ptr, idx, np.ascontiguousarray(kval[:, tperm].T))
+
+
+def _pattern(n: int, edges: np.ndarray) -> tuple:
+    """The CSR pattern of ``L`` (n vertices, ``edges`` (ne, 2) with ``s < d``): ``(ptr
+    (n + 1,), idx (nnz,))`` int64, columns sorted, and the positions in it of the diagonal
+    (n,), of ``(s, d)`` and of ``(d, s)`` (ne,) each."""
+    ne = len(edges)
     ar = np.arange(n)
     ids = np.arange(n + 2 * ne)
     P = sp.coo_matrix((ids, (np.concatenate([ar, edges[:, 0], edges[:, 1]]),
@@ -579,29 +623,26 @@ def _rhs_csr(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str, edges: np
     P.sort_indices()
     pos = np.empty(len(ids), np.int64)
     pos[P.data] = np.arange(P.nnz)
-    diag, fwd, bwd = pos[:n], pos[n:n + ne], pos[n + ne:]  # (v, v), (s, d), (d, s)
-    rims = energy != "spokes"
+    return (P.indptr.astype(np.int64), P.indices.astype(np.int64), pos[:n], pos[n:n + ne], pos[n + ne:])
+
+
+def _rhs_values(V: np.ndarray, F: np.ndarray, C: np.ndarray, rims: bool, T: np.ndarray, nnz: int) -> np.ndarray:
+    """(3, nnz) float64: the values of ``K^T`` on the pattern, one row per component, from
+    each face's 3x3 block at positions ``T`` (m, 3, 3) (:func:`_laplacian_and_rhs`)."""
+    m = len(F)
+    VF = V[F]  # (m, 3, 3): the corners' positions
     # u[k]: edge k (corner k + 1 to k + 2) times its weight; at corner r the edges through
     # it sum to u[r + 2] - u[r + 1] (the spokes' diagonal, every cell of a rims face)
-    u = [(C[:, k] / (3.0 if rims else 2.0))[:, None] * (V[F[:, (k + 1) % 3]] - V[F[:, (k + 2) % 3]])
-         for k in range(3)]
-    T = np.empty((len(F), 3, 3), np.int64)  # T[f, q, r]: position of (F[f, q], F[f, r])
-    B = np.empty((3, len(F), 3, 3))  # B[c, f, q, r]: component c of the face's sum there
-    for q in range(3):
-        for r in range(3):
-            if q == r:
-                T[:, q, r] = diag[F[:, q]]
-            else:
-                e = fe[:, 3 - q - r]
-                T[:, q, r] = np.where(F[:, q] < F[:, r], fwd[e], bwd[e])
-            if rims or q == r:
-                B[:, :, q, r] = (u[(r + 2) % 3] - u[(r + 1) % 3]).T
-            else:  # spokes: only the edge (q, r), + where r is its first corner
-                k = 3 - q - r
-                B[:, :, q, r] = (u[k] if r == (k + 1) % 3 else -u[k]).T
+    u = [(C[:, k] / (3.0 if rims else 2.0))[:, None] * (VF[:, (k + 1) % 3] - VF[:, (k + 2) % 3]) for k in range(3)]
+    W = np.stack([u[(r + 2) % 3] - u[(r + 1) % 3] for r in range(3)], 2)  # (m, 3 components, 3 corners)
     at = T.ravel()
-    kval = np.stack([np.bincount(at, weights=B[c].ravel(), minlength=P.nnz) for c in range(3)], 1)
-    tperm = np.empty(P.nnz, np.int64)  # position of (j, i) for (i, j)
-    tperm[diag], tperm[fwd], tperm[bwd] = diag, bwd, fwd
-    ptr, idx = P.indptr.astype(np.int64), P.indices.astype(np.int64)
-    return (ptr, idx, kval), (ptr, idx, np.ascontiguousarray(kval[tperm]))
+    kval = np.empty((3, nnz))
+    for c in range(3):
+        if rims:  # every cell of the face: its corner's edges at every position of the corner
+            B = np.broadcast_to(W[:, c, None, :], (m, 3, 3)).ravel()
+        else:  # spokes: the corner's edges on the diagonal; off it only the edge (q, r), + where r is its first corner
+            B = np.stack([u[k][:, c] for k in range(3)], 1)[:, _SPOKE_EDGE] * _SPOKE_SIGN
+            B[:, (0, 1, 2), (0, 1, 2)] = W[:, c, :]
+            B = B.ravel()
+        kval[c] = np.bincount(at, weights=B, minlength=nnz)
+    return kval

@@ -150,7 +150,7 @@ class ArapSolver:
         self.energy, self.n, self.options = energy, self.ops.n, options
         self.handles = validate_handle_indices(self.ops.V, handles)
         self._st = None
-        if len(np.setdiff1d(np.arange(self.n), self.handles)):  # not every vertex a handle
+        if len(self.handles) < self.n:  # not every vertex a handle (handles are unique)
             _check_components(self.ops.L, self.handles)
             self._st = _Stepper(self.ops, self.handles, threads=options.threads, reorder=options.reorder,
                                 linear_solver=options.linear_solver)
@@ -343,7 +343,9 @@ class _Stepper:
             mass = ops.mass[perm]
         else:
             Lp, hp, mass = ops.L, h, ops.mass
-        self.free = np.setdiff1d(np.arange(n), hp)
+        is_free = np.ones(n, bool)
+        is_free[hp] = False
+        self.free = np.flatnonzero(is_free)
         Lf = Lp[self.free]
         self.Lff = Lf[:, self.free].tocsc()
         self.Lfb = Lf[:, hp]
