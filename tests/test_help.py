@@ -58,6 +58,7 @@ HELP = {
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
     "benchmarks/arap_hierarchy.py": ["usage:", "--chains"],
     "benchmarks/arap_alternatives.py": ["usage:", "--max-cg", "--methods"],
+    "benchmarks/arap_gradient_blocks.py": ["usage:", "--restart-only", "--rings"],
     "benchmarks/arap_sliver_local.py": ["usage:", "--diagnose", "--every"],
     "benchmarks/arap_projected_newton.py": ["usage:", "--refresh", "--nc"],
     "benchmarks/arap_trace_energy.py": ["usage:", "--cases", "--root"],

@@ -599,9 +599,9 @@ def _laplacian_and_rhs(V: np.ndarray, F: np.ndarray, C: np.ndarray, energy: str,
         lt = F[:, a] < F[:, b]
         T[:, a, b] = np.where(lt, pf, pb)
         T[:, b, a] = np.where(lt, pb, pf)
-    # libigl's triplets per face-edge k (s, d its corners): (s, d), (d, s), (s, s), (d, d)
-    ab = [((k + 1) % 3, (k + 2) % 3) for k in range(3)]
-    at = [3 * a + b for a, b in ab for (a, b) in ((a, b), (b, a), (a, a), (b, b))]
+    # libigl's triplets per face-edge k, corners a = k + 1 and b = k + 2 (mod 3): (a, b),
+    # (b, a), (a, a), (b, b), at T[:, q, r] = T.reshape(m, 9)[:, 3 q + r]
+    at = [p for k in range(3) for a, b in [((k + 1) % 3, (k + 2) % 3)] for p in (3 * a + b, 3 * b + a, 4 * a, 4 * b)]
     Ct = np.repeat(C, 4, axis=1) * np.tile([-1.0, -1.0, 1.0, 1.0], 3)  # -C off the diagonal
     L = sp.csr_matrix((np.bincount(T.reshape(m, 9)[:, at].ravel(), weights=Ct.ravel(), minlength=nnz), idx, ptr),
                       shape=(n, n))
