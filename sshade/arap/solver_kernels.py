@@ -5,7 +5,8 @@
 L-BFGS direction), ``push`` /
 ``mix`` (Anderson's history and mixing; sums over fixed chunks of :data:`CHUNK`, so the
 same floats whatever the thread count), :func:`lbfgs_update` and
-:func:`lbfgs_direction` (L-BFGS's compact form).
+:func:`lbfgs_direction` (L-BFGS's compact form; their ``_parallel`` variants split the same
+blocks over threads, the blocks' sums added in block order: the same floats).
 :func:`loop_kernels` compiles (or loads from numba's cache) the serial or parallel
 variants on first use; :func:`warmup_kernels` every serial kernel of the solver,
 :mod:`sshade.arap.kernels` included.
@@ -152,11 +153,8 @@ LBFGS_BLOCK = 2048
 if nb is not None:
     # reassociated sums (vectorised): the order is fixed by the block and the vector width
     _njit_fm = nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-    # the blocks' loops, compiled into each kernel that calls them (with its reassociation)
-    _njit_block = nb.njit(nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"}, inline="always")
-    _njit_fm_par = nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"}, parallel=True)
 
-    @_njit_block
+    @_njit_fm
     def _update_block(b, x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, part, yb):
         """Block ``b`` (``LBFGS_BLOCK`` numbers) of :func:`lbfgs_update`: its writes, and its
         partial sums into ``part`` (4 M + 2,): ``part[a M + i]`` the block's share of
@@ -223,7 +221,7 @@ if nb is not None:
                 dots[a, i] = tot[a * M + i]
         return tot[4 * M], tot[4 * M + 1]
 
-    @_njit_fm
+    @_njit
     def lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
         """One pass of L-BFGS's compact form (Byrd, Nocedal & Schnabel 1994): the plain
         step's ``z = x - g``, the new pair (if ``new``) ``s = x - x_prev``, ``y = grad -
@@ -241,7 +239,7 @@ if nb is not None:
             _update_block(b, x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, parts[b], yb)
         return _update_sums(parts, dots)
 
-    @_njit_fm_par
+    @_njit_par
     def lbfgs_update_parallel(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
         """:func:`lbfgs_update` with its blocks split over threads (the same floats)."""
         nblk = (x.shape[0] + LBFGS_BLOCK - 1) // LBFGS_BLOCK
@@ -277,7 +275,7 @@ if nb is not None:
             cs[a] = acc / SY[idx[a], idx[a]]
             cz[a] = -gamma * p[a]
 
-    @_njit_block
+    @_njit_fm
     def _direction_block(b, S, Z, idx, cs, cz, gamma, z, grad, d, acc):
         """Block ``b`` of :func:`lbfgs_direction`: ``d`` there, and the block's share of the
         slope ``grad . d``; ``acc`` (LBFGS_BLOCK,) scratch."""
@@ -313,7 +311,7 @@ if nb is not None:
         _compact_coefficients(SY, YZ, Sg, Zg, idx, g, cs, cz)
         return cs, cz, g, np.empty(((N + LBFGS_BLOCK - 1) // LBFGS_BLOCK, 1))
 
-    @_njit_fm
+    @_njit
     def lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
         """The L-BFGS direction ``d = -H grad`` (N,) from the compact form (pairs ``idx``
         (k,), slots oldest first; :func:`_compact_coefficients`) with the initial Hessian
@@ -329,7 +327,7 @@ if nb is not None:
         _sum_blocks(parts, slope)
         return slope[0]
 
-    @_njit_fm_par
+    @_njit_par
     def lbfgs_direction_parallel(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
         """:func:`lbfgs_direction` with its blocks split over threads (the same floats)."""
         cs, cz, gamma, parts = _direction_setup(SY, YZ, Sg, Zg, idx, gamma, z.shape[0])
