@@ -129,35 +129,3 @@ def test_numpy_kernels_agree_with_numba():
           for f, dd in zip((solver_kernels.lbfgs_direction, solver_kernels._numpy_lbfgs_direction), d)]
     np.testing.assert_allclose(d[0], d[1], rtol=1e-11, atol=1e-12 * np.abs(d[1]).max())
     assert sl[0] == pytest.approx(sl[1], rel=1e-11)
-
-
-@pytest.mark.parametrize("new", [True, False])
-def test_parallel_kernels_give_the_serial_floats_at_any_thread_count(new):
-    if solver_kernels.nb is None:
-        pytest.skip("numba unusable")
-    from sshade.arap.threads import numba_threads
-    rng = np.random.default_rng(5)
-    N, m, slot = 5 * solver_kernels.LBFGS_BLOCK + 123, 6, 4  # a partial last block
-    S, Z = rng.standard_normal((m, N)), rng.standard_normal((m, N))
-    vecs = [rng.standard_normal(N) for _ in range(6)]
-    old = np.array([0, 1, 2, 5], np.int64)
-    SY = np.triu(rng.random((m, m))) + 5.0 * np.eye(m)
-    YZ = rng.random((m, m))
-    YZ = YZ + YZ.T
-    idx = np.array([5, 0, 1, 2], np.int64)
-    outs = []
-    for kernels, threads in ((solver_kernels.loop_kernels(False), 1), (solver_kernels.loop_kernels(True), 1),
-                             (solver_kernels.loop_kernels(True), 2)):
-        args = [v.copy() for v in vecs] + [S.copy(), Z.copy()]
-        dots = np.full((4, m), np.nan)
-        with numba_threads(threads):
-            ss_yy = kernels["lbfgs_update"](*args, slot, new, old, dots)
-            d = np.empty(N)
-            slope = kernels["lbfgs_direction"](args[6], args[7], SY, YZ, dots[0], dots[1], idx, 1.3, args[5],
-                                               args[2], d)
-        outs.append((np.array(ss_yy), dots, args, d, slope))
-    for o in outs[1:]:
-        assert np.array_equal(o[0], outs[0][0]) and np.array_equal(o[1], outs[0][1], equal_nan=True)
-        for a, b in zip(o[2], outs[0][2]):
-            assert np.array_equal(a, b)
-        assert np.array_equal(o[3], outs[0][3]) and o[4] == outs[0][4]

@@ -117,21 +117,12 @@ class LBFGS:
     sshade/arap/accelerate.py"). Without history the direction is the plain step ``-z``.
     History: ``S`` and ``Z = H0 Y`` in (m, N) ring buffers, ``N = 3 n_free`` (``Y`` is
     needed only through its products, kept in ``SY`` (m, m), ``s_i . y_j``, and ``YZ``
-    (m, m), ``y_i . H0 y_j``); the passes run in the numba kernels
-    :func:`sshade.arap.solver_kernels.lbfgs_update` and ``lbfgs_direction``, or their
-    variants split over ``threads`` (the same floats).
-
-    Parameters
-    ----------
-    m : int >= 1, the memory. Lff : (n_f, n_f) scipy.sparse, ``L_ff`` (the gradient's
-        product when the caller gives none). kerns : ``{threads: kernels}``
-        (:func:`sshade.arap.solver_kernels.loop_kernels`) or None (the serial module-level
-        kernels, or numpy without numba). threads : int >= 1, may change between calls.
+    (m, m), ``y_i . H0 y_j``); the passes run in the serial numba kernels
+    :func:`sshade.arap.solver_kernels.lbfgs_update` and ``lbfgs_direction``.
     """
 
-    def __init__(self, m: int, Lff, kerns=None, threads: int = 1):
+    def __init__(self, m: int, Lff):
         self.m, self.L = m, Lff.tocsr()
-        self.kerns, self.threads = kerns, threads
         N = 3 * Lff.shape[0]
         self.S, self.Z = np.zeros((m, N)), np.zeros((m, N))
         self.SY, self.YZ = np.ones((m, m)), np.zeros((m, m))
@@ -149,16 +140,6 @@ class LBFGS:
         within one problem (the targets' term cancels in each), and forget the last
         iterate (a pair across two problems would mix their targets)."""
         self.have_prev = False
-
-    def _run(self, name: str, *args):
-        """L-BFGS kernel ``name`` with ``threads`` threads (the same floats for any count),
-        the serial module-level kernel (or its numpy fallback) without ``kerns``."""
-        if self.kerns and self.threads > 1:
-            with numba_threads(self.threads):
-                return self.kerns[self.threads][name](*args)
-        if self.kerns:
-            return self.kerns[1][name](*args)
-        return (lbfgs_update if name == "lbfgs_update" else lbfgs_direction)(*args)
 
     def _slots(self) -> np.ndarray:
         """The kept pairs' ring slots, oldest first."""
@@ -180,8 +161,8 @@ class LBFGS:
         new = self.have_prev
         if new and self.n_hist == m:  # the new pair takes the oldest one's slot
             old = old[1:]
-        ss, yy = self._run("lbfgs_update", xv, gv, grad, self.x_prev, self.grad_prev, self.z_prev, self.S, self.Z,
-                           k, new, old, self.dots)
+        ss, yy = lbfgs_update(xv, gv, grad, self.x_prev, self.grad_prev, self.z_prev, self.S, self.Z, k, new,
+                              old, self.dots)
         self.have_prev = True
         dots = self.dots
         if new:
@@ -198,8 +179,8 @@ class LBFGS:
                 self.n_hist -= 1
         z = self.z_prev  # now this iterate's z
         d = np.empty_like(z)
-        slope = self._run("lbfgs_direction", self.S, self.Z, self.SY, self.YZ, dots[0], dots[1], self._slots(),
-                          self.gamma, z, grad, d)
+        slope = lbfgs_direction(self.S, self.Z, self.SY, self.YZ, dots[0], dots[1], self._slots(), self.gamma, z,
+                                grad, d)
         if not slope < 0:  # not a descent direction: plain step, fresh history
             self.n_hist, self.pos, self.gamma = 0, 0, 1.0
             np.negative(z, out=d)

@@ -435,8 +435,7 @@ class _Loop:
             kept.restart()
         self.lbfgs = self.anderson = None
         if acc == "lbfgs":
-            self.lbfgs = kept if kept is not None else LBFGS(m, st.Lff, st.kerns if st.kern else None, st.cur)
-            self.lbfgs.threads = st.cur
+            self.lbfgs = kept if kept is not None else LBFGS(m, st.Lff)
         elif acc == "anderson":
             self.anderson = kept if kept is not None else Anderson(m, 3 * len(st.free), st.kerns if st.kern else None,
                                                                     st.nthreads)
@@ -562,9 +561,8 @@ class _Loop:
         now = clock()
         st.picker.record(st.cur, now - t_pass)
         st.cur = st.picker.cur
-        for acc in (self.anderson, self.lbfgs):
-            if acc is not None:
-                acc.threads = st.cur
+        if self.anderson is not None:
+            self.anderson.threads = st.cur
         return now
 
     def result(self, precompute_s: float) -> ArapResult:

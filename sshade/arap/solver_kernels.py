@@ -5,8 +5,7 @@
 L-BFGS direction), ``push`` /
 ``mix`` (Anderson's history and mixing; sums over fixed chunks of :data:`CHUNK`, so the
 same floats whatever the thread count), :func:`lbfgs_update` and
-:func:`lbfgs_direction` (L-BFGS's compact form; their ``_parallel`` variants split the same
-blocks over threads, the blocks' sums added in block order: the same floats).
+:func:`lbfgs_direction` (L-BFGS's compact form).
 :func:`loop_kernels` compiles (or loads from numba's cache) the serial or parallel
 variants on first use; :func:`warmup_kernels` every serial kernel of the solver,
 :mod:`sshade.arap.kernels` included.
@@ -23,8 +22,7 @@ try:  # numba is a dependency of the package; without it the numpy paths are use
 except ImportError:  # pragma: no cover
     nb = None
 
-__all__ = ["CHUNK", "LBFGS_BLOCK", "loop_kernels", "lbfgs_update", "lbfgs_direction", "lbfgs_update_parallel",
-           "lbfgs_direction_parallel", "warmup_kernels"]
+__all__ = ["CHUNK", "LBFGS_BLOCK", "loop_kernels", "lbfgs_update", "lbfgs_direction", "warmup_kernels"]
 
 #: Anderson's dot products are summed over fixed chunks of CHUNK entries, then over the
 #: chunks: the same floats whatever the number of threads.
@@ -155,73 +153,6 @@ if nb is not None:
     _njit_fm = nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
 
     @_njit_fm
-    def _update_block(b, x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, part, yb):
-        """Block ``b`` (``LBFGS_BLOCK`` numbers) of :func:`lbfgs_update`: its writes, and its
-        partial sums into ``part`` (4 M + 2,): ``part[a M + i]`` the block's share of
-        ``dots[a, i]``, then of ``s.s`` and ``y.y``; ``yb`` (LBFGS_BLOCK,) scratch."""
-        N = x.shape[0]
-        M = (part.shape[0] - 2) // 4
-        c0 = b * LBFGS_BLOCK
-        c1 = min(N, c0 + LBFGS_BLOCK)
-        n = c1 - c0
-        for i in range(part.shape[0]):
-            part[i] = 0.0
-        xc = x[c0:c1]; gc = g[c0:c1]; grc = grad[c0:c1]  # block views: contiguous loops that vectorise
-        xp = x_prev[c0:c1]; gp = grad_prev[c0:c1]; zp = z_prev[c0:c1]
-        if new:
-            sc = S[slot, c0:c1]; hc = Z[slot, c0:c1]
-            p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0; p4 = 0.0; p5 = 0.0
-            for i in range(n):
-                zj = xc[i] - gc[i]
-                sj = xc[i] - xp[i]
-                yj = grc[i] - gp[i]
-                hj = zj - zp[i]
-                sc[i] = sj; hc[i] = hj; yb[i] = yj
-                xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = zj
-                p0 += sj * grc[i]; p1 += hj * grc[i]; p2 += sj * yj; p3 += hj * yj
-                p4 += sj * sj; p5 += yj * yj
-            part[slot] = p0; part[M + slot] = p1; part[2 * M + slot] = p2; part[3 * M + slot] = p3
-            part[4 * M] = p4
-            part[4 * M + 1] = p5
-        else:
-            for i in range(n):
-                xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = xc[i] - gc[i]
-        for t in range(old.shape[0]):
-            r = old[t]
-            sr = S[r, c0:c1]; zr = Z[r, c0:c1]
-            p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0
-            if new:
-                for i in range(n):
-                    sv = sr[i]; zv = zr[i]; gj = grc[i]; yj = yb[i]
-                    p0 += sv * gj; p1 += zv * gj; p2 += sv * yj; p3 += zv * yj
-            else:
-                for i in range(n):
-                    p0 += sr[i] * grc[i]; p1 += zr[i] * grc[i]
-            part[r] = p0; part[M + r] = p1; part[2 * M + r] = p2; part[3 * M + r] = p3
-
-    @_njit
-    def _sum_blocks(parts, out):
-        """``out[j] = sum_b parts[b, j]``, summed in block order (no reassociation: the same
-        floats whatever the threads that filled ``parts``)."""
-        for j in range(parts.shape[1]):
-            acc = 0.0
-            for b in range(parts.shape[0]):
-                acc += parts[b, j]
-            out[j] = acc
-
-    @_njit
-    def _update_sums(parts, dots):
-        """The blocks' partial sums of :func:`lbfgs_update` into ``dots`` (4, M); returns
-        ``(s.s, y.y)``."""
-        M = dots.shape[1]
-        tot = np.empty(parts.shape[1])
-        _sum_blocks(parts, tot)
-        for a in range(4):
-            for i in range(M):
-                dots[a, i] = tot[a * M + i]
-        return tot[4 * M], tot[4 * M + 1]
-
-    @_njit
     def lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
         """One pass of L-BFGS's compact form (Byrd, Nocedal & Schnabel 1994): the plain
         step's ``z = x - g``, the new pair (if ``new``) ``s = x - x_prev``, ``y = grad -
@@ -229,25 +160,51 @@ if nb is not None:
         point set to ``(x, grad, z)``, and the inner products with the kept pairs ``old``
         (k,) (slots) into ``dots`` (4, m) by slot: ``S_i . grad``, ``Z_i . grad``,
         ``S_i . y``, ``Z_i . y`` (the last two only if ``new``; the new pair's own at
-        ``slot``). Flat (N,) vectors, (m, N) histories. Returns ``(s.s, y.y)``. Block by
-        block (:func:`_update_block`), the blocks' sums added in block order: the floats of
-        :func:`lbfgs_update_parallel`."""
-        nblk = (x.shape[0] + LBFGS_BLOCK - 1) // LBFGS_BLOCK
-        parts = np.empty((nblk, 4 * dots.shape[1] + 2))
+        ``slot``). Flat (N,) vectors, (m, N) histories. Returns ``(s.s, y.y)``."""
+        N = x.shape[0]
+        k = old.shape[0]
+        for a in range(4):
+            for i in range(dots.shape[1]):
+                dots[a, i] = 0.0
+        ss = 0.0
+        yy = 0.0
         yb = np.empty(LBFGS_BLOCK)
-        for b in range(nblk):
-            _update_block(b, x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, parts[b], yb)
-        return _update_sums(parts, dots)
-
-    @_njit_par
-    def lbfgs_update_parallel(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
-        """:func:`lbfgs_update` with its blocks split over threads (the same floats)."""
-        nblk = (x.shape[0] + LBFGS_BLOCK - 1) // LBFGS_BLOCK
-        parts = np.empty((nblk, 4 * dots.shape[1] + 2))
-        for b in _prange(nblk):  # prange counts in uint64: one callee signature
-            _update_block(np.int64(b), x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, parts[b],
-                          np.empty(LBFGS_BLOCK))
-        return _update_sums(parts, dots)
+        for c0 in range(0, N, LBFGS_BLOCK):  # block views: contiguous loops that vectorise
+            c1 = min(N, c0 + LBFGS_BLOCK)
+            n = c1 - c0
+            xc = x[c0:c1]; gc = g[c0:c1]; grc = grad[c0:c1]
+            xp = x_prev[c0:c1]; gp = grad_prev[c0:c1]; zp = z_prev[c0:c1]
+            if new:
+                sc = S[slot, c0:c1]; hc = Z[slot, c0:c1]
+                p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0; p4 = 0.0; p5 = 0.0
+                for i in range(n):
+                    zj = xc[i] - gc[i]
+                    sj = xc[i] - xp[i]
+                    yj = grc[i] - gp[i]
+                    hj = zj - zp[i]
+                    sc[i] = sj; hc[i] = hj; yb[i] = yj
+                    xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = zj
+                    p0 += sj * grc[i]; p1 += hj * grc[i]; p2 += sj * yj; p3 += hj * yj
+                    p4 += sj * sj; p5 += yj * yj
+                dots[0, slot] += p0; dots[1, slot] += p1; dots[2, slot] += p2; dots[3, slot] += p3
+                ss += p4
+                yy += p5
+            else:
+                for i in range(n):
+                    xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = xc[i] - gc[i]
+            for t in range(k):
+                r = old[t]
+                sr = S[r, c0:c1]; zr = Z[r, c0:c1]
+                p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0
+                if new:
+                    for i in range(n):
+                        sv = sr[i]; zv = zr[i]; gj = grc[i]; yj = yb[i]
+                        p0 += sv * gj; p1 += zv * gj; p2 += sv * yj; p3 += zv * yj
+                else:
+                    for i in range(n):
+                        p0 += sr[i] * grc[i]; p1 += zr[i] * grc[i]
+                dots[0, r] += p0; dots[1, r] += p1; dots[2, r] += p2; dots[3, r] += p3
+        return ss, yy
 
     @_njit
     def _compact_coefficients(SY, YZ, Sg, Zg, idx, gamma, cs, cz):
@@ -276,66 +233,40 @@ if nb is not None:
             cz[a] = -gamma * p[a]
 
     @_njit_fm
-    def _direction_block(b, S, Z, idx, cs, cz, gamma, z, grad, d, acc):
-        """Block ``b`` of :func:`lbfgs_direction`: ``d`` there, and the block's share of the
-        slope ``grad . d``; ``acc`` (LBFGS_BLOCK,) scratch."""
-        N = z.shape[0]
-        c0 = b * LBFGS_BLOCK
-        c1 = min(N, c0 + LBFGS_BLOCK)
-        n = c1 - c0
-        zc = z[c0:c1]  # block views: contiguous loops that vectorise
-        for i in range(n):
-            acc[i] = gamma * zc[i]
-        for t in range(idx.shape[0]):
-            a = cs[t]
-            c = cz[t]
-            sr = S[idx[t], c0:c1]; zr = Z[idx[t], c0:c1]
-            for i in range(n):
-                acc[i] += a * sr[i] + c * zr[i]
-        dc = d[c0:c1]; gc = grad[c0:c1]
-        part = 0.0
-        for i in range(n):
-            v = -acc[i]
-            dc[i] = v
-            part += gc[i] * v
-        return part
-
-    @_njit
-    def _direction_setup(SY, YZ, Sg, Zg, idx, gamma, N):
-        """The compact form's coefficients ``(cs, cz)`` (:func:`_compact_coefficients`), the
-        scaling (1 without pairs) and the blocks' slope rows (nblk, 1) of an (N,) direction."""
-        k = idx.shape[0]
-        g = gamma if k > 0 else 1.0
-        cs = np.empty(k)
-        cz = np.empty(k)
-        _compact_coefficients(SY, YZ, Sg, Zg, idx, g, cs, cz)
-        return cs, cz, g, np.empty(((N + LBFGS_BLOCK - 1) // LBFGS_BLOCK, 1))
-
-    @_njit
     def lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
         """The L-BFGS direction ``d = -H grad`` (N,) from the compact form (pairs ``idx``
         (k,), slots oldest first; :func:`_compact_coefficients`) with the initial Hessian
         ``gamma H0``, ``H0 grad = z``, ``H0 y_i = Z_i`` (``H0`` unscaled without pairs);
-        returns the slope ``grad . d``. One pass over the kept pairs, block by block
-        (:func:`_direction_block`), the blocks' slopes added in block order: the floats of
-        :func:`lbfgs_direction_parallel`."""
-        cs, cz, gamma, parts = _direction_setup(SY, YZ, Sg, Zg, idx, gamma, z.shape[0])
+        returns the slope ``grad . d``. One pass over the kept pairs, block by block."""
+        N = z.shape[0]
+        k = idx.shape[0]
+        if k == 0:
+            gamma = 1.0
+        cs = np.empty(k)
+        cz = np.empty(k)
+        _compact_coefficients(SY, YZ, Sg, Zg, idx, gamma, cs, cz)
         acc = np.empty(LBFGS_BLOCK)
-        for b in range(parts.shape[0]):
-            parts[b, 0] = _direction_block(b, S, Z, idx, cs, cz, gamma, z, grad, d, acc)
-        slope = np.empty(1)
-        _sum_blocks(parts, slope)
-        return slope[0]
-
-    @_njit_par
-    def lbfgs_direction_parallel(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
-        """:func:`lbfgs_direction` with its blocks split over threads (the same floats)."""
-        cs, cz, gamma, parts = _direction_setup(SY, YZ, Sg, Zg, idx, gamma, z.shape[0])
-        for b in _prange(parts.shape[0]):  # prange counts in uint64: one callee signature
-            parts[b, 0] = _direction_block(np.int64(b), S, Z, idx, cs, cz, gamma, z, grad, d, np.empty(LBFGS_BLOCK))
-        slope = np.empty(1)
-        _sum_blocks(parts, slope)
-        return slope[0]
+        slope = 0.0
+        for c0 in range(0, N, LBFGS_BLOCK):  # block views: contiguous loops that vectorise
+            c1 = min(N, c0 + LBFGS_BLOCK)
+            n = c1 - c0
+            zc = z[c0:c1]
+            for i in range(n):
+                acc[i] = gamma * zc[i]
+            for t in range(k):
+                a = cs[t]
+                b = cz[t]
+                sr = S[idx[t], c0:c1]; zr = Z[idx[t], c0:c1]
+                for i in range(n):
+                    acc[i] += a * sr[i] + b * zr[i]
+            dc = d[c0:c1]; gc = grad[c0:c1]
+            part = 0.0
+            for i in range(n):
+                v = -acc[i]
+                dc[i] = v
+                part += gc[i] * v
+            slope += part
+        return slope
 
 
 def _numpy_lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
@@ -373,8 +304,7 @@ def _numpy_lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
 
 
 if nb is None:  # pragma: no cover - numba unusable
-    lbfgs_update = lbfgs_update_parallel = _numpy_lbfgs_update
-    lbfgs_direction = lbfgs_direction_parallel = _numpy_lbfgs_direction
+    lbfgs_update, lbfgs_direction = _numpy_lbfgs_update, _numpy_lbfgs_direction
 
 
 _LOOP = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
@@ -382,9 +312,8 @@ _LOOP = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
 
 def loop_kernels(parallel: bool):
     """``dict`` of the compiled loop kernels (serial or parallel variants: ``"set_rows"``,
-    ``"max_move"``, ``"grad"``, ``"push"``, ``"mix"``, ``"lbfgs_update"``,
-    ``"lbfgs_direction"``), or False when numba is unusable. Compiling the parallel
-    variants starts numba's thread pool."""
+    ``"max_move"``, ``"grad"``, ``"push"``, ``"mix"``), or False when numba is unusable.
+    Compiling the parallel variants starts numba's thread pool."""
     key = 2 if parallel else 1
     if _LOOP[key] is None:
         try:
@@ -393,9 +322,7 @@ def loop_kernels(parallel: bool):
             k = {"set_rows": _set_rows, "max_move": _max_move,
                  "grad": _grad_parallel if parallel else _grad_serial,
                  "push": _push_parallel if parallel else _push_serial,
-                 "mix": _mix_parallel if parallel else _mix_serial,
-                 "lbfgs_update": lbfgs_update_parallel if parallel else lbfgs_update,
-                 "lbfgs_direction": lbfgs_direction_parallel if parallel else lbfgs_direction}
+                 "mix": _mix_parallel if parallel else _mix_serial}
             x = np.zeros((2, 3))
             xf = x.reshape(-1)
             k["set_rows"](np.zeros((2, 3)), np.arange(2, dtype=np.uint32), x)
@@ -406,7 +333,6 @@ def loop_kernels(parallel: bool):
             part = np.empty((1, 4))
             k["push"](xf, xf, xf, xf, DF, DF.copy(), 0, 1, part)
             k["mix"](xf, DF, np.zeros(2), 1, np.empty(6))
-            _warm_lbfgs(k["lbfgs_update"], k["lbfgs_direction"])
             _LOOP[key] = k
         except Exception:  # pragma: no cover - numba missing or broken
             _LOOP[key] = False
@@ -417,13 +343,12 @@ def warmup_kernels() -> bool:
     """Compile (or load from numba's cache) the serial kernels of the solver and of
     :mod:`sshade.arap.kernels`, e.g. before forking worker processes. Returns whether numba
     is usable."""
-    return bool(warmup_energy_kernels() and loop_kernels(False))
-
-
-def _warm_lbfgs(update, direction) -> None:
-    """One call of each L-BFGS kernel on a 3-vector (compiles or loads it)."""
-    N, z = 3, np.zeros(3)
-    S, Z, dots = np.zeros((1, N)), np.zeros((1, N)), np.zeros((4, 1))
-    one = np.zeros(1, np.int64)
-    update(z, z, z, z.copy(), z.copy(), z.copy(), S, Z, 0, True, one[:0], dots)
-    direction(S, Z, np.ones((1, 1)), np.ones((1, 1)), np.zeros(1), np.zeros(1), one, 1.0, z, z, np.empty(N))
+    ok = bool(warmup_energy_kernels() and loop_kernels(False))
+    if ok:  # the L-BFGS kernels
+        N, z = 3, np.zeros(3)
+        S, Z, dots = np.zeros((1, N)), np.zeros((1, N)), np.zeros((4, 1))
+        one = np.zeros(1, np.int64)
+        lbfgs_update(z, z, z, z.copy(), z.copy(), z.copy(), S, Z, 0, True, one[:0], dots)
+        lbfgs_direction(S, Z, np.ones((1, 1)), np.ones((1, 1)), np.zeros(1), np.zeros(1), one, 1.0, z, z,
+                        np.empty(N))
+    return ok
