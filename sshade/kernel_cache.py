@@ -145,9 +145,10 @@ def _tetrahedron():
 
 
 def _warm_sampling() -> None:
-    """Geodesic sampling (both queues, mesh and locality order), the low-res ARAP's serial
-    kernels and L-BFGS."""
+    """Geodesic sampling (both queues, mesh and locality order), projection, the low-res
+    ARAP's serial kernels and L-BFGS."""
     V, F, E, _ = _tetrahedron()
+    project_to_fans(V, np.zeros(4, np.int64), V, F)
     order = locality_order(V)
     for queue in ("auto", "heap"):
         for graph, o in ((None, None), (edge_graph_from_edges(V, E, order), order)):
@@ -159,7 +160,7 @@ def _warm_sampling() -> None:
 
 def _warm_topology() -> None:
     """Mesh checks, half-edges, fans, normals, boundary loops, the closed-ball checks (full
-    and local), projection and both transfers' encoding and decoding."""
+    and local) and both transfers' encoding and decoding."""
     V, F, _, _ = _tetrahedron()
     validate_mesh(V, F)
     warm_closed_ball()
@@ -167,7 +168,6 @@ def _warm_topology() -> None:
     vertex_fan_count(F, he, 4)
     boundary_loops(F, he)
     vertex_normals(V, F)
-    project_to_fans(V, np.zeros(4, np.int64), V, F)
     L = np.broadcast_to(np.eye(3), (4, 3, 3)).copy()
     for bary in (None, np.full((4, 3), 1 / 3)):
         decode_with_frames(L, np.zeros((4, 3)), np.arange(4), V, F, bary=bary)
@@ -178,17 +178,18 @@ def _warm_topology() -> None:
 #: The kernels in two halves of about equal compile time: name -> (warm function, kernels
 #: it compiles). A cold :func:`compile_kernels` runs the first half in a forked child.
 GROUPS = {
-    "sampling and ARAP": (_warm_sampling, (
-        "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._morton_sort", "sshade.mesh.geodesic._fps",
+    "sampling, projection and ARAP": (_warm_sampling, (
+        "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._fps",
         "sshade.mesh.geodesic._grow", "sshade.mesh.geodesic._propagate",
         "sshade.arap.kernels._local_serial", "sshade.arap.kernels._rhs_serial",
-        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_direction")),
-    "topology, projection and transfer": (_warm_topology, (
+        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_direction",
+        "sshade.projection._project")),
+    "topology and transfer": (_warm_topology, (
         "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
         "sshade.closed_ball.closed_ball_holds", "sshade.closed_ball._region_euler", "sshade.closed_ball._pair_ids",
         "sshade.closed_ball._link_faces", "sshade.closed_ball._repair_candidates", "sshade.closed_ball._touched",
         "sshade.closed_ball._local_euler", "sshade.closed_ball._local_pairs", "sshade.closed_ball._local_triples",
-        "sshade.closed_ball._local_candidates", "sshade.closed_ball.vertex_faces", "sshade.projection._project",
+        "sshade.closed_ball._local_candidates", "sshade.closed_ball.vertex_faces",
         "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel",
         "sshade.smooth_transfer._offsets_kernel", "sshade.smooth_transfer._vertex_jacobians_kernel")),
 }

@@ -67,6 +67,7 @@ def warm_parallel_kernels() -> None:
     call it only where a parallel solve follows anyway (:func:`uses_parallel_kernels`)."""
     kernels.fused_kernels(True)
     solver_kernels.loop_kernels(True)
+    solver_kernels.anderson_kernels(True)
 
 
 def warm_once(done: set, key, run: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], object],

@@ -54,6 +54,8 @@ def test_a_cold_cache_is_announced_once_filled_on_two_processes_and_then_warm(tm
     assert sum(first["stats"][n][0] for n in groups[child]) >= 1
     assert sum(first["stats"][n][1] for n in groups[parent]) >= 1
     assert first["compiled_later"] == []  # a SShaDe call needs no kernel the groups left out
+    for name in ("_push_serial", "_mix_serial"):  # Anderson's, which SShaDe's L-BFGS never runs
+        assert first["stats"][f"sshade.arap.solver_kernels.{name}"] == [0, 0]
     second, err = _probe(tmp_path / "numba")
     assert second["cold"] == [] and err == []
     assert all(s[1] == 0 for s in second["stats"].values())  # every kernel loaded

@@ -392,3 +392,28 @@ def test_remesh_deterministic_with_shared_topology():
     a = remesh(V, F, 500, seed=4, topology=topo)
     b = remesh(V, F, 500, seed=4)
     assert np.array_equal(a.seeds, b.seeds) and np.array_equal(a.F, b.F) and np.array_equal(a.label, b.label)
+
+
+def _morton_order_ref(V):
+    """The Z-order by definition: 10 bits per axis of the bounding box's largest side,
+    bit b of axis k to bit 3b + k, one bit at a time; a stable sort (ties in index order)."""
+    lo = V.min(0)
+    ext = (V.max(0) - lo).max()
+    s = 1023.0 / ext if ext > 0 else 0.0
+    code = np.zeros(len(V), np.int64)
+    for k in range(3):
+        q = np.array([min(1023, max(0, int((x - lo[k]) * s))) for x in V[:, k]], np.int64)
+        for b in range(10):
+            code |= ((q >> b) & 1) << (3 * b + k)
+    return np.argsort(code, kind="stable")
+
+
+@pytest.mark.parametrize("case", ["random", "ties", "flat", "one"])
+def test_locality_order_is_the_stable_morton_order(case):
+    rng = np.random.default_rng(3)
+    V = {"random": rng.standard_normal((5000, 3)) * [1.0, 3.0, 0.2],
+         "ties": np.repeat(rng.integers(0, 4, (300, 3)).astype(float), 3, axis=0),
+         "flat": np.zeros((7, 3)), "one": np.ones((1, 3))}[case]
+    order = locality_order(V)
+    assert order.dtype == np.int64
+    assert np.array_equal(order, _morton_order_ref(V))

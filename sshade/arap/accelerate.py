@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .solver_kernels import CHUNK, lbfgs_direction, lbfgs_update
+from .solver_kernels import CHUNK, anderson_kernels, lbfgs_direction, lbfgs_update
 from .threads import numba_threads
 
 __all__ = ["Anderson", "LBFGS"]
@@ -28,13 +28,14 @@ class Anderson:
     same pass as the new differences and ``DF f``. The previous accepted ``(x, g)`` are
     kept by reference (never overwritten: the candidates go to two alternating buffers,
     the one not holding the current ``x``). ``kerns``: ``{threads: kernels}``
-    (:func:`sshade.arap.solver_kernels.loop_kernels`) or None (numpy); ``threads`` may
+    (:func:`sshade.arap.solver_kernels.loop_kernels`: numba usable, the passes run in
+    :func:`sshade.arap.solver_kernels.anderson_kernels`) or None (numpy); ``threads`` may
     change between steps.
     """
 
     def __init__(self, m: int, N: int, kerns, threads: int):
         self.m, self.N, self.kerns, self.threads = m, N, kerns, threads
-        self.kern = kerns[1] if kerns else None
+        self.kern = anderson_kernels(False) if kerns else None
         self.DF = np.empty((m, N))
         self.DG = np.empty((m, N))
         self.gram = np.zeros((m, m))
@@ -54,9 +55,10 @@ class Anderson:
         self.prev = None
 
     def _run(self, name, *args):
-        if self.threads > 1:
+        par = anderson_kernels(True) if self.threads > 1 else None
+        if par:  # the same floats as the serial kernels (sums over fixed chunks)
             with numba_threads(self.threads):
-                return self.kerns[self.threads][name](*args)
+                return par[name](*args)
         return self.kern[name](*args)
 
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray | None:

@@ -6,9 +6,9 @@ L-BFGS direction), ``push`` /
 ``mix`` (Anderson's history and mixing; sums over fixed chunks of :data:`CHUNK`, so the
 same floats whatever the thread count), :func:`lbfgs_update` and
 :func:`lbfgs_direction` (L-BFGS's compact form).
-:func:`loop_kernels` compiles (or loads from numba's cache) the serial or parallel
-variants on first use; :func:`warmup_kernels` every serial kernel of the solver,
-:mod:`sshade.arap.kernels` included.
+:func:`loop_kernels` and :func:`anderson_kernels` compile (or load from numba's cache)
+the serial or parallel variants on first use; :func:`warmup_kernels` the serial kernels
+of an L-BFGS solve, :mod:`sshade.arap.kernels` included.
 """
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ try:  # numba is a dependency of the package; without it the numpy paths are use
 except ImportError:  # pragma: no cover
     nb = None
 
-__all__ = ["CHUNK", "LBFGS_BLOCK", "loop_kernels", "lbfgs_update", "lbfgs_direction", "warmup_kernels"]
+__all__ = ["CHUNK", "LBFGS_BLOCK", "loop_kernels", "anderson_kernels", "lbfgs_update", "lbfgs_direction",
+           "warmup_kernels"]
 
 #: Anderson's dot products are summed over fixed chunks of CHUNK entries, then over the
 #: chunks: the same floats whatever the number of threads.
@@ -308,35 +309,55 @@ if nb is None:  # pragma: no cover - numba unusable
 
 
 _LOOP = {1: None, 2: None}  # None: not tried; False: unusable; else the kernels
+_ANDERSON = {1: None, 2: None}
+
+
+def _compiled(cache: dict, parallel: bool, make):
+    """``cache``'s kernels for ``parallel`` (``make(parallel)`` on first use: compiles,
+    or loads from numba's cache, and calls them once), or False when numba is unusable.
+    The parallel variants start numba's thread pool."""
+    key = 2 if parallel else 1
+    if cache[key] is None:
+        try:
+            if parallel:
+                note_launch()
+            cache[key] = make(parallel)
+        except Exception:  # pragma: no cover - numba missing or broken
+            cache[key] = False
+    return cache[key]
+
+
+def _make_loop(parallel: bool) -> dict:
+    k = {"set_rows": _set_rows, "max_move": _max_move, "grad": _grad_parallel if parallel else _grad_serial}
+    x = np.zeros((2, 3))
+    k["set_rows"](np.zeros((2, 3)), np.arange(2, dtype=np.uint32), x)
+    k["max_move"](x, x)
+    k["grad"](np.array([0, 1, 2], np.uint64), np.array([0, 1], np.uint32), np.ones(2), x, x, np.ones(2),
+              np.empty(2), np.empty((2, 3)))
+    return k
+
+
+def _make_anderson(parallel: bool) -> dict:
+    k = {"push": _push_parallel if parallel else _push_serial, "mix": _mix_parallel if parallel else _mix_serial}
+    xf = np.zeros(6)
+    DF = np.zeros((2, 6))
+    k["push"](xf, xf, xf, xf, DF, DF.copy(), 0, 1, np.empty((1, 4)))
+    k["mix"](xf, DF, np.zeros(2), 1, np.empty(6))
+    return k
 
 
 def loop_kernels(parallel: bool):
     """``dict`` of the compiled loop kernels (serial or parallel variants: ``"set_rows"``,
-    ``"max_move"``, ``"grad"``, ``"push"``, ``"mix"``), or False when numba is unusable.
-    Compiling the parallel variants starts numba's thread pool."""
-    key = 2 if parallel else 1
-    if _LOOP[key] is None:
-        try:
-            if parallel:
-                note_launch()
-            k = {"set_rows": _set_rows, "max_move": _max_move,
-                 "grad": _grad_parallel if parallel else _grad_serial,
-                 "push": _push_parallel if parallel else _push_serial,
-                 "mix": _mix_parallel if parallel else _mix_serial}
-            x = np.zeros((2, 3))
-            xf = x.reshape(-1)
-            k["set_rows"](np.zeros((2, 3)), np.arange(2, dtype=np.uint32), x)
-            k["max_move"](x, x)
-            k["grad"](np.array([0, 1, 2], np.uint64), np.array([0, 1], np.uint32), np.ones(2), x, x, np.ones(2),
-                      np.empty(2), np.empty((2, 3)))
-            DF = np.zeros((2, 6))
-            part = np.empty((1, 4))
-            k["push"](xf, xf, xf, xf, DF, DF.copy(), 0, 1, part)
-            k["mix"](xf, DF, np.zeros(2), 1, np.empty(6))
-            _LOOP[key] = k
-        except Exception:  # pragma: no cover - numba missing or broken
-            _LOOP[key] = False
-    return _LOOP[key]
+    ``"max_move"``, ``"grad"``), or False when numba is unusable. Compiling the parallel
+    variants starts numba's thread pool."""
+    return _compiled(_LOOP, parallel, _make_loop)
+
+
+def anderson_kernels(parallel: bool):
+    """``dict`` of Anderson's compiled kernels (serial or parallel variants: ``"push"``,
+    ``"mix"``), or False when numba is unusable; compiled on first use only, since the
+    default L-BFGS (and so SShaDe's first call) never runs them."""
+    return _compiled(_ANDERSON, parallel, _make_anderson)
 
 
 def warmup_kernels() -> bool:
