@@ -34,7 +34,7 @@ class Anderson:
     """
 
     def __init__(self, m: int, N: int, kerns, threads: int):
-        self.m, self.N, self.kerns, self.threads = m, N, kerns, threads
+        self.m, self.N, self.threads = m, N, threads
         self.kern = anderson_kernels(False) if kerns else None
         self.DF = np.empty((m, N))
         self.DG = np.empty((m, N))

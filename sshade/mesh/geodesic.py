@@ -108,8 +108,8 @@ def locality_order(V: np.ndarray) -> np.ndarray:
 
     The 30-bit Morton code takes 10 bits per axis of the bounding box's largest side
     (``q = int((x - lo) * 1023 / extent)``, bit ``b`` of axis ``k`` to bit ``3 b + k``);
-    ties keep the vertices' order. numpy, not a kernel (as fast at 1M vertices, and nothing
-    to compile on the first call)."""
+    ties keep the vertices' order. numpy, not a numba kernel: nothing to compile on the
+    first call."""
     V = np.ascontiguousarray(V, np.float64)
     n = len(V)
     if n == 0:
