@@ -132,7 +132,7 @@ def dot3(a, b) -> np.ndarray:
 
 def blend(W, T) -> np.ndarray:
     """Per-row weighted sums ``sum_j W[v, j] T[j]``, added over ``j`` in ascending order
-    (a column of zero weights adds nothing and is skipped: the sum is the same).
+    (a zero weight adds nothing and is skipped: for finite ``T`` the sum is the same).
 
     Parameters
     ----------
@@ -150,8 +150,22 @@ def blend(W, T) -> np.ndarray:
     tail = T.shape[1:]
     flat = T.reshape(len(T), -1)
     out = np.zeros((W.shape[0], flat.shape[1]), np.float64)
-    for j in np.flatnonzero(np.any(W != 0.0, axis=0)):
-        out += W[:, j, None] * flat[j]
+    # A zero weight adds 0 * x (a signed zero for finite x), which leaves a partial sum
+    # started at +0.0 unchanged: a joint's column is added to its nonzero rows only, or to
+    # every row where more than a fifth are nonzero (a pass over every row is faster
+    # there); each row gets the same terms in the same ascending order either way.
+    nnz = np.count_nonzero(W, axis=0)
+    sparse = np.flatnonzero((nnz > 0) & (nnz <= W.shape[0] // 5))
+    rows, cols = np.nonzero(W[:, sparse])
+    by_col = np.argsort(cols, kind="stable")  # rows ascending within each column
+    rows, ptr = rows[by_col], np.searchsorted(cols[by_col], np.arange(len(sparse) + 1))
+    at = dict(zip(sparse.tolist(), range(len(sparse))))
+    for j in np.flatnonzero(nnz).tolist():
+        if j in at:
+            r = rows[ptr[at[j]]:ptr[at[j] + 1]]  # unique: one term per row
+            out[r] += W[r, j, None] * flat[j]
+        else:
+            out += W[:, j, None] * flat[j]
     return out.reshape((W.shape[0],) + tail)
 
 

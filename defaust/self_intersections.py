@@ -67,15 +67,42 @@ def self_intersections(V, F) -> np.ndarray:
     F = np.ascontiguousarray(F, np.int64)
     corners = V[F]
     lo, hi = corners.min(axis=1), corners.max(axis=1)
-    h = float((hi - lo).max()) or 1.0  # cell size: no box spans more than two cells per axis
-    cell = np.floor((lo - lo.min(axis=0)) / h).astype(np.int64)
-    dims = cell.max(axis=0) + 2
-    if float(dims[0]) * float(dims[1]) * float(dims[2]) >= 2.0 ** 62:
-        raise SShaDeError("self_intersections: the mesh spans too many cells of its largest face's size")
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
-    order = np.argsort(key, kind="stable")
-    flags = _crossing_faces(np.ascontiguousarray(V), F, lo, hi, cell, dims, order, key[order])
+    c0, c1, dims, count = _grid(lo, hi)
+    face, key = _cell_entries(c0, c1, dims, count)
+    order = np.argsort(key, kind="stable")  # by cell, faces ascending within a cell
+    flags = _crossing_faces(np.ascontiguousarray(V), F, lo, hi, c0, dims, face[order], key[order])
     return np.flatnonzero(flags).astype(np.int64)
+
+
+#: The grid's cells hold at most this many (cell, face) entries per face on average: the
+#: cell size starts at twice the median face box and doubles until they fit.
+_ENTRIES_PER_FACE = 8
+
+
+def _grid(lo, hi):
+    """A uniform grid over the face boxes ``lo``, ``hi`` (m, 3): ``(c0, c1, dims, entries)``,
+    ``c0``, ``c1`` (m, 3) int64 the cells of each box's low and high corner, ``dims`` (3,)
+    int64 the cells per axis, ``entries`` the number of (cell, face) pairs of every box in
+    every cell it overlaps. The cell size is twice the median box extent, doubled while
+    there are more than :data:`_ENTRIES_PER_FACE` entries a face (at the largest box's
+    extent a box overlaps at most 2 x 2 x 2 cells) or the cells' count overflows."""
+    ext = (hi - lo).max(axis=1)
+    h_max = float(ext.max())
+    h = 2.0 * float(np.median(ext))
+    if not h > 0.0:
+        h = h_max if h_max > 0.0 else 1.0
+    origin = lo.min(axis=0)
+    while True:
+        c0 = np.floor((lo - origin) / h).astype(np.int64)
+        c1 = np.floor((hi - origin) / h).astype(np.int64)
+        dims = c1.max(axis=0) + 1
+        fits = float(dims[0]) * float(dims[1]) * float(dims[2]) < 2.0 ** 62
+        count = int(np.prod(c1 - c0 + 1, axis=1).sum())
+        if fits and (count <= _ENTRIES_PER_FACE * len(lo) or h >= h_max):
+            return c0, c1, dims, count
+        if not fits and h >= h_max:
+            raise SShaDeError("self_intersections: the mesh spans too many cells of its largest face's size")
+        h *= 2.0
 
 
 def _orient(V, a, b, c, d) -> float:
@@ -116,43 +143,56 @@ def _pair(V, F, i, j) -> bool:
     return False
 
 
-def _first_at_least(skey, k) -> int:
-    """The first index of sorted ``skey`` whose value is at least ``k``."""
-    lo, hi = 0, len(skey)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if skey[mid] < k:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+def _cell_entries(c0, c1, dims, count):
+    """``(face, key)`` (count,) int64: every face (ascending) in every cell its box
+    overlaps, ``key`` the cell's index ``(cx dims[1] + cy) dims[2] + cz``."""
+    face = np.empty(count, np.int64)
+    key = np.empty(count, np.int64)
+    t = 0
+    for f in range(c0.shape[0]):
+        for cx in range(c0[f, 0], c1[f, 0] + 1):
+            for cy in range(c0[f, 1], c1[f, 1] + 1):
+                for cz in range(c0[f, 2], c1[f, 2] + 1):
+                    face[t] = f
+                    key[t] = (cx * dims[1] + cy) * dims[2] + cz
+                    t += 1
+    return face, key
 
 
-def _crossing_faces(V, F, lo, hi, cell, dims, order, skey):
-    """(m,) uint8, 1 for a face that crosses another: each face against the faces whose
-    box corner lies in its cell or a neighbouring one, in face order."""
+def _crossing_faces(V, F, lo, hi, c0, dims, face, key):
+    """(m,) uint8, 1 for a face that crosses another: in each cell of the grid, every two
+    faces whose boxes overlap and whose boxes' common low corner lies in this cell (so a
+    pair sharing several cells is tested in one), ``face``/``key`` sorted by cell, faces
+    ascending within a cell. A pair whose faces are both flagged already is not tested
+    again: the flags are the same whatever order the pairs come in."""
     m = F.shape[0]
     flags = np.zeros(m, np.uint8)
-    for i in range(m):
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    cx, cy, cz = cell[i, 0] + dx, cell[i, 1] + dy, cell[i, 2] + dz
-                    if cx < 0 or cy < 0 or cz < 0:
-                        continue
-                    k = (cx * dims[1] + cy) * dims[2] + cz
-                    t = _first_at_least(skey, k)
-                    while t < m and skey[t] == k:
-                        j = order[t]
-                        t += 1
-                        if j <= i or (flags[i] and flags[j]):
-                            continue
-                        if (lo[j, 0] > hi[i, 0] or lo[i, 0] > hi[j, 0] or lo[j, 1] > hi[i, 1]
-                                or lo[i, 1] > hi[j, 1] or lo[j, 2] > hi[i, 2] or lo[i, 2] > hi[j, 2]):
-                            continue
-                        if _pair(V, F, i, j):
-                            flags[i] = 1
-                            flags[j] = 1
+    n = key.shape[0]
+    s = 0
+    while s < n:
+        k = key[s]
+        e = s
+        while e < n and key[e] == k:
+            e += 1
+        cz = k % dims[2]
+        cy = (k // dims[2]) % dims[1]
+        cx = k // (dims[1] * dims[2])
+        for a in range(s, e):
+            i = face[a]
+            for b in range(a + 1, e):
+                j = face[b]
+                if flags[i] and flags[j]:
+                    continue
+                if (lo[j, 0] > hi[i, 0] or lo[i, 0] > hi[j, 0] or lo[j, 1] > hi[i, 1]
+                        or lo[i, 1] > hi[j, 1] or lo[j, 2] > hi[i, 2] or lo[i, 2] > hi[j, 2]):
+                    continue
+                if (max(c0[i, 0], c0[j, 0]) != cx or max(c0[i, 1], c0[j, 1]) != cy
+                        or max(c0[i, 2], c0[j, 2]) != cz):
+                    continue  # the pair's common low corner is in another cell, tested there
+                if _pair(V, F, i, j):
+                    flags[i] = 1
+                    flags[j] = 1
+        s = e
     return flags
 
 
@@ -162,7 +202,7 @@ try:  # compiled: a high-resolution body has 340k faces
     _orient = _nb.njit(cache=True, fastmath=False)(_orient)
     _crosses = _nb.njit(cache=True, fastmath=False)(_crosses)
     _pair = _nb.njit(cache=True, fastmath=False)(_pair)
-    _first_at_least = _nb.njit(cache=True, fastmath=False)(_first_at_least)
+    _cell_entries = _nb.njit(cache=True)(_cell_entries)
     _crossing_faces = _nb.njit(cache=True, fastmath=False)(_crossing_faces)
 except ImportError:  # pragma: no cover - numba is a dependency
     pass

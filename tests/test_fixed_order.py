@@ -176,3 +176,21 @@ def test_the_same_bytes_under_other_blas_thread_counts_and_kernels():
         outs.add(r.stdout.strip())
     assert len(outs) == 1, outs
     assert len(hashlib.sha256(b"").hexdigest()) == len(outs.pop())
+
+
+def test_blend_skipping_zero_weights_gives_the_bytes_of_a_pass_over_every_row():
+    """Sparse weights (a few joints per row, signed zeros in the items): the same bytes as
+    adding ``W[:, j] T[j]`` to every row, joint by joint in ascending order."""
+    rng = np.random.default_rng(3)
+    n, k = 2000, 40
+    W = np.zeros((n, k))
+    for _ in range(4):
+        W[np.arange(n), rng.integers(0, k, n)] = rng.random(n) * rng.choice([1.0, -1.0], n)
+    W[:, 7] = 0.0
+    T = rng.standard_normal((k, 3, 4))
+    T[3] = -0.0
+    T[5, 1, 2] = 0.0
+    dense = np.zeros((n, 12))
+    for j in range(k):
+        dense = dense + W[:, j, None] * T[j].reshape(-1)
+    assert fo.blend(W, T).tobytes() == dense.reshape(n, 3, 4).tobytes()

@@ -216,7 +216,7 @@ def test_build_estimate_counts_each_workers_start_up_once():
     assert b["seconds"] == pytest.approx(P.BUILD_START_S + P.BUILD_S_PER_SUBJECT)
     assert P.build_stage(0, workers=2, start_s=P.BUILD_START_S)["seconds"] == 0.0
     words = P.render_plan(P.make_plan([], [], [], lambda *a: 0.0, build=b))
-    assert "2 subject(s) x ~85 s on 2 workers after ~10 s of start-up, about 95 s" in words
+    assert "2 subject(s) x ~68 s on 2 workers after ~10 s of start-up, about 78 s" in words
 
 
 @pytest.mark.parametrize("jobs", [1, 2])

@@ -27,9 +27,11 @@ __all__ = ["BUILD_S_PER_SUBJECT", "BUILD_START_S", "REFERENCE_S_PER_VERTEX", "SR
 #: compiled on a fresh machine), in the build probe's reference seconds
 #: (:data:`eval.run.machine_speed.PROBE_REFERENCE_S`): fitted to builds with 2 workers of 2
 #: subjects in 87.3 s and of 8 in about 352 s (numba's cache warm), and a fresh clone's 2 in
-#: 117.7 s (benchmarks/records/machine_speed.md, "The solvers' probe"). A parallel build
-#: takes rounds of ``workers`` subjects.
-BUILD_S_PER_SUBJECT = 85.0
+#: 117.7 s (benchmarks/records/machine_speed.md, "The solvers' probe"), then the subjects'
+#: share times 0.8 for the sparse skinning blend and the finer self-intersection grid (2
+#: subjects on 2 workers: 65.1 s against 80.1 s, the same bytes; benchmarks/records/
+#: defaust_build_speed.md). A parallel build takes rounds of ``workers`` subjects.
+BUILD_S_PER_SUBJECT = 68.0
 BUILD_START_S = 10.0
 #: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
 #: rigid fit, in the probe's reference seconds: 35-118 s (mean 47 s) at 169k vertices, 8 of
