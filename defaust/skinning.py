@@ -255,7 +255,9 @@ def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarra
         n = len(Ws)
         Vt, Ft = ls3_loop(Vt, Ft, 1)  # the topology of one more level
         E = np.concatenate([Ft[:, [0, 1]], Ft[:, [1, 2]], Ft[:, [2, 0]]])
-        E = np.unique(np.sort(E, axis=1), axis=0)
+        E = np.sort(E, axis=1)
+        key = np.unique(E[:, 0] * len(Vt) + E[:, 1])  # the rows' order, one int64 each
+        E = np.stack([key // len(Vt), key % len(Vt)], axis=1)
         E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
         new = len(Vt) - n
         if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
