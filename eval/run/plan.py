@@ -107,7 +107,7 @@ def build_stage(subjects: int, *, workers: int = 1, s_per_subject: float = BUILD
     >>> build_stage(10, workers=4, s_per_subject=56.0)["seconds"]
     168.0
     >>> build_stage(4, workers=2, start_s=BUILD_START_S)["seconds"]
-    180.0
+    146.0
     """
     w = int(workers) if isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1 else 1
     n = max(int(subjects), 0)
