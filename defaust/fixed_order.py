@@ -155,14 +155,15 @@ def blend(W, T) -> np.ndarray:
     # every row where more than a fifth are nonzero (a pass over every row is faster
     # there); each row gets the same terms in the same ascending order either way.
     nnz = np.count_nonzero(W, axis=0)
-    sparse = np.flatnonzero((nnz > 0) & (nnz <= W.shape[0] // 5))
-    rows, cols = np.nonzero(W[:, sparse])
-    by_col = np.argsort(cols, kind="stable")  # rows ascending within each column
-    rows, ptr = rows[by_col], np.searchsorted(cols[by_col], np.arange(len(sparse) + 1))
-    at = dict(zip(sparse.tolist(), range(len(sparse))))
+    sparse = nnz <= W.shape[0] // 5
+    if (sparse & (nnz > 0)).any():
+        rows, cols = np.nonzero(W)
+        keep = sparse[cols]
+        by_col = np.argsort(cols[keep], kind="stable")  # rows ascending within each column
+        rows, ptr = rows[keep][by_col], np.searchsorted(cols[keep][by_col], np.arange(W.shape[1] + 1))
     for j in np.flatnonzero(nnz).tolist():
-        if j in at:
-            r = rows[ptr[at[j]]:ptr[at[j] + 1]]  # unique: one term per row
+        if sparse[j]:
+            r = rows[ptr[j]:ptr[j + 1]]  # unique: one term per row
             out[r] += W[r, j, None] * flat[j]
         else:
             out += W[:, j, None] * flat[j]
