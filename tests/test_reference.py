@@ -234,3 +234,51 @@ def test_reference_key_changes_with_the_solver_code(monkeypatch):
     k1 = cache.reference_key(*args)
     monkeypatch.setattr(cache, "numerical_versions", lambda: {"numpy": "0"})
     assert len({k0, k1, cache.reference_key(*args)}) == 3
+
+
+def _strip(nx: int = 41, ny: int = 11, compress: float = 0.1):
+    """A flat 4 x 1 strip in z = 0 whose two end columns are handles, the right one moved
+    ``compress`` of the length towards the left: ``(V, F, handles, targets)``."""
+    x, y = np.meshgrid(np.linspace(0.0, 4.0, nx), np.linspace(0.0, 1.0, ny), indexing="ij")
+    V = np.column_stack([x.ravel(), y.ravel(), np.zeros(nx * ny)])
+    idx = np.arange(nx * ny).reshape(nx, ny)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    F = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])]).astype(np.int64)
+    h = np.concatenate([idx[0], idx[-1]]).astype(np.int64)
+    T = V[h].copy()
+    T[ny:, 0] -= compress * 4.0
+    return V, F, h, T
+
+
+def test_a_reference_continued_from_a_saddle_leaves_it_for_the_lower_basin_its_probe_finds(tmp_path):
+    """A compressed flat strip: by the z -> -z symmetry the solver stays in the plane and
+    stops there, first-order converged, at a saddle (the strip buckles out of the plane
+    at a lower energy). The deep solve continued from it stays at the saddle; the
+    second-order probe finds the lower basin and the reference is the buckled minimiser,
+    whose own probe comes back no lower."""
+    V, F, h, T = _strip()
+    flat = arap_deform(V, F, h, T, ArapOptions(energy="spokes_and_rims"))
+    assert flat.converged and np.abs(flat.V[:, 2]).max() < 1e-12
+    ref = reference_solution(V, F, h, T, cache_dir=tmp_path, U0=flat.V)
+    E_flat = flat.info["energy"]
+    rounds = ref.info["probe"]["rounds"]
+    assert rounds[0]["lower"] and rounds[0]["energy"] <= E_flat  # the deep solve stayed at the saddle
+    assert ref.info["probe"]["verified"] and not rounds[-1]["lower"]
+    assert ref.energy < 0.5 * E_flat and np.abs(ref.U[:, 2]).max() > 0.1  # buckled out of the plane
+    np.testing.assert_array_equal(ref.U[h], T)
+
+
+def test_the_probe_leaves_a_deep_minimiser_bit_for_bit_the_same(plane, tmp_path):
+    """On the lifted plane (a minimum) one probe round comes back no lower and the
+    reference is the deep solve's own output, bit for bit."""
+    from eval.metrics import reference as mod
+
+    V, F, h, T = plane
+    ref = reference_solution(V, F, h, T, cache_dir=tmp_path)
+    probe = ref.info["probe"]
+    assert probe["verified"] and len(probe["rounds"]) == 1 and probe["deep_iterations"] == 0
+    assert probe["rounds"][0]["probe_energy"] >= ref.energy * (1 - mod.PROBE_RTOL)
+    solver = mod._solver_settings(50000, 3600.0, "spokes_and_rims")
+    U, E, _ = mod._deep_solve(V, F, h, T, "spokes_and_rims", solver, None)
+    np.testing.assert_array_equal(ref.U, U)
+    assert ref.energy == E

@@ -30,10 +30,18 @@ from sshade.arap import (
 )
 from sshade.errors import SShaDeError
 from sshade.files import inside_folder
+from sshade.mesh.unit_frame import unit_frame
 
 __all__ = ["Reference", "status_words", "reference_path", "reference_solution"]
 
 log = logging.getLogger("eval")
+
+#: The second-order probe of a deep solve of a spokes energy (:func:`_probe`): the deep
+#: minimiser's vertices moved by Gaussian noise of ``PROBE_SCALE`` unit-frame lengths
+#: (:func:`sshade.mesh.unit_frame.unit_frame`; numpy ``default_rng(PROBE_SEED)``), solved
+#: again to the default criterion, at most ``PROBE_ROUNDS`` times; a probe lower than the
+#: deep energy by more than ``PROBE_RTOL`` of it found a lower basin.
+PROBE_SCALE, PROBE_SEED, PROBE_ROUNDS, PROBE_RTOL = 1e-3, 0, 3, 1e-9
 
 def _check_energy(energy: str) -> None:
     if energy not in ENERGIES and sr_alpha(energy) is None:
@@ -53,6 +61,40 @@ def _deep_solve(V, F, handles, targets, energy, solver, U0, R0=None):
                               time_budget_s=solver["time_budget_s"])
         res = solve_arap_sr(V, F, handles, targets, options, U0=U0, R0=R0)
     return np.asarray(res.V, np.float64), float(res.info.get("energy", np.nan)), res
+
+
+def _probe(V, F, handles, targets, energy, solver, U, E, res):
+    """The second-order probe of a deep solve ``(U, E, res)`` of a spokes energy: a
+    first-order stop (the gradient criterion) also holds at a saddle, and a deep solve
+    continued from a method that stopped at one stays there. Each round moves every free
+    vertex of ``U`` by Gaussian noise (:data:`PROBE_SCALE`, :data:`PROBE_SEED`) and solves
+    again to the default criterion; a probe lower than ``E`` by more than
+    :data:`PROBE_RTOL` of it (a saddle, or a minimum that shallow) starts a new deep
+    solve, and the next round probes that; a probe that comes back no lower ends the
+    rounds with ``(U, E, res)`` unchanged, bit for bit. ARAP-SR's energy (rotations in
+    its state) is not probed. Returns ``(U, E, res, probe)``: ``probe`` the record of the
+    rounds (``None`` for ARAP-SR): ``scale``, ``seed``, ``rounds`` (each: ``energy``,
+    ``probe_energy``, ``probe_iterations``, ``lower``), ``deep_iterations`` (of the deep
+    solves before the last) and ``verified`` (the last round found no lower energy)."""
+    if sr_params(energy) is not None:
+        return U, E, res, None
+    rng = np.random.default_rng(PROBE_SEED)
+    sigma = PROBE_SCALE * unit_frame(V).scale
+    options = ArapOptions(energy=energy, max_iter=solver["max_iter"], time_budget_s=solver["time_budget_s"])
+    rounds, deep_iterations = [], 0
+    for _ in range(PROBE_ROUNDS):
+        p = solve_arap(V, F, handles, targets, options, U0=U + sigma * rng.standard_normal(U.shape))
+        Ep = float(p.info.get("energy", np.nan))
+        lower = bool(Ep < E - PROBE_RTOL * abs(E))
+        rounds.append({"energy": E, "probe_energy": Ep, "probe_iterations": int(p.iterations), "lower": lower})
+        if not lower:
+            break
+        log.info("reference %s: a probe found a lower energy (%.9g against %.9g): solving again from it",
+                 energy, Ep, E)
+        deep_iterations += int(res.iterations)
+        U, E, res = _deep_solve(V, F, handles, targets, energy, solver, np.asarray(p.V, np.float64))
+    return U, E, res, {"scale": PROBE_SCALE, "seed": PROBE_SEED, "rounds": rounds,
+                       "deep_iterations": deep_iterations, "verified": not rounds[-1]["lower"]}
 
 
 def _sr_start(V, F, handles, targets, params, U0, R0):
@@ -80,7 +122,8 @@ class Reference:
     U : (n, 3) float64 the deep-converged minimiser (mesh units).
     energy : float, its ARAP energy (mesh units^2). energy_type : str.
     key : str, the cache key (hex). path : Path of the cache file.
-    info : dict, how it was obtained: iterations, status, gnorm, seconds, cached (bool).
+    info : dict, how it was obtained: iterations, status, gnorm, seconds, cached (bool),
+        and for a spokes energy ``probe``, its second-order probe (:func:`_probe`).
     """
 
     U: np.ndarray
@@ -109,6 +152,8 @@ def _solver_settings(max_iter: int, time_budget_s: float | None, energy: str) ->
            "time_budget_s": time_budget_s, "accelerate": "lbfgs" if sr_alpha(energy) is None else "anderson"}
     if sr_alpha(energy) is not None:  # Anderson on (U, R) keeping its history; coarse or continued start
         out["scheme"] = 2
+    else:  # the second-order probe (_probe)
+        out["probe"] = {"scale": PROBE_SCALE, "seed": PROBE_SEED, "rounds": PROBE_ROUNDS, "rtol": PROBE_RTOL}
     return out
 
 
@@ -146,7 +191,10 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
 
     Returns
     -------
-    :class:`Reference` (``info["cached"]`` tells whether it was read from disk).
+    :class:`Reference` (``info["cached"]`` tells whether it was read from disk). For a
+    spokes energy the deep solve's stop is probed to the second order (:func:`_probe`:
+    a first-order stop holds at a saddle too): a lower basin found there is solved
+    deep again, and ``info["probe"]`` records the rounds.
 
     Raises
     ------
@@ -171,10 +219,13 @@ def reference_solution(V, F, handles, targets, *, energy: str = "spokes_and_rims
             path.unlink()  # the link, never what it points to
     t0 = time.perf_counter()
     U, E, res = _deep_solve(V, F, handles, targets, energy, solver, U0, R0)
+    U, E, res, probe = _probe(V, F, handles, targets, energy, solver, U, E, res)
     dt = time.perf_counter() - t0
     info = {"iterations": int(res.iterations), "status": str(res.info.get("status")),
             "gnorm": float(res.info.get("gnorm", np.nan)), "rel_decrease": float(res.info.get("rel_decrease", np.nan)),
             "seconds": round(dt, 3), "solver": solver, "n_vertices": int(len(V)), "cached": False}
+    if probe is not None:
+        info["probe"] = probe
     path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(info)
     write_npz(inside_folder(cache_dir, path.name, "reference cache"),
