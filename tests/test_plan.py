@@ -199,13 +199,14 @@ def test_plan_counts_equal_the_runs_made(tiny_run):
 
 def test_a_reference_is_planned_at_its_prior_at_full_size_and_within_25_percent_on_faust():
     """At PRIOR_VERTICES a reference costs its per-vertex rate times the vertices; at FAUST's
-    6890 vertices, where the linear rate planned 2.1 s (ARAP) and 19.3 s (ARAP-SR), the
-    exponents bring it within 25 % of the means measured there from an empty cache (0.53 s
-    and 2.32 s in the probe's reference seconds, benchmarks/records/machine_speed.md)."""
+    6890 vertices, where the linear rate would plan 3.7 s (ARAP's energies) and 15.8 s
+    (ARAP-SR), the exponents bring it within 25 % of the means measured there with the
+    second-order probe (1.21 s and 3.49 s in the probe's reference seconds,
+    benchmarks/records/command_times.md, 2026-12-02)."""
     from eval.run.progress import PRIOR_VERTICES
     assert P.reference_s(PRIOR_VERTICES) == pytest.approx(P.REFERENCE_S_PER_VERTEX * PRIOR_VERTICES)
     assert P.reference_s(PRIOR_VERTICES, sr=True) == pytest.approx(P.SR_REFERENCE_S_PER_VERTEX * PRIOR_VERTICES)
-    for sr, measured in ((False, 0.53), (True, 2.32)):
+    for sr, measured in ((False, 1.21), (True, 3.49)):
         assert abs(P.reference_s(6890, sr) / measured - 1) < 0.25
 
 

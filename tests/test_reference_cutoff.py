@@ -13,6 +13,7 @@ import pytest
 
 from eval.experiments.cases.reference_cutoff import cutoff_candidate, reference_digest
 from eval.metrics.reference import Reference
+from eval.present.meshview import read_view
 from eval.run.code_identity import PACKAGES
 
 from .conftest import ROOT, subprocess_env
@@ -61,6 +62,11 @@ def test_a_reference_solved_again_bit_for_bit_keeps_its_rows_and_one_that_differ
         assert kept[m]["row"] == first[m]["row"] and kept[m]["reference"]["digest"] == first[m]["reference"]["digest"]
         assert kept[m]["key"] != first[m]["key"] and kept[m]["reproduced"]["from_key"] == first[m]["key"]
     assert (out / "cases.csv").read_text() == rows
+    # the kept runs (no mesh stored) keep their panels of the case's 3D view: its earlier
+    # view shows them under the keys they had before they were kept
+    views = [read_view(p) for p in sorted((out / "report").glob("*.js"))]
+    assert views and all(m["pos"] and m["kind"] == "result" and m["carried"]
+                         for v in views for m in v["meshes"] if m["label"] in ("A", "B"))
     # the spokes reference now differs by one part in 10^9: B runs again, A stays
     text = ref.read_text()
     assert SOLVED in text

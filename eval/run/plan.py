@@ -33,21 +33,24 @@ __all__ = ["BUILD_S_PER_SUBJECT", "BUILD_START_S", "REFERENCE_S_PER_VERTEX", "SR
 #: defaust_build_speed.md). A parallel build takes rounds of ``workers`` subjects.
 BUILD_S_PER_SUBJECT = 68.0
 BUILD_START_S = 10.0
-#: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims) from the
-#: rigid fit, in the probe's reference seconds: 35-118 s (mean 47 s) at 169k vertices, 8 of
-#: DeFAUST's references two at a time (benchmarks/records/machine_speed.md, "The solvers' probe").
-REFERENCE_S_PER_VERTEX = 2.8e-4
+#: Seconds per vertex of a deep reference solve (ARAP spokes or spokes-and-rims, continued
+#: from the method's converged result, then its second-order probe), in the probe's reference
+#: seconds: 91.5 s, the mean of DeFAUST's 4 spokes references (88-174 s, each probe finding
+#: a lower energy) and 4 spokes-and-rims references (37-49 s) at 169k vertices, on a 2-core
+#: EPYC whose probe read x0.9 (benchmarks/records/command_times.md, 2026-12-02; 47 s before
+#: the probe).
+REFERENCE_S_PER_VERTEX = 5.4e-4
 #: The same for ARAP-SR's energy (Anderson-accelerated block descent, continued from the
-#: method's converged result): 474 s, 1,269 iterations at DeFAUST s00_p01's 168,897
-#: vertices (2 cores, one busy with another job; an earlier probe's seconds, carried by the
-#: ARAP-SR prior's ratio, not measured again).
-SR_REFERENCE_S_PER_VERTEX = 3.0e-3
+#: method's converged result; not probed): 388 s, the mean of DeFAUST's 4 (214-478 s,
+#: 513-1,098 iterations) in the same run.
+SR_REFERENCE_S_PER_VERTEX = 2.3e-3
 #: How those seconds grow with the vertices ``n`` about :data:`eval.run.progress.PRIOR_VERTICES`,
 #: as ``n ** p`` (linear per vertex below that overestimated small meshes ninefold): fitted to
-#: the rates above and FAUST's 6890-vertex references computed from an empty cache (mean
-#: 0.53 s ARAP, 2.32 s ARAP-SR in the probe's reference seconds; machine_speed.md).
-REFERENCE_EXPONENT = 1.40
-SR_REFERENCE_EXPONENT = 1.68
+#: the rates above and FAUST's 6890-vertex references of the same code (mean 1.21 s ARAP's
+#: two energies, 3.49 s ARAP-SR in the probe's reference seconds, a probe reading x0.91;
+#: command_times.md, 2026-12-02).
+REFERENCE_EXPONENT = 1.35
+SR_REFERENCE_EXPONENT = 1.47
 
 
 def busy_words(load: float | None = None, cores: int | None = None) -> str:
@@ -153,21 +156,20 @@ def reference_s(n_vertices: int, sr: bool = False, speed: float = 1.0) -> float:
     machine's factor, :func:`eval.run.machine_speed.machine_speed`).
 
     >>> round(reference_s(168_864)), round(reference_s(6_890), 2), round(reference_s(6_890, sr=True), 2)
-    (47, 0.54, 2.35)
+    (91, 1.21, 3.52)
     """
     rate, p = (SR_REFERENCE_S_PER_VERTEX, SR_REFERENCE_EXPONENT) if sr else (REFERENCE_S_PER_VERTEX, REFERENCE_EXPONENT)
     return rate * PRIOR_VERTICES * size_factor(n_vertices, p) * float(speed)
 
 
 def _references_stage(references, jobs: int = 1, is_sr_energy=None, speed: float = 1.0) -> dict:
-    cached = to_compute = unknown = guessed = 0
+    cached = to_compute = unknown = 0
     seconds = 0.0
     for n_vertices, energy, is_cached in references:
         if is_cached:
             cached += 1
             continue
         sr = is_sr_energy is not None and bool(is_sr_energy(energy))
-        guessed += sr
         seconds += reference_s(n_vertices, sr, speed)
         if is_cached is None:
             unknown += 1
@@ -176,7 +178,7 @@ def _references_stage(references, jobs: int = 1, is_sr_energy=None, speed: float
     n = cached + to_compute + unknown
     each = seconds / (n - cached) if n > cached else 0.0
     return {"stage": "references", "count": n, "cached": cached, "to_compute": to_compute, "unknown": unknown,
-            "guessed": guessed, "seconds": _wall(seconds, [each], jobs), "each_s": each}
+            "seconds": _wall(seconds, [each], jobs), "each_s": each}
 
 
 def make_plan(cases, names, pairs, cost, *, build: dict | None = None, references=(), restored: int = 0,
@@ -202,7 +204,7 @@ def make_plan(cases, names, pairs, cost, *, build: dict | None = None, reference
         the cost model's, measured on the whole machine).
     is_sr_energy : None (no energy is ARAP-SR's) or a callable ``energy -> bool`` telling
         ARAP-SR's energies, whose references cost :data:`SR_REFERENCE_S_PER_VERTEX` per
-        vertex and count as a guess (the caller's, from :func:`eval.metrics.reference_scores.sr_alpha`:
+        vertex (the caller's, from :func:`eval.metrics.reference_scores.sr_alpha`:
         the plan knows no energy names).
 
     Returns
@@ -257,12 +259,11 @@ def _runs_words(r: dict, then: bool) -> str:
 def _refs_words(f: dict) -> str:
     if not f["count"]:
         return "references: none"
-    note = f" (ARAP-SR's {f['guessed']}: a guess, not measured yet)" if f.get("guessed") else ""
     if f["unknown"]:
-        return f"references: up to {f['unknown']} to compute, {duration_words(f['each_s'], about=True)} each{note}"
+        return f"references: up to {f['unknown']} to compute, {duration_words(f['each_s'], about=True)} each"
     if f["to_compute"]:
         return (f"references: {f['cached']} cached, {f['to_compute']} to compute, "
-                f"{duration_words(f['each_s'], about=True)} each{note}")
+                f"{duration_words(f['each_s'], about=True)} each")
     return f"references: {f['cached']} cached, 0 to compute"
 
 

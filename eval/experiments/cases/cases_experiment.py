@@ -372,6 +372,19 @@ def _run_in_array(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, b
             out.case_done(ci, {})
 
 
+def _former_key(rec: dict) -> str | None:
+    """The key a stored record had before this run gave it a new one, for the same run
+    (its vertices unchanged): re-keyed (:func:`eval.run.stale_rows.rekey_record`,
+    ``rekeyed``) or kept because its reference came out bit for bit the same
+    (:func:`eval.experiments.cases.reference_cutoff.keep_if_reproduced`, ``reproduced``);
+    None for any other record. An earlier figure or 3D view stamped with that key shows it."""
+    for how in ("rekeyed", "reproduced"):
+        k = rec[how].get("from_key") if isinstance(rec.get(how), dict) else None
+        if isinstance(k, str) and k:
+            return k
+    return None
+
+
 class _CaseOutputs:
     """What follows each finished case: ``cases.csv`` (the rows of every finished pair, in
     (case, method) order) and, for the first ``figures.max_cases`` / ``report.view_cases``
@@ -419,8 +432,8 @@ class _CaseOutputs:
         not_run = [n for m, n in zip(s.methods, s.names) if not s.runs_on(ci, m)]  # "not run", not "failed"
         results = {n: deformed.get(n) for n in s.names}
         keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
-        earlier = {s.names[mi]: (self.done[ci, mi].get("rekeyed") or {}).get("from_key") or keys[s.names[mi]]
-                   for mi in self.plan[ci] if (ci, mi) in self.done}  # a re-keyed record: the same run
+        earlier = {s.names[mi]: _former_key(self.done[ci, mi]) or keys[s.names[mi]]
+                   for mi in self.plan[ci] if (ci, mi) in self.done}  # a re-keyed or kept record: the same run
         if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/present/figures.py)
             self._figure(ci, results, not_run, unknown, keys, earlier)
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
