@@ -373,13 +373,15 @@ def _run_in_array(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, b
 
 
 def _former_key(rec: dict) -> str | None:
-    """The key a stored record had before this run gave it a new one, for the same run
-    (its vertices unchanged): re-keyed (:func:`eval.run.stale_rows.rekey_record`,
-    ``rekeyed``) or kept because its reference came out bit for bit the same
-    (:func:`eval.experiments.cases.reference_cutoff.keep_if_reproduced`, ``reproduced``);
-    None for any other record. An earlier figure or 3D view stamped with that key shows it."""
-    for how in ("rekeyed", "reproduced"):
-        k = rec[how].get("from_key") if isinstance(rec.get(how), dict) else None
+    """The key of an earlier record of the same vertices as the stored record ``rec``:
+    the key it had before this run gave it a new one (re-keyed,
+    :func:`eval.run.stale_rows.rekey_record`, ``rekeyed``; or kept because its reference
+    came out bit for bit the same,
+    :func:`eval.experiments.cases.reference_cutoff.keep_if_reproduced`, ``reproduced``),
+    or the record whose output bytes its run gave again (``same_output_as``); None for any
+    other record. An earlier figure or 3D view stamped with that key shows these vertices."""
+    for how in ("rekeyed", "reproduced", "same_output_as"):
+        k = rec[how].get("from_key" if how != "same_output_as" else "key") if isinstance(rec.get(how), dict) else None
         if isinstance(k, str) and k:
             return k
     return None
@@ -433,7 +435,7 @@ class _CaseOutputs:
         results = {n: deformed.get(n) for n in s.names}
         keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
         earlier = {s.names[mi]: _former_key(self.done[ci, mi]) or keys[s.names[mi]]
-                   for mi in self.plan[ci] if (ci, mi) in self.done}  # a re-keyed or kept record: the same run
+                   for mi in self.plan[ci] if (ci, mi) in self.done}  # the same vertices under an earlier key
         if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/present/figures.py)
             self._figure(ci, results, not_run, unknown, keys, earlier)
         if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
