@@ -37,7 +37,7 @@ BUILD_START_S = 10.0
 #: from the method's converged result, then its second-order probe), in the probe's reference
 #: seconds: 91.5 s, the mean of DeFAUST's 4 spokes references (88-174 s, each probe finding
 #: a lower energy) and 4 spokes-and-rims references (37-49 s) at 169k vertices, on a 2-core
-#: EPYC whose probe read x0.9 (benchmarks/records/command_times.md, 2026-12-02; 47 s before
+#: EPYC whose machine probe read x0.9 (benchmarks/records/command_times.md, 2026-12-02; 47 s before
 #: the probe).
 REFERENCE_S_PER_VERTEX = 5.4e-4
 #: The same for ARAP-SR's energy (Anderson-accelerated block descent, continued from the
@@ -47,7 +47,7 @@ SR_REFERENCE_S_PER_VERTEX = 2.3e-3
 #: How those seconds grow with the vertices ``n`` about :data:`eval.run.progress.PRIOR_VERTICES`,
 #: as ``n ** p`` (linear per vertex below that overestimated small meshes ninefold): fitted to
 #: the rates above and FAUST's 6890-vertex references of the same code (mean 1.21 s ARAP's
-#: two energies, 3.49 s ARAP-SR in the probe's reference seconds, a probe reading x0.91;
+#: two energies, 3.49 s ARAP-SR in the probe's reference seconds, a machine probe reading x0.91;
 #: command_times.md, 2026-12-02).
 REFERENCE_EXPONENT = 1.35
 SR_REFERENCE_EXPONENT = 1.47

@@ -380,8 +380,8 @@ def _former_key(rec: dict) -> str | None:
     :func:`eval.experiments.cases.reference_cutoff.keep_if_reproduced`, ``reproduced``),
     or the record whose output bytes its run gave again (``same_output_as``); None for any
     other record. An earlier figure or 3D view stamped with that key shows these vertices."""
-    for how in ("rekeyed", "reproduced", "same_output_as"):
-        k = rec[how].get("from_key" if how != "same_output_as" else "key") if isinstance(rec.get(how), dict) else None
+    for how, name in (("rekeyed", "from_key"), ("reproduced", "from_key"), ("same_output_as", "key")):
+        k = rec[how].get(name) if isinstance(rec.get(how), dict) else None
         if isinstance(k, str) and k:
             return k
     return None
