@@ -50,6 +50,7 @@ def test_builder_overrides_naming_subjects_are_kept(tmp_path):
     assert build_outlook(tmp_path / "new", ds)["subjects"] == 3
 
 
+@pytest.mark.slow
 def test_a_run_on_one_subject_builds_it_and_a_later_run_adds_the_others(tmp_path, caplog):
     root = tmp_path / "defaust"
     with caplog.at_level("INFO", logger="eval"):
@@ -74,6 +75,7 @@ def test_a_run_on_one_subject_builds_it_and_a_later_run_adds_the_others(tmp_path
     assert _hashes(root) == whole
 
 
+@pytest.mark.slow
 def test_a_run_with_a_limit_alone_builds_every_subject_and_reads_its_first_cases(tmp_path):
     root = tmp_path / "defaust"
     prepare_root(root, _ds(limit=2))
@@ -82,6 +84,7 @@ def test_a_run_with_a_limit_alone_builds_every_subject_and_reads_its_first_cases
     assert [c.name for c in load_defaust(root, DefaustOptions(limit=2))] == ["s00_p01", "s00_p02"]
 
 
+@pytest.mark.slow
 def test_a_run_on_a_build_other_than_the_canonical_one_records_and_says_so(defaust_ci, tmp_path):
     """A DeFAUST run records its build held against the canonical records in run.json
     (``dataset_build``); on a build that is not the canonical one (the synthetic ci build)

@@ -37,6 +37,7 @@ def serial(tmp_path_factory):
     return out, _build(out, 1)
 
 
+@pytest.mark.slow
 def test_two_workers_build_the_same_files_as_one(serial, tmp_path):
     out1, rep1 = serial
     rep2 = _build(tmp_path, 2)

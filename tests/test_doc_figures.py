@@ -43,12 +43,13 @@ MEASURE = re.compile(r"\b(?:(?i:volume|area|handle)|EL|GT mean)\b")
 NEAR = 25  #: a measure names the number's column when named at most this many characters before it
 
 
-def _files(target: Path) -> list[Path]:
+@functools.lru_cache(maxsize=None)
+def _files(target: Path) -> tuple[Path, ...]:
     if target.is_file():
-        return [target]
+        return (target,)
     tables = ("table", "sweep_table", "cases")
-    return sorted(p for p in target.rglob("*") if p.is_file() and "runs" not in p.relative_to(target).parts
-                  and (p.suffix == ".md" or p.name.startswith(tables) and p.suffix == ".csv"))
+    return tuple(sorted(p for p in target.rglob("*") if p.is_file() and "runs" not in p.relative_to(target).parts
+                        and (p.suffix == ".md" or p.name.startswith(tables) and p.suffix == ".csv")))
 
 
 @functools.lru_cache(maxsize=None)
@@ -73,7 +74,8 @@ def _rows(p: Path) -> tuple:
     return tuple(out)
 
 
-def _cells(targets, method: str | None, measure: str | None) -> list[float]:
+@functools.lru_cache(maxsize=None)
+def _cells(targets: frozenset, method: str | None, measure: str | None) -> tuple[float, ...]:
     """The numbers of the targets' table cells in ``method``'s rows (a row with a cell
     equal to it, or a column headed with it) and ``measure``'s column; ``None``: any."""
     cols = MEASURES.get(measure, MEASURES.get(measure.lower(), ())) if measure else ()
@@ -88,7 +90,7 @@ def _cells(targets, method: str | None, measure: str | None) -> list[float]:
                     if measure is not None and not any(h == c or h.endswith(" " + c) for c in cols):
                         continue
                     out += [float(m.group(0)) for m in NUMBER.finditer(cell)]
-    return out
+    return tuple(out)
 
 
 def _backed(s: str, targets, method, measure) -> bool:
@@ -96,7 +98,7 @@ def _backed(s: str, targets, method, measure) -> bool:
     column where the tables have them (each restriction dropped where it leaves no cell)."""
     dec = len(s.split(".")[1]) if "." in s else 0
     for key in ((method, measure), (method, None), (None, measure), (None, None)):
-        values = _cells(targets, *key)
+        values = _cells(frozenset(targets), *key)
         if values:
             return any(abs(v - float(s)) <= 0.5 * 10 ** -dec + 1e-12 for v in values)
     return False

@@ -101,6 +101,7 @@ def test_app_end_to_end(tmp_path, faust_root):
     assert "ARAP" in r.stdout  # the table is printed
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not _has_sshade(), reason="sshade.SShaDe not available yet")
 def test_app_runs_sshade(tmp_path, faust_root):
     r = _run([f"dataset.root={faust_root}", "dataset.limit=1", "methods=[SShaDe]", "sshade.n_samplings=1",

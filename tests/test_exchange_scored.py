@@ -105,6 +105,7 @@ def test_defaust_round_trip_through_an_outside_process_equals_the_builtin_row(tm
                            "dataset.resolution=low", "dataset.build.enabled=false"])
 
 
+@pytest.mark.slow
 def test_bad_result_files_are_failed_cases_with_reasons_and_the_rest_is_tabulated(tmp_path, faust_root):
     from eval.datasets import load_cases
     cases = load_cases("faust", faust_root, limit=5)

@@ -103,6 +103,7 @@ def test_ranks_follow_the_paired_test_and_no_column_is_a_folder_name(tmp_path):
     assert {r["rank"] for r in b1.rows} == {1} and "on one case only" in b1.rank_column
 
 
+@pytest.mark.slow
 def test_the_committed_board_shares_a_rank_where_the_paired_test_does_not_separate():
     boards = {b.folder: b for b in collect(ROOT / "results")[0]}
     if "defaust" not in boards:

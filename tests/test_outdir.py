@@ -190,6 +190,9 @@ def test_reproduce_marks_its_commands(monkeypatch):
     import eval.reproduce as rep
     seen = []
     monkeypatch.setattr(rep.subprocess, "call", lambda cmd, env=None: seen.append(env) or 0)
+    # the plan and the machine check read every committed row (tests/test_reproduce.py covers them)
+    monkeypatch.setattr(rep, "_print_plan", lambda selected: None)
+    monkeypatch.setattr(rep, "other_machine", lambda *args, **kwargs: None)
     assert rep.main([]) == 0
     assert seen and all(e.get(outdir.REPRODUCE_ENV) == "1" for e in seen)
 

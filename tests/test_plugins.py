@@ -77,6 +77,7 @@ def test_readme_example_runs_and_deforms():
 
 # ------------------------------------------------------------------ end to end
 
+@pytest.mark.slow
 def test_plugin_runs_through_python_m_eval(tmp_path, shared_data):
     """The README's command: its module saved as mymethod.py in the folder the command
     runs from, next to a method of ours; its row is in table.md, its info in cases.csv."""

@@ -133,6 +133,7 @@ def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(caps
     assert checked == 2 + 2 * found("torch")  # sweep, sweep_arap_sr_alpha (+ the two Implicit-ARAP sweeps)
 
 
+@pytest.mark.slow
 def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_method(capsys):
     """Before the first step: per step and method, the committed rows it reuses and those
     stale (those ``--check`` counts stale or pending); a sweep step resumes as a table

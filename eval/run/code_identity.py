@@ -21,6 +21,7 @@ from pathlib import Path
 
 from eval.run.library_versions import NUMERICAL, numerical_versions, used_libraries
 from eval.run.runinfo import REPO_ROOT
+from eval.run.syntax import attribute_chains, statements
 
 __all__ = ["PACKAGES", "ROW_HARNESS", "ROW_REFERENCES", "ARTIFACTS", "RECORD_ONLY", "code_text", "sources_digest",
            "sources_snapshot", "project_modules", "import_closure", "closure_constants", "file_imports",
@@ -57,7 +58,7 @@ RECORD_ONLY = ("eval.run", "eval.present", "eval.experiments.cases.case_jobs")
 
 def _strip_docstrings(tree: ast.AST) -> ast.AST:
     """``tree`` with the docstring of every module, class and function removed."""
-    for node in ast.walk(tree):
+    for node in statements(tree):
         body = getattr(node, "body", None)
         if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body
                 and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
@@ -69,13 +70,12 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
 @functools.lru_cache(maxsize=4096)
 def _code_text(path: str, mtime_ns: int, size: int) -> bytes:
     """What of a module's source decides what it computes: its syntax tree without
-    comments, docstrings, formatting or line numbers (``ast.dump``), as bytes; the raw
-    bytes when the file does not parse. Cached by file, modification time and size."""
-    data = Path(path).read_bytes()
+    comments, docstrings, formatting or line numbers (``ast.dump`` of :func:`_parse`), as
+    bytes; the raw bytes when the file does not parse. Cached by file, modification time and size."""
     try:
-        return ast.dump(_strip_docstrings(ast.parse(data)), include_attributes=False).encode()
+        return ast.dump(_parse(path, mtime_ns, size), include_attributes=False).encode()
     except (SyntaxError, ValueError):
-        return data
+        return Path(path).read_bytes()
 
 
 def code_text(path) -> bytes:
@@ -122,9 +122,12 @@ def _record_only(name: str) -> bool:
     return any(name == r or name.startswith(r + ".") for r in RECORD_ONLY)
 
 
-@functools.lru_cache(maxsize=512)
+@functools.lru_cache(maxsize=1024)
 def _parse(path: str, mtime_ns: int, size: int) -> ast.Module:
-    return ast.parse(Path(path).read_bytes(), path)
+    """The syntax tree of the file ``path`` without docstrings (:func:`_strip_docstrings`),
+    parsed once per file, modification time and size and shared by every reader here:
+    read, never changed. Raises SyntaxError or ValueError when the file does not parse."""
+    return _strip_docstrings(ast.parse(Path(path).read_bytes(), path))
 
 
 def _tree(path: Path) -> ast.Module:
@@ -244,15 +247,7 @@ def _reexport(name: str, attr: str, mods: Mapping) -> str | None:
 def _attribute_names(tree: ast.AST, bound: Mapping[str, str]) -> set[str]:
     """Dotted names used as attribute chains on the names ``bound`` (local name -> module
     name bound by ``import``): ``sshade.deform(...)`` after ``import sshade`` gives ``sshade.deform``."""
-    out = set()
-    for node in ast.walk(tree):
-        chain = []
-        while isinstance(node, ast.Attribute):
-            chain.append(node.attr)
-            node = node.value
-        if chain and isinstance(node, ast.Name) and node.id in bound:
-            out.add(".".join([bound[node.id], *reversed(chain)]))
-    return out
+    return {".".join([bound[name], *chain]) for name, chain in attribute_chains(tree) if name in bound}
 
 
 def _imports(name: str, path: Path, mods: Mapping) -> tuple[set[str], set[str]]:
@@ -263,7 +258,7 @@ def _imports(name: str, path: Path, mods: Mapping) -> tuple[set[str], set[str]]:
     pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
     tree = _tree(path)
     found, bound = set(), {}
-    for node in ast.walk(tree):
+    for node in statements(tree):  # in ast.walk's order: a name bound twice keeps the last binding
         if isinstance(node, ast.Import):
             for a in node.names:
                 found.add(a.name)  # the module itself runs (a lazy package: only the names used, below)
@@ -429,7 +424,7 @@ def _parts(path: str, mtime_ns: int, size: int, pkg: str) -> tuple[tuple, tuple,
     ast.dump)`` (docstrings left out, as :func:`code_text`), in order; ``(name, absolute
     dotted source)`` of each name its top-level imports bind; every name it reads or
     writes. Cached by file, modification time and size."""
-    tree = _strip_docstrings(ast.parse(Path(path).read_bytes(), path))  # a fresh tree: parsing beats a deep copy
+    tree = _parse(path, mtime_ns, size)
     stmts, binds = [], []
     for node in tree.body:
         if isinstance(node, ast.Import):
@@ -528,7 +523,7 @@ def _inert(path: str, mtime_ns: int, size: int) -> frozenset:
     defined (:func:`_dropped`), each as its ``ast.dump``; cached by file, modification
     time and size."""
     inert = set()
-    for node in _strip_docstrings(ast.parse(Path(path).read_bytes(), path)).body:
+    for node in _parse(path, mtime_ns, size).body:
         if (isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not node.decorator_list) or (
                 isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None
                 and all(isinstance(x, _LITERAL_NODES) for x in ast.walk(node.value))):
@@ -638,7 +633,7 @@ def row_libraries(modules, root: str | None = None) -> tuple[str, ...]:
     project ``modules`` (:func:`eval.run.library_versions.used_libraries` of their files
     under ``root``)."""
     mods = project_modules(root)
-    return used_libraries(mods[m] for m in modules if m in mods)
+    return used_libraries((mods[m] for m in modules if m in mods), parse=_tree)
 
 
 def artifact_identity(root: str | None = None) -> dict:

@@ -10,6 +10,8 @@ import functools
 from importlib import metadata
 from pathlib import Path
 
+from eval.run.syntax import statements
+
 __all__ = ["NUMERICAL", "IMPORT_NAMES", "BUILDS_ON", "numerical_versions", "used_libraries"]
 
 #: Distributions whose version can change a row's numbers: the solvers and mesh
@@ -37,15 +39,10 @@ def numerical_versions() -> dict:
     return out
 
 
-@functools.lru_cache(maxsize=2048)
-def _imported(path: str, mtime_ns: int, size: int) -> frozenset:
-    """The top-level names of the absolute imports anywhere in the file ``path``."""
-    try:
-        tree = ast.parse(Path(path).read_bytes(), path)
-    except (SyntaxError, ValueError):
-        return frozenset(NUMERICAL)  # unreadable: every library counts
+def _top_names(tree: ast.AST) -> frozenset:
+    """The top-level names of the absolute imports anywhere in ``tree``."""
     out = set()
-    for node in ast.walk(tree):
+    for node in statements(tree):  # an import is a statement
         if isinstance(node, ast.Import):
             out |= {a.name.split(".")[0] for a in node.names}
         elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
@@ -53,12 +50,30 @@ def _imported(path: str, mtime_ns: int, size: int) -> frozenset:
     return frozenset(out)
 
 
-def used_libraries(files) -> tuple[str, ...]:
+@functools.lru_cache(maxsize=2048)
+def _imported(path: str, mtime_ns: int, size: int) -> frozenset:
+    """:func:`_top_names` of the file ``path``; every library of :data:`NUMERICAL` when it does not parse."""
+    try:
+        return _top_names(ast.parse(Path(path).read_bytes(), path))
+    except (SyntaxError, ValueError):
+        return frozenset(NUMERICAL)  # unreadable: every library counts
+
+
+def used_libraries(files, parse=None) -> tuple[str, ...]:
     """The distributions of :data:`NUMERICAL` (in that order) that the Python ``files``
     import (module level or in a function; by :data:`IMPORT_NAMES`), with those they
-    compute with (:data:`BUILDS_ON`). Raises OSError when a file cannot be read."""
+    compute with (:data:`BUILDS_ON`). ``parse``: a function from a file's
+    :class:`~pathlib.Path` to its syntax tree (a caller's cache of them; raising
+    SyntaxError or ValueError for a file that does not parse), or None to parse here.
+    Raises OSError when a file cannot be read."""
     names = set()
     for f in files:
+        if parse is not None:
+            try:
+                names |= _top_names(parse(Path(f)))
+            except (SyntaxError, ValueError):
+                names |= set(NUMERICAL)
+            continue
         st = Path(f).stat()
         names |= _imported(str(f), st.st_mtime_ns, st.st_size)
     used = {d for d in NUMERICAL if IMPORT_NAMES.get(d, d) in names}

@@ -165,8 +165,6 @@ def _setup(spec: EvalSpec) -> _Setup:
     unless ``resume``), before any method runs."""
     methods = method_table.make_methods(spec.methods)  # every method's parameters are checked before any work
     specs = _method_specs(spec.methods, methods)
-    # once each, for its rows with and without reference columns (eval/run/code_identity.py)
-    codes = [{on: code_identity(m, sp, references=on) for on in (True, False)} for m, sp in zip(methods, specs)]
     ds = spec.dataset
     refs = CaseReferences(spec.reference)
     # fail fast, before the heavier imports; a DeFAUST build is planned (logged) first
@@ -183,6 +181,9 @@ def _setup(spec: EvalSpec) -> _Setup:
              names, base_rule,
              "".join(f"; {n} on {rule}" for n, (_, rule) in own.items()), out_dir)
     compared = _compared(spec, cases, ds, out_dir)  # read and checked before any method runs
+    # once each, for its rows with and without reference columns (eval/run/code_identity.py),
+    # after the checks above: a refused dataset or folder is said without this work
+    codes = [{on: code_identity(m, sp, references=on) for on in (True, False)} for m, sp in zip(methods, specs)]
     store = ResultStore(out_dir, meshes=spec.output.store_meshes, annotate=scored_against(refs, methods))
     store.check_links()  # a link in runs/ would take a resume's records outside out_dir
     if not spec.output.resume:
