@@ -174,6 +174,7 @@ def test_config_number_helper():
             number(key, **kw)
 
 
+@pytest.mark.slow
 def test_eval_bad_numbers_cli_before_any_work(tmp_path, faust_root):
     bad = ["arap.max_iter=inf", "dataset.limit=abc", "reference.time_budget_s=junk", "sshade.n_low=1e300"]
     cmds = [["eval", "experiment=ci", f"dataset.root={faust_root}", f"out_dir={tmp_path / f'run{i}'}", b]
@@ -245,6 +246,7 @@ def test_builder_failure_leaves_no_empty_folder(tmp_path, monkeypatch):
     assert mine.is_dir()
 
 
+@pytest.mark.slow
 def test_defaust_cli_bad_values_and_hydra_errors(tmp_path):
     cases = [(["seed=abc"], "seed"), (["handles.n_per_landmark=0"], "n_per_landmark"),
              (["high_res.vertex_range=[20,10]"], "vertex_range"), (["synthetic.voxel_size=inf"], "voxel"),

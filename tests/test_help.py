@@ -97,7 +97,11 @@ def test_every_entry_point_is_listed():
     assert found <= set(HELP), sorted(found - set(HELP))
 
 
-@pytest.mark.parametrize("cmd", sorted(HELP))
+#: the benchmark scripts' help (a process each, 1-2.5 s) runs with the slow tests; the commands' by default
+CASES = [pytest.param(c, marks=pytest.mark.slow) if c.startswith("benchmarks/") else c for c in sorted(HELP)]
+
+
+@pytest.mark.parametrize("cmd", CASES)
 def test_help_prints_usage_and_exits_0(cmd, tmp_path):
     r = subprocess.run([*_argv(cmd), "--help"], cwd=tmp_path, env=subprocess_env(), capture_output=True,
                        text=True, timeout=300)

@@ -146,6 +146,7 @@ def test_a_killed_worker_fails_its_pair_only_and_the_advised_command_keeps_the_s
     assert len(rows) == 6 and (rows["error"] == "").all()
 
 
+@pytest.mark.slow
 def test_os_exit_in_a_plugin_is_a_failed_pair_in_one_process(tmp_path, faust_root):
     out = tmp_path / "out"
     r = subprocess.run(_cmd(faust_root, out, [A, "{_target_:tests.worker_methods.ExitsProcess,name:X}"], jobs=1),

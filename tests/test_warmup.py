@@ -140,6 +140,7 @@ def test_evaluator_keeps_compilation_out_of_time_s(tmp_path, faust_root, monkeyp
     assert json.loads((tmp_path / "run.json").read_text())["compile_s"]["Slow"] == pytest.approx(0.8, abs=0.05)
 
 
+@pytest.mark.slow
 def test_scaling_keeps_compilation_out_of_its_timings(tmp_path, shared_data, monkeypatch):
     """eval.experiments.scaling.scaling_experiment: warm-ups before SShaDe and Elastic, reported as *_compile_s."""
     base = shared_data / "classic" / "armadillo.obj"
