@@ -122,7 +122,7 @@ def _record_only(name: str) -> bool:
     return any(name == r or name.startswith(r + ".") for r in RECORD_ONLY)
 
 
-@functools.lru_cache(maxsize=1024)
+@functools.lru_cache(maxsize=512)  # the bound it had: trees of other commits share it (eval/run/stale_rows.py)
 def _parse(path: str, mtime_ns: int, size: int) -> ast.Module:
     """The syntax tree of the file ``path`` without docstrings (:func:`_strip_docstrings`),
     parsed once per file, modification time and size and shared by every reader here:
