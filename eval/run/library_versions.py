@@ -50,13 +50,19 @@ def _top_names(tree: ast.AST) -> frozenset:
     return frozenset(out)
 
 
+def _names_of(tree) -> frozenset:
+    """:func:`_top_names` of ``tree()``; every library of :data:`NUMERICAL` when it raises
+    SyntaxError or ValueError (a file that does not parse: every library counts)."""
+    try:
+        return _top_names(tree())
+    except (SyntaxError, ValueError):
+        return frozenset(NUMERICAL)
+
+
 @functools.lru_cache(maxsize=2048)
 def _imported(path: str, mtime_ns: int, size: int) -> frozenset:
-    """:func:`_top_names` of the file ``path``; every library of :data:`NUMERICAL` when it does not parse."""
-    try:
-        return _top_names(ast.parse(Path(path).read_bytes(), path))
-    except (SyntaxError, ValueError):
-        return frozenset(NUMERICAL)  # unreadable: every library counts
+    """:func:`_names_of` the file ``path``, parsed here."""
+    return _names_of(lambda: ast.parse(Path(path).read_bytes(), path))
 
 
 def used_libraries(files, parse=None) -> tuple[str, ...]:
@@ -69,13 +75,10 @@ def used_libraries(files, parse=None) -> tuple[str, ...]:
     names = set()
     for f in files:
         if parse is not None:
-            try:
-                names |= _top_names(parse(Path(f)))
-            except (SyntaxError, ValueError):
-                names |= set(NUMERICAL)
-            continue
-        st = Path(f).stat()
-        names |= _imported(str(f), st.st_mtime_ns, st.st_size)
+            names |= _names_of(functools.partial(parse, Path(f)))
+        else:
+            st = Path(f).stat()
+            names |= _imported(str(f), st.st_mtime_ns, st.st_size)
     used = {d for d in NUMERICAL if IMPORT_NAMES.get(d, d) in names}
     used |= {b for d in list(used) for b in BUILDS_ON.get(d, ())}
     return tuple(d for d in NUMERICAL if d in used)
