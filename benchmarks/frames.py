@@ -8,12 +8,13 @@ eval.experiments.scaling.scaling_experiment.build_mesh), cached in ``--cache`` u
 file names (eval.experiments.scaling.mesh_set.cache_name), so both share the built meshes. The
 handles and the final targets: the scaling experiment's edit
 (eval.datasets.shapes.axis_handles: two regions fixed, one turned 20 degrees, one moved
-5 % of the diagonal). Frame i of f moves the handles to ``rest + s(i / f) (final - rest)``,
-s the smoothstep.
+5 % of the diagonal), or with ``--regions 8`` eight regions (:func:`eight_regions`: four
+fixed, four each turned 20 degrees about its own centre and moved 5 % of the diagonal).
+Frame i of f moves the handles to ``rest + s(i / f) (final - rest)``, s the smoothstep.
 
     python benchmarks/frames.py [--mesh armadillo=../shared/data/classic/armadillo.obj ...]
         [--sizes 200000 1000000] [--frames 60] [--k 5] [--n-low 6000] [--workers W]
-        [--cache data/scaling] [--out DIR]
+        [--regions 4|8] [--cache data/scaling] [--out DIR]
 
 Per mesh and size it prints and tabulates: ``prepare`` seconds and the memory the prepared
 object holds (PSS after prepare minus before, MB, the allocator trimmed before each
@@ -22,7 +23,9 @@ median and range, and the low-res iterations per frame summed over the samplings
 whether every frame converged; the one-shot ``sshade.deform`` of the last frame's targets
 (seconds, default workers) and the last frame's distance to it (mean, % of the diagonal);
 libigl's ``arap_solve`` seconds per iteration (spokes and rims, one iteration per call, as
-the paper protocol runs it; after its precomputation). With ``--out`` also
+the paper protocol runs it; after its precomputation), and two ratios to it: the frame
+median over one libigl iteration, and 1000 libigl iterations (the paper's protocol) over
+the one-shot ``deform``. With ``--out`` also
 DIR/table.md and DIR/frames.csv (every frame of every mesh), in a folder that is new, empty
 or this benchmark's earlier output.
 """
@@ -36,7 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
-from eval.datasets.shapes import axis_handles, axis_landmarks  # noqa: E402
+from defaust.fixed_order import rotvec_to_matrix  # noqa: E402
+from eval.datasets.shapes import axis_handles, axis_landmarks, principal_axes  # noqa: E402
 from eval.experiments.scaling.mesh_set import MeshEntry  # noqa: E402
 from eval.experiments.scaling.scaling_experiment import size_mesh  # noqa: E402
 from eval.run.memory import release_freed, tree_pss_mb  # noqa: E402
@@ -66,6 +70,49 @@ def sized_mesh(entry: MeshEntry, size: int, cache: Path):
     V0, F0 = read_mesh(entry.path)
     _, V, F, _ = size_mesh(entry, V0, F0, size, cache)
     return V, F, V0
+
+
+def eight_regions(V: np.ndarray, V0: np.ndarray, *, n_per_group: int = 30, region_radius: float = 0.06,
+                  rotate_deg: float = 20.0, translate: float = 0.05, seed: int = 0):
+    """Eight handle regions and their targets on ``V`` (the edit of ``--regions 8``).
+
+    The landmarks are the vertices of ``V`` nearest the extremes of the base mesh ``V0``
+    along its three principal axes a1, a2, a3 and along (a1 + a2) / sqrt 2, in the order
+    (min, max) per direction. Each region is up to ``n_per_group`` vertices picked at random
+    (seeded per region) within ``region_radius`` x the diagonal of its landmark and not in an
+    earlier region. The regions at even places stay; each at an odd place turns
+    ``rotate_deg`` about the principal axis of its place (a1, a2, a3, a1 again) around its
+    own centroid and moves ``translate`` x the diagonal along a3 (alternating sign).
+
+    V : (n, 3) float64, V0 : (n0, 3) float64. Returns ``handles`` (h,) int64 and
+    ``targets`` (h, 3) float64. Raises SShaDeError if a region holds no free vertex.
+    """
+    from scipy.spatial import cKDTree
+    center, (a1, a2, a3) = principal_axes(V0)
+    dirs = [a1, a2, a3, (a1 + a2) / np.sqrt(2.0)]
+    marks = []
+    for d in dirs:
+        p = (V0 - center) @ d
+        marks += [V0[p.argmin()], V0[p.argmax()]]
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    tree = cKDTree(V)
+    hs, ts, taken = [], [], set()
+    for g, mark in enumerate(marks):
+        cand = np.array(sorted(set(tree.query_ball_point(mark, region_radius * diag)) - taken), np.int64)
+        if len(cand) == 0:
+            raise SShaDeError(f"eight regions: no free vertex within {region_radius} x diagonal of landmark {g}")
+        pick = np.random.default_rng([seed, g]).choice(cand, min(n_per_group, len(cand)), replace=False)
+        taken.update(pick.tolist())
+        P = V[pick]
+        if g % 2:
+            axis = dirs[(g // 2) % 3]
+            R = rotvec_to_matrix(np.deg2rad(rotate_deg) * np.asarray(axis))
+            c = P.mean(0)
+            sign = 1.0 if (g // 2) % 2 == 0 else -1.0
+            P = (P - c) @ R.T + c + sign * translate * diag * a3
+        hs.append(pick)
+        ts.append(P)
+    return np.concatenate(hs), np.concatenate(ts)
 
 
 def _igl_iteration_s(V, F, h, T, n: int = 3) -> float:
@@ -102,11 +149,15 @@ def _frames(a, p, h, rest, T_end, rows: list, label: str) -> tuple[np.ndarray, n
 def _one(a, entry: MeshEntry, size: int, frames: list) -> dict:
     """The row of one mesh at one size (module docstring)."""
     V, F, V0 = sized_mesh(entry, size, Path(a.cache))
-    lm, center, axes = axis_landmarks(V0)
-    h, T_end, _, _ = axis_handles(V, lm, center, axes)
+    if a.regions == 8:
+        h, T_end = eight_regions(V, V0, seed=a.seed)
+    else:
+        lm, center, axes = axis_landmarks(V0)
+        h, T_end, _, _ = axis_handles(V, lm, center, axes)
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     label = f"{entry.name} {len(V)}"
-    print(f"{entry.name} ({entry.kind}) -> {len(V)} vertices, {len(F)} faces; {len(h)} handles; "
+    print(f"{entry.name} ({entry.kind}) -> {len(V)} vertices, {len(F)} faces; {len(h)} handles in {a.regions} "
+          f"regions; "
           f"k={a.k}, n_low={a.n_low}", flush=True)
     release_freed()
     mem0 = tree_pss_mb()
@@ -123,8 +174,9 @@ def _one(a, entry: MeshEntry, size: int, frames: list) -> dict:
     one = deform(V, F, h, T_end, n_low=a.n_low, n_samplings=a.k, seed=a.seed)
     deform_s = time.perf_counter() - t0
     igl_s = _igl_iteration_s(V, F, h, T_end)
-    row = {"mesh": entry.name, "kind": entry.kind, "vertices": len(V), "k": a.k, "n_low": a.n_low,
-           "workers": workers, "prepare_s": prepare_s, "prepared_mb": held, "frame_median_s": float(np.median(rest)),
+    row = {"mesh": entry.name, "kind": entry.kind, "vertices": len(V), "regions": a.regions, "k": a.k,
+           "n_low": a.n_low, "workers": workers, "prepare_s": prepare_s, "prepared_mb": held,
+           "frame_median_s": float(np.median(rest)),
            "frame_min_s": float(rest.min()), "frame_max_s": float(rest.max()),
            "iterations_median": float(np.median(its[1:] if len(its) > 1 else its)), "all_converged": ok,
            "deform_s": deform_s, "last_vs_deform_pct": float(100 * np.linalg.norm(Vd - one, axis=1).mean() / diag),
@@ -143,17 +195,20 @@ def _target(n: int) -> str:
 
 
 def _table(rows: list) -> str:
-    out = ["| Mesh | Vertices | k | n_low | Threads | Prepare (s) | One-shot deform (s) | Prepare / deform | "
+    out = ["| Mesh | Vertices | Regions | k | n_low | Threads | Prepare (s) | One-shot deform (s) | Prepare / deform | "
            "Prepared (MB) | Frame median (ms) | Frame range (ms) | Target (ms) | Iterations per frame (median) | "
-           "All converged | Last frame vs deform (% diag, mean) | libigl s / iteration |",
-           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"]
+           "All converged | Last frame vs deform (% diag, mean) | libigl s / iteration | Frame / libigl iteration | "
+           "1000 libigl iterations / one-shot deform |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|"]
     for r in rows:
-        out.append(f"| {r['mesh']} ({r['kind']}) | {r['vertices']} | {r['k']} | {r['n_low']} | {r['workers']} | "
+        out.append(f"| {r['mesh']} ({r['kind']}) | {r['vertices']} | {r['regions']} | {r['k']} | {r['n_low']} | "
+                   f"{r['workers']} | "
                    f"{r['prepare_s']:.2f} | {r['deform_s']:.2f} | {r['prepare_s'] / r['deform_s']:.2f} | "
                    f"{r['prepared_mb']:.0f} | {1e3 * r['frame_median_s']:.0f} | {1e3 * r['frame_min_s']:.0f}-"
                    f"{1e3 * r['frame_max_s']:.0f} | {_target(r['vertices'])} | {r['iterations_median']:.0f} | "
                    f"{'yes' if r['all_converged'] else 'no'} | {r['last_vs_deform_pct']:.4f} | "
-                   f"{r['igl_iteration_s']:.3f} |")
+                   f"{r['igl_iteration_s']:.3f} | {r['frame_median_s'] / r['igl_iteration_s']:.2f} | "
+                   f"{1000 * r['igl_iteration_s'] / r['deform_s']:.0f} |")
     return "\n".join(out) + "\n"
 
 
@@ -184,7 +239,8 @@ def _write(out: Path, a, table: str, rows: list, frames: list) -> None:
     (out / "table.md").write_text(
         f"### SShaDe prepared once, solved per frame ({a.frames}-frame smooth handle path)\n\n{table}\n"
         f"Made by `python benchmarks/frames.py {' '.join('--mesh ' + m for m in (a.mesh or DEFAULT_MESHES))} "
-        f"--sizes {' '.join(map(str, a.sizes))} --frames {a.frames} --k {a.k} --n-low {a.n_low}` at git commit "
+        f"--sizes {' '.join(map(str, a.sizes))} --frames {a.frames} --k {a.k} --n-low {a.n_low} "
+        f"--regions {a.regions}` at git commit "
         f"{gi.get('commit')} (dirty: {gi.get('dirty')}), seed {a.seed}, on {available_cores()} cores. The "
         f"columns: the benchmark's docstring; every frame's time and iterations in frames.csv.\n")
 
@@ -197,6 +253,8 @@ if __name__ == "__main__":
     ap.add_argument("--k", type=int, default=5)
     ap.add_argument("--n-low", type=int, default=6000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--regions", type=int, choices=(4, 8), default=4,
+                    help="handle regions of the edit: the scaling experiment's 4, or eight_regions' 8")
     ap.add_argument("--workers", type=int, default=None, help="threads of the prepared samplings (default: the cores)")
     ap.add_argument("--out", help="also write table.md, table.csv and frames.csv into this folder")
     args = ap.parse_args()
