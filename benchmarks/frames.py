@@ -39,8 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, as the other benchmarks
 
-from defaust.fixed_order import rotvec_to_matrix  # noqa: E402
-from eval.datasets.shapes import axis_handles, axis_landmarks, principal_axes  # noqa: E402
+from defaust.fixed_order import dot3, rotvec_to_matrix  # noqa: E402
+from eval.datasets.shapes import axis_handles, axis_landmarks  # noqa: E402
 from eval.experiments.scaling.mesh_set import MeshEntry  # noqa: E402
 from eval.experiments.scaling.scaling_experiment import size_mesh  # noqa: E402
 from eval.run.memory import release_freed, tree_pss_mb  # noqa: E402
@@ -76,43 +76,35 @@ def eight_regions(V: np.ndarray, V0: np.ndarray, *, n_per_group: int = 30, regio
                   rotate_deg: float = 20.0, translate: float = 0.05, seed: int = 0):
     """Eight handle regions and their targets on ``V`` (the edit of ``--regions 8``).
 
-    The landmarks are the vertices of ``V`` nearest the extremes of the base mesh ``V0``
-    along its three principal axes a1, a2, a3 and along (a1 + a2) / sqrt 2, in the order
-    (min, max) per direction. Each region is up to ``n_per_group`` vertices picked at random
-    (seeded per region) within ``region_radius`` x the diagonal of its landmark and not in an
-    earlier region. The regions at even places stay; each at an odd place turns
-    ``rotate_deg`` about the principal axis of its place (a1, a2, a3, a1 again) around its
-    own centroid and moves ``translate`` x the diagonal along a3 (alternating sign).
+    The landmarks: the base mesh ``V0``'s vertices of smallest and largest coordinate along
+    its principal axes a1 and a2 (:func:`eval.datasets.shapes.axis_landmarks`), then along
+    a3 and (a1 + a2) / sqrt 2. The regions around them are picked as the scaling edit picks
+    its four (:func:`eval.datasets.shapes.axis_handles`: up to ``n_per_group`` vertices of
+    ``V`` within ``region_radius`` x its diagonal, seeded per region, none in an earlier
+    region). The regions at even places stay; each at an odd place turns ``rotate_deg``
+    about the principal axis of its place (a1, a2, a3, a1 again) around its own centroid
+    and moves ``translate`` x the diagonal along a3 (alternating sign).
 
     V : (n, 3) float64, V0 : (n0, 3) float64. Returns ``handles`` (h,) int64 and
     ``targets`` (h, 3) float64. Raises SShaDeError if a region holds no free vertex.
     """
-    from scipy.spatial import cKDTree
-    center, (a1, a2, a3) = principal_axes(V0)
-    dirs = [a1, a2, a3, (a1 + a2) / np.sqrt(2.0)]
-    marks = []
-    for d in dirs:
-        p = (V0 - center) @ d
+    lm, center, axes = axis_landmarks(V0)
+    a1, a2, a3 = axes
+    marks = [*lm]
+    for d in (a3, (a1 + a2) / np.sqrt(2.0)):
+        p = dot3(V0 - center, d)
         marks += [V0[p.argmin()], V0[p.argmax()]]
+    h, _, _, group = axis_handles(V, np.stack(marks), center, axes, n_per_group=n_per_group,
+                                  region_radius=region_radius, seed=seed)
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
-    tree = cKDTree(V)
-    hs, ts, taken = [], [], set()
-    for g, mark in enumerate(marks):
-        cand = np.array(sorted(set(tree.query_ball_point(mark, region_radius * diag)) - taken), np.int64)
-        if len(cand) == 0:
-            raise SShaDeError(f"eight regions: no free vertex within {region_radius} x diagonal of landmark {g}")
-        pick = np.random.default_rng([seed, g]).choice(cand, min(n_per_group, len(cand)), replace=False)
-        taken.update(pick.tolist())
-        P = V[pick]
-        if g % 2:
-            axis = dirs[(g // 2) % 3]
-            R = rotvec_to_matrix(np.deg2rad(rotate_deg) * np.asarray(axis))
-            c = P.mean(0)
-            sign = 1.0 if (g // 2) % 2 == 0 else -1.0
-            P = (P - c) @ R.T + c + sign * translate * diag * a3
-        hs.append(pick)
-        ts.append(P)
-    return np.concatenate(hs), np.concatenate(ts)
+    T = V[h]
+    for g in range(1, 8, 2):
+        P = T[group == g]
+        R = rotvec_to_matrix(np.deg2rad(rotate_deg) * np.asarray(axes[(g // 2) % 3]))
+        c = P.mean(0)
+        sign = 1.0 if (g // 2) % 2 == 0 else -1.0
+        T[group == g] = (P - c) @ R.T + c + sign * translate * diag * a3
+    return h, T
 
 
 def _igl_iteration_s(V, F, h, T, n: int = 3) -> float:
@@ -157,8 +149,7 @@ def _one(a, entry: MeshEntry, size: int, frames: list) -> dict:
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
     label = f"{entry.name} {len(V)}"
     print(f"{entry.name} ({entry.kind}) -> {len(V)} vertices, {len(F)} faces; {len(h)} handles in {a.regions} "
-          f"regions; "
-          f"k={a.k}, n_low={a.n_low}", flush=True)
+          f"regions; k={a.k}, n_low={a.n_low}", flush=True)
     release_freed()
     mem0 = tree_pss_mb()
     t0 = time.perf_counter()

@@ -9,6 +9,7 @@ import importlib.util
 import numpy as np
 from scipy.spatial.distance import pdist
 
+from eval.datasets.shapes import principal_axes
 from sshade.arap.problems import capped_cylinder
 
 from .conftest import ROOT
@@ -27,7 +28,7 @@ def test_eight_regions_disjoint_static_and_rigid_moves():
     h, T = frames.eight_regions(V, V, translate=0.05, rotate_deg=20.0)
     assert h.dtype == np.int64 and T.shape == (len(h), 3)
     assert len(h) == 8 * 30 and len(np.unique(h)) == len(h)
-    _, (_, _, a3) = frames.principal_axes(V)
+    _, (_, _, a3) = principal_axes(V)
     diag = np.linalg.norm(V.max(0) - V.min(0))
     for g, idx in enumerate(_regions(h)):
         P, Q = V[h[idx]], T[idx]
