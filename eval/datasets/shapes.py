@@ -141,14 +141,15 @@ def axis_handles(V: np.ndarray, landmarks: np.ndarray, center: np.ndarray, axes,
     ----------
     V : (n, 3) float64 mesh vertices. landmarks : (4, 3) points, center : (3,), axes :
         (a1, a2, a3), from :func:`axis_landmarks` (of ``V`` or of a coarser version of
-        the same shape, so every resolution gets the same edit).
+        the same shape, so every resolution gets the same edit). Given (k, 3) landmarks,
+        one region is picked per landmark in the same way; those past the fourth stay.
     n_per_group : vertices per region; region_radius : fraction of the bbox diagonal;
     rotate_deg : degrees; translate : fraction of the bbox diagonal; seed : int.
 
     Returns
     -------
     handles : (h,) int64, targets : (h, 3) float64, static : (h,) bool, group : (h,)
-    int64 region (0..3) of each handle; regions in landmark order,
+    int64 region (0..k-1) of each handle; regions in landmark order,
     ``min(n_per_group, free vertices in the region)`` handles each.
 
     Raises
