@@ -5,7 +5,7 @@ plus keyword overrides, listed in help(), the ARAP solvers' as one
 :class:`sshade.arap.ArapOptions` (tests/test_arap_options.py), Implicit-ARAP's as one
 :class:`baselines.implicit_arap.ImplicitARAPParams` (tests/test_implicit_arap_params.py),
 a mesh image's look as one :class:`eval.present.render_style.RenderStyle`
-(tests/test_render_style.py).
+(tests/test_render_style.py). A public numba kernel counts as a function.
 """
 from __future__ import annotations
 
@@ -34,6 +34,7 @@ def _public_callables(package: str):
             obj = getattr(mod, name, None)
             if getattr(obj, "__module__", None) != mod.__name__:
                 continue
+            obj = getattr(obj, "py_func", obj)  # a numba kernel: its Python function
             if inspect.isfunction(obj):
                 yield f"{mod.__name__}.{name}", obj
             elif inspect.isclass(obj):

@@ -112,7 +112,7 @@ def test_numpy_kernels_agree_with_numba():
     old = np.array([0, 1, 3, 4], np.int64)
     outs = []
     for update in (solver_kernels.lbfgs_update, solver_kernels._numpy_lbfgs_update):
-        args = [v.copy() for v in vecs] + [S.copy(), Z.copy()]
+        args = [v.copy() for v in vecs[:3]] + [np.array(vecs[3:]), np.array([S, Z])]
         dots = np.zeros((4, m))
         ss_yy = update(*args, slot, True, old, dots)
         outs.append((np.array(ss_yy), dots, args))
@@ -125,7 +125,8 @@ def test_numpy_kernels_agree_with_numba():
     YZ = YZ + YZ.T
     idx = np.array([3, 4, 0, 1], np.int64)
     d = [np.empty(N), np.empty(N)]
-    sl = [f(S, Z, SY, YZ, vecs[0], vecs[1], idx, 1.7, vecs[2], vecs[3], dd)
+    dots = np.array([vecs[0], vecs[1], vecs[4], vecs[5]])[:, :m]
+    sl = [f(np.array([S, Z]), np.array([SY, YZ]), dots, idx, 1.7, vecs[2], vecs[3], dd)
           for f, dd in zip((solver_kernels.lbfgs_direction, solver_kernels._numpy_lbfgs_direction), d)]
     np.testing.assert_allclose(d[0], d[1], rtol=1e-11, atol=1e-12 * np.abs(d[1]).max())
     assert sl[0] == pytest.approx(sl[1], rel=1e-11)

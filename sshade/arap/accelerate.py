@@ -117,19 +117,20 @@ class LBFGS:
     where the scaled steps take fewer iterations (measured:
     benchmarks/records/lbfgs_scaling.md; docs/implementation.md, "Implementation notes:
     sshade/arap/accelerate.py"). Without history the direction is the plain step ``-z``.
-    History: ``S`` and ``Z = H0 Y`` in (m, N) ring buffers, ``N = 3 n_free`` (``Y`` is
-    needed only through its products, kept in ``SY`` (m, m), ``s_i . y_j``, and ``YZ``
-    (m, m), ``y_i . H0 y_j``); the passes run in the serial numba kernels
+    History: ``S`` and ``Z = H0 Y`` in (m, N) ring buffers, ``hist`` (2, m, N), ``N = 3
+    n_free`` (``Y`` is needed only through its products, kept in ``prods`` (2, m, m):
+    ``SY``, ``s_i . y_j``, and ``YZ``, ``y_i . H0 y_j``); the passes run in the serial numba kernels
     :func:`sshade.arap.solver_kernels.lbfgs_update` and ``lbfgs_direction``.
     """
 
     def __init__(self, m: int, Lff):
         self.m, self.L = m, Lff.tocsr()
         N = 3 * Lff.shape[0]
-        self.S, self.Z = np.zeros((m, N)), np.zeros((m, N))
-        self.SY, self.YZ = np.ones((m, m)), np.zeros((m, m))
+        self.hist = np.zeros((2, m, N))  # S, Z
+        self.prods = np.zeros((2, m, m))  # SY, YZ
+        self.prods[0] = 1.0
         self.dots = np.zeros((4, m))
-        self.x_prev, self.grad_prev, self.z_prev = np.zeros(N), np.zeros(N), np.zeros(N)
+        self.prev = np.zeros((3, N))  # x_prev, grad_prev, z_prev
         self.reset()
 
     def reset(self):
@@ -163,26 +164,25 @@ class LBFGS:
         new = self.have_prev
         if new and self.n_hist == m:  # the new pair takes the oldest one's slot
             old = old[1:]
-        ss, yy = lbfgs_update(xv, gv, grad, self.x_prev, self.grad_prev, self.z_prev, self.S, self.Z, k, new,
-                              old, self.dots)
+        ss, yy = lbfgs_update(xv, gv, grad, self.prev, self.hist, k, new, old, self.dots)
         self.have_prev = True
         dots = self.dots
         if new:
             sy, yz = dots[2, k], dots[3, k]
             if sy > 1e-12 * np.sqrt(ss * yy) and yz > 0:  # curvature condition: keep the pair
-                self.SY[old, k] = dots[2, old]
-                self.SY[k, k] = sy
-                self.YZ[old, k] = self.YZ[k, old] = dots[3, old]
-                self.YZ[k, k] = yz
+                SY, YZ = self.prods
+                SY[old, k] = dots[2, old]
+                SY[k, k] = sy
+                YZ[old, k] = YZ[k, old] = dots[3, old]
+                YZ[k, k] = yz
                 self.gamma = sy / yz
                 self.pos = (k + 1) % m
                 self.n_hist = min(self.n_hist + 1, m)
             elif self.n_hist == m:  # the rejected pair overwrote the oldest one
                 self.n_hist -= 1
-        z = self.z_prev  # now this iterate's z
+        z = self.prev[2]  # now this iterate's z
         d = np.empty_like(z)
-        slope = lbfgs_direction(self.S, self.Z, self.SY, self.YZ, dots[0], dots[1], self._slots(), self.gamma, z,
-                                grad, d)
+        slope = lbfgs_direction(self.hist, self.prods, dots, self._slots(), self.gamma, z, grad, d)
         if not slope < 0:  # not a descent direction: plain step, fresh history
             self.n_hist, self.pos, self.gamma = 0, 0, 1.0
             np.negative(z, out=d)

@@ -154,14 +154,18 @@ if nb is not None:
     _njit_fm = nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
 
     @_njit_fm
-    def lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
+    def lbfgs_update(x, g, grad, prev, hist, slot, new, old, dots):
         """One pass of L-BFGS's compact form (Byrd, Nocedal & Schnabel 1994): the plain
         step's ``z = x - g``, the new pair (if ``new``) ``s = x - x_prev``, ``y = grad -
         grad_prev``, ``H0 y = z - z_prev`` into ``S[slot]``, ``Z[slot]``, the previous
         point set to ``(x, grad, z)``, and the inner products with the kept pairs ``old``
         (k,) (slots) into ``dots`` (4, m) by slot: ``S_i . grad``, ``Z_i . grad``,
         ``S_i . y``, ``Z_i . y`` (the last two only if ``new``; the new pair's own at
-        ``slot``). Flat (N,) vectors, (m, N) histories. Returns ``(s.s, y.y)``."""
+        ``slot``). ``x``, ``g``, ``grad``: flat (N,) vectors; ``prev`` (3, N): the rows
+        ``x_prev``, ``grad_prev``, ``z_prev``; ``hist`` (2, m, N): the histories ``S``,
+        ``Z``. Returns ``(s.s, y.y)``."""
+        S = hist[0]; Z = hist[1]
+        x_prev = prev[0]; grad_prev = prev[1]; z_prev = prev[2]
         N = x.shape[0]
         k = old.shape[0]
         for a in range(4):
@@ -234,18 +238,21 @@ if nb is not None:
             cz[a] = -gamma * p[a]
 
     @_njit_fm
-    def lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
+    def lbfgs_direction(hist, prods, dots, idx, gamma, z, grad, d):
         """The L-BFGS direction ``d = -H grad`` (N,) from the compact form (pairs ``idx``
         (k,), slots oldest first; :func:`_compact_coefficients`) with the initial Hessian
         ``gamma H0``, ``H0 grad = z``, ``H0 y_i = Z_i`` (``H0`` unscaled without pairs);
-        returns the slope ``grad . d``. One pass over the kept pairs, block by block."""
+        returns the slope ``grad . d``. ``hist`` (2, m, N): ``S``, ``Z``; ``prods`` (2, m,
+        m): ``SY``, ``YZ``; ``dots`` (4, m): :func:`lbfgs_update`'s, rows 0 and 1
+        (``S_i . grad``, ``Z_i . grad``) read. One pass over the kept pairs, block by block."""
+        S = hist[0]; Z = hist[1]
         N = z.shape[0]
         k = idx.shape[0]
         if k == 0:
             gamma = 1.0
         cs = np.empty(k)
         cz = np.empty(k)
-        _compact_coefficients(SY, YZ, Sg, Zg, idx, gamma, cs, cz)
+        _compact_coefficients(prods[0], prods[1], dots[0], dots[1], idx, gamma, cs, cz)
         acc = np.empty(LBFGS_BLOCK)
         slope = 0.0
         for c0 in range(0, N, LBFGS_BLOCK):  # block views: contiguous loops that vectorise
@@ -270,8 +277,10 @@ if nb is not None:
         return slope
 
 
-def _numpy_lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, old, dots):
+def _numpy_lbfgs_update(x, g, grad, prev, hist, slot, new, old, dots):
     """:func:`lbfgs_update` in numpy (numba unusable)."""
+    S, Z = hist
+    x_prev, grad_prev, z_prev = prev
     z = x - g
     dots[:] = 0.0
     ss = yy = 0.0
@@ -291,8 +300,11 @@ def _numpy_lbfgs_update(x, g, grad, x_prev, grad_prev, z_prev, S, Z, slot, new, 
     return ss, yy
 
 
-def _numpy_lbfgs_direction(S, Z, SY, YZ, Sg, Zg, idx, gamma, z, grad, d):
+def _numpy_lbfgs_direction(hist, prods, dots, idx, gamma, z, grad, d):
     """:func:`lbfgs_direction` in numpy (numba unusable)."""
+    S, Z = hist
+    SY, YZ = prods
+    Sg, Zg = dots[0], dots[1]
     if len(idx) == 0:
         np.negative(z, out=d)
         return float(grad @ d)
@@ -367,9 +379,8 @@ def warmup_kernels() -> bool:
     ok = bool(warmup_energy_kernels() and loop_kernels(False))
     if ok:  # the L-BFGS kernels
         N, z = 3, np.zeros(3)
-        S, Z, dots = np.zeros((1, N)), np.zeros((1, N)), np.zeros((4, 1))
+        hist, dots = np.zeros((2, 1, N)), np.zeros((4, 1))
         one = np.zeros(1, np.int64)
-        lbfgs_update(z, z, z, z.copy(), z.copy(), z.copy(), S, Z, 0, True, one[:0], dots)
-        lbfgs_direction(S, Z, np.ones((1, 1)), np.ones((1, 1)), np.zeros(1), np.zeros(1), one, 1.0, z, z,
-                        np.empty(N))
+        lbfgs_update(z, z, z, np.zeros((3, N)), hist, 0, True, one[:0], dots)
+        lbfgs_direction(hist, np.ones((2, 1, 1)), dots, one, 1.0, z, z, np.empty(N))
     return ok
