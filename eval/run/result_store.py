@@ -442,8 +442,9 @@ class ResultStore:
         if not isinstance(old, dict) or old.get("output") != rec["output"] or old.get("key") == rec["key"]:
             return {}
         git = old.get("git") if isinstance(old.get("git"), dict) else {}
+        commit = git.get("commit")
         log.info("%s %s: the same output bytes as its stored row of %s", rec["case"], rec["method"],
-                 str(git.get("commit"))[:7])
+                 f"commit {str(commit)[:7]}" if commit else "no recorded commit")
         return {"same_output_as": {"commit": json_safe(git.get("commit")), "key": json_safe(old.get("key"))}}
 
     def rewrite(self, path, rec: dict) -> Path:

@@ -211,7 +211,11 @@ if nb is not None:
                 dots[0, r] += p0; dots[1, r] += p1; dots[2, r] += p2; dots[3, r] += p3
         return ss, yy
 
-    @_njit
+    # inlined into its one caller (numba IR): a kernel called from another kernel is also
+    # linked into the caller's machine code as a weak symbol, and which copy runs would
+    # then depend on whether the callee was compiled in this process or the caller was
+    # loaded from numba's cache (the copies round differently in the fastmath caller)
+    @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
     def _compact_coefficients(SY, YZ, Sg, Zg, idx, gamma, cs, cz):
         """The compact form's coefficients (Byrd, Nocedal & Schnabel 1994, eq. 2.6; pairs
         ``idx`` oldest first): ``H grad = gamma z + S^T cs + Z^T cz`` with ``R`` the upper
