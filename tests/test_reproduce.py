@@ -110,7 +110,7 @@ def test_a_step_adding_rows_beside_another_machines_is_not_run_and_says_whose(ca
     line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("== defaust_paper: "))
     assert line.startswith("== defaust_paper: not run (its rows were timed on another machine (")
     assert "and this one is Elsewhere CPU, sve, 64 cores" in line and line.endswith("its stale rows are marked pending")
-    assert re.search(r"[(;] ?(\d+) on AMD EPYC, (avx2|avx512), 2 cores[;)]", line)
+    assert re.search(r"[(;] ?(\d+) on AMD EPYC, (avx2|avx512\w*), 2 cores[;)]", line)
 
 
 def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(capsys):
