@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import re
 from unittest import mock
 
 import pytest
@@ -94,14 +93,20 @@ def test_only_runs_the_named_steps(capsys):
 
 def test_a_step_adding_rows_beside_another_machines_is_not_run_and_says_whose(capsys):
     """Without ``--any-machine``, on a machine none of defaust_paper's current rows was timed on
-    (one of the EPYCs'; its first record taken as stale and the others as current, whatever
-    the committed state), the dry run lists the step as not run, naming each machine with its
-    count, and the rows it leaves marked pending."""
+    (its first record taken as stale and the others as current, whatever the committed
+    state), the dry run lists the step as not run, naming each machine its kept records
+    were timed on with their count, as the stored records say, and the rows it leaves
+    marked pending."""
     from dataclasses import replace
+
+    from eval.run.stale_rows import row_machines
     real = reproduce.folder_states
+    kept: dict = {}
 
     def one_stale(folder, trees):
-        return [replace(s, stale=i == 0, why=s.why if i == 0 else "") for i, s in enumerate(real(folder, trees))]
+        states = [replace(s, stale=i == 0, why=s.why if i == 0 else "") for i, s in enumerate(real(folder, trees))]
+        kept[folder] = {(s.case, s.method) for s in states if not s.stale}
+        return states
     elsewhere = {"cpu": "Elsewhere CPU", "simd": "sve", "cores": 64}
     with mock.patch.object(reproduce, "_print_plan", lambda selected: None), \
             mock.patch.object(reproduce, "machine_info", lambda: elsewhere), \
@@ -110,7 +115,11 @@ def test_a_step_adding_rows_beside_another_machines_is_not_run_and_says_whose(ca
     line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("== defaust_paper: "))
     assert line.startswith("== defaust_paper: not run (its rows were timed on another machine (")
     assert "and this one is Elsewhere CPU, sve, 64 cores" in line and line.endswith("its stale rows are marked pending")
-    assert re.search(r"[(;] ?(\d+) on AMD EPYC, (avx2|avx512\w*), 2 cores[;)]", line)
+    (folder, pairs), = kept.items()
+    machines = row_machines([folder], pairs=pairs)
+    assert machines and sum(machines.values()) == len(pairs)
+    made = line[line.index("another machine (") + len("another machine ("):line.index(") and this one is")]
+    assert sorted(made.split("; ")) == sorted(f"{n} on {w}" for w, n in machines.items())
 
 
 def test_a_sweep_step_given_a_sweep_on_its_command_line_asks_for_a_multirun(capsys):
