@@ -28,7 +28,7 @@ from sshade.arap import (
 from sshade.errors import SShaDeError
 from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
-from sshade.warmup import WARMED, warm_once
+from sshade.warmup import WARMED, uses_parallel_kernels, warm_once, warm_parallel_kernels
 
 from .coarse_start import COARSE_N_LOW, check_start, start_rotations
 from .fullres_arap import check_arap_args
@@ -160,14 +160,19 @@ class ARAPSR:
     def warmup(self, n_vertices: int | None = None) -> float:
         """First-call costs (libigl, the linear solver, the polar and energy kernels, mesh
         validation, the remesh of a coarse start) paid once on a tiny mesh outside any timed call
-        (:func:`sshade.warmup.warm_once`); ``n_vertices`` is ignored. Returns the seconds
+        (:func:`sshade.warmup.warm_once`), and the parallel kernels when an ``n_vertices``
+        mesh runs them (:func:`sshade.warmup.uses_parallel_kernels`). Returns the seconds
         spent."""
         coarse = self.protocol == "converged" and self.start != "rigid"  # + the remesh's kernels
-        return warm_once(WARMED, ("arap_sr", self.protocol, coarse),
-                         lambda V, F, h, T: ARAPSR(alpha=self.alpha, alpha_scaling=self.alpha_scaling,
-                                                   max_iter=5, protocol=self.protocol,
-                                                   start="coarse" if coarse else "rigid",
-                                                   coarse_n_low=40).deform(V, F, h, T))
+        parallel = uses_parallel_kernels(n_vertices)
+        s = warm_once(WARMED, ("arap_sr", self.protocol, coarse),
+                      lambda V, F, h, T: ARAPSR(alpha=self.alpha, alpha_scaling=self.alpha_scaling,
+                                                max_iter=5, protocol=self.protocol,
+                                                start="coarse" if coarse else "rigid",
+                                                coarse_n_low=40).deform(V, F, h, T), parallel=parallel)
+        if parallel:
+            s += warm_once(WARMED, ("arap_sr", "parallel"), lambda *_: warm_parallel_kernels(smooth_rotations=True))
+        return s
 
 
 def warmup_kernels() -> float:

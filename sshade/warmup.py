@@ -61,13 +61,16 @@ def uses_parallel_kernels(n_vertices: int | None) -> bool:
     return int(n_vertices) >= PARALLEL_MIN_CELLS and resolve_threads(None, int(n_vertices)) > 1
 
 
-def warm_parallel_kernels() -> None:
+def warm_parallel_kernels(smooth_rotations: bool = False) -> None:
     """Compile (or load from numba's cache) the parallel variants of the ARAP kernels
-    (:mod:`sshade.arap.kernels`, :mod:`sshade.arap.solver_kernels`). Starts numba's thread pool:
-    call it only where a parallel solve follows anyway (:func:`uses_parallel_kernels`)."""
+    (:mod:`sshade.arap.kernels`, :mod:`sshade.arap.solver_kernels`), and ARAP-SR's local
+    step (``smooth_rotations``). Starts numba's thread pool: call it only where a parallel
+    solve follows anyway (:func:`uses_parallel_kernels`)."""
     kernels.fused_kernels(True)
     solver_kernels.loop_kernels(True)
     solver_kernels.anderson_kernels(True)
+    if smooth_rotations:
+        kernels.sr_local_kernel(True)
 
 
 def warm_once(done: set, key, run: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], object],

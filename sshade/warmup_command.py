@@ -34,7 +34,7 @@ def _stages():
     for energy, method in (("spokes", "ARAP"), ("spokes_and_rims", "Elastic")):
         for protocol in ("converged", "paper"):
             yield f"{method} ({protocol} protocol)", lambda e=energy, p=protocol: warm_fullres(e, p)
-    yield "full-resolution ARAP, parallel kernels", warm_parallel_kernels
+    yield "full-resolution ARAP and ARAP-SR, parallel kernels", lambda: warm_parallel_kernels(smooth_rotations=True)
     for ep in sorted(entry_points(group=ENTRY_POINTS), key=lambda e: e.name):
         yield ep.name, lambda ep=ep: ep.load()()
 

@@ -29,7 +29,7 @@ def test_fused_local_step_equals_numpy_path_bit_for_bit(monkeypatch, alpha, jaco
     pb = SRProblem(V, F, h, T, alpha)
     assert pb.fused is not None and np.array_equal(np.sort(pb.fused.perm), np.arange(pb.n))
     R_fused, E_fused = pb.local_step(U, R0.copy(), jacobi)
-    monkeypatch.setattr(kernels, "_SR_LOCAL", False)
+    monkeypatch.setattr(kernels, "_SR_LOCAL", {1: False, 2: False})
     pb_np = SRProblem(V, F, h, T, alpha)
     assert pb_np.fused is None
     R_np, E_np = pb_np.local_step(U, R0.copy(), jacobi)
@@ -88,3 +88,43 @@ def test_two_threads_sharing_a_problem_get_each_their_own_local_step(monkeypatch
             both = list(ex.map(lambda st: pb.local_step(st[0], st[1].copy()), states))
         for (Ra, Ea), (Rb, Eb) in zip(alone, both):
             assert np.array_equal(Ra, Rb) and Ea == Eb
+
+
+@pytest.mark.parametrize("jacobi", [False, True])
+def test_parallel_local_step_gives_the_serial_bits_at_every_share_count(monkeypatch, jacobi):
+    """The local step on numba's threads (:func:`sshade.arap.kernels.sr_local_kernel` with
+    ``parallel``), its runs of cells split into 1, 2, 3 or 7 shares, sets the serial
+    kernel's rotations and cell energies to the last bit, Jacobi and Gauss-Seidel, and
+    ``SRProblem.local_step`` on two threads gives the serial one's rotations and energy."""
+    import numba
+
+    from sshade.arap import kernels, smooth_rotations
+    from sshade.arap.threads import max_threads, numba_threads
+
+    monkeypatch.setattr(smooth_rotations, "REORDER_MIN_VERTICES", 0)
+    V, F, h, T = twisted_bar(**TWISTED)
+    pb = SRProblem(V, F, h, T, 0.05)
+    f = pb.fused
+    rng = np.random.default_rng(6)
+    U = V + 0.05 * rng.standard_normal(V.shape)
+    Rk = f.to_kernel(pb.ops.rotations(V + 0.02 * rng.standard_normal(V.shape)))
+    Uk = np.ascontiguousarray(U[f.perm])
+    order = f.jacobi_order if jacobi else f.gs
+
+    def run(kern, *nt):
+        R = Rk.copy()
+        Ek = np.empty(f.n)
+        kern(Uk, *f.kd.local_arrays(), *order, *f.graph, f.wR, Rk.copy() if jacobi else R, R,
+             np.empty((f.n, 3, 3)), Ek, *nt)
+        return R, Ek
+    R1, E1 = run(kernels.sr_local_kernel())
+    threads = min(2, max_threads(), numba.config.NUMBA_NUM_THREADS)
+    for shares in (1, 2, 3, 7):
+        with numba_threads(threads):
+            R2, E2 = run(kernels.sr_local_kernel(True), shares)
+        assert np.array_equal(R1, R2) and np.array_equal(E1, E2), shares
+    R0 = pb.ops.rotations(V)
+    want = pb.local_step(U, R0.copy(), jacobi)
+    f.threads = threads
+    got = pb.local_step(U, R0.copy(), jacobi)
+    assert np.array_equal(want[0], got[0]) and want[1] == got[1]

@@ -20,8 +20,8 @@ def test_warmup_names_every_stage_and_leaves_the_cache_warm():
     lines = r.stdout.splitlines()
     assert "numba's cache: " in lines[0]
     for stage in ("SShaDe kernels", "SShaDe pipeline", "ARAP (converged protocol)", "ARAP (paper protocol)",
-                  "Elastic (converged protocol)", "Elastic (paper protocol)", "full-resolution ARAP, parallel kernels",
-                  "ARAP-SR"):
+                  "Elastic (converged protocol)", "Elastic (paper protocol)",
+                  "full-resolution ARAP and ARAP-SR, parallel kernels", "ARAP-SR"):
         assert any(ln.startswith(f"{stage}: ") and ln.endswith(" s") for ln in lines), stage
     assert lines[-1].startswith("done in ") and "NUMBA_CACHE_DIR" in lines[-1]
     cold = subprocess.run([sys.executable, "-c", "from sshade.kernel_cache import cold_kernels; print(cold_kernels())"],

@@ -465,6 +465,34 @@ if nb is not None:
         for k in range(n):
             Ek[k] = _cell_energy(k, U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
 
+    @_njit_par
+    def _sr_local_par(U, kt_ptr, kt_idx, kt_val, edges, edge_vec, cell_ptr, pair_edge, pair_w, cells, bptr, a_ptr,
+                      a_idx, a_val, wR, Rold, R, M, Ek, nt):
+        """:func:`_sr_local_nb` on numba's threads: the covariances and energies split by
+        cell, each batch's runs of ``LANES`` cells (the serial kernel's runs) split into ``nt``
+        contiguous shares (int >= 1: the threads), each with its own scratch. Every cell's numbers are
+        computed as in the serial kernel, so the results are its bits at any thread count."""
+        n = R.shape[0]
+        for k in _prange(n):
+            _covariance(np.int64(k), U, kt_ptr, kt_idx, kt_val, M)
+        no_tr = np.empty(0)
+        for b in range(bptr.shape[0] - 1):
+            lo = bptr[b]
+            hi = bptr[b + 1]
+            runs = (hi - lo + LANES - 1) // LANES
+            share = (runs + nt - 1) // nt
+            for t in _prange(nt):
+                t0 = np.int64(t)  # prange counts in uint64, and uint64 * int64 is a float
+                S = np.empty(_SCRATCH)
+                W = np.empty((LANES, 3, 3))
+                Rl = np.empty((LANES, 3, 3))
+                for r in range(t0 * share, min((t0 + 1) * share, runs)):
+                    k0 = lo + r * LANES
+                    _sr_lanes(k0, min(LANES, hi - k0), cells, M, a_ptr, a_idx, a_val, wR, Rold, R, S, W, Rl,
+                              no_tr)
+        for k in _prange(n):
+            Ek[k] = _cell_energy(np.int64(k), U, edges, edge_vec, cell_ptr, pair_edge, pair_w, R)
+
     @_njit
     def _rhs_row(i, v, kv_ptr, kv_idx, kv_val, R, sub, out):
         """``out[i] = K(R)[v] - sub[i]`` from row ``v`` of the CSR with 3-vector values
@@ -499,7 +527,7 @@ _ENERGY = None
 # and parallel apart (the OpenMP layer is not fork-safe with GNU libgomp: the worker
 # pools fork).
 _FUSED = {1: None, 2: None}
-_SR_LOCAL = None
+_SR_LOCAL = {1: None, 2: None}  # serial, parallel: as _FUSED
 
 
 def polar_kernel():
@@ -537,25 +565,29 @@ def energy_kernel():
     return _ENERGY
 
 
-def sr_local_kernel():
+def sr_local_kernel(parallel: bool = False):
     """The compiled numba local step of ARAP-SR
     ``(U, *KernelData.local_arrays(), cells, bptr, a_ptr, a_idx, a_val, wR, Rold, R, M, Ek)``
     (every index array int64 but the kernel data's; :mod:`sshade.arap.smooth_rotations`),
-    or False when numba is unusable (then its numpy path)."""
-    global _SR_LOCAL
-    if _SR_LOCAL is None:
+    serial or on numba's threads (``parallel``: one more argument, the threads, int; the
+    same bits; compiling it starts numba's thread pool), or False when numba is unusable (then its numpy path)."""
+    key = 2 if parallel else 1
+    if _SR_LOCAL[key] is None:
         try:
             if not energy_kernel():
                 raise RuntimeError("numba unusable")
+            kern = _sr_local_par if parallel else _sr_local_nb
+            if parallel:
+                note_launch()
             U, kt, pairs, W = _tiny_fused_args()
             one = np.array([0, 1, 2], np.int64)
             graph = (one, np.array([1, 0], np.int64), np.ones(2))
-            _sr_local_nb(U, *kt, *pairs, np.arange(2, dtype=np.int64), np.array([0, 2], np.int64), *graph, 1.0, W,
-                         np.empty((2, 3, 3)), np.empty((2, 3, 3)), np.empty(2))
-            _SR_LOCAL = _sr_local_nb
+            kern(U, *kt, *pairs, np.arange(2, dtype=np.int64), np.array([0, 2], np.int64), *graph, 1.0, W,
+                 np.empty((2, 3, 3)), np.empty((2, 3, 3)), np.empty(2), *((2,) if parallel else ()))
+            _SR_LOCAL[key] = kern
         except Exception:  # pragma: no cover - numba missing or broken
-            _SR_LOCAL = False
-    return _SR_LOCAL
+            _SR_LOCAL[key] = False
+    return _SR_LOCAL[key]
 
 
 def _tiny_fused_args():

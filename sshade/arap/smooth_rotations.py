@@ -271,7 +271,7 @@ class SRProblem:
     def pack(self, U: np.ndarray, R: np.ndarray) -> np.ndarray:
         """The state ``(U_free, R)`` as one vector (Anderson's unknowns); the rotations are
         scaled by ``sqrt(alpha A)`` (their weight in the energy). Shape (3 n_f + 9 n,)."""
-        return np.concatenate([U[self.free].ravel(), self.rs * R.ravel()])
+        return np.concatenate([U.take(self.free, axis=0).ravel(), self.rs * R.ravel()])
 
     def unpack(self, x: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Inverse of :meth:`pack`: ``(U', R')`` with ``U'`` a copy of ``U`` whose free rows
@@ -287,7 +287,7 @@ class SRProblem:
         Un = np.array(U, np.float64)
         Un[self.h] = self.T
         B = self.ops.rhs(R) if B is None else B
-        Un[self.free] = self.solver.solve(B[self.free] - self.Lfb_T)
+        Un[self.free] = self.solver.solve(B.take(self.free, axis=0) - self.Lfb_T)
         return Un
 
     def gnorm(self, U: np.ndarray, R: np.ndarray, B: np.ndarray | None = None) -> float:
@@ -295,8 +295,8 @@ class SRProblem:
         (:func:`sshade.arap.gradient_norm`), dimensionless. ``B``: ``ops.rhs(R)`` if
         already computed."""
         B = self.ops.rhs(R) if B is None else B
-        g = 2.0 * (self.ops.L @ U - B)[self.free]
-        return gradient_norm(g, self.ops.mass[self.free], self.ops.diag)
+        g = 2.0 * (self.ops.L @ U - B).take(self.free, axis=0)
+        return gradient_norm(g, self.ops.mass.take(self.free), self.ops.diag)
 
     def reduced_energy(self, U: np.ndarray, R: np.ndarray | None = None, *, rtol: float = 1e-13,
                        max_sweeps: int = 2000) -> tuple[float, np.ndarray]:
@@ -421,7 +421,7 @@ def _iterate(pb: SRProblem, state, crit, max_iter, accelerate, time_budget_s, op
     zero_E = 1e-12 * 2.0 * pb.ops.rest_term
     # numpy passes: the serial loop kernels of sshade.arap were measured slower on this 12 n-long state
     acc = Anderson(opts["m"], 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
-    (U, R, E), E_prev, it, move = state, np.inf, 0, 0.0
+    (U, R, E), E_prev, it, Up = state, np.inf, 0, None
     hist = [E]
     while True:
         B = pb.work_rhs(R)
@@ -450,9 +450,9 @@ def _iterate(pb: SRProblem, state, crit, max_iter, accelerate, time_budget_s, op
                     info["n_fallback"] += 1
                     if opts["reset"]:
                         acc.reset()
-        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
-        U, R, E_prev, E, it = Un, Rn, E, En, it + 1
+        Up, U, R, E_prev, E, it = U, Un, Rn, E, En, it + 1
         hist.append(E)
+    move = 0.0 if Up is None else float(np.sqrt(((U - Up) ** 2).sum(1).max()))  # the last iteration's
     info.update(energy=E, gnorm=gn, rel_decrease=rel, energy_history=hist, move=move)
     return U, R, it, status
 
@@ -540,16 +540,18 @@ def _paper_iterations(pb: SRProblem, state, stop, thresh, crit, max_iter, time_b
     energy): ``((U, R, E), iterations, last_move, rel_decrease, status)`` with status
     ``"rule"`` (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
     t0 = time.perf_counter()
-    (U, R, E), it, move, rel = state, 0, np.inf, np.inf
+    (U, R, E), it, rel, Up = state, 0, np.inf, None
+
+    def moved():  # the largest vertex move of the last iteration (inf before the first)
+        return np.inf if Up is None else float(np.sqrt(((U - Up) ** 2).sum(1).max()))
     while True:
         if it >= max_iter:
-            return (U, R, E), it, move, rel, "max_iter"
+            return (U, R, E), it, moved(), rel, "max_iter"
         if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-            return (U, R, E), it, move, rel, "time_budget"
+            return (U, R, E), it, moved(), rel, "time_budget"
         Un = pb.global_step(U, None, pb.work_rhs(R))
         R, En = pb.work_step(Un, R.copy(), jacobi=True)
-        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
         rel = (E - En) / abs(En) if En != 0 else 0.0
-        U, E, it = Un, En, it + 1
-        if (move < thresh) if stop == "move" else (abs(rel) < crit.etol):
-            return (U, R, E), it, move, rel, "rule"
+        Up, U, E, it = U, Un, En, it + 1
+        if (moved() < thresh) if stop == "move" else (abs(rel) < crit.etol):
+            return (U, R, E), it, moved(), rel, "rule"

@@ -17,7 +17,7 @@ from numba import njit
 
 from .kernel_data import KernelData, as_u32, permute_csr, rcm_order
 from .kernels import sr_local_kernel
-from .threads import resolve_threads
+from .threads import numba_threads, resolve_threads
 
 __all__ = ["SRLocal", "edge_sq_sum", "gs_order"]
 
@@ -92,11 +92,11 @@ class SRLocal:
     def to_kernel(self, R: np.ndarray) -> np.ndarray:
         """(n, 3, 3) rotations of the mesh's numbering as a new C-contiguous array in the
         kernel's."""
-        return np.ascontiguousarray(np.asarray(R)[self.perm], np.float64)
+        return np.ascontiguousarray(np.asarray(R, np.float64).take(self.perm, axis=0))
 
     def from_kernel(self, Rk: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`to_kernel`: a new (n, 3, 3) array in the mesh's numbering."""
-        return Rk[self.inv]
+        return Rk.take(self.inv, axis=0)
 
     def step(self, U: np.ndarray, Rk: np.ndarray, jacobi: bool) -> float:
         """One local step: every rotation of ``Rk`` ((n, 3, 3) C-contiguous, kernel
@@ -104,7 +104,7 @@ class SRLocal:
         or by Gauss-Seidel batches (:func:`gs_order`); ``U`` (n, 3) in the mesh's
         numbering. Returns ``E(U, R)`` of ARAP-SR (mesh units^2), the cells' energies
         summed in the mesh's order."""
-        Uk = np.ascontiguousarray(np.asarray(U)[self.perm], np.float64)
+        Uk = np.ascontiguousarray(np.asarray(U, np.float64).take(self.perm, axis=0))
         Ek = np.empty(self.n)
         if jacobi or self.wR == 0:
             Rold = Rk.copy() if self.wR > 0 else Rk  # wR = 0: no neighbour read
@@ -112,8 +112,13 @@ class SRLocal:
         else:
             Rold, order = Rk, self.gs
         M = np.empty((self.n, 3, 3))  # the covariances (scratch of this call: two threads may share a problem)
-        sr_local_kernel()(Uk, *self.kd.local_arrays(), *order, *self.graph, self.wR, Rold, Rk, M, Ek)
-        E = float(Ek[self.inv].sum())  # in the mesh's order
+        args = (Uk, *self.kd.local_arrays(), *order, *self.graph, self.wR, Rold, Rk, M, Ek)
+        if self.threads > 1:  # the serial kernel's bits (sshade.arap.kernels.sr_local_kernel)
+            with numba_threads(self.threads):
+                sr_local_kernel(True)(*args, self.threads)
+        else:
+            sr_local_kernel()(*args)
+        E = float(Ek.take(self.inv).sum())  # in the mesh's order
         return 2.0 * E + self.wR * (self.smoothness(Rk) if self.wR > 0 else 0.0)
 
     def smoothness(self, Rk: np.ndarray) -> float:
@@ -127,4 +132,4 @@ class SRLocal:
         """``K(R)`` ((n, 3) float64, the mesh's numbering) of ``Rk`` (kernel numbering),
         each row summed as :meth:`sshade.arap.operators.ArapOperators.rhs` sums it."""
         out = self.ops.rhs_rows(Rk, self.rows, np.zeros((self.n, 3)), np.empty((self.n, 3)), self.threads, self.kd)
-        return out[self.inv]
+        return out.take(self.inv, axis=0)
