@@ -53,6 +53,7 @@ HELP = {
     "benchmarks/sshade_variants.py": ["usage:", "--energy", "--protocol"],
     "benchmarks/config_flow.py": ["usage:", "--methods"],
     "benchmarks/frames.py": ["usage:", "--frames"],
+    "benchmarks/fullres_heldout.py": ["usage:", "--igl-iterations"],
     "benchmarks/cold_start.py": ["usage:", "--before"],
     "-m eval.experiments.scaling.probe": ["usage:", "handles_npz"],
     "benchmarks/arap_coarse_start.py": ["usage:", "--deep"],
