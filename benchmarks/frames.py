@@ -107,10 +107,12 @@ def eight_regions(V: np.ndarray, V0: np.ndarray, *, n_per_group: int = 30, regio
     return h, T
 
 
-def _igl_iteration_s(V, F, h, T, n: int = 3) -> float:
+def igl_iteration_s(V, F, h, T, n: int = 3, energy: str = "spokes_and_rims") -> float:
+    """Seconds per ``igl.arap_solve`` iteration with ``energy`` (``"spokes"`` or
+    ``"spokes_and_rims"``): ``max_iter`` 1, ``n`` calls from the rest pose."""
     import igl
     data = igl.ARAPData()
-    data.energy = igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS
+    data.energy = igl.ARAP_ENERGY_TYPE_SPOKES if energy == "spokes" else igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS
     data.max_iter = 1
     igl.arap_precomputation(V, F, 3, h.astype(np.int32), data)
     U = V.copy()
@@ -164,7 +166,7 @@ def _one(a, entry: MeshEntry, size: int, frames: list) -> dict:
     t0 = time.perf_counter()
     one = deform(V, F, h, T_end, n_low=a.n_low, n_samplings=a.k, seed=a.seed)
     deform_s = time.perf_counter() - t0
-    igl_s = _igl_iteration_s(V, F, h, T_end)
+    igl_s = igl_iteration_s(V, F, h, T_end)
     row = {"mesh": entry.name, "kind": entry.kind, "vertices": len(V), "regions": a.regions, "k": a.k,
            "n_low": a.n_low, "workers": workers, "prepare_s": prepare_s, "prepared_mb": held,
            "frame_median_s": float(np.median(rest)),

@@ -32,20 +32,6 @@ DRAGON = str(Path(__file__).resolve().parents[2] / "shared" / "data" / "classic"
 DEFAULT = [(f"dragon={DRAGON}:hard", 160000), (f"dragon={DRAGON}", 182000)]
 
 
-def igl_iteration_s(V, F, h, T, energy: str, n: int) -> float:
-    """Seconds per ``igl.arap_solve`` iteration (``max_iter`` 1, ``n`` calls from the rest pose)."""
-    import igl
-    data = igl.ARAPData()
-    data.energy = igl.ARAP_ENERGY_TYPE_SPOKES if energy == "spokes" else igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS
-    data.max_iter = 1
-    igl.arap_precomputation(V, F, 3, h.astype(np.int32), data)
-    U = V.copy()
-    t0 = time.perf_counter()
-    for _ in range(n):
-        U = igl.arap_solve(T, data, U)
-    return (time.perf_counter() - t0) / n
-
-
 def main(a) -> int:
     pairs = list(zip(a.mesh, a.sizes)) if a.mesh else DEFAULT
     for name, cls_energy in METHODS.items():  # compile every kernel before any timer
@@ -64,7 +50,7 @@ def main(a) -> int:
             t0 = time.perf_counter()
             m.deform(V, F, h, T)
             s = time.perf_counter() - t0
-            it = igl_iteration_s(V, F, h, T, energy, a.igl_iterations)
+            it = fb.igl_iteration_s(V, F, h, T, a.igl_iterations, energy)
             print(f"| {entry.name} ({entry.kind}) | {len(V)} | {name} | {s:.1f} | {m.info['iterations']} | "
                   f"{m.info.get('status', m.info.get('converged'))} | {it:.3f} | {s / it:.0f} |", flush=True)
     return 0
