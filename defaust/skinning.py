@@ -151,9 +151,97 @@ def transfer_weights(V_src, F_src, W_src, P) -> np.ndarray:
     if V_src.ndim != 2 or V_src.shape[1] != 3 or W.ndim != 2 or len(W) != len(V_src):
         raise SShaDeError(f"transfer_weights: need V_src (n, 3) and W_src (n, k), got {V_src.shape} and {W.shape}")
     fi, bc = closest_barycentric(V_src, F_src, P)
-    out = (bc[:, 0:1] * W[F_src[fi, 0]] + bc[:, 1:2] * W[F_src[fi, 1]] + bc[:, 2:3] * W[F_src[fi, 2]])
-    out = np.maximum(out, 0.0)
-    return out / fo.sum_ascending(out, axis=1)[:, None]
+    return _interpolate(_sparse_rows(W) or W, W.shape[1], F_src[fi], bc)
+
+
+# ------------------------------------------------------------------ weights as sparse rows
+# An ANNY body's rows have a few nonzero joints of about 150, so the weights are carried as
+# rows of (column, value) pairs: the same products and sums as the dense arithmetic, in the
+# same order, on the nonzero entries only. A weight of +0.0 left out adds bc * (+0.0) = +0.0
+# (bc >= 0), which leaves a partial sum unchanged; rows with -0.0, NaN or inf weights (or
+# barycentric coordinates that are not finite) take the dense arithmetic instead, so every
+# output byte is the dense one's (tests/test_defaust_skinning.py holds them equal).
+
+def _sparse_rows(W):
+    """``(indptr (n+1,), cols (e,), vals (e,))`` of the nonzero entries of ``W`` (n, k)
+    float64, each row's columns ascending; None when ``W`` holds a -0.0, NaN or inf (there
+    a left-out entry would not be the +0.0 the dense arithmetic adds)."""
+    if not np.isfinite(W).all() or (np.signbit(W) & (W == 0)).any():
+        return None
+    rows, cols = np.nonzero(W)
+    indptr = np.zeros(len(W) + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=len(W)), out=indptr[1:])
+    return indptr, cols.astype(np.int64), W[rows, cols]
+
+
+def _gather(S, r):
+    """The entries of rows ``r`` (q,) of sparse rows ``S``: ``(owner (e,), cols, vals)``,
+    ``owner`` the position in ``r`` each entry belongs to, in ``r``'s order."""
+    indptr, cols, vals = S
+    start, count = indptr[r], indptr[r + 1] - indptr[r]
+    owner = np.repeat(np.arange(len(r)), count)
+    first = np.cumsum(count) - count
+    idx = np.repeat(start - first, count) + np.arange(int(count.sum()))
+    return owner, cols[idx], vals[idx]
+
+
+def _interpolate(W, k: int, corners, bc) -> np.ndarray:
+    """``max(bc0 W[c0] + bc1 W[c1] + bc2 W[c2], 0)`` per row, normalised by its sum in
+    ascending column order: (p, k) float64. ``W`` dense (n, k) or sparse rows
+    (:func:`_sparse_rows`); ``corners`` (p, 3) int64 rows of ``W``, ``bc`` (p, 3)."""
+    if isinstance(W, np.ndarray) or not np.isfinite(bc).all():
+        W = W if isinstance(W, np.ndarray) else _dense(W, k)
+        out = bc[:, 0:1] * W[corners[:, 0]] + bc[:, 1:2] * W[corners[:, 1]] + bc[:, 2:3] * W[corners[:, 2]]
+        out = np.maximum(out, 0.0)
+        return out / fo.sum_ascending(out, axis=1)[:, None]
+    out = np.zeros((len(corners), k), np.float64)
+    for c in range(3):  # ((bc0 w0 + bc1 w1) + bc2 w2), the terms with w = +0 left out
+        owner, cols, vals = _gather(W, corners[:, c])
+        out[owner, cols] += bc[owner, c] * vals  # one entry per (row, column) for each corner
+    np.maximum(out, 0.0, out=out)
+    rows, cols = np.nonzero(out)  # row-major: each row's columns ascending
+    total = np.zeros(len(out), np.float64)
+    rank = np.arange(len(rows)) - np.searchsorted(rows, rows)
+    for j in range(int(rank.max()) + 1 if len(rank) else 0):  # the j-th nonzero of each row
+        sel = rank == j
+        total[rows[sel]] += out[rows[sel], cols[sel]]
+    good = np.isfinite(total) & (total > 0)
+    keep = good[rows]
+    out[rows[keep], cols[keep]] /= total[rows[keep]]
+    out[~good] /= total[~good, None]  # all-zero (0/0) or overflowing rows as the dense division gives them
+    return out
+
+
+def _dense(S, k: int) -> np.ndarray:
+    """Sparse rows ``S`` as a dense (n, k) float64 array (left-out entries +0.0)."""
+    indptr, cols, vals = S
+    out = np.zeros((len(indptr) - 1, k), np.float64)
+    out[np.repeat(np.arange(len(indptr) - 1), np.diff(indptr)), cols] = vals
+    return out
+
+
+def _mean_rows(S, a, b):
+    """Sparse rows ``0.5 * (S[a] + S[b])`` for the row pairs ``a``, ``b`` (q,): the dense
+    arithmetic's values, an entry missing on one side added as +0.0."""
+    oa, ca, va = _gather(S, a)
+    ob, cb, vb = _gather(S, b)
+    owner, cols = np.concatenate([oa, ob]), np.concatenate([ca, cb])
+    vals = np.concatenate([va, vb])
+    order = np.lexsort((cols, owner))
+    owner, cols, vals = owner[order], cols[order], vals[order]
+    head = np.ones(len(owner), bool)
+    head[1:] = (owner[1:] != owner[:-1]) | (cols[1:] != cols[:-1])
+    starts = np.flatnonzero(head)
+    summed = np.add.reduceat(vals, starts) if len(starts) else vals[:0]  # at most two terms: x + y, or x + 0.0
+    summed = 0.5 * (summed + 0.0)
+    indptr = np.zeros(len(a) + 1, np.int64)
+    np.cumsum(np.bincount(owner[starts], minlength=len(a)), out=indptr[1:])
+    return indptr, cols[starts], summed
+
+
+def _stack(S, T):
+    """Sparse rows ``S`` followed by the rows ``T``."""
+    return (np.concatenate([S[0], T[0][1:] + S[0][-1]]), np.concatenate([S[1], T[1]]), np.concatenate([S[2], T[2]]))
 
 
 def closest_barycentric(V, F, P) -> tuple[np.ndarray, np.ndarray]:
@@ -246,26 +334,40 @@ def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarra
         np.array_equal(Ws[:len(W)], W)
         # -> True
     """
+    W = np.asarray(W, np.float64)
+    Vs, Fs, Ws = _subdivision_rows(V, F, W, iterations)
+    return Vs, Fs, (Ws if isinstance(Ws, np.ndarray) else _dense(Ws, W.shape[1]))
+
+
+def _subdivision_rows(V, F, W, iterations):
+    """:func:`subdivision_weights` with the weights as sparse rows (:func:`_sparse_rows`;
+    dense where ``W`` holds -0.0, NaN or inf): ``(Vs, Fs, Ws)``."""
     iterations = int(iterations)
     if iterations < 1:
         raise SShaDeError(f"subdivision iterations must be >= 1, got {iterations}")
-    Ws = np.asarray(W, np.float64)
+    Ws = _sparse_rows(W) or W
     Vt, Ft = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    n_rows = len(W)
     for _ in range(iterations):
-        n = len(Ws)
+        n = n_rows
         Vt, Ft = ls3_loop(Vt, Ft, 1)  # the topology of one more level
         E = np.concatenate([Ft[:, [0, 1]], Ft[:, [1, 2]], Ft[:, [2, 0]]])
         E = np.sort(E, axis=1)
-        key = np.unique(E[:, 0] * len(Vt) + E[:, 1])  # the rows' order, one int64 each
+        key = np.sort(E[:, 0] * len(Vt) + E[:, 1])  # the rows' order, one int64 each
+        key = key[np.concatenate([[True], key[1:] != key[:-1]])]  # np.unique's values, without its hash pass
         E = np.stack([key // len(Vt), key % len(Vt)], axis=1)
         E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
         new = len(Vt) - n
         if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
             raise SShaDeError("LS3 Loop subdivision: unexpected topology (a new vertex is not on one old edge)")
         E = E[np.argsort(E[:, 1], kind="stable")]
-        Ws = np.concatenate([Ws, 0.5 * (Ws[E[0::2, 0]] + Ws[E[1::2, 0]])])
+        if isinstance(Ws, np.ndarray):
+            Ws = np.concatenate([Ws, 0.5 * (Ws[E[0::2, 0]] + Ws[E[1::2, 0]])])
+        else:
+            Ws = _stack(Ws, _mean_rows(Ws, E[0::2, 0], E[1::2, 0]))
+        n_rows = len(Vt)
     Vs, Fs = ls3_loop(V, F, iterations)  # positions exactly as subdivide_remesh made them
-    if not np.array_equal(Fs, Ft) or len(Vs) != len(Ws):
+    if not np.array_equal(Fs, Ft) or len(Vs) != n_rows:
         raise SShaDeError("LS3 Loop subdivision: one call and repeated single iterations give other topologies")
     return Vs, Fs, Ws
 
@@ -291,5 +393,9 @@ def high_res_weights(V, F, W, V_high, iterations: int) -> np.ndarray:
 
         Wh = high_res_weights(sub.V, sub.F, sub.W, Vh, 2)
     """
-    Vs, Fs, Ws = subdivision_weights(V, F, W, iterations)
-    return transfer_weights(Vs, Fs, Ws, V_high)
+    W = np.asarray(W, np.float64)
+    if W.ndim != 2 or len(W) != len(V):
+        raise SShaDeError(f"high_res_weights: need V (n, 3) and W (n, k), got {np.shape(V)} and {W.shape}")
+    Vs, Fs, Ws = _subdivision_rows(V, F, W, iterations)
+    fi, bc = closest_barycentric(Vs, Fs, V_high)
+    return _interpolate(Ws, W.shape[1], Fs[fi], bc)
