@@ -192,23 +192,13 @@ def _interpolate(W, k: int, corners, bc) -> np.ndarray:
     if isinstance(W, np.ndarray) or not np.isfinite(bc).all():
         W = W if isinstance(W, np.ndarray) else _dense(W, k)
         out = bc[:, 0:1] * W[corners[:, 0]] + bc[:, 1:2] * W[corners[:, 1]] + bc[:, 2:3] * W[corners[:, 2]]
-        out = np.maximum(out, 0.0)
-        return out / fo.sum_ascending(out, axis=1)[:, None]
-    out = np.zeros((len(corners), k), np.float64)
-    for c in range(3):  # ((bc0 w0 + bc1 w1) + bc2 w2), the terms with w = +0 left out
-        owner, cols, vals = _gather(W, corners[:, c])
-        out[owner, cols] += bc[owner, c] * vals  # one entry per (row, column) for each corner
+    else:
+        out = np.zeros((len(corners), k), np.float64)
+        for c in range(3):  # ((bc0 w0 + bc1 w1) + bc2 w2), the terms with w = +0 left out
+            owner, cols, vals = _gather(W, corners[:, c])
+            out[owner, cols] += bc[owner, c] * vals  # one entry per (row, column) for each corner
     np.maximum(out, 0.0, out=out)
-    rows, cols = np.nonzero(out)  # row-major: each row's columns ascending
-    total = np.zeros(len(out), np.float64)
-    rank = np.arange(len(rows)) - np.searchsorted(rows, rows)
-    for j in range(int(rank.max()) + 1 if len(rank) else 0):  # the j-th nonzero of each row
-        sel = rank == j
-        total[rows[sel]] += out[rows[sel], cols[sel]]
-    good = np.isfinite(total) & (total > 0)
-    keep = good[rows]
-    out[rows[keep], cols[keep]] /= total[rows[keep]]
-    out[~good] /= total[~good, None]  # all-zero (0/0) or overflowing rows as the dense division gives them
+    out /= fo.sum_ascending(out, axis=1)[:, None]
     return out
 
 
