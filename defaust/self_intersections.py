@@ -65,8 +65,8 @@ def self_intersections(V, F) -> np.ndarray:
     if not len(F):
         return np.zeros(0, np.int64)
     F = np.ascontiguousarray(F, np.int64)
-    corners = V[F]
-    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]  # each face's box: its corners' least and greatest coordinates
+    lo, hi = np.minimum(np.minimum(A, B), C), np.maximum(np.maximum(A, B), C)
     c0, c1, dims, count = _grid(lo, hi)
     face, key = _cell_entries(c0, c1, dims, count)
     order = np.argsort(key, kind="stable")  # by cell, faces ascending within a cell

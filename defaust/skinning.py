@@ -331,35 +331,53 @@ def subdivision_weights(V, F, W, iterations: int) -> tuple[np.ndarray, np.ndarra
 
 def _subdivision_rows(V, F, W, iterations):
     """:func:`subdivision_weights` with the weights as sparse rows (:func:`_sparse_rows`;
-    dense where ``W`` holds -0.0, NaN or inf): ``(Vs, Fs, Ws)``."""
+    dense where ``W`` holds -0.0, NaN or inf): ``(Vs, Fs, Ws)``. The levels below the last
+    take their topology from single iterations; the last takes it from the one call that
+    gives the positions (:func:`_split_edges` checks each level against the one before)."""
     iterations = int(iterations)
     if iterations < 1:
         raise SShaDeError(f"subdivision iterations must be >= 1, got {iterations}")
     Ws = _sparse_rows(W) or W
-    Vt, Ft = np.asarray(V, np.float64), np.asarray(F, np.int64)
-    n_rows = len(W)
-    for _ in range(iterations):
-        n = n_rows
-        Vt, Ft = ls3_loop(Vt, Ft, 1)  # the topology of one more level
-        E = np.concatenate([Ft[:, [0, 1]], Ft[:, [1, 2]], Ft[:, [2, 0]]])
-        E = np.sort(E, axis=1)
-        key = np.sort(E[:, 0] * len(Vt) + E[:, 1])  # the rows' order, one int64 each
-        key = key[np.concatenate([[True], key[1:] != key[:-1]])]  # np.unique's values, without its hash pass
-        E = np.stack([key // len(Vt), key % len(Vt)], axis=1)
-        E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
-        new = len(Vt) - n
-        if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
-            raise SShaDeError("LS3 Loop subdivision: unexpected topology (a new vertex is not on one old edge)")
-        E = E[np.argsort(E[:, 1], kind="stable")]
-        if isinstance(Ws, np.ndarray):
-            Ws = np.concatenate([Ws, 0.5 * (Ws[E[0::2, 0]] + Ws[E[1::2, 0]])])
-        else:
-            Ws = _stack(Ws, _mean_rows(Ws, E[0::2, 0], E[1::2, 0]))
-        n_rows = len(Vt)
     Vs, Fs = ls3_loop(V, F, iterations)  # positions exactly as subdivide_remesh made them
-    if not np.array_equal(Fs, Ft) or len(Vs) != n_rows:
-        raise SShaDeError("LS3 Loop subdivision: one call and repeated single iterations give other topologies")
+    Vt, Ft = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    n = len(W)
+    for level in range(iterations):
+        V_next, F_next = (Vs, Fs) if level == iterations - 1 else ls3_loop(Vt, Ft, 1)
+        a, b = _split_edges(Ft, n, F_next, len(V_next))
+        if isinstance(Ws, np.ndarray):
+            Ws = np.concatenate([Ws, 0.5 * (Ws[a] + Ws[b])])
+        else:
+            Ws = _stack(Ws, _mean_rows(Ws, a, b))
+        Vt, Ft, n = V_next, F_next, len(V_next)
     return Vs, Fs, Ws
+
+
+def _split_edges(F, n: int, F_next, n_next: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two ends ``(a, b)`` (each (n_next - n,) int64, ``a < b``) of the edge of ``F``
+    (faces into ``n`` vertices) that each new vertex ``n, n + 1, ...`` of its LS3 Loop
+    subdivision ``F_next`` (into ``n_next``) splits: the new vertex's two neighbours among
+    the older ones. SShaDeError unless every new vertex has exactly two older neighbours
+    and the pairs are exactly the edges of ``F``, each once (pymeshlab keeps the old
+    vertices first and appends one vertex per edge)."""
+    key = _edge_keys(F_next, n_next)
+    E = np.stack([key // n_next, key % n_next], axis=1)
+    E = E[(E[:, 0] < n) & (E[:, 1] >= n)]  # (older end, new vertex)
+    new = n_next - n
+    if len(E) != 2 * new or not np.array_equal(np.bincount(E[:, 1] - n, minlength=new), np.full(new, 2)):
+        raise SShaDeError("LS3 Loop subdivision: unexpected topology (a new vertex is not on one old edge)")
+    E = E[np.argsort(E[:, 1], kind="stable")]
+    a, b = E[0::2, 0], E[1::2, 0]
+    if not np.array_equal(_edge_keys(F, n), np.sort(a * n + b)):
+        raise SShaDeError("LS3 Loop subdivision: the split edges are not the edges of the level before")
+    return a, b
+
+
+def _edge_keys(F, n: int) -> np.ndarray:
+    """(e,) int64 ascending: ``i n + j`` for each undirected edge ``i < j`` of the faces
+    ``F`` (m, 3) into ``n`` vertices, once (np.unique's values, without its hash pass)."""
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    key = np.sort(E[:, 0] * n + E[:, 1])
+    return key[np.concatenate([[True], key[1:] != key[:-1]])]
 
 
 def high_res_weights(V, F, W, V_high, iterations: int) -> np.ndarray:

@@ -9,6 +9,7 @@ import pytest
 from defaust import fixed_order as fo
 from defaust import skinning as sk
 from defaust.highres import ls3_loop
+from sshade.errors import SShaDeError
 
 
 def _dense_interpolate(W, corners, bc):
@@ -108,3 +109,27 @@ def test_subdivision_and_high_res_weights_give_the_dense_definitions_bytes():
     got = sk.high_res_weights(V, F, W, P, 2)
     assert got.tobytes() == _dense_interpolate(want, Fs[fi], bc).tobytes()
     assert got.tobytes() == sk.transfer_weights(Vs, Fs, want, P).tobytes()
+
+
+def test_a_last_level_whose_split_edges_are_not_the_level_befores_edges_is_refused(monkeypatch):
+    """The last LS3 level's topology comes from the call that gives the positions; an old
+    vertex numbered otherwise there than in the single iterations (two swapped) is refused."""
+    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    V, F = ls3_loop(V, F, 1)  # vertex 0 of valence 3, vertex 5 of valence 6
+    W = _sparse_weights(np.random.default_rng(7), len(V), 6, per_row=2)
+    real = sk.ls3_loop
+
+    def swapped(V_, F_, iterations=1):
+        Vs, Fs = real(V_, F_, iterations)
+        if iterations == 2:
+            p = np.arange(len(Vs))
+            p[[0, 5]] = p[[5, 0]]
+            Fs = p[Fs]
+        return Vs, Fs
+
+    monkeypatch.setattr(sk, "ls3_loop", swapped)
+    with pytest.raises(SShaDeError, match="split edges are not the edges"):
+        sk.subdivision_weights(V, F, W, 2)
+    monkeypatch.setattr(sk, "ls3_loop", real)
+    assert sk.subdivision_weights(V, F, W, 2)[2].tobytes() == _dense_subdivision(V, F, W, 2).tobytes()
