@@ -297,6 +297,7 @@ def test_vertex_edge_error_averages_to_the_table_metric_on_a_regular_mesh():
     k = np.bincount(unique_edges(F, len(V)).ravel(), minlength=len(V))
     assert np.sum(per_vertex * k) / np.sum(k) == pytest.approx(edge_length_error(V, X, F), rel=1e-12)
     assert np.array_equal(vertex_edge_error(V, V, F), np.zeros(len(V)))
+    assert vertex_edge_error(V, X, F, edges=unique_edges(F, len(V))).tobytes() == per_vertex.tobytes()
 
 
 @pytest.mark.parametrize("bad, where", [("report.max_faces=0", "check"), ("report.view_cases=-1", "check"),

@@ -108,19 +108,20 @@ def cluster_means(x, labels, n_clusters: int) -> np.ndarray:
     return np.stack([np.bincount(labels, x[:, k], minlength=n_clusters) / cnt for k in range(x.shape[1])], axis=1)
 
 
-def vertex_edge_error(V, X, F) -> np.ndarray:
+def vertex_edge_error(V, X, F, *, edges=None) -> np.ndarray:
     """(n,) float64 per-vertex edge-length error in % of the longest rest edge: the mean,
     over the vertex's incident edges, of ``| ||u - v|| - ||u' - v'|| | / max_e ||e||`` (the
     per-edge term of paper eq. (eq:edge-error), whose mean over all edges is
     :func:`eval.metrics.measures.edge_length_error`). ``V``, ``X``: (n, 3) rest and deformed
-    vertices; ``F``: (m, 3) faces. An isolated vertex gets 0; all rest edges of length 0
-    give zeros.
+    vertices; ``F``: (m, 3) faces; ``edges``: (e, 2) int64 ``unique_edges(F, len(V))``
+    when the caller has them (None: found here). An isolated vertex gets 0; all rest edges
+    of length 0 give zeros.
 
     >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0]])
     >>> np.round(vertex_edge_error(V, 2 * V, np.array([[0, 1, 2]])), 4)  # edges 1, sqrt2, 1 over sqrt2
     array([70.7107, 85.3553, 85.3553])
     """
-    E = unique_edges(np.asarray(F, np.int64), len(V))
+    E = unique_edges(np.asarray(F, np.int64), len(V)) if edges is None else edges
     l0 = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
     l1 = np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1)
     lmax = float(l0.max()) if len(l0) else 0.0
@@ -137,11 +138,13 @@ def _colour_values(V, F, meshes: Mapping, pos: dict, labels, c: int, carried=Non
     target = next((X for _l, (k, X) in meshes.items() if k == "target" and X is not None), None)
     diag = float(np.linalg.norm(np.ptp(np.asarray(V, np.float64), axis=0))) or 1.0
     vals: dict = dict(carried or {})
+    E = None  # the rest mesh's edges, found once for every mesh shown
     for label, (kind, X) in meshes.items():
         if label not in pos or kind not in ("target", "result"):
             continue
         X = np.asarray(X, np.float64)
-        v = {"edge": cluster_means(vertex_edge_error(V, X, F), labels, c)}
+        E = unique_edges(np.asarray(F, np.int64), len(V)) if E is None else E
+        v = {"edge": cluster_means(vertex_edge_error(V, X, F, edges=E), labels, c)}
         if target is not None and kind == "result":
             v["gt"] = cluster_means(100.0 * np.linalg.norm(X - target, axis=1) / diag, labels, c)
         vals[label] = v
