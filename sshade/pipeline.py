@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arap import ArapOptions, arap_deform, bbox_diag
+from .arap import ArapOptions, arap_deform, bbox_diag, beside_others
 from .averaging import combine, sampling_weights
 from .components import deform_components
 from .mesh.halfedge import count_components
@@ -149,7 +149,8 @@ def _finish(job: SamplingJob, prep: dict, U0=None):
     V, targets, handles = job.V, job.targets, job.handles
     t0 = time.perf_counter()
     VN = V[prep["seeds"]]
-    res = arap_deform(VN, prep["F"], prep["low_handles"], targets, job.arap, U0=U0)
+    with beside_others():  # the samplings' solves share the cores (sshade.arap.threads)
+        res = arap_deform(VN, prep["F"], prep["low_handles"], targets, job.arap, U0=U0)
     t1 = time.perf_counter()
     bary = prep["bary"] if job.anchor == "projection" else None
     Vd = rebuild(V, prep["tri"], bary, VN, res.V, prep["F"], transfer=job.transfer, gradient=job.gradient)

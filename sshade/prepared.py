@@ -20,7 +20,7 @@ from dataclasses import replace
 import igl
 import numpy as np
 
-from .arap import ArapDeformer, ArapOptions, LaplacianSolver
+from .arap import ArapDeformer, ArapOptions, LaplacianSolver, beside_others
 from .averaging import combine, proximity_weights, sampling_weights
 from .cores import pool_size
 from .errors import SShaDeError
@@ -182,7 +182,8 @@ class _Sampling:
         t0 = time.perf_counter()
         if carry and V0 is not None:
             V0 = self.moves.extend(V0, targets)
-        res = self.arap.deform(targets, options=arap, U0=V0, carry_history=carry)
+        with beside_others():  # the samplings' solves share the cores (sshade.arap.threads)
+            res = self.arap.deform(targets, options=arap, U0=V0, carry_history=carry)
         self.low, self.frames = res.V, None
         self.history = [res.V] + self.history[:START_RESULTS - 1]
         self.at = [at] + self.at[:START_RESULTS - 1]

@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .arap import ArapOptions, arap_deform, kernels, solver_kernels
-from .arap.threads import PARALLEL_MIN_CELLS, resolve_threads
+from .arap.threads import resolve_threads
 from .mesh.validate import validate_handles, validate_mesh
 
 __all__ = ["tiny_problem", "warm_once", "warm_fullres", "warm_parallel_kernels", "uses_parallel_kernels", "WARMED"]
@@ -53,12 +53,12 @@ def tiny_problem() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 def uses_parallel_kernels(n_vertices: int | None) -> bool:
     """Whether a full-resolution ARAP solve on an ``n_vertices`` mesh runs numba's parallel
-    kernels (:func:`sshade.arap.threads.resolve_threads` in the automatic mode: at least
-    ``PARALLEL_MIN_CELLS`` rotation cells = vertices, more than one thread, not inside a
-    worker process). False for None."""
+    kernels (:func:`sshade.arap.threads.resolve_threads` in the automatic mode, from this
+    thread: enough rotation cells = vertices, more than one thread, not inside a worker
+    process). False for None."""
     if n_vertices is None:
         return False
-    return int(n_vertices) >= PARALLEL_MIN_CELLS and resolve_threads(None, int(n_vertices)) > 1
+    return resolve_threads(None, int(n_vertices)) > 1
 
 
 def warm_parallel_kernels(smooth_rotations: bool = False) -> None:

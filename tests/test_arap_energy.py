@@ -325,9 +325,25 @@ def test_numpy_fallbacks_when_numba_is_off(monkeypatch, bar):
 
 
 def test_resolve_threads():
-    from sshade.arap import PARALLEL_MIN_CELLS, max_threads, resolve_threads
+    import threading
+
+    from sshade.arap import MAIN_MIN_CELLS, PARALLEL_MIN_CELLS, beside_others, max_threads, resolve_threads
     assert resolve_threads(None, 100) == 1
+    assert resolve_threads(None, MAIN_MIN_CELLS - 1) == 1
+    assert resolve_threads(None, MAIN_MIN_CELLS) == max_threads()  # the main thread's threshold
     assert resolve_threads(None, PARALLEL_MIN_CELLS) == max_threads()
+    got = {}
+    t = threading.Thread(target=lambda: got.update(small=resolve_threads(None, MAIN_MIN_CELLS),
+                                                   large=resolve_threads(None, PARALLEL_MIN_CELLS)))
+    t.start()
+    t.join()
+    assert got == {"small": 1, "large": max_threads()}  # another thread: the larger threshold
+    with beside_others():  # SShaDe's low-res solves: the larger threshold in the main thread too
+        with beside_others():
+            assert resolve_threads(None, MAIN_MIN_CELLS) == 1
+        assert resolve_threads(None, MAIN_MIN_CELLS) == 1
+        assert resolve_threads(None, PARALLEL_MIN_CELLS) == max_threads()
+    assert resolve_threads(None, MAIN_MIN_CELLS) == max_threads()
     assert resolve_threads(1, 10 ** 6) == 1
     assert resolve_threads(10 ** 6, 100) == max_threads()
     for bad in (0, -1, 1.5):

@@ -88,3 +88,21 @@ def test_averaging_is_deterministic_and_parallel_matches_serial(faust):
     a = deform(V, F, h, tg, n_low=300, n_samplings=3, seed=5, workers=1)
     b = deform(V, F, h, tg, n_low=300, n_samplings=3, seed=5, workers=2)
     assert np.allclose(a, b, atol=1e-12)
+
+
+def test_low_res_solves_in_the_main_thread_keep_the_serial_threshold(faust, monkeypatch):
+    """SShaDe's samplings share the cores (one solve per sampling), so their low-res solves
+    run serial below PARALLEL_MIN_CELLS even from the main thread (workers=1), while a
+    full-resolution solve of that size there may take the threads."""
+    import sshade.arap.solver as solver
+    from sshade.arap import MAIN_MIN_CELLS, max_threads
+    seen = []
+    real = solver.resolve_threads
+    monkeypatch.setattr(solver, "resolve_threads", lambda t, n: seen.append((n, real(t, n))) or seen[-1][1])
+    V, F, h = faust
+    tg = V[h] + np.array([0.0, 0.05, 0.0]) * (V[h, 1:2] > 0)
+    deform(V, F, h, tg, n_low=MAIN_MIN_CELLS + 500, n_samplings=1, seed=0, workers=1)
+    assert seen and all(n >= MAIN_MIN_CELLS and t == 1 for n, t in seen)
+    seen.clear()
+    Elastic().deform(V, F, h, tg)
+    assert seen and all(t == max_threads() for n, t in seen)

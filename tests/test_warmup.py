@@ -60,7 +60,9 @@ def test_tiny_problem_is_a_valid_deformation():
     assert len(V2) == 162 and len(h2) == 6 and np.abs(T2 - V2[h2]).max() > 0.1
     V[:] = 0  # copies: the next call is unchanged
     assert np.abs(tiny_problem()[0]).max() == pytest.approx(1.0)
-    assert not uses_parallel_kernels(None) and not uses_parallel_kernels(6890)
+    from sshade.arap import MAIN_MIN_CELLS, max_threads
+    assert not uses_parallel_kernels(None) and not uses_parallel_kernels(MAIN_MIN_CELLS - 1)
+    assert uses_parallel_kernels(6890) == (max_threads() > 1)  # this (main) thread's threshold
 
 
 @pytest.mark.parametrize("i", range(6))

@@ -24,5 +24,5 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "smooth_rotations": ["SRProblem", "arap_sr_deform", "solve_arap_sr"],
     "solver": ["REORDER_MIN_VERTICES", "ArapSolver", "solve_arap"],
     "solver_kernels": ["warmup_kernels"],
-    "threads": ["PARALLEL_MIN_CELLS", "max_threads", "resolve_threads"],
+    "threads": ["PARALLEL_MIN_CELLS", "MAIN_MIN_CELLS", "max_threads", "resolve_threads", "beside_others"],
 })

@@ -1,8 +1,9 @@
 """Thread policy of the ARAP kernels: how many threads numba's parallel kernels use.
 
-:func:`max_threads`, :func:`resolve_threads` (serial below :data:`PARALLEL_MIN_CELLS`
-cells, in worker processes, and in a forked child of an OpenMP pool's owner:
-:func:`fork_unsafe`), :func:`numba_threads` (context manager), :class:`ThreadPicker`
+:func:`max_threads`, :func:`resolve_threads` (serial below :data:`MAIN_MIN_CELLS` cells for
+a solve of the main thread, below :data:`PARALLEL_MIN_CELLS` for one of another thread or
+inside :func:`beside_others`, in worker processes, and in a forked child of an OpenMP pool's
+owner: :func:`fork_unsafe`), :func:`numba_threads` (context manager), :class:`ThreadPicker`
 (the automatic mode of :func:`sshade.arap.solver.solve_arap`) and :func:`avoid_old_tbb`
 (run at import). No kernel's result depends on the thread count. Threading layers:
 docs/implementation.md ("Implementation notes: sshade/arap/threads.py").
@@ -13,6 +14,7 @@ import ctypes
 import multiprocessing
 import os
 import sys
+import threading
 from contextlib import contextmanager
 
 from ..errors import SShaDeError
@@ -24,13 +26,20 @@ except ImportError:  # pragma: no cover
     nb = None
     nb_parallel = None
 
-__all__ = ["PARALLEL_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads",
-           "resolve_threads", "fork_unsafe", "note_launch", "numba_threads", "ThreadPicker"]
+__all__ = ["PARALLEL_MIN_CELLS", "MAIN_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads",
+           "resolve_threads", "beside_others", "fork_unsafe", "note_launch", "numba_threads", "ThreadPicker"]
 
 #: problems below this many cells use the serial kernels by default (no numba threading
 #: layer; a parallel region costs ~10-50 us, which small meshes do not pay back, and the
 #: low-res solves already run one per core in worker processes).
 PARALLEL_MIN_CELLS = 20_000
+#: the same threshold for a solve of the main thread of the main process, outside
+#: :func:`beside_others` (a full-resolution solve): no other solve shares its cores, and the
+#: solver's :class:`ThreadPicker` times the serial kernels against the threads, so small
+#: problems gain (benchmarks/records/elastic_small_cases.md, "The main thread's threshold").
+MAIN_MIN_CELLS = 2_000
+
+_LOCAL = threading.local()  # .beside: this thread is inside beside_others()
 
 _LAUNCH_PID = None  # process that started numba's thread pool through this package
 
@@ -100,8 +109,9 @@ def note_launch() -> None:
 def resolve_threads(threads: int | None, n_cells: int) -> int:
     """Threads for the per-cell kernels of a problem with ``n_cells`` cells (1 = serial).
 
-    ``threads=None`` (automatic): 1 below :data:`PARALLEL_MIN_CELLS` cells or inside a
-    child process (``multiprocessing`` workers: the caller already parallelises over
+    ``threads=None`` (automatic): 1 below :data:`MAIN_MIN_CELLS` cells in the main thread,
+    below :data:`PARALLEL_MIN_CELLS` in another thread or inside :func:`beside_others`, or
+    inside a child process (``multiprocessing`` workers: the caller already parallelises over
     processes), else :func:`max_threads` (``NUMBA_NUM_THREADS``). An explicit
     ``threads >= 1`` is capped at :func:`max_threads`, and at 1 in a forked child of a
     process that ran numba's OpenMP threads (a parallel region would abort it).
@@ -114,7 +124,8 @@ def resolve_threads(threads: int | None, n_cells: int) -> int:
         raise SShaDeError(f"threads must be an integer >= 1 or None, got {threads!r}")
     child = multiprocessing.parent_process() is not None
     if threads is None:
-        if n_cells < PARALLEL_MIN_CELLS or child:
+        alone = threading.current_thread() is threading.main_thread() and not getattr(_LOCAL, "beside", False)
+        if n_cells < (MAIN_MIN_CELLS if alone else PARALLEL_MIN_CELLS) or child:
             return 1
         t = max_threads()
     else:
@@ -122,6 +133,20 @@ def resolve_threads(threads: int | None, n_cells: int) -> int:
     if t > 1 and child and fork_unsafe():
         return 1
     return t
+
+
+@contextmanager
+def beside_others():
+    """Context manager: the automatic thread count of the solves this thread starts inside
+    takes :data:`PARALLEL_MIN_CELLS` as its threshold, as in any thread but the main one
+    (SShaDe's low-res solves: one per sampling, side by side on the cores, or one after the
+    other where a job was given one core). Nests."""
+    prev = getattr(_LOCAL, "beside", False)
+    _LOCAL.beside = True
+    try:
+        yield
+    finally:
+        _LOCAL.beside = prev
 
 
 @contextmanager
