@@ -29,9 +29,10 @@ except ImportError:  # pragma: no cover
 __all__ = ["PARALLEL_MIN_CELLS", "MAIN_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads",
            "resolve_threads", "beside_others", "fork_unsafe", "note_launch", "numba_threads", "ThreadPicker"]
 
-#: problems below this many cells use the serial kernels by default (no numba threading
+#: in the automatic mode, a solve of a thread other than the main one, or inside
+#: :func:`beside_others`, below this many cells uses the serial kernels (no numba threading
 #: layer; a parallel region costs ~10-50 us, which small meshes do not pay back, and the
-#: low-res solves already run one per core in worker processes).
+#: low-res solves already run one per core).
 PARALLEL_MIN_CELLS = 20_000
 #: the same threshold for a solve of the main thread of the main process, outside
 #: :func:`beside_others` (a full-resolution solve): no other solve shares its cores, and the
