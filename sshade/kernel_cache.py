@@ -191,7 +191,7 @@ GROUPS = {
         "sshade.closed_ball._local_euler", "sshade.closed_ball._local_pairs", "sshade.closed_ball._local_triples",
         "sshade.closed_ball._local_candidates", "sshade.closed_ball.vertex_faces",
         "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel",
-        "sshade.smooth_transfer._offsets_kernel", "sshade.smooth_transfer._vertex_jacobians_kernel")),
+        "sshade.smooth_transfer._vertex_jacobians_kernel")),
 }
 
 

@@ -33,7 +33,7 @@ from .params import SShaDeParams, check_params
 from .pipeline import SamplingJob, handle_pre_pct, low_res_size, prepare_samplings
 from .remesh import mesh_topology
 from .sampling import sampling_seeds, warm_kernels
-from .smooth_transfer import jacobian_rest, smooth_decode_with, smooth_offsets, vertex_jacobians
+from .smooth_transfer import corner_maps, jacobian_rest, smooth_decode_with, smooth_offsets, vertex_jacobians
 
 __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 
@@ -58,21 +58,88 @@ START_RESULTS = START_FITS[-1] + 1
 DISTINCT_POSITIONS = 1e-3
 
 
-def _fit_ahead(h: list, x: np.ndarray, most: int = 2) -> tuple[np.ndarray, int]:
-    """The least-squares polynomial of degree at most ``most`` through the results ``h``
-    ((k, 3) each) at path positions ``x`` ((r,) float64, r = len(h), relative to the
-    position predicted) evaluated there, and its degree: at most the distinct positions
-    less one (:data:`DISTINCT_POSITIONS`); positions all equal give their mean."""
+def _fit_weights(x: np.ndarray, most: int = 2) -> tuple[np.ndarray, int]:
+    """The weights ``c`` ((r,) float64) with which the least-squares polynomial of degree
+    at most ``most`` through r results at path positions ``x`` ((r,) float64, relative to
+    the position predicted) gives its value there, ``sum_j c_j h_j``, and its degree: at
+    most the distinct positions less one (:data:`DISTINCT_POSITIONS`); positions all equal
+    give their mean. The weights sum to 1 (to rounding): a constant path is continued."""
     span = float(np.abs(x).max())
     degree = 0
     if span > 0:
         x = x / span
         degree = min(most, int(np.count_nonzero(np.diff(np.sort(x)) > DISTINCT_POSITIONS)))
-    c = np.linalg.pinv(np.vander(x, degree + 1, increasing=True))[0] if degree else np.full(len(h), 1 / len(h))
-    out = c[0] * h[0]
-    for cj, hj in zip(c[1:], h[1:]):
-        out += cj * hj
-    return out, degree
+    c = np.linalg.pinv(np.vander(x, degree + 1, increasing=True))[0] if degree else np.full(len(x), 1 / len(x))
+    return c, degree
+
+
+class _PathResults:
+    """One sampling's last low-res results along the targets' path (at most
+    :data:`START_RESULTS`, newest first) and their path positions, with the differences of
+    successive results and their inner products, so that a start's candidate fits are scored
+    and the chosen one formed in one pass over the results each (:meth:`start`).
+
+    A fit's prediction error is ``sum_j w_j h_j`` with weights summing to zero, that is
+    ``sum_i W_i d_i`` over the differences ``d_i = h_i - h_(i+1)`` (``W`` the running sums of
+    ``w``): its squared norm is ``W' D W``, ``D`` the differences' Gram matrix, small numbers
+    with no cancellation against the positions.
+    """
+
+    def __init__(self, keep: int = START_RESULTS):
+        self.keep = keep
+        self.results: list = []  # (k, 3) float64 results, newest first
+        self.at: list = []  # their path positions
+        self.slots: list = []  # the slot in ``diffs`` of d_0, d_1, ...
+        self.diffs: np.ndarray | None = None  # (keep - 1, k, 3) by slot
+        self.gram = np.zeros((keep - 1, keep - 1))  # inner products of the slots' differences
+
+    def push(self, x: np.ndarray, at: float) -> None:
+        """Add the newest result ``x`` ((k, 3) float64, kept, not copied) at position ``at``."""
+        if self.results:
+            if self.diffs is None:
+                self.diffs = np.zeros((self.keep - 1, *x.shape))
+            m = len(self.diffs)
+            slot = self.slots[-1] if len(self.slots) == m else len(self.slots)
+            np.subtract(x, self.results[0], out=self.diffs[slot])
+            row = np.einsum("rij,ij->r", self.diffs, self.diffs[slot])
+            self.gram[slot, :] = row
+            self.gram[:, slot] = row
+            self.slots = [slot] + self.slots[:m - 1]
+        self.results = [x] + self.results[:self.keep - 1]
+        self.at = [at] + self.at[:self.keep - 1]
+
+    def _error(self, c: np.ndarray) -> float:
+        """Squared norm of ``sum_j c_j h_(j+1) - h_0`` (``c`` summing to 1)."""
+        W = np.cumsum(np.r_[-1.0, c])[:len(c)]
+        idx = self.slots[:len(c)]
+        return float(W @ self.gram[np.ix_(idx, idx)] @ W)
+
+    def _combine(self, c: np.ndarray) -> np.ndarray:
+        """``sum_j c_j h_j`` over the newest ``len(c)`` results, as ``(sum c) h_0 - sum_i
+        T_i d_i``, ``T_i = sum_(j > i) c_j``: a new (k, 3) array."""
+        coef = np.zeros(len(self.gram))
+        coef[self.slots[:len(c) - 1]] = np.cumsum(c[::-1])[::-1][1:]
+        out = np.einsum("r,rij->ij", coef, self.diffs)
+        np.subtract(self.results[0] * float(c.sum()), out, out=out)
+        return out
+
+    def start(self, at: float) -> tuple[np.ndarray, int]:
+        """The start at path position ``at`` and its degree: :meth:`_Sampling.start`."""
+        h, pos = self.results, np.asarray(self.at)
+        if len(h) == 1 or pos[0] == at:
+            return h[0], 0
+        best, err = 0, float(self.gram[self.slots[0], self.slots[0]])
+        for r in START_FITS:
+            r = min(r, len(h) - 1)
+            e = self._error(_fit_weights(pos[1:r + 1] - pos[0])[0])
+            if e < err:
+                best, err = r, e
+            if r == len(h) - 1:
+                break
+        if best == 0:
+            return h[0], 0
+        c, degree = _fit_weights(pos[:best] - at)
+        return self._combine(c), degree
 
 
 def _norm(a: np.ndarray) -> float:
@@ -136,41 +203,27 @@ class _Sampling:
         if p.transfer == "triangle":
             self.C = encode(V, prep["tri"], self.VN, prep["F"], self.axis, p.gradient, self.bary)
         else:  # the blended transfer's rest parts, known before the targets
-            self.G = smooth_offsets(V, prep["tri"], self.bary, self.VN, prep["F"])
+            self.g = smooth_offsets(V, prep["tri"], self.bary, self.VN, prep["F"])
             self.jac_rest = jacobian_rest(self.VN, prep["F"])
         self.arap = ArapDeformer(self.VN, prep["F"], prep["low_handles"], p.arap_options())
         self.moves = _HandleMoves(self.VN, prep["F"], prep["low_handles"])
-        self.history: list = []  # (k, 3) low-res results of the last START_RESULTS solves, newest first
-        self.at: list = []  # their path positions (Prepared.solve)
+        self.path = _PathResults()  # the last results and their path positions (Prepared.solve)
         self.last_iterations = 0  # of the last solve
 
     def start(self, at: float) -> tuple[np.ndarray, int]:
         """The start of the solve at path position ``at`` (:meth:`Prepared.solve`: the arc
         length of the targets' path), (k, 3), and its degree: the last result (degree 0),
         or the least-squares polynomial of degree at most 2 through the newest ``r``
-        results at their path positions evaluated at ``at`` (:func:`_fit_ahead`), ``r`` of
+        results at their path positions evaluated at ``at`` (:func:`_fit_weights`), ``r`` of
         :data:`START_FITS`: whichever predicted the newest result best from the results
-        before it (least Euclidean distance; a tie keeps the fewer results, the last result
-        first). A smooth path takes a fit, a handle that stops the last result; targets
-        where the last solve's were keep its result. Fitting over the arc length rather than
-        the frame number follows a path that slows down or speeds up (a smoothstep); a long
-        fit damps the results' convergence errors on a path that bends slowly, a short one
-        follows one that bends faster (benchmarks/records/frames_arc_length_start.md)."""
-        h, pos = self.history, np.asarray(self.at)
-        if len(h) == 1 or pos[0] == at:
-            return h[0], 0
-        best, err = 0, _norm(h[1] - h[0])
-        for r in START_FITS:
-            r = min(r, len(h) - 1)
-            past, _ = _fit_ahead(h[1:r + 1], pos[1:r + 1] - pos[0])
-            e = _norm(past - h[0])
-            if e < err:
-                best, err = r, e
-            if r == len(h) - 1:
-                break
-        if best == 0:
-            return h[0], 0
-        return _fit_ahead(h[:best], pos[:best] - at)
+        before it (least Euclidean distance, scored by :class:`_PathResults`; a tie keeps
+        the fewer results, the last result first). A smooth path takes a fit, a handle
+        that stops the last result; targets where the last solve's were keep its result.
+        Fitting over the arc length rather than the frame number follows a path that slows
+        down or speeds up (a smoothstep); a long fit damps the results' convergence errors
+        on a path that bends slowly, a short one follows one that bends faster
+        (benchmarks/records/frames_arc_length_start.md)."""
+        return self.path.start(at)
 
     def solve(self, targets, at: float, V0, arap: ArapOptions, carry: bool = False) -> dict:
         """The low-res ARAP at path position ``at`` (:meth:`start`) from ``V0`` ((k, 3) or
@@ -185,19 +238,19 @@ class _Sampling:
         with beside_others():  # the samplings' solves share the cores (sshade.arap.threads)
             res = self.arap.deform(targets, options=arap, U0=V0, carry_history=carry)
         self.low, self.frames = res.V, None
-        self.history = [res.V] + self.history[:START_RESULTS - 1]
-        self.at = [at] + self.at[:START_RESULTS - 1]
+        self.path.push(res.V, at)
         self.last_iterations = res.iterations
         return {"arap_s": time.perf_counter() - t0, "iterations": res.iterations, "converged": res.converged,
                 "status": res.info.get("status"), "warm_start": V0 is not None}
 
     def make_frames(self):
-        """The last solve's frames (Alg. 1) or corners' deformation gradients
-        (``transfer="vertex"``), made by the first call after the solve (threads racing
-        here compute the same ones): what :meth:`decode` applies."""
+        """The last solve's frames (Alg. 1) or corners' affine maps (``transfer="vertex"``:
+        :func:`sshade.smooth_transfer.corner_maps`), made by the first call after the solve
+        (threads racing here compute the same ones): what :meth:`decode` applies."""
         if self.frames is None:
             if self.transfer == "vertex":
-                self.frames = vertex_jacobians(self.VN, self.low, self.prep["F"], rest=self.jac_rest)
+                Jv = vertex_jacobians(self.VN, self.low, self.prep["F"], rest=self.jac_rest)
+                self.frames = corner_maps(Jv, self.VN, self.low)
             else:
                 self.frames = deformed_frames(self.VN, self.low, self.prep["F"], self.axis, self.gradient)
         return self.frames
@@ -208,7 +261,7 @@ class _Sampling:
         :func:`sshade.lrf.decode_with_frames`: rows, out and add as there)."""
         frames = self.make_frames()
         if self.transfer == "vertex":
-            return smooth_decode_with(frames, self.G, self.prep["tri"], self.bary, self.low, self.prep["F"],
+            return smooth_decode_with(frames, self.g, self.prep["tri"], self.bary, self.prep["F"],
                                       rows=rows, out=out, add=add)
         return decode_with_frames(frames, self.C, self.prep["tri"], self.low, self.prep["F"], self.bary,
                                   rows=rows, out=out, add=add)

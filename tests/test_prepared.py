@@ -137,12 +137,27 @@ def test_the_start_follows_the_path_and_stops_with_the_handles(faust_pair):
     assert degrees[:2] == [None, 0] and degrees[4] == 2 and degrees[5:] == [0, 0], degrees
 
 
+def _fit_ahead(h, x):
+    """The fit through results ``h`` (newest first) at positions ``x``, formed directly."""
+    from sshade.prepared import _fit_weights
+    c, degree = _fit_weights(x)
+    return sum(cj * hj for cj, hj in zip(c, h)), degree
+
+
+def _pushed(h, pos):
+    """A _PathResults holding results ``h`` at positions ``pos`` (both newest first)."""
+    from sshade.prepared import _PathResults
+    path = _PathResults()
+    for x, t in zip(h[::-1], pos[::-1]):
+        path.push(x, float(t))
+    return path
+
+
 def test_the_fitted_start_continues_a_quadratic_path_exactly_at_uneven_positions():
     """The least-squares polynomial through twelve results of a path quadratic in its
     position, taken at uneven positions (a smoothstep's), gives the positions at the next
     one to rounding, and so do the interpolating ones through three; through two results
     it continues a straight line; positions that do not move give their results' mean."""
-    from sshade.prepared import _fit_ahead
     rng = np.random.default_rng(0)
     a, b, c = rng.normal(size=(3, 40, 3))
     s = np.linspace(0, 1, 14) ** 2 * (3 - 2 * np.linspace(0, 1, 14))
@@ -160,7 +175,6 @@ def test_the_fitted_start_continues_a_quadratic_path_exactly_at_uneven_positions
 def test_the_fitted_start_caps_its_degree_at_the_distinct_positions():
     """Results at two positions (one repeated: handles stopped, then moved on) are fitted by
     a line, not by a quadratic that the repeated position leaves undetermined."""
-    from sshade.prepared import _fit_ahead
     a, b = np.ones((5, 3)), np.arange(15.0).reshape(5, 3)
     h = [a + b, a + b, a + b, a]  # newest first, at positions 1, 1, 1, 0
     out, degree = _fit_ahead(h, np.array([1.0, 1.0, 1.0, 0.0]) - 2.0)
@@ -170,10 +184,9 @@ def test_the_fitted_start_caps_its_degree_at_the_distinct_positions():
 def test_the_start_fits_through_the_count_of_results_that_predicted_best():
     """Results on a straight path, each off by a convergence error, are fitted through the
     most results (12: the errors averaged out); exact results on a path that bends fast
-    through the fewest (3: a long quadratic cannot follow it)."""
-    from types import SimpleNamespace
-
-    from sshade.prepared import START_FITS, START_RESULTS, _fit_ahead, _Sampling
+    through the fewest (3: a long quadratic cannot follow it). The fit formed from the
+    successive differences is the one formed directly, to rounding."""
+    from sshade.prepared import START_FITS, START_RESULTS
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(2, 30, 3))
     pos = np.linspace(1.0, 0.0, START_RESULTS) ** 1.5  # newest first, uneven
@@ -181,8 +194,28 @@ def test_the_start_fits_through_the_count_of_results_that_predicted_best():
     noisy = [a + b * t + 1e-3 * rng.normal(size=a.shape) for t in pos]
     bent = [a * np.cos(6 * t) + b * np.sin(6 * t) for t in pos]
     for h, r in ((noisy, START_FITS[-1]), (bent, START_FITS[0])):
-        start, degree = _Sampling.start(SimpleNamespace(history=h, at=list(pos)), at)
-        assert degree == 2 and np.array_equal(start, _fit_ahead(h[:r], pos[:r] - at)[0]), r
+        start, degree = _pushed(h, pos).start(at)
+        assert degree == 2 and np.allclose(start, _fit_ahead(h[:r], pos[:r] - at)[0], rtol=0, atol=1e-12), r
+
+
+def test_the_start_after_more_solves_than_kept_is_the_directly_scored_one():
+    """Twenty results pushed (the ring of differences wrapped): the start is the one chosen
+    and formed directly from the newest kept results, each candidate's prediction error
+    computed as the norm of its difference from the newest result."""
+    from sshade.prepared import START_FITS, START_RESULTS
+    rng = np.random.default_rng(3)
+    a, b, c = rng.normal(size=(3, 25, 3))
+    pos = np.cumsum(rng.uniform(0.5, 1.5, 20))[::-1] / 20  # newest first
+    h = [a + b * t + c * np.sin(3 * t) + 1e-4 * rng.normal(size=a.shape) for t in pos]
+    path = _pushed(h, pos)
+    kh, kp, at = h[:START_RESULTS], pos[:START_RESULTS], pos[0] + 0.06
+    best, err = 0, np.linalg.norm(kh[1] - kh[0])
+    for r in START_FITS:
+        e = np.linalg.norm(_fit_ahead(kh[1:r + 1], kp[1:r + 1] - kp[0])[0] - kh[0])
+        best, err = (r, e) if e < err else (best, err)
+    start, degree = path.start(at)
+    assert best > 0 and degree == 2
+    assert np.allclose(start, _fit_ahead(kh[:best], kp[:best] - at)[0], rtol=0, atol=1e-12)
 
 
 def test_the_handles_moves_extend_a_translation_exactly(faust_pair):
