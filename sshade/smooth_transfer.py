@@ -30,6 +30,11 @@ __all__ = ["triangle_jacobians", "JacobianRest", "jacobian_rest", "vertex_jacobi
 #: :mod:`sshade.lrf`) or the corners' deformation gradients blended (this module).
 TRANSFERS = ("triangle", "vertex")
 
+#: What :func:`_smooth_kernel` is given and makes: the rest offsets given (decode), the
+#: rest positions given (the offsets made inline, then decode), or the offsets alone.
+_GIVEN, _FROM_REST, _OFFSETS = 0, 1, 2
+_NO_MAPS, _NO_REST = np.zeros((0, 3, 4)), np.zeros((0, 3))
+
 
 def triangle_jacobians(VN: np.ndarray, VN_def: np.ndarray, FN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The deformation gradient of each low-res triangle, its unit normal taken to the
@@ -185,11 +190,11 @@ def smooth_offsets(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: 
     (n, 3) float64, C-contiguous: known before the targets, made once by
     :func:`sshade.prepare` and given to :func:`smooth_decode_with` every frame.
     """
-    w, _ = anchor_weights(bary)
-    C = np.asarray(FN, np.int64)[np.asarray(tri, np.int64)]
-    P = np.asarray(VN, np.float64)
-    a = (w[:, 0:1] * P[C[:, 0]] + w[:, 1:2] * P[C[:, 1]]) + w[:, 2:3] * P[C[:, 2]]
-    return np.ascontiguousarray(np.asarray(V, np.float64) - 0.5 * a)
+    g = np.empty((len(tri), 3))
+    _smooth_kernel(_NO_MAPS, np.ascontiguousarray(V, np.float64), np.ascontiguousarray(VN, np.float64), _OFFSETS,
+                   np.ascontiguousarray(tri, np.int32), *anchor_weights(bary), np.ascontiguousarray(FN, np.int64),
+                   0, len(tri), False, g)
+    return g
 
 
 def corner_maps(Jv: np.ndarray, VN: np.ndarray, VN_def: np.ndarray) -> np.ndarray:
@@ -233,7 +238,11 @@ def smooth_decode(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: n
     """
     if Jv is None:
         Jv = vertex_jacobians(VN, VN_def, FN)
-    return smooth_decode_with(corner_maps(Jv, VN, VN_def), smooth_offsets(V, tri, bary, VN, FN), tri, bary, FN)
+    out = np.empty((len(tri), 3))
+    _smooth_kernel(corner_maps(Jv, VN, VN_def), np.ascontiguousarray(V, np.float64),
+                   np.ascontiguousarray(VN, np.float64), _FROM_REST, np.ascontiguousarray(tri, np.int32),
+                   *anchor_weights(bary), np.ascontiguousarray(FN, np.int64), 0, len(tri), False, out)
+    return out
 
 
 def smooth_decode_with(A: np.ndarray, g: np.ndarray, tri: np.ndarray, bary: np.ndarray | None,
@@ -262,7 +271,7 @@ def smooth_decode_with(A: np.ndarray, g: np.ndarray, tri: np.ndarray, bary: np.n
     idx, lo, hi, out = decode_rows(rows, len(tri), out, add, "smooth_decode_with")
     g_, tri_, bary_ = (g, tri, bary) if idx is None else (g[idx], tri[idx], None if bary is None else bary[idx])
     w, per_vertex = anchor_weights(bary_)
-    _smooth_kernel(np.ascontiguousarray(A, np.float64), np.ascontiguousarray(g_, np.float64),
+    _smooth_kernel(np.ascontiguousarray(A, np.float64), np.ascontiguousarray(g_, np.float64), _NO_REST, _GIVEN,
                    np.ascontiguousarray(tri_, np.int32), w, per_vertex, np.ascontiguousarray(FN, np.int64),
                    lo, hi, add, out)
     return out
@@ -278,13 +287,22 @@ def _corners(i, tri, bary, per_vertex, FN):
 
 
 @njit(cache=True, nogil=True)
-def _smooth_kernel(A, g, tri, bary, per_vertex, FN, lo, hi, add, out):
-    """``out[i - lo] (+)= sum_k w_k (A[c_k, :, 3] + A[c_k, :, :3] g[i])`` for ``lo <= i <
-    hi`` (c_k the corners of ``tri[i]``, ``w = bary[i]`` or ``bary[0]``):
-    :func:`smooth_decode_with` in one pass, in scalars, corner 0, 1, 2 in order."""
+def _smooth_kernel(A, X, P, mode, tri, bary, per_vertex, FN, lo, hi, add, out):
+    """For ``lo <= i < hi`` (c_k the corners of ``tri[i]``, ``w = bary[i]`` or ``bary[0]``):
+    ``g = X[i]`` (``mode`` :data:`_GIVEN`) or ``g = X[i] - a / 2``, ``a = sum_k w_k P[c_k]``
+    (:data:`_FROM_REST`, :data:`_OFFSETS`); then ``out[i - lo] (+)= sum_k w_k (A[c_k, :, 3]
+    + A[c_k, :, :3] g)``, or ``out[i - lo] = g`` (:data:`_OFFSETS`): :func:`smooth_offsets`
+    and :func:`smooth_decode_with` in one pass, in scalars, corner 0, 1, 2 in order."""
     for i in range(lo, hi):
         c0, c1, c2, w0, w1, w2 = _corners(i, tri, bary, per_vertex, FN)
-        g0, g1, g2 = g[i, 0], g[i, 1], g[i, 2]
+        g0, g1, g2 = X[i, 0], X[i, 1], X[i, 2]
+        if mode != _GIVEN:
+            g0 -= 0.5 * (((0.0 + w0 * P[c0, 0]) + w1 * P[c1, 0]) + w2 * P[c2, 0])
+            g1 -= 0.5 * (((0.0 + w0 * P[c0, 1]) + w1 * P[c1, 1]) + w2 * P[c2, 1])
+            g2 -= 0.5 * (((0.0 + w0 * P[c0, 2]) + w1 * P[c1, 2]) + w2 * P[c2, 2])
+        if mode == _OFFSETS:
+            out[i - lo, 0], out[i - lo, 1], out[i - lo, 2] = g0, g1, g2
+            continue
         for d in range(3):
             v = w0 * (((A[c0, d, 3] + A[c0, d, 0] * g0) + A[c0, d, 1] * g1) + A[c0, d, 2] * g2)
             v += w1 * (((A[c1, d, 3] + A[c1, d, 0] * g0) + A[c1, d, 1] * g1) + A[c1, d, 2] * g2)
