@@ -9,8 +9,7 @@ maps blended, which is exact for a quadratic deformation with exact J_k (the two
 interpolants' errors are opposite). Measured: docs/differences.md M10. It is computed
 regrouped per corner, v' = sum_k b_k (t_k + J_k g), g = v - a/2 made once at rest
 (:func:`smooth_offsets`) and t_k = N'_k - J_k N_k / 2 once per deformed mesh
-(:func:`corner_maps`): a third of the rest data per vertex, about as many operations
-(timings: docs/implementation.md).
+(:func:`corner_maps`): a third of the rest data per vertex (docs/implementation.md).
 """
 from __future__ import annotations
 
