@@ -92,7 +92,8 @@ BAD_TYPES = [
     ("dataset.limit=true", "dataset.limit"), ("dataset.seed=abc", "dataset.seed"),
     ("dataset.sample=abc", "dataset.sample"), ("dataset.sample_seed=abc", "dataset.sample_seed"),
     ("dataset.n_per_landmark=inf", "dataset.n_per_landmark"), ("figures.max_cases=abc", "figures.max_cases"),
-    ("figures.enabled=maybe", "figures.enabled"), ("reference.max_iter=junk", "reference.max_iter"),
+    ("figures.enabled=maybe", "figures.enabled"), ("figures.rerun_restored=maybe", "figures.rerun_restored"),
+    ("reference.max_iter=junk", "reference.max_iter"),
     ("reference.max_iter=inf", "reference.max_iter"), ("sshade.n_samplings=abc", "n_samplings"),
     ("sshade.warm_start=abc", "warm_start"),
 ]

@@ -479,7 +479,7 @@ def test_a_figure_not_redrawn_is_not_shown_as_current(tmp_path, faust_root):
     earlier one is gone from the page (and the folder) and the page says why."""
     out = tmp_path / "run"
     other = "{_target_:tests.plugin_example.MyMethod,name:Other,iterations:%d}"
-    opts = ("dataset.limit=1", "figures.enabled=true", "figures.max_cases=1")
+    opts = ("dataset.limit=1", "figures.enabled=true", "figures.max_cases=1", "figures.rerun_restored=false")
     p, text = _faust_run(faust_root, out, *opts, f"methods=[{_MINE},{other % 2}]")
     (case,) = p.views
     assert f'src="figures/{case}.png"' in text
@@ -493,10 +493,42 @@ def test_a_figure_not_redrawn_is_not_shown_as_current(tmp_path, faust_root):
     assert [(m["kind"], m["carried"]) for m in meshes][-2:] == [("result", True), ("result", False)]
 
 
+def test_a_restored_run_without_its_mesh_is_rerun_and_its_figure_shows_the_stored_vertices(tmp_path, faust_root,
+                                                                                            monkeypatch):
+    """The same resume with figures.rerun_restored (the default): Mine is run again
+    after every pair, its vertices are the stored record's bit for bit (its output
+    digest), so the figure is redrawn, stamped with both records, and the page says so.
+    A rerun that gives other vertices (here: moved by a hundredth) draws nothing and
+    says why."""
+    from eval.experiments.cases import case_outputs
+    from eval.present.figures import FIGURE_RECORDS
+    from eval.present.render import png_text
+    out = tmp_path / "run"
+    other = "{_target_:tests.plugin_example.MyMethod,name:Other,iterations:%d}"
+    opts = ("dataset.limit=1", "figures.enabled=true", "figures.max_cases=1")
+    p, _ = _faust_run(faust_root, out, *opts, f"methods=[{_MINE},{other % 2}]")
+    (case,) = p.views
+    fig = out / "figures" / f"{case}.png"
+    fig.unlink()  # no earlier figure of these records to keep
+    p, text = _faust_run(faust_root, out, *opts, f"methods=[{_MINE},{other % 4}]", "resume=true")
+    stamp = json.loads(png_text(fig)[FIGURE_RECORDS])
+    mine = json.loads((out / "runs" / case / "Mine.json").read_text())
+    assert stamp["records"]["Mine"] == mine["key"] and mine["mesh"] is None  # restored, no mesh stored
+    assert f'src="figures/{case}.png"' in text
+    assert re.search(rf"outputs of case {case}: Mine rerun \(\d+ s, the stored vertices bit for bit\)", text)
+    fig.unlink()
+    real = case_outputs.rerun_output
+    monkeypatch.setattr(case_outputs, "rerun_output", lambda m, n, c, g: real(m, n, c, g) + 0.01)
+    p, text = _faust_run(faust_root, out, *opts, f"methods=[{_MINE},{other % 4}]", "resume=true")
+    assert not fig.exists() and f"figure of case {case} not redrawn" in text
+    assert f"outputs of case {case}: its rerun of Mine gave other vertices than the stored run" in text
+
+
 def test_a_resumed_run_keeps_the_figure_stamped_with_its_restored_records(tmp_path, faust_root):
     """Every pair restored without its mesh: the earlier figure, stamped with the records
-    it shows, stays this run's figure, byte for byte; a figure whose stamp names other
-    records (here: edited by hand) is removed, as one that cannot be redrawn."""
+    it shows, stays this run's figure, byte for byte (nothing is rerun); a figure whose
+    stamp names other records (here: edited by hand) is removed when reruns are off, and
+    redrawn from a rerun when they are on."""
     from eval.present.figures import FIGURE_RECORDS
     from eval.present.render import png_text, set_png_text
     out = tmp_path / "run"
@@ -511,8 +543,10 @@ def test_a_resumed_run_keeps_the_figure_stamped_with_its_restored_records(tmp_pa
     assert fig.read_bytes() == before and f'src="figures/{case}.png"' in text
     assert f"figure of case {case} kept from the earlier run: it shows the same stored records" in text
     set_png_text(fig, {FIGURE_RECORDS: json.dumps({**stamp, "records": {"Mine": "another record"}})})
-    p, text = _faust_run(faust_root, out, *opts, "resume=true")
+    p, text = _faust_run(faust_root, out, *opts, "resume=true", "figures.rerun_restored=false")
     assert not fig.exists() and f"figure of case {case} not redrawn" in text
+    p, text = _faust_run(faust_root, out, *opts, "resume=true")  # redrawn from a rerun of the stored vertices
+    assert json.loads(png_text(fig)[FIGURE_RECORDS]) == stamp and f"outputs of case {case}: Mine rerun" in text
 
 
 class _Links(HTMLParser):

@@ -157,10 +157,14 @@ class ReportOptions:
 class FigureOptions:
     """The ``figures`` section, typed (the Hydra schema of ``conf/config.yaml``'s
     ``figures``) and checked when made: ``enabled``, the figures of the first
-    ``max_cases`` cases (>= 0; None: 4). SShaDeError naming the key."""
+    ``max_cases`` cases (>= 0; None: 4); ``rerun_restored``: a restored run of those
+    cases (and of the 3D views' cases) whose record keeps no mesh is run again once
+    every pair has run, and shown when it gives the stored vertices bit for bit (else
+    the output is not drawn). SShaDeError naming the key."""
 
     enabled: bool = False
     max_cases: Optional[int] = checked_field(int, min=0, allow_none=True, default=4)
+    rerun_restored: bool = True
 
     def __post_init__(self):
         check_fields(self, "figures")

@@ -11,7 +11,6 @@ Exit status of ``python -m eval``: 0 on success (even if some method failed on s
 case), 2 on a configuration or input error (one ``error: ...`` line on stderr)."""
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ from eval import datasets
 from eval import method_config as method_table
 from eval.experiments.cases.case_array import CaseTask, TaskEnd, run_case_array
 from eval.experiments.cases.case_jobs import WorkerSetup, describe, job_count, run_case_jobs
+from eval.experiments.cases.case_outputs import CaseOutputs
 from eval.experiments.cases.case_plan import plan_runs, plan_speed, planned_root
 from eval.experiments.cases.case_references import CaseReferences
 from eval.experiments.cases.case_restore import keep_reproduced, leave_pending, named_change, restore
@@ -29,9 +29,6 @@ from eval.experiments.cases.reference_cutoff import scored_against
 from eval.experiments.experiment_registry import register_experiment
 from eval.metrics.meshes import CaseMeshes
 from eval.present.breakdown import write_breakdown
-from eval.present.figures import FIGURE_RECORDS, case_figure_path, write_case_figure
-from eval.present.meshview import OUTPUTS, VIEW_DIR, case_view_path, write_case_view, write_outputs
-from eval.present.render import png_text, set_png_text
 from eval.run.code_identity import code_identity
 from eval.run.compared import compared_rows, read_compared, run_settings
 from eval.run.jsonsafe import json_safe
@@ -40,10 +37,10 @@ from eval.run.pending_rows import OTHER_CASE_DATA, STOP_AFTER_ENV, stop_after_s
 from eval.run.progress import CostModel, default_cost_model, weighted_bar
 from eval.run.result_store import ResultStore, case_identity, pair_key
 from eval.run.runinfo import collect_runinfo, method_sources, write_runinfo
-from eval.run.spec import EvalSpec, FigureOptions, ReportOptions
+from eval.run.spec import EvalSpec
 from eval.run.stale_rows import CommitTrees, RowState
 from eval.run.subset import baseline_selection, method_selections, take_sample
-from eval.tables import compare, write_cases, write_tables
+from eval.tables import compare, write_tables
 from harness.method_registry import method_meta
 from harness.slurm_array import cluster_options
 from sshade.errors import SShaDeError
@@ -277,7 +274,7 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
     s.jobs = (job_count(spec.jobs, cases=n_cases, estimate_s=sum(est.values())) if array is None
               else max(1, min(array.array_parallelism, n_cases)))
     s.plan = plan_runs(s, todo, len(done), cost, jobs=s.jobs, speed=speed)  # the plan, before any run (case_plan.py)
-    out = _CaseOutputs(spec.figures, spec.report, s, plan, done)
+    out = CaseOutputs(spec.figures, spec.report, s, plan, done, rerun=spec.figures.rerun_restored and array is None)
     bar = weighted_bar(sum(est.values()), len(todo))
     if array is not None and s.deadline is not None:
         raise SShaDeError(f"{STOP_AFTER_ENV} starts the pairs one by one in this process: not with a cluster section")
@@ -302,6 +299,7 @@ def _run_cases(spec: EvalSpec, s: _Setup) -> list[dict]:
                         bar.retotal(bar.n + sum(est[p] for p in todo[todo.index((ci, mi)) + 1:]))
                         bar.refresh()
                 out.case_done(ci, fresh)
+    out.redraw(s.deadline)  # the outputs waiting for reruns of restored runs (figures.rerun_restored)
     return out.rows(len(cases))
 
 
@@ -371,145 +369,6 @@ def _run_in_array(spec: EvalSpec, s: _Setup, todo, keys, est, cost: CostModel, b
     for ci in range(len(s.cases)):
         if ci not in by_case:
             out.case_done(ci, {})
-
-
-def _former_key(rec: dict) -> str | None:
-    """The key of an earlier record of the same vertices as the stored record ``rec``:
-    the key it had before this run gave it a new one (re-keyed,
-    :func:`eval.run.stale_rows.rekey_record`, ``rekeyed``; or kept because its reference
-    came out bit for bit the same,
-    :func:`eval.experiments.cases.reference_cutoff.keep_if_reproduced`, ``reproduced``),
-    or the record whose output bytes its run gave again (``same_output_as``); None for any
-    other record. An earlier figure or 3D view stamped with that key shows these vertices."""
-    for how, name in (("rekeyed", "from_key"), ("reproduced", "from_key"), ("same_output_as", "key")):
-        k = rec[how].get(name) if isinstance(rec.get(how), dict) else None
-        if isinstance(k, str) and k:
-            return k
-    return None
-
-
-class _CaseOutputs:
-    """What follows each finished case: ``cases.csv`` (the rows of every finished pair, in
-    (case, method) order) and, for the first ``figures.max_cases`` / ``report.view_cases``
-    cases, the figure and the 3D view (restored pairs' meshes read from the store), with
-    ``report/outputs.json`` (:func:`eval.present.meshview.write_outputs`) naming the views and
-    figures this run wrote and saying why the others were not: the report shows only
-    those. A figure or view of this run's case that is not (re)drawn has its earlier
-    file removed (a resumed run keeps an earlier run's files), except a figure stamped
-    with exactly the records this run restored (:meth:`_figure`)."""
-
-    def __init__(self, figures: FigureOptions, report: ReportOptions, s: _Setup, plan: dict, done: dict):
-        self.s, self.plan, self.done = s, plan, done
-        self.n_fig = figures.max_cases if figures.enabled else 0  # figures.enabled / max_cases
-        self.n_view, self.max_faces = report.views, report.max_faces  # report.view_cases, max_faces
-        self.views, self.figures, self.notes = {}, {}, {}  # case index -> relative path; -> texts
-        self._record()  # at once: an earlier run's record never speaks for this run
-
-    def wants_meshes(self, ci: int) -> bool:
-        return ci < max(self.n_fig, self.n_view)
-
-    def rows(self, upto: int) -> list[dict]:
-        return [self.done[ci, mi]["row"] for ci in range(upto) for mi in self.plan[ci] if (ci, mi) in self.done]
-
-    def case_done(self, ci: int, fresh: dict) -> None:
-        """Case ``ci`` finished; ``fresh``: method index -> deformed vertices (or None) of
-        the pairs just run."""
-        import pandas as pd
-
-        s = self.s
-        write_cases(pd.DataFrame(self.rows(len(s.cases))), s.out_dir)  # partial results survive a crash
-        if not self.wants_meshes(ci):
-            return
-        deformed, unknown = {}, []  # method -> deformed vertices; restored without a mesh
-        for mi in self.plan[ci]:
-            name = s.names[mi]
-            if mi in fresh:
-                deformed[name] = fresh[mi]
-                continue
-            if (ci, mi) not in self.done:  # left at the run's stop, never stored: no row, no mesh
-                continue
-            deformed[name] = s.store.load_mesh(self.done[ci, mi], len(s.cases[ci].V))
-            if deformed[name] is None and not self.done[ci, mi]["row"].get("error"):
-                unknown.append(name)  # restored without its mesh (store.meshes=false)
-        case = s.cases[ci]
-        not_run = [n for m, n in zip(s.methods, s.names) if not s.runs_on(ci, m)]  # "not run", not "failed"
-        results = {n: deformed.get(n) for n in s.names}
-        keys = {s.names[mi]: self.done[ci, mi].get("key") for mi in self.plan[ci] if (ci, mi) in self.done}
-        earlier = {s.names[mi]: _former_key(self.done[ci, mi]) or keys[s.names[mi]]
-                   for mi in self.plan[ci] if (ci, mi) in self.done}  # the same vertices under an earlier key
-        if ci < self.n_fig:  # out_dir/figures/<case>.png (eval/present/figures.py)
-            self._figure(ci, results, not_run, unknown, keys, earlier)
-        if ci < self.n_view:  # out_dir/report/<case>.js, for index.html (eval/report.py)
-            other = [n for n in unknown if s.left.get((case.name, n), ("", None, False))[2]]  # an earlier build's
-            p = write_case_view(case, results, s.out_dir, max_faces=self.max_faces, not_run=not_run,
-                                stored=[n for n in unknown if n not in other], other_data=other, keys=keys,
-                                aliases=earlier)
-            self._kept(ci, "3D view", p, case_view_path(s.out_dir, case.name))
-        self._record()
-
-    def _figure(self, ci: int, results: dict, not_run: list, unknown: list, keys: dict, earlier: dict) -> None:
-        """Case ``ci``'s figure, stamped with the records it shows (:data:`FIGURE_RECORDS`,
-        a PNG text chunk). When some restored run has no stored mesh, an earlier run's
-        figure stamped with exactly these records (``keys``; or ``earlier``: the keys they
-        had before they were re-keyed, :func:`eval.run.stale_rows.rekey_record`) is kept,
-        stamped anew, and noted as such; else removed."""
-        s, case = self.s, self.s.cases[ci]
-        path = case_figure_path(s.out_dir / "figures", case.name)
-        stamp = json.dumps({"records": keys, "not_run": sorted(not_run)}, sort_keys=True)
-        before = json.dumps({"records": earlier, "not_run": sorted(not_run)}, sort_keys=True)
-        if not unknown:
-            p = write_case_figure(case, results, s.out_dir / "figures", not_run=not_run)
-            try:
-                p = p and set_png_text(p, {FIGURE_RECORDS: stamp})
-            except (OSError, SShaDeError) as e:
-                log.warning("figure %s not stamped with its records: %s", p, e)
-            return self._kept(ci, "figure", p, path)
-        try:
-            same = all(keys.values()) and png_text(path).get(FIGURE_RECORDS) in (stamp, before)
-            if same and png_text(path).get(FIGURE_RECORDS) != stamp:
-                set_png_text(path, {FIGURE_RECORDS: stamp})  # the same records under their new keys
-        except (OSError, SShaDeError):
-            same = False
-        if same:
-            self._kept(ci, "figure", path, path)
-            note = (f"figure of case {case.name} kept from the earlier run: it shows the same stored records "
-                    f"(the restored runs of {', '.join(unknown)} have no stored mesh)")
-            log.info("%s", note)
-            self.notes.setdefault(ci, []).append(note)
-            return None
-        return self._kept(ci, "figure", None, path, f"not redrawn: its restored runs of {', '.join(unknown)} have "
-                          "no stored mesh (store.meshes=true keeps them)")
-
-    def _kept(self, ci: int, what: str, path, earlier: Path, why: str = "not drawn (eval.log says why)") -> None:
-        """Record case ``ci``'s ``what`` (figure, 3D view) at ``path`` as this run's; when
-        ``path`` is None (not drawn), a note saying ``why``, and the file ``earlier`` of an
-        earlier run removed, so that it is never shown as this run's."""
-        if path is not None:
-            (self.figures if what == "figure" else self.views)[ci] = Path(path).relative_to(self.s.out_dir).as_posix()
-            return
-        note = f"{what} of case {self.s.cases[ci].name} {why}"
-        if earlier.is_file():
-            try:
-                earlier.unlink()
-                note += f"; the earlier run's {earlier.relative_to(self.s.out_dir).as_posix()} was removed"
-            except OSError as e:
-                note += f"; the earlier run's file could not be removed ({e.strerror})"
-        log.info("%s", note)
-        self.notes.setdefault(ci, []).append(note)
-
-    def _record(self) -> None:
-        """``report/outputs.json`` (when this run draws figures or views, or an earlier
-        run left one); a failure to write it is logged, the run goes on."""
-        s = self.s
-        if not (self.n_fig or self.n_view or (s.out_dir / VIEW_DIR / OUTPUTS).exists()):
-            return
-        names = [c.name for c in s.cases]
-        try:
-            write_outputs(s.out_dir, names, {names[ci]: p for ci, p in sorted(self.views.items())},
-                          {names[ci]: p for ci, p in sorted(self.figures.items())},
-                          [n for ci in sorted(self.notes) for n in self.notes[ci]])
-        except OSError as e:
-            log.warning("%s not written: %s", s.out_dir / VIEW_DIR / OUTPUTS, e)
 
 
 def _run_stored(s: _Setup, ci: int, mi: int, key: tuple[str, dict], cost: CostModel, bar):
