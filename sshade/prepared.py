@@ -48,17 +48,13 @@ __all__ = ["prepare", "prepare_with", "Prepared", "FRAME_ACCELERATION"]
 FRAME_ACCELERATION = {"accelerate": "anderson", "history": 32}
 
 
-#: The fits a later solve's start may take, ``(results, highest degree)``, in the order a
-#: tie is kept: lines first, then quadratics, each through the fewest results first; the
-#: one that best predicted the newest result from those before it is taken
-#: (:meth:`_Sampling.start`). Lines follow a straight path with less of the results'
-#: convergence errors than quadratics; quadratics follow a bending one
-#: (benchmarks/records/frames_start_degree.md).
-START_FITS = ((2, 1), (3, 1), (5, 1), (8, 1), (12, 1), (3, 2), (5, 2), (8, 2), (12, 2))
+#: How many results a later solve's start may be fitted through: the count whose fit
+#: best predicted the newest result from those before it (:meth:`_Sampling.start`).
+START_FITS = (3, 5, 8, 12)
 #: Results kept per sampling: the longest fit's and the newest one it is checked against.
-START_RESULTS = max(r for r, _ in START_FITS) + 1
+START_RESULTS = START_FITS[-1] + 1
 #: Path positions closer than this share of the fitted span count as one point when the
-#: fit's degree is capped at the distinct points less one (:func:`_fit_weights`).
+#: fit's degree is capped at the distinct points less one (:func:`_fit_ahead`).
 DISTINCT_POSITIONS = 1e-3
 
 
@@ -132,15 +128,17 @@ class _PathResults:
         h, pos = self.results, np.asarray(self.at)
         if len(h) == 1 or pos[0] == at:
             return h[0], 0
-        (best, most), err = (0, 0), float(self.gram[self.slots[0], self.slots[0]])
-        for r, d in START_FITS:
-            r = min(r, len(h) - 1)  # fewer results kept: the fit through all of them
-            e = self._error(_fit_weights(pos[1:r + 1] - pos[0], d)[0])
+        best, err = 0, float(self.gram[self.slots[0], self.slots[0]])
+        for r in START_FITS:
+            r = min(r, len(h) - 1)
+            e = self._error(_fit_weights(pos[1:r + 1] - pos[0])[0])
             if e < err:
-                (best, most), err = (r, d), e
+                best, err = r, e
+            if r == len(h) - 1:
+                break
         if best == 0:
             return h[0], 0
-        c, degree = _fit_weights(pos[:best] - at, most)
+        c, degree = _fit_weights(pos[:best] - at)
         return self._combine(c), degree
 
 
@@ -215,11 +213,11 @@ class _Sampling:
     def start(self, at: float) -> tuple[np.ndarray, int]:
         """The start of the solve at path position ``at`` (:meth:`Prepared.solve`: the arc
         length of the targets' path), (k, 3), and its degree: the last result (degree 0),
-        or the least-squares line or quadratic through the newest ``r`` results at their
-        path positions evaluated at ``at`` (:func:`_fit_weights`), ``r`` and the degree of
+        or the least-squares polynomial of degree at most 2 through the newest ``r``
+        results at their path positions evaluated at ``at`` (:func:`_fit_weights`), ``r`` of
         :data:`START_FITS`: whichever predicted the newest result best from the results
         before it (least Euclidean distance, scored by :class:`_PathResults`; a tie keeps
-        the last result, then the earlier fit of :data:`START_FITS`). A smooth path takes a fit, a handle
+        the fewer results, the last result first). A smooth path takes a fit, a handle
         that stops the last result; targets where the last solve's were keep its result.
         Fitting over the arc length rather than the frame number follows a path that slows
         down or speeds up (a smoothstep); a long fit damps the results' convergence errors

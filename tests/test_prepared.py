@@ -126,23 +126,21 @@ def test_solves_from_several_threads_each_land_on_their_own_targets(faust_pair):
 
 
 def test_the_start_follows_the_path_and_stops_with_the_handles(faust_pair):
-    """A steady path is extrapolated (a line or a quadratic once three results exist);
-    targets where the last solve's were keep its result (degree 0), and so do handles that
-    stop moving."""
+    """A steady path is extrapolated (degree 2 once three results exist); targets where the
+    last solve's were keep its result (degree 0), and so do handles that stop moving."""
     V, F, h, V2 = faust_pair
     with prepare(V, F, h, n_low=500, n_samplings=1) as p:
         degrees = []
         for t in [0.1, 0.2, 0.3, 0.4, 0.5, 0.5, 0.5]:
             _, info = p.solve(V[h] + t * (V2[h] - V[h]), return_info=True)
             degrees.append(info["samplings"][0].get("start_degree"))
-    assert degrees[:2] == [None, 0] and degrees[4] in (1, 2) and degrees[5:] == [0, 0], degrees
+    assert degrees[:2] == [None, 0] and degrees[4] == 2 and degrees[5:] == [0, 0], degrees
 
 
-def _fit_ahead(h, x, most=2):
-    """The fit of degree at most ``most`` through results ``h`` (newest first) at
-    positions ``x``, formed directly."""
+def _fit_ahead(h, x):
+    """The fit through results ``h`` (newest first) at positions ``x``, formed directly."""
     from sshade.prepared import _fit_weights
-    c, degree = _fit_weights(x, most)
+    c, degree = _fit_weights(x)
     return sum(cj * hj for cj, hj in zip(c, h)), degree
 
 
@@ -183,23 +181,21 @@ def test_the_fitted_start_caps_its_degree_at_the_distinct_positions():
     assert degree == 1 and np.allclose(out, a + 2 * b, rtol=0, atol=1e-12)
 
 
-def test_the_start_fits_through_the_count_and_degree_that_predicted_best():
-    """Results on a straight path, each off by a convergence error, are fitted by a line
-    through the most results (12: the errors averaged out, a quadratic's curvature only
-    fits them); exact results on a path that bends fast by a quadratic through the fewest
-    (3: a line, or a long quadratic, cannot follow it). The fit formed from the
+def test_the_start_fits_through_the_count_of_results_that_predicted_best():
+    """Results on a straight path, each off by a convergence error, are fitted through the
+    most results (12: the errors averaged out); exact results on a path that bends fast
+    through the fewest (3: a long quadratic cannot follow it). The fit formed from the
     successive differences is the one formed directly, to rounding."""
-    from sshade.prepared import START_RESULTS
+    from sshade.prepared import START_FITS, START_RESULTS
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(2, 30, 3))
     pos = np.linspace(1.0, 0.0, START_RESULTS) ** 1.5  # newest first, uneven
     at = 1.08
     noisy = [a + b * t + 1e-3 * rng.normal(size=a.shape) for t in pos]
     bent = [a * np.cos(6 * t) + b * np.sin(6 * t) for t in pos]
-    for h, r, most in ((noisy, 12, 1), (bent, 3, 2)):
+    for h, r in ((noisy, START_FITS[-1]), (bent, START_FITS[0])):
         start, degree = _pushed(h, pos).start(at)
-        direct = _fit_ahead(h[:r], pos[:r] - at, most)[0]
-        assert degree == most and np.allclose(start, direct, rtol=0, atol=1e-12), (r, most)
+        assert degree == 2 and np.allclose(start, _fit_ahead(h[:r], pos[:r] - at)[0], rtol=0, atol=1e-12), r
 
 
 def test_the_start_after_more_solves_than_kept_is_the_directly_scored_one():
@@ -213,13 +209,13 @@ def test_the_start_after_more_solves_than_kept_is_the_directly_scored_one():
     h = [a + b * t + c * np.sin(3 * t) + 1e-4 * rng.normal(size=a.shape) for t in pos]
     path = _pushed(h, pos)
     kh, kp, at = h[:START_RESULTS], pos[:START_RESULTS], pos[0] + 0.06
-    best, err = (0, 0), np.linalg.norm(kh[1] - kh[0])
-    for r, most in START_FITS:
-        e = np.linalg.norm(_fit_ahead(kh[1:r + 1], kp[1:r + 1] - kp[0], most)[0] - kh[0])
-        best, err = ((r, most), e) if e < err else (best, err)
+    best, err = 0, np.linalg.norm(kh[1] - kh[0])
+    for r in START_FITS:
+        e = np.linalg.norm(_fit_ahead(kh[1:r + 1], kp[1:r + 1] - kp[0])[0] - kh[0])
+        best, err = (r, e) if e < err else (best, err)
     start, degree = path.start(at)
-    assert best[0] > 0 and degree == best[1]
-    assert np.allclose(start, _fit_ahead(kh[:best[0]], kp[:best[0]] - at, best[1])[0], rtol=0, atol=1e-12)
+    assert best > 0 and degree == 2
+    assert np.allclose(start, _fit_ahead(kh[:best], kp[:best] - at)[0], rtol=0, atol=1e-12)
 
 
 def test_the_handles_moves_extend_a_translation_exactly(faust_pair):
