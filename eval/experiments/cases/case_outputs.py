@@ -116,8 +116,8 @@ class CaseOutputs:
     def redraw(self, deadline: float | None = None) -> None:
         """The outputs of the cases :meth:`case_done` deferred, once every pair has run (no
         timed run beside): each restored run without a stored mesh is run again in this
-        process (:func:`eval.experiments.cases.pair.rerun_output`, nothing stored, no
-        metric), and its vertices are shown only when their :func:`output_digest` is the
+        process (:func:`rerun_output`: nothing stored, its row discarded), and its
+        vertices are shown only when their :func:`output_digest` is the
         stored record's ``output``: the figure shows the very vertices its rows measured.
         A rerun that fails, gives other vertices, or would end past ``deadline``
         (``time.perf_counter()`` seconds; its expected cost from the record's ``time_s``)
