@@ -1,15 +1,22 @@
 """sshade.arap.accelerate: the L-BFGS direction in its compact form (Byrd, Nocedal &
 Schnabel 1994) against Nocedal & Wright's two-loop recursion (Algorithm 7.4), written here
 in numpy, on the iterates of a convex quadratic; the ring's bookkeeping (wrap-around, a
-rejected pair, a restart that keeps the pairs); the numpy fallback kernels against numba's.
+rejected pair, a restart that keeps the pairs); the float32 history (the matrix of the
+rounded pairs, within rounding of float64's); the numpy fallback kernels against numba's.
 """
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from sshade.arap import solver_kernels
+from sshade.arap import accelerate, solver_kernels
 from sshade.arap.accelerate import LBFGS
+
+
+@pytest.fixture
+def float64_history(monkeypatch):
+    """L-BFGS's history kept in float64: the compact form's algebra, exact to rounding."""
+    monkeypatch.setattr(accelerate, "LBFGS_HISTORY_DTYPE", np.float64)
 
 
 def _two_loop(S, Y, Z, gamma, grad, z):
@@ -40,10 +47,10 @@ def _problem(n=600, seed=0):
     return L, sp.csr_matrix(Q), rng
 
 
-def _run(m, steps, *, restart_at=None, seed=0):
+def _run(m, steps, *, restart_at=None, seed=0, slope_rel=1e-10):
     """L-BFGS iterates ``x + 0.7 d`` on the quadratic; at each step the direction against
-    the two-loop recursion on the pairs the reference keeps. Returns the worst relative
-    difference."""
+    the two-loop recursion on the pairs the reference keeps (the slope within
+    ``slope_rel``). Returns the worst relative difference."""
     L, Q, rng = _problem(seed=seed)
     n = L.shape[0]
     solve = sla.factorized(sp.csc_matrix(2.0 * L))
@@ -70,18 +77,45 @@ def _run(m, steps, *, restart_at=None, seed=0):
         ref = _two_loop(S, Y, Z, gamma, gr, zr)
         assert lb.n_hist == len(S)
         worst = max(worst, np.abs(d.ravel() + ref).max() / np.abs(ref).max())
-        assert slope == pytest.approx(-(gr @ ref), rel=1e-10) and slope < 0
+        assert slope == pytest.approx(-(gr @ ref), rel=slope_rel) and slope < 0
         x = x + 0.7 * d
     return worst
 
 
 @pytest.mark.parametrize("m", [1, 3, 10])
-def test_compact_direction_equals_the_two_loop_recursion_through_wraparound(m):
+def test_compact_direction_equals_the_two_loop_recursion_through_wraparound(m, float64_history):
     assert _run(m, 3 * m + 5) < 1e-12
 
 
-def test_compact_direction_equals_the_two_loop_recursion_after_a_restart_that_keeps_the_pairs():
+def test_compact_direction_equals_the_two_loop_recursion_after_a_restart_that_keeps_the_pairs(float64_history):
     assert _run(4, 14, restart_at=8) < 1e-12
+
+
+@pytest.mark.parametrize("m", [3, 10])
+def test_float32_history_directions_are_within_its_rounding_of_the_exact_recursion(m):
+    assert LBFGS(m, sp.eye(4)).hist.dtype == np.float32
+    assert _run(m, 3 * m + 5, slope_rel=1e-5) < 1e-6
+    assert _run(4, 14, restart_at=8, slope_rel=1e-5) < 1e-6
+
+
+def test_float32_history_products_are_those_of_the_stored_rounded_pair():
+    if solver_kernels.nb is None:
+        pytest.skip("numba unusable")
+    rng = np.random.default_rng(5)
+    N, m, slot = 3001, 4, 1
+    x, g, grad = (rng.standard_normal(N) for _ in range(3))
+    prev = rng.standard_normal((3, N))
+    y = grad - prev[1]
+    for update in (solver_kernels.lbfgs_update, solver_kernels._numpy_lbfgs_update):
+        hist, dots, p = rng.standard_normal((2, m, N)).astype(np.float32), np.zeros((4, m)), prev.copy()
+        ss, _ = update(x, g, grad, p, hist, slot, True, np.array([0, 2], np.int64), dots)
+        s, h = hist[0, slot].astype(np.float64), hist[1, slot].astype(np.float64)
+        np.testing.assert_array_equal(s, (x - prev[0]).astype(np.float32))  # rounded once
+        np.testing.assert_array_equal(h, ((x - g) - prev[2]).astype(np.float32))
+        want = [s @ grad, h @ grad, s @ y, h @ y]
+        np.testing.assert_allclose(dots[:, slot], want, rtol=1e-12)
+        assert ss == pytest.approx(s @ s, rel=1e-12)
+        assert abs(dots[2, slot] - (x - prev[0]) @ y) > 1e-12 * abs(dots[2, slot])  # the rounding is seen
 
 
 def test_a_pair_failing_the_curvature_test_is_dropped_and_the_oldest_with_it_when_full():
@@ -102,12 +136,13 @@ def test_a_pair_failing_the_curvature_test_is_dropped_and_the_oldest_with_it_whe
     assert lb.n_hist == 1 and lb.pos == pos and slope < 0  # the oldest pair's slot was overwritten
 
 
-def test_numpy_kernels_agree_with_numba():
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_numpy_kernels_agree_with_numba(dtype):
     if solver_kernels.nb is None:
         pytest.skip("numba unusable")
     rng = np.random.default_rng(3)
     N, m, slot = 5000, 5, 2
-    S, Z = rng.standard_normal((m, N)), rng.standard_normal((m, N))
+    S, Z = rng.standard_normal((m, N)).astype(dtype), rng.standard_normal((m, N)).astype(dtype)
     vecs = [rng.standard_normal(N) for _ in range(6)]
     old = np.array([0, 1, 3, 4], np.int64)
     outs = []

@@ -3,7 +3,13 @@ frame (:mod:`sshade.mesh.unit_frame`), so a moved or scaled bunny gives the move
 result in the same iterations. Before the unit frame, the bunny moved by 1e9 ran SShaDe's
 low-res ARAP into its 20,000-iteration cap (77 s instead of 0.3 s), a +1 move changed the
 result by 0.1 % of the diagonal, and a +250 move flipped 43 of its 3,485 vertices to
-another low-res triangle (a tie in the projection broken by rounding)."""
+another low-res triangle (a tie in the projection broken by rounding).
+
+The bound (:data:`BOUND`, relative to the diagonal): 1e-9 for ARAP-SR (Anderson, float64
+throughout); 1e-5 for the L-BFGS solves (SShaDe's low-res ARAP, ARAP, Elastic), whose
+history is stored in float32 (:data:`sshade.arap.accelerate.LBFGS_HISTORY_DTYPE`): the unit
+frame's last-bit differences can flip a stored pair's rounding, and the path then settles
+elsewhere within the stopping rule's accuracy (ARAP on this bunny: up to 4.3e-6)."""
 from __future__ import annotations
 
 import numpy as np
@@ -40,6 +46,7 @@ def _baseline(cls):
 
 
 METHODS = {"SShaDe": _sshade, "ARAP": _baseline(ARAP), "Elastic": _baseline(Elastic), "ARAP-SR": _baseline(ARAPSR)}
+BOUND = {"SShaDe": 1e-5, "ARAP": 1e-5, "Elastic": 1e-5, "ARAP-SR": 1e-9}
 
 
 @pytest.fixture(scope="module")
@@ -50,24 +57,24 @@ def at_origin(bunny):
 
 @pytest.mark.parametrize("name", METHODS)
 @pytest.mark.parametrize("diagonals", [1e-3, 1.0, 1e3])
-def test_a_move_of_up_to_1e3_diagonals_gives_the_moved_result_within_1e_9_in_the_same_iterations(
+def test_a_move_of_up_to_1e3_diagonals_gives_the_moved_result_within_the_bound_in_the_same_iterations(
         bunny, at_origin, name, diagonals):
     V, F, h, T, diag = bunny
     t = np.array([1.0, -0.5, 0.25]) * diagonals * diag
     Vd, it = METHODS[name](V + t, F, h, T + t)
     V0, it0 = at_origin[name]
     assert it == it0
-    assert np.abs(Vd - (V0 + t)).max() <= 1e-9 * diag
+    assert np.abs(Vd - (V0 + t)).max() <= BOUND[name] * diag
 
 
 @pytest.mark.parametrize("name", METHODS)
 @pytest.mark.parametrize("k", [1e-6, 1e6, 3.0])
-def test_a_scaled_mesh_gives_the_scaled_result_within_1e_9_in_the_same_iterations(bunny, at_origin, name, k):
+def test_a_scaled_mesh_gives_the_scaled_result_within_the_bound_in_the_same_iterations(bunny, at_origin, name, k):
     V, F, h, T, diag = bunny
     Vd, it = METHODS[name](V * k, F, h, T * k)
     V0, it0 = at_origin[name]
     assert it == it0
-    assert np.abs(Vd - V0 * k).max() <= 1e-9 * diag * k
+    assert np.abs(Vd - V0 * k).max() <= BOUND[name] * diag * k
 
 
 def test_sshade_moved_by_1e9_converges_in_the_same_iterations_to_the_moved_result_within_1e_6(bunny, at_origin):

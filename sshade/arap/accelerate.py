@@ -16,7 +16,13 @@ import numpy as np
 from .solver_kernels import CHUNK, anderson_kernels, lbfgs_direction, lbfgs_update
 from .threads import numba_threads
 
-__all__ = ["Anderson", "LBFGS"]
+__all__ = ["Anderson", "LBFGS", "LBFGS_HISTORY_DTYPE"]
+
+#: the storage of L-BFGS's history ``S``, ``Z``: each pair is rounded once to float32 when
+#: it is stored, and every inner product and direction uses the stored (rounded) pair in
+#: float64 arithmetic, so the quasi-Newton matrix is that of the rounded pairs. Half the
+#: bytes of the two passes over the history, which are bound by memory at full resolution.
+LBFGS_HISTORY_DTYPE = np.float32
 
 
 class Anderson:
@@ -126,7 +132,7 @@ class LBFGS:
     def __init__(self, m: int, Lff):
         self.m, self.L = m, Lff.tocsr()
         N = 3 * Lff.shape[0]
-        self.hist = np.zeros((2, m, N))  # S, Z
+        self.hist = np.zeros((2, m, N), LBFGS_HISTORY_DTYPE)  # S, Z
         self.prods = np.zeros((2, m, m))  # SY, YZ
         self.prods[0] = 1.0
         self.dots = np.zeros((4, m))

@@ -162,8 +162,9 @@ if nb is not None:
         (k,) (slots) into ``dots`` (4, m) by slot: ``S_i . grad``, ``Z_i . grad``,
         ``S_i . y``, ``Z_i . y`` (the last two only if ``new``; the new pair's own at
         ``slot``). ``x``, ``g``, ``grad``: flat (N,) vectors; ``prev`` (3, N): the rows
-        ``x_prev``, ``grad_prev``, ``z_prev``; ``hist`` (2, m, N): the histories ``S``,
-        ``Z``. Returns ``(s.s, y.y)``."""
+        ``x_prev``, ``grad_prev``, ``z_prev``; ``hist`` (2, m, N) float32 or float64: the
+        histories ``S``, ``Z``; the new pair's products use its stored (rounded) values.
+        Returns ``(s.s, y.y)``."""
         S = hist[0]; Z = hist[1]
         x_prev = prev[0]; grad_prev = prev[1]; z_prev = prev[2]
         N = x.shape[0]
@@ -184,10 +185,9 @@ if nb is not None:
                 p0 = 0.0; p1 = 0.0; p2 = 0.0; p3 = 0.0; p4 = 0.0; p5 = 0.0
                 for i in range(n):
                     zj = xc[i] - gc[i]
-                    sj = xc[i] - xp[i]
                     yj = grc[i] - gp[i]
-                    hj = zj - zp[i]
-                    sc[i] = sj; hc[i] = hj; yb[i] = yj
+                    sc[i] = xc[i] - xp[i]; hc[i] = zj - zp[i]; yb[i] = yj
+                    sj = np.float64(sc[i]); hj = np.float64(hc[i])  # the stored pair, rounded to its dtype
                     xp[i] = xc[i]; gp[i] = grc[i]; zp[i] = zj
                     p0 += sj * grc[i]; p1 += hj * grc[i]; p2 += sj * yj; p3 += hj * yj
                     p4 += sj * sj; p5 += yj * yj
@@ -290,10 +290,11 @@ def _numpy_lbfgs_update(x, g, grad, prev, hist, slot, new, old, dots):
     ss = yy = 0.0
     if new:
         y = grad - grad_prev
-        np.subtract(x, x_prev, out=S[slot])
+        np.subtract(x, x_prev, out=S[slot])  # rounded to the history's dtype
         np.subtract(z, z_prev, out=Z[slot])
-        dots[:, slot] = (S[slot] @ grad, Z[slot] @ grad, S[slot] @ y, Z[slot] @ y)
-        ss, yy = float(S[slot] @ S[slot]), float(y @ y)
+        s, h = S[slot].astype(np.float64), Z[slot].astype(np.float64)
+        dots[:, slot] = (s @ grad, h @ grad, s @ y, h @ y)
+        ss, yy = float(s @ s), float(y @ y)
     x_prev[:] = x
     grad_prev[:] = grad
     z_prev[:] = z
@@ -383,7 +384,7 @@ def warmup_kernels() -> bool:
     ok = bool(warmup_energy_kernels() and loop_kernels(False))
     if ok:  # the L-BFGS kernels
         N, z = 3, np.zeros(3)
-        hist, dots = np.zeros((2, 1, N)), np.zeros((4, 1))
+        hist, dots = np.zeros((2, 1, N), np.float32), np.zeros((4, 1))  # accelerate.LBFGS_HISTORY_DTYPE
         one = np.zeros(1, np.int64)
         lbfgs_update(z, z, z, np.zeros((3, N)), hist, 0, True, one[:0], dots)
         lbfgs_direction(hist, np.ones((2, 1, 1)), dots, one, 1.0, z, z, np.empty(N))
