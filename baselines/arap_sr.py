@@ -169,7 +169,7 @@ class ARAPSR:
                       lambda V, F, h, T: ARAPSR(alpha=self.alpha, alpha_scaling=self.alpha_scaling,
                                                 max_iter=5, protocol=self.protocol,
                                                 start="coarse" if coarse else "rigid",
-                                                coarse_n_low=40).deform(V, F, h, T), parallel=parallel)
+                                                coarse_n_low=40).deform(V, F, h, T))
         if parallel:
             s += warm_once(WARMED, ("arap_sr", "parallel"), lambda *_: warm_parallel_kernels(smooth_rotations=True))
         return s

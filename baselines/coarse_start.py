@@ -19,11 +19,11 @@ from sshade.arap import DEFORM_ENERGIES, SR_ENERGY, ArapOptions, Criterion, buil
 from sshade.errors import SShaDeError
 from sshade.remesh import remesh
 
+from .starts import STARTS, check_start
+
 __all__ = ["coarse_start", "start_rotations", "check_start", "uses_coarse", "STARTS", "COARSE_MIN_RATIO",
            "COARSE_N_LOW", "COARSE_MAX_ITER"]
 
-#: the converged protocol's starts: ``auto``, the rigid fit of the handles, the coarse start
-STARTS = ("auto", "rigid", "coarse")
 #: ``"auto"`` starts coarse only when the mesh has at least this many times ``n_low`` vertices
 COARSE_MIN_RATIO = 4
 #: the low-resolution size of the coarse start (``coarse_n_low``) by default: SShaDe's
@@ -32,17 +32,6 @@ COARSE_N_LOW = 6000
 #: the iteration cap of the coarse start's low-res ARAP and Elastic solve (ARAP-SR's: the
 #: converged protocol's, :data:`sshade.arap.DEFAULT_MAX_ITER`)
 COARSE_MAX_ITER = 5000
-
-
-def check_start(name: str, start, coarse_n_low) -> tuple[str, int]:
-    """A baseline's ``start`` (one of :data:`STARTS`) and ``coarse_n_low`` (an int >= 4),
-    checked when it is built. Returns ``(start, coarse_n_low)``; raises SShaDeError
-    naming ``name``, the parameter and its value."""
-    if not isinstance(start, str) or start not in STARTS:
-        raise SShaDeError(f"{name}: unknown start {start!r}; use one of {STARTS}")
-    if isinstance(coarse_n_low, bool) or not isinstance(coarse_n_low, int | np.integer) or coarse_n_low < 4:
-        raise SShaDeError(f"{name}: coarse_n_low must be an integer >= 4, got {coarse_n_low!r}")
-    return start, int(coarse_n_low)
 
 
 def uses_coarse(start: str, n_vertices: int, coarse_n_low: int) -> bool:

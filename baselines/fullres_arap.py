@@ -1,19 +1,34 @@
-"""Full-resolution ARAP baselines (paper §4.1): ARAP (spokes) and Elastic (spokes and rims)."""
+"""Full-resolution ARAP baselines (paper §4.1): ARAP (spokes) and Elastic (spokes and rims).
+
+The front every protocol shares (parameters, validation, the unit frame, the info
+columns); each protocol runs in a module of its own, named by :data:`PROTOCOL_MODULES` and
+imported when a baseline is built under it: :mod:`baselines.fullres_converged` (the
+converged solver, its coarse start) and :mod:`baselines.fullres_paper` (libigl's
+iteration). A row's code identity holds this module and the one its protocol names
+(eval.run.code_identity), so a change to the converged solver leaves the paper
+protocol's rows current.
+"""
 from __future__ import annotations
 
+import importlib
 import math
 
 import numpy as np
 
-from sshade.arap import DEFAULT_MAX_ITER, PROTOCOLS, ArapOptions, arap_deform, make_criterion
+from sshade.arap import DEFAULT_MAX_ITER, PROTOCOLS, ArapOptions, make_criterion
 from sshade.errors import SShaDeError
 from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
-from sshade.warmup import WARMED, warm_fullres, warm_once
 
-from .coarse_start import COARSE_N_LOW, check_start, coarse_start, start_rotations, uses_coarse
+from .coarse_start import COARSE_N_LOW
+from .starts import check_start
 
-__all__ = ["FullResArap", "ARAP", "Elastic", "check_arap_args"]
+__all__ = ["FullResArap", "ARAP", "Elastic", "check_arap_args", "PROTOCOL_MODULES"]
+
+#: the module that runs each protocol (:data:`sshade.arap.PROTOCOLS`): ``solve(method, V,
+#: F, handles, targets) -> (ArapResult, start info)`` and ``warmup(method, n_vertices) ->
+#: seconds``. Read as a literal by the code identity (eval.run.code_identity.identity_roots)
+PROTOCOL_MODULES = {"converged": "baselines.fullres_converged", "paper": "baselines.fullres_paper"}
 
 
 def check_arap_args(name: str, tol, max_iter, etol=None, gtol=None, alpha=None) -> dict:
@@ -104,6 +119,11 @@ class FullResArap:
         self.criterion = make_criterion(etol, gtol)
         self.info: dict = {}
 
+    @property
+    def _protocol(self):
+        """The module that runs :attr:`protocol` (:data:`PROTOCOL_MODULES`), imported on first use."""
+        return importlib.import_module(PROTOCOL_MODULES[self.protocol])
+
     def effective_params(self) -> dict:
         """The parameters :meth:`deform` runs with, every default resolved: ``energy``,
         ``protocol``, ``tol`` (the paper protocol's move rule), ``max_iter`` (None: the
@@ -134,13 +154,7 @@ class FullResArap:
         handles, targets = validate_handles(V, handles, targets)
         frame = unit_frame(V)  # solved centred and scaled (sshade.mesh.unit_frame), mapped back
         V, T = frame.to_unit(V), frame.to_unit(targets)
-        R0, cinfo = None, {}
-        if self.protocol == "converged":
-            R0, cinfo = start_rotations(self.start, V, F, handles, T, energy=self.energy,
-                                        coarse_n_low=self.coarse_n_low, criterion=self.criterion)
-        res = arap_deform(V, F, handles, T, self.arap_options(), R0=R0)
-        if cinfo:  # the coarse start's seconds count as set-up
-            res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
+        res, cinfo = self._protocol.solve(self, V, F, handles, T)
         self.info = {"iterations": res.iterations, "converged": res.converged, "protocol": self.protocol,
                      "handles": "hard",
                      "status": res.info.get("status"), "precompute_s": res.precompute_s, "solve_s": res.solve_s,
@@ -161,12 +175,7 @@ class FullResArap:
         outside any timed call (:func:`sshade.warmup.warm_fullres`), and the remesh and
         low-res solve of a coarse start when one runs (``n_vertices`` None: whenever
         ``start`` is not ``"rigid"``). Returns the seconds spent (0.0 when warm)."""
-        s = warm_fullres(self.energy, self.protocol, n_vertices)
-        if self.protocol == "converged" and self.start != "rigid" and (
-                n_vertices is None or uses_coarse(self.start, int(n_vertices), self.coarse_n_low)):
-            s += warm_once(WARMED, ("coarse_start", self.energy),
-                           lambda V, F, h, T: coarse_start(V, F, h, T, energy=self.energy, n_low=40))
-        return s
+        return self._protocol.warmup(self, n_vertices)
 
 
 class ARAP(FullResArap):

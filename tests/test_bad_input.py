@@ -17,7 +17,7 @@ import os
 import numpy as np
 import pytest
 
-import baselines.fullres_arap
+import baselines.fullres_converged
 from baselines import Elastic
 from sshade.errors import SShaDeError
 from sshade.files import atomic_write
@@ -108,7 +108,7 @@ def no_work(monkeypatch):
     """Replace the ARAP solver behind the baselines with a tripwire."""
     def tripwire(*a, **k):
         raise AssertionError("the deformation started: bad input was not rejected first")
-    monkeypatch.setattr(baselines.fullres_arap, "arap_deform", tripwire)
+    monkeypatch.setattr(baselines.fullres_converged, "arap_deform", tripwire)
 
 
 def test_good_tet_passes_validation_and_reaches_the_solver(no_work):

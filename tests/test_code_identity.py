@@ -23,8 +23,10 @@ from eval.run.code_identity import (
     code_identity,
     identity_roots,
     import_closure,
+    project_modules,
     sources_digest,
 )
+from eval.run.protocol_table import protocol_roots
 from eval.run.result_store import describe_change
 
 from .conftest import ROOT, edit_syntax_tree, subprocess_env
@@ -96,7 +98,7 @@ def _touch(path):
 def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     from baselines import ARAP
     from baselines.implicit_arap import ImplicitARAP
-    arap = import_closure(("baselines.fullres_arap",))
+    arap = import_closure(("baselines.fullres_arap", "baselines.fullres_converged"))
     assert {"sshade.arap.solver", "sshade.mesh.validate"} <= set(arap)
     # lazy package inits (SPEC 1): importing sshade.arap.solver does not import the pipeline
     assert not {"baselines", "sshade", "sshade.pipeline", "sshade.smooth_transfer", "baselines.arap_sr"} & set(arap)
@@ -126,6 +128,39 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     assert code_identity(ARAP(), root=root) == a0 and code_identity(ia, root=root) != i0
     _touch(src / "eval" / "metrics" / "measures.py")  # a metric: every row
     assert code_identity(ARAP(), root=root)["sources"] != a0["sources"]
+
+
+#: the modules of the converged solver, which the paper protocol of ARAP and Elastic never runs
+CONVERGED_ONLY = {"sshade.arap.solver", "sshade.arap.accelerate", "sshade.arap.solver_kernels",
+                  "sshade.arap.local_global", "baselines.fullres_converged", "baselines.coarse_start", "sshade.warmup"}
+
+
+def test_a_protocol_row_holds_its_own_protocols_module_and_an_unnamed_protocol_holds_both():
+    """ARAP's and Elastic's rows hold the module their ``protocol`` runs in (named by
+    ``baselines.fullres_arap.PROTOCOL_MODULES``): under the paper protocol none of the
+    converged solver, under the converged one all of it, and both when the definition
+    names no protocol; a class without a table adds nothing."""
+    spec = {"class": "baselines.fullres_arap.Elastic", "_target_": "baselines.Elastic"}
+    paper = set(code_identity(None, {**spec, "protocol": "paper"}, references=False)["modules"])
+    converged = set(code_identity(None, {**spec, "protocol": "converged"}, references=False)["modules"])
+    unnamed = set(code_identity(None, spec, references=False)["modules"])
+    assert {"baselines.fullres_paper", "sshade.arap.paper_protocol", "sshade.mesh.validate"} <= paper
+    assert not CONVERGED_ONLY & paper
+    assert CONVERGED_ONLY <= converged and "baselines.fullres_paper" not in converged
+    assert unnamed == paper | converged
+    assert protocol_roots({"class": "baselines.arap_sr.ARAPSR", "protocol": "paper"}, project_modules()) == ()
+
+
+def test_a_converged_solver_edit_leaves_the_paper_protocols_identity_as_it_was(tmp_path):
+    """An edit of the converged solver (a statement added to sshade/arap/solver.py, in a
+    copy of the sources) changes the identity of ARAP under the converged protocol and
+    leaves it under the paper protocol."""
+    src = _tree_copy(tmp_path / "src")
+    spec = {"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP"}
+    before = {p: code_identity(None, {**spec, "protocol": p}, root=str(src))["sources"] for p in ("paper", "converged")}
+    _touch(src / "sshade" / "arap" / "solver.py")
+    after = {p: code_identity(None, {**spec, "protocol": p}, root=str(src))["sources"] for p in ("paper", "converged")}
+    assert after["paper"] == before["paper"] and after["converged"] != before["converged"]
 
 
 #: the class and definition of each built-in method's rows, as its records store them

@@ -1,6 +1,7 @@
 """The full-resolution baselines (``baselines.Elastic``, ``baselines.ARAPSR``) under the
 converged protocol (conf/method/Elastic.yaml, ARAP-SR.yaml: the shared ``arap`` section's
-defaults) on the survey-style cases of ``sshade.arap.problems`` (``case``, the parameter):
+defaults; ``ElasticPaper`` and ``ArapSrPaper``: the paper's) on the survey-style cases
+of ``sshade.arap.problems`` (``case``, the parameter):
 ``bent_cylinder`` (a capped cylinder bent 90 degrees, 2,504 vertices), ``twisted_bar`` (a
 square bar twisted 135 degrees, 5,136 vertices) and ``lifted_plane`` (a sheet with its
 boundary fixed and a central disc lifted 20 %, 40,500 vertices): smooth, low-frequency
@@ -64,6 +65,31 @@ class Elastic:
 
     def time_elastic(self, case):
         """baselines.Elastic().deform on the case."""
+        self.method.deform(self.V, self.F, self.h, self.T)
+
+
+class ElasticPaper:
+    """Full-resolution Elastic under the paper protocol (``baselines.Elastic(protocol="paper",
+    max_iter=30)``: libigl's local/global, 30 iterations, then the gradient test) on one
+    case, after an untimed run in the same process: the baseline's own cost around
+    libigl's iterations (the front, the unit frame, the protocol's module)."""
+
+    params = CASE_PARAMS
+    param_names = ["case"]
+    number = 1
+    repeat = (3, 10, 15.0)
+    rounds = 2
+    warmup_time = 0
+    timeout = 300
+
+    def setup(self, case):
+        from baselines import Elastic as ElasticMethod
+        self.V, self.F, self.h, self.T = _case(case)
+        self.method = ElasticMethod(protocol="paper", max_iter=30)
+        _warm(self.method, case, self.V, self.F, self.h, self.T)
+
+    def time_elastic_paper(self, case):
+        """baselines.Elastic(protocol="paper", max_iter=30).deform on the case."""
         self.method.deform(self.V, self.F, self.h, self.T)
 
 

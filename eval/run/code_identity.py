@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from eval.run.library_versions import NUMERICAL, numerical_versions, used_libraries
+from eval.run.protocol_table import protocol_roots
 from eval.run.runinfo import REPO_ROOT
 from eval.run.syntax import attribute_chains, statements
 
@@ -350,7 +351,7 @@ def import_closure(roots: tuple, root: str | None = None, stop: tuple = ()) -> t
     :data:`RECORD_ONLY` are left out, and the modules ``stop`` (unless a root; e.g.
     :data:`ARTIFACTS` for a row) with all they alone import; ``root`` as in :func:`project_modules`.
 
-    >>> arap = import_closure(("baselines.fullres_arap",))
+    >>> arap = import_closure(("baselines.fullres_converged",))
     >>> "eval.tables" in arap, "sshade.arap.solver" in arap, "sshade.pipeline" in arap
     (False, True, False)
     """
@@ -587,20 +588,23 @@ def _plugin_digest(method) -> str | None:
         return "unknown"
 
 
-def identity_roots(spec: Mapping | None, references: bool = True) -> tuple[str, ...]:
+def identity_roots(spec: Mapping | None, references: bool = True, root: str | None = None) -> tuple[str, ...]:
     """The modules a row's identity starts from (sorted): :data:`ROW_HARNESS`, with
     ``references`` (the row has reference columns) :data:`ROW_REFERENCES`, and for a
     method's resolved definition ``spec`` (as stored in a record's key, :mod:`eval.run.result_store`)
     the dotted names of its ``class`` and of every ``_target_`` in it (nested ones too),
-    which :func:`import_closure` resolves to the modules defining them.
+    which :func:`import_closure` resolves to the modules defining them, and those its
+    ``protocol`` runs in (:func:`eval.run.protocol_table.protocol_roots`; ``root`` as in :func:`project_modules`).
 
-    >>> identity_roots({"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP"}, False)
-    ('baselines.ARAP', 'baselines.fullres_arap.ARAP', 'eval.experiments.cases.pair')
+    >>> identity_roots({"class": "baselines.fullres_arap.ARAP", "_target_": "baselines.ARAP",
+    ...                 "protocol": "paper"}, False)
+    ('baselines.ARAP', 'baselines.fullres_arap.ARAP', 'baselines.fullres_paper', 'eval.experiments.cases.pair')
     """
     roots = list(ROW_HARNESS) + (list(ROW_REFERENCES) if references else [])
     if isinstance(spec, Mapping):
         roots += [spec["class"]] if isinstance(spec.get("class"), str) else []
         roots += _targets(spec)  # resolved through lazy packages: "baselines.ARAPSR" -> baselines.arap_sr
+        roots += protocol_roots(spec, project_modules(root))
     return tuple(sorted({r for r in roots if r}))
 
 
@@ -617,7 +621,7 @@ def code_identity(method, spec=None, *, references: bool = True, root: str | Non
     spec = dict(spec or {})
     if method is not None and "class" not in spec:
         spec["class"] = f"{type(method).__module__}.{type(method).__qualname__}"
-    roots = identity_roots(spec, references)
+    roots = identity_roots(spec, references, root)
     mods, consts = import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
     plugin = None if method is None else _plugin_digest(method)
     used = set(row_libraries(mods, root)) if plugin is None else set(NUMERICAL)  # a plug-in's imports are unseen

@@ -195,7 +195,7 @@ def references_on(fields) -> bool:
 def _now(fields, root: str | None = None) -> tuple[tuple, tuple]:
     """``(modules, constants)`` of the identity of a record with key fields ``fields`` at the checkout ``root``."""
     spec = fields.get("method") if isinstance(fields, dict) else None
-    roots = identity_roots(spec, references_on(fields))
+    roots = identity_roots(spec, references_on(fields), root)
     return import_closure(roots, root, ARTIFACTS), closure_constants(roots, root, ARTIFACTS)
 
 

@@ -3,8 +3,8 @@ the full-resolution baselines (Sorkine & Alexa 2007; Chao et al. 2010; Levi & Go
 
 One concept per module, imports only downwards: threads, kernels, solver_kernels,
 kernel_data, operators, linear, criterion, options, accelerate, rigid, result, solver,
-smooth_rotations, local_global; :mod:`~sshade.arap.problems` (synthetic problems) is not
-imported here. What each module holds: docs/layout.md (``sshade/arap/``).
+smooth_rotations, rigid_motion, paper_protocol, local_global; :mod:`~sshade.arap.problems`
+(synthetic problems) is not imported here. What each module holds: docs/layout.md (``sshade/arap/``).
 """
 import lazy_loader
 
@@ -15,8 +15,9 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "criterion": ["DEEP_CRITERION", "DEFAULT_CRITERION", "Criterion", "gradient_norm", "make_criterion"],
     "kernel_data": ["KernelData", "rcm_order"],
     "linear": ["LINEAR_SOLVERS", "LaplacianSolver"],
-    "local_global": ["ArapDeformer", "arap_deform", "deformer_reads", "iterate"],
+    "local_global": ["ArapDeformer", "arap_deform", "deformer_reads"],
     "operators": ["ENERGIES", "ArapOperators", "bbox_diag", "build_operators", "fit_rotations"],
+    "paper_protocol": ["PaperSolver", "iterate", "paper_deform"],
     "options": ["ACCELERATIONS", "ALPHA_SCALINGS", "DEFAULT_ALPHA", "DEFAULT_MAX_ITER", "DEFORM_ENERGIES",
                 "PAPER_STOPS", "PROTOCOLS", "READS", "SR_ENERGY", "ArapOptions"],
     "result": ["ArapResult"],

@@ -6,9 +6,9 @@ al. 2010 "spokes and rims"); with ``energy="arap_sr"`` ARAP with smooth rotation
 
 - ``"converged"`` (default): :func:`sshade.arap.solver.solve_arap`, stopped by
   :class:`sshade.arap.criterion.Criterion`;
-- ``"paper"`` (paper §4.1, Table 1): libigl's ``arap_solve`` one iteration at a time
-  (:func:`iterate`), stopped by the largest vertex move; ``"stalled"`` where the gradient
-  test fails. Both start from the rigid fit of the handles. Details: docs/implementation.md
+- ``"paper"`` (paper §4.1, Table 1): libigl's ``arap_solve`` one iteration at a time,
+  stopped by the largest vertex move; ``"stalled"`` where the gradient test fails
+  (:mod:`sshade.arap.paper_protocol`). Both start from the rigid fit of the handles. Details: docs/implementation.md
   ("Implementation notes: sshade/arap/local_global.py").
 """
 from __future__ import annotations
@@ -16,15 +16,14 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-import igl
 import numpy as np
 
 from ..errors import SShaDeError
-from .criterion import gradient_norm
-from .operators import bbox_diag, build_operators
+from .operators import bbox_diag
 from .options import READS, SR_ENERGY, ArapOptions
+from .paper_protocol import PaperSolver, iterate
 from .result import ArapResult
-from .rigid import rigid_fit
+from .rigid_motion import rigid_motion
 from .smooth_rotations import SRProblem, arap_sr_deform, solve_arap_sr
 from .solver import ArapSolver
 
@@ -32,36 +31,6 @@ __all__ = ["arap_deform", "ArapDeformer", "iterate", "deformer_reads", "DEFORMER
 
 #: the options an :class:`ArapDeformer` is set up with: each deform's must be the same
 DEFORMER_SETUP = ("energy", "protocol", "alpha", "alpha_scaling", "linear_solver", "threads", "reorder")
-
-
-def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
-            time_budget_s: float | None = None) -> tuple[np.ndarray, int, bool, float]:
-    """The paper's stopping rule (§4.1) around any local/global step.
-
-    Parameters
-    ----------
-    step : callable (n, 3) -> (n, 3), one local/global iteration.
-    U : (n, 3) float64 start. thresh : float, stop when the largest vertex move of one
-        iteration is below it (mesh units). max_iter : int.
-    time_budget_s : float or None, also stop (unconverged) after this many seconds.
-
-    Returns
-    -------
-    (U, iterations, converged, last_move).
-    """
-    t0 = time.perf_counter()
-    it, move, converged = 0, np.inf, False
-    while it < max_iter:
-        Un = step(U)
-        it += 1
-        move = float(np.sqrt(((Un - U) ** 2).sum(1).max()))
-        U = Un
-        if move < thresh:
-            converged = True
-            break
-        if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-            break
-    return U, it, converged, move
 
 
 def deformer_reads(energy: str, protocol: str) -> frozenset[str]:
@@ -130,7 +99,8 @@ class ArapDeformer:
     """:func:`arap_deform` prepared once for a mesh and a handle set, then run for any
     targets (an animation's frames): the ``"converged"`` protocol keeps its
     :class:`sshade.arap.solver.ArapSolver` (operators, numbering, Cholesky factor), the
-    ``"paper"`` protocol libigl's ``ARAPData`` after ``arap_precomputation``, ``"arap_sr"``
+    ``"paper"`` protocol its :class:`sshade.arap.paper_protocol.PaperSolver` (libigl's
+    ``ARAPData``), ``"arap_sr"``
     its :class:`sshade.arap.smooth_rotations.SRProblem`. Each is made on the first call
     whose handles do not move rigidly (a rigid motion needs none).
 
@@ -168,7 +138,7 @@ class ArapDeformer:
         self.handles = handles
         self.energy, self.protocol = self.options.energy, self.options.protocol
         self.diag = bbox_diag(self.V)
-        self._solver = self._data = self._ops = self._sr = None
+        self._solver = self._paper = self._sr = None
 
     @property
     def factorisation(self):
@@ -197,17 +167,9 @@ class ArapDeformer:
         if R0 is not None and protocol != "converged":
             raise SShaDeError("start rotations R0 are for the 'converged' protocol only")
         bc = np.ascontiguousarray(targets, np.float64)
-        R, t = rigid_fit(V[handles], bc)
-        rigid_resid = float(np.abs(V[handles] @ R.T + t - bc).max())
-        if rigid_resid <= 1e-12 * self.diag:
-            # The handles move rigidly: the rigid motion (no distortion at all) is the answer,
-            # under both protocols. It is the minimiser wherever the cotangent weights are
-            # positive; on meshes with obtuse triangles libigl's weights turn negative and the
-            # raw energy could be lowered by distorting, which no user asks for. (Also avoids
-            # libigl's single-precision 3x3 polar decomposition adding ~1e-6 noise.)
-            return ArapResult(V=V @ R.T + t, iterations=0, converged=True, last_move=0.0,
-                              precompute_s=0.0, solve_s=0.0, info={"rigid": True, "protocol": protocol,
-                                                                   "status": "rigid"})
+        rigid = rigid_motion(V, handles, bc, self.diag, protocol)  # the answer, under both protocols
+        if rigid is not None:
+            return rigid
         if self.energy == SR_ENERGY:
             return self._smooth_rotations(bc, o, U0, R0)
         if protocol == "converged":
@@ -216,10 +178,9 @@ class ArapDeformer:
             res = self._solver.solve(targets, options=o, U0=U0, R0=R0, carry_history=carry_history)
             res.info["protocol"] = "converged"
             return res
-        U = V @ R.T + t if U0 is None else np.ascontiguousarray(U0, np.float64).copy()
-        res = self._paper(bc, U, thresh=o.tol * self.diag, max_iter=o.iteration_cap(),
-                          time_budget_s=o.time_budget_s)
-        return self._classify(res, o.criterion)
+        if self._paper is None:
+            self._paper = PaperSolver(V, self.F, handles, self.energy)
+        return self._paper.deform(bc, o, U0)
 
     def _smooth_rotations(self, bc: np.ndarray, o: ArapOptions, U0, R0) -> ArapResult:
         """ARAP-SR for the targets ``bc`` (h, 3) under this deformer's protocol, options
@@ -241,50 +202,6 @@ class ArapDeformer:
         res.precompute_s += setup_s
         res.info["protocol"] = self.protocol
         return res
-
-    def _paper(self, bc: np.ndarray, U: np.ndarray, *, thresh: float, max_iter: int,
-               time_budget_s: float | None) -> ArapResult:
-        """The ``"paper"`` protocol: libigl's local/global from ``U`` (n, 3) (its handle
-        rows set to ``bc`` (h, 3) here), stopped by :func:`iterate`; libigl's
-        precomputation on the first call (its seconds in that result's ``precompute_s``)."""
-        b = np.ascontiguousarray(self.handles, np.int32)
-        U[b] = bc
-        t0 = time.perf_counter()
-        if self._data is None:
-            data = igl.ARAPData()
-            data.energy = (igl.ARAP_ENERGY_TYPE_SPOKES if self.energy == "spokes"
-                           else igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS)
-            data.max_iter = 1
-            igl.arap_precomputation(self.V, self.F, 3, b, data)
-            self._data = data
-        t1 = time.perf_counter()
-        U, it, converged, move = iterate(lambda X: igl.arap_solve(bc, self._data, X), U, thresh=thresh,
-                                         max_iter=max_iter, time_budget_s=time_budget_s)
-        t2 = time.perf_counter()
-        return ArapResult(V=U, iterations=it, converged=converged, last_move=move,
-                          precompute_s=t1 - t0, solve_s=t2 - t1,
-                          info={"protocol": "paper", "status": ("converged" if converged else
-                                                               "max_iter" if it >= max_iter else "time_budget")})
-
-    def _classify(self, res: ArapResult, criterion) -> ArapResult:
-        """Under the ``"paper"`` protocol, tell a converged stop of the move rule from a
-        stalled one by the gradient norm at the result (``criterion.gtol``, the converged
-        protocol's test); sets ``res.converged``, ``info["status"]`` and ``info["gnorm"]``.
-        Not timed (outside ``solve_s``)."""
-        if self._ops is None:
-            self._ops = build_operators(self.V, self.F, self.energy)
-        ops = self._ops
-        free = np.ones(len(self.V), bool)
-        free[self.handles] = False
-        g = 2.0 * (ops.L @ res.V - ops.rhs(ops.rotations(res.V)))[free]
-        gn = gradient_norm(g, ops.mass[free], ops.diag)
-        res.info["gnorm"] = gn
-        if res.info["status"] == "converged" and not gn < criterion.gtol:
-            res.info["status"] = "stalled"
-            res.converged = False
-        return res
-
-
 
 
 def _checked(options, who: str) -> ArapOptions:
