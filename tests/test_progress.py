@@ -27,11 +27,14 @@ def test_cost_model_weights_by_method():
 
 
 def test_paper_protocol_has_its_own_prior():
-    """ARAP-SR under the paper protocol (its plain iteration to the 1000-iteration cap) is
-    planned at its own measured prior, not at the converged solve's (~5x less)."""
+    """ARAP-SR under the paper protocol (its plain iteration to its energy stop) is planned
+    at its own measured prior, linear in the vertices, not at the converged solve's (slower
+    at DeFAUST's 169k: 67 s a case against 42 s)."""
     conv = default_cost_model([SimpleNamespace(name="ARAP-SR", protocol="converged")])
     paper = default_cost_model([SimpleNamespace(name="ARAP-SR", protocol="paper")])
-    assert paper.estimate("ARAP-SR", 169_000) > 3 * conv.estimate("ARAP-SR", 169_000)  # both with ~2.5 s overhead
+    assert paper.estimate("ARAP-SR", 169_000) > 1.3 * conv.estimate("ARAP-SR", 169_000)  # both with ~2.5 s overhead
+    grow = paper.estimate("ARAP-SR", 338_000) - paper.estimate("ARAP-SR", 169_000)
+    assert grow == pytest.approx(169_000 * method_meta("ARAP-SR")["cost"]["paper"], rel=0.1)
     assert paper.priors["ARAP-SR"] == method_meta("ARAP-SR")["cost"]["paper"]
     assert conv.priors["ARAP-SR"] == method_meta("ARAP-SR")["cost"]["prior"]
 
