@@ -29,7 +29,7 @@ def test_cost_model_weights_by_method():
 def test_paper_protocol_has_its_own_prior():
     """ARAP-SR under the paper protocol (its plain iteration to its energy stop) is planned
     at its own measured prior, linear in the vertices, not at the converged solve's (slower
-    at DeFAUST's 169k: 67 s a case against 42 s)."""
+    at DeFAUST's 169k; benchmarks/records/machine_speed.md, "The ARAP-SR paper prior")."""
     conv = default_cost_model([SimpleNamespace(name="ARAP-SR", protocol="converged")])
     paper = default_cost_model([SimpleNamespace(name="ARAP-SR", protocol="paper")])
     assert paper.estimate("ARAP-SR", 169_000) > 1.3 * conv.estimate("ARAP-SR", 169_000)  # both with ~2.5 s overhead
