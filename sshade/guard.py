@@ -25,6 +25,8 @@ import numpy as np
 from .components import deform_components, n_components
 from .errors import SShaDeError
 from .mesh.checked import checked_mesh
+from .mesh.halfedge import large_mesh
+from .mesh.halfedge import warm_kernels as warm_mesh_kernels
 from .mesh.validate import check_points, validate_deformed, validate_handles, validate_mesh
 from .method_interface import is_plugin
 
@@ -247,7 +249,7 @@ def run_method(method, V, F, handles, targets, *, timeout_s=None) -> MethodRun:
     Vr, Fr, hr, tr = (_read_only(a) for a in (V, F, handles, targets))
     plugin = is_plugin(method)
     split = n_components(F, n) > 1
-    compile_s = _guarded(lambda: _warm(method, n), timeout_s, plugin)
+    compile_s = _guarded(lambda: _warm(method, n, large_mesh(F)), timeout_s, plugin)
     checked = _Checked(method, name)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -366,14 +368,25 @@ def _alarm(timeout_s):
             signal.setitimer(signal.ITIMER_REAL, max(old_delay - (time.monotonic() - t0), 1e-3))
 
 
-def _warm(method, n_vertices: int) -> float:
+_MESH_WARM: list = []  # [True] once _warm has compiled (or loaded) the mesh kernels in this process
+
+
+def _warm(method, n_vertices: int, large: bool = False) -> float:
     """Seconds of ``method.warmup(n_vertices)`` (the optional first-call compilation of a
     method, :class:`sshade.method_interface.Deformer`; 0.0 when it has none or is already warm,
-    or reports something that is not a finite number >= 0)."""
+    or reports something that is not a finite number >= 0), after, on a ``large`` mesh
+    (:func:`sshade.mesh.halfedge.large_mesh`), the mesh kernels a method may call on it
+    (normals, fans: while they are deferred, a warm-up on a tiny mesh takes their NumPy paths)."""
+    s = 0.0
+    if large and not _MESH_WARM:  # once per process
+        t = time.perf_counter()
+        warm_mesh_kernels()
+        _MESH_WARM.append(True)
+        s = time.perf_counter() - t
     warm = getattr(method, "warmup", None)
     if not callable(warm):
-        return 0.0
-    return _seconds(warm(n_vertices))
+        return s
+    return s + _seconds(warm(n_vertices))
 
 
 def _info_compile_s(info) -> float:

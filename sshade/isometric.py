@@ -18,6 +18,7 @@ import numpy as np
 
 from .averaging import combine, sampling_weights
 from .errors import SShaDeError
+from .mesh.halfedge import large_mesh
 from .mesh.validate import check_points, validate_mesh
 from .params import SShaDeParams, check_params, only_params
 from .pipeline import auto_n_low
@@ -206,7 +207,7 @@ def _transfer(V, F, he, S, T, params: SShaDeParams, t0: float) -> tuple[np.ndarr
     info with ``total_s`` counted from ``t0``."""
     n = len(V)
     k = params.n_samplings
-    warm_kernels()
+    warm_kernels(large_mesh(F))
     n_low = auto_n_low(n) if params.n_low == "auto" else params.n_low
     job = TransferJob(V=V, F=F, S=S, T=T, n_low=int(min(n_low, n)), seeds=sampling_seeds(params.seed, k),
                       topology=mesh_topology(V, F, he), gradient=params.gradient, anchor=params.anchor,

@@ -5,11 +5,11 @@ numba keys each cached kernel on its source file's modification time and size an
 CPU, so a fresh install, an upgrade, a new machine or an empty ``NUMBA_CACHE_DIR`` leaves
 it cold and the next call compiles every kernel (docs/deform.md, "The first call").
 :func:`compile_kernels` fills it: with two cores or more and ``fork``, a forked child
-compiles one half of the kernels (:data:`GROUPS`) while this process compiles the other,
-then this process loads the child's half from the cache; processes that find it cold at
-once take turns (a lock file in numba's cache folder), so the later ones load what the first
-compiled. :func:`notice` prints one line the first time a process finds the cache cold.
-``python -m sshade warmup`` does it ahead.
+compiles one half of the kernels (:data:`GROUPS`, and :data:`LARGE_GROUPS` but for a small
+mesh's call at a cold cache) while this process compiles the other and then loads the child's;
+processes that find it cold at once take turns (a lock file in numba's cache folder), so the
+later ones load what the first compiled. :func:`notice` prints one line the first time a
+process finds the cache cold. ``python -m sshade warmup`` does it ahead.
 """
 from __future__ import annotations
 
@@ -27,18 +27,20 @@ from pathlib import Path
 import numpy as np
 from numba.core.registry import CPUDispatcher
 
-from .arap import warmup_kernels
+from .arap.solver_kernels import warmup_lbfgs_kernels, warmup_step_kernels
 from .closed_ball import warm_kernels as warm_closed_ball
 from .cores import available_cores
 from .lrf import decode_with_frames, encode, frame_functions
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
-from .mesh.halfedge import boundary_loops, halfedges, vertex_fan_count, vertex_normals
+from .mesh.halfedge import boundary_loops, defer_kernels, halfedges, vertex_fan_count, vertex_normals
+from .mesh.halfedge import warm_kernels as warm_halfedges
 from .mesh.validate import validate_mesh
+from .mesh.validate import warm_kernels as warm_checks
 from .projection import project_to_fans
 from .smooth_transfer import smooth_decode
 
-__all__ = ["KERNEL_MODULES", "GROUPS", "COLD_COMPILE_S", "TURN_WAIT_S", "LOCK_NAME", "kernel_dispatchers",
-           "cache_folder", "lock_folder", "cold_kernels", "notice", "compile_kernels"]
+__all__ = ["KERNEL_MODULES", "GROUPS", "LARGE_GROUPS", "COLD_COMPILE_S", "TURN_WAIT_S", "LOCK_NAME",
+           "kernel_dispatchers", "cache_folder", "lock_folder", "cold_kernels", "notice", "compile_kernels"]
 
 #: The modules whose numba kernels one SShaDe call compiles.
 KERNEL_MODULES = ("sshade.mesh.halfedge", "sshade.mesh.geodesic", "sshade.mesh.validate", "sshade.closed_ball",
@@ -55,7 +57,7 @@ CHILD_MIN_WAIT_S = 60.0
 TURN_WAIT_S = 120.0
 LOCK_NAME = "sshade-compile.lock"
 _NOTICED = [False]
-_FILLED = [False]
+_FILLED: set = set()  # the parts filled in this process: "small" (GROUPS), "large" (LARGE_GROUPS)
 _LOCK = threading.Lock()
 
 
@@ -116,10 +118,14 @@ def _is_cached(d) -> bool:
         return True
 
 
-def cold_kernels() -> list[str]:
-    """The kernels of :data:`GROUPS` whose cache holds nothing for the installed sources
-    (sorted ``"module.name"``); empty when the cache is warm."""
-    names = {n for group in GROUPS.values() for n in group[1]}
+def cold_kernels(large: bool = True) -> list[str]:
+    """The kernels of :data:`GROUPS` (and of :data:`LARGE_GROUPS` when ``large``) whose cache
+    holds nothing for the installed sources (sorted ``"module.name"``); empty when warm."""
+    return _cold(GROUPS, LARGE_GROUPS) if large else _cold(GROUPS)
+
+
+def _cold(*parts: dict) -> list[str]:
+    names = {n for part in parts for g in part.values() for n in g[1]}
     return sorted(n for n, d in kernel_dispatchers().items() if n in names and not _is_cached(d))
 
 
@@ -128,7 +134,7 @@ def notice(cold: list[str], stream=None) -> None:
     if not cold or _NOTICED[0]:
         return
     _NOTICED[0] = True
-    share = len(cold) / max(1, sum(len(g[1]) for g in GROUPS.values()))
+    share = len(cold) / max(1, sum(len(g[1]) for part in (GROUPS, LARGE_GROUPS) for g in part.values()))
     print(f"compiling SShaDe's kernels once (about {max(1, round(share * COLD_COMPILE_S))} s); "
           "python -m sshade warmup does it ahead", file=stream or sys.stderr, flush=True)
 
@@ -145,8 +151,8 @@ def _tetrahedron():
 
 
 def _warm_sampling() -> None:
-    """Geodesic sampling (both queues, mesh and locality order), projection, the low-res
-    ARAP's serial kernels and L-BFGS."""
+    """Geodesic sampling (both queues, mesh and locality order), projection and the low-res
+    ARAP's serial energy, local-step, right-hand-side and gradient kernels."""
     V, F, E, _ = _tetrahedron()
     project_to_fans(V, np.zeros(4, np.int64), V, F)
     order = locality_order(V)
@@ -155,12 +161,13 @@ def _warm_sampling() -> None:
             st = VoronoiState(V, F, graph=graph, order=o, queue=queue)
             st.sample(2, 0)
             st.add([3])
-    warmup_kernels()
+    warmup_step_kernels()
 
 
 def _warm_topology() -> None:
-    """Mesh checks, half-edges, fans, normals, boundary loops, the closed-ball checks (full
-    and local) and both transfers' encoding and decoding."""
+    """Mesh checks, half-edges, fans, normals, boundary loops (a small mesh's paths: nothing
+    compiled), the closed-ball checks (full and local), both transfers' encoding and decoding,
+    and L-BFGS's kernels."""
     V, F, _, _ = _tetrahedron()
     validate_mesh(V, F)
     warm_closed_ball()
@@ -173,47 +180,78 @@ def _warm_topology() -> None:
         decode_with_frames(L, np.zeros((4, 3)), np.arange(4), V, F, bary=bary)
         encode(V, np.arange(4), V, F, frame_functions(V, F), "normalized", bary)
         smooth_decode(V, np.arange(4), bary, V, V, F)
+    warmup_lbfgs_kernels()
 
 
-#: The kernels in two halves of about equal compile time: name -> (warm function, kernels
-#: it compiles). A cold :func:`compile_kernels` runs the first half in a forked child.
+#: The kernels of a call on a small mesh in two halves of about equal compile time: name ->
+#: (warm function, kernels it compiles). A cold :func:`compile_kernels` runs the first half in a
+#: forked child.
 GROUPS = {
     "sampling, projection and ARAP": (_warm_sampling, (
         "sshade.mesh.geodesic._csr_from_edges", "sshade.mesh.geodesic._fps",
         "sshade.mesh.geodesic._grow", "sshade.mesh.geodesic._propagate",
         "sshade.arap.kernels._local_serial", "sshade.arap.kernels._rhs_serial",
-        "sshade.arap.solver_kernels._grad_serial", "sshade.arap.solver_kernels.lbfgs_direction",
-        "sshade.projection._project")),
-    "topology and transfer": (_warm_topology, (
-        "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._vertex_normals",
+        "sshade.arap.solver_kernels._grad_serial", "sshade.projection._project")),
+    "topology, transfer and L-BFGS": (_warm_topology, (
         "sshade.closed_ball.closed_ball_holds", "sshade.closed_ball._region_euler", "sshade.closed_ball._pair_ids",
         "sshade.closed_ball._link_faces", "sshade.closed_ball._repair_candidates", "sshade.closed_ball._touched",
         "sshade.closed_ball._local_euler", "sshade.closed_ball._local_pairs", "sshade.closed_ball._local_triples",
         "sshade.closed_ball._local_candidates", "sshade.closed_ball.vertex_faces",
         "sshade.lrf._decode_kernel", "sshade.lrf._encode_kernel", "sshade.smooth_transfer._smooth_kernel",
-        "sshade.smooth_transfer._vertex_jacobians_kernel")),
+        "sshade.smooth_transfer._vertex_jacobians_kernel", "sshade.arap.solver_kernels.lbfgs_update",
+        "sshade.arap.solver_kernels.lbfgs_direction")),
+}
+#: The kernels a call on a mesh of at least :data:`sshade.mesh.halfedge.KERNEL_MIN_FACES` faces
+#: takes besides :data:`GROUPS`' (the compiled mesh checks, half-edges, fans, components and
+#: normals), each half compiled with the group of the same name.
+LARGE_GROUPS = {
+    "sampling, projection and ARAP": (warm_checks, (
+        "sshade.mesh.validate._vertex_pass", "sshade.mesh.validate._face_pass", "sshade.mesh.validate._twin_faces",
+        "sshade.mesh.halfedge._pinched")),
+    "topology, transfer and L-BFGS": (warm_halfedges, (
+        "sshade.mesh.halfedge._halfedges", "sshade.mesh.halfedge._fan_count", "sshade.mesh.halfedge._components",
+        "sshade.mesh.halfedge._vertex_normals")),
 }
 
 
-def _child(name: str, seconds) -> None:
-    """Body of the forked child: die with the parent (Linux), compile one group, put its
-    seconds in ``seconds`` (a shared ``multiprocessing.Value``), exit."""
+def _plan(large: bool) -> dict:
+    """What this process has still to fill: group name -> its warm functions (the parts of
+    :data:`GROUPS` and, when ``large``, :data:`LARGE_GROUPS` not filled yet)."""
+    parts = [p for p, want in (("small", True), ("large", large)) if want and p not in _FILLED]
+    plan = {}
+    for name in GROUPS:
+        fns = [src[name][0] for p, src in (("small", GROUPS), ("large", LARGE_GROUPS)) if p in parts and name in src]
+        if fns:
+            plan[name] = tuple(fns)
+    return plan
+
+
+def _child(warm: tuple, seconds) -> None:
+    """Body of the forked child: die with the parent (Linux), run one group's warm functions,
+    put its seconds in ``seconds`` (a shared ``multiprocessing.Value``), exit."""
     try:
         ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: never outlive the caller
     except Exception:  # not Linux: the parent's finally still reaps it
         pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C goes to the caller, which ends this child
     t = time.perf_counter()
-    GROUPS[name][0]()
+    for fn in warm:
+        fn()
     seconds.value = time.perf_counter() - t
 
 
-def compile_kernels(*, show_notice: bool = True, split: bool | None = None, progress=None) -> float:
+def compile_kernels(*, large: bool = True, show_notice: bool = True, split: bool | None = None,
+                    progress=None) -> float:
     """Compile (or load from numba's cache) every kernel of :data:`GROUPS` in this process,
     once per process; on a cold cache, half of them in a forked child at the same time.
 
     Parameters
     ----------
+    large : also :data:`LARGE_GROUPS`' kernels, which a mesh of at least
+        :data:`sshade.mesh.halfedge.KERNEL_MIN_FACES` faces takes (:func:`sshade.mesh.halfedge.large_mesh`).
+        A call for a small mesh loads them too where numba's cache holds them; where it does
+        not, it leaves them and small meshes take their NumPy twins in this process
+        (:func:`sshade.mesh.halfedge.defer_kernels`) until a call for a large mesh fills them.
     show_notice : print :func:`notice`'s line when the cache is cold.
     split : run one group in a child; None: when the cache is cold, two or more cores are
         available (:func:`sshade.cores.available_cores`) and ``fork`` exists.
@@ -226,11 +264,18 @@ def compile_kernels(*, show_notice: bool = True, split: bool | None = None, prog
     group) only costs time: this process then compiles its group itself. Thread-safe.
     """
     with _LOCK:  # two threads at a cold cache: one fills it, the other then finds it done
-        return 0.0 if _FILLED[0] else _compile(show_notice, split, progress)
+        if not large and not _FILLED:  # a process's first fill, for a small mesh: the large part if cached
+            large = not _cold(LARGE_GROUPS)
+        plan = _plan(large)
+        defer_kernels(True)  # GROUPS' tiny meshes take the NumPy paths: LARGE_GROUPS' kernels only where listed
+        try:
+            return _compile(plan, large, show_notice, split, progress) if plan else 0.0
+        finally:
+            defer_kernels("large" not in _FILLED)
 
 
 @contextlib.contextmanager
-def _turn(cold: list[str]):
+def _turn(cold: list[str], large: bool = True):
     """Hold the lock file in :func:`lock_folder` (:data:`LOCK_NAME`, ``flock``: released when the
     holder exits, however it exits) while this process fills a cold cache; another
     process filling it makes this one wait, at most :data:`TURN_WAIT_S`. Yields whether
@@ -258,30 +303,32 @@ def _turn(cold: list[str]):
                     break
                 time.sleep(0.1)
         try:
-            yield bool(cold_kernels()) if held else True  # the other process may have filled it
+            yield bool(cold_kernels(large)) if held else True  # the other process may have filled it
         finally:
             if held:
                 fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
-def _compile(show_notice: bool, split: bool | None, progress) -> float:
+def _compile(plan: dict, large: bool, show_notice: bool, split: bool | None, progress) -> float:
     t0 = time.perf_counter()
-    cold = cold_kernels()
+    cold = cold_kernels(large)
     if show_notice:
         notice(cold)
-    with _turn(cold) as still_cold:
-        return _fill(t0, still_cold, split, progress)
+    with _turn(cold, large) as still_cold:
+        seconds = _fill(plan, t0, still_cold, split, progress)
+    _FILLED.update(("small", "large") if large else ("small",))
+    return seconds
 
 
-def _fill(t0: float, cold: bool, split: bool | None, progress) -> float:
+def _fill(plan: dict, t0: float, cold: bool, split: bool | None, progress) -> float:
+    names = list(plan)
     if split is None:
-        split = bool(cold) and available_cores() >= 2 and "fork" in mp.get_all_start_methods()
-    names = list(GROUPS)
+        split = bool(cold) and len(names) > 1 and available_cores() >= 2 and "fork" in mp.get_all_start_methods()
     child, child_s = None, None
     if split:
         ctx = mp.get_context("fork")
         child_s = ctx.Value("d", -1.0, lock=False)  # the child's own seconds, once it has compiled
-        child = ctx.Process(target=_child, args=(names[0], child_s), daemon=True)
+        child = ctx.Process(target=_child, args=(plan[names[0]], child_s), daemon=True)
         child.start()
     try:
         for name in (names[1:] + names[:1]) if child else names:
@@ -289,7 +336,8 @@ def _fill(t0: float, cold: bool, split: bool | None, progress) -> float:
                 # a child stuck (e.g. on a lock another thread held at the fork) is given up
                 child.join(timeout=max(CHILD_MIN_WAIT_S, 3 * (time.perf_counter() - t0)))
             t = time.perf_counter()
-            GROUPS[name][0]()
+            for fn in plan[name]:
+                fn()
             if progress is not None:
                 progress(_group_words(name, time.perf_counter() - t,
                                       child_s.value if child is not None and name == names[0] else -1.0))
@@ -297,7 +345,6 @@ def _fill(t0: float, cold: bool, split: bool | None, progress) -> float:
         if child is not None and child.is_alive():
             child.terminate()
             child.join()
-    _FILLED[0] = True
     return time.perf_counter() - t0
 
 

@@ -26,7 +26,7 @@ from .cores import pool_size
 from .errors import SShaDeError
 from .lrf import decode_with_frames, deformed_frames, encode, frame_functions
 from .mesh.bounds import bounding_box
-from .mesh.halfedge import count_components
+from .mesh.halfedge import count_components, large_mesh
 from .mesh.unit_frame import UnitFrame, unit_frame
 from .mesh.validate import validate_handle_indices, validate_mesh, validate_targets
 from .params import SShaDeParams, check_params
@@ -596,7 +596,7 @@ def prepare_with(V, F, handles, params: SShaDeParams) -> Prepared:
     the same result, warnings and errors."""
     t0 = time.perf_counter()
     p = params
-    warm_kernels()
+    warm_kernels(large_mesh(F))
     V, F, he = validate_mesh(V, F, return_halfedges=True, allow_components=True)
     h = validate_handle_indices(V, handles)
     if count_components(he.E, len(V)) > 1:

@@ -86,19 +86,24 @@ def average(results: list) -> np.ndarray:
     return out
 
 
-def warm_kernels() -> float:
+def warm_kernels(large: bool = True) -> float:
     """Compile (or load from numba's cache) the kernels of one sampling in this process
     (geodesic sampling, half-edges, projection, the low-res ARAP's serial kernels), so
     that forked workers inherit them instead of each compiling its own.
+
+    Parameters
+    ----------
+    large : also those of a mesh of at least :data:`sshade.mesh.halfedge.KERNEL_MIN_FACES`
+        faces (:func:`sshade.mesh.halfedge.large_mesh` of the call's faces).
 
     Returns
     -------
     float, the seconds spent (0.0 when already done in this process).
     """
-    if _WARM[0]:
-        return 0.0
     t0 = time.perf_counter()
-    compile_kernels()  # on a cold cache: half of them in a forked child at the same time
+    seconds = compile_kernels(large=large)  # on a cold cache: half of them in a forked child at the same time
+    if _WARM[0]:
+        return seconds
     V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 4], [2, 3, 4], [3, 1, 4]])
     st = VoronoiState(V, F)

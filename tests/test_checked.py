@@ -22,14 +22,20 @@ def _tet():
 
 @pytest.fixture()
 def counted(monkeypatch):
-    """The number of times validate_mesh's checks ran."""
+    """The number of times validate_mesh's checks ran (the compiled checks or, on a small mesh,
+    the reference checks alone)."""
     calls = []
-    real = val._fast_checks
+    real_fast, real_ref = val._fast_checks, val._reference_checks
 
     def fast(*a, **k):
         calls.append(1)
-        return real(*a, **k)
+        return real_fast(*a, **k)
+
+    def ref(*a, **k):
+        calls.append(1)
+        return real_ref(*a, **k)
     monkeypatch.setattr(val, "_fast_checks", fast)
+    monkeypatch.setattr(val, "_reference_checks", ref)
     return calls
 
 

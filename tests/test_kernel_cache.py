@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from sshade import kernel_cache
+from sshade.mesh import halfedge as hmod
 
 from .conftest import ROOT
 
@@ -43,7 +44,7 @@ def _probe(cache):
 @pytest.mark.slow
 def test_a_cold_cache_is_announced_once_filled_on_two_processes_and_then_warm(tmp_path):
     first, err = _probe(tmp_path / "numba")
-    groups = {g: names for g, (_, names) in kernel_cache.GROUPS.items()}
+    groups = {g: names + kernel_cache.LARGE_GROUPS[g][1] for g, (_, names) in kernel_cache.GROUPS.items()}
     assert sorted(first["cold"]) == sorted(n for names in groups.values() for n in names)
     assert len(err) == 1 and err[0].startswith("compiling SShaDe's kernels once (about ")
     assert err[0].endswith("python -m sshade warmup does it ahead")
@@ -61,6 +62,40 @@ def test_a_cold_cache_is_announced_once_filled_on_two_processes_and_then_warm(tm
     assert all(s[1] == 0 for s in second["stats"].values())  # every kernel loaded
 
 
+_SMALL = r"""
+import json
+from sshade import kernel_cache as kc
+from sshade import deform
+from sshade.warmup import tiny_problem
+deform(*tiny_problem(), n_low=40, n_samplings=2, workers=1)
+ds = kc.kernel_dispatchers()
+used = {n: sum(d.stats.cache_misses.values()) + sum(d.stats.cache_hits.values()) for n, d in ds.items()}
+from sshade.mesh import halfedge
+print(json.dumps({"used": used, "cold_small": kc.cold_kernels(False), "cold": kc.cold_kernels(),
+                  "deferred": halfedge._DEFERRED[0]}))
+"""
+
+
+@pytest.mark.slow
+def test_a_cold_first_call_on_a_small_mesh_compiles_none_of_the_large_meshes_kernels(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+
+    def small_call():
+        r = subprocess.run([sys.executable, "-c", _SMALL], cwd=ROOT, env=env, capture_output=True, text=True,
+                           timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return json.loads(r.stdout.strip().splitlines()[-1])
+    out = small_call()
+    large = sorted(n for _, names in kernel_cache.LARGE_GROUPS.values() for n in names)
+    assert [n for n in large if out["used"][n]] == [] and out["deferred"]  # neither compiled nor loaded
+    assert all(out["used"][n] >= 1 for _, names in kernel_cache.GROUPS.values() for n in names)
+    assert out["cold_small"] == [] and out["cold"] == large  # the next small call finds the cache warm
+    fill = "from sshade import kernel_cache as kc; kc.compile_kernels()"  # python -m sshade warmup's fill
+    assert subprocess.run([sys.executable, "-c", fill], cwd=ROOT, env=env, timeout=600).returncode == 0
+    out = small_call()  # now the cache holds them: loaded, and small meshes take the kernels again
+    assert all(out["used"][n] >= 1 for n in large) and not out["deferred"] and out["cold"] == []
+
+
 def _fake_groups(monkeypatch, log, child_body):
     """Two cheap groups whose runs are logged as (group, pid) lines in ``log``."""
     def run(name, body=None):
@@ -71,7 +106,9 @@ def _fake_groups(monkeypatch, log, child_body):
                 body()
         return f
     monkeypatch.setattr(kernel_cache, "GROUPS", {"a": (run("a", child_body), ()), "b": (run("b"), ())})
-    monkeypatch.setattr(kernel_cache, "_FILLED", [False])
+    monkeypatch.setattr(kernel_cache, "LARGE_GROUPS", {"a": (run("A"), ()), "b": (run("B"), ())})
+    monkeypatch.setattr(kernel_cache, "_FILLED", set())
+    monkeypatch.setattr(hmod, "_DEFERRED", [False])
 
 
 def _runs(log):
@@ -100,13 +137,44 @@ def test_the_childs_group_is_reported_with_the_childs_own_seconds_not_the_load_h
     lines: list[str] = []
     kernel_cache.compile_kernels(split=True, show_notice=False, progress=lines.append)
     assert [ln.split(":")[0] for ln in lines] == ["b", "a"]  # this process's group first, then the child's
+    assert {g for g, _ in _runs(log)} == {"a", "b", "A", "B"}  # each group with its large part
     assert re.fullmatch(r"b: \d+\.\d s", lines[0])
     m = re.fullmatch(r"a: (\d+\.\d) s in a second process, beside the first \((\d+\.\d) s to load here\)", lines[1])
     assert m and float(m[1]) >= 0.6 > float(m[2])  # the child's sleep, not the caller's quick run
-    monkeypatch.setattr(kernel_cache, "_FILLED", [False])
+    monkeypatch.setattr(kernel_cache, "_FILLED", set())
     lines.clear()
     kernel_cache.compile_kernels(split=False, show_notice=False, progress=lines.append)
     assert [re.fullmatch(r"[ab]: \d+\.\d s", ln) is not None for ln in lines] == [True, True]
+
+
+def test_a_small_calls_fill_at_a_cold_cache_defers_the_large_part_to_the_first_large_call(tmp_path, monkeypatch):
+    log = tmp_path / "runs.jsonl"
+    me = os.getpid()
+    _fake_groups(monkeypatch, log, None)
+    monkeypatch.setattr(kernel_cache, "_cold", lambda *parts: ["cold"])
+    kernel_cache.compile_kernels(large=False, split=True, show_notice=False)
+    assert {g for g, _ in _runs(log)} == {"a", "b"}  # the small call's kernels only
+    assert hmod._DEFERRED == [True]  # small meshes take the NumPy paths meanwhile
+    assert kernel_cache.compile_kernels(large=False, split=True) == 0.0
+    log.unlink()
+    kernel_cache.compile_kernels(large=True, split=False, show_notice=False)
+    assert sorted(_runs(log)) == [("A", me), ("B", me)]  # then only what was left
+    assert hmod._DEFERRED == [False]
+    assert kernel_cache.compile_kernels(large=True) == 0.0
+
+
+def test_a_small_calls_fill_loads_the_large_part_where_the_cache_holds_it(tmp_path, monkeypatch):
+    log = tmp_path / "runs.jsonl"
+    _fake_groups(monkeypatch, log, None)
+    monkeypatch.setattr(kernel_cache, "_cold", lambda *parts: [])
+    kernel_cache.compile_kernels(large=False, show_notice=False)
+    assert {g for g, _ in _runs(log)} == {"a", "b", "A", "B"} and hmod._DEFERRED == [False]
+
+
+def test_a_small_calls_cold_kernels_leave_out_the_large_part():
+    small, every = set(kernel_cache.cold_kernels(large=False)), set(kernel_cache.cold_kernels())
+    large = {n for _, names in kernel_cache.LARGE_GROUPS.values() for n in names}
+    assert small == every - large
 
 
 def test_an_interrupted_caller_leaves_no_child_behind(tmp_path, monkeypatch):
@@ -147,7 +215,9 @@ def test_a_hanging_child_is_given_up_and_its_group_run_by_the_caller(tmp_path, m
 
 def test_every_group_kernel_is_a_cached_kernel_of_the_package():
     ds = kernel_cache.kernel_dispatchers()
-    named = [n for _, names in kernel_cache.GROUPS.values() for n in names]
+    named = [n for part in (kernel_cache.GROUPS, kernel_cache.LARGE_GROUPS) for _, names in part.values()
+             for n in names]
+    assert set(kernel_cache.LARGE_GROUPS) == set(kernel_cache.GROUPS)
     assert len(named) == len(set(named)) and set(named) <= set(ds)
     assert kernel_cache.cache_folder() is not None
 
@@ -183,7 +253,7 @@ def test_a_process_at_a_cold_cache_waits_its_turn_and_finds_it_filled(tmp_path, 
     waiting and fills it alongside."""
     pytest.importorskip("fcntl")
     monkeypatch.setattr(kernel_cache, "lock_folder", lambda: tmp_path)
-    monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: [])  # filled by the other process
+    monkeypatch.setattr(kernel_cache, "cold_kernels", lambda *a: [])  # filled by the other process
     monkeypatch.setattr(kernel_cache, "TURN_WAIT_S", 0.4)
     other = _hold(tmp_path / kernel_cache.LOCK_NAME)
     t = time.perf_counter()
@@ -220,7 +290,7 @@ def test_a_link_fifo_or_folder_in_place_of_the_lock_file_takes_no_turn(tmp_path,
     lock = cache / kernel_cache.LOCK_NAME
     {"link": lambda: lock.symlink_to(outside), "fifo": lambda: os.mkfifo(lock), "folder": lock.mkdir}[kind]()
     monkeypatch.setattr(kernel_cache, "lock_folder", lambda: cache)
-    monkeypatch.setattr(kernel_cache, "cold_kernels", lambda: pytest.fail("no turn was to be taken"))
+    monkeypatch.setattr(kernel_cache, "cold_kernels", lambda *a: pytest.fail("no turn was to be taken"))
     t = time.perf_counter()
     with kernel_cache._turn(["m.k"]) as cold:
         assert cold

@@ -225,6 +225,25 @@ def test_fast_validation_passes_good_meshes_with_their_halfedges(mesh):
     assert _fast_checks(V2, F2, True, 1e-14) is not None
 
 
+def test_a_small_mesh_takes_the_reference_checks_alone_while_deferred_with_the_same_halfedges(mesh, monkeypatch):
+    import sshade.mesh.halfedge as hmod
+    import sshade.mesh.validate as val
+    V, F = mesh
+    calls = []
+    real = val._fast_checks
+    monkeypatch.setattr(val, "_fast_checks", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(hmod, "_DEFERRED", [True])
+    monkeypatch.setattr(hmod, "KERNEL_MIN_FACES", len(F) + 1)
+    small = validate_mesh(V, F, return_halfedges=True)
+    monkeypatch.setattr(hmod, "KERNEL_MIN_FACES", len(F))
+    large = validate_mesh(V, F, return_halfedges=True)
+    assert calls == [1]  # the compiled checks ran for the large one only
+    assert all(np.array_equal(a, b) for a, b in zip(small[:2], large[:2]))
+    a, b = small[2], large[2]
+    assert all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("E", "FE", "count", "twin"))
+    assert a.misoriented == b.misoriented == 0
+
+
 def test_fast_validation_on_junk_agrees_with_reference():
     from sshade.errors import SShaDeError
     for V, F in _junk_meshes():

@@ -87,7 +87,7 @@ def test_deform_reports_compile_time_outside_total(monkeypatch, sphere):
     V, F, h, T = sphere
     sd.warm_kernels()
 
-    def slow_warmup():  # a cold cache, simulated
+    def slow_warmup(large=True):  # a cold cache, simulated
         time.sleep(0.5)
         return 0.5
     monkeypatch.setattr(sd, "warm_kernels", slow_warmup)

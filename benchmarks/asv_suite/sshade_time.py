@@ -1,5 +1,6 @@
 """SShaDe's own times on the two 200k meshes: one-shot deform, a prepared frame, the
-remesh alone, the transfer alone; and a DeFAUST case where a build exists.
+remesh alone, the transfer alone; a DeFAUST case where a build exists; and the cold first
+call of a fresh process on the bunny.
 
 ``mesh`` (the parameter): ``clean`` = the Stanford armadillo LS3-subdivided and
 isotropically remeshed to about 200k vertices; ``hard`` = the TOSCA centaur0 LS3
@@ -8,11 +9,25 @@ experiment builds them (:mod:`._common`). SShaDe runs with n_low=6000, n_samplin
 seed=0 (paper §4.1) and its default workers.
 """
 import inspect
+import os
 import statistics
+import subprocess
+import sys
+import tempfile
 
 import numpy as np
 
-from ._common import SSHADE, arap_deform, defaust_root, load_mesh, mesh_files, prepared_frames, skip, warm_deform
+from ._common import (
+    SSHADE,
+    arap_deform,
+    defaust_root,
+    load_mesh,
+    mesh_files,
+    prepared_frames,
+    shared_data,
+    skip,
+    warm_deform,
+)
 
 MESH_PARAMS = ["clean", "hard"]
 
@@ -177,3 +192,55 @@ class DefaustCase:
         """sshade.deform on the first DeFAUST case."""
         import sshade
         sshade.deform(self.V, self.F, self.h, self.T, **SSHADE)
+
+
+# the README's API example in a fresh process: 50 lowest vertices fixed, 50 highest moved 15 % of the
+# diagonal along x; prints the seconds of the first sshade.deform (after the imports)
+_COLD_PROBE = r"""
+import sys, time
+import numpy as np
+from sshade import deform
+from sshade.mesh.io import read_mesh
+V, F = read_mesh(sys.argv[1])
+order = np.argsort(V[:, 1])
+h = np.r_[order[:50], order[-50:]]
+T = V[h].copy()
+T[50:] += [0.15 * np.linalg.norm(V.max(0) - V.min(0)), 0, 0]
+t = time.perf_counter()
+deform(V, F, h, T, n_low=1000, n_samplings=5, seed=0)
+print(time.perf_counter() - t)
+"""
+
+
+class ColdFirstCall:
+    """The first ``sshade.deform`` of a fresh process on an empty numba cache (a fresh
+    install, an upgrade, a new node): the README's API example on the bunny (3,485 vertices,
+    n_low 1000, n_samplings 5, seed 0), as ``benchmarks/cold_start.py``'s probe; every kernel
+    the call takes is compiled in it (on two processes where two cores are free). The median
+    of three fresh processes. Target: <= 8 s on 2 cores (the solver issue; results/cold_start)."""
+
+    number = 1
+    repeat = 1
+    rounds = 2
+    warmup_time = 0
+    timeout = 600
+
+    def setup(self):
+        self.bunny = shared_data() / "classic" / "bunny.off"
+        if not self.bunny.is_file():
+            raise skip(f"no {self.bunny} (set SSHADE_SHARED_DATA)")
+
+    def track_cold_first_call(self):
+        """Seconds of the first sshade.deform in a fresh process on an empty numba cache."""
+        runs = []
+        for _ in range(3):
+            with tempfile.TemporaryDirectory() as cache:
+                env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+                r = subprocess.run([sys.executable, "-c", _COLD_PROBE, str(self.bunny)], env=env, cwd=cache,
+                                   capture_output=True, text=True, timeout=300)
+                if r.returncode != 0:
+                    raise RuntimeError(r.stderr.strip().splitlines()[-1:])
+                runs.append(float(r.stdout.strip().splitlines()[-1]))
+        return statistics.median(runs)
+
+    track_cold_first_call.unit = "seconds"

@@ -13,16 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .solver_kernels import CHUNK, anderson_kernels, lbfgs_direction, lbfgs_update
+from .solver_kernels import CHUNK, LBFGS_HISTORY_DTYPE, anderson_kernels, lbfgs_direction, lbfgs_update
 from .threads import numba_threads
 
 __all__ = ["Anderson", "LBFGS", "LBFGS_HISTORY_DTYPE"]
-
-#: the storage of L-BFGS's history ``S``, ``Z``: each pair is rounded once to float32 when
-#: it is stored, and every inner product and direction uses the stored (rounded) pair in
-#: float64 arithmetic, so the quasi-Newton matrix is that of the rounded pairs. Half the
-#: bytes of the two passes over the history, which are bound by memory at full resolution.
-LBFGS_HISTORY_DTYPE = np.float32
 
 
 class Anderson:

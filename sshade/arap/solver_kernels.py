@@ -22,8 +22,15 @@ try:  # numba is a dependency of the package; without it the numpy paths are use
 except ImportError:  # pragma: no cover
     nb = None
 
-__all__ = ["CHUNK", "LBFGS_BLOCK", "loop_kernels", "anderson_kernels", "lbfgs_update", "lbfgs_direction",
-           "warmup_kernels"]
+__all__ = ["CHUNK", "LBFGS_BLOCK", "LBFGS_HISTORY_DTYPE", "loop_kernels", "anderson_kernels", "lbfgs_update",
+           "lbfgs_direction", "warmup_kernels", "warmup_step_kernels", "warmup_lbfgs_kernels"]
+
+#: the storage of L-BFGS's history ``S``, ``Z`` (:class:`sshade.arap.accelerate.LBFGS`): each
+#: pair is rounded once to float32 when it is stored, and every inner product and direction
+#: uses the stored (rounded) pair in float64 arithmetic, so the quasi-Newton matrix is that of
+#: the rounded pairs. Half the bytes of the two passes over the history, which are bound by
+#: memory at full resolution.
+LBFGS_HISTORY_DTYPE = np.float32
 
 #: Anderson's dot products are summed over fixed chunks of CHUNK entries, then over the
 #: chunks: the same floats whatever the number of threads.
@@ -379,13 +386,24 @@ def anderson_kernels(parallel: bool):
 
 def warmup_kernels() -> bool:
     """Compile (or load from numba's cache) the serial kernels of the solver and of
-    :mod:`sshade.arap.kernels`, e.g. before forking worker processes. Returns whether numba
-    is usable."""
-    ok = bool(warmup_energy_kernels() and loop_kernels(False))
-    if ok:  # the L-BFGS kernels
-        N, z = 3, np.zeros(3)
-        hist, dots = np.zeros((2, 1, N), np.float32), np.zeros((4, 1))  # accelerate.LBFGS_HISTORY_DTYPE
-        one = np.zeros(1, np.int64)
-        lbfgs_update(z, z, z, np.zeros((3, N)), hist, 0, True, one[:0], dots)
-        lbfgs_direction(hist, np.ones((2, 1, 1)), dots, one, 1.0, z, z, np.empty(N))
-    return ok
+    :mod:`sshade.arap.kernels` (:func:`warmup_step_kernels`, :func:`warmup_lbfgs_kernels`),
+    e.g. before forking worker processes. Returns whether numba is usable."""
+    return warmup_step_kernels() and warmup_lbfgs_kernels()
+
+
+def warmup_step_kernels() -> bool:
+    """Compile (or load) the energy, local-step, right-hand-side and gradient kernels (serial).
+    Returns whether numba is usable."""
+    return bool(warmup_energy_kernels() and loop_kernels(False))
+
+
+def warmup_lbfgs_kernels() -> bool:
+    """Compile (or load) L-BFGS's update and direction kernels. Returns whether numba is usable."""
+    if nb is None:  # pragma: no cover
+        return False
+    N, z = 3, np.zeros(3)
+    hist, dots = np.zeros((2, 1, N), LBFGS_HISTORY_DTYPE), np.zeros((4, 1))
+    one = np.zeros(1, np.int64)
+    lbfgs_update(z, z, z, np.zeros((3, N)), hist, 0, True, one[:0], dots)
+    lbfgs_direction(hist, np.ones((2, 1, 1)), dots, one, 1.0, z, z, np.empty(N))
+    return True

@@ -4,11 +4,12 @@ Half-edge ``h = 3 f + k`` of face ``f`` goes from ``F[f, k]`` to ``F[f, (k+1) % 
 Sorting the undirected keys ``(lo, hi)`` of all half-edges puts the (at most two, on a
 manifold) half-edges of each edge next to each other, which gives in one pass: the unique
 edges, the number of faces on each edge, the twin of every half-edge and the orientation
-check. The sort is a bucket sort by ``lo`` (stable, O(m)) followed by an insertion sort
-by ``hi`` inside each bucket (a vertex's bucket holds about its degree; a merge sort
-in buckets of more than 32, written as loops: numba's argsort and fancy indexing took
-4 of the kernel's 5 s of compilation), compiled with numba: the same order as a stable
-argsort of ``lo * n + hi``, about 15x faster at 200k vertices.
+check. The sort is a bucket sort by ``lo`` (stable, O(m)), then an insertion sort by ``hi``
+in each bucket (a merge sort, as loops, in buckets of more than 32), compiled with numba:
+the order of a stable argsort of ``lo * n + hi``, about 15x faster at 200k vertices. While
+the kernels are deferred (:func:`defer_kernels`: a first call on a small mesh at a cold numba
+cache), meshes under :data:`KERNEL_MIN_FACES` faces take NumPy/SciPy twins, which give the
+same integers and floats (the same operations in the same order) without compiling.
 """
 from __future__ import annotations
 
@@ -16,9 +17,42 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 __all__ = ["HalfEdges", "halfedges", "vertex_fan_count", "boundary_loops", "count_components",
-           "count_pinched_vertices", "vertex_normals"]
+           "count_pinched_vertices", "vertex_normals", "KERNEL_MIN_FACES", "large_mesh", "takes_kernels",
+           "defer_kernels", "warm_kernels"]
+
+#: While the kernels of this module and of :mod:`sshade.mesh.validate` are deferred
+#: (:func:`defer_kernels`), meshes with fewer faces take their NumPy/SciPy paths (the same
+#: results, 2-8x slower warm: a few ms at this size), which compile nothing; larger meshes
+#: always take the kernels (benchmarks/records/cold_compile.md).
+KERNEL_MIN_FACES = 20_000
+_DEFERRED = [False]
+
+
+def large_mesh(F) -> bool:
+    """Whether faces ``F`` (m, 3) number at least :data:`KERNEL_MIN_FACES` (anything without a
+    length, unchecked input, counts as small)."""
+    try:
+        return len(F) >= KERNEL_MIN_FACES
+    except TypeError:
+        return False
+
+
+def takes_kernels(F) -> bool:
+    """Whether a call on faces ``F`` (m, 3) takes the compiled kernels: always, but for a small
+    mesh (:func:`large_mesh`) while they are deferred (:func:`defer_kernels`)."""
+    return not _DEFERRED[0] or large_mesh(F)
+
+
+def defer_kernels(defer: bool) -> None:
+    """Let small meshes take the NumPy/SciPy paths (``defer`` True) or the kernels again, in
+    this process. Set by :func:`sshade.kernel_cache.compile_kernels`: deferred while the kernels
+    are neither compiled nor in numba's cache after a first call on a small mesh, so that it
+    compiles none of them. The results do not depend on it (the paths agree bit for bit)."""
+    _DEFERRED[0] = bool(defer)
 
 
 @dataclass
@@ -158,8 +192,30 @@ def halfedges(F: np.ndarray, n: int) -> HalfEdges:
     """Build :class:`HalfEdges` for faces ``F`` (m, 3) int over ``n`` vertices; O(m)
     (plus O(d log d) per vertex of degree d > 32)."""
     F = np.ascontiguousarray(F, np.int64)
-    E, FE, count, twin, mis = _halfedges(F, int(n))
+    E, FE, count, twin, mis = (_halfedges if takes_kernels(F) else _halfedges_numpy)(F, int(n))
     return HalfEdges(E=E, FE=FE, count=count, twin=twin, misoriented=int(mis))
+
+
+def _halfedges_numpy(F, n):
+    """:func:`_halfedges` in NumPy: a stable sort by ``(lo, hi)`` gives the same order."""
+    m3 = 3 * len(F)
+    a, b = F.reshape(-1), np.roll(F, -1, axis=1).reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((hi, lo))  # stable: equal edges keep half-edge order, as the kernel's sort
+    slo, shi = lo[order], hi[order]
+    new = np.ones(m3, bool)
+    new[1:] = (slo[1:] != slo[:-1]) | (shi[1:] != shi[:-1])
+    starts = np.flatnonzero(new)
+    E = np.stack([slo[starts], shi[starts]], axis=1)
+    count = np.diff(np.append(starts, m3)).astype(np.int64)
+    FE = np.empty(m3, np.int64)
+    FE[order] = np.cumsum(new) - 1
+    twin = np.full(m3, -1, np.int64)
+    p = starts[count == 2]
+    h1, h2 = order[p], order[p + 1]
+    twin[h1], twin[h2] = h2, h1
+    mis = int(np.count_nonzero((a[h1] > b[h1]) == (a[h2] > b[h2])))
+    return E, FE.reshape(-1, 3), count, twin, mis
 
 
 @njit(cache=True)
@@ -200,7 +256,27 @@ def _fan_count(F, twin, n):
 
 def vertex_fan_count(F: np.ndarray, he: HalfEdges, n: int) -> np.ndarray:
     """(n,) int64 number of face fans around each vertex (1 on a manifold vertex)."""
-    return _fan_count(F, he.twin, n)
+    if takes_kernels(F):
+        return _fan_count(F, he.twin, n)
+    return _fan_count_numpy(np.ascontiguousarray(F, np.int64), he.twin, int(n))
+
+
+def _fan_count_numpy(F, twin, n):
+    """:func:`_fan_count` in NumPy/SciPy: the same corner links, their components, and each
+    component counted where its run of corners (in corner order) changes vertex."""
+    m3 = twin.shape[0]
+    h = np.flatnonzero(twin > np.arange(m3))
+    t = twin[h]
+    f, k, g, j = h // 3, h % 3, t // 3, t % 3
+    rows = np.concatenate([3 * f + k, 3 * f + (k + 1) % 3])
+    cols = np.concatenate([3 * g + (j + 1) % 3, 3 * g + j])
+    links = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(m3, m3))
+    label = connected_components(links, directed=False)[1]
+    corners = np.argsort(label, kind="stable")
+    lab, v = label[corners], F.reshape(-1)[corners]
+    new = np.ones(m3, bool)
+    new[1:] = (lab[1:] != lab[:-1]) | (v[1:] != v[:-1])
+    return np.bincount(v[new], minlength=n).astype(np.int64)
 
 
 @njit(cache=True)
@@ -260,8 +336,13 @@ def _components(E, n):
 
 def count_components(E: np.ndarray, n: int) -> int:
     """Connected components of the graph with ``n`` vertices and edges ``E`` (e, 2)
-    (isolated vertices count); union-find, O(e)."""
-    return int(_components(np.ascontiguousarray(E, np.int64), int(n)))
+    (isolated vertices count); union-find, O(e) (SciPy's for fewer than
+    ``1.5 * KERNEL_MIN_FACES`` edges, a small mesh's, while the kernels are deferred)."""
+    E = np.ascontiguousarray(E, np.int64).reshape(-1, 2)
+    if not _DEFERRED[0] or 2 * len(E) >= 3 * KERNEL_MIN_FACES:
+        return int(_components(E, int(n)))
+    graph = coo_matrix((np.ones(len(E), np.int8), (E[:, 0], E[:, 1])), shape=(int(n), int(n)))
+    return int(connected_components(graph, directed=False)[0])
 
 
 @njit(cache=True, nogil=True)
@@ -290,7 +371,34 @@ def _vertex_normals(V, F):
 def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """(n, 3) float64 area-weighted unit vertex normals (sum of the incident faces'
     cross products, normalised; libigl's default weighting, equal up to round-off)."""
-    return _vertex_normals(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64))
+    V, F = np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64)
+    return (_vertex_normals if takes_kernels(F) else _vertex_normals_numpy)(V, F)
+
+
+def _vertex_normals_numpy(V, F):
+    """:func:`_vertex_normals` in NumPy: the same products, summed into each vertex in the
+    kernel's order (``np.add.at`` adds in index order) and normalised alike."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e1, e2 = b - a, c - a
+    fn = np.stack([e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1], e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2],
+                   e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]], axis=1)
+    N = np.zeros_like(V)
+    np.add.at(N, F.reshape(-1), np.repeat(fn, 3, axis=0))
+    r = np.sqrt(N[:, 0] * N[:, 0] + N[:, 1] * N[:, 1] + N[:, 2] * N[:, 2])
+    pos = r > 0
+    N[pos] /= r[pos, None]
+    return N
+
+
+def warm_kernels() -> None:
+    """Compile (or load from numba's cache) this module's kernels that the mesh checks and the
+    remesh take (:func:`takes_kernels`), on a closed tetrahedron."""
+    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    E, _, _, twin, _ = _halfedges(F, 4)
+    _fan_count(F, twin, 4)
+    _components(E, 4)
+    _vertex_normals(V, F)
 
 
 @njit(cache=True)

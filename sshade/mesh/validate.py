@@ -2,7 +2,9 @@
 of every layer (the method, the baselines, the builder, the evaluator, the command line).
 
 :func:`validate_mesh` (a single-component 2-manifold, boundary allowed: compiled
-O(n + m) checks, then the reference checks to name the first problem),
+O(n + m) checks, then the reference checks to name the first problem; on a small mesh
+while the kernels are deferred, :func:`sshade.mesh.halfedge.defer_kernels`, the reference
+checks alone),
 :func:`validate_handles`, :func:`validate_targets`, :func:`validate_deformed` (a method's
 output); :func:`check_arrays` (:func:`check_points`, :func:`check_faces`): shapes, dtypes,
 finite values and index range only. Errors: :class:`SShaDeError` naming what and where.
@@ -17,11 +19,11 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import SShaDeError
 from .bounds import bbox_diagonal, bounding_box
 from .checked import trusted_mesh
-from .halfedge import count_components, count_pinched_vertices, halfedges, vertex_fan_count
+from .halfedge import count_components, count_pinched_vertices, halfedges, takes_kernels, vertex_fan_count
 
 __all__ = ["validate_mesh", "validate_handles", "validate_targets", "validate_handle_indices", "validate_deformed",
            "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN",
-           "AREA_TOL", "zero_area_faces"]
+           "AREA_TOL", "zero_area_faces", "warm_kernels"]
 
 #: Largest coordinate magnitude accepted. The methods form products of up to about
 #: eight lengths (squared areas, circumradii, energies): beyond ~1e38 they overflow
@@ -248,7 +250,9 @@ def validate_mesh(V, F, *, name: str = "mesh", allow_boundary: bool = True,
     F = np.ascontiguousarray(F, dtype=np.int64)
     if not F.flags.writeable:
         F = F.copy()
-    he = _fast_checks(V, F, allow_boundary, area_tol, allow_components)
+    # a small mesh while the kernels are deferred: the reference checks alone (the same verdict
+    # and half-edges, nothing compiled)
+    he = _fast_checks(V, F, allow_boundary, area_tol, allow_components) if takes_kernels(F) else None
     if he is None:  # something looks wrong: the reference checks name it (or pass a borderline case)
         he = _reference_checks(V, F, name, allow_boundary, area_tol, allow_components)
     if return_halfedges:
@@ -338,6 +342,14 @@ def _fast_checks(V, F, allow_boundary, area_tol, allow_components=False):
     if (not allow_components and count_components(he.E, n) != 1) or count_pinched_vertices(F, he, n):
         return None
     return he
+
+
+def warm_kernels() -> None:
+    """Compile (or load from numba's cache) the kernels of the compiled checks
+    (:func:`sshade.mesh.halfedge.takes_kernels`), on a tetrahedron."""
+    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    _fast_checks(V, F, True, AREA_TOL)
 
 
 def _reference_checks(V, F, name, allow_boundary, area_tol, allow_components=False):

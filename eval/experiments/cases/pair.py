@@ -147,11 +147,15 @@ def run_pair(m, name: str, case, refs, guard: dict, meshes: CaseMeshes | None = 
     row["error"] = miss
     if row["error"]:
         log.warning("%s %s failed: %s", case.name, name, row["error"])
-    log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", case.name, name,
-             math.nan if row["time_s"] is None else row["time_s"],
+    return row, r.U, r.info
+
+
+def _log_row(row: dict) -> None:
+    """One log line of a stored row: its case, method, seconds and three measures."""
+    log.info("%s %-8s %7.2fs  vol %.2f%%  EL %.2f%%  FA %.3f deg", row["case"], row["method"],
+             math.nan if row.get("time_s") is None else row["time_s"],
              row.get("volume_err_pct", math.nan), row.get("edge_err_pct", math.nan),
              row.get("angle_err_deg", math.nan))
-    return row, r.U, r.info
 
 
 def _tell_case(m, case) -> None:
@@ -181,8 +185,9 @@ def _reported(info) -> float | None:
 
 def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str, fields: dict, *,
                   extra: dict | None = None):
-    """:func:`run_pair`, timed, then stored at once (:meth:`eval.run.result_store.ResultStore.save`; a
-    store that cannot be written is logged and the run goes on). ``extra``: cells added to
+    """:func:`run_pair`, timed, logged (one line: its seconds and three measures), then stored at
+    once (:meth:`eval.run.result_store.ResultStore.save`; a store that cannot be written is logged
+    and the run goes on). ``extra``: cells added to
     the row before it is stored (e.g. a worker's ``cores``).
 
     Returns
@@ -194,6 +199,8 @@ def run_and_store(m, name: str, case, refs, guard: dict, meshes, store, key: str
     """
     t0 = time.perf_counter()
     row, U, info = run_pair(m, name, case, refs, guard, meshes)
+    if U is not None:  # a failure has logged its warning
+        _log_row(row)
     row.update(extra or {})
     wall = time.perf_counter() - t0
     c = row.get("compile_s")
