@@ -2,14 +2,18 @@
 rotation enhanced as-rigid-as-possible mesh animation", IEEE TVCG), at full resolution
 behind the :class:`sshade.method_interface.Deformer` interface (:class:`ARAPSR`).
 
-Its energy and two protocols are :mod:`sshade.arap.smooth_rotations` (which states the
-energy and both definitions of alpha): ``"converged"`` (:func:`sshade.arap.solve_arap_sr`)
-and ``"paper"`` (:func:`sshade.arap.arap_sr_deform`: Open3D's plain Smoothed-ARAP
-iteration, run "until convergence with a cutoff of 1000 iterations", paper §4.1). Why it
-is written on libigl and checked against Open3D: docs/implementation.md, "Implementation notes:
-baselines/arap_sr.py".
+Its energy is :mod:`sshade.arap.smooth_rotations` (which states both definitions of
+alpha); each protocol runs in a module of its own, named by :data:`PROTOCOL_MODULES`:
+``"converged"`` (:mod:`baselines.arap_sr_converged`, :func:`sshade.arap.solve_arap_sr`)
+and ``"paper"`` (:mod:`baselines.arap_sr_paper`, :func:`sshade.arap.arap_sr_deform`:
+Open3D's plain Smoothed-ARAP iteration, run "until convergence with a cutoff of 1000
+iterations", paper §4.1), so a row's code identity holds its own protocol's code only. Why
+it is written on libigl and checked against Open3D: docs/implementation.md,
+"Implementation notes: baselines/arap_sr.py".
 """
 from __future__ import annotations
+
+import importlib
 
 import numpy as np
 
@@ -19,21 +23,22 @@ from sshade.arap import (
     DEFAULT_MAX_ITER,
     PAPER_STOPS,
     PROTOCOLS,
-    SR_ENERGY,
-    ArapOptions,
-    arap_sr_deform,
     make_criterion,
-    solve_arap_sr,
 )
 from sshade.errors import SShaDeError
 from sshade.mesh.unit_frame import unit_frame
 from sshade.mesh.validate import validate_handles, validate_mesh
-from sshade.warmup import WARMED, uses_parallel_kernels, warm_once, warm_parallel_kernels
 
-from .coarse_start import COARSE_N_LOW, check_start, start_rotations
+from .coarse_start import COARSE_N_LOW
 from .fullres_arap import check_arap_args
+from .starts import check_start
 
-__all__ = ["ARAPSR"]
+__all__ = ["ARAPSR", "PROTOCOL_MODULES"]
+
+#: the module that runs each protocol (:data:`sshade.arap.PROTOCOLS`): ``solve(method, V,
+#: F, handles, targets) -> ArapResult`` and ``warmup(method, n_vertices) -> seconds``.
+#: Read as a literal by the code identity (eval.run.code_identity.identity_roots)
+PROTOCOL_MODULES = {"converged": "baselines.arap_sr_converged", "paper": "baselines.arap_sr_paper"}
 
 
 class ARAPSR:
@@ -119,12 +124,7 @@ class ARAPSR:
         handles, targets = validate_handles(V, handles, targets)
         frame = unit_frame(V)  # solved centred and scaled (sshade.mesh.unit_frame), mapped back
         U, T = frame.to_unit(V), frame.to_unit(targets)
-        if self.protocol == "paper":
-            options = ArapOptions(alpha=self.alpha, alpha_scaling=self.alpha_scaling, stop=self.stop, tol=self.tol,
-                                  criterion=self.criterion, max_iter=self.max_iter)
-            res = arap_sr_deform(U, F, handles, T, options)
-        else:
-            res = self._converged(U, F, handles, T)
+        res = self._protocol.solve(self, U, F, handles, T)
         self.rotations = res.info.get("R") if self.protocol == "converged" else None
         proto = ("converged-sr" if self.protocol == "converged" else
                  "move-rule" if self.stop == "move" else "paper-sr")
@@ -142,37 +142,17 @@ class ARAPSR:
         Vd[handles] = targets  # hard constraints: exactly the targets given
         return Vd
 
-    def _converged(self, V, F, handles, targets):
-        """The converged protocol from the start of ``self.start``
-        (:func:`baselines.coarse_start.start_rotations`); a coarse start's seconds count in
-        ``precompute_s`` and its numbers go to ``info``."""
-        R0, cinfo = start_rotations(self.start, V, F, handles, targets, energy=SR_ENERGY, alpha=self.alpha,
-                                    alpha_scaling=self.alpha_scaling,
-                                    coarse_n_low=self.coarse_n_low, criterion=self.criterion)
-        options = ArapOptions(alpha=self.alpha, alpha_scaling=self.alpha_scaling, criterion=self.criterion,
-                              max_iter=self.max_iter)
-        res = solve_arap_sr(V, F, handles, targets, options, R0=R0)
-        if cinfo:
-            res.precompute_s += cinfo["remesh_s"] + cinfo["coarse_s"]
-            res.info.update(cinfo)
-        return res
+    @property
+    def _protocol(self):
+        """The module that runs :attr:`protocol` (:data:`PROTOCOL_MODULES`), imported on first use."""
+        return importlib.import_module(PROTOCOL_MODULES[self.protocol])
 
     def warmup(self, n_vertices: int | None = None) -> float:
         """First-call costs (libigl, the linear solver, the polar and energy kernels, mesh
-        validation, the remesh of a coarse start) paid once on a tiny mesh outside any timed call
-        (:func:`sshade.warmup.warm_once`), and the parallel kernels when an ``n_vertices``
-        mesh runs them (:func:`sshade.warmup.uses_parallel_kernels`). Returns the seconds
-        spent."""
-        coarse = self.protocol == "converged" and self.start != "rigid"  # + the remesh's kernels
-        parallel = uses_parallel_kernels(n_vertices)
-        s = warm_once(WARMED, ("arap_sr", self.protocol, coarse),
-                      lambda V, F, h, T: ARAPSR(alpha=self.alpha, alpha_scaling=self.alpha_scaling,
-                                                max_iter=5, protocol=self.protocol,
-                                                start="coarse" if coarse else "rigid",
-                                                coarse_n_low=40).deform(V, F, h, T))
-        if parallel:
-            s += warm_once(WARMED, ("arap_sr", "parallel"), lambda *_: warm_parallel_kernels(smooth_rotations=True))
-        return s
+        validation, the remesh of a coarse start) paid once on a tiny mesh outside any timed
+        call, and the parallel kernels when an ``n_vertices`` mesh runs them: the ``warmup``
+        of this protocol's module (:data:`PROTOCOL_MODULES`). Returns the seconds spent."""
+        return self._protocol.warmup(self, n_vertices)
 
 
 def warmup_kernels() -> float:

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sshade.arap.paper_protocol import paper_deform
-from sshade.mesh.validate import validate_handles, validate_mesh
-from sshade.warmup_base import WARMED, warm_once
+from sshade.arap.paper_protocol import paper_deform, warm_paper
 
 __all__ = ["solve", "warmup"]
 
@@ -25,14 +23,7 @@ def solve(method, V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np
 
 
 def warmup(method, n_vertices: int | None = None) -> float:
-    """Warm ``method``'s solve on :func:`sshade.warmup_base.tiny_problem`: libigl's set-up
-    and the gradient test's kernels, once per energy and process (``n_vertices`` unused:
-    libigl's iteration has no parallel variant to compile). Returns the seconds spent (0.0
-    when warm)."""
-    options = method.arap_options()
-
-    def run(V, F, h, T):  # as the baselines' deform: validation, then the solve
-        V, F = validate_mesh(V, F)
-        h, T = validate_handles(V, h, T)
-        return paper_deform(V, F, h, T, options)
-    return warm_once(WARMED, ("fullres", method.energy, "paper"), run)
+    """Warm ``method``'s solve (:func:`sshade.arap.paper_protocol.warm_paper` of its energy),
+    once per energy and process (``n_vertices`` unused: libigl's iteration has no parallel
+    variant to compile). Returns the seconds spent (0.0 when warm)."""
+    return warm_paper(method.energy)

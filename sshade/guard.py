@@ -29,6 +29,7 @@ from .mesh.halfedge import large_mesh
 from .mesh.halfedge import warm_kernels as warm_mesh_kernels
 from .mesh.validate import check_points, validate_deformed, validate_handles, validate_mesh
 from .method_interface import is_plugin
+from .warmup_base import WARMED, warm_once
 
 __all__ = ["MethodFailure", "MethodRun", "run_method", "check_timeout", "check_positive", "handle_error",
            "handles_not_reached", "HANDLE_ERROR_MAX_PCT", "MAX_TIMEOUT_S"]
@@ -368,21 +369,13 @@ def _alarm(timeout_s):
             signal.setitimer(signal.ITIMER_REAL, max(old_delay - (time.monotonic() - t0), 1e-3))
 
 
-_MESH_WARM: list = []  # [True] once _warm has compiled (or loaded) the mesh kernels in this process
-
-
 def _warm(method, n_vertices: int, large: bool = False) -> float:
     """Seconds of ``method.warmup(n_vertices)`` (the optional first-call compilation of a
     method, :class:`sshade.method_interface.Deformer`; 0.0 when it has none or is already warm,
     or reports something that is not a finite number >= 0), after, on a ``large`` mesh
     (:func:`sshade.mesh.halfedge.large_mesh`), the mesh kernels a method may call on it
     (normals, fans: while they are deferred, a warm-up on a tiny mesh takes their NumPy paths)."""
-    s = 0.0
-    if large and not _MESH_WARM:  # once per process
-        t = time.perf_counter()
-        warm_mesh_kernels()
-        _MESH_WARM.append(True)
-        s = time.perf_counter() - t
+    s = warm_once(WARMED, ("mesh", "large"), lambda *_: warm_mesh_kernels()) if large else 0.0
     warm = getattr(method, "warmup", None)
     if not callable(warm):
         return s

@@ -32,7 +32,7 @@ from .closed_ball import warm_kernels as warm_closed_ball
 from .cores import available_cores
 from .lrf import decode_with_frames, encode, frame_functions
 from .mesh.geodesic import VoronoiState, edge_graph_from_edges, locality_order
-from .mesh.halfedge import boundary_loops, defer_kernels, halfedges, vertex_fan_count, vertex_normals
+from .mesh.halfedge import boundary_loops, defer_kernels, halfedges, tetrahedron, vertex_fan_count, vertex_normals
 from .mesh.halfedge import warm_kernels as warm_halfedges
 from .mesh.validate import validate_mesh
 from .mesh.validate import warm_kernels as warm_checks
@@ -140,20 +140,11 @@ def notice(cold: list[str], stream=None) -> None:
 
 
 # ------------------------------------------------------------------ the two halves
-def _tetrahedron():
-    """A closed tetrahedron: V (4, 3) float64, F (4, 3) int64 (outward), and its edges
-    E (6, 2) int64 (lo < hi, sorted) and face edges FE (4, 3) int64, made without any kernel."""
-    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
-    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
-    ends = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-    E, FE = np.unique(ends, axis=0, return_inverse=True)
-    return V, F, np.ascontiguousarray(E, np.int64), np.ascontiguousarray(FE.reshape(4, 3), np.int64)
-
-
 def _warm_sampling() -> None:
     """Geodesic sampling (both queues, mesh and locality order), projection and the low-res
     ARAP's serial energy, local-step, right-hand-side and gradient kernels."""
-    V, F, E, _ = _tetrahedron()
+    V, F = tetrahedron()
+    E = np.unique(np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
     project_to_fans(V, np.zeros(4, np.int64), V, F)
     order = locality_order(V)
     for queue in ("auto", "heap"):
@@ -168,7 +159,7 @@ def _warm_topology() -> None:
     """Mesh checks, half-edges, fans, normals, boundary loops (a small mesh's paths: nothing
     compiled), the closed-ball checks (full and local), both transfers' encoding and decoding,
     and L-BFGS's kernels."""
-    V, F, _, _ = _tetrahedron()
+    V, F = tetrahedron()
     validate_mesh(V, F)
     warm_closed_ball()
     he = halfedges(F, 4)

@@ -190,11 +190,7 @@ def smooth_offsets(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: 
     (n, 3) float64, C-contiguous: known before the targets, made once by
     :func:`sshade.prepare` and given to :func:`smooth_decode_with` every frame.
     """
-    g = np.empty((len(tri), 3))
-    _smooth_kernel(_NO_MAPS, np.ascontiguousarray(V, np.float64), np.ascontiguousarray(VN, np.float64), _OFFSETS,
-                   np.ascontiguousarray(tri, np.int32), *anchor_weights(bary), np.ascontiguousarray(FN, np.int64),
-                   0, len(tri), False, g)
-    return g
+    return _from_rest(_NO_MAPS, V, tri, bary, VN, FN, _OFFSETS)
 
 
 def corner_maps(Jv: np.ndarray, VN: np.ndarray, VN_def: np.ndarray) -> np.ndarray:
@@ -238,10 +234,17 @@ def smooth_decode(V: np.ndarray, tri: np.ndarray, bary: np.ndarray | None, VN: n
     """
     if Jv is None:
         Jv = vertex_jacobians(VN, VN_def, FN)
+    return _from_rest(corner_maps(Jv, VN, VN_def), V, tri, bary, VN, FN, _FROM_REST)
+
+
+def _from_rest(A, V, tri, bary, VN, FN, mode) -> np.ndarray:
+    """:func:`_smooth_kernel` over every high-res vertex from the rest positions (``mode``
+    :data:`_OFFSETS` or :data:`_FROM_REST`; arrays as :func:`smooth_decode`'s, ``A`` the
+    corners' maps): a new (n, 3) float64 array."""
     out = np.empty((len(tri), 3))
-    _smooth_kernel(corner_maps(Jv, VN, VN_def), np.ascontiguousarray(V, np.float64),
-                   np.ascontiguousarray(VN, np.float64), _FROM_REST, np.ascontiguousarray(tri, np.int32),
-                   *anchor_weights(bary), np.ascontiguousarray(FN, np.int64), 0, len(tri), False, out)
+    _smooth_kernel(A, np.ascontiguousarray(V, np.float64), np.ascontiguousarray(VN, np.float64), mode,
+                   np.ascontiguousarray(tri, np.int32), *anchor_weights(bary), np.ascontiguousarray(FN, np.int64),
+                   0, len(tri), False, out)
     return out
 
 

@@ -11,21 +11,12 @@ module imports nothing above the ARAP solver; cold caches: docs/implementation.m
 from __future__ import annotations
 
 from .arap import ArapOptions, arap_deform, kernels, solver_kernels
-from .arap.threads import resolve_threads
+from .arap.paper_protocol import warm_paper
+from .arap.threads import uses_parallel_kernels
 from .mesh.validate import validate_handles, validate_mesh
 from .warmup_base import WARMED, tiny_problem, warm_once
 
 __all__ = ["tiny_problem", "warm_once", "warm_fullres", "warm_parallel_kernels", "uses_parallel_kernels", "WARMED"]
-
-
-def uses_parallel_kernels(n_vertices: int | None) -> bool:
-    """Whether a full-resolution ARAP solve on an ``n_vertices`` mesh runs numba's parallel
-    kernels (:func:`sshade.arap.threads.resolve_threads` in the automatic mode, from this
-    thread: enough rotation cells = vertices, more than one thread, not inside a worker
-    process). False for None."""
-    if n_vertices is None:
-        return False
-    return resolve_threads(None, int(n_vertices)) > 1
 
 
 def warm_parallel_kernels(smooth_rotations: bool = False) -> None:
@@ -42,15 +33,18 @@ def warm_parallel_kernels(smooth_rotations: bool = False) -> None:
 
 def warm_fullres(energy: str, protocol: str, n_vertices: int | None = None) -> float:
     """Warm a full-resolution ARAP solve (:func:`sshade.arap.arap_deform`) of ``energy``
-    (``"spokes"`` or ``"spokes_and_rims"``) under ``protocol`` (``"converged"`` or
-    ``"paper"``), with the parallel kernels too when an ``n_vertices`` mesh uses them
-    (:func:`uses_parallel_kernels`). Returns the seconds spent (0.0 when warm)."""
+    (``"spokes"`` or ``"spokes_and_rims"``) under ``protocol``: ``"converged"``, with the
+    parallel kernels too when an ``n_vertices`` mesh uses them (:func:`uses_parallel_kernels`),
+    or ``"paper"`` (:func:`sshade.arap.paper_protocol.warm_paper`). Returns the seconds
+    spent (0.0 when warm)."""
+    if protocol == "paper":
+        return warm_paper(energy)
 
     def run(V, F, h, T):  # as the baselines' deform: validation, then the solve
         V, F = validate_mesh(V, F)
         h, T = validate_handles(V, h, T)
         return arap_deform(V, F, h, T, ArapOptions(energy=energy, protocol=protocol))
     s = warm_once(WARMED, ("fullres", energy, protocol), run)
-    if protocol == "converged" and uses_parallel_kernels(n_vertices):
+    if uses_parallel_kernels(n_vertices):
         s += warm_once(WARMED, ("fullres", "parallel"), lambda *_: warm_parallel_kernels())
     return s

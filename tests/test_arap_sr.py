@@ -1,7 +1,7 @@
 """ARAP-SR baseline (Levi & Gotsman 2015): reduces to ARAP at alpha = 0, reproduces
 rigid motions, smooths rotations for alpha > 0; the converged protocol
-(sshade/arap/smooth_rotations.py) never increases the energy and matches a deep solve of its
-own energy; the paper protocol stops by its energy (or move) rule and says whether it
+(sshade/arap/sr_solver.py) never increases the energy and matches a deep solve of its
+own energy; the paper protocol (sshade/arap/sr_paper_protocol.py) stops by its energy (or move) rule and says whether it
 converged or stalled."""
 from __future__ import annotations
 

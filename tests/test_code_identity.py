@@ -130,25 +130,29 @@ def test_a_row_depends_on_the_modules_its_code_imports_and_no_others(tmp_path):
     assert code_identity(ARAP(), root=root)["sources"] != a0["sources"]
 
 
-#: the modules of the converged solver, which the paper protocol of ARAP and Elastic never runs
+#: the modules of the converged solvers, which the paper protocol of ARAP, Elastic and ARAP-SR never runs
 CONVERGED_ONLY = {"sshade.arap.solver", "sshade.arap.accelerate", "sshade.arap.solver_kernels",
-                  "sshade.arap.local_global", "baselines.fullres_converged", "baselines.coarse_start", "sshade.warmup"}
+                  "sshade.arap.local_global", "sshade.arap.sr_solver", "baselines.coarse_start", "sshade.warmup"}
 
 
-def test_a_protocol_row_holds_its_own_protocols_module_and_an_unnamed_protocol_holds_both():
-    """ARAP's and Elastic's rows hold the module their ``protocol`` runs in (named by
-    ``baselines.fullres_arap.PROTOCOL_MODULES``): under the paper protocol none of the
-    converged solver, under the converged one all of it, and both when the definition
-    names no protocol; a class without a table adds nothing."""
-    spec = {"class": "baselines.fullres_arap.Elastic", "_target_": "baselines.Elastic"}
+@pytest.mark.parametrize("cls, target, modules", [
+    ("baselines.fullres_arap.Elastic", "baselines.Elastic", ("baselines.fullres_paper", "baselines.fullres_converged")),
+    ("baselines.arap_sr.ARAPSR", "baselines.ARAPSR", ("baselines.arap_sr_paper", "baselines.arap_sr_converged")),
+])
+def test_a_protocol_row_holds_its_own_protocols_module_and_an_unnamed_protocol_holds_both(cls, target, modules):
+    """Elastic's and ARAP-SR's rows hold the module their ``protocol`` runs in (named by
+    their module's ``PROTOCOL_MODULES``): under the paper protocol none of the converged
+    solvers, under the converged one all of them, and both when the definition names no
+    protocol; a class without a table adds nothing."""
+    spec = {"class": cls, "_target_": target}
     paper = set(code_identity(None, {**spec, "protocol": "paper"}, references=False)["modules"])
     converged = set(code_identity(None, {**spec, "protocol": "converged"}, references=False)["modules"])
     unnamed = set(code_identity(None, spec, references=False)["modules"])
-    assert {"baselines.fullres_paper", "sshade.arap.paper_protocol", "sshade.mesh.validate"} <= paper
+    assert {modules[0], "sshade.mesh.validate"} <= paper and modules[1] not in paper
     assert not CONVERGED_ONLY & paper
-    assert CONVERGED_ONLY <= converged and "baselines.fullres_paper" not in converged
+    assert CONVERGED_ONLY | {modules[1]} <= converged and modules[0] not in converged
     assert unnamed == paper | converged
-    assert protocol_roots({"class": "baselines.arap_sr.ARAPSR", "protocol": "paper"}, project_modules()) == ()
+    assert protocol_roots({"class": "sshade.pipeline.SShaDe", "protocol": "paper"}, project_modules()) == ()
 
 
 def test_a_converged_solver_edit_leaves_the_paper_protocols_identity_as_it_was(tmp_path):

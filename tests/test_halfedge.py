@@ -13,6 +13,7 @@ from sshade.mesh.halfedge import (
     halfedges,
     large_mesh,
     takes_kernels,
+    tetrahedron,
     vertex_fan_count,
     vertex_normals,
 )
@@ -142,3 +143,11 @@ def test_only_a_small_mesh_takes_the_numpy_paths_and_only_while_the_kernels_are_
         halfedges(F, len(V))
         assert calls == ([1] if numpy_path else [])
     assert not large_mesh(object())  # no length: small (checked, and refused, later)
+
+
+def test_the_warm_up_tetrahedron_is_closed_consistently_oriented_and_outward():
+    V, F = tetrahedron()
+    he = halfedges(F, 4)
+    assert (he.twin >= 0).all() and (he.count == 2).all() and he.misoriented == 0
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    assert np.einsum("ij,ij->", a, np.cross(b, c)) / 6 == pytest.approx(1 / 6)

@@ -78,16 +78,18 @@ def _project_modules_run(call) -> set[str]:
 
 @pytest.mark.parametrize("protocol", ["paper", "converged"])
 def test_a_baseline_runs_no_project_code_outside_its_rows_identity(protocol):
-    """Built, warmed and run under ``protocol``, ARAP and Elastic run Python code of no
-    project module outside their rows' code identity (eval.run.code_identity), and under
-    the paper protocol none of the converged solver's."""
+    """Built, warmed and run under ``protocol``, ARAP, Elastic and ARAP-SR run Python code
+    of no project module outside their rows' code identity (eval.run.code_identity), and
+    under the paper protocol none of the converged solvers'."""
     import baselines
     V, F, h, T = twisted_bar(30.0, h=0.5)
-    for cls, target in ((baselines.ARAP, "baselines.ARAP"), (baselines.Elastic, "baselines.Elastic")):
+    for cls, target in ((baselines.ARAP, "baselines.ARAP"), (baselines.Elastic, "baselines.Elastic"),
+                        (baselines.ARAPSR, "baselines.ARAPSR")):
         spec = {"class": f"{cls.__module__}.{cls.__qualname__}", "_target_": target, "protocol": protocol}
         held = set(code_identity(None, spec, references=False)["modules"])
         ran = _project_modules_run(lambda c=cls: (m := c(protocol=protocol)).warmup() + m.deform(V, F, h, T).sum())
         packages = {".".join(x.split(".")[:i]) for x in held for i in range(1, x.count(".") + 1)}
         assert ran - held - packages == set(), ran - held - packages
         if protocol == "paper":
-            assert not {"sshade.arap.solver", "sshade.arap.accelerate", "sshade.arap.local_global"} & ran
+            assert not {"sshade.arap.solver", "sshade.arap.accelerate", "sshade.arap.local_global",
+                        "sshade.arap.sr_solver"} & ran

@@ -3,8 +3,9 @@ the full-resolution baselines (Sorkine & Alexa 2007; Chao et al. 2010; Levi & Go
 
 One concept per module, imports only downwards: threads, kernels, solver_kernels,
 kernel_data, operators, linear, criterion, options, accelerate, rigid, result, solver,
-smooth_rotations, rigid_motion, paper_protocol, local_global; :mod:`~sshade.arap.problems`
-(synthetic problems) is not imported here. What each module holds: docs/layout.md (``sshade/arap/``).
+sr_local, smooth_rotations, sr_solver, sr_paper_protocol, rigid_motion, paper_protocol,
+local_global; :mod:`~sshade.arap.problems` (synthetic problems) is not imported here. What
+each module holds: docs/layout.md (``sshade/arap/``).
 """
 import lazy_loader
 
@@ -13,7 +14,7 @@ import lazy_loader
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "accelerate": ["LBFGS", "Anderson"],
     "criterion": ["DEEP_CRITERION", "DEFAULT_CRITERION", "Criterion", "gradient_norm", "make_criterion"],
-    "kernel_data": ["KernelData", "rcm_order"],
+    "kernel_data": ["REORDER_MIN_VERTICES", "KernelData", "rcm_order"],
     "linear": ["LINEAR_SOLVERS", "LaplacianSolver"],
     "local_global": ["ArapDeformer", "arap_deform", "deformer_reads"],
     "operators": ["ENERGIES", "ArapOperators", "bbox_diag", "build_operators", "fit_rotations"],
@@ -22,8 +23,10 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
                 "PAPER_STOPS", "PROTOCOLS", "READS", "SR_ENERGY", "ArapOptions"],
     "result": ["ArapResult"],
     "rigid": ["rigid_fit"],
-    "smooth_rotations": ["SRProblem", "arap_sr_deform", "solve_arap_sr"],
-    "solver": ["REORDER_MIN_VERTICES", "ArapSolver", "solve_arap"],
+    "smooth_rotations": ["SRProblem"],
+    "solver": ["ArapSolver", "solve_arap"],
     "solver_kernels": ["warmup_kernels"],
+    "sr_paper_protocol": ["arap_sr_deform"],
+    "sr_solver": ["SR_ACCELERATIONS", "solve_arap_sr"],
     "threads": ["PARALLEL_MIN_CELLS", "MAIN_MIN_CELLS", "max_threads", "resolve_threads", "beside_others"],
 })

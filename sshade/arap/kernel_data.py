@@ -13,7 +13,11 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import SShaDeError
 
-__all__ = ["KernelData", "rcm_order", "permute_csr", "as_u32"]
+__all__ = ["KernelData", "rcm_order", "permute_csr", "as_u32", "REORDER_MIN_VERTICES"]
+
+#: vertices from which the solvers renumber the mesh for locality by default
+#: (:func:`rcm_order`; below, everything fits in the L2 cache).
+REORDER_MIN_VERTICES = 20_000
 
 
 def rcm_order(L) -> np.ndarray:

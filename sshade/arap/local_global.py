@@ -24,8 +24,10 @@ from .options import READS, SR_ENERGY, ArapOptions
 from .paper_protocol import PaperSolver, iterate
 from .result import ArapResult
 from .rigid_motion import rigid_motion
-from .smooth_rotations import SRProblem, arap_sr_deform, solve_arap_sr
+from .smooth_rotations import SRProblem
 from .solver import ArapSolver
+from .sr_paper_protocol import arap_sr_deform
+from .sr_solver import solve_arap_sr
 
 __all__ = ["arap_deform", "ArapDeformer", "iterate", "deformer_reads", "DEFORMER_SETUP"]
 
@@ -59,8 +61,8 @@ def arap_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.n
     options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). ``energy``:
         ``"spokes"`` (ARAP, Sorkine & Alexa 2007), ``"spokes_and_rims"`` (Elastic, Chao et
         al. 2010) or ``"arap_sr"`` (ARAP with smooth rotations, Levi & Gotsman 2015, of
-        ``alpha`` and ``alpha_scaling``: :func:`sshade.arap.smooth_rotations.solve_arap_sr`
-        under ``"converged"``, :func:`sshade.arap.smooth_rotations.arap_sr_deform` with the
+        ``alpha`` and ``alpha_scaling``: :func:`sshade.arap.sr_solver.solve_arap_sr`
+        under ``"converged"``, :func:`sshade.arap.sr_paper_protocol.arap_sr_deform` with the
         move rule under ``"paper"``). ``protocol``: ``"converged"`` (default:
         :func:`sshade.arap.solver.solve_arap`'s options; ``accelerate="lbfgs"`` runs
         ARAP-SR's Anderson acceleration) or ``"paper"`` (libigl's iteration, stopped when

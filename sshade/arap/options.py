@@ -2,8 +2,8 @@
 libigl's ``ARAPData`` holds ``arap_solve``'s.
 
 The four public solvers take one: :func:`sshade.arap.solver.solve_arap` (and
-:class:`~sshade.arap.solver.ArapSolver`), :func:`sshade.arap.smooth_rotations.solve_arap_sr`,
-:func:`sshade.arap.smooth_rotations.arap_sr_deform` and
+:class:`~sshade.arap.solver.ArapSolver`), :func:`sshade.arap.sr_solver.solve_arap_sr`,
+:func:`sshade.arap.sr_paper_protocol.arap_sr_deform` and
 :func:`sshade.arap.local_global.arap_deform` (and
 :class:`~sshade.arap.local_global.ArapDeformer`). The record is checked once, when it is
 made; each solver reads some of its fields (:data:`READS`) and refuses one it does not
@@ -99,7 +99,7 @@ class ArapOptions:
     threads : int >= 1 or None, default None: the numba kernels' threads (None: automatic,
         :class:`sshade.arap.threads.ThreadPicker`; the iterates do not depend on it). [solve_arap]
     reorder : bool or None, default None: iterate in a cache-friendly numbering (None: from
-        :data:`sshade.arap.solver.REORDER_MIN_VERTICES` vertices). [solve_arap]
+        :data:`sshade.arap.kernel_data.REORDER_MIN_VERTICES` vertices). [solve_arap]
     alpha : float >= 0, default :data:`DEFAULT_ALPHA`: ARAP-SR's smoothness weight (times
         the surface area). [ARAP-SR]
     alpha_scaling : str, default ``"valence"``, one of :data:`ALPHA_SCALINGS`. [ARAP-SR]

@@ -6,7 +6,7 @@ stalled by the gradient norm at the result (:class:`PaperSolver`, :func:`paper_d
 This module imports nothing of the converged solver (:mod:`sshade.arap.solver`, its
 accelerators and loop kernels), so the code identity of a row run under this protocol
 does not hold that solver (eval.run.code_identity; docs/implementation.md). ARAP-SR's
-paper protocol is :func:`sshade.arap.smooth_rotations.arap_sr_deform`;
+paper protocol is :func:`sshade.arap.sr_paper_protocol.arap_sr_deform`;
 :func:`sshade.arap.local_global.arap_deform` picks either for an energy.
 """
 from __future__ import annotations
@@ -17,6 +17,8 @@ import igl
 import numpy as np
 
 from ..errors import SShaDeError
+from ..mesh.validate import validate_handles, validate_mesh
+from ..warmup_base import WARMED, warm_once
 from .criterion import gradient_norm
 from .operators import ENERGIES, bbox_diag, build_operators
 from .options import READS, ArapOptions
@@ -24,7 +26,7 @@ from .result import ArapResult
 from .rigid import rigid_fit
 from .rigid_motion import rigid_motion
 
-__all__ = ["iterate", "PaperSolver", "paper_deform"]
+__all__ = ["iterate", "PaperSolver", "paper_deform", "warm_paper"]
 
 
 def iterate(step, U: np.ndarray, *, thresh: float, max_iter: int,
@@ -181,3 +183,17 @@ def paper_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.
     bc = np.ascontiguousarray(targets, np.float64)
     rigid = rigid_motion(solver.V, handles, bc, solver.diag, "paper")
     return rigid if rigid is not None else solver.deform(bc, o, U0)
+
+
+def warm_paper(energy: str) -> float:
+    """Warm the paper protocol of ``energy`` (``"spokes"`` or ``"spokes_and_rims"``) once per
+    process: a baseline's checks and :func:`paper_deform` on
+    :func:`sshade.warmup_base.tiny_problem` (libigl's set-up, the gradient test's kernels;
+    libigl's iteration has no parallel variant to compile). Returns the seconds spent (0.0
+    when warm). Errors of the run propagate (:func:`sshade.warmup_base.warm_once`)."""
+
+    def run(V, F, h, T):  # as the baselines' deform: validation, then the solve
+        V, F = validate_mesh(V, F)
+        h, T = validate_handles(V, h, T)
+        return paper_deform(V, F, h, T, ArapOptions(energy=energy, protocol="paper"))
+    return warm_once(WARMED, ("fullres", energy, "paper"), run)

@@ -1,15 +1,14 @@
 """ARAP with smooth rotations, ARAP-SR (Levi & Gotsman 2015, "Smooth rotation enhanced
-as-rigid-as-possible mesh animation", IEEE TVCG): its energy and its two protocols.
+as-rigid-as-possible mesh animation", IEEE TVCG): its energy and its problem.
 
     E(U, R) = sum_i sum_{j in N(i)} w_ij || e'_ij - R_i e_ij ||^2
               + alpha * A * sum_i c_i sum_{j in N(i)} || R_i - R_j ||_F^2
 
 ``w_ij`` libigl's cotangent weights, ``A`` the surface area, ``c_i = 1 / valence``
 (``alpha_scaling="valence"``, Open3D's alpha) or 1 (``"none"``; :data:`ALPHA_SCALINGS`).
-:func:`solve_arap_sr` (converged: Gauss-Seidel local step over a vertex colouring,
-:class:`SRProblem`; Anderson), :func:`arap_sr_deform` (the paper protocol, §4.1); their
-iterations keep the rotations in :mod:`sshade.arap.sr_local`'s numbering. Derivation and
-sources: docs/implementation.md, "Implementation notes: sshade/arap/smooth_rotations.py".
+:class:`SRProblem` holds its local and global steps for both protocols:
+:mod:`sshade.arap.sr_solver` (converged) and :mod:`sshade.arap.sr_paper_protocol` (§4.1).
+Derivation and sources: docs/implementation.md, "Implementation notes: sshade/arap/smooth_rotations.py".
 """
 from __future__ import annotations
 
@@ -21,22 +20,15 @@ from numba import njit
 
 from ..errors import SShaDeError
 from ..mesh.validate import validate_handles
-from .accelerate import Anderson
 from .criterion import gradient_norm
+from .kernel_data import REORDER_MIN_VERTICES
 from .kernels import sr_local_kernel
 from .linear import LaplacianSolver
-from .operators import bbox_diag, build_operators, fit_rotations
+from .operators import build_operators, fit_rotations
 from .options import ALPHA_SCALINGS, READS, SR_ENERGY, ArapOptions
-from .result import ArapResult
-from .rigid import rigid_fit
-from .solver import REORDER_MIN_VERTICES
 from .sr_local import SRLocal, edge_sq_sum
 
-__all__ = ["SRProblem", "colour_classes", "solve_arap_sr", "arap_sr_deform", "smoothness_weights",
-           "SR_ACCELERATIONS"]
-
-#: the iterations of :func:`solve_arap_sr` (``accelerate``, ``"auto"`` resolved)
-SR_ACCELERATIONS = ("anderson", "none")
+__all__ = ["SRProblem", "colour_classes", "smoothness_weights", "check_sr_options"]
 
 clock = time.perf_counter
 
@@ -314,85 +306,21 @@ class SRProblem:
         return E, self.from_work(Rw)
 
 
-def solve_arap_sr(V, F, handles, targets, options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
-                  R0: np.ndarray | None = None, problem: SRProblem | None = None) -> ArapResult:
-    """ARAP-SR run to a certified convergence, the converged protocol (docs/implementation.md,
-    "Implementation notes: sshade/arap/smooth_rotations.py").
+def check_sr_options(options, who: str, problem: SRProblem | None) -> ArapOptions:
+    """The options of the ARAP-SR solver ``who`` (a key of :data:`READS`).
 
-    Parameters
-    ----------
-    V : (n, 3) float64 rest positions (mesh units); F : (m, 3) int faces.
-    handles : (h,) int unique vertex indices; targets : (h, 3) float64.
-    options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). Read:
-        ``alpha`` (smoothness weight times the surface area; 0: ARAP spokes),
-        ``alpha_scaling`` (module docstring), ``criterion``, ``max_iter`` (None: 10000),
-        ``accelerate`` (``"auto"`` or ``"anderson"``: Anderson; ``"none"``: plain block
-        descent), ``history`` (Anderson's window, None: 5), ``time_budget_s``,
-        ``linear_solver``, ``jacobi`` (Jacobi local step instead of Gauss-Seidel,
-        measurements only: the energy may then increase; steps are not safeguarded),
-        ``reset_on_reject`` (forget Anderson's history after a rejected candidate),
-        ``energy`` (the default or ``"arap_sr"``). The others must keep their defaults.
-    U0 : (n, 3) float64 or None, start (default: the rigid fit of the handles, rotations
-        that fit's rotation; with ``R0``: the global step of ``R0``); handle rows are set
-        to ``targets``.
-    R0 : (n, 3, 3) float64 or None, start rotations (default: the rigid fit's), e.g.
-        those of a solve on a low-resolution remesh; one sweep at ``U0`` follows.
-    problem : :class:`SRProblem` or None, prebuilt for the same inputs, ``alpha``,
-        ``alpha_scaling`` and linear solver.
+    ``options``: an :class:`ArapOptions` or None (the defaults), setting no field ``who``
+    does not read, of ARAP-SR's energy (or the default), agreeing with ``problem``'s
+    (an :class:`SRProblem` or None) alpha, alpha_scaling and linear solver.
 
     Returns
     -------
-    :class:`sshade.arap.ArapResult` with ``info``: ``energy`` (``E(U, R)``, mesh
-    units^2), ``gnorm``, ``rel_decrease``, ``energy_history`` (accepted states, starting
-    at ``U0`` after one local step), ``status`` (``"converged"``, ``"max_iter"``,
-    ``"time_budget"``, ``"stalled"``: no decrease in float64, ``"rigid"``),
-    ``n_fallback`` (rejected Anderson candidates), ``n_sweeps``, ``n_colours``, ``alpha``,
-    ``alpha_scaling``, ``R`` ((n, 3, 3) the final rotations).
+    :class:`ArapOptions`, checked.
 
     Raises
     ------
-    SShaDeError on bad inputs (:class:`SRProblem`), ``U0`` / ``R0``, options (``accelerate``
-    ``"lbfgs"``, an option not read set, another energy) or a ``problem`` of another alpha.
+    SShaDeError naming ``who``.
     """
-    t0 = clock()
-    o = _sr_options(options, "solve_arap_sr", problem)
-    accelerate = o.acceleration(SR_ENERGY)
-    if accelerate not in SR_ACCELERATIONS:
-        raise SShaDeError(f"solve_arap_sr: accelerate must be 'auto' or one of {SR_ACCELERATIONS}, got "
-                          f"{o.accelerate!r} (ARAP-SR has no L-BFGS)")
-    crit = o.criterion
-    pb = problem if problem is not None else SRProblem(V, F, handles, targets, o.alpha, o.linear_solver,
-                                                       o.alpha_scaling)
-    Rr, tr_ = rigid_fit(pb.ops.V[pb.h], pb.T)
-    if R0 is None:
-        R = np.broadcast_to(Rr, (pb.n, 3, 3)).copy()
-    else:
-        R = np.array(R0, np.float64)
-        if R.shape != (pb.n, 3, 3) or not np.isfinite(R).all():
-            raise SShaDeError(f"R0 must be a finite ({pb.n}, 3, 3) array")
-    U = (pb.ops.V @ Rr.T + tr_ if R0 is None else pb.global_step(pb.ops.V, R)) if U0 is None \
-        else np.array(U0, np.float64)
-    if U.shape != (pb.n, 3) or not np.isfinite(U).all():
-        raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
-    U[pb.h] = pb.T
-    t1 = clock()
-    info = {"alpha": pb.alpha, "alpha_scaling": pb.alpha_scaling, "etol": crit.etol, "gtol": crit.gtol,
-            "accelerate": accelerate,
-            "n_colours": len(pb.classes), "n_fallback": 0, "n_sweeps": 1, "linear_solver": pb.solver.backend}
-    opts = {"m": o.window(accelerate), "jacobi": o.jacobi, "reset": o.reset_on_reject}
-    Rw, E = pb.work_step(U, pb.to_work(R), o.jacobi)
-    U, Rw, it, status = _iterate(pb, (U, Rw, E), crit, o.iteration_cap("converged"), accelerate, o.time_budget_s,
-                                 opts, info)
-    t2 = clock()
-    return ArapResult(V=U, iterations=it, converged=status in ("converged", "rigid"), last_move=info.pop("move"),
-                      precompute_s=t1 - t0, solve_s=t2 - t1, info=dict(info, status=status, R=pb.from_work(Rw)))
-
-
-def _sr_options(options, who: str, problem: SRProblem | None) -> ArapOptions:
-    """``options`` (None: the defaults) for the ARAP-SR solver ``who``: an
-    :class:`ArapOptions` setting no field it does not read (:data:`READS`), of ARAP-SR's
-    energy (or the default), agreeing with ``problem``'s alpha, alpha_scaling and linear
-    solver. Raises SShaDeError naming ``who``."""
     o = ArapOptions.of(options, who)
     o.refuse_unused(READS[who], who)
     if o.energy not in (SR_ENERGY, ArapOptions.energy):
@@ -408,150 +336,3 @@ def _sr_options(options, who: str, problem: SRProblem | None) -> ArapOptions:
             raise SShaDeError(f"{who}: linear_solver={o.linear_solver!r}, but the problem given factorised with "
                               f"{backend!r}")
     return o
-
-
-def _iterate(pb: SRProblem, state, crit, max_iter, accelerate, time_budget_s, opts, info):
-    """The iterations of :func:`solve_arap_sr` from ``state = (U, R, E)`` (``R`` the local
-    step at ``U`` in the iterations' numbering, :meth:`SRProblem.to_work`; ``E`` its
-    energy; ``opts``: ``m``, ``jacobi``, ``reset``): returns ``(U, R, iterations,
-    status)``, fills ``info``. ``K(R)`` of the accepted state is computed once, for the
-    gradient test and the next global step."""
-    t0 = clock()
-    jacobi = opts["jacobi"]
-    zero_E = 1e-12 * 2.0 * pb.ops.rest_term
-    # numpy passes: the serial loop kernels of sshade.arap were measured slower on this 12 n-long state
-    acc = Anderson(opts["m"], 3 * len(pb.free) + 9 * pb.n, None, 1) if accelerate == "anderson" else None
-    (U, R, E), E_prev, it, Up = state, np.inf, 0, None
-    hist = [E]
-    while True:
-        B = pb.work_rhs(R)
-        gn = pb.gnorm(U, None, B)
-        rel = 0.0 if abs(E) <= zero_E else ((E_prev - E) / abs(E) if np.isfinite(E_prev) else np.inf)
-        status = ("converged" if it > 0 or abs(E) > zero_E else "rigid") if rel < crit.etol and gn < crit.gtol \
-            else "max_iter" if it >= max_iter \
-            else "time_budget" if time_budget_s is not None and clock() - t0 > time_budget_s else None
-        if status is None and it > 0 and E >= E_prev and not jacobi:
-            status = "stalled"
-        if status is not None:
-            break
-        Ug = pb.global_step(U, None, B)
-        Rg, Eg = pb.work_step(Ug, R.copy(), jacobi)
-        info["n_sweeps"] += 1
-        Un, Rn, En = Ug, Rg, Eg
-        if acc is not None:  # residual of the joint map (U, R) -> (Ug, Rg); alpha = 0: R = R*(U), U's only
-            cand = acc.step(pb.pack(U, R if pb.wR > 0 else Rg), pb.pack(Ug, Rg))
-            if cand is not None:
-                Ua, Ra = pb.unpack(cand, Ug)
-                Ra, Ea = pb.work_step(Ua, Ra, jacobi)
-                info["n_sweeps"] += 1
-                if Ea < Eg:
-                    Un, Rn, En = Ua, Ra, Ea
-                else:
-                    info["n_fallback"] += 1
-                    if opts["reset"]:
-                        acc.reset()
-        Up, U, R, E_prev, E, it = U, Un, Rn, E, En, it + 1
-        hist.append(E)
-    move = 0.0 if Up is None else float(np.sqrt(((U - Up) ** 2).sum(1).max()))  # the last iteration's
-    info.update(energy=E, gnorm=gn, rel_decrease=rel, energy_history=hist, move=move)
-    return U, R, it, status
-
-
-def arap_sr_deform(V: np.ndarray, F: np.ndarray, handles: np.ndarray, targets: np.ndarray,
-                   options: ArapOptions | None = None, *, U0: np.ndarray | None = None,
-                   problem: SRProblem | None = None) -> ArapResult:
-    """ARAP with smooth rotations under the paper protocol (§4.1; the converged protocol
-    is :func:`solve_arap_sr`).
-
-    From ``U0`` (default the rigid fit of the handles), each iteration takes every rotation
-    at once from the previous ones (Jacobi local step, :meth:`SRProblem.sweep`), then
-    the global step, until ``options.stop`` fires: ``"energy"`` (default; the relative
-    change of ``E`` over one iteration below ``criterion.etol``) or ``"move"`` (the largest
-    vertex move of one iteration below ``tol * bbox_diag``). ``status`` is then
-    ``"converged"`` when the gradient norm is below ``criterion.gtol`` (and, for the energy
-    stop, the relative decrease below ``criterion.etol``), else ``"stalled"``;
-    ``"max_iter"`` / ``"time_budget"`` at the caps.
-
-    Parameters
-    ----------
-    V : (n, 3) float64; F : (m, 3) int64 (validated). handles : (h,) int64;
-    targets : (h, 3) float64.
-    options : :class:`sshade.arap.options.ArapOptions` or None (its defaults). Read:
-        ``alpha`` (rotation-smoothness weight times the surface area A, so it is
-        scale-free; 0 gives plain ARAP, spokes), ``alpha_scaling``, ``stop``, ``tol``
-        (the move rule's, a fraction of the bounding-box diagonal), ``criterion``,
-        ``max_iter`` (None: the paper protocol's 1000), ``time_budget_s``,
-        ``linear_solver``, ``energy`` (the default or ``"arap_sr"``), ``protocol`` (either:
-        this is the paper protocol). The others must keep their defaults.
-    U0 : (n, 3) float64 or None, start (handle rows set to ``targets``); the first local
-        step takes the rigid fit's rotation as every vertex's previous one.
-    problem : :class:`SRProblem` or None, prebuilt for the same inputs, ``alpha`` and
-        ``alpha_scaling``.
-
-    Returns
-    -------
-    :class:`sshade.arap.ArapResult`; ``info``: ``status``, ``stop``, ``energy`` (``E``,
-    mesh units^2), ``gnorm``, ``rel_decrease``, ``alpha``, ``alpha_scaling``, ``R``
-    ((n, 3, 3) the final rotations).
-
-    Raises
-    ------
-    SShaDeError on bad options (an option not read set, another energy), a ``problem`` of
-    another alpha, a bad ``U0``.
-
-    Examples
-    --------
-    Example::
-
-        res = arap_sr_deform(V, F, handles, targets, ArapOptions(stop="move"))
-    """
-    o = _sr_options(options, "arap_sr_deform", problem)
-    stop, crit = o.stop, o.criterion
-    V = np.ascontiguousarray(V, np.float64)
-    diag = bbox_diag(V)
-    R0, t0_ = rigid_fit(V[handles], targets)
-    info = {"alpha": o.alpha, "alpha_scaling": o.alpha_scaling, "stop": stop}
-    if float(np.abs(V[handles] @ R0.T + t0_ - targets).max()) <= 1e-12 * diag:
-        return ArapResult(V=V @ R0.T + t0_, iterations=0, converged=True, last_move=0.0, precompute_s=0.0,
-                          solve_s=0.0, info=dict(info, rigid=True, status="rigid"))
-    t0 = time.perf_counter()
-    pb = SRProblem(V, F, handles, targets, o.alpha, o.linear_solver, o.alpha_scaling) if problem is None \
-        else problem
-    t1 = time.perf_counter()
-    U = V @ R0.T + t0_ if U0 is None else np.array(U0, np.float64)
-    if U.shape != (pb.n, 3) or not np.isfinite(U).all():
-        raise SShaDeError(f"U0 must be a finite ({pb.n}, 3) array")
-    U[pb.h] = pb.T
-    state = (U, *pb.work_step(U, pb.to_work(np.broadcast_to(R0, (pb.n, 3, 3))), jacobi=True))
-    (U, Rw, E), it, move, rel, status = _paper_iterations(pb, state, stop, o.tol * diag, crit,
-                                                          o.iteration_cap("paper"), o.time_budget_s)
-    t2 = time.perf_counter()
-    gn = pb.gnorm(U, None, pb.work_rhs(Rw))
-    if status == "rule":
-        status = "converged" if gn < crit.gtol and (stop == "move" or abs(rel) < crit.etol) else "stalled"
-    info.update(status=status, energy=E, gnorm=gn, rel_decrease=rel)
-    return ArapResult(V=U, iterations=it, converged=status == "converged", last_move=move, precompute_s=t1 - t0,
-                      solve_s=t2 - t1, info=dict(info, R=pb.from_work(Rw)))
-
-
-def _paper_iterations(pb: SRProblem, state, stop, thresh, crit, max_iter, time_budget_s):
-    """The iterations of :func:`arap_sr_deform` from ``state = (U, R, E)`` (``R`` the
-    local step at ``U`` in the iterations' numbering, :meth:`SRProblem.to_work`; ``E`` its
-    energy): ``((U, R, E), iterations, last_move, rel_decrease, status)`` with status
-    ``"rule"`` (the stop rule fired), ``"max_iter"`` or ``"time_budget"``."""
-    t0 = time.perf_counter()
-    (U, R, E), it, rel, Up = state, 0, np.inf, None
-
-    def moved():  # the largest vertex move of the last iteration (inf before the first)
-        return np.inf if Up is None else float(np.sqrt(((U - Up) ** 2).sum(1).max()))
-    while True:
-        if it >= max_iter:
-            return (U, R, E), it, moved(), rel, "max_iter"
-        if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-            return (U, R, E), it, moved(), rel, "time_budget"
-        Un = pb.global_step(U, None, pb.work_rhs(R))
-        R, En = pb.work_step(Un, R.copy(), jacobi=True)
-        rel = (E - En) / abs(En) if En != 0 else 0.0
-        Up, U, E, it = U, Un, En, it + 1
-        if (moved() < thresh) if stop == "move" else (abs(rel) < crit.etol):
-            return (U, R, E), it, moved(), rel, "rule"

@@ -19,6 +19,7 @@ from ..errors import SShaDeError
 from ..mesh.validate import validate_handle_indices, validate_handles
 from .accelerate import LBFGS, Anderson
 from .criterion import Criterion, gradient_norm
+from .kernel_data import REORDER_MIN_VERTICES
 from .kernels import fused
 from .linear import LaplacianSolver
 from .operators import ENERGIES, ArapOperators, build_operators
@@ -28,11 +29,8 @@ from .rigid import rigid_fit
 from .solver_kernels import loop_kernels
 from .threads import ThreadPicker, numba_threads, resolve_threads
 
-__all__ = ["solve_arap", "ArapSolver", "REORDER_MIN_VERTICES", "SOLVER_SETUP"]
+__all__ = ["solve_arap", "ArapSolver", "SOLVER_SETUP"]
 
-#: vertices from which :func:`solve_arap` renumbers the mesh for locality by default
-#: (:func:`sshade.arap.kernel_data.rcm_order`; below, everything fits in the L2 cache).
-REORDER_MIN_VERTICES = 20_000
 #: the options an :class:`ArapSolver` is set up with: each solve's must be the same
 SOLVER_SETUP = ("energy", "linear_solver", "threads", "reorder")
 

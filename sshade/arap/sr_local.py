@@ -4,7 +4,7 @@ neighbours' rotations and the polar decompositions batch by batch, then every ce
 energy), the right-hand side ``K(R)`` and the smoothness sum, on rotations kept in the
 reverse Cuthill-McKee numbering
 of large meshes (:func:`sshade.arap.kernel_data.rcm_order`), where the kernels' gathers hit
-the cache; the mesh's numbering below :data:`sshade.arap.solver.REORDER_MIN_VERTICES`.
+the cache; the mesh's numbering below :data:`sshade.arap.kernel_data.REORDER_MIN_VERTICES`.
 Every sum keeps the mesh's order, so each number is the one the scipy formulas give in the
 mesh's numbering, bit for bit, and a sweep gives the rotations of the scipy path (the
 colour classes in turn, :func:`gs_order`). Used by :mod:`sshade.arap.smooth_rotations`;

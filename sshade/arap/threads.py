@@ -27,6 +27,7 @@ except ImportError:  # pragma: no cover
     nb_parallel = None
 
 __all__ = ["PARALLEL_MIN_CELLS", "MAIN_MIN_CELLS", "TBB_MIN_INTERFACE", "tbb_usable", "avoid_old_tbb", "max_threads",
+           "uses_parallel_kernels",
            "resolve_threads", "beside_others", "fork_unsafe", "note_launch", "numba_threads", "ThreadPicker"]
 
 #: in the automatic mode, a solve of a thread other than the main one, or inside
@@ -134,6 +135,14 @@ def resolve_threads(threads: int | None, n_cells: int) -> int:
     if t > 1 and child and fork_unsafe():
         return 1
     return t
+
+
+def uses_parallel_kernels(n_vertices: int | None) -> bool:
+    """Whether a full-resolution ARAP solve on an ``n_vertices`` mesh runs numba's parallel
+    kernels (:func:`resolve_threads` in the automatic mode, from this thread: enough
+    rotation cells = vertices, more than one thread, not inside a worker process). False
+    for None."""
+    return n_vertices is not None and resolve_threads(None, int(n_vertices)) > 1
 
 
 @contextmanager

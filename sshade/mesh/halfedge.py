@@ -390,11 +390,23 @@ def _vertex_normals_numpy(V, F):
     return N
 
 
-def warm_kernels() -> None:
-    """Compile (or load from numba's cache) this module's kernels that the mesh checks and the
-    remesh take (:func:`takes_kernels`), on a closed tetrahedron."""
+def tetrahedron() -> tuple[np.ndarray, np.ndarray]:
+    """The unit corner tetrahedron, the smallest closed mesh, on which warm-ups compile kernels.
+
+    Returns
+    -------
+    V : (4, 3) float64, the origin and the three unit points.
+    F : (4, 3) int64, faces oriented outward (positive signed volume).
+    """
     V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    return V, F
+
+
+def warm_kernels() -> None:
+    """Compile (or load from numba's cache) this module's kernels that the mesh checks and the
+    remesh take (:func:`takes_kernels`), on :func:`tetrahedron`."""
+    V, F = tetrahedron()
     E, _, _, twin, _ = _halfedges(F, 4)
     _fan_count(F, twin, 4)
     _components(E, 4)

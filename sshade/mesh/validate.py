@@ -19,7 +19,7 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import SShaDeError
 from .bounds import bbox_diagonal, bounding_box
 from .checked import trusted_mesh
-from .halfedge import count_components, count_pinched_vertices, halfedges, takes_kernels, vertex_fan_count
+from .halfedge import count_components, count_pinched_vertices, halfedges, takes_kernels, tetrahedron, vertex_fan_count
 
 __all__ = ["validate_mesh", "validate_handles", "validate_targets", "validate_handle_indices", "validate_deformed",
            "check_arrays", "check_points", "check_faces", "MAX_DIAGONALS", "COORD_MAX", "DIAG_MIN",
@@ -346,9 +346,8 @@ def _fast_checks(V, F, allow_boundary, area_tol, allow_components=False):
 
 def warm_kernels() -> None:
     """Compile (or load from numba's cache) the kernels of the compiled checks
-    (:func:`sshade.mesh.halfedge.takes_kernels`), on a tetrahedron."""
-    V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
-    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    (:func:`sshade.mesh.halfedge.takes_kernels`), on :func:`sshade.mesh.halfedge.tetrahedron`."""
+    V, F = tetrahedron()
     _fast_checks(V, F, True, AREA_TOL)
 
 
