@@ -43,7 +43,7 @@ def warmup(method, n_vertices: int | None = None) -> float:
     """Warm ``method``'s solve on :func:`sshade.warmup_base.tiny_problem` (libigl, the linear
     solver, the polar and energy kernels, mesh validation, and the remesh when its start is
     not ``"rigid"``), once per process, and the parallel kernels when an ``n_vertices`` mesh
-    runs them (:func:`sshade.warmup.uses_parallel_kernels`). Returns the seconds spent."""
+    runs them (:func:`sshade.arap.threads.uses_parallel_kernels`). Returns the seconds spent."""
     coarse = method.start != "rigid"
     s = warm_once(WARMED, ("arap_sr", "converged", coarse),
                   lambda V, F, h, T: type(method)(alpha=method.alpha, alpha_scaling=method.alpha_scaling, max_iter=5,
