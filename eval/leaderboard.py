@@ -213,28 +213,49 @@ def _animation_board(d: Path, info: dict) -> Board | None:
 
 
 def _stale(d: Path, trees: CommitTrees) -> dict:
-    """``{method: (stale, rows, commits, modules)}`` of the stored rows of run folder ``d``
-    (and of the folders below it) whose code identity differs from this checkout's, with
-    the commits that made them and the modules changed since
-    (:func:`eval.run.stale_rows.check_folders`); methods without a stale row left out."""
+    """``{method: (stale, rows, commits, modules, marked)}`` of the stored rows of run
+    folder ``d`` (and of the folders below it) whose code identity differs from this
+    checkout's, with the commits that made them, the modules changed since and how many of
+    them its tables list as pending (:func:`eval.run.stale_rows.check_folders`); methods
+    without such a row left out."""
     out: dict = {}
     for ms in check_folders(run_folders(d), trees, marked=marked_pending).values():
         for m, v in ms.items():
-            k, n, c, ch = out.get(m, (0, 0, set(), set()))
-            out[m] = (k + v["stale"], n + v["rows"], c | v["commits"], ch | v["changed"])
+            k, n, c, ch, j = out.get(m, (0, 0, set(), set(), 0))
+            out[m] = (k + v["stale"], n + v["rows"], c | v["commits"], ch | v["changed"], j + v["marked"])
     return {m: knc for m, knc in out.items() if knc[0]}
 
 
 def stale_words(stale: tuple | None) -> str:
-    """A cell's mark for a method with stale rows, with the commits that made them and the
-    modules changed since (at most three named):
-    ``" [stale: 8 of 40 rows, made at 3e79476; sshade.guard changed]"``; ``""`` for none."""
+    """A cell's mark for a method with rows not made by this checkout's code, with the
+    commits that made them and the modules changed since (at most three named): ``pending``
+    when its tables list every one of them (``stale[4]``, the rows listed, equals
+    ``stale[0]``), ``stale`` otherwise, with how many are listed:
+    ``" [pending: 8 of 40 rows, made at 3e79476; sshade.guard changed]"``,
+    ``" [stale: 8 of 40 rows (3 listed pending), made at 3e79476]"``; ``""`` for none."""
     if not stale or not stale[0]:
         return ""
     changed = sorted(stale[3]) if len(stale) > 3 else []
     more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
     what = f"; {', '.join(changed[:3])}{more} changed" if changed else ""
-    return f" [stale: {stale[0]} of {stale[1]} rows, made at {', '.join(sorted(stale[2]))}{what}]"
+    listed = stale[4] if len(stale) > 4 else 0
+    word, part = ("pending", "") if listed >= stale[0] else ("stale", f" ({listed} listed pending)" if listed else "")
+    return f" [{word}: {stale[0]} of {stale[1]} rows{part}, made at {', '.join(sorted(stale[2]))}{what}]"
+
+
+def _marks_legend(marks: list[tuple]) -> str:
+    """The leaderboard's sentence on the cells marked by :func:`stale_words` (``marks``:
+    their tuples), naming only the marks it shows; ``""`` for none."""
+    words = {stale_words(m)[2:].split(":")[0] for m in marks if stale_words(m)}
+    if not words:
+        return ""
+    what = " or ".join(f"[{w}: k of n rows, made at C]" for w in sorted(words))
+    return (f" A cell marked {what} holds rows made by the code of commit C, which changed since "
+            "(`python -m eval.reproduce --check` names the modules): not this checkout's numbers"
+            + ("; pending: its tables list them, to be made again (`python -m eval.reproduce --budget`)"
+               if "pending" in words else "")
+            + ("; stale: no table lists them yet (`python -m eval.reproduce --retabulate` marks them)"
+               if "stale" in words else "") + ".")
 
 
 def _data_mark(info: dict) -> tuple[str, str]:
@@ -292,7 +313,7 @@ def collect(root) -> tuple[list[Board], list[str]]:
                 b.stale = _stale(d, trees)
                 made = marked_run(d) if kind == "animation" else None  # a folder run whole, marked by --retabulate
                 if made is not None:  # one row per method in its table
-                    b.stale = {r["method"]: (1, 1, {made}, set()) for r in b.rows}
+                    b.stale = {r["method"]: (1, 1, {made}, set(), 1) for r in b.rows}
                 boards.append(b)
             elif kind == "tosca":
                 apart += _tosca_line(d)
@@ -398,9 +419,7 @@ def leaderboard_markdown(root) -> str:
            f"mean's {CI[0]:.0%} interval is a percentile bootstrap over its cases ({CI[1]} resamples, seed {CI[2]}). "
            f"Where the data has no ground truth the cell shows {' / '.join(label(k) for k in BOARD_MEASURES)} "
            "errors and nobody is ranked."
-           + (" A cell marked [stale: k of n rows, made at C] holds rows made by the code of commit C, which "
-              "changed since (`python -m eval.reproduce --check` names the modules): not this checkout's numbers."
-              if any(b.stale for b in boards) else "")
+           + _marks_legend([v for b in boards for v in b.stale.values()])
            + _data_legend({b.data[0] for b in boards}), "",
            "| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]

@@ -47,7 +47,7 @@ from eval.run.outdir import (
     refuse_results,
     results_dir,
 )
-from eval.run.pending_rows import marked_pending
+from eval.run.pending_rows import marked_pending, marked_run
 from eval.run.row_check import checked_cases, read_cases
 from eval.run.runinfo import read_runinfo
 from eval.run.stale_rows import CommitTrees, check_folders
@@ -442,7 +442,7 @@ def safe_report(run_dir) -> Path | None:
 def write_index(root) -> Path:
     """``root/index.html``: a link to the page (or the folder) of every run folder
     below ``root`` (a folder with ``run.json``, up to three levels down), with its
-    experiment and status (with how many of its stored rows are stale at this checkout,
+    experiment and status (with how many of its stored rows are pending or stale at this checkout,
     :func:`eval.run.stale_rows.check_folders`, or, for a folder run whole, whether it is,
     :func:`eval.run.stale_runs.whole_run_state`). Raises OutputDirError when
     ``root/index.html`` is not ours."""
@@ -459,14 +459,17 @@ def write_index(root) -> Path:
         target = f"{rel}/{PAGE}" if (d / PAGE).is_file() else f"{rel}/"
         exp = ((info.get("config") or {}).get("experiment") or {}).get("name", "")
         k = sum(v["stale"] for v in stale.get(d, {}).values())
+        j = sum(v["marked"] for v in stale.get(d, {}).values())
         n = sum(v["rows"] for v in stale.get(d, {}).values())
         made = ", ".join(sorted(set().union(*(v["commits"] for v in stale.get(d, {}).values()))))
         changed = sorted(set().union(*(v.get("changed", ()) for v in stale.get(d, {}).values())))
         what = f"; {', '.join(changed[:3])}{' and more' if len(changed) > 3 else ''} changed since" if changed else ""
-        status = str(info.get("status", "")) + (f"; {k} of {n} rows stale, made at {made}{what} "
+        word = "pending (listed in its tables)" if j >= k else f"stale ({j} listed pending)" if j else "stale"
+        status = str(info.get("status", "")) + (f"; {k} of {n} rows {word}, made at {made}{what} "
                                                 "(python -m eval.reproduce --check)" if k else "")
         if d in whole and whole[d].stale:
-            status += f"; stale: {whole[d].why} (python -m eval.reproduce --check)"
+            status += (f"; {'pending' if marked_run(d) is not None else 'stale'}: {whole[d].why} "
+                       "(python -m eval.reproduce --check)")
         rows.append([f"<td>{_link(root, target, _e(rel))}</td>", f"<td>{_e(exp)}</td>",
                      f"<td>{_e(status)}</td>", _cell(info.get("n_cases")),
                      f"<td>{_e((info.get('git') or {}).get('commit', ''))[:12]}</td>"])
