@@ -22,8 +22,8 @@ from eval.run.stale_rows import CommitTrees, check_folders, run_folders
 from eval.tables import common_case_values, compare
 from sshade.pipeline import SShaDe
 
-__all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "stale_words",
-           "LABELS", "RANK_COLUMN", "run_board_markdown"]
+__all__ = ["LEADERBOARD", "HEADING", "Board", "collect", "leaderboard_markdown", "leaderboard_rows", "listed_words",
+           "mark_word", "stale_words", "LABELS", "RANK_COLUMN", "run_board_markdown"]
 
 LEADERBOARD = "leaderboard.md"  #: the file written beside ``index.html``
 #: Folder name -> the dataset's name on the board (other folders: their own name).
@@ -239,14 +239,25 @@ def stale_words(stale: tuple | None) -> str:
     more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
     what = f"; {', '.join(changed[:3])}{more} changed" if changed else ""
     listed = stale[4] if len(stale) > 4 else 0
-    word, part = ("pending", "") if listed >= stale[0] else ("stale", f" ({listed} listed pending)" if listed else "")
-    return f" [{word}: {stale[0]} of {stale[1]} rows{part}, made at {', '.join(sorted(stale[2]))}{what}]"
+    return f" [{mark_word(stale[0], listed)}: {stale[0]} of {stale[1]} rows{listed_words(stale[0], listed)}, " \
+           f"made at {', '.join(sorted(stale[2]))}{what}]"
+
+
+def mark_word(older: int, listed: int) -> str:
+    """``"pending"`` when the tables list all ``older`` rows made by other code than this
+    checkout's (``listed`` of them), ``"stale"`` otherwise."""
+    return "pending" if listed >= older else "stale"
+
+
+def listed_words(older: int, listed: int) -> str:
+    """How many of ``older`` stale rows are listed pending, ``""`` when none or all are."""
+    return f" ({listed} listed pending)" if 0 < listed < older else ""
 
 
 def _marks_legend(marks: list[tuple]) -> str:
     """The leaderboard's sentence on the cells marked by :func:`stale_words` (``marks``:
     their tuples), naming only the marks it shows; ``""`` for none."""
-    words = {stale_words(m)[2:].split(":")[0] for m in marks if stale_words(m)}
+    words = {mark_word(m[0], m[4] if len(m) > 4 else 0) for m in marks if m and m[0]}
     if not words:
         return ""
     what = " or ".join(f"[{w}: k of n rows, made at C]" for w in sorted(words))

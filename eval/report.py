@@ -30,6 +30,8 @@ from eval.leaderboard import (
     collect,
     leaderboard_markdown,
     leaderboard_rows,
+    listed_words,
+    mark_word,
     run_board_markdown,
 )
 from eval.present.breakdown import BREAKDOWN_METRICS
@@ -464,7 +466,7 @@ def write_index(root) -> Path:
         made = ", ".join(sorted(set().union(*(v["commits"] for v in stale.get(d, {}).values()))))
         changed = sorted(set().union(*(v.get("changed", ()) for v in stale.get(d, {}).values())))
         what = f"; {', '.join(changed[:3])}{' and more' if len(changed) > 3 else ''} changed since" if changed else ""
-        word = "pending (listed in its tables)" if j >= k else f"stale ({j} listed pending)" if j else "stale"
+        word = "pending (listed in its tables)" if mark_word(k, j) == "pending" else f"stale{listed_words(k, j)}"
         status = str(info.get("status", "")) + (f"; {k} of {n} rows {word}, made at {made}{what} "
                                                 "(python -m eval.reproduce --check)" if k else "")
         if d in whole and whole[d].stale:
