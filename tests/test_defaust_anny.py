@@ -141,6 +141,7 @@ print(hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in parts))
 """
 
 
+@pytest.mark.slow  # four subprocesses, ~15 s
 def test_a_subject_has_the_same_bytes_under_other_blas_thread_counts_and_kernels(model, anny_assets):
     """Subject 3 (whose float32 body once changed with the BLAS thread count), its skinning
     of another mesh and a frame of its path: one hash under 1 and 2 OpenBLAS threads and

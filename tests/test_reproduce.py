@@ -168,6 +168,7 @@ def test_the_plan_before_any_step_names_rows_reused_and_stale_per_step_and_metho
                and (f"current at {made[:7]})" in ln or "stale" in ln or "pending" in ln) for ln in plan), plan
 
 
+@pytest.mark.slow  # ~15 s; tests/test_stale_rows.py checks the same rows in the quick suite
 def test_check_json_counts_every_committed_row_and_exits_0_at_this_checkout(capsys):
     assert main(["--check", "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
